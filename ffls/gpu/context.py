@@ -1,0 +1,73 @@
+"""Headless OpenGL contexts: EGL first, OSMesa as the fallback.
+
+This is one of the two places in ffls that create contexts (the other is the viewer's window).
+The library itself only ever receives a ``moderngl.Context``.
+"""
+from __future__ import annotations
+
+import os
+
+from ..errors import GLUnavailable
+
+REQUIRED_GL = 430  # compute shaders and SSBOs
+
+
+def create_headless_context(backend: str | None = None, require: int = REQUIRED_GL):
+    """Create a standalone ``moderngl.Context`` without any window system.
+
+    Parameters
+    ----------
+    backend : {'egl', 'osmesa', None}
+        ``None`` tries EGL (a GPU where there is one, Mesa llvmpipe otherwise), then OSMesa.
+        The environment variable ``FFLS_GL_BACKEND`` overrides it.
+    require : int
+        Minimum OpenGL version as ``major * 100 + minor * 10``.
+
+    Raises
+    ------
+    GLUnavailable
+        If no backend gives an OpenGL ``require`` context; the message lists what each said.
+    """
+    import moderngl
+
+    backend = backend or os.environ.get("FFLS_GL_BACKEND") or None
+    order = [backend] if backend else ["egl", "osmesa"]
+    failures = []
+    for name in order:
+        try:
+            if name == "osmesa":
+                ctx = _create_osmesa(require)
+            else:
+                ctx = moderngl.create_context(standalone=True, backend=name, require=require)
+            ctx.gc_mode = "context_gc"
+            return ctx
+        except Exception as e:  # moderngl raises plain Exception for missing libraries
+            failures.append(f"{name}: {' '.join(str(e).split())}")
+    raise GLUnavailable(
+        f"no OpenGL {require // 100}.{require % 100 // 10} context: " + "; ".join(failures)
+        + " (install Mesa: apt-get install libegl1 libgl1 libosmesa6)"
+    )
+
+
+def _create_osmesa(require: int):
+    """An OSMesa context (glcontext ships no OSMesa backend; see ffls.gpu.osmesa)."""
+    from .osmesa import create_osmesa_context
+
+    return create_osmesa_context(require)
+
+
+def describe_context(ctx) -> dict:
+    """What a context offers: renderer, version, and the limits ffls depends on."""
+    info = ctx.info
+    return {
+        "vendor": info.get("GL_VENDOR"),
+        "renderer": info.get("GL_RENDERER"),
+        "version": info.get("GL_VERSION"),
+        "glsl": info.get("GL_SHADING_LANGUAGE_VERSION"),
+        "gl_version_code": ctx.version_code,
+        "max_texture_size": info.get("GL_MAX_TEXTURE_SIZE"),
+        "max_array_texture_layers": info.get("GL_MAX_ARRAY_TEXTURE_LAYERS"),
+        "max_ssbo_bytes": info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE"),
+        "max_compute_work_group_invocations": info.get("GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS"),
+        "float_atomics": "GL_NV_shader_atomic_float" in ctx.extensions,
+    }
