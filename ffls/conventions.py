@@ -75,7 +75,8 @@ def spherical_to_direction(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
 def direction_to_spherical(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(theta, phi) of directions (..., 3): theta in [0, pi] from +Z, phi in (-pi, pi] from +X."""
     d = np.asarray(d, dtype=np.float64)
-    theta = np.arccos(np.clip(d[..., 2] / np.maximum(np.linalg.norm(d, axis=-1), 1e-300), -1.0, 1.0))
+    # atan2 keeps full precision near the poles, where arccos(z) loses half the digits
+    theta = np.arctan2(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
     phi = np.arctan2(d[..., 1], d[..., 0])
     return theta, phi
 

@@ -39,7 +39,13 @@ def create_headless_context(backend: str | None = None, require: int = REQUIRED_
                 ctx = _create_osmesa(require)
             else:
                 ctx = moderngl.create_context(standalone=True, backend=name, require=require)
-            ctx.gc_mode = "context_gc"
+            # GL objects are released when Python drops them, or earlier by an explicit
+            # release(). ("context_gc" would be the alternative, but moderngl 5.13 queues
+            # explicitly released objects again and ctx.gc() then fails.)
+            ctx.gc_mode = "auto"
+            if not isinstance(ctx.extra, dict):
+                ctx.extra = {}
+            ctx.extra.setdefault("backend", name)
             return ctx
         except Exception as e:  # moderngl raises plain Exception for missing libraries
             failures.append(f"{name}: {' '.join(str(e).split())}")
@@ -57,9 +63,22 @@ def _create_osmesa(require: int):
 
 
 def describe_context(ctx) -> dict:
-    """What a context offers: renderer, version, and the limits ffls depends on."""
+    """What a context offers: backend, renderer, version, and the limits ffls depends on.
+
+    Returns
+    -------
+    dict
+        JSON-serialisable: strings, ints, bools and lists of ints.
+    """
     info = ctx.info
+
+    def lim(name):
+        v = info.get(name)
+        return list(v) if isinstance(v, tuple) else v
+
+    extra = ctx.extra if isinstance(ctx.extra, dict) else {}
     return {
+        "backend": extra.get("backend"),
         "vendor": info.get("GL_VENDOR"),
         "renderer": info.get("GL_RENDERER"),
         "version": info.get("GL_VERSION"),
@@ -69,5 +88,10 @@ def describe_context(ctx) -> dict:
         "max_array_texture_layers": info.get("GL_MAX_ARRAY_TEXTURE_LAYERS"),
         "max_ssbo_bytes": info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE"),
         "max_compute_work_group_invocations": info.get("GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS"),
+        "max_compute_work_group_count": lim("GL_MAX_COMPUTE_WORK_GROUP_COUNT"),
+        "max_compute_work_group_size": lim("GL_MAX_COMPUTE_WORK_GROUP_SIZE"),
+        "max_ssbo_bindings": info.get("GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS"),
+        "max_viewport_dims": lim("GL_MAX_VIEWPORT_DIMS"),
         "float_atomics": "GL_NV_shader_atomic_float" in ctx.extensions,
+        "fp64": ctx.version_code >= 400 or "GL_ARB_gpu_shader_fp64" in ctx.extensions,
     }

@@ -1,0 +1,111 @@
+"""Accuracy and speed of light estimation on the paper's Table 1 grid (Masselus et al. 2002).
+
+Lights at phi = 0..180 deg (20 deg steps, 0 = toward the camera) and theta = 0..70 deg (10 deg
+steps from the zenith): 80 lights, rendered by :mod:`ffls.synth` at 768 x 768 (spheres ~45 px).
+Configurations: grey ground (albedo 0.3) distant and near (10 cm light at 2 m), black ground,
+noise, 8-bit sRGB. The spheres are given from the renderer's truth (the estimator is measured, not
+the detector). Prints a table and writes ``benchmarks/results/bench_lights.json``.
+
+    python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--workers 1]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from ffls.capture import load_capture
+from ffls.conventions import angle_between, spherical_to_direction
+from ffls.errors import atomic_output
+from ffls.spheres.estimate import capture_samples, estimate_photo
+from ffls.synth import write_synthetic_capture
+
+CONFIGS = {
+    "distant_grey": dict(light_model="distant", ground_albedo=0.3),
+    "near_grey": dict(light_model="near", ground_albedo=0.3, light_distance=2.0, light_radius=0.05),
+    "distant_black": dict(light_model="distant", ground_albedo=0.0),
+    "near_black": dict(light_model="near", ground_albedo=0.0, light_distance=2.0, light_radius=0.05),
+    "distant_grey_noise": dict(light_model="distant", ground_albedo=0.3, noise=0.01),
+    "distant_grey_srgb8": dict(light_model="distant", ground_albedo=0.3, encoding="srgb8", noise=1 / 255),
+}
+TARGETS = {"distant_grey": (1.0, 0.5), "near_grey": (2.5, 1.0)}
+
+
+def grid(phi_step, theta_step):
+    phis = np.arange(0, 181, phi_step, dtype=float)
+    thetas = np.arange(0, 71, theta_step, dtype=float)
+    P, T = np.meshgrid(phis, thetas, indexing="ij")
+    # phi = 0 toward the camera: the synthetic camera sits at -Y, so world azimuth = phi - 90 deg
+    d = spherical_to_direction(np.radians(T.ravel()), np.radians(P.ravel() - 90.0))
+    return phis, thetas, d
+
+
+def run_config(name, cfg, res, dirs, folder, workers):
+    write_synthetic_capture(folder, resolution=res, directions=dirs, progress=False, **cfg)
+    cap = load_capture(folder)
+    truth = json.loads((Path(folder) / "truth.json").read_text())
+    M = np.linalg.inv(cap.world_from_camera)
+    sph = [SimpleNamespace(center_cam=M[:3, :3] @ np.asarray(c) + M[:3, 3], radius=truth["sphere_radius"])
+           for c in truth["sphere_centers"]]
+    shape = cap.load_image(0).shape[:2]
+    samples = capture_samples(cap, sph, shape)
+    imgs = [cap.load_image(i) for i in range(len(dirs))]
+    estimate_photo(imgs[0], samples, cap.scene_center)  # warm-up
+    t = time.perf_counter()
+    res_ = [estimate_photo(im, samples, cap.scene_center) for im in imgs]
+    dt = (time.perf_counter() - t) / len(imgs)
+    est = np.array([r["direction"] for r in res_])
+    err = np.degrees(angle_between(est, np.asarray(truth["directions"])))
+    ok = np.array([r["status"] == "ok" for r in res_])
+    e = err[ok]
+    return {
+        "config": name, **{k: v for k, v in cfg.items()}, "resolution": res, "n": int(len(dirs)),
+        "accepted": int(ok.sum()),
+        "rejected": {r["reason"]: sum(1 for x in res_ if x["reason"] == r["reason"]) for r in res_ if r["reason"]},
+        "median_deg": float(np.median(e)) if e.size else None, "p90_deg": float(np.percentile(e, 90)) if e.size else None,
+        "max_deg": float(e.max()) if e.size else None,
+        "median_uncertainty_deg": float(np.median([r["uncertainty_deg"] for r, o in zip(res_, ok) if o])) if e.size else None,
+        "models": {m: sum(1 for r in res_ if r["model"] == m) for m in ("distant", "near")},
+        "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
+        "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--res", type=int, default=768)
+    ap.add_argument("--phi-step", type=int, default=20)
+    ap.add_argument("--theta-step", type=int, default=10)
+    ap.add_argument("--configs", default=",".join(CONFIGS))
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_lights.json"))
+    a = ap.parse_args(argv)
+    phis, thetas, dirs = grid(a.phi_step, a.theta_step)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in a.configs.split(","):
+            r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(tmp, name), a.workers)
+            rows.append(r)
+            tgt = TARGETS.get(name)
+            print(f"{name:22s} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "
+                  f"p90={r['p90_deg']:.2f} max={r['max_deg']:.2f} deg  unc~{r['median_uncertainty_deg']:.2f}  "
+                  f"{r['ms_per_image']:.0f} ms/img ({r['images_per_second_per_core']:.1f} img/s/core)"
+                  + (f"  target max {tgt[0]} median {tgt[1]}" if tgt else ""), flush=True)
+    doc = {"benchmark": "bench_lights", "cpu_count": os.cpu_count(), "machine": platform.processor() or platform.machine(),
+           "phis_deg": phis.tolist(), "thetas_deg": thetas.tolist(), "results": rows}
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(out) as t:
+        t.write_text(json.dumps(doc, indent=1))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

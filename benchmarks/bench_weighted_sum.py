@@ -1,0 +1,159 @@
+"""Benchmark of pass 2 (weighted sum of basis images), its compressed variant, and the display pass.
+
+For each (N lights, W x H) it reports the median time (after one warm-up, ``ctx.finish()``
+before stopping the clock) of pass 2 in its compute and fragment versions over a float16
+basis, frames per second, bytes moved per frame (basis texels read + output written), the
+resulting bandwidth as a fraction of the device's copy bandwidth measured in the same run
+(``ctx.copy_buffer`` of a large buffer; NumPy ``copyto`` for the CPU), and the NumPy float32
+path (:func:`ffls.relight.relight_fast`) as a ratio. Compressed rows (K = 8, 16, 32) time the
+coefficient projection (GPU compute pass; the CPU alternative, NumPy + buffer upload, beside it)
+plus pass 2 (fragment version, the Engine's) over K + 1 layers. Combinations whose float32 basis would
+exceed ``--host-budget`` MiB of host memory are skipped and listed.
+
+    python benchmarks/bench_weighted_sum.py [--quick] [--reps 5]
+
+Prints a table and writes ``benchmarks/results/bench_weighted_sum.json``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ffls.gpu.basis import BasisTextures
+from ffls.gpu.context import create_headless_context, describe_context
+from ffls.gpu.weighted_sum import Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
+from ffls.relight import relight_fast
+
+RESULTS = Path(__file__).resolve().parent / "results" / "bench_weighted_sum.json"
+
+
+def median_ms(fn, ctx=None, reps=5, warmup=1):
+    for _ in range(warmup):
+        fn()
+        if ctx is not None:
+            ctx.finish()
+    ts = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        if ctx is not None:
+            ctx.finish()
+        ts.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(ts)
+
+
+def copy_bandwidth(ctx, mib=256, reps=5):
+    """GPU buffer copy and NumPy copy bandwidth, bytes (read + written) per second."""
+    nbytes = mib << 20
+    a = ctx.buffer(reserve=nbytes)
+    b = ctx.buffer(reserve=nbytes)
+    gl_ms = median_ms(lambda: ctx.copy_buffer(b, a), ctx, reps)
+    release_gl(a)
+    release_gl(b)
+    x = np.ones(nbytes // 4, np.float32)
+    y = np.empty_like(x)
+    np_ms = median_ms(lambda: np.copyto(y, x), None, reps)
+    return 2 * nbytes / (gl_ms * 1e-3), 2 * nbytes / (np_ms * 1e-3)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="N in (64, 256), sizes 256 and 512 only")
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--host-budget", type=float, default=1024, help="MiB of float32 basis on the host")
+    args = ap.parse_args(argv)
+
+    ctx = create_headless_context()
+    info = describe_context(ctx)
+    info["cpu_count"] = os.cpu_count()
+    gl_bw, np_bw = copy_bandwidth(ctx, reps=args.reps)
+    print(f"device: {info['renderer']} | GL {info['version']} | {info['cpu_count']} CPUs")
+    print(f"copy bandwidth (read+write): GL copy_buffer {gl_bw / 1e9:.2f} GB/s, NumPy copyto {np_bw / 1e9:.2f} GB/s")
+
+    ns = (64, 256) if args.quick else (64, 256, 1024)
+    sizes = (256, 512) if args.quick else (256, 512, 1024)
+    rng = np.random.default_rng(0)
+    rows, skipped = [], []
+    for s in sizes:
+        tm = ToneMapPass(ctx, (s, s))
+        for n in ns:
+            host_mib = n * s * s * 3 * 4 / 2 ** 20
+            if host_mib > args.host_budget:
+                skipped.append(f"N={n} {s}x{s}: float32 basis {host_mib:.0f} MiB > host budget {args.host_budget:.0f} MiB")
+                continue
+            basis = rng.random((n, s, s, 3), dtype=np.float32)
+            w = rng.random((n, 3))
+            bt = BasisTextures(ctx, basis, "f16")
+            wbuf = ctx.buffer(weights_to_vec4(w))
+            moved = n * s * s * 8 + s * s * 16  # RGBA16F texels read + RGBA32F written
+            row = {"n": n, "size": s, "bytes_per_frame": moved}
+            for method in ("compute", "fragment"):
+                ws = WeightedSum(ctx, bt, method)
+                ms = median_ms(lambda: ws.run(wbuf), ctx, args.reps)
+                row[f"{method}_ms"] = ms
+                if method == "compute":
+                    row["tonemap_ms"] = median_ms(lambda: tm.run(ws.output, 0.0, "aces"), ctx, args.reps)
+                ws.release()
+            row["numpy_f32_ms"] = median_ms(lambda: relight_fast(w, basis), None, max(3, args.reps // 2))
+            best = min(row["compute_ms"], row["fragment_ms"])
+            row["best"] = "compute" if row["compute_ms"] <= row["fragment_ms"] else "fragment"
+            row["fps_pass2"] = 1e3 / best
+            row["gbps"] = moved / (best * 1e-3) / 1e9
+            row["frac_copy_bw"] = moved / (best * 1e-3) / gl_bw
+            row["numpy_over_gl"] = row["numpy_f32_ms"] / best
+            rows.append(row)
+            print(f"N={n:5d} {s:4d}^2  compute {row['compute_ms']:8.1f} ms  fragment {row['fragment_ms']:8.1f} ms  "
+                  f"tonemap {row['tonemap_ms']:6.1f} ms  numpy {row['numpy_f32_ms']:8.1f} ms  "
+                  f"{row['gbps']:6.2f} GB/s = {100 * row['frac_copy_bw']:5.1f}% of copy", flush=True)
+            release_gl(wbuf)
+            bt.release()
+            del basis
+        tm.release()
+
+    # compressed basis rows: projection (n -> K + 1) + pass 2 over K + 1 layers
+    comp_rows = []
+    n, s = 256, 512
+    w = rng.random((n, 3))
+    wbuf = ctx.buffer(weights_to_vec4(w))
+    for K in (8, 16, 32):
+        layers = rng.standard_normal((K + 1, s, s, 3)).astype(np.float32)
+        P = np.ones((n, K + 1, 3), np.float32)
+        P[:, 1:] = rng.standard_normal((n, K, 3)) / np.sqrt(n)
+        bt = BasisTextures(ctx, layers, "f16")
+        ws = WeightedSum(ctx, bt, "fragment")  # the Engine's pass 2
+        proj = Projector(ctx, P)
+        proj_ms = median_ms(lambda: proj.run(wbuf), ctx, args.reps)
+        p2_ms = median_ms(lambda: ws.run(proj.coeffs_buffer), ctx, args.reps)
+        cpu_proj_ms = median_ms(lambda: proj.coeffs_buffer.write(weights_to_vec4(np.einsum("nkc,nc->kc", P, w))),
+                                ctx, args.reps)
+        moved = (K + 1) * s * s * 8 + s * s * 16
+        r = {"n": n, "size": s, "K": K, "project_gpu_ms": proj_ms, "project_cpu_ms": cpu_proj_ms, "pass2_ms": p2_ms,
+             "fps": 1e3 / (proj_ms + p2_ms), "frac_copy_bw": moved / (p2_ms * 1e-3) / gl_bw}
+        comp_rows.append(r)
+        print(f"compressed N={n} {s}^2 K={K:3d}: project GPU {proj_ms:6.2f} ms (CPU {cpu_proj_ms:6.2f} ms), "
+              f"pass2 {p2_ms:7.2f} ms, {r['fps']:6.1f} fps, {100 * r['frac_copy_bw']:5.1f}% of copy", flush=True)
+        proj.release()
+        ws.release()
+        bt.release()
+    release_gl(wbuf)
+    for line in skipped:
+        print("skipped:", line)
+
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    out = {"device": info, "copy_bandwidth_gl_Bps": gl_bw, "copy_bandwidth_numpy_Bps": np_bw,
+           "reps": args.reps, "rows": rows, "compressed": comp_rows, "skipped": skipped}
+    tmp = RESULTS.with_suffix(".tmp.json")
+    tmp.write_text(json.dumps(out, indent=1))
+    os.replace(tmp, RESULTS)
+    print(f"wrote {RESULTS}")
+    ctx.release()
+
+
+if __name__ == "__main__":
+    main()

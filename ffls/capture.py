@@ -1,0 +1,829 @@
+"""Capture folders (``capture.json`` + images), light lists (``lights.json``) and RTI ``.lp`` files.
+
+The file formats are specified, with complete examples, in ``docs/formats.md``. Every loader
+validates everything it reads and raises :class:`ffls.errors.InputError` naming the file and
+the key, image or line at fault; every writer is atomic.
+
+Encoding rule when ``capture.json`` has no ``"encoding"``: 8-bit images are taken as sRGB
+encoded, 16-bit, half and float images (PNG/TIFF/EXR/HDR) as linear. It is decided per image
+from the stored bit depth, and :meth:`Capture.load_basis` refuses captures that mix depths.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+from . import conventions
+from .errors import InputError, atomic_output
+from .imageio import read_image
+from .tonemap import srgb_decode
+
+__all__ = [
+    "CAPTURE_FILE",
+    "LIGHTS_FILE",
+    "Capture",
+    "load_capture",
+    "save_capture",
+    "Lights",
+    "load_lights",
+    "save_lights",
+    "read_lp",
+    "write_lp",
+    "lp_to_world",
+    "world_to_lp",
+    "lights_from_lp",
+    "UNIT_TOLERANCE",
+]
+
+CAPTURE_FILE = "capture.json"
+LIGHTS_FILE = "lights.json"
+#: Largest accepted | |d| - 1 | for a light direction read from a file.
+UNIT_TOLERANCE = 1e-3
+_ENCODINGS = ("srgb", "linear")
+_DIST_LENGTHS = (4, 5, 8, 12, 14)
+_CAPTURE_KEYS = {"format", "version", "images", "image_size", "encoding", "camera", "sphere_radius",
+                 "spheres", "scene_center", "hemisphere", "units"}
+
+
+# ----------------------------------------------------------------------------- validation helpers
+class _Json:
+    """Reads and checks values of one JSON file, raising InputError naming the file and key."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def fail(self, key: str, problem: str):
+        raise InputError(f"{key}: {problem}" if key else problem, self.path)
+
+    def load(self, what: str) -> dict:
+        if not self.path.exists():
+            self.fail("", f"{what} not found")
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            self.fail("", f"cannot read {what} ({type(e).__name__}: {e})")
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as e:
+            self.fail("", f"corrupt JSON at line {e.lineno} column {e.colno}: {e.msg}")
+        if not isinstance(doc, dict):
+            self.fail("", f"{what} must hold a JSON object, not {type(doc).__name__}")
+        return doc
+
+    def header(self, doc: dict, fmt: str) -> None:
+        if doc.get("format") != fmt:
+            self.fail("format", f"expected {fmt!r}, got {doc.get('format')!r}")
+        if "version" not in doc:
+            self.fail("version", "missing key")
+        if doc["version"] != 1:
+            self.fail("version", f"unsupported version {doc['version']!r} (this ffls reads version 1)")
+
+    def require(self, doc: dict, key: str, prefix: str = ""):
+        if key not in doc:
+            self.fail(prefix + key, "missing key")
+        return doc[key]
+
+    def number(self, value, key: str, positive: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            self.fail(key, f"expected a finite number, got {value!r}")
+        if positive and value <= 0:
+            self.fail(key, f"must be positive, got {value!r}")
+        return float(value)
+
+    def array(self, value, key: str, shape: tuple) -> np.ndarray:
+        try:
+            a = np.array(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = None
+        if a is None or a.shape != shape or isinstance(value, str):
+            self.fail(key, f"expected an array of shape {shape} of numbers, got {_short(value)}")
+        if not np.all(np.isfinite(a)):
+            self.fail(key, "non-finite number")
+        return a
+
+    def string(self, value, key: str) -> str:
+        if not isinstance(value, str) or not value:
+            self.fail(key, f"expected a non-empty string, got {_short(value)}")
+        return value
+
+
+def _short(value, n: int = 60) -> str:
+    s = json.dumps(value) if not isinstance(value, np.ndarray) else repr(value.tolist())
+    return s if len(s) <= n else s[: n - 3] + "..."
+
+
+def _check_name(j: _Json, name, key: str) -> str:
+    name = j.string(name, key)
+    p = PurePosixPath(name.replace("\\", "/"))
+    if p.is_absolute() or ".." in p.parts or ":" in name:
+        j.fail(key, f"image name {name!r} must be a path relative to the capture folder, inside it")
+    return name
+
+
+def _write_json(path: Path, doc: dict) -> Path:
+    text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def _read_table(path: Path, j: _Json, key: str) -> np.ndarray:
+    """A (256, 3) inverse response table from .npy or .csv."""
+    if not path.is_file():
+        j.fail(key, f"response file {path.name!r} not found")
+    try:
+        if path.suffix.lower() == ".npy":
+            t = np.load(path, allow_pickle=False)
+        elif path.suffix.lower() == ".csv":
+            t = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+        else:
+            j.fail(key, f"response file {path.name!r} must be .npy or .csv")
+    except (OSError, ValueError) as e:
+        raise InputError(f"cannot read inverse response table ({type(e).__name__}: {e})", path) from None
+    t = np.asarray(t, dtype=np.float64)
+    if t.ndim == 1:
+        t = t[:, None]
+    if t.shape == (256, 1):
+        t = np.repeat(t, 3, axis=1)
+    if t.shape != (256, 3):
+        raise InputError(f"inverse response table must have shape (256, 3) or (256,), got {t.shape}", path)
+    if not np.all(np.isfinite(t)) or (t < 0).any():
+        raise InputError("inverse response table must be finite and non-negative", path)
+    if (np.diff(t, axis=0) < 0).any():
+        raise InputError("inverse response table must be non-decreasing in every channel", path)
+    return t
+
+
+# ----------------------------------------------------------------------------- Capture
+@dataclass
+class Capture:
+    """A capture folder: photographs of an object under free-form lights, plus metadata.
+
+    Attributes
+    ----------
+    folder : pathlib.Path
+    image_names : list of str
+        As listed in ``capture.json`` (relative to ``folder``).
+    image_paths : list of pathlib.Path
+    encoding : str or dict
+        ``'srgb'``, ``'linear'``, ``'auto'`` (absent in the file: by bit depth, see the module
+        docstring) or ``{'response': file}``.
+    K : (3, 3) float64 ndarray or None
+        Camera intrinsics (None when the file has no ``camera``).
+    dist : (k,) float64 ndarray
+        OpenCV distortion coefficients (zeros when absent).
+    world_from_camera : (4, 4) float64 ndarray
+        Rigid transform; ``conventions.DEFAULT_WORLD_FROM_CAMERA`` when absent.
+    world_from_camera_is_default : bool
+        True when ``world_from_camera`` was not given.
+    sphere_radius : float or None
+        Radius of the calibration spheres in world units.
+    scene_center : (3,) float64 ndarray
+        World origin of the light directions (zeros when absent).
+    hemisphere : {'upper', 'full'}
+    spheres : list of dict
+        Sphere hints: ``{'center': [x, y, z]}`` or ``{'center_px': [u, v], 'radius_px': r}``.
+    image_size : (int, int) or None
+        Expected (width, height) of every image, checked when images are read.
+    units : str or None
+    response : (256, 3) float64 ndarray or None
+        Inverse camera response: linear value of each 8-bit code, per channel.
+    extra : dict
+        Unknown top-level keys, kept for round trips.
+    """
+
+    folder: Path
+    image_names: list
+    image_paths: list = field(default_factory=list)
+    encoding: object = "auto"
+    K: np.ndarray | None = None
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    world_from_camera: np.ndarray = field(default_factory=lambda: conventions.DEFAULT_WORLD_FROM_CAMERA.copy())
+    world_from_camera_is_default: bool = True
+    sphere_radius: float | None = None
+    scene_center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    hemisphere: str = "upper"
+    spheres: list = field(default_factory=list)
+    image_size: tuple | None = None
+    units: str | None = None
+    response: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.folder = Path(self.folder)
+        self.image_names = list(self.image_names)
+        if not self.image_paths:
+            self.image_paths = [self.folder / n for n in self.image_names]
+
+    @property
+    def json_path(self) -> Path:
+        """``folder / 'capture.json'``."""
+        return self.folder / CAPTURE_FILE
+
+    def __len__(self) -> int:
+        return len(self.image_names)
+
+    def _check_size(self, i: int, img) -> None:
+        if self.image_size is not None:
+            h, w = img.shape
+            if (w, h) != tuple(self.image_size):
+                raise InputError(
+                    f"image is {w}x{h} but {CAPTURE_FILE} says image_size {self.image_size[0]}x{self.image_size[1]}",
+                    self.image_paths[i],
+                )
+
+    def _linearise(self, i: int, img) -> np.ndarray:
+        enc = self.encoding
+        if enc == "auto":
+            enc = "srgb" if img.bit_depth == 8 else "linear"
+        if enc == "linear":
+            return img.pixels
+        if enc == "srgb":
+            if img.is_hdr:
+                raise InputError(f"{CAPTURE_FILE} says encoding 'srgb' but the image is floating point", img.path)
+            return srgb_decode(img.pixels)
+        # inverse response table for 8-bit codes
+        if img.bit_depth != 8:
+            raise InputError(f"an inverse response table applies to 8-bit images, this one is {img.bit_depth}", img.path)
+        codes = np.rint(img.pixels * 255).astype(np.intp)
+        out = np.empty(img.pixels.shape, dtype=np.float32)
+        for c in range(3):
+            out[..., c] = self.response[codes[..., c], c]
+        return out
+
+    def load_image(self, i: int) -> np.ndarray:
+        """Image ``i`` as linear radiance.
+
+        Parameters
+        ----------
+        i : int
+            Index into :attr:`image_names`.
+
+        Returns
+        -------
+        (H, W, 3) float32 ndarray
+            sRGB images decoded with :func:`ffls.tonemap.srgb_decode`, response-table images
+            mapped per channel, linear images as stored.
+        """
+        img = read_image(self.image_paths[i])
+        self._check_size(i, img)
+        return np.asarray(self._linearise(i, img), dtype=np.float32)
+
+    def load_basis(self, indices=None, progress: bool = True) -> np.ndarray:
+        """Load several images as one linear array.
+
+        Parameters
+        ----------
+        indices : sequence of int, optional
+            Which images (all by default), in that order.
+        progress : bool
+            Show a tqdm bar on stderr (never when stderr is not a terminal or ``CI`` is set).
+
+        Returns
+        -------
+        (n, H, W, 3) float32 ndarray
+
+        Raises
+        ------
+        InputError
+            Naming the first image whose size differs from the first one's, or whose bit depth
+            differs (with automatic encoding).
+        """
+        from tqdm import tqdm
+
+        idx = list(range(len(self))) if indices is None else [int(k) for k in indices]
+        if not idx:
+            raise ValueError("load_basis: no images selected")
+        disable = not progress or not sys.stderr.isatty() or bool(os.environ.get("CI"))
+        out = None
+        depth0 = None
+        for n, i in enumerate(tqdm(idx, desc="loading images", unit="img", disable=disable, leave=False)):
+            img = read_image(self.image_paths[i])
+            self._check_size(i, img)
+            if out is None:
+                out = np.empty((len(idx), *img.pixels.shape), dtype=np.float32)
+                depth0 = img.bit_depth
+            elif img.pixels.shape != out.shape[1:]:
+                h, w = img.shape
+                raise InputError(
+                    f"image is {w}x{h} but the first image {self.image_names[idx[0]]!r} is "
+                    f"{out.shape[2]}x{out.shape[1]}", img.path)
+            elif self.encoding == "auto" and img.bit_depth != depth0:
+                raise InputError(
+                    f"bit depth {img.bit_depth} differs from the first image's ({depth0}); with no "
+                    f"'encoding' in {CAPTURE_FILE} a capture must not mix depths", img.path)
+            out[n] = self._linearise(i, img)
+        return out
+
+    def to_json(self) -> dict:
+        """The ``capture.json`` document of this capture."""
+        doc: dict = {"format": "ffls-capture", "version": 1, "images": list(self.image_names)}
+        if self.image_size is not None:
+            doc["image_size"] = [int(self.image_size[0]), int(self.image_size[1])]
+        if self.encoding != "auto":
+            doc["encoding"] = self.encoding
+        if self.K is not None:
+            cam = {"K": np.asarray(self.K).tolist(), "dist": np.asarray(self.dist).tolist()}
+            if not self.world_from_camera_is_default:
+                cam["world_from_camera"] = np.asarray(self.world_from_camera).tolist()
+            doc["camera"] = cam
+        elif not self.world_from_camera_is_default:
+            doc["camera"] = {"world_from_camera": np.asarray(self.world_from_camera).tolist()}
+        if self.sphere_radius is not None:
+            doc["sphere_radius"] = float(self.sphere_radius)
+        if self.spheres:
+            doc["spheres"] = [dict(s) for s in self.spheres]
+        if np.any(self.scene_center != 0):
+            doc["scene_center"] = np.asarray(self.scene_center, dtype=float).tolist()
+        doc["hemisphere"] = self.hemisphere
+        if self.units is not None:
+            doc["units"] = self.units
+        doc.update(self.extra)
+        return doc
+
+
+def _parse_camera(j: _Json, cam) -> tuple:
+    if not isinstance(cam, dict):
+        j.fail("camera", f"expected an object, got {_short(cam)}")
+    K = None
+    dist = np.zeros(5)
+    if "K" in cam:
+        K = j.array(cam["K"], "camera.K", (3, 3))
+        if not (K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1])):
+            j.fail("camera.K", "expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+    elif "dist" in cam:
+        j.fail("camera.K", "missing key (camera.dist is given)")
+    if "dist" in cam:
+        d = cam["dist"]
+        n = len(d) if isinstance(d, list) else -1
+        if n not in _DIST_LENGTHS:
+            j.fail("camera.dist", f"expected a list of {', '.join(map(str, _DIST_LENGTHS))} numbers (OpenCV), got {_short(d)}")
+        dist = j.array(d, "camera.dist", (n,))
+    wfc = conventions.DEFAULT_WORLD_FROM_CAMERA.copy()
+    default = True
+    if "world_from_camera" in cam:
+        wfc = j.array(cam["world_from_camera"], "camera.world_from_camera", (4, 4))
+        if not (conventions.is_rotation(wfc[:3, :3], atol=1e-4) and np.allclose(wfc[3], [0, 0, 0, 1])):
+            j.fail("camera.world_from_camera", "not a rigid transform (rotation block must be orthonormal with det 1, last row 0 0 0 1)")
+        default = False
+    unknown = set(cam) - {"K", "dist", "world_from_camera"}
+    if unknown:
+        j.fail("camera", f"unknown key {sorted(unknown)[0]!r}")
+    return K, dist, wfc, default
+
+
+def _parse_spheres(j: _Json, spheres) -> list:
+    if not isinstance(spheres, list):
+        j.fail("spheres", f"expected a list, got {_short(spheres)}")
+    out = []
+    for k, s in enumerate(spheres):
+        key = f"spheres[{k}]"
+        if not isinstance(s, dict):
+            j.fail(key, f"expected an object, got {_short(s)}")
+        item = {}
+        if "center" in s:
+            item["center"] = j.array(s["center"], key + ".center", (3,)).tolist()
+        if "center_px" in s:
+            item["center_px"] = j.array(s["center_px"], key + ".center_px", (2,)).tolist()
+            item["radius_px"] = j.number(j.require(s, "radius_px", key + "."), key + ".radius_px", positive=True)
+        if not item:
+            j.fail(key, "expected 'center' [x, y, z] or 'center_px' [u, v] with 'radius_px'")
+        for extra_key in set(s) - {"center", "center_px", "radius_px"}:
+            item[extra_key] = s[extra_key]
+        out.append(item)
+    return out
+
+
+def load_capture(folder: str | os.PathLike) -> Capture:
+    """Load and validate a capture folder.
+
+    Parameters
+    ----------
+    folder : path-like
+        Folder holding ``capture.json`` and the images it lists (``capture.json`` itself may be
+        passed too).
+
+    Returns
+    -------
+    Capture
+
+    Raises
+    ------
+    InputError
+        Missing folder or ``capture.json``, corrupt JSON, a missing key, a value of the wrong
+        type or shape, an unreadable response table, or a listed image that does not exist --
+        naming ``capture.json`` and the key or image.
+    """
+    folder = Path(folder)
+    if folder.name == CAPTURE_FILE and folder.is_file():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError("capture folder not found" if not folder.exists() else "not a folder", folder)
+    j = _Json(folder / CAPTURE_FILE)
+    doc = j.load("capture.json")
+    j.header(doc, "ffls-capture")
+    names = j.require(doc, "images")
+    if not isinstance(names, list) or not names:
+        j.fail("images", f"expected a non-empty list of file names, got {_short(names)}")
+    names = [_check_name(j, n, f"images[{k}]") for k, n in enumerate(names)]
+    seen = set()
+    for n in names:
+        if n in seen:
+            j.fail("images", f"image {n!r} is listed twice")
+        seen.add(n)
+    paths = [folder / n for n in names]
+    for n, p in zip(names, paths):
+        if not p.is_file():
+            j.fail("images", f"listed image {n!r} not found in {folder}")
+
+    image_size = None
+    if "image_size" in doc:
+        s = doc["image_size"]
+        if not (isinstance(s, list) and len(s) == 2 and all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in s)):
+            j.fail("image_size", f"expected [width, height] positive integers, got {_short(s)}")
+        image_size = (s[0], s[1])
+
+    encoding = doc.get("encoding", "auto")
+    response = None
+    if isinstance(encoding, dict):
+        if set(encoding) != {"response"}:
+            j.fail("encoding", "expected 'srgb', 'linear' or {\"response\": \"file.npy|.csv\"}")
+        rname = _check_name(j, encoding["response"], "encoding.response")
+        response = _read_table(folder / rname, j, "encoding.response")
+        encoding = {"response": rname}
+    elif "encoding" in doc and encoding not in _ENCODINGS:
+        j.fail("encoding", f"expected 'srgb', 'linear' or {{\"response\": file}}, got {_short(encoding)}")
+
+    K, dist, wfc, wfc_default = (None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True)
+    if "camera" in doc:
+        K, dist, wfc, wfc_default = _parse_camera(j, doc["camera"])
+
+    radius = None
+    if "sphere_radius" in doc:
+        radius = j.number(doc["sphere_radius"], "sphere_radius", positive=True)
+    spheres = _parse_spheres(j, doc["spheres"]) if "spheres" in doc else []
+    center = j.array(doc["scene_center"], "scene_center", (3,)) if "scene_center" in doc else np.zeros(3)
+    hemisphere = doc.get("hemisphere", "upper")
+    if hemisphere not in conventions.HEMISPHERES:
+        j.fail("hemisphere", f"expected one of {conventions.HEMISPHERES}, got {_short(hemisphere)}")
+    units = doc.get("units")
+    if units is not None and not isinstance(units, str):
+        j.fail("units", f"expected a string, got {_short(units)}")
+    extra = {k: v for k, v in doc.items() if k not in _CAPTURE_KEYS}
+    return Capture(
+        folder=folder, image_names=names, image_paths=paths, encoding=encoding, K=K, dist=dist,
+        world_from_camera=wfc, world_from_camera_is_default=wfc_default, sphere_radius=radius,
+        scene_center=center, hemisphere=hemisphere, spheres=spheres, image_size=image_size,
+        units=units, response=response, extra=extra,
+    )
+
+
+def save_capture(capture: Capture) -> Path:
+    """Write ``capture.json`` into ``capture.folder`` atomically.
+
+    Returns
+    -------
+    pathlib.Path
+        The written ``capture.json``.
+    """
+    return _write_json(capture.json_path, capture.to_json())
+
+
+# ----------------------------------------------------------------------------- Lights
+@dataclass
+class Lights:
+    """Light directions estimated for (or given with) the images of a capture.
+
+    Attributes
+    ----------
+    image_names : list of str
+    directions : (n, 3) float64 ndarray
+        Unit vectors in the world frame, from the scene centre toward the light.
+    positions : (n, 3) float64 ndarray
+        Light positions in world units, NaN where absent.
+    status : list of {'ok', 'rejected'}
+    reasons : list of str or None
+        Why a light was rejected (None for accepted ones).
+    extra : list of dict
+        Other per-light keys (e.g. ``uncertainty_deg``), kept for round trips.
+    """
+
+    image_names: list
+    directions: np.ndarray
+    positions: np.ndarray | None = None
+    status: list | None = None
+    reasons: list | None = None
+    extra: list | None = None
+
+    def __post_init__(self):
+        n = len(self.image_names)
+        self.image_names = list(self.image_names)
+        self.directions = np.asarray(self.directions, dtype=np.float64).reshape(n, 3)
+        self.positions = (np.full((n, 3), np.nan) if self.positions is None
+                          else np.asarray(self.positions, dtype=np.float64).reshape(n, 3))
+        self.status = ["ok"] * n if self.status is None else list(self.status)
+        self.reasons = [None] * n if self.reasons is None else list(self.reasons)
+        self.extra = [{} for _ in range(n)] if self.extra is None else [dict(e) for e in self.extra]
+        if not (len(self.status) == len(self.reasons) == len(self.extra) == n):
+            raise ValueError("Lights: image_names, status, reasons and extra must have the same length")
+        bad = [s for s in self.status if s not in ("ok", "rejected")]
+        if bad:
+            raise ValueError(f"Lights: status must be 'ok' or 'rejected', not {bad[0]!r}")
+
+    def __len__(self) -> int:
+        return len(self.image_names)
+
+    @property
+    def ok_mask(self) -> np.ndarray:
+        """(n,) bool: True for accepted lights."""
+        return np.array([s == "ok" for s in self.status], dtype=bool)
+
+    def accepted(self) -> tuple[np.ndarray, np.ndarray]:
+        """Indices (k,) int and directions (k, 3) float64 of the accepted lights."""
+        idx = np.flatnonzero(self.ok_mask)
+        return idx, self.directions[idx]
+
+    def to_json(self) -> dict:
+        """The ``lights.json`` document."""
+        lights = []
+        for i, name in enumerate(self.image_names):
+            item = {"image": name, "direction": [float(v) for v in self.directions[i]]}
+            if np.all(np.isfinite(self.positions[i])):
+                item["position"] = [float(v) for v in self.positions[i]]
+            item["status"] = self.status[i]
+            if self.reasons[i] is not None:
+                item["reason"] = self.reasons[i]
+            item.update(self.extra[i])
+            lights.append(item)
+        return {"format": "ffls-lights", "version": 1, "lights": lights}
+
+
+def _order_to_capture(j: _Json, names: list, capture: Capture) -> np.ndarray:
+    known = set(capture.image_names)
+    for n in names:
+        if n not in known:
+            j.fail("lights", f"image {n!r} is not in the capture's {CAPTURE_FILE}")
+    have = set(names)
+    for n in capture.image_names:
+        if n not in have:
+            j.fail("lights", f"capture image {n!r} has no light")
+    pos = {n: k for k, n in enumerate(names)}
+    return np.array([pos[n] for n in capture.image_names], dtype=np.intp)
+
+
+def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Lights:
+    """Load and validate a ``lights.json`` file.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``lights.json`` file.
+    capture : Capture, optional
+        When given, the light images must be exactly the capture's images, and the result is
+        reordered to the capture's image order (light ``i`` belongs to image ``i``).
+
+    Returns
+    -------
+    Lights
+        Directions renormalised to exact unit length.
+
+    Raises
+    ------
+    InputError
+        Corrupt JSON, missing keys, non-finite numbers, a direction that is not unit (within
+        ``UNIT_TOLERANCE``; the message gives the image and the norm), duplicate images, or
+        images that do not match the capture (naming the first one).
+    """
+    path = Path(path)
+    j = _Json(path)
+    doc = j.load("lights.json")
+    j.header(doc, "ffls-lights")
+    items = j.require(doc, "lights")
+    if not isinstance(items, list) or not items:
+        j.fail("lights", f"expected a non-empty list, got {_short(items)}")
+    names, dirs, pos, status, reasons, extra = [], [], [], [], [], []
+    for k, it in enumerate(items):
+        key = f"lights[{k}]"
+        if not isinstance(it, dict):
+            j.fail(key, f"expected an object, got {_short(it)}")
+        name = j.string(j.require(it, "image", key + "."), key + ".image")
+        if name in names:
+            j.fail(key + ".image", f"image {name!r} has two lights")
+        key = f"light for {name!r}"
+        d = j.array(j.require(it, "direction", key + ": "), key + ": direction", (3,))
+        norm = float(np.linalg.norm(d))
+        if abs(norm - 1.0) > UNIT_TOLERANCE:
+            j.fail(key, f"direction is not a unit vector (norm {norm:.6g}, tolerance {UNIT_TOLERANCE})")
+        p = j.array(it["position"], key + ": position", (3,)) if "position" in it else np.full(3, np.nan)
+        st = it.get("status", "ok")
+        if st not in ("ok", "rejected"):
+            j.fail(key, f"status must be 'ok' or 'rejected', got {_short(st)}")
+        reason = it.get("reason")
+        if st == "rejected" and not isinstance(reason, str):
+            j.fail(key, "a rejected light needs a 'reason' string")
+        if reason is not None and not isinstance(reason, str):
+            j.fail(key, f"reason must be a string, got {_short(reason)}")
+        ex = {kk: v for kk, v in it.items() if kk not in ("image", "direction", "position", "status", "reason")}
+        if "uncertainty_deg" in ex:
+            ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
+        names.append(name)
+        dirs.append(d / norm)
+        pos.append(p)
+        status.append(st)
+        reasons.append(reason)
+        extra.append(ex)
+    order = np.arange(len(names)) if capture is None else _order_to_capture(j, names, capture)
+    return Lights(
+        image_names=[names[i] for i in order],
+        directions=np.array(dirs)[order],
+        positions=np.array(pos)[order],
+        status=[status[i] for i in order],
+        reasons=[reasons[i] for i in order],
+        extra=[extra[i] for i in order],
+    )
+
+
+def save_lights(lights: Lights, path: str | os.PathLike) -> Path:
+    """Write ``lights.json`` atomically.
+
+    Raises
+    ------
+    ValueError
+        Non-finite or non-unit directions, or rejected lights without a reason (the file would
+        not load back).
+    """
+    d = np.asarray(lights.directions, dtype=np.float64)
+    if not np.all(np.isfinite(d)):
+        raise ValueError("save_lights: non-finite directions")
+    norms = np.linalg.norm(d, axis=1)
+    if np.any(np.abs(norms - 1) > UNIT_TOLERANCE):
+        i = int(np.argmax(np.abs(norms - 1)))
+        raise ValueError(f"save_lights: direction of {lights.image_names[i]!r} has norm {norms[i]:.6g}")
+    for name, st, r in zip(lights.image_names, lights.status, lights.reasons):
+        if st == "rejected" and not isinstance(r, str):
+            raise ValueError(f"save_lights: rejected light {name!r} needs a reason")
+    return _write_json(Path(path), lights.to_json())
+
+
+# ----------------------------------------------------------------------------- RTI .lp files
+#: Camera (OpenCV: x right, y down, z forward) from the RTI .lp frame (x right, y up, z toward the camera).
+_CAM_FROM_LP = np.diag([1.0, -1.0, -1.0])
+
+
+def lp_to_world(directions, world_from_camera=None) -> np.ndarray:
+    """Convert RTI ``.lp`` directions to the ffls world frame.
+
+    The ``.lp`` frame is the image's: x right, y up, z toward the camera. In OpenCV camera
+    coordinates (x right, y down, z forward) that is ``(x, -y, -z)``; the rotation block of
+    ``world_from_camera`` then takes it to the world.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Directions in the ``.lp`` frame.
+    world_from_camera : (4, 4) array_like, optional
+        Defaults to ``conventions.DEFAULT_WORLD_FROM_CAMERA`` (then .lp z -> world -Y, y -> +Z).
+
+    Returns
+    -------
+    (n, 3) float64 ndarray
+    """
+    wfc = conventions.DEFAULT_WORLD_FROM_CAMERA if world_from_camera is None else np.asarray(world_from_camera, dtype=np.float64)
+    R = wfc[:3, :3] @ _CAM_FROM_LP
+    return np.asarray(directions, dtype=np.float64) @ R.T
+
+
+def world_to_lp(directions, world_from_camera=None) -> np.ndarray:
+    """Inverse of :func:`lp_to_world`: world directions (n, 3) to the ``.lp`` frame."""
+    wfc = conventions.DEFAULT_WORLD_FROM_CAMERA if world_from_camera is None else np.asarray(world_from_camera, dtype=np.float64)
+    R = wfc[:3, :3] @ _CAM_FROM_LP
+    return np.asarray(directions, dtype=np.float64) @ R  # R orthonormal: inverse is R.T
+
+
+def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
+    """Read an RTI ``.lp`` light-position file.
+
+    Format: the first line is the number of lights n; then n lines ``filename x y z``
+    (whitespace separated; a file name may contain spaces). Blank lines are ignored.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    names : list of str
+        File names as written.
+    directions : (n, 3) float64 ndarray
+        Unit directions in the ``.lp`` frame (see :func:`lp_to_world`), renormalised.
+
+    Raises
+    ------
+    InputError
+        Missing file, a bad count, a count that does not match the lines, numbers that do not
+        parse, or non-unit vectors (naming the line).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(".lp file not found", path)
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as e:
+        raise InputError(f"cannot read .lp file ({e})", path) from None
+    rows = [(k + 1, ln.strip()) for k, ln in enumerate(lines) if ln.strip()]
+    if not rows:
+        raise InputError("empty .lp file", path)
+    try:
+        n = int(rows[0][1])
+    except ValueError:
+        raise InputError(f"line {rows[0][0]}: expected the number of lights, got {rows[0][1][:40]!r}", path) from None
+    if n <= 0 or n != len(rows) - 1:
+        raise InputError(f"the count on line {rows[0][0]} says {n} lights but {len(rows) - 1} follow", path)
+    names, dirs = [], []
+    for lineno, text in rows[1:]:
+        parts = text.rsplit(None, 3)
+        try:
+            if len(parts) != 4:
+                raise ValueError
+            d = np.array([float(v) for v in parts[1:]])
+        except ValueError:
+            raise InputError(f"line {lineno}: expected 'filename x y z', got {text[:60]!r}", path) from None
+        norm = float(np.linalg.norm(d))
+        if not np.all(np.isfinite(d)) or abs(norm - 1) > UNIT_TOLERANCE:
+            raise InputError(f"line {lineno}: direction of {parts[0]!r} is not a unit vector (norm {norm:.6g})", path)
+        names.append(parts[0])
+        dirs.append(d / norm)
+    return names, np.array(dirs)
+
+
+def write_lp(path: str | os.PathLike, names, directions) -> Path:
+    """Write an RTI ``.lp`` file atomically.
+
+    Parameters
+    ----------
+    path : path-like
+    names : sequence of str
+        Image file names (no line breaks).
+    directions : (n, 3) array_like
+        Unit directions in the ``.lp`` frame (see :func:`world_to_lp`).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    names = list(names)
+    d = np.asarray(directions, dtype=np.float64)
+    if d.shape != (len(names), 3):
+        raise ValueError(f"write_lp: directions must be ({len(names)}, 3), got {d.shape}")
+    if not np.all(np.isfinite(d)) or np.any(np.abs(np.linalg.norm(d, axis=1) - 1) > UNIT_TOLERANCE):
+        raise ValueError("write_lp: directions must be finite unit vectors")
+    for nm in names:
+        if not nm or "\n" in nm or "\r" in nm or nm != nm.strip():
+            raise ValueError(f"write_lp: invalid file name {nm!r}")
+    text = f"{len(names)}\n" + "".join(f"{nm} {x:.9f} {y:.9f} {z:.9f}\n" for nm, (x, y, z) in zip(names, d))
+    path = Path(path)
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def lights_from_lp(path: str | os.PathLike, capture: Capture) -> Lights:
+    """Lights of a capture from an RTI ``.lp`` file, converted to the world frame.
+
+    ``.lp`` file names are matched to the capture's images by base name (``.lp`` files often
+    hold absolute or Windows paths). Every capture image needs exactly one line.
+
+    Parameters
+    ----------
+    path : path-like
+    capture : Capture
+        Supplies the image order and ``world_from_camera``.
+
+    Returns
+    -------
+    Lights
+        In the capture's image order, all ``'ok'``.
+    """
+    path = Path(path)
+    names, d = read_lp(path)
+    base = [PurePosixPath(n.replace("\\", "/")).name for n in names]
+    by_base = {PurePosixPath(n.replace("\\", "/")).name: n for n in capture.image_names}
+    mapped = []
+    for b in base:
+        if b not in by_base:
+            raise InputError(f"image {b!r} is not in the capture's {CAPTURE_FILE}", path)
+        mapped.append(by_base[b])
+    if len(set(mapped)) != len(mapped):
+        raise InputError("an image is listed twice", path)
+    missing = [n for n in capture.image_names if n not in set(mapped)]
+    if missing:
+        raise InputError(f"capture image {missing[0]!r} has no light", path)
+    pos = {n: k for k, n in enumerate(mapped)}
+    order = [pos[n] for n in capture.image_names]
+    return Lights(list(capture.image_names), lp_to_world(d[order], capture.world_from_camera))

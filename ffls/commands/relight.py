@@ -1,0 +1,54 @@
+"""``ffls relight``: relight a capture under a light map (CPU, Masselus et al. 2002 section 6)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+NAME = "relight"
+HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
+DESCRIPTION = (
+    "Integrate the light map over the angular Voronoi cells of the capture's light directions "
+    "and write the weighted sum of the basis images: .exr is linear float, .png is tone-mapped sRGB."
+)
+
+OUTPUT_SUFFIXES = (".exr", ".png")
+
+
+def add_arguments(p):
+    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("--lights", default=None, help="lights.json (default: CAPTURE/lights.json)")
+    p.add_argument("--probe", required=True, help="HDR light map (.exr or .hdr)")
+    p.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
+    p.add_argument("--rotate-z", type=float, default=0.0, metavar="DEG",
+                   help="rotate the light map about +Z by DEG degrees (counter-clockwise from above)")
+    p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops for PNG output")
+    p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
+    p.add_argument("--cells-res", type=int, default=256, help="cell-texture resolution (0: exact k-d tree)")
+    p.add_argument("-o", "--out", required=True, help="output image, .exr or .png")
+
+
+def run(args) -> int:
+    from ..capture import load_capture, load_lights
+    from ..conventions import rotation_z
+    from ..errors import InputError
+    from ..imageio import write_exr, write_png
+    from ..lightmap import load_lightmap
+    from ..relight import relight_capture
+    from ..tonemap import to_uint8, tonemap
+
+    out = Path(args.out)
+    if out.suffix.lower() not in OUTPUT_SUFFIXES:
+        raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
+    capture = load_capture(args.capture)
+    lights = load_lights(args.lights if args.lights else Path(args.capture) / "lights.json", capture)
+    lightmap = load_lightmap(args.probe, layout=args.layout)
+    image, w = relight_capture(capture, lights, lightmap, rotation=rotation_z(args.rotate_z),
+                               cells_res=args.cells_res or None)
+    if out.suffix.lower() == ".exr":
+        write_exr(out, image)
+    else:
+        write_png(out, to_uint8(tonemap(image, exposure=args.exposure, method=args.tonemap)))
+    kept = w.total_power.sum() - w.dropped_power.sum()
+    frac = kept / w.total_power.sum() if w.total_power.sum() > 0 else 1.0
+    print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "
+          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used)")
+    return 0

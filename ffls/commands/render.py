@@ -1,0 +1,216 @@
+"""``ffls render``: relight a capture on the GPU (ffls.gpu.Engine); stills, or a turntable video.
+
+The GPU path is the default. Where no OpenGL 4.3 context can be created the command stops with
+one line saying so and suggesting ``--cpu`` (it never falls back silently: the two paths differ
+in speed by orders of magnitude and a CI job should notice). ``--cpu`` runs the reference path
+(:func:`ffls.voronoi.integrate_weights` + :func:`ffls.relight.relight_reference`, float64; with
+``--rank K`` the compressed basis' exact float64 algebra).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+NAME = "render"
+HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
+DESCRIPTION = (
+    "Relight a capture under an HDR light map with the GPU engine (pass 1: per-cell light-map "
+    "integration; pass 2: weighted sum of the basis images; tone mapping). .exr output is linear "
+    "float, .png tone-mapped sRGB. --turntable N rotates the map 360 degrees about +Z in N frames."
+)
+
+STILL_SUFFIXES = (".exr", ".png")
+
+
+def add_arguments(p):
+    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("--lights", default=None, help="lights.json (default: CAPTURE/lights.json)")
+    p.add_argument("--probe", required=True, help="HDR light map (.exr/.hdr) or a built-in name (sky, paper, ...)")
+    p.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
+    rot = p.add_mutually_exclusive_group()
+    rot.add_argument("--rotate-z", type=float, default=None, metavar="DEG",
+                     help="rotate the light map about +Z by DEG degrees (counter-clockwise from above)")
+    rot.add_argument("--rotate", default=None, metavar="YAW,PITCH,ROLL",
+                     help="rotate the light map by yaw (about +Z), pitch (+Y), roll (+X), degrees")
+    p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops (PNG/video)")
+    p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve (PNG/video)")
+    p.add_argument("--rank", type=int, default=None, metavar="K",
+                   help="use a compressed basis of K eigen-images (computed once, saved in the capture folder)")
+    p.add_argument("--dtype", default="f16", choices=("f16", "f32"), help="GPU storage of the basis")
+    p.add_argument("--cells-res", type=int, default=256, help="cell-texture resolution")
+    p.add_argument("--turntable", type=int, default=None, metavar="N",
+                   help="write N frames over 360 degrees about +Z: -o OUT.mp4 or a folder of PNGs")
+    p.add_argument("--fps", type=float, default=30.0, help="frames per second of the turntable video")
+    p.add_argument("--cpu", action="store_true", help="use the CPU reference path instead of the GPU")
+    p.add_argument("-o", "--out", required=True, help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
+
+
+def parse_rotation(args) -> np.ndarray:
+    """The light-map rotation (3, 3) from ``--rotate-z`` or ``--rotate``."""
+    from ..conventions import rotation_ypr, rotation_z
+    from ..errors import InputError
+
+    if args.rotate is not None:
+        try:
+            yaw, pitch, roll = (float(v) for v in args.rotate.split(","))
+        except ValueError:
+            raise InputError(f"--rotate wants YAW,PITCH,ROLL in degrees, not {args.rotate!r}") from None
+        return rotation_ypr(yaw, pitch, roll)
+    return rotation_z(args.rotate_z or 0.0)
+
+
+def load_probe(spec: str, layout=None):
+    """A light map from a file path, or a built-in by name."""
+    from ..errors import InputError
+    from ..lightmap import builtin_lightmap, load_lightmap
+
+    if Path(spec).exists():
+        return load_lightmap(spec, layout=layout)
+    if Path(spec).suffix:
+        raise InputError("light map not found", spec)
+    return builtin_lightmap(spec)
+
+
+class _CpuRenderer:
+    """Reference path with the Engine's interface subset used here (float64)."""
+
+    def __init__(self, capture, lights, rank, cells_res):
+        from ..errors import InputError
+        from ..gpu.engine import _capture_basis
+        from ..voronoi import bake_cells
+
+        self.basis, self.directions = _capture_basis(capture, lights)
+        self.hemisphere = capture.hemisphere
+        self.cells = bake_cells(self.directions, self.hemisphere, cells_res)
+        self.cb = None
+        if rank is not None:
+            from ..compress import compress_basis, load_compressed
+
+            try:
+                self.cb = load_compressed(capture.folder, self.basis.shape[0], self.basis.shape[1:3], rank,
+                                          basis=self.basis)
+            except InputError:
+                self.cb = compress_basis(self.basis, rank)
+        self.lm, self.R = None, np.eye(3)
+
+    def set_lightmap(self, lm):
+        self.lm = lm
+
+    def set_rotation(self, R):
+        self.R = R
+
+    def render(self, exposure=0.0, tonemap="srgb"):
+        from ..relight import relight_reference
+        from ..tonemap import tonemap as tm
+        from ..voronoi import integrate_weights
+
+        w = integrate_weights(self.lm, self.directions, self.R, self.hemisphere, cells=self.cells).weights
+        self.hdr = self.cb.relight(w) if self.cb is not None else relight_reference(w, self.basis)
+        self.display = tm(self.hdr, exposure, tonemap)
+
+    def read_hdr(self):
+        return self.hdr.astype(np.float32)
+
+    def read_display(self):
+        from ..tonemap import to_uint8
+
+        return to_uint8(self.display)
+
+    def release(self):
+        pass
+
+
+def _make_renderer(args, capture, lights):
+    if args.cpu:
+        return _CpuRenderer(capture, lights, args.rank, args.cells_res), None
+    from ..errors import GLUnavailable
+    from ..gpu.context import create_headless_context
+    from ..gpu.engine import Engine
+
+    try:
+        ctx = create_headless_context()
+    except GLUnavailable as e:
+        raise GLUnavailable(f"no GPU path ({e.message}); rerun with --cpu for the CPU reference path") from None
+    eng = Engine.from_capture(ctx, capture, lights, dtype=args.dtype, rank=args.rank, cell_res=args.cells_res)
+    return eng, ctx
+
+
+def _write_still(out: Path, r, args):
+    from ..imageio import write_exr, write_png
+
+    if out.suffix.lower() == ".exr":
+        write_exr(out, r.read_hdr())
+    else:
+        write_png(out, r.read_display())
+
+
+def _write_turntable(out: Path, r, R0, args):
+    import cv2
+    from tqdm import tqdm
+
+    from ..conventions import rotation_z
+    from ..errors import FflsError, InputError, atomic_output
+    from ..imageio import write_png
+
+    n = args.turntable
+    if n < 1:
+        raise InputError(f"--turntable needs N >= 1, not {n}")
+    frames = ((k, rotation_z(360.0 * k / n) @ R0) for k in range(n))
+    bar = dict(total=n, desc="ffls render", unit="frame")
+    if out.suffix.lower() == ".mp4":
+        with atomic_output(out) as tmp:
+            writer = None
+            try:
+                for k, R in tqdm(frames, **bar):
+                    r.set_rotation(R)
+                    r.render(args.exposure, args.tonemap)
+                    img = r.read_display()
+                    if writer is None:
+                        h, w = img.shape[:2]
+                        writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps), (w, h))
+                        if not writer.isOpened():
+                            raise FflsError("OpenCV cannot write mp4 (mp4v) here; use -o DIR/ for PNG frames", out)
+                    writer.write(np.ascontiguousarray(img[..., ::-1]))
+            finally:
+                if writer is not None:
+                    writer.release()
+        return f"{out} ({n} frames, {args.fps:g} fps)"
+    if out.suffix:
+        raise InputError("turntable output must be .mp4 or a folder", out)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, R in tqdm(frames, **bar):
+        r.set_rotation(R)
+        r.render(args.exposure, args.tonemap)
+        write_png(out / f"frame_{k:04d}.png", r.read_display())
+    return f"{out}/frame_0000..{n - 1:04d}.png"
+
+
+def run(args) -> int:
+    from ..capture import load_capture, load_lights
+    from ..errors import InputError
+
+    out = Path(args.out)
+    if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
+        raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
+    R0 = parse_rotation(args)
+    capture = load_capture(args.capture)
+    lights = load_lights(args.lights if args.lights else Path(args.capture) / "lights.json", capture)
+    lightmap = load_probe(args.probe, args.layout)
+    r, ctx = _make_renderer(args, capture, lights)
+    try:
+        r.set_lightmap(lightmap)
+        if args.turntable is not None:
+            what = _write_turntable(out, r, R0, args)
+        else:
+            r.set_rotation(R0)
+            r.render(args.exposure, args.tonemap)
+            _write_still(out, r, args)
+            what = str(out)
+        path = "cpu reference" if args.cpu else f"gpu {getattr(r, 'basis_info', {}).get('dtype', '')}"
+        print(f"ffls render: {what} ({path}{'' if args.rank is None else f', rank {args.rank}'})")
+    finally:
+        r.release()
+        if ctx is not None:
+            ctx.release()
+    return 0

@@ -1,0 +1,317 @@
+"""Compressed radiance basis: mean image + K eigen-images from a randomised SVD (PCA).
+
+Each basis image is approximated as ``B_i ~= M + sum_k U[i, k] E_k`` (per channel), so the
+relit image becomes
+
+    relit = sum_i w_i B_i ~= (sum_i w_i) M + sum_k c_k E_k,   c_k = sum_i U[i, k] w_i,
+
+and pass 2 sums ``K + 1`` layers ``[M, E_1..E_K]`` with coefficients ``c = P^T w`` instead of
+``n`` layers (:meth:`CompressedBasis.projection_matrix`, ``P[:, 0] = 1``).
+
+Two modes:
+
+* ``'per_channel'`` (default): one SVD per colour channel, ``E_k`` of channel c spans only that
+  channel; loadings ``U`` are ``(n, K, 3)``. At the same K and the same storage
+  ``(K, H, W, 3)`` it is never worse than a shared basis (it is optimal per channel); on the
+  synthetic capture both give the same error to 2 digits (docs/gpu.md, "Compressed basis"),
+  at about three times the SVD cost.
+* ``'shared'``: one SVD of the images as vectors of length ``H W 3``; the loadings are the same
+  for the three channels (stored broadcast to ``(n, K, 3)``).
+
+The SVD is the randomised range finder with power (subspace) iterations of N. Halko,
+P.-G. Martinsson, J. A. Tropp, "Finding structure with randomness: probabilistic algorithms for
+constructing approximate matrix decompositions", SIAM Review 53(2), 2011 (Algorithms 4.4 + 5.1):
+``Y = X Omega``, ``q`` rounds of ``Q = qr(X (X^T Q))``, then the exact SVD of the small
+``Q^T X``. The products run in float32 BLAS, the small factorisations in float64.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, atomic_output
+
+__all__ = ["CompressedBasis", "compress_basis", "randomized_svd_Halko2011", "save_compressed",
+           "load_compressed", "basis_checksum", "COMPRESSED_FILENAME", "MODES"]
+
+#: File name of a compressed basis inside a capture folder.
+COMPRESSED_FILENAME = "basis_compressed.npz"
+MODES = ("per_channel", "shared")
+_FORMAT_VERSION = 1
+
+
+@dataclass
+class CompressedBasis:
+    """Mean image + K eigen-images of a basis ``(n, H, W, 3)``.
+
+    Attributes
+    ----------
+    mean : (H, W, 3) float32
+        Mean basis image ``M``.
+    components : (K, H, W, 3) float32
+        Eigen-images ``E_k`` (singular value folded in).
+    loadings : (n, K, 3) float32
+        ``U[i, k, c]``; orthonormal columns per channel.
+    singular_values : (K, 3) float64
+    mode : {'per_channel', 'shared'}
+    info : dict
+        Parameters (seed, oversample, power_iters), timing, and the relative Frobenius error of
+        the reconstruction when it was measured.
+    """
+
+    mean: np.ndarray
+    components: np.ndarray
+    loadings: np.ndarray
+    singular_values: np.ndarray
+    mode: str = "per_channel"
+    info: dict = field(default_factory=dict)
+
+    @property
+    def rank(self) -> int:
+        """K, the number of eigen-images."""
+        return int(self.components.shape[0])
+
+    @property
+    def n_lights(self) -> int:
+        return int(self.loadings.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of the images."""
+        return tuple(self.mean.shape[:2])
+
+    def project_weights(self, weights) -> np.ndarray:
+        """Coefficients ``c_k = sum_i U[i, k] w_i`` of the eigen-images.
+
+        Parameters
+        ----------
+        weights : (n, 3) array_like
+
+        Returns
+        -------
+        (K, 3) float64
+            The mean term's coefficient is ``weights.sum(0)`` (see :meth:`layer_coefficients`).
+        """
+        w = _check_weights(weights, self.n_lights)
+        return np.einsum("nkc,nc->kc", self.loadings.astype(np.float64), w)
+
+    def layer_coefficients(self, weights) -> np.ndarray:
+        """Coefficients ``(K + 1, 3)`` float64 of the layers ``[M, E_1..E_K]``: ``P^T w``."""
+        w = _check_weights(weights, self.n_lights)
+        return np.concatenate([w.sum(0, keepdims=True), self.project_weights(w)], axis=0)
+
+    def layers(self) -> np.ndarray:
+        """The ``K + 1`` images ``[M, E_1..E_K]`` as ``(K + 1, H, W, 3)`` float32 (pass-2 basis)."""
+        return np.concatenate([self.mean[None], self.components], axis=0).astype(np.float32, copy=False)
+
+    def projection_matrix(self) -> np.ndarray:
+        """``P`` ``(n, K + 1, 3)`` float32 with ``P[:, 0] = 1`` and ``P[:, 1:] = U``."""
+        P = np.ones((self.n_lights, self.rank + 1, 3), dtype=np.float32)
+        P[:, 1:] = self.loadings
+        return P
+
+    def relight(self, weights) -> np.ndarray:
+        """Relit image ``(H, W, 3)`` float64 from the compressed basis (exact algebra, float64)."""
+        c = self.layer_coefficients(weights)
+        out = c[0] * self.mean.astype(np.float64)
+        for k in range(self.rank):
+            out += c[k + 1] * self.components[k].astype(np.float64)
+        return out
+
+    def reconstruct(self, i: int) -> np.ndarray:
+        """Approximation ``(H, W, 3)`` float64 of basis image ``i``."""
+        return self.mean.astype(np.float64) + np.einsum("kc,khwc->hwc", self.loadings[i].astype(np.float64),
+                                                        self.components.astype(np.float64))
+
+
+def _check_weights(weights, n) -> np.ndarray:
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != (n, 3):
+        raise ValueError(f"weights must have shape ({n}, 3), not {w.shape}")
+    return w
+
+
+def randomized_svd_Halko2011(X: np.ndarray, rank: int, oversample: int = 10, power_iters: int = 2,
+                             seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Truncated SVD ``X ~= U diag(s) Vt`` by randomised subspace iteration (Halko et al. 2011).
+
+    Parameters
+    ----------
+    X : (m, D) float32 array
+        ``m`` small (lights), ``D`` large (pixels).
+    rank : int
+        K, 1 <= K <= m.
+    oversample : int
+        Extra sketch columns ``p`` (``l = K + p``, clipped to m).
+    power_iters : int
+        Subspace iterations ``q``; each re-orthonormalises (Algorithm 4.4).
+    seed : int
+
+    Returns
+    -------
+    U : (m, K) float64, orthonormal columns
+    s : (K,) float64, non-increasing
+    Vt : (K, D) float32, orthonormal rows
+    """
+    m, D = X.shape
+    if not 1 <= rank <= m:
+        raise ValueError(f"rank must be in [1, {m}], not {rank}")
+    l = min(m, rank + oversample)
+    rng = np.random.default_rng(seed)
+    if l == m:  # the sketch spans everything: the exact range is the identity
+        Q = np.eye(m)
+    else:
+        omega = rng.standard_normal((D, l), dtype=np.float32)
+        Q, _ = np.linalg.qr((X @ omega).astype(np.float64))
+        for _ in range(power_iters):
+            Z, _ = np.linalg.qr((X.T @ Q.astype(np.float32)).astype(np.float64))
+            Q, _ = np.linalg.qr((X @ Z.astype(np.float32)).astype(np.float64))
+    Bm = Q.T.astype(np.float32) @ X  # (l, D)
+    # SVD of the small (l, D) matrix through its (l, l) Gram matrix, in float64
+    G = Bm.astype(np.float64) @ Bm.T.astype(np.float64)
+    evals, evecs = np.linalg.eigh(G)
+    order = np.argsort(evals)[::-1][:rank]
+    s = np.sqrt(np.maximum(evals[order], 0.0))
+    Ub = evecs[:, order]
+    inv = np.divide(1.0, s, out=np.zeros_like(s), where=s > s.max(initial=0.0) * 1e-12)
+    Vt = ((Ub * inv).T.astype(np.float32)) @ Bm
+    return Q @ Ub, s, Vt
+
+
+def compress_basis(basis, rank: int, seed: int = 0, mode: str = "per_channel", oversample: int = 10,
+                   power_iters: int = 2) -> CompressedBasis:
+    """Compress a basis to its mean and ``rank`` eigen-images (randomised PCA).
+
+    Parameters
+    ----------
+    basis : (n, H, W, 3) float array
+        Finite linear radiance.
+    rank : int
+        K, 1 <= K <= n - 1 (the mean takes one degree of freedom; K = n - 1 is exact).
+    seed : int
+        Seed of the random sketch (results are deterministic for a seed).
+    mode : {'per_channel', 'shared'}
+    oversample, power_iters : int
+        See :func:`randomized_svd_Halko2011`.
+
+    Returns
+    -------
+    CompressedBasis
+    """
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, not {mode!r}")
+    b = np.asarray(basis)
+    if b.ndim != 4 or b.shape[-1] != 3:
+        raise ValueError(f"basis must be (n, H, W, 3), not {b.shape}")
+    n, H, W, _ = b.shape
+    if not 1 <= rank <= max(n - 1, 1):
+        raise ValueError(f"rank must be in [1, {max(n - 1, 1)}] for {n} lights, not {rank}")
+    if not np.all(np.isfinite(b)):
+        raise ValueError("basis has NaN/Inf values")
+    t0 = time.perf_counter()
+    mean = b.mean(axis=0, dtype=np.float64).astype(np.float32)
+    comps = np.empty((rank, H, W, 3), dtype=np.float32)
+    loadings = np.empty((n, rank, 3), dtype=np.float32)
+    svals = np.empty((rank, 3))
+    if mode == "shared":
+        X = b.reshape(n, -1).astype(np.float32) - mean.reshape(1, -1)
+        U, s, Vt = randomized_svd_Halko2011(X, rank, oversample, power_iters, seed)
+        comps[:] = (s[:, None].astype(np.float32) * Vt).reshape(rank, H, W, 3)
+        loadings[:] = U[:, :, None]
+        svals[:] = s[:, None]
+    else:
+        for c in range(3):
+            X = b[..., c].reshape(n, -1).astype(np.float32) - mean[..., c].reshape(1, -1)
+            U, s, Vt = randomized_svd_Halko2011(X, rank, oversample, power_iters, seed + c)
+            comps[..., c] = (s[:, None].astype(np.float32) * Vt).reshape(rank, H, W)
+            loadings[..., c] = U
+            svals[:, c] = s
+            del X
+    info = {"seed": seed, "oversample": oversample, "power_iters": power_iters,
+            "seconds": time.perf_counter() - t0, "n": n, "H": H, "W": W, "basis_sum": basis_checksum(b)}
+    return CompressedBasis(mean, comps, loadings, svals, mode, info)
+
+
+def basis_checksum(basis) -> float:
+    """A cheap fingerprint of a basis (float64 sum of |x| weighted by the light index + 1).
+
+    Stored in ``info['basis_sum']`` so that a saved compression of other images is not reused.
+    """
+    b = np.asarray(basis)
+    return float(sum((i + 1) * np.abs(b[i], dtype=np.float64).sum() for i in range(b.shape[0])))
+
+
+def save_compressed(cb: CompressedBasis, folder, filename: str = COMPRESSED_FILENAME) -> Path:
+    """Write ``cb`` to ``folder/filename`` (.npz, atomically).
+
+    Returns
+    -------
+    Path of the written file.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError("capture folder does not exist", folder)
+    path = folder / filename
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, version=np.int64(_FORMAT_VERSION), mean=cb.mean, components=cb.components,
+                     loadings=cb.loadings, singular_values=cb.singular_values, mode=np.str_(cb.mode),
+                     info_keys=np.array(list(cb.info.keys()), dtype=str),
+                     info_values=np.array([float(v) for v in cb.info.values()]))
+    return path
+
+
+def load_compressed(folder_or_file, n_lights: int | None = None, shape: tuple[int, int] | None = None,
+                    rank: int | None = None, basis=None) -> CompressedBasis:
+    """Read a compressed basis written by :func:`save_compressed`.
+
+    Parameters
+    ----------
+    folder_or_file : path-like
+        A capture folder (reads :data:`COMPRESSED_FILENAME`) or the .npz itself.
+    n_lights, shape : optional
+        Checked against the file (a stale file of another capture is refused).
+    rank : int, optional
+        Keep only the first ``rank`` eigen-images (must be <= the stored rank).
+    basis : (n, H, W, 3) array, optional
+        The basis it should have been made from (checked with :func:`basis_checksum`).
+
+    Raises
+    ------
+    InputError
+        Missing, corrupt or inconsistent file.
+    """
+    p = Path(folder_or_file)
+    path = p / COMPRESSED_FILENAME if p.is_dir() else p
+    if not path.is_file():
+        raise InputError("no compressed basis (run with --rank K to create one)", path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if int(z["version"]) != _FORMAT_VERSION:
+                raise InputError(f"compressed basis format {int(z['version'])}, expected {_FORMAT_VERSION}", path)
+            cb = CompressedBasis(z["mean"], z["components"], z["loadings"], z["singular_values"], str(z["mode"]),
+                                 dict(zip([str(k) for k in z["info_keys"]], [float(v) for v in z["info_values"]])))
+    except InputError:
+        raise
+    except (OSError, KeyError, ValueError) as e:
+        raise InputError(f"corrupt compressed basis: {e}", path) from None
+    K = cb.rank
+    if cb.components.shape[1:] != cb.mean.shape or cb.loadings.shape[1:] != (K, 3) or cb.mean.shape[-1:] != (3,):
+        raise InputError("inconsistent array shapes in compressed basis", path)
+    if n_lights is not None and cb.n_lights != n_lights:
+        raise InputError(f"compressed basis has {cb.n_lights} lights, the capture {n_lights}", path)
+    if shape is not None and tuple(cb.shape) != tuple(shape):
+        raise InputError(f"compressed basis images are {cb.shape}, the capture's {tuple(shape)}", path)
+    if basis is not None:
+        want = basis_checksum(basis)
+        if abs(cb.info.get("basis_sum", np.nan) - want) > 1e-6 * max(abs(want), 1e-30):
+            raise InputError("compressed basis was made from other images (stale file)", path)
+    if rank is not None:
+        if rank > K:
+            raise InputError(f"compressed basis has rank {K} < requested {rank}", path)
+        cb = CompressedBasis(cb.mean, cb.components[:rank], cb.loadings[:, :rank], cb.singular_values[:rank],
+                             cb.mode, cb.info)
+    return cb

@@ -1,0 +1,240 @@
+"""Radiance basis on the GPU: float16 (or float32) texture arrays with a per-dataset scale.
+
+A basis ``(n, H, W, 3)`` float32 is uploaded as one or more ``sampler2DArray`` textures, layer
+``i`` holding light ``i``. Float16 storage multiplies every value by one power-of-two scale
+``s`` (exact in binary floating point) chosen so that the largest magnitude lands at
+:data:`F16_TARGET_MAX` = 2**12, far inside float16's range (65504) and far above its smallest
+normal (2**-14): a 1e6 pixel becomes 1e6 * 2**-8 = 3906.25, never ``inf``. Pass 2 multiplies
+its float32 accumulator by ``1 / s``.
+
+The conversion is checked, never silent (:class:`Float16Report`): a non-finite input raises,
+an overflow to ``inf`` raises, and a *significant* value (``|x| >= SIGNIFICANT_REL * max|x|``)
+that becomes zero or subnormal raises.
+
+Limits: if ``n`` exceeds ``GL_MAX_ARRAY_TEXTURE_LAYERS`` (or ``max_layers``) the basis is split
+into several arrays and pass 2 sums over all of them; if the whole basis exceeds the memory
+budget it is refused with a one-line :class:`ffls.errors.InputError`. Nothing is ever truncated.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures"]
+
+#: The largest basis magnitude after scaling to float16 (2**12; float16 max is 65504).
+F16_TARGET_MAX = 2.0 ** 12
+#: Values with ``|x| >= SIGNIFICANT_REL * max|x|`` must survive float16 as normal numbers.
+SIGNIFICANT_REL = 1e-6
+#: Default memory budget for basis textures, bytes (refused above it).
+DEFAULT_BUDGET = 4 * 1024 ** 3
+
+_F16_MIN_NORMAL = 2.0 ** -14
+
+
+@dataclass(frozen=True)
+class Float16Report:
+    """What the float16 conversion did to a basis.
+
+    Attributes
+    ----------
+    scale : float
+        Power of two applied before the conversion (stored = round_f16(x * scale)).
+    max_abs : float
+        Largest input magnitude.
+    n_overflow : int
+        Values that became ``inf`` (always 0 on return: conversion raises otherwise).
+    n_underflow : int
+        Significant values (``|x| >= SIGNIFICANT_REL * max_abs``) that became zero or subnormal
+        (always 0 on return).
+    n_flushed : int
+        Non-zero, insignificant values that became zero or subnormal (reported, allowed).
+    max_rel_error : float
+        Largest relative rounding error over significant values (<= 2**-11 for normal float16).
+    """
+
+    scale: float
+    max_abs: float
+    n_overflow: int
+    n_underflow: int
+    n_flushed: int
+    max_rel_error: float
+
+
+def choose_scale(max_abs: float, target: float = F16_TARGET_MAX) -> float:
+    """Power-of-two scale ``s`` with ``max_abs * s`` in ``(target / 2, target]``; 1 for an all-zero basis.
+
+    Parameters
+    ----------
+    max_abs : float
+        Largest magnitude of the basis, finite and >= 0.
+    target : float
+        Where the largest magnitude should land.
+    """
+    if not np.isfinite(max_abs) or max_abs < 0:
+        raise ValueError(f"max_abs must be finite and >= 0, not {max_abs}")
+    if max_abs == 0:
+        return 1.0
+    return float(2.0 ** np.floor(np.log2(target / max_abs)))
+
+
+def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: int = 64,
+               max_abs: float | None = None) -> tuple[np.ndarray, Float16Report]:
+    """Scale and convert a basis to float16, checking overflow and underflow.
+
+    Parameters
+    ----------
+    basis : (n, ...) float array
+        Finite values.
+    scale : float, optional
+        Scale to apply; default :func:`choose_scale` of the basis.
+    path : path-like, optional
+        Named in errors.
+    chunk : int
+        Layers converted at a time (bounds the temporaries).
+    max_abs : float, optional
+        The dataset's largest magnitude when ``basis`` is one part of it (defines which values
+        are significant); default the largest magnitude of ``basis``.
+
+    Returns
+    -------
+    (n, ...) float16 ndarray, Float16Report
+
+    Raises
+    ------
+    InputError
+        On NaN/Inf input, on overflow to inf, or on underflow of significant values.
+    """
+    basis = np.asarray(basis)
+    if basis.size and not np.all(np.isfinite(basis)):
+        bad = int(np.count_nonzero(~np.isfinite(basis)))
+        raise InputError(f"basis has {bad} NaN/Inf values; cannot upload", path)
+    if max_abs is None:
+        max_abs = float(np.max(np.abs(basis))) if basis.size else 0.0
+    if scale is None:
+        scale = choose_scale(max_abs)
+    out = np.empty(basis.shape, dtype=np.float16)
+    n_over = n_under = n_flush = 0
+    rel = 0.0
+    sig = SIGNIFICANT_REL * max_abs
+    for a in range(0, max(basis.shape[0], 1) if basis.ndim else 1, chunk):
+        x = np.asarray(basis[a:a + chunk], dtype=np.float32) * np.float32(scale)
+        with np.errstate(over="ignore"):
+            h = x.astype(np.float16)
+        out[a:a + chunk] = h
+        hf = h.astype(np.float32)
+        n_over += int(np.count_nonzero(np.isinf(hf)))
+        tiny = (np.abs(hf) < _F16_MIN_NORMAL) & (x != 0)
+        significant = np.abs(x) >= np.float32(sig * scale)
+        n_under += int(np.count_nonzero(tiny & significant & (sig > 0)))
+        n_flush += int(np.count_nonzero(tiny & ~significant))
+        m = significant & (x != 0) & np.isfinite(hf)
+        if np.any(m):
+            rel = max(rel, float(np.max(np.abs(hf[m] - x[m]) / np.abs(x[m]))))
+    report = Float16Report(float(scale), max_abs, n_over, n_under, n_flush, rel)
+    if n_over:
+        raise InputError(f"float16 basis: {n_over} values overflow to inf at scale {scale:g} (max |x| = {max_abs:g})", path)
+    if n_under:
+        raise InputError(f"float16 basis: {n_under} significant values underflow at scale {scale:g} "
+                         f"(max |x| = {max_abs:g}); use dtype='f32'", path)
+    return out, report
+
+
+class BasisTextures:
+    """A basis ``(n, H, W, 3)`` resident on the GPU as one or more texture arrays.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    basis : (n, H, W, 3) float32 array
+        Linear radiance, finite. Row 0 of the image is the top row of the photograph; the
+        texture stores it at ``texelFetch`` row 0 (no flip).
+    dtype : {'f16', 'f32'}
+        Storage: RGBA16F with a power-of-two per-dataset scale, or RGBA32F with scale 1.
+    max_layers : int, optional
+        Layers per array; default ``GL_MAX_ARRAY_TEXTURE_LAYERS``. Larger ``n`` is split.
+    budget_bytes : int
+        Refuse (``InputError``) a basis whose GPU storage exceeds this.
+    path : path-like, optional
+        Named in errors (the capture folder).
+
+    Attributes
+    ----------
+    textures : list of moderngl.TextureArray
+        ``textures[j]`` holds layers ``offsets[j] : offsets[j] + counts[j]``.
+    offsets, counts : list of int
+    scale : float
+        Stored value = radiance * scale; pass 2 multiplies by ``1 / scale``.
+    report : Float16Report or None
+        For ``dtype='f16'``.
+    """
+
+    def __init__(self, ctx, basis, dtype: str = "f16", *, max_layers: int | None = None,
+                 budget_bytes: int = DEFAULT_BUDGET, path=None):
+        if dtype not in ("f16", "f32"):
+            raise ValueError(f"dtype must be 'f16' or 'f32', not {dtype!r}")
+        basis = np.asarray(basis)
+        if basis.ndim != 4 or basis.shape[-1] != 3 or basis.shape[0] < 1:
+            raise InputError(f"basis must have shape (n, H, W, 3) with n >= 1, not {basis.shape}", path)
+        n, H, W, _ = basis.shape
+        self.ctx = ctx
+        self.dtype = dtype
+        self.n = int(n)
+        self.size = (int(W), int(H))
+        max_tex = int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384)
+        if W > max_tex or H > max_tex:
+            raise InputError(f"basis images {W}x{H} exceed GL_MAX_TEXTURE_SIZE {max_tex}", path)
+        hw_layers = int(ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS") or 256)
+        self.max_layers = hw_layers if max_layers is None else min(int(max_layers), hw_layers)
+        if self.max_layers < 1:
+            raise ValueError("max_layers must be >= 1")
+        itemsize = 2 if dtype == "f16" else 4
+        self.nbytes = n * H * W * 4 * itemsize
+        if self.nbytes > budget_bytes:
+            raise InputError(
+                f"basis of {n} images {W}x{H} needs {self.nbytes / 2**20:.0f} MiB of GPU memory as {dtype}, "
+                f"over the budget of {budget_bytes / 2**20:.0f} MiB; use --rank K (compression), dtype 'f16', "
+                f"or a smaller capture", path)
+        if not np.all(np.isfinite(basis)):
+            raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
+        max_abs = float(np.max(np.abs(basis)))
+        self.scale = choose_scale(max_abs) if dtype == "f16" else 1.0
+        self.report = None
+        self.textures, self.offsets, self.counts = [], [], []
+        rel, n_flush = 0.0, 0
+        try:
+            for a in range(0, n, self.max_layers):
+                b = min(n, a + self.max_layers)
+                rgba = np.zeros((b - a, H, W, 4), dtype=np.float16 if dtype == "f16" else np.float32)
+                if dtype == "f16":
+                    h, rep = to_float16(basis[a:b], scale=self.scale, path=path, max_abs=max_abs)
+                    rgba[..., :3] = h
+                    rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
+                else:
+                    rgba[..., :3] = basis[a:b]
+                tex = ctx.texture_array((W, H, b - a), 4, data=rgba.tobytes(), dtype="f2" if dtype == "f16" else "f4")
+                tex.filter = (0x2600, 0x2600)  # GL_NEAREST; pass 2 uses texelFetch anyway
+                self.textures.append(tex)
+                self.offsets.append(a)
+                self.counts.append(b - a)
+        except BaseException:
+            self.release()
+            raise
+        if dtype == "f16":
+            self.report = Float16Report(self.scale, max_abs, 0, 0, n_flush, rel)
+
+    @property
+    def n_arrays(self) -> int:
+        """Number of texture arrays the basis was split into."""
+        return len(self.textures)
+
+    def release(self) -> None:
+        """Release the textures."""
+        from .weighted_sum import release_gl
+
+        for t in self.textures:
+            release_gl(t)
+        self.textures = []

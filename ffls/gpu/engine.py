@@ -1,0 +1,324 @@
+"""The relighting engine: light map -> pass 1 (cell weights) -> pass 2 (weighted sum) -> tone map.
+
+:class:`Engine` owns the GPU state of one capture: the basis texture arrays (float16 with a
+per-dataset scale, or float32; optionally a compressed basis of K eigen-images), pass 1
+(``ffls.gpu.integrate.CellIntegrator`` when available, else the CPU integration
+:func:`ffls.voronoi.integrate_weights` over the same baked cell texture), pass 2
+(:class:`ffls.gpu.weighted_sum.WeightedSum`) and the display pass. It never creates a context.
+
+Typical use (viewer or CLI)::
+
+    eng = Engine.from_capture(ctx, capture, lights, dtype="f16")
+    eng.set_lightmap(lm)
+    eng.set_rotation(rotation_z(30))
+    eng.render(exposure=0.0, tonemap="aces")
+    imgui.image(eng.display_texture.glo, eng.size)    # row 0 = top row: uv (0,0)-(1,1) is upright
+    hdr = eng.read_hdr()
+
+Only what changed is recomputed: a new exposure or tone curve reruns the display pass only; a
+new light map or rotation reruns pass 1 and 2.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..conventions import check_hemisphere, is_rotation
+from ..errors import InputError
+from .basis import DEFAULT_BUDGET, BasisTextures
+from .weighted_sum import Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
+
+__all__ = ["Engine"]
+
+
+def _cell_integrator_class():
+    """``ffls.gpu.integrate.CellIntegrator`` or None when pass 1's module is not available."""
+    try:
+        from .integrate import CellIntegrator
+    except ImportError:
+        return None
+    return CellIntegrator
+
+
+def _capture_basis(capture, lights) -> tuple[np.ndarray, np.ndarray]:
+    """Basis ``(k, H, W, 3)`` float32 and directions ``(k, 3)`` of the accepted lights, matched by image name."""
+    ok = np.asarray(lights.ok_mask, dtype=bool)
+    path = getattr(lights, "path", None) or getattr(capture, "folder", None)
+    if not np.any(ok):
+        raise InputError("no light has status ok", path)
+    names = [n for n, o in zip(lights.image_names, ok) if o]
+    pos = {n: i for i, n in enumerate(capture.image_names)}
+    missing = [n for n in names if n not in pos]
+    if missing:
+        raise InputError(f"lights name images not in the capture: {', '.join(missing[:3])}", path)
+    sel = [pos[n] for n in names]
+    basis = capture.load_basis(indices=sel)
+    return basis, np.asarray(lights.directions, dtype=np.float64)[ok]
+
+
+class Engine:
+    """GPU relighting of one capture.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+        OpenGL 4.3+ (compute shaders, SSBOs). Created by the caller.
+    basis : (n, H, W, 3) float32 array
+        Linear basis images, finite; row 0 is the top row.
+    directions : (n, 3) float array
+        Unit light directions (world frame) of the basis images.
+    hemisphere : {'upper', 'full'}
+    dtype : {'f16', 'f32'}
+        GPU storage of the basis (float16 uses a checked per-dataset scale).
+    rank : int, optional
+        Use a compressed basis of ``rank`` eigen-images (:mod:`ffls.compress`).
+    cell_res : int
+        Resolution of the Voronoi cell-index texture (pass 1).
+    compressed : ffls.compress.CompressedBasis, optional
+        A precomputed compression (``rank`` is then its rank); with ``rank`` and no
+        ``compressed`` the basis is compressed here.
+    method : {'fragment', 'compute'}
+        Pass-2 implementation; ``'fragment'`` is 1.2-2x faster on llvmpipe (docs/gpu.md "Pass 2").
+    max_layers : int, optional
+        Layers per texture array (default the device limit); more lights split the basis.
+    budget_bytes : int
+        GPU memory allowed for the basis; more raises :class:`ffls.errors.InputError`.
+    path : path-like, optional
+        Named in errors (the capture folder).
+    """
+
+    def __init__(self, ctx, basis, directions, hemisphere: str = "upper", *, dtype: str = "f16",
+                 rank: int | None = None, cell_res: int = 256, compressed=None, method: str = "fragment",
+                 max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, path=None):
+        check_hemisphere(hemisphere)
+        basis = np.asarray(basis)
+        d = np.asarray(directions, dtype=np.float64)
+        if basis.ndim != 4 or basis.shape[-1] != 3:
+            raise InputError(f"basis must have shape (n, H, W, 3), not {basis.shape}", path)
+        if d.shape != (basis.shape[0], 3):
+            raise InputError(f"{d.shape[0] if d.ndim == 2 else '?'} light directions for {basis.shape[0]} basis images", path)
+        self.ctx = ctx
+        self.hemisphere = hemisphere
+        self.directions = d
+        self.cell_res = int(cell_res)
+        self._n = int(basis.shape[0])
+        self._size = (int(basis.shape[2]), int(basis.shape[1]))
+        self.timings: dict[str, float] = {}
+        self.compressed = None
+        self._objs = []
+        self._textures = self._pass2 = self._display = self._projector = None
+        self._integrator = None
+        self._weights_buffer = ctx.buffer(reserve=16 * self._n)
+        self._cpu_weights = np.zeros((self._n, 3))
+        self._cells = None
+        self._lightmap = None
+        self._rotation = np.eye(3)
+        self._weights_source = None
+        self._weights_dirty = False
+        self._hdr_dirty = True
+        self._display_key = None
+        try:
+            if compressed is None and rank is not None:
+                from ..compress import compress_basis
+
+                compressed = compress_basis(basis, int(rank))
+            if compressed is not None:
+                if compressed.n_lights != self._n or tuple(compressed.shape) != basis.shape[1:3]:
+                    raise InputError("compressed basis does not match the capture's basis", path)
+                self.compressed = compressed
+                self._textures = BasisTextures(ctx, compressed.layers(), dtype, max_layers=max_layers,
+                                               budget_bytes=budget_bytes, path=path)
+                self._projector = Projector(ctx, compressed.projection_matrix())
+            else:
+                self._textures = BasisTextures(ctx, basis, dtype, max_layers=max_layers,
+                                               budget_bytes=budget_bytes, path=path)
+            self._pass2 = WeightedSum(ctx, self._textures, method)
+            self._display = ToneMapPass(ctx, self._size)
+        except BaseException:
+            self.release()
+            raise
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_capture(cls, ctx, capture, lights, **kw) -> "Engine":
+        """An engine for a capture folder and its light directions.
+
+        Parameters
+        ----------
+        capture : ffls.capture.Capture
+            ``capture.load_basis()`` gives the basis, ``capture.hemisphere`` the domain.
+        lights : ffls.capture.Lights
+            ``directions`` (m, 3) matched to the capture's images by ``image_names``; lights
+            with ``ok_mask`` False are left out (their basis images are not loaded).
+        **kw
+            As :class:`Engine`. With ``rank=K`` a compressed basis saved in the capture folder
+            (:func:`ffls.compress.load_compressed`) is used when it has at least K
+            eigen-images and was made from the same images (checksum); otherwise it is computed and saved
+            there (skipped silently if the folder is read-only).
+        """
+        basis, d = _capture_basis(capture, lights)
+        rank = kw.get("rank")
+        if rank is not None and kw.get("compressed") is None:
+            from ..compress import compress_basis, load_compressed, save_compressed
+
+            try:
+                kw["compressed"] = load_compressed(capture.folder, n_lights=basis.shape[0], shape=basis.shape[1:3],
+                                                   rank=int(rank), basis=basis)
+            except InputError:
+                cb = compress_basis(basis, int(rank))
+                try:
+                    save_compressed(cb, capture.folder)
+                except (OSError, InputError):
+                    pass
+                kw["compressed"] = cb
+        kw.setdefault("path", getattr(capture, "folder", None))
+        return cls(ctx, basis, d, getattr(capture, "hemisphere", "upper"), **kw)
+
+    # ------------------------------------------------------------------ inputs
+    def set_lightmap(self, lm) -> None:
+        """Use light map ``lm`` (:class:`ffls.lightmap.LightMap`); pass 1 reruns at the next render."""
+        self._lightmap = lm
+        if self._integrator is not None:
+            self._integrator.set_lightmap(lm)
+        self._weights_dirty = True
+
+    def set_rotation(self, R) -> None:
+        """Rotate the light map by ``R`` (3, 3) (content at d moves to R d; conventions.rotation_z)."""
+        R = np.asarray(R, dtype=np.float64)
+        if not is_rotation(R):
+            raise ValueError("R must be a 3x3 rotation matrix")
+        if not np.array_equal(R, self._rotation):
+            self._rotation = R.copy()
+            self._weights_dirty = self._lightmap is not None
+
+    def set_weights(self, weights) -> None:
+        """Use these per-light weights ``(n, 3)`` directly (bypasses pass 1 until the next light map)."""
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != (self._n, 3):
+            raise ValueError(f"weights must have shape ({self._n}, 3), not {w.shape}")
+        if not np.all(np.isfinite(w)):
+            raise ValueError("weights must be finite")
+        self._lightmap = None
+        self._cpu_weights = w.copy()
+        self._weights_buffer.write(weights_to_vec4(w))
+        self._weights_source = self._weights_buffer
+        self._weights_dirty = False
+        self._hdr_dirty = True
+
+    # ------------------------------------------------------------------ passes
+    def _ensure_cells(self):
+        if self._cells is None:
+            from ..voronoi import bake_cells
+
+            self._cells = bake_cells(self.directions, self.hemisphere, self.cell_res)
+        return self._cells
+
+    def _run_pass1(self):
+        cls = _cell_integrator_class()
+        if cls is not None:
+            if self._integrator is None:
+                self._integrator = cls(self.ctx, self.directions, self.hemisphere, self._ensure_cells())
+                self._integrator.set_lightmap(self._lightmap)
+            self._weights_source = self._integrator.run(self._rotation)
+            self._cpu_weights = None
+        else:  # CPU pass 1 over the same cell texture the GPU would use
+            from ..voronoi import integrate_weights
+
+            w = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
+                                  cells=self._ensure_cells()).weights
+            self._cpu_weights = w
+            self._weights_buffer.write(weights_to_vec4(w))
+            self._weights_source = self._weights_buffer
+
+    def _timed(self, name, fn):
+        t0 = time.perf_counter()
+        fn()
+        self.ctx.finish()
+        self.timings[name] = (time.perf_counter() - t0) * 1e3
+
+    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+        """Run what changed of pass 1, projection, pass 2 and the display pass.
+
+        Parameters
+        ----------
+        exposure : float
+            Stops applied before the tone curve (display texture only; the HDR is unscaled).
+        tonemap : {'srgb', 'reinhard', 'aces'}
+
+        Notes
+        -----
+        :attr:`timings` gets the wall time (ms, after ``ctx.finish()``) of each pass that ran:
+        ``pass1``, ``project`` (compressed basis), ``pass2``, ``tonemap``; passes that did not
+        need to run are absent.
+        """
+        if self._lightmap is None and self._weights_source is None:
+            raise RuntimeError("Engine.render: call set_lightmap(lm) or set_weights(w) first")
+        self.timings = {}
+        if self._weights_dirty:
+            self._timed("pass1", self._run_pass1)
+            self._weights_dirty = False
+            self._hdr_dirty = True
+        if self._hdr_dirty:
+            if self._projector is not None:
+                self._timed("project", lambda: self._projector.run(self._weights_source))
+                src = self._projector.coeffs_buffer
+            else:
+                src = self._weights_source
+            self._timed("pass2", lambda: self._pass2.run(src))
+            self._hdr_dirty = False
+            self._display_key = None
+        key = (float(exposure), tonemap)
+        if key != self._display_key:
+            self._timed("tonemap", lambda: self._display.run(self._pass2.output, exposure, tonemap))
+            self._display_key = key
+
+    # ------------------------------------------------------------------ outputs
+    @property
+    def hdr_texture(self):
+        """RGBA32F ``moderngl.Texture`` (W, H): the last relit image, linear radiance (alpha 1)."""
+        return self._pass2.output
+
+    @property
+    def display_texture(self):
+        """RGBA8 ``moderngl.Texture`` (W, H): the last tone-mapped, sRGB-encoded image; ``.glo`` for imgui."""
+        return self._display.output
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(W, H) of the images."""
+        return self._size
+
+    @property
+    def n_lights(self) -> int:
+        return self._n
+
+    @property
+    def basis_info(self) -> dict:
+        """How the basis is stored: dtype, float16 scale, arrays, bytes, rank (None = uncompressed)."""
+        t = self._textures
+        return {"dtype": t.dtype, "scale": t.scale, "n_arrays": t.n_arrays, "layers": t.n, "bytes": t.nbytes,
+                "rank": None if self.compressed is None else self.compressed.rank}
+
+    def read_hdr(self) -> np.ndarray:
+        """The relit image ``(H, W, 3)`` float32, row 0 = top row."""
+        return self._pass2.read()
+
+    def read_display(self) -> np.ndarray:
+        """The display image ``(H, W, 3)`` uint8, sRGB-encoded."""
+        return self._display.read()
+
+    def read_weights(self) -> np.ndarray:
+        """The weights of the last render ``(n, 3)`` float64 (pass-1 output or :meth:`set_weights`)."""
+        if self._cpu_weights is not None:
+            return np.array(self._cpu_weights, dtype=np.float64)
+        return np.asarray(self._integrator.read_weights(), dtype=np.float64)
+
+    def release(self) -> None:
+        """Release every GL object the engine made (not the context)."""
+        for o in (self._integrator, self._projector, self._pass2, self._display, self._textures):
+            if o is not None:
+                o.release()
+        release_gl(self._weights_buffer)
+        self._integrator = self._projector = self._pass2 = self._display = self._textures = None
+        self._weights_buffer = None

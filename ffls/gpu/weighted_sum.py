@@ -1,0 +1,263 @@
+"""Pass 2 on the GPU: the weighted sum of basis images, the display pass and coefficient projection.
+
+* :class:`WeightedSum` -- ``relit(p) = sum_i w_i * B_i(p)`` per channel over the texture
+  arrays of a :class:`ffls.gpu.basis.BasisTextures`, float32 accumulation, into an RGBA32F
+  texture. ``method='compute'`` (``shaders/weighted_sum.glsl``, one dispatch per array,
+  accumulating through ``imageLoad``) or ``'fragment'`` (``shaders/weighted_sum_frag.glsl``, a
+  full-screen triangle, arrays summed by additive float blending). The weights are read from an
+  SSBO (std430 ``vec4 w[n]``, rgb used) bound at :data:`WEIGHTS_BINDING`: pass 1's
+  ``weights_buffer`` as is, or a coefficient buffer of a compressed basis.
+* :class:`ToneMapPass` -- exposure + sRGB/Reinhard/ACES + sRGB encoding into an RGBA8 texture
+  (``shaders/tonemap.glsl``), matching :func:`ffls.tonemap.tonemap` + ``to_uint8`` within one
+  code value.
+* :class:`Projector` -- ``c = P^T w`` for a compressed basis (``shaders/project_coeffs.glsl``),
+  ``P`` from :meth:`ffls.compress.CompressedBasis.projection_matrix`.
+
+NumPy references: :func:`ffls.relight.relight_reference` (float64) for the weighted sum,
+:func:`ffls.tonemap.tonemap` for the display pass, :meth:`CompressedBasis.project_weights` for
+the projection. Texture row 0 is image row 0 (the top row of the photograph); nothing is flipped.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .shaders import load_program
+
+__all__ = ["WEIGHTS_BINDING", "METHODS", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4", "release_gl"]
+
+#: SSBO binding point from which pass 2 (and the projector) read the weights.
+WEIGHTS_BINDING = 0
+#: Pass-2 implementations; :class:`ffls.gpu.engine.Engine` uses ``'fragment'``, measured
+#: 1.2-2x faster than ``'compute'`` on llvmpipe (docs/gpu.md "Pass 2").
+METHODS = ("compute", "fragment")
+_TONEMAP_CODES = {"srgb": 0, "reinhard": 1, "aces": 2}
+
+
+def weights_to_vec4(w) -> bytes:
+    """Pack weights ``(n, 3)`` as std430 ``vec4[n]`` float32 bytes (alpha 0)."""
+    w = np.asarray(w, dtype=np.float32)
+    if w.ndim != 2 or w.shape[1] != 3:
+        raise ValueError(f"weights must have shape (n, 3), not {w.shape}")
+    out = np.zeros((w.shape[0], 4), dtype=np.float32)
+    out[:, :3] = w
+    return out.tobytes()
+
+
+class _Released:
+    """Stands in for a released object's ``mglo``: moderngl 5.13 queues ``mglo`` for
+    ``ctx.gc()`` in ``context_gc`` mode even after an explicit ``release()``, and the
+    ``InvalidObject`` it leaves there has no ``release`` (AttributeError in ``ctx.gc()``)."""
+
+    def release(self):
+        pass
+
+
+def release_gl(obj) -> None:
+    """Release a moderngl object now, safely under every ``gc_mode`` (None is ignored)."""
+    if obj is not None:
+        obj.release()
+        obj.mglo = _Released()
+
+
+def _default_framebuffer(ctx):
+    if getattr(ctx, "_ffls_fbo0", None) is None:
+        ctx._ffls_fbo0 = ctx.detect_framebuffer(0)
+    return ctx._ffls_fbo0
+
+
+def _groups(size, local=8):
+    return (-(-size[0] // local), -(-size[1] // local), 1)
+
+
+class WeightedSum:
+    """Pass 2: ``sum_i w_i B_i`` over a basis on the GPU into an RGBA32F texture.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    basis : ffls.gpu.basis.BasisTextures
+    method : {'compute', 'fragment'}
+
+    Attributes
+    ----------
+    output : moderngl.Texture
+        RGBA32F, ``basis.size`` (W, H); alpha is 1.
+    """
+
+    def __init__(self, ctx, basis, method: str = "compute"):
+        if method not in METHODS:
+            raise ValueError(f"pass-2 method must be one of {METHODS}, not {method!r}")
+        self.ctx, self.basis, self.method = ctx, basis, method
+        self.size = basis.size
+        self.output = ctx.texture(self.size, 4, dtype="f4")
+        self.output.filter = (0x2600, 0x2600)
+        if method == "compute":
+            self.prog = load_program(ctx, "weighted_sum.glsl", {"WEIGHTS_BINDING": WEIGHTS_BINDING})
+            self._fbo = self._vao = None
+        else:
+            self.prog = load_program(ctx, "weighted_sum_frag.glsl", {"WEIGHTS_BINDING": WEIGHTS_BINDING})
+            self._fbo = ctx.framebuffer(color_attachments=[self.output])
+            self._vao = ctx.vertex_array(self.prog, [])
+        if "u_basis" in self.prog:
+            self.prog["u_basis"].value = 0
+        if "u_size" in self.prog:
+            self.prog["u_size"].value = self.size
+
+    def run(self, weights_buffer, n_weights: int | None = None) -> None:
+        """Compute the relit image into :attr:`output`.
+
+        Parameters
+        ----------
+        weights_buffer : moderngl.Buffer
+            std430 ``vec4 w[n]`` with at least ``basis.n`` entries (rgb used).
+        n_weights : int, optional
+            Entries in the buffer, checked against ``basis.n`` when given.
+        """
+        if n_weights is not None and n_weights < self.basis.n:
+            raise ValueError(f"{n_weights} weights for a basis of {self.basis.n} layers")
+        if weights_buffer.size < 16 * self.basis.n:
+            raise ValueError(f"weights buffer holds {weights_buffer.size // 16} vec4, basis has {self.basis.n} layers")
+        weights_buffer.bind_to_storage_buffer(WEIGHTS_BINDING)
+        prog = self.prog
+        prog["u_inv_scale"].value = 1.0 / self.basis.scale
+        if self.method == "compute":
+            self.output.bind_to_image(0, read=True, write=True)
+            for j, (tex, off, cnt) in enumerate(zip(self.basis.textures, self.basis.offsets, self.basis.counts)):
+                if j:
+                    self.ctx.memory_barrier()
+                tex.use(0)
+                prog["u_offset"].value = off
+                prog["u_count"].value = cnt
+                prog["u_accumulate"].value = 1 if j else 0
+                prog.run(*_groups(self.size))
+            self.ctx.memory_barrier()
+        else:
+            ctx = self.ctx
+            previous = ctx.fbo
+            self._fbo.use()
+            ctx.disable(ctx.DEPTH_TEST)
+            self._fbo.clear(0.0, 0.0, 0.0, 0.0)
+            ctx.enable(ctx.BLEND)
+            ctx.blend_func = (ctx.ONE, ctx.ONE, ctx.ONE, ctx.ZERO)  # rgb summed, alpha stays 1
+            ctx.blend_equation = ctx.FUNC_ADD
+            try:
+                for tex, off, cnt in zip(self.basis.textures, self.basis.offsets, self.basis.counts):
+                    tex.use(0)
+                    prog["u_offset"].value = off
+                    prog["u_count"].value = cnt
+                    self._vao.render(mode=ctx.TRIANGLES, vertices=3)
+            finally:
+                ctx.disable(ctx.BLEND)
+                ctx.blend_func = ctx.DEFAULT_BLENDING
+                # never leave our framebuffer bound: moderngl re-binds the bound one when it
+                # creates framebuffers, an error once ours is released
+                (previous if previous is not None else _default_framebuffer(ctx)).use()
+
+    def read(self) -> np.ndarray:
+        """The relit image ``(H, W, 3)`` float32 (row 0 = image row 0)."""
+        W, H = self.size
+        return np.frombuffer(self.output.read(), dtype=np.float32).reshape(H, W, 4)[..., :3].copy()
+
+    def release(self) -> None:
+        """Release the output texture and framebuffer (programs are cached by the loader)."""
+        for o in (self._vao, self._fbo, self.output):
+            release_gl(o)
+        self._vao = self._fbo = self.output = None
+
+
+class ToneMapPass:
+    """Exposure + tone curve + sRGB encoding of an RGBA32F texture into an RGBA8 texture.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    size : (W, H)
+
+    Attributes
+    ----------
+    output : moderngl.Texture
+        RGBA8 display texture (alpha 255); ``output.glo`` is usable by imgui.
+    """
+
+    def __init__(self, ctx, size):
+        self.ctx, self.size = ctx, tuple(size)
+        self.prog = load_program(ctx, "tonemap.glsl")
+        self.prog["u_size"].value = self.size
+        self.output = ctx.texture(self.size, 4, dtype="f1")
+        self.output.filter = (0x2601, 0x2601)  # GL_LINEAR for display
+
+    def run(self, hdr_texture, exposure: float = 0.0, method: str = "srgb") -> None:
+        """Tone-map ``hdr_texture`` (RGBA32F, same size) into :attr:`output`.
+
+        Parameters
+        ----------
+        hdr_texture : moderngl.Texture
+        exposure : float
+            Stops; the radiance is multiplied by ``2 ** exposure``.
+        method : {'srgb', 'reinhard', 'aces'}
+        """
+        if method not in _TONEMAP_CODES:
+            raise ValueError(f"tone-map method must be one of {tuple(_TONEMAP_CODES)}, not {method!r}")
+        hdr_texture.bind_to_image(0, read=True, write=False)
+        self.output.bind_to_image(1, read=False, write=True)
+        self.prog["u_exposure_scale"].value = float(2.0 ** float(exposure))
+        self.prog["u_method"].value = _TONEMAP_CODES[method]
+        self.prog.run(*_groups(self.size))
+        self.ctx.memory_barrier()
+
+    def read(self) -> np.ndarray:
+        """The display image ``(H, W, 3)`` uint8."""
+        W, H = self.size
+        return np.frombuffer(self.output.read(), dtype=np.uint8).reshape(H, W, 4)[..., :3].copy()
+
+    def release(self) -> None:
+        release_gl(self.output)
+        self.output = None
+
+
+class Projector:
+    """``c = P^T w`` on the GPU for a compressed basis.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    P : (n, L, 3) float array
+        Projection matrix (:meth:`ffls.compress.CompressedBasis.projection_matrix`), ``L = K + 1``.
+
+    Attributes
+    ----------
+    coeffs_buffer : moderngl.Buffer
+        std430 ``vec4 c[L]`` (rgb used): the weights for pass 2 over ``[mean, E_1..E_K]``.
+    """
+
+    def __init__(self, ctx, P):
+        P = np.asarray(P, dtype=np.float32)
+        if P.ndim != 3 or P.shape[2] != 3:
+            raise ValueError(f"P must have shape (n, L, 3), not {P.shape}")
+        self.ctx = ctx
+        self.n, self.L = P.shape[:2]
+        p4 = np.zeros((self.n, self.L, 4), dtype=np.float32)
+        p4[..., :3] = P
+        self.p_buffer = ctx.buffer(p4.tobytes())
+        self.coeffs_buffer = ctx.buffer(reserve=16 * self.L)
+        self.prog = load_program(ctx, "project_coeffs.glsl", {"WEIGHTS_BINDING": WEIGHTS_BINDING})
+
+    def run(self, weights_buffer) -> None:
+        """Project the weights in ``weights_buffer`` (``vec4 w[n]``) into :attr:`coeffs_buffer`."""
+        if weights_buffer.size < 16 * self.n:
+            raise ValueError(f"weights buffer holds {weights_buffer.size // 16} vec4, projection needs {self.n}")
+        weights_buffer.bind_to_storage_buffer(WEIGHTS_BINDING)
+        self.p_buffer.bind_to_storage_buffer(1)
+        self.coeffs_buffer.bind_to_storage_buffer(2)
+        self.prog["u_n"].value = self.n
+        self.prog["u_L"].value = self.L
+        self.prog.run(-(-self.L // 64), 1, 1)
+        self.ctx.memory_barrier()
+
+    def read(self) -> np.ndarray:
+        """Coefficients ``(L, 3)`` float32."""
+        return np.frombuffer(self.coeffs_buffer.read(), dtype=np.float32).reshape(self.L, 4)[:, :3].copy()
+
+    def release(self) -> None:
+        for b in (self.p_buffer, self.coeffs_buffer):
+            release_gl(b)

@@ -1,0 +1,195 @@
+"""Camera calibration from photos of a ChArUco board or a chessboard (OpenCV).
+
+Zhang, Z. (2000). A flexible new technique for camera calibration. IEEE TPAMI 22(11), as
+implemented by :func:`cv2.calibrateCamera`. Corners come from :class:`cv2.aruco.CharucoDetector`
+(ChArUco: partial views are fine, corners are identified) or :func:`cv2.findChessboardCorners`
+(the whole board must be visible) refined with :func:`cv2.cornerSubPix`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import InputError, atomic_output
+
+__all__ = ["CameraCalibration", "make_board", "detect_board", "calibrate_camera", "write_camera_to_capture"]
+
+
+@dataclasses.dataclass
+class CameraCalibration:
+    """Result of :func:`calibrate_camera`.
+
+    Attributes
+    ----------
+    K : (3, 3) float64
+    dist : (5,) float64
+        OpenCV (k1, k2, p1, p2, k3).
+    rms : float
+        RMS reprojection error, pixels.
+    image_size : (W, H)
+    used : list of str
+        The images whose board was found.
+    skipped : list of str
+        The images without a usable board.
+    """
+
+    K: np.ndarray
+    dist: np.ndarray
+    rms: float
+    image_size: tuple
+    used: list
+    skipped: list
+
+    def to_dict(self) -> dict:
+        return {"K": self.K.tolist(), "dist": self.dist.ravel().tolist(), "rms_px": float(self.rms),
+                "image_size": list(self.image_size), "used": list(self.used), "skipped": list(self.skipped)}
+
+
+def _dictionary(dictionary):
+    if isinstance(dictionary, str):
+        name = dictionary if dictionary.startswith("DICT_") else f"DICT_{dictionary}"
+        if not hasattr(cv2.aruco, name):
+            raise ValueError(f"unknown ArUco dictionary {dictionary!r}")
+        return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
+    return dictionary
+
+
+def make_board(squares=(7, 5), square_size: float = 0.03, marker_size: float = 0.022,
+               dictionary="DICT_5X5_100"):
+    """A :class:`cv2.aruco.CharucoBoard` of ``squares`` = (columns, rows) squares."""
+    return cv2.aruco.CharucoBoard((int(squares[0]), int(squares[1])), float(square_size), float(marker_size),
+                                  _dictionary(dictionary))
+
+
+def detect_board(gray, board: str = "charuco", squares=(7, 5), square_size: float = 0.03,
+                 marker_size: float = 0.022, dictionary="DICT_5X5_100", min_corners: int = 6):
+    """Board corners in one image.
+
+    Parameters
+    ----------
+    gray : (H, W) uint8
+    board : {'charuco', 'chessboard'}
+    squares : (int, int)
+        Squares along x and y (a chessboard has ``(x-1) * (y-1)`` inner corners).
+
+    Returns
+    -------
+    (object_points (n, 3) float32, image_points (n, 2) float32) or None when no board is found.
+    """
+    if board == "charuco":
+        b = make_board(squares, square_size, marker_size, dictionary)
+        det = cv2.aruco.CharucoDetector(b)
+        corners, ids, _, _ = det.detectBoard(gray)
+        if ids is None or len(ids) < min_corners:
+            return None
+        obj, img = b.matchImagePoints(corners, ids)
+        return obj.reshape(-1, 3).astype(np.float32), img.reshape(-1, 2).astype(np.float32)
+    if board == "chessboard":
+        pattern = (int(squares[0]) - 1, int(squares[1]) - 1)
+        ok, corners = cv2.findChessboardCorners(gray, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        if not ok:
+            return None
+        corners = cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1),
+                                   (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-4))
+        gx, gy = np.meshgrid(np.arange(pattern[0]), np.arange(pattern[1]))
+        obj = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1) * float(square_size)
+        return obj.astype(np.float32), corners.reshape(-1, 2).astype(np.float32)
+    raise ValueError(f"board must be 'charuco' or 'chessboard', not {board!r}")
+
+
+def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square_size: float = 0.03,
+                     marker_size: float = 0.022, dictionary="DICT_5X5_100", fix_k3: bool = True,
+                     images=None) -> CameraCalibration:
+    """Intrinsics K and distortion from photos of a calibration board.
+
+    Parameters
+    ----------
+    image_paths : list of path
+        Photos of the board (named in errors). Ignored for reading when ``images`` is given.
+    board : {'charuco', 'chessboard'}
+    squares : (int, int)
+        Squares along the board's x and y.
+    square_size, marker_size : float
+        Side of a square and of an ArUco marker (scene units, e.g. metres).
+    dictionary : str or cv2.aruco.Dictionary
+        ArUco dictionary, e.g. ``'DICT_5X5_100'`` (OpenCV's name).
+    fix_k3 : bool
+        Keep k3 = 0 (recommended unless the lens is very wide).
+    images : list of (H, W) or (H, W, 3) uint8, optional
+        Images already in memory (then ``image_paths`` only names them).
+
+    Returns
+    -------
+    CameraCalibration
+
+    Raises
+    ------
+    InputError
+        An unreadable image, images of different sizes, or fewer than 3 views with a board.
+    """
+    paths = [Path(p) for p in image_paths]
+    obj_pts, img_pts, used, skipped = [], [], [], []
+    size = None
+    n = len(images) if images is not None else len(paths)
+    for i in range(n):
+        name = paths[i] if i < len(paths) else Path(f"image {i}")
+        if images is not None:
+            im = np.asarray(images[i])
+        else:
+            im = cv2.imread(str(name), cv2.IMREAD_GRAYSCALE)
+            if im is None:
+                raise InputError("cannot read image", name)
+        if im.ndim == 3:
+            im = cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)
+        if im.dtype != np.uint8:
+            raise InputError(f"calibration photos must be 8-bit, got {im.dtype}", name)
+        if size is None:
+            size = (im.shape[1], im.shape[0])
+        elif size != (im.shape[1], im.shape[0]):
+            raise InputError(f"image size {im.shape[1]}x{im.shape[0]} differs from {size[0]}x{size[1]}", name)
+        found = detect_board(im, board, squares, square_size, marker_size, dictionary)
+        if found is None:
+            skipped.append(str(name))
+            continue
+        obj_pts.append(found[0])
+        img_pts.append(found[1])
+        used.append(str(name))
+    if len(obj_pts) < 3:
+        where = paths[0].parent if paths else None
+        raise InputError(f"a {board} board ({squares[0]}x{squares[1]} squares) was found in {len(obj_pts)} of"
+                         f" {n} photos; need at least 3", where)
+    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    rms, K, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None, flags=flags)
+    return CameraCalibration(K=np.asarray(K, dtype=np.float64), dist=np.asarray(dist, dtype=np.float64).ravel()[:5],
+                             rms=float(rms), image_size=size, used=used, skipped=skipped)
+
+
+def write_camera_to_capture(capture_dir, K, dist) -> Path:
+    """Set ``camera.K`` and ``camera.dist`` in ``CAPTURE_DIR/capture.json``, keeping every other key.
+
+    The file is read, modified and written back atomically.
+    """
+    path = Path(capture_dir) / "capture.json"
+    if not path.is_file():
+        raise InputError("capture.json not found", path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise InputError(f"cannot read JSON ({e})", path) from None
+    if not isinstance(doc, dict):
+        raise InputError("expected a JSON object", path)
+    cam = doc.get("camera") or {}
+    if not isinstance(cam, dict):
+        raise InputError("'camera' must be an object", path)
+    cam["K"] = np.asarray(K, dtype=np.float64).reshape(3, 3).tolist()
+    cam["dist"] = np.asarray(dist, dtype=np.float64).ravel().tolist()
+    doc["camera"] = cam
+    text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path

@@ -1,0 +1,461 @@
+"""Light direction from the shading of one white diffuse sphere.
+
+Masselus, Dutre, Anrys, "The Free-form Light Stage", EGWR 2002, section 5, eq. 2: a Lambertian
+sphere of known centre and radius has a known normal ``n`` at every pixel, and its intensity is
+``I = rho E max(0, n . l)``; least squares over the lit pixels gives ``l``.
+
+Additions, each needed on real photographs and independent renders:
+
+* an ambient term ``b`` (Hougen & Ahuja 1993, "Estimation of the light source distribution and
+  its use in integrated shape recovery from stereo and shading");
+* a ground-bounce term ``c g(n)`` with ``g(n) = (1 - n_z) / 2`` (world ``+Z`` up), the form factor
+  from a sphere point to an infinite, uniformly lit plane below it. A grey ground lights the
+  spheres from below; without this term the fit mistakes that light for a lower light. On the
+  lit side ``g`` is linear in ``n`` and so collinear with ``b`` and the ``n_z`` part of ``l``:
+  only the shadow side separates them, so shadow-side pixels are fitted too;
+* pixels near the terminator (``|n . l| < terminator``) are left out (area-light penumbra and
+  the kink of ``max``); the fit is repeated with the new classification until it is stable;
+* robust residual rejection (MAD) removes cast shadows, specks and highlights;
+* saturated, near-black and non-finite pixels are never used (the caller's ``valid`` mask);
+* the simplest of the models ``plain`` (``a, l``), ``ambient`` (``+ b``) and ``bounce``
+  (``+ b + c g``) that the data support is chosen: the richest whose added term is significant
+  (t > 3; BIC dropped the bounce when few shadow pixels were in view, see :func:`_select_model`).
+
+For a fixed lit/shadow classification the model ``I = [n . l > 0] n . v + b + c g(n)`` is linear
+in ``v = a l``, ``b`` and ``c``; it is solved with :func:`scipy.optimize.lsq_linear` with
+``b, c >= 0``. The angular uncertainty comes from the covariance ``s^2 (A^T A)^-1`` of ``v``
+projected on the tangent plane of ``l``.
+
+:func:`sphere_samples` computes, once per capture, the pixels of a sphere and their world-frame
+normals by intersecting each pixel's (undistorted) ray with the sphere.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..conventions import UP, normalize
+from .detect import pixel_rays
+
+__all__ = [
+    "MODELS",
+    "SphereSamples",
+    "LambertFit",
+    "ground_bounce",
+    "sphere_samples",
+    "fit_lambert",
+    "fit_lambert_MasselusDutreAnrys2002",
+    "tangent_uncertainty_deg",
+]
+
+#: Per-sphere shading models, simplest first.
+MODELS = ("plain", "ambient", "bounce")
+
+
+def ground_bounce(normals: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
+    """Form factor ``(1 - n . up) / 2`` from sphere points to an infinite ground plane below.
+
+    Parameters
+    ----------
+    normals : (m, 3) float, unit, world frame
+    up : (3,) float, unit
+
+    Returns
+    -------
+    (m,) float in [0, 1]
+    """
+    return np.clip(0.5 * (1.0 - np.asarray(normals, dtype=np.float64) @ np.asarray(up, dtype=np.float64)), 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class SphereSamples:
+    """The pixels of one sphere usable for shading fits; fixed for a capture (camera and sphere).
+
+    Attributes
+    ----------
+    rows, cols : (m,) int
+        Pixel coordinates (row = y, col = x).
+    normals : (m, 3) float64
+        Unit world-frame normals at the ray-sphere hits.
+    points : (m, 3) float64
+        World-frame surface points at the hits.
+    center : (3,) float64
+        World-frame sphere centre.
+    radius : float
+        Sphere radius (world units).
+    radius_px : float
+        Apparent radius in pixels (for reports).
+    """
+
+    rows: np.ndarray
+    cols: np.ndarray
+    normals: np.ndarray
+    points: np.ndarray
+    center: np.ndarray
+    radius: float
+    radius_px: float
+
+    def values(self, image: np.ndarray) -> np.ndarray:
+        """Grey intensity (m,) float64 of these pixels: the mean of the channels of ``image`` (H, W[, C])."""
+        px = np.asarray(image)[self.rows, self.cols]
+        px = px.astype(np.float64, copy=False)
+        return px.mean(axis=-1) if px.ndim == 2 else px
+
+    def __len__(self) -> int:
+        return int(self.rows.size)
+
+
+def sphere_samples(shape: tuple[int, int], K: np.ndarray, dist: np.ndarray | None, center_cam: np.ndarray,
+                   radius: float, world_from_camera: np.ndarray | None = None, margin_px: float = 1.5) -> SphereSamples:
+    """Pixels of a sphere and their normals, from the ray-sphere intersection.
+
+    Pixels whose ray passes within ``margin_px`` pixels (angularly) of the silhouette are left
+    out: their colour mixes sphere and background and their normal is poorly defined.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        Image size.
+    K : (3, 3) float
+        Camera matrix.
+    dist : (k,) float or None
+        OpenCV distortion coefficients.
+    center_cam : (3,) float
+        Sphere centre in the camera frame.
+    radius : float
+        Sphere radius, same units as ``center_cam``.
+    world_from_camera : (4, 4) float, optional
+        Camera-to-world transform; identity if None.
+    margin_px : float
+        Silhouette margin in pixels.
+
+    Returns
+    -------
+    SphereSamples
+    """
+    C = np.asarray(center_cam, dtype=np.float64).reshape(3)
+    R = float(radius)
+    K = np.asarray(K, dtype=np.float64)
+    H, W = int(shape[0]), int(shape[1])
+    dC = float(np.linalg.norm(C))
+    if not (R > 0 and dC > R and C[2] > 0):
+        raise ValueError("sphere must lie in front of the camera and not contain it")
+    f = 0.5 * (K[0, 0] + K[1, 1])
+    ang_s = np.arcsin(R / dC)  # angular radius of the silhouette
+    # image-space bounding box (generous, distortion is handled by the exact ray test below)
+    cpx = K @ (C / C[2])
+    r_px = f * np.tan(ang_s) * (dC / C[2]) ** 2 * 1.3 + 4.0
+    x0, x1 = max(int(np.floor(cpx[0] - r_px)), 0), min(int(np.ceil(cpx[0] + r_px)), W - 1)
+    y0, y1 = max(int(np.floor(cpx[1] - r_px)), 0), min(int(np.ceil(cpx[1] + r_px)), H - 1)
+    if x1 < x0 or y1 < y0:
+        raise ValueError("sphere is outside the image")
+    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    px = np.stack([xx.ravel(), yy.ravel()], axis=-1).astype(np.float64)
+    d = pixel_rays(px, K, dist)
+    ang = np.arccos(np.clip(d @ (C / dC), -1.0, 1.0))
+    keep = ang < ang_s - margin_px / f
+    d = d[keep]
+    dc = d @ C
+    disc = np.maximum(dc * dc - dC * dC + R * R, 0.0)
+    t = dc - np.sqrt(disc)
+    P = d * t[:, None]
+    n = (P - C) / R
+    if world_from_camera is None:
+        Rw, tw = np.eye(3), np.zeros(3)
+    else:
+        M = np.asarray(world_from_camera, dtype=np.float64)
+        Rw, tw = M[:3, :3], M[:3, 3]
+    n_w = normalize(n @ Rw.T)
+    P_w = P @ Rw.T + tw
+    radius_px = f * np.tan(ang_s)
+    return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
+                         center=Rw @ C + tw, radius=R, radius_px=float(radius_px))
+
+
+def tangent_uncertainty_deg(v: np.ndarray, cov_v: np.ndarray) -> float:
+    """RMS angular error (degrees) of ``v / |v|`` given the covariance (3, 3) of ``v`` (3,).
+
+    The covariance is projected on the tangent plane of the direction; the result is the square
+    root of the trace (the expected angle between the estimate and the truth, RMS).
+    """
+    v = np.asarray(v, dtype=np.float64)
+    nv = float(np.linalg.norm(v))
+    if not np.isfinite(nv) or nv == 0.0 or not np.all(np.isfinite(cov_v)):
+        return float("inf")
+    u = v / nv
+    P = np.eye(3) - np.outer(u, u)
+    tr = float(np.trace(P @ cov_v @ P)) / (nv * nv)
+    return float(np.degrees(np.sqrt(max(tr, 0.0))))
+
+
+@dataclass
+class LambertFit:
+    """Result of a per-sphere fit.
+
+    Attributes
+    ----------
+    status : str
+        ``'ok'`` or a rejection reason (``'too_dark'``, ``'saturated'``, ``'shadowed'``, ``'fit_failed'``).
+    direction : (3,) float64
+        Unit world-frame light direction (NaN when the fit failed).
+    intensity : float
+        ``a = rho E`` (image units).
+    ambient, bounce : float
+        ``b`` and ``c`` (0 where the model lacks the term).
+    model : str
+        One of :data:`MODELS`.
+    rms : float
+        RMS residual over the pixels used, relative to ``intensity``.
+    uncertainty_deg : float
+        Statistical RMS angular error of ``direction``.
+    n_lit, n_shadow : int
+        Pixels used on the lit and shadow side.
+    n_rejected : int
+        Pixels rejected as outliers (cast shadow, highlights).
+    n_invalid : int
+        Pixels excluded by the validity mask (saturated, near-black, non-finite).
+    n_saturated : int
+        Of those, saturated.
+    inliers : (m,) bool
+        Pixels used in the final fit (lit or shadow side).
+    """
+
+    status: str
+    direction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    intensity: float = 0.0
+    ambient: float = 0.0
+    bounce: float = 0.0
+    model: str = "plain"
+    rms: float = float("nan")
+    uncertainty_deg: float = float("inf")
+    n_lit: int = 0
+    n_shadow: int = 0
+    n_rejected: int = 0
+    n_invalid: int = 0
+    n_saturated: int = 0
+    inliers: np.ndarray | None = None
+
+    def as_dict(self) -> dict:
+        """JSON-ready summary (without the pixel mask)."""
+        def num(x):
+            x = float(x)
+            return x if np.isfinite(x) else None
+
+        return {
+            "status": self.status,
+            "direction": [float(x) for x in self.direction] if np.all(np.isfinite(self.direction)) else None,
+            "intensity": num(self.intensity), "ambient": num(self.ambient), "bounce": num(self.bounce),
+            "model": self.model, "rms": num(self.rms), "uncertainty_deg": num(self.uncertainty_deg),
+            "n_lit": int(self.n_lit), "n_shadow": int(self.n_shadow), "n_rejected": int(self.n_rejected),
+            "n_invalid": int(self.n_invalid), "n_saturated": int(self.n_saturated),
+        }
+
+
+def _design(normals, g, lit, shadow, model):
+    """Design matrix rows for the lit and shadow pixels; columns v (3), [b], [c]."""
+    use = lit | shadow
+    n = normals[use]
+    A = [n * lit[use, None]]
+    if model != "plain":
+        A.append(np.ones((n.shape[0], 1)))
+    if model == "bounce":
+        A.append(g[use, None])
+    return np.concatenate(A, axis=1), use
+
+
+def _solve(A, y):
+    p = A.shape[1]
+    lb = np.full(p, -np.inf)
+    lb[3:] = 0.0
+    if p == 3:
+        x = np.linalg.lstsq(A, y, rcond=None)[0]
+    else:
+        x = lsq_linear(A, y, bounds=(lb, np.full(p, np.inf)), method="bvls").x
+    return x
+
+
+def _t_last(fit) -> float:
+    """t statistic of the last (added) coefficient of a linear fit ``(x, A, use, r)``."""
+    x, A, _, r = fit
+    k, p = A.shape
+    s2 = float(r @ r) / max(k - p, 1)
+    var = s2 * np.linalg.pinv(A.T @ A)[-1, -1]
+    return float(x[-1] / np.sqrt(var)) if var > 0 else (np.inf if x[-1] > 0 else 0.0)
+
+
+def _select_model(fits: dict, t_min: float = 3.0) -> str:
+    """The richest model whose added term is significant (t > ``t_min``), else the next simpler one.
+
+    BIC was tried first: with few shadow-side pixels in view (light from the camera side) it kept
+    dropping the bounce term, and the bounce then tilted the light by ~3 degrees. A significant,
+    non-negative bounce coefficient is physical, so it is kept.
+    """
+    for mdl in ("bounce", "ambient"):
+        if mdl in fits and _t_last(fits[mdl]) > t_min:
+            return mdl
+    return "plain" if "plain" in fits else next(iter(fits))
+
+
+def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter):
+    """Classification / rejection iterations from one start; returns (best, inliers, robust cost)."""
+    inl = ok.copy()
+    best = None
+    fits = {}
+    for _ in range(max_iter):
+        nl = normals @ ldir
+        lit = inl & (nl > terminator)
+        shadow = inl & (nl < -terminator)
+        if lit.sum() < min_lit:
+            break
+        fits = {}
+        for mdl in models:
+            A, use = _design(normals, g, lit, shadow, mdl)
+            x = _solve(A, y[use])
+            r = y[use] - A @ x
+            fits[mdl] = (x, A, use, r)
+        mdl = _select_model(fits)
+        x, A, use, r = fits[mdl]
+        v = x[:3]
+        a = float(np.linalg.norm(v))
+        if not np.isfinite(a) or a == 0:
+            break
+        new_dir = v / a
+        # robust rejection on all valid pixels (predictions with the current model)
+        pred = a * np.maximum(normals @ new_dir, 0.0)
+        if mdl != "plain":
+            pred = pred + x[3]
+        if mdl == "bounce":
+            pred = pred + x[4] * g
+        res = y - pred
+        sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), rel_noise_floor * a)
+        new_inl = ok & (np.abs(res) <= clip_sigma * sigma)
+        best = (mdl, x, A, use, r, lit, shadow, new_dir, a)
+        stable = (np.array_equal(new_inl, inl) and float(new_dir @ ldir) > np.cos(np.radians(1e-3)))
+        inl = new_inl
+        ldir = new_dir
+        if stable:
+            break
+    if best is None:
+        return None, inl, np.inf
+    mdl, x, A, use, r, lit, shadow, d, a = best
+    pred = a * np.maximum(normals @ d, 0.0) + (x[3] if x.size > 3 else 0.0) + (x[4] * g if x.size > 4 else 0.0)
+    res = (y - pred)[ok]
+    scale = max(rel_noise_floor * float(np.max(y[ok])), 1e-300)
+    cost = float(np.mean(np.minimum((res / scale) ** 2, clip_sigma ** 2)))  # truncated: outliers count once
+    return best, inl, cost
+
+
+def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | None = None, *,
+                n_saturated: int = 0, terminator: float = 0.15, models: tuple[str, ...] = MODELS,
+                clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, up: np.ndarray = UP,
+                min_lit: int = 30, max_reject_fraction: float = 0.25, max_iter: int = 8) -> LambertFit:
+    """Fit ``I(n) = a max(0, n . l) + b + c g(n)`` to one sphere's pixels.
+
+    Parameters
+    ----------
+    normals : (m, 3) float
+        Unit world-frame normals.
+    values : (m,) float
+        Linear intensities.
+    valid : (m,) bool, optional
+        Pixels that may be used (not saturated, not near-black); non-finite values are always
+        excluded.
+    n_saturated : int
+        How many of the invalid pixels are saturated (decides the ``'saturated'`` status).
+    terminator : float
+        Pixels with ``|n . l| < terminator`` are not used.
+    models : tuple of str
+        Candidate models (subset of :data:`MODELS`); see :func:`_select_model`.
+    clip_sigma : float
+        Residuals beyond ``clip_sigma`` robust standard deviations are rejected.
+    rel_noise_floor : float
+        Lower bound of that standard deviation, relative to the peak intensity (model mismatch
+        must not be mistaken for outliers).
+    up : (3,) float
+        World up, for the ground-bounce term.
+    min_lit : int
+        Fewer usable lit pixels than this gives ``'too_dark'`` (or ``'saturated'``).
+    max_reject_fraction : float
+        More rejected lit pixels than this fraction gives ``'shadowed'``.
+    max_iter : int
+        Classification / rejection iterations.
+
+    Returns
+    -------
+    LambertFit
+    """
+    normals = np.asarray(normals, dtype=np.float64)
+    y_all = np.asarray(values, dtype=np.float64)
+    m = y_all.shape[0]
+    ok = np.isfinite(y_all) & np.all(np.isfinite(normals), axis=1)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool)
+    n_invalid = int(m - ok.sum())
+    base = LambertFit(status="fit_failed", n_invalid=n_invalid, n_saturated=int(n_saturated))
+    for mdl in models:
+        if mdl not in MODELS:
+            raise ValueError(f"unknown model {mdl!r}; expected one of {MODELS}")
+    if ok.sum() < min_lit:
+        base.status = "saturated" if n_saturated >= max(min_lit, 0.5 * (m - ok.sum())) and n_saturated > 0 else "too_dark"
+        return base
+    y = np.where(ok, y_all, 0.0)
+    g = ground_bounce(normals, up)
+    # initial classification: clearly bright pixels are lit
+    peak = float(np.percentile(y[ok], 99))
+    if not peak > 0:
+        base.status = "too_dark"
+        return base
+    bright = ok & (y > 0.3 * peak)
+    if bright.sum() < min_lit:
+        base.status = "saturated" if n_saturated > bright.sum() else "too_dark"
+        return base
+    # start from least squares on the bright pixels
+    Ab = np.concatenate([normals[bright], np.ones((bright.sum(), 1))], axis=1)
+    starts = [np.linalg.lstsq(Ab, y[bright], rcond=None)[0][:3]]
+    # (a second start from the brightness-weighted mean normal of the bright pixels was tried: on
+    # small back spheres with a thin lit crescent and strong bounce it converged to wrong
+    # solutions that the other spheres then confirmed; a rejection is safer than a wrong light)
+    best, inl, best_cost = None, ok, np.inf
+    for v0 in starts:
+        if not np.all(np.isfinite(v0)) or np.linalg.norm(v0) == 0:
+            continue
+        cand, cand_inl, cost = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
+                                        clip_sigma, rel_noise_floor, max_iter)
+        if cand is not None:
+            best, inl, best_cost = cand, cand_inl, cost
+            break
+    if best is None:
+        base.status = "too_dark"
+        return base
+    mdl, x, A, use, r, lit, shadow, ldir, a = best
+    k, p = A.shape
+    s2 = float(r @ r) / max(k - p, 1)
+    try:
+        cov = s2 * np.linalg.pinv(A.T @ A)
+        unc = tangent_uncertainty_deg(x[:3], cov[:3, :3])
+    except np.linalg.LinAlgError:
+        unc = float("inf")
+    nl = normals @ ldir
+    cand_lit = ok & (nl > terminator)
+    n_rej = int((cand_lit & ~inl).sum())
+    fit = LambertFit(
+        status="ok", direction=ldir, intensity=a,
+        ambient=float(x[3]) if p > 3 else 0.0, bounce=float(x[4]) if p > 4 else 0.0,
+        model=mdl, rms=float(np.sqrt(float(r @ r) / k)) / a, uncertainty_deg=unc,
+        n_lit=int(lit.sum()), n_shadow=int(shadow.sum()),
+        n_rejected=int((ok & ~inl).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
+    )
+    # a sphere whose expected lit area is largely outlying is in a cast shadow
+    if cand_lit.sum() and n_rej > max_reject_fraction * cand_lit.sum():
+        fit.status = "shadowed"
+    elif n_saturated > 0.3 * (int(cand_lit.sum()) + n_saturated):
+        fit.status = "saturated"
+    elif not np.isfinite(unc):
+        fit.status = "fit_failed"
+    return fit
+
+
+#: The paper's per-sphere method, under its name (GUIDE: one paper per function).
+fit_lambert_MasselusDutreAnrys2002 = fit_lambert

@@ -1,0 +1,1071 @@
+"""A built-in synthetic Free-form Light Stage scene, rendered with NumPy (no GL).
+
+The scene is what the system of Masselus, Dutre and Anrys ("The Free-form Light Stage",
+Eurographics Workshop on Rendering 2002) needs to be tested end to end: a fixed pinhole camera,
+an object with diffuse and glossy parts on a grey (or black-velvet) table, and four white diffuse
+spheres beside it whose shading gives each photograph's light direction. Every image is lit by
+one small light; cast shadows and one bounce of light off the ground are rendered.
+
+Scene (metres, world +Z up, scene centre at the origin)
+    * ground plane z = 0, Lambertian, albedo ``ground_albedo`` (0 = the paper's black velvet);
+    * a blue diffuse box pedestal, a glossy red sphere on it (Lambert + normalised Blinn-Phong
+      lobe, ``(m + 8) / (8 pi) (n.h)^m``) and a leaning green capsule beside it;
+    * four white Lambertian spheres (albedo 0.8) resting on the ground at the corners of a square;
+    * an OpenCV pinhole camera in front (at -Y), looking toward +Y and down 30 degrees.
+
+Radiometry
+    A *distant* light of direction ``l`` gives unit irradiance at normal incidence, so image
+    ``i`` of a distant-light capture is the basis image ``B_i`` of the architecture
+    (``relit = sum_i w_i B_i``). A *near* light at position ``q`` is an isotropic point light
+    (or a small spherical light, sampled with several points) of intensity ``I``; the irradiance
+    it gives is ``I cos / r^2``. The default intensity ``I = |q|^2`` gives unit irradiance at the
+    scene centre. The surface radiance is ``(kd / pi + f_spec) E``.
+
+Bounce
+    One bounce off the ground onto the object and spheres: the ground's radiance is
+    ``albedo / pi * E_direct`` (with its cast shadows) and the irradiance it gives a point ``p`` is
+    estimated once per pixel by stratified cosine-weighted Monte Carlo (fixed seed) whose rays
+    hit the ground; the hits are binned into a coarse ground grid (plus far rings), giving a
+    sparse matrix ``F`` (surface pixels x ground cells). Per light only ``E_direct`` at the cell
+    centres is evaluated (with shadow rays) and ``E_bounce = F @ (albedo / pi * E_cells)``. The
+    bounce light reflects diffusely (``kd / pi``). The ground receives no bounce light.
+
+The oracle :func:`render_lightmap` renders the scene under a light map by summing distant-light
+renders over a clustering of the map's texels; relighting a distant-light capture must converge
+to it as the number of capture lights grows. See ``docs/synth.md`` for measured speed and error.
+"""
+from __future__ import annotations
+
+import functools
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .capture import LIGHTS_FILE, Capture, Lights, save_capture, save_lights
+from .conventions import check_hemisphere, in_domain, normalize
+from .errors import InputError, atomic_output
+from .imageio import write_exr, write_png
+from .tonemap import srgb_encode
+
+__all__ = [
+    "SynthScene",
+    "LABEL_BACKGROUND",
+    "LABEL_GROUND",
+    "LABEL_OBJECT",
+    "LABEL_SPHERE0",
+    "GBuffer",
+    "gbuffer",
+    "pixel_labels",
+    "sphere_mask",
+    "sphere_pixel_radii",
+    "render_light",
+    "render_lights",
+    "render_lightmap",
+    "cluster_lightmap",
+    "stratified_directions",
+    "write_synthetic_capture",
+    "TRUTH_FILE",
+]
+
+#: Labels of :func:`pixel_labels`: nothing hit, the ground, the object, then sphere k is ``LABEL_SPHERE0 + k``.
+LABEL_BACKGROUND = -1
+LABEL_GROUND = 0
+LABEL_OBJECT = 1
+LABEL_SPHERE0 = 2
+
+#: Ground truth written beside ``capture.json`` by :func:`write_synthetic_capture`.
+TRUTH_FILE = "truth.json"
+
+_EPS = 1e-6  # ray-origin offset along the normal, metres
+
+
+# ============================================================================ scene description
+@dataclass(frozen=True)
+class SynthScene:
+    """Layout of the synthetic scene; frozen and hashable (it keys the G-buffer cache).
+
+    Parameters
+    ----------
+    sphere_radius : float
+        Radius of the four white spheres (m). They rest on the ground: centre z = radius.
+    sphere_xy : tuple of 4 (x, y)
+        Ground positions of the sphere centres (m). Default: corners of a 0.5 m square.
+    sphere_albedo : float
+        Lambertian albedo of the white spheres.
+    ground_albedo : float
+        Lambertian albedo of the ground plane (0 = black velvet).
+    camera_distance : float
+        Distance from the camera centre to ``camera_target`` (m).
+    camera_elevation_deg : float
+        How far the camera looks down, degrees (the camera sits at -Y, raised).
+    camera_fov_deg : float
+        Horizontal (and vertical: square pixels, square images) field of view, degrees.
+    camera_target : tuple of 3
+        World point on the optical axis (m).
+    bounce_samples : int
+        Monte Carlo rays per surface pixel for the ground bounce (rounded up to a square).
+    ground_cells : int
+        Cells per side of the ground grid that carries the bounce light.
+    ground_extent : float
+        Half side of that grid (m); ground beyond it is binned into far rings.
+    supersample : int
+        Primary rays per pixel along each axis (box filter); 1 = one ray through each pixel centre.
+    seed : int
+        Seed of the bounce sampling (the output is deterministic).
+
+    Notes
+    -----
+    The defaults put the spheres at about 45 px radius at 768 x 768 (52 px for the front pair,
+    36 px for the back pair) and keep everything inside the frame at any resolution.
+    """
+
+    sphere_radius: float = 0.05
+    sphere_xy: tuple = ((-0.25, -0.25), (0.25, -0.25), (0.25, 0.25), (-0.25, 0.25))
+    sphere_albedo: float = 0.8
+    ground_albedo: float = 0.3
+    camera_distance: float = 1.0
+    camera_elevation_deg: float = 30.0
+    camera_fov_deg: float = 46.0
+    camera_target: tuple = (0.0, 0.0, 0.05)
+    bounce_samples: int = 64
+    ground_cells: int = 128
+    ground_extent: float = 1.0
+    supersample: int = 1
+    seed: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "sphere_xy", tuple(tuple(float(v) for v in p) for p in self.sphere_xy))
+        object.__setattr__(self, "camera_target", tuple(float(v) for v in self.camera_target))
+        if self.sphere_radius <= 0 or self.camera_distance <= 0 or not 0 < self.camera_fov_deg < 180:
+            raise ValueError("sphere_radius and camera_distance must be > 0 and 0 < fov < 180")
+        if self.supersample < 1 or self.bounce_samples < 1 or self.ground_cells < 1:
+            raise ValueError("supersample, bounce_samples and ground_cells must be >= 1")
+
+    # ------------------------------------------------------------------ derived quantities
+    @property
+    def sphere_centers(self) -> np.ndarray:
+        """(4, 3) float64 sphere centres (m), resting on the ground."""
+        return np.array([[x, y, self.sphere_radius] for x, y in self.sphere_xy], dtype=np.float64)
+
+    def camera_center(self) -> np.ndarray:
+        """(3,) camera centre in world coordinates (m)."""
+        e = math.radians(self.camera_elevation_deg)
+        return np.asarray(self.camera_target) + self.camera_distance * np.array([0.0, -math.cos(e), math.sin(e)])
+
+    def world_from_camera(self) -> np.ndarray:
+        """(4, 4) rigid transform, OpenCV camera axes (x right, y down, z forward) to world."""
+        c = self.camera_center()
+        f = normalize(np.asarray(self.camera_target) - c)
+        x = normalize(np.cross(f, [0.0, 0.0, 1.0]))
+        y = np.cross(f, x)
+        M = np.eye(4)
+        M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, y, f, c
+        return M
+
+    def K(self, resolution: int) -> np.ndarray:
+        """(3, 3) intrinsics for a ``resolution`` x ``resolution`` image.
+
+        OpenCV convention: pixel (u, v) = (column, row) has its centre at integer coordinates,
+        so the principal point is ((W - 1) / 2, (H - 1) / 2).
+        """
+        f = 0.5 * resolution / math.tan(math.radians(self.camera_fov_deg) / 2)
+        c = 0.5 * (resolution - 1)
+        return np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
+
+    def primitives(self) -> list:
+        """The scene's primitives: ground, pedestal, glossy body, capsule, then the 4 spheres."""
+        white = (self.sphere_albedo,) * 3
+        prims = [
+            _Ground(_Material((self.ground_albedo,) * 3), LABEL_GROUND),
+            _Box((-0.09, -0.09, 0.0), (0.09, 0.09, 0.05), _Material((0.12, 0.22, 0.55)), LABEL_OBJECT),
+            _Sphere((0.0, 0.0, 0.135), 0.085, _Material((0.55, 0.10, 0.07), ks=0.3, shininess=50.0), LABEL_OBJECT),
+            _Capsule((0.15, -0.08, 0.025), (0.10, 0.02, 0.19), 0.025,
+                     _Material((0.20, 0.50, 0.12), ks=0.08, shininess=20.0), LABEL_OBJECT),
+        ]
+        for k, c in enumerate(self.sphere_centers):
+            prims.append(_Sphere(tuple(c), self.sphere_radius, _Material(white), LABEL_SPHERE0 + k))
+        return prims
+
+
+# ============================================================================ primitives
+@dataclass(frozen=True)
+class _Material:
+    kd: tuple
+    ks: float = 0.0
+    shininess: float = 1.0
+
+
+def _safe_inv(d):
+    d = np.where(d == 0.0, 1e-300, d)
+    return 1.0 / d
+
+
+@dataclass(frozen=True)
+class _Sphere:
+    center: tuple
+    radius: float
+    material: _Material
+    label: int
+
+    def interval(self, o, d):
+        """Entry and exit distances (n,), +inf/-inf for a miss; ``d`` unit (n, 3)."""
+        oc = o - np.asarray(self.center)
+        b = np.einsum("ij,ij->i", oc, d)
+        c = np.einsum("ij,ij->i", oc, oc) - self.radius ** 2
+        h = b * b - c
+        s = np.sqrt(np.maximum(h, 0.0))
+        miss = h < 0
+        return np.where(miss, np.inf, -b - s), np.where(miss, -np.inf, -b + s)
+
+    def normal(self, p):
+        return (p - np.asarray(self.center)) / self.radius
+
+
+@dataclass(frozen=True)
+class _Box:
+    lo: tuple
+    hi: tuple
+    material: _Material
+    label: int
+
+    def interval(self, o, d):
+        inv = _safe_inv(d)
+        with np.errstate(invalid="ignore", over="ignore"):
+            a = (np.asarray(self.lo) - o) * inv
+            b = (np.asarray(self.hi) - o) * inv
+        t0 = np.nanmax(np.minimum(a, b), axis=1)
+        t1 = np.nanmin(np.maximum(a, b), axis=1)
+        miss = t0 > t1
+        return np.where(miss, np.inf, t0), np.where(miss, -np.inf, t1)
+
+    def normal(self, p):
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        q = (p - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
+        axis = np.argmax(np.abs(q), axis=1)
+        n = np.zeros_like(p)
+        n[np.arange(len(p)), axis] = np.sign(q[np.arange(len(p)), axis])
+        return n
+
+
+@dataclass(frozen=True)
+class _Capsule:
+    a: tuple
+    b: tuple
+    radius: float
+    material: _Material
+    label: int
+
+    def _pieces(self):
+        return (_Sphere(self.a, self.radius, self.material, self.label),
+                _Sphere(self.b, self.radius, self.material, self.label))
+
+    def _cylinder(self, o, d):
+        a, b = np.asarray(self.a), np.asarray(self.b)
+        ax = b - a
+        L = np.linalg.norm(ax)
+        ax = ax / L
+        oa = o - a
+        dp = d - np.outer(d @ ax, ax)
+        op = oa - np.outer(oa @ ax, ax)
+        A = np.einsum("ij,ij->i", dp, dp)
+        B = np.einsum("ij,ij->i", dp, op)
+        C = np.einsum("ij,ij->i", op, op) - self.radius ** 2
+        h = B * B - A * C
+        par = A < 1e-14
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.sqrt(np.maximum(h, 0.0))
+            c0 = np.where(par, np.where(C < 0, -np.inf, np.inf), (-B - s) / A)
+            c1 = np.where(par, np.where(C < 0, np.inf, -np.inf), (-B + s) / A)
+        c0 = np.where(~par & (h < 0), np.inf, c0)
+        c1 = np.where(~par & (h < 0), -np.inf, c1)
+        # slab 0 <= (o + t d - a).ax <= L
+        da = d @ ax
+        pa = oa @ ax
+        inv = _safe_inv(da)
+        with np.errstate(invalid="ignore", over="ignore"):
+            s0, s1 = (0.0 - pa) * inv, (L - pa) * inv
+        par2 = da == 0.0
+        inside = (pa >= 0) & (pa <= L)
+        s_lo = np.where(par2, np.where(inside, -np.inf, np.inf), np.minimum(s0, s1))
+        s_hi = np.where(par2, np.where(inside, np.inf, -np.inf), np.maximum(s0, s1))
+        t0, t1 = np.maximum(c0, s_lo), np.minimum(c1, s_hi)
+        miss = t0 > t1
+        return np.where(miss, np.inf, t0), np.where(miss, -np.inf, t1)
+
+    def intervals(self, o, d):
+        """The (entry, exit) pairs of the capsule's three convex pieces."""
+        return [self._cylinder(o, d)] + [s.interval(o, d) for s in self._pieces()]
+
+    def interval(self, o, d):
+        """Entry of the union (origin outside) and the largest exit; exact for first hits."""
+        ivs = self.intervals(o, d)
+        return np.minimum.reduce([i[0] for i in ivs]), np.maximum.reduce([i[1] for i in ivs])
+
+    def normal(self, p):
+        a, b = np.asarray(self.a), np.asarray(self.b)
+        ax = b - a
+        t = np.clip(((p - a) @ ax) / (ax @ ax), 0.0, 1.0)
+        return normalize(p - (a + t[:, None] * ax))
+
+
+@dataclass(frozen=True)
+class _Ground:
+    material: _Material
+    label: int
+
+    def interval(self, o, d):
+        """The solid half-space z < 0."""
+        dz, oz = d[:, 2], o[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -oz / dz
+        t0 = np.where(dz < 0, t, np.where(dz > 0, -np.inf, np.where(oz < 0, -np.inf, np.inf)))
+        t1 = np.where(dz < 0, np.inf, np.where(dz > 0, t, np.where(oz < 0, np.inf, -np.inf)))
+        return t0, t1
+
+    def normal(self, p):
+        n = np.zeros_like(p)
+        n[:, 2] = 1.0
+        return n
+
+
+def _closest_hit(prims, o, d):
+    """Closest entry t > 0 and the index of the primitive hit (-1 for none); origins outside."""
+    best = np.full(len(o), np.inf)
+    idx = np.full(len(o), -1, dtype=np.int64)
+    for k, p in enumerate(prims):
+        t0, t1 = p.interval(o, d)
+        ok = (t0 > 0) & (t0 <= t1) & (t0 < best)
+        best = np.where(ok, t0, best)
+        idx = np.where(ok, k, idx)
+    return best, idx
+
+
+def _bound(p):
+    """Bounding sphere (centre (3,), radius) of a box or capsule primitive."""
+    if isinstance(p, _Box):
+        lo, hi = np.asarray(p.lo), np.asarray(p.hi)
+        return 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+    a, b = np.asarray(p.a), np.asarray(p.b)
+    return 0.5 * (a + b), 0.5 * float(np.linalg.norm(b - a)) + p.radius
+
+
+def _sphere_any(o, oo, d, od, c, r, tmax):
+    """Any-hit of segments with a solid sphere; ``oo`` = |o|^2 (n,), ``od`` = o.d (n,)."""
+    dc = d @ c
+    b = od - dc
+    cc = oo - 2.0 * (o @ c) + (c @ c - r * r)
+    h = b * b - cc
+    hit = (h >= 0) & ((b < 0) | (cc < 0))
+    if tmax is not None:
+        hit &= -b - np.sqrt(np.maximum(h, 0.0)) < tmax
+    return hit
+
+
+def _occluded(prims, o, d, tmax=None):
+    """Whether the open segment o + t d, 0 < t < tmax, meets any primitive's solid. (n,) bool.
+
+    Parameters
+    ----------
+    o : (n, 3) float64
+        Origins, outside or on the primitives.
+    d : (n, 3) or (3,) float64
+        Unit directions (one shared direction for a distant light).
+    tmax : (n,) float or None
+        Segment lengths; None = rays.
+
+    Boxes and capsules are first culled with their bounding spheres (exact tests only on the
+    rays that pass near them).
+    """
+    n = len(o)
+    hit = np.zeros(n, dtype=bool)
+    if n == 0:
+        return hit
+    oo = np.einsum("ij,ij->i", o, o)
+    od = o @ d if d.ndim == 1 else np.einsum("ij,ij->i", o, d)
+    for p in prims:
+        if isinstance(p, _Sphere):
+            hit |= _sphere_any(o, oo, d, od, np.asarray(p.center), p.radius, tmax)
+            continue
+        if isinstance(p, _Ground):
+            dd = np.broadcast_to(d, o.shape)
+            t0, t1 = p.interval(o, dd)
+            h = (t1 > 0) & (t0 <= t1)
+            if tmax is not None:
+                h &= t0 < tmax
+            hit |= h
+            continue
+        c, r = _bound(p)
+        sel = np.flatnonzero(_sphere_any(o, oo, d, od, c, r, tmax) & ~hit)
+        if len(sel) == 0:
+            continue
+        os_ = o[sel]
+        ds_ = np.broadcast_to(d, o.shape)[sel]
+        ivs = p.intervals(os_, ds_) if isinstance(p, _Capsule) else [p.interval(os_, ds_)]
+        hs = np.zeros(len(sel), dtype=bool)
+        for t0, t1 in ivs:
+            h = (t1 > 0) & (t0 <= t1)
+            if tmax is not None:
+                h &= t0 < tmax[sel]
+            hs |= h
+        hit[sel] |= hs
+    return hit
+
+
+# ============================================================================ G-buffer
+@dataclass
+class GBuffer:
+    """Primary hits of one (scene, resolution), computed once and cached.
+
+    Attributes
+    ----------
+    shape : (Hs, Ws)
+        Supersampled image shape (``resolution * supersample`` per side).
+    points, normals, view : (P, 3) float64
+        World position, unit normal and unit direction to the camera of every hit sample.
+    index : (P,) int64
+        Flat index into the supersampled image of each hit sample.
+    prim : (P,) int64
+        Index into ``scene.primitives()`` of the primitive hit.
+    labels : (Hs, Ws) int8
+        :data:`LABEL_GROUND`, :data:`LABEL_OBJECT`, ``LABEL_SPHERE0 + k`` or :data:`LABEL_BACKGROUND`.
+    kd : (P, 3), ks : (P,), shininess : (P,)
+        Material of each hit sample.
+    """
+
+    shape: tuple
+    points: np.ndarray
+    normals: np.ndarray
+    view: np.ndarray
+    index: np.ndarray
+    prim: np.ndarray
+    labels: np.ndarray
+    kd: np.ndarray
+    ks: np.ndarray
+    shininess: np.ndarray
+    bounce: sp.csr_matrix = field(default=None, repr=False)  # (P, C) or None
+    cell_points: np.ndarray = field(default=None, repr=False)  # (C, 3)
+
+
+def _primary_rays(scene: SynthScene, resolution: int):
+    s = scene.supersample
+    K = scene.K(resolution)
+    n = resolution * s
+    sub = (np.arange(n) + 0.5) / s - 0.5  # pixel coordinates of the sub-sample centres
+    u, v = np.meshgrid(sub, sub)
+    x = (u - K[0, 2]) / K[0, 0]
+    y = (v - K[1, 2]) / K[1, 1]
+    M = scene.world_from_camera()
+    dc = np.stack([x.ravel(), y.ravel(), np.ones(x.size)], axis=1)
+    d = normalize(dc @ M[:3, :3].T)
+    o = np.broadcast_to(M[:3, 3], d.shape).copy()
+    return o, d, (n, n)
+
+
+@functools.lru_cache(maxsize=4)
+def gbuffer(scene: SynthScene, resolution: int) -> GBuffer:
+    """The cached primary-hit buffer of ``scene`` at ``resolution`` x ``resolution``.
+
+    The bounce form-factor matrix is built here too (static geometry), so the first call at a
+    resolution costs a few seconds at most and later calls are free.
+    """
+    if int(resolution) < 1:
+        raise ValueError("resolution must be >= 1")
+    prims = scene.primitives()
+    o, d, shape = _primary_rays(scene, int(resolution))
+    t, idx = _closest_hit(prims, o, d)
+    hit = idx >= 0
+    index = np.flatnonzero(hit)
+    pid = idx[hit]
+    p = o[hit] + t[hit, None] * d[hit]
+    n = np.zeros_like(p)
+    labels = np.full(shape[0] * shape[1], LABEL_BACKGROUND, dtype=np.int8)
+    kd = np.zeros_like(p)
+    ks = np.zeros(len(p))
+    sh = np.ones(len(p))
+    for k, prim in enumerate(prims):
+        m = pid == k
+        if not m.any():
+            continue
+        n[m] = prim.normal(p[m])
+        labels[index[m]] = prim.label
+        kd[m] = prim.material.kd
+        ks[m] = prim.material.ks
+        sh[m] = prim.material.shininess
+    # the ground is exactly z = 0 where hit
+    g = labels[index] == LABEL_GROUND
+    p[g, 2] = 0.0
+    gb = GBuffer(shape=shape, points=p, normals=normalize(n), view=-d[hit], index=index, prim=pid,
+                 labels=labels.reshape(shape), kd=kd, ks=ks, shininess=sh)
+    gb.bounce, gb.cell_points = _bounce_matrix(scene, prims, gb)
+    return gb
+
+
+# ============================================================================ bounce
+def _concentric(u1, u2):
+    """Shirley-Chiu concentric map of the unit square onto the unit disk."""
+    a, b = 2 * u1 - 1, 2 * u2 - 1
+    first = np.abs(a) > np.abs(b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(first, a, b)
+        phi = np.where(first, (np.pi / 4) * (b / a), np.pi / 2 - (np.pi / 4) * (a / b))
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def _frame(n):
+    """Orthonormal tangents (t, b) for unit normals (n, 3) (Duff et al. 2017)."""
+    sign = np.where(n[:, 2] >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t = np.stack([1 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    bb = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    return t, bb
+
+
+_N_RINGS, _N_AZ, _RING_MAX = 12, 32, 256.0
+
+
+def _cell_of(scene: SynthScene, x):
+    """Ground cell index of ground points (n, 2): grid cells, then log-radius x azimuth rings."""
+    G, E = scene.ground_cells, scene.ground_extent
+    i = np.floor((x[:, 0] + E) / (2 * E) * G).astype(np.int64)
+    j = np.floor((x[:, 1] + E) / (2 * E) * G).astype(np.int64)
+    inside = (i >= 0) & (i < G) & (j >= 0) & (j < G)
+    r = np.maximum(np.abs(x[:, 0]), np.abs(x[:, 1]))
+    ring = np.clip(np.floor(np.log(np.maximum(r, E) / E) / np.log(_RING_MAX) * _N_RINGS), 0, _N_RINGS - 1).astype(np.int64)
+    az = np.floor((np.arctan2(x[:, 1], x[:, 0]) + np.pi) / (2 * np.pi) * _N_AZ).astype(np.int64) % _N_AZ
+    return np.where(inside, j * G + i, G * G + ring * _N_AZ + az)
+
+
+def _bounce_matrix(scene: SynthScene, prims, gb: GBuffer, chunk: int = 400_000):
+    """Sparse (P, C) matrix F with E_bounce(p) = sum_c F[p, c] L_ground(c); and cell points (C, 3)."""
+    G = scene.ground_cells
+    C = G * G + _N_RINGS * _N_AZ
+    E = scene.ground_extent
+    c = (np.arange(G) + 0.5) / G * 2 * E - E
+    cx, cy = np.meshgrid(c, c)
+    grid_pts = np.stack([cx.ravel(), cy.ravel(), np.zeros(G * G)], axis=1)
+    surf = np.flatnonzero(gb.labels.ravel()[gb.index] > LABEL_GROUND)
+    P = len(gb.points)
+    k = int(math.ceil(math.sqrt(scene.bounce_samples)))
+    S = k * k
+    if len(surf) == 0:
+        return sp.csr_matrix((P, C), dtype=np.float64), np.concatenate([grid_pts, np.zeros((C - G * G, 3))])
+    rng = np.random.default_rng(scene.seed)
+    occ_prims = [p for p in prims if not isinstance(p, _Ground)]
+    rows, cols, hits = [], [], []
+    per = max(1, chunk // S)
+    for s0 in range(0, len(surf), per):
+        ids = surf[s0:s0 + per]
+        m = len(ids)
+        si, sj = np.meshgrid(np.arange(k), np.arange(k))
+        u1 = (si.ravel()[None, :] + rng.random((m, S))) / k
+        u2 = (sj.ravel()[None, :] + rng.random((m, S))) / k
+        dx, dy = _concentric(u1, u2)
+        dz = np.sqrt(np.maximum(0.0, 1 - dx * dx - dy * dy))
+        n = gb.normals[ids]
+        t, b = _frame(n)
+        d = (dx[..., None] * t[:, None] + dy[..., None] * b[:, None] + dz[..., None] * n[:, None]).reshape(-1, 3)
+        o = np.repeat(gb.points[ids] + _EPS * n, S, axis=0)
+        row = np.repeat(ids, S)
+        down = d[:, 2] < -1e-9
+        o, d, row = o[down], d[down], row[down]
+        tg = -o[:, 2] / d[:, 2]
+        vis = ~_occluded(occ_prims, o, d, tg)
+        x = o[vis] + tg[vis, None] * d[vis]
+        rows.append(row[vis])
+        cols.append(_cell_of(scene, x[:, :2]))
+        hits.append(x)
+    rows = np.concatenate(rows)
+    cols = np.concatenate(cols)
+    x = np.concatenate(hits)
+    F = sp.csr_matrix((np.full(len(rows), np.pi / S), (rows, cols)), shape=(P, C))
+    # representative point of each ring cell: the mean of its hits (radius clipped); grid: centres
+    ring_pts = np.zeros((C - G * G, 3))
+    rc = cols >= G * G
+    if rc.any():
+        cnt = np.bincount(cols[rc] - G * G, minlength=C - G * G)
+        for ax in (0, 1):
+            ring_pts[:, ax] = np.bincount(cols[rc] - G * G, weights=x[rc, ax], minlength=C - G * G) / np.maximum(cnt, 1)
+    r = np.linalg.norm(ring_pts[:, :2], axis=1, keepdims=True)
+    ring_pts[:, :2] *= np.minimum(1.0, _RING_MAX * E / np.maximum(r, 1e-12))
+    return F, np.concatenate([grid_pts, ring_pts])
+
+
+# ============================================================================ shading
+def _light_samples(direction, position, intensity, radius, n_samples):
+    """A light as a list of (direction or None, position or None, weight)."""
+    if (direction is None) == (position is None):
+        raise ValueError("give exactly one of direction= or position=")
+    if direction is not None:
+        dvec = np.asarray(direction, dtype=np.float64).reshape(3)
+        if not np.isfinite(dvec).all() or np.linalg.norm(dvec) == 0:
+            raise ValueError("direction must be a finite non-zero 3-vector")
+        return [(normalize(dvec), None, 1.0)]
+    q = np.asarray(position, dtype=np.float64).reshape(3)
+    I = float(q @ q) if intensity is None else float(intensity)
+    if radius <= 0 or n_samples <= 1:
+        return [(None, q, I)]
+    # stratified points on the disk of the spherical light facing the scene centre
+    w = normalize(-q)
+    t, b = _frame(w[None])
+    k = int(math.ceil(math.sqrt(n_samples)))
+    g = (np.arange(k) + 0.5) / k
+    u1, u2 = np.meshgrid(g, g)
+    dx, dy = _concentric(u1.ravel(), u2.ravel())
+    pts = q + radius * (dx[:, None] * t + dy[:, None] * b)
+    return [(None, p, I / len(pts)) for p in pts]
+
+
+def _irradiance(prims, p, n, samples):
+    """Yield (l (n, 3), E (n,)) per light sample: unit direction to the light and shadowed irradiance."""
+    for dvec, q, wgt in samples:
+        if dvec is not None:
+            l = np.broadcast_to(dvec, p.shape)
+            cos = n @ dvec
+            lit = cos > 0
+            E = np.zeros(len(p))
+            if lit.any():
+                vis = ~_occluded(prims, p[lit] + _EPS * n[lit], dvec)
+                E[lit] = wgt * cos[lit] * vis
+        else:
+            w = q - p
+            r = np.linalg.norm(w, axis=1)
+            l = w / r[:, None]
+            cos = np.einsum("ij,ij->i", n, l)
+            lit = cos > 0
+            E = np.zeros(len(p))
+            if lit.any():
+                o = p[lit] + _EPS * n[lit]
+                vis = ~_occluded(prims, o, l[lit], r[lit])
+                E[lit] = wgt * cos[lit] / r[lit] ** 2 * vis
+        yield l, E
+
+
+def _render(scene, gb, samples, resolution, out=None):
+    prims = scene.primitives()
+    p, n, v = gb.points, gb.normals, gb.view
+    rad = np.zeros((len(p), 3))
+    spec_pts = gb.ks > 0
+    for l, E in _irradiance(prims, p, n, samples):
+        f = gb.kd / np.pi
+        rad += f * E[:, None]
+        if spec_pts.any():
+            m = spec_pts & (E > 0)
+            h = normalize(l[m] + v[m])
+            nh = np.maximum(np.einsum("ij,ij->i", n[m], h), 0.0)
+            sh = gb.shininess[m]
+            fs = gb.ks[m] * (sh + 8) / (8 * np.pi) * nh ** sh
+            rad[m] += (fs * E[m])[:, None]
+    # ground bounce onto the object and spheres
+    if scene.ground_albedo > 0 and gb.bounce is not None and gb.bounce.nnz:
+        cp = gb.cell_points
+        up = np.zeros_like(cp)
+        up[:, 2] = 1.0
+        Ec = sum(E for _, E in _irradiance(prims, cp, up, samples))
+        Eb = gb.bounce @ (scene.ground_albedo / np.pi * Ec)
+        rad += gb.kd / np.pi * Eb[:, None]
+    Hs, Ws = gb.shape
+    img = np.zeros((Hs * Ws, 3))
+    img[gb.index] = rad
+    s = scene.supersample
+    img = img.reshape(resolution, s, resolution, s, 3).mean(axis=(1, 3))
+    if out is not None:
+        out[...] = img
+        return out
+    return img.astype(np.float32)
+
+
+def render_light(scene: SynthScene, resolution: int, direction=None, position=None, *,
+                 intensity: float | None = None, light_radius: float = 0.0, light_samples: int = 9) -> np.ndarray:
+    """Render the scene under one light.
+
+    Parameters
+    ----------
+    scene : SynthScene
+    resolution : int
+        Image width and height (pixels).
+    direction : (3,) float, optional
+        A distant light from this direction (world, toward the light) with unit irradiance at
+        normal incidence.
+    position : (3,) float, optional
+        A near light at this world position (m). Exactly one of ``direction`` and ``position``.
+    intensity : float, optional
+        Near-light intensity ``I`` (irradiance ``I cos / r^2``); default ``|position|^2`` (unit
+        irradiance at the scene centre).
+    light_radius : float
+        Radius (m) of a spherical near light; 0 = point light.
+    light_samples : int
+        Points sampling a spherical light (rounded up to a square), for soft shadows.
+
+    Returns
+    -------
+    (resolution, resolution, 3) float32
+        Linear radiance.
+    """
+    gb = gbuffer(scene, int(resolution))
+    return _render(scene, gb, _light_samples(direction, position, intensity, light_radius, light_samples), int(resolution))
+
+
+def render_lights(scene: SynthScene, resolution: int, directions=None, *, positions=None,
+                  light_radius: float = 0.0, light_samples: int = 9, progress: bool = False) -> np.ndarray:
+    """Render one image per distant light (or per near light with ``positions=``).
+
+    Parameters
+    ----------
+    scene : SynthScene
+    resolution : int
+    directions : (n, 3) float, optional
+        Distant-light directions (normalised here).
+    positions : (n, 3) float, optional
+        Near-light positions (m) instead, each with intensity ``|position|^2``.
+    light_radius, light_samples
+        As in :func:`render_light`.
+    progress : bool
+        Show a tqdm bar.
+
+    Returns
+    -------
+    (n, resolution, resolution, 3) float32
+    """
+    if (directions is None) == (positions is None):
+        raise ValueError("give exactly one of directions= or positions=")
+    arr = np.atleast_2d(np.asarray(directions if positions is None else positions, dtype=np.float64))
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError("directions/positions must be (n, 3)")
+    gb = gbuffer(scene, int(resolution))
+    out = np.empty((len(arr), resolution, resolution, 3), dtype=np.float32)
+    it = range(len(arr))
+    if progress:
+        from tqdm import tqdm
+        it = tqdm(it, desc="render", unit="img")
+    for i in it:
+        s = (_light_samples(arr[i], None, None, 0, 1) if positions is None
+             else _light_samples(None, arr[i], None, light_radius, light_samples))
+        out[i] = _render(scene, gb, s, int(resolution))
+    return out
+
+
+# ============================================================================ masks and truth
+def pixel_labels(scene: SynthScene, resolution: int) -> np.ndarray:
+    """(H, W) int8 label of each pixel (its centre sub-sample's majority with supersampling).
+
+    :data:`LABEL_BACKGROUND`, :data:`LABEL_GROUND`, :data:`LABEL_OBJECT` or ``LABEL_SPHERE0 + k``.
+    """
+    gb = gbuffer(scene, int(resolution))
+    s = scene.supersample
+    lab = gb.labels.reshape(resolution, s, resolution, s).transpose(0, 2, 1, 3).reshape(resolution, resolution, s * s)
+    if s == 1:
+        return lab[..., 0].copy()
+    vals = np.arange(LABEL_BACKGROUND, LABEL_SPHERE0 + 4)
+    counts = (lab[..., None] == vals).sum(axis=2)
+    return vals[np.argmax(counts, axis=-1)].astype(np.int8)
+
+
+def sphere_mask(scene: SynthScene, resolution: int) -> np.ndarray:
+    """(H, W) int8: index 0..3 of the white sphere seen at each pixel, -1 elsewhere."""
+    lab = pixel_labels(scene, resolution)
+    return np.where(lab >= LABEL_SPHERE0, lab - LABEL_SPHERE0, -1).astype(np.int8)
+
+
+def sphere_pixel_radii(scene: SynthScene, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """Projected sphere centres and apparent radii in pixels.
+
+    Returns
+    -------
+    centers_px : (4, 2) float64
+        (u, v) = (column, row) projection of each 3D centre (OpenCV convention).
+    radii_px : (4,) float64
+        ``f tan(asin(R / D))``: the silhouette's half-angle in pixels along the focal length.
+    """
+    K = scene.K(resolution)
+    M = scene.world_from_camera()
+    c = (scene.sphere_centers - M[:3, 3]) @ M[:3, :3]  # camera coordinates
+    uv = (c @ K.T)[:, :2] / c[:, 2:3]
+    D = np.linalg.norm(c, axis=1)
+    R = scene.sphere_radius
+    return uv, K[0, 0] * R / np.sqrt(D * D - R * R)
+
+
+# ============================================================================ light directions
+def stratified_directions(n: int, hemisphere: str = "upper", seed: int = 0) -> np.ndarray:
+    """Jittered equal-area spiral of ``n`` unit directions over the upper hemisphere or full sphere.
+
+    Band ``k`` of ``n`` equal-area bands in z gets one direction at a jittered z inside the band
+    and the golden-angle azimuth plus a random global rotation, so the set is stratified
+    and random, and deterministic for a ``seed``.
+
+    Returns
+    -------
+    (n, 3) float64, unit
+    """
+    check_hemisphere(hemisphere)
+    if n < 1:
+        raise ValueError("n must be >= 1")
+    rng = np.random.default_rng(seed)
+    zlo = 0.0 if hemisphere == "upper" else -1.0
+    z = 1.0 - (np.arange(n) + rng.random(n)) / n * (1.0 - zlo)
+    phi = rng.random() * 2 * np.pi + np.arange(n) * np.pi * (3.0 - math.sqrt(5.0)) + rng.normal(0, 0.1, n)
+    r = np.sqrt(np.maximum(0.0, 1 - z * z))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+# ============================================================================ oracle
+def _map_samples(lightmap):
+    if hasattr(lightmap, "samples"):
+        dirs, rad, sa = lightmap.samples()
+    else:
+        dirs, rad, sa = lightmap
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    rad = np.asarray(rad, dtype=np.float64).reshape(len(dirs), -1)
+    sa = np.asarray(sa, dtype=np.float64).reshape(-1)
+    if rad.shape[1] == 1:
+        rad = np.repeat(rad, 3, axis=1)
+    if rad.shape[1] != 3 or len(sa) != len(dirs):
+        raise ValueError("light-map samples must be dirs (M, 3), radiance (M, 3), solid_angle (M,)")
+    return dirs, rad, sa
+
+
+def cluster_lightmap(lightmap, n_dirs: int = 2048, hemisphere: str = "upper", rotation=None):
+    """Reduce a light map to ``n_dirs`` distant lights (the oracle's discretisation).
+
+    Texels holding more than ``1 / n_dirs`` of the energy (at most ``n_dirs // 8`` of them: a
+    sun) become distant lights of their own at their exact directions. The other texels are
+    assigned to the nearest of the remaining spiral directions; each cluster
+    ``k`` becomes one distant light at its luminance-weighted mean direction ``m_k`` with
+    irradiance ``E_k = sum_i L_i w_i (d_i . m_k)`` per channel: the first moment (vector
+    irradiance) of the cluster projected on ``m_k``. This is exact for an unshadowed Lambertian
+    point that sees the whole cluster (plain ``sum L w`` would overestimate it by
+    ``1 + O(cluster radius^2)``); the error elsewhere is second order in the cluster radius. For
+    ``hemisphere='upper'`` texels below the horizon are dropped first (as the relighter does).
+
+    Parameters
+    ----------
+    lightmap : LightMap or tuple
+        An object with ``samples() -> (dirs (M, 3), radiance (M, 3), solid_angle (M,))``, or that tuple.
+    n_dirs : int
+    hemisphere : {'upper', 'full'}
+    rotation : (3, 3) float, optional
+        Light-map rotation: radiance from ``d`` arrives from ``R d``.
+
+    Returns
+    -------
+    directions : (k, 3) float64, unit
+    irradiance : (k, 3) float64
+        ``E_k`` above; only clusters with non-zero energy are returned (k <= n_dirs). Their sum is
+        slightly below the map's ``sum L w`` (by the projection factor).
+    dropped : int
+        Number of texels with non-zero radiance dropped below the horizon.
+    """
+    check_hemisphere(hemisphere)
+    dirs, rad, sa = _map_samples(lightmap)
+    if not (np.isfinite(rad).all() and np.isfinite(sa).all()):
+        raise InputError("light map has non-finite radiance or solid angles")
+    if rotation is not None:
+        dirs = dirs @ np.asarray(rotation, dtype=np.float64).T
+    keep = in_domain(dirs, hemisphere)
+    dropped = int(np.count_nonzero(~keep & np.any(rad != 0, axis=1)))
+    dirs, rad, sa = dirs[keep], rad[keep], sa[keep]
+    E = rad * sa[:, None]
+    lum = np.abs(E) @ np.array([0.2126, 0.7152, 0.0722])
+    lum = np.where(lum > 0, lum, np.abs(E).sum(axis=1))
+    # the brightest texels (a sun) become lights of their own, at their exact directions
+    n_solo = min(n_dirs // 8, len(dirs))
+    solo = np.zeros(len(dirs), dtype=bool)
+    if n_solo > 0 and lum.sum() > 0:
+        top = np.argpartition(-lum, n_solo - 1)[:n_solo]
+        solo[top[lum[top] > lum.sum() / n_dirs]] = True
+    n_cl = max(1, n_dirs - int(solo.sum()))
+    centres = stratified_directions(n_cl, hemisphere, seed=12345)
+    rest = ~solo
+    _, lab = cKDTree(centres).query(dirs[rest])
+    wgt = lum[rest]
+    mean = np.stack([np.bincount(lab, weights=wgt * dirs[rest, c], minlength=n_cl) for c in range(3)], axis=1)
+    nrm = np.linalg.norm(mean, axis=1, keepdims=True)
+    mean = np.where(nrm > 0, mean / np.maximum(nrm, 1e-300), centres)
+    if hemisphere == "upper":  # a mean of texels with z >= 0 has z >= 0; guard rounding
+        mean[:, 2] = np.maximum(mean[:, 2], 0.0)
+        mean = normalize(mean)
+    # first moment (vector irradiance) of each channel, projected on the cluster direction
+    cosk = np.einsum("ij,ij->i", dirs[rest], mean[lab])
+    irr = np.stack([np.bincount(lab, weights=E[rest, c] * cosk, minlength=n_cl) for c in range(3)], axis=1)
+    mean = np.concatenate([dirs[solo], mean])
+    irr = np.concatenate([E[solo], irr])
+    nz = np.any(irr != 0, axis=1)
+    return mean[nz], irr[nz], dropped
+
+
+def render_lightmap(scene: SynthScene, lightmap, resolution: int, n_dirs: int = 2048, hemisphere: str = "upper",
+                    rotation=None, progress: bool = False) -> np.ndarray:
+    """The oracle: the scene lit directly by a light map (distant illumination).
+
+    ``sum_k E_k * B(d_k)`` over the clusters of :func:`cluster_lightmap`, where ``B(d)`` is the
+    distant-light render of :func:`render_light`. Light from below the horizon is dropped for
+    ``hemisphere='upper'`` (the relighter's rule). See ``docs/synth.md`` for its measured
+    discretisation error.
+
+    Parameters
+    ----------
+    scene : SynthScene
+    lightmap : LightMap or (dirs, radiance, solid_angle)
+    resolution : int
+    n_dirs : int
+        Number of distant lights the map is reduced to.
+    hemisphere : {'upper', 'full'}
+    rotation : (3, 3) float, optional
+    progress : bool
+
+    Returns
+    -------
+    (resolution, resolution, 3) float32
+        Linear radiance.
+    """
+    d, irr, _ = cluster_lightmap(lightmap, n_dirs, hemisphere, rotation)
+    gb = gbuffer(scene, int(resolution))
+    acc = np.zeros((resolution, resolution, 3))
+    tmp = np.empty_like(acc)
+    it = range(len(d))
+    if progress:
+        from tqdm import tqdm
+        it = tqdm(it, desc="oracle", unit="dir")
+    for k in it:
+        _render(scene, gb, _light_samples(d[k], None, None, 0, 1), int(resolution), out=tmp)
+        acc += tmp * irr[k]
+    return acc.astype(np.float32)
+
+
+# ============================================================================ capture writer
+def _write_json(path: Path, obj):
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(obj, indent=1) + "\n")
+
+
+def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, light_model: str = "distant",
+                            light_distance: float = 2.0, seed: int = 0, ground_albedo: float = 0.3,
+                            hemisphere: str = "upper", encoding: str = "linear", noise: float = 0.0,
+                            directions=None, progress: bool = True, scene: SynthScene | None = None,
+                            light_radius: float = 0.0, light_samples: int = 9) -> dict:
+    """Render a synthetic capture folder: images, ``capture.json``, ``lights.json``, ``truth.json``.
+
+    Parameters
+    ----------
+    folder : path
+        Output folder (created if missing).
+    n_lights : int
+        Number of images (ignored when ``directions`` is given).
+    resolution : int
+        Image width and height (pixels).
+    light_model : {'distant', 'near'}
+        Distant lights of unit irradiance, or point lights at ``light_distance * direction``
+        with intensity ``light_distance ** 2`` (unit irradiance at the scene centre).
+    light_distance : float
+        Distance (m) of near lights from the scene centre.
+    seed : int
+        Seed of the light directions and of the noise.
+    ground_albedo : float
+        Albedo of the table (0 = black velvet).
+    hemisphere : {'upper', 'full'}
+        Where the default directions are drawn; written to ``capture.json``.
+    encoding : {'linear', 'srgb8'}
+        Half-float linear EXR, or 8-bit sRGB PNG (clipped at 1, the camera saturating).
+    noise : float
+        Standard deviation of Gaussian noise added to the stored values, as a fraction of full
+        scale: to the encoded value before 8-bit quantisation (``1/255`` = one code value), or to
+        the linear value for EXR.
+    directions : (n, 3) float, optional
+        Explicit light directions (normalised here).
+    progress : bool
+        tqdm progress bar.
+    scene : SynthScene, optional
+        Scene layout; default ``SynthScene(ground_albedo=ground_albedo)``.
+    light_radius, light_samples
+        Spherical near light (see :func:`render_light`).
+
+    Returns
+    -------
+    dict
+        ``{"folder", "images", "directions" (n, 3), "positions" (n, 3) or None, "scene"}``.
+    """
+    check_hemisphere(hemisphere)
+    if light_model not in ("distant", "near"):
+        raise ValueError("light_model must be 'distant' or 'near'")
+    if encoding not in ("linear", "srgb8"):
+        raise ValueError("encoding must be 'linear' or 'srgb8'")
+    if noise < 0:
+        raise ValueError("noise must be >= 0")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if scene is None:
+        scene = SynthScene(ground_albedo=ground_albedo)
+    if directions is None:
+        dirs = stratified_directions(int(n_lights), hemisphere, seed)
+    else:
+        dirs = normalize(np.atleast_2d(np.asarray(directions, dtype=np.float64)))
+        if dirs.ndim != 2 or dirs.shape[1] != 3 or not np.all(np.linalg.norm(dirs, axis=1) > 0.5):
+            raise ValueError("directions must be (n, 3) non-zero vectors")
+    positions = light_distance * dirs if light_model == "near" else None
+    n = len(dirs)
+    width = max(4, len(str(n - 1)))
+    ext = "exr" if encoding == "linear" else "png"
+    names = [f"img_{i:0{width}d}.{ext}" for i in range(n)]
+    gb = gbuffer(scene, int(resolution))
+    rng = np.random.default_rng([seed, 1])
+    it = range(n)
+    if progress:
+        from tqdm import tqdm
+        it = tqdm(it, desc="synth", unit="img")
+    for i in it:
+        s = (_light_samples(dirs[i], None, None, 0, 1) if positions is None
+             else _light_samples(None, positions[i], None, light_radius, light_samples))
+        img = _render(scene, gb, s, int(resolution))
+        if encoding == "linear":
+            if noise > 0:
+                img = img + rng.normal(0.0, noise, img.shape).astype(np.float32)
+            write_exr(folder / names[i], img, half=True)  # atomic
+        else:
+            enc = srgb_encode(np.clip(img.astype(np.float64), 0.0, None))
+            if noise > 0:
+                enc = enc + rng.normal(0.0, noise, enc.shape)
+            write_png(folder / names[i], np.rint(np.clip(enc, 0, 1) * 255).astype(np.uint8))  # atomic
+
+    centers = scene.sphere_centers
+    uv, rpx = sphere_pixel_radii(scene, int(resolution))
+    mask = sphere_mask(scene, int(resolution))
+    area_r = [math.sqrt(np.count_nonzero(mask == k) / math.pi) for k in range(4)]
+    R = int(resolution)
+    capture = Capture(
+        folder=folder, image_names=names, encoding="linear" if encoding == "linear" else "srgb",
+        K=scene.K(R), dist=np.zeros(5), world_from_camera=scene.world_from_camera(),
+        world_from_camera_is_default=False, sphere_radius=scene.sphere_radius, scene_center=np.zeros(3),
+        hemisphere=hemisphere, image_size=(R, R), units="m", extra={"truth": TRUTH_FILE},
+    )
+    lights = Lights(image_names=names, directions=dirs, positions=positions)
+    truth = {
+        "format": "ffls-synth-truth",
+        "version": 1,
+        "light_model": light_model,
+        "images": names,
+        "directions": dirs.tolist(),
+        "positions": None if positions is None else positions.tolist(),
+        "intensities": None if positions is None else (light_distance ** 2 * np.ones(n)).tolist(),
+        "light_radius": light_radius if light_model == "near" else 0.0,
+        "sphere_centers": centers.tolist(),
+        "sphere_radius": scene.sphere_radius,
+        "sphere_centers_px": uv.tolist(),
+        "sphere_radii_px": rpx.tolist(),
+        "sphere_radii_px_from_area": area_r,
+        "ground_albedo": scene.ground_albedo,
+        "resolution": int(resolution),
+        "encoding": encoding,
+        "noise": noise,
+        "seed": seed,
+    }
+    _write_json(folder / TRUTH_FILE, truth)
+    save_lights(lights, folder / LIGHTS_FILE)
+    save_capture(capture)  # last: a folder with capture.json is complete
+    return {"folder": folder, "images": names, "directions": dirs, "positions": positions, "scene": scene}

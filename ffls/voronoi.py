@@ -1,0 +1,602 @@
+"""Angular Voronoi weighting of a light map over the captured light directions.
+
+Masselus, Dutre, Anrys, "The Free-form Light Stage", EGWR 2002, section 6: every light-map
+texel represents a small solid angle of incident light; it is given to the captured light
+direction nearest to it *by angle* (an angular Voronoi diagram on the sphere), and the weight of
+basis image ``i`` is the sum of ``radiance * solid_angle`` over the texels of cell ``i``.
+
+Two ways to find the cell of a texel, with one tie rule:
+
+* ``cells=None`` -- the float64 reference. A :class:`scipy.spatial.cKDTree` over the unit light
+  vectors (chord order is angle order on the unit sphere) proposes the two nearest lights, and
+  the winner is the larger dot product ``d . l`` (computed by :func:`_dots`), ties to the lowest
+  light index.
+* a :class:`CellTexture` (``bake_cells``) -- what the GPU does too. A texture over the
+  concentric map (upper hemisphere) or the octahedral map (full sphere) stores, per texel, a
+  *conservative candidate list*: every light whose Voronoi cell can intersect the texel. A
+  rotated light-map direction is looked up with the map's ``texel_index`` and given to the
+  candidate with the largest dot product (the same :func:`_dots`), ties to the lowest index
+  (candidates are stored in increasing index order, so the first maximum wins). Because the true
+  nearest light is always a candidate, this assignment equals the reference one exactly.
+
+Why the candidate list is conservative: let ``c`` be a texel centre, ``r`` the texel's angular
+radius (the largest angle from ``c`` to its boundary) and ``a`` the angle from ``c`` to its
+nearest light. For any direction ``p`` in the texel, its nearest light ``j`` satisfies
+``angle(p, j) <= angle(p, nearest(c)) <= a + r``, hence ``angle(c, j) <= a + 2 r``. The baker
+keeps every light within ``a + 2 r (1 + 5%) + 1e-9`` of the centre.
+
+Exact duplicates: directions are de-duplicated before anything else; the first occurrence
+(lowest index) keeps the cell and every later copy gets an empty cell (weight 0). Nearly equal
+but different directions are distinct points and split the cell between them.
+
+Dropped light: for the ``upper`` hemisphere, texels whose rotated direction has ``z < 0`` are
+dropped; their count and power are reported in :class:`Weights`. ``z == 0`` is kept.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .conventions import (
+    check_hemisphere,
+    covered_solid_angle,
+    in_domain,
+    is_rotation,
+    latlong_directions,
+)
+
+__all__ = [
+    "CellTexture",
+    "Weights",
+    "MAP_FOR_HEMISPHERE",
+    "bake_cells",
+    "integrate_weights",
+    "assign_cells",
+    "cell_solid_angles",
+    "unique_directions",
+]
+
+#: The sphere parameterisation a cell texture uses for each hemisphere setting.
+MAP_FOR_HEMISPHERE = {"upper": "concentric", "full": "octahedral"}
+
+#: Relative and absolute slack added to the candidate radius ``a + 2 r``.
+CANDIDATE_REL_SLACK = 0.05
+CANDIDATE_ABS_SLACK = 1e-9
+
+#: Lights with 0 <= z <= this count as on the horizon in :func:`cell_solid_angles`.
+_HORIZON_EPS = 1e-9
+
+
+# ----------------------------------------------------------------------------- helpers
+def _check_directions(directions) -> np.ndarray:
+    d = np.asarray(directions, dtype=np.float64)
+    if d.ndim == 1 and d.shape == (3,):
+        d = d[None, :]
+    if d.ndim != 2 or d.shape[1] != 3 or d.shape[0] < 1:
+        raise ValueError(f"directions must have shape (n, 3) with n >= 1, not {d.shape}")
+    if not np.all(np.isfinite(d)):
+        raise ValueError("directions contain NaN or Inf")
+    norm = np.linalg.norm(d, axis=1, keepdims=True)
+    if np.any(norm == 0):
+        raise ValueError("directions contain a zero vector")
+    return d / norm
+
+
+def unique_directions(directions) -> tuple[np.ndarray, np.ndarray]:
+    """De-duplicate light directions, keeping the first (lowest-index) occurrence.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Light directions; normalised here.
+
+    Returns
+    -------
+    unit : (n, 3) float64
+        The normalised directions.
+    keep : (u,) int64
+        Increasing indices into ``directions`` of the first occurrence of every distinct unit
+        vector (bitwise equality after normalisation).
+    """
+    d = _check_directions(directions)
+    d = d + 0.0  # turn -0.0 into +0.0 so that equal vectors compare equal bytewise
+    _, first = np.unique(d, axis=0, return_index=True)
+    return d, np.sort(first)
+
+
+def _dots(p: np.ndarray, lights: np.ndarray) -> np.ndarray:
+    """Dot products ``p . l`` in one fixed float64 operation order (shared by both assigners).
+
+    Parameters
+    ----------
+    p : (m, 3) float64
+    lights : (m, k, 3) float64
+
+    Returns
+    -------
+    (m, k) float64
+    """
+    return (p[:, None, 0] * lights[..., 0] + p[:, None, 1] * lights[..., 1]) + p[:, None, 2] * lights[..., 2]
+
+
+def _argmax_lowest(dots: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """Per row, the candidate with the largest dot; ties to the lowest candidate index.
+
+    ``cand`` rows may be in any order and contain -1 padding (whose dots must be -inf).
+    """
+    best = dots.max(axis=1, keepdims=True)
+    big = np.iinfo(np.int64).max
+    return np.where(dots == best, cand.astype(np.int64), big).min(axis=1)
+
+
+def _rotate(R: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``conventions.rotate_directions(R, d)`` for (m, 3) ``d``, as three fused column updates.
+
+    Same result to float64 rounding; avoids a BLAS call for a 3-wide matrix product, which is
+    slow (and thread-hungry) for millions of rows.
+    """
+    return d[:, 0:1] * R[:, 0] + d[:, 1:2] * R[:, 1] + d[:, 2:3] * R[:, 2]
+
+
+def _chord_to_angle(chord: np.ndarray) -> np.ndarray:
+    return 2.0 * np.arcsin(np.clip(0.5 * chord, 0.0, 1.0))
+
+
+def _angle_to_chord(angle: np.ndarray) -> np.ndarray:
+    return 2.0 * np.sin(0.5 * np.minimum(angle, np.pi))
+
+
+def _get_map(hemisphere: str):
+    from .sphere_maps import get_map  # written alongside; imported lazily
+
+    return get_map(MAP_FOR_HEMISPHERE[hemisphere])
+
+
+# ----------------------------------------------------------------------------- cell texture
+@dataclass(frozen=True)
+class CellTexture:
+    """Angular Voronoi cells of a set of light directions, baked into a sphere-map texture.
+
+    Attributes
+    ----------
+    index : (res, res) int32
+        The nearest light (by angle; ties to the lowest index) at each texel centre, -1 where
+        the map has no valid texel.
+    candidates : (res, res, k) int32
+        Every light whose Voronoi cell can intersect the texel, in increasing index order,
+        padded with -1 (see the module docstring for the bound). Where more than ``k`` lights
+        qualify, the ``k`` nearest to the centre are kept (then re-sorted by index).
+    overflow : int
+        Number of texels that had more than ``k`` candidates (0 means the lookup is exact).
+    res : int
+        Texture resolution (square).
+    hemisphere : str
+        ``'upper'`` (concentric map) or ``'full'`` (octahedral map).
+    map_name : str
+        Name of the :mod:`ffls.sphere_maps` parameterisation.
+    directions : (n, 3) float64
+        The normalised light directions the cells were built from (duplicates included).
+    k : int
+        Candidate slots per texel.
+    texel_radius : (res, res) float64
+        Angular radius (rad) of every texel: largest angle from its centre to its boundary
+        (corners and edge midpoints), before the slack.
+    """
+
+    index: np.ndarray
+    candidates: np.ndarray
+    overflow: int
+    res: int
+    hemisphere: str
+    map_name: str
+    directions: np.ndarray
+    k: int
+    texel_radius: np.ndarray
+
+    @property
+    def n_lights(self) -> int:
+        return int(self.directions.shape[0])
+
+    def texel_of(self, d: np.ndarray) -> np.ndarray:
+        """Flat texel index (-1 outside the map's domain) of directions ``d`` (m, 3)."""
+        smap = _get_map(self.hemisphere)
+        idx = smap.texel_index(np.asarray(d, dtype=np.float64), self.res)
+        if isinstance(idx, tuple):  # (row, col) form: flatten, keeping -1 outside
+            rows, cols = (np.asarray(a, dtype=np.int64) for a in idx)
+            out = rows * self.res + cols
+            return np.where((rows < 0) | (cols < 0), -1, out)
+        return np.asarray(idx, dtype=np.int64)
+
+    def assign(self, d: np.ndarray) -> np.ndarray:
+        """Cell (light index) of each direction (m, 3) by candidate lookup; -1 outside the map."""
+        d = np.asarray(d, dtype=np.float64)
+        t = self.texel_of(d).astype(np.int64).reshape(-1)
+        out = np.full(t.shape, -1, dtype=np.int64)
+        ok = t >= 0
+        if np.any(ok):
+            cand = self.candidates.reshape(-1, self.k)[t[ok]]
+            out[ok] = _assign_from_candidates(d.reshape(-1, 3)[ok], cand, self.directions)
+        return out
+
+
+def _assign_from_candidates(p: np.ndarray, cand: np.ndarray, lights: np.ndarray, chunk: int = 1 << 17) -> np.ndarray:
+    """Max dot among ``cand`` (m, k) for directions ``p`` (m, 3); ties to the lowest index.
+
+    A texel with a single candidate needs no dot product (most texels, away from cell edges);
+    the others are evaluated on only as many columns as the fullest row uses.
+    """
+    cand = np.asarray(cand)
+    out = cand[:, 0].astype(np.int64)
+    if cand.shape[1] == 1:
+        return out
+    multi = np.flatnonzero(cand[:, 1] >= 0)
+    if multi.size == 0:
+        return out
+    cm = cand[multi]
+    width = int((cm >= 0).sum(axis=1).max())
+    cm = cm[:, :width].astype(np.int64)
+    pm = p[multi]
+    padded = np.concatenate([lights, np.zeros((1, 3))], axis=0)  # row -1 -> zeros, masked below
+    for s in range(0, multi.size, chunk):
+        c = cm[s:s + chunk]
+        dots = _dots(pm[s:s + chunk], padded[c])
+        dots[c < 0] = -np.inf
+        out[multi[s:s + chunk]] = _argmax_lowest(dots, c)
+    return out
+
+
+def _texel_geometry(smap, res: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Texel centres (res, res, 3), angular radii (res, res) and validity (res, res).
+
+    The radius is the largest angle from the centre to the texel's four corners and four edge
+    midpoints, evaluated with the map's ``uv_to_direction`` on a half-texel grid. The uv axis
+    order (u along columns) is checked against ``directions(res)``.
+    """
+    centres = np.asarray(smap.directions(res), dtype=np.float64)
+    valid = np.asarray(smap.valid_mask(res), dtype=bool) & np.all(np.isfinite(centres), axis=-1)
+    t = np.arange(2 * res + 1) / (2.0 * res)
+    uu, vv = np.meshgrid(t, t)  # [row, col]: u varies along columns
+    grid = np.asarray(smap.uv_to_direction(np.stack([uu, vv], axis=-1)), dtype=np.float64)
+    mid = grid[1::2, 1::2]
+    ok = valid & np.all(np.isfinite(mid), axis=-1)
+    if not np.allclose(mid[ok], centres[ok], atol=1e-9):
+        grid = np.swapaxes(grid, 0, 1)  # the map puts u along rows
+        mid = grid[1::2, 1::2]
+        if not np.allclose(mid[ok], centres[ok], atol=1e-9):
+            raise RuntimeError("sphere map uv_to_direction disagrees with directions(res)")
+    cz = np.where(valid[..., None], centres, 0.0)
+    chord = np.zeros((res, res))
+    for di in (0, 1, 2):
+        for dj in (0, 1, 2):
+            if di == 1 and dj == 1:
+                continue
+            b = grid[di:di + 2 * res:2, dj:dj + 2 * res:2] - cz
+            chord = np.fmax(chord, np.sqrt(np.einsum("ijk,ijk->ij", b, b)))  # fmax skips NaN
+    return centres, _chord_to_angle(chord), valid
+
+
+def _candidate_rows(unit: np.ndarray, keep: np.ndarray, tree: cKDTree, q: np.ndarray, rad: np.ndarray,
+                    k: int, k_query: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Candidates of texels with centres ``q`` (m, 3) and padded angular radii ``rad`` (m,).
+
+    Returns ``cand`` (m, k) original light indices (-1 padded, nearest first), ``nearest`` (m,)
+    (max dot at the centre, ties to the lowest index) and ``count`` (m,) (candidates before
+    truncation to ``k``).
+    """
+    m = q.shape[0]
+    nu = keep.size
+    kq = min(k + 4 if k_query is None else k_query, nu)
+    dist, idx = tree.query(q, k=kq)
+    dist = dist.reshape(m, kq)
+    idx = idx.reshape(m, kq)
+    ang = _chord_to_angle(dist)
+    # triangle-inequality prefilter: a light j can own part of the texel only if
+    # angle(c, j) <= angle(c, nearest) + 2 r
+    reach = ang[:, 0] + 2.0 * rad
+    rows = [(np.arange(m), idx, ang)]
+    more = np.flatnonzero(ang[:, -1] <= reach) if kq < nu else np.zeros(0, dtype=np.int64)
+    if more.size:  # rare: more than k_query lights in reach; gather them all
+        lists = tree.query_ball_point(q[more], _angle_to_chord(reach[more]) * (1 + 1e-12) + 1e-15)
+        width = max(len(x) for x in lists)
+        big = np.full((more.size, width), -1, dtype=np.int64)
+        for r, lst in enumerate(lists):
+            big[r, :len(lst)] = lst
+        bang = np.where(big >= 0, np.arccos(np.clip(np.einsum("mi,mki->mk", q[more], unit[keep][np.maximum(big, 0)]), -1, 1)), np.inf)
+        order = np.argsort(bang, axis=1, kind="stable")
+        rows.append((more, np.take_along_axis(big, order, 1), np.take_along_axis(bang, order, 1)))
+    cand = np.full((m, k), -1, dtype=np.int64)
+    count = np.zeros(m, dtype=np.int64)
+    nearest = np.empty(m, dtype=np.int64)
+    for sel, ii, aa in rows:
+        qs = q[sel]
+        # exact nearest at the centre: max dot among the two nearest, ties to the lowest index
+        k2 = min(2, ii.shape[1])
+        lit2 = keep[ii[:, :k2]]
+        nearest[sel] = _argmax_lowest(_dots(qs, unit[lit2]), lit2)
+        # j can own a point p of the texel (angle(p, c) <= r) only if p . (j - n) >= 0 for
+        # some such p, i.e. the angle from c to the bisector great circle of n and j is <= r:
+        #     c . (n - j) <= |n - j| sin(r)
+        # tested only where the triangle prefilter passes (few entries per row)
+        ok = (aa <= reach[sel][:, None] + 1e-12) & (ii >= 0)
+        r_i, c_i = np.nonzero(ok)
+        lit = keep[ii[r_i, c_i]]
+        diff = unit[nearest[sel][r_i]] - unit[lit]
+        lhs = np.einsum("si,si->s", qs[r_i], diff)
+        rhs = np.sqrt(np.einsum("si,si->s", diff, diff)) * np.sin(np.minimum(rad[sel][r_i], np.pi / 2))
+        ok[r_i, c_i] = (lhs <= rhs) | (lit == nearest[sel][r_i])
+        count[sel] = ok.sum(axis=1)
+        # keep the k nearest qualifying lights (columns are in distance order)
+        rank = np.cumsum(ok, axis=1) - 1
+        put = ok & (rank < k)
+        r_idx, c_idx = np.nonzero(put)
+        cand[sel[r_idx], rank[r_idx, c_idx]] = keep[ii[r_idx, c_idx]]
+    return cand, nearest, count
+
+
+def _bake(unit: np.ndarray, keep: np.ndarray, smap, res: int, k: int, hemisphere: str, map_name: str) -> CellTexture:
+    centres, radius, valid = _texel_geometry(smap, res)
+    tree = cKDTree(unit[keep])
+    q = centres[valid]
+    rad = radius[valid] * (1.0 + CANDIDATE_REL_SLACK) + CANDIDATE_ABS_SLACK
+    cand, nearest, count = _candidate_rows(unit, keep, tree, q, rad, k)
+    overflow = int(np.count_nonzero(count > k))
+    # increasing index order, -1 padding last (so the first maximum is the lowest index)
+    key = np.where(cand < 0, np.iinfo(np.int64).max, cand)
+    cand = np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1)
+    index = np.full((res, res), -1, dtype=np.int32)
+    index[valid] = nearest
+    candidates = np.full((res, res, k), -1, dtype=np.int32)
+    candidates[valid] = cand
+    return CellTexture(index=index, candidates=candidates, overflow=overflow, res=res, hemisphere=hemisphere,
+                       map_name=map_name, directions=unit, k=k, texel_radius=radius)
+
+
+def bake_cells(directions, hemisphere: str = "upper", res: int = 256, k: int = 8, max_res: int | None = None) -> CellTexture:
+    """Bake the angular Voronoi cells of ``directions`` into a candidate texture.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Light directions in the capture/world frame (normalised here). Duplicates allowed.
+    hemisphere : {'upper', 'full'}
+        ``'upper'`` bakes over the concentric map (z >= 0), ``'full'`` over the octahedral map.
+    res : int
+        Texture resolution (res x res texels).
+    k : int
+        Candidate slots per texel (the GPU twin reads ``k`` ints per texel).
+    max_res : int, optional
+        If given and the bake at ``res`` overflows (some texel has more than ``k`` candidates),
+        ``res`` is doubled until the overflow is 0 or ``max_res`` is reached; the last bake is
+        returned and its ``overflow`` says whether the lookup is exact. Default: no retry.
+
+    Returns
+    -------
+    CellTexture
+    """
+    check_hemisphere(hemisphere)
+    if int(k) < 1 or int(res) < 1:
+        raise ValueError("res and k must be positive")
+    unit, keep = unique_directions(directions)
+    map_name = MAP_FOR_HEMISPHERE[hemisphere]
+    smap = _get_map(hemisphere)
+    res = int(res)
+    while True:
+        cells = _bake(unit, keep, smap, res, int(k), hemisphere, map_name)
+        if cells.overflow == 0 or max_res is None or 2 * res > int(max_res):
+            return cells
+        res *= 2
+
+
+# ----------------------------------------------------------------------------- integration
+@dataclass(frozen=True)
+class Weights:
+    """Per-light weights of a light map.
+
+    Attributes
+    ----------
+    weights : (n, 3) float64
+        Sum of ``radiance * solid_angle`` over the texels in each light's Voronoi cell
+        (irradiance units, W m^-2). Later exact duplicates get 0.
+    dropped_texels : int
+        Light-map texels not given to any light (rotated below the horizon for ``upper``).
+    dropped_power : (3,) float64
+        Their summed ``radiance * solid_angle``.
+    total_power : (3,) float64
+        ``radiance * solid_angle`` over every texel; ``weights.sum(0) + dropped_power`` equals it
+        up to float64 rounding.
+    """
+
+    weights: np.ndarray
+    dropped_texels: int
+    dropped_power: np.ndarray
+    total_power: np.ndarray
+
+
+def _samples(lightmap_or_samples):
+    if hasattr(lightmap_or_samples, "samples"):
+        dirs, rad, sa = lightmap_or_samples.samples()
+    else:
+        dirs, rad, sa = lightmap_or_samples
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    rad = np.asarray(rad, dtype=np.float64)
+    if rad.ndim == 1:
+        rad = rad[:, None]
+    rad = rad.reshape(dirs.shape[0], -1)
+    if rad.shape[1] != 3:
+        raise ValueError(f"radiance must be (M, 3), not {rad.shape}")
+    sa = np.asarray(sa, dtype=np.float64).reshape(-1)
+    if sa.shape[0] != dirs.shape[0]:
+        raise ValueError("directions, radiance and solid_angle must have the same length")
+    if not (np.all(np.isfinite(rad)) and np.all(np.isfinite(sa))):
+        raise ValueError("light map radiance or solid angles contain NaN or Inf")
+    if not np.all(np.isfinite(dirs)):
+        raise ValueError("light map directions contain NaN or Inf (pass valid texels only)")
+    return dirs, rad, sa
+
+
+def assign_cells(p, directions, cells: CellTexture | None = None) -> np.ndarray:
+    """Angular Voronoi cell (light index) of each direction.
+
+    Parameters
+    ----------
+    p : (m, 3) array_like
+        Unit directions (already rotated, in the capture frame).
+    directions : (n, 3) array_like
+        Light directions.
+    cells : CellTexture, optional
+        ``None``: k-d tree reference. Otherwise the candidate lookup (``cells`` must be baked
+        from the same directions).
+
+    Returns
+    -------
+    (m,) int64
+        Light index, ties to the lowest index; -1 where ``cells`` has no texel for ``p``.
+    """
+    p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+    if cells is not None:
+        return cells.assign(p)
+    unit, keep = unique_directions(directions)
+    kq = min(2, keep.size)
+    out = np.empty(p.shape[0], dtype=np.int64)
+    tree = cKDTree(unit[keep])
+    chunk = 1 << 18
+    for s in range(0, p.shape[0], chunk):
+        ps = p[s:s + chunk]
+        _, idx = tree.query(ps, k=kq)
+        idx = keep[np.asarray(idx).reshape(ps.shape[0], kq)]
+        out[s:s + chunk] = _argmax_lowest(_dots(ps, unit[idx]), idx)
+    return out
+
+
+def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere: str = "upper",
+                      cells: CellTexture | None = None, method: str = "MasselusDutreAnrys2002") -> Weights:
+    """Integrate a light map over the angular Voronoi cells of the light directions.
+
+    Masselus, Dutre, Anrys 2002, section 6: every texel adds ``radiance * solid_angle`` to the
+    cell that its rotated direction ``R d`` falls in.
+
+    Parameters
+    ----------
+    lightmap_or_samples : LightMap or tuple
+        A :class:`ffls.lightmap.LightMap` (its ``samples()`` are used) or a tuple
+        ``(dirs (M, 3), radiance (M, 3), solid_angle (M,))`` of valid texels.
+    directions : (n, 3) array_like
+        Light directions in the capture frame.
+    rotation : (3, 3) array_like, optional
+        Light-map rotation (content at ``d`` moves to ``R d``); identity by default.
+    hemisphere : {'upper', 'full'}
+        For ``'upper'`` texels with rotated ``z < 0`` are dropped and counted.
+    cells : CellTexture, optional
+        ``None``: exact k-d tree assignment (float64 reference). A CellTexture baked from the
+        same directions: candidate-texture lookup (what the GPU does); identical cells while
+        ``cells.overflow == 0``. Directions outside the texture's map are dropped and counted.
+    method : str
+        Only ``'MasselusDutreAnrys2002'`` (nearest light by angle).
+
+    Returns
+    -------
+    Weights
+    """
+    if method != "MasselusDutreAnrys2002":
+        raise ValueError(f"unknown method {method!r}")
+    check_hemisphere(hemisphere)
+    unit = _check_directions(directions)
+    R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+    if not is_rotation(R):
+        raise ValueError("rotation must be a 3x3 rotation matrix")
+    if cells is not None:
+        if cells.hemisphere != hemisphere or cells.directions.shape != unit.shape or not np.array_equal(cells.directions, unit):
+            raise ValueError("cells were baked for other directions or another hemisphere")
+    dirs, rad, sa = _samples(lightmap_or_samples)
+    power = rad * sa[:, None]
+    total = power.sum(axis=0)
+    p = _rotate(R, dirs)  # == conventions.rotate_directions(R, dirs)
+    keep = in_domain(p, hemisphere)
+    idx = np.full(p.shape[0], -1, dtype=np.int64)
+    if np.any(keep):
+        idx[keep] = assign_cells(p[keep], unit, cells)
+    hit = idx >= 0
+    n = unit.shape[0]
+    w = np.stack([np.bincount(idx[hit], weights=power[hit, c], minlength=n) for c in range(3)], axis=1)
+    dropped = ~hit
+    return Weights(weights=w, dropped_texels=int(np.count_nonzero(dropped)),
+                   dropped_power=power[dropped].sum(axis=0), total_power=total)
+
+
+# ----------------------------------------------------------------------------- cell areas
+def _latlong_samples(height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Directions (M, 3) and exact solid angles (M,) of a 2h x h lat-long grid."""
+    width = 2 * height
+    d = latlong_directions(width, height).reshape(-1, 3)
+    edges = np.cos(np.pi * np.arange(height + 1) / height)
+    row = (edges[:-1] - edges[1:]) * (2.0 * np.pi / width)
+    return d, np.repeat(row, width)
+
+
+def cell_solid_angles(directions, hemisphere: str = "upper", method: str = "auto", res: int = 1024) -> np.ndarray:
+    """Solid angle (sr) of every light's angular Voronoi cell within the covered domain.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Light directions.
+    hemisphere : {'upper', 'full'}
+    method : {'auto', 'spherical_voronoi', 'sample'}
+        ``'spherical_voronoi'``: exact areas from :class:`scipy.spatial.SphericalVoronoi`. For
+        ``'upper'`` the lights are mirrored through z = 0 (a mirrored light is never nearer to
+        an upper direction than its original, so the cells of the originals in the mirrored set
+        are exactly their upper-hemisphere parts); needs all lights at z >= 0 and at least 4
+        distinct points. ``'sample'``: integrate a constant map on a ``2 res x res`` lat-long
+        grid with exact texel solid angles (error ~ boundary length x texel size).
+        ``'auto'``: spherical Voronoi where it applies, else sampling.
+    res : int
+        Lat-long height for ``'sample'``.
+
+    Returns
+    -------
+    (n,) float64
+        Cell solid angles; later exact duplicates get 0. They sum to 2 pi (upper) or 4 pi (full).
+    """
+    check_hemisphere(hemisphere)
+    unit, keep = unique_directions(directions)
+    if method not in ("auto", "spherical_voronoi", "sample"):
+        raise ValueError(f"unknown method {method!r}")
+    if method in ("auto", "spherical_voronoi"):
+        try:
+            return _cell_areas_sv(unit, keep, hemisphere)
+        except (ValueError, RuntimeError):
+            if method == "spherical_voronoi":
+                raise
+    d, sa = _latlong_samples(int(res))
+    w = integrate_weights((d, np.ones((d.shape[0], 3)), sa), unit, hemisphere=hemisphere)
+    return w.weights[:, 0]
+
+
+def _cell_areas_sv(unit: np.ndarray, keep: np.ndarray, hemisphere: str) -> np.ndarray:
+    from scipy.spatial import SphericalVoronoi
+
+    pts = unit[keep]
+    if hemisphere == "upper":
+        if np.any(pts[:, 2] < 0):
+            raise ValueError("lights below the horizon: mirroring does not apply")
+        horizon = pts[:, 2] <= _HORIZON_EPS  # snapped onto z = 0 (area error O(z))
+        pts = pts.copy()
+        pts[horizon, 2] = 0.0
+        pts[horizon] = pts[horizon] / np.linalg.norm(pts[horizon], axis=1, keepdims=True)
+        mirrored = pts[~horizon] * np.array([1.0, 1.0, -1.0])
+        allpts = np.concatenate([pts, mirrored], axis=0)
+    else:
+        allpts = pts
+    if allpts.shape[0] < 4:
+        raise ValueError("spherical Voronoi needs at least 4 points")
+    sv = SphericalVoronoi(allpts, radius=1.0, center=np.zeros(3))
+    areas = sv.calculate_areas()[: pts.shape[0]]
+    if hemisphere == "upper":
+        areas = np.where(horizon, 0.5 * areas, areas)  # a horizon light's cell is symmetric
+    if not np.isclose(areas.sum(), covered_solid_angle(hemisphere), rtol=1e-9):
+        raise RuntimeError("spherical Voronoi areas do not sum to the covered solid angle")
+    out = np.zeros(unit.shape[0])
+    out[keep] = areas
+    return out

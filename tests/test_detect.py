@@ -1,0 +1,257 @@
+"""Sphere detection (ffls.spheres.detect) on analytic renders made here, independent of ffls.synth.
+
+Tolerances: centre within 0.35 px in the image and within 1 % of the camera distance in space
+(the depth follows from the apparent radius: 0.3 px of a 30 px radius is 1 %).
+"""
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from ffls.errors import InputError
+from ffls.spheres import detect
+
+
+K0 = np.array([[600.0, 0, 200.0], [0, 600.0, 150.0], [0, 0, 1]])
+DIST0 = np.array([-0.08, 0.02, 0.0, 0.0, 0.0])
+R0 = 0.05
+CENTRES0 = np.array([[-0.28, -0.15, 1.2], [0.28, -0.15, 1.25], [-0.26, 0.16, 1.1], [0.3, 0.17, 1.15]])
+
+
+def render(K, dist, centres, R, shape=(300, 400), lights=None, ss=3, ground=0.01, seed=0, noise=0.002):
+    """Per-pixel max over a few lights of Lambertian white spheres (albedo 0.8), supersampled.
+
+    Rays come from cv2.undistortPoints, so the render follows OpenCV's distortion model exactly.
+    Returns (H, W, 3) float32 linear radiance.
+    """
+    H, W = shape
+    if lights is None:
+        rng = np.random.default_rng(seed)
+        lights = rng.normal(size=(40, 3))
+        lights[:, 2] = -np.abs(lights[:, 2])  # toward the camera side, as a hand-held light
+        lights /= np.linalg.norm(lights, axis=1, keepdims=True)
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    acc = np.zeros((H, W))
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
+    for oy in off:
+        for ox in off:
+            px = np.stack([xx.ravel() + ox, yy.ravel() + oy], axis=1)
+            s = detect.pixel_rays(px, K, dist)
+            val = np.full(len(s), ground)
+            tbest = np.full(len(s), np.inf)
+            for C in centres:
+                b = s @ C
+                disc = b * b - (C @ C - R * R)
+                hit = disc >= 0
+                t = np.where(hit, b - np.sqrt(np.where(hit, disc, 0)), np.inf)
+                closer = t < tbest
+                n = (t[closer, None] * s[closer] - C) / R
+                shade = np.max(np.clip(n @ lights.T, 0, None), axis=1)
+                val[closer] = 0.8 * shade + 0.01
+                tbest = np.minimum(tbest, t)
+            acc += val.reshape(H, W)
+    acc /= ss * ss
+    acc += np.random.default_rng(seed + 1).normal(0, noise, acc.shape)
+    return np.repeat(acc[..., None], 3, axis=2).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def scene0():
+    return render(K0, DIST0, CENTRES0, R0)
+
+
+def _match(fits, centres, K, dist):
+    out = []
+    for C in centres:
+        ft = min(fits, key=lambda f: np.linalg.norm(f.center_cam - C))
+        px_true = detect.project_points(C[None], K, dist)[0]
+        out.append((np.linalg.norm(ft.center_px - px_true), np.linalg.norm(ft.center_cam - C) / np.linalg.norm(C), ft))
+    return out
+
+
+def test_four_spheres_auto(scene0):
+    fits = detect.find_spheres(scene0, K0, DIST0, R0)
+    assert len(fits) == 4
+    assert [f.center_px[0] for f in fits] == sorted(f.center_px[0] for f in fits)
+    for e_px, e_rel, ft in _match(fits, CENTRES0, K0, DIST0):
+        assert e_px < 0.35, e_px
+        assert e_rel < 0.01, e_rel
+        assert ft.residual_px < 0.5 and ft.inlier_fraction > 0.8 and ft.coverage > 0.9
+        assert ft.source == "auto"
+
+
+def test_sequence_max_equals_max_image():
+    seq = [render(K0, DIST0, CENTRES0[:1], R0, shape=(120, 160), lights=np.array([l]), ss=1, noise=0)
+           for l in ([0.0, -0.7, -0.7], [0.7, 0.0, -0.7])]
+    mx = detect.max_image(seq)
+    np.testing.assert_array_equal(mx, np.maximum(seq[0], seq[1]))
+    np.testing.assert_array_equal(detect.max_image(np.stack(seq)), mx)
+
+
+def test_mask_and_normals_consistent():
+    C, R = np.array([0.05, -0.02, 1.0]), 0.06
+    m = detect.sphere_mask((300, 400), K0, DIST0, C, R)
+    ys, xs = np.nonzero(m)
+    n = detect.sphere_normals(np.stack([xs, ys], 1), K0, DIST0, C, R)
+    assert np.all(np.isfinite(n))
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1, atol=1e-9)
+    # normals face the camera: n . (P - 0) < 0  <=> n . ray < 0
+    rays = detect.pixel_rays(np.stack([xs, ys], 1), K0, DIST0)
+    assert np.all(np.sum(n * rays, axis=1) <= 1e-9)
+    # a ray outside the mask misses
+    out = detect.sphere_normals(np.array([[5.0, 5.0]]), K0, DIST0, C, R)
+    assert np.all(np.isnan(out))
+    # area matches the analytic disc area within 2 % (small distortion near the centre)
+    alpha = np.arcsin(R / np.linalg.norm(C))
+    assert abs(m.sum() / (np.pi * (600 * np.tan(alpha)) ** 2) - 1) < 0.03
+    # the margin shrinks the mask
+    assert detect.sphere_mask((300, 400), K0, DIST0, C, R, margin_px=3).sum() < m.sum()
+
+
+def test_to_world_default_frame():
+    np.testing.assert_allclose(detect.to_world([0, 0, 2.0]), [0, 2.0, 0])  # forward -> +Y
+    np.testing.assert_allclose(detect.to_world([0, -1.0, 0], points=False), [0, 0, 1.0])  # image up -> +Z
+
+
+@pytest.mark.parametrize("kind", ["stand_dark", "stand_bright", "occluder", "shadow"])
+def test_robust_to_non_silhouette_edges(kind):
+    C = np.array([0.0, 0.0, 1.0])
+    R = 0.06
+    K = np.array([[700.0, 0, 120.0], [0, 700.0, 100.0], [0, 0, 1]])
+    img = render(K, None, [C], R, shape=(200, 240))
+    cx, cy, r = 120.0, 100.0, 700 * np.tan(np.arcsin(R / 1.0))
+    if kind == "stand_dark":  # a stand below the sphere, darker than the sphere, touching it
+        img[int(cy + 0.8 * r):, int(cx - 8):int(cx + 8)] = 0.25
+    elif kind == "stand_bright":
+        img[int(cy + 0.8 * r):, int(cx - 8):int(cx + 8)] = 1.2
+    elif kind == "occluder":  # something in front covering a quarter of the outline
+        yy, xx = np.mgrid[0:200, 0:240]
+        img[(xx - (cx + r)) ** 2 + (yy - (cy - r)) ** 2 < (0.8 * r) ** 2] = 0.35
+    elif kind == "shadow":  # a cast shadow: a straight edge across sphere and ground
+        yy, xx = np.mgrid[0:200, 0:240]
+        img[(xx + 0.5 * yy) > cx + 0.5 * cy + 0.3 * r] *= 0.3
+    fits = detect.find_spheres(img, K, None, R, n_spheres=1)
+    e_px = np.linalg.norm(fits[0].center_px - [cx, cy])
+    assert e_px < 0.5, (kind, e_px)
+    assert abs(fits[0].distance - 1.0) < 0.02, (kind, fits[0].distance)
+    if kind in ("occluder", "stand_dark", "stand_bright"):
+        assert fits[0].inlier_fraction < 1.0 or fits[0].coverage < 1.0
+
+
+def test_tiny_sphere():
+    C, R = np.array([0.02, 0.01, 2.0]), 0.025  # 7.5 px radius
+    img = render(K0, None, [C], R)
+    ft = detect.find_spheres(img, K0, None, R, n_spheres=1)[0]
+    assert 7.0 < ft.radius_px < 8.0
+    assert np.linalg.norm(ft.center_px - detect.project_points(C[None], K0, None)[0]) < 0.4
+    assert abs(ft.distance / np.linalg.norm(C) - 1) < 0.05
+
+
+def test_near_orthographic_camera():
+    f = 30000.0  # a very long lens far away: 1.2 m sphere at 50 m would be 1.4 deg wide
+    K = np.array([[f, 0, 160.0], [0, f, 120.0], [0, 0, 1]])
+    C, R = np.array([0.02, -0.01, 40.0]), 0.05
+    img = render(K, None, [C], R, shape=(240, 320))
+    ft = detect.find_spheres(img, K, None, R, n_spheres=1)[0]
+    assert np.linalg.norm(ft.center_px - detect.project_points(C[None], K, None)[0]) < 0.35
+    assert abs(ft.distance / np.linalg.norm(C) - 1) < 0.02
+    # normals are what matter for the lights: compare at sphere pixels
+    m = detect.sphere_mask(img.shape, K, None, C, R, margin_px=2)
+    ys, xs = np.nonzero(m)
+    pix = np.stack([xs, ys], 1)
+    n_true = detect.sphere_normals(pix, K, None, C, R)
+    n_fit = ft.normals(pix)
+    ang = np.degrees(np.arccos(np.clip(np.sum(n_true * n_fit, 1), -1, 1)))
+    assert np.nanmax(ang) < 3.0 and np.nanmean(ang) < 1.0
+
+
+def test_hints_px_and_world():
+    img = render(K0, DIST0, CENTRES0, R0)
+    px = detect.project_points(CENTRES0, K0, DIST0)
+    hints = [{"center_px": [p[0] + 3, p[1] - 2], "radius_px": 28} for p in px[:2]]
+    fits = detect.find_spheres(img, K0, DIST0, R0, hints=hints)
+    assert len(fits) == 2 and all(f.source == "hint" for f in fits)
+    for ft, C in zip(fits, CENTRES0[:2]):
+        assert np.linalg.norm(ft.center_cam - C) < 0.01 * np.linalg.norm(C)
+    wfc = detect.DEFAULT_WORLD_FROM_CAMERA
+    hints_w = [{"center": list(detect.to_world(C + [0.01, 0, 0], wfc))} for C in CENTRES0]
+    fits = detect.find_spheres(img, K0, DIST0, R0, hints=hints_w)
+    for ft, C in zip(fits, CENTRES0):
+        assert np.linalg.norm(ft.center_cam - C) < 0.01 * np.linalg.norm(C)
+
+
+def test_overrides_skip_detection():
+    fits = detect.find_spheres(None, K0, DIST0, R0, overrides=[{"center_cam": CENTRES0[0].tolist()}])
+    assert fits[0].source == "override"
+    np.testing.assert_allclose(fits[0].center_cam, CENTRES0[0])
+    json.dumps(fits[0].to_dict())
+
+
+# ----------------------------------------------------------------------------- bad input
+def test_all_black_sequence(tmp_path):
+    with pytest.raises(InputError, match="black") as e:
+        detect.find_spheres([np.zeros((50, 60, 3), np.float32)] * 3, K0, None, R0, source=tmp_path)
+    assert str(tmp_path) in str(e.value)
+
+
+def test_no_sphere_visible(tmp_path):
+    rng = np.random.default_rng(3)
+    img = np.full((200, 240, 3), 0.05, np.float32)
+    img[40:120, 30:200] = 0.6  # a box, no circle
+    img += rng.normal(0, 0.002, img.shape).astype(np.float32)
+    with pytest.raises(InputError, match="sphere") as e:
+        detect.find_spheres(img, K0, None, R0, source=tmp_path / "images")
+    assert "images" in str(e.value)
+
+
+def test_too_few_spheres():
+    img = render(K0, None, CENTRES0[:2], R0)
+    with pytest.raises(InputError, match="found 2 of 4 spheres"):
+        detect.find_spheres(img, K0, None, R0, n_spheres=4)
+
+
+def test_sphere_cut_by_border():
+    # centre pixel x = 200 + 600 * (-0.31 / 1.0) = 14 px, radius ~30 px: cut by the left border
+    img = render(K0, None, [np.array([-0.31, 0.0, 1.0])], R0)
+    with pytest.raises(InputError, match="cut by the image border"):
+        detect.find_spheres(img, K0, None, R0, n_spheres=1)
+
+
+def test_wrong_radius_against_scene_scale():
+    img = render(K0, DIST0, CENTRES0, R0)
+    wfc = np.array(detect.DEFAULT_WORLD_FROM_CAMERA)
+    wfc[:3, 3] = [0.0, -1.2, 0.0]  # camera 1.2 in front of the scene centre
+    assert len(detect.find_spheres(img, K0, DIST0, R0, world_from_camera=wfc)) == 4
+    with pytest.raises(InputError, match="sphere_radius in capture.json looks wrong"):
+        detect.find_spheres(img, K0, DIST0, R0 * 10, world_from_camera=wfc)
+    hints_w = [{"center": list(detect.to_world(C, detect.DEFAULT_WORLD_FROM_CAMERA))} for C in CENTRES0]
+    with pytest.raises(InputError, match="sphere_radius in capture.json looks wrong"):
+        detect.find_spheres(img, K0, DIST0, R0 * 3, hints=hints_w)
+
+
+def test_nonpositive_radius():
+    with pytest.raises(InputError, match="sphere_radius"):
+        detect.find_spheres(np.ones((10, 10, 3)), K0, None, -1.0)
+
+
+# ----------------------------------------------------------------------------- ffls.synth captures
+def test_synth_capture_centres(tmp_path):
+    synth = pytest.importorskip("ffls.synth")
+    from ffls.capture import load_capture
+    synth.write_synthetic_capture(tmp_path, n_lights=12, resolution=384, encoding="srgb8", noise=1 / 255,
+                                  progress=False)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    cap = load_capture(tmp_path)
+    cap.spheres = []  # no hints: automatic detection
+    fits = detect.find_spheres_in_capture(cap)
+    assert len(fits) == 4
+    cw = np.array(truth["sphere_centers"])
+    cpx = np.array(truth["sphere_centers_px"])
+    for ft in fits:
+        k = int(np.argmin(np.linalg.norm(cw - ft.center_world, axis=1)))
+        cam_dist = np.linalg.norm(cw[k] - cap.world_from_camera[:3, 3])
+        assert np.linalg.norm(ft.center_px - cpx[k]) < 0.35
+        assert np.linalg.norm(ft.center_world - cw[k]) < 0.015 * cam_dist

@@ -1,0 +1,308 @@
+"""Pass 2 (weighted sum), float16 basis, split arrays, compression, tone-map shader, Engine, ``ffls render``.
+
+Tolerances (the reference is float64 ``relight_reference``):
+
+* ``max |gpu - ref| <= TOL * max |ref|`` over the image, and
+* per pixel ``|gpu - ref| <= TOL * |ref|`` wherever ``|ref| >= 0.1 max |ref|`` (bright pixels),
+
+with ``TOL = 1e-3`` for both storages (float16 rounds each basis value by <= 2**-11 = 4.9e-4
+relative; a sum of non-negative terms keeps that bound; float32 is ~1e-6).
+Display images: at most one 8-bit code value from ``to_uint8(tonemap(...))``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ffls.errors import InputError
+
+TOL = 1e-3
+
+
+def _check_close(gpu, ref, tol=TOL):
+    gpu = np.asarray(gpu, dtype=np.float64)
+    assert gpu.shape == ref.shape
+    assert np.all(np.isfinite(gpu))
+    scale = np.abs(ref).max()
+    assert np.abs(gpu - ref).max() <= tol * scale, np.abs(gpu - ref).max() / scale
+    bright = np.abs(ref) >= 0.1 * scale
+    assert np.all(np.abs(gpu - ref)[bright] <= tol * np.abs(ref)[bright])
+
+
+def _basis(rng, n, H=16, W=16, dynamic=True):
+    b = rng.random((n, H, W, 3), dtype=np.float32)
+    if dynamic:  # several decades, as real radiance
+        b *= np.float32(10.0) ** rng.uniform(-3, 1, size=(n, 1, 1, 1)).astype(np.float32)
+    return b
+
+
+def _run_pass2(ctx, basis, w, dtype="f16", method="compute", **kw):
+    from ffls.gpu.basis import BasisTextures
+    from ffls.gpu.weighted_sum import WeightedSum, release_gl, weights_to_vec4
+
+    bt = BasisTextures(ctx, basis, dtype, **kw)
+    ws = WeightedSum(ctx, bt, method)
+    buf = ctx.buffer(weights_to_vec4(w))
+    try:
+        ws.run(buf)
+        return ws.read(), bt.n_arrays
+    finally:
+        release_gl(buf)
+        ws.release()
+        bt.release()
+
+
+# ----------------------------------------------------------------------------- float16 checks (no GL)
+def test_float16_scale_keeps_1e6_finite():
+    from ffls.gpu.basis import F16_TARGET_MAX, to_float16
+
+    b = np.array([[1e6, 1.0, 1e-3, 0.0]], dtype=np.float32)
+    h, rep = to_float16(b)
+    assert np.all(np.isfinite(h))
+    assert rep.n_overflow == 0 and rep.n_underflow == 0
+    assert F16_TARGET_MAX / 2 < 1e6 * rep.scale <= F16_TARGET_MAX
+    # significant values (>= 1e-6 of the max) keep float16's relative precision ...
+    np.testing.assert_allclose(h[0, :2].astype(np.float64) / rep.scale, b[0, :2], rtol=2 ** -11)
+    assert rep.max_rel_error <= 2 ** -11
+    # ... 1e-3 (1e-9 of the max) becomes subnormal: allowed, but counted
+    assert rep.n_flushed == 1
+
+
+def test_float16_overflow_and_underflow_are_reported():
+    from ffls.gpu.basis import to_float16
+
+    with pytest.raises(InputError, match="overflow"):
+        to_float16(np.array([1e6, 1.0], dtype=np.float32), scale=1.0)
+    with pytest.raises(InputError, match="underflow"):  # 1e-3 is significant next to 1.0
+        to_float16(np.array([1.0, 1e-3], dtype=np.float32), scale=2.0 ** -16)
+    with pytest.raises(InputError, match="NaN"):
+        to_float16(np.array([1.0, np.nan], dtype=np.float32))
+    # insignificant values may flush to zero, and are counted
+    _, rep = to_float16(np.array([1.0, 1e-12], dtype=np.float32))
+    assert rep.n_flushed == 1 and rep.n_underflow == 0
+
+
+# ----------------------------------------------------------------------------- pass 2
+@pytest.mark.gl
+@pytest.mark.parametrize("dtype", ["f16", "f32"])
+@pytest.mark.parametrize("method", ["compute", "fragment"])
+def test_pass2_matches_reference(ctx, rng, dtype, method):
+    from ffls.relight import relight_reference
+
+    basis = _basis(rng, 64, 12, 20)
+    w = rng.random((64, 3)) * 3
+    gpu, _ = _run_pass2(ctx, basis, w, dtype, method)
+    _check_close(gpu, relight_reference(w, basis))
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("n", [1, 2048])
+def test_pass2_extreme_light_counts(ctx, rng, n):
+    from ffls.relight import relight_reference
+
+    basis = _basis(rng, n, 16, 16)
+    w = rng.random((n, 3))
+    gpu, n_arrays = _run_pass2(ctx, basis, w, "f16")
+    assert n_arrays == 1  # 2048 is llvmpipe's GL_MAX_ARRAY_TEXTURE_LAYERS: still one array
+    _check_close(gpu, relight_reference(w, basis))
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("dtype", ["f16", "f32"])
+def test_sun_1e6_no_float16_overflow(ctx, rng, dtype):
+    """A 1e6 basis value (a specular glint) and a 1e6 sun weight next to 1e-3 sky weights."""
+    from ffls.relight import relight_reference
+
+    basis = _basis(rng, 32, 8, 8, dynamic=False)
+    basis[3, 2, 5] = 1e6
+    w = np.full((32, 3), 1e-3)
+    w[3] = 1e6
+    gpu, _ = _run_pass2(ctx, basis, w, dtype)
+    ref = relight_reference(w, basis)
+    assert ref.max() > 1e11  # far beyond float16, inside float32
+    _check_close(gpu, ref)
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("method", ["compute", "fragment"])
+def test_split_arrays_match_reference(ctx, rng, method):
+    from ffls.relight import relight_reference
+
+    basis = _basis(rng, 50, 8, 12)
+    w = rng.random((50, 3))
+    gpu, n_arrays = _run_pass2(ctx, basis, w, "f16", method, max_layers=7)
+    assert n_arrays == 8  # 7 * 7 + 1: the last array holds one layer, nothing truncated
+    _check_close(gpu, relight_reference(w, basis))
+
+
+@pytest.mark.gl
+def test_over_budget_is_refused(ctx, rng):
+    from ffls.gpu.basis import BasisTextures
+
+    with pytest.raises(InputError, match="budget"):
+        BasisTextures(ctx, _basis(rng, 4, 8, 8), "f16", budget_bytes=1000)
+
+
+# ----------------------------------------------------------------------------- compression
+def _lowrank_basis(rng, n=40, H=12, W=16, r=5, noise=0.01):
+    L = rng.random((n, r))
+    S = rng.random((r, H, W, 3))
+    return (np.einsum("nk,khwc->nhwc", L, S) + noise * rng.random((n, H, W, 3))).astype(np.float32)
+
+
+@pytest.mark.parametrize("mode", ["per_channel", "shared"])
+def test_compression_algebra_and_error(rng, mode):
+    from ffls.compress import compress_basis
+    from ffls.relight import relight_reference
+
+    basis = _lowrank_basis(rng)
+    w = rng.random((40, 3))
+    ref = relight_reference(w, basis)
+    cb = compress_basis(basis, 8, mode=mode)
+    # exact projection algebra: sum_i w_i (M + sum_k U_ik E_k) == (sum w) M + sum_k c_k E_k
+    recon = np.stack([cb.reconstruct(i) for i in range(40)])
+    np.testing.assert_allclose(cb.relight(w), relight_reference(w, recon), rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    # rank 8 > the true rank 5: only the 1 % noise is left
+    assert np.sqrt(np.mean((cb.relight(w) - ref) ** 2) / np.mean(ref ** 2)) < 5e-3
+    # the full rank n - 1 is exact up to float32
+    _check_close(compress_basis(basis, 39, mode=mode).relight(w), ref, tol=1e-4)
+
+
+def test_compressed_save_load_roundtrip(tmp_path, rng):
+    from ffls.compress import compress_basis, load_compressed, save_compressed
+
+    basis = _lowrank_basis(rng, n=10)
+    cb = compress_basis(basis, 6)
+    save_compressed(cb, tmp_path)
+    cb2 = load_compressed(tmp_path, n_lights=10, shape=(12, 16), rank=4, basis=basis)
+    assert cb2.rank == 4
+    np.testing.assert_array_equal(cb2.components, cb.components[:4])
+    with pytest.raises(InputError, match="lights"):
+        load_compressed(tmp_path, n_lights=11)
+    with pytest.raises(InputError, match="stale"):
+        load_compressed(tmp_path, basis=basis * 2)
+    with pytest.raises(InputError, match="rank"):
+        load_compressed(tmp_path, rank=7)
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(InputError, match="corrupt"):
+        load_compressed(tmp_path / "bad.npz")
+
+
+@pytest.mark.gl
+def test_gpu_projection_and_compressed_pass2(ctx, rng):
+    from ffls.compress import compress_basis
+    from ffls.gpu.engine import Engine
+    from ffls.gpu.weighted_sum import Projector, release_gl, weights_to_vec4
+    from ffls.relight import relight_reference
+
+    basis = _lowrank_basis(rng)
+    w = rng.random((40, 3))
+    cb = compress_basis(basis, 8)
+    proj = Projector(ctx, cb.projection_matrix())
+    buf = ctx.buffer(weights_to_vec4(w))
+    try:
+        proj.run(buf)
+        np.testing.assert_allclose(proj.read(), cb.layer_coefficients(w), rtol=1e-5, atol=1e-5)
+    finally:
+        release_gl(buf)
+        proj.release()
+    d = _directions(rng, 40)
+    for rank, ref in ((8, cb.relight(w)), (39, relight_reference(w, basis))):
+        # eigen-images have both signs: compare with the max-norm bound only
+        eng = Engine(ctx, basis, d, dtype="f32", rank=rank)
+        try:
+            eng.set_weights(w)
+            eng.render()
+            assert set(eng.timings) == {"project", "pass2", "tonemap"}
+            gpu = eng.read_hdr().astype(np.float64)
+            assert np.abs(gpu - ref).max() <= TOL * np.abs(ref).max()
+        finally:
+            eng.release()
+
+
+# ----------------------------------------------------------------------------- tone mapping
+@pytest.mark.gl
+@pytest.mark.parametrize("method", ["srgb", "reinhard", "aces"])
+def test_tonemap_shader_matches_numpy(ctx, rng, method):
+    from ffls.gpu.weighted_sum import ToneMapPass, release_gl
+    from ffls.tonemap import to_uint8, tonemap
+
+    H, W = 16, 24
+    hdr = (10.0 ** rng.uniform(-5, 2.5, size=(H, W, 3))).astype(np.float32)
+    hdr[0, 0] = 0.0
+    hdr[0, 1] = -0.5  # negative radiance (noise) maps to 0 in every curve
+    tex = ctx.texture((W, H), 4, data=np.dstack([hdr, np.ones((H, W), np.float32)]).tobytes(), dtype="f4")
+    tm = ToneMapPass(ctx, (W, H))
+    try:
+        for ev in (-2.0, 0.0, 1.5):
+            tm.run(tex, ev, method)
+            ref = to_uint8(tonemap(hdr.astype(np.float64), ev, method))
+            diff = np.abs(tm.read().astype(int) - ref)
+            assert diff.max() <= 1, (ev, diff.max())
+            assert np.count_nonzero(diff) <= 0.01 * diff.size
+    finally:
+        tm.release()
+        release_gl(tex)
+
+
+# ----------------------------------------------------------------------------- Engine end to end
+def _directions(rng, n):
+    d = rng.normal(size=(n, 3))
+    d[:, 2] = np.abs(d[:, 2]) + 0.05
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("dtype", ["f16", "f32"])
+def test_engine_matches_cpu_pipeline(ctx, rng, dtype):
+    from ffls.conventions import rotation_ypr, rotation_z
+    from ffls.gpu.engine import Engine
+    from ffls.lightmap import sky_sun_map
+    from ffls.relight import relight_reference
+    from ffls.tonemap import to_uint8, tonemap
+    from ffls.voronoi import bake_cells, integrate_weights
+
+    n = 30
+    basis = _basis(rng, n, 10, 14)
+    d = _directions(rng, n)
+    lm = sky_sun_map(32)
+    cells = bake_cells(d, "upper", 64)
+    eng = Engine(ctx, basis, d, "upper", dtype=dtype, cell_res=64)
+    try:
+        assert eng.size == (14, 10) and eng.n_lights == n
+        for R in (rotation_z(40.0), rotation_ypr(10.0, 20.0, -5.0)):
+            eng.set_lightmap(lm)
+            eng.set_rotation(R)
+            eng.render(exposure=-1.0, tonemap="aces")
+            assert {"pass1", "pass2", "tonemap"} <= set(eng.timings)
+            w = integrate_weights(lm, d, R, "upper", cells=cells).weights
+            np.testing.assert_allclose(eng.read_weights(), w, rtol=1e-4, atol=1e-6 * np.abs(w).max())
+            ref = relight_reference(w, basis)
+            _check_close(eng.read_hdr(), ref)
+            disp = eng.read_display()
+            assert np.abs(disp.astype(int) - to_uint8(tonemap(ref, -1.0, "aces"))).max() <= 1
+        # a new exposure reruns the display pass only
+        eng.render(exposure=0.5, tonemap="aces")
+        assert set(eng.timings) == {"tonemap"}
+        assert eng.display_texture.components == 4 and eng.hdr_texture.dtype == "f4"
+    finally:
+        eng.release()
+
+
+@pytest.mark.gl
+def test_render_command_gpu_matches_cpu(tmp_path):
+    from ffls.cli import main
+    from ffls.imageio import read_image
+    from ffls.synth import write_synthetic_capture
+
+    cap = tmp_path / "cap"
+    write_synthetic_capture(cap, n_lights=12, resolution=24, progress=False)
+    gpu, cpu = tmp_path / "gpu.exr", tmp_path / "cpu.exr"
+    assert main(["render", str(cap), "--probe", "sky", "--rotate-z", "30", "--dtype", "f32", "-o", str(gpu)]) == 0
+    assert main(["render", str(cap), "--probe", "sky", "--rotate-z", "30", "--cpu", "-o", str(cpu)]) == 0
+    a, b = read_image(gpu).pixels.astype(np.float64), read_image(cpu).pixels.astype(np.float64)
+    assert np.abs(a - b).max() <= TOL * np.abs(b).max()
+    frames = tmp_path / "frames"
+    assert main(["render", str(cap), "--probe", "sky", "--turntable", "3", "-o", str(frames)]) == 0
+    assert sorted(p.name for p in frames.iterdir()) == ["frame_0000.png", "frame_0001.png", "frame_0002.png"]
+    assert main(["render", str(cap), "--probe", "sky", "-o", str(tmp_path / "x.jpg")]) == 2

@@ -1,0 +1,251 @@
+"""ffls.imageio and ffls.tonemap: round trips, error messages, atomic writes, sRGB curves."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ffls import imageio, tonemap
+from ffls.errors import InputError
+
+
+def _one_line(e: Exception, name: str) -> None:
+    s = str(e)
+    assert "\n" not in s
+    assert name in s
+
+
+# ----------------------------------------------------------------------------- round trips
+@pytest.mark.parametrize("shape", [(5, 7, 3), (1, 1, 3), (16, 9, 3)])
+def test_exr_float_round_trip_exact(tmp_path, rng, shape):
+    rgb = (rng.standard_normal(shape) * 100).astype(np.float32)
+    p = imageio.write_exr(tmp_path / "a.exr", rgb)
+    img = imageio.read_image(p)
+    assert img.bit_depth == "float" and img.kind == "exr"
+    assert img.pixels.dtype == np.float32 and img.pixels.shape == shape
+    np.testing.assert_array_equal(img.pixels, rgb)
+
+
+def test_exr_non_contiguous_input(tmp_path, rng):
+    big = rng.random((10, 12, 4)).astype(np.float32)
+    rgb = big[::2, ::3, 1:]  # a strided view
+    imageio.write_exr(tmp_path / "a.exr", rgb)
+    np.testing.assert_array_equal(imageio.read_image(tmp_path / "a.exr").pixels, rgb)
+
+
+def test_exr_half_round_trip(tmp_path, rng):
+    rgb = (rng.random((6, 8, 3)) * 1000).astype(np.float32)
+    imageio.write_exr(tmp_path / "h.exr", rgb, half=True)
+    img = imageio.read_image(tmp_path / "h.exr")
+    assert img.bit_depth == "half"
+    np.testing.assert_array_equal(img.pixels, rgb.astype(np.float16).astype(np.float32))
+
+
+def test_exr_half_overflow_rejected(tmp_path):
+    rgb = np.full((2, 2, 3), 1e5, np.float32)
+    with pytest.raises(ValueError, match="half"):
+        imageio.write_exr(tmp_path / "h.exr", rgb, half=True)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_exr_luminance_only_is_replicated(tmp_path):
+    import OpenEXR
+
+    y = np.arange(12, dtype=np.float32).reshape(3, 4)
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, {"Y": y}) as f:
+        f.write(str(tmp_path / "y.exr"))
+    img = imageio.read_image(tmp_path / "y.exr")
+    assert img.pixels.shape == (3, 4, 3)
+    for c in range(3):
+        np.testing.assert_array_equal(img.pixels[..., c], y)
+
+
+def test_exr_without_colour_channels_rejected(tmp_path):
+    import OpenEXR
+
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                      {"Z": np.ones((2, 2), np.float32)}) as f:
+        f.write(str(tmp_path / "z.exr"))
+    with pytest.raises(InputError, match="no R, G, B or Y") as e:
+        imageio.read_image(tmp_path / "z.exr")
+    _one_line(e.value, "z.exr")
+
+
+def test_hdr_round_trip(tmp_path, rng):
+    rgb = (rng.random((8, 16, 3)) * 50 + 0.01).astype(np.float32)
+    rgb[0, 0] = [10.0, 0.5, 0.02]  # distinct channels catch a BGR/RGB swap
+    imageio.write_hdr(tmp_path / "a.hdr", rgb)
+    img = imageio.read_image(tmp_path / "a.hdr")
+    assert img.kind == "hdr" and img.bit_depth == "float"
+    # RGBE: 8-bit mantissa with a shared exponent -> relative error below 1/128 of the max channel
+    err = np.abs(img.pixels - rgb) / rgb.max(axis=-1, keepdims=True)
+    assert err.max() < 1 / 128
+    assert img.pixels[0, 0, 0] > img.pixels[0, 0, 1] > img.pixels[0, 0, 2]
+
+
+def test_hdr_rejects_negative_and_nan(tmp_path):
+    with pytest.raises(ValueError, match="negative"):
+        imageio.write_hdr(tmp_path / "a.hdr", -np.ones((2, 2, 3)))
+    with pytest.raises(ValueError, match="non-finite"):
+        imageio.write_hdr(tmp_path / "a.hdr", np.full((2, 2, 3), np.nan))
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("dtype,scale,depth", [(np.uint8, 255, 8), (np.uint16, 65535, 16)])
+def test_png_round_trip(tmp_path, rng, dtype, scale, depth):
+    img = rng.integers(0, scale + 1, size=(7, 5, 3)).astype(dtype)
+    img[0, 0] = [scale, 0, 0]  # pure red must stay red
+    imageio.write_png(tmp_path / "a.png", img)
+    back = imageio.read_image(tmp_path / "a.png")
+    assert back.bit_depth == depth and back.kind == "png"
+    np.testing.assert_array_equal(np.rint(back.pixels * scale).astype(dtype), img)
+    np.testing.assert_array_equal(back.pixels[0, 0], [1, 0, 0])
+
+
+def test_png_grey_and_rgba(tmp_path, rng):
+    grey = rng.integers(0, 256, size=(4, 6)).astype(np.uint8)
+    imageio.write_png(tmp_path / "g.png", grey)
+    g = imageio.read_image(tmp_path / "g.png").pixels
+    assert g.shape == (4, 6, 3)
+    np.testing.assert_array_equal(g[..., 0], g[..., 2])
+    rgba = rng.integers(0, 256, size=(4, 6, 4)).astype(np.uint8)
+    imageio.write_png(tmp_path / "c.png", rgba)
+    c = imageio.read_image(tmp_path / "c.png").pixels
+    np.testing.assert_array_equal(np.rint(c * 255).astype(np.uint8), rgba[..., :3])
+
+
+def test_png_rejects_float(tmp_path):
+    with pytest.raises(ValueError, match="float input"):
+        imageio.write_png(tmp_path / "a.png", np.zeros((2, 2, 3), np.float32))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_jpeg_and_tiff_read(tmp_path, rng):
+    import cv2
+
+    img = np.zeros((8, 8, 3), np.uint8)
+    img[..., 2] = 200  # BGR: red
+    cv2.imwrite(str(tmp_path / "a.jpg"), img)
+    j = imageio.read_image(tmp_path / "a.jpg")
+    assert j.kind == "jpeg" and j.bit_depth == 8
+    assert j.pixels[..., 0].mean() > 0.7 and j.pixels[..., 2].mean() < 0.1
+    t16 = rng.integers(0, 65536, size=(3, 4, 3)).astype(np.uint16)
+    cv2.imwrite(str(tmp_path / "a.tif"), t16)
+    t = imageio.read_image(tmp_path / "a.tif")
+    assert t.kind == "tiff" and t.bit_depth == 16
+    np.testing.assert_array_equal(np.rint(t.pixels * 65535).astype(np.uint16), t16[..., ::-1])
+
+
+# ----------------------------------------------------------------------------- errors
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError, match="not found") as e:
+        imageio.read_image(tmp_path / "missing.png")
+    _one_line(e.value, "missing.png")
+
+
+@pytest.mark.parametrize("name", ["bad.png", "bad.exr", "bad.hdr", "bad.jpg", "empty.tif"])
+def test_corrupt_file(tmp_path, name):
+    (tmp_path / name).write_bytes(b"" if name.startswith("empty") else b"not an image at all" * 20)
+    with pytest.raises(InputError) as e:
+        imageio.read_image(tmp_path / name)
+    _one_line(e.value, name)
+
+
+def test_truncated_exr(tmp_path, rng):
+    imageio.write_exr(tmp_path / "a.exr", rng.random((64, 64, 3)).astype(np.float32))
+    data = (tmp_path / "a.exr").read_bytes()
+    (tmp_path / "t.exr").write_bytes(data[: len(data) // 3])
+    with pytest.raises(InputError) as e:
+        imageio.read_image(tmp_path / "t.exr")
+    _one_line(e.value, "t.exr")
+
+
+def test_tga_rejected_with_reason(tmp_path):
+    (tmp_path / "a.tga").write_bytes(b"\0" * 40)
+    with pytest.raises(InputError, match="TGA") as e:
+        imageio.read_image(tmp_path / "a.tga")
+    _one_line(e.value, "a.tga")
+
+
+def test_unknown_extension(tmp_path):
+    (tmp_path / "a.xyz").write_bytes(b"\0")
+    with pytest.raises(InputError, match="unsupported") as e:
+        imageio.read_image(tmp_path / "a.xyz")
+    _one_line(e.value, "a.xyz")
+
+
+def test_writer_failure_leaves_nothing(tmp_path, monkeypatch):
+    import OpenEXR
+
+    class Boom:
+        def __init__(self, *a, **k):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *a):
+            return False
+
+        def write(self, path):
+            with open(path, "wb") as f:
+                f.write(b"half")  # a partial file
+            raise RuntimeError("disk full")
+
+    monkeypatch.setattr(OpenEXR, "File", Boom)
+    with pytest.raises(RuntimeError, match="disk full"):
+        imageio.write_exr(tmp_path / "out.exr", np.zeros((2, 2, 3)))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_wrong_extension_for_writer(tmp_path):
+    with pytest.raises(ValueError, match=".exr"):
+        imageio.write_exr(tmp_path / "a.png", np.zeros((2, 2, 3)))
+    with pytest.raises(ValueError, match="shape"):
+        imageio.write_exr(tmp_path / "a.exr", np.zeros((2, 2)))
+
+
+# ----------------------------------------------------------------------------- tonemap
+def test_srgb_known_values():
+    x = np.array([0.0, 0.0031308, 0.18, 0.5, 1.0])
+    # reference values from the IEC 61966-2-1 formula
+    want = np.array([0.0, 0.040449936, 0.461356129, 0.735356983, 1.0])
+    np.testing.assert_allclose(tonemap.srgb_encode(x), want, atol=1e-8)
+    np.testing.assert_allclose(tonemap.srgb_decode(np.array([0.04045, 0.5, 1.0])),
+                               [0.04045 / 12.92, 0.214041140, 1.0], atol=1e-8)
+    assert tonemap.srgb_decode(np.array([128 / 255]))[0] == pytest.approx(0.2158605, abs=1e-6)
+
+
+@pytest.mark.parametrize("dtype,tol", [(np.float64, 1e-12), (np.float32, 2e-6)])
+def test_srgb_round_trip(rng, dtype, tol):
+    x = rng.random(10000).astype(dtype)
+    x[:5] = [0, 0.0031308, 0.04045, 1, 1e-7]
+    y = tonemap.srgb_decode(tonemap.srgb_encode(x))
+    assert y.dtype == dtype
+    np.testing.assert_allclose(y, x, atol=tol, rtol=tol)
+    enc = tonemap.srgb_encode(x)
+    assert np.all(np.diff(enc[np.argsort(x)]) >= 0)  # monotone
+
+
+def test_srgb_is_continuous_at_the_knee():
+    eps = 1e-12
+    lo, hi = tonemap.srgb_encode(np.array([0.0031308 - eps, 0.0031308 + eps]))
+    assert abs(hi - lo) < 1e-7
+
+
+def test_tonemap_methods(rng):
+    hdr = rng.random((4, 5, 3)) * 20
+    for m in tonemap.METHODS:
+        out = tonemap.tonemap(hdr, exposure=-1.0, method=m)
+        assert out.dtype == np.float32 and out.shape == hdr.shape
+        assert out.min() >= 0 and out.max() <= 1
+    np.testing.assert_allclose(tonemap.tonemap(np.array([0.25]), exposure=1.0), tonemap.srgb_encode(0.5), rtol=1e-6)
+    assert tonemap.reinhard(np.array([1.0]))[0] == 0.5
+    assert tonemap.aces(np.array([0.0]))[0] == 0.0 and tonemap.aces(np.array([1e6]))[0] == 1.0
+    with pytest.raises(ValueError, match="method"):
+        tonemap.tonemap(hdr, method="filmic")
+
+
+def test_to_uint8():
+    np.testing.assert_array_equal(tonemap.to_uint8(np.array([0.0, 0.5, 1.0, 2.0, -1.0])), [0, 128, 255, 255, 0])
+    with pytest.raises(ValueError, match="non-finite"):
+        tonemap.to_uint8(np.array([np.nan]))

@@ -1,0 +1,324 @@
+"""Light estimation from the spheres (issue 3): per-sphere Lambert fits, combination, rejection.
+
+Analytic renders here (Lambertian spheres + ambient + a ground bounce of an infinite plane, 2x2
+supersampled) keep the tests fast and independent of ffls.synth; one test uses ffls.synth.
+"""
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize, spherical_to_direction
+from ffls.errors import InputError
+from ffls.spheres.estimate import (REASONS, combine_distant, estimate_photo, fit_ray_convergence,
+                                   pixel_validity)
+from ffls.spheres.lambert import fit_lambert, ground_bounce, sphere_samples
+
+RES = 200
+R_SPH = 0.05
+CENTERS = np.array([[-0.25, 0.55, 0.05], [0.25, 0.55, 0.05], [0.25, 1.05, 0.05], [-0.25, 1.05, 0.05]])  # world
+WFC = np.eye(4)
+WFC[:3, :3] = DEFAULT_WORLD_FROM_CAMERA[:3, :3]
+WFC[:3, 3] = [0.0, -0.2, 0.45]  # camera raised, looking along +Y
+# tilt the camera down by 25 deg
+_c, _s = np.cos(np.radians(25)), np.sin(np.radians(25))
+WFC[:3, :3] = np.array([[1, 0, 0], [0, _c, _s], [0, -_s, _c]]) @ WFC[:3, :3]
+SCENE_CENTER = np.array([0.0, 0.8, 0.0])
+
+
+def _K(f=250.0):
+    return np.array([[f, 0, (RES - 1) / 2], [0, f, (RES - 1) / 2], [0, 0, 1.0]])
+
+
+def _cam(c_world, wfc=WFC):
+    M = np.linalg.inv(wfc)
+    return M[:3, :3] @ c_world + M[:3, 3]
+
+
+def render(direction=None, position=None, ambient=0.02, bounce=0.3, K=None, wfc=WFC, centers=CENTERS, ss=2,
+           intensity=1.0):
+    """Spheres only: E max(0, n.l) (1/r^2 for a point light) * 0.8 + ambient + bounce * E_z * g(n)."""
+    K = _K() if K is None else K
+    img = np.zeros((RES, RES, 3), np.float32)
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    for c in centers:
+        C = _cam(c, wfc)
+        acc = np.zeros((RES, RES))
+        cov = np.zeros((RES, RES))
+        for dy in off:
+            for dx in off:
+                yy, xx = np.mgrid[0:RES, 0:RES].astype(float)
+                xy = np.stack([(xx + dx - K[0, 2]) / K[0, 0], (yy + dy - K[1, 2]) / K[1, 1], np.ones_like(xx)], -1)
+                d = xy / np.linalg.norm(xy, axis=-1, keepdims=True)
+                b = d @ C
+                disc = b * b - C @ C + R_SPH ** 2
+                hit = disc > 0
+                t = b - np.sqrt(np.where(hit, disc, 0))
+                P = d * t[..., None]
+                n = ((P - C) / R_SPH) @ wfc[:3, :3].T
+                Pw = P @ wfc[:3, :3].T + wfc[:3, 3]
+                if position is not None:
+                    v = position - Pw
+                    r = np.linalg.norm(v, axis=-1)
+                    E = intensity * np.maximum(np.sum(n * v, -1) / r, 0) * (np.linalg.norm(position)) ** 2 / r ** 2
+                    ez = max(normalize(position)[2], 0)
+                else:
+                    E = intensity * np.maximum(n @ direction, 0)
+                    ez = max(direction[2], 0)
+                val = 0.8 * (E + ambient + bounce * ez * ground_bounce(n.reshape(-1, 3)).reshape(n.shape[:2]))
+                acc += np.where(hit, val, 0)
+                cov += hit
+        img += (acc / ss ** 2)[..., None]
+    return img
+
+
+def samples_for(K=None, wfc=WFC, centers=CENTERS):
+    K = _K() if K is None else K
+    return [sphere_samples((RES, RES), K, None, _cam(c, wfc), R_SPH, wfc) for c in centers]
+
+
+def light(theta, phi):
+    return spherical_to_direction(np.radians(theta), np.radians(phi))
+
+
+@pytest.fixture(scope="module")
+def samples():
+    return samples_for()
+
+
+# ----------------------------------------------------------------------------- geometry
+def test_sphere_samples_normals_are_unit_and_face_camera(samples):
+    for s, c in zip(samples, CENTERS):
+        assert len(s) > 100
+        np.testing.assert_allclose(np.linalg.norm(s.normals, axis=1), 1, atol=1e-9)
+        np.testing.assert_allclose(s.center, c, atol=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(s.points - c, axis=1), R_SPH, atol=1e-9)
+        cam = WFC[:3, 3]
+        assert np.all(np.sum(s.normals * (cam - s.points), axis=1) > 0)
+
+
+def test_ground_bounce_range():
+    n = normalize(np.random.default_rng(0).normal(size=(100, 3)))
+    g = ground_bounce(n)
+    assert np.all((g >= 0) & (g <= 1))
+    assert ground_bounce(np.array([[0, 0, -1.0]]))[0] == 1 and ground_bounce(np.array([[0, 0, 1.0]]))[0] == 0
+
+
+# ----------------------------------------------------------------------------- per sphere
+FRONTAL = pytest.mark.xfail(strict=True, reason=(
+    "known limitation: with the light on the camera side no shadow-side pixels are in view, the "
+    "ground bounce is then collinear with ambient + a lower light in a single photo, and the "
+    "direction tilts by ~3 deg; needs the per-capture ground-albedo prior (docs/spheres.md)"))
+
+
+@pytest.mark.parametrize("theta,phi", [(0, 0), pytest.param(30, -90, marks=FRONTAL), (60, 40), (70, 180)])
+def test_fit_lambert_with_bounce(samples, theta, phi):
+    l = light(theta, phi)
+    img = render(direction=l)
+    s = samples[0]
+    fit = fit_lambert(s.normals, s.values(img))
+    assert fit.status == "ok"
+    err = np.degrees(angle_between(fit.direction, l))
+    assert err < 0.6, (err, fit.model)
+    assert fit.uncertainty_deg < 1.0
+
+
+def test_bounce_term_removes_bias(samples):
+    """Fitting only ambient (no bounce) tilts the light downward; the bounce model does not."""
+    l = light(40, 30)
+    img = render(direction=l, bounce=0.5)
+    s = samples[0]
+    full = fit_lambert(s.normals, s.values(img))
+    plain = fit_lambert(s.normals, s.values(img), models=("ambient",))
+    e_full = np.degrees(angle_between(full.direction, l))
+    e_amb = np.degrees(angle_between(plain.direction, l))
+    assert full.model == "bounce"
+    assert e_full < 0.5 < e_amb
+
+
+def test_black_ground_picks_simple_model(samples):
+    l = light(20, 0)
+    img = render(direction=l, ambient=0.0, bounce=0.0)
+    s = samples[1]
+    fit = fit_lambert(s.normals, s.values(img), valid=s.values(img) > 1e-4)
+    assert fit.model in ("plain", "ambient")
+    assert np.degrees(angle_between(fit.direction, l)) < 0.3
+
+
+def test_pixel_validity_saturation_plateau():
+    px = np.linspace(0, 2, 100)[:, None].repeat(3, 1)
+    px[-10:] = 1.5
+    px[-5:] = np.nan
+    valid, nsat = pixel_validity(np.minimum(px, 1.5))
+    assert nsat >= 5 and not valid[-10:].any()
+    assert not valid[0]  # near-black
+
+
+# ----------------------------------------------------------------------------- combination
+def test_combine_distant_weights():
+    d = normalize(np.array([[0, 0, 1.0], [0.01, 0, 1.0]]))
+    m, u, chi, dof = combine_distant(d, np.array([0.1, 10.0]))
+    assert np.degrees(angle_between(m, d[0])) < 0.01 and dof == 2 and u < 0.11
+
+
+def test_ray_convergence_parallel_rays_stable():
+    d = np.tile(light(30, 10), (4, 1))
+    conv = fit_ray_convergence(CENTERS, d, np.full(4, 0.5), SCENE_CENTER)
+    assert conv["rho"] < 1e-3 and np.all(np.isfinite(conv["direction"]))
+    assert np.degrees(angle_between(conv["direction"], d[0])) < 1e-3
+
+
+def test_ray_convergence_finds_point():
+    S = SCENE_CENTER + 1.5 * light(40, 60)
+    d = normalize(S - CENTERS)
+    conv = fit_ray_convergence(CENTERS, d, np.full(4, 0.5), SCENE_CENTER)
+    np.testing.assert_allclose(conv["position"], S, atol=1e-4)
+
+
+# ----------------------------------------------------------------------------- photos
+GRID = [(0, 0), (40, 30), (30, 90), (10, 180), (60, 60), (45, 0), (50, 20), (20, -10)]
+GRID_FRONTAL = [(20, -90), (60, -150), (70, -60)]
+
+
+@FRONTAL
+def test_distant_accuracy_frontal_lights(samples):
+    errs = []
+    for th, ph in GRID_FRONTAL:
+        l = light(th, ph)
+        r = estimate_photo(render(direction=l), samples, SCENE_CENTER)
+        errs.append(np.degrees(angle_between(r["direction"], l)) if r["status"] == "ok" else 90.0)
+    assert max(errs) < 1.0, errs
+
+
+def test_distant_accuracy_reduced_grid(samples):
+    """At most one of 8 photos rejected (small back spheres with a thin lit crescent can be); the
+    accepted ones within 0.6 deg, median 0.3 deg."""
+    errs = []
+    for th, ph in GRID:
+        l = light(th, ph)
+        r = estimate_photo(render(direction=l), samples, SCENE_CENTER)
+        if r["status"] == "ok":
+            assert r["model"] == "distant"
+            errs.append(np.degrees(angle_between(r["direction"], l)))
+    assert len(errs) >= 7
+    assert max(errs) < 0.6 and np.median(errs) < 0.3, errs
+
+
+@pytest.mark.parametrize("th,ph", [(20, -60), (50, 120), (30, 20)])
+def test_near_light_joint_fit(samples, th, ph):
+    S = SCENE_CENTER + 2.0 * light(th, ph)
+    r = estimate_photo(render(position=S), samples, SCENE_CENTER)
+    assert r["status"] == "ok" and r["model"] == "near"
+    err = np.degrees(angle_between(r["direction"], S - SCENE_CENTER))
+    assert err < 1.0
+    # the per-sphere distant fits alone are worse than the joint near fit
+    assert np.linalg.norm(r["position"] - S) < 0.1
+
+
+def test_forced_distant_model(samples):
+    S = SCENE_CENTER + 30.0 * light(30, 0)
+    r = estimate_photo(render(position=S), samples, SCENE_CENTER, model="distant")
+    assert r["status"] == "ok" and r["model"] == "distant"
+    assert np.degrees(angle_between(r["direction"], S - SCENE_CENTER)) < 0.6
+
+
+def test_single_sphere(samples):
+    l = light(35, 70)
+    r = estimate_photo(render(direction=l), samples[:1], SCENE_CENTER)
+    assert r["status"] == "ok" and r["used_spheres"] == [0]
+    assert np.degrees(angle_between(r["direction"], l)) < 0.6
+
+
+def test_near_orthographic_camera():
+    f = 20000.0
+    wfc = WFC.copy()
+    wfc[:3, 3] = SCENE_CENTER - 100.0 * wfc[:3, 2]  # 100 m away along the optical axis
+    K = _K(f)
+    l = light(45, -30)
+    smp = samples_for(K=K, wfc=wfc)
+    r = estimate_photo(render(direction=l, K=K, wfc=wfc), smp, SCENE_CENTER)
+    assert r["status"] == "ok"
+    assert np.degrees(angle_between(r["direction"], l)) < 0.6
+
+
+# ----------------------------------------------------------------------------- rejection
+def test_all_black_photo_too_dark(samples):
+    r = estimate_photo(np.zeros((RES, RES, 3), np.float32), samples, SCENE_CENTER)
+    assert r["status"] == "rejected" and r["reason"] == "too_dark"
+    assert np.all(np.isfinite(r["direction"]))
+
+
+def test_saturated_photo(samples):
+    img = np.minimum(render(direction=light(20, 0), intensity=8.0), 1.0)
+    r = estimate_photo(img, samples, SCENE_CENTER)
+    assert r["status"] == "rejected" and r["reason"] == "saturated"
+
+
+def test_one_shadowed_sphere_is_dropped(samples):
+    l = light(30, 45)
+    img = render(direction=l)
+    s = samples[2]
+    img[s.rows, s.cols] *= 0.05  # the person's shadow: only a little light left
+    r = estimate_photo(img, samples, SCENE_CENTER)
+    assert r["status"] == "ok" and 2 not in r["used_spheres"]
+    assert r["spheres"][2]["status"] in ("shadowed", "outlier", "too_dark")
+    assert np.degrees(angle_between(r["direction"], l)) < 0.6
+
+
+def test_partial_cast_shadow_rejected_as_outliers(samples):
+    l = light(30, 45)
+    img = render(direction=l)
+    s = samples[0]
+    cut = s.normals[:, 0] > 0.3  # a shadow edge across the sphere
+    img[s.rows[cut], s.cols[cut]] *= 0.1
+    r = estimate_photo(img, samples, SCENE_CENTER)
+    assert r["status"] == "ok"
+    assert np.degrees(angle_between(r["direction"], l)) < 0.8
+
+
+def test_all_spheres_shadowed(samples):
+    img = render(direction=light(30, 45))
+    for s in samples[1:]:
+        img[s.rows, s.cols] = 0.0
+    r = estimate_photo(img, samples, SCENE_CENTER)
+    assert r["status"] == "rejected" and r["reason"] == "too_few_spheres"
+
+
+def test_spheres_disagree(samples):
+    a = render(direction=light(30, 0))
+    b = render(direction=light(30, 180))
+    img = a.copy()
+    for s in samples[2:]:
+        img[s.rows, s.cols] = b[s.rows, s.cols]
+    r = estimate_photo(img, samples, SCENE_CENTER, model="distant")
+    assert r["status"] == "rejected" and r["reason"] == "spheres_disagree"
+
+
+def test_reasons_documented():
+    assert set(REASONS) == {"spheres_disagree", "saturated", "too_dark", "shadowed", "too_few_spheres", "fit_failed"}
+
+
+# ----------------------------------------------------------------------------- capture level
+def test_estimate_lights_on_synth_capture(tmp_path):
+    synth = pytest.importorskip("ffls.synth")
+    from ffls.capture import load_capture, load_lights, save_lights
+    from ffls.spheres.estimate import estimate_lights
+
+    dirs = np.array([light(10, -90), light(40, 0), light(60, 150)])
+    synth.write_synthetic_capture(tmp_path, resolution=256, directions=dirs, ground_albedo=0.0, progress=False)
+    cap = load_capture(tmp_path)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    M = np.linalg.inv(cap.world_from_camera)
+    sph = [SimpleNamespace(center_cam=M[:3, :3] @ np.asarray(c) + M[:3, 3], radius=truth["sphere_radius"])
+           for c in truth["sphere_centers"]]
+    L = estimate_lights(cap, spheres=sph, progress=False, workers=1)
+    err = np.degrees(angle_between(L.directions, dirs))
+    assert all(s == "ok" for s in L.status) and err.max() < 1.0, err
+    save_lights(L, tmp_path / "lights.json")
+    back = load_lights(tmp_path / "lights.json", cap)
+    np.testing.assert_allclose(back.directions, L.directions, atol=1e-9)
+    with pytest.raises(InputError):
+        estimate_lights(cap, spheres=sph[:1], progress=False, workers=1, model="near")
