@@ -141,8 +141,14 @@ def rotation_ypr(yaw: float = 0.0, pitch: float = 0.0, roll: float = 0.0) -> np.
 
 
 def rotate_directions(R: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Apply the light-map rotation R (3x3) to directions (..., 3): content at d moves to R d."""
-    return np.asarray(d, dtype=np.float64) @ np.asarray(R, dtype=np.float64).T
+    """Apply the light-map rotation R (3x3) to directions (..., 3): content at d moves to R d.
+
+    Written as three fused column updates: a BLAS product with an inner size of 3 is several
+    times slower for millions of directions.
+    """
+    d = np.asarray(d, dtype=np.float64)
+    R = np.asarray(R, dtype=np.float64)
+    return d[..., 0:1] * R[:, 0] + d[..., 1:2] * R[:, 1] + d[..., 2:3] * R[:, 2]
 
 
 def is_rotation(R: np.ndarray, atol: float = 1e-6) -> bool:

@@ -362,7 +362,8 @@ def _sphere_any(o, oo, d, od, c, r, tmax):
     h = b * b - cc
     hit = (h >= 0) & ((b < 0) | (cc < 0))
     if tmax is not None:
-        hit &= -b - np.sqrt(np.maximum(h, 0.0)) < tmax
+        k = np.flatnonzero(hit)  # few candidates: test the segment length on them only
+        hit[k] = -b[k] - np.sqrt(h[k]) < tmax[k]
     return hit
 
 
@@ -392,6 +393,11 @@ def _occluded(prims, o, d, tmax=None):
             hit |= _sphere_any(o, oo, d, od, np.asarray(p.center), p.radius, tmax)
             continue
         if isinstance(p, _Ground):
+            if o[:, 2].min() >= 0:  # segments in z >= 0 (convex) cannot enter the half-space z < 0
+                if d.ndim == 1 and d[2] >= 0:
+                    continue
+                if tmax is not None and (o[:, 2] + tmax * d[:, 2]).min() >= 0:
+                    continue
             dd = np.broadcast_to(d, o.shape)
             t0, t1 = p.interval(o, dd)
             h = (t1 > 0) & (t0 <= t1)
@@ -470,8 +476,19 @@ def _primary_rays(scene: SynthScene, resolution: int):
 def gbuffer(scene: SynthScene, resolution: int) -> GBuffer:
     """The cached primary-hit buffer of ``scene`` at ``resolution`` x ``resolution``.
 
-    The bounce form-factor matrix is built here too (static geometry), so the first call at a
-    resolution costs a few seconds at most and later calls are free.
+    The bounce form-factor matrix is built here too (static geometry): the first call costs
+    about 0.3 s at 256 x 256 and 5 s at 768 x 768; later calls are free. The returned object is
+    shared by every caller (an LRU cache of 4 entries): do not modify its arrays.
+
+    Parameters
+    ----------
+    scene : SynthScene
+    resolution : int
+        Image width and height (pixels), before supersampling.
+
+    Returns
+    -------
+    GBuffer
     """
     if int(resolution) < 1:
         raise ValueError("resolution must be >= 1")
@@ -623,27 +640,36 @@ def _light_samples(direction, position, intensity, radius, n_samples):
 
 
 def _irradiance(prims, p, n, samples):
-    """Yield (l (n, 3), E (n,)) per light sample: unit direction to the light and shadowed irradiance."""
+    """Yield (l (n, 3), E (n,)) per light sample: unit direction to the light and shadowed irradiance.
+
+    Only the points facing the light cast shadow rays; a point set that mostly faces it is not
+    subset (the copies would cost more than the rays they save).
+    """
+    o_all = p + _EPS * n
     for dvec, q, wgt in samples:
         if dvec is not None:
             l = np.broadcast_to(dvec, p.shape)
             cos = n @ dvec
-            lit = cos > 0
-            E = np.zeros(len(p))
-            if lit.any():
-                vis = ~_occluded(prims, p[lit] + _EPS * n[lit], dvec)
-                E[lit] = wgt * cos[lit] * vis
+            w_r2 = None
         else:
             w = q - p
-            r = np.linalg.norm(w, axis=1)
+            r2 = np.einsum("ij,ij->i", w, w)
+            r = np.sqrt(r2)
             l = w / r[:, None]
             cos = np.einsum("ij,ij->i", n, l)
-            lit = cos > 0
-            E = np.zeros(len(p))
-            if lit.any():
-                o = p[lit] + _EPS * n[lit]
-                vis = ~_occluded(prims, o, l[lit], r[lit])
-                E[lit] = wgt * cos[lit] / r[lit] ** 2 * vis
+            w_r2 = r2
+        lit = cos > 0
+        E = np.zeros(len(p))
+        n_lit = int(np.count_nonzero(lit))
+        if n_lit:
+            sel = slice(None) if n_lit > 0.7 * len(p) else lit
+            if dvec is not None:
+                vis = ~_occluded(prims, o_all[sel], dvec)
+                e = cos[sel] * vis
+            else:
+                vis = ~_occluded(prims, o_all[sel], l[sel], r[sel])
+                e = cos[sel] / w_r2[sel] * vis
+            E[sel] = wgt * np.maximum(e, 0.0)
         yield l, E
 
 
@@ -982,7 +1008,8 @@ def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, 
     progress : bool
         tqdm progress bar.
     scene : SynthScene, optional
-        Scene layout; default ``SynthScene(ground_albedo=ground_albedo)``.
+        Scene layout; default ``SynthScene(ground_albedo=ground_albedo)``. When given, its own
+        ``ground_albedo`` is used and the ``ground_albedo`` argument is ignored.
     light_radius, light_samples
         Spherical near light (see :func:`render_light`).
 

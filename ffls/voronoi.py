@@ -20,10 +20,13 @@ Two ways to find the cell of a texel, with one tie rule:
   nearest light is always a candidate, this assignment equals the reference one exactly.
 
 Why the candidate list is conservative: let ``c`` be a texel centre, ``r`` the texel's angular
-radius (the largest angle from ``c`` to its boundary) and ``a`` the angle from ``c`` to its
-nearest light. For any direction ``p`` in the texel, its nearest light ``j`` satisfies
-``angle(p, j) <= angle(p, nearest(c)) <= a + r``, hence ``angle(c, j) <= a + 2 r``. The baker
-keeps every light within ``a + 2 r (1 + 5%) + 1e-9`` of the centre.
+radius (the largest angle from ``c`` to its corners and edge midpoints, padded by 5 % + 1e-9 rad)
+and ``n`` the light nearest to ``c``. A light ``j`` can own a point ``p`` of the texel only if
+``p . (j - n) >= 0`` for some ``p`` within ``r`` of ``c``, i.e. only if the bisector great circle
+of ``n`` and ``j`` passes within ``r`` of ``c``: ``c . (n - j) <= |n - j| sin r``. The baker keeps
+every such ``j`` (after the triangle-inequality prefilter ``angle(c, j) <= angle(c, n) + 2 r``).
+If more than ``k`` qualify, the ``k`` nearest are kept and the texel counts in ``overflow``;
+only then can the lookup differ from the reference. See ``docs/voronoi.md`` for measurements.
 
 Exact duplicates: directions are de-duplicated before anything else; the first occurrence
 (lowest index) keeps the cell and every later copy gets an empty cell (weight 0). Nearly equal
@@ -45,6 +48,7 @@ from .conventions import (
     in_domain,
     is_rotation,
     latlong_directions,
+    rotate_directions,
 )
 
 __all__ = [
@@ -129,15 +133,6 @@ def _argmax_lowest(dots: np.ndarray, cand: np.ndarray) -> np.ndarray:
     best = dots.max(axis=1, keepdims=True)
     big = np.iinfo(np.int64).max
     return np.where(dots == best, cand.astype(np.int64), big).min(axis=1)
-
-
-def _rotate(R: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """``conventions.rotate_directions(R, d)`` for (m, 3) ``d``, as three fused column updates.
-
-    Same result to float64 rounding; avoids a BLAS call for a 3-wide matrix product, which is
-    slow (and thread-hungry) for millions of rows.
-    """
-    return d[:, 0:1] * R[:, 0] + d[:, 1:2] * R[:, 1] + d[:, 2:3] * R[:, 2]
 
 
 def _chord_to_angle(chord: np.ndarray) -> np.ndarray:
@@ -512,7 +507,7 @@ def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere
     dirs, rad, sa = _samples(lightmap_or_samples)
     power = rad * sa[:, None]
     total = power.sum(axis=0)
-    p = _rotate(R, dirs)  # == conventions.rotate_directions(R, dirs)
+    p = rotate_directions(R, dirs)
     keep = in_domain(p, hemisphere)
     idx = np.full(p.shape[0], -1, dtype=np.int64)
     if np.any(keep):

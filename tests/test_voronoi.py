@@ -300,7 +300,7 @@ def test_candidate_lookup_equals_kdtree_for_every_texel(rng, hemisphere, n):
     dirs = random_dirs(rng, n, hemisphere, duplicates=n // 50)
     cells = vo.bake_cells(dirs, hemisphere, res=256, max_res=1024)
     assert cells.overflow == 0
-    p = vo._rotate(random_rotation(rng), d)
+    p = cv.rotate_directions(random_rotation(rng), d)
     p = p[cv.in_domain(p, hemisphere)]
     exact = vo.assign_cells(p, dirs)
     looked_up = vo.assign_cells(p, dirs, cells)
@@ -369,10 +369,12 @@ def test_cells_must_match_directions(rng):
         vo.integrate_weights((d, np.ones_like(d), sa), cells.directions, hemisphere="full", cells=cells)
 
 
-def test_rotate_matches_conventions(rng):
+def test_rotate_directions_is_the_matrix_product(rng):
     d = cv.normalize(rng.normal(size=(1000, 3)))
     R = random_rotation(rng)
-    np.testing.assert_allclose(vo._rotate(R, d), cv.rotate_directions(R, d), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(cv.rotate_directions(R, d), d @ R.T, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(cv.rotate_directions(R, d.reshape(10, 100, 3)), (d @ R.T).reshape(10, 100, 3),
+                               rtol=0, atol=1e-15)
 
 
 def test_lightmap_object_accepted():

@@ -23,7 +23,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures"]
+__all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
+           "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "SSBO_BAND_BYTES"]
 
 #: The largest basis magnitude after scaling to float16 (2**12; float16 max is 65504).
 F16_TARGET_MAX = 2.0 ** 12
@@ -31,6 +32,10 @@ F16_TARGET_MAX = 2.0 ** 12
 SIGNIFICANT_REL = 1e-6
 #: Default memory budget for basis textures, bytes (refused above it).
 DEFAULT_BUDGET = 4 * 1024 ** 3
+#: Layers summed by one pass-2 dispatch of :class:`PackedBasis` (its shader is unrolled over them).
+PACKED_LAYERS = 256
+#: Largest SSBO binding used for a band of :class:`PackedBasis` (Mesa's limit is 128 MiB).
+SSBO_BAND_BYTES = 128 * 1024 ** 2
 
 _F16_MIN_NORMAL = 2.0 ** -14
 
@@ -238,3 +243,143 @@ class BasisTextures:
         for t in self.textures:
             release_gl(t)
         self.textures = []
+
+
+def pack_pixel_major(layers: np.ndarray, dtype: str = "f16") -> np.ndarray:
+    """Reorder basis layers into the pixel-major words of ``shaders/weighted_sum_packed.glsl``.
+
+    Parameters
+    ----------
+    layers : (m, h, w, 3) float16 (``dtype='f16'``) or float32 (``dtype='f32'``) array
+        Already scaled/converted values of ``m`` consecutive layers over ``h`` rows.
+    dtype : {'f16', 'f32'}
+
+    Returns
+    -------
+    (h, w, n_blocks, 3, 4) uint32 ndarray
+        For each pixel, ``n_blocks = ceil(m / L)`` blocks of ``L`` layers (``L = 8`` for f16,
+        4 for f32), each block one uvec4 per channel; a float16 word holds layers ``2k`` (low
+        half) and ``2k + 1`` (high half). Padding layers are 0.
+    """
+    per = 8 if dtype == "f16" else 4
+    m, h, w, _ = layers.shape
+    nb = -(-m // per)
+    x = np.zeros((nb * per, h, w, 3), dtype=np.float16 if dtype == "f16" else np.float32)
+    x[:m] = layers
+    x = np.ascontiguousarray(x.reshape(nb, per, h, w, 3).transpose(2, 3, 0, 4, 1))  # h, w, nb, 3, per
+    return x.view(np.uint32).reshape(h, w, nb, 3, 4)
+
+
+class PackedBasis:
+    """A basis ``(n, H, W, 3)`` resident on the GPU as pixel-major packed SSBOs (pass 2 ``'packed'``).
+
+    The layers are cut into chunks of at most ``max_layers`` (one dispatch each) and the rows of
+    each chunk into bands whose buffer fits one SSBO binding (``band_bytes``). A band buffer
+    holds, for each pixel, the chunk's layers as :func:`pack_pixel_major` lays them out:
+    ``ceil(3 m / 8)`` uvec4 of float16 (``m`` layers), or ``ceil(3 m / 4)`` of float32. Float16
+    uses the same checked power-of-two per-dataset scale as :class:`BasisTextures`.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    basis : (n, H, W, 3) float32 array
+        Linear radiance, finite; row 0 is the top row (stored first; no flip).
+    dtype : {'f16', 'f32'}
+    max_layers : int, optional
+        Layers per chunk (default :data:`PACKED_LAYERS`; at most 4096, the 64 KiB uniform
+        block of the weights).
+    budget_bytes : int
+        Refuse (``InputError``) a basis whose GPU storage exceeds this.
+    band_bytes : int, optional
+        Largest band buffer (default the device's SSBO block size, at most :data:`SSBO_BAND_BYTES`).
+    path : path-like, optional
+        Named in errors.
+
+    Attributes
+    ----------
+    bands : list of list of (row0, rows, moderngl.Buffer)
+        ``bands[j]`` holds chunk ``j`` (layers ``offsets[j] : offsets[j] + counts[j]``).
+    offsets, counts : list of int
+    scale : float
+        Stored value = radiance * scale; pass 2 multiplies by ``1 / scale``.
+    report : Float16Report or None
+        For ``dtype='f16'``.
+    nbytes : int
+        Bytes of all band buffers.
+    """
+
+    def __init__(self, ctx, basis, dtype: str = "f16", *, max_layers: int | None = None,
+                 budget_bytes: int = DEFAULT_BUDGET, band_bytes: int | None = None, path=None):
+        if dtype not in ("f16", "f32"):
+            raise ValueError(f"dtype must be 'f16' or 'f32', not {dtype!r}")
+        basis = np.asarray(basis)
+        if basis.ndim != 4 or basis.shape[-1] != 3 or basis.shape[0] < 1:
+            raise InputError(f"basis must have shape (n, H, W, 3) with n >= 1, not {basis.shape}", path)
+        n, H, W, _ = basis.shape
+        self.ctx = ctx
+        self.dtype = dtype
+        self.n = int(n)
+        self.size = (int(W), int(H))
+        self.max_layers = PACKED_LAYERS if max_layers is None else int(max_layers)
+        if not 1 <= self.max_layers <= 4096:
+            raise ValueError("max_layers must be in [1, 4096] for the packed basis")
+        per = 8 if dtype == "f16" else 4
+        self.offsets = list(range(0, n, self.max_layers))
+        self.counts = [min(n, a + self.max_layers) - a for a in self.offsets]
+        pixel_bytes = [48 * -(-c // per) for c in self.counts]
+        self.nbytes = int(H * W * sum(pixel_bytes))
+        if self.nbytes > budget_bytes:
+            raise InputError(
+                f"basis of {n} images {W}x{H} needs {self.nbytes / 2**20:.0f} MiB of GPU memory as {dtype}, "
+                f"over the budget of {budget_bytes / 2**20:.0f} MiB; use --rank K (compression), dtype 'f16', "
+                f"or a smaller capture", path)
+        if not np.all(np.isfinite(basis)):
+            raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
+        limit = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or SSBO_BAND_BYTES)
+        limit = min(limit, SSBO_BAND_BYTES) if band_bytes is None else int(band_bytes)
+        max_abs = float(np.max(np.abs(basis)))
+        self.scale = choose_scale(max_abs) if dtype == "f16" else 1.0
+        self.report = None
+        self.bands = []
+        rel, n_flush = 0.0, 0
+        try:
+            for a, cnt, pb in zip(self.offsets, self.counts, pixel_bytes):
+                if W * pb > limit:
+                    raise InputError(f"one image row of {cnt} packed layers ({W * pb} bytes) exceeds the SSBO "
+                                     f"limit of {limit} bytes; use a smaller max_layers", path)
+                rows = max(1, min(H, limit // (W * pb)))
+                chunk = []
+                self.bands.append(chunk)
+                for r in range(0, H, rows):
+                    part = basis[a:a + cnt, r:r + rows]
+                    if dtype == "f16":
+                        part, rep = to_float16(part, scale=self.scale, path=path, max_abs=max_abs)
+                        rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
+                    else:
+                        part = np.asarray(part, dtype=np.float32)
+                    words = pack_pixel_major(part, dtype)
+                    chunk.append((r, part.shape[1], ctx.buffer(words.tobytes())))
+        except BaseException:
+            self.release()
+            raise
+        if dtype == "f16":
+            self.report = Float16Report(self.scale, max_abs, 0, 0, n_flush, rel)
+
+    @property
+    def n_arrays(self) -> int:
+        """Number of layer chunks (one dispatch each per band), as :attr:`BasisTextures.n_arrays`."""
+        return len(self.bands)
+
+    @property
+    def n_bands(self) -> int:
+        """Largest number of row bands of a chunk."""
+        return max((len(c) for c in self.bands), default=0)
+
+    def release(self) -> None:
+        """Release the buffers."""
+        from .weighted_sum import release_gl
+
+        for chunk in self.bands:
+            for _, _, buf in chunk:
+                release_gl(buf)
+        self.bands = []

@@ -26,8 +26,8 @@ import numpy as np
 
 from ..conventions import check_hemisphere, is_rotation
 from ..errors import InputError
-from .basis import DEFAULT_BUDGET, BasisTextures
-from .weighted_sum import Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
+from .basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
+from .weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
 
 __all__ = ["Engine"]
 
@@ -78,10 +78,14 @@ class Engine:
     compressed : ffls.compress.CompressedBasis, optional
         A precomputed compression (``rank`` is then its rank); with ``rank`` and no
         ``compressed`` the basis is compressed here.
-    method : {'fragment', 'compute'}
-        Pass-2 implementation; ``'fragment'`` is 1.2-2x faster on llvmpipe (docs/gpu.md "Pass 2").
+    method : {'packed', 'fragment', 'compute'}
+        Pass-2 implementation (:data:`ffls.gpu.weighted_sum.METHODS`). ``'packed'`` (default)
+        stores the basis as pixel-major float16 pairs in SSBOs (:class:`ffls.gpu.basis.PackedBasis`)
+        and is the fastest on llvmpipe; ``'fragment'`` and ``'compute'`` read RGBA16F/RGBA32F
+        texture arrays (docs/gpu.md "Pass 2").
     max_layers : int, optional
-        Layers per texture array (default the device limit); more lights split the basis.
+        Layers per texture array (default the device limit) or per packed chunk (default
+        :data:`ffls.gpu.basis.PACKED_LAYERS`); more lights split the basis.
     budget_bytes : int
         GPU memory allowed for the basis; more raises :class:`ffls.errors.InputError`.
     path : path-like, optional
@@ -89,7 +93,7 @@ class Engine:
     """
 
     def __init__(self, ctx, basis, directions, hemisphere: str = "upper", *, dtype: str = "f16",
-                 rank: int | None = None, cell_res: int = 256, compressed=None, method: str = "fragment",
+                 rank: int | None = None, cell_res: int = 256, compressed=None, method: str = DEFAULT_METHOD,
                  max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, path=None):
         check_hemisphere(hemisphere)
         basis = np.asarray(basis)
@@ -107,6 +111,7 @@ class Engine:
         self.timings: dict[str, float] = {}
         self.compressed = None
         self._objs = []
+        storage = PackedBasis if method == "packed" else BasisTextures
         self._textures = self._pass2 = self._display = self._projector = None
         self._integrator = None
         self._weights_buffer = ctx.buffer(reserve=16 * self._n)
@@ -127,11 +132,11 @@ class Engine:
                 if compressed.n_lights != self._n or tuple(compressed.shape) != basis.shape[1:3]:
                     raise InputError("compressed basis does not match the capture's basis", path)
                 self.compressed = compressed
-                self._textures = BasisTextures(ctx, compressed.layers(), dtype, max_layers=max_layers,
+                self._textures = storage(ctx, compressed.layers(), dtype, max_layers=max_layers,
                                                budget_bytes=budget_bytes, path=path)
                 self._projector = Projector(ctx, compressed.projection_matrix())
             else:
-                self._textures = BasisTextures(ctx, basis, dtype, max_layers=max_layers,
+                self._textures = storage(ctx, basis, dtype, max_layers=max_layers,
                                                budget_bytes=budget_bytes, path=path)
             self._pass2 = WeightedSum(ctx, self._textures, method)
             self._display = ToneMapPass(ctx, self._size)

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -757,7 +756,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
     if not hints:
         good = [ft for ft in fits if ft.residual_px <= max_residual_px and ft.coverage >= min_coverage]
         # White diffuse spheres are the brightest, most neutral and most exactly round things in
-        # the max image: rank by outline support x coverage x brightness x neutrality x fit quality,
+        # the max image, and nothing hides their outline: rank by outline support x coverage x
+        # brightness x neutrality x fit quality,
         # then keep non-overlapping fits.
         yy, xx = np.mgrid[0:H, 0:W]
         rgb = mx if mx.ndim == 3 and mx.shape[2] >= 3 else None
@@ -771,7 +771,10 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
             else:
                 neutral.append(1.0)
         top = max(bright, default=1.0) or 1.0
-        score = [ft.n_inliers * ft.coverage * (b / top) * (0.25 + 0.75 * nt) / (1 + (ft.residual_px / 0.5) ** 2)
+        # support: inlier edge points per pixel of outline (about 1 for a fully visible outline),
+        # so that a large, partly hidden round object does not outrank a small whole sphere
+        score = [min(ft.n_inliers / (2 * np.pi * ft.radius_px), 1.2) * ft.coverage * (b / top)
+                 * (0.25 + 0.75 * nt) / (1 + (ft.residual_px / 0.5) ** 2)
                  for ft, b, nt in zip(good, bright, neutral)]
         order = np.argsort([-v for v in score], kind="stable")
         chosen = []

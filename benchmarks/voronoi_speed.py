@@ -1,0 +1,84 @@
+"""Speed of the angular Voronoi integration (ffls.voronoi) and of CPU relighting (ffls.relight).
+
+Usage::
+
+    python benchmarks/voronoi_speed.py [--height 512] [--lights 50,400,2048] [--repeat 7] [--json benchmarks/results/voronoi_speed.json]
+
+For a ``2h x h`` lat-long light map (the bundled paper map) and N random upper-hemisphere lights,
+times (median of --repeat runs after a warm-up, wall clock): baking the candidate texture, the
+integration with the exact k-d tree, with the candidate texture, and ``relight_fast`` of a
+256x256 basis. As the reference measured in the same run: the time to copy the light-map
+samples (dirs + radiance + solid angle, float64) once, i.e. the machine's copy bandwidth on the
+same bytes. Prints a table and writes JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+import numpy as np
+
+from ffls.lightmap import paper_map
+from ffls.relight import relight_fast, relight_reference
+from ffls.voronoi import bake_cells, integrate_weights
+
+
+def median_time(fn, repeat):
+    fn()
+    ts = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t)
+    return float(np.median(ts))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--height", type=int, default=512)
+    ap.add_argument("--lights", default="50,400,2048")
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--json", default="benchmarks/results/voronoi_speed.json")
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(0)
+    lm = paper_map(args.height)
+    samples = lm.samples()
+    nbytes = sum(a.nbytes for a in samples)
+    t_copy = median_time(lambda: [a.copy() for a in samples], args.repeat)
+    rows = []
+    for n in (int(s) for s in args.lights.split(",")):
+        dirs = rng.normal(size=(n, 3))
+        dirs[:, 2] = np.abs(dirs[:, 2])
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        R = np.eye(3)
+        t_bake = median_time(lambda: bake_cells(dirs, "upper", res=256, max_res=1024), max(1, args.repeat // 2))
+        cells = bake_cells(dirs, "upper", res=256, max_res=1024)
+        t_exact = median_time(lambda: integrate_weights(samples, dirs, R, "upper"), args.repeat)
+        t_cells = median_time(lambda: integrate_weights(samples, dirs, R, "upper", cells=cells), args.repeat)
+        w = integrate_weights(samples, dirs, R, "upper", cells=cells).weights
+        basis = rng.exponential(size=(n, 256, 256, 3)).astype(np.float32) if n <= 400 else None
+        t_relight = median_time(lambda: relight_fast(w, basis), args.repeat) if basis is not None else float("nan")
+        t_ref = median_time(lambda: relight_reference(w, basis), 1) if basis is not None else float("nan")
+        rows.append({"n_lights": n, "bake_s": t_bake, "cells_res": cells.res, "overflow": cells.overflow,
+                     "integrate_exact_s": t_exact, "integrate_cells_s": t_cells,
+                     "relight_fast_256_s": t_relight, "relight_reference_256_s": t_ref,
+                     "cells_vs_copy": t_cells / t_copy})
+    W, H = 2 * args.height, args.height
+    print(f"light map {W}x{H} ({H * W} texels, {nbytes / 1e6:.1f} MB of samples, copy {1e3 * t_copy:.1f} ms "
+          f"= {nbytes / t_copy / 1e9:.2f} GB/s), {os.cpu_count()} CPUs, median of {args.repeat}")
+    print(f"{'N':>6} {'bake':>9} {'res':>5} {'exact':>9} {'cells':>9} {'cells/copy':>11} {'relight256':>11} {'ref256':>9}")
+    for r in rows:
+        print(f"{r['n_lights']:>6} {1e3 * r['bake_s']:>7.0f}ms {r['cells_res']:>5} {1e3 * r['integrate_exact_s']:>7.0f}ms "
+              f"{1e3 * r['integrate_cells_s']:>7.0f}ms {r['cells_vs_copy']:>10.1f}x {1e3 * r['relight_fast_256_s']:>9.1f}ms "
+              f"{1e3 * r['relight_reference_256_s']:>7.0f}ms")
+    with open(args.json, "w") as f:
+        json.dump({"width": W, "height": H, "cpu_count": os.cpu_count(), "copy_s": t_copy,
+                   "sample_bytes": nbytes, "rows": rows}, f, indent=1)
+    print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

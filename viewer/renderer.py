@@ -1,0 +1,325 @@
+"""The viewer's renderer: reads :class:`viewer.state.ViewerState`, drives the GPU engine, makes
+the textures the GUI shows, and reports them in a :class:`viewer.state.ViewInfo`.
+
+It receives the ``moderngl.Context`` of the window (it never creates one) and never changes
+the state. What it makes:
+
+* the relit image: :class:`ffls.gpu.engine.Engine` (pass 1, pass 2, tone map); rebuilt when a
+  quality knob that needs it changes (:meth:`ViewerState.quality_key`);
+* the light-map preview: a lat-long thumbnail of the rotated light map (or of the per-cell
+  weights as a heat map) with the Voronoi cell borders of the capture's lights drawn in; the
+  light positions go to the GUI as uv so that it can draw and pick them;
+* the selected light's basis photo (tone-mapped);
+* the background overlay: a checkerboard outside the capture's object mask, drawn by the GUI
+  over the relit image when the background is hidden. A capture has a mask only when one is
+  given explicitly (``"mask": "mask.png"`` in ``capture.json``, or ``ffls view --mask``);
+  the viewer never guesses one from the pixel values.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ffls.conventions import direction_to_latlong_uv, latlong_directions, rotation_ypr
+from ffls.errors import FflsError, InputError
+from ffls.tonemap import tonemap as tonemap_np
+from ffls.tonemap import to_uint8
+
+from .state import BUILTIN_MAPS, ViewerState, ViewInfo
+
+__all__ = ["Renderer", "load_lightmap_spec", "load_mask", "heat_colours"]
+
+#: Height of the lat-long preview texture (width is twice that).
+PREVIEW_HEIGHT = 128
+
+
+def load_lightmap_spec(spec: str):
+    """A light map from a built-in name (:data:`viewer.state.BUILTIN_MAPS`) or a file path.
+
+    Raises
+    ------
+    ffls.errors.FflsError
+        Unknown name, missing or unreadable file.
+    """
+    from ffls.lightmap import builtin_lightmap, load_lightmap
+
+    if spec in BUILTIN_MAPS:
+        return builtin_lightmap(spec)
+    p = Path(spec).expanduser()
+    if p.is_file():
+        return load_lightmap(p)
+    if p.suffix or "/" in spec:
+        raise InputError("light map not found", p)
+    return builtin_lightmap(spec)  # raises with the list of built-in names
+
+
+def load_mask(capture, path=None, size=None) -> np.ndarray | None:
+    """The capture's object mask ``(H, W)`` bool (True = object), or None when it has none.
+
+    Parameters
+    ----------
+    capture : ffls.capture.Capture
+        ``capture.extra['mask']`` (a file relative to the capture folder) is used when ``path``
+        is None.
+    path : path-like, optional
+        An explicit mask image: white (> 0.5 after reading, any channel) is the object.
+    size : (int, int), optional
+        Expected (W, H); a mask of another size raises :class:`ffls.errors.InputError`.
+    """
+    from ffls.imageio import read_image
+
+    if path is None:
+        rel = (capture.extra or {}).get("mask") if capture is not None else None
+        if not rel:
+            return None
+        path = Path(capture.folder) / str(rel)
+    data = np.asarray(read_image(path).pixels, dtype=np.float64)  # integer files already scaled to [0, 1]
+    m = (data.max(axis=-1) if data.ndim == 3 else data) > 0.5
+    if size is not None and (m.shape[1], m.shape[0]) != tuple(size):
+        raise InputError(f"mask is {m.shape[1]}x{m.shape[0]}, the images are {size[0]}x{size[1]}", path)
+    return m
+
+
+def heat_colours(t: np.ndarray) -> np.ndarray:
+    """A perceptual heat map (dark blue -> purple -> orange -> yellow) of ``t`` in [0, 1]; (..., 3) float."""
+    stops = np.array([[0.02, 0.02, 0.10], [0.30, 0.05, 0.45], [0.80, 0.20, 0.30], [0.98, 0.60, 0.10],
+                      [1.00, 1.00, 0.60]])
+    x = np.clip(np.asarray(t, dtype=np.float64), 0, 1) * (len(stops) - 1)
+    i = np.minimum(x.astype(int), len(stops) - 2)
+    f = (x - i)[..., None]
+    return stops[i] * (1 - f) + stops[i + 1] * f
+
+
+class Renderer:
+    """Draws what a :class:`ViewerState` asks for with an :class:`ffls.gpu.engine.Engine`.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+        The window's context (OpenGL 4.3).
+    capture : ffls.capture.Capture
+    lights : ffls.capture.Lights
+    mask : (H, W) bool array, optional
+        Object mask (True = object); None disables hiding the background.
+    mask_reason : str
+        Shown as the tooltip of the disabled background checkbox when ``mask`` is None.
+    """
+
+    def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = ""):
+        from ffls.voronoi import bake_cells
+
+        self.ctx = ctx
+        self.capture = capture
+        self.lights = lights
+        ok = np.asarray(lights.ok_mask, dtype=bool)
+        names = [n for n, o in zip(lights.image_names, ok) if o]
+        pos = {n: i for i, n in enumerate(capture.image_names)}
+        self.image_index = [pos[n] for n in names if n in pos]
+        self.directions = np.asarray(lights.directions, dtype=np.float64)[ok]
+        self.hemisphere = getattr(capture, "hemisphere", "upper")
+        self.engine = None
+        self.info = ViewInfo(n_lights=len(self.directions), renderer=ctx.info.get("GL_RENDERER", ""),
+                             mask_available=mask is not None,
+                             mask_reason=mask_reason or "this capture has no object mask")
+        self._quality_key = None
+        self._lightmap_spec = None
+        self._failed_spec = None
+        self._lightmap = None
+        self._preview_latlong = None
+        self._preview_key = None
+        self._photo_key = None
+        self._R = None
+        self.frame_ms = {}
+        # textures owned here
+        self._preview_tex = ctx.texture((2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT), 4, dtype="f1")
+        self._photo_tex = None
+        self._overlay_tex = None
+        # the world-frame geometry of the preview: texel directions, cells, cell borders, light uv
+        d = latlong_directions(2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT)
+        self._preview_dirs = d
+        cells = bake_cells(self.directions, self.hemisphere, 256)
+        cid = cells.assign(d.reshape(-1, 3)).reshape(d.shape[:2])
+        border = np.zeros(cid.shape, dtype=bool)
+        border[:, :-1] |= cid[:, :-1] != cid[:, 1:]
+        border[:-1, :] |= cid[:-1, :] != cid[1:, :]
+        self._cell_id = cid
+        self._border = border & (cid >= 0)
+        u, v = direction_to_latlong_uv(self.directions)
+        self.info.light_uv = np.stack([u, v], axis=-1)
+        if mask is not None:
+            self._make_overlay(mask)
+
+    # ------------------------------------------------------------------ setup
+    def _make_overlay(self, mask: np.ndarray) -> None:
+        h, w = mask.shape
+        yy, xx = np.mgrid[0:h, 0:w]
+        checker = (((yy // 8) + (xx // 8)) % 2).astype(np.uint8)
+        rgba = np.empty((h, w, 4), dtype=np.uint8)
+        rgba[..., :3] = np.where(checker[..., None] == 1, 96, 64)
+        rgba[..., 3] = np.where(mask, 0, 255)
+        self._overlay_tex = self.ctx.texture((w, h), 4, np.ascontiguousarray(rgba).tobytes())
+        self.info.overlay_tex = self._overlay_tex.glo
+
+    def _build_engine(self, state: ViewerState) -> None:
+        from ffls.gpu.engine import Engine
+
+        q = state.quality
+        method = q.get("method", "compressed")
+        kw = {"cell_res": int(q.get("cell_res", 256))}
+        if method == "compressed":
+            kw.update(dtype="f16", rank=int(min(int(q.get("rank", 32)), len(self.directions))))
+        else:
+            kw.update(dtype="f32" if method.endswith("f32") else "f16")
+        t0 = time.perf_counter()
+        new = Engine.from_capture(self.ctx, self.capture, self.lights, **kw)
+        if self.engine is not None:
+            self.engine.release()
+        self.engine = new
+        if self._lightmap is not None:
+            new.set_lightmap(self._lightmap)
+        self._R = None
+        self.info.basis_info = dict(new.basis_info)
+        self.info.image_size = new.size
+        self.info.message = f"engine ready ({time.perf_counter() - t0:.1f} s): {self._describe_basis()}"
+
+    def _describe_basis(self) -> str:
+        b = self.info.basis_info
+        r = "full basis" if b.get("rank") is None else f"rank {b['rank']}"
+        return f"{r}, {b.get('layers')} layers {b.get('dtype')}, {b.get('bytes', 0) / 2**20:.0f} MiB"
+
+    def _load_lightmap(self, spec: str) -> None:
+        try:
+            lm = load_lightmap_spec(spec)
+        except (FflsError, OSError, ValueError) as e:
+            self._failed_spec = spec
+            self.info.message = f"light map {spec!r}: {e}"
+            return
+        self._lightmap = lm
+        self._lightmap_spec = spec
+        self._failed_spec = None
+        self._preview_latlong = lm.to_latlong(PREVIEW_HEIGHT).data.astype(np.float64)
+        self._preview_key = None
+        if self.engine is not None:
+            self.engine.set_lightmap(lm)
+        self.info.message = f"light map: {Path(spec).name if spec not in BUILTIN_MAPS else spec}"
+
+    # ------------------------------------------------------------------ per frame
+    def update(self, state: ViewerState) -> ViewInfo:
+        """Bring the engine and textures up to date with ``state`` and render the relit image.
+
+        Returns
+        -------
+        ViewInfo
+            Texture ids and facts for the GUI (the same object every call).
+        """
+        t0 = time.perf_counter()
+        if state.quality_key() != self._quality_key:
+            self._quality_key = state.quality_key()
+            self._build_engine(state)
+        if state.lightmap != self._lightmap_spec and state.lightmap != self._failed_spec:
+            self._load_lightmap(state.lightmap)
+        R = rotation_ypr(state.yaw, state.pitch, state.roll)
+        eng = self.engine
+        if self._lightmap is not None:
+            eng.set_rotation(R)
+            eng.render(state.exposure, state.tonemap)
+            self.info.image_tex = eng.display_texture.glo
+        self.info.timings = dict(eng.timings)
+        self._update_preview(state, R)
+        self._update_photo(state)
+        self.frame_ms = {"renderer": (time.perf_counter() - t0) * 1e3}
+        return self.info
+
+    def _update_preview(self, state: ViewerState, R: np.ndarray) -> None:
+        if self._preview_latlong is None:
+            return
+        weights_key = None
+        if state.preview_mode == "weights":
+            weights_key = self.engine.read_weights().sum(axis=1).round(9).tobytes()
+        key = (self._lightmap_spec, R.round(9).tobytes(), state.preview_mode, weights_key)
+        if key == self._preview_key:
+            return
+        self._preview_key = key
+        rgb = self.preview_image(R, state.preview_mode)
+        rgba = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=-1)
+        self._preview_tex.write(np.ascontiguousarray(rgba).tobytes())
+        self.info.preview_tex = self._preview_tex.glo
+        self.info.preview_size = (2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT)
+
+    def preview_image(self, R: np.ndarray, mode: str = "lightmap") -> np.ndarray:
+        """The light-map preview ``(PREVIEW_HEIGHT, 2 PREVIEW_HEIGHT, 3)`` uint8, world frame.
+
+        Parameters
+        ----------
+        R : (3, 3) float
+            Light-map rotation: the preview texel at world direction ``d`` shows the map's
+            radiance from ``R^T d``.
+        mode : {'lightmap', 'weights'}
+            The rotated map (Reinhard, exposed for its median), or each cell filled with its
+            light's weight (luminance, log scale over three decades) as a heat map.
+        """
+        d = self._preview_dirs
+        if mode == "weights":
+            w = self.engine.read_weights()
+            lum = 0.2126 * w[:, 0] + 0.7152 * w[:, 1] + 0.0722 * w[:, 2]
+            top = float(lum.max()) if lum.size and lum.max() > 0 else 1.0
+            t = np.clip((np.log10(np.maximum(lum, top * 1e-3) / top) + 3.0) / 3.0, 0, 1)
+            cid = self._cell_id
+            rgb = np.where((cid >= 0)[..., None], heat_colours(t[np.maximum(cid, 0)]), 0.05)
+            img = to_uint8(rgb)
+        else:
+            src = d @ np.asarray(R, dtype=np.float64)  # R^T d, row vectors
+            u, v = direction_to_latlong_uv(src)
+            h, w = self._preview_latlong.shape[:2]
+            ii = np.clip((u * w).astype(int), 0, w - 1)
+            jj = np.clip((v * h).astype(int), 0, h - 1)
+            rad = self._preview_latlong[jj, ii]
+            lum = rad @ np.array([0.2126, 0.7152, 0.0722])
+            med = float(np.median(lum[lum > 0])) if np.any(lum > 0) else 1.0
+            img = to_uint8(tonemap_np(rad, float(np.log2(0.25 / med)), "reinhard"))
+            if self.hemisphere == "upper":  # dim what the capture does not cover
+                img[d[..., 2] < 0] = (img[d[..., 2] < 0] * 0.35).astype(np.uint8)
+        img[self._border] = (230, 230, 230)
+        return img
+
+    def _update_photo(self, state: ViewerState) -> None:
+        sel = state.selected_light
+        if sel is None or not 0 <= sel < len(self.image_index):
+            self.info.photo_tex = 0
+            return
+        if self._photo_key == sel:
+            return
+        from ffls.demo import auto_exposure
+
+        img = self.capture.load_image(self.image_index[sel])
+        disp = to_uint8(tonemap_np(img, auto_exposure(img), "srgb"))
+        rgba = np.concatenate([disp, np.full(disp.shape[:2] + (1,), 255, np.uint8)], axis=-1)
+        size = (disp.shape[1], disp.shape[0])
+        if self._photo_tex is None or self._photo_tex.size != size:
+            if self._photo_tex is not None:
+                self._photo_tex.release()
+            self._photo_tex = self.ctx.texture(size, 4, dtype="f1")
+        self._photo_tex.write(np.ascontiguousarray(rgba).tobytes())
+        self._photo_key = sel
+        self.info.photo_tex = self._photo_tex.glo
+
+    # ------------------------------------------------------------------ outputs
+    def read_hdr(self) -> np.ndarray:
+        """The relit HDR image ``(H, W, 3)`` float32 of the last :meth:`update`."""
+        return self.engine.read_hdr()
+
+    def read_display(self) -> np.ndarray:
+        """The tone-mapped relit image ``(H, W, 3)`` uint8 of the last :meth:`update`."""
+        return self.engine.read_display()
+
+    def release(self) -> None:
+        """Release the engine and every texture made here (not the context)."""
+        if self.engine is not None:
+            self.engine.release()
+            self.engine = None
+        for t in (self._preview_tex, self._photo_tex, self._overlay_tex):
+            if t is not None:
+                t.release()
+        self._preview_tex = self._photo_tex = self._overlay_tex = None

@@ -1,0 +1,312 @@
+"""The viewer's state: everything the GUI may change, and nothing else.
+
+The viewer has three parts (GUIDE section 2):
+
+* :class:`ViewerState` (this module): a plain dataclass. The GUI function
+  (:func:`viewer.gui.draw_gui`) changes only it; the renderer (:class:`viewer.renderer.Renderer`)
+  and the window loop (:mod:`viewer.app`) read it.
+* :class:`ViewInfo`: what the renderer tells the GUI each frame (texture ids, light positions in
+  the preview, timings, messages). The GUI reads it and never changes it.
+* :data:`QUALITY_KNOBS`: descriptors of the quality panel. A later issue adds a knob by appending
+  a :class:`Knob` here (and reading ``state.quality[key]`` in the renderer); the GUI draws every
+  knob from its descriptor.
+
+Nothing here imports a GL or window module.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Knob", "QUALITY_KNOBS", "METHODS", "TONEMAPS", "BUILTIN_MAPS", "ViewerState", "ViewInfo",
+           "TurntableJob", "default_quality", "parse_size", "parse_rotation"]
+
+#: Tone curves of :func:`ffls.tonemap.tonemap` (and the engine's display pass).
+TONEMAPS = ("srgb", "reinhard", "aces")
+#: Built-in light maps (:func:`ffls.lightmap.builtin_lightmap`).
+BUILTIN_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
+#: Pass-2 methods: compressed basis of rank K (float16 eigen-images), or the full basis.
+METHODS = ("compressed", "full f16", "full f32")
+#: Frame times kept for the plot.
+HISTORY = 240
+
+
+@dataclass(frozen=True)
+class Knob:
+    """Descriptor of one quality control; the GUI draws it, the renderer reads ``state.quality[key]``.
+
+    Attributes
+    ----------
+    key : str
+        Key in :attr:`ViewerState.quality`.
+    label : str
+        Text beside the widget.
+    kind : {'choice', 'int', 'float', 'bool'}
+        Widget: combo box, integer slider, float slider, checkbox.
+    default : object
+        Initial value.
+    choices : tuple of str
+        Values of a ``'choice'`` knob.
+    lo, hi : float
+        Slider range of ``'int'``/``'float'`` knobs. ``hi`` may be lowered per capture (see
+        :meth:`ViewerState.knob_range`), e.g. the rank cannot exceed the number of lights.
+    help : str
+        Tooltip.
+    enabled_when : tuple, optional
+        ``(key, values)``: the knob is enabled only while ``quality[key]`` is in ``values``.
+    rebuild : bool
+        True when a change needs a new engine (GPU upload); False when the next render suffices.
+    """
+
+    key: str
+    label: str
+    kind: str
+    default: object
+    choices: tuple = ()
+    lo: float = 0
+    hi: float = 1
+    help: str = ""
+    enabled_when: tuple | None = None
+    rebuild: bool = True
+
+
+#: The quality panel, in display order.
+QUALITY_KNOBS: tuple[Knob, ...] = (
+    Knob("method", "method", "choice", "compressed", choices=METHODS,
+         help="compressed: mean + K eigen-images (fast); full: every basis image, float16 or float32"),
+    Knob("rank", "rank K", "int", 32, lo=1, hi=128, enabled_when=("method", ("compressed",)),
+         help="eigen-images of the compressed basis (computed once, saved in the capture folder)"),
+    Knob("cell_res", "cell texture", "choice", "256", choices=("128", "256", "512"),
+         help="resolution of the Voronoi cell-index texture of pass 1"),
+)
+
+
+def default_quality() -> dict:
+    """``{key: default}`` of every :data:`QUALITY_KNOBS` entry."""
+    return {k.key: k.default for k in QUALITY_KNOBS}
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``'WxH'`` -> ``(W, H)`` positive ints; ``ValueError`` otherwise."""
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise ValueError(f"size must be WxH (e.g. 1280x800), not {text!r}") from None
+    if w < 1 or h < 1:
+        raise ValueError(f"size must be positive, not {text!r}")
+    return w, h
+
+
+def parse_rotation(text: str) -> tuple[float, float, float]:
+    """``'YAW,PITCH,ROLL'`` (degrees; missing trailing values are 0) -> three floats."""
+    try:
+        v = [float(x) for x in str(text).split(",")]
+    except ValueError:
+        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}") from None
+    if not 1 <= len(v) <= 3 or not all(math.isfinite(x) for x in v):
+        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}")
+    return tuple(v + [0.0] * (3 - len(v)))
+
+
+@dataclass
+class TurntableJob:
+    """A turntable recording in progress: ``frames`` PNGs over 360 degrees of yaw into ``folder``."""
+
+    folder: str
+    frames: int = 120
+    done: int = 0
+    start_yaw: float = 0.0
+
+
+@dataclass
+class ViewerState:
+    """Everything the viewer's GUI controls.
+
+    Attributes
+    ----------
+    yaw, pitch, roll : float
+        Light-map rotation in degrees (:func:`ffls.conventions.rotation_ypr`).
+    auto_rotate : bool
+        Advance the yaw by ``auto_rotate_speed`` degrees per second.
+    auto_rotate_speed : float
+    exposure : float
+        Stops applied before the tone curve.
+    tonemap : {'srgb', 'reinhard', 'aces'}
+    show_background : bool
+        Show the pixels outside the capture's object mask (only with a mask, see docs/viewer.md).
+    lightmap : str
+        A built-in name (:data:`BUILTIN_MAPS`) or a file path; the renderer loads it when it changes.
+    lightmap_path_input : str
+        The path text field (fallback of the open dialog).
+    open_dialog : bool
+        Pending: the app opens a file dialog (portable_file_dialogs) and puts the result in
+        ``lightmap``.
+    selected_light : int or None
+        Index (among the accepted lights) whose basis photo is shown.
+    preview_mode : {'lightmap', 'weights'}
+        Light-map preview: the rotated map, or the per-cell weights as a heat map.
+    quality : dict
+        Values of :data:`QUALITY_KNOBS`.
+    quality_drafts : dict
+        Slider values being dragged, committed to ``quality`` on release (knobs that rebuild).
+    window_size : (int, int)
+        Window size in screen coordinates (updated on resize).
+    fullscreen : bool
+    screenshot_path : str or None
+        Pending: save the window (PNG, GUI included) and the relit HDR (EXR, same stem).
+    turntable : TurntableJob or None
+        Recording in progress.
+    turntable_frames, turntable_folder : int, str
+        Settings of the next recording.
+    frame_times_ms : deque of float
+        Recent frame times (ms), newest last.
+    show_help, show_gui : bool
+    quit : bool
+        Pending: close the window.
+    drag_deg_per_px : float
+        Rotation per pixel of mouse drag.
+    """
+
+    yaw: float = 0.0
+    pitch: float = 0.0
+    roll: float = 0.0
+    auto_rotate: bool = False
+    auto_rotate_speed: float = 30.0
+    exposure: float = 0.0
+    tonemap: str = "aces"
+    show_background: bool = True
+    lightmap: str = "courtyard"
+    lightmap_path_input: str = ""
+    open_dialog: bool = False
+    selected_light: int | None = None
+    preview_mode: str = "lightmap"
+    quality: dict = field(default_factory=default_quality)
+    quality_drafts: dict = field(default_factory=dict)
+    window_size: tuple = (1280, 800)
+    fullscreen: bool = False
+    screenshot_path: str | None = None
+    turntable: TurntableJob | None = None
+    turntable_frames: int = 120
+    turntable_folder: str = "turntable"
+    frame_times_ms: deque = field(default_factory=lambda: deque(maxlen=HISTORY))
+    show_help: bool = False
+    show_gui: bool = True
+    quit: bool = False
+    drag_deg_per_px: float = 0.4
+
+    # ------------------------------------------------------------------ pure updates
+    def rotate_by(self, dyaw: float = 0.0, dpitch: float = 0.0, droll: float = 0.0) -> None:
+        """Add to the rotation; yaw and roll wrap to [-180, 180), pitch is clamped to [-90, 90]."""
+        self.yaw = wrap_degrees(self.yaw + dyaw)
+        self.roll = wrap_degrees(self.roll + droll)
+        self.pitch = float(np.clip(self.pitch + dpitch, -90.0, 90.0))
+
+    def reset_rotation(self) -> None:
+        """Yaw, pitch and roll back to 0 and auto-rotation off."""
+        self.yaw = self.pitch = self.roll = 0.0
+        self.auto_rotate = False
+
+    def advance(self, dt: float) -> None:
+        """Advance time by ``dt`` seconds (auto-rotation); turntable frames are stepped by the app."""
+        if self.auto_rotate and self.turntable is None:
+            self.yaw = wrap_degrees(self.yaw + self.auto_rotate_speed * float(dt))
+
+    def record_frame_time(self, ms: float) -> None:
+        """Append a frame time (ms) to the history."""
+        self.frame_times_ms.append(float(ms))
+
+    def fps(self) -> float:
+        """Frames per second over the history (0 when empty)."""
+        if not self.frame_times_ms:
+            return 0.0
+        return 1000.0 / max(1e-6, float(np.mean(self.frame_times_ms)))
+
+    def knob_range(self, knob: Knob, n_lights: int | None) -> tuple[float, float]:
+        """Slider range of ``knob`` for a capture of ``n_lights`` accepted lights."""
+        hi = knob.hi
+        if knob.key == "rank" and n_lights:
+            hi = min(hi, n_lights)
+        return knob.lo, hi
+
+    def knob_enabled(self, knob: Knob) -> bool:
+        """Whether ``knob`` applies under the other knobs' current values."""
+        if knob.enabled_when is None:
+            return True
+        key, values = knob.enabled_when
+        return self.quality.get(key) in values
+
+    def quality_key(self) -> tuple:
+        """The values of the knobs that need a new engine (the renderer rebuilds when this changes)."""
+        rebuild = [k.key for k in QUALITY_KNOBS if k.rebuild and self.knob_enabled(k)]
+        return tuple((k, self.quality.get(k)) for k in rebuild)
+
+
+def wrap_degrees(a: float) -> float:
+    """``a`` wrapped to [-180, 180)."""
+    return float((a + 180.0) % 360.0 - 180.0)
+
+
+@dataclass
+class ViewInfo:
+    """What the renderer shows the GUI each frame (read-only for the GUI).
+
+    Attributes
+    ----------
+    image_tex : int
+        GL name of the RGBA8 display texture (``Engine.display_texture.glo``), 0 when none.
+    image_size : (int, int)
+        (W, H) of the relit image.
+    overlay_tex : int
+        GL name of the background overlay (checkerboard outside the mask), 0 when none.
+    preview_tex : int
+        GL name of the lat-long preview (RGBA8), 0 when none.
+    preview_size : (int, int)
+        (W, H) of the preview texture (W = 2 H).
+    light_uv : (n, 2) float
+        Lat-long uv (0..1, v down) of the accepted lights, world frame.
+    photo_tex : int
+        GL name of the selected light's basis photo (tone-mapped), 0 when none.
+    n_lights : int
+    mask_available : bool
+        Whether the capture has an object mask (enables the background checkbox).
+    mask_reason : str
+        Why the background checkbox is disabled.
+    timings : dict
+        The engine's last pass timings (ms).
+    basis_info : dict
+        ``Engine.basis_info``.
+    renderer : str
+        GL renderer string.
+    message : str
+        Last error or notice (e.g. a light map that failed to load).
+    framebuffer_scale : (float, float)
+        Framebuffer pixels per window coordinate.
+    content_scale : float
+        The monitor's content scale (HiDPI).
+    dialog_available : bool
+        Whether a native file dialog can be opened (a desktop session).
+    recording : str
+        Turntable progress text, empty when idle.
+    """
+
+    image_tex: int = 0
+    image_size: tuple = (1, 1)
+    overlay_tex: int = 0
+    preview_tex: int = 0
+    preview_size: tuple = (2, 1)
+    light_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    photo_tex: int = 0
+    n_lights: int = 0
+    mask_available: bool = False
+    mask_reason: str = ""
+    timings: dict = field(default_factory=dict)
+    basis_info: dict = field(default_factory=dict)
+    renderer: str = ""
+    message: str = ""
+    framebuffer_scale: tuple = (1.0, 1.0)
+    content_scale: float = 1.0
+    dialog_available: bool = False
+    recording: str = ""
