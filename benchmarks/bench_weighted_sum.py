@@ -1,14 +1,18 @@
 """Benchmark of pass 2 (weighted sum of basis images), its compressed variant, and the display pass.
 
 For each (N lights, W x H) it reports the median time (after one warm-up, ``ctx.finish()``
-before stopping the clock) of pass 2 in its compute and fragment versions over a float16
-basis, frames per second, bytes moved per frame (basis texels read + output written), the
-resulting bandwidth as a fraction of the device's copy bandwidth measured in the same run
-(``ctx.copy_buffer`` of a large buffer; NumPy ``copyto`` for the CPU), and the NumPy float32
-path (:func:`ffls.relight.relight_fast`) as a ratio. Compressed rows (K = 8, 16, 32) time the
-coefficient projection (GPU compute pass; the CPU alternative, NumPy + buffer upload, beside it)
-plus pass 2 (fragment version, the Engine's) over K + 1 layers. Combinations whose float32 basis would
-exceed ``--host-budget`` MiB of host memory are skipped and listed.
+before stopping the clock) of pass 2 over a float16 basis in its three versions: ``compute``
+and ``fragment`` (RGBA16F texture arrays, the previous method) and ``packed`` (pixel-major
+float16 pairs in SSBOs, :class:`ffls.gpu.basis.PackedBasis`, the Engine's default); frames per
+second, bytes moved per frame by each storage (basis read + RGBA32F output written: 8 bytes per
+RGBA16F texel, 6 bytes per packed RGB value plus block padding), the resulting bandwidth as a
+fraction of the device's copy bandwidth measured in the same run (``ctx.copy_buffer`` of a large
+buffer; NumPy ``copyto`` for the CPU), and the NumPy float32 path
+(:func:`ffls.relight.relight_fast`) as a ratio. Compressed rows (``--comp-lights`` = 160 lights,
+K = 8, 16, 32, 512 x 512: the viewer's case) time the coefficient projection (GPU compute pass;
+the CPU alternative, NumPy + buffer upload, beside it) plus pass 2 over K + 1 layers, for
+``fragment`` and ``packed``. Combinations whose float32 basis would exceed ``--host-budget`` MiB
+of host memory are skipped and listed.
 
     python benchmarks/bench_weighted_sum.py [--quick] [--reps 5]
 
@@ -25,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.gpu.basis import BasisTextures
+from ffls.gpu.basis import BasisTextures, PackedBasis
 from ffls.gpu.context import create_headless_context, describe_context
 from ffls.gpu.weighted_sum import Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
 from ffls.relight import relight_fast
@@ -67,6 +71,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="N in (64, 256), sizes 256 and 512 only")
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--host-budget", type=float, default=1024, help="MiB of float32 basis on the host")
+    ap.add_argument("--comp-lights", type=int, default=160, help="lights of the compressed rows")
     args = ap.parse_args(argv)
 
     ctx = create_headless_context()
@@ -90,57 +95,71 @@ def main(argv=None):
             basis = rng.random((n, s, s, 3), dtype=np.float32)
             w = rng.random((n, 3))
             bt = BasisTextures(ctx, basis, "f16")
+            pb = PackedBasis(ctx, basis, "f16")
             wbuf = ctx.buffer(weights_to_vec4(w))
             moved = n * s * s * 8 + s * s * 16  # RGBA16F texels read + RGBA32F written
-            row = {"n": n, "size": s, "bytes_per_frame": moved}
-            for method in ("compute", "fragment"):
-                ws = WeightedSum(ctx, bt, method)
+            moved_packed = pb.nbytes + s * s * 16  # packed halves (with block padding) + RGBA32F written
+            row = {"n": n, "size": s, "bytes_per_frame": moved, "bytes_per_frame_packed": moved_packed}
+            for method in ("compute", "fragment", "packed"):
+                ws = WeightedSum(ctx, pb if method == "packed" else bt, method)
                 ms = median_ms(lambda: ws.run(wbuf), ctx, args.reps)
                 row[f"{method}_ms"] = ms
                 if method == "compute":
                     row["tonemap_ms"] = median_ms(lambda: tm.run(ws.output, 0.0, "aces"), ctx, args.reps)
                 ws.release()
             row["numpy_f32_ms"] = median_ms(lambda: relight_fast(w, basis), None, max(3, args.reps // 2))
-            best = min(row["compute_ms"], row["fragment_ms"])
-            row["best"] = "compute" if row["compute_ms"] <= row["fragment_ms"] else "fragment"
+            prev = min(row["compute_ms"], row["fragment_ms"])
+            row["previous_best"] = "compute" if row["compute_ms"] <= row["fragment_ms"] else "fragment"
+            row["frac_copy_bw_previous"] = moved / (prev * 1e-3) / gl_bw
+            best = row["packed_ms"]
             row["fps_pass2"] = 1e3 / best
-            row["gbps"] = moved / (best * 1e-3) / 1e9
-            row["frac_copy_bw"] = moved / (best * 1e-3) / gl_bw
+            row["gbps"] = moved_packed / (best * 1e-3) / 1e9
+            row["frac_copy_bw"] = moved_packed / (best * 1e-3) / gl_bw
+            row["speedup_vs_previous"] = prev / best
             row["numpy_over_gl"] = row["numpy_f32_ms"] / best
             rows.append(row)
-            print(f"N={n:5d} {s:4d}^2  compute {row['compute_ms']:8.1f} ms  fragment {row['fragment_ms']:8.1f} ms  "
-                  f"tonemap {row['tonemap_ms']:6.1f} ms  numpy {row['numpy_f32_ms']:8.1f} ms  "
-                  f"{row['gbps']:6.2f} GB/s = {100 * row['frac_copy_bw']:5.1f}% of copy", flush=True)
+            print(f"N={n:5d} {s:4d}^2  compute {row['compute_ms']:8.1f}  fragment {row['fragment_ms']:8.1f}  "
+                  f"packed {best:7.1f} ms  tonemap {row['tonemap_ms']:5.1f}  numpy {row['numpy_f32_ms']:7.1f} ms  "
+                  f"packed {row['gbps']:5.2f} GB/s = {100 * row['frac_copy_bw']:5.1f}% of copy "
+                  f"(previous {100 * row['frac_copy_bw_previous']:4.1f}%), x{row['speedup_vs_previous']:.1f}", flush=True)
             release_gl(wbuf)
             bt.release()
+            pb.release()
             del basis
         tm.release()
 
     # compressed basis rows: projection (n -> K + 1) + pass 2 over K + 1 layers
     comp_rows = []
-    n, s = 256, 512
+    n, s = args.comp_lights, 512
     w = rng.random((n, 3))
     wbuf = ctx.buffer(weights_to_vec4(w))
     for K in (8, 16, 32):
         layers = rng.standard_normal((K + 1, s, s, 3)).astype(np.float32)
         P = np.ones((n, K + 1, 3), np.float32)
         P[:, 1:] = rng.standard_normal((n, K, 3)) / np.sqrt(n)
-        bt = BasisTextures(ctx, layers, "f16")
-        ws = WeightedSum(ctx, bt, "fragment")  # the Engine's pass 2
         proj = Projector(ctx, P)
         proj_ms = median_ms(lambda: proj.run(wbuf), ctx, args.reps)
-        p2_ms = median_ms(lambda: ws.run(proj.coeffs_buffer), ctx, args.reps)
         cpu_proj_ms = median_ms(lambda: proj.coeffs_buffer.write(weights_to_vec4(np.einsum("nkc,nc->kc", P, w))),
                                 ctx, args.reps)
-        moved = (K + 1) * s * s * 8 + s * s * 16
-        r = {"n": n, "size": s, "K": K, "project_gpu_ms": proj_ms, "project_cpu_ms": cpu_proj_ms, "pass2_ms": p2_ms,
-             "fps": 1e3 / (proj_ms + p2_ms), "frac_copy_bw": moved / (p2_ms * 1e-3) / gl_bw}
+        r = {"n": n, "size": s, "K": K, "project_gpu_ms": proj_ms, "project_cpu_ms": cpu_proj_ms}
+        for method in ("fragment", "packed"):
+            store = (PackedBasis if method == "packed" else BasisTextures)(ctx, layers, "f16")
+            ws = WeightedSum(ctx, store, method)
+            ms = median_ms(lambda: ws.run(proj.coeffs_buffer), ctx, args.reps)
+            moved = (store.nbytes if method == "packed" else (K + 1) * s * s * 8) + s * s * 16
+            r[f"pass2_{method}_ms"] = ms
+            r[f"frac_copy_bw_{method}"] = moved / (ms * 1e-3) / gl_bw
+            ws.release()
+            store.release()
+        r["pass2_ms"] = r["pass2_packed_ms"]
+        r["fps"] = 1e3 / (proj_ms + r["pass2_ms"])
+        r["frac_copy_bw"] = r["frac_copy_bw_packed"]
         comp_rows.append(r)
         print(f"compressed N={n} {s}^2 K={K:3d}: project GPU {proj_ms:6.2f} ms (CPU {cpu_proj_ms:6.2f} ms), "
-              f"pass2 {p2_ms:7.2f} ms, {r['fps']:6.1f} fps, {100 * r['frac_copy_bw']:5.1f}% of copy", flush=True)
+              f"pass2 fragment {r['pass2_fragment_ms']:7.2f} ms, packed {r['pass2_packed_ms']:6.2f} ms, "
+              f"{r['fps']:6.1f} fps, {100 * r['frac_copy_bw']:5.1f}% of copy "
+              f"(fragment {100 * r['frac_copy_bw_fragment']:4.1f}%)", flush=True)
         proj.release()
-        ws.release()
-        bt.release()
     release_gl(wbuf)
     for line in skipped:
         print("skipped:", line)

@@ -37,10 +37,10 @@ def _basis(rng, n, H=16, W=16, dynamic=True):
 
 
 def _run_pass2(ctx, basis, w, dtype="f16", method="compute", **kw):
-    from ffls.gpu.basis import BasisTextures
+    from ffls.gpu.basis import BasisTextures, PackedBasis
     from ffls.gpu.weighted_sum import WeightedSum, release_gl, weights_to_vec4
 
-    bt = BasisTextures(ctx, basis, dtype, **kw)
+    bt = (PackedBasis if method == "packed" else BasisTextures)(ctx, basis, dtype, **kw)
     ws = WeightedSum(ctx, bt, method)
     buf = ctx.buffer(weights_to_vec4(w))
     try:
@@ -85,7 +85,7 @@ def test_float16_overflow_and_underflow_are_reported():
 # ----------------------------------------------------------------------------- pass 2
 @pytest.mark.gl
 @pytest.mark.parametrize("dtype", ["f16", "f32"])
-@pytest.mark.parametrize("method", ["compute", "fragment"])
+@pytest.mark.parametrize("method", ["compute", "fragment", "packed"])
 def test_pass2_matches_reference(ctx, rng, dtype, method):
     from ffls.relight import relight_reference
 
@@ -97,19 +97,25 @@ def test_pass2_matches_reference(ctx, rng, dtype, method):
 
 @pytest.mark.gl
 @pytest.mark.parametrize("n", [1, 2048])
-def test_pass2_extreme_light_counts(ctx, rng, n):
+@pytest.mark.parametrize("method", ["compute", "packed"])
+def test_pass2_extreme_light_counts(ctx, rng, n, method):
+    from ffls.gpu.basis import PACKED_LAYERS
     from ffls.relight import relight_reference
 
     basis = _basis(rng, n, 16, 16)
     w = rng.random((n, 3))
-    gpu, n_arrays = _run_pass2(ctx, basis, w, "f16")
-    assert n_arrays == 1  # 2048 is llvmpipe's GL_MAX_ARRAY_TEXTURE_LAYERS: still one array
+    gpu, n_arrays = _run_pass2(ctx, basis, w, "f16", method)
+    if method == "packed":  # chunks of PACKED_LAYERS layers, one unrolled dispatch each
+        assert n_arrays == -(-n // PACKED_LAYERS)
+    else:
+        assert n_arrays == 1  # 2048 is llvmpipe's GL_MAX_ARRAY_TEXTURE_LAYERS: still one array
     _check_close(gpu, relight_reference(w, basis))
 
 
 @pytest.mark.gl
 @pytest.mark.parametrize("dtype", ["f16", "f32"])
-def test_sun_1e6_no_float16_overflow(ctx, rng, dtype):
+@pytest.mark.parametrize("method", ["compute", "packed"])
+def test_sun_1e6_no_float16_overflow(ctx, rng, dtype, method):
     """A 1e6 basis value (a specular glint) and a 1e6 sun weight next to 1e-3 sky weights."""
     from ffls.relight import relight_reference
 
@@ -117,7 +123,7 @@ def test_sun_1e6_no_float16_overflow(ctx, rng, dtype):
     basis[3, 2, 5] = 1e6
     w = np.full((32, 3), 1e-3)
     w[3] = 1e6
-    gpu, _ = _run_pass2(ctx, basis, w, dtype)
+    gpu, _ = _run_pass2(ctx, basis, w, dtype, method)
     ref = relight_reference(w, basis)
     assert ref.max() > 1e11  # far beyond float16, inside float32
     _check_close(gpu, ref)
@@ -136,11 +142,72 @@ def test_split_arrays_match_reference(ctx, rng, method):
 
 
 @pytest.mark.gl
+@pytest.mark.parametrize("dtype", ["f16", "f32"])
+def test_packed_chunks_and_bands_match_reference(ctx, rng, dtype):
+    """Layers cut into chunks (7 layers: an unaligned uniform-block offset, padded blocks) and
+    rows into bands (a band buffer of 3 rows), signed values as in eigen-images."""
+    from ffls.relight import relight_reference
+
+    n, H, W = 50, 10, 12
+    basis = _basis(rng, n, H, W) * rng.choice([-1.0, 1.0], size=(n, H, W, 3)).astype(np.float32)
+    basis[:, 0, 0] = 0.0  # zeros stay zeros (no float16 bias artefact)
+    w = rng.random((n, 3))
+    per = 8 if dtype == "f16" else 4
+    band_bytes = 3 * W * 48 * -(-7 // per)
+    gpu, n_arrays = _run_pass2(ctx, basis, w, dtype, "packed", max_layers=7, band_bytes=band_bytes)
+    assert n_arrays == 8
+    ref = relight_reference(w, basis)
+    # signed sums may cancel: the max-norm bound only, plus exact zeros
+    assert np.abs(gpu - ref).max() <= TOL * np.abs(ref).max()
+    assert np.all(gpu[0, 0] == 0.0)
+
+
+def test_pack_pixel_major_layout(rng):
+    """Word k of block b, channel c holds layers 8b + 2k (low half) and 8b + 2k + 1 (high half)."""
+    from ffls.gpu.basis import pack_pixel_major
+
+    m, h, w = 11, 3, 4
+    x = rng.standard_normal((m, h, w, 3)).astype(np.float16)
+    words = pack_pixel_major(x, "f16")
+    assert words.shape == (h, w, 2, 3, 4) and words.dtype == np.uint32
+    halves = words.view(np.uint16).reshape(h, w, 2, 3, 8).view(np.float16)  # little-endian: low half first
+    for i in range(16):
+        b, k = divmod(i, 8)
+        expect = x[i] if i < m else np.zeros((h, w, 3), np.float16)
+        np.testing.assert_array_equal(halves[:, :, b, :, k], expect)
+    y = rng.random((5, h, w, 3), dtype=np.float32)
+    f = pack_pixel_major(y, "f32").view(np.float32)
+    assert f.shape == (h, w, 2, 3, 4)
+    np.testing.assert_array_equal(f[:, :, 1, :, 0], y[4])
+    assert np.all(f[:, :, 1, :, 1:] == 0)
+
+
+@pytest.mark.gl
+def test_pass2_method_needs_matching_storage(ctx, rng):
+    from ffls.gpu.basis import BasisTextures, PackedBasis
+    from ffls.gpu.weighted_sum import WeightedSum
+
+    basis = _basis(rng, 3, 4, 4)
+    pb = PackedBasis(ctx, basis)
+    bt = BasisTextures(ctx, basis)
+    try:
+        with pytest.raises(TypeError, match="PackedBasis"):
+            WeightedSum(ctx, bt, "packed")
+        with pytest.raises(TypeError, match="BasisTextures"):
+            WeightedSum(ctx, pb, "fragment")
+    finally:
+        pb.release()
+        bt.release()
+
+
+@pytest.mark.gl
 def test_over_budget_is_refused(ctx, rng):
-    from ffls.gpu.basis import BasisTextures
+    from ffls.gpu.basis import BasisTextures, PackedBasis
 
     with pytest.raises(InputError, match="budget"):
         BasisTextures(ctx, _basis(rng, 4, 8, 8), "f16", budget_bytes=1000)
+    with pytest.raises(InputError, match="budget"):
+        PackedBasis(ctx, _basis(rng, 4, 8, 8), "f16", budget_bytes=1000)
 
 
 # ----------------------------------------------------------------------------- compression
@@ -207,9 +274,11 @@ def test_gpu_projection_and_compressed_pass2(ctx, rng):
         release_gl(buf)
         proj.release()
     d = _directions(rng, 40)
-    for rank, ref in ((8, cb.relight(w)), (39, relight_reference(w, basis))):
+    cases = [(8, cb.relight(w), "f32", "packed"), (39, relight_reference(w, basis), "f32", "packed"),
+             (8, cb.relight(w), "f16", "packed"), (8, cb.relight(w), "f32", "fragment")]
+    for rank, ref, dtype, method in cases:
         # eigen-images have both signs: compare with the max-norm bound only
-        eng = Engine(ctx, basis, d, dtype="f32", rank=rank)
+        eng = Engine(ctx, basis, d, dtype=dtype, rank=rank, method=method)
         try:
             eng.set_weights(w)
             eng.render()

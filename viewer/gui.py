@@ -146,7 +146,8 @@ def _image_window(state: ViewerState, view: ViewInfo, x, y, w, h) -> None:
     imgui.set_next_window_pos(imgui.ImVec2(x, y))
     imgui.set_next_window_size(imgui.ImVec2(max(w, 1.0), max(h, 1.0)))
     flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_saved_settings
-             | imgui.WindowFlags_.no_bring_to_front_on_focus | imgui.WindowFlags_.no_scroll_with_mouse)
+             | imgui.WindowFlags_.no_bring_to_front_on_focus | imgui.WindowFlags_.no_scroll_with_mouse
+             | imgui.WindowFlags_.no_background)  # the cleared framebuffer is the background: one blend less
     imgui.begin("relit", None, flags)
     avail = imgui.get_content_region_avail()
     iw, ih = view.image_size

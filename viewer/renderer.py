@@ -29,7 +29,7 @@ from ffls.tonemap import to_uint8
 
 from .state import BUILTIN_MAPS, ViewerState, ViewInfo
 
-__all__ = ["Renderer", "load_lightmap_spec", "load_mask", "heat_colours"]
+__all__ = ["Renderer", "load_lightmap_spec", "load_mask", "heat_colours", "pass1_lightmap"]
 
 #: Height of the lat-long preview texture (width is twice that).
 PREVIEW_HEIGHT = 128
@@ -82,6 +82,25 @@ def load_mask(capture, path=None, size=None) -> np.ndarray | None:
     return m
 
 
+def pass1_lightmap(lm, height):
+    """The light map pass 1 integrates: ``lm`` itself (``'full'``) or a lat-long of ``height`` rows.
+
+    A lat-long map whose height is a multiple of ``height`` is box-filtered
+    (:meth:`ffls.lightmap.LightMap.downsample`, which keeps the integral); other maps are
+    resampled with :meth:`ffls.lightmap.LightMap.to_latlong` at four times the height first,
+    then box-filtered. A map no taller than ``height`` is used as it is.
+    """
+    if height in (None, "full"):
+        return lm
+    h = int(height)
+    if lm.layout == "latlong":
+        if lm.res <= h:
+            return lm
+        if lm.res % h == 0:
+            return lm.downsample(lm.res // h)
+    return lm.to_latlong(4 * h).downsample(4)
+
+
 def heat_colours(t: np.ndarray) -> np.ndarray:
     """A perceptual heat map (dark blue -> purple -> orange -> yellow) of ``t`` in [0, 1]; (..., 3) float."""
     stops = np.array([[0.02, 0.02, 0.10], [0.30, 0.05, 0.45], [0.80, 0.20, 0.30], [0.98, 0.60, 0.10],
@@ -127,10 +146,10 @@ class Renderer:
         self._lightmap_spec = None
         self._failed_spec = None
         self._lightmap = None
+        self._pass1_key = None
         self._preview_latlong = None
         self._preview_key = None
         self._photo_key = None
-        self._R = None
         self.frame_ms = {}
         # textures owned here
         self._preview_tex = ctx.texture((2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT), 4, dtype="f1")
@@ -139,6 +158,7 @@ class Renderer:
         # the world-frame geometry of the preview: texel directions, cells, cell borders, light uv
         d = latlong_directions(2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT)
         self._preview_dirs = d
+        self._below = d[..., 2] < 0
         cells = bake_cells(self.directions, self.hemisphere, 256)
         cid = cells.assign(d.reshape(-1, 3)).reshape(d.shape[:2])
         border = np.zeros(cid.shape, dtype=bool)
@@ -177,9 +197,7 @@ class Renderer:
         if self.engine is not None:
             self.engine.release()
         self.engine = new
-        if self._lightmap is not None:
-            new.set_lightmap(self._lightmap)
-        self._R = None
+        self._pass1_key = None
         self.info.basis_info = dict(new.basis_info)
         self.info.image_size = new.size
         self.info.message = f"engine ready ({time.perf_counter() - t0:.1f} s): {self._describe_basis()}"
@@ -199,10 +217,12 @@ class Renderer:
         self._lightmap = lm
         self._lightmap_spec = spec
         self._failed_spec = None
-        self._preview_latlong = lm.to_latlong(PREVIEW_HEIGHT).data.astype(np.float64)
+        rad = lm.to_latlong(PREVIEW_HEIGHT).data.astype(np.float64)
+        lum = rad @ np.array([0.2126, 0.7152, 0.0722])
+        med = float(np.median(lum[lum > 0])) if np.any(lum > 0) else 1.0
+        self._preview_latlong = to_uint8(tonemap_np(rad, float(np.log2(0.25 / med)), "reinhard"))
         self._preview_key = None
-        if self.engine is not None:
-            self.engine.set_lightmap(lm)
+        self._pass1_key = None
         self.info.message = f"light map: {Path(spec).name if spec not in BUILTIN_MAPS else spec}"
 
     # ------------------------------------------------------------------ per frame
@@ -222,6 +242,10 @@ class Renderer:
             self._load_lightmap(state.lightmap)
         R = rotation_ypr(state.yaw, state.pitch, state.roll)
         eng = self.engine
+        pass1_key = (self._lightmap_spec, state.quality.get("map_res", "full"))
+        if self._lightmap is not None and pass1_key != self._pass1_key:
+            eng.set_lightmap(pass1_lightmap(self._lightmap, pass1_key[1]))
+            self._pass1_key = pass1_key
         if self._lightmap is not None:
             eng.set_rotation(R)
             eng.render(state.exposure, state.tonemap)
@@ -275,12 +299,9 @@ class Renderer:
             h, w = self._preview_latlong.shape[:2]
             ii = np.clip((u * w).astype(int), 0, w - 1)
             jj = np.clip((v * h).astype(int), 0, h - 1)
-            rad = self._preview_latlong[jj, ii]
-            lum = rad @ np.array([0.2126, 0.7152, 0.0722])
-            med = float(np.median(lum[lum > 0])) if np.any(lum > 0) else 1.0
-            img = to_uint8(tonemap_np(rad, float(np.log2(0.25 / med)), "reinhard"))
+            img = self._preview_latlong[jj, ii]  # tone-mapped once per map (Reinhard, exposed for its median)
             if self.hemisphere == "upper":  # dim what the capture does not cover
-                img[d[..., 2] < 0] = (img[d[..., 2] < 0] * 0.35).astype(np.uint8)
+                img[self._below] = img[self._below] // 3
         img[self._border] = (230, 230, 230)
         return img
 

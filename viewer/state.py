@@ -81,6 +81,9 @@ QUALITY_KNOBS: tuple[Knob, ...] = (
          help="eigen-images of the compressed basis (computed once, saved in the capture folder)"),
     Knob("cell_res", "cell texture", "choice", "256", choices=("128", "256", "512"),
          help="resolution of the Voronoi cell-index texture of pass 1"),
+    Knob("map_res", "pass-1 map", "choice", "128", choices=("full", "256", "128", "64"),
+         help="lat-long height of the light map integrated by pass 1 (box-filtered: the integral is kept)",
+         rebuild=False),
 )
 
 

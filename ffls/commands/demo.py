@@ -19,6 +19,8 @@ def add_arguments(p):
     p.add_argument("--rotations", default="0,90,180,270", help="comma-separated rotations about +Z, degrees")
     p.add_argument("--cpu", action="store_true", help="force the CPU reference relighter")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-view", action="store_true",
+                   help="do not open the viewer on the capture afterwards (it opens only when a display exists)")
 
 
 def run(args) -> int:
@@ -33,4 +35,30 @@ def run(args) -> int:
     print(f"  capture:       {res.capture_dir}  ({args.lights} images, {res.seconds['synth']:.1f} s)")
     print(f"  renders:       {res.out_dir / 'renders'}  ({len(res.images)} PNG + EXR, {res.seconds['relight']:.1f} s)")
     print(f"  contact sheet: {res.contact_sheet}")
+    if not getattr(args, "no_view", False):
+        _open_viewer(res.capture_dir)
     return 0
+
+
+def _open_viewer(capture_dir) -> None:
+    """Open the interactive viewer on the demo capture when a display exists (else say how)."""
+    try:
+        from viewer.headless import has_display
+    except ImportError:  # the viewer's dependencies (imgui-bundle, glfw) are not installed
+        return
+    if not has_display():
+        print(f"  viewer:        no display; run `ffls view {capture_dir}` on a desktop")
+        return
+    from ..errors import GLUnavailable
+    from viewer.app import ViewerApp, open_capture
+
+    try:
+        app = ViewerApp(*open_capture(capture_dir), headless=False)
+    except GLUnavailable as e:
+        print(f"  viewer:        not opened ({e})")
+        return
+    try:
+        app.auto_expose()
+        app.run()
+    finally:
+        app.close()

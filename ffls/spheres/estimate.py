@@ -31,7 +31,6 @@ from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.stats import chi2 as _chi2
 
 from ..conventions import UP, angle_between, normalize
@@ -49,6 +48,9 @@ __all__ = [
     "estimate_lights",
     "estimate_lights_MasselusDutreAnrys2002",
     "capture_samples",
+    "sphere_values",
+    "calibrate_bounce",
+    "estimate_photos",
 ]
 
 #: Rejection reasons of a photo (and of single spheres), with their meaning.
@@ -150,6 +152,83 @@ def combine_distant(directions: np.ndarray, uncertainty_deg: np.ndarray) -> tupl
     return mean, float(np.degrees(np.sqrt(2.0 / w.sum()))), chi, 2 * (len(d) - 1)
 
 
+def _lm(fun, x0, lb=None, ub=None, max_iter: int = 40, rel_step: float = 1e-7, ftol: float = 1e-10,
+        xtol: float = 1e-9):
+    """Small Levenberg-Marquardt with box bounds (projection) and a forward-difference Jacobian.
+
+    For the few (<= 3) nonlinear parameters of this module, where :func:`scipy.optimize.least_squares`
+    costs more in overhead than in arithmetic.
+
+    Parameters
+    ----------
+    fun : callable
+        ``fun(x) -> (m,) residuals``.
+    x0 : (p,) float
+    lb, ub : (p,) float, optional
+    max_iter : int
+    rel_step : float
+        Finite-difference step relative to ``max(|x_i|, 1)``.
+    ftol, xtol : float
+        Stop when the relative cost decrease falls below ``ftol`` or the relative step below
+        ``xtol``.
+
+    Returns
+    -------
+    x : (p,) float
+    r : (m,) float
+        Residuals at ``x``.
+    J : (m, p) float
+        Jacobian at ``x``.
+    """
+    x = np.asarray(x0, dtype=np.float64).copy()
+    p = x.size
+    lb = np.full(p, -np.inf) if lb is None else np.asarray(lb, dtype=np.float64)
+    ub = np.full(p, np.inf) if ub is None else np.asarray(ub, dtype=np.float64)
+    x = np.clip(x, lb, ub)
+
+    def jac(x, r):
+        J = np.empty((r.size, p))
+        for i in range(p):
+            h = rel_step * max(abs(x[i]), 1.0)
+            xh = x.copy()
+            xh[i] = x[i] + h if x[i] + h <= ub[i] else x[i] - h
+            J[:, i] = (fun(xh) - r) / (xh[i] - x[i])
+        return J
+
+    r = fun(x)
+    cost = float(r @ r)
+    lam = 1e-3
+    J = jac(x, r)
+    for _ in range(max_iter):
+        JtJ = J.T @ J
+        grad = J.T @ r
+        D = np.diag(np.maximum(np.diag(JtJ), 1e-12 * max(float(np.max(np.diag(JtJ))), 1e-300)))
+        improved = False
+        while lam < 1e8:
+            try:
+                dx = -np.linalg.solve(JtJ + lam * D, grad)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            xn = np.clip(x + dx, lb, ub)
+            rn = fun(xn)
+            cn = float(rn @ rn)
+            if np.isfinite(cn) and cn <= cost:
+                improved = True
+                break
+            lam *= 10.0
+        if not improved:
+            break
+        step = float(np.max(np.abs(xn - x) / np.maximum(np.abs(x), 1.0)))
+        done = (cost - cn) <= ftol * max(cost, 1e-300) or step <= xtol
+        x, r, cost = xn, rn, cn
+        lam = max(lam / 10.0, 1e-9)
+        J = jac(x, r)
+        if done:
+            break
+    return x, r, J
+
+
 def _tangent_basis(u):
     a = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     e1 = normalize(np.cross(u, a))
@@ -198,29 +277,34 @@ def fit_ray_convergence(centers: np.ndarray, directions: np.ndarray, uncertainty
 
     best = None
     for rho0 in (0.0, 0.1, 0.5):
-        r = least_squares(fun, np.array([0.0, 0.0, rho0]), bounds=([-1, -1, 0.0], [1, 1, 0.99]), method="trf")
-        if best is None or r.cost < best.cost:
-            best = r
-    _, m = dirs(best.x)
-    rho = best.x[2] / scale
-    chi = 2.0 * best.cost
+        x, r, _ = _lm(fun, np.array([0.0, 0.0, rho0]), np.array([-1.0, -1.0, 0.0]), np.array([1.0, 1.0, 0.99]))
+        if best is None or r @ r < best[1] @ best[1]:
+            best = (x, r)
+    _, m = dirs(best[0])
+    rho = best[0][2] / scale
+    chi = float(best[1] @ best[1])
     pos = None if rho <= 1e-12 else np.asarray(scene_center, dtype=np.float64) + m / rho
     return {"direction": m, "rho": float(rho), "position": pos, "chi2": float(chi), "dof": max(2 * k - 3, 0)}
 
 
 # ----------------------------------------------------------------------------- joint near fit
 def fit_near_light(samples: list[SphereSamples], values: list[np.ndarray], masks: list[np.ndarray],
-                   position0: np.ndarray, terms: list[tuple[bool, bool]] | None = None,
+                   position0: np.ndarray, terms: list[tuple] | None = None,
                    terminator: float = 0.15, up: np.ndarray = UP, n_rounds: int = 2) -> dict:
     """Joint fit of a point light's position to several spheres' pixels.
 
     Model per pixel ``p`` of sphere ``k`` (surface point ``P``, normal ``n``, ``d = S - P``)::
 
-        I = a_k D_k^2 max(0, n . d) / |d|^3 + b_k + c_k g(n)
+        I = a_k D_k^2 [max(0, n . d) / |d|^3 + rho_k h_k(S) g(n)] + b_k            (calibrated)
+        I = a_k D_k^2 max(0, n . d) / |d|^3 + b_k + c_k g(n)                       (free bounce)
 
-    with ``D_k = |S0 - C_k|`` a fixed scale (so ``a_k`` is in image units), ``b_k, c_k >= 0``.
-    Solved with :func:`scipy.optimize.least_squares` (analytic Jacobian), pixels near the
-    terminator re-selected and outliers (MAD) rejected between rounds.
+    with ``D_k = |S0 - C_k|`` a fixed scale (so ``a_k`` is in image units), ``b_k, c_k >= 0``,
+    ``rho_k`` the sphere's calibrated ground ratio and ``h_k(S) = max(0, (S - G_k) . up) /
+    |S - G_k|^3`` the point light's irradiance of the ground at the sphere's contact point
+    ``G_k = C_k - R up`` (per unit ``a_k D_k^2``). For a given ``S`` the per-sphere coefficients
+    are linear and solved in closed form (variable projection, Golub & Pereyra 1973); the three
+    coordinates of ``S`` by Levenberg-Marquardt on the projected residual. Pixels near the
+    terminator are re-selected and outliers (MAD) rejected between rounds.
 
     Parameters
     ----------
@@ -230,8 +314,9 @@ def fit_near_light(samples: list[SphereSamples], values: list[np.ndarray], masks
         Pixels allowed (valid, not outliers of the per-sphere fit).
     position0 : (3,) float
         Initial light position (world).
-    terms : list of (bool, bool), optional
-        Per sphere: fit ambient ``b_k``, fit bounce ``c_k``. Default both.
+    terms : list of (bool, bool or float), optional
+        Per sphere: fit the ambient ``b_k``; the bounce: True (free ``c_k``), False (none) or a
+        float (the calibrated ratio ``rho_k``). Default ``(True, True)``.
     terminator : float
     up : (3,) float
     n_rounds : int
@@ -242,112 +327,80 @@ def fit_near_light(samples: list[SphereSamples], values: list[np.ndarray], masks
         ``position`` (3,), ``cov`` (3, 3) covariance of the position, ``rms`` (relative),
         ``n_pixels``, ``success`` (bool).
     """
+    from .lambert import _solve_normal
+
     K = len(samples)
     if terms is None:
         terms = [(True, True)] * K
+    up = np.asarray(up, dtype=np.float64)
     S0 = np.asarray(position0, dtype=np.float64)
     D2 = [float(np.sum((S0 - s.center) ** 2)) for s in samples]
-    gs = [ground_bounce(s.normals, up) for s in samples]
-    # parameter layout
-    idx = []
-    p = 3
-    for (hb, hc) in terms:
-        ia = p
-        ib = p + 1 if hb else None
-        ic = (p + 1 + hb) if hc else None
-        idx.append((ia, ib, ic))
-        p += 1 + hb + hc
+    G = [s.center - s.radius * up for s in samples]
     sel = [np.asarray(m, dtype=bool).copy() for m in masks]
+    data = []
 
-    def parts(x):
-        S = x[:3]
-        out = []
+    def prepare():
+        data.clear()
         for k, s in enumerate(samples):
-            n, P, y = s.normals[sel[k]], s.points[sel[k]], values[k][sel[k]]
-            dd = S - P
-            r2 = np.sum(dd * dd, axis=1)
-            r = np.sqrt(r2)
-            q = np.sum(n * dd, axis=1)
-            lit = q > 0
-            f = np.where(lit, q, 0.0) / (r2 * r) * D2[k]
-            ia, ib, ic = idx[k]
-            pred = x[ia] * f
-            if ib is not None:
-                pred = pred + x[ib]
-            if ic is not None:
-                pred = pred + x[ic] * gs[k][sel[k]]
-            out.append((dd, r, q, lit, f, pred, y, n))
-        return out
+            w = sel[k]
+            data.append((s.normals[w], s.points[w], np.asarray(values[k], dtype=np.float64)[w],
+                         ground_bounce(s.normals[w], up)))
 
-    def fun(x):
-        return np.concatenate([pr[5] - pr[6] for pr in parts(x)])
+    def solve(S, k):
+        n, P, y, g = data[k]
+        dd = S - P
+        r2 = np.einsum("ij,ij->i", dd, dd)
+        q = np.einsum("ij,ij->i", n, dd)
+        f = np.maximum(q, 0.0) / (r2 * np.sqrt(r2)) * D2[k]
+        hb, bounce = terms[k]
+        cols = [f]
+        if not isinstance(bounce, (bool, np.bool_)):
+            e = S - G[k]
+            h = max(float(e @ up), 0.0) / float(e @ e) ** 1.5 * D2[k]
+            cols[0] = f + float(bounce) * h * g
+        if hb:
+            cols.append(np.ones_like(f))
+        if bounce is True:
+            cols.append(g)
+        A = np.stack(cols, axis=1)
+        x, _ = _solve_normal(A.T @ A, A.T @ y, n_free=1)
+        return y - A @ x, x
 
-    def jac(x):
-        pr_all = parts(x)
-        m = sum(len(pr[6]) for pr in pr_all)
-        J = np.zeros((m, p))
-        o = 0
-        for k, (dd, r, q, lit, f, pred, y, n) in enumerate(pr_all):
-            ia, ib, ic = idx[k]
-            mk = len(y)
-            dS = (n / (r ** 3)[:, None] - 3.0 * (q / r ** 5)[:, None] * dd) * (x[ia] * D2[k])
-            J[o:o + mk, :3] = np.where(lit[:, None], dS, 0.0)
-            J[o:o + mk, ia] = f
-            if ib is not None:
-                J[o:o + mk, ib] = 1.0
-            if ic is not None:
-                J[o:o + mk, ic] = gs[k][sel[k]]
-            o += mk
-        return J
+    def fun(S):
+        return np.concatenate([solve(S, k)[0] for k in range(K)])
 
-    # initial per-sphere linear terms from the start position
-    x = np.zeros(p)
-    x[:3] = S0
-    for k, s in enumerate(samples):
-        dd = S0 - s.points
-        r = np.linalg.norm(dd, axis=1)
-        f = np.maximum(np.sum(s.normals * dd, axis=1), 0.0) / r ** 3 * D2[k]
-        m = sel[k] & (f > 0.3 * max(f.max(), 1e-300))
-        if m.sum() > 0:
-            x[idx[k][0]] = max(float(np.median(values[k][m] / f[m])), 1e-12)
-    lb = np.full(p, 0.0)
-    lb[:3] = -np.inf
-    ub = np.full(p, np.inf)
+    x = S0.copy()
     res = None
     for rnd in range(n_rounds):
         # terminator band and outliers with the current position
         for k, s in enumerate(samples):
-            dd = x[:3] - s.points
+            dd = x - s.points
             c = np.sum(s.normals * dd, axis=1) / np.linalg.norm(dd, axis=1)
             sel[k] = np.asarray(masks[k], dtype=bool) & (np.abs(c) > terminator)
         if rnd > 0 and res is not None:
-            r_all = fun(x)
-            o = 0
+            prepare()
             for k in range(K):
-                mk = int(sel[k].sum())
-                rk = r_all[o:o + mk]
-                o += mk
-                sd = max(1.4826 * float(np.median(np.abs(rk - np.median(rk)))), 0.01 * x[idx[k][0]])
-                keep = np.abs(rk) <= 4.0 * sd
+                rk, xk = solve(x, k)
+                sd = max(1.4826 * float(np.median(np.abs(rk - np.median(rk)))), 0.01 * abs(xk[0]))
                 w = np.flatnonzero(sel[k])
-                sel[k][w[~keep]] = False
-        if sum(int(s_.sum()) for s_ in sel) <= p:
+                sel[k][w[np.abs(rk) > 4.0 * sd]] = False
+        if sum(int(s_.sum()) for s_ in sel) <= 3 + 3 * K:
             break
-        x0 = np.clip(x, lb, ub)
-        x0[3:] = np.maximum(x0[3:], 1e-12)
-        res = least_squares(fun, x0, jac=jac, bounds=(lb, ub), method="trf", x_scale="jac", tr_solver="lsmr",
-                            xtol=1e-10, ftol=1e-10, max_nfev=60)
-        x = res.x
-    if res is None:
+        prepare()
+        scale = float(np.linalg.norm(x))
+        xs, r, J = _lm(lambda u: fun(u * scale), x / scale)
+        x = xs * scale
+        res = (r, J / scale)
+    if res is None or not np.all(np.isfinite(x)):
         return {"position": S0, "cov": np.full((3, 3), np.inf), "rms": np.inf, "n_pixels": 0, "success": False}
-    r = res.fun
-    J = res.jac
+    r, J = res
+    n_lin = sum(1 + bool(hb) + (b is True) for hb, b in terms)
     mtot = r.size
-    s2 = float(r @ r) / max(mtot - p, 1)
+    s2 = float(r @ r) / max(mtot - 3 - n_lin, 1)
     cov = s2 * np.linalg.pinv(J.T @ J)
-    a_mean = float(np.mean([x[i[0]] for i in idx]))
-    return {"position": x[:3].copy(), "cov": cov[:3, :3], "rms": float(np.sqrt(np.mean(r * r))) / max(a_mean, 1e-300),
-            "n_pixels": int(mtot), "success": bool(res.status > 0 and np.all(np.isfinite(x)))}
+    a_mean = float(np.mean([abs(solve(x, k)[1][0]) for k in range(K)]))
+    return {"position": x.copy(), "cov": cov, "rms": float(np.sqrt(np.mean(r * r))) / max(a_mean, 1e-300),
+            "n_pixels": int(mtot), "success": bool(np.all(np.isfinite(x)) and a_mean > 0)}
 
 
 # ----------------------------------------------------------------------------- one photo
@@ -357,7 +410,9 @@ def _evaluate(idx, fits, centers, floor, scene_center, model):
     mean, u_mean, chi_d, dof_d = combine_distant(dirs, unc)
     out = {"idx": list(idx), "model": "distant", "direction": mean, "uncertainty_deg": u_mean,
            "chi2": chi_d, "dof": dof_d, "position": None}
-    if len(idx) >= 2 and model in ("auto", "near"):
+    # a near fit can only lower chi2 to >= 0: when chi2 of the distant model is below the LR
+    # threshold, the near model cannot be significant and is not fitted
+    if len(idx) >= 2 and (model == "near" or (model == "auto" and chi_d > _chi2.ppf(1 - _ALPHA, 1))):
         conv = fit_ray_convergence(centers[list(idx)], dirs, unc, scene_center)
         near = conv["position"] is not None and (
             model == "near" or chi_d - conv["chi2"] > _chi2.ppf(1 - _ALPHA, 1))
@@ -368,15 +423,61 @@ def _evaluate(idx, fits, centers, floor, scene_center, model):
     return out
 
 
-def estimate_photo(image: np.ndarray, samples: list[SphereSamples], scene_center: np.ndarray, *,
+def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: float | None = None,
+                  raw: np.ndarray | None = None, bit_depth=None) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """The spheres' pixels of one photo: grey values, validity, saturated count.
+
+    Only the sphere pixels are read (fancy indexing of the precomputed pixel lists), never the
+    whole image.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) float
+        Linear radiance.
+    samples : list of SphereSamples
+    saturation : float, optional
+        Known clip level of the linear values.
+    raw : (H, W, 3) array, optional
+        The image as stored, with ``bit_depth``: then
+        :func:`ffls.spheres.response.valid_pixel_mask` also applies (saturated codes of any
+        channel, near-black codes; non-finite and negative floats).
+    bit_depth : {8, 16, 'half', 'float'}, optional
+
+    Returns
+    -------
+    list of (grey (m,) float64, valid (m,) bool, n_saturated int)
+    """
+    from .response import valid_pixel_mask
+
+    img = np.asarray(image)
+    out = []
+    for s in samples:
+        px = img[s.rows, s.cols].astype(np.float64)
+        valid, nsat = pixel_validity(px, saturation=saturation)
+        if raw is not None and bit_depth is not None:
+            rp = np.asarray(raw)[s.rows, s.cols]
+            rp = rp.reshape(1, -1, rp.shape[-1] if rp.ndim == 2 else 1)
+            if bit_depth in (8, 16):
+                not_sat = valid_pixel_mask(rp, bit_depth, low=-1.0)[0]
+                valid &= valid_pixel_mask(rp, bit_depth)[0]
+                nsat = max(nsat, int((~not_sat).sum()))
+            else:  # float data: no top code; near-black is relative (pixel_validity)
+                valid &= valid_pixel_mask(rp, bit_depth, low=0.0)[0]
+        grey = px.mean(axis=1) if px.ndim == 2 else px
+        out.append((grey, valid, int(nsat)))
+    return out
+
+
+def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene_center: np.ndarray, *,
                    model: str = "auto", min_spheres: int | None = None, sigma_floor_deg: float = 1.0,
-                   terminator: float = 0.15, saturation: float | None = None, up: np.ndarray = UP) -> dict:
+                   terminator: float = 0.15, saturation: float | None = None, up: np.ndarray = UP,
+                   bounce_ratio: list | None = None, values: list | None = None) -> dict:
     """Estimate the light of one photograph from its spheres.
 
     Parameters
     ----------
-    image : (H, W, 3) float
-        Linear radiance.
+    image : (H, W, 3) float or None
+        Linear radiance (None when ``values`` is given).
     samples : list of SphereSamples
         The spheres' pixels and normals (:func:`capture_samples`).
     scene_center : (3,) float
@@ -391,6 +492,11 @@ def estimate_photo(image: np.ndarray, samples: list[SphereSamples], scene_center
     saturation : float, optional
         Known clip level of the linear values.
     up : (3,) float
+    bounce_ratio : list of (float or None), optional
+        Per sphere, the calibrated ground ratio (:func:`calibrate_bounce`): the bounce is then
+        imposed (``c = rho a max(l_z, 0)``) instead of fitted. None (or a None entry): free.
+    values : list, optional
+        :func:`sphere_values` of the photo, instead of ``image``.
 
     Returns
     -------
@@ -398,19 +504,22 @@ def estimate_photo(image: np.ndarray, samples: list[SphereSamples], scene_center
         ``status`` ('ok' | 'rejected'), ``reason`` (None or a :data:`REASONS` key), ``direction``
         (3,) unit (a best guess, or +Z, when rejected), ``position`` (3,) or None,
         ``uncertainty_deg``, ``model``, ``spheres`` (list of per-sphere dicts: status, direction,
-        uncertainty_deg, rms, model, pixel counts), ``used_spheres`` (list of int).
+        uncertainty_deg, rms, model, pixel counts, ground ratio), ``used_spheres`` (list of int).
     """
     if model not in LIGHT_MODELS:
         raise ValueError(f"model must be one of {LIGHT_MODELS}, not {model!r}")
-    img = np.asarray(image)
     n_sph = len(samples)
+    if values is None:
+        if image is None:
+            raise ValueError("estimate_photo needs an image or its sphere values")
+        values = sphere_values(image, samples, saturation=saturation)
+    if bounce_ratio is None:
+        bounce_ratio = [None] * n_sph
     need = min(2, n_sph) if min_spheres is None else int(min_spheres)
     fits = []
-    for s in samples:
-        px = img[s.rows, s.cols].astype(np.float64)
-        valid, nsat = pixel_validity(px, saturation=saturation)
-        grey = px.mean(axis=1) if px.ndim == 2 else px
-        fits.append(fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up))
+    for s, (grey, valid, nsat), rho in zip(samples, values, bounce_ratio):
+        fits.append(fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
+                                bounce_ratio=rho, g=s.ground if s.ground is not None and np.array_equal(up, UP) else None))
     status = [f.status for f in fits]
     ok = [i for i, f in enumerate(fits) if f.status == "ok"]
     if len(ok) >= 2:  # a sphere far darker than the others is in a shadow
@@ -455,12 +564,16 @@ def estimate_photo(image: np.ndarray, samples: list[SphereSamples], scene_center
     used = ev["idx"]
     direction, unc, position = ev["direction"], ev["uncertainty_deg"], ev["position"]
     if ev["model"] == "near":
-        jf = fit_near_light([samples[i] for i in used],
-                            [np.asarray(img[samples[i].rows, samples[i].cols], dtype=np.float64).mean(axis=1)
-                             for i in used],
+        terms = []
+        for i in used:
+            f = fits[i]
+            if f.bounce_ratio is not None:
+                terms.append((f.model == "fixed_ambient", float(f.bounce_ratio)))
+            else:
+                terms.append((f.model != "plain", f.model == "bounce"))
+        jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
                             [fits[i].inliers | _valid_lit(fits[i]) for i in used], position,
-                            terms=[(fits[i].model != "plain", fits[i].model == "bounce") for i in used],
-                            terminator=terminator, up=up)
+                            terms=terms, terminator=terminator, up=up)
         if jf["success"] and np.all(np.isfinite(jf["position"])):
             position = jf["position"]
             v = position - np.asarray(scene_center, dtype=np.float64)
@@ -499,6 +612,95 @@ def capture_samples(capture, spheres, shape: tuple[int, int]) -> list[SphereSamp
     return out
 
 
+def calibrate_bounce(results: list[dict], n_spheres: int, max_sigma: float = 0.05, min_photos: int = 3,
+                     min_lz: float = 0.2) -> list[dict]:
+    """Each sphere's ground ratio ``rho_g`` from the photos where it is well determined.
+
+    The light reflected by the ground onto a sphere is ``c = rho_g a max(l_z, 0)``: the ground's
+    irradiance is ``max(l_z, 0)`` times the sphere's (``a``), and ``rho_g`` (the ground albedo times
+    the fraction of the ground the sphere sees lit) is a constant of the capture for each sphere.
+    Where a photo shows the sphere's shadow side the free-bounce fit separates ``c`` from the
+    ambient and the light (small ``ground_ratio_sigma``); where it does not (light on the camera
+    side) ``c`` is confounded with them. The weighted median of the well-determined photos'
+    ``c / (a l_z)`` is imposed in all photos (:func:`estimate_photo` ``bounce_ratio``).
+
+    Parameters
+    ----------
+    results : list of dict
+        :func:`estimate_photo` results with a free bounce (their ``spheres`` reports).
+    n_spheres : int
+    max_sigma : float
+        Largest ``ground_ratio_sigma`` of a photo to use.
+    min_photos : int
+        Fewer usable photos than this leave the sphere uncalibrated (free bounce per photo).
+    min_lz : float
+        Smallest ``l_z`` of a photo to use (the ratio divides by ``l_z``).
+
+    Returns
+    -------
+    list of dict
+        Per sphere ``ratio`` (float, or None when uncalibrated), ``spread`` (robust standard
+        deviation of the photos' estimates), ``n_photos``.
+    """
+    out = []
+    for k in range(n_spheres):
+        est, w = [], []
+        for r in results:
+            if r.get("status") != "ok" or not r.get("spheres"):
+                continue
+            sp = r["spheres"][k]
+            d, q, sd = sp.get("direction"), sp.get("ground_ratio"), sp.get("ground_ratio_sigma")
+            if (sp.get("status") != "ok" or d is None or q is None or sd is None or d[2] < min_lz
+                    or not sd <= max_sigma):
+                continue
+            est.append(q)
+            w.append(1.0 / max(sd, 1e-6) ** 2)
+        if len(est) < min_photos:
+            out.append({"ratio": None, "spread": None, "n_photos": len(est)})
+            continue
+        est, w = np.asarray(est), np.asarray(w)
+        o = np.argsort(est)
+        cw = np.cumsum(w[o])
+        med = float(est[o][np.searchsorted(cw, 0.5 * cw[-1])])
+        spread = float(1.4826 * np.median(np.abs(est - med)))
+        out.append({"ratio": float(np.clip(med, 0.0, 1.0)), "spread": spread, "n_photos": int(len(est))})
+    return out
+
+
+def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np.ndarray,
+                    bounce: str = "calibrated", **kwargs) -> tuple[list[dict], list[dict] | None]:
+    """:func:`estimate_photo` for several photos of one capture, in one process, with the
+    capture-wide bounce calibration of :func:`estimate_lights`.
+
+    Parameters
+    ----------
+    values : list
+        Per photo, its :func:`sphere_values`.
+    samples : list of SphereSamples
+    scene_center : (3,) float
+    bounce : {'calibrated', 'free'}
+    **kwargs
+        Passed to :func:`estimate_photo`.
+
+    Returns
+    -------
+    results : list of dict
+    calibration : list of dict or None
+        :func:`calibrate_bounce` per sphere (None for ``bounce='free'``).
+    """
+    if bounce not in ("calibrated", "free"):
+        raise ValueError(f"bounce must be 'calibrated' or 'free', not {bounce!r}")
+    results = [estimate_photo(None, samples, scene_center, values=v, **kwargs) for v in values]
+    if bounce == "free":
+        return results, None
+    calib = calibrate_bounce(results, len(samples))
+    ratios = [c["ratio"] for c in calib]
+    if any(r is not None for r in ratios):
+        results = [estimate_photo(None, samples, scene_center, values=v, bounce_ratio=ratios, **kwargs)
+                   for v in values]
+    return results, calib
+
+
 _W = {}
 
 
@@ -506,9 +708,27 @@ def _init_worker(capture, samples, kwargs):
     _W.update(capture=capture, samples=samples, kwargs=kwargs)
 
 
+def _load(capture, i):
+    """Linear image ``i`` and its raw pixels and bit depth (for the validity mask)."""
+    from ..imageio import read_image
+
+    img = read_image(capture.image_paths[i])
+    capture._check_size(i, img)
+    return np.asarray(capture._linearise(i, img), dtype=np.float32), img.pixels, img.bit_depth
+
+
 def _work(i):
-    img = _W["capture"].load_image(i)
-    return estimate_photo(img, _W["samples"], _W["capture"].scene_center, **_W["kwargs"])
+    cap, samples, kw = _W["capture"], _W["samples"], _W["kwargs"]
+    lin, raw, depth = _load(cap, i)
+    vals = sphere_values(lin, samples, saturation=kw.get("saturation"), raw=raw, bit_depth=depth)
+    vals = [(g.astype(np.float32), v, n) for g, v, n in vals]  # cached for the second pass
+    return estimate_photo(None, samples, cap.scene_center, values=vals, **kw), vals
+
+
+def _work2(args):
+    vals, ratios = args
+    cap, samples, kw = _W["capture"], _W["samples"], _W["kwargs"]
+    return estimate_photo(None, samples, cap.scene_center, values=vals, bounce_ratio=ratios, **kw)
 
 
 def _record(r: dict) -> dict:
@@ -519,9 +739,32 @@ def _record(r: dict) -> dict:
     return extra
 
 
+def _map(fn, items, workers, capture, samples, kw, bar):
+    out = []
+    if workers == 1 or len(items) == 1:
+        _init_worker(capture, samples, kw)
+        for it in items:
+            out.append(fn(it))
+            if bar is not None:
+                bar.update(1)
+        return out
+    with ProcessPoolExecutor(max_workers=min(workers, len(items)), initializer=_init_worker,
+                             initargs=(capture, samples, kw)) as ex:
+        for r in ex.map(fn, items, chunksize=max(1, len(items) // (8 * workers))):
+            out.append(r)
+            if bar is not None:
+                bar.update(1)
+    return out
+
+
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
-                    model: str = "auto", **kwargs):
+                    model: str = "auto", bounce: str = "calibrated", **kwargs):
     """Estimate every photograph's light from the capture's spheres.
+
+    Two passes: every photo is fitted with a free ground bounce; each sphere's ground ratio is
+    calibrated on the photos that determine it (:func:`calibrate_bounce`); every photo is then
+    fitted again with that ratio imposed (spheres without enough such photos keep the free
+    bounce). The spheres' pixels are kept in memory between the passes (never the images).
 
     Parameters
     ----------
@@ -534,6 +777,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     workers : int, optional
         Processes; default every core. 1 runs in this process.
     model : {'auto', 'distant', 'near'}
+    bounce : {'calibrated', 'free'}
+        Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo.
     **kwargs
         Passed to :func:`estimate_photo` (``min_spheres``, ``sigma_floor_deg``, ``terminator``,
         ``saturation``).
@@ -543,12 +788,15 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     ffls.capture.Lights
         Directions (world, from the scene centre), positions for near lights, status, reasons
         (:data:`REASONS`), and per light ``extra``: ``uncertainty_deg``, ``model``,
-        ``used_spheres``, ``spheres`` (per-sphere direction, residual, uncertainty, pixel counts).
+        ``used_spheres``, ``spheres`` (per-sphere direction, residual, uncertainty, pixel counts,
+        ground ratio estimate and the imposed ``bounce_ratio``).
     """
     from ..capture import Lights
 
     if model not in LIGHT_MODELS:
         raise ValueError(f"model must be one of {LIGHT_MODELS}, not {model!r}")
+    if bounce not in ("calibrated", "free"):
+        raise ValueError(f"bounce must be 'calibrated' or 'free', not {bounce!r}")
     if capture.K is None:
         raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them", capture.json_path)
     if capture.sphere_radius is None:
@@ -568,27 +816,22 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         shape = capture.load_image(0).shape[:2]
     samples = capture_samples(capture, spheres, shape)
     kw = dict(model=model, **kwargs)
-    workers = os.cpu_count() or 1 if workers is None else max(1, int(workers))
+    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=n, desc="lights", unit="img")
-    results = []
+        bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        if workers == 1 or n == 1:
-            _init_worker(capture, samples, kw)
-            for i in range(n):
-                results.append(_work(i))
-                if bar is not None:
-                    bar.update(1)
-        else:
-            with ProcessPoolExecutor(max_workers=min(workers, n), initializer=_init_worker,
-                                     initargs=(capture, samples, kw)) as ex:
-                for r in ex.map(_work, range(n), chunksize=max(1, n // (8 * workers))):
-                    results.append(r)
-                    if bar is not None:
-                        bar.update(1)
+        first = _map(_work, list(range(n)), workers, capture, samples, kw, bar)
+        results = [r for r, _ in first]
+        if bounce == "calibrated":
+            calib = calibrate_bounce(results, len(samples))
+            ratios = [c["ratio"] for c in calib]
+            if any(r is not None for r in ratios):
+                results = _map(_work2, [(v, ratios) for _, v in first], workers, capture, samples, kw, bar)
+            elif bar is not None:
+                bar.update(n)
     finally:
         if bar is not None:
             bar.close()

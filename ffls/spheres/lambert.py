@@ -34,13 +34,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from ..conventions import UP, normalize
 from .detect import pixel_rays
 
 __all__ = [
     "MODELS",
+    "FIXED_MODELS",
     "SphereSamples",
     "LambertFit",
     "ground_bounce",
@@ -50,8 +50,10 @@ __all__ = [
     "tangent_uncertainty_deg",
 ]
 
-#: Per-sphere shading models, simplest first.
+#: Per-sphere shading models, simplest first (free bounce term).
 MODELS = ("plain", "ambient", "bounce")
+#: Models with a calibrated bounce (``c = rho_g a max(l_z, 0)``), simplest first.
+FIXED_MODELS = ("fixed", "fixed_ambient")
 
 
 def ground_bounce(normals: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
@@ -87,6 +89,8 @@ class SphereSamples:
         Sphere radius (world units).
     radius_px : float
         Apparent radius in pixels (for reports).
+    ground : (m,) float64 or None
+        :func:`ground_bounce` of ``normals`` for world up ``+Z`` (computed once per capture).
     """
 
     rows: np.ndarray
@@ -96,6 +100,7 @@ class SphereSamples:
     center: np.ndarray
     radius: float
     radius_px: float
+    ground: np.ndarray | None = None
 
     def values(self, image: np.ndarray) -> np.ndarray:
         """Grey intensity (m,) float64 of these pixels: the mean of the channels of ``image`` (H, W[, C])."""
@@ -171,7 +176,8 @@ def sphere_samples(shape: tuple[int, int], K: np.ndarray, dist: np.ndarray | Non
     P_w = P @ Rw.T + tw
     radius_px = f * np.tan(ang_s)
     return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
-                         center=Rw @ C + tw, radius=R, radius_px=float(radius_px))
+                         center=Rw @ C + tw, radius=R, radius_px=float(radius_px),
+                         ground=ground_bounce(n_w))
 
 
 def tangent_uncertainty_deg(v: np.ndarray, cov_v: np.ndarray) -> float:
@@ -220,6 +226,14 @@ class LambertFit:
         Of those, saturated.
     inliers : (m,) bool
         Pixels used in the final fit (lit or shadow side).
+    ground_ratio : float
+        ``c / (a l_z)`` of the free-bounce fit (NaN when not available): this photo's estimate of
+        the sphere's ground ratio ``rho_g``.
+    ground_ratio_sigma : float
+        Its standard deviation (relative noise at least ``rel_noise_floor``); large where the
+        photo shows no shadow side and ``c`` is confounded with ``b`` and ``l``.
+    bounce_ratio : float or None
+        The calibrated ratio imposed in this fit (None: free bounce).
     """
 
     status: str
@@ -236,6 +250,9 @@ class LambertFit:
     n_invalid: int = 0
     n_saturated: int = 0
     inliers: np.ndarray | None = None
+    ground_ratio: float = float("nan")
+    ground_ratio_sigma: float = float("inf")
+    bounce_ratio: float | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready summary (without the pixel mask)."""
@@ -250,39 +267,102 @@ class LambertFit:
             "model": self.model, "rms": num(self.rms), "uncertainty_deg": num(self.uncertainty_deg),
             "n_lit": int(self.n_lit), "n_shadow": int(self.n_shadow), "n_rejected": int(self.n_rejected),
             "n_invalid": int(self.n_invalid), "n_saturated": int(self.n_saturated),
+            "ground_ratio": num(self.ground_ratio), "ground_ratio_sigma": num(self.ground_ratio_sigma),
+            "bounce_ratio": None if self.bounce_ratio is None else num(self.bounce_ratio),
         }
 
 
-def _design(normals, g, lit, shadow, model):
-    """Design matrix rows for the lit and shadow pixels; columns v (3), [b], [c]."""
-    use = lit | shadow
-    n = normals[use]
-    A = [n * lit[use, None]]
-    if model != "plain":
-        A.append(np.ones((n.shape[0], 1)))
+def _model_map(model: str, ratio: float) -> np.ndarray:
+    """Columns (5, p) mapping a model's parameters onto the full design ``[n [lit], 1, g]``.
+
+    ``plain`` is ``v``; ``ambient`` ``v, b``; ``bounce`` ``v, b, c``. The calibrated models
+    ``fixed`` (``v``) and ``fixed_ambient`` (``v, b``) tie the bounce to the light,
+    ``c = ratio v_z``: the ground's irradiance is ``a max(l_z, 0)`` and it reflects ``ratio``
+    of it onto the sphere (see :func:`fit_lambert`), so the ``v_z`` column becomes
+    ``n_z [lit] + ratio g``.
+    """
+    I5 = np.eye(5)
+    if model == "plain":
+        return I5[:, :3]
+    if model == "ambient":
+        return I5[:, :4]
     if model == "bounce":
-        A.append(g[use, None])
-    return np.concatenate(A, axis=1), use
+        return I5
+    T = I5[:, :4].copy() if model == "fixed_ambient" else I5[:, :3].copy()
+    T[4, 2] = ratio
+    return T
 
 
-def _solve(A, y):
-    p = A.shape[1]
-    lb = np.full(p, -np.inf)
-    lb[3:] = 0.0
-    if p == 3:
-        x = np.linalg.lstsq(A, y, rcond=None)[0]
-    else:
-        x = lsq_linear(A, y, bounds=(lb, np.full(p, np.inf)), method="bvls").x
-    return x
+def _solve_normal(G, h, n_free: int = 3):
+    """Least squares from the normal equations ``G x = h`` with ``x[n_free:] >= 0``.
+
+    The active set is enumerated (at most two bounded coefficients here); returns ``x`` and the
+    inverse of ``G`` on the free set (zeros elsewhere).
+    """
+    p = G.shape[0]
+    try:  # the unconstrained solution, when feasible, is the optimum (convex problem)
+        Ginv = np.linalg.inv(G)
+        x = Ginv @ h
+        if np.all(x[n_free:] >= 0) and np.all(np.isfinite(x)):
+            return x, Ginv
+    except np.linalg.LinAlgError:
+        pass
+    bounded = list(range(n_free, p))
+    best = None
+    for mask in range(1 << len(bounded)):
+        fixed = [bounded[k] for k in range(len(bounded)) if mask >> k & 1]
+        free = [k for k in range(p) if k not in fixed]
+        Gf = G[np.ix_(free, free)]
+        try:
+            Gi = np.linalg.inv(Gf)
+        except np.linalg.LinAlgError:
+            Gi = np.linalg.pinv(Gf)
+        xf = Gi @ h[free]
+        if np.any(xf[n_free:] < 0):  # the free set lists the unbounded coefficients first
+            continue
+        x = np.zeros(p)
+        x[free] = xf
+        q = float(x @ G @ x - 2.0 * x @ h)  # rss - y'y
+        if best is None or q < best[0]:
+            Ginv = np.zeros((p, p))
+            Ginv[np.ix_(free, free)] = Gi
+            best = (q, x, Ginv)
+    return best[1], best[2]
 
 
-def _t_last(fit) -> float:
-    """t statistic of the last (added) coefficient of a linear fit ``(x, A, use, r)``."""
-    x, A, _, r = fit
-    k, p = A.shape
-    s2 = float(r @ r) / max(k - p, 1)
-    var = s2 * np.linalg.pinv(A.T @ A)[-1, -1]
-    return float(x[-1] / np.sqrt(var)) if var > 0 else (np.inf if x[-1] > 0 else 0.0)
+class _Fit:
+    """One linear fit for a fixed classification: parameters, covariance factor, residuals."""
+
+    __slots__ = ("model", "x", "Ginv", "k", "rss", "v", "b", "c")
+
+    def __init__(self, model, T, G5, h5, yy, k, ratio):
+        G = T.T @ G5 @ T
+        h = T.T @ h5
+        x, Ginv = _solve_normal(G, h)
+        if model.startswith("fixed") and x[2] < 0:  # light below the horizon: no ground bounce
+            T = _model_map(model, 0.0)
+            G, h = T.T @ G5 @ T, T.T @ h5
+            x, Ginv = _solve_normal(G, h)
+            ratio = 0.0
+        self.model, self.x, self.Ginv, self.k = model, x, Ginv, k
+        self.rss = max(float(yy - 2.0 * x @ h + x @ G @ x), 0.0)
+        self.v = x[:3]
+        self.b = float(x[3]) if x.size > 3 else 0.0
+        if model == "bounce":
+            self.c = float(x[4])
+        elif model.startswith("fixed"):
+            self.c = ratio * max(float(x[2]), 0.0)
+        else:
+            self.c = 0.0
+
+    @property
+    def s2(self) -> float:
+        return self.rss / max(self.k - self.x.size, 1)
+
+    def t_last(self) -> float:
+        """t statistic of the last coefficient."""
+        var = self.s2 * self.Ginv[-1, -1]
+        return float(self.x[-1] / np.sqrt(var)) if var > 0 else (np.inf if self.x[-1] > 0 else 0.0)
 
 
 def _select_model(fits: dict, t_min: float = 3.0) -> str:
@@ -292,65 +372,73 @@ def _select_model(fits: dict, t_min: float = 3.0) -> str:
     dropping the bounce term, and the bounce then tilted the light by ~3 degrees. A significant,
     non-negative bounce coefficient is physical, so it is kept.
     """
-    for mdl in ("bounce", "ambient"):
-        if mdl in fits and _t_last(fits[mdl]) > t_min:
+    for mdl in ("bounce", "ambient", "fixed_ambient"):
+        if mdl in fits and fits[mdl].t_last() > t_min:
             return mdl
-    return "plain" if "plain" in fits else next(iter(fits))
+    for mdl in ("plain", "fixed"):
+        if mdl in fits:
+            return mdl
+    return next(iter(fits))
 
 
-def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter):
-    """Classification / rejection iterations from one start; returns (best, inliers, robust cost)."""
+def _gram(F, y, lit, shadow):
+    """Normal equations of the full design ``[n [lit], 1, g]``: ``A^T A``, ``A^T y``, ``y^T y``.
+
+    ``F`` (m, 5) holds ``[n, 1, g]`` per pixel; shadow-side rows only have the last two columns.
+    """
+    Fl, yl = F[lit], y[lit]
+    Fs, ys = F[shadow, 3:], y[shadow]
+    G5 = Fl.T @ Fl
+    G5[3:, 3:] += Fs.T @ Fs
+    h5 = Fl.T @ yl
+    h5[3:] += Fs.T @ ys
+    return G5, h5, float(yl @ yl + ys @ ys)
+
+
+def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio):
+    """Classification / rejection iterations from one start; returns (state, inliers)."""
     inl = ok.copy()
     best = None
-    fits = {}
+    F = np.empty((normals.shape[0], 5))
+    F[:, :3] = normals
+    F[:, 3] = 1.0
+    F[:, 4] = g
     for _ in range(max_iter):
         nl = normals @ ldir
         lit = inl & (nl > terminator)
         shadow = inl & (nl < -terminator)
         if lit.sum() < min_lit:
             break
-        fits = {}
-        for mdl in models:
-            A, use = _design(normals, g, lit, shadow, mdl)
-            x = _solve(A, y[use])
-            r = y[use] - A @ x
-            fits[mdl] = (x, A, use, r)
+        G5, h5, yy = _gram(F, y, lit, shadow)
+        use = lit | shadow
+        k = int(use.sum())
+        fits = {m: _Fit(m, _model_map(m, ratio), G5, h5, yy, k, ratio) for m in models}
         mdl = _select_model(fits)
-        x, A, use, r = fits[mdl]
-        v = x[:3]
-        a = float(np.linalg.norm(v))
+        fit = fits[mdl]
+        a = float(np.linalg.norm(fit.v))
         if not np.isfinite(a) or a == 0:
             break
-        new_dir = v / a
+        new_dir = fit.v / a
         # robust rejection on all valid pixels (predictions with the current model)
-        pred = a * np.maximum(normals @ new_dir, 0.0)
-        if mdl != "plain":
-            pred = pred + x[3]
-        if mdl == "bounce":
-            pred = pred + x[4] * g
+        pred = a * np.maximum(normals @ new_dir, 0.0) + fit.b + fit.c * g
         res = y - pred
+        r = res[use]  # the residuals of the fitted pixels
         sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), rel_noise_floor * a)
         new_inl = ok & (np.abs(res) <= clip_sigma * sigma)
-        best = (mdl, x, A, use, r, lit, shadow, new_dir, a)
+        best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a)
         stable = (np.array_equal(new_inl, inl) and float(new_dir @ ldir) > np.cos(np.radians(1e-3)))
         inl = new_inl
         ldir = new_dir
         if stable:
             break
-    if best is None:
-        return None, inl, np.inf
-    mdl, x, A, use, r, lit, shadow, d, a = best
-    pred = a * np.maximum(normals @ d, 0.0) + (x[3] if x.size > 3 else 0.0) + (x[4] * g if x.size > 4 else 0.0)
-    res = (y - pred)[ok]
-    scale = max(rel_noise_floor * float(np.max(y[ok])), 1e-300)
-    cost = float(np.mean(np.minimum((res / scale) ** 2, clip_sigma ** 2)))  # truncated: outliers count once
-    return best, inl, cost
+    return best, inl
 
 
 def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | None = None, *,
                 n_saturated: int = 0, terminator: float = 0.15, models: tuple[str, ...] = MODELS,
                 clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, up: np.ndarray = UP,
-                min_lit: int = 30, max_reject_fraction: float = 0.25, max_iter: int = 8) -> LambertFit:
+                min_lit: int = 30, max_reject_fraction: float = 0.25, max_iter: int = 8,
+                bounce_ratio: float | None = None, g: np.ndarray | None = None) -> LambertFit:
     """Fit ``I(n) = a max(0, n . l) + b + c g(n)`` to one sphere's pixels.
 
     Parameters
@@ -367,12 +455,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     terminator : float
         Pixels with ``|n . l| < terminator`` are not used.
     models : tuple of str
-        Candidate models (subset of :data:`MODELS`); see :func:`_select_model`.
+        Candidate models (subset of :data:`MODELS`); see :func:`_select_model`. Ignored when
+        ``bounce_ratio`` is given.
     clip_sigma : float
         Residuals beyond ``clip_sigma`` robust standard deviations are rejected.
     rel_noise_floor : float
         Lower bound of that standard deviation, relative to the peak intensity (model mismatch
-        must not be mistaken for outliers).
+        must not be mistaken for outliers); also the noise level assumed for
+        :attr:`LambertFit.ground_ratio_sigma`.
     up : (3,) float
         World up, for the ground-bounce term.
     min_lit : int
@@ -381,6 +471,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         More rejected lit pixels than this fraction gives ``'shadowed'``.
     max_iter : int
         Classification / rejection iterations.
+    bounce_ratio : float, optional
+        The sphere's ground ratio ``rho_g`` (calibrated over the capture,
+        :func:`ffls.spheres.estimate.calibrate_bounce`): the bounce is then not a free term but
+        ``c = rho_g a max(l_z, 0)`` (the ground's irradiance is ``a l_z`` in the sphere's units;
+        it reflects ``rho_g`` of it onto the sphere with the form factor ``g``). The candidate
+        models are then ``fixed`` (``a, l``) and ``fixed_ambient`` (``+ b``).
+    g : (m,) float, optional
+        Precomputed :func:`ground_bounce` of ``normals``.
 
     Returns
     -------
@@ -394,14 +492,21 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         ok &= np.asarray(valid, dtype=bool)
     n_invalid = int(m - ok.sum())
     base = LambertFit(status="fit_failed", n_invalid=n_invalid, n_saturated=int(n_saturated))
-    for mdl in models:
-        if mdl not in MODELS:
-            raise ValueError(f"unknown model {mdl!r}; expected one of {MODELS}")
+    if bounce_ratio is not None:
+        if not (np.isfinite(bounce_ratio) and bounce_ratio >= 0):
+            raise ValueError(f"bounce_ratio must be finite and >= 0, got {bounce_ratio!r}")
+        models = ("fixed", "fixed_ambient")
+        ratio = float(bounce_ratio)
+    else:
+        ratio = 0.0
+        for mdl in models:
+            if mdl not in MODELS:
+                raise ValueError(f"unknown model {mdl!r}; expected one of {MODELS}")
     if ok.sum() < min_lit:
         base.status = "saturated" if n_saturated >= max(min_lit, 0.5 * (m - ok.sum())) and n_saturated > 0 else "too_dark"
         return base
     y = np.where(ok, y_all, 0.0)
-    g = ground_bounce(normals, up)
+    g = ground_bounce(normals, up) if g is None else np.asarray(g, dtype=np.float64)
     # initial classification: clearly bright pixels are lit
     peak = float(np.percentile(y[ok], 99))
     if not peak > 0:
@@ -413,48 +518,55 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         return base
     # start from least squares on the bright pixels
     Ab = np.concatenate([normals[bright], np.ones((bright.sum(), 1))], axis=1)
-    starts = [np.linalg.lstsq(Ab, y[bright], rcond=None)[0][:3]]
+    v0 = np.linalg.lstsq(Ab, y[bright], rcond=None)[0][:3]
     # (a second start from the brightness-weighted mean normal of the bright pixels was tried: on
     # small back spheres with a thin lit crescent and strong bounce it converged to wrong
     # solutions that the other spheres then confirmed; a rejection is safer than a wrong light)
-    best, inl, best_cost = None, ok, np.inf
-    for v0 in starts:
-        if not np.all(np.isfinite(v0)) or np.linalg.norm(v0) == 0:
-            continue
-        cand, cand_inl, cost = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
-                                        clip_sigma, rel_noise_floor, max_iter)
-        if cand is not None:
-            best, inl, best_cost = cand, cand_inl, cost
-            break
+    best, inl = None, ok
+    if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
+        best, inl = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
+                             clip_sigma, rel_noise_floor, max_iter, ratio)
     if best is None:
         base.status = "too_dark"
         return base
-    mdl, x, A, use, r, lit, shadow, ldir, a = best
-    k, p = A.shape
-    s2 = float(r @ r) / max(k - p, 1)
+    fit, ldir, a, lit, shadow, use = best["fit"], best["dir"], best["a"], best["lit"], best["shadow"], best["use"]
+    k = fit.k
     try:
-        cov = s2 * np.linalg.pinv(A.T @ A)
-        unc = tangent_uncertainty_deg(x[:3], cov[:3, :3])
+        unc = tangent_uncertainty_deg(fit.v, fit.s2 * fit.Ginv[:3, :3])
     except np.linalg.LinAlgError:
         unc = float("inf")
+    # the ground ratio c / (a l_z) of the free-bounce fit and its standard deviation at a relative
+    # noise of at least rel_noise_floor: small only where the shadow side separates c from b, l
+    ratio_est, ratio_sd = float("nan"), float("inf")
+    if "bounce" in best["fits"] and ldir[2] > 0:
+        fb = best["fits"]["bounce"]
+        ab = float(np.linalg.norm(fb.v))
+        lz = fb.v[2] / ab if ab > 0 else 0.0
+        if lz > 0:
+            s = max(np.sqrt(fb.s2), rel_noise_floor * ab)
+            ratio_est = fb.c / (ab * lz)
+            ratio_sd = float(s * np.sqrt(max(fb.Ginv[4, 4], 0.0)) / (ab * lz))
+            if fb.Ginv[4, 4] == 0.0:  # c at its bound: not determined by this photo
+                ratio_sd = float("inf")
     nl = normals @ ldir
     cand_lit = ok & (nl > terminator)
     n_rej = int((cand_lit & ~inl).sum())
-    fit = LambertFit(
-        status="ok", direction=ldir, intensity=a,
-        ambient=float(x[3]) if p > 3 else 0.0, bounce=float(x[4]) if p > 4 else 0.0,
-        model=mdl, rms=float(np.sqrt(float(r @ r) / k)) / a, uncertainty_deg=unc,
+    fitres = LambertFit(
+        status="ok", direction=ldir, intensity=a, ambient=fit.b, bounce=fit.c,
+        model=best["model"], rms=float(np.sqrt(fit.rss / k)) / a, uncertainty_deg=unc,
         n_lit=int(lit.sum()), n_shadow=int(shadow.sum()),
         n_rejected=int((ok & ~inl).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
+        ground_ratio=ratio_est, ground_ratio_sigma=ratio_sd,
+        bounce_ratio=None if bounce_ratio is None else float(bounce_ratio),
     )
     # a sphere whose expected lit area is largely outlying is in a cast shadow
     if cand_lit.sum() and n_rej > max_reject_fraction * cand_lit.sum():
-        fit.status = "shadowed"
+        fitres.status = "shadowed"
     elif n_saturated > 0.3 * (int(cand_lit.sum()) + n_saturated):
-        fit.status = "saturated"
+        fitres.status = "saturated"
     elif not np.isfinite(unc):
-        fit.status = "fit_failed"
-    return fit
+        fitres.status = "fit_failed"
+    return fitres
 
 
 #: The paper's per-sphere method, under its name (GUIDE: one paper per function).

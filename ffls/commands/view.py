@@ -1,0 +1,105 @@
+"""``ffls view``: the interactive viewer (glfw + imgui-bundle over the GPU engine).
+
+A thin layer over :mod:`viewer.app`. With ``--frames N`` it runs N frames and exits (scripted
+mode, e.g. with ``--screenshot OUT.png``); with no display (or ``--headless``) the window lives
+on glfw's null platform with EGL, so scripted runs work on machines without X.
+"""
+from __future__ import annotations
+
+NAME = "view"
+HELP = "interactive viewer: rotate light maps, change exposure and quality, save screenshots"
+DESCRIPTION = (
+    "Open a window over a capture: the relit image under a rotatable HDR light map, a light-map "
+    "preview with the lights and their Voronoi cells, exposure, tone mapping, quality and speed "
+    "panels. --frames N --screenshot OUT.png renders N frames, saves the window (and OUT.exr, the "
+    "relit HDR) and exits; with no DISPLAY/WAYLAND_DISPLAY (or --headless) it runs on glfw's null "
+    "platform with EGL. Keys: drag/arrows rotate, +/- exposure, space auto-rotate, S screenshot, "
+    "F fullscreen, H help, Esc quit (docs/viewer.md)."
+)
+
+
+def add_arguments(p):
+    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("--lights", default=None, help="lights.json (default: CAPTURE/lights.json)")
+    p.add_argument("--probe", default="courtyard", metavar="MAP",
+                   help="light map: a file (.exr/.hdr) or a built-in name (default courtyard)")
+    p.add_argument("--rotate", default="0,0,0", metavar="YAW,PITCH,ROLL", help="initial rotation, degrees")
+    p.add_argument("--auto-rotate", type=float, default=None, metavar="DEG_PER_S",
+                   help="start auto-rotating the yaw at this speed")
+    p.add_argument("--exposure", type=float, default=None, metavar="EV",
+                   help="exposure in stops (default: automatic for the first frame)")
+    p.add_argument("--tonemap", default="aces", choices=("srgb", "reinhard", "aces"))
+    p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
+    p.add_argument("--rank", type=int, default=32, metavar="K",
+                   help="compressed basis of K eigen-images (default 32); 0 = full float16 basis")
+    p.add_argument("--mask", default=None, metavar="FILE",
+                   help="object mask image (white = object): enables hiding the background")
+    p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
+    p.add_argument("--headless", action="store_true",
+                   help="glfw's null platform with EGL (automatic when no display is set)")
+    p.add_argument("--frames", type=int, default=None, metavar="N", help="run N frames and exit")
+    p.add_argument("--screenshot", default=None, metavar="OUT.png",
+                   help="after the last frame save the window (PNG) and the relit HDR (OUT.exr)")
+    p.add_argument("--benchmark", action="store_true",
+                   help="with --frames: rotate the light map every frame and print frame-time statistics")
+
+
+def build_state(args):
+    """The initial :class:`viewer.state.ViewerState` from the parsed arguments."""
+    from ffls.errors import InputError
+    from viewer.state import ViewerState, parse_rotation, parse_size
+
+    try:
+        size = parse_size(args.size)
+        yaw, pitch, roll = parse_rotation(args.rotate)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    st = ViewerState(yaw=yaw, pitch=pitch, roll=roll, tonemap=args.tonemap, lightmap=args.probe,
+                     window_size=size, fullscreen=bool(args.fullscreen))
+    if args.exposure is not None:
+        st.exposure = float(args.exposure)
+    if args.auto_rotate is not None:
+        st.auto_rotate, st.auto_rotate_speed = True, float(args.auto_rotate)
+    if args.rank is not None and args.rank < 0:
+        raise InputError(f"--rank must be >= 0, not {args.rank}")
+    if args.rank == 0:
+        st.quality["method"] = "full f16"
+    else:
+        st.quality["rank"] = int(args.rank)
+    return st
+
+
+def run(args) -> int:
+    from ffls.errors import InputError
+    from viewer.app import ViewerApp, open_capture
+
+    if args.frames is not None and args.frames < 1:
+        raise InputError(f"--frames must be >= 1, not {args.frames}")
+    if args.benchmark and args.frames is None:
+        raise InputError("--benchmark needs --frames N")
+    st = build_state(args)
+    capture, lights = open_capture(args.capture, args.lights)
+    app = ViewerApp(capture, lights, st, headless=True if args.headless else None, timing=args.benchmark)
+    try:
+        if args.exposure is None:  # expose the first frame for its log-average luminance
+            app.auto_expose()
+        if args.benchmark:
+            st.auto_rotate = True
+            st.auto_rotate_speed = st.auto_rotate_speed if args.auto_rotate is not None else 30.0
+            app.run(frames=args.frames, screenshot=args.screenshot, dt=1.0 / 30.0)
+        else:
+            app.run(frames=args.frames, screenshot=args.screenshot)
+        if args.frames is not None:
+            s = app.summary(skip=min(2, max(0, args.frames - 1)))
+            passes = ", ".join(f"{k} {v:.1f}" for k, v in s["passes"].items())
+            b = app.renderer.info
+            print(f"ffls view: {app.frames_rendered} frames on {app.platform} platform ({b.renderer}); "
+                  f"{b.image_size[0]}x{b.image_size[1]}, {b.n_lights} lights, "
+                  f"{'full basis' if b.basis_info.get('rank') is None else 'rank ' + str(b.basis_info['rank'])}")
+            print(f"  frame time: mean {s['mean_ms']:.1f} ms, median {s['median_ms']:.1f} ms "
+                  f"({s['fps']:.1f} fps) over {s['frames']} frames; passes (ms, mean where run): {passes or 'none'}")
+            if args.screenshot:
+                print(f"  screenshot: {args.screenshot} (window) and {args.screenshot[:-4]}.exr (relit HDR)")
+    finally:
+        app.close()
+    return 0

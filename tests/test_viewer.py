@@ -1,0 +1,316 @@
+"""The viewer: state, GUI (no GL), renderer and window on glfw's null platform with EGL.
+
+Image comparisons state their tolerances. Window tests skip, with the reason, where glfw's null
+platform or an EGL OpenGL 4.3 context is not available.
+"""
+from __future__ import annotations
+
+import ast
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+imgui_bundle = pytest.importorskip("imgui_bundle", reason="imgui-bundle is not installed")
+
+from ffls.tonemap import srgb_decode  # noqa: E402
+from viewer.state import QUALITY_KNOBS, TurntableJob, ViewerState, ViewInfo, parse_rotation, parse_size  # noqa: E402
+
+VIEWER = Path(__file__).resolve().parents[1] / "viewer"
+GL_MODULES = {"moderngl", "glfw", "OpenGL", "glcontext"}
+
+
+# ----------------------------------------------------------------------------- no GL needed
+def test_gui_and_state_import_no_gl_module():
+    for name in ("gui.py", "state.py"):
+        tree = ast.parse((VIEWER / name).read_text())
+        mods = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                mods |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                mods.add(node.module.split(".")[0])
+        assert not mods & GL_MODULES, f"{name} imports {mods & GL_MODULES}"
+
+
+def test_state_parsing_and_knobs():
+    assert parse_size("640x400") == (640, 400)
+    assert parse_rotation("30,-10") == (30.0, -10.0, 0.0)
+    for bad in ("640", "0x10", "ax3"):
+        with pytest.raises(ValueError):
+            parse_size(bad)
+    with pytest.raises(ValueError):
+        parse_rotation("1,2,3,4")
+    st = ViewerState()
+    assert {k.key for k in QUALITY_KNOBS} == set(st.quality)
+    key = st.quality_key()
+    st.quality["map_res"] = "64"  # pass-1 resolution: no engine rebuild
+    assert st.quality_key() == key
+    st.quality["rank"] = 4
+    assert st.quality_key() != key
+    st.quality["method"] = "full f32"  # rank no longer applies
+    assert all(k != "rank" for k, _ in st.quality_key())
+    st.rotate_by(dyaw=190.0, dpitch=120.0)
+    assert st.yaw == pytest.approx(-170.0) and st.pitch == 90.0
+    st.auto_rotate, st.auto_rotate_speed = True, 30.0
+    st.advance(0.5)
+    assert st.yaw == pytest.approx(-155.0)
+
+
+@pytest.fixture
+def bare_imgui():
+    """An imgui + implot context with no renderer backend and no GL context at all."""
+    from imgui_bundle import imgui, implot
+
+    c = imgui.create_context()
+    imgui.set_current_context(c)
+    p = implot.create_context()
+    implot.set_current_context(p)
+    io = imgui.get_io()
+    io.set_ini_filename(None)
+    io.display_size = imgui.ImVec2(900, 600)
+    io.delta_time = 1 / 60
+    io.backend_flags |= imgui.BackendFlags_.renderer_has_textures
+    yield imgui
+    implot.destroy_context(p)
+    imgui.destroy_context(c)
+
+
+def _frames(imgui, st, info, events=()):
+    """Run one imgui frame per entry of ``events`` (a callable queuing input, or None)."""
+    from viewer.gui import draw_gui
+
+    for ev in events:
+        if ev is not None:
+            ev(imgui.get_io())
+        imgui.new_frame()
+        draw_gui(st, info)
+        imgui.render()
+
+
+def test_gui_changes_only_state_without_gl(bare_imgui):
+    """draw_gui runs with no GL context current (so it makes no GL call) and changes only the state."""
+    imgui = bare_imgui
+    K = imgui.Key
+    st = ViewerState(window_size=(900, 600))
+    info = ViewInfo(image_tex=7, image_size=(64, 64), preview_tex=8, preview_size=(256, 128),
+                    light_uv=np.array([[0.25, 0.25], [0.75, 0.4]]), n_lights=2, renderer="none")
+    info_before = repr(info)
+
+    def key(k, down):
+        return lambda io: io.add_key_event(k, down)
+
+    _frames(imgui, st, info, [None, key(K.right_arrow, True), key(K.right_arrow, False)])
+    assert st.yaw == pytest.approx(5.0)
+    _frames(imgui, st, info, [key(K.equal, True), key(K.equal, False)])
+    assert st.exposure == pytest.approx(0.5)
+    _frames(imgui, st, info, [key(K.space, True), key(K.space, False)])
+    assert st.auto_rotate
+    _frames(imgui, st, info, [key(K.s, True), key(K.s, False)])
+    assert st.screenshot_path and st.screenshot_path.endswith(".png")
+    _frames(imgui, st, info, [key(K.escape, True), key(K.escape, False)])
+    assert st.quit
+    # drag in the image (right of the 360 px panel): 50 px right = -20 degrees of yaw at 0.4 deg/px
+    st2 = ViewerState(window_size=(900, 600), drag_deg_per_px=0.4)
+    _frames(imgui, st2, info, [
+        lambda io: io.add_mouse_pos_event(600, 300), lambda io: io.add_mouse_button_event(0, True),
+        lambda io: io.add_mouse_pos_event(650, 300), lambda io: io.add_mouse_button_event(0, False), None])
+    assert st2.yaw == pytest.approx(-20.0)
+    assert repr(info) == info_before  # the view info is read only
+
+
+# ----------------------------------------------------------------------------- window tests
+@pytest.fixture(scope="module")
+def capture_dir(tmp_path_factory):
+    from ffls.synth import write_synthetic_capture
+
+    folder = tmp_path_factory.mktemp("viewer") / "cap"
+    write_synthetic_capture(folder, n_lights=24, resolution=64, seed=3, progress=False)
+    return folder
+
+
+def _open_app(capture_dir, **kw):
+    from ffls.errors import GLUnavailable
+    from viewer.app import ViewerApp, open_capture
+
+    st = kw.pop("state", None) or ViewerState(window_size=(640, 400), lightmap="sky", tonemap="srgb")
+    st.quality["rank"] = 8
+    try:
+        return ViewerApp(*open_capture(capture_dir), st, headless=True, **kw)
+    except GLUnavailable as e:
+        pytest.skip(f"no viewer window on glfw's null platform with EGL: {e}")
+
+
+@pytest.fixture(scope="module")
+def app(capture_dir):
+    a = _open_app(capture_dir)
+    yield a
+    a.close()
+
+
+@pytest.fixture
+def fresh(app):
+    """The module's app, reset to a known state; asserts no GL error after the test."""
+    st = app.state
+    st.yaw = st.pitch = st.roll = 0.0
+    st.exposure, st.tonemap, st.auto_rotate, st.lightmap = 0.0, "srgb", False, "sky"
+    app.step(dt=0.0)
+    assert app.ctx.error == "GL_NO_ERROR"
+    yield app
+    assert app.ctx.error == "GL_NO_ERROR"
+
+
+@pytest.mark.viewer
+def test_exposure_plus_one_ev_doubles_linear_values(fresh):
+    app = fresh
+    d0 = srgb_decode(app.renderer.read_display() / 255.0)
+    win0 = app.read_window()
+    app.state.exposure = 1.0
+    app.step(dt=0.0)
+    d1 = srgb_decode(app.renderer.read_display() / 255.0)
+    sel = (d0 > 0.05) & (d0 < 0.4)  # not clipped at +1 EV, well above 8-bit quantisation
+    assert sel.sum() > 500
+    ratio = d1[sel] / d0[sel]
+    assert np.median(ratio) == pytest.approx(2.0, abs=0.05)
+    assert np.mean(np.abs(ratio - 2.0) > 0.2) < 0.01  # at most 1 % of the pixels off by > 10 %
+    # the window shows it: the image area (right of the control panel) got brighter
+    win1 = app.read_window()
+    right = slice(win0.shape[1] // 2 + 100, None)
+    assert win1[:, right].mean() > win0[:, right].mean() + 5
+
+
+@pytest.mark.viewer
+def test_rotation_180_changes_and_360_restores(fresh):
+    app = fresh
+    h0 = app.renderer.read_hdr()
+    app.state.yaw = 180.0
+    app.step(dt=0.0)
+    h180 = app.renderer.read_hdr()
+    app.state.yaw = 360.0
+    app.step(dt=0.0)
+    h360 = app.renderer.read_hdr()
+    scale = float(h0.max())
+    assert np.mean(np.abs(h180 - h0)) > 0.02 * scale  # the sun moved to the other side
+    err = np.abs(h360 - h0) / scale
+    assert err.max() < 1e-3  # float16 basis; cell assignment identical up to rounding
+
+
+@pytest.mark.viewer
+def test_preview_and_weights_mode(fresh):
+    app = fresh
+    r = app.renderer
+    info = r.info
+    assert info.preview_tex and info.light_uv.shape == (24, 2)
+    R = np.eye(3)
+    a = r.preview_image(R, "lightmap")
+    assert a.shape == (128, 256, 3) and (a == 230).all(axis=-1).sum() > 100  # cell borders drawn
+    from ffls.conventions import rotation_ypr
+
+    b = r.preview_image(rotation_ypr(90, 0, 0), "lightmap")
+    assert np.mean(np.abs(a.astype(int) - b.astype(int))) > 5
+    app.state.preview_mode = "weights"
+    app.step(dt=0.0)
+    w = r.preview_image(R, "weights")
+    assert w[:64].std() > 10  # the heat map varies over the upper hemisphere
+    app.state.preview_mode = "lightmap"
+    app.state.selected_light = 3
+    app.step(dt=0.0)
+    assert info.photo_tex
+    app.state.selected_light = None
+
+
+@pytest.mark.viewer
+def test_screenshot_turntable_drop(fresh, tmp_path):
+    from ffls.imageio import read_image
+    from ffls.lightmap import constant_map, save_lightmap
+
+    app = fresh
+    png, exr = app.save_screenshot(tmp_path / "shot.png")
+    img = read_image(png).pixels
+    fbw, fbh = app.glfw.get_framebuffer_size(app.window)
+    assert img.shape == (fbh, fbw, 3)
+    assert img[:, :200].std() > 0.05  # the control panel is in the picture
+    hdr = read_image(exr).pixels
+    np.testing.assert_allclose(hdr, app.renderer.read_hdr(), rtol=1e-3, atol=1e-6)
+    # turntable: 3 PNG frames, then the job ends and the yaw is back
+    app.state.turntable = TurntableJob(str(tmp_path / "tt"), frames=3, start_yaw=0.0)
+    for _ in range(3):
+        app.step(dt=0.0)
+    assert app.state.turntable is None and app.state.yaw == 0.0
+    frames = sorted((tmp_path / "tt").glob("frame_*.png"))
+    assert len(frames) == 3
+    assert np.abs(read_image(frames[0]).pixels - read_image(frames[1]).pixels).mean() > 1e-3
+    # a dropped light map file is loaded; a bad one leaves a message and the old map
+    save_lightmap(constant_map(16, 0.5), tmp_path / "grey.exr")
+    app._on_drop(app.window, [str(tmp_path / "grey.exr")])
+    app.step(dt=0.0)
+    assert app.state.lightmap.endswith("grey.exr") and "grey.exr" in app.renderer.info.message
+    grey = app.renderer.read_hdr()
+    app.state.yaw = 90.0  # a constant map does not care about rotation
+    app.step(dt=0.0)
+    np.testing.assert_allclose(app.renderer.read_hdr(), grey, rtol=2e-3, atol=1e-5)
+    app._on_drop(app.window, [str(tmp_path / "missing.exr")])
+    app.step(dt=0.0)
+    assert "missing.exr" in app.renderer.info.message
+    np.testing.assert_allclose(app.renderer.read_hdr(), grey, rtol=2e-3, atol=1e-5)
+
+
+@pytest.mark.viewer
+def test_mask_enables_hiding_the_background(capture_dir, app, tmp_path):
+    """With a mask (capture.json "mask"), the background checkbox hides what is outside it."""
+    from ffls.imageio import write_png
+    from viewer.renderer import load_mask
+
+    from ffls.capture import load_capture
+
+    cap = load_capture(capture_dir)
+    assert load_mask(cap) is None  # none given: none guessed
+    m = np.zeros((64, 64), dtype=np.uint8)
+    m[16:48, 16:48] = 255
+    write_png(tmp_path / "mask.png", np.repeat(m[..., None], 3, axis=-1))
+    doc = json.loads((capture_dir / "capture.json").read_text())
+    doc["mask"] = str(tmp_path / "mask.png")
+    masked = tmp_path / "cap"
+    masked.mkdir()
+    for f in capture_dir.iterdir():
+        (masked / f.name).symlink_to(f)
+    (masked / "capture.json").unlink()
+    (masked / "capture.json").write_text(json.dumps(doc))
+    mask = load_mask(load_capture(masked))
+    assert mask.sum() == 32 * 32
+    assert not app.renderer.info.mask_available  # the module's capture has no mask
+    second = _open_app(masked)  # a second window beside the module's
+    try:
+        assert second.renderer.info.mask_available and second.renderer.info.overlay_tex
+        second.step(dt=0.0)
+        shown = second.read_window().astype(int)
+        second.state.show_background = False
+        second.step(dt=0.0)
+        hidden = second.read_window().astype(int)
+        diff = np.abs(hidden - shown).max(axis=-1) > 10
+        assert diff[:, :360].sum() < 50  # the control panel hardly changes (a checkbox)
+        assert diff[:, 360:].sum() > 1000  # the checkerboard replaced the background
+        assert second.ctx.error == "GL_NO_ERROR"
+    finally:
+        second.close()
+
+
+@pytest.mark.viewer
+def test_cli_frames_screenshot(capture_dir, app, tmp_path, capsys):
+    """``ffls view CAP --frames N --screenshot OUT.png`` through ffls.cli.main, beside another window."""
+    from ffls.cli import main
+    from ffls.imageio import read_image
+
+    out = tmp_path / "view.png"
+    rc = main(["view", str(capture_dir), "--headless", "--frames", "3", "--screenshot", str(out),
+               "--size", "560x360", "--rank", "4", "--probe", "paper", "--rotate", "30,0,0", "--exposure", "1"])
+    assert rc == 0
+    assert read_image(out).pixels.shape == (360, 560, 3)
+    assert read_image(out.with_suffix(".exr")).pixels.shape == (64, 64, 3)
+    text = capsys.readouterr().out
+    assert "3 frames on null platform" in text and "rank 4" in text
+    # the module's window still works after the CLI's window came and went
+    app.step(dt=0.0)
+    assert app.ctx.error == "GL_NO_ERROR"
+    assert main(["view", str(capture_dir), "--headless", "--frames", "0"]) == 2

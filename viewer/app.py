@@ -1,0 +1,403 @@
+"""The viewer's window: glfw + imgui-bundle's OpenGL 3 / glfw backends + the main loop.
+
+This is one of the two places in ffls that create an OpenGL context (the other is
+:mod:`ffls.gpu.context`): the glfw window's, wrapped by ``moderngl.create_context``. Per frame:
+
+1. poll events (the drop callback puts a dropped light map into the state);
+2. advance time (auto-rotation, turntable step);
+3. :meth:`viewer.renderer.Renderer.update` (engine passes that the state made necessary);
+4. :func:`viewer.gui.draw_gui` (changes only the state);
+5. imgui draws into the default framebuffer; pending actions (screenshot, turntable frame,
+   fullscreen, open dialog, quit) are carried out; buffers are swapped.
+"""
+from __future__ import annotations
+
+import ctypes
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ffls.errors import GLUnavailable, InputError
+
+from . import headless as platforms
+from .state import ViewerState
+
+__all__ = ["ViewerApp", "open_capture"]
+
+
+def open_capture(folder, lights=None):
+    """``(capture, lights)`` of a capture folder; ``lights`` defaults to ``FOLDER/lights.json``."""
+    from ffls.capture import load_capture, load_lights
+
+    capture = load_capture(folder)
+    lights_path = Path(lights) if lights else Path(folder) / "lights.json"
+    if not lights_path.exists():
+        raise InputError("no lights.json: estimate the light directions first (ffls lights)", lights_path)
+    return capture, load_lights(lights_path, capture)
+
+
+class ViewerApp:
+    """The viewer window over one capture.
+
+    Parameters
+    ----------
+    capture : ffls.capture.Capture
+    lights : ffls.capture.Lights
+    state : ViewerState, optional
+        Initial state (its ``window_size`` and ``fullscreen`` shape the window).
+    headless : bool, optional
+        True: glfw's null platform with EGL (no display needed); False: a desktop window;
+        None: null platform when no ``DISPLAY``/``WAYLAND_DISPLAY`` is set.
+    mask_path : path-like, optional
+        Object mask image (white = object) for hiding the background; else the capture's
+        ``"mask"`` entry, else none.
+    vsync : bool
+        Swap interval 1 on a desktop (the display limits the frame rate); always 0 headless.
+    title : str
+    timing : bool
+        Wait for the GPU after drawing the window each frame so that :attr:`stats` charges each
+        part of the frame correctly (benchmarks; costs the CPU/GPU overlap).
+
+    Attributes
+    ----------
+    state : ViewerState
+    renderer : viewer.renderer.Renderer
+    ctx : moderngl.Context
+    platform : {'null', 'desktop'}
+    stats : list of dict
+        Per frame: ``frame_ms`` (wall time of :meth:`step`) and the engine passes that ran (ms).
+    """
+
+    def __init__(self, capture, lights, state: ViewerState | None = None, *, headless: bool | None = None,
+                 mask_path=None, vsync: bool = True, title: str = "ffls view", timing: bool = False):
+        from .renderer import Renderer, load_mask
+
+        self.state = state if state is not None else ViewerState()
+        self.platform = platforms.choose_platform(headless)
+        self._imgui_ready = False
+        self.window = None
+        self.renderer = None
+        self.ctx = None
+        self._dialog = None
+        self.frames_rendered = 0
+        self.stats: list[dict] = []
+        self.timing = bool(timing)
+        self._previous_context = platforms.CurrentEGLContext()
+        glfw = self.glfw = platforms.acquire_glfw(self.platform)
+        try:
+            platforms.window_hints(glfw, self.platform)
+            w, h = (int(v) for v in self.state.window_size)
+            monitor = glfw.get_primary_monitor() if self.state.fullscreen else None
+            if monitor:
+                mode = glfw.get_video_mode(monitor)
+                w, h = mode.size.width, mode.size.height
+            self.window = glfw.create_window(w, h, title, monitor, None)
+            if not self.window:
+                raise GLUnavailable(f"glfw could not open an OpenGL 4.3 window on the {self.platform} platform")
+            self._fullscreen = bool(monitor)
+            self._windowed_geometry = (100, 100, *self.state.window_size)
+            glfw.make_context_current(self.window)
+            glfw.swap_interval(1 if (vsync and self.platform == "desktop") else 0)
+            import moderngl
+
+            try:
+                self.ctx = moderngl.create_context(require=430)
+            except Exception as e:  # moderngl raises plain Exception
+                raise GLUnavailable(f"the window's context is not OpenGL 4.3: {e}") from None
+            mask = load_mask(capture, mask_path, size=self._image_size(capture))
+            reason = "" if mask is not None else "this capture has no object mask"
+            self.renderer = Renderer(self.ctx, capture, lights, mask=mask, mask_reason=reason)
+            self._init_imgui()
+            glfw.set_drop_callback(self.window, self._on_drop)
+            self._t_last = None
+        except BaseException:
+            self.close()
+            raise
+
+    @staticmethod
+    def _image_size(capture):
+        s = getattr(capture, "image_size", None)
+        return tuple(s) if s else None
+
+    def _init_imgui(self) -> None:
+        from imgui_bundle import imgui, implot
+
+        self._imgui_ctx = imgui.create_context()
+        imgui.set_current_context(self._imgui_ctx)
+        self._implot_ctx = implot.create_context()
+        implot.set_current_context(self._implot_ctx)
+        io = imgui.get_io()
+        io.set_ini_filename(None)  # never write imgui.ini into the working directory
+        sx, sy = self.glfw.get_window_content_scale(self.window)
+        scale = max(1.0, float(sx))
+        if scale != 1.0:
+            imgui.get_style().scale_all_sizes(scale)
+            imgui.get_style().font_scale_dpi = scale
+        self.renderer.info.content_scale = scale
+        addr = ctypes.cast(self.window, ctypes.c_void_p).value
+        if not imgui.backends.glfw_init_for_opengl(addr, True):
+            raise GLUnavailable("imgui's glfw backend did not initialise")
+        if not imgui.backends.opengl3_init("#version 430"):
+            raise GLUnavailable("imgui's OpenGL 3 backend did not initialise")
+        self._imgui_ready = True
+        self.renderer.info.dialog_available = self.platform == "desktop" and platforms.has_display()
+
+    # ------------------------------------------------------------------ callbacks
+    def _make_current(self) -> None:
+        """Make this window's GL and imgui contexts current (several viewers may coexist)."""
+        from imgui_bundle import imgui, implot
+
+        self.glfw.make_context_current(self.window)
+        imgui.set_current_context(self._imgui_ctx)
+        implot.set_current_context(self._implot_ctx)
+
+    def _on_drop(self, window, paths) -> None:
+        """glfw drop callback: the first dropped file becomes the light map."""
+        if paths:
+            p = paths[0]
+            self.state.lightmap = p.decode() if isinstance(p, bytes) else str(p)
+
+    # ------------------------------------------------------------------ loop
+    def should_close(self) -> bool:
+        """Whether the user closed the window or asked to quit."""
+        return bool(self.state.quit or self.glfw.window_should_close(self.window))
+
+    def step(self, dt: float | None = None) -> None:
+        """Run one frame.
+
+        Parameters
+        ----------
+        dt : float, optional
+            Seconds to advance the animation by (auto-rotation); default the wall time since
+            the previous frame (0 for the first).
+        """
+        from imgui_bundle import imgui
+
+        from .gui import draw_gui
+
+        glfw, st = self.glfw, self.state
+        now = time.perf_counter()
+        self._make_current()
+        if self._t_last is not None:
+            st.record_frame_time((now - self._t_last) * 1e3)
+        if dt is None:
+            dt = 0.0 if self._t_last is None else now - self._t_last
+        self._t_last = now
+        glfw.poll_events()
+        st.window_size = tuple(glfw.get_window_size(self.window))
+        self._poll_dialog()
+        st.advance(dt)
+        job = st.turntable
+        if job is not None:
+            st.yaw = ((job.start_yaw + 360.0 * job.done / job.frames) + 180.0) % 360.0 - 180.0
+        t_update = time.perf_counter()
+        info = self.renderer.update(st)
+        t_gui = time.perf_counter()
+        fbw, fbh = glfw.get_framebuffer_size(self.window)
+        ww, wh = st.window_size
+        info.framebuffer_scale = (fbw / max(ww, 1), fbh / max(wh, 1))
+        info.recording = "" if job is None else f"recording turntable {job.done + 1}/{job.frames} -> {job.folder}"
+
+        imgui.backends.opengl3_new_frame()
+        imgui.backends.glfw_new_frame()
+        imgui.new_frame()
+        draw_gui(st, info)
+        imgui.render()
+        t_draw = time.perf_counter()
+
+        self.ctx.screen.use()
+        self.ctx.viewport = (0, 0, fbw, fbh)
+        self.ctx.clear(0.09, 0.09, 0.1, 1.0)
+        imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
+        if self.timing:
+            self.ctx.finish()  # charge the window's drawing to this frame, not to the next pass 1
+        t_swap = time.perf_counter()
+        if job is not None:
+            self._turntable_frame(job)
+        if st.screenshot_path:
+            path, st.screenshot_path = st.screenshot_path, None
+            self.save_screenshot(path)
+        glfw.swap_buffers(self.window)
+        self._apply_fullscreen()
+        self.frames_rendered += 1
+        t_end = time.perf_counter()
+        self.stats.append({"frame_ms": (t_end - now) * 1e3, **info.timings,
+                           "update (all engine + preview)": (t_gui - t_update) * 1e3,
+                           "gui": (t_draw - t_gui) * 1e3, "window draw": (t_swap - t_draw) * 1e3,
+                           "swap + actions": (t_end - t_swap) * 1e3})
+
+    def run(self, frames: int | None = None, screenshot=None, dt: float | None = None) -> None:
+        """Run frames until the window closes, or ``frames`` frames; then save ``screenshot``.
+
+        Parameters
+        ----------
+        frames : int, optional
+            Stop after this many frames (scripted mode).
+        screenshot : path-like, optional
+            After the last frame: save the window (PNG) and the relit HDR (EXR, same stem).
+        dt : float, optional
+            Fixed animation step per frame (default: wall time).
+        """
+        n = 0
+        while not self.should_close() and (frames is None or n < frames):
+            if screenshot is not None and frames is not None and n == frames - 1:
+                self.state.screenshot_path = str(screenshot)
+            self.step(dt)
+            n += 1
+        if screenshot is not None and (frames is None or n < frames):  # window closed early
+            self.save_screenshot(screenshot)
+
+    def auto_expose(self, key: float = 0.18) -> float:
+        """Set ``state.exposure`` so that the current relit image's log-average luminance maps to ``key``.
+
+        Returns
+        -------
+        float
+            The exposure in stops (:func:`ffls.demo.auto_exposure`, rounded to 0.01).
+        """
+        from ffls.demo import auto_exposure
+
+        self._make_current()
+        self.renderer.update(self.state)
+        self.state.exposure = round(auto_exposure(self.renderer.read_hdr(), key), 2)
+        return self.state.exposure
+
+    def summary(self, skip: int = 1) -> dict:
+        """Frame-time statistics of the frames run so far, leaving out the first ``skip``.
+
+        Returns
+        -------
+        dict
+            ``frames``, ``mean_ms``, ``median_ms``, ``fps`` (1000 / mean), and ``passes``: the
+            mean ms of each engine pass over the frames where it ran.
+        """
+        rows = self.stats[skip:] if len(self.stats) > skip else self.stats
+        ms = np.array([r["frame_ms"] for r in rows]) if rows else np.zeros(0)
+        keys = sorted({k for r in rows for k in r if k != "frame_ms"})
+        passes = {k: float(np.mean([r[k] for r in rows if k in r])) for k in keys}
+        mean = float(ms.mean()) if ms.size else float("nan")
+        return {"frames": int(ms.size), "mean_ms": mean, "median_ms": float(np.median(ms)) if ms.size else mean,
+                "fps": 1000.0 / mean if ms.size and mean > 0 else float("nan"), "passes": passes}
+
+    # ------------------------------------------------------------------ actions
+    def read_window(self) -> np.ndarray:
+        """The default framebuffer (the whole window, GUI included) ``(H, W, 3)`` uint8, row 0 on top."""
+        self._make_current()
+        # moderngl's screen.read() selects GL_COLOR_ATTACHMENT0 as the read buffer, which is
+        # GL_INVALID_OPERATION on the default framebuffer; a blit into an FBO reads GL_BACK.
+        fbw, fbh = self.glfw.get_framebuffer_size(self.window)
+        fbo = self.ctx.simple_framebuffer((fbw, fbh), components=4)
+        try:
+            self.ctx.copy_framebuffer(fbo, self.ctx.detect_framebuffer(0))  # its size now, after resizes
+            raw = fbo.read(components=3, alignment=1)
+        finally:
+            for a in (*fbo.color_attachments, fbo.depth_attachment, fbo):
+                if a is not None:
+                    a.release()
+        self.ctx.screen.use()
+        return np.frombuffer(raw, dtype=np.uint8).reshape(fbh, fbw, 3)[::-1].copy()
+
+    def save_screenshot(self, path) -> tuple[Path, Path]:
+        """Write the window to ``path`` (PNG) and the relit HDR to ``path`` with suffix ``.exr``.
+
+        Returns
+        -------
+        (Path, Path)
+            The PNG and the EXR.
+        """
+        from ffls.imageio import write_exr, write_png
+
+        path = Path(path)
+        if path.suffix.lower() != ".png":
+            raise InputError("screenshot must be a .png (the HDR goes beside it as .exr)", path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_png(path, self.read_window())
+        exr = path.with_suffix(".exr")
+        write_exr(exr, self.renderer.read_hdr())
+        self.renderer.info.message = f"saved {path} and {exr.name}"
+        return path, exr
+
+    def _turntable_frame(self, job) -> None:
+        from ffls.imageio import write_png
+
+        folder = Path(job.folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_png(folder / f"frame_{job.done:04d}.png", self.renderer.read_display())
+        job.done += 1
+        if job.done >= job.frames:
+            self.state.turntable = None
+            self.state.yaw = job.start_yaw
+            self.renderer.info.message = f"turntable: {job.frames} frames in {folder}/frame_NNNN.png"
+
+    def _apply_fullscreen(self) -> None:
+        glfw = self.glfw
+        want = bool(self.state.fullscreen)
+        if want == self._fullscreen:
+            return
+        if want:
+            monitor = glfw.get_primary_monitor()
+            if not monitor:
+                self.state.fullscreen = False
+                self.renderer.info.message = "no monitor to go fullscreen on"
+                return
+            x, y = glfw.get_window_pos(self.window)
+            self._windowed_geometry = (x, y, *glfw.get_window_size(self.window))
+            mode = glfw.get_video_mode(monitor)
+            glfw.set_window_monitor(self.window, monitor, 0, 0, mode.size.width, mode.size.height, mode.refresh_rate)
+        else:
+            x, y, w, h = self._windowed_geometry
+            glfw.set_window_monitor(self.window, None, x, y, w, h, 0)
+        self._fullscreen = want
+
+    def _poll_dialog(self) -> None:
+        st = self.state
+        if st.open_dialog:
+            st.open_dialog = False
+            if self.renderer.info.dialog_available and self._dialog is None:
+                try:
+                    from imgui_bundle import portable_file_dialogs as pfd
+
+                    self._dialog = pfd.open_file("Open a light map", "", ["HDR light maps", "*.exr *.hdr", "All files", "*"])
+                except Exception as e:  # no zenity/kdialog: fall back to the path field
+                    self.renderer.info.dialog_available = False
+                    self.renderer.info.message = f"no file dialog ({e}); type a path instead"
+        if self._dialog is not None and self._dialog.ready(0):
+            res = self._dialog.result()
+            self._dialog = None
+            if res:
+                st.lightmap = res[0]
+
+    # ------------------------------------------------------------------ teardown
+    def close(self) -> None:
+        """Release the renderer, imgui, the window and glfw (safe to call twice)."""
+        if self.window is not None:
+            self.glfw.make_context_current(self.window)
+        if self._imgui_ready:
+            from imgui_bundle import imgui, implot
+
+            self._make_current()
+            imgui.backends.opengl3_shutdown()
+            imgui.backends.glfw_shutdown()
+            implot.destroy_context(self._implot_ctx)
+            imgui.destroy_context(self._imgui_ctx)
+            self._imgui_ready = False
+        if self.renderer is not None:
+            self.renderer.release()
+            self.renderer = None
+        if self.ctx is not None:
+            self.ctx.release()
+            self.ctx = None
+        if self.window is not None:
+            self.glfw.destroy_window(self.window)
+            self.window = None
+        if getattr(self, "glfw", None) is not None:
+            platforms.release_glfw(self.glfw)
+            self.glfw = None
+            self._previous_context.restore()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
