@@ -133,33 +133,6 @@ def _write_json(path: Path, doc: dict) -> Path:
     return path
 
 
-def _read_table(path: Path, j: _Json, key: str) -> np.ndarray:
-    """A (256, 3) inverse response table from .npy or .csv."""
-    if not path.is_file():
-        j.fail(key, f"response file {path.name!r} not found")
-    try:
-        if path.suffix.lower() == ".npy":
-            t = np.load(path, allow_pickle=False)
-        elif path.suffix.lower() == ".csv":
-            t = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
-        else:
-            j.fail(key, f"response file {path.name!r} must be .npy or .csv")
-    except (OSError, ValueError) as e:
-        raise InputError(f"cannot read inverse response table ({type(e).__name__}: {e})", path) from None
-    t = np.asarray(t, dtype=np.float64)
-    if t.ndim == 1:
-        t = t[:, None]
-    if t.shape == (256, 1):
-        t = np.repeat(t, 3, axis=1)
-    if t.shape != (256, 3):
-        raise InputError(f"inverse response table must have shape (256, 3) or (256,), got {t.shape}", path)
-    if not np.all(np.isfinite(t)) or (t < 0).any():
-        raise InputError("inverse response table must be finite and non-negative", path)
-    if (np.diff(t, axis=0) < 0).any():
-        raise InputError("inverse response table must be non-decreasing in every channel", path)
-    return t
-
-
 # ----------------------------------------------------------------------------- Capture
 @dataclass
 class Capture:
@@ -455,7 +428,11 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         if set(encoding) != {"response"}:
             j.fail("encoding", "expected 'srgb', 'linear' or {\"response\": \"file.npy|.csv\"}")
         rname = _check_name(j, encoding["response"], "encoding.response")
-        response = _read_table(folder / rname, j, "encoding.response")
+        from .spheres.response import load_response  # one reader of response tables
+
+        if not (folder / rname).is_file():
+            j.fail("encoding.response", f"response file {rname!r} not found")
+        response = load_response(folder / rname).astype(np.float64)
         encoding = {"response": rname}
     elif "encoding" in doc and encoding not in _ENCODINGS:
         j.fail("encoding", f"expected 'srgb', 'linear' or {{\"response\": file}}, got {_short(encoding)}")

@@ -699,3 +699,41 @@ def builtin_lightmap(name: str, height: int = 256) -> LightMap:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LightMapWarning)
         return load_lightmap(bundled[name])
+
+
+def as_samples(lightmap_or_samples):
+    """Light-map samples as float64 arrays, from a :class:`LightMap` or a ``(dirs, radiance, solid_angle)`` tuple.
+
+    Returns
+    -------
+    dirs : (M, 3) float64
+    radiance : (M, 3) float64
+        A single channel is repeated to RGB.
+    solid_angle : (M,) float64
+
+    Raises
+    ------
+    ValueError
+        Mismatched lengths, or NaN/Inf anywhere.
+    """
+    if hasattr(lightmap_or_samples, "samples"):
+        dirs, rad, sa = lightmap_or_samples.samples()
+    else:
+        dirs, rad, sa = lightmap_or_samples
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    rad = np.asarray(rad, dtype=np.float64)
+    if rad.ndim == 1:
+        rad = rad[:, None]
+    rad = rad.reshape(dirs.shape[0], -1)
+    if rad.shape[1] == 1:
+        rad = np.repeat(rad, 3, axis=1)
+    if rad.shape[1] != 3:
+        raise ValueError(f"radiance must be (M, 3), not {rad.shape}")
+    sa = np.asarray(sa, dtype=np.float64).reshape(-1)
+    if sa.shape[0] != dirs.shape[0]:
+        raise ValueError("directions, radiance and solid_angle must have the same length")
+    if not (np.all(np.isfinite(rad)) and np.all(np.isfinite(sa))):
+        raise ValueError("light map radiance or solid angles contain NaN or Inf")
+    if not np.all(np.isfinite(dirs)):
+        raise ValueError("light map directions contain NaN or Inf (pass valid texels only)")
+    return dirs, rad, sa

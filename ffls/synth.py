@@ -50,6 +50,7 @@ from .capture import LIGHTS_FILE, Capture, Lights, save_capture, save_lights
 from .conventions import check_hemisphere, in_domain, normalize
 from .errors import InputError, atomic_output
 from .imageio import write_exr, write_png
+from .lightmap import as_samples
 from .tonemap import srgb_encode
 
 __all__ = [
@@ -842,21 +843,6 @@ def stratified_directions(n: int, hemisphere: str = "upper", seed: int = 0) -> n
 
 
 # ============================================================================ oracle
-def _map_samples(lightmap):
-    if hasattr(lightmap, "samples"):
-        dirs, rad, sa = lightmap.samples()
-    else:
-        dirs, rad, sa = lightmap
-    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
-    rad = np.asarray(rad, dtype=np.float64).reshape(len(dirs), -1)
-    sa = np.asarray(sa, dtype=np.float64).reshape(-1)
-    if rad.shape[1] == 1:
-        rad = np.repeat(rad, 3, axis=1)
-    if rad.shape[1] != 3 or len(sa) != len(dirs):
-        raise ValueError("light-map samples must be dirs (M, 3), radiance (M, 3), solid_angle (M,)")
-    return dirs, rad, sa
-
-
 def cluster_lightmap(lightmap, n_dirs: int = 2048, hemisphere: str = "upper", rotation=None):
     """Reduce a light map to ``n_dirs`` distant lights (the oracle's discretisation).
 
@@ -889,7 +875,7 @@ def cluster_lightmap(lightmap, n_dirs: int = 2048, hemisphere: str = "upper", ro
         Number of texels with non-zero radiance dropped below the horizon.
     """
     check_hemisphere(hemisphere)
-    dirs, rad, sa = _map_samples(lightmap)
+    dirs, rad, sa = as_samples(lightmap)
     if not (np.isfinite(rad).all() and np.isfinite(sa).all()):
         raise InputError("light map has non-finite radiance or solid angles")
     if rotation is not None:

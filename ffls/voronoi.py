@@ -50,6 +50,7 @@ from .conventions import (
     latlong_directions,
     rotate_directions,
 )
+from .lightmap import as_samples
 
 __all__ = [
     "CellTexture",
@@ -409,28 +410,6 @@ class Weights:
     total_power: np.ndarray
 
 
-def _samples(lightmap_or_samples):
-    if hasattr(lightmap_or_samples, "samples"):
-        dirs, rad, sa = lightmap_or_samples.samples()
-    else:
-        dirs, rad, sa = lightmap_or_samples
-    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
-    rad = np.asarray(rad, dtype=np.float64)
-    if rad.ndim == 1:
-        rad = rad[:, None]
-    rad = rad.reshape(dirs.shape[0], -1)
-    if rad.shape[1] != 3:
-        raise ValueError(f"radiance must be (M, 3), not {rad.shape}")
-    sa = np.asarray(sa, dtype=np.float64).reshape(-1)
-    if sa.shape[0] != dirs.shape[0]:
-        raise ValueError("directions, radiance and solid_angle must have the same length")
-    if not (np.all(np.isfinite(rad)) and np.all(np.isfinite(sa))):
-        raise ValueError("light map radiance or solid angles contain NaN or Inf")
-    if not np.all(np.isfinite(dirs)):
-        raise ValueError("light map directions contain NaN or Inf (pass valid texels only)")
-    return dirs, rad, sa
-
-
 def assign_cells(p, directions, cells: CellTexture | None = None) -> np.ndarray:
     """Angular Voronoi cell (light index) of each direction.
 
@@ -504,7 +483,7 @@ def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere
     if cells is not None:
         if cells.hemisphere != hemisphere or cells.directions.shape != unit.shape or not np.array_equal(cells.directions, unit):
             raise ValueError("cells were baked for other directions or another hemisphere")
-    dirs, rad, sa = _samples(lightmap_or_samples)
+    dirs, rad, sa = as_samples(lightmap_or_samples)
     power = rad * sa[:, None]
     total = power.sum(axis=0)
     p = rotate_directions(R, dirs)

@@ -102,7 +102,12 @@ class ViewerApp:
             import moderngl
 
             try:
-                self.ctx = moderngl.create_context(require=430)
+                # wrap the window's current context through moderngl's own loader of the current
+                # context's functions: glcontext's "detect" mode would assume GLX, and plain
+                # create_context() hands a second window the first window's cached context
+                from _moderngl import DefaultLoader
+
+                self.ctx = moderngl.create_context(require=430, context=DefaultLoader())
             except Exception as e:  # moderngl raises plain Exception
                 raise GLUnavailable(f"the window's context is not OpenGL 4.3: {e}") from None
             mask = load_mask(capture, mask_path, size=self._image_size(capture))
