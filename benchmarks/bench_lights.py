@@ -4,9 +4,12 @@ Lights at phi = 0..180 deg (20 deg steps, 0 = toward the camera) and theta = 0..
 steps from the zenith): 80 lights, rendered by :mod:`ffls.synth` at 768 x 768 (spheres ~45 px).
 Configurations: grey ground (albedo 0.3) distant and near (10 cm light at 2 m), black ground,
 noise, 8-bit sRGB. The spheres are given from the renderer's truth (the estimator is measured, not
-the detector). Prints a table and writes ``benchmarks/results/bench_lights.json``.
+the detector). Both passes of :func:`ffls.spheres.estimate.estimate_photos` (free bounce, then the
+capture-wide ground ratio imposed; ``--bounce free``: one pass) run in one process; the time per
+image covers both passes and the sphere pixel extraction, not the image decoding. Prints a table
+and writes ``benchmarks/results/bench_lights.json``.
 
-    python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--workers 1]
+    python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--cache DIR]
 """
 from __future__ import annotations
 
@@ -24,7 +27,7 @@ import numpy as np
 from ffls.capture import load_capture
 from ffls.conventions import angle_between, spherical_to_direction
 from ffls.errors import atomic_output
-from ffls.spheres.estimate import capture_samples, estimate_photo
+from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_values
 from ffls.synth import write_synthetic_capture
 
 CONFIGS = {
@@ -47,8 +50,14 @@ def grid(phi_step, theta_step):
     return phis, thetas, d
 
 
-def run_config(name, cfg, res, dirs, folder, workers):
-    write_synthetic_capture(folder, resolution=res, directions=dirs, progress=False, **cfg)
+def run_config(name, cfg, res, dirs, folder, bounce="calibrated"):
+    folder = Path(folder)
+    if (folder / "truth.json").exists():  # a cached render (--cache) of the same grid
+        old = np.asarray(json.loads((folder / "truth.json").read_text())["directions"])
+        if old.shape != dirs.shape or not np.allclose(old, dirs, atol=1e-9):
+            raise SystemExit(f"{folder} holds another grid; remove it or use another --cache")
+    else:
+        write_synthetic_capture(folder, resolution=res, directions=dirs, progress=False, **cfg)
     cap = load_capture(folder)
     truth = json.loads((Path(folder) / "truth.json").read_text())
     M = np.linalg.inv(cap.world_from_camera)
@@ -57,9 +66,9 @@ def run_config(name, cfg, res, dirs, folder, workers):
     shape = cap.load_image(0).shape[:2]
     samples = capture_samples(cap, sph, shape)
     imgs = [cap.load_image(i) for i in range(len(dirs))]
-    estimate_photo(imgs[0], samples, cap.scene_center)  # warm-up
     t = time.perf_counter()
-    res_ = [estimate_photo(im, samples, cap.scene_center) for im in imgs]
+    vals = [sphere_values(im, samples) for im in imgs]
+    res_, calib = estimate_photos(vals, samples, cap.scene_center, bounce=bounce)
     dt = (time.perf_counter() - t) / len(imgs)
     est = np.array([r["direction"] for r in res_])
     err = np.degrees(angle_between(est, np.asarray(truth["directions"])))
@@ -73,7 +82,7 @@ def run_config(name, cfg, res, dirs, folder, workers):
         "max_deg": float(e.max()) if e.size else None,
         "median_uncertainty_deg": float(np.median([r["uncertainty_deg"] for r, o in zip(res_, ok) if o])) if e.size else None,
         "models": {m: sum(1 for r in res_ if r["model"] == m) for m in ("distant", "near")},
-        "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
+        "bounce": bounce, "calibration": calib, "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
         "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
     }
 
@@ -84,14 +93,16 @@ def main(argv=None):
     ap.add_argument("--phi-step", type=int, default=20)
     ap.add_argument("--theta-step", type=int, default=10)
     ap.add_argument("--configs", default=",".join(CONFIGS))
-    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated")
+    ap.add_argument("--cache", default=None, help="keep (and reuse) the renders in this folder")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_lights.json"))
     a = ap.parse_args(argv)
     phis, thetas, dirs = grid(a.phi_step, a.theta_step)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in a.configs.split(","):
-            r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(tmp, name), a.workers)
+            base = a.cache or tmp
+            r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(base, f"{name}_{a.res}"), a.bounce)
             rows.append(r)
             tgt = TARGETS.get(name)
             print(f"{name:22s} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "
@@ -100,6 +111,14 @@ def main(argv=None):
                   + (f"  target max {tgt[0]} median {tgt[1]}" if tgt else ""), flush=True)
     doc = {"benchmark": "bench_lights", "cpu_count": os.cpu_count(), "machine": platform.processor() or platform.machine(),
            "phis_deg": phis.tolist(), "thetas_deg": thetas.tolist(), "results": rows}
+    for r in rows:  # phi rows x theta columns, for docs/spheres.md
+        print(f"\n{r['config']} ({r['bounce']} bounce): median {r['median_deg']:.2f}, max {r['max_deg']:.2f} deg, "
+              f"{r['ms_per_image']:.0f} ms/img, accepted {r['accepted']}/{r['n']}")
+        print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")
+        print("|---" * (len(thetas) + 1) + "|")
+        e = np.array([np.nan if x is None else x for x in r["errors_deg"]]).reshape(len(phis), len(thetas))
+        for p_, row in zip(phis, e):
+            print(f"| {p_:.0f} | " + " | ".join("rej" if np.isnan(x) else f"{x:.2f}" for x in row) + " |")
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output(out) as t:

@@ -77,7 +77,7 @@ class Knob:
 QUALITY_KNOBS: tuple[Knob, ...] = (
     Knob("method", "method", "choice", "compressed", choices=METHODS,
          help="compressed: mean + K eigen-images (fast); full: every basis image, float16 or float32"),
-    Knob("rank", "rank K", "int", 32, lo=1, hi=128, enabled_when=("method", ("compressed",)),
+    Knob("rank", "rank K", "int", 16, lo=1, hi=128, enabled_when=("method", ("compressed",)),
          help="eigen-images of the compressed basis (computed once, saved in the capture folder)"),
     Knob("cell_res", "cell texture", "choice", "256", choices=("128", "256", "512"),
          help="resolution of the Voronoi cell-index texture of pass 1"),

@@ -17,6 +17,9 @@ def add_arguments(p):
     p.add_argument("-o", "--output", default=None, help="lights.json to write (default: CAPTURE/lights.json)")
     p.add_argument("--model", choices=("auto", "distant", "near"), default="auto",
                    help="light model: chosen per photo (auto), distant or near (default auto)")
+    p.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated",
+                   help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
+                        "(two passes), or free per photo (default calibrated)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: every core)")
     p.add_argument("--plot", default=None, metavar="PLOT.png",
                    help="draw the accepted directions and their Voronoi cells on the hemisphere")
@@ -80,7 +83,8 @@ def run(args) -> int:
     from ..spheres.estimate import estimate_lights
 
     cap = load_capture(args.capture)
-    lights = estimate_lights(cap, progress=not args.no_progress, workers=args.workers, model=args.model)
+    lights = estimate_lights(cap, progress=not args.no_progress, workers=args.workers, model=args.model,
+                             bounce=args.bounce)
     out = Path(args.output) if args.output else cap.folder / "lights.json"
     save_lights(lights, out)
     print(summary(lights))

@@ -30,8 +30,8 @@ def add_arguments(p):
                    help="exposure in stops (default: automatic for the first frame)")
     p.add_argument("--tonemap", default="aces", choices=("srgb", "reinhard", "aces"))
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
-    p.add_argument("--rank", type=int, default=32, metavar="K",
-                   help="compressed basis of K eigen-images (default 32); 0 = full float16 basis")
+    p.add_argument("--rank", type=int, default=16, metavar="K",
+                   help="compressed basis of K eigen-images (default 16); 0 = full float16 basis")
     p.add_argument("--mask", default=None, metavar="FILE",
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
