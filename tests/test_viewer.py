@@ -332,3 +332,12 @@ def test_cli_frames_screenshot(capture_dir, app, tmp_path, capsys):
     app.step(dt=0.0)
     assert app.ctx.error == "GL_NO_ERROR"
     assert main(["view", str(capture_dir), "--headless", "--frames", "0"]) == 2
+
+
+def test_auto_method_is_full_on_a_gpu_and_compressed_on_llvmpipe():
+    from viewer.renderer import resolve_method
+
+    assert resolve_method("auto", "llvmpipe (LLVM 15.0.6, 256 bits)") == "compressed"
+    assert resolve_method("auto", "NVIDIA H100 80GB HBM3/PCIe/SSE2") == "full f16"
+    assert resolve_method("full f32", "llvmpipe") == "full f32"
+    assert resolve_method("compressed", "NVIDIA H100") == "compressed"

@@ -29,7 +29,7 @@ from ffls.tonemap import to_uint8
 
 from .state import BUILTIN_MAPS, ViewerState, ViewInfo
 
-__all__ = ["Renderer", "load_lightmap_spec", "load_mask", "heat_colours", "pass1_lightmap"]
+__all__ = ["Renderer", "load_lightmap_spec", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
 
 #: Height of the lat-long preview texture (width is twice that).
 PREVIEW_HEIGHT = 128
@@ -80,6 +80,19 @@ def load_mask(capture, path=None, size=None) -> np.ndarray | None:
     if size is not None and (m.shape[1], m.shape[0]) != tuple(size):
         raise InputError(f"mask is {m.shape[1]}x{m.shape[0]}, the images are {size[0]}x{size[1]}", path)
     return m
+
+
+def resolve_method(method: str, renderer: str) -> str:
+    """The pass-2 method that ``'auto'`` stands for on ``renderer`` (a GL_RENDERER string).
+
+    A CPU rasteriser gets the compressed basis (the full one cannot keep frame rate there); a
+    GPU gets the full float16 basis. Other methods are returned unchanged.
+    """
+    from ffls.gpu.context import is_software_renderer
+
+    if method != "auto":
+        return method
+    return "compressed" if is_software_renderer(renderer) else "full f16"
 
 
 def pass1_lightmap(lm, height):
@@ -186,7 +199,7 @@ class Renderer:
         from ffls.gpu.engine import Engine
 
         q = state.quality
-        method = q.get("method", "compressed")
+        method = resolve_method(q.get("method", "auto"), self.info.renderer)
         kw = {"cell_res": int(q.get("cell_res", 256))}
         if method == "compressed":
             kw.update(dtype="f16", rank=int(min(int(q.get("rank", 32)), len(self.directions))))

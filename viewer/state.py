@@ -29,7 +29,9 @@ TONEMAPS = ("srgb", "reinhard", "aces")
 #: Built-in light maps (:func:`ffls.lightmap.builtin_lightmap`).
 BUILTIN_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
 #: Pass-2 methods: compressed basis of rank K (float16 eigen-images), or the full basis.
-METHODS = ("compressed", "full f16", "full f32")
+#: 'auto' is the full float16 basis on a GPU and the compressed one on a CPU rasteriser
+#: (llvmpipe), where the full basis cannot keep frame rate (docs/viewer.md).
+METHODS = ("auto", "compressed", "full f16", "full f32")
 #: Frame times kept for the plot.
 HISTORY = 240
 
@@ -75,9 +77,10 @@ class Knob:
 
 #: The quality panel, in display order.
 QUALITY_KNOBS: tuple[Knob, ...] = (
-    Knob("method", "method", "choice", "compressed", choices=METHODS,
-         help="compressed: mean + K eigen-images (fast); full: every basis image, float16 or float32"),
-    Knob("rank", "rank K", "int", 16, lo=1, hi=128, enabled_when=("method", ("compressed",)),
+    Knob("method", "method", "choice", "auto", choices=METHODS,
+         help="auto: full f16 on a GPU, compressed on a CPU rasteriser; compressed: mean + K "
+              "eigen-images (fast); full: every basis image, float16 or float32"),
+    Knob("rank", "rank K", "int", 16, lo=1, hi=128, enabled_when=("method", ("auto", "compressed")),
          help="eigen-images of the compressed basis (computed once, saved in the capture folder)"),
     Knob("cell_res", "cell texture", "choice", "256", choices=("128", "256", "512"),
          help="resolution of the Voronoi cell-index texture of pass 1"),

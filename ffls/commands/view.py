@@ -30,8 +30,9 @@ def add_arguments(p):
                    help="exposure in stops (default: automatic for the first frame)")
     p.add_argument("--tonemap", default="aces", choices=("srgb", "reinhard", "aces"))
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
-    p.add_argument("--rank", type=int, default=16, metavar="K",
-                   help="compressed basis of K eigen-images (default 16); 0 = full float16 basis")
+    p.add_argument("--rank", type=int, default=None, metavar="K",
+                   help="compressed basis of K eigen-images; 0 = full float16 basis (default: full on a "
+                        "GPU, rank 16 on a CPU rasteriser such as llvmpipe)")
     p.add_argument("--mask", default=None, metavar="FILE",
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
@@ -64,7 +65,8 @@ def build_state(args):
         raise InputError(f"--rank must be >= 0, not {args.rank}")
     if args.rank == 0:
         st.quality["method"] = "full f16"
-    else:
+    elif args.rank is not None:
+        st.quality["method"] = "compressed"
         st.quality["rank"] = int(args.rank)
     return st
 

@@ -62,6 +62,16 @@ def _create_osmesa(require: int):
     return create_osmesa_context(require)
 
 
+#: GL_RENDERER substrings of CPU rasterisers (Mesa llvmpipe/softpipe/swrast, SwiftShader).
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader")
+
+
+def is_software_renderer(renderer: str) -> bool:
+    """True when ``renderer`` (a GL_RENDERER string) names a CPU rasteriser."""
+    r = (renderer or "").lower()
+    return any(s in r for s in SOFTWARE_RENDERERS)
+
+
 def describe_context(ctx) -> dict:
     """What a context offers: backend, renderer, version, and the limits ffls depends on.
 
