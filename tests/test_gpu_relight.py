@@ -38,7 +38,8 @@ def _basis(rng, n, H=16, W=16, dynamic=True):
 
 def _run_pass2(ctx, basis, w, dtype="f16", method="compute", **kw):
     from ffls.gpu.basis import BasisTextures, PackedBasis
-    from ffls.gpu.weighted_sum import WeightedSum, release_gl, weights_to_vec4
+    from ffls.gpu.context import release_gl
+    from ffls.gpu.weighted_sum import WeightedSum, weights_to_vec4
 
     bt = (PackedBasis if method == "packed" else BasisTextures)(ctx, basis, dtype, **kw)
     ws = WeightedSum(ctx, bt, method)
@@ -259,7 +260,8 @@ def test_compressed_save_load_roundtrip(tmp_path, rng):
 def test_gpu_projection_and_compressed_pass2(ctx, rng):
     from ffls.compress import compress_basis
     from ffls.gpu.engine import Engine
-    from ffls.gpu.weighted_sum import Projector, release_gl, weights_to_vec4
+    from ffls.gpu.context import release_gl
+    from ffls.gpu.weighted_sum import Projector, weights_to_vec4
     from ffls.relight import relight_reference
 
     basis = _lowrank_basis(rng)
@@ -293,7 +295,8 @@ def test_gpu_projection_and_compressed_pass2(ctx, rng):
 @pytest.mark.gl
 @pytest.mark.parametrize("method", ["srgb", "reinhard", "aces"])
 def test_tonemap_shader_matches_numpy(ctx, rng, method):
-    from ffls.gpu.weighted_sum import ToneMapPass, release_gl
+    from ffls.gpu.context import release_gl
+    from ffls.gpu.weighted_sum import ToneMapPass
     from ffls.tonemap import to_uint8, tonemap
 
     H, W = 16, 24

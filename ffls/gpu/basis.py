@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from .context import release_gl
 
 __all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
            "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "SSBO_BAND_BYTES"]
@@ -238,8 +239,6 @@ class BasisTextures:
 
     def release(self) -> None:
         """Release the textures."""
-        from .weighted_sum import release_gl
-
         for t in self.textures:
             release_gl(t)
         self.textures = []
@@ -377,8 +376,6 @@ class PackedBasis:
 
     def release(self) -> None:
         """Release the buffers."""
-        from .weighted_sum import release_gl
-
         for chunk in self.bands:
             for _, _, buf in chunk:
                 release_gl(buf)

@@ -105,3 +105,13 @@ def describe_context(ctx) -> dict:
         "float_atomics": "GL_NV_shader_atomic_float" in ctx.extensions,
         "fp64": ctx.version_code >= 400 or "GL_ARB_gpu_shader_fp64" in ctx.extensions,
     }
+
+
+def release_gl(obj) -> None:
+    """Release a moderngl object now; None is ignored.
+
+    Contexts made here run ``gc_mode='auto'``, so an object released explicitly may also be
+    dropped by Python later without harm.
+    """
+    if obj is not None:
+        obj.release()

@@ -2,8 +2,7 @@
 
 :class:`Engine` owns the GPU state of one capture: the basis texture arrays (float16 with a
 per-dataset scale, or float32; optionally a compressed basis of K eigen-images), pass 1
-(``ffls.gpu.integrate.CellIntegrator`` when available, else the CPU integration
-:func:`ffls.voronoi.integrate_weights` over the same baked cell texture), pass 2
+(:class:`ffls.gpu.integrate.CellIntegrator`), pass 2
 (:class:`ffls.gpu.weighted_sum.WeightedSum`) and the display pass. It never creates a context.
 
 Typical use (viewer or CLI)::
@@ -27,18 +26,11 @@ import numpy as np
 from ..conventions import check_hemisphere, is_rotation
 from ..errors import InputError
 from .basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
-from .weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
+from .context import release_gl
+from .integrate import CellIntegrator
+from .weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, weights_to_vec4
 
 __all__ = ["Engine"]
-
-
-def _cell_integrator_class():
-    """``ffls.gpu.integrate.CellIntegrator`` or None when pass 1's module is not available."""
-    try:
-        from .integrate import CellIntegrator
-    except ImportError:
-        return None
-    return CellIntegrator
 
 
 def _capture_basis(capture, lights) -> tuple[np.ndarray, np.ndarray]:
@@ -220,21 +212,11 @@ class Engine:
         return self._cells
 
     def _run_pass1(self):
-        cls = _cell_integrator_class()
-        if cls is not None:
-            if self._integrator is None:
-                self._integrator = cls(self.ctx, self.directions, self.hemisphere, self._ensure_cells())
-                self._integrator.set_lightmap(self._lightmap)
-            self._weights_source = self._integrator.run(self._rotation)
-            self._cpu_weights = None
-        else:  # CPU pass 1 over the same cell texture the GPU would use
-            from ..voronoi import integrate_weights
-
-            w = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
-                                  cells=self._ensure_cells()).weights
-            self._cpu_weights = w
-            self._weights_buffer.write(weights_to_vec4(w))
-            self._weights_source = self._weights_buffer
+        if self._integrator is None:
+            self._integrator = CellIntegrator(self.ctx, self.directions, self.hemisphere, self._ensure_cells())
+            self._integrator.set_lightmap(self._lightmap)
+        self._weights_source = self._integrator.run(self._rotation)
+        self._cpu_weights = None
 
     def _timed(self, name, fn):
         t0 = time.perf_counter()

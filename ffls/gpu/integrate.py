@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..conventions import check_hemisphere, is_rotation
+from .context import release_gl
 from .shaders import load_program
 
 __all__ = ["CellIntegrator", "METHODS", "WEIGHTS_BINDING"]
@@ -50,21 +51,6 @@ _CHAIN = 128
 _PARTIAL_BUDGET = 1 << 22
 #: Blocks of the counting sort ('sort'); each is walked serially by one invocation.
 _SORT_BLOCKS = 256
-
-
-class _Released:
-    """Stands in for a released object's ``mglo``: moderngl 5.13's ``__del__`` in ``context_gc``
-    mode queues ``mglo`` for ``ctx.gc()`` even after an explicit ``release()``, and the
-    ``InvalidObject`` it leaves has no ``release`` (AttributeError in ``ctx.gc()``)."""
-
-    def release(self):
-        pass
-
-
-def _release(obj) -> None:
-    """Release a moderngl object now, safely under every ``gc_mode``."""
-    obj.release()
-    obj.mglo = _Released()
 
 
 class CellIntegrator:
@@ -161,7 +147,7 @@ class CellIntegrator:
 
     def _release_map(self):
         for o in self._objects:
-            _release(o)
+            release_gl(o)
         self._objects = []
 
     def _bind_common(self, prog, R):
@@ -347,5 +333,5 @@ class CellIntegrator:
         """Release every GL object this integrator made (programs stay in the loader's cache)."""
         self._release_map()
         for o in (self._lights, self._cand, self.weights_buffer, self._stats):
-            _release(o)
+            release_gl(o)
         self.m = 0

@@ -24,9 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .context import release_gl
 from .shaders import load_program
 
-__all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "METHODS", "DEFAULT_METHOD", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4", "release_gl"]
+__all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "METHODS", "DEFAULT_METHOD", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4"]
 
 #: SSBO binding point from which pass 2 (and the projector) read the weights.
 WEIGHTS_BINDING = 0
@@ -50,22 +51,6 @@ def weights_to_vec4(w) -> bytes:
     out = np.zeros((w.shape[0], 4), dtype=np.float32)
     out[:, :3] = w
     return out.tobytes()
-
-
-class _Released:
-    """Stands in for a released object's ``mglo``: moderngl 5.13 queues ``mglo`` for
-    ``ctx.gc()`` in ``context_gc`` mode even after an explicit ``release()``, and the
-    ``InvalidObject`` it leaves there has no ``release`` (AttributeError in ``ctx.gc()``)."""
-
-    def release(self):
-        pass
-
-
-def release_gl(obj) -> None:
-    """Release a moderngl object now, safely under every ``gc_mode`` (None is ignored)."""
-    if obj is not None:
-        obj.release()
-        obj.mglo = _Released()
 
 
 def _default_framebuffer(ctx):
