@@ -345,7 +345,8 @@ def test_glsl_matches_python(ctx, rng):
     prog["n"] = n
     prog.run(group_x=(n + 63) // 64)
     out = np.frombuffer(b_out.read(), dtype="f4").reshape(n, 5, 4).astype(np.float64)
-    # no explicit release: the context runs gc_mode="context_gc" and the ctx fixture collects
+    for b in (b_dir, b_uv, b_out):
+        b.release()
 
     d32 = d.astype("f4").astype(np.float64)  # the GPU's input
     conc, octa, ll = get_map("concentric"), get_map("octahedral"), get_map("latlong")

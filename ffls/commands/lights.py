@@ -43,35 +43,77 @@ def summary(lights) -> str:
     return "\n".join(lines)
 
 
-def plot_lights(lights, path, hemisphere: str = "upper", res: int = 256) -> Path:
-    """PNG of the accepted directions with their angular Voronoi cells on the concentric map."""
+def _disc_to_direction(x, y, lower=False):
+    """Equal-area disc -> hemisphere (the concentric map's disc step): r^2 = 1 - |z|."""
+    r2 = x * x + y * y
+    s = np.sqrt(np.maximum(0.0, 2.0 - r2))
+    z = 1.0 - r2
+    return np.stack([x * s, y * s, -z if lower else z], axis=-1)
+
+
+def _direction_to_disc(d):
+    """Inverse of :func:`_disc_to_direction` for unit directions (..., 3): disc (x, y)."""
+    r2 = 1.0 - np.abs(d[..., 2])
+    s = np.sqrt(np.maximum(2.0 - r2, 1e-300))
+    return d[..., 0] / s, d[..., 1] / s
+
+
+def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path:
+    """PNG of the light directions with their angular Voronoi cells on the hemisphere disc.
+
+    The hemisphere is drawn on the disc of Shirley and Chiu's concentric map with the
+    equal-area lift (area on the disc is proportional to solid angle): +Z at the centre, the
+    horizon on the rim, +X to the right, +Y up. Rings mark 30 and 60 degrees from the zenith.
+    Accepted lights are black dots, rejected ones red crosses; a ``full`` capture gets a second
+    disc for the lower hemisphere (seen from above).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from ..errors import atomic_output
-    from ..sphere_maps import get_map
-    from ..voronoi import assign_cells, bake_cells
+    from ..voronoi import assign_cells
 
     idx, d = lights.accepted()
-    smap = get_map("concentric")
-    fig, ax = plt.subplots(figsize=(6, 6), dpi=100)
-    if len(d):
-        cells = bake_cells(d, hemisphere="upper", res=res)
-        dirs = smap.directions(res)
-        lab = assign_cells(dirs.reshape(-1, 3), d, cells).reshape(dirs.shape[:2]).astype(float)
-        valid = smap.valid_mask(res)
-        lab[~valid] = np.nan
-        rng = np.random.default_rng(0)
-        perm = rng.permutation(len(d))
-        ax.imshow(np.where(np.isnan(lab), np.nan, perm[np.nan_to_num(lab).astype(int)]), cmap="tab20",
-                  origin="upper", interpolation="nearest", alpha=0.6)
-        up = d[d[:, 2] >= 0]
-        px = smap.to_pixel(up, res)
-        ax.plot(np.asarray(px)[:, 0] - 0.5, np.asarray(px)[:, 1] - 0.5, "k.", ms=3)
-    ax.set_title(f"{len(d)} light directions (concentric map, +Z at centre)")
-    ax.set_axis_off()
+    rejected = np.asarray(lights.directions)[~np.asarray(lights.ok_mask, dtype=bool)]
+    halves = [False] if hemisphere == "upper" else [False, True]
+    fig, axes = plt.subplots(1, len(halves), figsize=(6 * len(halves), 6.4), dpi=100, squeeze=False)
+    t = (np.arange(res) + 0.5) / res * 2.0 - 1.0
+    x, y = np.meshgrid(t, -t)  # image rows go down, +Y up
+    inside = x * x + y * y <= 1.0
+    rng = np.random.default_rng(0)
+    perm = rng.permutation(max(len(d), 1))
+    for ax, lower in zip(axes[0], halves):
+        if len(d):
+            lab = np.full(x.shape, -1, dtype=np.int64)
+            lab[inside] = assign_cells(_disc_to_direction(x[inside], y[inside], lower), d)
+            border = np.zeros(lab.shape, dtype=bool)
+            border[:, :-1] |= lab[:, :-1] != lab[:, 1:]
+            border[:-1, :] |= lab[:-1, :] != lab[1:, :]
+            img = np.where(lab >= 0, perm[np.maximum(lab, 0) % len(perm)], np.nan).astype(float)
+            ax.imshow(np.ma.masked_invalid(img), cmap="tab20", extent=(-1, 1, -1, 1), interpolation="nearest",
+                      alpha=0.55)
+            ax.imshow(np.ma.masked_where(~(border & inside), border.astype(float)), cmap="gray_r",
+                      extent=(-1, 1, -1, 1), interpolation="nearest", vmin=0, vmax=1)
+        for pts, style in ((d, "k."), (rejected, "rx")):
+            sel = pts[(pts[:, 2] < 0) == lower] if len(pts) else pts
+            if len(sel):
+                px, py = _direction_to_disc(sel)
+                ax.plot(px, py, style, ms=4)
+        ang = np.linspace(0, 2 * np.pi, 200)
+        for theta in (30, 60, 90):
+            r = np.sqrt(1.0 - np.cos(np.radians(theta)))
+            ax.plot(r * np.cos(ang), r * np.sin(ang), color="0.4", lw=0.6 if theta < 90 else 1.0)
+        ax.text(1.02, 0, "+X", va="center")
+        ax.text(0, 1.03, "+Y", ha="center")
+        ax.set_xlim(-1.1, 1.1)
+        ax.set_ylim(-1.1, 1.1)
+        ax.set_aspect("equal")
+        ax.set_axis_off()
+        ax.set_title(("lower" if lower else "upper") + " hemisphere (+Z at centre; rings 30, 60, 90 deg)"
+                     if len(halves) > 1 else "hemisphere: +Z at centre; rings at 30, 60, 90 deg", fontsize=9)
+    fig.suptitle(f"{len(d)} accepted light directions ({len(rejected)} rejected, red x) and their Voronoi cells")
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
