@@ -254,6 +254,17 @@ def test_screenshot_turntable_drop(fresh, tmp_path):
     frames = sorted((tmp_path / "tt").glob("frame_*.png"))
     assert len(frames) == 3
     assert np.abs(read_image(frames[0]).pixels - read_image(frames[1]).pixels).mean() > 1e-3
+    # an mp4 appears only when the recording completes; a stopped one leaves nothing
+    app.state.turntable = TurntableJob(str(tmp_path / "stopped.mp4"), frames=4, start_yaw=0.0)
+    app.step(dt=0.0)
+    app.state.turntable = None  # the GUI's Stop button
+    app.step(dt=0.0)
+    assert not list(tmp_path.glob("stopped*")) and not list(tmp_path.glob(".stopped*"))
+    app.state.turntable = TurntableJob(str(tmp_path / "tt.mp4"), frames=3, start_yaw=0.0)
+    for _ in range(3):
+        app.step(dt=0.0)
+    assert app.state.turntable is None and (tmp_path / "tt.mp4").stat().st_size > 0
+    assert "3 frames" in app.renderer.info.message
     # a dropped light map file is loaded; a bad one leaves a message and the old map
     save_lightmap(constant_map(16, 0.5), tmp_path / "grey.exr")
     app._on_drop(app.window, [str(tmp_path / "grey.exr")])

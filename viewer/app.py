@@ -80,6 +80,7 @@ class ViewerApp:
         self.renderer = None
         self.ctx = None
         self._dialog = None
+        self._sink = self._sink_job = None  # turntable FrameWriter and the job it records
         self.frames_rendered = 0
         self.stats: list[dict] = []
         self.timing = bool(timing)
@@ -220,6 +221,8 @@ class ViewerApp:
         t_swap = time.perf_counter()
         if job is not None:
             self._turntable_frame(job)
+        elif self._sink is not None:
+            self._drop_sink()
         if st.screenshot_path:
             path, st.screenshot_path = st.screenshot_path, None
             self.save_screenshot(path)
@@ -324,16 +327,33 @@ class ViewerApp:
         return path, exr
 
     def _turntable_frame(self, job) -> None:
-        from ffls.imageio import write_png
+        from ffls.errors import FflsError
+        from ffls.video import FrameWriter
 
-        folder = Path(job.folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        write_png(folder / f"frame_{job.done:04d}.png", self.renderer.read_display())
+        if self._sink_job is not job:
+            self._drop_sink()
+            try:
+                self._sink = FrameWriter(job.folder, fps=30.0)
+            except FflsError as e:
+                self.state.turntable = None
+                self.renderer.info.message = f"turntable: {e}"
+                return
+            self._sink_job = job
+        self._sink.write(self.renderer.read_display())
         job.done += 1
         if job.done >= job.frames:
             self.state.turntable = None
             self.state.yaw = job.start_yaw
-            self.renderer.info.message = f"turntable: {job.frames} frames in {folder}/frame_NNNN.png"
+            self.renderer.info.message = f"turntable: {self._sink.close()}"
+            self._sink = self._sink_job = None
+
+    def _drop_sink(self) -> None:
+        """Abort a recording that the GUI stopped (a partial mp4 is removed)."""
+        if self._sink is not None:
+            self._sink.abort()
+            self.renderer.info.message = f"turntable stopped: {self._sink.out} not written" \
+                if self._sink.is_video else f"turntable stopped after {self._sink.frames} frames"
+        self._sink = self._sink_job = None
 
     def _apply_fullscreen(self) -> None:
         glfw = self.glfw
@@ -376,6 +396,8 @@ class ViewerApp:
     # ------------------------------------------------------------------ teardown
     def close(self) -> None:
         """Release the renderer, imgui, the window and glfw (safe to call twice)."""
+        if getattr(self, "_sink", None) is not None:
+            self._drop_sink()
         if self.window is not None:
             self.glfw.make_context_current(self.window)
         if self._imgui_ready:

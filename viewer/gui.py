@@ -329,12 +329,13 @@ def _output_panel(state: ViewerState, view: ViewInfo) -> None:
         state.screenshot_path = default_screenshot_name()
     imgui.set_item_tooltip("window as PNG (GUI included) and the relit HDR as EXR, in the working directory")
     _, state.turntable_frames = imgui.slider_int("frames", state.turntable_frames, 8, 720)
-    _, state.turntable_folder = imgui.input_text("folder", state.turntable_folder)
+    _, state.turntable_folder = imgui.input_text("output", state.turntable_folder)
     if state.turntable is None:
         if imgui.button("Record turntable") and state.turntable_folder.strip():
             state.turntable = TurntableJob(state.turntable_folder.strip(), int(state.turntable_frames),
                                            start_yaw=state.yaw)
-        imgui.set_item_tooltip("rotates the yaw 360 degrees and writes frame_NNNN.png (the relit image) to the folder")
+        imgui.set_item_tooltip("rotates the yaw 360 degrees and records the relit image: to an .mp4 video, "
+                               "or as frame_NNNN.png files when the output is a folder")
     else:
         imgui.text(view.recording or "recording...")
         if imgui.button("Stop"):

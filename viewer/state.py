@@ -119,7 +119,8 @@ def parse_rotation(text: str) -> tuple[float, float, float]:
 
 @dataclass
 class TurntableJob:
-    """A turntable recording in progress: ``frames`` PNGs over 360 degrees of yaw into ``folder``."""
+    """A turntable recording in progress: ``frames`` frames over 360 degrees of yaw into ``folder``
+    (an ``.mp4`` file, or a folder of ``frame_NNNN.png``)."""
 
     folder: str
     frames: int = 120
@@ -196,7 +197,7 @@ class ViewerState:
     screenshot_path: str | None = None
     turntable: TurntableJob | None = None
     turntable_frames: int = 120
-    turntable_folder: str = "turntable"
+    turntable_folder: str = "turntable.mp4"
     frame_times_ms: deque = field(default_factory=lambda: deque(maxlen=HISTORY))
     show_help: bool = False
     show_gui: bool = True

@@ -146,44 +146,22 @@ def _write_still(out: Path, r, args):
 
 
 def _write_turntable(out: Path, r, R0, args):
-    import cv2
     from tqdm import tqdm
 
     from ..conventions import rotation_z
-    from ..errors import FflsError, InputError, atomic_output
-    from ..imageio import write_png
+    from ..errors import InputError
+    from ..video import FrameWriter
 
     n = args.turntable
     if n < 1:
         raise InputError(f"--turntable needs N >= 1, not {n}")
     frames = ((k, rotation_z(360.0 * k / n) @ R0) for k in range(n))
-    bar = dict(total=n, desc="ffls render", unit="frame")
-    if out.suffix.lower() == ".mp4":
-        with atomic_output(out) as tmp:
-            writer = None
-            try:
-                for k, R in tqdm(frames, **bar):
-                    r.set_rotation(R)
-                    r.render(args.exposure, args.tonemap)
-                    img = r.read_display()
-                    if writer is None:
-                        h, w = img.shape[:2]
-                        writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps), (w, h))
-                        if not writer.isOpened():
-                            raise FflsError("OpenCV cannot write mp4 (mp4v) here; use -o DIR/ for PNG frames", out)
-                    writer.write(np.ascontiguousarray(img[..., ::-1]))
-            finally:
-                if writer is not None:
-                    writer.release()
-        return f"{out} ({n} frames, {args.fps:g} fps)"
-    if out.suffix:
-        raise InputError("turntable output must be .mp4 or a folder", out)
-    out.mkdir(parents=True, exist_ok=True)
-    for k, R in tqdm(frames, **bar):
-        r.set_rotation(R)
-        r.render(args.exposure, args.tonemap)
-        write_png(out / f"frame_{k:04d}.png", r.read_display())
-    return f"{out}/frame_0000..{n - 1:04d}.png"
+    with FrameWriter(out, fps=args.fps) as sink:
+        for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame"):
+            r.set_rotation(R)
+            r.render(args.exposure, args.tonemap)
+            sink.write(r.read_display())
+    return sink.describe()
 
 
 def run(args) -> int:

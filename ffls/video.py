@@ -1,0 +1,113 @@
+"""Frame sequences out: an mp4 video (OpenCV, mp4v) or a folder of numbered PNGs.
+
+One writer serves ``ffls render --turntable`` and the viewer's turntable recording. An mp4 is
+written to a temporary file and renamed when the writer closes successfully, so an interrupted
+recording leaves nothing half-written behind.
+"""
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import numpy as np
+
+from .errors import FflsError, InputError, atomic_output
+
+
+class FrameWriter:
+    """Write RGB frames to ``OUT.mp4`` or to ``DIR/frame_NNNN.png``.
+
+    Parameters
+    ----------
+    out : path
+        A path ending in ``.mp4``, or a folder (created if missing; any other suffix is an error).
+    fps : float
+        Frame rate of the mp4.
+
+    Use as a context manager: the mp4 appears at ``out`` only when the block ends without an
+    exception. ``write(rgb)`` takes (H, W, 3) uint8 frames of one size.
+    """
+
+    def __init__(self, out, fps: float = 30.0):
+        self.out = Path(out)
+        self.fps = float(fps)
+        self.frames = 0
+        self.is_video = self.out.suffix.lower() == ".mp4"
+        if not self.is_video and self.out.suffix:
+            raise InputError("a frame sequence goes to an .mp4 file or a folder", self.out)
+        if self.fps <= 0:
+            raise InputError(f"frame rate must be positive, not {fps}", self.out)
+        self._atomic = None
+        self._tmp = None
+        self._writer = None
+        self._size = None
+        if self.is_video:
+            self._atomic = atomic_output(self.out)
+            self._tmp = self._atomic.__enter__()
+        else:
+            self.out.mkdir(parents=True, exist_ok=True)
+
+    def write(self, rgb: np.ndarray) -> None:
+        """Append one frame, (H, W, 3) uint8 RGB."""
+        rgb = np.asarray(rgb)
+        if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+            raise ValueError(f"frames must be (H, W, 3) uint8, not {rgb.dtype} {rgb.shape}")
+        if self._size is None:
+            self._size = rgb.shape[:2]
+        elif rgb.shape[:2] != self._size:
+            raise ValueError(f"frame {self.frames} is {rgb.shape[:2]}, the first was {self._size}")
+        if self.is_video:
+            import cv2
+
+            if self._writer is None:
+                h, w = self._size
+                self._writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
+                if not self._writer.isOpened():
+                    raise FflsError("OpenCV cannot write mp4 (mp4v) here; write PNG frames to a folder instead",
+                                    self.out)
+            self._writer.write(np.ascontiguousarray(rgb[..., ::-1]))
+        else:
+            from .imageio import write_png
+
+            write_png(self.out / f"frame_{self.frames:04d}.png", rgb)
+        self.frames += 1
+
+    def close(self) -> str:
+        """Finish the sequence; returns a one-line description of what was written."""
+        if self.is_video:
+            if self._writer is not None:
+                self._writer.release()
+                self._writer = None
+            if self._atomic is not None:
+                atomic, self._atomic = self._atomic, None
+                if self.frames == 0:
+                    atomic.__exit__(InputError, InputError("no frames"), None)
+                    raise InputError("no frames were written", self.out)
+                atomic.__exit__(None, None, None)
+        return self.describe()
+
+    def describe(self) -> str:
+        """One line: where the frames went."""
+        if self.is_video:
+            return f"{self.out} ({self.frames} frames, {self.fps:g} fps)"
+        return f"{self.out}/frame_0000..{max(self.frames - 1, 0):04d}.png"
+
+    def abort(self) -> None:
+        """Stop without output: a partial mp4 is removed (PNG frames already written stay)."""
+        if self._writer is not None:
+            self._writer.release()
+            self._writer = None
+        if self._atomic is not None:
+            atomic, self._atomic = self._atomic, None
+            with contextlib.suppress(Exception):
+                atomic.__exit__(RuntimeError, RuntimeError("aborted"), None)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+        return False
