@@ -1,0 +1,49 @@
+"""The CLI as a whole: every subcommand is registered, documents itself, and turns bad input
+into one line on stderr with exit status 2 (no traceback)."""
+from __future__ import annotations
+
+import importlib
+
+import pytest
+
+from ffls.cli import COMMANDS, build_parser, main
+
+
+def test_every_command_module_is_registered_and_complete():
+    names = set()
+    for name in COMMANDS:
+        mod = importlib.import_module(f"ffls.commands.{name}")
+        assert mod.NAME == name and mod.HELP and callable(mod.add_arguments) and callable(mod.run)
+        names.add(mod.NAME)
+    assert names == set(COMMANDS)
+    assert set(build_parser()._subparsers._group_actions[0].choices) == names
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_help(name, capsys):
+    with pytest.raises(SystemExit) as e:
+        main([name, "--help"])
+    assert e.value.code == 0
+    assert capsys.readouterr().out.startswith("usage: ffls " + name)
+
+
+def test_no_command_prints_help(capsys):
+    assert main([]) == 2
+    assert "COMMAND" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv", [
+    ["relight", "{missing}", "--probe", "sky", "-o", "{tmp}/out.exr"],
+    ["render", "{missing}", "--probe", "sky", "-o", "{tmp}/out.exr"],
+    ["lights", "{missing}"],
+    ["view", "{missing}", "--frames", "1", "--headless"],
+    ["lightmap", "info", "{missing}.exr"],
+])
+def test_missing_input_is_one_line_naming_the_file(argv, tmp_path, capsys):
+    missing = str(tmp_path / "nowhere")
+    argv = [a.format(missing=missing, tmp=tmp_path) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "Traceback" not in err
+    assert err.startswith(f"ffls {argv[0]}: error: ") and "nowhere" in err
+    assert not list(tmp_path.iterdir())  # no partial output
