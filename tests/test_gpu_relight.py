@@ -378,3 +378,15 @@ def test_render_command_gpu_matches_cpu(tmp_path):
     assert main(["render", str(cap), "--probe", "sky", "--turntable", "3", "-o", str(frames)]) == 0
     assert sorted(p.name for p in frames.iterdir()) == ["frame_0000.png", "frame_0001.png", "frame_0002.png"]
     assert main(["render", str(cap), "--probe", "sky", "-o", str(tmp_path / "x.jpg")]) == 2
+
+
+@pytest.mark.gl
+def test_auto_method_is_packed_on_llvmpipe_and_compute_on_a_gpu(ctx):
+    from types import SimpleNamespace
+
+    from ffls.gpu.weighted_sum import default_method
+
+    assert default_method(SimpleNamespace(info={"GL_RENDERER": "llvmpipe (LLVM 15.0.6, 256 bits)"})) == "packed"
+    assert default_method(SimpleNamespace(info={"GL_RENDERER": "NVIDIA H100 80GB HBM3/PCIe/SSE2"})) == "compute"
+    expected = "packed" if "llvmpipe" in ctx.info["GL_RENDERER"] else "compute"
+    assert default_method(ctx) == expected

@@ -28,7 +28,7 @@ from ..errors import InputError
 from .basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
 from .context import release_gl
 from .integrate import CellIntegrator
-from .weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, weights_to_vec4
+from .weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, default_method, weights_to_vec4
 
 __all__ = ["Engine"]
 
@@ -70,11 +70,12 @@ class Engine:
     compressed : ffls.compress.CompressedBasis, optional
         A precomputed compression (``rank`` is then its rank); with ``rank`` and no
         ``compressed`` the basis is compressed here.
-    method : {'packed', 'fragment', 'compute'}
-        Pass-2 implementation (:data:`ffls.gpu.weighted_sum.METHODS`). ``'packed'`` (default)
-        stores the basis as pixel-major float16 pairs in SSBOs (:class:`ffls.gpu.basis.PackedBasis`)
-        and is the fastest on llvmpipe; ``'fragment'`` and ``'compute'`` read RGBA16F/RGBA32F
-        texture arrays (docs/gpu.md "Pass 2").
+    method : {'auto', 'packed', 'fragment', 'compute'}
+        Pass-2 implementation (:data:`ffls.gpu.weighted_sum.METHODS`). ``'packed'`` stores the
+        basis as pixel-major float16 pairs in SSBOs (:class:`ffls.gpu.basis.PackedBasis`) and is
+        the fastest on llvmpipe; ``'fragment'`` and ``'compute'`` read RGBA16F/RGBA32F texture
+        arrays (docs/gpu.md "Pass 2"). ``'auto'`` (default): packed on a CPU rasteriser, compute
+        on a GPU (:func:`ffls.gpu.weighted_sum.default_method`).
     max_layers : int, optional
         Layers per texture array (default the device limit) or per packed chunk (default
         :data:`ffls.gpu.basis.PACKED_LAYERS`); more lights split the basis.
@@ -103,6 +104,9 @@ class Engine:
         self.timings: dict[str, float] = {}
         self.compressed = None
         self._objs = []
+        if method == "auto":
+            method = default_method(ctx)
+        self.method = method
         storage = PackedBasis if method == "packed" else BasisTextures
         self._textures = self._pass2 = self._display = self._projector = None
         self._integrator = None
@@ -285,7 +289,7 @@ class Engine:
         """How the basis is stored: dtype, float16 scale, arrays, bytes, rank (None = uncompressed)."""
         t = self._textures
         return {"dtype": t.dtype, "scale": t.scale, "n_arrays": t.n_arrays, "layers": t.n, "bytes": t.nbytes,
-                "rank": None if self.compressed is None else self.compressed.rank}
+                "rank": None if self.compressed is None else self.compressed.rank, "method": self.method}
 
     def read_hdr(self) -> np.ndarray:
         """The relit image ``(H, W, 3)`` float32, row 0 = top row."""

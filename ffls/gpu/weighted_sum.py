@@ -27,7 +27,7 @@ import numpy as np
 from .context import release_gl
 from .shaders import load_program
 
-__all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "METHODS", "DEFAULT_METHOD", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4"]
+__all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "METHODS", "DEFAULT_METHOD", "default_method", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4"]
 
 #: SSBO binding point from which pass 2 (and the projector) read the weights.
 WEIGHTS_BINDING = 0
@@ -38,9 +38,24 @@ BASIS_BINDING = 1
 #: Pass-2 implementations: ``'compute'`` and ``'fragment'`` read a
 #: :class:`ffls.gpu.basis.BasisTextures`, ``'packed'`` a :class:`ffls.gpu.basis.PackedBasis`.
 METHODS = ("compute", "fragment", "packed")
-#: The Engine's pass 2: ``'packed'``, the fastest on llvmpipe (docs/gpu.md "Pass 2").
-DEFAULT_METHOD = "packed"
+#: The Engine's pass 2: ``'auto'`` picks :func:`default_method` for the context.
+DEFAULT_METHOD = "auto"
 _TONEMAP_CODES = {"srgb": 0, "reinhard": 1, "aces": 2}
+
+
+def default_method(ctx) -> str:
+    """The pass-2 method for ``ctx``: ``'packed'`` on a CPU rasteriser, ``'compute'`` on a GPU.
+
+    ``'packed'`` (pixel-major float16 in SSBOs) won every measured row on llvmpipe (docs/gpu.md
+    "Pass 2"): there a texel fetch costs the same whatever its size. On a GPU the texture-array
+    layout is the conventional one: neighbouring pixels read neighbouring texels (coalesced,
+    through the texture cache), while the pixel-major layout strides them apart; compute was
+    chosen over fragment because fragment arithmetic ran far slower on the H100/H200 machines
+    this project has seen. This choice on a GPU is not yet measured here.
+    """
+    from .context import is_software_renderer
+
+    return "packed" if is_software_renderer(ctx.info.get("GL_RENDERER", "")) else "compute"
 
 
 def weights_to_vec4(w) -> bytes:
