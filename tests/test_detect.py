@@ -254,3 +254,24 @@ def test_synth_capture_centres(tmp_path):
         cam_dist = np.linalg.norm(cw[k] - cap.world_from_camera[:3, 3])
         assert np.linalg.norm(ft.center_px - cpx[k]) < 0.35
         assert np.linalg.norm(ft.center_world - cw[k]) < 0.015 * cam_dist
+
+
+def test_synth_capture_half_azimuth_grid(tmp_path):
+    """The paper's Table 1 grid lights one side of the spheres only (phi 0..180 from the camera):
+    the unlit part of each outline fades into the ground and pulls the edge inward. The refit on
+    the directly lit limb (``lit_limb``) keeps the centres within 0.5 px (without it: 0.81 px)."""
+    synth = pytest.importorskip("ffls.synth")
+    from ffls.capture import load_capture
+    from ffls.conventions import spherical_to_direction
+
+    P, T = np.meshgrid(np.arange(0, 181, 30.0), np.array([20.0, 45.0, 70.0]), indexing="ij")
+    dirs = spherical_to_direction(np.radians(T.ravel()), np.radians(P.ravel() - 90.0))  # camera at -Y
+    synth.write_synthetic_capture(tmp_path, resolution=384, directions=dirs, progress=False)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    cap = load_capture(tmp_path)
+    cap.spheres = []
+    fits = detect.find_spheres_in_capture(cap)
+    assert len(fits) == 4
+    cpx = np.array(truth["sphere_centers_px"])
+    err = [float(np.min(np.linalg.norm(cpx - ft.center_px, axis=1))) for ft in fits]
+    assert max(err) < 0.5, err

@@ -603,9 +603,52 @@ def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, 
         K=K, dist=dist, world_from_camera=wfc)
 
 
+def _refine_on_lit_limb(ft, L, K, dist, R, f, wfc, lit_limb, min_points: int = 8,
+                        min_coverage: float = 0.5):
+    """Refit a found sphere on the part of its outline where the limb is directly lit.
+
+    Where the limb is lit only by the ground bounce (the underside, above the sphere's own contact
+    shadow) or never lit (azimuths the hand-held light did not visit), the max image fades
+    gradually from the limb into a dark background and the edge lands inside the silhouette: on
+    path-traced renders the centre moved up by 0.2-0.5 px and the distance grew by 0.3-0.8 %
+    (docs/spheres.md, "Independent renders"). A directly lit limb is a sharp, high-contrast step.
+    Edge points whose limb (1.5 px inside) is below ``lit_limb`` times the sphere's 95th
+    percentile in the max image are dropped and the cone is refitted, if enough outline remains
+    (``min_points``, ``min_coverage``); otherwise the fit is returned unchanged.
+    """
+    P = ft.edge_px
+    if P is None or len(P) < min_points:
+        return ft
+    H, W = L.shape
+    cpx, r = ft.center_px, ft.radius_px
+    rr = np.hypot(P[:, 0] - cpx[0], P[:, 1] - cpx[1])
+    u = (cpx - P) / np.maximum(rr, 1e-9)[:, None]
+    limb = _bilinear(L, P + 1.5 * u)
+    y0, y1 = max(int(cpx[1] - r), 0), min(int(cpx[1] + r) + 1, H)
+    x0, x1 = max(int(cpx[0] - r), 0), min(int(cpx[0] + r) + 1, W)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    inside = (xx - cpx[0]) ** 2 + (yy - cpx[1]) ** 2 <= (0.8 * r) ** 2
+    if not inside.any():
+        return ft
+    keep = limb >= lit_limb * float(np.percentile(L[yy[inside], xx[inside]], 95))
+    if keep.sum() < min_points or keep.all() or _coverage(P[keep], cpx) < min_coverage:
+        return ft
+    s = pixel_rays(P[keep], K, dist)
+    C0 = ft.center_cam
+    try:
+        C, inl, res = fit_sphere_center(s, R, f, C0 / np.linalg.norm(C0), float(np.arcsin(R / np.linalg.norm(C0))))
+    except ValueError:
+        return ft
+    Pk = P[keep]
+    rms = float(np.sqrt(np.mean(res[inl] ** 2)))
+    return _make_fit(C, R, K, dist, wfc, ft.source, edge_px=Pk[inl], residual=rms, n_edge=ft.n_edge_points,
+                     n_in=int(inl.sum()), coverage=_coverage(Pk[inl], project_points(C[None], K, dist)[0]))
+
+
 def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None, overrides=None,
                  world_from_camera=None, scene_center=None, source: str | os.PathLike | None = None,
-                 max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0) -> list[SphereFit]:
+                 max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
+                 lit_limb: float | None = 0.65) -> list[SphereFit]:
     """Find the reference spheres and their centres.
 
     Parameters
@@ -636,6 +679,12 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
         Named in error messages (the capture folder or the images).
     max_residual_px, min_coverage : float
         Quality limits: RMS silhouette residual (pixels) and outline coverage (fraction).
+    seed : int
+        RANSAC seed.
+    lit_limb : float or None
+        After the spheres are chosen, each is refitted on the edge points whose limb (1.5 px
+        inside) is at least this fraction of the sphere's 95th percentile in the max image, i.e.
+        where the limb was directly lit (:func:`_refine_on_lit_limb`); None: no refinement.
 
     Returns
     -------
@@ -796,6 +845,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
                 raise InputError(f"sphere {k} near pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}): outline does"
                                  f" not fit a sphere (rms {ft.residual_px:.2f} px, coverage {ft.coverage:.0%})", source)
 
+    if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
+        fits = [_refine_on_lit_limb(ft, L, K, dist, R, f, wfc, lit_limb) for ft in fits]
     for k, ft in enumerate(fits):
         outline = silhouette_px(K, dist, ft.center_cam, R)
         if (outline[:, 0].min() < 0.5 or outline[:, 1].min() < 0.5
