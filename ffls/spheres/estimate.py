@@ -51,6 +51,7 @@ __all__ = [
     "sphere_values",
     "calibrate_bounce",
     "estimate_photos",
+    "refine_sphere_centres",
 ]
 
 #: Rejection reasons of a photo (and of single spheres), with their meaning.
@@ -667,8 +668,71 @@ def calibrate_bounce(results: list[dict], n_spheres: int, max_sigma: float = 0.0
     return out
 
 
+def refine_sphere_centres(samples: list[SphereSamples], results: list[dict], values: list, terminator: float = 0.15,
+                   **kwargs) -> tuple[list[SphereSamples], list, list]:
+    """Refine every sphere's centre from the first-pass shading of all photos.
+
+    :func:`ffls.spheres.refine.refine_sphere_centre` per sphere (photos where that sphere's fit
+    was ``'ok'``), then :func:`ffls.spheres.refine.recentre_samples`; the photos' values are
+    subset to the new pixels (no image is read again).
+
+    Parameters
+    ----------
+    samples : list of SphereSamples
+    results : list of dict
+        First-pass :func:`estimate_photo` results (their per-sphere reports).
+    values : list
+        Per photo, its :func:`sphere_values` for ``samples``.
+    terminator : float
+    **kwargs
+        Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
+
+    Returns
+    -------
+    samples : list of SphereSamples
+        Recentred where a refinement was accepted (others unchanged).
+    values : list
+        Per photo, the values for the new samples.
+    refinements : list of CentreRefinement
+    """
+    from .refine import recentre_samples, refine_sphere_centre
+
+    new_s, idxs, refs = [], [], []
+    for k, s in enumerate(samples):
+        dirs = []
+        for r in results:
+            sp = (r.get("spheres") or [None] * len(samples))[k]
+            ok = sp is not None and sp.get("status") == "ok" and sp.get("direction") is not None
+            dirs.append(np.asarray(sp["direction"]) if ok else None)
+        ref = refine_sphere_centre(s, [v[k] for v in values], dirs, terminator=terminator, **kwargs)
+        refs.append(ref)
+        if ref.accepted:
+            s2, idx = recentre_samples(s, ref.center)
+            new_s.append(s2)
+            idxs.append(idx)
+        else:
+            new_s.append(s)
+            idxs.append(None)
+    new_v = [[tuple([vk[0][i], vk[1][i], *vk[2:]]) if i is not None else vk for vk, i in zip(v, idxs)]
+             for v in values]
+    return new_s, new_v, refs
+
+
+def _attach_refinements(results: list[dict], refinements: list | None) -> list[dict]:
+    """Record each sphere's (refined) centre and its shift in the per-sphere reports."""
+    if not refinements:
+        return results
+    for r in results:
+        for sp, ref in zip(r.get("spheres") or [], refinements):
+            sp["center"] = [float(v) for v in ref.center]
+            sp["center_shift_px"] = ref.shift_norm_px
+            sp["center_refined"] = bool(ref.accepted)
+    return results
+
+
 def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np.ndarray,
-                    bounce: str = "calibrated", **kwargs) -> tuple[list[dict], list[dict] | None]:
+                    bounce: str = "calibrated", refine_centres: bool = True, refinements: list | None = None,
+                    **kwargs) -> tuple[list[dict], list[dict] | None]:
     """:func:`estimate_photo` for several photos of one capture, in one process, with the
     capture-wide bounce calibration of :func:`estimate_lights`.
 
@@ -679,26 +743,40 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     samples : list of SphereSamples
     scene_center : (3,) float
     bounce : {'calibrated', 'free'}
+    refine_centres : bool
+        Refine the spheres' centres from the first pass's shading and fit the photos again before the bounce calibration (:func:`refine_sphere_centres`).
+    refinements : list, optional
+        If given (an empty list), receives the :class:`~ffls.spheres.refine.CentreRefinement`
+        of each sphere.
     **kwargs
         Passed to :func:`estimate_photo`.
 
     Returns
     -------
     results : list of dict
+        Per-sphere reports hold ``center`` (world), ``center_shift_px`` and ``center_refined``
+        when ``refine_centres``.
     calibration : list of dict or None
         :func:`calibrate_bounce` per sphere (None for ``bounce='free'``).
     """
     if bounce not in ("calibrated", "free"):
         raise ValueError(f"bounce must be 'calibrated' or 'free', not {bounce!r}")
     results = [estimate_photo(None, samples, scene_center, values=v, **kwargs) for v in values]
+    refs = None
+    if refine_centres:
+        samples, values, refs = refine_sphere_centres(samples, results, values, terminator=kwargs.get("terminator", 0.15))
+        if refinements is not None:
+            refinements.extend(refs)
+        if any(r.accepted for r in refs):
+            results = [estimate_photo(None, samples, scene_center, values=v, **kwargs) for v in values]
     if bounce == "free":
-        return results, None
+        return _attach_refinements(results, refs), None
     calib = calibrate_bounce(results, len(samples))
     ratios = [c["ratio"] for c in calib]
     if any(r is not None for r in ratios):
         results = [estimate_photo(None, samples, scene_center, values=v, bounce_ratio=ratios, **kwargs)
                    for v in values]
-    return results, calib
+    return _attach_refinements(results, refs), calib
 
 
 _W = {}

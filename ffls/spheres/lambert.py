@@ -91,6 +91,9 @@ class SphereSamples:
         Apparent radius in pixels (for reports).
     ground : (m,) float64 or None
         :func:`ground_bounce` of ``normals`` for world up ``+Z`` (computed once per capture).
+    origin : (3,) float64 or None
+        World-frame camera centre (the pixels' rays start there; needed by
+        :mod:`ffls.spheres.refine`).
     """
 
     rows: np.ndarray
@@ -101,6 +104,7 @@ class SphereSamples:
     radius: float
     radius_px: float
     ground: np.ndarray | None = None
+    origin: np.ndarray | None = None
 
     def values(self, image: np.ndarray) -> np.ndarray:
         """Grey intensity (m,) float64 of these pixels: the mean of the channels of ``image`` (H, W[, C])."""
@@ -177,7 +181,7 @@ def sphere_samples(shape: tuple[int, int], K: np.ndarray, dist: np.ndarray | Non
     radius_px = f * np.tan(ang_s)
     return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
                          center=Rw @ C + tw, radius=R, radius_px=float(radius_px),
-                         ground=ground_bounce(n_w))
+                         ground=ground_bounce(n_w), origin=np.asarray(tw, dtype=np.float64).copy())
 
 
 def tangent_uncertainty_deg(v: np.ndarray, cov_v: np.ndarray) -> float:
