@@ -3,13 +3,16 @@
 Lights at phi = 0..180 deg (20 deg steps, 0 = toward the camera) and theta = 0..70 deg (10 deg
 steps from the zenith): 80 lights, rendered by :mod:`ffls.synth` at 768 x 768 (spheres ~45 px).
 Configurations: grey ground (albedo 0.3) distant and near (10 cm light at 2 m), black ground,
-noise, 8-bit sRGB. The spheres are given from the renderer's truth (the estimator is measured, not
-the detector). Both passes of :func:`ffls.spheres.estimate.estimate_photos` (free bounce, then the
+noise, 8-bit sRGB. ``--spheres detect`` (default) finds the spheres automatically
+(:func:`ffls.spheres.detect.find_spheres_in_capture`, no hints: the real pipeline); ``--spheres
+truth`` gives them from the renderer's truth (the estimator alone). ``--no-refine`` switches off
+the photometric centre refinement. Both passes of :func:`ffls.spheres.estimate.estimate_photos` (free bounce, then the
 capture-wide ground ratio imposed; ``--bounce free``: one pass) run in one process; the time per
 image covers both passes and the sphere pixel extraction, not the image decoding. Prints a table
 and writes ``benchmarks/results/bench_lights.json``.
 
     python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--cache DIR]
+        [--spheres detect|truth] [--no-refine]
 """
 from __future__ import annotations
 
@@ -50,7 +53,7 @@ def grid(phi_step, theta_step):
     return phis, thetas, d
 
 
-def run_config(name, cfg, res, dirs, folder, bounce="calibrated"):
+def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detect", refine=True):
     folder = Path(folder)
     if (folder / "truth.json").exists():  # a cached render (--cache) of the same grid
         old = np.asarray(json.loads((folder / "truth.json").read_text())["directions"])
@@ -61,14 +64,21 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated"):
     cap = load_capture(folder)
     truth = json.loads((Path(folder) / "truth.json").read_text())
     M = np.linalg.inv(cap.world_from_camera)
-    sph = [SimpleNamespace(center_cam=M[:3, :3] @ np.asarray(c) + M[:3, 3], radius=truth["sphere_radius"])
-           for c in truth["sphere_centers"]]
+    if spheres == "detect":
+        from ffls.spheres.detect import find_spheres_in_capture
+
+        sph = find_spheres_in_capture(cap)
+    else:
+        sph = [SimpleNamespace(center_cam=M[:3, :3] @ np.asarray(c) + M[:3, 3], radius=truth["sphere_radius"])
+               for c in truth["sphere_centers"]]
     shape = cap.load_image(0).shape[:2]
     samples = capture_samples(cap, sph, shape)
     imgs = [cap.load_image(i) for i in range(len(dirs))]
     t = time.perf_counter()
     vals = [sphere_values(im, samples) for im in imgs]
-    res_, calib = estimate_photos(vals, samples, cap.scene_center, bounce=bounce)
+    refs = []
+    res_, calib = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine,
+                                  refinements=refs)
     dt = (time.perf_counter() - t) / len(imgs)
     est = np.array([r["direction"] for r in res_])
     err = np.degrees(angle_between(est, np.asarray(truth["directions"])))
@@ -82,7 +92,8 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated"):
         "max_deg": float(e.max()) if e.size else None,
         "median_uncertainty_deg": float(np.median([r["uncertainty_deg"] for r, o in zip(res_, ok) if o])) if e.size else None,
         "models": {m: sum(1 for r in res_ if r["model"] == m) for m in ("distant", "near")},
-        "bounce": bounce, "calibration": calib, "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
+        "bounce": bounce, "spheres": spheres, "refine_centres": refine,
+        "centre_shift_px": [r.shift_norm_px for r in refs], "calibration": calib, "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
         "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
     }
 
@@ -94,6 +105,9 @@ def main(argv=None):
     ap.add_argument("--theta-step", type=int, default=10)
     ap.add_argument("--configs", default=",".join(CONFIGS))
     ap.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated")
+    ap.add_argument("--spheres", choices=("detect", "truth"), default="detect",
+                    help="find the spheres automatically (the real pipeline) or take the true centres")
+    ap.add_argument("--no-refine", action="store_true", help="no photometric refinement of the sphere centres")
     ap.add_argument("--cache", default=None, help="keep (and reuse) the renders in this folder")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_lights.json"))
     a = ap.parse_args(argv)
@@ -102,12 +116,14 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         for name in a.configs.split(","):
             base = a.cache or tmp
-            r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(base, f"{name}_{a.res}"), a.bounce)
+            r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(base, f"{name}_{a.res}"), a.bounce,
+                           a.spheres, not a.no_refine)
             rows.append(r)
             tgt = TARGETS.get(name)
-            print(f"{name:22s} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "
+            print(f"{name:22s} spheres={a.spheres} refine={not a.no_refine} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "
                   f"p90={r['p90_deg']:.2f} max={r['max_deg']:.2f} deg  unc~{r['median_uncertainty_deg']:.2f}  "
                   f"{r['ms_per_image']:.0f} ms/img ({r['images_per_second_per_core']:.1f} img/s/core)"
+                  f" shift px {[round(x, 2) for x in r['centre_shift_px']]}"
                   + (f"  target max {tgt[0]} median {tgt[1]}" if tgt else ""), flush=True)
     doc = {"benchmark": "bench_lights", "cpu_count": os.cpu_count(), "machine": platform.processor() or platform.machine(),
            "phis_deg": phis.tolist(), "thetas_deg": thetas.tolist(), "results": rows}

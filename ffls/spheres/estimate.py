@@ -732,7 +732,7 @@ def _attach_refinements(results: list[dict], refinements: list | None) -> list[d
 
 def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np.ndarray,
                     bounce: str = "calibrated", refine_centres: bool = True, refinements: list | None = None,
-                    **kwargs) -> tuple[list[dict], list[dict] | None]:
+                    refine_options: dict | None = None, **kwargs) -> tuple[list[dict], list[dict] | None]:
     """:func:`estimate_photo` for several photos of one capture, in one process, with the
     capture-wide bounce calibration of :func:`estimate_lights`.
 
@@ -764,7 +764,8 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     results = [estimate_photo(None, samples, scene_center, values=v, **kwargs) for v in values]
     refs = None
     if refine_centres:
-        samples, values, refs = refine_sphere_centres(samples, results, values, terminator=kwargs.get("terminator", 0.15))
+        samples, values, refs = refine_sphere_centres(samples, results, values, terminator=kwargs.get("terminator", 0.15),
+                                                      **(refine_options or {}))
         if refinements is not None:
             refinements.extend(refs)
         if any(r.accepted for r in refs):
@@ -836,7 +837,8 @@ def _map(fn, items, workers, capture, samples, kw, bar):
 
 
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
-                    model: str = "auto", bounce: str = "calibrated", **kwargs):
+                    model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
+                    refine_options: dict | None = None, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes: every photo is fitted with a free ground bounce; each sphere's ground ratio is
@@ -857,6 +859,11 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     model : {'auto', 'distant', 'near'}
     bounce : {'calibrated', 'free'}
         Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo.
+    refine_centres : bool
+        After the first pass, refine each sphere's centre from the shading of up to 40 photos
+        (:func:`refine_sphere_centres`) and repeat the first pass with the new centres.
+    refine_options : dict, optional
+        Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
     **kwargs
         Passed to :func:`estimate_photo` (``min_spheres``, ``sigma_floor_deg``, ``terminator``,
         ``saturation``).
@@ -867,7 +874,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         Directions (world, from the scene centre), positions for near lights, status, reasons
         (:data:`REASONS`), and per light ``extra``: ``uncertainty_deg``, ``model``,
         ``used_spheres``, ``spheres`` (per-sphere direction, residual, uncertainty, pixel counts,
-        ground ratio estimate and the imposed ``bounce_ratio``).
+        ground ratio estimate and the imposed ``bounce_ratio``; with ``refine_centres`` also the
+        sphere's world ``center``, ``center_shift_px`` and ``center_refined``).
     """
     from ..capture import Lights
 
@@ -903,6 +911,13 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     try:
         first = _map(_work, list(range(n)), workers, capture, samples, kw, bar)
         results = [r for r, _ in first]
+        refs = None
+        if refine_centres:
+            samples, vals, refs = refine_sphere_centres(samples, results, [v for _, v in first],
+                                                        terminator=kw.get("terminator", 0.15), **(refine_options or {}))
+            if any(r.accepted for r in refs):
+                results = _map(_work2, [(v, None) for v in vals], workers, capture, samples, kw, None)
+                first = list(zip(results, vals))
         if bounce == "calibrated":
             calib = calibrate_bounce(results, len(samples))
             ratios = [c["ratio"] for c in calib]
@@ -913,6 +928,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     finally:
         if bar is not None:
             bar.close()
+    results = _attach_refinements(results, refs)
     dirs = np.array([normalize(r["direction"]) if np.all(np.isfinite(r["direction"])) else UP for r in results])
     pos = np.array([r["position"] if r["position"] is not None else np.full(3, np.nan) for r in results])
     return Lights(image_names=capture.image_names, directions=dirs, positions=pos,

@@ -189,7 +189,8 @@ def select_photos(directions: np.ndarray, max_photos: int, first: int = 0) -> np
 def refine_sphere_centre(samples: SphereSamples, values: list, directions: list, *, max_photos: int = 40,
                          margin_px: float = 1.0, max_shift_px: float = 2.0, terminator: float = 0.15,
                          clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, min_lit: int = 30,
-                         min_shadow: int = 10, n_rounds: int = 2, up: np.ndarray = UP) -> CentreRefinement:
+                         min_shadow: int = 10, n_rounds: int = 2, shading: str = "bounce", lit_only: bool = True,
+                         up: np.ndarray = UP) -> CentreRefinement:
     """Refine a sphere's centre by fitting the Lambertian shading of many photos at once.
 
     Parameters
@@ -258,16 +259,30 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
         n = _hit_normals(d, D * u, R)[0]
         return n, u
 
-    def solve(p, lit, use, has_g, scale):
-        n, _ = normals_at(p)
-        g = 0.5 * (1.0 - n @ up)
+    def design(n, lit, use, has_g):
+        if shading == "sh2":  # direct term + order-2 spherical harmonics of the indirect light
+            x_, y_, z_ = n[:, 0], n[:, 1], n[:, 2]
+            B = np.stack([np.ones_like(x_), x_, y_, z_, x_ * y_, x_ * z_, y_ * z_, x_ * x_ - y_ * y_,
+                          3 * z_ * z_ - 1], axis=1)
+            F = np.empty((J, n.shape[0], 12))
+            F[..., :3] = n[None] * lit[..., None]
+            F[..., 3:] = B[None] * use[..., None]
+            return F
         F = np.empty((J, n.shape[0], 5))
         F[..., :3] = n[None] * lit[..., None]
         F[..., 3] = use
-        F[..., 4] = g[None] * (use & has_g[:, None])
+        F[..., 4] = 0.5 * (1.0 - n @ up)[None] * (use & has_g[:, None])
+        return F
+
+    def solve(p, lit, use, has_g, scale):
+        n, _ = normals_at(p)
+        F = design(n, lit, use, has_g)
         Yw = Y * use / scale[:, None]
         G = np.einsum("jmp,jmq->jpq", F, F)
-        G[:, 4, 4] += ~has_g
+        if shading == "sh2":  # the SH's linear part is collinear with v on the lit side: tiny ridge
+            G[:, 3:, 3:] += 1e-6 * np.trace(G, axis1=1, axis2=2)[:, None, None] * np.eye(G.shape[1] - 3)
+        else:
+            G[:, 4, 4] += ~has_g
         h = np.einsum("jmp,jm->jp", F, Yw)
         x = np.linalg.solve(G, h[..., None])[..., 0]
         r = Yw - np.einsum("jmp,jp->jm", F, x)
@@ -282,6 +297,8 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
         nl = L @ n.T  # (J, m)
         lit = V & (nl > terminator)
         shadow = V & (nl < -terminator)
+        if lit_only:
+            shadow[:] = False
         use = lit | shadow
         has_g = shadow.sum(axis=1) >= min_shadow
         # intensity per photo (for relative residuals) and outliers at the current centre
