@@ -149,6 +149,16 @@ def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: 
     return out, report
 
 
+def _check_basis(basis, dtype: str, path=None) -> np.ndarray:
+    """``basis`` as an array of shape (n, H, W, 3), n >= 1, for storage as ``dtype`` ('f16'/'f32')."""
+    if dtype not in ("f16", "f32"):
+        raise ValueError(f"dtype must be 'f16' or 'f32', not {dtype!r}")
+    basis = np.asarray(basis)
+    if basis.ndim != 4 or basis.shape[-1] != 3 or basis.shape[0] < 1:
+        raise InputError(f"basis must have shape (n, H, W, 3) with n >= 1, not {basis.shape}", path)
+    return basis
+
+
 class BasisTextures:
     """A basis ``(n, H, W, 3)`` resident on the GPU as one or more texture arrays.
 
@@ -180,11 +190,7 @@ class BasisTextures:
 
     def __init__(self, ctx, basis, dtype: str = "f16", *, max_layers: int | None = None,
                  budget_bytes: int = DEFAULT_BUDGET, path=None):
-        if dtype not in ("f16", "f32"):
-            raise ValueError(f"dtype must be 'f16' or 'f32', not {dtype!r}")
-        basis = np.asarray(basis)
-        if basis.ndim != 4 or basis.shape[-1] != 3 or basis.shape[0] < 1:
-            raise InputError(f"basis must have shape (n, H, W, 3) with n >= 1, not {basis.shape}", path)
+        basis = _check_basis(basis, dtype, path)
         n, H, W, _ = basis.shape
         self.ctx = ctx
         self.dtype = dtype
@@ -309,11 +315,7 @@ class PackedBasis:
 
     def __init__(self, ctx, basis, dtype: str = "f16", *, max_layers: int | None = None,
                  budget_bytes: int = DEFAULT_BUDGET, band_bytes: int | None = None, path=None):
-        if dtype not in ("f16", "f32"):
-            raise ValueError(f"dtype must be 'f16' or 'f32', not {dtype!r}")
-        basis = np.asarray(basis)
-        if basis.ndim != 4 or basis.shape[-1] != 3 or basis.shape[0] < 1:
-            raise InputError(f"basis must have shape (n, H, W, 3) with n >= 1, not {basis.shape}", path)
+        basis = _check_basis(basis, dtype, path)
         n, H, W, _ = basis.shape
         self.ctx = ctx
         self.dtype = dtype
