@@ -49,6 +49,7 @@ __all__ = [
     "constant_map",
     "builtin_lightmap",
     "BUILTIN_PROCEDURAL",
+    "lightmap_from_spec",
 ]
 
 #: Light-map layouts.
@@ -699,6 +700,20 @@ def builtin_lightmap(name: str, height: int = 256) -> LightMap:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LightMapWarning)
         return load_lightmap(bundled[name])
+
+
+def lightmap_from_spec(spec, layout: str | None = None) -> LightMap:
+    """A light map from a file path or a built-in name (:func:`builtin_lightmap`).
+
+    An existing file wins; a path-like spec (with a suffix or a folder) that does not exist is an
+    error naming it; anything else is looked up among the built-in maps, whose error lists them.
+    """
+    p = Path(spec).expanduser()
+    if p.is_file():
+        return load_lightmap(p, layout=layout)
+    if p.suffix or os.sep in str(spec):
+        raise InputError("light map not found", p)
+    return builtin_lightmap(str(spec))
 
 
 def as_samples(lightmap_or_samples):

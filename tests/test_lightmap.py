@@ -293,3 +293,16 @@ def test_cli_info_convert_make(tmp_path, capsys):
 def test_write_hdr_of_procedural_map(tmp_path):
     write_hdr(tmp_path / "p.hdr", lightmap.paper_map(8).data)
     assert lightmap.load_lightmap(tmp_path / "p.hdr").data.shape == (8, 16, 3)
+
+
+def test_lightmap_from_spec_file_builtin_and_errors(tmp_path):
+    from ffls.errors import FflsError, InputError
+    from ffls.lightmap import constant_map, lightmap_from_spec, save_lightmap
+
+    save_lightmap(constant_map(8, 0.25), tmp_path / "grey.exr")
+    assert lightmap_from_spec(tmp_path / "grey.exr").data.max() == pytest.approx(0.25)
+    assert lightmap_from_spec("sky").layout == "latlong"
+    with pytest.raises(InputError, match="missing.exr: light map not found"):
+        lightmap_from_spec(tmp_path / "missing.exr")
+    with pytest.raises(FflsError, match="built-in maps"):
+        lightmap_from_spec("nosuchmap")

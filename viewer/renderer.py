@@ -24,35 +24,16 @@ import numpy as np
 
 from ffls.conventions import direction_to_latlong_uv, latlong_directions, rotation_ypr
 from ffls.errors import FflsError, InputError
+from ffls.lightmap import lightmap_from_spec
 from ffls.tonemap import tonemap as tonemap_np
 from ffls.tonemap import to_uint8
 
 from .state import BUILTIN_MAPS, ViewerState, ViewInfo
 
-__all__ = ["Renderer", "load_lightmap_spec", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
+__all__ = ["Renderer", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
 
 #: Height of the lat-long preview texture (width is twice that).
 PREVIEW_HEIGHT = 128
-
-
-def load_lightmap_spec(spec: str):
-    """A light map from a built-in name (:data:`viewer.state.BUILTIN_MAPS`) or a file path.
-
-    Raises
-    ------
-    ffls.errors.FflsError
-        Unknown name, missing or unreadable file.
-    """
-    from ffls.lightmap import builtin_lightmap, load_lightmap
-
-    if spec in BUILTIN_MAPS:
-        return builtin_lightmap(spec)
-    p = Path(spec).expanduser()
-    if p.is_file():
-        return load_lightmap(p)
-    if p.suffix or "/" in spec:
-        raise InputError("light map not found", p)
-    return builtin_lightmap(spec)  # raises with the list of built-in names
 
 
 def load_mask(capture, path=None, size=None) -> np.ndarray | None:
@@ -222,7 +203,7 @@ class Renderer:
 
     def _load_lightmap(self, spec: str) -> None:
         try:
-            lm = load_lightmap_spec(spec)
+            lm = lightmap_from_spec(spec)
         except (FflsError, OSError, ValueError) as e:
             self._failed_spec = spec
             self.info.message = f"light map {spec!r}: {e}"

@@ -16,7 +16,7 @@ OUTPUT_SUFFIXES = (".exr", ".png")
 def add_arguments(p):
     p.add_argument("capture", help="capture folder (with capture.json)")
     p.add_argument("--lights", default=None, help="lights.json (default: CAPTURE/lights.json)")
-    p.add_argument("--probe", required=True, help="HDR light map (.exr or .hdr)")
+    p.add_argument("--probe", required=True, help="HDR light map (.exr/.hdr) or a built-in name (sky, paper, courtyard, ...)")
     p.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
     p.add_argument("--rotate-z", type=float, default=0.0, metavar="DEG",
                    help="rotate the light map about +Z by DEG degrees (counter-clockwise from above)")
@@ -31,7 +31,7 @@ def run(args) -> int:
     from ..conventions import rotation_z
     from ..errors import InputError
     from ..imageio import write_exr, write_png
-    from ..lightmap import load_lightmap
+    from ..lightmap import lightmap_from_spec
     from ..relight import relight_capture
     from ..tonemap import to_uint8, tonemap
 
@@ -40,7 +40,7 @@ def run(args) -> int:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
     capture = load_capture(args.capture)
     lights = load_lights(args.lights if args.lights else Path(args.capture) / "lights.json", capture)
-    lightmap = load_lightmap(args.probe, layout=args.layout)
+    lightmap = lightmap_from_spec(args.probe, layout=args.layout)
     image, w = relight_capture(capture, lights, lightmap, rotation=rotation_z(args.rotate_z),
                                cells_res=args.cells_res or None)
     if out.suffix.lower() == ".exr":

@@ -60,18 +60,6 @@ def parse_rotation(args) -> np.ndarray:
     return rotation_z(args.rotate_z or 0.0)
 
 
-def load_probe(spec: str, layout=None):
-    """A light map from a file path, or a built-in by name."""
-    from ..errors import InputError
-    from ..lightmap import builtin_lightmap, load_lightmap
-
-    if Path(spec).exists():
-        return load_lightmap(spec, layout=layout)
-    if Path(spec).suffix:
-        raise InputError("light map not found", spec)
-    return builtin_lightmap(spec)
-
-
 class _CpuRenderer:
     """Reference path with the Engine's interface subset used here (float64)."""
 
@@ -174,7 +162,9 @@ def run(args) -> int:
     R0 = parse_rotation(args)
     capture = load_capture(args.capture)
     lights = load_lights(args.lights if args.lights else Path(args.capture) / "lights.json", capture)
-    lightmap = load_probe(args.probe, args.layout)
+    from ..lightmap import lightmap_from_spec
+
+    lightmap = lightmap_from_spec(args.probe, args.layout)
     r, ctx = _make_renderer(args, capture, lights)
     try:
         r.set_lightmap(lightmap)
