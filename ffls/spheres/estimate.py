@@ -472,7 +472,7 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
 def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene_center: np.ndarray, *,
                    model: str = "auto", min_spheres: int | None = None, sigma_floor_deg: float = 1.0,
                    terminator: float = 0.15, saturation: float | None = None, up: np.ndarray = UP,
-                   bounce_ratio: list | None = None, values: list | None = None) -> dict:
+                   bounce_ratio: list | None = None, values: list | None = None, start: list | None = None) -> dict:
     """Estimate the light of one photograph from its spheres.
 
     Parameters
@@ -498,6 +498,9 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         imposed (``c = rho a max(l_z, 0)``) instead of fitted. None (or a None entry): free.
     values : list, optional
         :func:`sphere_values` of the photo, instead of ``image``.
+    start : list, optional
+        Per sphere, a direction (or None) to start its fit from (:func:`fit_lambert` ``start``):
+        an earlier pass's result for the same photo.
 
     Returns
     -------
@@ -517,10 +520,13 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     if bounce_ratio is None:
         bounce_ratio = [None] * n_sph
     need = min(2, n_sph) if min_spheres is None else int(min_spheres)
+    if start is None:
+        start = [None] * n_sph
     fits = []
-    for s, (grey, valid, nsat), rho in zip(samples, values, bounce_ratio):
+    for s, (grey, valid, nsat), rho, l0 in zip(samples, values, bounce_ratio, start):
         fits.append(fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
-                                bounce_ratio=rho, g=s.ground if s.ground is not None and np.array_equal(up, UP) else None))
+                                bounce_ratio=rho, g=s.ground if s.ground is not None and np.array_equal(up, UP) else None,
+                                start=l0))
     status = [f.status for f in fits]
     ok = [i for i, f in enumerate(fits) if f.status == "ok"]
     if len(ok) >= 2:  # a sphere far darker than the others is in a shadow
@@ -718,6 +724,43 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[dict], val
     return new_s, new_v, refs
 
 
+def refit_spheres(result: dict, samples: list[SphereSamples], values: list, refinements: list, *,
+                  terminator: float = 0.15, up: np.ndarray = UP, **_) -> dict:
+    """A photo's first-pass ``result`` with the free-bounce fits of the recentred spheres redone.
+
+    What the capture-wide bounce calibration needs after a centre refinement
+    (:func:`calibrate_bounce` reads the per-sphere ground ratios of the photos that were
+    ``'ok'``): the photo's status and the spheres' combination are kept from the first pass (the
+    second pass redoes them with the calibrated ratios), only the per-sphere fits of the spheres
+    whose centre moved are recomputed, each started from its first-pass direction. Spheres that
+    the first pass marked (shadowed, outlier) keep that mark.
+    """
+    out = dict(result)
+    sph = result.get("spheres")
+    if not sph:
+        return out
+    new = list(sph)
+    for k, (s, (grey, valid, nsat), ref) in enumerate(zip(samples, values, refinements)):
+        if not ref.accepted:
+            continue
+        f = fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
+                        g=s.ground if s.ground is not None and np.array_equal(up, UP) else None,
+                        start=None if sph[k].get("direction") is None else np.asarray(sph[k]["direction"]))
+        d = f.as_dict()
+        st = sph[k]["status"] if sph[k]["status"] not in ("ok",) else d["status"]
+        new[k] = {**d, "status": st}
+    out["spheres"] = new
+    return out
+
+
+def _starts(result: dict) -> list | None:
+    """Per sphere, its direction in an earlier pass's ``result`` (None where it was not fitted)."""
+    sph = result.get("spheres")
+    if not sph:
+        return None
+    return [None if sp.get("direction") is None else np.asarray(sp["direction"], dtype=np.float64) for sp in sph]
+
+
 def _attach_refinements(results: list[dict], refinements: list | None) -> list[dict]:
     """Record each sphere's (refined) centre and its shift in the per-sphere reports."""
     if not refinements:
@@ -769,14 +812,18 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
         if refinements is not None:
             refinements.extend(refs)
         if any(r.accepted for r in refs):
-            results = [estimate_photo(None, samples, scene_center, values=v, **kwargs) for v in values]
+            if bounce == "free":
+                results = [estimate_photo(None, samples, scene_center, values=v, start=_starts(r), **kwargs)
+                           for v, r in zip(values, results)]
+            else:
+                results = [refit_spheres(r, samples, v, refs, **kwargs) for v, r in zip(values, results)]
     if bounce == "free":
         return _attach_refinements(results, refs), None
     calib = calibrate_bounce(results, len(samples))
     ratios = [c["ratio"] for c in calib]
     if any(r is not None for r in ratios):
-        results = [estimate_photo(None, samples, scene_center, values=v, bounce_ratio=ratios, **kwargs)
-                   for v in values]
+        results = [estimate_photo(None, samples, scene_center, values=v, bounce_ratio=ratios, start=_starts(r), **kwargs)
+                   for v, r in zip(values, results)]
     return _attach_refinements(results, refs), calib
 
 
@@ -805,9 +852,9 @@ def _work(i):
 
 
 def _work2(args):
-    vals, ratios = args
+    vals, ratios, start = args
     cap, samples, kw = _W["capture"], _W["samples"], _W["kwargs"]
-    return estimate_photo(None, samples, cap.scene_center, values=vals, bounce_ratio=ratios, **kw)
+    return estimate_photo(None, samples, cap.scene_center, values=vals, bounce_ratio=ratios, start=start, **kw)
 
 
 def _record(r: dict) -> dict:
@@ -860,7 +907,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     bounce : {'calibrated', 'free'}
         Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo.
     refine_centres : bool
-        After the first pass, refine each sphere's centre from the shading of up to 40 photos
+        After the first pass, refine each sphere's centre from the shading of up to 20 photos
         (:func:`refine_sphere_centres`) and repeat the first pass with the new centres.
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
@@ -916,13 +963,17 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             samples, vals, refs = refine_sphere_centres(samples, results, [v for _, v in first],
                                                         terminator=kw.get("terminator", 0.15), **(refine_options or {}))
             if any(r.accepted for r in refs):
-                results = _map(_work2, [(v, None) for v in vals], workers, capture, samples, kw, None)
+                if bounce == "free":
+                    results = _map(_work2, [(v, None, _starts(r)) for v, r in zip(vals, results)], workers, capture,
+                                   samples, kw, None)
+                else:  # only what the bounce calibration reads (cheap: in this process)
+                    results = [refit_spheres(r, samples, v, refs, **kw) for v, r in zip(vals, results)]
                 first = list(zip(results, vals))
         if bounce == "calibrated":
             calib = calibrate_bounce(results, len(samples))
             ratios = [c["ratio"] for c in calib]
             if any(r is not None for r in ratios):
-                results = _map(_work2, [(v, ratios) for _, v in first], workers, capture, samples, kw, bar)
+                results = _map(_work2, [(v, ratios, _starts(r)) for r, v in first], workers, capture, samples, kw, bar)
             elif bar is not None:
                 bar.update(n)
     finally:

@@ -364,8 +364,11 @@ class _Fit:
         return self.rss / max(self.k - self.x.size, 1)
 
     def t_last(self) -> float:
-        """t statistic of the last coefficient."""
-        var = self.s2 * self.Ginv[-1, -1]
+        """t statistic of the last coefficient (0 where the data do not determine it)."""
+        gi = float(self.Ginv[-1, -1])
+        if not (np.isfinite(gi) and gi > 0):  # at its bound, or a numerically singular design
+            return 0.0
+        var = self.s2 * gi
         return float(self.x[-1] / np.sqrt(var)) if var > 0 else (np.inf if self.x[-1] > 0 else 0.0)
 
 
@@ -399,8 +402,16 @@ def _gram(F, y, lit, shadow):
     return G5, h5, float(yl @ yl + ys @ ys)
 
 
-def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio):
-    """Classification / rejection iterations from one start; returns (state, inliers)."""
+def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio,
+             min_shadow=1):
+    """Classification / rejection iterations from one start; returns (state, inliers).
+
+    The free bounce ``c`` is only fitted with at least ``min_shadow`` shadow-side pixels: on the
+    lit side ``g = (1 - n_z) / 2`` is exactly a combination of the ``1`` and ``n_z`` columns, so
+    without shadow pixels the design is singular and its inverse is rounding noise (it gave a
+    "significant" bounce with a zero ratio uncertainty that then dominated the capture-wide
+    calibration, :func:`ffls.spheres.estimate.calibrate_bounce`).
+    """
     inl = ok.copy()
     best = None
     F = np.empty((normals.shape[0], 5))
@@ -416,7 +427,8 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
         G5, h5, yy = _gram(F, y, lit, shadow)
         use = lit | shadow
         k = int(use.sum())
-        fits = {m: _Fit(m, _model_map(m, ratio), G5, h5, yy, k, ratio) for m in models}
+        mods = [m for m in models if m != "bounce" or shadow.sum() >= min_shadow] or list(models)
+        fits = {m: _Fit(m, _model_map(m, ratio), G5, h5, yy, k, ratio) for m in mods}
         mdl = _select_model(fits)
         fit = fits[mdl]
         a = float(np.linalg.norm(fit.v))
@@ -442,7 +454,8 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
                 n_saturated: int = 0, terminator: float = 0.15, models: tuple[str, ...] = MODELS,
                 clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, up: np.ndarray = UP,
                 min_lit: int = 30, max_reject_fraction: float = 0.25, max_iter: int = 8,
-                bounce_ratio: float | None = None, g: np.ndarray | None = None) -> LambertFit:
+                bounce_ratio: float | None = None, g: np.ndarray | None = None, min_shadow: int = 1,
+                start: np.ndarray | None = None) -> LambertFit:
     """Fit ``I(n) = a max(0, n . l) + b + c g(n)`` to one sphere's pixels.
 
     Parameters
@@ -483,6 +496,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         models are then ``fixed`` (``a, l``) and ``fixed_ambient`` (``+ b``).
     g : (m,) float, optional
         Precomputed :func:`ground_bounce` of ``normals``.
+    min_shadow : int
+        The free bounce is fitted only with at least this many shadow-side pixels (on the lit
+        side its column is a combination of the ambient and ``n_z`` columns: without shadow
+        pixels it is not identifiable at all; with a few, its covariance says how poorly).
+    start : (3,) float, optional
+        A light direction to start the iterations from (e.g. this sphere's fit of the same photo
+        in an earlier pass) instead of the least-squares start on the bright pixels; it only
+        saves iterations (the classification is iterated to the same fixed point).
 
     Returns
     -------
@@ -521,15 +542,18 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         base.status = "saturated" if n_saturated > bright.sum() else "too_dark"
         return base
     # start from least squares on the bright pixels
-    Ab = np.concatenate([normals[bright], np.ones((bright.sum(), 1))], axis=1)
-    v0 = np.linalg.lstsq(Ab, y[bright], rcond=None)[0][:3]
+    if start is not None and np.all(np.isfinite(start)) and np.linalg.norm(start) > 0:
+        v0 = np.asarray(start, dtype=np.float64)
+    else:
+        Ab = np.concatenate([normals[bright], np.ones((bright.sum(), 1))], axis=1)
+        v0 = np.linalg.lstsq(Ab, y[bright], rcond=None)[0][:3]
     # (a second start from the brightness-weighted mean normal of the bright pixels was tried: on
     # small back spheres with a thin lit crescent and strong bounce it converged to wrong
     # solutions that the other spheres then confirmed; a rejection is safer than a wrong light)
     best, inl = None, ok
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
         best, inl = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
-                             clip_sigma, rel_noise_floor, max_iter, ratio)
+                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow)
     if best is None:
         base.status = "too_dark"
         return base
@@ -550,7 +574,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
             s = max(np.sqrt(fb.s2), rel_noise_floor * ab)
             ratio_est = fb.c / (ab * lz)
             ratio_sd = float(s * np.sqrt(max(fb.Ginv[4, 4], 0.0)) / (ab * lz))
-            if fb.Ginv[4, 4] == 0.0:  # c at its bound: not determined by this photo
+            if not fb.Ginv[4, 4] > 0.0:  # c at its bound (or singular): not determined by this photo
                 ratio_sd = float("inf")
     nl = normals @ ldir
     cand_lit = ok & (nl > terminator)

@@ -186,7 +186,7 @@ def select_photos(directions: np.ndarray, max_photos: int, first: int = 0) -> np
     return np.array(sorted(chosen))
 
 
-def refine_sphere_centre(samples: SphereSamples, values: list, directions: list, *, max_photos: int = 40,
+def refine_sphere_centre(samples: SphereSamples, values: list, directions: list, *, max_photos: int = 20,
                          margin_px: float = 1.0, max_shift_px: float = 2.0, terminator: float = 0.15,
                          clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, min_lit: int = 30,
                          min_shadow: int = 10, n_rounds: int = 2, shading: str = "bounce", lit_only: bool = True,
@@ -274,8 +274,38 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
         F[..., 4] = 0.5 * (1.0 - n @ up)[None] * (use & has_g[:, None])
         return F
 
+    iu = np.triu_indices(3)
+
+    def solve_bounce(n, lit, use, has_g, scale):
+        # the per-photo normal equations of the design [n [lit], 1 [use], g [use, has_g]] from
+        # per-pixel products (one (J, m) @ (m, k) product each) instead of a (J, m, 5) design
+        g = 0.5 * (1.0 - n @ up)
+        Wl, Wu = lit.astype(np.float64), use.astype(np.float64)
+        Pl = np.concatenate([n[:, iu[0]] * n[:, iu[1]], n, n * g[:, None]], axis=1)  # (m, 12)
+        Pu = np.stack([np.ones_like(g), g, g * g], axis=1)
+        Sl, Su = Wl @ Pl, Wu @ Pu
+        hg = has_g.astype(np.float64)
+        G = np.empty((J, 5, 5))
+        G[:, iu[0], iu[1]] = Sl[:, :6]
+        G[:, iu[1], iu[0]] = Sl[:, :6]
+        G[:, :3, 3] = G[:, 3, :3] = Sl[:, 6:9]
+        G[:, :3, 4] = G[:, 4, :3] = Sl[:, 9:12] * hg[:, None]
+        G[:, 3, 3] = Su[:, 0]
+        G[:, 3, 4] = G[:, 4, 3] = Su[:, 1] * hg
+        G[:, 4, 4] = Su[:, 2] * hg + (1.0 - hg)
+        Yw = Y * Wu / scale[:, None]
+        h = np.empty((J, 5))
+        h[:, :3] = (Yw * Wl) @ n
+        h[:, 3] = Yw.sum(axis=1)
+        h[:, 4] = (Yw @ g) * hg
+        x = np.linalg.solve(G, h[..., None])[..., 0]
+        r = Yw - Wl * (x[:, :3] @ n.T) - Wu * (x[:, 3:4] + (x[:, 4] * hg)[:, None] * g[None])
+        return r, x
+
     def solve(p, lit, use, has_g, scale):
         n, _ = normals_at(p)
+        if shading != "sh2":
+            return solve_bounce(n, lit, use, has_g, scale)
         F = design(n, lit, use, has_g)
         Yw = Y * use / scale[:, None]
         G = np.einsum("jmp,jmq->jpq", F, F)
