@@ -14,7 +14,7 @@ import pytest
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize, spherical_to_direction
 from ffls.errors import InputError
 from ffls.spheres.estimate import (REASONS, calibrate_bounce, combine_distant, estimate_photo, estimate_photos,
-                                   fit_ray_convergence, pixel_validity, sphere_values)
+                                   fit_near_light, fit_ray_convergence, pixel_validity, sphere_values)
 from ffls.spheres.lambert import fit_lambert, ground_bounce, sphere_samples
 
 RES = 200
@@ -412,3 +412,34 @@ def test_cli_lights(tmp_path, capsys):
     err = np.degrees(angle_between(back.directions[ok], np.asarray(truth["directions"])[ok]))
     assert err.max() < 3.0, err
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 1000
+
+
+def test_near_joint_fit_when_calibration_falls_back(samples):
+    """With too few photos to calibrate the bounce, the first pass is final: its near photos (whose
+    joint fit the first pass defers, ``joint=False``) still get the joint fit."""
+    Ss = [SCENE_CENTER + 2.0 * light(th, ph) for th, ph in [(20, -60), (50, 120)]]
+    vals = [sphere_values(render(position=S), samples) for S in Ss]
+    res, calib = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False)
+    assert all(c["ratio"] is None for c in calib)
+    for r, v, S in zip(res, vals, Ss):
+        assert r["status"] == "ok" and r["model"] == "near" and not r.get("joint_pending")
+        full = estimate_photo(None, samples, SCENE_CENTER, values=v)
+        assert np.allclose(r["position"], full["position"], atol=1e-6)
+        assert np.linalg.norm(r["position"] - S) < 0.1
+    deferred = estimate_photo(None, samples, SCENE_CENTER, values=vals[0], joint=False)
+    assert deferred["joint_pending"] and deferred["model"] == "near"
+
+
+def test_near_fit_pixel_lattice_matches_all_pixels(samples):
+    """The joint fit on every 4th pixel (default ``stride``) agrees with the fit on all pixels far
+    within the statistical uncertainty of the direction."""
+    S = SCENE_CENTER + 2.0 * light(40, 30)
+    v = sphere_values(render(position=S), samples)
+    r = estimate_photo(None, samples, SCENE_CENTER, values=v)
+    fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples, v)]
+    kw = {"terms": None, "terminator": 0.15}
+    a = fit_near_light(samples, [x[0] for x in v], [f.inliers for f in fits], r["position"], stride=1, **kw)
+    b = fit_near_light(samples, [x[0] for x in v], [f.inliers for f in fits], r["position"], **kw)
+    assert a["success"] and b["success"] and b["n_pixels"] < 0.3 * a["n_pixels"]
+    assert np.degrees(angle_between(a["position"] - SCENE_CENTER, b["position"] - SCENE_CENTER)) < 0.05
+    assert np.linalg.norm(a["position"] - S) < 0.1 and np.linalg.norm(b["position"] - S) < 0.1

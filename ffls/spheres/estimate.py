@@ -153,8 +153,13 @@ def combine_distant(directions: np.ndarray, uncertainty_deg: np.ndarray) -> tupl
     return mean, float(np.degrees(np.sqrt(2.0 / w.sum()))), chi, 2 * (len(d) - 1)
 
 
+#: Stopping tolerances of the light-position fits: a relative step of 1e-6 is 6e-5 deg of direction
+#: (and 2 um of a light at 2 m), far below the 1 deg floor of a sphere's uncertainty.
+_FTOL, _XTOL = 1e-8, 1e-6
+
+
 def _lm(fun, x0, lb=None, ub=None, max_iter: int = 40, rel_step: float = 1e-7, ftol: float = 1e-10,
-        xtol: float = 1e-9):
+        xtol: float = 1e-9, want_jac: bool = True):
     """Small Levenberg-Marquardt with box bounds (projection) and a forward-difference Jacobian.
 
     For the few (<= 3) nonlinear parameters of this module, where :func:`scipy.optimize.least_squares`
@@ -172,6 +177,9 @@ def _lm(fun, x0, lb=None, ub=None, max_iter: int = 40, rel_step: float = 1e-7, f
     ftol, xtol : float
         Stop when the relative cost decrease falls below ``ftol`` or the relative step below
         ``xtol``.
+    want_jac : bool
+        False: the Jacobian at the solution is not needed (returned as None when the iterations
+        end by convergence; it costs ``p`` more evaluations).
 
     Returns
     -------
@@ -187,7 +195,7 @@ def _lm(fun, x0, lb=None, ub=None, max_iter: int = 40, rel_step: float = 1e-7, f
     ub = np.full(p, np.inf) if ub is None else np.asarray(ub, dtype=np.float64)
     x = np.clip(x, lb, ub)
 
-    def jac(x, r):
+    def jacobian(x, r):
         J = np.empty((r.size, p))
         for i in range(p):
             h = rel_step * max(abs(x[i]), 1.0)
@@ -199,7 +207,7 @@ def _lm(fun, x0, lb=None, ub=None, max_iter: int = 40, rel_step: float = 1e-7, f
     r = fun(x)
     cost = float(r @ r)
     lam = 1e-3
-    J = jac(x, r)
+    J = jacobian(x, r)
     for _ in range(max_iter):
         JtJ = J.T @ J
         grad = J.T @ r
@@ -212,6 +220,8 @@ def _lm(fun, x0, lb=None, ub=None, max_iter: int = 40, rel_step: float = 1e-7, f
                 lam *= 10.0
                 continue
             xn = np.clip(x + dx, lb, ub)
+            if float(np.max(np.abs(xn - x) / np.maximum(np.abs(x), 1.0))) <= xtol:
+                break  # the damped step is negligible: converged (no more trials at higher damping)
             rn = fun(xn)
             cn = float(rn @ rn)
             if np.isfinite(cn) and cn <= cost:
@@ -224,9 +234,10 @@ def _lm(fun, x0, lb=None, ub=None, max_iter: int = 40, rel_step: float = 1e-7, f
         done = (cost - cn) <= ftol * max(cost, 1e-300) or step <= xtol
         x, r, cost = xn, rn, cn
         lam = max(lam / 10.0, 1e-9)
-        J = jac(x, r)
         if done:
+            J = jacobian(x, r) if want_jac else None
             break
+        J = jacobian(x, r)
     return x, r, J
 
 
@@ -269,8 +280,10 @@ def fit_ray_convergence(centers: np.ndarray, directions: np.ndarray, uncertainty
     scale = float(np.max(np.linalg.norm(C, axis=1))) or 1.0
 
     def dirs(x):
-        m = normalize(m0 + x[0] * e1 + x[1] * e2)
-        return normalize(m[None, :] - (x[2] / scale) * C), m
+        m = m0 + x[0] * e1 + x[1] * e2
+        m = m / np.sqrt(m @ m)
+        p = m[None, :] - (x[2] / scale) * C
+        return p / np.sqrt(np.einsum("ij,ij->i", p, p))[:, None], m
 
     def fun(x):
         p, _ = dirs(x)
@@ -278,7 +291,8 @@ def fit_ray_convergence(centers: np.ndarray, directions: np.ndarray, uncertainty
 
     best = None
     for rho0 in (0.0, 0.1, 0.5):
-        x, r, _ = _lm(fun, np.array([0.0, 0.0, rho0]), np.array([-1.0, -1.0, 0.0]), np.array([1.0, 1.0, 0.99]))
+        x, r, _ = _lm(fun, np.array([0.0, 0.0, rho0]), np.array([-1.0, -1.0, 0.0]), np.array([1.0, 1.0, 0.99]),
+                      ftol=_FTOL, xtol=_XTOL, want_jac=False)
         if best is None or r @ r < best[1] @ best[1]:
             best = (x, r)
     _, m = dirs(best[0])
@@ -291,7 +305,7 @@ def fit_ray_convergence(centers: np.ndarray, directions: np.ndarray, uncertainty
 # ----------------------------------------------------------------------------- joint near fit
 def fit_near_light(samples: list[SphereSamples], values: list[np.ndarray], masks: list[np.ndarray],
                    position0: np.ndarray, terms: list[tuple] | None = None,
-                   terminator: float = 0.15, up: np.ndarray = UP, n_rounds: int = 2) -> dict:
+                   terminator: float = 0.15, up: np.ndarray = UP, n_rounds: int = 2, stride: int = 4) -> dict:
     """Joint fit of a point light's position to several spheres' pixels.
 
     Model per pixel ``p`` of sphere ``k`` (surface point ``P``, normal ``n``, ``d = S - P``)::
@@ -335,71 +349,122 @@ def fit_near_light(samples: list[SphereSamples], values: list[np.ndarray], masks
         terms = [(True, True)] * K
     up = np.asarray(up, dtype=np.float64)
     S0 = np.asarray(position0, dtype=np.float64)
-    D2 = [float(np.sum((S0 - s.center) ** 2)) for s in samples]
+    D2 = np.array([float(np.sum((S0 - s.center) ** 2)) for s in samples])
     G = [s.center - s.radius * up for s in samples]
-    sel = [np.asarray(m, dtype=bool).copy() for m in masks]
-    data = []
+    ratio = [None if isinstance(b, (bool, np.bool_)) else float(b) for _, b in terms]
+    # per sphere, the coefficient columns present besides the first (a_k): ambient, free bounce
+    hb = np.array([bool(b_) for b_, _ in terms])
+    hc = np.array([b_ is True for _, b_ in terms])
+    rho = np.array([0.0 if r_ is None else r_ for r_ in ratio])
+    Gc = np.array(G)
+    # a fixed lattice of each sphere's pixels (every ``stride``-th of the pixel list, raster order),
+    # its geometry gathered once per call as contiguous float64 and subset per round
+    lat = [np.arange(0, len(s), max(int(stride), 1)) for s in samples]
+    allN = [np.ascontiguousarray(s.normals[i], dtype=np.float64) for s, i in zip(samples, lat)]
+    allP = [np.ascontiguousarray(s.points[i], dtype=np.float64) for s, i in zip(samples, lat)]
+    allY = [np.asarray(v, dtype=np.float64)[i] for v, i in zip(values, lat)]
+    allG = [(s.ground if s.ground is not None and np.array_equal(up, UP) else ground_bounce(s.normals, up))[i]
+            for s, i in zip(samples, lat)]
+    allM = [np.asarray(m, dtype=bool)[i] for m, i in zip(masks, lat)]
+    sel = [m.copy() for m in allM]
+    D = {}
 
     def prepare():
-        data.clear()
-        for k, s in enumerate(samples):
-            w = sel[k]
-            data.append((s.normals[w], s.points[w], np.asarray(values[k], dtype=np.float64)[w],
-                         ground_bounce(s.normals[w], up)))
+        # all used spheres' selected pixels in one array: q = n.S - n.P and |S - P|^2 = S.S - 2 P.S + P.P
+        # are then two matrix-vector products per evaluation, the per-sphere Gram entries segment sums
+        idx = [np.flatnonzero(w) for w in sel]
+        cnt = np.array([i.size for i in idx])
+        starts = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+        n = np.concatenate([allN[k][i] for k, i in enumerate(idx)])
+        P = np.concatenate([allP[k][i] for k, i in enumerate(idx)])
+        y = np.concatenate([allY[k][i] for k, i in enumerate(idx)])
+        g = np.concatenate([allG[k][i] for k, i in enumerate(idx)])
+        D.update(NP=np.ascontiguousarray(np.stack([n, P])), nP=np.einsum("ij,ij->i", n, P),
+                 PP=np.einsum("ij,ij->i", P, P), y=y, g=g, cnt=cnt, starts=np.minimum(starts, max(int(cnt.sum()) - 1, 0)),
+                 d2=np.repeat(D2, cnt), nonempty=cnt > 0,
+                 # data-only sums: 1, g, g^2, y, g y
+                 const=np.stack([cnt.astype(np.float64), *(np.add.reduceat(v, np.minimum(starts, max(v.size - 1, 0)))
+                                                           * (cnt > 0) if v.size else np.zeros(K)
+                                                           for v in (g, g * g, y, g * y))]))
 
-    def solve(S, k):
-        n, P, y, g = data[k]
-        dd = S - P
-        r2 = np.einsum("ij,ij->i", dd, dd)
-        q = np.einsum("ij,ij->i", n, dd)
-        f = np.maximum(q, 0.0) / (r2 * np.sqrt(r2)) * D2[k]
-        hb, bounce = terms[k]
-        cols = [f]
-        if not isinstance(bounce, (bool, np.bool_)):
-            e = S - G[k]
-            h = max(float(e @ up), 0.0) / float(e @ e) ** 1.5 * D2[k]
-            cols[0] = f + float(bounce) * h * g
-        if hb:
-            cols.append(np.ones_like(f))
-        if bounce is True:
-            cols.append(g)
-        A = np.stack(cols, axis=1)
-        x, _ = _solve_normal(A.T @ A, A.T @ y, n_free=1)
-        return y - A @ x, x
+    def solve_all(S):
+        """Per sphere the closed-form coefficients at ``S``; the residuals of all pixels."""
+        qp = D["NP"] @ S
+        q = qp[0] - D["nP"]
+        r2 = (S @ S) - 2.0 * qp[1] + D["PP"]
+        f = np.maximum(q, 0.0) / (r2 * np.sqrt(r2)) * D["d2"]
+        g, y = D["g"], D["y"]
+        ff, f1, fg, fy = np.add.reduceat(np.stack([f * f, f, f * g, f * y]), D["starts"], axis=1) * D["nonempty"]
+        n1, sg, sgg, sy, sgy = D["const"]
+        # calibrated bounce: the first column is f + t_k g, t_k = rho_k h_k(S) D_k^2
+        e = S[None, :] - Gc
+        t = rho * np.maximum(e @ up, 0.0) / np.einsum("ij,ij->i", e, e) ** 1.5 * D2
+        ff, f1, fg, fy = ff + 2 * t * fg + t * t * sgg, f1 + t * sg, fg + t * sgg, fy + t * sgy
+        # (K, 3, 3) normal equations of (a_k, b_k, c_k); an absent column is an identity row (-> 0)
+        Gm = np.empty((K, 3, 3))
+        Gm[:, 0, 0], Gm[:, 0, 1], Gm[:, 0, 2] = ff, f1 * hb, fg * hc
+        Gm[:, 1, 1], Gm[:, 1, 2], Gm[:, 2, 2] = np.where(hb, n1, 1.0), sg * hb * hc, np.where(hc, sgg, 1.0)
+        Gm[:, 1, 0], Gm[:, 2, 0], Gm[:, 2, 1] = Gm[:, 0, 1], Gm[:, 0, 2], Gm[:, 1, 2]
+        h = np.stack([fy, sy * hb, sgy * hc], axis=1)
+        try:
+            X = np.linalg.solve(Gm, h[:, :, None])[:, :, 0]
+            bad = ~(np.all(X[:, 1:] >= 0, axis=1) & np.all(np.isfinite(X), axis=1))
+        except np.linalg.LinAlgError:
+            X, bad = np.zeros((K, 3)), np.ones(K, dtype=bool)
+        for k in np.flatnonzero(bad):  # a bound active (or singular): the active-set solution
+            cols = [0] + ([1] if hb[k] else []) + ([2] if hc[k] else [])
+            X[k] = 0.0
+            X[k, cols] = _solve_normal(Gm[k][np.ix_(cols, cols)], h[k, cols], n_free=1)[0]
+        X = np.column_stack([X[:, 0], X[:, 1], X[:, 2] + t * X[:, 0]])  # c_k: free, or t_k a_k
+        Xp = np.repeat(X, D["cnt"], axis=0)
+        return y - Xp[:, 0] * f - Xp[:, 1] - Xp[:, 2] * g, X
 
     def fun(S):
-        return np.concatenate([solve(S, k)[0] for k in range(K)])
+        return solve_all(S)[0]
 
     x = S0.copy()
     res = None
     for rnd in range(n_rounds):
         # terminator band and outliers with the current position
-        for k, s in enumerate(samples):
-            dd = x - s.points
-            c = np.sum(s.normals * dd, axis=1) / np.linalg.norm(dd, axis=1)
-            sel[k] = np.asarray(masks[k], dtype=bool) & (np.abs(c) > terminator)
+        for k in range(K):
+            dd = x - allP[k]
+            c = np.einsum("ij,ij->i", allN[k], dd) / np.sqrt(np.einsum("ij,ij->i", dd, dd))
+            sel[k] = allM[k] & (np.abs(c) > terminator)
         if rnd > 0 and res is not None:
             prepare()
-            for k in range(K):
-                rk, xk = solve(x, k)
-                sd = max(1.4826 * float(np.median(np.abs(rk - np.median(rk)))), 0.01 * abs(xk[0]))
+            r_all, X = solve_all(x)
+            for k, rk in enumerate(np.split(r_all, np.cumsum(D["cnt"])[:-1])):
+                sd = max(1.4826 * float(np.median(np.abs(rk - np.median(rk)))), 0.01 * abs(X[k, 0]))
                 w = np.flatnonzero(sel[k])
                 sel[k][w[np.abs(rk) > 4.0 * sd]] = False
         if sum(int(s_.sum()) for s_ in sel) <= 3 + 3 * K:
             break
         prepare()
+        sel_fit = [s_.copy() for s_ in sel]
         scale = float(np.linalg.norm(x))
-        xs, r, J = _lm(lambda u: fun(u * scale), x / scale)
+        last = rnd == n_rounds - 1
+        xs, r, J = _lm(lambda u: fun(u * scale), x / scale, ftol=_FTOL, xtol=_XTOL, want_jac=last)
         x = xs * scale
-        res = (r, J / scale)
+        res = (r, None if J is None else J / scale, scale)  # J None: not needed if another round follows
     if res is None or not np.all(np.isfinite(x)):
         return {"position": S0, "cov": np.full((3, 3), np.inf), "rms": np.inf, "n_pixels": 0, "success": False}
-    r, J = res
+    r, J, scale = res
+    if J is None:  # the last round that ran was not the last planned one (too few pixels left)
+        sel[:] = sel_fit
+        prepare()
+        u = x / scale
+        J = np.empty((r.size, 3))
+        for i in range(3):
+            h = 1e-7 * max(abs(u[i]), 1.0)
+            uh = u.copy()
+            uh[i] += h
+            J[:, i] = (fun(uh * scale) - r) / h
+        J /= scale
     n_lin = sum(1 + bool(hb) + (b is True) for hb, b in terms)
     mtot = r.size
     s2 = float(r @ r) / max(mtot - 3 - n_lin, 1)
     cov = s2 * np.linalg.pinv(J.T @ J)
-    a_mean = float(np.mean([abs(solve(x, k)[1][0]) for k in range(K)]))
+    a_mean = float(np.mean(np.abs(solve_all(x)[1][:, 0])))
     return {"position": x.copy(), "cov": cov, "rms": float(np.sqrt(np.mean(r * r))) / max(a_mean, 1e-300),
             "n_pixels": int(mtot), "success": bool(np.all(np.isfinite(x)) and a_mean > 0)}
 
@@ -472,7 +537,8 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
 def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene_center: np.ndarray, *,
                    model: str = "auto", min_spheres: int | None = None, sigma_floor_deg: float = 1.0,
                    terminator: float = 0.15, saturation: float | None = None, up: np.ndarray = UP,
-                   bounce_ratio: list | None = None, values: list | None = None, start: list | None = None) -> dict:
+                   bounce_ratio: list | None = None, values: list | None = None, start: list | None = None,
+                   joint: bool = True) -> dict:
     """Estimate the light of one photograph from its spheres.
 
     Parameters
@@ -501,6 +567,10 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     start : list, optional
         Per sphere, a direction (or None) to start its fit from (:func:`fit_lambert` ``start``):
         an earlier pass's result for the same photo.
+    joint : bool
+        Run the joint near-light fit (:func:`fit_near_light`) when the near model is chosen. False
+        keeps the ray-intersection position (flagged ``joint_pending``): for a first pass whose
+        per-sphere fits alone are used (:func:`estimate_photos` refits with the calibrated bounce).
 
     Returns
     -------
@@ -570,7 +640,9 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         status[j] = OUTLIER
     used = ev["idx"]
     direction, unc, position = ev["direction"], ev["uncertainty_deg"], ev["position"]
-    if ev["model"] == "near":
+    if ev["model"] == "near" and not joint:
+        result["joint_pending"] = True
+    elif ev["model"] == "near":
         terms = []
         for i in used:
             f = fits[i]
@@ -804,7 +876,10 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     """
     if bounce not in ("calibrated", "free"):
         raise ValueError(f"bounce must be 'calibrated' or 'free', not {bounce!r}")
-    results = [estimate_photo(None, samples, scene_center, values=v, **kwargs) for v in values]
+    # with a calibrated bounce the first pass only feeds the centre refinement and the calibration
+    # (per-sphere fits): its near photos skip the joint position fit, redone in the second pass
+    results = [estimate_photo(None, samples, scene_center, values=v, joint=bounce == "free", **kwargs)
+               for v in values]
     refs = None
     if refine_centres:
         samples, values, refs = refine_sphere_centres(samples, results, values, terminator=kwargs.get("terminator", 0.15),
@@ -824,6 +899,9 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     if any(r is not None for r in ratios):
         results = [estimate_photo(None, samples, scene_center, values=v, bounce_ratio=ratios, start=_starts(r), **kwargs)
                    for v, r in zip(values, results)]
+    else:  # no calibration: the first pass is final; its near photos get their joint fit now
+        results = [estimate_photo(None, samples, scene_center, values=v, start=_starts(r), **kwargs)
+                   if r.get("joint_pending") else r for v, r in zip(values, results)]
     return _attach_refinements(results, refs), calib
 
 
@@ -956,7 +1034,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
         bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        first = _map(_work, list(range(n)), workers, capture, samples, kw, bar)
+        # calibrated bounce: the first pass skips the joint near fit (redone in the second pass)
+        first = _map(_work, list(range(n)), workers, capture, samples, dict(kw, joint=bounce == "free"), bar)
         results = [r for r, _ in first]
         refs = None
         if refine_centres:
@@ -974,8 +1053,15 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             ratios = [c["ratio"] for c in calib]
             if any(r is not None for r in ratios):
                 results = _map(_work2, [(v, ratios, _starts(r)) for r, v in first], workers, capture, samples, kw, bar)
-            elif bar is not None:
-                bar.update(n)
+            else:  # no calibration: the first pass is final; its near photos get their joint fit now
+                pend = [i for i, r in enumerate(results) if r.get("joint_pending")]
+                if pend:
+                    redo = _map(_work2, [(first[i][1], None, _starts(results[i])) for i in pend], workers, capture,
+                                samples, kw, None)
+                    for i, r in zip(pend, redo):
+                        results[i] = r
+                if bar is not None:
+                    bar.update(n)
     finally:
         if bar is not None:
             bar.close()
