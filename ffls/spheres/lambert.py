@@ -304,16 +304,19 @@ def _solve_normal(G, h, n_free: int = 3):
     inverse of ``G`` on the free set (zeros elsewhere).
     """
     p = G.shape[0]
+    first = 0
     try:  # the unconstrained solution, when feasible, is the optimum (convex problem)
         Ginv = np.linalg.inv(G)
         x = Ginv @ h
-        if np.all(x[n_free:] >= 0) and np.all(np.isfinite(x)):
-            return x, Ginv
+        if np.isfinite(x).all():
+            if (x[n_free:] >= 0).all():
+                return x, Ginv
+            first = 1  # the enumeration below would reject the full free set again
     except np.linalg.LinAlgError:
         pass
     bounded = list(range(n_free, p))
     best = None
-    for mask in range(1 << len(bounded)):
+    for mask in range(first, 1 << len(bounded)):
         fixed = [bounded[k] for k in range(len(bounded)) if mask >> k & 1]
         free = [k for k in range(p) if k not in fixed]
         Gf = G[np.ix_(free, free)]
@@ -322,7 +325,7 @@ def _solve_normal(G, h, n_free: int = 3):
         except np.linalg.LinAlgError:
             Gi = np.linalg.pinv(Gf)
         xf = Gi @ h[free]
-        if np.any(xf[n_free:] < 0):  # the free set lists the unbounded coefficients first
+        if (xf[n_free:] < 0).any():  # the free set lists the unbounded coefficients first
             continue
         x = np.zeros(p)
         x[free] = xf
@@ -340,8 +343,12 @@ class _Fit:
     __slots__ = ("model", "x", "Ginv", "k", "rss", "v", "b", "c")
 
     def __init__(self, model, T, G5, h5, yy, k, ratio):
-        G = T.T @ G5 @ T
-        h = T.T @ h5
+        if model.startswith("fixed"):
+            G = T.T @ G5 @ T
+            h = T.T @ h5
+        else:  # T selects the leading columns
+            p = T.shape[1]
+            G, h = G5[:p, :p].copy(), h5[:p].copy()
         x, Ginv = _solve_normal(G, h)
         if model.startswith("fixed") and x[2] < 0:  # light below the horizon: no ground bounce
             T = _model_map(model, 0.0)
@@ -388,18 +395,71 @@ def _select_model(fits: dict, t_min: float = 3.0) -> str:
     return next(iter(fits))
 
 
-def _gram(F, y, lit, shadow):
-    """Normal equations of the full design ``[n [lit], 1, g]``: ``A^T A``, ``A^T y``, ``y^T y``.
+_TRIU = np.triu_indices(5)
+#: Positions in the product table of the shadow-side entries (``1, g`` rows): (3,3), (3,4), (4,4).
+_S_IDX = (12, 13, 14)
 
-    ``F`` (m, 5) holds ``[n, 1, g]`` per pixel; shadow-side rows only have the last two columns.
+
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-d array (same value), without its overhead."""
+    n = x.size
+    h = n // 2
+    if n % 2:
+        return float(np.partition(x, h)[h])
+    p = np.partition(x, (h - 1, h))
+    return float(np.mean(p[h - 1:h + 1]))
+
+
+def _product_table(F, y):
+    """Per pixel: the upper triangle of ``f f^T`` (15), ``f y`` (5) and ``y^2`` (1) for ``f = [n, 1, g]``.
+
+    ``F`` is (5, m) (one row per column of the design); the table is (21, m). With it the normal
+    equations of any pixel selection are one weighted sum (:func:`_gram`).
     """
-    Fl, yl = F[lit], y[lit]
-    Fs, ys = F[shadow, 3:], y[shadow]
-    G5 = Fl.T @ Fl
-    G5[3:, 3:] += Fs.T @ Fs
-    h5 = Fl.T @ yl
-    h5[3:] += Fs.T @ ys
-    return G5, h5, float(yl @ yl + ys @ ys)
+    Tb = np.empty((21, F.shape[1]))
+    for q, (i, j) in enumerate(zip(*_TRIU)):
+        np.multiply(F[i], F[j], out=Tb[q])
+    np.multiply(F, y, out=Tb[15:20])
+    np.multiply(y, y, out=Tb[20])
+    return Tb
+
+
+def _gram(Tb, lit, shadow):
+    """Normal equations of the full design ``[n [lit], 1, g]``: ``A^T A``, ``A^T y``, ``y^T y``, and the counts.
+
+    ``Tb`` is :func:`_product_table`; shadow-side rows only have the last two columns.
+    """
+    W = np.empty((2, Tb.shape[1]))
+    W[0] = lit
+    W[1] = shadow
+    S = Tb @ W.T
+    sl, ss = S[:, 0], S[:, 1]
+    G5 = np.empty((5, 5))
+    G5[_TRIU] = sl[:15]
+    G5[3, 3] += ss[12]
+    G5[3, 4] += ss[13]
+    G5[4, 4] += ss[14]
+    G5[_TRIU[1], _TRIU[0]] = G5[_TRIU]
+    h5 = sl[15:20].copy()
+    h5[3:] += ss[18:20]
+    return G5, h5, float(sl[20] + ss[20]), int(round(sl[12])), int(round(ss[12]))
+
+
+def _fits(models, G5, h5, yy, k, ratio):
+    """The candidate fits, computed lazily in :func:`_select_model`'s order (only those it reads)."""
+    fits = {}
+    for mdl in ("bounce", "ambient", "fixed_ambient"):
+        if mdl in models:
+            fits[mdl] = _Fit(mdl, _model_map(mdl, ratio), G5, h5, yy, k, ratio)
+            if fits[mdl].t_last() > 3.0:
+                return fits, mdl
+    for mdl in ("plain", "fixed"):
+        if mdl in models:
+            fits[mdl] = _Fit(mdl, _model_map(mdl, ratio), G5, h5, yy, k, ratio)
+            return fits, mdl
+    mdl = models[0]
+    fits[mdl] = _Fit(mdl, _model_map(mdl, ratio), G5, h5, yy, k, ratio)
+    return fits, mdl
 
 
 def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio,
@@ -414,34 +474,42 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     """
     inl = ok.copy()
     best = None
-    F = np.empty((normals.shape[0], 5))
-    F[:, :3] = normals
-    F[:, 3] = 1.0
-    F[:, 4] = g
+    F = np.empty((5, normals.shape[0]))
+    F[:3] = normals.T
+    F[3] = 1.0
+    F[4] = g
+    Tb = _product_table(F, y)
+    nl = normals @ ldir
     for _ in range(max_iter):
-        nl = normals @ ldir
         lit = inl & (nl > terminator)
         shadow = inl & (nl < -terminator)
-        if lit.sum() < min_lit:
+        G5, h5, yy, n_lit, n_shadow = _gram(Tb, lit, shadow)
+        if n_lit < min_lit:
             break
-        G5, h5, yy = _gram(F, y, lit, shadow)
         use = lit | shadow
-        k = int(use.sum())
-        mods = [m for m in models if m != "bounce" or shadow.sum() >= min_shadow] or list(models)
-        fits = {m: _Fit(m, _model_map(m, ratio), G5, h5, yy, k, ratio) for m in mods}
-        mdl = _select_model(fits)
+        k = n_lit + n_shadow
+        mods = [m for m in models if m != "bounce" or n_shadow >= min_shadow] or list(models)
+        fits, mdl = _fits(mods, G5, h5, yy, k, ratio)
         fit = fits[mdl]
         a = float(np.linalg.norm(fit.v))
         if not np.isfinite(a) or a == 0:
             break
         new_dir = fit.v / a
         # robust rejection on all valid pixels (predictions with the current model)
-        pred = a * np.maximum(normals @ new_dir, 0.0) + fit.b + fit.c * g
-        res = y - pred
+        nl = normals @ new_dir
+        res = np.maximum(nl, 0.0)  # (in place: y - (a max(nl, 0) + b + c g))
+        res *= a
+        res += fit.b
+        res += fit.c * g
+        np.subtract(y, res, out=res)
         r = res[use]  # the residuals of the fitted pixels
-        sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), rel_noise_floor * a)
-        new_inl = ok & (np.abs(res) <= clip_sigma * sigma)
-        best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a)
+        r -= _median(r)
+        np.abs(r, out=r)
+        sigma = max(1.4826 * _median(r), rel_noise_floor * a)
+        np.abs(res, out=res)
+        new_inl = res <= clip_sigma * sigma
+        new_inl &= ok
+        best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a, nl=nl)
         stable = (np.array_equal(new_inl, inl) and float(new_dir @ ldir) > np.cos(np.radians(1e-3)))
         inl = new_inl
         ldir = new_dir
@@ -576,7 +644,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
             ratio_sd = float(s * np.sqrt(max(fb.Ginv[4, 4], 0.0)) / (ab * lz))
             if not fb.Ginv[4, 4] > 0.0:  # c at its bound (or singular): not determined by this photo
                 ratio_sd = float("inf")
-    nl = normals @ ldir
+    nl = best["nl"]  # normals @ ldir
     cand_lit = ok & (nl > terminator)
     n_rej = int((cand_lit & ~inl).sum())
     fitres = LambertFit(
