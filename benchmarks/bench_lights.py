@@ -130,12 +130,22 @@ def main(argv=None):
     for r in rows:  # phi rows x theta columns, for docs/spheres.md
         print(f"\n{r['config']} ({r['bounce']} bounce): median {r['median_deg']:.2f}, max {r['max_deg']:.2f} deg, "
               f"{r['ms_per_image']:.0f} ms/img, accepted {r['accepted']}/{r['n']}")
-        print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")
-        print("|---" * (len(thetas) + 1) + "|")
-        e = np.array([np.nan if x is None else x for x in r["errors_deg"]]).reshape(len(phis), len(thetas))
-        for p_, row in zip(phis, e):
-            print(f"| {p_:.0f} | " + " | ".join("rej" if np.isnan(x) else f"{x:.2f}" for x in row) + " |")
-    out = Path(a.out)
+        print_error_table(r["errors_deg"], phis, thetas)
+    write_json(a.out, doc)
+
+
+def print_error_table(errors_deg, phis, thetas) -> None:
+    """Print per-light errors (degrees; None = rejected) as a Markdown table, phi rows x theta columns."""
+    print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")
+    print("|---" * (len(thetas) + 1) + "|")
+    e = np.array([np.nan if x is None else x for x in errors_deg]).reshape(len(phis), len(thetas))
+    for p_, row in zip(phis, e):
+        print(f"| {p_:.0f} | " + " | ".join("rej" if np.isnan(x) else f"{x:.2f}" for x in row) + " |")
+
+
+def write_json(path, doc) -> None:
+    """Write a benchmark's JSON results atomically and say where."""
+    out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output(out) as t:
         t.write_text(json.dumps(doc, indent=1))

@@ -37,9 +37,10 @@ from types import SimpleNamespace
 import numpy as np
 
 from ffls.capture import load_capture
-from ffls.conventions import angle_between, normalize
-from ffls.errors import atomic_output
+from ffls.conventions import angle_between
 from ffls.imageio import write_exr
+
+from bench_lights import print_error_table, write_json  # noqa: E402  (benchmarks/ is on sys.path)
 
 SPHERE_RADIUS = 0.05
 SPHERE_XY = ((0.29, -0.06), (-0.02, -0.27), (-0.30, 0.04), (0.36, 0.24))
@@ -279,19 +280,11 @@ def main(argv=None):
                   + (f" (target max {tgt[0]} median {tgt[1]})" if tgt else ""), flush=True)
     for r in rows:
         print(f"\n{r['config']} spheres={r['spheres']}: median {r['median_deg']}, max {r['max_deg']}")
-        print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")
-        print("|---" * (len(thetas) + 1) + "|")
-        e = np.array([np.nan if x is None else x for x in r["errors_deg"]]).reshape(len(phis), len(thetas))
-        for p_, row in zip(phis, e):
-            print(f"| {p_:.0f} | " + " | ".join("rej" if np.isnan(x) else f"{x:.2f}" for x in row) + " |")
+        print_error_table(r["errors_deg"], phis, thetas)
     doc = {"benchmark": "independent_mitsuba", "cpu_count": os.cpu_count(),
            "machine": platform.processor() or platform.machine(), "phis_deg": phis.tolist(),
            "thetas_deg": thetas.tolist(), "camera": CAMERA, "sphere_xy": SPHERE_XY, "fov_deg": a.fov, "results": rows}
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(out) as t:
-        t.write_text(json.dumps(doc, indent=1))
-    print(f"wrote {out}")
+    write_json(a.out, doc)
 
 
 if __name__ == "__main__":
