@@ -804,3 +804,19 @@ def lights_from_lp(path: str | os.PathLike, capture: Capture) -> Lights:
     pos = {n: k for k, n in enumerate(mapped)}
     order = [pos[n] for n in capture.image_names]
     return Lights(list(capture.image_names), lp_to_world(d[order], capture.world_from_camera))
+
+
+def load_capture_and_lights(folder, lights=None) -> tuple[Capture, Lights]:
+    """``(capture, lights)`` of a capture folder; ``lights`` defaults to ``FOLDER/lights.json``.
+
+    Raises
+    ------
+    InputError
+        As :func:`load_capture` and :func:`load_lights`; a missing default ``lights.json`` says how
+        to make one (``ffls lights``).
+    """
+    capture = load_capture(folder)
+    path = Path(lights) if lights else Path(folder) / LIGHTS_FILE
+    if not path.exists():
+        raise InputError("no lights file: estimate the light directions first (ffls lights CAPTURE)", path)
+    return capture, load_lights(path, capture)

@@ -377,3 +377,11 @@ def test_lights_from_lp(tmp_path, rng):
     with pytest.raises(InputError, match="has no light") as e:
         cap.lights_from_lp(tmp_path / "c" / "y.lp", c)
     _one_line(e.value, "y.lp", names[2])
+
+
+def test_load_capture_and_lights_says_how_to_make_missing_lights(tmp_path):
+    _make(tmp_path / "c")
+    (tmp_path / "c" / "lights.json").unlink(missing_ok=True)
+    with pytest.raises(InputError, match="ffls lights") as e:
+        cap.load_capture_and_lights(tmp_path / "c")
+    _one_line(e.value, "lights.json")

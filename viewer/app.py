@@ -27,14 +27,10 @@ __all__ = ["ViewerApp", "open_capture"]
 
 
 def open_capture(folder, lights=None):
-    """``(capture, lights)`` of a capture folder; ``lights`` defaults to ``FOLDER/lights.json``."""
-    from ffls.capture import load_capture, load_lights
+    """``(capture, lights)`` of a capture folder (:func:`ffls.capture.load_capture_and_lights`)."""
+    from ffls.capture import load_capture_and_lights
 
-    capture = load_capture(folder)
-    lights_path = Path(lights) if lights else Path(folder) / "lights.json"
-    if not lights_path.exists():
-        raise InputError("no lights.json: estimate the light directions first (ffls lights)", lights_path)
-    return capture, load_lights(lights_path, capture)
+    return load_capture_and_lights(folder, lights)
 
 
 class ViewerApp:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .common import add_capture_arguments
+
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
 DESCRIPTION = (
@@ -14,10 +16,7 @@ OUTPUT_SUFFIXES = (".exr", ".png")
 
 
 def add_arguments(p):
-    p.add_argument("capture", help="capture folder (with capture.json)")
-    p.add_argument("--lights", default=None, help="lights.json (default: CAPTURE/lights.json)")
-    p.add_argument("--probe", required=True, help="HDR light map (.exr/.hdr) or a built-in name (sky, paper, courtyard, ...)")
-    p.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
+    add_capture_arguments(p)
     p.add_argument("--rotate-z", type=float, default=0.0, metavar="DEG",
                    help="rotate the light map about +Z by DEG degrees (counter-clockwise from above)")
     p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops for PNG output")
@@ -27,7 +26,7 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from ..capture import load_capture, load_lights
+    from ..capture import load_capture_and_lights
     from ..conventions import rotation_z
     from ..errors import InputError
     from ..imageio import write_exr, write_png
@@ -38,8 +37,7 @@ def run(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
-    capture = load_capture(args.capture)
-    lights = load_lights(args.lights if args.lights else Path(args.capture) / "lights.json", capture)
+    capture, lights = load_capture_and_lights(args.capture, args.lights)
     lightmap = lightmap_from_spec(args.probe, layout=args.layout)
     image, w = relight_capture(capture, lights, lightmap, rotation=rotation_z(args.rotate_z),
                                cells_res=args.cells_res or None)

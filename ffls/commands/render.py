@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .common import add_capture_arguments
+
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
 DESCRIPTION = (
@@ -24,10 +26,7 @@ STILL_SUFFIXES = (".exr", ".png")
 
 
 def add_arguments(p):
-    p.add_argument("capture", help="capture folder (with capture.json)")
-    p.add_argument("--lights", default=None, help="lights.json (default: CAPTURE/lights.json)")
-    p.add_argument("--probe", required=True, help="HDR light map (.exr/.hdr) or a built-in name (sky, paper, ...)")
-    p.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
+    add_capture_arguments(p)
     rot = p.add_mutually_exclusive_group()
     rot.add_argument("--rotate-z", type=float, default=None, metavar="DEG",
                      help="rotate the light map about +Z by DEG degrees (counter-clockwise from above)")
@@ -153,15 +152,14 @@ def _write_turntable(out: Path, r, R0, args):
 
 
 def run(args) -> int:
-    from ..capture import load_capture, load_lights
+    from ..capture import load_capture_and_lights
     from ..errors import InputError
 
     out = Path(args.out)
     if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
     R0 = parse_rotation(args)
-    capture = load_capture(args.capture)
-    lights = load_lights(args.lights if args.lights else Path(args.capture) / "lights.json", capture)
+    capture, lights = load_capture_and_lights(args.capture, args.lights)
     from ..lightmap import lightmap_from_spec
 
     lightmap = lightmap_from_spec(args.probe, args.layout)
