@@ -23,8 +23,8 @@ import numpy as np
 from ffls.conventions import rotation_ypr
 from ffls.gpu.context import create_headless_context, describe_context
 from ffls.gpu.integrate import METHODS, CellIntegrator
-from ffls.lightmap import sky_sun_map
-from ffls.voronoi import bake_cells, integrate_weights
+from ffls.lightmaps.lightmap import sky_sun_map
+from ffls.weights.voronoi import bake_cells, integrate_weights
 
 
 def _median_time(fn, repeat):

@@ -1,7 +1,7 @@
 """Accuracy and speed of light estimation on the paper's Table 1 grid (Masselus et al. 2002).
 
 Lights at phi = 0..180 deg (20 deg steps, 0 = toward the camera) and theta = 0..70 deg (10 deg
-steps from the zenith): 80 lights, rendered by :mod:`ffls.synth` at 768 x 768 (spheres ~45 px).
+steps from the zenith): 80 lights, rendered by :mod:`ffls.synth.scene` at 768 x 768 (spheres ~45 px).
 Configurations: grey ground (albedo 0.3) distant and near (10 cm light at 2 m), black ground,
 noise, 8-bit sRGB. ``--spheres detect`` (default) finds the spheres automatically
 (:func:`ffls.spheres.detect.find_spheres_in_capture`, no hints: the real pipeline); ``--spheres
@@ -27,11 +27,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ffls.capture import load_capture
+from ffls.io.capture import load_capture
 from ffls.conventions import angle_between, spherical_to_direction
 from ffls.errors import atomic_output
 from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_values
-from ffls.synth import write_synthetic_capture
+from ffls.synth.scene import write_synthetic_capture
+from ffls.radiance.photos import load_photo
 
 CONFIGS = {
     "distant_grey": dict(light_model="distant", ground_albedo=0.3),
@@ -71,9 +72,9 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     else:
         sph = [SimpleNamespace(center_cam=M[:3, :3] @ np.asarray(c) + M[:3, 3], radius=truth["sphere_radius"])
                for c in truth["sphere_centers"]]
-    shape = cap.load_image(0).shape[:2]
+    shape = load_photo(cap, 0).shape[:2]
     samples = capture_samples(cap, sph, shape)
-    imgs = [cap.load_image(i) for i in range(len(dirs))]
+    imgs = [load_photo(cap, i) for i in range(len(dirs))]
     t = time.perf_counter()
     vals = [sphere_values(im, samples) for im in imgs]
     refs = []

@@ -8,7 +8,7 @@ second, bytes moved per frame by each storage (basis read + RGBA32F output writt
 RGBA16F texel, 6 bytes per packed RGB value plus block padding), the resulting bandwidth as a
 fraction of the device's copy bandwidth measured in the same run (``ctx.copy_buffer`` of a large
 buffer; NumPy ``copyto`` for the CPU), and the NumPy float32 path
-(:func:`ffls.relight.relight_fast`) as a ratio. Compressed rows (``--comp-lights`` = 160 lights,
+(:func:`ffls.relight.cpu.relight_fast`) as a ratio. Compressed rows (``--comp-lights`` = 160 lights,
 K = 8, 16, 32, 512 x 512: the viewer's case) time the coefficient projection (GPU compute pass;
 the CPU alternative, NumPy + buffer upload, beside it) plus pass 2 over K + 1 layers, for
 ``fragment`` and ``packed``. Combinations whose float32 basis would exceed ``--host-budget`` MiB
@@ -32,7 +32,7 @@ import numpy as np
 from ffls.gpu.basis import BasisTextures, PackedBasis
 from ffls.gpu.context import create_headless_context, describe_context
 from ffls.gpu.weighted_sum import Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
-from ffls.relight import relight_fast
+from ffls.relight.cpu import relight_fast
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_weighted_sum.json"
 

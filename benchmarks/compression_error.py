@@ -1,9 +1,9 @@
-"""Relit-image error and speed of the compressed basis (ffls.compress) against K, on a synthetic capture.
+"""Relit-image error and speed of the compressed basis (ffls.relight.compress) against K, on a synthetic capture.
 
 For K in 4..64 and both modes ('per_channel', 'shared') it reports the relative RMS error
 ``||relit_K - relit|| / ||relit||`` (float64, the whole image) of the compressed relighting
 against ``relight_reference`` under three light maps (sky + sun, the paper's map, and a bundled
-HDR), and the compression time. The capture is written by ``ffls.synth.write_synthetic_capture``.
+HDR), and the compression time. The capture is written by ``ffls.synth.scene.write_synthetic_capture``.
 
     python benchmarks/compression_error.py [--lights 128] [--res 128]
 
@@ -20,13 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.capture import load_capture, load_lights
-from ffls.compress import compress_basis
+from ffls.io.capture import load_capture, load_lights
+from ffls.relight.compress import compress_basis
 from ffls.conventions import rotation_z
-from ffls.lightmap import builtin_lightmap
-from ffls.relight import relight_reference
-from ffls.synth import write_synthetic_capture
-from ffls.voronoi import integrate_weights
+from ffls.lightmaps.lightmap import builtin_lightmap
+from ffls.relight.cpu import relight_reference
+from ffls.synth.scene import write_synthetic_capture
+from ffls.weights.voronoi import integrate_weights
+from ffls.radiance.photos import load_photos
 
 RESULTS = Path(__file__).resolve().parent / "results" / "compression_error.json"
 
@@ -42,7 +43,7 @@ def main(argv=None):
         write_synthetic_capture(tmp, n_lights=args.lights, resolution=args.res, progress=False)
         cap = load_capture(tmp)
         lights = load_lights(Path(tmp) / "lights.json", cap)
-        basis = cap.load_basis(progress=False)
+        basis = load_photos(cap, progress=False)
         print(f"synthetic capture: {basis.shape[0]} lights, {args.res}x{args.res}, {time.perf_counter() - t0:.1f} s")
     d = lights.directions[lights.ok_mask]
     maps = {m: builtin_lightmap(m, 128) for m in args.maps.split(",")}

@@ -1,9 +1,9 @@
 """Convergence of Voronoi relighting to the direct render as the number of lights grows.
 
-For each N, a distant-light capture of the built-in synthetic scene (``ffls.synth``) with N
+For each N, a distant-light capture of the built-in synthetic scene (``ffls.synth.scene``) with N
 stratified light directions is relit under a smooth light map (Masselus et al. 2002, section 6:
 angular Voronoi weights, exact k-d tree cells and the candidate texture) and compared with the
-oracle :func:`ffls.synth.render_lightmap`, which lights the scene directly by the map reduced to
+oracle :func:`ffls.synth.scene.render_lightmap`, which lights the scene directly by the map reduced to
 ``--oracle-dirs`` distant lights. Error: relative RMS over all pixels and channels,
 ``||relit - oracle|| / ||oracle||``, and the 99th percentile of the per-pixel relative error on
 pixels brighter than 5 % of the mean.
@@ -26,10 +26,10 @@ import time
 
 import numpy as np
 
-from ffls import synth
-from ffls.lightmap import paper_map, sky_sun_map
-from ffls.relight import relight_fast, relight_reference
-from ffls.voronoi import bake_cells, integrate_weights
+from ffls.synth import scene as synth
+from ffls.lightmaps.lightmap import paper_map, sky_sun_map
+from ffls.relight.cpu import relight_fast, relight_reference
+from ffls.weights.voronoi import bake_cells, integrate_weights
 
 
 def smooth_map(name: str, height: int):

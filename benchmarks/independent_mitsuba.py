@@ -1,14 +1,14 @@
 """Light-direction accuracy on independent, physically based renders (Mitsuba 3).
 
-``ffls.synth`` renders with a one-bounce ground model that the estimator's bounce term was
+``ffls.synth.scene`` renders with a one-bounce ground model that the estimator's bounce term was
 designed around. This benchmark renders a different scene with Mitsuba 3's path tracer (multiple
 bounces: ground <-> spheres <-> object, the spheres' contact shadows, the object's
 interreflections) and runs the whole ffls pipeline on it: automatic sphere detection
 (:func:`ffls.spheres.detect.find_spheres_in_capture`) and :func:`ffls.spheres.estimate.estimate_lights`
-on :func:`ffls.capture.load_capture` of the written capture folder. The estimator is also run on
+on :func:`ffls.io.capture.load_capture` of the written capture folder. The estimator is also run on
 the true sphere centres, to separate detection from shading errors.
 
-Scene (nothing taken from ``ffls.synth``): a 6 m x 6 m grey diffuse ground (albedo 0.3), four white
+Scene (nothing taken from ``ffls.synth.scene``): a 6 m x 6 m grey diffuse ground (albedo 0.3), four white
 diffuse spheres (albedo 0.8, radius 5 cm) resting on it at irregular positions, a rotated
 rough-plastic cube and a capped diffuse cylinder between them, a perspective camera 1.15 m from
 the scene centre at azimuth -115 deg and 35 deg elevation (fov chosen for ~45 px spheres at
@@ -36,9 +36,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ffls.capture import load_capture
+from ffls.io.capture import load_capture
 from ffls.conventions import angle_between
-from ffls.imageio import write_exr
+from ffls.io.images import write_exr
 
 from bench_lights import print_error_table, write_json  # noqa: E402  (benchmarks/ is on sys.path)
 
@@ -246,7 +246,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "independent_mitsuba.json"))
     ap.add_argument("--evaluate", nargs="*", default=None, metavar="DIR",
                     help="only evaluate existing capture folders with a truth.json (e.g. bench_lights --cache"
-                         " renders of ffls.synth), detected and true spheres; no Mitsuba needed")
+                         " renders of ffls.synth.scene), detected and true spheres; no Mitsuba needed")
     a = ap.parse_args(argv)
     if a.evaluate:
         for folder in a.evaluate:

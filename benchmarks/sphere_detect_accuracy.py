@@ -1,4 +1,4 @@
-"""Accuracy of sphere detection (ffls.spheres.detect) on ffls.synth captures: centre errors.
+"""Accuracy of sphere detection (ffls.spheres.detect) on ffls.synth.scene captures: centre errors.
 
 Usage: python benchmarks/sphere_detect_accuracy.py [--res 768] [--n 40] [--out result.json]
 
@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from ffls.capture import load_capture
+from ffls.io.capture import load_capture
 from ffls.spheres.detect import find_spheres_in_capture
-from ffls.synth import write_synthetic_capture
+from ffls.synth.scene import write_synthetic_capture
 
 
 def run_case(folder, n, res, encoding, ground, light_model, hints):

@@ -1,11 +1,11 @@
-"""Discretisation error of the synthetic oracle (ffls.synth.render_lightmap), beside relighting.
+"""Discretisation error of the synthetic oracle (ffls.synth.scene.render_lightmap), beside relighting.
 
 Usage: python benchmarks/synth_oracle_error.py [--res 96] [--ref 8192] [--n-dirs 512 2048]
                                               [--lights 100 400] [--out result.json]
 
 For each light map (the procedural sky-with-sun and paper maps, 128 texels high) the oracle with
 ``--ref`` directions is the reference; the table gives the relative RMS and max absolute errors of
-the oracle with fewer directions, and, for scale, of Voronoi relighting (ffls.voronoi exact cells,
+the oracle with fewer directions, and, for scale, of Voronoi relighting (ffls.weights.voronoi exact cells,
 ``relit = sum_i w_i B_i``) of distant-light synthetic captures with ``--lights`` lights.
 """
 from __future__ import annotations
@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from ffls import synth
-from ffls.lightmap import paper_map, sky_sun_map
-from ffls.voronoi import integrate_weights
+from ffls.synth import scene as synth
+from ffls.lightmaps.lightmap import paper_map, sky_sun_map
+from ffls.weights.voronoi import integrate_weights
 
 
 def _rel(a, b):

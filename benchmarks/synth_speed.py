@@ -1,4 +1,4 @@
-"""Speed of the synthetic renderer (ffls.synth): G-buffer, per-image render, whole captures.
+"""Speed of the synthetic renderer (ffls.synth.scene): G-buffer, per-image render, whole captures.
 
 Usage: python benchmarks/synth_speed.py [--repeats 3] [--big] [--out result.json]
 
@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from ffls import synth
+from ffls.synth import scene as synth
 
 
 def _median_time(fn, repeats):

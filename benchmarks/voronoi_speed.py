@@ -1,4 +1,4 @@
-"""Speed of the angular Voronoi integration (ffls.voronoi) and of CPU relighting (ffls.relight).
+"""Speed of the angular Voronoi integration (ffls.weights.voronoi) and of CPU relighting (ffls.relight.cpu).
 
 Usage::
 
@@ -20,9 +20,9 @@ import time
 
 import numpy as np
 
-from ffls.lightmap import paper_map
-from ffls.relight import relight_fast, relight_reference
-from ffls.voronoi import bake_cells, integrate_weights
+from ffls.lightmaps.lightmap import paper_map
+from ffls.relight.cpu import relight_fast, relight_reference
+from ffls.weights.voronoi import bake_cells, integrate_weights
 
 
 def median_time(fn, repeat):

@@ -11,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-from .errors import FflsError
+from ffls.errors import FflsError
 
 #: Subcommand modules, in the order ``ffls --help`` lists them.
 COMMANDS = (
@@ -39,7 +39,7 @@ def _load_commands():
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from ffls import __version__
 
     parser = argparse.ArgumentParser(prog="ffls", description="Free-form Light Stage: relight objects from photographs.")
     parser.add_argument("--version", action="version", version=f"ffls {__version__}")

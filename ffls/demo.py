@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from ffls.radiance.photos import load_photos
 
 DEFAULT_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
 DEFAULT_ROTATIONS = (0.0, 90.0, 180.0, 270.0)
@@ -44,13 +45,13 @@ def auto_exposure(hdr: np.ndarray, key: float = 0.18) -> float:
 
 def _relighter(capture, lights, use_gpu):
     """Return (render(lightmap, rotation) -> HDR image (H, W, 3) float32, backend description, release)."""
-    from .conventions import rotation_z
+    from ffls.conventions import rotation_z
 
     if use_gpu in ("auto", True):
         try:
-            from .errors import GLUnavailable
-            from .gpu.context import create_headless_context
-            from .gpu.engine import Engine
+            from ffls.errors import GLUnavailable
+            from ffls.gpu.context import create_headless_context
+            from ffls.gpu.engine import Engine
 
             ctx = create_headless_context()
         except (GLUnavailable, ImportError) as e:
@@ -72,12 +73,12 @@ def _relighter(capture, lights, use_gpu):
 
             return render, f"gpu: {ctx.info['GL_RENDERER']}", release
 
-    from .relight import relight_fast
-    from .voronoi import bake_cells, integrate_weights
+    from ffls.relight.cpu import relight_fast
+    from ffls.weights.voronoi import bake_cells, integrate_weights
 
     idx = np.flatnonzero(lights.ok_mask)
     dirs = lights.directions[idx]
-    basis = capture.load_basis(idx)
+    basis = load_photos(capture, idx)
     cells = bake_cells(dirs, capture.hemisphere)
 
     def render(lm, deg):
@@ -91,7 +92,7 @@ def contact_sheet(tiles: list[list[np.ndarray]], row_labels, col_labels, path) -
     """Write a grid of uint8 (H, W, 3) tiles with labels to a PNG (atomically)."""
     from PIL import Image, ImageDraw
 
-    from .errors import atomic_output
+    from ffls.errors import atomic_output
 
     h, w = tiles[0][0].shape[:2]
     pad, top, left = 4, 22, 90
@@ -122,15 +123,15 @@ def run_demo(out_dir="ffls-demo", n_lights: int = 160, resolution: int = 256, ma
     n_lights, resolution : int
         Size of the synthetic capture.
     maps : sequence of str
-        Built-in light map names (:func:`ffls.lightmap.builtin_lightmap`).
+        Built-in light map names (:func:`ffls.lightmaps.lightmap.builtin_lightmap`).
     use_gpu : {'auto', True, False}
         'auto' uses the GPU engine where an OpenGL 4.3 context exists, else the CPU path.
     """
-    from .capture import load_capture, load_lights
-    from .imageio import write_exr, write_png
-    from .lightmap import builtin_lightmap
-    from .synth import write_synthetic_capture
-    from .tonemap import tonemap, to_uint8
+    from ffls.io.capture import load_capture, load_lights
+    from ffls.io.images import write_exr, write_png
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.synth.scene import write_synthetic_capture
+    from ffls.display.tonemap import tonemap, to_uint8
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,4 @@
-"""Camera calibration (ffls.spheres.calibrate) on synthetic ChArUco views with a known K.
+"""Camera calibration (ffls.camera.calibrate) on synthetic ChArUco views with a known K.
 
 A ChArUco board image from OpenCV is warped into seven views through known poses and a known K
 (the homography K [r1 r2 t] composed with the board-image-from-plane homography), so the
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ffls.errors import InputError
-from ffls.spheres import calibrate as cal
+from ffls.camera import calibrate as cal
 
 K_TRUE = np.array([[820.0, 0, 331.0], [0, 820.0, 236.0], [0, 0, 1]])
 SQUARES, SQ, MK = (7, 5), 0.03, 0.022

@@ -1,4 +1,4 @@
-"""ffls.capture: capture.json, lights.json and RTI .lp files."""
+"""ffls.io.capture: capture.json, lights.json and RTI .lp files."""
 from __future__ import annotations
 
 import json
@@ -6,11 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from ffls import capture as cap
+from ffls.io import capture as cap
 from ffls import conventions
 from ffls.errors import InputError
-from ffls.imageio import write_exr, write_png
-from ffls.tonemap import srgb_decode
+from ffls.io.images import write_exr, write_png
+from ffls.radiance.encoding import srgb_decode
+from ffls.radiance.photos import load_photo, load_photos
 
 
 def _one_line(e: Exception, *names: str) -> None:
@@ -58,22 +59,22 @@ def test_load_capture_and_images(tmp_path):
     assert c.world_from_camera_is_default
     np.testing.assert_array_equal(c.world_from_camera, conventions.DEFAULT_WORLD_FROM_CAMERA)
     assert c.K.shape == (3, 3) and c.sphere_radius == 0.025
-    img = c.load_image(1)
+    img = load_photo(c, 1)
     assert img.dtype == np.float32 and img.shape == (4, 6, 3)
     np.testing.assert_allclose(img, srgb_decode(imgs[1] / 255.0), atol=1e-6)  # 8-bit: sRGB by default
-    basis = c.load_basis(progress=False)
+    basis = load_photos(c, progress=False)
     assert basis.shape == (3, 4, 6, 3) and basis.dtype == np.float32
     np.testing.assert_array_equal(basis[1], img)
-    np.testing.assert_array_equal(c.load_basis([2, 0], progress=False)[0], c.load_image(2))
+    np.testing.assert_array_equal(load_photos(c, [2, 0], progress=False)[0], load_photo(c, 2))
 
 
 def test_encoding_rules(tmp_path):
     _, imgs = _make(tmp_path / "c", depth=16)
     c = cap.load_capture(tmp_path / "c")
-    np.testing.assert_allclose(c.load_image(0), imgs[0] / 65535.0, atol=1e-7)  # 16-bit: linear
+    np.testing.assert_allclose(load_photo(c, 0), imgs[0] / 65535.0, atol=1e-7)  # 16-bit: linear
     _edit(tmp_path / "c", encoding="srgb")
     c = cap.load_capture(tmp_path / "c")
-    np.testing.assert_allclose(c.load_image(0), srgb_decode(imgs[0] / 65535.0), atol=1e-6)
+    np.testing.assert_allclose(load_photo(c, 0), srgb_decode(imgs[0] / 65535.0), atol=1e-6)
     _edit(tmp_path / "c", encoding="gamma22")
     with pytest.raises(InputError, match="encoding") as e:
         cap.load_capture(tmp_path / "c")
@@ -88,7 +89,7 @@ def test_exr_capture_is_linear(tmp_path, rng):
     (folder / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": ["a.exr"]}))
     c = cap.load_capture(folder)
     assert c.K is None
-    np.testing.assert_array_equal(c.load_image(0), rgb)
+    np.testing.assert_array_equal(load_photo(c, 0), rgb)
 
 
 @pytest.mark.parametrize("ext", [".npy", ".csv"])
@@ -101,7 +102,7 @@ def test_response_table(tmp_path, ext):
         np.savetxt(tmp_path / "c" / "response.csv", table, delimiter=",")
     _edit(tmp_path / "c", encoding={"response": "response" + ext})
     c = cap.load_capture(tmp_path / "c")
-    img = c.load_image(0)
+    img = load_photo(c, 0)
     for ch in range(3):
         np.testing.assert_allclose(img[..., ch], table[imgs[0][..., ch], ch], rtol=1e-6)
 
@@ -177,7 +178,7 @@ def test_image_sizes_disagree(tmp_path):
     write_png(tmp_path / "c" / names[2], np.zeros((5, 6, 3), np.uint8))
     c = cap.load_capture(tmp_path / "c")
     with pytest.raises(InputError, match="6x5 but the first image") as e:
-        c.load_basis(progress=False)
+        load_photos(c, progress=False)
     _one_line(e.value, names[2], names[0])
 
 
@@ -186,7 +187,7 @@ def test_image_size_key_checked(tmp_path):
     c = cap.load_capture(tmp_path / "c")
     assert c.image_size == (7, 4)
     with pytest.raises(InputError, match="image_size 7x4") as e:
-        c.load_image(0)
+        load_photo(c, 0)
     _one_line(e.value, "img_000.png")
 
 
@@ -195,7 +196,7 @@ def test_corrupt_image_in_capture(tmp_path):
     (tmp_path / "c" / names[0]).write_bytes(b"broken")
     c = cap.load_capture(tmp_path / "c")
     with pytest.raises(InputError) as e:
-        c.load_basis(progress=False)
+        load_photos(c, progress=False)
     _one_line(e.value, names[0])
 
 

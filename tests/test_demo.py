@@ -6,7 +6,7 @@ import pytest
 
 from ffls.cli import main
 from ffls.demo import auto_exposure, run_demo
-from ffls.imageio import read_image
+from ffls.io.images import read_image
 
 SMALL = dict(n_lights=24, resolution=48, maps=("sky", "paper"), rotations=(0.0, 180.0), progress=False)
 

@@ -1,4 +1,4 @@
-"""Sphere detection (ffls.spheres.detect) on analytic renders made here, independent of ffls.synth.
+"""Sphere detection (ffls.spheres.detect) on analytic renders made here, independent of ffls.synth.scene.
 
 Tolerances: centre within 0.35 px in the image and within 1 % of the camera distance in space
 (the depth follows from the apparent radius: 0.3 px of a 30 px radius is 1 %).
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from ffls.errors import InputError
+from ffls.camera import projection
 from ffls.spheres import detect
 
 
@@ -38,7 +39,7 @@ def render(K, dist, centres, R, shape=(300, 400), lights=None, ss=3, ground=0.01
     for oy in off:
         for ox in off:
             px = np.stack([xx.ravel() + ox, yy.ravel() + oy], axis=1)
-            s = detect.pixel_rays(px, K, dist)
+            s = projection.pixel_rays(px, K, dist)
             val = np.full(len(s), ground)
             tbest = np.full(len(s), np.inf)
             for C in centres:
@@ -66,7 +67,7 @@ def _match(fits, centres, K, dist):
     out = []
     for C in centres:
         ft = min(fits, key=lambda f: np.linalg.norm(f.center_cam - C))
-        px_true = detect.project_points(C[None], K, dist)[0]
+        px_true = projection.project_points(C[None], K, dist)[0]
         out.append((np.linalg.norm(ft.center_px - px_true), np.linalg.norm(ft.center_cam - C) / np.linalg.norm(C), ft))
     return out
 
@@ -98,7 +99,7 @@ def test_mask_and_normals_consistent():
     assert np.all(np.isfinite(n))
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1, atol=1e-9)
     # normals face the camera: n . (P - 0) < 0  <=> n . ray < 0
-    rays = detect.pixel_rays(np.stack([xs, ys], 1), K0, DIST0)
+    rays = projection.pixel_rays(np.stack([xs, ys], 1), K0, DIST0)
     assert np.all(np.sum(n * rays, axis=1) <= 1e-9)
     # a ray outside the mask misses
     out = detect.sphere_normals(np.array([[5.0, 5.0]]), K0, DIST0, C, R)
@@ -145,7 +146,7 @@ def test_tiny_sphere():
     img = render(K0, None, [C], R)
     ft = detect.find_spheres(img, K0, None, R, n_spheres=1)[0]
     assert 7.0 < ft.radius_px < 8.0
-    assert np.linalg.norm(ft.center_px - detect.project_points(C[None], K0, None)[0]) < 0.4
+    assert np.linalg.norm(ft.center_px - projection.project_points(C[None], K0, None)[0]) < 0.4
     assert abs(ft.distance / np.linalg.norm(C) - 1) < 0.05
 
 
@@ -155,7 +156,7 @@ def test_near_orthographic_camera():
     C, R = np.array([0.02, -0.01, 40.0]), 0.05
     img = render(K, None, [C], R, shape=(240, 320))
     ft = detect.find_spheres(img, K, None, R, n_spheres=1)[0]
-    assert np.linalg.norm(ft.center_px - detect.project_points(C[None], K, None)[0]) < 0.35
+    assert np.linalg.norm(ft.center_px - projection.project_points(C[None], K, None)[0]) < 0.35
     assert abs(ft.distance / np.linalg.norm(C) - 1) < 0.02
     # normals are what matter for the lights: compare at sphere pixels
     m = detect.sphere_mask(img.shape, K, None, C, R, margin_px=2)
@@ -169,7 +170,7 @@ def test_near_orthographic_camera():
 
 def test_hints_px_and_world():
     img = render(K0, DIST0, CENTRES0, R0)
-    px = detect.project_points(CENTRES0, K0, DIST0)
+    px = projection.project_points(CENTRES0, K0, DIST0)
     hints = [{"center_px": [p[0] + 3, p[1] - 2], "radius_px": 28} for p in px[:2]]
     fits = detect.find_spheres(img, K0, DIST0, R0, hints=hints)
     assert len(fits) == 2 and all(f.source == "hint" for f in fits)
@@ -236,10 +237,10 @@ def test_nonpositive_radius():
         detect.find_spheres(np.ones((10, 10, 3)), K0, None, -1.0)
 
 
-# ----------------------------------------------------------------------------- ffls.synth captures
+# ----------------------------------------------------------------------------- ffls.synth.scene captures
 def test_synth_capture_centres(tmp_path):
-    synth = pytest.importorskip("ffls.synth")
-    from ffls.capture import load_capture
+    synth = pytest.importorskip("ffls.synth.scene")
+    from ffls.io.capture import load_capture
     synth.write_synthetic_capture(tmp_path, n_lights=12, resolution=384, encoding="srgb8", noise=1 / 255,
                                   progress=False)
     truth = json.loads((tmp_path / "truth.json").read_text())
@@ -260,8 +261,8 @@ def test_synth_capture_half_azimuth_grid(tmp_path):
     """The paper's Table 1 grid lights one side of the spheres only (phi 0..180 from the camera):
     the unlit part of each outline fades into the ground and pulls the edge inward. The refit on
     the directly lit limb (``lit_limb``) keeps the centres within 0.5 px (without it: 0.81 px)."""
-    synth = pytest.importorskip("ffls.synth")
-    from ffls.capture import load_capture
+    synth = pytest.importorskip("ffls.synth.scene")
+    from ffls.io.capture import load_capture
     from ffls.conventions import spherical_to_direction
 
     P, T = np.meshgrid(np.arange(0, 181, 30.0), np.array([20.0, 45.0, 70.0]), indexing="ij")

@@ -4,7 +4,7 @@ Tolerance (all tests): per cell,
 ``|w_gpu - w_ref| <= RTOL * max(|w_ref|, FLOOR * total)`` with ``RTOL = 1e-5``, ``FLOOR = 1e-6``
 and ``total`` the map's power per channel: plain 1e-5 relative on every cell holding at least
 1e-6 of the power, and 1e-11 of the total on the smaller ones. The reference is
-``ffls.voronoi.integrate_weights(..., cells=<the same CellTexture>)`` in float64; the GPU
+``ffls.weights.voronoi.integrate_weights(..., cells=<the same CellTexture>)`` in float64; the GPU
 rounds each texel's power to float32 once and accumulates in float32. Dropped-texel counts are
 compared exactly, and energy is conserved: ``sum(w) + dropped_power == total`` within 1e-5.
 """
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from ffls.conventions import rotation_ypr
-from ffls.lightmap import LightMap, constant_map, sky_sun_map
-from ffls.voronoi import bake_cells, integrate_weights
+from ffls.lightmaps.lightmap import LightMap, constant_map, sky_sun_map
+from ffls.weights.voronoi import bake_cells, integrate_weights
 
 pytestmark = pytest.mark.gl
 

@@ -88,7 +88,7 @@ def test_float16_overflow_and_underflow_are_reported():
 @pytest.mark.parametrize("dtype", ["f16", "f32"])
 @pytest.mark.parametrize("method", ["compute", "fragment", "packed"])
 def test_pass2_matches_reference(ctx, rng, dtype, method):
-    from ffls.relight import relight_reference
+    from ffls.relight.cpu import relight_reference
 
     basis = _basis(rng, 64, 12, 20)
     w = rng.random((64, 3)) * 3
@@ -101,7 +101,7 @@ def test_pass2_matches_reference(ctx, rng, dtype, method):
 @pytest.mark.parametrize("method", ["compute", "packed"])
 def test_pass2_extreme_light_counts(ctx, rng, n, method):
     from ffls.gpu.basis import PACKED_LAYERS
-    from ffls.relight import relight_reference
+    from ffls.relight.cpu import relight_reference
 
     basis = _basis(rng, n, 16, 16)
     w = rng.random((n, 3))
@@ -118,7 +118,7 @@ def test_pass2_extreme_light_counts(ctx, rng, n, method):
 @pytest.mark.parametrize("method", ["compute", "packed"])
 def test_sun_1e6_no_float16_overflow(ctx, rng, dtype, method):
     """A 1e6 basis value (a specular glint) and a 1e6 sun weight next to 1e-3 sky weights."""
-    from ffls.relight import relight_reference
+    from ffls.relight.cpu import relight_reference
 
     basis = _basis(rng, 32, 8, 8, dynamic=False)
     basis[3, 2, 5] = 1e6
@@ -133,7 +133,7 @@ def test_sun_1e6_no_float16_overflow(ctx, rng, dtype, method):
 @pytest.mark.gl
 @pytest.mark.parametrize("method", ["compute", "fragment"])
 def test_split_arrays_match_reference(ctx, rng, method):
-    from ffls.relight import relight_reference
+    from ffls.relight.cpu import relight_reference
 
     basis = _basis(rng, 50, 8, 12)
     w = rng.random((50, 3))
@@ -147,7 +147,7 @@ def test_split_arrays_match_reference(ctx, rng, method):
 def test_packed_chunks_and_bands_match_reference(ctx, rng, dtype):
     """Layers cut into chunks (7 layers: an unaligned uniform-block offset, padded blocks) and
     rows into bands (a band buffer of 3 rows), signed values as in eigen-images."""
-    from ffls.relight import relight_reference
+    from ffls.relight.cpu import relight_reference
 
     n, H, W = 50, 10, 12
     basis = _basis(rng, n, H, W) * rng.choice([-1.0, 1.0], size=(n, H, W, 3)).astype(np.float32)
@@ -220,8 +220,8 @@ def _lowrank_basis(rng, n=40, H=12, W=16, r=5, noise=0.01):
 
 @pytest.mark.parametrize("mode", ["per_channel", "shared"])
 def test_compression_algebra_and_error(rng, mode):
-    from ffls.compress import compress_basis
-    from ffls.relight import relight_reference
+    from ffls.relight.compress import compress_basis
+    from ffls.relight.cpu import relight_reference
 
     basis = _lowrank_basis(rng)
     w = rng.random((40, 3))
@@ -237,7 +237,7 @@ def test_compression_algebra_and_error(rng, mode):
 
 
 def test_compressed_save_load_roundtrip(tmp_path, rng):
-    from ffls.compress import compress_basis, load_compressed, save_compressed
+    from ffls.relight.compress import compress_basis, load_compressed, save_compressed
 
     basis = _lowrank_basis(rng, n=10)
     cb = compress_basis(basis, 6)
@@ -258,11 +258,11 @@ def test_compressed_save_load_roundtrip(tmp_path, rng):
 
 @pytest.mark.gl
 def test_gpu_projection_and_compressed_pass2(ctx, rng):
-    from ffls.compress import compress_basis
+    from ffls.relight.compress import compress_basis
     from ffls.gpu.engine import Engine
     from ffls.gpu.context import release_gl
     from ffls.gpu.weighted_sum import Projector, weights_to_vec4
-    from ffls.relight import relight_reference
+    from ffls.relight.cpu import relight_reference
 
     basis = _lowrank_basis(rng)
     w = rng.random((40, 3))
@@ -297,7 +297,7 @@ def test_gpu_projection_and_compressed_pass2(ctx, rng):
 def test_tonemap_shader_matches_numpy(ctx, rng, method):
     from ffls.gpu.context import release_gl
     from ffls.gpu.weighted_sum import ToneMapPass
-    from ffls.tonemap import to_uint8, tonemap
+    from ffls.display.tonemap import to_uint8, tonemap
 
     H, W = 16, 24
     hdr = (10.0 ** rng.uniform(-5, 2.5, size=(H, W, 3))).astype(np.float32)
@@ -329,10 +329,10 @@ def _directions(rng, n):
 def test_engine_matches_cpu_pipeline(ctx, rng, dtype):
     from ffls.conventions import rotation_ypr, rotation_z
     from ffls.gpu.engine import Engine
-    from ffls.lightmap import sky_sun_map
-    from ffls.relight import relight_reference
-    from ffls.tonemap import to_uint8, tonemap
-    from ffls.voronoi import bake_cells, integrate_weights
+    from ffls.lightmaps.lightmap import sky_sun_map
+    from ffls.relight.cpu import relight_reference
+    from ffls.display.tonemap import to_uint8, tonemap
+    from ffls.weights.voronoi import bake_cells, integrate_weights
 
     n = 30
     basis = _basis(rng, n, 10, 14)
@@ -364,8 +364,8 @@ def test_engine_matches_cpu_pipeline(ctx, rng, dtype):
 @pytest.mark.gl
 def test_render_command_gpu_matches_cpu(tmp_path):
     from ffls.cli import main
-    from ffls.imageio import read_image
-    from ffls.synth import write_synthetic_capture
+    from ffls.io.images import read_image
+    from ffls.synth.scene import write_synthetic_capture
 
     cap = tmp_path / "cap"
     write_synthetic_capture(cap, n_lights=12, resolution=24, progress=False)

@@ -1,10 +1,12 @@
-"""ffls.imageio and ffls.tonemap: round trips, error messages, atomic writes, sRGB curves."""
+"""ffls.io.images and ffls.display.tonemap: round trips, error messages, atomic writes, sRGB curves."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ffls import imageio, tonemap
+from ffls.display import tonemap
+from ffls.radiance import encoding
+from ffls.io import images as imageio
 from ffls.errors import InputError
 
 
@@ -209,26 +211,26 @@ def test_srgb_known_values():
     x = np.array([0.0, 0.0031308, 0.18, 0.5, 1.0])
     # reference values from the IEC 61966-2-1 formula
     want = np.array([0.0, 0.040449936, 0.461356129, 0.735356983, 1.0])
-    np.testing.assert_allclose(tonemap.srgb_encode(x), want, atol=1e-8)
-    np.testing.assert_allclose(tonemap.srgb_decode(np.array([0.04045, 0.5, 1.0])),
+    np.testing.assert_allclose(encoding.srgb_encode(x), want, atol=1e-8)
+    np.testing.assert_allclose(encoding.srgb_decode(np.array([0.04045, 0.5, 1.0])),
                                [0.04045 / 12.92, 0.214041140, 1.0], atol=1e-8)
-    assert tonemap.srgb_decode(np.array([128 / 255]))[0] == pytest.approx(0.2158605, abs=1e-6)
+    assert encoding.srgb_decode(np.array([128 / 255]))[0] == pytest.approx(0.2158605, abs=1e-6)
 
 
 @pytest.mark.parametrize("dtype,tol", [(np.float64, 1e-12), (np.float32, 2e-6)])
 def test_srgb_round_trip(rng, dtype, tol):
     x = rng.random(10000).astype(dtype)
     x[:5] = [0, 0.0031308, 0.04045, 1, 1e-7]
-    y = tonemap.srgb_decode(tonemap.srgb_encode(x))
+    y = encoding.srgb_decode(encoding.srgb_encode(x))
     assert y.dtype == dtype
     np.testing.assert_allclose(y, x, atol=tol, rtol=tol)
-    enc = tonemap.srgb_encode(x)
+    enc = encoding.srgb_encode(x)
     assert np.all(np.diff(enc[np.argsort(x)]) >= 0)  # monotone
 
 
 def test_srgb_is_continuous_at_the_knee():
     eps = 1e-12
-    lo, hi = tonemap.srgb_encode(np.array([0.0031308 - eps, 0.0031308 + eps]))
+    lo, hi = encoding.srgb_encode(np.array([0.0031308 - eps, 0.0031308 + eps]))
     assert abs(hi - lo) < 1e-7
 
 
@@ -238,7 +240,7 @@ def test_tonemap_methods(rng):
         out = tonemap.tonemap(hdr, exposure=-1.0, method=m)
         assert out.dtype == np.float32 and out.shape == hdr.shape
         assert out.min() >= 0 and out.max() <= 1
-    np.testing.assert_allclose(tonemap.tonemap(np.array([0.25]), exposure=1.0), tonemap.srgb_encode(0.5), rtol=1e-6)
+    np.testing.assert_allclose(tonemap.tonemap(np.array([0.25]), exposure=1.0), encoding.srgb_encode(0.5), rtol=1e-6)
     assert tonemap.reinhard(np.array([1.0]))[0] == 0.5
     assert tonemap.aces(np.array([0.0]))[0] == 0.0 and tonemap.aces(np.array([1e6]))[0] == 1.0
     with pytest.raises(ValueError, match="method"):

@@ -1,7 +1,7 @@
 """Light estimation from the spheres (issue 3): per-sphere Lambert fits, combination, rejection.
 
 Analytic renders here (Lambertian spheres + ambient + a ground bounce of an infinite plane, 2x2
-supersampled) keep the tests fast and independent of ffls.synth; one test uses ffls.synth.
+supersampled) keep the tests fast and independent of ffls.synth.scene; one test uses ffls.synth.scene.
 """
 from __future__ import annotations
 
@@ -370,8 +370,8 @@ def test_reasons_documented():
 
 # ----------------------------------------------------------------------------- capture level
 def test_estimate_lights_on_synth_capture(tmp_path):
-    synth = pytest.importorskip("ffls.synth")
-    from ffls.capture import load_capture, load_lights, save_lights
+    synth = pytest.importorskip("ffls.synth.scene")
+    from ffls.io.capture import load_capture, load_lights, save_lights
     from ffls.spheres.estimate import estimate_lights
 
     dirs = np.array([light(10, -90), light(40, 0), light(60, 150)])
@@ -393,8 +393,8 @@ def test_estimate_lights_on_synth_capture(tmp_path):
 
 def test_cli_lights(tmp_path, capsys):
     """``ffls lights``: summary printed, lights.json and the --plot PNG written."""
-    synth = pytest.importorskip("ffls.synth")
-    from ffls.capture import load_lights
+    synth = pytest.importorskip("ffls.synth.scene")
+    from ffls.io.capture import load_lights
     from ffls.cli import main
 
     dirs = np.array([light(10, -90), light(40, 0), light(60, 150), light(30, 60)])

@@ -1,14 +1,15 @@
-"""ffls.lightmap: loading, layout detection, validation, crosses, procedural maps, the CLI."""
+"""ffls.lightmaps.lightmap: loading, layout detection, validation, crosses, procedural maps, the CLI."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ffls import conventions, lightmap
+from ffls import conventions
+from ffls.lightmaps import lightmap
 from ffls.assets import builtin_lightmaps
 from ffls.errors import FflsError, InputError
-from ffls.imageio import read_image, write_exr, write_hdr
-from ffls.lightmap import LightMap, LightMapWarning
+from ffls.io.images import read_image, write_exr, write_hdr
+from ffls.lightmaps.lightmap import LightMap, LightMapWarning
 
 
 def _one_line(e: Exception, name: str) -> None:
@@ -164,7 +165,7 @@ def test_save_failure_leaves_no_partial_file(tmp_path, monkeypatch):
 # ----------------------------------------------------------------------------- cube crosses
 @pytest.mark.parametrize("orientation", ["horizontal", "vertical"])
 def test_cross_matches_sphere_maps_cube(orientation):
-    from ffls.sphere_maps import get_map
+    from ffls.lightmaps.sphere_maps import get_map
 
     R = 6
     d, mask = lightmap.cross_directions(R, orientation)
@@ -297,7 +298,7 @@ def test_write_hdr_of_procedural_map(tmp_path):
 
 def test_lightmap_from_spec_file_builtin_and_errors(tmp_path):
     from ffls.errors import FflsError, InputError
-    from ffls.lightmap import constant_map, lightmap_from_spec, save_lightmap
+    from ffls.lightmaps.lightmap import constant_map, lightmap_from_spec, save_lightmap
 
     save_lightmap(constant_map(8, 0.25), tmp_path / "grey.exr")
     assert lightmap_from_spec(tmp_path / "grey.exr").data.max() == pytest.approx(0.25)

@@ -1,7 +1,7 @@
 """Photometric refinement of a sphere's centre (ffls.spheres.refine) on an analytic render.
 
 The render here is a few lines of NumPy (a Lambertian sphere through a pinhole camera, 3x3
-supersampled, a small ambient), independent of ffls.synth and of the code under test.
+supersampled, a small ambient), independent of ffls.synth.scene and of the code under test.
 """
 from __future__ import annotations
 

@@ -1,12 +1,13 @@
-"""CPU relighting (ffls.relight), the ``ffls relight`` command and convergence to the oracle."""
+"""CPU relighting (ffls.relight.cpu), the ``ffls relight`` command and convergence to the oracle."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from ffls import conventions as cv
-from ffls import voronoi as vo
-from ffls.relight import relight_capture, relight_fast, relight_reference
+from ffls.weights import voronoi as vo
+from ffls.relight.cpu import relight_capture, relight_fast, relight_reference
+from ffls.radiance.photos import load_photos
 
 
 def _basis(rng, n, h=24, w=40, dtype=np.float32):
@@ -56,7 +57,7 @@ def test_shape_errors(rng):
 
 
 def test_single_bright_texel_picks_the_nearest_basis_image(rng):
-    from ffls.sphere_maps import get_map
+    from ffls.lightmaps.sphere_maps import get_map
 
     m = get_map("latlong")
     d = m.directions(128).reshape(-1, 3)
@@ -79,7 +80,7 @@ def test_single_bright_texel_picks_the_nearest_basis_image(rng):
 # ----------------------------------------------------------------------------- capture
 @pytest.fixture(scope="module")
 def small_capture(tmp_path_factory):
-    from ffls.synth import write_synthetic_capture
+    from ffls.synth.scene import write_synthetic_capture
 
     folder = tmp_path_factory.mktemp("cap")
     write_synthetic_capture(folder, n_lights=16, resolution=32, progress=False, seed=3)
@@ -87,8 +88,8 @@ def small_capture(tmp_path_factory):
 
 
 def test_relight_capture_uses_only_ok_lights(small_capture):
-    from ffls.capture import load_capture, load_lights
-    from ffls.lightmap import paper_map
+    from ffls.io.capture import load_capture, load_lights
+    from ffls.lightmaps.lightmap import paper_map
 
     cap = load_capture(small_capture)
     lights = load_lights(small_capture / "lights.json", cap)
@@ -98,7 +99,7 @@ def test_relight_capture_uses_only_ok_lights(small_capture):
     img, w = relight_capture(cap, lights, lm, rotation=cv.rotation_z(40.0))
     ok = lights.ok_mask
     assert w.weights.shape == (14, 3)
-    basis = cap.load_basis(np.flatnonzero(ok))
+    basis = load_photos(cap, np.flatnonzero(ok))
     w_exact = vo.integrate_weights(lm, lights.directions[ok], cv.rotation_z(40.0), cap.hemisphere)
     np.testing.assert_array_equal(w.weights, w_exact.weights)  # the candidate texture is exact
     ref = relight_reference(w_exact.weights, basis)
@@ -110,8 +111,8 @@ def test_relight_capture_uses_only_ok_lights(small_capture):
 
 def test_relight_command_writes_exr_and_png(small_capture, tmp_path, capsys):
     from ffls.cli import main
-    from ffls.imageio import read_image
-    from ffls.lightmap import save_lightmap, sky_sun_map
+    from ffls.io.images import read_image
+    from ffls.lightmaps.lightmap import save_lightmap, sky_sun_map
 
     probe = tmp_path / "sky.exr"
     save_lightmap(sky_sun_map(32), probe)
@@ -143,8 +144,8 @@ def test_relit_capture_converges_to_the_oracle():
     # without its sun, against the direct render (oracle, 1024 distant lights). Measured
     # (benchmarks/convergence.py, 64x64, 2048 oracle lights): rel. RMS 0.0245 (N=50),
     # 0.0088 (N=200). Stated: < 0.04 at N = 50, < 0.015 at N = 200, and at least 1.8x lower.
-    from ffls import synth
-    from ffls.lightmap import sky_sun_map
+    from ffls.synth import scene as synth
+    from ffls.lightmaps.lightmap import sky_sun_map
 
     scene = synth.SynthScene()
     lm = sky_sun_map(128, sun_irradiance=0.0)

@@ -1,4 +1,4 @@
-"""Camera response recovery, HDR merge, response files and valid-pixel masks (ffls.spheres.response)."""
+"""Camera response recovery, HDR merge, response files and valid-pixel masks (ffls.radiance.response)."""
 from __future__ import annotations
 
 import json
@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from ffls.errors import InputError
-from ffls.spheres import response as rsp
+from ffls.io import response as response_files
+from ffls.radiance import response as rsp
 
 
 def _camera(E, t, rng):
@@ -68,12 +69,12 @@ def test_linearize_is_table_lookup():
 @pytest.mark.parametrize("suffix", [".npy", ".csv"])
 def test_save_load_roundtrip_and_capture_reader(tmp_path, suffix):
     curve = np.cumsum(np.random.default_rng(1).uniform(0.001, 0.01, (256, 3)), axis=0).astype(np.float32)
-    p = rsp.save_response(tmp_path / f"response{suffix}", curve)
-    np.testing.assert_allclose(rsp.load_response(p), curve, rtol=1e-6)
+    p = response_files.save_response(tmp_path / f"response{suffix}", curve)
+    np.testing.assert_allclose(response_files.load_response(p), curve, rtol=1e-6)
     assert [q.name for q in tmp_path.iterdir()] == [p.name]  # atomic: no temporary left
-    # ffls.capture reads encoding.response through the same reader
-    from ffls.capture import load_capture
-    from ffls.imageio import write_png
+    # ffls.io.capture reads encoding.response through the same reader
+    from ffls.io.capture import load_capture
+    from ffls.io.images import write_png
 
     write_png(tmp_path / "a.png", np.zeros((4, 4, 3), np.uint8))
     (tmp_path / "capture.json").write_text(
@@ -83,16 +84,16 @@ def test_save_load_roundtrip_and_capture_reader(tmp_path, suffix):
 
 def test_load_response_errors(tmp_path):
     with pytest.raises(InputError, match="not found"):
-        rsp.load_response(tmp_path / "nope.npy")
+        response_files.load_response(tmp_path / "nope.npy")
     bad = tmp_path / "bad.npy"
     np.save(bad, np.ones((10, 3)))
     with pytest.raises(InputError, match="shape") as e:
-        rsp.load_response(bad)
+        response_files.load_response(bad)
     assert "bad.npy" in str(e.value)
     dec = tmp_path / "dec.npy"
     np.save(dec, np.linspace(1, 0, 256))
     with pytest.raises(InputError, match="non-decreasing"):
-        rsp.load_response(dec)
+        response_files.load_response(dec)
 
 
 def test_valid_pixel_mask_8_16_float():
@@ -125,7 +126,7 @@ def test_cli_response_from_exposures_json(tmp_path, bracket):
     _write_bracket(tmp_path, bracket)
     out = tmp_path / "resp.npy"
     assert main(["calibrate", "response", str(tmp_path), "-o", str(out)]) == 0
-    curve = rsp.load_response(out)
+    curve = response_files.load_response(out)
     z = np.arange(40, 220)
     ratio = curve[z, 1] / _finv(z.astype(np.float64))
     assert np.max(np.abs(ratio / np.median(ratio) - 1)) < 0.1

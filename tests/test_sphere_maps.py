@@ -1,4 +1,4 @@
-"""Tests of ffls.sphere_maps and its GLSL twin shaders/include/sphere_maps.glsl."""
+"""Tests of ffls.lightmaps.sphere_maps and its GLSL twin shaders/include/sphere_maps.glsl."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ffls import conventions
-from ffls.sphere_maps import MAPS, DEFAULT_PROBE_FRAME, AngularMap, MirrorBallMap, get_map
+from ffls.lightmaps.sphere_maps import MAPS, DEFAULT_PROBE_FRAME, AngularMap, MirrorBallMap, get_map
 
 NAMES = sorted(MAPS)
 FLAT = [n for n in NAMES if n != "cube"]

@@ -1,4 +1,4 @@
-"""Tests of the synthetic scene renderer and capture writer (ffls.synth, ffls synth)."""
+"""Tests of the synthetic scene renderer and capture writer (ffls.synth.scene, ffls synth)."""
 from __future__ import annotations
 
 import json
@@ -6,8 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from ffls import synth
-from ffls.synth import SynthScene
+from ffls.synth import scene as synth
+from ffls.synth.scene import SynthScene
+from ffls.radiance.photos import load_photo
 
 RES = 64
 
@@ -202,7 +203,7 @@ def test_oracle_of_a_single_texel_is_the_distant_light_render():
 
 
 def test_oracle_constant_map_and_horizon_rule():
-    from ffls.lightmap import constant_map
+    from ffls.lightmaps.lightmap import constant_map
 
     s = _scene(ground_albedo=0.5)
     img = synth.render_lightmap(s, constant_map(64, 1.0), RES, n_dirs=256)
@@ -220,7 +221,7 @@ def test_oracle_constant_map_and_horizon_rule():
 
 def test_cluster_lightmap_conserves_energy_and_rotates():
     from ffls.conventions import rotation_z
-    from ffls.lightmap import sky_sun_map
+    from ffls.lightmaps.lightmap import sky_sun_map
 
     lm = sky_sun_map(32)
     d, rad, sa = lm.samples()
@@ -243,7 +244,7 @@ def test_cluster_lightmap_conserves_energy_and_rotates():
 
 # ----------------------------------------------------------------------------- capture folder
 def test_capture_folder_loads_and_matches_renders(tmp_path):
-    from ffls.capture import load_capture, load_lights
+    from ffls.io.capture import load_capture, load_lights
 
     res = synth.write_synthetic_capture(tmp_path / "cap", n_lights=4, resolution=RES, seed=7, progress=False)
     cap = load_capture(tmp_path / "cap")
@@ -259,7 +260,7 @@ def test_capture_folder_loads_and_matches_renders(tmp_path):
     assert all(s == "ok" for s in lights.status)
     for i in range(4):
         ref = synth.render_light(SynthScene(), RES, direction=res["directions"][i])
-        np.testing.assert_allclose(cap.load_image(i), ref, rtol=1e-3, atol=1e-4)  # half floats
+        np.testing.assert_allclose(load_photo(cap, i), ref, rtol=1e-3, atol=1e-4)  # half floats
     # K projects the true sphere centres onto the recorded pixel centres
     c = (np.asarray(truth["sphere_centers"]) - cap.world_from_camera[:3, 3]) @ cap.world_from_camera[:3, :3]
     uv = (c @ cap.K.T)[:, :2] / c[:, 2:]
@@ -277,7 +278,7 @@ def test_capture_is_deterministic_and_seeded(tmp_path):
 
 
 def test_srgb8_capture_with_noise_and_near_lights(tmp_path):
-    from ffls.capture import load_capture, load_lights
+    from ffls.io.capture import load_capture, load_lights
 
     d = np.array([[0.0, -0.5, 0.8], [0.5, 0.5, 0.5]])
     res = synth.write_synthetic_capture(tmp_path / "n", resolution=RES, light_model="near", light_distance=1.5,
@@ -287,7 +288,7 @@ def test_srgb8_capture_with_noise_and_near_lights(tmp_path):
     assert cap.encoding == "srgb" and cap.image_names[0].endswith(".png")
     np.testing.assert_allclose(lights.positions, 1.5 * d / np.linalg.norm(d, axis=1, keepdims=True))
     np.testing.assert_allclose(lights.directions, res["directions"])
-    img = cap.load_image(0)
+    img = load_photo(cap, 0)
     ref = synth.render_light(SynthScene(), RES, position=res["positions"][0])
     err = img - np.clip(ref, 0, 1)
     assert 0.001 < np.std(err) < 0.02  # noise of 2 code values, seen through the sRGB curve

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from ffls.errors import InputError
-from ffls.video import FrameWriter
+from ffls.io.video import FrameWriter
 
 
 def _frames(n, h=32, w=48):

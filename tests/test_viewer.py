@@ -14,7 +14,7 @@ import pytest
 
 imgui_bundle = pytest.importorskip("imgui_bundle", reason="imgui-bundle is not installed")
 
-from ffls.tonemap import srgb_decode  # noqa: E402
+from ffls.radiance.encoding import srgb_decode  # noqa: E402
 from viewer.state import QUALITY_KNOBS, TurntableJob, ViewerState, ViewInfo, parse_rotation, parse_size  # noqa: E402
 
 VIEWER = Path(__file__).resolve().parents[1] / "viewer"
@@ -123,7 +123,7 @@ def test_gui_changes_only_state_without_gl(bare_imgui):
 # ----------------------------------------------------------------------------- window tests
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory):
-    from ffls.synth import write_synthetic_capture
+    from ffls.synth.scene import write_synthetic_capture
 
     folder = tmp_path_factory.mktemp("viewer") / "cap"
     write_synthetic_capture(folder, n_lights=24, resolution=64, seed=3, progress=False)
@@ -235,8 +235,8 @@ def test_preview_and_weights_mode(fresh):
 
 @pytest.mark.viewer
 def test_screenshot_turntable_drop(fresh, tmp_path):
-    from ffls.imageio import read_image
-    from ffls.lightmap import constant_map, save_lightmap
+    from ffls.io.images import read_image
+    from ffls.lightmaps.lightmap import constant_map, save_lightmap
 
     app = fresh
     png, exr = app.save_screenshot(tmp_path / "shot.png")
@@ -283,10 +283,10 @@ def test_screenshot_turntable_drop(fresh, tmp_path):
 @pytest.mark.viewer
 def test_mask_enables_hiding_the_background(capture_dir, app, tmp_path):
     """With a mask (capture.json "mask"), the background checkbox hides what is outside it."""
-    from ffls.imageio import write_png
+    from ffls.io.images import write_png
     from viewer.renderer import load_mask
 
-    from ffls.capture import load_capture
+    from ffls.io.capture import load_capture
 
     cap = load_capture(capture_dir)
     assert load_mask(cap) is None  # none given: none guessed
@@ -329,7 +329,7 @@ def test_mask_enables_hiding_the_background(capture_dir, app, tmp_path):
 def test_cli_frames_screenshot(capture_dir, app, tmp_path, capsys):
     """``ffls view CAP --frames N --screenshot OUT.png`` through ffls.cli.main, beside another window."""
     from ffls.cli import main
-    from ffls.imageio import read_image
+    from ffls.io.images import read_image
 
     out = tmp_path / "view.png"
     rc = main(["view", str(capture_dir), "--headless", "--frames", "3", "--screenshot", str(out),

@@ -1,8 +1,8 @@
-"""Angular Voronoi weighting (ffls.voronoi): GUIDE section 4 invariants and extremes.
+"""Angular Voronoi weighting (ffls.weights.voronoi): GUIDE section 4 invariants and extremes.
 
 The light maps here are built directly as ``(dirs, radiance, solid_angle)`` tuples on a lat-long
-grid with exact per-row solid angles, independent of ffls.lightmap and ffls.sphere_maps, so that
-these tests check the weighting alone. Tests of the candidate texture need ffls.sphere_maps.
+grid with exact per-row solid angles, independent of ffls.lightmaps.lightmap and ffls.lightmaps.sphere_maps, so that
+these tests check the weighting alone. Tests of the candidate texture need ffls.lightmaps.sphere_maps.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ffls import conventions as cv
-from ffls import voronoi as vo
+from ffls.weights import voronoi as vo
 
 
 # ----------------------------------------------------------------------------- fixtures
@@ -285,7 +285,7 @@ def test_cell_solid_angles_methods_agree(rng, hemisphere):
 
 # ----------------------------------------------------------------------------- cell texture
 def _latlong_1024x512():
-    from ffls.sphere_maps import get_map
+    from ffls.lightmaps.sphere_maps import get_map
 
     m = get_map("latlong")
     return m.directions(512).reshape(-1, 3), m.solid_angles(512).ravel()
@@ -322,7 +322,7 @@ def test_cell_texture_layout(rng):
     _, keep = vo.unique_directions(dirs)
     assert not np.isin(np.setdiff1d(np.arange(100), keep), c).any()
     # the index texture is the exact cell of each texel centre
-    from ffls.sphere_maps import get_map
+    from ffls.lightmaps.sphere_maps import get_map
 
     centres = get_map("concentric").directions(64).reshape(-1, 3)
     np.testing.assert_array_equal(cells.index.ravel(), vo.assign_cells(centres, dirs))
@@ -378,7 +378,7 @@ def test_rotate_directions_is_the_matrix_product(rng):
 
 
 def test_lightmap_object_accepted():
-    from ffls.lightmap import constant_map
+    from ffls.lightmaps.lightmap import constant_map
 
     lm = constant_map(64, radiance=(1.0, 2.0, 3.0))
     dirs = [[0, 0, 1.0], [1.0, 0, 0.2], [-0.5, 0.5, 0.3]]

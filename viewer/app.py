@@ -20,15 +20,15 @@ import numpy as np
 
 from ffls.errors import GLUnavailable, InputError
 
-from . import headless as platforms
-from .state import ViewerState
+from viewer import headless as platforms
+from viewer.state import ViewerState
 
 __all__ = ["ViewerApp", "open_capture"]
 
 
 def open_capture(folder, lights=None):
-    """``(capture, lights)`` of a capture folder (:func:`ffls.capture.load_capture_and_lights`)."""
-    from ffls.capture import load_capture_and_lights
+    """``(capture, lights)`` of a capture folder (:func:`ffls.io.capture.load_capture_and_lights`)."""
+    from ffls.io.capture import load_capture_and_lights
 
     return load_capture_and_lights(folder, lights)
 
@@ -38,8 +38,8 @@ class ViewerApp:
 
     Parameters
     ----------
-    capture : ffls.capture.Capture
-    lights : ffls.capture.Lights
+    capture : ffls.io.capture.Capture
+    lights : ffls.io.capture.Lights
     state : ViewerState, optional
         Initial state (its ``window_size`` and ``fullscreen`` shape the window).
     headless : bool, optional
@@ -67,7 +67,7 @@ class ViewerApp:
 
     def __init__(self, capture, lights, state: ViewerState | None = None, *, headless: bool | None = None,
                  mask_path=None, vsync: bool = True, title: str = "ffls view", timing: bool = False):
-        from .renderer import Renderer, load_mask
+        from viewer.renderer import Renderer, load_mask
 
         self.state = state if state is not None else ViewerState()
         self.platform = platforms.choose_platform(headless)
@@ -176,7 +176,7 @@ class ViewerApp:
         """
         from imgui_bundle import imgui
 
-        from .gui import draw_gui
+        from viewer.gui import draw_gui
 
         glfw, st = self.glfw, self.state
         now = time.perf_counter()
@@ -310,7 +310,7 @@ class ViewerApp:
         (Path, Path)
             The PNG and the EXR.
         """
-        from ffls.imageio import write_exr, write_png
+        from ffls.io.images import write_exr, write_png
 
         path = Path(path)
         if path.suffix.lower() != ".png":
@@ -324,7 +324,7 @@ class ViewerApp:
 
     def _turntable_frame(self, job) -> None:
         from ffls.errors import FflsError
-        from ffls.video import FrameWriter
+        from ffls.io.video import FrameWriter
 
         if self._sink_job is not job:
             self._drop_sink()

@@ -14,7 +14,7 @@ import time
 import numpy as np
 from imgui_bundle import imgui, implot
 
-from .state import BUILTIN_MAPS, QUALITY_KNOBS, TONEMAPS, TurntableJob, ViewerState, ViewInfo
+from viewer.state import BUILTIN_MAPS, QUALITY_KNOBS, TONEMAPS, TurntableJob, ViewerState, ViewInfo
 
 __all__ = ["draw_gui", "handle_shortcuts", "SHORTCUTS", "PANEL_WIDTH"]
 

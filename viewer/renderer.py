@@ -24,11 +24,12 @@ import numpy as np
 
 from ffls.conventions import direction_to_latlong_uv, latlong_directions, rotation_ypr
 from ffls.errors import FflsError, InputError
-from ffls.lightmap import lightmap_from_spec
-from ffls.tonemap import tonemap as tonemap_np
-from ffls.tonemap import to_uint8
+from ffls.lightmaps.lightmap import lightmap_from_spec
+from ffls.display.tonemap import tonemap as tonemap_np
+from ffls.display.tonemap import to_uint8
+from ffls.radiance.photos import load_photo
 
-from .state import BUILTIN_MAPS, ViewerState, ViewInfo
+from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo
 
 __all__ = ["Renderer", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
 
@@ -41,7 +42,7 @@ def load_mask(capture, path=None, size=None) -> np.ndarray | None:
 
     Parameters
     ----------
-    capture : ffls.capture.Capture
+    capture : ffls.io.capture.Capture
         ``capture.extra['mask']`` (a file relative to the capture folder) is used when ``path``
         is None.
     path : path-like, optional
@@ -49,7 +50,7 @@ def load_mask(capture, path=None, size=None) -> np.ndarray | None:
     size : (int, int), optional
         Expected (W, H); a mask of another size raises :class:`ffls.errors.InputError`.
     """
-    from ffls.imageio import read_image
+    from ffls.io.images import read_image
 
     if path is None:
         rel = (capture.extra or {}).get("mask") if capture is not None else None
@@ -80,8 +81,8 @@ def pass1_lightmap(lm, height):
     """The light map pass 1 integrates: ``lm`` itself (``'full'``) or a lat-long of ``height`` rows.
 
     A lat-long map whose height is a multiple of ``height`` is box-filtered
-    (:meth:`ffls.lightmap.LightMap.downsample`, which keeps the integral); other maps are
-    resampled with :meth:`ffls.lightmap.LightMap.to_latlong` at four times the height first,
+    (:meth:`ffls.lightmaps.lightmap.LightMap.downsample`, which keeps the integral); other maps are
+    resampled with :meth:`ffls.lightmaps.lightmap.LightMap.to_latlong` at four times the height first,
     then box-filtered. A map no taller than ``height`` is used as it is.
     """
     if height in (None, "full"):
@@ -112,8 +113,8 @@ class Renderer:
     ----------
     ctx : moderngl.Context
         The window's context (OpenGL 4.3).
-    capture : ffls.capture.Capture
-    lights : ffls.capture.Lights
+    capture : ffls.io.capture.Capture
+    lights : ffls.io.capture.Lights
     mask : (H, W) bool array, optional
         Object mask (True = object); None disables hiding the background.
     mask_reason : str
@@ -121,7 +122,7 @@ class Renderer:
     """
 
     def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = ""):
-        from ffls.voronoi import bake_cells
+        from ffls.weights.voronoi import bake_cells
 
         self.ctx = ctx
         self.capture = capture
@@ -308,7 +309,7 @@ class Renderer:
             return
         from ffls.demo import auto_exposure
 
-        img = self.capture.load_image(self.image_index[sel])
+        img = load_photo(self.capture, self.image_index[sel])
         disp = to_uint8(tonemap_np(img, auto_exposure(img), "srgb"))
         rgba = np.concatenate([disp, np.full(disp.shape[:2] + (1,), 255, np.uint8)], axis=-1)
         size = (disp.shape[1], disp.shape[0])

@@ -24,9 +24,9 @@ import numpy as np
 __all__ = ["Knob", "QUALITY_KNOBS", "METHODS", "TONEMAPS", "BUILTIN_MAPS", "ViewerState", "ViewInfo",
            "TurntableJob", "default_quality", "parse_size", "parse_rotation"]
 
-#: Tone curves of :func:`ffls.tonemap.tonemap` (and the engine's display pass).
+#: Tone curves of :func:`ffls.display.tonemap.tonemap` (and the engine's display pass).
 TONEMAPS = ("srgb", "reinhard", "aces")
-#: Built-in light maps (:func:`ffls.lightmap.builtin_lightmap`).
+#: Built-in light maps (:func:`ffls.lightmaps.lightmap.builtin_lightmap`).
 BUILTIN_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
 #: Pass-2 methods: compressed basis of rank K (float16 eigen-images), or the full basis.
 #: 'auto' is the full float16 basis on a GPU and the compressed one on a CPU rasteriser

@@ -43,13 +43,13 @@ def add_arguments(p):
 
 def run(args) -> int:
     if args.what == "response":
-        from ..spheres.response import calibrate_response_folder
+        from ffls.radiance.response import calibrate_response_folder
 
         curve = calibrate_response_folder(args.bracket_dir, args.output, samples=args.samples,
                                           smoothness=args.smoothness)
         print(f"wrote {args.output}: inverse response (256, 3), code 128 -> {curve[128].round(4).tolist()}")
         return 0
-    from ..spheres.calibrate import calibrate_camera, write_camera_to_capture
+    from ffls.camera.calibrate import calibrate_camera, write_camera_to_capture
 
     cal = calibrate_camera(args.photos, board=args.board, squares=args.squares, square_size=args.square_size,
                            marker_size=args.marker_size, dictionary=args.dictionary)

@@ -24,7 +24,7 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from ..demo import DEFAULT_MAPS, run_demo
+    from ffls.demo import DEFAULT_MAPS, run_demo
 
     maps = tuple(m.strip() for m in args.maps.split(",")) if args.maps else DEFAULT_MAPS
     rotations = tuple(float(r) for r in args.rotations.split(","))
@@ -49,7 +49,7 @@ def _open_viewer(capture_dir) -> None:
     if not has_display():
         print(f"  viewer:        no display; run `ffls view {capture_dir}` on a desktop")
         return
-    from ..errors import GLUnavailable
+    from ffls.errors import GLUnavailable
     from viewer.app import ViewerApp, open_capture
 
     try:

@@ -61,7 +61,7 @@ def gather(backend: str | None = None) -> dict:
     """
     import os
 
-    from ..gpu.context import create_headless_context, describe_context
+    from ffls.gpu.context import create_headless_context, describe_context
 
     ctx = create_headless_context(backend=backend)
     try:

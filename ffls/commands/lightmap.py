@@ -1,4 +1,4 @@
-"""``ffls lightmap``: inspect, convert and make light maps (thin layer over :mod:`ffls.lightmap`)."""
+"""``ffls lightmap``: inspect, convert and make light maps (thin layer over :mod:`ffls.lightmaps.lightmap`)."""
 from __future__ import annotations
 
 import warnings
@@ -35,7 +35,7 @@ def add_arguments(p):
 
 
 def _load(spec: str, layout):
-    from ..lightmap import LightMapWarning, builtin_lightmap, load_lightmap
+    from ffls.lightmaps.lightmap import LightMapWarning, builtin_lightmap, load_lightmap
 
     if not Path(spec).exists() and Path(spec).suffix == "":
         return builtin_lightmap(spec)
@@ -49,7 +49,7 @@ def _fmt(v) -> str:
 
 
 def run(args) -> int:
-    from ..lightmap import paper_map, save_lightmap, sky_sun_map
+    from ffls.lightmaps.lightmap import paper_map, save_lightmap, sky_sun_map
 
     if args.action == "info":
         lm = _load(args.map, args.layout)

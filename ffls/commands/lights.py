@@ -72,8 +72,8 @@ def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..errors import atomic_output
-    from ..voronoi import assign_cells
+    from ffls.errors import atomic_output
+    from ffls.weights.voronoi import assign_cells
 
     idx, d = lights.accepted()
     rejected = np.asarray(lights.directions)[~np.asarray(lights.ok_mask, dtype=bool)]
@@ -121,8 +121,8 @@ def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path
 
 
 def run(args) -> int:
-    from ..capture import load_capture, save_lights
-    from ..spheres.estimate import estimate_lights
+    from ffls.io.capture import load_capture, save_lights
+    from ffls.spheres.estimate import estimate_lights
 
     cap = load_capture(args.capture)
     lights = estimate_lights(cap, progress=not args.no_progress, workers=args.workers, model=args.model,

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import add_capture_arguments
+from ffls.commands.common import add_capture_arguments
 
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
@@ -26,13 +26,13 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from ..capture import load_capture_and_lights
-    from ..conventions import rotation_z
-    from ..errors import InputError
-    from ..imageio import write_exr, write_png
-    from ..lightmap import lightmap_from_spec
-    from ..relight import relight_capture
-    from ..tonemap import to_uint8, tonemap
+    from ffls.io.capture import load_capture_and_lights
+    from ffls.conventions import rotation_z
+    from ffls.errors import InputError
+    from ffls.io.images import write_exr, write_png
+    from ffls.lightmaps.lightmap import lightmap_from_spec
+    from ffls.relight.cpu import relight_capture
+    from ffls.display.tonemap import to_uint8, tonemap
 
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:

@@ -3,7 +3,7 @@
 The GPU path is the default. Where no OpenGL 4.3 context can be created the command stops with
 one line saying so and suggesting ``--cpu`` (it never falls back silently: the two paths differ
 in speed by orders of magnitude and a CI job should notice). ``--cpu`` runs the reference path
-(:func:`ffls.voronoi.integrate_weights` + :func:`ffls.relight.relight_reference`, float64; with
+(:func:`ffls.weights.voronoi.integrate_weights` + :func:`ffls.relight.cpu.relight_reference`, float64; with
 ``--rank K`` the compressed basis' exact float64 algebra).
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import add_capture_arguments
+from ffls.commands.common import add_capture_arguments
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -47,8 +47,8 @@ def add_arguments(p):
 
 def parse_rotation(args) -> np.ndarray:
     """The light-map rotation (3, 3) from ``--rotate-z`` or ``--rotate``."""
-    from ..conventions import rotation_ypr, rotation_z
-    from ..errors import InputError
+    from ffls.conventions import rotation_ypr, rotation_z
+    from ffls.errors import InputError
 
     if args.rotate is not None:
         try:
@@ -63,16 +63,16 @@ class _CpuRenderer:
     """Reference path with the Engine's interface subset used here (float64)."""
 
     def __init__(self, capture, lights, rank, cells_res):
-        from ..errors import InputError
-        from ..gpu.engine import _capture_basis
-        from ..voronoi import bake_cells
+        from ffls.errors import InputError
+        from ffls.gpu.engine import _capture_basis
+        from ffls.weights.voronoi import bake_cells
 
         self.basis, self.directions = _capture_basis(capture, lights)
         self.hemisphere = capture.hemisphere
         self.cells = bake_cells(self.directions, self.hemisphere, cells_res)
         self.cb = None
         if rank is not None:
-            from ..compress import compress_basis, load_compressed
+            from ffls.relight.compress import compress_basis, load_compressed
 
             try:
                 self.cb = load_compressed(capture.folder, self.basis.shape[0], self.basis.shape[1:3], rank,
@@ -88,9 +88,9 @@ class _CpuRenderer:
         self.R = R
 
     def render(self, exposure=0.0, tonemap="srgb"):
-        from ..relight import relight_reference
-        from ..tonemap import tonemap as tm
-        from ..voronoi import integrate_weights
+        from ffls.relight.cpu import relight_reference
+        from ffls.display.tonemap import tonemap as tm
+        from ffls.weights.voronoi import integrate_weights
 
         w = integrate_weights(self.lm, self.directions, self.R, self.hemisphere, cells=self.cells).weights
         self.hdr = self.cb.relight(w) if self.cb is not None else relight_reference(w, self.basis)
@@ -100,7 +100,7 @@ class _CpuRenderer:
         return self.hdr.astype(np.float32)
 
     def read_display(self):
-        from ..tonemap import to_uint8
+        from ffls.display.tonemap import to_uint8
 
         return to_uint8(self.display)
 
@@ -111,9 +111,9 @@ class _CpuRenderer:
 def _make_renderer(args, capture, lights):
     if args.cpu:
         return _CpuRenderer(capture, lights, args.rank, args.cells_res), None
-    from ..errors import GLUnavailable
-    from ..gpu.context import create_headless_context
-    from ..gpu.engine import Engine
+    from ffls.errors import GLUnavailable
+    from ffls.gpu.context import create_headless_context
+    from ffls.gpu.engine import Engine
 
     try:
         ctx = create_headless_context()
@@ -124,7 +124,7 @@ def _make_renderer(args, capture, lights):
 
 
 def _write_still(out: Path, r, args):
-    from ..imageio import write_exr, write_png
+    from ffls.io.images import write_exr, write_png
 
     if out.suffix.lower() == ".exr":
         write_exr(out, r.read_hdr())
@@ -135,9 +135,9 @@ def _write_still(out: Path, r, args):
 def _write_turntable(out: Path, r, R0, args):
     from tqdm import tqdm
 
-    from ..conventions import rotation_z
-    from ..errors import InputError
-    from ..video import FrameWriter
+    from ffls.conventions import rotation_z
+    from ffls.errors import InputError
+    from ffls.io.video import FrameWriter
 
     n = args.turntable
     if n < 1:
@@ -152,15 +152,15 @@ def _write_turntable(out: Path, r, R0, args):
 
 
 def run(args) -> int:
-    from ..capture import load_capture_and_lights
-    from ..errors import InputError
+    from ffls.io.capture import load_capture_and_lights
+    from ffls.errors import InputError
 
     out = Path(args.out)
     if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
     R0 = parse_rotation(args)
     capture, lights = load_capture_and_lights(args.capture, args.lights)
-    from ..lightmap import lightmap_from_spec
+    from ffls.lightmaps.lightmap import lightmap_from_spec
 
     lightmap = lightmap_from_spec(args.probe, args.layout)
     r, ctx = _make_renderer(args, capture, lights)

@@ -1,4 +1,4 @@
-"""``ffls synth``: render a synthetic capture folder with the built-in scene (:mod:`ffls.synth`)."""
+"""``ffls synth``: render a synthetic capture folder with the built-in scene (:mod:`ffls.synth.scene`)."""
 from __future__ import annotations
 
 import argparse
@@ -46,8 +46,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..errors import InputError
-    from ..synth import write_synthetic_capture
+    from ffls.errors import InputError
+    from ffls.synth.scene import write_synthetic_capture
 
     if args.near is not None and not args.near > 0:
         raise InputError(f"--near must be > 0, not {args.near}")

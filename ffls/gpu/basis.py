@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from .context import release_gl
+from ffls.errors import InputError
+from ffls.gpu.context import release_gl
 
 __all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
            "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "SSBO_BAND_BYTES"]

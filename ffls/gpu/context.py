@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 
-from ..errors import GLUnavailable
+from ffls.errors import GLUnavailable
 
 REQUIRED_GL = 430  # compute shaders and SSBOs
 
@@ -57,7 +57,7 @@ def create_headless_context(backend: str | None = None, require: int = REQUIRED_
 
 def _create_osmesa(require: int):
     """An OSMesa context (glcontext ships no OSMesa backend; see ffls.gpu.osmesa)."""
-    from .osmesa import create_osmesa_context
+    from ffls.gpu.osmesa import create_osmesa_context
 
     return create_osmesa_context(require)
 

@@ -23,12 +23,13 @@ import time
 
 import numpy as np
 
-from ..conventions import check_hemisphere, is_rotation
-from ..errors import InputError
-from .basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
-from .context import release_gl
-from .integrate import CellIntegrator
-from .weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, default_method, weights_to_vec4
+from ffls.conventions import check_hemisphere, is_rotation
+from ffls.errors import InputError
+from ffls.gpu.basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
+from ffls.gpu.context import release_gl
+from ffls.gpu.integrate import CellIntegrator
+from ffls.gpu.weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, default_method, weights_to_vec4
+from ffls.radiance.photos import load_photos
 
 __all__ = ["Engine"]
 
@@ -45,7 +46,7 @@ def _capture_basis(capture, lights) -> tuple[np.ndarray, np.ndarray]:
     if missing:
         raise InputError(f"lights name images not in the capture: {', '.join(missing[:3])}", path)
     sel = [pos[n] for n in names]
-    basis = capture.load_basis(indices=sel)
+    basis = load_photos(capture, indices=sel)
     return basis, np.asarray(lights.directions, dtype=np.float64)[ok]
 
 
@@ -64,10 +65,10 @@ class Engine:
     dtype : {'f16', 'f32'}
         GPU storage of the basis (float16 uses a checked per-dataset scale).
     rank : int, optional
-        Use a compressed basis of ``rank`` eigen-images (:mod:`ffls.compress`).
+        Use a compressed basis of ``rank`` eigen-images (:mod:`ffls.relight.compress`).
     cell_res : int
         Resolution of the Voronoi cell-index texture (pass 1).
-    compressed : ffls.compress.CompressedBasis, optional
+    compressed : ffls.relight.compress.CompressedBasis, optional
         A precomputed compression (``rank`` is then its rank); with ``rank`` and no
         ``compressed`` the basis is compressed here.
     method : {'auto', 'packed', 'fragment', 'compute'}
@@ -121,7 +122,7 @@ class Engine:
         self._display_key = None
         try:
             if compressed is None and rank is not None:
-                from ..compress import compress_basis
+                from ffls.relight.compress import compress_basis
 
                 compressed = compress_basis(basis, int(rank))
             if compressed is not None:
@@ -147,21 +148,21 @@ class Engine:
 
         Parameters
         ----------
-        capture : ffls.capture.Capture
-            ``capture.load_basis()`` gives the basis, ``capture.hemisphere`` the domain.
-        lights : ffls.capture.Lights
+        capture : ffls.io.capture.Capture
+            ``load_photos(capture)`` gives the basis, ``capture.hemisphere`` the domain.
+        lights : ffls.io.capture.Lights
             ``directions`` (m, 3) matched to the capture's images by ``image_names``; lights
             with ``ok_mask`` False are left out (their basis images are not loaded).
         **kw
             As :class:`Engine`. With ``rank=K`` a compressed basis saved in the capture folder
-            (:func:`ffls.compress.load_compressed`) is used when it has at least K
+            (:func:`ffls.relight.compress.load_compressed`) is used when it has at least K
             eigen-images and was made from the same images (checksum); otherwise it is computed and saved
             there (skipped silently if the folder is read-only).
         """
         basis, d = _capture_basis(capture, lights)
         rank = kw.get("rank")
         if rank is not None and kw.get("compressed") is None:
-            from ..compress import compress_basis, load_compressed, save_compressed
+            from ffls.relight.compress import compress_basis, load_compressed, save_compressed
 
             try:
                 kw["compressed"] = load_compressed(capture.folder, n_lights=basis.shape[0], shape=basis.shape[1:3],
@@ -178,7 +179,7 @@ class Engine:
 
     # ------------------------------------------------------------------ inputs
     def set_lightmap(self, lm) -> None:
-        """Use light map ``lm`` (:class:`ffls.lightmap.LightMap`); pass 1 reruns at the next render."""
+        """Use light map ``lm`` (:class:`ffls.lightmaps.lightmap.LightMap`); pass 1 reruns at the next render."""
         self._lightmap = lm
         if self._integrator is not None:
             self._integrator.set_lightmap(lm)
@@ -210,7 +211,7 @@ class Engine:
     # ------------------------------------------------------------------ passes
     def _ensure_cells(self):
         if self._cells is None:
-            from ..voronoi import bake_cells
+            from ffls.weights.voronoi import bake_cells
 
             self._cells = bake_cells(self.directions, self.hemisphere, self.cell_res)
         return self._cells

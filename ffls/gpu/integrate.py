@@ -2,8 +2,8 @@
 
 Masselus, Dutre, Anrys, "The Free-form Light Stage", EGWR 2002, section 6: every light-map
 texel adds ``radiance * solid_angle`` to the cell of the light nearest (by angle) to its rotated
-direction ``R d``. This is the GPU twin of :func:`ffls.voronoi.integrate_weights` with
-``cells=`` a :class:`ffls.voronoi.CellTexture`: per texel, the rotated direction picks a texel of
+direction ``R d``. This is the GPU twin of :func:`ffls.weights.voronoi.integrate_weights` with
+``cells=`` a :class:`ffls.weights.voronoi.CellTexture`: per texel, the rotated direction picks a texel of
 the cell texture, and the exact cell is the candidate with the largest dot product (ties to the
 lowest index). Rotation, hemisphere test and dot products run in float64 (GLSL ``double``), so
 the cell of every texel matches the float64 reference except on exact ties; accumulation is
@@ -31,9 +31,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..conventions import check_hemisphere, is_rotation
-from .context import release_gl
-from .shaders import load_program
+from ffls.conventions import check_hemisphere, is_rotation
+from ffls.gpu.context import release_gl
+from ffls.gpu.shaders import load_program
 
 __all__ = ["CellIntegrator", "METHODS", "WEIGHTS_BINDING"]
 
@@ -64,7 +64,7 @@ class CellIntegrator:
         Light directions (the ones ``cells`` was baked from; normalised here).
     hemisphere : {'upper', 'full'}
         For ``'upper'`` texels whose rotated direction has ``z < 0`` are dropped and counted.
-    cells : ffls.voronoi.CellTexture
+    cells : ffls.weights.voronoi.CellTexture
         Candidate texture baked from ``directions`` for ``hemisphere``.
     method : {'auto', 'blend', 'atomic', 'sort'}
         Technique (module docstring).
@@ -118,7 +118,7 @@ class CellIntegrator:
 
         Parameters
         ----------
-        lm : ffls.lightmap.LightMap or tuple
+        lm : ffls.lightmaps.lightmap.LightMap or tuple
             A light map of any layout (its ``samples()``), or ``(dirs (M, 3), radiance (M, 3),
             solid_angle (M,))``. The product ``radiance * solid_angle`` is formed in float64
             and rounded once to float32.

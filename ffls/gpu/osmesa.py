@@ -21,7 +21,7 @@ import ctypes
 import ctypes.util
 import os
 
-from ..errors import GLUnavailable
+from ffls.errors import GLUnavailable
 
 __all__ = ["OSMesaContext", "create_osmesa_context", "find_osmesa_library"]
 

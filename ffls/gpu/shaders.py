@@ -15,7 +15,7 @@ import re
 import weakref
 from pathlib import Path
 
-from ..errors import FflsError
+from ffls.errors import FflsError
 
 GLSL_VERSION = "#version 430 core"
 _STAGES = ("VERTEX_SHADER", "GEOMETRY_SHADER", "FRAGMENT_SHADER", "COMPUTE_SHADER")

@@ -11,21 +11,21 @@
   SSBO (std430 ``vec4 w[n]``, rgb used) bound at :data:`WEIGHTS_BINDING`: pass 1's
   ``weights_buffer`` as is, or a coefficient buffer of a compressed basis.
 * :class:`ToneMapPass` -- exposure + sRGB/Reinhard/ACES + sRGB encoding into an RGBA8 texture
-  (``shaders/tonemap.glsl``), matching :func:`ffls.tonemap.tonemap` + ``to_uint8`` within one
+  (``shaders/tonemap.glsl``), matching :func:`ffls.display.tonemap.tonemap` + ``to_uint8`` within one
   code value.
 * :class:`Projector` -- ``c = P^T w`` for a compressed basis (``shaders/project_coeffs.glsl``),
-  ``P`` from :meth:`ffls.compress.CompressedBasis.projection_matrix`.
+  ``P`` from :meth:`ffls.relight.compress.CompressedBasis.projection_matrix`.
 
-NumPy references: :func:`ffls.relight.relight_reference` (float64) for the weighted sum,
-:func:`ffls.tonemap.tonemap` for the display pass, :meth:`CompressedBasis.project_weights` for
+NumPy references: :func:`ffls.relight.cpu.relight_reference` (float64) for the weighted sum,
+:func:`ffls.display.tonemap.tonemap` for the display pass, :meth:`CompressedBasis.project_weights` for
 the projection. Texture row 0 is image row 0 (the top row of the photograph); nothing is flipped.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .context import release_gl
-from .shaders import load_program
+from ffls.gpu.context import release_gl
+from ffls.gpu.shaders import load_program
 
 __all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "METHODS", "DEFAULT_METHOD", "default_method", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4"]
 
@@ -53,7 +53,7 @@ def default_method(ctx) -> str:
     chosen over fragment because fragment arithmetic ran far slower on the H100/H200 machines
     this project has seen. This choice on a GPU is not yet measured here.
     """
-    from .context import is_software_renderer
+    from ffls.gpu.context import is_software_renderer
 
     return "packed" if is_software_renderer(ctx.info.get("GL_RENDERER", "")) else "compute"
 
@@ -95,7 +95,7 @@ class WeightedSum:
     """
 
     def __init__(self, ctx, basis, method: str = "compute"):
-        from .basis import PackedBasis
+        from ffls.gpu.basis import PackedBasis
 
         if method not in METHODS:
             raise ValueError(f"pass-2 method must be one of {METHODS}, not {method!r}")
@@ -288,7 +288,7 @@ class Projector:
     ----------
     ctx : moderngl.Context
     P : (n, L, 3) float array
-        Projection matrix (:meth:`ffls.compress.CompressedBasis.projection_matrix`), ``L = K + 1``.
+        Projection matrix (:meth:`ffls.relight.compress.CompressedBasis.projection_matrix`), ``L = K + 1``.
 
     Attributes
     ----------

@@ -47,8 +47,10 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..conventions import DEFAULT_WORLD_FROM_CAMERA
-from ..errors import InputError
+from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+from ffls.camera.projection import camera_arrays, pixel_rays, project_points
+from ffls.errors import InputError
+from ffls.radiance.photos import load_photo
 
 __all__ = [
     "SphereFit",
@@ -153,50 +155,6 @@ class SphereFit:
 
 
 # ----------------------------------------------------------------------------- camera helpers
-def _camera(K, dist):
-    K = np.asarray(K, dtype=np.float64).reshape(3, 3)
-    dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=np.float64).ravel()
-    return K, dist
-
-
-def pixel_rays(pixels, K, dist=None) -> np.ndarray:
-    """Unit viewing rays (camera frame) through image points.
-
-    Parameters
-    ----------
-    pixels : (n, 2) float
-        Pixel coordinates (x right, y down; pixel centres at integers), in the distorted image.
-    K : (3, 3) float
-    dist : (k,) float or None
-        OpenCV distortion coefficients.
-
-    Returns
-    -------
-    (n, 3) float64, unit, z > 0.
-    """
-    K, dist = _camera(K, dist)
-    p = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
-    if p.shape[0] == 0:
-        return np.zeros((0, 3))
-    if np.any(dist != 0):
-        xy = cv2.undistortPoints(p, K, dist, None, None, None,
-                                 (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)).reshape(-1, 2)
-    else:
-        xy = (p.reshape(-1, 2) - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T
-    r = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
-    return r / np.linalg.norm(r, axis=1, keepdims=True)
-
-
-def project_points(points_cam, K, dist=None) -> np.ndarray:
-    """Project camera-frame points (n, 3) to pixels (n, 2) with OpenCV's model."""
-    K, dist = _camera(K, dist)
-    P = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    if P.shape[0] == 0:
-        return np.zeros((0, 2))
-    px, _ = cv2.projectPoints(P.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, dist)
-    return px.reshape(-1, 2)
-
-
 def to_world(v, world_from_camera=None, points: bool = True) -> np.ndarray:
     """Camera-frame points or directions (..., 3) to the world frame.
 
@@ -254,7 +212,7 @@ def sphere_mask(shape, K, dist, C, R, margin_px: float = 0.0) -> np.ndarray:
     -------
     (H, W) bool
     """
-    K, dist = _camera(K, dist)
+    K, dist = camera_arrays(K, dist)
     H, W = int(shape[0]), int(shape[1])
     c, alpha = _cone(C, R)
     f = float(np.sqrt(K[0, 0] * K[1, 1]))
@@ -697,7 +655,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
         All-black images, no sphere or too few spheres, a sphere cut by the image border, a
         silhouette that does not fit a sphere, or a ``sphere_radius`` inconsistent with the scene.
     """
-    K, dist = _camera(K, dist)
+    K, dist = camera_arrays(K, dist)
     wfc = DEFAULT_WORLD_FROM_CAMERA if world_from_camera is None else np.asarray(world_from_camera, dtype=np.float64)
     R = float(sphere_radius)
     if not (np.isfinite(R) and R > 0):
@@ -876,15 +834,15 @@ def _check_radius(fits, hint_info, wfc, R, source, scene_center=None):
 
 
 def find_spheres_in_capture(capture, n_spheres: int = 4, overrides=None, progress=None) -> list[SphereFit]:
-    """:func:`find_spheres` on a loaded :class:`ffls.capture.Capture`, using its whole sequence.
+    """:func:`find_spheres` on a loaded :class:`ffls.io.capture.Capture`, using its whole sequence.
 
     Uses ``capture.K``, ``.dist``, ``.sphere_radius``, ``.spheres`` (hints),
-    ``.world_from_camera``, ``.scene_center`` and the max over ``capture.load_image(i)`` for all
+    ``.world_from_camera``, ``.scene_center`` and the max over ``load_photo(capture, i)`` for all
     photos (streamed: one image in memory at a time). ``progress`` is an optional wrapper such as
     ``tqdm.tqdm`` (called as ``progress(iterable, total=n)``).
     """
     n = len(capture.image_paths)
-    it = (capture.load_image(i) for i in range(n))
+    it = (load_photo(capture, i) for i in range(n))
     if progress is not None:
         it = progress(it, total=n)
     hints = getattr(capture, "spheres", None) or None

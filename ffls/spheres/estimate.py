@@ -33,9 +33,10 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from scipy.stats import chi2 as _chi2
 
-from ..conventions import UP, angle_between, normalize
-from ..errors import InputError
-from .lambert import SphereSamples, fit_lambert, ground_bounce, sphere_samples, tangent_uncertainty_deg
+from ffls.conventions import UP, angle_between, normalize
+from ffls.errors import InputError
+from ffls.spheres.lambert import SphereSamples, fit_lambert, ground_bounce, sphere_samples, tangent_uncertainty_deg
+from ffls.radiance.photos import load_photo, read_photo
 
 __all__ = [
     "REASONS",
@@ -342,7 +343,7 @@ def fit_near_light(samples: list[SphereSamples], values: list[np.ndarray], masks
         ``position`` (3,), ``cov`` (3, 3) covariance of the position, ``rms`` (relative),
         ``n_pixels``, ``success`` (bool).
     """
-    from .lambert import _solve_normal
+    from ffls.spheres.lambert import _solve_normal
 
     K = len(samples)
     if terms is None:
@@ -505,7 +506,7 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
         Known clip level of the linear values.
     raw : (H, W, 3) array, optional
         The image as stored, with ``bit_depth``: then
-        :func:`ffls.spheres.response.valid_pixel_mask` also applies (saturated codes of any
+        :func:`ffls.radiance.response.valid_pixel_mask` also applies (saturated codes of any
         channel, near-black codes; non-finite and negative floats).
     bit_depth : {8, 16, 'half', 'float'}, optional
 
@@ -513,7 +514,7 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
     -------
     list of (grey (m,) float64, valid (m,) bool, n_saturated int)
     """
-    from .response import valid_pixel_mask
+    from ffls.radiance.response import valid_pixel_mask
 
     img = np.asarray(image)
     out = []
@@ -773,7 +774,7 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[dict], val
         Per photo, the values for the new samples.
     refinements : list of CentreRefinement
     """
-    from .refine import recentre_samples, refine_sphere_centre
+    from ffls.spheres.refine import recentre_samples, refine_sphere_centre
 
     new_s, idxs, refs = [], [], []
     for k, s in enumerate(samples):
@@ -914,11 +915,8 @@ def _init_worker(capture, samples, kwargs):
 
 def _load(capture, i):
     """Linear image ``i`` and its raw pixels and bit depth (for the validity mask)."""
-    from ..imageio import read_image
-
-    img = read_image(capture.image_paths[i])
-    capture._check_size(i, img)
-    return np.asarray(capture._linearise(i, img), dtype=np.float32), img.pixels, img.bit_depth
+    photo = read_photo(capture, i)
+    return photo.linear, photo.raw, photo.bit_depth
 
 
 def _work(i):
@@ -973,7 +971,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
     Parameters
     ----------
-    capture : ffls.capture.Capture
+    capture : ffls.io.capture.Capture
     spheres : list of SphereFit, optional
         The spheres (``center_cam`` camera frame, ``radius``); found with
         :func:`ffls.spheres.detect.find_spheres_in_capture` when None.
@@ -995,14 +993,14 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
     Returns
     -------
-    ffls.capture.Lights
+    ffls.io.capture.Lights
         Directions (world, from the scene centre), positions for near lights, status, reasons
         (:data:`REASONS`), and per light ``extra``: ``uncertainty_deg``, ``model``,
         ``used_spheres``, ``spheres`` (per-sphere direction, residual, uncertainty, pixel counts,
         ground ratio estimate and the imposed ``bounce_ratio``; with ``refine_centres`` also the
         sphere's world ``center``, ``center_shift_px`` and ``center_refined``).
     """
-    from ..capture import Lights
+    from ffls.io.capture import Lights
 
     if model not in LIGHT_MODELS:
         raise ValueError(f"model must be one of {LIGHT_MODELS}, not {model!r}")
@@ -1016,7 +1014,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     if n == 0:
         raise InputError("capture lists no images", capture.json_path)
     if spheres is None:
-        from .detect import find_spheres_in_capture
+        from ffls.spheres.detect import find_spheres_in_capture
 
         spheres = find_spheres_in_capture(capture)
     if model == "near" and len(spheres) < 2:
@@ -1024,7 +1022,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     if capture.image_size is not None:
         shape = (int(capture.image_size[1]), int(capture.image_size[0]))
     else:
-        shape = capture.load_image(0).shape[:2]
+        shape = load_photo(capture, 0).shape[:2]
     samples = capture_samples(capture, spheres, shape)
     kw = dict(model=model, **kwargs)
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))

@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..conventions import UP, normalize
-from .detect import pixel_rays
+from ffls.conventions import UP, normalize
+from ffls.camera.projection import pixel_rays
 
 __all__ = [
     "MODELS",

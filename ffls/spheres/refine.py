@@ -46,8 +46,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..conventions import UP, normalize
-from .lambert import SphereSamples, ground_bounce
+from ffls.conventions import UP, normalize
+from ffls.spheres.lambert import SphereSamples, ground_bounce
 
 __all__ = ["CentreRefinement", "refine_sphere_centre", "recentre_samples", "select_photos"]
 

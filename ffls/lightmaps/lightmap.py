@@ -1,7 +1,7 @@
 """Light maps: loading with layout detection and validation, saving, sampling, procedural maps.
 
 A light map gives the radiance arriving at the scene centre from every direction. Layouts
-(their geometry lives in :mod:`ffls.sphere_maps`; conventions in ``ffls.conventions``):
+(their geometry lives in :mod:`ffls.lightmaps.sphere_maps`; conventions in ``ffls.conventions``):
 
 ``latlong``
     Equirectangular, width = 2 x height (Blender/Cycles / Poly Haven orientation).
@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import conventions
-from .errors import FflsError, InputError
-from .imageio import read_image, write_exr, write_hdr
+from ffls import conventions
+from ffls.errors import FflsError, InputError
+from ffls.io.images import read_image, write_exr, write_hdr
 
 __all__ = [
     "LAYOUTS",
@@ -63,7 +63,7 @@ class LightMapWarning(UserWarning):
 
 
 def _sphere_map(layout: str):
-    from .sphere_maps import get_map
+    from ffls.lightmaps.sphere_maps import get_map
 
     return get_map(layout)
 
@@ -116,7 +116,7 @@ class LightMap:
     # ------------------------------------------------------------------ geometry
     @property
     def res(self) -> int:
-        """Resolution as :mod:`ffls.sphere_maps` counts it: the height (lat-long), side or face size."""
+        """Resolution as :mod:`ffls.lightmaps.sphere_maps` counts it: the height (lat-long), side or face size."""
         return int(self.data.shape[1] if self.layout == "cube" else self.data.shape[0])
 
     def solid_angles(self) -> np.ndarray:
@@ -327,7 +327,7 @@ def _cross_index(face: int, orientation: str) -> tuple[np.ndarray, np.ndarray]:
     cross_idx = np.flatnonzero(mask)
     cube_idx = _flat_texel_index(_sphere_map("cube"), d.reshape(-1, 3)[cross_idx], face)
     if np.unique(cube_idx).size != 6 * face * face:
-        raise RuntimeError("cube cross and ffls.sphere_maps cube faces do not match one to one")
+        raise RuntimeError("cube cross and ffls.lightmaps.sphere_maps cube faces do not match one to one")
     return cross_idx, cube_idx
 
 
@@ -344,7 +344,7 @@ def cross_to_cube(cross: np.ndarray, orientation: str | None = None) -> np.ndarr
     Returns
     -------
     (6, R, R, C) ndarray
-        Faces in the order and orientation of ``ffls.sphere_maps.get_map('cube')``.
+        Faces in the order and orientation of ``ffls.lightmaps.sphere_maps.get_map('cube')``.
     """
     h, w = cross.shape[:2]
     if orientation is None:
@@ -365,7 +365,7 @@ def cube_to_cross(faces: np.ndarray, orientation: str = "horizontal") -> np.ndar
     Parameters
     ----------
     faces : (6, R, R, C) ndarray
-        Faces in ``ffls.sphere_maps`` cube order and orientation.
+        Faces in ``ffls.lightmaps.sphere_maps`` cube order and orientation.
     orientation : {'horizontal', 'vertical'}
 
     Returns
@@ -688,7 +688,7 @@ def builtin_lightmap(name: str, height: int = 256) -> LightMap:
         The bundled maps carry tiny negative values from lossy compression; they are clamped
         without a warning here (they are known and ours) and counted in ``clamped_negatives``.
     """
-    from .assets import builtin_lightmaps
+    from ffls.assets import builtin_lightmaps
 
     if name == "sky":
         return sky_sun_map(height)

@@ -1,7 +1,7 @@
 """Images in and out: OpenEXR (half/float), Radiance .hdr, PNG/JPEG/TIFF; every write is atomic.
 
 Readers return RGB in file order (OpenCV's BGR is swapped), float32, without any transfer
-function applied: linearising 8-bit photographs is the capture's job (``ffls.capture``), never
+function applied: linearising 8-bit photographs is the capture's job (``ffls.io.capture``), never
 guessed here. Bad input raises :class:`ffls.errors.InputError` naming the file.
 
 OpenEXR goes through the OpenEXR 3.x Python bindings (``OpenEXR.File``), the rest through
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, atomic_output
+from ffls.errors import InputError, atomic_output
 
 __all__ = [
     "ImageData",
@@ -317,7 +317,7 @@ def write_png(path: str | os.PathLike, img) -> Path:
     path : path-like
         Output ``.png`` path.
     img : (H, W), (H, W, 3) or (H, W, 4) uint8 or uint16 ndarray
-        Grey, RGB or RGBA, already encoded for display (see :func:`ffls.tonemap.to_uint8`).
+        Grey, RGB or RGBA, already encoded for display (see :func:`ffls.display.tonemap.to_uint8`).
 
     Returns
     -------
@@ -337,8 +337,8 @@ def write_png(path: str | os.PathLike, img) -> Path:
     if a.dtype not in (np.uint8, np.uint16):
         if np.issubdtype(a.dtype, np.floating):
             raise ValueError(
-                "write_png: float input is not accepted; tone-map it (ffls.tonemap.tonemap) and "
-                "quantise it (ffls.tonemap.to_uint8) first"
+                "write_png: float input is not accepted; tone-map it (ffls.display.tonemap.tonemap) and "
+                "quantise it (ffls.display.tonemap.to_uint8) first"
             )
         raise ValueError(f"write_png: expected uint8 or uint16, got dtype {a.dtype}")
     if a.ndim == 2:

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, atomic_output
+from ffls.errors import InputError, atomic_output
 
 __all__ = ["CompressedBasis", "compress_basis", "randomized_svd_Halko2011", "save_compressed",
            "load_compressed", "basis_checksum", "COMPRESSED_FILENAME", "MODES"]

@@ -46,12 +46,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .capture import LIGHTS_FILE, Capture, Lights, save_capture, save_lights
-from .conventions import check_hemisphere, in_domain, normalize
-from .errors import InputError, atomic_output
-from .imageio import write_exr, write_png
-from .lightmap import as_samples
-from .tonemap import srgb_encode
+from ffls.io.capture import LIGHTS_FILE, Capture, Lights, save_capture, save_lights
+from ffls.conventions import check_hemisphere, in_domain, normalize
+from ffls.errors import InputError, atomic_output
+from ffls.io.images import write_exr, write_png
+from ffls.lightmaps.lightmap import as_samples
+from ffls.radiance.encoding import srgb_encode
 
 __all__ = [
     "SynthScene",

@@ -6,7 +6,7 @@ the key, image or line at fault; every writer is atomic.
 
 Encoding rule when ``capture.json`` has no ``"encoding"``: 8-bit images are taken as sRGB
 encoded, 16-bit, half and float images (PNG/TIFF/EXR/HDR) as linear. It is decided per image
-from the stored bit depth, and :meth:`Capture.load_basis` refuses captures that mix depths.
+from the stored bit depth (:mod:`ffls.radiance.photos` linearises), and a basis must not mix depths.
 """
 from __future__ import annotations
 
@@ -19,10 +19,9 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from . import conventions
-from .errors import InputError, atomic_output
-from .imageio import read_image
-from .tonemap import srgb_decode
+from ffls import conventions
+from ffls.errors import InputError, atomic_output
+from ffls.io.response import load_response
 
 __all__ = [
     "CAPTURE_FILE",
@@ -202,98 +201,6 @@ class Capture:
     def __len__(self) -> int:
         return len(self.image_names)
 
-    def _check_size(self, i: int, img) -> None:
-        if self.image_size is not None:
-            h, w = img.shape
-            if (w, h) != tuple(self.image_size):
-                raise InputError(
-                    f"image is {w}x{h} but {CAPTURE_FILE} says image_size {self.image_size[0]}x{self.image_size[1]}",
-                    self.image_paths[i],
-                )
-
-    def _linearise(self, i: int, img) -> np.ndarray:
-        enc = self.encoding
-        if enc == "auto":
-            enc = "srgb" if img.bit_depth == 8 else "linear"
-        if enc == "linear":
-            return img.pixels
-        if enc == "srgb":
-            if img.is_hdr:
-                raise InputError(f"{CAPTURE_FILE} says encoding 'srgb' but the image is floating point", img.path)
-            return srgb_decode(img.pixels)
-        # inverse response table for 8-bit codes
-        if img.bit_depth != 8:
-            raise InputError(f"an inverse response table applies to 8-bit images, this one is {img.bit_depth}", img.path)
-        codes = np.rint(img.pixels * 255).astype(np.intp)
-        out = np.empty(img.pixels.shape, dtype=np.float32)
-        for c in range(3):
-            out[..., c] = self.response[codes[..., c], c]
-        return out
-
-    def load_image(self, i: int) -> np.ndarray:
-        """Image ``i`` as linear radiance.
-
-        Parameters
-        ----------
-        i : int
-            Index into :attr:`image_names`.
-
-        Returns
-        -------
-        (H, W, 3) float32 ndarray
-            sRGB images decoded with :func:`ffls.tonemap.srgb_decode`, response-table images
-            mapped per channel, linear images as stored.
-        """
-        img = read_image(self.image_paths[i])
-        self._check_size(i, img)
-        return np.asarray(self._linearise(i, img), dtype=np.float32)
-
-    def load_basis(self, indices=None, progress: bool = True) -> np.ndarray:
-        """Load several images as one linear array.
-
-        Parameters
-        ----------
-        indices : sequence of int, optional
-            Which images (all by default), in that order.
-        progress : bool
-            Show a tqdm bar on stderr (never when stderr is not a terminal or ``CI`` is set).
-
-        Returns
-        -------
-        (n, H, W, 3) float32 ndarray
-
-        Raises
-        ------
-        InputError
-            Naming the first image whose size differs from the first one's, or whose bit depth
-            differs (with automatic encoding).
-        """
-        from tqdm import tqdm
-
-        idx = list(range(len(self))) if indices is None else [int(k) for k in indices]
-        if not idx:
-            raise ValueError("load_basis: no images selected")
-        disable = not progress or not sys.stderr.isatty() or bool(os.environ.get("CI"))
-        out = None
-        depth0 = None
-        for n, i in enumerate(tqdm(idx, desc="loading images", unit="img", disable=disable, leave=False)):
-            img = read_image(self.image_paths[i])
-            self._check_size(i, img)
-            if out is None:
-                out = np.empty((len(idx), *img.pixels.shape), dtype=np.float32)
-                depth0 = img.bit_depth
-            elif img.pixels.shape != out.shape[1:]:
-                h, w = img.shape
-                raise InputError(
-                    f"image is {w}x{h} but the first image {self.image_names[idx[0]]!r} is "
-                    f"{out.shape[2]}x{out.shape[1]}", img.path)
-            elif self.encoding == "auto" and img.bit_depth != depth0:
-                raise InputError(
-                    f"bit depth {img.bit_depth} differs from the first image's ({depth0}); with no "
-                    f"'encoding' in {CAPTURE_FILE} a capture must not mix depths", img.path)
-            out[n] = self._linearise(i, img)
-        return out
-
     def to_json(self) -> dict:
         """The ``capture.json`` document of this capture."""
         doc: dict = {"format": "ffls-capture", "version": 1, "images": list(self.image_names)}
@@ -428,8 +335,6 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         if set(encoding) != {"response"}:
             j.fail("encoding", "expected 'srgb', 'linear' or {\"response\": \"file.npy|.csv\"}")
         rname = _check_name(j, encoding["response"], "encoding.response")
-        from .spheres.response import load_response  # one reader of response tables
-
         if not (folder / rname).is_file():
             j.fail("encoding.response", f"response file {rname!r} not found")
         response = load_response(folder / rname).astype(np.float64)

@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import InputError, atomic_output
+from ffls.errors import InputError, atomic_output
 
 __all__ = ["CameraCalibration", "make_board", "detect_board", "calibrate_camera", "write_camera_to_capture"]
 

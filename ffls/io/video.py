@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FflsError, InputError, atomic_output
+from ffls.errors import FflsError, InputError, atomic_output
 
 
 class FrameWriter:
@@ -67,7 +67,7 @@ class FrameWriter:
                                     self.out)
             self._writer.write(np.ascontiguousarray(rgb[..., ::-1]))
         else:
-            from .imageio import write_png
+            from ffls.io.images import write_png
 
             write_png(self.out / f"frame_{self.frames:04d}.png", rgb)
         self.frames += 1

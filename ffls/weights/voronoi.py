@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .conventions import (
+from ffls.conventions import (
     check_hemisphere,
     covered_solid_angle,
     in_domain,
@@ -50,7 +50,7 @@ from .conventions import (
     latlong_directions,
     rotate_directions,
 )
-from .lightmap import as_samples
+from ffls.lightmaps.lightmap import as_samples
 
 __all__ = [
     "CellTexture",
@@ -145,7 +145,7 @@ def _angle_to_chord(angle: np.ndarray) -> np.ndarray:
 
 
 def _get_map(hemisphere: str):
-    from .sphere_maps import get_map  # written alongside; imported lazily
+    from ffls.lightmaps.sphere_maps import get_map  # written alongside; imported lazily
 
     return get_map(MAP_FOR_HEMISPHERE[hemisphere])
 
@@ -171,7 +171,7 @@ class CellTexture:
     hemisphere : str
         ``'upper'`` (concentric map) or ``'full'`` (octahedral map).
     map_name : str
-        Name of the :mod:`ffls.sphere_maps` parameterisation.
+        Name of the :mod:`ffls.lightmaps.sphere_maps` parameterisation.
     directions : (n, 3) float64
         The normalised light directions the cells were built from (duplicates included).
     k : int
@@ -454,7 +454,7 @@ def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere
     Parameters
     ----------
     lightmap_or_samples : LightMap or tuple
-        A :class:`ffls.lightmap.LightMap` (its ``samples()`` are used) or a tuple
+        A :class:`ffls.lightmaps.lightmap.LightMap` (its ``samples()`` are used) or a tuple
         ``(dirs (M, 3), radiance (M, 3), solid_angle (M,))`` of valid texels.
     directions : (n, 3) array_like
         Light directions in the capture frame.

@@ -46,7 +46,7 @@ import functools
 
 import numpy as np
 
-from . import conventions
+from ffls import conventions
 
 __all__ = [
     "SphereMap", "LatLongMap", "ConcentricMap", "OctahedralMap", "AngularMap", "MirrorBallMap",

@@ -1,8 +1,8 @@
-"""Tone mapping: exposure, the sRGB transfer curves, Reinhard and ACES curves.
+"""Tone mapping: exposure, then the sRGB, Reinhard or ACES curve, and 8-bit quantisation.
 
 Everything inside ffls is linear radiance; this module turns it into display values.
 
-* sRGB transfer function: IEC 61966-2-1:1999 (the exact piecewise curve, not a 2.2 gamma).
+* sRGB transfer function: :func:`ffls.radiance.encoding.srgb_encode` (IEC 61966-2-1:1999).
 * Reinhard: E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic tone reproduction for
   digital images", SIGGRAPH 2002 -- the simple global operator ``x / (1 + x)``, per channel.
 * ACES: K. Narkowicz, "ACES Filmic Tone Mapping Curve" (blog post, 2016), a rational fit of the
@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ffls.radiance.encoding import float_array, srgb_encode
+
 __all__ = [
     "METHODS",
-    "srgb_encode",
-    "srgb_decode",
     "apply_exposure",
     "reinhard",
     "aces",
@@ -28,61 +28,6 @@ __all__ = [
 
 #: Tone curves accepted by :func:`tonemap`.
 METHODS = ("srgb", "reinhard", "aces")
-
-# IEC 61966-2-1 constants.
-_ENC_THRESHOLD = 0.0031308
-_DEC_THRESHOLD = 0.04045
-_LINEAR_SLOPE = 12.92
-_A = 0.055
-_GAMMA = 2.4
-
-
-def _as_float(x) -> np.ndarray:
-    """Float array keeping float32/float64 precision; other dtypes become float64."""
-    x = np.asarray(x)
-    if x.dtype in (np.float32, np.float64):
-        return x
-    return x.astype(np.float64)
-
-
-def srgb_encode(linear) -> np.ndarray:
-    """Linear values to sRGB-encoded values (IEC 61966-2-1 piecewise curve).
-
-    Parameters
-    ----------
-    linear : (...) array_like
-        Linear values; the curve is meant for [0, 1]. Values at or below 0.0031308 (including
-        negatives) use the linear segment ``12.92 x``; values above 1 follow the power segment.
-
-    Returns
-    -------
-    (...) ndarray
-        Encoded values, float32 for float32 input, float64 otherwise (computed in that precision).
-    """
-    x = _as_float(linear)
-    lin = x * x.dtype.type(_LINEAR_SLOPE)
-    powed = x.dtype.type(1.0 + _A) * np.power(np.maximum(x, x.dtype.type(_ENC_THRESHOLD)), x.dtype.type(1.0 / _GAMMA)) - x.dtype.type(_A)
-    return np.where(x <= _ENC_THRESHOLD, lin, powed).astype(x.dtype, copy=False)
-
-
-def srgb_decode(encoded) -> np.ndarray:
-    """sRGB-encoded values to linear values (inverse of :func:`srgb_encode`).
-
-    Parameters
-    ----------
-    encoded : (...) array_like
-        Encoded values, meant for [0, 1] (8-bit images divided by 255).
-
-    Returns
-    -------
-    (...) ndarray
-        Linear values, float32 for float32 input, float64 otherwise.
-    """
-    c = _as_float(encoded)
-    lin = c / c.dtype.type(_LINEAR_SLOPE)
-    powed = np.power((np.maximum(c, c.dtype.type(_DEC_THRESHOLD)) + c.dtype.type(_A)) / c.dtype.type(1.0 + _A), c.dtype.type(_GAMMA))
-    return np.where(c <= _DEC_THRESHOLD, lin, powed).astype(c.dtype, copy=False)
-
 
 def apply_exposure(rgb, stops: float) -> np.ndarray:
     """Scale linear values by ``2 ** stops``.
@@ -99,7 +44,7 @@ def apply_exposure(rgb, stops: float) -> np.ndarray:
     (...) ndarray
         Scaled values in the input's float precision.
     """
-    x = _as_float(rgb)
+    x = float_array(rgb)
     return x * x.dtype.type(2.0 ** float(stops))
 
 
@@ -116,7 +61,7 @@ def reinhard(x) -> np.ndarray:
     (...) ndarray
         Values in [0, 1).
     """
-    x = np.maximum(_as_float(x), 0)
+    x = np.maximum(float_array(x), 0)
     return x / (1 + x)
 
 
@@ -136,7 +81,7 @@ def aces(x) -> np.ndarray:
     (...) ndarray
         Values in [0, 1] (still linear: encode with :func:`srgb_encode` for display).
     """
-    x = np.maximum(_as_float(x), 0)
+    x = np.maximum(float_array(x), 0)
     t = x.dtype.type
     y = (x * (t(2.51) * x + t(0.03))) / (x * (t(2.43) * x + t(0.59)) + t(0.14))
     return np.clip(y, 0, 1)
@@ -188,7 +133,7 @@ def to_uint8(display) -> np.ndarray:
     ValueError
         If any value is NaN or infinite.
     """
-    d = _as_float(display)
+    d = float_array(display)
     if not np.all(np.isfinite(d)):
         raise ValueError(f"to_uint8: {int(np.count_nonzero(~np.isfinite(d)))} non-finite values")
     return np.rint(np.clip(d, 0, 1) * 255).astype(np.uint8)

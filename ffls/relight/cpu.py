@@ -1,7 +1,7 @@
 """CPU relighting: the weighted sum of basis images (Masselus, Dutre, Anrys 2002, section 6).
 
 ``relit = sum_i w_i * B_i`` per colour channel, where ``w`` are the angular Voronoi weights of a
-light map (:func:`ffls.voronoi.integrate_weights`) and ``B_i`` the basis image lit from light
+light map (:func:`ffls.weights.voronoi.integrate_weights`) and ``B_i`` the basis image lit from light
 direction ``i``.
 
 * :func:`relight_reference` accumulates in float64 (the reference the GPU and the fast path are
@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .conventions import check_hemisphere
-from .voronoi import Weights, bake_cells, integrate_weights
+from ffls.conventions import check_hemisphere
+from ffls.weights.voronoi import Weights, bake_cells, integrate_weights
+from ffls.radiance.photos import load_photos
 
 __all__ = ["relight_reference", "relight_fast", "relight_capture"]
 
@@ -94,13 +95,13 @@ def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | N
 
     Parameters
     ----------
-    capture : ffls.capture.Capture
+    capture : ffls.io.capture.Capture
         Gives the basis images (``load_basis(indices)`` -> (n, H, W, 3)), ``image_names`` and
         ``hemisphere``.
-    lights : ffls.capture.Lights
+    lights : ffls.io.capture.Lights
         Light directions (``directions`` (m, 3)), ``ok_mask`` (m,) and ``image_names`` (m,);
         only lights with ``ok_mask`` set take part.
-    lightmap : ffls.lightmap.LightMap or (dirs, radiance, solid_angle)
+    lightmap : ffls.lightmaps.lightmap.LightMap or (dirs, radiance, solid_angle)
     rotation : (3, 3) array_like, optional
         Light-map rotation; identity by default.
     cells_res : int or None
@@ -118,7 +119,7 @@ def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | N
     hemisphere = check_hemisphere(getattr(capture, "hemisphere", "upper"))
     ok = np.asarray(lights.ok_mask, dtype=bool)
     if not np.any(ok):
-        from .errors import InputError
+        from ffls.errors import InputError
 
         raise InputError("no light has status ok", getattr(lights, "path", None))
     dirs = np.asarray(lights.directions, dtype=np.float64)[ok]
@@ -127,11 +128,11 @@ def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | N
     pos = {n: i for i, n in enumerate(cap_names)}
     missing = [n for n in names if n not in pos]
     if missing:
-        from .errors import InputError
+        from ffls.errors import InputError
 
         raise InputError(f"lights name images not in the capture: {', '.join(missing[:3])}", getattr(lights, "path", None))
     sel = [pos[n] for n in names]
-    basis = capture.load_basis(sel)  # only the used images, in the order of ``dirs``
+    basis = load_photos(capture, sel)  # only the used images, in the order of ``dirs``
     cells = None if cells_res is None else bake_cells(dirs, hemisphere, res=cells_res, k=k, max_res=max_res)
     wts = integrate_weights(lightmap, dirs, rotation=rotation, hemisphere=hemisphere, cells=cells)
     image = relight_fast(wts.weights, basis) if fast else relight_reference(wts.weights, basis)

@@ -1,0 +1,1 @@
+"""Camera models: projection and viewing rays (pinhole with OpenCV distortion), intrinsics calibration."""

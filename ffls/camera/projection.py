@@ -1,0 +1,56 @@
+"""The pinhole camera with OpenCV's distortion model: viewing rays and projection.
+
+Conventions (GUIDE section 1): x right, y down, z forward; ``K`` is 3x3 and ``dist`` is OpenCV's
+distortion vector. Pixel centres are at integer coordinates.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = ["camera_arrays", "pixel_rays", "project_points"]
+
+
+def camera_arrays(K, dist=None) -> tuple[np.ndarray, np.ndarray]:
+    """``K`` as (3, 3) float64 and ``dist`` as a flat float64 vector (zeros when None)."""
+    K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=np.float64).ravel()
+    return K, dist
+
+
+def pixel_rays(pixels, K, dist=None) -> np.ndarray:
+    """Unit viewing rays (camera frame) through image points.
+
+    Parameters
+    ----------
+    pixels : (n, 2) float
+        Pixel coordinates (x right, y down; pixel centres at integers), in the distorted image.
+    K : (3, 3) float
+    dist : (k,) float or None
+        OpenCV distortion coefficients.
+
+    Returns
+    -------
+    (n, 3) float64, unit, z > 0.
+    """
+    K, dist = camera_arrays(K, dist)
+    p = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+    if p.shape[0] == 0:
+        return np.zeros((0, 3))
+    if np.any(dist != 0):
+        xy = cv2.undistortPoints(p, K, dist, None, None, None,
+                                 (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)).reshape(-1, 2)
+    else:
+        xy = (p.reshape(-1, 2) - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T
+    r = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
+    return r / np.linalg.norm(r, axis=1, keepdims=True)
+
+
+def project_points(points_cam, K, dist=None) -> np.ndarray:
+    """Project camera-frame points (n, 3) to pixels (n, 2) with OpenCV's model."""
+    K, dist = camera_arrays(K, dist)
+    P = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
+    if P.shape[0] == 0:
+        return np.zeros((0, 2))
+    px, _ = cv2.projectPoints(P.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, dist)
+    return px.reshape(-1, 2)

@@ -1,0 +1,63 @@
+"""Transfer functions between encoded pixel values and linear radiance.
+
+* sRGB: IEC 61966-2-1:1999, the exact piecewise curve (not a 2.2 gamma).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["float_array", "srgb_encode", "srgb_decode"]
+
+# IEC 61966-2-1 constants.
+_ENC_THRESHOLD = 0.0031308
+_DEC_THRESHOLD = 0.04045
+_LINEAR_SLOPE = 12.92
+_A = 0.055
+_GAMMA = 2.4
+
+
+def float_array(x) -> np.ndarray:
+    """Float array keeping float32/float64 precision; other dtypes become float64."""
+    x = np.asarray(x)
+    if x.dtype in (np.float32, np.float64):
+        return x
+    return x.astype(np.float64)
+
+
+def srgb_encode(linear) -> np.ndarray:
+    """Linear values to sRGB-encoded values (IEC 61966-2-1 piecewise curve).
+
+    Parameters
+    ----------
+    linear : (...) array_like
+        Linear values; the curve is meant for [0, 1]. Values at or below 0.0031308 (including
+        negatives) use the linear segment ``12.92 x``; values above 1 follow the power segment.
+
+    Returns
+    -------
+    (...) ndarray
+        Encoded values, float32 for float32 input, float64 otherwise (computed in that precision).
+    """
+    x = float_array(linear)
+    lin = x * x.dtype.type(_LINEAR_SLOPE)
+    powed = x.dtype.type(1.0 + _A) * np.power(np.maximum(x, x.dtype.type(_ENC_THRESHOLD)), x.dtype.type(1.0 / _GAMMA)) - x.dtype.type(_A)
+    return np.where(x <= _ENC_THRESHOLD, lin, powed).astype(x.dtype, copy=False)
+
+
+def srgb_decode(encoded) -> np.ndarray:
+    """sRGB-encoded values to linear values (inverse of :func:`srgb_encode`).
+
+    Parameters
+    ----------
+    encoded : (...) array_like
+        Encoded values, meant for [0, 1] (8-bit images divided by 255).
+
+    Returns
+    -------
+    (...) ndarray
+        Linear values, float32 for float32 input, float64 otherwise.
+    """
+    c = float_array(encoded)
+    lin = c / c.dtype.type(_LINEAR_SLOPE)
+    powed = np.power((np.maximum(c, c.dtype.type(_DEC_THRESHOLD)) + c.dtype.type(_A)) / c.dtype.type(1.0 + _A), c.dtype.type(_GAMMA))
+    return np.where(c <= _DEC_THRESHOLD, lin, powed).astype(c.dtype, copy=False)

@@ -1,0 +1,149 @@
+"""The photos of a capture as linear radiance.
+
+A capture's ``encoding`` (see :mod:`ffls.io.capture`) says how stored pixel values map to
+radiance: ``'srgb'`` (IEC 61966-2-1), ``'linear'``, an inverse response table for 8-bit codes,
+or ``'auto'``, decided per image by its bit depth (8-bit sRGB, deeper or float linear).
+"""
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from ffls.errors import InputError
+from ffls.io.capture import CAPTURE_FILE
+from ffls.io.images import ImageData, read_image
+from ffls.radiance.encoding import srgb_decode
+
+__all__ = ["Photo", "linearise", "read_photo", "load_photo", "load_photos"]
+
+
+@dataclass(frozen=True)
+class Photo:
+    """One photo of a capture, read and linearised.
+
+    Attributes
+    ----------
+    linear : (H, W, 3) float32 ndarray
+        Linear radiance.
+    raw : (H, W, 3) float32 ndarray
+        The stored values scaled to [0, 1] (for saturation and validity masks).
+    bit_depth : {8, 16, 'half', 'float'}
+    """
+
+    linear: np.ndarray
+    raw: np.ndarray
+    bit_depth: int | str
+
+
+def linearise(img: ImageData, encoding, response=None) -> np.ndarray:
+    """Linear radiance of a decoded image.
+
+    Parameters
+    ----------
+    img : ImageData
+        As read by :func:`ffls.io.images.read_image`.
+    encoding : {'auto', 'srgb', 'linear'} or dict
+        ``{'response': name}`` uses ``response``.
+    response : (256, 3) ndarray, optional
+        Inverse response table (linear value of each 8-bit code, per channel).
+
+    Returns
+    -------
+    (H, W, 3) ndarray
+    """
+    enc = encoding
+    if enc == "auto":
+        enc = "srgb" if img.bit_depth == 8 else "linear"
+    if enc == "linear":
+        return img.pixels
+    if enc == "srgb":
+        if img.is_hdr:
+            raise InputError(f"{CAPTURE_FILE} says encoding 'srgb' but the image is floating point", img.path)
+        return srgb_decode(img.pixels)
+    if img.bit_depth != 8:
+        raise InputError(f"an inverse response table applies to 8-bit images, this one is {img.bit_depth}", img.path)
+    codes = np.rint(img.pixels * 255).astype(np.intp)
+    out = np.empty(img.pixels.shape, dtype=np.float32)
+    for c in range(3):
+        out[..., c] = response[codes[..., c], c]
+    return out
+
+
+def _check_size(capture, i: int, img: ImageData) -> None:
+    if capture.image_size is not None:
+        h, w = img.shape
+        if (w, h) != tuple(capture.image_size):
+            raise InputError(
+                f"image is {w}x{h} but {CAPTURE_FILE} says image_size {capture.image_size[0]}x{capture.image_size[1]}",
+                capture.image_paths[i],
+            )
+
+
+def read_photo(capture, i: int) -> Photo:
+    """Photo ``i`` of ``capture``: linear radiance, raw values and bit depth.
+
+    Raises
+    ------
+    InputError
+        Unreadable image, or a size that differs from the capture's ``image_size``.
+    """
+    img = read_image(capture.image_paths[i])
+    _check_size(capture, i, img)
+    linear = np.asarray(linearise(img, capture.encoding, capture.response), dtype=np.float32)
+    return Photo(linear, img.pixels, img.bit_depth)
+
+
+def load_photo(capture, i: int) -> np.ndarray:
+    """Photo ``i`` of ``capture`` as (H, W, 3) float32 linear radiance."""
+    return read_photo(capture, i).linear
+
+
+def load_photos(capture, indices=None, progress: bool = True) -> np.ndarray:
+    """Several photos of ``capture`` as one linear array.
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+    indices : sequence of int, optional
+        Which images (all by default), in that order.
+    progress : bool
+        Show a tqdm bar on stderr (never when stderr is not a terminal or ``CI`` is set).
+
+    Returns
+    -------
+    (n, H, W, 3) float32 ndarray
+
+    Raises
+    ------
+    InputError
+        Naming the first image whose size differs from the first one's, or whose bit depth
+        differs (with automatic encoding).
+    """
+    from tqdm import tqdm
+
+    idx = list(range(len(capture))) if indices is None else [int(k) for k in indices]
+    if not idx:
+        raise ValueError("load_photos: no images selected")
+    disable = not progress or not sys.stderr.isatty() or bool(os.environ.get("CI"))
+    out = None
+    depth0 = None
+    for n, i in enumerate(tqdm(idx, desc="loading images", unit="img", disable=disable, leave=False)):
+        img = read_image(capture.image_paths[i])
+        _check_size(capture, i, img)
+        if out is None:
+            out = np.empty((len(idx), *img.pixels.shape), dtype=np.float32)
+            depth0 = img.bit_depth
+        elif img.pixels.shape != out.shape[1:]:
+            h, w = img.shape
+            raise InputError(
+                f"image is {w}x{h} but the first image {capture.image_names[idx[0]]!r} is "
+                f"{out.shape[2]}x{out.shape[1]}", img.path)
+        elif capture.encoding == "auto" and img.bit_depth != depth0:
+            raise InputError(
+                f"bit depth {img.bit_depth} differs from the first image's ({depth0}); with no "
+                f"'encoding' in {CAPTURE_FILE} a capture must not mix depths", img.path)
+        out[n] = linearise(img, capture.encoding, capture.response)
+    return out

@@ -1,0 +1,1 @@
+"""Per-light weights from a light map: the angular Voronoi diagram of the light directions (Masselus et al. 2002)."""
