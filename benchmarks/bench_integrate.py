@@ -12,29 +12,17 @@ reference. Prints a table and writes JSON (default ``benchmarks/results/bench_in
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ffls.conventions import rotation_ypr
-from ffls.gpu.context import create_headless_context, describe_context
+from ffls.gpu.context import create_headless_context
 from ffls.gpu.integrate import METHODS, CellIntegrator
 from ffls.lightmaps.lightmap import sky_sun_map
 from ffls.weights.voronoi import bake_cells, integrate_weights
 
-
-def _median_time(fn, repeat):
-    fn()  # warm-up
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
+from common import device_info, device_line, median_seconds, write_json  # benchmarks/common.py
 
 
 def numpy_fast(samples32, R, cells, n):
@@ -65,10 +53,9 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     ctx = create_headless_context()
-    dev = describe_context(ctx)
-    device = {"renderer": dev["renderer"], "version": dev["version"], "backend": dev["backend"],
-              "cpu_count": os.cpu_count(), "machine": platform.machine()}
-    print(f"device: {device['renderer']} | GL {device['version']} | {device['cpu_count']} CPUs")
+    dev = device_info(ctx)
+    device = {k: dev[k] for k in ("renderer", "version", "backend", "cpu_count", "machine")}
+    print(device_line(device))
     rng = np.random.default_rng(0)
     R = rotation_ypr(37.0, 21.0, -8.0)
     rows = []
@@ -90,21 +77,16 @@ def main(argv=None):
             for m in METHODS:
                 gpu = CellIntegrator(ctx, d, "upper", cells, method=m)
                 gpu.set_lightmap(lm)
-
-                def go():
-                    gpu.run(R)
-                    ctx.finish()
-
-                row[f"{m}_s"] = _median_time(go, args.repeat)
+                row[f"{m}_s"] = median_seconds(lambda: gpu.run(R), args.repeat, ctx=ctx)
                 row[f"{m}_rel_err"] = rel_err(gpu.read_weights().astype(np.float64), ref)
                 a = gpu.run(R).read()
                 row[f"{m}_repeatable"] = a == gpu.run(R).read()
                 gpu.release()
                 ctx.gc()
-            row["numpy64_s"] = _median_time(lambda: integrate_weights(lm, d, R, "upper", cells=cells),
-                                            max(1, min(args.repeat, 3)))
+            row["numpy64_s"] = median_seconds(lambda: integrate_weights(lm, d, R, "upper", cells=cells),
+                                              max(1, min(args.repeat, 3)))
             s32 = (dirs.astype(np.float32), power.astype(np.float32))
-            row["numpy32_s"] = _median_time(lambda: numpy_fast(s32, R, cells, n), max(1, min(args.repeat, 3)))
+            row["numpy32_s"] = median_seconds(lambda: numpy_fast(s32, R, cells, n), max(1, min(args.repeat, 3)))
             row["numpy32_rel_err"] = rel_err(numpy_fast(s32, R, cells, n).astype(np.float64), ref)
             best = min(row[f"{m}_s"] for m in METHODS)
             row["numpy64_over_best_gpu"] = row["numpy64_s"] / best
@@ -116,11 +98,8 @@ def main(argv=None):
                   flush=True)
     wins = {m: sum(1 for r in rows if min(METHODS, key=lambda k: r[k + '_s']) == m) for m in METHODS}
     print("fastest technique per configuration:", wins)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"device": device, "repeat": args.repeat, "rotation_ypr": [37.0, 21.0, -8.0],
-                               "rows": rows, "fastest_counts": wins}, indent=2))
-    print(f"wrote {out}")
+    write_json(args.out, {"device": device, "repeat": args.repeat, "rotation_ypr": [37.0, 21.0, -8.0],
+                          "rows": rows, "fastest_counts": wins}, indent=2)
     ctx.release()
 
 

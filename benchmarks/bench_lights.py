@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -29,10 +28,11 @@ import numpy as np
 
 from ffls.io.capture import load_capture
 from ffls.conventions import angle_between, spherical_to_direction
-from ffls.errors import atomic_output
 from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_values
 from ffls.synth.scene import write_synthetic_capture
 from ffls.radiance.photos import load_photo
+
+from common import host_info, print_error_table, write_json  # benchmarks/common.py
 
 CONFIGS = {
     "distant_grey": dict(light_model="distant", ground_albedo=0.3),
@@ -126,31 +126,13 @@ def main(argv=None):
                   f"{r['ms_per_image']:.0f} ms/img ({r['images_per_second_per_core']:.1f} img/s/core)"
                   f" shift px {[round(x, 2) for x in r['centre_shift_px']]}"
                   + (f"  target max {tgt[0]} median {tgt[1]}" if tgt else ""), flush=True)
-    doc = {"benchmark": "bench_lights", "cpu_count": os.cpu_count(), "machine": platform.processor() or platform.machine(),
+    doc = {"benchmark": "bench_lights", **host_info(),
            "phis_deg": phis.tolist(), "thetas_deg": thetas.tolist(), "results": rows}
     for r in rows:  # phi rows x theta columns, for docs/spheres.md
         print(f"\n{r['config']} ({r['bounce']} bounce): median {r['median_deg']:.2f}, max {r['max_deg']:.2f} deg, "
               f"{r['ms_per_image']:.0f} ms/img, accepted {r['accepted']}/{r['n']}")
         print_error_table(r["errors_deg"], phis, thetas)
     write_json(a.out, doc)
-
-
-def print_error_table(errors_deg, phis, thetas) -> None:
-    """Print per-light errors (degrees; None = rejected) as a Markdown table, phi rows x theta columns."""
-    print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")
-    print("|---" * (len(thetas) + 1) + "|")
-    e = np.array([np.nan if x is None else x for x in errors_deg]).reshape(len(phis), len(thetas))
-    for p_, row in zip(phis, e):
-        print(f"| {p_:.0f} | " + " | ".join("rej" if np.isnan(x) else f"{x:.2f}" for x in row) + " |")
-
-
-def write_json(path, doc) -> None:
-    """Write a benchmark's JSON results atomically and say where."""
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(out) as t:
-        t.write_text(json.dumps(doc, indent=1))
-    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

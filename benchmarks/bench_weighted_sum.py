@@ -21,49 +21,18 @@ Prints a table and writes ``benchmarks/results/bench_weighted_sum.json``.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import statistics
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ffls.gpu.basis import BasisTextures, PackedBasis
-from ffls.gpu.context import create_headless_context, describe_context
+from ffls.gpu.context import create_headless_context
 from ffls.gpu.weighted_sum import Projector, ToneMapPass, WeightedSum, release_gl, weights_to_vec4
 from ffls.relight.cpu import relight_fast
 
+from common import device_info, device_line, gl_copy_bandwidth, median_ms, numpy_copy_bandwidth, write_json
+
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_weighted_sum.json"
-
-
-def median_ms(fn, ctx=None, reps=5, warmup=1):
-    for _ in range(warmup):
-        fn()
-        if ctx is not None:
-            ctx.finish()
-    ts = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        if ctx is not None:
-            ctx.finish()
-        ts.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(ts)
-
-
-def copy_bandwidth(ctx, mib=256, reps=5):
-    """GPU buffer copy and NumPy copy bandwidth, bytes (read + written) per second."""
-    nbytes = mib << 20
-    a = ctx.buffer(reserve=nbytes)
-    b = ctx.buffer(reserve=nbytes)
-    gl_ms = median_ms(lambda: ctx.copy_buffer(b, a), ctx, reps)
-    release_gl(a)
-    release_gl(b)
-    x = np.ones(nbytes // 4, np.float32)
-    y = np.empty_like(x)
-    np_ms = median_ms(lambda: np.copyto(y, x), None, reps)
-    return 2 * nbytes / (gl_ms * 1e-3), 2 * nbytes / (np_ms * 1e-3)
 
 
 def main(argv=None):
@@ -75,10 +44,9 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     ctx = create_headless_context()
-    info = describe_context(ctx)
-    info["cpu_count"] = os.cpu_count()
-    gl_bw, np_bw = copy_bandwidth(ctx, reps=args.reps)
-    print(f"device: {info['renderer']} | GL {info['version']} | {info['cpu_count']} CPUs")
+    info = device_info(ctx)
+    gl_bw, np_bw = gl_copy_bandwidth(ctx, 256 << 20, args.reps), numpy_copy_bandwidth(256 << 20, args.reps)
+    print(device_line(info))
     print(f"copy bandwidth (read+write): GL copy_buffer {gl_bw / 1e9:.2f} GB/s, NumPy copyto {np_bw / 1e9:.2f} GB/s")
 
     ns = (64, 256) if args.quick else (64, 256, 1024)
@@ -102,12 +70,12 @@ def main(argv=None):
             row = {"n": n, "size": s, "bytes_per_frame": moved, "bytes_per_frame_packed": moved_packed}
             for method in ("compute", "fragment", "packed"):
                 ws = WeightedSum(ctx, pb if method == "packed" else bt, method)
-                ms = median_ms(lambda: ws.run(wbuf), ctx, args.reps)
+                ms = median_ms(lambda: ws.run(wbuf), args.reps, ctx=ctx)
                 row[f"{method}_ms"] = ms
                 if method == "compute":
-                    row["tonemap_ms"] = median_ms(lambda: tm.run(ws.output, 0.0, "aces"), ctx, args.reps)
+                    row["tonemap_ms"] = median_ms(lambda: tm.run(ws.output, 0.0, "aces"), args.reps, ctx=ctx)
                 ws.release()
-            row["numpy_f32_ms"] = median_ms(lambda: relight_fast(w, basis), None, max(3, args.reps // 2))
+            row["numpy_f32_ms"] = median_ms(lambda: relight_fast(w, basis), max(3, args.reps // 2))
             prev = min(row["compute_ms"], row["fragment_ms"])
             row["previous_best"] = "compute" if row["compute_ms"] <= row["fragment_ms"] else "fragment"
             row["frac_copy_bw_previous"] = moved / (prev * 1e-3) / gl_bw
@@ -138,14 +106,14 @@ def main(argv=None):
         P = np.ones((n, K + 1, 3), np.float32)
         P[:, 1:] = rng.standard_normal((n, K, 3)) / np.sqrt(n)
         proj = Projector(ctx, P)
-        proj_ms = median_ms(lambda: proj.run(wbuf), ctx, args.reps)
+        proj_ms = median_ms(lambda: proj.run(wbuf), args.reps, ctx=ctx)
         cpu_proj_ms = median_ms(lambda: proj.coeffs_buffer.write(weights_to_vec4(np.einsum("nkc,nc->kc", P, w))),
-                                ctx, args.reps)
+                                args.reps, ctx=ctx)
         r = {"n": n, "size": s, "K": K, "project_gpu_ms": proj_ms, "project_cpu_ms": cpu_proj_ms}
         for method in ("fragment", "packed"):
             store = (PackedBasis if method == "packed" else BasisTextures)(ctx, layers, "f16")
             ws = WeightedSum(ctx, store, method)
-            ms = median_ms(lambda: ws.run(proj.coeffs_buffer), ctx, args.reps)
+            ms = median_ms(lambda: ws.run(proj.coeffs_buffer), args.reps, ctx=ctx)
             moved = (store.nbytes if method == "packed" else (K + 1) * s * s * 8) + s * s * 16
             r[f"pass2_{method}_ms"] = ms
             r[f"frac_copy_bw_{method}"] = moved / (ms * 1e-3) / gl_bw
@@ -164,13 +132,9 @@ def main(argv=None):
     for line in skipped:
         print("skipped:", line)
 
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
     out = {"device": info, "copy_bandwidth_gl_Bps": gl_bw, "copy_bandwidth_numpy_Bps": np_bw,
            "reps": args.reps, "rows": rows, "compressed": comp_rows, "skipped": skipped}
-    tmp = RESULTS.with_suffix(".tmp.json")
-    tmp.write_text(json.dumps(out, indent=1))
-    os.replace(tmp, RESULTS)
-    print(f"wrote {RESULTS}")
+    write_json(RESULTS, out)
     ctx.release()
 
 

@@ -12,8 +12,6 @@ Prints a table and writes ``benchmarks/results/compression_error.json``.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import tempfile
 import time
 from pathlib import Path
@@ -28,6 +26,8 @@ from ffls.relight.cpu import relight_reference
 from ffls.synth.scene import write_synthetic_capture
 from ffls.weights.voronoi import integrate_weights
 from ffls.radiance.photos import load_photos
+
+from common import write_json  # benchmarks/common.py
 
 RESULTS = Path(__file__).resolve().parent / "results" / "compression_error.json"
 
@@ -61,12 +61,7 @@ def main(argv=None):
             rows.append({"mode": mode, "K": K, "rel_rms": errs, "compress_s": cb.info["seconds"]})
             print(f"{mode:12s} {K:4d} " + " ".join(f"{errs[m]:10.2e}" for m in maps) + f" {cb.info['seconds']:10.2f}",
                   flush=True)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    tmpf = RESULTS.with_suffix(".tmp.json")
-    tmpf.write_text(json.dumps({"lights": int(basis.shape[0]), "res": args.res, "maps": list(maps), "rows": rows},
-                               indent=1))
-    os.replace(tmpf, RESULTS)
-    print(f"wrote {RESULTS}")
+    write_json(RESULTS, {"lights": int(basis.shape[0]), "res": args.res, "maps": list(maps), "rows": rows})
 
 
 if __name__ == "__main__":

@@ -19,9 +19,6 @@ the weight integration after a warm-up).
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import time
 
 import numpy as np
@@ -30,6 +27,8 @@ from ffls.synth import scene as synth
 from ffls.lightmaps.lightmap import paper_map, sky_sun_map
 from ffls.relight.cpu import relight_fast, relight_reference
 from ffls.weights.voronoi import bake_cells, integrate_weights
+
+from common import host_info, median_seconds, write_json  # benchmarks/common.py
 
 
 def smooth_map(name: str, height: int):
@@ -72,11 +71,8 @@ def main(argv=None) -> int:
         dirs = synth.stratified_directions(n, "upper", seed=args.seed)
         basis = synth.render_lights(scene, args.res, dirs)
         cells = bake_cells(dirs, "upper", res=256, max_res=1024)
-        times = []
-        for i in range(args.repeat + 1):
-            t = time.perf_counter()
-            w = integrate_weights(lm, dirs, hemisphere="upper", cells=cells)
-            times.append(time.perf_counter() - t)
+        t_integrate = median_seconds(lambda: integrate_weights(lm, dirs, hemisphere="upper", cells=cells), args.repeat)
+        w = integrate_weights(lm, dirs, hemisphere="upper", cells=cells)
         w_exact = integrate_weights(lm, dirs, hemisphere="upper")
         ref = relight_reference(w_exact.weights, basis)
         fast = relight_fast(w.weights, basis)
@@ -85,19 +81,16 @@ def main(argv=None) -> int:
         rows.append({"n_lights": n, "rel_rms": rms, "rel_p99": p99, "rel_rms_fast_cells": rms_fast,
                      "cells_res": cells.res, "cells_overflow": cells.overflow,
                      "weights_equal": bool(np.array_equal(w.weights, w_exact.weights)),
-                     "integrate_s_median": float(np.median(times[1:]))})
+                     "integrate_s_median": t_integrate})
     print(f"map {args.map} ({lm.data.shape[1]}x{lm.data.shape[0]}), image {args.res}x{args.res}, "
-          f"oracle {args.oracle_dirs} dirs ({t_oracle:.1f} s), {os.cpu_count()} CPUs")
+          f"oracle {args.oracle_dirs} dirs ({t_oracle:.1f} s), {host_info()['cpu_count']} CPUs")
     print(f"{'N':>6} {'rel RMS':>10} {'p99 rel':>10} {'fast+cells':>11} {'cells==exact':>13} {'integrate':>10}")
     for r in rows:
         print(f"{r['n_lights']:>6} {r['rel_rms']:>10.4f} {r['rel_p99']:>10.4f} {r['rel_rms_fast_cells']:>11.4f} "
               f"{str(r['weights_equal']):>13} {1e3 * r['integrate_s_median']:>8.1f}ms")
     out = {"map": args.map, "map_height": args.map_height, "res": args.res, "oracle_dirs": args.oracle_dirs,
-           "cpu_count": os.cpu_count(), "machine": platform.processor() or platform.machine(),
-           "oracle_s": t_oracle, "rows": rows}
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=1)
-    print(f"wrote {args.json}")
+           **host_info(), "oracle_s": t_oracle, "rows": rows}
+    write_json(args.json, out)
     return 0
 
 

@@ -28,8 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -40,7 +38,7 @@ from ffls.io.capture import load_capture
 from ffls.conventions import angle_between
 from ffls.io.images import write_exr
 
-from bench_lights import print_error_table, write_json  # noqa: E402  (benchmarks/ is on sys.path)
+from common import host_info, print_error_table, write_json  # noqa: E402  (benchmarks/common.py)
 
 SPHERE_RADIUS = 0.05
 SPHERE_XY = ((0.29, -0.06), (-0.02, -0.27), (-0.30, 0.04), (0.36, 0.24))
@@ -281,8 +279,7 @@ def main(argv=None):
     for r in rows:
         print(f"\n{r['config']} spheres={r['spheres']}: median {r['median_deg']}, max {r['max_deg']}")
         print_error_table(r["errors_deg"], phis, thetas)
-    doc = {"benchmark": "independent_mitsuba", "cpu_count": os.cpu_count(),
-           "machine": platform.processor() or platform.machine(), "phis_deg": phis.tolist(),
+    doc = {"benchmark": "independent_mitsuba", **host_info(), "phis_deg": phis.tolist(),
            "thetas_deg": thetas.tolist(), "camera": CAMERA, "sphere_xy": SPHERE_XY, "fov_deg": a.fov, "results": rows}
     write_json(a.out, doc)
 

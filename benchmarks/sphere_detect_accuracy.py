@@ -21,6 +21,8 @@ from ffls.io.capture import load_capture
 from ffls.spheres.detect import find_spheres_in_capture
 from ffls.synth.scene import write_synthetic_capture
 
+from common import write_json  # benchmarks/common.py
+
 
 def run_case(folder, n, res, encoding, ground, light_model, hints):
     write_synthetic_capture(folder, n_lights=n, resolution=res, encoding=encoding, ground_albedo=ground,
@@ -67,8 +69,7 @@ def main():
         print(f"{enc:8} {ground:<6} {lm:8} {str(hints):5} {r['found']:5} {r['px_max']:7.3f} {r['px_mean']:7.3f} "
               f"{1000 * r['world_max_m']:14.2f} {r['rel_depth_max']:8.4f} {r['residual_px_max']:7.3f} {r['detect_s']:6.2f}")
     if a.out:
-        with open(a.out, "w") as f:
-            json.dump({"cpu_count": os.cpu_count(), "cases": out}, f, indent=1)
+        write_json(a.out, {"cpu_count": os.cpu_count(), "cases": out})
 
 
 if __name__ == "__main__":

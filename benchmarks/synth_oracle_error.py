@@ -11,7 +11,6 @@ the oracle with fewer directions, and, for scale, of Voronoi relighting (ffls.we
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 
@@ -20,6 +19,8 @@ import numpy as np
 from ffls.synth import scene as synth
 from ffls.lightmaps.lightmap import paper_map, sky_sun_map
 from ffls.weights.voronoi import integrate_weights
+
+from common import write_json  # benchmarks/common.py
 
 
 def _rel(a, b):
@@ -60,8 +61,7 @@ def main():
                   flush=True)
     print(f"resolution {a.res}, reference n_dirs {a.ref}, cpus {os.cpu_count()}")
     if a.out:
-        with open(a.out, "w") as f:
-            json.dump({"resolution": a.res, "ref_n_dirs": a.ref, "cpu_count": os.cpu_count(), "rows": rows}, f, indent=1)
+        write_json(a.out, {"resolution": a.res, "ref_n_dirs": a.ref, "cpu_count": os.cpu_count(), "rows": rows})
 
 
 if __name__ == "__main__":

@@ -11,33 +11,15 @@ as the ratio "bytes of the output image per second / copy bandwidth".
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
-import statistics
 import tempfile
-import time
 
 import numpy as np
 
 from ffls.synth import scene as synth
 
-
-def _median_time(fn, repeats):
-    fn()  # warm-up
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
-
-
-def _copy_bandwidth():
-    a = np.ones(64 * 2**20 // 8)
-    b = np.empty_like(a)
-    t = _median_time(lambda: np.copyto(b, a), 5)
-    return 2 * a.nbytes / t  # read + write
+from common import median_seconds, numpy_copy_bandwidth, write_json  # benchmarks/common.py
 
 
 def main():
@@ -47,7 +29,7 @@ def main():
     ap.add_argument("--out", help="write the table as JSON here")
     a = ap.parse_args()
     scene = synth.SynthScene()
-    bw = _copy_bandwidth()
+    bw = numpy_copy_bandwidth(64 << 20, 5, np.float64)
     rows = []
 
     def row(case, seconds, res, images=1):
@@ -61,9 +43,9 @@ def main():
         def build():
             synth.gbuffer.cache_clear()
             synth.gbuffer(scene, res)
-        row("gbuffer + bounce matrix", _median_time(build, a.repeats), res)
-        row("distant light, 1 image", _median_time(lambda: synth.render_light(scene, res, direction=[0.3, -0.4, 0.8]), a.repeats), res)
-        row("near area light (9 pts), 1 image", _median_time(
+        row("gbuffer + bounce matrix", median_seconds(build, a.repeats), res)
+        row("distant light, 1 image", median_seconds(lambda: synth.render_light(scene, res, direction=[0.3, -0.4, 0.8]), a.repeats), res)
+        row("near area light (9 pts), 1 image", median_seconds(
             lambda: synth.render_light(scene, res, position=[0.6, -0.8, 1.2], light_radius=0.05), a.repeats), res)
     cases = [(100, 256)] + ([(80, 768)] if a.big else [])
     for n, res in cases:
@@ -71,13 +53,12 @@ def main():
             def cap():
                 synth.gbuffer.cache_clear()  # include the G-buffer build: a cold capture
                 synth.write_synthetic_capture(tmp, n_lights=n, resolution=res, progress=False)
-            row("capture (EXR, cold cache)", _median_time(cap, 1 if res > 256 else a.repeats), res, n)
+            row("capture (EXR, cold cache)", median_seconds(cap, 1 if res > 256 else a.repeats), res, n)
     info = {"cpu_count": os.cpu_count(), "machine": platform.machine(), "processor": platform.processor(),
             "numpy": np.__version__, "copy_bandwidth_GBps": bw / 1e9, "rows": rows}
     print(f"cpus {os.cpu_count()}, numpy {np.__version__}, copy bandwidth {bw / 1e9:.1f} GB/s")
     if a.out:
-        with open(a.out, "w") as f:
-            json.dump(info, f, indent=1)
+        write_json(a.out, info)
 
 
 if __name__ == "__main__":

@@ -14,9 +14,7 @@ same bytes. Prints a table and writes JSON.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import time
 
 import numpy as np
 
@@ -24,15 +22,7 @@ from ffls.lightmaps.lightmap import paper_map
 from ffls.relight.cpu import relight_fast, relight_reference
 from ffls.weights.voronoi import bake_cells, integrate_weights
 
-
-def median_time(fn, repeat):
-    fn()
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts))
+from common import median_seconds, write_json  # benchmarks/common.py
 
 
 def main(argv=None) -> int:
@@ -46,21 +36,21 @@ def main(argv=None) -> int:
     lm = paper_map(args.height)
     samples = lm.samples()
     nbytes = sum(a.nbytes for a in samples)
-    t_copy = median_time(lambda: [a.copy() for a in samples], args.repeat)
+    t_copy = median_seconds(lambda: [a.copy() for a in samples], args.repeat)
     rows = []
     for n in (int(s) for s in args.lights.split(",")):
         dirs = rng.normal(size=(n, 3))
         dirs[:, 2] = np.abs(dirs[:, 2])
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
         R = np.eye(3)
-        t_bake = median_time(lambda: bake_cells(dirs, "upper", res=256, max_res=1024), max(1, args.repeat // 2))
+        t_bake = median_seconds(lambda: bake_cells(dirs, "upper", res=256, max_res=1024), max(1, args.repeat // 2))
         cells = bake_cells(dirs, "upper", res=256, max_res=1024)
-        t_exact = median_time(lambda: integrate_weights(samples, dirs, R, "upper"), args.repeat)
-        t_cells = median_time(lambda: integrate_weights(samples, dirs, R, "upper", cells=cells), args.repeat)
+        t_exact = median_seconds(lambda: integrate_weights(samples, dirs, R, "upper"), args.repeat)
+        t_cells = median_seconds(lambda: integrate_weights(samples, dirs, R, "upper", cells=cells), args.repeat)
         w = integrate_weights(samples, dirs, R, "upper", cells=cells).weights
         basis = rng.exponential(size=(n, 256, 256, 3)).astype(np.float32) if n <= 400 else None
-        t_relight = median_time(lambda: relight_fast(w, basis), args.repeat) if basis is not None else float("nan")
-        t_ref = median_time(lambda: relight_reference(w, basis), 1) if basis is not None else float("nan")
+        t_relight = median_seconds(lambda: relight_fast(w, basis), args.repeat) if basis is not None else float("nan")
+        t_ref = median_seconds(lambda: relight_reference(w, basis), 1) if basis is not None else float("nan")
         rows.append({"n_lights": n, "bake_s": t_bake, "cells_res": cells.res, "overflow": cells.overflow,
                      "integrate_exact_s": t_exact, "integrate_cells_s": t_cells,
                      "relight_fast_256_s": t_relight, "relight_reference_256_s": t_ref,
@@ -73,10 +63,8 @@ def main(argv=None) -> int:
         print(f"{r['n_lights']:>6} {1e3 * r['bake_s']:>7.0f}ms {r['cells_res']:>5} {1e3 * r['integrate_exact_s']:>7.0f}ms "
               f"{1e3 * r['integrate_cells_s']:>7.0f}ms {r['cells_vs_copy']:>10.1f}x {1e3 * r['relight_fast_256_s']:>9.1f}ms "
               f"{1e3 * r['relight_reference_256_s']:>7.0f}ms")
-    with open(args.json, "w") as f:
-        json.dump({"width": W, "height": H, "cpu_count": os.cpu_count(), "copy_s": t_copy,
-                   "sample_bytes": nbytes, "rows": rows}, f, indent=1)
-    print(f"wrote {args.json}")
+    write_json(args.json, {"width": W, "height": H, "cpu_count": os.cpu_count(), "copy_s": t_copy,
+                           "sample_bytes": nbytes, "rows": rows})
     return 0
 
 

@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from ffls.radiance.photos import load_photos
 
 DEFAULT_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
 DEFAULT_ROTATIONS = (0.0, 90.0, 180.0, 270.0)
@@ -27,26 +26,24 @@ class DemoResult:
     exrs: dict = field(default_factory=dict)  # (map name, rotation) -> EXR path
     contact_sheet: Path | None = None
     backend: str = "cpu"  # 'gpu: <renderer>' or 'cpu'
+    note: str | None = None  # why use_gpu='auto' fell back to the CPU (for the caller to report)
     seconds: dict = field(default_factory=dict)
 
 
-def auto_exposure(hdr: np.ndarray, key: float = 0.18) -> float:
-    """Exposure in stops that maps the log-average luminance of ``hdr`` (H, W, 3) to ``key``.
-
-    Pixels that are exactly zero (background) are ignored; an all-zero image gives 0 stops.
-    """
-    lum = 0.2126 * hdr[..., 0] + 0.7152 * hdr[..., 1] + 0.0722 * hdr[..., 2]
-    lum = lum[lum > 0]
-    if lum.size == 0:
-        return 0.0
-    log_avg = float(np.exp(np.mean(np.log(lum + 1e-12))))
-    return float(np.log2(key / log_avg))
-
-
 def _relighter(capture, lights, use_gpu):
-    """Return (render(lightmap, rotation) -> HDR image (H, W, 3) float32, backend description, release)."""
-    from ffls.conventions import rotation_z
+    """The relighter for the demo: the GPU engine where it can run, else the CPU one.
 
+    Returns
+    -------
+    relighter : ffls.gpu.engine.Engine or ffls.relight.cpu.CpuRelighter
+    backend : str
+        ``'gpu: <renderer>'`` or ``'cpu'``.
+    release : callable
+        Releases the relighter (and the context it made).
+    note : str or None
+        Why the GPU was not used, where ``use_gpu='auto'`` fell back to the CPU.
+    """
+    note = None
     if use_gpu in ("auto", True):
         try:
             from ffls.errors import GLUnavailable
@@ -57,35 +54,20 @@ def _relighter(capture, lights, use_gpu):
         except (GLUnavailable, ImportError) as e:
             if use_gpu is True:
                 raise
-            print(f"ffls demo: no GPU path ({e}); using the CPU reference relighter")
+            note = f"no GPU path ({e}); using the CPU relighter"
         else:
             engine = Engine.from_capture(ctx, capture, lights)
-
-            def render(lm, deg):
-                engine.set_lightmap(lm)
-                engine.set_rotation(rotation_z(deg))
-                engine.render()
-                return engine.read_hdr()
 
             def release():
                 engine.release()
                 ctx.release()
 
-            return render, f"gpu: {ctx.info['GL_RENDERER']}", release
+            return engine, f"gpu: {ctx.info['GL_RENDERER']}", release, None
 
-    from ffls.relight.cpu import relight_fast
-    from ffls.weights.voronoi import bake_cells, integrate_weights
+    from ffls.relight.cpu import CpuRelighter
 
-    idx = np.flatnonzero(lights.ok_mask)
-    dirs = lights.directions[idx]
-    basis = load_photos(capture, idx)
-    cells = bake_cells(dirs, capture.hemisphere)
-
-    def render(lm, deg):
-        w = integrate_weights(lm, dirs, rotation_z(deg), capture.hemisphere, cells=cells)
-        return relight_fast(w.weights, basis)
-
-    return render, "cpu", lambda: None
+    cpu = CpuRelighter.from_capture(capture, lights, precision="f32")
+    return cpu, "cpu", cpu.release, note
 
 
 def contact_sheet(tiles: list[list[np.ndarray]], row_labels, col_labels, path) -> Path:
@@ -131,7 +113,8 @@ def run_demo(out_dir="ffls-demo", n_lights: int = 160, resolution: int = 256, ma
     from ffls.io.images import write_exr, write_png
     from ffls.lightmaps.lightmap import builtin_lightmap
     from ffls.synth.scene import write_synthetic_capture
-    from ffls.display.tonemap import tonemap, to_uint8
+    from ffls.conventions import rotation_z
+    from ffls.display.tonemap import auto_exposure, tonemap, to_uint8
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -145,7 +128,7 @@ def run_demo(out_dir="ffls-demo", n_lights: int = 160, resolution: int = 256, ma
     capture = load_capture(cap_dir)
     lights = load_lights(cap_dir / "lights.json", capture)
     t0 = time.perf_counter()
-    render, res.backend, release = _relighter(capture, lights, use_gpu)
+    relighter, res.backend, release, res.note = _relighter(capture, lights, use_gpu)
     renders = out / "renders"
     renders.mkdir(exist_ok=True)
     tiles = []
@@ -154,7 +137,10 @@ def run_demo(out_dir="ffls-demo", n_lights: int = 160, resolution: int = 256, ma
             lm = builtin_lightmap(name)
             row, exposure = [], None
             for deg in rotations:
-                hdr = render(lm, deg)
+                relighter.set_lightmap(lm)
+                relighter.set_rotation(rotation_z(deg))
+                relighter.render()
+                hdr = relighter.read_hdr()
                 if exposure is None:
                     exposure = auto_exposure(hdr)
                 stem = renders / f"{name}_rot{int(round(deg)):03d}"

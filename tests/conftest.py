@@ -6,7 +6,8 @@ import pytest
 
 
 @pytest.fixture(scope="session")
-def _gl_context():
+def gl_session():
+    """The one headless context of the test session (skips where none can be made)."""
     from ffls.errors import GLUnavailable
     from ffls.gpu.context import create_headless_context
 
@@ -19,12 +20,16 @@ def _gl_context():
 
 
 @pytest.fixture
-def ctx(_gl_context):
-    """The session's headless context; asserts no GL error before and after each test."""
-    assert _gl_context.error == "GL_NO_ERROR"
-    yield _gl_context
-    _gl_context.gc()
-    err = _gl_context.error
+def ctx(gl_session):
+    """The session's headless context, made current (a viewer window may have been); asserts no
+    GL error before and after each test."""
+    from ffls.gpu.context import make_current
+
+    make_current(gl_session)
+    assert gl_session.error == "GL_NO_ERROR"
+    yield gl_session
+    gl_session.gc()
+    err = gl_session.error
     assert err == "GL_NO_ERROR", f"GL error after test: {err}"
 
 

@@ -2,21 +2,29 @@
 into one line on stderr with exit status 2 (no traceback)."""
 from __future__ import annotations
 
-import importlib
-
 import pytest
 
-from ffls.cli import COMMANDS, build_parser, main
+from ffls.cli import main, subcommands
+from ffls.commands import BUILTIN, ENTRY_POINT_GROUP, command_modules, find_command
+
+COMMANDS = [mod.NAME for mod in command_modules()]
 
 
 def test_every_command_module_is_registered_and_complete():
-    names = set()
-    for name in COMMANDS:
-        mod = importlib.import_module(f"ffls.commands.{name}")
-        assert mod.NAME == name and mod.HELP and callable(mod.add_arguments) and callable(mod.run)
-        names.add(mod.NAME)
-    assert names == set(COMMANDS)
-    assert set(build_parser()._subparsers._group_actions[0].choices) == names
+    for mod in command_modules():
+        assert mod.HELP and callable(mod.add_arguments) and callable(mod.run)
+        assert find_command(mod.NAME) is mod
+    assert COMMANDS[:len(BUILTIN)] == list(BUILTIN) and len(set(COMMANDS)) == len(COMMANDS)
+    assert list(subcommands()) == COMMANDS
+    assert find_command("no-such-command") is None
+
+
+def test_the_viewer_registers_view_through_the_entry_point_group():
+    from importlib.metadata import entry_points
+
+    (ep,) = entry_points(group=ENTRY_POINT_GROUP, name="view")
+    assert ep.value == "viewer.command" and "view" in COMMANDS and "view" not in BUILTIN
+    assert callable(find_command("view").show_capture)
 
 
 @pytest.mark.parametrize("name", COMMANDS)

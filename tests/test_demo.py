@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from ffls.cli import main
-from ffls.demo import auto_exposure, run_demo
+from ffls.demo import run_demo
+from ffls.display.tonemap import auto_exposure
 from ffls.io.images import read_image
 
 SMALL = dict(n_lights=24, resolution=48, maps=("sky", "paper"), rotations=(0.0, 180.0), progress=False)
@@ -49,6 +50,17 @@ def test_demo_command(tmp_path, capsys):
     assert rc == 0
     assert "contact sheet" in out and str(tmp_path / "d") in out
     assert (tmp_path / "d" / "contact_sheet.png").is_file()
+
+
+def test_demo_command_finds_the_viewer_and_does_not_open_it_without_a_display(tmp_path, capsys, monkeypatch):
+    """Without --no-view the demo asks the registered ``view`` command; with no display it only says how."""
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    rc = main(["demo", "-o", str(tmp_path / "d"), "--lights", "12", "--resolution", "32", "--maps", "sky",
+               "--rotations", "0", "--cpu"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert f"viewer:        no display; run `ffls view {tmp_path / 'd' / 'capture'}` on a desktop" in out
 
 
 def test_auto_exposure_maps_log_average_to_key():

@@ -159,3 +159,45 @@ def test_relit_capture_converges_to_the_oracle():
         err[n] = np.linalg.norm(relit - oracle) / np.linalg.norm(oracle)
     assert err[50] < 0.04 and err[200] < 0.015
     assert err[200] * 1.8 < err[50]
+
+
+def test_cpu_relighter_has_the_engine_interface_and_the_reference_numbers(small_capture):
+    """CpuRelighter: the Engine's methods; f64 = relight_reference, f32 = relight_fast; display = tonemap."""
+    from ffls.display.tonemap import to_uint8, tonemap
+    from ffls.gpu.engine import Engine
+    from ffls.io.capture import load_capture, load_lights
+    from ffls.lightmaps.lightmap import paper_map
+    from ffls.relight.basis import accepted_basis
+    from ffls.relight.cpu import CpuRelighter
+
+    for name in ("set_lightmap", "set_rotation", "set_weights", "render", "read_hdr", "read_display",
+                 "read_weights", "release", "size", "n_lights"):
+        assert hasattr(Engine, name) and hasattr(CpuRelighter, name), name
+    cap = load_capture(small_capture)
+    lights = load_lights(small_capture / "lights.json", cap)
+    lights.status[5] = "rejected"
+    basis, dirs = accepted_basis(cap, lights)
+    assert basis.shape[0] == dirs.shape[0] == 15
+    lm, R = paper_map(64), cv.rotation_z(75.0)
+    w = vo.integrate_weights(lm, dirs, R, cap.hemisphere, cells=vo.bake_cells(dirs, cap.hemisphere))
+    for precision, ref in (("f64", relight_reference(w.weights, basis)), ("f32", relight_fast(w.weights, basis))):
+        r = CpuRelighter.from_capture(cap, lights, precision=precision)
+        assert r.size == (32, 32) and r.n_lights == 15
+        with pytest.raises(RuntimeError):
+            r.render()
+        r.set_lightmap(lm)
+        r.set_rotation(R)
+        r.render(exposure=1.0, tonemap="aces")
+        assert r.hdr.dtype == ref.dtype
+        np.testing.assert_array_equal(r.hdr, ref)
+        np.testing.assert_array_equal(r.read_hdr(), ref.astype(np.float32))
+        np.testing.assert_array_equal(r.read_weights(), w.weights)
+        np.testing.assert_array_equal(r.read_display(), to_uint8(tonemap(ref, 1.0, "aces")))
+        hdr = r.hdr
+        r.render(exposure=-2.0, tonemap="srgb")  # a new exposure re-tone-maps, never relights
+        assert r.hdr is hdr
+        np.testing.assert_array_equal(r.read_display(), to_uint8(tonemap(ref, -2.0, "srgb")))
+        r.set_weights(2 * w.weights)
+        r.render()
+        np.testing.assert_allclose(r.read_hdr(), 2 * ref, rtol=1e-6)
+        r.release()

@@ -1,6 +1,8 @@
 """Tests of ffls.lightmaps.sphere_maps and its GLSL twin shaders/include/sphere_maps.glsl."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -335,7 +337,7 @@ def test_glsl_matches_python(ctx, rng):
     n = 10_000
     d = _random_dirs(rng, n)
     uv = rng.uniform(0.0, 1.0, size=(n, 2))
-    prog = load_program(ctx, "test_sphere_maps.glsl")
+    prog = load_program(ctx, str(Path(__file__).resolve().parent / "shaders" / "sphere_maps_probe.glsl"))
     b_dir = ctx.buffer(np.concatenate([d, np.zeros((n, 1))], axis=1).astype("f4").tobytes())
     b_uv = ctx.buffer(uv.astype("f4").tobytes())
     b_out = ctx.buffer(reserve=n * 5 * 16)

@@ -1,4 +1,4 @@
-"""Tests of the synthetic scene renderer and capture writer (ffls.synth.scene, ffls synth)."""
+"""Tests of the synthetic scene renderer and capture writer (ffls.synth.scene, ffls.synth.geometry, ffls synth)."""
 from __future__ import annotations
 
 import json
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from ffls.synth import scene as synth
+from ffls.synth.geometry import Box, Capsule, Material, closest_hit, occluded
 from ffls.synth.scene import SynthScene
 from ffls.radiance.photos import load_photo
 
@@ -32,8 +33,8 @@ def _ground_far(scene, res, margin=0.06):
 # ----------------------------------------------------------------------------- geometry
 def test_capsule_and_box_hits_lie_on_their_surfaces():
     rng = np.random.default_rng(3)
-    caps = synth._Capsule((0.15, -0.08, 0.025), (0.10, 0.02, 0.19), 0.025, synth._Material((1, 1, 1)), 1)
-    box = synth._Box((-0.09, -0.09, 0.0), (0.09, 0.09, 0.05), synth._Material((1, 1, 1)), 1)
+    caps = Capsule((0.15, -0.08, 0.025), (0.10, 0.02, 0.19), 0.025, Material((1, 1, 1)), 1)
+    box = Box((-0.09, -0.09, 0.0), (0.09, 0.09, 0.05), Material((1, 1, 1)), 1)
     o = rng.normal(size=(4000, 3)) * 0.5 + [0, 0, 0.6]
     for prim, sdf in (
         (caps, lambda x: np.linalg.norm(x - (np.array(caps.a) + np.clip(((x - caps.a) @ (np.subtract(caps.b, caps.a)))
@@ -44,12 +45,12 @@ def test_capsule_and_box_hits_lie_on_their_surfaces():
         target = rng.uniform(-0.1, 0.1, size=(4000, 3)) + (np.array(caps.a) + caps.b) / 2 * (prim is caps)
         d = target - o
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        t, idx = synth._closest_hit([prim], o, d)
+        t, idx = closest_hit([prim], o, d)
         hit = idx == 0
         assert hit.sum() > 500
         assert np.abs(sdf(o[hit] + t[hit, None] * d[hit])).max() < 1e-9
         # any-hit agrees with closest-hit for infinite rays from outside
-        assert np.array_equal(synth._occluded([prim], o, d), hit)
+        assert np.array_equal(occluded([prim], o, d), hit)
         # normals are unit and point against the incoming ray
         nrm = prim.normal(o[hit] + t[hit, None] * d[hit])
         assert np.allclose(np.linalg.norm(nrm, axis=1), 1)

@@ -143,13 +143,12 @@ def _open_app(capture_dir, **kw):
 
 
 @pytest.fixture(scope="module")
-def app(capture_dir, _gl_context):
+def app(capture_dir, gl_session):
+    # gl_session: the session's headless context exists first, so the viewer gives it back on
+    # close (the ctx fixture of tests/conftest.py also makes it current before each GL test)
     a = _open_app(capture_dir)
     yield a
     a.close()
-    # the window's context was current on this thread: make the session's headless context
-    # (tests/conftest.py) current again for the GL tests that follow
-    _gl_context.__enter__()
 
 
 @pytest.fixture
@@ -267,14 +266,14 @@ def test_screenshot_turntable_drop(fresh, tmp_path):
     assert "3 frames" in app.renderer.info.message
     # a dropped light map file is loaded; a bad one leaves a message and the old map
     save_lightmap(constant_map(16, 0.5), tmp_path / "grey.exr")
-    app._on_drop(app.window, [str(tmp_path / "grey.exr")])
+    app.on_drop(app.window, [str(tmp_path / "grey.exr")])
     app.step(dt=0.0)
     assert app.state.lightmap.endswith("grey.exr") and "grey.exr" in app.renderer.info.message
     grey = app.renderer.read_hdr()
     app.state.yaw = 90.0  # a constant map does not care about rotation
     app.step(dt=0.0)
     np.testing.assert_allclose(app.renderer.read_hdr(), grey, rtol=2e-3, atol=1e-5)
-    app._on_drop(app.window, [str(tmp_path / "missing.exr")])
+    app.on_drop(app.window, [str(tmp_path / "missing.exr")])
     app.step(dt=0.0)
     assert "missing.exr" in app.renderer.info.message
     np.testing.assert_allclose(app.renderer.read_hdr(), grey, rtol=2e-3, atol=1e-5)

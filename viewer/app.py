@@ -111,7 +111,7 @@ class ViewerApp:
             reason = "" if mask is not None else "this capture has no object mask"
             self.renderer = Renderer(self.ctx, capture, lights, mask=mask, mask_reason=reason)
             self._init_imgui()
-            glfw.set_drop_callback(self.window, self._on_drop)
+            glfw.set_drop_callback(self.window, self.on_drop)
             self._t_last = None
         except BaseException:
             self.close()
@@ -154,7 +154,7 @@ class ViewerApp:
         imgui.set_current_context(self._imgui_ctx)
         implot.set_current_context(self._implot_ctx)
 
-    def _on_drop(self, window, paths) -> None:
+    def on_drop(self, window, paths) -> None:
         """glfw drop callback: the first dropped file becomes the light map."""
         if paths:
             p = paths[0]
@@ -258,9 +258,9 @@ class ViewerApp:
         Returns
         -------
         float
-            The exposure in stops (:func:`ffls.demo.auto_exposure`, rounded to 0.01).
+            The exposure in stops (:func:`ffls.display.tonemap.auto_exposure`, rounded to 0.01).
         """
-        from ffls.demo import auto_exposure
+        from ffls.display.tonemap import auto_exposure
 
         self._make_current()
         self.renderer.update(self.state)

@@ -26,7 +26,7 @@ from ffls.conventions import direction_to_latlong_uv, latlong_directions, rotati
 from ffls.errors import FflsError, InputError
 from ffls.lightmaps.lightmap import lightmap_from_spec
 from ffls.display.tonemap import tonemap as tonemap_np
-from ffls.display.tonemap import to_uint8
+from ffls.display.tonemap import auto_exposure, to_uint8
 from ffls.radiance.photos import load_photo
 
 from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo
@@ -307,8 +307,6 @@ class Renderer:
             return
         if self._photo_key == sel:
             return
-        from ffls.demo import auto_exposure
-
         img = load_photo(self.capture, self.image_index[sel])
         disp = to_uint8(tonemap_np(img, auto_exposure(img), "srgb"))
         rgba = np.concatenate([disp, np.full(disp.shape[:2] + (1,), 255, np.uint8)], axis=-1)

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import sys
 
+from ffls.commands import find_command
+
 NAME = "demo"
 HELP = "synthesise a capture and relight it under the built-in light maps (the default job)"
 DESCRIPTION = (
@@ -31,34 +33,26 @@ def run(args) -> int:
     res = run_demo(args.out, n_lights=args.lights, resolution=args.resolution, maps=maps,
                    rotations=rotations, use_gpu=False if args.cpu else "auto", seed=args.seed,
                    progress=sys.stderr.isatty())
+    if res.note:
+        print(f"ffls demo: {res.note}")
     print(f"ffls demo: relit with {res.backend}")
     print(f"  capture:       {res.capture_dir}  ({args.lights} images, {res.seconds['synth']:.1f} s)")
     print(f"  renders:       {res.out_dir / 'renders'}  ({len(res.images)} PNG + EXR, {res.seconds['relight']:.1f} s)")
     print(f"  contact sheet: {res.contact_sheet}")
-    if not getattr(args, "no_view", False):
+    if not args.no_view:
         _open_viewer(res.capture_dir)
     return 0
 
 
 def _open_viewer(capture_dir) -> None:
-    """Open the interactive viewer on the demo capture when a display exists (else say how)."""
-    try:
-        from viewer.headless import has_display
-    except ImportError:  # the viewer's dependencies (imgui-bundle, glfw) are not installed
-        return
-    if not has_display():
-        print(f"  viewer:        no display; run `ffls view {capture_dir}` on a desktop")
-        return
-    from ffls.errors import GLUnavailable
-    from viewer.app import ViewerApp, open_capture
+    """Open the viewer on the demo capture when one is installed and a display exists (else say how).
 
-    try:
-        app = ViewerApp(*open_capture(capture_dir), headless=False)
-    except GLUnavailable as e:
-        print(f"  viewer:        not opened ({e})")
+    The viewer is found through the ``view`` command it registers (:func:`ffls.commands.find_command`);
+    its ``show_capture`` opens the window, or says why not.
+    """
+    view = find_command("view")
+    if view is None or not hasattr(view, "show_capture"):  # the viewer is not installed
         return
-    try:
-        app.auto_expose()
-        app.run()
-    finally:
-        app.close()
+    why = view.show_capture(capture_dir)
+    if why:
+        print(f"  viewer:        {why}")

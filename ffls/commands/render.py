@@ -2,7 +2,8 @@
 
 The GPU path is the default. Where no OpenGL 4.3 context can be created the command stops with
 one line saying so and suggesting ``--cpu`` (it never falls back silently: the two paths differ
-in speed by orders of magnitude and a CI job should notice). ``--cpu`` runs the reference path
+in speed by orders of magnitude and a CI job should notice). ``--cpu`` runs the reference path,
+:class:`ffls.relight.cpu.CpuRelighter` with the same interface as the engine
 (:func:`ffls.weights.voronoi.integrate_weights` + :func:`ffls.relight.cpu.relight_reference`, float64; with
 ``--rank K`` the compressed basis' exact float64 algebra).
 """
@@ -59,58 +60,12 @@ def parse_rotation(args) -> np.ndarray:
     return rotation_z(args.rotate_z or 0.0)
 
 
-class _CpuRenderer:
-    """Reference path with the Engine's interface subset used here (float64)."""
-
-    def __init__(self, capture, lights, rank, cells_res):
-        from ffls.errors import InputError
-        from ffls.gpu.engine import _capture_basis
-        from ffls.weights.voronoi import bake_cells
-
-        self.basis, self.directions = _capture_basis(capture, lights)
-        self.hemisphere = capture.hemisphere
-        self.cells = bake_cells(self.directions, self.hemisphere, cells_res)
-        self.cb = None
-        if rank is not None:
-            from ffls.relight.compress import compress_basis, load_compressed
-
-            try:
-                self.cb = load_compressed(capture.folder, self.basis.shape[0], self.basis.shape[1:3], rank,
-                                          basis=self.basis)
-            except InputError:
-                self.cb = compress_basis(self.basis, rank)
-        self.lm, self.R = None, np.eye(3)
-
-    def set_lightmap(self, lm):
-        self.lm = lm
-
-    def set_rotation(self, R):
-        self.R = R
-
-    def render(self, exposure=0.0, tonemap="srgb"):
-        from ffls.relight.cpu import relight_reference
-        from ffls.display.tonemap import tonemap as tm
-        from ffls.weights.voronoi import integrate_weights
-
-        w = integrate_weights(self.lm, self.directions, self.R, self.hemisphere, cells=self.cells).weights
-        self.hdr = self.cb.relight(w) if self.cb is not None else relight_reference(w, self.basis)
-        self.display = tm(self.hdr, exposure, tonemap)
-
-    def read_hdr(self):
-        return self.hdr.astype(np.float32)
-
-    def read_display(self):
-        from ffls.display.tonemap import to_uint8
-
-        return to_uint8(self.display)
-
-    def release(self):
-        pass
-
-
 def _make_renderer(args, capture, lights):
     if args.cpu:
-        return _CpuRenderer(capture, lights, args.rank, args.cells_res), None
+        from ffls.relight.cpu import CpuRelighter
+
+        return CpuRelighter.from_capture(capture, lights, precision="f64", rank=args.rank,
+                                         cell_res=args.cells_res), None
     from ffls.errors import GLUnavailable
     from ffls.gpu.context import create_headless_context
     from ffls.gpu.engine import Engine

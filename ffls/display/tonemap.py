@@ -8,6 +8,9 @@ Everything inside ffls is linear radiance; this module turns it into display val
 * ACES: K. Narkowicz, "ACES Filmic Tone Mapping Curve" (blog post, 2016), a rational fit of the
   ACES reference rendering transform + ODT, applied per channel.
 
+* Automatic exposure: the log-average luminance mapped to a key value (the "key" of
+  Reinhard et al. 2002, section 2), :func:`auto_exposure`.
+
 NaN and Inf are **not** silently replaced: :func:`tonemap` assumes finite input (NaN stays NaN)
 and :func:`to_uint8` raises ``ValueError`` on non-finite values.
 """
@@ -24,6 +27,7 @@ __all__ = [
     "aces",
     "tonemap",
     "to_uint8",
+    "auto_exposure",
 ]
 
 #: Tone curves accepted by :func:`tonemap`.
@@ -137,3 +141,17 @@ def to_uint8(display) -> np.ndarray:
     if not np.all(np.isfinite(d)):
         raise ValueError(f"to_uint8: {int(np.count_nonzero(~np.isfinite(d)))} non-finite values")
     return np.rint(np.clip(d, 0, 1) * 255).astype(np.uint8)
+
+
+def auto_exposure(hdr: np.ndarray, key: float = 0.18) -> float:
+    """Exposure in stops that maps the log-average luminance of ``hdr`` (H, W, 3) to ``key``.
+
+    Reinhard et al. 2002, equation 1 (Rec.709 luminance). Pixels that are exactly zero
+    (background) are ignored; an all-zero image gives 0 stops.
+    """
+    lum = 0.2126 * hdr[..., 0] + 0.7152 * hdr[..., 1] + 0.0722 * hdr[..., 2]
+    lum = lum[lum > 0]
+    if lum.size == 0:
+        return 0.0
+    log_avg = float(np.exp(np.mean(np.log(lum + 1e-12))))
+    return float(np.log2(key / log_avg))

@@ -115,3 +115,23 @@ def release_gl(obj) -> None:
     """
     if obj is not None:
         obj.release()
+
+
+def default_framebuffer(ctx):
+    """Framebuffer 0 of ``ctx``, as a moderngl reference (never deleted by garbage collection).
+
+    Passes that draw into their own framebuffer bind this one afterwards when none was bound
+    before: moderngl re-binds the bound framebuffer whenever it creates one, which fails once a
+    pass's framebuffer is released. A new reference is cheap (no GL object is made), so none is
+    cached.
+    """
+    return ctx.detect_framebuffer(0)
+
+
+def make_current(ctx) -> None:
+    """Make ``ctx`` current on this thread (after another context, e.g. a viewer window's, was).
+
+    moderngl makes a context current on entering ``with ctx:`` and restores the previous one on
+    leaving; this is the entry alone, for a caller that keeps ``ctx`` current from now on.
+    """
+    ctx.__enter__()

@@ -29,25 +29,9 @@ from ffls.gpu.basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
 from ffls.gpu.context import release_gl
 from ffls.gpu.integrate import CellIntegrator
 from ffls.gpu.weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, default_method, weights_to_vec4
-from ffls.radiance.photos import load_photos
+from ffls.relight.basis import accepted_basis
 
 __all__ = ["Engine"]
-
-
-def _capture_basis(capture, lights) -> tuple[np.ndarray, np.ndarray]:
-    """Basis ``(k, H, W, 3)`` float32 and directions ``(k, 3)`` of the accepted lights, matched by image name."""
-    ok = np.asarray(lights.ok_mask, dtype=bool)
-    path = getattr(lights, "path", None) or getattr(capture, "folder", None)
-    if not np.any(ok):
-        raise InputError("no light has status ok", path)
-    names = [n for n, o in zip(lights.image_names, ok) if o]
-    pos = {n: i for i, n in enumerate(capture.image_names)}
-    missing = [n for n in names if n not in pos]
-    if missing:
-        raise InputError(f"lights name images not in the capture: {', '.join(missing[:3])}", path)
-    sel = [pos[n] for n in names]
-    basis = load_photos(capture, indices=sel)
-    return basis, np.asarray(lights.directions, dtype=np.float64)[ok]
 
 
 class Engine:
@@ -149,7 +133,7 @@ class Engine:
         Parameters
         ----------
         capture : ffls.io.capture.Capture
-            ``load_photos(capture)`` gives the basis, ``capture.hemisphere`` the domain.
+            :func:`ffls.relight.basis.accepted_basis` gives the basis, ``capture.hemisphere`` the domain.
         lights : ffls.io.capture.Lights
             ``directions`` (m, 3) matched to the capture's images by ``image_names``; lights
             with ``ok_mask`` False are left out (their basis images are not loaded).
@@ -159,21 +143,12 @@ class Engine:
             eigen-images and was made from the same images (checksum); otherwise it is computed and saved
             there (skipped silently if the folder is read-only).
         """
-        basis, d = _capture_basis(capture, lights)
+        basis, d = accepted_basis(capture, lights)
         rank = kw.get("rank")
         if rank is not None and kw.get("compressed") is None:
-            from ffls.relight.compress import compress_basis, load_compressed, save_compressed
+            from ffls.relight.compress import load_or_compress
 
-            try:
-                kw["compressed"] = load_compressed(capture.folder, n_lights=basis.shape[0], shape=basis.shape[1:3],
-                                                   rank=int(rank), basis=basis)
-            except InputError:
-                cb = compress_basis(basis, int(rank))
-                try:
-                    save_compressed(cb, capture.folder)
-                except (OSError, InputError):
-                    pass
-                kw["compressed"] = cb
+            kw["compressed"] = load_or_compress(capture.folder, basis, int(rank), save=True)
         kw.setdefault("path", getattr(capture, "folder", None))
         return cls(ctx, basis, d, getattr(capture, "hemisphere", "upper"), **kw)
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from ffls.conventions import check_hemisphere, is_rotation
-from ffls.gpu.context import release_gl
+from ffls.gpu.context import default_framebuffer, release_gl
 from ffls.gpu.shaders import load_program
 
 __all__ = ["CellIntegrator", "METHODS", "WEIGHTS_BINDING"]
@@ -110,7 +110,6 @@ class CellIntegrator:
         self.m = 0
         self.total_power = np.zeros(3)
         self._ran = False
-        self._default_fbo = None
 
     # ------------------------------------------------------------------ light map
     def set_lightmap(self, lm) -> None:
@@ -205,11 +204,7 @@ class CellIntegrator:
             ctx.disable(moderngl.BLEND)
             # leave our framebuffer unbound: moderngl re-binds the current one whenever it
             # creates a framebuffer, which fails once ours is released
-            if prev_fbo is None:
-                if self._default_fbo is None:
-                    self._default_fbo = ctx.detect_framebuffer(0)
-                prev_fbo = self._default_fbo
-            prev_fbo.use()
+            (prev_fbo if prev_fbo is not None else default_framebuffer(ctx)).use()
         red = load_program(ctx, "integrate_reduce.glsl", {**self._defines, "SOURCE_TEXTURE": 1})
         self._tex.use(0)
         red["partials"].value = 0

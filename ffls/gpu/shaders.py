@@ -35,7 +35,11 @@ class ShaderError(FflsError):
 
 def _read(name: str) -> tuple[Path, str]:
     root = shader_dir()
-    for cand in (root / name, root / "include" / name):
+    if Path(name).is_absolute():  # a program outside the package (a test's probe); includes still come from root
+        cands = (Path(name),)
+    else:
+        cands = (root / name, root / "include" / name)
+    for cand in cands:
         if cand.is_file():
             return cand, cand.read_text()
     raise ShaderError(f"no shader file {name!r} in {root}")
@@ -97,6 +101,9 @@ _cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 def load_program(ctx, name: str, defines: dict | None = None, varyings: tuple[str, ...] = ()):
     """Compile (or fetch from the cache) the program in ``shaders/<name>``.
+
+    ``name`` may also be the absolute path of a program file outside the package (the tests'
+    probe programs in ``tests/shaders/``); its ``#include`` files still come from ``shaders/``.
 
     Programs are cached by (context, name, defines) and released together by
     :func:`release_programs`. A file with a ``COMPUTE_SHADER`` section gives a

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffls.gpu.context import release_gl
+from ffls.gpu.context import default_framebuffer, release_gl
 from ffls.gpu.shaders import load_program
 
 __all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "METHODS", "DEFAULT_METHOD", "default_method", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4"]
@@ -66,12 +66,6 @@ def weights_to_vec4(w) -> bytes:
     out = np.zeros((w.shape[0], 4), dtype=np.float32)
     out[:, :3] = w
     return out.tobytes()
-
-
-def _default_framebuffer(ctx):
-    if getattr(ctx, "_ffls_fbo0", None) is None:
-        ctx._ffls_fbo0 = ctx.detect_framebuffer(0)
-    return ctx._ffls_fbo0
 
 
 def _groups(size, local=8):
@@ -217,7 +211,7 @@ class WeightedSum:
                 ctx.blend_func = ctx.DEFAULT_BLENDING
                 # never leave our framebuffer bound: moderngl re-binds the bound one when it
                 # creates framebuffers, an error once ours is released
-                (previous if previous is not None else _default_framebuffer(ctx)).use()
+                (previous if previous is not None else default_framebuffer(ctx)).use()
 
     def read(self) -> np.ndarray:
         """The relit image ``(H, W, 3)`` float32 (row 0 = image row 0)."""

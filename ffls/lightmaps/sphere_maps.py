@@ -432,9 +432,12 @@ class _DiscMap(SphereMap):
         lx, ly, lz = local[..., 0], local[..., 1], local[..., 2]
         rho = np.hypot(lx, ly)
         r = self._local_to_radius(lx, ly, lz, rho)
+        # the antipode goes to (1, 0); so do directions whose rho is subnormal, where lx / rho
+        # keeps only a few significant bits (a direction 1e-313 from the antipode is the antipode)
+        off_axis = rho >= np.finfo(np.float64).tiny
         with np.errstate(invalid="ignore", divide="ignore"):
-            px = np.where(rho > 0, r * lx / rho, r)  # the antipode goes to (1, 0)
-            py = np.where(rho > 0, r * ly / rho, 0.0)
+            px = np.where(off_axis, r * lx / rho, r)
+            py = np.where(off_axis, r * ly / rho, 0.0)
         return np.stack([0.5 * (px + 1.0), 0.5 * (1.0 - py)], axis=-1)
 
     @functools.lru_cache(maxsize=16)

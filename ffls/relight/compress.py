@@ -35,7 +35,7 @@ import numpy as np
 from ffls.errors import InputError, atomic_output
 
 __all__ = ["CompressedBasis", "compress_basis", "randomized_svd_Halko2011", "save_compressed",
-           "load_compressed", "basis_checksum", "COMPRESSED_FILENAME", "MODES"]
+           "load_compressed", "load_or_compress", "basis_checksum", "COMPRESSED_FILENAME", "MODES"]
 
 #: File name of a compressed basis inside a capture folder.
 COMPRESSED_FILENAME = "basis_compressed.npz"
@@ -314,4 +314,35 @@ def load_compressed(folder_or_file, n_lights: int | None = None, shape: tuple[in
             raise InputError(f"compressed basis has rank {K} < requested {rank}", path)
         cb = CompressedBasis(cb.mean, cb.components[:rank], cb.loadings[:, :rank], cb.singular_values[:rank],
                              cb.mode, cb.info)
+    return cb
+
+
+def load_or_compress(folder, basis, rank: int, save: bool = True) -> CompressedBasis:
+    """The rank-``rank`` compression of ``basis``: the one saved in ``folder`` if it fits, else a new one.
+
+    Parameters
+    ----------
+    folder : path-like
+        Capture folder; its :data:`COMPRESSED_FILENAME` is used when it has at least ``rank``
+        eigen-images and was made from the same images (:func:`basis_checksum`).
+    basis : (n, H, W, 3) array
+    rank : int
+    save : bool
+        Save a newly computed compression in ``folder`` (skipped silently if the folder is
+        read-only or gone).
+
+    Returns
+    -------
+    CompressedBasis
+    """
+    basis = np.asarray(basis)
+    try:
+        return load_compressed(folder, n_lights=basis.shape[0], shape=basis.shape[1:3], rank=int(rank), basis=basis)
+    except InputError:
+        cb = compress_basis(basis, int(rank))
+    if save:
+        try:
+            save_compressed(cb, folder)
+        except (OSError, InputError):
+            pass
     return cb

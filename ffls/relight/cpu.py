@@ -8,16 +8,26 @@ direction ``i``.
   compared against).
 * :func:`relight_fast` is one float32 BLAS product per block of pixels: ``(3, n) @ (n, 3 P)``
   over a reshaped view of the basis (no copy of the basis), keeping the channel-diagonal part.
+* :class:`CpuRelighter` relights one capture with the interface of the GPU engine
+  (:class:`ffls.gpu.engine.Engine`): ``set_lightmap``, ``set_rotation``, ``render``,
+  ``read_hdr``, ``read_display``, ``release``. ``ffls relight``, ``ffls render --cpu`` and the
+  demo's CPU path all use it; :func:`relight_capture` is its one-call form.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ffls.conventions import check_hemisphere
+from ffls.conventions import check_hemisphere, is_rotation
+from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
+from ffls.errors import InputError
+from ffls.relight.basis import accepted_basis
+from ffls.relight.compress import compress_basis, load_or_compress
 from ffls.weights.voronoi import Weights, bake_cells, integrate_weights
-from ffls.radiance.photos import load_photos
 
-__all__ = ["relight_reference", "relight_fast", "relight_capture"]
+__all__ = ["relight_reference", "relight_fast", "CpuRelighter", "relight_capture", "PRECISIONS"]
+
+#: Accumulation of the weighted sum: ``'f32'`` :func:`relight_fast`, ``'f64'`` :func:`relight_reference`.
+PRECISIONS = ("f32", "f64")
 
 
 def _check(weights, basis) -> tuple[np.ndarray, np.ndarray]:
@@ -89,15 +99,202 @@ def relight_fast(weights, basis, block_pixels: int = 1 << 16) -> np.ndarray:
     return out.reshape(H, W, 3)
 
 
+class CpuRelighter:
+    """CPU relighting of one capture, with the interface of :class:`ffls.gpu.engine.Engine`.
+
+    Pass 1 is :func:`ffls.weights.voronoi.integrate_weights` (through a candidate-cell texture,
+    the GPU's lookup, or the exact k-d tree), pass 2 :func:`relight_fast` (float32),
+    :func:`relight_reference` (float64) or, with a compressed basis, its exact float64 algebra
+    (:meth:`ffls.relight.compress.CompressedBasis.relight`); the display image is
+    :func:`ffls.display.tonemap.tonemap` of the relit image, made when first read. Only what
+    changed is recomputed.
+
+    Parameters
+    ----------
+    basis : (n, H, W, 3) float array
+        Linear basis images; row 0 is the top row.
+    directions : (n, 3) float array
+        Unit light directions (world frame) of the basis images.
+    hemisphere : {'upper', 'full'}
+    precision : {'f32', 'f64'}
+        Accumulation of the weighted sum (:data:`PRECISIONS`); ignored with a compressed basis.
+    rank : int, optional
+        Use a compressed basis of ``rank`` eigen-images (computed here unless ``compressed``).
+    compressed : ffls.relight.compress.CompressedBasis, optional
+        A precomputed compression of ``basis``.
+    cell_res : int or None
+        Resolution of the candidate-cell texture (:func:`ffls.weights.voronoi.bake_cells`), or
+        ``None`` for the exact k-d tree assignment.
+    cell_k, cell_max_res : int
+        Candidate slots per texel, and the resolution up to which an overflowing bake is redone
+        at twice the resolution (``None``: no retry); as :func:`ffls.weights.voronoi.bake_cells`.
+    path : path-like, optional
+        Named in errors (the capture folder).
+    """
+
+    def __init__(self, basis, directions, hemisphere: str = "upper", *, precision: str = "f32",
+                 rank: int | None = None, compressed=None, cell_res: int | None = 256, cell_k: int = 8,
+                 cell_max_res: int | None = None, path=None):
+        self.hemisphere = check_hemisphere(hemisphere)
+        basis = np.asarray(basis)
+        d = np.asarray(directions, dtype=np.float64)
+        if basis.ndim != 4 or basis.shape[-1] != 3:
+            raise InputError(f"basis must have shape (n, H, W, 3), not {basis.shape}", path)
+        if d.shape != (basis.shape[0], 3):
+            raise InputError(f"{d.shape[0] if d.ndim == 2 else '?'} light directions for {basis.shape[0]} basis images", path)
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
+        if compressed is None and rank is not None:
+            compressed = compress_basis(basis, int(rank))
+        if compressed is not None and (compressed.n_lights != basis.shape[0] or tuple(compressed.shape) != basis.shape[1:3]):
+            raise InputError("compressed basis does not match the capture's basis", path)
+        self.basis = basis
+        self.directions = d
+        self.precision = precision
+        self.compressed = compressed
+        self.cells = None if cell_res is None else bake_cells(d, self.hemisphere, res=cell_res, k=cell_k,
+                                                               max_res=cell_max_res)
+        #: :class:`ffls.weights.voronoi.Weights` of the last render (None before the first, or after set_weights).
+        self.last_weights: Weights | None = None
+        self._lightmap = None
+        self._rotation = np.eye(3)
+        self._weights = None
+        self._hdr = None
+        self._display = None
+        self._display_key = None
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_capture(cls, capture, lights, *, save_compressed: bool = False, **kw) -> "CpuRelighter":
+        """A relighter for a capture folder and its light directions.
+
+        Parameters
+        ----------
+        capture : ffls.io.capture.Capture
+            The basis comes from :func:`ffls.relight.basis.accepted_basis`, the domain from
+            ``capture.hemisphere``.
+        lights : ffls.io.capture.Lights
+            Lights with ``ok_mask`` False are left out (their photos are not loaded).
+        save_compressed : bool
+            With ``rank=K``: a compressed basis saved in the capture folder is used when it fits
+            (:func:`ffls.relight.compress.load_or_compress`); a new one is saved there only if
+            this is set.
+        **kw
+            As :class:`CpuRelighter`.
+        """
+        basis, d = accepted_basis(capture, lights)
+        rank = kw.get("rank")
+        if rank is not None and kw.get("compressed") is None:
+            kw["compressed"] = load_or_compress(capture.folder, basis, int(rank), save=save_compressed)
+        kw.setdefault("path", getattr(capture, "folder", None))
+        return cls(basis, d, getattr(capture, "hemisphere", "upper"), **kw)
+
+    # ------------------------------------------------------------------ inputs
+    def set_lightmap(self, lm) -> None:
+        """Use light map ``lm`` (:class:`ffls.lightmaps.lightmap.LightMap` or ``(dirs, radiance, solid_angle)``)."""
+        self._lightmap = lm
+        self._weights = None
+
+    def set_rotation(self, R) -> None:
+        """Rotate the light map by ``R`` (3, 3) (content at d moves to R d; conventions.rotation_z)."""
+        R = np.asarray(R, dtype=np.float64)
+        if not is_rotation(R):
+            raise ValueError("R must be a 3x3 rotation matrix")
+        if not np.array_equal(R, self._rotation):
+            self._rotation = R.copy()
+            if self._lightmap is not None:
+                self._weights = None
+
+    def set_weights(self, weights) -> None:
+        """Use these per-light weights ``(n, 3)`` directly (bypasses pass 1 until the next light map)."""
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != (self.n_lights, 3):
+            raise ValueError(f"weights must have shape ({self.n_lights}, 3), not {w.shape}")
+        if not np.all(np.isfinite(w)):
+            raise ValueError("weights must be finite")
+        self._lightmap = None
+        self.last_weights = None
+        self._weights = w.copy()
+        self._hdr = None
+
+    # ------------------------------------------------------------------ passes
+    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+        """Compute what changed: the weights (pass 1), the relit image (pass 2), the display image.
+
+        Parameters
+        ----------
+        exposure : float
+            Stops applied before the tone curve (display image only; the HDR is unscaled).
+        tonemap : {'srgb', 'reinhard', 'aces'}
+        """
+        if self._lightmap is None and self._weights is None:
+            raise RuntimeError("CpuRelighter.render: call set_lightmap(lm) or set_weights(w) first")
+        if self._weights is None:
+            self.last_weights = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
+                                                  cells=self.cells)
+            self._weights = self.last_weights.weights
+            self._hdr = None
+        if self._hdr is None:
+            if self.compressed is not None:
+                self._hdr = self.compressed.relight(self._weights)
+            elif self.precision == "f64":
+                self._hdr = relight_reference(self._weights, self.basis)
+            else:
+                self._hdr = relight_fast(self._weights, self.basis)
+            self._display = None
+        key = (float(exposure), tonemap)
+        if key != self._display_key:
+            self._display = None
+            self._display_key = key
+
+    # ------------------------------------------------------------------ outputs
+    @property
+    def size(self) -> tuple[int, int]:
+        """(W, H) of the images."""
+        return int(self.basis.shape[2]), int(self.basis.shape[1])
+
+    @property
+    def n_lights(self) -> int:
+        return int(self.basis.shape[0])
+
+    @property
+    def hdr(self) -> np.ndarray:
+        """The last relit image ``(H, W, 3)`` in its accumulation dtype (float32 for 'f32', else float64)."""
+        if self._hdr is None:
+            raise RuntimeError("CpuRelighter: nothing rendered yet")
+        return self._hdr
+
+    def read_hdr(self) -> np.ndarray:
+        """The relit image ``(H, W, 3)`` float32, row 0 = top row."""
+        return self.hdr.astype(np.float32)
+
+    def read_display(self) -> np.ndarray:
+        """The display image ``(H, W, 3)`` uint8, sRGB-encoded."""
+        if self._display is None:  # tone-mapped on first read (an EXR-only caller never pays for it)
+            exposure, method = self._display_key if self._display_key is not None else (0.0, "srgb")
+            self._display = tonemap_np(self.hdr, exposure, method)
+        return to_uint8(self._display)
+
+    def read_weights(self) -> np.ndarray:
+        """The weights of the last render ``(n, 3)`` float64 (pass-1 output or :meth:`set_weights`)."""
+        if self._weights is None:
+            raise RuntimeError("CpuRelighter: nothing rendered yet")
+        return np.array(self._weights, dtype=np.float64)
+
+    def release(self) -> None:
+        """Drop the basis and the images (the GPU engine's counterpart frees GL objects)."""
+        self.basis = self.cells = self.compressed = None
+        self._hdr = self._display = self._weights = self._display_key = None
+
+
 def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | None = 256, fast: bool = True,
                     k: int = 4, max_res: int | None = 1024) -> tuple[np.ndarray, Weights]:
-    """Relight a capture under a light map.
+    """Relight a capture under a light map (one :class:`CpuRelighter` render).
 
     Parameters
     ----------
     capture : ffls.io.capture.Capture
-        Gives the basis images (``load_basis(indices)`` -> (n, H, W, 3)), ``image_names`` and
-        ``hemisphere``.
+        Gives the basis images, ``image_names`` and ``hemisphere``.
     lights : ffls.io.capture.Lights
         Light directions (``directions`` (m, 3)), ``ok_mask`` (m,) and ``image_names`` (m,);
         only lights with ``ok_mask`` set take part.
@@ -109,6 +306,8 @@ def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | N
         overflows), or ``None`` for the exact k-d tree assignment.
     fast : bool
         :func:`relight_fast` (float32) rather than :func:`relight_reference` (float64).
+    k : int
+        Candidate slots per texel of the cell texture.
 
     Returns
     -------
@@ -116,24 +315,10 @@ def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | N
     weights : Weights
         For the used lights, in the order of ``lights`` restricted to ``ok_mask``.
     """
-    hemisphere = check_hemisphere(getattr(capture, "hemisphere", "upper"))
-    ok = np.asarray(lights.ok_mask, dtype=bool)
-    if not np.any(ok):
-        from ffls.errors import InputError
-
-        raise InputError("no light has status ok", getattr(lights, "path", None))
-    dirs = np.asarray(lights.directions, dtype=np.float64)[ok]
-    names = [n for n, o in zip(lights.image_names, ok) if o]
-    cap_names = list(capture.image_names)
-    pos = {n: i for i, n in enumerate(cap_names)}
-    missing = [n for n in names if n not in pos]
-    if missing:
-        from ffls.errors import InputError
-
-        raise InputError(f"lights name images not in the capture: {', '.join(missing[:3])}", getattr(lights, "path", None))
-    sel = [pos[n] for n in names]
-    basis = load_photos(capture, sel)  # only the used images, in the order of ``dirs``
-    cells = None if cells_res is None else bake_cells(dirs, hemisphere, res=cells_res, k=k, max_res=max_res)
-    wts = integrate_weights(lightmap, dirs, rotation=rotation, hemisphere=hemisphere, cells=cells)
-    image = relight_fast(wts.weights, basis) if fast else relight_reference(wts.weights, basis)
-    return image, wts
+    r = CpuRelighter.from_capture(capture, lights, precision="f32" if fast else "f64", cell_res=cells_res,
+                                  cell_k=k, cell_max_res=max_res)
+    r.set_lightmap(lightmap)
+    if rotation is not None:
+        r.set_rotation(rotation)
+    r.render()
+    return r.hdr, r.last_weights

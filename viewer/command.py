@@ -3,6 +3,11 @@
 A thin layer over :mod:`viewer.app`. With ``--frames N`` it runs N frames and exits (scripted
 mode, e.g. with ``--screenshot OUT.png``); with no display (or ``--headless``) the window lives
 on glfw's null platform with EGL, so scripted runs work on machines without X.
+
+The viewer registers this module as the ``view`` command under the entry-point group
+``ffls.commands`` (``pyproject.toml``); ``ffls`` finds it there and never imports ``viewer``.
+:func:`show_capture` is what ``ffls demo`` calls, through the same entry point, to open the
+window on its capture afterwards.
 """
 from __future__ import annotations
 
@@ -105,3 +110,33 @@ def run(args) -> int:
     finally:
         app.close()
     return 0
+
+
+def show_capture(capture_dir) -> str | None:
+    """Open the interactive window on ``capture_dir`` when a display exists (``ffls demo`` calls this).
+
+    Returns
+    -------
+    str or None
+        None after the window was opened and closed; otherwise one line saying why it was not
+        opened (no display, no OpenGL 4.3 window), for the caller to print.
+    """
+    from ffls.errors import GLUnavailable
+    from viewer.headless import has_display
+
+    if not has_display():
+        return f"no display; run `ffls view {capture_dir}` on a desktop"
+    try:
+        from viewer.app import ViewerApp, open_capture
+    except ImportError as e:  # imgui-bundle or glfw missing
+        return f"not opened ({e})"
+    try:
+        app = ViewerApp(*open_capture(capture_dir), headless=False)
+    except GLUnavailable as e:
+        return f"not opened ({e})"
+    try:
+        app.auto_expose()
+        app.run()
+    finally:
+        app.close()
+    return None

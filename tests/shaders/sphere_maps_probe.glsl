@@ -1,4 +1,4 @@
-// Test program for shaders/include/sphere_maps.glsl (tests/test_sphere_maps.py): evaluates
+// Test-only program for shaders/include/sphere_maps.glsl (tests/test_sphere_maps.py; not installed): evaluates
 // every map function on n directions and n uv points.
 #if defined COMPUTE_SHADER
 #include "sphere_maps.glsl"

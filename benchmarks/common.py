@@ -1,0 +1,105 @@
+"""What every benchmark shares: timing, the device, the copy-bandwidth reference, JSON and tables.
+
+The scripts run as ``python benchmarks/NAME.py`` (their folder is then on ``sys.path``) and
+import these helpers with ``from common import ...``. Timings are the median of several runs
+after a warm-up (docs/architecture.md, "Benchmarks"); GPU timings call ``ctx.finish()`` after
+every run so that they include the work, not only its submission.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ffls.errors import atomic_output
+
+__all__ = ["median_seconds", "median_ms", "numpy_copy_bandwidth", "gl_copy_bandwidth", "host_info", "device_info",
+           "device_line", "write_json", "print_error_table"]
+
+
+def median_seconds(fn, repeat: int = 5, warmup: int = 1, ctx=None) -> float:
+    """Median wall time of ``fn()`` in seconds over ``repeat`` runs after ``warmup`` runs.
+
+    Parameters
+    ----------
+    fn : callable
+    repeat, warmup : int
+    ctx : moderngl.Context, optional
+        ``ctx.finish()`` after every run (GPU work is timed to its end).
+    """
+    for _ in range(warmup):
+        fn()
+        if ctx is not None:
+            ctx.finish()
+    ts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        if ctx is not None:
+            ctx.finish()
+        ts.append(time.perf_counter() - t0)
+    return float(statistics.median(ts))
+
+
+def median_ms(fn, repeat: int = 5, warmup: int = 1, ctx=None) -> float:
+    """:func:`median_seconds` in milliseconds."""
+    return 1e3 * median_seconds(fn, repeat, warmup, ctx)
+
+
+def numpy_copy_bandwidth(nbytes: int, repeat: int = 5, dtype=np.float32) -> float:
+    """NumPy ``copyto`` bandwidth of ``nbytes`` buffers, bytes read + written per second."""
+    x = np.ones(nbytes // np.dtype(dtype).itemsize, dtype)
+    y = np.empty_like(x)
+    return 2 * x.nbytes / median_seconds(lambda: np.copyto(y, x), repeat)
+
+
+def gl_copy_bandwidth(ctx, nbytes: int, repeat: int = 5) -> float:
+    """GPU ``copy_buffer`` bandwidth of ``nbytes`` buffers, bytes read + written per second."""
+    a = ctx.buffer(reserve=nbytes)
+    b = ctx.buffer(reserve=nbytes)
+    try:
+        return 2 * nbytes / median_seconds(lambda: ctx.copy_buffer(b, a), repeat, ctx=ctx)
+    finally:
+        a.release()
+        b.release()
+
+
+def host_info() -> dict:
+    """``cpu_count`` and ``machine`` (the processor, else the architecture) of this computer."""
+    return {"cpu_count": os.cpu_count(), "machine": platform.processor() or platform.machine()}
+
+
+def device_info(ctx) -> dict:
+    """:func:`ffls.gpu.context.describe_context` of ``ctx`` (renderer, GL version, limits) plus :func:`host_info`."""
+    from ffls.gpu.context import describe_context
+
+    return {**describe_context(ctx), **host_info()}
+
+
+def device_line(info: dict) -> str:
+    """``device: <renderer> | GL <version> | <n> CPUs``, the first line every GPU benchmark prints."""
+    return f"device: {info['renderer']} | GL {info['version']} | {info['cpu_count']} CPUs"
+
+
+def write_json(path, doc, indent: int = 1) -> Path:
+    """Write a benchmark's results atomically (creating the folder) and say where."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(out) as t:
+        Path(t).write_text(json.dumps(doc, indent=indent))
+    print(f"wrote {out}")
+    return out
+
+
+def print_error_table(errors_deg, phis, thetas) -> None:
+    """Print per-light errors (degrees; None = rejected) as a Markdown table, phi rows x theta columns."""
+    print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")
+    print("|---" * (len(thetas) + 1) + "|")
+    e = np.array([np.nan if x is None else x for x in errors_deg]).reshape(len(phis), len(thetas))
+    for p_, row in zip(phis, e):
+        print(f"| {p_:.0f} | " + " | ".join("rej" if np.isnan(x) else f"{x:.2f}" for x in row) + " |")
