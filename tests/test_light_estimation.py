@@ -16,7 +16,7 @@ from ffls.errors import InputError
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
 from ffls.spheres.estimate import BounceCalibration, calibrate_bounce, estimate_photos
 from ffls.spheres.lambert import fit_lambert
-from ffls.spheres.photo import REASONS, estimate_photo
+from ffls.spheres.photo import REASONS, estimate_photo, near_fit_mask
 from ffls.spheres.samples import ground_bounce, pixel_validity, sphere_samples, sphere_values
 
 RES = 200
@@ -446,3 +446,25 @@ def test_near_fit_pixel_lattice_matches_all_pixels(samples):
     assert a.success and b.success and b.n_pixels < 0.3 * a.n_pixels
     assert np.degrees(angle_between(a.position - SCENE_CENTER, b.position - SCENE_CENTER)) < 0.05
     assert np.linalg.norm(a.position - S) < 0.1 and np.linalg.norm(b.position - S) < 0.1
+
+
+def test_near_fit_mask_keeps_the_terminator_band(samples):
+    """The joint near fit gets every valid, non-outlier pixel (it re-selects the terminator band
+    with the light's position), not only the per-sphere fit's pixels outside its own band; dark
+    specks (outliers) and invalid pixels stay out."""
+    l = light(50, 30)
+    s = samples[0]
+    y = s.values(render(direction=l))
+    valid = np.ones(len(s), bool)
+    valid[::7] = False  # "saturated" pixels
+    specks = np.zeros(len(s), bool)
+    specks[np.flatnonzero(s.normals @ l > 0.5)[::11]] = True
+    y[specks] *= 0.3
+    fit = fit_lambert(s.normals, y, valid, terminator=0.15)
+    assert fit.status == "ok" and np.degrees(angle_between(fit.direction, l)) < 0.5
+    mask = near_fit_mask(fit)
+    band = valid & (np.abs(s.normals @ fit.direction) < 0.15)
+    assert band.sum() > 20 and mask[band & fit.non_outliers].all() and mask[band].mean() > 0.9
+    assert (mask & ~fit.inliers).any()  # more than the per-sphere fit's own pixels
+    assert not mask[~valid].any()
+    assert (specks & valid).sum() > 5 and not mask[specks].any()

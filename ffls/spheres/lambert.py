@@ -98,7 +98,11 @@ class LambertFit:
     n_saturated : int
         Of those, saturated.
     inliers : (m,) bool
-        Pixels used in the final fit (lit or shadow side).
+        Pixels used in the final fit (lit or shadow side, outside the terminator band).
+    non_outliers : (m,) bool
+        Valid pixels that the final model does not reject as outliers, on any side of the
+        terminator (what a fit with another classification, such as the joint near-light fit,
+        may use).
     ground_ratio : float
         ``c / (a l_z)`` of the free-bounce fit (NaN when not available): this photo's estimate of
         the sphere's ground ratio ``rho_g``.
@@ -123,6 +127,7 @@ class LambertFit:
     n_invalid: int = 0
     n_saturated: int = 0
     inliers: np.ndarray | None = None
+    non_outliers: np.ndarray | None = None
     ground_ratio: float = float("nan")
     ground_ratio_sigma: float = float("inf")
     bounce_ratio: float | None = None
@@ -538,6 +543,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         model=best["model"], rms=float(np.sqrt(fit.rss / k)) / a, uncertainty_deg=unc,
         n_lit=int(lit.sum()), n_shadow=int(shadow.sum()),
         n_rejected=int((ok & ~inl).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
+        non_outliers=inl,
         ground_ratio=ratio_est, ground_ratio_sigma=ratio_sd,
         bounce_ratio=None if bounce_ratio is None else float(bounce_ratio),
     )

@@ -281,6 +281,11 @@ def _consistent_light(ok: list[int], fits, centers, sigma_floor_deg, scene_cente
 def near_fit_mask(fit: LambertFit) -> np.ndarray:
     """The pixels of a sphere that the joint near-light fit may use, from the sphere's own fit.
 
+    The pixels of the sphere's final fit and every other valid pixel that its model does not
+    reject as an outlier, on either side of the sphere's terminator band: the joint fit
+    re-selects the band itself with the light's position (a near light's direction changes over
+    the sphere), so the per-sphere band must not be cut out here.
+
     Parameters
     ----------
     fit : LambertFit
@@ -289,8 +294,9 @@ def near_fit_mask(fit: LambertFit) -> np.ndarray:
     -------
     (m,) bool
     """
-    # the per-sphere fit's final pixel set; the joint fit re-selects the terminator band itself
-    return fit.inliers | fit.inliers
+    if fit.non_outliers is None:
+        return fit.inliers
+    return fit.inliers | fit.non_outliers
 
 
 def _near_terms(fits: list[LambertFit]) -> list[tuple]:
