@@ -17,6 +17,7 @@ and writes ``benchmarks/results/bench_lights.json``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import tempfile
@@ -28,7 +29,8 @@ import numpy as np
 
 from ffls.io.capture import load_capture
 from ffls.conventions import angle_between, spherical_to_direction
-from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_values
+from ffls.spheres.estimate import capture_samples, estimate_photos
+from ffls.spheres.samples import sphere_values
 from ffls.synth.scene import write_synthetic_capture
 from ffls.radiance.photos import load_photo
 
@@ -77,22 +79,22 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     imgs = [load_photo(cap, i) for i in range(len(dirs))]
     t = time.perf_counter()
     vals = [sphere_values(im, samples) for im in imgs]
-    refs = []
-    res_, calib = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine,
-                                  refinements=refs)
+    result = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine)
     dt = (time.perf_counter() - t) / len(imgs)
-    est = np.array([r["direction"] for r in res_])
+    res_, refs = result.photos, result.refinements or []
+    calib = None if result.calibration is None else [dataclasses.asdict(c) for c in result.calibration]
+    est = np.array([r.direction for r in res_])
     err = np.degrees(angle_between(est, np.asarray(truth["directions"])))
-    ok = np.array([r["status"] == "ok" for r in res_])
+    ok = np.array([r.status == "ok" for r in res_])
     e = err[ok]
     return {
         "config": name, **{k: v for k, v in cfg.items()}, "resolution": res, "n": int(len(dirs)),
         "accepted": int(ok.sum()),
-        "rejected": {r["reason"]: sum(1 for x in res_ if x["reason"] == r["reason"]) for r in res_ if r["reason"]},
+        "rejected": {r.reason: sum(1 for x in res_ if x.reason == r.reason) for r in res_ if r.reason},
         "median_deg": float(np.median(e)) if e.size else None, "p90_deg": float(np.percentile(e, 90)) if e.size else None,
         "max_deg": float(e.max()) if e.size else None,
-        "median_uncertainty_deg": float(np.median([r["uncertainty_deg"] for r, o in zip(res_, ok) if o])) if e.size else None,
-        "models": {m: sum(1 for r in res_ if r["model"] == m) for m in ("distant", "near")},
+        "median_uncertainty_deg": float(np.median([r.uncertainty_deg for r, o in zip(res_, ok) if o])) if e.size else None,
+        "models": {m: sum(1 for r in res_ if r.model == m) for m in ("distant", "near")},
         "bounce": bounce, "spheres": spheres, "refine_centres": refine,
         "centre_shift_px": [r.shift_norm_px for r in refs], "calibration": calib, "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
         "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],

@@ -88,6 +88,20 @@ def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
 
 
+def tangent_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal basis ``(e1, e2)`` of the plane perpendicular to the unit vector ``u`` (3,).
+
+    ``e1 = normalize(u x a)`` with ``a = +X`` (or ``+Y`` where ``|u_x| >= 0.9``) and
+    ``e2 = u x e1``, so that ``(e1, e2, u)`` is right-handed. The same ``u`` always gives the same
+    basis: tangent-plane offsets (a sphere centre's shift in pixels, a direction's update) are
+    reproducible.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    a = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = normalize(np.cross(u, a))
+    return e1, np.cross(u, e1)
+
+
 # ----------------------------------------------------------------------------- lat-long
 def latlong_uv_to_direction(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Direction for lat-long texture coordinates u, v in [0, 1] (v = 0 is the top row, +Z)."""

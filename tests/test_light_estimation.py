@@ -13,9 +13,11 @@ import pytest
 
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize, spherical_to_direction
 from ffls.errors import InputError
-from ffls.spheres.estimate import (REASONS, calibrate_bounce, combine_distant, estimate_photo, estimate_photos,
-                                   fit_near_light, fit_ray_convergence, pixel_validity, sphere_values)
-from ffls.spheres.lambert import fit_lambert, ground_bounce, sphere_samples
+from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
+from ffls.spheres.estimate import BounceCalibration, calibrate_bounce, estimate_photos
+from ffls.spheres.lambert import fit_lambert
+from ffls.spheres.photo import REASONS, estimate_photo, near_fit_mask
+from ffls.spheres.samples import ground_bounce, pixel_validity, sphere_samples, sphere_values
 
 RES = 200
 R_SPH = 0.05
@@ -47,7 +49,6 @@ def render(direction=None, position=None, ambient=0.02, bounce=0.3, K=None, wfc=
     for c in centers:
         C = _cam(c, wfc)
         acc = np.zeros((RES, RES))
-        cov = np.zeros((RES, RES))
         for dy in off:
             for dx in off:
                 yy, xx = np.mgrid[0:RES, 0:RES].astype(float)
@@ -70,7 +71,6 @@ def render(direction=None, position=None, ambient=0.02, bounce=0.3, K=None, wfc=
                     ez = max(direction[2], 0)
                 val = 0.8 * (E + ambient + bounce * ez * ground_bounce(n.reshape(-1, 3)).reshape(n.shape[:2]))
                 acc += np.where(hit, val, 0)
-                cov += hit
         img += (acc / ss ** 2)[..., None]
     return img
 
@@ -192,15 +192,15 @@ def test_combine_distant_weights():
 def test_ray_convergence_parallel_rays_stable():
     d = np.tile(light(30, 10), (4, 1))
     conv = fit_ray_convergence(CENTERS, d, np.full(4, 0.5), SCENE_CENTER)
-    assert conv["rho"] < 1e-3 and np.all(np.isfinite(conv["direction"]))
-    assert np.degrees(angle_between(conv["direction"], d[0])) < 1e-3
+    assert conv.rho < 1e-3 and np.all(np.isfinite(conv.direction))
+    assert np.degrees(angle_between(conv.direction, d[0])) < 1e-3
 
 
 def test_ray_convergence_finds_point():
     S = SCENE_CENTER + 1.5 * light(40, 60)
     d = normalize(S - CENTERS)
     conv = fit_ray_convergence(CENTERS, d, np.full(4, 0.5), SCENE_CENTER)
-    np.testing.assert_allclose(conv["position"], S, atol=1e-4)
+    np.testing.assert_allclose(conv.position, S, atol=1e-4)
 
 
 # ----------------------------------------------------------------------------- photos
@@ -217,33 +217,36 @@ def grid_values(samples):
 def test_distant_accuracy_frontal_lights(samples, grid_values):
     """Two passes: the ground ratio from the photos that show the shadow side, imposed in all."""
     dirs, vals = grid_values
-    res, cal = estimate_photos(vals, samples, SCENE_CENTER)
+    est = estimate_photos(vals, samples, SCENE_CENTER)
+    res, cal = est.photos, est.calibration
     for c in cal:
-        assert c["n_photos"] >= 3 and abs(c["ratio"] - 0.3) < 0.01, cal
-    errs = np.array([np.degrees(angle_between(r["direction"], d)) if r["status"] == "ok" else 90.0
+        assert c.n_photos >= 3 and abs(c.ratio - 0.3) < 0.01, cal
+    errs = np.array([np.degrees(angle_between(r.direction, d)) if r.status == "ok" else 90.0
                      for r, d in zip(res, dirs)])
     # every camera-side light accepted; of the others at most one (thin lit crescents, see below)
     nf = len(GRID_FRONTAL)
     assert errs[-nf:].max() < 0.3 and np.sum(errs[:-nf] > 0.3) <= 1, errs
-    assert all(sp["bounce_ratio"] is not None for r in res for sp in r["spheres"] if sp["status"] == "ok")
+    assert all(sp.fit.bounce_ratio is not None for r in res for sp in r.spheres if sp.status == "ok")
 
 
 def test_calibration_falls_back_with_few_photos(samples, grid_values):
     """Two photos cannot calibrate (min_photos = 3): the bounce stays free."""
     dirs, vals = grid_values
-    res, cal = estimate_photos(vals[-2:], samples, SCENE_CENTER)
-    assert all(c["ratio"] is None for c in cal), cal
-    assert all(sp["bounce_ratio"] is None for r in res for sp in r["spheres"])
-    assert any(sp["status"] == "ok" for r in res for sp in r["spheres"])
-    assert calibrate_bounce([], 4) == [{"ratio": None, "spread": None, "n_photos": 0}] * 4
+    est = estimate_photos(vals[-2:], samples, SCENE_CENTER)
+    res, cal = est.photos, est.calibration
+    assert all(c.ratio is None for c in cal), cal
+    assert all(sp.fit.bounce_ratio is None for r in res for sp in r.spheres)
+    assert any(sp.status == "ok" for r in res for sp in r.spheres)
+    assert calibrate_bounce([], 4) == [BounceCalibration(ratio=None, spread=None, n_photos=0)] * 4
 
 
 def test_black_ground_calibrates_to_zero(samples):
     dirs = [light(th, ph) for th, ph in GRID]
     vals = [sphere_values(render(direction=d, bounce=0.0), samples) for d in dirs]
-    res, cal = estimate_photos(vals, samples, SCENE_CENTER)
-    assert all(c["ratio"] is not None and c["ratio"] < 0.01 for c in cal), cal
-    errs = [np.degrees(angle_between(r["direction"], d)) for r, d in zip(res, dirs) if r["status"] == "ok"]
+    est = estimate_photos(vals, samples, SCENE_CENTER)
+    res, cal = est.photos, est.calibration
+    assert all(c.ratio is not None and c.ratio < 0.01 for c in cal), cal
+    errs = [np.degrees(angle_between(r.direction, d)) for r, d in zip(res, dirs) if r.status == "ok"]
     assert len(errs) >= 7 and max(errs) < 0.3, errs
 
 
@@ -267,9 +270,9 @@ def test_distant_accuracy_reduced_grid(samples):
     for th, ph in GRID:
         l = light(th, ph)
         r = estimate_photo(render(direction=l), samples, SCENE_CENTER)
-        if r["status"] == "ok":
-            assert r["model"] == "distant"
-            errs.append(np.degrees(angle_between(r["direction"], l)))
+        if r.status == "ok":
+            assert r.model == "distant"
+            errs.append(np.degrees(angle_between(r.direction, l)))
     assert len(errs) >= 7
     assert max(errs) < 0.6 and np.median(errs) < 0.3, errs
 
@@ -278,25 +281,25 @@ def test_distant_accuracy_reduced_grid(samples):
 def test_near_light_joint_fit(samples, th, ph):
     S = SCENE_CENTER + 2.0 * light(th, ph)
     r = estimate_photo(render(position=S), samples, SCENE_CENTER)
-    assert r["status"] == "ok" and r["model"] == "near"
-    err = np.degrees(angle_between(r["direction"], S - SCENE_CENTER))
+    assert r.status == "ok" and r.model == "near"
+    err = np.degrees(angle_between(r.direction, S - SCENE_CENTER))
     assert err < 1.0
     # the per-sphere distant fits alone are worse than the joint near fit
-    assert np.linalg.norm(r["position"] - S) < 0.1
+    assert np.linalg.norm(r.position - S) < 0.1
 
 
 def test_forced_distant_model(samples):
     S = SCENE_CENTER + 30.0 * light(30, 0)
     r = estimate_photo(render(position=S), samples, SCENE_CENTER, model="distant")
-    assert r["status"] == "ok" and r["model"] == "distant"
-    assert np.degrees(angle_between(r["direction"], S - SCENE_CENTER)) < 0.6
+    assert r.status == "ok" and r.model == "distant"
+    assert np.degrees(angle_between(r.direction, S - SCENE_CENTER)) < 0.6
 
 
 def test_single_sphere(samples):
     l = light(35, 70)
     r = estimate_photo(render(direction=l), samples[:1], SCENE_CENTER)
-    assert r["status"] == "ok" and r["used_spheres"] == [0]
-    assert np.degrees(angle_between(r["direction"], l)) < 0.6
+    assert r.status == "ok" and r.used_spheres == [0]
+    assert np.degrees(angle_between(r.direction, l)) < 0.6
 
 
 def test_near_orthographic_camera():
@@ -307,21 +310,21 @@ def test_near_orthographic_camera():
     l = light(45, -30)
     smp = samples_for(K=K, wfc=wfc)
     r = estimate_photo(render(direction=l, K=K, wfc=wfc), smp, SCENE_CENTER)
-    assert r["status"] == "ok"
-    assert np.degrees(angle_between(r["direction"], l)) < 0.6
+    assert r.status == "ok"
+    assert np.degrees(angle_between(r.direction, l)) < 0.6
 
 
 # ----------------------------------------------------------------------------- rejection
 def test_all_black_photo_too_dark(samples):
     r = estimate_photo(np.zeros((RES, RES, 3), np.float32), samples, SCENE_CENTER)
-    assert r["status"] == "rejected" and r["reason"] == "too_dark"
-    assert np.all(np.isfinite(r["direction"]))
+    assert r.status == "rejected" and r.reason == "too_dark"
+    assert np.all(np.isfinite(r.direction))
 
 
 def test_saturated_photo(samples):
     img = np.minimum(render(direction=light(20, 0), intensity=8.0), 1.0)
     r = estimate_photo(img, samples, SCENE_CENTER)
-    assert r["status"] == "rejected" and r["reason"] == "saturated"
+    assert r.status == "rejected" and r.reason == "saturated"
 
 
 def test_one_shadowed_sphere_is_dropped(samples):
@@ -330,9 +333,9 @@ def test_one_shadowed_sphere_is_dropped(samples):
     s = samples[2]
     img[s.rows, s.cols] *= 0.05  # the person's shadow: only a little light left
     r = estimate_photo(img, samples, SCENE_CENTER)
-    assert r["status"] == "ok" and 2 not in r["used_spheres"]
-    assert r["spheres"][2]["status"] in ("shadowed", "outlier", "too_dark")
-    assert np.degrees(angle_between(r["direction"], l)) < 0.6
+    assert r.status == "ok" and 2 not in r.used_spheres
+    assert r.spheres[2].status in ("shadowed", "outlier", "too_dark")
+    assert np.degrees(angle_between(r.direction, l)) < 0.6
 
 
 def test_partial_cast_shadow_rejected_as_outliers(samples):
@@ -342,8 +345,8 @@ def test_partial_cast_shadow_rejected_as_outliers(samples):
     cut = s.normals[:, 0] > 0.3  # a shadow edge across the sphere
     img[s.rows[cut], s.cols[cut]] *= 0.1
     r = estimate_photo(img, samples, SCENE_CENTER)
-    assert r["status"] == "ok"
-    assert np.degrees(angle_between(r["direction"], l)) < 0.8
+    assert r.status == "ok"
+    assert np.degrees(angle_between(r.direction, l)) < 0.8
 
 
 def test_all_spheres_shadowed(samples):
@@ -351,7 +354,7 @@ def test_all_spheres_shadowed(samples):
     for s in samples[1:]:
         img[s.rows, s.cols] = 0.0
     r = estimate_photo(img, samples, SCENE_CENTER)
-    assert r["status"] == "rejected" and r["reason"] == "too_few_spheres"
+    assert r.status == "rejected" and r.reason == "too_few_spheres"
 
 
 def test_spheres_disagree(samples):
@@ -361,7 +364,7 @@ def test_spheres_disagree(samples):
     for s in samples[2:]:
         img[s.rows, s.cols] = b[s.rows, s.cols]
     r = estimate_photo(img, samples, SCENE_CENTER, model="distant")
-    assert r["status"] == "rejected" and r["reason"] == "spheres_disagree"
+    assert r.status == "rejected" and r.reason == "spheres_disagree"
 
 
 def test_reasons_documented():
@@ -419,15 +422,15 @@ def test_near_joint_fit_when_calibration_falls_back(samples):
     joint fit the first pass defers, ``joint=False``) still get the joint fit."""
     Ss = [SCENE_CENTER + 2.0 * light(th, ph) for th, ph in [(20, -60), (50, 120)]]
     vals = [sphere_values(render(position=S), samples) for S in Ss]
-    res, calib = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False)
-    assert all(c["ratio"] is None for c in calib)
-    for r, v, S in zip(res, vals, Ss):
-        assert r["status"] == "ok" and r["model"] == "near" and not r.get("joint_pending")
+    est = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False)
+    assert all(c.ratio is None for c in est.calibration)
+    for r, v, S in zip(est.photos, vals, Ss):
+        assert r.status == "ok" and r.model == "near" and not r.joint_pending
         full = estimate_photo(None, samples, SCENE_CENTER, values=v)
-        assert np.allclose(r["position"], full["position"], atol=1e-6)
-        assert np.linalg.norm(r["position"] - S) < 0.1
+        assert np.allclose(r.position, full.position, atol=1e-6)
+        assert np.linalg.norm(r.position - S) < 0.1
     deferred = estimate_photo(None, samples, SCENE_CENTER, values=vals[0], joint=False)
-    assert deferred["joint_pending"] and deferred["model"] == "near"
+    assert deferred.joint_pending and deferred.model == "near"
 
 
 def test_near_fit_pixel_lattice_matches_all_pixels(samples):
@@ -438,8 +441,30 @@ def test_near_fit_pixel_lattice_matches_all_pixels(samples):
     r = estimate_photo(None, samples, SCENE_CENTER, values=v)
     fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples, v)]
     kw = {"terms": None, "terminator": 0.15}
-    a = fit_near_light(samples, [x[0] for x in v], [f.inliers for f in fits], r["position"], stride=1, **kw)
-    b = fit_near_light(samples, [x[0] for x in v], [f.inliers for f in fits], r["position"], **kw)
-    assert a["success"] and b["success"] and b["n_pixels"] < 0.3 * a["n_pixels"]
-    assert np.degrees(angle_between(a["position"] - SCENE_CENTER, b["position"] - SCENE_CENTER)) < 0.05
-    assert np.linalg.norm(a["position"] - S) < 0.1 and np.linalg.norm(b["position"] - S) < 0.1
+    a = fit_near_light(samples, [x[0] for x in v], [f.inliers for f in fits], r.position, stride=1, **kw)
+    b = fit_near_light(samples, [x[0] for x in v], [f.inliers for f in fits], r.position, **kw)
+    assert a.success and b.success and b.n_pixels < 0.3 * a.n_pixels
+    assert np.degrees(angle_between(a.position - SCENE_CENTER, b.position - SCENE_CENTER)) < 0.05
+    assert np.linalg.norm(a.position - S) < 0.1 and np.linalg.norm(b.position - S) < 0.1
+
+
+def test_near_fit_mask_keeps_the_terminator_band(samples):
+    """The joint near fit gets every valid, non-outlier pixel (it re-selects the terminator band
+    with the light's position), not only the per-sphere fit's pixels outside its own band; dark
+    specks (outliers) and invalid pixels stay out."""
+    l = light(50, 30)
+    s = samples[0]
+    y = s.values(render(direction=l))
+    valid = np.ones(len(s), bool)
+    valid[::7] = False  # "saturated" pixels
+    specks = np.zeros(len(s), bool)
+    specks[np.flatnonzero(s.normals @ l > 0.5)[::11]] = True
+    y[specks] *= 0.3
+    fit = fit_lambert(s.normals, y, valid, terminator=0.15)
+    assert fit.status == "ok" and np.degrees(angle_between(fit.direction, l)) < 0.5
+    mask = near_fit_mask(fit)
+    band = valid & (np.abs(s.normals @ fit.direction) < 0.15)
+    assert band.sum() > 20 and mask[band & fit.non_outliers].all() and mask[band].mean() > 0.9
+    assert (mask & ~fit.inliers).any()  # more than the per-sphere fit's own pixels
+    assert not mask[~valid].any()
+    assert (specks & valid).sum() > 5 and not mask[specks].any()

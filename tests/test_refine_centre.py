@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from ffls.conventions import angle_between, normalize
-from ffls.spheres.estimate import pixel_validity
-from ffls.spheres.lambert import fit_lambert, sphere_samples
+from ffls.spheres.lambert import fit_lambert
+from ffls.spheres.samples import pixel_validity, sphere_samples
 from ffls.spheres.refine import recentre_samples, refine_sphere_centre
 
 RES, F, R = 120, 400.0, 0.05

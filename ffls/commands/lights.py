@@ -43,21 +43,6 @@ def summary(lights) -> str:
     return "\n".join(lines)
 
 
-def _disc_to_direction(x, y, lower=False):
-    """Equal-area disc -> hemisphere (the concentric map's disc step): r^2 = 1 - |z|."""
-    r2 = x * x + y * y
-    s = np.sqrt(np.maximum(0.0, 2.0 - r2))
-    z = 1.0 - r2
-    return np.stack([x * s, y * s, -z if lower else z], axis=-1)
-
-
-def _direction_to_disc(d):
-    """Inverse of :func:`_disc_to_direction` for unit directions (..., 3): disc (x, y)."""
-    r2 = 1.0 - np.abs(d[..., 2])
-    s = np.sqrt(np.maximum(2.0 - r2, 1e-300))
-    return d[..., 0] / s, d[..., 1] / s
-
-
 def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path:
     """PNG of the light directions with their angular Voronoi cells on the hemisphere disc.
 
@@ -73,6 +58,7 @@ def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path
     import matplotlib.pyplot as plt
 
     from ffls.errors import atomic_output
+    from ffls.lightmaps.sphere_maps import disc_to_hemisphere, hemisphere_to_disc
     from ffls.weights.voronoi import assign_cells
 
     idx, d = lights.accepted()
@@ -87,7 +73,8 @@ def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path
     for ax, lower in zip(axes[0], halves):
         if len(d):
             lab = np.full(x.shape, -1, dtype=np.int64)
-            lab[inside] = assign_cells(_disc_to_direction(x[inside], y[inside], lower), d)
+            pixel_dirs = disc_to_hemisphere(np.hypot(x[inside], y[inside]), np.arctan2(y[inside], x[inside]), lower)
+            lab[inside] = assign_cells(pixel_dirs, d)
             border = np.zeros(lab.shape, dtype=bool)
             border[:, :-1] |= lab[:, :-1] != lab[:, 1:]
             border[:-1, :] |= lab[:-1, :] != lab[1:, :]
@@ -99,8 +86,8 @@ def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path
         for pts, style in ((d, "k."), (rejected, "rx")):
             sel = pts[(pts[:, 2] < 0) == lower] if len(pts) else pts
             if len(sel):
-                px, py = _direction_to_disc(sel)
-                ax.plot(px, py, style, ms=4)
+                r, phi = hemisphere_to_disc(sel)
+                ax.plot(r * np.cos(phi), r * np.sin(phi), style, ms=4)
         ang = np.linspace(0, 2 * np.pi, 200)
         for theta in (30, 60, 90):
             r = np.sqrt(1.0 - np.cos(np.radians(theta)))

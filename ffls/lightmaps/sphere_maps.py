@@ -50,7 +50,7 @@ from ffls import conventions
 
 __all__ = [
     "SphereMap", "LatLongMap", "ConcentricMap", "OctahedralMap", "AngularMap", "MirrorBallMap",
-    "CubeMap", "MAPS", "get_map", "DEFAULT_PROBE_FRAME",
+    "CubeMap", "MAPS", "get_map", "DEFAULT_PROBE_FRAME", "disc_to_hemisphere", "hemisphere_to_disc",
 ]
 
 #: Columns: image right, image up and the image centre of the angular and mirror-ball maps, in
@@ -271,6 +271,53 @@ def _concentric_disc_to_square(r: np.ndarray, phi: np.ndarray) -> tuple[np.ndarr
     return a, b
 
 
+def disc_to_hemisphere(r: np.ndarray, phi: np.ndarray, lower: bool = False) -> np.ndarray:
+    """Lambert's equal-area lift of the unit disc onto a hemisphere (Clarberg 2008).
+
+    The disc point ``r (cos phi, sin phi)`` goes to ``(x sqrt(2 - r^2), y sqrt(2 - r^2), 1 - r^2)``:
+    area on the disc is proportional to solid angle (``dOmega = 2 dA``), the centre is the pole and
+    the rim the horizon. The second step of :class:`ConcentricMap`.
+
+    Parameters
+    ----------
+    r, phi : (...) float
+        Polar disc coordinates, ``|r| <= 1``.
+    lower : bool
+        Lift onto the lower hemisphere (``z = r^2 - 1``, seen from above) instead of the upper.
+
+    Returns
+    -------
+    (..., 3) float64
+        Unit directions.
+    """
+    r = np.asarray(r, dtype=np.float64)
+    phi = np.asarray(phi, dtype=np.float64)
+    r2 = r * r  # exactly 1 on the border: z = 0, never below
+    s = r * np.sqrt(np.maximum(2.0 - r2, 0.0))
+    z = 1.0 - r2
+    return np.stack([s * np.cos(phi), s * np.sin(phi), -z if lower else z], axis=-1)
+
+
+def hemisphere_to_disc(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`disc_to_hemisphere` (either hemisphere, by ``|z|``).
+
+    Parameters
+    ----------
+    d : (..., 3) float
+        Unit directions.
+
+    Returns
+    -------
+    r, phi : (...) float64
+        Polar disc coordinates, ``r = sqrt(1 - |z|)`` computed without cancellation.
+    """
+    d = np.asarray(d, dtype=np.float64)
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.hypot(x, y) / np.sqrt(1.0 + np.abs(z))  # sqrt(1 - |z|), without cancellation
+    return r, np.arctan2(y, x)
+
+
 class ConcentricMap(SphereMap):
     """Equal-area map of the upper hemisphere on a square, shape (res, res).
 
@@ -291,19 +338,16 @@ class ConcentricMap(SphereMap):
         a = 2.0 * uv[..., 0] - 1.0
         b = 1.0 - 2.0 * uv[..., 1]
         r, phi = _concentric_square_to_disc(a, b)
-        r2 = r * r  # exactly 1 on the border: z = 0, never below
-        s = r * np.sqrt(np.maximum(2.0 - r2, 0.0))
-        d = np.stack([s * np.cos(phi), s * np.sin(phi), 1.0 - r2], axis=-1)
+        d = disc_to_hemisphere(r, phi)
         out = (np.maximum(np.abs(a), np.abs(b)) > 1.0) | ~np.isfinite(a + b)
         return np.where(out[..., None], np.nan, d)
 
     def direction_to_uv(self, d) -> np.ndarray:
         d = _unit(_as_dirs(d))
-        x, y, z = d[..., 0], d[..., 1], d[..., 2]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            r = np.hypot(x, y) / np.sqrt(1.0 + z)  # sqrt(1 - z), without cancellation
+        z = d[..., 2]
+        r, phi = hemisphere_to_disc(d)
         r = np.where(z >= 0.0, r, 0.0)  # z < 0 (or NaN): placeholder, NaN below
-        a, b = _concentric_disc_to_square(r, np.arctan2(y, x))
+        a, b = _concentric_disc_to_square(r, phi)
         uv = np.stack([0.5 * (a + 1.0), 0.5 * (1.0 - b)], axis=-1)
         bad = ~(z >= 0.0)
         return np.where(bad[..., None], np.nan, uv)

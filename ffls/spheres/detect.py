@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_basis
 from ffls.camera.projection import camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo
@@ -183,9 +183,7 @@ def _cone(C, R):
 def silhouette_px(K, dist, C, R, n: int = 90) -> np.ndarray:
     """Pixels (n, 2) of the sphere's outline: the tangent circle projected with distortion."""
     c, alpha = _cone(C, R)
-    a = np.cross(c, [0.0, 1.0, 0.0] if abs(c[1]) < 0.9 else [1.0, 0.0, 0.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(c, a)
+    a, b = tangent_basis(c)
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)[:, None]
     rays = np.cos(alpha) * c + np.sin(alpha) * (np.cos(t) * a + np.sin(t) * b)
     return project_points(rays, K, dist)
@@ -226,7 +224,7 @@ def sphere_mask(shape, K, dist, C, R, margin_px: float = 0.0) -> np.ndarray:
         return mask
     yy, xx = np.mgrid[y0:y1, x0:x1]
     rays = pixel_rays(np.stack([xx.ravel(), yy.ravel()], axis=1), K, dist)
-    ang = np.arctan2(np.linalg.norm(np.cross(rays, c), axis=1), rays @ c)
+    ang = angle_between(rays, c)
     mask[y0:y1, x0:x1] = (ang <= alpha - margin_px / f).reshape(yy.shape)
     return mask
 
@@ -426,8 +424,7 @@ def _cone_residuals(params, s, f):
     x, y, a = params / f
     c = np.array([x, y, 1.0])
     c /= np.linalg.norm(c)
-    ang = np.arctan2(np.linalg.norm(np.cross(s, c), axis=1), s @ c)
-    return f * (ang - a)
+    return f * (angle_between(s, c) - a)
 
 
 def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, trim: float = 3.0):
@@ -539,7 +536,6 @@ def _parse_hint(h, K, dist, world_from_camera, R):
         Cc = T[:3, :3] @ Cw + T[:3, 3]
         if Cc[2] <= R:
             raise ValueError(f"hinted centre {Cw.tolist()} is not in front of the camera")
-        outline = silhouette_px(K, dist, Cc, R)
         cpx = project_points(Cc[None], K, dist)[0]
         return cpx, None, Cc  # radius from the image: a wrong sphere_radius must not steer the search
     if "center_cam" in h:
@@ -609,6 +605,13 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
                  lit_limb: float | None = 0.65) -> list[SphereFit]:
     """Find the reference spheres and their centres.
 
+    The stages of the module docstring, one function each: the max image
+    (:func:`_max_luminance`), its edges (:func:`_edge_map`), candidate circles
+    (:func:`_hinted_candidates` or :func:`_hough_circle_candidates`), a cone fit per candidate
+    (:func:`_fit_candidates`), the choice of the spheres (:func:`_choose_spheres`, or
+    :func:`_check_hinted_fits` with hints), the lit-limb refit (:func:`_refine_on_lit_limb`) and
+    the checks (:func:`_check_inside_image`, :func:`_check_radius`).
+
     Parameters
     ----------
     images : (H, W, 3) float, (N, H, W, 3) float, or an iterable of (H, W, 3) float
@@ -660,73 +663,133 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
     R = float(sphere_radius)
     if not (np.isfinite(R) and R > 0):
         raise InputError(f"sphere_radius must be a positive number, got {sphere_radius!r}", source)
-    f = float(np.sqrt(K[0, 0] * K[1, 1]))
-
     if overrides:
-        fits = []
-        for o in overrides:
-            if "center_cam" in o:
-                C = np.asarray(o["center_cam"], dtype=np.float64)
-            else:
-                Cw = np.asarray(o.get("center", o.get("center_world")), dtype=np.float64)
-                T = np.linalg.inv(wfc)
-                C = T[:3, :3] @ Cw + T[:3, 3]
-            if C[2] <= R or np.linalg.norm(C) <= R:
-                raise InputError(f"sphere override {o} is not in front of the camera", source)
-            fits.append(_make_fit(C, R, K, dist, wfc, "override"))
-        return fits
+        return _spheres_from_overrides(overrides, K, dist, wfc, R, source)
+    f = float(np.sqrt(K[0, 0] * K[1, 1]))
+    mx, L = _max_luminance(images, source)
+    edges = _edge_map(mx, L, source)
+    if hints:
+        hint_info = [_parse_hint_or_fail(h, K, dist, wfc, R, source) for h in hints]
+        cands = _hinted_candidates(hint_info, edges, L.shape, source)
+        search_tol = 0.35
+    else:
+        hint_info = []
+        cands = _hough_circle_candidates(edges, L, source)
+        search_tol = 0.3
+    fits, failures = _fit_candidates(cands, edges, K, dist, wfc, R, f, search_tol, "hint" if hints else "auto",
+                                     np.random.default_rng(seed))
+    if hints:
+        _check_hinted_fits(fits, failures, max_residual_px, min_coverage, source)
+    else:
+        fits = _choose_spheres(fits, mx, L, n_spheres, max_residual_px, min_coverage, len(cands), source)
+    if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
+        fits = [_refine_on_lit_limb(ft, L, K, dist, R, f, wfc, lit_limb) for ft in fits]
+    _check_inside_image(fits, K, dist, R, L.shape, source)
+    _check_radius(fits, hint_info, wfc, R, source, scene_center)
+    return fits
 
+
+# ----------------------------------------------------------------------------- stages of find_spheres
+def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFit]:
+    """Overridden centres (``center_cam``, or a world ``center``) as they are; detection is skipped."""
+    fits = []
+    for o in overrides:
+        if "center_cam" in o:
+            C = np.asarray(o["center_cam"], dtype=np.float64)
+        else:
+            Cw = np.asarray(o.get("center", o.get("center_world")), dtype=np.float64)
+            T = np.linalg.inv(wfc)
+            C = T[:3, :3] @ Cw + T[:3, 3]
+        if C[2] <= R or np.linalg.norm(C) <= R:
+            raise InputError(f"sphere override {o} is not in front of the camera", source)
+        fits.append(_make_fit(C, R, K, dist, wfc, "override"))
+    return fits
+
+
+def _max_luminance(images, source) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 1: the max image (:func:`max_image`) and its luminance; all-black sequences refused."""
     try:
         mx = max_image(images)
     except ValueError as e:
         raise InputError(str(e), source) from None
     L = _luminance(mx)
-    H, W = L.shape
     peak = float(L.max()) if L.size else 0.0
     if not np.isfinite(peak) or peak <= 0 or float(np.percentile(L, 99.9)) <= 1e-6 * max(peak, 1e-30):
         raise InputError("all images are black (no light on the spheres in any photo)", source)
+    return mx, L
+
+
+@dataclasses.dataclass
+class _EdgeMap:
+    """Stage 2's output: subpixel edge points, their gradients, the log image and the edge distance map."""
+
+    points: np.ndarray  # (n, 2) x, y
+    grads: np.ndarray  # (n, 2) unit, toward brighter
+    log8: np.ndarray  # (H, W) uint8, :func:`_log8`
+    scale: float  # 8-bit levels per natural-log unit of radiance
+    distance: np.ndarray  # (H, W) float32: distance to the nearest edge pixel
+
+
+def _edge_map(mx, L, source) -> _EdgeMap:
+    """Stage 2: edges of the max image (:func:`edge_points`) and the distance to them."""
+    H, W = L.shape
     pts, grads = edge_points(mx)
     if len(pts) < 10:
         raise InputError("no edges in the images: no sphere visible", source)
     g8f, scale = _log8(L)
-    g8 = g8f.astype(np.uint8)
     edge_img = np.ones((H, W), np.uint8)
     edge_img[np.clip(np.rint(pts[:, 1]).astype(int), 0, H - 1), np.clip(np.rint(pts[:, 0]).astype(int), 0, W - 1)] = 0
-    dt = cv2.distanceTransform(edge_img, cv2.DIST_L2, 3)
+    return _EdgeMap(points=pts, grads=grads, log8=g8f.astype(np.uint8), scale=scale,
+                    distance=cv2.distanceTransform(edge_img, cv2.DIST_L2, 3))
+
+
+def _parse_hint_or_fail(h, K, dist, wfc, R, source):
+    try:
+        return _parse_hint(h, K, dist, wfc, R)
+    except (ValueError, TypeError) as e:
+        raise InputError(f"bad sphere hint: {e}", source) from None
+
+
+def _hinted_candidates(hint_info, edges: _EdgeMap, shape, source) -> list[tuple[float, float, float]]:
+    """Stage 3 with hints: one circle (x, y, r) per hint; a radius the hint lacks comes from the edges."""
+    H, W = shape
+    cands = []
+    for cpx, rpx, _ in hint_info:
+        if rpx is None:  # centre only: the radius comes from the edges around it
+            rpx = _radius_from_edges(edges.points, edges.grads, cpx, min(H, W) / 2)
+            if rpx is None:
+                raise InputError(f"no sphere found near the hinted centre ({cpx[0]:.0f}, {cpx[1]:.0f}) px", source)
+        cands.append((float(cpx[0]), float(cpx[1]), float(rpx)))
+    return cands
+
+
+def _hough_circle_candidates(edges: _EdgeMap, L, source, max_candidates: int = 40) -> list[tuple[float, float, float]]:
+    """Stage 3 without hints: Hough circles scored by edge support and brightness, near-duplicates dropped."""
+    H, W = L.shape
     bg = float(np.median(L))
+    hc = _hough_candidates(edges.log8, 3, min(H, W) / 2, edges.scale)
+    scored = [(float(_score_circle(x, y, r, edges.distance, L, bg)), x, y, r) for x, y, r in hc]
+    scored = [s for s in scored if s[0] >= 0.35]
+    scored.sort(key=lambda s: -s[0])
+    cands = []  # drop near-duplicates only; overlapping circles are resolved after fitting
+    for sc, x, y, r in scored:
+        if all(np.hypot(x - cx, y - cy) > 0.2 * r or abs(r - cr) > 0.2 * r for cx, cy, cr in cands):
+            cands.append((x, y, r))
+    cands = cands[:max_candidates]
+    if not cands:
+        raise InputError("no sphere found in the images (no round bright outline)", source)
+    return cands
 
-    # ------------------------------------------------------------ candidate circles
-    hint_info = []
-    if hints:
-        for h in hints:
-            try:
-                cpx, rpx, Cc = _parse_hint(h, K, dist, wfc, R)
-            except (ValueError, TypeError) as e:
-                raise InputError(f"bad sphere hint: {e}", source) from None
-            hint_info.append((cpx, rpx, Cc))
-        cands = []
-        for cpx, rpx, _ in hint_info:
-            if rpx is None:  # centre only: the radius comes from the edges around it
-                rpx = _radius_from_edges(pts, grads, cpx, min(H, W) / 2)
-                if rpx is None:
-                    raise InputError(f"no sphere found near the hinted centre ({cpx[0]:.0f}, {cpx[1]:.0f}) px", source)
-            cands.append((float(cpx[0]), float(cpx[1]), float(rpx)))
-        search_tol = 0.35
-    else:
-        hc = _hough_candidates(g8, 3, min(H, W) / 2, scale)
-        scored = [(float(_score_circle(x, y, r, dt, L, bg)), x, y, r) for x, y, r in hc]
-        scored = [s for s in scored if s[0] >= 0.35]
-        scored.sort(key=lambda s: -s[0])
-        cands = []  # drop near-duplicates only; overlapping circles are resolved after fitting
-        for sc, x, y, r in scored:
-            if all(np.hypot(x - cx, y - cy) > 0.2 * r or abs(r - cr) > 0.2 * r for cx, cy, cr in cands):
-                cands.append((x, y, r))
-        cands = cands[:40]
-        if not cands:
-            raise InputError("no sphere found in the images (no round bright outline)", source)
-        search_tol = 0.3
 
-    rng = np.random.default_rng(seed)
+def _fit_candidates(cands, edges: _EdgeMap, K, dist, wfc, R, f, search_tol, label, rng):
+    """Stage 4: per candidate circle, the tangent cone fitted to its silhouette edge points.
+
+    Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
+    majority polarity; RANSAC circle start; :func:`fit_sphere_center`. Returns the fits and the
+    failures ``(k, x, y, r, why)``.
+    """
+    pts, grads = edges.points, edges.grads
+    K_und = np.array([[f, 0, K[0, 2]], [0, f, K[1, 2]], [0, 0, 1]])  # undistorted, square pixels
     fits, failures = [], []
     for k, (cx, cy, r) in enumerate(cands):
         d = np.hypot(pts[:, 0] - cx, pts[:, 1] - cy)
@@ -741,14 +804,14 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
         if len(P) < 8:
             failures.append((k, cx, cy, r, f"only {len(P)} edge points"))
             continue
-        und = project_points(pixel_rays(P, K, dist), np.array([[f, 0, K[0, 2]], [0, f, K[1, 2]], [0, 0, 1]]), None)
+        und = project_points(pixel_rays(P, K, dist), K_und, None)
         circ = _ransac_circle(und, r, rng)
         if circ is None:
             failures.append((k, cx, cy, r, "no circle through the edge points"))
             continue
-        c0 = pixel_rays(circ[0][None], np.array([[f, 0, K[0, 2]], [0, f, K[1, 2]], [0, 0, 1]]))[0]
-        edge_ray = pixel_rays((circ[0] + [circ[1], 0])[None], np.array([[f, 0, K[0, 2]], [0, f, K[1, 2]], [0, 0, 1]]))[0]
-        a0 = float(np.arctan2(np.linalg.norm(np.cross(c0, edge_ray)), c0 @ edge_ray))
+        c0 = pixel_rays(circ[0][None], K_und)[0]
+        edge_ray = pixel_rays((circ[0] + [circ[1], 0])[None], K_und)[0]
+        a0 = float(angle_between(c0, edge_ray))
         s = pixel_rays(P, K, dist)
         try:
             C, inl, res = fit_sphere_center(s, R, f, c0, a0)
@@ -756,63 +819,70 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
             failures.append((k, cx, cy, r, str(e)))
             continue
         rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-        fit = _make_fit(C, R, K, dist, wfc, "hint" if hints else "auto", edge_px=P[inl], residual=rms,
-                        n_edge=len(P), n_in=int(inl.sum()), coverage=_coverage(P[inl], project_points(C[None], K, dist)[0]))
-        fits.append(fit)
+        fits.append(_make_fit(C, R, K, dist, wfc, label, edge_px=P[inl], residual=rms, n_edge=len(P),
+                              n_in=int(inl.sum()), coverage=_coverage(P[inl], project_points(C[None], K, dist)[0])))
+    return fits, failures
 
-    if not hints:
-        good = [ft for ft in fits if ft.residual_px <= max_residual_px and ft.coverage >= min_coverage]
-        # White diffuse spheres are the brightest, most neutral and most exactly round things in
-        # the max image, and nothing hides their outline: rank by outline support x coverage x
-        # brightness x neutrality x fit quality,
-        # then keep non-overlapping fits.
-        yy, xx = np.mgrid[0:H, 0:W]
-        rgb = mx if mx.ndim == 3 and mx.shape[2] >= 3 else None
-        bright, neutral = [], []
-        for ft in good:
-            inside = (xx - ft.center_px[0]) ** 2 + (yy - ft.center_px[1]) ** 2 <= (0.7 * ft.radius_px) ** 2
-            bright.append(float(np.median(L[inside])) if inside.any() else 0.0)
-            if rgb is not None and inside.any():
-                med = np.median(rgb[inside][:, :3], axis=0)
-                neutral.append(float(np.clip(med.min() / max(med.max(), 1e-12), 0, 1)))
-            else:
-                neutral.append(1.0)
-        top = max(bright, default=1.0) or 1.0
-        # support: inlier edge points per pixel of outline (about 1 for a fully visible outline),
-        # so that a large, partly hidden round object does not outrank a small whole sphere
-        score = [min(ft.n_inliers / (2 * np.pi * ft.radius_px), 1.2) * ft.coverage * (b / top)
-                 * (0.25 + 0.75 * nt) / (1 + (ft.residual_px / 0.5) ** 2)
-                 for ft, b, nt in zip(good, bright, neutral)]
-        order = np.argsort([-v for v in score], kind="stable")
-        chosen = []
-        for i in order:
-            ft = good[i]
-            if all(np.hypot(*(ft.center_px - o.center_px)) > 0.8 * (ft.radius_px + o.radius_px) for o in chosen):
-                chosen.append(ft)
-        good = chosen[:n_spheres]
-        if len(good) < n_spheres:
-            raise InputError(f"found {len(good)} of {n_spheres} spheres in the images"
-                             f" ({len(cands)} candidate circles)", source)
-        fits = sorted(good, key=lambda ft: ft.center_px[0])
-    else:
-        if failures:
-            k, cx, cy, r, why = failures[0]
-            raise InputError(f"sphere {k} near pixel ({cx:.0f}, {cy:.0f}): cannot fit its outline ({why})", source)
-        for k, ft in enumerate(fits):
-            if ft.residual_px > max_residual_px or ft.coverage < min_coverage:
-                raise InputError(f"sphere {k} near pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}): outline does"
-                                 f" not fit a sphere (rms {ft.residual_px:.2f} px, coverage {ft.coverage:.0%})", source)
 
-    if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [_refine_on_lit_limb(ft, L, K, dist, R, f, wfc, lit_limb) for ft in fits]
+def _choose_spheres(fits, mx, L, n_spheres, max_residual_px, min_coverage, n_cands, source) -> list[SphereFit]:
+    """Stage 5 without hints: the ``n_spheres`` best non-overlapping fits, left to right.
+
+    White diffuse spheres are the brightest, most neutral and most exactly round things in the
+    max image, and nothing hides their outline: fits within the quality limits are ranked by
+    outline support x coverage x brightness x neutrality x fit quality.
+    """
+    H, W = L.shape
+    good = [ft for ft in fits if ft.residual_px <= max_residual_px and ft.coverage >= min_coverage]
+    yy, xx = np.mgrid[0:H, 0:W]
+    rgb = mx if mx.ndim == 3 and mx.shape[2] >= 3 else None
+    bright, neutral = [], []
+    for ft in good:
+        inside = (xx - ft.center_px[0]) ** 2 + (yy - ft.center_px[1]) ** 2 <= (0.7 * ft.radius_px) ** 2
+        bright.append(float(np.median(L[inside])) if inside.any() else 0.0)
+        if rgb is not None and inside.any():
+            med = np.median(rgb[inside][:, :3], axis=0)
+            neutral.append(float(np.clip(med.min() / max(med.max(), 1e-12), 0, 1)))
+        else:
+            neutral.append(1.0)
+    top = max(bright, default=1.0) or 1.0
+    # support: inlier edge points per pixel of outline (about 1 for a fully visible outline),
+    # so that a large, partly hidden round object does not outrank a small whole sphere
+    score = [min(ft.n_inliers / (2 * np.pi * ft.radius_px), 1.2) * ft.coverage * (b / top)
+             * (0.25 + 0.75 * nt) / (1 + (ft.residual_px / 0.5) ** 2)
+             for ft, b, nt in zip(good, bright, neutral)]
+    order = np.argsort([-v for v in score], kind="stable")
+    chosen = []
+    for i in order:
+        ft = good[i]
+        if all(np.hypot(*(ft.center_px - o.center_px)) > 0.8 * (ft.radius_px + o.radius_px) for o in chosen):
+            chosen.append(ft)
+    chosen = chosen[:n_spheres]
+    if len(chosen) < n_spheres:
+        raise InputError(f"found {len(chosen)} of {n_spheres} spheres in the images ({n_cands} candidate circles)",
+                         source)
+    return sorted(chosen, key=lambda ft: ft.center_px[0])
+
+
+def _check_hinted_fits(fits, failures, max_residual_px, min_coverage, source) -> None:
+    """Stage 5 with hints: every hinted sphere must have fitted within the quality limits."""
+    if failures:
+        k, cx, cy, r, why = failures[0]
+        raise InputError(f"sphere {k} near pixel ({cx:.0f}, {cy:.0f}): cannot fit its outline ({why})", source)
+    for k, ft in enumerate(fits):
+        if ft.residual_px > max_residual_px or ft.coverage < min_coverage:
+            raise InputError(f"sphere {k} near pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}): outline does"
+                             f" not fit a sphere (rms {ft.residual_px:.2f} px, coverage {ft.coverage:.0%})", source)
+
+
+def _check_inside_image(fits, K, dist, R, shape, source) -> None:
+    """Every sphere's projected outline must lie inside the image."""
+    H, W = shape
     for k, ft in enumerate(fits):
         outline = silhouette_px(K, dist, ft.center_cam, R)
         if (outline[:, 0].min() < 0.5 or outline[:, 1].min() < 0.5
                 or outline[:, 0].max() > W - 1.5 or outline[:, 1].max() > H - 1.5):
             raise InputError(f"sphere {k} at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius"
                              f" {ft.radius_px:.0f} px, is cut by the image border", source)
-    _check_radius(fits, hint_info, wfc, R, source, scene_center)
-    return fits
 
 
 def _check_radius(fits, hint_info, wfc, R, source, scene_center=None):

@@ -26,8 +26,7 @@ in ``v = a l``, ``b`` and ``c``; it is solved with :func:`scipy.optimize.lsq_lin
 ``b, c >= 0``. The angular uncertainty comes from the covariance ``s^2 (A^T A)^-1`` of ``v``
 projected on the tangent plane of ``l``.
 
-:func:`sphere_samples` computes, once per capture, the pixels of a sphere and their world-frame
-normals by intersecting each pixel's (undistorted) ray with the sphere.
+The pixels and their world-frame normals come from :func:`ffls.spheres.samples.sphere_samples`.
 """
 from __future__ import annotations
 
@@ -35,18 +34,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ffls.conventions import UP, normalize
-from ffls.camera.projection import pixel_rays
+from ffls.conventions import UP
+from ffls.spheres.samples import ground_bounce
 
 __all__ = [
     "MODELS",
     "FIXED_MODELS",
-    "SphereSamples",
     "LambertFit",
-    "ground_bounce",
-    "sphere_samples",
     "fit_lambert",
     "fit_lambert_MasselusDutreAnrys2002",
+    "solve_normal_equations",
     "tangent_uncertainty_deg",
 ]
 
@@ -54,134 +51,6 @@ __all__ = [
 MODELS = ("plain", "ambient", "bounce")
 #: Models with a calibrated bounce (``c = rho_g a max(l_z, 0)``), simplest first.
 FIXED_MODELS = ("fixed", "fixed_ambient")
-
-
-def ground_bounce(normals: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
-    """Form factor ``(1 - n . up) / 2`` from sphere points to an infinite ground plane below.
-
-    Parameters
-    ----------
-    normals : (m, 3) float, unit, world frame
-    up : (3,) float, unit
-
-    Returns
-    -------
-    (m,) float in [0, 1]
-    """
-    return np.clip(0.5 * (1.0 - np.asarray(normals, dtype=np.float64) @ np.asarray(up, dtype=np.float64)), 0.0, 1.0)
-
-
-@dataclass(frozen=True)
-class SphereSamples:
-    """The pixels of one sphere usable for shading fits; fixed for a capture (camera and sphere).
-
-    Attributes
-    ----------
-    rows, cols : (m,) int
-        Pixel coordinates (row = y, col = x).
-    normals : (m, 3) float64
-        Unit world-frame normals at the ray-sphere hits.
-    points : (m, 3) float64
-        World-frame surface points at the hits.
-    center : (3,) float64
-        World-frame sphere centre.
-    radius : float
-        Sphere radius (world units).
-    radius_px : float
-        Apparent radius in pixels (for reports).
-    ground : (m,) float64 or None
-        :func:`ground_bounce` of ``normals`` for world up ``+Z`` (computed once per capture).
-    origin : (3,) float64 or None
-        World-frame camera centre (the pixels' rays start there; needed by
-        :mod:`ffls.spheres.refine`).
-    """
-
-    rows: np.ndarray
-    cols: np.ndarray
-    normals: np.ndarray
-    points: np.ndarray
-    center: np.ndarray
-    radius: float
-    radius_px: float
-    ground: np.ndarray | None = None
-    origin: np.ndarray | None = None
-
-    def values(self, image: np.ndarray) -> np.ndarray:
-        """Grey intensity (m,) float64 of these pixels: the mean of the channels of ``image`` (H, W[, C])."""
-        px = np.asarray(image)[self.rows, self.cols]
-        px = px.astype(np.float64, copy=False)
-        return px.mean(axis=-1) if px.ndim == 2 else px
-
-    def __len__(self) -> int:
-        return int(self.rows.size)
-
-
-def sphere_samples(shape: tuple[int, int], K: np.ndarray, dist: np.ndarray | None, center_cam: np.ndarray,
-                   radius: float, world_from_camera: np.ndarray | None = None, margin_px: float = 1.5) -> SphereSamples:
-    """Pixels of a sphere and their normals, from the ray-sphere intersection.
-
-    Pixels whose ray passes within ``margin_px`` pixels (angularly) of the silhouette are left
-    out: their colour mixes sphere and background and their normal is poorly defined.
-
-    Parameters
-    ----------
-    shape : (H, W)
-        Image size.
-    K : (3, 3) float
-        Camera matrix.
-    dist : (k,) float or None
-        OpenCV distortion coefficients.
-    center_cam : (3,) float
-        Sphere centre in the camera frame.
-    radius : float
-        Sphere radius, same units as ``center_cam``.
-    world_from_camera : (4, 4) float, optional
-        Camera-to-world transform; identity if None.
-    margin_px : float
-        Silhouette margin in pixels.
-
-    Returns
-    -------
-    SphereSamples
-    """
-    C = np.asarray(center_cam, dtype=np.float64).reshape(3)
-    R = float(radius)
-    K = np.asarray(K, dtype=np.float64)
-    H, W = int(shape[0]), int(shape[1])
-    dC = float(np.linalg.norm(C))
-    if not (R > 0 and dC > R and C[2] > 0):
-        raise ValueError("sphere must lie in front of the camera and not contain it")
-    f = 0.5 * (K[0, 0] + K[1, 1])
-    ang_s = np.arcsin(R / dC)  # angular radius of the silhouette
-    # image-space bounding box (generous, distortion is handled by the exact ray test below)
-    cpx = K @ (C / C[2])
-    r_px = f * np.tan(ang_s) * (dC / C[2]) ** 2 * 1.3 + 4.0
-    x0, x1 = max(int(np.floor(cpx[0] - r_px)), 0), min(int(np.ceil(cpx[0] + r_px)), W - 1)
-    y0, y1 = max(int(np.floor(cpx[1] - r_px)), 0), min(int(np.ceil(cpx[1] + r_px)), H - 1)
-    if x1 < x0 or y1 < y0:
-        raise ValueError("sphere is outside the image")
-    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
-    px = np.stack([xx.ravel(), yy.ravel()], axis=-1).astype(np.float64)
-    d = pixel_rays(px, K, dist)
-    ang = np.arccos(np.clip(d @ (C / dC), -1.0, 1.0))
-    keep = ang < ang_s - margin_px / f
-    d = d[keep]
-    dc = d @ C
-    disc = np.maximum(dc * dc - dC * dC + R * R, 0.0)
-    t = dc - np.sqrt(disc)
-    P = d * t[:, None]
-    n = (P - C) / R
-    if world_from_camera is None:
-        Rw, tw = np.eye(3), np.zeros(3)
-    else:
-        M = np.asarray(world_from_camera, dtype=np.float64)
-        Rw, tw = M[:3, :3], M[:3, 3]
-    n_w = normalize(n @ Rw.T)
-    P_w = P @ Rw.T + tw
-    radius_px = f * np.tan(ang_s)
-    return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
-                         center=Rw @ C + tw, radius=R, radius_px=float(radius_px),
-                         ground=ground_bounce(n_w), origin=np.asarray(tw, dtype=np.float64).copy())
 
 
 def tangent_uncertainty_deg(v: np.ndarray, cov_v: np.ndarray) -> float:
@@ -229,7 +98,11 @@ class LambertFit:
     n_saturated : int
         Of those, saturated.
     inliers : (m,) bool
-        Pixels used in the final fit (lit or shadow side).
+        Pixels used in the final fit (lit or shadow side, outside the terminator band).
+    non_outliers : (m,) bool
+        Valid pixels that the final model does not reject as outliers, on any side of the
+        terminator (what a fit with another classification, such as the joint near-light fit,
+        may use).
     ground_ratio : float
         ``c / (a l_z)`` of the free-bounce fit (NaN when not available): this photo's estimate of
         the sphere's ground ratio ``rho_g``.
@@ -254,6 +127,7 @@ class LambertFit:
     n_invalid: int = 0
     n_saturated: int = 0
     inliers: np.ndarray | None = None
+    non_outliers: np.ndarray | None = None
     ground_ratio: float = float("nan")
     ground_ratio_sigma: float = float("inf")
     bounce_ratio: float | None = None
@@ -297,11 +171,28 @@ def _model_map(model: str, ratio: float) -> np.ndarray:
     return T
 
 
-def _solve_normal(G, h, n_free: int = 3):
-    """Least squares from the normal equations ``G x = h`` with ``x[n_free:] >= 0``.
+def solve_normal_equations(G: np.ndarray, h: np.ndarray, n_free: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Least squares from its normal equations ``G x = h`` with ``x[n_free:] >= 0``.
 
-    The active set is enumerated (at most two bounded coefficients here); returns ``x`` and the
-    inverse of ``G`` on the free set (zeros elsewhere).
+    The linear shading coefficients of this module and of the joint near-light fit
+    (:func:`ffls.spheres.combine.fit_near_light`): the light's ``v`` (or ``a``) is free, the
+    ambient and bounce coefficients are non-negative. The active set is enumerated (at most two
+    bounded coefficients here).
+
+    Parameters
+    ----------
+    G : (p, p) float
+        ``A^T A``, symmetric positive semi-definite.
+    h : (p,) float
+        ``A^T y``.
+    n_free : int
+        The first ``n_free`` coefficients are unbounded, the others ``>= 0``.
+
+    Returns
+    -------
+    x : (p,) float
+    G_inv : (p, p) float
+        Inverse of ``G`` on the free set of the solution (zeros elsewhere).
     """
     p = G.shape[0]
     first = 0
@@ -349,11 +240,11 @@ class _Fit:
         else:  # T selects the leading columns
             p = T.shape[1]
             G, h = G5[:p, :p].copy(), h5[:p].copy()
-        x, Ginv = _solve_normal(G, h)
+        x, Ginv = solve_normal_equations(G, h)
         if model.startswith("fixed") and x[2] < 0:  # light below the horizon: no ground bounce
             T = _model_map(model, 0.0)
             G, h = T.T @ G5 @ T, T.T @ h5
-            x, Ginv = _solve_normal(G, h)
+            x, Ginv = solve_normal_equations(G, h)
             ratio = 0.0
         self.model, self.x, self.Ginv, self.k = model, x, Ginv, k
         self.rss = max(float(yy - 2.0 * x @ h + x @ G @ x), 0.0)
@@ -652,6 +543,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         model=best["model"], rms=float(np.sqrt(fit.rss / k)) / a, uncertainty_deg=unc,
         n_lit=int(lit.sum()), n_shadow=int(shadow.sum()),
         n_rejected=int((ok & ~inl).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
+        non_outliers=inl,
         ground_ratio=ratio_est, ground_ratio_sigma=ratio_sd,
         bounce_ratio=None if bounce_ratio is None else float(bounce_ratio),
     )

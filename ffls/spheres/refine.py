@@ -46,8 +46,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from ffls.conventions import UP, normalize
-from ffls.spheres.lambert import SphereSamples, ground_bounce
+from ffls.conventions import UP, normalize, tangent_basis
+from ffls.spheres.samples import SphereSamples, ground_bounce
 
 __all__ = ["CentreRefinement", "refine_sphere_centre", "recentre_samples", "select_photos"]
 
@@ -117,12 +117,6 @@ def _geometry(samples: SphereSamples):
     f = float(samples.radius_px / np.tan(alpha))
     d = normalize(samples.points - O)
     return O, C, D, alpha, f, d
-
-
-def _tangent_basis(u):
-    a = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = normalize(np.cross(u, a))
-    return e1, np.cross(u, e1)
 
 
 def _hit_normals(d, CO, R):
@@ -198,7 +192,7 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
     samples : SphereSamples
         The sphere's pixels and normals for the initial (detected) centre, with ``origin``.
     values : list of (grey (m,), valid (m,) bool, ...)
-        Per photo, this sphere's :func:`ffls.spheres.estimate.sphere_values` entry.
+        Per photo, this sphere's :func:`ffls.spheres.samples.sphere_values` entry.
     directions : list of (3,) float or None
         Per photo, the first-pass light direction of this sphere (None or NaN where its fit was
         not ``'ok'``; those photos are not used).
@@ -229,7 +223,7 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
     up = np.asarray(up, dtype=np.float64)
     CO0 = C0 - O
     u0 = CO0 / D
-    e1, e2 = _tangent_basis(u0)
+    e1, e2 = tangent_basis(u0)
     ang = np.arccos(np.clip(d_all @ u0, -1.0, 1.0))
     pix = np.flatnonzero(ang < alpha - margin_px / f)
     d = d_all[pix]

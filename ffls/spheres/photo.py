@@ -1,0 +1,400 @@
+"""One light per photograph from its spheres: per-sphere fits, combination, rejection.
+
+Masselus, Dutre, Anrys, "The Free-form Light Stage", EGWR 2002, section 5. Per photo
+(:func:`estimate_photo`):
+
+1. every sphere is fitted on its own (:func:`ffls.spheres.lambert.fit_lambert`: Lambert +
+   ambient + ground bounce); a sphere far darker than the others is in a cast shadow;
+2. the usable spheres' directions ``l_i`` (RMS uncertainties ``s_i``, a statistical part from the
+   fit and a floor ``sigma_floor_deg`` for what the model does not capture) are explained by a
+   distant or a near light (:mod:`ffls.spheres.combine`); ``model='auto'`` takes the near model
+   only when its chi-square drop is significant (likelihood-ratio test, 1 degree of freedom,
+   ``p < 1e-3``);
+3. if the chosen model is inconsistent (``p < 1e-3``) and one sphere's removal makes it
+   consistent, that sphere is dropped (``'outlier'``); otherwise the photo is rejected;
+4. a near light's position is refined by the joint fit to all used spheres' pixels
+   (:func:`ffls.spheres.combine.fit_near_light`), initialised from the ray intersection.
+
+Rejection reasons (:data:`REASONS`) are short fixed strings stored in ``lights.json``.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2 as chi2_distribution
+
+from ffls.conventions import UP, normalize
+from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
+from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
+from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
+
+__all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SphereResult", "LightHypothesis", "PhotoEstimate",
+           "fit_spheres", "fit_light_model", "near_fit_mask", "estimate_photo"]
+
+#: Rejection reasons of a photo (and of single spheres), with their meaning.
+REASONS = {
+    "too_dark": "too few lit, unsaturated pixels on the spheres (light off, or pointing away)",
+    "saturated": "the lit part of the spheres is clipped",
+    "shadowed": "the spheres are in a cast shadow (object, person) or much darker than the others",
+    "spheres_disagree": "the spheres' directions are inconsistent beyond their uncertainty and no single "
+                        "sphere explains it",
+    "too_few_spheres": "fewer usable spheres than needed (min_spheres)",
+    "fit_failed": "the shading fit did not converge to a finite direction",
+}
+#: Light models of :func:`estimate_photo`.
+LIGHT_MODELS = ("auto", "distant", "near")
+#: Sphere status for a sphere dropped from the combination because it disagreed with the others.
+OUTLIER = "outlier"
+#: Significance level of the consistency and likelihood-ratio tests.
+SIGNIFICANCE = 1e-3
+
+
+@dataclass
+class SphereResult:
+    """One sphere in one photo: its own fit, and its status in the photo's combination.
+
+    Attributes
+    ----------
+    fit : LambertFit
+    status : str
+        ``fit.status``, or ``'shadowed'`` / :data:`OUTLIER` where the combination set the sphere
+        aside.
+    """
+
+    fit: LambertFit
+    status: str
+
+    @property
+    def direction(self) -> np.ndarray | None:
+        """The fitted direction (3,), or None where it is not finite."""
+        d = self.fit.direction
+        return None if d is None or not np.all(np.isfinite(d)) else np.asarray(d, dtype=np.float64)
+
+    def as_dict(self) -> dict:
+        """JSON-ready report: ``status`` and :meth:`LambertFit.as_dict` (without the pixel mask)."""
+        return {"status": self.status, **{k: v for k, v in self.fit.as_dict().items() if k != "status"}}
+
+
+@dataclass
+class LightHypothesis:
+    """A light model fitted to some spheres' directions (:func:`estimate_photo`, step 2).
+
+    Attributes
+    ----------
+    spheres : list of int
+        The spheres used.
+    model : {'distant', 'near'}
+    direction : (3,) float, unit
+    uncertainty_deg : float
+        RMS uncertainty of the distant mean (the near model keeps it until the joint fit).
+    chi2 : float
+    dof : int
+    position : (3,) float or None
+        The near light's position (ray intersection).
+    p : float
+        Chi-square probability of the fit (1 with no degree of freedom).
+    """
+
+    spheres: list[int]
+    model: str
+    direction: np.ndarray
+    uncertainty_deg: float
+    chi2: float
+    dof: int
+    position: np.ndarray | None
+    p: float
+
+
+@dataclass
+class PhotoEstimate:
+    """The light of one photograph (:func:`estimate_photo`).
+
+    Attributes
+    ----------
+    status : {'ok', 'rejected'}
+    reason : str or None
+        A :data:`REASONS` key when rejected.
+    direction : (3,) float
+        Unit, from the scene centre (a best guess, or +Z, when rejected).
+    position : (3,) float or None
+        Near light's position (world).
+    uncertainty_deg : float
+        RMS angular uncertainty (infinite when rejected).
+    model : {'distant', 'near'} or None
+    used_spheres : list of int
+    spheres : list of SphereResult
+        Every sphere, used or not.
+    chi2 : float or None
+        Of the chosen light model (None when rejected).
+    dof : int or None
+    joint_pending : bool
+        A near light whose joint fit was deferred (``estimate_photo(joint=False)``): ``position``
+        is the ray intersection.
+    """
+
+    status: str
+    reason: str | None
+    direction: np.ndarray
+    position: np.ndarray | None = None
+    uncertainty_deg: float = float("inf")
+    model: str | None = None
+    used_spheres: list[int] = field(default_factory=list)
+    spheres: list[SphereResult] = field(default_factory=list)
+    chi2: float | None = None
+    dof: int | None = None
+    joint_pending: bool = False
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def sphere_directions(self) -> list[np.ndarray | None]:
+        """Per sphere its fitted direction (None where it has none): the start of a later pass's fits."""
+        return [s.direction for s in self.spheres]
+
+    def sphere_reports(self, refinements: list | None = None) -> list[dict]:
+        """JSON-ready per-sphere reports; with the spheres' :class:`~ffls.spheres.refine.CentreRefinement`
+        also each sphere's world ``center``, ``center_shift_px`` and ``center_refined``."""
+        reports = [s.as_dict() for s in self.spheres]
+        for rep, ref in zip(reports, refinements or []):
+            rep["center"] = [float(v) for v in ref.center]
+            rep["center_shift_px"] = ref.shift_norm_px
+            rep["center_refined"] = bool(ref.accepted)
+        return reports
+
+    def record(self, refinements: list | None = None) -> dict:
+        """The ``extra`` entry of this photo in ``lights.json``: uncertainty, model, spheres, chi2."""
+        extra = {"uncertainty_deg": float(self.uncertainty_deg) if np.isfinite(self.uncertainty_deg) else None,
+                 "model": self.model, "used_spheres": self.used_spheres,
+                 "spheres": self.sphere_reports(refinements)}
+        if self.chi2 is not None:
+            extra.update(chi2=self.chi2, dof=self.dof)
+        return extra
+
+
+# ----------------------------------------------------------------------------- stages
+def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, terminator: float = 0.15,
+                up: np.ndarray = UP, bounce_ratio: list | None = None, start: list | None = None) -> list[LambertFit]:
+    """Step 1: every sphere's own fit (:func:`ffls.spheres.lambert.fit_lambert`).
+
+    Parameters
+    ----------
+    samples : list of SphereSamples
+    values : list of SphereValues
+    terminator : float
+    up : (3,) float
+    bounce_ratio : list of (float or None), optional
+        Per sphere, the calibrated ground ratio (None: free bounce).
+    start : list of ((3,) float or None), optional
+        Per sphere, a direction to start from.
+
+    Returns
+    -------
+    list of LambertFit
+    """
+    n = len(samples)
+    bounce_ratio = [None] * n if bounce_ratio is None else bounce_ratio
+    start = [None] * n if start is None else start
+    return [fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up, bounce_ratio=rho,
+                        g=s.ground_factor(up), start=l0)
+            for s, (grey, valid, nsat), rho, l0 in zip(samples, values, bounce_ratio, start)]
+
+
+def _mark_shadowed(fits: list[LambertFit]) -> tuple[list[str], list[int]]:
+    """Statuses and usable spheres: a sphere far darker than the other usable ones is in a shadow."""
+    status = [f.status for f in fits]
+    ok = [i for i, f in enumerate(fits) if f.status == "ok"]
+    if len(ok) >= 2:
+        med = float(np.median([fits[i].intensity for i in ok]))
+        for i in list(ok):
+            if fits[i].intensity < 0.25 * med:
+                status[i] = "shadowed"
+                ok.remove(i)
+    return status, ok
+
+
+def _rejection_reason(status: list[str], ok: list[int]) -> str:
+    """Why too few spheres are usable: the most common sphere status, or ``too_few_spheres``."""
+    if ok:
+        return "too_few_spheres"
+    priority = ("saturated", "shadowed", "too_dark", "fit_failed")
+    counts = Counter(st for st in status)
+    return max(priority, key=lambda r: (counts.get(r, 0), -priority.index(r)))
+
+
+def fit_light_model(spheres: list[int], fits: list[LambertFit], centers: np.ndarray, sigma_floor_deg: float,
+                    scene_center: np.ndarray, model: str) -> LightHypothesis:
+    """Step 2: the distant (and, where asked or significant, the near) light of some spheres' directions.
+
+    Parameters
+    ----------
+    spheres : list of int
+        The spheres to combine.
+    fits : list of LambertFit
+    centers : (k, 3) float
+        All spheres' world centres.
+    sigma_floor_deg : float
+    scene_center : (3,) float
+    model : {'auto', 'distant', 'near'}
+
+    Returns
+    -------
+    LightHypothesis
+    """
+    dirs = np.array([fits[i].direction for i in spheres])
+    unc = np.array([np.hypot(fits[i].uncertainty_deg, sigma_floor_deg) for i in spheres])
+    mean, u_mean, chi_d, dof_d = combine_distant(dirs, unc)
+    out = LightHypothesis(spheres=list(spheres), model="distant", direction=mean, uncertainty_deg=u_mean,
+                          chi2=chi_d, dof=dof_d, position=None, p=1.0)
+    # a near fit can only lower chi2 to >= 0: when chi2 of the distant model is below the LR
+    # threshold, the near model cannot be significant and is not fitted
+    threshold = chi2_distribution.ppf(1 - SIGNIFICANCE, 1)
+    if len(spheres) >= 2 and (model == "near" or (model == "auto" and chi_d > threshold)):
+        conv = fit_ray_convergence(centers[list(spheres)], dirs, unc, scene_center)
+        if conv.position is not None and (model == "near" or chi_d - conv.chi2 > threshold):
+            out.model, out.direction, out.chi2, out.dof, out.position = (
+                "near", conv.direction, conv.chi2, conv.dof, conv.position)
+    out.p = 1.0 if out.dof == 0 else float(chi2_distribution.sf(out.chi2, out.dof))
+    return out
+
+
+def _consistent_light(ok: list[int], fits, centers, sigma_floor_deg, scene_center, model):
+    """Step 3: the light of all usable spheres, or of all but one (the outlier) when only that is
+    consistent; ``(hypothesis, outlier index or None)``, or ``(hypothesis of all, -1)`` when none is."""
+    hyp = fit_light_model(ok, fits, centers, sigma_floor_deg, scene_center, model)
+    if hyp.p >= SIGNIFICANCE:
+        return hyp, None
+    candidates = []
+    if len(ok) >= 3:
+        for j in ok:
+            sub = fit_light_model([i for i in ok if i != j], fits, centers, sigma_floor_deg, scene_center, model)
+            if sub.p >= SIGNIFICANCE:
+                candidates.append((sub.chi2, j, sub))
+    if not candidates:
+        return hyp, -1
+    _, j, sub = min(candidates, key=lambda c: c[0])
+    return sub, j
+
+
+def near_fit_mask(fit: LambertFit) -> np.ndarray:
+    """The pixels of a sphere that the joint near-light fit may use, from the sphere's own fit.
+
+    The pixels of the sphere's final fit and every other valid pixel that its model does not
+    reject as an outlier, on either side of the sphere's terminator band: the joint fit
+    re-selects the band itself with the light's position (a near light's direction changes over
+    the sphere), so the per-sphere band must not be cut out here.
+
+    Parameters
+    ----------
+    fit : LambertFit
+
+    Returns
+    -------
+    (m,) bool
+    """
+    if fit.non_outliers is None:
+        return fit.inliers
+    return fit.inliers | fit.non_outliers
+
+
+def _near_terms(fits: list[LambertFit]) -> list[tuple]:
+    """Per sphere, the joint fit's shading terms of its own fit's model: (ambient, bounce)."""
+    terms = []
+    for f in fits:
+        if f.bounce_ratio is not None:
+            terms.append((f.model == "fixed_ambient", float(f.bounce_ratio)))
+        else:
+            terms.append((f.model != "plain", f.model == "bounce"))
+    return terms
+
+
+# ----------------------------------------------------------------------------- one photo
+def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene_center: np.ndarray, *,
+                   model: str = "auto", min_spheres: int | None = None, sigma_floor_deg: float = 1.0,
+                   terminator: float = 0.15, saturation: float | None = None, up: np.ndarray = UP,
+                   bounce_ratio: list | None = None, values: list | None = None, start: list | None = None,
+                   joint: bool = True) -> PhotoEstimate:
+    """Estimate the light of one photograph from its spheres.
+
+    Parameters
+    ----------
+    image : (H, W, 3) float or None
+        Linear radiance (None when ``values`` is given).
+    samples : list of SphereSamples
+        The spheres' pixels and normals (:func:`ffls.spheres.estimate.capture_samples`).
+    scene_center : (3,) float
+        World origin of the light direction.
+    model : {'auto', 'distant', 'near'}
+    min_spheres : int, optional
+        Usable spheres needed; default ``min(2, len(samples))``.
+    sigma_floor_deg : float
+        RMS angular error added (in quadrature) to each sphere's statistical uncertainty for what
+        the shading model does not capture.
+    terminator : float
+    saturation : float, optional
+        Known clip level of the linear values.
+    up : (3,) float
+    bounce_ratio : list of (float or None), optional
+        Per sphere, the calibrated ground ratio (:func:`ffls.spheres.estimate.calibrate_bounce`):
+        the bounce is then imposed (``c = rho a max(l_z, 0)``) instead of fitted. None (or a None
+        entry): free.
+    values : list of SphereValues, optional
+        :func:`ffls.spheres.samples.sphere_values` of the photo, instead of ``image``.
+    start : list, optional
+        Per sphere, a direction (or None) to start its fit from (:func:`fit_lambert` ``start``):
+        an earlier pass's result for the same photo.
+    joint : bool
+        Run the joint near-light fit (:func:`ffls.spheres.combine.fit_near_light`) when the near
+        model is chosen. False keeps the ray-intersection position (``joint_pending``): for a first
+        pass whose per-sphere fits alone are used (the second pass refits with the calibrated
+        bounce).
+
+    Returns
+    -------
+    PhotoEstimate
+    """
+    if model not in LIGHT_MODELS:
+        raise ValueError(f"model must be one of {LIGHT_MODELS}, not {model!r}")
+    n_sph = len(samples)
+    if values is None:
+        if image is None:
+            raise ValueError("estimate_photo needs an image or its sphere values")
+        values = sphere_values(image, samples, saturation=saturation)
+    need = min(2, n_sph) if min_spheres is None else int(min_spheres)
+    fits = fit_spheres(samples, values, terminator=terminator, up=up, bounce_ratio=bounce_ratio, start=start)
+    status, ok = _mark_shadowed(fits)
+    centers = np.array([s.center for s in samples])
+
+    def rejected(reason, direction=None):
+        return PhotoEstimate(status="rejected", reason=reason,
+                             direction=np.array(UP, dtype=np.float64) if direction is None else direction,
+                             spheres=[SphereResult(f, st) for f, st in zip(fits, status)])
+
+    if len(ok) < need:
+        return rejected(_rejection_reason(status, ok), fits[ok[0]].direction if ok else None)
+    hyp, outlier = _consistent_light(ok, fits, centers, sigma_floor_deg, scene_center, model)
+    if outlier == -1:
+        return rejected("spheres_disagree", hyp.direction)
+    if outlier is not None:
+        status[outlier] = OUTLIER
+    used = hyp.spheres
+    direction, unc, position = hyp.direction, hyp.uncertainty_deg, hyp.position
+    pending = hyp.model == "near" and not joint
+    if hyp.model == "near" and joint:
+        jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
+                            [near_fit_mask(fits[i]) for i in used], position,
+                            terms=_near_terms([fits[i] for i in used]), terminator=terminator, up=up)
+        if not (jf.success and np.all(np.isfinite(jf.position))):
+            return rejected("fit_failed", direction)
+        position = jf.position
+        v = position - np.asarray(scene_center, dtype=np.float64)
+        direction = normalize(v)
+        stat = tangent_uncertainty_deg(v, jf.cov)
+        unc = float(np.hypot(stat, sigma_floor_deg / np.sqrt(len(used))))
+    return PhotoEstimate(status="ok", reason=None, direction=np.asarray(direction, dtype=np.float64),
+                         position=None if position is None else np.asarray(position, dtype=np.float64),
+                         uncertainty_deg=float(unc), model=hyp.model, used_spheres=[int(i) for i in used],
+                         spheres=[SphereResult(f, st) for f, st in zip(fits, status)], chi2=float(hyp.chi2),
+                         dof=int(hyp.dof), joint_pending=pending)

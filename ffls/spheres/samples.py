@@ -1,0 +1,266 @@
+"""The spheres' pixels: where they are, their normals, and their values in one photo.
+
+Stage between detection (:mod:`ffls.spheres.detect`, a centre per sphere) and the per-sphere
+fits (:mod:`ffls.spheres.lambert`): once per capture, :func:`sphere_samples` intersects every
+pixel's (undistorted) ray with each sphere (Masselus, Dutre, Anrys 2002, section 5: "the normal
+at each pixel of a sphere is known"); per photo, :func:`sphere_values` reads only those pixels
+and marks the usable ones (:func:`pixel_validity`: finite, not saturated, not near-black).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ffls.camera.projection import pixel_rays
+from ffls.conventions import UP, normalize
+
+__all__ = ["SphereSamples", "SphereValues", "ground_bounce", "sphere_samples", "pixel_validity", "sphere_values"]
+
+
+def ground_bounce(normals: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
+    """Form factor ``(1 - n . up) / 2`` from sphere points to an infinite ground plane below.
+
+    Parameters
+    ----------
+    normals : (m, 3) float, unit, world frame
+    up : (3,) float, unit
+
+    Returns
+    -------
+    (m,) float in [0, 1]
+    """
+    return np.clip(0.5 * (1.0 - np.asarray(normals, dtype=np.float64) @ np.asarray(up, dtype=np.float64)), 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class SphereSamples:
+    """The pixels of one sphere usable for shading fits; fixed for a capture (camera and sphere).
+
+    Attributes
+    ----------
+    rows, cols : (m,) int
+        Pixel coordinates (row = y, col = x).
+    normals : (m, 3) float64
+        Unit world-frame normals at the ray-sphere hits.
+    points : (m, 3) float64
+        World-frame surface points at the hits.
+    center : (3,) float64
+        World-frame sphere centre.
+    radius : float
+        Sphere radius (world units).
+    radius_px : float
+        Apparent radius in pixels (for reports).
+    ground : (m,) float64 or None
+        :func:`ground_bounce` of ``normals`` for world up ``+Z`` (computed once per capture).
+    origin : (3,) float64 or None
+        World-frame camera centre (the pixels' rays start there; needed by
+        :mod:`ffls.spheres.refine`).
+    """
+
+    rows: np.ndarray
+    cols: np.ndarray
+    normals: np.ndarray
+    points: np.ndarray
+    center: np.ndarray
+    radius: float
+    radius_px: float
+    ground: np.ndarray | None = None
+    origin: np.ndarray | None = None
+
+    def values(self, image: np.ndarray) -> np.ndarray:
+        """Grey intensity (m,) float64 of these pixels: the mean of the channels of ``image`` (H, W[, C])."""
+        px = np.asarray(image)[self.rows, self.cols]
+        px = px.astype(np.float64, copy=False)
+        return px.mean(axis=-1) if px.ndim == 2 else px
+
+    def ground_factor(self, up: np.ndarray = UP) -> np.ndarray:
+        """:func:`ground_bounce` of :attr:`normals` for world ``up`` (the precomputed :attr:`ground` for ``+Z``)."""
+        if self.ground is not None and np.array_equal(up, UP):
+            return self.ground
+        return ground_bounce(self.normals, up)
+
+    def __len__(self) -> int:
+        return int(self.rows.size)
+
+
+def sphere_samples(shape: tuple[int, int], K: np.ndarray, dist: np.ndarray | None, center_cam: np.ndarray,
+                   radius: float, world_from_camera: np.ndarray | None = None, margin_px: float = 1.5) -> SphereSamples:
+    """Pixels of a sphere and their normals, from the ray-sphere intersection.
+
+    Pixels whose ray passes within ``margin_px`` pixels (angularly) of the silhouette are left
+    out: their colour mixes sphere and background and their normal is poorly defined.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        Image size.
+    K : (3, 3) float
+        Camera matrix.
+    dist : (k,) float or None
+        OpenCV distortion coefficients.
+    center_cam : (3,) float
+        Sphere centre in the camera frame.
+    radius : float
+        Sphere radius, same units as ``center_cam``.
+    world_from_camera : (4, 4) float, optional
+        Camera-to-world transform; identity if None.
+    margin_px : float
+        Silhouette margin in pixels.
+
+    Returns
+    -------
+    SphereSamples
+    """
+    C = np.asarray(center_cam, dtype=np.float64).reshape(3)
+    R = float(radius)
+    K = np.asarray(K, dtype=np.float64)
+    H, W = int(shape[0]), int(shape[1])
+    dC = float(np.linalg.norm(C))
+    if not (R > 0 and dC > R and C[2] > 0):
+        raise ValueError("sphere must lie in front of the camera and not contain it")
+    f = 0.5 * (K[0, 0] + K[1, 1])
+    ang_s = np.arcsin(R / dC)  # angular radius of the silhouette
+    # image-space bounding box (generous, distortion is handled by the exact ray test below)
+    cpx = K @ (C / C[2])
+    r_px = f * np.tan(ang_s) * (dC / C[2]) ** 2 * 1.3 + 4.0
+    x0, x1 = max(int(np.floor(cpx[0] - r_px)), 0), min(int(np.ceil(cpx[0] + r_px)), W - 1)
+    y0, y1 = max(int(np.floor(cpx[1] - r_px)), 0), min(int(np.ceil(cpx[1] + r_px)), H - 1)
+    if x1 < x0 or y1 < y0:
+        raise ValueError("sphere is outside the image")
+    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    px = np.stack([xx.ravel(), yy.ravel()], axis=-1).astype(np.float64)
+    d = pixel_rays(px, K, dist)
+    ang = np.arccos(np.clip(d @ (C / dC), -1.0, 1.0))
+    keep = ang < ang_s - margin_px / f
+    d = d[keep]
+    dc = d @ C
+    disc = np.maximum(dc * dc - dC * dC + R * R, 0.0)
+    t = dc - np.sqrt(disc)
+    P = d * t[:, None]
+    n = (P - C) / R
+    if world_from_camera is None:
+        Rw, tw = np.eye(3), np.zeros(3)
+    else:
+        M = np.asarray(world_from_camera, dtype=np.float64)
+        Rw, tw = M[:3, :3], M[:3, 3]
+    n_w = normalize(n @ Rw.T)
+    P_w = P @ Rw.T + tw
+    radius_px = f * np.tan(ang_s)
+    return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
+                         center=Rw @ C + tw, radius=R, radius_px=float(radius_px),
+                         ground=ground_bounce(n_w), origin=np.asarray(tw, dtype=np.float64).copy())
+
+
+class SphereValues(NamedTuple):
+    """One sphere's pixels in one photo (:func:`sphere_values`), in :class:`SphereSamples` order.
+
+    Attributes
+    ----------
+    grey : (m,) float
+        Linear grey values (mean of the channels).
+    valid : (m,) bool
+        Usable pixels (finite, not saturated, not near-black).
+    n_saturated : int
+        Saturated pixels among the sphere's.
+    """
+
+    grey: np.ndarray
+    valid: np.ndarray
+    n_saturated: int
+
+    def subset(self, index: np.ndarray) -> "SphereValues":
+        """The values of the pixels ``index`` (the saturated count is kept: it describes the photo)."""
+        return SphereValues(self.grey[index], self.valid[index], self.n_saturated)
+
+
+def pixel_validity(pixels: np.ndarray, black_fraction: float = 0.02, min_plateau: int = 4,
+                   saturation: float | None = None) -> tuple[np.ndarray, int]:
+    """Usable pixels of one sphere: finite, not saturated, not near-black.
+
+    Saturation is the clip level ``saturation`` where the caller knows it, and in any case a
+    plateau: at least ``min_plateau`` pixels sharing the maximum of a channel (clipping makes
+    plateaus; unclipped radiance does not).
+
+    Parameters
+    ----------
+    pixels : (m, 3) or (m,) float
+        Linear values of the sphere's pixels.
+    black_fraction : float
+        Grey values below this fraction of the sphere's 99th percentile are near-black.
+    min_plateau : int
+    saturation : float, optional
+
+    Returns
+    -------
+    valid : (m,) bool
+    n_saturated : int
+    """
+    p = np.asarray(pixels, dtype=np.float64)
+    if p.ndim == 1:
+        p = p[:, None]
+    finite = np.all(np.isfinite(p), axis=1)
+    sat = np.zeros(p.shape[0], dtype=bool)
+    if finite.any():
+        q = np.where(finite[:, None], p, -np.inf)
+        for ch in range(p.shape[1]):
+            top = float(q[:, ch].max())
+            if top > 0:
+                at_top = q[:, ch] >= top * (1.0 - 1e-6)
+                if at_top.sum() >= min_plateau:
+                    sat |= at_top
+            if saturation is not None:
+                sat |= q[:, ch] >= 0.999 * saturation
+    grey = np.where(finite, p.mean(axis=1), 0.0)
+    ok = finite & ~sat
+    ref = float(np.percentile(grey[ok], 99)) if ok.any() else 0.0
+    dark = grey <= max(black_fraction * ref, 0.0)
+    return ok & ~dark, int((sat & finite).sum())
+
+
+
+def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: float | None = None,
+                  raw: np.ndarray | None = None, bit_depth=None) -> list[SphereValues]:
+    """The spheres' pixels of one photo: grey values, validity, saturated count.
+
+    Only the sphere pixels are read (fancy indexing of the precomputed pixel lists), never the
+    whole image.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) float
+        Linear radiance.
+    samples : list of SphereSamples
+    saturation : float, optional
+        Known clip level of the linear values.
+    raw : (H, W, 3) array, optional
+        The image as stored, with ``bit_depth``: then
+        :func:`ffls.radiance.response.valid_pixel_mask` also applies (saturated codes of any
+        channel, near-black codes; non-finite and negative floats).
+    bit_depth : {8, 16, 'half', 'float'}, optional
+
+    Returns
+    -------
+    list of SphereValues
+        One per sphere (grey float64).
+    """
+    from ffls.radiance.response import valid_pixel_mask
+
+    img = np.asarray(image)
+    out = []
+    for s in samples:
+        px = img[s.rows, s.cols].astype(np.float64)
+        valid, nsat = pixel_validity(px, saturation=saturation)
+        if raw is not None and bit_depth is not None:
+            rp = np.asarray(raw)[s.rows, s.cols]
+            rp = rp.reshape(1, -1, rp.shape[-1] if rp.ndim == 2 else 1)
+            if bit_depth in (8, 16):
+                not_sat = valid_pixel_mask(rp, bit_depth, low=-1.0)[0]
+                valid &= valid_pixel_mask(rp, bit_depth)[0]
+                nsat = max(nsat, int((~not_sat).sum()))
+            else:  # float data: no top code; near-black is relative (pixel_validity)
+                valid &= valid_pixel_mask(rp, bit_depth, low=0.0)[0]
+        grey = px.mean(axis=1) if px.ndim == 2 else px
+        out.append(SphereValues(grey, valid, int(nsat)))
+    return out
