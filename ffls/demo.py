@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from ffls.display.tonemap import auto_exposure  # noqa: F401  (moved to ffls.display.tonemap; kept importable here)
 from ffls.radiance.photos import load_photos
 
 DEFAULT_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
@@ -28,19 +29,6 @@ class DemoResult:
     contact_sheet: Path | None = None
     backend: str = "cpu"  # 'gpu: <renderer>' or 'cpu'
     seconds: dict = field(default_factory=dict)
-
-
-def auto_exposure(hdr: np.ndarray, key: float = 0.18) -> float:
-    """Exposure in stops that maps the log-average luminance of ``hdr`` (H, W, 3) to ``key``.
-
-    Pixels that are exactly zero (background) are ignored; an all-zero image gives 0 stops.
-    """
-    lum = 0.2126 * hdr[..., 0] + 0.7152 * hdr[..., 1] + 0.0722 * hdr[..., 2]
-    lum = lum[lum > 0]
-    if lum.size == 0:
-        return 0.0
-    log_avg = float(np.exp(np.mean(np.log(lum + 1e-12))))
-    return float(np.log2(key / log_avg))
 
 
 def _relighter(capture, lights, use_gpu):
