@@ -2,7 +2,6 @@
 working space (linear Rec.709, D65) and reported; one that cannot be converted is an error."""
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls.conventions import direction_to_latlong_uv, in_domain, latlong_directions, rotation_ypr
-from ffls.errors import FflsError, InputError
+from ffls.errors import FflsError
 from ffls.lightmaps.lightmap import lightmap_from_spec
 from ffls.display.tonemap import tonemap as tonemap_np
 from ffls.display.tonemap import to_uint8

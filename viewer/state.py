@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ffls.commands.common import parse_rotation  # one definition of --rotate for relight, render and view
+from ffls.commands.common import parse_rotation  # noqa: F401  (re-exported: one --rotate for every command)
 from ffls.relight.compress import DEFAULT_RANK, rank_range
 
 __all__ = ["Knob", "QUALITY_KNOBS", "METHODS", "TONEMAPS", "BUILTIN_MAPS", "ViewerState", "ViewInfo",

@@ -154,8 +154,6 @@ def check_rank_arg(rank, n_lights: int, flag: str = "--rank") -> None:
     from ffls.relight.compress import rank_range
 
     lo, hi = rank_range(n_lights)
-    if hi < lo:
-        raise InputError(f"{flag} {rank}: a capture of {n_lights} light cannot be compressed; leave out {flag}")
     if not lo <= int(rank) <= hi:
         raise InputError(f"{flag} {rank} is out of range: it must be in [{lo}, {hi}] for {n_lights} lights")
 
