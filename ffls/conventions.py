@@ -16,14 +16,22 @@ Rotation of a light map
     A rotation R moves the map's content: radiance that came from d now comes from R d.
     Rotating about +Z by +a degrees moves a light at azimuth phi to phi + a.
 Hemisphere
-    Captures cover the upper hemisphere (z >= 0) unless they say ``full``.
+    Captures cover the upper hemisphere (z >= 0) unless they say ``full``, or give the axis of
+    their hemisphere (``{"axis": [x, y, z]}``: the directions ``d`` with ``d . axis >= 0``; an RTI
+    dome's axis is the camera axis). :class:`Hemisphere` is the value type; every function that
+    takes a hemisphere accepts it or its JSON form (``'upper'``, ``'full'``, ``{'axis': [...]}``).
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 UP = np.array([0.0, 0.0, 1.0])
 HEMISPHERES = ("upper", "full")
+#: Camera models a capture may declare (``"camera": {"model": ...}``): OpenCV pinhole with
+#: distortion, or orthographic (parallel rays along the camera's +z; no focal length needed).
+CAMERA_MODELS = ("pinhole", "orthographic")
 
 #: world_from_camera when a capture gives none: camera x (image right) -> +X,
 #: camera y (image down) -> -Z, camera z (forward) -> +Y. The camera sits at the origin.
@@ -35,25 +43,133 @@ DEFAULT_WORLD_FROM_CAMERA = np.array(
 )
 
 
-def covered_solid_angle(hemisphere: str) -> float:
-    """Solid angle (sr) covered by a capture's lights: 2 pi for ``upper``, 4 pi for ``full``."""
-    check_hemisphere(hemisphere)
-    return 2.0 * np.pi if hemisphere == "upper" else 4.0 * np.pi
+@dataclass(frozen=True, eq=False)
+class Hemisphere:
+    """The part of the sphere of directions that a capture's lights cover.
+
+    Attributes
+    ----------
+    axis : (3,) tuple of float, unit, or None
+        The hemisphere of directions ``d`` with ``d . axis >= 0``; ``None`` is the full sphere.
+        ``(0, 0, 1)`` is the upper hemisphere (``'upper'``).
+
+    Notes
+    -----
+    Build it with :func:`as_hemisphere` (or :func:`check_hemisphere`), which also accepts the JSON
+    forms ``'upper'``, ``'full'`` and ``{'axis': [x, y, z]}``. A hemisphere compares equal to its
+    JSON form, so ``hemisphere == 'upper'`` works whichever form a caller holds.
+    """
+
+    axis: tuple | None = (0.0, 0.0, 1.0)
+
+    @property
+    def name(self) -> str:
+        """``'upper'``, ``'full'`` or ``'axis'``."""
+        if self.axis is None:
+            return "full"
+        return "upper" if self.axis == (0.0, 0.0, 1.0) else "axis"
+
+    @property
+    def solid_angle(self) -> float:
+        """Covered solid angle (sr): 4 pi for the full sphere, else 2 pi."""
+        return 4.0 * np.pi if self.axis is None else 2.0 * np.pi
+
+    def to_json(self):
+        """``'upper'``, ``'full'`` or ``{'axis': [x, y, z]}``."""
+        return self.name if self.name != "axis" else {"axis": [float(v) for v in self.axis]}
+
+    def side(self, directions) -> np.ndarray:
+        """``d . axis`` of directions (..., 3) in the fixed operation order ``(x a_x + y a_y) + z a_z``
+        (the GPU's, see ``shaders/include/cell_lookup.glsl``); the full sphere has no side (ValueError)."""
+        if self.axis is None:
+            raise ValueError("the full sphere has no axis")
+        d = np.asarray(directions, dtype=np.float64)
+        a = self.axis
+        return (d[..., 0] * a[0] + d[..., 1] * a[1]) + d[..., 2] * a[2]
+
+    def contains(self, directions) -> np.ndarray:
+        """Boolean mask (...) of directions (..., 3) inside (``d . axis >= 0``; all for ``full``)."""
+        d = np.asarray(directions)
+        if self.axis is None:
+            return np.ones(d.shape[:-1], dtype=bool)
+        if self.name == "upper":
+            return d[..., 2] >= 0.0
+        return self.side(d) >= 0.0
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Hemisphere):
+            try:
+                other = as_hemisphere(other)
+            except (ValueError, TypeError):
+                return NotImplemented
+        return self.axis == other.axis
+
+    def __hash__(self) -> int:
+        return hash(self.axis)
+
+    def __str__(self) -> str:
+        return self.name if self.name != "axis" else "axis " + ",".join(f"{v:.4g}" for v in self.axis)
 
 
-def check_hemisphere(hemisphere: str) -> str:
-    if hemisphere not in HEMISPHERES:
-        raise ValueError(f"hemisphere must be one of {HEMISPHERES}, not {hemisphere!r}")
-    return hemisphere
+UPPER = Hemisphere((0.0, 0.0, 1.0))
+FULL = Hemisphere(None)
 
 
-def in_domain(directions: np.ndarray, hemisphere: str) -> np.ndarray:
-    """Boolean mask of directions (..., 3) inside the covered domain (z >= 0 for ``upper``)."""
-    check_hemisphere(hemisphere)
-    d = np.asarray(directions)
-    if hemisphere == "full":
-        return np.ones(d.shape[:-1], dtype=bool)
-    return d[..., 2] >= 0.0
+def as_hemisphere(value) -> Hemisphere:
+    """A :class:`Hemisphere` from itself or its JSON form.
+
+    Parameters
+    ----------
+    value : Hemisphere, {'upper', 'full'} or dict
+        ``{'axis': [x, y, z]}`` (any non-zero finite length; normalised here).
+
+    Returns
+    -------
+    Hemisphere
+
+    Raises
+    ------
+    ValueError
+        Anything else, naming the accepted forms.
+    """
+    if isinstance(value, Hemisphere):
+        return value
+    if isinstance(value, str):
+        if value == "upper":
+            return UPPER
+        if value == "full":
+            return FULL
+    elif isinstance(value, dict) and set(value) == {"axis"}:
+        a = value["axis"]
+        ok = isinstance(a, (list, tuple, np.ndarray)) and len(a) == 3 and not any(isinstance(v, (bool, str)) for v in a)
+        if ok:
+            try:
+                v = np.array(a, dtype=np.float64)
+            except (TypeError, ValueError):
+                ok = False
+        if ok and np.all(np.isfinite(v)) and np.linalg.norm(v) > 0:
+            v = v / np.linalg.norm(v)
+            v = v + 0.0  # -0.0 -> 0.0
+            if np.allclose(v, [0.0, 0.0, 1.0], rtol=0, atol=1e-12):
+                return UPPER
+            return Hemisphere(tuple(float(x) for x in v))
+        raise ValueError(f"hemisphere axis must be three finite numbers, not all zero, not {a!r}")
+    raise ValueError(f"hemisphere must be one of {HEMISPHERES} or {{'axis': [x, y, z]}}, not {value!r}")
+
+
+def covered_solid_angle(hemisphere) -> float:
+    """Solid angle (sr) covered by a capture's lights: 4 pi for ``full``, else 2 pi."""
+    return check_hemisphere(hemisphere).solid_angle
+
+
+def check_hemisphere(hemisphere) -> Hemisphere:
+    """The :class:`Hemisphere` of ``hemisphere`` (see :func:`as_hemisphere`); ValueError otherwise."""
+    return as_hemisphere(hemisphere)
+
+
+def in_domain(directions: np.ndarray, hemisphere) -> np.ndarray:
+    """Boolean mask of directions (..., 3) inside the covered domain (``d . axis >= 0``; z >= 0 for ``upper``)."""
+    return check_hemisphere(hemisphere).contains(directions)
 
 
 # ----------------------------------------------------------------------------- directions

@@ -344,6 +344,23 @@ def test_cli_frames_screenshot(capture_dir, app, tmp_path, capsys):
     assert main(["view", str(capture_dir), "--headless", "--frames", "0"]) == 2
 
 
+@pytest.mark.viewer
+def test_cli_on_a_12_light_capture_uses_a_valid_default_rank(app, tmp_path, capsys):
+    """Issue 9: the default rank was n on a 12-light capture (a crash); it is min(16, n - 1) = 11."""
+    from ffls.cli import main
+    from ffls.synth.scene import write_synthetic_capture
+
+    cap = tmp_path / "cap12"
+    write_synthetic_capture(cap, n_lights=12, resolution=32, seed=4, progress=False)
+    rc = main(["view", str(cap), "--headless", "--frames", "1", "--size", "320x200", "--probe", "paper"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    if "rank" in text:  # a CPU rasteriser: the compressed basis ('auto')
+        assert "rank 11" in text
+    app.step(dt=0.0)  # the module's window still works
+    assert app.ctx.error == "GL_NO_ERROR"
+
+
 def test_auto_method_is_full_on_a_gpu_and_compressed_on_llvmpipe():
     from viewer.renderer import resolve_method
 

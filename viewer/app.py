@@ -26,11 +26,12 @@ from viewer.state import ViewerState
 __all__ = ["ViewerApp", "open_capture"]
 
 
-def open_capture(folder, lights=None):
-    """``(capture, lights)`` of a capture folder (:func:`ffls.io.capture.load_capture_and_lights`)."""
+def open_capture(folder, lights=None, lights_map=None):
+    """``(capture, lights)`` of a capture folder (:func:`ffls.io.capture.load_capture_and_lights`):
+    ``lights`` a lights.json or .lp file, possibly another capture's (``lights_map``)."""
     from ffls.io.capture import load_capture_and_lights
 
-    return load_capture_and_lights(folder, lights)
+    return load_capture_and_lights(folder, lights, lights_map)
 
 
 class ViewerApp:
@@ -253,7 +254,10 @@ class ViewerApp:
             self.save_screenshot(screenshot)
 
     def auto_expose(self, key: float = 0.18) -> float:
-        """Set ``state.exposure`` so that the current relit image's log-average luminance maps to ``key``.
+        """Set ``state.exposure`` so that the object's log-average luminance in the current relit image maps to ``key``.
+
+        The object is the mask when the viewer has one, else the bright part of the image (the
+        black background is not metered; :func:`ffls.display.tonemap.object_pixels`).
 
         Returns
         -------
@@ -264,7 +268,7 @@ class ViewerApp:
 
         self._make_current()
         self.renderer.update(self.state)
-        self.state.exposure = round(auto_exposure(self.renderer.read_hdr(), key), 2)
+        self.state.exposure = round(auto_exposure(self.renderer.read_hdr(), key, mask=self.renderer.mask), 2)
         return self.state.exposure
 
     def summary(self, skip: int = 1) -> dict:

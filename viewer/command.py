@@ -24,20 +24,23 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
+    from ffls.commands.common import add_lights_arguments, add_rotation_arguments, exposure_arg
+
     p.add_argument("capture", help="capture folder (with capture.json)")
-    p.add_argument("--lights", default=None, help="lights.json (default: CAPTURE/lights.json)")
+    add_lights_arguments(p)
     p.add_argument("--probe", default="courtyard", metavar="MAP",
                    help="light map: a file (.exr/.hdr) or a built-in name (default courtyard)")
-    p.add_argument("--rotate", default="0,0,0", metavar="YAW,PITCH,ROLL", help="initial rotation, degrees")
+    add_rotation_arguments(p, default="0,0,0")
     p.add_argument("--auto-rotate", type=float, default=None, metavar="DEG_PER_S",
                    help="start auto-rotating the yaw at this speed")
-    p.add_argument("--exposure", type=float, default=None, metavar="EV",
-                   help="exposure in stops (default: automatic for the first frame)")
+    p.add_argument("--exposure", type=exposure_arg, default="auto", metavar="EV|auto",
+                   help="exposure in stops (default auto: the first frame metered on the object, the --mask when "
+                        "given)")
     p.add_argument("--tonemap", default="aces", choices=("srgb", "reinhard", "aces"))
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
     p.add_argument("--rank", type=int, default=None, metavar="K",
-                   help="compressed basis of K eigen-images; 0 = full float16 basis (default: full on a "
-                        "GPU, rank 16 on a CPU rasteriser such as llvmpipe)")
+                   help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
+                        "(default: full on a GPU, rank min(16, n-1) on a CPU rasteriser such as llvmpipe)")
     p.add_argument("--mask", default=None, metavar="FILE",
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
@@ -52,17 +55,18 @@ def add_arguments(p):
 
 def build_state(args):
     """The initial :class:`viewer.state.ViewerState` from the parsed arguments."""
+    from ffls.commands.common import rotation_angles
     from ffls.errors import InputError
-    from viewer.state import ViewerState, parse_rotation, parse_size
+    from viewer.state import ViewerState, parse_size
 
     try:
         size = parse_size(args.size)
-        yaw, pitch, roll = parse_rotation(args.rotate)
     except ValueError as e:
         raise InputError(str(e)) from None
+    yaw, pitch, roll = rotation_angles(args)
     st = ViewerState(yaw=yaw, pitch=pitch, roll=roll, tonemap=args.tonemap, lightmap=args.probe,
                      window_size=size, fullscreen=bool(args.fullscreen))
-    if args.exposure is not None:
+    if args.exposure != "auto":
         st.exposure = float(args.exposure)
     if args.auto_rotate is not None:
         st.auto_rotate, st.auto_rotate_speed = True, float(args.auto_rotate)
@@ -76,6 +80,22 @@ def build_state(args):
     return st
 
 
+def _check_and_report(args, capture, lights) -> None:
+    """``--rank`` against the accepted lights (0 = full basis), and the informational lines
+    (lights matched by order or map, colour conversions, coverage warnings)."""
+    from ffls.commands.common import check_rank_arg, print_notes
+    from ffls.io.images import colour_summary
+    from ffls.weights.voronoi import coverage_warnings
+
+    idx, dirs = lights.accepted()
+    if args.rank:
+        check_rank_arg(args.rank, len(idx))
+    notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
+    if len(idx):
+        notes += coverage_warnings(dirs, capture.hemisphere)
+    print_notes(NAME, *notes)
+
+
 def run(args) -> int:
     from ffls.errors import InputError
     from viewer.app import ViewerApp, open_capture
@@ -85,10 +105,12 @@ def run(args) -> int:
     if args.benchmark and args.frames is None:
         raise InputError("--benchmark needs --frames N")
     st = build_state(args)
-    capture, lights = open_capture(args.capture, args.lights)
-    app = ViewerApp(capture, lights, st, headless=True if args.headless else None, timing=args.benchmark)
+    capture, lights = open_capture(args.capture, args.lights, getattr(args, "lights_map", None))
+    _check_and_report(args, capture, lights)
+    app = ViewerApp(capture, lights, st, headless=True if args.headless else None, timing=args.benchmark,
+                    mask_path=args.mask)
     try:
-        if args.exposure is None:  # expose the first frame for its log-average luminance
+        if args.exposure == "auto":  # expose the first frame for the object's log-average luminance
             app.auto_expose()
         if args.benchmark:
             st.auto_rotate = True

@@ -22,12 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.conventions import direction_to_latlong_uv, latlong_directions, rotation_ypr
-from ffls.errors import FflsError, InputError
+from ffls.conventions import direction_to_latlong_uv, in_domain, latlong_directions, rotation_ypr
+from ffls.errors import FflsError
 from ffls.lightmaps.lightmap import lightmap_from_spec
 from ffls.display.tonemap import tonemap as tonemap_np
 from ffls.display.tonemap import auto_exposure, to_uint8
 from ffls.radiance.photos import load_photo
+from ffls.relight.compress import DEFAULT_RANK, default_rank
 
 from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo
 
@@ -46,22 +47,19 @@ def load_mask(capture, path=None, size=None) -> np.ndarray | None:
         ``capture.extra['mask']`` (a file relative to the capture folder) is used when ``path``
         is None.
     path : path-like, optional
-        An explicit mask image: white (> 0.5 after reading, any channel) is the object.
+        An explicit mask image: white (> 0.5 after reading, any channel) is the object
+        (:func:`ffls.io.images.read_mask`).
     size : (int, int), optional
         Expected (W, H); a mask of another size raises :class:`ffls.errors.InputError`.
     """
-    from ffls.io.images import read_image
+    from ffls.io.images import read_mask
 
     if path is None:
         rel = (capture.extra or {}).get("mask") if capture is not None else None
         if not rel:
             return None
         path = Path(capture.folder) / str(rel)
-    data = np.asarray(read_image(path).pixels, dtype=np.float64)  # integer files already scaled to [0, 1]
-    m = (data.max(axis=-1) if data.ndim == 3 else data) > 0.5
-    if size is not None and (m.shape[1], m.shape[0]) != tuple(size):
-        raise InputError(f"mask is {m.shape[1]}x{m.shape[0]}, the images are {size[0]}x{size[1]}", path)
-    return m
+    return read_mask(path, size=size) > 0.5
 
 
 def resolve_method(method: str, renderer: str) -> str:
@@ -122,6 +120,7 @@ class Renderer:
     """
 
     def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = ""):
+        self.mask = mask  # metered by automatic exposure (ffls.display.tonemap.auto_exposure)
         from ffls.weights.voronoi import bake_cells
 
         self.ctx = ctx
@@ -153,7 +152,7 @@ class Renderer:
         # the world-frame geometry of the preview: texel directions, cells, cell borders, light uv
         d = latlong_directions(2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT)
         self._preview_dirs = d
-        self._below = d[..., 2] < 0
+        self._below = ~in_domain(d, self.hemisphere)  # outside the capture's hemisphere
         cells = bake_cells(self.directions, self.hemisphere, 256)
         cid = cells.assign(d.reshape(-1, 3)).reshape(d.shape[:2])
         border = np.zeros(cid.shape, dtype=bool)
@@ -184,7 +183,7 @@ class Renderer:
         method = resolve_method(q.get("method", "auto"), self.info.renderer)
         kw = {"cell_res": int(q.get("cell_res", 256))}
         if method == "compressed":
-            kw.update(dtype="f16", rank=int(min(int(q.get("rank", 32)), len(self.directions))))
+            kw.update(dtype="f16", rank=default_rank(len(self.directions), int(q.get("rank", DEFAULT_RANK))))
         else:
             kw.update(dtype="f32" if method.endswith("f32") else "f16")
         t0 = time.perf_counter()
@@ -295,7 +294,7 @@ class Renderer:
             ii = np.clip((u * w).astype(int), 0, w - 1)
             jj = np.clip((v * h).astype(int), 0, h - 1)
             img = self._preview_latlong[jj, ii]  # tone-mapped once per map (Reinhard, exposed for its median)
-            if self.hemisphere == "upper":  # dim what the capture does not cover
+            if self.hemisphere != "full":  # dim what the capture does not cover
                 img[self._below] = img[self._below] // 3
         img[self._border] = (230, 230, 230)
         return img
@@ -307,6 +306,7 @@ class Renderer:
             return
         if self._photo_key == sel:
             return
+
         img = load_photo(self.capture, self.image_index[sel])
         disp = to_uint8(tonemap_np(img, auto_exposure(img), "srgb"))
         rgba = np.concatenate([disp, np.full(disp.shape[:2] + (1,), 255, np.uint8)], axis=-1)

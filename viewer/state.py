@@ -15,11 +15,13 @@ Nothing here imports a GL or window module.
 """
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from ffls.commands.common import parse_rotation  # noqa: F401  (re-exported: one --rotate for every command)
+from ffls.relight.compress import DEFAULT_RANK, rank_range
 
 __all__ = ["Knob", "QUALITY_KNOBS", "METHODS", "TONEMAPS", "BUILTIN_MAPS", "ViewerState", "ViewInfo",
            "TurntableJob", "default_quality", "parse_size", "parse_rotation"]
@@ -80,7 +82,7 @@ QUALITY_KNOBS: tuple[Knob, ...] = (
     Knob("method", "method", "choice", "auto", choices=METHODS,
          help="auto: full f16 on a GPU, compressed on a CPU rasteriser; compressed: mean + K "
               "eigen-images (fast); full: every basis image, float16 or float32"),
-    Knob("rank", "rank K", "int", 16, lo=1, hi=128, enabled_when=("method", ("auto", "compressed")),
+    Knob("rank", "rank K", "int", DEFAULT_RANK, lo=1, hi=128, enabled_when=("method", ("auto", "compressed")),
          help="eigen-images of the compressed basis (computed once, saved in the capture folder)"),
     Knob("cell_res", "cell texture", "choice", "256", choices=("128", "256", "512"),
          help="resolution of the Voronoi cell-index texture of pass 1"),
@@ -104,17 +106,6 @@ def parse_size(text: str) -> tuple[int, int]:
     if w < 1 or h < 1:
         raise ValueError(f"size must be positive, not {text!r}")
     return w, h
-
-
-def parse_rotation(text: str) -> tuple[float, float, float]:
-    """``'YAW,PITCH,ROLL'`` (degrees; missing trailing values are 0) -> three floats."""
-    try:
-        v = [float(x) for x in str(text).split(",")]
-    except ValueError:
-        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}") from None
-    if not 1 <= len(v) <= 3 or not all(math.isfinite(x) for x in v):
-        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}")
-    return tuple(v + [0.0] * (3 - len(v)))
 
 
 @dataclass
@@ -235,7 +226,7 @@ class ViewerState:
         """Slider range of ``knob`` for a capture of ``n_lights`` accepted lights."""
         hi = knob.hi
         if knob.key == "rank" and n_lights:
-            hi = min(hi, n_lights)
+            hi = min(hi, rank_range(n_lights)[1])  # K <= n - 1 (ffls.relight.compress.rank_range)
         return knob.lo, hi
 
     def knob_enabled(self, knob: Knob) -> bool:

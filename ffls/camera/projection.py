@@ -1,14 +1,20 @@
-"""The pinhole camera with OpenCV's distortion model: viewing rays and projection.
+"""Camera models: the pinhole camera with OpenCV's distortion model, and the orthographic camera.
 
 Conventions (GUIDE section 1): x right, y down, z forward; ``K`` is 3x3 and ``dist`` is OpenCV's
 distortion vector. Pixel centres are at integer coordinates.
+
+The orthographic camera (``"camera": {"model": "orthographic"}`` in ``capture.json``: a long
+lens, or a ball seen from far away) has parallel viewing rays along its +z axis; directions need
+no focal length and no pixel scale.
 """
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-__all__ = ["camera_arrays", "pixel_rays", "project_points"]
+from ffls.conventions import CAMERA_MODELS
+
+__all__ = ["CAMERA_MODELS", "camera_arrays", "pixel_rays", "orthographic_rays", "camera_rays", "project_points"]
 
 
 def camera_arrays(K, dist=None) -> tuple[np.ndarray, np.ndarray]:
@@ -44,6 +50,48 @@ def pixel_rays(pixels, K, dist=None) -> np.ndarray:
         xy = (p.reshape(-1, 2) - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T
     r = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
     return r / np.linalg.norm(r, axis=1, keepdims=True)
+
+
+def orthographic_rays(pixels) -> np.ndarray:
+    """Unit viewing rays (camera frame) of an orthographic camera: every ray is +z.
+
+    Parameters
+    ----------
+    pixels : (n, 2) float
+        Pixel coordinates (only their count matters: the rays are parallel).
+
+    Returns
+    -------
+    (n, 3) float64, every row ``(0, 0, 1)``.
+    """
+    p = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    r = np.zeros((p.shape[0], 3))
+    r[:, 2] = 1.0
+    return r
+
+
+def camera_rays(pixels, model: str = "pinhole", K=None, dist=None) -> np.ndarray:
+    """Unit viewing rays (camera frame) through image points under a capture's camera model.
+
+    Parameters
+    ----------
+    pixels : (n, 2) float
+    model : {'pinhole', 'orthographic'}
+        ``capture.camera_model``.
+    K, dist
+        Pinhole intrinsics (required for ``'pinhole'``, ignored for ``'orthographic'``).
+
+    Returns
+    -------
+    (n, 3) float64, unit, z > 0.
+    """
+    if model == "orthographic":
+        return orthographic_rays(pixels)
+    if model != "pinhole":
+        raise ValueError(f"camera model must be one of {CAMERA_MODELS}, not {model!r}")
+    if K is None:
+        raise ValueError("a pinhole camera needs K")
+    return pixel_rays(pixels, K, dist)
 
 
 def project_points(points_cam, K, dist=None) -> np.ndarray:

@@ -24,6 +24,8 @@ def add_arguments(p):
     p.add_argument("--plot", default=None, metavar="PLOT.png",
                    help="draw the accepted directions and their Voronoi cells on the hemisphere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--lp", default=None, metavar="OUT.lp",
+                   help="also write the accepted lights as an RTI .lp file (camera frame; docs/formats.md)")
 
 
 def summary(lights) -> str:
@@ -121,4 +123,29 @@ def run(args) -> int:
     if args.plot:
         plot_lights(lights, args.plot, hemisphere=cap.hemisphere)
         print(f"wrote {args.plot}")
+    if args.lp:
+        print(export_lp(lights, cap, args.lp))
+    idx, dirs = lights.accepted()
+    if len(idx):
+        from ffls.commands.common import print_notes
+        from ffls.weights.voronoi import coverage_warnings
+
+        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere))
     return 0
+
+
+def export_lp(lights, capture, path) -> str:
+    """Write the accepted ``lights`` of ``capture`` as an RTI ``.lp`` file; returns the line to print.
+
+    Directions go to the ``.lp`` frame with the capture's ``world_from_camera``
+    (:func:`ffls.io.capture.world_to_lp`); rejected lights are left out (``.lp`` has no status).
+    """
+    from ffls.errors import InputError
+    from ffls.io.capture import world_to_lp, write_lp
+
+    idx, dirs = lights.accepted()
+    if not len(idx):
+        raise InputError("no accepted light to write", path)
+    write_lp(path, [lights.image_names[i] for i in idx], world_to_lp(dirs, capture.world_from_camera))
+    left = len(lights) - len(idx)
+    return f"wrote {path} ({len(idx)} lights" + (f"; {left} rejected left out)" if left else ")")

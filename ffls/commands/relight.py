@@ -3,7 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ffls.commands.common import add_capture_arguments
+from ffls.commands.common import (add_capture_arguments, add_mask_argument, add_rotation_arguments, check_mask_size,
+                                  exposure_arg, load_relight_inputs, rotation_from_args, write_output)
 
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
@@ -17,34 +18,32 @@ OUTPUT_SUFFIXES = (".exr", ".png")
 
 def add_arguments(p):
     add_capture_arguments(p)
-    p.add_argument("--rotate-z", type=float, default=0.0, metavar="DEG",
-                   help="rotate the light map about +Z by DEG degrees (counter-clockwise from above)")
-    p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops for PNG output")
+    add_rotation_arguments(p)
+    p.add_argument("--exposure", type=exposure_arg, default=0.0, metavar="EV|auto",
+                   help="exposure in stops for PNG output; auto meters the object (the --mask when given)")
+    add_mask_argument(p)
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
     p.add_argument("--cells-res", type=int, default=256, help="cell-texture resolution (0: exact k-d tree)")
     p.add_argument("-o", "--out", required=True, help="output image, .exr or .png")
 
 
 def run(args) -> int:
-    from ffls.io.capture import load_capture_and_lights
-    from ffls.conventions import rotation_z
     from ffls.errors import InputError
-    from ffls.io.images import write_exr, write_png
-    from ffls.lightmaps.lightmap import lightmap_from_spec
     from ffls.relight.cpu import relight_capture
-    from ffls.display.tonemap import to_uint8, tonemap
+    from ffls.display.tonemap import auto_exposure, to_uint8, tonemap
 
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
-    capture, lights = load_capture_and_lights(args.capture, args.lights)
-    lightmap = lightmap_from_spec(args.probe, layout=args.layout)
-    image, w = relight_capture(capture, lights, lightmap, rotation=rotation_z(args.rotate_z),
+    capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
+    image, w = relight_capture(capture, lights, lightmap, rotation=rotation_from_args(args),
                                cells_res=args.cells_res or None)
-    if out.suffix.lower() == ".exr":
-        write_exr(out, image)
-    else:
-        write_png(out, to_uint8(tonemap(image, exposure=args.exposure, method=args.tonemap)))
+    check_mask_size(mask, image.shape)
+    display = None
+    if out.suffix.lower() != ".exr":
+        exposure = auto_exposure(image, mask=mask) if args.exposure == "auto" else args.exposure
+        display = to_uint8(tonemap(image, exposure=exposure, method=args.tonemap))
+    write_output(out, image, display, mask)
     kept = w.total_power.sum() - w.dropped_power.sum()
     frac = kept / w.total_power.sum() if w.total_power.sum() > 0 else 1.0
     print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.commands.common import add_capture_arguments
+from ffls.commands.common import (add_capture_arguments, add_mask_argument, add_rotation_arguments, check_mask_size,
+                                  exposure_arg, load_relight_inputs, rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -28,15 +29,14 @@ STILL_SUFFIXES = (".exr", ".png")
 
 def add_arguments(p):
     add_capture_arguments(p)
-    rot = p.add_mutually_exclusive_group()
-    rot.add_argument("--rotate-z", type=float, default=None, metavar="DEG",
-                     help="rotate the light map about +Z by DEG degrees (counter-clockwise from above)")
-    rot.add_argument("--rotate", default=None, metavar="YAW,PITCH,ROLL",
-                     help="rotate the light map by yaw (about +Z), pitch (+Y), roll (+X), degrees")
-    p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="exposure in stops (PNG/video)")
+    add_rotation_arguments(p)
+    p.add_argument("--exposure", type=exposure_arg, default=0.0, metavar="EV|auto",
+                   help="exposure in stops (PNG/video); auto meters the object (the --mask when given)")
+    add_mask_argument(p)
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve (PNG/video)")
     p.add_argument("--rank", type=int, default=None, metavar="K",
-                   help="use a compressed basis of K eigen-images (computed once, saved in the capture folder)")
+                   help="use a compressed basis of K eigen-images, 1 <= K <= n-1 for n lights (computed once, "
+                        "saved in the capture folder)")
     p.add_argument("--dtype", default="f16", choices=("f16", "f32"), help="GPU storage of the basis")
     p.add_argument("--cells-res", type=int, default=256, help="cell-texture resolution")
     p.add_argument("--turntable", type=int, default=None, metavar="N",
@@ -47,17 +47,8 @@ def add_arguments(p):
 
 
 def parse_rotation(args) -> np.ndarray:
-    """The light-map rotation (3, 3) from ``--rotate-z`` or ``--rotate``."""
-    from ffls.conventions import rotation_ypr, rotation_z
-    from ffls.errors import InputError
-
-    if args.rotate is not None:
-        try:
-            yaw, pitch, roll = (float(v) for v in args.rotate.split(","))
-        except ValueError:
-            raise InputError(f"--rotate wants YAW,PITCH,ROLL in degrees, not {args.rotate!r}") from None
-        return rotation_ypr(yaw, pitch, roll)
-    return rotation_z(args.rotate_z or 0.0)
+    """The light-map rotation (3, 3) from ``--rotate-z`` or ``--rotate`` (:func:`ffls.commands.common.rotation_from_args`)."""
+    return rotation_from_args(args)
 
 
 def _make_renderer(args, capture, lights):
@@ -78,16 +69,23 @@ def _make_renderer(args, capture, lights):
     return eng, ctx
 
 
-def _write_still(out: Path, r, args):
-    from ffls.io.images import write_exr, write_png
+def _auto_exposure(r, args, mask) -> float:
+    """``--exposure``: the number, or (``auto``) the metering of the current render's object."""
+    if args.exposure != "auto":
+        return args.exposure
+    from ffls.display.tonemap import auto_exposure
 
-    if out.suffix.lower() == ".exr":
-        write_exr(out, r.read_hdr())
-    else:
-        write_png(out, r.read_display())
+    r.render(0.0, args.tonemap)
+    hdr = r.read_hdr()
+    check_mask_size(mask, hdr.shape)
+    return auto_exposure(hdr, mask=mask)
 
 
-def _write_turntable(out: Path, r, R0, args):
+def _write_still(out: Path, r, args, mask=None):
+    write_output(out, r.read_hdr(), None if out.suffix.lower() == ".exr" else r.read_display(), mask)
+
+
+def _write_turntable(out: Path, r, R0, args, exposure: float = 0.0):
     from tqdm import tqdm
 
     from ffls.conventions import rotation_z
@@ -101,32 +99,29 @@ def _write_turntable(out: Path, r, R0, args):
     with FrameWriter(out, fps=args.fps) as sink:
         for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame"):
             r.set_rotation(R)
-            r.render(args.exposure, args.tonemap)
+            r.render(exposure, args.tonemap)
             sink.write(r.read_display())
     return sink.describe()
 
 
 def run(args) -> int:
-    from ffls.io.capture import load_capture_and_lights
     from ffls.errors import InputError
 
     out = Path(args.out)
     if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
-    R0 = parse_rotation(args)
-    capture, lights = load_capture_and_lights(args.capture, args.lights)
-    from ffls.lightmaps.lightmap import lightmap_from_spec
-
-    lightmap = lightmap_from_spec(args.probe, args.layout)
+    R0 = rotation_from_args(args)
+    capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
     r, ctx = _make_renderer(args, capture, lights)
     try:
         r.set_lightmap(lightmap)
+        r.set_rotation(R0)
+        exposure = _auto_exposure(r, args, mask)  # a turntable keeps the first frame's
         if args.turntable is not None:
-            what = _write_turntable(out, r, R0, args)
+            what = _write_turntable(out, r, R0, args, exposure)
         else:
-            r.set_rotation(R0)
-            r.render(args.exposure, args.tonemap)
-            _write_still(out, r, args)
+            r.render(exposure, args.tonemap)
+            _write_still(out, r, args, mask)
             what = str(out)
         path = "cpu reference" if args.cpu else f"gpu {getattr(r, 'basis_info', {}).get('dtype', '')}"
         print(f"ffls render: {what} ({path}{'' if args.rank is None else f', rank {args.rank}'})")

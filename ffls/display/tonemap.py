@@ -13,6 +13,12 @@ Everything inside ffls is linear radiance; this module turns it into display val
 
 NaN and Inf are **not** silently replaced: :func:`tonemap` assumes finite input (NaN stays NaN)
 and :func:`to_uint8` raises ``ValueError`` on non-finite values.
+
+Automatic exposure (:func:`auto_exposure`) maps the log-average luminance of the *object* to a
+key (Reinhard et al. 2002, section 3.1): the object is the mask when one is given, else the
+bright class of an Otsu split of the log luminance (N. Otsu, "A threshold selection method from
+gray-level histograms", IEEE SMC 9(1), 1979, through OpenCV) when it stands well clear of a dark
+background, else every pixel above zero.
 """
 from __future__ import annotations
 
@@ -22,6 +28,11 @@ from ffls.radiance.encoding import float_array, srgb_encode
 
 __all__ = [
     "METHODS",
+    "LUMINANCE_WEIGHTS",
+    "BACKGROUND_GAP_STOPS",
+    "luminance",
+    "object_pixels",
+    "auto_exposure",
     "apply_exposure",
     "reinhard",
     "aces",
@@ -32,6 +43,89 @@ __all__ = [
 
 #: Tone curves accepted by :func:`tonemap`.
 METHODS = ("srgb", "reinhard", "aces")
+#: Rec.709 / sRGB luminance of linear RGB (the working space, GUIDE section 1).
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+#: Without a mask, the dark class of the Otsu split is background when its mean log luminance is
+#: at least this many stops below the bright class's (a black cloth or an empty render
+#: background is 5 or more stops below a lit object; shading within an object rarely splits so).
+BACKGROUND_GAP_STOPS = 4.0
+
+
+def luminance(rgb) -> np.ndarray:
+    """Rec.709 luminance (...) float64 of linear RGB (..., 3)."""
+    x = np.asarray(rgb, dtype=np.float64)
+    return (LUMINANCE_WEIGHTS[0] * x[..., 0] + LUMINANCE_WEIGHTS[1] * x[..., 1]) + LUMINANCE_WEIGHTS[2] * x[..., 2]
+
+
+def object_pixels(hdr, mask=None) -> np.ndarray:
+    """The pixels that :func:`auto_exposure` meters: the object, not the background.
+
+    Parameters
+    ----------
+    hdr : (H, W, 3) array_like
+        Linear radiance.
+    mask : (H, W) array_like, optional
+        Object mask: coverage in [0, 1] or bool; pixels with mask > 0.5 are the object.
+
+    Returns
+    -------
+    (H, W) bool
+        Pixels with finite positive luminance that are inside the mask; without a mask, those
+        of the bright class of an Otsu split of log2 luminance (256 bins between its minimum
+        and maximum) when the two classes' mean log luminances differ by at least
+        :data:`BACKGROUND_GAP_STOPS`, else all of them.
+    """
+    import cv2
+
+    lum = luminance(hdr)
+    ok = np.isfinite(lum) & (lum > 0)
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != lum.shape:
+            raise ValueError(f"mask of shape {m.shape} does not fit an image of shape {lum.shape}")
+        return ok & (m.astype(np.float64) > 0.5)
+    if np.count_nonzero(ok) < 2:
+        return ok
+    lg = np.log2(lum[ok])
+    lo, hi = float(lg.min()), float(lg.max())
+    if hi - lo < BACKGROUND_GAP_STOPS:
+        return ok
+    q = np.rint((lg - lo) / (hi - lo) * 255).astype(np.uint8).reshape(-1, 1)
+    t, _ = cv2.threshold(q, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    bright = q[:, 0] > t
+    if not bright.any() or bright.all() or lg[bright].mean() - lg[~bright].mean() < BACKGROUND_GAP_STOPS:
+        return ok
+    out = np.zeros_like(ok)
+    out[ok] = bright
+    return out
+
+
+def auto_exposure(hdr, key: float = 0.18, mask=None) -> float:
+    """Exposure in stops that maps the log-average luminance of the object in ``hdr`` to ``key``.
+
+    Parameters
+    ----------
+    hdr : (H, W, 3) array_like
+        Linear radiance.
+    key : float
+        Target log-average luminance (0.18: middle grey).
+    mask : (H, W) array_like, optional
+        Object mask (> 0.5 is the object; ``--mask``). Without one the dark background is left
+        out as :func:`object_pixels` says.
+
+    Returns
+    -------
+    float
+        Stops (0 when no pixel qualifies, e.g. an all-zero image).
+    """
+    hdr = np.asarray(hdr)
+    sel = object_pixels(hdr, mask)
+    if not sel.any():
+        return 0.0
+    lum = luminance(hdr)[sel]
+    log_avg = float(np.exp(np.mean(np.log(lum + 1e-12))))
+    return float(np.log2(key / log_avg))
+
 
 def apply_exposure(rgb, stops: float) -> np.ndarray:
     """Scale linear values by ``2 ** stops``.

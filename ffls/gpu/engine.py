@@ -45,7 +45,7 @@ class Engine:
         Linear basis images, finite; row 0 is the top row.
     directions : (n, 3) float array
         Unit light directions (world frame) of the basis images.
-    hemisphere : {'upper', 'full'}
+    hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
     dtype : {'f16', 'f32'}
         GPU storage of the basis (float16 uses a checked per-dataset scale).
     rank : int, optional
@@ -73,7 +73,7 @@ class Engine:
     def __init__(self, ctx, basis, directions, hemisphere: str = "upper", *, dtype: str = "f16",
                  rank: int | None = None, cell_res: int = 256, compressed=None, method: str = DEFAULT_METHOD,
                  max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, path=None):
-        check_hemisphere(hemisphere)
+        hemisphere = check_hemisphere(hemisphere)
         basis = np.asarray(basis)
         d = np.asarray(directions, dtype=np.float64)
         if basis.ndim != 4 or basis.shape[-1] != 3:

@@ -62,8 +62,10 @@ class CellIntegrator:
         OpenGL 4.3+ context (compute shaders, SSBOs, float64 in shaders).
     directions : (n, 3) array_like
         Light directions (the ones ``cells`` was baked from; normalised here).
-    hemisphere : {'upper', 'full'}
-        For ``'upper'`` texels whose rotated direction has ``z < 0`` are dropped and counted.
+    hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
+        Texels whose rotated direction is outside (``z < 0`` for ``'upper'``, ``d . axis < 0``
+        for an axis hemisphere; the ``HEMI_AXIS`` define and the ``hemi_axis`` uniform) are
+        dropped and counted.
     cells : ffls.weights.voronoi.CellTexture
         Candidate texture baked from ``directions`` for ``hemisphere``.
     method : {'auto', 'blend', 'atomic', 'sort'}
@@ -79,8 +81,8 @@ class CellIntegrator:
         ``radiance * solid_angle`` summed over the light map (float64, CPU).
     """
 
-    def __init__(self, ctx, directions, hemisphere: str, cells, method: str = "auto"):
-        check_hemisphere(hemisphere)
+    def __init__(self, ctx, directions, hemisphere, cells, method: str = "auto"):
+        hemisphere = check_hemisphere(hemisphere)
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         d = d / np.linalg.norm(d, axis=1, keepdims=True)
         if cells.hemisphere != hemisphere:
@@ -100,6 +102,8 @@ class CellIntegrator:
         self._defines = {"N_LIGHTS": self.n, "CELL_RES": int(cells.res), "CELL_K": int(cells.k)}
         if hemisphere == "upper":
             self._defines["HEMI_UPPER"] = 1
+        elif hemisphere.axis is not None:
+            self._defines["HEMI_AXIS"] = 1
         self._max_ssbo = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or (1 << 27))
         self._lights = ctx.buffer(np.ascontiguousarray(cells.directions, dtype=np.float64).tobytes())
         cand = np.ascontiguousarray(cells.candidates, dtype=np.int32)
@@ -153,6 +157,8 @@ class CellIntegrator:
         prog["R"].write(np.ascontiguousarray(np.asarray(R, dtype=np.float64).T).tobytes())
         if "n_texels" in prog:
             prog["n_texels"].value = self.m
+        if "hemi_axis" in prog:
+            prog["hemi_axis"].write(np.asarray(self.hemisphere.axis, dtype=np.float64).tobytes())
         self._tdir.bind_to_storage_buffer(1)
         self._tpow.bind_to_storage_buffer(2)
         self._lights.bind_to_storage_buffer(3)

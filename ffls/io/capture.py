@@ -37,6 +37,9 @@ __all__ = [
     "lp_to_world",
     "world_to_lp",
     "lights_from_lp",
+    "load_lights_any",
+    "parse_lights_map",
+    "load_capture_and_lights",
     "UNIT_TOLERANCE",
 ]
 
@@ -158,7 +161,12 @@ class Capture:
         Radius of the calibration spheres in world units.
     scene_center : (3,) float64 ndarray
         World origin of the light directions (zeros when absent).
-    hemisphere : {'upper', 'full'}
+    hemisphere : ffls.conventions.Hemisphere
+        ``'upper'`` (default), ``'full'`` or ``{"axis": [x, y, z]}`` in the file; compares equal
+        to those forms.
+    camera_model : {'pinhole', 'orthographic'}
+        ``camera.model``; an orthographic camera has parallel rays along its +z and no ``K``
+        (:func:`ffls.camera.projection.camera_rays`).
     spheres : list of dict
         Sphere hints: ``{'center': [x, y, z]}`` or ``{'center_px': [u, v], 'radius_px': r}``.
     image_size : (int, int) or None
@@ -180,15 +188,19 @@ class Capture:
     world_from_camera_is_default: bool = True
     sphere_radius: float | None = None
     scene_center: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    hemisphere: str = "upper"
+    hemisphere: object = "upper"
     spheres: list = field(default_factory=list)
     image_size: tuple | None = None
     units: str | None = None
     response: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
+    camera_model: str = "pinhole"
 
     def __post_init__(self):
         self.folder = Path(self.folder)
+        self.hemisphere = conventions.as_hemisphere(self.hemisphere)
+        if self.camera_model not in conventions.CAMERA_MODELS:
+            raise ValueError(f"camera_model must be one of {conventions.CAMERA_MODELS}, not {self.camera_model!r}")
         self.image_names = list(self.image_names)
         if not self.image_paths:
             self.image_paths = [self.folder / n for n in self.image_names]
@@ -208,20 +220,22 @@ class Capture:
             doc["image_size"] = [int(self.image_size[0]), int(self.image_size[1])]
         if self.encoding != "auto":
             doc["encoding"] = self.encoding
+        cam = {}
+        if self.camera_model != "pinhole":
+            cam["model"] = self.camera_model
         if self.K is not None:
-            cam = {"K": np.asarray(self.K).tolist(), "dist": np.asarray(self.dist).tolist()}
-            if not self.world_from_camera_is_default:
-                cam["world_from_camera"] = np.asarray(self.world_from_camera).tolist()
+            cam.update({"K": np.asarray(self.K).tolist(), "dist": np.asarray(self.dist).tolist()})
+        if not self.world_from_camera_is_default:
+            cam["world_from_camera"] = np.asarray(self.world_from_camera).tolist()
+        if cam:
             doc["camera"] = cam
-        elif not self.world_from_camera_is_default:
-            doc["camera"] = {"world_from_camera": np.asarray(self.world_from_camera).tolist()}
         if self.sphere_radius is not None:
             doc["sphere_radius"] = float(self.sphere_radius)
         if self.spheres:
             doc["spheres"] = [dict(s) for s in self.spheres]
         if np.any(self.scene_center != 0):
             doc["scene_center"] = np.asarray(self.scene_center, dtype=float).tolist()
-        doc["hemisphere"] = self.hemisphere
+        doc["hemisphere"] = conventions.as_hemisphere(self.hemisphere).to_json()
         if self.units is not None:
             doc["units"] = self.units
         doc.update(self.extra)
@@ -252,10 +266,16 @@ def _parse_camera(j: _Json, cam) -> tuple:
         if not (conventions.is_rotation(wfc[:3, :3], atol=1e-4) and np.allclose(wfc[3], [0, 0, 0, 1])):
             j.fail("camera.world_from_camera", "not a rigid transform (rotation block must be orthonormal with det 1, last row 0 0 0 1)")
         default = False
-    unknown = set(cam) - {"K", "dist", "world_from_camera"}
+    unknown = set(cam) - {"K", "dist", "world_from_camera", "model"}
     if unknown:
         j.fail("camera", f"unknown key {sorted(unknown)[0]!r}")
-    return K, dist, wfc, default
+    model = cam.get("model", "pinhole")
+    if model not in conventions.CAMERA_MODELS:
+        j.fail("camera.model", f"expected one of {conventions.CAMERA_MODELS}, got {_short(model)}")
+    if model == "orthographic" and ("K" in cam or "dist" in cam):
+        j.fail("camera", f"an orthographic camera has no {'K' if 'K' in cam else 'dist'} (parallel rays need no "
+                         "focal length); remove it, or use \"model\": \"pinhole\"")
+    return K, dist, wfc, default, model
 
 
 def _parse_spheres(j: _Json, spheres) -> list:
@@ -342,18 +362,21 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     elif "encoding" in doc and encoding not in _ENCODINGS:
         j.fail("encoding", f"expected 'srgb', 'linear' or {{\"response\": file}}, got {_short(encoding)}")
 
-    K, dist, wfc, wfc_default = (None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True)
+    K, dist, wfc, wfc_default, model = (None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True,
+                                        "pinhole")
     if "camera" in doc:
-        K, dist, wfc, wfc_default = _parse_camera(j, doc["camera"])
+        K, dist, wfc, wfc_default, model = _parse_camera(j, doc["camera"])
 
     radius = None
     if "sphere_radius" in doc:
         radius = j.number(doc["sphere_radius"], "sphere_radius", positive=True)
     spheres = _parse_spheres(j, doc["spheres"]) if "spheres" in doc else []
     center = j.array(doc["scene_center"], "scene_center", (3,)) if "scene_center" in doc else np.zeros(3)
-    hemisphere = doc.get("hemisphere", "upper")
-    if hemisphere not in conventions.HEMISPHERES:
-        j.fail("hemisphere", f"expected one of {conventions.HEMISPHERES}, got {_short(hemisphere)}")
+    try:
+        hemisphere = conventions.as_hemisphere(doc.get("hemisphere", "upper"))
+    except ValueError:
+        j.fail("hemisphere", f"expected 'upper', 'full' or {{\"axis\": [x, y, z]}} (three finite numbers, not all "
+                             f"zero), got {_short(doc.get('hemisphere'))}")
     units = doc.get("units")
     if units is not None and not isinstance(units, str):
         j.fail("units", f"expected a string, got {_short(units)}")
@@ -362,7 +385,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         folder=folder, image_names=names, image_paths=paths, encoding=encoding, K=K, dist=dist,
         world_from_camera=wfc, world_from_camera_is_default=wfc_default, sphere_radius=radius,
         scene_center=center, hemisphere=hemisphere, spheres=spheres, image_size=image_size,
-        units=units, response=response, extra=extra,
+        units=units, response=response, extra=extra, camera_model=model,
     )
 
 
@@ -394,6 +417,9 @@ class Lights:
         Why a light was rejected (None for accepted ones).
     extra : list of dict
         Other per-light keys (e.g. ``uncertainty_deg``), kept for round trips.
+    note : str or None
+        How the lights were matched to a capture's images when that is worth saying (by order,
+        or by a name map; see :func:`load_lights_any`); not written to ``lights.json``.
     """
 
     image_names: list
@@ -402,6 +428,7 @@ class Lights:
     status: list | None = None
     reasons: list | None = None
     extra: list | None = None
+    note: str | None = field(default=None, compare=False)
 
     def __post_init__(self):
         n = len(self.image_names)
@@ -711,17 +738,168 @@ def lights_from_lp(path: str | os.PathLike, capture: Capture) -> Lights:
     return Lights(list(capture.image_names), lp_to_world(d[order], capture.world_from_camera))
 
 
-def load_capture_and_lights(folder, lights=None) -> tuple[Capture, Lights]:
-    """``(capture, lights)`` of a capture folder; ``lights`` defaults to ``FOLDER/lights.json``.
+def _base(name: str) -> str:
+    return PurePosixPath(name.replace("\\", "/")).name
+
+
+def parse_lights_map(spec) -> dict:
+    """A name map ``{light image name: capture image name}`` from ``--lights-map``.
+
+    Parameters
+    ----------
+    spec : str, path-like or dict
+        A JSON object given inline (text starting with ``{``), a file holding one, or a dict.
+        Keys are the image names of the lights file (for ``.lp`` files the name as written or
+        its base name), values the images of the capture they apply to.
+
+    Returns
+    -------
+    dict of str to str
 
     Raises
     ------
     InputError
-        As :func:`load_capture` and :func:`load_lights`; a missing default ``lights.json`` says how
+        Not a JSON object of non-empty strings, or two keys mapped to one image (naming
+        ``--lights-map`` or the file).
+    """
+    where = None
+    if isinstance(spec, dict):
+        doc = spec
+    else:
+        text = str(spec)
+        if text.lstrip().startswith("{"):
+            try:
+                doc = json.loads(text)
+            except json.JSONDecodeError as e:
+                raise InputError(f"--lights-map: not valid JSON ({e.msg} at column {e.colno})") from None
+        else:
+            where = Path(text)
+            doc = _Json(where).load("lights map")
+    if not isinstance(doc, dict) or not doc:
+        raise InputError("--lights-map: expected a non-empty JSON object {\"light image\": \"capture image\"}", where)
+    for k, v in doc.items():
+        if not isinstance(v, str) or not v or not k:
+            raise InputError(f"--lights-map: {k!r} must map to a non-empty image name, not {_short(v)}", where)
+    seen = {}
+    for k, v in doc.items():
+        if v in seen:
+            raise InputError(f"--lights-map: {seen[v]!r} and {k!r} both map to {v!r}", where)
+        seen[v] = k
+    return dict(doc)
+
+
+def _read_lights_file(path: Path, capture: Capture) -> Lights:
+    """Lights in file order: ``lights.json`` as written, or ``.lp`` converted to the capture's world frame."""
+    if path.suffix.lower() == ".lp":
+        names, d = read_lp(path)
+        return Lights(names, lp_to_world(d, capture.world_from_camera))
+    return load_lights(path)
+
+
+def _select(lights: Lights, order) -> Lights:
+    return Lights(
+        image_names=[lights.image_names[i] for i in order],
+        directions=lights.directions[order],
+        positions=lights.positions[order],
+        status=[lights.status[i] for i in order],
+        reasons=[lights.reasons[i] for i in order],
+        extra=[lights.extra[i] for i in order],
+    )
+
+
+def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) -> Lights:
+    """The lights of ``capture`` from a ``lights.json`` or RTI ``.lp`` file, possibly another capture's.
+
+    Matching, in this order (``docs/formats.md``, "Lights of one capture applied to another"):
+
+    1. ``lights_map`` given: light ``k`` (named by its image in the file; for ``.lp`` also by
+       base name) applies to capture image ``lights_map[k]``; lights the map leaves out are
+       unused; every capture image needs one.
+    2. The file's image names are the capture's (``.lp``: by base name): matched by name.
+    3. None of the names is an image of the capture and the counts agree: by order (light
+       ``i`` to image ``i``), and :attr:`Lights.note` says so.
+
+    Parameters
+    ----------
+    path : path-like
+        ``lights.json`` (world frame) or ``.lp`` (converted with the capture's
+        ``world_from_camera``, see :func:`lp_to_world`).
+    capture : Capture
+    lights_map : dict or str, optional
+        As :func:`parse_lights_map` accepts.
+
+    Returns
+    -------
+    Lights
+        In the capture's image order, named by the capture's images; ``note`` set when matched
+        by order or by the map.
+
+    Raises
+    ------
+    InputError
+        Naming the file: names that match only partly, counts that differ when nothing
+        matches, a map naming unknown lights or images, or a capture image without a light.
+    """
+    path = Path(path)
+    lp = path.suffix.lower() == ".lp"
+    raw = _read_lights_file(path, capture)
+    cap_names = list(capture.image_names)
+    if lights_map is not None:
+        m = parse_lights_map(lights_map)
+        index = {}
+        for k, n in enumerate(raw.image_names):
+            index.setdefault(n, k)
+            if lp:
+                index.setdefault(_base(n), k)
+        known = set(cap_names)
+        pos = {}
+        for key, target in m.items():
+            if key not in index:
+                raise InputError(f"--lights-map names light {key!r}, which is not in the lights file", path)
+            if target not in known:
+                raise InputError(f"--lights-map maps {key!r} to {target!r}, which is not an image of the capture", path)
+            pos[target] = index[key]
+        missing = [n for n in cap_names if n not in pos]
+        if missing:
+            raise InputError(f"capture image {missing[0]!r} has no light in --lights-map", path)
+        out = _select(raw, [pos[n] for n in cap_names])
+        out.image_names = cap_names
+        out.note = (f"lights: {len(cap_names)} of the {len(raw)} lights in {path.name} applied to this capture's "
+                    f"images by the name map")
+        return out
+    key = _base if lp else (lambda n: n)
+    cap_key = {key(n): n for n in cap_names}
+    hits = sum(key(n) in cap_key for n in raw.image_names)
+    if hits == 0 and len(raw) == len(cap_names):
+        out = _select(raw, list(range(len(raw))))
+        out.image_names = cap_names
+        out.note = (f"lights: {path.name} names none of this capture's images; its {len(raw)} lights are applied "
+                    f"to the {len(cap_names)} images by order ({raw.image_names[0]!r} -> {cap_names[0]!r}, ...)")
+        return out
+    if hits == 0:
+        raise InputError(f"none of the {len(raw)} lights names an image of the capture ({len(cap_names)} images), so "
+                         "they cannot apply by order either; give --lights-map '{\"light image\": \"capture image\"}'",
+                         path)
+    return lights_from_lp(path, capture) if lp else load_lights(path, capture)
+
+
+def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Capture, Lights]:
+    """``(capture, lights)`` of a capture folder; ``lights`` defaults to ``FOLDER/lights.json``.
+
+    ``lights`` may be a ``lights.json`` or an RTI ``.lp`` file, also one of another capture of
+    the same lights (matched by :func:`load_lights_any`, with ``lights_map`` when given; the
+    returned lights' ``note`` says how they were matched).
+
+    Raises
+    ------
+    InputError
+        As :func:`load_capture` and :func:`load_lights_any`; a missing default ``lights.json`` says how
         to make one (``ffls lights``).
     """
     capture = load_capture(folder)
     path = Path(lights) if lights else Path(folder) / LIGHTS_FILE
     if not path.exists():
+        if lights:
+            raise InputError("lights file not found", path)
         raise InputError("no lights file: estimate the light directions first (ffls lights CAPTURE)", path)
-    return capture, load_lights(path, capture)
+    return capture, load_lights_any(path, capture, lights_map)

@@ -4,6 +4,12 @@ Readers return RGB in file order (OpenCV's BGR is swapped), float32, without any
 function applied: linearising 8-bit photographs is the capture's job (``ffls.io.capture``), never
 guessed here. Bad input raises :class:`ffls.errors.InputError` naming the file.
 
+Colour: an OpenEXR file whose ``chromaticities`` attribute is not Rec.709/D65 (ACEScg, a wide
+gamut or a camera space) is converted to the working space (linear Rec.709, D65) by
+:mod:`ffls.io.colourspace` as it is read, and :attr:`ImageData.colour_note` says so; one whose
+attribute cannot be converted is an error. Alpha (an EXR ``A`` channel, a PNG/TIFF fourth
+channel) is returned in :attr:`ImageData.alpha`; writers take an optional alpha.
+
 OpenEXR goes through the OpenEXR 3.x Python bindings (``OpenEXR.File``), the rest through
 OpenCV. OpenCV cannot read TGA; such files are rejected with a message saying so.
 """
@@ -25,6 +31,11 @@ __all__ = [
     "write_exr",
     "write_hdr",
     "write_png",
+    "read_mask",
+    "exr_chromaticities",
+    "colour_summary",
+    "premultiply",
+    "with_alpha",
 ]
 
 _KINDS = {
@@ -58,12 +69,23 @@ class ImageData:
         File format.
     path : pathlib.Path
         Where it was read from.
+    alpha : (H, W) float32 ndarray or None
+        The alpha channel as stored (EXR ``A``; integer files scaled to [0, 1]), None when absent.
+    chromaticities : (8,) tuple of float or None
+        The EXR ``chromaticities`` attribute as stored (red, green, blue, white xy), None when
+        absent (then the file is in the working space by the OpenEXR default, Rec.709/D65).
+    colour_note : str or None
+        Set when ``pixels`` were converted from the file's colour space to the working space:
+        one line saying from what (:meth:`ffls.io.colourspace.ColourConversion.describe`).
     """
 
     pixels: np.ndarray
     bit_depth: int | str
     kind: str
     path: Path
+    alpha: np.ndarray | None = None
+    chromaticities: tuple | None = None
+    colour_note: str | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -87,44 +109,52 @@ def _kind_of(path: Path) -> str:
     )
 
 
-def read_image(path: str | os.PathLike) -> ImageData:
+def read_image(path: str | os.PathLike, working_space: bool = True) -> ImageData:
     """Read an image file as RGB float32.
 
     Parameters
     ----------
     path : path-like
         An ``.exr``, ``.hdr``/``.pic``, ``.png``, ``.jpg``/``.jpeg`` or ``.tif``/``.tiff`` file.
+    working_space : bool
+        Convert an EXR whose ``chromaticities`` are another space to the working space (linear
+        Rec.709, D65) and say so in ``colour_note`` (default). False returns the stored values.
 
     Returns
     -------
     ImageData
-        ``pixels`` is (H, W, 3) float32. Grey images are replicated to three channels and alpha
-        is dropped.
+        ``pixels`` is (H, W, 3) float32. Grey images are replicated to three channels; alpha
+        is in ``alpha``.
 
     Raises
     ------
     InputError
-        If the file is missing, unreadable, corrupt or of an unsupported format.
+        If the file is missing, unreadable, corrupt or of an unsupported format, or its colour
+        space cannot be converted.
     """
     path = Path(path)
     kind = _kind_of(path)
     if not path.is_file():
         raise InputError("image file not found" if not path.exists() else "not a file", path)
     if kind == "exr":
-        return read_exr(path)
+        return read_exr(path, working_space=working_space)
     return _read_cv2(path, kind)
 
 
-def read_exr(path: str | os.PathLike) -> ImageData:
+def read_exr(path: str | os.PathLike, working_space: bool = True) -> ImageData:
     """Read an OpenEXR file (half or float channels) as RGB float32.
 
-    Takes the ``R``, ``G``, ``B`` channels, or replicates ``Y`` for luminance-only files; other
-    channels (alpha, depth, ...) are ignored.
+    Takes the ``R``, ``G``, ``B`` channels, or replicates ``Y`` for luminance-only files, and
+    ``A`` as alpha; other channels (depth, ...) are ignored.
 
     Parameters
     ----------
     path : path-like
         The ``.exr`` file.
+    working_space : bool
+        Convert RGB from the space of the ``chromaticities`` attribute (when present and not
+        Rec.709/D65) to the working space, reporting it in ``colour_note``
+        (:func:`ffls.io.colourspace.convert_to_working_space`).
 
     Returns
     -------
@@ -134,7 +164,8 @@ def read_exr(path: str | os.PathLike) -> ImageData:
     Raises
     ------
     InputError
-        Missing, corrupt, or without R/G/B or Y channels, or with integer/subsampled channels.
+        Missing, corrupt, or without R/G/B or Y channels, or with integer/subsampled channels,
+        or with a ``chromaticities`` attribute that is not a convertible colour space.
     """
     import OpenEXR
 
@@ -144,6 +175,7 @@ def read_exr(path: str | os.PathLike) -> ImageData:
     try:
         f = OpenEXR.File(str(path), separate_channels=True)
         channels = f.channels()
+        header = f.header()
     except Exception as e:  # the bindings raise RuntimeError/others with multi-line text
         raise InputError(f"cannot read OpenEXR file ({type(e).__name__}: {e})", path) from None
     names = set(channels)
@@ -167,9 +199,30 @@ def read_exr(path: str | os.PathLike) -> ImageData:
         if px.ndim != 2:
             raise InputError(f"OpenEXR channel {name} is not a 2-D image (deep data?)", path)
         planes.append(px.astype(np.float32))
+    alpha = None
+    if "A" in names:
+        a = np.asarray(channels["A"].pixels)
+        if a.dtype not in (np.float16, np.float32) or a.ndim != 2:
+            raise InputError(f"OpenEXR channel A has type {a.dtype} and {a.ndim} dimensions; expected a 2-D half "
+                             "or float image", path)
+        planes.append(a.astype(np.float32))
     if len({p.shape for p in planes}) != 1:
         raise InputError("OpenEXR channels differ in size", path)
-    return ImageData(np.stack(planes, axis=-1), depth, "exr", path)
+    if "A" in names:
+        alpha = planes.pop()
+    rgb = np.stack(planes, axis=-1)
+    chroma = header.get("chromaticities")
+    note = None
+    if chroma is not None:
+        from ffls.io.colourspace import convert_to_working_space, working_space_conversion
+
+        if working_space:
+            rgb, conv = convert_to_working_space(rgb, chroma, path)
+            note = None if conv is None else conv.describe()
+        else:
+            working_space_conversion(chroma, path)  # malformed: an error either way
+        chroma = tuple(float(v) for v in np.asarray(chroma, dtype=np.float64).reshape(-1))
+    return ImageData(rgb, depth, "exr", path, alpha=alpha, chromaticities=chroma, colour_note=note)
 
 
 def _read_cv2(path: Path, kind: str) -> ImageData:
@@ -188,14 +241,17 @@ def _read_cv2(path: Path, kind: str) -> ImageData:
         img = None
     if img is None:
         raise InputError(f"cannot decode {kind.upper()} image (corrupt or not a {kind.upper()} file)", path)
+    alpha = None
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
     elif img.shape[2] == 2:  # grey + alpha
+        alpha = img[:, :, 1]
         img = np.repeat(img[:, :, :1], 3, axis=2)
     elif img.shape[2] == 1:
         img = np.repeat(img, 3, axis=2)
     else:
-        img = img[:, :, 2::-1]  # BGR(A) -> RGB, alpha dropped
+        alpha = img[:, :, 3] if img.shape[2] == 4 else None
+        img = img[:, :, 2::-1]  # BGR(A) -> RGB
     dt = img.dtype
     if dt == np.uint8:
         pixels, depth = img.astype(np.float32) / np.float32(255), 8
@@ -209,7 +265,86 @@ def _read_cv2(path: Path, kind: str) -> ImageData:
         pixels, depth = img.astype(np.float32), "float"
     else:
         raise InputError(f"unsupported pixel type {dt} in {kind.upper()} image", path)
-    return ImageData(np.ascontiguousarray(pixels), depth, kind, path)
+    if alpha is not None:
+        scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(alpha.dtype, 1.0)
+        alpha = np.ascontiguousarray(alpha.astype(np.float32) / np.float32(scale))
+    return ImageData(np.ascontiguousarray(pixels), depth, kind, path, alpha=alpha)
+
+
+def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
+    """An object mask image as coverage (H, W) float32 in [0, 1] (white = object).
+
+    The coverage of a pixel is its largest channel (integer files scaled to [0, 1]; floats
+    clipped to [0, 1]); a file with alpha uses the alpha times that.
+
+    Parameters
+    ----------
+    path : path-like
+        PNG, TIFF, EXR, ... (anything :func:`read_image` reads).
+    size : (int, int), optional
+        Expected (W, H): another size raises InputError naming both.
+
+    Raises
+    ------
+    InputError
+        Unreadable, non-finite values, or the wrong size.
+    """
+    img = read_image(path, working_space=False)
+    m = img.pixels.max(axis=-1)
+    if img.alpha is not None:
+        m = m * img.alpha
+    if not np.all(np.isfinite(m)):
+        raise InputError("mask has NaN or Inf values", path)
+    if size is not None and (m.shape[1], m.shape[0]) != tuple(size):
+        raise InputError(f"mask is {m.shape[1]}x{m.shape[0]}, the images are {size[0]}x{size[1]}", path)
+    return np.clip(m, 0.0, 1.0).astype(np.float32)
+
+
+def exr_chromaticities(path: str | os.PathLike) -> tuple | None:
+    """The ``chromaticities`` attribute of an OpenEXR file (8 floats), read from the header only; None when absent."""
+    import OpenEXR
+
+    path = Path(path)
+    try:
+        header = OpenEXR.File(str(path), header_only=True).header()
+    except Exception as e:  # the bindings raise RuntimeError/others with multi-line text
+        raise InputError(f"cannot read OpenEXR file ({type(e).__name__}: {e})", path) from None
+    c = header.get("chromaticities")
+    return None if c is None else tuple(np.asarray(c, dtype=np.float64).reshape(-1).tolist())
+
+
+def colour_summary(paths) -> str | None:
+    """One line saying which of the image files ``paths`` are converted to the working space on reading.
+
+    Reads only the headers of the ``.exr`` files (the others carry no colour space ffls reads).
+    E.g. ``"colour: 12 of 12 images: colour space ACEScg (...) converted to linear Rec.709 (D65), ..."``.
+
+    Returns
+    -------
+    str or None
+        None when no file needs a conversion.
+
+    Raises
+    ------
+    InputError
+        A file whose colour space cannot be converted (as :func:`read_image` would).
+    """
+    from ffls.io.colourspace import working_space_conversion
+
+    paths = [Path(p) for p in paths]
+    notes = []
+    for p in paths:
+        if p.suffix.lower() != ".exr":
+            continue
+        c = exr_chromaticities(p)
+        conv = None if c is None else working_space_conversion(c, p)
+        if conv is not None:
+            notes.append(conv.describe())
+    if not notes:
+        return None
+    kinds = sorted(set(notes))
+    head = f"colour: {len(notes)} of {len(paths)} images: " if len(paths) > 1 else "colour: "
+    return head + kinds[0] + (f" (and {len(kinds) - 1} other spaces)" if len(kinds) > 1 else "")
 
 
 # ----------------------------------------------------------------------------- writers
@@ -222,22 +357,49 @@ def _check_rgb(rgb, what: str) -> np.ndarray:
     return a
 
 
+def _check_alpha(alpha, shape, what: str) -> np.ndarray:
+    m = np.asarray(alpha, dtype=np.float32)
+    if m.shape != tuple(shape):
+        raise ValueError(f"{what}: alpha must have shape {tuple(shape)}, got {m.shape}")
+    if not np.all(np.isfinite(m)) or m.min() < 0 or m.max() > 1:
+        raise ValueError(f"{what}: alpha must be finite and in [0, 1]")
+    return m
+
+
+def premultiply(rgb, alpha) -> np.ndarray:
+    """``rgb`` (H, W, 3) times ``alpha`` (H, W): OpenEXR's premultiplied RGBA convention."""
+    m = _check_alpha(alpha, np.asarray(rgb).shape[:2], "premultiply")
+    return np.asarray(rgb, dtype=np.float32) * m[..., None]
+
+
+def with_alpha(rgb8, alpha) -> np.ndarray:
+    """Display values (H, W, 3) uint8/uint16 with ``alpha`` (H, W) in [0, 1] as RGBA of the same dtype
+    (PNG's straight, not premultiplied, alpha)."""
+    a = np.asarray(rgb8)
+    m = _check_alpha(alpha, a.shape[:2], "with_alpha")
+    top = np.iinfo(a.dtype).max
+    return np.concatenate([a, np.rint(m * top).astype(a.dtype)[..., None]], axis=-1)
+
+
 def _check_suffix(path: Path, allowed: tuple[str, ...], what: str) -> None:
     if path.suffix.lower() not in allowed:
         raise ValueError(f"{what}: {path} must end with {' or '.join(allowed)}")
 
 
-def write_exr(path: str | os.PathLike, rgb, half: bool = False) -> Path:
-    """Write an RGB OpenEXR file with ZIP compression, atomically.
+def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> Path:
+    """Write an RGB (or RGBA) OpenEXR file with ZIP compression, atomically.
 
     Parameters
     ----------
     path : path-like
         Output ``.exr`` path.
     rgb : (H, W, 3) array_like
-        Linear values.
+        Linear values, written as given. OpenEXR's RGBA is premultiplied: pass ``rgb`` already
+        multiplied by ``alpha`` (:func:`ffls.io.images.premultiply`) for compositing.
     half : bool
         Store 16-bit half floats instead of 32-bit floats.
+    alpha : (H, W) array_like, optional
+        Coverage in [0, 1], written as channel ``A``.
 
     Returns
     -------
@@ -266,6 +428,8 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False) -> Path:
             )
     # OpenEXR 3.x mis-writes non-contiguous channel views without error: copy each channel.
     channels = {c: np.ascontiguousarray(a[:, :, i], dtype=dtype) for i, c in enumerate("RGB")}
+    if alpha is not None:
+        channels["A"] = np.ascontiguousarray(_check_alpha(alpha, a.shape[:2], "write_exr"), dtype=dtype)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     with atomic_output(path) as tmp:
         with OpenEXR.File(header, channels) as f:

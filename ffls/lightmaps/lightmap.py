@@ -92,12 +92,16 @@ class LightMap:
         Where it came from: a file path or a procedural map's name.
     clamped_negatives : int
         How many pixels had negative values clamped to 0 when loading.
+    colour_note : str or None
+        Set when the file was in another colour space and was converted to the working space
+        (linear Rec.709, D65) on loading: one line saying from what (:mod:`ffls.io.colourspace`).
     """
 
     data: np.ndarray
     layout: str
     source: str = ""
     clamped_negatives: int = field(default=0)
+    colour_note: str | None = field(default=None, compare=False)
 
     def __post_init__(self):
         if self.layout not in LAYOUTS:
@@ -486,7 +490,8 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
     Raises
     ------
     InputError
-        Missing/corrupt file, another format, a size that fits no layout, NaN or Inf values.
+        Missing/corrupt file, another format, a size that fits no layout, NaN or Inf values, an EXR
+        colour space (``chromaticities``) that cannot be converted to the working space.
 
     Warns
     -----
@@ -505,7 +510,7 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
     data, clamped = validate_radiance(img.pixels, path)
     if layout == "cube":
         data = cross_to_cube(data)
-    return LightMap(data, layout, str(path), clamped)
+    return LightMap(data, layout, str(path), clamped, colour_note=img.colour_note)
 
 
 def save_lightmap(lm: LightMap, path: str | os.PathLike, half: bool = False) -> Path:

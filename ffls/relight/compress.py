@@ -35,12 +35,32 @@ import numpy as np
 from ffls.errors import InputError, atomic_output
 
 __all__ = ["CompressedBasis", "compress_basis", "randomized_svd_Halko2011", "save_compressed",
-           "load_compressed", "load_or_compress", "basis_checksum", "COMPRESSED_FILENAME", "MODES"]
+           "load_compressed", "load_or_compress", "basis_checksum", "COMPRESSED_FILENAME", "MODES", "DEFAULT_RANK",
+           "rank_range", "default_rank"]
 
 #: File name of a compressed basis inside a capture folder.
 COMPRESSED_FILENAME = "basis_compressed.npz"
 MODES = ("per_channel", "shared")
 _FORMAT_VERSION = 1
+#: Rank used where none is asked for (the viewer on a CPU rasteriser); capped by :func:`default_rank`.
+DEFAULT_RANK = 16
+
+
+def rank_range(n_lights: int) -> tuple[int, int]:
+    """Valid ranks ``(1, n - 1)`` for a basis of ``n_lights`` images (``(1, 1)`` for a single light).
+
+    The mean takes one degree of freedom, so K = n - 1 already reproduces the basis exactly.
+    """
+    return 1, max(int(n_lights) - 1, 1)
+
+
+def default_rank(n_lights: int, preferred: int = DEFAULT_RANK) -> int:
+    """``preferred`` capped to the valid range of :func:`rank_range`: always a valid rank.
+
+    E.g. 16 for 100 lights, 11 for 12 lights (exact: K = n - 1), 1 for 2 lights.
+    """
+    lo, hi = rank_range(n_lights)
+    return int(min(max(int(preferred), lo), hi))
 
 
 @dataclass
@@ -207,8 +227,9 @@ def compress_basis(basis, rank: int, seed: int = 0, mode: str = "per_channel", o
     if b.ndim != 4 or b.shape[-1] != 3:
         raise ValueError(f"basis must be (n, H, W, 3), not {b.shape}")
     n, H, W, _ = b.shape
-    if not 1 <= rank <= max(n - 1, 1):
-        raise ValueError(f"rank must be in [1, {max(n - 1, 1)}] for {n} lights, not {rank}")
+    lo, hi = rank_range(n)
+    if not lo <= rank <= hi:
+        raise ValueError(f"rank must be in [{lo}, {hi}] for {n} lights, not {rank}")
     if not np.all(np.isfinite(b)):
         raise ValueError("basis has NaN/Inf values")
     t0 = time.perf_counter()

@@ -33,7 +33,10 @@ Exact duplicates: directions are de-duplicated before anything else; the first o
 but different directions are distinct points and split the cell between them.
 
 Dropped light: for the ``upper`` hemisphere, texels whose rotated direction has ``z < 0`` are
-dropped; their count and power are reported in :class:`Weights`. ``z == 0`` is kept.
+dropped; their count and power are reported in :class:`Weights`. ``z == 0`` is kept. For a
+hemisphere around another axis (:class:`ffls.conventions.Hemisphere`) the test is
+``d . axis >= 0`` and the cells are baked over the full sphere's octahedral map (the lookup is
+exact there too; half of the texture lies outside the domain and is never read).
 """
 from __future__ import annotations
 
@@ -56,14 +59,19 @@ __all__ = [
     "CellTexture",
     "Weights",
     "MAP_FOR_HEMISPHERE",
+    "cell_map_name",
     "bake_cells",
     "integrate_weights",
     "assign_cells",
     "cell_solid_angles",
     "unique_directions",
+    "Coverage",
+    "coverage",
+    "coverage_warnings",
 ]
 
-#: The sphere parameterisation a cell texture uses for each hemisphere setting.
+#: The sphere parameterisation a cell texture uses for each named hemisphere (any other axis:
+#: ``'octahedral'``, see :func:`cell_map_name`).
 MAP_FOR_HEMISPHERE = {"upper": "concentric", "full": "octahedral"}
 
 #: Relative and absolute slack added to the candidate radius ``a + 2 r``.
@@ -144,10 +152,15 @@ def _angle_to_chord(angle: np.ndarray) -> np.ndarray:
     return 2.0 * np.sin(0.5 * np.minimum(angle, np.pi))
 
 
-def _get_map(hemisphere: str):
+def cell_map_name(hemisphere) -> str:
+    """The sphere map a cell texture uses: ``'concentric'`` for ``upper``, else ``'octahedral'``."""
+    return "concentric" if check_hemisphere(hemisphere) == "upper" else "octahedral"
+
+
+def _get_map(hemisphere):
     from ffls.lightmaps.sphere_maps import get_map  # written alongside; imported lazily
 
-    return get_map(MAP_FOR_HEMISPHERE[hemisphere])
+    return get_map(cell_map_name(hemisphere))
 
 
 # ----------------------------------------------------------------------------- cell texture
@@ -168,8 +181,8 @@ class CellTexture:
         Number of texels that had more than ``k`` candidates (0 means the lookup is exact).
     res : int
         Texture resolution (square).
-    hemisphere : str
-        ``'upper'`` (concentric map) or ``'full'`` (octahedral map).
+    hemisphere : ffls.conventions.Hemisphere
+        ``'upper'`` (concentric map), ``'full'`` or another axis (octahedral map).
     map_name : str
         Name of the :mod:`ffls.lightmaps.sphere_maps` parameterisation.
     directions : (n, 3) float64
@@ -185,7 +198,7 @@ class CellTexture:
     candidates: np.ndarray
     overflow: int
     res: int
-    hemisphere: str
+    hemisphere: object
     map_name: str
     directions: np.ndarray
     k: int
@@ -356,8 +369,8 @@ def bake_cells(directions, hemisphere: str = "upper", res: int = 256, k: int = 8
     ----------
     directions : (n, 3) array_like
         Light directions in the capture/world frame (normalised here). Duplicates allowed.
-    hemisphere : {'upper', 'full'}
-        ``'upper'`` bakes over the concentric map (z >= 0), ``'full'`` over the octahedral map.
+    hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
+        ``'upper'`` bakes over the concentric map (z >= 0), the others over the octahedral map.
     res : int
         Texture resolution (res x res texels).
     k : int
@@ -371,11 +384,11 @@ def bake_cells(directions, hemisphere: str = "upper", res: int = 256, k: int = 8
     -------
     CellTexture
     """
-    check_hemisphere(hemisphere)
+    hemisphere = check_hemisphere(hemisphere)
     if int(k) < 1 or int(res) < 1:
         raise ValueError("res and k must be positive")
     unit, keep = unique_directions(directions)
-    map_name = MAP_FOR_HEMISPHERE[hemisphere]
+    map_name = cell_map_name(hemisphere)
     smap = _get_map(hemisphere)
     res = int(res)
     while True:
@@ -460,8 +473,9 @@ def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere
         Light directions in the capture frame.
     rotation : (3, 3) array_like, optional
         Light-map rotation (content at ``d`` moves to ``R d``); identity by default.
-    hemisphere : {'upper', 'full'}
-        For ``'upper'`` texels with rotated ``z < 0`` are dropped and counted.
+    hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
+        Texels whose rotated direction is outside (``z < 0`` for ``'upper'``, ``d . axis < 0``)
+        are dropped and counted.
     cells : CellTexture, optional
         ``None``: exact k-d tree assignment (float64 reference). A CellTexture baked from the
         same directions: candidate-texture lookup (what the GPU does); identical cells while
@@ -475,7 +489,7 @@ def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere
     """
     if method != "MasselusDutreAnrys2002":
         raise ValueError(f"unknown method {method!r}")
-    check_hemisphere(hemisphere)
+    hemisphere = check_hemisphere(hemisphere)
     unit = _check_directions(directions)
     R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
     if not is_rotation(R):
@@ -516,13 +530,13 @@ def cell_solid_angles(directions, hemisphere: str = "upper", method: str = "auto
     ----------
     directions : (n, 3) array_like
         Light directions.
-    hemisphere : {'upper', 'full'}
+    hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
     method : {'auto', 'spherical_voronoi', 'sample'}
-        ``'spherical_voronoi'``: exact areas from :class:`scipy.spatial.SphericalVoronoi`. For
-        ``'upper'`` the lights are mirrored through z = 0 (a mirrored light is never nearer to
-        an upper direction than its original, so the cells of the originals in the mirrored set
-        are exactly their upper-hemisphere parts); needs all lights at z >= 0 and at least 4
-        distinct points. ``'sample'``: integrate a constant map on a ``2 res x res`` lat-long
+        ``'spherical_voronoi'``: exact areas from :class:`scipy.spatial.SphericalVoronoi`. For a
+        hemisphere the lights are mirrored through its plane (z = 0 for ``'upper'``; a mirrored
+        light is never nearer to a direction inside than its original, so the cells of the
+        originals in the mirrored set are exactly their parts inside); needs all lights inside
+        (``d . axis >= 0``) and at least 4 distinct points. ``'sample'``: integrate a constant map on a ``2 res x res`` lat-long
         grid with exact texel solid angles (error ~ boundary length x texel size).
         ``'auto'``: spherical Voronoi where it applies, else sampling.
     res : int
@@ -531,9 +545,9 @@ def cell_solid_angles(directions, hemisphere: str = "upper", method: str = "auto
     Returns
     -------
     (n,) float64
-        Cell solid angles; later exact duplicates get 0. They sum to 2 pi (upper) or 4 pi (full).
+        Cell solid angles; later exact duplicates get 0. They sum to 2 pi (a hemisphere) or 4 pi (full).
     """
-    check_hemisphere(hemisphere)
+    hemisphere = check_hemisphere(hemisphere)
     unit, keep = unique_directions(directions)
     if method not in ("auto", "spherical_voronoi", "sample"):
         raise ValueError(f"unknown method {method!r}")
@@ -548,18 +562,21 @@ def cell_solid_angles(directions, hemisphere: str = "upper", method: str = "auto
     return w.weights[:, 0]
 
 
-def _cell_areas_sv(unit: np.ndarray, keep: np.ndarray, hemisphere: str) -> np.ndarray:
+def _cell_areas_sv(unit: np.ndarray, keep: np.ndarray, hemisphere) -> np.ndarray:
     from scipy.spatial import SphericalVoronoi
 
     pts = unit[keep]
-    if hemisphere == "upper":
-        if np.any(pts[:, 2] < 0):
+    half = hemisphere.axis is not None
+    if half:
+        a = np.asarray(hemisphere.axis)
+        side = hemisphere.side(pts)
+        if np.any(side < 0):
             raise ValueError("lights below the horizon: mirroring does not apply")
-        horizon = pts[:, 2] <= _HORIZON_EPS  # snapped onto z = 0 (area error O(z))
+        horizon = side <= _HORIZON_EPS  # snapped onto the plane (area error O(side))
         pts = pts.copy()
-        pts[horizon, 2] = 0.0
+        pts[horizon] -= side[horizon, None] * a
         pts[horizon] = pts[horizon] / np.linalg.norm(pts[horizon], axis=1, keepdims=True)
-        mirrored = pts[~horizon] * np.array([1.0, 1.0, -1.0])
+        mirrored = pts[~horizon] - 2.0 * side[~horizon, None] * a
         allpts = np.concatenate([pts, mirrored], axis=0)
     else:
         allpts = pts
@@ -567,10 +584,114 @@ def _cell_areas_sv(unit: np.ndarray, keep: np.ndarray, hemisphere: str) -> np.nd
         raise ValueError("spherical Voronoi needs at least 4 points")
     sv = SphericalVoronoi(allpts, radius=1.0, center=np.zeros(3))
     areas = sv.calculate_areas()[: pts.shape[0]]
-    if hemisphere == "upper":
+    if half:
         areas = np.where(horizon, 0.5 * areas, areas)  # a horizon light's cell is symmetric
     if not np.isclose(areas.sum(), covered_solid_angle(hemisphere), rtol=1e-9):
         raise RuntimeError("spherical Voronoi areas do not sum to the covered solid angle")
     out = np.zeros(unit.shape[0])
     out[keep] = areas
+    return out
+
+
+# ----------------------------------------------------------------------------- coverage
+#: A cell wider than this (degrees) covers its part of the map poorly (issue 9).
+WIDE_CELL_DEG = 60.0
+#: A direction farther than this (degrees) from every light is "far" (half of WIDE_CELL_DEG).
+FAR_DEG = 30.0
+#: Share of the domain far from every light above which :func:`coverage_warnings` warns.
+FAR_SHARE = 0.10
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """How well a set of light directions covers its domain.
+
+    Attributes
+    ----------
+    cell_width_deg : (n,) float64
+        Width of every light's Voronoi cell within the domain: twice the largest angle from the
+        light to a point of its cell (the diameter of the smallest cap centred on the light that
+        holds the cell); 0 for empty cells (later exact duplicates).
+    far_share : float
+        Share (0..1) of the domain's solid angle more than ``far_deg`` from every light.
+    far_deg : float
+    max_gap_deg : float
+        Largest angle from a point of the domain to its nearest light.
+    """
+
+    cell_width_deg: np.ndarray
+    far_share: float
+    far_deg: float
+    max_gap_deg: float
+
+
+def coverage(directions, hemisphere="upper", far_deg: float = FAR_DEG, res: int = 256) -> Coverage:
+    """Measure how well ``directions`` cover the hemisphere's domain (the Voronoi cells' sizes).
+
+    Sampled on a ``2 res x res`` lat-long grid with exact texel solid angles: each sample is
+    given to its nearest light (:func:`assign_cells`); the cell width and the far share follow
+    from the angles to those lights. The sampling error is about one texel (180 / res degrees).
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Light directions (the accepted ones).
+    hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
+    far_deg : float
+        Threshold of :attr:`Coverage.far_share`.
+    res : int
+        Lat-long height of the sampling grid.
+
+    Returns
+    -------
+    Coverage
+    """
+    hemisphere = check_hemisphere(hemisphere)
+    unit = _check_directions(directions)
+    d, sa = _latlong_samples(int(res))
+    inside = in_domain(d, hemisphere)
+    d, sa = d[inside], sa[inside]
+    idx = assign_cells(d, unit)
+    ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", d, unit[idx]), -1.0, 1.0)))
+    width = np.zeros(unit.shape[0])
+    np.maximum.at(width, idx, 2.0 * ang)
+    far = ang > far_deg
+    return Coverage(cell_width_deg=width, far_share=float(sa[far].sum() / sa.sum()), far_deg=float(far_deg),
+                    max_gap_deg=float(ang.max()))
+
+
+def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CELL_DEG, far_deg: float = FAR_DEG,
+                      far_share: float = FAR_SHARE) -> list:
+    """One line per coverage problem of ``directions`` over the hemisphere (empty when none).
+
+    * cells wider than ``wide_deg`` degrees: ``"coverage: 3 cells wider than 60 deg (widest 84
+      deg at az 120 el 10)"`` (azimuth from +X toward +Y, elevation above the xy plane, world
+      frame, of the widest cell's light);
+    * more than ``far_share`` of the domain farther than ``far_deg`` from every light:
+      ``"coverage: 18% of the domain is more than 30 deg from every light (farthest 52 deg)"``.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+    hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
+    wide_deg, far_deg, far_share : float
+        Thresholds (defaults :data:`WIDE_CELL_DEG`, :data:`FAR_DEG`, :data:`FAR_SHARE`).
+
+    Returns
+    -------
+    list of str
+    """
+    unit = _check_directions(directions)
+    c = coverage(unit, hemisphere, far_deg)
+    out = []
+    wide = np.flatnonzero(c.cell_width_deg > wide_deg)
+    if wide.size:
+        i = int(np.argmax(c.cell_width_deg))
+        az = np.degrees(np.arctan2(unit[i, 1], unit[i, 0]))
+        el = np.degrees(np.arcsin(np.clip(unit[i, 2], -1.0, 1.0)))
+        out.append(f"coverage: {wide.size} cell{'s' if wide.size > 1 else ''} wider than {wide_deg:g} deg "
+                   f"(widest {c.cell_width_deg[i]:.0f} deg at az {az:.0f} el {el:.0f})")
+    if c.far_share > far_share:
+        out.append(f"coverage: {100 * c.far_share:.0f}% of the domain is more than {far_deg:g} deg from every light "
+                   f"(farthest {c.max_gap_deg:.0f} deg)")
     return out

@@ -1,6 +1,7 @@
 // Pass 1 (ffls.gpu.integrate): the angular Voronoi cell of a rotated light-map texel.
 // Defines (set by CellIntegrator): N_LIGHTS, CELL_RES, CELL_K, and HEMI_UPPER (concentric map,
-// z < 0 dropped) or nothing (octahedral map, full sphere). Cell N_LIGHTS is the "dropped" bin.
+// z < 0 dropped), HEMI_AXIS (octahedral map, p . hemi_axis < 0 dropped: a hemisphere around any
+// axis) or neither (octahedral map, full sphere). Cell N_LIGHTS is the "dropped" bin.
 // The decision (rotation, hemisphere test, dot products) runs in float64 so that it agrees
 // with the float64 reference ffls.voronoi.integrate_weights(..., cells=...) on every texel but
 // exact ties; the texel lookup runs in float32, which is safe because the candidate lists are
@@ -14,6 +15,9 @@ layout(std430, binding = 4) readonly buffer Candidates { int cand[]; };     // C
 
 uniform dmat3 R;           // light-map rotation: content at d moves to R d
 uniform uint n_texels;     // texels in the light map
+#if defined HEMI_AXIS
+uniform dvec3 hemi_axis;   // unit axis of the covered hemisphere (ffls.conventions.Hemisphere)
+#endif
 
 const int DROP_BIN = N_LIGHTS;
 
@@ -24,6 +28,11 @@ int cell_of_texel(uint t) {
     if (p.z < 0.0LF) return DROP_BIN;
     vec2 uv = concentric_uv(vec3(p));
 #else
+#if defined HEMI_AXIS
+    // the reference's operation order (Hemisphere.side): (p.x a.x + p.y a.y) + p.z a.z
+    precise double side = (p.x * hemi_axis.x + p.y * hemi_axis.y) + p.z * hemi_axis.z;
+    if (side < 0.0LF) return DROP_BIN;
+#endif
     vec2 uv = octahedral_uv(vec3(p));
 #endif
     ivec2 ij = clamp(ivec2(floor(uv * float(CELL_RES))), ivec2(0), ivec2(CELL_RES - 1));
