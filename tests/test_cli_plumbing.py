@@ -63,7 +63,7 @@ def test_bad_rotation_flags_are_one_argparse_line(flags, capsys):
 
 
 def test_view_state_takes_the_shared_rotation():
-    from ffls.commands.view import build_state
+    from viewer.command import build_state
 
     pytest.importorskip("imgui_bundle", reason="imgui-bundle is not installed")
     st = build_state(build_parser().parse_args(["view", "CAP", "--rotate-z", "25"]))

@@ -235,17 +235,3 @@ def to_uint8(display) -> np.ndarray:
     if not np.all(np.isfinite(d)):
         raise ValueError(f"to_uint8: {int(np.count_nonzero(~np.isfinite(d)))} non-finite values")
     return np.rint(np.clip(d, 0, 1) * 255).astype(np.uint8)
-
-
-def auto_exposure(hdr: np.ndarray, key: float = 0.18) -> float:
-    """Exposure in stops that maps the log-average luminance of ``hdr`` (H, W, 3) to ``key``.
-
-    Reinhard et al. 2002, equation 1 (Rec.709 luminance). Pixels that are exactly zero
-    (background) are ignored; an all-zero image gives 0 stops.
-    """
-    lum = 0.2126 * hdr[..., 0] + 0.7152 * hdr[..., 1] + 0.0722 * hdr[..., 2]
-    lum = lum[lum > 0]
-    if lum.size == 0:
-        return 0.0
-    log_avg = float(np.exp(np.mean(np.log(lum + 1e-12))))
-    return float(np.log2(key / log_avg))
