@@ -18,11 +18,27 @@ __all__ = ["Material", "Sphere", "Box", "Capsule", "Ground", "closest_hit", "occ
 
 @dataclass(frozen=True)
 class Material:
-    """Lambert ``kd`` (RGB albedo) plus a normalised Blinn-Phong lobe of weight ``ks`` and exponent ``shininess``."""
+    """Lambert ``kd`` (RGB albedo), a normalised Blinn-Phong lobe and a perfect-mirror coat.
+
+    Attributes
+    ----------
+    kd : (3,) tuple
+        Lambertian albedo.
+    ks, shininess : float
+        Weight and exponent of a normalised Blinn-Phong lobe (the object's gloss).
+    mirror : float
+        Reflectance of a perfect-mirror coat at normal incidence (0 = none; chrome about 0.9).
+    fresnel : bool
+        Whether the coat's reflectance follows Schlick's approximation,
+        ``F = mirror + (1 - mirror) (1 - cos)^5`` (a dielectric coat, e.g. a glossy black ball),
+        or stays ``mirror`` at every angle (a metal).
+    """
 
     kd: tuple
     ks: float = 0.0
     shininess: float = 1.0
+    mirror: float = 0.0
+    fresnel: bool = False
 
 
 def _safe_inv(d):

@@ -85,6 +85,34 @@ TRUTH_FILE = "truth.json"
 
 _EPS = 1e-6  # ray-origin offset along the normal, metres
 
+#: Materials of the calibration spheres (``SynthScene.sphere_materials``).
+SPHERE_MATERIALS = ("matte", "grey", "mirror", "glossy_black")
+#: Lambert albedo of a ``'grey'`` sphere (``'matte'`` uses ``SynthScene.sphere_albedo``, 0.8).
+GREY_ALBEDO = 0.25
+#: Reflectance of a ``'mirror'`` (chrome) sphere, the same at every angle; it has no diffuse part.
+CHROME_REFLECTANCE = 0.9
+#: A ``'glossy_black'`` sphere: diffuse albedo, and the normal-incidence reflectance of its Schlick-Fresnel mirror coat.
+BLACK_ALBEDO, BLACK_COAT_F0 = 0.03, 0.04
+#: Ground textures (``SynthScene.ground_texture``).
+GROUND_TEXTURES = ("none", "blotchy", "checker")
+#: Default angular radius (degrees) of a distant light as mirrors see it (the sun's is 0.27).
+LIGHT_ANGULAR_RADIUS_DEG = 0.5
+_MIRROR_SUB = 16  # sub-rays per side of a pixel near a mirror highlight
+
+
+def _value_noise(q, seed: int) -> np.ndarray:
+    """Smooth value noise in [0, 1] at points (n, 2): hashed lattice values, smoothstep-blended."""
+    i = np.floor(q)
+    f = q - i
+    f = f * f * (3.0 - 2.0 * f)
+
+    def h(di, dj):
+        x = np.sin((i[:, 0] + di) * 127.1 + (i[:, 1] + dj) * 311.7 + seed * 74.7) * 43758.5453
+        return x - np.floor(x)
+
+    a, b, c, d = h(0, 0), h(1, 0), h(0, 1), h(1, 1)
+    return (a * (1 - f[:, 0]) + b * f[:, 0]) * (1 - f[:, 1]) + (c * (1 - f[:, 0]) + d * f[:, 0]) * f[:, 1]
+
 
 # ============================================================================ scene description
 @dataclass(frozen=True)
@@ -139,20 +167,59 @@ class SynthScene:
     ground_extent: float = 1.0
     supersample: int = 1
     seed: int = 0
+    sphere_materials: tuple = "matte"
+    with_object: bool = True
+    ground_texture: str = "none"
+    texture_scale: float = 0.04
+    camera_model: str = "pinhole"
 
     def __post_init__(self):
         object.__setattr__(self, "sphere_xy", tuple(tuple(float(v) for v in p) for p in self.sphere_xy))
         object.__setattr__(self, "camera_target", tuple(float(v) for v in self.camera_target))
+        if any(len(p) != 2 for p in self.sphere_xy):
+            raise ValueError("sphere_xy must be a sequence of (x, y) ground positions")
+        mats = self.sphere_materials
+        n = len(self.sphere_xy)
+        if isinstance(mats, str):
+            mats = (tuple(SPHERE_MATERIALS[k % len(SPHERE_MATERIALS)] for k in range(n)) if mats == "mixed"
+                    else (mats,) * n)
+        mats = tuple(mats)
+        if len(mats) != n or any(m not in SPHERE_MATERIALS for m in mats):
+            raise ValueError(f"sphere_materials: one of {SPHERE_MATERIALS} (or 'mixed') for all spheres, or one "
+                             f"per sphere ({n}), not {self.sphere_materials!r}")
+        object.__setattr__(self, "sphere_materials", mats)
         if self.sphere_radius <= 0 or self.camera_distance <= 0 or not 0 < self.camera_fov_deg < 180:
             raise ValueError("sphere_radius and camera_distance must be > 0 and 0 < fov < 180")
         if self.supersample < 1 or self.bounce_samples < 1 or self.ground_cells < 1:
             raise ValueError("supersample, bounce_samples and ground_cells must be >= 1")
+        if self.ground_texture not in GROUND_TEXTURES or not self.texture_scale > 0:
+            raise ValueError(f"ground_texture must be one of {GROUND_TEXTURES} and texture_scale > 0")
+        if self.camera_model not in ("pinhole", "orthographic"):
+            raise ValueError("camera_model must be 'pinhole' or 'orthographic'")
 
     # ------------------------------------------------------------------ derived quantities
     @property
     def sphere_centers(self) -> np.ndarray:
-        """(4, 3) float64 sphere centres (m), resting on the ground."""
-        return np.array([[x, y, self.sphere_radius] for x, y in self.sphere_xy], dtype=np.float64)
+        """(n, 3) float64 sphere centres (m), resting on the ground."""
+        return np.array([[x, y, self.sphere_radius] for x, y in self.sphere_xy], dtype=np.float64).reshape(-1, 3)
+
+    @property
+    def n_spheres(self) -> int:
+        return len(self.sphere_xy)
+
+    def metres_per_pixel(self, resolution: int) -> float:
+        """Pixel pitch of the orthographic camera (m): it sees the width ``2 D tan(fov / 2)`` of a
+        pinhole at ``camera_distance`` at its target."""
+        return 2.0 * self.camera_distance * math.tan(math.radians(self.camera_fov_deg) / 2) / int(resolution)
+
+    def project(self, points, resolution: int) -> np.ndarray:
+        """(n, 2) pixel coordinates (u, v) of world points (n, 3), OpenCV pixel-centre convention."""
+        M = self.world_from_camera()
+        c = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - M[:3, 3]) @ M[:3, :3]
+        if self.camera_model == "orthographic":
+            return c[:, :2] / self.metres_per_pixel(resolution) + 0.5 * (int(resolution) - 1)
+        K = self.K(resolution)
+        return (c @ K.T)[:, :2] / c[:, 2:3]
 
     def camera_center(self) -> np.ndarray:
         """(3,) camera centre in world coordinates (m)."""
@@ -170,28 +237,61 @@ class SynthScene:
         return M
 
     def K(self, resolution: int) -> np.ndarray:
-        """(3, 3) intrinsics for a ``resolution`` x ``resolution`` image.
+        """(3, 3) intrinsics for a ``resolution`` x ``resolution`` image (pinhole camera only).
 
         OpenCV convention: pixel (u, v) = (column, row) has its centre at integer coordinates,
         so the principal point is ((W - 1) / 2, (H - 1) / 2).
         """
+        if self.camera_model != "pinhole":
+            raise ValueError("an orthographic camera has no K (use metres_per_pixel)")
         f = 0.5 * resolution / math.tan(math.radians(self.camera_fov_deg) / 2)
         c = 0.5 * (resolution - 1)
         return np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
 
+    def sphere_material(self, k: int) -> Material:
+        """The :class:`~ffls.synth.geometry.Material` of sphere ``k``."""
+        name = self.sphere_materials[k]
+        if name == "matte":
+            return Material((self.sphere_albedo,) * 3)
+        if name == "grey":
+            return Material((GREY_ALBEDO,) * 3)
+        if name == "mirror":
+            return Material((0.0, 0.0, 0.0), mirror=CHROME_REFLECTANCE)
+        return Material((BLACK_ALBEDO,) * 3, mirror=BLACK_COAT_F0, fresnel=True)
+
     def primitives(self) -> list:
-        """The scene's primitives: ground, pedestal, glossy body, capsule, then the 4 spheres."""
-        white = (self.sphere_albedo,) * 3
-        prims = [
-            Ground(Material((self.ground_albedo,) * 3), LABEL_GROUND),
-            Box((-0.09, -0.09, 0.0), (0.09, 0.09, 0.05), Material((0.12, 0.22, 0.55)), LABEL_OBJECT),
-            Sphere((0.0, 0.0, 0.135), 0.085, Material((0.55, 0.10, 0.07), ks=0.3, shininess=50.0), LABEL_OBJECT),
-            Capsule((0.15, -0.08, 0.025), (0.10, 0.02, 0.19), 0.025,
-                     Material((0.20, 0.50, 0.12), ks=0.08, shininess=20.0), LABEL_OBJECT),
-        ]
+        """The scene's primitives: ground, pedestal, glossy body, capsule (if ``with_object``), then the spheres."""
+        prims = [Ground(Material((self.ground_albedo,) * 3), LABEL_GROUND)]
+        if self.with_object:
+            prims += [
+                Box((-0.09, -0.09, 0.0), (0.09, 0.09, 0.05), Material((0.12, 0.22, 0.55)), LABEL_OBJECT),
+                Sphere((0.0, 0.0, 0.135), 0.085, Material((0.55, 0.10, 0.07), ks=0.3, shininess=50.0), LABEL_OBJECT),
+                Capsule((0.15, -0.08, 0.025), (0.10, 0.02, 0.19), 0.025,
+                         Material((0.20, 0.50, 0.12), ks=0.08, shininess=20.0), LABEL_OBJECT),
+            ]
         for k, c in enumerate(self.sphere_centers):
-            prims.append(Sphere(tuple(c), self.sphere_radius, Material(white), LABEL_SPHERE0 + k))
+            prims.append(Sphere(tuple(c), self.sphere_radius, self.sphere_material(k), LABEL_SPHERE0 + k))
         return prims
+
+    def ground_albedo_at(self, xy) -> np.ndarray:
+        """(n,) albedo of the ground at points (n, 2) (m): ``ground_albedo``, or its texture.
+
+        ``'blotchy'``: two octaves of value noise (cell ``texture_scale``), pushed through a steep
+        tanh into high-contrast blotches, albedo ``ground_albedo * (0.1 .. 1.9)``;
+        ``'checker'``: squares of side ``texture_scale`` of ``0.2`` and ``1.8 * ground_albedo``.
+        Either way the mean albedo is about ``ground_albedo``.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        a = self.ground_albedo
+        if self.ground_texture == "none":
+            return np.full(len(xy), float(a))
+        q = xy / self.texture_scale
+        if self.ground_texture == "checker":
+            t = (np.floor(q[:, 0]) + np.floor(q[:, 1])) % 2
+            return a * (0.2 + 1.6 * t)
+        n = 0.65 * _value_noise(q, self.seed) + 0.35 * _value_noise(2.03 * q + 17.0, self.seed + 1)
+        t = 0.5 + 0.5 * np.tanh(8.0 * (n - 0.5))
+        return a * (0.1 + 1.8 * t)
 
 
 # ============================================================================ G-buffer
@@ -212,7 +312,22 @@ class GBuffer:
     labels : (Hs, Ws) int8
         :data:`LABEL_GROUND`, :data:`LABEL_OBJECT`, ``LABEL_SPHERE0 + k`` or :data:`LABEL_BACKGROUND`.
     kd : (P, 3), ks : (P,), shininess : (P,)
-        Material of each hit sample.
+        Material of each hit sample (``kd`` of the ground is its texture there).
+    mirror_idx : (M,) int64
+        Indices (into the P hits) of the hits on a mirror-coated sphere.
+    mirror_F : (M,) float64
+        Reflectance of the coat there (Schlick's Fresnel term at the viewing angle, or constant).
+    refl_dir : (M, 3) float64
+        Reflected viewing ray (unit).
+    refl_hit : (M,) bool
+        Whether the reflected ray hits the scene (else it leaves it).
+    refl_t, refl_points, refl_normals, refl_kd
+        Distance, point, normal and Lambert albedo of those secondary hits ((M,), (M, 3) x 3).
+    refl_footprint : (M,) float64
+        Largest angle (radians) between the reflected ray of the pixel centre and those of its
+        corners (pi where a corner misses the sphere): where a light can show in the pixel.
+    cell_albedo : (C,) float64
+        Ground albedo at the bounce cells.
     """
 
     shape: tuple
@@ -227,20 +342,52 @@ class GBuffer:
     shininess: np.ndarray
     bounce: sp.csr_matrix = field(default=None, repr=False)  # (P, C) or None
     cell_points: np.ndarray = field(default=None, repr=False)  # (C, 3)
+    mirror_idx: np.ndarray = field(default=None, repr=False)
+    mirror_F: np.ndarray = field(default=None, repr=False)
+    refl_dir: np.ndarray = field(default=None, repr=False)
+    refl_hit: np.ndarray = field(default=None, repr=False)
+    refl_t: np.ndarray = field(default=None, repr=False)
+    refl_points: np.ndarray = field(default=None, repr=False)
+    refl_normals: np.ndarray = field(default=None, repr=False)
+    refl_kd: np.ndarray = field(default=None, repr=False)
+    refl_footprint: np.ndarray = field(default=None, repr=False)
+    cell_albedo: np.ndarray = field(default=None, repr=False)
+
+
+def _rays_through(scene: SynthScene, resolution: int, u, v):
+    """World rays (o, d) (n, 3) through pixel coordinates ``u``, ``v`` (n,) of the camera."""
+    M = scene.world_from_camera()
+    u = np.asarray(u, dtype=np.float64).ravel()
+    v = np.asarray(v, dtype=np.float64).ravel()
+    if scene.camera_model == "orthographic":
+        s = scene.metres_per_pixel(resolution)
+        c = 0.5 * (resolution - 1)
+        d = np.broadcast_to(M[:3, 2], (len(u), 3)).copy()
+        # origins on the image plane, well outside the scene (parallel rays: the distance is free)
+        back = M[:3, 3] - 10.0 * M[:3, 2]
+        o = back + np.outer((u - c) * s, M[:3, 0]) + np.outer((v - c) * s, M[:3, 1])
+        return o, d
+    K = scene.K(resolution)
+    x = (u - K[0, 2]) / K[0, 0]
+    y = (v - K[1, 2]) / K[1, 1]
+    dc = np.stack([x, y, np.ones(x.size)], axis=1)
+    d = normalize(dc @ M[:3, :3].T)
+    o = np.broadcast_to(M[:3, 3], d.shape).copy()
+    return o, d
+
+
+def _sample_uv(scene: SynthScene, resolution: int, flat_index):
+    """(u, v) pixel coordinates of the supersampled samples ``flat_index`` (row-major, n = resolution * supersample)."""
+    s = scene.supersample
+    n = resolution * s
+    row, col = np.divmod(np.asarray(flat_index, dtype=np.int64), n)
+    return (col + 0.5) / s - 0.5, (row + 0.5) / s - 0.5
 
 
 def _primary_rays(scene: SynthScene, resolution: int):
-    s = scene.supersample
-    K = scene.K(resolution)
-    n = resolution * s
-    sub = (np.arange(n) + 0.5) / s - 0.5  # pixel coordinates of the sub-sample centres
-    u, v = np.meshgrid(sub, sub)
-    x = (u - K[0, 2]) / K[0, 0]
-    y = (v - K[1, 2]) / K[1, 1]
-    M = scene.world_from_camera()
-    dc = np.stack([x.ravel(), y.ravel(), np.ones(x.size)], axis=1)
-    d = normalize(dc @ M[:3, :3].T)
-    o = np.broadcast_to(M[:3, 3], d.shape).copy()
+    n = resolution * scene.supersample
+    u, v = _sample_uv(scene, resolution, np.arange(n * n))
+    o, d = _rays_through(scene, resolution, u, v)
     return o, d, (n, n)
 
 
@@ -276,6 +423,8 @@ def gbuffer(scene: SynthScene, resolution: int) -> GBuffer:
     kd = np.zeros_like(p)
     ks = np.zeros(len(p))
     sh = np.ones(len(p))
+    mir = np.zeros(len(p))
+    fres = np.zeros(len(p), dtype=bool)
     for k, prim in enumerate(prims):
         m = pid == k
         if not m.any():
@@ -285,13 +434,85 @@ def gbuffer(scene: SynthScene, resolution: int) -> GBuffer:
         kd[m] = prim.material.kd
         ks[m] = prim.material.ks
         sh[m] = prim.material.shininess
+        mir[m] = prim.material.mirror
+        fres[m] = prim.material.fresnel
     # the ground is exactly z = 0 where hit
     g = labels[index] == LABEL_GROUND
     p[g, 2] = 0.0
+    if scene.ground_texture != "none" and g.any():
+        kd[g] = scene.ground_albedo_at(p[g, :2])[:, None]
     gb = GBuffer(shape=shape, points=p, normals=normalize(n), view=-d[hit], index=index, prim=pid,
                  labels=labels.reshape(shape), kd=kd, ks=ks, shininess=sh)
     gb.bounce, gb.cell_points = _bounce_matrix(scene, prims, gb)
+    G = scene.ground_cells
+    gb.cell_albedo = np.full(len(gb.cell_points), float(scene.ground_albedo))
+    gb.cell_albedo[:G * G] = scene.ground_albedo_at(gb.cell_points[:G * G, :2])
+    _mirror_buffers(scene, prims, gb, mir, fres, int(resolution))
     return gb
+
+
+def _surface_at(scene: SynthScene, prims, p, pid):
+    """Unit normals (n, 3) and Lambert albedo (n, 3) at hit points ``p`` of primitives ``pid``."""
+    n = np.zeros_like(p)
+    kd = np.zeros_like(p)
+    for k, prim in enumerate(prims):
+        m = pid == k
+        if m.any():
+            n[m] = prim.normal(p[m])
+            kd[m] = prim.material.kd
+            if isinstance(prim, Ground):
+                p[m, 2] = 0.0
+                kd[m] = scene.ground_albedo_at(p[m, :2])[:, None]
+    return normalize(n), kd
+
+
+def _reflect(view, n):
+    """Mirror direction (unit) of the viewing ray ``-view`` about unit normals ``n``."""
+    return normalize(2.0 * np.einsum("ij,ij->i", view, n)[:, None] * n - view)
+
+
+def _mirror_buffers(scene: SynthScene, prims, gb: GBuffer, mirror, fresnel, resolution: int):
+    """Fill the ``mirror_*`` and ``refl_*`` fields of ``gb`` (static reflected rays of mirror-coated hits)."""
+    mi = np.flatnonzero(mirror > 0)
+    gb.mirror_idx = mi
+    nrm, v = gb.normals[mi], gb.view[mi]
+    cos = np.clip(np.einsum("ij,ij->i", nrm, v), 0.0, 1.0)
+    F0 = mirror[mi]
+    gb.mirror_F = np.where(fresnel[mi], F0 + (1.0 - F0) * (1.0 - cos) ** 5, F0)
+    r = _reflect(v, nrm)
+    gb.refl_dir = r
+    o2 = gb.points[mi] + _EPS * nrm
+    t2, id2 = closest_hit(prims, o2, r)
+    hit = id2 >= 0
+    gb.refl_hit, gb.refl_t = hit, t2
+    p2 = o2[hit] + t2[hit, None] * r[hit]
+    gb.refl_normals, gb.refl_kd = _surface_at(scene, prims, p2, id2[hit])
+    gb.refl_points = p2
+    # footprint: reflected rays through the (supersampled) pixel's corners, on the same sphere
+    foot = np.zeros(len(mi))
+    if len(mi):
+        u, vv = _sample_uv(scene, resolution, gb.index[mi])
+        h = 0.5 / scene.supersample
+        worst = np.zeros(len(mi))
+        for du, dv in ((-h, -h), (h, -h), (-h, h), (h, h)):
+            o, d = _rays_through(scene, resolution, u + du, vv + dv)
+            t0 = np.full(len(mi), np.inf)
+            for k in np.unique(gb.prim[mi]):
+                m = gb.prim[mi] == k
+                t0[m] = prims[k].interval(o[m], d[m])[0]
+            ok = np.isfinite(t0)
+            rc = np.zeros_like(d)
+            if ok.any():
+                pc = o[ok] + t0[ok, None] * d[ok]
+                nc = np.zeros_like(pc)
+                for k in np.unique(gb.prim[mi][ok]):
+                    m = gb.prim[mi][ok] == k
+                    nc[m] = prims[k].normal(pc[m])
+                rc[ok] = _reflect(-d[ok], nc)
+            ang = np.arccos(np.clip(np.einsum("ij,ij->i", rc, r), -1.0, 1.0))
+            worst = np.where(ok, np.maximum(worst, ang), np.pi)  # a corner off the sphere: anywhere
+        foot = worst
+    gb.refl_footprint = foot
 
 
 # ============================================================================ bounce
@@ -339,7 +560,7 @@ def _bounce_matrix(scene: SynthScene, prims, gb: GBuffer, chunk: int = 400_000):
     c = (np.arange(G) + 0.5) / G * 2 * E - E
     cx, cy = np.meshgrid(c, c)
     grid_pts = np.stack([cx.ravel(), cy.ravel(), np.zeros(G * G)], axis=1)
-    surf = np.flatnonzero(gb.labels.ravel()[gb.index] > LABEL_GROUND)
+    surf = np.flatnonzero((gb.labels.ravel()[gb.index] > LABEL_GROUND) & (gb.kd.max(axis=1) > 0))
     P = len(gb.points)
     k = int(math.ceil(math.sqrt(scene.bounce_samples)))
     S = k * k
@@ -411,6 +632,93 @@ def _light_samples(direction, position, intensity, radius, n_samples):
     return [(None, p, I / len(pts)) for p in pts]
 
 
+def _emitter(direction, position, intensity, radius, angular_radius_deg):
+    """The light as mirrors see it: a disc of directions (distant) or a sphere (near), uniform radiance.
+
+    A distant light of angular radius ``theta`` has radiance ``1 / (pi sin^2 theta)``, so its
+    irradiance at normal incidence stays 1. A near light of intensity ``I`` is a sphere of radius
+    ``radius`` (or, for a point light, the radius that subtends ``angular_radius_deg`` from the
+    scene centre) of radiance ``I / (pi radius^2)``.
+    """
+    th = math.radians(float(angular_radius_deg))
+    if not 0 < th < math.pi / 2:
+        raise ValueError(f"light_angular_radius_deg must be in (0, 90), not {angular_radius_deg}")
+    if direction is not None:
+        return {"kind": "distant", "l": normalize(np.asarray(direction, dtype=np.float64).reshape(3)),
+                "theta": th, "L": 1.0 / (np.pi * math.sin(th) ** 2)}
+    q = np.asarray(position, dtype=np.float64).reshape(3)
+    I = float(q @ q) if intensity is None else float(intensity)
+    a = float(radius) if radius > 0 else float(np.linalg.norm(q)) * math.tan(th)
+    return {"kind": "near", "q": q, "a": a, "L": I / (np.pi * a * a)}
+
+
+def _mirror_light(scene: SynthScene, gb: GBuffer, em: dict, prims, resolution: int):
+    """The light seen in mirror-coated pixels: (indices into the hits (k,), radiance (k,)).
+
+    Pixels whose reflected ray may reach the light (within its angular radius plus the pixel's
+    footprint) are re-sampled with ``_MIRROR_SUB`` x ``_MIRROR_SUB`` sub-rays on their own sphere;
+    a sub-ray counts when its reflection hits the light unoccluded and its primary ray is not
+    hidden by another primitive. The pixel gets the mean of ``F L`` over its sub-rays.
+    """
+    mi = gb.mirror_idx
+    p, r = gb.points[mi], gb.refl_dir
+    if em["kind"] == "distant":
+        to = np.broadcast_to(em["l"], p.shape)
+        half = np.full(len(p), em["theta"])
+    else:
+        w = em["q"] - p
+        dist = np.linalg.norm(w, axis=1)
+        to = w / dist[:, None]
+        half = np.arcsin(np.minimum(1.0, em["a"] / dist))
+    ang = np.arccos(np.clip(np.einsum("ij,ij->i", r, to), -1.0, 1.0))
+    cand = np.flatnonzero(ang < half + gb.refl_footprint + 1e-9)
+    if len(cand) == 0:
+        return cand, np.zeros(0)
+    ci = mi[cand]
+    m = _MIRROR_SUB
+    offs = ((np.arange(m) + 0.5) / m - 0.5) / scene.supersample
+    ou, ov = np.meshgrid(offs, offs)
+    u, v = _sample_uv(scene, resolution, gb.index[ci])
+    o, d = _rays_through(scene, resolution, (u[:, None] + ou.ravel()).ravel(), (v[:, None] + ov.ravel()).ravel())
+    pix = np.repeat(np.arange(len(ci)), m * m)
+    own = gb.prim[ci][pix]
+    t0 = np.full(len(o), np.inf)
+    F0 = np.zeros(len(o))
+    fres = np.zeros(len(o), dtype=bool)
+    nrm = np.zeros_like(o)
+    for k in np.unique(own):
+        sel = own == k
+        t0[sel] = prims[k].interval(o[sel], d[sel])[0]
+        F0[sel] = prims[k].material.mirror
+        fres[sel] = prims[k].material.fresnel
+    ok = np.flatnonzero(np.isfinite(t0) & (t0 > 0))
+    ps = o[ok] + t0[ok, None] * d[ok]
+    for k in np.unique(own[ok]):
+        sel = own[ok] == k
+        nrm[ok[sel]] = prims[k].normal(ps[sel])
+    ns = nrm[ok]
+    rs = _reflect(-d[ok], ns)
+    if em["kind"] == "distant":
+        hit = rs @ em["l"] >= math.cos(em["theta"])
+        tl = None
+    else:
+        oc = ps - em["q"]
+        b = np.einsum("ij,ij->i", oc, rs)
+        c = np.einsum("ij,ij->i", oc, oc) - em["a"] ** 2
+        h = b * b - c
+        tl = -b - np.sqrt(np.maximum(h, 0.0))
+        hit = (h >= 0) & (tl > 0)
+    k = np.flatnonzero(hit)
+    vis = ~occluded(prims, ps[k] + _EPS * ns[k], rs[k], None if tl is None else tl[k])
+    vis &= ~occluded(prims, o[ok[k]], d[ok[k]], t0[ok[k]] * (1.0 - 1e-6))
+    cos = np.clip(np.einsum("ij,ij->i", ns[k], -d[ok[k]]), 0.0, 1.0)
+    f0 = F0[ok[k]]
+    F = np.where(fres[ok[k]], f0 + (1.0 - f0) * (1.0 - cos) ** 5, f0)
+    val = np.bincount(pix[ok[k]], weights=F * em["L"] * vis, minlength=len(ci)) / (m * m)
+    keep = val > 0
+    return ci[keep], val[keep]
+
+
 def _irradiance(prims, p, n, samples):
     """Yield (l (n, 3), E (n,)) per light sample: unit direction to the light and shadowed irradiance.
 
@@ -445,7 +753,7 @@ def _irradiance(prims, p, n, samples):
         yield l, E
 
 
-def _render(scene, gb, samples, resolution, out=None):
+def _render(scene, gb, samples, resolution, out=None, emitter=None):
     prims = scene.primitives()
     p, n, v = gb.points, gb.normals, gb.view
     rad = np.zeros((len(p), 3))
@@ -466,8 +774,17 @@ def _render(scene, gb, samples, resolution, out=None):
         up = np.zeros_like(cp)
         up[:, 2] = 1.0
         Ec = sum(E for _, E in _irradiance(prims, cp, up, samples))
-        Eb = gb.bounce @ (scene.ground_albedo / np.pi * Ec)
+        Eb = gb.bounce @ (gb.cell_albedo / np.pi * Ec)
         rad += gb.kd / np.pi * Eb[:, None]
+    # mirror coats: the reflected scene, lit directly (one level), and the light itself
+    if len(gb.mirror_idx):
+        mi, h = gb.mirror_idx, gb.refl_hit
+        if h.any():
+            E2 = sum(E for _, E in _irradiance(prims, gb.refl_points, gb.refl_normals, samples))
+            rad[mi[h]] += (gb.mirror_F[h] * E2)[:, None] * gb.refl_kd / np.pi
+        if emitter is not None:
+            idx, val = _mirror_light(scene, gb, emitter, prims, resolution)
+            rad[idx] += val[:, None]
     Hs, Ws = gb.shape
     img = np.zeros((Hs * Ws, 3))
     img[gb.index] = rad
@@ -480,7 +797,8 @@ def _render(scene, gb, samples, resolution, out=None):
 
 
 def render_light(scene: SynthScene, resolution: int, direction=None, position=None, *,
-                 intensity: float | None = None, light_radius: float = 0.0, light_samples: int = 9) -> np.ndarray:
+                 intensity: float | None = None, light_radius: float = 0.0, light_samples: int = 9,
+                 light_angular_radius_deg: float = LIGHT_ANGULAR_RADIUS_DEG) -> np.ndarray:
     """Render the scene under one light.
 
     Parameters
@@ -500,6 +818,11 @@ def render_light(scene: SynthScene, resolution: int, direction=None, position=No
         Radius (m) of a spherical near light; 0 = point light.
     light_samples : int
         Points sampling a spherical light (rounded up to a square), for soft shadows.
+    light_angular_radius_deg : float
+        How large the light looks in mirror spheres: the angular radius of a distant light (its
+        radiance is ``1 / (pi sin^2)`` of it, so its irradiance stays 1), and, for a point near
+        light (``light_radius`` 0), the angle its sphere subtends from the scene centre. Diffuse
+        shading is unaffected.
 
     Returns
     -------
@@ -507,11 +830,14 @@ def render_light(scene: SynthScene, resolution: int, direction=None, position=No
         Linear radiance.
     """
     gb = gbuffer(scene, int(resolution))
-    return _render(scene, gb, _light_samples(direction, position, intensity, light_radius, light_samples), int(resolution))
+    samples = _light_samples(direction, position, intensity, light_radius, light_samples)
+    em = _emitter(direction, position, intensity, light_radius, light_angular_radius_deg)
+    return _render(scene, gb, samples, int(resolution), emitter=em)
 
 
 def render_lights(scene: SynthScene, resolution: int, directions=None, *, positions=None,
-                  light_radius: float = 0.0, light_samples: int = 9, progress: bool = False) -> np.ndarray:
+                  light_radius: float = 0.0, light_samples: int = 9, progress: bool = False,
+                  light_angular_radius_deg: float = LIGHT_ANGULAR_RADIUS_DEG) -> np.ndarray:
     """Render one image per distant light (or per near light with ``positions=``).
 
     Parameters
@@ -522,7 +848,7 @@ def render_lights(scene: SynthScene, resolution: int, directions=None, *, positi
         Distant-light directions (normalised here).
     positions : (n, 3) float, optional
         Near-light positions (m) instead, each with intensity ``|position|^2``.
-    light_radius, light_samples
+    light_radius, light_samples, light_angular_radius_deg
         As in :func:`render_light`.
     progress : bool
         Show a tqdm bar.
@@ -543,9 +869,10 @@ def render_lights(scene: SynthScene, resolution: int, directions=None, *, positi
         from tqdm import tqdm
         it = tqdm(it, desc="render", unit="img")
     for i in it:
-        s = (_light_samples(arr[i], None, None, 0, 1) if positions is None
-             else _light_samples(None, arr[i], None, light_radius, light_samples))
-        out[i] = _render(scene, gb, s, int(resolution))
+        d, q = (arr[i], None) if positions is None else (None, arr[i])
+        s = _light_samples(d, q, None, light_radius if q is not None else 0, light_samples if q is not None else 1)
+        em = _emitter(d, q, None, light_radius, light_angular_radius_deg)
+        out[i] = _render(scene, gb, s, int(resolution), emitter=em)
     return out
 
 
@@ -560,13 +887,13 @@ def pixel_labels(scene: SynthScene, resolution: int) -> np.ndarray:
     lab = gb.labels.reshape(resolution, s, resolution, s).transpose(0, 2, 1, 3).reshape(resolution, resolution, s * s)
     if s == 1:
         return lab[..., 0].copy()
-    vals = np.arange(LABEL_BACKGROUND, LABEL_SPHERE0 + 4)
+    vals = np.arange(LABEL_BACKGROUND, LABEL_SPHERE0 + scene.n_spheres)
     counts = (lab[..., None] == vals).sum(axis=2)
     return vals[np.argmax(counts, axis=-1)].astype(np.int8)
 
 
 def sphere_mask(scene: SynthScene, resolution: int) -> np.ndarray:
-    """(H, W) int8: index 0..3 of the white sphere seen at each pixel, -1 elsewhere."""
+    """(H, W) int8: index 0..n-1 of the sphere seen at each pixel, -1 elsewhere."""
     lab = pixel_labels(scene, resolution)
     return np.where(lab >= LABEL_SPHERE0, lab - LABEL_SPHERE0, -1).astype(np.int8)
 
@@ -576,17 +903,20 @@ def sphere_pixel_radii(scene: SynthScene, resolution: int) -> tuple[np.ndarray, 
 
     Returns
     -------
-    centers_px : (4, 2) float64
+    centers_px : (n, 2) float64
         (u, v) = (column, row) projection of each 3D centre (OpenCV convention).
-    radii_px : (4,) float64
-        ``f tan(asin(R / D))``: the silhouette's half-angle in pixels along the focal length.
+    radii_px : (n,) float64
+        Pinhole: ``f tan(asin(R / D))``, the silhouette's half-angle in pixels along the focal
+        length. Orthographic: ``R`` over the pixel pitch (the outline is then an exact circle).
     """
+    uv = scene.project(scene.sphere_centers, resolution)
+    R = scene.sphere_radius
+    if scene.camera_model == "orthographic":
+        return uv, np.full(scene.n_spheres, R / scene.metres_per_pixel(resolution))
     K = scene.K(resolution)
     M = scene.world_from_camera()
     c = (scene.sphere_centers - M[:3, 3]) @ M[:3, :3]  # camera coordinates
-    uv = (c @ K.T)[:, :2] / c[:, 2:3]
     D = np.linalg.norm(c, axis=1)
-    R = scene.sphere_radius
     return uv, K[0, 0] * R / np.sqrt(D * D - R * R)
 
 
