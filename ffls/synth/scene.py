@@ -49,10 +49,9 @@ from scipy.spatial import cKDTree
 from ffls.io.capture import LIGHTS_FILE, Capture, Lights, save_capture, save_lights
 from ffls.conventions import check_hemisphere, in_domain, normalize
 from ffls.errors import InputError, atomic_output
-from ffls.io.images import write_exr, write_png
 from ffls.lightmaps.lightmap import as_samples
-from ffls.radiance.encoding import srgb_encode
 from ffls.synth.geometry import Box, Capsule, Ground, Material, Sphere, closest_hit, occluded
+from ffls.synth.photo import PhotoSettings, develop, gamma_response_table, write_photo
 
 __all__ = [
     "SynthScene",
@@ -71,7 +70,17 @@ __all__ = [
     "cluster_lightmap",
     "stratified_directions",
     "write_synthetic_capture",
+    "write_calibration_pair",
+    "make_scene",
+    "sphere_layout",
     "TRUTH_FILE",
+    "RESPONSE_FILE",
+    "SPHERE_MATERIALS",
+    "GROUND_TEXTURES",
+    "BACKGROUNDS",
+    "LENSES",
+    "LONG_LENS_FOV_DEG",
+    "LIGHT_ANGULAR_RADIUS_DEG",
 ]
 
 #: Labels of :func:`pixel_labels`: nothing hit, the ground, the object, then sphere k is ``LABEL_SPHERE0 + k``.
@@ -82,6 +91,8 @@ LABEL_SPHERE0 = 2
 
 #: Ground truth written beside ``capture.json`` by :func:`write_synthetic_capture`.
 TRUTH_FILE = "truth.json"
+#: The inverse response table a gamma-2.2 8-bit capture states in ``capture.json``.
+RESPONSE_FILE = "response.npy"
 
 _EPS = 1e-6  # ray-origin offset along the normal, metres
 
@@ -292,6 +303,68 @@ class SynthScene:
         n = 0.65 * _value_noise(q, self.seed) + 0.35 * _value_noise(2.03 * q + 17.0, self.seed + 1)
         t = 0.5 + 0.5 * np.tanh(8.0 * (n - 0.5))
         return a * (0.1 + 1.8 * t)
+
+
+# ============================================================================ conditions
+#: Backgrounds of :func:`make_scene`: keyword arguments of :class:`SynthScene`.
+BACKGROUNDS = {
+    "black": {"ground_albedo": 0.0},
+    "grey": {"ground_albedo": 0.3},
+    "white": {"ground_albedo": 0.8},
+    "textured": {"ground_albedo": 0.3, "ground_texture": "blotchy"},
+}
+#: Field of view of the long lens: 10 m away, it frames what the normal lens frames at 1 m.
+LONG_LENS_FOV_DEG = 2.0 * math.degrees(math.atan(math.tan(math.radians(23.0)) / 10.0))
+#: Lenses of :func:`make_scene`: keyword arguments of :class:`SynthScene`.
+LENSES = {
+    "normal": {},
+    "long": {"camera_distance": 10.0, "camera_fov_deg": LONG_LENS_FOV_DEG},
+    "orthographic": {"camera_model": "orthographic", "camera_distance": 10.0, "camera_fov_deg": LONG_LENS_FOV_DEG},
+}
+
+
+def sphere_layout(n: int, ring: float | None = None) -> tuple:
+    """Ground positions (x, y) of ``n`` spheres evenly on a circle around the object.
+
+    The first sits front-left (azimuth -135 degrees) and the others follow counter-clockwise;
+    ``n = 4`` gives the default corners of a 0.5 m square. The ring radius is 0.354 m up to 4
+    spheres and 0.3 m beyond (so that side spheres stay in frame).
+    """
+    n = int(n)
+    if n < 0:
+        raise ValueError("the number of spheres must be >= 0")
+    if ring is None:
+        ring = math.sqrt(0.125) if n <= 4 else 0.3
+    a = np.radians(-135.0 + 360.0 * np.arange(n) / max(n, 1))
+    return tuple((float(ring * math.cos(t)), float(ring * math.sin(t))) for t in a)
+
+
+def make_scene(spheres: int = 4, sphere_material="matte", background: str = "grey", lens: str = "normal",
+               with_object: bool = True, sphere_xy=None, **kwargs) -> SynthScene:
+    """A :class:`SynthScene` for named conditions.
+
+    Parameters
+    ----------
+    spheres : int
+        Number of spheres on :func:`sphere_layout` (ignored when ``sphere_xy`` is given).
+    sphere_material : str or sequence of str
+        One of :data:`SPHERE_MATERIALS`, ``'mixed'`` (cycling through them), or one per sphere.
+    background : {'black', 'grey', 'white', 'textured'}
+        See :data:`BACKGROUNDS`.
+    lens : {'normal', 'long', 'orthographic'}
+        See :data:`LENSES`.
+    with_object : bool
+    sphere_xy : sequence of (x, y), optional
+    **kwargs
+        Other :class:`SynthScene` fields (``sphere_radius``, ``supersample``, ...).
+    """
+    if background not in BACKGROUNDS:
+        raise ValueError(f"background must be one of {tuple(BACKGROUNDS)}, not {background!r}")
+    if lens not in LENSES:
+        raise ValueError(f"lens must be one of {tuple(LENSES)}, not {lens!r}")
+    xy = sphere_layout(spheres) if sphere_xy is None else tuple(sphere_xy)
+    kw = {**BACKGROUNDS[background], **LENSES[lens], **kwargs}
+    return SynthScene(sphere_xy=xy, sphere_materials=sphere_material, with_object=with_object, **kw)
 
 
 # ============================================================================ G-buffer
@@ -1058,11 +1131,41 @@ def _write_json(path: Path, obj):
         tmp.write_text(json.dumps(obj, indent=1) + "\n")
 
 
+def _capture_encoding(folder: Path, photo: PhotoSettings):
+    """``capture.json``'s ``encoding`` for ``photo`` ("auto" = left out); writes ``response.npy`` for gamma 2.2."""
+    if not photo.state_encoding:
+        return "auto"
+    if photo.curve != "gamma2.2":
+        return photo.curve
+    if photo.bits != 8:
+        raise ValueError("capture.json can state gamma 2.2 only for 8-bit files (a 256-entry response); "
+                         "use state_encoding=False for 16-bit gamma 2.2")
+    with atomic_output(folder / RESPONSE_FILE) as tmp:
+        np.save(tmp, gamma_response_table())
+    return {"response": RESPONSE_FILE}
+
+
+def _lens_truth(scene: SynthScene, resolution: int) -> dict:
+    ortho = scene.camera_model == "orthographic"
+    return {
+        "model": scene.camera_model,
+        "distance": scene.camera_distance,
+        "fov_deg": scene.camera_fov_deg,
+        "elevation_deg": scene.camera_elevation_deg,
+        "target": list(scene.camera_target),
+        "K": None if ortho else scene.K(resolution).tolist(),
+        "metres_per_pixel": scene.metres_per_pixel(resolution) if ortho else None,
+        "world_from_camera": scene.world_from_camera().tolist(),
+    }
+
+
 def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, light_model: str = "distant",
                             light_distance: float = 2.0, seed: int = 0, ground_albedo: float = 0.3,
                             hemisphere: str = "upper", encoding: str = "linear", noise: float = 0.0,
                             directions=None, progress: bool = True, scene: SynthScene | None = None,
-                            light_radius: float = 0.0, light_samples: int = 9) -> dict:
+                            light_radius: float = 0.0, light_samples: int = 9, photo: PhotoSettings | None = None,
+                            light_angular_radius_deg: float = LIGHT_ANGULAR_RADIUS_DEG,
+                            write_lights: bool = True) -> dict:
     """Render a synthetic capture folder: images, ``capture.json``, ``lights.json``, ``truth.json``.
 
     Parameters
@@ -1085,11 +1188,12 @@ def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, 
     hemisphere : {'upper', 'full'}
         Where the default directions are drawn; written to ``capture.json``.
     encoding : {'linear', 'srgb8'}
-        Half-float linear EXR, or 8-bit sRGB PNG (clipped at 1, the camera saturating).
+        Shorthand when ``photo`` is None: half-float linear EXR, or 8-bit sRGB PNG (clipped at 1,
+        the camera saturating).
     noise : float
-        Standard deviation of Gaussian noise added to the stored values, as a fraction of full
-        scale: to the encoded value before 8-bit quantisation (``1/255`` = one code value), or to
-        the linear value for EXR.
+        Shorthand when ``photo`` is None: standard deviation of Gaussian noise added to the
+        stored values, as a fraction of full scale: to the encoded value before 8-bit
+        quantisation (``1/255`` = one code value), or to the linear value for EXR.
     directions : (n, 3) float, optional
         Explicit light directions (normalised here).
     progress : bool
@@ -1097,23 +1201,36 @@ def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, 
     scene : SynthScene, optional
         Scene layout; default ``SynthScene(ground_albedo=ground_albedo)``. When given, its own
         ``ground_albedo`` is used and the ``ground_albedo`` argument is ignored.
-    light_radius, light_samples
-        Spherical near light (see :func:`render_light`).
+    light_radius, light_samples, light_angular_radius_deg
+        Spherical near light, and the light's size in mirrors (see :func:`render_light`).
+    photo : ffls.synth.photo.PhotoSettings, optional
+        The camera: file format, transfer curve, exposure, vignetting, sensor noise, JPEG
+        quality, and whether ``capture.json`` states the encoding. Give either ``photo`` or the
+        ``encoding``/``noise`` shorthand.
+    write_lights : bool
+        Write ``lights.json`` (False: an object capture whose lights come from another capture).
 
     Returns
     -------
     dict
-        ``{"folder", "images", "directions" (n, 3), "positions" (n, 3) or None, "scene"}``.
+        ``{"folder", "images", "directions" (n, 3), "positions" (n, 3) or None, "scene", "photo"}``.
     """
     check_hemisphere(hemisphere)
     if light_model not in ("distant", "near"):
         raise ValueError("light_model must be 'distant' or 'near'")
-    if encoding not in ("linear", "srgb8"):
-        raise ValueError("encoding must be 'linear' or 'srgb8'")
-    if noise < 0:
-        raise ValueError("noise must be >= 0")
+    if photo is None:
+        if encoding not in ("linear", "srgb8"):
+            raise ValueError("encoding must be 'linear' or 'srgb8' (or pass photo=PhotoSettings(...))")
+        if noise < 0:
+            raise ValueError("noise must be >= 0")
+        photo = (PhotoSettings("exr", "linear", noise=noise) if encoding == "linear"
+                 else PhotoSettings("png8", "srgb", noise=noise))
+        legacy_encoding = encoding
+    else:
+        if encoding != "linear" or noise != 0.0:
+            raise ValueError("give photo= or the encoding=/noise= shorthand, not both")
+        legacy_encoding = photo.curve
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     if scene is None:
         scene = SynthScene(ground_albedo=ground_albedo)
     if directions is None:
@@ -1122,43 +1239,50 @@ def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, 
         dirs = normalize(np.atleast_2d(np.asarray(directions, dtype=np.float64)))
         if dirs.ndim != 2 or dirs.shape[1] != 3 or not np.all(np.linalg.norm(dirs, axis=1) > 0.5):
             raise ValueError("directions must be (n, 3) non-zero vectors")
+    _emitter([0.0, 0.0, 1.0], None, None, 0.0, light_angular_radius_deg)  # checks the angle
+    folder.mkdir(parents=True, exist_ok=True)
+    cap_encoding = _capture_encoding(folder, photo)
     positions = light_distance * dirs if light_model == "near" else None
     n = len(dirs)
     width = max(4, len(str(n - 1)))
-    ext = "exr" if encoding == "linear" else "png"
-    names = [f"img_{i:0{width}d}.{ext}" for i in range(n)]
-    gb = gbuffer(scene, int(resolution))
+    names = [f"img_{i:0{width}d}.{photo.extension}" for i in range(n)]
+    R = int(resolution)
+    ortho = scene.camera_model == "orthographic"
+    K = None if ortho else scene.K(R)
+    gb = gbuffer(scene, R)
     rng = np.random.default_rng([seed, 1])
     it = range(n)
     if progress:
         from tqdm import tqdm
         it = tqdm(it, desc="synth", unit="img")
     for i in it:
-        s = (_light_samples(dirs[i], None, None, 0, 1) if positions is None
-             else _light_samples(None, positions[i], None, light_radius, light_samples))
-        img = _render(scene, gb, s, int(resolution))
-        if encoding == "linear":
-            if noise > 0:
-                img = img + rng.normal(0.0, noise, img.shape).astype(np.float32)
-            write_exr(folder / names[i], img, half=True)  # atomic
-        else:
-            enc = srgb_encode(np.clip(img.astype(np.float64), 0.0, None))
-            if noise > 0:
-                enc = enc + rng.normal(0.0, noise, enc.shape)
-            write_png(folder / names[i], np.rint(np.clip(enc, 0, 1) * 255).astype(np.uint8))  # atomic
+        d, q = (dirs[i], None) if positions is None else (None, positions[i])
+        s = (_light_samples(d, None, None, 0, 1) if q is None
+             else _light_samples(None, q, None, light_radius, light_samples))
+        img = _render(scene, gb, s, R, emitter=_emitter(d, q, None, light_radius, light_angular_radius_deg))
+        write_photo(folder / names[i], develop(img, photo, rng, K), photo)  # atomic
 
     centers = scene.sphere_centers
-    uv, rpx = sphere_pixel_radii(scene, int(resolution))
-    mask = sphere_mask(scene, int(resolution))
-    area_r = [math.sqrt(np.count_nonzero(mask == k) / math.pi) for k in range(4)]
-    R = int(resolution)
+    uv, rpx = sphere_pixel_radii(scene, R)
+    mask = sphere_mask(scene, R)
+    area_r = [math.sqrt(np.count_nonzero(mask == k) / math.pi) for k in range(scene.n_spheres)]
     capture = Capture(
-        folder=folder, image_names=names, encoding="linear" if encoding == "linear" else "srgb",
-        K=scene.K(R), dist=np.zeros(5), world_from_camera=scene.world_from_camera(),
-        world_from_camera_is_default=False, sphere_radius=scene.sphere_radius, scene_center=np.zeros(3),
-        hemisphere=hemisphere, image_size=(R, R), units="m", extra={"truth": TRUTH_FILE},
+        folder=folder, image_names=names, encoding=cap_encoding,
+        K=K, dist=np.zeros(5), world_from_camera=scene.world_from_camera(),
+        world_from_camera_is_default=False, sphere_radius=scene.sphere_radius if scene.n_spheres else None,
+        scene_center=np.zeros(3), hemisphere=hemisphere, image_size=(R, R), units="m",
+        extra={"truth": TRUTH_FILE}, camera_model=scene.camera_model,
     )
-    lights = Lights(image_names=names, directions=dirs, positions=positions)
+    spheres = []
+    for k in range(scene.n_spheres):
+        mat = scene.sphere_material(k)
+        spheres.append({
+            "material": scene.sphere_materials[k], "center": centers[k].tolist(), "radius": scene.sphere_radius,
+            "center_px": uv[k].tolist(), "radius_px": float(rpx[k]), "radius_px_from_area": area_r[k],
+            "pixels": int(np.count_nonzero(mask == k)), "albedo": float(mat.kd[0]),
+            "mirror_reflectance": float(mat.mirror), "fresnel": bool(mat.fresnel),
+        })
+    in_mirror_radius = (light_radius if light_model == "near" and light_radius > 0 else None)
     truth = {
         "format": "ffls-synth-truth",
         "version": 1,
@@ -1168,18 +1292,81 @@ def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, 
         "positions": None if positions is None else positions.tolist(),
         "intensities": None if positions is None else (light_distance ** 2 * np.ones(n)).tolist(),
         "light_radius": light_radius if light_model == "near" else 0.0,
+        "light_angular_radius_deg": light_angular_radius_deg,
+        "light_radius_in_mirrors": in_mirror_radius,
+        "lights_file": bool(write_lights),
         "sphere_centers": centers.tolist(),
         "sphere_radius": scene.sphere_radius,
         "sphere_centers_px": uv.tolist(),
         "sphere_radii_px": rpx.tolist(),
         "sphere_radii_px_from_area": area_r,
+        "spheres": spheres,
+        "object": scene.with_object,
+        "object_pixels": int(np.count_nonzero(pixel_labels(scene, R) == LABEL_OBJECT)),
         "ground_albedo": scene.ground_albedo,
-        "resolution": int(resolution),
-        "encoding": encoding,
-        "noise": noise,
+        "ground_texture": scene.ground_texture,
+        "texture_scale": scene.texture_scale,
+        "lens": _lens_truth(scene, R),
+        "resolution": R,
+        "encoding": legacy_encoding,
+        "encoding_stated": photo.state_encoding,
+        "capture_encoding": None if cap_encoding == "auto" else cap_encoding,
+        "file_format": photo.file_format,
+        "bits": photo.bits,
+        "curve": photo.curve,
+        "gamma": photo.gamma,
+        "exposure": photo.exposure,
+        "vignetting": {"model": photo.vignetting, "coeffs": list(photo.vignetting_coeffs)},
+        "sensor_noise": {"shot_gain": photo.shot_gain, "read_noise": photo.read_noise},
+        "jpeg_quality": photo.jpeg_quality if photo.file_format == "jpeg" else None,
+        "photo": photo.to_json(),
+        "noise": photo.noise,
         "seed": seed,
     }
     _write_json(folder / TRUTH_FILE, truth)
-    save_lights(lights, folder / LIGHTS_FILE)
+    if write_lights:
+        save_lights(Lights(image_names=names, directions=dirs, positions=positions), folder / LIGHTS_FILE)
     save_capture(capture)  # last: a folder with capture.json is complete
-    return {"folder": folder, "images": names, "directions": dirs, "positions": positions, "scene": scene}
+    return {"folder": folder, "images": names, "directions": dirs, "positions": positions, "scene": scene,
+            "photo": photo}
+
+
+def write_calibration_pair(folder, scene: SynthScene | None = None, n_lights: int = 100, seed: int = 0,
+                           hemisphere: str = "upper", directions=None, **kwargs) -> dict:
+    """Two captures under the same lights: ``folder/calibration`` (spheres only) and ``folder/object``.
+
+    The calibration capture has the spheres of ``scene`` and no object, and a ``lights.json``
+    of the true directions; the object capture has the object and no spheres, and no
+    ``lights.json``: its lights are to come from the calibration capture (``--lights
+    folder/calibration/lights.json``, matched by order). Both have a ``truth.json``.
+
+    Parameters
+    ----------
+    folder : path
+    scene : SynthScene, optional
+        The layout (camera, ground, spheres); default ``SynthScene()``.
+    n_lights, seed, hemisphere, directions
+        As in :func:`write_synthetic_capture`; the directions are drawn once and shared.
+    **kwargs
+        Passed to both :func:`write_synthetic_capture` calls (resolution, light_model, photo, ...).
+
+    Returns
+    -------
+    dict
+        ``{"calibration": result, "object": result}`` of :func:`write_synthetic_capture`.
+    """
+    import dataclasses
+
+    scene = SynthScene() if scene is None else scene
+    if scene.n_spheres == 0:
+        raise ValueError("a calibration capture needs at least one sphere")
+    if directions is None:
+        directions = stratified_directions(int(n_lights), hemisphere, seed)
+    folder = Path(folder)
+    cal = write_synthetic_capture(folder / "calibration", scene=dataclasses.replace(scene, with_object=False),
+                                  directions=directions, seed=seed, hemisphere=hemisphere, **kwargs)
+    obj = write_synthetic_capture(folder / "object", scene=dataclasses.replace(scene, with_object=True, sphere_xy=(),
+                                                                               sphere_materials=()),
+                                  directions=directions, seed=seed + 1, hemisphere=hemisphere, write_lights=False,
+                                  **kwargs)
+    return {"calibration": cal, "object": obj}
