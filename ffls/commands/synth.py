@@ -1,31 +1,141 @@
-"""``ffls synth``: render a synthetic capture folder with the built-in scene (:mod:`ffls.synth.scene`)."""
+"""``ffls synth``: render a synthetic capture folder with the built-in scene (:mod:`ffls.synth.scene`).
+
+Besides the default scene (an object and four white spheres, linear EXR), the flags give the
+conditions of real photographs: any number of spheres of any material, calibration shots
+without the object, black/grey/white/textured backgrounds, long and orthographic lenses, 8- and
+16-bit files in sRGB, linear or gamma 2.2 (stated in ``capture.json`` or not), JPEG, exposure,
+vignetting and Poisson-Gaussian sensor noise (``docs/synth.md``).
+"""
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 NAME = "synth"
-HELP = "render a synthetic capture (object, 4 white spheres, one light per image)"
+HELP = "render a synthetic capture (object, calibration spheres, one light per image)"
 DESCRIPTION = (
     "Render a synthetic Free-form Light Stage capture with the built-in NumPy ray tracer: a glossy "
-    "and diffuse object on a grey table with four white diffuse spheres, one light per image, cast "
-    "shadows and one bounce off the table. Writes the images, capture.json, lights.json (true "
-    "directions) and truth.json."
+    "and diffuse object on a table with calibration spheres (matte, grey, mirror or glossy black), one "
+    "light per image, cast shadows and one bounce off the table, seen through a normal, long or "
+    "orthographic lens and stored as a camera would (EXR, PNG, TIFF or JPEG; sRGB, linear or gamma 2.2; "
+    "exposure, vignetting, sensor noise). Writes the images, capture.json, lights.json (true "
+    "directions) and truth.json (everything needed to score)."
 )
+
+_MATERIALS = ("matte", "grey", "mirror", "glossy_black")
+
+
+# ----------------------------------------------------------------------------- argument types
+def _number(text: str, what: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {what}, not {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected a finite number, not {text!r}")
+    return v
 
 
 def _positive_int(text: str) -> int:
-    v = int(text)
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, not {v}")
     return v
 
 
+def _count(text: str) -> int:
+    """A number of spheres: 0 to 64."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
+    if not 0 <= v <= 64:
+        raise argparse.ArgumentTypeError(f"must be in 0..64, not {v}")
+    return v
+
+
 def _nonneg_float(text: str) -> float:
-    v = float(text)
+    v = _number(text, "a number")
     if not v >= 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, not {text}")
     return v
+
+
+def _positive_float(text: str) -> float:
+    v = _number(text, "a number")
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
+    return v
+
+
+def _albedo(text: str) -> float:
+    v = _number(text, "an albedo")
+    if not 0 <= v <= 1:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1], not {text}")
+    return v
+
+
+def _angle(text: str) -> float:
+    v = _number(text, "an angle in degrees")
+    if not 0 < v < 90:
+        raise argparse.ArgumentTypeError(f"must be in (0, 90) degrees, not {text}")
+    return v
+
+
+def _quality(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer 0..100, not {text!r}") from None
+    if not 0 <= v <= 100:
+        raise argparse.ArgumentTypeError(f"must be in 0..100, not {v}")
+    return v
+
+
+def _materials(text: str):
+    """``matte``, ``grey``, ``mirror``, ``glossy_black``, ``mixed``, or a comma list (one per sphere)."""
+    if text == "mixed":
+        return text
+    parts = [t.strip() for t in text.split(",")]
+    bad = [t for t in parts if t not in _MATERIALS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown material {bad[0]!r}: expected {', '.join(_MATERIALS)} or mixed "
+                                         "(or a comma list, one per sphere)")
+    return parts[0] if len(parts) == 1 else tuple(parts)
+
+
+def _sphere_xy(text: str) -> tuple:
+    """``X,Y;X,Y;...`` ground positions (m)."""
+    out = []
+    for item in text.split(";"):
+        xy = item.split(",")
+        if len(xy) != 2:
+            raise argparse.ArgumentTypeError(f"expected X,Y;X,Y;... (metres), not {text!r}")
+        out.append((_number(xy[0], "a number"), _number(xy[1], "a number")))
+    return tuple(out)
+
+
+def _vignetting(text: str):
+    """``none``, ``cos4`` or ``radial:A[,B[,C]]`` -> (model, coeffs)."""
+    if text in ("none", "cos4"):
+        return text, ()
+    if text.startswith("radial:"):
+        coeffs = text[len("radial:"):].split(",")
+        if 1 <= len(coeffs) <= 3:
+            return "radial", tuple(_number(c, "a coefficient") for c in coeffs)
+    raise argparse.ArgumentTypeError(f"expected none, cos4 or radial:A[,B[,C]], not {text!r}")
+
+
+def _choice(*names):
+    def parse(text: str) -> str:
+        if text not in names:
+            raise argparse.ArgumentTypeError(f"expected one of {', '.join(names)}, not {text!r}")
+        return text
+    return parse
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,36 +146,138 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="point lights at DIST metres from the scene centre instead of distant lights")
     p.add_argument("--light-radius", type=_nonneg_float, default=0.0, metavar="M",
                    help="radius of a spherical near light (soft shadows; default 0 = point)")
-    p.add_argument("--ground-albedo", type=_nonneg_float, default=0.3, metavar="A", help="table albedo (default 0.3; 0 = black velvet)")
+    p.add_argument("--light-angle", type=_angle, default=0.5, metavar="DEG",
+                   help="angular radius of the light as mirror spheres see it (distant lights, and point near "
+                        "lights from the scene centre; default 0.5)")
+    g = p.add_argument_group("scene")
+    g.add_argument("--spheres", type=_count, default=4, metavar="N",
+                   help="number of calibration spheres on a ring around the object (default 4)")
+    g.add_argument("--sphere-xy", type=_sphere_xy, default=None, metavar="X,Y;X,Y;...",
+                   help="ground positions of the spheres in metres (instead of --spheres)")
+    g.add_argument("--sphere-radius", type=_positive_float, default=0.05, metavar="M", help="sphere radius (default 0.05)")
+    g.add_argument("--sphere-material", type=_materials, default="matte", metavar="MAT",
+                   help="matte (white), grey, mirror (chrome), glossy_black, mixed, or a comma list per sphere")
+    g.add_argument("--no-object", action="store_true", help="spheres only (a calibration shot)")
+    g.add_argument("--background", type=_choice("black", "grey", "white", "textured", "checker"), default="grey",
+                   help="table: black, grey (default), white, textured (high-contrast blotches) or checker")
+    g.add_argument("--ground-albedo", type=_albedo, default=None, metavar="A",
+                   help="table albedo (mean albedo when textured); overrides --background's (grey 0.3)")
+    g.add_argument("--lens", type=_choice("normal", "long", "orthographic"), default="normal",
+                   help="normal (46 deg at 1 m, default), long (4.8 deg at 10 m) or orthographic (parallel rays)")
+    g.add_argument("--calibration-pair", action="store_true",
+                   help="write OUT_DIR/calibration (spheres, no object, lights.json) and OUT_DIR/object "
+                        "(object, no spheres, no lights.json) under the same lights")
+    f = p.add_argument_group("photograph")
+    f.add_argument("--format", dest="file_format", type=_choice("exr", "png8", "png16", "tiff16", "jpeg"),
+                   default=None, help="exr (linear half float, default), png8, png16, tiff16 or jpeg")
+    f.add_argument("--encoding", type=_choice("srgb", "linear", "gamma2.2"), default=None,
+                   help="transfer curve of integer files (default srgb; exr is linear)")
+    f.add_argument("--unstated-encoding", action="store_true",
+                   help="leave the encoding out of capture.json (truth.json still records it)")
+    f.add_argument("--jpeg-quality", type=_quality, default=90, metavar="Q", help="JPEG quality 0..100 (default 90)")
+    f.add_argument("--exposure", type=_positive_float, default=1.0, metavar="X",
+                   help="scale from scene radiance to full scale (default 1: a white sphere peaks at 0.25)")
+    f.add_argument("--vignetting", type=_vignetting, default=("none", ()), metavar="MODEL",
+                   help="none (default), cos4 (pinhole lenses) or radial:A[,B[,C]] (1 + A r^2 + B r^4 + C r^6, "
+                        "r = 1 at the corners)")
+    f.add_argument("--shot-noise", type=_nonneg_float, default=0.0, metavar="GAIN",
+                   help="Poisson shot noise: full-scale units per electron (variance GAIN * x; e.g. 1e-4)")
+    f.add_argument("--read-noise", type=_nonneg_float, default=0.0, metavar="SIGMA",
+                   help="Gaussian read noise, fraction of full scale (e.g. 0.002)")
+    f.add_argument("--noise", type=_nonneg_float, default=0.0, metavar="SIGMA",
+                   help="Gaussian noise, fraction of full scale, added to the encoded value before quantisation "
+                        "(default 0)")
+    f.add_argument("--srgb8", action="store_true", help="shorthand for --format png8 --encoding srgb")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the light directions and noise (default 0)")
-    p.add_argument("--srgb8", action="store_true", help="write 8-bit sRGB PNGs instead of half-float linear EXRs")
-    p.add_argument("--noise", type=_nonneg_float, default=0.0, metavar="SIGMA",
-                   help="Gaussian noise, fraction of full scale, added before quantisation (default 0)")
     p.add_argument("--full-sphere", action="store_true", help="draw directions over the full sphere (hemisphere 'full')")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def run(args: argparse.Namespace) -> int:
+def photo_settings(args: argparse.Namespace):
+    """The :class:`ffls.synth.photo.PhotoSettings` of the parsed flags (InputError on a conflict)."""
     from ffls.errors import InputError
-    from ffls.synth.scene import write_synthetic_capture
+    from ffls.synth.photo import PhotoSettings
 
-    if args.near is not None and not args.near > 0:
-        raise InputError(f"--near must be > 0, not {args.near}")
-    t = time.perf_counter()
-    res = write_synthetic_capture(
-        args.out_dir,
-        n_lights=args.lights,
+    fmt, curve = args.file_format, args.encoding
+    if args.srgb8:
+        if fmt not in (None, "png8") or curve not in (None, "srgb"):
+            raise InputError("--srgb8 means --format png8 --encoding srgb; give one or the other")
+        fmt, curve = "png8", "srgb"
+    fmt = fmt or "exr"
+    if fmt == "exr" and curve not in (None, "linear"):
+        raise InputError(f"--encoding {curve}: EXR files are linear; choose --format png8, png16, tiff16 or jpeg")
+    curve = curve or ("linear" if fmt == "exr" else "srgb")
+    if curve == "gamma2.2" and fmt in ("png16", "tiff16") and not args.unstated_encoding:
+        raise InputError("--encoding gamma2.2 with a 16-bit --format cannot be stated in capture.json (its response "
+                         "table is 8-bit): add --unstated-encoding or use png8/jpeg")
+    if args.jpeg_quality != 90 and fmt != "jpeg":
+        raise InputError("--jpeg-quality needs --format jpeg")
+    model, coeffs = args.vignetting
+    if model == "cos4" and args.lens == "orthographic":
+        raise InputError("--vignetting cos4 needs a pinhole lens (an orthographic lens has no off-axis angle); "
+                         "use radial:A")
+    return PhotoSettings(file_format=fmt, curve=curve, exposure=args.exposure, vignetting=model,
+                         vignetting_coeffs=coeffs, shot_gain=args.shot_noise, read_noise=args.read_noise,
+                         noise=args.noise, jpeg_quality=args.jpeg_quality, state_encoding=not args.unstated_encoding)
+
+
+def scene_of(args: argparse.Namespace):
+    """The :class:`ffls.synth.scene.SynthScene` of the parsed flags (InputError on a conflict)."""
+    from ffls.errors import InputError
+    from ffls.synth.scene import make_scene
+
+    n = len(args.sphere_xy) if args.sphere_xy is not None else args.spheres
+    mats = args.sphere_material
+    if isinstance(mats, tuple) and len(mats) != n:
+        raise InputError(f"--sphere-material lists {len(mats)} materials for {n} spheres")
+    if args.no_object and n == 0:
+        raise InputError("--no-object with no spheres: the images would show only the table")
+    if args.calibration_pair and n == 0:
+        raise InputError("--calibration-pair needs spheres (--spheres N >= 1)")
+    if args.calibration_pair and args.no_object:
+        raise InputError("--calibration-pair writes the object capture itself; drop --no-object")
+    background = "textured" if args.background == "checker" else args.background
+    kw = {"ground_texture": "checker"} if args.background == "checker" else {}
+    if args.ground_albedo is not None:
+        kw["ground_albedo"] = args.ground_albedo
+    return make_scene(spheres=n, sphere_material=mats, background=background, lens=args.lens,
+                      with_object=not args.no_object, sphere_xy=args.sphere_xy, sphere_radius=args.sphere_radius, **kw)
+
+
+def _synth(args: argparse.Namespace, folder) -> dict:
+    from ffls.synth.scene import write_calibration_pair, write_synthetic_capture
+
+    kw = dict(
         resolution=args.resolution,
         light_model="distant" if args.near is None else "near",
         light_distance=2.0 if args.near is None else args.near,
         light_radius=args.light_radius,
+        light_angular_radius_deg=args.light_angle,
         seed=args.seed,
-        ground_albedo=args.ground_albedo,
         hemisphere="full" if args.full_sphere else "upper",
-        encoding="srgb8" if args.srgb8 else "linear",
-        noise=args.noise,
+        photo=photo_settings(args),
         progress=not args.quiet,
+        scene=scene_of(args),
     )
-    print(f"wrote {len(res['images'])} images, capture.json, lights.json and truth.json to {res['folder']} "
-          f"in {time.perf_counter() - t:.1f} s")
+    if args.calibration_pair:
+        return write_calibration_pair(folder, n_lights=args.lights, **kw)
+    return write_synthetic_capture(folder, n_lights=args.lights, **kw)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ffls.errors import InputError
+
+    if args.near is not None and not args.near > 0:
+        raise InputError(f"--near must be > 0, not {args.near}")
+    t = time.perf_counter()
+    res = _synth(args, args.out_dir)
+    dt = time.perf_counter() - t
+    if args.calibration_pair:
+        cal, obj = res["calibration"], res["object"]
+        print(f"wrote {len(cal['images'])} images, capture.json, lights.json and truth.json to {cal['folder']}, and "
+              f"{len(obj['images'])} images, capture.json and truth.json (no lights.json: use --lights "
+              f"{cal['folder'] / 'lights.json'}) to {obj['folder']} in {dt:.1f} s")
+    else:
+        print(f"wrote {len(res['images'])} images, capture.json, lights.json and truth.json to {res['folder']} "
+              f"in {dt:.1f} s")
     return 0

@@ -336,7 +336,7 @@ def sphere_layout(n: int, ring: float | None = None) -> tuple:
     if ring is None:
         ring = math.sqrt(0.125) if n <= 4 else 0.3
     a = np.radians(-135.0 + 360.0 * np.arange(n) / max(n, 1))
-    return tuple((float(ring * math.cos(t)), float(ring * math.sin(t))) for t in a)
+    return tuple((round(float(ring * math.cos(t)), 12), round(float(ring * math.sin(t)), 12)) for t in a)
 
 
 def make_scene(spheres: int = 4, sphere_material="matte", background: str = "grey", lens: str = "normal",
