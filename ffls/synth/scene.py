@@ -108,7 +108,7 @@ BLACK_ALBEDO, BLACK_COAT_F0 = 0.03, 0.04
 GROUND_TEXTURES = ("none", "blotchy", "checker")
 #: Default angular radius (degrees) of a distant light as mirrors see it (the sun's is 0.27).
 LIGHT_ANGULAR_RADIUS_DEG = 0.5
-_MIRROR_SUB = 16  # sub-rays per side of a pixel near a mirror highlight
+_MIRROR_SUB = 16  # sub-rays per side of a pixel near a mirror highlight (at least)
 
 
 def _value_noise(q, seed: int) -> np.ndarray:
@@ -729,9 +729,10 @@ def _mirror_light(scene: SynthScene, gb: GBuffer, em: dict, prims, resolution: i
     """The light seen in mirror-coated pixels: (indices into the hits (k,), radiance (k,)).
 
     Pixels whose reflected ray may reach the light (within its angular radius plus the pixel's
-    footprint) are re-sampled with ``_MIRROR_SUB`` x ``_MIRROR_SUB`` sub-rays on their own sphere;
-    a sub-ray counts when its reflection hits the light unoccluded and its primary ray is not
-    hidden by another primitive. The pixel gets the mean of ``F L`` over its sub-rays.
+    footprint) are re-sampled with m x m sub-rays on their own sphere, m = 16, 32 or 64 so that
+    the sub-rays' reflections are at most half the light's angular radius apart (rim pixels:
+    16); a sub-ray counts when its reflection hits the light unoccluded and its primary ray is
+    not hidden by another primitive. The pixel gets the mean of ``F L`` over its sub-rays.
     """
     mi = gb.mirror_idx
     p, r = gb.points[mi], gb.refl_dir
@@ -744,11 +745,26 @@ def _mirror_light(scene: SynthScene, gb: GBuffer, em: dict, prims, resolution: i
         to = w / dist[:, None]
         half = np.arcsin(np.minimum(1.0, em["a"] / dist))
     ang = np.arccos(np.clip(np.einsum("ij,ij->i", r, to), -1.0, 1.0))
-    cand = np.flatnonzero(ang < half + gb.refl_footprint + 1e-9)
+    foot = gb.refl_footprint
+    cand = np.flatnonzero(ang < half + foot + 1e-9)
     if len(cand) == 0:
         return cand, np.zeros(0)
-    ci = mi[cand]
-    m = _MIRROR_SUB
+    # sub-rays per side: the pixel spans about 2 * footprint of reflected directions
+    need = np.where(foot[cand] >= np.pi, _MIRROR_SUB, np.ceil(4.0 * foot[cand] / half[cand]))
+    m_of = np.select([need <= 16, need <= 32], [16, 32], 64)
+    idx, vals = [], []
+    for m in np.unique(m_of):
+        c = cand[m_of == m]
+        v = _mirror_light_subrays(scene, gb, em, prims, resolution, mi[c], int(m))
+        idx.append(mi[c])
+        vals.append(v)
+    idx, vals = np.concatenate(idx), np.concatenate(vals)
+    keep = vals > 0
+    return idx[keep], vals[keep]
+
+
+def _mirror_light_subrays(scene: SynthScene, gb: GBuffer, em: dict, prims, resolution: int, ci, m: int):
+    """Mean ``F L`` over m x m sub-rays of the hits ``ci`` (k,) on mirror-coated spheres."""
     offs = ((np.arange(m) + 0.5) / m - 0.5) / scene.supersample
     ou, ov = np.meshgrid(offs, offs)
     u, v = _sample_uv(scene, resolution, gb.index[ci])
@@ -787,9 +803,7 @@ def _mirror_light(scene: SynthScene, gb: GBuffer, em: dict, prims, resolution: i
     cos = np.clip(np.einsum("ij,ij->i", ns[k], -d[ok[k]]), 0.0, 1.0)
     f0 = F0[ok[k]]
     F = np.where(fres[ok[k]], f0 + (1.0 - f0) * (1.0 - cos) ** 5, f0)
-    val = np.bincount(pix[ok[k]], weights=F * em["L"] * vis, minlength=len(ci)) / (m * m)
-    keep = val > 0
-    return ci[keep], val[keep]
+    return np.bincount(pix[ok[k]], weights=F * em["L"] * vis, minlength=len(ci)) / (m * m)
 
 
 def _irradiance(prims, p, n, samples):
