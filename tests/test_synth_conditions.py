@@ -357,3 +357,18 @@ def test_cli_bad_values_get_one_line(tmp_path, capsys, argv, flag):
     err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith(("usage:", " "))]
     assert len(err) == 1 and flag in err[0], err
     assert not out.exists()
+
+
+def test_mirror_highlight_flux_does_not_depend_on_the_light_size():
+    # a distant light of angular radius theta has radiance 1 / (pi sin^2 theta): its irradiance, and so the
+    # flux of its (unresolved) reflection in a chrome ball, stays the same
+    s = make_scene(1, "mirror", background="black", with_object=False)
+    d = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    flux = []
+    for th in (0.5, 3.0):
+        img = synth.render_light(s, 128, direction=d, light_angular_radius_deg=th)[..., 0]
+        flux.append(img[img > 0.5].sum())
+        assert img.max() <= 0.9 / (np.pi * np.sin(np.radians(th)) ** 2) * (1 + 1e-6)
+    assert flux[0] == pytest.approx(flux[1], rel=0.05)
+    with pytest.raises(ValueError):
+        synth.render_light(s, 16, direction=d, light_angular_radius_deg=0)

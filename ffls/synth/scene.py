@@ -729,9 +729,9 @@ def _mirror_light(scene: SynthScene, gb: GBuffer, em: dict, prims, resolution: i
     """The light seen in mirror-coated pixels: (indices into the hits (k,), radiance (k,)).
 
     Pixels whose reflected ray may reach the light (within its angular radius plus the pixel's
-    footprint) are re-sampled with m x m sub-rays on their own sphere, m = 16, 32 or 64 so that
-    the sub-rays' reflections are at most half the light's angular radius apart (rim pixels:
-    16); a sub-ray counts when its reflection hits the light unoccluded and its primary ray is
+    footprint) are re-sampled with m x m sub-rays on their own sphere, m = 16, 32, 64 or 128 so
+    that the sub-rays' reflections are about a quarter of the light's angular radius apart (at
+    most 128 per side; rim pixels: 16); a sub-ray counts when its reflection hits the light unoccluded and its primary ray is
     not hidden by another primitive. The pixel gets the mean of ``F L`` over its sub-rays.
     """
     mi = gb.mirror_idx
@@ -750,8 +750,8 @@ def _mirror_light(scene: SynthScene, gb: GBuffer, em: dict, prims, resolution: i
     if len(cand) == 0:
         return cand, np.zeros(0)
     # sub-rays per side: the pixel spans about 2 * footprint of reflected directions
-    need = np.where(foot[cand] >= np.pi, _MIRROR_SUB, np.ceil(4.0 * foot[cand] / half[cand]))
-    m_of = np.select([need <= 16, need <= 32], [16, 32], 64)
+    need = np.where(foot[cand] >= np.pi, _MIRROR_SUB, np.ceil(8.0 * foot[cand] / half[cand]))
+    m_of = np.select([need <= 16, need <= 32, need <= 64], [16, 32, 64], 128)
     idx, vals = [], []
     for m in np.unique(m_of):
         c = cand[m_of == m]
