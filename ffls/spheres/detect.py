@@ -464,7 +464,7 @@ def edge_points(img, sigma: float = 1.0):
     gy = cv2.Sobel(blur, cv2.CV_64F, 0, 1, ksize=3)
     mag = np.hypot(gx, gy)
     noise = float(np.median(mag))
-    high = max(1.0 * scale, 8.0 * noise)
+    high = max(0.5 * scale, 8.0 * noise)
     low = 0.5 * high
     edges = cv2.Canny(g8, low, high, L2gradient=True)
     ys, xs = np.nonzero(edges)
@@ -678,10 +678,10 @@ def _hough_candidates(g8, min_r, max_r, scale):
     found = []
     for p2 in (0.9, 0.8, 0.7):
         c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=max(2 * min_r, 4),
-                             param1=2.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
+                             param1=1.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
         if c is not None:
             found.extend(c.reshape(-1, 3).tolist())
-    c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=scale,
+    c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=0.5 * scale,
                          param2=20, minRadius=int(min_r), maxRadius=int(max_r))
     if c is not None:
         found.extend(c.reshape(-1, 3)[:30].tolist())
@@ -814,7 +814,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  world_from_camera=None, scene_center=None, source: str | os.PathLike | None = None,
                  max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
-                 n_photos: int | None = None, min_visible: float = 0.5) -> Spheres:
+                 n_photos: int | None = None, min_visible: float = 0.6) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -956,7 +956,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
 #: (:func:`_select_spheres`; documented with their reasons in docs/spheres.md).
 CRITERIA = {
     "max_residual_px": 1.5,      # RMS of the outline points about the fitted cone/circle
-    "min_closed": 0.6,           # outline coverage (36 angular bins) over the visible outline
+    "min_closed": 0.5,           # outline coverage (36 angular bins) over the visible outline
     "min_support": 0.5,          # inlier edge points per pixel of visible outline
     "min_neutral": 0.5,          # min/max channel of the median colour inside (white, grey, chrome)
     "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
