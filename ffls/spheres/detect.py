@@ -509,35 +509,37 @@ def _radius_from_edges(pts, grads, cpx, r_max):
 
 
 # ----------------------------------------------------------------------------- fitting
-def _circle_from_3(p):
-    (x1, y1), (x2, y2), (x3, y3) = p
-    a = np.array([[x2 - x1, y2 - y1], [x3 - x1, y3 - y1]]) * 2
-    b = np.array([x2**2 - x1**2 + y2**2 - y1**2, x3**2 - x1**2 + y3**2 - y1**2])
-    det = np.linalg.det(a)
-    if abs(det) < 1e-9:
-        return None
-    c = np.linalg.solve(a, b)
-    return c, float(np.hypot(*(p[0] - c)))
-
-
 def _ransac_circle(pts, r_expected, rng, n_iter=300, tol=1.5):
-    """Best-supported circle (centre (2,), radius) among 3-point samples, radius within 40 %."""
-    best, best_n = None, -1
+    """Best-supported circle (centre (2,), radius) among 3-point samples, radius within 40 %.
+
+    All ``n_iter`` samples are evaluated at once (circumcentres in closed form, inlier counts by
+    broadcasting).
+    """
     m = len(pts)
     if m < 3:
         return None
-    for _ in range(n_iter):
-        idx = rng.choice(m, 3, replace=False)
-        res = _circle_from_3(pts[idx])
-        if res is None:
-            continue
-        c, r = res
-        if not (0.6 * r_expected <= r <= 1.4 * r_expected):
-            continue
-        n_in = int(np.count_nonzero(np.abs(np.hypot(*(pts - c).T) - r) < tol))
-        if n_in > best_n:
-            best, best_n = (c, r), n_in
-    return best
+    idx = np.stack([rng.choice(m, 3, replace=False) for _ in range(n_iter)]) if m < 6 else \
+        np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
+    if m >= 6:  # drop samples with a repeated point
+        idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
+    p1, p2, p3 = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
+    a = 2 * (p2 - p1)
+    b = 2 * (p3 - p1)
+    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    ra = np.sum(p2 ** 2 - p1 ** 2, axis=1)
+    rb = np.sum(p3 ** 2 - p1 ** 2, axis=1)
+    ok = np.abs(det) > 1e-9
+    det = np.where(ok, det, 1.0)
+    c = np.stack([(ra * b[:, 1] - rb * a[:, 1]) / det, (a[:, 0] * rb - b[:, 0] * ra) / det], axis=1)
+    r = np.hypot(*(p1 - c).T)
+    ok &= (r >= 0.6 * r_expected) & (r <= 1.4 * r_expected)
+    if not ok.any():
+        return None
+    c, r = c[ok], r[ok]
+    d = np.hypot(pts[None, :, 0] - c[:, None, 0], pts[None, :, 1] - c[:, None, 1])
+    n_in = np.count_nonzero(np.abs(d - r[:, None]) < tol, axis=1)
+    k = int(np.argmax(n_in))
+    return c[k], float(r[k])
 
 
 def _cone_residuals(params, s, f):
@@ -676,12 +678,12 @@ def _hough_candidates(g8, min_r, max_r, scale):
     """
     blur = cv2.GaussianBlur(g8, (0, 0), 1.5)
     found = []
-    for p2 in (0.9, 0.8, 0.7):
+    for p2 in (0.8, 0.7):
         c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=max(2 * min_r, 4),
                              param1=1.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
         if c is not None:
             found.extend(c.reshape(-1, 3).tolist())
-    c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=0.5 * scale,
+    c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=scale,
                          param2=20, minRadius=int(min_r), maxRadius=int(max_r))
     if c is not None:
         found.extend(c.reshape(-1, 3)[:30].tolist())
