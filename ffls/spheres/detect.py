@@ -1,38 +1,44 @@
 """Finding the reference spheres: silhouette edges -> sphere centres (Masselus et al. 2002, sec. 5).
 
-The Free-form Light Stage places four white diffuse spheres of known radius ``R`` beside the
-object. Their centres ``C`` (camera frame) give every sphere pixel a surface normal, from which
-the per-photo light direction follows (:mod:`ffls.spheres.estimate`).
+Calibration spheres of known radius ``R`` (white or grey matte, or chrome) stand in the scene or
+in their own calibration shots. Their centres ``C`` (camera frame) give every sphere pixel a
+surface normal, from which the per-photo light direction follows (:mod:`ffls.spheres.estimate`).
+Any number of spheres is found, with no hint; hints (a count, a rough pixel circle, a world
+centre) are optional.
 
 Method
 ------
-1. **Max image.** The per-pixel maximum over the whole sequence (:func:`max_image`). A hand-held
-   light visits every side of the spheres, so in the maximum each sphere is lit almost all the
-   way round and its silhouette is a closed, high-contrast outline; a single photo shows only the
-   lit crescent, whose terminator is not a silhouette.
+1. **Max image.** The per-pixel maximum over the whole sequence, and which photo gave it
+   (:func:`extreme_images`). A light that visits every side of the spheres makes each
+   silhouette a closed, high-contrast outline in the maximum; a single photo shows only the lit
+   crescent, whose terminator is not a silhouette.
 2. **Edges.** Luminance of the max image, log tone-mapped to 8 bit, lightly blurred; Canny with
-   thresholds derived from the image itself (Otsu split into background and foreground classes;
-   the edge contrast is the difference of the class means). Edge pixels are refined to subpixel
-   precision along the gradient (parabola through the gradient magnitude).
-3. **Candidates.** With no hints, :func:`cv2.HoughCircles` (``HOUGH_GRADIENT_ALT``) proposes
-   circles, scored by how much of their outline the edges support and how bright their inside is;
-   the ``n_spheres`` best non-overlapping ones are kept. Hints (an approximate pixel circle, or a
-   world centre projected through the camera) restrict the search to an annulus around them.
-   Overrides skip detection altogether.
+   thresholds derived from the image itself (a radiance ratio of about 1.2, never below the
+   texture/noise level). Edge pixels are refined to subpixel precision along the gradient.
+3. **Candidates.** With no hints, :func:`cv2.HoughCircles` proposes circles, kept by how much of
+   their in-image outline the edges support. Hints (an approximate pixel circle, with or
+   without radius, or a world centre projected through the camera) restrict the search to an
+   annulus around them. Overrides skip detection altogether.
 4. **Centre from the silhouette (equation 1).** Every silhouette ray ``s_i`` is tangent to the
    sphere: ``|C|^2 - R^2 - (s_i . C)^2 = 0``. The same condition in geometric form is
    ``angle(s_i, C) = alpha`` with ``sin(alpha) = R / |C|``: the rays lie on the tangent cone. We
    minimise ``f * (angle(s_i, c) - alpha)`` (``f`` the focal length in pixels, so the residual
    is in pixels) over the cone axis ``c`` and half-angle ``alpha``, and set
    ``C = R / sin(alpha) * c``. This parametrisation stays well conditioned for a near-orthographic
-   camera (a long lens far away), where the algebraic form degenerates: direction and apparent
-   size are always well measured, and the depth follows from the apparent size.
+   camera (a long lens far away), where the algebraic form degenerates. An orthographic camera
+   (no ``K``) fits a circle in pixels instead (:func:`fit_circle`); its normals follow from the
+   pixel offset over the pixel radius (:func:`orthographic_normals`).
 5. **Robustness.** Edge pixels that are not silhouette (a stand, an occluder, a shadow boundary,
    the terminator) are handled by (a) keeping only edges whose gradient is radial and of the
-   majority polarity, (b) a RANSAC circle search for the initial cone, (c) a ``soft_l1`` loss
+   majority polarity, (b) a RANSAC circle search for the initial fit, (c) a ``soft_l1`` loss
    with a 1-pixel scale, and (d) trimming at a robust multiple of the residual spread followed
-   by a refit on the inliers. Inlier counts, the fraction of the outline covered by inliers and
-   the RMS residual are reported.
+   by a refit on the inliers.
+6. **Which outlines are spheres** (no hints, :func:`_select_spheres`, :data:`CRITERIA`): round
+   (fit RMS), closed and supported (coverage of the visible outline), visible enough (a sphere
+   cut by the frame edge is used when 60 % of its outline is inside), neutral in colour, shading
+   that changes across the photos as a sphere's does (not the same brightest photo everywhere),
+   and sizes consistent with one shared ``sphere_radius``. Round outlines set aside are reported
+   with their reason (:attr:`Spheres.rejected`).
 
 The silhouette fixes only the cone, not ``R``: a wrong ``sphere_radius`` scales every centre's
 distance. It is caught against a scene scale where one exists (the camera's distance to the
