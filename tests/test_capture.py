@@ -153,7 +153,7 @@ def test_corrupt_json(tmp_path):
     ({"sphere_radius": "big"}, "sphere_radius"),
     ({"hemisphere": "lower"}, "hemisphere"),
     ({"scene_center": [0, 0]}, "scene_center"),
-    ({"spheres": [{"center_px": [1, 2]}]}, "spheres[0].radius_px"),
+    ({"spheres": [{"center_px": [1, 2], "radius_px": -3}]}, "spheres[0].radius_px"),
     ({"spheres": [{}]}, "spheres[0]"),
     ({"image_size": [6]}, "image_size"),
 ])

@@ -214,10 +214,17 @@ def test_too_few_spheres():
 
 
 def test_sphere_cut_by_border():
-    # centre pixel x = 200 + 600 * (-0.31 / 1.0) = 14 px, radius ~30 px: cut by the left border
-    img = render(K0, None, [np.array([-0.31, 0.0, 1.0])], R0)
-    with pytest.raises(InputError, match="cut by the image border"):
-        detect.find_spheres(img, K0, None, R0, n_spheres=1)
+    # centre pixel x = 200 + 600 * (-0.31 / 1.0) = 14 px, radius ~30 px: about 2/3 of the outline
+    # is inside the image, so the sphere is used, with its centre from the visible arc
+    C = np.array([-0.31, 0.0, 1.0])
+    img = render(K0, None, [C], R0)
+    ft = detect.find_spheres(img, K0, None, R0, n_spheres=1)[0]
+    assert 0.55 < ft.visible_fraction < 0.8
+    assert np.linalg.norm(ft.center_px - projection.project_points(C[None], K0, None)[0]) < 0.5
+    # centre at x = 200 - 600 * 0.335 = -1 px: less than half of the outline is inside
+    img = render(K0, None, [np.array([-0.335, 0.0, 1.0])], R0)
+    with pytest.raises(InputError, match="cropped too much"):
+        detect.find_spheres(img, K0, None, R0, hints=[{"center_px": [2.0, 150.0], "radius_px": 30}])
 
 
 def test_wrong_radius_against_scene_scale():

@@ -50,7 +50,7 @@ UNIT_TOLERANCE = 1e-3
 _ENCODINGS = ("srgb", "linear")
 _DIST_LENGTHS = (4, 5, 8, 12, 14)
 _CAPTURE_KEYS = {"format", "version", "images", "image_size", "encoding", "camera", "sphere_radius",
-                 "spheres", "scene_center", "hemisphere", "units"}
+                 "spheres", "sphere_count", "scene_center", "hemisphere", "units"}
 
 
 # ----------------------------------------------------------------------------- validation helpers
@@ -168,7 +168,11 @@ class Capture:
         ``camera.model``; an orthographic camera has parallel rays along its +z and no ``K``
         (:func:`ffls.camera.projection.camera_rays`).
     spheres : list of dict
-        Sphere hints: ``{'center': [x, y, z]}`` or ``{'center_px': [u, v], 'radius_px': r}``.
+        Sphere hints: ``{'center': [x, y, z]}`` or ``{'center_px': [u, v]}`` with an optional
+        ``'radius_px'`` (both forms in one hint must agree).
+    sphere_count : int or None
+        How many calibration spheres the images show (``sphere_count``); None: every sphere
+        detection finds (:func:`ffls.spheres.detect.find_spheres`).
     image_size : (int, int) or None
         Expected (width, height) of every image, checked when images are read.
     units : str or None
@@ -195,6 +199,7 @@ class Capture:
     response: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
     camera_model: str = "pinhole"
+    sphere_count: int | None = None
 
     def __post_init__(self):
         self.folder = Path(self.folder)
@@ -233,6 +238,8 @@ class Capture:
             doc["sphere_radius"] = float(self.sphere_radius)
         if self.spheres:
             doc["spheres"] = [dict(s) for s in self.spheres]
+        if self.sphere_count is not None:
+            doc["sphere_count"] = int(self.sphere_count)
         if np.any(self.scene_center != 0):
             doc["scene_center"] = np.asarray(self.scene_center, dtype=float).tolist()
         doc["hemisphere"] = conventions.as_hemisphere(self.hemisphere).to_json()
@@ -278,7 +285,20 @@ def _parse_camera(j: _Json, cam) -> tuple:
     return K, dist, wfc, default, model
 
 
-def _parse_spheres(j: _Json, spheres) -> list:
+def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
+    """``spheres`` (hints) and ``sphere_count``: (list of hint dicts, count or None).
+
+    A hint is ``{"center": [x, y, z]}`` (world), ``{"center_px": [u, v]}`` with an optional
+    ``"radius_px"``, or both (detection checks that they agree). A count that disagrees with the
+    number of hints is an error.
+    """
+    n = None
+    if count is not None:
+        if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+            j.fail("sphere_count", f"expected a positive integer, got {_short(count)}")
+        n = int(count)
+    if spheres is None:
+        return [], n
     if not isinstance(spheres, list):
         j.fail("spheres", f"expected a list, got {_short(spheres)}")
     out = []
@@ -291,13 +311,19 @@ def _parse_spheres(j: _Json, spheres) -> list:
             item["center"] = j.array(s["center"], key + ".center", (3,)).tolist()
         if "center_px" in s:
             item["center_px"] = j.array(s["center_px"], key + ".center_px", (2,)).tolist()
-            item["radius_px"] = j.number(j.require(s, "radius_px", key + "."), key + ".radius_px", positive=True)
+            if "radius_px" in s:
+                item["radius_px"] = j.number(s["radius_px"], key + ".radius_px", positive=True)
+        elif "radius_px" in s:
+            j.fail(key, "'radius_px' without 'center_px'")
         if not item:
-            j.fail(key, "expected 'center' [x, y, z] or 'center_px' [u, v] with 'radius_px'")
+            j.fail(key, "expected 'center' [x, y, z] or 'center_px' [u, v] (with an optional 'radius_px')")
         for extra_key in set(s) - {"center", "center_px", "radius_px"}:
             item[extra_key] = s[extra_key]
         out.append(item)
-    return out
+    if n is not None and out and n != len(out):
+        j.fail("sphere_count", f"is {n} but 'spheres' lists {len(out)} hints; hints conflict: give one hint per "
+                               f"sphere, or remove sphere_count")
+    return out, n
 
 
 def load_capture(folder: str | os.PathLike) -> Capture:
@@ -370,7 +396,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     radius = None
     if "sphere_radius" in doc:
         radius = j.number(doc["sphere_radius"], "sphere_radius", positive=True)
-    spheres = _parse_spheres(j, doc["spheres"]) if "spheres" in doc else []
+    spheres, sphere_count = _parse_spheres(j, doc.get("spheres"), doc.get("sphere_count"))
     center = j.array(doc["scene_center"], "scene_center", (3,)) if "scene_center" in doc else np.zeros(3)
     try:
         hemisphere = conventions.as_hemisphere(doc.get("hemisphere", "upper"))
@@ -385,7 +411,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         folder=folder, image_names=names, image_paths=paths, encoding=encoding, K=K, dist=dist,
         world_from_camera=wfc, world_from_camera_is_default=wfc_default, sphere_radius=radius,
         scene_center=center, hemisphere=hemisphere, spheres=spheres, image_size=image_size,
-        units=units, response=response, extra=extra, camera_model=model,
+        units=units, response=response, extra=extra, camera_model=model, sphere_count=sphere_count,
     )
 
 

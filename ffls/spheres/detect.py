@@ -1,38 +1,44 @@
 """Finding the reference spheres: silhouette edges -> sphere centres (Masselus et al. 2002, sec. 5).
 
-The Free-form Light Stage places four white diffuse spheres of known radius ``R`` beside the
-object. Their centres ``C`` (camera frame) give every sphere pixel a surface normal, from which
-the per-photo light direction follows (:mod:`ffls.spheres.estimate`).
+Calibration spheres of known radius ``R`` (white or grey matte, or chrome) stand in the scene or
+in their own calibration shots. Their centres ``C`` (camera frame) give every sphere pixel a
+surface normal, from which the per-photo light direction follows (:mod:`ffls.spheres.estimate`).
+Any number of spheres is found, with no hint; hints (a count, a rough pixel circle, a world
+centre) are optional.
 
 Method
 ------
-1. **Max image.** The per-pixel maximum over the whole sequence (:func:`max_image`). A hand-held
-   light visits every side of the spheres, so in the maximum each sphere is lit almost all the
-   way round and its silhouette is a closed, high-contrast outline; a single photo shows only the
-   lit crescent, whose terminator is not a silhouette.
+1. **Max image.** The per-pixel maximum over the whole sequence, and which photo gave it
+   (:func:`extreme_images`). A light that visits every side of the spheres makes each
+   silhouette a closed, high-contrast outline in the maximum; a single photo shows only the lit
+   crescent, whose terminator is not a silhouette.
 2. **Edges.** Luminance of the max image, log tone-mapped to 8 bit, lightly blurred; Canny with
-   thresholds derived from the image itself (Otsu split into background and foreground classes;
-   the edge contrast is the difference of the class means). Edge pixels are refined to subpixel
-   precision along the gradient (parabola through the gradient magnitude).
-3. **Candidates.** With no hints, :func:`cv2.HoughCircles` (``HOUGH_GRADIENT_ALT``) proposes
-   circles, scored by how much of their outline the edges support and how bright their inside is;
-   the ``n_spheres`` best non-overlapping ones are kept. Hints (an approximate pixel circle, or a
-   world centre projected through the camera) restrict the search to an annulus around them.
-   Overrides skip detection altogether.
+   thresholds derived from the image itself (a radiance ratio of about 1.2, never below the
+   texture/noise level). Edge pixels are refined to subpixel precision along the gradient.
+3. **Candidates.** With no hints, :func:`cv2.HoughCircles` proposes circles, kept by how much of
+   their in-image outline the edges support. Hints (an approximate pixel circle, with or
+   without radius, or a world centre projected through the camera) restrict the search to an
+   annulus around them. Overrides skip detection altogether.
 4. **Centre from the silhouette (equation 1).** Every silhouette ray ``s_i`` is tangent to the
    sphere: ``|C|^2 - R^2 - (s_i . C)^2 = 0``. The same condition in geometric form is
    ``angle(s_i, C) = alpha`` with ``sin(alpha) = R / |C|``: the rays lie on the tangent cone. We
    minimise ``f * (angle(s_i, c) - alpha)`` (``f`` the focal length in pixels, so the residual
    is in pixels) over the cone axis ``c`` and half-angle ``alpha``, and set
    ``C = R / sin(alpha) * c``. This parametrisation stays well conditioned for a near-orthographic
-   camera (a long lens far away), where the algebraic form degenerates: direction and apparent
-   size are always well measured, and the depth follows from the apparent size.
+   camera (a long lens far away), where the algebraic form degenerates. An orthographic camera
+   (no ``K``) fits a circle in pixels instead (:func:`fit_circle`); its normals follow from the
+   pixel offset over the pixel radius (:func:`orthographic_normals`).
 5. **Robustness.** Edge pixels that are not silhouette (a stand, an occluder, a shadow boundary,
    the terminator) are handled by (a) keeping only edges whose gradient is radial and of the
-   majority polarity, (b) a RANSAC circle search for the initial cone, (c) a ``soft_l1`` loss
+   majority polarity, (b) a RANSAC circle search for the initial fit, (c) a ``soft_l1`` loss
    with a 1-pixel scale, and (d) trimming at a robust multiple of the residual spread followed
-   by a refit on the inliers. Inlier counts, the fraction of the outline covered by inliers and
-   the RMS residual are reported.
+   by a refit on the inliers.
+6. **Which outlines are spheres** (no hints, :func:`_select_spheres`, :data:`CRITERIA`): round
+   (fit RMS), closed and supported (coverage of the visible outline), visible enough (a sphere
+   cut by the frame edge is used when 60 % of its outline is inside), neutral in colour, shading
+   that changes across the photos as a sphere's does (not the same brightest photo everywhere),
+   and sizes consistent with one shared ``sphere_radius``. Round outlines set aside are reported
+   with their reason (:attr:`Spheres.rejected`).
 
 The silhouette fixes only the cone, not ``R``: a wrong ``sphere_radius`` scales every centre's
 distance. It is caught against a scene scale where one exists (the camera's distance to the
@@ -48,7 +54,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_basis
-from ffls.camera.projection import camera_arrays, pixel_rays, project_points
+from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo
 
@@ -65,6 +71,13 @@ __all__ = [
     "silhouette_px",
     "to_world",
     "edge_points",
+    "Spheres",
+    "extreme_images",
+    "orthographic_normals",
+    "disc_mask",
+    "outline_visible_fraction",
+    "fit_circle",
+    "CRITERIA",
 ]
 
 
@@ -102,6 +115,15 @@ class SphereFit:
     K, dist : arrays
         The camera used for the fit (kept so :meth:`mask` and :meth:`normals` need no arguments).
     world_from_camera : (4, 4) float64
+    camera_model : {'pinhole', 'orthographic'}
+        For ``'orthographic'`` ``K`` and ``dist`` are None; the normals follow from the pixel
+        offset over :attr:`radius_px` (:func:`orthographic_normals`) and ``center_cam`` is
+        ``(u - cx, v - cy, 0) * radius / radius_px`` with ``(cx, cy)`` the image centre (an
+        orthographic camera measures no depth).
+    visible_fraction : float
+        Fraction of the projected outline inside the image (1 unless the frame edge cuts it).
+    score : float
+        Detection score of an unhinted sphere (support x closure x neutrality x fit quality).
     """
 
     center_cam: np.ndarray
@@ -116,9 +138,12 @@ class SphereFit:
     coverage: float
     source: str
     edge_px: np.ndarray
-    K: np.ndarray
-    dist: np.ndarray
+    K: np.ndarray | None
+    dist: np.ndarray | None
     world_from_camera: np.ndarray
+    camera_model: str = "pinhole"
+    visible_fraction: float = 1.0
+    score: float = 0.0
 
     @property
     def distance(self) -> float:
@@ -126,11 +151,15 @@ class SphereFit:
         return float(np.linalg.norm(self.center_cam))
 
     def mask(self, shape, margin_px: float = 0.0) -> np.ndarray:
-        """Pixels whose rays hit this sphere; see :func:`sphere_mask`."""
+        """Pixels whose rays hit this sphere; see :func:`sphere_mask` (:func:`disc_mask` when orthographic)."""
+        if self.camera_model == "orthographic":
+            return disc_mask(shape, self.center_px, self.radius_px, margin_px=margin_px)
         return sphere_mask(shape, self.K, self.dist, self.center_cam, self.radius, margin_px=margin_px)
 
     def normals(self, pixels) -> np.ndarray:
-        """Camera-frame unit normals at ``pixels`` (n, 2); see :func:`sphere_normals`."""
+        """Camera-frame unit normals at ``pixels`` (n, 2); see :func:`sphere_normals` (:func:`orthographic_normals`)."""
+        if self.camera_model == "orthographic":
+            return orthographic_normals(pixels, self.center_px, self.radius_px)
         return sphere_normals(pixels, self.K, self.dist, self.center_cam, self.radius)
 
     def normals_world(self, pixels) -> np.ndarray:
@@ -151,7 +180,25 @@ class SphereFit:
             "inlier_fraction": float(self.inlier_fraction),
             "coverage": float(self.coverage),
             "source": self.source,
+            "camera_model": self.camera_model,
+            "visible_fraction": float(self.visible_fraction),
         }
+
+
+class Spheres(list):
+    """The spheres found (a list of :class:`SphereFit`) and the round outlines set aside.
+
+    Attributes
+    ----------
+    rejected : list of str
+        One line per candidate that looked like a sphere (a closed, round outline) but was not
+        used, with the reason (cut by the frame edge, coloured, unchanging shading, apparent size
+        inconsistent with the other spheres).
+    """
+
+    def __init__(self, fits=(), rejected=()):
+        super().__init__(fits)
+        self.rejected = list(rejected)
 
 
 # ----------------------------------------------------------------------------- camera helpers
@@ -257,6 +304,47 @@ def sphere_normals(pixels, K, dist, C, R) -> np.ndarray:
     return n
 
 
+def orthographic_normals(pixels, center_px, radius_px) -> np.ndarray:
+    """Camera-frame unit normals of a sphere seen by an orthographic camera.
+
+    The viewing ray is +z everywhere, so the visible hemisphere faces -z and the normal at pixel
+    offset ``(dx, dy) / radius_px = (a, b)`` is ``(a, b, -sqrt(1 - a^2 - b^2))``.
+
+    Parameters
+    ----------
+    pixels : (n, 2) float
+    center_px : (2,) float
+    radius_px : float
+
+    Returns
+    -------
+    (n, 3) float64
+        Unit normals; NaN outside the disc.
+    """
+    p = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    ab = (p - np.asarray(center_px, dtype=np.float64).reshape(2)) / float(radius_px)
+    q = 1.0 - np.sum(ab * ab, axis=1)
+    n = np.concatenate([ab, -np.sqrt(np.clip(q, 0.0, None))[:, None]], axis=1)
+    n[q < 0] = np.nan
+    return n
+
+
+def disc_mask(shape, center_px, radius_px, margin_px: float = 0.0) -> np.ndarray:
+    """Pixels (H, W) bool within ``radius_px - margin_px`` of ``center_px`` (an orthographic sphere)."""
+    H, W = int(shape[0]), int(shape[1])
+    yy, xx = np.ogrid[:H, :W]
+    r = float(radius_px) - float(margin_px)
+    return (xx - center_px[0]) ** 2 + (yy - center_px[1]) ** 2 <= max(r, 0.0) ** 2
+
+
+def outline_visible_fraction(outline_px, shape) -> float:
+    """Fraction of outline points (n, 2) inside the image ``shape`` (H, W), half a pixel in from the border."""
+    H, W = int(shape[0]), int(shape[1])
+    o = np.asarray(outline_px, dtype=np.float64)
+    inside = (o[:, 0] >= 0.5) & (o[:, 0] <= W - 1.5) & (o[:, 1] >= 0.5) & (o[:, 1] <= H - 1.5)
+    return float(inside.mean()) if len(o) else 0.0
+
+
 # ----------------------------------------------------------------------------- images
 def max_image(images) -> np.ndarray:
     """Per-pixel maximum over a sequence of linear images.
@@ -285,6 +373,44 @@ def max_image(images) -> np.ndarray:
     if acc is None:
         raise ValueError("no images")
     return acc
+
+
+def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, int]:
+    """Per-pixel maximum over a sequence, which photo gave it, and the number of images, in one pass.
+
+    Parameters
+    ----------
+    images : as :func:`max_image`
+        A single image is taken to be a max image already: no index (None), count 1.
+
+    Returns
+    -------
+    mx : (H, W, 3) or (H, W) float32
+        :func:`max_image`.
+    brightest : (H, W) int32 or None
+        Index of the photo with the highest luminance at each pixel (the first on ties).
+    n : int
+    """
+    if isinstance(images, np.ndarray) and images.ndim in (2, 3) and not (images.ndim == 3 and images.shape[-1] not in (1, 3, 4)):
+        return max_image(images), None, 1
+    mx = best_l = idx = None
+    n = 0
+    for im in images:
+        im = np.nan_to_num(np.asarray(im, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        lum = _luminance(im).astype(np.float32)
+        if mx is None:
+            mx, best_l, idx = im.copy(), lum, np.zeros(lum.shape, np.int32)
+        elif im.shape != mx.shape:
+            raise ValueError(f"image shapes differ: {im.shape} vs {mx.shape}")
+        else:
+            np.maximum(mx, im, out=mx)
+            up = lum > best_l
+            idx[up] = n
+            best_l[up] = lum[up]
+        n += 1
+    if mx is None:
+        raise ValueError("no images")
+    return mx, idx, n
 
 
 def _luminance(img: np.ndarray) -> np.ndarray:
@@ -344,7 +470,7 @@ def edge_points(img, sigma: float = 1.0):
     gy = cv2.Sobel(blur, cv2.CV_64F, 0, 1, ksize=3)
     mag = np.hypot(gx, gy)
     noise = float(np.median(mag))
-    high = max(1.0 * scale, 8.0 * noise)
+    high = max(0.5 * scale, 8.0 * noise)
     low = 0.5 * high
     edges = cv2.Canny(g8, low, high, L2gradient=True)
     ys, xs = np.nonzero(edges)
@@ -389,35 +515,37 @@ def _radius_from_edges(pts, grads, cpx, r_max):
 
 
 # ----------------------------------------------------------------------------- fitting
-def _circle_from_3(p):
-    (x1, y1), (x2, y2), (x3, y3) = p
-    a = np.array([[x2 - x1, y2 - y1], [x3 - x1, y3 - y1]]) * 2
-    b = np.array([x2**2 - x1**2 + y2**2 - y1**2, x3**2 - x1**2 + y3**2 - y1**2])
-    det = np.linalg.det(a)
-    if abs(det) < 1e-9:
-        return None
-    c = np.linalg.solve(a, b)
-    return c, float(np.hypot(*(p[0] - c)))
-
-
 def _ransac_circle(pts, r_expected, rng, n_iter=300, tol=1.5):
-    """Best-supported circle (centre (2,), radius) among 3-point samples, radius within 40 %."""
-    best, best_n = None, -1
+    """Best-supported circle (centre (2,), radius) among 3-point samples, radius within 40 %.
+
+    All ``n_iter`` samples are evaluated at once (circumcentres in closed form, inlier counts by
+    broadcasting).
+    """
     m = len(pts)
     if m < 3:
         return None
-    for _ in range(n_iter):
-        idx = rng.choice(m, 3, replace=False)
-        res = _circle_from_3(pts[idx])
-        if res is None:
-            continue
-        c, r = res
-        if not (0.6 * r_expected <= r <= 1.4 * r_expected):
-            continue
-        n_in = int(np.count_nonzero(np.abs(np.hypot(*(pts - c).T) - r) < tol))
-        if n_in > best_n:
-            best, best_n = (c, r), n_in
-    return best
+    idx = np.stack([rng.choice(m, 3, replace=False) for _ in range(n_iter)]) if m < 6 else \
+        np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
+    if m >= 6:  # drop samples with a repeated point
+        idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
+    p1, p2, p3 = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
+    a = 2 * (p2 - p1)
+    b = 2 * (p3 - p1)
+    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    ra = np.sum(p2 ** 2 - p1 ** 2, axis=1)
+    rb = np.sum(p3 ** 2 - p1 ** 2, axis=1)
+    ok = np.abs(det) > 1e-9
+    det = np.where(ok, det, 1.0)
+    c = np.stack([(ra * b[:, 1] - rb * a[:, 1]) / det, (a[:, 0] * rb - b[:, 0] * ra) / det], axis=1)
+    r = np.hypot(*(p1 - c).T)
+    ok &= (r >= 0.6 * r_expected) & (r <= 1.4 * r_expected)
+    if not ok.any():
+        return None
+    c, r = c[ok], r[ok]
+    d = np.hypot(pts[None, :, 0] - c[:, None, 0], pts[None, :, 1] - c[:, None, 1])
+    n_in = np.count_nonzero(np.abs(d - r[:, None]) < tol, axis=1)
+    k = int(np.argmax(n_in))
+    return c[k], float(r[k])
 
 
 def _cone_residuals(params, s, f):
@@ -479,6 +607,49 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     return R / np.sin(a) * c, inl, _cone_residuals(p, s, f)
 
 
+def _circle_residuals(params, pts):
+    return np.hypot(pts[:, 0] - params[0], pts[:, 1] - params[1]) - params[2]
+
+
+def fit_circle(points, init_center, init_radius, f_scale: float = 1.0, trim: float = 3.0):
+    """Robust circle fit in pixels: the outline of a sphere seen by an orthographic camera.
+
+    Same loss and trimming as :func:`fit_sphere_center` (``soft_l1`` with scale ``f_scale``
+    pixels, then up to three rounds of trimming at ``max(trim * robust sigma, 1 px)``).
+
+    Parameters
+    ----------
+    points : (n, 2) float
+        Candidate outline points, pixels.
+    init_center : (2,) float
+    init_radius : float
+
+    Returns
+    -------
+    center : (2,) float64
+    radius : float
+    inliers : (n,) bool
+    residuals : (n,) float64
+        Signed distances of all points from the circle, pixels.
+    """
+    P = np.asarray(points, dtype=np.float64)
+    p = np.array([init_center[0], init_center[1], init_radius], dtype=np.float64)
+    inl = np.ones(len(P), dtype=bool)
+    for _ in range(3):
+        p = least_squares(_circle_residuals, p, args=(P[inl],), loss="soft_l1", f_scale=f_scale,
+                          method="trf").x
+        r = _circle_residuals(p, P)
+        sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
+        new = np.abs(r) < max(trim * sigma, 1.0)
+        if new.sum() < 3 or np.array_equal(new, inl):
+            inl = new if new.sum() >= 3 else inl
+            break
+        inl = new
+    if not p[2] > 0:
+        raise ValueError("fitted radius is not positive")
+    return p[:2].copy(), float(p[2]), inl, _circle_residuals(p, P)
+
+
 def _coverage(points, center, n_bins=36):
     if len(points) == 0:
         return 0.0
@@ -488,20 +659,21 @@ def _coverage(points, center, n_bins=36):
 
 
 # ----------------------------------------------------------------------------- candidates
-def _score_circle(cx, cy, r, dt, L, bg):
+def _score_circle(cx, cy, r, dt):
+    """Edge support of a circle: the fraction of its in-image outline within 1.5 px of an edge.
+
+    Returns ``(support, visible)``; ``visible`` is the fraction of the outline inside the image.
+    Brightness is not scored: a sphere may be darker than a white background.
+    """
     t = np.linspace(0, 2 * np.pi, 120, endpoint=False)
     H, W = dt.shape
     xs = cx + r * np.cos(t)
     ys = cy + r * np.sin(t)
     ok = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
     if not ok.any():
-        return 0.0
+        return 0.0, 0.0
     d = dt[np.rint(ys[ok]).astype(int), np.rint(xs[ok]).astype(int)]
-    support = np.count_nonzero(d <= 1.5) / t.size
-    yy, xx = np.ogrid[:H, :W]
-    inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= (0.7 * r) ** 2
-    bright = float(np.median(L[inside])) if inside.any() else 0.0
-    return support * (1.0 if bright > bg else 0.25)
+    return float(np.count_nonzero(d <= 1.5) / ok.sum()), float(ok.mean())
 
 
 def _hough_candidates(g8, min_r, max_r, scale):
@@ -512,9 +684,9 @@ def _hough_candidates(g8, min_r, max_r, scale):
     """
     blur = cv2.GaussianBlur(g8, (0, 0), 1.5)
     found = []
-    for p2 in (0.9, 0.8, 0.7):
+    for p2 in (0.8, 0.7):
         c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=max(2 * min_r, 4),
-                             param1=2.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
+                             param1=1.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
         if c is not None:
             found.extend(c.reshape(-1, 3).tolist())
     c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=scale,
@@ -524,29 +696,29 @@ def _hough_candidates(g8, min_r, max_r, scale):
     return np.array(found, dtype=np.float64).reshape(-1, 3)
 
 
-# ----------------------------------------------------------------------------- main entry
-def _parse_hint(h, K, dist, world_from_camera, R):
-    """(center_px (2,), radius_px, center_cam or None) from one hint dict."""
-    if "center_px" in h:
-        r = float(h.get("radius_px", 0)) or None
-        return np.asarray(h["center_px"], dtype=np.float64), r, None
-    if "center" in h or "center_world" in h:
-        Cw = np.asarray(h.get("center", h.get("center_world")), dtype=np.float64)
-        T = np.linalg.inv(world_from_camera)
-        Cc = T[:3, :3] @ Cw + T[:3, 3]
-        if Cc[2] <= R:
-            raise ValueError(f"hinted centre {Cw.tolist()} is not in front of the camera")
-        cpx = project_points(Cc[None], K, dist)[0]
-        return cpx, None, Cc  # radius from the image: a wrong sphere_radius must not steer the search
-    if "center_cam" in h:
-        Cc = np.asarray(h["center_cam"], dtype=np.float64)
-        outline = silhouette_px(K, dist, Cc, R)
-        cpx = project_points(Cc[None], K, dist)[0]
-        return cpx, float(np.mean(np.hypot(*(outline - cpx).T))), Cc
-    raise ValueError(f"a sphere hint needs 'center', 'center_cam' or 'center_px', got keys {sorted(h)}")
+# ----------------------------------------------------------------------------- camera of one search
+@dataclasses.dataclass
+class _Camera:
+    """What the stages need of the camera: pinhole (K, dist, f) or orthographic (pixels only)."""
+
+    model: str
+    K: np.ndarray | None
+    dist: np.ndarray | None
+    wfc: np.ndarray
+    R: float
+    shape: tuple
+
+    @property
+    def ortho(self) -> bool:
+        return self.model == "orthographic"
+
+    @property
+    def f(self) -> float:
+        return float(np.sqrt(self.K[0, 0] * self.K[1, 1]))
 
 
-def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0):
+def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0,
+              shape=None):
     outline = silhouette_px(K, dist, C, R)
     cpx = project_points(np.asarray(C)[None], K, dist)[0]
     return SphereFit(
@@ -554,83 +726,137 @@ def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, 
         center_px=cpx, radius_px=float(np.mean(np.hypot(*(outline - cpx).T))), residual_px=float(residual),
         n_edge_points=int(n_edge), n_inliers=int(n_in), inlier_fraction=float(n_in / n_edge) if n_edge else 1.0,
         coverage=float(coverage), source=source, edge_px=np.zeros((0, 2)) if edge_px is None else edge_px,
-        K=K, dist=dist, world_from_camera=wfc)
+        K=K, dist=dist, world_from_camera=wfc,
+        visible_fraction=1.0 if shape is None else outline_visible_fraction(silhouette_px(K, dist, C, R, n=360),
+                                                                            shape))
 
 
-def _refine_on_lit_limb(ft, L, K, dist, R, f, wfc, lit_limb, min_points: int = 8,
-                        min_coverage: float = 0.5):
-    """Refit a found sphere on the part of its outline where the limb is directly lit.
+def _make_fit_ortho(cpx, rpx, cam: _Camera, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0):
+    H, W = cam.shape
+    cpx = np.asarray(cpx, dtype=np.float64)
+    scale = cam.R / float(rpx)  # scene units per pixel
+    C = np.array([(cpx[0] - (W - 1) / 2) * scale, (cpx[1] - (H - 1) / 2) * scale, 0.0])
+    t = np.linspace(0, 2 * np.pi, 360, endpoint=False)
+    outline = cpx + float(rpx) * np.stack([np.cos(t), np.sin(t)], axis=1)
+    return SphereFit(
+        center_cam=C, center_world=to_world(C, cam.wfc), radius=cam.R, center_px=cpx, radius_px=float(rpx),
+        residual_px=float(residual), n_edge_points=int(n_edge), n_inliers=int(n_in),
+        inlier_fraction=float(n_in / n_edge) if n_edge else 1.0, coverage=float(coverage), source=source,
+        edge_px=np.zeros((0, 2)) if edge_px is None else edge_px, K=None, dist=None, world_from_camera=cam.wfc,
+        camera_model="orthographic", visible_fraction=outline_visible_fraction(outline, cam.shape))
 
-    Where the limb is lit only by the ground bounce (the underside, above the sphere's own contact
-    shadow) or never lit (azimuths the hand-held light did not visit), the max image fades
-    gradually from the limb into a dark background and the edge lands inside the silhouette: on
-    path-traced renders the centre moved up by 0.2-0.5 px and the distance grew by 0.3-0.8 %
-    (docs/spheres.md, "Independent renders"). A directly lit limb is a sharp, high-contrast step.
-    Edge points whose limb (1.5 px inside) is below ``lit_limb`` times the sphere's 95th
-    percentile in the max image are dropped and the cone is refitted, if enough outline remains
-    (``min_points``, ``min_coverage``); otherwise the fit is returned unchanged.
-    """
-    P = ft.edge_px
-    if P is None or len(P) < min_points:
-        return ft
-    H, W = L.shape
-    cpx, r = ft.center_px, ft.radius_px
-    rr = np.hypot(P[:, 0] - cpx[0], P[:, 1] - cpx[1])
-    u = (cpx - P) / np.maximum(rr, 1e-9)[:, None]
-    limb = _bilinear(L, P + 1.5 * u)
-    y0, y1 = max(int(cpx[1] - r), 0), min(int(cpx[1] + r) + 1, H)
-    x0, x1 = max(int(cpx[0] - r), 0), min(int(cpx[0] + r) + 1, W)
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    inside = (xx - cpx[0]) ** 2 + (yy - cpx[1]) ** 2 <= (0.8 * r) ** 2
-    if not inside.any():
-        return ft
-    keep = limb >= lit_limb * float(np.percentile(L[yy[inside], xx[inside]], 95))
-    if keep.sum() < min_points or keep.all() or _coverage(P[keep], cpx) < min_coverage:
-        return ft
-    s = pixel_rays(P[keep], K, dist)
-    C0 = ft.center_cam
-    try:
-        C, inl, res = fit_sphere_center(s, R, f, C0 / np.linalg.norm(C0), float(np.arcsin(R / np.linalg.norm(C0))))
-    except ValueError:
-        return ft
-    Pk = P[keep]
+
+def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, rng=None, n_edge=None, edge_sel=None):
+    """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails."""
+    if cam.ortho:
+        c, r, inl, res = fit_circle(P, c0_px, r0_px)
+        rms = float(np.sqrt(np.mean(res[inl] ** 2)))
+        return _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
+                               n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
+    f = cam.f
+    K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])
+    c0 = pixel_rays(np.asarray(c0_px, dtype=np.float64)[None], K_und)[0]
+    edge_ray = pixel_rays((np.asarray(c0_px, dtype=np.float64) + [r0_px, 0])[None], K_und)[0]
+    a0 = float(angle_between(c0, edge_ray))
+    s = pixel_rays(P, cam.K, cam.dist)
+    C, inl, res = fit_sphere_center(s, cam.R, f, c0, a0)
     rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-    return _make_fit(C, R, K, dist, wfc, ft.source, edge_px=Pk[inl], residual=rms, n_edge=ft.n_edge_points,
-                     n_in=int(inl.sum()), coverage=_coverage(Pk[inl], project_points(C[None], K, dist)[0]))
+    return _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
+                     n_edge=n_edge or len(P), n_in=int(inl.sum()),
+                     coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
 
 
-def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None, overrides=None,
+# ----------------------------------------------------------------------------- hints
+def _parse_hint(h, cam: _Camera):
+    """(center_px (2,), radius_px or None, center_cam or None) from one hint dict.
+
+    A hint giving both a pixel circle and a world centre must agree: the projected world centre
+    within half a radius (+2 px) of ``center_px``, and a ``radius_px`` within a factor 1.5 of the
+    projected radius.
+    """
+    K, dist, R = cam.K, cam.dist, cam.R
+    px = rpx = Cc = None
+    if "center_px" in h:
+        px = np.asarray(h["center_px"], dtype=np.float64).reshape(2)
+        rpx = float(h.get("radius_px") or 0) or None
+    if "center" in h or "center_world" in h or "center_cam" in h:
+        if cam.ortho:
+            raise ValueError("a world centre hint needs a pinhole camera (camera.K); give 'center_px' for an "
+                             "orthographic camera")
+        if "center_cam" in h:
+            Cc = np.asarray(h["center_cam"], dtype=np.float64).reshape(3)
+        else:
+            Cw = np.asarray(h.get("center", h.get("center_world")), dtype=np.float64).reshape(3)
+            T = np.linalg.inv(cam.wfc)
+            Cc = T[:3, :3] @ Cw + T[:3, 3]
+        if Cc[2] <= R or np.linalg.norm(Cc) <= R:
+            raise ValueError(f"hinted centre {np.round(Cc, 4).tolist()} (camera frame) is not in front of the camera")
+        wpx = project_points(Cc[None], K, dist)[0]
+        wr = float(np.mean(np.hypot(*(silhouette_px(K, dist, Cc, R) - wpx).T)))
+        if px is not None:
+            if np.hypot(*(px - wpx)) > 0.5 * wr + 2 or (rpx is not None and not 1 / 1.5 <= rpx / wr <= 1.5):
+                raise ValueError(f"its pixel circle ({px[0]:.0f}, {px[1]:.0f}) px"
+                                 f"{f', radius {rpx:.0f} px' if rpx else ''} disagrees with its world centre, "
+                                 f"which projects to ({wpx[0]:.0f}, {wpx[1]:.0f}) px, radius {wr:.0f} px")
+        else:
+            px = wpx
+            # the radius comes from the image for a world hint: a wrong sphere_radius must not steer the search
+            rpx = wr if "center_cam" in h else None
+    if px is None:
+        raise ValueError(f"a sphere hint needs 'center' [x, y, z] or 'center_px' [u, v], got keys {sorted(h)}")
+    return px, rpx, Cc
+
+
+def _check_duplicate_circles(circles, what, source) -> None:
+    """Two hints (or hinted fits) for the same circle: centres closer than half the mean radius."""
+    for i in range(len(circles)):
+        for j in range(i + 1, len(circles)):
+            (xi, yi, ri), (xj, yj, rj) = circles[i], circles[j]
+            if np.hypot(xi - xj, yi - yj) < 0.5 * (ri + rj) / 2 + 1:
+                raise InputError(f"spheres[{i}] and spheres[{j}] {what} the same sphere, at pixel ({xi:.0f}, {yi:.0f});"
+                                 f" hints conflict: give one hint per sphere", source)
+
+
+# ----------------------------------------------------------------------------- main entry
+def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, hints=None, overrides=None,
                  world_from_camera=None, scene_center=None, source: str | os.PathLike | None = None,
                  max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
-                 lit_limb: float | None = 0.65) -> list[SphereFit]:
-    """Find the reference spheres and their centres.
+                 lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
+                 n_photos: int | None = None, min_visible: float = 0.6) -> Spheres:
+    """Find the reference spheres and their centres: any number, with or without hints.
 
-    The stages of the module docstring, one function each: the max image
+    The stages of the module docstring, one function each: the max (and min) image
     (:func:`_max_luminance`), its edges (:func:`_edge_map`), candidate circles
-    (:func:`_hinted_candidates` or :func:`_hough_circle_candidates`), a cone fit per candidate
-    (:func:`_fit_candidates`), the choice of the spheres (:func:`_choose_spheres`, or
-    :func:`_check_hinted_fits` with hints), the lit-limb refit (:func:`_refine_on_lit_limb`) and
-    the checks (:func:`_check_inside_image`, :func:`_check_radius`).
+    (:func:`_hinted_candidates` or :func:`_hough_circle_candidates`), a fit per candidate
+    (:func:`_fit_candidates`: the tangent cone for a pinhole camera, a circle for an orthographic
+    one), the choice of the spheres (:func:`_select_spheres` without hints, :func:`_check_hinted_fits`
+    with hints), the lit-limb refit (:func:`_refine_on_lit_limb`) and the scale check
+    (:func:`_check_radius`).
 
     Parameters
     ----------
     images : (H, W, 3) float, (N, H, W, 3) float, or an iterable of (H, W, 3) float
-        Linear radiance. A sequence is reduced to its per-pixel maximum (:func:`max_image`);
-        a single image is used as given (pass the max image yourself to save memory).
-    K : (3, 3) float
-        Camera matrix.
+        Linear radiance. A sequence is reduced to its per-pixel maximum and minimum
+        (:func:`extreme_images`); a single image is used as the max image.
+    K : (3, 3) float or None
+        Camera matrix (None for an orthographic camera).
     dist : (k,) float or None
         OpenCV distortion coefficients.
-    sphere_radius : float
-        Radius of the spheres, scene units.
-    n_spheres : int
-        How many spheres to find when no hints are given.
+    sphere_radius : float or None
+        Radius of the spheres, scene units. Optional for an orthographic camera (then 1: the
+        centres are in sphere radii; directions need no scale).
+    n_spheres : int, optional
+        How many spheres there are (``capture.json`` ``sphere_count``): the best ``n_spheres``
+        candidates that pass the criteria are kept, and fewer is an error. None: every
+        candidate that passes.
     hints : list of dict, optional
         One per sphere: ``{"center": [x, y, z]}`` (world), ``{"center_cam": [...]}`` or
-        ``{"center_px": [u, v], "radius_px": r}``. Only edges near the hinted outline are used.
+        ``{"center_px": [u, v]}`` with an optional ``"radius_px"``. Only edges near each hinted
+        outline are used. Two hints for the same sphere, a count that disagrees with the hints, or
+        a pixel and a world centre that disagree are errors.
     overrides : list of dict, optional
         Sphere centres to use as they are (``{"center": ...}`` world or ``{"center_cam": ...}``);
-        detection is skipped.
+        detection is skipped (pinhole only).
     world_from_camera : (4, 4) float, optional
         Defaults to :data:`ffls.conventions.DEFAULT_WORLD_FROM_CAMERA`.
     scene_center : (3,) float, optional
@@ -639,57 +865,114 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int = 4, hints=None,
     source : path, optional
         Named in error messages (the capture folder or the images).
     max_residual_px, min_coverage : float
-        Quality limits: RMS silhouette residual (pixels) and outline coverage (fraction).
+        Quality limits for hinted spheres: RMS outline residual (pixels) and outline coverage
+        (fraction of the visible outline). Unhinted candidates need coverage 0.6 (:data:`CRITERIA`).
     seed : int
         RANSAC seed.
     lit_limb : float or None
-        After the spheres are chosen, each is refitted on the edge points whose limb (1.5 px
-        inside) is at least this fraction of the sphere's 95th percentile in the max image, i.e.
-        where the limb was directly lit (:func:`_refine_on_lit_limb`); None: no refinement.
+        Refit each chosen sphere on its directly lit limb (:func:`_refine_on_lit_limb`); None: no refit.
+    camera_model : {'pinhole', 'orthographic'}
+    brightest_index : (H, W) int, optional
+        Per pixel, the photo that is brightest there (:func:`extreme_images`), when ``images`` is
+        already a max image (enables the shading-change criterion).
+    n_photos : int, optional
+        Photos behind a max image given directly (for messages and the shading criterion).
+    min_visible : float
+        A sphere cut by the frame edge is used when at least this fraction of its outline is
+        inside the image; otherwise it is set aside (``Spheres.rejected``), or an error when hinted.
 
     Returns
     -------
-    list of SphereFit
-        Sorted left to right by ``center_px`` x (hints and overrides keep their order).
+    Spheres
+        A list of :class:`SphereFit`, sorted left to right by ``center_px`` x (hints keep their
+        order), with ``.rejected``: one line per round outline set aside, with the reason.
 
     Raises
     ------
     InputError
-        All-black images, no sphere or too few spheres, a sphere cut by the image border, a
-        silhouette that does not fit a sphere, or a ``sphere_radius`` inconsistent with the scene.
+        All-black images; no sphere found (the message says where ffls looked and how to give a
+        hint); fewer spheres than ``n_spheres``; conflicting hints; a hinted sphere cropped too
+        much or whose outline does not fit a sphere; a ``sphere_radius`` inconsistent with the scene.
     """
-    K, dist = camera_arrays(K, dist)
+    if camera_model not in CAMERA_MODELS:
+        raise ValueError(f"camera_model must be one of {CAMERA_MODELS}, not {camera_model!r}")
+    ortho = camera_model == "orthographic"
     wfc = DEFAULT_WORLD_FROM_CAMERA if world_from_camera is None else np.asarray(world_from_camera, dtype=np.float64)
-    R = float(sphere_radius)
-    if not (np.isfinite(R) and R > 0):
-        raise InputError(f"sphere_radius must be a positive number, got {sphere_radius!r}", source)
+    if ortho and sphere_radius is None:
+        R = 1.0
+    else:
+        try:
+            R = float(sphere_radius)
+        except (TypeError, ValueError):
+            R = float("nan")
+        if not (np.isfinite(R) and R > 0):
+            raise InputError(f"sphere_radius must be a positive number, got {sphere_radius!r}", source)
+    if ortho:
+        K = dist = None
+    else:
+        if K is None:
+            raise InputError("a pinhole camera needs camera.K in capture.json (or declare "
+                             "\"camera\": {\"model\": \"orthographic\"})", source)
+        K, dist = camera_arrays(K, dist)
+    if n_spheres is not None and (isinstance(n_spheres, bool) or int(n_spheres) != n_spheres or n_spheres < 1):
+        raise InputError(f"sphere_count must be a positive integer, got {n_spheres!r}", source)
+    if hints and n_spheres is not None and int(n_spheres) != len(hints):
+        raise InputError(f"sphere_count is {int(n_spheres)} but {len(hints)} spheres are listed; hints conflict: "
+                         f"give one hint per sphere, or remove sphere_count", source)
     if overrides:
-        return _spheres_from_overrides(overrides, K, dist, wfc, R, source)
-    f = float(np.sqrt(K[0, 0] * K[1, 1]))
-    mx, L = _max_luminance(images, source)
+        if ortho:
+            raise InputError("sphere overrides need a pinhole camera; give 'center_px' hints instead", source)
+        return Spheres(_spheres_from_overrides(overrides, K, dist, wfc, R, source))
+    mx, brightest, L, n_img = _max_luminance(images, source)
+    if brightest_index is not None:
+        brightest = np.asarray(brightest_index, dtype=np.int64)
+    n_photos = int(n_photos) if n_photos is not None else n_img
+    cam = _Camera(camera_model, K, dist, wfc, R, L.shape)
     edges = _edge_map(mx, L, source)
+    rng = np.random.default_rng(seed)
+    rejected: list[str] = []
     if hints:
-        hint_info = [_parse_hint_or_fail(h, K, dist, wfc, R, source) for h in hints]
+        hint_info = []
+        for k, h in enumerate(hints):
+            try:
+                hint_info.append(_parse_hint(h, cam))
+            except (ValueError, TypeError) as e:
+                raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
         cands = _hinted_candidates(hint_info, edges, L.shape, source)
-        search_tol = 0.35
+        _check_duplicate_circles(cands, "hint", source)
+        fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", rng)
+        _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
+        _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
         hint_info = []
-        cands = _hough_circle_candidates(edges, L, source)
-        search_tol = 0.3
-    fits, failures = _fit_candidates(cands, edges, K, dist, wfc, R, f, search_tol, "hint" if hints else "auto",
-                                     np.random.default_rng(seed))
-    if hints:
-        _check_hinted_fits(fits, failures, max_residual_px, min_coverage, source)
-    else:
-        fits = _choose_spheres(fits, mx, L, n_spheres, max_residual_px, min_coverage, len(cands), source)
+        cands = _hough_circle_candidates(edges, L)
+        fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
+        fits, rejected = _select_spheres(fits, mx, brightest, L, cam, n_photos, max_residual_px, min_visible)
+        if n_spheres is not None and len(fits) > n_spheres:
+            fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
+        if not fits or (n_spheres is not None and len(fits) < n_spheres):
+            raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, len(cands)), source)
+        fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [_refine_on_lit_limb(ft, L, K, dist, R, f, wfc, lit_limb) for ft in fits]
-    _check_inside_image(fits, K, dist, R, L.shape, source)
-    _check_radius(fits, hint_info, wfc, R, source, scene_center)
-    return fits
+        fits = [_refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
+    if not ortho:
+        _check_radius(fits, hint_info, wfc, R, source, scene_center)
+    return Spheres(fits, rejected)
 
 
-# ----------------------------------------------------------------------------- stages of find_spheres
+#: Criteria an unhinted round outline must meet to count as a calibration sphere
+#: (:func:`_select_spheres`; documented with their reasons in docs/spheres.md).
+CRITERIA = {
+    "max_residual_px": 1.5,      # RMS of the outline points about the fitted cone/circle
+    "min_closed": 0.5,           # outline coverage (36 angular bins) over the visible outline
+    "min_support": 0.5,          # inlier edge points per pixel of visible outline
+    "min_neutral": 0.5,          # min/max channel of the median colour inside (white, grey, chrome)
+    "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
+    "size_ratio_pinhole": 2.0,   # implied depths of all spheres within this factor of each other
+    "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
+}
+
+
 def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFit]:
     """Overridden centres (``center_cam``, or a world ``center``) as they are; detection is skipped."""
     fits = []
@@ -706,17 +989,17 @@ def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFi
     return fits
 
 
-def _max_luminance(images, source) -> tuple[np.ndarray, np.ndarray]:
-    """Stage 1: the max image (:func:`max_image`) and its luminance; all-black sequences refused."""
+def _max_luminance(images, source):
+    """Stage 1: the max image, the brightest-photo index (None for a single image), luminance of the max, count."""
     try:
-        mx = max_image(images)
+        mx, brightest, n = extreme_images(images)
     except ValueError as e:
         raise InputError(str(e), source) from None
     L = _luminance(mx)
     peak = float(L.max()) if L.size else 0.0
     if not np.isfinite(peak) or peak <= 0 or float(np.percentile(L, 99.9)) <= 1e-6 * max(peak, 1e-30):
         raise InputError("all images are black (no light on the spheres in any photo)", source)
-    return mx, L
+    return mx, brightest, L, n
 
 
 @dataclasses.dataclass
@@ -734,64 +1017,67 @@ def _edge_map(mx, L, source) -> _EdgeMap:
     """Stage 2: edges of the max image (:func:`edge_points`) and the distance to them."""
     H, W = L.shape
     pts, grads = edge_points(mx)
-    if len(pts) < 10:
-        raise InputError("no edges in the images: no sphere visible", source)
     g8f, scale = _log8(L)
     edge_img = np.ones((H, W), np.uint8)
-    edge_img[np.clip(np.rint(pts[:, 1]).astype(int), 0, H - 1), np.clip(np.rint(pts[:, 0]).astype(int), 0, W - 1)] = 0
+    if len(pts):
+        edge_img[np.clip(np.rint(pts[:, 1]).astype(int), 0, H - 1),
+                 np.clip(np.rint(pts[:, 0]).astype(int), 0, W - 1)] = 0
     return _EdgeMap(points=pts, grads=grads, log8=g8f.astype(np.uint8), scale=scale,
                     distance=cv2.distanceTransform(edge_img, cv2.DIST_L2, 3))
-
-
-def _parse_hint_or_fail(h, K, dist, wfc, R, source):
-    try:
-        return _parse_hint(h, K, dist, wfc, R)
-    except (ValueError, TypeError) as e:
-        raise InputError(f"bad sphere hint: {e}", source) from None
 
 
 def _hinted_candidates(hint_info, edges: _EdgeMap, shape, source) -> list[tuple[float, float, float]]:
     """Stage 3 with hints: one circle (x, y, r) per hint; a radius the hint lacks comes from the edges."""
     H, W = shape
     cands = []
-    for cpx, rpx, _ in hint_info:
+    for k, (cpx, rpx, _) in enumerate(hint_info):
         if rpx is None:  # centre only: the radius comes from the edges around it
             rpx = _radius_from_edges(edges.points, edges.grads, cpx, min(H, W) / 2)
             if rpx is None:
-                raise InputError(f"no sphere found near the hinted centre ({cpx[0]:.0f}, {cpx[1]:.0f}) px", source)
+                raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
+                                 f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
         cands.append((float(cpx[0]), float(cpx[1]), float(rpx)))
     return cands
 
 
-def _hough_circle_candidates(edges: _EdgeMap, L, source, max_candidates: int = 40) -> list[tuple[float, float, float]]:
-    """Stage 3 without hints: Hough circles scored by edge support and brightness, near-duplicates dropped."""
+def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60) -> list[tuple[float, float, float]]:
+    """Stage 3 without hints: Hough circles scored by edge support, near-duplicates dropped."""
     H, W = L.shape
-    bg = float(np.median(L))
+    if len(edges.points) < 10:
+        return []
     hc = _hough_candidates(edges.log8, 3, min(H, W) / 2, edges.scale)
-    scored = [(float(_score_circle(x, y, r, edges.distance, L, bg)), x, y, r) for x, y, r in hc]
-    scored = [s for s in scored if s[0] >= 0.35]
+    scored = []
+    for x, y, r in hc:
+        support, visible = _score_circle(x, y, r, edges.distance)
+        if support >= 0.35 and visible >= 0.4:
+            scored.append((support * min(visible / 0.8, 1.0), x, y, r))
     scored.sort(key=lambda s: -s[0])
     cands = []  # drop near-duplicates only; overlapping circles are resolved after fitting
     for sc, x, y, r in scored:
         if all(np.hypot(x - cx, y - cy) > 0.2 * r or abs(r - cr) > 0.2 * r for cx, cy, cr in cands):
             cands.append((x, y, r))
-    cands = cands[:max_candidates]
-    if not cands:
-        raise InputError("no sphere found in the images (no round bright outline)", source)
-    return cands
+    return cands[:max_candidates]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, K, dist, wfc, R, f, search_tol, label, rng):
-    """Stage 4: per candidate circle, the tangent cone fitted to its silhouette edge points.
+def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng):
+    """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
-    majority polarity; RANSAC circle start; :func:`fit_sphere_center`. Returns the fits and the
-    failures ``(k, x, y, r, why)``.
+    majority polarity; RANSAC circle start; :func:`fit_sphere_center` (pinhole) or
+    :func:`fit_circle` (orthographic). Returns the fits and the failures ``(k, x, y, r, why)``.
     """
     pts, grads = edges.points, edges.grads
-    K_und = np.array([[f, 0, K[0, 2]], [0, f, K[1, 2]], [0, 0, 1]])  # undistorted, square pixels
     fits, failures = [], []
+    if cam.ortho:
+        und_all = pts
+    else:
+        f = cam.f
+        K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])  # undistorted, square pixels
+        und_all = project_points(pixel_rays(pts, cam.K, cam.dist), K_und, None) if len(pts) else pts
     for k, (cx, cy, r) in enumerate(cands):
+        if len(pts) == 0:
+            failures.append((k, cx, cy, r, "no edges in the image"))
+            continue
         d = np.hypot(pts[:, 0] - cx, pts[:, 1] - cy)
         near = (d > (1 - search_tol) * r - 2) & (d < (1 + search_tol) * r + 2)
         radial = np.stack([pts[:, 0] - cx, pts[:, 1] - cy], axis=1) / np.maximum(d, 1e-9)[:, None]
@@ -804,85 +1090,164 @@ def _fit_candidates(cands, edges: _EdgeMap, K, dist, wfc, R, f, search_tol, labe
         if len(P) < 8:
             failures.append((k, cx, cy, r, f"only {len(P)} edge points"))
             continue
-        und = project_points(pixel_rays(P, K, dist), K_und, None)
-        circ = _ransac_circle(und, r, rng)
+        circ = _ransac_circle(und_all[sel], r, rng)
         if circ is None:
             failures.append((k, cx, cy, r, "no circle through the edge points"))
             continue
-        c0 = pixel_rays(circ[0][None], K_und)[0]
-        edge_ray = pixel_rays((circ[0] + [circ[1], 0])[None], K_und)[0]
-        a0 = float(angle_between(c0, edge_ray))
-        s = pixel_rays(P, K, dist)
         try:
-            C, inl, res = fit_sphere_center(s, R, f, c0, a0)
+            fits.append(_fit_outline(P, cam, circ[0], circ[1], label))
         except ValueError as e:
             failures.append((k, cx, cy, r, str(e)))
-            continue
-        rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-        fits.append(_make_fit(C, R, K, dist, wfc, label, edge_px=P[inl], residual=rms, n_edge=len(P),
-                              n_in=int(inl.sum()), coverage=_coverage(P[inl], project_points(C[None], K, dist)[0])))
     return fits, failures
 
 
-def _choose_spheres(fits, mx, L, n_spheres, max_residual_px, min_coverage, n_cands, source) -> list[SphereFit]:
-    """Stage 5 without hints: the ``n_spheres`` best non-overlapping fits, left to right.
+def _disc_pixels(ft: SphereFit, shape, frac: float = 0.7):
+    """Row and column indices of the pixels within ``frac`` of the apparent radius, inside the image."""
+    H, W = shape
+    cx, cy = ft.center_px
+    r = frac * ft.radius_px
+    y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)) + 1, H)
+    x0, x1 = max(int(np.floor(cx - r)), 0), min(int(np.ceil(cx + r)) + 1, W)
+    if y0 >= y1 or x0 >= x1:
+        return np.zeros(0, int), np.zeros(0, int)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    m = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+    return yy[m], xx[m]
 
-    White diffuse spheres are the brightest, most neutral and most exactly round things in the
-    max image, and nothing hides their outline: fits within the quality limits are ranked by
-    outline support x coverage x brightness x neutrality x fit quality.
+
+def _neutrality(mx, L, rows, cols) -> float:
+    """Colour neutrality of the pixels: the 25th percentile over the lit pixels of min/max channel.
+
+    1 for grey; a white, grey or chrome sphere stays near 1 (sensor noise and white balance
+    aside). The lower quartile rather than the median, because a coloured glossy ball's
+    highlights from many photos whiten much of it in the max image. 1 for a single-channel image.
     """
-    H, W = L.shape
-    good = [ft for ft in fits if ft.residual_px <= max_residual_px and ft.coverage >= min_coverage]
-    yy, xx = np.mgrid[0:H, 0:W]
-    rgb = mx if mx.ndim == 3 and mx.shape[2] >= 3 else None
-    bright, neutral = [], []
-    for ft in good:
-        inside = (xx - ft.center_px[0]) ** 2 + (yy - ft.center_px[1]) ** 2 <= (0.7 * ft.radius_px) ** 2
-        bright.append(float(np.median(L[inside])) if inside.any() else 0.0)
-        if rgb is not None and inside.any():
-            med = np.median(rgb[inside][:, :3], axis=0)
-            neutral.append(float(np.clip(med.min() / max(med.max(), 1e-12), 0, 1)))
+    if not (mx.ndim == 3 and mx.shape[2] >= 3) or rows.size == 0:
+        return 1.0
+    px = mx[rows, cols][:, :3].astype(np.float64)
+    lum = L[rows, cols]
+    lit = lum > 0.1 * float(np.percentile(lum, 95))
+    if lit.sum() < 5:
+        return 1.0
+    ratio = px[lit].min(axis=1) / np.maximum(px[lit].max(axis=1), 1e-12)
+    return float(np.clip(np.percentile(ratio, 25), 0, 1))
+
+
+def _shading_change(brightest, L, rows, cols) -> float:
+    """Share of the lit pixels whose brightest photo is not the most common one.
+
+    A sphere's pixels face different ways, so different photos light them best: a matte sphere's
+    pixels split among the lights (Voronoi cells of the normals), a mirror's highlights each come
+    from their own photo. A flat painted disc or a print is brightest in the same photo
+    everywhere: the share is about 0.
+    """
+    lum = L[rows, cols]
+    lit = lum > 0.05 * float(np.percentile(lum, 95)) if lum.size else lum > 0
+    if lit.sum() < 10:
+        return 1.0
+    counts = np.bincount(brightest[rows[lit], cols[lit]])
+    return float(1.0 - counts.max() / lit.sum())
+
+
+def _select_spheres(fits, mx, brightest, L, cam: _Camera, n_photos, max_residual_px, min_visible):
+    """Stage 5 without hints: which fitted round outlines are calibration spheres.
+
+    A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
+    inlier points cover at least :data:`CRITERIA` ``min_closed`` of the visible outline and give at
+    least ``min_support`` points per pixel of it. Overlapping round outlines keep the best-scored
+    one (support x closure x neutrality / (1 + (rms / 0.5 px)^2)). A round outline is then set
+    aside, with a one-line reason, when it is cut by the frame edge (less than ``min_visible`` of
+    it inside), coloured (``min_neutral``), its shading does not change across the photos as a
+    sphere's does (``min_shading_change``, with at least 3 photos), or its size disagrees with the
+    other spheres' (all spheres share ``sphere_radius``: implied depths within ``size_ratio_pinhole``,
+    or apparent radii within ``size_ratio_ortho`` for an orthographic camera; the consistent group
+    with the largest total score wins).
+
+    Returns
+    -------
+    chosen : list of SphereFit
+        Each with a ``score`` attribute.
+    rejected : list of str
+    """
+    crit = CRITERIA
+    shape = L.shape
+    round_ = []
+    for ft in fits:
+        vis = max(ft.visible_fraction, 1e-6)
+        closed = min(ft.coverage / vis, 1.0)
+        support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
+        if ft.residual_px > max_residual_px or closed < crit["min_closed"] or support < crit["min_support"]:
+            continue
+        rows, cols = _disc_pixels(ft, shape)
+        if rows.size < 5:
+            continue
+        neutral = _neutrality(mx, L, rows, cols)
+        ft.score = min(support, 1.2) * closed * (0.25 + 0.75 * neutral) / (1 + (ft.residual_px / 0.5) ** 2)
+        round_.append((ft, neutral, rows, cols))
+    round_.sort(key=lambda t: -t[0].score)
+    distinct = []
+    for t in round_:
+        ft = t[0]
+        if all(np.hypot(*(ft.center_px - o[0].center_px)) > 0.8 * (ft.radius_px + o[0].radius_px) for o in distinct):
+            distinct.append(t)
+    rejected, ok = [], []
+    for ft, neutral, rows, cols in distinct:
+        where = f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius {ft.radius_px:.0f} px"
+        if ft.visible_fraction < min_visible:
+            rejected.append(f"{where}: cropped too much, only {ft.visible_fraction:.0%} of its outline is inside the"
+                            f" image (needs {min_visible:.0%})")
+        elif neutral < crit["min_neutral"]:
+            rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
+                            f" white, grey or chrome sphere")
+        elif (brightest is not None and n_photos >= 3
+              and (chg := _shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
+            rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
+                            f" (the same photo is brightest on {1 - chg:.0%} of it)")
         else:
-            neutral.append(1.0)
-    top = max(bright, default=1.0) or 1.0
-    # support: inlier edge points per pixel of outline (about 1 for a fully visible outline),
-    # so that a large, partly hidden round object does not outrank a small whole sphere
-    score = [min(ft.n_inliers / (2 * np.pi * ft.radius_px), 1.2) * ft.coverage * (b / top)
-             * (0.25 + 0.75 * nt) / (1 + (ft.residual_px / 0.5) ** 2)
-             for ft, b, nt in zip(good, bright, neutral)]
-    order = np.argsort([-v for v in score], kind="stable")
-    chosen = []
-    for i in order:
-        ft = good[i]
-        if all(np.hypot(*(ft.center_px - o.center_px)) > 0.8 * (ft.radius_px + o.radius_px) for o in chosen):
-            chosen.append(ft)
-    chosen = chosen[:n_spheres]
-    if len(chosen) < n_spheres:
-        raise InputError(f"found {len(chosen)} of {n_spheres} spheres in the images ({n_cands} candidate circles)",
-                         source)
-    return sorted(chosen, key=lambda ft: ft.center_px[0])
+            ok.append(ft)
+    if len(ok) > 1:  # size consistency: all spheres share sphere_radius
+        size = np.array([ft.radius_px if cam.ortho else ft.distance for ft in ok])
+        tol = np.log(crit["size_ratio_ortho"] if cam.ortho else crit["size_ratio_pinhole"])
+        groups = [(size >= s) & (size <= s * np.exp(tol)) for s in size]  # windows [s, ratio * s]
+        best = max(range(len(ok)), key=lambda i: (sum(ft.score for ft, g in zip(ok, groups[i]) if g), -i))
+        keep = groups[best]
+        ref = float(np.median(size[keep]))
+        for ft, k, s in zip(ok, keep, size):
+            if not k:
+                what = f"radius {s:.1f} px" if cam.ortho else f"depth {s:.3g}"
+                ref_s = f"{ref:.1f} px" if cam.ortho else f"{ref:.3g}"
+                rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                                f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})")
+        ok = [ft for ft, k in zip(ok, keep) if k]
+    return ok, rejected
 
 
-def _check_hinted_fits(fits, failures, max_residual_px, min_coverage, source) -> None:
-    """Stage 5 with hints: every hinted sphere must have fitted within the quality limits."""
+def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands) -> str:
+    H, W = shape
+    found = (f"found {len(fits)} of {int(n_spheres)} spheres" if n_spheres is not None and fits
+             else f"no sphere found (sphere_count {int(n_spheres)})" if n_spheres is not None else "no sphere found")
+    photos = f"the max image of {n_photos} photos" if n_photos > 1 else "the given max image"
+    aside = f"; set aside: {rejected[0]}" + (f" (and {len(rejected) - 1} more)" if len(rejected) > 1 else "") \
+        if rejected else ""
+    return (f"{found}: looked in {photos} ({W}x{H} px) for round outlines of radius 3 to {min(H, W) // 2} px"
+            f" ({n_cands} candidate circles){aside}; give a hint in capture.json, e.g. "
+            f"\"spheres\": [{{\"center_px\": [u, v]}}] or \"sphere_count\": n")
+
+
+def _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source) -> None:
+    """Stage 5 with hints: every hinted sphere must fit within the quality limits and be visible enough."""
     if failures:
         k, cx, cy, r, why = failures[0]
-        raise InputError(f"sphere {k} near pixel ({cx:.0f}, {cy:.0f}): cannot fit its outline ({why})", source)
+        raise InputError(f"spheres[{k}] near pixel ({cx:.0f}, {cy:.0f}): cannot fit its outline ({why})", source)
     for k, ft in enumerate(fits):
-        if ft.residual_px > max_residual_px or ft.coverage < min_coverage:
-            raise InputError(f"sphere {k} near pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}): outline does"
-                             f" not fit a sphere (rms {ft.residual_px:.2f} px, coverage {ft.coverage:.0%})", source)
-
-
-def _check_inside_image(fits, K, dist, R, shape, source) -> None:
-    """Every sphere's projected outline must lie inside the image."""
-    H, W = shape
-    for k, ft in enumerate(fits):
-        outline = silhouette_px(K, dist, ft.center_cam, R)
-        if (outline[:, 0].min() < 0.5 or outline[:, 1].min() < 0.5
-                or outline[:, 0].max() > W - 1.5 or outline[:, 1].max() > H - 1.5):
-            raise InputError(f"sphere {k} at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius"
-                             f" {ft.radius_px:.0f} px, is cut by the image border", source)
+        where = f"spheres[{k}] near pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius {ft.radius_px:.0f} px"
+        if ft.visible_fraction < min_visible:
+            raise InputError(f"{where}: cropped too much, only {ft.visible_fraction:.0%} of its outline is inside the"
+                             f" image (needs {min_visible:.0%}); reframe, or remove this sphere's hint", source)
+        closed = ft.coverage / max(ft.visible_fraction, 1e-6)
+        if ft.residual_px > max_residual_px or closed < min_coverage:
+            raise InputError(f"{where}: outline does not fit a sphere (rms {ft.residual_px:.2f} px, coverage"
+                             f" {closed:.0%} of the visible outline)", source)
 
 
 def _check_radius(fits, hint_info, wfc, R, source, scene_center=None):
@@ -903,20 +1268,60 @@ def _check_radius(fits, hint_info, wfc, R, source, scene_center=None):
                              f" but the scene centre is at {cam_dist:.3g} (radius {R:g})", source)
 
 
-def find_spheres_in_capture(capture, n_spheres: int = 4, overrides=None, progress=None) -> list[SphereFit]:
+def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_coverage: float = 0.5):
+    """Refit a found sphere on the part of its outline where the limb is directly lit.
+
+    Where the limb is lit only by the ground bounce (the underside, above the sphere's own contact
+    shadow) or never lit (azimuths the hand-held light did not visit), the max image fades
+    gradually from the limb into a dark background and the edge lands inside the silhouette: on
+    path-traced renders the centre moved up by 0.2-0.5 px and the distance grew by 0.3-0.8 %
+    (docs/spheres.md, "Independent renders"). A directly lit limb is a sharp, high-contrast step.
+    Edge points whose limb (1.5 px inside) is below ``lit_limb`` times the sphere's 95th
+    percentile in the max image are dropped and the outline is refitted, if enough of it remains
+    (``min_points``, ``min_coverage`` of the visible outline); otherwise the fit is returned unchanged.
+    """
+    P = ft.edge_px
+    if P is None or len(P) < min_points:
+        return ft
+    cpx, r = ft.center_px, ft.radius_px
+    rr = np.hypot(P[:, 0] - cpx[0], P[:, 1] - cpx[1])
+    u = (cpx - P) / np.maximum(rr, 1e-9)[:, None]
+    limb = _bilinear(L, P + 1.5 * u)
+    rows, cols = _disc_pixels(ft, L.shape, 0.8)
+    if rows.size == 0:
+        return ft
+    keep = limb >= lit_limb * float(np.percentile(L[rows, cols], 95))
+    if keep.sum() < min_points or keep.all() or _coverage(P[keep], cpx) < min_coverage * ft.visible_fraction:
+        return ft
+    try:
+        new = _fit_outline(P[keep], cam, cpx, r, ft.source, n_edge=ft.n_edge_points)
+    except ValueError:
+        return ft
+    new.score = ft.score
+    return new
+
+
+def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None) -> Spheres:
     """:func:`find_spheres` on a loaded :class:`ffls.io.capture.Capture`, using its whole sequence.
 
-    Uses ``capture.K``, ``.dist``, ``.sphere_radius``, ``.spheres`` (hints),
-    ``.world_from_camera``, ``.scene_center`` and the max over ``load_photo(capture, i)`` for all
-    photos (streamed: one image in memory at a time). ``progress`` is an optional wrapper such as
-    ``tqdm.tqdm`` (called as ``progress(iterable, total=n)``).
+    Uses ``capture.K``, ``.dist``, ``.camera_model``, ``.sphere_radius``, ``.spheres`` (hints),
+    ``.sphere_count`` (``n_spheres`` when not given), ``.world_from_camera``, ``.scene_center``
+    and the max (and brightest-photo index, :func:`extreme_images`) over ``load_photo(capture, i)`` for all photos (streamed: one image in
+    memory at a time). ``progress`` is an optional wrapper such as ``tqdm.tqdm`` (called as
+    ``progress(iterable, total=n)``).
     """
     n = len(capture.image_paths)
     it = (load_photo(capture, i) for i in range(n))
     if progress is not None:
         it = progress(it, total=n)
+    mx, brightest, n_img = extreme_images(it) if n else (None, None, 0)
+    if mx is None:
+        raise InputError("capture lists no images", capture.folder)
     hints = getattr(capture, "spheres", None) or None
-    return find_spheres(max_image(it), capture.K, capture.dist, capture.sphere_radius,
-                        n_spheres=len(hints) if hints else n_spheres, hints=hints, overrides=overrides,
-                        world_from_camera=capture.world_from_camera,
-                        scene_center=getattr(capture, "scene_center", None), source=capture.folder)
+    if n_spheres is None:
+        n_spheres = getattr(capture, "sphere_count", None)
+    model = getattr(capture, "camera_model", "pinhole")
+    return find_spheres(mx, capture.K, capture.dist, capture.sphere_radius, n_spheres=n_spheres, hints=hints,
+                        overrides=overrides, world_from_camera=capture.world_from_camera,
+                        scene_center=getattr(capture, "scene_center", None), source=capture.folder,
+                        camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img)

@@ -36,7 +36,8 @@ from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.lambert import fit_lambert
 from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
-from ffls.spheres.samples import SphereSamples, SphereValues, sphere_samples, sphere_values
+from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
+                                  sphere_values)
 
 __all__ = [
     "BOUNCE_MODES",
@@ -104,11 +105,16 @@ class CaptureEstimate:
 def capture_samples(capture, spheres, shape: tuple[int, int]) -> list[SphereSamples]:
     """:func:`ffls.spheres.samples.sphere_samples` for each found sphere (objects with ``center_cam`` and ``radius``)."""
     out = []
+    ortho = getattr(capture, "camera_model", "pinhole") == "orthographic"
     for k, s in enumerate(spheres):
-        R = float(getattr(s, "radius", None) or capture.sphere_radius)
+        R = float(getattr(s, "radius", None) or capture.sphere_radius or 1.0)
         try:
-            out.append(sphere_samples(shape, capture.K, capture.dist, np.asarray(s.center_cam), R,
-                                      capture.world_from_camera))
+            if ortho:  # parallel rays: normals from the pixel offset over the pixel radius
+                out.append(sphere_samples_orthographic(shape, s.center_px, s.radius_px, s.center_cam, R,
+                                                       capture.world_from_camera))
+            else:
+                out.append(sphere_samples(shape, capture.K, capture.dist, np.asarray(s.center_cam), R,
+                                          capture.world_from_camera))
         except ValueError as e:
             raise InputError(f"sphere {k}: {e}", capture.folder) from None
         if len(out[-1]) < 20:
@@ -468,10 +474,19 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     from ffls.io.capture import Lights
 
     _check_modes(model, bounce)
-    if capture.K is None:
-        raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them", capture.json_path)
-    if capture.sphere_radius is None:
-        raise InputError("capture has no sphere_radius; light estimation needs it", capture.json_path)
+    if getattr(capture, "camera_model", "pinhole") == "orthographic":
+        # parallel rays: directions only (no depth for a near light, no camera centre for the
+        # photometric centre refinement); sphere_radius is optional
+        if model == "near":
+            raise InputError("model 'near' needs a pinhole camera (camera.K): an orthographic camera measures no "
+                             "depth to place a near light", capture.json_path)
+        model, refine_centres = "distant", False
+    else:
+        if capture.K is None:
+            raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them, or declare "
+                             "\"camera\": {\"model\": \"orthographic\"} for a long lens", capture.json_path)
+        if capture.sphere_radius is None:
+            raise InputError("capture has no sphere_radius; light estimation needs it", capture.json_path)
     n = len(capture.image_names)
     if n == 0:
         raise InputError("capture lists no images", capture.json_path)

@@ -16,7 +16,8 @@ import numpy as np
 from ffls.camera.projection import pixel_rays
 from ffls.conventions import UP, normalize
 
-__all__ = ["SphereSamples", "SphereValues", "ground_bounce", "sphere_samples", "pixel_validity", "sphere_values"]
+__all__ = ["SphereSamples", "SphereValues", "ground_bounce", "sphere_samples", "sphere_samples_orthographic",
+           "pixel_validity", "sphere_values"]
 
 
 def ground_bounce(normals: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
@@ -56,7 +57,7 @@ class SphereSamples:
         :func:`ground_bounce` of ``normals`` for world up ``+Z`` (computed once per capture).
     origin : (3,) float64 or None
         World-frame camera centre (the pixels' rays start there; needed by
-        :mod:`ffls.spheres.refine`).
+        :mod:`ffls.spheres.refine`). None for an orthographic camera (parallel rays).
     """
 
     rows: np.ndarray
@@ -151,6 +152,60 @@ def sphere_samples(shape: tuple[int, int], K: np.ndarray, dist: np.ndarray | Non
     return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
                          center=Rw @ C + tw, radius=R, radius_px=float(radius_px),
                          ground=ground_bounce(n_w), origin=np.asarray(tw, dtype=np.float64).copy())
+
+
+def sphere_samples_orthographic(shape: tuple[int, int], center_px, radius_px: float, center_cam=None,
+                                radius: float = 1.0, world_from_camera: np.ndarray | None = None,
+                                margin_px: float = 1.5) -> SphereSamples:
+    """Pixels of a sphere seen by an orthographic camera, and their normals.
+
+    Every viewing ray is +z (camera frame), so the normal at pixel offset ``(dx, dy)`` from the
+    centre is ``(dx / r, dy / r, -sqrt(1 - (dx^2 + dy^2) / r^2))`` with ``r = radius_px``: no
+    focal length, no pixel scale. Only pixels inside the image and at least ``margin_px`` inside
+    the outline are kept (a sphere cut by the frame edge gives its visible part).
+
+    Parameters
+    ----------
+    shape : (H, W)
+    center_px : (2,) float
+        Centre of the sphere's disc, pixels.
+    radius_px : float
+        Apparent radius, pixels.
+    center_cam : (3,) float, optional
+        Camera-frame centre for :attr:`SphereSamples.points` (``SphereFit.center_cam``); the
+        origin when None.
+    radius : float
+        Sphere radius (scene units; 1 when ``sphere_radius`` is not given).
+    world_from_camera : (4, 4) float, optional
+    margin_px : float
+
+    Returns
+    -------
+    SphereSamples
+        ``origin`` is None (parallel rays: :mod:`ffls.spheres.refine` does not apply).
+    """
+    H, W = int(shape[0]), int(shape[1])
+    cx, cy = (float(v) for v in np.asarray(center_px, dtype=np.float64).reshape(2))
+    r = float(radius_px)
+    if not r > margin_px:
+        raise ValueError(f"sphere radius {r:.1f} px is too small")
+    x0, x1 = max(int(np.floor(cx - r)), 0), min(int(np.ceil(cx + r)), W - 1)
+    y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)), H - 1)
+    if x1 < x0 or y1 < y0:
+        raise ValueError("sphere is outside the image")
+    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    a, b = (xx.ravel() - cx) / r, (yy.ravel() - cy) / r
+    keep = np.hypot(a, b) < 1.0 - margin_px / r
+    a, b = a[keep], b[keep]
+    n = np.stack([a, b, -np.sqrt(np.clip(1.0 - a * a - b * b, 0.0, None))], axis=1)
+    C = np.zeros(3) if center_cam is None else np.asarray(center_cam, dtype=np.float64).reshape(3)
+    R = float(radius)
+    M = np.eye(4) if world_from_camera is None else np.asarray(world_from_camera, dtype=np.float64)
+    Rw, tw = M[:3, :3], M[:3, 3]
+    n_w = normalize(n @ Rw.T)
+    P_w = (C + R * n) @ Rw.T + tw
+    return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
+                         center=Rw @ C + tw, radius=R, radius_px=r, ground=ground_bounce(n_w), origin=None)
 
 
 class SphereValues(NamedTuple):

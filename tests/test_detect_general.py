@@ -1,0 +1,231 @@
+"""Sphere detection without hints on photo sequences made here (tests/detect_scenes.py).
+
+Any number of spheres (1, 3, 6, 8) on black, grey, white and textured backgrounds; distractors
+(a red matte sphere, a flat painted disc); spheres cut by the frame edge; a mirror (chrome) ball;
+a long lens and an orthographic camera; hints (count, pixel circle without radius) and
+conflicting hints; the no-sphere message. Tolerances come from ``benchmarks/detect_general.py``
+(docs/spheres.md, "Detection without hints: measured"): centre errors there are at most 0.55 px
+for matte spheres and 1 px for a mirror ball.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import detect_scenes as ds
+from ffls.errors import InputError
+from ffls.spheres import detect
+
+LIGHTS = ds.lights(12, seed=1)
+
+
+def _errors(scene, fits):
+    truth = np.array([scene.centre_px(b) for b in scene.balls])
+    return [float(np.min(np.linalg.norm(truth - f.center_px, axis=1))) for f in fits]
+
+
+@pytest.mark.parametrize("n,background", [(1, "black"), (1, "white"), (3, "grey"), (3, "texture"),
+                                          (6, "white"), (6, "texture"), (8, "black"), (8, "grey")])
+def test_any_count_any_background(n, background):
+    """A diagonal of the count x background grid (the whole grid: benchmarks/detect_general.py)."""
+    scene = ds.layout(n, seed=7 * n + len(background))
+    seq = ds.render(scene, LIGHTS, background, seed=n)
+    fits = detect.find_spheres(seq, scene.K, None, 0.04)
+    assert len(fits) == n, (n, background, fits.rejected)
+    err = _errors(scene, fits)
+    assert max(err) < 0.6, err
+    assert [f.center_px[0] for f in fits] == sorted(f.center_px[0] for f in fits)
+    # one match per sphere: no sphere found twice
+    truth = np.array([scene.centre_px(b) for b in scene.balls])
+    assert len({int(np.argmin(np.linalg.norm(truth - f.center_px, axis=1))) for f in fits}) == n
+
+
+@pytest.mark.parametrize("background", ["black", "grey"])
+def test_distractors_are_not_spheres(background):
+    scene = ds.layout(5, seed=11)
+    scene.balls[3].albedo = (0.8, 0.1, 0.08)  # a red matte sphere: round, shaded, but coloured
+    flat = scene.balls.pop(4)  # a flat white painted disc where the fifth sphere was
+    u, v = scene.centre_px(flat)
+    scene.discs.append((u, v, 18.0, (0.9, 0.9, 0.9)))
+    seq = ds.render(scene, LIGHTS, background)
+    fits = detect.find_spheres(seq, scene.K, None, 0.04)
+    assert len(fits) == 3
+    red = scene.centre_px(scene.balls[3])
+    assert all(np.linalg.norm(f.center_px - red) > 10 for f in fits)
+    assert all(np.linalg.norm(f.center_px - [u, v]) > 10 for f in fits)
+    why = " | ".join(fits.rejected)
+    assert "coloured" in why and "shading does not change" in why
+    # a single max image has no per-photo information: the flat disc cannot be told apart then,
+    # and the colour criterion still rejects the red sphere
+    fits1 = detect.find_spheres(seq.max(axis=0), scene.K, None, 0.04)
+    assert all(np.linalg.norm(f.center_px - red) > 10 for f in fits1)
+
+
+def _ball_at(u, v, K, z=1.0, R=0.04):
+    return ds.Ball(np.array([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z]), R)
+
+
+def test_spheres_cut_by_the_frame_edge():
+    K = np.array([[500.0, 0, 199.5], [0, 500, 149.5], [0, 0, 1]])
+    # radius 20 px; the third is 63 % inside (used), the fourth 54 % (set aside)
+    balls = [_ball_at(100, 150, K), _ball_at(250, 100, K), _ball_at(8, 200, K), _ball_at(300, 296, K)]
+    scene = ds.Scene((300, 400), balls, "pinhole", K)
+    seq = ds.render(scene, LIGHTS, "grey")
+    fits = detect.find_spheres(seq, K, None, 0.04)
+    assert len(fits) == 3
+    assert max(_errors(scene, fits)) < 0.5
+    cut = min(fits, key=lambda f: f.center_px[0])
+    assert 0.6 < cut.visible_fraction < 0.7
+    assert len(fits.rejected) == 1 and "cropped too much" in fits.rejected[0] and "54%" in fits.rejected[0]
+    # its samples are the pixels inside the image only
+    from ffls.spheres.samples import sphere_samples
+    s = sphere_samples((300, 400), K, None, cut.center_cam, 0.04)
+    assert s.cols.min() == 0 and np.all(s.cols < 400) and len(s) > 500
+    # hinted, the same cropped sphere is an error naming it
+    with pytest.raises(InputError, match=r"spheres\[0\].*cropped too much"):
+        detect.find_spheres(seq, K, None, 0.04, hints=[{"center_px": [300, 294]}])
+
+
+def test_mirror_ball():
+    """A chrome ball: in the max image its reflected surroundings and the lights' highlights, no
+    uniform disc, and a dim limb (it reflects what lies behind it)."""
+    scene = ds.layout(2, seed=5)
+    scene.balls[0].kind = "mirror"
+    seq = ds.render(scene, LIGHTS, "grey")
+    fits = detect.find_spheres(seq, scene.K, None, 0.04)
+    assert len(fits) == 2
+    assert max(_errors(scene, fits)) < 1.0
+    scene = ds.layout(1, seed=9)
+    scene.balls[0].kind = "mirror"
+    fits = detect.find_spheres(ds.render(scene, LIGHTS, "black"), scene.K, None, 0.04)
+    assert len(fits) == 1 and _errors(scene, fits)[0] < 0.5
+
+
+def test_long_lens_needs_no_invented_focal_length():
+    f = 30000.0  # 1.2 deg field of view: spheres at 40 m
+    K = np.array([[f, 0, 199.5], [0, f, 149.5], [0, 0, 1]])
+    balls = [_ball_at(u, v, K, z=40 + dz, R=0.03) for u, v, dz in [(80, 80, 0), (250, 200, 0.3), (330, 90, -0.2)]]
+    scene = ds.Scene((300, 400), balls, "pinhole", K)
+    fits = detect.find_spheres(ds.render(scene, LIGHTS, "grey"), K, None, 0.03)
+    assert len(fits) == 3 and max(_errors(scene, fits)) < 0.3
+
+
+def _ortho_scene():
+    balls = [ds.Ball(np.array([u, v, 100.0]), 22.0) for u, v in [(80, 80), (250, 200), (330, 90)]]
+    return ds.Scene((300, 400), balls, "orthographic", None)
+
+
+def test_orthographic_camera():
+    scene = _ortho_scene()
+    seq = ds.render(scene, LIGHTS, "texture")
+    fits = detect.find_spheres(seq, None, None, None, camera_model="orthographic")
+    assert len(fits) == 3 and all(f.camera_model == "orthographic" and f.K is None for f in fits)
+    assert max(_errors(scene, fits)) < 0.3
+    for f in fits:
+        assert abs(f.radius_px - 22.0) < 0.3
+        ys, xs = np.nonzero(f.mask(seq.shape[1:3], margin_px=2))
+        pix = np.stack([xs, ys], axis=1).astype(float)
+        b = min(scene.balls, key=lambda b: np.linalg.norm(b.center[:2] - f.center_px))
+        n_true = detect.orthographic_normals(pix, b.center[:2], b.radius)
+        ang = np.degrees(np.arccos(np.clip(np.sum(n_true * f.normals(pix), axis=1), -1, 1)))
+        assert np.nanmax(ang) < 3.0 and np.nanmean(ang) < 1.0
+    # the sizes must agree under an orthographic camera: a half-size ball is set aside
+    scene.balls.append(ds.Ball(np.array([150.0, 230.0, 100.0]), 11.0))
+    fits = detect.find_spheres(ds.render(scene, LIGHTS, "black"), None, None, None, camera_model="orthographic")
+    assert len(fits) == 3 and any("disagrees with the other spheres" in r for r in fits.rejected)
+
+
+def test_orthographic_capture_end_to_end(tmp_path):
+    """capture.json with an orthographic camera, no K and no sphere_radius: spheres found and
+    the lights estimated (distant model), within a few degrees of the truth."""
+    from ffls.conventions import angle_between
+    from ffls.io.capture import load_capture
+    from ffls.io.images import write_exr
+    from ffls.spheres.estimate import estimate_lights
+
+    scene = _ortho_scene()
+    seq = ds.render(scene, LIGHTS, "grey", noise=0.001)
+    names = []
+    for i, im in enumerate(seq):
+        names.append(f"p{i:02d}.exr")
+        write_exr(tmp_path / names[-1], im)
+    (tmp_path / "capture.json").write_text(json.dumps({
+        "format": "ffls-capture", "version": 1, "images": names, "encoding": "linear",
+        "camera": {"model": "orthographic"}, "hemisphere": "full"}))
+    cap = load_capture(tmp_path)
+    fits = detect.find_spheres_in_capture(cap)
+    assert len(fits) == 3
+    lights = estimate_lights(cap, progress=False, workers=1)
+    truth = detect.to_world(LIGHTS, cap.world_from_camera, points=False)
+    ok = np.array(lights.status) == "ok"
+    assert ok.sum() >= 10
+    err = np.degrees(angle_between(lights.directions[ok], truth[ok]))
+    assert np.median(err) < 2.0 and err.max() < 5.0, err
+
+
+# ----------------------------------------------------------------------------- hints
+def test_count_hint_keeps_the_best():
+    scene = ds.layout(3, seed=21)
+    seq = ds.render(scene, LIGHTS, "grey")
+    assert len(detect.find_spheres(seq, scene.K, None, 0.04, n_spheres=3)) == 3
+    with pytest.raises(InputError, match=r"found 3 of 4 spheres.*sphere_count"):
+        detect.find_spheres(seq, scene.K, None, 0.04, n_spheres=4)
+
+
+def test_pixel_hint_without_radius():
+    scene = ds.layout(3, seed=22)
+    seq = ds.render(scene, LIGHTS, "white")
+    hints = [{"center_px": list(scene.centre_px(b) + [3.0, -2.0])} for b in scene.balls[:2]]
+    fits = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints)
+    assert len(fits) == 2 and all(f.source == "hint" for f in fits)
+    assert max(_errors(scene, fits)) < 0.6
+
+
+def test_conflicting_hints():
+    scene = ds.layout(2, seed=23)
+    seq = ds.render(scene, LIGHTS, "black")
+    p = [list(scene.centre_px(b)) for b in scene.balls]
+    with pytest.raises(InputError, match="sphere_count is 3 but 2 spheres are listed"):
+        detect.find_spheres(seq, scene.K, None, 0.04, n_spheres=3, hints=[{"center_px": q} for q in p])
+    with pytest.raises(InputError, match=r"spheres\[0\] and spheres\[1\] hint the same sphere"):
+        detect.find_spheres(seq, scene.K, None, 0.04, hints=[{"center_px": p[0]}, {"center_px": [p[0][0] + 2, p[0][1]]}])
+    world = detect.to_world(scene.balls[1].center)
+    with pytest.raises(InputError, match=r"spheres\[0\].*disagrees with its world centre"):
+        detect.find_spheres(seq, scene.K, None, 0.04, hints=[{"center_px": p[0], "center": list(world)}])
+    fits = detect.find_spheres(seq, scene.K, None, 0.04, hints=[{"center_px": p[1], "center": list(world)}])
+    assert _errors(scene, fits)[0] < 0.5
+
+
+def test_no_sphere_message_says_where_and_how(tmp_path):
+    scene = ds.Scene((200, 260), [], "pinhole", np.array([[400.0, 0, 130], [0, 400, 100], [0, 0, 1]]))
+    seq = ds.render(scene, LIGHTS[:5], "texture")
+    with pytest.raises(InputError) as e:
+        detect.find_spheres(seq, scene.K, None, 0.04, source=tmp_path)
+    msg = str(e.value)
+    assert "\n" not in msg and str(tmp_path) in msg
+    for part in ("no sphere found", "5 photos", "260x200 px", "radius 3 to 100 px", '"center_px"', '"sphere_count"'):
+        assert part in msg, (part, msg)
+
+
+def test_capture_json_count_and_hints(tmp_path):
+    from ffls.io.capture import load_capture
+
+    names = ["a.exr"]
+    from ffls.io.images import write_exr
+    write_exr(tmp_path / "a.exr", np.zeros((4, 4, 3), np.float32))
+    doc = {"format": "ffls-capture", "version": 1, "images": names, "sphere_count": 2,
+           "spheres": [{"center_px": [1, 2]}, {"center_px": [3, 2], "radius_px": 1.5}]}
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    cap = load_capture(tmp_path)
+    assert cap.sphere_count == 2 and "radius_px" not in cap.spheres[0]
+    assert cap.to_json()["sphere_count"] == 2
+    doc["sphere_count"] = 3
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="sphere_count.*lists 2 hints"):
+        load_capture(tmp_path)
+    doc["sphere_count"] = 0
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="sphere_count"):
+        load_capture(tmp_path)
