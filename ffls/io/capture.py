@@ -611,7 +611,7 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         if reason is not None and not isinstance(reason, str):
             j.fail(key, f"reason must be a string, got {_short(reason)}")
         ex = {kk: v for kk, v in it.items() if kk not in ("image", "direction", "position", "status", "reason")}
-        if "uncertainty_deg" in ex:
+        if ex.get("uncertainty_deg") is not None:  # null: a rejected light has none
             ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
         names.append(name)
         dirs.append(d / norm)
