@@ -19,7 +19,9 @@ second candidate, scored the same way.
 
 * Every (photo, sphere) pair is a *unit*: its lit pixels (``n . l > terminator``, not clipped in
   any channel, not near black, no robust outlier) are chosen once per round with the current
-  curve, then kept fixed while the curve varies, so the objective is smooth.
+  curve, then kept fixed while the curve varies, so the objective is smooth. A unit whose
+  shading is not Lambertian (a mirror ball; ``min_r2``), or whose best RMS residual over all
+  curves is more than 2.5 times the median unit's (a wrong lit side, a cast shadow), is left out.
 * For a curve ``f`` each unit's ``(v, b)`` is the weighted least-squares solution, the residuals
   divided by the curve's slope ``f'(raw)``: the misfit is measured in stored values, where the
   noise (quantisation, sensor) lives, and so is comparable between curves. The sum over units is
@@ -69,7 +71,10 @@ METHODS = ("gamma",)
 GAMMA_SEARCH = (0.8, 3.2)
 #: Photos with at least one usable matte sphere needed to calibrate (and to bootstrap over photos).
 MIN_PHOTOS = 4
-_GRID_STEP = 0.02
+_COARSE_STEP = 0.1  # first round: the whole range
+_GRID_STEP = 0.01  # second round: around the first round's minimum, for the bootstrap
+_FINE_HALF_WIDTH = 0.3
+_MAX_RMS_RATIO = 2.5  # a pair whose best RMS residual exceeds the median pair's by more is left out
 _SLOPE_STEP = 1e-4
 
 
@@ -187,8 +192,9 @@ class _Unit:
 def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
     """Choose ``unit``'s lit pixels with ``curve`` (iterating the fit); False when the unit is unusable.
 
-    Start from the brightest half of the usable pixels, fit ``v . n + b``, keep the pixels with
-    ``n . l > terminator`` that are no robust outlier (``clip`` MADs), refit; four rounds. The
+    Start from the pixels within ``acos(terminator)`` of the mean normal of the brightest tenth,
+    fit ``v . n + b``, keep the pixels with ``n . l > terminator`` that are no robust outlier
+    (``clip`` MADs), refit; at most five rounds. The
     unit is unusable with fewer than ``min_pixels`` pixels, a normal range too narrow to show the
     curve (``n . l`` spanning less than 0.4), or a fit explaining less than ``min_r2`` of the
     variance (no Lambertian shading: a mirror ball, a shadowed or flat sphere).
@@ -197,15 +203,21 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     if ok.sum() < min_pixels:
         return False
     y_all, w_all = _grey_and_weight(unit.raw, curve)
-    sel = ok & (y_all >= np.median(y_all[ok]))
-    for _ in range(4):
+    normals = unit.A[:, :3]
+    top = ok & (y_all >= np.percentile(y_all[ok], 90))  # the brightest tenth: around the light's direction
+    start = normals[top].sum(axis=0)
+    if not np.linalg.norm(start) > 0:
+        return False
+    cos = normals @ (start / np.linalg.norm(start))
+    sel = ok & (cos > terminator)
+    for _ in range(5):
         if sel.sum() < min_pixels:
             return False
         x, _ = _solve(unit.A[sel], y_all[sel], w_all[sel])
         nv = float(np.linalg.norm(x[:3]))
         if not np.isfinite(nv) or nv <= 0:
             return False
-        cos = unit.A[:, :3] @ (x[:3] / nv)
+        cos = normals @ (x[:3] / nv)
         r = w_all * (y_all - unit.A @ x)
         lit = ok & (cos > terminator)
         if lit.sum() < min_pixels:
@@ -300,29 +312,37 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
             usable = finite & ~np.any(v >= 0.98, axis=1) & ~np.all(v <= 0.02, axis=1)
             units.append(_Unit(p, k, np.clip(v, 0.0, 1.0), A[k], usable))
 
-    grid = np.arange(GAMMA_SEARCH[0], GAMMA_SEARCH[1] + 0.5 * _GRID_STEP, _GRID_STEP)
     lo, hi = GAMMA_SEARCH
+    coarse = np.arange(lo, hi + 0.5 * _COARSE_STEP, _COARSE_STEP)
     curve = 0.5 * (lo + hi)  # pilot selection: the middle of the range
-    used = units
-    for _ in range(2):  # select with the current curve, profile, repeat with the best gamma
-        used = [u for u in units if _select(u, curve, terminator, min_pixels, min_r2)]
+    used, grid = units, coarse
+    for rnd in range(2):  # select with the current curve, profile, repeat with the best gamma
+        # the pilot curve may be far off: the shading test (min_r2) waits for the first round's gamma
+        used = [u for u in units if _select(u, curve, terminator, min_pixels, min_r2 if rnd else -np.inf)]
+        curves = np.array([[u.rss(g) for g in grid] for u in used]).reshape(len(used), len(grid))
+        if len(used):
+            # a (photo, sphere) pair that no curve fits well (a wrong lit side, a cast shadow or an
+            # interreflection the model lacks) is left out: its best RMS residual is an outlier
+            best_ms = curves.min(axis=1) / np.array([u.selected.sum() for u in used])
+            keep = best_ms <= _MAX_RMS_RATIO ** 2 * np.median(best_ms)
+            used, curves = [u for u, k in zip(used, keep) if k], curves[keep]
+        profiled = grid
         photos = sorted({u.photo for u in used})
         if len(photos) < min_photos:
             raise EncodingCalibrationError(
                 f"only {len(photos)} photo{'s' if len(photos) != 1 else ''} show a matte sphere's shading clearly "
                 f"enough (at least {min_photos} needed, of {len(raw)} photos)")
-        curves = np.array([[u.rss(g) for g in grid] for u in used])  # (units, grid)
-        total = curves.sum(axis=0)
-        k = int(np.argmin(total))
-        a, b = grid[max(k - 2, 0)], grid[min(k + 2, len(grid) - 1)]
+        k = int(np.argmin(curves.sum(axis=0)))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
         res = minimize_scalar(lambda g: sum(u.rss(g) for u in used), bounds=(a, b), method="bounded",
                               options={"xatol": 1e-4})
-        best = float(res.x)
-        curve = best
+        best = curve = float(res.x)
+        # the second round's grid (for the bootstrap): fine, around the first round's minimum
+        grid = np.arange(max(lo, best - _FINE_HALF_WIDTH), min(hi, best + _FINE_HALF_WIDTH) + 0.5 * _GRID_STEP,
+                         _GRID_STEP)
     if best <= lo + _GRID_STEP or best >= hi - _GRID_STEP:
         raise EncodingCalibrationError(
             f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})")
-
     n_pix = int(sum(int(u.selected.sum()) for u in used))
     rss_best = float(res.fun)
     dof = max(n_pix - 4 * len(used) - 1, 1)
@@ -332,12 +352,12 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     sd_curv = math.sqrt(2 * s2 / d2) if d2 > 0 else float("inf")
     # bootstrap over photos: resample whole photos' RSS curves
     photo_index = {p: i for i, p in enumerate(photos)}
-    per_photo = np.zeros((len(photos), len(grid)))
+    per_photo = np.zeros((len(photos), len(profiled)))
     for u, c in zip(used, curves):
         per_photo[photo_index[u.photo]] += c
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, len(photos), size=(int(n_bootstrap), len(photos)))
-    boot = np.array([_parabola_min(grid, per_photo[d].sum(axis=0)) for d in draws])
+    boot = np.array([_parabola_min(profiled, per_photo[d].sum(axis=0)) for d in draws])
     sd_boot = float(np.std(boot, ddof=1)) if len(boot) > 1 else float("inf")
     sd = max(sd_curv, sd_boot)
     unc = 1.96 * sd
