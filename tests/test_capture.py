@@ -59,9 +59,14 @@ def test_load_capture_and_images(tmp_path):
     assert c.world_from_camera_is_default
     np.testing.assert_array_equal(c.world_from_camera, conventions.DEFAULT_WORLD_FROM_CAMERA)
     assert c.K.shape == (3, 3) and c.sphere_radius == 0.025
+    with pytest.raises(InputError, match="does not guess") as e:  # 8-bit, no encoding: never guessed
+        load_photo(c, 1)
+    _one_line(e.value, "img_001.png")
+    _edit(tmp_path / "c", encoding="srgb")
+    c = cap.load_capture(tmp_path / "c")
     img = load_photo(c, 1)
     assert img.dtype == np.float32 and img.shape == (4, 6, 3)
-    np.testing.assert_allclose(img, srgb_decode(imgs[1] / 255.0), atol=1e-6)  # 8-bit: sRGB by default
+    np.testing.assert_allclose(img, srgb_decode(imgs[1] / 255.0), atol=1e-6)
     basis = load_photos(c, progress=False)
     assert basis.shape == (3, 4, 6, 3) and basis.dtype == np.float32
     np.testing.assert_array_equal(basis[1], img)
@@ -71,7 +76,20 @@ def test_load_capture_and_images(tmp_path):
 def test_encoding_rules(tmp_path):
     _, imgs = _make(tmp_path / "c", depth=16)
     c = cap.load_capture(tmp_path / "c")
-    np.testing.assert_allclose(load_photo(c, 0), imgs[0] / 65535.0, atol=1e-7)  # 16-bit: linear
+    with pytest.raises(InputError, match="16-bit image could be sRGB, linear or gamma"):  # 16-bit: not guessed either
+        load_photo(c, 0)
+    _edit(tmp_path / "c", encoding="linear")
+    c = cap.load_capture(tmp_path / "c")
+    np.testing.assert_allclose(load_photo(c, 0), imgs[0] / 65535.0, atol=1e-7)
+    _edit(tmp_path / "c", encoding={"gamma": 1.8})
+    c = cap.load_capture(tmp_path / "c")
+    assert c.encoding == {"gamma": 1.8}
+    np.testing.assert_allclose(load_photo(c, 0), (imgs[0] / 65535.0) ** 1.8, rtol=1e-5, atol=1e-7)
+    for bad in ({"gamma": 9.0}, {"gamma": "2.2"}, {"gamma": 2.2, "x": 1}):
+        _edit(tmp_path / "c", encoding=bad)
+        with pytest.raises(InputError, match="encoding") as e:
+            cap.load_capture(tmp_path / "c")
+        _one_line(e.value, "capture.json")
     _edit(tmp_path / "c", encoding="srgb")
     c = cap.load_capture(tmp_path / "c")
     np.testing.assert_allclose(load_photo(c, 0), srgb_decode(imgs[0] / 65535.0), atol=1e-6)
@@ -174,7 +192,7 @@ def test_listed_image_missing(tmp_path):
 
 
 def test_image_sizes_disagree(tmp_path):
-    names, _ = _make(tmp_path / "c")
+    names, _ = _make(tmp_path / "c", doc_extra={"encoding": "srgb"})
     write_png(tmp_path / "c" / names[2], np.zeros((5, 6, 3), np.uint8))
     c = cap.load_capture(tmp_path / "c")
     with pytest.raises(InputError, match="6x5 but the first image") as e:

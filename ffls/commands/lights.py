@@ -114,8 +114,13 @@ def run(args) -> int:
     from ffls.spheres.estimate import estimate_lights
 
     cap = load_capture(args.capture)
-    lights = estimate_lights(cap, progress=not args.no_progress, workers=args.workers, model=args.model,
-                             bounce=args.bounce)
+    cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress)
+    if calibration is not None:
+        print(calibration.summary())
+    lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
+                             model=args.model, bounce=args.bounce)
+    if calibration is not None:
+        lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"
     save_lights(lights, out)
     print(summary(lights))
@@ -132,6 +137,40 @@ def run(args) -> int:
 
         print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere))
     return 0
+
+
+def calibrate_if_unknown(capture, progress: bool = False):
+    """``capture`` with its encoding calibrated from the spheres when ``capture.json`` states none.
+
+    Floating-point images are linear by definition, and a stated ``"encoding"`` always wins:
+    then nothing is done. Otherwise (integer images, no ``"encoding"``) the spheres are found
+    on the stored values and :func:`ffls.spheres.encoding.calibrate_capture_encoding` names the
+    curve; the photos are then linearised with it for the light estimation.
+
+    Returns
+    -------
+    capture : Capture
+        A copy with ``encoding`` set when calibrated, else the input.
+    spheres : list of SphereFit or None
+        The spheres found for the calibration (None when not calibrated: found later).
+    calibration : EncodingCalibration or None
+    """
+    from dataclasses import replace
+
+    from ffls.io.images import read_image
+    from ffls.radiance.photos import encoding_unknown
+
+    if capture.encoding != "auto" or not encoding_unknown("auto", read_image(capture.image_paths[0]).bit_depth):
+        return capture, None, None
+    from ffls.spheres.encoding import calibrate_capture_encoding
+
+    wrap = None
+    if progress:
+        from tqdm import tqdm
+
+        wrap = tqdm
+    calibration, spheres = calibrate_capture_encoding(capture, progress=wrap)
+    return replace(capture, encoding=calibration.encoding), spheres, calibration
 
 
 def export_lp(lights, capture, path) -> str:

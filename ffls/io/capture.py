@@ -4,9 +4,13 @@ The file formats are specified, with complete examples, in ``docs/formats.md``. 
 validates everything it reads and raises :class:`ffls.errors.InputError` naming the file and
 the key, image or line at fault; every writer is atomic.
 
-Encoding rule when ``capture.json`` has no ``"encoding"``: 8-bit images are taken as sRGB
-encoded, 16-bit, half and float images (PNG/TIFF/EXR/HDR) as linear. It is decided per image
-from the stored bit depth (:mod:`ffls.radiance.photos` linearises), and a basis must not mix depths.
+Encoding rule when ``capture.json`` has no ``"encoding"`` (``Capture.encoding == 'auto'``):
+floating-point images (EXR, HDR) are linear by definition; integer images (8- or 16-bit PNG,
+TIFF, JPEG) have an unknown encoding, which ffls never guesses. ``ffls lights`` calibrates it from
+the spheres and writes it into ``lights.json`` (the top-level ``"encoding"`` record,
+:attr:`Lights.encoding`); :func:`load_capture_and_lights` applies that record to a capture that
+states none. Elsewhere :mod:`ffls.radiance.photos` refuses such images with one line. A stated
+``"encoding"`` always wins.
 """
 from __future__ import annotations
 
@@ -41,6 +45,10 @@ __all__ = [
     "parse_lights_map",
     "load_capture_and_lights",
     "UNIT_TOLERANCE",
+    "ENCODING_CURVES",
+    "GAMMA_RANGE",
+    "encoding_from_record",
+    "apply_lights_encoding",
 ]
 
 CAPTURE_FILE = "capture.json"
@@ -48,6 +56,9 @@ LIGHTS_FILE = "lights.json"
 #: Largest accepted | |d| - 1 | for a light direction read from a file.
 UNIT_TOLERANCE = 1e-3
 _ENCODINGS = ("srgb", "linear")
+_ENCODING_FORMS = "'srgb', 'linear', {\"gamma\": g} or {\"response\": \"file.npy|.csv\"}"
+#: Gammas accepted in ``{"gamma": g}`` (``ffls.radiance.encoding.GAMMA_RANGE``; io/ is below radiance/).
+GAMMA_RANGE = (0.2, 5.0)
 _DIST_LENGTHS = (4, 5, 8, 12, 14)
 _CAPTURE_KEYS = {"format", "version", "images", "image_size", "encoding", "camera", "sphere_radius",
                  "spheres", "sphere_count", "scene_center", "hemisphere", "units"}
@@ -147,8 +158,9 @@ class Capture:
         As listed in ``capture.json`` (relative to ``folder``).
     image_paths : list of pathlib.Path
     encoding : str or dict
-        ``'srgb'``, ``'linear'``, ``'auto'`` (absent in the file: by bit depth, see the module
-        docstring) or ``{'response': file}``.
+        ``'srgb'``, ``'linear'``, ``{'gamma': g}``, ``{'response': file}`` or ``'auto'`` (absent
+        in the file: linear for floating-point images, unknown for integer ones; see the module
+        docstring).
     K : (3, 3) float64 ndarray or None
         Camera intrinsics (None when the file has no ``camera``).
     dist : (k,) float64 ndarray
@@ -247,6 +259,13 @@ class Capture:
             doc["units"] = self.units
         doc.update(self.extra)
         return doc
+
+
+def _parse_gamma(j: _Json, value, key: str) -> float:
+    g = j.number(value, key, positive=True)
+    if not GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
+        j.fail(key, f"gamma must be between {GAMMA_RANGE[0]} and {GAMMA_RANGE[1]}, got {g:g}")
+    return g
 
 
 def _parse_camera(j: _Json, cam) -> tuple:
@@ -377,16 +396,18 @@ def load_capture(folder: str | os.PathLike) -> Capture:
 
     encoding = doc.get("encoding", "auto")
     response = None
-    if isinstance(encoding, dict):
+    if isinstance(encoding, dict) and set(encoding) == {"gamma"}:
+        encoding = {"gamma": _parse_gamma(j, encoding["gamma"], "encoding.gamma")}
+    elif isinstance(encoding, dict):
         if set(encoding) != {"response"}:
-            j.fail("encoding", "expected 'srgb', 'linear' or {\"response\": \"file.npy|.csv\"}")
+            j.fail("encoding", f"expected {_ENCODING_FORMS}")
         rname = _check_name(j, encoding["response"], "encoding.response")
         if not (folder / rname).is_file():
             j.fail("encoding.response", f"response file {rname!r} not found")
         response = load_response(folder / rname).astype(np.float64)
         encoding = {"response": rname}
     elif "encoding" in doc and encoding not in _ENCODINGS:
-        j.fail("encoding", f"expected 'srgb', 'linear' or {{\"response\": file}}, got {_short(encoding)}")
+        j.fail("encoding", f"expected {_ENCODING_FORMS}, got {_short(encoding)}")
 
     K, dist, wfc, wfc_default, model = (None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True,
                                         "pinhole")
@@ -446,6 +467,13 @@ class Lights:
     note : str or None
         How the lights were matched to a capture's images when that is worth saying (by order,
         or by a name map; see :func:`load_lights_any`); not written to ``lights.json``.
+    encoding : dict or None
+        The encoding that ``ffls lights`` calibrated from the spheres (the top-level
+        ``"encoding"`` record of ``lights.json``, ``docs/formats.md``): ``curve`` (``'linear'``,
+        ``'srgb'`` or ``'gamma'``), ``gamma``, ``uncertainty`` (95% half-width of the gamma),
+        ``method``, ``spheres``, ``photos``, and any other keys kept. None when the encoding was
+        stated in ``capture.json`` or the images are floating point.
+        :func:`encoding_from_record` gives the ``Capture.encoding`` it stands for.
     """
 
     image_names: list
@@ -455,8 +483,12 @@ class Lights:
     reasons: list | None = None
     extra: list | None = None
     note: str | None = field(default=None, compare=False)
+    encoding: dict | None = None
 
     def __post_init__(self):
+        if self.encoding is not None:
+            encoding_from_record(self.encoding)  # ValueError for a malformed record
+            self.encoding = dict(self.encoding)
         n = len(self.image_names)
         self.image_names = list(self.image_names)
         self.directions = np.asarray(self.directions, dtype=np.float64).reshape(n, 3)
@@ -496,7 +528,47 @@ class Lights:
                 item["reason"] = self.reasons[i]
             item.update(self.extra[i])
             lights.append(item)
-        return {"format": "ffls-lights", "version": 1, "lights": lights}
+        doc = {"format": "ffls-lights", "version": 1}
+        if self.encoding is not None:
+            doc["encoding"] = dict(self.encoding)
+        doc["lights"] = lights
+        return doc
+
+
+ENCODING_CURVES = ("linear", "srgb", "gamma")
+
+
+def encoding_from_record(record: dict):
+    """The ``Capture.encoding`` that a ``lights.json`` ``"encoding"`` record stands for.
+
+    Parameters
+    ----------
+    record : dict
+        ``{"curve": "linear" | "srgb" | "gamma", "gamma": g, ...}`` (:attr:`Lights.encoding`).
+
+    Returns
+    -------
+    str or dict
+        ``'linear'``, ``'srgb'`` or ``{'gamma': g}``.
+
+    Raises
+    ------
+    ValueError
+        Not a dict, an unknown ``curve``, or a ``gamma`` curve without a finite gamma in
+        :data:`GAMMA_RANGE`.
+    """
+    if not isinstance(record, dict):
+        raise ValueError(f"expected an object, got {_short(record)}")
+    curve = record.get("curve")
+    if curve not in ENCODING_CURVES:
+        raise ValueError(f"curve must be one of {ENCODING_CURVES}, got {_short(curve)}")
+    if curve != "gamma":
+        return curve
+    g = record.get("gamma")
+    if isinstance(g, bool) or not isinstance(g, (int, float)) or not math.isfinite(g) \
+            or not GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
+        raise ValueError(f"gamma must be a number between {GAMMA_RANGE[0]} and {GAMMA_RANGE[1]}, got {_short(g)}")
+    return {"gamma": float(g)}
 
 
 def _order_to_capture(j: _Json, names: list, capture: Capture) -> np.ndarray:
@@ -565,7 +637,7 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         if reason is not None and not isinstance(reason, str):
             j.fail(key, f"reason must be a string, got {_short(reason)}")
         ex = {kk: v for kk, v in it.items() if kk not in ("image", "direction", "position", "status", "reason")}
-        if "uncertainty_deg" in ex:
+        if ex.get("uncertainty_deg") is not None:  # null: a rejected light has none
             ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
         names.append(name)
         dirs.append(d / norm)
@@ -573,8 +645,15 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         status.append(st)
         reasons.append(reason)
         extra.append(ex)
+    record = doc.get("encoding")
+    if record is not None:
+        try:
+            encoding_from_record(record)
+        except ValueError as e:
+            j.fail("encoding", str(e))
     order = np.arange(len(names)) if capture is None else _order_to_capture(j, names, capture)
     return Lights(
+        encoding=record,
         image_names=[names[i] for i in order],
         directions=np.array(dirs)[order],
         positions=np.array(pos)[order],
@@ -830,6 +909,7 @@ def _select(lights: Lights, order) -> Lights:
         status=[lights.status[i] for i in order],
         reasons=[lights.reasons[i] for i in order],
         extra=[lights.extra[i] for i in order],
+        encoding=lights.encoding,
     )
 
 
@@ -928,4 +1008,24 @@ def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Captu
         if lights:
             raise InputError("lights file not found", path)
         raise InputError("no lights file: estimate the light directions first (ffls lights CAPTURE)", path)
-    return capture, load_lights_any(path, capture, lights_map)
+    found = load_lights_any(path, capture, lights_map)
+    return apply_lights_encoding(capture, found), found
+
+
+def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
+    """``capture`` with the encoding that ``ffls lights`` calibrated, where ``capture.json`` states none.
+
+    A stated ``"encoding"`` always wins: the capture is returned unchanged when its encoding is
+    not ``'auto'`` or ``lights`` has no :attr:`Lights.encoding` record. The record may come
+    from another capture's ``lights.json`` (calibration shots of the same camera).
+
+    Returns
+    -------
+    Capture
+        A copy with ``encoding`` set (the input is not modified), or ``capture`` itself.
+    """
+    if capture.encoding != "auto" or lights.encoding is None:
+        return capture
+    from dataclasses import replace
+
+    return replace(capture, encoding=encoding_from_record(lights.encoding))

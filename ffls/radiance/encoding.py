@@ -1,12 +1,18 @@
 """Transfer functions between encoded pixel values and linear radiance.
 
 * sRGB: IEC 61966-2-1:1999, the exact piecewise curve (not a 2.2 gamma).
+* A pure power law ("gamma"): ``linear = encoded ** gamma`` on values normalised to [0, 1], the
+  ``{"gamma": g}`` encoding of ``capture.json`` and the family that
+  :mod:`ffls.spheres.encoding` calibrates from the spheres.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["float_array", "srgb_encode", "srgb_decode"]
+__all__ = ["float_array", "srgb_encode", "srgb_decode", "gamma_encode", "gamma_decode", "GAMMA_RANGE"]
+
+#: Gammas accepted in ``{"gamma": g}`` (and searched by the calibration): a wider curve is no camera's.
+GAMMA_RANGE = (0.2, 5.0)
 
 # IEC 61966-2-1 constants.
 _ENC_THRESHOLD = 0.0031308
@@ -61,3 +67,49 @@ def srgb_decode(encoded) -> np.ndarray:
     lin = c / c.dtype.type(_LINEAR_SLOPE)
     powed = np.power((np.maximum(c, c.dtype.type(_DEC_THRESHOLD)) + c.dtype.type(_A)) / c.dtype.type(1.0 + _A), c.dtype.type(_GAMMA))
     return np.where(c <= _DEC_THRESHOLD, lin, powed).astype(c.dtype, copy=False)
+
+
+def _check_gamma(gamma) -> float:
+    g = float(gamma)
+    if not (GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]):
+        raise ValueError(f"gamma must be in [{GAMMA_RANGE[0]}, {GAMMA_RANGE[1]}], not {gamma!r}")
+    return g
+
+
+def gamma_decode(encoded, gamma: float) -> np.ndarray:
+    """Encoded values to linear values by a power law: ``linear = max(encoded, 0) ** gamma``.
+
+    Parameters
+    ----------
+    encoded : (...) array_like
+        Values normalised to [0, 1] (an 8-bit image divided by 255, a 16-bit one by 65535).
+    gamma : float
+        The exponent, in :data:`GAMMA_RANGE` (1 is linear; 2.2 the common display gamma).
+
+    Returns
+    -------
+    (...) ndarray
+        Linear values, float32 for float32 input, float64 otherwise.
+    """
+    g = _check_gamma(gamma)
+    c = float_array(encoded)
+    return np.power(np.maximum(c, c.dtype.type(0)), c.dtype.type(g)).astype(c.dtype, copy=False)
+
+
+def gamma_encode(linear, gamma: float) -> np.ndarray:
+    """Linear values to encoded values, the inverse of :func:`gamma_decode`: ``max(linear, 0) ** (1 / gamma)``.
+
+    Parameters
+    ----------
+    linear : (...) array_like
+    gamma : float
+        In :data:`GAMMA_RANGE`.
+
+    Returns
+    -------
+    (...) ndarray
+        Encoded values, float32 for float32 input, float64 otherwise.
+    """
+    g = _check_gamma(gamma)
+    x = float_array(linear)
+    return np.power(np.maximum(x, x.dtype.type(0)), x.dtype.type(1.0 / g)).astype(x.dtype, copy=False)

@@ -1,8 +1,15 @@
 """The photos of a capture as linear radiance.
 
 A capture's ``encoding`` (see :mod:`ffls.io.capture`) says how stored pixel values map to
-radiance: ``'srgb'`` (IEC 61966-2-1), ``'linear'``, an inverse response table for 8-bit codes,
-or ``'auto'``, decided per image by its bit depth (8-bit sRGB, deeper or float linear).
+radiance: ``'srgb'`` (IEC 61966-2-1), ``'linear'``, ``{'gamma': g}`` (a power law), an inverse
+response table for 8-bit codes, or ``'auto'`` when ``capture.json`` states none.
+
+ffls never guesses an encoding. With ``'auto'``, floating-point images (EXR, HDR) are linear by
+definition; integer images (8- or 16-bit PNG, TIFF, JPEG) have an *unknown* encoding and
+:func:`linearise` refuses them with one line: state ``"encoding"`` in ``capture.json``, or run
+``ffls lights``, which calibrates it from the spheres (:mod:`ffls.spheres.encoding`) and records
+it in ``lights.json``, where the other commands find it
+(:func:`ffls.io.capture.load_capture_and_lights`).
 """
 from __future__ import annotations
 
@@ -15,9 +22,10 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.io.capture import CAPTURE_FILE
 from ffls.io.images import ImageData, read_image
-from ffls.radiance.encoding import srgb_decode
+from ffls.radiance.encoding import gamma_decode, srgb_decode
 
-__all__ = ["Photo", "linearise", "read_photo", "load_photo", "load_photos"]
+__all__ = ["Photo", "linearise", "encoding_unknown", "unknown_encoding_message", "read_photo", "load_photo",
+           "load_photos"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +46,22 @@ class Photo:
     bit_depth: int | str
 
 
+def unknown_encoding_message(bit_depth) -> str:
+    """The one line that refuses an integer image of unknown encoding (``bit_depth`` 8 or 16)."""
+    return (f"{CAPTURE_FILE} states no \"encoding\" and this {bit_depth}-bit image could be sRGB, linear or "
+            f"gamma-encoded; ffls does not guess: state \"encoding\" (\"srgb\", \"linear\" or {{\"gamma\": g}}) "
+            f"in {CAPTURE_FILE}, or run 'ffls lights' to calibrate it from the spheres")
+
+
+def encoding_unknown(encoding, bit_depth) -> bool:
+    """True when ``encoding`` (a capture's) leaves images of ``bit_depth`` undetermined.
+
+    That is ``'auto'`` (no ``"encoding"`` in ``capture.json``) with integer data (8 or 16 bits);
+    floating-point data are linear by definition.
+    """
+    return encoding == "auto" and bit_depth in (8, 16)
+
+
 def linearise(img: ImageData, encoding, response=None) -> np.ndarray:
     """Linear radiance of a decoded image.
 
@@ -46,6 +70,8 @@ def linearise(img: ImageData, encoding, response=None) -> np.ndarray:
     img : ImageData
         As read by :func:`ffls.io.images.read_image`.
     encoding : {'auto', 'srgb', 'linear'} or dict
+        ``'auto'`` (none stated) is linear for floating-point images and an error for integer
+        ones (:func:`unknown_encoding_message`); ``{'gamma': g}`` is ``pixels ** g``;
         ``{'response': name}`` uses ``response``.
     response : (256, 3) ndarray, optional
         Inverse response table (linear value of each 8-bit code, per channel).
@@ -53,16 +79,29 @@ def linearise(img: ImageData, encoding, response=None) -> np.ndarray:
     Returns
     -------
     (H, W, 3) ndarray
+
+    Raises
+    ------
+    InputError
+        An integer image with no stated encoding, or an encoding that does not apply to the
+        image (sRGB or gamma for floating point, a response table for 16 bits).
     """
     enc = encoding
     if enc == "auto":
-        enc = "srgb" if img.bit_depth == 8 else "linear"
+        if encoding_unknown(enc, img.bit_depth):
+            raise InputError(unknown_encoding_message(img.bit_depth), img.path)
+        enc = "linear"
     if enc == "linear":
         return img.pixels
     if enc == "srgb":
         if img.is_hdr:
             raise InputError(f"{CAPTURE_FILE} says encoding 'srgb' but the image is floating point", img.path)
         return srgb_decode(img.pixels)
+    if isinstance(enc, dict) and "gamma" in enc:
+        if img.is_hdr:
+            raise InputError(f"{CAPTURE_FILE} says encoding {{\"gamma\": {enc['gamma']}}} but the image is floating "
+                             "point (linear by definition)", img.path)
+        return gamma_decode(img.pixels, enc["gamma"])
     if img.bit_depth != 8:
         raise InputError(f"an inverse response table applies to 8-bit images, this one is {img.bit_depth}", img.path)
     codes = np.rint(img.pixels * 255).astype(np.intp)

@@ -1,0 +1,473 @@
+"""The encoding of integer images, calibrated from the shading of matte spheres.
+
+ffls never guesses whether 8- or 16-bit files are sRGB, linear or gamma-encoded. When
+``capture.json`` states no ``"encoding"``, the matte spheres themselves calibrate it: a matte
+sphere of known centre and radius under a distant light has a known shading law on its lit side,
+
+    ``I(n) = v . n + b``,
+
+Lambert's ``a max(0, n . l)`` (Masselus, Dutre, Anrys 2002, eq. 2) plus an ambient term
+(Hougen & Ahuja 1993) and the ground bounce ``c (1 - n_z) / 2``, which is linear in ``n`` too and
+so is absorbed into ``v`` and ``b`` (:mod:`ffls.spheres.lambert`). Only the right decoding curve
+``f`` makes ``f(raw)`` an affine function of the normal over the whole lit side of every sphere
+in every photo: the sphere is the known scene of the response calibration, in the spirit of
+Debevec & Malik (1997) with known geometry in place of known exposures.
+
+Method ``'gamma'`` (:func:`calibrate_encoding_gamma`): ``f(x) = x ** gamma`` on values normalised to
+[0, 1], with ``gamma`` continuous in :data:`GAMMA_SEARCH`; the sRGB curve (IEC 61966-2-1) is a
+second candidate, scored the same way.
+
+* Every (photo, sphere) pair is a *unit*: its lit pixels (``n . l > terminator``, not clipped in
+  any channel, not near black, no robust outlier) are chosen once per round with the current
+  curve, then kept fixed while the curve varies, so the objective is smooth. A unit whose
+  shading is not Lambertian (a mirror ball; ``min_r2``), or whose best RMS residual over all
+  curves is more than 2.5 times the median unit's (a wrong lit side, a cast shadow), is left out.
+* For a curve ``f`` each unit's ``(v, b)`` is the weighted least-squares solution, the residuals
+  divided by the curve's slope ``f'(raw)``: the misfit is measured in stored values, where the
+  noise (quantisation, sensor) lives, and so is comparable between curves. The sum over units is
+  the profile objective ``RSS(gamma)``; :func:`scipy.optimize.minimize_scalar` finds its minimum,
+  and a second round re-selects the pixels with that curve.
+* The uncertainty is the larger of two: the curvature of the profile likelihood
+  (``sd = sqrt(2 s^2 / RSS'')``) and a bootstrap over photos (each photo's ``RSS`` curve is
+  resampled, which keeps whatever misfit a photo shares across its pixels). It is reported as a
+  95% half-width (1.96 sd), the GUIDE's convention for uncertainties.
+* Naming: ``linear`` when the gamma's 95% interval holds 1; ``srgb`` when the sRGB curve fits as
+  well as the best gamma (its excess ``RSS``, scaled by the noise variance inflated by the
+  bootstrap/curvature variance ratio, under the chi-square 95% point of one degree of freedom);
+  otherwise ``gamma g``.
+
+:func:`calibrate_encoding` is the entry point on arrays (``method=``);
+:func:`calibrate_capture_encoding` runs it on a capture: spheres found on the stored values (edges
+survive a monotone curve), their pixels read from every photo.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+from scipy.stats import chi2
+
+from ffls.errors import InputError
+from ffls.io.capture import CAPTURE_FILE
+from ffls.io.images import read_image
+from ffls.radiance.encoding import gamma_decode, srgb_decode
+
+__all__ = [
+    "METHODS",
+    "GAMMA_SEARCH",
+    "MIN_PHOTOS",
+    "EncodingCalibration",
+    "EncodingCalibrationError",
+    "calibrate_encoding",
+    "calibrate_encoding_gamma",
+    "calibrate_capture_encoding",
+]
+
+#: Calibration methods of :func:`calibrate_encoding`.
+METHODS = ("gamma",)
+#: Range of the gamma search: a best gamma at either end is no gamma curve (calibration fails).
+GAMMA_SEARCH = (0.8, 3.2)
+#: Photos with at least one usable matte sphere needed to calibrate (and to bootstrap over photos).
+MIN_PHOTOS = 4
+_COARSE_STEP = 0.1  # first round: the whole range
+_GRID_STEP = 0.01  # second round: around the first round's minimum, for the bootstrap
+_FINE_HALF_WIDTH = 0.3
+_MAX_RMS_RATIO = 2.5  # a pair whose best RMS residual exceeds the median pair's by more is left out
+_SLOPE_STEP = 1e-4
+
+
+class EncodingCalibrationError(ValueError):
+    """The spheres cannot calibrate the encoding (too few photos or matte spheres, no gamma fits)."""
+
+
+@dataclass(frozen=True)
+class EncodingCalibration:
+    """The encoding found from the spheres (:func:`calibrate_encoding`).
+
+    Attributes
+    ----------
+    curve : {'linear', 'srgb', 'gamma'}
+        The name given to the calibrated curve (module docstring, "Naming").
+    gamma : float
+        The best gamma.
+    uncertainty : float
+        95% half-width of ``gamma`` (1.96 times the larger of the curvature and bootstrap sd).
+    sd_curvature, sd_bootstrap : float
+        The two standard deviations of ``gamma``.
+    srgb_excess : float
+        The sRGB curve's excess misfit over the best gamma, in units of the (inflated) noise
+        variance; below ``chi2(1).ppf(0.95)`` (3.84) the sRGB curve fits as well.
+    rms : float
+        RMS residual at the best gamma, in stored values (full scale 1).
+    method : str
+    n_spheres, n_photos, n_units, n_pixels : int
+        Spheres and photos that contributed, their (photo, sphere) pairs, and pixels used.
+    """
+
+    curve: str
+    gamma: float
+    uncertainty: float
+    sd_curvature: float
+    sd_bootstrap: float
+    srgb_excess: float
+    rms: float
+    method: str
+    n_spheres: int
+    n_photos: int
+    n_units: int
+    n_pixels: int
+
+    @property
+    def encoding(self):
+        """The ``Capture.encoding`` to use: ``'linear'``, ``'srgb'`` or ``{'gamma': g}``."""
+        if self.curve == "gamma":
+            return {"gamma": round(float(self.gamma), 4)}
+        return self.curve
+
+    def record(self) -> dict:
+        """The top-level ``"encoding"`` record of ``lights.json`` (``docs/formats.md``)."""
+        return {"curve": self.curve, "gamma": round(float(self.gamma), 4),
+                "uncertainty": round(float(self.uncertainty), 4), "method": f"spheres:{self.method}",
+                "spheres": int(self.n_spheres), "photos": int(self.n_photos), "pixels": int(self.n_pixels),
+                "srgb_excess": round(float(self.srgb_excess), 3), "rms": float(f"{self.rms:.4g}")}
+
+    def summary(self) -> str:
+        """One line, e.g. ``encoding: linear (gamma 1.02 +- 0.03 from 3 spheres, 40 photos)``."""
+        src = (f"from {self.n_spheres} sphere{'s' if self.n_spheres != 1 else ''}, "
+               f"{self.n_photos} photos")
+        g = f"gamma {self.gamma:.2f} +- {self.uncertainty:.2f}"
+        if self.curve == "linear":
+            return f"encoding: linear ({g} {src})"
+        if self.curve == "srgb":
+            return f"encoding: srgb (the sRGB curve fits as well as the best {g}; {src})"
+        return f"encoding: {g} ({src}; not linear, and the sRGB curve fits worse)"
+
+
+# ----------------------------------------------------------------------------- curves
+def _decode(raw: np.ndarray, curve) -> np.ndarray:
+    """Linear values of ``raw`` (float64, normalised) under ``curve`` (a gamma, or ``'srgb'``)."""
+    return srgb_decode(raw) if curve == "srgb" else gamma_decode(raw, curve)
+
+
+def _grey_and_weight(raw: np.ndarray, curve) -> tuple[np.ndarray, np.ndarray]:
+    """Grey linear value (mean of the decoded channels) and the weight ``1 / slope`` of each pixel.
+
+    The slope is the RMS over channels of ``f'(raw)`` (central difference): the weighted
+    residual is then in stored values.
+    """
+    y = _decode(raw, curve).mean(axis=1)
+    h = _SLOPE_STEP
+    d = (_decode(raw + h, curve) - _decode(np.maximum(raw - h, 0.0), curve)) / (raw + h - np.maximum(raw - h, 0.0))
+    slope = np.sqrt(np.mean(d * d, axis=1))
+    return y, 1.0 / np.maximum(slope, 1e-6)
+
+
+def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted least squares ``min ||w (y - A x)||``; returns ``x`` and the weighted residuals."""
+    Aw = A * w[:, None]
+    x, *_ = np.linalg.lstsq(Aw, y * w, rcond=None)
+    return x, w * (y - A @ x)
+
+
+@dataclass
+class _Unit:
+    """One (photo, sphere) pair: its pixels' stored values (m, 3) and normals (m, 3), and the selection."""
+
+    photo: int
+    sphere: int
+    raw: np.ndarray
+    A: np.ndarray  # (m, 4): normal and 1
+    usable: np.ndarray  # (m,) bool: not clipped, not near black
+    selected: np.ndarray | None = None
+
+    def rss(self, curve) -> float:
+        s = self.selected
+        y, w = _grey_and_weight(self.raw[s], curve)
+        _, r = _solve(self.A[s], y, w)
+        return float(r @ r)
+
+
+def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
+    """Choose ``unit``'s lit pixels with ``curve`` (iterating the fit); False when the unit is unusable.
+
+    Start from the pixels within ``acos(terminator)`` of the mean normal of the brightest tenth,
+    fit ``v . n + b``, keep the pixels with ``n . l > terminator`` that are no robust outlier
+    (``clip`` MADs), refit; at most five rounds. The
+    unit is unusable with fewer than ``min_pixels`` pixels, a normal range too narrow to show the
+    curve (``n . l`` spanning less than 0.4), or a fit explaining less than ``min_r2`` of the
+    variance (no Lambertian shading: a mirror ball, a shadowed or flat sphere).
+    """
+    ok = unit.usable
+    if ok.sum() < min_pixels:
+        return False
+    y_all, w_all = _grey_and_weight(unit.raw, curve)
+    normals = unit.A[:, :3]
+    top = ok & (y_all >= np.percentile(y_all[ok], 90))  # the brightest tenth: around the light's direction
+    start = normals[top].sum(axis=0)
+    if not np.linalg.norm(start) > 0:
+        return False
+    cos = normals @ (start / np.linalg.norm(start))
+    sel = ok & (cos > terminator)
+    for _ in range(5):
+        if sel.sum() < min_pixels:
+            return False
+        x, _ = _solve(unit.A[sel], y_all[sel], w_all[sel])
+        nv = float(np.linalg.norm(x[:3]))
+        if not np.isfinite(nv) or nv <= 0:
+            return False
+        cos = normals @ (x[:3] / nv)
+        r = w_all * (y_all - unit.A @ x)
+        lit = ok & (cos > terminator)
+        if lit.sum() < min_pixels:
+            return False
+        mad = 1.4826 * float(np.median(np.abs(r[lit] - np.median(r[lit]))))
+        new = lit & (np.abs(r - np.median(r[lit])) <= clip * max(mad, 1e-12))
+        if np.array_equal(new, sel):
+            break
+        sel = new
+    if sel.sum() < min_pixels or float(np.ptp(cos[sel])) < 0.4:
+        return False
+    yw = y_all[sel] * w_all[sel]
+    _, r = _solve(unit.A[sel], y_all[sel], w_all[sel])
+    tot = float(np.sum((yw - yw.mean()) ** 2))
+    if tot <= 0 or 1.0 - float(r @ r) / tot < min_r2:
+        return False
+    unit.selected = sel
+    return True
+
+
+def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
+    """Sub-grid minimum of ``f`` sampled on the regular grid ``g`` (parabola through the lowest point)."""
+    k = int(np.argmin(f))
+    if k == 0 or k == len(g) - 1:
+        return float(g[k])
+    a, b, c = f[k - 1], f[k], f[k + 1]
+    den = a - 2 * b + c
+    step = g[1] - g[0]
+    return float(g[k] + (0.5 * (a - c) / den * step if den > 0 else 0.0))
+
+
+# ----------------------------------------------------------------------------- methods
+def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
+                             min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
+                             seed: int = 0) -> EncodingCalibration:
+    """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
+
+    Parameters
+    ----------
+    raw : sequence of sequence of (m_k, 3) float
+        Per photo, per sphere, the stored values of the sphere's pixels normalised to [0, 1]
+        (an 8-bit image divided by 255). Clipped values are recognised at 0.98 of full scale
+        (any channel), near-black ones at 0.02 (every channel).
+    normals : sequence of (m_k, 3) float
+        Per sphere, the unit normals of those pixels (:attr:`ffls.spheres.samples.SphereSamples.normals`).
+    matte : sequence of bool, optional
+        Per sphere, whether it is matte; mirror and glossy spheres are left out. By default every
+        sphere is tried, and a (photo, sphere) pair whose shading is not Lambertian (``min_r2``)
+        is left out.
+    terminator : float
+        Pixels with ``n . l`` at or below this are left out (penumbra, the kink of Lambert's max).
+    min_pixels : int
+        Fewest selected pixels of a usable (photo, sphere) pair.
+    min_r2 : float
+        Least share of the shading variance the affine model must explain.
+    min_photos : int
+        Fewest photos with a usable sphere.
+    n_bootstrap : int
+        Bootstrap resamples of the photos.
+    seed : int
+        Seed of the bootstrap.
+
+    Returns
+    -------
+    EncodingCalibration
+
+    Raises
+    ------
+    EncodingCalibrationError
+        Too few usable photos, or a best gamma at an end of :data:`GAMMA_SEARCH`.
+    """
+    normals = [np.asarray(n, dtype=np.float64).reshape(-1, 3) for n in normals]
+    n_sph = len(normals)
+    matte = [True] * n_sph if matte is None else [bool(m) for m in matte]
+    if len(matte) != n_sph:
+        raise ValueError(f"matte has {len(matte)} entries for {n_sph} spheres")
+    if not any(matte):
+        raise EncodingCalibrationError("no matte sphere: mirror and glossy spheres cannot calibrate the encoding")
+    A = [np.column_stack([n, np.ones(len(n))]) for n in normals]
+    units = []
+    for p, per_photo in enumerate(raw):
+        if len(per_photo) != n_sph:
+            raise ValueError(f"photo {p} has {len(per_photo)} spheres, expected {n_sph}")
+        for k, v in enumerate(per_photo):
+            if not matte[k]:
+                continue
+            v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
+            if len(v) != len(normals[k]):
+                raise ValueError(f"photo {p}, sphere {k}: {len(v)} values for {len(normals[k])} normals")
+            finite = np.all(np.isfinite(v), axis=1)
+            v = np.where(finite[:, None], v, 0.0)
+            usable = finite & ~np.any(v >= 0.98, axis=1) & ~np.all(v <= 0.02, axis=1)
+            units.append(_Unit(p, k, np.clip(v, 0.0, 1.0), A[k], usable))
+
+    lo, hi = GAMMA_SEARCH
+    coarse = np.arange(lo, hi + 0.5 * _COARSE_STEP, _COARSE_STEP)
+    curve = 0.5 * (lo + hi)  # pilot selection: the middle of the range
+    used, grid = units, coarse
+    for rnd in range(2):  # select with the current curve, profile, repeat with the best gamma
+        # the pilot curve may be far off: the shading test (min_r2) waits for the first round's gamma
+        used = [u for u in units if _select(u, curve, terminator, min_pixels, min_r2 if rnd else -np.inf)]
+        curves = np.array([[u.rss(g) for g in grid] for u in used]).reshape(len(used), len(grid))
+        if len(used):
+            # a (photo, sphere) pair that no curve fits well (a wrong lit side, a cast shadow or an
+            # interreflection the model lacks) is left out: its best RMS residual is an outlier
+            best_ms = curves.min(axis=1) / np.array([u.selected.sum() for u in used])
+            keep = best_ms <= _MAX_RMS_RATIO ** 2 * np.median(best_ms)
+            used, curves = [u for u, k in zip(used, keep) if k], curves[keep]
+        profiled = grid
+        photos = sorted({u.photo for u in used})
+        if len(photos) < min_photos:
+            raise EncodingCalibrationError(
+                f"only {len(photos)} photo{'s' if len(photos) != 1 else ''} show a matte sphere's shading clearly "
+                f"enough (at least {min_photos} needed, of {len(raw)} photos)")
+        k = int(np.argmin(curves.sum(axis=0)))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        res = minimize_scalar(lambda g: sum(u.rss(g) for u in used), bounds=(a, b), method="bounded",
+                              options={"xatol": 1e-4})
+        best = curve = float(res.x)
+        # the second round's grid (for the bootstrap): fine, around the first round's minimum
+        grid = np.arange(max(lo, best - _FINE_HALF_WIDTH), min(hi, best + _FINE_HALF_WIDTH) + 0.5 * _GRID_STEP,
+                         _GRID_STEP)
+    if best <= lo + _GRID_STEP or best >= hi - _GRID_STEP:
+        raise EncodingCalibrationError(
+            f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})")
+    n_pix = int(sum(int(u.selected.sum()) for u in used))
+    rss_best = float(res.fun)
+    dof = max(n_pix - 4 * len(used) - 1, 1)
+    s2 = rss_best / dof
+    h = 0.01
+    d2 = (sum(u.rss(best + h) for u in used) - 2 * rss_best + sum(u.rss(best - h) for u in used)) / (h * h)
+    sd_curv = math.sqrt(2 * s2 / d2) if d2 > 0 else float("inf")
+    # bootstrap over photos: resample whole photos' RSS curves
+    photo_index = {p: i for i, p in enumerate(photos)}
+    per_photo = np.zeros((len(photos), len(profiled)))
+    for u, c in zip(used, curves):
+        per_photo[photo_index[u.photo]] += c
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, len(photos), size=(int(n_bootstrap), len(photos)))
+    boot = np.array([_parabola_min(profiled, per_photo[d].sum(axis=0)) for d in draws])
+    sd_boot = float(np.std(boot, ddof=1)) if len(boot) > 1 else float("inf")
+    sd = max(sd_curv, sd_boot)
+    unc = 1.96 * sd
+    inflation = max(1.0, (sd_boot / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
+    rss_srgb = sum(u.rss("srgb") for u in used)
+    excess = (rss_srgb - rss_best) / (s2 * inflation)
+    if abs(best - 1.0) <= unc:
+        name = "linear"
+    elif excess <= chi2.ppf(0.95, 1):
+        name = "srgb"
+    else:
+        name = "gamma"
+    return EncodingCalibration(
+        curve=name, gamma=best, uncertainty=unc, sd_curvature=sd_curv, sd_bootstrap=sd_boot,
+        srgb_excess=float(excess), rms=math.sqrt(rss_best / n_pix), method="gamma",
+        n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix)
+
+
+def calibrate_encoding(raw, normals, method: str = "gamma", **kwargs) -> EncodingCalibration:
+    """The encoding of integer images from the shading of matte spheres (module docstring).
+
+    Parameters
+    ----------
+    raw : sequence of sequence of (m_k, 3) float
+        Per photo, per sphere, the stored values of the sphere's pixels normalised to [0, 1].
+    normals : sequence of (m_k, 3) float
+        Per sphere, the unit normals of those pixels.
+    method : {'gamma'}
+        :func:`calibrate_encoding_gamma` (a continuous gamma, with the sRGB curve as a candidate).
+    **kwargs
+        Passed to the method.
+
+    Returns
+    -------
+    EncodingCalibration
+
+    Raises
+    ------
+    EncodingCalibrationError
+        The spheres cannot calibrate it.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, not {method!r}")
+    return calibrate_encoding_gamma(raw, normals, **kwargs)
+
+
+def _ask(message: str) -> str:
+    return (f"cannot calibrate the encoding: {message}; state \"encoding\" (\"srgb\", \"linear\" or "
+            f"{{\"gamma\": g}}) in {CAPTURE_FILE}")
+
+
+def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = "gamma", progress=None,
+                               **kwargs) -> tuple[EncodingCalibration, list]:
+    """Calibrate the encoding of a capture whose ``capture.json`` states none.
+
+    The spheres are found on the stored values (a monotone curve keeps their outlines), unless
+    given; their pixels are read from every photo and passed to :func:`calibrate_encoding`.
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+        Integer images (8 or 16 bits).
+    spheres : list of SphereFit, optional
+        As :func:`ffls.spheres.detect.find_spheres_in_capture` returns (found when None).
+    matte : sequence of bool, optional
+        Per sphere, whether it is matte (all tried by default; see :func:`calibrate_encoding_gamma`).
+    method : {'gamma'}
+    progress : callable, optional
+        A wrapper such as ``tqdm.tqdm``, called as ``progress(iterable, total=n, desc=...)``.
+    **kwargs
+        Passed to the method.
+
+    Returns
+    -------
+    calibration : EncodingCalibration
+    spheres : list of SphereFit
+        The spheres used (to estimate the lights with, once the photos are linearised).
+
+    Raises
+    ------
+    InputError
+        Naming ``capture.json``: floating-point images (linear by definition), mixed bit depths,
+        or spheres that cannot calibrate the encoding (one line asking for ``"encoding"``).
+    """
+    from ffls.spheres.detect import find_spheres_in_capture
+    from ffls.spheres.estimate import capture_samples
+
+    first = read_image(capture.image_paths[0])
+    if first.bit_depth not in (8, 16):
+        raise InputError(f"the images are {first.bit_depth} floating point, linear by definition: nothing to "
+                         "calibrate", capture.image_paths[0])
+    if spheres is None:
+        # the stored values as they are: the outlines (edges) survive any monotone curve
+        spheres = find_spheres_in_capture(replace(capture, encoding="linear"))
+    h, w = first.shape
+    samples = capture_samples(capture, spheres, (h, w))
+    it = range(len(capture))
+    if progress is not None:
+        it = progress(it, total=len(capture), desc="encoding")
+    raw = []
+    for i in it:
+        img = first if i == 0 else read_image(capture.image_paths[i])
+        if img.bit_depth != first.bit_depth:
+            raise InputError(f"bit depth {img.bit_depth} differs from the first image's ({first.bit_depth}); with no "
+                             f"'encoding' in {CAPTURE_FILE} a capture must not mix depths", img.path)
+        if img.shape != (h, w):
+            raise InputError(f"image is {img.shape[1]}x{img.shape[0]} but the first image is {w}x{h}", img.path)
+        raw.append([np.asarray(img.pixels[s.rows, s.cols], dtype=np.float64) for s in samples])
+    try:
+        cal = calibrate_encoding(raw, [s.normals for s in samples], method=method, matte=matte, **kwargs)
+    except EncodingCalibrationError as e:
+        raise InputError(_ask(str(e)), capture.json_path) from None
+    return cal, spheres

@@ -1,0 +1,245 @@
+"""The encoding of integer images: never guessed; calibrated from the matte spheres (ffls.spheres.encoding)."""
+import json
+import shutil
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ffls.cli import main
+from ffls.errors import InputError
+from ffls.io import capture as cap
+from ffls.io.images import read_image, write_png
+from ffls.radiance.encoding import gamma_decode, gamma_encode, srgb_encode
+from ffls.radiance.photos import load_photo
+from ffls.spheres.detect import find_spheres
+from ffls.spheres.encoding import (
+    EncodingCalibrationError,
+    calibrate_capture_encoding,
+    calibrate_encoding,
+)
+from ffls.spheres.estimate import estimate_lights
+from ffls.synth.scene import SynthScene, write_synthetic_capture
+
+RES = 256
+N_LIGHTS = 14
+ONE_SPHERE = (0.25, -0.25, 0.07)  # x, y on the ground, and the radius (= z of the centre), metres
+
+
+def _one_line(e, *names):
+    assert "\n" not in str(e)
+    for n in names:
+        assert n in str(e), (n, str(e))
+
+
+@pytest.fixture(scope="module")
+def linear_captures(tmp_path_factory):
+    """Noise-free linear EXR captures: the default four spheres, and one sphere."""
+    root = tmp_path_factory.mktemp("linear")
+    four = write_synthetic_capture(root / "four", n_lights=N_LIGHTS, resolution=RES, progress=False, seed=3)
+    one_scene = SynthScene(sphere_xy=(ONE_SPHERE[:2],), sphere_radius=ONE_SPHERE[2])
+    one = write_synthetic_capture(root / "one", n_lights=N_LIGHTS, resolution=RES, progress=False, seed=4,
+                                  scene=one_scene)
+    return {"four": (root / "four", four["directions"]), "one": (root / "one", one["directions"])}
+
+
+def encoded_capture(src, dst, true, bits=8, noise=1.0 / 255, n=None, encoding_key=None, seed=0):
+    """Copy the linear capture ``src`` to ``dst`` as integer PNGs encoded with ``true`` (no ``encoding`` key)."""
+    dst.mkdir()
+    doc = json.loads((src / "capture.json").read_text())
+    doc.pop("encoding")
+    names = doc["images"][:n] if n else doc["images"]
+    imgs = [read_image(src / nm).pixels.astype(np.float64) for nm in names]
+    exposure = 0.9 / max(float(np.percentile(im, 99.9)) for im in imgs)
+    rng = np.random.default_rng(seed)
+    top = 255 if bits == 8 else 65535
+    out = []
+    for nm, im in zip(names, imgs):
+        lin = np.clip(im * exposure, 0.0, None)
+        enc = lin if true == "linear" else srgb_encode(lin) if true == "srgb" else gamma_encode(lin, true)
+        enc = enc + rng.normal(0.0, noise, enc.shape)
+        png = nm.replace(".exr", ".png")
+        write_png(dst / png, np.rint(np.clip(enc, 0, 1) * top).astype(np.uint8 if bits == 8 else np.uint16))
+        out.append(png)
+    doc["images"] = out
+    if encoding_key is not None:
+        doc["encoding"] = encoding_key
+    (dst / "capture.json").write_text(json.dumps(doc))
+    return dst
+
+
+def _angles(lights, truth):
+    ok = lights.ok_mask
+    cos = np.clip(np.sum(lights.directions * truth[: len(lights)], axis=1), -1, 1)
+    return np.degrees(np.arccos(cos))[ok]
+
+
+# ----------------------------------------------------------------------------- the pure function
+def _sphere_shading(true_gamma, n_photos=8, seed=0):
+    """Stored values of one matte sphere (Lambert + ambient) under random lights, encoded with ``true_gamma``."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(-0.95, 0.95, 60)
+    x, y = np.meshgrid(t, t)
+    inside = x * x + y * y < 0.95 ** 2
+    normals = np.column_stack([x[inside], -np.sqrt(1 - x[inside] ** 2 - y[inside] ** 2), y[inside]])
+    raw = []
+    for _ in range(n_photos):
+        light = rng.normal(size=3)
+        light[1] = -abs(light[1]) - 0.5
+        light /= np.linalg.norm(light)
+        lin = 0.8 * np.maximum(normals @ light, 0) + 0.03
+        enc = gamma_encode(lin, true_gamma)[:, None] + rng.normal(0, 1 / 255, (len(lin), 3))
+        raw.append([np.clip(np.rint(enc * 255), 0, 255) / 255])
+    return raw, [normals]
+
+
+@pytest.mark.parametrize("true_gamma, curve", [(1.0, "linear"), (1.8, "gamma"), (2.6, "gamma")])
+def test_calibrate_encoding_on_arrays(true_gamma, curve):
+    raw, normals = _sphere_shading(true_gamma)
+    cal = calibrate_encoding(raw, normals, method="gamma")
+    assert cal.curve == curve
+    assert abs(cal.gamma - true_gamma) <= cal.uncertainty
+    assert 0 < cal.uncertainty < 0.1
+    assert cal.n_photos == 8 and cal.n_spheres == 1
+
+
+def test_calibrate_encoding_refuses():
+    raw, normals = _sphere_shading(2.2, n_photos=3)
+    with pytest.raises(EncodingCalibrationError, match="only 3 photos"):
+        calibrate_encoding(raw, normals)
+    raw, normals = _sphere_shading(2.2)
+    with pytest.raises(EncodingCalibrationError, match="no matte sphere"):
+        calibrate_encoding(raw, normals, matte=[False])
+    with pytest.raises(ValueError, match="method"):
+        calibrate_encoding(raw, normals, method="polynomial")
+    flat = [[np.full_like(r[0], 0.5)] for r in raw]  # no shading: nothing constrains the curve
+    with pytest.raises(EncodingCalibrationError):
+        calibrate_encoding(flat, normals)
+
+
+def test_gamma_curve_round_trip():
+    x = np.linspace(0, 1, 101)
+    np.testing.assert_allclose(gamma_decode(gamma_encode(x, 2.2), 2.2), x, atol=1e-12)
+    np.testing.assert_allclose(gamma_decode(np.array([0.5]), 2.0), [0.25])
+    assert gamma_decode(np.float32([0.5]), 1.5).dtype == np.float32
+    with pytest.raises(ValueError, match="gamma"):
+        gamma_decode(x, 0.0)
+
+
+# ----------------------------------------------------------------------------- captures
+@pytest.mark.parametrize("true", ["linear", "srgb", 2.2])
+def test_lights_calibrates_four_spheres(linear_captures, tmp_path, capsys, true):
+    src, truth = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", true)
+    assert main(["lights", str(folder), "--no-progress", "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    line = [ln for ln in out.splitlines() if ln.startswith("encoding: ")]
+    assert len(line) == 1, out
+    lights = cap.load_lights(folder / "lights.json")
+    rec = lights.encoding
+    assert rec["curve"] == ("gamma" if true == 2.2 else true), out
+    assert rec["photos"] >= 8 and rec["spheres"] >= 3 and rec["method"] == "spheres:gamma"
+    if true != "srgb":
+        assert abs(rec["gamma"] - (1.0 if true == "linear" else true)) <= rec["uncertainty"], rec
+    assert line[0].startswith(f"encoding: {'gamma 2.2' if true == 2.2 else true}")
+    ang = _angles(lights, truth)
+    assert lights.ok_mask.sum() >= N_LIGHTS - 2
+    assert np.median(ang) < 1.0 and np.percentile(ang, 90) < 1.5, ang
+    # the other commands find the calibrated encoding in lights.json
+    c, l2 = cap.load_capture_and_lights(folder)
+    assert c.encoding == cap.encoding_from_record(rec) and l2.encoding == rec
+
+
+@pytest.mark.parametrize("true", [2.2, "linear"])
+def test_one_sphere(linear_captures, tmp_path, true):
+    """One matte sphere calibrates too (placed at its true centre: this tests the calibration, not detection)."""
+    src, truth = linear_captures["one"]
+    folder = encoded_capture(src, tmp_path / "c", true, seed=1)
+    c = cap.load_capture(folder)
+    spheres = find_spheres(read_image(c.image_paths[0]).pixels, c.K, c.dist, c.sphere_radius,
+                           overrides=[{"center": list(ONE_SPHERE)}], world_from_camera=c.world_from_camera)
+    cal, used = calibrate_capture_encoding(c, spheres=spheres)
+    assert used is spheres and cal.n_spheres == 1
+    assert cal.curve == ("gamma" if true == 2.2 else "linear"), cal.summary()
+    assert abs(cal.gamma - (1.0 if true == "linear" else true)) <= cal.uncertainty, cal.summary()
+    lights = estimate_lights(replace(c, encoding=cal.encoding), spheres=spheres, progress=False, workers=1)
+    ang = _angles(lights, truth)
+    assert np.median(ang) < 1.0, ang
+
+
+def test_sixteen_bit(linear_captures, tmp_path):
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", 2.2, bits=16, noise=0.5 / 255)
+    c = cap.load_capture(folder)
+    assert read_image(c.image_paths[0]).bit_depth == 16
+    with pytest.raises(InputError, match="16-bit image could be sRGB, linear or gamma") as e:
+        load_photo(c, 0)
+    _one_line(e.value, c.image_names[0], "capture.json", "ffls lights")
+    cal, _ = calibrate_capture_encoding(c)
+    assert cal.curve == "gamma" and abs(cal.gamma - 2.2) <= cal.uncertainty, cal.summary()
+
+
+def test_too_few_photos_one_line(linear_captures, tmp_path, capsys):
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", "srgb", n=3)
+    assert main(["lights", str(folder), "--no-progress", "--workers", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    _one_line(err, "cannot calibrate the encoding", "capture.json", '"encoding"')
+    assert not (folder / "lights.json").exists()
+
+
+def test_explicit_encoding_wins(linear_captures, tmp_path, capsys):
+    src, truth = linear_captures["four"]
+    # linear files declared sRGB: the statement is obeyed (no calibration, no record)
+    folder = encoded_capture(src, tmp_path / "c", "linear", encoding_key="srgb")
+    assert main(["lights", str(folder), "--no-progress", "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "encoding:" not in out
+    lights = cap.load_lights(folder / "lights.json")
+    assert lights.encoding is None
+    # a lights.json record never overrides capture.json
+    lights.encoding = {"curve": "gamma", "gamma": 1.7, "uncertainty": 0.01, "method": "spheres:gamma",
+                       "spheres": 4, "photos": 14}
+    cap.save_lights(lights, folder / "lights.json")
+    c, l2 = cap.load_capture_and_lights(folder)
+    assert c.encoding == "srgb" and l2.encoding["gamma"] == 1.7
+    # float images are linear by definition: nothing to calibrate
+    c = cap.load_capture(src)
+    with pytest.raises(InputError, match="linear by definition"):
+        calibrate_capture_encoding(c)
+    shutil.rmtree(folder)
+
+
+def test_unknown_encoding_refused_elsewhere(linear_captures, tmp_path, capsys):
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", "srgb")
+    shutil.copy(src / "lights.json", folder / "lights.json")  # lights without an encoding record
+    doc = json.loads((folder / "lights.json").read_text())
+    for it in doc["lights"]:
+        it["image"] = it["image"].replace(".exr", ".png")
+    (folder / "lights.json").write_text(json.dumps(doc))
+    assert main(["relight", str(folder), "--probe", "sky", "-o", str(tmp_path / "out.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert sum("error" in ln for ln in err) == 1
+    _one_line(err[-1], "does not guess", "ffls lights", "capture.json")
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_lights_record_round_trip_and_validation(tmp_path):
+    rec = {"curve": "gamma", "gamma": 2.2, "uncertainty": 0.02, "method": "spheres:gamma", "spheres": 4,
+           "photos": 40}
+    lights = cap.Lights(["a.png"], [[0, 0, 1.0]], encoding=rec)
+    cap.save_lights(lights, tmp_path / "lights.json")
+    back = cap.load_lights(tmp_path / "lights.json")
+    assert back.encoding == rec and cap.encoding_from_record(rec) == {"gamma": 2.2}
+    assert cap.encoding_from_record({"curve": "srgb"}) == "srgb"
+    for bad in ({"curve": "gamma"}, {"curve": "gamma", "gamma": 30}, {"curve": "log"}, "srgb"):
+        doc = json.loads((tmp_path / "lights.json").read_text())
+        doc["encoding"] = bad
+        (tmp_path / "lights.json").write_text(json.dumps(doc))
+        with pytest.raises(InputError, match="encoding") as e:
+            cap.load_lights(tmp_path / "lights.json")
+        _one_line(e.value, "lights.json")
+        with pytest.raises(ValueError):
+            cap.Lights(["a.png"], [[0, 0, 1.0]], encoding=bad)
