@@ -1,0 +1,170 @@
+"""Light estimation under the conditions of real photographs: error, acceptance and 95% cone coverage.
+
+For each condition (an exact ``ffls synth`` flag list) the paper's Table 1 grid of lights
+(:func:`bench_lights.grid`: phi 0..180 in 20-degree steps, theta 0..70 in 10-degree steps, 80
+lights) is rendered with :mod:`ffls.synth`, and the real command runs on it as a user would run
+it: ``ffls lights CAPTURE --workers 1`` with no hints, no sphere count and (for the "unstated"
+conditions) no encoding. The table gives, against ``truth.json``:
+
+* accepted photos / all, and the rejection reasons;
+* the median and maximum angular error of the accepted photos (degrees);
+* the coverage: the share of accepted photos whose error is within their reported
+  ``uncertainty_deg`` (the radius of the 95% cone; the goal is 90-98%), and the median cone;
+* the encoding ``ffls lights`` reported (calibrated when the capture states none);
+* the time per photo of ``ffls lights`` (one process; detection, calibration and both passes).
+
+A condition that makes ``ffls lights`` stop gets its one-line error in the table. Prints a
+Markdown table (for docs/spheres.md) and writes JSON.
+
+    python benchmarks/bench_conditions.py [--res 512] [--only NAME ...] [--cache DIR] [--out FILE]
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ffls.cli import build_parser, main as ffls_main
+from ffls.commands.synth import photo_settings, scene_of
+from ffls.conventions import angle_between
+from ffls.synth.scene import write_synthetic_capture
+
+from bench_lights import grid  # benchmarks/bench_lights.py
+from common import host_info, write_json  # benchmarks/common.py
+
+#: name -> ``ffls synth OUT`` flags (the lights are the Table 1 grid).
+CONDITIONS = {
+    "4 white, grey ground, EXR": [],
+    "4 white, near 10 cm light at 2 m": ["--near", "2", "--light-radius", "0.05"],
+    "sRGB 8-bit, unstated": ["--format", "png8", "--encoding", "srgb", "--unstated-encoding", "--exposure", "3"],
+    "linear 8-bit, unstated": ["--format", "png8", "--encoding", "linear", "--unstated-encoding", "--exposure", "3"],
+    "gamma 2.2 8-bit, unstated": ["--format", "png8", "--encoding", "gamma2.2", "--unstated-encoding",
+                                  "--exposure", "3"],
+    "sRGB 16-bit TIFF, unstated": ["--format", "tiff16", "--encoding", "srgb", "--unstated-encoding",
+                                   "--exposure", "3"],
+    "JPEG q85, sRGB stated": ["--format", "jpeg", "--jpeg-quality", "85", "--encoding", "srgb", "--exposure", "3"],
+    "noise + vignetting, 8-bit sRGB": ["--format", "png8", "--encoding", "srgb", "--exposure", "3",
+                                       "--shot-noise", "1e-4", "--read-noise", "0.002", "--vignetting", "cos4"],
+    "one grey sphere, 8-bit linear unstated": ["--spheres", "1", "--sphere-material", "grey", "--format", "png8",
+                                               "--encoding", "linear", "--unstated-encoding", "--exposure", "3"],
+    "one mirror ball, 8-bit sRGB": ["--spheres", "1", "--sphere-material", "mirror", "--format", "png8",
+                                    "--encoding", "srgb", "--exposure", "3"],
+    "one glossy black ball, 8-bit sRGB": ["--spheres", "1", "--sphere-material", "glossy_black", "--format", "png8",
+                                          "--encoding", "srgb", "--exposure", "3"],
+    "8 mixed spheres": ["--spheres", "8", "--sphere-material", "mixed"],
+    "black background": ["--background", "black"],
+    "white background": ["--background", "white"],
+    "textured background": ["--background", "textured"],
+    "long lens (10 m, 4.8 deg)": ["--lens", "long"],
+    "orthographic": ["--lens", "orthographic"],
+    "calibration shot: grey + mirror, no object": ["--no-object", "--spheres", "2", "--sphere-material", "grey,mirror"],
+}
+
+
+def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
+    """The capture of ``ffls synth OUT --resolution RES FLAGS`` under the lights ``dirs``."""
+    args = build_parser().parse_args(["synth", str(folder), "--resolution", str(res), "--quiet", *flags])
+    write_synthetic_capture(folder, directions=dirs, resolution=res, scene=scene_of(args), photo=photo_settings(args),
+                            progress=False, light_model="distant" if args.near is None else "near",
+                            light_distance=2.0 if args.near is None else args.near, light_radius=args.light_radius)
+
+
+def run_condition(name: str, flags: list, res: int, dirs: np.ndarray, folder: Path) -> dict:
+    folder = Path(folder)
+    if not (folder / "truth.json").exists():
+        render(folder, flags, res, dirs)
+    truth = json.loads((folder / "truth.json").read_text())
+    if not np.allclose(np.asarray(truth["directions"]), dirs, atol=1e-9):
+        raise SystemExit(f"{folder} holds another grid; remove it or use another --cache")
+    out = folder / "lights_estimated.json"
+    stdout, stderr = io.StringIO(), io.StringIO()
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        rc = ffls_main(["lights", str(folder), "-o", str(out), "--workers", "1", "--no-progress"])
+    dt = (time.perf_counter() - t0) / len(dirs)
+    row = {"condition": name, "flags": flags, "command": f"ffls synth OUT --resolution {res} {' '.join(flags)}".strip(),
+           "resolution": res, "n": int(len(dirs)), "rc": rc, "ms_per_photo": 1e3 * dt,
+           "stdout": stdout.getvalue().strip().splitlines(), "stderr": stderr.getvalue().strip().splitlines()}
+    if rc != 0:
+        row["error"] = (row["stderr"] or ["(no message)"])[-1]
+        return row
+    doc = json.loads(out.read_text())
+    lights = doc["lights"]
+    est = np.array([l["direction"] for l in lights], dtype=np.float64)
+    ok = np.array([l.get("status", "ok") == "ok" for l in lights])
+    unc = np.array([l.get("uncertainty_deg") if l.get("uncertainty_deg") is not None else np.nan for l in lights],
+                   dtype=np.float64)
+    err = np.degrees(angle_between(est, np.asarray(truth["directions"], dtype=np.float64)))
+    e, u = err[ok], unc[ok]
+    reasons: dict = {}
+    for l in lights:
+        if l.get("status", "ok") != "ok":
+            reasons[l.get("reason")] = reasons.get(l.get("reason"), 0) + 1
+    enc = doc.get("encoding")
+    row.update({
+        "accepted": int(ok.sum()), "rejected": reasons,
+        "median_deg": float(np.median(e)) if e.size else None, "max_deg": float(e.max()) if e.size else None,
+        "coverage": float(np.mean(e <= u)) if e.size else None,
+        "median_cone_deg": float(np.median(u)) if e.size else None,
+        "encoding": enc, "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
+    })
+    return row
+
+
+def encoding_text(enc) -> str:
+    if not enc:
+        return "stated"
+    if isinstance(enc, dict):
+        name = enc.get("curve", "?")
+        g, s = enc.get("gamma"), enc.get("uncertainty")
+        return f"{name}" + (f" (gamma {g:.2f}" + (f" +- {s:.2f})" if s is not None else ")") if g is not None else "")
+    return str(enc)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--res", type=int, default=512)
+    ap.add_argument("--phi-step", type=int, default=20)
+    ap.add_argument("--theta-step", type=int, default=10)
+    ap.add_argument("--only", nargs="*", default=None, help="names (substrings) of the conditions to run")
+    ap.add_argument("--cache", default=None, help="keep (and reuse) the renders in this folder")
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_conditions.json"))
+    a = ap.parse_args(argv)
+    _, _, dirs = grid(a.phi_step, a.theta_step)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(a.cache or tmp)
+        for i, (name, flags) in enumerate(CONDITIONS.items()):
+            if a.only and not any(o in name for o in a.only):
+                continue
+            r = run_condition(name, flags, a.res, dirs, base / f"c{i:02d}_{a.res}")
+            rows.append(r)
+            if r["rc"] != 0:
+                print(f"{name:44s} ERROR {r['error']}", flush=True)
+                continue
+            print(f"{name:44s} ok {r['accepted']:3d}/{r['n']} median {r['median_deg']:.2f} max {r['max_deg']:.2f} deg "
+                  f"coverage {100 * r['coverage']:.0f}% cone {r['median_cone_deg']:.2f} enc {encoding_text(r['encoding'])} "
+                  f"{r['ms_per_photo']:.0f} ms/photo {r['rejected'] or ''}", flush=True)
+    print("\n| condition | accepted | median / max error (deg) | 95% cone coverage (median cone) | encoding found | ms/photo | `ffls synth` flags |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        flags = "`" + " ".join(r["flags"]) + "`" if r["flags"] else "(defaults)"
+        if r["rc"] != 0:
+            print(f"| {r['condition']} | stopped: {r['error']} | | | | | {flags} |")
+            continue
+        med = "-" if r["median_deg"] is None else f"{r['median_deg']:.2f} / {r['max_deg']:.2f}"
+        cov = "-" if r["coverage"] is None else f"{100 * r['coverage']:.0f}% ({r['median_cone_deg']:.2f})"
+        print(f"| {r['condition']} | {r['accepted']}/{r['n']} | {med} | {cov} | {encoding_text(r['encoding'])} | "
+              f"{r['ms_per_photo']:.0f} | {flags} |")
+    write_json(a.out, {"benchmark": "bench_conditions", **host_info(), "resolution": a.res, "results": rows})
+
+
+if __name__ == "__main__":
+    main()
