@@ -372,3 +372,19 @@ def test_mirror_highlight_flux_does_not_depend_on_the_light_size():
     assert flux[0] == pytest.approx(flux[1], rel=0.05)
     with pytest.raises(ValueError):
         synth.render_light(s, 16, direction=d, light_angular_radius_deg=0)
+
+
+def test_cropped_and_hidden_spheres_are_recorded(tmp_path):
+    res = 64
+    # one sphere in the open, one cut by the right frame edge, one behind the object
+    scene = make_scene(sphere_xy=[(-0.25, -0.25), (0.33, -0.25), (0.0, 0.2)], sphere_material="grey")
+    synth.write_synthetic_capture(tmp_path, n_lights=1, resolution=res, scene=scene, progress=False)
+    sph = json.loads((tmp_path / "truth.json").read_text())["spheres"]
+    assert sph[0]["in_frame_fraction"] == 1.0 and sph[0]["visible_fraction"] == 1.0
+    assert sph[0]["silhouette_pixels"] == sph[0]["pixels"]
+    assert 0.2 < sph[1]["in_frame_fraction"] < 0.9
+    assert sph[1]["visible_fraction"] == pytest.approx(sph[1]["in_frame_fraction"])
+    assert sph[2]["in_frame_fraction"] == 1.0 and sph[2]["visible_fraction"] < 0.9  # the object hides part
+    # the edge sphere's centre is outside the frame or near it, and its pixels touch the border
+    mask = synth.sphere_mask(scene, res)
+    assert (mask[:, -1] == 1).any()
