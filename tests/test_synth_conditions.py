@@ -388,3 +388,16 @@ def test_cropped_and_hidden_spheres_are_recorded(tmp_path):
     # the edge sphere's centre is outside the frame or near it, and its pixels touch the border
     mask = synth.sphere_mask(scene, res)
     assert (mask[:, -1] == 1).any()
+
+
+@pytest.mark.parametrize("fmt, curve", [("png16", "srgb"), ("tiff16", "linear"), ("png16", "linear")])
+def test_16bit_files_round_trip(tmp_path, fmt, curve):
+    from ffls.io.capture import load_capture
+    from ffls.radiance.photos import load_photo
+
+    r = synth.write_synthetic_capture(tmp_path, n_lights=1, resolution=32, progress=False,
+                                      photo=PhotoSettings(fmt, curve, exposure=2.0))
+    assert r["images"][0].endswith(".tiff" if fmt == "tiff16" else ".png")
+    ref = np.clip(2.0 * synth.render_light(SynthScene(), 32, direction=r["directions"][0]), 0, 1)
+    got = load_photo(load_capture(tmp_path), 0)
+    assert np.abs(got - ref).max() < 2e-5 and np.abs(got - ref).max() > 0  # 16-bit quantisation
