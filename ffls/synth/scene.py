@@ -1386,7 +1386,8 @@ def write_calibration_pair(folder, scene: SynthScene | None = None, n_lights: in
     The calibration capture has the spheres of ``scene`` and no object, and a ``lights.json``
     of the true directions; the object capture has the object and no spheres, and no
     ``lights.json``: its lights are to come from the calibration capture (``--lights
-    folder/calibration/lights.json``, matched by order). Both have a ``truth.json``.
+    folder/calibration/lights.json``, matched by order). Both have a ``truth.json``; the object
+    capture's noise is drawn with ``seed + 1`` (independent of the calibration's).
 
     Parameters
     ----------
