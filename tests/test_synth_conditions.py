@@ -400,3 +400,16 @@ def test_16bit_files_round_trip(tmp_path, fmt, curve):
     ref = np.clip(2.0 * synth.render_light(SynthScene(), 32, direction=r["directions"][0]), 0, 1)
     got = load_photo(load_capture(tmp_path), 0)
     assert np.abs(got - ref).max() < 2e-5 and np.abs(got - ref).max() > 0  # 16-bit quantisation
+
+
+def test_glossy_black_coat_follows_fresnel_and_chrome_does_not():
+    s = make_scene(2, ("glossy_black", "mirror"), background="grey", with_object=False)
+    gb = synth.gbuffer(s, 128)
+    lab = gb.labels.ravel()[gb.index[gb.mirror_idx]] - synth.LABEL_SPHERE0
+    cos = np.einsum("ij,ij->i", gb.normals[gb.mirror_idx], gb.view[gb.mirror_idx])
+    black, chrome = lab == 0, lab == 1
+    assert np.all(gb.mirror_F[chrome] == 0.9)
+    assert gb.mirror_F[black & (cos > 0.95)].max() < 0.041 and gb.mirror_F[black & (cos < 0.15)].min() > 0.4
+    # under a zenith light the black ball's grazing rim mirrors the bright table; its centre is dark
+    img = synth.render_light(s, 128, direction=[0, 0, 1]).reshape(-1, 3)[gb.index[gb.mirror_idx]][:, 0]
+    assert np.median(img[black & (cos < 0.15) & gb.refl_hit]) > 5 * np.median(img[black & (cos > 0.95)])
