@@ -153,24 +153,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--spheres", type=_count, default=4, metavar="N",
                    help="number of calibration spheres on a ring around the object (default 4)")
     g.add_argument("--sphere-xy", type=_sphere_xy, default=None, metavar="X,Y;X,Y;...",
-                   help="ground positions of the spheres in metres (instead of --spheres)")
+                   help="ground positions of the spheres in metres (instead of --spheres); write --sphere-xy=... when "
+                        "the first number is negative")
     g.add_argument("--sphere-radius", type=_positive_float, default=0.05, metavar="M", help="sphere radius (default 0.05)")
     g.add_argument("--sphere-material", type=_materials, default="matte", metavar="MAT",
                    help="matte (white), grey, mirror (chrome), glossy_black, mixed, or a comma list per sphere")
     g.add_argument("--no-object", action="store_true", help="spheres only (a calibration shot)")
     g.add_argument("--background", type=_choice("black", "grey", "white", "textured", "checker"), default="grey",
+                   metavar="{black,grey,white,textured,checker}",
                    help="table: black, grey (default), white, textured (high-contrast blotches) or checker")
     g.add_argument("--ground-albedo", type=_albedo, default=None, metavar="A",
                    help="table albedo (mean albedo when textured); overrides --background's (grey 0.3)")
     g.add_argument("--lens", type=_choice("normal", "long", "orthographic"), default="normal",
+                   metavar="{normal,long,orthographic}",
                    help="normal (46 deg at 1 m, default), long (4.8 deg at 10 m) or orthographic (parallel rays)")
     g.add_argument("--calibration-pair", action="store_true",
                    help="write OUT_DIR/calibration (spheres, no object, lights.json) and OUT_DIR/object "
                         "(object, no spheres, no lights.json) under the same lights")
     f = p.add_argument_group("photograph")
     f.add_argument("--format", dest="file_format", type=_choice("exr", "png8", "png16", "tiff16", "jpeg"),
-                   default=None, help="exr (linear half float, default), png8, png16, tiff16 or jpeg")
+                   default=None, metavar="{exr,png8,png16,tiff16,jpeg}",
+                   help="exr (linear half float, default), png8, png16, tiff16 or jpeg")
     f.add_argument("--encoding", type=_choice("srgb", "linear", "gamma2.2"), default=None,
+                   metavar="{srgb,linear,gamma2.2}",
                    help="transfer curve of integer files (default srgb; exr is linear)")
     f.add_argument("--unstated-encoding", action="store_true",
                    help="leave the encoding out of capture.json (truth.json still records it)")

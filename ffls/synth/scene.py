@@ -64,6 +64,7 @@ __all__ = [
     "pixel_labels",
     "sphere_mask",
     "sphere_pixel_radii",
+    "sphere_silhouettes",
     "render_light",
     "render_lights",
     "render_lightmap",
@@ -1007,6 +1008,35 @@ def sphere_pixel_radii(scene: SynthScene, resolution: int) -> tuple[np.ndarray, 
     return uv, K[0, 0] * R / np.sqrt(D * D - R * R)
 
 
+def sphere_silhouettes(scene: SynthScene, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel counts of each sphere's whole silhouette, and of its part inside the frame.
+
+    Rays through pixel centres on a grid that extends past the frame as far as needed; each
+    sphere is tested alone (no occlusion), so ``pixels / whole`` (``pixels`` from
+    :func:`sphere_mask`) is the fraction of a sphere that is seen, and ``in_frame / whole`` how
+    much of it the frame edge leaves.
+
+    Returns
+    -------
+    whole : (n,) int64
+    in_frame : (n,) int64
+    """
+    R = int(resolution)
+    uv, rpx = sphere_pixel_radii(scene, R)
+    whole = np.zeros(scene.n_spheres, dtype=np.int64)
+    inside = np.zeros(scene.n_spheres, dtype=np.int64)
+    for k, c in enumerate(scene.sphere_centers):
+        h = int(math.ceil(2.0 * rpx[k])) + 2  # off-axis outlines are stretched ellipses: search 2 radii
+        u0, v0 = int(round(uv[k, 0])), int(round(uv[k, 1]))
+        vv, uu = np.mgrid[v0 - h:v0 + h + 1, u0 - h:u0 + h + 1]
+        o, d = _rays_through(scene, R, uu.ravel(), vv.ravel())
+        t0, t1 = Sphere(tuple(c), scene.sphere_radius, Material((0, 0, 0)), 0).interval(o, d)
+        hit = (t0 <= t1) & (t1 > 0)
+        whole[k] = np.count_nonzero(hit)
+        inside[k] = np.count_nonzero(hit & (uu.ravel() >= 0) & (uu.ravel() < R) & (vv.ravel() >= 0) & (vv.ravel() < R))
+    return whole, inside
+
+
 # ============================================================================ light directions
 def stratified_directions(n: int, hemisphere: str = "upper", seed: int = 0) -> np.ndarray:
     """Jittered equal-area spiral of ``n`` unit directions over the upper hemisphere or full sphere.
@@ -1280,6 +1310,7 @@ def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, 
     uv, rpx = sphere_pixel_radii(scene, R)
     mask = sphere_mask(scene, R)
     area_r = [math.sqrt(np.count_nonzero(mask == k) / math.pi) for k in range(scene.n_spheres)]
+    whole, in_frame = sphere_silhouettes(scene, R)
     capture = Capture(
         folder=folder, image_names=names, encoding=cap_encoding,
         K=K, dist=np.zeros(5), world_from_camera=scene.world_from_camera(),
@@ -1293,7 +1324,10 @@ def write_synthetic_capture(folder, n_lights: int = 100, resolution: int = 256, 
         spheres.append({
             "material": scene.sphere_materials[k], "center": centers[k].tolist(), "radius": scene.sphere_radius,
             "center_px": uv[k].tolist(), "radius_px": float(rpx[k]), "radius_px_from_area": area_r[k],
-            "pixels": int(np.count_nonzero(mask == k)), "albedo": float(mat.kd[0]),
+            "pixels": int(np.count_nonzero(mask == k)), "silhouette_pixels": int(whole[k]),
+            "in_frame_fraction": float(in_frame[k] / max(whole[k], 1)),
+            "visible_fraction": float(np.count_nonzero(mask == k) / max(whole[k], 1)),
+            "albedo": float(mat.kd[0]),
             "mirror_reflectance": float(mat.mirror), "fresnel": bool(mat.fresnel),
         })
     in_mirror_radius = (light_radius if light_model == "near" and light_radius > 0 else None)
@@ -1352,7 +1386,8 @@ def write_calibration_pair(folder, scene: SynthScene | None = None, n_lights: in
     The calibration capture has the spheres of ``scene`` and no object, and a ``lights.json``
     of the true directions; the object capture has the object and no spheres, and no
     ``lights.json``: its lights are to come from the calibration capture (``--lights
-    folder/calibration/lights.json``, matched by order). Both have a ``truth.json``.
+    folder/calibration/lights.json``, matched by order). Both have a ``truth.json``; the object
+    capture's noise is drawn with ``seed + 1`` (independent of the calibration's).
 
     Parameters
     ----------
