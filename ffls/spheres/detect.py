@@ -500,18 +500,27 @@ def _bilinear(img, xy):
             + fy * ((1 - fx) * img[y0 + 1, x0] + fx * img[y0 + 1, x0 + 1]))
 
 
-def _radius_from_edges(pts, grads, cpx, r_max):
-    """Apparent radius around a known centre: the peak of the radial-edge distance histogram."""
+def _radius_from_edges(pts, grads, cpx, r_max, r_min: float = 3.0):
+    """Apparent radius around a known centre: the peak of the radial-edge distance histogram.
+
+    Counts are divided by the circumference (``2 pi r``), so the score is the fraction of each
+    circle covered by radial edges, not how much clutter a large circle crosses; of the radii
+    scoring at least 0.6 of the best, the largest is taken (the outline encloses whatever lies
+    inside the sphere, e.g. a mirror's highlights). At least 8 edge points are needed.
+    """
     v = pts - cpx
     d = np.hypot(v[:, 0], v[:, 1])
     cosr = np.abs(np.sum(v * grads, axis=1)) / np.maximum(d, 1e-9)
-    sel = (cosr > 0.9) & (d >= 3) & (d <= r_max)
+    sel = (cosr > 0.9) & (d >= max(r_min, 3)) & (d <= r_max)
     if sel.sum() < 8:
         return None
     hist = np.bincount(np.rint(d[sel]).astype(int), minlength=int(r_max) + 3).astype(np.float64)
     hist = np.convolve(hist, [1, 2, 1], mode="same")
-    r = int(np.argmax(hist))
-    return float(r) if hist[r] >= 8 else None
+    frac = hist / (4 * 2 * np.pi * np.maximum(np.arange(hist.size), 1.0))
+    frac[hist < 32] = 0
+    if not frac.max() > 0:
+        return None
+    return float(np.nonzero(frac >= 0.6 * frac.max())[0].max())
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -768,7 +777,7 @@ def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, rng=None, n_edge=None, e
 
 # ----------------------------------------------------------------------------- hints
 def _parse_hint(h, cam: _Camera):
-    """(center_px (2,), radius_px or None, center_cam or None) from one hint dict.
+    """(center_px (2,), radius_px or None, center_cam or None, projected radius or None) from one hint dict.
 
     A hint giving both a pixel circle and a world centre must agree: the projected world centre
     within half a radius (+2 px) of ``center_px``, and a ``radius_px`` within a factor 1.5 of the
@@ -800,11 +809,13 @@ def _parse_hint(h, cam: _Camera):
                                  f"which projects to ({wpx[0]:.0f}, {wpx[1]:.0f}) px, radius {wr:.0f} px")
         else:
             px = wpx
-            # the radius comes from the image for a world hint: a wrong sphere_radius must not steer the search
+            # the radius comes from the image for a world hint (searched within a factor 4 of the
+            # projected one): a wrong sphere_radius must not steer the search
             rpx = wr if "center_cam" in h else None
+        return px, rpx, Cc, wr
     if px is None:
         raise ValueError(f"a sphere hint needs 'center' [x, y, z] or 'center_px' [u, v], got keys {sorted(h)}")
-    return px, rpx, Cc
+    return px, rpx, Cc, None
 
 
 def _check_duplicate_circles(circles, what, source) -> None:
@@ -1030,9 +1041,10 @@ def _hinted_candidates(hint_info, edges: _EdgeMap, shape, source) -> list[tuple[
     """Stage 3 with hints: one circle (x, y, r) per hint; a radius the hint lacks comes from the edges."""
     H, W = shape
     cands = []
-    for k, (cpx, rpx, _) in enumerate(hint_info):
+    for k, (cpx, rpx, _, r_proj) in enumerate(hint_info):
         if rpx is None:  # centre only: the radius comes from the edges around it
-            rpx = _radius_from_edges(edges.points, edges.grads, cpx, min(H, W) / 2)
+            lo, hi = (3.0, min(H, W) / 2) if r_proj is None else (r_proj / 4, min(4 * r_proj, max(H, W)))
+            rpx = _radius_from_edges(edges.points, edges.grads, cpx, hi, lo)
             if rpx is None:
                 raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
                                  f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
