@@ -1058,6 +1058,14 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60) -> li
     if len(edges.points) < 10:
         return []
     hc = _hough_candidates(edges.log8, 3, min(H, W) / 2, edges.scale)
+    # the outermost well-covered circle around each Hough centre too: a mirror ball's highlights and
+    # reflections make inner circles that Hough may prefer to its faint outline
+    outer = []
+    for x, y, r in hc:
+        r2 = _radius_from_edges(edges.points, edges.grads, np.array([x, y]), min(2.5 * r, min(H, W) / 2), 1.2 * r)
+        if r2 is not None:
+            outer.append((x, y, r2))
+    hc = np.concatenate([hc, np.array(outer).reshape(-1, 3)])
     scored = []
     for x, y, r in hc:
         support, visible = _score_circle(x, y, r, edges.distance)
