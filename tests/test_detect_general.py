@@ -229,3 +229,11 @@ def test_capture_json_count_and_hints(tmp_path):
     (tmp_path / "capture.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match="sphere_count"):
         load_capture(tmp_path)
+
+
+def test_only_sphere_cropped_too_much_is_named_in_the_error(tmp_path):
+    K = np.array([[500.0, 0, 199.5], [0, 500, 149.5], [0, 0, 1]])
+    scene = ds.Scene((300, 400), [_ball_at(300, 296, K)], "pinhole", K)  # 54 % of its outline inside
+    with pytest.raises(InputError, match=r"no sphere found.*cropped too much, only 54%.*center_px") as e:
+        detect.find_spheres(ds.render(scene, LIGHTS, "grey"), K, None, 0.04, source=tmp_path)
+    assert "\n" not in str(e.value)
