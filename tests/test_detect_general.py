@@ -78,6 +78,8 @@ def test_spheres_cut_by_the_frame_edge():
     assert max(_errors(scene, fits)) < 0.5
     cut = min(fits, key=lambda f: f.center_px[0])
     assert 0.6 < cut.visible_fraction < 0.7
+    assert 0 < cut.center_sigma_px < 0.3  # well constrained, though less than a whole outline
+    assert cut.center_sigma_px > max(f.center_sigma_px for f in fits if f is not cut)
     assert len(fits.rejected) == 1 and "cropped too much" in fits.rejected[0] and "54%" in fits.rejected[0]
     # its samples are the pixels inside the image only
     from ffls.spheres.samples import sphere_samples

@@ -124,6 +124,8 @@ class SphereFit:
         Fraction of the projected outline inside the image (1 unless the frame edge cuts it).
     score : float
         Detection score of an unhinted sphere (support x closure x neutrality x fit quality).
+    center_sigma_px : float
+        Standard error of the fitted centre, pixels (0 for overrides).
     """
 
     center_cam: np.ndarray
@@ -144,6 +146,7 @@ class SphereFit:
     camera_model: str = "pinhole"
     visible_fraction: float = 1.0
     score: float = 0.0
+    center_sigma_px: float = 0.0
 
     @property
     def distance(self) -> float:
@@ -182,6 +185,7 @@ class SphereFit:
             "source": self.source,
             "camera_model": self.camera_model,
             "visible_fraction": float(self.visible_fraction),
+            "center_sigma_px": float(self.center_sigma_px),
         }
 
 
@@ -755,13 +759,39 @@ def _make_fit_ortho(cpx, rpx, cam: _Camera, source, edge_px=None, residual=0.0, 
         camera_model="orthographic", visible_fraction=outline_visible_fraction(outline, cam.shape))
 
 
-def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, rng=None, n_edge=None, edge_sel=None):
-    """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails."""
+def _centre_sigma_px(fun, p, args) -> float:
+    """Standard error (pixels) of the centre of a fitted outline: the larger principal value of the
+    covariance of the first two parameters (both in pixels), ``(J^T J)^-1 * rms^2``, with ``J``
+    the forward-difference Jacobian of the residuals ``fun(p, *args)`` at the solution ``p``."""
+    p = np.asarray(p, dtype=np.float64)
+    r0 = fun(p, *args)
+    n = r0.size
+    if n <= p.size:
+        return float("inf")
+    J = np.empty((n, p.size))
+    for i in range(p.size):
+        dp = np.zeros_like(p)
+        dp[i] = 1e-3
+        J[:, i] = (fun(p + dp, *args) - r0) / 1e-3
+    try:
+        cov = np.linalg.inv(J.T @ J) * float(r0 @ r0) / (n - p.size)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    return float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
+
+
+def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, n_edge=None):
+    """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails.
+
+    The fit's ``center_sigma_px`` is the standard error of its centre (:func:`_centre_sigma_px`).
+    """
     if cam.ortho:
         c, r, inl, res = fit_circle(P, c0_px, r0_px)
         rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-        return _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
-                               n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
+        ft = _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
+                             n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
+        ft.center_sigma_px = _centre_sigma_px(_circle_residuals, [c[0], c[1], r], (P[inl],))
+        return ft
     f = cam.f
     K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])
     c0 = pixel_rays(np.asarray(c0_px, dtype=np.float64)[None], K_und)[0]
@@ -770,9 +800,13 @@ def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, rng=None, n_edge=None, e
     s = pixel_rays(P, cam.K, cam.dist)
     C, inl, res = fit_sphere_center(s, cam.R, f, c0, a0)
     rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-    return _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
-                     n_edge=n_edge or len(P), n_in=int(inl.sum()),
-                     coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
+    ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
+                   n_edge=n_edge or len(P), n_in=int(inl.sum()),
+                   coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
+    d = C / np.linalg.norm(C)
+    p = f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
+    ft.center_sigma_px = _centre_sigma_px(_cone_residuals, p, (s[inl], f))
+    return ft
 
 
 # ----------------------------------------------------------------------------- hints
@@ -981,6 +1015,7 @@ CRITERIA = {
     "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
     "size_ratio_pinhole": 2.0,   # implied depths of all spheres within this factor of each other
     "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
+    "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
 }
 
 
@@ -1216,6 +1251,9 @@ def _select_spheres(fits, mx, brightest, L, cam: _Camera, n_photos, max_residual
         if ft.visible_fraction < min_visible:
             rejected.append(f"{where}: cropped too much, only {ft.visible_fraction:.0%} of its outline is inside the"
                             f" image (needs {min_visible:.0%})")
+        elif ft.center_sigma_px > crit["max_center_sigma_px"]:
+            rejected.append(f"{where}: its centre is poorly constrained by the visible outline (standard error "
+                            f"{ft.center_sigma_px:.2f} px > {crit['max_center_sigma_px']})")
         elif neutral < crit["min_neutral"]:
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
                             f" white, grey or chrome sphere")
@@ -1264,6 +1302,9 @@ def _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visibl
         if ft.visible_fraction < min_visible:
             raise InputError(f"{where}: cropped too much, only {ft.visible_fraction:.0%} of its outline is inside the"
                              f" image (needs {min_visible:.0%}); reframe, or remove this sphere's hint", source)
+        if ft.center_sigma_px > CRITERIA["max_center_sigma_px"]:
+            raise InputError(f"{where}: its centre is poorly constrained by the visible outline (standard error"
+                             f" {ft.center_sigma_px:.2f} px > {CRITERIA['max_center_sigma_px']})", source)
         closed = ft.coverage / max(ft.visible_fraction, 1e-6)
         if ft.residual_px > max_residual_px or closed < min_coverage:
             raise InputError(f"{where}: outline does not fit a sphere (rms {ft.residual_px:.2f} px, coverage"
