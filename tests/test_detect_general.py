@@ -78,6 +78,8 @@ def test_spheres_cut_by_the_frame_edge():
     assert max(_errors(scene, fits)) < 0.5
     cut = min(fits, key=lambda f: f.center_px[0])
     assert 0.6 < cut.visible_fraction < 0.7
+    assert 0 < cut.center_sigma_px < 0.3  # well constrained, though less than a whole outline
+    assert cut.center_sigma_px > max(f.center_sigma_px for f in fits if f is not cut)
     assert len(fits.rejected) == 1 and "cropped too much" in fits.rejected[0] and "54%" in fits.rejected[0]
     # its samples are the pixels inside the image only
     from ffls.spheres.samples import sphere_samples
@@ -229,3 +231,11 @@ def test_capture_json_count_and_hints(tmp_path):
     (tmp_path / "capture.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match="sphere_count"):
         load_capture(tmp_path)
+
+
+def test_only_sphere_cropped_too_much_is_named_in_the_error(tmp_path):
+    K = np.array([[500.0, 0, 199.5], [0, 500, 149.5], [0, 0, 1]])
+    scene = ds.Scene((300, 400), [_ball_at(300, 296, K)], "pinhole", K)  # 54 % of its outline inside
+    with pytest.raises(InputError, match=r"no sphere found.*cropped too much, only 54%.*center_px") as e:
+        detect.find_spheres(ds.render(scene, LIGHTS, "grey"), K, None, 0.04, source=tmp_path)
+    assert "\n" not in str(e.value)

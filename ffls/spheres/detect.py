@@ -33,7 +33,7 @@ Method
    majority polarity, (b) a RANSAC circle search for the initial fit, (c) a ``soft_l1`` loss
    with a 1-pixel scale, and (d) trimming at a robust multiple of the residual spread followed
    by a refit on the inliers.
-6. **Which outlines are spheres** (no hints, :func:`_select_spheres`, :data:`CRITERIA`): round
+6. **Which outlines are spheres** (no hints, :mod:`ffls.spheres.select`): round
    (fit RMS), closed and supported (coverage of the visible outline), visible enough (a sphere
    cut by the frame edge is used when 60 % of its outline is inside), neutral in colour, shading
    that changes across the photos as a sphere's does (not the same brightest photo everywhere),
@@ -57,6 +57,7 @@ from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_b
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo
+from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
 
 __all__ = [
     "SphereFit",
@@ -124,6 +125,8 @@ class SphereFit:
         Fraction of the projected outline inside the image (1 unless the frame edge cuts it).
     score : float
         Detection score of an unhinted sphere (support x closure x neutrality x fit quality).
+    center_sigma_px : float
+        Standard error of the fitted centre, pixels (0 for overrides).
     """
 
     center_cam: np.ndarray
@@ -144,6 +147,7 @@ class SphereFit:
     camera_model: str = "pinhole"
     visible_fraction: float = 1.0
     score: float = 0.0
+    center_sigma_px: float = 0.0
 
     @property
     def distance(self) -> float:
@@ -182,6 +186,7 @@ class SphereFit:
             "source": self.source,
             "camera_model": self.camera_model,
             "visible_fraction": float(self.visible_fraction),
+            "center_sigma_px": float(self.center_sigma_px),
         }
 
 
@@ -500,18 +505,27 @@ def _bilinear(img, xy):
             + fy * ((1 - fx) * img[y0 + 1, x0] + fx * img[y0 + 1, x0 + 1]))
 
 
-def _radius_from_edges(pts, grads, cpx, r_max):
-    """Apparent radius around a known centre: the peak of the radial-edge distance histogram."""
+def _radius_from_edges(pts, grads, cpx, r_max, r_min: float = 3.0):
+    """Apparent radius around a known centre: the peak of the radial-edge distance histogram.
+
+    Counts are divided by the circumference (``2 pi r``), so the score is the fraction of each
+    circle covered by radial edges, not how much clutter a large circle crosses; of the radii
+    scoring at least 0.6 of the best, the largest is taken (the outline encloses whatever lies
+    inside the sphere, e.g. a mirror's highlights). At least 8 edge points are needed.
+    """
     v = pts - cpx
     d = np.hypot(v[:, 0], v[:, 1])
     cosr = np.abs(np.sum(v * grads, axis=1)) / np.maximum(d, 1e-9)
-    sel = (cosr > 0.9) & (d >= 3) & (d <= r_max)
+    sel = (cosr > 0.9) & (d >= max(r_min, 3)) & (d <= r_max)
     if sel.sum() < 8:
         return None
     hist = np.bincount(np.rint(d[sel]).astype(int), minlength=int(r_max) + 3).astype(np.float64)
     hist = np.convolve(hist, [1, 2, 1], mode="same")
-    r = int(np.argmax(hist))
-    return float(r) if hist[r] >= 8 else None
+    frac = hist / (4 * 2 * np.pi * np.maximum(np.arange(hist.size), 1.0))
+    frac[hist < 32] = 0
+    if not frac.max() > 0:
+        return None
+    return float(np.nonzero(frac >= 0.6 * frac.max())[0].max())
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -746,13 +760,39 @@ def _make_fit_ortho(cpx, rpx, cam: _Camera, source, edge_px=None, residual=0.0, 
         camera_model="orthographic", visible_fraction=outline_visible_fraction(outline, cam.shape))
 
 
-def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, rng=None, n_edge=None, edge_sel=None):
-    """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails."""
+def _centre_sigma_px(fun, p, args) -> float:
+    """Standard error (pixels) of the centre of a fitted outline: the larger principal value of the
+    covariance of the first two parameters (both in pixels), ``(J^T J)^-1 * rms^2``, with ``J``
+    the forward-difference Jacobian of the residuals ``fun(p, *args)`` at the solution ``p``."""
+    p = np.asarray(p, dtype=np.float64)
+    r0 = fun(p, *args)
+    n = r0.size
+    if n <= p.size:
+        return float("inf")
+    J = np.empty((n, p.size))
+    for i in range(p.size):
+        dp = np.zeros_like(p)
+        dp[i] = 1e-3
+        J[:, i] = (fun(p + dp, *args) - r0) / 1e-3
+    try:
+        cov = np.linalg.inv(J.T @ J) * float(r0 @ r0) / (n - p.size)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    return float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
+
+
+def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, n_edge=None):
+    """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails.
+
+    The fit's ``center_sigma_px`` is the standard error of its centre (:func:`_centre_sigma_px`).
+    """
     if cam.ortho:
         c, r, inl, res = fit_circle(P, c0_px, r0_px)
         rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-        return _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
-                               n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
+        ft = _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
+                             n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
+        ft.center_sigma_px = _centre_sigma_px(_circle_residuals, [c[0], c[1], r], (P[inl],))
+        return ft
     f = cam.f
     K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])
     c0 = pixel_rays(np.asarray(c0_px, dtype=np.float64)[None], K_und)[0]
@@ -761,14 +801,18 @@ def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, rng=None, n_edge=None, e
     s = pixel_rays(P, cam.K, cam.dist)
     C, inl, res = fit_sphere_center(s, cam.R, f, c0, a0)
     rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-    return _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
-                     n_edge=n_edge or len(P), n_in=int(inl.sum()),
-                     coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
+    ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
+                   n_edge=n_edge or len(P), n_in=int(inl.sum()),
+                   coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
+    d = C / np.linalg.norm(C)
+    p = f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
+    ft.center_sigma_px = _centre_sigma_px(_cone_residuals, p, (s[inl], f))
+    return ft
 
 
 # ----------------------------------------------------------------------------- hints
 def _parse_hint(h, cam: _Camera):
-    """(center_px (2,), radius_px or None, center_cam or None) from one hint dict.
+    """(center_px (2,), radius_px or None, center_cam or None, projected radius or None) from one hint dict.
 
     A hint giving both a pixel circle and a world centre must agree: the projected world centre
     within half a radius (+2 px) of ``center_px``, and a ``radius_px`` within a factor 1.5 of the
@@ -800,11 +844,13 @@ def _parse_hint(h, cam: _Camera):
                                  f"which projects to ({wpx[0]:.0f}, {wpx[1]:.0f}) px, radius {wr:.0f} px")
         else:
             px = wpx
-            # the radius comes from the image for a world hint: a wrong sphere_radius must not steer the search
+            # the radius comes from the image for a world hint (searched within a factor 4 of the
+            # projected one): a wrong sphere_radius must not steer the search
             rpx = wr if "center_cam" in h else None
+        return px, rpx, Cc, wr
     if px is None:
         raise ValueError(f"a sphere hint needs 'center' [x, y, z] or 'center_px' [u, v], got keys {sorted(h)}")
-    return px, rpx, Cc
+    return px, rpx, Cc, None
 
 
 def _check_duplicate_circles(circles, what, source) -> None:
@@ -829,7 +875,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     (:func:`_max_luminance`), its edges (:func:`_edge_map`), candidate circles
     (:func:`_hinted_candidates` or :func:`_hough_circle_candidates`), a fit per candidate
     (:func:`_fit_candidates`: the tangent cone for a pinhole camera, a circle for an orthographic
-    one), the choice of the spheres (:func:`_select_spheres` without hints, :func:`_check_hinted_fits`
+    one), the choice of the spheres (:func:`ffls.spheres.select.select_spheres` without hints, :func:`_check_hinted_fits`
     with hints), the lit-limb refit (:func:`_refine_on_lit_limb`) and the scale check
     (:func:`_check_radius`).
 
@@ -947,7 +993,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         hint_info = []
         cands = _hough_circle_candidates(edges, L)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
-        fits, rejected = _select_spheres(fits, mx, brightest, L, cam, n_photos, max_residual_px, min_visible)
+        fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible)
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
         if not fits or (n_spheres is not None and len(fits) < n_spheres):
@@ -958,19 +1004,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
-
-
-#: Criteria an unhinted round outline must meet to count as a calibration sphere
-#: (:func:`_select_spheres`; documented with their reasons in docs/spheres.md).
-CRITERIA = {
-    "max_residual_px": 1.5,      # RMS of the outline points about the fitted cone/circle
-    "min_closed": 0.5,           # outline coverage (36 angular bins) over the visible outline
-    "min_support": 0.5,          # inlier edge points per pixel of visible outline
-    "min_neutral": 0.5,          # min/max channel of the median colour inside (white, grey, chrome)
-    "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
-    "size_ratio_pinhole": 2.0,   # implied depths of all spheres within this factor of each other
-    "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
-}
 
 
 def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFit]:
@@ -1030,9 +1063,10 @@ def _hinted_candidates(hint_info, edges: _EdgeMap, shape, source) -> list[tuple[
     """Stage 3 with hints: one circle (x, y, r) per hint; a radius the hint lacks comes from the edges."""
     H, W = shape
     cands = []
-    for k, (cpx, rpx, _) in enumerate(hint_info):
+    for k, (cpx, rpx, _, r_proj) in enumerate(hint_info):
         if rpx is None:  # centre only: the radius comes from the edges around it
-            rpx = _radius_from_edges(edges.points, edges.grads, cpx, min(H, W) / 2)
+            lo, hi = (3.0, min(H, W) / 2) if r_proj is None else (r_proj / 4, min(4 * r_proj, max(H, W)))
+            rpx = _radius_from_edges(edges.points, edges.grads, cpx, hi, lo)
             if rpx is None:
                 raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
                                  f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
@@ -1046,6 +1080,14 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60) -> li
     if len(edges.points) < 10:
         return []
     hc = _hough_candidates(edges.log8, 3, min(H, W) / 2, edges.scale)
+    # the outermost well-covered circle around each Hough centre too: a mirror ball's highlights and
+    # reflections make inner circles that Hough may prefer to its faint outline
+    outer = []
+    for x, y, r in hc:
+        r2 = _radius_from_edges(edges.points, edges.grads, np.array([x, y]), min(2.5 * r, min(H, W) / 2), 1.2 * r)
+        if r2 is not None:
+            outer.append((x, y, r2))
+    hc = np.concatenate([hc, np.array(outer).reshape(-1, 3)])
     scored = []
     for x, y, r in hc:
         support, visible = _score_circle(x, y, r, edges.distance)
@@ -1101,127 +1143,6 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
     return fits, failures
 
 
-def _disc_pixels(ft: SphereFit, shape, frac: float = 0.7):
-    """Row and column indices of the pixels within ``frac`` of the apparent radius, inside the image."""
-    H, W = shape
-    cx, cy = ft.center_px
-    r = frac * ft.radius_px
-    y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)) + 1, H)
-    x0, x1 = max(int(np.floor(cx - r)), 0), min(int(np.ceil(cx + r)) + 1, W)
-    if y0 >= y1 or x0 >= x1:
-        return np.zeros(0, int), np.zeros(0, int)
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    m = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
-    return yy[m], xx[m]
-
-
-def _neutrality(mx, L, rows, cols) -> float:
-    """Colour neutrality of the pixels: the 25th percentile over the lit pixels of min/max channel.
-
-    1 for grey; a white, grey or chrome sphere stays near 1 (sensor noise and white balance
-    aside). The lower quartile rather than the median, because a coloured glossy ball's
-    highlights from many photos whiten much of it in the max image. 1 for a single-channel image.
-    """
-    if not (mx.ndim == 3 and mx.shape[2] >= 3) or rows.size == 0:
-        return 1.0
-    px = mx[rows, cols][:, :3].astype(np.float64)
-    lum = L[rows, cols]
-    lit = lum > 0.1 * float(np.percentile(lum, 95))
-    if lit.sum() < 5:
-        return 1.0
-    ratio = px[lit].min(axis=1) / np.maximum(px[lit].max(axis=1), 1e-12)
-    return float(np.clip(np.percentile(ratio, 25), 0, 1))
-
-
-def _shading_change(brightest, L, rows, cols) -> float:
-    """Share of the lit pixels whose brightest photo is not the most common one.
-
-    A sphere's pixels face different ways, so different photos light them best: a matte sphere's
-    pixels split among the lights (Voronoi cells of the normals), a mirror's highlights each come
-    from their own photo. A flat painted disc or a print is brightest in the same photo
-    everywhere: the share is about 0.
-    """
-    lum = L[rows, cols]
-    lit = lum > 0.05 * float(np.percentile(lum, 95)) if lum.size else lum > 0
-    if lit.sum() < 10:
-        return 1.0
-    counts = np.bincount(brightest[rows[lit], cols[lit]])
-    return float(1.0 - counts.max() / lit.sum())
-
-
-def _select_spheres(fits, mx, brightest, L, cam: _Camera, n_photos, max_residual_px, min_visible):
-    """Stage 5 without hints: which fitted round outlines are calibration spheres.
-
-    A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
-    inlier points cover at least :data:`CRITERIA` ``min_closed`` of the visible outline and give at
-    least ``min_support`` points per pixel of it. Overlapping round outlines keep the best-scored
-    one (support x closure x neutrality / (1 + (rms / 0.5 px)^2)). A round outline is then set
-    aside, with a one-line reason, when it is cut by the frame edge (less than ``min_visible`` of
-    it inside), coloured (``min_neutral``), its shading does not change across the photos as a
-    sphere's does (``min_shading_change``, with at least 3 photos), or its size disagrees with the
-    other spheres' (all spheres share ``sphere_radius``: implied depths within ``size_ratio_pinhole``,
-    or apparent radii within ``size_ratio_ortho`` for an orthographic camera; the consistent group
-    with the largest total score wins).
-
-    Returns
-    -------
-    chosen : list of SphereFit
-        Each with a ``score`` attribute.
-    rejected : list of str
-    """
-    crit = CRITERIA
-    shape = L.shape
-    round_ = []
-    for ft in fits:
-        vis = max(ft.visible_fraction, 1e-6)
-        closed = min(ft.coverage / vis, 1.0)
-        support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
-        if ft.residual_px > max_residual_px or closed < crit["min_closed"] or support < crit["min_support"]:
-            continue
-        rows, cols = _disc_pixels(ft, shape)
-        if rows.size < 5:
-            continue
-        neutral = _neutrality(mx, L, rows, cols)
-        ft.score = min(support, 1.2) * closed * (0.25 + 0.75 * neutral) / (1 + (ft.residual_px / 0.5) ** 2)
-        round_.append((ft, neutral, rows, cols))
-    round_.sort(key=lambda t: -t[0].score)
-    distinct = []
-    for t in round_:
-        ft = t[0]
-        if all(np.hypot(*(ft.center_px - o[0].center_px)) > 0.8 * (ft.radius_px + o[0].radius_px) for o in distinct):
-            distinct.append(t)
-    rejected, ok = [], []
-    for ft, neutral, rows, cols in distinct:
-        where = f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius {ft.radius_px:.0f} px"
-        if ft.visible_fraction < min_visible:
-            rejected.append(f"{where}: cropped too much, only {ft.visible_fraction:.0%} of its outline is inside the"
-                            f" image (needs {min_visible:.0%})")
-        elif neutral < crit["min_neutral"]:
-            rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
-                            f" white, grey or chrome sphere")
-        elif (brightest is not None and n_photos >= 3
-              and (chg := _shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
-            rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
-                            f" (the same photo is brightest on {1 - chg:.0%} of it)")
-        else:
-            ok.append(ft)
-    if len(ok) > 1:  # size consistency: all spheres share sphere_radius
-        size = np.array([ft.radius_px if cam.ortho else ft.distance for ft in ok])
-        tol = np.log(crit["size_ratio_ortho"] if cam.ortho else crit["size_ratio_pinhole"])
-        groups = [(size >= s) & (size <= s * np.exp(tol)) for s in size]  # windows [s, ratio * s]
-        best = max(range(len(ok)), key=lambda i: (sum(ft.score for ft, g in zip(ok, groups[i]) if g), -i))
-        keep = groups[best]
-        ref = float(np.median(size[keep]))
-        for ft, k, s in zip(ok, keep, size):
-            if not k:
-                what = f"radius {s:.1f} px" if cam.ortho else f"depth {s:.3g}"
-                ref_s = f"{ref:.1f} px" if cam.ortho else f"{ref:.3g}"
-                rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
-                                f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})")
-        ok = [ft for ft, k in zip(ok, keep) if k]
-    return ok, rejected
-
-
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands) -> str:
     H, W = shape
     found = (f"found {len(fits)} of {int(n_spheres)} spheres" if n_spheres is not None and fits
@@ -1244,6 +1165,9 @@ def _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visibl
         if ft.visible_fraction < min_visible:
             raise InputError(f"{where}: cropped too much, only {ft.visible_fraction:.0%} of its outline is inside the"
                              f" image (needs {min_visible:.0%}); reframe, or remove this sphere's hint", source)
+        if ft.center_sigma_px > CRITERIA["max_center_sigma_px"]:
+            raise InputError(f"{where}: its centre is poorly constrained by the visible outline (standard error"
+                             f" {ft.center_sigma_px:.2f} px > {CRITERIA['max_center_sigma_px']})", source)
         closed = ft.coverage / max(ft.visible_fraction, 1e-6)
         if ft.residual_px > max_residual_px or closed < min_coverage:
             raise InputError(f"{where}: outline does not fit a sphere (rms {ft.residual_px:.2f} px, coverage"
@@ -1287,7 +1211,7 @@ def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_
     rr = np.hypot(P[:, 0] - cpx[0], P[:, 1] - cpx[1])
     u = (cpx - P) / np.maximum(rr, 1e-9)[:, None]
     limb = _bilinear(L, P + 1.5 * u)
-    rows, cols = _disc_pixels(ft, L.shape, 0.8)
+    rows, cols = disc_pixels(ft, L.shape, 0.8)
     if rows.size == 0:
         return ft
     keep = limb >= lit_limb * float(np.percentile(L[rows, cols], 95))

@@ -1,0 +1,168 @@
+"""Which round outlines in the max image are calibration spheres (detection without hints).
+
+Stage 5 of :func:`ffls.spheres.detect.find_spheres` when no hint is given: every fitted round
+outline (a :class:`ffls.spheres.detect.SphereFit`) is judged by criteria that hold for real
+calibration spheres in general (:data:`CRITERIA`, documented with their reasons in
+``docs/spheres.md``, "Detection without hints"): round, closed and supported outline; visible
+enough when the frame edge cuts it; a well-constrained centre; neutral colour; shading that
+changes across the photos as a sphere's does; a size consistent with the other spheres (all
+share ``sphere_radius``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["CRITERIA", "disc_pixels", "neutrality", "shading_change", "select_spheres"]
+
+
+#: Criteria an unhinted round outline must meet to count as a calibration sphere
+#: (:func:`select_spheres`; documented with their reasons in docs/spheres.md).
+CRITERIA = {
+    "max_residual_px": 1.5,      # RMS of the outline points about the fitted cone/circle
+    "min_closed": 0.5,           # outline coverage (36 angular bins) over the visible outline
+    "min_support": 0.5,          # inlier edge points per pixel of visible outline
+    "min_neutral": 0.5,          # lower quartile of min/max channel over the lit pixels (white, grey, chrome)
+    "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
+    "size_ratio_pinhole": 2.0,   # implied depths of all spheres within this factor of each other
+    "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
+    "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
+}
+
+
+def disc_pixels(ft, shape, frac: float = 0.7):
+    """Row and column indices of the pixels within ``frac`` of the apparent radius, inside the image."""
+    H, W = shape
+    cx, cy = ft.center_px
+    r = frac * ft.radius_px
+    y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)) + 1, H)
+    x0, x1 = max(int(np.floor(cx - r)), 0), min(int(np.ceil(cx + r)) + 1, W)
+    if y0 >= y1 or x0 >= x1:
+        return np.zeros(0, int), np.zeros(0, int)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    m = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+    return yy[m], xx[m]
+
+
+def neutrality(mx, L, rows, cols) -> float:
+    """Colour neutrality of the pixels: the 25th percentile over the lit pixels of min/max channel.
+
+    1 for grey; a white, grey or chrome sphere stays near 1 (sensor noise and white balance
+    aside). The lower quartile rather than the median, because a coloured glossy ball's
+    highlights from many photos whiten much of it in the max image. 1 for a single-channel image.
+    """
+    if not (mx.ndim == 3 and mx.shape[2] >= 3) or rows.size == 0:
+        return 1.0
+    px = mx[rows, cols][:, :3].astype(np.float64)
+    lum = L[rows, cols]
+    lit = lum > 0.1 * float(np.percentile(lum, 95))
+    if lit.sum() < 5:
+        return 1.0
+    ratio = px[lit].min(axis=1) / np.maximum(px[lit].max(axis=1), 1e-12)
+    return float(np.clip(np.percentile(ratio, 25), 0, 1))
+
+
+def shading_change(brightest, L, rows, cols) -> float:
+    """Share of the lit pixels whose brightest photo is not the most common one.
+
+    A sphere's pixels face different ways, so different photos light them best: a matte sphere's
+    pixels split among the lights (Voronoi cells of the normals), a mirror's highlights each come
+    from their own photo. A flat painted disc or a print is brightest in the same photo
+    everywhere: the share is about 0.
+    """
+    lum = L[rows, cols]
+    lit = lum > 0.05 * float(np.percentile(lum, 95)) if lum.size else lum > 0
+    if lit.sum() < 10:
+        return 1.0
+    counts = np.bincount(brightest[rows[lit], cols[lit]])
+    return float(1.0 - counts.max() / lit.sum())
+
+
+def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible):
+    """Stage 5 without hints: which fitted round outlines are calibration spheres.
+
+    A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
+    inlier points cover at least :data:`CRITERIA` ``min_closed`` of the visible outline and give at
+    least ``min_support`` points per pixel of it. Overlapping round outlines keep the best-scored
+    one (support x closure x (0.25 + 0.75 neutrality) / (1 + (rms / 0.5 px)^2)). A round outline
+    is then set aside, with a one-line reason, when it is cut by the frame edge (less than
+    ``min_visible`` of it inside), its centre is poorly constrained (standard error above
+    ``max_center_sigma_px``), it is coloured (``min_neutral``), its shading does not change
+    across the photos as a sphere's does (``min_shading_change``, with at least 3 photos), or its
+    size disagrees with the other spheres' (all spheres share ``sphere_radius``: implied depths
+    within ``size_ratio_pinhole``, or apparent radii within ``size_ratio_ortho`` for an
+    orthographic camera; the consistent group with the largest total score wins).
+
+    Parameters
+    ----------
+    fits : list of ffls.spheres.detect.SphereFit
+        The fitted candidates; each kept one gets its ``score`` set.
+    mx : (H, W, 3) or (H, W) float
+        Max image.
+    brightest : (H, W) int or None
+        Per pixel, the photo that is brightest there (None: the shading criterion is skipped).
+    L : (H, W) float
+        Luminance of ``mx``.
+    ortho : bool
+        Orthographic camera (sizes compared as pixel radii, not depths).
+    n_photos : int
+    max_residual_px, min_visible : float
+
+    Returns
+    -------
+    chosen : list of SphereFit
+    rejected : list of str
+    """
+    crit = CRITERIA
+    shape = L.shape
+    round_ = []
+    for ft in fits:
+        vis = max(ft.visible_fraction, 1e-6)
+        closed = min(ft.coverage / vis, 1.0)
+        support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
+        if ft.residual_px > max_residual_px or closed < crit["min_closed"] or support < crit["min_support"]:
+            continue
+        rows, cols = disc_pixels(ft, shape)
+        if rows.size < 5:
+            continue
+        neutral = neutrality(mx, L, rows, cols)
+        ft.score = min(support, 1.2) * closed * (0.25 + 0.75 * neutral) / (1 + (ft.residual_px / 0.5) ** 2)
+        round_.append((ft, neutral, rows, cols))
+    round_.sort(key=lambda t: -t[0].score)
+    distinct = []
+    for t in round_:
+        ft = t[0]
+        if all(np.hypot(*(ft.center_px - o[0].center_px)) > 0.8 * (ft.radius_px + o[0].radius_px) for o in distinct):
+            distinct.append(t)
+    rejected, ok = [], []
+    for ft, neutral, rows, cols in distinct:
+        where = f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius {ft.radius_px:.0f} px"
+        if ft.visible_fraction < min_visible:
+            rejected.append(f"{where}: cropped too much, only {ft.visible_fraction:.0%} of its outline is inside the"
+                            f" image (needs {min_visible:.0%})")
+        elif ft.center_sigma_px > crit["max_center_sigma_px"]:
+            rejected.append(f"{where}: its centre is poorly constrained by the visible outline (standard error "
+                            f"{ft.center_sigma_px:.2f} px > {crit['max_center_sigma_px']})")
+        elif neutral < crit["min_neutral"]:
+            rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
+                            f" white, grey or chrome sphere")
+        elif (brightest is not None and n_photos >= 3
+              and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
+            rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
+                            f" (the same photo is brightest on {1 - chg:.0%} of it)")
+        else:
+            ok.append(ft)
+    if len(ok) > 1:  # size consistency: all spheres share sphere_radius
+        size = np.array([ft.radius_px if ortho else ft.distance for ft in ok])
+        tol = np.log(crit["size_ratio_ortho"] if ortho else crit["size_ratio_pinhole"])
+        groups = [(size >= s) & (size <= s * np.exp(tol)) for s in size]  # windows [s, ratio * s]
+        best = max(range(len(ok)), key=lambda i: (sum(ft.score for ft, g in zip(ok, groups[i]) if g), -i))
+        keep = groups[best]
+        ref = float(np.median(size[keep]))
+        for ft, k, s in zip(ok, keep, size):
+            if not k:
+                what = f"radius {s:.1f} px" if ortho else f"depth {s:.3g}"
+                ref_s = f"{ref:.1f} px" if ortho else f"{ref:.3g}"
+                rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                                f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})")
+        ok = [ft for ft, k in zip(ok, keep) if k]
+    return ok, rejected
