@@ -149,6 +149,9 @@ def main(argv=None):
             if r["rc"] != 0:
                 print(f"{name:44s} ERROR {r['error']}", flush=True)
                 continue
+            if not r["accepted"]:
+                print(f"{name:44s} ok   0/{r['n']} {r['rejected']}", flush=True)
+                continue
             print(f"{name:44s} ok {r['accepted']:3d}/{r['n']} median {r['median_deg']:.2f} max {r['max_deg']:.2f} deg "
                   f"coverage {100 * r['coverage']:.0f}% cone {r['median_cone_deg']:.2f} enc {encoding_text(r['encoding'])} "
                   f"{r['ms_per_photo']:.0f} ms/photo {r['rejected'] or ''}", flush=True)
