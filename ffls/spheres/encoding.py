@@ -138,7 +138,8 @@ class EncodingCalibration:
         """One line, e.g. ``encoding: linear (gamma 1.02 +- 0.03 from 3 spheres, 40 photos)``."""
         src = (f"from {self.n_spheres} sphere{'s' if self.n_spheres != 1 else ''}, "
                f"{self.n_photos} photos")
-        g = f"gamma {self.gamma:.2f} +- {self.uncertainty:.2f}"
+        nd = 3 if self.uncertainty < 0.01 else 2
+        g = f"gamma {self.gamma:.{nd}f} +- {self.uncertainty:.{nd}f}"
         if self.curve == "linear":
             return f"encoding: linear ({g} {src})"
         if self.curve == "srgb":
