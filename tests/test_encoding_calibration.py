@@ -224,8 +224,11 @@ def test_explicit_encoding_wins(linear_captures, tmp_path, capsys):
     cap.save_lights(lights, folder / "lights.json")
     c, l2 = cap.load_capture_and_lights(folder)
     assert c.encoding == "srgb" and l2.encoding["gamma"] == 1.7
-    # float images are linear by definition: nothing to calibrate
+    # float images are linear by definition: nothing to calibrate, and a record does not apply
     c = cap.load_capture(src)
+    assert cap.apply_lights_encoding(c, l2).encoding == "linear"
+    c = replace(c, encoding="auto")
+    assert cap.apply_lights_encoding(c, l2) is c
     with pytest.raises(InputError, match="linear by definition"):
         calibrate_capture_encoding(c)
     shutil.rmtree(folder)
