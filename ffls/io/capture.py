@@ -58,7 +58,7 @@ UNIT_TOLERANCE = 1e-3
 _ENCODINGS = ("srgb", "linear")
 _FLOAT_SUFFIXES = (".exr", ".hdr", ".pic")
 _ENCODING_FORMS = "'srgb', 'linear', {\"gamma\": g} or {\"response\": \"file.npy|.csv\"}"
-#: Gammas accepted in ``{"gamma": g}`` (``ffls.radiance.encoding.GAMMA_RANGE``; io/ is below radiance/).
+#: Gammas accepted in ``{"gamma": g}`` (also by :func:`ffls.radiance.encoding.gamma_decode`): wider is no camera's.
 GAMMA_RANGE = (0.2, 5.0)
 _DIST_LENGTHS = (4, 5, 8, 12, 14)
 _CAPTURE_KEYS = {"format", "version", "images", "image_size", "encoding", "camera", "sphere_radius",
