@@ -8,6 +8,7 @@ each it runs what ``ffls lights`` runs (:func:`ffls.commands.lights.calibrate_if
 true encoding stated. Prints a table and writes JSON.
 
     OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --res 512 --lights 40 --json out.json
+    OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --res 256 --lights 20 --repeat 10
 """
 from __future__ import annotations
 
@@ -60,23 +61,16 @@ def errors_deg(lights, truth) -> np.ndarray:
     return np.degrees(np.arccos(cos))[ok]
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--res", type=int, default=512)
-    ap.add_argument("--lights", type=int, default=40)
-    ap.add_argument("--noise", type=float, default=1.0, help="noise sd in code values of 8 bits (default 1)")
-    ap.add_argument("--bits", type=int, choices=(8, 16), default=8)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--json", default=None)
-    args = ap.parse_args(argv)
+def run_seed(args, seed: int) -> list:
+    """The three true encodings of one rendered capture (light directions drawn with ``seed``)."""
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         info = write_synthetic_capture(tmp / "source", n_lights=args.lights, resolution=args.res, progress=False,
-                                       seed=args.seed)
+                                       seed=seed)
         truth = info["directions"]
         for k, (name, true) in enumerate(TRUE.items()):
-            folder = encode_capture(tmp / "source", tmp / name, true, args.bits, args.noise / 255, args.seed + k)
+            folder = encode_capture(tmp / "source", tmp / name, true, args.bits, args.noise / 255, seed + k)
             cap = load_capture(folder)
             t0 = time.perf_counter()
             cal_cap, spheres, cal = calibrate_if_unknown(cap)
@@ -84,11 +78,28 @@ def main(argv=None) -> int:
             got = estimate_lights(cal_cap, spheres=spheres, progress=False, workers=1)
             ref = estimate_lights(replace(cap, encoding=STATED[name]), spheres=spheres, progress=False, workers=1)
             e, r = errors_deg(got, truth), errors_deg(ref, truth)
-            rows.append({"true": name, "named": cal.curve, "gamma": cal.gamma, "uncertainty": cal.uncertainty,
-                         "srgb_excess": cal.srgb_excess, "spheres": cal.n_spheres, "photos": cal.n_photos,
+            rows.append({"seed": seed, "true": name, "named": cal.curve, "gamma": cal.gamma,
+                         "uncertainty": cal.uncertainty, "srgb_excess": cal.srgb_excess,
+                         "spheres": cal.n_spheres, "photos": cal.n_photos,
                          "calibration_s": t_cal, "median_deg": float(np.median(e)), "max_deg": float(e.max()),
                          "accepted": int(got.ok_mask.sum()), "stated_median_deg": float(np.median(r)),
                          "stated_max_deg": float(r.max()), "summary": cal.summary()})
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--res", type=int, default=512)
+    ap.add_argument("--lights", type=int, default=40)
+    ap.add_argument("--noise", type=float, default=1.0, help="noise sd in code values of 8 bits (default 1)")
+    ap.add_argument("--bits", type=int, choices=(8, 16), default=8)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--repeat", type=int, default=1, help="captures with seeds SEED, SEED+1, ... (coverage)")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+    rows = []
+    for seed in range(args.seed, args.seed + args.repeat):
+        rows += run_seed(args, seed)
     print(f"{args.lights} lights, {args.res} px, {args.bits}-bit PNG, noise {args.noise} code values")
     print(f"{'true':9} {'named':7} {'gamma':>13} {'sRGB exc':>9} {'median':>7} {'max':>6} {'acc':>5} "
           f"{'stated med':>10} {'stated max':>10} {'cal s':>6}")
@@ -96,6 +107,14 @@ def main(argv=None) -> int:
         print(f"{r['true']:9} {r['named']:7} {r['gamma']:6.3f}+-{r['uncertainty']:.3f} {r['srgb_excess']:9.1f} "
               f"{r['median_deg']:7.2f} {r['max_deg']:6.2f} {r['accepted']:5d} {r['stated_median_deg']:10.2f} "
               f"{r['stated_max_deg']:10.2f} {r['calibration_s']:6.1f}")
+    if args.repeat > 1:
+        for name, g in (("linear", 1.0), ("srgb", None), ("gamma2.2", 2.2)):
+            rs = [r for r in rows if r["true"] == name]
+            named = sum(r["named"] == ("gamma" if name == "gamma2.2" else name) for r in rs)
+            inside = sum(abs(r["gamma"] - g) <= r["uncertainty"] for r in rs) if g is not None else 0
+            cover = "" if g is None else f", true gamma inside the 95% interval {inside}/{len(rs)}"
+            print(f"{name}: named right {named}/{len(rs)}{cover}, median of medians "
+                  f"{np.median([r['median_deg'] for r in rs]):.2f} deg")
     if args.json:
         Path(args.json).write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
     return 0

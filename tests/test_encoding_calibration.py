@@ -43,8 +43,11 @@ def linear_captures(tmp_path_factory):
     return {"four": (root / "four", four["directions"]), "one": (root / "one", one["directions"])}
 
 
-def encoded_capture(src, dst, true, bits=8, noise=1.0 / 255, n=None, encoding_key=None, seed=0):
-    """Copy the linear capture ``src`` to ``dst`` as integer PNGs encoded with ``true`` (no ``encoding`` key)."""
+def encoded_capture(src, dst, true, bits=8, noise=1.0 / 255, n=None, encoding_key=None, seed=0, jpeg=None):
+    """Copy the linear capture ``src`` to ``dst`` as integer PNGs encoded with ``true`` (no ``encoding`` key).
+
+    ``jpeg`` (a quality, 8 bits only) writes JPEG files with OpenCV instead.
+    """
     dst.mkdir()
     doc = json.loads((src / "capture.json").read_text())
     doc.pop("encoding")
@@ -58,8 +61,15 @@ def encoded_capture(src, dst, true, bits=8, noise=1.0 / 255, n=None, encoding_ke
         lin = np.clip(im * exposure, 0.0, None)
         enc = lin if true == "linear" else srgb_encode(lin) if true == "srgb" else gamma_encode(lin, true)
         enc = enc + rng.normal(0.0, noise, enc.shape)
-        png = nm.replace(".exr", ".png")
-        write_png(dst / png, np.rint(np.clip(enc, 0, 1) * top).astype(np.uint8 if bits == 8 else np.uint16))
+        codes = np.rint(np.clip(enc, 0, 1) * top).astype(np.uint8 if bits == 8 else np.uint16)
+        if jpeg:
+            import cv2
+
+            png = nm.replace(".exr", ".jpg")
+            assert cv2.imwrite(str(dst / png), codes[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(jpeg)])
+        else:
+            png = nm.replace(".exr", ".png")
+            write_png(dst / png, codes)
         out.append(png)
     doc["images"] = out
     if encoding_key is not None:
@@ -179,6 +189,16 @@ def test_sixteen_bit(linear_captures, tmp_path):
     assert cal.curve == "gamma" and abs(cal.gamma - 2.2) <= cal.uncertainty, cal.summary()
 
 
+def test_jpeg(linear_captures, tmp_path):
+    """JPEG files (quality 95: blocks and ringing on top of the noise) are calibrated too."""
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", "srgb", jpeg=95)
+    c = cap.load_capture(folder)
+    assert read_image(c.image_paths[0]).kind == "jpeg"
+    cal, _ = calibrate_capture_encoding(c)
+    assert cal.curve == "srgb", cal.summary()
+
+
 def test_too_few_photos_one_line(linear_captures, tmp_path, capsys):
     src, _ = linear_captures["four"]
     folder = encoded_capture(src, tmp_path / "c", "srgb", n=3)
@@ -204,8 +224,11 @@ def test_explicit_encoding_wins(linear_captures, tmp_path, capsys):
     cap.save_lights(lights, folder / "lights.json")
     c, l2 = cap.load_capture_and_lights(folder)
     assert c.encoding == "srgb" and l2.encoding["gamma"] == 1.7
-    # float images are linear by definition: nothing to calibrate
+    # float images are linear by definition: nothing to calibrate, and a record does not apply
     c = cap.load_capture(src)
+    assert cap.apply_lights_encoding(c, l2).encoding == "linear"
+    c = replace(c, encoding="auto")
+    assert cap.apply_lights_encoding(c, l2) is c
     with pytest.raises(InputError, match="linear by definition"):
         calibrate_capture_encoding(c)
     shutil.rmtree(folder)

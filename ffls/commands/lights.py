@@ -9,7 +9,9 @@ import numpy as np
 NAME = "lights"
 HELP = "estimate each photo's light direction from the white spheres"
 DESCRIPTION = ("Fit every photo's spheres (Lambert + ambient + ground bounce), combine them into one "
-               "distant or near light, reject inconsistent photos, and write lights.json.")
+               "distant or near light, reject inconsistent photos, and write lights.json. Integer images "
+               "whose encoding capture.json does not state are first calibrated from the matte spheres "
+               "(a gamma, or the sRGB curve); the result is printed and recorded in lights.json.")
 
 
 def add_arguments(p):

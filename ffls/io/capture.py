@@ -56,8 +56,9 @@ LIGHTS_FILE = "lights.json"
 #: Largest accepted | |d| - 1 | for a light direction read from a file.
 UNIT_TOLERANCE = 1e-3
 _ENCODINGS = ("srgb", "linear")
+_FLOAT_SUFFIXES = (".exr", ".hdr", ".pic")
 _ENCODING_FORMS = "'srgb', 'linear', {\"gamma\": g} or {\"response\": \"file.npy|.csv\"}"
-#: Gammas accepted in ``{"gamma": g}`` (``ffls.radiance.encoding.GAMMA_RANGE``; io/ is below radiance/).
+#: Gammas accepted in ``{"gamma": g}`` (also by :func:`ffls.radiance.encoding.gamma_decode`): wider is no camera's.
 GAMMA_RANGE = (0.2, 5.0)
 _DIST_LENGTHS = (4, 5, 8, 12, 14)
 _CAPTURE_KEYS = {"format", "version", "images", "image_size", "encoding", "camera", "sphere_radius",
@@ -1016,7 +1017,8 @@ def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
     """``capture`` with the encoding that ``ffls lights`` calibrated, where ``capture.json`` states none.
 
     A stated ``"encoding"`` always wins: the capture is returned unchanged when its encoding is
-    not ``'auto'`` or ``lights`` has no :attr:`Lights.encoding` record. The record may come
+    not ``'auto'``, its images are floating point (``.exr``, ``.hdr``: linear by definition), or
+    ``lights`` has no :attr:`Lights.encoding` record. The record may come
     from another capture's ``lights.json`` (calibration shots of the same camera).
 
     Returns
@@ -1026,6 +1028,8 @@ def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
     """
     if capture.encoding != "auto" or lights.encoding is None:
         return capture
+    if capture.image_paths and Path(capture.image_paths[0]).suffix.lower() in _FLOAT_SUFFIXES:
+        return capture  # floating-point images are linear by definition
     from dataclasses import replace
 
     return replace(capture, encoding=encoding_from_record(lights.encoding))

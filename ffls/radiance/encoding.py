@@ -9,10 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["float_array", "srgb_encode", "srgb_decode", "gamma_encode", "gamma_decode", "GAMMA_RANGE"]
+from ffls.io.capture import GAMMA_RANGE  # the gammas ``{"gamma": g}`` accepts (defined with the file format)
 
-#: Gammas accepted in ``{"gamma": g}`` (and searched by the calibration): a wider curve is no camera's.
-GAMMA_RANGE = (0.2, 5.0)
+__all__ = ["float_array", "srgb_encode", "srgb_decode", "gamma_encode", "gamma_decode", "GAMMA_RANGE"]
 
 # IEC 61966-2-1 constants.
 _ENC_THRESHOLD = 0.0031308

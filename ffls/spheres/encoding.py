@@ -73,9 +73,10 @@ GAMMA_SEARCH = (0.8, 3.2)
 MIN_PHOTOS = 4
 _COARSE_STEP = 0.1  # first round: the whole range
 _GRID_STEP = 0.01  # second round: around the first round's minimum, for the bootstrap
-_FINE_HALF_WIDTH = 0.3
+_FINE_HALF_WIDTH = 0.2
 _MAX_RMS_RATIO = 2.5  # a pair whose best RMS residual exceeds the median pair's by more is left out
 _SLOPE_STEP = 1e-4
+_TINY = 1e-6  # below the smallest 16-bit code (1.5e-5): log of a zero channel stays finite
 
 
 class EncodingCalibrationError(ValueError):
@@ -137,7 +138,8 @@ class EncodingCalibration:
         """One line, e.g. ``encoding: linear (gamma 1.02 +- 0.03 from 3 spheres, 40 photos)``."""
         src = (f"from {self.n_spheres} sphere{'s' if self.n_spheres != 1 else ''}, "
                f"{self.n_photos} photos")
-        g = f"gamma {self.gamma:.2f} +- {self.uncertainty:.2f}"
+        nd = 3 if self.uncertainty < 0.01 else 2
+        g = f"gamma {self.gamma:.{nd}f} +- {self.uncertainty:.{nd}f}"
         if self.curve == "linear":
             return f"encoding: linear ({g} {src})"
         if self.curve == "srgb":
@@ -151,15 +153,24 @@ def _decode(raw: np.ndarray, curve) -> np.ndarray:
     return srgb_decode(raw) if curve == "srgb" else gamma_decode(raw, curve)
 
 
-def _grey_and_weight(raw: np.ndarray, curve) -> tuple[np.ndarray, np.ndarray]:
+def _grey_and_weight(raw: np.ndarray, curve, log_raw: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Grey linear value (mean of the decoded channels) and the weight ``1 / slope`` of each pixel.
 
-    The slope is the RMS over channels of ``f'(raw)`` (central difference): the weighted
-    residual is then in stored values.
+    The slope is the RMS over channels of ``f'(raw)``: the weighted residual is then in stored
+    values. For a gamma it is exact (``g x^(g-1)``, from ``log_raw`` when given); for the sRGB
+    curve a central difference.
     """
-    y = _decode(raw, curve).mean(axis=1)
-    h = _SLOPE_STEP
-    d = (_decode(raw + h, curve) - _decode(np.maximum(raw - h, 0.0), curve)) / (raw + h - np.maximum(raw - h, 0.0))
+    if curve == "srgb":
+        y = _decode(raw, curve).mean(axis=1)
+        h = _SLOPE_STEP
+        lo = np.maximum(raw - h, 0.0)
+        d = (_decode(raw + h, curve) - _decode(lo, curve)) / (raw + h - lo)
+    else:
+        g = float(curve)
+        lr = np.log(np.maximum(raw, _TINY)) if log_raw is None else log_raw
+        d = np.exp((g - 1.0) * lr)  # x^(g-1)
+        y = (raw * d).mean(axis=1)
+        d *= g
     slope = np.sqrt(np.mean(d * d, axis=1))
     return y, 1.0 / np.maximum(slope, 1e-6)
 
@@ -182,11 +193,42 @@ class _Unit:
     usable: np.ndarray  # (m,) bool: not clipped, not near black
     selected: np.ndarray | None = None
 
+    def select(self, selected: np.ndarray) -> None:
+        """Fix the selection (and cache its values, their logarithms and design rows for :meth:`rss`)."""
+        self.selected = selected
+        self._raw = self.raw[selected]
+        self._log = np.log(np.maximum(self._raw, _TINY))
+        self._A = self.A[selected]
+
     def rss(self, curve) -> float:
-        s = self.selected
-        y, w = _grey_and_weight(self.raw[s], curve)
-        _, r = _solve(self.A[s], y, w)
+        """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
+        y, w = _grey_and_weight(self._raw, curve, None if curve == "srgb" else self._log)
+        Aw = self._A * w[:, None]
+        yw = y * w
+        G = Aw.T @ Aw
+        try:
+            x = np.linalg.solve(G, Aw.T @ yw)
+        except np.linalg.LinAlgError:
+            x, *_ = np.linalg.lstsq(Aw, yw, rcond=None)
+        r = yw - Aw @ x
         return float(r @ r)
+
+    def rss_grid(self, gammas: np.ndarray) -> np.ndarray:
+        """:meth:`rss` for every gamma of ``gammas`` (k,), at once: (k,) float."""
+        g = np.asarray(gammas, dtype=np.float64)[:, None, None]
+        d = np.exp((g - 1.0) * self._log[None])  # (k, m, 3): x^(g-1)
+        y = (self._raw[None] * d).mean(axis=2)
+        w = 1.0 / np.maximum(np.sqrt(np.mean(d * d, axis=2)) * g[:, :, 0], 1e-6)  # (k, m)
+        Aw = self._A[None] * w[:, :, None]
+        yw = y * w
+        G = np.einsum("kmi,kmj->kij", Aw, Aw)
+        b = np.einsum("kmi,km->ki", Aw, yw)
+        try:
+            x = np.linalg.solve(G, b[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            return np.array([self.rss(float(v)) for v in gammas])
+        r = yw - np.einsum("kmi,ki->km", Aw, x)
+        return np.einsum("km,km->k", r, r)
 
 
 def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
@@ -234,7 +276,7 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     tot = float(np.sum((yw - yw.mean()) ** 2))
     if tot <= 0 or 1.0 - float(r @ r) / tot < min_r2:
         return False
-    unit.selected = sel
+    unit.select(sel)
     return True
 
 
@@ -319,7 +361,7 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     for rnd in range(2):  # select with the current curve, profile, repeat with the best gamma
         # the pilot curve may be far off: the shading test (min_r2) waits for the first round's gamma
         used = [u for u in units if _select(u, curve, terminator, min_pixels, min_r2 if rnd else -np.inf)]
-        curves = np.array([[u.rss(g) for g in grid] for u in used]).reshape(len(used), len(grid))
+        curves = np.array([u.rss_grid(grid) for u in used]).reshape(len(used), len(grid))
         if len(used):
             # a (photo, sphere) pair that no curve fits well (a wrong lit side, a cast shadow or an
             # interreflection the model lacks) is left out: its best RMS residual is an outlier
