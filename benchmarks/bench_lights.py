@@ -87,13 +87,15 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     err = np.degrees(angle_between(est, np.asarray(truth["directions"])))
     ok = np.array([r.status == "ok" for r in res_])
     e = err[ok]
+    unc = np.array([r.uncertainty_deg for r in res_])[ok]  # 95% cone radius
     return {
         "config": name, **{k: v for k, v in cfg.items()}, "resolution": res, "n": int(len(dirs)),
         "accepted": int(ok.sum()),
         "rejected": {r.reason: sum(1 for x in res_ if x.reason == r.reason) for r in res_ if r.reason},
         "median_deg": float(np.median(e)) if e.size else None, "p90_deg": float(np.percentile(e, 90)) if e.size else None,
         "max_deg": float(e.max()) if e.size else None,
-        "median_uncertainty_deg": float(np.median([r.uncertainty_deg for r, o in zip(res_, ok) if o])) if e.size else None,
+        "median_uncertainty_deg": float(np.median(unc)) if e.size else None,
+        "coverage": float(np.mean(e <= unc)) if e.size else None,
         "models": {m: sum(1 for r in res_ if r.model == m) for m in ("distant", "near")},
         "bounce": bounce, "spheres": spheres, "refine_centres": refine,
         "centre_shift_px": [r.shift_norm_px for r in refs], "calibration": calib, "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
@@ -124,7 +126,8 @@ def main(argv=None):
             rows.append(r)
             tgt = TARGETS.get(name)
             print(f"{name:22s} spheres={a.spheres} refine={not a.no_refine} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "
-                  f"p90={r['p90_deg']:.2f} max={r['max_deg']:.2f} deg  unc~{r['median_uncertainty_deg']:.2f}  "
+                  f"p90={r['p90_deg']:.2f} max={r['max_deg']:.2f} deg  cone95~{r['median_uncertainty_deg']:.2f} "
+                  f"coverage {100 * r['coverage']:.0f}%  "
                   f"{r['ms_per_image']:.0f} ms/img ({r['images_per_second_per_core']:.1f} img/s/core)"
                   f" shift px {[round(x, 2) for x in r['centre_shift_px']]}"
                   + (f"  target max {tgt[0]} median {tgt[1]}" if tgt else ""), flush=True)
