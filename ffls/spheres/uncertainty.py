@@ -278,16 +278,6 @@ def _fallback() -> ErrorModel:
 FALLBACK_MODEL = _fallback()
 
 
-def _reml_terms(r, s2, scale, tau):
-    """Per photo: -2 log restricted likelihood (both axes) and the chi-square of its scatter."""
-    v = (scale * scale) * s2 + tau * tau  # (k,)
-    w = 1.0 / v
-    mu = (w[:, None] * r).sum(axis=0) / w.sum()
-    chi = float(np.sum(w[:, None] * (r - mu) ** 2))
-    nll = 2.0 * float(np.sum(np.log(v))) + 2.0 * float(np.log(w.sum())) + chi
-    return nll, chi
-
-
 def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
                     common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
                     fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4) -> ErrorModel:
@@ -326,25 +316,37 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         return FALLBACK_MODEL
     keep = np.ones(len(data), dtype=bool)
     med_sigma = float(np.sqrt(np.median(np.concatenate([s2 for _, s2 in data]))))
-    x = np.array([0.0, np.log(max(med_sigma, 1e-6))])  # log s, log tau (radians)
+    x0 = np.array([0.0, np.log(max(med_sigma, 1e-6))])  # log s, log tau (radians); every round starts here
+    x = x0
     lo = np.array([np.log(0.2) if fit_scale else 0.0, np.log(1e-5)])
     hi = np.array([np.log(50.0) if fit_scale else 0.0, np.log(np.radians(30.0))])
 
-    def objective(x, subset):
-        scale, tau = np.exp(x[0]), np.exp(x[1])
-        return sum(_reml_terms(r, s2, scale, tau)[0] for r, s2 in subset)
+    # all photos' spheres stacked, with segment sums per photo (one vector pass per evaluation)
+    k_all = np.array([r.shape[0] for r, _ in data])
+    starts = np.concatenate([[0], np.cumsum(k_all)[:-1]])
+    R_all = np.concatenate([r for r, _ in data])
+    S2_all = np.concatenate([s2 for _, s2 in data])
+    photo_of = np.repeat(np.arange(len(data)), k_all)
 
-    n_trimmed = 0
+    def terms(x):
+        """Per photo: -2 log restricted likelihood and chi-square of the scatter."""
+        v = np.exp(2.0 * x[0]) * S2_all + np.exp(2.0 * x[1])
+        w = 1.0 / v
+        sw = np.add.reduceat(w, starts)
+        mu = np.add.reduceat(w[:, None] * R_all, starts) / sw[:, None]
+        chi = np.add.reduceat(w * np.sum((R_all - mu[photo_of]) ** 2, axis=1), starts)
+        return 2.0 * np.add.reduceat(np.log(v), starts) + 2.0 * np.log(sw) + chi, chi
+
+    def objective(x, subset):
+        return float(np.sum(terms(x)[0][subset]))
+
     for _ in range(max_rounds):
-        subset = [d for d, k in zip(data, keep) if k]
-        if len(subset) < min_photos:
+        if keep.sum() < min_photos:
             break
-        res = minimize(objective, np.clip(x, lo, hi), args=(subset,), method="L-BFGS-B",
+        res = minimize(objective, np.clip(x0, lo, hi), args=(keep,), method="L-BFGS-B",
                        bounds=list(zip(lo, hi)))
         x = res.x
-        scale, tau = float(np.exp(x[0])), float(np.exp(x[1]))
-        p = np.array([chi2_distribution.sf(_reml_terms(r, s2, scale, tau)[1], 2 * (r.shape[0] - 1))
-                      for r, s2 in data])
+        p = chi2_distribution.sf(terms(x)[1], 2 * (k_all - 1))
         new_keep = p >= trim
         if np.array_equal(new_keep, keep):
             break
