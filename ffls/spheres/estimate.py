@@ -304,7 +304,7 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
             continue
         old = result.spheres[k]
         f = fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
-                        g=s.ground_factor(up), start=old.direction, pixels=(s.rows, s.cols))
+                        g=s.ground_factor(up), start=old.direction)  # (no uncertainty needed: no pixels)
         spheres[k] = SphereResult(f, f.status if old.status == "ok" else old.status)
     return replace(result, spheres=spheres)
 
