@@ -516,7 +516,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     -------
     ffls.io.capture.Lights
         Directions (world, from the scene centre), positions for near lights, status, reasons
-        (:data:`ffls.spheres.photo.REASONS`), and per light ``extra``: ``uncertainty_deg``,
+        (:data:`ffls.spheres.photo.REASONS`), and per light ``extra``: ``uncertainty_deg`` (the
+        radius of the 95% cone, calibrated over the capture: :func:`calibrate_uncertainty`),
         ``model``, ``used_spheres``, ``spheres`` (per-sphere direction, residual, uncertainty,
         pixel counts, ground ratio estimate and the imposed ``bounce_ratio``; with
         ``refine_centres`` also the sphere's world ``center``, ``center_shift_px`` and

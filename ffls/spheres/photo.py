@@ -362,8 +362,10 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     min_spheres : int, optional
         Usable spheres needed; default ``min(2, len(samples))``.
     sigma_floor_deg : float
-        RMS angular error added (in quadrature) to each sphere's statistical uncertainty for what
-        the shading model does not capture.
+        RMS angular error added (in quadrature) to each sphere's 1-sigma uncertainty for what
+        the shading model does not capture, in the combination and its consistency tests. The
+        reported ``uncertainty_deg`` is a 95% cone of :data:`ffls.spheres.uncertainty.FALLBACK_MODEL`
+        here; :func:`ffls.spheres.estimate.estimate_photos` recalibrates it over the capture.
     terminator : float
     saturation : float, optional
         Known clip level of the linear values.
