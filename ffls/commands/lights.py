@@ -43,7 +43,7 @@ def summary(lights) -> str:
     if reasons:
         lines.append("rejected: " + ", ".join(f"{k} {v}" for k, v in reasons.most_common()))
     if unc:
-        lines.append(f"median uncertainty {float(np.median(unc)):.2f} deg")
+        lines.append(f"median uncertainty {float(np.median(unc)):.2f} deg (radius of the 95% cone)")
     return "\n".join(lines)
 
 

@@ -18,7 +18,10 @@ sequence. The stages, each in its own module:
   3. each sphere's ground ratio is calibrated on the photos that determine it
      (:func:`calibrate_bounce`);
   4. every photo is fitted again with that ratio imposed (spheres without enough such photos
-     keep the free bounce).
+     keep the free bounce);
+  5. the error model of the directions is calibrated on the spheres' disagreement over all
+     photos (:func:`calibrate_uncertainty`, :mod:`ffls.spheres.uncertainty`) and every photo's
+     ``uncertainty_deg`` becomes the radius of its 95% cone under it.
 
 The spheres' pixels are kept in memory between the passes (never the images).
 """
@@ -38,6 +41,7 @@ from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estima
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values)
+from ffls.spheres.uncertainty import ErrorModel, fit_error_model, photo_residuals
 
 __all__ = [
     "BOUNCE_MODES",
@@ -47,6 +51,7 @@ __all__ = [
     "calibrate_bounce",
     "refine_sphere_centres",
     "refit_spheres",
+    "calibrate_uncertainty",
     "estimate_photos",
     "estimate_lights",
     "estimate_lights_MasselusDutreAnrys2002",
@@ -89,12 +94,16 @@ class CaptureEstimate:
         Per sphere (None without ``refine_centres``).
     samples : list of SphereSamples
         The spheres' pixels, recentred where a refinement was accepted.
+    error_model : ErrorModel or None
+        The capture's error model of the directions (:func:`calibrate_uncertainty`); the photos'
+        ``uncertainty_deg`` are 95% cones under it.
     """
 
     photos: list[PhotoEstimate]
     calibration: list[BounceCalibration] | None
     refinements: list[CentreRefinement] | None
     samples: list[SphereSamples]
+    error_model: ErrorModel | None = None
 
     def records(self) -> list[dict]:
         """Per photo, its ``lights.json`` ``extra`` (:meth:`PhotoEstimate.record`)."""
@@ -178,6 +187,48 @@ def calibrate_bounce(results: list[PhotoEstimate], n_spheres: int, max_sigma: fl
     return out
 
 
+def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
+                          **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
+    """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
+
+    Every accepted photo with two or more used spheres gives their tangent offsets from the
+    directions its light predicts at each sphere (the distant direction, or the near light's
+    position seen from each sphere's centre) and their 1-sigma fit statistics;
+    :func:`ffls.spheres.uncertainty.fit_error_model` fits the capture's per-sphere scale and floor
+    (trimmed restricted maximum likelihood) and bounds the common mode. With fewer such photos
+    (one sphere per photo) the stated fallback model is used. Every photo (accepted or not) then
+    gets its cones (:meth:`ffls.spheres.photo.PhotoEstimate.with_error_model`).
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+    samples : list of SphereSamples
+        The spheres (their world centres, for near lights).
+    **kwargs
+        Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
+
+    Returns
+    -------
+    model : ErrorModel
+    results : list of PhotoEstimate
+    """
+    centers = np.array([s.center for s in samples])
+    residuals, sigmas = [], []
+    for r in results:
+        if not r.ok or len(r.used_spheres) < 2:
+            continue
+        used = r.used_spheres
+        dirs = [r.spheres[i].direction for i in used]
+        if any(d is None for d in dirs):
+            continue
+        near = r.model == "near" and r.position is not None
+        residuals.append(photo_residuals(np.array(dirs), r.direction, r.position if near else None,
+                                         centers[used] if near else None))
+        sigmas.append(np.array([r.spheres[i].fit.uncertainty_deg for i in used]) / np.sqrt(2.0))
+    model = fit_error_model(residuals, sigmas, **kwargs)
+    return model, [r.with_error_model(model) for r in results]
+
+
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
                           terminator: float = 0.15, **kwargs) -> tuple[list[SphereSamples], list, list]:
     """Refine every sphere's centre from the first-pass shading of all photos.
@@ -259,7 +310,7 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
             continue
         old = result.spheres[k]
         f = fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
-                        g=s.ground_factor(up), start=old.direction)
+                        g=s.ground_factor(up), start=old.direction)  # (no uncertainty needed: no pixels)
         spheres[k] = SphereResult(f, f.status if old.status == "ok" else old.status)
     return replace(result, spheres=spheres)
 
@@ -375,18 +426,24 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                 results = [refit_spheres(r, samples, v, refinements, terminator=terminator, up=up)
                            for r, v in zip(results, values)]
     if bounce == "free":
-        return CaptureEstimate(results, None, refinements, samples)
+        error_model, results = calibrate_uncertainty(results, samples)
+        return CaptureEstimate(results, None, refinements, samples, error_model)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
     if any(r is not None for r in ratios):
         results = refit(range(n_photos), ratios, counted=True)
+    elif refinements is not None and any(r.accepted for r in refinements):
+        # no calibration, but recentred spheres: the first pass's combinations (directions, used
+        # spheres) are of the old centres, so every photo is fitted again (free bounce)
+        results = refit(range(n_photos), None, counted=True)
     else:  # no calibration: the first pass is final; its near photos get their joint fit now
         pending = [i for i, r in enumerate(results) if r.joint_pending]
         if pending:
             for i, r in zip(pending, refit(pending, None, counted=False)):
                 results[i] = r
         fitter.advance(n_photos)
-    return CaptureEstimate(results, calibration, refinements, samples)
+    error_model, results = calibrate_uncertainty(results, samples)
+    return CaptureEstimate(results, calibration, refinements, samples, error_model)
 
 
 def _check_modes(model: str, bounce: str) -> None:
@@ -465,7 +522,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     -------
     ffls.io.capture.Lights
         Directions (world, from the scene centre), positions for near lights, status, reasons
-        (:data:`ffls.spheres.photo.REASONS`), and per light ``extra``: ``uncertainty_deg``,
+        (:data:`ffls.spheres.photo.REASONS`), and per light ``extra``: ``uncertainty_deg`` (the
+        radius of the 95% cone, calibrated over the capture: :func:`calibrate_uncertainty`),
         ``model``, ``used_spheres``, ``spheres`` (per-sphere direction, residual, uncertainty,
         pixel counts, ground ratio estimate and the imposed ``bounce_ratio``; with
         ``refine_centres`` also the sphere's world ``center``, ``center_shift_px`` and

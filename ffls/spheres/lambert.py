@@ -36,6 +36,7 @@ import numpy as np
 
 from ffls.conventions import UP
 from ffls.spheres.samples import ground_bounce
+from ffls.spheres.uncertainty import correlation_inflation
 
 __all__ = [
     "MODELS",
@@ -88,7 +89,16 @@ class LambertFit:
     rms : float
         RMS residual over the pixels used, relative to ``intensity``.
     uncertainty_deg : float
-        Statistical RMS angular error of ``direction``.
+        1-sigma RMS angular error (degrees) of ``direction``: the fit's covariance, inflated by
+        the residuals' spatial correlation (``inflation``) where the pixels' positions are
+        known. Internal (the combination and its tests use it); the reports give 95% cones
+        (:mod:`ffls.spheres.uncertainty`).
+    statistical_deg : float
+        The same without the correlation inflation (independent residuals).
+    inflation : float
+        Variance inflation factor of the covariance: pixel count over the effective number of
+        independent pixels (:func:`ffls.spheres.uncertainty.correlation_inflation`; 1 without
+        pixel positions).
     n_lit, n_shadow : int
         Pixels used on the lit and shadow side.
     n_rejected : int
@@ -121,6 +131,8 @@ class LambertFit:
     model: str = "plain"
     rms: float = float("nan")
     uncertainty_deg: float = float("inf")
+    statistical_deg: float = float("inf")
+    inflation: float = 1.0
     n_lit: int = 0
     n_shadow: int = 0
     n_rejected: int = 0
@@ -142,7 +154,8 @@ class LambertFit:
             "status": self.status,
             "direction": [float(x) for x in self.direction] if np.all(np.isfinite(self.direction)) else None,
             "intensity": num(self.intensity), "ambient": num(self.ambient), "bounce": num(self.bounce),
-            "model": self.model, "rms": num(self.rms), "uncertainty_deg": num(self.uncertainty_deg),
+            "model": self.model, "rms": num(self.rms), "sigma_deg": num(self.uncertainty_deg),
+            "inflation": num(self.inflation),
             "n_lit": int(self.n_lit), "n_shadow": int(self.n_shadow), "n_rejected": int(self.n_rejected),
             "n_invalid": int(self.n_invalid), "n_saturated": int(self.n_saturated),
             "ground_ratio": num(self.ground_ratio), "ground_ratio_sigma": num(self.ground_ratio_sigma),
@@ -301,6 +314,16 @@ def _median(x: np.ndarray) -> float:
     return float(np.mean(p[h - 1:h + 1]))
 
 
+def _percentile(x: np.ndarray, q: float) -> float:
+    """``np.percentile(x, q)`` of a 1-d array (linear interpolation, same value), without its overhead."""
+    n = x.size
+    pos = q / 100.0 * (n - 1)
+    lo = int(np.floor(pos))
+    hi = min(lo + 1, n - 1)
+    p = np.partition(x, (lo, hi))
+    return float(p[lo] + (pos - lo) * (p[hi] - p[lo]))
+
+
 def _product_table(F, y):
     """Per pixel: the upper triangle of ``f f^T`` (15), ``f y`` (5) and ``y^2`` (1) for ``f = [n, 1, g]``.
 
@@ -414,7 +437,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
                 clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, up: np.ndarray = UP,
                 min_lit: int = 30, max_reject_fraction: float = 0.25, max_iter: int = 8,
                 bounce_ratio: float | None = None, g: np.ndarray | None = None, min_shadow: int = 1,
-                start: np.ndarray | None = None) -> LambertFit:
+                start: np.ndarray | None = None, pixels: tuple[np.ndarray, np.ndarray] | None = None) -> LambertFit:
     """Fit ``I(n) = a max(0, n . l) + b + c g(n)`` to one sphere's pixels.
 
     Parameters
@@ -463,6 +486,10 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         A light direction to start the iterations from (e.g. this sphere's fit of the same photo
         in an earlier pass) instead of the least-squares start on the bright pixels; it only
         saves iterations (the classification is iterated to the same fixed point).
+    pixels : ((m,) int, (m,) int), optional
+        The pixels' rows and columns: the covariance is then inflated by the residuals' spatial
+        correlation (:func:`ffls.spheres.uncertainty.correlation_inflation`); without them the
+        residuals are taken as independent.
 
     Returns
     -------
@@ -492,7 +519,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     y = np.where(ok, y_all, 0.0)
     g = ground_bounce(normals, up) if g is None else np.asarray(g, dtype=np.float64)
     # initial classification: clearly bright pixels are lit
-    peak = float(np.percentile(y[ok], 99))
+    peak = _percentile(y[ok], 99.0)
     if not peak > 0:
         base.status = "too_dark"
         return base
@@ -519,9 +546,18 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     fit, ldir, a, lit, shadow, use = best["fit"], best["dir"], best["a"], best["lit"], best["shadow"], best["use"]
     k = fit.k
     try:
-        unc = tangent_uncertainty_deg(fit.v, fit.s2 * fit.Ginv[:3, :3])
+        stat = tangent_uncertainty_deg(fit.v, fit.s2 * fit.Ginv[:3, :3])
     except np.linalg.LinAlgError:
-        unc = float("inf")
+        stat = float("inf")
+    nl = best["nl"]  # normals @ ldir
+    inflation = 1.0
+    if pixels is not None and np.isfinite(stat):
+        # misfit leaves smooth residuals: fewer independent pixels than pixels
+        res = y - (a * np.maximum(nl, 0.0) + fit.b + fit.c * g)
+        rows, cols = pixels
+        inflation = correlation_inflation(res[use], np.asarray(rows)[use], np.asarray(cols)[use],
+                                          max_factor=k / (2.0 * fit.x.size))[0]
+    unc = stat * float(np.sqrt(inflation))
     # the ground ratio c / (a l_z) of the free-bounce fit and its standard deviation at a relative
     # noise of at least rel_noise_floor: small only where the shadow side separates c from b, l
     ratio_est, ratio_sd = float("nan"), float("inf")
@@ -535,12 +571,12 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
             ratio_sd = float(s * np.sqrt(max(fb.Ginv[4, 4], 0.0)) / (ab * lz))
             if not fb.Ginv[4, 4] > 0.0:  # c at its bound (or singular): not determined by this photo
                 ratio_sd = float("inf")
-    nl = best["nl"]  # normals @ ldir
     cand_lit = ok & (nl > terminator)
     n_rej = int((cand_lit & ~inl).sum())
     fitres = LambertFit(
         status="ok", direction=ldir, intensity=a, ambient=fit.b, bounce=fit.c,
-        model=best["model"], rms=float(np.sqrt(fit.rss / k)) / a, uncertainty_deg=unc,
+        model=best["model"], rms=float(np.sqrt(fit.rss / k)) / a, uncertainty_deg=unc, statistical_deg=stat,
+        inflation=inflation,
         n_lit=int(lit.sum()), n_shadow=int(shadow.sum()),
         n_rejected=int((ok & ~inl).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
         non_outliers=inl,

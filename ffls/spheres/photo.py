@@ -20,7 +20,7 @@ Rejection reasons (:data:`REASONS`) are short fixed strings stored in ``lights.j
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2 as chi2_distribution
@@ -29,6 +29,7 @@ from ffls.conventions import UP, normalize
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
 from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
+from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel, cone_deg
 
 __all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SphereResult", "LightHypothesis", "PhotoEstimate",
            "fit_spheres", "fit_light_model", "near_fit_mask", "estimate_photo"]
@@ -61,10 +62,14 @@ class SphereResult:
     status : str
         ``fit.status``, or ``'shadowed'`` / :data:`OUTLIER` where the combination set the sphere
         aside.
+    uncertainty_deg : float or None
+        Radius (degrees) of the 95% cone of this sphere's direction under the error model
+        (:meth:`PhotoEstimate.with_error_model`); None where it has no direction.
     """
 
     fit: LambertFit
     status: str
+    uncertainty_deg: float | None = None
 
     @property
     def direction(self) -> np.ndarray | None:
@@ -74,7 +79,9 @@ class SphereResult:
 
     def as_dict(self) -> dict:
         """JSON-ready report: ``status`` and :meth:`LambertFit.as_dict` (without the pixel mask)."""
-        return {"status": self.status, **{k: v for k, v in self.fit.as_dict().items() if k != "status"}}
+        cone = self.uncertainty_deg
+        return {"status": self.status, **{k: v for k, v in self.fit.as_dict().items() if k != "status"},
+                "uncertainty_deg": float(cone) if cone is not None and np.isfinite(cone) else None}
 
 
 @dataclass
@@ -121,7 +128,8 @@ class PhotoEstimate:
     position : (3,) float or None
         Near light's position (world).
     uncertainty_deg : float
-        RMS angular uncertainty (infinite when rejected).
+        Radius (degrees) of the 95% confidence cone of ``direction`` (infinite when rejected):
+        :meth:`with_error_model`, :mod:`ffls.spheres.uncertainty`.
     model : {'distant', 'near'} or None
     used_spheres : list of int
     spheres : list of SphereResult
@@ -132,6 +140,8 @@ class PhotoEstimate:
     joint_pending : bool
         A near light whose joint fit was deferred (``estimate_photo(joint=False)``): ``position``
         is the ray intersection.
+    joint_sigma_deg : float
+        1-sigma RMS angular error of the near light's joint fit statistics (0 otherwise).
     """
 
     status: str
@@ -145,10 +155,32 @@ class PhotoEstimate:
     chi2: float | None = None
     dof: int | None = None
     joint_pending: bool = False
+    joint_sigma_deg: float = 0.0
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    def with_error_model(self, model: ErrorModel) -> "PhotoEstimate":
+        """This estimate with its 95% cones (photo and spheres) under ``model``.
+
+        The photo's per-axis standard deviation is :meth:`ErrorModel.photo_sigma_deg` of its used
+        spheres' 1-sigma fits (and at least the near light's joint fit statistics, scaled); each
+        sphere with a direction gets the cone of its own direction
+        (:meth:`ErrorModel.sphere_sigma_deg` plus the common mode).
+        """
+        stat = {i: s.fit.uncertainty_deg / np.sqrt(2.0) for i, s in enumerate(self.spheres)
+                if s.direction is not None and np.isfinite(s.fit.uncertainty_deg)}
+        spheres = [replace(s, uncertainty_deg=float(cone_deg(np.hypot(model.sphere_sigma_deg(stat[i]),
+                                                                       model.common_deg)))
+                           if i in stat else None) for i, s in enumerate(self.spheres)]
+        unc = self.uncertainty_deg
+        if self.ok:
+            used = [stat.get(i, np.inf) for i in self.used_spheres]
+            sigma = model.photo_sigma_deg(np.asarray(used)) if used else float("inf")
+            sigma = max(sigma, model.scale * self.joint_sigma_deg / np.sqrt(2.0))
+            unc = float(cone_deg(sigma))
+        return replace(self, spheres=spheres, uncertainty_deg=unc)
 
     def sphere_directions(self) -> list[np.ndarray | None]:
         """Per sphere its fitted direction (None where it has none): the start of a later pass's fits."""
@@ -198,7 +230,7 @@ def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, ter
     bounce_ratio = [None] * n if bounce_ratio is None else bounce_ratio
     start = [None] * n if start is None else start
     return [fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up, bounce_ratio=rho,
-                        g=s.ground_factor(up), start=l0)
+                        g=s.ground_factor(up), start=l0, pixels=(s.rows, s.cols))
             for s, (grey, valid, nsat), rho, l0 in zip(samples, values, bounce_ratio, start)]
 
 
@@ -330,8 +362,10 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     min_spheres : int, optional
         Usable spheres needed; default ``min(2, len(samples))``.
     sigma_floor_deg : float
-        RMS angular error added (in quadrature) to each sphere's statistical uncertainty for what
-        the shading model does not capture.
+        RMS angular error added (in quadrature) to each sphere's 1-sigma uncertainty for what
+        the shading model does not capture, in the combination and its consistency tests. The
+        reported ``uncertainty_deg`` is a 95% cone of :data:`ffls.spheres.uncertainty.FALLBACK_MODEL`
+        here; :func:`ffls.spheres.estimate.estimate_photos` recalibrates it over the capture.
     terminator : float
     saturation : float, optional
         Known clip level of the linear values.
@@ -370,7 +404,8 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     def rejected(reason, direction=None):
         return PhotoEstimate(status="rejected", reason=reason,
                              direction=np.array(UP, dtype=np.float64) if direction is None else direction,
-                             spheres=[SphereResult(f, st) for f, st in zip(fits, status)])
+                             spheres=[SphereResult(f, st) for f, st in zip(fits, status)]
+                             ).with_error_model(FALLBACK_MODEL)
 
     if len(ok) < need:
         return rejected(_rejection_reason(status, ok), fits[ok[0]].direction if ok else None)
@@ -380,7 +415,7 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     if outlier is not None:
         status[outlier] = OUTLIER
     used = hyp.spheres
-    direction, unc, position = hyp.direction, hyp.uncertainty_deg, hyp.position
+    direction, position, joint_sigma = hyp.direction, hyp.position, 0.0
     pending = hyp.model == "near" and not joint
     if hyp.model == "near" and joint:
         jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
@@ -391,10 +426,11 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         position = jf.position
         v = position - np.asarray(scene_center, dtype=np.float64)
         direction = normalize(v)
-        stat = tangent_uncertainty_deg(v, jf.cov)
-        unc = float(np.hypot(stat, sigma_floor_deg / np.sqrt(len(used))))
+        joint_sigma = tangent_uncertainty_deg(v, jf.cov)
+    # 95% cones of the stated single-photo model; estimate_photos recalibrates them capture-wide
     return PhotoEstimate(status="ok", reason=None, direction=np.asarray(direction, dtype=np.float64),
                          position=None if position is None else np.asarray(position, dtype=np.float64),
-                         uncertainty_deg=float(unc), model=hyp.model, used_spheres=[int(i) for i in used],
+                         model=hyp.model, used_spheres=[int(i) for i in used],
                          spheres=[SphereResult(f, st) for f, st in zip(fits, status)], chi2=float(hyp.chi2),
-                         dof=int(hyp.dof), joint_pending=pending)
+                         dof=int(hyp.dof), joint_pending=pending,
+                         joint_sigma_deg=float(joint_sigma)).with_error_model(FALLBACK_MODEL)

@@ -1,0 +1,390 @@
+"""Honest uncertainty of the light directions: 95% confidence cones calibrated on the data.
+
+A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a direction
+(GUIDE, section 1). It is built from three parts, each measured on the photographs themselves:
+
+1. **Per sphere, the fit statistics inflated by the misfit.** The covariance ``s^2 (A^T A)^-1``
+   of a shading fit (:mod:`ffls.spheres.lambert`) already scales with the residual variance
+   ``s^2`` (the reduced chi-square of the fit), but it assumes independent residuals. Model
+   misfit (interreflection, an approximate bounce, penumbra, a centre a fraction of a pixel off)
+   leaves smooth, spatially correlated residuals, so the pixels carry far less independent
+   information than their count. :func:`correlation_inflation` measures the residuals'
+   correlation between neighbouring pixels along the rows and the columns and inflates the
+   covariance by the variance inflation factor of a separable first-order autoregressive field,
+   ``(1 + r_x) / (1 - r_x) * (1 + r_y) / (1 - r_y)`` (the ratio of the pixel count to the
+   effective number of independent pixels; Bartlett 1946, Bayley & Hammersley 1946).
+2. **Capture-wide, what the fit statistics miss, from the spheres' disagreement.** In a photo
+   with two or more spheres, the spheres' directions must agree up to their errors. Their
+   scatter about the photo's light measures the per-sphere error that the fit statistics do not
+   see (:func:`fit_error_model`): a scale ``s`` of the statistical standard deviations and an
+   added per-sphere floor ``tau`` (per axis), ``var_i = s^2 sigma_i^2 + tau^2``, by restricted
+   maximum likelihood (the photo's direction is estimated from the same spheres, Patterson &
+   Thompson 1971) over all photos, trimmed: photos whose scatter is improbable under the fitted
+   model (``p < 1e-3``) are left out and the fit repeated.
+3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
+   (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
+   assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
+   systematic errors is at most ``COMMON_CORRELATION = 0.25`` (the shared part's variance at most
+   a third of the unshared part's), so the common-mode variance is at most
+   ``rho / (1 - rho) * tau_s^2``, where ``tau_s^2`` is the per-sphere systematic variance that
+   the disagreement measured (``tau^2`` plus the part of ``s^2 sigma^2`` beyond the fit
+   statistics); plus ``COMMON_FLOOR_DEG`` (per axis) for the geometry shared by all spheres
+   (camera pose, a bias of the detected radii) that even perfectly agreeing spheres carry. The
+   bound was chosen on ffls synth renders (``docs/spheres.md``), where the measured common mode
+   lies in this range except where the estimator itself is biased (noisy dark pixels): that bias
+   is not bounded by it. With one sphere there is no disagreement: the fit statistics plus a
+   stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
+   (:data:`FALLBACK_MODEL`).
+
+The photo's per-axis standard deviation is that of the inverse-variance mean of its spheres plus
+the common mode; the cone is ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` times it (a per-axis Gaussian on
+the tangent plane: the squared angle over the per-axis variance is chi-square with 2 degrees of
+freedom).
+
+Internally (:mod:`ffls.spheres.lambert`, :mod:`ffls.spheres.combine`, the consistency and
+outlier tests of :mod:`ffls.spheres.photo`) uncertainties stay 1-sigma RMS angles; only the
+reported ``uncertainty_deg`` values are 95% cone radii.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+from scipy.stats import chi2 as chi2_distribution
+
+from ffls.conventions import normalize, tangent_basis
+
+__all__ = [
+    "CONFIDENCE",
+    "CONE_FACTOR",
+    "COMMON_CORRELATION",
+    "COMMON_FLOOR_DEG",
+    "FALLBACK_FLOOR_DEG",
+    "ErrorModel",
+    "cone_deg",
+    "correlation_inflation",
+    "tangent_residuals",
+    "fit_error_model",
+    "common_mode_deg",
+    "photo_residuals",
+    "FALLBACK_MODEL",
+]
+
+#: Confidence level of a reported cone.
+CONFIDENCE = 0.95
+#: Radius of the 95% cone in per-axis standard deviations: ``sqrt(chi2.ppf(0.95, 2))``.
+CONE_FACTOR = float(np.sqrt(chi2_distribution.ppf(CONFIDENCE, 2)))
+#: Assumed upper bound of the correlation between two spheres' systematic errors (module docstring).
+COMMON_CORRELATION = 0.25
+#: Per-axis standard deviation (degrees) of the common-mode error of even perfectly agreeing spheres.
+COMMON_FLOOR_DEG = 0.1
+#: Per-sphere RMS floor (degrees) where no disagreement can be measured (one sphere per photo).
+FALLBACK_FLOOR_DEG = 1.0
+#: Significance below which a photo's scatter is trimmed from the error-model fit.
+TRIM_SIGNIFICANCE = 1e-3
+
+
+def cone_deg(sigma_axis_deg):
+    """95% cone radius (degrees) of a direction with per-axis standard deviation ``sigma_axis_deg``.
+
+    Parameters
+    ----------
+    sigma_axis_deg : float or array
+        Standard deviation of each of the two tangent-plane components (degrees).
+
+    Returns
+    -------
+    float or array
+        ``CONE_FACTOR * sigma_axis_deg``.
+    """
+    return CONE_FACTOR * np.asarray(sigma_axis_deg, dtype=np.float64) if np.ndim(sigma_axis_deg) \
+        else CONE_FACTOR * float(sigma_axis_deg)
+
+
+def correlation_inflation(residuals: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                          max_factor: float | None = None) -> tuple[float, float, float]:
+    """Variance inflation of a fit's covariance from its residuals' spatial correlation.
+
+    The residuals are placed on their pixel grid; the lag-one correlation ``r_x`` between
+    horizontally adjacent pixels and ``r_y`` between vertically adjacent ones (both pixels
+    present) give the factor ``(1 + r_x) / (1 - r_x) * (1 + r_y) / (1 - r_y)`` of a separable
+    first-order autoregressive field: the pixel count divided by the effective number of
+    independent pixels. Negative correlations count as zero (no deflation).
+
+    Parameters
+    ----------
+    residuals : (m,) float
+        Residuals of the pixels used in the fit.
+    rows, cols : (m,) int
+        Their pixel coordinates.
+    max_factor : float, optional
+        Upper bound of the factor (e.g. the pixel count over the parameter count).
+
+    Returns
+    -------
+    factor : float
+        >= 1.
+    r_x, r_y : float
+        The lag-one correlations, in [0, 1).
+    """
+    r = np.asarray(residuals, dtype=np.float64)
+    rows = np.asarray(rows)
+    cols = np.asarray(cols)
+    if r.size < 4:
+        return 1.0, 0.0, 0.0
+    r = r - r.mean()
+    r0, c0 = int(rows.min()), int(cols.min())
+    grid = np.zeros((int(rows.max()) - r0 + 2, int(cols.max()) - c0 + 2))
+    have = np.zeros(grid.shape, dtype=bool)
+    grid[rows - r0, cols - c0] = r
+    have[rows - r0, cols - c0] = True
+
+    def lag_one(a, b, ha, hb):
+        both = ha & hb
+        if both.sum() < 3:
+            return 0.0
+        x, y = a[both], b[both]
+        den = 0.5 * float(x @ x + y @ y)
+        return float(np.clip((x @ y) / den, 0.0, 0.999)) if den > 0 else 0.0
+
+    rx = lag_one(grid[:, :-1], grid[:, 1:], have[:, :-1], have[:, 1:])
+    ry = lag_one(grid[:-1], grid[1:], have[:-1], have[1:])
+    f = (1.0 + rx) / (1.0 - rx) * (1.0 + ry) / (1.0 - ry)
+    if max_factor is not None:
+        f = min(f, max(float(max_factor), 1.0))
+    return float(max(f, 1.0)), rx, ry
+
+
+def tangent_residuals(directions: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Tangent-plane offsets (radians) of directions from their predictions.
+
+    Each offset is expressed in the tangent basis of the mean of the predictions (a photo's
+    spheres are close to each other on the unit sphere), so the offsets of one photo share axes.
+
+    Parameters
+    ----------
+    directions : (k, 3) float, unit
+    predicted : (k, 3) float, unit
+
+    Returns
+    -------
+    (k, 2) float
+    """
+    d = normalize(np.atleast_2d(np.asarray(directions, dtype=np.float64)))
+    p = normalize(np.atleast_2d(np.asarray(predicted, dtype=np.float64)))
+    e1, e2 = tangent_basis(normalize(p.sum(axis=0)))
+    # log map of d at p, then expressed on the shared axes
+    c = np.clip(np.einsum("ij,ij->i", d, p), -1.0, 1.0)
+    t = d - c[:, None] * p
+    nt = np.linalg.norm(t, axis=1)
+    ang = np.arccos(c)
+    scale = np.where(nt > 0, ang / np.maximum(nt, 1e-300), 0.0)
+    t = t * scale[:, None]
+    return np.stack([t @ e1, t @ e2], axis=1)
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """The error model of a capture's directions (module docstring).
+
+    Attributes
+    ----------
+    scale : float
+        ``s``: multiplies each sphere's statistical per-axis standard deviation.
+    floor_deg : float
+        ``tau``: per-axis standard deviation (degrees) added, in quadrature, to each sphere.
+    common_deg : float
+        Per-axis standard deviation (degrees) of the error shared by all spheres of a photo,
+        added to the photo's.
+    source : {'disagreement', 'fallback'}
+        Measured from the spheres' disagreement, or the stated single-sphere fallback.
+    n_photos : int
+        Photos with two or more spheres used in the fit.
+    n_trimmed : int
+        Of those, left out as improbable under the fitted model.
+    """
+
+    scale: float
+    floor_deg: float
+    common_deg: float
+    source: str
+    n_photos: int = 0
+    n_trimmed: int = 0
+
+    def sphere_sigma_deg(self, stat_sigma_deg):
+        """Per-axis standard deviation (degrees) of one sphere's direction: ``sqrt(s^2 sigma^2 + tau^2)``.
+
+        Parameters
+        ----------
+        stat_sigma_deg : float or (k,) float
+            The sphere's statistical per-axis standard deviation (degrees).
+        """
+        s = np.asarray(stat_sigma_deg, dtype=np.float64)
+        return np.sqrt((self.scale * s) ** 2 + self.floor_deg ** 2)
+
+    def photo_sigma_deg(self, stat_sigma_deg) -> float:
+        """Per-axis standard deviation (degrees) of a photo's direction from its used spheres.
+
+        The inverse-variance mean of the spheres (:meth:`sphere_sigma_deg`) plus the common mode.
+
+        Parameters
+        ----------
+        stat_sigma_deg : (k,) float
+            The used spheres' statistical per-axis standard deviations (degrees).
+        """
+        v = self.sphere_sigma_deg(np.atleast_1d(stat_sigma_deg)) ** 2
+        if v.size == 0 or not np.all(np.isfinite(v)):
+            return float("inf")
+        return float(np.sqrt(1.0 / np.sum(1.0 / np.maximum(v, 1e-300)) + self.common_deg ** 2))
+
+    def as_dict(self) -> dict:
+        """JSON-ready summary."""
+        return {"scale": float(self.scale), "floor_deg": float(self.floor_deg), "common_deg": float(self.common_deg),
+                "source": self.source, "n_photos": int(self.n_photos), "n_trimmed": int(self.n_trimmed),
+                "confidence": CONFIDENCE}
+
+
+def common_mode_deg(systematic_var_deg2: float, correlation: float = COMMON_CORRELATION,
+                    floor_deg: float = COMMON_FLOOR_DEG) -> float:
+    """Per-axis bound (degrees) of the common-mode error (module docstring, part 3).
+
+    Parameters
+    ----------
+    systematic_var_deg2 : float
+        Per-axis variance (degrees squared) of one sphere's systematic error that the spheres do
+        not share.
+    correlation : float
+        Bound of the correlation between two spheres' systematic errors, in [0, 1).
+    floor_deg : float
+        Added in quadrature.
+
+    Returns
+    -------
+    float
+    """
+    rho = float(np.clip(correlation, 0.0, 0.99))
+    return float(np.sqrt(rho / (1.0 - rho) * max(float(systematic_var_deg2), 0.0) + floor_deg ** 2))
+
+
+def _fallback() -> ErrorModel:
+    # no disagreement to measure: the statistics as they are, plus the stated floor (RMS -> per
+    # axis) and its common-mode share
+    tau = FALLBACK_FLOOR_DEG / np.sqrt(2.0)
+    return ErrorModel(scale=1.0, floor_deg=tau, common_deg=common_mode_deg(tau * tau), source="fallback")
+
+
+#: The single-sphere model (no disagreement to measure): statistics plus ``FALLBACK_FLOOR_DEG``.
+FALLBACK_MODEL = _fallback()
+
+
+def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
+                    common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
+                    fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4) -> ErrorModel:
+    """The capture's error model from its spheres' disagreement (module docstring, parts 2 and 3).
+
+    Parameters
+    ----------
+    residuals : list of (k_j, 2) float
+        Per photo with ``k_j >= 2`` used spheres, their tangent-plane offsets (radians) from the
+        directions the photo's light predicts at each sphere (:func:`tangent_residuals`).
+    stat_sigma_deg : list of (k_j,) float
+        The spheres' statistical per-axis standard deviations (degrees).
+    common_correlation : float
+        Bound of the correlation between two spheres' systematic errors (the common mode).
+    min_photos : int
+        Fewer usable photos give :data:`FALLBACK_MODEL`.
+    fit_scale : bool
+        Fit the scale ``s`` with the floor ``tau`` (else ``s = 1``).
+    trim : float
+        Photos whose scatter has a chi-square probability below this under the fitted model are
+        left out, and the model refitted (up to ``max_rounds`` times).
+    max_rounds : int
+
+    Returns
+    -------
+    ErrorModel
+    """
+    data = []
+    for r, s in zip(residuals, stat_sigma_deg):
+        r = np.asarray(r, dtype=np.float64).reshape(-1, 2)
+        s = np.radians(np.asarray(s, dtype=np.float64).ravel())
+        if r.shape[0] >= 2 and r.shape[0] == s.size and np.all(np.isfinite(r)) and np.all(np.isfinite(s)) \
+                and np.all(s > 0):
+            data.append((r, s * s))
+    if len(data) < min_photos:
+        return FALLBACK_MODEL
+    keep = np.ones(len(data), dtype=bool)
+    med_sigma = float(np.sqrt(np.median(np.concatenate([s2 for _, s2 in data]))))
+    x0 = np.array([0.0, np.log(max(med_sigma, 1e-6))])  # log s, log tau (radians); every round starts here
+    x = x0
+    lo = np.array([np.log(0.2) if fit_scale else 0.0, np.log(1e-5)])
+    hi = np.array([np.log(50.0) if fit_scale else 0.0, np.log(np.radians(30.0))])
+
+    # all photos' spheres stacked, with segment sums per photo (one vector pass per evaluation)
+    k_all = np.array([r.shape[0] for r, _ in data])
+    starts = np.concatenate([[0], np.cumsum(k_all)[:-1]])
+    R_all = np.concatenate([r for r, _ in data])
+    S2_all = np.concatenate([s2 for _, s2 in data])
+    photo_of = np.repeat(np.arange(len(data)), k_all)
+
+    def terms(x):
+        """Per photo: -2 log restricted likelihood and chi-square of the scatter."""
+        v = np.exp(2.0 * x[0]) * S2_all + np.exp(2.0 * x[1])
+        w = 1.0 / v
+        sw = np.add.reduceat(w, starts)
+        mu = np.add.reduceat(w[:, None] * R_all, starts) / sw[:, None]
+        chi = np.add.reduceat(w * np.sum((R_all - mu[photo_of]) ** 2, axis=1), starts)
+        return 2.0 * np.add.reduceat(np.log(v), starts) + 2.0 * np.log(sw) + chi, chi
+
+    def objective(x, subset):
+        return float(np.sum(terms(x)[0][subset]))
+
+    for _ in range(max_rounds):
+        if keep.sum() < min_photos:
+            break
+        res = minimize(objective, np.clip(x0, lo, hi), args=(keep,), method="L-BFGS-B",
+                       bounds=list(zip(lo, hi)))
+        x = res.x
+        p = chi2_distribution.sf(terms(x)[1], 2 * (k_all - 1))
+        new_keep = p >= trim
+        if np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
+    n_trimmed = int((~keep).sum())
+    scale, tau = float(np.exp(x[0])), float(np.exp(x[1]))
+    # the systematic per-sphere variance: the floor, plus what the scale adds beyond the statistics
+    s2_med = float(np.median(np.concatenate([s2 for (_, s2), k in zip(data, keep) if k] or [np.zeros(1)])))
+    sys_var = tau * tau + max(scale * scale - 1.0, 0.0) * s2_med
+    common = common_mode_deg(float(np.degrees(np.sqrt(sys_var))) ** 2, common_correlation)
+    return ErrorModel(scale=scale, floor_deg=float(np.degrees(tau)), common_deg=common,
+                      source="disagreement", n_photos=int(keep.sum()), n_trimmed=n_trimmed)
+
+
+def photo_residuals(directions: np.ndarray, light_direction: np.ndarray, position: np.ndarray | None = None,
+                    centers: np.ndarray | None = None) -> np.ndarray:
+    """Tangent offsets (radians) of a photo's sphere directions from what its light predicts.
+
+    A distant light predicts its direction at every sphere; a near light at ``position`` predicts
+    ``normalize(position - center_i)``.
+
+    Parameters
+    ----------
+    directions : (k, 3) float, unit
+        The used spheres' fitted directions.
+    light_direction : (3,) float, unit
+    position : (3,) float, optional
+        The near light's position (world).
+    centers : (k, 3) float, optional
+        The used spheres' centres (world), with ``position``.
+
+    Returns
+    -------
+    (k, 2) float
+    """
+    d = np.atleast_2d(np.asarray(directions, dtype=np.float64))
+    if position is not None and centers is not None and np.all(np.isfinite(position)):
+        pred = normalize(np.asarray(position, dtype=np.float64)[None, :] - np.atleast_2d(centers))
+    else:
+        pred = np.repeat(normalize(np.asarray(light_direction, dtype=np.float64))[None, :], len(d), axis=0)
+    return tangent_residuals(d, pred)
