@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ffls.commands.common import (add_capture_arguments, add_mask_argument, add_rotation_arguments, check_mask_size,
+from ffls.commands.common import (CELLS_RES_OR_EXACT, output_path, add_capture_arguments, add_mask_argument, add_rotation_arguments, check_mask_size,
                                   exposure_arg, load_relight_inputs, rotation_from_args, write_output)
 
 NAME = "relight"
@@ -23,8 +23,9 @@ def add_arguments(p):
                    help="exposure in stops for PNG output; auto meters the object (the --mask when given)")
     add_mask_argument(p)
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
-    p.add_argument("--cells-res", type=int, default=256, help="cell-texture resolution (0: exact k-d tree)")
-    p.add_argument("-o", "--out", required=True, help="output image, .exr or .png")
+    p.add_argument("--cells-res", type=CELLS_RES_OR_EXACT, default=256,
+                   help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
+    p.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output image, .exr or .png")
 
 
 def run(args) -> int:

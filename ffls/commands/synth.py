@@ -29,17 +29,19 @@ def _nonneg_float(text: str) -> float:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("out_dir", metavar="OUT_DIR", help="output capture folder (created if missing)")
-    p.add_argument("--lights", type=_positive_int, default=100, metavar="N", help="number of images (default 100)")
-    p.add_argument("--resolution", type=_positive_int, default=256, metavar="R", help="image width and height (default 256)")
-    p.add_argument("--near", type=float, default=None, metavar="DIST",
+    from ffls.commands.common import N_LIGHTS, SEED, SYNTH_RES, number, output_path
+
+    p.add_argument("out_dir", metavar="OUT_DIR", type=output_path(folder_ok=True, file_ok=False), help="output capture folder (created if missing)")
+    p.add_argument("--lights", type=N_LIGHTS, default=100, metavar="N", help="number of images (default 100)")
+    p.add_argument("--resolution", type=SYNTH_RES, default=256, metavar="R", help="image width and height (default 256)")
+    p.add_argument("--near", type=number(0.0, 1e6, lo_open=True), default=None, metavar="DIST",
                    help="point lights at DIST metres from the scene centre instead of distant lights")
-    p.add_argument("--light-radius", type=_nonneg_float, default=0.0, metavar="M",
+    p.add_argument("--light-radius", type=number(0.0, 1e6), default=0.0, metavar="M",
                    help="radius of a spherical near light (soft shadows; default 0 = point)")
-    p.add_argument("--ground-albedo", type=_nonneg_float, default=0.3, metavar="A", help="table albedo (default 0.3; 0 = black velvet)")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the light directions and noise (default 0)")
+    p.add_argument("--ground-albedo", type=number(0.0, 1.0), default=0.3, metavar="A", help="table albedo (default 0.3; 0 = black velvet)")
+    p.add_argument("--seed", type=SEED, default=0, metavar="S", help="seed of the light directions and noise (default 0)")
     p.add_argument("--srgb8", action="store_true", help="write 8-bit sRGB PNGs instead of half-float linear EXRs")
-    p.add_argument("--noise", type=_nonneg_float, default=0.0, metavar="SIGMA",
+    p.add_argument("--noise", type=number(0.0, 1.0), default=0.0, metavar="SIGMA",
                    help="Gaussian noise, fraction of full scale, added before quantisation (default 0)")
     p.add_argument("--full-sphere", action="store_true", help="draw directions over the full sphere (hemisphere 'full')")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -35,6 +35,8 @@ from ffls.io.images import read_image, write_exr, write_hdr
 
 __all__ = [
     "LAYOUTS",
+    "MIN_RES",
+    "min_size_text",
     "LightMap",
     "LightMapWarning",
     "load_lightmap",
@@ -56,6 +58,19 @@ __all__ = [
 LAYOUTS = ("latlong", "angular", "mirrorball", "cube")
 #: Names of the procedural maps :func:`builtin_lightmap` makes.
 BUILTIN_PROCEDURAL = ("sky", "paper")
+
+
+#: Smallest light map accepted, per layout: the height of a lat-long map (width twice it), the side of an
+#: angular or mirror-ball map, the face of a cube map. Smaller maps cannot tell the hemispheres apart
+#: (a 2x1 lat-long map has one row straddling the horizon, so its upper-hemisphere integral equals
+#: the full sphere's) and resolve no direction.
+MIN_RES = {"latlong": 4, "angular": 4, "mirrorball": 4, "cube": 2}
+
+
+def min_size_text(layout: str) -> str:
+    """The smallest accepted size of ``layout`` as ``WxH`` text (for messages)."""
+    r = MIN_RES[layout]
+    return {"latlong": f"{2 * r}x{r}", "cube": f"{4 * r}x{3 * r} (a cross of {r}x{r} faces)"}.get(layout, f"{r}x{r}")
 
 
 class LightMapWarning(UserWarning):
@@ -116,6 +131,9 @@ class LightMap:
             ok = len(s) == 3 and s[2] == 3 and s[0] == s[1] and s[0] > 0
         if not ok:
             raise ValueError(f"light-map data of shape {s} does not fit layout {self.layout!r}")
+        if self.res < MIN_RES[self.layout]:
+            raise ValueError(f"a {self.layout} light map must be at least {min_size_text(self.layout)}, "
+                             f"not of shape {s}")
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -507,6 +525,10 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
         layout = detect_layout(h, w, layout)
     except ValueError as e:
         raise InputError(str(e), path) from None
+    res = w // 4 if layout == "cube" and 3 * w == 4 * h else (h // 4 if layout == "cube" else h)
+    if res < MIN_RES[layout]:
+        raise InputError(f"a {w}x{h} light map is too small: a {layout} map must be at least "
+                         f"{min_size_text(layout)}", path)
     data, clamped = validate_radiance(img.pixels, path)
     if layout == "cube":
         data = cross_to_cube(data)
