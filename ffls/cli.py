@@ -108,7 +108,12 @@ def _one_line_warnings(command: str):
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # a bad argument: one line already printed; --help and --version exit as usual
+        if e.code in (0, None):
+            raise
+        return e.code if isinstance(e.code, int) else 2
     if getattr(args, "handler", None) is None:
         parser.print_help()
         return 2

@@ -39,7 +39,7 @@ class InputError(FflsError):
     """Bad input data: a missing, corrupt or inconsistent file."""
 
 
-class OutputError(FflsError):
+class OutputError(FflsError, OSError):
     """An output cannot be written: no folder, no permission, read-only, disk full, would replace an input."""
 
 
@@ -64,7 +64,9 @@ _WHY = {
 
 def os_error_message(e: OSError) -> str:
     """A short reason for an OSError, without the path (the caller names it)."""
-    return _WHY.get(e.errno, e.strerror or type(e).__name__)
+    if e.errno in _WHY:
+        return _WHY[e.errno]
+    return e.strerror or (str(e.args[0]) if len(e.args) == 1 else "") or type(e).__name__
 
 
 # ----------------------------------------------------------------------------- inputs

@@ -265,8 +265,9 @@ def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = T
 CELLS_RES = integer(16, 4096, memory=lambda r: 800.0 * r * r, what="cell texture")
 #: ``--cells-res`` of relight: as :data:`CELLS_RES`, or 0 for the exact k-d tree.
 CELLS_RES_OR_EXACT = integer(16, 4096, memory=lambda r: 800.0 * r * r, what="cell texture", special={"0": 0})
-#: ``--rank K``: at least 1; checked against the number of lights by :func:`check_rank_arg`.
-RANK = integer(1, 100000)
+#: ``--rank K``: an integer here; its range [1, n-1] depends on the lights and is checked once they are
+#: loaded, before anything is allocated, by :func:`check_rank_arg`.
+RANK = integer()
 #: ``--turntable N`` frames.
 FRAMES = integer(1, 100000)
 #: ``--fps``.

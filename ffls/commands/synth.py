@@ -48,14 +48,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ffls.errors import InputError
-    from ffls.synth.scene import write_synthetic_capture
+    """Render into a staging folder beside OUT_DIR and swap it in when complete.
+
+    An interrupted or failed ``ffls synth`` leaves OUT_DIR as it was (the old capture, or
+    nothing), never new images beside old ``lights.json`` (:func:`ffls.errors.atomic_folder`).
+    An existing OUT_DIR that is not a capture folder (no ``capture.json``) is not replaced.
+    """
+    from pathlib import Path
+
+    from ffls.errors import InputError, atomic_folder
 
     if args.near is not None and not args.near > 0:
         raise InputError(f"--near must be > 0, not {args.near}")
+    if args.near is not None and args.light_radius >= args.near:
+        raise InputError(f"--light-radius {args.light_radius:g} must be smaller than --near {args.near:g} "
+                         "(the light would enclose the scene)")
+    out = Path(args.out_dir)
+    if out.is_dir() and any(out.iterdir()) and not (out / "capture.json").is_file():
+        raise InputError("exists, is not empty and holds no capture.json: refusing to replace it", out)
     t = time.perf_counter()
-    res = write_synthetic_capture(
-        args.out_dir,
+    with atomic_folder(out) as stage:
+        res = _synth(args, stage)
+    print(f"wrote {len(res['images'])} images, capture.json, lights.json and truth.json to {out} "
+          f"in {time.perf_counter() - t:.1f} s")
+    return 0
+
+
+def _synth(args: argparse.Namespace, folder) -> dict:
+    from ffls.synth.scene import write_synthetic_capture
+
+    return write_synthetic_capture(
+        folder,
         n_lights=args.lights,
         resolution=args.resolution,
         light_model="distant" if args.near is None else "near",
@@ -68,6 +91,3 @@ def run(args: argparse.Namespace) -> int:
         noise=args.noise,
         progress=not args.quiet,
     )
-    print(f"wrote {len(res['images'])} images, capture.json, lights.json and truth.json to {res['folder']} "
-          f"in {time.perf_counter() - t:.1f} s")
-    return 0

@@ -131,9 +131,6 @@ class LightMap:
             ok = len(s) == 3 and s[2] == 3 and s[0] == s[1] and s[0] > 0
         if not ok:
             raise ValueError(f"light-map data of shape {s} does not fit layout {self.layout!r}")
-        if self.res < MIN_RES[self.layout]:
-            raise ValueError(f"a {self.layout} light map must be at least {min_size_text(self.layout)}, "
-                             f"not of shape {s}")
 
     # ------------------------------------------------------------------ geometry
     @property
