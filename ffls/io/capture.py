@@ -446,6 +446,9 @@ class Lights:
     note : str or None
         How the lights were matched to a capture's images when that is worth saying (by order,
         or by a name map; see :func:`load_lights_any`); not written to ``lights.json``.
+    path : pathlib.Path or None
+        The file the lights were read from (:func:`load_capture_and_lights`), named in errors
+        about them (e.g. no light has status ok); not written.
     """
 
     image_names: list
@@ -455,6 +458,7 @@ class Lights:
     reasons: list | None = None
     extra: list | None = None
     note: str | None = field(default=None, compare=False)
+    path: Path | None = field(default=None, compare=False)
 
     def __post_init__(self):
         n = len(self.image_names)
@@ -928,4 +932,6 @@ def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Captu
         if lights:
             raise InputError("lights file not found", path)
         raise InputError("no lights file: estimate the light directions first (ffls lights CAPTURE)", path)
-    return capture, load_lights_any(path, capture, lights_map)
+    lights_ = load_lights_any(path, capture, lights_map)
+    lights_.path = path
+    return capture, lights_
