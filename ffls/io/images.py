@@ -23,6 +23,7 @@ does not report every failure (a full disk), so its return value and the file ar
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import sys
 import tempfile
@@ -141,8 +142,9 @@ def quiet_native_output():
     """Capture what C libraries (OpenEXR, libpng, OpenCV) write to file descriptors 1 and 2 during the block.
 
     Yields an object whose ``text`` holds the captured output after the block, and whose
-    ``first_line()`` gives the line worth quoting in an error. Python's own ``sys.stdout`` and
-    ``sys.stderr`` are flushed before and are not redirected. Thread-safe (one capture at a time).
+    ``first_line()`` gives the line worth quoting in an error. Python's ``sys.stdout`` and
+    ``sys.stderr`` are flushed before and redirected too (bindings print through them).
+    Thread-safe (one capture at a time).
     """
     cap = _Captured()
     with _QUIET_LOCK:
@@ -155,17 +157,28 @@ def quiet_native_output():
         except OSError:  # no descriptors to spare: run unquiet rather than fail
             yield cap
             return
+        py = io.StringIO()  # what the bindings print through Python (pybind11 py::print)
         try:
             for fd, _ in saved:
                 os.dup2(sink.fileno(), fd)
-            yield cap
+            with contextlib.redirect_stdout(py), contextlib.redirect_stderr(py):
+                yield cap
         finally:
+            _flush_c_stdio()
             for fd, old in saved:
                 os.dup2(old, fd)
                 os.close(old)
             sink.seek(0)
-            cap.text = sink.read().decode("utf-8", "replace")
+            cap.text = sink.read().decode("utf-8", "replace") + py.getvalue()
             sink.close()
+
+
+def _flush_c_stdio() -> None:
+    """fflush(NULL): C (and C++ iostream, synced with it) buffers reach the captured descriptors now."""
+    import ctypes
+
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None).fflush(None)
 
 
 def nonfinite_message(a: np.ndarray) -> str | None:
@@ -269,6 +282,8 @@ def read_exr(path: str | os.PathLike, working_space: bool = True) -> ImageData:
             header = f.header()
         except Exception as e:  # the bindings raise RuntimeError/others with multi-line text
             err = e
+    if err is None and ("EXR_ERR" in cap.text or "Exception" in cap.text):  # read "successfully", data incomplete
+        err = RuntimeError(cap.first_line())
     if err is not None:
         why = cap.first_line().replace(str(path) + ": ", "")
         raise InputError(f"cannot read OpenEXR file, corrupt or truncated ({why or f'{type(err).__name__}: {err}'})",
