@@ -26,6 +26,7 @@ import sys
 import warnings
 
 from ffls.commands import command_modules
+from ffls.commands.common import deferred_notes
 from ffls.errors import FflsError, guard_inputs, os_error_message
 
 __all__ = ["build_parser", "subcommands", "main", "OneLineParser", "Terminated"]
@@ -106,6 +107,17 @@ def _one_line_warnings(command: str):
             warnings.showwarning = old
 
 
+def _quiet_opencv() -> None:
+    """OpenCV logs nothing to the terminal (its failures are reported by the reader, naming the file)."""
+    import os
+
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "SILENT")  # read when cv2 is first imported
+    if "cv2" in sys.modules:
+        cv2 = sys.modules["cv2"]
+        with contextlib.suppress(Exception):
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
@@ -118,8 +130,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     name = f"ffls {args.command}"
+    _quiet_opencv()
     try:
-        with _sigterm_as_interrupt(), _one_line_warnings(args.command), guard_inputs():
+        with _sigterm_as_interrupt(), _one_line_warnings(args.command), guard_inputs(), deferred_notes():
             return int(args.handler(args) or 0)
     except FflsError as e:
         print(f"{name}: error: {e}", file=sys.stderr)

@@ -155,8 +155,10 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None):
     nothing behind, neither the temporary file nor a half-written output, and an existing
     ``path`` stays as it was. The temporary name keeps the extension (some writers choose the
     format from it). After the block the temporary file must exist and be non-empty (writers
-    such as ``cv2.imwrite`` do not report every failure); its data are flushed to disk before the
-    rename, so a full disk is noticed here.
+    such as ``cv2.imwrite`` do not report every failure). A full disk shows as an error of the
+    writer's ``write`` (ext4 and tmpfs reserve blocks at write time) or as this size check; the
+    file is not fsync'ed (that would guard against a power cut, not promised here, and costs
+    about 5 ms a file: 40% of a 100-image ``ffls synth`` at 64 px).
 
     Raises
     ------
@@ -189,8 +191,6 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None):
             raise OutputError("the writer left " + ("no file" if size < 0 else "an empty file")
                               + " (disk full or a library error)", path)
         try:
-            with open(tmp, "rb+") as f:
-                os.fsync(f.fileno())
             os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
             os.replace(tmp, path)
         except OSError as e:

@@ -49,6 +49,21 @@ def ws(tmp_path_factory):
         img[5, 7, 1] = bad
         write_exr(c / "img_0003.exr", img, half=True)
         w[name] = c
+    # a capture of few lights (its coverage notes must not come before an error) with a NaN pixel,
+    # and with a photo of the wrong size
+    few = root / "few"
+    write_synthetic_capture(few, n_lights=8, resolution=24, progress=False, seed=4)
+    w["few"] = few
+    for name, edit in (("few_nan", "nan"), ("few_size", "size")):
+        c = root / name
+        shutil.copytree(few, c)
+        img = read_image(c / "img_0005.exr").pixels.copy()
+        if edit == "nan":
+            img[1, 1, 0] = np.nan
+        else:
+            img = img[:20, :22]
+        write_exr(c / "img_0005.exr", img, half=True)
+        w[name] = c
     # a truncated photo
     c = copy("cap_trunc")
     data = (c / "img_0002.exr").read_bytes()
@@ -96,6 +111,9 @@ def ws(tmp_path_factory):
         writer(maps / f"good{ext}", good)
         data = (maps / f"good{ext}").read_bytes()
         (maps / f"trunc{ext}").write_bytes(data[: len(data) // 2])
+    bright = good.copy()
+    bright[3, 3] = 1e6
+    write_exr(maps / "bright.exr", bright)
     nanmap = good.copy()
     nanmap[3, 4] = np.nan
     write_exr(maps / "nan.exr", nanmap)
@@ -280,6 +298,20 @@ CASES = [
     ("lp-1e308", L + ["--lights", "{lp_huge}", "-o", "{out}/a.exr"], "huge.lp", "a.exr"),
     ("capture-version-true", ["relight", "{cap_version_true}", "--probe", "sky", "-o", "{out}/a.exr"],
      "capture.json", "a.exr"),
+    ("few-nan", ["relight", "{few_nan}", "--probe", "sky", "-o", "{out}/a.exr"], "img_0005.exr", "a.exr"),
+    ("few-nan-render", ["render", "{few_nan}", "--probe", "sky", "--cpu", "-o", "{out}/a.png"], "img_0005.exr",
+     "a.png"),
+    ("few-size", ["relight", "{few_size}", "--probe", "sky", "-o", "{out}/a.exr"], "img_0005.exr", "a.exr"),
+    ("few-rank", ["render", "{few}", "--probe", "sky", "--cpu", "--rank", "8", "-o", "{out}/a.png"], "--rank",
+     "a.png"),
+    ("render-rot-huge", R + ["--rotate", "1e300,0,0", "-o", "{out}/a.png"], "--rotate", "a.png"),
+    ("relight-rotz-huge", L + ["--rotate-z", "1e300", "-o", "{out}/a.png"], "--rotate-z", "a.png"),
+    ("lm-half-overflow", ["lightmap", "convert", "{maps}/bright.exr", "{out}/m.exr", "--half"], "m.exr", "m.exr"),
+    ("cal-camera-missing", ["calibrate", "camera", "{root}/nothere.png"], "nothere.png", ""),
+    ("demo-maps-unknown", ["demo", "-o", "{out}/d", "--maps", "nosuch", "--no-view"], "--maps", "d"),
+    ("render-probe-unknown", R[:3] + ["nosuchmap", "--cpu", "-o", "{out}/a.png"], "nosuchmap", "a.png"),
+    ("relight-mask-missing", L + ["--mask", "{root}/nomask.png", "-o", "{out}/a.png"], "nomask.png", "a.png"),
+    ("relight-lights-map-bad", L + ["--lights-map", "{{bad", "-o", "{out}/a.exr"], "--lights-map", "a.exr"),
     ("render-missing-capture", ["render", "{root}/nocap", "--probe", "sky", "--cpu", "-o", "{out}/a.png"],
      "nocap", "a.png"),
 ]
@@ -320,13 +352,13 @@ def _render_png(ws, out):
 
 @pytest.mark.parametrize("kind", ["png", "exr", "hdr-map", "synth"])
 def test_disk_full_mocked_is_one_line(ws, tmp_path, capfd, monkeypatch, kind):
-    """ENOSPC from the file system (mocked at os.fsync, where a full disk shows at the latest)."""
+    """ENOSPC from the file system (mocked at the final rename; test_real_full_disk_is_one_line has a real one)."""
     import ffls.errors
 
-    def full(fd):
+    def full(*a, **k):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(ffls.errors.os, "fsync", full)
+    monkeypatch.setattr(ffls.errors.os, "replace", full)
     argv = {
         "png": _render_png(ws, tmp_path / "a.png"),
         "exr": _render_png(ws, tmp_path / "a.exr"),
@@ -426,10 +458,10 @@ def test_existing_output_survives_a_failed_write(ws, tmp_path, capfd, monkeypatc
     assert main(["lightmap", "make", "sky", str(target), "--height", "8"]) == 0
     old = target.read_bytes()
 
-    def full(fd):
+    def full(*a, **k):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(ffls.errors.os, "fsync", full)
+    monkeypatch.setattr(ffls.errors.os, "replace", full)
     assert main(["lightmap", "make", "sky", str(target), "--height", "16"]) == 2
     assert target.read_bytes() == old and _entries(tmp_path) == {"m.exr"}
 
@@ -447,15 +479,35 @@ def test_cell_texture_too_coarse_for_the_lights_is_refused():
 
 
 # ----------------------------------------------------------------------------- warnings, help
-def test_clamped_negatives_warning_is_one_line(tmp_path, capfd):
+def test_clamped_negatives_warning_is_one_line(ws, tmp_path, capfd):
     data = np.ones((16, 32, 3), np.float32)
     data[2, 3] = -1.0
     write_exr(tmp_path / "neg.exr", data)
     capfd.readouterr()
-    rc = main(["lightmap", "convert", str(tmp_path / "neg.exr"), str(tmp_path / "out.exr")])
+    rc = main(["relight", str(ws["cap"]), "--probe", str(tmp_path / "neg.exr"), "-o", str(tmp_path / "a.exr")])
     _, err = capfd.readouterr()
-    assert rc == 0
-    assert "Warning" not in err and "warnings.warn" not in err
+    warn = [ln for ln in err.splitlines() if "warning" in ln]
+    assert rc == 0 and len(warn) == 1, err
+    assert warn[0].startswith("ffls relight: warning: ") and "neg.exr" in warn[0] and "clamped 1 pixels" in warn[0]
+    assert "warnings.warn" not in err and "LightMapWarning" not in err
+
+
+def test_turntable_never_replaces_a_folder_of_other_files(ws, tmp_path, capfd):
+    d = tmp_path / "mine"
+    d.mkdir()
+    (d / "notes.txt").write_text("keep me")
+    assert main(["render", str(ws["cap"]), "--probe", "sky", "--cpu", "--turntable", "2", "-o", str(d)]) == 2
+    assert _entries(d) == {"notes.txt"} and _entries(tmp_path) == {"mine"}
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mine" in err[0] and "refusing" in err[0], err
+
+
+def test_turntable_replaces_its_own_frames_after_success(ws, tmp_path, capfd):
+    d = tmp_path / "frames"
+    assert main(["render", str(ws["cap"]), "--probe", "sky", "--cpu", "--turntable", "3", "-o", str(d)]) == 0
+    assert _entries(d) == {"frame_0000.png", "frame_0001.png", "frame_0002.png"}
+    assert main(["render", str(ws["cap"]), "--probe", "sky", "--cpu", "--turntable", "2", "-o", str(d)]) == 0
+    assert _entries(d) == {"frame_0000.png", "frame_0001.png"} and _entries(tmp_path) == {"frames"}
 
 
 def test_every_command_has_help(capsys):

@@ -18,6 +18,8 @@ refused while parsing, in one line naming the flag and the allowed range.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import contextvars
 import math
 import os
 import sys
@@ -37,6 +39,7 @@ __all__ = [
     "size_wxh",
     "float_list",
     "output_path",
+    "builtin_map_names",
     "available_memory",
     "check_memory",
     "add_capture_arguments",
@@ -49,6 +52,8 @@ __all__ = [
     "check_rank_arg",
     "check_cells_res",
     "print_notes",
+    "flush_notes",
+    "deferred_notes",
     "add_mask_argument",
     "load_relight_inputs",
     "check_mask_size",
@@ -220,6 +225,19 @@ def float_list(lo: float | None = None, hi: float | None = None, min_len: int = 
     return parse
 
 
+def builtin_map_names(text) -> tuple:
+    """argparse type: comma-separated built-in light-map names (:func:`ffls.lightmaps.lightmap.builtin_lightmap`)."""
+    from ffls.assets import builtin_lightmaps
+    from ffls.lightmaps.lightmap import BUILTIN_PROCEDURAL
+
+    known = [*builtin_lightmaps(), *BUILTIN_PROCEDURAL]
+    names = tuple(m.strip() for m in str(text).split(","))
+    for m in names:
+        if m not in known:
+            raise argparse.ArgumentTypeError(f"unknown light map {m!r}; built-in maps: {', '.join(known)}")
+    return names
+
+
 def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = True):
     """argparse type: an output path, checked before any work (:func:`ffls.errors.check_output_path`).
 
@@ -304,7 +322,7 @@ def add_capture_arguments(p, probe_required: bool = True, probe_default: str | N
 
 # ----------------------------------------------------------------------------- rotation
 def parse_rotation(text: str) -> tuple[float, float, float]:
-    """``'YAW,PITCH,ROLL'`` (degrees; missing trailing values are 0) -> three finite floats.
+    """``'YAW,PITCH,ROLL'`` (degrees; missing trailing values are 0) -> three finite floats, each within +-1e6.
 
     Raises
     ------
@@ -315,8 +333,8 @@ def parse_rotation(text: str) -> tuple[float, float, float]:
         v = [float(x) for x in str(text).split(",")]
     except ValueError:
         raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}") from None
-    if not 1 <= len(v) <= 3 or not all(math.isfinite(x) for x in v):
-        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}")
+    if not 1 <= len(v) <= 3 or not all(math.isfinite(x) and abs(x) <= 1e6 for x in v):
+        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees (finite, within +-1e6), not {text!r}")
     return tuple(v + [0.0] * (3 - len(v)))
 
 
@@ -425,11 +443,42 @@ def check_cells_res(res, directions, hemisphere, flag: str = "--cells-res") -> N
                          f"candidate cells than fit (the weights would be wrong); use {flag} {cells.res} or more")
 
 
+_NOTES: contextvars.ContextVar = contextvars.ContextVar("ffls_notes", default=None)
+
+
 def print_notes(command: str, *notes) -> None:
-    """Print each non-empty informational line as ``ffls COMMAND: NOTE`` on stderr."""
+    """Print each non-empty informational line as ``ffls COMMAND: NOTE`` on stderr.
+
+    Inside :func:`deferred_notes` (the CLI) the lines wait for :func:`flush_notes` (a command
+    calls it once its inputs are loaded) or the command's successful end; a command that fails
+    before then prints only its one error line.
+    """
+    pending = _NOTES.get()
     for note in notes:
         if note:
-            print(f"ffls {command}: {note}", file=sys.stderr)
+            line = f"ffls {command}: {note}"
+            if pending is None:
+                print(line, file=sys.stderr)
+            else:
+                pending.append(line)
+
+
+def flush_notes() -> None:
+    """Print the informational lines held by :func:`deferred_notes` now."""
+    pending = _NOTES.get()
+    while pending:
+        print(pending.pop(0), file=sys.stderr)
+
+
+@contextlib.contextmanager
+def deferred_notes():
+    """Hold :func:`print_notes` lines until :func:`flush_notes` or a successful end; drop them on an error."""
+    token = _NOTES.set([])
+    try:
+        yield
+        flush_notes()
+    finally:
+        _NOTES.reset(token)
 
 
 # ----------------------------------------------------------------------------- loading

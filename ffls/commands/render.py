@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_mask_argument,
-                                  add_rotation_arguments, check_mask_size, exposure_arg, output_path, load_relight_inputs, rotation_from_args, write_output)
+                                  add_rotation_arguments, check_mask_size, exposure_arg, flush_notes,
+                                  load_relight_inputs, output_path, rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -114,6 +115,7 @@ def run(args) -> int:
     R0 = rotation_from_args(args)
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
     r, ctx = _make_renderer(args, capture, lights)
+    flush_notes()  # the inputs are loaded: the informational lines now
     try:
         r.set_lightmap(lightmap)
         r.set_rotation(R0)

@@ -10,11 +10,16 @@ output stays as it was.
 from __future__ import annotations
 
 import contextlib
+import re
 from pathlib import Path
 
 import numpy as np
 
 from ffls.errors import FflsError, InputError, atomic_folder, atomic_output
+
+
+#: Names of the frames a PNG folder holds (an existing folder of only these may be replaced).
+_FRAME = re.compile(r"frame_\d{4,}\.png")
 
 
 class FrameWriter:
@@ -45,6 +50,11 @@ class FrameWriter:
         self._tmp = None
         self._writer = None
         self._size = None
+        if not self.is_video and self.out.is_dir():
+            other = [p.name for p in self.out.iterdir() if not _FRAME.fullmatch(p.name)]
+            if other:
+                raise InputError(f"the folder holds other files than frames ({other[0]!r}, ...); refusing to "
+                                 "replace it: choose a new or empty folder", self.out)
         self._atomic = atomic_output(self.out) if self.is_video else atomic_folder(self.out)
         self._tmp = self._atomic.__enter__()
 

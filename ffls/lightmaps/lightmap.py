@@ -553,6 +553,10 @@ def save_lightmap(lm: LightMap, path: str | os.PathLike, half: bool = False) -> 
     ext = path.suffix.lower()
     img = cube_to_cross(lm.data) if lm.layout == "cube" else lm.data
     if ext == ".exr":
+        top = float(np.max(img)) if img.size else 0.0
+        if half and top > float(np.finfo(np.float16).max):
+            raise FflsError(f"values up to {top:.6g} exceed the half-float range (65504): write float "
+                            "(without --half / half=False)", path)
         return write_exr(path, img, half=half)
     if ext in (".hdr", ".pic"):
         if half:
