@@ -230,21 +230,39 @@ def atomic_folder(path: str | os.PathLike):
             if isinstance(e, FflsError):
                 raise
             _raise_os(e, path)
-        try:
-            if path.exists():
-                old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=parent))
-                os.replace(path, old / path.name)
-            os.replace(stage, path)
-        except OSError as e:
-            if old is not None and (old / path.name).exists() and not path.exists():
-                os.replace(old / path.name, path)  # put the old output back
-            _raise_os(e, path)
+        with _signals_deferred():  # Ctrl-C / SIGTERM between the two renames would lose both folders
+            try:
+                if path.exists():
+                    old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=parent))
+                    os.replace(path, old / path.name)
+                os.replace(stage, path)
+            except OSError as e:
+                if old is not None and (old / path.name).exists() and not path.exists():
+                    os.replace(old / path.name, path)  # put the old output back
+                _raise_os(e, path)
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
     finally:
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT and SIGTERM (delivered when the block ends) where the platform and thread allow."""
+    import signal
+
+    sigs = {signal.SIGINT, signal.SIGTERM}
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    except (AttributeError, ValueError, OSError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _umask() -> int:

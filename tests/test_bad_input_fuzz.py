@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +24,11 @@ from hypothesis import strategies as st  # noqa: E402
 from ffls.errors import InputError  # noqa: E402
 from ffls.io.capture import load_capture, load_lights, read_lp  # noqa: E402
 from ffls.io.images import read_image, write_exr, write_hdr, write_png  # noqa: E402
-from ffls.lightmaps.lightmap import load_lightmap  # noqa: E402
+from ffls.lightmaps.lightmap import LightMapWarning, load_lightmap  # noqa: E402
 
-SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+# derandomize: the suite is reproducible; raise max_examples locally to fuzz harder
+SETTINGS = settings(max_examples=60, deadline=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 # JSON values that are wrong in interesting ways
 nasty = st.one_of(
@@ -130,4 +133,6 @@ def test_corrupt_images_fuzz(capfd, good_files, ext, cut, flips):
         p.write_bytes(data)
         _call(read_image, p, capfd)
         if ext != ".png":
-            _call(load_lightmap, p, capfd)
+            with warnings.catch_warnings():  # a flipped byte may make a valid map with negatives: clamped, warned
+                warnings.simplefilter("ignore", LightMapWarning)
+                _call(load_lightmap, p, capfd)
