@@ -21,7 +21,8 @@ def add_arguments(p):
     sub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
     r = sub.add_parser("response", help="inverse camera response from bracketed photos (Debevec-Malik 1997)")
     r.add_argument("bracket_dir", help="folder of bracketed 8-bit photos (+ exposures.json, or EXIF exposure times)")
-    r.add_argument("-o", "--output", default="response.npy", type=output_path((".npy", ".csv")), help="output table, .npy or .csv (default response.npy)")
+    r.add_argument("-o", "--output", default="response.npy", type=output_path((".npy", ".csv")),
+                   help="output table, .npy or .csv (default response.npy)")
     r.add_argument("--samples", type=integer(10, 100000), default=70,
                    help="pixel samples for the solver, 10 to 100000 (default 70)")
     r.add_argument("--smoothness", type=number(0.0, 1e6, lo_open=True), default=10.0,

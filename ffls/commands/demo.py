@@ -16,7 +16,9 @@ DESCRIPTION = (
 def add_arguments(p):
     from ffls.commands.common import N_LIGHTS, SEED, SYNTH_RES, builtin_map_names, float_list, output_path
 
-    p.add_argument("-o", "--out", default="ffls-demo", type=output_path(folder_ok=True, file_ok=False), help="output folder (default: ./ffls-demo)")
+    p.add_argument("-o", "--out", default="ffls-demo", type=output_path(folder_ok=True, file_ok=False),
+
+                   help="output folder (default: ./ffls-demo)")
     p.add_argument("--lights", type=N_LIGHTS, default=160, help="number of lights in the synthetic capture")
     p.add_argument("--resolution", type=SYNTH_RES, default=256, help="image size in pixels (square)")
     p.add_argument("--maps", default=None, type=builtin_map_names, help="comma-separated built-in light maps")

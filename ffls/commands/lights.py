@@ -16,7 +16,8 @@ def add_arguments(p):
     from ffls.commands.common import integer, output_path
 
     p.add_argument("capture", help="capture folder (with capture.json)")
-    p.add_argument("-o", "--output", default=None, type=output_path((".json",)), help="lights.json to write (default: CAPTURE/lights.json)")
+    p.add_argument("-o", "--output", default=None, type=output_path((".json",)),
+                   help="lights.json to write (default: CAPTURE/lights.json)")
     p.add_argument("--model", choices=("auto", "distant", "near"), default="auto",
                    help="light model: chosen per photo (auto), distant or near (default auto)")
     p.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated",

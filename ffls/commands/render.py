@@ -45,7 +45,8 @@ def add_arguments(p):
                    help="write N frames over 360 degrees about +Z: -o OUT.mp4 or a folder of PNGs")
     p.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
     p.add_argument("--cpu", action="store_true", help="use the CPU reference path instead of the GPU")
-    p.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True), help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
+    p.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True),
+                   help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
 
 
 def parse_rotation(args) -> np.ndarray:
@@ -99,7 +100,7 @@ def _write_turntable(out: Path, r, R0, args, exposure: float = 0.0):
         raise InputError(f"--turntable needs N >= 1, not {n}")
     frames = ((k, rotation_z(360.0 * k / n) @ R0) for k in range(n))
     with FrameWriter(out, fps=args.fps) as sink:
-        for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame"):
+        for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame", disable=None):
             r.set_rotation(R)
             r.render(exposure, args.tonemap)
             sink.write(r.read_display())

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 NAME = "synth"
@@ -89,5 +90,5 @@ def _synth(args: argparse.Namespace, folder) -> dict:
         hemisphere="full" if args.full_sphere else "upper",
         encoding="srgb8" if args.srgb8 else "linear",
         noise=args.noise,
-        progress=not args.quiet,
+        progress=not args.quiet and sys.stderr.isatty(),  # a bar is for a terminal, not a log
     )
