@@ -1,26 +1,53 @@
-"""The ``ffls`` command: a thin layer over the library.
+"""The ``ffls`` command: a thin layer over the library, and the one-line error policy.
 
 Each subcommand is a module (:mod:`ffls.commands`: built in, or registered by another package
 under the entry-point group ``ffls.commands``, as the viewer registers ``view``) that defines
 ``NAME``, ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``; ``run`` is one library
-call that a test can make without a subprocess. :class:`ffls.errors.FflsError` becomes one line
-on stderr and exit status 2, never a traceback.
+call that a test can make without a subprocess.
+
+The error policy (``docs/reliability.md``), applied here once for every command:
+
+* a bad argument (:mod:`ffls.commands.common` types) or bad input (:class:`ffls.errors.FflsError`)
+  is one line on stderr, ``ffls COMMAND: error: ...``, and exit status 2; never a traceback;
+* an OS error that escapes a command (a file that cannot be read or written) is one line naming
+  the file, status 2; running out of memory is one line, status 2;
+* Ctrl-C (SIGINT) and SIGTERM unwind the command (every output is atomic, so nothing partial is
+  left) and print one line, status 130 or 143;
+* a Python warning (a light map's clamped negatives, ...) is one line, ``ffls COMMAND: warning: ...``;
+* while a command runs, its inputs are protected: an output that would replace one is refused
+  (:func:`ffls.errors.guard_inputs`).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import warnings
 
 from ffls.commands import command_modules
-from ffls.errors import FflsError
+from ffls.commands.common import deferred_notes
+from ffls.errors import FflsError, guard_inputs, os_error_message
 
-__all__ = ["build_parser", "subcommands", "main"]
+__all__ = ["build_parser", "subcommands", "main", "OneLineParser", "Terminated"]
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C so that every ``finally`` and atomic write unwinds."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line (``PROG: error: ...``) and exit status 2."""
+
+    def error(self, message):
+        message = " ".join(str(message).split())
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _build() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
     from ffls import __version__
 
-    parser = argparse.ArgumentParser(prog="ffls", description="Free-form Light Stage: relight objects from photographs.")
+    parser = OneLineParser(prog="ffls", description="Free-form Light Stage: relight objects from photographs.")
     parser.add_argument("--version", action="version", version=f"ffls {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     parsers = {}
@@ -42,25 +69,92 @@ def subcommands() -> dict[str, argparse.ArgumentParser]:
     return _build()[1]
 
 
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM raises :class:`Terminated` in the main thread (only there can Python install handlers)."""
+    def handler(signum, frame):
+        raise Terminated()
+
+    try:
+        old = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread: leave SIGTERM alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@contextlib.contextmanager
+def _one_line_warnings(command: str):
+    """Show every Python warning as one line ``ffls COMMAND: warning: ...`` (each text once)."""
+    seen = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        if text not in seen:
+            seen.add(text)
+            print(f"ffls {command}: warning: {text}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        if not sys.warnoptions:
+            warnings.simplefilter("default")
+        old, warnings.showwarning = warnings.showwarning, show
+        try:
+            yield
+        finally:
+            warnings.showwarning = old
+
+
+def _quiet_opencv() -> None:
+    """OpenCV logs nothing to the terminal (its failures are reported by the reader, naming the file)."""
+    import os
+
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "SILENT")  # read when cv2 is first imported
+    if "cv2" in sys.modules:
+        cv2 = sys.modules["cv2"]
+        with contextlib.suppress(Exception):
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # a bad argument: one line already printed; --help and --version exit as usual
+        if e.code in (0, None):
+            raise
+        return e.code if isinstance(e.code, int) else 2
     if getattr(args, "handler", None) is None:
         parser.print_help()
         return 2
+    name = f"ffls {args.command}"
+    _quiet_opencv()
     try:
-        return int(args.handler(args) or 0)
+        with _sigterm_as_interrupt(), _one_line_warnings(args.command), guard_inputs(), deferred_notes():
+            return int(args.handler(args) or 0)
     except FflsError as e:
-        print(f"ffls {args.command}: error: {e}", file=sys.stderr)
+        print(f"{name}: error: {e}", file=sys.stderr)
         return 2
+    except Terminated:
+        print(f"{name}: terminated; nothing partial was left", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
-        print(f"ffls {args.command}: interrupted", file=sys.stderr)
+        print(f"{name}: interrupted; nothing partial was left", file=sys.stderr)
         return 130
     except BrokenPipeError:  # e.g. `ffls info | head`: the reader left; say nothing more
         import os
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except MemoryError:
+        print(f"{name}: error: out of memory; ask for a smaller size or resolution", file=sys.stderr)
+        return 2
+    except OSError as e:  # a file the library opened without its own check
+        where = e.filename if e.filename is not None else "file"
+        print(f"{name}: error: {where}: {os_error_message(e)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -15,28 +15,24 @@ DESCRIPTION = (
 )
 
 
-def _pair(text: str):
-    import argparse
-    try:
-        a, b = text.lower().split("x")
-        return int(a), int(b)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected COLSxROWS, e.g. 7x5, got {text!r}") from None
-
-
 def add_arguments(p):
+    from ffls.commands.common import integer, number, output_path, size_wxh
+
     sub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
     r = sub.add_parser("response", help="inverse camera response from bracketed photos (Debevec-Malik 1997)")
     r.add_argument("bracket_dir", help="folder of bracketed 8-bit photos (+ exposures.json, or EXIF exposure times)")
-    r.add_argument("-o", "--output", default="response.npy", help="output table, .npy or .csv (default response.npy)")
-    r.add_argument("--samples", type=int, default=70, help="pixel samples for the solver (default 70)")
-    r.add_argument("--smoothness", type=float, default=10.0, help="smoothness weight lambda (default 10)")
+    r.add_argument("-o", "--output", default="response.npy", type=output_path((".npy", ".csv")),
+                   help="output table, .npy or .csv (default response.npy)")
+    r.add_argument("--samples", type=integer(10, 100000), default=70,
+                   help="pixel samples for the solver, 10 to 100000 (default 70)")
+    r.add_argument("--smoothness", type=number(0.0, 1e6, lo_open=True), default=10.0,
+                   help="smoothness weight lambda, > 0 (default 10)")
     c = sub.add_parser("camera", help="camera matrix and distortion from photos of a calibration board")
     c.add_argument("photos", nargs="+", help="photos of the board")
     c.add_argument("--board", choices=("charuco", "chessboard"), default="charuco")
-    c.add_argument("--squares", type=_pair, default=(7, 5), help="squares along x and y, e.g. 7x5")
-    c.add_argument("--square-size", type=float, default=0.03, help="square side, scene units (default 0.03)")
-    c.add_argument("--marker-size", type=float, default=0.022, help="ArUco marker side (default 0.022)")
+    c.add_argument("--squares", type=size_wxh(2, 100), default=(7, 5), help="squares along x and y, e.g. 7x5")
+    c.add_argument("--square-size", type=number(0.0, 1e3, lo_open=True), default=0.03, help="square side, scene units (default 0.03)")
+    c.add_argument("--marker-size", type=number(0.0, 1e3, lo_open=True), default=0.022, help="ArUco marker side (default 0.022)")
     c.add_argument("--dictionary", default="DICT_5X5_100", help="ArUco dictionary (default DICT_5X5_100)")
     c.add_argument("--capture", help="capture folder whose capture.json gets camera.K and camera.dist")
 

@@ -8,14 +8,40 @@ One definition of each flag, used by every command that takes it:
   :func:`rotation_from_args`;
 * ``--exposure EV|auto``: :func:`exposure_arg`;
 * ``--rank K``: checked against the number of lights, once it is known, by :func:`check_rank_arg`.
+
+And the one shared set of argparse types that every subcommand's numeric and path arguments use
+(``docs/reliability.md``): :func:`number` (finite, in a range), :func:`integer` (in a range, with
+an optional memory estimate checked against the memory the machine has), :func:`size_wxh`,
+:func:`float_list` and :func:`output_path` (suffix, parent folder, not a folder). A bad value is
+refused while parsing, in one line naming the flag and the allowed range.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import contextvars
 import math
+import os
 import sys
 
 __all__ = [
+    "CELLS_RES",
+    "CELLS_RES_OR_EXACT",
+    "RANK",
+    "FRAMES",
+    "FPS",
+    "MAP_HEIGHT",
+    "N_LIGHTS",
+    "SYNTH_RES",
+    "SEED",
+    "number",
+    "integer",
+    "size_wxh",
+    "float_list",
+    "output_path",
+    "builtin_map_names",
+    "available_memory",
+    "check_memory",
     "add_capture_arguments",
     "add_lights_arguments",
     "add_rotation_arguments",
@@ -24,12 +50,254 @@ __all__ = [
     "rotation_from_args",
     "exposure_arg",
     "check_rank_arg",
+    "check_cells_res",
     "print_notes",
+    "flush_notes",
+    "deferred_notes",
     "add_mask_argument",
     "load_relight_inputs",
     "check_mask_size",
     "write_output",
 ]
+
+
+# ----------------------------------------------------------------------------- shared argparse types
+def _fmt_num(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _range_text(lo, hi, lo_open: bool = False, hi_open: bool = False) -> str:
+    if lo is not None and hi is not None:
+        return f"in {'(' if lo_open else '['}{_fmt_num(lo)}, {_fmt_num(hi)}{')' if hi_open else ']'}"
+    if lo is not None:
+        return f"{'>' if lo_open else '>='} {_fmt_num(lo)}"
+    if hi is not None:
+        return f"{'<' if hi_open else '<='} {_fmt_num(hi)}"
+    return "finite"
+
+
+def _in_range(v, lo, hi, lo_open, hi_open) -> bool:
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        return False
+    if hi is not None and (v >= hi if hi_open else v > hi):
+        return False
+    return True
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation (``MemAvailable``; total physical memory as fallback)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 1 << 62
+
+
+def check_memory(nbytes: float, what: str) -> None:
+    """Refuse, before allocating, a request estimated at ``nbytes`` above the memory available.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        ``what`` (e.g. ``"--cells-res 100000"``) needs more memory than is available; one line.
+    """
+    have = available_memory()
+    if nbytes > have:
+        raise argparse.ArgumentTypeError(
+            f"{what} needs about {nbytes / 2**30:.3g} GiB of memory, more than the {have / 2**30:.3g} GiB available")
+
+
+def number(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False,
+           unit: str = "", special: tuple = ()):
+    """argparse type: a finite float in a range.
+
+    Parameters
+    ----------
+    lo, hi : float, optional
+        Bounds (inclusive unless ``lo_open`` / ``hi_open``).
+    unit : str
+        Said in the message (``"degrees"``, ``"stops"``).
+    special : tuple of str
+        Words accepted as themselves (lower case), e.g. ``("auto",)``.
+
+    Returns
+    -------
+    callable
+        ``text -> float`` (or the special word); raises ``argparse.ArgumentTypeError`` naming the
+        range, which argparse prefixes with the flag.
+    """
+    def parse(text):
+        t = str(text).strip()
+        if t.lower() in special:
+            return t.lower()
+        try:
+            v = float(t)
+        except ValueError:
+            v = math.nan
+        if not math.isfinite(v) or not _in_range(v, lo, hi, lo_open, hi_open):
+            extra = f" or {' or '.join(repr(w) for w in special)}" if special else ""
+            rng = _range_text(lo, hi, lo_open, hi_open)
+            raise argparse.ArgumentTypeError(
+                f"expected a finite number{' of ' + unit if unit else ''} {rng}{extra}, not {text!r}"
+                if rng != "finite" else f"expected a finite number{' of ' + unit if unit else ''}{extra}, not {text!r}")
+        return v
+
+    parse.__name__ = "number"  # argparse names the type in some messages
+    return parse
+
+
+def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str = "", special: dict | None = None):
+    """argparse type: an integer in ``[lo, hi]``, optionally within the machine's memory.
+
+    Parameters
+    ----------
+    lo, hi : int, optional
+        Inclusive bounds. ``hi`` keeps a typo (``100000``) from becoming a huge allocation.
+    memory : callable, optional
+        ``value -> bytes`` the request will allocate; a value needing more than
+        :func:`available_memory` is refused in the same line.
+    what : str
+        What the value is, for the memory message (``"cell texture"``).
+    special : dict, optional
+        Words or values accepted outside the range, mapped to what they mean (``{"0": 0}``).
+    """
+    special = dict(special or {})
+
+    def parse(text):
+        t = str(text).strip()
+        if t.lower() in special:
+            return special[t.lower()]
+        try:
+            v = int(t)
+        except ValueError:
+            v = None
+        if v is None or not _in_range(v, lo, hi, False, False):
+            extra = "".join(f" or {k}" for k in special)
+            raise argparse.ArgumentTypeError(f"expected an integer {_range_text(lo, hi)}{extra}, not {text!r}")
+        if memory is not None:
+            check_memory(memory(v), f"{v}" + (f" ({what})" if what else ""))
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def size_wxh(lo: int = 1, hi: int = 16384, memory=None):
+    """argparse type: ``WxH`` (e.g. ``7x5``, ``1920x1080``) with both in ``[lo, hi]`` -> ``(W, H)``."""
+    def parse(text):
+        try:
+            a, b = str(text).lower().split("x")
+            w, h = int(a), int(b)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected WxH (e.g. 7x5) with both in [{lo}, {hi}], not {text!r}") from None
+        if not (lo <= w <= hi and lo <= h <= hi):
+            raise argparse.ArgumentTypeError(f"expected WxH with both in [{lo}, {hi}], not {text!r}")
+        if memory is not None:
+            check_memory(memory(w, h), str(text))
+        return w, h
+
+    parse.__name__ = "size"
+    return parse
+
+
+def float_list(lo: float | None = None, hi: float | None = None, min_len: int = 1, max_len: int = 1000,
+               unit: str = ""):
+    """argparse type: comma-separated finite floats in ``[lo, hi]`` -> tuple (``0,90,180``)."""
+    one = number(lo, hi, unit=unit)
+
+    def parse(text):
+        parts = [p for p in str(text).split(",")]
+        if not min_len <= len(parts) <= max_len:
+            raise argparse.ArgumentTypeError(
+                f"expected {min_len} to {max_len} comma-separated numbers, not {text!r}")
+        try:
+            return tuple(one(p) for p in parts)
+        except argparse.ArgumentTypeError as e:
+            raise argparse.ArgumentTypeError(f"in {text!r}: {e}") from None
+
+    parse.__name__ = "list"
+    return parse
+
+
+def builtin_map_names(text) -> tuple:
+    """argparse type: comma-separated built-in light-map names (:func:`ffls.lightmaps.lightmap.builtin_lightmap`)."""
+    from ffls.assets import builtin_lightmaps
+    from ffls.lightmaps.lightmap import BUILTIN_PROCEDURAL
+
+    known = [*builtin_lightmaps(), *BUILTIN_PROCEDURAL]
+    names = tuple(m.strip() for m in str(text).split(","))
+    for m in names:
+        if m not in known:
+            raise argparse.ArgumentTypeError(f"unknown light map {m!r}; built-in maps: {', '.join(known)}")
+    return names
+
+
+def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = True):
+    """argparse type: an output path, checked before any work (:func:`ffls.errors.check_output_path`).
+
+    Parameters
+    ----------
+    suffixes : tuple of str
+        Allowed file extensions (lower case, with the dot); empty: any.
+    folder_ok : bool
+        A path without one of ``suffixes`` is a folder output (e.g. a turntable's PNG frames).
+    file_ok : bool
+        False: the path must be a folder output.
+
+    The parent folder must exist; an existing path must be of the right kind (a file is not a
+    folder and a folder is not a file). Whether it is an input is checked when writing.
+    """
+    from pathlib import Path
+
+    def parse(text):
+        from ffls.errors import FflsError, check_output_path
+
+        p = Path(text)
+        is_file = file_ok and (not suffixes or p.suffix.lower() in suffixes)
+        if not is_file and not folder_ok:
+            raise argparse.ArgumentTypeError(f"{text}: must end with {' or '.join(suffixes)}")
+        if not is_file and p.suffix and file_ok:
+            raise argparse.ArgumentTypeError(
+                f"{text}: must end with {' or '.join(suffixes)}, or name a folder (no extension)")
+        try:
+            check_output_path(p, folder=not is_file)
+        except FflsError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+        return str(p)
+
+    parse.__name__ = "output path"
+    return parse
+
+
+# The numeric arguments several commands share, each declared once. Memory estimates per unit were
+# measured with tracemalloc (docs/reliability.md): about 770 bytes per cell-texture texel
+# (ffls.weights.voronoi.bake_cells), 1.3 kB per synthetic image pixel (ffls.synth.scene), 150 bytes
+# per lat-long texel of a procedural or resampled light map.
+#: ``--cells-res`` of render: the cell texture is res x res.
+CELLS_RES = integer(16, 4096, memory=lambda r: 800.0 * r * r, what="cell texture")
+#: ``--cells-res`` of relight: as :data:`CELLS_RES`, or 0 for the exact k-d tree.
+CELLS_RES_OR_EXACT = integer(16, 4096, memory=lambda r: 800.0 * r * r, what="cell texture", special={"0": 0})
+#: ``--rank K``: an integer here; its range [1, n-1] depends on the lights and is checked once they are
+#: loaded, before anything is allocated, by :func:`check_rank_arg`.
+RANK = integer()
+#: ``--turntable N`` frames.
+FRAMES = integer(1, 100000)
+#: ``--fps``.
+FPS = number(0.1, 1000.0)
+#: Height of a lat-long light map made or resampled (width twice it).
+MAP_HEIGHT = integer(4, 16384, memory=lambda h: 160.0 * 2 * h * h, what="light map")
+#: Number of lights of a synthetic capture.
+N_LIGHTS = integer(1, 100000)
+#: Width and height of synthetic images.
+SYNTH_RES = integer(8, 16384, memory=lambda r: 1400.0 * r * r, what="synthetic image")
+#: A random seed (NumPy accepts non-negative integers).
+SEED = integer(0, 2**63 - 1)
 
 
 def add_lights_arguments(p) -> None:
@@ -54,7 +322,7 @@ def add_capture_arguments(p, probe_required: bool = True, probe_default: str | N
 
 # ----------------------------------------------------------------------------- rotation
 def parse_rotation(text: str) -> tuple[float, float, float]:
-    """``'YAW,PITCH,ROLL'`` (degrees; missing trailing values are 0) -> three finite floats.
+    """``'YAW,PITCH,ROLL'`` (degrees; missing trailing values are 0) -> three finite floats, each within +-1e6.
 
     Raises
     ------
@@ -65,8 +333,8 @@ def parse_rotation(text: str) -> tuple[float, float, float]:
         v = [float(x) for x in str(text).split(",")]
     except ValueError:
         raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}") from None
-    if not 1 <= len(v) <= 3 or not all(math.isfinite(x) for x in v):
-        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees, not {text!r}")
+    if not 1 <= len(v) <= 3 or not all(math.isfinite(x) and abs(x) <= 1e6 for x in v):
+        raise ValueError(f"rotation must be YAW,PITCH,ROLL in degrees (finite, within +-1e6), not {text!r}")
     return tuple(v + [0.0] * (3 - len(v)))
 
 
@@ -77,14 +345,8 @@ def _rotation_type(text: str) -> tuple[float, float, float]:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _degrees_type(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"expected a finite angle in degrees, not {text!r}")
-    return v
+#: ``--rotate-z DEG``: any finite angle within a sane range.
+_degrees_type = number(-1e6, 1e6, unit="degrees")
 
 
 def add_rotation_arguments(p, default: str | None = None) -> None:
@@ -127,15 +389,11 @@ def exposure_arg(text: str):
     ``auto`` meters the object (the ``--mask`` when given), not the background:
     :func:`ffls.display.tonemap.auto_exposure`.
     """
-    if str(text).strip().lower() == "auto":
-        return "auto"
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"expected stops (a finite number) or 'auto', not {text!r}")
-    return v
+    return _exposure(text)
+
+
+#: Stops of exposure: 2**±64 spans far beyond any radiance a float32 image holds.
+_exposure = number(-64.0, 64.0, unit="stops", special=("auto",))
 
 
 # ----------------------------------------------------------------------------- rank
@@ -158,11 +416,69 @@ def check_rank_arg(rank, n_lights: int, flag: str = "--rank") -> None:
         raise InputError(f"{flag} {rank} is out of range: it must be in [{lo}, {hi}] for {n_lights} lights")
 
 
+def check_cells_res(res, directions, hemisphere, flag: str = "--cells-res") -> None:
+    """Refuse a cell texture too coarse for the lights: some texel would have more candidate cells than it holds.
+
+    Such a texture gives wrong weights silently (the GPU engine bakes at exactly ``res``), so the
+    smallest resolution that works (doubling ``res``) is named instead.
+
+    Raises
+    ------
+    ffls.errors.InputError
+        One line naming the flag, the overflowing texel count and a resolution that works.
+    """
+    if not res or not len(directions):
+        return
+    if int(res) >= 16 * math.sqrt(len(directions)):  # measured: no overflow this fine (docs/reliability.md)
+        return
+    from ffls.errors import InputError
+    from ffls.weights.voronoi import bake_cells
+
+    cells = bake_cells(directions, hemisphere, res=int(res), max_res=4096)
+    if cells.overflow:
+        raise InputError(f"{flag} {res} is too coarse for {len(directions)} lights ({cells.overflow} texels "
+                         f"hold more candidate cells than fit even at {cells.res}); use fewer lights")
+    if cells.res != int(res):
+        raise InputError(f"{flag} {res} is too coarse for {len(directions)} lights: texels would hold more "
+                         f"candidate cells than fit (the weights would be wrong); use {flag} {cells.res} or more")
+
+
+_NOTES: contextvars.ContextVar = contextvars.ContextVar("ffls_notes", default=None)
+
+
 def print_notes(command: str, *notes) -> None:
-    """Print each non-empty informational line as ``ffls COMMAND: NOTE`` on stderr."""
+    """Print each non-empty informational line as ``ffls COMMAND: NOTE`` on stderr.
+
+    Inside :func:`deferred_notes` (the CLI) the lines wait for :func:`flush_notes` (a command
+    calls it once its inputs are loaded) or the command's successful end; a command that fails
+    before then prints only its one error line.
+    """
+    pending = _NOTES.get()
     for note in notes:
         if note:
-            print(f"ffls {command}: {note}", file=sys.stderr)
+            line = f"ffls {command}: {note}"
+            if pending is None:
+                print(line, file=sys.stderr)
+            else:
+                pending.append(line)
+
+
+def flush_notes() -> None:
+    """Print the informational lines held by :func:`deferred_notes` now."""
+    pending = _NOTES.get()
+    while pending:
+        print(pending.pop(0), file=sys.stderr)
+
+
+@contextlib.contextmanager
+def deferred_notes():
+    """Hold :func:`print_notes` lines until :func:`flush_notes` or a successful end; drop them on an error."""
+    token = _NOTES.set([])
+    try:
+        yield
+        flush_notes()
+    finally:
+        _NOTES.reset(token)
 
 
 # ----------------------------------------------------------------------------- loading
@@ -192,6 +508,8 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
     capture, lights = load_capture_and_lights(args.capture, args.lights, getattr(args, "lights_map", None))
     idx, dirs = lights.accepted()
     check_rank_arg(getattr(args, "rank", None), len(idx))
+    if command == "render":  # relight re-bakes finer by itself (relight_capture's max_res)
+        check_cells_res(getattr(args, "cells_res", None), dirs, capture.hemisphere)
     lm = None
     if lightmap:
         from ffls.lightmaps.lightmap import lightmap_from_spec

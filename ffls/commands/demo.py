@@ -14,13 +14,18 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    p.add_argument("-o", "--out", default="ffls-demo", help="output folder (default: ./ffls-demo)")
-    p.add_argument("--lights", type=int, default=160, help="number of lights in the synthetic capture")
-    p.add_argument("--resolution", type=int, default=256, help="image size in pixels (square)")
-    p.add_argument("--maps", default=None, help="comma-separated built-in light maps")
-    p.add_argument("--rotations", default="0,90,180,270", help="comma-separated rotations about +Z, degrees")
+    from ffls.commands.common import N_LIGHTS, SEED, SYNTH_RES, builtin_map_names, float_list, output_path
+
+    p.add_argument("-o", "--out", default="ffls-demo", type=output_path(folder_ok=True, file_ok=False),
+
+                   help="output folder (default: ./ffls-demo)")
+    p.add_argument("--lights", type=N_LIGHTS, default=160, help="number of lights in the synthetic capture")
+    p.add_argument("--resolution", type=SYNTH_RES, default=256, help="image size in pixels (square)")
+    p.add_argument("--maps", default=None, type=builtin_map_names, help="comma-separated built-in light maps")
+    p.add_argument("--rotations", default=(0.0, 90.0, 180.0, 270.0), type=float_list(-1e6, 1e6, 1, 360, "degrees"),
+                   help="comma-separated rotations about +Z, degrees")
     p.add_argument("--cpu", action="store_true", help="force the CPU reference relighter")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--no-view", action="store_true",
                    help="do not open the viewer on the capture afterwards (it opens only when a display exists)")
 
@@ -28,8 +33,8 @@ def add_arguments(p):
 def run(args) -> int:
     from ffls.demo import DEFAULT_MAPS, run_demo
 
-    maps = tuple(m.strip() for m in args.maps.split(",")) if args.maps else DEFAULT_MAPS
-    rotations = tuple(float(r) for r in args.rotations.split(","))
+    maps = args.maps or DEFAULT_MAPS
+    rotations = tuple(args.rotations)
     res = run_demo(args.out, n_lights=args.lights, resolution=args.resolution, maps=maps,
                    rotations=rotations, use_gpu=False if args.cpu else "auto", seed=args.seed,
                    progress=sys.stderr.isatty())

@@ -14,6 +14,8 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
+    from ffls.commands.common import MAP_HEIGHT, output_path
+
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     info = sub.add_parser("info", help="print size, layout, min/max/mean and irradiance")
     info.add_argument("map", help="light-map file (.exr/.hdr) or built-in name (courtyard, sky, ...)")
@@ -21,16 +23,16 @@ def add_arguments(p):
                       help="layout of the input (default: from the aspect ratio; square = angular)")
     conv = sub.add_parser("convert", help="convert between .exr and .hdr (and optionally to lat-long)")
     conv.add_argument("input")
-    conv.add_argument("output", help=".exr or .hdr")
+    conv.add_argument("output", type=output_path((".exr", ".hdr", ".pic")), help=".exr or .hdr")
     conv.add_argument("--layout", choices=("latlong", "angular", "mirrorball", "cube"), default=None,
                       help="layout of the input (default: from the aspect ratio; square = angular)")
-    conv.add_argument("--to-latlong", type=int, metavar="HEIGHT", default=None,
+    conv.add_argument("--to-latlong", type=MAP_HEIGHT, metavar="HEIGHT", default=None,
                       help="resample to a lat-long map of this height (nearest texel)")
     conv.add_argument("--half", action="store_true", help="write half-float EXR")
     make = sub.add_parser("make", help="write a procedural light map")
     make.add_argument("kind", choices=("sky", "paper"))
-    make.add_argument("output", help=".exr or .hdr")
-    make.add_argument("--height", type=int, default=256, help="map height (width is twice it)")
+    make.add_argument("output", type=output_path((".exr", ".hdr", ".pic")), help=".exr or .hdr")
+    make.add_argument("--height", type=MAP_HEIGHT, default=256, help="map height, 4 to 16384 (width is twice it)")
     make.add_argument("--half", action="store_true", help="write half-float EXR")
 
 
@@ -68,7 +70,7 @@ def run(args) -> int:
         return 0
     if args.action == "convert":
         lm = _load(args.input, args.layout)
-        if args.to_latlong:
+        if args.to_latlong is not None:
             lm = lm.to_latlong(args.to_latlong)
         save_lightmap(lm, args.output, half=args.half)
         print(f"wrote {args.output} ({lm.layout}, {lm.clamped_negatives} negative pixels clamped)")

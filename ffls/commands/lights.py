@@ -15,18 +15,21 @@ DESCRIPTION = ("Fit every photo's spheres (Lambert + ambient + ground bounce), c
 
 
 def add_arguments(p):
+    from ffls.commands.common import integer, output_path
+
     p.add_argument("capture", help="capture folder (with capture.json)")
-    p.add_argument("-o", "--output", default=None, help="lights.json to write (default: CAPTURE/lights.json)")
+    p.add_argument("-o", "--output", default=None, type=output_path((".json",)),
+                   help="lights.json to write (default: CAPTURE/lights.json)")
     p.add_argument("--model", choices=("auto", "distant", "near"), default="auto",
                    help="light model: chosen per photo (auto), distant or near (default auto)")
     p.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated",
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), or free per photo (default calibrated)")
-    p.add_argument("--workers", type=int, default=None, help="processes (default: every core)")
-    p.add_argument("--plot", default=None, metavar="PLOT.png",
+    p.add_argument("--workers", type=integer(1, 1024), default=None, help="processes, 1 to 1024 (default: every core)")
+    p.add_argument("--plot", default=None, type=output_path((".png",)), metavar="PLOT.png",
                    help="draw the accepted directions and their Voronoi cells on the hemisphere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--lp", default=None, metavar="OUT.lp",
+    p.add_argument("--lp", default=None, type=output_path((".lp",)), metavar="OUT.lp",
                    help="also write the accepted lights as an RTI .lp file (camera frame; docs/formats.md)")
 
 

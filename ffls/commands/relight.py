@@ -3,8 +3,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ffls.commands.common import (add_capture_arguments, add_mask_argument, add_rotation_arguments, check_mask_size,
-                                  exposure_arg, load_relight_inputs, rotation_from_args, write_output)
+from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument, add_rotation_arguments,
+                                  check_mask_size, exposure_arg, flush_notes, load_relight_inputs, output_path,
+                                  rotation_from_args, write_output)
 
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
@@ -23,8 +24,9 @@ def add_arguments(p):
                    help="exposure in stops for PNG output; auto meters the object (the --mask when given)")
     add_mask_argument(p)
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
-    p.add_argument("--cells-res", type=int, default=256, help="cell-texture resolution (0: exact k-d tree)")
-    p.add_argument("-o", "--out", required=True, help="output image, .exr or .png")
+    p.add_argument("--cells-res", type=CELLS_RES_OR_EXACT, default=256,
+                   help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
+    p.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output image, .exr or .png")
 
 
 def run(args) -> int:
@@ -39,6 +41,7 @@ def run(args) -> int:
     image, w = relight_capture(capture, lights, lightmap, rotation=rotation_from_args(args),
                                cells_res=args.cells_res or None)
     check_mask_size(mask, image.shape)
+    flush_notes()  # the inputs are loaded: the informational lines now
     display = None
     if out.suffix.lower() != ".exr":
         exposure = auto_exposure(image, mask=mask) if args.exposure == "auto" else args.exposure

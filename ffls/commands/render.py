@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.commands.common import (add_capture_arguments, add_mask_argument, add_rotation_arguments, check_mask_size,
-                                  exposure_arg, load_relight_inputs, rotation_from_args, write_output)
+from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_mask_argument,
+                                  add_rotation_arguments, check_mask_size, exposure_arg, flush_notes,
+                                  load_relight_inputs, output_path, rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -34,16 +35,18 @@ def add_arguments(p):
                    help="exposure in stops (PNG/video); auto meters the object (the --mask when given)")
     add_mask_argument(p)
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve (PNG/video)")
-    p.add_argument("--rank", type=int, default=None, metavar="K",
+    p.add_argument("--rank", type=RANK, default=None, metavar="K",
                    help="use a compressed basis of K eigen-images, 1 <= K <= n-1 for n lights (computed once, "
                         "saved in the capture folder)")
     p.add_argument("--dtype", default="f16", choices=("f16", "f32"), help="GPU storage of the basis")
-    p.add_argument("--cells-res", type=int, default=256, help="cell-texture resolution")
-    p.add_argument("--turntable", type=int, default=None, metavar="N",
+    p.add_argument("--cells-res", type=CELLS_RES, default=256,
+                   help="cell-texture resolution, 16 to 4096 (default 256); too coarse for the lights is refused")
+    p.add_argument("--turntable", type=FRAMES, default=None, metavar="N",
                    help="write N frames over 360 degrees about +Z: -o OUT.mp4 or a folder of PNGs")
-    p.add_argument("--fps", type=float, default=30.0, help="frames per second of the turntable video")
+    p.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
     p.add_argument("--cpu", action="store_true", help="use the CPU reference path instead of the GPU")
-    p.add_argument("-o", "--out", required=True, help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
+    p.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True),
+                   help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
 
 
 def parse_rotation(args) -> np.ndarray:
@@ -97,7 +100,7 @@ def _write_turntable(out: Path, r, R0, args, exposure: float = 0.0):
         raise InputError(f"--turntable needs N >= 1, not {n}")
     frames = ((k, rotation_z(360.0 * k / n) @ R0) for k in range(n))
     with FrameWriter(out, fps=args.fps) as sink:
-        for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame"):
+        for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame", disable=None):
             r.set_rotation(R)
             r.render(exposure, args.tonemap)
             sink.write(r.read_display())
@@ -113,6 +116,7 @@ def run(args) -> int:
     R0 = rotation_from_args(args)
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
     r, ctx = _make_renderer(args, capture, lights)
+    flush_notes()  # the inputs are loaded: the informational lines now
     try:
         r.set_lightmap(lightmap)
         r.set_rotation(R0)

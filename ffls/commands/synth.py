@@ -9,7 +9,7 @@ vignetting and Poisson-Gaussian sensor noise (``docs/synth.md``).
 from __future__ import annotations
 
 import argparse
-import math
+import sys
 import time
 
 NAME = "synth"
@@ -27,73 +27,12 @@ _MATERIALS = ("matte", "grey", "mirror", "glossy_black")
 
 
 # ----------------------------------------------------------------------------- argument types
-def _number(text: str, what: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {what}, not {text!r}") from None
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"expected a finite number, not {text!r}")
-    return v
+# Numbers use the shared argparse types of ffls.commands.common (finite, in range, one line);
+# the parsers below read this command's own structured values.
+def _finite(text: str) -> float:
+    from ffls.commands.common import number
 
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, not {v}")
-    return v
-
-
-def _count(text: str) -> int:
-    """A number of spheres: 0 to 64."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
-    if not 0 <= v <= 64:
-        raise argparse.ArgumentTypeError(f"must be in 0..64, not {v}")
-    return v
-
-
-def _nonneg_float(text: str) -> float:
-    v = _number(text, "a number")
-    if not v >= 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, not {text}")
-    return v
-
-
-def _positive_float(text: str) -> float:
-    v = _number(text, "a number")
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
-    return v
-
-
-def _albedo(text: str) -> float:
-    v = _number(text, "an albedo")
-    if not 0 <= v <= 1:
-        raise argparse.ArgumentTypeError(f"must be in [0, 1], not {text}")
-    return v
-
-
-def _angle(text: str) -> float:
-    v = _number(text, "an angle in degrees")
-    if not 0 < v < 90:
-        raise argparse.ArgumentTypeError(f"must be in (0, 90) degrees, not {text}")
-    return v
-
-
-def _quality(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer 0..100, not {text!r}") from None
-    if not 0 <= v <= 100:
-        raise argparse.ArgumentTypeError(f"must be in 0..100, not {v}")
-    return v
+    return number()(text)
 
 
 def _materials(text: str):
@@ -115,7 +54,7 @@ def _sphere_xy(text: str) -> tuple:
         xy = item.split(",")
         if len(xy) != 2:
             raise argparse.ArgumentTypeError(f"expected X,Y;X,Y;... (metres), not {text!r}")
-        out.append((_number(xy[0], "a number"), _number(xy[1], "a number")))
+        out.append((_finite(xy[0]), _finite(xy[1])))
     return tuple(out)
 
 
@@ -126,7 +65,7 @@ def _vignetting(text: str):
     if text.startswith("radial:"):
         coeffs = text[len("radial:"):].split(",")
         if 1 <= len(coeffs) <= 3:
-            return "radial", tuple(_number(c, "a coefficient") for c in coeffs)
+            return "radial", tuple(_finite(c) for c in coeffs)
     raise argparse.ArgumentTypeError(f"expected none, cos4 or radial:A[,B[,C]], not {text!r}")
 
 
@@ -139,30 +78,34 @@ def _choice(*names):
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("out_dir", metavar="OUT_DIR", help="output capture folder (created if missing)")
-    p.add_argument("--lights", type=_positive_int, default=100, metavar="N", help="number of images (default 100)")
-    p.add_argument("--resolution", type=_positive_int, default=256, metavar="R", help="image width and height (default 256)")
-    p.add_argument("--near", type=float, default=None, metavar="DIST",
+    from ffls.commands.common import N_LIGHTS, SEED, SYNTH_RES, integer, number, output_path
+
+    p.add_argument("out_dir", metavar="OUT_DIR", type=output_path(folder_ok=True, file_ok=False),
+                   help="output capture folder (created if missing)")
+    p.add_argument("--lights", type=N_LIGHTS, default=100, metavar="N", help="number of images (default 100)")
+    p.add_argument("--resolution", type=SYNTH_RES, default=256, metavar="R", help="image width and height (default 256)")
+    p.add_argument("--near", type=number(0.0, 1e6, lo_open=True), default=None, metavar="DIST",
                    help="point lights at DIST metres from the scene centre instead of distant lights")
-    p.add_argument("--light-radius", type=_nonneg_float, default=0.0, metavar="M",
+    p.add_argument("--light-radius", type=number(0.0, 1e6), default=0.0, metavar="M",
                    help="radius of a spherical near light (soft shadows; default 0 = point)")
-    p.add_argument("--light-angle", type=_angle, default=0.5, metavar="DEG",
+    p.add_argument("--light-angle", type=number(0.0, 90.0, lo_open=True, hi_open=True, unit="degrees"), default=0.5,
+                   metavar="DEG",
                    help="angular radius of the light as mirror spheres see it (distant lights, and point near "
                         "lights from the scene centre; default 0.5)")
     g = p.add_argument_group("scene")
-    g.add_argument("--spheres", type=_count, default=4, metavar="N",
+    g.add_argument("--spheres", type=integer(0, 64), default=4, metavar="N",
                    help="number of calibration spheres on a ring around the object (default 4)")
     g.add_argument("--sphere-xy", type=_sphere_xy, default=None, metavar="X,Y;X,Y;...",
                    help="ground positions of the spheres in metres (instead of --spheres); write --sphere-xy=... when "
                         "the first number is negative")
-    g.add_argument("--sphere-radius", type=_positive_float, default=0.05, metavar="M", help="sphere radius (default 0.05)")
+    g.add_argument("--sphere-radius", type=number(0.0, 10.0, lo_open=True), default=0.05, metavar="M", help="sphere radius (default 0.05)")
     g.add_argument("--sphere-material", type=_materials, default="matte", metavar="MAT",
                    help="matte (white), grey, mirror (chrome), glossy_black, mixed, or a comma list per sphere")
     g.add_argument("--no-object", action="store_true", help="spheres only (a calibration shot)")
     g.add_argument("--background", type=_choice("black", "grey", "white", "textured", "checker"), default="grey",
                    metavar="{black,grey,white,textured,checker}",
                    help="table: black, grey (default), white, textured (high-contrast blotches) or checker")
-    g.add_argument("--ground-albedo", type=_albedo, default=None, metavar="A",
+    g.add_argument("--ground-albedo", type=number(0.0, 1.0), default=None, metavar="A",
                    help="table albedo (mean albedo when textured); overrides --background's (grey 0.3)")
     g.add_argument("--lens", type=_choice("normal", "long", "orthographic"), default="normal",
                    metavar="{normal,long,orthographic}",
@@ -179,21 +122,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="transfer curve of integer files (default srgb; exr is linear)")
     f.add_argument("--unstated-encoding", action="store_true",
                    help="leave the encoding out of capture.json (truth.json still records it)")
-    f.add_argument("--jpeg-quality", type=_quality, default=90, metavar="Q", help="JPEG quality 0..100 (default 90)")
-    f.add_argument("--exposure", type=_positive_float, default=1.0, metavar="X",
+    f.add_argument("--jpeg-quality", type=integer(0, 100), default=90, metavar="Q", help="JPEG quality 0..100 (default 90)")
+    f.add_argument("--exposure", type=number(0.0, 1e6, lo_open=True), default=1.0, metavar="X",
                    help="scale from scene radiance to full scale (default 1: a white sphere peaks at 0.25)")
     f.add_argument("--vignetting", type=_vignetting, default=("none", ()), metavar="MODEL",
                    help="none (default), cos4 (pinhole lenses) or radial:A[,B[,C]] (1 + A r^2 + B r^4 + C r^6, "
                         "r = 1 at the corners)")
-    f.add_argument("--shot-noise", type=_nonneg_float, default=0.0, metavar="GAIN",
+    f.add_argument("--shot-noise", type=number(0.0, 1.0), default=0.0, metavar="GAIN",
                    help="Poisson shot noise: full-scale units per electron (variance GAIN * x; e.g. 1e-4)")
-    f.add_argument("--read-noise", type=_nonneg_float, default=0.0, metavar="SIGMA",
+    f.add_argument("--read-noise", type=number(0.0, 1.0), default=0.0, metavar="SIGMA",
                    help="Gaussian read noise, fraction of full scale (e.g. 0.002)")
-    f.add_argument("--noise", type=_nonneg_float, default=0.0, metavar="SIGMA",
+    f.add_argument("--noise", type=number(0.0, 1.0), default=0.0, metavar="SIGMA",
                    help="Gaussian noise, fraction of full scale, added to the encoded value before quantisation "
                         "(default 0)")
     f.add_argument("--srgb8", action="store_true", help="shorthand for --format png8 --encoding srgb")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the light directions and noise (default 0)")
+    p.add_argument("--seed", type=SEED, default=0, metavar="S", help="seed of the light directions and noise (default 0)")
     p.add_argument("--full-sphere", action="store_true", help="draw directions over the full sphere (hemisphere 'full')")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -261,7 +204,7 @@ def _synth(args: argparse.Namespace, folder) -> dict:
         seed=args.seed,
         hemisphere="full" if args.full_sphere else "upper",
         photo=photo_settings(args),
-        progress=not args.quiet,
+        progress=not args.quiet and sys.stderr.isatty(),  # a bar is for a terminal, not a log
         scene=scene_of(args),
     )
     if args.calibration_pair:
@@ -270,19 +213,34 @@ def _synth(args: argparse.Namespace, folder) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ffls.errors import InputError
+    """Render into a staging folder beside OUT_DIR and swap it in when complete.
 
-    if args.near is not None and not args.near > 0:
-        raise InputError(f"--near must be > 0, not {args.near}")
+    An interrupted or failed ``ffls synth`` leaves OUT_DIR as it was (the old capture, or
+    nothing), never new images beside an old ``lights.json`` (:func:`ffls.errors.atomic_folder`).
+    An existing OUT_DIR that is not a capture folder (no ``capture.json``, nor the two captures of
+    ``--calibration-pair``) is not replaced.
+    """
+    from pathlib import Path
+
+    from ffls.errors import InputError, atomic_folder
+
+    if args.near is not None and args.light_radius >= args.near:
+        raise InputError(f"--light-radius {args.light_radius:g} must be smaller than --near {args.near:g} "
+                         "(the light would enclose the scene)")
+    photo_settings(args), scene_of(args)  # conflicting flags: one line before anything is written
+    out = Path(args.out_dir)
+    captures = [out / "capture.json", out / "calibration" / "capture.json"]
+    if out.is_dir() and any(out.iterdir()) and not any(c.is_file() for c in captures):
+        raise InputError("exists, is not empty and holds no capture.json: refusing to replace it", out)
     t = time.perf_counter()
-    res = _synth(args, args.out_dir)
+    with atomic_folder(out) as stage:
+        res = _synth(args, stage)
     dt = time.perf_counter() - t
     if args.calibration_pair:
-        cal, obj = res["calibration"], res["object"]
-        print(f"wrote {len(cal['images'])} images, capture.json, lights.json and truth.json to {cal['folder']}, and "
-              f"{len(obj['images'])} images, capture.json and truth.json (no lights.json: use --lights "
-              f"{cal['folder'] / 'lights.json'}) to {obj['folder']} in {dt:.1f} s")
+        cal, obj = out / "calibration", out / "object"
+        print(f"wrote {len(res['calibration']['images'])} images, capture.json, lights.json and truth.json to {cal}, "
+              f"and {len(res['object']['images'])} images, capture.json and truth.json (no lights.json: use --lights "
+              f"{cal / 'lights.json'}) to {obj} in {dt:.1f} s")
     else:
-        print(f"wrote {len(res['images'])} images, capture.json, lights.json and truth.json to {res['folder']} "
-              f"in {dt:.1f} s")
+        print(f"wrote {len(res['images'])} images, capture.json, lights.json and truth.json to {out} in {dt:.1f} s")
     return 0

@@ -24,7 +24,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ffls import conventions
-from ffls.errors import InputError, atomic_output
+from ffls.errors import InputError, atomic_output, register_input
 from ffls.io.response import load_response
 
 __all__ = [
@@ -78,6 +78,7 @@ class _Json:
     def load(self, what: str) -> dict:
         if not self.path.exists():
             self.fail("", f"{what} not found")
+        register_input(self.path)
         try:
             text = self.path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as e:
@@ -95,7 +96,7 @@ class _Json:
             self.fail("format", f"expected {fmt!r}, got {doc.get('format')!r}")
         if "version" not in doc:
             self.fail("version", "missing key")
-        if doc["version"] != 1:
+        if isinstance(doc["version"], bool) or not isinstance(doc["version"], int) or doc["version"] != 1:
             self.fail("version", f"unsupported version {doc['version']!r} (this ffls reads version 1)")
 
     def require(self, doc: dict, key: str, prefix: str = ""):
@@ -110,21 +111,46 @@ class _Json:
             self.fail(key, f"must be positive, got {value!r}")
         return float(value)
 
-    def array(self, value, key: str, shape: tuple) -> np.ndarray:
+    def array(self, value, key: str, shape: tuple, max_abs: float | None = None) -> np.ndarray:
+        if not _all_numbers(value):  # a boolean is not a number (np.array would take True as 1.0)
+            self.fail(key, f"expected an array of shape {shape} of numbers, got {_short(value)}")
         try:
             a = np.array(value, dtype=np.float64)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             a = None
         if a is None or a.shape != shape or isinstance(value, str):
             self.fail(key, f"expected an array of shape {shape} of numbers, got {_short(value)}")
         if not np.all(np.isfinite(a)):
             self.fail(key, "non-finite number")
+        if max_abs is not None and np.any(np.abs(a) > max_abs):
+            self.fail(key, f"values beyond +-{max_abs:g}: {_short(value)}")
         return a
+
+    def direction(self, value, key: str) -> np.ndarray:
+        """A (3,) unit vector (within :data:`UNIT_TOLERANCE`), renormalised; huge values fail without overflow."""
+        d = self.array(value, key, (3,), max_abs=2.0)
+        norm = float(np.linalg.norm(d))
+        if abs(norm - 1.0) > UNIT_TOLERANCE:
+            self.fail(key, f"not a unit vector (norm {norm:.6g}, tolerance {UNIT_TOLERANCE})")
+        return d / norm
 
     def string(self, value, key: str) -> str:
         if not isinstance(value, str) or not value:
             self.fail(key, f"expected a non-empty string, got {_short(value)}")
         return value
+
+
+def _all_numbers(value) -> bool:
+    """True when ``value`` is a number or nested lists of numbers, none of them a boolean."""
+    if isinstance(value, bool):
+        return False
+    if isinstance(value, (int, float)):
+        return True
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "iuf"
+    if isinstance(value, (list, tuple)):
+        return all(_all_numbers(v) for v in value)
+    return False
 
 
 def _short(value, n: int = 60) -> str:
@@ -475,6 +501,9 @@ class Lights:
         ``method``, ``spheres``, ``photos``, and any other keys kept. None when the encoding was
         stated in ``capture.json`` or the images are floating point.
         :func:`encoding_from_record` gives the ``Capture.encoding`` it stands for.
+    path : pathlib.Path or None
+        The file the lights were read from (:func:`load_capture_and_lights`), named in errors
+        about them (e.g. no light has status ok); not written.
     """
 
     image_names: list
@@ -485,6 +514,7 @@ class Lights:
     extra: list | None = None
     note: str | None = field(default=None, compare=False)
     encoding: dict | None = None
+    path: Path | None = field(default=None, compare=False)
 
     def __post_init__(self):
         if self.encoding is not None:
@@ -624,10 +654,8 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         if name in names:
             j.fail(key + ".image", f"image {name!r} has two lights")
         key = f"light for {name!r}"
-        d = j.array(j.require(it, "direction", key + ": "), key + ": direction", (3,))
-        norm = float(np.linalg.norm(d))
-        if abs(norm - 1.0) > UNIT_TOLERANCE:
-            j.fail(key, f"direction is not a unit vector (norm {norm:.6g}, tolerance {UNIT_TOLERANCE})")
+        d = j.direction(j.require(it, "direction", key + ": "), key + ": direction")
+        norm = 1.0
         p = j.array(it["position"], key + ": position", (3,)) if "position" in it else np.full(3, np.nan)
         st = it.get("status", "ok")
         if st not in ("ok", "rejected"):
@@ -747,6 +775,7 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise InputError(".lp file not found", path)
+    register_input(path)
     try:
         lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
     except OSError as e:
@@ -769,8 +798,9 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
             d = np.array([float(v) for v in parts[1:]])
         except ValueError:
             raise InputError(f"line {lineno}: expected 'filename x y z', got {text[:60]!r}", path) from None
-        norm = float(np.linalg.norm(d))
-        if not np.all(np.isfinite(d)) or abs(norm - 1) > UNIT_TOLERANCE:
+        finite = bool(np.all(np.isfinite(d))) and float(np.max(np.abs(d))) <= 2.0
+        norm = float(np.linalg.norm(d)) if finite else float("inf")
+        if not finite or abs(norm - 1) > UNIT_TOLERANCE:
             raise InputError(f"line {lineno}: direction of {parts[0]!r} is not a unit vector (norm {norm:.6g})", path)
         names.append(parts[0])
         dirs.append(d / norm)
@@ -1010,6 +1040,7 @@ def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Captu
             raise InputError("lights file not found", path)
         raise InputError("no lights file: estimate the light directions first (ffls lights CAPTURE)", path)
     found = load_lights_any(path, capture, lights_map)
+    found.path = path
     return apply_lights_encoding(capture, found), found
 
 

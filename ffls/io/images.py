@@ -12,16 +12,28 @@ channel) is returned in :attr:`ImageData.alpha`; writers take an optional alpha.
 
 OpenEXR goes through the OpenEXR 3.x Python bindings (``OpenEXR.File``), the rest through
 OpenCV. OpenCV cannot read TGA; such files are rejected with a message saying so.
+
+Quiet libraries: OpenCV's log is silenced, and what OpenEXR, libpng or OpenCV print on the C
+level while a file is decoded is captured (:func:`quiet_native_output`) and becomes part of the
+one error line when the file cannot be read, instead of extra lines on the terminal. NaN or Inf
+pixels are an error naming the file and the count. Writers check what they wrote: ``cv2.imwrite``
+does not report every failure (a full disk), so its return value and the file are checked
+(:func:`ffls.errors.atomic_output`), and every write failure is one line naming the file.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import os
+import sys
+import tempfile
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError, atomic_output
+from ffls.errors import InputError, OutputError, atomic_output, register_input
 
 __all__ = [
     "ImageData",
@@ -36,6 +48,8 @@ __all__ = [
     "colour_summary",
     "premultiply",
     "with_alpha",
+    "quiet_native_output",
+    "nonfinite_message",
 ]
 
 _KINDS = {
@@ -98,6 +112,85 @@ class ImageData:
         return self.bit_depth in ("half", "float")
 
 
+_QUIET_LOCK = threading.RLock()
+
+
+class _Captured:
+    """Text the native libraries printed during a :func:`quiet_native_output` block."""
+
+    text = ""
+
+    def first_line(self) -> str:
+        """The most informative captured line (OpenEXR's ``EXR_ERR_...`` or OpenCV's ``error:``), or ''."""
+        lines = [" ".join(ln.split()) for ln in self.text.splitlines() if ln.strip()]
+        for key in ("EXR_ERR", "error:", "Error", "error"):
+            for ln in lines:
+                if key in ln:
+                    return ln
+        return lines[0] if lines else ""
+
+
+def _silence_opencv_log() -> None:
+    import cv2
+
+    with contextlib.suppress(AttributeError, cv2.error):
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+
+
+@contextlib.contextmanager
+def quiet_native_output():
+    """Capture what C libraries (OpenEXR, libpng, OpenCV) write to file descriptors 1 and 2 during the block.
+
+    Yields an object whose ``text`` holds the captured output after the block, and whose
+    ``first_line()`` gives the line worth quoting in an error. Python's ``sys.stdout`` and
+    ``sys.stderr`` are flushed before and redirected too (bindings print through them).
+    Thread-safe (one capture at a time).
+    """
+    cap = _Captured()
+    with _QUIET_LOCK:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        try:
+            sink = tempfile.TemporaryFile()
+            saved = [(fd, os.dup(fd)) for fd in (1, 2)]
+        except OSError:  # no descriptors to spare: run unquiet rather than fail
+            yield cap
+            return
+        py = io.StringIO()  # what the bindings print through Python (pybind11 py::print)
+        try:
+            for fd, _ in saved:
+                os.dup2(sink.fileno(), fd)
+            with contextlib.redirect_stdout(py), contextlib.redirect_stderr(py):
+                yield cap
+        finally:
+            _flush_c_stdio()
+            for fd, old in saved:
+                os.dup2(old, fd)
+                os.close(old)
+            sink.seek(0)
+            cap.text = sink.read().decode("utf-8", "replace") + py.getvalue()
+            sink.close()
+
+
+def _flush_c_stdio() -> None:
+    """fflush(NULL): C (and C++ iostream, synced with it) buffers reach the captured descriptors now."""
+    import ctypes
+
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None).fflush(None)
+
+
+def nonfinite_message(a: np.ndarray) -> str | None:
+    """``'N pixels with NaN or Inf values (a NaN, b Inf channel values)'`` for (H, W, C) data, or None when all finite."""
+    bad = ~np.isfinite(a)
+    if not bad.any():
+        return None
+    npx = int(np.count_nonzero(bad.any(axis=-1))) if a.ndim == 3 else int(np.count_nonzero(bad))
+    return (f"{npx} pixels with NaN or Inf values ({int(np.isnan(a).sum())} NaN, "
+            f"{int(np.isinf(a).sum())} Inf channel values)")
+
+
 def _kind_of(path: Path) -> str:
     ext = path.suffix.lower()
     if ext in _KINDS:
@@ -109,7 +202,7 @@ def _kind_of(path: Path) -> str:
     )
 
 
-def read_image(path: str | os.PathLike, working_space: bool = True) -> ImageData:
+def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfinite: bool = False) -> ImageData:
     """Read an image file as RGB float32.
 
     Parameters
@@ -119,6 +212,8 @@ def read_image(path: str | os.PathLike, working_space: bool = True) -> ImageData
     working_space : bool
         Convert an EXR whose ``chromaticities`` are another space to the working space (linear
         Rec.709, D65) and say so in ``colour_note`` (default). False returns the stored values.
+    allow_nonfinite : bool
+        Return NaN/Inf values as stored instead of raising (default: an error with the count).
 
     Returns
     -------
@@ -129,16 +224,23 @@ def read_image(path: str | os.PathLike, working_space: bool = True) -> ImageData
     Raises
     ------
     InputError
-        If the file is missing, unreadable, corrupt or of an unsupported format, or its colour
-        space cannot be converted.
+        If the file is missing, unreadable, corrupt (truncated) or of an unsupported format, its
+        colour space cannot be converted, or (unless ``allow_nonfinite``) it holds NaN or Inf
+        pixels (the message gives the count).
     """
     path = Path(path)
     kind = _kind_of(path)
     if not path.is_file():
         raise InputError("image file not found" if not path.exists() else "not a file", path)
-    if kind == "exr":
-        return read_exr(path, working_space=working_space)
-    return _read_cv2(path, kind)
+    register_input(path)
+    img = read_exr(path, working_space=working_space) if kind == "exr" else _read_cv2(path, kind)
+    if not allow_nonfinite:
+        why = nonfinite_message(img.pixels)
+        if why is None and img.alpha is not None and not np.all(np.isfinite(img.alpha)):
+            why = "NaN or Inf values in the alpha channel"
+        if why:
+            raise InputError(f"image has {why}", path)
+    return img
 
 
 def read_exr(path: str | os.PathLike, working_space: bool = True) -> ImageData:
@@ -172,12 +274,20 @@ def read_exr(path: str | os.PathLike, working_space: bool = True) -> ImageData:
     path = Path(path)
     if not path.is_file():
         raise InputError("image file not found", path)
-    try:
-        f = OpenEXR.File(str(path), separate_channels=True)
-        channels = f.channels()
-        header = f.header()
-    except Exception as e:  # the bindings raise RuntimeError/others with multi-line text
-        raise InputError(f"cannot read OpenEXR file ({type(e).__name__}: {e})", path) from None
+    err = None
+    with quiet_native_output() as cap:
+        try:
+            f = OpenEXR.File(str(path), separate_channels=True)
+            channels = f.channels()
+            header = f.header()
+        except Exception as e:  # the bindings raise RuntimeError/others with multi-line text
+            err = e
+    if err is None and ("EXR_ERR" in cap.text or "Exception" in cap.text):  # read "successfully", data incomplete
+        err = RuntimeError(cap.first_line())
+    if err is not None:
+        why = cap.first_line().replace(str(path) + ": ", "")
+        raise InputError(f"cannot read OpenEXR file, corrupt or truncated ({why or f'{type(err).__name__}: {err}'})",
+                         path) from None
     names = set(channels)
     if {"R", "G", "B"} <= names:
         use = ["R", "G", "B"]
@@ -235,12 +345,14 @@ def _read_cv2(path: Path, kind: str) -> ImageData:
     if buf.size == 0:
         raise InputError("image file is empty", path)
     flags = cv2.IMREAD_UNCHANGED if kind != "hdr" else cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR
-    try:
-        img = cv2.imdecode(buf, flags)
-    except cv2.error:
-        img = None
-    if img is None:
-        raise InputError(f"cannot decode {kind.upper()} image (corrupt or not a {kind.upper()} file)", path)
+    _silence_opencv_log()
+    with quiet_native_output() as cap:
+        try:
+            img = cv2.imdecode(buf, flags)
+        except cv2.error:
+            img = None
+    if img is None or "incomplete" in cap.text or "libpng error" in cap.text:
+        raise InputError(f"cannot decode {kind.upper()} image (corrupt, truncated or not a {kind.upper()} file)", path)
     alpha = None
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
@@ -386,6 +498,22 @@ def _check_suffix(path: Path, allowed: tuple[str, ...], what: str) -> None:
         raise ValueError(f"{what}: {path} must end with {' or '.join(allowed)}")
 
 
+def _imwrite(path: Path, data: np.ndarray) -> None:
+    """``cv2.imwrite`` through :func:`ffls.errors.atomic_output`, its return value and the file checked."""
+    import cv2
+
+    _silence_opencv_log()
+    with atomic_output(path) as tmp:
+        with quiet_native_output() as cap:
+            try:
+                ok = cv2.imwrite(str(tmp), data)
+            except cv2.error:
+                ok = False
+        if not ok:
+            raise OutputError(f"OpenCV could not write the image ({cap.first_line() or 'disk full or no permission'})",
+                              path)
+
+
 def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> Path:
     """Write an RGB (or RGBA) OpenEXR file with ZIP compression, atomically.
 
@@ -432,8 +560,15 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> P
         channels["A"] = np.ascontiguousarray(_check_alpha(alpha, a.shape[:2], "write_exr"), dtype=dtype)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     with atomic_output(path) as tmp:
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(tmp))
+        with quiet_native_output() as cap:
+            try:
+                with OpenEXR.File(header, channels) as f:
+                    f.write(str(tmp))
+                err = None
+            except Exception as e:  # a full disk, ...: the bindings raise RuntimeError
+                err = e
+        if err is not None:
+            raise OutputError(f"cannot write OpenEXR file ({cap.first_line() or err})", path) from None
     return path
 
 
@@ -457,8 +592,6 @@ def write_hdr(path: str | os.PathLike, rgb) -> Path:
     ValueError
         Wrong shape or extension, negative or non-finite values.
     """
-    import cv2
-
     path = Path(path)
     _check_suffix(path, (".hdr", ".pic"), "write_hdr")
     a = _check_rgb(rgb, "write_hdr").astype(np.float32, copy=False)
@@ -467,9 +600,7 @@ def write_hdr(path: str | os.PathLike, rgb) -> Path:
     if (a < 0).any():
         raise ValueError(f"write_hdr: {int(np.count_nonzero(a < 0))} negative values (RGBE cannot store them)")
     bgr = np.ascontiguousarray(a[:, :, ::-1])
-    with atomic_output(path) as tmp:
-        if not cv2.imwrite(str(tmp), bgr):
-            raise OSError(f"OpenCV could not write {path}")
+    _imwrite(path, bgr)
     return path
 
 
@@ -493,8 +624,6 @@ def write_png(path: str | os.PathLike, img) -> Path:
     ValueError
         Float input (tone-map and quantise first), another dtype, shape or extension.
     """
-    import cv2
-
     path = Path(path)
     _check_suffix(path, (".png",), "write_png")
     a = np.asarray(img)
@@ -514,7 +643,5 @@ def write_png(path: str | os.PathLike, img) -> Path:
     else:
         raise ValueError(f"write_png: expected (H, W), (H, W, 3) or (H, W, 4), got shape {a.shape}")
     out = np.ascontiguousarray(out)
-    with atomic_output(path) as tmp:
-        if not cv2.imwrite(str(tmp), out):
-            raise OSError(f"OpenCV could not write {path}")
+    _imwrite(path, out)
     return path

@@ -1,17 +1,25 @@
 """Frame sequences out: an mp4 video (OpenCV, mp4v) or a folder of numbered PNGs.
 
 One writer serves ``ffls render --turntable`` and the viewer's turntable recording. An mp4 is
-written to a temporary file and renamed when the writer closes successfully, so an interrupted
-recording leaves nothing half-written behind.
+written to a temporary file (:func:`ffls.errors.atomic_output`) and a PNG folder to a staging
+folder beside it (:func:`ffls.errors.atomic_folder`); either is renamed onto the output only when
+the writer closes successfully, so an error, Ctrl-C or SIGTERM (which the CLI turns into an
+exception) leaves neither a ``.tmp.mp4`` nor a folder of some frames behind, and an existing
+output stays as it was.
 """
 from __future__ import annotations
 
 import contextlib
+import re
 from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import FflsError, InputError, atomic_output
+from ffls.errors import FflsError, InputError, atomic_folder, atomic_output
+
+
+#: Names of the frames a PNG folder holds (an existing folder of only these may be replaced).
+_FRAME = re.compile(r"frame_\d{4,}\.png")
 
 
 class FrameWriter:
@@ -20,7 +28,8 @@ class FrameWriter:
     Parameters
     ----------
     out : path
-        A path ending in ``.mp4``, or a folder (created if missing; any other suffix is an error).
+        A path ending in ``.mp4``, or a folder (created when the writer closes, replacing an
+        existing one; any other suffix is an error). Its parent folder must exist.
     fps : float
         Frame rate of the mp4.
 
@@ -35,17 +44,19 @@ class FrameWriter:
         self.is_video = self.out.suffix.lower() == ".mp4"
         if not self.is_video and self.out.suffix:
             raise InputError("a frame sequence goes to an .mp4 file or a folder", self.out)
-        if self.fps <= 0:
+        if not self.fps > 0 or self.fps == float("inf"):
             raise InputError(f"frame rate must be positive, not {fps}", self.out)
         self._atomic = None
         self._tmp = None
         self._writer = None
         self._size = None
-        if self.is_video:
-            self._atomic = atomic_output(self.out)
-            self._tmp = self._atomic.__enter__()
-        else:
-            self.out.mkdir(parents=True, exist_ok=True)
+        if not self.is_video and self.out.is_dir():
+            other = [p.name for p in self.out.iterdir() if not _FRAME.fullmatch(p.name)]
+            if other:
+                raise InputError(f"the folder holds other files than frames ({other[0]!r}, ...); refusing to "
+                                 "replace it: choose a new or empty folder", self.out)
+        self._atomic = atomic_output(self.out) if self.is_video else atomic_folder(self.out)
+        self._tmp = self._atomic.__enter__()
 
     def write(self, rgb: np.ndarray) -> None:
         """Append one frame, (H, W, 3) uint8 RGB."""
@@ -69,21 +80,21 @@ class FrameWriter:
         else:
             from ffls.io.images import write_png
 
-            write_png(self.out / f"frame_{self.frames:04d}.png", rgb)
+            write_png(self._tmp / f"frame_{self.frames:04d}.png", rgb)
         self.frames += 1
 
     def close(self) -> str:
         """Finish the sequence; returns a one-line description of what was written."""
-        if self.is_video:
-            if self._writer is not None:
-                self._writer.release()
-                self._writer = None
-            if self._atomic is not None:
-                atomic, self._atomic = self._atomic, None
-                if self.frames == 0:
+        if self._writer is not None:
+            self._writer.release()
+            self._writer = None
+        if self._atomic is not None:
+            atomic, self._atomic = self._atomic, None
+            if self.frames == 0:
+                with contextlib.suppress(InputError):
                     atomic.__exit__(InputError, InputError("no frames"), None)
-                    raise InputError("no frames were written", self.out)
-                atomic.__exit__(None, None, None)
+                raise InputError("no frames were written", self.out)
+            atomic.__exit__(None, None, None)
         return self.describe()
 
     def describe(self) -> str:
@@ -93,7 +104,7 @@ class FrameWriter:
         return f"{self.out}/frame_0000..{max(self.frames - 1, 0):04d}.png"
 
     def abort(self) -> None:
-        """Stop without output: a partial mp4 is removed (PNG frames already written stay)."""
+        """Stop without output: a partial mp4 or PNG folder is removed; an existing output stays."""
         if self._writer is not None:
             self._writer.release()
             self._writer = None

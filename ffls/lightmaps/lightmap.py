@@ -35,6 +35,8 @@ from ffls.io.images import read_image, write_exr, write_hdr
 
 __all__ = [
     "LAYOUTS",
+    "MIN_RES",
+    "min_size_text",
     "LightMap",
     "LightMapWarning",
     "load_lightmap",
@@ -56,6 +58,19 @@ __all__ = [
 LAYOUTS = ("latlong", "angular", "mirrorball", "cube")
 #: Names of the procedural maps :func:`builtin_lightmap` makes.
 BUILTIN_PROCEDURAL = ("sky", "paper")
+
+
+#: Smallest light map accepted, per layout: the height of a lat-long map (width twice it), the side of an
+#: angular or mirror-ball map, the face of a cube map. Smaller maps cannot tell the hemispheres apart
+#: (a 2x1 lat-long map has one row straddling the horizon, so its upper-hemisphere integral equals
+#: the full sphere's) and resolve no direction.
+MIN_RES = {"latlong": 4, "angular": 4, "mirrorball": 4, "cube": 2}
+
+
+def min_size_text(layout: str) -> str:
+    """The smallest accepted size of ``layout`` as ``WxH`` text (for messages)."""
+    r = MIN_RES[layout]
+    return {"latlong": f"{2 * r}x{r}", "cube": f"{4 * r}x{3 * r} (a cross of {r}x{r} faces)"}.get(layout, f"{r}x{r}")
 
 
 class LightMapWarning(UserWarning):
@@ -507,6 +522,10 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
         layout = detect_layout(h, w, layout)
     except ValueError as e:
         raise InputError(str(e), path) from None
+    res = w // 4 if layout == "cube" and 3 * w == 4 * h else (h // 4 if layout == "cube" else h)
+    if res < MIN_RES[layout]:
+        raise InputError(f"a {w}x{h} light map is too small: a {layout} map must be at least "
+                         f"{min_size_text(layout)}", path)
     data, clamped = validate_radiance(img.pixels, path)
     if layout == "cube":
         data = cross_to_cube(data)
@@ -534,6 +553,10 @@ def save_lightmap(lm: LightMap, path: str | os.PathLike, half: bool = False) -> 
     ext = path.suffix.lower()
     img = cube_to_cross(lm.data) if lm.layout == "cube" else lm.data
     if ext == ".exr":
+        top = float(np.max(img)) if img.size else 0.0
+        if half and top > float(np.finfo(np.float16).max):
+            raise FflsError(f"values up to {top:.6g} exceed the half-float range (65504): write float "
+                            "(without --half / half=False)", path)
         return write_exr(path, img, half=half)
     if ext in (".hdr", ".pic"):
         if half:
