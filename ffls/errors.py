@@ -265,6 +265,27 @@ def _signals_deferred():
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
+def run_uninterrupted(step) -> None:
+    """Run ``step()`` to its end even when Ctrl-C or SIGTERM arrives meanwhile, then raise the interrupt.
+
+    Signals are held while ``step`` runs; one that was already pending raises in the middle of it
+    all the same (Python runs its handler at the next bytecode), so ``step`` must be resumable:
+    called again, it carries on where it stopped and does nothing once done. Used where an
+    interrupted clean-up would leave things worse than either end (file descriptors redirected,
+    a folder half swapped).
+    """
+    interrupt = None
+    while True:
+        try:
+            with _signals_deferred():
+                step()
+            break
+        except KeyboardInterrupt as e:  # cli.Terminated (SIGTERM) is a KeyboardInterrupt too
+            interrupt = interrupt or e
+    if interrupt is not None:
+        raise interrupt
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError, OutputError, atomic_output, register_input
+from ffls.errors import InputError, OutputError, atomic_output, register_input, run_uninterrupted
 
 __all__ = [
     "ImageData",
@@ -164,13 +164,20 @@ def quiet_native_output():
             with contextlib.redirect_stdout(py), contextlib.redirect_stderr(py):
                 yield cap
         finally:
-            _flush_c_stdio()
-            for fd, old in saved:
-                os.dup2(old, fd)
-                os.close(old)
-            sink.seek(0)
-            cap.text = sink.read().decode("utf-8", "replace") + py.getvalue()
-            sink.close()
+            def restore():  # resumable: an interrupt mid-way must not leave fd 2 on the sink
+                if saved:
+                    _flush_c_stdio()
+                while saved:
+                    fd, old = saved[-1]
+                    os.dup2(old, fd)
+                    saved.pop()
+                    os.close(old)  # an interrupt just before this leaks one descriptor, no worse
+                if not sink.closed:
+                    sink.seek(0)
+                    cap.text = sink.read().decode("utf-8", "replace") + py.getvalue()
+                    sink.close()
+
+            run_uninterrupted(restore)
 
 
 def _flush_c_stdio() -> None:
