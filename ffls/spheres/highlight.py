@@ -44,7 +44,7 @@ import numpy as np
 from scipy import ndimage
 
 from ffls.camera.projection import camera_rays
-from ffls.conventions import CAMERA_MODELS, normalize
+from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
 
 __all__ = [
     "MATERIALS",
@@ -79,10 +79,13 @@ HIGHLIGHT_STATUSES = {
 CONE95_PER_RMS = float(np.sqrt(-2.0 * np.log(0.05) / 2.0))
 #: Per-axis floor of a highlight centre's pixel uncertainty (sampling, demosaicing).
 PIXEL_FLOOR_PX = 0.05
-#: Per-axis uncertainty of a clipped highlight's centre per pixel of its clipped core's radius:
-#: the profile under the clip is unknown, so an asymmetric source (a lamp in a reflector) may
-#: move its centroid within the core.
-CLIP_SIGMA_PER_PX = 0.1
+#: Per-axis uncertainty (pixels) of a clipped highlight's centre: the profile under the clip is
+#: lost. Measured on the renders of ``tests/test_highlight.py`` (docs/spheres.md): RMS 0.23 px
+#: for cores of 2-4 clipped pixels (centroid), 0.08 px for larger ones (censored fit).
+CLIP_SIGMA_PX = 0.25
+#: Fewest clipped pixels for the censored fit (:func:`highlight_centre_Tobin1958`): a smaller
+#: blob has fewer informative pixels than the fit's five parameters.
+MIN_CENSORED_PX = 8
 #: The fraction of the disc above half the brightest signal below which a sphere is a mirror.
 MIRROR_COMPACTNESS = 0.03
 
@@ -210,6 +213,15 @@ class HighlightSpot:
         Equivalent radius of the core.
     rim_px : float
         Smallest distance from a blob pixel carrying signal to the edge of the disc.
+    background_at : (m,) float
+        The background plane at the blob's pixels (``values - weights``).
+    clipped : (m,) bool
+        The blob's clipped pixels.
+    clip_level : float
+        Median value of the clipped pixels (NaN when none).
+    shoulder : bool
+        False where a clipped core has no unclipped pixel above a tenth of the peak around it:
+        its outline is then known to a pixel only.
     """
 
     found: bool
@@ -224,6 +236,10 @@ class HighlightSpot:
     n_saturated: int = 0
     core_radius_px: float = 0.0
     rim_px: float = float("inf")
+    background_at: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    clipped: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    clip_level: float = float("nan")
+    shoulder: bool = True
 
 
 def saturated_pixels(grey: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -280,6 +296,8 @@ def find_highlight(image: np.ndarray, disc: np.ndarray, saturated: np.ndarray | 
     3. The local background is a plane fitted to a ring of disc pixels around the core, its
        spread the residuals' MAD (at least the pixel noise); the blob is the core dilated by its
        shoulder (3 px plus half the core's radius), weighted by the signal above that plane.
+    4. ``'saturated'``: a clipped core larger than ``max_core_fraction`` of the disc (gross
+       over-exposure); ``'highlight_at_rim'``: signal within 1.5 px of the disc's edge.
 
     Parameters
     ----------
@@ -318,6 +336,9 @@ def find_highlight(image: np.ndarray, disc: np.ndarray, saturated: np.ndarray | 
         lab, nlab = ndimage.label(sat)
         sizes = ndimage.sum_labels(np.ones_like(img), lab, index=np.arange(1, nlab + 1))
         big = lab == (1 + int(np.argmax(sizes)))
+        if float(sizes.max()) >= max_core_fraction * disc.sum():  # gross over-exposure
+            return HighlightSpot(False, "saturated", background=med, noise=spread, n_core=int(sizes.max()),
+                                 n_saturated=int(sizes.max()))
         r0, c0 = np.argwhere(big)[0]
     else:  # the blurred maximum finds the blob (not a hot pixel); its brightest raw pixel is the peak
         r0, c0 = np.unravel_index(int(np.argmax(smooth)), img.shape)
@@ -345,19 +366,21 @@ def find_highlight(image: np.ndarray, disc: np.ndarray, saturated: np.ndarray | 
     back = b_plane[0] + b_plane[1] * (cc - c0) + b_plane[2] * (rr - r0)
     w = img[rr, cc] - back  # not clamped: the noise of the shoulder averages out
     b = float(b_plane[0])
+    if not peak_val - b > min_snr * max(noise, spread):  # not above the reflections around it: no highlight
+        return HighlightSpot(False, "no_highlight", peak=max(peak_val - b, 0.0), background=b, noise=noise)
     n_sat = int((sat & core).sum())
     # distance of the signal-carrying blob pixels to the disc's edge (outside the disc = 0)
     edge = ndimage.distance_transform_edt(np.pad(disc, 1))[1:-1, 1:-1]
     carrying = w > 0.1 * (peak_val - b)
     rim = float(edge[rr[carrying], cc[carrying]].min()) if carrying.any() else float("inf")
     spot = HighlightSpot(True, "ok", peak=float(peak_val - b), background=b, noise=noise, rows=rr, cols=cc, weights=w,
-                         n_core=n_core, n_saturated=n_sat, core_radius_px=r_core, rim_px=rim)
-    if rim <= 1.5:
-        spot.status = "highlight_at_rim"
-    elif n_sat > 0 and n_sat >= max_core_fraction * disc.sum():
+                         n_core=n_core, n_saturated=n_sat, core_radius_px=r_core, rim_px=rim, background_at=back,
+                         clipped=sat[rr, cc], clip_level=float(np.median(img[sat])) if sat.any() else float("nan"))
+    if n_sat > 0 and n_sat >= max_core_fraction * disc.sum():
         spot.status = "saturated"
-    elif n_sat > 0 and not np.any(blob & ~sat & (img > b + 0.1 * (peak_val - b))):
-        spot.status = "saturated"  # a clipped core with no unclipped shoulder around it
+    elif rim <= 1.5:
+        spot.status = "highlight_at_rim"
+    spot.shoulder = not (n_sat > 0 and not np.any(blob & ~sat & (img > b + 0.1 * (peak_val - b))))
     return spot
 
 
@@ -397,6 +420,100 @@ def highlight_centre_Debevec1998(view: SphereView, spot: HighlightSpot, origin_p
     d = normalize(np.sum(w[ok, None] * L[ok], axis=0))
     pixel = np.sum(w[ok, None] * px[ok], axis=0) / w[ok].sum()
     return d, pixel
+
+
+def highlight_centre_Tobin1958(view: SphereView, spot: HighlightSpot, start: np.ndarray, origin_px=(0.0, 0.0),
+                               sub: int = 8) -> tuple[np.ndarray, float]:
+    """A clipped highlight's direction from a censored fit of a soft-edged disc light.
+
+    Tobin, "Estimation of Relationships for Limited Dependent Variables", Econometrica 1958: a
+    clipped pixel says only that its value is at least the clip level. The light is a disc of
+    angular radius ``alpha`` and radiance ``A`` around ``l``, its edge softened by ``s`` (blur,
+    the source's own fall-off); each blob pixel's value is the background plane plus ``A`` times
+    the mean over ``sub x sub`` points of the pixel of ``Phi((alpha - angle(l(p), l)) / s)``
+    (``l(p)`` the reflected direction, :meth:`SphereView.reflect`). Unclipped pixels give the
+    residual ``(model - value) / noise``, clipped ones ``max(clip - model, 0) / noise``. The
+    flat core fixes nothing but the edge: ``l`` comes from the clipped blob's outline and its
+    unclipped shoulder, through the sphere's exact geometry.
+
+    Parameters
+    ----------
+    view : SphereView
+    spot : HighlightSpot
+        With clipped pixels (``spot.clipped``, ``spot.clip_level``).
+    start : (3,) float, unit
+        Initial direction (:func:`highlight_centre_Debevec1998`).
+    origin_px : (2,) float
+    sub : int
+        Sub-pixel samples per axis.
+
+    Returns
+    -------
+    direction : (3,) float, unit (NaN when the fit fails)
+    sigma_deg : float
+        RMS angular uncertainty of ``direction`` from the fit's covariance (infinite on failure).
+    """
+    from scipy.optimize import least_squares
+    from scipy.special import ndtr
+
+    px = np.stack([spot.cols + float(origin_px[0]), spot.rows + float(origin_px[1])], axis=1).astype(np.float64)
+    o = (np.arange(sub) + 0.5) / sub - 0.5
+    offs = np.stack(np.meshgrid(o, o), -1).reshape(-1, 2)
+    D, _ = view.reflect((px[:, None, :] + offs[None]).reshape(-1, 2))
+    D = D.reshape(len(px), len(offs), 3)
+    inside = np.all(np.isfinite(D), axis=2)
+    D = np.where(inside[..., None], D, 0.0)
+    y = spot.background_at + spot.weights
+    clip = float(spot.clip_level)
+    noise = max(float(spot.noise), 1e-3 * clip)
+    start = normalize(np.asarray(start, dtype=np.float64))
+    e1, e2 = tangent_basis(start)
+    # start: the core's solid angle gives alpha, a pixel's angular size the edge
+    omega_px = float(np.median(np.linalg.norm(np.cross(D[:, 1] - D[:, 0], D[:, sub] - D[:, 0]), axis=1))) * sub * sub
+    alpha0 = max(float(np.sqrt(max(spot.n_core, 1) * omega_px / np.pi)), 1e-4)
+    s0 = max(0.5 * float(np.sqrt(omega_px)), 1e-5)
+    x0 = np.array([0.0, 0.0, np.log(alpha0), np.log(2.0 * max(clip - float(np.median(spot.background_at)), 1e-12)),
+                   np.log(s0)])
+
+    def direction(x):
+        return normalize(start + x[0] * e1 + x[1] * e2)
+
+    def model(x):
+        ang = np.arccos(np.clip(D @ direction(x), -1.0, 1.0))
+        cover = np.where(inside, ndtr((np.exp(x[2]) - ang) / np.exp(x[4])), 0.0).mean(axis=1)
+        return spot.background_at + np.exp(x[3]) * cover
+
+    def residuals(x):
+        m = model(x)
+        return np.where(spot.clipped, np.maximum(clip - m, 0.0), m - y) / noise
+
+    # the edge is never sharper than a quarter pixel (lens blur, demosaicing; it also keeps the
+    # model smooth between the sub-pixel samples), and a disc much smaller than the blur is a
+    # point: bounds that keep the parameters identifiable
+    lo = np.array([-0.5, -0.5, np.log(0.1 * s0), -np.inf, np.log(0.5 * s0)])
+    hi = np.array([0.5, 0.5, np.log(np.pi / 2), np.inf, np.log(10.0 * s0)])
+    res = None
+    for a0 in (alpha0, 0.3 * alpha0):  # a disc, or a blurred point
+        x0[2] = np.log(max(a0, 0.2 * s0))
+        try:
+            r = least_squares(residuals, np.clip(x0, lo + 1e-9, hi - 1e-9), x_scale=np.array([s0, s0, 0.3, 0.3, 0.3]),
+                              bounds=(lo, hi), method="trf", max_nfev=400)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if r.status >= 0 and (res is None or r.cost < res.cost):
+            res = r
+    if res is None:
+        return np.full(3, np.nan), float("inf")
+    d = direction(res.x)
+    dof = max(int(np.count_nonzero(res.fun)) - 5, 1)
+    s2 = max(float(res.fun @ res.fun) / dof, 1.0)  # misfit inflates (never deflates) the noise
+    try:
+        cov = np.linalg.pinv(res.jac.T @ res.jac)[:2, :2] * s2
+    except np.linalg.LinAlgError:
+        return d, float("inf")
+    if res.status < 0 or not np.all(np.isfinite(d)):  # status 0 (evaluations spent) keeps the best point
+        return np.full(3, np.nan), float("inf")
+    return d, float(np.degrees(np.sqrt(max(np.trace(cov), 0.0))))
 
 
 def highlight_direction(view: SphereView, pixel) -> tuple[np.ndarray, np.ndarray]:
@@ -461,6 +578,9 @@ class HighlightFit:
         Distance of the highlight to the disc's edge.
     model : str
         ``'highlight'``.
+    method : {'centroid', 'censored'}
+        How the centre was found: the light-probe centroid, or for a clipped highlight the
+        censored disc fit (:func:`highlight_centre_Tobin1958`).
     """
 
     status: str
@@ -476,6 +596,7 @@ class HighlightFit:
     clipped: bool = False
     rim_px: float = float("inf")
     model: str = "highlight"
+    method: str = "centroid"
 
     @property
     def cone95_deg(self) -> float:
@@ -489,7 +610,7 @@ class HighlightFit:
             return x if np.isfinite(x) else None
 
         fin = bool(np.all(np.isfinite(self.direction)))
-        return {"status": self.status, "kind": "mirror", "model": self.model,
+        return {"status": self.status, "kind": "mirror", "model": self.model, "method": self.method,
                 "direction": [float(x) for x in self.direction] if fin else None,
                 "uncertainty_deg": num(self.uncertainty_deg), "cone95_deg": num(self.cone95_deg),
                 "intensity": num(self.intensity),
@@ -508,9 +629,10 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
     the sphere's normal (:meth:`SphereView.reflect`).
 
     The centre's per-axis pixel uncertainty is
-    ``sqrt(sigma_noise^2 + (k r_clip)^2 + sigma_c^2 + s0^2)``: ``sigma_noise`` the background's
-    spread (noise and clutter) propagated through the weighted mean, ``r_clip`` the equivalent
-    radius of the clipped core with ``k =`` :data:`CLIP_SIGMA_PER_PX`, ``sigma_c`` the sphere
+    ``sqrt(sigma_noise^2 + c^2 + q^2 + sigma_c^2 + s0^2)``: ``sigma_noise`` the
+    background's spread (noise and clutter) propagated through the weighted mean, ``c =``
+    :data:`CLIP_SIGMA_PX` where the core is clipped, ``q = 1/sqrt(12)`` px where a clipped core
+    has no unclipped shoulder, ``sigma_c`` the sphere
     centre's uncertainty (``view.center_sigma_px``) and ``s0 =`` :data:`PIXEL_FLOOR_PX`. It is
     mapped to directions by the numerical Jacobian of the pixel-to-direction map; ``floor_deg``
     is added in quadrature.
@@ -541,20 +663,27 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
     d, pixel = highlight_centre_Debevec1998(view, spot, origin_px)
     if not (np.all(np.isfinite(d)) and np.all(np.isfinite(pixel))):
         return HighlightFit(status="fit_failed", **base)
-    _, point = highlight_direction(view, pixel)
-    px = np.stack([spot.cols + float(origin_px[0]), spot.rows + float(origin_px[1])], axis=1)
-    w = spot.weights
-    wsum = float(w.sum())
-    var_noise = float(spot.noise ** 2 * np.sum((px - pixel) ** 2, axis=0).mean() / wsum ** 2) if wsum > 0 else np.inf
-    r_clip = float(np.sqrt(spot.n_saturated / np.pi))
-    sigma = float(np.sqrt(var_noise + (CLIP_SIGMA_PER_PX * r_clip) ** 2 + view.center_sigma_px ** 2
-                          + PIXEL_FLOOR_PX ** 2))
     J = _pixel_jacobian(view, pixel)
     if not np.all(np.isfinite(J)):
         return HighlightFit(status="fit_failed", **base)
-    stat = float(np.degrees(sigma * np.sqrt(np.sum(J * J))))  # sqrt(trace(J sigma^2 I J^T))
+    norm_J = float(np.sqrt(np.sum(J * J)))  # sqrt(trace(J sigma^2 I J^T)) / sigma
+    common = float(np.hypot(view.center_sigma_px, PIXEL_FLOOR_PX))
+    px = np.stack([spot.cols + float(origin_px[0]), spot.rows + float(origin_px[1])], axis=1)
+    wsum = float(spot.weights.sum())
+    var_noise = float(spot.noise ** 2 * np.sum((px - pixel) ** 2, axis=0).mean() / wsum ** 2) if wsum > 0 else np.inf
+    clip = CLIP_SIGMA_PX if spot.n_saturated > 0 else 0.0
+    quant = 0.0 if spot.shoulder else 1.0 / np.sqrt(12.0)  # an outline without shoulder: a pixel's quantisation
+    sigma = float(np.sqrt(var_noise + clip ** 2 + quant ** 2 + common ** 2))
+    method = "centroid"
+    if spot.n_saturated >= MIN_CENSORED_PX and spot.shoulder:  # the clipped core's profile is lost: fit its outline
+        dc, _ = highlight_centre_Tobin1958(view, spot, d, origin_px)
+        # kept where it lies within 3 sigma of the centroid (a source far from a soft disc may not fit)
+        if np.all(np.isfinite(dc)) and angle_between(dc, d) <= 3.0 * sigma * norm_J:
+            d, method = dc, "censored"
+    _, point = highlight_direction(view, pixel)
+    stat = float(np.degrees(sigma * norm_J))
     return HighlightFit(status=spot.status, direction=d, point=point, uncertainty_deg=float(np.hypot(stat, floor_deg)),
-                        pixel=pixel, pixel_sigma=sigma, **base)
+                        pixel=pixel, pixel_sigma=sigma, method=method, **base)
 
 
 #: The package's name for the method (one paper per function; see the module docstring).
