@@ -384,3 +384,78 @@ def test_capture_auto_classifies_and_rejects_all_saturated(tmp_path):
     with pytest.raises(InputError, match="saturated in every photo"):
         estimate_photos(big, samples, np.zeros(3), materials=["matte", "mirror"], views=views,
                         refine_centres=False, model="distant")
+
+
+# ----------------------------------------------------------------------------- measurement (docs/spheres.md)
+def measure(n: int = 40) -> list[dict]:
+    """Accuracy and 95 % cone coverage of the highlight fit on this module's renders (60 px radius).
+
+    ``python tests/test_highlight.py`` prints the table of ``docs/spheres.md``."""
+    K, s, view = _disc_view()
+    disc = np.zeros((160, 160), bool)
+    disc[s.rows, s.cols] = True
+    ortho = SphereView(center_px=np.array([80.0, 80.0]), radius_px=60.0, model="orthographic", center_sigma_px=0.05)
+    conditions = [
+        ("perspective, 1.5 deg light, unclipped", dict(light_radius_deg=1.5), None, view, None),
+        ("perspective, 3 deg light, clipped at 30 %", dict(light_radius_deg=3.0, clip=0.3), 0.3, view, None),
+        ("perspective, 1.5 deg light, clipped at 30 %", dict(light_radius_deg=1.5, clip=0.3), 0.3, view, None),
+        ("orthographic, 1.5 deg light", dict(light_radius_deg=1.5, ortho=(R_SPH / 60.0, 80.0, 80.0)), None, ortho,
+         None),
+        ("black glossy ball, 2 deg light", dict(light_radius_deg=2.0, power=10.0), None, view, "glossy"),
+    ]
+    rows = []
+    for name, kw, clip, v, kind in conditions:
+        errs, cones, stat, ok = [], [], [], 0
+        v0 = SphereView(v.center_px, v.radius_px, v.model, v.K, v.dist, v.center_cam, v.radius, center_sigma_px=0.0)
+        for k, l in enumerate(random_lights(n, seed=101)):
+            kw2 = dict(kw)
+            if "ortho" not in kw2:
+                kw2["K"] = K
+            img = render((160, 160), [((0, 0, 1.0), R_SPH, kind or "mirror")], light=l, noise=0.005, seed=k, ss=5,
+                         **kw2)
+            sat = None if clip is None else img >= clip * (1 - 1e-9)
+            fit = fit_highlight(v, img, disc, sat)
+            if fit.status != "ok":
+                continue
+            ok += 1
+            errs.append(float(np.degrees(angle_between(fit.direction, l))))
+            cones.append(fit.cone95_deg)
+            stat.append(fit_highlight(v0, img, disc, sat, floor_deg=0.0).cone95_deg)  # without the floors
+        e, c = np.array(errs), np.array(cones)
+        rows.append(dict(condition=name, accepted=f"{ok}/{n}", median=float(np.median(e)), max=float(e.max()),
+                         cone95_median=float(np.median(c)), coverage=float(np.mean(e <= c)),
+                         coverage_stat=float(np.mean(e <= np.array(stat)))))
+    # a near light (3 cm sphere light, 45-70 cm away) from two mirror spheres' rays
+    _, samples, views = _pipeline_spheres(["mirror", "mirror"])
+    K2 = _K(SHAPE[1], SHAPE[0])
+    rng = np.random.default_rng(103)
+    center = 0.5 * (C_LEFT + C_RIGHT)
+    errs, cones, pos, ok = [], [], [], 0
+    m = max(n // 4, 5)
+    for k in range(m):
+        d = random_lights(1, seed=200 + k, max_deg=60)[0]
+        S = center + rng.uniform(0.45, 0.7) * d
+        img = render(SHAPE, [(C_LEFT, R_SPH, "mirror"), (C_RIGHT, R_SPH, "mirror")], light_pos=S, light_size=0.015,
+                     K=K2, noise=0.005, seed=k, ss=3)
+        est = estimate_photo(img, samples, center, model="near", mirrors=views)
+        if not est.ok:
+            continue
+        ok += 1
+        errs.append(float(np.degrees(angle_between(est.direction, normalize(S - center)))))
+        cones.append(CONE95_PER_RMS * est.uncertainty_deg)
+        pos.append(float(np.linalg.norm(est.position - S) / np.linalg.norm(S - center)))
+    e, c = np.array(errs), np.array(cones)
+    rows.append(dict(condition=f"near light from 2 mirror spheres (position error median {100 * np.median(pos):.1f} % "
+                               f"of the distance)", accepted=f"{ok}/{m}", median=float(np.median(e)),
+                     max=float(e.max()), cone95_median=float(np.median(c)), coverage=float(np.mean(e <= c)),
+                     coverage_stat=float("nan")))
+    return rows
+
+
+if __name__ == "__main__":
+    print("| condition | accepted | median err (deg) | max err (deg) | median 95% cone (deg) | coverage | "
+          "coverage without floors |")
+    print("|---|---|---|---|---|---|---|")
+    for r in measure():
+        print(f"| {r['condition']} | {r['accepted']} | {r['median']:.3f} | {r['max']:.3f} | {r['cone95_median']:.3f} "
+              f"| {100 * r['coverage']:.0f} % | {100 * r['coverage_stat']:.0f} % |")

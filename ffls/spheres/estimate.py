@@ -441,7 +441,8 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
-    fitter.options["mirrors"] = [v if m == "mirror" else None for m, v in zip(materials, views or [None] * len(samples))]
+    views = [None] * len(samples) if views is None else list(views)
+    fitter.options["mirrors"] = [v if m == "mirror" else None for m, v in zip(materials, views)]
     terminator = fitter.options.get("terminator", 0.15)
     up = fitter.options.get("up", UP)
     # with a calibrated bounce the first pass only feeds the centre refinement and the calibration
@@ -454,7 +455,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         first = fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)], samples)
     results = [r for r, _ in first]
     kinds = sphere_kinds(materials, samples, values)
-    mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views or [None] * len(samples))]
+    mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views)]
     if mirrors != fitter.options["mirrors"]:  # classified mirrors: their first-pass fits from the highlight
         fitter.options["mirrors"] = mirrors
         results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],

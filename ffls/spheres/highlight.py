@@ -24,6 +24,9 @@ Saturation: where the highlight's core is clipped its pixels keep the clip value
 weighted mean is taken in *direction* space, where the reflected image of a symmetric source is
 symmetric, so a flat clipped core and its unclipped shoulder give an unbiased centre (a plain
 pixel centroid is pulled toward the sphere's centre, where the mirror ball magnifies least).
+Where enough pixels are clipped, a soft-edged disc light is fitted to the blob with the clipped
+pixels as censored observations (Tobin 1958, :func:`highlight_centre_Tobin1958`): the clipped
+blob's outline and its unclipped shoulder locate it.
 
 Uncertainty (RMS angular, the unit of :attr:`ffls.spheres.lambert.LambertFit.uncertainty_deg`):
 the centre's pixel uncertainty (background noise and clutter under the blob, the clipped core's
@@ -45,6 +48,7 @@ from scipy import ndimage
 
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
+from ffls.io.capture import SPHERE_MATERIALS
 
 __all__ = [
     "MATERIALS",
@@ -56,6 +60,12 @@ __all__ = [
     "SphereKind",
     "find_highlight",
     "highlight_centre_Debevec1998",
+    "highlight_centre_Tobin1958",
+    "CLIP_SIGMA_PX",
+    "CENSORED_SIGMA_PX",
+    "MIN_CENSORED_PX",
+    "PIXEL_FLOOR_PX",
+    "MIRROR_COMPACTNESS",
     "highlight_direction",
     "highlight_direction_Mudge2006",
     "fit_highlight",
@@ -66,7 +76,7 @@ __all__ = [
 ]
 
 #: Sphere materials of ``capture.json`` (``'auto'``: classified from the photos).
-MATERIALS = ("matte", "mirror", "auto")
+MATERIALS = SPHERE_MATERIALS
 #: Statuses of a highlight fit other than ``'ok'``, with their meaning.
 HIGHLIGHT_STATUSES = {
     "no_highlight": "no compact highlight on the mirror sphere (light behind it, or off)",
@@ -79,10 +89,12 @@ HIGHLIGHT_STATUSES = {
 CONE95_PER_RMS = float(np.sqrt(-2.0 * np.log(0.05) / 2.0))
 #: Per-axis floor of a highlight centre's pixel uncertainty (sampling, demosaicing).
 PIXEL_FLOOR_PX = 0.05
-#: Per-axis uncertainty (pixels) of a clipped highlight's centre: the profile under the clip is
-#: lost. Measured on the renders of ``tests/test_highlight.py`` (docs/spheres.md): RMS 0.23 px
-#: for cores of 2-4 clipped pixels (centroid), 0.08 px for larger ones (censored fit).
-CLIP_SIGMA_PX = 0.25
+#: Per-axis uncertainty (pixels) of a clipped highlight's centre from the centroid (the profile
+#: under the clip is lost) and from the censored fit. Measured on the renders of
+#: ``tests/test_highlight.py`` (symmetric disc lights; docs/spheres.md): per-axis RMS 0.15 px for
+#: cores of 2-4 clipped pixels (centroid), 0.05 px for larger ones (censored fit).
+CLIP_SIGMA_PX = 0.15
+CENSORED_SIGMA_PX = 0.05
 #: Fewest clipped pixels for the censored fit (:func:`highlight_centre_Tobin1958`): a smaller
 #: blob has fewer informative pixels than the fit's five parameters.
 MIN_CENSORED_PX = 8
@@ -423,7 +435,7 @@ def highlight_centre_Debevec1998(view: SphereView, spot: HighlightSpot, origin_p
 
 
 def highlight_centre_Tobin1958(view: SphereView, spot: HighlightSpot, start: np.ndarray, origin_px=(0.0, 0.0),
-                               sub: int = 8) -> tuple[np.ndarray, float]:
+                               sub: int = 8) -> np.ndarray:
     """A clipped highlight's direction from a censored fit of a soft-edged disc light.
 
     Tobin, "Estimation of Relationships for Limited Dependent Variables", Econometrica 1958: a
@@ -449,9 +461,10 @@ def highlight_centre_Tobin1958(view: SphereView, spot: HighlightSpot, start: np.
 
     Returns
     -------
-    direction : (3,) float, unit (NaN when the fit fails)
-    sigma_deg : float
-        RMS angular uncertainty of ``direction`` from the fit's covariance (infinite on failure).
+    (3,) float, unit
+        The light's direction (NaN when the fit fails). Its uncertainty is not taken from the
+        fit's covariance: the disc's radius, radiance and edge are confounded when only the edge
+        is seen (see :data:`CENSORED_SIGMA_PX`).
     """
     from scipy.optimize import least_squares
     from scipy.special import ndtr
@@ -502,18 +515,10 @@ def highlight_centre_Tobin1958(view: SphereView, spot: HighlightSpot, start: np.
             continue
         if r.status >= 0 and (res is None or r.cost < res.cost):
             res = r
-    if res is None:
-        return np.full(3, np.nan), float("inf")
+    if res is None:  # (status 0, evaluations spent, keeps the best point)
+        return np.full(3, np.nan)
     d = direction(res.x)
-    dof = max(int(np.count_nonzero(res.fun)) - 5, 1)
-    s2 = max(float(res.fun @ res.fun) / dof, 1.0)  # misfit inflates (never deflates) the noise
-    try:
-        cov = np.linalg.pinv(res.jac.T @ res.jac)[:2, :2] * s2
-    except np.linalg.LinAlgError:
-        return d, float("inf")
-    if res.status < 0 or not np.all(np.isfinite(d)):  # status 0 (evaluations spent) keeps the best point
-        return np.full(3, np.nan), float("inf")
-    return d, float(np.degrees(np.sqrt(max(np.trace(cov), 0.0))))
+    return d if np.all(np.isfinite(d)) else np.full(3, np.nan)
 
 
 def highlight_direction(view: SphereView, pixel) -> tuple[np.ndarray, np.ndarray]:
@@ -631,7 +636,9 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
     The centre's per-axis pixel uncertainty is
     ``sqrt(sigma_noise^2 + c^2 + q^2 + sigma_c^2 + s0^2)``: ``sigma_noise`` the
     background's spread (noise and clutter) propagated through the weighted mean, ``c =``
-    :data:`CLIP_SIGMA_PX` where the core is clipped, ``q = 1/sqrt(12)`` px where a clipped core
+    :data:`CLIP_SIGMA_PX` where the core is clipped (:data:`CENSORED_SIGMA_PX` where the censored
+    fit :func:`highlight_centre_Tobin1958` located it: cores of :data:`MIN_CENSORED_PX` or more
+    clipped pixels with an unclipped shoulder), ``q = 1/sqrt(12)`` px where a clipped core
     has no unclipped shoulder, ``sigma_c`` the sphere
     centre's uncertainty (``view.center_sigma_px``) and ``s0 =`` :data:`PIXEL_FLOOR_PX`. It is
     mapped to directions by the numerical Jacobian of the pixel-to-direction map; ``floor_deg``
@@ -676,10 +683,11 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
     sigma = float(np.sqrt(var_noise + clip ** 2 + quant ** 2 + common ** 2))
     method = "centroid"
     if spot.n_saturated >= MIN_CENSORED_PX and spot.shoulder:  # the clipped core's profile is lost: fit its outline
-        dc, _ = highlight_centre_Tobin1958(view, spot, d, origin_px)
+        dc = highlight_centre_Tobin1958(view, spot, d, origin_px)
         # kept where it lies within 3 sigma of the centroid (a source far from a soft disc may not fit)
         if np.all(np.isfinite(dc)) and angle_between(dc, d) <= 3.0 * sigma * norm_J:
             d, method = dc, "censored"
+            sigma = float(np.sqrt(var_noise + CENSORED_SIGMA_PX ** 2 + common ** 2))
     _, point = highlight_direction(view, pixel)
     stat = float(np.degrees(sigma * norm_J))
     return HighlightFit(status=spot.status, direction=d, point=point, uncertainty_deg=float(np.hypot(stat, floor_deg)),
