@@ -315,7 +315,7 @@ def test_sphere_materials_from_capture_json(tmp_path):
 
 # ----------------------------------------------------------------------------- photos and captures
 SHAPE = (200, 400)
-C_LEFT, C_RIGHT = np.array([-0.15, 0.0, 1.0]), np.array([0.15, 0.0, 1.0])
+C_LEFT, C_RIGHT = np.array([-0.1, 0.0, 1.0]), np.array([0.1, 0.0, 1.0])
 
 
 def _pipeline_spheres(kinds, centers=(C_LEFT, C_RIGHT)):
@@ -384,6 +384,32 @@ def test_capture_auto_classifies_and_rejects_all_saturated(tmp_path):
     with pytest.raises(InputError, match="saturated in every photo"):
         estimate_photos(big, samples, np.zeros(3), materials=["matte", "mirror"], views=views,
                         refine_centres=False, model="distant")
+
+
+def test_estimate_lights_on_a_mirror_capture(tmp_path):
+    """``ffls lights`` end to end: 16-bit linear PNGs of two chrome balls, pixel hints, the kind
+    classified (``"auto"``), sphere centres from detection, directions in the world frame."""
+    from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+    from ffls.spheres.estimate import estimate_lights
+
+    K = _K(SHAPE[1], SHAPE[0])
+    spheres = [(C_LEFT, R_SPH, "mirror"), (C_RIGHT, R_SPH, "mirror")]
+    lights = random_lights(3, seed=31, max_deg=55)
+    names = []
+    for k, l in enumerate(lights):
+        img = np.clip(render(SHAPE, spheres, light=l, K=K, noise=0.002, seed=k, ss=2, env=0.3), 0.0, 1.0)
+        cv2.imwrite(str(tmp_path / f"img{k}.png"), np.repeat((img * 65535).astype(np.uint16)[..., None], 3, 2))
+        names.append(f"img{k}.png")
+    doc = {"format": "ffls-capture", "version": 1, "images": names, "encoding": "linear",
+           "camera": {"K": K.tolist()}, "sphere_radius": R_SPH,
+           "spheres": [{"center_px": (K @ (C / C[2]))[:2].tolist(), "radius_px": 60.0} for C in (C_LEFT, C_RIGHT)]}
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    out = estimate_lights(load_capture(tmp_path), progress=False, workers=1)
+    truth = lights @ DEFAULT_WORLD_FROM_CAMERA[:3, :3].T
+    assert out.status == ["ok"] * 3
+    for d, t, extra in zip(out.directions, truth, out.extra):
+        assert np.degrees(angle_between(d, t)) < 0.5
+        assert [(s["kind"], s["kind_source"]) for s in extra["spheres"]] == [("mirror", "classified")] * 2
 
 
 # ----------------------------------------------------------------------------- measurement (docs/spheres.md)
