@@ -484,4 +484,5 @@ if __name__ == "__main__":
     print("|---|---|---|---|---|---|---|")
     for r in measure():
         print(f"| {r['condition']} | {r['accepted']} | {r['median']:.3f} | {r['max']:.3f} | {r['cone95_median']:.3f} "
-              f"| {100 * r['coverage']:.0f} % | {100 * r['coverage_stat']:.0f} % |")
+              f"| {100 * r['coverage']:.0f} % | "
+              + ("–" if np.isnan(r["coverage_stat"]) else f"{100 * r['coverage_stat']:.0f} %") + " |")
