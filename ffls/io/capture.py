@@ -49,6 +49,8 @@ __all__ = [
     "GAMMA_RANGE",
     "encoding_from_record",
     "apply_lights_encoding",
+    "SPHERE_MATERIALS",
+    "sphere_materials",
 ]
 
 CAPTURE_FILE = "capture.json"
@@ -370,6 +372,56 @@ def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
         j.fail("sphere_count", f"is {n} but 'spheres' lists {len(out)} hints; hints conflict: give one hint per "
                                f"sphere, or remove sphere_count")
     return out, n
+
+
+#: Sphere materials of ``capture.json`` (``"auto"``: classified from the photos).
+SPHERE_MATERIALS = ("matte", "mirror", "auto")
+
+
+def sphere_materials(capture: Capture, n_spheres: int) -> list[str]:
+    """Each sphere's declared material: ``spheres[k].material``, else ``sphere_material``, else ``'auto'``.
+
+    ``"material"`` in a sphere hint applies to that sphere (hints keep their order); the
+    capture-wide ``"sphere_material"`` to every sphere without one. ``"mirror"`` covers chrome
+    and black glossy balls (the light is the highlight), ``"matte"`` diffuse ones (the light is
+    the shading), ``"auto"`` is classified from the photos.
+
+    Parameters
+    ----------
+    capture : Capture
+    n_spheres : int
+        Spheres found.
+
+    Returns
+    -------
+    list of str
+        One of :data:`SPHERE_MATERIALS` per sphere.
+
+    Raises
+    ------
+    InputError
+        An unknown material, or per-sphere materials for a different number of spheres than found.
+    """
+    path = capture.json_path
+
+    def check(value, key):
+        if value not in SPHERE_MATERIALS:
+            raise InputError(f"{key}: expected one of {', '.join(repr(m) for m in SPHERE_MATERIALS)}, "
+                             f"got {_short(value)}", path)
+        return value
+
+    default = check(capture.extra.get("sphere_material", "auto"), "sphere_material")
+    per = [(k, h["material"]) for k, h in enumerate(capture.spheres or []) if isinstance(h, dict) and "material" in h]
+    for k, m in per:
+        check(m, f"spheres[{k}].material")
+    if per and len(capture.spheres) != int(n_spheres):
+        raise InputError(f"spheres[].material is given for {len(capture.spheres)} hinted spheres but "
+                         f"{n_spheres} were found; give a hint (with its material) for every sphere, or use "
+                         f"\"sphere_material\" for all", path)
+    out = [default] * int(n_spheres)
+    for k, m in per:
+        out[k] = m
+    return out
 
 
 def load_capture(folder: str | os.PathLike) -> Capture:

@@ -24,6 +24,12 @@ sequence. The stages, each in its own module:
      ``uncertainty_deg`` becomes the radius of its 95% cone under it.
 
 The spheres' pixels are kept in memory between the passes (never the images).
+
+Each sphere is matte or a mirror (chrome, black glossy): declared in ``capture.json``
+(:func:`ffls.io.capture.sphere_materials`) or, for ``'auto'``, classified after the first pass
+from its photos (:func:`ffls.spheres.highlight.classify_sphere`); a sphere found to be a mirror
+has its first-pass fits redone from its highlight. A mirror sphere takes no part in the centre
+refinement or the bounce calibration (both model shading).
 """
 from __future__ import annotations
 
@@ -36,6 +42,7 @@ import numpy as np
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
+from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness
 from ffls.spheres.lambert import fit_lambert
 from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
@@ -48,6 +55,8 @@ __all__ = [
     "BounceCalibration",
     "CaptureEstimate",
     "capture_samples",
+    "sphere_views",
+    "sphere_kinds",
     "calibrate_bounce",
     "refine_sphere_centres",
     "refit_spheres",
@@ -97,6 +106,8 @@ class CaptureEstimate:
     error_model : ErrorModel or None
         The capture's error model of the directions (:func:`calibrate_uncertainty`); the photos'
         ``uncertainty_deg`` are 95% cones under it.
+    kinds : list of SphereKind or None
+        Per sphere, its material as used and how it was decided.
     """
 
     photos: list[PhotoEstimate]
@@ -104,10 +115,17 @@ class CaptureEstimate:
     refinements: list[CentreRefinement] | None
     samples: list[SphereSamples]
     error_model: ErrorModel | None = None
+    kinds: list[SphereKind] | None = None
 
     def records(self) -> list[dict]:
-        """Per photo, its ``lights.json`` ``extra`` (:meth:`PhotoEstimate.record`)."""
-        return [p.record(self.refinements) for p in self.photos]
+        """Per photo, its ``lights.json`` ``extra`` (:meth:`PhotoEstimate.record`); each sphere's
+        report also says how its kind was decided (``kind_source``, ``compactness``)."""
+        out = [p.record(self.refinements) for p in self.photos]
+        for rec in out:
+            for rep, kind in zip(rec["spheres"], self.kinds or []):
+                rep["kind_source"] = kind.source
+                rep["compactness"] = kind.statistic
+        return out
 
 
 # ----------------------------------------------------------------------------- capture stages
@@ -129,6 +147,66 @@ def capture_samples(capture, spheres, shape: tuple[int, int]) -> list[SphereSamp
         if len(out[-1]) < 20:
             raise InputError(f"sphere {k} covers only {len(out[-1])} pixels; too small to estimate a light",
                              capture.folder)
+    return out
+
+
+def sphere_views(capture, spheres) -> list[SphereView]:
+    """Each found sphere's :class:`~ffls.spheres.highlight.SphereView` (what maps its pixels to
+    reflected directions) under the capture's camera.
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+    spheres : list
+        Objects with ``center_cam`` and ``radius`` (and, where known, ``center_px``, ``radius_px``,
+        ``residual_px``, ``n_inliers``: :class:`ffls.spheres.detect.SphereFit`).
+
+    Returns
+    -------
+    list of SphereView
+    """
+    from ffls.camera.projection import project_points
+
+    model = getattr(capture, "camera_model", "pinhole")
+    out = []
+    for s in spheres:
+        C = np.asarray(s.center_cam, dtype=np.float64)
+        R = float(getattr(s, "radius", None) or capture.sphere_radius)
+        cpx = getattr(s, "center_px", None)
+        rpx = getattr(s, "radius_px", None)
+        if cpx is None and capture.K is not None:
+            cpx = project_points(C[None], capture.K, capture.dist)[0]
+        if rpx is None and capture.K is not None:
+            f = 0.5 * (capture.K[0, 0] + capture.K[1, 1])
+            rpx = f * np.tan(np.arcsin(min(R / float(np.linalg.norm(C)), 1.0)))
+        proxy = type("Sphere", (), dict(center_px=cpx, radius_px=rpx, center_cam=C, radius=R,
+                                        residual_px=getattr(s, "residual_px", 0.0),
+                                        n_inliers=getattr(s, "n_inliers", 0)))
+        out.append(SphereView.from_sphere(proxy, model, capture.K, capture.dist, capture.world_from_camera))
+    return out
+
+
+def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: list) -> list[SphereKind]:
+    """Each sphere's kind: as declared, or for ``'auto'`` classified from the photos' values.
+
+    Parameters
+    ----------
+    materials : list of {'matte', 'mirror', 'auto'}
+    samples : list of SphereSamples
+    values : list
+        Per photo, its :func:`ffls.spheres.samples.sphere_values`.
+
+    Returns
+    -------
+    list of SphereKind
+    """
+    out = []
+    for k, (m, s) in enumerate(zip(materials, samples)):
+        if m != "auto":
+            out.append(SphereKind(m, "declared"))
+            continue
+        stats = [highlight_compactness(s.rows, s.cols, v[k][0]) for v in values]
+        out.append(classify_sphere(stats))
     return out
 
 
@@ -169,6 +247,8 @@ def calibrate_bounce(results: list[PhotoEstimate], n_spheres: int, max_sigma: fl
             if r.status != "ok" or not r.spheres:
                 continue
             sp = r.spheres[k]
+            if sp.kind != "matte":
+                continue
             d, q, sd = sp.direction, sp.fit.ground_ratio, sp.fit.ground_ratio_sigma
             if (sp.status != "ok" or d is None or not np.isfinite(q) or not np.isfinite(sd) or d[2] < min_lz
                     or not sd <= max_sigma):
@@ -261,7 +341,7 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         dirs = []
         for r in results:
             sp = r.spheres[k] if r.spheres else None
-            dirs.append(sp.direction if sp is not None and sp.status == "ok" else None)
+            dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
         ref = refine_sphere_centre(s, [v[k] for v in values], dirs, terminator=terminator, **kwargs)
         refinements.append(ref)
         if ref.accepted:
@@ -306,9 +386,9 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
         return replace(result)
     spheres = list(result.spheres)
     for k, (s, (grey, valid, nsat), ref) in enumerate(zip(samples, values, refinements)):
-        if not ref.accepted:
-            continue
         old = result.spheres[k]
+        if not ref.accepted or old.kind != "matte":
+            continue
         f = fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
                         g=s.ground_factor(up), start=old.direction)  # (no uncertainty needed: no pixels)
         spheres[k] = SphereResult(f, f.status if old.status == "ok" else old.status)
@@ -395,9 +475,31 @@ class _PhotoFitter:
         return out
 
 
+def _check_highlights(results: list[PhotoEstimate], kinds: list[SphereKind], where) -> None:
+    """InputError when a mirror sphere's highlight is saturated (no unclipped shoulder) in every photo."""
+    for k, kind in enumerate(kinds):
+        if kind.kind != "mirror" or not results:
+            continue
+        st = [r.spheres[k].fit.status for r in results if r.spheres]
+        if st and all(x == "saturated" for x in st):
+            raise InputError(f"sphere {k} (mirror): its highlight is saturated in every photo ({len(st)}), with no "
+                             f"unclipped edge to locate it; lower the exposure, or give the images' encoding and "
+                             f"saturation level", where)
+
+
 def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
-              bounce: str, refine_centres: bool, refine_options: dict | None) -> CaptureEstimate:
-    """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos."""
+              bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
+              views: list | None = None, where=None) -> CaptureEstimate:
+    """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
+
+    ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
+    ``views`` (per sphere its :class:`~ffls.spheres.highlight.SphereView`) decide each sphere's
+    fit; ``where`` is the path named by a capture-wide error."""
+    materials = ["matte"] * len(samples) if materials is None else list(materials)
+    if views is None and any(m != "matte" for m in materials):
+        raise ValueError("mirror or 'auto' spheres need their views")
+    views = [None] * len(samples) if views is None else list(views)
+    fitter.options["mirrors"] = [v if m == "mirror" else None for m, v in zip(materials, views)]
     terminator = fitter.options.get("terminator", 0.15)
     up = fitter.options.get("up", UP)
     # with a calibrated bounce the first pass only feeds the centre refinement and the calibration
@@ -409,6 +511,13 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     else:
         first = fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)], samples)
     results = [r for r, _ in first]
+    kinds = sphere_kinds(materials, samples, values)
+    mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views)]
+    if mirrors != fitter.options["mirrors"]:  # classified mirrors: their first-pass fits from the highlight
+        fitter.options["mirrors"] = mirrors
+        results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],
+                                            samples, counted=False)]
+    _check_highlights(results, kinds, where)
 
     def refit(indices, ratios, counted):
         tasks = [_PhotoTask(i, values=values[i], bounce_ratio=ratios, start=results[i].sphere_directions())
@@ -427,7 +536,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                            for r, v in zip(results, values)]
     if bounce == "free":
         error_model, results = calibrate_uncertainty(results, samples)
-        return CaptureEstimate(results, None, refinements, samples, error_model)
+        return CaptureEstimate(results, None, refinements, samples, error_model, kinds)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
     if any(r is not None for r in ratios):
@@ -443,7 +552,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                 results[i] = r
         fitter.advance(n_photos)
     error_model, results = calibrate_uncertainty(results, samples)
-    return CaptureEstimate(results, calibration, refinements, samples, error_model)
+    return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds)
 
 
 def _check_modes(model: str, bounce: str) -> None:
@@ -456,7 +565,7 @@ def _check_modes(model: str, bounce: str) -> None:
 # ----------------------------------------------------------------------------- entry points
 def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np.ndarray,
                     bounce: str = "calibrated", refine_centres: bool = True, refine_options: dict | None = None,
-                    **kwargs) -> CaptureEstimate:
+                    materials: list | None = None, views: list | None = None, **kwargs) -> CaptureEstimate:
     """The two passes of :func:`estimate_lights` on photos whose sphere values are given, in this process.
 
     Parameters
@@ -471,9 +580,13 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
         the bounce calibration (:func:`refine_sphere_centres`).
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
+    materials : list of {'matte', 'mirror', 'auto'}, optional
+        Per sphere (all matte when None).
+    views : list of SphereView, optional
+        Per sphere (needed for ``'mirror'`` and ``'auto'``).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``model``, ``min_spheres``,
-        ``sigma_floor_deg``, ``terminator``, ``up``).
+        ``sigma_floor_deg``, ``terminator``, ``up``, ``mirror_floor_deg``).
 
     Returns
     -------
@@ -482,7 +595,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     _check_modes(kwargs.get("model", "auto"), bounce)
     fitter = _PhotoFitter(None, scene_center, kwargs)
     return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
-                     refine_options=refine_options)
+                     refine_options=refine_options, materials=materials, views=views)
 
 
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
@@ -524,7 +637,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         Directions (world, from the scene centre), positions for near lights, status, reasons
         (:data:`ffls.spheres.photo.REASONS`), and per light ``extra``: ``uncertainty_deg`` (the
         radius of the 95% cone, calibrated over the capture: :func:`calibrate_uncertainty`),
-        ``model``, ``used_spheres``, ``spheres`` (per-sphere direction, residual, uncertainty,
+        ``model``, ``used_spheres``, ``spheres`` (per-sphere ``kind``, ``kind_source`` and
+        ``compactness``, direction, residual or highlight, uncertainty,
         pixel counts, ground ratio estimate and the imposed ``bounce_ratio``; with
         ``refine_centres`` also the sphere's world ``center``, ``center_shift_px`` and
         ``center_refined``).
@@ -559,6 +673,10 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     else:
         shape = load_photo(capture, 0).shape[:2]
     samples = capture_samples(capture, spheres, shape)
+    from ffls.io.capture import sphere_materials
+
+    materials = sphere_materials(capture, len(spheres))
+    views = sphere_views(capture, spheres)
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     bar = None
     if progress:
@@ -568,7 +686,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     try:
         fitter = _PhotoFitter(capture, capture.scene_center, dict(model=model, **kwargs), workers, bar)
         est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
-                        refine_options=refine_options)
+                        refine_options=refine_options, materials=materials, views=views, where=capture.json_path)
     finally:
         if bar is not None:
             bar.close()

@@ -15,6 +15,12 @@ Masselus, Dutre, Anrys, "The Free-form Light Stage", EGWR 2002, section 5. Per p
 4. a near light's position is refined by the joint fit to all used spheres' pixels
    (:func:`ffls.spheres.combine.fit_near_light`), initialised from the ray intersection.
 
+A sphere is matte or a mirror (chrome, black glossy): a mirror sphere's step 1 is its
+highlight (:func:`ffls.spheres.highlight.fit_highlight`, the RTI highlight method), whose
+direction and RMS uncertainty enter steps 2 and 3 like a matte sphere's; its near-light ray starts
+at the highlight's reflection point. The joint near fit (step 4) needs shading, so a photo whose
+used spheres include a mirror keeps the ray intersection.
+
 Rejection reasons (:data:`REASONS`) are short fixed strings stored in ``lights.json``.
 """
 from __future__ import annotations
@@ -27,12 +33,14 @@ from scipy.stats import chi2 as chi2_distribution
 
 from ffls.conventions import UP, normalize
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
+from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView, fit_highlight_samples
 from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
 from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel, cone_deg
 
 __all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SphereResult", "LightHypothesis", "PhotoEstimate",
-           "fit_spheres", "fit_light_model", "near_fit_mask", "estimate_photo"]
+           "fit_spheres", "sphere_uncertainty_deg", "ray_origins", "fit_light_model", "near_fit_mask",
+           "estimate_photo"]
 
 #: Rejection reasons of a photo (and of single spheres), with their meaning.
 REASONS = {
@@ -43,6 +51,8 @@ REASONS = {
                         "sphere explains it",
     "too_few_spheres": "fewer usable spheres than needed (min_spheres)",
     "fit_failed": "the shading fit did not converge to a finite direction",
+    "no_highlight": HIGHLIGHT_STATUSES["no_highlight"],
+    "highlight_at_rim": HIGHLIGHT_STATUSES["highlight_at_rim"],
 }
 #: Light models of :func:`estimate_photo`.
 LIGHT_MODELS = ("auto", "distant", "near")
@@ -58,7 +68,9 @@ class SphereResult:
 
     Attributes
     ----------
-    fit : LambertFit
+    fit : LambertFit or HighlightFit
+        A matte sphere's shading fit or a mirror sphere's highlight; both have ``status``,
+        ``direction``, ``uncertainty_deg`` (RMS) and ``as_dict``.
     status : str
         ``fit.status``, or ``'shadowed'`` / :data:`OUTLIER` where the combination set the sphere
         aside.
@@ -67,9 +79,14 @@ class SphereResult:
         (:meth:`PhotoEstimate.with_error_model`); None where it has no direction.
     """
 
-    fit: LambertFit
+    fit: LambertFit | HighlightFit
     status: str
     uncertainty_deg: float | None = None
+
+    @property
+    def kind(self) -> str:
+        """``'mirror'`` for a highlight fit, ``'matte'`` for a shading fit."""
+        return "mirror" if isinstance(self.fit, HighlightFit) else "matte"
 
     @property
     def direction(self) -> np.ndarray | None:
@@ -80,7 +97,9 @@ class SphereResult:
     def as_dict(self) -> dict:
         """JSON-ready report: ``status`` and :meth:`LambertFit.as_dict` (without the pixel mask)."""
         cone = self.uncertainty_deg
-        return {"status": self.status, **{k: v for k, v in self.fit.as_dict().items() if k != "status"},
+        return {"status": self.status, "kind": self.kind,
+                **{k: v for k, v in self.fit.as_dict().items() if k not in ("status", "kind", "uncertainty_deg")},
+                "sigma_deg": float(self.fit.uncertainty_deg) if np.isfinite(self.fit.uncertainty_deg) else None,
                 "uncertainty_deg": float(cone) if cone is not None and np.isfinite(cone) else None}
 
 
@@ -208,8 +227,10 @@ class PhotoEstimate:
 
 # ----------------------------------------------------------------------------- stages
 def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, terminator: float = 0.15,
-                up: np.ndarray = UP, bounce_ratio: list | None = None, start: list | None = None) -> list[LambertFit]:
-    """Step 1: every sphere's own fit (:func:`ffls.spheres.lambert.fit_lambert`).
+                up: np.ndarray = UP, bounce_ratio: list | None = None, start: list | None = None,
+                mirrors: list | None = None, mirror_floor_deg: float = 0.1) -> list[LambertFit | HighlightFit]:
+    """Step 1: every sphere's own fit (:func:`ffls.spheres.lambert.fit_lambert`, or for a mirror
+    sphere :func:`ffls.spheres.highlight.fit_highlight_samples`).
 
     Parameters
     ----------
@@ -221,26 +242,38 @@ def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, ter
         Per sphere, the calibrated ground ratio (None: free bounce).
     start : list of ((3,) float or None), optional
         Per sphere, a direction to start from.
+    mirrors : list of (SphereView or None), optional
+        Per sphere, the view of a mirror sphere (None: matte).
+    mirror_floor_deg : float
+        RMS floor of a mirror sphere's uncertainty (:func:`ffls.spheres.highlight.fit_highlight`).
 
     Returns
     -------
-    list of LambertFit
+    list of LambertFit or HighlightFit
     """
     n = len(samples)
     bounce_ratio = [None] * n if bounce_ratio is None else bounce_ratio
     start = [None] * n if start is None else start
-    return [fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up, bounce_ratio=rho,
-                        g=s.ground_factor(up), start=l0, pixels=(s.rows, s.cols))
-            for s, (grey, valid, nsat), rho, l0 in zip(samples, values, bounce_ratio, start)]
+    mirrors = [None] * n if mirrors is None else mirrors
+    out = []
+    for s, (grey, valid, nsat), rho, l0, view in zip(samples, values, bounce_ratio, start, mirrors):
+        if isinstance(view, SphereView):
+            out.append(fit_highlight_samples(view, s, grey, valid, floor_deg=mirror_floor_deg))
+        else:
+            out.append(fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
+                                   bounce_ratio=rho, g=s.ground_factor(up), start=l0, pixels=(s.rows, s.cols)))
+    return out
 
 
-def _mark_shadowed(fits: list[LambertFit]) -> tuple[list[str], list[int]]:
-    """Statuses and usable spheres: a sphere far darker than the other usable ones is in a shadow."""
+def _mark_shadowed(fits: list) -> tuple[list[str], list[int]]:
+    """Statuses and usable spheres: a matte sphere far darker than the other usable matte ones is
+    in a shadow (a mirror's highlight brightness says nothing about a cast shadow's)."""
     status = [f.status for f in fits]
     ok = [i for i, f in enumerate(fits) if f.status == "ok"]
-    if len(ok) >= 2:
-        med = float(np.median([fits[i].intensity for i in ok]))
-        for i in list(ok):
+    matte = [i for i in ok if isinstance(fits[i], LambertFit)]
+    if len(matte) >= 2:
+        med = float(np.median([fits[i].intensity for i in matte]))
+        for i in matte:
             if fits[i].intensity < 0.25 * med:
                 status[i] = "shadowed"
                 ok.remove(i)
@@ -251,12 +284,31 @@ def _rejection_reason(status: list[str], ok: list[int]) -> str:
     """Why too few spheres are usable: the most common sphere status, or ``too_few_spheres``."""
     if ok:
         return "too_few_spheres"
-    priority = ("saturated", "shadowed", "too_dark", "fit_failed")
+    priority = ("saturated", "shadowed", "too_dark", "no_highlight", "highlight_at_rim", "fit_failed")
     counts = Counter(st for st in status)
     return max(priority, key=lambda r: (counts.get(r, 0), -priority.index(r)))
 
 
-def fit_light_model(spheres: list[int], fits: list[LambertFit], centers: np.ndarray, sigma_floor_deg: float,
+def sphere_uncertainty_deg(fit, sigma_floor_deg: float) -> float:
+    """A sphere's RMS uncertainty in the combination: a matte fit's statistical part with the
+    shading model's floor ``sigma_floor_deg`` in quadrature; a highlight fit's own (its floor is
+    already inside)."""
+    if isinstance(fit, HighlightFit):
+        return float(fit.uncertainty_deg)
+    return float(np.hypot(fit.uncertainty_deg, sigma_floor_deg))
+
+
+def ray_origins(spheres: list[int], fits: list, centers: np.ndarray) -> np.ndarray:
+    """Where each sphere's light ray starts (k, 3): a matte sphere's centre, a mirror's
+    reflection point (where known)."""
+    out = np.array([centers[i] for i in spheres], dtype=np.float64).reshape(-1, 3)
+    for j, i in enumerate(spheres):
+        if isinstance(fits[i], HighlightFit) and np.all(np.isfinite(fits[i].point)):
+            out[j] = fits[i].point
+    return out
+
+
+def fit_light_model(spheres: list[int], fits: list, centers: np.ndarray, sigma_floor_deg: float,
                     scene_center: np.ndarray, model: str) -> LightHypothesis:
     """Step 2: the distant (and, where asked or significant, the near) light of some spheres' directions.
 
@@ -276,7 +328,7 @@ def fit_light_model(spheres: list[int], fits: list[LambertFit], centers: np.ndar
     LightHypothesis
     """
     dirs = np.array([fits[i].direction for i in spheres])
-    unc = np.array([np.hypot(fits[i].uncertainty_deg, sigma_floor_deg) for i in spheres])
+    unc = np.array([sphere_uncertainty_deg(fits[i], sigma_floor_deg) for i in spheres])
     mean, u_mean, chi_d, dof_d = combine_distant(dirs, unc)
     out = LightHypothesis(spheres=list(spheres), model="distant", direction=mean, uncertainty_deg=u_mean,
                           chi2=chi_d, dof=dof_d, position=None, p=1.0)
@@ -284,7 +336,7 @@ def fit_light_model(spheres: list[int], fits: list[LambertFit], centers: np.ndar
     # threshold, the near model cannot be significant and is not fitted
     threshold = chi2_distribution.ppf(1 - SIGNIFICANCE, 1)
     if len(spheres) >= 2 and (model == "near" or (model == "auto" and chi_d > threshold)):
-        conv = fit_ray_convergence(centers[list(spheres)], dirs, unc, scene_center)
+        conv = fit_ray_convergence(ray_origins(spheres, fits, centers), dirs, unc, scene_center)
         if conv.position is not None and (model == "near" or chi_d - conv.chi2 > threshold):
             out.model, out.direction, out.chi2, out.dof, out.position = (
                 "near", conv.direction, conv.chi2, conv.dof, conv.position)
@@ -347,7 +399,7 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
                    model: str = "auto", min_spheres: int | None = None, sigma_floor_deg: float = 1.0,
                    terminator: float = 0.15, saturation: float | None = None, up: np.ndarray = UP,
                    bounce_ratio: list | None = None, values: list | None = None, start: list | None = None,
-                   joint: bool = True) -> PhotoEstimate:
+                   joint: bool = True, mirrors: list | None = None, mirror_floor_deg: float = 0.1) -> PhotoEstimate:
     """Estimate the light of one photograph from its spheres.
 
     Parameters
@@ -384,6 +436,12 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         model is chosen. False keeps the ray-intersection position (``joint_pending``): for a first
         pass whose per-sphere fits alone are used (the second pass refits with the calibrated
         bounce).
+    mirrors : list of (SphereView or None), optional
+        Per sphere, the :class:`~ffls.spheres.highlight.SphereView` of a mirror or glossy sphere
+        (its light is its highlight); None (or a None entry): matte.
+    mirror_floor_deg : float
+        RMS floor of a mirror sphere's uncertainty (what the highlight model leaves out: the
+        ball's roundness and radius).
 
     Returns
     -------
@@ -397,7 +455,8 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
             raise ValueError("estimate_photo needs an image or its sphere values")
         values = sphere_values(image, samples, saturation=saturation)
     need = min(2, n_sph) if min_spheres is None else int(min_spheres)
-    fits = fit_spheres(samples, values, terminator=terminator, up=up, bounce_ratio=bounce_ratio, start=start)
+    fits = fit_spheres(samples, values, terminator=terminator, up=up, bounce_ratio=bounce_ratio, start=start,
+                       mirrors=mirrors, mirror_floor_deg=mirror_floor_deg)
     status, ok = _mark_shadowed(fits)
     centers = np.array([s.center for s in samples])
 
@@ -416,8 +475,10 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         status[outlier] = OUTLIER
     used = hyp.spheres
     direction, position, joint_sigma = hyp.direction, hyp.position, 0.0
-    pending = hyp.model == "near" and not joint
-    if hyp.model == "near" and joint:
+    # the joint fit models shading: with a mirror sphere among the used, the ray intersection stays
+    shading_only = all(isinstance(fits[i], LambertFit) for i in used)
+    pending = hyp.model == "near" and not joint and shading_only
+    if hyp.model == "near" and joint and shading_only:
         jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
                             [near_fit_mask(fits[i]) for i in used], position,
                             terms=_near_terms([fits[i] for i in used]), terminator=terminator, up=up)
