@@ -70,6 +70,7 @@ CONDITIONS = {
 
 def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
     """The capture of ``ffls synth OUT --resolution RES FLAGS`` under the lights ``dirs``."""
+    folder.parent.mkdir(parents=True, exist_ok=True)
     args = build_parser().parse_args(["synth", str(folder), "--resolution", str(res), "--quiet", *flags])
     write_synthetic_capture(folder, directions=dirs, resolution=res, scene=scene_of(args), photo=photo_settings(args),
                             progress=False, light_model="distant" if args.near is None else "near",
