@@ -24,7 +24,7 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    from ffls.commands.common import add_lights_arguments, add_rotation_arguments, exposure_arg
+    from ffls.commands.common import FRAMES, add_lights_arguments, add_rotation_arguments, exposure_arg, output_path
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     add_lights_arguments(p)
@@ -46,8 +46,8 @@ def add_arguments(p):
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
     p.add_argument("--headless", action="store_true",
                    help="glfw's null platform with EGL (automatic when no display is set)")
-    p.add_argument("--frames", type=int, default=None, metavar="N", help="run N frames and exit")
-    p.add_argument("--screenshot", default=None, metavar="OUT.png",
+    p.add_argument("--frames", type=FRAMES, default=None, metavar="N", help="run N frames and exit")
+    p.add_argument("--screenshot", type=output_path((".png",)), default=None, metavar="OUT.png",
                    help="after the last frame save the window (PNG) and the relit HDR (OUT.exr)")
     p.add_argument("--benchmark", action="store_true",
                    help="with --frames: rotate the light map every frame and print frame-time statistics")

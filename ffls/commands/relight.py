@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument, add_rotation_arguments,
-                                  check_mask_size, exposure_arg, flush_notes, load_relight_inputs, output_path,
+                                  check_mask_size, exposure_arg, load_relight_inputs, output_path,
                                   rotation_from_args, write_output)
 
 NAME = "relight"
@@ -41,7 +41,6 @@ def run(args) -> int:
     image, w = relight_capture(capture, lights, lightmap, rotation=rotation_from_args(args),
                                cells_res=args.cells_res or None)
     check_mask_size(mask, image.shape)
-    flush_notes()  # the inputs are loaded: the informational lines now
     display = None
     if out.suffix.lower() != ".exr":
         exposure = auto_exposure(image, mask=mask) if args.exposure == "auto" else args.exposure

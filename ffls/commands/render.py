@@ -116,7 +116,8 @@ def run(args) -> int:
     R0 = rotation_from_args(args)
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
     r, ctx = _make_renderer(args, capture, lights)
-    flush_notes()  # the inputs are loaded: the informational lines now
+    if args.turntable is not None:
+        flush_notes()  # a long job: the informational lines now (a still's wait for its success)
     try:
         r.set_lightmap(lightmap)
         r.set_rotation(R0)
