@@ -16,7 +16,10 @@ Additions, each needed on real photographs and independent renders:
 * pixels near the terminator (``|n . l| < terminator``) are left out (area-light penumbra and
   the kink of ``max``); the fit is repeated with the new classification until it is stable;
 * robust residual rejection (MAD) removes cast shadows, specks and highlights;
-* saturated, near-black and non-finite pixels are never used (the caller's ``valid`` mask);
+* saturated, clipped-black and non-finite pixels are never used (the caller's ``valid`` mask);
+  noisy near-zero and negative values are used (censoring them by value biases the fit), and
+  where some pixels are clipped at the black floor, those the model predicts near the floor are
+  left out too (censoring by the prediction, not by the noisy value);
 * the simplest of the models ``plain`` (``a, l``), ``ambient`` (``+ b``) and ``bounce``
   (``+ b + c g``) that the data support is chosen: the richest whose added term is significant
   (t > 3; BIC dropped the bounce when few shadow pixels were in view, see :func:`_select_model`).
@@ -104,7 +107,7 @@ class LambertFit:
     n_rejected : int
         Pixels rejected as outliers (cast shadow, highlights).
     n_invalid : int
-        Pixels excluded by the validity mask (saturated, near-black, non-finite).
+        Pixels excluded by the validity mask (saturated, clipped at the black floor, non-finite).
     n_saturated : int
         Of those, saturated.
     inliers : (m,) bool
@@ -377,7 +380,7 @@ def _fits(models, G5, h5, yy, k, ratio):
 
 
 def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio,
-             min_shadow=1):
+             min_shadow=1, floor_censor=False, floor_sigma=2.5, dark_fraction=0.01):
     """Classification / rejection iterations from one start; returns (state, inliers).
 
     The free bounce ``c`` is only fitted with at least ``min_shadow`` shadow-side pixels: on the
@@ -385,8 +388,16 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     without shadow pixels the design is singular and its inverse is rounding noise (it gave a
     "significant" bounce with a zero ratio uncertainty that then dominated the capture-wide
     calibration, :func:`ffls.spheres.estimate.calibrate_bounce`).
+
+    Dark pixels are selected by the model, never by their noisy value (selecting on the observed
+    value keeps the bright half of the noise and biases the fit; selecting on the prediction does
+    not): pixels whose predicted value is below ``dark_fraction`` of ``a`` (the darkest shadow
+    side, where the bounce model is least exact) are left out from the second iteration on, and
+    with ``floor_censor`` (some pixels are clipped at the black floor 0) also those predicted
+    below ``floor_sigma`` robust noise deviations, whatever their observed value.
     """
     inl = ok.copy()
+    censored = np.zeros_like(ok)
     best = None
     F = np.empty((5, normals.shape[0]))
     F[:3] = normals.T
@@ -415,15 +426,20 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
         res *= a
         res += fit.b
         res += fit.c * g
+        pred = res.copy()
         np.subtract(y, res, out=res)
         r = res[use]  # the residuals of the fitted pixels
         r -= _median(r)
         np.abs(r, out=r)
-        sigma = max(1.4826 * _median(r), rel_noise_floor * a)
+        noise = 1.4826 * _median(r)
+        sigma = max(noise, rel_noise_floor * a)
         np.abs(res, out=res)
         new_inl = res <= clip_sigma * sigma
         new_inl &= ok
-        best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a, nl=nl)
+        censored = pred < max(dark_fraction * a, floor_sigma * noise if floor_censor else 0.0)
+        new_inl &= ~censored
+        best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a, nl=nl,
+                    censored=censored)
         stable = (np.array_equal(new_inl, inl) and float(new_dir @ ldir) > np.cos(np.radians(1e-3)))
         inl = new_inl
         ldir = new_dir
@@ -447,7 +463,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     values : (m,) float
         Linear intensities.
     valid : (m,) bool, optional
-        Pixels that may be used (not saturated, not near-black); non-finite values are always
+        Pixels that may be used (not saturated, not clipped at the black floor); non-finite values are always
         excluded.
     n_saturated : int
         How many of the invalid pixels are saturated (decides the ``'saturated'`` status).
@@ -513,6 +529,8 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         for mdl in models:
             if mdl not in MODELS:
                 raise ValueError(f"unknown model {mdl!r}; expected one of {MODELS}")
+    # pixels clipped at the black floor (pixel_validity): censor by the prediction too
+    floor_censor = bool(np.any(np.isfinite(y_all) & ~ok & (y_all <= 0.0)))
     if ok.sum() < min_lit:
         base.status = "saturated" if n_saturated >= max(min_lit, 0.5 * (m - ok.sum())) and n_saturated > 0 else "too_dark"
         return base
@@ -539,7 +557,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     best, inl = None, ok
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
         best, inl = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
-                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow)
+                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor_censor)
     if best is None:
         base.status = "too_dark"
         return base
@@ -571,14 +589,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
             ratio_sd = float(s * np.sqrt(max(fb.Ginv[4, 4], 0.0)) / (ab * lz))
             if not fb.Ginv[4, 4] > 0.0:  # c at its bound (or singular): not determined by this photo
                 ratio_sd = float("inf")
-    cand_lit = ok & (nl > terminator)
+    cand_lit = ok & (nl > terminator) & ~best["censored"]
     n_rej = int((cand_lit & ~inl).sum())
     fitres = LambertFit(
         status="ok", direction=ldir, intensity=a, ambient=fit.b, bounce=fit.c,
         model=best["model"], rms=float(np.sqrt(fit.rss / k)) / a, uncertainty_deg=unc, statistical_deg=stat,
         inflation=inflation,
         n_lit=int(lit.sum()), n_shadow=int(shadow.sum()),
-        n_rejected=int((ok & ~inl).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
+        n_rejected=int((ok & ~inl & ~best["censored"]).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
         non_outliers=inl,
         ground_ratio=ratio_est, ground_ratio_sigma=ratio_sd,
         bounce_ratio=None if bounce_ratio is None else float(bounce_ratio),
