@@ -341,25 +341,31 @@ def _product_table(F, y):
     return Tb
 
 
+def _design_products(normals, g, y):
+    """:func:`_product_table` of the design ``[n, 1, g]`` (normals (m, 3), ``g`` and ``y`` (m,))."""
+    F = np.empty((5, normals.shape[0]))
+    F[:3] = normals.T
+    F[3] = 1.0
+    F[4] = g
+    return _product_table(F, y)
+
+
 def _gram(Tb, lit, shadow):
     """Normal equations of the full design ``[n [lit], 1, g]``: ``A^T A``, ``A^T y``, ``y^T y``, and the counts.
 
     ``Tb`` is :func:`_product_table`; shadow-side rows only have the last two columns.
     """
-    W = np.empty((2, Tb.shape[1]))
-    W[0] = lit
-    W[1] = shadow
-    S = Tb @ W.T
-    sl, ss = S[:, 0], S[:, 1]
+    sl = Tb @ lit.astype(np.float64)
+    ss = Tb[12:] @ shadow.astype(np.float64)  # rows (3,3), (3,4), (4,4), f y (5), y^2: entries 12..20
     G5 = np.empty((5, 5))
     G5[_TRIU] = sl[:15]
-    G5[3, 3] += ss[12]
-    G5[3, 4] += ss[13]
-    G5[4, 4] += ss[14]
+    G5[3, 3] += ss[0]
+    G5[3, 4] += ss[1]
+    G5[4, 4] += ss[2]
     G5[_TRIU[1], _TRIU[0]] = G5[_TRIU]
     h5 = sl[15:20].copy()
-    h5[3:] += ss[18:20]
-    return G5, h5, float(sl[20] + ss[20]), int(round(sl[12])), int(round(ss[12]))
+    h5[3:] += ss[6:8]
+    return G5, h5, float(sl[20] + ss[8]), int(round(sl[12])), int(round(ss[0]))
 
 
 def _fits(models, G5, h5, yy, k, ratio):
@@ -380,7 +386,7 @@ def _fits(models, G5, h5, yy, k, ratio):
 
 
 def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio,
-             min_shadow=1, floor_censor=False, floor_sigma=2.5, dark_fraction=0.01):
+             min_shadow=1, floor_censor=False, floor_sigma=2.5, dark_fraction=0.01, Tb=None):
     """Classification / rejection iterations from one start; returns (state, inliers).
 
     The free bounce ``c`` is only fitted with at least ``min_shadow`` shadow-side pixels: on the
@@ -388,6 +394,8 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     without shadow pixels the design is singular and its inverse is rounding noise (it gave a
     "significant" bounce with a zero ratio uncertainty that then dominated the capture-wide
     calibration, :func:`ffls.spheres.estimate.calibrate_bounce`).
+
+    ``Tb`` is :func:`_product_table` of ``[n, 1, g]`` and ``y`` (computed here when None).
 
     Dark pixels are selected by the model, never by their noisy value (selecting on the observed
     value keeps the bright half of the noise and biases the fit; selecting on the prediction does
@@ -399,11 +407,8 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     inl = ok.copy()
     censored = np.zeros_like(ok)
     best = None
-    F = np.empty((5, normals.shape[0]))
-    F[:3] = normals.T
-    F[3] = 1.0
-    F[4] = g
-    Tb = _product_table(F, y)
+    if Tb is None:
+        Tb = _design_products(normals, g, y)
     nl = normals @ ldir
     for _ in range(max_iter):
         lit = inl & (nl > terminator)
@@ -514,7 +519,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     normals = np.asarray(normals, dtype=np.float64)
     y_all = np.asarray(values, dtype=np.float64)
     m = y_all.shape[0]
-    ok = np.isfinite(y_all) & np.all(np.isfinite(normals), axis=1)
+    ok = np.isfinite(y_all) & np.isfinite(normals.sum(axis=1))  # (a sum is finite iff its terms are)
     if valid is not None:
         ok &= np.asarray(valid, dtype=bool)
     n_invalid = int(m - ok.sum())
@@ -545,19 +550,24 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     if bright.sum() < min_lit:
         base.status = "saturated" if n_saturated > bright.sum() else "too_dark"
         return base
-    # start from least squares on the bright pixels
+    # the per-pixel products of the design, once for the start and every iteration
+    Tb = _design_products(normals, g, y)
+    # start from least squares on the bright pixels (I = n . v + b), from the product table
     if start is not None and np.all(np.isfinite(start)) and np.linalg.norm(start) > 0:
         v0 = np.asarray(start, dtype=np.float64)
     else:
-        Ab = np.concatenate([normals[bright], np.ones((bright.sum(), 1))], axis=1)
-        v0 = np.linalg.lstsq(Ab, y[bright], rcond=None)[0][:3]
+        G5, h5 = _gram(Tb, bright, np.zeros_like(bright))[:2]
+        try:
+            v0 = np.linalg.solve(G5[:4, :4], h5[:4])[:3]
+        except np.linalg.LinAlgError:
+            v0 = np.full(3, np.nan)
     # (a second start from the brightness-weighted mean normal of the bright pixels was tried: on
     # small back spheres with a thin lit crescent and strong bounce it converged to wrong
     # solutions that the other spheres then confirmed; a rejection is safer than a wrong light)
     best, inl = None, ok
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
         best, inl = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
-                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor_censor)
+                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor_censor, Tb=Tb)
     if best is None:
         base.status = "too_dark"
         return base
