@@ -493,3 +493,29 @@ def test_near_fit_mask_keeps_the_terminator_band(samples):
     assert (mask & ~fit.inliers).any()  # more than the per-sphere fit's own pixels
     assert not mask[~valid].any()
     assert (specks & valid).sum() > 5 and not mask[specks].any()
+
+
+def test_fit_lambert_clipped_black_floor_is_censored_by_the_model():
+    """8-bit linear codes under Poisson-Gaussian noise: the shadow side is partly clipped at code
+    0. The clipped pixels are invalid for pixel_validity; the fit leaves out the pixels its model
+    predicts near the floor and keeps the others, so the shadow side still separates the bounce."""
+    rng = np.random.default_rng(3)
+    n = normalize(rng.normal(size=(40000, 3)))
+    n = n[n[:, 1] < -0.1][:10000]
+    g = 0.5 * (1 - n[:, 2])
+    errs, errs_by_value, clipped = [], [], 0
+    for _ in range(6):
+        l = normalize(np.array([rng.uniform(-1, 1), rng.uniform(-1, -0.2), rng.uniform(0.1, 1)]))
+        clean = 0.5 * np.maximum(n @ l, 0) + 0.003 + 0.01 * g
+        x = 2e-4 * rng.poisson(clean / 2e-4) + rng.normal(0, 0.004, clean.size)
+        y = np.clip(np.round(x * 255), 0, 255) / 255
+        valid, nsat = pixel_validity(y)
+        clipped += int((~valid & (y == 0)).sum())
+        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g)
+        errs.append(np.degrees(angle_between(f.direction, l)))
+        valid, nsat = pixel_validity(y, black_fraction=0.02)  # the former rule: censored by value
+        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g)
+        errs_by_value.append(np.degrees(angle_between(f.direction, l)))
+    assert clipped > 0
+    assert np.mean(errs) < 0.15, errs
+    assert np.mean(errs) < 0.6 * np.mean(errs_by_value), (errs, errs_by_value)

@@ -386,7 +386,7 @@ def _fits(models, G5, h5, yy, k, ratio):
 
 
 def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio,
-             min_shadow=1, floor_censor=False, floor_sigma=2.5, dark_fraction=0.01, Tb=None):
+             min_shadow=1, floor=None, floor_sigma=2.5, dark_fraction=0.01, Tb=None):
     """Classification / rejection iterations from one start; returns (state, inliers).
 
     The free bounce ``c`` is only fitted with at least ``min_shadow`` shadow-side pixels: on the
@@ -400,10 +400,17 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     Dark pixels are selected by the model, never by their noisy value (selecting on the observed
     value keeps the bright half of the noise and biases the fit; selecting on the prediction does
     not): pixels whose predicted value is below ``dark_fraction`` of ``a`` (the darkest shadow
-    side, where the bounce model is least exact) are left out from the second iteration on, and
-    with ``floor_censor`` (some pixels are clipped at the black floor 0) also those predicted
-    below ``floor_sigma`` robust noise deviations, whatever their observed value.
+    side, where the bounce model is least exact) are left out from the second iteration on.
+    ``floor`` (m,) bool, optional: pixels clipped at the black floor (outside ``ok``; their ``y``
+    is the clipped value). Then the pixels predicted below ``floor_sigma`` robust noise deviations
+    (of the shadow side's residuals: the noise near the floor, below the lit side's shot noise)
+    are left out, whatever their observed value, and from the second iteration on the clipped
+    pixels predicted above that are used with their clipped value (a Tobit-style cut on the
+    model: where clipping is unlikely the clipped value is the data; leaving those pixels out
+    would select on the noise again).
     """
+    has_floor = floor is not None and bool(floor.any())
+    usable = (ok | floor) if has_floor else ok
     inl = ok.copy()
     censored = np.zeros_like(ok)
     best = None
@@ -433,6 +440,10 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
         res += fit.c * g
         pred = res.copy()
         np.subtract(y, res, out=res)
+        if has_floor:  # the noise near the floor: residuals of the dark unclipped pixels, whatever their class
+            dark = ok & (pred < 0.1 * a)
+            rd = res[dark] if dark.sum() >= min_lit else res[use]
+            floor_noise = 1.4826 * _median(np.abs(rd - _median(rd)))
         r = res[use]  # the residuals of the fitted pixels
         r -= _median(r)
         np.abs(r, out=r)
@@ -440,8 +451,8 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
         sigma = max(noise, rel_noise_floor * a)
         np.abs(res, out=res)
         new_inl = res <= clip_sigma * sigma
-        new_inl &= ok
-        censored = pred < max(dark_fraction * a, floor_sigma * noise if floor_censor else 0.0)
+        new_inl &= usable
+        censored = pred < max(dark_fraction * a, floor_sigma * floor_noise if has_floor else 0.0)
         new_inl &= ~censored
         best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a, nl=nl,
                     censored=censored)
@@ -535,11 +546,11 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
             if mdl not in MODELS:
                 raise ValueError(f"unknown model {mdl!r}; expected one of {MODELS}")
     # pixels clipped at the black floor (pixel_validity): censor by the prediction too
-    floor_censor = bool(np.any(np.isfinite(y_all) & ~ok & (y_all <= 0.0)))
+    floor = np.isfinite(y_all) & np.isfinite(normals.sum(axis=1)) & ~ok & (y_all <= 0.0)
     if ok.sum() < min_lit:
         base.status = "saturated" if n_saturated >= max(min_lit, 0.5 * (m - ok.sum())) and n_saturated > 0 else "too_dark"
         return base
-    y = np.where(ok, y_all, 0.0)
+    y = np.where(ok | floor, y_all, 0.0)
     g = ground_bounce(normals, up) if g is None else np.asarray(g, dtype=np.float64)
     # initial classification: clearly bright pixels are lit
     peak = _percentile(y[ok], 99.0)
@@ -567,7 +578,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     best, inl = None, ok
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
         best, inl = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
-                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor_censor, Tb=Tb)
+                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=Tb)
     if best is None:
         base.status = "too_dark"
         return base
