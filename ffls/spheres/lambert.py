@@ -403,7 +403,8 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     side, where the bounce model is least exact) are left out from the second iteration on.
     ``floor`` (m,) bool, optional: pixels clipped at the black floor (outside ``ok``; their ``y``
     is the clipped value). Then the pixels predicted below ``floor_sigma`` robust noise deviations
-    (of the shadow side's residuals: the noise near the floor, below the lit side's shot noise)
+    (of the residuals of the unclipped pixels predicted below 10 % of ``a``: the noise near the
+    floor, which is below the lit side's shot noise)
     are left out, whatever their observed value, and from the second iteration on the clipped
     pixels predicted above that are used with their clipped value (a Tobit-style cut on the
     model: where clipping is unlikely the clipped value is the data; leaving those pixels out
