@@ -179,7 +179,32 @@ def test_pixel_validity_saturation_plateau():
     px[-5:] = np.nan
     valid, nsat = pixel_validity(np.minimum(px, 1.5))
     assert nsat >= 5 and not valid[-10:].any()
-    assert not valid[0]  # near-black
+    assert valid[1:20].all()  # dark but not clipped: data
+
+
+def test_pixel_validity_keeps_noisy_dark_pixels_and_drops_the_clipped_floor():
+    rng = np.random.default_rng(0)
+    dark = rng.normal(0.002, 0.01, 500)  # a dark region under sensor noise: negative values too
+    valid, _ = pixel_validity(np.concatenate([dark, np.linspace(0.1, 1.0, 500)]))
+    assert valid.all()  # no censoring by value: it would keep the bright half of the noise
+    clipped = np.concatenate([np.maximum(dark, 0.0), np.linspace(0.1, 1.0, 500)])  # clipped at 0
+    valid, _ = pixel_validity(clipped)
+    assert not valid[clipped == 0].any() and valid[clipped > 0].all()
+
+
+def test_fit_lambert_unbiased_under_noise_on_the_shadow_side():
+    rng = np.random.default_rng(1)
+    n = normalize(rng.normal(size=(20000, 3)))
+    n = n[n[:, 1] < -0.1]  # the half facing a camera at -Y
+    l = normalize(np.array([0.5, -0.3, 0.4]))
+    clean = 0.5 * np.maximum(n @ l, 0.0) + 0.002
+    errs = []
+    for _ in range(4):
+        y = clean + rng.normal(0, 0.01, clean.size)
+        valid, nsat = pixel_validity(y)
+        f = fit_lambert(n, y, valid, n_saturated=nsat, models=("ambient",))
+        errs.append(np.degrees(angle_between(f.direction, l)))
+    assert np.mean(errs) < 0.3
 
 
 # ----------------------------------------------------------------------------- combination
@@ -469,3 +494,29 @@ def test_near_fit_mask_keeps_the_terminator_band(samples):
     assert (mask & ~fit.inliers).any()  # more than the per-sphere fit's own pixels
     assert not mask[~valid].any()
     assert (specks & valid).sum() > 5 and not mask[specks].any()
+
+
+def test_fit_lambert_clipped_black_floor_is_censored_by_the_model():
+    """8-bit linear codes under Poisson-Gaussian noise: the shadow side is partly clipped at code
+    0. The clipped pixels are invalid for pixel_validity; the fit leaves out the pixels its model
+    predicts near the floor and keeps the others, so the shadow side still separates the bounce."""
+    rng = np.random.default_rng(3)
+    n = normalize(rng.normal(size=(40000, 3)))
+    n = n[n[:, 1] < -0.1][:10000]
+    g = 0.5 * (1 - n[:, 2])
+    errs, errs_by_value, clipped = [], [], 0
+    for _ in range(6):
+        l = normalize(np.array([rng.uniform(-1, 1), rng.uniform(-1, -0.2), rng.uniform(0.1, 1)]))
+        clean = 0.5 * np.maximum(n @ l, 0) + 0.003 + 0.01 * g
+        x = 2e-4 * rng.poisson(clean / 2e-4) + rng.normal(0, 0.004, clean.size)
+        y = np.clip(np.round(x * 255), 0, 255) / 255
+        valid, nsat = pixel_validity(y)
+        clipped += int((~valid & (y == 0)).sum())
+        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g)
+        errs.append(np.degrees(angle_between(f.direction, l)))
+        valid, nsat = pixel_validity(y, black_fraction=0.02)  # the former rule: censored by value
+        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g)
+        errs_by_value.append(np.degrees(angle_between(f.direction, l)))
+    assert clipped > 0
+    assert np.mean(errs) < 0.15, errs
+    assert np.mean(errs) < 0.6 * np.mean(errs_by_value), (errs, errs_by_value)

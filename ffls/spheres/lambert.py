@@ -16,7 +16,10 @@ Additions, each needed on real photographs and independent renders:
 * pixels near the terminator (``|n . l| < terminator``) are left out (area-light penumbra and
   the kink of ``max``); the fit is repeated with the new classification until it is stable;
 * robust residual rejection (MAD) removes cast shadows, specks and highlights;
-* saturated, near-black and non-finite pixels are never used (the caller's ``valid`` mask);
+* saturated, clipped-black and non-finite pixels are never used (the caller's ``valid`` mask);
+  noisy near-zero and negative values are used (censoring them by value biases the fit), and
+  where some pixels are clipped at the black floor, those the model predicts near the floor are
+  left out too (censoring by the prediction, not by the noisy value);
 * the simplest of the models ``plain`` (``a, l``), ``ambient`` (``+ b``) and ``bounce``
   (``+ b + c g``) that the data support is chosen: the richest whose added term is significant
   (t > 3; BIC dropped the bounce when few shadow pixels were in view, see :func:`_select_model`).
@@ -104,7 +107,7 @@ class LambertFit:
     n_rejected : int
         Pixels rejected as outliers (cast shadow, highlights).
     n_invalid : int
-        Pixels excluded by the validity mask (saturated, near-black, non-finite).
+        Pixels excluded by the validity mask (saturated, clipped at the black floor, non-finite).
     n_saturated : int
         Of those, saturated.
     inliers : (m,) bool
@@ -338,25 +341,31 @@ def _product_table(F, y):
     return Tb
 
 
+def _design_products(normals, g, y):
+    """:func:`_product_table` of the design ``[n, 1, g]`` (normals (m, 3), ``g`` and ``y`` (m,))."""
+    F = np.empty((5, normals.shape[0]))
+    F[:3] = normals.T
+    F[3] = 1.0
+    F[4] = g
+    return _product_table(F, y)
+
+
 def _gram(Tb, lit, shadow):
     """Normal equations of the full design ``[n [lit], 1, g]``: ``A^T A``, ``A^T y``, ``y^T y``, and the counts.
 
     ``Tb`` is :func:`_product_table`; shadow-side rows only have the last two columns.
     """
-    W = np.empty((2, Tb.shape[1]))
-    W[0] = lit
-    W[1] = shadow
-    S = Tb @ W.T
-    sl, ss = S[:, 0], S[:, 1]
+    sl = Tb @ lit.astype(np.float64)
+    ss = Tb[12:] @ shadow.astype(np.float64)  # rows (3,3), (3,4), (4,4), f y (5), y^2: entries 12..20
     G5 = np.empty((5, 5))
     G5[_TRIU] = sl[:15]
-    G5[3, 3] += ss[12]
-    G5[3, 4] += ss[13]
-    G5[4, 4] += ss[14]
+    G5[3, 3] += ss[0]
+    G5[3, 4] += ss[1]
+    G5[4, 4] += ss[2]
     G5[_TRIU[1], _TRIU[0]] = G5[_TRIU]
     h5 = sl[15:20].copy()
-    h5[3:] += ss[18:20]
-    return G5, h5, float(sl[20] + ss[20]), int(round(sl[12])), int(round(ss[12]))
+    h5[3:] += ss[6:8]
+    return G5, h5, float(sl[20] + ss[8]), int(round(sl[12])), int(round(ss[0]))
 
 
 def _fits(models, G5, h5, yy, k, ratio):
@@ -377,7 +386,7 @@ def _fits(models, G5, h5, yy, k, ratio):
 
 
 def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, rel_noise_floor, max_iter, ratio,
-             min_shadow=1):
+             min_shadow=1, floor=None, floor_sigma=2.5, dark_fraction=0.01, Tb=None):
     """Classification / rejection iterations from one start; returns (state, inliers).
 
     The free bounce ``c`` is only fitted with at least ``min_shadow`` shadow-side pixels: on the
@@ -385,14 +394,29 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     without shadow pixels the design is singular and its inverse is rounding noise (it gave a
     "significant" bounce with a zero ratio uncertainty that then dominated the capture-wide
     calibration, :func:`ffls.spheres.estimate.calibrate_bounce`).
+
+    ``Tb`` is :func:`_product_table` of ``[n, 1, g]`` and ``y`` (computed here when None).
+
+    Dark pixels are selected by the model, never by their noisy value (selecting on the observed
+    value keeps the bright half of the noise and biases the fit; selecting on the prediction does
+    not): pixels whose predicted value is below ``dark_fraction`` of ``a`` (the darkest shadow
+    side, where the bounce model is least exact) are left out from the second iteration on.
+    ``floor`` (m,) bool, optional: pixels clipped at the black floor (outside ``ok``; their ``y``
+    is the clipped value). Then the pixels predicted below ``floor_sigma`` robust noise deviations
+    (of the residuals of the unclipped pixels predicted below 10 % of ``a``: the noise near the
+    floor, which is below the lit side's shot noise)
+    are left out, whatever their observed value, and from the second iteration on the clipped
+    pixels predicted above that are used with their clipped value (a Tobit-style cut on the
+    model: where clipping is unlikely the clipped value is the data; leaving those pixels out
+    would select on the noise again).
     """
+    has_floor = floor is not None and bool(floor.any())
+    usable = (ok | floor) if has_floor else ok
     inl = ok.copy()
+    censored = np.zeros_like(ok)
     best = None
-    F = np.empty((5, normals.shape[0]))
-    F[:3] = normals.T
-    F[3] = 1.0
-    F[4] = g
-    Tb = _product_table(F, y)
+    if Tb is None:
+        Tb = _design_products(normals, g, y)
     nl = normals @ ldir
     for _ in range(max_iter):
         lit = inl & (nl > terminator)
@@ -415,15 +439,24 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
         res *= a
         res += fit.b
         res += fit.c * g
+        pred = res.copy()
         np.subtract(y, res, out=res)
+        if has_floor:  # the noise near the floor: residuals of the dark unclipped pixels, whatever their class
+            dark = ok & (pred < 0.1 * a)
+            rd = res[dark] if dark.sum() >= min_lit else res[use]
+            floor_noise = 1.4826 * _median(np.abs(rd - _median(rd)))
         r = res[use]  # the residuals of the fitted pixels
         r -= _median(r)
         np.abs(r, out=r)
-        sigma = max(1.4826 * _median(r), rel_noise_floor * a)
+        noise = 1.4826 * _median(r)
+        sigma = max(noise, rel_noise_floor * a)
         np.abs(res, out=res)
         new_inl = res <= clip_sigma * sigma
-        new_inl &= ok
-        best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a, nl=nl)
+        new_inl &= usable
+        censored = pred < max(dark_fraction * a, floor_sigma * floor_noise if has_floor else 0.0)
+        new_inl &= ~censored
+        best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a, nl=nl,
+                    censored=censored)
         stable = (np.array_equal(new_inl, inl) and float(new_dir @ ldir) > np.cos(np.radians(1e-3)))
         inl = new_inl
         ldir = new_dir
@@ -447,7 +480,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     values : (m,) float
         Linear intensities.
     valid : (m,) bool, optional
-        Pixels that may be used (not saturated, not near-black); non-finite values are always
+        Pixels that may be used (not saturated, not clipped at the black floor); non-finite values are always
         excluded.
     n_saturated : int
         How many of the invalid pixels are saturated (decides the ``'saturated'`` status).
@@ -498,7 +531,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     normals = np.asarray(normals, dtype=np.float64)
     y_all = np.asarray(values, dtype=np.float64)
     m = y_all.shape[0]
-    ok = np.isfinite(y_all) & np.all(np.isfinite(normals), axis=1)
+    ok = np.isfinite(y_all) & np.isfinite(normals.sum(axis=1))  # (a sum is finite iff its terms are)
     if valid is not None:
         ok &= np.asarray(valid, dtype=bool)
     n_invalid = int(m - ok.sum())
@@ -513,10 +546,12 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         for mdl in models:
             if mdl not in MODELS:
                 raise ValueError(f"unknown model {mdl!r}; expected one of {MODELS}")
+    # pixels clipped at the black floor (pixel_validity): censor by the prediction too
+    floor = np.isfinite(y_all) & np.isfinite(normals.sum(axis=1)) & ~ok & (y_all <= 0.0)
     if ok.sum() < min_lit:
         base.status = "saturated" if n_saturated >= max(min_lit, 0.5 * (m - ok.sum())) and n_saturated > 0 else "too_dark"
         return base
-    y = np.where(ok, y_all, 0.0)
+    y = np.where(ok | floor, y_all, 0.0)
     g = ground_bounce(normals, up) if g is None else np.asarray(g, dtype=np.float64)
     # initial classification: clearly bright pixels are lit
     peak = _percentile(y[ok], 99.0)
@@ -527,19 +562,24 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     if bright.sum() < min_lit:
         base.status = "saturated" if n_saturated > bright.sum() else "too_dark"
         return base
-    # start from least squares on the bright pixels
+    # the per-pixel products of the design, once for the start and every iteration
+    Tb = _design_products(normals, g, y)
+    # start from least squares on the bright pixels (I = n . v + b), from the product table
     if start is not None and np.all(np.isfinite(start)) and np.linalg.norm(start) > 0:
         v0 = np.asarray(start, dtype=np.float64)
     else:
-        Ab = np.concatenate([normals[bright], np.ones((bright.sum(), 1))], axis=1)
-        v0 = np.linalg.lstsq(Ab, y[bright], rcond=None)[0][:3]
+        G5, h5 = _gram(Tb, bright, np.zeros_like(bright))[:2]
+        try:
+            v0 = np.linalg.solve(G5[:4, :4], h5[:4])[:3]
+        except np.linalg.LinAlgError:
+            v0 = np.full(3, np.nan)
     # (a second start from the brightness-weighted mean normal of the bright pixels was tried: on
     # small back spheres with a thin lit crescent and strong bounce it converged to wrong
     # solutions that the other spheres then confirmed; a rejection is safer than a wrong light)
     best, inl = None, ok
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
         best, inl = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
-                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow)
+                             clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=Tb)
     if best is None:
         base.status = "too_dark"
         return base
@@ -571,14 +611,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
             ratio_sd = float(s * np.sqrt(max(fb.Ginv[4, 4], 0.0)) / (ab * lz))
             if not fb.Ginv[4, 4] > 0.0:  # c at its bound (or singular): not determined by this photo
                 ratio_sd = float("inf")
-    cand_lit = ok & (nl > terminator)
+    cand_lit = ok & (nl > terminator) & ~best["censored"]
     n_rej = int((cand_lit & ~inl).sum())
     fitres = LambertFit(
         status="ok", direction=ldir, intensity=a, ambient=fit.b, bounce=fit.c,
         model=best["model"], rms=float(np.sqrt(fit.rss / k)) / a, uncertainty_deg=unc, statistical_deg=stat,
         inflation=inflation,
         n_lit=int(lit.sum()), n_shadow=int(shadow.sum()),
-        n_rejected=int((ok & ~inl).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
+        n_rejected=int((ok & ~inl & ~best["censored"]).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
         non_outliers=inl,
         ground_ratio=ratio_est, ground_ratio_sigma=ratio_sd,
         bounce_ratio=None if bounce_ratio is None else float(bounce_ratio),

@@ -4,7 +4,7 @@ Stage between detection (:mod:`ffls.spheres.detect`, a centre per sphere) and th
 fits (:mod:`ffls.spheres.lambert`): once per capture, :func:`sphere_samples` intersects every
 pixel's (undistorted) ray with each sphere (Masselus, Dutre, Anrys 2002, section 5: "the normal
 at each pixel of a sphere is known"); per photo, :func:`sphere_values` reads only those pixels
-and marks the usable ones (:func:`pixel_validity`: finite, not saturated, not near-black).
+and marks the usable ones (:func:`pixel_validity`: finite, not saturated, not clipped at black).
 """
 from __future__ import annotations
 
@@ -216,7 +216,7 @@ class SphereValues(NamedTuple):
     grey : (m,) float
         Linear grey values (mean of the channels).
     valid : (m,) bool
-        Usable pixels (finite, not saturated, not near-black).
+        Usable pixels (finite, not saturated, not clipped at the black floor).
     n_saturated : int
         Saturated pixels among the sphere's.
     """
@@ -230,20 +230,32 @@ class SphereValues(NamedTuple):
         return SphereValues(self.grey[index], self.valid[index], self.n_saturated)
 
 
-def pixel_validity(pixels: np.ndarray, black_fraction: float = 0.02, min_plateau: int = 4,
+def pixel_validity(pixels: np.ndarray, black_fraction: float | None = None, min_plateau: int = 4,
                    saturation: float | None = None) -> tuple[np.ndarray, int]:
-    """Usable pixels of one sphere: finite, not saturated, not near-black.
+    """Usable pixels of one sphere: finite, not saturated, not clipped at the black floor.
 
     Saturation is the clip level ``saturation`` where the caller knows it, and in any case a
     plateau: at least ``min_plateau`` pixels sharing the maximum of a channel (clipping makes
     plateaus; unclipped radiance does not).
 
+    Dark pixels are *not* censored by their value: a noisy pixel of a dark region is as likely
+    below its mean as above it, so dropping the pixels below a threshold keeps the bright half of
+    the noise and biases the shading fit (the shadow side and the terminator read too bright: with
+    Gaussian noise of 1% of full scale the lights were ~1 degree off, the same for every sphere).
+    Near-zero and negative values are kept: the shading model takes them. Only the pixels
+    clipped at the black floor are invalid: a plateau of at least ``min_plateau`` pixels at a
+    channel's minimum, where that minimum is at most 0 (the black level of linear data; an
+    8-bit code 0, a float image clipped at 0). Their true value is unknown (anything below the
+    floor); :func:`ffls.spheres.lambert.fit_lambert` then also leaves out the pixels that its
+    model predicts near the floor, so the censoring does not depend on the noise.
+
     Parameters
     ----------
     pixels : (m, 3) or (m,) float
         Linear values of the sphere's pixels.
-    black_fraction : float
-        Grey values below this fraction of the sphere's 99th percentile are near-black.
+    black_fraction : float, optional
+        Also invalidate grey values below this fraction of the sphere's 99th percentile (the
+        former near-black rule; biased under noise, see above). None (default): not applied.
     min_plateau : int
     saturation : float, optional
 
@@ -257,8 +269,10 @@ def pixel_validity(pixels: np.ndarray, black_fraction: float = 0.02, min_plateau
         p = p[:, None]
     finite = np.all(np.isfinite(p), axis=1)
     sat = np.zeros(p.shape[0], dtype=bool)
+    floor = np.zeros(p.shape[0], dtype=bool)
     if finite.any():
         q = np.where(finite[:, None], p, -np.inf)
+        qlo = np.where(finite[:, None], p, np.inf)
         for ch in range(p.shape[1]):
             top = float(q[:, ch].max())
             if top > 0:
@@ -267,12 +281,17 @@ def pixel_validity(pixels: np.ndarray, black_fraction: float = 0.02, min_plateau
                     sat |= at_top
             if saturation is not None:
                 sat |= q[:, ch] >= 0.999 * saturation
-    grey = np.where(finite, p.mean(axis=1), 0.0)
-    ok = finite & ~sat
-    ref = float(np.percentile(grey[ok], 99)) if ok.any() else 0.0
-    dark = grey <= max(black_fraction * ref, 0.0)
-    return ok & ~dark, int((sat & finite).sum())
-
+            low = float(qlo[:, ch].min())
+            if low <= 0.0:
+                at_low = qlo[:, ch] <= low
+                if at_low.sum() >= min_plateau:
+                    floor |= at_low
+    ok = finite & ~sat & ~floor
+    if black_fraction is not None:
+        grey = np.where(finite, p.mean(axis=1), 0.0)
+        ref = float(np.percentile(grey[ok], 99)) if ok.any() else 0.0
+        ok &= grey > max(black_fraction * ref, 0.0)
+    return ok, int((sat & finite).sum())
 
 
 def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: float | None = None,
@@ -291,8 +310,9 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
         Known clip level of the linear values.
     raw : (H, W, 3) array, optional
         The image as stored, with ``bit_depth``: then
-        :func:`ffls.radiance.response.valid_pixel_mask` also applies (saturated codes of any
-        channel, near-black codes; non-finite and negative floats).
+        :func:`ffls.radiance.response.valid_pixel_mask` also applies to integer codes (saturated
+        codes of any channel, code 0 in every channel: clipped at the floor); float values
+        (negative ones included) are left to :func:`pixel_validity`.
     bit_depth : {8, 16, 'half', 'float'}, optional
 
     Returns
@@ -310,12 +330,12 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
         if raw is not None and bit_depth is not None:
             rp = np.asarray(raw)[s.rows, s.cols]
             rp = rp.reshape(1, -1, rp.shape[-1] if rp.ndim == 2 else 1)
-            if bit_depth in (8, 16):
+            if bit_depth in (8, 16):  # saturated codes of any channel; code 0 in every channel (clipped)
                 not_sat = valid_pixel_mask(rp, bit_depth, low=-1.0)[0]
-                valid &= valid_pixel_mask(rp, bit_depth)[0]
-                nsat = max(nsat, int((~not_sat).sum()))
-            else:  # float data: no top code; near-black is relative (pixel_validity)
                 valid &= valid_pixel_mask(rp, bit_depth, low=0.0)[0]
+                nsat = max(nsat, int((~not_sat).sum()))
+            # float data: no top code, and near-zero or negative (noisy) values are data
+            # (pixel_validity; the non-finite are already invalid)
         grey = px.mean(axis=1) if px.ndim == 2 else px
         out.append(SphereValues(grey, valid, int(nsat)))
     return out
