@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CRITERIA", "disc_pixels", "neutrality", "shading_change", "select_spheres"]
+__all__ = ["CRITERIA", "clip_levels", "disc_pixels", "neutrality", "shading_change", "select_spheres"]
 
 
 #: Criteria an unhinted round outline must meet to count as a calibration sphere
@@ -43,12 +43,27 @@ def disc_pixels(ft, shape, frac: float = 0.7):
     return yy[m], xx[m]
 
 
-def neutrality(mx, L, rows, cols) -> float:
-    """Colour neutrality of the pixels: the 25th percentile over the lit pixels of min/max channel.
+def clip_levels(mx) -> np.ndarray:
+    """Per channel, the level at or above which a pixel of the max image counts as clipped: 0.98 x its maximum.
+
+    A file's clipped pixels all read the channel's largest code (after linearisation, the same
+    value), so they sit at the channel's maximum over the image. In a floating-point image that
+    never clipped this excludes only the few brightest pixels.
+    """
+    mx = np.asarray(mx, dtype=np.float64)
+    peak = mx.reshape(-1, mx.shape[2])[:, :3].max(axis=0) if mx.ndim == 3 else np.array([mx.max()])
+    return 0.98 * peak
+
+
+def neutrality(mx, L, rows, cols, clip=None) -> float | None:
+    """Colour neutrality of the pixels: the 25th percentile over the lit, unclipped pixels of min/max channel.
 
     1 for grey; a white, grey or chrome sphere stays near 1 (sensor noise and white balance
     aside). The lower quartile rather than the median, because a coloured glossy ball's
-    highlights from many photos whiten much of it in the max image. 1 for a single-channel image.
+    highlights from many photos whiten much of it in the max image. Pixels with any channel at
+    or above its clip level (``clip``, default :func:`clip_levels` of ``mx``) carry no colour
+    evidence (a saturated red ball clips to white in an 8-bit file) and are left out. 1 for a
+    single-channel image; None when fewer than 5 lit pixels are unclipped (no evidence).
     """
     if not (mx.ndim == 3 and mx.shape[2] >= 3) or rows.size == 0:
         return 1.0
@@ -57,7 +72,11 @@ def neutrality(mx, L, rows, cols) -> float:
     lit = lum > 0.1 * float(np.percentile(lum, 95))
     if lit.sum() < 5:
         return 1.0
-    ratio = px[lit].min(axis=1) / np.maximum(px[lit].max(axis=1), 1e-12)
+    clip = clip_levels(mx) if clip is None else np.asarray(clip, dtype=np.float64)
+    use = lit & ~np.any(px >= clip, axis=1)
+    if use.sum() < 5:
+        return None
+    ratio = px[use].min(axis=1) / np.maximum(px[use].max(axis=1), 1e-12)
     return float(np.clip(np.percentile(ratio, 25), 0, 1))
 
 
@@ -115,6 +134,7 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     crit = CRITERIA
     shape = L.shape
     round_ = []
+    clip = clip_levels(mx) if mx.ndim == 3 and mx.shape[2] >= 3 else None
     for ft in fits:
         vis = max(ft.visible_fraction, 1e-6)
         closed = min(ft.coverage / vis, 1.0)
@@ -124,8 +144,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         rows, cols = disc_pixels(ft, shape)
         if rows.size < 5:
             continue
-        neutral = neutrality(mx, L, rows, cols)
-        ft.score = min(support, 1.2) * closed * (0.25 + 0.75 * neutral) / (1 + (ft.residual_px / 0.5) ** 2)
+        neutral = neutrality(mx, L, rows, cols, clip)
+        ft.score = (min(support, 1.2) * closed * (0.25 + 0.75 * (0.5 if neutral is None else neutral))
+                    / (1 + (ft.residual_px / 0.5) ** 2))
         round_.append((ft, neutral, rows, cols))
     round_.sort(key=lambda t: -t[0].score)
     distinct = []
@@ -142,6 +163,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         elif ft.center_sigma_px > crit["max_center_sigma_px"]:
             rejected.append(f"{where}: its centre is poorly constrained by the visible outline (standard error "
                             f"{ft.center_sigma_px:.2f} px > {crit['max_center_sigma_px']})")
+        elif neutral is None:
+            rejected.append(f"{where}: clipped on all its lit pixels, so its colour cannot be judged (a saturated"
+                            f" coloured object clips to white); lower the exposure, or give a hint")
         elif neutral < crit["min_neutral"]:
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
                             f" white, grey or chrome sphere")
