@@ -73,14 +73,15 @@ def test_neutrality_ignores_clipped_pixels():
     yy, xx = np.mgrid[:40, :40]
     disc = (xx - 20) ** 2 + (yy - 20) ** 2 <= 15 ** 2
     mx[disc] = (1.0, 1.0, 1.0)  # clipped
-    ring = disc & ((xx - 20) ** 2 + (yy - 20) ** 2 > 12 ** 2)
+    ring = disc & ((xx - 20) ** 2 + (yy - 20) ** 2 > 13.8 ** 2)  # 15 % of it
     mx[ring] = (0.9, 0.15, 0.1)  # the unclipped red limb
     L = mx @ np.array([0.2126, 0.7152, 0.0722])
     rows, cols = np.nonzero(disc)
     assert np.allclose(clip_levels(mx), 0.98)
-    assert neutrality(mx, L, rows, cols) < 0.3
+    assert neutrality(mx, L, rows, cols) > 0.9  # all counted (a floating-point image does not clip)
+    assert neutrality(mx, L, rows, cols, clip_levels(mx)) < 0.3
     mx_all = np.repeat(np.where(disc[..., None], 1.0, 0.0), 3, axis=2)
-    assert neutrality(mx_all, mx_all[..., 0], rows, cols) is None  # all clipped: nothing to judge
+    assert neutrality(mx_all, mx_all[..., 0], rows, cols, clip_levels(mx_all)) is None  # all clipped: nothing to judge
 
 
 def test_one_grey_sphere_8bit_clipped_red_ball_not_a_sphere(tmp_path):

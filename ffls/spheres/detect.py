@@ -56,7 +56,7 @@ from scipy.optimize import least_squares
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_basis
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
-from ffls.radiance.photos import load_photo
+from ffls.radiance.photos import read_photo
 from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
 
 __all__ = [
@@ -897,7 +897,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  world_from_camera=None, scene_center=None, source: str | os.PathLike | None = None,
                  max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
-                 n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None) -> Spheres:
+                 n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
+                 saturates: bool = False) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -956,6 +957,10 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         Mean luminance over the photos (:func:`extreme_images`), when ``images`` is already a max
         image: with 3 or more photos, circles are also proposed on :func:`shading_ratio`, where a
         textured ground's albedo cancels.
+    saturates : bool
+        The photos are integer files that clip at their largest code: pixels with a channel at
+        or above :func:`ffls.spheres.select.clip_levels` carry no colour evidence for the
+        neutrality criterion (a saturated red ball reads white). False for floating-point images.
     min_visible : float
         A sphere cut by the frame edge is used when at least this fraction of its outline is
         inside the image; otherwise it is set aside (``Spheres.rejected``), or an error when hinted.
@@ -1029,7 +1034,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
                                          else None)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
-        fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible)
+        fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
+                                        saturates=saturates)
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
         if not fits or (n_spheres is not None and len(fits) < n_spheres):
@@ -1302,12 +1308,20 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
 
     Uses ``capture.K``, ``.dist``, ``.camera_model``, ``.sphere_radius``, ``.spheres`` (hints),
     ``.sphere_count`` (``n_spheres`` when not given), ``.world_from_camera``, ``.scene_center``
-    and the max (and brightest-photo index, :func:`extreme_images`) over ``load_photo(capture, i)`` for all photos (streamed: one image in
+    and the max (and brightest-photo index, :func:`extreme_images`) over ``read_photo(capture, i)`` for all photos (streamed: one image in
     memory at a time). ``progress`` is an optional wrapper such as ``tqdm.tqdm`` (called as
     ``progress(iterable, total=n)``).
     """
     n = len(capture.image_paths)
-    it = (load_photo(capture, i) for i in range(n))
+    depths = set()
+
+    def photos():
+        for i in range(n):
+            ph = read_photo(capture, i)
+            depths.add(ph.bit_depth)
+            yield ph.linear
+
+    it = photos()
     if progress is not None:
         it = progress(it, total=n)
     mx, brightest, mean, n_img = extreme_images(it) if n else (None, None, None, 0)
@@ -1321,4 +1335,5 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         overrides=overrides, world_from_camera=capture.world_from_camera,
                         scene_center=getattr(capture, "scene_center", None), source=capture.folder,
                         camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img,
-                        mean_luminance=mean if n_img > 1 else None)
+                        mean_luminance=mean if n_img > 1 else None,
+                        saturates=any(isinstance(d, int) for d in depths))

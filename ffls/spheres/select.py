@@ -62,8 +62,9 @@ def neutrality(mx, L, rows, cols, clip=None) -> float | None:
     aside). The lower quartile rather than the median, because a coloured glossy ball's
     highlights from many photos whiten much of it in the max image. Pixels with any channel at
     or above its clip level (``clip``, default :func:`clip_levels` of ``mx``) carry no colour
-    evidence (a saturated red ball clips to white in an 8-bit file) and are left out. 1 for a
-    single-channel image; None when fewer than 5 lit pixels are unclipped (no evidence).
+    evidence (a saturated red ball clips to white in an 8-bit file) and are left out (with
+    ``clip`` None nothing is left out: floating-point images do not clip). 1 for a single-channel
+    image; None when fewer than 5 lit pixels are unclipped (no evidence).
     """
     if not (mx.ndim == 3 and mx.shape[2] >= 3) or rows.size == 0:
         return 1.0
@@ -72,8 +73,7 @@ def neutrality(mx, L, rows, cols, clip=None) -> float | None:
     lit = lum > 0.1 * float(np.percentile(lum, 95))
     if lit.sum() < 5:
         return 1.0
-    clip = clip_levels(mx) if clip is None else np.asarray(clip, dtype=np.float64)
-    use = lit & ~np.any(px >= clip, axis=1)
+    use = lit if clip is None else lit & ~np.any(px >= np.asarray(clip, dtype=np.float64), axis=1)
     if use.sum() < 5:
         return None
     ratio = px[use].min(axis=1) / np.maximum(px[use].max(axis=1), 1e-12)
@@ -96,7 +96,8 @@ def shading_change(brightest, L, rows, cols) -> float:
     return float(1.0 - counts.max() / lit.sum())
 
 
-def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible):
+def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible,
+                   saturates: bool = False):
     """Stage 5 without hints: which fitted round outlines are calibration spheres.
 
     A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
@@ -125,6 +126,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         Orthographic camera (sizes compared as pixel radii, not depths).
     n_photos : int
     max_residual_px, min_visible : float
+    saturates : bool
+        The photos are integer files that clip: colour is judged on the unclipped pixels only
+        (:func:`clip_levels`, :func:`neutrality`).
 
     Returns
     -------
@@ -134,7 +138,7 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     crit = CRITERIA
     shape = L.shape
     round_ = []
-    clip = clip_levels(mx) if mx.ndim == 3 and mx.shape[2] >= 3 else None
+    clip = clip_levels(mx) if saturates and mx.ndim == 3 and mx.shape[2] >= 3 else None
     for ft in fits:
         vis = max(ft.visible_fraction, 1e-6)
         closed = min(ft.coverage / vis, 1.0)
