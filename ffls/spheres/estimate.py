@@ -482,6 +482,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             raise InputError("model 'near' needs a pinhole camera (camera.K): an orthographic camera measures no "
                              "depth to place a near light", capture.json_path)
         model = "distant"
+        refine_options = {"fit_radius": True, **(refine_options or {})}
     else:
         if capture.K is None:
             raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them, or declare "
