@@ -101,3 +101,37 @@ def test_lights_prints_spheres_and_set_aside(tmp_path, capsys):
     line = [ln for ln in out.splitlines() if "spheres found" in ln]
     assert len(line) == 1 and re.match(r"\d+ spheres found: at \(\d+\.\d, \d+\.\d\) px, radius \d+\.\d px", line[0])
     assert any(ln.startswith("ffls lights: set aside: round outline") for ln in err.splitlines())
+
+
+def test_orthographic_refinement_recovers_circle():
+    """Orthographic samples have a virtual far camera centre, so the photometric refinement runs;
+    with ``fit_radius`` it also corrects the apparent radius (the detected edge sits inside)."""
+    from ffls.spheres.detect import orthographic_normals
+    from ffls.spheres.refine import recentre_samples, refine_sphere_centre
+    from ffls.spheres.samples import sphere_samples_orthographic
+
+    shape, R = (128, 128), 0.05
+    c_true, r_true = np.array([60.3, 58.7]), 30.2
+    img_c = np.array([63.5, 63.5])
+
+    def cam_centre(c, r):
+        return np.array([*(c - img_c), 0.0]) * R / r
+
+    c0, r0 = c_true + [0.4, -0.3], r_true - 0.3  # the detected circle: off and small
+    s = sphere_samples_orthographic(shape, c0, r0, cam_centre(c0, r0), R)
+    assert s.origin is not None
+    px = np.stack([s.cols, s.rows], axis=1).astype(float)
+    n_true = orthographic_normals(px, c_true, r_true)
+    rng = np.random.default_rng(0)
+    dirs = []
+    for _ in range(16):
+        v = rng.normal(size=3)
+        v[2] = -abs(v[2]) - 0.3  # lights on the camera's side (the camera looks along +z)
+        dirs.append(v / np.linalg.norm(v))
+    values = [(np.clip(np.nan_to_num(n_true @ l), 0, None) + 0.02, np.isfinite(n_true[:, 0])) for l in dirs]
+    ref = refine_sphere_centre(s, values, dirs, fit_radius=True)
+    assert ref.accepted
+    new, _ = recentre_samples(s, ref.center)
+    assert new.radius_px == pytest.approx(r_true, abs=0.05)
+    c_fit = c0 + (np.asarray(ref.center) - s.center)[:2] * r0 / R  # the samples' pixels: R / r0 per pixel
+    assert np.allclose(c_fit, c_true, atol=0.05)
