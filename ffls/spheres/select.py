@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CRITERIA", "clip_levels", "disc_pixels", "neutrality", "shading_change", "select_spheres"]
+__all__ = ["CRITERIA", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "shading_change", "select_spheres"]
 
 
 #: Criteria an unhinted round outline must meet to count as a calibration sphere
@@ -25,6 +25,7 @@ CRITERIA = {
     "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
     "size_ratio_pinhole": 2.0,   # implied depths of all spheres within this factor of each other
     "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
+    "max_light_disagreement_deg": 40.0,  # per-photo light directions vs the closest other sphere (3+ spheres)
     "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
 }
 
@@ -94,6 +95,60 @@ def shading_change(brightest, L, rows, cols) -> float:
         return 1.0
     counts = np.bincount(brightest[rows[lit], cols[lit]])
     return float(1.0 - counts.max() / lit.sum())
+
+
+def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3):
+    """Per photo, the light direction a sphere's brightest pixels suggest, as matte and as mirror.
+
+    The pixels (inside 0.95 of the outline) whose brightest photo is ``k`` face light ``k``: for a
+    matte sphere their mean normal points near it (the light's cell among the others'), for a
+    mirror their mean reflected view ray points at it. Camera frame.
+
+    Parameters
+    ----------
+    ft : ffls.spheres.detect.SphereFit
+    brightest : (H, W) int
+        Per pixel, the brightest photo.
+    n_photos : int
+    min_pixels : int
+        Photos with fewer of the sphere's pixels get NaN.
+
+    Returns
+    -------
+    matte, mirror : (n_photos, 3) float64
+        Unit directions (NaN rows where the sphere has fewer than ``min_pixels`` pixels).
+    """
+    from ffls.camera.projection import pixel_rays
+
+    rows, cols = disc_pixels(ft, brightest.shape, 0.95)
+    matte = np.full((n_photos, 3), np.nan)
+    mirror = np.full((n_photos, 3), np.nan)
+    if rows.size == 0:
+        return matte, mirror
+    px = np.stack([cols, rows], axis=1).astype(np.float64)
+    n = ft.normals(px)
+    if ft.camera_model == "orthographic":
+        v = np.tile([0.0, 0.0, -1.0], (len(px), 1))
+    else:
+        v = -pixel_rays(px, ft.K, ft.dist)
+    ok = np.all(np.isfinite(n), axis=1)
+    refl = 2.0 * np.sum(n * v, axis=1)[:, None] * n - v
+    b = np.where(ok, brightest[rows, cols], -1)
+    for k in range(n_photos):
+        sel = b == k
+        if sel.sum() >= min_pixels:
+            for out, d in ((matte, n), (mirror, refl)):
+                m = d[sel].mean(axis=0)
+                out[k] = m / max(np.linalg.norm(m), 1e-12)
+    return matte, mirror
+
+
+def _disagreement_deg(a, b) -> float:
+    """Median angle (degrees) between two sets of per-photo directions over the photos both have (inf if < 3)."""
+    both = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
+    if both.sum() < 3:
+        return float("inf")
+    return float(np.degrees(np.median(np.arccos(np.clip(np.sum(a[both] * b[both], axis=1), -1, 1)))))
 
 
 def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible,
@@ -193,4 +248,19 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
                 rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
                                 f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})")
         ok = [ft for ft, k in zip(ok, keep) if k]
+    if len(ok) >= 3 and brightest is not None and n_photos >= 3:  # all spheres see the same lights
+        dirs = [light_directions_per_photo(ft, brightest, n_photos) for ft in ok]
+        closest = []
+        for i in range(len(ok)):
+            closest.append(min(_disagreement_deg(a, b) for j in range(len(ok)) if j != i
+                               for a in dirs[i] for b in dirs[j]))
+        lim = crit["max_light_disagreement_deg"]
+        agree = [c <= lim for c in closest]
+        if sum(agree) >= 2:
+            for ft, a, c in zip(ok, agree, closest):
+                if not a:
+                    rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                                    f"{ft.radius_px:.0f} px: the lights its shading shows disagree with every other "
+                                    f"sphere's (median {c:.0f} deg > {lim:.0f} to the closest, as matte or mirror)")
+            ok = [ft for ft, a in zip(ok, agree) if a]
     return ok, rejected
