@@ -135,3 +135,13 @@ def test_orthographic_refinement_recovers_circle():
     assert new.radius_px == pytest.approx(r_true, abs=0.05)
     c_fit = c0 + (np.asarray(ref.center) - s.center)[:2] * r0 / R  # the samples' pixels: R / r0 per pixel
     assert np.allclose(c_fit, c_true, atol=0.05)
+
+
+def test_glossy_highlight_cluster_set_aside_by_light_consistency(tmp_path):
+    """The object's red glossy ball shows a round, neutral cluster of highlights; the lights its
+    shading implies disagree with the real spheres' (matte or mirror), so it is set aside."""
+    write_synthetic_capture(tmp_path, resolution=256, directions=_dirs(), progress=False)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    sp = find_spheres_in_capture(load_capture(tmp_path))
+    assert len(sp) == 4 and _matched(sp, truth) == 4
+    assert any("disagree with every other sphere" in r for r in sp.rejected)

@@ -65,7 +65,8 @@ def neutrality(mx, L, rows, cols, clip=None) -> float | None:
     or above its clip level (``clip``, default :func:`clip_levels` of ``mx``) carry no colour
     evidence (a saturated red ball clips to white in an 8-bit file) and are left out (with
     ``clip`` None nothing is left out: floating-point images do not clip). 1 for a single-channel
-    image; None when fewer than 5 lit pixels are unclipped (no evidence).
+    image; None when fewer than 5 lit pixels are unclipped (no evidence: the colour criterion is
+    then skipped, as for a chrome ball whose lit pixels are all clipped highlights).
     """
     if not (mx.ndim == 3 and mx.shape[2] >= 3) or rows.size == 0:
         return 1.0
@@ -222,10 +223,7 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         elif ft.center_sigma_px > crit["max_center_sigma_px"]:
             rejected.append(f"{where}: its centre is poorly constrained by the visible outline (standard error "
                             f"{ft.center_sigma_px:.2f} px > {crit['max_center_sigma_px']})")
-        elif neutral is None:
-            rejected.append(f"{where}: clipped on all its lit pixels, so its colour cannot be judged (a saturated"
-                            f" coloured object clips to white); lower the exposure, or give a hint")
-        elif neutral < crit["min_neutral"]:
+        elif neutral is not None and neutral < crit["min_neutral"]:
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
                             f" white, grey or chrome sphere")
         elif (brightest is not None and n_photos >= 3
