@@ -50,6 +50,17 @@ def summary(lights) -> str:
     return "\n".join(lines)
 
 
+def spheres_summary(spheres) -> str:
+    """One line: how many spheres were found and, per sphere, its kind (when known) and pixel circle."""
+    parts = []
+    for ft in spheres:
+        kind = getattr(ft, "kind", None)
+        parts.append(f"{kind + ' ' if kind else ''}at ({ft.center_px[0]:.1f}, {ft.center_px[1]:.1f}) px, "
+                     f"radius {ft.radius_px:.1f} px")
+    n = len(parts)
+    return f"{n} sphere{'s' if n != 1 else ''} found: " + "; ".join(parts)
+
+
 def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path:
     """PNG of the light directions with their angular Voronoi cells on the hemisphere disc.
 
@@ -118,10 +129,18 @@ def run(args) -> int:
     from ffls.io.capture import load_capture, save_lights
     from ffls.spheres.estimate import estimate_lights
 
+    from ffls.commands.common import print_notes
+
     cap = load_capture(args.capture)
     cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress)
     if calibration is not None:
         print(calibration.summary())
+    if spheres is None:
+        from ffls.spheres.detect import find_spheres_in_capture
+
+        spheres = find_spheres_in_capture(cap)
+    print(spheres_summary(spheres))
+    print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
     lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
                              model=args.model, bounce=args.bounce)
     if calibration is not None:
@@ -137,7 +156,6 @@ def run(args) -> int:
         print(export_lp(lights, cap, args.lp))
     idx, dirs = lights.accepted()
     if len(idx):
-        from ffls.commands.common import print_notes
         from ffls.weights.voronoi import coverage_warnings
 
         print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere))

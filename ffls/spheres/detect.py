@@ -56,7 +56,7 @@ from scipy.optimize import least_squares
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_basis
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
-from ffls.radiance.photos import load_photo
+from ffls.radiance.photos import read_photo
 from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
 
 __all__ = [
@@ -78,6 +78,8 @@ __all__ = [
     "disc_mask",
     "outline_visible_fraction",
     "fit_circle",
+    "gradient_noise",
+    "shading_ratio",
     "CRITERIA",
 ]
 
@@ -380,8 +382,8 @@ def max_image(images) -> np.ndarray:
     return acc
 
 
-def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, int]:
-    """Per-pixel maximum over a sequence, which photo gave it, and the number of images, in one pass.
+def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
+    """Per-pixel maximum over a sequence, which photo gave it, the mean luminance and the count, in one pass.
 
     Parameters
     ----------
@@ -394,17 +396,19 @@ def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, int]:
         :func:`max_image`.
     brightest : (H, W) int32 or None
         Index of the photo with the highest luminance at each pixel (the first on ties).
+    mean : (H, W) float64 or None
+        Mean luminance over the photos (None for a single image).
     n : int
     """
     if isinstance(images, np.ndarray) and images.ndim in (2, 3) and not (images.ndim == 3 and images.shape[-1] not in (1, 3, 4)):
-        return max_image(images), None, 1
-    mx = best_l = idx = None
+        return max_image(images), None, None, 1
+    mx = best_l = idx = total = None
     n = 0
     for im in images:
         im = np.nan_to_num(np.asarray(im, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
         lum = _luminance(im).astype(np.float32)
         if mx is None:
-            mx, best_l, idx = im.copy(), lum, np.zeros(lum.shape, np.int32)
+            mx, best_l, idx, total = im.copy(), lum, np.zeros(lum.shape, np.int32), lum.astype(np.float64)
         elif im.shape != mx.shape:
             raise ValueError(f"image shapes differ: {im.shape} vs {mx.shape}")
         else:
@@ -412,10 +416,11 @@ def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, int]:
             up = lum > best_l
             idx[up] = n
             best_l[up] = lum[up]
+            total += lum
         n += 1
     if mx is None:
         raise ValueError("no images")
-    return mx, idx, n
+    return mx, idx, total / n, n
 
 
 def _luminance(img: np.ndarray) -> np.ndarray:
@@ -446,6 +451,28 @@ def _log8(L: np.ndarray) -> tuple[np.ndarray, float]:
     return np.clip(s * np.log((L + eps) / eps), 0, 255), float(s)
 
 
+def gradient_noise(g, sigma: float = 1.0) -> float:
+    """Median Sobel gradient magnitude that pixel noise alone gives in ``g`` blurred by ``sigma``.
+
+    Measured on the high-pass residual ``g - median3(g)``: for white noise its blurred gradient
+    magnitude is 1/1.78 of the noise's own (measured on Gaussian noise of any level), while
+    smooth scene content, shading and texture with features wider than a pixel, leaves almost
+    nothing in it. Hence ``1.78 * median(|grad(blur(g - median3(g)))|)``.
+
+    Parameters
+    ----------
+    g : (H, W) float
+        Image (here the 8-bit log tone map).
+    sigma : float
+        The Gaussian blur applied before the gradient.
+    """
+    g32 = np.ascontiguousarray(g, dtype=np.float32)
+    res = cv2.GaussianBlur((g32 - cv2.medianBlur(g32, 3)).astype(np.float64), (0, 0), sigma)
+    gx = cv2.Sobel(res, cv2.CV_64F, 1, 0, ksize=3)
+    gy = cv2.Sobel(res, cv2.CV_64F, 0, 1, ksize=3)
+    return 1.78 * float(np.median(np.hypot(gx, gy)))
+
+
 def edge_points(img, sigma: float = 1.0):
     """Canny edges of a (max) image with data-driven thresholds, refined to subpixel.
 
@@ -469,12 +496,14 @@ def edge_points(img, sigma: float = 1.0):
     g8 = np.clip(np.rint(blur), 0, 255).astype(np.uint8)
     # Thresholds from the image's log scale: a silhouette of a white sphere is a radiance ratio
     # of at least ~1.5 (0.4 log units; the sphere against a grey table); blurred over ~2 px that
-    # step gives an L2 Sobel magnitude of about 2.9 * 0.4 * s. Never below the noise: most pixels
-    # are flat, so the median gradient magnitude measures it.
+    # step gives an L2 Sobel magnitude of about 2.9 * 0.4 * s. Never below the noise: the
+    # gradient of the pixel noise alone, measured on the image minus its 3x3 median (which keeps
+    # the noise and drops the scene, textured grounds included; a textured tablecloth's own
+    # gradients are not noise and must not raise the threshold above the spheres' outlines).
     gx = cv2.Sobel(blur, cv2.CV_64F, 1, 0, ksize=3)
     gy = cv2.Sobel(blur, cv2.CV_64F, 0, 1, ksize=3)
     mag = np.hypot(gx, gy)
-    noise = float(np.median(mag))
+    noise = gradient_noise(g8f, sigma)
     high = max(0.5 * scale, 8.0 * noise)
     low = 0.5 * high
     edges = cv2.Canny(g8, low, high, L2gradient=True)
@@ -868,7 +897,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  world_from_camera=None, scene_center=None, source: str | os.PathLike | None = None,
                  max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
-                 n_photos: int | None = None, min_visible: float = 0.6) -> Spheres:
+                 n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
+                 saturates: bool = False) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -923,6 +953,14 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         already a max image (enables the shading-change criterion).
     n_photos : int, optional
         Photos behind a max image given directly (for messages and the shading criterion).
+    mean_luminance : (H, W) float, optional
+        Mean luminance over the photos (:func:`extreme_images`), when ``images`` is already a max
+        image: with 3 or more photos, circles are also proposed on :func:`shading_ratio`, where a
+        textured ground's albedo cancels.
+    saturates : bool
+        The photos are integer files that clip at their largest code: pixels with a channel at
+        or above :func:`ffls.spheres.select.clip_levels` carry no colour evidence for the
+        neutrality criterion (a saturated red ball reads white). False for floating-point images.
     min_visible : float
         A sphere cut by the frame edge is used when at least this fraction of its outline is
         inside the image; otherwise it is set aside (``Spheres.rejected``), or an error when hinted.
@@ -969,9 +1007,11 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         if ortho:
             raise InputError("sphere overrides need a pinhole camera; give 'center_px' hints instead", source)
         return Spheres(_spheres_from_overrides(overrides, K, dist, wfc, R, source))
-    mx, brightest, L, n_img = _max_luminance(images, source)
+    mx, brightest, mean, L, n_img = _max_luminance(images, source)
     if brightest_index is not None:
         brightest = np.asarray(brightest_index, dtype=np.int64)
+    if mean_luminance is not None:
+        mean = np.asarray(mean_luminance, dtype=np.float64)
     n_photos = int(n_photos) if n_photos is not None else n_img
     cam = _Camera(camera_model, K, dist, wfc, R, L.shape)
     edges = _edge_map(mx, L, source)
@@ -991,9 +1031,11 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
         hint_info = []
-        cands = _hough_circle_candidates(edges, L)
+        cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
+                                         else None)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
-        fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible)
+        fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
+                                        saturates=saturates)
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
         if not fits or (n_spheres is not None and len(fits) < n_spheres):
@@ -1023,16 +1065,16 @@ def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFi
 
 
 def _max_luminance(images, source):
-    """Stage 1: the max image, the brightest-photo index (None for a single image), luminance of the max, count."""
+    """Stage 1: the max image, the brightest-photo index and the mean luminance (None for a single image), luminance of the max, count."""
     try:
-        mx, brightest, n = extreme_images(images)
+        mx, brightest, mean, n = extreme_images(images)
     except ValueError as e:
         raise InputError(str(e), source) from None
     L = _luminance(mx)
     peak = float(L.max()) if L.size else 0.0
     if not np.isfinite(peak) or peak <= 0 or float(np.percentile(L, 99.9)) <= 1e-6 * max(peak, 1e-30):
         raise InputError("all images are black (no light on the spheres in any photo)", source)
-    return mx, brightest, L, n
+    return mx, brightest, mean, L, n
 
 
 @dataclasses.dataclass
@@ -1074,12 +1116,48 @@ def _hinted_candidates(hint_info, edges: _EdgeMap, shape, source) -> list[tuple[
     return cands
 
 
-def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60) -> list[tuple[float, float, float]]:
-    """Stage 3 without hints: Hough circles scored by edge support, near-duplicates dropped."""
+def shading_ratio(L_max, L_mean) -> np.ndarray:
+    """``ln(max / mean)`` of the luminance over the photos, per pixel: an albedo-free image.
+
+    Albedo multiplies every photo of a Lambertian pixel alike and cancels in the ratio, so a
+    textured ground (a patterned tablecloth, wood, paper with print) becomes flat: its value
+    depends on its normal (and shadows) only. A sphere's pixels face every way, so its outline
+    stands out against the ground whatever the ground's pattern. Circles are proposed on it as
+    well as on the max image (:func:`_hough_circle_candidates`).
+
+    Parameters
+    ----------
+    L_max, L_mean : (H, W) float
+        Max and mean luminance over the photos.
+
+    Returns
+    -------
+    (H, W) float64, >= 0
+    """
+    L_max = np.clip(np.nan_to_num(np.asarray(L_max, dtype=np.float64)), 0, None)
+    L_mean = np.clip(np.nan_to_num(np.asarray(L_mean, dtype=np.float64)), 0, None)
+    ref = float(np.percentile(L_max, 99.9)) if L_max.size else 1.0
+    eps = max(1e-5 * ref, 1e-30)
+    return np.log((L_max + eps) / (np.minimum(L_mean, L_max) + eps))
+
+
+def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio=None) -> list[tuple[float, float, float]]:
+    """Stage 3 without hints: Hough circles scored by edge support, near-duplicates dropped.
+
+    Circles are proposed on the log max image and, when ``ratio`` (:func:`shading_ratio`) is
+    given, on it too (mapped to 8 bit by its robust peak; Hough's edge threshold a ratio step of
+    half its peak); all are scored on the max image's edges.
+    """
     H, W = L.shape
     if len(edges.points) < 10:
         return []
     hc = _hough_candidates(edges.log8, 3, min(H, W) / 2, edges.scale)
+    if ratio is not None:
+        peak = float(np.percentile(ratio, 99.5))
+        if peak > 0:
+            sc = 255.0 / peak
+            hc = np.concatenate([hc, _hough_candidates(np.clip(ratio * sc, 0, 255).astype(np.uint8), 3,
+                                                       min(H, W) / 2, 0.5 * sc)])
     # the outermost well-covered circle around each Hough centre too: a mirror ball's highlights and
     # reflections make inner circles that Hough may prefer to its faint outline
     outer = []
@@ -1230,15 +1308,23 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
 
     Uses ``capture.K``, ``.dist``, ``.camera_model``, ``.sphere_radius``, ``.spheres`` (hints),
     ``.sphere_count`` (``n_spheres`` when not given), ``.world_from_camera``, ``.scene_center``
-    and the max (and brightest-photo index, :func:`extreme_images`) over ``load_photo(capture, i)`` for all photos (streamed: one image in
+    and the max (and brightest-photo index, :func:`extreme_images`) over ``read_photo(capture, i)`` for all photos (streamed: one image in
     memory at a time). ``progress`` is an optional wrapper such as ``tqdm.tqdm`` (called as
     ``progress(iterable, total=n)``).
     """
     n = len(capture.image_paths)
-    it = (load_photo(capture, i) for i in range(n))
+    depths = set()
+
+    def photos():
+        for i in range(n):
+            ph = read_photo(capture, i)
+            depths.add(ph.bit_depth)
+            yield ph.linear
+
+    it = photos()
     if progress is not None:
         it = progress(it, total=n)
-    mx, brightest, n_img = extreme_images(it) if n else (None, None, 0)
+    mx, brightest, mean, n_img = extreme_images(it) if n else (None, None, None, 0)
     if mx is None:
         raise InputError("capture lists no images", capture.folder)
     hints = getattr(capture, "spheres", None) or None
@@ -1248,4 +1334,6 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
     return find_spheres(mx, capture.K, capture.dist, capture.sphere_radius, n_spheres=n_spheres, hints=hints,
                         overrides=overrides, world_from_camera=capture.world_from_camera,
                         scene_center=getattr(capture, "scene_center", None), source=capture.folder,
-                        camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img)
+                        camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img,
+                        mean_luminance=mean if n_img > 1 else None,
+                        saturates=any(isinstance(d, int) for d in depths))

@@ -647,12 +647,14 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
     _check_modes(model, bounce)
     if getattr(capture, "camera_model", "pinhole") == "orthographic":
-        # parallel rays: directions only (no depth for a near light, no camera centre for the
-        # photometric centre refinement); sphere_radius is optional
+        # parallel rays: directions only (no depth for a near light; the photometric centre
+        # refinement runs from a virtual far camera centre, sphere_samples_orthographic);
+        # sphere_radius is optional
         if model == "near":
             raise InputError("model 'near' needs a pinhole camera (camera.K): an orthographic camera measures no "
                              "depth to place a near light", capture.json_path)
-        model, refine_centres = "distant", False
+        model = "distant"
+        refine_options = {"fit_radius": True, **(refine_options or {})}
     else:
         if capture.K is None:
             raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them, or declare "

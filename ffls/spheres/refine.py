@@ -75,6 +75,9 @@ class CentreRefinement:
         Whether ``center`` differs from ``center_initial``.
     message : str
         Why a refinement was not accepted (or ``'ok'``).
+    radius_shift_px : float
+        Change of the apparent radius, pixels (0 unless ``fit_radius``: the centre's distance
+        then changes with it, the sphere radius being fixed).
     """
 
     center: np.ndarray
@@ -87,6 +90,7 @@ class CentreRefinement:
     cost_final: float = float("nan")
     accepted: bool = False
     message: str = ""
+    radius_shift_px: float = 0.0
 
     @property
     def shift_norm_px(self) -> float:
@@ -103,7 +107,8 @@ class CentreRefinement:
                 "shift_px": [float(v) for v in self.shift_px], "shift_norm_px": self.shift_norm_px,
                 "shift_sigma_px": num(self.shift_sigma_px), "n_photos": int(self.n_photos),
                 "n_pixels": int(self.n_pixels), "cost_initial": num(self.cost_initial),
-                "cost_final": num(self.cost_final), "accepted": bool(self.accepted), "message": self.message}
+                "cost_final": num(self.cost_final), "accepted": bool(self.accepted), "message": self.message,
+                "radius_shift_px": float(self.radius_shift_px)}
 
 
 def _geometry(samples: SphereSamples):
@@ -120,11 +125,16 @@ def _geometry(samples: SphereSamples):
 
 
 def _hit_normals(d, CO, R):
-    """Unit normals at the first hits of rays ``d`` (from the camera centre) with a sphere at ``CO``."""
+    """Unit normals at the first hits of rays ``d`` (from the camera centre) with a sphere at ``CO``.
+
+    In the stable form: ``perp = b d - CO`` (the centre's offset from the ray, at most ``R``)
+    and ``R^2 - |perp|^2`` in place of ``b^2 - |CO|^2 + R^2``, which cancels catastrophically
+    for a far camera (the virtual centre of an orthographic one is 1e4 radii away).
+    """
     b = d @ CO
-    disc = np.maximum(b * b - CO @ CO + R * R, 0.0)
-    t = b - np.sqrt(disc)
-    return (d * t[:, None] - CO) / R, t
+    perp = d * b[:, None] - CO
+    s = np.sqrt(np.maximum(R * R - np.sum(perp * perp, axis=1), 0.0))
+    return (perp - d * s[:, None]) / R, b - s
 
 
 def recentre_samples(samples: SphereSamples, center: np.ndarray, margin_px: float = 1.5,
@@ -184,7 +194,7 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
                          margin_px: float = 1.0, max_shift_px: float = 2.0, terminator: float = 0.15,
                          clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, min_lit: int = 30,
                          min_shadow: int = 10, n_rounds: int = 2, shading: str = "bounce", lit_only: bool = True,
-                         up: np.ndarray = UP) -> CentreRefinement:
+                         up: np.ndarray = UP, fit_radius: bool = False) -> CentreRefinement:
     """Refine a sphere's centre by fitting the Lambertian shading of many photos at once.
 
     Parameters
@@ -213,6 +223,12 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
     n_rounds : int
         Classification / rejection rounds.
     up : (3,) float
+    fit_radius : bool
+        Also fit the apparent radius (a third parameter, pixels, bounded like the shift): the
+        silhouette's edge sits slightly inside a limb that darkens toward the outline, so the
+        detected radius is small by a fraction of a pixel; with ``sphere_radius`` fixed the
+        centre's distance changes with it. Used for orthographic cameras, where the virtual
+        distance is arbitrary (:func:`ffls.spheres.samples.sphere_samples_orthographic`).
 
     Returns
     -------
@@ -248,9 +264,14 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
     Y = np.where(V, Y, 0.0)
     J = len(photos)
 
+    r_px = float(f * np.tan(alpha))
+
+    def dist_at(p):
+        return D if len(p) < 3 else float(R / np.sin(np.arctan((r_px + p[2]) / f)))
+
     def normals_at(p):
         u = normalize(u0 + (p[0] * e1 + p[1] * e2) / f)
-        n = _hit_normals(d, D * u, R)[0]
+        n = _hit_normals(d, dist_at(p) * u, R)[0]
         return n, u
 
     def design(n, lit, use, has_g):
@@ -312,7 +333,7 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
         r = Yw - np.einsum("jmp,jp->jm", F, x)
         return r, x
 
-    p = np.zeros(2)
+    p = np.zeros(3 if fit_radius else 2)
     scale = np.ones(J)
     res = None
     cost0 = None
@@ -345,7 +366,7 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
         if rnd == 0:
             cost0 = float(np.sum(f_scale ** 2 * 2 * (np.sqrt(1 + (r0 / f_scale) ** 2) - 1)))
         res = least_squares(fun, p, loss="soft_l1", f_scale=f_scale, method="trf", x_scale=1.0,
-                            bounds=(np.full(2, -max_shift_px - 0.5), np.full(2, max_shift_px + 0.5)),
+                            bounds=(np.full(p.size, -max_shift_px - 0.5), np.full(p.size, max_shift_px + 0.5)),
                             xtol=1e-6, ftol=1e-10)
         p = res.x
         # the photos' light directions at the refined centre, for the next round's classes
@@ -354,17 +375,18 @@ def refine_sphere_centre(samples: SphereSamples, values: list, directions: list,
     cost1 = float(2.0 * res.cost)
     Jm = res.jac
     try:
-        cov = np.linalg.inv(Jm.T @ Jm) * float(np.sum(res.fun ** 2)) / max(res.fun.size - 2 - 5 * J, 1)
-        sd = float(np.sqrt(max(np.trace(cov), 0.0)))
+        cov = np.linalg.inv(Jm.T @ Jm) * float(np.sum(res.fun ** 2)) / max(res.fun.size - p.size - 5 * J, 1)
+        sd = float(np.sqrt(max(np.trace(cov[:2, :2]), 0.0)))
     except np.linalg.LinAlgError:
         sd = float("inf")
     u = normalize(u0 + (p[0] * e1 + p[1] * e2) / f)
-    C1 = O + D * u
-    out = CentreRefinement(center=C1, center_initial=C0.copy(), shift_px=p.copy(), shift_sigma_px=sd, n_photos=J,
-                           n_pixels=int(mask.sum()), cost_initial=cost0, cost_final=cost1, accepted=True, message="ok")
+    C1 = O + dist_at(p) * u
+    out = CentreRefinement(center=C1, center_initial=C0.copy(), shift_px=p[:2].copy(), shift_sigma_px=sd, n_photos=J,
+                           n_pixels=int(mask.sum()), cost_initial=cost0, cost_final=cost1, accepted=True, message="ok",
+                           radius_shift_px=float(p[2]) if p.size > 2 else 0.0)
     if not res.success or not np.all(np.isfinite(p)):
         out.accepted, out.message = False, f"least_squares failed: {res.message}"
-    elif np.linalg.norm(p) > max_shift_px:
+    elif np.linalg.norm(p[:2]) > max_shift_px or (p.size > 2 and abs(p[2]) > max_shift_px):
         out.accepted, out.message = False, f"shift {np.linalg.norm(p):.2f} px beyond max_shift_px"
     if not out.accepted:
         out.center = C0.copy()

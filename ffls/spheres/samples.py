@@ -16,7 +16,7 @@ import numpy as np
 from ffls.camera.projection import pixel_rays
 from ffls.conventions import UP, normalize
 
-__all__ = ["SphereSamples", "SphereValues", "ground_bounce", "sphere_samples", "sphere_samples_orthographic",
+__all__ = ["ORTHO_VIRTUAL_DISTANCE", "SphereSamples", "SphereValues", "ground_bounce", "sphere_samples", "sphere_samples_orthographic",
            "pixel_validity", "sphere_values"]
 
 
@@ -33,6 +33,11 @@ def ground_bounce(normals: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
     (m,) float in [0, 1]
     """
     return np.clip(0.5 * (1.0 - np.asarray(normals, dtype=np.float64) @ np.asarray(up, dtype=np.float64)), 0.0, 1.0)
+
+
+#: Distance, in sphere radii, of the virtual camera centre of an orthographic camera's samples
+#: (:func:`sphere_samples_orthographic`): rays from it diverge by at most 1e-4 rad (0.006 deg).
+ORTHO_VIRTUAL_DISTANCE = 1.0e4
 
 
 @dataclass(frozen=True)
@@ -57,7 +62,8 @@ class SphereSamples:
         :func:`ground_bounce` of ``normals`` for world up ``+Z`` (computed once per capture).
     origin : (3,) float64 or None
         World-frame camera centre (the pixels' rays start there; needed by
-        :mod:`ffls.spheres.refine`). None for an orthographic camera (parallel rays).
+        :mod:`ffls.spheres.refine`); for an orthographic camera a virtual one far behind the
+        sphere (:data:`ORTHO_VIRTUAL_DISTANCE`).
     """
 
     rows: np.ndarray
@@ -182,7 +188,12 @@ def sphere_samples_orthographic(shape: tuple[int, int], center_px, radius_px: fl
     Returns
     -------
     SphereSamples
-        ``origin`` is None (parallel rays: :mod:`ffls.spheres.refine` does not apply).
+        ``origin`` is a virtual camera centre :data:`ORTHO_VIRTUAL_DISTANCE` sphere radii behind
+        the centre along the viewing direction: an orthographic camera is the limit of a pinhole
+        one far away, and from there the rays through the samples diverge by at most
+        ``1 / ORTHO_VIRTUAL_DISTANCE`` rad, so :mod:`ffls.spheres.refine` (the photometric
+        centre refinement, which needs a ray origin) applies unchanged; its pixel shifts are
+        pixels of this image.
     """
     H, W = int(shape[0]), int(shape[1])
     cx, cy = (float(v) for v in np.asarray(center_px, dtype=np.float64).reshape(2))
@@ -204,8 +215,10 @@ def sphere_samples_orthographic(shape: tuple[int, int], center_px, radius_px: fl
     Rw, tw = M[:3, :3], M[:3, 3]
     n_w = normalize(n @ Rw.T)
     P_w = (C + R * n) @ Rw.T + tw
+    C_w = Rw @ C + tw
+    origin = C_w - ORTHO_VIRTUAL_DISTANCE * R * Rw[:, 2]  # camera +z is the viewing direction
     return SphereSamples(rows=yy.ravel()[keep], cols=xx.ravel()[keep], normals=n_w, points=P_w,
-                         center=Rw @ C + tw, radius=R, radius_px=r, ground=ground_bounce(n_w), origin=None)
+                         center=C_w, radius=R, radius_px=r, ground=ground_bounce(n_w), origin=origin)
 
 
 class SphereValues(NamedTuple):

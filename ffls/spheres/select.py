@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CRITERIA", "disc_pixels", "neutrality", "shading_change", "select_spheres"]
+__all__ = ["CRITERIA", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "shading_change", "select_spheres"]
 
 
 #: Criteria an unhinted round outline must meet to count as a calibration sphere
@@ -25,6 +25,7 @@ CRITERIA = {
     "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
     "size_ratio_pinhole": 2.0,   # implied depths of all spheres within this factor of each other
     "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
+    "max_light_disagreement_deg": 40.0,  # per-photo light directions vs the closest other sphere (3+ spheres)
     "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
 }
 
@@ -43,12 +44,29 @@ def disc_pixels(ft, shape, frac: float = 0.7):
     return yy[m], xx[m]
 
 
-def neutrality(mx, L, rows, cols) -> float:
-    """Colour neutrality of the pixels: the 25th percentile over the lit pixels of min/max channel.
+def clip_levels(mx) -> np.ndarray:
+    """Per channel, the level at or above which a pixel of the max image counts as clipped: 0.98 x its maximum.
+
+    A file's clipped pixels all read the channel's largest code (after linearisation, the same
+    value), so they sit at the channel's maximum over the image. In a floating-point image that
+    never clipped this excludes only the few brightest pixels.
+    """
+    mx = np.asarray(mx, dtype=np.float64)
+    peak = mx.reshape(-1, mx.shape[2])[:, :3].max(axis=0) if mx.ndim == 3 else np.array([mx.max()])
+    return 0.98 * peak
+
+
+def neutrality(mx, L, rows, cols, clip=None) -> float | None:
+    """Colour neutrality of the pixels: the 25th percentile over the lit, unclipped pixels of min/max channel.
 
     1 for grey; a white, grey or chrome sphere stays near 1 (sensor noise and white balance
     aside). The lower quartile rather than the median, because a coloured glossy ball's
-    highlights from many photos whiten much of it in the max image. 1 for a single-channel image.
+    highlights from many photos whiten much of it in the max image. Pixels with any channel at
+    or above its clip level (``clip``, default :func:`clip_levels` of ``mx``) carry no colour
+    evidence (a saturated red ball clips to white in an 8-bit file) and are left out (with
+    ``clip`` None nothing is left out: floating-point images do not clip). 1 for a single-channel
+    image; None when fewer than 5 lit pixels are unclipped (no evidence: the colour criterion is
+    then skipped, as for a chrome ball whose lit pixels are all clipped highlights).
     """
     if not (mx.ndim == 3 and mx.shape[2] >= 3) or rows.size == 0:
         return 1.0
@@ -57,7 +75,10 @@ def neutrality(mx, L, rows, cols) -> float:
     lit = lum > 0.1 * float(np.percentile(lum, 95))
     if lit.sum() < 5:
         return 1.0
-    ratio = px[lit].min(axis=1) / np.maximum(px[lit].max(axis=1), 1e-12)
+    use = lit if clip is None else lit & ~np.any(px >= np.asarray(clip, dtype=np.float64), axis=1)
+    if use.sum() < 5:
+        return None
+    ratio = px[use].min(axis=1) / np.maximum(px[use].max(axis=1), 1e-12)
     return float(np.clip(np.percentile(ratio, 25), 0, 1))
 
 
@@ -77,7 +98,62 @@ def shading_change(brightest, L, rows, cols) -> float:
     return float(1.0 - counts.max() / lit.sum())
 
 
-def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible):
+def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3):
+    """Per photo, the light direction a sphere's brightest pixels suggest, as matte and as mirror.
+
+    The pixels (inside 0.95 of the outline) whose brightest photo is ``k`` face light ``k``: for a
+    matte sphere their mean normal points near it (the light's cell among the others'), for a
+    mirror their mean reflected view ray points at it. Camera frame.
+
+    Parameters
+    ----------
+    ft : ffls.spheres.detect.SphereFit
+    brightest : (H, W) int
+        Per pixel, the brightest photo.
+    n_photos : int
+    min_pixels : int
+        Photos with fewer of the sphere's pixels get NaN.
+
+    Returns
+    -------
+    matte, mirror : (n_photos, 3) float64
+        Unit directions (NaN rows where the sphere has fewer than ``min_pixels`` pixels).
+    """
+    from ffls.camera.projection import pixel_rays
+
+    rows, cols = disc_pixels(ft, brightest.shape, 0.95)
+    matte = np.full((n_photos, 3), np.nan)
+    mirror = np.full((n_photos, 3), np.nan)
+    if rows.size == 0:
+        return matte, mirror
+    px = np.stack([cols, rows], axis=1).astype(np.float64)
+    n = ft.normals(px)
+    if ft.camera_model == "orthographic":
+        v = np.tile([0.0, 0.0, -1.0], (len(px), 1))
+    else:
+        v = -pixel_rays(px, ft.K, ft.dist)
+    ok = np.all(np.isfinite(n), axis=1)
+    refl = 2.0 * np.sum(n * v, axis=1)[:, None] * n - v
+    b = np.where(ok, brightest[rows, cols], -1)
+    for k in range(n_photos):
+        sel = b == k
+        if sel.sum() >= min_pixels:
+            for out, d in ((matte, n), (mirror, refl)):
+                m = d[sel].mean(axis=0)
+                out[k] = m / max(np.linalg.norm(m), 1e-12)
+    return matte, mirror
+
+
+def _disagreement_deg(a, b) -> float:
+    """Median angle (degrees) between two sets of per-photo directions over the photos both have (inf if < 3)."""
+    both = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
+    if both.sum() < 3:
+        return float("inf")
+    return float(np.degrees(np.median(np.arccos(np.clip(np.sum(a[both] * b[both], axis=1), -1, 1)))))
+
+
+def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible,
+                   saturates: bool = False):
     """Stage 5 without hints: which fitted round outlines are calibration spheres.
 
     A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
@@ -106,6 +182,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         Orthographic camera (sizes compared as pixel radii, not depths).
     n_photos : int
     max_residual_px, min_visible : float
+    saturates : bool
+        The photos are integer files that clip: colour is judged on the unclipped pixels only
+        (:func:`clip_levels`, :func:`neutrality`).
 
     Returns
     -------
@@ -115,6 +194,7 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     crit = CRITERIA
     shape = L.shape
     round_ = []
+    clip = clip_levels(mx) if saturates and mx.ndim == 3 and mx.shape[2] >= 3 else None
     for ft in fits:
         vis = max(ft.visible_fraction, 1e-6)
         closed = min(ft.coverage / vis, 1.0)
@@ -124,8 +204,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         rows, cols = disc_pixels(ft, shape)
         if rows.size < 5:
             continue
-        neutral = neutrality(mx, L, rows, cols)
-        ft.score = min(support, 1.2) * closed * (0.25 + 0.75 * neutral) / (1 + (ft.residual_px / 0.5) ** 2)
+        neutral = neutrality(mx, L, rows, cols, clip)
+        ft.score = (min(support, 1.2) * closed * (0.25 + 0.75 * (0.5 if neutral is None else neutral))
+                    / (1 + (ft.residual_px / 0.5) ** 2))
         round_.append((ft, neutral, rows, cols))
     round_.sort(key=lambda t: -t[0].score)
     distinct = []
@@ -142,7 +223,7 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         elif ft.center_sigma_px > crit["max_center_sigma_px"]:
             rejected.append(f"{where}: its centre is poorly constrained by the visible outline (standard error "
                             f"{ft.center_sigma_px:.2f} px > {crit['max_center_sigma_px']})")
-        elif neutral < crit["min_neutral"]:
+        elif neutral is not None and neutral < crit["min_neutral"]:
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
                             f" white, grey or chrome sphere")
         elif (brightest is not None and n_photos >= 3
@@ -165,4 +246,19 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
                 rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
                                 f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})")
         ok = [ft for ft, k in zip(ok, keep) if k]
+    if len(ok) >= 3 and brightest is not None and n_photos >= 3:  # all spheres see the same lights
+        dirs = [light_directions_per_photo(ft, brightest, n_photos) for ft in ok]
+        closest = []
+        for i in range(len(ok)):
+            closest.append(min(_disagreement_deg(a, b) for j in range(len(ok)) if j != i
+                               for a in dirs[i] for b in dirs[j]))
+        lim = crit["max_light_disagreement_deg"]
+        agree = [c <= lim for c in closest]
+        if sum(agree) >= 2:
+            for ft, a, c in zip(ok, agree, closest):
+                if not a:
+                    rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                                    f"{ft.radius_px:.0f} px: the lights its shading shows disagree with every other "
+                                    f"sphere's (median {c:.0f} deg > {lim:.0f} to the closest, as matte or mirror)")
+            ok = [ft for ft, a in zip(ok, agree) if a]
     return ok, rejected
