@@ -78,3 +78,20 @@ def test_refinement_needs_photos():
     grey = s.values(img)
     ref = refine_sphere_centre(s, [(grey, np.ones(len(s), bool), 0)] * 2, [np.array([0.3, -0.2, -1.0])] * 2)
     assert not ref.accepted and np.array_equal(ref.center, ref.center_initial)
+
+
+def test_degenerate_shading_system_keeps_the_detected_centre(monkeypatch):
+    """A singular shading system (white background, pixels set aside) is a refinement not accepted, not a crash."""
+    import ffls.spheres.refine as refine
+    from ffls.spheres.samples import sphere_samples
+
+    K = np.array([[500.0, 0, 64], [0, 500.0, 64], [0, 0, 1]])
+    s = sphere_samples((128, 128), K, None, np.array([0.0, 0.0, 1.0]), 0.05)
+
+    def singular(*args, **kwargs):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(refine, "refine_sphere_centre_shading", singular)
+    ref = refine.refine_sphere_centre(s, [], [])
+    assert not ref.accepted and "degenerate" in ref.message
+    np.testing.assert_allclose(ref.center, ref.center_initial)

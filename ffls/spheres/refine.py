@@ -49,7 +49,7 @@ from scipy.optimize import least_squares
 from ffls.conventions import UP, normalize, tangent_basis
 from ffls.spheres.samples import SphereSamples, ground_bounce
 
-__all__ = ["CentreRefinement", "refine_sphere_centre", "recentre_samples", "select_photos"]
+__all__ = ["CentreRefinement", "refine_sphere_centre", "refine_sphere_centre_shading", "recentre_samples", "select_photos"]
 
 
 @dataclass
@@ -190,7 +190,23 @@ def select_photos(directions: np.ndarray, max_photos: int, first: int = 0) -> np
     return np.array(sorted(chosen))
 
 
-def refine_sphere_centre(samples: SphereSamples, values: list, directions: list, *, max_photos: int = 20,
+def refine_sphere_centre(samples: SphereSamples, values: list, directions: list, **kwargs) -> CentreRefinement:
+    """Refine a sphere's centre by fitting the Lambertian shading of many photos at once.
+
+    :func:`refine_sphere_centre_shading` (its parameters are passed on); a shading system that
+    has no unique solution (e.g. a photo whose pixels were all set aside, on a bright background)
+    is a refinement not accepted, with the reason in ``message``, never an error: the detected
+    centre stands.
+    """
+    try:
+        return refine_sphere_centre_shading(samples, values, directions, **kwargs)
+    except np.linalg.LinAlgError as e:
+        C0 = _geometry(samples)[1]
+        return CentreRefinement(center=C0.copy(), center_initial=C0.copy(), shift_px=np.zeros(2),
+                                message=f"degenerate shading system ({e})")
+
+
+def refine_sphere_centre_shading(samples: SphereSamples, values: list, directions: list, *, max_photos: int = 20,
                          margin_px: float = 1.0, max_shift_px: float = 2.0, terminator: float = 0.15,
                          clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, min_lit: int = 30,
                          min_shadow: int = 10, n_rounds: int = 2, shading: str = "bounce", lit_only: bool = True,
