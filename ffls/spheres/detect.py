@@ -629,25 +629,32 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     s = np.asarray(rays, dtype=np.float64)
     d = np.asarray(init_dir, dtype=np.float64)
     p0 = f * np.array([d[0] / d[2], d[1] / d[2], init_alpha])
-    inl = np.ones(len(s), dtype=bool)
-    p = p0
-    for _ in range(3):
-        sol = least_squares(_cone_residuals, p, args=(s[inl], f), loss="soft_l1", f_scale=f_scale,
-                            x_scale=1.0, method="trf")
-        p = sol.x
-        r = _cone_residuals(p, s, f)
-        sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
-        new = np.abs(r) < max(trim * sigma, 1.0)
-        if new.sum() < 3 or np.array_equal(new, inl):
-            inl = new if new.sum() >= 3 else inl
-            break
-        inl = new
+    p, inl = _trimmed_fit(lambda q, pts: _cone_residuals(q, pts, f), p0, s, f_scale, trim)
     x, y, a = p / f
     if not (0 < a < np.pi / 2):
         raise ValueError("fitted apparent radius is not in (0, 90) degrees")
     c = np.array([x, y, 1.0])
     c /= np.linalg.norm(c)
     return R / np.sin(a) * c, inl, _cone_residuals(p, s, f)
+
+
+def _trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
+    """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
+    to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
+    on the rest. Returns the parameters and the inlier mask (n,) of the last round."""
+    p = p0
+    inl = np.ones(len(pts), dtype=bool)
+    for _ in range(3):
+        p = least_squares(residuals, p, args=(pts[inl],), loss="soft_l1", f_scale=f_scale, x_scale=1.0,
+                          method="trf").x
+        r = residuals(p, pts)
+        sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
+        new = np.abs(r) < max(trim * sigma, 1.0)
+        if new.sum() < 3 or np.array_equal(new, inl):
+            inl = new if new.sum() >= 3 else inl
+            break
+        inl = new
+    return p, inl
 
 
 def _circle_residuals(params, pts):
@@ -676,18 +683,8 @@ def fit_circle(points, init_center, init_radius, f_scale: float = 1.0, trim: flo
         Signed distances of all points from the circle, pixels.
     """
     P = np.asarray(points, dtype=np.float64)
-    p = np.array([init_center[0], init_center[1], init_radius], dtype=np.float64)
-    inl = np.ones(len(P), dtype=bool)
-    for _ in range(3):
-        p = least_squares(_circle_residuals, p, args=(P[inl],), loss="soft_l1", f_scale=f_scale,
-                          method="trf").x
-        r = _circle_residuals(p, P)
-        sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
-        new = np.abs(r) < max(trim * sigma, 1.0)
-        if new.sum() < 3 or np.array_equal(new, inl):
-            inl = new if new.sum() >= 3 else inl
-            break
-        inl = new
+    p0 = np.array([init_center[0], init_center[1], init_radius], dtype=np.float64)
+    p, inl = _trimmed_fit(_circle_residuals, p0, P, f_scale, trim)
     if not p[2] > 0:
         raise ValueError("fitted radius is not positive")
     return p[:2].copy(), float(p[2]), inl, _circle_residuals(p, P)
