@@ -58,6 +58,7 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo
 from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
+from ffls.spheres.mirror_outline import OUTER_SOURCE, enclosing_circle
 
 __all__ = [
     "SphereFit",
@@ -993,6 +994,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         hint_info = []
         cands = _hough_circle_candidates(edges, L)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
+        fits = [_outer_outline(ft, edges, cam, rng) for ft in fits]  # a mirror's dark cap -> its silhouette
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible)
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
@@ -1141,6 +1143,21 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
         except ValueError as e:
             failures.append((k, cx, cy, r, str(e)))
     return fits, failures
+
+
+def _outer_outline(ft, edges: _EdgeMap, cam: _Camera, rng):
+    """A candidate inside a larger outline the edges support (a mirror ball's dark cap inside its
+    silhouette, :func:`ffls.spheres.mirror_outline.enclosing_circle`) is refitted on that outline,
+    again until no larger one is supported (at most 3 times)."""
+    for _ in range(3):
+        oc = enclosing_circle(edges.points, ft.center_px, ft.radius_px, rng, shape=cam.shape)
+        if oc is None:
+            return ft
+        try:
+            ft = _fit_outline(edges.points[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
+        except ValueError:
+            return ft
+    return ft
 
 
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands) -> str:
