@@ -58,7 +58,7 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo
 from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
-from ffls.spheres.mirror_outline import OUTER_SOURCE, enclosing_circle
+from ffls.spheres.mirror_outline import OUTER_SOURCE, enclosing_circle, mirror_silhouette
 
 __all__ = [
     "SphereFit",
@@ -128,6 +128,10 @@ class SphereFit:
         Detection score of an unhinted sphere (support x closure x neutrality x fit quality).
     center_sigma_px : float
         Standard error of the fitted centre, pixels (0 for overrides).
+    outline_sigma_px : float
+        A mirror ball's outline ambiguity, pixels: half the gap (centre and radius) between its two
+        outline estimates (the reflected room's contrasts, which run inside the limb, and the limb's
+        reflectance step, :mod:`ffls.spheres.mirror_outline`); 0 for other spheres.
     """
 
     center_cam: np.ndarray
@@ -149,6 +153,7 @@ class SphereFit:
     visible_fraction: float = 1.0
     score: float = 0.0
     center_sigma_px: float = 0.0
+    outline_sigma_px: float = 0.0
 
     @property
     def distance(self) -> float:
@@ -188,6 +193,7 @@ class SphereFit:
             "camera_model": self.camera_model,
             "visible_fraction": float(self.visible_fraction),
             "center_sigma_px": float(self.center_sigma_px),
+            "outline_sigma_px": float(self.outline_sigma_px),
         }
 
 
@@ -994,7 +1000,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         hint_info = []
         cands = _hough_circle_candidates(edges, L)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
-        fits = [_outer_outline(ft, edges, cam, rng) for ft in fits]  # a mirror's dark cap -> its silhouette
+        fits = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]  # a mirror's dark cap -> its silhouette
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible)
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
@@ -1002,7 +1008,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, len(cands)), source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [_refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
+        fits = [ft if ft.source == OUTER_SOURCE else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -1145,18 +1151,30 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
     return fits, failures
 
 
-def _outer_outline(ft, edges: _EdgeMap, cam: _Camera, rng):
+def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera, rng):
     """A candidate inside a larger outline the edges support (a mirror ball's dark cap inside its
     silhouette, :func:`ffls.spheres.mirror_outline.enclosing_circle`) is refitted on that outline,
-    again until no larger one is supported (at most 3 times)."""
+    again until no larger one is supported (at most 3 times); its ``outline_sigma_px`` is the
+    disagreement with the limb's reflectance step (:func:`ffls.spheres.mirror_outline.mirror_silhouette`)."""
     for _ in range(3):
         oc = enclosing_circle(edges.points, ft.center_px, ft.radius_px, rng, shape=cam.shape)
         if oc is None:
-            return ft
+            break
         try:
             ft = _fit_outline(edges.points[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
         except ValueError:
-            return ft
+            break
+    if ft.source != OUTER_SOURCE:
+        return ft
+    sil = mirror_silhouette(np.log(np.maximum(L, 1e-12)), ft.center_px, ft.radius_px, rng, shape=cam.shape)
+    if sil is not None:  # the limb's reflectance step: a second outline estimate
+        try:
+            limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
+            # the reflected contrasts run inside the limb, the step at or just outside it: half their gap
+            ft.outline_sigma_px = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px),
+                                                       limb.radius_px - ft.radius_px))
+        except ValueError:
+            pass
     return ft
 
 
