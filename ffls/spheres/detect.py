@@ -58,7 +58,7 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo
 from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
-from ffls.spheres.mirror_outline import OUTER_SOURCE, enclosing_circle, mirror_silhouette
+from ffls.spheres.mirror_outline import MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, dark_cap, enclosing_circle, mirror_silhouette
 
 __all__ = [
     "SphereFit",
@@ -1000,7 +1000,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         hint_info = []
         cands = _hough_circle_candidates(edges, L)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
-        fits = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]  # a mirror's dark cap -> its silhouette
+        fits = _with_outer_outlines(fits, edges, L, cam, rng)  # a mirror's dark cap -> its silhouette
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible)
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
@@ -1151,11 +1151,30 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
     return fits, failures
 
 
+def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
+    """Each candidate grown to its outer outline (:func:`_outer_outline`); where a grown outline is
+    the same circle (centre and radius within 15%) as a candidate fitted directly, the one covering
+    more of its outline is kept (a matte sphere's own outline beats its inner circles grown to it)."""
+    grown = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]
+    outer = [g for g in grown if g.source == OUTER_SOURCE]
+    direct = [g for g in grown if g.source != OUTER_SOURCE]
+
+    def same(a, b):
+        r = max(a.radius_px, b.radius_px)
+        return np.hypot(*(a.center_px - b.center_px)) < 0.15 * r and abs(a.radius_px - b.radius_px) < 0.15 * r
+
+    keep_outer = [g for g in outer if not any(same(g, d) and d.coverage >= g.coverage for d in direct)]
+    keep_direct = [d for d in direct if not any(same(g, d) for g in keep_outer)]
+    return keep_direct + keep_outer
+
+
 def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera, rng):
-    """A candidate inside a larger outline the edges support (a mirror ball's dark cap inside its
-    silhouette, :func:`ffls.spheres.mirror_outline.enclosing_circle`) is refitted on that outline,
+    """A candidate that is a dark cap (:func:`ffls.spheres.mirror_outline.dark_cap`) inside a larger
+    outline the edges support (a mirror ball's reflected dark room inside its silhouette, :func:`ffls.spheres.mirror_outline.enclosing_circle`) is refitted on that outline,
     again until no larger one is supported (at most 3 times); its ``outline_sigma_px`` is the
     disagreement with the limb's reflectance step (:func:`ffls.spheres.mirror_outline.mirror_silhouette`)."""
+    if not dark_cap(L, ft.center_px, ft.radius_px):
+        return ft
     for _ in range(3):
         oc = enclosing_circle(edges.points, ft.center_px, ft.radius_px, rng, shape=cam.shape)
         if oc is None:
@@ -1166,13 +1185,14 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera, rng):
             break
     if ft.source != OUTER_SOURCE:
         return ft
+    ft.outline_sigma_px = MIRROR_OUTLINE_FLOOR_PX
     sil = mirror_silhouette(np.log(np.maximum(L, 1e-12)), ft.center_px, ft.radius_px, rng, shape=cam.shape)
     if sil is not None:  # the limb's reflectance step: a second outline estimate
         try:
             limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
             # the reflected contrasts run inside the limb, the step at or just outside it: half their gap
-            ft.outline_sigma_px = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px),
-                                                       limb.radius_px - ft.radius_px))
+            gap = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px), limb.radius_px - ft.radius_px))
+            ft.outline_sigma_px = max(gap, MIRROR_OUTLINE_FLOOR_PX)
         except ValueError:
             pass
     return ft

@@ -28,6 +28,11 @@ import numpy as np
 #: ``SphereFit.source`` of a sphere fitted to an outer outline found by :func:`enclosing_circle`.
 OUTER_SOURCE = "auto (outer outline)"
 
+#: Least outline ambiguity of a mirror ball (pixels): the reflected contrasts that give its outline
+#: run 1 to 2 px inside the limb at 384 px (``ffls synth --sphere-material mirror``), and the two
+#: outline estimates can agree by chance (``SphereFit.outline_sigma_px``).
+MIRROR_OUTLINE_FLOOR_PX = 1.0
+
 
 @dataclasses.dataclass
 class OuterCircle:
@@ -320,3 +325,35 @@ def mirror_silhouette(log_lum, center, radius, rng=None, *, shape=None, min_cove
     if circle_coverage(pts[inl], c, r, tol, shape) < min_coverage:
         return None
     return pts[inl], c, r
+
+
+def dark_cap(lum, center, radius, ratio: float = 0.7) -> bool:
+    """Whether a circle looks like a mirror ball's dark cap: darker inside than just around it.
+
+    A chrome ball under a hand-held light reflects the dark room above the table: in the max image
+    the cap (inside 0.7 radii) is darker than the ring just outside (1.15 to 1.4 radii), whose
+    median it must stay below ``ratio`` times. A sphere's lit cap or a highlight is brighter than its
+    surroundings; only a dark cap is grown to an outer outline (:func:`enclosing_circle`).
+
+    Parameters
+    ----------
+    lum : (H, W) float
+        Luminance of the max image.
+    center : (2,) float
+    radius : float
+    ratio : float
+    """
+    H, W = lum.shape
+    cx, cy = float(center[0]), float(center[1])
+    R = 1.4 * float(radius)
+    x0, x1 = max(int(np.floor(cx - R)), 0), min(int(np.ceil(cx + R)) + 1, W)
+    y0, y1 = max(int(np.floor(cy - R)), 0), min(int(np.ceil(cy + R)) + 1, H)
+    if x1 <= x0 or y1 <= y0:
+        return False
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d = np.hypot(xx - cx, yy - cy) / float(radius)
+    crop = np.asarray(lum, dtype=np.float64)[y0:y1, x0:x1]
+    inside, ring = crop[d <= 0.7], crop[(d >= 1.15) & (d <= 1.4)]
+    if inside.size < 5 or ring.size < 5:
+        return False
+    return bool(np.median(inside) < ratio * np.median(ring))
