@@ -1153,8 +1153,9 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
 
 def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
     """Each candidate grown to its outer outline (:func:`_outer_outline`); where a grown outline is
-    the same circle (centre and radius within 15%) as a candidate fitted directly, the one covering
-    more of its outline is kept (a matte sphere's own outline beats its inner circles grown to it)."""
+    the same circle (centre and radius within 15%) as a candidate fitted directly, the direct one is
+    kept if it is round (RMS within ``CRITERIA['max_residual_px']``) and covers more of its outline
+    (a matte sphere's own outline beats its inner circles grown to it)."""
     grown = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]
     outer = [g for g in grown if g.source == OUTER_SOURCE]
     direct = [g for g in grown if g.source != OUTER_SOURCE]
@@ -1163,7 +1164,10 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
         r = max(a.radius_px, b.radius_px)
         return np.hypot(*(a.center_px - b.center_px)) < 0.15 * r and abs(a.radius_px - b.radius_px) < 0.15 * r
 
-    keep_outer = [g for g in outer if not any(same(g, d) and d.coverage >= g.coverage for d in direct)]
+    def better(d, g):  # a direct fit that is round (residual within the limit) and covers more
+        return d.coverage >= g.coverage and d.residual_px <= max(g.residual_px, CRITERIA["max_residual_px"])
+
+    keep_outer = [g for g in outer if not any(same(g, d) and better(d, g) for d in direct)]
     keep_direct = [d for d in direct if not any(same(g, d) for g in keep_outer)]
     return keep_direct + keep_outer
 
