@@ -58,6 +58,7 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
 from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
+from ffls.spheres.mirror_outline import MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, dark_cap, enclosing_circle, mirror_silhouette
 
 __all__ = [
     "SphereFit",
@@ -129,6 +130,10 @@ class SphereFit:
         Detection score of an unhinted sphere (support x closure x neutrality x fit quality).
     center_sigma_px : float
         Standard error of the fitted centre, pixels (0 for overrides).
+    outline_sigma_px : float
+        A mirror ball's outline ambiguity, pixels: half the gap (centre and radius) between its two
+        outline estimates (the reflected room's contrasts, which run inside the limb, and the limb's
+        reflectance step, :mod:`ffls.spheres.mirror_outline`); 0 for other spheres.
     """
 
     center_cam: np.ndarray
@@ -150,6 +155,7 @@ class SphereFit:
     visible_fraction: float = 1.0
     score: float = 0.0
     center_sigma_px: float = 0.0
+    outline_sigma_px: float = 0.0
 
     @property
     def distance(self) -> float:
@@ -189,6 +195,7 @@ class SphereFit:
             "camera_model": self.camera_model,
             "visible_fraction": float(self.visible_fraction),
             "center_sigma_px": float(self.center_sigma_px),
+            "outline_sigma_px": float(self.outline_sigma_px),
         }
 
 
@@ -1031,6 +1038,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
                                          else None)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
+        fits = _with_outer_outlines(fits, edges, L, cam, rng)  # a mirror's dark cap -> its silhouette
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
                                         saturates=saturates)
         if n_spheres is not None and len(fits) > n_spheres:
@@ -1039,7 +1047,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, len(cands)), source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [_refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
+        fits = [ft if ft.source == OUTER_SOURCE else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -1216,6 +1224,57 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
         except ValueError as e:
             failures.append((k, cx, cy, r, str(e)))
     return fits, failures
+
+
+def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
+    """Each candidate grown to its outer outline (:func:`_outer_outline`); where a grown outline is
+    the same circle (centre and radius within 15%) as a candidate fitted directly, the direct one is
+    kept if it is round (RMS within ``CRITERIA['max_residual_px']``) and covers more of its outline
+    (a matte sphere's own outline beats its inner circles grown to it)."""
+    grown = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]
+    outer = [g for g in grown if g.source == OUTER_SOURCE]
+    direct = [g for g in grown if g.source != OUTER_SOURCE]
+
+    def same(a, b):
+        r = max(a.radius_px, b.radius_px)
+        return np.hypot(*(a.center_px - b.center_px)) < 0.15 * r and abs(a.radius_px - b.radius_px) < 0.15 * r
+
+    def better(d, g):  # a direct fit that is round (residual within the limit) and covers more
+        return d.coverage >= g.coverage and d.residual_px <= max(g.residual_px, CRITERIA["max_residual_px"])
+
+    keep_outer = [g for g in outer if not any(same(g, d) and better(d, g) for d in direct)]
+    keep_direct = [d for d in direct if not any(same(g, d) for g in keep_outer)]
+    return keep_direct + keep_outer
+
+
+def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera, rng):
+    """A candidate that is a dark cap (:func:`ffls.spheres.mirror_outline.dark_cap`) inside a larger
+    outline the edges support (a mirror ball's reflected dark room inside its silhouette, :func:`ffls.spheres.mirror_outline.enclosing_circle`) is refitted on that outline,
+    again until no larger one is supported (at most 3 times); its ``outline_sigma_px`` is the
+    disagreement with the limb's reflectance step (:func:`ffls.spheres.mirror_outline.mirror_silhouette`)."""
+    if not dark_cap(L, ft.center_px, ft.radius_px):
+        return ft
+    for _ in range(3):
+        oc = enclosing_circle(edges.points, ft.center_px, ft.radius_px, rng, shape=cam.shape)
+        if oc is None:
+            break
+        try:
+            ft = _fit_outline(edges.points[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
+        except ValueError:
+            break
+    if ft.source != OUTER_SOURCE:
+        return ft
+    ft.outline_sigma_px = MIRROR_OUTLINE_FLOOR_PX
+    sil = mirror_silhouette(np.log(np.maximum(L, 1e-12)), ft.center_px, ft.radius_px, rng, shape=cam.shape)
+    if sil is not None:  # the limb's reflectance step: a second outline estimate
+        try:
+            limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
+            # the reflected contrasts run inside the limb, the step at or just outside it: half their gap
+            gap = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px), limb.radius_px - ft.radius_px))
+            ft.outline_sigma_px = max(gap, MIRROR_OUTLINE_FLOOR_PX)
+        except ValueError:
+            pass
+    return ft
 
 
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands) -> str:

@@ -34,6 +34,7 @@ refinement or the bounce calibration (both model shading).
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -159,7 +160,7 @@ def sphere_views(capture, spheres) -> list[SphereView]:
     capture : ffls.io.capture.Capture
     spheres : list
         Objects with ``center_cam`` and ``radius`` (and, where known, ``center_px``, ``radius_px``,
-        ``residual_px``, ``n_inliers``: :class:`ffls.spheres.detect.SphereFit`).
+        ``residual_px``, ``n_inliers``, ``outline_sigma_px``: :class:`ffls.spheres.detect.SphereFit`).
 
     Returns
     -------
@@ -181,13 +182,18 @@ def sphere_views(capture, spheres) -> list[SphereView]:
             rpx = f * np.tan(np.arcsin(min(R / float(np.linalg.norm(C)), 1.0)))
         proxy = type("Sphere", (), dict(center_px=cpx, radius_px=rpx, center_cam=C, radius=R,
                                         residual_px=getattr(s, "residual_px", 0.0),
-                                        n_inliers=getattr(s, "n_inliers", 0)))
+                                        n_inliers=getattr(s, "n_inliers", 0),
+                                        outline_sigma_px=getattr(s, "outline_sigma_px", 0.0)))
         out.append(SphereView.from_sphere(proxy, model, capture.K, capture.dist, capture.world_from_camera))
     return out
 
 
 def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: list) -> list[SphereKind]:
     """Each sphere's kind: as declared, or for ``'auto'`` classified from the photos' values.
+
+    With 3 photos or more, each pixel's median over the photos is subtracted first: a chrome ball
+    reflects a lit table or room that is as bright as a matte sphere's lit cap, but it stays where it
+    is, while the highlight moves with the light (a matte sphere's lit cap moves as a whole).
 
     Parameters
     ----------
@@ -205,7 +211,12 @@ def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: lis
         if m != "auto":
             out.append(SphereKind(m, "declared"))
             continue
-        stats = [highlight_compactness(s.rows, s.cols, v[k][0]) for v in values]
+        grey = np.stack([np.asarray(v[k][0], dtype=np.float64) for v in values])
+        if len(grey) >= 3:  # the static part (a mirror's reflected room or table) removed: what moves is the light
+            with warnings.catch_warnings():  # a pixel non-finite in every photo stays NaN (then ignored)
+                warnings.simplefilter("ignore", RuntimeWarning)
+                grey = grey - np.nanmedian(grey, axis=0)
+        stats = [highlight_compactness(s.rows, s.cols, g) for g in grey]
         out.append(classify_sphere(stats))
     return out
 

@@ -412,7 +412,8 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         World origin of the light direction.
     model : {'auto', 'distant', 'near'}
     min_spheres : int, optional
-        Usable spheres needed; default ``min(2, len(samples))``.
+        Usable spheres needed; default 2, or 1 when only one sphere can show this light (a mirror
+        sphere with ``no_highlight`` or ``highlight_at_rim`` cannot: the light is behind it).
     sigma_floor_deg : float
         RMS angular error added (in quadrature) to each sphere's 1-sigma uncertainty for what
         the shading model does not capture, in the combination and its consistency tests. The
@@ -454,9 +455,11 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         if image is None:
             raise ValueError("estimate_photo needs an image or its sphere values")
         values = sphere_values(image, samples, saturation=saturation)
-    need = min(2, n_sph) if min_spheres is None else int(min_spheres)
     fits = fit_spheres(samples, values, terminator=terminator, up=up, bounce_ratio=bounce_ratio, start=start,
                        mirrors=mirrors, mirror_floor_deg=mirror_floor_deg)
+    # a mirror that cannot show this light (behind it: no highlight, or one at the rim) is not missing
+    blind = sum(isinstance(f, HighlightFit) and f.status in ("no_highlight", "highlight_at_rim") for f in fits)
+    need = max(min(2, n_sph - blind), 1) if min_spheres is None else int(min_spheres)
     status, ok = _mark_shadowed(fits)
     centers = np.array([s.center for s in samples])
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap
+
 __all__ = ["CRITERIA", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "shading_change", "select_spheres"]
 
 
@@ -163,7 +165,8 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     is then set aside, with a one-line reason, when it is cut by the frame edge (less than
     ``min_visible`` of it inside), its centre is poorly constrained (standard error above
     ``max_center_sigma_px``), it is coloured (``min_neutral``), its shading does not change
-    across the photos as a sphere's does (``min_shading_change``, with at least 3 photos), or its
+    across the photos as a sphere's does (``min_shading_change``, with at least 3 photos; not asked
+    of a mirror ball's outer outline, whose reflected table is brightest in the same photo), or its
     size disagrees with the other spheres' (all spheres share ``sphere_radius``: implied depths
     within ``size_ratio_pinhole``, or apparent radii within ``size_ratio_ortho`` for an
     orthographic camera; the consistent group with the largest total score wins).
@@ -226,7 +229,8 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         elif neutral is not None and neutral < crit["min_neutral"]:
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
                             f" white, grey or chrome sphere")
-        elif (brightest is not None and n_photos >= 3
+        elif (brightest is not None and n_photos >= 3 and ft.source != OUTER_SOURCE  # a mirror shows its room
+              and not dark_cap(L, ft.center_px, ft.radius_px)
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
             rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
                             f" (the same photo is brightest on {1 - chg:.0%} of it)")

@@ -1,0 +1,359 @@
+"""The outer outline of a mirror ball: the silhouette, not the reflected horizon.
+
+A chrome (or black glossy) ball shows its surroundings, not its own shading. Under a hand-held
+light in a room or on a table, the upper part of the ball reflects the dark room or sky, the lower
+part the lit table: in the max image the ball is a dark cap on a bright background whose lower
+boundary is the *reflected horizon*, a curve well inside the silhouette, while the lower part of
+the silhouette (table reflected against the table) has little contrast. A circle fitted to that dark
+cap is too small and too high (on ``ffls synth --sphere-material mirror`` at 384 px: radius 19.9 px
+against 27.2, centre 9 px off), and every light direction from it is tens of degrees wrong.
+
+:func:`enclosing_circle` searches, around such a candidate circle, for the *outermost* circle that
+the edges support: a circle at least ``min_growth`` times larger that encloses the candidate's own
+outline points, is covered by edge points over at least ``min_coverage`` of its in-frame
+circumference, and gains edge points the candidate circle does not have. For a mirror ball the
+upper arc of the dark cap is the silhouette; with the remaining outline points (sides, contact
+shadow) it fixes the outer circle, and the horizon is left inside. A matte sphere's fitted outline
+encloses everything of it, so no larger circle is supported and the candidate stays as it is.
+
+Pure functions on point arrays (pixels, x right, y down); the sphere fit itself (tangent cone or
+circle) stays in :mod:`ffls.spheres.detect`.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+#: ``SphereFit.source`` of a sphere fitted to an outer outline found by :func:`enclosing_circle`.
+OUTER_SOURCE = "auto (outer outline)"
+
+#: Least outline ambiguity of a mirror ball (pixels): the reflected contrasts that give its outline
+#: run 1 to 2 px inside the limb at 384 px (``ffls synth --sphere-material mirror``), and the two
+#: outline estimates can agree by chance (``SphereFit.outline_sigma_px``).
+MIRROR_OUTLINE_FLOOR_PX = 1.0
+
+
+@dataclasses.dataclass
+class OuterCircle:
+    """A circle enclosing a candidate outline (:func:`enclosing_circle`).
+
+    Attributes
+    ----------
+    center : (2,) float
+        Pixels (x, y).
+    radius : float
+        Pixels.
+    inliers : (n,) bool
+        Over the ``points`` given: within ``tol`` of the circle.
+    coverage : float
+        Fraction of the circle's in-frame circumference (5-degree bins) with an inlier.
+    new_fraction : float
+        Fraction of the inliers that are not on the candidate circle (the evidence it adds).
+    """
+
+    center: np.ndarray
+    radius: float
+    inliers: np.ndarray
+    coverage: float
+    new_fraction: float
+
+
+def _circumcircles(p1, p2, p3):
+    """Centres (m, 2) and radii (m,) of the circles through three points each (nan when collinear)."""
+    a = 2 * (p2 - p1)
+    b = 2 * (p3 - p1)
+    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    ra = np.sum(p2 ** 2 - p1 ** 2, axis=1)
+    rb = np.sum(p3 ** 2 - p1 ** 2, axis=1)
+    ok = np.abs(det) > 1e-9
+    det = np.where(ok, det, 1.0)
+    c = np.stack([(ra * b[:, 1] - rb * a[:, 1]) / det, (a[:, 0] * rb - b[:, 0] * ra) / det], axis=1)
+    r = np.where(ok, np.hypot(*(p1 - c).T), np.nan)
+    return c, r
+
+
+def _in_frame_bins(center, radius, shape, n_bins):
+    """(n_bins,) bool: which angular bins of the circle lie inside the image (all when no shape)."""
+    if shape is None:
+        return np.ones(n_bins, bool)
+    H, W = shape
+    t = (np.arange(n_bins) + 0.5) / n_bins * 2 * np.pi - np.pi
+    x = center[0] + radius * np.cos(t)
+    y = center[1] + radius * np.sin(t)
+    return (x >= 0) & (x <= W - 1) & (y >= 0) & (y <= H - 1)
+
+
+def circle_coverage(points, center, radius, tol: float = 1.5, shape=None, n_bins: int = 72) -> float:
+    """Fraction of a circle's in-frame circumference with an edge point within ``tol`` (5-degree bins).
+
+    Parameters
+    ----------
+    points : (n, 2) float
+        Edge points (x, y), pixels.
+    center : (2,) float
+    radius : float
+    tol : float
+        Pixels.
+    shape : (H, W), optional
+        Image size: bins outside the frame are not counted.
+    n_bins : int
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    vis = _in_frame_bins(center, radius, shape, n_bins)
+    if not vis.any() or len(pts) == 0:
+        return 0.0
+    v = pts - center
+    on = np.abs(np.hypot(v[:, 0], v[:, 1]) - radius) <= tol
+    ang = np.arctan2(v[on, 1], v[on, 0])
+    bins = np.floor((ang + np.pi) / (2 * np.pi) * n_bins).astype(int) % n_bins
+    hit = np.zeros(n_bins, bool)
+    hit[bins] = True
+    return float(np.count_nonzero(hit & vis) / np.count_nonzero(vis))
+
+
+def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float = 1.5,
+                     min_growth: float = 1.12, max_growth: float = 2.0, min_coverage: float = 0.5,
+                     min_new: float = 0.3, max_outside: float = 0.05, n_iter: int = 800) -> OuterCircle | None:
+    """The outermost well-supported circle that encloses a candidate circle's outline, or None.
+
+    RANSAC over 3-point samples of the edge points within ``max_growth`` radii of the candidate.
+    A sample circle qualifies when its radius is ``min_growth`` to ``max_growth`` times the
+    candidate's, it contains the candidate's centre, at most ``max_outside`` of the candidate's
+    own outline points (within ``tol`` of the candidate circle) lie more than ``tol`` outside it,
+    at least ``min_new`` of its inliers are off the candidate circle, and its inliers cover at
+    least ``min_coverage`` of its in-frame circumference (:func:`circle_coverage`). Of the
+    qualifying circles the best covered wins (ties: the larger). The result is then refined by an
+    algebraic least-squares circle on its inliers (Kasa), re-checked against the same tests.
+
+    Parameters
+    ----------
+    points : (n, 2) float
+        Edge points (x, y), pixels: every edge of the image (or of the region).
+    center : (2,) float
+        The candidate circle's centre, pixels.
+    radius : float
+        Its radius, pixels.
+    rng : numpy.random.Generator, optional
+        Sampling (default seed 0: deterministic).
+    shape : (H, W), optional
+        Image size, for the in-frame circumference.
+    tol : float
+        Inlier distance, pixels.
+    min_growth, max_growth, min_coverage, min_new, max_outside : float
+        The tests above.
+    n_iter : int
+        RANSAC samples.
+
+    Returns
+    -------
+    OuterCircle or None
+        None when no larger circle qualifies (the candidate is its own outline).
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    c0 = np.asarray(center, dtype=np.float64).reshape(2)
+    r0 = float(radius)
+    if not (np.isfinite(r0) and r0 > 0) or len(pts) < 8:
+        return None
+    d0 = np.hypot(pts[:, 0] - c0[0], pts[:, 1] - c0[1])
+    own = np.abs(d0 - r0) <= tol
+    near = d0 <= max_growth * r0 + 2 * tol
+    P = pts[near]
+    own_pts = pts[own]
+    m = len(P)
+    if m < 8 or len(own_pts) < 3:
+        return None
+    idx = np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
+    idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
+    c, r = _circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
+    ok = np.isfinite(r) & (r >= min_growth * r0) & (r <= max_growth * r0)
+    ok &= np.hypot(c[:, 0] - c0[0], c[:, 1] - c0[1]) < r
+    if not ok.any():
+        return None
+    c, r = c[ok], r[ok]
+
+    def qualifies(cc, rr):
+        d_own = np.hypot(own_pts[:, 0] - cc[0], own_pts[:, 1] - cc[1])
+        if np.mean(d_own > rr + tol) > max_outside:
+            return None
+        d = np.hypot(pts[:, 0] - cc[0], pts[:, 1] - cc[1])
+        inl = np.abs(d - rr) <= tol
+        if inl.sum() < 8:
+            return None
+        new = float(np.mean(~own[inl]))
+        cov = circle_coverage(pts[inl], cc, rr, tol, shape)
+        if new < min_new or cov < min_coverage:
+            return None
+        return OuterCircle(center=np.asarray(cc, dtype=np.float64), radius=float(rr), inliers=inl, coverage=cov,
+                           new_fraction=new)
+
+    # cheap pre-score: inlier counts among the nearby points, then the full tests on the best few
+    dd = np.hypot(P[None, :, 0] - c[:, None, 0], P[None, :, 1] - c[:, None, 1])
+    n_in = np.count_nonzero(np.abs(dd - r[:, None]) <= tol, axis=1)
+    order = np.argsort(-(n_in / r))[:60]
+    best = None
+    for k in order:
+        q = qualifies(c[k], r[k])
+        if q is not None and (best is None or (q.coverage, q.radius) > (best.coverage, best.radius)):
+            best = q
+    if best is None:
+        return None
+    # refine on the inliers (Kasa: x^2 + y^2 = 2 a x + 2 b y + e), re-checked
+    Q = pts[best.inliers]
+    A = np.column_stack([2 * Q[:, 0], 2 * Q[:, 1], np.ones(len(Q))])
+    sol, *_ = np.linalg.lstsq(A, np.sum(Q ** 2, axis=1), rcond=None)
+    cc = sol[:2]
+    rr = float(np.sqrt(max(sol[2] + cc @ cc, 0.0)))
+    if min_growth * r0 <= rr <= max_growth * r0:
+        q = qualifies(cc, rr)
+        if q is not None and q.coverage >= best.coverage - 0.05:
+            best = q
+    return best
+
+
+def radial_steps(log_lum, center, radius, *, r_range=(0.9, 1.3), n_angles: int = 180, step_px: float = 0.25,
+                 min_step: float = 0.02) -> np.ndarray:
+    """Every radial brightness step near a circle, sub-pixel: weak outline points of a mirror ball.
+
+    At its limb a mirror reflects what lies just behind it, so its silhouette against that
+    background is only the step of its reflectance (about 10% for polished chrome in the renders,
+    40% for a real chrome ball), too weak for the image-wide edge thresholds. Along ``n_angles``
+    rays from ``center``, ``log_lum`` is sampled (bilinear) from ``r_range[0]`` to ``r_range[1]``
+    radii; every local maximum of the absolute radial derivative (after a 0.7-pixel Gaussian) that
+    is at least ``min_step`` natural-log units per pixel and 4 times the lower quartile of the
+    absolute derivative (the noise of the flat parts) is an outline point, refined by a parabola through its neighbours.
+
+    Parameters
+    ----------
+    log_lum : (H, W) float
+        Natural log of the luminance (of the max image).
+    center : (2,) float
+        Pixels (x, y).
+    radius : float
+        Pixels.
+    r_range : (2,) float
+        Radii searched, in units of ``radius``.
+    n_angles : int
+    step_px : float
+        Sampling step along the rays, pixels.
+    min_step : float
+        Least derivative, log units per pixel.
+
+    Returns
+    -------
+    (m, 2) float
+        Points (x, y) inside the image.
+    """
+    H, W = log_lum.shape
+    c = np.asarray(center, dtype=np.float64).reshape(2)
+    rs = np.arange(r_range[0] * radius, r_range[1] * radius, step_px)
+    t = np.arange(n_angles) / n_angles * 2 * np.pi
+    u = np.stack([np.cos(t), np.sin(t)], axis=1)
+    xy = c[None, None, :] + rs[None, :, None] * u[:, None, :]  # (A, R, 2)
+    inside = (xy[..., 0] >= 0) & (xy[..., 0] <= W - 1) & (xy[..., 1] >= 0) & (xy[..., 1] <= H - 1)
+    x = np.clip(xy[..., 0], 0, W - 1.000001)
+    y = np.clip(xy[..., 1], 0, H - 1.000001)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    img = np.asarray(log_lum, dtype=np.float64)
+    prof = ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x0 + 1])
+            + fy * ((1 - fx) * img[y0 + 1, x0] + fx * img[y0 + 1, x0 + 1]))
+    k = np.exp(-0.5 * (np.arange(-8, 9) * step_px / 0.7) ** 2)  # 0.7-pixel Gaussian along the ray
+    k /= k.sum()
+    pad = np.pad(prof, ((0, 0), (8, 8)), mode="edge")
+    sm = np.stack([np.convolve(p, k, mode="valid") for p in pad])
+    g = np.abs(np.gradient(sm, step_px, axis=1))
+    g[~inside] = 0.0
+    noise = float(np.percentile(g[inside], 25)) if inside.any() else 0.0  # flat parts: most of a ray is structure
+    thr = max(min_step, 4.0 * noise)
+    peak = (g[:, 1:-1] >= thr) & (g[:, 1:-1] >= g[:, :-2]) & (g[:, 1:-1] > g[:, 2:]) & inside[:, 1:-1]
+    a_i, r_i = np.nonzero(peak)
+    r_i = r_i + 1
+    gm, g0, gp = g[a_i, r_i - 1], g[a_i, r_i], g[a_i, r_i + 1]
+    den = gm - 2 * g0 + gp
+    off = np.where(den < 0, 0.5 * (gm - gp) / np.where(den < 0, den, -1.0), 0.0)
+    r = rs[r_i] + np.clip(off, -0.5, 0.5) * step_px
+    return c[None, :] + r[:, None] * u[a_i]
+
+
+def best_circle(points, r_min, r_max, rng=None, *, tol: float = 1.0, n_iter: int = 600):
+    """The circle (centre (2,), radius, inliers (n,) bool) with most points within ``tol``, radius in range.
+
+    RANSAC over 3-point samples; None when fewer than 8 points or no sample qualifies.
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    m = len(P)
+    if m < 8:
+        return None
+    idx = np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
+    idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
+    c, r = _circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
+    ok = np.isfinite(r) & (r >= r_min) & (r <= r_max)
+    if not ok.any():
+        return None
+    c, r = c[ok], r[ok]
+    d = np.hypot(P[None, :, 0] - c[:, None, 0], P[None, :, 1] - c[:, None, 1])
+    n_in = np.count_nonzero(np.abs(d - r[:, None]) <= tol, axis=1)
+    k = int(np.argmax(n_in))
+    inl = np.abs(np.hypot(P[:, 0] - c[k, 0], P[:, 1] - c[k, 1]) - r[k]) <= tol
+    return c[k], float(r[k]), inl
+
+
+def mirror_silhouette(log_lum, center, radius, rng=None, *, shape=None, min_coverage: float = 0.5,
+                      max_growth: float = 1.25, tol: float = 1.0):
+    """A mirror ball's silhouette near an outer outline: the circle of weak reflectance steps.
+
+    The outline found from the image-wide edges (:func:`enclosing_circle`) follows the reflected
+    room's strongest contrasts, which run just inside the limb (at 384 px the ball's radius came out
+    1.4 px short, its centre 5 cm deep). The steps of :func:`radial_steps` within ``0.9`` to
+    ``max_growth`` radii are fitted by :func:`best_circle` (radius at least 0.97 of the outline's);
+    the result is kept when its inliers cover at least ``min_coverage`` of its in-frame
+    circumference.
+
+    Returns
+    -------
+    (points (m, 2), centre (2,), radius) or None
+        The inlier points (for the sphere fit) and the circle.
+    """
+    pts = radial_steps(log_lum, center, radius, r_range=(0.9, max_growth))
+    bc = best_circle(pts, 0.97 * radius, max_growth * radius, rng, tol=tol)
+    if bc is None:
+        return None
+    c, r, inl = bc
+    if circle_coverage(pts[inl], c, r, tol, shape) < min_coverage:
+        return None
+    return pts[inl], c, r
+
+
+def dark_cap(lum, center, radius, ratio: float = 0.7) -> bool:
+    """Whether a circle looks like a mirror ball's dark cap: darker inside than just around it.
+
+    A chrome ball under a hand-held light reflects the dark room above the table: in the max image
+    the cap (inside 0.7 radii) is darker than the ring just outside (1.15 to 1.4 radii), whose
+    median it must stay below ``ratio`` times. A sphere's lit cap or a highlight is brighter than its
+    surroundings; only a dark cap is grown to an outer outline (:func:`enclosing_circle`).
+
+    Parameters
+    ----------
+    lum : (H, W) float
+        Luminance of the max image.
+    center : (2,) float
+    radius : float
+    ratio : float
+    """
+    H, W = lum.shape
+    cx, cy = float(center[0]), float(center[1])
+    R = 1.4 * float(radius)
+    x0, x1 = max(int(np.floor(cx - R)), 0), min(int(np.ceil(cx + R)) + 1, W)
+    y0, y1 = max(int(np.floor(cy - R)), 0), min(int(np.ceil(cy + R)) + 1, H)
+    if x1 <= x0 or y1 <= y0:
+        return False
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d = np.hypot(xx - cx, yy - cy) / float(radius)
+    crop = np.asarray(lum, dtype=np.float64)[y0:y1, x0:x1]
+    inside, ring = crop[d <= 0.7], crop[(d >= 1.15) & (d <= 1.4)]
+    if inside.size < 5 or ring.size < 5:
+        return False
+    return bool(np.median(inside) < ratio * np.median(ring))

@@ -1,0 +1,117 @@
+"""A chrome ball is found by its silhouette, not by the reflected horizon (ffls.spheres.mirror_outline).
+
+Renders of ``ffls synth`` (a mirror ball on a lit grey table, the sky black): in the max image the
+ball is a dark cap whose lower boundary is the reflected horizon, well inside the silhouette.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ffls.io.capture import load_capture
+from ffls.radiance.photos import load_photo
+from ffls.spheres.detect import extreme_images, find_spheres_in_capture
+from ffls.spheres.mirror_outline import OUTER_SOURCE, circle_coverage, dark_cap, enclosing_circle
+from ffls.synth.photo import PhotoSettings
+from ffls.synth.scene import make_scene, write_synthetic_capture
+
+#: a few lights of the paper's grid (theta, phi in degrees), the upper hemisphere of the world (z up)
+LIGHTS_DEG = [(10, 0), (30, 60), (40, 140), (50, 200), (60, 280), (25, 320), (45, 20), (35, 100)]
+
+
+def _dirs():
+    t, p = np.radians(np.array(LIGHTS_DEG, dtype=np.float64)).T
+    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=1)
+
+
+def _capture(folder, materials, n_spheres, with_object=True, res=320):
+    scene = make_scene(spheres=n_spheres, sphere_material=materials, with_object=with_object)
+    write_synthetic_capture(folder, directions=_dirs(), resolution=res, scene=scene, progress=False,
+                            photo=PhotoSettings(file_format="png8", curve="srgb", exposure=3.0))
+    return json.loads((folder / "truth.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def mirror_capture(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("mirror")
+    return folder, _capture(folder, "mirror", 1)
+
+
+def test_enclosing_circle_on_arcs():
+    """The dark cap's outline (top arc of the silhouette + a flatter horizon) grows to the silhouette;
+    a closed circle with nothing around it stays as it is."""
+    rng = np.random.default_rng(3)
+    c, R = np.array([100.0, 100.0]), 30.0
+    t = np.radians(np.arange(-160, -19, 2.0))  # upper arc of the silhouette (y down: negative sin is up)
+    top = c + R * np.stack([np.cos(t), np.sin(t)], axis=1)
+    horizon_x = np.linspace(top[0, 0], top[-1, 0], 40)
+    horizon = np.stack([horizon_x, np.full_like(horizon_x, c[1] - 0.1 * R)], axis=1)  # the reflected horizon
+    t2 = np.radians(np.arange(40, 141, 3.0))  # lower arc: the contact shadow's edge against the ball
+    bottom = c + R * np.stack([np.cos(t2), np.sin(t2)], axis=1)
+    pts = np.concatenate([top, horizon, bottom]) + rng.normal(0, 0.2, (len(top) + len(horizon) + len(bottom), 2))
+    # the circle through the cap alone (what the max-image fit locks onto)
+    cap_c, cap_r = np.array([100.0, 84.0]), 20.0
+    oc = enclosing_circle(pts, cap_c, cap_r, rng, shape=(200, 200))
+    assert oc is not None
+    assert np.hypot(*(oc.center - c)) < 0.5 and abs(oc.radius - R) < 0.5
+    assert oc.coverage >= 0.5 and circle_coverage(pts, c, R) >= 0.5
+    # a complete circle with nothing larger around it: no outer outline
+    full = c + R * np.stack([np.cos(np.radians(np.arange(0, 360, 3.0))), np.sin(np.radians(np.arange(0, 360, 3.0)))], 1)
+    assert enclosing_circle(full, c, R, rng, shape=(200, 200)) is None
+
+
+def test_mirror_ball_found_by_its_silhouette(mirror_capture):
+    """One chrome ball, no hints: the centre within 1 px of the truth (the dark cap's circle was 9 px off)."""
+    folder, truth = mirror_capture
+    sp = find_spheres_in_capture(load_capture(folder))
+    assert len(sp) == 1
+    t = truth["spheres"][0]
+    assert np.hypot(*(np.asarray(sp[0].center_px) - t["center_px"])) < 1.0
+    assert sp[0].source == OUTER_SOURCE
+    # the radius comes out a little short (the reflected contrasts run just inside the limb): at most 8%
+    assert abs(sp[0].radius_px / t["radius_px_from_area"] - 1) < 0.08
+    assert 0 < sp[0].outline_sigma_px < 2.0
+
+
+def test_mirror_ball_lights_without_hints(mirror_capture):
+    """``ffls lights``' estimate on the chrome ball with no hints: classified a mirror, every photo
+    within 10 degrees (at 320 px; the dark cap's circle gave 20-70), the 95% cones covering the truth."""
+    from ffls.conventions import angle_between
+    from ffls.spheres.estimate import estimate_lights
+
+    folder, truth = mirror_capture
+    out = estimate_lights(load_capture(folder), progress=False, workers=1)
+    ok = np.array([s == "ok" for s in out.status])
+    assert ok.sum() >= len(ok) - 1
+    err = np.degrees(angle_between(np.asarray(out.directions)[ok], np.asarray(truth["directions"])[ok]))
+    assert err.max() < 10.0
+    cones = np.array([e["uncertainty_deg"] for e, o in zip(out.extra, ok) if o], dtype=np.float64)
+    assert np.mean(err <= cones) >= 7 / 8
+    assert all(e["spheres"][0]["kind"] == "mirror" for e, o in zip(out.extra, ok) if o)
+
+
+def test_matte_sphere_keeps_its_outline(tmp_path):
+    """A grey matte ball is no dark cap: no outer outline is taken, the centre stays right."""
+    truth = _capture(tmp_path, "grey", 1, res=256)
+    cap = load_capture(tmp_path)
+    sp = find_spheres_in_capture(cap)
+    assert len(sp) == 1 and sp[0].source != OUTER_SOURCE
+    assert np.hypot(*(np.asarray(sp[0].center_px) - truth["spheres"][0]["center_px"])) < 1.0
+    mx, _, _, _ = extreme_images(load_photo(cap, i) for i in range(len(cap.image_paths)))
+    L = mx.mean(axis=2)
+    assert not dark_cap(L, sp[0].center_px, sp[0].radius_px)
+
+
+@pytest.mark.xfail(strict=True, reason="open (issue 9): with the noise-based Canny threshold of the textured-ground fix, "
+                   "the chrome ball's direct outline fit (radius 16.2 px against 15.1, centre 1.38 px off) wins over "
+                   "its outer-outline fit (0.33 px off on the branch without that threshold); docs/spheres.md")
+def test_calibration_shot_grey_and_mirror(tmp_path):
+    """Calibration shot, no object: the grey and the chrome ball are both found, each at its silhouette."""
+    truth = _capture(tmp_path, ["grey", "mirror"], 2, with_object=False)
+    sp = find_spheres_in_capture(load_capture(tmp_path))
+    assert len(sp) == 2
+    for t in truth["spheres"]:
+        d = min(np.hypot(*(np.asarray(f.center_px) - t["center_px"])) for f in sp)
+        assert d < 1.0, (t["material"], d)
