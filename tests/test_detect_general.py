@@ -239,3 +239,17 @@ def test_only_sphere_cropped_too_much_is_named_in_the_error(tmp_path):
     with pytest.raises(InputError, match=r"no sphere found.*cropped too much, only 54%.*center_px") as e:
         detect.find_spheres(ds.render(scene, LIGHTS, "grey"), K, None, 0.04, source=tmp_path)
     assert "\n" not in str(e.value)
+
+
+def test_pinhole_capture_without_sphere_radius_is_one_line(tmp_path):
+    """A capture with no sphere_radius (e.g. the object shots of a calibration pair) names capture.json."""
+    from ffls.io.capture import load_capture
+    from ffls.spheres.detect import find_spheres_in_capture
+    from ffls.synth.scene import make_scene, write_synthetic_capture
+
+    write_synthetic_capture(tmp_path, n_lights=3, resolution=32, scene=make_scene(spheres=0), progress=False)
+    cap = load_capture(tmp_path)
+    assert cap.sphere_radius is None
+    with pytest.raises(InputError, match="no sphere_radius") as e:
+        find_spheres_in_capture(cap)
+    assert "capture.json" in str(e.value)

@@ -1377,6 +1377,10 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
             depths.add(ph.bit_depth)
             yield ph.linear
 
+    if getattr(capture, "camera_model", "pinhole") != "orthographic" and capture.sphere_radius is None:
+        raise InputError("has no sphere_radius: finding the spheres with a pinhole camera needs their radius "
+                         "(world units; or \"camera\": {\"model\": \"orthographic\"} for a long lens)",
+                         capture.json_path)
     it = photos()
     if progress is not None:
         it = progress(it, total=n)
