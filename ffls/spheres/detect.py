@@ -58,7 +58,8 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
 from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
-from ffls.spheres.mirror_outline import MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, dark_cap, enclosing_circle, mirror_silhouette
+from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circumcircles, dark_cap,
+                                         enclosing_circle, mirror_silhouette)
 
 __all__ = [
     "SphereFit",
@@ -578,17 +579,9 @@ def _ransac_circle(pts, r_expected, rng, n_iter=300, tol=1.5):
         np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
     if m >= 6:  # drop samples with a repeated point
         idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
-    p1, p2, p3 = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
-    a = 2 * (p2 - p1)
-    b = 2 * (p3 - p1)
-    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    ra = np.sum(p2 ** 2 - p1 ** 2, axis=1)
-    rb = np.sum(p3 ** 2 - p1 ** 2, axis=1)
-    ok = np.abs(det) > 1e-9
-    det = np.where(ok, det, 1.0)
-    c = np.stack([(ra * b[:, 1] - rb * a[:, 1]) / det, (a[:, 0] * rb - b[:, 0] * ra) / det], axis=1)
-    r = np.hypot(*(p1 - c).T)
-    ok &= (r >= 0.6 * r_expected) & (r <= 1.4 * r_expected)
+    c, r = circumcircles(pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]])
+    ok = np.isfinite(r)
+    ok[ok] = (r[ok] >= 0.6 * r_expected) & (r[ok] <= 1.4 * r_expected)
     if not ok.any():
         return None
     c, r = c[ok], r[ok]

@@ -59,7 +59,7 @@ class OuterCircle:
     new_fraction: float
 
 
-def _circumcircles(p1, p2, p3):
+def circumcircles(p1, p2, p3):
     """Centres (m, 2) and radii (m,) of the circles through three points each (nan when collinear)."""
     a = 2 * (p2 - p1)
     b = 2 * (p3 - p1)
@@ -166,7 +166,7 @@ def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float
         return None
     idx = np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
     idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
-    c, r = _circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
+    c, r = circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
     ok = np.isfinite(r) & (r >= min_growth * r0) & (r <= max_growth * r0)
     ok &= np.hypot(c[:, 0] - c0[0], c[:, 1] - c0[1]) < r
     if not ok.any():
@@ -289,7 +289,7 @@ def best_circle(points, r_min, r_max, rng=None, *, tol: float = 1.0, n_iter: int
         return None
     idx = np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
     idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
-    c, r = _circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
+    c, r = circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
     ok = np.isfinite(r) & (r >= r_min) & (r <= r_max)
     if not ok.any():
         return None
