@@ -539,10 +539,18 @@ def test_usage_error_is_one_line(capfd):
 
 
 # ----------------------------------------------------------------------------- interruptions
+def _default_sigint():
+    # a child of a background job inherits SIGINT ignored (the shell's rule for asynchronous
+    # commands), and Python then installs no KeyboardInterrupt handler: give it the default back,
+    # as a terminal's foreground job has it
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _child(argv, cwd, **kw):
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONUNBUFFERED="1")
     return subprocess.Popen([sys.executable, "-m", "ffls", *map(str, argv)], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint, **kw)
 
 
 def _wait_for(pred, timeout=60.0):
