@@ -266,3 +266,26 @@ def test_lights_record_round_trip_and_validation(tmp_path):
         _one_line(e.value, "lights.json")
         with pytest.raises(ValueError):
             cap.Lights(["a.png"], [[0, 0, 1.0]], encoding=bad)
+
+
+def test_gamma_files_on_a_grey_ground_are_calibrated(tmp_path):
+    """Gamma-2.2 8-bit photos of grey balls on a grey ground, made without ffls.synth: the stored values
+    compress the contrast so far that no candidate survives detection on them; the spheres are then
+    searched on the values decoded as sRGB, and the gamma is calibrated (not taken from that search)."""
+    import detect_scenes as ds
+
+    sc = ds.layout(3, shape=(240, 320), f=400.0, R=0.04, seed=3)
+    for b in sc.balls:
+        b.albedo = (0.45, 0.45, 0.45)
+    imgs = ds.render(sc, ds.lights(24, seed=1), background="grey", noise=0.004, seed=2)
+    imgs = np.clip(imgs / np.percentile(imgs, 99.5) * 0.9, 0, 1)
+    names = []
+    for i, im in enumerate(imgs):
+        names.append(f"p{i:02d}.png")
+        write_png(tmp_path / names[-1], np.rint(gamma_encode(im, 2.2) * 255).astype(np.uint8))
+    (tmp_path / "capture.json").write_text(json.dumps({
+        "format": "ffls-capture", "version": 1, "images": names, "camera": {"K": sc.K.tolist()},
+        "sphere_radius": 0.04}))
+    calibration, spheres = calibrate_capture_encoding(cap.load_capture(tmp_path))
+    assert len(spheres) == 3
+    assert calibration.curve == "gamma" and abs(calibration.gamma - 2.2) <= max(calibration.uncertainty, 0.05)

@@ -492,8 +492,18 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
         raise InputError(f"the images are {first.bit_depth} floating point, linear by definition: nothing to "
                          "calibrate", capture.image_paths[0])
     if spheres is None:
-        # the stored values as they are: the outlines (edges) survive any monotone curve
-        spheres = find_spheres_in_capture(replace(capture, encoding="linear"))
+        # The outlines survive a monotone curve, but the detection's thresholds (edge noise, shading
+        # ratio) are set for radiance: a curve that compresses contrast (gamma-encoded files on a
+        # grey ground) can hide every candidate. Search the stored values, then the same values
+        # decoded as sRGB, which undoes most of a camera's compression; this only finds the
+        # spheres, the encoding is still calibrated from them below.
+        try:
+            spheres = find_spheres_in_capture(replace(capture, encoding="linear"))
+        except InputError as first_error:
+            try:
+                spheres = find_spheres_in_capture(replace(capture, encoding="srgb"))
+            except InputError:
+                raise first_error from None
     h, w = first.shape
     samples = capture_samples(capture, spheres, (h, w))
     it = range(len(capture))
