@@ -37,7 +37,7 @@ from ffls.conventions import angle_between
 from ffls.synth.scene import write_synthetic_capture
 
 from bench_lights import grid  # benchmarks/bench_lights.py
-from common import host_info, write_json  # benchmarks/common.py
+from common import cached_capture, host_info, write_json  # benchmarks/common.py
 
 #: name -> ``ffls synth OUT`` flags (the lights are the Table 1 grid).
 CONDITIONS = {
@@ -79,11 +79,7 @@ def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
 
 def run_condition(name: str, flags: list, res: int, dirs: np.ndarray, folder: Path) -> dict:
     folder = Path(folder)
-    if not (folder / "truth.json").exists():
-        render(folder, flags, res, dirs)
-    truth = json.loads((folder / "truth.json").read_text())
-    if not np.allclose(np.asarray(truth["directions"]), dirs, atol=1e-9):
-        raise SystemExit(f"{folder} holds another grid; remove it or use another --cache")
+    truth = cached_capture(folder, dirs, lambda f: render(f, flags, res, dirs))
     out = folder / "lights_estimated.json"
     stdout, stderr = io.StringIO(), io.StringIO()
     t0 = time.perf_counter()

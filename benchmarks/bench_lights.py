@@ -35,7 +35,7 @@ from ffls.spheres.samples import sphere_values
 from ffls.synth.scene import SynthScene, write_synthetic_capture
 from ffls.radiance.photos import load_photo
 
-from common import host_info, print_error_table, write_json  # benchmarks/common.py
+from common import cached_capture, host_info, print_error_table, write_json  # benchmarks/common.py
 
 CONFIGS = {
     "distant_grey": dict(light_model="distant", ground_albedo=0.3),
@@ -63,14 +63,9 @@ def grid(phi_step, theta_step):
 
 def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detect", refine=True):
     folder = Path(folder)
-    if (folder / "truth.json").exists():  # a cached render (--cache) of the same grid
-        old = np.asarray(json.loads((folder / "truth.json").read_text())["directions"])
-        if old.shape != dirs.shape or not np.allclose(old, dirs, atol=1e-9):
-            raise SystemExit(f"{folder} holds another grid; remove it or use another --cache")
-    else:
-        write_synthetic_capture(folder, resolution=res, directions=dirs, progress=False, **cfg)
+    truth = cached_capture(folder, dirs, lambda f: write_synthetic_capture(f, resolution=res, directions=dirs,
+                                                                          progress=False, **cfg))
     cap = load_capture(folder)
-    truth = json.loads((Path(folder) / "truth.json").read_text())
     M = np.linalg.inv(cap.world_from_camera)
     if spheres == "detect":
         from ffls.spheres.detect import find_spheres_in_capture

@@ -96,6 +96,23 @@ def write_json(path, doc, indent: int = 1) -> Path:
     return out
 
 
+def cached_capture(folder, directions, render) -> dict:
+    """The ``truth.json`` of a synthetic capture in ``folder`` under ``directions`` (n, 3).
+
+    Calls ``render(folder)`` when the folder holds no capture yet (no ``--cache``, or a new one);
+    a cached capture of other directions stops the benchmark (remove it or use another cache).
+    """
+    folder = Path(folder)
+    truth_file = folder / "truth.json"
+    if truth_file.exists():
+        old = np.asarray(json.loads(truth_file.read_text())["directions"])
+        if old.shape != np.shape(directions) or not np.allclose(old, directions, atol=1e-9):
+            raise SystemExit(f"{folder} holds another grid; remove it or use another --cache")
+    else:
+        render(folder)
+    return json.loads(truth_file.read_text())
+
+
 def print_error_table(errors_deg, phis, thetas) -> None:
     """Print per-light errors (degrees; None = rejected) as a Markdown table, phi rows x theta columns."""
     print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")
