@@ -1352,14 +1352,17 @@ def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_
     return new
 
 
-def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None) -> Spheres:
+def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None,
+                            extremes=None) -> Spheres:
     """:func:`find_spheres` on a loaded :class:`ffls.io.capture.Capture`, using its whole sequence.
 
     Uses ``capture.K``, ``.dist``, ``.camera_model``, ``.sphere_radius``, ``.spheres`` (hints),
     ``.sphere_count`` (``n_spheres`` when not given), ``.world_from_camera``, ``.scene_center``
     and the max (and brightest-photo index, :func:`extreme_images`) over ``read_photo(capture, i)`` for all photos (streamed: one image in
     memory at a time). ``progress`` is an optional wrapper such as ``tqdm.tqdm`` (called as
-    ``progress(iterable, total=n)``).
+    ``progress(iterable, total=n)``). ``extremes``, when given, is that reduction already made
+    (``(max, brightest, mean, n, bit_depths)``, e.g. :func:`ffls.spheres.estimate.decode_photos`):
+    no photo is read.
     """
     n = len(capture.image_paths)
     depths = set()
@@ -1374,10 +1377,14 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
         raise InputError("has no sphere_radius: finding the spheres with a pinhole camera needs their radius "
                          "(world units; or \"camera\": {\"model\": \"orthographic\"} for a long lens)",
                          capture.json_path)
-    it = photos()
-    if progress is not None:
-        it = progress(it, total=n)
-    mx, brightest, mean, n_img = extreme_images(it) if n else (None, None, None, 0)
+    if extremes is not None:
+        mx, brightest, mean, n_img, found_depths = extremes
+        depths.update(found_depths)
+    else:
+        it = photos()
+        if progress is not None:
+            it = progress(it, total=n)
+        mx, brightest, mean, n_img = extreme_images(it) if n else (None, None, None, 0)
     if mx is None:
         raise InputError("capture lists no images", capture.folder)
     hints = getattr(capture, "spheres", None) or None

@@ -62,6 +62,8 @@ __all__ = [
     "refine_sphere_centres",
     "refit_spheres",
     "calibrate_uncertainty",
+    "DecodedPhotos",
+    "decode_photos",
     "estimate_photos",
     "estimate_lights",
     "estimate_lights_MasselusDutreAnrys2002",
@@ -406,6 +408,200 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
     return replace(result, spheres=spheres)
 
 
+# ----------------------------------------------------------------------------- decoding once
+#: Largest share of the available memory that :func:`decode_photos` keeps decoded photos in.
+DECODED_MEMORY_SHARE = 0.25
+#: Luminance weights of :func:`decode_photos`' reductions (Rec. 709, as the sphere detection's).
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass
+class DecodedPhotos:
+    """A capture's photos decoded once (:func:`decode_photos`): what the sphere detection needs of
+    them, and (memory permitting) the decoded photos themselves for the first pass.
+
+    Attributes
+    ----------
+    max_image : (H, W, 3) float32
+        Per-pixel maximum over the photos (non-finite values as 0).
+    brightest : (H, W) int32
+        Index of the photo of highest luminance at each pixel (the first on ties).
+    mean_luminance : (H, W) float64
+    n : int
+    bit_depths : set
+        The photos' stored bit depths.
+    linear : (n, H, W, 3) float32 or None
+        The linear photos, in memory shared with the worker processes (None: over the budget,
+        the first pass decodes them again).
+    raw : (n, H, W, 3) uint8 or uint16, or None
+        Integer photos' stored codes (what :func:`ffls.spheres.samples.sphere_values` reads for
+        saturation); None for float photos or when ``linear`` is None.
+    """
+
+    max_image: np.ndarray
+    brightest: np.ndarray
+    mean_luminance: np.ndarray
+    n: int
+    bit_depths: set
+    linear: np.ndarray | None = None
+    raw: np.ndarray | None = None
+
+    def extremes(self) -> tuple:
+        """``(max_image, brightest, mean_luminance, n, bit_depths)`` for
+        :func:`ffls.spheres.detect.find_spheres_in_capture` ``extremes``."""
+        return self.max_image, self.brightest, self.mean_luminance, self.n, self.bit_depths
+
+    def photo(self, i: int):
+        """Photo ``i`` as ``(linear, raw, bit_depth)`` from memory, or None where not kept."""
+        if self.linear is None:
+            return None
+        depth = next(iter(self.bit_depths)) if len(self.bit_depths) == 1 else None
+        if depth is None:
+            return None
+        return self.linear[i], (None if self.raw is None else self.raw[i]), depth
+
+
+def _available_memory() -> int:
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 0
+
+
+def _shared_array(shape, dtype) -> np.ndarray:
+    """A zeroed array in anonymous shared memory: written by forked worker processes, seen here."""
+    import mmap
+
+    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    return np.frombuffer(mmap.mmap(-1, max(nbytes, 1)), dtype=dtype, count=int(np.prod(shape))).reshape(shape)
+
+
+@dataclass
+class _DecodeContext:
+    capture: object
+    shape: tuple
+    linear: np.ndarray | None
+    raw: np.ndarray | None
+
+
+_decode_context: _DecodeContext | None = None
+
+
+def _set_decode_context(context: _DecodeContext) -> None:
+    global _decode_context
+    _decode_context = context
+
+
+def _decode_range(bounds: tuple[int, int]):
+    """Decode photos ``start..stop-1`` (into the shared arrays where kept) and reduce them:
+    ``(start, max, best luminance, brightest index, luminance sum, bit depths)``."""
+    from ffls.radiance.photos import read_photo
+
+    ctx = _decode_context
+    start, stop = bounds
+    mx = best = idx = total = None
+    depths = set()
+    for i in range(start, stop):
+        ph = read_photo(ctx.capture, i)
+        if ph.linear.shape != ctx.shape:
+            raise InputError(f"image is {ph.linear.shape[1]}x{ph.linear.shape[0]}, the capture's first is "
+                             f"{ctx.shape[1]}x{ctx.shape[0]}: every photo must have the same size",
+                             ctx.capture.image_paths[i])
+        depths.add(ph.bit_depth)
+        if ctx.linear is not None:
+            ctx.linear[i] = ph.linear
+            if ctx.raw is not None:
+                top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
+                ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
+        im = np.nan_to_num(ph.linear, nan=0.0, posinf=0.0, neginf=0.0)
+        lum = (im.astype(np.float64) @ _LUMA).astype(np.float32)
+        if mx is None:
+            mx, best, idx, total = im.copy(), lum, np.full(lum.shape, i, np.int32), lum.astype(np.float64)
+        else:
+            np.maximum(mx, im, out=mx)
+            up = lum > best
+            idx[up] = i
+            best[up] = lum[up]
+            total += lum
+    return start, mx, best, idx, total, depths
+
+
+def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=None) -> DecodedPhotos:
+    """Decode every photo of ``capture`` once: the reductions the sphere detection needs and,
+    within :data:`DECODED_MEMORY_SHARE` of the available memory, the photos for the first pass.
+
+    Chunks of photos are decoded and reduced in ``workers`` processes (forked: they write the
+    photos into shared memory) and their reductions merged in order, so the result is the same as
+    :func:`ffls.spheres.detect.extreme_images` over the sequence.
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+    workers : int
+    keep : bool
+        Keep the decoded photos (within the budget).
+    progress_bar : tqdm, optional
+        Advanced by one per photo.
+
+    Returns
+    -------
+    DecodedPhotos
+
+    Raises
+    ------
+    InputError
+        An unreadable photo, or one whose size differs from the first one's.
+    """
+    from ffls.radiance.photos import read_photo
+
+    n = len(capture.image_paths)
+    if n == 0:
+        raise InputError("capture lists no images", capture.json_path)
+    first = read_photo(capture, 0)
+    shape = first.linear.shape
+    integer = first.bit_depth in (8, 16)
+    per_photo = first.linear.nbytes + (first.linear.size * (1 if first.bit_depth == 8 else 2) if integer else 0)
+    linear = raw = None
+    if keep and n * per_photo <= DECODED_MEMORY_SHARE * _available_memory():
+        linear = _shared_array((n,) + shape, np.float32)
+        if integer:
+            raw = _shared_array((n,) + shape, np.uint8 if first.bit_depth == 8 else np.uint16)
+    context = _DecodeContext(capture, shape, linear, raw)
+    workers = max(1, min(int(workers), n))
+    size = max(1, -(-n // (2 * workers)))  # two chunks per worker
+    chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
+    parts = []
+    if workers == 1:
+        _set_decode_context(context)
+        try:
+            for c in chunks:
+                parts.append(_decode_range(c))
+                if progress_bar is not None:
+                    progress_bar.update(c[1] - c[0])
+        finally:
+            _set_decode_context(None)
+    else:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=workers, initializer=_set_decode_context, initargs=(context,)) as ex:
+            for part, c in zip(ex.map(_decode_range, chunks), chunks):
+                parts.append(part)
+                if progress_bar is not None:
+                    progress_bar.update(c[1] - c[0])
+    _, mx, best, idx, total, depths = parts[0]
+    for _, mx_k, best_k, idx_k, total_k, depths_k in parts[1:]:  # in order: the first photo wins ties
+        np.maximum(mx, mx_k, out=mx)
+        up = best_k > best
+        idx[up] = idx_k[up]
+        best[up] = best_k[up]
+        total += total_k
+        depths |= depths_k
+    if linear is not None and len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
+        linear = raw = None
+    return DecodedPhotos(max_image=mx, brightest=idx, mean_luminance=total / n, n=n, bit_depths=depths,
+                         linear=linear, raw=raw)
+
+
 # ----------------------------------------------------------------------------- running the photo fits
 class _PhotoTask(NamedTuple):
     """One photo's fit: its values (None: read photo ``index`` of the capture), the imposed
@@ -426,6 +622,7 @@ class _FitContext:
     samples: list[SphereSamples]
     scene_center: np.ndarray
     options: dict  # estimate_photo keyword arguments (model, min_spheres, sigma_floor_deg, ...)
+    decoded: DecodedPhotos | None = None  # photos decoded once (shared memory), else read here
 
 
 #: The context of the photo fits running in this process (set by :func:`_set_context`).
@@ -443,9 +640,12 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
     ctx = _context
     values, read = task.values, task.values is None
     if read:
-        photo = read_photo(ctx.capture, task.index)
-        values = sphere_values(photo.linear, ctx.samples, saturation=ctx.options.get("saturation"), raw=photo.raw,
-                               bit_depth=photo.bit_depth)
+        kept = None if ctx.decoded is None else ctx.decoded.photo(task.index)
+        if kept is None:
+            photo = read_photo(ctx.capture, task.index)
+            kept = (photo.linear, photo.raw, photo.bit_depth)
+        values = sphere_values(kept[0], ctx.samples, saturation=ctx.options.get("saturation"), raw=kept[1],
+                               bit_depth=kept[2])
         values = [SphereValues(v.grey.astype(np.float32), v.valid, v.n_saturated) for v in values]
     est = estimate_photo(None, ctx.samples, ctx.scene_center, values=values, bounce_ratio=task.bounce_ratio,
                          start=task.start, joint=task.joint, **ctx.options)
@@ -455,8 +655,9 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
 class _PhotoFitter:
     """Runs a pass's photo fits in this process (``workers == 1``) or in a pool of processes."""
 
-    def __init__(self, capture, scene_center, options: dict, workers: int = 1, progress_bar=None):
-        self.capture, self.scene_center, self.options = capture, scene_center, options
+    def __init__(self, capture, scene_center, options: dict, workers: int = 1, progress_bar=None,
+                 decoded: DecodedPhotos | None = None):
+        self.capture, self.scene_center, self.options, self.decoded = capture, scene_center, options, decoded
         self.workers, self.progress_bar = max(1, int(workers)), progress_bar
 
     def advance(self, n: int) -> None:
@@ -466,7 +667,7 @@ class _PhotoFitter:
     def run(self, tasks: list[_PhotoTask], samples: list[SphereSamples],
             counted: bool = True) -> list[tuple[PhotoEstimate, list | None]]:
         """:func:`_run_photo_task` for every task, in order; ``counted`` advances the progress bar."""
-        context = _FitContext(self.capture, samples, self.scene_center, self.options)
+        context = _FitContext(self.capture, samples, self.scene_center, self.options, self.decoded)
         out = []
         if self.workers == 1 or len(tasks) == 1:
             _set_context(context)
@@ -611,7 +812,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
 
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
-                    refine_options: dict | None = None, **kwargs):
+                    refine_options: dict | None = None, decoded: DecodedPhotos | None = None, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -638,6 +839,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         (:func:`refine_sphere_centres`) and repeat the first pass with the new centres.
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
+    decoded : DecodedPhotos, optional
+        The photos decoded once (:func:`decode_photos`, which the sphere detection also used):
+        the first pass reads them from memory. Made here when ``spheres`` is None.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``).
@@ -675,14 +879,19 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     n = len(capture.image_names)
     if n == 0:
         raise InputError("capture lists no images", capture.json_path)
+    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if spheres is None:
         from ffls.spheres.detect import find_spheres_in_capture
 
-        spheres = find_spheres_in_capture(capture)
+        if decoded is None:
+            decoded = decode_photos(capture, workers)
+        spheres = find_spheres_in_capture(capture, extremes=decoded.extremes())
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
     if capture.image_size is not None:
         shape = (int(capture.image_size[1]), int(capture.image_size[0]))
+    elif decoded is not None:
+        shape = decoded.max_image.shape[:2]
     else:
         shape = load_photo(capture, 0).shape[:2]
     samples = capture_samples(capture, spheres, shape)
@@ -690,14 +899,13 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
     materials = sphere_materials(capture, len(spheres))
     views = sphere_views(capture, spheres)
-    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        fitter = _PhotoFitter(capture, capture.scene_center, dict(model=model, **kwargs), workers, bar)
+        fitter = _PhotoFitter(capture, capture.scene_center, dict(model=model, **kwargs), workers, bar, decoded)
         est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
                         refine_options=refine_options, materials=materials, views=views, where=capture.json_path)
     finally:

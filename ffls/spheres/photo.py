@@ -29,7 +29,7 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.stats import chi2 as chi2_distribution
+from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse (scipy.stats imports slowly)
 
 from ffls.conventions import UP, normalize
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
@@ -334,13 +334,13 @@ def fit_light_model(spheres: list[int], fits: list, centers: np.ndarray, sigma_f
                           chi2=chi_d, dof=dof_d, position=None, p=1.0)
     # a near fit can only lower chi2 to >= 0: when chi2 of the distant model is below the LR
     # threshold, the near model cannot be significant and is not fitted
-    threshold = chi2_distribution.ppf(1 - SIGNIFICANCE, 1)
+    threshold = chdtri(1, SIGNIFICANCE)
     if len(spheres) >= 2 and (model == "near" or (model == "auto" and chi_d > threshold)):
         conv = fit_ray_convergence(ray_origins(spheres, fits, centers), dirs, unc, scene_center)
         if conv.position is not None and (model == "near" or chi_d - conv.chi2 > threshold):
             out.model, out.direction, out.chi2, out.dof, out.position = (
                 "near", conv.direction, conv.chi2, conv.dof, conv.position)
-    out.p = 1.0 if out.dof == 0 else float(chi2_distribution.sf(out.chi2, out.dof))
+    out.p = 1.0 if out.dof == 0 else float(chdtrc(out.dof, out.chi2))
     return out
 
 

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize
-from scipy.stats import chi2 as chi2_distribution
+from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse (scipy.stats imports slowly)
 
 from ffls.conventions import normalize, tangent_basis
 
@@ -74,7 +74,7 @@ __all__ = [
 #: Confidence level of a reported cone.
 CONFIDENCE = 0.95
 #: Radius of the 95% cone in per-axis standard deviations: ``sqrt(chi2.ppf(0.95, 2))``.
-CONE_FACTOR = float(np.sqrt(chi2_distribution.ppf(CONFIDENCE, 2)))
+CONE_FACTOR = float(np.sqrt(chdtri(2, 1.0 - CONFIDENCE)))
 #: Assumed upper bound of the correlation between two spheres' systematic errors (module docstring).
 COMMON_CORRELATION = 0.25
 #: Per-axis standard deviation (degrees) of the common-mode error of even perfectly agreeing spheres.
@@ -346,7 +346,7 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         res = minimize(objective, np.clip(x0, lo, hi), args=(keep,), method="L-BFGS-B",
                        bounds=list(zip(lo, hi)))
         x = res.x
-        p = chi2_distribution.sf(terms(x)[1], 2 * (k_all - 1))
+        p = chdtrc(2 * (k_all - 1), terms(x)[1])
         new_keep = p >= trim
         if np.array_equal(new_keep, keep):
             break
