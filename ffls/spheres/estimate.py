@@ -49,7 +49,7 @@ from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estima
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values)
-from ffls.spheres.uncertainty import ErrorModel, fit_error_model, photo_residuals
+from ffls.spheres.uncertainty import ErrorModel, centre_floor_deg, fit_error_model, photo_residuals
 
 __all__ = [
     "BOUNCE_MODES",
@@ -281,6 +281,7 @@ def calibrate_bounce(results: list[PhotoEstimate], n_spheres: int, max_sigma: fl
 
 
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
+                          refinements: list[CentreRefinement] | None = None,
                           **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
@@ -296,7 +297,11 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     ----------
     results : list of PhotoEstimate
     samples : list of SphereSamples
-        The spheres (their world centres, for near lights).
+        The spheres (their world centres, for near lights; their pixel radii).
+    refinements : list of CentreRefinement, optional
+        Per sphere, its photometric centre refinement: an accepted one measures the centre's
+        uncertainty (outline against shading), propagated to the sphere's direction
+        (:func:`ffls.spheres.uncertainty.centre_floor_deg`) as a known part of its variance.
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -306,7 +311,11 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     results : list of PhotoEstimate
     """
     centers = np.array([s.center for s in samples])
-    residuals, sigmas = [], []
+    centre = np.zeros(len(samples))
+    for k, (s, ref) in enumerate(zip(samples, refinements or [])):
+        if ref is not None and ref.accepted:
+            centre[k] = centre_floor_deg(ref.shift_px, s.radius_px)
+    residuals, sigmas, used_all = [], [], []
     for r in results:
         if not r.ok or len(r.used_spheres) < 2:
             continue
@@ -318,7 +327,8 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         residuals.append(photo_residuals(np.array(dirs), r.direction, r.position if near else None,
                                          centers[used] if near else None))
         sigmas.append(np.array([r.spheres[i].fit.uncertainty_deg for i in used]) / np.sqrt(2.0))
-    model = fit_error_model(residuals, sigmas, **kwargs)
+        used_all.append(np.asarray(used))
+    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre, **kwargs)
     return model, [r.with_error_model(model) for r in results]
 
 
@@ -747,7 +757,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                 results = [refit_spheres(r, samples, v, refinements, terminator=terminator, up=up)
                            for r, v in zip(results, values)]
     if bounce == "free":
-        error_model, results = calibrate_uncertainty(results, samples)
+        error_model, results = calibrate_uncertainty(results, samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
@@ -763,7 +773,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
             for i, r in zip(pending, refit(pending, None, counted=False)):
                 results[i] = r
         fitter.advance(n_photos)
-    error_model, results = calibrate_uncertainty(results, samples)
+    error_model, results = calibrate_uncertainty(results, samples, refinements)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds)
 
 

@@ -161,6 +161,10 @@ class PhotoEstimate:
         is the ray intersection.
     joint_sigma_deg : float
         1-sigma RMS angular error of the near light's joint fit statistics (0 otherwise).
+    weights : list of float or None
+        The used spheres' weights in the combination (inverse variances of
+        :func:`sphere_uncertainty_deg`): the photo's variance under an error model is that of
+        this weighted mean (:meth:`with_error_model`).
     """
 
     status: str
@@ -175,6 +179,7 @@ class PhotoEstimate:
     dof: int | None = None
     joint_pending: bool = False
     joint_sigma_deg: float = 0.0
+    weights: list[float] | None = None
 
     @property
     def ok(self) -> bool:
@@ -184,19 +189,21 @@ class PhotoEstimate:
         """This estimate with its 95% cones (photo and spheres) under ``model``.
 
         The photo's per-axis standard deviation is :meth:`ErrorModel.photo_sigma_deg` of its used
-        spheres' 1-sigma fits (and at least the near light's joint fit statistics, scaled); each
+        spheres' 1-sigma fits, combined with the weights the photo's direction was made with (and
+        at least the near light's joint fit statistics, scaled); each
         sphere with a direction gets the cone of its own direction
         (:meth:`ErrorModel.sphere_sigma_deg` plus the common mode).
         """
         stat = {i: s.fit.uncertainty_deg / np.sqrt(2.0) for i, s in enumerate(self.spheres)
                 if s.direction is not None and np.isfinite(s.fit.uncertainty_deg)}
-        spheres = [replace(s, uncertainty_deg=float(cone_deg(np.hypot(model.sphere_sigma_deg(stat[i]),
+        spheres = [replace(s, uncertainty_deg=float(cone_deg(np.hypot(model.sphere_sigma_deg(stat[i], i),
                                                                        model.common_deg)))
                            if i in stat else None) for i, s in enumerate(self.spheres)]
         unc = self.uncertainty_deg
         if self.ok:
             used = [stat.get(i, np.inf) for i in self.used_spheres]
-            sigma = model.photo_sigma_deg(np.asarray(used)) if used else float("inf")
+            sigma = (model.photo_sigma_deg(np.asarray(used), self.used_spheres, self.weights) if used
+                     else float("inf"))
             sigma = max(sigma, model.scale * self.joint_sigma_deg / np.sqrt(2.0))
             unc = float(cone_deg(sigma))
         return replace(self, spheres=spheres, uncertainty_deg=unc)
@@ -496,5 +503,6 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
                          position=None if position is None else np.asarray(position, dtype=np.float64),
                          model=hyp.model, used_spheres=[int(i) for i in used],
                          spheres=[SphereResult(f, st) for f, st in zip(fits, status)], chi2=float(hyp.chi2),
-                         dof=int(hyp.dof), joint_pending=pending,
-                         joint_sigma_deg=float(joint_sigma)).with_error_model(FALLBACK_MODEL)
+                         dof=int(hyp.dof), joint_pending=pending, joint_sigma_deg=float(joint_sigma),
+                         weights=[float(sphere_uncertainty_deg(fits[i], sigma_floor_deg)) ** -2 for i in used]
+                         ).with_error_model(FALLBACK_MODEL)
