@@ -13,7 +13,11 @@ image covers both passes and the sphere pixel extraction, not the image decoding
 and writes ``benchmarks/results/bench_lights.json``.
 
     python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--cache DIR]
-        [--spheres detect|truth] [--no-refine]
+        [--spheres detect|truth] [--no-refine] [--end-to-end WORKERS]
+
+``--end-to-end WORKERS`` also times the whole command ``ffls lights CAPTURE --workers WORKERS``
+in a new process (imports, decoding once, sphere detection, both passes, writing lights.json):
+the throughput a user sees, in photos per second of wall time.
 """
 from __future__ import annotations
 
@@ -102,6 +106,25 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     }
 
 
+def end_to_end(folder, workers: int, n: int) -> dict:
+    """Wall and CPU time (this process's children) of ``ffls lights FOLDER --workers WORKERS`` as a
+    user runs it (a new Python process), and photos per second of wall time."""
+    import resource
+    import subprocess
+    import sys
+
+    out = os.path.join(folder, "lights_end_to_end.json")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "ffls.cli", "lights", str(folder), "-o", out, "--workers", str(workers),
+                    "--no-progress"], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"end_to_end_s": wall, "end_to_end_cpu_s": cpu, "end_to_end_photos_per_s": n / wall,
+            "end_to_end_workers": workers}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=768)
@@ -113,6 +136,9 @@ def main(argv=None):
                     help="find the spheres automatically (the real pipeline) or take the true centres")
     ap.add_argument("--no-refine", action="store_true", help="no photometric refinement of the sphere centres")
     ap.add_argument("--cache", default=None, help="keep (and reuse) the renders in this folder")
+    ap.add_argument("--end-to-end", type=int, default=0, metavar="WORKERS",
+                    help="also time the whole command `ffls lights CAPTURE --workers WORKERS` (a new process: "
+                         "imports, decoding, detection, both passes, writing) and report photos/s")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_lights.json"))
     a = ap.parse_args(argv)
     phis, thetas, dirs = grid(a.phi_step, a.theta_step)
@@ -122,6 +148,10 @@ def main(argv=None):
             base = a.cache or tmp
             r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(base, f"{name}_{a.res}"), a.bounce,
                            a.spheres, not a.no_refine)
+            if a.end_to_end:
+                r.update(end_to_end(os.path.join(base, f"{name}_{a.res}"), a.end_to_end, r["n"]))
+                print(f"{name}: ffls lights --workers {a.end_to_end}: {r['end_to_end_s']:.2f} s wall, "
+                      f"{r['end_to_end_photos_per_s']:.1f} photos/s ({r['end_to_end_cpu_s']:.2f} s CPU)", flush=True)
             rows.append(r)
             tgt = TARGETS.get(name)
             print(f"{name:22s} spheres={a.spheres} refine={not a.no_refine} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "

@@ -18,8 +18,9 @@ Masselus, Dutre, Anrys, "The Free-form Light Stage", EGWR 2002, section 5. Per p
 A sphere is matte or a mirror (chrome, black glossy): a mirror sphere's step 1 is its
 highlight (:func:`ffls.spheres.highlight.fit_highlight`, the RTI highlight method), whose
 direction and RMS uncertainty enter steps 2 and 3 like a matte sphere's; its near-light ray starts
-at the highlight's reflection point. The joint near fit (step 4) needs shading, so a photo whose
-used spheres include a mirror keeps the ray intersection.
+at the highlight's reflection point. In the joint near fit (step 4) a mirror's ray is a residual
+beside the matte spheres' pixels (:func:`ffls.spheres.combine.fit_near_light_mixed`), and the
+position's covariance carries into the cone.
 
 Rejection reasons (:data:`REASONS`) are short fixed strings stored in ``lights.json``.
 """
@@ -32,7 +33,7 @@ import numpy as np
 from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse (scipy.stats imports slowly)
 
 from ffls.conventions import UP, normalize
-from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
+from ffls.spheres.combine import combine_distant, fit_near_light, fit_near_light_mixed, fit_ray_convergence
 from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView, fit_highlight_samples
 from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
@@ -485,13 +486,23 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         status[outlier] = OUTLIER
     used = hyp.spheres
     direction, position, joint_sigma = hyp.direction, hyp.position, 0.0
-    # the joint fit models shading: with a mirror sphere among the used, the ray intersection stays
+    # the joint fit: matte spheres' shading; with mirror spheres among the used, their reflected
+    # rays join the same least-squares problem (fit_near_light_mixed)
     shading_only = all(isinstance(fits[i], LambertFit) for i in used)
-    pending = hyp.model == "near" and not joint and shading_only
-    if hyp.model == "near" and joint and shading_only:
-        jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
-                            [near_fit_mask(fits[i]) for i in used], position,
-                            terms=_near_terms([fits[i] for i in used]), terminator=terminator, up=up)
+    pending = hyp.model == "near" and not joint
+    if hyp.model == "near" and joint:
+        matte = [i for i in used if isinstance(fits[i], LambertFit)]
+        if shading_only:
+            jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
+                                [near_fit_mask(fits[i]) for i in used], position,
+                                terms=_near_terms([fits[i] for i in used]), terminator=terminator, up=up)
+        else:
+            rays = [(fits[i].point, fits[i].direction, np.radians(fits[i].uncertainty_deg) / np.sqrt(2.0))
+                    for i in used if i not in matte]
+            jf = fit_near_light_mixed([samples[i] for i in matte], [values[i][0] for i in matte],
+                                      [near_fit_mask(fits[i]) for i in matte], position, rays,
+                                      terms=_near_terms([fits[i] for i in matte]),
+                                      inflation=[fits[i].inflation for i in matte], terminator=terminator, up=up)
         if not (jf.success and np.all(np.isfinite(jf.position))):
             return rejected("fit_failed", direction)
         position = jf.position
