@@ -520,3 +520,31 @@ def test_fit_lambert_clipped_black_floor_is_censored_by_the_model():
     assert clipped > 0
     assert np.mean(errs) < 0.15, errs
     assert np.mean(errs) < 0.6 * np.mean(errs_by_value), (errs, errs_by_value)
+
+
+def test_near_fit_mixed_matte_pixels_and_mirror_rays(samples):
+    """Two matte spheres' pixels and two mirror rays (exact, from points on the other two spheres)
+    in one least-squares problem: the position is found from a start 20 cm off, its covariance is
+    finite, and rays alone (no matte sphere) triangulate it with a covariance that scales with
+    their stated deviation."""
+    from ffls.spheres.combine import fit_near_light_mixed
+
+    S = SCENE_CENTER + 2.0 * light(40, 30)
+    v = sphere_values(render(position=S), samples[:2])
+    fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples[:2], v)]
+    points = [CENTERS[k] + R_SPH * normalize(S - CENTERS[k]) for k in (2, 3)]
+    sig = np.radians(0.3) / np.sqrt(2.0)
+    rays = [(p, normalize(S - p), sig) for p in points]
+    start = S + np.array([0.2, -0.1, 0.1])
+    fit = fit_near_light_mixed(samples[:2], [x[0] for x in v], [near_fit_mask(f) for f in fits], start, rays,
+                               inflation=[f.inflation for f in fits])
+    assert fit.success and np.all(np.isfinite(fit.cov))
+    assert np.linalg.norm(fit.position - S) < 0.1
+    assert np.degrees(angle_between(fit.position - SCENE_CENTER, S - SCENE_CENTER)) < 0.3
+    # rays only: exact rays meet at S; twice the stated deviation, twice the position's sd
+    rays3 = rays + [(CENTERS[0] + R_SPH * normalize(S - CENTERS[0]), normalize(S - CENTERS[0] - R_SPH
+                                                                            * normalize(S - CENTERS[0])), sig)]
+    a = fit_near_light_mixed([], [], [], start, rays3)
+    b = fit_near_light_mixed([], [], [], start, [(p, d, 2 * s) for p, d, s in rays3])
+    assert a.success and np.linalg.norm(a.position - S) < 1e-3
+    assert np.sqrt(np.trace(b.cov)) == pytest.approx(2 * np.sqrt(np.trace(a.cov)), rel=0.05)
