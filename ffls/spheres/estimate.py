@@ -332,8 +332,14 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     return model, [r.with_error_model(model) for r in results]
 
 
+def _refine_one(args) -> CentreRefinement:
+    """:func:`ffls.spheres.refine.refine_sphere_centre` of one sphere (a picklable task)."""
+    sample, vals, dirs, terminator, kwargs = args
+    return refine_sphere_centre(sample, vals, dirs, terminator=terminator, **kwargs)
+
+
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
-                          terminator: float = 0.15, **kwargs) -> tuple[list[SphereSamples], list, list]:
+                          terminator: float = 0.15, map_fn=map, **kwargs) -> tuple[list[SphereSamples], list, list]:
     """Refine every sphere's centre from the first-pass shading of all photos.
 
     :func:`ffls.spheres.refine.refine_sphere_centre` per sphere (photos where that sphere's fit
@@ -348,6 +354,9 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
     values : list
         Per photo, its :func:`ffls.spheres.samples.sphere_values` for ``samples``.
     terminator : float
+    map_fn : callable
+        ``map``-like: runs the spheres' refinements (independent of each other), e.g. in a pool
+        of processes.
     **kwargs
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
 
@@ -359,14 +368,16 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         Per photo, the values for the new samples.
     refinements : list of CentreRefinement
     """
-    new_samples, kept, refinements = [], [], []
+    new_samples, kept = [], []
+    tasks = []
     for k, s in enumerate(samples):
         dirs = []
         for r in results:
             sp = r.spheres[k] if r.spheres else None
             dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
-        ref = refine_sphere_centre(s, [v[k] for v in values], dirs, terminator=terminator, **kwargs)
-        refinements.append(ref)
+        tasks.append((s, [v[k] for v in values], dirs, terminator, kwargs))
+    refinements = list(map_fn(_refine_one, tasks))
+    for s, ref in zip(samples, refinements):
         if ref.accepted:
             s2, idx = recentre_samples(s, ref.center)
             new_samples.append(s2)
@@ -670,6 +681,16 @@ class _PhotoFitter:
         self.capture, self.scene_center, self.options, self.decoded = capture, scene_center, options, decoded
         self.workers, self.progress_bar = max(1, int(workers)), progress_bar
 
+    def map(self, fn, items) -> list:
+        """``[fn(x) for x in items]``, in the pool of processes when there are several workers and items."""
+        items = list(items)
+        if self.workers == 1 or len(items) < 2:
+            return [fn(x) for x in items]
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=min(self.workers, len(items))) as ex:
+            return list(ex.map(fn, items))
+
     def advance(self, n: int) -> None:
         if self.progress_bar is not None:
             self.progress_bar.update(n)
@@ -749,7 +770,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     refinements = None
     if refine_centres:
         samples, values, refinements = refine_sphere_centres(samples, results, values, terminator=terminator,
-                                                             **(refine_options or {}))
+                                                             map_fn=fitter.map, **(refine_options or {}))
         if any(r.accepted for r in refinements):
             if bounce == "free":
                 results = refit(range(n_photos), None, counted=False)
