@@ -534,8 +534,13 @@ def _decode_range(bounds: tuple[int, int]):
             if ctx.raw is not None:
                 top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
                 ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
-        im = np.nan_to_num(ph.linear, nan=0.0, posinf=0.0, neginf=0.0)
-        lum = (im.astype(np.float64) @ _LUMA).astype(np.float32)
+        im = ph.linear
+        if not np.isfinite(im).all():
+            im = np.nan_to_num(im, nan=0.0, posinf=0.0, neginf=0.0)
+        # float32 luminance (the detection's extreme_images rounds a float64 one to float32: the
+        # same but for the last bit, which decides only exact near-ties of the brightest photo)
+        lum = im[..., 0] * np.float32(_LUMA[0]) + im[..., 1] * np.float32(_LUMA[1]) + im[..., 2] * np.float32(_LUMA[2]) \
+            if im.ndim == 3 and im.shape[2] >= 3 else im.reshape(im.shape[:2]).astype(np.float32)
         if mx is None:
             mx, best, idx, total = im.copy(), lum, np.full(lum.shape, i, np.int32), lum.astype(np.float64)
         else:
@@ -552,8 +557,8 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     within :data:`DECODED_MEMORY_SHARE` of the available memory, the photos for the first pass.
 
     Chunks of photos are decoded and reduced in ``workers`` processes (forked: they write the
-    photos into shared memory) and their reductions merged in order, so the result is the same as
-    :func:`ffls.spheres.detect.extreme_images` over the sequence.
+    photos into shared memory) and their reductions merged in order: the result is that of
+    :func:`ffls.spheres.detect.extreme_images` over the sequence (the luminance in float32).
 
     Parameters
     ----------
@@ -633,6 +638,7 @@ class _PhotoTask(NamedTuple):
     bounce_ratio: list | None = None
     start: list | None = None
     joint: bool = True
+    refit: tuple | None = None  # (first-pass estimate, refinements): refit_spheres instead of a fit
 
 
 @dataclass
@@ -659,6 +665,9 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
     """Fit one photo in the current context; returns its estimate and, where the photo was read
     here, its sphere values (grey float32: kept in memory for the later passes)."""
     ctx = _context
+    if task.refit is not None:
+        return refit_spheres(task.refit[0], ctx.samples, task.values, task.refit[1],
+                             terminator=ctx.options.get("terminator", 0.15), up=ctx.options.get("up", UP)), None
     values, read = task.values, task.values is None
     if read:
         kept = None if ctx.decoded is None else ctx.decoded.photo(task.index)
@@ -774,9 +783,10 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         if any(r.accepted for r in refinements):
             if bounce == "free":
                 results = refit(range(n_photos), None, counted=False)
-            else:  # only what the bounce calibration reads (cheap: in this process)
-                results = [refit_spheres(r, samples, v, refinements, terminator=terminator, up=up)
-                           for r, v in zip(results, values)]
+            else:  # only what the bounce calibration reads: the recentred spheres' fits
+                results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, refit=(r, refinements))
+                                                     for i, (r, v) in enumerate(zip(results, values))],
+                                                    samples, counted=False)]
     if bounce == "free":
         error_model, results = calibrate_uncertainty(results, samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds)
