@@ -33,9 +33,9 @@ import numpy as np
 
 from ffls.io.capture import load_capture
 from ffls.conventions import angle_between, spherical_to_direction
-from ffls.spheres.estimate import capture_samples, estimate_photos
+from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_views
 from ffls.spheres.samples import sphere_values
-from ffls.synth.scene import SynthScene, write_synthetic_capture
+from ffls.synth.scene import SynthScene, make_scene, write_synthetic_capture
 from ffls.radiance.photos import load_photo
 
 from common import cached_capture, host_info, print_error_table, write_json  # benchmarks/common.py
@@ -51,6 +51,10 @@ CONFIGS = {
     "distant_grey_1sphere": dict(light_model="distant", scene=SynthScene(sphere_xy=((0.25, -0.25),), ground_albedo=0.3)),
     "near_grey_1sphere": dict(light_model="near", light_distance=2.0, light_radius=0.05,
                               scene=SynthScene(sphere_xy=((0.25, -0.25),), ground_albedo=0.3)),
+    # white, grey, chrome and black glossy balls under a near light (as `ffls synth --near 2
+    # --light-radius 0.05 --sphere-material mixed`): the joint near fit of matte pixels and mirror rays
+    "near_mixed": dict(light_model="near", light_distance=2.0, light_radius=0.05,
+                       scene=make_scene(sphere_material="mixed")),
 }
 TARGETS = {"distant_grey": (1.0, 0.5), "near_grey": (2.5, 1.0)}
 
@@ -82,7 +86,16 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     imgs = [load_photo(cap, i) for i in range(len(dirs))]
     t = time.perf_counter()
     vals = [sphere_values(im, samples) for im in imgs]
-    result = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine)
+    if spheres == "detect":
+        from ffls.io.capture import sphere_materials
+
+        materials = sphere_materials(cap, len(sph))
+    else:  # the renderer's materials: chrome and black glossy balls are mirrors
+        materials = ["mirror" if t.get("material") in ("mirror", "glossy_black") else "matte"
+                     for t in truth.get("spheres", [{}] * len(sph))]
+    views = sphere_views(cap, sph) if any(m != "matte" for m in materials) else None
+    result = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine,
+                             materials=materials, views=views)
     dt = (time.perf_counter() - t) / len(imgs)
     res_, refs = result.photos, result.refinements or []
     calib = None if result.calibration is None else [dataclasses.asdict(c) for c in result.calibration]

@@ -548,3 +548,58 @@ def test_near_fit_mixed_matte_pixels_and_mirror_rays(samples):
     b = fit_near_light_mixed([], [], [], start, [(p, d, 2 * s) for p, d, s in rays3])
     assert a.success and np.linalg.norm(a.position - S) < 1e-3
     assert np.sqrt(np.trace(b.cov)) == pytest.approx(2 * np.sqrt(np.trace(a.cov)), rel=0.05)
+
+
+def _png_capture(folder, n=5, shape=(24, 32), encoding="linear", seed=0):
+    import json
+
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    names = []
+    for i in range(n):
+        q = rng.integers(0, 256, (*shape, 3), dtype=np.uint8)
+        q[0, 0] = 255  # a saturated pixel
+        names.append(f"p{i}.png")
+        cv2.imwrite(str(folder / names[-1]), q)
+    K = [[40.0, 0, (shape[1] - 1) / 2], [0, 40.0, (shape[0] - 1) / 2], [0, 0, 1]]
+    (folder / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": names,
+                                                     "camera": {"K": K}, "sphere_radius": 0.04,
+                                                     "encoding": encoding}))
+    return names
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_decode_photos_once_matches_reading_them(tmp_path, workers):
+    """decode_photos gives the detection's reductions (as extreme_images over the photos) and keeps
+    the decoded photos (linear values and stored codes) that the first pass would read."""
+    from ffls.io.capture import load_capture
+    from ffls.radiance.photos import read_photo
+    from ffls.spheres.detect import extreme_images
+    from ffls.spheres.estimate import decode_photos
+
+    _png_capture(tmp_path)
+    cap = load_capture(tmp_path)
+    d = decode_photos(cap, workers=workers)
+    mx, idx, mean, n = extreme_images(read_photo(cap, i).linear for i in range(5))
+    assert d.n == n == 5 and d.bit_depths == {8}
+    assert np.array_equal(d.max_image, mx) and np.array_equal(d.brightest, idx)
+    assert np.allclose(d.mean_luminance, mean, rtol=1e-6, atol=1e-7)
+    for i in range(5):
+        ph = read_photo(cap, i)
+        lin, raw, depth = d.photo(i)
+        assert depth == 8 and np.array_equal(lin, ph.linear)
+        assert np.array_equal(raw, np.rint(ph.raw * 255).astype(np.uint8))
+
+
+def test_decode_photos_names_a_photo_of_another_size(tmp_path):
+    import cv2
+
+    from ffls.io.capture import load_capture
+    from ffls.spheres.estimate import decode_photos
+
+    names = _png_capture(tmp_path)
+    cv2.imwrite(str(tmp_path / names[3]), np.zeros((20, 32, 3), np.uint8))
+    with pytest.raises(InputError) as e:
+        decode_photos(load_capture(tmp_path), workers=1)
+    assert names[3] in str(e.value.path) and "same size" in str(e.value)
