@@ -17,10 +17,13 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    with two or more spheres, the spheres' directions must agree up to their errors. Their
    scatter about the photo's light measures the per-sphere error that the fit statistics do not
    see (:func:`fit_error_model`): a scale ``s`` of the statistical standard deviations and an
-   added per-sphere floor ``tau`` (per axis), ``var_i = s^2 sigma_i^2 + tau^2``, by restricted
-   maximum likelihood (the photo's direction is estimated from the same spheres, Patterson &
-   Thompson 1971) over all photos, trimmed: photos whose scatter is improbable under the fitted
-   model (``p < 1e-3``) are left out and the fit repeated.
+   added per-sphere floor ``tau`` (per axis), ``var_i = s^2 sigma_i^2 + g_i^2 + tau^2``, by
+   restricted maximum likelihood (the photo's direction is estimated from the same spheres,
+   Patterson & Thompson 1971) over all photos, trimmed: photos whose scatter is improbable under
+   the fitted model at a family-wise level (``p < 1e-3 / n_photos``) are left out and the fit
+   repeated. ``g_i`` is the sphere's centre uncertainty propagated to its direction
+   (:func:`centre_floor_deg`: the outline and the shading place the centre ``shift`` apart), a
+   known part of its variance.
 3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
    (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
    assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
@@ -36,8 +39,8 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
    (:data:`FALLBACK_MODEL`).
 
-The photo's per-axis standard deviation is that of the inverse-variance mean of its spheres plus
-the common mode; the cone is ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` times it (a per-axis Gaussian on
+The photo's per-axis standard deviation is that of the weighted mean its direction was made with
+(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus the common mode; the cone is ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` times it (a per-axis Gaussian on
 the tangent plane: the squared angle over the per-axis variance is chi-square with 2 degrees of
 freedom).
 
