@@ -25,7 +25,7 @@ import numpy as np
 
 from ffls.conventions import normalize
 from ffls.errors import InputError
-from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix, solve_sources
+from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix, neighbour_edges, solve_sources
 from ffls.probes.sources import HOUGEN_AHUJA_SIZES, model_sources, sources_to_latlong
 
 __all__ = ["SourceFit", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals"]
@@ -94,7 +94,8 @@ def check_normals(normals) -> np.ndarray:
 
 
 def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True, nonnegative: bool = False,
-                 rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full") -> SourceFit:
+                 rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full",
+                 smoothness: float = 0.0) -> SourceFit:
     """Recover model-source intensities from a diffuse object's pixels (Hougen and Ahuja 1993).
 
     Parameters
@@ -110,10 +111,12 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
         The model sources: a size for :func:`ffls.probes.sources.model_sources` (5, 9, 17: rings
         on the hemisphere around ``axis``; anything else: a geodesic sphere of about that size),
         or explicit directions (their domain is then ``hemisphere``).
-    ambient : bool
-        Fit the free ambient term.
+    ambient : bool or {'free', 'nonnegative'}
+        Fit the ambient term: ``True``/``'free'`` leaves it unconstrained (the paper; it may come
+        out negative, and the map with it), ``'nonnegative'`` constrains it too when
+        ``nonnegative`` is set (then every texel of the map is >= 0), ``False`` leaves it out.
     nonnegative : bool
-        Constrain the source intensities to be non-negative (NNLS); the ambient stays free.
+        Constrain the source intensities to be non-negative (NNLS).
     rcond : float, optional
         Unconstrained only: truncate singular values below ``rcond`` x the largest (needed
         for large source sets, whose plain least-squares system is singular).
@@ -121,6 +124,10 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
         Pole of the ring sets (5, 9, 17 sources), whose map then covers that hemisphere only.
     hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
         Domain of geodesic or explicit sources.
+    smoothness : float
+        Optional first-difference penalty between neighbouring sources
+        (:func:`ffls.probes.linear.solve_sources`); 0 is the paper's plain fit. It makes large
+        source sets well posed and fills the directions behind the object from their neighbours.
 
     Returns
     -------
@@ -146,8 +153,12 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
     # the model is linear in the irradiance; fit irradiance = pi I / rho (per-pixel albedo allowed)
     target = np.pi * b / rho
     M = lambert_matrix(n, dirs)
+    if ambient not in (True, False, "free", "nonnegative"):
+        raise ValueError(f"ambient must be True, False, 'free' or 'nonnegative', not {ambient!r}")
     sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond,
-                        what=f"{dirs.shape[0]} sources{' + ambient' if ambient else ''}")
+                        what=f"{dirs.shape[0]} sources{' + ambient' if ambient else ''}",
+                        smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 else None,
+                        ambient_nonnegative=ambient == "nonnegative")
     rendered = sol.predicted * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))

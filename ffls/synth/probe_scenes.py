@@ -210,7 +210,8 @@ def cast_shadow_scene(lightmap, resolution: int = 64, extent: float = 1.0, box_c
     if specular is not None:
         h = normalize(d[None, :, :] + view[:, None, :])
         alpha = np.arccos(np.clip(h[..., 2], -1.0, 1.0))
-        resp = resp + float(specular["ks"]) * np.exp(-alpha ** 2 / (2.0 * float(specular["sigma"]) ** 2))
+        cos_r = view[:, 2:3]
+        resp = resp + float(specular["ks"]) / cos_r * np.exp(-alpha ** 2 / (2.0 * float(specular["sigma"]) ** 2))
     box = Box(tuple(lo), tuple(hi), Material((0.5, 0.5, 0.5)), 1)
     origin = pts + np.array([0.0, 0.0, 1e-9])
     vis = np.empty((pts.shape[0], d.shape[0]), dtype=bool)
