@@ -49,6 +49,7 @@ __all__ = [
     "box_visibility",
     "mesh_visibility",
     "occluder_visibility",
+    "shadow_kernel",
     "dome_nodes",
     "sato_sato_ikeuchi",
     "estimate_lighting_SatoSatoIkeuchi1999",
@@ -235,6 +236,57 @@ def occluder_visibility(points, directions, occluder) -> np.ndarray:
     return mesh_visibility(points, directions, occluder)
 
 
+def shadow_kernel(directions, visibility, plane_normal, case: str = "lambertian", albedo=1.0, view_dirs=None,
+                  specular: dict | None = None) -> np.ndarray:
+    """The linear model of a shadow image: ``I[x, c] = sum_i K[x, i, c] E[i, c]``.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Unit node directions.
+    visibility : (m, n) array_like of bool
+        Occlusion coefficients ``S(x, i)``.
+    plane_normal : (3,) array_like
+    case : {'lambertian', 'torrance_sparrow', 'ratio'}
+        For ``'ratio'`` the kernel is ``cos(theta_i) S`` and predicts ``I / I_surface`` from
+        ``E / E_0``.
+    albedo : float, (3,), (m,) or (m, 3) array_like
+        Unused by ``'ratio'``.
+    view_dirs : (m, 3) array_like
+        ``'torrance_sparrow'``: unit directions to the camera.
+    specular : dict
+        ``'torrance_sparrow'``: ``{'ks': , 'sigma': }``.
+
+    Returns
+    -------
+    (m, n, 3) float64
+    """
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    V = np.asarray(visibility, dtype=np.float64)
+    m = V.shape[0]
+    nrm = normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))
+    cos_i = np.maximum(d @ nrm, 0.0)
+    if case == "ratio":
+        return np.repeat((cos_i[None, :] * V)[:, :, None], 3, axis=2)
+    rho = broadcast_albedo(albedo, m)
+    K = (cos_i[None, :] * V)[:, :, None] * (rho[:, None, :] / np.pi)
+    if case == "torrance_sparrow":
+        if view_dirs is None or specular is None:
+            raise InputError("the Torrance-Sparrow case needs view directions and the specular "
+                             "parameters {'ks', 'sigma'}")
+        v = normalize(np.asarray(view_dirs, dtype=np.float64).reshape(m, 3))
+        cos_r = v @ nrm
+        if np.any(cos_r <= 0):
+            raise InputError("the camera sees the receiver from behind")
+        h = normalize(d[None, :, :] + v[:, None, :])
+        alpha = np.arccos(np.clip(h @ nrm, -1.0, 1.0))
+        spec = float(specular["ks"]) / cos_r[:, None] * np.exp(-alpha ** 2 / (2.0 * float(specular["sigma"]) ** 2))
+        K = K + (spec * (cos_i[None, :] > 0) * V)[:, :, None]
+    elif case != "lambertian":
+        raise ValueError(f"case must be one of {CASES}, not {case!r}")
+    return K
+
+
 def sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0), nodes=521, case: str = "lambertian",
                       albedo=1.0, surface_radiance=None, view_dirs=None, specular: dict | None = None,
                       nonnegative: bool = True, smoothness: float = 0.0, reference_albedo: float = 1.0,
@@ -313,59 +365,32 @@ def sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0), 
         if np.any(s <= 0):
             raise InputError("the surface image has pixels <= 0 where the receiver is seen")
         target = b / s
-        M = cos_i[None, :] * V
-        weight = None
     else:
-        rho = broadcast_albedo(albedo, m)
-        f = cos_i[None, :] / np.pi * np.ones((m, 1))
-        if case == "torrance_sparrow":
-            if view_dirs is None or specular is None:
-                raise InputError("the Torrance-Sparrow case needs view directions and the specular "
-                                 "parameters {'ks', 'sigma'}")
-            v = normalize(np.asarray(view_dirs, dtype=np.float64).reshape(m, 3))
-            cos_r = v @ nrm
-            if np.any(cos_r <= 0):
-                raise InputError("the camera sees the receiver from behind")
-            h = normalize(dirs[None, :, :] + v[:, None, :])
-            alpha = np.arccos(np.clip(h @ nrm, -1.0, 1.0))
-            spec = float(specular["ks"]) / cos_r[:, None] * np.exp(-alpha ** 2 / (2.0 * float(specular["sigma"]) ** 2))
-            spec = spec * (cos_i[None, :] > 0)
-        else:
-            spec = 0.0
-        # per channel: I_c = sum_i (rho_c / pi cos_i + spec) S E_ic; the albedo varies per channel,
-        # so divide it out of the diffuse part when it is the same for all pixels per channel.
-        weight = rho
-        M = None
-        diffuse = f * V
-        specular_part = spec * V if case == "torrance_sparrow" else None
+        target = b
+    K = shadow_kernel(dirs, V, nrm, case, albedo, view_dirs, specular)
     edges = neighbour_edges(dirs) if smoothness > 0 else None
     what = f"{dirs.shape[0]} dome nodes"
+    x = np.zeros((dirs.shape[0], 3))
+    pred = np.empty((m, 3))
+    conds, ranks = [], []
+    observed = None
+    same = bool(np.all(K == K[:, :, :1]))
+    for chans in ([0, 1, 2],) if same else ([0], [1], [2]):
+        sol = solve_sources(K[:, :, chans[0]], target[:, chans], None, nonnegative, None if nonnegative else 1e-8,
+                            what, smoothness, edges)
+        x[:, chans] = sol.x
+        pred[:, chans] = sol.predicted
+        conds.append(sol.condition)
+        ranks.append(sol.rank)
+        observed = sol.observed
+    cond, rank = max(conds), min(ranks)
     if case == "ratio":
-        sol = solve_sources(M, target, None, nonnegative, None if nonnegative else 1e-8, what, smoothness, edges)
-        x = sol.x
         e0 = np.pi * np.mean(s, axis=0) / float(reference_albedo)
         intensities = x * e0
-        rendered = sol.predicted * s
-        cond, rank, observed = sol.condition, sol.rank, sol.observed
+        rendered = pred * s
     else:
-        x = np.zeros((dirs.shape[0], 3))
-        rendered = np.empty((m, 3))
-        conds, ranks = [], []
-        observed = None
-        grey = bool(np.all(weight == weight[:, :1]))
-        for chans in ([0, 1, 2],) if grey else ([0], [1], [2]):
-            Mc = diffuse * weight[:, chans[0]:chans[0] + 1]
-            if specular_part is not None:
-                Mc = Mc + specular_part
-            sol = solve_sources(Mc, b[:, chans], None, nonnegative, None if nonnegative else 1e-8, what,
-                                smoothness, edges)
-            x[:, chans] = sol.x
-            rendered[:, chans] = sol.predicted
-            conds.append(sol.condition)
-            ranks.append(sol.rank)
-            observed = sol.observed
         intensities = x
-        cond, rank = max(conds), min(ranks)
+        rendered = pred
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
     return SourceFit(directions=dirs, intensities=intensities, ambient=np.zeros(3), rendered=rendered, rms=rms,
