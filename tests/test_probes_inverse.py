@@ -304,3 +304,17 @@ def test_evaluation_helpers_are_consistent(courtyard):
     n = sphere_normals_uniform(500)
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0)
     assert abs(n.mean(axis=0)).max() < 0.01
+
+
+def test_confidence_maps(sphere, shadow):
+    from ffls.probes.hougen_ahuja import normal_confidence
+    from ffls.probes.sato_sato_ikeuchi import shadow_confidence
+
+    c = normal_confidence(sphere.normals, 16)
+    assert c.shape == (16, 32) and c.max() == pytest.approx(1.0, abs=0.02)
+    # the ball is seen from -Y: the direction straight behind it (+Y) is barely seen
+    assert c[8, 8] < 0.3 and c[8, 24] > 0.95
+    d = dome_nodes(46)
+    V = box_visibility(shadow.points, d, shadow.box_center, shadow.box_size)
+    s = shadow_confidence(d, V, height=16)
+    assert s[8:].max() == 0.0 and 0 < s.max() <= 1

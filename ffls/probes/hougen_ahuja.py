@@ -28,7 +28,7 @@ from ffls.errors import InputError
 from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix, neighbour_edges, solve_sources
 from ffls.probes.sources import HOUGEN_AHUJA_SIZES, model_sources, sources_to_latlong
 
-__all__ = ["SourceFit", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals"]
+__all__ = ["SourceFit", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals", "normal_confidence"]
 
 
 @dataclass(frozen=True)
@@ -169,3 +169,31 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
 
 #: The colour-hdri style name of :func:`hougen_ahuja`.
 estimate_sources_HougenAhuja1993 = hougen_ahuja
+
+
+def normal_confidence(normals, height: int = 64, chunk: int = 4096) -> np.ndarray:
+    """How directly a diffuse object's pixels see each direction of a lat-long map.
+
+    Per texel direction ``w``: ``max_i max(0, n_i . w)`` over the pixels' normals. 1 where some
+    pixel faces ``w``; 0 for directions that light no pixel (behind a ball seen from one side:
+    exactly the camera's antipode); small values mark directions seen only at grazing angles,
+    whose light the data barely constrain. Use it as the map's mask/alpha (for example
+    ``> 0.2``) and report the rest as unseen.
+
+    Parameters
+    ----------
+    normals : (m, 3) array_like
+    height : int
+
+    Returns
+    -------
+    (height, 2 height) float64
+    """
+    from ffls.conventions import latlong_directions
+
+    n = check_normals(normals)
+    w = latlong_directions(2 * int(height), int(height)).reshape(-1, 3)
+    best = np.zeros(w.shape[0])
+    for s in range(0, n.shape[0], chunk):
+        best = np.maximum(best, (n[s:s + chunk] @ w.T).max(axis=0))
+    return np.clip(best, 0.0, 1.0).reshape(int(height), 2 * int(height))

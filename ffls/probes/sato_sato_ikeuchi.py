@@ -52,6 +52,7 @@ __all__ = [
     "shadow_kernel",
     "dome_nodes",
     "sato_sato_ikeuchi",
+    "shadow_confidence",
     "estimate_lighting_SatoSatoIkeuchi1999",
 ]
 
@@ -400,3 +401,31 @@ def sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0), 
 
 #: The colour-hdri style name of :func:`sato_sato_ikeuchi`.
 estimate_lighting_SatoSatoIkeuchi1999 = sato_sato_ikeuchi
+
+
+def shadow_confidence(directions, visibility, plane_normal=(0.0, 0.0, 1.0), height: int = 64) -> np.ndarray:
+    """Per lat-long texel: the share of receiver pixels from which its node is hidden by the occluder.
+
+    A node whose shadow falls on no pixel in view (0) is constrained only through the total
+    irradiance of the plane, together with every other such node: its light is a guess. Nodes
+    below the receiver's horizon are 0 too (the plane sees no light from there).
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Dome nodes.
+    visibility : (m, n) array_like of bool
+        :func:`occluder_visibility` of the receiver pixels.
+    plane_normal : (3,) array_like
+    height : int
+
+    Returns
+    -------
+    (height, 2 height) float64 in [0, 1]
+    """
+    from ffls.probes.sources import cells_to_latlong
+
+    V = np.asarray(visibility, dtype=bool)
+    nrm = normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))
+    share = (~V).mean(axis=0)
+    return cells_to_latlong(directions, share, height, {"axis": [float(v) for v in nrm]})

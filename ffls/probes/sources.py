@@ -47,6 +47,7 @@ __all__ = [
     "frame_to_axis",
     "latlong_solid_angles",
     "sources_to_latlong",
+    "cells_to_latlong",
     "to_lightmap",
     "cell_solid_angles",
 ]
@@ -278,6 +279,31 @@ def sources_to_latlong(directions, intensities, height: int = 64, hemisphere="fu
     if ambient is not None:
         out += np.broadcast_to(np.asarray(ambient, dtype=np.float64), (3,)) / np.pi
     return out.reshape(h, 2 * h, 3)
+
+
+def cells_to_latlong(directions, values, height: int = 64, hemisphere="full") -> np.ndarray:
+    """Give every lat-long texel the value of its source's cell (nearest by angle; 0 outside the domain).
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+    values : (n,) array_like
+        Per-source values (a confidence, a 0/1 "seen" flag...).
+    height : int
+    hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
+
+    Returns
+    -------
+    (height, 2 height) float64
+    """
+    h = int(height)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    texels = latlong_directions(2 * h, h).reshape(-1, 3)
+    inside = in_domain(texels, hemisphere)
+    out = np.zeros(texels.shape[0])
+    out[inside] = v[assign_cells(texels[inside], d)]
+    return out.reshape(h, 2 * h)
 
 
 def to_lightmap(radiance, source: str = "probe") -> tuple[LightMap, int]:
