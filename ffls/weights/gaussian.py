@@ -15,12 +15,18 @@ to 1. Where all ``k + 1`` nearest lights are at exactly the same angle (a ring o
 ``p`` on a symmetric gantry) the differences vanish; there the plain kernel over the ``k``
 nearest is used (a single point of discontinuity). With ``n <= k`` lights all take part,
 without the subtraction.
+
+Declustering: a kernel sum counts a cluster of lights several times (two nearly equal lights
+would take twice the share of one). Each light's kernel is divided by its own density
+``rho_j``: the same un-normalised sum evaluated at the light's own direction
+(:func:`light_density`), so a pair of nearly equal lights shares about what one light would
+take, as the Voronoi cells do. ``rho_j`` is a constant per light: continuity is kept.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEFAULT_K", "DEFAULT_WIDTH", "weights_gaussian"]
+__all__ = ["DEFAULT_K", "DEFAULT_WIDTH", "weights_gaussian", "light_density"]
 
 #: Nearest lights that share a direction.
 DEFAULT_K = 4
@@ -34,8 +40,36 @@ def _chord_to_angle(chord):
     return 2.0 * np.arcsin(np.clip(0.5 * chord, 0.0, 1.0))
 
 
+def _raw(ps, keep, tree, k, width):
+    """Un-normalised weights ``(m, min(k, u))`` and their light indices (into ``keep``'s order)."""
+    u = keep.size
+    kk = min(k + 1, u)
+    dist, idx = tree.query(ps, k=kk)
+    dist = np.asarray(dist).reshape(ps.shape[0], kk)
+    idx = np.asarray(idx).reshape(ps.shape[0], kk)
+    theta = _chord_to_angle(dist)
+    cosang = 1.0 - 0.5 * dist * dist  # p . l from the chord, exact for unit vectors
+    sigma = np.maximum(width * theta[:, -1:], 1e-9)
+    kern = np.exp((cosang - 1.0) / (sigma * sigma))
+    if u > k:
+        w = kern[:, :k] - kern[:, k:k + 1]
+        tot = w.sum(axis=1, keepdims=True)
+        tie = tot[:, 0] <= _TIE_REL * kern[:, :k].sum(axis=1)
+        w[tie] = kern[tie, :k]
+        w = np.maximum(w, 0.0)
+    else:
+        w = kern
+    return w, idx[:, :w.shape[1]]
+
+
+def light_density(unit, keep, tree, k: int = DEFAULT_K, width: float = DEFAULT_WIDTH) -> np.ndarray:
+    """Declustering density ``(u,)`` of the distinct lights: the un-normalised kernel sum at each light."""
+    w, _ = _raw(unit[keep], keep, tree, int(k), float(width))
+    return w.sum(axis=1)
+
+
 def weights_gaussian(p, unit, keep, tree, k: int = DEFAULT_K, width: float = DEFAULT_WIDTH,
-                     chunk: int = 1 << 17) -> tuple[np.ndarray, np.ndarray]:
+                     chunk: int = 1 << 17, density=None) -> tuple[np.ndarray, np.ndarray]:
     """vMF kernel weights of directions over their ``k`` nearest lights.
 
     Parameters
@@ -48,6 +82,8 @@ def weights_gaussian(p, unit, keep, tree, k: int = DEFAULT_K, width: float = DEF
         Indices of the distinct lights; ``tree`` is built over ``unit[keep]``.
     tree : scipy.spatial.cKDTree
         k-d tree of ``unit[keep]`` (chord order is angle order).
+    density : (u,) float64, optional
+        :func:`light_density` (computed here when not given).
     k : int
         Lights per direction (>= 1).
     width : float
@@ -66,28 +102,15 @@ def weights_gaussian(p, unit, keep, tree, k: int = DEFAULT_K, width: float = DEF
         raise ValueError("width must be > 0")
     u = keep.size
     m = p.shape[0]
-    kk = min(k + 1, u)
     kout = min(k, u)
+    if density is None:
+        density = light_density(unit, keep, tree, k, width)
     index = np.empty((m, kout), dtype=np.int64)
     weight = np.empty((m, kout))
     for a in range(0, m, chunk):
-        ps = p[a:a + chunk]
-        dist, idx = tree.query(ps, k=kk)
-        dist = np.asarray(dist).reshape(ps.shape[0], kk)
-        idx = np.asarray(idx).reshape(ps.shape[0], kk)
-        theta = _chord_to_angle(dist)
-        cosang = 1.0 - 0.5 * dist * dist  # p . l from the chord, exact for unit vectors
-        sigma = np.maximum(width * theta[:, -1:], 1e-9)
-        kern = np.exp((cosang - 1.0) / (sigma * sigma))
-        if u > k:
-            w = kern[:, :k] - kern[:, k:k + 1]
-            tot = w.sum(axis=1, keepdims=True)
-            tie = tot[:, 0] <= _TIE_REL * kern[:, :k].sum(axis=1)
-            w[tie] = kern[tie, :k]
-            w = np.maximum(w, 0.0)
-        else:
-            w = kern
+        w, idx = _raw(p[a:a + chunk], keep, tree, k, width)
+        w = w / density[idx]
         w /= w.sum(axis=1, keepdims=True)
-        index[a:a + chunk] = keep[idx[:, :kout]]
-        weight[a:a + chunk] = w[:, :kout]
+        index[a:a + chunk] = keep[idx]
+        weight[a:a + chunk] = w
     return index, weight

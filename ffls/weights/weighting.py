@@ -134,6 +134,8 @@ class Weighting:
         self.directions, self._keep = unique_directions(directions)
         self._tree = cKDTree(self.directions[self._keep])
         self._bary = Barycentric(self.directions, self._keep, self.hemisphere) if scheme == "barycentric" else None
+        self._density = (_ga.light_density(self.directions, self._keep, self._tree, self.options["k"],
+                                           self.options["width"]) if scheme == "gaussian" else None)
 
     @property
     def n_lights(self) -> int:
@@ -157,7 +159,7 @@ class Weighting:
             idx, w = self._bary(p)
         else:
             idx, w = _ga.weights_gaussian(p, self.directions, self._keep, self._tree, self.options["k"],
-                                          self.options["width"])
+                                          self.options["width"], density=self._density)
         return SparseWeights(index=idx, weight=w)
 
 
