@@ -92,7 +92,7 @@ def test_barycentric_reproduces_each_light_and_covers_the_rim():
     cap[:, :2] *= 0.05
     cap /= np.linalg.norm(cap, axis=1, keepdims=True)
     b = Weighting(cap, "barycentric", "full")
-    assert b._bary is not None and b._bary.n_virtual > 0
+    assert b.triangulation is not None and b.triangulation.n_virtual > 0
     sw = b(_queries(2000, 6, "full"))
     np.testing.assert_allclose(sw.weight.sum(1), 1.0, atol=1e-12)
 

@@ -141,6 +141,11 @@ class Weighting:
     def n_lights(self) -> int:
         return int(self.directions.shape[0])
 
+    @property
+    def triangulation(self) -> Barycentric | None:
+        """The :class:`ffls.weights.barycentric.Barycentric` triangulation (``'barycentric'`` only)."""
+        return self._bary
+
     def _assign(self, q: np.ndarray) -> np.ndarray:
         return assign_cells(q, self.directions)
 
