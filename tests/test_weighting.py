@@ -241,3 +241,20 @@ def test_render_light_command(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "outside the capture's hemisphere" in err and "exclude each other" in err
     assert main(["relight", str(cap), "--probe", "sky", "--weighting", "gaussian", "-o", str(cpu)]) == 0
+
+
+@pytest.mark.parametrize("hemisphere", ["upper", "full"])
+def test_hierarchical_cell_bake_equals_the_direct_one(hemisphere):
+    from ffls.weights.voronoi import assign_cells, bake_cells
+
+    d = _lights(300, 13, hemisphere)
+    d = np.concatenate([d, d[:3]])  # duplicates
+    fast = bake_cells(d, hemisphere, res=512)
+    slow = bake_cells(d, hemisphere, res=512, method="direct")
+    assert fast.overflow == 0 == slow.overflow
+    np.testing.assert_array_equal(fast.index, slow.index)
+    q = _queries(300_000, 14, hemisphere)
+    exact = assign_cells(q, d)
+    np.testing.assert_array_equal(assign_cells(q, d, fast), exact)
+    # the coarse levels settle most texels: their lists hold a single candidate
+    assert np.mean(fast.candidates[..., 1] < 0) >= np.mean(slow.candidates[..., 1] < 0)
