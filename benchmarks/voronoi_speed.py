@@ -33,8 +33,9 @@ from common import median_seconds, write_json  # benchmarks/common.py
 
 def gpu_pass1_rows(rng, repeat: int) -> list:
     """Pass 1 on the GPU (ffls.gpu.integrate.CellIntegrator) per weighting scheme: voronoi's
-    candidate cells ('sort') and the smooth schemes' weight textures ('blend', one point per texel
-    and slot); 256 random upper lights, sky_sun maps of height 128 and 512. Empty without GL."""
+    candidate cells and the smooth schemes' weight textures (one item per texel and slot), both
+    with the default technique 'sort'; 256 random upper lights, sky_sun maps of height 128 and
+    512. Empty without GL."""
     from ffls.errors import GLUnavailable
     from ffls.weights.weighting import SCHEMES, bake_weights
 

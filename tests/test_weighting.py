@@ -173,18 +173,24 @@ def test_flicker_smooth_schemes_at_least_5x_below_voronoi():
 # ----------------------------------------------------------------------------- GPU
 @pytest.mark.gl
 @pytest.mark.parametrize("scheme", ["antialiased", "barycentric", "gaussian"])
-@pytest.mark.parametrize("hemisphere", ["upper", "full"])
-def test_gpu_pass1_matches_the_texture_reference(ctx, scheme, hemisphere):
+@pytest.mark.parametrize("hemisphere", ["upper", "full", {"axis": [0.0, 0.6, 0.8]}], ids=["upper", "full", "axis"])
+@pytest.mark.parametrize("method", ["sort", "blend"])
+def test_gpu_pass1_matches_the_texture_reference(ctx, scheme, hemisphere, method):
     from ffls.gpu.integrate import CellIntegrator
 
-    d = _lights(40, 11, hemisphere)
+    d = _lights(40, 11, "full" if hemisphere == "full" else "upper")
+    if isinstance(hemisphere, dict):
+        d = d[d @ np.array(hemisphere["axis"]) >= 0]
     lm = sky_sun_map(48)
     tex = bake_weights(d, scheme, hemisphere, res=64)
-    gi = CellIntegrator(ctx, d, hemisphere, tex)
+    gi = CellIntegrator(ctx, d, hemisphere, tex, method=method)
     try:
         gi.set_lightmap(lm)
         for R in (np.eye(3), rotation_ypr(33, 21, 7)):
             gi.run(R)
+            first = gi.weights_buffer.read()
+            gi.run(R)
+            assert gi.weights_buffer.read() == first  # deterministic
             ref = integrate(lm, d, R, hemisphere, scheme, texture=tex)
             g = gi.read_weights().astype(np.float64)
             assert np.all(np.abs(g - ref.weights) <= 1e-5 * ref.total_power[None, :]), np.abs(g - ref.weights).max()
@@ -192,6 +198,8 @@ def test_gpu_pass1_matches_the_texture_reference(ctx, scheme, hemisphere):
             np.testing.assert_allclose(g.sum(0) + gi.dropped_power, ref.total_power, rtol=1e-5)
     finally:
         gi.release()
+    with pytest.raises(ValueError, match="'sort' or 'blend'"):
+        CellIntegrator(ctx, d, hemisphere, tex, method="atomic")
 
 
 @pytest.mark.gl
