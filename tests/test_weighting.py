@@ -144,6 +144,12 @@ def test_bad_scheme_and_options():
     with pytest.raises(ValueError, match="takes no option"):
         Weighting(d, "barycentric", k=3)
     assert set(OPTIONS) == set(SCHEMES)
+    for scheme in SCHEMES:
+        with pytest.raises(ValueError, match="zero vector|NaN"):
+            cell_weights(d, [[0.0, 0.0, 0.0]], scheme)
+        with pytest.raises(ValueError, match="NaN"):
+            cell_weights(d, [[np.nan, 0.0, 1.0]], scheme)
+        assert cell_weights(d, np.zeros((0, 3)), scheme).weight.shape[0] == 0
 
 
 def test_cli_weighting_choices_match_the_library():
