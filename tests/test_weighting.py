@@ -272,3 +272,19 @@ def test_hierarchical_cell_bake_equals_the_direct_one(hemisphere):
     np.testing.assert_array_equal(assign_cells(q, d, fast), exact)
     # the coarse levels settle most texels: their lists hold a single candidate
     assert np.mean(fast.candidates[..., 1] < 0) >= np.mean(slow.candidates[..., 1] < 0)
+
+
+@pytest.mark.parametrize("scheme", ["antialiased", "barycentric", "gaussian"])
+def test_texture_quantisation_shrinks_with_resolution(scheme):
+    # the GPU's nearest-texel lookup against the exact weights, per light, as a share of the power:
+    # a 1-degree sun is the worst case (its weight is that of one texel); <= 3 % at 512^2
+    d = _lights(60, 15)
+    lm = sky_sun_map(64)
+    R = rotation_ypr(20, 10, 0)
+    exact = integrate(lm, d, R, "upper", scheme).weights
+    errs = []
+    for res in (128, 512):
+        tex = bake_weights(d, scheme, "upper", res=res)
+        w = integrate(lm, d, R, "upper", scheme, texture=tex).weights
+        errs.append(np.abs(w - exact).max() / exact.sum(0).max())
+    assert errs[1] <= 0.03 and errs[1] < errs[0], errs
