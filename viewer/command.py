@@ -24,10 +24,13 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    from ffls.commands.common import FRAMES, add_lights_arguments, add_rotation_arguments, exposure_arg, output_path
+    from ffls.commands.common import (FRAMES, add_light_argument, add_lights_arguments, add_rotation_arguments,
+                                      add_weighting_argument, exposure_arg, output_path)
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     add_lights_arguments(p)
+    add_weighting_argument(p)
+    add_light_argument(p)
     p.add_argument("--probe", default="courtyard", metavar="MAP",
                    help="light map: a file (.exr/.hdr) or a built-in name (default courtyard)")
     add_rotation_arguments(p, default="0,0,0")
@@ -70,6 +73,10 @@ def build_state(args):
         st.exposure = float(args.exposure)
     if args.auto_rotate is not None:
         st.auto_rotate, st.auto_rotate_speed = True, float(args.auto_rotate)
+    st.quality["weighting"] = getattr(args, "weighting", "voronoi")
+    if getattr(args, "light", None) is not None:  # start in light mode (RTI style)
+        st.light_mode = True
+        st.light_az, st.light_el = (float(a) for a in args.light)
     if args.rank is not None and args.rank < 0:
         raise InputError(f"--rank must be >= 0, not {args.rank}")
     if args.rank == 0:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ffls.commands.common import WEIGHTINGS
 from ffls.commands.common import parse_rotation  # noqa: F401  (re-exported: one --rotate for every command)
 from ffls.relight.compress import DEFAULT_RANK, rank_range
 
@@ -88,6 +89,11 @@ QUALITY_KNOBS: tuple[Knob, ...] = (
          help="resolution of the Voronoi cell-index texture of pass 1"),
     Knob("map_res", "pass-1 map", "choice", "128", choices=("full", "256", "128", "64"),
          help="lat-long height of the light map integrated by pass 1 (box-filtered: the integral is kept)",
+         rebuild=False),
+    Knob("weighting", "weighting", "choice", "voronoi", choices=WEIGHTINGS,
+         help="how a light-map direction is shared among the lights: voronoi (box per cell), antialiased "
+              "(soft cell borders), barycentric (spherical triangles), gaussian (kernel over the nearest "
+              "lights); the smooth ones do not pop as the map rotates (docs/weighting.md)",
          rebuild=False),
 )
 
@@ -166,6 +172,12 @@ class ViewerState:
         Pending: close the window.
     drag_deg_per_px : float
         Rotation per pixel of mouse drag.
+    light_mode : bool
+        RTI-style relighting: one directional light (``light_az``, ``light_el``) instead of the
+        light map, interpolated with the ``weighting`` knob; dragging moves the light.
+    light_az, light_el : float
+        The light's azimuth (degrees from +X toward +Y, wrapped to [-180, 180)) and elevation
+        (degrees above the horizon, [-90, 90]), world frame.
     """
 
     yaw: float = 0.0
@@ -194,6 +206,9 @@ class ViewerState:
     show_gui: bool = True
     quit: bool = False
     drag_deg_per_px: float = 0.4
+    light_mode: bool = False
+    light_az: float = 45.0
+    light_el: float = 45.0
 
     # ------------------------------------------------------------------ pure updates
     def rotate_by(self, dyaw: float = 0.0, dpitch: float = 0.0, droll: float = 0.0) -> None:
@@ -201,6 +216,25 @@ class ViewerState:
         self.yaw = wrap_degrees(self.yaw + dyaw)
         self.roll = wrap_degrees(self.roll + droll)
         self.pitch = float(np.clip(self.pitch + dpitch, -90.0, 90.0))
+
+    def move_light(self, daz: float = 0.0, delev: float = 0.0) -> None:
+        """Move the single light: azimuth wraps to [-180, 180), elevation is clamped to [-90, 90]."""
+        self.light_az = wrap_degrees(self.light_az + daz)
+        self.light_el = float(np.clip(self.light_el + delev, -90.0, 90.0))
+
+    def set_light_disc(self, x: float, y: float) -> None:
+        """Put the light over the point (x, y) of the unit disc (the upper hemisphere seen from above,
+        +X right, +Y up, as an RTI viewer's light widget); outside the disc it goes to the rim."""
+        r = float(np.hypot(x, y))
+        if r > 1.0:
+            x, y, r = x / r, y / r, 1.0
+        self.light_az = wrap_degrees(float(np.degrees(np.arctan2(y, x))) if r > 0 else self.light_az)
+        self.light_el = float(np.degrees(np.arccos(min(r, 1.0))))
+
+    def light_vector(self) -> np.ndarray:
+        """Unit world direction (3,) toward the single light."""
+        az, el = np.radians(self.light_az), np.radians(self.light_el)
+        return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
     def reset_rotation(self) -> None:
         """Yaw, pitch and roll back to 0 and auto-rotation off."""
@@ -288,6 +322,8 @@ class ViewInfo:
         Whether a native file dialog can be opened (a desktop session).
     recording : str
         Turntable progress text, empty when idle.
+    single_light_uv : (2,) float or None
+        In light mode, the single light's lat-long uv (for the preview marker); None otherwise.
     """
 
     image_tex: int = 0
@@ -308,3 +344,4 @@ class ViewInfo:
     content_scale: float = 1.0
     dialog_available: bool = False
     recording: str = ""
+    single_light_uv: tuple | None = None

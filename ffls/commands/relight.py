@@ -4,6 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument, add_rotation_arguments,
+                                  add_weighting_argument,
                                   check_mask_size, exposure_arg, load_relight_inputs, output_path,
                                   rotation_from_args, write_output)
 
@@ -26,6 +27,7 @@ def add_arguments(p):
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
     p.add_argument("--cells-res", type=CELLS_RES_OR_EXACT, default=256,
                    help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
+    add_weighting_argument(p)
     p.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output image, .exr or .png")
 
 
@@ -39,7 +41,7 @@ def run(args) -> int:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
     image, w = relight_capture(capture, lights, lightmap, rotation=rotation_from_args(args),
-                               cells_res=args.cells_res or None)
+                               cells_res=args.cells_res or None, weighting=args.weighting)
     check_mask_size(mask, image.shape)
     display = None
     if out.suffix.lower() != ".exr":
@@ -49,5 +51,5 @@ def run(args) -> int:
     kept = w.total_power.sum() - w.dropped_power.sum()
     frac = kept / w.total_power.sum() if w.total_power.sum() > 0 else 1.0
     print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "
-          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used)")
+          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used, {args.weighting} weighting)")
     return 0

@@ -13,23 +13,28 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_mask_argument,
-                                  add_rotation_arguments, check_mask_size, exposure_arg, flush_notes,
-                                  load_relight_inputs, output_path, rotation_from_args, write_output)
+from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
+                                  add_mask_argument, add_rotation_arguments, add_weighting_argument, check_mask_size,
+                                  exposure_arg, flush_notes, light_vector, load_relight_inputs, output_path,
+                                  rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
 DESCRIPTION = (
     "Relight a capture under an HDR light map with the GPU engine (pass 1: per-cell light-map "
     "integration; pass 2: weighted sum of the basis images; tone mapping). .exr output is linear "
-    "float, .png tone-mapped sRGB. --turntable N rotates the map 360 degrees about +Z in N frames."
+    "float, .png tone-mapped sRGB. --turntable N rotates the map 360 degrees about +Z in N frames. "
+    "--light AZ,EL relights with one directional light instead of a map (RTI style), interpolated "
+    "with --weighting."
 )
 
 STILL_SUFFIXES = (".exr", ".png")
 
 
 def add_arguments(p):
-    add_capture_arguments(p)
+    add_capture_arguments(p, probe_required=False)
+    add_light_argument(p)
+    add_weighting_argument(p)
     add_rotation_arguments(p)
     p.add_argument("--exposure", type=exposure_arg, default=0.0, metavar="EV|auto",
                    help="exposure in stops (PNG/video); auto meters the object (the --mask when given)")
@@ -59,7 +64,7 @@ def _make_renderer(args, capture, lights):
         from ffls.relight.cpu import CpuRelighter
 
         return CpuRelighter.from_capture(capture, lights, precision="f64", rank=args.rank,
-                                         cell_res=args.cells_res), None
+                                         cell_res=args.cells_res, weighting=args.weighting), None
     from ffls.errors import GLUnavailable
     from ffls.gpu.context import create_headless_context
     from ffls.gpu.engine import Engine
@@ -68,7 +73,8 @@ def _make_renderer(args, capture, lights):
         ctx = create_headless_context()
     except GLUnavailable as e:
         raise GLUnavailable(f"no GPU path ({e.message}); rerun with --cpu for the CPU reference path") from None
-    eng = Engine.from_capture(ctx, capture, lights, dtype=args.dtype, rank=args.rank, cell_res=args.cells_res)
+    eng = Engine.from_capture(ctx, capture, lights, dtype=args.dtype, rank=args.rank, cell_res=args.cells_res,
+                              weighting=args.weighting)
     return eng, ctx
 
 
@@ -82,6 +88,29 @@ def _auto_exposure(r, args, mask) -> float:
     hdr = r.read_hdr()
     check_mask_size(mask, hdr.shape)
     return auto_exposure(hdr, mask=mask)
+
+
+def single_light_weights(r, args, R) -> np.ndarray:
+    """Per-light RGB weights ``(n, 3)`` of ``--light AZ,EL`` rotated by ``R``, under ``--weighting``.
+
+    A light outside the capture's hemisphere gives no light (all zero).
+    """
+    from ffls.conventions import in_domain
+    from ffls.weights.weighting import light_weights
+
+    d = R @ light_vector(args.light)
+    if not in_domain(d[None, :], r.hemisphere)[0]:
+        return np.zeros((r.n_lights, 3))
+    w = light_weights(r.directions, d, args.weighting, r.hemisphere)
+    return np.repeat(w[:, None], 3, axis=1)
+
+
+def _apply(r, args, R) -> None:
+    """Set the frame's rotation (light map) or its single light's weights (``--light``)."""
+    if args.light is None:
+        r.set_rotation(R)
+    else:
+        r.set_weights(single_light_weights(r, args, R))
 
 
 def _write_still(out: Path, r, args, mask=None):
@@ -101,7 +130,7 @@ def _write_turntable(out: Path, r, R0, args, exposure: float = 0.0):
     frames = ((k, rotation_z(360.0 * k / n) @ R0) for k in range(n))
     with FrameWriter(out, fps=args.fps) as sink:
         for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame", disable=None):
-            r.set_rotation(R)
+            _apply(r, args, R)
             r.render(exposure, args.tonemap)
             sink.write(r.read_display())
     return sink.describe()
@@ -114,13 +143,23 @@ def run(args) -> int:
     if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
     R0 = rotation_from_args(args)
-    capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
+    if (args.light is None) == (args.probe is None):
+        raise InputError("give either --probe MAP or --light AZ,EL" if args.light is None
+                         else "--probe and --light exclude each other: give one")
+    capture, lights, lightmap, mask = load_relight_inputs(args, NAME, lightmap=args.light is None)
+    if args.light is not None:
+        from ffls.conventions import in_domain
+
+        if not in_domain((R0 @ light_vector(args.light))[None, :], capture.hemisphere)[0]:
+            raise InputError(f"--light {args.light[0]:g},{args.light[1]:g} is outside the capture's hemisphere "
+                             "(no photo was lit from there)")
     r, ctx = _make_renderer(args, capture, lights)
     if args.turntable is not None:
         flush_notes()  # a long job: the informational lines now (a still's wait for its success)
     try:
-        r.set_lightmap(lightmap)
-        r.set_rotation(R0)
+        if lightmap is not None:
+            r.set_lightmap(lightmap)
+        _apply(r, args, R0)
         exposure = _auto_exposure(r, args, mask)  # a turntable keeps the first frame's
         if args.turntable is not None:
             what = _write_turntable(out, r, R0, args, exposure)
@@ -129,7 +168,9 @@ def run(args) -> int:
             _write_still(out, r, args, mask)
             what = str(out)
         path = "cpu reference" if args.cpu else f"gpu {getattr(r, 'basis_info', {}).get('dtype', '')}"
-        print(f"ffls render: {what} ({path}{'' if args.rank is None else f', rank {args.rank}'})")
+        what_light = (f"light az {args.light[0]:g} el {args.light[1]:g}, " if args.light is not None else "")
+        print(f"ffls render: {what} ({path}{'' if args.rank is None else f', rank {args.rank}'}, "
+              f"{what_light}{args.weighting} weighting)")
     finally:
         r.release()
         if ctx is not None:

@@ -26,6 +26,15 @@ Three techniques (``method=``), all deterministic (same input, same bits):
     a serial scatter) and a per-cell segmented sum: deterministic by construction on any GPU.
 
 ``'auto'`` picks ``'sort'`` (see ``docs/gpu.md``, "Pass 1", for the measurements).
+
+Smooth weighting schemes (:mod:`ffls.weights.weighting`): with ``cells`` a
+:class:`ffls.weights.weighting.WeightTexture` every texel adds ``power x weight`` to each of the
+(light, weight) slots of the weight-texture texel its rotated direction falls in
+(the GPU twin of :func:`ffls.weights.weighting.integrate` with ``texture=``): ``'sort'`` makes one
+item per texel and slot (``shaders/integrate_sparse_items.glsl``: cell = the slot's light, power x
+weight) and sorts and sums the items as above; ``'blend'`` finds every texel's weight texel once
+(``integrate_sparse_texels.glsl``) and blends one point per texel and slot
+(``integrate_sparse.glsl``).
 """
 from __future__ import annotations
 
@@ -66,8 +75,9 @@ class CellIntegrator:
         Texels whose rotated direction is outside (``z < 0`` for ``'upper'``, ``d . axis < 0``
         for an axis hemisphere; the ``HEMI_AXIS`` define and the ``hemi_axis`` uniform) are
         dropped and counted.
-    cells : ffls.weights.voronoi.CellTexture
-        Candidate texture baked from ``directions`` for ``hemisphere``.
+    cells : ffls.weights.voronoi.CellTexture or ffls.weights.weighting.WeightTexture
+        Candidate texture baked from ``directions`` for ``hemisphere`` (Voronoi cells), or the
+        weight texture of a smooth scheme (``'sort'``, the default, or ``'blend'``).
     method : {'auto', 'blend', 'atomic', 'sort'}
         Technique (module docstring).
 
@@ -89,6 +99,9 @@ class CellIntegrator:
             raise ValueError(f"cells were baked for hemisphere {cells.hemisphere!r}, not {hemisphere!r}")
         if cells.directions.shape != d.shape or not np.allclose(cells.directions, d, rtol=0, atol=1e-12):
             raise ValueError("cells were baked for other directions")
+        self.sparse = hasattr(cells, "slots")  # a WeightTexture (smooth weighting)
+        if self.sparse and method not in ("auto", "blend", "sort"):
+            raise ValueError(f"a weight texture ({cells.scheme}) integrates with method 'sort' or 'blend', not {method!r}")
         method = AUTO_METHOD if method == "auto" else method
         if method not in METHODS:
             raise ValueError(f"method must be 'auto' or one of {METHODS}, not {method!r}")
@@ -99,15 +112,27 @@ class CellIntegrator:
         self.n = int(d.shape[0])
         self.hemisphere = hemisphere
         self.cells = cells
-        self._defines = {"N_LIGHTS": self.n, "CELL_RES": int(cells.res), "CELL_K": int(cells.k)}
+        if self.sparse:
+            self._defines = {"N_LIGHTS": self.n, "CELL_RES": int(cells.res), "SLOTS": int(cells.slots)}
+        else:
+            self._defines = {"N_LIGHTS": self.n, "CELL_RES": int(cells.res), "CELL_K": int(cells.k)}
         if hemisphere == "upper":
             self._defines["HEMI_UPPER"] = 1
         elif hemisphere.axis is not None:
             self._defines["HEMI_AXIS"] = 1
         self._max_ssbo = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or (1 << 27))
         self._lights = ctx.buffer(np.ascontiguousarray(cells.directions, dtype=np.float64).tobytes())
-        cand = np.ascontiguousarray(cells.candidates, dtype=np.int32)
-        self._cand = ctx.buffer(cand.tobytes())
+        if self.sparse:
+            self._cand = ctx.buffer(np.ascontiguousarray(cells.index, dtype=np.int32).tobytes())
+            self._slot_weights = ctx.buffer(np.ascontiguousarray(cells.weight, dtype=np.float32).tobytes())
+            self._program = "integrate_sparse.glsl"
+            self._per_texel = int(cells.slots)
+        else:
+            cand = np.ascontiguousarray(cells.candidates, dtype=np.int32)
+            self._cand = ctx.buffer(cand.tobytes())
+            self._slot_weights = None
+            self._program = "integrate_blend.glsl"
+            self._per_texel = 1
         self.weights_buffer = ctx.buffer(reserve=16 * self.n)
         self._stats = ctx.buffer(reserve=32)
         self._objects: list = []  # per-light-map objects
@@ -154,7 +179,8 @@ class CellIntegrator:
         self._objects = []
 
     def _bind_common(self, prog, R):
-        prog["R"].write(np.ascontiguousarray(np.asarray(R, dtype=np.float64).T).tobytes())
+        if "R" in prog:
+            prog["R"].write(np.ascontiguousarray(np.asarray(R, dtype=np.float64).T).tobytes())
         if "n_texels" in prog:
             prog["n_texels"].value = self.m
         if "hemi_axis" in prog:
@@ -163,6 +189,8 @@ class CellIntegrator:
         self._tpow.bind_to_storage_buffer(2)
         self._lights.bind_to_storage_buffer(3)
         self._cand.bind_to_storage_buffer(4)
+        if self._slot_weights is not None:
+            self._slot_weights.bind_to_storage_buffer(5)
 
     # ------------------------------------------------------------------ (a) blend
     def _setup_blend(self):
@@ -181,14 +209,22 @@ class CellIntegrator:
         self._tex = ctx.texture((tw, th * self._slices), 4, dtype="f4")
         self._tex.filter = (ctx.NEAREST, ctx.NEAREST)
         self._fbo = ctx.framebuffer(color_attachments=[self._tex])
-        self._vao = ctx.vertex_array(load_program(ctx, "integrate_blend.glsl", self._defines), [])
+        self._vao = ctx.vertex_array(load_program(ctx, self._program, self._defines), [])
         self._objects += [self._fbo, self._tex, self._vao]
+        if self.sparse:  # the weight-texture texel of every light-map texel (integrate_sparse_texels.glsl)
+            self._wtexel = ctx.buffer(reserve=4 * self.m)
+            self._objects.append(self._wtexel)
 
     def _run_blend(self, R):
         import moderngl
 
         ctx = self.ctx
-        prog = load_program(ctx, "integrate_blend.glsl", self._defines)
+        if self.sparse:  # rotation, hemisphere test and lookup once per texel, then one point per slot
+            look = load_program(ctx, "integrate_sparse_texels.glsl", self._defines)
+            self._bind_common(look, R)
+            self._wtexel.bind_to_storage_buffer(7)
+            look.run(-(-self.m // _LOCAL))
+        prog = load_program(ctx, self._program, self._defines)
         self._bind_common(prog, R)
         prog["texels_per_slice"].value = self._per_slice
         prog["grid"].value = self._grid
@@ -203,7 +239,7 @@ class CellIntegrator:
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         ctx.blend_equation = moderngl.FUNC_ADD
         try:
-            self._vao.render(moderngl.POINTS, vertices=self.m)
+            self._vao.render(moderngl.POINTS, vertices=self.m * self._per_texel)
         finally:
             ctx.blend_func = moderngl.DEFAULT_BLENDING
             ctx.blend_equation = moderngl.FUNC_ADD
@@ -259,30 +295,51 @@ class CellIntegrator:
         ctx = self.ctx
         self._blocks = _SORT_BLOCKS
         self._sort_defines = {"N_LIGHTS": self.n, "N_BLOCKS": self._blocks}
-        self._cell_ids = ctx.buffer(reserve=4 * self.m)
-        self._counts = ctx.buffer(reserve=4 * (self.n + 1) * self._blocks)
-        self._sorted = ctx.buffer(reserve=16 * self.m)
+        items = self.m * self._per_texel
+        bins = self.n + (2 if self.sparse else 1)  # + the void bin of padded slots
+        self._cell_ids = ctx.buffer(reserve=4 * items)
+        self._counts = ctx.buffer(reserve=4 * bins * self._blocks)
+        self._sorted = ctx.buffer(reserve=16 * items)
         self._objects += [self._cell_ids, self._counts, self._sorted]
+        if self.sparse:
+            if 16 * items > self._max_ssbo:
+                raise ValueError(f"light map of {self.m} texels x {self._per_texel} slots exceeds the SSBO limit; "
+                                 "downsample it (LightMap.downsample)")
+            self._item_power = ctx.buffer(reserve=16 * items)
+            self._objects.append(self._item_power)
 
     def _run_sort(self, R):
         ctx = self.ctx
-        ids = load_program(ctx, "integrate_cell_ids.glsl", self._defines)
-        self._bind_common(ids, R)
-        self._cell_ids.bind_to_storage_buffer(5)
-        ids.run(-(-self.m // _LOCAL))
+        items = self.m * self._per_texel
+        bins = self.n + (2 if self.sparse else 1)
+        if self.sparse:
+            ids = load_program(ctx, "integrate_sparse_items.glsl", self._defines)
+            self._bind_common(ids, R)
+            self._cand.bind_to_storage_buffer(3)
+            self._slot_weights.bind_to_storage_buffer(4)
+            self._cell_ids.bind_to_storage_buffer(5)
+            self._item_power.bind_to_storage_buffer(9)
+            ids.run(-(-self.m // _LOCAL))
+            power = self._item_power
+        else:
+            ids = load_program(ctx, "integrate_cell_ids.glsl", self._defines)
+            self._bind_common(ids, R)
+            self._cell_ids.bind_to_storage_buffer(5)
+            ids.run(-(-self.m // _LOCAL))
+            power = self._tpow
         self._counts.clear()
         self._counts.bind_to_storage_buffer(7)
         self._sorted.bind_to_storage_buffer(8)
         groups = -(-self._blocks // 8)
         hist = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "HISTOGRAM": 1})
-        hist["n_texels"].value = self.m
+        hist["n_texels"].value = items
         hist.run(groups)
         scan = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCAN": 1})
-        scan["n_counts"].value = (self.n + 1) * self._blocks
+        scan["n_counts"].value = bins * self._blocks
         scan.run(1)
         scat = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCATTER": 1})
-        scat["n_texels"].value = self.m
-        self._tpow.bind_to_storage_buffer(2)
+        scat["n_texels"].value = items
+        power.bind_to_storage_buffer(2)
         scat.run(groups)
         seg = load_program(ctx, "integrate_segment_sum.glsl", self._sort_defines)
         self.weights_buffer.bind_to_storage_buffer(0)
@@ -333,6 +390,6 @@ class CellIntegrator:
     def release(self) -> None:
         """Release every GL object this integrator made (programs stay in the loader's cache)."""
         self._release_map()
-        for o in (self._lights, self._cand, self.weights_buffer, self._stats):
+        for o in (self._lights, self._cand, self._slot_weights, self.weights_buffer, self._stats):
             release_gl(o)
         self.m = 0
