@@ -129,7 +129,7 @@ def write_composite_set(folder, lightmap, *, n_object_lights: int = 100, n_surfa
                         resolution: int = 256, capture_albedo: float = 0.3, scene_albedo: float = 0.5,
                         wall_albedo=(0.6, 0.35, 0.25), wall: dict | None = None, spheres: int = 4,
                         sphere_material="matte", seed: int = 0, truth_dirs: int = 2048, photo=None,
-                        progress: bool = False) -> dict:
+                        progress: bool = False, scene=None) -> dict:
     """Write a composite test set into ``folder`` (see the module docstring for the files).
 
     Parameters
@@ -154,6 +154,10 @@ def write_composite_set(folder, lightmap, *, n_object_lights: int = 100, n_surfa
     photo : ffls.synth.photo.PhotoSettings, optional
         How the captures are stored (default linear EXR).
     progress : bool
+    scene : ffls.synth.scene.SynthScene, optional
+        The object capture's scene (its ground albedo, spheres, lens); replaces ``spheres``,
+        ``sphere_material`` and ``capture_albedo``. The surface capture is it without the object;
+        the virtual scene keeps its camera.
 
     Returns
     -------
@@ -167,8 +171,11 @@ def write_composite_set(folder, lightmap, *, n_object_lights: int = 100, n_surfa
     folder.mkdir(parents=True, exist_ok=True)
     R = int(resolution)
     n_surface_lights = int(n_object_lights if n_surface_lights is None else n_surface_lights)
-    obj_scene = make_scene(spheres=spheres, sphere_material=sphere_material, with_object=True,
-                           ground_albedo=float(capture_albedo))
+    if scene is None:
+        scene = make_scene(spheres=spheres, sphere_material=sphere_material, ground_albedo=float(capture_albedo))
+    obj_scene = dataclasses.replace(scene, with_object=True)
+    camera = {k: getattr(obj_scene, k) for k in ("camera_distance", "camera_elevation_deg", "camera_fov_deg",
+                                                   "camera_target", "camera_model", "supersample")}
     surf_scene = dataclasses.replace(obj_scene, with_object=False)
     kw = {"resolution": R, "progress": progress, "photo": photo}
     write_synthetic_capture(folder / "object", scene=obj_scene,
@@ -182,7 +189,8 @@ def write_composite_set(folder, lightmap, *, n_object_lights: int = 100, n_surfa
                                          ("surface_mask", "surface_mask.png"), ("sphere_mask", "sphere_mask.png"))}
     save_lightmap(scene_map, paths["scene_map"])
     for key, with_object in (("background", False), ("truth", True)):
-        img = render_virtual_scene(scene_map, R, scene_albedo, with_object, n_dirs=truth_dirs, progress=progress)
+        img = render_virtual_scene(scene_map, R, scene_albedo, with_object, n_dirs=truth_dirs, progress=progress,
+                                   **camera)
         write_exr(paths[key], img)
     masks = composite_masks(obj_scene, R)
     for key in ("object", "surface"):
@@ -192,11 +200,11 @@ def write_composite_set(folder, lightmap, *, n_object_lights: int = 100, n_surfa
         "format": "ffls-composite-set", "version": 1, "resolution": R,
         "object": "object", "surface": "surface",
         "n_object_lights": int(n_object_lights), "n_surface_lights": n_surface_lights, "seed": int(seed),
-        "capture_albedo": float(capture_albedo), "scene_albedo": float(scene_albedo),
+        "capture_albedo": float(obj_scene.ground_albedo), "scene_albedo": float(scene_albedo),
         "wall_albedo": None if wall_albedo is None else [float(v) for v in wall_albedo],
         "wall": None if wall_albedo is None else {k: (list(v) if isinstance(v, tuple) else v)
                                                   for k, v in dict(WALL if wall is None else wall).items()},
-        "base_map": str(lightmap.source), "truth_dirs": int(truth_dirs), "spheres": int(spheres),
+        "base_map": str(lightmap.source), "truth_dirs": int(truth_dirs), "spheres": obj_scene.n_spheres,
         **{k: p.name for k, p in paths.items()},
     }
     with atomic_output(folder / COMPOSITE_FILE) as tmp:
