@@ -185,9 +185,9 @@ def run(args) -> int:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
     if args.turntable is not None and out.suffix.lower() in STILL_SUFFIXES:
         raise InputError("--turntable writes a video (.mp4) or a folder of PNGs, not a still", out)
-    files = _siblings(out) if args.turntable is None else None
     R0 = rotation_from_args(args)
     inputs = load_inputs(args)
+    files = _siblings(out) if args.turntable is None else None  # after the inputs are known: none is replaced
     print_notes(NAME, *inputs["notes"])
     comp = make_compositor(args, inputs)
     try:

@@ -5,7 +5,7 @@ surface and the surface alone; relight both with a light map made at the object'
 virtual scene; and merge them into a render (or photograph) of that scene with *differential
 rendering* (Debevec, "Rendering Synthetic Objects into Real Scenes", SIGGRAPH 1998):
 
-    composite = background + s * (relit object-on-surface - relit surface alone)   over the surface,
+    composite = background + (relit object-on-surface - relit surface alone)   over the surface,
     composite = relit object                                                     over the object's mask.
 
 The difference carries what the object does to the surface, its cast shadows and the light it
@@ -19,7 +19,11 @@ object, calibration spheres present in both) the background shows unchanged.
   corrects an exposure or albedo mismatch between the captured surface and the virtual one
   (the difference is multiplied by it); the offset absorbs additive mismatches (flare, a black
   level) so that they do not bias the scale. On a uniformly lit surface the two cannot be told
-  apart, and ``mode='auto'`` then fits the scale alone (and says so).
+  apart, and ``mode='auto'`` then fits the scale alone (and says so). The object-on-surface
+  field is registered on the same pixels with its own scale and offset: the two captures have
+  different lights (another power, another sampling of the map), so their relit surfaces differ
+  by a few percent even where the object changes nothing, and that must not be added to the
+  whole surface.
 * :func:`composite_Debevec1998` is the difference above; :func:`composite_ratio` its
   multiplicative variant, ``background * object_relit / surface_relit`` over the surface, which
   needs no scale and carries a textured background's texture into the shadow (but is noisy where
@@ -72,12 +76,14 @@ MAX_FIT_PIXELS = 40000
 
 @dataclass(frozen=True)
 class Registration:
-    """``background ~ scale * surface_relit + offset`` on the surface, per channel.
+    """``background ~ scale * surface_relit + offset`` on the surface, per channel (and the same for the object field).
 
     Attributes
     ----------
     scale, offset : (3,) float64
-        Per-channel scale and offset (radiance units of the background).
+        Per-channel scale and offset (radiance units of the background) of the surface-alone field.
+    object_field_scale, object_field_offset : (3,) float64 or None
+        The same for the object-on-surface field, fitted on the same pixels (None: as the surface's).
     mode : str
         What was fitted: ``'scale-offset'``, ``'scale'``, ``'none'`` or ``'given'``.
     pixels : int
@@ -95,18 +101,36 @@ class Registration:
     pixels: int = 0
     residual: float = 0.0
     note: str = ""
+    object_field_scale: np.ndarray | None = None
+    object_field_offset: np.ndarray | None = None
+
+    @property
+    def object_scale(self) -> np.ndarray:
+        """(3,) scale of the object-on-surface field."""
+        return np.asarray(self.scale if self.object_field_scale is None else self.object_field_scale, dtype=np.float64)
+
+    @property
+    def object_offset(self) -> np.ndarray:
+        """(3,) offset of the object-on-surface field."""
+        return np.asarray(self.offset if self.object_field_offset is None else self.object_field_offset,
+                          dtype=np.float64)
 
     def describe(self) -> str:
         """One line: scale and offset per channel, pixels and residual."""
         s = ", ".join(f"{v:.4g}" for v in self.scale)
         o = ", ".join(f"{v:.3g}" for v in self.offset)
         text = f"registration {self.mode}: scale ({s}), offset ({o})"
+        if self.object_field_scale is not None:
+            so = ", ".join(f"{v:.4g}" for v in self.object_scale)
+            text += f" (object field: scale ({so}))"
         if self.pixels:
             text += f" on {self.pixels} surface pixels, residual {100 * self.residual:.2g}%"
         return text + (f"; {self.note}" if self.note else "")
 
     def to_json(self) -> dict:
         return {"scale": [float(v) for v in self.scale], "offset": [float(v) for v in self.offset],
+                "object_field_scale": [float(v) for v in self.object_scale],
+                "object_field_offset": [float(v) for v in self.object_offset],
                 "mode": self.mode, "pixels": int(self.pixels), "residual": float(self.residual), "note": self.note}
 
 
@@ -322,7 +346,8 @@ def _robust_line(x: np.ndarray, y: np.ndarray, with_offset: bool) -> tuple[float
     return float(res.x[0]), 0.0
 
 
-def register_surface(background, surface_relit, pixels, mode: str = "auto", seed: int = 0) -> Registration:
+def register_surface(background, surface_relit, pixels, mode: str = "auto", seed: int = 0,
+                     object_relit=None) -> Registration:
     """Per-channel scale and offset with ``background ~ scale * surface_relit + offset`` on ``pixels``.
 
     Parameters
@@ -335,6 +360,9 @@ def register_surface(background, surface_relit, pixels, mode: str = "auto", seed
         separate it from the scale (:data:`OFFSET_MIN_SPREAD`); ``'none'`` is scale 1, offset 0.
     seed : int
         Seed of the subsample when more than :data:`MAX_FIT_PIXELS` pixels are given.
+    object_relit : (H, W, 3) float, optional
+        The object-on-surface field, registered on the same pixels with the same mode (its
+        ``object_field_scale`` / ``object_field_offset``).
 
     Returns
     -------
@@ -358,9 +386,11 @@ def register_surface(background, surface_relit, pixels, mode: str = "auto", seed
                          "larger surface mask, or --registration none")
     x = np.asarray(surface_relit, dtype=np.float64)[pixels]
     y = np.asarray(background, dtype=np.float64)[pixels]
+    xo = None if object_relit is None else np.asarray(object_relit, dtype=np.float64)[pixels]
     if n > MAX_FIT_PIXELS:
         pick = np.random.default_rng(seed).choice(n, MAX_FIT_PIXELS, replace=False)
         x, y = x[pick], y[pick]
+        xo = None if xo is None else xo[pick]
     note = ""
     with_offset = mode == "scale-offset"
     if mode == "auto":
@@ -373,6 +403,12 @@ def register_surface(background, surface_relit, pixels, mode: str = "auto", seed
     scale, offset = np.ones(3), np.zeros(3)
     for c in range(3):
         scale[c], offset[c] = _robust_line(x[:, c], y[:, c], with_offset)
+    oscale = ooffset = None
+    if xo is not None:
+        oscale, ooffset = np.ones(3), np.zeros(3)
+        for c in range(3):
+            oscale[c], ooffset[c] = _robust_line(xo[:, c], y[:, c], with_offset)
+        scale = np.where(np.all(oscale > 0), scale, np.minimum(scale, oscale))  # either non-positive: refused below
     if not np.all(scale > 0):
         raise InputError(f"the registration scale is not positive ({', '.join(f'{v:.3g}' for v in scale)}): the "
                          "relit surface does not resemble the background's surface (check the surface mask, the "
@@ -380,7 +416,7 @@ def register_surface(background, surface_relit, pixels, mode: str = "auto", seed
     r = (y - (x * scale + offset)) @ LUMINANCE
     yl = float(np.median(y @ LUMINANCE))
     resid = 1.4826 * float(np.median(np.abs(r - np.median(r)))) / max(yl, 1e-30)
-    return Registration(scale, offset, "scale-offset" if with_offset else "scale", n, resid, note)
+    return Registration(scale, offset, "scale-offset" if with_offset else "scale", n, resid, note, oscale, ooffset)
 
 
 # ----------------------------------------------------------------------------- composites
@@ -392,23 +428,32 @@ def _finish(out: np.ndarray, object_relit, object_mask, object_scale) -> tuple[n
     return np.where(neg, 0.0, out).astype(np.float32), clamped
 
 
+def _field(x, scale, offset):
+    return np.asarray(x, dtype=np.float64) * np.asarray(scale, dtype=np.float64) + np.asarray(offset, dtype=np.float64)
+
+
 def composite_Debevec1998(background, object_relit, surface_relit, object_mask, surface_mask, scale=1.0,
+                          offset=0.0, object_field_scale=None, object_field_offset=None,
                           object_scale=1.0) -> tuple[np.ndarray, int]:
-    """Differential rendering: ``background + scale * (object_relit - surface_relit)`` over the surface.
+    """Differential rendering: ``background + (object_relit - surface_relit)`` over the surface, registered.
 
     Debevec, "Rendering Synthetic Objects into Real Scenes", SIGGRAPH 1998, section 5 (with the
     local scene's two renders replaced by the two relit reflectance fields, as in Masselus et al.
-    2002, section 7). The relit object replaces the result over its mask (blended by coverage).
+    2002, section 7). Each field is first brought to the background's units by its registration
+    (``scale * field + offset``), so the difference is zero wherever the object changes nothing;
+    the relit object replaces the result over its mask (blended by coverage).
 
     Parameters
     ----------
     background, object_relit, surface_relit : (H, W, 3) float
     object_mask, surface_mask : (H, W) float in [0, 1]
-    scale : float or (3,) float
-        The registration scale (:func:`register_surface`) applied to the difference.
+    scale, offset : float or (3,) float
+        Registration of the surface-alone field (:func:`register_surface`).
+    object_field_scale, object_field_offset : float or (3,) float, optional
+        Registration of the object-on-surface field (default: the surface's).
     object_scale : float or (3,) float
-        Applied to the relit object (1 when the mismatch is the surface's albedo; the
-        registration scale when it is the exposure).
+        Applied to the relit object over its mask (1 when the mismatch is the surface's albedo;
+        the field's registration scale when it is the exposure).
 
     Returns
     -------
@@ -416,29 +461,34 @@ def composite_Debevec1998(background, object_relit, surface_relit, object_mask, 
     clamped : int
         Pixels set to 0 from negative.
     """
-    bg = np.asarray(background, dtype=np.float64)
-    d = np.asarray(object_relit, dtype=np.float64) - np.asarray(surface_relit, dtype=np.float64)
-    out = bg + np.asarray(scale, dtype=np.float64) * d * np.asarray(surface_mask, dtype=np.float64)[..., None]
+    osc = scale if object_field_scale is None else object_field_scale
+    oof = offset if object_field_offset is None else object_field_offset
+    d = _field(object_relit, osc, oof) - _field(surface_relit, scale, offset)
+    out = np.asarray(background, dtype=np.float64) + d * np.asarray(surface_mask, dtype=np.float64)[..., None]
     return _finish(out, np.asarray(object_relit, dtype=np.float64), np.asarray(object_mask, dtype=np.float64),
                    np.asarray(object_scale, dtype=np.float64))
 
 
-def composite_ratio(background, object_relit, surface_relit, object_mask, surface_mask, offset=0.0,
-                    object_scale=1.0, floor: float = 0.02) -> tuple[np.ndarray, int]:
-    """Multiplicative differential rendering: ``(background - offset) * object_relit / surface_relit + offset``.
+def composite_ratio(background, object_relit, surface_relit, object_mask, surface_mask, scale=1.0, offset=0.0,
+                    object_field_scale=None, object_scale=1.0, floor: float = 0.02) -> tuple[np.ndarray, int]:
+    """Multiplicative differential rendering: ``(background - offset) * ratio + offset`` over the surface.
 
-    The ratio of the two relit fields is the fraction of light the object leaves the surface (a
-    shadow < 1, a bounce > 1), whatever the surface's albedo or the exposure, so it needs no
-    registration scale, and a textured background keeps its texture inside the shadow. Where the
-    relit surface is darker than ``floor`` times its median over the surface region the ratio is
-    unreliable (noise over a dark denominator) and left at 1.
+    ``ratio = (object_field_scale * object_relit) / (scale * surface_relit)`` is the fraction of
+    light the object leaves the surface (a shadow < 1, a bounce > 1), whatever the surface's
+    albedo or the exposure of the background; the two scales only correct the captures'
+    difference (their lights' power and sampling). A textured background keeps its texture
+    inside the shadow. Where the relit surface is darker than ``floor`` times its median over the
+    surface region the ratio is unreliable (noise over a dark denominator) and left at 1.
 
     Parameters
     ----------
     background, object_relit, surface_relit : (H, W, 3) float
     object_mask, surface_mask : (H, W) float in [0, 1]
-    offset : float or (3,) float
-        The registration offset: the part of the background that the lighting does not scale.
+    scale, offset : float or (3,) float
+        Registration of the surface-alone field; the offset is the part of the background that
+        the lighting does not scale.
+    object_field_scale : float or (3,) float, optional
+        Scale of the object-on-surface field (default: the surface's).
     object_scale : float or (3,) float
     floor : float
 
@@ -448,16 +498,19 @@ def composite_ratio(background, object_relit, surface_relit, object_mask, surfac
     clamped : int
     """
     bg = np.asarray(background, dtype=np.float64)
-    o = np.asarray(object_relit, dtype=np.float64)
-    s = np.asarray(surface_relit, dtype=np.float64)
+    sc = np.asarray(scale, dtype=np.float64)
+    o = np.asarray(object_relit, dtype=np.float64) * np.asarray(sc if object_field_scale is None
+                                                                 else object_field_scale, dtype=np.float64)
+    sr = np.asarray(surface_relit, dtype=np.float64) * sc
     sm = np.asarray(surface_mask, dtype=np.float64)
     region = sm > 0.5
-    ref = np.median(s[region], axis=0) if region.any() else np.ones(3)
-    ok = s > floor * np.maximum(ref, 1e-30)
-    ratio = np.where(ok, o / np.where(ok, s, 1.0), 1.0)
+    ref = np.median(sr[region], axis=0) if region.any() else np.ones(3)
+    ok = sr > floor * np.maximum(ref, 1e-30)
+    ratio = np.where(ok, o / np.where(ok, sr, 1.0), 1.0)
     off = np.asarray(offset, dtype=np.float64)
     out = bg + (bg - off) * (ratio - 1.0) * sm[..., None]
-    return _finish(out, o, np.asarray(object_mask, dtype=np.float64), np.asarray(object_scale, dtype=np.float64))
+    return _finish(out, np.asarray(object_relit, dtype=np.float64), np.asarray(object_mask, dtype=np.float64),
+                   np.asarray(object_scale, dtype=np.float64))
 
 
 def composite(background, object_relit, surface_relit, object_mask, surface_mask, *, method: str = "Debevec1998",
@@ -482,7 +535,7 @@ def composite(background, object_relit, surface_relit, object_mask, surface_mask
     registration : {'auto', 'scale-offset', 'scale', 'none'} or Registration
         A mode of :func:`register_surface` (fitted here), or a fixed registration.
     object_scale : bool
-        Scale the relit object by the registration scale too: right when the mismatch is the
+        Scale the relit object by its field's registration scale: right when the mismatch is the
         exposure (a photographed background), wrong when it is the surface's albedo (a virtual
         scene lit by a map rendered with it, where the relit object is already in its units).
     change_threshold, margin_px
@@ -507,12 +560,13 @@ def composite(background, object_relit, surface_relit, object_mask, surface_mask
         if registration != "none":
             used = registration_pixels(obj, sur, om, sm, change_threshold=change_threshold, margin_px=margin_px,
                                        background=bg)
-        reg = register_surface(bg, sur, used, registration)
-    osc = reg.scale if object_scale else 1.0
+        reg = register_surface(bg, sur, used, registration, object_relit=obj)
+    osc = reg.object_scale if object_scale else 1.0
     if method == "Debevec1998":
-        img, clamped = composite_Debevec1998(bg, obj, sur, om, sm, reg.scale, osc)
+        img, clamped = composite_Debevec1998(bg, obj, sur, om, sm, reg.scale, reg.offset, reg.object_scale,
+                                             reg.object_offset, osc)
     else:
-        img, clamped = composite_ratio(bg, obj, sur, om, sm, reg.offset, osc)
+        img, clamped = composite_ratio(bg, obj, sur, om, sm, reg.scale, reg.offset, reg.object_scale, osc)
     return CompositeResult(img, reg, method, clamped, used, om.astype(np.float32))
 
 
