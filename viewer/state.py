@@ -135,6 +135,9 @@ class ViewerState:
     tonemap : {'srgb', 'reinhard', 'aces'}
     show_background : bool
         Show the pixels outside the capture's object mask (only with a mask, see docs/viewer.md).
+    composite : bool
+        Show the object composited into the background (differential rendering,
+        :mod:`ffls.relight.composite`; only with ``ffls view --composite-surface``).
     lightmap : str
         A built-in name (:data:`BUILTIN_MAPS`) or a file path; the renderer loads it when it changes.
     lightmap_path_input : str
@@ -176,6 +179,7 @@ class ViewerState:
     exposure: float = 0.0
     tonemap: str = "aces"
     show_background: bool = True
+    composite: bool = False
     lightmap: str = "courtyard"
     lightmap_path_input: str = ""
     open_dialog: bool = False
@@ -288,6 +292,10 @@ class ViewInfo:
         Whether a native file dialog can be opened (a desktop session).
     recording : str
         Turntable progress text, empty when idle.
+    composite_available : bool
+        Whether a surface capture and background were given (enables the composite checkbox).
+    registration : str
+        The composite's registration (:meth:`ffls.relight.composite.Registration.describe`).
     """
 
     image_tex: int = 0
@@ -308,3 +316,5 @@ class ViewInfo:
     content_scale: float = 1.0
     dialog_available: bool = False
     recording: str = ""
+    composite_available: bool = False
+    registration: str = ""
