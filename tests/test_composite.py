@@ -241,3 +241,43 @@ def test_composite_turntable(cset, tmp_path, capfd):
     assert [p.name for p in imgs] == ["frame_0000.png", "frame_0001.png", "frame_0002.png"]
     a, b = (read_image(p, working_space=False).pixels for p in imgs[:2])
     assert not np.array_equal(a, b)  # the scene's map turned
+
+
+def test_viewer_composite_mode(cset, gl_session):
+    """The viewer's composite mode: the background with the object and its shadow, live under rotation."""
+    pytest.importorskip("imgui_bundle", reason="imgui-bundle is not installed")
+    from ffls.errors import GLUnavailable
+    from ffls.io.capture import load_capture_and_lights
+    from viewer.app import ViewerApp
+    from viewer.renderer import CompositeInputs
+    from viewer.state import ViewerState
+
+    cap, lights = load_capture_and_lights(cset / "object")
+    scap, slights = load_capture_and_lights(cset / "surface")
+    bg = read_image(cset / "background.exr").pixels
+    om, sm = read_mask(cset / "object_mask.png"), read_mask(cset / "surface_mask.png")
+    st = ViewerState(window_size=(480, 320), lightmap=str(cset / "scene_map.exr"), tonemap="srgb", composite=True)
+    st.quality["method"] = "full f32"
+    try:
+        app = ViewerApp(cap, lights, st, headless=True, composite=CompositeInputs(scap, slights, bg, om, sm))
+    except GLUnavailable as e:
+        pytest.skip(f"no viewer window on glfw's null platform with EGL: {e}")
+    try:
+        app.step(dt=0.0)
+        assert app.ctx.error == "GL_NO_ERROR"
+        a = app.renderer.read_hdr().copy()
+        assert app.renderer.info.composite_available and "registration" in app.renderer.info.registration
+        sph = read_mask(cset / "sphere_mask.png") > 0.5
+        assert np.array_equal(a[sph], bg[sph])  # the background, not the relit capture with its spheres
+        ref = composite(bg, app.renderer.engine.read_hdr(), app.renderer.surface_engine.read_hdr(), om, sm)
+        assert np.allclose(a, ref.image, rtol=1e-5, atol=1e-6)
+        st.yaw = 90.0
+        app.step(dt=0.0)
+        b = app.renderer.read_hdr()
+        assert not np.allclose(a[om > 0.5], b[om > 0.5])  # the scene's map turned: the object relit
+        st.composite = False
+        app.step(dt=0.0)
+        assert not np.array_equal(app.renderer.read_hdr()[sph], bg[sph])  # plain relighting again
+        assert app.ctx.error == "GL_NO_ERROR"
+    finally:
+        app.close()
