@@ -306,4 +306,4 @@ def test_mitsuba_latlong_sensor_and_envmap_follow_the_guide():
     img = np.array(mi.render(scene, spp=16))
     assert img.shape == data.shape
     assert np.abs(img - data).mean() < 0.04 and np.abs(img - data).max() < 0.15  # pixel filter and bilinear lookup
-    assert np.abs(img[:, ::-1] - data).mean() > 0.5 and np.abs(img[::-1] - data).mean() > 0.5  # not mirrored
+    assert np.abs(img[:, ::-1] - data).mean() > 0.2 and np.abs(img[::-1] - data).mean() > 0.2  # not mirrored
