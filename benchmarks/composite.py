@@ -22,7 +22,12 @@ both methods), and compared with the direct render:
   the background's mean there; the spheres themselves are outside the surface mask.
 
     python benchmarks/composite.py [--maps courtyard,sunrise,studio,sky] [--lights 50,100,200,400]
-        [--schemes MasselusDutreAnrys2002,...] [--res 256] [--truth-dirs 2048] [--cache DIR]
+        [--schemes MasselusDutreAnrys2002,...] [--res 256] [--truth-dirs 2048] [--cache DIR] [--oracle]
+
+``--oracle`` adds rows (scheme ``direct``, lights 0) where the two fields are not relit captures but
+the capture scenes rendered directly under the map: the error of differential rendering itself
+(the captured ground's albedo in the object's bounce light, the registration), without the
+relighting's discretisation of the map over the lights.
 
 Prints a table and writes ``benchmarks/results/composite.json``.
 """
@@ -44,7 +49,7 @@ from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.basis import accepted_basis
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import relight_fast
-from ffls.synth.scene import make_scene, stratified_directions, write_synthetic_capture
+from ffls.synth.scene import make_scene, render_lightmap, stratified_directions, write_synthetic_capture
 from ffls.synth.virtual import composite_masks, render_virtual_scene, wall_lightmap
 from ffls.weights.voronoi import integrate_weights
 
@@ -93,6 +98,7 @@ def main():
     ap.add_argument("--truth-dirs", type=int, default=2048)
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite.json"))
+    ap.add_argument("--oracle", action="store_true", help="also composite direct renders of the two capture scenes")
     a = ap.parse_args()
     cache = Path(a.cache)
     cache.mkdir(parents=True, exist_ok=True)
@@ -119,30 +125,41 @@ def main():
         ring = near_sph & (sm > 0.5) & ~change
         every = np.ones(om.shape, dtype=bool)
         obj = om > 0.5
+        fields = []
+        if a.oracle:
+            direct = []
+            for key, sc in (("object", obj_scene), ("surface", surf_scene)):
+                p = cache / f"{name}_direct_{key}_{R}_{a.truth_dirs}.exr"
+                if not p.exists():
+                    write_exr(p, render_lightmap(sc, lm, R, n_dirs=a.truth_dirs))
+                direct.append(read_image(p).pixels.astype(np.float64))
+            fields.append((0, "direct", *direct))
         for n, (((ob, od), oh), ((sb, sd), sh)) in captures.items():
             for scheme in a.schemes.split(","):
                 wo, ws = _weights(lm, od, oh, scheme), _weights(lm, sd, sh, scheme)
                 if wo is None or ws is None:
                     skipped.add(scheme)
                     continue
-                o, s = relight_fast(wo, ob).astype(np.float64), relight_fast(ws, sb).astype(np.float64)
-                paste = bg * (1 - om[..., None]) + o * om[..., None]
-                for method in METHODS:
-                    r = composite(bg, o, s, om, sm, method=method)
-                    c = r.image.astype(np.float64)
-                    rows.append({
-                        "map": name, "lights": n, "scheme": scheme, "method": method,
-                        "change": _rel(c, tr, change), "paste": _rel(paste, tr, change),
-                        "overall": _rel(c, tr, every), "object": _rel(c, tr, obj),
-                        "sphere_trace": float((np.abs(c - bg)[ring] @ LUMINANCE).mean() / (bg[ring] @ LUMINANCE).mean()),
-                        "change_pixels": int(change.sum()),
-                        "registration": r.registration.to_json(),
-                    })
-                    x = rows[-1]
-                    print(f"{name:10s} {n:4d} {scheme:24s} {method:12s} change {100 * x['change']:5.1f}%  paste "
-                          f"{100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
-                          f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  "
-                          f"({x['change_pixels']} px)", flush=True)
+                fields.append((n, scheme, relight_fast(wo, ob).astype(np.float64),
+                               relight_fast(ws, sb).astype(np.float64)))
+        for n, scheme, o, s in fields:
+            paste = bg * (1 - om[..., None]) + o * om[..., None]
+            for method in METHODS:
+                r = composite(bg, o, s, om, sm, method=method)
+                c = r.image.astype(np.float64)
+                rows.append({
+                    "map": name, "lights": n, "scheme": scheme, "method": method,
+                    "change": _rel(c, tr, change), "paste": _rel(paste, tr, change),
+                    "overall": _rel(c, tr, every), "object": _rel(c, tr, obj),
+                    "sphere_trace": float((np.abs(c - bg)[ring] @ LUMINANCE).mean() / (bg[ring] @ LUMINANCE).mean()),
+                    "change_pixels": int(change.sum()),
+                    "registration": r.registration.to_json(),
+                })
+                x = rows[-1]
+                print(f"{name:10s} {n:4d} {scheme:24s} {method:12s} change {100 * x['change']:5.1f}%  paste "
+                      f"{100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
+                      f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  "
+                      f"({x['change_pixels']} px)", flush=True)
     print(f"schemes not in this build (skipped): {', '.join(sorted(skipped)) or 'none'}")
     write_json(a.out, {"resolution": R, "truth_dirs": a.truth_dirs, "capture_albedo": CAPTURE_ALBEDO,
                        "scene_albedo": SCENE_ALBEDO, "skipped_schemes": sorted(skipped), "host": host_info(),
