@@ -125,6 +125,22 @@ def ws(tmp_path_factory):
     data = (root / "mask.png").read_bytes()
     (root / "mask_trunc.png").write_bytes(data[: len(data) // 2])
     w["mask_trunc"] = root / "mask_trunc.png"
+    # composite: backgrounds, surface masks, and a capture of another camera (K changed)
+    write_exr(root / "bg.exr", np.full((24, 24, 3), 0.2, np.float32))
+    write_exr(root / "bg_small.exr", np.full((20, 24, 3), 0.2, np.float32))
+    write_png(root / "bg.png", np.full((24, 24, 3), 50, np.uint8))
+    sm = np.zeros((24, 24), np.uint8)
+    sm[18:, :] = 255
+    write_png(root / "surf.png", sm)
+    write_png(root / "surf_empty.png", np.zeros((24, 24), np.uint8))
+    write_png(root / "mask_small.png", np.full((20, 20), 255, np.uint8))
+    c = root / "few_cam"
+    shutil.copytree(few, c)
+    doc = json.loads((c / "capture.json").read_text())
+    doc["camera"]["K"][0][0] *= 1.5
+    doc["camera"]["K"][1][1] *= 1.5
+    (c / "capture.json").write_text(json.dumps(doc))
+    w["few_cam"] = c
     # a folder where a file is wanted, a file where a folder is wanted
     (root / "isdir.exr").mkdir()
     (root / "isdir.png").mkdir()
@@ -157,6 +173,7 @@ def _run(capfd, argv, where: Path):
 # and the output path that must not appear ("" when the case writes nothing by design).
 R = ["render", "{cap}", "--probe", "sky", "--cpu"]
 L = ["relight", "{cap}", "--probe", "sky"]
+C = ["composite", "--object", "{cap}", "--surface", "{few}", "--lightmap", "sky", "--background", "{root}/bg.exr"]
 CASES = [
     # --- numeric arguments: render / relight
     ("render-rank-0", R + ["--rank", "0", "-o", "{out}/a.png"], "--rank", "a.png"),
@@ -322,6 +339,48 @@ CASES = [
     ("render-probe-unknown", R[:3] + ["nosuchmap", "--cpu", "-o", "{out}/a.png"], "nosuchmap", "a.png"),
     ("relight-mask-missing", L + ["--mask", "{root}/nomask.png", "-o", "{out}/a.png"], "nomask.png", "a.png"),
     ("relight-lights-map-bad", L + ["--lights-map", "{{bad", "-o", "{out}/a.exr"], "--lights-map", "a.exr"),
+    # --- composite
+    ("comp-mask-size", C + ["--mask", "{root}/mask_small.png", "--surface-mask", "{root}/surf.png", "-o",
+                            "{out}/c.exr"], "mask_small.png", "c.exr"),
+    ("comp-surf-mask-size", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/mask_small.png", "-o",
+                                 "{out}/c.exr"], "mask_small.png", "c.exr"),
+    ("comp-no-surface", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/surf_empty.png", "-o",
+                             "{out}/c.exr"], "surf_empty.png", "c.exr"),
+    ("comp-surface-is-object", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/mask.png", "-o",
+                                    "{out}/c.exr"], "no surface pixel", "c.exr"),
+    ("comp-other-camera", ["composite", "--object", "{cap}", "--surface", "{few_cam}", "--lightmap", "sky",
+                           "--background", "{root}/bg.exr", "--mask", "{root}/mask.png", "--surface-mask",
+                           "{root}/surf.png", "-o", "{out}/c.exr"], "different camera", "c.exr"),
+    ("comp-bg-size", ["composite", "--object", "{cap}", "--surface", "{few}", "--lightmap", "sky", "--background",
+                      "{root}/bg_small.exr", "--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "-o",
+                      "{out}/c.exr"], "bg_small.exr", "c.exr"),
+    ("comp-bg-png", ["composite", "--object", "{cap}", "--surface", "{few}", "--lightmap", "sky", "--background",
+                     "{root}/bg.png", "--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "-o",
+                     "{out}/c.exr"], "bg.png", "c.exr"),
+    ("comp-out-suffix", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "-o",
+                             "{out}/c.jpg"], "c.jpg", "c.jpg"),
+    ("comp-turntable-still", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "--turntable",
+                                  "3", "-o", "{out}/c.exr"], "c.exr", "c.exr"),
+    ("comp-rank", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "--rank", "20", "-o",
+                       "{out}/c.exr"], "--rank", "c.exr"),
+    ("comp-lightmap-unknown", ["composite", "--object", "{cap}", "--surface", "{few}", "--lightmap", "nosuchmap",
+                               "--background", "{root}/bg.exr", "--mask", "{root}/mask.png", "--surface-mask",
+                               "{root}/surf.png", "-o", "{out}/c.exr"], "nosuchmap", "c.exr"),
+    ("comp-onto-background", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "-o",
+                                  "{root}/bg.exr"], "bg.exr", ""),
+    ("comp-png-sibling-onto-input", C + ["--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "-o",
+                                         "{root}/mask.exr"], "mask.png", ""),
+    ("view-composite-no-mask", ["view", "{cap}", "--headless", "--frames", "1", "--composite-surface", "{few}",
+                                "--background", "{root}/bg.exr", "--surface-mask", "{root}/surf.png"], "--mask", ""),
+    ("view-background-alone", ["view", "{cap}", "--headless", "--frames", "1", "--background", "{root}/bg.exr"],
+     "--composite-surface", ""),
+    ("view-composite-camera", ["view", "{cap}", "--headless", "--frames", "1", "--composite-surface", "{few_cam}",
+                               "--background", "{root}/bg.exr", "--surface-mask", "{root}/surf.png", "--mask",
+                               "{root}/mask.png"], "different camera", ""),
+    ("synth-composite-near", ["synth", "{out}/s", "--composite-set", "sky", "--near", "2"], "--near", "s"),
+    ("synth-composite-map", ["synth", "{out}/s", "--composite-set", "nosuchmap"], "nosuchmap", "s"),
+    ("synth-composite-wall", ["synth", "{out}/s", "--composite-set", "sky", "--wall-albedo", "1,2"],
+     "--wall-albedo", "s"),
     ("render-missing-capture", ["render", "{root}/nocap", "--probe", "sky", "--cpu", "-o", "{out}/a.png"],
      "nocap", "a.png"),
 ]

@@ -52,6 +52,8 @@ class ViewerApp:
     vsync : bool
         Swap interval 1 on a desktop (the display limits the frame rate); always 0 headless.
     title : str
+    composite : viewer.renderer.CompositeInputs, optional
+        Enables the composite mode (``ffls view --composite-surface``).
     timing : bool
         Wait for the GPU after drawing the window each frame so that :attr:`stats` charges each
         part of the frame correctly (benchmarks; costs the CPU/GPU overlap).
@@ -67,7 +69,8 @@ class ViewerApp:
     """
 
     def __init__(self, capture, lights, state: ViewerState | None = None, *, headless: bool | None = None,
-                 mask_path=None, vsync: bool = True, title: str = "ffls view", timing: bool = False):
+                 mask_path=None, vsync: bool = True, title: str = "ffls view", timing: bool = False,
+                 composite=None):
         from viewer.renderer import Renderer, load_mask
 
         self.state = state if state is not None else ViewerState()
@@ -110,7 +113,7 @@ class ViewerApp:
                 raise GLUnavailable(f"the window's context is not OpenGL 4.3: {e}") from None
             mask = load_mask(capture, mask_path, size=self._image_size(capture))
             reason = "" if mask is not None else "this capture has no object mask"
-            self.renderer = Renderer(self.ctx, capture, lights, mask=mask, mask_reason=reason)
+            self.renderer = Renderer(self.ctx, capture, lights, mask=mask, mask_reason=reason, composite=composite)
             self._init_imgui()
             glfw.set_drop_callback(self.window, self.on_drop)
             self._t_last = None

@@ -52,6 +52,15 @@ def add_arguments(p):
     p.add_argument("--frames", type=FRAMES, default=None, metavar="N", help="run N frames and exit")
     p.add_argument("--screenshot", type=output_path((".png",)), default=None, metavar="OUT.png",
                    help="after the last frame save the window (PNG) and the relit HDR (OUT.exr)")
+    c = p.add_argument_group("composite mode (docs/composite.md)")
+    c.add_argument("--composite-surface", default=None, metavar="CAPTURE",
+                   help="capture of the surface alone (same camera): enables the composite mode, the object merged "
+                        "into --background with its shadows as the light map turns; needs --mask and --surface-mask")
+    c.add_argument("--surface-lights", default=None, metavar="FILE",
+                   help="lights of the surface capture (default CAPTURE/lights.json)")
+    c.add_argument("--background", default=None, metavar="BG.exr", help="linear background (.exr/.hdr)")
+    c.add_argument("--surface-mask", default=None, metavar="SURF.png", help="surface region (white = surface)")
+    c.add_argument("--composite", action="store_true", help="start in the composite mode")
     p.add_argument("--benchmark", action="store_true",
                    help="with --frames: rotate the light map every frame and print frame-time statistics")
 
@@ -103,6 +112,47 @@ def _check_and_report(args, capture, lights) -> None:
     print_notes(NAME, *notes)
 
 
+def composite_inputs(args, capture):
+    """:class:`viewer.renderer.CompositeInputs` of ``--composite-surface`` (None without it), checked.
+
+    Raises
+    ------
+    ffls.errors.InputError
+        A missing companion flag, cameras that differ, or images and masks of the wrong size.
+    """
+    from pathlib import Path
+
+    from ffls.errors import InputError
+
+    given = [f for f, v in (("--background", args.background), ("--surface-mask", args.surface_mask),
+                            ("--surface-lights", args.surface_lights)) if v is not None]
+    if args.composite_surface is None:
+        if given or args.composite:
+            raise InputError(f"{(given or ['--composite'])[0]} needs --composite-surface CAPTURE")
+        return None
+    missing = [f for f, v in (("--background", args.background), ("--surface-mask", args.surface_mask),
+                              ("--mask", args.mask)) if v is None]
+    if missing:
+        raise InputError(f"--composite-surface needs {' and '.join(missing)}")
+    from ffls.io.images import read_image, read_mask
+    from ffls.relight.composite import check_same_camera
+    from viewer.app import open_capture
+    from viewer.renderer import CompositeInputs
+
+    scap, slights = open_capture(args.composite_surface, args.surface_lights)
+    check_same_camera(capture, scap, Path(scap.folder) / "capture.json")
+    bg = read_image(args.background)
+    size = capture.image_size or (bg.pixels.shape[1], bg.pixels.shape[0])
+    if (bg.pixels.shape[1], bg.pixels.shape[0]) != tuple(size):
+        raise InputError(f"the background is {bg.pixels.shape[1]}x{bg.pixels.shape[0]}, the captures' photos "
+                         f"{size[0]}x{size[1]}", args.background)
+    om = read_mask(args.mask, size=size)
+    sm = read_mask(args.surface_mask, size=size)
+    if not ((sm > 0.5) & (om < 0.5)).any():
+        raise InputError("the surface mask has no surface pixel outside the object's mask", args.surface_mask)
+    return CompositeInputs(scap, slights, bg.pixels, om, sm)
+
+
 def run(args) -> int:
     from ffls.errors import InputError
     from viewer.app import ViewerApp, open_capture
@@ -114,8 +164,10 @@ def run(args) -> int:
     st = build_state(args)
     capture, lights = open_capture(args.capture, args.lights, getattr(args, "lights_map", None))
     _check_and_report(args, capture, lights)
+    comp = composite_inputs(args, capture)
+    st.composite = comp is not None and bool(args.composite)
     app = ViewerApp(capture, lights, st, headless=True if args.headless else None, timing=args.benchmark,
-                    mask_path=args.mask)
+                    mask_path=args.mask, composite=comp)
     try:
         if args.exposure == "auto":  # expose the first frame for the object's log-average luminance
             app.auto_expose()

@@ -297,6 +297,12 @@ def _image_panel(state: ViewerState, view: ViewInfo) -> None:
     imgui.end_disabled()
     if not view.mask_available:
         imgui.set_item_tooltip(f"{view.mask_reason}; give one with ffls view --mask FILE or \"mask\" in capture.json")
+    imgui.begin_disabled(not view.composite_available)
+    _, state.composite = imgui.checkbox("composite into background", state.composite)
+    imgui.end_disabled()
+    imgui.set_item_tooltip(view.registration if view.composite_available else
+                           "give ffls view --composite-surface CAPTURE --background BG.exr --surface-mask SURF.png "
+                           "--mask OBJ.png")
 
 
 def _quality_panel(state: ViewerState, view: ViewInfo) -> None:

@@ -10,6 +10,10 @@ the state. What it makes:
   weights as a heat map) with the Voronoi cell borders of the capture's lights drawn in; the
   light positions go to the GUI as uv so that it can draw and pick them;
 * the selected light's basis photo (tone-mapped);
+* the composite (``state.composite``, with :class:`CompositeInputs`): a second engine relights the
+  surface-alone capture under the same rotated map, and :func:`ffls.relight.composite.composite`
+  merges both into the background on the CPU (registration fitted once per light map); the
+  result is tone-mapped into its own texture;
 * the background overlay: a checkerboard outside the capture's object mask, drawn by the GUI
   over the relit image when the background is hidden. A capture has a mask only when one is
   given explicitly (``"mask": "mask.png"`` in ``capture.json``, or ``ffls view --mask``);
@@ -18,6 +22,7 @@ the state. What it makes:
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +37,7 @@ from ffls.relight.compress import DEFAULT_RANK, default_rank
 
 from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo
 
-__all__ = ["Renderer", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
+__all__ = ["Renderer", "CompositeInputs", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
 
 #: Height of the lat-long preview texture (width is twice that).
 PREVIEW_HEIGHT = 128
@@ -104,6 +109,30 @@ def heat_colours(t: np.ndarray) -> np.ndarray:
     return stops[i] * (1 - f) + stops[i + 1] * f
 
 
+@dataclass
+class CompositeInputs:
+    """What the composite mode needs beside the object capture (``ffls view --composite-surface``).
+
+    Attributes
+    ----------
+    capture, lights
+        The surface-alone capture (same camera) and its lights.
+    background : (H, W, 3) float32
+        Linear background (the scene without the object).
+    object_mask, surface_mask : (H, W) float32
+        Coverage of the object and of the surface region.
+    method : str
+        :data:`ffls.relight.composite.METHODS`.
+    """
+
+    capture: object
+    lights: object
+    background: np.ndarray
+    object_mask: np.ndarray
+    surface_mask: np.ndarray
+    method: str = "Debevec1998"
+
+
 class Renderer:
     """Draws what a :class:`ViewerState` asks for with an :class:`ffls.gpu.engine.Engine`.
 
@@ -117,9 +146,11 @@ class Renderer:
         Object mask (True = object); None disables hiding the background.
     mask_reason : str
         Shown as the tooltip of the disabled background checkbox when ``mask`` is None.
+    composite : CompositeInputs, optional
+        Enables the composite mode.
     """
 
-    def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = ""):
+    def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = "", composite=None):
         self.mask = mask  # metered by automatic exposure (ffls.display.tonemap.auto_exposure)
         from ffls.weights.voronoi import bake_cells
 
@@ -133,6 +164,12 @@ class Renderer:
         self.directions = np.asarray(lights.directions, dtype=np.float64)[ok]
         self.hemisphere = getattr(capture, "hemisphere", "upper")
         self.engine = None
+        self.composite_inputs = composite
+        self.surface_engine = None
+        self._composite_tex = None
+        self._composite_hdr = None
+        self._composite_display = None
+        self._registration = None
         self.info = ViewInfo(n_lights=len(self.directions), renderer=ctx.info.get("GL_RENDERER", ""),
                              mask_available=mask is not None,
                              mask_reason=mask_reason or "this capture has no object mask")
@@ -166,6 +203,7 @@ class Renderer:
         self.info.light_uv = np.stack([u, v], axis=-1)
         if mask is not None:
             self._make_overlay(mask)
+        self.info.composite_available = composite is not None
 
     # ------------------------------------------------------------------ setup
     def _make_overlay(self, mask: np.ndarray) -> None:
@@ -194,6 +232,14 @@ class Renderer:
         if self.engine is not None:
             self.engine.release()
         self.engine = new
+        if self.composite_inputs is not None:
+            if self.surface_engine is not None:
+                self.surface_engine.release()
+            ci = self.composite_inputs
+            if kw.get("rank") is not None:
+                kw["rank"] = default_rank(int(np.count_nonzero(ci.lights.ok_mask)), kw["rank"])
+            self.surface_engine = Engine.from_capture(self.ctx, ci.capture, ci.lights, **kw)
+            self._registration = None
         self._pass1_key = None
         self.info.basis_info = dict(new.basis_info)
         self.info.image_size = new.size
@@ -242,6 +288,8 @@ class Renderer:
         pass1_key = (self._lightmap_spec, state.quality.get("map_res", "full"))
         scheme = state.quality.get("weighting", "voronoi")
         eng.set_weighting(scheme)  # a no-op unless it changed (pass 1 reruns then)
+        if self.surface_engine is not None:
+            self.surface_engine.set_weighting(scheme)
         if state.light_mode:  # RTI style: one directional light, weights from the scheme
             key = (state.light_az, state.light_el, scheme)
             if key != self._light_key:
@@ -256,12 +304,19 @@ class Renderer:
             self._light_key = None
             self.info.single_light_uv = None
             if self._lightmap is not None and pass1_key != self._pass1_key:
-                eng.set_lightmap(pass1_lightmap(self._lightmap, pass1_key[1]))
+                lm1 = pass1_lightmap(self._lightmap, pass1_key[1])
+                eng.set_lightmap(lm1)
+                if self.surface_engine is not None:
+                    self.surface_engine.set_lightmap(lm1)
                 self._pass1_key = pass1_key
+                self._registration = None  # refitted under the new map
             if self._lightmap is not None:
                 eng.set_rotation(R)
                 eng.render(state.exposure, state.tonemap)
                 self.info.image_tex = eng.display_texture.glo
+                self._composite_hdr = None
+                if state.composite and self.surface_engine is not None:
+                    self._update_composite(state, R)
         self.info.timings = dict(eng.timings)
         self._update_preview(state, R)
         self._update_photo(state)
@@ -282,6 +337,32 @@ class Renderer:
         wt = self._light_weightings[scheme]
         w = wt(d[None, :]).dense(wt.n_lights)[0]
         return np.repeat(w[:, None], 3, axis=1)
+
+    def _update_composite(self, state: ViewerState, R: np.ndarray) -> None:
+        """Relight the surface capture, composite both into the background, show it (CPU merge)."""
+        from ffls.relight.composite import composite
+
+        ci = self.composite_inputs
+        self.surface_engine.set_rotation(R)
+        self.surface_engine.render(0.0, state.tonemap)
+        try:
+            res = composite(ci.background, self.engine.read_hdr(), self.surface_engine.read_hdr(), ci.object_mask,
+                            ci.surface_mask, method=ci.method,
+                            registration=self._registration if self._registration is not None else "auto")
+        except FflsError as e:
+            self.info.message = f"composite: {e}"
+            state.composite = False
+            return
+        self._registration = res.registration
+        self.info.registration = res.registration.describe()
+        self._composite_hdr = res.image
+        disp = self._composite_display = to_uint8(tonemap_np(res.image, state.exposure, state.tonemap))
+        rgba = np.concatenate([disp, np.full(disp.shape[:2] + (1,), 255, np.uint8)], axis=-1)
+        size = (disp.shape[1], disp.shape[0])
+        if self._composite_tex is None:
+            self._composite_tex = self.ctx.texture(size, 4, dtype="f1")
+        self._composite_tex.write(np.ascontiguousarray(rgba).tobytes())
+        self.info.image_tex = self._composite_tex.glo
 
     def _update_preview(self, state: ViewerState, R: np.ndarray) -> None:
         if self._preview_latlong is None:
@@ -354,11 +435,15 @@ class Renderer:
 
     # ------------------------------------------------------------------ outputs
     def read_hdr(self) -> np.ndarray:
-        """The relit HDR image ``(H, W, 3)`` float32 of the last :meth:`update`."""
+        """The relit HDR image ``(H, W, 3)`` float32 of the last :meth:`update` (the composite in composite mode)."""
+        if self._composite_hdr is not None:
+            return self._composite_hdr
         return self.engine.read_hdr()
 
     def read_display(self) -> np.ndarray:
-        """The tone-mapped relit image ``(H, W, 3)`` uint8 of the last :meth:`update`."""
+        """The tone-mapped relit image ``(H, W, 3)`` uint8 of the last :meth:`update` (or the composite)."""
+        if self._composite_hdr is not None:
+            return self._composite_display
         return self.engine.read_display()
 
     def release(self) -> None:
@@ -366,7 +451,10 @@ class Renderer:
         if self.engine is not None:
             self.engine.release()
             self.engine = None
-        for t in (self._preview_tex, self._photo_tex, self._overlay_tex):
+        if self.surface_engine is not None:
+            self.surface_engine.release()
+            self.surface_engine = None
+        for t in (self._preview_tex, self._photo_tex, self._overlay_tex, self._composite_tex):
             if t is not None:
                 t.release()
-        self._preview_tex = self._photo_tex = self._overlay_tex = None
+        self._preview_tex = self._photo_tex = self._overlay_tex = self._composite_tex = None

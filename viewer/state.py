@@ -141,6 +141,9 @@ class ViewerState:
     tonemap : {'srgb', 'reinhard', 'aces'}
     show_background : bool
         Show the pixels outside the capture's object mask (only with a mask, see docs/viewer.md).
+    composite : bool
+        Show the object composited into the background (differential rendering,
+        :mod:`ffls.relight.composite`; only with ``ffls view --composite-surface``).
     lightmap : str
         A built-in name (:data:`BUILTIN_MAPS`) or a file path; the renderer loads it when it changes.
     lightmap_path_input : str
@@ -188,6 +191,7 @@ class ViewerState:
     exposure: float = 0.0
     tonemap: str = "aces"
     show_background: bool = True
+    composite: bool = False
     lightmap: str = "courtyard"
     lightmap_path_input: str = ""
     open_dialog: bool = False
@@ -324,6 +328,10 @@ class ViewInfo:
         Turntable progress text, empty when idle.
     single_light_uv : (2,) float or None
         In light mode, the single light's lat-long uv (for the preview marker); None otherwise.
+    composite_available : bool
+        Whether a surface capture and background were given (enables the composite checkbox).
+    registration : str
+        The composite's registration (:meth:`ffls.relight.composite.Registration.describe`).
     """
 
     image_tex: int = 0
@@ -345,3 +353,5 @@ class ViewInfo:
     dialog_available: bool = False
     recording: str = ""
     single_light_uv: tuple | None = None
+    composite_available: bool = False
+    registration: str = ""

@@ -69,6 +69,15 @@ def _vignetting(text: str):
     raise argparse.ArgumentTypeError(f"expected none, cos4 or radial:A[,B[,C]], not {text!r}")
 
 
+def _wall(text: str):
+    """``none`` or ``R,G,B`` albedo in [0, 1]."""
+    if text == "none":
+        return None
+    from ffls.commands.common import float_list
+
+    return float_list(0.0, 1.0, min_len=3, max_len=3)(text)
+
+
 def _choice(*names):
     def parse(text: str) -> str:
         if text not in names:
@@ -113,6 +122,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--calibration-pair", action="store_true",
                    help="write OUT_DIR/calibration (spheres, no object, lights.json) and OUT_DIR/object "
                         "(object, no spheres, no lights.json) under the same lights")
+    c = p.add_argument_group("composite test set (docs/composite.md)")
+    c.add_argument("--composite-set", default=None, metavar="MAP",
+                   help="write OUT_DIR/object (object and spheres), OUT_DIR/surface (ground and spheres alone, other "
+                        "lights), and a virtual scene under MAP (a light-map file or built-in name) with a wall and "
+                        "another ground albedo: scene_map.exr, background.exr, truth.exr and the masks")
+    c.add_argument("--scene-albedo", type=number(0.0, 1.0), default=0.5, metavar="A",
+                   help="ground albedo of the virtual scene (default 0.5; the captures' is --ground-albedo)")
+    c.add_argument("--wall-albedo", type=_wall, default=(0.6, 0.35, 0.25), metavar="R,G,B|none",
+                   help="albedo of the virtual scene's wall (default 0.6,0.35,0.25), or none")
+    c.add_argument("--surface-lights", type=N_LIGHTS, default=None, metavar="N",
+                   help="lights of the surface capture (default --lights)")
+    c.add_argument("--truth-dirs", type=integer(16, 100000), default=2048, metavar="N",
+                   help="distant lights the map is reduced to for the direct renders (default 2048)")
     f = p.add_argument_group("photograph")
     f.add_argument("--format", dest="file_format", type=_choice("exr", "png8", "png16", "tiff16", "jpeg"),
                    default=None, metavar="{exr,png8,png16,tiff16,jpeg}",
@@ -182,6 +204,9 @@ def scene_of(args: argparse.Namespace):
         raise InputError("--no-object with no spheres: the images would show only the table")
     if args.calibration_pair and n == 0:
         raise InputError("--calibration-pair needs spheres (--spheres N >= 1)")
+    if getattr(args, "composite_set", None) is not None and (args.calibration_pair or args.no_object):
+        raise InputError("--composite-set writes the object and surface captures itself; drop "
+                         + ("--calibration-pair" if args.calibration_pair else "--no-object"))
     if args.calibration_pair and args.no_object:
         raise InputError("--calibration-pair writes the object capture itself; drop --no-object")
     background = "textured" if args.background == "checker" else args.background
@@ -209,6 +234,15 @@ def _synth(args: argparse.Namespace, folder) -> dict:
     )
     if args.calibration_pair:
         return write_calibration_pair(folder, n_lights=args.lights, **kw)
+    if args.composite_set is not None:
+        from ffls.lightmaps.lightmap import lightmap_from_spec
+        from ffls.synth.virtual import write_composite_set
+
+        return write_composite_set(folder, lightmap_from_spec(args.composite_set), n_object_lights=args.lights,
+                                   n_surface_lights=args.surface_lights, resolution=args.resolution,
+                                   scene_albedo=args.scene_albedo, wall_albedo=args.wall_albedo, seed=args.seed,
+                                   truth_dirs=args.truth_dirs, photo=kw["photo"], progress=kw["progress"],
+                                   scene=kw["scene"])
     return write_synthetic_capture(folder, n_lights=args.lights, **kw)
 
 
@@ -228,15 +262,25 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--light-radius {args.light_radius:g} must be smaller than --near {args.near:g} "
                          "(the light would enclose the scene)")
     photo_settings(args), scene_of(args)  # conflicting flags: one line before anything is written
+    if args.composite_set is not None:
+        from ffls.lightmaps.lightmap import lightmap_from_spec
+
+        if args.near is not None:
+            raise InputError("--composite-set renders distant lights; drop --near")
+        lightmap_from_spec(args.composite_set)  # a bad map: one line before anything is rendered
     out = Path(args.out_dir)
-    captures = [out / "capture.json", out / "calibration" / "capture.json"]
+    captures = [out / "capture.json", out / "calibration" / "capture.json", out / "composite.json"]
     if out.is_dir() and any(out.iterdir()) and not any(c.is_file() for c in captures):
         raise InputError("exists, is not empty and holds no capture.json: refusing to replace it", out)
     t = time.perf_counter()
     with atomic_folder(out) as stage:
         res = _synth(args, stage)
     dt = time.perf_counter() - t
-    if args.calibration_pair:
+    if args.composite_set is not None:
+        print(f"wrote {out / 'object'} ({res['params']['n_object_lights']} lights), {out / 'surface'} "
+              f"({res['params']['n_surface_lights']} lights), scene_map.exr, background.exr, truth.exr, "
+              f"object_mask.png, surface_mask.png, sphere_mask.png and composite.json to {out} in {dt:.1f} s")
+    elif args.calibration_pair:
         cal, obj = out / "calibration", out / "object"
         print(f"wrote {len(res['calibration']['images'])} images, capture.json, lights.json and truth.json to {cal}, "
               f"and {len(res['object']['images'])} images, capture.json and truth.json (no lights.json: use --lights "

@@ -1,0 +1,231 @@
+"""Differential rendering on independent, path-traced renders (Mitsuba 3; docs/composite.md).
+
+Nothing here comes from ``ffls.synth``: Mitsuba 3's path tracer (``max_depth`` 6: the object's
+shadow *and* its bounce light on the ground, the ground's light on the object, interreflections)
+renders
+
+* the object capture: a rotated blue cube with a red ball on it and a green cylinder beside it,
+  on a grey diffuse ground (albedo 0.3) with four white diffuse spheres (albedo 0.8, r = 5 cm),
+  one ``directional`` light of irradiance 1 per image, N stratified directions (seed 0);
+* the surface capture: the ground and spheres alone, N other directions (seed 1);
+* the virtual scene under a real HDR map (``envmap`` with :data:`ENVMAP_TO_WORLD`): another
+  ground albedo (0.5) and a real wall (a 2.5 m x 0.8 m rectangle 0.8 m to the -X side, albedo
+  0.6, 0.35, 0.25): the background (no object, no spheres), the truth (with the object), and the
+  scene's light map at the object's place (``scripts/mitsuba_latlong.py``'s lat-long sensor 8 cm
+  above the ground, without the object);
+* the masks, by casting the camera's rays.
+
+Then ``ffls composite``'s library path (:func:`ffls.commands.composite.make_compositor`'s pieces:
+:class:`ffls.relight.cpu.CpuRelighter` per capture, :func:`ffls.relight.composite.composite`) and
+the errors of ``benchmarks/composite.py`` (change region: surface pixels off the object where the
+truth differs from the background by more than 3%; pasting without the shadow; the ring around
+the spheres).
+
+    python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
+        [--res 128] [--spp 16] [--truth-spp 256] [--cache DIR]
+
+Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/composite_mitsuba.json``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from common import host_info, write_json
+
+from ffls.assets import builtin_lightmaps
+from ffls.io.capture import Capture, Lights, load_capture_and_lights, save_capture, save_lights
+from ffls.io.images import read_image, write_exr
+from ffls.lightmaps.lightmap import load_lightmap
+from ffls.relight.composite import LUMINANCE, METHODS, composite
+from ffls.relight.cpu import CpuRelighter
+from ffls.synth.scene import stratified_directions
+
+ROOT = Path(__file__).resolve().parents[1]
+CAPTURE_ALBEDO, SCENE_ALBEDO = 0.3, 0.5
+WALL_ALBEDO = (0.6, 0.35, 0.25)
+CAM_ORIGIN, CAM_TARGET, FOV = (0.0, -0.866, 0.55), (0.0, 0.0, 0.05), 46.0
+SPHERES = ((-0.25, -0.25), (0.25, -0.25), (0.25, 0.25), (-0.25, 0.25))
+
+
+def _latlong_module():
+    spec = importlib.util.spec_from_file_location("mitsuba_latlong", ROOT / "scripts" / "mitsuba_latlong.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _diffuse(rgb):
+    return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(rgb) if np.ndim(rgb) else rgb}}
+
+
+def _shapes(mi, ground_albedo, with_object, spheres, wall):
+    T = mi.ScalarTransform4f
+    s = {"ground": {"type": "rectangle", "to_world": T().scale([3.0, 3.0, 1.0]), "bsdf": _diffuse(ground_albedo)}}
+    if with_object:
+        s["cube"] = {"type": "cube", "to_world": T().translate([0, 0, 0.05]).rotate([0, 0, 1], 25).scale(0.08),
+                     "bsdf": _diffuse((0.12, 0.22, 0.55))}
+        s["ball"] = {"type": "sphere", "center": [0.0, 0.0, 0.18], "radius": 0.08,
+                     "bsdf": {"type": "plastic", "diffuse_reflectance": {"type": "rgb", "value": [0.55, 0.1, 0.07]}}}
+        s["post"] = {"type": "cylinder", "p0": [0.15, -0.08, 0.0], "p1": [0.15, -0.08, 0.2], "radius": 0.025,
+                     "bsdf": _diffuse((0.2, 0.5, 0.12))}
+    if spheres:
+        for k, (x, y) in enumerate(SPHERES):
+            s[f"sphere{k}"] = {"type": "sphere", "center": [x, y, 0.05], "radius": 0.05, "bsdf": _diffuse(0.8)}
+    if wall:
+        # a 2.5 m x 0.8 m wall in the plane x = -0.8 facing +X (y from -1 to 1.5, z from 0 to 0.8)
+        s["wall"] = {"type": "rectangle", "bsdf": _diffuse(WALL_ALBEDO),
+                     "to_world": T().translate([-0.8, 0.25, 0.4]).rotate([0, 1, 0], 90).scale([0.4, 1.25, 1.0])}
+    return s
+
+
+def _sensor(mi, res, spp):
+    T = mi.ScalarTransform4f
+    return {"type": "perspective", "fov": FOV, "fov_axis": "x",
+            "to_world": T().look_at(origin=list(CAM_ORIGIN), target=list(CAM_TARGET), up=[0, 0, 1]),
+            "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "sampler": {"type": "independent", "sample_count": spp}}
+
+
+def _camera(res):
+    """K and world_from_camera (OpenCV axes) of the Mitsuba camera."""
+    f = 0.5 * res / math.tan(math.radians(FOV) / 2)
+    K = np.array([[f, 0, 0.5 * (res - 1)], [0, f, 0.5 * (res - 1)], [0, 0, 1.0]])
+    o, t = np.array(CAM_ORIGIN), np.array(CAM_TARGET)
+    z = (t - o) / np.linalg.norm(t - o)
+    x = np.cross(z, [0, 0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    M = np.eye(4)
+    M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, y, z, o
+    return K, M
+
+
+def _capture(mi, folder: Path, n, seed, with_object, res, spp):
+    folder.mkdir(parents=True, exist_ok=True)
+    dirs = stratified_directions(n, "upper", seed)
+    names = [f"img_{i:04d}.exr" for i in range(n)]
+    if not (folder / "capture.json").exists():
+        base = {"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "sensor": _sensor(mi, res, spp),
+                **_shapes(mi, CAPTURE_ALBEDO, with_object, True, False)}
+        for i, d in enumerate(dirs):
+            sc = mi.load_dict({**base, "light": {"type": "directional", "direction": list(-d),
+                                                 "irradiance": {"type": "rgb", "value": 1.0}}})
+            write_exr(folder / names[i], np.array(mi.render(sc, seed=seed * 100003 + i)), half=False)
+        K, M = _camera(res)
+        save_lights(Lights(image_names=names, directions=dirs), folder / "lights.json")
+        save_capture(Capture(folder=folder, image_names=names, encoding="linear", K=K, dist=np.zeros(5),
+                             world_from_camera=M, world_from_camera_is_default=False, sphere_radius=0.05,
+                             image_size=(res, res), hemisphere="upper", units="m"))
+    return load_capture_and_lights(folder)
+
+
+def _masks(mi, res):
+    """Object, surface (ground, no spheres) and sphere masks by casting the camera's pixel-centre rays."""
+    scene = mi.load_dict({"type": "scene", "sensor": _sensor(mi, res, 1), **_shapes(mi, 0.3, True, True, False)})
+    sensor = scene.sensors()[0]
+    ids = {}
+    for k, sh in enumerate(scene.shapes()):
+        ids[k] = sh.id()
+    label = np.empty((res, res), dtype=object)
+    for j in range(res):
+        for i in range(res):
+            ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f((i + 0.5) / res, (j + 0.5) / res), mi.Point2f(0.5, 0.5))
+            si = scene.ray_intersect(ray)
+            label[j, i] = si.shape.id() if si.is_valid() else ""
+    obj = np.isin(label, ["cube", "ball", "post"])
+    sph = np.char.startswith(label.astype(str), "sphere")
+    return obj, label == "ground", sph
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--maps", default="courtyard,sunrise,studio")
+    ap.add_argument("--lights", default="100,200")
+    ap.add_argument("--res", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--truth-spp", type=int, default=256)
+    ap.add_argument("--map-height", type=int, default=128)
+    ap.add_argument("--cache", default="/tmp/ffls_bench_composite_mitsuba")
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite_mitsuba.json"))
+    a = ap.parse_args()
+    import mitsuba as mi
+
+    mi.set_variant("scalar_rgb")
+    ll = _latlong_module()
+    ll.register()
+    cache = Path(a.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    R = a.res
+    t0 = time.perf_counter()
+    om_b, sm_b, sph = _masks(mi, R)
+    om, sm = om_b.astype(np.float64), sm_b.astype(np.float64)
+    grow = max(2, int(round(0.02 * R)))
+    near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
+    caps = {}
+    for n in (int(v) for v in a.lights.split(",")):
+        caps[n] = (_capture(mi, cache / f"object_{R}_{n}_{a.spp}", n, 0, True, R, a.spp),
+                   _capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
+        print(f"captures of {n} lights ready ({time.perf_counter() - t0:.0f} s)", flush=True)
+    rows = []
+    maps = builtin_lightmaps()
+    for name in a.maps.split(","):
+        env = {"type": "envmap", "filename": str(maps[name]), "to_world": mi.ScalarTransform4f(ll.ENVMAP_TO_WORLD)}
+        files = {k: cache / f"{name}_{k}_{R}_{a.truth_spp}.exr" for k in ("background", "truth", "map")}
+        for key, with_object in (("background", False), ("truth", True)):
+            if not files[key].exists():
+                sc = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "env": env,
+                                   "sensor": _sensor(mi, R, a.truth_spp),
+                                   **_shapes(mi, SCENE_ALBEDO, with_object, False, True)})
+                write_exr(files[key], np.array(mi.render(sc, seed=7)), half=False)
+        if not files["map"].exists():
+            sc = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "env": env,
+                               "sensor": {**ll.latlong_sensor((0.0, 0.0, 0.08), a.map_height),
+                                          "sampler": {"type": "independent", "sample_count": a.truth_spp}},
+                               **_shapes(mi, SCENE_ALBEDO, False, False, True)})
+            write_exr(files["map"], np.array(mi.render(sc, seed=11)), half=False)
+        bg = read_image(files["background"]).pixels.astype(np.float64)
+        tr = read_image(files["truth"]).pixels.astype(np.float64)
+        lm = load_lightmap(files["map"])
+        lt, lb = tr @ LUMINANCE, bg @ LUMINANCE
+        change = sm_b & ~om_b & (np.abs(lt - lb) > 0.03 * lb)
+        ring = near_sph & sm_b & ~change
+        for n, ((oc, ol), (sc_, sl)) in caps.items():
+            o = CpuRelighter.from_capture(oc, ol, precision="f64", cell_max_res=4096)
+            s = CpuRelighter.from_capture(sc_, sl, precision="f64", cell_max_res=4096)
+            for r in (o, s):
+                r.set_lightmap(lm)
+                r.render()
+            oh, sh = o.read_hdr().astype(np.float64), s.read_hdr().astype(np.float64)
+            paste = bg * (1 - om[..., None]) + oh * om[..., None]
+            for method in METHODS:
+                res = composite(bg, oh, sh, om, sm, method=method)
+                c = res.image.astype(np.float64)
+
+                def rel(x, m):
+                    return float(np.abs(x - tr)[m].sum() / max(tr[m].sum(), 1e-30))
+
+                rows.append({"map": name, "lights": n, "scheme": "MasselusDutreAnrys2002", "method": method,
+                             "change": rel(c, change), "paste": rel(paste, change),
+                             "overall": rel(c, np.ones_like(change)), "object": rel(c, om_b),
+                             "sphere_trace": float((np.abs(c - bg)[ring] @ LUMINANCE).mean()
+                                                   / (bg[ring] @ LUMINANCE).mean()),
+                             "change_pixels": int(change.sum()), "registration": res.registration.to_json()})
+                x = rows[-1]
+                print(f"{name:10s} {n:4d} {method:12s} change {100 * x['change']:5.1f}%  paste {100 * x['paste']:5.1f}%"
+                      f"  overall {100 * x['overall']:4.1f}%  object {100 * x['object']:4.1f}%  sphere trace "
+                      f"{100 * x['sphere_trace']:4.1f}%  ({x['change_pixels']} px)", flush=True)
+    write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "capture_albedo": CAPTURE_ALBEDO,
+                       "scene_albedo": SCENE_ALBEDO, "host": host_info(), "seconds": time.perf_counter() - t0,
+                       "rows": rows})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,227 @@
+"""``ffls composite``: put the relit object into a virtual scene or a photograph (paper section 7).
+
+Differential rendering (:mod:`ffls.relight.composite`): the object-on-surface and surface-alone
+captures are relit under the scene's light map, each over its own lights, and merged into the
+background: ``background + scale * (object - surface)`` over the surface mask, the relit object
+over its mask. The registration (scale and offset of the relit surface to the background's
+surface) is fitted once and printed. A still writes OUT.exr (linear) and OUT.png (tone-mapped)
+and OUT.json (the registration); ``--turntable N`` rotates the scene's map about +Z and writes
+frames like ``ffls render``.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, exposure_arg, output_path,
+                                  print_notes, flush_notes, rotation_from_args)
+
+NAME = "composite"
+HELP = "merge a relit object and its shadows into a virtual scene or photograph (differential rendering)"
+DESCRIPTION = (
+    "Relight two captures made with one camera, the object on a surface and the surface alone, under "
+    "the scene's light map (made at the object's place), and merge them into the background with "
+    "differential rendering: background + scale * (object - surface) over the surface mask, the relit object "
+    "over its mask, so that its shadows and bounce light transfer. A uniform scale and offset registering "
+    "the relit surface to the background's surface is fitted and reported. Writes OUT.exr, OUT.png and "
+    "OUT.json; --turntable N rotates the scene's map 360 degrees about +Z (mp4 or folder of PNGs)."
+)
+
+STILL_SUFFIXES = (".exr", ".png")
+BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
+
+
+def add_arguments(p):
+    from ffls.relight.composite import METHODS, REGISTRATION_MODES
+
+    g = p.add_argument_group("inputs")
+    g.add_argument("--object", required=True, metavar="CAPTURE", help="capture folder of the object on the surface")
+    g.add_argument("--object-lights", default=None, metavar="FILE",
+                   help="lights.json or .lp of the object capture (default CAPTURE/lights.json)")
+    g.add_argument("--surface", required=True, metavar="CAPTURE",
+                   help="capture folder of the surface alone (same camera; its own lights)")
+    g.add_argument("--surface-lights", default=None, metavar="FILE",
+                   help="lights.json or .lp of the surface capture (default CAPTURE/lights.json)")
+    g.add_argument("--lightmap", required=True, metavar="MAP",
+                   help="the scene's light map at the object's place (.exr/.hdr, or a built-in name)")
+    g.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
+    g.add_argument("--background", required=True, metavar="BG.exr",
+                   help="linear render or photograph of the scene without the object, from the captures' camera "
+                        "(.exr or .hdr, same size as the photos)")
+    g.add_argument("--mask", required=True, metavar="OBJ_MASK.png", help="object mask (white = object)")
+    g.add_argument("--surface-mask", required=True, metavar="SURF.png",
+                   help="surface region (white = the captured surface stands for the scene's; leave the "
+                        "calibration spheres out)")
+    add_rotation_arguments(p)
+    c = p.add_argument_group("composite")
+    c.add_argument("--method", default="Debevec1998", choices=METHODS,
+                   help="Debevec1998: add the difference (default); ratio: multiply by object/surface")
+    c.add_argument("--registration", default="auto", choices=REGISTRATION_MODES,
+                   help="fit background ~ scale * surface + offset on the surface (auto: the offset only where the "
+                        "surface's brightness varies enough); none: scale 1")
+    c.add_argument("--scale-object", action="store_true",
+                   help="scale the relit object by the registration too (the mismatch is the exposure, e.g. a "
+                        "photographed background; default: it is the surface's albedo)")
+    o = p.add_argument_group("output")
+    o.add_argument("--exposure", type=exposure_arg, default=0.0, metavar="EV|auto",
+                   help="exposure in stops of the PNG/video (auto: metered on the whole composite)")
+    o.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve (PNG/video)")
+    o.add_argument("--rank", type=RANK, default=None, metavar="K",
+                   help="relight with compressed bases of K eigen-images (1 <= K <= n-1 for each capture)")
+    o.add_argument("--cells-res", type=CELLS_RES, default=256,
+                   help="cell-texture resolution, 16 to 4096 (default 256)")
+    o.add_argument("--turntable", type=FRAMES, default=None, metavar="N",
+                   help="write N frames rotating the scene's map 360 degrees about +Z: -o OUT.mp4 or a folder")
+    o.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
+    o.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True),
+                   help="OUT.exr or OUT.png (both are written, and OUT.json), or .mp4 / DIR/ with --turntable")
+
+
+def _siblings(out: Path) -> dict:
+    from ffls.errors import check_output_path
+
+    files = {s: out.with_suffix(s) for s in (".exr", ".png", ".json")}
+    for p in files.values():
+        check_output_path(p)
+    return files
+
+
+def _image_size(capture) -> tuple[int, int]:
+    """(W, H) of a capture's photos: ``image_size`` when stated, else the first photo's."""
+    if capture.image_size is not None:
+        return tuple(int(v) for v in capture.image_size)
+    from ffls.io.images import read_image
+
+    h, w = read_image(capture.image_paths[0], working_space=False).pixels.shape[:2]
+    return w, h
+
+
+def load_inputs(args):
+    """The two captures and lights, light map, background and masks of ``args``, checked before any relighting.
+
+    Returns
+    -------
+    dict
+        ``object``, ``surface`` ((capture, lights) each), ``lightmap``, ``background`` (H, W, 3),
+        ``object_mask``, ``surface_mask`` ((H, W) float32), ``notes`` (informational lines).
+    """
+    from ffls.commands.common import check_cells_res, check_rank_arg
+    from ffls.errors import InputError
+    from ffls.io.capture import load_capture_and_lights
+    from ffls.io.images import colour_summary, read_image, read_mask
+    from ffls.lightmaps.lightmap import lightmap_from_spec
+    from ffls.relight.composite import check_same_camera
+    from ffls.weights.voronoi import coverage_warnings
+
+    fields = {}
+    notes = []
+    for key, folder, lights in (("object", args.object, args.object_lights),
+                                ("surface", args.surface, args.surface_lights)):
+        cap, li = load_capture_and_lights(folder, lights)
+        idx, dirs = li.accepted()
+        check_rank_arg(args.rank, len(idx), f"--rank (the {key} capture)")
+        check_cells_res(args.cells_res, dirs, cap.hemisphere)
+        fields[key] = (cap, li)
+        notes += [li.note, colour_summary([cap.image_paths[i] for i in idx])]
+        notes += [f"{key}: {w}" for w in coverage_warnings(dirs, cap.hemisphere)] if len(idx) else []
+    (ocap, _), (scap, _) = fields["object"], fields["surface"]
+    check_same_camera(ocap, scap, Path(scap.folder) / "capture.json")
+    size = _image_size(ocap)
+    ssize = _image_size(scap)
+    if ssize != size:
+        raise InputError(f"the surface capture's photos are {ssize[0]}x{ssize[1]}, the object capture's "
+                         f"{size[0]}x{size[1]}: two fields from different cameras", scap.folder)
+    bg_path = Path(args.background)
+    if bg_path.suffix.lower() not in BACKGROUND_SUFFIXES:
+        raise InputError("the background must be a linear HDR image (.exr or .hdr); convert an 8-bit photograph "
+                         "to linear radiance first (ffls never guesses its encoding)", bg_path)
+    bg = read_image(bg_path)
+    if (bg.pixels.shape[1], bg.pixels.shape[0]) != size:
+        raise InputError(f"the background is {bg.pixels.shape[1]}x{bg.pixels.shape[0]}, the captures' photos "
+                         f"{size[0]}x{size[1]} (render the scene from the capture's camera at its size)", bg_path)
+    if getattr(bg, "colour_note", None):
+        notes.append(f"colour: background: {bg.colour_note}")
+    om = read_mask(args.mask, size=size)
+    sm = read_mask(args.surface_mask, size=size)
+    if not ((sm > 0.5) & (om < 0.5)).any():
+        raise InputError("the surface mask has no surface pixel outside the object's mask (white = surface)",
+                         args.surface_mask)
+    lm = lightmap_from_spec(args.lightmap, args.layout)
+    if lm.colour_note:
+        notes.append(f"colour: light map: {lm.colour_note}")
+    return {**fields, "lightmap": lm, "background": bg.pixels, "object_mask": om, "surface_mask": sm,
+            "notes": notes}
+
+
+def make_compositor(args, inputs):
+    """A :class:`ffls.relight.composite.Compositor` over two CPU relighters (float32 sums, or ``--rank K``)."""
+    from ffls.relight.composite import Compositor
+    from ffls.relight.cpu import CpuRelighter
+
+    rel = [CpuRelighter.from_capture(*inputs[k], precision="f32", rank=args.rank, cell_res=args.cells_res,
+                                     cell_max_res=4096)
+           for k in ("object", "surface")]
+    return Compositor(*rel, inputs["background"], inputs["object_mask"], inputs["surface_mask"],
+                      method=args.method, registration=args.registration, object_scale=args.scale_object,
+                      paths={"background": args.background, "object_mask": args.mask,
+                             "surface_mask": args.surface_mask, "surface_relit": args.surface,
+                             "object_relit": args.object})
+
+
+def _display(img, exposure, tonemap):
+    from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
+
+    return to_uint8(tonemap_np(img, exposure=exposure, method=tonemap))
+
+
+def run(args) -> int:
+    from ffls.conventions import rotation_z
+    from ffls.display.tonemap import auto_exposure
+    from ffls.errors import InputError, atomic_output
+    from ffls.io.images import write_exr, write_png
+
+    out = Path(args.out)
+    if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
+        raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
+    if args.turntable is not None and out.suffix.lower() in STILL_SUFFIXES:
+        raise InputError("--turntable writes a video (.mp4) or a folder of PNGs, not a still", out)
+    R0 = rotation_from_args(args)
+    inputs = load_inputs(args)
+    files = _siblings(out) if args.turntable is None else None  # after the inputs are known: none is replaced
+    print_notes(NAME, *inputs["notes"])
+    comp = make_compositor(args, inputs)
+    try:
+        comp.set_lightmap(inputs["lightmap"])
+        comp.set_rotation(R0)
+        res = comp.render()
+        exposure = auto_exposure(res.image) if args.exposure == "auto" else float(args.exposure)
+        reg = res.registration
+        if args.turntable is None:
+            write_exr(files[".exr"], res.image)
+            write_png(files[".png"], _display(res.image, exposure, args.tonemap))
+            report = {"format": "ffls-composite", "version": 1, "method": res.method,
+                      "registration": reg.to_json(), "clamped_pixels": res.clamped_pixels,
+                      "object": str(args.object), "surface": str(args.surface), "lightmap": str(args.lightmap),
+                      "background": str(args.background), "exposure": exposure}
+            with atomic_output(files[".json"]) as tmp:
+                tmp.write_text(json.dumps(report, indent=1) + "\n")
+            what = f"{files['.exr']}, {files['.png'].name} and {files['.json'].name}"
+        else:
+            from tqdm import tqdm
+
+            from ffls.io.video import FrameWriter
+
+            flush_notes()
+            n = args.turntable
+            with FrameWriter(out, fps=args.fps) as sink:
+                for k in tqdm(range(n), desc="ffls composite", unit="frame", disable=None):
+                    if k:
+                        comp.set_rotation(rotation_z(360.0 * k / n) @ R0)
+                        res = comp.render()
+                    sink.write(_display(res.image, exposure, args.tonemap))
+            what = sink.describe()
+        print(f"ffls composite: {what} ({res.method}); {reg.describe()}"
+              + (f"; {res.clamped_pixels} negative pixels set to 0" if res.clamped_pixels else ""))
+    finally:
+        comp.release()
+    return 0
