@@ -29,7 +29,8 @@ from ffls.gpu.basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
 from ffls.gpu.context import release_gl
 from ffls.gpu.integrate import CellIntegrator
 from ffls.gpu.weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, default_method, weights_to_vec4
-from ffls.relight.basis import accepted_basis
+from ffls.relight.basis import capture_basis
+from ffls.relight.quality import integration_map
 
 __all__ = ["Engine"]
 
@@ -66,13 +67,22 @@ class Engine:
         :data:`ffls.gpu.basis.PACKED_LAYERS`); more lights split the basis.
     budget_bytes : int
         GPU memory allowed for the basis; more raises :class:`ffls.errors.InputError`.
+    map_res : int, optional
+        Height of the lat-long light map pass 1 integrates
+        (:func:`ffls.relight.quality.integration_map`, box-filtered, integral kept); None = the
+        map as given.
+    profile : bool
+        Wait for the GPU after each pass and record its time in :attr:`timings` (default True).
+        False lets the CPU run ahead (the viewer's frames overlap its own work with the GPU's);
+        :attr:`timings` is then empty.
     path : path-like, optional
         Named in errors (the capture folder).
     """
 
     def __init__(self, ctx, basis, directions, hemisphere: str = "upper", *, dtype: str = "f16",
                  rank: int | None = None, cell_res: int = 256, compressed=None, method: str = DEFAULT_METHOD,
-                 max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, path=None):
+                 max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, map_res: int | None = None,
+                 profile: bool = True, path=None):
         hemisphere = check_hemisphere(hemisphere)
         basis = np.asarray(basis)
         d = np.asarray(directions, dtype=np.float64)
@@ -84,6 +94,8 @@ class Engine:
         self.hemisphere = hemisphere
         self.directions = d
         self.cell_res = int(cell_res)
+        self.map_res = None if map_res is None else int(map_res)
+        self.profile = bool(profile)
         self._n = int(basis.shape[0])
         self._size = (int(basis.shape[2]), int(basis.shape[1]))
         self.timings: dict[str, float] = {}
@@ -127,7 +139,7 @@ class Engine:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_capture(cls, ctx, capture, lights, **kw) -> "Engine":
+    def from_capture(cls, ctx, capture, lights, quality=None, **kw) -> "Engine":
         """An engine for a capture folder and its light directions.
 
         Parameters
@@ -137,13 +149,21 @@ class Engine:
         lights : ffls.io.capture.Lights
             ``directions`` (m, 3) matched to the capture's images by ``image_names``; lights
             with ``ok_mask`` False are left out (their basis images are not loaded).
+        quality : ffls.relight.quality.Quality, optional
+            Every knob at once: near-light correction and basis subset
+            (:func:`ffls.relight.basis.capture_basis`), then ``dtype``, ``rank``, ``cell_res``
+            and ``map_res`` from it (keywords given in ``kw`` win).
         **kw
             As :class:`Engine`. With ``rank=K`` a compressed basis saved in the capture folder
             (:func:`ffls.relight.compress.load_compressed`) is used when it has at least K
             eigen-images and was made from the same images (checksum); otherwise it is computed and saved
             there (skipped silently if the folder is read-only).
         """
-        basis, d = accepted_basis(capture, lights)
+        basis, d, _ = capture_basis(capture, lights, quality)
+        if quality is not None:
+            for k, v in (("dtype", quality.precision), ("rank", quality.rank), ("cell_res", quality.cell_res),
+                         ("map_res", quality.map_res)):
+                kw.setdefault(k, v)
         rank = kw.get("rank")
         if rank is not None and kw.get("compressed") is None:
             from ffls.relight.compress import load_or_compress
@@ -155,6 +175,7 @@ class Engine:
     # ------------------------------------------------------------------ inputs
     def set_lightmap(self, lm) -> None:
         """Use light map ``lm`` (:class:`ffls.lightmaps.lightmap.LightMap`); pass 1 reruns at the next render."""
+        lm = integration_map(lm, self.map_res)
         self._lightmap = lm
         if self._integrator is not None:
             self._integrator.set_lightmap(lm)
@@ -199,6 +220,9 @@ class Engine:
         self._cpu_weights = None
 
     def _timed(self, name, fn):
+        if not self.profile:
+            fn()
+            return
         t0 = time.perf_counter()
         fn()
         self.ctx.finish()
@@ -217,7 +241,7 @@ class Engine:
         -----
         :attr:`timings` gets the wall time (ms, after ``ctx.finish()``) of each pass that ran:
         ``pass1``, ``project`` (compressed basis), ``pass2``, ``tonemap``; passes that did not
-        need to run are absent.
+        need to run are absent (all are absent when :attr:`profile` is False).
         """
         if self._lightmap is None and self._weights_source is None:
             raise RuntimeError("Engine.render: call set_lightmap(lm) or set_weights(w) first")
