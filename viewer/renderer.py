@@ -28,14 +28,18 @@ from ffls.lightmaps.lightmap import lightmap_from_spec
 from ffls.display.tonemap import tonemap as tonemap_np
 from ffls.display.tonemap import auto_exposure, to_uint8
 from ffls.radiance.photos import load_photo
-from ffls.relight.compress import DEFAULT_RANK, default_rank
+from ffls.relight.quality import integration_map
 
-from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo
+from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo, quality_from_state
 
 __all__ = ["Renderer", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
 
 #: Height of the lat-long preview texture (width is twice that).
 PREVIEW_HEIGHT = 128
+#: While the map turns by itself (auto-rotation, turntable), the preview and the cell-weight heat
+#: map are redrawn at most this often (seconds): they are a thumbnail, and the heat map reads the
+#: weights back from the GPU (a wait for pass 1).
+PREVIEW_INTERVAL = 0.1
 
 
 def load_mask(capture, path=None, size=None) -> np.ndarray | None:
@@ -119,11 +123,13 @@ class Renderer:
         Shown as the tooltip of the disabled background checkbox when ``mask`` is None.
     """
 
-    def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = ""):
+    def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = "", profile: bool = False):
         self.mask = mask  # metered by automatic exposure (ffls.display.tonemap.auto_exposure)
         from ffls.weights.voronoi import bake_cells
 
         self.ctx = ctx
+        self.profile = bool(profile)  # per-pass timings (a wait for the GPU after each pass)
+        self._preview_time = -np.inf
         self.capture = capture
         self.lights = lights
         ok = np.asarray(lights.ok_mask, dtype=bool)
@@ -179,22 +185,25 @@ class Renderer:
     def _build_engine(self, state: ViewerState) -> None:
         from ffls.gpu.engine import Engine
 
-        q = state.quality
-        method = resolve_method(q.get("method", "auto"), self.info.renderer)
-        kw = {"cell_res": int(q.get("cell_res", 256))}
-        if method == "compressed":
-            kw.update(dtype="f16", rank=default_rank(len(self.directions), int(q.get("rank", DEFAULT_RANK))))
-        else:
-            kw.update(dtype="f32" if method.endswith("f32") else "f16")
+        from ffls.gpu.context import is_software_renderer
+        from ffls.relight.basis import accepted_positions
+
+        quality = quality_from_state(state.quality, len(self.directions), is_software_renderer(self.info.renderer))
+        note = ""
+        if quality.near_correction and not np.all(np.isfinite(accepted_positions(self.lights))):
+            quality = quality.replace(near_correction=False)
+            note = "; near-light correction off: the lights file gives no positions"
         t0 = time.perf_counter()
-        new = Engine.from_capture(self.ctx, self.capture, self.lights, **kw)
+        # the pass-1 map height is applied here (it changes without a rebuild), not by the engine
+        new = Engine.from_capture(self.ctx, self.capture, self.lights, quality=quality, map_res=None,
+                                  profile=self.profile)
         if self.engine is not None:
             self.engine.release()
         self.engine = new
         self._pass1_key = None
         self.info.basis_info = dict(new.basis_info)
         self.info.image_size = new.size
-        self.info.message = f"engine ready ({time.perf_counter() - t0:.1f} s): {self._describe_basis()}"
+        self.info.message = f"engine ready ({time.perf_counter() - t0:.1f} s): {self._describe_basis()}{note}"
 
     def _describe_basis(self) -> str:
         b = self.info.basis_info
@@ -245,14 +254,18 @@ class Renderer:
             eng.render(state.exposure, state.tonemap)
             self.info.image_tex = eng.display_texture.glo
         self.info.timings = dict(eng.timings)
-        self._update_preview(state, R)
+        self._update_preview(state, R, animating=state.auto_rotate or state.turntable is not None)
         self._update_photo(state)
         self.frame_ms = {"renderer": (time.perf_counter() - t0) * 1e3}
         return self.info
 
-    def _update_preview(self, state: ViewerState, R: np.ndarray) -> None:
+    def _update_preview(self, state: ViewerState, R: np.ndarray, animating: bool = False) -> None:
         if self._preview_latlong is None:
             return
+        now = time.perf_counter()
+        if (animating and self._preview_key is not None and self._preview_key[2] == state.preview_mode
+                and self._preview_key[0] == self._lightmap_spec and now - self._preview_time < PREVIEW_INTERVAL):
+            return  # a thumbnail of a turning map: 10 redraws a second are enough
         weights_key = None
         if state.preview_mode == "weights":
             weights_key = self.engine.read_weights().sum(axis=1).round(9).tobytes()
@@ -260,6 +273,7 @@ class Renderer:
         if key == self._preview_key:
             return
         self._preview_key = key
+        self._preview_time = now
         rgb = self.preview_image(R, state.preview_mode)
         rgba = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=-1)
         self._preview_tex.write(np.ascontiguousarray(rgba).tobytes())

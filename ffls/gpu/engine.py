@@ -32,7 +32,7 @@ from ffls.gpu.weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, Weight
 from ffls.relight.basis import capture_basis
 from ffls.relight.quality import integration_map
 
-__all__ = ["Engine"]
+__all__ = ["Engine", "gpu_frame_ms"]
 
 
 class Engine:
@@ -313,3 +313,35 @@ class Engine:
         release_gl(self._weights_buffer)
         self._integrator = self._projector = self._pass2 = self._display = self._textures = None
         self._weights_buffer = None
+
+
+def gpu_frame_ms(ctx, basis, directions, lightmap, quality, hemisphere="upper", frames: int = 3) -> float:
+    """Median ms per frame of an :class:`Engine` for ``quality``, the map rotated every frame.
+
+    ``basis`` and ``directions`` are after near correction; the subset, storage, rank, cell
+    texture and map height of ``quality`` are applied here. A frame is pass 1, projection, pass 2
+    and the display pass, with ``ctx.finish()`` (the timer of ``--quality auto``,
+    :func:`ffls.relight.auto.choose_quality`).
+    """
+    from ffls.conventions import rotation_z
+    from ffls.relight.quality import farthest_point_subset
+
+    b = np.asarray(basis)
+    d = np.asarray(directions, dtype=np.float64)
+    if quality.basis_subset is not None and quality.basis_subset < len(d):
+        idx = farthest_point_subset(d, quality.basis_subset)
+        b, d = b[idx], d[idx]
+    eng = Engine(ctx, b, d, hemisphere, dtype=quality.precision, rank=quality.rank, cell_res=quality.cell_res,
+                 map_res=quality.map_res, profile=False)
+    try:
+        eng.set_lightmap(lightmap)
+        ts = []
+        for k in range(frames + 1):
+            eng.set_rotation(rotation_z(1.0 + k))
+            t0 = time.perf_counter()
+            eng.render()
+            ctx.finish()
+            ts.append((time.perf_counter() - t0) * 1e3)
+    finally:
+        eng.release()
+    return float(np.median(ts[1:]))

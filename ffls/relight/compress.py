@@ -43,7 +43,7 @@ COMPRESSED_FILENAME = "basis_compressed.npz"
 MODES = ("per_channel", "shared")
 _FORMAT_VERSION = 1
 #: Rank used where none is asked for (the viewer on a CPU rasteriser); capped by :func:`default_rank`.
-DEFAULT_RANK = 16
+DEFAULT_RANK = 15
 
 
 def rank_range(n_lights: int) -> tuple[int, int]:
