@@ -315,13 +315,15 @@ class Engine:
         self._weights_buffer = None
 
 
-def gpu_frame_ms(ctx, basis, directions, lightmap, quality, hemisphere="upper", frames: int = 3) -> float:
+def gpu_frame_ms(ctx, basis, directions, lightmap, quality, hemisphere="upper", frames: int = 3,
+                 compressed=None) -> float:
     """Median ms per frame of an :class:`Engine` for ``quality``, the map rotated every frame.
 
     ``basis`` and ``directions`` are after near correction; the subset, storage, rank, cell
     texture and map height of ``quality`` are applied here. A frame is pass 1, projection, pass 2
     and the display pass, with ``ctx.finish()`` (the timer of ``--quality auto``,
-    :func:`ffls.relight.auto.choose_quality`).
+    :func:`ffls.relight.auto.choose_quality`). ``compressed``: a compression of the (subset)
+    basis of rank >= ``quality.rank`` to truncate instead of compressing again.
     """
     from ffls.conventions import rotation_z
     from ffls.relight.quality import farthest_point_subset
@@ -331,8 +333,14 @@ def gpu_frame_ms(ctx, basis, directions, lightmap, quality, hemisphere="upper", 
     if quality.basis_subset is not None and quality.basis_subset < len(d):
         idx = farthest_point_subset(d, quality.basis_subset)
         b, d = b[idx], d[idx]
+    cb = None
+    if quality.rank is not None and compressed is not None and compressed.rank >= quality.rank \
+            and compressed.n_lights == len(d):
+        from ffls.relight.auto import truncate
+
+        cb = truncate(compressed, quality.rank)
     eng = Engine(ctx, b, d, hemisphere, dtype=quality.precision, rank=quality.rank, cell_res=quality.cell_res,
-                 map_res=quality.map_res, profile=False)
+                 map_res=quality.map_res, profile=False, compressed=cb)
     try:
         eng.set_lightmap(lightmap)
         ts = []

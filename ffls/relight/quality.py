@@ -258,8 +258,9 @@ def integration_map(lightmap, height: int | None):
     A lat-long map whose height is a multiple of ``height`` is box-filtered
     (:meth:`ffls.lightmaps.lightmap.LightMap.downsample`, which keeps its integral); other maps
     are resampled with :meth:`~ffls.lightmaps.lightmap.LightMap.to_latlong` at four times the
-    height first, then box-filtered. A map no taller than ``height`` is returned as it is, and so
-    is a map given as samples.
+    height first, then box-filtered, then scaled (per channel) to the original total power: the
+    resampling alone can move a sun's energy by several percent. A map no taller than ``height``
+    is returned as it is, and so is a map given as samples.
     """
     if height is None or not hasattr(lightmap, "layout"):
         return lightmap
@@ -269,7 +270,11 @@ def integration_map(lightmap, height: int | None):
             return lightmap
         if lightmap.res % h == 0:
             return lightmap.downsample(lightmap.res // h)
-    return lightmap.to_latlong(4 * h).downsample(4)
+    small = lightmap.to_latlong(4 * h).downsample(4)
+    # resampling moves a small bright source's energy; give back the exact total, per channel
+    want, got = lightmap.total_power(), small.total_power()
+    scale = np.divide(want, got, out=np.ones(3), where=got > 0)
+    return replace(small, data=(small.data * scale.astype(np.float32)).astype(np.float32))
 
 
 # ----------------------------------------------------------------------------- all together
