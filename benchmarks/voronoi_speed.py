@@ -2,25 +2,31 @@
 
 Usage::
 
-    python benchmarks/voronoi_speed.py [--height 512] [--lights 50,400,2048] [--repeat 7] [--json benchmarks/results/voronoi_speed.json]
+    python benchmarks/voronoi_speed.py [--height 512] [--lights 50,400,2048] [--repeat 7] [--bake-res 1024]
+        [--json benchmarks/results/voronoi_speed.json]
 
 For a ``2h x h`` lat-long light map (the bundled paper map) and N random upper-hemisphere lights,
 times (median of --repeat runs after a warm-up, wall clock): baking the candidate texture, the
 integration with the exact k-d tree, with the candidate texture, and ``relight_fast`` of a
 256x256 basis. As the reference measured in the same run: the time to copy the light-map
 samples (dirs + radiance + solid angle, float64) once, i.e. the machine's copy bandwidth on the
-same bytes. Prints a table and writes JSON.
+same bytes. Then the bake of a ``--bake-res`` cell texture (upper hemisphere, k = 8) for 50, 500
+and 2048 lights, hierarchical (the default) and direct, wall and CPU time (``time.process_time``,
+one thread: the machine may be shared), with a check that both give the same exact lookup. Prints
+tables and writes JSON.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
+import time
 
 import numpy as np
 
 from ffls.lightmaps.lightmap import paper_map
 from ffls.relight.cpu import relight_fast, relight_reference
-from ffls.weights.voronoi import bake_cells, integrate_weights
+from ffls.weights.voronoi import assign_cells, bake_cells, integrate_weights
 
 from common import median_seconds, write_json  # benchmarks/common.py
 
@@ -30,6 +36,7 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=int, default=512)
     ap.add_argument("--lights", default="50,400,2048")
     ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--bake-res", type=int, default=1024)
     ap.add_argument("--json", default="benchmarks/results/voronoi_speed.json")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
@@ -55,6 +62,28 @@ def main(argv=None) -> int:
                      "integrate_exact_s": t_exact, "integrate_cells_s": t_cells,
                      "relight_fast_256_s": t_relight, "relight_reference_256_s": t_ref,
                      "cells_vs_copy": t_cells / t_copy})
+    bake_rows = []
+    q = rng.normal(size=(200_000, 3))
+    q[:, 2] = np.abs(q[:, 2])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    for n in (50, 500, 2048):
+        dirs = rng.normal(size=(n, 3))
+        dirs[:, 2] = np.abs(dirs[:, 2])
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        row = {"n_lights": n, "res": args.bake_res}
+        for method in ("hierarchical", "direct"):
+            walls, cpus = [], []
+            for _ in range(1 if method == "direct" else 3):
+                t0, c0 = time.perf_counter(), time.process_time()
+                cells = bake_cells(dirs, "upper", res=args.bake_res, method=method)
+                cpus.append(time.process_time() - c0)
+                walls.append(time.perf_counter() - t0)
+            row[f"{method}_wall_s"] = statistics.median(walls)
+            row[f"{method}_cpu_s"] = statistics.median(cpus)
+            row[f"{method}_overflow"] = cells.overflow
+            row[f"{method}_lookup"] = assign_cells(q, dirs, cells)
+        row["same_lookup"] = bool(np.array_equal(row.pop("hierarchical_lookup"), row.pop("direct_lookup")))
+        bake_rows.append(row)
     W, H = 2 * args.height, args.height
     print(f"light map {W}x{H} ({H * W} texels, {nbytes / 1e6:.1f} MB of samples, copy {1e3 * t_copy:.1f} ms "
           f"= {nbytes / t_copy / 1e9:.2f} GB/s), {os.cpu_count()} CPUs, median of {args.repeat}")
@@ -63,8 +92,13 @@ def main(argv=None) -> int:
         print(f"{r['n_lights']:>6} {1e3 * r['bake_s']:>7.0f}ms {r['cells_res']:>5} {1e3 * r['integrate_exact_s']:>7.0f}ms "
               f"{1e3 * r['integrate_cells_s']:>7.0f}ms {r['cells_vs_copy']:>10.1f}x {1e3 * r['relight_fast_256_s']:>9.1f}ms "
               f"{1e3 * r['relight_reference_256_s']:>7.0f}ms")
+    print(f"bake of a {args.bake_res}^2 cell texture (upper, k = 8): wall / CPU seconds")
+    print(f"{'N':>6} {'hierarchical':>16} {'direct':>16} {'same lookup':>12}")
+    for r in bake_rows:
+        print(f"{r['n_lights']:>6} {r['hierarchical_wall_s']:>7.2f} / {r['hierarchical_cpu_s']:>5.2f} "
+              f"{r['direct_wall_s']:>7.2f} / {r['direct_cpu_s']:>5.2f} {str(r['same_lookup']):>12}")
     write_json(args.json, {"width": W, "height": H, "cpu_count": os.cpu_count(), "copy_s": t_copy,
-                           "sample_bytes": nbytes, "rows": rows})
+                           "sample_bytes": nbytes, "rows": rows, "bake": bake_rows})
     return 0
 
 

@@ -32,8 +32,10 @@ def max_gap_deg(subset, probes):
 # ----------------------------------------------------------------------------- knobs
 def test_quality_validates_and_labels():
     q = Quality(precision="float32", rank=15, basis_subset=64, map_res=64, near_correction=True)
-    assert q.precision == "f32" and q.label() == "voronoi f32 K15 sub64 cells256 map64 near"
-    for bad in ({"precision": "f8"}, {"rank": 0}, {"basis_subset": 0}, {"map_res": 1}, {"cell_res": 8}):
+    assert q.precision == "f32" and q.label() == "voronoi f32 K15 sub64 map64 near"
+    assert Quality(weighting="gaussian", cell_res=128).label() == "gaussian f16 full tex128 map-full"
+    for bad in ({"precision": "f8"}, {"rank": 0}, {"basis_subset": 0}, {"map_res": 1}, {"cell_res": 8},
+                {"weighting": "box"}):
         with pytest.raises(ValueError):
             Quality(**bad)
 
@@ -128,10 +130,15 @@ def test_choose_picks_the_cheapest_meeting_the_target():
 def test_choose_quality_measures_this_capture():
     d = fibonacci(40)
     b = lambert_basis(d, size=16)
-    c = choose_quality(b, d, sky_sun_map(32), max_error=0.5, max_photos=8)
+    from ffls.relight.auto import candidate_qualities
+
+    cands = candidate_qualities(len(d), weightings=("voronoi", "barycentric"), map_heights=(None,))
+    c = choose_quality(b, d, sky_sun_map(32), max_error=0.5, max_photos=8, candidates=cands)
     assert c.met and c.ms > 0 and "leave-one-out" in c.reason
     errs = {r["label"]: r["error"] for r in c.table}
-    assert errs["voronoi f16 K7 cells256 map-full"] >= errs["voronoi f32 full cells256 map-full"]
+    assert errs["voronoi f16 K7 map-full"] >= errs["voronoi f32 full map-full"]
+    # a smooth scheme interpolates a smooth light field better than the box filter (leave-one-out)
+    assert errs["barycentric f32 full map-full"] < errs["voronoi f32 full map-full"]
     slow = max(r["ms"] for r in c.table)
     assert c.ms <= slow
 
@@ -228,8 +235,8 @@ def test_viewer_quality_panel_round_trip():
 
     keys = {k.key for k in QUALITY_KNOBS}
     assert {"method", "rank", "cell_res", "map_res", "subset", "near"} <= keys
-    q = Quality(rank=7, basis_subset=30, cell_res=128, map_res=64, near_correction=True)
+    q = Quality(weighting="gaussian", rank=7, basis_subset=30, cell_res=128, map_res=64, near_correction=True)
     assert quality_from_state(state_quality(q), 100, software=True) == q
-    q = Quality(precision="f32")
+    q = Quality(precision="f32", cell_res=256)
     assert quality_from_state(state_quality(q), 100, software=False) == q
     assert subset_size("1/4", 100) == 25 and subset_size("all", 100) is None and subset_size("300", 100) == 100

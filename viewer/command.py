@@ -24,11 +24,14 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    from ffls.commands.common import (CELLS_RES, FRAMES, add_lights_arguments, add_quality_arguments,
-                                      add_rotation_arguments, exposure_arg, output_path)
+    from ffls.commands.common import (CELLS_RES, FRAMES, add_light_argument, add_lights_arguments,
+                                      add_quality_arguments, add_rotation_arguments, add_weighting_argument,
+                                      exposure_arg, output_path)
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     add_lights_arguments(p)
+    add_weighting_argument(p)
+    add_light_argument(p)
     p.add_argument("--probe", default="courtyard", metavar="MAP",
                    help="light map: a file (.exr/.hdr) or a built-in name (default courtyard)")
     add_rotation_arguments(p, default="0,0,0")
@@ -41,7 +44,7 @@ def add_arguments(p):
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
-                        "(default: full on a GPU, rank min(16, n-1) on a CPU rasteriser such as llvmpipe)")
+                        "(default: full on a GPU, rank min(15, n-1) on a CPU rasteriser such as llvmpipe)")
     p.add_argument("--mask", default=None, metavar="FILE",
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
@@ -74,6 +77,10 @@ def build_state(args):
         st.exposure = float(args.exposure)
     if args.auto_rotate is not None:
         st.auto_rotate, st.auto_rotate_speed = True, float(args.auto_rotate)
+    st.quality["weighting"] = getattr(args, "weighting", "voronoi")
+    if getattr(args, "light", None) is not None:  # start in light mode (RTI style)
+        st.light_mode = True
+        st.light_az, st.light_el = (float(a) for a in args.light)
     if args.rank is not None and args.rank < 0:
         raise InputError(f"--rank must be >= 0, not {args.rank}")
     prec = getattr(args, "precision", None)

@@ -24,6 +24,7 @@ PANEL_WIDTH = 360
 SHORTCUTS = (
     ("drag image / preview", "rotate the light map (horizontal: yaw, vertical: pitch)"),
     ("click a light (preview)", "show its basis photo"),
+    ("light mode: drag image / disc", "move the single light (RTI style)"),
     ("Left / Right", "yaw -/+ 5 deg (Shift: 1 deg)"),
     ("Up / Down", "pitch +/- 5 deg (Shift: 1 deg)"),
     (", / .", "roll -/+ 5 deg"),
@@ -73,6 +74,7 @@ def draw_gui(state: ViewerState, view: ViewInfo) -> None:
         flags = imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
         imgui.begin("ffls view", None, flags)
         _lightmap_panel(state, view)
+        _light_panel(state)
         _rotation_panel(state)
         _image_panel(state, view)
         _quality_panel(state, view)
@@ -138,7 +140,10 @@ def _drag_rotate(state: ViewerState, deg_x: float, deg_y: float) -> None:
     if imgui.is_item_active() and imgui.is_mouse_dragging(imgui.MouseButton_.left, 0.0):
         d = imgui.get_io().mouse_delta
         if d.x or d.y:
-            state.rotate_by(dyaw=-d.x * deg_x, dpitch=-d.y * deg_y)
+            if state.light_mode:  # RTI style: the drag moves the single light (right: azimuth down, up: higher)
+                state.move_light(daz=-d.x * deg_x, delev=-d.y * deg_y)
+            else:
+                state.rotate_by(dyaw=-d.x * deg_x, dpitch=-d.y * deg_y)
 
 
 # ----------------------------------------------------------------------------- image
@@ -218,6 +223,9 @@ def _preview(state: ViewerState, view: ViewInfo) -> None:
     dl = imgui.get_window_draw_list()
     dl.add_image(_tex(view.preview_tex), p0, imgui.ImVec2(p0.x + w, p0.y + h))
     dot, sel = _u32(0.2, 0.9, 1.0), _u32(1.0, 0.2, 0.2)
+    if view.single_light_uv is not None:  # light mode: the single light
+        u, v = view.single_light_uv
+        dl.add_circle_filled(imgui.ImVec2(p0.x + u * w, p0.y + v * h), 5.0, _u32(1.0, 0.9, 0.2))
     for i, (u, v) in enumerate(view.light_uv):
         c = imgui.ImVec2(p0.x + u * w, p0.y + v * h)
         if i == state.selected_light:
@@ -234,6 +242,32 @@ def _preview(state: ViewerState, view: ViewInfo) -> None:
         iw, ih = view.image_size
         pw = imgui.get_content_region_avail().x
         imgui.image(_tex(view.photo_tex), imgui.ImVec2(pw, pw * ih / max(iw, 1)))
+
+
+def _light_panel(state: ViewerState) -> None:
+    """Light mode (RTI style): one directional light; a disc (the hemisphere seen from above) to drag it."""
+    if not imgui.collapsing_header("Single light"):
+        return
+    _, state.light_mode = imgui.checkbox("light mode (instead of the map)", state.light_mode)
+    imgui.set_item_tooltip("relight with one directional light, interpolated with the quality panel's weighting")
+    imgui.begin_disabled(not state.light_mode)
+    _, state.light_az = imgui.slider_float("azimuth", state.light_az, -180.0, 180.0, "%.1f deg")
+    _, state.light_el = imgui.slider_float("elevation", state.light_el, -90.0, 90.0, "%.1f deg")
+    side = min(160.0, imgui.get_content_region_avail().x)
+    p0 = imgui.get_cursor_screen_pos()
+    imgui.invisible_button("##lightdisc", imgui.ImVec2(side, side))
+    c = imgui.ImVec2(p0.x + side / 2, p0.y + side / 2)
+    rad = side / 2 - 4
+    if state.light_mode and imgui.is_item_active():
+        m = imgui.get_mouse_pos()
+        state.set_light_disc((m.x - c.x) / rad, -(m.y - c.y) / rad)  # screen y down, disc +Y up
+    dl = imgui.get_window_draw_list()
+    dl.add_circle(c, rad, _u32(0.6, 0.6, 0.6), 64, 1.5)
+    d = state.light_vector()
+    col = _u32(1.0, 0.9, 0.2) if d[2] >= 0 else _u32(0.5, 0.5, 0.5)  # below the horizon: seen through
+    dl.add_circle_filled(imgui.ImVec2(c.x + d[0] * rad, c.y - d[1] * rad), 5.0, col)
+    imgui.set_item_tooltip("the upper hemisphere seen from above (+X right, +Y up): drag to move the light")
+    imgui.end_disabled()
 
 
 def _rotation_panel(state: ViewerState) -> None:

@@ -143,6 +143,8 @@ class Renderer:
                              mask_available=mask is not None,
                              mask_reason=mask_reason or "this capture has no object mask")
         self._quality_key = None
+        self._light_key = None
+        self._light_weightings = {}
         self._lightmap_spec = None
         self._failed_spec = None
         self._lightmap = None
@@ -194,9 +196,11 @@ class Renderer:
             quality = quality.replace(near_correction=False)
             note = "; near-light correction off: the lights file gives no positions"
         t0 = time.perf_counter()
-        # the pass-1 map height is applied here (it changes without a rebuild), not by the engine
+        # the pass-1 map height is applied here (it changes without a rebuild), not by the engine; the
+        # weighting knob switches without a rebuild (set_weighting in update), its texture at its default
         new = Engine.from_capture(self.ctx, self.capture, self.lights, quality=quality, map_res=None,
-                                  profile=self.profile)
+                                  profile=self.profile, cell_res=quality.cell_res or 256, weights_res=None)
+        self._light_key = None
         if self.engine is not None:
             self.engine.release()
         self.engine = new
@@ -246,18 +250,48 @@ class Renderer:
         R = rotation_ypr(state.yaw, state.pitch, state.roll)
         eng = self.engine
         pass1_key = (self._lightmap_spec, state.quality.get("map_res", "full"))
-        if self._lightmap is not None and pass1_key != self._pass1_key:
-            eng.set_lightmap(pass1_lightmap(self._lightmap, pass1_key[1]))
-            self._pass1_key = pass1_key
-        if self._lightmap is not None:
-            eng.set_rotation(R)
+        scheme = state.quality.get("weighting", "voronoi")
+        eng.set_weighting(scheme)  # a no-op unless it changed (pass 1 reruns then)
+        if state.light_mode:  # RTI style: one directional light, weights from the scheme
+            key = (state.light_az, state.light_el, scheme)
+            if key != self._light_key:
+                eng.set_weights(self.single_light_weights(state))
+                self._light_key = key
+                self._pass1_key = None  # the light map comes back when the mode ends
             eng.render(state.exposure, state.tonemap)
             self.info.image_tex = eng.display_texture.glo
+            u, v = direction_to_latlong_uv(state.light_vector()[None, :])
+            self.info.single_light_uv = (float(u[0]), float(v[0]))
+        else:
+            self._light_key = None
+            self.info.single_light_uv = None
+            if self._lightmap is not None and pass1_key != self._pass1_key:
+                eng.set_lightmap(pass1_lightmap(self._lightmap, pass1_key[1]))
+                self._pass1_key = pass1_key
+            if self._lightmap is not None:
+                eng.set_rotation(R)
+                eng.render(state.exposure, state.tonemap)
+                self.info.image_tex = eng.display_texture.glo
         self.info.timings = dict(eng.timings)
         self._update_preview(state, R, animating=state.auto_rotate or state.turntable is not None)
         self._update_photo(state)
         self.frame_ms = {"renderer": (time.perf_counter() - t0) * 1e3}
         return self.info
+
+    def single_light_weights(self, state: ViewerState) -> np.ndarray:
+        """Per-light RGB weights ``(n, 3)`` of the light mode's light under the ``weighting`` knob
+        (:func:`ffls.weights.weighting.light_weights`); zero when the light is outside the hemisphere."""
+        from ffls.weights.weighting import Weighting
+
+        scheme = state.quality.get("weighting", "voronoi")
+        d = state.light_vector()
+        if not in_domain(d[None, :], self.hemisphere)[0] or len(self.directions) == 0:
+            return np.zeros((len(self.directions), 3))
+        if scheme not in self._light_weightings:
+            self._light_weightings[scheme] = Weighting(self.directions, scheme, self.hemisphere)
+        wt = self._light_weightings[scheme]
+        w = wt(d[None, :]).dense(wt.n_lights)[0]
+        return np.repeat(w[:, None], 3, axis=1)
 
     def _update_preview(self, state: ViewerState, R: np.ndarray, animating: bool = False) -> None:
         if self._preview_latlong is None:

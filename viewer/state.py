@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ffls.commands.common import WEIGHTINGS
 from ffls.commands.common import parse_rotation  # noqa: F401  (re-exported: one --rotate for every command)
 from ffls.relight.compress import DEFAULT_RANK, rank_range
 
@@ -91,6 +92,11 @@ QUALITY_KNOBS: tuple[Knob, ...] = (
     Knob("map_res", "pass-1 map", "choice", "128", choices=("full", "256", "128", "64", "32"),
          help="lat-long height of the light map integrated by pass 1 (box-filtered: the integral is kept)",
          rebuild=False),
+    Knob("weighting", "weighting", "choice", "voronoi", choices=WEIGHTINGS,
+         help="how a light-map direction is shared among the lights: voronoi (box per cell), antialiased "
+              "(soft cell borders), barycentric (spherical triangles), gaussian (kernel over the nearest "
+              "lights); the smooth ones do not pop as the map rotates (docs/weighting.md)",
+         rebuild=False),
     Knob("subset", "basis subset", "choice", "all", choices=SUBSETS,
          help="use a fraction of the photos, chosen by farthest-point sampling on the light directions"),
     Knob("near", "near-light correction", "bool", False,
@@ -128,7 +134,8 @@ def quality_from_state(quality: dict, n_lights: int, software: bool):
     n = n_lights if sub is None else sub
     rank = default_rank(n, int(quality.get("rank", DEFAULT_RANK))) if method == "compressed" and n > 1 else None
     mr = quality.get("map_res", "full")
-    return Quality(precision="f32" if method.endswith("f32") else "f16", rank=rank, basis_subset=sub,
+    return Quality(weighting=quality.get("weighting", "voronoi"),
+                   precision="f32" if method.endswith("f32") else "f16", rank=rank, basis_subset=sub,
                    cell_res=int(quality.get("cell_res", 256)), map_res=None if mr in (None, "full") else int(mr),
                    near_correction=bool(quality.get("near", False)))
 
@@ -145,9 +152,10 @@ def state_quality(quality) -> dict:
     else:
         q["method"] = "full f32" if quality.precision == "f32" else "full f16"
     q["subset"] = "all" if quality.basis_subset is None else str(int(quality.basis_subset))
-    q["cell_res"] = str(int(quality.cell_res))
+    q["cell_res"] = str(int(quality.cell_res or 256))
     q["map_res"] = "full" if quality.map_res is None else str(int(quality.map_res))
     q["near"] = bool(quality.near_correction)
+    q["weighting"] = quality.weighting
     return q
 
 
@@ -220,6 +228,12 @@ class ViewerState:
         Pending: close the window.
     drag_deg_per_px : float
         Rotation per pixel of mouse drag.
+    light_mode : bool
+        RTI-style relighting: one directional light (``light_az``, ``light_el``) instead of the
+        light map, interpolated with the ``weighting`` knob; dragging moves the light.
+    light_az, light_el : float
+        The light's azimuth (degrees from +X toward +Y, wrapped to [-180, 180)) and elevation
+        (degrees above the horizon, [-90, 90]), world frame.
     """
 
     yaw: float = 0.0
@@ -248,6 +262,9 @@ class ViewerState:
     show_gui: bool = True
     quit: bool = False
     drag_deg_per_px: float = 0.4
+    light_mode: bool = False
+    light_az: float = 45.0
+    light_el: float = 45.0
 
     # ------------------------------------------------------------------ pure updates
     def rotate_by(self, dyaw: float = 0.0, dpitch: float = 0.0, droll: float = 0.0) -> None:
@@ -255,6 +272,25 @@ class ViewerState:
         self.yaw = wrap_degrees(self.yaw + dyaw)
         self.roll = wrap_degrees(self.roll + droll)
         self.pitch = float(np.clip(self.pitch + dpitch, -90.0, 90.0))
+
+    def move_light(self, daz: float = 0.0, delev: float = 0.0) -> None:
+        """Move the single light: azimuth wraps to [-180, 180), elevation is clamped to [-90, 90]."""
+        self.light_az = wrap_degrees(self.light_az + daz)
+        self.light_el = float(np.clip(self.light_el + delev, -90.0, 90.0))
+
+    def set_light_disc(self, x: float, y: float) -> None:
+        """Put the light over the point (x, y) of the unit disc (the upper hemisphere seen from above,
+        +X right, +Y up, as an RTI viewer's light widget); outside the disc it goes to the rim."""
+        r = float(np.hypot(x, y))
+        if r > 1.0:
+            x, y, r = x / r, y / r, 1.0
+        self.light_az = wrap_degrees(float(np.degrees(np.arctan2(y, x))) if r > 0 else self.light_az)
+        self.light_el = float(np.degrees(np.arccos(min(r, 1.0))))
+
+    def light_vector(self) -> np.ndarray:
+        """Unit world direction (3,) toward the single light."""
+        az, el = np.radians(self.light_az), np.radians(self.light_el)
+        return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
     def reset_rotation(self) -> None:
         """Yaw, pitch and roll back to 0 and auto-rotation off."""
@@ -342,6 +378,8 @@ class ViewInfo:
         Whether a native file dialog can be opened (a desktop session).
     recording : str
         Turntable progress text, empty when idle.
+    single_light_uv : (2,) float or None
+        In light mode, the single light's lat-long uv (for the preview marker); None otherwise.
     """
 
     image_tex: int = 0
@@ -362,3 +400,4 @@ class ViewInfo:
     content_scale: float = 1.0
     dialog_available: bool = False
     recording: str = ""
+    single_light_uv: tuple | None = None

@@ -326,6 +326,64 @@ def add_lights_arguments(p) -> None:
                         "given inline or as a .json file (docs/formats.md)")
 
 
+#: Weighting schemes of pass 1 (``--weighting``; ffls.weights.weighting.SCHEMES, spelled here so
+#: that parsing imports no SciPy; a test keeps the two equal).
+WEIGHTINGS = ("voronoi", "antialiased", "barycentric", "gaussian")
+
+
+def add_weighting_argument(p) -> None:
+    """``--weighting voronoi|antialiased|barycentric|gaussian`` (relight, render, view)."""
+    p.add_argument("--weighting", default="voronoi", choices=WEIGHTINGS,
+                   help="how a light-map direction is shared among the lights: voronoi (the paper's box filter, "
+                        "default), antialiased (soft cell borders), barycentric (spherical triangles), gaussian "
+                        "(von Mises-Fisher kernel over the nearest lights); docs/weighting.md")
+
+
+def light_direction(text: str) -> tuple[float, float]:
+    """``'AZ,EL'`` (degrees) -> (azimuth, elevation): azimuth from +X toward +Y, elevation above the xy plane.
+
+    Raises
+    ------
+    ValueError
+        Not two finite numbers, or the elevation outside [-90, 90].
+    """
+    parts = [t.strip() for t in str(text).split(",")]
+    if len(parts) != 2:
+        raise ValueError(f"expected AZ,EL in degrees, not {text!r}")
+    try:
+        az, el = (float(t) for t in parts)
+    except ValueError:
+        raise ValueError(f"expected AZ,EL in degrees, not {text!r}") from None
+    if not (math.isfinite(az) and math.isfinite(el)) or abs(az) > 1e6:
+        raise ValueError(f"AZ,EL must be finite numbers (|AZ| <= 1e6), not {text!r}")
+    if not -90.0 <= el <= 90.0:
+        raise ValueError(f"the elevation must be within [-90, 90] degrees, not {el:g}")
+    return az, el
+
+
+def _light_type(text: str):
+    try:
+        return light_direction(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def add_light_argument(p) -> None:
+    """``--light AZ,EL``: one directional light instead of a light map (render)."""
+    p.add_argument("--light", type=_light_type, default=None, metavar="AZ,EL",
+                   help="relight with one directional light from azimuth AZ (degrees from +X toward +Y) and "
+                        "elevation EL (degrees above the horizon), interpolated with --weighting (RTI style); "
+                        "replaces --probe")
+
+
+def light_vector(az_el) -> "np.ndarray":
+    """Unit world direction (3,) of (azimuth, elevation) in degrees (:func:`light_direction`)."""
+    import numpy as np
+
+    az, el = (math.radians(float(a)) for a in az_el)
+    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+
+
 def add_capture_arguments(p, probe_required: bool = True, probe_default: str | None = None) -> None:
     """``CAPTURE``, ``--lights``, ``--lights-map`` and ``--probe`` (and ``--layout`` for the map file)."""
     p.add_argument("capture", help="capture folder (with capture.json)")
@@ -588,7 +646,7 @@ def quality_from_args(args):
     cells = getattr(args, "cells_res", None)
     return Quality(weighting=getattr(args, "weighting", None) or "voronoi", precision=prec,
                    rank=getattr(args, "rank", None) or None, basis_subset=getattr(args, "basis_subset", None),
-                   cell_res=int(cells) if cells else 256, map_res=getattr(args, "map_res", None),
+                   cell_res=int(cells) if cells else None, map_res=getattr(args, "map_res", None),
                    near_correction=bool(getattr(args, "near_correction", False)))
 
 

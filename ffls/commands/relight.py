@@ -4,8 +4,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument,
-                                  add_quality_arguments, add_rotation_arguments, check_mask_size, exposure_arg,
-                                  load_relight_inputs, output_path, resolve_quality, rotation_from_args, write_output)
+                                  add_quality_arguments, add_rotation_arguments, add_weighting_argument,
+                                  check_mask_size, exposure_arg, load_relight_inputs, output_path, resolve_quality,
+                                  rotation_from_args, write_output)
 
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
@@ -26,6 +27,7 @@ def add_arguments(p):
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
     p.add_argument("--cells-res", type=CELLS_RES_OR_EXACT, default=256,
                    help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
+    add_weighting_argument(p)
     add_quality_arguments(p, precision_default=None, rank=True)
     p.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output image, .exr or .png")
 
@@ -57,5 +59,5 @@ def run(args) -> int:
     kept = w.total_power.sum() - w.dropped_power.sum()
     frac = kept / w.total_power.sum() if w.total_power.sum() > 0 else 1.0
     print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "
-          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used)")
+          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used, {args.weighting} weighting)")
     return 0

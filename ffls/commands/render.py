@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_mask_argument,
-                                  add_quality_arguments, add_rotation_arguments, check_mask_size, exposure_arg,
-                                  flush_notes, load_relight_inputs, output_path, resolve_quality, rotation_from_args,
+from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
+                                  add_mask_argument, add_quality_arguments, add_rotation_arguments,
+                                  add_weighting_argument, check_mask_size, exposure_arg, flush_notes, light_vector,
+                                  load_relight_inputs, output_path, resolve_quality, rotation_from_args,
                                   write_output)
 
 NAME = "render"
@@ -23,14 +24,18 @@ HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable
 DESCRIPTION = (
     "Relight a capture under an HDR light map with the GPU engine (pass 1: per-cell light-map "
     "integration; pass 2: weighted sum of the basis images; tone mapping). .exr output is linear "
-    "float, .png tone-mapped sRGB. --turntable N rotates the map 360 degrees about +Z in N frames."
+    "float, .png tone-mapped sRGB. --turntable N rotates the map 360 degrees about +Z in N frames. "
+    "--light AZ,EL relights with one directional light instead of a map (RTI style), interpolated "
+    "with --weighting."
 )
 
 STILL_SUFFIXES = (".exr", ".png")
 
 
 def add_arguments(p):
-    add_capture_arguments(p)
+    add_capture_arguments(p, probe_required=False)
+    add_light_argument(p)
+    add_weighting_argument(p)
     add_rotation_arguments(p)
     p.add_argument("--exposure", type=exposure_arg, default=0.0, metavar="EV|auto",
                    help="exposure in stops (PNG/video); auto meters the object (the --mask when given)")
@@ -39,8 +44,9 @@ def add_arguments(p):
     p.add_argument("--rank", type=RANK, default=None, metavar="K",
                    help="use a compressed basis of K eigen-images, 1 <= K <= n-1 for n lights (computed once, "
                         "saved in the capture folder)")
-    p.add_argument("--cells-res", type=CELLS_RES, default=256,
-                   help="cell-texture resolution, 16 to 4096 (default 256); too coarse for the lights is refused")
+    p.add_argument("--cells-res", type=CELLS_RES, default=None,
+                   help="resolution of pass 1's texture, 16 to 4096: the cell texture of voronoi (default 256; too "
+                        "coarse for the lights is refused) or a smooth scheme's weight texture (default 512)")
     p.add_argument("--turntable", type=FRAMES, default=None, metavar="N",
                    help="write N frames over 360 degrees about +Z: -o OUT.mp4 or a folder of PNGs")
     p.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
@@ -95,6 +101,29 @@ def _auto_exposure(r, args, mask) -> float:
     return auto_exposure(hdr, mask=mask)
 
 
+def single_light_weights(r, args, R) -> np.ndarray:
+    """Per-light RGB weights ``(n, 3)`` of ``--light AZ,EL`` rotated by ``R``, under ``--weighting``.
+
+    A light outside the capture's hemisphere gives no light (all zero).
+    """
+    from ffls.conventions import in_domain
+    from ffls.weights.weighting import light_weights
+
+    d = R @ light_vector(args.light)
+    if not in_domain(d[None, :], r.hemisphere)[0]:
+        return np.zeros((r.n_lights, 3))
+    w = light_weights(r.directions, d, args.weighting, r.hemisphere)
+    return np.repeat(w[:, None], 3, axis=1)
+
+
+def _apply(r, args, R) -> None:
+    """Set the frame's rotation (light map) or its single light's weights (``--light``)."""
+    if args.light is None:
+        r.set_rotation(R)
+    else:
+        r.set_weights(single_light_weights(r, args, R))
+
+
 def _write_still(out: Path, r, args, mask=None):
     write_output(out, r.read_hdr(), None if out.suffix.lower() == ".exr" else r.read_display(), mask)
 
@@ -112,7 +141,7 @@ def _write_turntable(out: Path, r, R0, args, exposure: float = 0.0):
     frames = ((k, rotation_z(360.0 * k / n) @ R0) for k in range(n))
     with FrameWriter(out, fps=args.fps) as sink:
         for _, R in tqdm(frames, total=n, desc="ffls render", unit="frame", disable=None):
-            r.set_rotation(R)
+            _apply(r, args, R)
             r.render(exposure, args.tonemap)
             sink.write(r.read_display())
     return sink.describe()
@@ -125,13 +154,25 @@ def run(args) -> int:
     if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
     R0 = rotation_from_args(args)
-    capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
+    if (args.light is None) == (args.probe is None):
+        raise InputError("give either --probe MAP or --light AZ,EL" if args.light is None
+                         else "--probe and --light exclude each other: give one")
+    capture, lights, lightmap, mask = load_relight_inputs(args, NAME, lightmap=args.light is None)
+    if args.light is not None:
+        from ffls.conventions import in_domain
+
+        if not in_domain((R0 @ light_vector(args.light))[None, :], capture.hemisphere)[0]:
+            raise InputError(f"--light {args.light[0]:g},{args.light[1]:g} is outside the capture's hemisphere "
+                             "(no photo was lit from there)")
+    if args.light is not None and args.quality == "auto":
+        raise InputError("--quality auto measures a light map: give --probe MAP, not --light")
     r, ctx = _make_renderer(args, capture, lights, lightmap, R0)
     if args.turntable is not None:
         flush_notes()  # a long job: the informational lines now (a still's wait for its success)
     try:
-        r.set_lightmap(lightmap)
-        r.set_rotation(R0)
+        if lightmap is not None:
+            r.set_lightmap(lightmap)
+        _apply(r, args, R0)
         exposure = _auto_exposure(r, args, mask)  # a turntable keeps the first frame's
         if args.turntable is not None:
             what = _write_turntable(out, r, R0, args, exposure)
@@ -142,7 +183,9 @@ def run(args) -> int:
         info = getattr(r, "basis_info", {})
         path = "cpu reference" if args.cpu else f"gpu {info.get('dtype', '')}"
         rank = info.get("rank") if not args.cpu else getattr(getattr(r, "compressed", None), "rank", None)
-        print(f"ffls render: {what} ({path}, {r.n_lights} lights{'' if rank is None else f', rank {rank}'})")
+        what_light = (f"light az {args.light[0]:g} el {args.light[1]:g}, " if args.light is not None else "")
+        print(f"ffls render: {what} ({path}, {r.n_lights} lights{'' if rank is None else f', rank {rank}'}, "
+              f"{what_light}{getattr(r, 'weighting', args.weighting)} weighting)")
     finally:
         r.release()
         if ctx is not None:

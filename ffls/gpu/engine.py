@@ -53,6 +53,13 @@ class Engine:
         Use a compressed basis of ``rank`` eigen-images (:mod:`ffls.relight.compress`).
     cell_res : int
         Resolution of the Voronoi cell-index texture (pass 1).
+    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+        Weighting scheme of pass 1 (:mod:`ffls.weights.weighting`); ``'voronoi'`` uses the exact
+        candidate-cell texture, the others a baked :class:`ffls.weights.weighting.WeightTexture`.
+    weights_res : int
+        Resolution of that weight texture (smooth schemes).
+    weighting_options : dict, optional
+        Scheme options (:data:`ffls.weights.weighting.OPTIONS`).
     compressed : ffls.relight.compress.CompressedBasis, optional
         A precomputed compression (``rank`` is then its rank); with ``rank`` and no
         ``compressed`` the basis is compressed here.
@@ -82,7 +89,8 @@ class Engine:
     def __init__(self, ctx, basis, directions, hemisphere: str = "upper", *, dtype: str = "f16",
                  rank: int | None = None, cell_res: int = 256, compressed=None, method: str = DEFAULT_METHOD,
                  max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, map_res: int | None = None,
-                 profile: bool = True, path=None):
+                 profile: bool = True, path=None, weighting: str = "voronoi", weights_res: int | None = None,
+                 weighting_options: dict | None = None):
         hemisphere = check_hemisphere(hemisphere)
         basis = np.asarray(basis)
         d = np.asarray(directions, dtype=np.float64)
@@ -110,6 +118,7 @@ class Engine:
         self._weights_buffer = ctx.buffer(reserve=16 * self._n)
         self._cpu_weights = np.zeros((self._n, 3))
         self._cells = None
+        self.set_weighting(weighting, weights_res, **(weighting_options or {}))
         self._lightmap = None
         self._rotation = np.eye(3)
         self._weights_source = None
@@ -151,8 +160,9 @@ class Engine:
             with ``ok_mask`` False are left out (their basis images are not loaded).
         quality : ffls.relight.quality.Quality, optional
             Every knob at once: near-light correction and basis subset
-            (:func:`ffls.relight.basis.capture_basis`), then ``dtype``, ``rank``, ``cell_res``
-            and ``map_res`` from it (keywords given in ``kw`` win).
+            (:func:`ffls.relight.basis.capture_basis`), then ``dtype``, ``rank``, ``map_res``,
+            ``weighting`` and ``cell_res`` (``weights_res`` for a smooth scheme) from it (keywords
+            given in ``kw`` win).
         **kw
             As :class:`Engine`. With ``rank=K`` a compressed basis saved in the capture folder
             (:func:`ffls.relight.compress.load_compressed`) is used when it has at least K
@@ -161,9 +171,12 @@ class Engine:
         """
         basis, d, _ = capture_basis(capture, lights, quality)
         if quality is not None:
-            for k, v in (("dtype", quality.precision), ("rank", quality.rank), ("cell_res", quality.cell_res),
-                         ("map_res", quality.map_res)):
-                kw.setdefault(k, v)
+            kw.setdefault("dtype", quality.precision)
+            kw.setdefault("rank", quality.rank)
+            kw.setdefault("map_res", quality.map_res)
+            kw.setdefault("weighting", quality.weighting)
+            if quality.cell_res is not None:  # the cell texture (voronoi) or the weight texture (smooth schemes)
+                kw.setdefault("cell_res" if quality.weighting == "voronoi" else "weights_res", quality.cell_res)
         rank = kw.get("rank")
         if rank is not None and kw.get("compressed") is None:
             from ffls.relight.compress import load_or_compress
@@ -204,12 +217,40 @@ class Engine:
         self._weights_dirty = False
         self._hdr_dirty = True
 
+    def set_weighting(self, scheme: str = "voronoi", res: int | None = None, **options) -> None:
+        """Use weighting ``scheme`` in pass 1 (:mod:`ffls.weights.weighting`); reruns pass 1 at the next render.
+
+        ``res``: resolution of the smooth schemes' weight texture (default
+        :data:`ffls.weights.weighting.DEFAULT_TEXTURE_RES`); ``options``: the scheme's options.
+        The texture is baked at the next render.
+        """
+        from ffls.weights.weighting import DEFAULT_TEXTURE_RES, texture_slots
+
+        texture_slots(scheme, **options)  # checks the scheme and its options
+        key = (scheme, DEFAULT_TEXTURE_RES if res is None else int(res), tuple(sorted(options.items())))
+        if key == getattr(self, "_weighting_key", None):
+            return
+        self._weighting_key = key
+        self.weighting = scheme
+        if self._integrator is not None:
+            self._integrator.release()
+            self._integrator = None
+        if scheme != "voronoi" or not hasattr(self._cells, "candidates"):
+            self._cells = None
+        self._weights_dirty = getattr(self, "_lightmap", None) is not None
+
     # ------------------------------------------------------------------ passes
     def _ensure_cells(self):
         if self._cells is None:
-            from ffls.weights.voronoi import bake_cells
+            scheme, res, options = self._weighting_key
+            if scheme == "voronoi":
+                from ffls.weights.voronoi import bake_cells
 
-            self._cells = bake_cells(self.directions, self.hemisphere, self.cell_res)
+                self._cells = bake_cells(self.directions, self.hemisphere, self.cell_res)
+            else:
+                from ffls.weights.weighting import bake_weights
+
+                self._cells = bake_weights(self.directions, scheme, self.hemisphere, res, **dict(options))
         return self._cells
 
     def _run_pass1(self):
@@ -311,6 +352,7 @@ class Engine:
             if o is not None:
                 o.release()
         release_gl(self._weights_buffer)
+        self._cells = None
         self._integrator = self._projector = self._pass2 = self._display = self._textures = None
         self._weights_buffer = None
 
@@ -339,8 +381,10 @@ def gpu_frame_ms(ctx, basis, directions, lightmap, quality, hemisphere="upper", 
         from ffls.relight.auto import truncate
 
         cb = truncate(compressed, quality.rank)
-    eng = Engine(ctx, b, d, hemisphere, dtype=quality.precision, rank=quality.rank, cell_res=quality.cell_res,
-                 map_res=quality.map_res, profile=False, compressed=cb)
+    res = {} if quality.cell_res is None else {"cell_res" if quality.weighting == "voronoi" else "weights_res":
+                                               quality.cell_res}
+    eng = Engine(ctx, b, d, hemisphere, dtype=quality.precision, rank=quality.rank, map_res=quality.map_res,
+                 profile=False, compressed=cb, weighting=quality.weighting, **res)
     try:
         eng.set_lightmap(lightmap)
         ts = []

@@ -26,6 +26,12 @@ Three techniques (``method=``), all deterministic (same input, same bits):
     a serial scatter) and a per-cell segmented sum: deterministic by construction on any GPU.
 
 ``'auto'`` picks ``'sort'`` (see ``docs/gpu.md``, "Pass 1", for the measurements).
+
+Smooth weighting schemes (:mod:`ffls.weights.weighting`): with ``cells`` a
+:class:`ffls.weights.weighting.WeightTexture` every texel adds ``power x weight`` to each of the
+(light, weight) slots of the weight-texture texel its rotated direction falls in
+(``shaders/integrate_sparse.glsl``, technique ``'blend'`` with one point per texel and slot; the
+GPU twin of :func:`ffls.weights.weighting.integrate` with ``texture=``).
 """
 from __future__ import annotations
 
@@ -66,8 +72,9 @@ class CellIntegrator:
         Texels whose rotated direction is outside (``z < 0`` for ``'upper'``, ``d . axis < 0``
         for an axis hemisphere; the ``HEMI_AXIS`` define and the ``hemi_axis`` uniform) are
         dropped and counted.
-    cells : ffls.weights.voronoi.CellTexture
-        Candidate texture baked from ``directions`` for ``hemisphere``.
+    cells : ffls.weights.voronoi.CellTexture or ffls.weights.weighting.WeightTexture
+        Candidate texture baked from ``directions`` for ``hemisphere`` (Voronoi cells), or the
+        weight texture of a smooth scheme (then only ``'blend'`` applies; ``'auto'`` takes it).
     method : {'auto', 'blend', 'atomic', 'sort'}
         Technique (module docstring).
 
@@ -89,7 +96,10 @@ class CellIntegrator:
             raise ValueError(f"cells were baked for hemisphere {cells.hemisphere!r}, not {hemisphere!r}")
         if cells.directions.shape != d.shape or not np.allclose(cells.directions, d, rtol=0, atol=1e-12):
             raise ValueError("cells were baked for other directions")
-        method = AUTO_METHOD if method == "auto" else method
+        self.sparse = hasattr(cells, "slots")  # a WeightTexture (smooth weighting)
+        if self.sparse and method not in ("auto", "blend"):
+            raise ValueError(f"a weight texture ({cells.scheme}) integrates with method 'blend' only, not {method!r}")
+        method = ("blend" if self.sparse else AUTO_METHOD) if method == "auto" else method
         if method not in METHODS:
             raise ValueError(f"method must be 'auto' or one of {METHODS}, not {method!r}")
         if method == "atomic" and "GL_NV_shader_atomic_float" not in ctx.extensions:
@@ -99,15 +109,27 @@ class CellIntegrator:
         self.n = int(d.shape[0])
         self.hemisphere = hemisphere
         self.cells = cells
-        self._defines = {"N_LIGHTS": self.n, "CELL_RES": int(cells.res), "CELL_K": int(cells.k)}
+        if self.sparse:
+            self._defines = {"N_LIGHTS": self.n, "CELL_RES": int(cells.res), "SLOTS": int(cells.slots)}
+        else:
+            self._defines = {"N_LIGHTS": self.n, "CELL_RES": int(cells.res), "CELL_K": int(cells.k)}
         if hemisphere == "upper":
             self._defines["HEMI_UPPER"] = 1
         elif hemisphere.axis is not None:
             self._defines["HEMI_AXIS"] = 1
         self._max_ssbo = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or (1 << 27))
         self._lights = ctx.buffer(np.ascontiguousarray(cells.directions, dtype=np.float64).tobytes())
-        cand = np.ascontiguousarray(cells.candidates, dtype=np.int32)
-        self._cand = ctx.buffer(cand.tobytes())
+        if self.sparse:
+            self._cand = ctx.buffer(np.ascontiguousarray(cells.index, dtype=np.int32).tobytes())
+            self._slot_weights = ctx.buffer(np.ascontiguousarray(cells.weight, dtype=np.float32).tobytes())
+            self._program = "integrate_sparse.glsl"
+            self._per_texel = int(cells.slots)
+        else:
+            cand = np.ascontiguousarray(cells.candidates, dtype=np.int32)
+            self._cand = ctx.buffer(cand.tobytes())
+            self._slot_weights = None
+            self._program = "integrate_blend.glsl"
+            self._per_texel = 1
         self.weights_buffer = ctx.buffer(reserve=16 * self.n)
         self._stats = ctx.buffer(reserve=32)
         self._objects: list = []  # per-light-map objects
@@ -163,6 +185,8 @@ class CellIntegrator:
         self._tpow.bind_to_storage_buffer(2)
         self._lights.bind_to_storage_buffer(3)
         self._cand.bind_to_storage_buffer(4)
+        if self._slot_weights is not None:
+            self._slot_weights.bind_to_storage_buffer(5)
 
     # ------------------------------------------------------------------ (a) blend
     def _setup_blend(self):
@@ -181,14 +205,14 @@ class CellIntegrator:
         self._tex = ctx.texture((tw, th * self._slices), 4, dtype="f4")
         self._tex.filter = (ctx.NEAREST, ctx.NEAREST)
         self._fbo = ctx.framebuffer(color_attachments=[self._tex])
-        self._vao = ctx.vertex_array(load_program(ctx, "integrate_blend.glsl", self._defines), [])
+        self._vao = ctx.vertex_array(load_program(ctx, self._program, self._defines), [])
         self._objects += [self._fbo, self._tex, self._vao]
 
     def _run_blend(self, R):
         import moderngl
 
         ctx = self.ctx
-        prog = load_program(ctx, "integrate_blend.glsl", self._defines)
+        prog = load_program(ctx, self._program, self._defines)
         self._bind_common(prog, R)
         prog["texels_per_slice"].value = self._per_slice
         prog["grid"].value = self._grid
@@ -203,7 +227,7 @@ class CellIntegrator:
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         ctx.blend_equation = moderngl.FUNC_ADD
         try:
-            self._vao.render(moderngl.POINTS, vertices=self.m)
+            self._vao.render(moderngl.POINTS, vertices=self.m * self._per_texel)
         finally:
             ctx.blend_func = moderngl.DEFAULT_BLENDING
             ctx.blend_equation = moderngl.FUNC_ADD
@@ -333,6 +357,6 @@ class CellIntegrator:
     def release(self) -> None:
         """Release every GL object this integrator made (programs stay in the loader's cache)."""
         self._release_map()
-        for o in (self._lights, self._cand, self.weights_buffer, self._stats):
+        for o in (self._lights, self._cand, self._slot_weights, self.weights_buffer, self._stats):
             release_gl(o)
         self.m = 0

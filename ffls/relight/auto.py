@@ -22,10 +22,10 @@ for *this* capture and *this* light map from measurements made here, on the capt
 
 With ground truth (a benchmark), the caller passes the true errors instead.
 
-Candidates (:func:`candidate_qualities`): ranks whose K + 1 layers fill whole blocks of 8 float16
-layers (7, 15, 23, 31, 63: pass 2 reads blocks of 8, so K = 16 costs as much as K = 23), the full
-basis in float16 and float32, farthest-point subsets of 1/2 and 1/4 of the photos, and pass-1 map
-heights full, 256, 128 and 64.
+Candidates (:func:`candidate_qualities`): every weighting scheme; ranks whose K + 1 layers fill
+whole blocks of 8 float16 layers (7, 15, 23, 31, 63: pass 2 reads blocks of 8, so K = 16 costs as
+much as K = 23); the full basis in float16 and float32; farthest-point subsets of 1/2 and 1/4 of
+the photos; pass-1 map heights full and 64.
 """
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ from ffls.conventions import rotation_z
 from ffls.relight.compress import CompressedBasis, compress_basis, rank_range
 from ffls.relight.cpu import CpuRelighter
 from ffls.relight.quality import Quality, farthest_point_subset
-from ffls.weights.voronoi import integrate_weights
+from ffls.weights.weighting import SCHEMES, integrate as integrate_scheme, light_weights
 
 __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor", "relight_quality",
            "estimate_errors", "cpu_frame_ms", "shrink", "truncate", "choose", "choose_quality", "BLOCK_RANKS", "point_light_weights"]
@@ -46,7 +46,7 @@ __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor",
 #: Ranks K whose K + 1 layers fill whole blocks of 8 float16 layers (the packed pass 2's unit).
 BLOCK_RANKS = (7, 15, 23, 31, 63)
 #: Map heights tried for pass 1 (None = the map as given).
-MAP_HEIGHTS = (None, 256, 128, 64)
+MAP_HEIGHTS = (None, 64)
 
 
 @dataclass
@@ -77,20 +77,26 @@ class Choice:
 
 
 def candidate_qualities(n_lights: int, base: Quality | None = None, subsets: bool = True,
-                        map_heights=MAP_HEIGHTS) -> list[Quality]:
+                        map_heights=MAP_HEIGHTS, weightings=None) -> list[Quality]:
     """The configurations the automatic choice considers for ``n_lights`` photos.
 
-    ``base`` gives the knobs not varied here (weighting, cell resolution, near correction).
+    Every weighting scheme (``weightings``, default :data:`ffls.weights.weighting.SCHEMES`) with
+    the full basis (float16 and float32) and the block ranks, at each map height; subsets with
+    ``base``'s scheme. ``base`` gives the knobs not varied here (texture resolution, near
+    correction).
     """
     base = Quality() if base is None else base
+    schemes = SCHEMES if weightings is None else tuple(weightings)
     hi = rank_range(n_lights)[1]
     out = []
     for mr in map_heights:
-        out.append(base.replace(rank=None, precision="f32", basis_subset=None, map_res=mr))
-        out.append(base.replace(rank=None, precision="f16", basis_subset=None, map_res=mr))
-        for k in BLOCK_RANKS:
-            if k <= hi and k < n_lights - 1:
-                out.append(base.replace(rank=k, precision="f16", basis_subset=None, map_res=mr))
+        for w in schemes:
+            b = base.replace(weighting=w, map_res=mr, basis_subset=None)
+            out.append(b.replace(rank=None, precision="f32"))
+            out.append(b.replace(rank=None, precision="f16"))
+            for k in BLOCK_RANKS:
+                if k <= hi and k < n_lights - 1:
+                    out.append(b.replace(rank=k, precision="f16"))
         if subsets:
             for frac in (2, 4):
                 m = n_lights // frac
@@ -100,18 +106,9 @@ def candidate_qualities(n_lights: int, base: Quality | None = None, subsets: boo
 
 
 def point_light_weights(directions, d, weighting: str = "voronoi", hemisphere="upper") -> np.ndarray:
-    """Weights ``(n,)`` that a weighting scheme gives the ``n`` lights for one point light at ``d``.
-
-    ``'voronoi'``: all of it to the nearest light by angle (ties: the lowest index), the box
-    filter's answer.
-    """
-    dirs = np.asarray(directions, dtype=np.float64)
-    d = np.asarray(d, dtype=np.float64)
-    if weighting != "voronoi":
-        raise ValueError(f"unknown weighting {weighting!r}")
-    w = np.zeros(len(dirs))
-    w[int(np.argmax(dirs @ d))] = 1.0
-    return w
+    """Weights ``(n,)`` that a weighting scheme gives the ``n`` lights for one point light at ``d``
+    (:func:`ffls.weights.weighting.light_weights`; ``'voronoi'``: all to the nearest light)."""
+    return light_weights(directions, d, weighting, hemisphere)
 
 
 def leave_one_out_errors(basis, directions, held_out, weighting: str = "voronoi", hemisphere="upper") -> np.ndarray:
@@ -210,7 +207,7 @@ def relight_quality(basis, directions, lightmap, rotation, quality: Quality, hem
         cb = compressed if compressed is not None and compressed.n_lights == len(d) else None
         cb = compress_basis(b, quality.rank) if cb is None or cb.rank < quality.rank else truncate(cb, quality.rank)
     r = CpuRelighter(b, d, hemisphere, precision="f64", compressed=cb, cell_res=None, storage=quality.precision,
-                     map_res=quality.map_res)
+                     map_res=quality.map_res, weighting=quality.weighting)
     r.set_lightmap(lightmap)
     r.set_rotation(np.eye(3) if rotation is None else rotation)
     r.render()
@@ -227,34 +224,36 @@ def estimate_errors(basis, directions, lightmap, rotation, candidates, hemispher
                     max_photos: int = 24) -> tuple[list[float], dict]:
     """Estimated relative RMS error of each candidate, without ground truth (module docstring).
 
-    Candidates are grouped by their basis subset; each group has its own reference (float32,
-    every photo of the subset, full rank, the map as given) and its own leave-one-out floor on
-    the subset's photos, so that a coarser sampling shows in the floor.
+    Candidates are grouped by their basis subset and weighting scheme; each group has its own
+    reference (float32, every photo of the subset, full rank, the map as given, the scheme) and
+    its own leave-one-out floor on the subset's photos with the scheme's point-light weights, so
+    that a coarser sampling or a better interpolation shows in the floor. ``weighting`` names the
+    scheme whose floor is reported as ``e0``.
 
     Returns
     -------
     errors : list of float
     info : dict
-        ``e0`` (the floor of the whole basis), ``floors`` ({subset: e0}), ``loo`` (details for
-        the whole basis) and ``deviations``.
+        ``e0`` (the floor of the whole basis), ``floors`` ({(subset, scheme): e0}), ``loo``
+        (details for the whole basis) and ``deviations``.
     """
     b = np.asarray(basis)
     d = np.asarray(directions, dtype=np.float64)
     groups = {}
     for i, q in enumerate(candidates):
         m = q.basis_subset if q.basis_subset is not None and q.basis_subset < len(d) else None
-        groups.setdefault(m, []).append(i)
+        groups.setdefault((m, q.weighting), []).append(i)
     errs = [np.nan] * len(candidates)
     devs = [np.nan] * len(candidates)
     floors, loo_all = {}, None
-    for m, members in groups.items():
+    for (m, scheme), members in groups.items():
         idx = np.arange(len(d)) if m is None else farthest_point_subset(d, m)
         bs, ds = b[idx], d[idx]
-        ref = relight_quality(bs, ds, lightmap, rotation, Quality(precision="f32"), hemisphere)
-        w = integrate_weights(lightmap, ds, rotation, hemisphere).weights
-        e0, loo = loo_floor(bs, ds, w, weighting, hemisphere, max_photos, relit=ref)
-        floors[m] = e0
-        if m is None:
+        ref = relight_quality(bs, ds, lightmap, rotation, Quality(precision="f32", weighting=scheme), hemisphere)
+        w = integrate_scheme(lightmap, ds, rotation, hemisphere, scheme).weights
+        e0, loo = loo_floor(bs, ds, w, scheme, hemisphere, max_photos, relit=ref)
+        floors[(m, scheme)] = e0
+        if m is None and (loo_all is None or scheme == weighting):
             loo_all = loo
         ranks = [candidates[i].rank for i in members if candidates[i].rank is not None]
         cb = compress_basis(bs, max(ranks)) if ranks else None
@@ -264,7 +263,7 @@ def estimate_errors(basis, directions, lightmap, rotation, candidates, hemispher
             img = relight_quality(bs, ds, lightmap, rotation, q, hemisphere, compressed=cb)
             devs[i] = float(np.linalg.norm(img - ref)) / denom if denom > 0 else 0.0
             errs[i] = float(np.hypot(e0, devs[i]))
-    e0 = floors.get(None, min(floors.values()))
+    e0 = floors.get((None, weighting), min(floors.values()))
     if loo_all is None:
         loo_all = {"held_out": np.zeros(0, int), "eps": np.zeros(0), "share": 0.0}
     return errs, {"e0": e0, "floors": floors, "loo": loo_all, "deviations": devs}
@@ -289,8 +288,8 @@ def cpu_frame_ms(basis, directions, lightmap, quality: Quality, hemisphere="uppe
     if quality.basis_subset is not None and quality.basis_subset < len(d):
         idx = farthest_point_subset(d, quality.basis_subset)
         b, d = b[idx], d[idx]
-    r = CpuRelighter(b, d, hemisphere, rank=quality.rank, cell_res=quality.cell_res, storage=quality.precision,
-                     map_res=quality.map_res)
+    r = CpuRelighter(b, d, hemisphere, rank=quality.rank, cell_res=quality.cell_res or 256,
+                     storage=quality.precision, map_res=quality.map_res, weighting=quality.weighting)
     r.set_lightmap(lightmap)
     ts = []
     for k in range(repeats + 1):
@@ -376,8 +375,8 @@ def choose_quality(basis, directions, lightmap, rotation=None, *, max_error: flo
     b = np.asarray(basis)
     d = np.asarray(directions, dtype=np.float64)
     cands = candidate_qualities(len(d), base) if candidates is None else list(candidates)
-    errs, info = estimate_errors(shrink(b, error_size), d, lightmap, rotation, cands, hemisphere, (base or Quality()).weighting,
-                                 max_photos)
+    errs, info = estimate_errors(shrink(b, error_size), d, lightmap, rotation, cands, hemisphere,
+                                 (base or Quality()).weighting, max_photos)
     if timer is None:
         def timer(q, basis_, directions_):
             return cpu_frame_ms(basis_, directions_, lightmap, q, hemisphere)

@@ -25,6 +25,7 @@ from ffls.relight.compress import CompressedBasis, compress_basis, load_or_compr
 from ffls.relight.quality import integration_map
 from ffls.relight.storage import store_basis
 from ffls.weights.voronoi import Weights, bake_cells, integrate_weights
+from ffls.weights.weighting import Weighting, integrate as integrate_scheme
 
 __all__ = ["relight_reference", "relight_fast", "CpuRelighter", "relight_capture", "PRECISIONS"]
 
@@ -137,6 +138,12 @@ class CpuRelighter:
     map_res : int, optional
         Height of the lat-long light map pass 1 integrates
         (:func:`ffls.relight.quality.integration_map`); None = the map as given.
+    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+        Weighting scheme of pass 1 (:mod:`ffls.weights.weighting`). The smooth schemes are
+        evaluated exactly at every rotated light-map direction (the float64 reference; the GPU
+        looks them up in a baked texture).
+    weighting_options : dict, optional
+        The scheme's options (:data:`ffls.weights.weighting.OPTIONS`).
     path : path-like, optional
         Named in errors (the capture folder).
     """
@@ -144,7 +151,7 @@ class CpuRelighter:
     def __init__(self, basis, directions, hemisphere: str = "upper", *, precision: str = "f32",
                  rank: int | None = None, compressed=None, cell_res: int | None = 256, cell_k: int = 8,
                  cell_max_res: int | None = None, storage: str | None = None, map_res: int | None = None,
-                 path=None):
+                 path=None, weighting: str = "voronoi", weighting_options: dict | None = None):
         self.hemisphere = check_hemisphere(hemisphere)
         basis = np.asarray(basis)
         d = np.asarray(directions, dtype=np.float64)
@@ -169,8 +176,11 @@ class CpuRelighter:
         self.directions = d
         self.precision = precision
         self.compressed = compressed
-        self.cells = None if cell_res is None else bake_cells(d, self.hemisphere, res=cell_res, k=cell_k,
-                                                               max_res=cell_max_res)
+        self._cell_args = (cell_res, cell_k, cell_max_res)
+        self.cells = None
+        self.weighting = None
+        self._weighting = None
+        self.set_weighting(weighting, **(weighting_options or {}))
         #: :class:`ffls.weights.voronoi.Weights` of the last render (None before the first, or after set_weights).
         self.last_weights: Weights | None = None
         self._lightmap = None
@@ -198,16 +208,18 @@ class CpuRelighter:
             this is set.
         quality : ffls.relight.quality.Quality, optional
             Every knob at once: near-light correction and basis subset
-            (:func:`ffls.relight.basis.capture_basis`), then ``storage``, ``rank``, ``cell_res``
-            and ``map_res`` from it (keywords given in ``kw`` win).
+            (:func:`ffls.relight.basis.capture_basis`), then ``storage``, ``rank``, ``cell_res``,
+            ``map_res`` and ``weighting`` from it (keywords given in ``kw`` win).
         **kw
             As :class:`CpuRelighter`.
         """
         basis, d, _ = capture_basis(capture, lights, quality)
         if quality is not None:
-            for k, v in (("storage", quality.precision), ("rank", quality.rank), ("cell_res", quality.cell_res),
-                         ("map_res", quality.map_res)):
+            for k, v in (("storage", quality.precision), ("rank", quality.rank), ("map_res", quality.map_res),
+                         ("weighting", quality.weighting)):
                 kw.setdefault(k, v)
+            if quality.cell_res is not None:
+                kw.setdefault("cell_res", quality.cell_res)
         rank = kw.get("rank")
         if rank is not None and kw.get("compressed") is None:
             kw["compressed"] = load_or_compress(capture.folder, basis, int(rank), save=save_compressed)
@@ -242,6 +254,21 @@ class CpuRelighter:
         self._weights = w.copy()
         self._hdr = None
 
+    def set_weighting(self, scheme: str = "voronoi", **options) -> None:
+        """Use weighting ``scheme`` (:mod:`ffls.weights.weighting`) from the next render on."""
+        if scheme == "voronoi":
+            if options:
+                raise ValueError("weighting 'voronoi' takes no options")
+            res, k, max_res = self._cell_args
+            if self.cells is None and res is not None:
+                self.cells = bake_cells(self.directions, self.hemisphere, res=res, k=k, max_res=max_res)
+            self._weighting = None
+        else:
+            self._weighting = Weighting(self.directions, scheme, self.hemisphere, **options)
+        if scheme != self.weighting and getattr(self, "_lightmap", None) is not None:
+            self._weights = None
+        self.weighting = scheme
+
     # ------------------------------------------------------------------ passes
     def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
         """Compute what changed: the weights (pass 1), the relit image (pass 2), the display image.
@@ -255,8 +282,13 @@ class CpuRelighter:
         if self._lightmap is None and self._weights is None:
             raise RuntimeError("CpuRelighter.render: call set_lightmap(lm) or set_weights(w) first")
         if self._weights is None:
-            self.last_weights = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
-                                                  cells=self.cells)
+            if self._weighting is None:
+                self.last_weights = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
+                                                      cells=self.cells)
+            else:
+                self.last_weights = integrate_scheme(self._lightmap, self.directions, self._rotation, self.hemisphere,
+                                                     self.weighting, weighting=self._weighting,
+                                                     **self._weighting.options)
             self._weights = self.last_weights.weights
             self._hdr = None
         if self._hdr is None:
@@ -329,7 +361,8 @@ def _stored_compressed(cb, storage, path=None):
 
 
 def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | None = 256, fast: bool = True,
-                    k: int = 4, max_res: int | None = 1024) -> tuple[np.ndarray, Weights]:
+                    k: int = 4, max_res: int | None = 1024, weighting: str = "voronoi",
+                    weighting_options: dict | None = None) -> tuple[np.ndarray, Weights]:
     """Relight a capture under a light map (one :class:`CpuRelighter` render).
 
     Parameters
@@ -349,6 +382,8 @@ def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | N
         :func:`relight_fast` (float32) rather than :func:`relight_reference` (float64).
     k : int
         Candidate slots per texel of the cell texture.
+    weighting : str
+        Weighting scheme (:mod:`ffls.weights.weighting`); ``weighting_options`` its options.
 
     Returns
     -------
@@ -357,7 +392,8 @@ def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | N
         For the used lights, in the order of ``lights`` restricted to ``ok_mask``.
     """
     r = CpuRelighter.from_capture(capture, lights, precision="f32" if fast else "f64", cell_res=cells_res,
-                                  cell_k=k, cell_max_res=max_res)
+                                  cell_k=k, cell_max_res=max_res, weighting=weighting,
+                                  weighting_options=weighting_options)
     r.set_lightmap(lightmap)
     if rotation is not None:
         r.set_rotation(rotation)

@@ -34,12 +34,13 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.relight.storage import parse_storage
+from ffls.weights.weighting import SCHEMES
 
 __all__ = ["Quality", "near_light_scales", "near_light_directions", "apply_near_correction",
            "farthest_point_subset", "integration_map", "prepare_basis", "WEIGHTINGS", "MAP_RES_CHOICES"]
 
-#: Weighting schemes known to this module (``ffls.weights``); others are checked by the relighter.
-WEIGHTINGS = ("voronoi",)
+#: Weighting schemes of pass 1 (:data:`ffls.weights.weighting.SCHEMES`).
+WEIGHTINGS = SCHEMES
 #: Light-map heights offered for pass 1 (None = the map as loaded).
 MAP_RES_CHOICES = (None, 512, 256, 128, 64, 32)
 
@@ -50,16 +51,19 @@ class Quality:
 
     Attributes
     ----------
-    weighting : str
-        Weighting scheme of pass 1 (``'voronoi'``: the paper's box filter per cell).
+    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+        Weighting scheme of pass 1 (:mod:`ffls.weights.weighting`; ``'voronoi'``: the paper's box
+        filter per cell).
     precision : {'f16', 'f32'}
         Storage of the basis (or of the compressed layers).
     rank : int or None
         Compressed basis of K eigen-images; None = every basis image.
     basis_subset : int or None
         Use only this many photos, chosen by :func:`farthest_point_subset`; None = all.
-    cell_res : int
-        Resolution of the cell texture of pass 1.
+    cell_res : int or None
+        Resolution of the texture pass 1 looks directions up in: the candidate-cell texture
+        (``voronoi``) or the weight texture (smooth schemes); None = the scheme's default
+        (256 for the cells, :data:`ffls.weights.weighting.DEFAULT_TEXTURE_RES` for weights).
     map_res : int or None
         Height of the lat-long map pass 1 integrates (:func:`integration_map`); None = as loaded.
     near_correction : bool
@@ -70,7 +74,7 @@ class Quality:
     precision: str = "f16"
     rank: int | None = None
     basis_subset: int | None = None
-    cell_res: int = 256
+    cell_res: int | None = None
     map_res: int | None = None
     near_correction: bool = False
 
@@ -82,8 +86,10 @@ class Quality:
             raise ValueError(f"basis_subset must be >= 1 or None, not {self.basis_subset}")
         if self.map_res is not None and int(self.map_res) < 2:
             raise ValueError(f"map_res must be >= 2 or None, not {self.map_res}")
-        if int(self.cell_res) < 16:
-            raise ValueError(f"cell_res must be >= 16, not {self.cell_res}")
+        if self.cell_res is not None and int(self.cell_res) < 16:
+            raise ValueError(f"cell_res must be >= 16 or None, not {self.cell_res}")
+        if self.weighting not in SCHEMES:
+            raise ValueError(f"weighting must be one of {SCHEMES}, not {self.weighting!r}")
 
     def replace(self, **kw) -> "Quality":
         """A copy with some knobs changed."""
@@ -93,11 +99,12 @@ class Quality:
         return asdict(self)
 
     def label(self) -> str:
-        """A short description, e.g. ``'voronoi f16 K16 m128/256 map128'``."""
+        """A short description, e.g. ``'gaussian f16 K15 sub64 tex256 map64 near'``."""
         parts = [self.weighting, self.precision, "full" if self.rank is None else f"K{self.rank}"]
         if self.basis_subset is not None:
             parts.append(f"sub{self.basis_subset}")
-        parts.append(f"cells{self.cell_res}")
+        if self.cell_res is not None:
+            parts.append(f"tex{self.cell_res}")
         parts.append("map-full" if self.map_res is None else f"map{self.map_res}")
         if self.near_correction:
             parts.append("near")

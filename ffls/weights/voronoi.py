@@ -191,7 +191,8 @@ class CellTexture:
         Candidate slots per texel.
     texel_radius : (res, res) float64
         Angular radius (rad) of every texel: largest angle from its centre to its boundary
-        (corners and edge midpoints), before the slack.
+        (corners and edge midpoints), before the slack; NaN for texels that the hierarchical
+        bake settled at a coarser level (inside one cell).
     """
 
     index: np.ndarray
@@ -344,7 +345,33 @@ def _candidate_rows(unit: np.ndarray, keep: np.ndarray, tree: cKDTree, q: np.nda
     return cand, nearest, count
 
 
-def _bake(unit: np.ndarray, keep: np.ndarray, smap, res: int, k: int, hemisphere: str, map_name: str) -> CellTexture:
+#: The hierarchical bake starts at this resolution or below (``_bake``).
+_COARSE_RES = 64
+#: Boundary points per texel edge (corners included) for the radius of a coarse texel.
+_COARSE_EDGE_POINTS = 5
+
+
+def _subset_geometry(smap, res: int, flat: np.ndarray, edge_points: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (m, 3) and angular radii (m,) of texels ``flat`` (row-major) at ``res``.
+
+    The radius is the largest angle from the centre to ``edge_points`` points along each edge
+    (corners included; 3 = corners and edge midpoints, as :func:`_texel_geometry`). The maps
+    used here (concentric, octahedral) put u along columns (:meth:`SphereMap.texel_centers_uv`).
+    """
+    row = (flat // res).astype(np.float64)
+    col = (flat % res).astype(np.float64)
+    centre = np.asarray(smap.uv_to_direction(np.stack([(col + 0.5) / res, (row + 0.5) / res], -1)), dtype=np.float64)
+    t = np.linspace(0.0, 1.0, int(edge_points))
+    ring = np.unique(np.concatenate([np.stack([t, np.zeros_like(t)], 1), np.stack([t, np.ones_like(t)], 1),
+                                     np.stack([np.zeros_like(t), t], 1), np.stack([np.ones_like(t), t], 1)]), axis=0)
+    chord = np.zeros(flat.size)
+    for du, dv in ring:
+        b = np.asarray(smap.uv_to_direction(np.stack([(col + du) / res, (row + dv) / res], -1)), dtype=np.float64)
+        chord = np.fmax(chord, np.linalg.norm(b - centre, axis=1))
+    return centre, _chord_to_angle(chord)
+
+
+def _bake_direct(unit, keep, smap, res, k, hemisphere, map_name) -> CellTexture:
     centres, radius, valid = _texel_geometry(smap, res)
     tree = cKDTree(unit[keep])
     q = centres[valid]
@@ -362,7 +389,77 @@ def _bake(unit: np.ndarray, keep: np.ndarray, smap, res: int, k: int, hemisphere
                        map_name=map_name, directions=unit, k=k, texel_radius=radius)
 
 
-def bake_cells(directions, hemisphere: str = "upper", res: int = 256, k: int = 8, max_res: int | None = None) -> CellTexture:
+def _levels(res: int) -> list:
+    """Resolutions of the hierarchical bake, coarse to fine (each half the next)."""
+    levels = [res]
+    while levels[0] > _COARSE_RES and levels[0] % 2 == 0:  # halving: the least refined work (measured)
+        levels.insert(0, levels[0] // 2)
+    return levels
+
+
+def _bake(unit: np.ndarray, keep: np.ndarray, smap, res: int, k: int, hemisphere: str, map_name: str) -> CellTexture:
+    """Candidate texture, hierarchically: a coarse texel inside one cell gives it to all its sub-texels.
+
+    A texel at a coarse level whose conservative candidate list (the same test as at full
+    resolution, with its own larger radius) holds one light lies entirely inside that light's
+    cell, and so does every finer texel it contains: they get that single candidate (and it is
+    the exact cell of their centres) without a query. Only the texels of coarse texels with
+    several candidates are refined, level by level; the finest level runs the usual bake on
+    them. The lookup equals the reference exactly as before (tests/test_voronoi.py); the lists
+    can only be shorter than a direct bake's. Maps with invalid texels bake directly.
+    """
+    levels = _levels(res)
+    if len(levels) == 1 or not np.all(smap.valid_mask(levels[0])):
+        return _bake_direct(unit, keep, smap, res, k, hemisphere, map_name)
+    tree = cKDTree(unit[keep])
+    single = np.full(res * res, -1, dtype=np.int64)  # light of texels settled at a coarse level
+    todo = np.arange(levels[0] * levels[0], dtype=np.int64)  # texels to examine at the current level
+    for li, r in enumerate(levels[:-1]):
+        q, rad = _subset_geometry(smap, r, todo, _COARSE_EDGE_POINTS)
+        rad = rad * (1.0 + CANDIDATE_REL_SLACK) + CANDIDATE_ABS_SLACK
+        cand, nearest, count = _candidate_rows(unit, keep, tree, q, rad, 1)
+        f_to_fine = res // r
+        one = count == 1
+        # settle the fine texels under single-candidate coarse texels
+        rows, cols = np.divmod(todo[one], r)
+        sub = np.arange(f_to_fine)
+        fr = (rows[:, None] * f_to_fine + sub[None, :])[:, :, None]
+        fc = (cols[:, None] * f_to_fine + sub[None, :])[:, None, :]
+        single[(fr * res + fc).reshape(-1)] = np.repeat(nearest[one], f_to_fine * f_to_fine)
+        # children of the others at the next level
+        nr = levels[li + 1]
+        g = nr // r
+        rows, cols = np.divmod(todo[~one], r)
+        sub = np.arange(g)
+        cr = (rows[:, None] * g + sub[None, :])[:, :, None]
+        cc = (cols[:, None] * g + sub[None, :])[:, None, :]
+        todo = (cr * nr + cc).reshape(-1)
+    index = np.full(res * res, -1, dtype=np.int32)
+    candidates = np.full((res * res, k), -1, dtype=np.int32)
+    settled = single >= 0
+    index[settled] = single[settled]
+    candidates[settled, 0] = single[settled]
+    overflow = 0
+    if todo.size:
+        q, radius = _subset_geometry(smap, res, todo)
+        rad = radius * (1.0 + CANDIDATE_REL_SLACK) + CANDIDATE_ABS_SLACK
+        # few lights are in reach of a small texel: query 6 (more in reach are gathered exactly)
+        cand, nearest, count = _candidate_rows(unit, keep, tree, q, rad, k, k_query=min(k + 4, 6))
+        overflow = int(np.count_nonzero(count > k))
+        key = np.where(cand < 0, np.iinfo(np.int64).max, cand)
+        cand = np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1)
+        index[todo] = nearest
+        candidates[todo] = cand
+    texel_radius = np.full(res * res, np.nan)
+    if todo.size:
+        texel_radius[todo] = radius
+    return CellTexture(index=index.reshape(res, res), candidates=candidates.reshape(res, res, k), overflow=overflow,
+                       res=res, hemisphere=hemisphere, map_name=map_name, directions=unit, k=k,
+                       texel_radius=texel_radius.reshape(res, res))
+
+
+def bake_cells(directions, hemisphere: str = "upper", res: int = 256, k: int = 8, max_res: int | None = None,
+               method: str = "hierarchical") -> CellTexture:
     """Bake the angular Voronoi cells of ``directions`` into a candidate texture.
 
     Parameters
@@ -379,6 +476,10 @@ def bake_cells(directions, hemisphere: str = "upper", res: int = 256, k: int = 8
         If given and the bake at ``res`` overflows (some texel has more than ``k`` candidates),
         ``res`` is doubled until the overflow is 0 or ``max_res`` is reached; the last bake is
         returned and its ``overflow`` says whether the lookup is exact. Default: no retry.
+    method : {'hierarchical', 'direct'}
+        ``'hierarchical'`` (default): texels settled at coarser levels where one cell covers a
+        whole coarse texel, only the rest refined (docs/voronoi.md, "Bake speed"); ``'direct'``:
+        every texel queried at full resolution. Both give the exact lookup.
 
     Returns
     -------
@@ -387,12 +488,15 @@ def bake_cells(directions, hemisphere: str = "upper", res: int = 256, k: int = 8
     hemisphere = check_hemisphere(hemisphere)
     if int(k) < 1 or int(res) < 1:
         raise ValueError("res and k must be positive")
+    if method not in ("hierarchical", "direct"):
+        raise ValueError(f"method must be 'hierarchical' or 'direct', not {method!r}")
+    bake = _bake if method == "hierarchical" else _bake_direct
     unit, keep = unique_directions(directions)
     map_name = cell_map_name(hemisphere)
     smap = _get_map(hemisphere)
     res = int(res)
     while True:
-        cells = _bake(unit, keep, smap, res, int(k), hemisphere, map_name)
+        cells = bake(unit, keep, smap, res, int(k), hemisphere, map_name)
         if cells.overflow == 0 or max_res is None or 2 * res > int(max_res):
             return cells
         res *= 2

@@ -1,0 +1,94 @@
+"""Relit error of each weighting scheme against ground truth (ffls synth's direct renders).
+
+Usage::
+
+    python benchmarks/weighting_error.py [--lights 120] [--res 64] [--maps sky,studio,courtyard]
+        [--rotations 0,40] [--dirs 2048] [--texture-res 512] [--json benchmarks/results/weighting_error.json]
+
+The default synthetic scene is rendered under ``--lights`` stratified upper-hemisphere directions
+(the basis) and, as the truth, lit directly by every light map (``ffls.synth.scene.render_lightmap``,
+the map reduced to ``--dirs`` clustered directions) for each rotation about +Z. Every scheme
+relights the basis (``ffls.weights.weighting.integrate``: exact weights, and, with
+``--texture-res``, the GPU's baked-texture lookup). Reported: relative RMS error
+``||relit - truth|| / ||truth||`` per map (mean over rotations), and the mean over maps; a
+gaussian width sweep is included (``gaussian:w=...``). Prints a table and writes JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from ffls.conventions import rotation_z
+from ffls.lightmaps.lightmap import builtin_lightmap
+from ffls.relight.cpu import relight_fast
+from ffls.weights.weighting import SCHEMES, Weighting, bake_weights, integrate
+
+
+def variants(texture_res: int) -> list:
+    """(label, scheme, options, texture_res or None) of every configuration measured."""
+    out = [(s, s, {}, None) for s in SCHEMES]
+    out += [(f"gaussian:k={k},w={w}", "gaussian", {"k": k, "width": w}, None)
+            for k, w in ((4, 0.3), (4, 0.4), (6, 0.3), (8, 0.25))]
+    if texture_res:
+        out += [(f"{s}@tex{texture_res}", s, {}, texture_res) for s in SCHEMES if s != "voronoi"]
+    return out
+
+
+def main(argv=None) -> int:
+    from common import host_info, write_json  # benchmarks/common.py
+    from ffls.synth.scene import make_scene, render_lightmap, render_lights, stratified_directions
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--lights", type=int, default=120)
+    ap.add_argument("--res", type=int, default=64)
+    ap.add_argument("--maps", default="sky,studio,courtyard")
+    ap.add_argument("--rotations", default="0,40")
+    ap.add_argument("--dirs", type=int, default=2048)
+    ap.add_argument("--map-height", type=int, default=256)
+    ap.add_argument("--texture-res", type=int, default=512)
+    ap.add_argument("--json", default="benchmarks/results/weighting_error.json")
+    args = ap.parse_args(argv)
+    scene = make_scene()
+    d = stratified_directions(args.lights, "upper", seed=0)
+    basis = render_lights(scene, args.res, d)
+    rots = [float(a) for a in args.rotations.split(",")]
+    cfgs = variants(args.texture_res)
+    prepared = {}
+    for label, s, opts, tr in cfgs:
+        prepared[label] = ({"texture": bake_weights(d, s, "upper", res=tr, **opts)} if tr else
+                           {"weighting": Weighting(d, s, "upper", **opts)} if s != "voronoi" else {})
+    table = {label: {} for label, *_ in cfgs}
+    t0 = time.perf_counter()
+    for name in args.maps.split(","):
+        lm = builtin_lightmap(name, args.map_height)
+        h = lm.data.shape[0]
+        if lm.layout == "latlong" and h > args.map_height and h % args.map_height == 0:
+            lm = lm.downsample(h // args.map_height)
+        samples = lm.samples()
+        errs = {label: [] for label, *_ in cfgs}
+        for a in rots:
+            R = rotation_z(a)
+            truth = render_lightmap(scene, samples, args.res, n_dirs=args.dirs, rotation=R).astype(np.float64)
+            for label, s, opts, tr in cfgs:
+                w = integrate(samples, d, R, "upper", s, **prepared[label], **opts).weights
+                relit = relight_fast(w, basis).astype(np.float64)
+                errs[label].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
+        for label in errs:
+            table[label][name] = float(np.mean(errs[label]))
+    maps = args.maps.split(",")
+    print(f"{args.lights} lights, {args.res}^2, truth from {args.dirs} directions, rotations {args.rotations} "
+          f"({time.perf_counter() - t0:.0f} s); relative RMS error")
+    print(f"{'scheme':>28} " + " ".join(f"{m:>10}" for m in maps) + f" {'mean':>8} {'/ voronoi':>9}")
+    ref = np.mean([table["voronoi"][m] for m in maps])
+    for label in table:
+        mean = float(np.mean([table[label][m] for m in maps]))
+        table[label]["mean"] = mean
+        print(f"{label:>28} " + " ".join(f"{table[label][m]:>10.4f}" for m in maps) + f" {mean:>8.4f} {mean / ref:>9.3f}")
+    write_json(args.json, {"args": vars(args), "host": host_info(), "rel_rmse": table})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
