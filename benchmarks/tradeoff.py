@@ -50,6 +50,7 @@ from ffls.relight.auto import estimate_errors, relight_quality, truncate
 from ffls.relight.compress import compress_basis
 from ffls.relight.quality import Quality, apply_near_correction, farthest_point_subset
 from ffls.synth import scene as synth
+from ffls.weights.weighting import SCHEMES
 
 from common import device_info, device_line, host_info, write_json  # benchmarks/common.py
 
@@ -78,21 +79,27 @@ def map_path(name) -> Path:
 
 
 def configurations(n: int, quick: bool = False) -> list[Quality]:
-    """The grid: rank x pass-1 map height (float16, all photos), then subsets, precision and the cell texture."""
+    """The grid: scheme x rank x pass-1 map height (float16, all photos), then subsets, precision and textures."""
     ranks = [None, 7, 15, 23, 31, 63] if not quick else [None, 15]
-    heights = [None, 128, 64, 32] if not quick else [None, 64]
+    heights = [None, 64, 32] if not quick else [None, 64]
     out = []
     for k in ranks:
         if k is not None and k >= n - 1:
             continue
         for h in heights:
             out.append(Quality(rank=k, map_res=h))
+    for w in SCHEMES[1:]:
+        for k in ((None, 15, 31) if not quick else (None,)):
+            for h in ((None, 64) if not quick else (64,)):
+                out.append(Quality(weighting=w, rank=k, map_res=h))
     for m in (n // 2, n // 4):
         for h in ((None, 64) if not quick else (64,)):
             out.append(Quality(basis_subset=m, map_res=h))
             out.append(Quality(basis_subset=m, rank=15 if m > 16 else None, map_res=h))
     out += [Quality(precision="f32", map_res=64), Quality(precision="f32", rank=15, map_res=64)]
     out += [Quality(rank=15, map_res=64, cell_res=c) for c in (128, 512)]
+    if not quick:
+        out += [Quality(weighting="gaussian", rank=15, map_res=64, cell_res=c) for c in (128, 256)]
     seen, uniq = set(), []
     for q in out:
         if q not in seen:
@@ -165,21 +172,16 @@ def near_experiment(scene, res, n, oracle_dirs, lm, quick=False):
     return rows
 
 
-def flicker_rows(basis, dirs, scene, res, lm, weightings):
-    """Flicker of each weighting under a sun, 1-degree steps (benchmarks/flicker.py's metric)."""
+def flicker_rows(basis, dirs, lm, frames: int = 40):
+    """Flicker (benchmarks/flicker.py's metric: RMS of the second difference over the RMS image) of
+    each scheme under a map with a sun turning in 1-degree steps; None where flicker.py is absent."""
     try:
         import flicker  # benchmarks/flicker.py (written with the weighting schemes)
     except ImportError:
         return None
-    fn = getattr(flicker, "flicker_metric", None) or getattr(flicker, "flicker", None)
-    if fn is None:
-        return None
-    out = []
-    for w in weightings:
-        frames = [relight_quality(basis, dirs, lm, rotation_z(float(a)), Quality(precision="f32", weighting=w))
-                  for a in np.arange(0.0, 40.0, 1.0)]
-        out.append({"weighting": w, "flicker": float(fn(np.stack(frames)))})
-    return out
+    vals = flicker.scheme_flicker(basis, dirs, lm, SCHEMES, frames=frames, step_deg=1.0, start_deg=10.0)
+    return [{"weighting": w, "flicker": float(v), "ratio_to_voronoi": float(v / vals["voronoi"])}
+            for w, v in vals.items()]
 
 
 def pareto(points):
@@ -212,6 +214,7 @@ def plot(rows, map_names, path, device):
             q = r["quality"]
             colour = "C0" if q["rank"] is None else "C1"
             marker = "s" if q["basis_subset"] else ("^" if q["precision"] == "f32" else "o")
+            colour = {"voronoi": colour, "antialiased": "C2", "barycentric": "C3", "gaussian": "C4"}[q["weighting"]]
             ax.scatter(r["ms"], r[key], c=colour, marker=marker, s=36 if i in front else 14,
                        edgecolors="k" if i in front else "none", zorder=3)
         fr = sorted((pts[i] for i in front), key=lambda p: p[0])
@@ -222,8 +225,9 @@ def plot(rows, map_names, path, device):
         ax.set_title(name)
         ax.grid(True, which="both", lw=0.3)
     axes[0].set_ylabel("relative RMS error")
-    fig.suptitle(f"error against time per frame ({device}); blue: full basis, orange: compressed; "
-                 f"square: subset, triangle: float32; ringed: Pareto front", fontsize=9)
+    fig.suptitle(f"error against time per frame ({device}); voronoi blue (full) / orange (compressed), "
+                 f"antialiased green, barycentric red, gaussian purple; square: subset, triangle: float32; "
+                 f"ringed: Pareto front", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -238,6 +242,8 @@ def main():
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="a small grid (tests)")
     ap.add_argument("--no-near", action="store_true")
+    ap.add_argument("--map-height", type=int, default=128, help="the maps are resampled to this height first")
+    ap.add_argument("--cache", default=None, help="folder keeping the capture and the truths between runs")
     ap.add_argument("--out", default=str(ROOT / "docs" / "tradeoff.md"))
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "tradeoff.json"))
     a = ap.parse_args()
@@ -246,16 +252,25 @@ def main():
     n = a.lights
     dirs = synth.stratified_directions(n, "upper", seed=1)
     print(f"capture: {n} distant lights, {a.res}^2")
-    basis = synth.render_lights(scene, a.res, dirs)
+    cache = Path(a.cache) / f"tradeoff_{n}_{a.res}_{a.oracle_dirs}.npz" if a.cache else None
+    cached = dict(np.load(cache)) if cache is not None and cache.exists() else {}
+    basis = cached["basis"] if "basis" in cached else synth.render_lights(scene, a.res, dirs)
     with warnings.catch_warnings():  # the maps' few tiny negative texels (lossy EXR) are clamped, as reported
         warnings.simplefilter("ignore")
-        maps = {name: load_lightmap(map_path(f)).to_latlong(256) for name, f in MAPS}
+        maps = {name: load_lightmap(map_path(f)).to_latlong(a.map_height) for name, f in MAPS}
     truths = {}
     for name, lm in maps.items():
         for yaw in YAWS:
+            key = f"truth {name} {yaw:g}"
+            if key in cached:
+                truths[(name, yaw)] = cached[key]
+                continue
             t0 = time.perf_counter()
             truths[(name, yaw)] = synth.render_lightmap(scene, lm, a.res, n_dirs=a.oracle_dirs, rotation=rotation_z(yaw))
             print(f"  truth {name} yaw {yaw:g}: {time.perf_counter() - t0:.0f} s")
+    if cache is not None and not cached:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(cache, basis=basis, **{f"truth {k[0]} {k[1]:g}": v for k, v in truths.items()})
     configs = configurations(n, a.quick)
     max_rank = max((q.rank for q in configs if q.rank is not None), default=None)
     cb_full = compress_basis(basis, max_rank) if max_rank else None
@@ -289,14 +304,15 @@ def main():
         r["ms"] = t
     # the automatic choice's estimate (leave-one-out, no truth) against the truth, per map
     est_rows = []
-    probe = [Quality(precision="f32"), Quality(rank=7), Quality(rank=31), Quality(basis_subset=n // 4)]
+    probe = [Quality(precision="f32"), Quality(rank=7), Quality(rank=min(31, n - 2)), Quality(basis_subset=n // 4),
+             Quality(weighting="barycentric"), Quality(weighting="gaussian")]
     for name, lm in maps.items():
         est, info = estimate_errors(basis, dirs, lm, rotation_z(YAWS[0]), probe)
         for q, e in zip(probe, est):
             true = rel_rmse(relight_quality(basis, dirs, lm, rotation_z(YAWS[0]), q), truths[(name, YAWS[0])])
             est_rows.append({"map": name, "label": q.label(), "estimate": e, "true": true})
     near = [] if a.no_near else near_experiment(scene, a.res, min(n, 96), a.oracle_dirs, maps["overcast"], a.quick)
-    fl = flicker_rows(basis, dirs, scene, a.res, maps["sharp sun"], ["voronoi"])
+    fl = flicker_rows(basis, dirs, maps["sharp sun"], frames=12 if a.quick else 40)
     device = device_line(dev) if dev else "no GL"
     doc = {"host": host_info(), "device": dev, "lights": n, "res": a.res, "time_res": a.time_res,
            "oracle_dirs": a.oracle_dirs, "maps": dict(MAPS), "yaws": YAWS, "rows": rows, "estimate": est_rows,
@@ -318,7 +334,8 @@ def write_markdown(a, doc, names, device, img):
          f"`{cmd.strip()}` ({device}; {doc['host'].get('cpu_count', os.cpu_count())} CPUs; "
          f"{doc['lights']} lights, errors at {doc['res']}^2 against `render_lightmap` with {doc['oracle_dirs']} "
          f"directions, means over yaw {', '.join(f'{y:g}' for y in doc['yaws'])} degrees; times at "
-         f"{doc['time_res']}^2, median of {a.reps} rounds; JSON `benchmarks/results/tradeoff.json`). "
+         f"{doc['time_res']}^2, median of {a.reps} rounds; maps resampled to {a.map_height} texels high (`map-full`); "
+         "JSON `benchmarks/results/tradeoff.json`). "
          "Error: relative RMSE (lower is better) and PSNR (dB) of the sRGB tone-mapped 8-bit images. "
          "**Bold**: on the Pareto front of mean error against time.", "",
          "| configuration | ms/frame | " + " | ".join(f"{m} rRMSE / PSNR" for m in names) + " | mean rRMSE |",
@@ -342,9 +359,10 @@ def write_markdown(a, doc, names, device, img):
             L.append(f"| {r['capture']} | {'on' if r['correction'] else 'off'} | {r['rel_rmse']:.4f} | "
                      f"{r['rel_rmse_object']:.4f} | {r['psnr']:.1f} |")
     if doc["flicker"]:
-        L += ["", "### Flicker (sun map, 1-degree steps)", "", "| weighting | flicker |", "|---|---:|"]
+        L += ["", "### Flicker (the sharp-sun map turning in 1-degree steps, `benchmarks/flicker.py`'s metric)", "",
+              "| weighting | flicker | / voronoi |", "|---|---:|---:|"]
         for r in doc["flicker"]:
-            L.append(f"| {r['weighting']} | {r['flicker']:.4g} |")
+            L.append(f"| {r['weighting']} | {r['flicker']:.4g} | {r['ratio_to_voronoi']:.3f} |")
     L.append("")
     out = Path(a.out)
     head = out.read_text().split("<!-- written by benchmarks/tradeoff.py")[0] if out.exists() else ""

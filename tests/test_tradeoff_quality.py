@@ -185,9 +185,11 @@ def test_relight_quality_flags(capture, near_capture, tmp_path, capsys):
 
 def test_relight_quality_auto_says_what_it_chose(capture, tmp_path, capsys):
     from ffls.cli import main
+    from ffls.lightmaps.lightmap import save_lightmap
 
+    probe = save_lightmap(sky_sun_map(24), tmp_path / "sky24.exr")  # small: every candidate is timed on the CPU
     out = tmp_path / "auto.exr"
-    assert main(["relight", str(capture), "--probe", "sky", "--quality", "auto", "--max-error", "0.9",
+    assert main(["relight", str(capture), "--probe", str(probe), "--quality", "auto", "--max-error", "0.9",
                  "-o", str(out)]) == 0
     err = capsys.readouterr().err
     line = [s for s in err.splitlines() if "quality auto:" in s]
@@ -206,9 +208,19 @@ def test_render_quality_flags_on_the_gpu(capture, tmp_path, capsys, ctx):
     assert "8 lights" in capsys.readouterr().out
     ga, gb = read_image(a).pixels, read_image(b).pixels
     np.testing.assert_allclose(ga, gb, rtol=1e-3, atol=1e-3 * gb.max())
-    assert main(["render", str(capture), "--probe", "sky", "--quality", "auto", "--target-fps", "1",
-                 "-o", str(a)]) == 0
-    assert "quality auto:" in capsys.readouterr().err
+
+
+@pytest.mark.gl
+def test_gpu_frame_timer_applies_every_knob(ctx):
+    from ffls.gpu.engine import gpu_frame_ms
+    from ffls.relight.auto import candidate_qualities
+
+    d = fibonacci(20)
+    b = lambert_basis(d, size=16)
+    cands = candidate_qualities(20, weightings=("voronoi", "gaussian"), map_heights=(None, 16))
+    assert {q.weighting for q in cands} == {"voronoi", "gaussian"} and any(q.basis_subset for q in cands)
+    for q in cands[:4] + [c for c in cands if c.basis_subset][:1]:
+        assert gpu_frame_ms(ctx, b, d, sky_sun_map(32), q, frames=1) > 0
 
 
 @pytest.mark.gl

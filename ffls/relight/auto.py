@@ -36,12 +36,13 @@ import numpy as np
 
 from ffls.conventions import rotation_z
 from ffls.relight.compress import CompressedBasis, compress_basis, rank_range
-from ffls.relight.cpu import CpuRelighter
-from ffls.relight.quality import Quality, farthest_point_subset
+from ffls.relight.cpu import CpuRelighter, relight_reference
+from ffls.relight.quality import Quality, farthest_point_subset, integration_map
+from ffls.relight.storage import store_basis
 from ffls.weights.weighting import SCHEMES, integrate as integrate_scheme, light_weights
 
 __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor", "relight_quality",
-           "estimate_errors", "cpu_frame_ms", "shrink", "truncate", "choose", "choose_quality", "BLOCK_RANKS", "point_light_weights"]
+           "estimate_errors", "cpu_frame_ms", "shrink", "truncate", "relight_weights", "choose", "choose_quality", "BLOCK_RANKS", "point_light_weights"]
 
 #: Ranks K whose K + 1 layers fill whole blocks of 8 float16 layers (the packed pass 2's unit).
 BLOCK_RANKS = (7, 15, 23, 31, 63)
@@ -214,6 +215,24 @@ def relight_quality(basis, directions, lightmap, rotation, quality: Quality, hem
     return np.asarray(r.hdr, dtype=np.float64)
 
 
+def relight_weights(basis, weights, quality: Quality, compressed: CompressedBasis | None = None) -> np.ndarray:
+    """Pass 2 of a configuration on the CPU: ``(H, W, 3)`` float64 from ``weights`` ``(n, 3)``.
+
+    The storage rounding and the rank of ``quality`` are applied (``compressed`` of rank >= K is
+    truncated instead of compressing again); the subset, the weighting and the map height are
+    already in ``basis`` and ``weights``.
+    """
+    b = np.asarray(basis)
+    if quality.rank is not None:
+        cb = compressed if compressed is not None and compressed.rank >= quality.rank else compress_basis(b, quality.rank)
+        layers = store_basis(truncate(cb, quality.rank).layers(), quality.precision)
+        stored = layers[0].astype(np.float64) / layers[1]
+        coeffs = truncate(cb, quality.rank).layer_coefficients(weights)
+        return np.einsum("kc,khwc->hwc", coeffs, stored)
+    stored, scale, _ = store_basis(b, quality.precision)
+    return relight_reference(weights, stored) / scale
+
+
 def truncate(cb: CompressedBasis, rank: int) -> CompressedBasis:
     """The first ``rank`` eigen-images of a compressed basis (the best rank-K part of it)."""
     return CompressedBasis(cb.mean, cb.components[:rank], cb.loadings[:, :rank], cb.singular_values[:rank],
@@ -249,8 +268,15 @@ def estimate_errors(basis, directions, lightmap, rotation, candidates, hemispher
     for (m, scheme), members in groups.items():
         idx = np.arange(len(d)) if m is None else farthest_point_subset(d, m)
         bs, ds = b[idx], d[idx]
-        ref = relight_quality(bs, ds, lightmap, rotation, Quality(precision="f32", weighting=scheme), hemisphere)
-        w = integrate_scheme(lightmap, ds, rotation, hemisphere, scheme).weights
+        weights = {}  # one pass 1 per map height: rank and storage change only pass 2
+
+        def weights_at(mr, ds=ds, scheme=scheme, weights=weights):
+            if mr not in weights:
+                weights[mr] = integrate_scheme(integration_map(lightmap, mr), ds, rotation, hemisphere, scheme).weights
+            return weights[mr]
+
+        w = weights_at(None)
+        ref = relight_weights(bs, w, Quality(precision="f32"))
         e0, loo = loo_floor(bs, ds, w, scheme, hemisphere, max_photos, relit=ref)
         floors[(m, scheme)] = e0
         if m is None and (loo_all is None or scheme == weighting):
@@ -259,8 +285,8 @@ def estimate_errors(basis, directions, lightmap, rotation, candidates, hemispher
         cb = compress_basis(bs, max(ranks)) if ranks else None
         denom = float(np.linalg.norm(ref))
         for i in members:
-            q = candidates[i].replace(basis_subset=None)
-            img = relight_quality(bs, ds, lightmap, rotation, q, hemisphere, compressed=cb)
+            q = candidates[i]
+            img = relight_weights(bs, weights_at(q.map_res), q, compressed=cb)
             devs[i] = float(np.linalg.norm(img - ref)) / denom if denom > 0 else 0.0
             errs[i] = float(np.hypot(e0, devs[i]))
     e0 = floors.get((None, weighting), min(floors.values()))
@@ -346,7 +372,8 @@ def choose(candidates, errors, ms, max_error: float | None = None, fps: float | 
 
 def choose_quality(basis, directions, lightmap, rotation=None, *, max_error: float | None = None,
                    fps: float | None = None, timer=None, hemisphere="upper", base: Quality | None = None,
-                   candidates=None, max_photos: int = 24, error_size: int | None = 128) -> Choice:
+                   candidates=None, max_photos: int = 24, error_size: int | None = 128,
+                   error_map_height: int | None = 128) -> Choice:
     """Measure every candidate on this capture and map, and :func:`choose`.
 
     Parameters
@@ -371,11 +398,16 @@ def choose_quality(basis, directions, lightmap, rotation=None, *, max_error: flo
         The errors are estimated on the photos shrunk (area average, :func:`cv2.resize`) to at
         most this many pixels on a side (relative errors hardly change; the time does); None =
         full size. Times are always measured at full size.
+    error_map_height : int, optional
+        The errors are estimated on the map box-filtered to at most this height
+        (:func:`ffls.relight.quality.integration_map`, integral kept): a smooth scheme's exact
+        weights cost per texel. None = the map as given.
     """
     b = np.asarray(basis)
     d = np.asarray(directions, dtype=np.float64)
     cands = candidate_qualities(len(d), base) if candidates is None else list(candidates)
-    errs, info = estimate_errors(shrink(b, error_size), d, lightmap, rotation, cands, hemisphere,
+    errs, info = estimate_errors(shrink(b, error_size), d, integration_map(lightmap, error_map_height), rotation,
+                                 cands, hemisphere,
                                  (base or Quality()).weighting, max_photos)
     if timer is None:
         def timer(q, basis_, directions_):
