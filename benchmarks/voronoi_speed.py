@@ -31,6 +31,46 @@ from ffls.weights.voronoi import assign_cells, bake_cells, integrate_weights
 from common import median_seconds, write_json  # benchmarks/common.py
 
 
+def gpu_pass1_rows(rng, repeat: int) -> list:
+    """Pass 1 on the GPU (ffls.gpu.integrate.CellIntegrator) per weighting scheme: voronoi's
+    candidate cells and the smooth schemes' weight textures (one item per texel and slot), both
+    with the default technique 'sort'; 256 random upper lights, sky_sun maps of height 128 and
+    512. Empty without GL."""
+    from ffls.errors import GLUnavailable
+    from ffls.weights.weighting import SCHEMES, bake_weights
+
+    try:
+        from ffls.gpu.context import create_headless_context
+        from ffls.gpu.integrate import CellIntegrator
+
+        ctx = create_headless_context()
+    except GLUnavailable:
+        return []
+    from ffls.conventions import rotation_z
+    from ffls.lightmaps.lightmap import sky_sun_map
+
+    dirs = rng.normal(size=(256, 3))
+    dirs[:, 2] = np.abs(dirs[:, 2])
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    textures, bake_s = {}, {}
+    for s in SCHEMES:
+        t0 = time.perf_counter()
+        textures[s] = bake_cells(dirs, "upper", res=256) if s == "voronoi" else bake_weights(dirs, s, "upper", res=512)
+        bake_s[s] = time.perf_counter() - t0
+    rows = []
+    for h in (128, 512):
+        lm = sky_sun_map(h)
+        ms = {}
+        for s in SCHEMES:
+            gi = CellIntegrator(ctx, dirs, "upper", textures[s])
+            gi.set_lightmap(lm)
+            ms[s] = median_seconds(lambda: gi.run(rotation_z(10.0)), repeat, ctx=ctx) * 1e3
+            gi.release()
+        rows.append({"map": f"{2 * h}x{h}", "ms": ms, "bake_s": bake_s})
+    ctx.release()
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--height", type=int, default=512)
@@ -84,6 +124,7 @@ def main(argv=None) -> int:
             row[f"{method}_lookup"] = assign_cells(q, dirs, cells)
         row["same_lookup"] = bool(np.array_equal(row.pop("hierarchical_lookup"), row.pop("direct_lookup")))
         bake_rows.append(row)
+    pass1 = gpu_pass1_rows(rng, args.repeat)
     W, H = 2 * args.height, args.height
     print(f"light map {W}x{H} ({H * W} texels, {nbytes / 1e6:.1f} MB of samples, copy {1e3 * t_copy:.1f} ms "
           f"= {nbytes / t_copy / 1e9:.2f} GB/s), {os.cpu_count()} CPUs, median of {args.repeat}")
@@ -97,8 +138,14 @@ def main(argv=None) -> int:
     for r in bake_rows:
         print(f"{r['n_lights']:>6} {r['hierarchical_wall_s']:>7.2f} / {r['hierarchical_cpu_s']:>5.2f} "
               f"{r['direct_wall_s']:>7.2f} / {r['direct_cpu_s']:>5.2f} {str(r['same_lookup']):>12}")
+    if pass1:
+        print("GPU pass 1 per weighting scheme (256 lights, weight texture 512^2): ms, and bake s")
+        print(f"{'map':>10} " + " ".join(f"{s:>12}" for s in pass1[0]["ms"]))
+        for r in pass1:
+            print(f"{r['map']:>10} " + " ".join(f"{v:>10.1f}ms" for v in r["ms"].values()))
+        print(f"{'bake':>10} " + " ".join(f"{v:>11.2f}s" for v in pass1[0]["bake_s"].values()))
     write_json(args.json, {"width": W, "height": H, "cpu_count": os.cpu_count(), "copy_s": t_copy,
-                           "sample_bytes": nbytes, "rows": rows, "bake": bake_rows})
+                           "sample_bytes": nbytes, "rows": rows, "bake": bake_rows, "gpu_pass1": pass1})
     return 0
 
 

@@ -30,8 +30,11 @@ Three techniques (``method=``), all deterministic (same input, same bits):
 Smooth weighting schemes (:mod:`ffls.weights.weighting`): with ``cells`` a
 :class:`ffls.weights.weighting.WeightTexture` every texel adds ``power x weight`` to each of the
 (light, weight) slots of the weight-texture texel its rotated direction falls in
-(``shaders/integrate_sparse.glsl``, technique ``'blend'`` with one point per texel and slot; the
-GPU twin of :func:`ffls.weights.weighting.integrate` with ``texture=``).
+(the GPU twin of :func:`ffls.weights.weighting.integrate` with ``texture=``): ``'sort'`` makes one
+item per texel and slot (``shaders/integrate_sparse_items.glsl``: cell = the slot's light, power x
+weight) and sorts and sums the items as above; ``'blend'`` finds every texel's weight texel once
+(``integrate_sparse_texels.glsl``) and blends one point per texel and slot
+(``integrate_sparse.glsl``).
 """
 from __future__ import annotations
 
@@ -74,7 +77,7 @@ class CellIntegrator:
         dropped and counted.
     cells : ffls.weights.voronoi.CellTexture or ffls.weights.weighting.WeightTexture
         Candidate texture baked from ``directions`` for ``hemisphere`` (Voronoi cells), or the
-        weight texture of a smooth scheme (then only ``'blend'`` applies; ``'auto'`` takes it).
+        weight texture of a smooth scheme (``'sort'``, the default, or ``'blend'``).
     method : {'auto', 'blend', 'atomic', 'sort'}
         Technique (module docstring).
 
@@ -97,9 +100,9 @@ class CellIntegrator:
         if cells.directions.shape != d.shape or not np.allclose(cells.directions, d, rtol=0, atol=1e-12):
             raise ValueError("cells were baked for other directions")
         self.sparse = hasattr(cells, "slots")  # a WeightTexture (smooth weighting)
-        if self.sparse and method not in ("auto", "blend"):
-            raise ValueError(f"a weight texture ({cells.scheme}) integrates with method 'blend' only, not {method!r}")
-        method = ("blend" if self.sparse else AUTO_METHOD) if method == "auto" else method
+        if self.sparse and method not in ("auto", "blend", "sort"):
+            raise ValueError(f"a weight texture ({cells.scheme}) integrates with method 'sort' or 'blend', not {method!r}")
+        method = AUTO_METHOD if method == "auto" else method
         if method not in METHODS:
             raise ValueError(f"method must be 'auto' or one of {METHODS}, not {method!r}")
         if method == "atomic" and "GL_NV_shader_atomic_float" not in ctx.extensions:
@@ -176,7 +179,8 @@ class CellIntegrator:
         self._objects = []
 
     def _bind_common(self, prog, R):
-        prog["R"].write(np.ascontiguousarray(np.asarray(R, dtype=np.float64).T).tobytes())
+        if "R" in prog:
+            prog["R"].write(np.ascontiguousarray(np.asarray(R, dtype=np.float64).T).tobytes())
         if "n_texels" in prog:
             prog["n_texels"].value = self.m
         if "hemi_axis" in prog:
@@ -207,11 +211,19 @@ class CellIntegrator:
         self._fbo = ctx.framebuffer(color_attachments=[self._tex])
         self._vao = ctx.vertex_array(load_program(ctx, self._program, self._defines), [])
         self._objects += [self._fbo, self._tex, self._vao]
+        if self.sparse:  # the weight-texture texel of every light-map texel (integrate_sparse_texels.glsl)
+            self._wtexel = ctx.buffer(reserve=4 * self.m)
+            self._objects.append(self._wtexel)
 
     def _run_blend(self, R):
         import moderngl
 
         ctx = self.ctx
+        if self.sparse:  # rotation, hemisphere test and lookup once per texel, then one point per slot
+            look = load_program(ctx, "integrate_sparse_texels.glsl", self._defines)
+            self._bind_common(look, R)
+            self._wtexel.bind_to_storage_buffer(7)
+            look.run(-(-self.m // _LOCAL))
         prog = load_program(ctx, self._program, self._defines)
         self._bind_common(prog, R)
         prog["texels_per_slice"].value = self._per_slice
@@ -283,30 +295,51 @@ class CellIntegrator:
         ctx = self.ctx
         self._blocks = _SORT_BLOCKS
         self._sort_defines = {"N_LIGHTS": self.n, "N_BLOCKS": self._blocks}
-        self._cell_ids = ctx.buffer(reserve=4 * self.m)
-        self._counts = ctx.buffer(reserve=4 * (self.n + 1) * self._blocks)
-        self._sorted = ctx.buffer(reserve=16 * self.m)
+        items = self.m * self._per_texel
+        bins = self.n + (2 if self.sparse else 1)  # + the void bin of padded slots
+        self._cell_ids = ctx.buffer(reserve=4 * items)
+        self._counts = ctx.buffer(reserve=4 * bins * self._blocks)
+        self._sorted = ctx.buffer(reserve=16 * items)
         self._objects += [self._cell_ids, self._counts, self._sorted]
+        if self.sparse:
+            if 16 * items > self._max_ssbo:
+                raise ValueError(f"light map of {self.m} texels x {self._per_texel} slots exceeds the SSBO limit; "
+                                 "downsample it (LightMap.downsample)")
+            self._item_power = ctx.buffer(reserve=16 * items)
+            self._objects.append(self._item_power)
 
     def _run_sort(self, R):
         ctx = self.ctx
-        ids = load_program(ctx, "integrate_cell_ids.glsl", self._defines)
-        self._bind_common(ids, R)
-        self._cell_ids.bind_to_storage_buffer(5)
-        ids.run(-(-self.m // _LOCAL))
+        items = self.m * self._per_texel
+        bins = self.n + (2 if self.sparse else 1)
+        if self.sparse:
+            ids = load_program(ctx, "integrate_sparse_items.glsl", self._defines)
+            self._bind_common(ids, R)
+            self._cand.bind_to_storage_buffer(3)
+            self._slot_weights.bind_to_storage_buffer(4)
+            self._cell_ids.bind_to_storage_buffer(5)
+            self._item_power.bind_to_storage_buffer(9)
+            ids.run(-(-self.m // _LOCAL))
+            power = self._item_power
+        else:
+            ids = load_program(ctx, "integrate_cell_ids.glsl", self._defines)
+            self._bind_common(ids, R)
+            self._cell_ids.bind_to_storage_buffer(5)
+            ids.run(-(-self.m // _LOCAL))
+            power = self._tpow
         self._counts.clear()
         self._counts.bind_to_storage_buffer(7)
         self._sorted.bind_to_storage_buffer(8)
         groups = -(-self._blocks // 8)
         hist = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "HISTOGRAM": 1})
-        hist["n_texels"].value = self.m
+        hist["n_texels"].value = items
         hist.run(groups)
         scan = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCAN": 1})
-        scan["n_counts"].value = (self.n + 1) * self._blocks
+        scan["n_counts"].value = bins * self._blocks
         scan.run(1)
         scat = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCATTER": 1})
-        scat["n_texels"].value = self.m
-        self._tpow.bind_to_storage_buffer(2)
+        scat["n_texels"].value = items
+        power.bind_to_storage_buffer(2)
         scat.run(groups)
         seg = load_program(ctx, "integrate_segment_sum.glsl", self._sort_defines)
         self.weights_buffer.bind_to_storage_buffer(0)

@@ -46,7 +46,7 @@ def _tangent_frame(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def weights_antialiased(p, assign, width_deg: float = DEFAULT_WIDTH_DEG,
-                        samples: int = DEFAULT_SAMPLES, chunk: int = 1 << 15) -> tuple[np.ndarray, np.ndarray]:
+                        samples: int = DEFAULT_SAMPLES, chunk: int = 1 << 15, nearest2=None) -> tuple[np.ndarray, np.ndarray]:
     """Coverage weights of the Voronoi cells over a cap around each direction.
 
     Parameters
@@ -59,6 +59,12 @@ def weights_antialiased(p, assign, width_deg: float = DEFAULT_WIDTH_DEG,
         Angular radius of the cap (degrees), > 0.
     samples : int
         Stencil points per direction.
+    nearest2 : callable, optional
+        ``nearest2(p) -> (cell (m,), angle1 (m,), angle2 (m,))``: the exact cell of ``p`` and the
+        angles (rad) to its nearest and second-nearest distinct lights. A direction with
+        ``(angle2 - angle1) / 2 > width`` has its whole cap inside its cell (every point of the
+        cap is nearer to that light than to any other, by the triangle inequality), so it takes
+        weight 1 without the stencil (same result, fewer lookups).
 
     Returns
     -------
@@ -72,6 +78,21 @@ def weights_antialiased(p, assign, width_deg: float = DEFAULT_WIDTH_DEG,
     st = stencil(samples) * np.radians(float(width_deg))
     rr = np.linalg.norm(st, axis=1)
     ang = np.arctan2(st[:, 1], st[:, 0])
+    if nearest2 is not None and p.shape[0]:
+        cell, a1, a2 = nearest2(p)
+        deep = 0.5 * (a2 - a1) > np.radians(float(width_deg)) * (1.0 + 1e-9) + 1e-12
+        if np.any(deep):
+            rest = np.flatnonzero(~deep)
+            ri, rw = weights_antialiased(p[rest], assign, width_deg, samples, chunk) if rest.size else (
+                np.zeros((0, 1), dtype=np.int64), np.zeros((0, 1)))
+            k = max(1, ri.shape[1])
+            index = np.full((p.shape[0], k), -1, dtype=np.int64)
+            weight = np.zeros((p.shape[0], k))
+            index[deep, 0] = cell[deep]
+            weight[deep, 0] = 1.0
+            index[rest, :ri.shape[1]] = ri
+            weight[rest, :rw.shape[1]] = rw
+            return index, weight
     m = p.shape[0]
     s = st.shape[0]
     cells = np.empty((m, s), dtype=np.int64)

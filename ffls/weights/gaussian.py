@@ -31,7 +31,7 @@ __all__ = ["DEFAULT_K", "DEFAULT_WIDTH", "weights_gaussian", "light_density"]
 #: Nearest lights that share a direction.
 DEFAULT_K = 4
 #: Kernel sigma as a multiple of the angle to the (k+1)-th nearest light.
-DEFAULT_WIDTH = 0.5
+DEFAULT_WIDTH = 0.3
 #: Relative size of the subtracted kernel sum under which the plain kernel is used (ties).
 _TIE_REL = 1e-9
 

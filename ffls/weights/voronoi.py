@@ -348,7 +348,7 @@ def _candidate_rows(unit: np.ndarray, keep: np.ndarray, tree: cKDTree, q: np.nda
 #: The hierarchical bake starts at this resolution or below (``_bake``).
 _COARSE_RES = 64
 #: Boundary points per texel edge (corners included) for the radius of a coarse texel.
-_COARSE_EDGE_POINTS = 5
+_COARSE_EDGE_POINTS = 3
 
 
 def _subset_geometry(smap, res: int, flat: np.ndarray, edge_points: int = 3) -> tuple[np.ndarray, np.ndarray]:

@@ -141,8 +141,22 @@ class Weighting:
     def n_lights(self) -> int:
         return int(self.directions.shape[0])
 
+    @property
+    def triangulation(self) -> Barycentric | None:
+        """The :class:`ffls.weights.barycentric.Barycentric` triangulation (``'barycentric'`` only)."""
+        return self._bary
+
     def _assign(self, q: np.ndarray) -> np.ndarray:
         return assign_cells(q, self.directions)
+
+    def _nearest2(self, q: np.ndarray):
+        """Exact cell, and angles to the nearest and second-nearest distinct lights (inf if one)."""
+        cell = assign_cells(q, self.directions)
+        kk = min(2, self._keep.size)
+        dist, _ = self._tree.query(q, k=kk)
+        ang = 2.0 * np.arcsin(np.clip(0.5 * np.asarray(dist).reshape(q.shape[0], kk), 0.0, 1.0))
+        a2 = ang[:, 1] if kk == 2 else np.full(q.shape[0], np.inf)
+        return cell, ang[:, 0], a2
 
     def __call__(self, p) -> SparseWeights:
         """Weights of unit directions ``p`` (m, 3) (world frame; not tested against the hemisphere)."""
@@ -154,7 +168,8 @@ class Weighting:
             idx = self._assign(p)[:, None]
             w = np.ones(idx.shape)
         elif self.scheme == "antialiased":
-            idx, w = _aa.weights_antialiased(p, self._assign, self.options["width_deg"], self.options["samples"])
+            idx, w = _aa.weights_antialiased(p, self._assign, self.options["width_deg"], self.options["samples"],
+                                             nearest2=self._nearest2)
         elif self.scheme == "barycentric":
             idx, w = self._bary(p)
         else:
