@@ -44,7 +44,7 @@ def add_arguments(p):
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
-                        "(default: full on a GPU, rank min(15, n-1) on a CPU rasteriser such as llvmpipe)")
+                        "(default: full on a GPU, rank min(7, n-1) on a CPU rasteriser such as llvmpipe)")
     p.add_argument("--mask", default=None, metavar="FILE",
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
