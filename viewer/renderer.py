@@ -80,22 +80,9 @@ def resolve_method(method: str, renderer: str) -> str:
 
 
 def pass1_lightmap(lm, height):
-    """The light map pass 1 integrates: ``lm`` itself (``'full'``) or a lat-long of ``height`` rows.
-
-    A lat-long map whose height is a multiple of ``height`` is box-filtered
-    (:meth:`ffls.lightmaps.lightmap.LightMap.downsample`, which keeps the integral); other maps are
-    resampled with :meth:`ffls.lightmaps.lightmap.LightMap.to_latlong` at four times the height first,
-    then box-filtered. A map no taller than ``height`` is used as it is.
-    """
-    if height in (None, "full"):
-        return lm
-    h = int(height)
-    if lm.layout == "latlong":
-        if lm.res <= h:
-            return lm
-        if lm.res % h == 0:
-            return lm.downsample(lm.res // h)
-    return lm.to_latlong(4 * h).downsample(4)
+    """The light map pass 1 integrates: ``lm`` itself (``'full'``) or a lat-long of ``height`` rows
+    (:func:`ffls.relight.quality.integration_map`: box-filtered, the integral kept)."""
+    return integration_map(lm, None if height in (None, "full") else int(height))
 
 
 def heat_colours(t: np.ndarray) -> np.ndarray:
