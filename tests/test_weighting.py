@@ -144,6 +144,12 @@ def test_bad_scheme_and_options():
     with pytest.raises(ValueError, match="takes no option"):
         Weighting(d, "barycentric", k=3)
     assert set(OPTIONS) == set(SCHEMES)
+    for scheme in SCHEMES:
+        with pytest.raises(ValueError, match="zero vector|NaN"):
+            cell_weights(d, [[0.0, 0.0, 0.0]], scheme)
+        with pytest.raises(ValueError, match="NaN"):
+            cell_weights(d, [[np.nan, 0.0, 1.0]], scheme)
+        assert cell_weights(d, np.zeros((0, 3)), scheme).weight.shape[0] == 0
 
 
 def test_cli_weighting_choices_match_the_library():
@@ -266,3 +272,19 @@ def test_hierarchical_cell_bake_equals_the_direct_one(hemisphere):
     np.testing.assert_array_equal(assign_cells(q, d, fast), exact)
     # the coarse levels settle most texels: their lists hold a single candidate
     assert np.mean(fast.candidates[..., 1] < 0) >= np.mean(slow.candidates[..., 1] < 0)
+
+
+@pytest.mark.parametrize("scheme", ["antialiased", "barycentric", "gaussian"])
+def test_texture_quantisation_shrinks_with_resolution(scheme):
+    # the GPU's nearest-texel lookup against the exact weights, per light, as a share of the power:
+    # a 1-degree sun is the worst case (its weight is that of one texel); <= 3 % at 512^2
+    d = _lights(60, 15)
+    lm = sky_sun_map(64)
+    R = rotation_ypr(20, 10, 0)
+    exact = integrate(lm, d, R, "upper", scheme).weights
+    errs = []
+    for res in (128, 512):
+        tex = bake_weights(d, scheme, "upper", res=res)
+        w = integrate(lm, d, R, "upper", scheme, texture=tex).weights
+        errs.append(np.abs(w - exact).max() / exact.sum(0).max())
+    assert errs[1] <= 0.03 and errs[1] < errs[0], errs

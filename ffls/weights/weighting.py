@@ -163,7 +163,13 @@ class Weighting:
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
         if not np.all(np.isfinite(p)):
             raise ValueError("directions contain NaN or Inf")
-        p = p / np.linalg.norm(p, axis=1, keepdims=True)
+        norm = np.linalg.norm(p, axis=1, keepdims=True)
+        if np.any(norm == 0):
+            raise ValueError("directions contain a zero vector")
+        p = p / norm
+        if p.shape[0] == 0:
+            k = texture_slots(self.scheme, **self.options)
+            return SparseWeights(index=np.zeros((0, k), dtype=np.int64), weight=np.zeros((0, k)))
         if self.scheme == "voronoi":
             idx = self._assign(p)[:, None]
             w = np.ones(idx.shape)
