@@ -413,8 +413,12 @@ def choose_quality(basis, directions, lightmap, rotation=None, *, max_error: flo
         def timer(q, basis_, directions_):
             return cpu_frame_ms(basis_, directions_, lightmap, q, hemisphere)
     ms = [float(timer(q, b, d)) for q in cands]
-    loo = info["loo"]
-    how = (f"error = leave-one-out floor {100 * info['e0']:.2f}% ({len(loo['held_out'])} photos held out, "
-           f"{100 * loo['share']:.0f}% of the image) combined with each candidate's deviation from the full basis; "
-           f"times measured here")
-    return choose(cands, errs, ms, max_error, fps, how)
+    choice = choose(cands, errs, ms, max_error, fps)
+    q = choice.quality
+    m = q.basis_subset if q.basis_subset is not None and q.basis_subset < len(d) else None
+    floor = info["floors"].get((m, q.weighting), info["e0"])
+    how = (f"error = its leave-one-out floor {100 * floor:.2f}% ({q.weighting}"
+           f"{'' if m is None else f', {m} photos'}; up to {max_photos} photos held out) combined with its "
+           f"deviation from the full basis; times measured here")
+    choice.reason = f"{choice.reason}\n  {how}"
+    return choice
