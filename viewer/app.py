@@ -57,6 +57,9 @@ class ViewerApp:
     timing : bool
         Wait for the GPU after drawing the window each frame so that :attr:`stats` charges each
         part of the frame correctly (benchmarks; costs the CPU/GPU overlap).
+    profile : bool
+        Also wait for the GPU after each engine pass to time it (``ffls view --profile``); the
+        passes then no longer overlap the frame's CPU work, so frames are slower.
 
     Attributes
     ----------
@@ -70,7 +73,7 @@ class ViewerApp:
 
     def __init__(self, capture, lights, state: ViewerState | None = None, *, headless: bool | None = None,
                  mask_path=None, vsync: bool = True, title: str = "ffls view", timing: bool = False,
-                 composite=None):
+                 composite=None, profile: bool = False):
         from viewer.renderer import Renderer, load_mask
 
         self.state = state if state is not None else ViewerState()
@@ -113,7 +116,8 @@ class ViewerApp:
                 raise GLUnavailable(f"the window's context is not OpenGL 4.3: {e}") from None
             mask = load_mask(capture, mask_path, size=self._image_size(capture))
             reason = "" if mask is not None else "this capture has no object mask"
-            self.renderer = Renderer(self.ctx, capture, lights, mask=mask, mask_reason=reason, composite=composite)
+            self.renderer = Renderer(self.ctx, capture, lights, mask=mask, mask_reason=reason, composite=composite,
+                                     profile=profile)
             self._init_imgui()
             glfw.set_drop_callback(self.window, self.on_drop)
             self._t_last = None
@@ -150,6 +154,10 @@ class ViewerApp:
         self.renderer.info.dialog_available = self.platform == "desktop" and platforms.has_display()
 
     # ------------------------------------------------------------------ callbacks
+    def make_current(self) -> None:
+        """Make this window's GL and imgui contexts current (before using :attr:`ctx` from outside)."""
+        self._make_current()
+
     def _make_current(self) -> None:
         """Make this window's GL and imgui contexts current (several viewers may coexist)."""
         from imgui_bundle import imgui, implot

@@ -24,8 +24,9 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    from ffls.commands.common import (FRAMES, add_light_argument, add_lights_arguments, add_rotation_arguments,
-                                      add_weighting_argument, exposure_arg, output_path)
+    from ffls.commands.common import (CELLS_RES, FRAMES, add_light_argument, add_lights_arguments,
+                                      add_quality_arguments, add_rotation_arguments, add_weighting_argument,
+                                      exposure_arg, output_path)
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     add_lights_arguments(p)
@@ -43,7 +44,7 @@ def add_arguments(p):
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
-                        "(default: full on a GPU, rank min(16, n-1) on a CPU rasteriser such as llvmpipe)")
+                        "(default: full on a GPU, rank min(7, n-1) on a CPU rasteriser such as llvmpipe)")
     p.add_argument("--mask", default=None, metavar="FILE",
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
@@ -63,6 +64,9 @@ def add_arguments(p):
     c.add_argument("--composite", action="store_true", help="start in the composite mode")
     p.add_argument("--benchmark", action="store_true",
                    help="with --frames: rotate the light map every frame and print frame-time statistics")
+    p.add_argument("--profile", action="store_true",
+                   help="with --benchmark: also time each engine pass (waits for the GPU after each, so slower frames)")
+    add_quality_arguments(p, precision_default=None, fps_flags=("--fps", "--target-fps"), cells_res=CELLS_RES)
 
 
 def build_state(args):
@@ -88,24 +92,63 @@ def build_state(args):
         st.light_az, st.light_el = (float(a) for a in args.light)
     if args.rank is not None and args.rank < 0:
         raise InputError(f"--rank must be >= 0, not {args.rank}")
+    prec = getattr(args, "precision", None)
     if args.rank == 0:
-        st.quality["method"] = "full f16"
+        st.quality["method"] = "full f32" if prec in ("float32", "f32") else "full f16"
     elif args.rank is not None:
+        if prec in ("float32", "f32"):
+            raise InputError("--precision float32 applies to the full basis in the viewer (--rank 0); "
+                             "compressed layers are float16")
         st.quality["method"] = "compressed"
         st.quality["rank"] = int(args.rank)
+    elif prec is not None:
+        st.quality["method"] = "full f32" if prec in ("float32", "f32") else "full f16"
+    if getattr(args, "basis_subset", None) is not None:
+        st.quality["subset"] = str(int(args.basis_subset))
+    if getattr(args, "map_res", None) is not None:
+        st.quality["map_res"] = str(int(args.map_res))
+    if getattr(args, "cells_res", None) not in (None, 256):
+        st.quality["cell_res"] = str(int(args.cells_res))
+    if getattr(args, "near_correction", False):
+        st.quality["near"] = True
     return st
+
+
+def choose_auto_quality(app, args, capture, lights) -> None:
+    """``--quality auto``: measure this capture and map in the window's context, and set the panel."""
+    from ffls.commands.common import resolve_quality
+    from ffls.conventions import rotation_ypr
+    from ffls.gpu.engine import gpu_frame_ms
+    from ffls.lightmaps.lightmap import lightmap_from_spec
+    from viewer.renderer import pass1_lightmap
+    from viewer.state import state_quality
+
+    st = app.state
+    lm = lightmap_from_spec(st.lightmap)
+
+    def timer(q, basis, directions):
+        app.make_current()
+        return gpu_frame_ms(app.ctx, basis, directions, pass1_lightmap(lm, q.map_res), q.replace(map_res=None),
+                            capture.hemisphere)
+
+    args.cells_res = args.cells_res or 256
+    q = resolve_quality(args, capture, lights, lm, rotation_ypr(st.yaw, st.pitch, st.roll), timer=timer,
+                        command=NAME)
+    st.quality.update(state_quality(q))
 
 
 def _check_and_report(args, capture, lights) -> None:
     """``--rank`` against the accepted lights (0 = full basis), and the informational lines
     (lights matched by order or map, colour conversions, coverage warnings)."""
-    from ffls.commands.common import check_rank_arg, print_notes
+    from ffls.commands.common import check_quality_args, check_rank_arg, print_notes
     from ffls.io.images import colour_summary
+    from ffls.relight.basis import accepted_positions
     from ffls.weights.voronoi import coverage_warnings
 
     idx, dirs = lights.accepted()
     if args.rank:
         check_rank_arg(args.rank, len(idx))
+    check_quality_args(args, len(idx), accepted_positions(lights))
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
     if len(idx):
         notes += coverage_warnings(dirs, capture.hemisphere)
@@ -164,11 +207,15 @@ def run(args) -> int:
     st = build_state(args)
     capture, lights = open_capture(args.capture, args.lights, getattr(args, "lights_map", None))
     _check_and_report(args, capture, lights)
+    if args.profile and not args.benchmark:
+        raise InputError("--profile needs --benchmark")
     comp = composite_inputs(args, capture)
     st.composite = comp is not None and bool(args.composite)
     app = ViewerApp(capture, lights, st, headless=True if args.headless else None, timing=args.benchmark,
-                    mask_path=args.mask, composite=comp)
+                    mask_path=args.mask, composite=comp, profile=args.profile)
     try:
+        if args.quality == "auto":
+            choose_auto_quality(app, args, capture, lights)
         if args.exposure == "auto":  # expose the first frame for the object's log-average luminance
             app.auto_expose()
         if args.benchmark:

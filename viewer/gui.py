@@ -314,6 +314,8 @@ def _quality_panel(state: ViewerState, view: ViewInfo) -> None:
         val = state.quality.get(knob.key, knob.default)
         if knob.kind == "choice":
             items = list(knob.choices)
+            if val not in items:  # a value from the command line (e.g. --basis-subset 100)
+                items.append(str(val))
             changed, i = imgui.combo(knob.label, items.index(val) if val in items else 0, items)
             if changed:
                 state.quality[knob.key] = items[i]

@@ -33,14 +33,18 @@ from ffls.lightmaps.lightmap import lightmap_from_spec
 from ffls.display.tonemap import tonemap as tonemap_np
 from ffls.display.tonemap import auto_exposure, to_uint8
 from ffls.radiance.photos import load_photo
-from ffls.relight.compress import DEFAULT_RANK, default_rank
+from ffls.relight.quality import integration_map
 
-from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo
+from viewer.state import BUILTIN_MAPS, ViewerState, ViewInfo, quality_from_state
 
 __all__ = ["Renderer", "CompositeInputs", "load_mask", "heat_colours", "pass1_lightmap", "resolve_method"]
 
 #: Height of the lat-long preview texture (width is twice that).
 PREVIEW_HEIGHT = 128
+#: While the map turns by itself (auto-rotation, turntable), the preview and the cell-weight heat
+#: map are redrawn at most this often (seconds): they are a thumbnail, and the heat map reads the
+#: weights back from the GPU (a wait for pass 1).
+PREVIEW_INTERVAL = 0.1
 
 
 def load_mask(capture, path=None, size=None) -> np.ndarray | None:
@@ -81,22 +85,9 @@ def resolve_method(method: str, renderer: str) -> str:
 
 
 def pass1_lightmap(lm, height):
-    """The light map pass 1 integrates: ``lm`` itself (``'full'``) or a lat-long of ``height`` rows.
-
-    A lat-long map whose height is a multiple of ``height`` is box-filtered
-    (:meth:`ffls.lightmaps.lightmap.LightMap.downsample`, which keeps the integral); other maps are
-    resampled with :meth:`ffls.lightmaps.lightmap.LightMap.to_latlong` at four times the height first,
-    then box-filtered. A map no taller than ``height`` is used as it is.
-    """
-    if height in (None, "full"):
-        return lm
-    h = int(height)
-    if lm.layout == "latlong":
-        if lm.res <= h:
-            return lm
-        if lm.res % h == 0:
-            return lm.downsample(lm.res // h)
-    return lm.to_latlong(4 * h).downsample(4)
+    """The light map pass 1 integrates: ``lm`` itself (``'full'``) or a lat-long of ``height`` rows
+    (:func:`ffls.relight.quality.integration_map`: box-filtered, the integral kept)."""
+    return integration_map(lm, None if height in (None, "full") else int(height))
 
 
 def heat_colours(t: np.ndarray) -> np.ndarray:
@@ -150,11 +141,14 @@ class Renderer:
         Enables the composite mode.
     """
 
-    def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = "", composite=None):
+    def __init__(self, ctx, capture, lights, mask=None, mask_reason: str = "", composite=None,
+                 profile: bool = False):
         self.mask = mask  # metered by automatic exposure (ffls.display.tonemap.auto_exposure)
         from ffls.weights.voronoi import bake_cells
 
         self.ctx = ctx
+        self.profile = bool(profile)  # per-pass timings (a wait for the GPU after each pass)
+        self._preview_time = -np.inf
         self.capture = capture
         self.lights = lights
         ok = np.asarray(lights.ok_mask, dtype=bool)
@@ -219,15 +213,19 @@ class Renderer:
     def _build_engine(self, state: ViewerState) -> None:
         from ffls.gpu.engine import Engine
 
-        q = state.quality
-        method = resolve_method(q.get("method", "auto"), self.info.renderer)
-        kw = {"cell_res": int(q.get("cell_res", 256))}
-        if method == "compressed":
-            kw.update(dtype="f16", rank=default_rank(len(self.directions), int(q.get("rank", DEFAULT_RANK))))
-        else:
-            kw.update(dtype="f32" if method.endswith("f32") else "f16")
+        from ffls.gpu.context import is_software_renderer
+        from ffls.relight.basis import accepted_positions
+
+        quality = quality_from_state(state.quality, len(self.directions), is_software_renderer(self.info.renderer))
+        note = ""
+        if quality.near_correction and not np.all(np.isfinite(accepted_positions(self.lights))):
+            quality = quality.replace(near_correction=False)
+            note = "; near-light correction off: the lights file gives no positions"
         t0 = time.perf_counter()
-        new = Engine.from_capture(self.ctx, self.capture, self.lights, **kw)
+        # the pass-1 map height is applied here (it changes without a rebuild), not by the engine; the
+        # weighting knob switches without a rebuild (set_weighting in update), its texture at its default
+        new = Engine.from_capture(self.ctx, self.capture, self.lights, quality=quality, map_res=None,
+                                  profile=self.profile, cell_res=quality.cell_res or 256, weights_res=None)
         self._light_key = None
         if self.engine is not None:
             self.engine.release()
@@ -236,14 +234,18 @@ class Renderer:
             if self.surface_engine is not None:
                 self.surface_engine.release()
             ci = self.composite_inputs
-            if kw.get("rank") is not None:
-                kw["rank"] = default_rank(int(np.count_nonzero(ci.lights.ok_mask)), kw["rank"])
-            self.surface_engine = Engine.from_capture(self.ctx, ci.capture, ci.lights, **kw)
+            sq = quality_from_state(state.quality, int(np.count_nonzero(ci.lights.ok_mask)),
+                                    is_software_renderer(self.info.renderer))
+            if sq.near_correction and not np.all(np.isfinite(accepted_positions(ci.lights))):
+                sq = sq.replace(near_correction=False)
+            self.surface_engine = Engine.from_capture(self.ctx, ci.capture, ci.lights, quality=sq, map_res=None,
+                                                      profile=self.profile, cell_res=sq.cell_res or 256,
+                                                      weights_res=None)
             self._registration = None
         self._pass1_key = None
         self.info.basis_info = dict(new.basis_info)
         self.info.image_size = new.size
-        self.info.message = f"engine ready ({time.perf_counter() - t0:.1f} s): {self._describe_basis()}"
+        self.info.message = f"engine ready ({time.perf_counter() - t0:.1f} s): {self._describe_basis()}{note}"
 
     def _describe_basis(self) -> str:
         b = self.info.basis_info
@@ -318,7 +320,7 @@ class Renderer:
                 if state.composite and self.surface_engine is not None:
                     self._update_composite(state, R)
         self.info.timings = dict(eng.timings)
-        self._update_preview(state, R)
+        self._update_preview(state, R, animating=state.auto_rotate or state.turntable is not None)
         self._update_photo(state)
         self.frame_ms = {"renderer": (time.perf_counter() - t0) * 1e3}
         return self.info
@@ -364,9 +366,13 @@ class Renderer:
         self._composite_tex.write(np.ascontiguousarray(rgba).tobytes())
         self.info.image_tex = self._composite_tex.glo
 
-    def _update_preview(self, state: ViewerState, R: np.ndarray) -> None:
+    def _update_preview(self, state: ViewerState, R: np.ndarray, animating: bool = False) -> None:
         if self._preview_latlong is None:
             return
+        now = time.perf_counter()
+        if (animating and self._preview_key is not None and self._preview_key[2] == state.preview_mode
+                and self._preview_key[0] == self._lightmap_spec and now - self._preview_time < PREVIEW_INTERVAL):
+            return  # a thumbnail of a turning map: 10 redraws a second are enough
         weights_key = None
         if state.preview_mode == "weights":
             weights_key = self.engine.read_weights().sum(axis=1).round(9).tobytes()
@@ -374,6 +380,7 @@ class Renderer:
         if key == self._preview_key:
             return
         self._preview_key = key
+        self._preview_time = now
         rgb = self.preview_image(R, state.preview_mode)
         rgba = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=-1)
         self._preview_tex.write(np.ascontiguousarray(rgba).tobytes())

@@ -25,7 +25,7 @@ from ffls.commands.common import parse_rotation  # noqa: F401  (re-exported: one
 from ffls.relight.compress import DEFAULT_RANK, rank_range
 
 __all__ = ["Knob", "QUALITY_KNOBS", "METHODS", "TONEMAPS", "BUILTIN_MAPS", "ViewerState", "ViewInfo",
-           "TurntableJob", "default_quality", "parse_size", "parse_rotation"]
+           "TurntableJob", "default_quality", "SUBSETS", "subset_size", "quality_from_state", "state_quality", "parse_size", "parse_rotation"]
 
 #: Tone curves of :func:`ffls.display.tonemap.tonemap` (and the engine's display pass).
 TONEMAPS = ("srgb", "reinhard", "aces")
@@ -35,6 +35,8 @@ BUILTIN_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
 #: 'auto' is the full float16 basis on a GPU and the compressed one on a CPU rasteriser
 #: (llvmpipe), where the full basis cannot keep frame rate (docs/viewer.md).
 METHODS = ("auto", "compressed", "full f16", "full f32")
+#: Basis subsets of the quality panel: all photos, or a fraction chosen by farthest-point sampling.
+SUBSETS = ("all", "1/2", "1/4", "1/8")
 #: Frame times kept for the plot.
 HISTORY = 240
 
@@ -87,7 +89,7 @@ QUALITY_KNOBS: tuple[Knob, ...] = (
          help="eigen-images of the compressed basis (computed once, saved in the capture folder)"),
     Knob("cell_res", "cell texture", "choice", "256", choices=("128", "256", "512"),
          help="resolution of the Voronoi cell-index texture of pass 1"),
-    Knob("map_res", "pass-1 map", "choice", "128", choices=("full", "256", "128", "64"),
+    Knob("map_res", "pass-1 map", "choice", "64", choices=("full", "256", "128", "64", "32"),
          help="lat-long height of the light map integrated by pass 1 (box-filtered: the integral is kept)",
          rebuild=False),
     Knob("weighting", "weighting", "choice", "voronoi", choices=WEIGHTINGS,
@@ -95,12 +97,66 @@ QUALITY_KNOBS: tuple[Knob, ...] = (
               "(soft cell borders), barycentric (spherical triangles), gaussian (kernel over the nearest "
               "lights); the smooth ones do not pop as the map rotates (docs/weighting.md)",
          rebuild=False),
+    Knob("subset", "basis subset", "choice", "all", choices=SUBSETS,
+         help="use a fraction of the photos, chosen by farthest-point sampling on the light directions"),
+    Knob("near", "near-light correction", "bool", False,
+         help="scale each photo by its light's squared distance to the scene centre (needs light positions)"),
 )
 
 
 def default_quality() -> dict:
     """``{key: default}`` of every :data:`QUALITY_KNOBS` entry."""
     return {k.key: k.default for k in QUALITY_KNOBS}
+
+
+def subset_size(choice: str, n_lights: int) -> int | None:
+    """Photos kept for a :data:`SUBSETS` choice or a count ``'N'`` (None = all); at least 1."""
+    if choice in (None, "all"):
+        return None
+    text = str(choice)
+    if "/" in text:
+        return max(1, n_lights // int(text.split("/")[1]))
+    return min(max(1, int(text)), n_lights)  # a count given on the command line (--basis-subset N)
+
+
+def quality_from_state(quality: dict, n_lights: int, software: bool):
+    """The :class:`ffls.relight.quality.Quality` of the panel's values ``quality`` for ``n_lights`` photos.
+
+    ``software``: the GL renderer is a CPU rasteriser (``method='auto'`` is then the compressed basis).
+    """
+    from ffls.relight.compress import default_rank
+    from ffls.relight.quality import Quality
+
+    method = quality.get("method", "auto")
+    if method == "auto":
+        method = "compressed" if software else "full f16"
+    sub = subset_size(quality.get("subset", "all"), n_lights)
+    n = n_lights if sub is None else sub
+    rank = default_rank(n, int(quality.get("rank", DEFAULT_RANK))) if method == "compressed" and n > 1 else None
+    mr = quality.get("map_res", "full")
+    return Quality(weighting=quality.get("weighting", "voronoi"),
+                   precision="f32" if method.endswith("f32") else "f16", rank=rank, basis_subset=sub,
+                   cell_res=int(quality.get("cell_res", 256)), map_res=None if mr in (None, "full") else int(mr),
+                   near_correction=bool(quality.get("near", False)))
+
+
+def state_quality(quality) -> dict:
+    """The panel's values (``{key: value}`` of :data:`QUALITY_KNOBS`) for a
+    :class:`ffls.relight.quality.Quality` (what ``--quality auto`` chose, or the command line's knobs).
+
+    A compressed basis is float16 in the viewer; ``quality.precision`` applies to the full basis.
+    """
+    q = default_quality()
+    if quality.rank is not None:
+        q["method"], q["rank"] = "compressed", int(quality.rank)
+    else:
+        q["method"] = "full f32" if quality.precision == "f32" else "full f16"
+    q["subset"] = "all" if quality.basis_subset is None else str(int(quality.basis_subset))
+    q["cell_res"] = str(int(quality.cell_res or 256))
+    q["map_res"] = "full" if quality.map_res is None else str(int(quality.map_res))
+    q["near"] = bool(quality.near_correction)
+    q["weighting"] = quality.weighting
+    return q
 
 
 def parse_size(text: str) -> tuple[int, int]:

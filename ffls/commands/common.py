@@ -58,6 +58,14 @@ __all__ = [
     "load_relight_inputs",
     "check_mask_size",
     "write_output",
+    "MAP_RES",
+    "BASIS_SUBSET",
+    "MAX_ERROR",
+    "TARGET_FPS",
+    "add_quality_arguments",
+    "quality_from_args",
+    "check_quality_args",
+    "resolve_quality",
 ]
 
 
@@ -296,6 +304,14 @@ MAP_HEIGHT = integer(4, 16384, memory=lambda h: 160.0 * 2 * h * h, what="light m
 N_LIGHTS = integer(1, 100000)
 #: Width and height of synthetic images.
 SYNTH_RES = integer(8, 16384, memory=lambda r: 1400.0 * r * r, what="synthetic image")
+#: ``--map-res H|full``: height of the lat-long map pass 1 integrates (None = full).
+MAP_RES = integer(2, 16384, special={"full": None})
+#: ``--basis-subset N``: photos kept; checked against the accepted lights once loaded.
+BASIS_SUBSET = integer(1, 1000000)
+#: ``--max-error E``: relative RMS error target of ``--quality auto`` (a fraction: 0.05 = 5 %).
+MAX_ERROR = number(0.0, 10.0, lo_open=True)
+#: ``--target-fps F`` (``view``: also ``--fps``): frame-rate target of ``--quality auto``.
+TARGET_FPS = number(0.1, 1000.0)
 #: A random seed (NumPy accepts non-negative integers).
 SEED = integer(0, 2**63 - 1)
 
@@ -582,6 +598,116 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
         notes += coverage_warnings(dirs, capture.hemisphere)
     print_notes(command, *notes)
     return capture, lights, lm, mask
+
+
+# ----------------------------------------------------------------------------- quality knobs
+def add_quality_arguments(p, *, precision_default: str | None = "float16", fps_flags=("--target-fps",),
+                          rank: bool = False, cells_res=None) -> None:
+    """The speed/accuracy knobs shared by relight, render and view (``docs/tradeoff.md``).
+
+    ``--precision float16|float32`` (``--dtype`` is the same flag), ``--basis-subset N``,
+    ``--map-res H|full``, ``--near-correction``, and ``--quality manual|auto`` with its targets
+    ``--max-error E`` and ``--target-fps F``. ``rank=True`` adds ``--rank K`` (commands that
+    define their own leave it False); ``cells_res`` an argparse type adds ``--cells-res``.
+    """
+    g = p.add_argument_group("quality (speed against accuracy; docs/tradeoff.md)")
+    g.add_argument("--precision", "--dtype", dest="precision", default=precision_default,
+                   choices=("float16", "float32", "f16", "f32"),
+                   help="storage of the basis: float16 (checked per-dataset scale) or float32"
+                        + (f" (default {precision_default})" if precision_default else " (default: as loaded)"))
+    g.add_argument("--basis-subset", type=BASIS_SUBSET, default=None, metavar="N",
+                   help="use N of the photos, chosen by farthest-point sampling on the light directions")
+    g.add_argument("--map-res", type=MAP_RES, default=None, metavar="H|full",
+                   help="height of the lat-long light map that pass 1 integrates (box-filtered, integral kept; "
+                        "default full)")
+    g.add_argument("--near-correction", action="store_true",
+                   help="near lights: scale each photo by its light's squared distance to the scene centre and "
+                        "take its direction from the position (needs positions in the lights file)")
+    if rank:
+        g.add_argument("--rank", type=RANK, default=None, metavar="K",
+                       help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights")
+    if cells_res is not None:
+        g.add_argument("--cells-res", type=cells_res, default=256,
+                       help="cell-texture resolution, 16 to 4096 (default 256)")
+    g.add_argument("--quality", default="manual", choices=("manual", "auto"),
+                   help="auto: measure this capture and map and pick the cheapest configuration meeting "
+                        "--max-error and/or " + "/".join(fps_flags) + " (rank, precision, subset, map height)")
+    g.add_argument("--max-error", type=MAX_ERROR, default=None, metavar="E",
+                   help="with --quality auto: relative RMS error target (0.05 = 5%%)")
+    g.add_argument(*fps_flags, dest="target_fps", type=TARGET_FPS, default=None, metavar="F",
+                   help="with --quality auto: frame-rate target (frames per second)")
+
+
+def quality_from_args(args):
+    """The :class:`ffls.relight.quality.Quality` that the manual knobs of ``args`` name."""
+    from ffls.relight.quality import Quality
+
+    prec = getattr(args, "precision", None) or "float32"
+    cells = getattr(args, "cells_res", None)
+    return Quality(weighting=getattr(args, "weighting", None) or "voronoi", precision=prec,
+                   rank=getattr(args, "rank", None) or None, basis_subset=getattr(args, "basis_subset", None),
+                   cell_res=int(cells) if cells else None, map_res=getattr(args, "map_res", None),
+                   near_correction=bool(getattr(args, "near_correction", False)))
+
+
+def check_quality_args(args, n_lights: int, positions=None) -> None:
+    """Check the quality flags against the capture (one line naming the flag).
+
+    Raises
+    ------
+    ffls.errors.InputError
+        ``--basis-subset`` above the accepted lights; ``--near-correction`` without positions;
+        ``--quality auto`` without a target, or a target without ``--quality auto``.
+    """
+    import numpy as np
+
+    from ffls.errors import InputError
+
+    sub = getattr(args, "basis_subset", None)
+    if sub is not None and sub > n_lights:
+        raise InputError(f"--basis-subset {sub} exceeds the {n_lights} accepted lights")
+    if getattr(args, "near_correction", False):
+        pos = np.full((n_lights, 3), np.nan) if positions is None else np.asarray(positions, dtype=float)
+        missing = int(np.count_nonzero(~np.all(np.isfinite(pos), axis=1)))
+        if missing:
+            raise InputError(f"--near-correction needs light positions; {missing} of {n_lights} accepted lights "
+                             f"have none in the lights file")
+    auto = getattr(args, "quality", "manual") == "auto"
+    targets = getattr(args, "max_error", None) is not None or getattr(args, "target_fps", None) is not None
+    if auto and not targets:
+        raise InputError("--quality auto needs --max-error E and/or a frame-rate target")
+    if targets and not auto:
+        raise InputError("--max-error and the frame-rate target apply only with --quality auto")
+
+
+def resolve_quality(args, capture, lights, lightmap, rotation=None, timer=None, command: str = ""):
+    """The configuration to relight with: the manual knobs, or (``--quality auto``) the measured choice.
+
+    With ``--quality auto`` the candidates are measured on this capture and light map
+    (:func:`ffls.relight.auto.choose_quality`; ``timer(quality, basis, directions) -> ms`` times a
+    frame on the caller's path, default the CPU relighter) and the choice and its reason are printed (stderr,
+    two lines).
+
+    Returns
+    -------
+    ffls.relight.quality.Quality
+    """
+    from ffls.relight.basis import accepted_positions
+
+    idx, _ = lights.accepted()
+    check_quality_args(args, len(idx), accepted_positions(lights))
+    q = quality_from_args(args)
+    if getattr(args, "quality", "manual") != "auto":
+        return q
+    from ffls.relight.auto import choose_quality
+    from ffls.relight.basis import capture_basis
+
+    basis, d, _ = capture_basis(capture, lights, q.replace(basis_subset=None))
+    choice = choose_quality(basis, d, lightmap, rotation, max_error=args.max_error, fps=args.target_fps,
+                            timer=timer, hemisphere=capture.hemisphere, base=q.replace(rank=None, basis_subset=None))
+    for line in choice.reason.splitlines():
+        print(f"ffls {command}: {line.strip()}" if command else line, file=sys.stderr)
+    return choice.quality
 
 
 def check_mask_size(mask, shape, flag: str = "--mask") -> None:

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument, add_rotation_arguments,
-                                  add_weighting_argument,
-                                  check_mask_size, exposure_arg, load_relight_inputs, output_path,
+from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument,
+                                  add_quality_arguments, add_rotation_arguments, add_weighting_argument,
+                                  check_mask_size, exposure_arg, load_relight_inputs, output_path, resolve_quality,
                                   rotation_from_args, write_output)
 
 NAME = "relight"
@@ -28,20 +28,28 @@ def add_arguments(p):
     p.add_argument("--cells-res", type=CELLS_RES_OR_EXACT, default=256,
                    help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
     add_weighting_argument(p)
+    add_quality_arguments(p, precision_default=None, rank=True)
     p.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output image, .exr or .png")
 
 
 def run(args) -> int:
     from ffls.errors import InputError
-    from ffls.relight.cpu import relight_capture
+    from ffls.relight.cpu import CpuRelighter
     from ffls.display.tonemap import auto_exposure, to_uint8, tonemap
 
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
-    image, w = relight_capture(capture, lights, lightmap, rotation=rotation_from_args(args),
-                               cells_res=args.cells_res or None, weighting=args.weighting)
+    R = rotation_from_args(args)
+    q = resolve_quality(args, capture, lights, lightmap, R, command=NAME)
+    storage = None if args.precision is None and args.quality != "auto" else q.precision
+    r = CpuRelighter.from_capture(capture, lights, quality=q, storage=storage, cell_res=args.cells_res or None,
+                                  cell_k=4, cell_max_res=1024)
+    r.set_lightmap(lightmap)
+    r.set_rotation(R)
+    r.render()
+    image, w = r.hdr, r.last_weights
     check_mask_size(mask, image.shape)
     display = None
     if out.suffix.lower() != ".exr":

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
-                                  add_mask_argument, add_rotation_arguments, add_weighting_argument, check_mask_size,
-                                  exposure_arg, flush_notes, light_vector, load_relight_inputs, output_path,
-                                  rotation_from_args, write_output)
+                                  add_mask_argument, add_quality_arguments, add_rotation_arguments,
+                                  add_weighting_argument, check_mask_size, exposure_arg, flush_notes, light_vector,
+                                  load_relight_inputs, output_path, resolve_quality, rotation_from_args,
+                                  write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -43,13 +44,14 @@ def add_arguments(p):
     p.add_argument("--rank", type=RANK, default=None, metavar="K",
                    help="use a compressed basis of K eigen-images, 1 <= K <= n-1 for n lights (computed once, "
                         "saved in the capture folder)")
-    p.add_argument("--dtype", default="f16", choices=("f16", "f32"), help="GPU storage of the basis")
-    p.add_argument("--cells-res", type=CELLS_RES, default=256,
-                   help="cell-texture resolution, 16 to 4096 (default 256); too coarse for the lights is refused")
+    p.add_argument("--cells-res", type=CELLS_RES, default=None,
+                   help="resolution of pass 1's texture, 16 to 4096: the cell texture of voronoi (default 256; too "
+                        "coarse for the lights is refused) or a smooth scheme's weight texture (default 512)")
     p.add_argument("--turntable", type=FRAMES, default=None, metavar="N",
                    help="write N frames over 360 degrees about +Z: -o OUT.mp4 or a folder of PNGs")
     p.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
     p.add_argument("--cpu", action="store_true", help="use the CPU reference path instead of the GPU")
+    add_quality_arguments(p, precision_default="float16")
     p.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True),
                    help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
 
@@ -59,22 +61,31 @@ def parse_rotation(args) -> np.ndarray:
     return rotation_from_args(args)
 
 
-def _make_renderer(args, capture, lights):
+def _make_renderer(args, capture, lights, lightmap=None, R0=None):
+    """The relighter (GPU engine, or with ``--cpu`` the float64 reference) and its context, under the
+    configuration of the quality flags (``--quality auto`` measures it here, on the same path)."""
     if args.cpu:
         from ffls.relight.cpu import CpuRelighter
 
-        return CpuRelighter.from_capture(capture, lights, precision="f64", rank=args.rank,
-                                         cell_res=args.cells_res, weighting=args.weighting), None
+        q = resolve_quality(args, capture, lights, lightmap, R0, command=NAME)
+        return CpuRelighter.from_capture(capture, lights, quality=q, precision="f64"), None
     from ffls.errors import GLUnavailable
     from ffls.gpu.context import create_headless_context
-    from ffls.gpu.engine import Engine
+    from ffls.gpu.engine import Engine, gpu_frame_ms
 
     try:
         ctx = create_headless_context()
     except GLUnavailable as e:
         raise GLUnavailable(f"no GPU path ({e.message}); rerun with --cpu for the CPU reference path") from None
-    eng = Engine.from_capture(ctx, capture, lights, dtype=args.dtype, rank=args.rank, cell_res=args.cells_res,
-                              weighting=args.weighting)
+    try:
+        def timer(q, basis, directions):
+            return gpu_frame_ms(ctx, basis, directions, lightmap, q, capture.hemisphere)
+
+        q = resolve_quality(args, capture, lights, lightmap, R0, timer=timer, command=NAME)
+        eng = Engine.from_capture(ctx, capture, lights, quality=q)
+    except BaseException:
+        ctx.release()
+        raise
     return eng, ctx
 
 
@@ -153,7 +164,9 @@ def run(args) -> int:
         if not in_domain((R0 @ light_vector(args.light))[None, :], capture.hemisphere)[0]:
             raise InputError(f"--light {args.light[0]:g},{args.light[1]:g} is outside the capture's hemisphere "
                              "(no photo was lit from there)")
-    r, ctx = _make_renderer(args, capture, lights)
+    if args.light is not None and args.quality == "auto":
+        raise InputError("--quality auto measures a light map: give --probe MAP, not --light")
+    r, ctx = _make_renderer(args, capture, lights, lightmap, R0)
     if args.turntable is not None:
         flush_notes()  # a long job: the informational lines now (a still's wait for its success)
     try:
@@ -167,10 +180,12 @@ def run(args) -> int:
             r.render(exposure, args.tonemap)
             _write_still(out, r, args, mask)
             what = str(out)
-        path = "cpu reference" if args.cpu else f"gpu {getattr(r, 'basis_info', {}).get('dtype', '')}"
+        info = getattr(r, "basis_info", {})
+        path = "cpu reference" if args.cpu else f"gpu {info.get('dtype', '')}"
+        rank = info.get("rank") if not args.cpu else getattr(getattr(r, "compressed", None), "rank", None)
         what_light = (f"light az {args.light[0]:g} el {args.light[1]:g}, " if args.light is not None else "")
-        print(f"ffls render: {what} ({path}{'' if args.rank is None else f', rank {args.rank}'}, "
-              f"{what_light}{args.weighting} weighting)")
+        print(f"ffls render: {what} ({path}, {r.n_lights} lights{'' if rank is None else f', rank {rank}'}, "
+              f"{what_light}{getattr(r, 'weighting', args.weighting)} weighting)")
     finally:
         r.release()
         if ctx is not None:

@@ -29,9 +29,10 @@ from ffls.gpu.basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
 from ffls.gpu.context import release_gl
 from ffls.gpu.integrate import CellIntegrator
 from ffls.gpu.weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, default_method, weights_to_vec4
-from ffls.relight.basis import accepted_basis
+from ffls.relight.basis import capture_basis
+from ffls.relight.quality import integration_map
 
-__all__ = ["Engine"]
+__all__ = ["Engine", "gpu_frame_ms"]
 
 
 class Engine:
@@ -73,14 +74,23 @@ class Engine:
         :data:`ffls.gpu.basis.PACKED_LAYERS`); more lights split the basis.
     budget_bytes : int
         GPU memory allowed for the basis; more raises :class:`ffls.errors.InputError`.
+    map_res : int, optional
+        Height of the lat-long light map pass 1 integrates
+        (:func:`ffls.relight.quality.integration_map`, box-filtered, integral kept); None = the
+        map as given.
+    profile : bool
+        Wait for the GPU after each pass and record its time in :attr:`timings` (default True).
+        False lets the CPU run ahead (the viewer's frames overlap its own work with the GPU's);
+        :attr:`timings` is then empty.
     path : path-like, optional
         Named in errors (the capture folder).
     """
 
     def __init__(self, ctx, basis, directions, hemisphere: str = "upper", *, dtype: str = "f16",
                  rank: int | None = None, cell_res: int = 256, compressed=None, method: str = DEFAULT_METHOD,
-                 max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, path=None,
-                 weighting: str = "voronoi", weights_res: int | None = None, weighting_options: dict | None = None):
+                 max_layers: int | None = None, budget_bytes: int = DEFAULT_BUDGET, map_res: int | None = None,
+                 profile: bool = True, path=None, weighting: str = "voronoi", weights_res: int | None = None,
+                 weighting_options: dict | None = None):
         hemisphere = check_hemisphere(hemisphere)
         basis = np.asarray(basis)
         d = np.asarray(directions, dtype=np.float64)
@@ -92,6 +102,8 @@ class Engine:
         self.hemisphere = hemisphere
         self.directions = d
         self.cell_res = int(cell_res)
+        self.map_res = None if map_res is None else int(map_res)
+        self.profile = bool(profile)
         self._n = int(basis.shape[0])
         self._size = (int(basis.shape[2]), int(basis.shape[1]))
         self.timings: dict[str, float] = {}
@@ -136,7 +148,7 @@ class Engine:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_capture(cls, ctx, capture, lights, **kw) -> "Engine":
+    def from_capture(cls, ctx, capture, lights, quality=None, **kw) -> "Engine":
         """An engine for a capture folder and its light directions.
 
         Parameters
@@ -146,13 +158,25 @@ class Engine:
         lights : ffls.io.capture.Lights
             ``directions`` (m, 3) matched to the capture's images by ``image_names``; lights
             with ``ok_mask`` False are left out (their basis images are not loaded).
+        quality : ffls.relight.quality.Quality, optional
+            Every knob at once: near-light correction and basis subset
+            (:func:`ffls.relight.basis.capture_basis`), then ``dtype``, ``rank``, ``map_res``,
+            ``weighting`` and ``cell_res`` (``weights_res`` for a smooth scheme) from it (keywords
+            given in ``kw`` win).
         **kw
             As :class:`Engine`. With ``rank=K`` a compressed basis saved in the capture folder
             (:func:`ffls.relight.compress.load_compressed`) is used when it has at least K
             eigen-images and was made from the same images (checksum); otherwise it is computed and saved
             there (skipped silently if the folder is read-only).
         """
-        basis, d = accepted_basis(capture, lights)
+        basis, d, _ = capture_basis(capture, lights, quality)
+        if quality is not None:
+            kw.setdefault("dtype", quality.precision)
+            kw.setdefault("rank", quality.rank)
+            kw.setdefault("map_res", quality.map_res)
+            kw.setdefault("weighting", quality.weighting)
+            if quality.cell_res is not None:  # the cell texture (voronoi) or the weight texture (smooth schemes)
+                kw.setdefault("cell_res" if quality.weighting == "voronoi" else "weights_res", quality.cell_res)
         rank = kw.get("rank")
         if rank is not None and kw.get("compressed") is None:
             from ffls.relight.compress import load_or_compress
@@ -164,6 +188,7 @@ class Engine:
     # ------------------------------------------------------------------ inputs
     def set_lightmap(self, lm) -> None:
         """Use light map ``lm`` (:class:`ffls.lightmaps.lightmap.LightMap`); pass 1 reruns at the next render."""
+        lm = integration_map(lm, self.map_res)
         self._lightmap = lm
         if self._integrator is not None:
             self._integrator.set_lightmap(lm)
@@ -236,6 +261,9 @@ class Engine:
         self._cpu_weights = None
 
     def _timed(self, name, fn):
+        if not self.profile:
+            fn()
+            return
         t0 = time.perf_counter()
         fn()
         self.ctx.finish()
@@ -254,7 +282,7 @@ class Engine:
         -----
         :attr:`timings` gets the wall time (ms, after ``ctx.finish()``) of each pass that ran:
         ``pass1``, ``project`` (compressed basis), ``pass2``, ``tonemap``; passes that did not
-        need to run are absent.
+        need to run are absent (all are absent when :attr:`profile` is False).
         """
         if self._lightmap is None and self._weights_source is None:
             raise RuntimeError("Engine.render: call set_lightmap(lm) or set_weights(w) first")
@@ -327,3 +355,45 @@ class Engine:
         self._cells = None
         self._integrator = self._projector = self._pass2 = self._display = self._textures = None
         self._weights_buffer = None
+
+
+def gpu_frame_ms(ctx, basis, directions, lightmap, quality, hemisphere="upper", frames: int = 3,
+                 compressed=None) -> float:
+    """Median ms per frame of an :class:`Engine` for ``quality``, the map rotated every frame.
+
+    ``basis`` and ``directions`` are after near correction; the subset, storage, rank, cell
+    texture and map height of ``quality`` are applied here. A frame is pass 1, projection, pass 2
+    and the display pass, with ``ctx.finish()`` (the timer of ``--quality auto``,
+    :func:`ffls.relight.auto.choose_quality`). ``compressed``: a compression of the (subset)
+    basis of rank >= ``quality.rank`` to truncate instead of compressing again.
+    """
+    from ffls.conventions import rotation_z
+    from ffls.relight.quality import farthest_point_subset
+
+    b = np.asarray(basis)
+    d = np.asarray(directions, dtype=np.float64)
+    if quality.basis_subset is not None and quality.basis_subset < len(d):
+        idx = farthest_point_subset(d, quality.basis_subset)
+        b, d = b[idx], d[idx]
+    cb = None
+    if quality.rank is not None and compressed is not None and compressed.rank >= quality.rank \
+            and compressed.n_lights == len(d):
+        from ffls.relight.auto import truncate
+
+        cb = truncate(compressed, quality.rank)
+    res = {} if quality.cell_res is None else {"cell_res" if quality.weighting == "voronoi" else "weights_res":
+                                               quality.cell_res}
+    eng = Engine(ctx, b, d, hemisphere, dtype=quality.precision, rank=quality.rank, map_res=quality.map_res,
+                 profile=False, compressed=cb, weighting=quality.weighting, **res)
+    try:
+        eng.set_lightmap(lightmap)
+        ts = []
+        for k in range(frames + 1):
+            eng.set_rotation(rotation_z(1.0 + k))
+            t0 = time.perf_counter()
+            eng.render()
+            ctx.finish()
+            ts.append((time.perf_counter() - t0) * 1e3)
+    finally:
+        eng.release()
+    return float(np.median(ts[1:]))

@@ -11,7 +11,7 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photos
 
-__all__ = ["accepted_basis"]
+__all__ = ["accepted_basis", "accepted_positions", "capture_basis"]
 
 
 def accepted_basis(capture, lights) -> tuple[np.ndarray, np.ndarray]:
@@ -49,3 +49,40 @@ def accepted_basis(capture, lights) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"lights name images not in the capture: {', '.join(missing[:3])}", path)
     basis = load_photos(capture, [pos[n] for n in names])
     return basis, np.asarray(lights.directions, dtype=np.float64)[ok]
+
+
+def accepted_positions(lights) -> np.ndarray:
+    """Positions ``(k, 3)`` float64 of the accepted lights (NaN rows where ``lights.json`` gives none)."""
+    ok = np.asarray(lights.ok_mask, dtype=bool)
+    pos = getattr(lights, "positions", None)
+    if pos is None:
+        return np.full((int(ok.sum()), 3), np.nan)
+    return np.asarray(pos, dtype=np.float64)[ok]
+
+
+def capture_basis(capture, lights, quality=None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The basis and directions a relighter uses under ``quality`` (near correction, basis subset).
+
+    Parameters
+    ----------
+    capture, lights
+        As :func:`accepted_basis`.
+    quality : ffls.relight.quality.Quality, optional
+        Its ``near_correction`` and ``basis_subset`` are applied
+        (:func:`ffls.relight.quality.prepare_basis`); None = the accepted basis as it is.
+
+    Returns
+    -------
+    basis : (m, H, W, 3) float32
+    directions : (m, 3) float64
+    info : dict
+        As :func:`ffls.relight.quality.prepare_basis`.
+    """
+    from ffls.relight.quality import prepare_basis
+
+    basis, d = accepted_basis(capture, lights)
+    if quality is None:
+        return basis, d, {"indices": np.arange(len(d)), "near_scales": None}
+    path = getattr(lights, "path", None) or getattr(capture, "folder", None)
+    return prepare_basis(basis, d, accepted_positions(lights), near_correction=quality.near_correction,
+                         basis_subset=quality.basis_subset, path=path)

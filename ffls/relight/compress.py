@@ -43,7 +43,8 @@ COMPRESSED_FILENAME = "basis_compressed.npz"
 MODES = ("per_channel", "shared")
 _FORMAT_VERSION = 1
 #: Rank used where none is asked for (the viewer on a CPU rasteriser); capped by :func:`default_rank`.
-DEFAULT_RANK = 16
+#: K + 1 = 8 layers fill one block of the packed pass 2 (docs/viewer.md, "Frame budget").
+DEFAULT_RANK = 7
 
 
 def rank_range(n_lights: int) -> tuple[int, int]:

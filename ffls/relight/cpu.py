@@ -20,8 +20,10 @@ import numpy as np
 from ffls.conventions import check_hemisphere, is_rotation
 from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
 from ffls.errors import InputError
-from ffls.relight.basis import accepted_basis
-from ffls.relight.compress import compress_basis, load_or_compress
+from ffls.relight.basis import capture_basis
+from ffls.relight.compress import CompressedBasis, compress_basis, load_or_compress
+from ffls.relight.quality import integration_map
+from ffls.relight.storage import store_basis
 from ffls.weights.voronoi import Weights, bake_cells, integrate_weights
 from ffls.weights.weighting import Weighting, integrate as integrate_scheme
 
@@ -129,6 +131,13 @@ class CpuRelighter:
     cell_k, cell_max_res : int
         Candidate slots per texel, and the resolution up to which an overflowing bake is redone
         at twice the resolution (``None``: no retry); as :func:`ffls.weights.voronoi.bake_cells`.
+    storage : {'f32', 'f16'}, optional
+        Round the basis (or the compressed layers) as the GPU stores it
+        (:func:`ffls.relight.storage.store_basis`: float16 with the checked per-dataset scale),
+        so that the CPU path shows the storage's error; None (default) keeps the input as is.
+    map_res : int, optional
+        Height of the lat-long light map pass 1 integrates
+        (:func:`ffls.relight.quality.integration_map`); None = the map as given.
     weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
         Weighting scheme of pass 1 (:mod:`ffls.weights.weighting`). The smooth schemes are
         evaluated exactly at every rotated light-map direction (the float64 reference; the GPU
@@ -141,8 +150,8 @@ class CpuRelighter:
 
     def __init__(self, basis, directions, hemisphere: str = "upper", *, precision: str = "f32",
                  rank: int | None = None, compressed=None, cell_res: int | None = 256, cell_k: int = 8,
-                 cell_max_res: int | None = None, path=None, weighting: str = "voronoi",
-                 weighting_options: dict | None = None):
+                 cell_max_res: int | None = None, storage: str | None = None, map_res: int | None = None,
+                 path=None, weighting: str = "voronoi", weighting_options: dict | None = None):
         self.hemisphere = check_hemisphere(hemisphere)
         basis = np.asarray(basis)
         d = np.asarray(directions, dtype=np.float64)
@@ -156,6 +165,13 @@ class CpuRelighter:
             compressed = compress_basis(basis, int(rank))
         if compressed is not None and (compressed.n_lights != basis.shape[0] or tuple(compressed.shape) != basis.shape[1:3]):
             raise InputError("compressed basis does not match the capture's basis", path)
+        if storage is not None:
+            if compressed is not None:
+                compressed = _stored_compressed(compressed, storage, path)
+            else:
+                basis = _stored(basis, storage, path)
+        self.storage = storage
+        self.map_res = None if map_res is None else int(map_res)
         self.basis = basis
         self.directions = d
         self.precision = precision
@@ -176,7 +192,7 @@ class CpuRelighter:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_capture(cls, capture, lights, *, save_compressed: bool = False, **kw) -> "CpuRelighter":
+    def from_capture(cls, capture, lights, *, save_compressed: bool = False, quality=None, **kw) -> "CpuRelighter":
         """A relighter for a capture folder and its light directions.
 
         Parameters
@@ -190,10 +206,20 @@ class CpuRelighter:
             With ``rank=K``: a compressed basis saved in the capture folder is used when it fits
             (:func:`ffls.relight.compress.load_or_compress`); a new one is saved there only if
             this is set.
+        quality : ffls.relight.quality.Quality, optional
+            Every knob at once: near-light correction and basis subset
+            (:func:`ffls.relight.basis.capture_basis`), then ``storage``, ``rank``, ``cell_res``,
+            ``map_res`` and ``weighting`` from it (keywords given in ``kw`` win).
         **kw
             As :class:`CpuRelighter`.
         """
-        basis, d = accepted_basis(capture, lights)
+        basis, d, _ = capture_basis(capture, lights, quality)
+        if quality is not None:
+            for k, v in (("storage", quality.precision), ("rank", quality.rank), ("map_res", quality.map_res),
+                         ("weighting", quality.weighting)):
+                kw.setdefault(k, v)
+            if quality.cell_res is not None:
+                kw.setdefault("cell_res", quality.cell_res)
         rank = kw.get("rank")
         if rank is not None and kw.get("compressed") is None:
             kw["compressed"] = load_or_compress(capture.folder, basis, int(rank), save=save_compressed)
@@ -203,7 +229,7 @@ class CpuRelighter:
     # ------------------------------------------------------------------ inputs
     def set_lightmap(self, lm) -> None:
         """Use light map ``lm`` (:class:`ffls.lightmaps.lightmap.LightMap` or ``(dirs, radiance, solid_angle)``)."""
-        self._lightmap = lm
+        self._lightmap = integration_map(lm, self.map_res)
         self._weights = None
 
     def set_rotation(self, R) -> None:
@@ -316,6 +342,22 @@ class CpuRelighter:
         """Drop the basis and the images (the GPU engine's counterpart frees GL objects)."""
         self.basis = self.cells = self.compressed = None
         self._hdr = self._display = self._weights = self._display_key = None
+
+
+def _stored(basis, storage, path=None) -> np.ndarray:
+    """``basis`` as the storage ``storage`` gives it back: float32 values after the rounding."""
+    stored, scale, _ = store_basis(basis, storage, path)
+    if stored.dtype == np.float32:
+        return stored
+    out = stored.astype(np.float32)
+    out *= np.float32(1.0 / scale)  # a power of two: exact
+    return out
+
+
+def _stored_compressed(cb, storage, path=None):
+    """A compressed basis whose mean and eigen-images went through ``storage`` together (one scale, as on the GPU)."""
+    layers = _stored(cb.layers(), storage, path)
+    return CompressedBasis(layers[0], layers[1:], cb.loadings, cb.singular_values, cb.mode, dict(cb.info))
 
 
 def relight_capture(capture, lights, lightmap, rotation=None, cells_res: int | None = 256, fast: bool = True,
