@@ -4,8 +4,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument, add_rotation_arguments,
-                                  check_mask_size, exposure_arg, load_relight_inputs, output_path,
-                                  rotation_from_args, write_output)
+                                  add_scale_arguments, check_mask_size, exposure_arg, load_relight_inputs,
+                                  memory_from_args, output_path, print_notes, rotation_from_args, runner_from_args,
+                                  write_output)
 
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
@@ -26,6 +27,7 @@ def add_arguments(p):
     p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
     p.add_argument("--cells-res", type=CELLS_RES_OR_EXACT, default=256,
                    help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
+    add_scale_arguments(p)
     p.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output image, .exr or .png")
 
 
@@ -38,8 +40,26 @@ def run(args) -> int:
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
-    image, w = relight_capture(capture, lights, lightmap, rotation=rotation_from_args(args),
-                               cells_res=args.cells_res or None)
+    if out.suffix.lower() == ".exr" and mask is None:
+        copies = 2  # the result and the writer's copy
+    else:
+        copies = 4  # and the tone map's float images
+    with runner_from_args(args) as runner:
+        from ffls.relight.stream import open_streamed
+
+        r, notes = open_streamed(capture, lights, memory_from_args(args), store=args.store, runner=runner,
+                                 cell_res=args.cells_res or None, cell_max_res=1024, force=args.tiles,
+                                 output_copies=copies)
+    print_notes(NAME, *notes)
+    if r is not None:  # tile by tile from the store
+        r.set_lightmap(lightmap)
+        r.set_rotation(rotation_from_args(args))
+        r.render()
+        image, w = r.hdr, r.last_weights
+        r.release()
+    else:
+        image, w = relight_capture(capture, lights, lightmap, rotation=rotation_from_args(args),
+                                   cells_res=args.cells_res or None)
     check_mask_size(mask, image.shape)
     display = None
     if out.suffix.lower() != ".exr":

@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_mask_argument,
-                                  add_rotation_arguments, check_mask_size, exposure_arg, flush_notes,
-                                  load_relight_inputs, output_path, rotation_from_args, write_output)
+                                  add_rotation_arguments, add_scale_arguments, check_mask_size, exposure_arg,
+                                  flush_notes, load_relight_inputs, memory_from_args, output_path, print_notes,
+                                  rotation_from_args, runner_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -45,6 +46,7 @@ def add_arguments(p):
                    help="write N frames over 360 degrees about +Z: -o OUT.mp4 or a folder of PNGs")
     p.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
     p.add_argument("--cpu", action="store_true", help="use the CPU reference path instead of the GPU")
+    add_scale_arguments(p)
     p.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True),
                    help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
 
@@ -55,6 +57,18 @@ def parse_rotation(args) -> np.ndarray:
 
 
 def _make_renderer(args, capture, lights):
+    with runner_from_args(args) as runner:
+        from ffls.relight.stream import open_streamed
+
+        copies = 2 if args.turntable is None and Path(args.out).suffix.lower() == ".exr" else 4
+        streamed, notes = open_streamed(capture, lights, memory_from_args(args), store=args.store, runner=runner,
+                                        rank=args.rank, cell_res=args.cells_res, force=args.tiles,
+                                        output_copies=copies)
+    print_notes(NAME, *notes)
+    if streamed is not None:
+        if args.cpu:
+            return streamed, None
+        return _tiled_gpu(args, streamed)
     if args.cpu:
         from ffls.relight.cpu import CpuRelighter
 
@@ -70,6 +84,23 @@ def _make_renderer(args, capture, lights):
         raise GLUnavailable(f"no GPU path ({e.message}); rerun with --cpu for the CPU reference path") from None
     eng = Engine.from_capture(ctx, capture, lights, dtype=args.dtype, rank=args.rank, cell_res=args.cells_res)
     return eng, ctx
+
+
+def _tiled_gpu(args, streamed):
+    """The GPU engine tile by tile over the store (:class:`ffls.gpu.tiled.TiledEngine`)."""
+    from ffls.errors import GLUnavailable
+    from ffls.gpu.context import create_headless_context
+    from ffls.gpu.tiled import TiledEngine
+
+    try:
+        ctx = create_headless_context()
+    except GLUnavailable as e:
+        raise GLUnavailable(f"no GPU path ({e.message}); rerun with --cpu for the CPU reference path") from None
+    try:
+        return TiledEngine(ctx, streamed, dtype=args.dtype, cell_res=args.cells_res), ctx
+    except BaseException:
+        ctx.release()
+        raise
 
 
 def _auto_exposure(r, args, mask) -> float:

@@ -41,7 +41,7 @@ from ffls.store.ingest import SerialRunner, build_pyramid
 
 __all__ = ["parse_memory", "default_memory", "tile_working_set", "check_budget", "relight_field",
            "StoredCompression", "compress_field", "load_or_compress_field", "relight_compressed_field",
-           "load_compressed_level", "compression_key", "gram_tiles", "layer_tiles"]
+           "load_compressed_level", "compression_key", "gram_tiles", "layer_tiles", "StreamedRelighter", "in_memory_bytes", "open_streamed"]
 
 
 # ----------------------------------------------------------------------------- memory
@@ -361,3 +361,193 @@ def load_compressed_level(sc: StoredCompression, level: int) -> CompressedBasis:
     return CompressedBasis(lay[0], lay[1:], sc.loadings, sc.singular_values, "per_channel",
                            {**sc.info, "level": level})
 
+
+
+class StreamedRelighter:
+    """Relighting streamed from the store, with the interface of :class:`ffls.relight.cpu.CpuRelighter`.
+
+    Pass 1 is :func:`ffls.weights.voronoi.integrate_weights` (as the CPU relighter), pass 2
+    :func:`relight_field` (or, with a compression, :func:`relight_compressed_field`), the
+    display image :func:`ffls.display.tonemap.tonemap` of the relit image.
+
+    Parameters
+    ----------
+    field : ffls.store.field.ReflectanceField
+    names : list of str
+        The photos of the lights used, in the order of ``directions``.
+    directions : (k, 3) float
+    hemisphere : Hemisphere
+    compression : StoredCompression, optional
+    cell_res, cell_k, cell_max_res : as :class:`ffls.relight.cpu.CpuRelighter`
+    level : int
+        Pyramid level relit (0 = full resolution).
+    progress : bool
+    """
+
+    def __init__(self, field, names, directions, hemisphere="upper", *, compression=None, cell_res: int | None = 256,
+                 cell_k: int = 8, cell_max_res: int | None = None, level: int = 0, progress: bool = True):
+        from ffls.conventions import check_hemisphere
+        from ffls.weights.voronoi import bake_cells
+
+        self.field = field
+        self.rows = field.rows_of(names)
+        self.directions = np.asarray(directions, dtype=np.float64)
+        if self.directions.shape != (len(self.rows), 3):
+            raise InputError(f"{len(self.directions)} light directions for {len(self.rows)} photos", field.path)
+        self.hemisphere = check_hemisphere(hemisphere)
+        self.compression = compression
+        self.level = int(level)
+        self.progress = progress
+        self.cells = None if cell_res is None else bake_cells(self.directions, self.hemisphere, res=cell_res,
+                                                               k=cell_k, max_res=cell_max_res)
+        self.last_weights = None
+        self._lightmap = None
+        self._rotation = np.eye(3)
+        self._weights = None
+        self._hdr = None
+        self._display = None
+        self._display_key = None
+
+    def set_lightmap(self, lm) -> None:
+        self._lightmap = lm
+        self._weights = None
+
+    def set_rotation(self, R) -> None:
+        from ffls.conventions import is_rotation
+
+        R = np.asarray(R, dtype=np.float64)
+        if not is_rotation(R):
+            raise ValueError("R must be a 3x3 rotation matrix")
+        if not np.array_equal(R, self._rotation):
+            self._rotation = R.copy()
+            if self._lightmap is not None:
+                self._weights = None
+
+    def set_weights(self, weights) -> None:
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != (len(self.rows), 3) or not np.all(np.isfinite(w)):
+            raise ValueError(f"weights must be finite, of shape ({len(self.rows)}, 3)")
+        self._lightmap = None
+        self.last_weights = None
+        self._weights = w.copy()
+        self._hdr = None
+
+    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+        from ffls.weights.voronoi import integrate_weights
+
+        if self._lightmap is None and self._weights is None:
+            raise RuntimeError("StreamedRelighter.render: call set_lightmap(lm) or set_weights(w) first")
+        if self._weights is None:
+            self.last_weights = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
+                                                  cells=self.cells)
+            self._weights = self.last_weights.weights
+            self._hdr = None
+        if self._hdr is None:
+            self._hdr = None  # the previous image goes before the next is made (memory)
+            if self.compression is not None:
+                self._hdr = relight_compressed_field(self.compression, self._weights, self.level, self.progress)
+            else:
+                self._hdr = relight_field(self.field, self.rows, self._weights, self.level, self.progress)
+            self._display = None
+        key = (float(exposure), tonemap)
+        if key != self._display_key:
+            self._display = None
+            self._display_key = key
+
+    @property
+    def size(self) -> tuple[int, int]:
+        h, w = self.field.levels[self.level]
+        return int(w), int(h)
+
+    @property
+    def n_lights(self) -> int:
+        return len(self.rows)
+
+    @property
+    def hdr(self) -> np.ndarray:
+        if self._hdr is None:
+            raise RuntimeError("StreamedRelighter: nothing rendered yet")
+        return self._hdr
+
+    def read_hdr(self) -> np.ndarray:
+        return self.hdr
+
+    def read_display(self) -> np.ndarray:
+        from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
+
+        if self._display is None:
+            exposure, method = self._display_key if self._display_key is not None else (0.0, "srgb")
+            self._display = to_uint8(tonemap_np(self.hdr, exposure, method))
+        return self._display
+
+    def read_weights(self) -> np.ndarray:
+        if self._weights is None:
+            raise RuntimeError("StreamedRelighter: nothing rendered yet")
+        return np.array(self._weights, dtype=np.float64)
+
+    def release(self) -> None:
+        self._hdr = self._display = self._weights = self.cells = None
+
+
+def in_memory_bytes(n_lights: int, shape, output_copies: int = 3) -> int:
+    """Bytes the in-memory path needs: the float32 photos, one photo being decoded, the output images."""
+    H, W = shape
+    return int((n_lights + 2 + output_copies) * H * W * 3 * 4)
+
+
+def open_streamed(capture, lights, memory: int, *, store=None, runner=None, rank: int | None = None,
+                  cell_res: int | None = 256, cell_max_res: int | None = None, force: bool = False,
+                  progress: bool = True, output_copies: int = 3):
+    """A :class:`StreamedRelighter` when the photos would not fit ``memory`` (or ``force``, or a fresh store exists).
+
+    The store is built on first use (:func:`ffls.store.ingest.ensure_field`, with ``runner``);
+    a stale one is rebuilt, and the returned note says why.
+
+    Parameters
+    ----------
+    capture, lights : as :func:`ffls.relight.basis.accepted_basis`
+    memory : int
+        The budget, bytes (checked: :func:`check_budget`).
+    store : path-like, optional
+        Default ``CAPTURE/field.zarr``.
+    rank : int, optional
+        Relight a compressed basis of this rank (computed out of core and kept in the store).
+
+    Returns
+    -------
+    relighter : StreamedRelighter or None
+        None: the in-memory path fits (the caller uses it).
+    notes : list of str
+        One line per thing worth saying (a rebuilt store, the budget used).
+    """
+    from ffls.store.field import choose_tile, default_store_path, field_status
+    from ffls.store.ingest import ensure_field
+
+    idx, dirs = lights.accepted()
+    if not len(idx):
+        raise InputError("no light has status ok", getattr(lights, "path", None) or capture.folder)
+    names = [lights.image_names[i] for i in idx]
+    path = default_store_path(capture) if store is None else Path(store)
+    status, _ = field_status(capture, path)
+    shape = None
+    if capture.image_size is not None:
+        shape = (int(capture.image_size[1]), int(capture.image_size[0]))
+    else:
+        from ffls.io.images import read_image
+
+        shape = tuple(read_image(capture.image_paths[0]).pixels.shape[:2])
+    if not force and status != "ok" and in_memory_bytes(len(idx), shape, output_copies) <= memory:
+        return None, []
+    tile = choose_tile(len(capture.image_names))
+    if status != "ok":  # refuse a budget too small before the (long) ingest
+        check_budget(memory, shape, len(capture.image_names), len(idx), tile, output_copies)
+    rep = ensure_field(capture, path, runner=runner, progress=progress)
+    field = rep.field
+    need = check_budget(memory, field.shape, field.n, len(idx), field.tile, output_copies)
+    notes = [rep.note,
+             f"streamed from {path} in {field.tile}x{field.tile} tiles of {field.n} photos "
+             f"(about {need['need'] / 2 ** 20:.0f}M of the {memory / 2 ** 20:.0f}M allowed)"]
+    comp = None if rank is None else load_or_compress_field(field, names, int(rank), runner=runner, progress=progress)
+    r = StreamedRelighter(field, names, dirs, capture.hemisphere, compression=comp, cell_res=cell_res,
+                          cell_max_res=cell_max_res, progress=progress)
+    return r, [x for x in notes if x]

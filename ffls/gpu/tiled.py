@@ -1,0 +1,154 @@
+"""The GPU engine over a capture too large for memory or the GPU: pass 2 tile by tile from the store.
+
+:class:`TiledEngine` has the interface of :class:`ffls.gpu.engine.Engine` (``set_lightmap``,
+``set_rotation``, ``set_weights``, ``render``, ``read_hdr``, ``read_display``, ``read_weights``,
+``release``). Pass 1 (:class:`ffls.gpu.integrate.CellIntegrator`) runs once for the whole
+image; pass 2 runs per tile of the store (:mod:`ffls.store.field`): the tile's photos are read
+(one chunk), uploaded as a small :class:`Engine`'s basis, summed with the pass-1 weights and
+read back into the full-resolution result. With a compressed basis
+(:class:`ffls.relight.stream.StoredCompression`) pass 2 is the streamed sum of its ``K + 1``
+layers (:func:`ffls.relight.stream.relight_compressed_field`). The display image is the tone
+curve of :func:`ffls.display.tonemap.tonemap` (the GLSL display pass is its twin).
+
+Memory: the result image and one tile; GPU memory: one tile's basis.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ffls.conventions import is_rotation
+from ffls.gpu.engine import Engine
+from ffls.gpu.integrate import CellIntegrator
+from ffls.relight.stream import relight_compressed_field
+
+__all__ = ["TiledEngine"]
+
+
+class TiledEngine:
+    """GPU relighting of a stored capture, tile by tile.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    streamed : ffls.relight.stream.StreamedRelighter
+        Gives the store, the rows and directions of the lights, the hemisphere and the compression.
+    dtype : {'f16', 'f32'}
+        GPU storage of each tile's basis.
+    cell_res : int
+        Resolution of the cell texture of pass 1.
+    """
+
+    def __init__(self, ctx, streamed, dtype: str = "f16", cell_res: int = 256, method: str = "auto"):
+        from ffls.weights.voronoi import bake_cells
+
+        self.ctx = ctx
+        self.streamed = streamed
+        self.dtype = dtype
+        self.method = method
+        self.directions = streamed.directions
+        self.hemisphere = streamed.hemisphere
+        self._integrator = CellIntegrator(ctx, self.directions, self.hemisphere,
+                                          bake_cells(self.directions, self.hemisphere, cell_res))
+        self._lightmap = None
+        self._rotation = np.eye(3)
+        self._weights = None
+        self._hdr = None
+        self._display = None
+        self._display_key = None
+        self.timings: dict = {}
+
+    def set_lightmap(self, lm) -> None:
+        self._lightmap = lm
+        self._integrator.set_lightmap(lm)
+        self._weights = None
+
+    def set_rotation(self, R) -> None:
+        R = np.asarray(R, dtype=np.float64)
+        if not is_rotation(R):
+            raise ValueError("R must be a 3x3 rotation matrix")
+        if not np.array_equal(R, self._rotation):
+            self._rotation = R.copy()
+            if self._lightmap is not None:
+                self._weights = None
+
+    def set_weights(self, weights) -> None:
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != (self.n_lights, 3) or not np.all(np.isfinite(w)):
+            raise ValueError(f"weights must be finite, of shape ({self.n_lights}, 3)")
+        self._lightmap = None
+        self._weights = w.copy()
+        self._hdr = None
+
+    def _pass2(self, w) -> np.ndarray:
+        s = self.streamed
+        if s.compression is not None:
+            return relight_compressed_field(s.compression, w, s.level, s.progress)
+        f = s.field
+        h, wd = f.levels[s.level]
+        out = np.empty((h, wd, 3), dtype=np.float32)
+        arr = f.array(s.level)
+        for ys, xs in f.tiles(s.level):
+            tile = f.read_tile(ys, xs, s.rows, s.level, arr=arr)
+            eng = Engine(self.ctx, tile, self.directions, self.hemisphere, dtype=self.dtype, method=self.method)
+            try:
+                eng.set_weights(w)
+                eng.render()
+                out[ys, xs] = eng.read_hdr()
+            finally:
+                eng.release()
+            del tile
+        return out
+
+    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+        """Pass 1 (when the light map or rotation changed), pass 2 over the tiles, then the display image on read."""
+        if self._lightmap is None and self._weights is None:
+            raise RuntimeError("TiledEngine.render: call set_lightmap(lm) or set_weights(w) first")
+        if self._weights is None:
+            self._integrator.run(self._rotation)
+            self._weights = np.asarray(self._integrator.read_weights(), dtype=np.float64)[:, :3]
+            self._hdr = None
+        if self._hdr is None:
+            self._hdr = self._pass2(self._weights)
+            self._display = None
+        key = (float(exposure), tonemap)
+        if key != self._display_key:
+            self._display = None
+            self._display_key = key
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.streamed.size
+
+    @property
+    def n_lights(self) -> int:
+        return int(len(self.directions))
+
+    @property
+    def basis_info(self) -> dict:
+        f = self.streamed.field
+        return {"dtype": self.dtype, "tiles": len(f.tiles(self.streamed.level)), "tile": f.tile,
+                "rank": None if self.streamed.compression is None else self.streamed.compression.rank}
+
+    def read_hdr(self) -> np.ndarray:
+        if self._hdr is None:
+            raise RuntimeError("TiledEngine: nothing rendered yet")
+        return self._hdr
+
+    def read_display(self) -> np.ndarray:
+        from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
+
+        if self._display is None:
+            exposure, method = self._display_key if self._display_key is not None else (0.0, "srgb")
+            self._display = to_uint8(tonemap_np(self.read_hdr(), exposure, method))
+        return self._display
+
+    def read_weights(self) -> np.ndarray:
+        if self._weights is None:
+            raise RuntimeError("TiledEngine: nothing rendered yet")
+        return np.array(self._weights, dtype=np.float64)
+
+    def release(self) -> None:
+        if self._integrator is not None:
+            self._integrator.release()
+        self._integrator = None
+        self._hdr = self._display = self._weights = None
