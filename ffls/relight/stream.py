@@ -306,7 +306,8 @@ def compress_field(field, names, rank: int, runner=None, progress: bool = True) 
                    dtype="float16", compressors=compressor(), fill_value=0, overwrite=True)
     runner.map(partial(layer_tiles, field.path, rows, proj, scale, bound, key), _groups(tiles, n_groups),
                desc="compress: pass 2")
-    shapes = build_pyramid(field.path, f"compressed/{key}", rank + 1, (H, W), field.tile, runner)
+    shapes = build_pyramid(field.path, f"compressed/{key}", rank + 1, (H, W), field.tile, runner,
+                           max(max(field.levels[-1]), 1))  # the photos' levels
     info = {"mode": "per_channel", "method": "gram", "seconds": time.perf_counter() - t0, "n": n, "H": H, "W": W}
     write_json_atomic(field.path / "compressed" / f"{key}.json",
                       {"key": key, "names": list(names), "rank": rank, "scale": scale, "levels": [list(x) for x in shapes],

@@ -39,13 +39,13 @@ from pathlib import Path
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.store.field import (FORMAT, MARKER, VERSION, ReflectanceField, choose_tile, compressor, default_store_path,
+from ffls.store.field import (FORMAT, MARKER, MIN_LEVEL_SIZE, VERSION, ReflectanceField, choose_tile, compressor, default_store_path,
                               level_shapes, open_field, photo_record, provenance, read_json, stale_reason,
                               tile_slices, write_json_atomic)
 from ffls.store.float16 import choose_scale, to_float16
 
 __all__ = ["SerialRunner", "IngestReport", "ingest_capture", "ensure_field", "stage_photo", "build_tile",
-           "build_level_tile", "PLAN", "PROGRESS"]
+           "build_level_tile", "build_pyramid", "PLAN", "PROGRESS"]
 
 #: The plan of an ingest under way (what a resumed ingest must match).
 PLAN = "plan.json"
@@ -173,12 +173,16 @@ def build_level_tile(path, source: str, target: str, tile: tuple) -> None:
     zarr.open_array(str(path / target), mode="r+")[:, ys, xs, :] = m.astype(np.float16)
 
 
-def build_pyramid(path, prefix: str, n_layers: int, shape, tile: int, runner) -> list[tuple[int, int]]:
-    """Create and fill ``PREFIX/levels/k`` (or ``levels/k`` with ``prefix`` '') from ``PREFIX``'s level 0."""
+def build_pyramid(path, prefix: str, n_layers: int, shape, tile: int, runner,
+                  min_size: int = MIN_LEVEL_SIZE) -> list[tuple[int, int]]:
+    """Create and fill ``PREFIX/levels/k`` (or ``levels/k`` with ``prefix`` '') from ``PREFIX``'s level 0.
+
+    Levels halve down to the first whose larger side is at most ``min_size``
+    (:func:`ffls.store.field.level_shapes`); returns their shapes, level 0 first."""
     import zarr
 
     g = zarr.open_group(str(path), mode="r+")
-    shapes = level_shapes(*shape)
+    shapes = level_shapes(*shape, min_size=min_size)
     base = f"{prefix}/levels" if prefix else "levels"
     src = prefix if prefix else "basis"
     for k in range(1, len(shapes)):
@@ -196,7 +200,7 @@ def _remove(path: Path) -> None:
 
 
 def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, progress: bool = True,
-                   rebuild: bool = False) -> IngestReport:
+                   rebuild: bool = False, min_level: int = MIN_LEVEL_SIZE) -> IngestReport:
     """Build (or resume, or check) the chunked store of ``capture``.
 
     Parameters
@@ -214,6 +218,8 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
         Progress bar of the default runner.
     rebuild : bool
         Build again even when the store is complete and fresh.
+    min_level : int
+        The pyramid stops at the first level whose larger side is at most this.
 
     Returns
     -------
@@ -248,7 +254,7 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
     tile = choose_tile(n) if tile is None else int(tile)
     if tile < 1:
         raise ValueError(f"tile must be >= 1, not {tile}")
-    plan = _plan(capture, prov, shape, tile)
+    plan = {**_plan(capture, prov, shape, tile), "min_level": int(min_level)}
     if path.exists() and marker is None:
         old = read_json(path / PLAN)
         if old != plan or not (path / "staging").exists():
@@ -280,7 +286,7 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
     reports = runner.map(partial(build_tile, path, photo_scales, scale, max_abs), tile_slices(*shape, tile),
                          desc="ingest: tiles")
     t2 = time.perf_counter()
-    shapes = build_pyramid(path, "", n, shape, tile, runner)
+    shapes = build_pyramid(path, "", n, shape, tile, runner, min_level)
     t3 = time.perf_counter()
     seconds = {"photos": t1 - t0, "tiles": t2 - t1, "pyramid": t3 - t2}
     g["basis"].attrs["scale"] = scale
