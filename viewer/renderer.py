@@ -133,6 +133,7 @@ class Renderer:
         self.directions = np.asarray(lights.directions, dtype=np.float64)[ok]
         self.hemisphere = getattr(capture, "hemisphere", "upper")
         self.engine = None
+        self.streamed, self.level = None, 0  # the full-resolution store when a pyramid level is shown
         self.info = ViewInfo(n_lights=len(self.directions), renderer=ctx.info.get("GL_RENDERER", ""),
                              mask_available=mask is not None,
                              mask_reason=mask_reason or "this capture has no object mask")
@@ -177,8 +178,6 @@ class Renderer:
         self.info.overlay_tex = self._overlay_tex.glo
 
     def _build_engine(self, state: ViewerState) -> None:
-        from ffls.gpu.engine import Engine
-
         q = state.quality
         method = resolve_method(q.get("method", "auto"), self.info.renderer)
         kw = {"cell_res": int(q.get("cell_res", 256))}
@@ -187,7 +186,15 @@ class Renderer:
         else:
             kw.update(dtype="f32" if method.endswith("f32") else "f16")
         t0 = time.perf_counter()
-        new = Engine.from_capture(self.ctx, self.capture, self.lights, **kw)
+        # the photos, or the level of the store's pyramid that fits the GPU and the window (docs/scale.md)
+        from ffls.commands.common import available_memory
+        from ffls.gpu.tiled import engine_for_view
+        from ffls.relight.stream import default_memory
+
+        rank = kw.pop("rank", None)
+        new, self.streamed, self.level = engine_for_view(self.ctx, self.capture, self.lights,
+                                                         default_memory(available_memory()), rank=rank,
+                                                         window=state.window_size, **kw)
         if self.engine is not None:
             self.engine.release()
         self.engine = new
@@ -323,6 +330,14 @@ class Renderer:
     def read_hdr(self) -> np.ndarray:
         """The relit HDR image ``(H, W, 3)`` float32 of the last :meth:`update`."""
         return self.engine.read_hdr()
+
+    def read_hdr_full(self) -> np.ndarray:
+        """The relit HDR at full resolution: the engine's, or the store's relit tile by tile with its weights."""
+        if self.streamed is None:
+            return self.engine.read_hdr()
+        self.streamed.set_weights(self.engine.read_weights())
+        self.streamed.render()
+        return self.streamed.read_hdr()
 
     def read_display(self) -> np.ndarray:
         """The tone-mapped relit image ``(H, W, 3)`` uint8 of the last :meth:`update`."""

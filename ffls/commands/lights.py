@@ -26,6 +26,9 @@ def add_arguments(p):
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), or free per photo (default calibrated)")
     p.add_argument("--workers", type=integer(1, 1024), default=None, help="processes, 1 to 1024 (default: every core)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT|local",
+                   help="read and linearise the photos on Dask: a dask.distributed cluster, or 'local' for a local "
+                        "cluster of --workers processes (docs/scale.md)")
     p.add_argument("--plot", default=None, type=output_path((".png",)), metavar="PLOT.png",
                    help="draw the accepted directions and their Voronoi cells on the hemisphere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -141,8 +144,16 @@ def run(args) -> int:
         spheres = find_spheres_in_capture(cap)
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
-    lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
-                             model=args.model, bounce=args.bounce)
+    if getattr(args, "scheduler", None):
+        from ffls.cluster import open_client
+        from ffls.cluster.lights import estimate_lights_dask
+
+        remote = None if args.scheduler == "local" else args.scheduler
+        with open_client(args.workers, remote, progress=not args.no_progress) as runner:
+            lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce)
+    else:
+        lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
+                                 model=args.model, bounce=args.bounce)
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"

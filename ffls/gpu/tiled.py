@@ -21,7 +21,7 @@ from ffls.gpu.engine import Engine
 from ffls.gpu.integrate import CellIntegrator
 from ffls.relight.stream import relight_compressed_field
 
-__all__ = ["TiledEngine"]
+__all__ = ["TiledEngine", "engine_for_view"]
 
 
 class TiledEngine:
@@ -152,3 +152,60 @@ class TiledEngine:
             self._integrator.release()
         self._integrator = None
         self._hdr = self._display = self._weights = None
+
+
+def engine_for_view(ctx, capture, lights, memory: int, *, window=None, budget_bytes: int | None = None,
+                    rank: int | None = None, runner=None, progress: bool = False, **kw):
+    """An :class:`Engine` of the resolution that fits: the photos themselves, or a level of the store's pyramid.
+
+    When the accepted photos fit both the GPU budget (RGBA16F layers) and ``memory`` (float32 in
+    host memory) the engine is :meth:`Engine.from_capture`, as before. Otherwise the store is
+    built if needed (:func:`ffls.store.ingest.ensure_field`) and the level chosen by
+    :func:`ffls.store.field.choose_level` (the finest that fits the budget and is not finer
+    than ``window`` needs) is loaded; with ``rank`` the level of the stored compressed basis.
+
+    Parameters
+    ----------
+    memory : int
+        Host memory allowed, bytes (the viewer's default: half of ``MemAvailable``).
+
+    Returns
+    -------
+    engine : Engine
+    streamed : ffls.relight.stream.StreamedRelighter or None
+        The full-resolution relighter of the store (None when the engine holds the photos
+        themselves): screenshots and final renders use it, tile by tile, with the engine's weights.
+    level : int
+        The pyramid level shown (0 = full resolution).
+    """
+    from ffls.gpu.basis import DEFAULT_BUDGET
+    from ffls.relight.stream import StreamedRelighter, load_compressed_level, load_or_compress_field
+    from ffls.store.field import choose_level
+    from ffls.store.ingest import ensure_field
+
+    budget = DEFAULT_BUDGET if budget_bytes is None else int(budget_bytes)
+    idx, dirs = lights.accepted()
+    if capture.image_size is not None:
+        H, W = int(capture.image_size[1]), int(capture.image_size[0])
+    else:
+        from ffls.io.images import read_image
+
+        H, W = read_image(capture.image_paths[0]).pixels.shape[:2]
+    layers = len(idx) if rank is None else int(rank) + 1
+    mem = int(memory)
+    if layers * H * W * 8 <= budget and (len(idx) + 2) * H * W * 12 <= mem:
+        return Engine.from_capture(ctx, capture, lights, rank=rank, **kw), None, 0
+    field = ensure_field(capture, runner=runner, progress=progress).field
+    names = [lights.image_names[i] for i in idx]
+    comp = None if rank is None else load_or_compress_field(field, names, int(rank), runner=runner, progress=progress)
+    level = choose_level(field.levels, layers, min(budget, mem // 2), window)
+    streamed = StreamedRelighter(field, names, dirs, capture.hemisphere, compression=comp, progress=progress)
+    h, w = field.levels[level]
+    if comp is not None:
+        cb = load_compressed_level(comp, level)
+        shape_only = np.broadcast_to(np.zeros((), np.float32), (len(idx), h, w, 3))  # never read with a compression
+        eng = Engine(ctx, shape_only, dirs, capture.hemisphere, compressed=cb, path=field.path, **kw)
+    else:
+        eng = Engine(ctx, field.read_level(level, streamed.rows), dirs, capture.hemisphere, path=field.path, **kw)
+    return eng, streamed, level
+

@@ -499,7 +499,7 @@ def in_memory_bytes(n_lights: int, shape, output_copies: int = 3) -> int:
 def open_streamed(capture, lights, memory: int, *, store=None, runner=None, rank: int | None = None,
                   cell_res: int | None = 256, cell_max_res: int | None = None, force: bool = False,
                   progress: bool = True, output_copies: int = 3):
-    """A :class:`StreamedRelighter` when the photos would not fit ``memory`` (or ``force``, or a fresh store exists).
+    """A :class:`StreamedRelighter` when the photos would not fit ``memory`` (or with ``force``); else None.
 
     The store is built on first use (:func:`ffls.store.ingest.ensure_field`, with ``runner``);
     a stale one is rebuilt, and the returned note says why.
@@ -537,7 +537,7 @@ def open_streamed(capture, lights, memory: int, *, store=None, runner=None, rank
         from ffls.io.images import read_image
 
         shape = tuple(read_image(capture.image_paths[0]).pixels.shape[:2])
-    if not force and status != "ok" and in_memory_bytes(len(idx), shape, output_copies) <= memory:
+    if not force and in_memory_bytes(len(idx), shape, output_copies) <= memory:
         return None, []
     tile = choose_tile(len(capture.image_names))
     if status != "ok":  # refuse a budget too small before the (long) ingest
