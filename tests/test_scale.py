@@ -168,3 +168,32 @@ def test_tiled_gpu_pass2_equals_the_engine(ctx, tmp_path):
     finally:
         t.release()
         eng.release()
+
+
+@pytest.mark.gl
+def test_viewer_engine_shows_the_level_that_fits(ctx, tmp_path):
+    from ffls.gpu.tiled import engine_for_view
+    from ffls.relight.stream import relight_field
+
+    cap = make_capture(tmp_path / "cap", n=5, H=40, W=56)
+    capture, lights = load_capture_and_lights(cap.folder)
+    f = ingest_capture(capture, tile=16, progress=False, min_level=16).field
+    assert f.levels == [(40, 56), (20, 28), (10, 14)]
+    # the photos fit: the engine holds them, no store is used
+    eng, streamed, level = engine_for_view(ctx, capture, lights, 2 ** 30)
+    assert streamed is None and level == 0 and eng.size == (56, 40)
+    eng.release()
+    # a budget that holds level 1 only (5 layers x 20 x 28 x RGBA16F = 22400 bytes)
+    eng, streamed, level = engine_for_view(ctx, capture, lights, 10 ** 5, budget_bytes=30000)
+    try:
+        assert level == 1 and eng.size == (28, 20)
+        w = np.random.default_rng(0).random((5, 3))
+        eng.set_weights(w)
+        eng.render()
+        np.testing.assert_allclose(eng.read_hdr(), relight_field(f, streamed.rows, w, level=1, progress=False),
+                                   rtol=2e-3, atol=1e-4)
+        streamed.set_weights(eng.read_weights())  # the screenshot: full resolution, tile by tile
+        streamed.render()
+        assert streamed.read_hdr().shape == (40, 56, 3)
+    finally:
+        eng.release()
