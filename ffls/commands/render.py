@@ -60,10 +60,12 @@ def _make_renderer(args, capture, lights):
     with runner_from_args(args) as runner:
         from ffls.relight.stream import open_streamed
 
+        from ffls.gpu.basis import DEFAULT_BUDGET
+
         copies = 2 if args.turntable is None and Path(args.out).suffix.lower() == ".exr" else 4
         streamed, notes = open_streamed(capture, lights, memory_from_args(args), store=args.store, runner=runner,
                                         rank=args.rank, cell_res=args.cells_res, force=args.tiles,
-                                        output_copies=copies)
+                                        output_copies=copies, gpu_budget=None if args.cpu else DEFAULT_BUDGET)
     print_notes(NAME, *notes)
     if streamed is not None:
         if args.cpu:

@@ -498,7 +498,7 @@ def in_memory_bytes(n_lights: int, shape, output_copies: int = 3) -> int:
 
 def open_streamed(capture, lights, memory: int, *, store=None, runner=None, rank: int | None = None,
                   cell_res: int | None = 256, cell_max_res: int | None = None, force: bool = False,
-                  progress: bool = True, output_copies: int = 3):
+                  progress: bool = True, output_copies: int = 3, gpu_budget: int | None = None):
     """A :class:`StreamedRelighter` when the photos would not fit ``memory`` (or with ``force``); else None.
 
     The store is built on first use (:func:`ffls.store.ingest.ensure_field`, with ``runner``);
@@ -513,6 +513,8 @@ def open_streamed(capture, lights, memory: int, *, store=None, runner=None, rank
         Default ``CAPTURE/field.zarr``.
     rank : int, optional
         Relight a compressed basis of this rank (computed out of core and kept in the store).
+    gpu_budget : int, optional
+        Bytes the GPU may hold; photos over it (RGBA16F layers) are streamed too.
 
     Returns
     -------
@@ -537,7 +539,9 @@ def open_streamed(capture, lights, memory: int, *, store=None, runner=None, rank
         from ffls.io.images import read_image
 
         shape = tuple(read_image(capture.image_paths[0]).pixels.shape[:2])
-    if not force and in_memory_bytes(len(idx), shape, output_copies) <= memory:
+    layers = len(idx) if rank is None else int(rank) + 1
+    too_big_for_gpu = gpu_budget is not None and layers * shape[0] * shape[1] * 8 > gpu_budget
+    if not force and not too_big_for_gpu and in_memory_bytes(len(idx), shape, output_copies) <= memory:
         return None, []
     tile = choose_tile(len(capture.image_names))
     if status != "ok":  # refuse a budget too small before the (long) ingest
