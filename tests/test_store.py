@@ -214,3 +214,16 @@ def test_fresh_store_is_not_rebuilt(capture):
     ingest_capture(capture, tile=16, progress=False)
     rep = ingest_capture(capture, tile=16, progress=False)
     assert not rep.built and rep.note is None
+
+
+def test_bad_photo_is_one_line_and_leaves_an_incomplete_store(capture):
+    img = np.ones((40, 56, 3), dtype=np.float32)
+    img[1, 2, 0] = np.nan
+    write_exr(capture.image_paths[5], img)
+    with pytest.raises(InputError, match="NaN") as e:
+        ingest_capture(capture, tile=16, progress=False)
+    assert str(capture.image_paths[5]) in str(e.value.path) and "\n" not in str(e.value)
+    assert field_status(capture)[0] == "incomplete"
+    write_exr(capture.image_paths[5], np.ones((40, 56, 3), dtype=np.float32))  # fixed: the ingest resumes
+    rep = ingest_capture(capture, tile=16, progress=False)
+    assert rep.built and rep.resumed == 5 and rep.staged == 2  # photos 0-4 were staged before photo 5 failed
