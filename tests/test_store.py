@@ -17,7 +17,7 @@ from ffls.io.images import write_exr
 from ffls.relight.cpu import relight_fast
 from ffls.radiance.photos import load_photos
 from ffls.store.field import MARKER, choose_level, field_status, level_shapes, open_field
-from ffls.store.ingest import SerialRunner, ingest_capture
+from ffls.store.ingest import ingest_capture
 
 
 def make_capture(folder, n=7, H=40, W=56, seed=0, dynamic_range=False):

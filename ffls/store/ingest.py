@@ -28,9 +28,9 @@ A complete store whose photos changed since (:func:`ffls.store.field.stale_reaso
 """
 from __future__ import annotations
 
+import os
 import shutil
 import sys
-import os
 import time
 from dataclasses import dataclass
 from functools import partial
@@ -198,7 +198,10 @@ def build_pyramid(path, prefix: str, n_layers: int, shape, tile: int, runner,
 
 
 def _remove(path: Path) -> None:
-    shutil.rmtree(path, ignore_errors=False) if path.is_dir() else path.unlink(missing_ok=True)
+    if path.is_dir():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
 
 
 def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, progress: bool = True,
