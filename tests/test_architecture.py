@@ -22,16 +22,16 @@ RANKS = {
     "ffls.conventions": 0, "ffls.errors": 0,
     "ffls.io": 1,
     "ffls.radiance": 2, "ffls.camera": 2, "ffls.lightmaps": 2,
-    "ffls.display": 3, "ffls.spheres": 3, "ffls.weights": 3,
+    "ffls.display": 3, "ffls.spheres": 3, "ffls.weights": 3, "ffls.store": 3,
     "ffls.probes": 4, "ffls.relight": 4,
-    "ffls.gpu": 5, "ffls.synth": 5,
+    "ffls.gpu": 5, "ffls.synth": 5, "ffls.cluster": 5,
     "ffls.demo": 6,
     "ffls.commands": 7, "ffls.cli": 8, "ffls.__main__": 9,
     "ffls.shaders": 0, "ffls.assets": 0,
 }
 #: Packages that the rank rule does not cover, with what they may import.
 LOWEST_STAGES = ("ffls.io", "ffls.radiance", "ffls.camera", "ffls.lightmaps")
-HIGH_STAGES = ("ffls.spheres", "ffls.probes", "ffls.weights", "ffls.relight", "ffls.gpu", "ffls.synth", "ffls.commands")
+HIGH_STAGES = ("ffls.store", "ffls.cluster", "ffls.spheres", "ffls.probes", "ffls.weights", "ffls.relight", "ffls.gpu", "ffls.synth", "ffls.commands")
 
 
 def _module_name(path: Path) -> str:

@@ -333,7 +333,7 @@ class ViewerApp:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_png(path, self.read_window())
         exr = path.with_suffix(".exr")
-        write_exr(exr, self.renderer.read_hdr())
+        write_exr(exr, self.renderer.read_hdr_full())  # full resolution, tile by tile from a store
         self.renderer.info.message = f"saved {path} and {exr.name}"
         return path, exr
 

@@ -164,6 +164,7 @@ class Renderer:
         self._composite_hdr = None
         self._composite_display = None
         self._registration = None
+        self.streamed, self.level = None, 0  # the full-resolution store when a pyramid level is shown
         self.info = ViewInfo(n_lights=len(self.directions), renderer=ctx.info.get("GL_RENDERER", ""),
                              mask_available=mask is not None,
                              mask_reason=mask_reason or "this capture has no object mask")
@@ -224,8 +225,15 @@ class Renderer:
         t0 = time.perf_counter()
         # the pass-1 map height is applied here (it changes without a rebuild), not by the engine; the
         # weighting knob switches without a rebuild (set_weighting in update), its texture at its default
-        new = Engine.from_capture(self.ctx, self.capture, self.lights, quality=quality, map_res=None,
-                                  profile=self.profile, cell_res=quality.cell_res or 256, weights_res=None)
+        # the photos, or the level of the store's pyramid that fits the GPU and the window (docs/scale.md)
+        from ffls.commands.common import available_memory
+        from ffls.gpu.tiled import engine_for_view
+        from ffls.relight.stream import default_memory
+
+        new, self.streamed, self.level = engine_for_view(self.ctx, self.capture, self.lights,
+                                                         default_memory(available_memory()), quality=quality,
+                                                         window=state.window_size, map_res=None, profile=self.profile,
+                                                         cell_res=quality.cell_res or 256, weights_res=None)
         self._light_key = None
         if self.engine is not None:
             self.engine.release()
@@ -446,6 +454,14 @@ class Renderer:
         if self._composite_hdr is not None:
             return self._composite_hdr
         return self.engine.read_hdr()
+
+    def read_hdr_full(self) -> np.ndarray:
+        """The relit HDR at full resolution: the engine's, or the store's relit tile by tile with its weights."""
+        if self.streamed is None:
+            return self.engine.read_hdr()
+        self.streamed.set_weights(self.engine.read_weights())
+        self.streamed.render()
+        return self.streamed.read_hdr()
 
     def read_display(self) -> np.ndarray:
         """The tone-mapped relit image ``(H, W, 3)`` uint8 of the last :meth:`update` (or the composite)."""

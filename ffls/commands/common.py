@@ -66,6 +66,11 @@ __all__ = [
     "quality_from_args",
     "check_quality_args",
     "resolve_quality",
+    "MEMORY",
+    "add_scale_arguments",
+    "runner_from_args",
+    "memory_from_args",
+    "open_streamed_from_args",
 ]
 
 
@@ -680,6 +685,34 @@ def check_quality_args(args, n_lights: int, positions=None) -> None:
         raise InputError("--max-error and the frame-rate target apply only with --quality auto")
 
 
+def open_streamed_from_args(args, capture, lights, command: str, output_copies: int, gpu_budget=None):
+    """The relighter streamed from the capture's store when the photos do not fit ``--memory``
+    (or with ``--tiles``), under the manual quality flags; None when the in-memory path fits.
+
+    Raises
+    ------
+    ffls.errors.InputError
+        ``--quality auto`` on a capture that streams (the choice measures the capture in memory).
+    """
+    from ffls.errors import InputError
+    from ffls.relight.basis import accepted_positions
+    from ffls.relight.stream import open_streamed
+
+    idx, _ = lights.accepted()
+    check_quality_args(args, len(idx), accepted_positions(lights))
+    q = quality_from_args(args)
+    with runner_from_args(args) as runner:
+        r, notes = open_streamed(capture, lights, memory_from_args(args), store=args.store, runner=runner,
+                                 cell_res=getattr(args, "cells_res", None) or None, cell_max_res=1024,
+                                 force=args.tiles, output_copies=output_copies, gpu_budget=gpu_budget, quality=q)
+    if r is not None and getattr(args, "quality", "manual") == "auto":
+        r.release()
+        raise InputError("--quality auto measures the capture in memory, and this capture streams from its store: "
+                         "give the knobs instead (docs/tradeoff.md)")
+    print_notes(command, *notes)
+    return r
+
+
 def resolve_quality(args, capture, lights, lightmap, rotation=None, timer=None, command: str = ""):
     """The configuration to relight with: the manual knobs, or (``--quality auto``) the measured choice.
 
@@ -730,3 +763,86 @@ def write_output(out, hdr, display8=None, mask=None) -> None:
         write_exr(out, hdr if mask is None else premultiply(hdr, mask), alpha=mask)
     else:
         write_png(out, display8 if mask is None else with_alpha(display8, mask))
+
+
+# ----------------------------------------------------------------------------- captures of any size (docs/scale.md)
+def _memory_type(text):
+    from ffls.relight.stream import parse_memory
+
+    try:
+        v = parse_memory(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    if v < 64 * 2 ** 20:
+        raise argparse.ArgumentTypeError(f"expected at least 64M, not {text!r}")
+    return v
+
+
+#: ``--memory SIZE``: bytes (``1G``, ``512M``), at least 64 MiB.
+MEMORY = _memory_type
+MEMORY.__name__ = "size"
+
+
+def add_scale_arguments(p, store: bool = True, memory: bool = True) -> None:
+    """``--memory``, ``--store``, ``--tiles`` (streamed relighting) and ``--workers``, ``--scheduler`` (Dask)."""
+    if memory:
+        p.add_argument("--memory", type=MEMORY, default=None, metavar="SIZE",
+                       help="memory budget, e.g. 1G or 512M (default: half of the memory available now); photos "
+                            "that do not fit are streamed tile by tile from the capture's store")
+    if store:
+        p.add_argument("--store", default=None, metavar="DIR.zarr",
+                       help="the chunked store of the photos (default CAPTURE/field.zarr; built on first use)")
+        p.add_argument("--tiles", action="store_true",
+                       help="stream from the store even when the photos would fit in memory")
+    p.add_argument("--workers", type=integer(1, 1024), default=None, metavar="N",
+                   help="local Dask worker processes for the per-photo work (default every core; 1: in this process)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run the per-photo work on this dask.distributed cluster (docs/scale.md)")
+
+
+def memory_from_args(args) -> int:
+    """``--memory``, or half of the memory available now (:func:`ffls.relight.stream.default_memory`)."""
+    from ffls.relight.stream import default_memory
+
+    m = getattr(args, "memory", None)
+    return int(m) if m is not None else default_memory(available_memory())
+
+
+class _LazyCluster:
+    """A Dask runner started on its first task (a fresh store needs none, and a cluster takes seconds)."""
+
+    def __init__(self, workers, scheduler, progress, stack):
+        self.workers, self.scheduler, self.progress, self.stack = workers, scheduler, progress, stack
+        self.runner = None
+
+    def started(self):
+        if self.runner is None:
+            from ffls.cluster import open_client
+
+            self.runner = self.stack.enter_context(open_client(self.workers, self.scheduler, self.progress))
+        return self.runner
+
+    @property
+    def n_workers(self) -> int:
+        return self.started().n_workers
+
+    def map(self, fn, items, desc: str = ""):
+        return self.started().map(fn, items, desc)
+
+
+@contextlib.contextmanager
+def runner_from_args(args, progress: bool = True):
+    """The runner of the per-photo tasks: a Dask cluster (``--scheduler``, or local ``--workers``), or this process.
+
+    ``--workers 1`` (and no ``--scheduler``) runs in this process, without Dask. The cluster is
+    started on the first task only.
+    """
+    scheduler = getattr(args, "scheduler", None)
+    workers = getattr(args, "workers", None)
+    if not scheduler and workers == 1:
+        from ffls.store.ingest import SerialRunner
+
+        yield SerialRunner(progress)
+        return
+    with contextlib.ExitStack() as stack:
+        yield _LazyCluster(workers, scheduler, progress, stack)

@@ -27,6 +27,9 @@ def add_arguments(p):
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), or free per photo (default calibrated)")
     p.add_argument("--workers", type=integer(1, 1024), default=None, help="processes, 1 to 1024 (default: every core)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT|local",
+                   help="read and linearise the photos on Dask: a dask.distributed cluster, or 'local' for a local "
+                        "cluster of --workers processes (docs/scale.md)")
     p.add_argument("--plot", default=None, type=output_path((".png",)), metavar="PLOT.png",
                    help="draw the accepted directions and their Voronoi cells on the hemisphere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -137,7 +140,12 @@ def run(args) -> int:
     if calibration is not None:
         print(calibration.summary())
     decoded = None
-    if spheres is None:  # every photo decoded once: the detection's reductions, then the first pass
+    cluster = bool(getattr(args, "scheduler", None))
+    if spheres is None and cluster:  # the photos are read on the cluster for the fits; here for detection only
+        from ffls.spheres.detect import find_spheres_in_capture
+
+        spheres = find_spheres_in_capture(cap)
+    elif spheres is None:  # every photo decoded once: the detection's reductions, then the first pass
         from ffls.spheres.detect import find_spheres_in_capture
         from ffls.spheres.estimate import decode_photos
 
@@ -154,8 +162,16 @@ def run(args) -> int:
         spheres = find_spheres_in_capture(cap, extremes=decoded.extremes())
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
-    lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
-                             model=args.model, bounce=args.bounce, decoded=decoded)
+    if cluster:
+        from ffls.cluster import open_client
+        from ffls.cluster.lights import estimate_lights_dask
+
+        remote = None if args.scheduler == "local" else args.scheduler
+        with open_client(args.workers, remote, progress=not args.no_progress) as runner:
+            lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce)
+    else:
+        lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
+                                 model=args.model, bounce=args.bounce, decoded=decoded)
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"

@@ -4,9 +4,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument,
-                                  add_quality_arguments, add_rotation_arguments, add_weighting_argument,
-                                  check_mask_size, exposure_arg, load_relight_inputs, output_path, resolve_quality,
-                                  rotation_from_args, write_output)
+                                  add_quality_arguments, add_rotation_arguments, add_scale_arguments,
+                                  add_weighting_argument, check_mask_size, exposure_arg, load_relight_inputs,
+                                  open_streamed_from_args, output_path, resolve_quality, rotation_from_args,
+                                  write_output)
 
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
@@ -29,6 +30,7 @@ def add_arguments(p):
                    help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
     add_weighting_argument(p)
     add_quality_arguments(p, precision_default=None, rank=True)
+    add_scale_arguments(p)
     p.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output image, .exr or .png")
 
 
@@ -42,14 +44,23 @@ def run(args) -> int:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
     R = rotation_from_args(args)
-    q = resolve_quality(args, capture, lights, lightmap, R, command=NAME)
-    storage = None if args.precision is None and args.quality != "auto" else q.precision
-    r = CpuRelighter.from_capture(capture, lights, quality=q, storage=storage, cell_res=args.cells_res or None,
-                                  cell_k=4, cell_max_res=1024)
-    r.set_lightmap(lightmap)
-    r.set_rotation(R)
-    r.render()
-    image, w = r.hdr, r.last_weights
+    copies = 2 if out.suffix.lower() == ".exr" and mask is None else 4  # the result, the writer's copy, the tone map's
+    r = open_streamed_from_args(args, capture, lights, NAME, copies)
+    if r is not None:  # tile by tile from the store
+        r.set_lightmap(lightmap)
+        r.set_rotation(R)
+        r.render()
+        image, w = r.hdr, r.last_weights
+        r.release()
+    else:
+        q = resolve_quality(args, capture, lights, lightmap, R, command=NAME)
+        storage = None if args.precision is None and args.quality != "auto" else q.precision
+        r = CpuRelighter.from_capture(capture, lights, quality=q, storage=storage, cell_res=args.cells_res or None,
+                                      cell_k=4, cell_max_res=1024)
+        r.set_lightmap(lightmap)
+        r.set_rotation(R)
+        r.render()
+        image, w = r.hdr, r.last_weights
     check_mask_size(mask, image.shape)
     display = None
     if out.suffix.lower() != ".exr":

@@ -15,9 +15,9 @@ import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
                                   add_mask_argument, add_quality_arguments, add_rotation_arguments,
-                                  add_weighting_argument, check_mask_size, exposure_arg, flush_notes, light_vector,
-                                  load_relight_inputs, output_path, resolve_quality, rotation_from_args,
-                                  write_output)
+                                  add_scale_arguments, add_weighting_argument, check_mask_size, exposure_arg,
+                                  flush_notes, light_vector, load_relight_inputs, open_streamed_from_args,
+                                  output_path, resolve_quality, rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -52,6 +52,7 @@ def add_arguments(p):
     p.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
     p.add_argument("--cpu", action="store_true", help="use the CPU reference path instead of the GPU")
     add_quality_arguments(p, precision_default="float16")
+    add_scale_arguments(p)
     p.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True),
                    help="output: .exr/.png (still), .mp4 or DIR/ (turntable)")
 
@@ -63,7 +64,17 @@ def parse_rotation(args) -> np.ndarray:
 
 def _make_renderer(args, capture, lights, lightmap=None, R0=None):
     """The relighter (GPU engine, or with ``--cpu`` the float64 reference) and its context, under the
-    configuration of the quality flags (``--quality auto`` measures it here, on the same path)."""
+    configuration of the quality flags (``--quality auto`` measures it here, on the same path); a
+    capture that does not fit ``--memory`` or the GPU is relit tile by tile from its store."""
+    from ffls.gpu.basis import DEFAULT_BUDGET
+
+    copies = 2 if args.turntable is None and Path(args.out).suffix.lower() == ".exr" else 4
+    streamed = open_streamed_from_args(args, capture, lights, NAME, copies,
+                                       gpu_budget=None if args.cpu else DEFAULT_BUDGET)
+    if streamed is not None:
+        if args.cpu:
+            return streamed, None
+        return _tiled_gpu(args, streamed)
     if args.cpu:
         from ffls.relight.cpu import CpuRelighter
 
@@ -87,6 +98,26 @@ def _make_renderer(args, capture, lights, lightmap=None, R0=None):
         ctx.release()
         raise
     return eng, ctx
+
+
+def _tiled_gpu(args, streamed):
+    """The GPU engine tile by tile over the store (:class:`ffls.gpu.tiled.TiledEngine`)."""
+    from ffls.errors import GLUnavailable
+    from ffls.gpu.context import create_headless_context
+    from ffls.gpu.tiled import TiledEngine
+
+    try:
+        ctx = create_headless_context()
+    except GLUnavailable as e:
+        raise GLUnavailable(f"no GPU path ({e.message}); rerun with --cpu for the CPU reference path") from None
+    try:
+        from ffls.relight.storage import parse_storage
+
+        return TiledEngine(ctx, streamed, dtype=parse_storage(args.precision or "float16"),
+                           cell_res=args.cells_res or 256), ctx
+    except BaseException:
+        ctx.release()
+        raise
 
 
 def _auto_exposure(r, args, mask) -> float:

@@ -21,7 +21,8 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.gpu.context import release_gl
-from ffls.relight.storage import F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, to_float16
+# the checked float16 conversion is shared with the chunked store on disk (one definition)
+from ffls.store.float16 import F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, to_float16
 
 __all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
            "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "SSBO_BAND_BYTES"]
