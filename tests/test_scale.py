@@ -120,6 +120,36 @@ def test_cli_relight_streams_and_equals_in_memory(tmp_path, capsys):
     assert np.max(np.abs(x - y)) <= 2 ** -10 * np.max(np.abs(x))
 
 
+@pytest.mark.parametrize("knobs", [["--weighting", "barycentric"], ["--weighting", "gaussian", "--map-res", "32"]])
+def test_cli_streamed_relight_follows_the_quality_knobs(tmp_path, capsys, knobs):
+    """The streamed path relights under the same weighting scheme and pass-1 map as the in-memory one."""
+    from ffls.cli import main
+    from ffls.io.images import read_image
+
+    cap = make_capture(tmp_path / "cap", n=6)
+    a, b, v = tmp_path / "a.exr", tmp_path / "b.exr", tmp_path / "v.exr"
+    base = ["relight", str(cap.folder), "--probe", "sky", "--workers", "1"]
+    assert main(base + knobs + ["-o", str(a)]) == 0
+    assert main(base + knobs + ["--tiles", "-o", str(b)]) == 0
+    assert main(base + ["--tiles", "-o", str(v)]) == 0
+    capsys.readouterr()
+    x, y, z = read_image(a).pixels, read_image(b).pixels, read_image(v).pixels
+    assert np.max(np.abs(x - y)) <= 2 ** -10 * np.max(np.abs(x))
+    assert np.max(np.abs(y - z)) > 2 ** -8 * np.max(np.abs(x))  # the scheme did change the streamed result
+
+
+@pytest.mark.parametrize("flag", [["--basis-subset", "3"], ["--quality", "auto", "--max-error", "0.1"]])
+def test_cli_streamed_refuses_in_memory_knobs_in_one_line(tmp_path, capsys, flag):
+    from ffls.cli import main
+
+    cap = make_capture(tmp_path / "cap", n=6)
+    out = tmp_path / "x.exr"
+    rc = main(["relight", str(cap.folder), "--probe", "sky", "--tiles", "--workers", "1", "-o", str(out)] + flag)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and flag[0] in err[0], err
+    assert not out.exists()
+
+
 def test_cli_memory_too_small_refused_in_one_line(tmp_path, capsys):
     from ffls.cli import main
 
