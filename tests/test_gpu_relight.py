@@ -97,6 +97,38 @@ def test_pass2_matches_reference(ctx, rng, dtype, method):
 
 
 @pytest.mark.gl
+@pytest.mark.parametrize("method", ["compute", "fragment", "packed"])
+def test_two_pass2_instances_of_different_sizes_share_a_context(ctx, rng, method):
+    """The programs are cached per context: an instance made after another of another size must not
+    change the first's image size (the viewer's composite, the tiled engine's tiles)."""
+    from ffls.gpu.basis import BasisTextures, PackedBasis
+    from ffls.gpu.context import release_gl
+    from ffls.gpu.weighted_sum import ToneMapPass, WeightedSum, weights_to_vec4
+    from ffls.relight.cpu import relight_reference
+
+    kind = PackedBasis if method == "packed" else BasisTextures
+    a, b = _basis(rng, 8, 12, 20), _basis(rng, 8, 7, 33)
+    w = rng.random((8, 3))
+    ta, tb = kind(ctx, a, "f32"), kind(ctx, b, "f32")
+    wa, wb = WeightedSum(ctx, ta, method), WeightedSum(ctx, tb, method)  # both made before either runs
+    pa, pb = ToneMapPass(ctx, wa.size), ToneMapPass(ctx, wb.size)
+    buf = ctx.buffer(weights_to_vec4(w))
+    try:
+        wa.run(buf)
+        wb.run(buf)
+        _check_close(wa.read(), relight_reference(w, a))
+        _check_close(wb.read(), relight_reference(w, b))
+        pa.run(wa.output)
+        pb.run(wb.output)
+        assert pa.read().shape == (12, 20, 3) and pb.read().shape == (7, 33, 3)
+        assert pa.read().any()  # written over the whole image, not clipped to the other's size
+    finally:
+        release_gl(buf)
+        for x in (pa, pb, wa, wb, ta, tb):
+            x.release()
+
+
+@pytest.mark.gl
 @pytest.mark.parametrize("n", [1, 2048])
 @pytest.mark.parametrize("method", ["compute", "packed"])
 def test_pass2_extreme_light_counts(ctx, rng, n, method):

@@ -111,10 +111,6 @@ class WeightedSum:
             self.prog = load_program(ctx, "weighted_sum_frag.glsl", {"WEIGHTS_BINDING": WEIGHTS_BINDING})
             self._fbo = ctx.framebuffer(color_attachments=[self.output])
             self._vao = ctx.vertex_array(self.prog, [])
-        if "u_basis" in self.prog:
-            self.prog["u_basis"].value = 0
-        if "u_size" in self.prog:
-            self.prog["u_size"].value = self.size
 
     def _init_packed(self):
         b = self.basis
@@ -125,9 +121,7 @@ class WeightedSum:
                        "BASIS_BINDING": BASIS_BINDING}
             if b.dtype == "f16":
                 defines["PACKED_F16"] = True
-            prog = load_program(self.ctx, "weighted_sum_packed.glsl", defines)
-            prog["u_width"].value = self.size[0]
-            self._progs.append(prog)
+            self._progs.append(load_program(self.ctx, "weighted_sum_packed.glsl", defines))
         # uniform-block ranges must start at a multiple of the device's alignment: chunks whose
         # first weight is not aligned read a copy of their weights (a GPU-side copy, no read-back)
         align = int(self.ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT") or 256)
@@ -152,6 +146,7 @@ class WeightedSum:
                 self._wscratch.bind_to_uniform_block(WEIGHTS_UBO_BINDING, offset=slot, size=16 * cnt)
             if j:
                 ctx.memory_barrier()
+            prog["u_width"].value = self.size[0]  # programs are cached per context: this instance's size, each run
             prog["u_inv_scale"].value = 1.0 / b.scale
             prog["u_accumulate"].value = 1 if j else 0
             for row0, rows, buf in bands:
@@ -179,6 +174,11 @@ class WeightedSum:
             return
         weights_buffer.bind_to_storage_buffer(WEIGHTS_BINDING)
         prog = self.prog
+        # the programs are cached per context and shared by every instance: this one's uniforms, each run
+        if "u_basis" in prog:
+            prog["u_basis"].value = 0
+        if "u_size" in prog:
+            prog["u_size"].value = self.size
         prog["u_inv_scale"].value = 1.0 / self.basis.scale
         if self.method == "compute":
             self.output.bind_to_image(0, read=True, write=True)
@@ -242,7 +242,6 @@ class ToneMapPass:
     def __init__(self, ctx, size):
         self.ctx, self.size = ctx, tuple(size)
         self.prog = load_program(ctx, "tonemap.glsl")
-        self.prog["u_size"].value = self.size
         self.output = ctx.texture(self.size, 4, dtype="f1")
         self.output.filter = (0x2601, 0x2601)  # GL_LINEAR for display
 
@@ -260,6 +259,7 @@ class ToneMapPass:
             raise ValueError(f"tone-map method must be one of {tuple(_TONEMAP_CODES)}, not {method!r}")
         hdr_texture.bind_to_image(0, read=True, write=False)
         self.output.bind_to_image(1, read=False, write=True)
+        self.prog["u_size"].value = self.size  # the program is shared by every pass of this context
         self.prog["u_exposure_scale"].value = float(2.0 ** float(exposure))
         self.prog["u_method"].value = _TONEMAP_CODES[method]
         self.prog.run(*_groups(self.size))
