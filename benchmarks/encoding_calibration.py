@@ -80,6 +80,7 @@ def run_seed(args, seed: int) -> list:
             e, r = errors_deg(got, truth), errors_deg(ref, truth)
             rows.append({"seed": seed, "true": name, "named": cal.curve, "gamma": cal.gamma,
                          "uncertainty": cal.uncertainty, "srgb_excess": cal.srgb_excess,
+                         "linear_excess": cal.linear_excess, "bic_penalty": cal.bic_penalty,
                          "spheres": cal.n_spheres, "photos": cal.n_photos,
                          "calibration_s": t_cal, "median_deg": float(np.median(e)), "max_deg": float(e.max()),
                          "accepted": int(got.ok_mask.sum()), "stated_median_deg": float(np.median(r)),
@@ -101,10 +102,11 @@ def main(argv=None) -> int:
     for seed in range(args.seed, args.seed + args.repeat):
         rows += run_seed(args, seed)
     print(f"{args.lights} lights, {args.res} px, {args.bits}-bit PNG, noise {args.noise} code values")
-    print(f"{'true':9} {'named':7} {'gamma':>13} {'sRGB exc':>9} {'median':>7} {'max':>6} {'acc':>5} "
+    print(f"{'true':9} {'named':7} {'gamma':>13} {'lin exc':>9} {'sRGB exc':>9} {'ln n_eff':>8} {'median':>7} {'max':>6} {'acc':>5} "
           f"{'stated med':>10} {'stated max':>10} {'cal s':>6}")
     for r in rows:
-        print(f"{r['true']:9} {r['named']:7} {r['gamma']:6.3f}+-{r['uncertainty']:.3f} {r['srgb_excess']:9.1f} "
+        print(f"{r['true']:9} {r['named']:7} {r['gamma']:6.3f}+-{r['uncertainty']:.3f} {r['linear_excess']:9.1f} "
+              f"{r['srgb_excess']:9.1f} {r['bic_penalty']:8.1f} "
               f"{r['median_deg']:7.2f} {r['max_deg']:6.2f} {r['accepted']:5d} {r['stated_median_deg']:10.2f} "
               f"{r['stated_max_deg']:10.2f} {r['calibration_s']:6.1f}")
     if args.repeat > 1:

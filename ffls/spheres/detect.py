@@ -76,12 +76,19 @@ __all__ = [
     "edge_points",
     "Spheres",
     "extreme_images",
+    "sequence_stats",
+    "SequenceStats",
+    "photo_colour_counts",
+    "photo_edge_tensor",
+    "consistent_edge_points",
+    "COLOUR_BINS",
     "orthographic_normals",
     "disc_mask",
     "outline_visible_fraction",
     "fit_circle",
     "gradient_noise",
     "shading_ratio",
+    "outline_quality",
     "CRITERIA",
 ]
 
@@ -390,6 +397,197 @@ def max_image(images) -> np.ndarray:
     return acc
 
 
+#: Bins of :func:`photo_colour_counts` over the min/max channel ratio [0, 1].
+COLOUR_BINS = 16
+
+
+@dataclasses.dataclass
+class SequenceStats:
+    """What detection keeps of a photo sequence, gathered in one streamed pass (:func:`sequence_stats`).
+
+    Attributes
+    ----------
+    max : (H, W, 3) or (H, W) float32
+        Per-pixel maximum (:func:`max_image`).
+    brightest : (H, W) int32 or None
+        Index of the photo with the highest luminance at each pixel (the first on ties).
+    mean : (H, W) float64 or None
+        Mean luminance over the photos.
+    n : int
+        Photos.
+    colour_counts : (COLOUR_BINS, H, W) uint16 or None
+        Per pixel, how many photos put it in each bin of the min/max channel ratio, counting only
+        the photos where it is lit and unclipped (:func:`photo_colour_counts`); None for a single
+        image or a single-channel sequence.
+    edge_tensor : (3, H, W) float32 or None
+        The per-photo edge evidence (:func:`photo_edge_tensor`); None for a single image.
+    """
+
+    max: np.ndarray
+    brightest: np.ndarray | None
+    mean: np.ndarray | None
+    n: int
+    colour_counts: np.ndarray | None = None
+    edge_tensor: np.ndarray | None = None
+
+
+def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> None:
+    """Add one photo's log-luminance structure tensor to ``tensor`` (in place): per-photo edge evidence.
+
+    A silhouette is an edge at the same place in nearly every photo, whatever the light: the
+    sphere's limb and the ground behind it differ in most photos, though which is brighter
+    changes. In the max image it can vanish where both are bright in some photo (a white sphere on
+    a white ground, at its top), and a contact shadow's boundary can replace it below. Moving
+    edges (terminators, cast shadows) cross each pixel in few photos. The sum over the photos of
+    the gradient's outer product ``g g^T`` of ``ln(L + floor * peak)`` (blurred by ``sigma``;
+    ``peak`` the photo's 99.5th percentile, so the noise of its dark parts is not amplified)
+    keeps the consistent edges strong whatever their polarity (a summed gradient would cancel
+    them) and spreads the moving ones thin (:func:`consistent_edge_points`).
+
+    Parameters
+    ----------
+    lum : (H, W) float
+        The photo's luminance.
+    tensor : (3, H, W) float32
+        ``[sum gx^2, sum gx gy, sum gy^2]``, gradients in natural-log units per pixel.
+    sigma, floor : float
+    """
+    peak = float(np.percentile(lum, 99.5))
+    if not peak > 0:
+        return
+    g = cv2.GaussianBlur(np.log(np.asarray(lum, dtype=np.float32) + np.float32(floor * peak)), (0, 0), sigma)
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    tensor[0] += gx * gx
+    tensor[1] += gx * gy
+    tensor[2] += gy * gy
+
+
+def consistent_edge_points(tensor, n_photos: int):
+    """Ridge points of the per-photo edge evidence (:func:`photo_edge_tensor`), sub-pixel.
+
+    The strength is ``sqrt(lambda_1 / n)``, the RMS over the photos of the log-luminance gradient
+    along the tensor's principal direction ``e_1``. A point is kept where the strength is a local
+    maximum along ``e_1`` and above 3 times its median over the image; its position is refined by
+    a parabola through its two neighbours along ``e_1``.
+
+    Parameters
+    ----------
+    tensor : (3, H, W) float
+    n_photos : int
+
+    Returns
+    -------
+    points : (m, 2) float64
+        (x, y), pixels.
+    dirs : (m, 2) float64
+        Unit ``e_1`` (across the edge; its sign is arbitrary).
+    strength : (m,) float64
+    """
+    jxx, jxy, jyy = (np.asarray(t, dtype=np.float64) / max(int(n_photos), 1) for t in tensor)
+    half_tr = 0.5 * (jxx + jyy)
+    l1 = half_tr + np.sqrt(np.maximum(half_tr ** 2 - (jxx * jyy - jxy ** 2), 0.0))
+    S = np.sqrt(np.maximum(l1, 0.0))
+    ang = 0.5 * np.arctan2(2 * jxy, jxx - jyy)
+    H, W = S.shape
+    ys, xs = np.mgrid[0:H, 0:W]
+    thr = 3.0 * float(np.median(S))
+    cand = S > max(thr, 1e-12)
+    p = np.stack([xs[cand], ys[cand]], axis=1).astype(np.float64)
+    e = np.stack([np.cos(ang[cand]), np.sin(ang[cand])], axis=1)
+    s0 = S[cand]
+    sp, sm = _bilinear(S, p + e), _bilinear(S, p - e)
+    ridge = (s0 >= sp) & (s0 > sm)
+    den = sm - 2 * s0 + sp
+    off = np.where(den < 0, 0.5 * (sm - sp) / np.where(den < 0, den, -1.0), 0.0)
+    off = np.clip(off, -0.5, 0.5)
+    return p[ridge] + off[ridge, None] * e[ridge], e[ridge], s0[ridge]
+
+
+def photo_colour_counts(im, lum, counts, lit_fraction: float = 0.1, clip_fraction: float = 0.98) -> None:
+    """Add one photo's colour evidence to ``counts`` (in place): per pixel, its min/max channel bin.
+
+    Colour is judged in each photo, not in the max image: a coloured glossy ball's highlights
+    from many photos whiten it in the max image, but each photo shows a highlight on few of its
+    pixels, and its body colour (dichromatic reflection, Shafer 1985) everywhere else it is lit.
+    A pixel counts in a photo when it is lit (luminance at least ``lit_fraction`` of the photo's
+    99.5th percentile: dark pixels' ratios are noise) and no channel is clipped (at or above
+    ``clip_fraction`` of the photo's channel maximum: a clipped highlight reads white, a clipped
+    red channel reads less red). Its bin is ``floor(COLOUR_BINS * min/max)``.
+
+    Parameters
+    ----------
+    im : (H, W, 3+) float
+        Linear photo.
+    lum : (H, W) float
+        Its luminance.
+    counts : (COLOUR_BINS, H, W) uint16
+    lit_fraction, clip_fraction : float
+    """
+    rgb = im[..., :3]
+    hi = rgb.max(axis=2)
+    lo = rgb.min(axis=2)
+    peak = float(np.percentile(lum, 99.5))
+    if not peak > 0:
+        return
+    chan_max = rgb.reshape(-1, 3).max(axis=0)
+    use = (lum >= lit_fraction * peak) & ~np.any(rgb >= clip_fraction * chan_max, axis=2) & (hi > 0)
+    flat = np.flatnonzero(use)
+    if flat.size == 0:
+        return
+    ratio = lo.reshape(-1)[flat] / hi.reshape(-1)[flat]
+    b = np.minimum((ratio * COLOUR_BINS).astype(np.int64), COLOUR_BINS - 1)
+    cf = counts.reshape(COLOUR_BINS, -1)
+    cf[b, flat] += 1  # one bin per pixel: no repeated index
+
+
+def sequence_stats(images, colour: bool = True, edges: bool = True) -> SequenceStats:
+    """The max image, the brightest photo, the mean luminance and the per-photo colour counts, in one pass.
+
+    Parameters
+    ----------
+    images : as :func:`max_image`
+        A single image is taken to be a max image already: no index, mean or colour counts; count 1.
+    colour : bool
+        Gather :attr:`SequenceStats.colour_counts` (:func:`photo_colour_counts`).
+    edges : bool
+        Gather :attr:`SequenceStats.edge_tensor` (:func:`photo_edge_tensor`).
+
+    Returns
+    -------
+    SequenceStats
+    """
+    if isinstance(images, np.ndarray) and images.ndim in (2, 3) and not (images.ndim == 3 and images.shape[-1] not in (1, 3, 4)):
+        return SequenceStats(max_image(images), None, None, 1)
+    mx = best_l = idx = total = counts = tensor = None
+    n = 0
+    for im in images:
+        im = np.nan_to_num(np.asarray(im, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        lum = _luminance(im).astype(np.float32)
+        if mx is None:
+            mx, best_l, idx, total = im.copy(), lum, np.zeros(lum.shape, np.int32), lum.astype(np.float64)
+            if colour and im.ndim == 3 and im.shape[2] >= 3:
+                counts = np.zeros((COLOUR_BINS, *lum.shape), np.uint16)
+            if edges:
+                tensor = np.zeros((3, *lum.shape), np.float32)
+        elif im.shape != mx.shape:
+            raise ValueError(f"image shapes differ: {im.shape} vs {mx.shape}")
+        else:
+            np.maximum(mx, im, out=mx)
+            up = lum > best_l
+            idx[up] = n
+            best_l[up] = lum[up]
+            total += lum
+        if counts is not None and n < np.iinfo(np.uint16).max:
+            photo_colour_counts(im, lum, counts)
+        if tensor is not None:
+            photo_edge_tensor(lum, tensor)
+        n += 1
+    if mx is None:
+        raise ValueError("no images")
+    return SequenceStats(mx, idx, total / n, n, counts, tensor if n > 1 else None)
+
+
 def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
     """Per-pixel maximum over a sequence, which photo gave it, the mean luminance and the count, in one pass.
 
@@ -408,27 +606,8 @@ def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | 
         Mean luminance over the photos (None for a single image).
     n : int
     """
-    if isinstance(images, np.ndarray) and images.ndim in (2, 3) and not (images.ndim == 3 and images.shape[-1] not in (1, 3, 4)):
-        return max_image(images), None, None, 1
-    mx = best_l = idx = total = None
-    n = 0
-    for im in images:
-        im = np.nan_to_num(np.asarray(im, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-        lum = _luminance(im).astype(np.float32)
-        if mx is None:
-            mx, best_l, idx, total = im.copy(), lum, np.zeros(lum.shape, np.int32), lum.astype(np.float64)
-        elif im.shape != mx.shape:
-            raise ValueError(f"image shapes differ: {im.shape} vs {mx.shape}")
-        else:
-            np.maximum(mx, im, out=mx)
-            up = lum > best_l
-            idx[up] = n
-            best_l[up] = lum[up]
-            total += lum
-        n += 1
-    if mx is None:
-        raise ValueError("no images")
-    return mx, idx, total / n, n
+    st = sequence_stats(images, colour=False, edges=False)
+    return st.max, st.brightest, st.mean, st.n
 
 
 def _luminance(img: np.ndarray) -> np.ndarray:
@@ -895,7 +1074,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
                  n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
-                 saturates: bool = False) -> Spheres:
+                 saturates: bool = False, colour_counts=None) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -958,6 +1137,11 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         The photos are integer files that clip at their largest code: pixels with a channel at
         or above :func:`ffls.spheres.select.clip_levels` carry no colour evidence for the
         neutrality criterion (a saturated red ball reads white). False for floating-point images.
+        Used only without per-photo colour evidence.
+    colour_counts : (COLOUR_BINS, H, W) int, optional
+        Per-photo colour evidence (:func:`photo_colour_counts`), when ``images`` is already a max
+        image; gathered from ``images`` when they are a sequence. With it, colour is judged per
+        photo (:func:`ffls.spheres.select.photo_neutrality`), not on the max image.
     min_visible : float
         A sphere cut by the frame edge is used when at least this fraction of its outline is
         inside the image; otherwise it is set aside (``Spheres.rejected``), or an error when hinted.
@@ -1004,7 +1188,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         if ortho:
             raise InputError("sphere overrides need a pinhole camera; give 'center_px' hints instead", source)
         return Spheres(_spheres_from_overrides(overrides, K, dist, wfc, R, source))
-    mx, brightest, mean, L, n_img = _max_luminance(images, source)
+    mx, brightest, mean, L, n_img, colour = _max_luminance(images, source)
+    if colour_counts is not None:
+        colour = np.asarray(colour_counts)
     if brightest_index is not None:
         brightest = np.asarray(brightest_index, dtype=np.int64)
     if mean_luminance is not None:
@@ -1033,7 +1219,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
         fits = _with_outer_outlines(fits, edges, L, cam, rng)  # a mirror's dark cap -> its silhouette
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
-                                        saturates=saturates)
+                                        saturates=saturates, colour_counts=colour)
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
         if not fits or (n_spheres is not None and len(fits) < n_spheres):
@@ -1063,16 +1249,18 @@ def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFi
 
 
 def _max_luminance(images, source):
-    """Stage 1: the max image, the brightest-photo index and the mean luminance (None for a single image), luminance of the max, count."""
+    """Stage 1: the max image, the brightest-photo index and the mean luminance (None for a single image),
+    luminance of the max, count, and the per-photo colour counts (:func:`sequence_stats`)."""
     try:
-        mx, brightest, mean, n = extreme_images(images)
+        st = sequence_stats(images)
     except ValueError as e:
         raise InputError(str(e), source) from None
+    mx, brightest, mean, n = st.max, st.brightest, st.mean, st.n
     L = _luminance(mx)
     peak = float(L.max()) if L.size else 0.0
     if not np.isfinite(peak) or peak <= 0 or float(np.percentile(L, 99.9)) <= 1e-6 * max(peak, 1e-30):
         raise InputError("all images are black (no light on the spheres in any photo)", source)
-    return mx, brightest, mean, L, n
+    return mx, brightest, mean, L, n, st.colour_counts
 
 
 @dataclasses.dataclass
@@ -1219,11 +1407,24 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
     return fits, failures
 
 
+def outline_quality(ft) -> float:
+    """How well a fitted outline is supported: ``coverage / (1 + (residual_px / 0.5)^2)``.
+
+    The fit-quality factor of the selection's score (:func:`ffls.spheres.select.select_spheres`):
+    the share of the outline with edge support, discounted by the RMS distance of the points
+    from the fitted outline (a 0.5-pixel RMS halves it).
+    """
+    return float(ft.coverage) / (1.0 + (float(ft.residual_px) / 0.5) ** 2)
+
+
 def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
     """Each candidate grown to its outer outline (:func:`_outer_outline`); where a grown outline is
     the same circle (centre and radius within 15%) as a candidate fitted directly, the direct one is
-    kept if it is round (RMS within ``CRITERIA['max_residual_px']``) and covers more of its outline
-    (a matte sphere's own outline beats its inner circles grown to it)."""
+    kept if it is round (RMS within ``CRITERIA['max_residual_px']``) and fits at least as well by
+    the selection's outline quality, coverage / (1 + (RMS / 0.5 px)^2) (:func:`outline_quality`):
+    a matte sphere's own closed outline beats its inner circles grown to it, while a mirror ball's
+    dark cap fitted directly together with its contact shadow below (a wider circle, 1.4 px off,
+    RMS 0.76 px) loses to the outer outline of its silhouette (RMS 0.47 px, same coverage)."""
     grown = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]
     outer = [g for g in grown if g.source == OUTER_SOURCE]
     direct = [g for g in grown if g.source != OUTER_SOURCE]
@@ -1232,8 +1433,9 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
         r = max(a.radius_px, b.radius_px)
         return np.hypot(*(a.center_px - b.center_px)) < 0.15 * r and abs(a.radius_px - b.radius_px) < 0.15 * r
 
-    def better(d, g):  # a direct fit that is round (residual within the limit) and covers more
-        return d.coverage >= g.coverage and d.residual_px <= max(g.residual_px, CRITERIA["max_residual_px"])
+    def better(d, g):  # a direct fit that is round (residual within the limit) and fits at least as well
+        return outline_quality(d) >= outline_quality(g) and d.residual_px <= max(g.residual_px,
+                                                                                 CRITERIA["max_residual_px"])
 
     keep_outer = [g for g in outer if not any(same(g, d) and better(d, g) for d in direct)]
     keep_direct = [d for d in direct if not any(same(g, d) for g in keep_outer)]
@@ -1377,9 +1579,10 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
     it = photos()
     if progress is not None:
         it = progress(it, total=n)
-    mx, brightest, mean, n_img = extreme_images(it) if n else (None, None, None, 0)
-    if mx is None:
+    if not n:
         raise InputError("capture lists no images", capture.folder)
+    st = sequence_stats(it)
+    mx, brightest, mean, n_img = st.max, st.brightest, st.mean, st.n
     hints = getattr(capture, "spheres", None) or None
     if n_spheres is None:
         n_spheres = getattr(capture, "sphere_count", None)
@@ -1389,4 +1592,4 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         scene_center=getattr(capture, "scene_center", None), source=capture.folder,
                         camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img,
                         mean_luminance=mean if n_img > 1 else None,
-                        saturates=any(isinstance(d, int) for d in depths))
+                        saturates=any(isinstance(d, int) for d in depths), colour_counts=st.colour_counts)
