@@ -57,7 +57,7 @@ from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_b
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
-from ffls.spheres.select import CRITERIA, disc_pixels, select_spheres
+from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, select_spheres
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circumcircles, dark_cap,
                                          enclosing_circle, mirror_silhouette)
 
@@ -81,7 +81,9 @@ __all__ = [
     "photo_colour_counts",
     "photo_edge_tensor",
     "consistent_edge_points",
+    "consistent_edge_strength",
     "COLOUR_BINS",
+    "EDGE_PHOTOS",
     "orthographic_normals",
     "disc_mask",
     "outline_visible_fraction",
@@ -89,8 +91,13 @@ __all__ = [
     "gradient_noise",
     "shading_ratio",
     "outline_quality",
+    "PHOTO_EDGES",
     "CRITERIA",
 ]
+
+
+#: ``SphereFit.outline_edges`` of an outline fitted on the edges that hold in the photos.
+PHOTO_EDGES = "photos"
 
 
 # ----------------------------------------------------------------------------- result
@@ -142,6 +149,9 @@ class SphereFit:
         A mirror ball's outline ambiguity, pixels: half the gap (centre and radius) between its two
         outline estimates (the reflected room's contrasts, which run inside the limb, and the limb's
         reflectance step, :mod:`ffls.spheres.mirror_outline`); 0 for other spheres.
+    outline_edges : {'max image', 'photos'}
+        Where the outline's points come from: the max image's edges, or the edges that hold in the
+        photos (:data:`PHOTO_EDGES`, :func:`consistent_edge_points`).
     """
 
     center_cam: np.ndarray
@@ -164,6 +174,7 @@ class SphereFit:
     score: float = 0.0
     center_sigma_px: float = 0.0
     outline_sigma_px: float = 0.0
+    outline_edges: str = "max image"
 
     @property
     def distance(self) -> float:
@@ -204,6 +215,7 @@ class SphereFit:
             "visible_fraction": float(self.visible_fraction),
             "center_sigma_px": float(self.center_sigma_px),
             "outline_sigma_px": float(self.outline_sigma_px),
+            "outline_edges": self.outline_edges,
         }
 
 
@@ -399,6 +411,10 @@ def max_image(images) -> np.ndarray:
 
 #: Bins of :func:`photo_colour_counts` over the min/max channel ratio [0, 1].
 COLOUR_BINS = 16
+#: At most this many photos, evenly spread over the sequence, give the per-photo edge evidence
+#: (:func:`photo_edge_tensor`): a silhouette holds in nearly all of them, so a score of photos is
+#: plenty, and the cost stays bounded for long sequences.
+EDGE_PHOTOS = 24
 
 
 @dataclasses.dataclass
@@ -415,12 +431,15 @@ class SequenceStats:
         Mean luminance over the photos.
     n : int
         Photos.
-    colour_counts : (COLOUR_BINS, H, W) uint16 or None
-        Per pixel, how many photos put it in each bin of the min/max channel ratio, counting only
-        the photos where it is lit and unclipped (:func:`photo_colour_counts`); None for a single
-        image or a single-channel sequence.
+    colour_counts : (COLOUR_BINS, ceil(H / COLOUR_STEP), ceil(W / COLOUR_STEP)) uint16 or None
+        Per sampled pixel, how many photos put it in each bin of the min/max channel ratio,
+        counting only the photos where it is lit and unclipped (:func:`photo_colour_counts`); None
+        for a single image or a single-channel sequence.
     edge_tensor : (3, H, W) float32 or None
-        The per-photo edge evidence (:func:`photo_edge_tensor`); None for a single image.
+        The per-photo edge evidence (:func:`photo_edge_tensor`) of at most :data:`EDGE_PHOTOS`
+        photos; None for a single image.
+    edge_photos : int
+        How many photos gave ``edge_tensor``.
     """
 
     max: np.ndarray
@@ -429,6 +448,13 @@ class SequenceStats:
     n: int
     colour_counts: np.ndarray | None = None
     edge_tensor: np.ndarray | None = None
+    edge_photos: int = 0
+
+
+def _robust_peak(lum, q: float = 99.5) -> float:
+    """The ``q``-th percentile of a luminance image, on every 4th pixel of every 4th row (fast, and as robust)."""
+    sub = np.asarray(lum)[::4, ::4] if min(np.shape(lum)) >= 64 else np.asarray(lum)
+    return float(np.percentile(sub, q))
 
 
 def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> None:
@@ -440,7 +466,7 @@ def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> N
     a white ground, at its top), and a contact shadow's boundary can replace it below. Moving
     edges (terminators, cast shadows) cross each pixel in few photos. The sum over the photos of
     the gradient's outer product ``g g^T`` of ``ln(L + floor * peak)`` (blurred by ``sigma``;
-    ``peak`` the photo's 99.5th percentile, so the noise of its dark parts is not amplified)
+    ``peak`` the photo's 99.5th percentile (:func:`_robust_peak`), so the noise of its dark parts is not amplified)
     keeps the consistent edges strong whatever their polarity (a summed gradient would cancel
     them) and spreads the moving ones thin (:func:`consistent_edge_points`).
 
@@ -452,7 +478,7 @@ def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> N
         ``[sum gx^2, sum gx gy, sum gy^2]``, gradients in natural-log units per pixel.
     sigma, floor : float
     """
-    peak = float(np.percentile(lum, 99.5))
+    peak = _robust_peak(lum)
     if not peak > 0:
         return
     g = cv2.GaussianBlur(np.log(np.asarray(lum, dtype=np.float32) + np.float32(floor * peak)), (0, 0), sigma)
@@ -461,6 +487,15 @@ def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> N
     tensor[0] += gx * gx
     tensor[1] += gx * gy
     tensor[2] += gy * gy
+
+
+def consistent_edge_strength(tensor, n_photos: int) -> tuple[np.ndarray, np.ndarray]:
+    """Strength ``sqrt(lambda_1 / n)`` (H, W) and angle (H, W, radians) of the principal direction
+    ``e_1`` of the summed per-photo structure tensor (:func:`photo_edge_tensor`)."""
+    jxx, jxy, jyy = (np.asarray(t, dtype=np.float64) / max(int(n_photos), 1) for t in tensor)
+    half_tr = 0.5 * (jxx + jyy)
+    l1 = half_tr + np.sqrt(np.maximum(half_tr ** 2 - (jxx * jyy - jxy ** 2), 0.0))
+    return np.sqrt(np.maximum(l1, 0.0)), 0.5 * np.arctan2(2 * jxy, jxx - jyy)
 
 
 def consistent_edge_points(tensor, n_photos: int):
@@ -484,11 +519,7 @@ def consistent_edge_points(tensor, n_photos: int):
         Unit ``e_1`` (across the edge; its sign is arbitrary).
     strength : (m,) float64
     """
-    jxx, jxy, jyy = (np.asarray(t, dtype=np.float64) / max(int(n_photos), 1) for t in tensor)
-    half_tr = 0.5 * (jxx + jyy)
-    l1 = half_tr + np.sqrt(np.maximum(half_tr ** 2 - (jxx * jyy - jxy ** 2), 0.0))
-    S = np.sqrt(np.maximum(l1, 0.0))
-    ang = 0.5 * np.arctan2(2 * jxy, jxx - jyy)
+    S, ang = consistent_edge_strength(tensor, n_photos)
     H, W = S.shape
     ys, xs = np.mgrid[0:H, 0:W]
     thr = 3.0 * float(np.median(S))
@@ -511,7 +542,7 @@ def photo_colour_counts(im, lum, counts, lit_fraction: float = 0.1, clip_fractio
     from many photos whiten it in the max image, but each photo shows a highlight on few of its
     pixels, and its body colour (dichromatic reflection, Shafer 1985) everywhere else it is lit.
     A pixel counts in a photo when it is lit (luminance at least ``lit_fraction`` of the photo's
-    99.5th percentile: dark pixels' ratios are noise) and no channel is clipped (at or above
+    99.5th percentile, :func:`_robust_peak`: dark pixels' ratios are noise) and no channel is clipped (at or above
     ``clip_fraction`` of the photo's channel maximum: a clipped highlight reads white, a clipped
     red channel reads less red). Its bin is ``floor(COLOUR_BINS * min/max)``.
 
@@ -521,27 +552,31 @@ def photo_colour_counts(im, lum, counts, lit_fraction: float = 0.1, clip_fractio
         Linear photo.
     lum : (H, W) float
         Its luminance.
-    counts : (COLOUR_BINS, H, W) uint16
+    counts : (COLOUR_BINS, ceil(H / COLOUR_STEP), ceil(W / COLOUR_STEP)) uint16
+        Every :data:`COLOUR_STEP`-th pixel of every :data:`COLOUR_STEP`-th row.
     lit_fraction, clip_fraction : float
     """
-    rgb = im[..., :3]
-    hi = rgb.max(axis=2)
-    lo = rgb.min(axis=2)
-    peak = float(np.percentile(lum, 99.5))
+    im = im[::COLOUR_STEP, ::COLOUR_STEP]
+    lum = lum[::COLOUR_STEP, ::COLOUR_STEP]
+    peak = _robust_peak(lum)
     if not peak > 0:
         return
-    chan_max = rgb.reshape(-1, 3).max(axis=0)
-    use = (lum >= lit_fraction * peak) & ~np.any(rgb >= clip_fraction * chan_max, axis=2) & (hi > 0)
+    chans = [im[..., c] for c in range(3)]  # channel slices: numpy's reductions over a last axis of 3 are slow
+    hi = np.maximum(np.maximum(chans[0], chans[1]), chans[2])
+    use = (lum >= lit_fraction * peak) & (hi > 0)
+    for c in chans:
+        use &= c < clip_fraction * float(c.max())
     flat = np.flatnonzero(use)
     if flat.size == 0:
         return
+    lo = np.minimum(np.minimum(chans[0], chans[1]), chans[2])
     ratio = lo.reshape(-1)[flat] / hi.reshape(-1)[flat]
     b = np.minimum((ratio * COLOUR_BINS).astype(np.int64), COLOUR_BINS - 1)
-    cf = counts.reshape(COLOUR_BINS, -1)
-    cf[b, flat] += 1  # one bin per pixel: no repeated index
+    cf = counts.reshape(-1)
+    cf[b * (counts.shape[1] * counts.shape[2]) + flat] += 1  # one bin per pixel: no repeated index
 
 
-def sequence_stats(images, colour: bool = True, edges: bool = True) -> SequenceStats:
+def sequence_stats(images, colour: bool = True, edges: bool = True, n_images: int | None = None) -> SequenceStats:
     """The max image, the brightest photo, the mean luminance and the per-photo colour counts, in one pass.
 
     Parameters
@@ -551,7 +586,11 @@ def sequence_stats(images, colour: bool = True, edges: bool = True) -> SequenceS
     colour : bool
         Gather :attr:`SequenceStats.colour_counts` (:func:`photo_colour_counts`).
     edges : bool
-        Gather :attr:`SequenceStats.edge_tensor` (:func:`photo_edge_tensor`).
+        Gather :attr:`SequenceStats.edge_tensor` (:func:`photo_edge_tensor`), from every
+        ``ceil(n_images / EDGE_PHOTOS)``-th photo (all when the count is unknown: the first
+        :data:`EDGE_PHOTOS`).
+    n_images : int, optional
+        The length of ``images`` when it is an iterator.
 
     Returns
     -------
@@ -567,9 +606,12 @@ def sequence_stats(images, colour: bool = True, edges: bool = True) -> SequenceS
         if mx is None:
             mx, best_l, idx, total = im.copy(), lum, np.zeros(lum.shape, np.int32), lum.astype(np.float64)
             if colour and im.ndim == 3 and im.shape[2] >= 3:
-                counts = np.zeros((COLOUR_BINS, *lum.shape), np.uint16)
+                counts = np.zeros((COLOUR_BINS, *lum[::COLOUR_STEP, ::COLOUR_STEP].shape), np.uint16)
             if edges:
                 tensor = np.zeros((3, *lum.shape), np.float32)
+                n_total = n_images if n_images is not None else len(images) if hasattr(images, "__len__") else None
+                every = max(1, -(-n_total // EDGE_PHOTOS)) if n_total else 1
+                n_edge = 0
         elif im.shape != mx.shape:
             raise ValueError(f"image shapes differ: {im.shape} vs {mx.shape}")
         else:
@@ -580,12 +622,13 @@ def sequence_stats(images, colour: bool = True, edges: bool = True) -> SequenceS
             total += lum
         if counts is not None and n < np.iinfo(np.uint16).max:
             photo_colour_counts(im, lum, counts)
-        if tensor is not None:
+        if tensor is not None and n % every == 0 and n_edge < EDGE_PHOTOS:
             photo_edge_tensor(lum, tensor)
+            n_edge += 1
         n += 1
     if mx is None:
         raise ValueError("no images")
-    return SequenceStats(mx, idx, total / n, n, counts, tensor if n > 1 else None)
+    return SequenceStats(mx, idx, total / n, n, counts, tensor if n > 1 else None, n_edge if tensor is not None else 0)
 
 
 def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
@@ -1074,7 +1117,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
                  n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
-                 saturates: bool = False, colour_counts=None) -> Spheres:
+                 saturates: bool = False, colour_counts=None, edge_tensor=None,
+                 edge_photos: int | None = None) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -1142,6 +1186,12 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         Per-photo colour evidence (:func:`photo_colour_counts`), when ``images`` is already a max
         image; gathered from ``images`` when they are a sequence. With it, colour is judged per
         photo (:func:`ffls.spheres.select.photo_neutrality`), not on the max image.
+    edge_tensor : (3, H, W) float, optional
+        Per-photo edge evidence (:func:`photo_edge_tensor`), when ``images`` is already a max
+        image; gathered from ``images`` when they are a sequence. With it each sphere found is
+        refitted on the edges that hold in the photos (:func:`_refine_on_consistent_edges`).
+    edge_photos : int, optional
+        How many photos gave ``edge_tensor`` (default ``n_photos``).
     min_visible : float
         A sphere cut by the frame edge is used when at least this fraction of its outline is
         inside the image; otherwise it is set aside (``Spheres.rejected``), or an error when hinted.
@@ -1188,9 +1238,13 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         if ortho:
             raise InputError("sphere overrides need a pinhole camera; give 'center_px' hints instead", source)
         return Spheres(_spheres_from_overrides(overrides, K, dist, wfc, R, source))
-    mx, brightest, mean, L, n_img, colour = _max_luminance(images, source)
+    mx, brightest, mean, L, n_img, colour, tensor = _max_luminance(images, source)
     if colour_counts is not None:
         colour = np.asarray(colour_counts)
+    if edge_tensor is not None:
+        tensor = (np.asarray(edge_tensor), int(edge_photos or n_photos or n_img))
+    if tensor[0] is None:
+        tensor = None
     if brightest_index is not None:
         brightest = np.asarray(brightest_index, dtype=np.int64)
     if mean_luminance is not None:
@@ -1210,6 +1264,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hinted_candidates(hint_info, edges, L.shape, source)
         _check_duplicate_circles(cands, "hint", source)
         fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", rng)
+        fits = _with_consistent_edges(fits, tensor, cam, rng, max_residual_px)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
@@ -1217,7 +1272,16 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
                                          else None)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
+        photo_edges = _photo_edge_map(tensor)
+        if photo_edges is not None:  # circles the max image lost (a white sphere on a white ground)
+            pc = _hough_circle_candidates(photo_edges, L)
+            pfits, _ = _fit_candidates(pc, photo_edges, cam, 0.3, "auto", rng, polarity=False)
+            for ft in pfits:
+                ft.outline_edges = PHOTO_EDGES
+            cands = cands + pc
+            fits = fits + pfits
         fits = _with_outer_outlines(fits, edges, L, cam, rng)  # a mirror's dark cap -> its silhouette
+        fits = _with_consistent_edges(fits, tensor, cam, rng, max_residual_px)
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
                                         saturates=saturates, colour_counts=colour)
         if n_spheres is not None and len(fits) > n_spheres:
@@ -1226,7 +1290,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, len(cands)), source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [ft if ft.source == OUTER_SOURCE else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
+        fits = [ft if ft.source == OUTER_SOURCE or ft.outline_edges == PHOTO_EDGES
+                else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -1260,7 +1325,7 @@ def _max_luminance(images, source):
     peak = float(L.max()) if L.size else 0.0
     if not np.isfinite(peak) or peak <= 0 or float(np.percentile(L, 99.9)) <= 1e-6 * max(peak, 1e-30):
         raise InputError("all images are black (no light on the spheres in any photo)", source)
-    return mx, brightest, mean, L, n, st.colour_counts
+    return mx, brightest, mean, L, n, st.colour_counts, (st.edge_tensor, st.edge_photos)
 
 
 @dataclasses.dataclass
@@ -1284,6 +1349,26 @@ def _edge_map(mx, L, source) -> _EdgeMap:
         edge_img[np.clip(np.rint(pts[:, 1]).astype(int), 0, H - 1),
                  np.clip(np.rint(pts[:, 0]).astype(int), 0, W - 1)] = 0
     return _EdgeMap(points=pts, grads=grads, log8=g8f.astype(np.uint8), scale=scale,
+                    distance=cv2.distanceTransform(edge_img, cv2.DIST_L2, 3))
+
+
+def _photo_edge_map(tensor) -> _EdgeMap | None:
+    """Stage 2 on the per-photo edge evidence (``tensor``: the summed tensor and its photo count):
+    its ridge points (:func:`consistent_edge_points`), the strength mapped to 8 bit by its 99.5th
+    percentile (for Hough, whose edge threshold is then a fifth of that level) and the distance to
+    the ridge points. None without the evidence."""
+    if tensor is None or tensor[1] < 3:
+        return None
+    S, _ = consistent_edge_strength(*tensor)
+    pts, dirs, _ = consistent_edge_points(*tensor)
+    H, W = S.shape
+    peak = float(np.percentile(S, 99.5))
+    if not peak > 0 or len(pts) == 0:
+        return None
+    s8 = np.clip(S * (255.0 / peak), 0, 255).astype(np.uint8)
+    edge_img = np.ones((H, W), np.uint8)
+    edge_img[np.clip(np.rint(pts[:, 1]).astype(int), 0, H - 1), np.clip(np.rint(pts[:, 0]).astype(int), 0, W - 1)] = 0
+    return _EdgeMap(points=pts, grads=dirs, log8=s8, scale=0.2 * 255.0,
                     distance=cv2.distanceTransform(edge_img, cv2.DIST_L2, 3))
 
 
@@ -1365,11 +1450,12 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     return cands[:max_candidates]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng):
+def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng, polarity: bool = True):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
-    majority polarity; RANSAC circle start; :func:`fit_sphere_center` (pinhole) or
+    majority polarity (any polarity when ``polarity`` is False: the per-photo edges' direction
+    has no sign); RANSAC circle start; :func:`fit_sphere_center` (pinhole) or
     :func:`fit_circle` (orthographic). Returns the fits and the failures ``(k, x, y, r, why)``.
     """
     pts, grads = edges.points, edges.grads
@@ -1389,7 +1475,7 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
         radial = np.stack([pts[:, 0] - cx, pts[:, 1] - cy], axis=1) / np.maximum(d, 1e-9)[:, None]
         cosr = np.sum(radial * grads, axis=1)
         sel = near & (np.abs(cosr) > 0.7)
-        if sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
+        if polarity and sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
             inward = sel & (cosr < 0)
             sel = inward if inward.sum() >= 0.5 * sel.sum() else sel & (cosr > 0)
         P = pts[sel]
@@ -1554,6 +1640,63 @@ def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_
     return new
 
 
+def _with_consistent_edges(fits, tensor, cam: _Camera, rng, max_residual_px: float) -> list:
+    """Every fitted candidate refitted on the per-photo edge evidence ``tensor`` (the summed tensor and
+    its photo count) where it fits better (:func:`_refine_on_consistent_edges`); unchanged without
+    the evidence (None: a single image, or fewer than 3 photos). A mirror ball's outer outline is left as it is: its silhouette's contrast, the
+    step of its reflectance, is the same in every photo as the reflected contrasts inside it."""
+    if tensor is None or tensor[1] < 3 or not fits:
+        return fits
+    cpts = consistent_edge_points(*tensor)
+    return [ft if ft.source == OUTER_SOURCE else _refine_on_consistent_edges(ft, cpts, cam, rng, max_residual_px)
+            for ft in fits]
+
+
+def _refine_on_consistent_edges(ft, cpts, cam: _Camera, rng, max_residual_px: float, band: float = 0.1,
+                                min_points: int = 8):
+    """Refit a found sphere on the per-photo edge evidence (:func:`consistent_edge_points`), if it fits better.
+
+    In the max image a silhouette can merge with a bright ground (a white sphere on a white
+    ground, at its top) and meet its contact shadow below: the outline fit then follows the shadow
+    (on ``ffls synth --background white`` at 384 px, 2 of 4 spheres 1.4-1.7 px off). The edges
+    that hold in the photos keep the silhouette all round. The ridge points within
+    ``band`` radii (+ 2 px) of the current outline whose direction is radial (``|cos| > 0.7``) are
+    searched by RANSAC for a circle (1-pixel tolerance: a contact shadow's boundary runs a few
+    pixels outside the silhouette); the points within 1.5 px of it are fitted
+    (:func:`_fit_outline`). The refit replaces the fit when it is round (RMS within
+    ``max_residual_px``), moves the centre by less than a quarter of the radius and has the
+    higher :func:`outline_quality`; otherwise the fit is returned unchanged.
+    """
+    pts, dirs, _ = cpts
+    if ft.source == "override" or len(pts) < min_points:
+        return ft
+    c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+    v = pts - c0
+    d = np.hypot(v[:, 0], v[:, 1])
+    cosr = np.abs(np.sum(v * dirs, axis=1)) / np.maximum(d, 1e-9)
+    sel = (np.abs(d - r0) < band * r0 + 2.0) & (cosr > 0.7)
+    if sel.sum() < min_points:
+        return ft
+    P = pts[sel]
+    circ = _ransac_circle(P, r0, rng, tol=1.0)
+    if circ is None:
+        return ft
+    Q = P[np.abs(np.hypot(P[:, 0] - circ[0][0], P[:, 1] - circ[0][1]) - circ[1]) <= 1.5]
+    if len(Q) < min_points:
+        return ft
+    try:
+        new = _fit_outline(Q, cam, circ[0], circ[1], ft.source)
+    except ValueError:
+        return ft
+    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
+            or outline_quality(new) <= outline_quality(ft)):
+        return ft
+    new.score = ft.score
+    new.outline_sigma_px = ft.outline_sigma_px
+    new.outline_edges = PHOTO_EDGES
+    return new
+
+
 def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None) -> Spheres:
     """:func:`find_spheres` on a loaded :class:`ffls.io.capture.Capture`, using its whole sequence.
 
@@ -1581,7 +1724,7 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
         it = progress(it, total=n)
     if not n:
         raise InputError("capture lists no images", capture.folder)
-    st = sequence_stats(it)
+    st = sequence_stats(it, n_images=n)
     mx, brightest, mean, n_img = st.max, st.brightest, st.mean, st.n
     hints = getattr(capture, "spheres", None) or None
     if n_spheres is None:
@@ -1592,4 +1735,5 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         scene_center=getattr(capture, "scene_center", None), source=capture.folder,
                         camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img,
                         mean_luminance=mean if n_img > 1 else None,
-                        saturates=any(isinstance(d, int) for d in depths), colour_counts=st.colour_counts)
+                        saturates=any(isinstance(d, int) for d in depths), colour_counts=st.colour_counts,
+                        edge_tensor=st.edge_tensor, edge_photos=st.edge_photos)

@@ -14,7 +14,7 @@ import numpy as np
 
 from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap
 
-__all__ = ["CRITERIA", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "photo_neutrality",
+__all__ = ["CRITERIA", "COLOUR_STEP", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "photo_neutrality",
            "shading_change", "select_spheres"]
 
 
@@ -23,6 +23,7 @@ __all__ = ["CRITERIA", "clip_levels", "disc_pixels", "light_directions_per_photo
 CRITERIA = {
     "max_residual_px": 1.5,      # RMS of the outline points about the fitted cone/circle
     "min_closed": 0.5,           # outline coverage (36 angular bins) over the visible outline
+    "min_closed_photos": 0.8,    # the same, for an outline on the edges that hold in the photos
     "min_support": 0.5,          # inlier edge points per pixel of visible outline
     "min_neutral": 0.5,          # median min/max channel over the lit photos' pixels (white, grey, chrome)
     "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
@@ -85,11 +86,17 @@ def neutrality(mx, L, rows, cols, clip=None) -> float | None:
     return float(np.clip(np.percentile(ratio, 25), 0, 1))
 
 
+#: The per-photo colour evidence (:func:`ffls.spheres.detect.photo_colour_counts`) is kept for every
+#: ``COLOUR_STEP``-th pixel of every ``COLOUR_STEP``-th row (a sphere's body colour is smooth; a
+#: 3-pixel sphere still has 4 samples per photo).
+COLOUR_STEP = 2
+
+
 def photo_neutrality(counts, rows, cols, min_samples: int = 20) -> float | None:
     """Colour neutrality judged in the photos: the median min/max channel over every lit, unclipped (pixel, photo).
 
-    ``counts`` (:func:`ffls.spheres.detect.photo_colour_counts`) holds, per pixel, how many photos
-    put it in each bin of the min/max channel ratio. The bins of the given pixels are pooled and
+    ``counts`` (:func:`ffls.spheres.detect.photo_colour_counts`) holds, per sampled pixel (every
+    ``COLOUR_STEP``-th), how many photos put it in each bin of the min/max channel ratio. The bins of the given pixels are pooled and
     their median is returned (the middle of its bin, linearly interpolated within it). A coloured
     glossy ball reads its body colour: its highlights are white in only a few photos per pixel, so
     they move the median little, while the max image, which keeps every photo's highlight, reads
@@ -98,14 +105,17 @@ def photo_neutrality(counts, rows, cols, min_samples: int = 20) -> float | None:
 
     Parameters
     ----------
-    counts : (B, H, W) int
+    counts : (B, ceil(H / COLOUR_STEP), ceil(W / COLOUR_STEP)) int
     rows, cols : (m,) int
-        The pixels.
+        The pixels (full-resolution indices; each is read at its sampled pixel).
     min_samples : int
     """
     if rows.size == 0:
         return None
-    h = np.asarray(counts[:, rows, cols], dtype=np.int64).sum(axis=1)
+    r, c = np.asarray(rows) // COLOUR_STEP, np.asarray(cols) // COLOUR_STEP
+    ok = (r < counts.shape[1]) & (c < counts.shape[2])
+    flat = np.unique(r[ok] * counts.shape[2] + c[ok])  # each sampled pixel once
+    h = np.asarray(counts.reshape(counts.shape[0], -1)[:, flat], dtype=np.int64).sum(axis=1)
     total = int(h.sum())
     if total < min_samples:
         return None
@@ -192,7 +202,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
 
     A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
     inlier points cover at least :data:`CRITERIA` ``min_closed`` of the visible outline and give at
-    least ``min_support`` points per pixel of it. Overlapping round outlines keep the best-scored
+    least ``min_support`` points per pixel of it (an outline fitted on the edges that hold in the
+    photos must cover ``min_closed_photos``: a silhouette holds there all round, while a contact
+    shadow's boundary, which holds in many photos too, is an open arc). Overlapping round outlines keep the best-scored
     one (support x closure x (0.25 + 0.75 neutrality) / (1 + (rms / 0.5 px)^2)). A round outline
     is then set aside, with a one-line reason, when it is cut by the frame edge (less than
     ``min_visible`` of it inside), its centre is poorly constrained (standard error above
@@ -236,7 +248,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         vis = max(ft.visible_fraction, 1e-6)
         closed = min(ft.coverage / vis, 1.0)
         support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
-        if ft.residual_px > max_residual_px or closed < crit["min_closed"] or support < crit["min_support"]:
+        # a silhouette holds in every photo all round; a contact shadow's boundary is an arc
+        min_closed = crit["min_closed_photos"] if ft.outline_edges == "photos" else crit["min_closed"]
+        if ft.residual_px > max_residual_px or closed < min_closed or support < crit["min_support"]:
             continue
         rows, cols = disc_pixels(ft, shape)
         if rows.size < 5:
