@@ -59,7 +59,7 @@ from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
 from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, select_spheres
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circumcircles, dark_cap,
-                                         enclosing_circle, mirror_silhouette)
+                                         enclosing_circle, limb_radius, mirror_silhouette)
 
 __all__ = [
     "SphereFit",
@@ -1264,7 +1264,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hinted_candidates(hint_info, edges, L.shape, source)
         _check_duplicate_circles(cands, "hint", source)
         fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", rng)
-        fits = _with_consistent_edges(fits, tensor, cam, rng, max_residual_px)
+        fits = _with_consistent_edges(fits, tensor, L, cam, rng, max_residual_px)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
@@ -1276,12 +1276,13 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         if photo_edges is not None:  # circles the max image lost (a white sphere on a white ground)
             pc = _hough_circle_candidates(photo_edges, L)
             pfits, _ = _fit_candidates(pc, photo_edges, cam, 0.3, "auto", rng, polarity=False)
+            pfits = [ft for ft in pfits if not dark_cap(L, ft.center_px, ft.radius_px)]  # mirrors: outer outline
             for ft in pfits:
                 ft.outline_edges = PHOTO_EDGES
             cands = cands + pc
             fits = fits + pfits
         fits = _with_outer_outlines(fits, edges, L, cam, rng)  # a mirror's dark cap -> its silhouette
-        fits = _with_consistent_edges(fits, tensor, cam, rng, max_residual_px)
+        fits = _with_consistent_edges(fits, tensor, L, cam, rng, max_residual_px)
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
                                         saturates=saturates, colour_counts=colour)
         if n_spheres is not None and len(fits) > n_spheres:
@@ -1511,7 +1512,12 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
     a matte sphere's own closed outline beats its inner circles grown to it, while a mirror ball's
     dark cap fitted directly together with its contact shadow below (a wider circle, 1.4 px off,
     RMS 0.76 px) loses to the outer outline of its silhouette (RMS 0.47 px, same coverage)."""
-    grown = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]
+    # a mirror's outline is found in the max image; a circle proposed on the photos' edges is not grown.
+    # Each candidate's search has its own generator (seeded from ``rng`` once): the outline found for
+    # one candidate must not depend on how many candidates came before it.
+    seed = int(rng.integers(2 ** 31))
+    grown = [ft if ft.outline_edges == PHOTO_EDGES else _outer_outline(ft, edges, L, cam, np.random.default_rng(seed))
+             for ft in fits]
     outer = [g for g in grown if g.source == OUTER_SOURCE]
     direct = [g for g in grown if g.source != OUTER_SOURCE]
 
@@ -1545,8 +1551,12 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera, rng):
             break
     if ft.source != OUTER_SOURCE:
         return ft
+    log_l = np.log(np.maximum(L, 1e-12))
+    r_limb = limb_radius(log_l, ft.center_px, ft.radius_px)
+    if r_limb is not None and abs(r_limb / ft.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
+        ft = _with_radius(ft, r_limb, cam)
     ft.outline_sigma_px = MIRROR_OUTLINE_FLOOR_PX
-    sil = mirror_silhouette(np.log(np.maximum(L, 1e-12)), ft.center_px, ft.radius_px, rng, shape=cam.shape)
+    sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, rng, shape=cam.shape)
     if sil is not None:  # the limb's reflectance step: a second outline estimate
         try:
             limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
@@ -1556,6 +1566,30 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera, rng):
         except ValueError:
             pass
     return ft
+
+
+def _with_radius(ft, radius_px: float, cam: _Camera):
+    """The same sphere fit with its apparent radius set to ``radius_px`` and its centre's direction kept.
+
+    Pinhole: the tangent cone's half-angle is scaled by ``radius_px / ft.radius_px`` (the apparent
+    radius is proportional to it to within 0.1 % for a cone of 10 degrees) and the depth follows
+    (``C = R / sin(alpha) c``); orthographic: the circle's radius. Fit statistics are kept.
+    """
+    if cam.ortho:
+        new = _make_fit_ortho(ft.center_px, radius_px, cam, ft.source, edge_px=ft.edge_px, residual=ft.residual_px,
+                              n_edge=ft.n_edge_points, n_in=ft.n_inliers, coverage=ft.coverage)
+    else:
+        C = np.asarray(ft.center_cam, dtype=np.float64)
+        d = float(np.linalg.norm(C))
+        alpha = np.arcsin(min(ft.radius / d, 1.0)) * radius_px / ft.radius_px
+        if not 0 < alpha < np.pi / 2:
+            return ft
+        new = _make_fit(cam.R / np.sin(alpha) * C / d, cam.R, cam.K, cam.dist, cam.wfc, ft.source, edge_px=ft.edge_px,
+                        residual=ft.residual_px, n_edge=ft.n_edge_points, n_in=ft.n_inliers, coverage=ft.coverage,
+                        shape=cam.shape)
+    new.score, new.center_sigma_px = ft.score, ft.center_sigma_px
+    new.outline_sigma_px, new.outline_edges = ft.outline_sigma_px, ft.outline_edges
+    return new
 
 
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands) -> str:
@@ -1640,16 +1674,18 @@ def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_
     return new
 
 
-def _with_consistent_edges(fits, tensor, cam: _Camera, rng, max_residual_px: float) -> list:
+def _with_consistent_edges(fits, tensor, L, cam: _Camera, rng, max_residual_px: float) -> list:
     """Every fitted candidate refitted on the per-photo edge evidence ``tensor`` (the summed tensor and
     its photo count) where it fits better (:func:`_refine_on_consistent_edges`); unchanged without
-    the evidence (None: a single image, or fewer than 3 photos). A mirror ball's outer outline is left as it is: its silhouette's contrast, the
-    step of its reflectance, is the same in every photo as the reflected contrasts inside it."""
+    the evidence (None: a single image, or fewer than 3 photos). A mirror ball (an outer outline, or
+    a dark cap, :func:`ffls.spheres.mirror_outline.dark_cap`, on ``L``, the max image's luminance)
+    is left as it is: its silhouette's contrast, the step of its reflectance, is the same in every
+    photo as the reflected contrasts inside it; its outline is the max image's (:func:`_outer_outline`)."""
     if tensor is None or tensor[1] < 3 or not fits:
         return fits
     cpts = consistent_edge_points(*tensor)
-    return [ft if ft.source == OUTER_SOURCE else _refine_on_consistent_edges(ft, cpts, cam, rng, max_residual_px)
-            for ft in fits]
+    return [ft if ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
+            else _refine_on_consistent_edges(ft, cpts, cam, rng, max_residual_px) for ft in fits]
 
 
 def _refine_on_consistent_edges(ft, cpts, cam: _Camera, rng, max_residual_px: float, band: float = 0.1,
