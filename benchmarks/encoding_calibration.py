@@ -9,6 +9,11 @@ true encoding stated. Prints a table and writes JSON.
 
     OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --res 512 --lights 40 --json out.json
     OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --res 256 --lights 20 --repeat 10
+    OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --detect-scenes --lights 40
+
+``--detect-scenes``: the captures are made without ``ffls synth`` (``tests/detect_scenes.py``: 3
+grey balls on a grey background, 400 x 300 px, NumPy ray casting), stored as 8-bit PNGs in each
+encoding; only the calibration (the curve named and the test line) is printed.
 """
 from __future__ import annotations
 
@@ -88,6 +93,37 @@ def run_seed(args, seed: int) -> list:
     return rows
 
 
+def detect_scenes_naming(args) -> list:
+    """The encoding named on captures made without ``ffls synth`` (``tests/detect_scenes.py``), per true curve."""
+    from ffls.spheres.encoding import calibrate_capture_encoding
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    import detect_scenes as ds
+
+    rows = []
+    for seed in range(args.seed, args.seed + args.repeat):
+        sc = ds.layout(3, shape=(300, 400), f=500.0, R=0.04, seed=seed)
+        for b in sc.balls:
+            b.albedo = (0.45, 0.45, 0.45)
+        imgs = ds.render(sc, ds.lights(args.lights, seed=seed + 1), background="grey", noise=0.004, seed=seed + 2)
+        imgs = np.clip(imgs / np.percentile(imgs, 99.5) * 0.9, 0, 1)
+        for name, true in TRUE.items():
+            with tempfile.TemporaryDirectory() as tmp:
+                tmp = Path(tmp)
+                names = []
+                for i, im in enumerate(imgs):
+                    enc = im if true == "linear" else srgb_encode(im) if true == "srgb" else gamma_encode(im, true)
+                    names.append(f"p{i:02d}.png")
+                    write_png(tmp / names[-1], np.rint(np.clip(enc, 0, 1) * 255).astype(np.uint8))
+                (tmp / "capture.json").write_text(json.dumps({
+                    "format": "ffls-capture", "version": 1, "images": names, "camera": {"K": sc.K.tolist()},
+                    "sphere_radius": 0.04}))
+                cal, _ = calibrate_capture_encoding(load_capture(tmp))
+            rows.append({"seed": seed, "true": name, "named": cal.curve, "summary": cal.summary()})
+            print(f"seed {seed} {name:9} -> {cal.summary()}", flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=512)
@@ -97,7 +133,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeat", type=int, default=1, help="captures with seeds SEED, SEED+1, ... (coverage)")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--detect-scenes", action="store_true", help="captures made without ffls synth (naming only)")
     args = ap.parse_args(argv)
+    if args.detect_scenes:
+        rows = detect_scenes_naming(args)
+        if args.json:
+            Path(args.json).write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
+        return 0
     rows = []
     for seed in range(args.seed, args.seed + args.repeat):
         rows += run_seed(args, seed)

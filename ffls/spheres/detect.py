@@ -11,7 +11,10 @@ Method
 1. **Max image.** The per-pixel maximum over the whole sequence, and which photo gave it
    (:func:`extreme_images`). A light that visits every side of the spheres makes each
    silhouette a closed, high-contrast outline in the maximum; a single photo shows only the lit
-   crescent, whose terminator is not a silhouette.
+   crescent, whose terminator is not a silhouette. In the same streamed pass each photo adds its
+   colour evidence (:func:`photo_colour_counts`: colour is judged per photo, where a glossy ball's
+   highlights cover few pixels, not on the max image they whiten) and, for at most
+   :data:`EDGE_PHOTOS` photos, its log-luminance structure tensor (:func:`photo_edge_tensor`).
 2. **Edges.** Luminance of the max image, log tone-mapped to 8 bit, lightly blurred; Canny with
    thresholds derived from the image itself (a radiance ratio of about 1.2, never below the
    texture/noise level). Edge pixels are refined to subpixel precision along the gradient.
@@ -28,6 +31,11 @@ Method
    camera (a long lens far away), where the algebraic form degenerates. An orthographic camera
    (no ``K``) fits a circle in pixels instead (:func:`fit_circle`); its normals follow from the
    pixel offset over the pixel radius (:func:`orthographic_normals`).
+4b. **Edges that hold in the photos.** The ridge points of the summed tensor
+   (:func:`consistent_edge_points`) keep a silhouette whatever its polarity in each photo, while
+   terminators and cast shadows move: circles are also proposed and fitted on them, and every
+   candidate is refitted on them where that fits better (:func:`_refine_on_consistent_edges`; a
+   white sphere on a white ground merges with the ground in the max image).
 5. **Robustness.** Edge pixels that are not silhouette (a stand, an occluder, a shadow boundary,
    the terminator) are handled by (a) keeping only edges whose gradient is radial and of the
    majority polarity, (b) a RANSAC circle search for the initial fit, (c) a ``soft_l1`` loss
@@ -1272,17 +1280,14 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
                                          else None)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
-        photo_edges = _photo_edge_map(tensor)
-        if photo_edges is not None:  # circles the max image lost (a white sphere on a white ground)
-            pc = _hough_circle_candidates(photo_edges, L)
-            pfits, _ = _fit_candidates(pc, photo_edges, cam, 0.3, "auto", rng, polarity=False)
-            pfits = [ft for ft in pfits if not dark_cap(L, ft.center_px, ft.radius_px)]  # mirrors: outer outline
-            for ft in pfits:
-                ft.outline_edges = PHOTO_EDGES
-            cands = cands + pc
-            fits = fits + pfits
         fits = _with_outer_outlines(fits, edges, L, cam, rng)  # a mirror's dark cap -> its silhouette
-        fits = _with_consistent_edges(fits, tensor, L, cam, rng, max_residual_px)
+        # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
+        # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
+        # ground's circles hold in every photo too) gains from them a score that hides a real sphere
+        open_ = [ft.coverage < CRITERIA["min_closed"] * ft.visible_fraction for ft in fits]
+        refit = _with_consistent_edges([ft for ft, o in zip(fits, open_) if o], tensor, L, cam, rng, max_residual_px)
+        it = iter(refit)
+        fits = [next(it) if o else ft for ft, o in zip(fits, open_)]
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
                                         saturates=saturates, colour_counts=colour)
         if n_spheres is not None and len(fits) > n_spheres:
@@ -1293,6 +1298,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
         fits = [ft if ft.source == OUTER_SOURCE or ft.outline_edges == PHOTO_EDGES
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
+    if not hints:  # and on the edges that hold in the photos, where they fit better
+        fits = _with_consistent_edges(fits, tensor, L, cam, rng, max_residual_px)
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -1350,26 +1357,6 @@ def _edge_map(mx, L, source) -> _EdgeMap:
         edge_img[np.clip(np.rint(pts[:, 1]).astype(int), 0, H - 1),
                  np.clip(np.rint(pts[:, 0]).astype(int), 0, W - 1)] = 0
     return _EdgeMap(points=pts, grads=grads, log8=g8f.astype(np.uint8), scale=scale,
-                    distance=cv2.distanceTransform(edge_img, cv2.DIST_L2, 3))
-
-
-def _photo_edge_map(tensor) -> _EdgeMap | None:
-    """Stage 2 on the per-photo edge evidence (``tensor``: the summed tensor and its photo count):
-    its ridge points (:func:`consistent_edge_points`), the strength mapped to 8 bit by its 99.5th
-    percentile (for Hough, whose edge threshold is then a fifth of that level) and the distance to
-    the ridge points. None without the evidence."""
-    if tensor is None or tensor[1] < 3:
-        return None
-    S, _ = consistent_edge_strength(*tensor)
-    pts, dirs, _ = consistent_edge_points(*tensor)
-    H, W = S.shape
-    peak = float(np.percentile(S, 99.5))
-    if not peak > 0 or len(pts) == 0:
-        return None
-    s8 = np.clip(S * (255.0 / peak), 0, 255).astype(np.uint8)
-    edge_img = np.ones((H, W), np.uint8)
-    edge_img[np.clip(np.rint(pts[:, 1]).astype(int), 0, H - 1), np.clip(np.rint(pts[:, 0]).astype(int), 0, W - 1)] = 0
-    return _EdgeMap(points=pts, grads=dirs, log8=s8, scale=0.2 * 255.0,
                     distance=cv2.distanceTransform(edge_img, cv2.DIST_L2, 3))
 
 
@@ -1451,12 +1438,11 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     return cands[:max_candidates]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng, polarity: bool = True):
+def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
-    majority polarity (any polarity when ``polarity`` is False: the per-photo edges' direction
-    has no sign); RANSAC circle start; :func:`fit_sphere_center` (pinhole) or
+    majority polarity; RANSAC circle start; :func:`fit_sphere_center` (pinhole) or
     :func:`fit_circle` (orthographic). Returns the fits and the failures ``(k, x, y, r, why)``.
     """
     pts, grads = edges.points, edges.grads
@@ -1476,7 +1462,7 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
         radial = np.stack([pts[:, 0] - cx, pts[:, 1] - cy], axis=1) / np.maximum(d, 1e-9)[:, None]
         cosr = np.sum(radial * grads, axis=1)
         sel = near & (np.abs(cosr) > 0.7)
-        if polarity and sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
+        if sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
             inward = sel & (cosr < 0)
             sel = inward if inward.sum() >= 0.5 * sel.sum() else sel & (cosr > 0)
         P = pts[sel]
@@ -1512,12 +1498,10 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
     a matte sphere's own closed outline beats its inner circles grown to it, while a mirror ball's
     dark cap fitted directly together with its contact shadow below (a wider circle, 1.4 px off,
     RMS 0.76 px) loses to the outer outline of its silhouette (RMS 0.47 px, same coverage)."""
-    # a mirror's outline is found in the max image; a circle proposed on the photos' edges is not grown.
     # Each candidate's search has its own generator (seeded from ``rng`` once): the outline found for
     # one candidate must not depend on how many candidates came before it.
     seed = int(rng.integers(2 ** 31))
-    grown = [ft if ft.outline_edges == PHOTO_EDGES else _outer_outline(ft, edges, L, cam, np.random.default_rng(seed))
-             for ft in fits]
+    grown = [_outer_outline(ft, edges, L, cam, np.random.default_rng(seed)) for ft in fits]
     outer = [g for g in grown if g.source == OUTER_SOURCE]
     direct = [g for g in grown if g.source != OUTER_SOURCE]
 

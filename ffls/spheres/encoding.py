@@ -39,7 +39,12 @@ second candidate, scored the same way.
   parameter only when it lowers the misfit by more than the BIC's ``ln(n_eff)``: the curve with
   the smallest of (linear excess, sRGB excess, ``ln(n_eff)``) is named. An interval test (does
   the 95% interval hold 1?) would call a linear file ``gamma 1.004`` as soon as the pixels are
-  many and the model's small misfit biases the gamma by more than its tiny interval.
+  many and the model's small misfit biases the gamma by more than its tiny interval. The BIC is
+  blind to a misfit the model shares between the curves (interreflection, a bounce shape), which
+  can leave a linear file a few hundredths of a code value from gamma 1 yet "significantly" off:
+  so when the free gamma wins but the linear or sRGB curve decodes every stored value within half
+  a code value of it (``code_step``: 1/255 for 8-bit files), that curve is named, since the file
+  cannot tell them apart.
 
 :func:`calibrate_encoding` is the entry point on arrays (``method=``);
 :func:`calibrate_capture_encoding` runs it on a capture: spheres found on the stored values (edges
@@ -154,6 +159,9 @@ class EncodingCalibration:
         g = f"gamma {self.gamma:.{nd}f} +- {self.uncertainty:.{nd}f}"
         test = (f"BIC: excess misfit linear {self.linear_excess:.1f}, sRGB {self.srgb_excess:.1f}, "
                 f"free gamma's penalty {self.bic_penalty:.1f}")
+        if self.curve == "linear" and self.linear_excess > self.bic_penalty or \
+                self.curve == "srgb" and self.srgb_excess > self.bic_penalty:
+            test += "; within half a code value of the best gamma"
         if self.curve == "linear":
             return f"encoding: linear (fits as well as the best {g}; {test}; {src})"
         if self.curve == "srgb":
@@ -308,7 +316,7 @@ def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
-                             seed: int = 0) -> EncodingCalibration:
+                             seed: int = 0, code_step: float | None = None) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -335,6 +343,11 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         Bootstrap resamples of the photos.
     seed : int
         Seed of the bootstrap.
+    code_step : float, optional
+        One code value of the files, normalised (1/255 for 8 bits). When the BIC prefers the free
+        gamma but the linear or sRGB curve decodes every stored value within half a code of it,
+        that curve is named all the same: the files cannot tell them apart (module docstring,
+        "Naming").
 
     Returns
     -------
@@ -425,6 +438,14 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     n_eff = max(n_pix / inflation, math.e)
     penalty = math.log(n_eff)
     name, _ = min((("linear", lin_excess), ("srgb", excess), ("gamma", penalty)), key=lambda t: t[1])
+    if name == "gamma" and code_step is not None:
+        # a named curve that decodes every stored value within half a code of the best gamma is the
+        # same curve as far as the file can tell (the BIC is blind to a misfit the model shares)
+        x = np.linspace(0.0, 1.0, 1025)
+        near = [(float(np.max(np.abs(_decode(x, c) - _decode(x, best)))), n) for c, n in ((1.0, "linear"), ("srgb", "srgb"))]
+        gap, closest = min(near)
+        if gap <= 0.5 * code_step:
+            name = closest
     return EncodingCalibration(
         curve=name, gamma=best, uncertainty=unc, sd_curvature=sd_curv, sd_bootstrap=sd_boot,
         srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
@@ -533,6 +554,7 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
             raise InputError(f"image is {img.shape[1]}x{img.shape[0]} but the first image is {w}x{h}", img.path)
         raw.append([np.asarray(img.pixels[s.rows, s.cols], dtype=np.float64) for s in samples])
     try:
+        kwargs.setdefault("code_step", 1.0 / (2 ** first.bit_depth - 1))
         cal = calibrate_encoding(raw, [s.normals for s in samples], method=method, matte=matte, **kwargs)
     except EncodingCalibrationError as e:
         raise InputError(_ask(str(e)), capture.json_path) from None
