@@ -1498,10 +1498,7 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
     a matte sphere's own closed outline beats its inner circles grown to it, while a mirror ball's
     dark cap fitted directly together with its contact shadow below (a wider circle, 1.4 px off,
     RMS 0.76 px) loses to the outer outline of its silhouette (RMS 0.47 px, same coverage)."""
-    # Each candidate's search has its own generator (seeded from ``rng`` once): the outline found for
-    # one candidate must not depend on how many candidates came before it.
-    seed = int(rng.integers(2 ** 31))
-    grown = [_outer_outline(ft, edges, L, cam, np.random.default_rng(seed)) for ft in fits]
+    grown = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]
     outer = [g for g in grown if g.source == OUTER_SOURCE]
     direct = [g for g in grown if g.source != OUTER_SOURCE]
 
