@@ -68,6 +68,61 @@ CONDITIONS = {
 }
 
 
+#: name -> (balls, background, stored curve, file type) of a capture made WITHOUT ffls synth:
+#: ``tests/detect_scenes.py`` (NumPy ray casting; grey matte balls of albedo 0.45 in front of a
+#: lit background plane, 40 lights, 400 x 300 px, noise 0.004, 8-bit, encoding unstated).
+SCENES = {
+    "ds: 1 ball, textured background, linear PNG": (1, "texture", "linear", "png"),
+    "ds: 2 balls, white background, linear PNG": (2, "white", "linear", "png"),
+    "ds: 3 balls, black background, gamma-2.2 JPEG": (3, "black", "gamma", "jpg"),
+    "ds: 3 balls, grey background, linear JPEG": (3, "grey", "linear", "jpg"),
+    "ds: 3 balls, grey background, gamma-2.2 PNG": (3, "grey", "gamma", "png"),
+}
+
+
+def scene_directions() -> np.ndarray:
+    """The 40 world light directions of the :data:`SCENES` captures."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import detect_scenes as ds
+    from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+
+    return (DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ ds.lights(40, seed=1).T).T
+
+
+def render_scene(folder: Path, spec: tuple) -> None:
+    """A :data:`SCENES` capture, rendered by ``tests/detect_scenes.py`` (not ffls synth)."""
+    import sys
+
+    import cv2
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import detect_scenes as ds
+    from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+
+    n_balls, background, curve, ext = spec
+    folder.mkdir(parents=True, exist_ok=True)
+    sc = ds.layout(n_balls, shape=(300, 400), f=500.0, R=0.04, seed=3)
+    for b in sc.balls:
+        b.albedo = (0.45, 0.45, 0.45)
+    imgs = ds.render(sc, ds.lights(40, seed=1), background=background, noise=0.004, seed=2)
+    imgs = imgs / np.percentile(imgs, 99.5) * 0.9
+    names = []
+    for i, im in enumerate(imgs):
+        v = np.clip(im, 0, 1) ** (1 / 2.2 if curve == "gamma" else 1.0)
+        q = np.rint(v * 255).astype(np.uint8)[..., ::-1]
+        name = f"p{i:03d}.{ext}"
+        cv2.imwrite(str(folder / name), q, [cv2.IMWRITE_JPEG_QUALITY, 90] if ext == "jpg" else [])
+        names.append(name)
+    R, t = DEFAULT_WORLD_FROM_CAMERA[:3, :3], DEFAULT_WORLD_FROM_CAMERA[:3, 3]
+    doc = {"format": "ffls-capture", "version": 1, "images": names, "camera": {"K": sc.K.tolist()},
+           "sphere_radius": 0.04, "scene_center": (R @ np.mean([b.center for b in sc.balls], 0) + t).tolist(),
+           "hemisphere": "full"}
+    (folder / "capture.json").write_text(json.dumps(doc))
+    (folder / "truth.json").write_text(json.dumps({"directions": scene_directions().tolist()}))
+
+
 def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
     """The capture of ``ffls synth OUT --resolution RES FLAGS`` under the lights ``dirs``."""
     folder.parent.mkdir(parents=True, exist_ok=True)
@@ -77,17 +132,25 @@ def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
                             light_distance=2.0 if args.near is None else args.near, light_radius=args.light_radius)
 
 
-def run_condition(name: str, flags: list, res: int, dirs: np.ndarray, folder: Path) -> dict:
+def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) -> dict:
+    """``flags``: ``ffls synth`` flags, or a :data:`SCENES` tuple (rendered by tests/detect_scenes.py)."""
     folder = Path(folder)
-    truth = cached_capture(folder, dirs, lambda f: render(f, flags, res, dirs))
+    if isinstance(flags, tuple):
+        spec = flags
+        truth = cached_capture(folder, scene_directions(), lambda f: render_scene(f, spec))
+        flags = [f"tests/detect_scenes.py: {spec[0]} balls, {spec[1]} background, {spec[2]} {spec[3]}"]
+        command = flags[0]
+    else:
+        truth = cached_capture(folder, dirs, lambda f: render(f, flags, res, dirs))
+        command = f"ffls synth OUT --resolution {res} {' '.join(flags)}".strip()
     out = folder / "lights_estimated.json"
     stdout, stderr = io.StringIO(), io.StringIO()
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
         rc = ffls_main(["lights", str(folder), "-o", str(out), "--workers", "1", "--no-progress"])
-    dt = (time.perf_counter() - t0) / len(dirs)
-    row = {"condition": name, "flags": flags, "command": f"ffls synth OUT --resolution {res} {' '.join(flags)}".strip(),
-           "resolution": res, "n": int(len(dirs)), "rc": rc, "ms_per_photo": 1e3 * dt,
+    dt = (time.perf_counter() - t0) / len(truth["directions"])
+    row = {"condition": name, "flags": flags, "command": command,
+           "resolution": res, "n": int(len(truth["directions"])), "rc": rc, "ms_per_photo": 1e3 * dt,
            "stdout": stdout.getvalue().strip().splitlines(), "stderr": stderr.getvalue().strip().splitlines()}
     if rc != 0:
         row["error"] = (row["stderr"] or ["(no message)"])[-1]
@@ -138,10 +201,12 @@ def main(argv=None):
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(a.cache or tmp)
-        for i, (name, flags) in enumerate(CONDITIONS.items()):
+        jobs = [(name, flags, f"c{i:02d}_{a.res}") for i, (name, flags) in enumerate(CONDITIONS.items())]
+        jobs += [(name, spec, f"ds{i:02d}") for i, (name, spec) in enumerate(SCENES.items())]
+        for name, flags, sub in jobs:
             if a.only and not any(o in name for o in a.only):
                 continue
-            r = run_condition(name, flags, a.res, dirs, base / f"c{i:02d}_{a.res}")
+            r = run_condition(name, flags, a.res, dirs, base / sub)
             rows.append(r)
             if r["rc"] != 0:
                 print(f"{name:44s} ERROR {r['error']}", flush=True)

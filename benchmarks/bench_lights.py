@@ -13,7 +13,11 @@ image covers both passes and the sphere pixel extraction, not the image decoding
 and writes ``benchmarks/results/bench_lights.json``.
 
     python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--cache DIR]
-        [--spheres detect|truth] [--no-refine]
+        [--spheres detect|truth] [--no-refine] [--end-to-end WORKERS]
+
+``--end-to-end WORKERS`` also times the whole command ``ffls lights CAPTURE --workers WORKERS``
+in a new process (imports, decoding once, sphere detection, both passes, writing lights.json):
+the throughput a user sees, in photos per second of wall time.
 """
 from __future__ import annotations
 
@@ -29,9 +33,9 @@ import numpy as np
 
 from ffls.io.capture import load_capture
 from ffls.conventions import angle_between, spherical_to_direction
-from ffls.spheres.estimate import capture_samples, estimate_photos
+from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_views
 from ffls.spheres.samples import sphere_values
-from ffls.synth.scene import SynthScene, write_synthetic_capture
+from ffls.synth.scene import SynthScene, make_scene, write_synthetic_capture
 from ffls.radiance.photos import load_photo
 
 from common import cached_capture, host_info, print_error_table, write_json  # benchmarks/common.py
@@ -47,6 +51,10 @@ CONFIGS = {
     "distant_grey_1sphere": dict(light_model="distant", scene=SynthScene(sphere_xy=((0.25, -0.25),), ground_albedo=0.3)),
     "near_grey_1sphere": dict(light_model="near", light_distance=2.0, light_radius=0.05,
                               scene=SynthScene(sphere_xy=((0.25, -0.25),), ground_albedo=0.3)),
+    # white, grey, chrome and black glossy balls under a near light (as `ffls synth --near 2
+    # --light-radius 0.05 --sphere-material mixed`): the joint near fit of matte pixels and mirror rays
+    "near_mixed": dict(light_model="near", light_distance=2.0, light_radius=0.05,
+                       scene=make_scene(sphere_material="mixed")),
 }
 TARGETS = {"distant_grey": (1.0, 0.5), "near_grey": (2.5, 1.0)}
 
@@ -78,7 +86,16 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     imgs = [load_photo(cap, i) for i in range(len(dirs))]
     t = time.perf_counter()
     vals = [sphere_values(im, samples) for im in imgs]
-    result = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine)
+    if spheres == "detect":
+        from ffls.io.capture import sphere_materials
+
+        materials = sphere_materials(cap, len(sph))
+    else:  # the renderer's materials: chrome and black glossy balls are mirrors
+        materials = ["mirror" if t.get("material") in ("mirror", "glossy_black") else "matte"
+                     for t in truth.get("spheres", [{}] * len(sph))]
+    views = sphere_views(cap, sph) if any(m != "matte" for m in materials) else None
+    result = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine,
+                             materials=materials, views=views)
     dt = (time.perf_counter() - t) / len(imgs)
     res_, refs = result.photos, result.refinements or []
     calib = None if result.calibration is None else [dataclasses.asdict(c) for c in result.calibration]
@@ -102,6 +119,25 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     }
 
 
+def end_to_end(folder, workers: int, n: int) -> dict:
+    """Wall and CPU time (this process's children) of ``ffls lights FOLDER --workers WORKERS`` as a
+    user runs it (a new Python process), and photos per second of wall time."""
+    import resource
+    import subprocess
+    import sys
+
+    out = os.path.join(folder, "lights_end_to_end.json")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "ffls.cli", "lights", str(folder), "-o", out, "--workers", str(workers),
+                    "--no-progress"], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"end_to_end_s": wall, "end_to_end_cpu_s": cpu, "end_to_end_photos_per_s": n / wall,
+            "end_to_end_workers": workers}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=768)
@@ -113,6 +149,9 @@ def main(argv=None):
                     help="find the spheres automatically (the real pipeline) or take the true centres")
     ap.add_argument("--no-refine", action="store_true", help="no photometric refinement of the sphere centres")
     ap.add_argument("--cache", default=None, help="keep (and reuse) the renders in this folder")
+    ap.add_argument("--end-to-end", type=int, default=0, metavar="WORKERS",
+                    help="also time the whole command `ffls lights CAPTURE --workers WORKERS` (a new process: "
+                         "imports, decoding, detection, both passes, writing) and report photos/s")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_lights.json"))
     a = ap.parse_args(argv)
     phis, thetas, dirs = grid(a.phi_step, a.theta_step)
@@ -122,6 +161,10 @@ def main(argv=None):
             base = a.cache or tmp
             r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(base, f"{name}_{a.res}"), a.bounce,
                            a.spheres, not a.no_refine)
+            if a.end_to_end:
+                r.update(end_to_end(os.path.join(base, f"{name}_{a.res}"), a.end_to_end, r["n"]))
+                print(f"{name}: ffls lights --workers {a.end_to_end}: {r['end_to_end_s']:.2f} s wall, "
+                      f"{r['end_to_end_photos_per_s']:.1f} photos/s ({r['end_to_end_cpu_s']:.2f} s CPU)", flush=True)
             rows.append(r)
             tgt = TARGETS.get(name)
             print(f"{name:22s} spheres={a.spheres} refine={not a.no_refine} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "

@@ -520,3 +520,123 @@ def test_fit_lambert_clipped_black_floor_is_censored_by_the_model():
     assert clipped > 0
     assert np.mean(errs) < 0.15, errs
     assert np.mean(errs) < 0.6 * np.mean(errs_by_value), (errs, errs_by_value)
+
+
+def test_near_fit_mixed_matte_pixels_and_mirror_rays(samples):
+    """Two matte spheres' pixels and two mirror rays (exact, from points on the other two spheres)
+    in one least-squares problem: the position is found from a start 20 cm off, its covariance is
+    finite, and rays alone (no matte sphere) triangulate it with a covariance that scales with
+    their stated deviation."""
+    from ffls.spheres.combine import fit_near_light_mixed
+
+    S = SCENE_CENTER + 2.0 * light(40, 30)
+    v = sphere_values(render(position=S), samples[:2])
+    fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples[:2], v)]
+    points = [CENTERS[k] + R_SPH * normalize(S - CENTERS[k]) for k in (2, 3)]
+    sig = np.radians(0.3) / np.sqrt(2.0)
+    rays = [(p, normalize(S - p), sig) for p in points]
+    start = S + np.array([0.2, -0.1, 0.1])
+    fit = fit_near_light_mixed(samples[:2], [x[0] for x in v], [near_fit_mask(f) for f in fits], start, rays,
+                               inflation=[f.inflation for f in fits])
+    assert fit.success and np.all(np.isfinite(fit.cov))
+    assert np.linalg.norm(fit.position - S) < 0.1
+    assert np.degrees(angle_between(fit.position - SCENE_CENTER, S - SCENE_CENTER)) < 0.3
+    # rays only: exact rays meet at S; twice the stated deviation, twice the position's sd
+    rays3 = rays + [(CENTERS[0] + R_SPH * normalize(S - CENTERS[0]), normalize(S - CENTERS[0] - R_SPH
+                                                                            * normalize(S - CENTERS[0])), sig)]
+    a = fit_near_light_mixed([], [], [], start, rays3)
+    b = fit_near_light_mixed([], [], [], start, [(p, d, 2 * s) for p, d, s in rays3])
+    assert a.success and np.linalg.norm(a.position - S) < 1e-3
+    assert np.sqrt(np.trace(b.cov)) == pytest.approx(2 * np.sqrt(np.trace(a.cov)), rel=0.05)
+
+
+def _png_capture(folder, n=5, shape=(24, 32), encoding="linear", seed=0):
+    import json
+
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    names = []
+    for i in range(n):
+        q = rng.integers(0, 256, (*shape, 3), dtype=np.uint8)
+        q[0, 0] = 255  # a saturated pixel
+        names.append(f"p{i}.png")
+        cv2.imwrite(str(folder / names[-1]), q)
+    K = [[40.0, 0, (shape[1] - 1) / 2], [0, 40.0, (shape[0] - 1) / 2], [0, 0, 1]]
+    (folder / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": names,
+                                                     "camera": {"K": K}, "sphere_radius": 0.04,
+                                                     "encoding": encoding}))
+    return names
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_decode_photos_once_matches_reading_them(tmp_path, workers):
+    """decode_photos gives the detection's reductions (as sequence_stats over the photos: max,
+    brightest, mean, per-photo colour counts and edge evidence) and keeps the decoded photos
+    (linear values and stored codes) that the first pass would read."""
+    from ffls.io.capture import load_capture
+    from ffls.radiance.photos import read_photo
+    from ffls.spheres.detect import sequence_stats
+    from ffls.spheres.estimate import decode_photos
+
+    _png_capture(tmp_path)
+    cap = load_capture(tmp_path)
+    d = decode_photos(cap, workers=workers)
+    st = sequence_stats([read_photo(cap, i).linear for i in range(5)])
+    assert d.n == st.n == 5 and d.bit_depths == {8}  # five chunks merged
+    assert np.array_equal(d.stats.max, st.max) and np.array_equal(d.stats.brightest, st.brightest)
+    assert np.allclose(d.stats.mean, st.mean, rtol=1e-6, atol=1e-7)
+    assert d.stats.colour_counts.sum() > 0 and np.array_equal(d.stats.colour_counts, st.colour_counts)
+    assert d.stats.edge_photos == st.edge_photos == 5
+    assert np.allclose(d.stats.edge_tensor, st.edge_tensor, rtol=1e-5, atol=1e-6)
+    for i in range(5):
+        ph = read_photo(cap, i)
+        lin, raw, depth = d.photo(i)
+        assert depth == 8 and np.array_equal(lin, ph.linear)
+        assert np.array_equal(raw, np.rint(ph.raw * 255).astype(np.uint8))
+
+
+def test_decode_photos_same_for_any_workers(tmp_path):
+    """The chunks do not depend on the number of workers: the reductions are identical to the bit."""
+    from ffls.io.capture import load_capture
+    from ffls.spheres.estimate import decode_photos
+
+    _png_capture(tmp_path)
+    cap = load_capture(tmp_path)
+    a, b = decode_photos(cap, workers=1), decode_photos(cap, workers=2)
+    for f in ("max", "brightest", "mean", "colour_counts", "edge_tensor"):
+        assert np.array_equal(getattr(a.stats, f), getattr(b.stats, f)), f
+
+
+def test_cli_lights_same_for_one_and_two_workers(tmp_path, capsys):
+    """``ffls lights`` decodes the photos once (in a pool with 2 workers), detection included: its
+    per-photo colour evidence sets the object's red glossy ball aside as coloured either way, and
+    lights.json is the same, byte for byte, with 1 and 2 workers."""
+    from ffls.synth import scene as synth
+    from ffls.cli import main
+
+    dirs = np.array([light(t, p) for t, p in [(10, -90), (40, 0), (60, 150), (30, 60), (50, -120), (20, 100),
+                                              (65, -30), (35, 170), (45, -60)]])
+    synth.write_synthetic_capture(tmp_path, resolution=224, directions=dirs, progress=False)
+    docs = []
+    for w in (1, 2):
+        out = tmp_path / f"L{w}.json"
+        assert main(["lights", str(tmp_path), "-o", str(out), "--workers", str(w), "--no-progress"]) == 0
+        text, err = capsys.readouterr()
+        assert "4 spheres found" in text
+        assert any("coloured" in ln and "in the photos" in ln for ln in err.splitlines()), err
+        docs.append(out.read_bytes())
+    assert docs[0] == docs[1]
+
+
+def test_decode_photos_names_a_photo_of_another_size(tmp_path):
+    import cv2
+
+    from ffls.io.capture import load_capture
+    from ffls.spheres.estimate import decode_photos
+
+    names = _png_capture(tmp_path)
+    cv2.imwrite(str(tmp_path / names[3]), np.zeros((20, 32, 3), np.uint8))
+    with pytest.raises(InputError) as e:
+        decode_photos(load_capture(tmp_path), workers=1)
+    assert names[3] in str(e.value.path) and "same size" in str(e.value)

@@ -1,6 +1,7 @@
 """``ffls lights CAPTURE``: estimate each photograph's light direction from the spheres."""
 from __future__ import annotations
 
+import os
 from collections import Counter
 from pathlib import Path
 
@@ -135,14 +136,26 @@ def run(args) -> int:
     cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress)
     if calibration is not None:
         print(calibration.summary())
-    if spheres is None:
+    decoded = None
+    if spheres is None:  # every photo decoded once: the detection's reductions, then the first pass
         from ffls.spheres.detect import find_spheres_in_capture
+        from ffls.spheres.estimate import decode_photos
 
-        spheres = find_spheres_in_capture(cap)
+        bar = None
+        if not args.no_progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(cap.image_paths), desc="decoding", unit="img")
+        try:
+            decoded = decode_photos(cap, workers=args.workers or os.cpu_count() or 1, progress_bar=bar)
+        finally:
+            if bar is not None:
+                bar.close()
+        spheres = find_spheres_in_capture(cap, stats=decoded.stats, bit_depths=decoded.bit_depths)
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
     lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
-                             model=args.model, bounce=args.bounce)
+                             model=args.model, bounce=args.bounce, decoded=decoded)
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"

@@ -26,7 +26,8 @@ from ffls.conventions import UP, angle_between, normalize, tangent_basis
 from ffls.spheres.lambert import solve_normal_equations
 from ffls.spheres.samples import SphereSamples
 
-__all__ = ["combine_distant", "RayConvergence", "fit_ray_convergence", "NearLightFit", "fit_near_light"]
+__all__ = ["combine_distant", "RayConvergence", "fit_ray_convergence", "NearLightFit", "fit_near_light",
+           "fit_near_light_mixed"]
 
 
 def _sigma_axis(unc_deg):
@@ -442,3 +443,113 @@ def fit_near_light(samples: list[SphereSamples], values: list[np.ndarray], masks
     a_mean = float(np.mean(np.abs(shading.solve(x)[1][:, 0])))
     return NearLightFit(position=x.copy(), cov=cov, rms=float(np.sqrt(np.mean(r * r))) / max(a_mean, 1e-300),
                         n_pixels=int(mtot), success=bool(np.all(np.isfinite(x)) and a_mean > 0))
+
+
+def fit_near_light_mixed(samples: list[SphereSamples], values: list[np.ndarray], masks: list[np.ndarray],
+                         position0: np.ndarray, rays: list[tuple], terms: list[tuple] | None = None,
+                         inflation: list[float] | None = None, terminator: float = 0.15, up: np.ndarray = UP,
+                         n_rounds: int = 2, stride: int = 4) -> NearLightFit:
+    """Joint fit of a point light's position to matte spheres' pixels and mirror spheres' rays.
+
+    One least-squares problem (:func:`scipy.optimize.least_squares`) in the light's position
+    ``S`` whose residuals, each in units of its own standard deviation, are
+
+    * per matte sphere ``k``, its pixels' shading residuals (the model of :func:`fit_near_light`,
+      linear coefficients solved in closed form for each ``S``) over the sphere's robust residual
+      deviation ``s_k`` times ``sqrt(f_k)``, ``f_k`` the sphere's own variance inflation for
+      spatially correlated residuals (:func:`ffls.spheres.uncertainty.correlation_inflation`;
+      without it the hundreds of correlated pixels would outweigh every mirror);
+    * per mirror sphere, the two tangent components of ``normalize(S - P_j)`` about its measured
+      reflected direction ``d_j`` (the highlight's ray from its reflection point ``P_j``), over the
+      direction's per-axis standard deviation.
+
+    The position's covariance is ``(J^T J)^-1`` times the reduced chi-square when above 1 (the
+    residuals' spread as measured), so that it carries into the light direction's cone.
+
+    Parameters
+    ----------
+    samples, values, masks :
+        The matte spheres, as :func:`fit_near_light` (may be empty).
+    position0 : (3,) float
+        Initial position (the ray intersection).
+    rays : list of (origin (3,), direction (3,), sigma_axis_rad)
+        The mirror spheres' reflected rays.
+    terms : list of (bool, bool or float), optional
+        Per matte sphere, as :func:`fit_near_light`.
+    inflation : list of float, optional
+        Per matte sphere, its own fit's variance inflation (``LambertFit.inflation``); 1 when None.
+    terminator, up, n_rounds, stride :
+        As :func:`fit_near_light`.
+
+    Returns
+    -------
+    NearLightFit
+    """
+    from scipy.optimize import least_squares
+
+    K = len(samples)
+    up = np.asarray(up, dtype=np.float64)
+    S0 = np.asarray(position0, dtype=np.float64)
+    terms = [(True, True)] * K if terms is None else terms
+    infl = np.ones(K) if inflation is None else np.maximum(np.nan_to_num(np.asarray(inflation, dtype=np.float64),
+                                                                         nan=1.0), 1.0)
+    origins = np.array([np.asarray(o, dtype=np.float64) for o, _, _ in rays]).reshape(-1, 3)
+    dirs = normalize(np.array([np.asarray(d, dtype=np.float64) for _, d, _ in rays]).reshape(-1, 3)) if rays \
+        else np.zeros((0, 3))
+    sig = np.array([float(s) for _, _, s in rays])
+    if len(rays) and not (np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs)) and np.all(sig > 0)):
+        return NearLightFit(position=S0, cov=np.full((3, 3), np.inf), rms=np.inf, n_pixels=0, success=False)
+    tangents = np.stack([np.stack(tangent_basis(d)) for d in dirs]) if len(rays) else np.zeros((0, 2, 3))
+    shading = _JointShading(samples, values, masks, S0, terms, up, stride) if K else None
+    pixel_scale = np.zeros(0)
+
+    def mirror_residuals(S):
+        if not len(rays):
+            return np.zeros(0)
+        u = S[None, :] - origins
+        u = u / np.linalg.norm(u, axis=1, keepdims=True)
+        return (np.einsum("kij,kj->ki", tangents, u) / sig[:, None]).ravel()
+
+    def residuals(S):
+        r = mirror_residuals(S)
+        if shading is None:
+            return r
+        return np.concatenate([shading.residuals(S) * pixel_scale, r])
+
+    def per_sphere_scale(S):
+        """Per selected pixel, 1 / (robust residual sd of its sphere * sqrt(its inflation))."""
+        res, X = shading.solve(S)
+        out = []
+        for k, rk in enumerate(np.split(res, np.cumsum(shading.counts)[:-1])):
+            sd = 1.4826 * float(np.median(np.abs(rk - np.median(rk)))) if rk.size else 1.0
+            sd = max(sd, 1e-3 * abs(float(X[k, 0])), 1e-12)
+            out.append(np.full(rk.size, 1.0 / (sd * np.sqrt(infl[k]))))
+        return np.concatenate(out) if out else np.zeros(0)
+
+    x = S0.copy()
+    fit = None
+    for rnd in range(max(int(n_rounds), 1)):
+        if shading is not None:
+            sel = shading.terminator_selection(x, terminator)
+            if rnd > 0:
+                shading.select(sel)
+                shading.drop_outliers(sel, *shading.solve(x))
+            shading.select(sel)
+            if int(shading.counts.sum()) <= 3 * K:
+                break
+            pixel_scale = per_sphere_scale(x)
+        scale = max(float(np.linalg.norm(x)), 1e-6)
+        fit = least_squares(residuals, x, x_scale=scale, method="trf", xtol=_XTOL, ftol=_FTOL)
+        if not np.all(np.isfinite(fit.x)):
+            break
+        x = fit.x
+    if fit is None or not np.all(np.isfinite(x)) or fit.fun.size <= 3:
+        return NearLightFit(position=S0, cov=np.full((3, 3), np.inf), rms=np.inf, n_pixels=0, success=False)
+    r, J = fit.fun, fit.jac
+    n_lin = shading.n_linear if shading is not None else 0
+    dof = max(r.size - 3 - n_lin, 1)
+    chi2_red = float(r @ r) / dof
+    cov = max(chi2_red, 1.0) * np.linalg.pinv(J.T @ J)
+    n_pix = int(shading.counts.sum()) if shading is not None else 0
+    return NearLightFit(position=x.copy(), cov=cov, rms=float(np.sqrt(chi2_red)), n_pixels=n_pix,
+                        success=bool(fit.status > 0))

@@ -86,6 +86,7 @@ __all__ = [
     "extreme_images",
     "sequence_stats",
     "SequenceStats",
+    "SequenceAccumulator",
     "photo_colour_counts",
     "photo_edge_tensor",
     "consistent_edge_points",
@@ -584,8 +585,108 @@ def photo_colour_counts(im, lum, counts, lit_fraction: float = 0.1, clip_fractio
     cf[b * (counts.shape[1] * counts.shape[2]) + flat] += 1  # one bin per pixel: no repeated index
 
 
+class SequenceAccumulator:
+    """The streamed reductions of :func:`sequence_stats`, one photo at a time: ``add(image, index)``,
+    ``merge(later)``, ``result()``.
+
+    Every reduction is a function of the photo's index in the sequence, not of the order of
+    ``add`` calls, so a sequence cut into consecutive chunks, each accumulated on its own (e.g.
+    in worker processes) and merged in order, gives what one accumulator over the whole sequence
+    gives: the max and the colour counts exactly, the brightest photo exactly (the first on ties),
+    the luminance sum and the edge tensor to within rounding (exactly, for a given chunking).
+
+    Parameters
+    ----------
+    colour : bool
+        Gather :attr:`SequenceStats.colour_counts` (:func:`photo_colour_counts`; 3-channel photos).
+    edges : bool
+        Gather :attr:`SequenceStats.edge_tensor` (:func:`photo_edge_tensor`) from photos
+        ``0, k, 2k, ...`` (at most :data:`EDGE_PHOTOS` of them), ``k = ceil(n_images / EDGE_PHOTOS)``
+        (``k = 1`` when the length is unknown: the first :data:`EDGE_PHOTOS`).
+    n_images : int, optional
+        The whole sequence's length.
+    """
+
+    def __init__(self, colour: bool = True, edges: bool = True, n_images: int | None = None):
+        self.colour, self.edges = bool(colour), bool(edges)
+        self.every = max(1, -(-int(n_images) // EDGE_PHOTOS)) if n_images else 1
+        self.max = self.best = self.brightest = self.total = self.counts = self.tensor = None
+        self.n = self.edge_photos = 0
+
+    def add(self, im, index: int | None = None) -> None:
+        """Add photo number ``index`` (default: the count so far) of the sequence.
+
+        Parameters
+        ----------
+        im : (H, W, 3), (H, W, 1) or (H, W) float
+            Linear photo (non-finite values count as 0).
+        index : int, optional
+        """
+        i = self.n if index is None else int(index)
+        im = np.asarray(im, dtype=np.float32)
+        if not np.isfinite(im).all():
+            im = np.nan_to_num(im, nan=0.0, posinf=0.0, neginf=0.0)
+        if im.ndim == 3 and im.shape[2] >= 3:  # float32 luminance (Rec. 709), channel by channel: fast
+            lum = im[..., 0] * np.float32(0.2126) + im[..., 1] * np.float32(0.7152) + im[..., 2] * np.float32(0.0722)
+        else:
+            lum = (im[..., 0] if im.ndim == 3 else im).astype(np.float32)
+        if self.max is None:
+            self.max, self.best = im.copy(), lum
+            self.brightest, self.total = np.full(lum.shape, i, np.int32), lum.astype(np.float64)
+            if self.colour and im.ndim == 3 and im.shape[2] >= 3:
+                self.counts = np.zeros((COLOUR_BINS, *lum[::COLOUR_STEP, ::COLOUR_STEP].shape), np.uint16)
+            if self.edges:
+                self.tensor = np.zeros((3, *lum.shape), np.float32)
+        elif im.shape != self.max.shape:
+            raise ValueError(f"image shapes differ: {im.shape} vs {self.max.shape}")
+        else:
+            np.maximum(self.max, im, out=self.max)
+            up = lum > self.best
+            self.brightest[up] = i
+            self.best[up] = lum[up]
+            self.total += lum
+        if self.counts is not None and i < np.iinfo(np.uint16).max:  # no count can overflow
+            photo_colour_counts(im, lum, self.counts)
+        if self.tensor is not None and i % self.every == 0 and i // self.every < EDGE_PHOTOS:
+            photo_edge_tensor(lum, self.tensor)
+            self.edge_photos += 1
+        self.n += 1
+
+    def merge(self, later: "SequenceAccumulator") -> "SequenceAccumulator":
+        """Fold in ``later``, an accumulator of photos that all come after this one's (ties of the
+        brightest photo go to the earlier photo); returns self."""
+        if later.max is None:
+            return self
+        if self.max is None:
+            self.__dict__.update(later.__dict__)
+            return self
+        if later.max.shape != self.max.shape:
+            raise ValueError(f"image shapes differ: {later.max.shape} vs {self.max.shape}")
+        np.maximum(self.max, later.max, out=self.max)
+        up = later.best > self.best
+        self.brightest[up] = later.brightest[up]
+        self.best[up] = later.best[up]
+        self.total += later.total
+        if self.counts is not None and later.counts is not None:
+            self.counts += later.counts
+        if self.tensor is not None and later.tensor is not None:
+            self.tensor += later.tensor
+        self.n += later.n
+        self.edge_photos += later.edge_photos
+        return self
+
+    def result(self) -> SequenceStats:
+        """The :class:`SequenceStats` of the photos added (and merged)."""
+        if self.max is None:
+            raise ValueError("no images")
+        tensor = self.tensor if self.n > 1 and self.edge_photos else None
+        return SequenceStats(self.max, self.brightest, self.total / self.n, self.n, self.counts, tensor,
+                             self.edge_photos if tensor is not None else 0)
+
+
 def sequence_stats(images, colour: bool = True, edges: bool = True, n_images: int | None = None) -> SequenceStats:
-    """The max image, the brightest photo, the mean luminance and the per-photo colour counts, in one pass.
+    """The max image, the brightest photo, the mean luminance, the per-photo colour counts and the
+    per-photo edge evidence, in one pass (a :class:`SequenceAccumulator` over ``images``).
 
     Parameters
     ----------
@@ -606,37 +707,12 @@ def sequence_stats(images, colour: bool = True, edges: bool = True, n_images: in
     """
     if isinstance(images, np.ndarray) and images.ndim in (2, 3) and not (images.ndim == 3 and images.shape[-1] not in (1, 3, 4)):
         return SequenceStats(max_image(images), None, None, 1)
-    mx = best_l = idx = total = counts = tensor = None
-    n = 0
+    if n_images is None and hasattr(images, "__len__"):
+        n_images = len(images)
+    acc = SequenceAccumulator(colour, edges, n_images)
     for im in images:
-        im = np.nan_to_num(np.asarray(im, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-        lum = _luminance(im).astype(np.float32)
-        if mx is None:
-            mx, best_l, idx, total = im.copy(), lum, np.zeros(lum.shape, np.int32), lum.astype(np.float64)
-            if colour and im.ndim == 3 and im.shape[2] >= 3:
-                counts = np.zeros((COLOUR_BINS, *lum[::COLOUR_STEP, ::COLOUR_STEP].shape), np.uint16)
-            if edges:
-                tensor = np.zeros((3, *lum.shape), np.float32)
-                n_total = n_images if n_images is not None else len(images) if hasattr(images, "__len__") else None
-                every = max(1, -(-n_total // EDGE_PHOTOS)) if n_total else 1
-                n_edge = 0
-        elif im.shape != mx.shape:
-            raise ValueError(f"image shapes differ: {im.shape} vs {mx.shape}")
-        else:
-            np.maximum(mx, im, out=mx)
-            up = lum > best_l
-            idx[up] = n
-            best_l[up] = lum[up]
-            total += lum
-        if counts is not None and n < np.iinfo(np.uint16).max:
-            photo_colour_counts(im, lum, counts)
-        if tensor is not None and n % every == 0 and n_edge < EDGE_PHOTOS:
-            photo_edge_tensor(lum, tensor)
-            n_edge += 1
-        n += 1
-    if mx is None:
-        raise ValueError("no images")
-    return SequenceStats(mx, idx, total / n, n, counts, tensor if n > 1 else None, n_edge if tensor is not None else 0)
+        acc.add(im)
+    return acc.result()
 
 
 def extreme_images(images) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
@@ -1714,14 +1790,17 @@ def _refine_on_consistent_edges(ft, cpts, cam: _Camera, rng, max_residual_px: fl
     return new
 
 
-def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None) -> Spheres:
+def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None,
+                            stats: SequenceStats | None = None, bit_depths=None) -> Spheres:
     """:func:`find_spheres` on a loaded :class:`ffls.io.capture.Capture`, using its whole sequence.
 
     Uses ``capture.K``, ``.dist``, ``.camera_model``, ``.sphere_radius``, ``.spheres`` (hints),
     ``.sphere_count`` (``n_spheres`` when not given), ``.world_from_camera``, ``.scene_center``
-    and the max (and brightest-photo index, :func:`extreme_images`) over ``read_photo(capture, i)`` for all photos (streamed: one image in
+    and the :func:`sequence_stats` of ``read_photo(capture, i)`` for all photos (streamed: one image in
     memory at a time). ``progress`` is an optional wrapper such as ``tqdm.tqdm`` (called as
-    ``progress(iterable, total=n)``).
+    ``progress(iterable, total=n)``). ``stats``, when given, is that reduction already made, with
+    ``bit_depths`` the photos' stored bit depths (e.g. :func:`ffls.spheres.estimate.decode_photos`,
+    which decodes the photos once for detection and estimation): no photo is read.
     """
     n = len(capture.image_paths)
     depths = set()
@@ -1736,12 +1815,16 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
         raise InputError("has no sphere_radius: finding the spheres with a pinhole camera needs their radius "
                          "(world units; or \"camera\": {\"model\": \"orthographic\"} for a long lens)",
                          capture.json_path)
-    it = photos()
-    if progress is not None:
-        it = progress(it, total=n)
     if not n:
         raise InputError("capture lists no images", capture.folder)
-    st = sequence_stats(it, n_images=n)
+    if stats is not None:
+        depths.update(bit_depths or ())
+    else:
+        it = photos()
+        if progress is not None:
+            it = progress(it, total=n)
+        stats = sequence_stats(it, n_images=n)
+    st = stats
     mx, brightest, mean, n_img = st.max, st.brightest, st.mean, st.n
     hints = getattr(capture, "spheres", None) or None
     if n_spheres is None:

@@ -43,13 +43,14 @@ import numpy as np
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
+from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness
 from ffls.spheres.lambert import fit_lambert
 from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values)
-from ffls.spheres.uncertainty import ErrorModel, fit_error_model, photo_residuals
+from ffls.spheres.uncertainty import ErrorModel, centre_floor_deg, fit_error_model, photo_residuals
 
 __all__ = [
     "BOUNCE_MODES",
@@ -62,6 +63,8 @@ __all__ = [
     "refine_sphere_centres",
     "refit_spheres",
     "calibrate_uncertainty",
+    "DecodedPhotos",
+    "decode_photos",
     "estimate_photos",
     "estimate_lights",
     "estimate_lights_MasselusDutreAnrys2002",
@@ -279,6 +282,7 @@ def calibrate_bounce(results: list[PhotoEstimate], n_spheres: int, max_sigma: fl
 
 
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
+                          refinements: list[CentreRefinement] | None = None,
                           **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
@@ -294,7 +298,11 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     ----------
     results : list of PhotoEstimate
     samples : list of SphereSamples
-        The spheres (their world centres, for near lights).
+        The spheres (their world centres, for near lights; their pixel radii).
+    refinements : list of CentreRefinement, optional
+        Per sphere, its photometric centre refinement: an accepted one measures the centre's
+        uncertainty (outline against shading), propagated to the sphere's direction
+        (:func:`ffls.spheres.uncertainty.centre_floor_deg`) as a known part of its variance.
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -304,7 +312,11 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     results : list of PhotoEstimate
     """
     centers = np.array([s.center for s in samples])
-    residuals, sigmas = [], []
+    centre = np.zeros(len(samples))
+    for k, (s, ref) in enumerate(zip(samples, refinements or [])):
+        if ref is not None and ref.accepted:
+            centre[k] = centre_floor_deg(ref.shift_px, s.radius_px)
+    residuals, sigmas, used_all = [], [], []
     for r in results:
         if not r.ok or len(r.used_spheres) < 2:
             continue
@@ -316,12 +328,19 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         residuals.append(photo_residuals(np.array(dirs), r.direction, r.position if near else None,
                                          centers[used] if near else None))
         sigmas.append(np.array([r.spheres[i].fit.uncertainty_deg for i in used]) / np.sqrt(2.0))
-    model = fit_error_model(residuals, sigmas, **kwargs)
+        used_all.append(np.asarray(used))
+    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre, **kwargs)
     return model, [r.with_error_model(model) for r in results]
 
 
+def _refine_one(args) -> CentreRefinement:
+    """:func:`ffls.spheres.refine.refine_sphere_centre` of one sphere (a picklable task)."""
+    sample, vals, dirs, terminator, kwargs = args
+    return refine_sphere_centre(sample, vals, dirs, terminator=terminator, **kwargs)
+
+
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
-                          terminator: float = 0.15, **kwargs) -> tuple[list[SphereSamples], list, list]:
+                          terminator: float = 0.15, map_fn=map, **kwargs) -> tuple[list[SphereSamples], list, list]:
     """Refine every sphere's centre from the first-pass shading of all photos.
 
     :func:`ffls.spheres.refine.refine_sphere_centre` per sphere (photos where that sphere's fit
@@ -336,6 +355,9 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
     values : list
         Per photo, its :func:`ffls.spheres.samples.sphere_values` for ``samples``.
     terminator : float
+    map_fn : callable
+        ``map``-like: runs the spheres' refinements (independent of each other), e.g. in a pool
+        of processes.
     **kwargs
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
 
@@ -347,14 +369,16 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         Per photo, the values for the new samples.
     refinements : list of CentreRefinement
     """
-    new_samples, kept, refinements = [], [], []
+    new_samples, kept = [], []
+    tasks = []
     for k, s in enumerate(samples):
         dirs = []
         for r in results:
             sp = r.spheres[k] if r.spheres else None
             dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
-        ref = refine_sphere_centre(s, [v[k] for v in values], dirs, terminator=terminator, **kwargs)
-        refinements.append(ref)
+        tasks.append((s, [v[k] for v in values], dirs, terminator, kwargs))
+    refinements = list(map_fn(_refine_one, tasks))
+    for s, ref in zip(samples, refinements):
         if ref.accepted:
             s2, idx = recentre_samples(s, ref.center)
             new_samples.append(s2)
@@ -406,6 +430,191 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
     return replace(result, spheres=spheres)
 
 
+# ----------------------------------------------------------------------------- decoding once
+#: Largest share of the available memory that :func:`decode_photos` keeps decoded photos in.
+DECODED_MEMORY_SHARE = 0.25
+#: :func:`decode_photos` cuts the sequence into this many chunks of consecutive photos (fewer for
+#: fewer photos), whatever the number of workers: the chunks' reductions are merged in order, so
+#: the result, to the last bit, does not depend on the number of workers.
+DECODE_CHUNKS = 8
+
+
+@dataclass
+class DecodedPhotos:
+    """A capture's photos decoded once (:func:`decode_photos`): what the sphere detection needs of
+    them, and (memory permitting) the decoded photos themselves for the first pass.
+
+    Attributes
+    ----------
+    stats : ffls.spheres.detect.SequenceStats
+        The detection's reductions of the sequence (max image, brightest photo, mean luminance,
+        per-photo colour counts and edge evidence; :func:`ffls.spheres.detect.sequence_stats`).
+    bit_depths : set
+        The photos' stored bit depths.
+    linear : (n, H, W, 3) float32 or None
+        The linear photos, in memory shared with the worker processes (None: over the budget,
+        the first pass decodes them again).
+    raw : (n, H, W, 3) uint8 or uint16, or None
+        Integer photos' stored codes (what :func:`ffls.spheres.samples.sphere_values` reads for
+        saturation); None for float photos or when ``linear`` is None.
+    """
+
+    stats: SequenceStats
+    bit_depths: set
+    linear: np.ndarray | None = None
+    raw: np.ndarray | None = None
+
+    @property
+    def n(self) -> int:
+        return self.stats.n
+
+    @property
+    def shape(self) -> tuple:
+        """(H, W) of the photos."""
+        return self.stats.max.shape[:2]
+
+    def photo(self, i: int):
+        """Photo ``i`` as ``(linear, raw, bit_depth)`` from memory, or None where not kept."""
+        if self.linear is None:
+            return None
+        depth = next(iter(self.bit_depths)) if len(self.bit_depths) == 1 else None
+        if depth is None:
+            return None
+        return self.linear[i], (None if self.raw is None else self.raw[i]), depth
+
+
+def _available_memory() -> int:
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 0
+
+
+def _shared_array(shape, dtype) -> np.ndarray:
+    """A zeroed array in anonymous shared memory: written by forked worker processes, seen here."""
+    import mmap
+
+    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    return np.frombuffer(mmap.mmap(-1, max(nbytes, 1)), dtype=dtype, count=int(np.prod(shape))).reshape(shape)
+
+
+@dataclass
+class _DecodeContext:
+    capture: object
+    n: int
+    shape: tuple
+    linear: np.ndarray | None
+    raw: np.ndarray | None
+
+
+_decode_context: _DecodeContext | None = None
+
+
+def _set_decode_context(context: _DecodeContext) -> None:
+    global _decode_context
+    _decode_context = context
+
+
+def _decode_range(bounds: tuple[int, int]):
+    """Decode photos ``start..stop-1`` (into the shared arrays where kept) and reduce them:
+    ``(SequenceAccumulator of the range, bit depths)``."""
+    from ffls.radiance.photos import read_photo
+
+    ctx = _decode_context
+    start, stop = bounds
+    acc = SequenceAccumulator(n_images=ctx.n)
+    depths = set()
+    for i in range(start, stop):
+        ph = read_photo(ctx.capture, i)
+        if ph.linear.shape != ctx.shape:
+            raise InputError(f"image is {ph.linear.shape[1]}x{ph.linear.shape[0]}, the capture's first is "
+                             f"{ctx.shape[1]}x{ctx.shape[0]}: every photo must have the same size",
+                             ctx.capture.image_paths[i])
+        depths.add(ph.bit_depth)
+        if ctx.linear is not None:
+            ctx.linear[i] = ph.linear
+            if ctx.raw is not None:
+                top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
+                ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
+        acc.add(ph.linear, i)
+    return acc, depths
+
+
+def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=None) -> DecodedPhotos:
+    """Decode every photo of ``capture`` once: the reductions the sphere detection needs and,
+    within :data:`DECODED_MEMORY_SHARE` of the available memory, the photos for the first pass.
+
+    :data:`DECODE_CHUNKS` chunks of consecutive photos are decoded and reduced
+    (:class:`ffls.spheres.detect.SequenceAccumulator`: max, brightest photo, mean luminance,
+    per-photo colour counts and edge evidence) in ``workers`` processes (forked: they write the
+    photos into shared memory), and the chunks' reductions merged in order: the result is that of
+    :func:`ffls.spheres.detect.sequence_stats` over the sequence (the luminance and edge sums to
+    within rounding), the same for any ``workers``.
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+    workers : int
+    keep : bool
+        Keep the decoded photos (within the budget).
+    progress_bar : tqdm, optional
+        Advanced by one per photo.
+
+    Returns
+    -------
+    DecodedPhotos
+
+    Raises
+    ------
+    InputError
+        An unreadable photo, or one whose size differs from the first one's.
+    """
+    from ffls.radiance.photos import read_photo
+
+    n = len(capture.image_paths)
+    if n == 0:
+        raise InputError("capture lists no images", capture.json_path)
+    first = read_photo(capture, 0)
+    shape = first.linear.shape
+    integer = first.bit_depth in (8, 16)
+    per_photo = first.linear.nbytes + (first.linear.size * (1 if first.bit_depth == 8 else 2) if integer else 0)
+    linear = raw = None
+    if keep and n * per_photo <= DECODED_MEMORY_SHARE * _available_memory():
+        linear = _shared_array((n,) + shape, np.float32)
+        if integer:
+            raw = _shared_array((n,) + shape, np.uint8 if first.bit_depth == 8 else np.uint16)
+    context = _DecodeContext(capture, n, shape, linear, raw)
+    workers = max(1, min(int(workers), n))
+    size = max(1, -(-n // DECODE_CHUNKS))  # the chunks do not depend on the workers: nor does the result
+    chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
+    parts = []
+    if workers == 1:
+        _set_decode_context(context)
+        try:
+            for c in chunks:
+                parts.append(_decode_range(c))
+                if progress_bar is not None:
+                    progress_bar.update(c[1] - c[0])
+        finally:
+            _set_decode_context(None)
+    else:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), initializer=_set_decode_context,
+                                 initargs=(context,)) as ex:
+            for part, c in zip(ex.map(_decode_range, chunks), chunks):
+                parts.append(part)
+                if progress_bar is not None:
+                    progress_bar.update(c[1] - c[0])
+    acc, depths = parts[0]
+    for acc_k, depths_k in parts[1:]:  # in order: the earlier photo wins ties of the brightest
+        acc.merge(acc_k)
+        depths |= depths_k
+    if linear is not None and len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
+        linear = raw = None
+    return DecodedPhotos(stats=acc.result(), bit_depths=depths, linear=linear, raw=raw)
+
+
 # ----------------------------------------------------------------------------- running the photo fits
 class _PhotoTask(NamedTuple):
     """One photo's fit: its values (None: read photo ``index`` of the capture), the imposed
@@ -416,6 +625,7 @@ class _PhotoTask(NamedTuple):
     bounce_ratio: list | None = None
     start: list | None = None
     joint: bool = True
+    refit: tuple | None = None  # (first-pass estimate, refinements): refit_spheres instead of a fit
 
 
 @dataclass
@@ -426,6 +636,7 @@ class _FitContext:
     samples: list[SphereSamples]
     scene_center: np.ndarray
     options: dict  # estimate_photo keyword arguments (model, min_spheres, sigma_floor_deg, ...)
+    decoded: DecodedPhotos | None = None  # photos decoded once (shared memory), else read here
 
 
 #: The context of the photo fits running in this process (set by :func:`_set_context`).
@@ -441,11 +652,17 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
     """Fit one photo in the current context; returns its estimate and, where the photo was read
     here, its sphere values (grey float32: kept in memory for the later passes)."""
     ctx = _context
+    if task.refit is not None:
+        return refit_spheres(task.refit[0], ctx.samples, task.values, task.refit[1],
+                             terminator=ctx.options.get("terminator", 0.15), up=ctx.options.get("up", UP)), None
     values, read = task.values, task.values is None
     if read:
-        photo = read_photo(ctx.capture, task.index)
-        values = sphere_values(photo.linear, ctx.samples, saturation=ctx.options.get("saturation"), raw=photo.raw,
-                               bit_depth=photo.bit_depth)
+        kept = None if ctx.decoded is None else ctx.decoded.photo(task.index)
+        if kept is None:
+            photo = read_photo(ctx.capture, task.index)
+            kept = (photo.linear, photo.raw, photo.bit_depth)
+        values = sphere_values(kept[0], ctx.samples, saturation=ctx.options.get("saturation"), raw=kept[1],
+                               bit_depth=kept[2])
         values = [SphereValues(v.grey.astype(np.float32), v.valid, v.n_saturated) for v in values]
     est = estimate_photo(None, ctx.samples, ctx.scene_center, values=values, bounce_ratio=task.bounce_ratio,
                          start=task.start, joint=task.joint, **ctx.options)
@@ -455,9 +672,20 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
 class _PhotoFitter:
     """Runs a pass's photo fits in this process (``workers == 1``) or in a pool of processes."""
 
-    def __init__(self, capture, scene_center, options: dict, workers: int = 1, progress_bar=None):
-        self.capture, self.scene_center, self.options = capture, scene_center, options
+    def __init__(self, capture, scene_center, options: dict, workers: int = 1, progress_bar=None,
+                 decoded: DecodedPhotos | None = None):
+        self.capture, self.scene_center, self.options, self.decoded = capture, scene_center, options, decoded
         self.workers, self.progress_bar = max(1, int(workers)), progress_bar
+
+    def map(self, fn, items) -> list:
+        """``[fn(x) for x in items]``, in the pool of processes when there are several workers and items."""
+        items = list(items)
+        if self.workers == 1 or len(items) < 2:
+            return [fn(x) for x in items]
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=min(self.workers, len(items))) as ex:
+            return list(ex.map(fn, items))
 
     def advance(self, n: int) -> None:
         if self.progress_bar is not None:
@@ -466,7 +694,7 @@ class _PhotoFitter:
     def run(self, tasks: list[_PhotoTask], samples: list[SphereSamples],
             counted: bool = True) -> list[tuple[PhotoEstimate, list | None]]:
         """:func:`_run_photo_task` for every task, in order; ``counted`` advances the progress bar."""
-        context = _FitContext(self.capture, samples, self.scene_center, self.options)
+        context = _FitContext(self.capture, samples, self.scene_center, self.options, self.decoded)
         out = []
         if self.workers == 1 or len(tasks) == 1:
             _set_context(context)
@@ -538,15 +766,16 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     refinements = None
     if refine_centres:
         samples, values, refinements = refine_sphere_centres(samples, results, values, terminator=terminator,
-                                                             **(refine_options or {}))
+                                                             map_fn=fitter.map, **(refine_options or {}))
         if any(r.accepted for r in refinements):
             if bounce == "free":
                 results = refit(range(n_photos), None, counted=False)
-            else:  # only what the bounce calibration reads (cheap: in this process)
-                results = [refit_spheres(r, samples, v, refinements, terminator=terminator, up=up)
-                           for r, v in zip(results, values)]
+            else:  # only what the bounce calibration reads: the recentred spheres' fits
+                results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, refit=(r, refinements))
+                                                     for i, (r, v) in enumerate(zip(results, values))],
+                                                    samples, counted=False)]
     if bounce == "free":
-        error_model, results = calibrate_uncertainty(results, samples)
+        error_model, results = calibrate_uncertainty(results, samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
@@ -562,7 +791,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
             for i, r in zip(pending, refit(pending, None, counted=False)):
                 results[i] = r
         fitter.advance(n_photos)
-    error_model, results = calibrate_uncertainty(results, samples)
+    error_model, results = calibrate_uncertainty(results, samples, refinements)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds)
 
 
@@ -611,7 +840,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
 
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
-                    refine_options: dict | None = None, **kwargs):
+                    refine_options: dict | None = None, decoded: DecodedPhotos | None = None, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -638,6 +867,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         (:func:`refine_sphere_centres`) and repeat the first pass with the new centres.
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
+    decoded : DecodedPhotos, optional
+        The photos decoded once (:func:`decode_photos`, which the sphere detection also used):
+        the first pass reads them from memory. Made here when ``spheres`` is None.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``).
@@ -675,14 +907,19 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     n = len(capture.image_names)
     if n == 0:
         raise InputError("capture lists no images", capture.json_path)
+    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if spheres is None:
         from ffls.spheres.detect import find_spheres_in_capture
 
-        spheres = find_spheres_in_capture(capture)
+        if decoded is None:
+            decoded = decode_photos(capture, workers)
+        spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths)
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
     if capture.image_size is not None:
         shape = (int(capture.image_size[1]), int(capture.image_size[0]))
+    elif decoded is not None:
+        shape = decoded.shape
     else:
         shape = load_photo(capture, 0).shape[:2]
     samples = capture_samples(capture, spheres, shape)
@@ -690,14 +927,13 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
     materials = sphere_materials(capture, len(spheres))
     views = sphere_views(capture, spheres)
-    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        fitter = _PhotoFitter(capture, capture.scene_center, dict(model=model, **kwargs), workers, bar)
+        fitter = _PhotoFitter(capture, capture.scene_center, dict(model=model, **kwargs), workers, bar, decoded)
         est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
                         refine_options=refine_options, materials=materials, views=views, where=capture.json_path)
     finally:

@@ -44,7 +44,6 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
@@ -334,6 +333,8 @@ def find_highlight(image: np.ndarray, disc: np.ndarray, saturated: np.ndarray | 
     -------
     HighlightSpot
     """
+    from scipy import ndimage  # imported here: only mirror spheres need it (the import is slow)
+
     img = np.asarray(image, dtype=np.float64)
     disc = np.asarray(disc, dtype=bool) & np.isfinite(img)
     sat = np.zeros_like(disc) if saturated is None else (np.asarray(saturated, dtype=bool) & disc)

@@ -18,8 +18,9 @@ Masselus, Dutre, Anrys, "The Free-form Light Stage", EGWR 2002, section 5. Per p
 A sphere is matte or a mirror (chrome, black glossy): a mirror sphere's step 1 is its
 highlight (:func:`ffls.spheres.highlight.fit_highlight`, the RTI highlight method), whose
 direction and RMS uncertainty enter steps 2 and 3 like a matte sphere's; its near-light ray starts
-at the highlight's reflection point. The joint near fit (step 4) needs shading, so a photo whose
-used spheres include a mirror keeps the ray intersection.
+at the highlight's reflection point. In the joint near fit (step 4) a mirror's ray is a residual
+beside the matte spheres' pixels (:func:`ffls.spheres.combine.fit_near_light_mixed`), and the
+position's covariance carries into the cone.
 
 Rejection reasons (:data:`REASONS`) are short fixed strings stored in ``lights.json``.
 """
@@ -29,10 +30,10 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.stats import chi2 as chi2_distribution
+from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse (scipy.stats imports slowly)
 
 from ffls.conventions import UP, normalize
-from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
+from ffls.spheres.combine import combine_distant, fit_near_light, fit_near_light_mixed, fit_ray_convergence
 from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView, fit_highlight_samples
 from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
@@ -161,6 +162,10 @@ class PhotoEstimate:
         is the ray intersection.
     joint_sigma_deg : float
         1-sigma RMS angular error of the near light's joint fit statistics (0 otherwise).
+    weights : list of float or None
+        The used spheres' weights in the combination (inverse variances of
+        :func:`sphere_uncertainty_deg`): the photo's variance under an error model is that of
+        this weighted mean (:meth:`with_error_model`).
     """
 
     status: str
@@ -175,6 +180,7 @@ class PhotoEstimate:
     dof: int | None = None
     joint_pending: bool = False
     joint_sigma_deg: float = 0.0
+    weights: list[float] | None = None
 
     @property
     def ok(self) -> bool:
@@ -184,19 +190,21 @@ class PhotoEstimate:
         """This estimate with its 95% cones (photo and spheres) under ``model``.
 
         The photo's per-axis standard deviation is :meth:`ErrorModel.photo_sigma_deg` of its used
-        spheres' 1-sigma fits (and at least the near light's joint fit statistics, scaled); each
+        spheres' 1-sigma fits, combined with the weights the photo's direction was made with (and
+        at least the near light's joint fit statistics, scaled); each
         sphere with a direction gets the cone of its own direction
         (:meth:`ErrorModel.sphere_sigma_deg` plus the common mode).
         """
         stat = {i: s.fit.uncertainty_deg / np.sqrt(2.0) for i, s in enumerate(self.spheres)
                 if s.direction is not None and np.isfinite(s.fit.uncertainty_deg)}
-        spheres = [replace(s, uncertainty_deg=float(cone_deg(np.hypot(model.sphere_sigma_deg(stat[i]),
+        spheres = [replace(s, uncertainty_deg=float(cone_deg(np.hypot(model.sphere_sigma_deg(stat[i], i),
                                                                        model.common_deg)))
                            if i in stat else None) for i, s in enumerate(self.spheres)]
         unc = self.uncertainty_deg
         if self.ok:
             used = [stat.get(i, np.inf) for i in self.used_spheres]
-            sigma = model.photo_sigma_deg(np.asarray(used)) if used else float("inf")
+            sigma = (model.photo_sigma_deg(np.asarray(used), self.used_spheres, self.weights) if used
+                     else float("inf"))
             sigma = max(sigma, model.scale * self.joint_sigma_deg / np.sqrt(2.0))
             unc = float(cone_deg(sigma))
         return replace(self, spheres=spheres, uncertainty_deg=unc)
@@ -334,13 +342,13 @@ def fit_light_model(spheres: list[int], fits: list, centers: np.ndarray, sigma_f
                           chi2=chi_d, dof=dof_d, position=None, p=1.0)
     # a near fit can only lower chi2 to >= 0: when chi2 of the distant model is below the LR
     # threshold, the near model cannot be significant and is not fitted
-    threshold = chi2_distribution.ppf(1 - SIGNIFICANCE, 1)
+    threshold = chdtri(1, SIGNIFICANCE)
     if len(spheres) >= 2 and (model == "near" or (model == "auto" and chi_d > threshold)):
         conv = fit_ray_convergence(ray_origins(spheres, fits, centers), dirs, unc, scene_center)
         if conv.position is not None and (model == "near" or chi_d - conv.chi2 > threshold):
             out.model, out.direction, out.chi2, out.dof, out.position = (
                 "near", conv.direction, conv.chi2, conv.dof, conv.position)
-    out.p = 1.0 if out.dof == 0 else float(chi2_distribution.sf(out.chi2, out.dof))
+    out.p = 1.0 if out.dof == 0 else float(chdtrc(out.dof, out.chi2))
     return out
 
 
@@ -478,13 +486,23 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         status[outlier] = OUTLIER
     used = hyp.spheres
     direction, position, joint_sigma = hyp.direction, hyp.position, 0.0
-    # the joint fit models shading: with a mirror sphere among the used, the ray intersection stays
+    # the joint fit: matte spheres' shading; with mirror spheres among the used, their reflected
+    # rays join the same least-squares problem (fit_near_light_mixed)
     shading_only = all(isinstance(fits[i], LambertFit) for i in used)
-    pending = hyp.model == "near" and not joint and shading_only
-    if hyp.model == "near" and joint and shading_only:
-        jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
-                            [near_fit_mask(fits[i]) for i in used], position,
-                            terms=_near_terms([fits[i] for i in used]), terminator=terminator, up=up)
+    pending = hyp.model == "near" and not joint
+    if hyp.model == "near" and joint:
+        matte = [i for i in used if isinstance(fits[i], LambertFit)]
+        if shading_only:
+            jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
+                                [near_fit_mask(fits[i]) for i in used], position,
+                                terms=_near_terms([fits[i] for i in used]), terminator=terminator, up=up)
+        else:
+            rays = [(fits[i].point, fits[i].direction, np.radians(fits[i].uncertainty_deg) / np.sqrt(2.0))
+                    for i in used if i not in matte]
+            jf = fit_near_light_mixed([samples[i] for i in matte], [values[i][0] for i in matte],
+                                      [near_fit_mask(fits[i]) for i in matte], position, rays,
+                                      terms=_near_terms([fits[i] for i in matte]),
+                                      inflation=[fits[i].inflation for i in matte], terminator=terminator, up=up)
         if not (jf.success and np.all(np.isfinite(jf.position))):
             return rejected("fit_failed", direction)
         position = jf.position
@@ -496,5 +514,6 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
                          position=None if position is None else np.asarray(position, dtype=np.float64),
                          model=hyp.model, used_spheres=[int(i) for i in used],
                          spheres=[SphereResult(f, st) for f, st in zip(fits, status)], chi2=float(hyp.chi2),
-                         dof=int(hyp.dof), joint_pending=pending,
-                         joint_sigma_deg=float(joint_sigma)).with_error_model(FALLBACK_MODEL)
+                         dof=int(hyp.dof), joint_pending=pending, joint_sigma_deg=float(joint_sigma),
+                         weights=[float(sphere_uncertainty_deg(fits[i], sigma_floor_deg)) ** -2 for i in used]
+                         ).with_error_model(FALLBACK_MODEL)

@@ -17,10 +17,13 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    with two or more spheres, the spheres' directions must agree up to their errors. Their
    scatter about the photo's light measures the per-sphere error that the fit statistics do not
    see (:func:`fit_error_model`): a scale ``s`` of the statistical standard deviations and an
-   added per-sphere floor ``tau`` (per axis), ``var_i = s^2 sigma_i^2 + tau^2``, by restricted
-   maximum likelihood (the photo's direction is estimated from the same spheres, Patterson &
-   Thompson 1971) over all photos, trimmed: photos whose scatter is improbable under the fitted
-   model (``p < 1e-3``) are left out and the fit repeated.
+   added per-sphere floor ``tau`` (per axis), ``var_i = s^2 sigma_i^2 + g_i^2 + tau^2``, by
+   restricted maximum likelihood (the photo's direction is estimated from the same spheres,
+   Patterson & Thompson 1971) over all photos, trimmed: photos whose scatter is improbable under
+   the fitted model at a family-wise level (``p < 1e-3 / n_photos``) are left out and the fit
+   repeated. ``g_i`` is the sphere's centre uncertainty propagated to its direction
+   (:func:`centre_floor_deg`: the outline and the shading place the centre ``shift`` apart), a
+   known part of its variance.
 3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
    (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
    assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
@@ -36,8 +39,8 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
    (:data:`FALLBACK_MODEL`).
 
-The photo's per-axis standard deviation is that of the inverse-variance mean of its spheres plus
-the common mode; the cone is ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` times it (a per-axis Gaussian on
+The photo's per-axis standard deviation is that of the weighted mean its direction was made with
+(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus the common mode; the cone is ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` times it (a per-axis Gaussian on
 the tangent plane: the squared angle over the per-axis variance is chi-square with 2 degrees of
 freedom).
 
@@ -51,7 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize
-from scipy.stats import chi2 as chi2_distribution
+from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse (scipy.stats imports slowly)
 
 from ffls.conventions import normalize, tangent_basis
 
@@ -66,6 +69,7 @@ __all__ = [
     "correlation_inflation",
     "tangent_residuals",
     "fit_error_model",
+    "centre_floor_deg",
     "common_mode_deg",
     "photo_residuals",
     "FALLBACK_MODEL",
@@ -74,7 +78,7 @@ __all__ = [
 #: Confidence level of a reported cone.
 CONFIDENCE = 0.95
 #: Radius of the 95% cone in per-axis standard deviations: ``sqrt(chi2.ppf(0.95, 2))``.
-CONE_FACTOR = float(np.sqrt(chi2_distribution.ppf(CONFIDENCE, 2)))
+CONE_FACTOR = float(np.sqrt(chdtri(2, 1.0 - CONFIDENCE)))
 #: Assumed upper bound of the correlation between two spheres' systematic errors (module docstring).
 COMMON_CORRELATION = 0.25
 #: Per-axis standard deviation (degrees) of the common-mode error of even perfectly agreeing spheres.
@@ -211,38 +215,108 @@ class ErrorModel:
     source: str
     n_photos: int = 0
     n_trimmed: int = 0
+    centre_deg: tuple = ()
 
-    def sphere_sigma_deg(self, stat_sigma_deg):
-        """Per-axis standard deviation (degrees) of one sphere's direction: ``sqrt(s^2 sigma^2 + tau^2)``.
+    def centre_sigma_deg(self, spheres) -> np.ndarray:
+        """Per-axis standard deviation (degrees) that each sphere's centre uncertainty gives its
+        direction (:func:`centre_floor_deg`; 0 for a sphere without one).
+
+        Parameters
+        ----------
+        spheres : (k,) int
+            Sphere indices.
+        """
+        c = np.asarray(self.centre_deg, dtype=np.float64)
+        idx = np.atleast_1d(np.asarray(spheres, dtype=np.intp))
+        out = np.zeros(idx.shape)
+        have = idx < c.size
+        out[have] = c[idx[have]]
+        return out
+
+    def sphere_sigma_deg(self, stat_sigma_deg, spheres=None):
+        """Per-axis standard deviation (degrees) of one sphere's direction:
+        ``sqrt(s^2 sigma^2 + g^2 + tau^2)``, ``g`` its centre term (:meth:`centre_sigma_deg`).
 
         Parameters
         ----------
         stat_sigma_deg : float or (k,) float
             The sphere's statistical per-axis standard deviation (degrees).
+        spheres : int or (k,) int, optional
+            The spheres' indices (for their centre terms; none when omitted).
         """
         s = np.asarray(stat_sigma_deg, dtype=np.float64)
-        return np.sqrt((self.scale * s) ** 2 + self.floor_deg ** 2)
+        g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
+        return np.sqrt((self.scale * s) ** 2 + g ** 2 + self.floor_deg ** 2)
 
-    def photo_sigma_deg(self, stat_sigma_deg) -> float:
+    def photo_sigma_deg(self, stat_sigma_deg, spheres=None, weights=None) -> float:
         """Per-axis standard deviation (degrees) of a photo's direction from its used spheres.
 
-        The inverse-variance mean of the spheres (:meth:`sphere_sigma_deg`) plus the common mode.
+        The weighted mean of the spheres (variances :meth:`sphere_sigma_deg`) plus the common
+        mode. With the ``weights`` the photo's direction was combined with, its variance is
+        ``sum w_k^2 v_k``; without, the inverse-variance mean's ``1 / sum 1/v_k`` (the smallest
+        possible: it understates a combination made with other weights).
 
         Parameters
         ----------
         stat_sigma_deg : (k,) float
             The used spheres' statistical per-axis standard deviations (degrees).
+        spheres : (k,) int, optional
+            Their indices (for their centre terms).
+        weights : (k,) float, optional
+            The combination's weights of these spheres (normalised here).
         """
-        v = self.sphere_sigma_deg(np.atleast_1d(stat_sigma_deg)) ** 2
+        v = self.sphere_sigma_deg(np.atleast_1d(stat_sigma_deg), None if spheres is None else np.atleast_1d(spheres)) ** 2
         if v.size == 0 or not np.all(np.isfinite(v)):
             return float("inf")
+        w = None if weights is None else np.atleast_1d(np.asarray(weights, dtype=np.float64))
+        if w is not None and w.size == v.size and np.all(np.isfinite(w)) and np.all(w >= 0) and w.sum() > 0:
+            w = w / w.sum()
+            return float(np.sqrt(np.sum(w * w * v) + self.common_deg ** 2))
         return float(np.sqrt(1.0 / np.sum(1.0 / np.maximum(v, 1e-300)) + self.common_deg ** 2))
+
+    def with_centres(self, centre_deg) -> "ErrorModel":
+        """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
+        from dataclasses import replace
+
+        return replace(self, centre_deg=tuple(float(x) for x in np.atleast_1d(centre_deg)))
 
     def as_dict(self) -> dict:
         """JSON-ready summary."""
         return {"scale": float(self.scale), "floor_deg": float(self.floor_deg), "common_deg": float(self.common_deg),
+                "centre_deg": [float(x) for x in self.centre_deg],
                 "source": self.source, "n_photos": int(self.n_photos), "n_trimmed": int(self.n_trimmed),
                 "confidence": CONFIDENCE}
+
+
+def centre_floor_deg(shift_px, radius_px) -> float:
+    """Per-axis standard deviation (degrees) of a sphere's direction from its centre's uncertainty.
+
+    A sphere's centre has two independent estimates: its outline (the detection) and its shading
+    (the photometric refinement, :mod:`ffls.spheres.refine`). Their difference ``shift_px`` has,
+    per axis, the variance of both estimates' errors; taking them equal, each has a per-axis
+    standard deviation of ``|shift| / 2`` pixels (the 2-D length of a difference of two isotropic
+    errors of per-axis sd ``sigma`` has root mean square ``2 sigma``). A centre off by ``e``
+    pixels turns every normal by ``e / r_px`` radians (to first order), and so the fitted light
+    direction: the direction's per-axis standard deviation is ``|shift| / (2 r_px)``. This is
+    systematic (the same in every photo), so it is not averaged over pixels or photos.
+
+    Parameters
+    ----------
+    shift_px : (2,) float or float
+        The refinement's centre shift (pixels), or its length.
+    radius_px : float
+        The sphere's radius in pixels.
+
+    Returns
+    -------
+    float
+        0 when either is not finite or the radius not positive.
+    """
+    d = float(np.linalg.norm(np.atleast_1d(np.asarray(shift_px, dtype=np.float64))))
+    r = float(radius_px)
+    if not (np.isfinite(d) and np.isfinite(r) and r > 0):
+        return 0.0
+    return float(np.degrees(0.5 * d / r))
 
 
 def common_mode_deg(systematic_var_deg2: float, correlation: float = COMMON_CORRELATION,
@@ -280,7 +354,8 @@ FALLBACK_MODEL = _fallback()
 
 def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
                     common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
-                    fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4) -> ErrorModel:
+                    fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4,
+                    spheres: list[np.ndarray] | None = None, centre_deg=None) -> ErrorModel:
     """The capture's error model from its spheres' disagreement (module docstring, parts 2 and 3).
 
     Parameters
@@ -297,40 +372,58 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     fit_scale : bool
         Fit the scale ``s`` with the floor ``tau`` (else ``s = 1``).
     trim : float
-        Photos whose scatter has a chi-square probability below this under the fitted model are
-        left out, and the model refitted (up to ``max_rounds`` times).
+        Photos whose scatter has a chi-square probability below ``trim / n_photos`` under the
+        fitted model (a family-wise level, Bonferroni) are left out, and the model refitted (up
+        to ``max_rounds`` times). A per-photo level (no correction) trimmed 5-17% of the photos
+        of ffls synth captures whose systematic errors are heavier-tailed than the Gaussian
+        model, and so shrank the floor it estimates: cones 30-50% too narrow.
     max_rounds : int
+    spheres : list of (k_j,) int, optional
+        Per photo, the indices of its used spheres (for ``centre_deg``).
+    centre_deg : (n_spheres,) float, optional
+        Per sphere, the per-axis standard deviation (degrees) its centre's uncertainty gives its
+        direction (:func:`centre_floor_deg`): a known variance component of each sphere, so
+        that ``tau`` is what remains beyond it.
 
     Returns
     -------
     ErrorModel
+        With ``centre_deg`` (also the fallback, where too few photos have 2+ spheres).
     """
+    centre = np.zeros(0) if centre_deg is None else np.asarray(centre_deg, dtype=np.float64)
+    centre_rad2 = np.radians(np.nan_to_num(centre)) ** 2
     data = []
-    for r, s in zip(residuals, stat_sigma_deg):
+    for j, (r, s) in enumerate(zip(residuals, stat_sigma_deg)):
         r = np.asarray(r, dtype=np.float64).reshape(-1, 2)
         s = np.radians(np.asarray(s, dtype=np.float64).ravel())
+        g2 = np.zeros(s.size)
+        if spheres is not None and centre.size:
+            idx = np.asarray(spheres[j], dtype=np.intp).ravel()
+            if idx.size == s.size:
+                g2 = np.where(idx < centre.size, centre_rad2[np.minimum(idx, centre.size - 1)], 0.0)
         if r.shape[0] >= 2 and r.shape[0] == s.size and np.all(np.isfinite(r)) and np.all(np.isfinite(s)) \
                 and np.all(s > 0):
-            data.append((r, s * s))
+            data.append((r, s * s, g2))
     if len(data) < min_photos:
-        return FALLBACK_MODEL
+        return FALLBACK_MODEL.with_centres(centre)
     keep = np.ones(len(data), dtype=bool)
-    med_sigma = float(np.sqrt(np.median(np.concatenate([s2 for _, s2 in data]))))
+    med_sigma = float(np.sqrt(np.median(np.concatenate([s2 for _, s2, _ in data]))))
     x0 = np.array([0.0, np.log(max(med_sigma, 1e-6))])  # log s, log tau (radians); every round starts here
     x = x0
     lo = np.array([np.log(0.2) if fit_scale else 0.0, np.log(1e-5)])
     hi = np.array([np.log(50.0) if fit_scale else 0.0, np.log(np.radians(30.0))])
 
     # all photos' spheres stacked, with segment sums per photo (one vector pass per evaluation)
-    k_all = np.array([r.shape[0] for r, _ in data])
+    k_all = np.array([r.shape[0] for r, _, _ in data])
     starts = np.concatenate([[0], np.cumsum(k_all)[:-1]])
-    R_all = np.concatenate([r for r, _ in data])
-    S2_all = np.concatenate([s2 for _, s2 in data])
+    R_all = np.concatenate([r for r, _, _ in data])
+    S2_all = np.concatenate([s2 for _, s2, _ in data])
+    G2_all = np.concatenate([g2 for _, _, g2 in data])
     photo_of = np.repeat(np.arange(len(data)), k_all)
 
     def terms(x):
         """Per photo: -2 log restricted likelihood and chi-square of the scatter."""
-        v = np.exp(2.0 * x[0]) * S2_all + np.exp(2.0 * x[1])
+        v = np.exp(2.0 * x[0]) * S2_all + G2_all + np.exp(2.0 * x[1])
         w = 1.0 / v
         sw = np.add.reduceat(w, starts)
         mu = np.add.reduceat(w[:, None] * R_all, starts) / sw[:, None]
@@ -346,19 +439,21 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         res = minimize(objective, np.clip(x0, lo, hi), args=(keep,), method="L-BFGS-B",
                        bounds=list(zip(lo, hi)))
         x = res.x
-        p = chi2_distribution.sf(terms(x)[1], 2 * (k_all - 1))
-        new_keep = p >= trim
+        p = chdtrc(2 * (k_all - 1), terms(x)[1])
+        new_keep = p >= trim / len(data)  # family-wise (Bonferroni): a wild photo, not the model's tail
         if np.array_equal(new_keep, keep):
             break
         keep = new_keep
     n_trimmed = int((~keep).sum())
     scale, tau = float(np.exp(x[0])), float(np.exp(x[1]))
     # the systematic per-sphere variance: the floor, plus what the scale adds beyond the statistics
-    s2_med = float(np.median(np.concatenate([s2 for (_, s2), k in zip(data, keep) if k] or [np.zeros(1)])))
-    sys_var = tau * tau + max(scale * scale - 1.0, 0.0) * s2_med
+    s2_med = float(np.median(np.concatenate([s2 for (_, s2, _), k in zip(data, keep) if k] or [np.zeros(1)])))
+    g2_med = float(np.median(np.concatenate([g2 for (_, _, g2), k in zip(data, keep) if k] or [np.zeros(1)])))
+    sys_var = tau * tau + g2_med + max(scale * scale - 1.0, 0.0) * s2_med
     common = common_mode_deg(float(np.degrees(np.sqrt(sys_var))) ** 2, common_correlation)
     return ErrorModel(scale=scale, floor_deg=float(np.degrees(tau)), common_deg=common,
-                      source="disagreement", n_photos=int(keep.sum()), n_trimmed=n_trimmed)
+                      source="disagreement", n_photos=int(keep.sum()), n_trimmed=n_trimmed,
+                      centre_deg=tuple(float(x) for x in centre))
 
 
 def photo_residuals(directions: np.ndarray, light_direction: np.ndarray, position: np.ndarray | None = None,
