@@ -9,6 +9,11 @@ true encoding stated. Prints a table and writes JSON.
 
     OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --res 512 --lights 40 --json out.json
     OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --res 256 --lights 20 --repeat 10
+    OMP_NUM_THREADS=1 python benchmarks/encoding_calibration.py --detect-scenes --lights 40
+
+``--detect-scenes``: the captures are made without ``ffls synth`` (``tests/detect_scenes.py``: 3
+grey balls on a grey background, 400 x 300 px, NumPy ray casting), stored as 8-bit PNGs in each
+encoding; only the calibration (the curve named and the test line) is printed.
 """
 from __future__ import annotations
 
@@ -80,10 +85,42 @@ def run_seed(args, seed: int) -> list:
             e, r = errors_deg(got, truth), errors_deg(ref, truth)
             rows.append({"seed": seed, "true": name, "named": cal.curve, "gamma": cal.gamma,
                          "uncertainty": cal.uncertainty, "srgb_excess": cal.srgb_excess,
+                         "linear_excess": cal.linear_excess, "bic_penalty": cal.bic_penalty,
                          "spheres": cal.n_spheres, "photos": cal.n_photos,
                          "calibration_s": t_cal, "median_deg": float(np.median(e)), "max_deg": float(e.max()),
                          "accepted": int(got.ok_mask.sum()), "stated_median_deg": float(np.median(r)),
                          "stated_max_deg": float(r.max()), "summary": cal.summary()})
+    return rows
+
+
+def detect_scenes_naming(args) -> list:
+    """The encoding named on captures made without ``ffls synth`` (``tests/detect_scenes.py``), per true curve."""
+    from ffls.spheres.encoding import calibrate_capture_encoding
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    import detect_scenes as ds
+
+    rows = []
+    for seed in range(args.seed, args.seed + args.repeat):
+        sc = ds.layout(3, shape=(300, 400), f=500.0, R=0.04, seed=seed)
+        for b in sc.balls:
+            b.albedo = (0.45, 0.45, 0.45)
+        imgs = ds.render(sc, ds.lights(args.lights, seed=seed + 1), background="grey", noise=0.004, seed=seed + 2)
+        imgs = np.clip(imgs / np.percentile(imgs, 99.5) * 0.9, 0, 1)
+        for name, true in TRUE.items():
+            with tempfile.TemporaryDirectory() as tmp:
+                tmp = Path(tmp)
+                names = []
+                for i, im in enumerate(imgs):
+                    enc = im if true == "linear" else srgb_encode(im) if true == "srgb" else gamma_encode(im, true)
+                    names.append(f"p{i:02d}.png")
+                    write_png(tmp / names[-1], np.rint(np.clip(enc, 0, 1) * 255).astype(np.uint8))
+                (tmp / "capture.json").write_text(json.dumps({
+                    "format": "ffls-capture", "version": 1, "images": names, "camera": {"K": sc.K.tolist()},
+                    "sphere_radius": 0.04}))
+                cal, _ = calibrate_capture_encoding(load_capture(tmp))
+            rows.append({"seed": seed, "true": name, "named": cal.curve, "summary": cal.summary()})
+            print(f"seed {seed} {name:9} -> {cal.summary()}", flush=True)
     return rows
 
 
@@ -96,15 +133,22 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeat", type=int, default=1, help="captures with seeds SEED, SEED+1, ... (coverage)")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--detect-scenes", action="store_true", help="captures made without ffls synth (naming only)")
     args = ap.parse_args(argv)
+    if args.detect_scenes:
+        rows = detect_scenes_naming(args)
+        if args.json:
+            Path(args.json).write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
+        return 0
     rows = []
     for seed in range(args.seed, args.seed + args.repeat):
         rows += run_seed(args, seed)
     print(f"{args.lights} lights, {args.res} px, {args.bits}-bit PNG, noise {args.noise} code values")
-    print(f"{'true':9} {'named':7} {'gamma':>13} {'sRGB exc':>9} {'median':>7} {'max':>6} {'acc':>5} "
+    print(f"{'true':9} {'named':7} {'gamma':>13} {'lin exc':>9} {'sRGB exc':>9} {'ln n_eff':>8} {'median':>7} {'max':>6} {'acc':>5} "
           f"{'stated med':>10} {'stated max':>10} {'cal s':>6}")
     for r in rows:
-        print(f"{r['true']:9} {r['named']:7} {r['gamma']:6.3f}+-{r['uncertainty']:.3f} {r['srgb_excess']:9.1f} "
+        print(f"{r['true']:9} {r['named']:7} {r['gamma']:6.3f}+-{r['uncertainty']:.3f} {r['linear_excess']:9.1f} "
+              f"{r['srgb_excess']:9.1f} {r['bic_penalty']:8.1f} "
               f"{r['median_deg']:7.2f} {r['max_deg']:6.2f} {r['accepted']:5d} {r['stated_median_deg']:10.2f} "
               f"{r['stated_max_deg']:10.2f} {r['calibration_s']:6.1f}")
     if args.repeat > 1:

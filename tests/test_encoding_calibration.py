@@ -113,6 +113,27 @@ def test_calibrate_encoding_on_arrays(true_gamma, curve):
     assert cal.n_photos == 8 and cal.n_spheres == 1
 
 
+def test_encoding_named_by_bic_or_half_a_code():
+    """Naming: the best gamma must beat a named curve by more than the BIC's ln(n_eff); failing that,
+    a named curve within half a code value of it is named all the same (the file cannot tell them
+    apart), and the summary says which test named it."""
+    raw, normals = _sphere_shading(1.0, n_photos=40)
+    cal = calibrate_encoding(raw, normals, code_step=1 / 255)
+    assert cal.curve == "linear" and cal.linear_excess <= cal.bic_penalty
+    assert "BIC" in cal.summary() and "half a code" not in cal.summary()
+    # gamma 1.004: "significantly" off linear by the BIC, but 0.0015 from it at most, under half a code
+    raw, normals = _sphere_shading(1.004, n_photos=40)
+    assert calibrate_encoding(raw, normals).curve == "gamma"
+    cal = calibrate_encoding(raw, normals, code_step=1 / 255)
+    assert cal.curve == "linear" and cal.linear_excess > cal.bic_penalty
+    assert "within half a code value" in cal.summary()
+    # gamma 1.02: 0.0074 from linear at most, about two codes: not linear
+    raw, normals = _sphere_shading(1.02, n_photos=40)
+    assert calibrate_encoding(raw, normals, code_step=1 / 255).curve == "gamma"
+    rec = cal.record()
+    assert {"linear_excess", "srgb_excess", "bic_penalty"} <= set(rec)
+
+
 def test_calibrate_encoding_refuses():
     raw, normals = _sphere_shading(2.2, n_photos=3)
     with pytest.raises(EncodingCalibrationError, match="only 3 photos"):

@@ -571,25 +571,62 @@ def _png_capture(folder, n=5, shape=(24, 32), encoding="linear", seed=0):
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_decode_photos_once_matches_reading_them(tmp_path, workers):
-    """decode_photos gives the detection's reductions (as extreme_images over the photos) and keeps
-    the decoded photos (linear values and stored codes) that the first pass would read."""
+    """decode_photos gives the detection's reductions (as sequence_stats over the photos: max,
+    brightest, mean, per-photo colour counts and edge evidence) and keeps the decoded photos
+    (linear values and stored codes) that the first pass would read."""
     from ffls.io.capture import load_capture
     from ffls.radiance.photos import read_photo
-    from ffls.spheres.detect import extreme_images
+    from ffls.spheres.detect import sequence_stats
     from ffls.spheres.estimate import decode_photos
 
     _png_capture(tmp_path)
     cap = load_capture(tmp_path)
     d = decode_photos(cap, workers=workers)
-    mx, idx, mean, n = extreme_images(read_photo(cap, i).linear for i in range(5))
-    assert d.n == n == 5 and d.bit_depths == {8}
-    assert np.array_equal(d.max_image, mx) and np.array_equal(d.brightest, idx)
-    assert np.allclose(d.mean_luminance, mean, rtol=1e-6, atol=1e-7)
+    st = sequence_stats([read_photo(cap, i).linear for i in range(5)])
+    assert d.n == st.n == 5 and d.bit_depths == {8}  # five chunks merged
+    assert np.array_equal(d.stats.max, st.max) and np.array_equal(d.stats.brightest, st.brightest)
+    assert np.allclose(d.stats.mean, st.mean, rtol=1e-6, atol=1e-7)
+    assert d.stats.colour_counts.sum() > 0 and np.array_equal(d.stats.colour_counts, st.colour_counts)
+    assert d.stats.edge_photos == st.edge_photos == 5
+    assert np.allclose(d.stats.edge_tensor, st.edge_tensor, rtol=1e-5, atol=1e-6)
     for i in range(5):
         ph = read_photo(cap, i)
         lin, raw, depth = d.photo(i)
         assert depth == 8 and np.array_equal(lin, ph.linear)
         assert np.array_equal(raw, np.rint(ph.raw * 255).astype(np.uint8))
+
+
+def test_decode_photos_same_for_any_workers(tmp_path):
+    """The chunks do not depend on the number of workers: the reductions are identical to the bit."""
+    from ffls.io.capture import load_capture
+    from ffls.spheres.estimate import decode_photos
+
+    _png_capture(tmp_path)
+    cap = load_capture(tmp_path)
+    a, b = decode_photos(cap, workers=1), decode_photos(cap, workers=2)
+    for f in ("max", "brightest", "mean", "colour_counts", "edge_tensor"):
+        assert np.array_equal(getattr(a.stats, f), getattr(b.stats, f)), f
+
+
+def test_cli_lights_same_for_one_and_two_workers(tmp_path, capsys):
+    """``ffls lights`` decodes the photos once (in a pool with 2 workers), detection included: its
+    per-photo colour evidence sets the object's red glossy ball aside as coloured either way, and
+    lights.json is the same, byte for byte, with 1 and 2 workers."""
+    from ffls.synth import scene as synth
+    from ffls.cli import main
+
+    dirs = np.array([light(t, p) for t, p in [(10, -90), (40, 0), (60, 150), (30, 60), (50, -120), (20, 100),
+                                              (65, -30), (35, 170), (45, -60)]])
+    synth.write_synthetic_capture(tmp_path, resolution=224, directions=dirs, progress=False)
+    docs = []
+    for w in (1, 2):
+        out = tmp_path / f"L{w}.json"
+        assert main(["lights", str(tmp_path), "-o", str(out), "--workers", str(w), "--no-progress"]) == 0
+        text, err = capsys.readouterr()
+        assert "4 spheres found" in text
+        assert any("coloured" in ln and "in the photos" in ln for ln in err.splitlines()), err
+        docs.append(out.read_bytes())
+    assert docs[0] == docs[1]
 
 
 def test_decode_photos_names_a_photo_of_another_size(tmp_path):

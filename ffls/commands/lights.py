@@ -159,7 +159,7 @@ def run(args) -> int:
         finally:
             if bar is not None:
                 bar.close()
-        spheres = find_spheres_in_capture(cap, extremes=decoded.extremes())
+        spheres = find_spheres_in_capture(cap, stats=decoded.stats, bit_depths=decoded.bit_depths)
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
     if cluster:

@@ -31,10 +31,20 @@ second candidate, scored the same way.
   (``sd = sqrt(2 s^2 / RSS'')``) and a bootstrap over photos (each photo's ``RSS`` curve is
   resampled, which keeps whatever misfit a photo shares across its pixels). It is reported as a
   95% half-width (1.96 sd), the GUIDE's convention for uncertainties.
-* Naming: ``linear`` when the gamma's 95% interval holds 1; ``srgb`` when the sRGB curve fits as
-  well as the best gamma (its excess ``RSS``, scaled by the noise variance inflated by the
-  bootstrap/curvature variance ratio, under the chi-square 95% point of one degree of freedom);
-  otherwise ``gamma g``.
+* Naming is a model selection by the Bayesian information criterion (Schwarz 1978): a named curve
+  (``linear``, gamma 1, or ``srgb``) has no free parameter, the best gamma has one. Each named
+  curve's *excess* is its ``RSS`` above the best gamma's, in units of the noise variance inflated
+  by the bootstrap/curvature variance ratio (the residuals are correlated; the same inflation
+  gives the effective number of pixels ``n_eff = n / inflation``). The best gamma is worth its
+  parameter only when it lowers the misfit by more than the BIC's ``ln(n_eff)``: the curve with
+  the smallest of (linear excess, sRGB excess, ``ln(n_eff)``) is named. An interval test (does
+  the 95% interval hold 1?) would call a linear file ``gamma 1.004`` as soon as the pixels are
+  many and the model's small misfit biases the gamma by more than its tiny interval. The BIC is
+  blind to a misfit the model shares between the curves (interreflection, a bounce shape), which
+  can leave a linear file a few hundredths of a code value from gamma 1 yet "significantly" off:
+  so when the free gamma wins but the linear or sRGB curve decodes every stored value within half
+  a code value of it (``code_step``: 1/255 for 8-bit files), that curve is named, since the file
+  cannot tell them apart.
 
 :func:`calibrate_encoding` is the entry point on arrays (``method=``);
 :func:`calibrate_capture_encoding` runs it on a capture: spheres found on the stored values (edges
@@ -47,7 +57,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.stats import chi2
 
 from ffls.errors import InputError
 from ffls.io.capture import CAPTURE_FILE
@@ -97,9 +106,11 @@ class EncodingCalibration:
         95% half-width of ``gamma`` (1.96 times the larger of the curvature and bootstrap sd).
     sd_curvature, sd_bootstrap : float
         The two standard deviations of ``gamma``.
-    srgb_excess : float
-        The sRGB curve's excess misfit over the best gamma, in units of the (inflated) noise
-        variance; below ``chi2(1).ppf(0.95)`` (3.84) the sRGB curve fits as well.
+    srgb_excess, linear_excess : float
+        The sRGB and the linear curve's excess misfit over the best gamma, in units of the
+        (inflated) noise variance (module docstring, "Naming").
+    bic_penalty : float
+        ``ln(n_eff)``: a named curve whose excess is below it is preferred to the free gamma.
     rms : float
         RMS residual at the best gamma, in stored values (full scale 1).
     method : str
@@ -113,6 +124,8 @@ class EncodingCalibration:
     sd_curvature: float
     sd_bootstrap: float
     srgb_excess: float
+    linear_excess: float
+    bic_penalty: float
     rms: float
     method: str
     n_spheres: int
@@ -132,19 +145,28 @@ class EncodingCalibration:
         return {"curve": self.curve, "gamma": round(float(self.gamma), 4),
                 "uncertainty": round(float(self.uncertainty), 4), "method": f"spheres:{self.method}",
                 "spheres": int(self.n_spheres), "photos": int(self.n_photos), "pixels": int(self.n_pixels),
-                "srgb_excess": round(float(self.srgb_excess), 3), "rms": float(f"{self.rms:.4g}")}
+                "srgb_excess": round(float(self.srgb_excess), 3),
+                "linear_excess": round(float(self.linear_excess), 3),
+                "bic_penalty": round(float(self.bic_penalty), 3), "rms": float(f"{self.rms:.4g}")}
 
     def summary(self) -> str:
-        """One line, e.g. ``encoding: linear (gamma 1.02 +- 0.03 from 3 spheres, 40 photos)``."""
+        """One line naming the curve and the test, e.g. ``encoding: linear (fits as well as the best gamma
+        1.004 +- 0.003; BIC: excess misfit linear 2.1, sRGB 9e+03, free gamma's penalty 8.4; from 4
+        spheres, 40 photos)``."""
         src = (f"from {self.n_spheres} sphere{'s' if self.n_spheres != 1 else ''}, "
                f"{self.n_photos} photos")
         nd = 3 if self.uncertainty < 0.01 else 2
         g = f"gamma {self.gamma:.{nd}f} +- {self.uncertainty:.{nd}f}"
+        test = (f"BIC: excess misfit linear {self.linear_excess:.1f}, sRGB {self.srgb_excess:.1f}, "
+                f"free gamma's penalty {self.bic_penalty:.1f}")
+        if self.curve == "linear" and self.linear_excess > self.bic_penalty or \
+                self.curve == "srgb" and self.srgb_excess > self.bic_penalty:
+            test += "; within half a code value of the best gamma"
         if self.curve == "linear":
-            return f"encoding: linear ({g} {src})"
+            return f"encoding: linear (fits as well as the best {g}; {test}; {src})"
         if self.curve == "srgb":
-            return f"encoding: srgb (the sRGB curve fits as well as the best {g}; {src})"
-        return f"encoding: {g} ({src}; not linear, and the sRGB curve fits worse)"
+            return f"encoding: srgb (fits as well as the best {g}; {test}; {src})"
+        return f"encoding: {g} (linear and sRGB fit worse; {test}; {src})"
 
 
 # ----------------------------------------------------------------------------- curves
@@ -294,7 +316,7 @@ def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
-                             seed: int = 0) -> EncodingCalibration:
+                             seed: int = 0, code_step: float | None = None) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -321,6 +343,11 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         Bootstrap resamples of the photos.
     seed : int
         Seed of the bootstrap.
+    code_step : float, optional
+        One code value of the files, normalised (1/255 for 8 bits). When the BIC prefers the free
+        gamma but the linear or sRGB curve decodes every stored value within half a code of it,
+        that curve is named all the same: the files cannot tell them apart (module docstring,
+        "Naming").
 
     Returns
     -------
@@ -404,17 +431,25 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     sd = max(sd_curv, sd_boot)
     unc = 1.96 * sd
     inflation = max(1.0, (sd_boot / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
-    rss_srgb = sum(u.rss("srgb") for u in used)
-    excess = (rss_srgb - rss_best) / (s2 * inflation)
-    if abs(best - 1.0) <= unc:
-        name = "linear"
-    elif excess <= chi2.ppf(0.95, 1):
-        name = "srgb"
-    else:
-        name = "gamma"
+    # model selection (BIC): a named curve has no free parameter, the best gamma one
+    noise = s2 * inflation
+    excess = (sum(u.rss("srgb") for u in used) - rss_best) / noise
+    lin_excess = (sum(u.rss(1.0) for u in used) - rss_best) / noise
+    n_eff = max(n_pix / inflation, math.e)
+    penalty = math.log(n_eff)
+    name, _ = min((("linear", lin_excess), ("srgb", excess), ("gamma", penalty)), key=lambda t: t[1])
+    if name == "gamma" and code_step is not None:
+        # a named curve that decodes every stored value within half a code of the best gamma is the
+        # same curve as far as the file can tell (the BIC is blind to a misfit the model shares)
+        x = np.linspace(0.0, 1.0, 1025)
+        near = [(float(np.max(np.abs(_decode(x, c) - _decode(x, best)))), n) for c, n in ((1.0, "linear"), ("srgb", "srgb"))]
+        gap, closest = min(near)
+        if gap <= 0.5 * code_step:
+            name = closest
     return EncodingCalibration(
         curve=name, gamma=best, uncertainty=unc, sd_curvature=sd_curv, sd_bootstrap=sd_boot,
-        srgb_excess=float(excess), rms=math.sqrt(rss_best / n_pix), method="gamma",
+        srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
+        rms=math.sqrt(rss_best / n_pix), method="gamma",
         n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix)
 
 
@@ -519,6 +554,7 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
             raise InputError(f"image is {img.shape[1]}x{img.shape[0]} but the first image is {w}x{h}", img.path)
         raw.append([np.asarray(img.pixels[s.rows, s.cols], dtype=np.float64) for s in samples])
     try:
+        kwargs.setdefault("code_step", 1.0 / (2 ** first.bit_depth - 1))
         cal = calibrate_encoding(raw, [s.normals for s in samples], method=method, matte=matte, **kwargs)
     except EncodingCalibrationError as e:
         raise InputError(_ask(str(e)), capture.json_path) from None

@@ -43,6 +43,7 @@ import numpy as np
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
+from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness
 from ffls.spheres.lambert import fit_lambert
 from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo
@@ -432,8 +433,10 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
 # ----------------------------------------------------------------------------- decoding once
 #: Largest share of the available memory that :func:`decode_photos` keeps decoded photos in.
 DECODED_MEMORY_SHARE = 0.25
-#: Luminance weights of :func:`decode_photos`' reductions (Rec. 709, as the sphere detection's).
-_LUMA = np.array([0.2126, 0.7152, 0.0722])
+#: :func:`decode_photos` cuts the sequence into this many chunks of consecutive photos (fewer for
+#: fewer photos), whatever the number of workers: the chunks' reductions are merged in order, so
+#: the result, to the last bit, does not depend on the number of workers.
+DECODE_CHUNKS = 8
 
 
 @dataclass
@@ -443,12 +446,9 @@ class DecodedPhotos:
 
     Attributes
     ----------
-    max_image : (H, W, 3) float32
-        Per-pixel maximum over the photos (non-finite values as 0).
-    brightest : (H, W) int32
-        Index of the photo of highest luminance at each pixel (the first on ties).
-    mean_luminance : (H, W) float64
-    n : int
+    stats : ffls.spheres.detect.SequenceStats
+        The detection's reductions of the sequence (max image, brightest photo, mean luminance,
+        per-photo colour counts and edge evidence; :func:`ffls.spheres.detect.sequence_stats`).
     bit_depths : set
         The photos' stored bit depths.
     linear : (n, H, W, 3) float32 or None
@@ -459,18 +459,19 @@ class DecodedPhotos:
         saturation); None for float photos or when ``linear`` is None.
     """
 
-    max_image: np.ndarray
-    brightest: np.ndarray
-    mean_luminance: np.ndarray
-    n: int
+    stats: SequenceStats
     bit_depths: set
     linear: np.ndarray | None = None
     raw: np.ndarray | None = None
 
-    def extremes(self) -> tuple:
-        """``(max_image, brightest, mean_luminance, n, bit_depths)`` for
-        :func:`ffls.spheres.detect.find_spheres_in_capture` ``extremes``."""
-        return self.max_image, self.brightest, self.mean_luminance, self.n, self.bit_depths
+    @property
+    def n(self) -> int:
+        return self.stats.n
+
+    @property
+    def shape(self) -> tuple:
+        """(H, W) of the photos."""
+        return self.stats.max.shape[:2]
 
     def photo(self, i: int):
         """Photo ``i`` as ``(linear, raw, bit_depth)`` from memory, or None where not kept."""
@@ -500,6 +501,7 @@ def _shared_array(shape, dtype) -> np.ndarray:
 @dataclass
 class _DecodeContext:
     capture: object
+    n: int
     shape: tuple
     linear: np.ndarray | None
     raw: np.ndarray | None
@@ -515,12 +517,12 @@ def _set_decode_context(context: _DecodeContext) -> None:
 
 def _decode_range(bounds: tuple[int, int]):
     """Decode photos ``start..stop-1`` (into the shared arrays where kept) and reduce them:
-    ``(start, max, best luminance, brightest index, luminance sum, bit depths)``."""
+    ``(SequenceAccumulator of the range, bit depths)``."""
     from ffls.radiance.photos import read_photo
 
     ctx = _decode_context
     start, stop = bounds
-    mx = best = idx = total = None
+    acc = SequenceAccumulator(n_images=ctx.n)
     depths = set()
     for i in range(start, stop):
         ph = read_photo(ctx.capture, i)
@@ -534,31 +536,20 @@ def _decode_range(bounds: tuple[int, int]):
             if ctx.raw is not None:
                 top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
                 ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
-        im = ph.linear
-        if not np.isfinite(im).all():
-            im = np.nan_to_num(im, nan=0.0, posinf=0.0, neginf=0.0)
-        # float32 luminance (the detection's extreme_images rounds a float64 one to float32: the
-        # same but for the last bit, which decides only exact near-ties of the brightest photo)
-        lum = im[..., 0] * np.float32(_LUMA[0]) + im[..., 1] * np.float32(_LUMA[1]) + im[..., 2] * np.float32(_LUMA[2]) \
-            if im.ndim == 3 and im.shape[2] >= 3 else im.reshape(im.shape[:2]).astype(np.float32)
-        if mx is None:
-            mx, best, idx, total = im.copy(), lum, np.full(lum.shape, i, np.int32), lum.astype(np.float64)
-        else:
-            np.maximum(mx, im, out=mx)
-            up = lum > best
-            idx[up] = i
-            best[up] = lum[up]
-            total += lum
-    return start, mx, best, idx, total, depths
+        acc.add(ph.linear, i)
+    return acc, depths
 
 
 def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=None) -> DecodedPhotos:
     """Decode every photo of ``capture`` once: the reductions the sphere detection needs and,
     within :data:`DECODED_MEMORY_SHARE` of the available memory, the photos for the first pass.
 
-    Chunks of photos are decoded and reduced in ``workers`` processes (forked: they write the
-    photos into shared memory) and their reductions merged in order: the result is that of
-    :func:`ffls.spheres.detect.extreme_images` over the sequence (the luminance in float32).
+    :data:`DECODE_CHUNKS` chunks of consecutive photos are decoded and reduced
+    (:class:`ffls.spheres.detect.SequenceAccumulator`: max, brightest photo, mean luminance,
+    per-photo colour counts and edge evidence) in ``workers`` processes (forked: they write the
+    photos into shared memory), and the chunks' reductions merged in order: the result is that of
+    :func:`ffls.spheres.detect.sequence_stats` over the sequence (the luminance and edge sums to
+    within rounding), the same for any ``workers``.
 
     Parameters
     ----------
@@ -592,9 +583,9 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
         linear = _shared_array((n,) + shape, np.float32)
         if integer:
             raw = _shared_array((n,) + shape, np.uint8 if first.bit_depth == 8 else np.uint16)
-    context = _DecodeContext(capture, shape, linear, raw)
+    context = _DecodeContext(capture, n, shape, linear, raw)
     workers = max(1, min(int(workers), n))
-    size = max(1, -(-n // (2 * workers)))  # two chunks per worker
+    size = max(1, -(-n // DECODE_CHUNKS))  # the chunks do not depend on the workers: nor does the result
     chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
     parts = []
     if workers == 1:
@@ -609,23 +600,19 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     else:
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(max_workers=workers, initializer=_set_decode_context, initargs=(context,)) as ex:
+        with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), initializer=_set_decode_context,
+                                 initargs=(context,)) as ex:
             for part, c in zip(ex.map(_decode_range, chunks), chunks):
                 parts.append(part)
                 if progress_bar is not None:
                     progress_bar.update(c[1] - c[0])
-    _, mx, best, idx, total, depths = parts[0]
-    for _, mx_k, best_k, idx_k, total_k, depths_k in parts[1:]:  # in order: the first photo wins ties
-        np.maximum(mx, mx_k, out=mx)
-        up = best_k > best
-        idx[up] = idx_k[up]
-        best[up] = best_k[up]
-        total += total_k
+    acc, depths = parts[0]
+    for acc_k, depths_k in parts[1:]:  # in order: the earlier photo wins ties of the brightest
+        acc.merge(acc_k)
         depths |= depths_k
     if linear is not None and len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
         linear = raw = None
-    return DecodedPhotos(max_image=mx, brightest=idx, mean_luminance=total / n, n=n, bit_depths=depths,
-                         linear=linear, raw=raw)
+    return DecodedPhotos(stats=acc.result(), bit_depths=depths, linear=linear, raw=raw)
 
 
 # ----------------------------------------------------------------------------- running the photo fits
@@ -926,13 +913,13 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
         if decoded is None:
             decoded = decode_photos(capture, workers)
-        spheres = find_spheres_in_capture(capture, extremes=decoded.extremes())
+        spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths)
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
     if capture.image_size is not None:
         shape = (int(capture.image_size[1]), int(capture.image_size[0]))
     elif decoded is not None:
-        shape = decoded.max_image.shape[:2]
+        shape = decoded.shape
     else:
         shape = load_photo(capture, 0).shape[:2]
     samples = capture_samples(capture, spheres, shape)

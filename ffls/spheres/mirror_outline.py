@@ -277,6 +277,81 @@ def radial_steps(log_lum, center, radius, *, r_range=(0.9, 1.3), n_angles: int =
     return c[None, :] + r[:, None] * u[a_i]
 
 
+def limb_radius(log_lum, center, radius, *, r_range=(0.97, 1.1), n_angles: int = 180, step_px: float = 0.25,
+                min_step: float = 0.03, min_angles: int = 30) -> float | None:
+    """A mirror ball's radius from its limb: the median distance of its reflectance steps from ``center``.
+
+    At its limb a mirror shows what lies just behind it, dimmed by its reflectance (below 1): going
+    outward across the silhouette the radiance *rises*, all round, by the same ratio. The
+    reflected room's contrasts that an outer outline follows (:func:`enclosing_circle`) run 1 to 2
+    px inside it, so that outline's radius comes out short (3-5% at 384 px), while its centre is
+    good (they are nearly concentric). Along ``n_angles`` rays from ``center``, ``log_lum`` is
+    sampled (bilinear) over ``r_range`` radii and smoothed by a 0.7-pixel Gaussian; on each ray the
+    rising step (a local maximum of the outward derivative of at least ``min_step`` log units per
+    pixel: a 10% reflectance step gives about 0.05) *nearest* the outline's radius
+    is taken; the median of their distances is the radius. The median ignores the rays that meet a
+    contact shadow's outer edge (also rising outward) or no step. None with fewer than
+    ``min_angles`` steps.
+
+    Parameters
+    ----------
+    log_lum : (H, W) float
+        Natural log of the luminance (of the max image).
+    center : (2,) float
+        The outline's centre, pixels (x, y).
+    radius : float
+        The outline's radius, pixels.
+    r_range : (2,) float
+        Radii searched, in units of ``radius``.
+    n_angles : int
+    step_px : float
+    min_step : float
+    min_angles : int
+
+    Returns
+    -------
+    float or None
+        Pixels.
+    """
+    H, W = log_lum.shape
+    c = np.asarray(center, dtype=np.float64).reshape(2)
+    rs = np.arange(r_range[0] * radius, r_range[1] * radius, step_px)
+    if rs.size < 5:
+        return None
+    t = np.arange(n_angles) / n_angles * 2 * np.pi
+    u = np.stack([np.cos(t), np.sin(t)], axis=1)
+    xy = c[None, None, :] + rs[None, :, None] * u[:, None, :]
+    inside = (xy[..., 0] >= 0) & (xy[..., 0] <= W - 1) & (xy[..., 1] >= 0) & (xy[..., 1] <= H - 1)
+    x = np.clip(xy[..., 0], 0, W - 1.000001)
+    y = np.clip(xy[..., 1], 0, H - 1.000001)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    img = np.asarray(log_lum, dtype=np.float64)
+    prof = ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x0 + 1])
+            + fy * ((1 - fx) * img[y0 + 1, x0] + fx * img[y0 + 1, x0 + 1]))
+    k = np.exp(-0.5 * (np.arange(-8, 9) * step_px / 0.7) ** 2)
+    k /= k.sum()
+    pad = np.pad(prof, ((0, 0), (8, 8)), mode="edge")
+    sm = np.stack([np.convolve(p, k, mode="valid") for p in pad])
+    g = np.gradient(sm, step_px, axis=1)  # signed: > 0 where it brightens outward
+    whole = np.all(inside, axis=1)  # rays wholly inside the frame
+    if not whole.any():
+        return None
+    thr = min_step  # not raised by the quartile of the derivative: the reflected room fills the band with structure
+    peak = (g[:, 1:-1] >= thr) & (g[:, 1:-1] >= g[:, :-2]) & (g[:, 1:-1] > g[:, 2:]) & whole[:, None]
+    a_i, r_i = np.nonzero(peak)
+    if a_i.size == 0:
+        return None
+    dist = np.abs(rs[r_i + 1] - radius)
+    best = {}
+    for a, r, d in zip(a_i, rs[r_i + 1], dist):
+        if a not in best or d < best[a][1]:
+            best[a] = (r, d)
+    if len(best) < min_angles:
+        return None
+    return float(np.median([v[0] for v in best.values()]))
+
+
 def best_circle(points, r_min, r_max, rng=None, *, tol: float = 1.0, n_iter: int = 600):
     """The circle (centre (2,), radius, inliers (n,) bool) with most points within ``tol``, radius in range.
 

@@ -14,7 +14,8 @@ import numpy as np
 
 from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap
 
-__all__ = ["CRITERIA", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "shading_change", "select_spheres"]
+__all__ = ["CRITERIA", "COLOUR_STEP", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "photo_neutrality",
+           "shading_change", "select_spheres"]
 
 
 #: Criteria an unhinted round outline must meet to count as a calibration sphere
@@ -22,8 +23,9 @@ __all__ = ["CRITERIA", "clip_levels", "disc_pixels", "light_directions_per_photo
 CRITERIA = {
     "max_residual_px": 1.5,      # RMS of the outline points about the fitted cone/circle
     "min_closed": 0.5,           # outline coverage (36 angular bins) over the visible outline
+    "min_closed_photos": 0.8,    # the same, for an outline on the edges that hold in the photos
     "min_support": 0.5,          # inlier edge points per pixel of visible outline
-    "min_neutral": 0.5,          # lower quartile of min/max channel over the lit pixels (white, grey, chrome)
+    "min_neutral": 0.5,          # median min/max channel over the lit photos' pixels (white, grey, chrome)
     "min_shading_change": 0.1,   # share of the inside not brightest in the most common photo
     "size_ratio_pinhole": 2.0,   # implied depths of all spheres within this factor of each other
     "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
@@ -82,6 +84,46 @@ def neutrality(mx, L, rows, cols, clip=None) -> float | None:
         return None
     ratio = px[use].min(axis=1) / np.maximum(px[use].max(axis=1), 1e-12)
     return float(np.clip(np.percentile(ratio, 25), 0, 1))
+
+
+#: The per-photo colour evidence (:func:`ffls.spheres.detect.photo_colour_counts`) is kept for every
+#: ``COLOUR_STEP``-th pixel of every ``COLOUR_STEP``-th row (a sphere's body colour is smooth; a
+#: 3-pixel sphere still has 4 samples per photo).
+COLOUR_STEP = 2
+
+
+def photo_neutrality(counts, rows, cols, min_samples: int = 20) -> float | None:
+    """Colour neutrality judged in the photos: the median min/max channel over every lit, unclipped (pixel, photo).
+
+    ``counts`` (:func:`ffls.spheres.detect.photo_colour_counts`) holds, per sampled pixel (every
+    ``COLOUR_STEP``-th), how many photos put it in each bin of the min/max channel ratio. The bins of the given pixels are pooled and
+    their median is returned (the middle of its bin, linearly interpolated within it). A coloured
+    glossy ball reads its body colour: its highlights are white in only a few photos per pixel, so
+    they move the median little, while the max image, which keeps every photo's highlight, reads
+    it white. None when fewer than ``min_samples`` samples (no evidence: a chrome ball whose lit
+    pixels are all clipped highlights).
+
+    Parameters
+    ----------
+    counts : (B, ceil(H / COLOUR_STEP), ceil(W / COLOUR_STEP)) int
+    rows, cols : (m,) int
+        The pixels (full-resolution indices; each is read at its sampled pixel).
+    min_samples : int
+    """
+    if rows.size == 0:
+        return None
+    r, c = np.asarray(rows) // COLOUR_STEP, np.asarray(cols) // COLOUR_STEP
+    ok = (r < counts.shape[1]) & (c < counts.shape[2])
+    flat = np.unique(r[ok] * counts.shape[2] + c[ok])  # each sampled pixel once
+    h = np.asarray(counts.reshape(counts.shape[0], -1)[:, flat], dtype=np.int64).sum(axis=1)
+    total = int(h.sum())
+    if total < min_samples:
+        return None
+    cum = np.cumsum(h)
+    k = int(np.searchsorted(cum, 0.5 * total))
+    below = float(cum[k - 1]) if k else 0.0
+    frac = (0.5 * total - below) / max(float(h[k]), 1.0)
+    return float(np.clip((k + frac) / len(h), 0.0, 1.0))
 
 
 def shading_change(brightest, L, rows, cols) -> float:
@@ -155,12 +197,14 @@ def _disagreement_deg(a, b) -> float:
 
 
 def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible,
-                   saturates: bool = False):
+                   saturates: bool = False, colour_counts=None):
     """Stage 5 without hints: which fitted round outlines are calibration spheres.
 
     A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
     inlier points cover at least :data:`CRITERIA` ``min_closed`` of the visible outline and give at
-    least ``min_support`` points per pixel of it. Overlapping round outlines keep the best-scored
+    least ``min_support`` points per pixel of it (an outline fitted on the edges that hold in the
+    photos must cover ``min_closed_photos``: a silhouette holds there all round, while a contact
+    shadow's boundary, which holds in many photos too, is an open arc). Overlapping round outlines keep the best-scored
     one (support x closure x (0.25 + 0.75 neutrality) / (1 + (rms / 0.5 px)^2)). A round outline
     is then set aside, with a one-line reason, when it is cut by the frame edge (less than
     ``min_visible`` of it inside), its centre is poorly constrained (standard error above
@@ -187,7 +231,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     max_residual_px, min_visible : float
     saturates : bool
         The photos are integer files that clip: colour is judged on the unclipped pixels only
-        (:func:`clip_levels`, :func:`neutrality`).
+        (:func:`clip_levels`, :func:`neutrality`; without ``colour_counts``).
+    colour_counts : (B, H, W) int, optional
+        Per-photo colour evidence (:func:`ffls.spheres.detect.photo_colour_counts`).
 
     Returns
     -------
@@ -202,12 +248,15 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         vis = max(ft.visible_fraction, 1e-6)
         closed = min(ft.coverage / vis, 1.0)
         support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
-        if ft.residual_px > max_residual_px or closed < crit["min_closed"] or support < crit["min_support"]:
+        # a silhouette holds in every photo all round; a contact shadow's boundary is an arc
+        min_closed = crit["min_closed_photos"] if ft.outline_edges == "photos" else crit["min_closed"]
+        if ft.residual_px > max_residual_px or closed < min_closed or support < crit["min_support"]:
             continue
         rows, cols = disc_pixels(ft, shape)
         if rows.size < 5:
             continue
-        neutral = neutrality(mx, L, rows, cols, clip)
+        neutral = (photo_neutrality(colour_counts, rows, cols) if colour_counts is not None
+                   else neutrality(mx, L, rows, cols, clip))
         ft.score = (min(support, 1.2) * closed * (0.25 + 0.75 * (0.5 if neutral is None else neutral))
                     / (1 + (ft.residual_px / 0.5) ** 2))
         round_.append((ft, neutral, rows, cols))
@@ -227,8 +276,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
             rejected.append(f"{where}: its centre is poorly constrained by the visible outline (standard error "
                             f"{ft.center_sigma_px:.2f} px > {crit['max_center_sigma_px']})")
         elif neutral is not None and neutral < crit["min_neutral"]:
-            rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}), not a"
-                            f" white, grey or chrome sphere")
+            judged = "median over its lit pixels in the photos" if colour_counts is not None else "in the max image"
+            rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}, {judged}),"
+                            f" not a white, grey or chrome sphere")
         elif (brightest is not None and n_photos >= 3 and ft.source != OUTER_SOURCE  # a mirror shows its room
               and not dark_cap(L, ft.center_px, ft.radius_px)
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
