@@ -284,3 +284,22 @@ def rotate_directions(R: np.ndarray, d: np.ndarray) -> np.ndarray:
 def is_rotation(R: np.ndarray, atol: float = 1e-6) -> bool:
     R = np.asarray(R, dtype=np.float64)
     return R.shape == (3, 3) and np.allclose(R @ R.T, np.eye(3), atol=atol) and abs(np.linalg.det(R) - 1) < atol
+
+
+def checked_rotation(R) -> np.ndarray:
+    """``R`` as a float64 (3, 3) array; ``ValueError`` unless it is a rotation (every relighter's ``set_rotation``)."""
+    R = np.asarray(R, dtype=np.float64)
+    if not is_rotation(R):
+        raise ValueError("R must be a 3x3 rotation matrix")
+    return R
+
+
+def checked_weights(weights, n: int) -> np.ndarray:
+    """Per-light RGB weights as a float64 ``(n, 3)`` copy; ``ValueError`` for another shape or a non-finite value
+    (every relighter's ``set_weights``)."""
+    w = np.array(weights, dtype=np.float64)
+    if w.shape != (int(n), 3):
+        raise ValueError(f"weights must have shape ({int(n)}, 3), not {w.shape}")
+    if not np.all(np.isfinite(w)):
+        raise ValueError("weights must be finite")
+    return w

@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from ffls.conventions import check_hemisphere, is_rotation
+from ffls.conventions import check_hemisphere, checked_rotation, checked_weights
 from ffls.errors import InputError
 from ffls.gpu.basis import DEFAULT_BUDGET, BasisTextures, PackedBasis
 from ffls.gpu.context import release_gl
@@ -196,22 +196,16 @@ class Engine:
 
     def set_rotation(self, R) -> None:
         """Rotate the light map by ``R`` (3, 3) (content at d moves to R d; conventions.rotation_z)."""
-        R = np.asarray(R, dtype=np.float64)
-        if not is_rotation(R):
-            raise ValueError("R must be a 3x3 rotation matrix")
+        R = checked_rotation(R)
         if not np.array_equal(R, self._rotation):
             self._rotation = R.copy()
             self._weights_dirty = self._lightmap is not None
 
     def set_weights(self, weights) -> None:
         """Use these per-light weights ``(n, 3)`` directly (bypasses pass 1 until the next light map)."""
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != (self._n, 3):
-            raise ValueError(f"weights must have shape ({self._n}, 3), not {w.shape}")
-        if not np.all(np.isfinite(w)):
-            raise ValueError("weights must be finite")
+        w = checked_weights(weights, self._n)
         self._lightmap = None
-        self._cpu_weights = w.copy()
+        self._cpu_weights = w
         self._weights_buffer.write(weights_to_vec4(w))
         self._weights_source = self._weights_buffer
         self._weights_dirty = False

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffls.conventions import is_rotation
+from ffls.conventions import checked_rotation, checked_weights
 from ffls.errors import InputError
 from ffls.gpu.engine import Engine
 from ffls.gpu.integrate import CellIntegrator
@@ -80,20 +80,16 @@ class TiledEngine:
         self._weights = None
 
     def set_rotation(self, R) -> None:
-        R = np.asarray(R, dtype=np.float64)
-        if not is_rotation(R):
-            raise ValueError("R must be a 3x3 rotation matrix")
+        R = checked_rotation(R)
         if not np.array_equal(R, self._rotation):
             self._rotation = R.copy()
             if self._lightmap is not None:
                 self._weights = None
 
     def set_weights(self, weights) -> None:
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != (self.n_lights, 3) or not np.all(np.isfinite(w)):
-            raise ValueError(f"weights must be finite, of shape ({self.n_lights}, 3)")
+        w = checked_weights(weights, self.n_lights)
         self._lightmap = None
-        self._weights = w.copy()
+        self._weights = w
         self._hdr = None
 
     def _pass2(self, w) -> np.ndarray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffls.conventions import check_hemisphere, is_rotation
+from ffls.conventions import check_hemisphere, checked_rotation, checked_weights
 from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
 from ffls.errors import InputError
 from ffls.relight.basis import capture_basis
@@ -234,9 +234,7 @@ class CpuRelighter:
 
     def set_rotation(self, R) -> None:
         """Rotate the light map by ``R`` (3, 3) (content at d moves to R d; conventions.rotation_z)."""
-        R = np.asarray(R, dtype=np.float64)
-        if not is_rotation(R):
-            raise ValueError("R must be a 3x3 rotation matrix")
+        R = checked_rotation(R)
         if not np.array_equal(R, self._rotation):
             self._rotation = R.copy()
             if self._lightmap is not None:
@@ -244,14 +242,10 @@ class CpuRelighter:
 
     def set_weights(self, weights) -> None:
         """Use these per-light weights ``(n, 3)`` directly (bypasses pass 1 until the next light map)."""
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != (self.n_lights, 3):
-            raise ValueError(f"weights must have shape ({self.n_lights}, 3), not {w.shape}")
-        if not np.all(np.isfinite(w)):
-            raise ValueError("weights must be finite")
+        w = checked_weights(weights, self.n_lights)
         self._lightmap = None
         self.last_weights = None
-        self._weights = w.copy()
+        self._weights = w
         self._hdr = None
 
     def set_weighting(self, scheme: str = "voronoi", **options) -> None:

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ffls.conventions import checked_rotation, checked_weights
 from ffls.errors import InputError
 from ffls.relight.compress import CompressedBasis, rank_range
 from ffls.relight.cpu import relight_fast
@@ -422,23 +423,17 @@ class StreamedRelighter:
         self._weights = None
 
     def set_rotation(self, R) -> None:
-        from ffls.conventions import is_rotation
-
-        R = np.asarray(R, dtype=np.float64)
-        if not is_rotation(R):
-            raise ValueError("R must be a 3x3 rotation matrix")
+        R = checked_rotation(R)
         if not np.array_equal(R, self._rotation):
             self._rotation = R.copy()
             if self._lightmap is not None:
                 self._weights = None
 
     def set_weights(self, weights) -> None:
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != (len(self.rows), 3) or not np.all(np.isfinite(w)):
-            raise ValueError(f"weights must be finite, of shape ({len(self.rows)}, 3)")
+        w = checked_weights(weights, len(self.rows))
         self._lightmap = None
         self.last_weights = None
-        self._weights = w.copy()
+        self._weights = w
         self._hdr = None
 
     def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
