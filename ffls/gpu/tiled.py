@@ -16,16 +16,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffls.conventions import checked_rotation, checked_weights
 from ffls.errors import InputError
 from ffls.gpu.engine import Engine
 from ffls.gpu.integrate import CellIntegrator
+from ffls.relight.inputs import WeightsInputs
 from ffls.relight.stream import relight_compressed_field
 
 __all__ = ["TiledEngine", "engine_for_view"]
 
 
-class TiledEngine:
+class TiledEngine(WeightsInputs):
     """GPU relighting of a stored capture, tile by tile.
 
     Parameters
@@ -78,19 +78,6 @@ class TiledEngine:
         self._lightmap = lm
         self._integrator.set_lightmap(integration_map(lm, self.map_res))
         self._weights = None
-
-    def set_rotation(self, R) -> None:
-        R = checked_rotation(R)
-        if not np.array_equal(R, self._rotation):
-            self._rotation = R.copy()
-            if self._lightmap is not None:
-                self._weights = None
-
-    def set_weights(self, weights) -> None:
-        w = checked_weights(weights, self.n_lights)
-        self._lightmap = None
-        self._weights = w
-        self._hdr = None
 
     def _pass2(self, w) -> np.ndarray:
         s = self.streamed

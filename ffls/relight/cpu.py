@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffls.conventions import check_hemisphere, checked_rotation, checked_weights
+from ffls.conventions import check_hemisphere
 from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
 from ffls.errors import InputError
 from ffls.relight.basis import capture_basis
@@ -26,6 +26,7 @@ from ffls.relight.quality import integration_map
 from ffls.relight.storage import store_basis
 from ffls.weights.voronoi import Weights, bake_cells, integrate_weights
 from ffls.weights.weighting import Weighting, integrate as integrate_scheme
+from ffls.relight.inputs import WeightsInputs
 
 __all__ = ["relight_reference", "relight_fast", "CpuRelighter", "relight_capture", "PRECISIONS"]
 
@@ -102,7 +103,7 @@ def relight_fast(weights, basis, block_pixels: int = 1 << 16) -> np.ndarray:
     return out.reshape(H, W, 3)
 
 
-class CpuRelighter:
+class CpuRelighter(WeightsInputs):
     """CPU relighting of one capture, with the interface of :class:`ffls.gpu.engine.Engine`.
 
     Pass 1 is :func:`ffls.weights.voronoi.integrate_weights` (through a candidate-cell texture,
@@ -231,22 +232,6 @@ class CpuRelighter:
         """Use light map ``lm`` (:class:`ffls.lightmaps.lightmap.LightMap` or ``(dirs, radiance, solid_angle)``)."""
         self._lightmap = integration_map(lm, self.map_res)
         self._weights = None
-
-    def set_rotation(self, R) -> None:
-        """Rotate the light map by ``R`` (3, 3) (content at d moves to R d; conventions.rotation_z)."""
-        R = checked_rotation(R)
-        if not np.array_equal(R, self._rotation):
-            self._rotation = R.copy()
-            if self._lightmap is not None:
-                self._weights = None
-
-    def set_weights(self, weights) -> None:
-        """Use these per-light weights ``(n, 3)`` directly (bypasses pass 1 until the next light map)."""
-        w = checked_weights(weights, self.n_lights)
-        self._lightmap = None
-        self.last_weights = None
-        self._weights = w
-        self._hdr = None
 
     def set_weighting(self, scheme: str = "voronoi", **options) -> None:
         """Use weighting ``scheme`` (:mod:`ffls.weights.weighting`) from the next render on."""

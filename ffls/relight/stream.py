@@ -32,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.conventions import checked_rotation, checked_weights
 from ffls.errors import InputError
 from ffls.relight.compress import CompressedBasis, rank_range
 from ffls.relight.cpu import relight_fast
+from ffls.relight.inputs import WeightsInputs
 from ffls.store.field import compressor, read_json, tile_slices, write_json_atomic
 from ffls.store.float16 import choose_scale, to_float16
 from ffls.store.ingest import SerialRunner, build_pyramid
@@ -365,7 +365,7 @@ def load_compressed_level(sc: StoredCompression, level: int) -> CompressedBasis:
 
 
 
-class StreamedRelighter:
+class StreamedRelighter(WeightsInputs):
     """Relighting streamed from the store, with the interface of :class:`ffls.relight.cpu.CpuRelighter`.
 
     Pass 1 is :func:`ffls.weights.weighting.integrate` under the ``weighting`` scheme, on the map
@@ -421,20 +421,6 @@ class StreamedRelighter:
     def set_lightmap(self, lm) -> None:
         self._lightmap = lm
         self._weights = None
-
-    def set_rotation(self, R) -> None:
-        R = checked_rotation(R)
-        if not np.array_equal(R, self._rotation):
-            self._rotation = R.copy()
-            if self._lightmap is not None:
-                self._weights = None
-
-    def set_weights(self, weights) -> None:
-        w = checked_weights(weights, len(self.rows))
-        self._lightmap = None
-        self.last_weights = None
-        self._weights = w
-        self._hdr = None
 
     def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
         from ffls.relight.quality import integration_map
