@@ -21,7 +21,7 @@ __all__ = ["BUILTIN", "ENTRY_POINT_GROUP", "builtin_commands", "registered_comma
            "find_command"]
 
 #: The subcommand modules of this package, in the order ``ffls --help`` lists them.
-BUILTIN = ("demo", "synth", "relight", "render", "lights", "calibrate", "info", "lightmap")
+BUILTIN = ("demo", "synth", "relight", "render", "lights", "calibrate", "info", "lightmap", "probe")
 #: Entry-point group through which other packages add subcommands (``name = "package.module"``).
 ENTRY_POINT_GROUP = "ffls.commands"
 
