@@ -169,14 +169,14 @@ def mirror_ball_pixels(directions_cam, camera_model: str, K=None, dist=None, cen
         raise ValueError("the ball must lie in front of the camera, not around it")
     c_hat = C / D
     n = normalize(w - c_hat)
-    done = np.zeros(len(w), dtype=bool)
-    for _ in range(int(iterations)):
-        v = normalize(C + n)
-        n_new = normalize(w - v)
-        step = np.linalg.norm(n_new - n, axis=1)
-        n = n_new
-        done = step < tol
-        if done.all():
+    active = np.arange(len(w))
+    for _ in range(int(iterations)):  # iterate only the directions not yet converged
+        v = normalize(C + n[active])
+        n_new = normalize(w[active] - v)
+        step = np.linalg.norm(n_new - n[active], axis=1)
+        n[active] = n_new
+        active = active[~(step < tol)]
+        if not len(active):
             break
     P = C + n
     v = normalize(P)
@@ -308,11 +308,12 @@ def merge_mirror_views(views, power: float = 2.0) -> MirrorView:
                       views[0].camera_direction, views[0].camera_cone & ~(best > 0))
 
 
-def fill_unseen(radiance, seen, k: int = 8) -> np.ndarray:
+def fill_unseen(radiance, seen, k: int = 16) -> np.ndarray:
     """Fill the unseen texels of a lat-long map from the nearest seen directions.
 
-    Inverse-distance weighted mean of the ``k`` nearest seen texel directions (on the sphere,
-    so the seam and the poles need no care).
+    Each unseen texel takes the per-channel median of its ``k`` nearest seen texel directions
+    (on the sphere, so the seam and the poles need no care). The median, unlike a mean, does not
+    smear a compact bright source at the edge of the blind spot over all of it.
 
     Parameters
     ----------
@@ -334,12 +335,11 @@ def fill_unseen(radiance, seen, k: int = 8) -> np.ndarray:
     flat_seen = seen.ravel()
     tree = cKDTree(d[flat_seen])
     kk = int(min(k, flat_seen.sum()))
-    dist, idx = tree.query(d[~flat_seen], k=kk)
-    dist, idx = dist.reshape(-1, kk), idx.reshape(-1, kk)
-    w = 1.0 / np.maximum(dist, 1e-9)
+    _, idx = tree.query(d[~flat_seen], k=kk)
+    idx = np.asarray(idx).reshape(-1, kk)
     src = rad.reshape(-1, 3)[flat_seen]
     out = rad.reshape(-1, 3).copy()
-    out[~flat_seen] = (src[idx] * w[..., None]).sum(axis=1) / w.sum(axis=1, keepdims=True)
+    out[~flat_seen] = np.median(src[idx], axis=1)
     return out.reshape(rad.shape)
 
 

@@ -15,7 +15,7 @@ from ffls.probes.debevec import (CAMERA_CONE_DEG, RIM_PX, blind_spot, fill_unsee
 from ffls.probes.locate import locate_sphere
 from ffls.probes.result import LightmapEstimate
 
-__all__ = ["FILL_MODES", "mirror_lightmap"]
+__all__ = ["FILL_MODES", "CAMERA_SIZE", "camera_cone", "mirror_lightmap"]
 
 #: How unseen directions are filled: from the nearest seen ones, or left black.
 FILL_MODES = ("nearest", "zero")
@@ -25,8 +25,25 @@ def _integer_images(view) -> bool:
     return any(im.path.suffix.lower() not in (".exr", ".hdr", ".pic") for im in view.images)
 
 
-def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float = CAMERA_CONE_DEG, rim_px: float = RIM_PX,
-                    supersample: int = 2, weight_power: float = 2.0, fill: str = "nearest") -> LightmapEstimate:
+#: Default radius (scene units, metres) of what stands at the camera: the photographer and the tripod.
+CAMERA_SIZE = 0.5
+
+
+def camera_cone(geo, camera_size: float = CAMERA_SIZE, fallback_deg: float = CAMERA_CONE_DEG) -> tuple[float, str]:
+    """The half-angle (degrees) of the cone the camera and photographer fill, seen from the ball, and how it was set.
+
+    ``atan(camera_size / D)`` with ``D`` the camera's distance from the ball, when the ball is
+    located in scene units (a pinhole camera and a stated radius); otherwise ``fallback_deg``.
+    """
+    if geo.camera_model == "pinhole" and geo.radius_known:
+        D = float(np.linalg.norm(geo.center_cam))
+        return float(np.degrees(np.arctan(camera_size / D))), f"{camera_size:g} at {D:.3g} from the ball"
+    return float(fallback_deg), "camera distance unknown: default"
+
+
+def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = None, rim_px: float = RIM_PX,
+                    supersample: int = 2, weight_power: float = 2.0, fill: str = "nearest",
+                    camera_size: float = CAMERA_SIZE) -> LightmapEstimate:
     """A light map from one or more photographs (or brackets) of a mirror ball (Debevec 1998).
 
     Parameters
@@ -34,9 +51,10 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float = CAMERA_CO
     probe : ffls.io.probe.Probe
     height : int
         Map height (width ``2 height``).
-    camera_cone_deg : float
+    camera_cone_deg : float or None
         Half-angle of the masked cone around the direction toward the camera (the camera and
-        photographer); 0 keeps it.
+        photographer); 0 keeps it. None (default): ``atan(camera_size / D)`` for a ball at a known
+        distance ``D`` (:func:`camera_cone`), else 10 degrees.
     rim_px : float
         Width of the rim left out, pixels.
     supersample : int
@@ -45,6 +63,8 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float = CAMERA_CO
         Views are merged with weights ``confidence ** weight_power``.
     fill : {'nearest', 'zero'}
         Unseen directions: from the nearest seen ones (default), or black.
+    camera_size : float
+        Radius (scene units) of the camera and photographer, for the default cone.
 
     Returns
     -------
@@ -71,18 +91,20 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float = CAMERA_CO
                              f"(use 'ffls probe diffuse')", src)
         vr = view_radiance(view, probe.encoding, probe.response, src)
         geo = locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
+        cone, why = (float(camera_cone_deg), "given") if camera_cone_deg is not None else camera_cone(geo, camera_size)
         mv = unwrap_mirror_ball_Debevec1998(
             vr.radiance, geo.camera_model, geo.K, geo.dist, geo.world_from_camera, geo.center_cam, geo.radius,
             geo.center_px, geo.radius_px, height=height, valid=vr.valid, saturated=vr.saturated,
-            camera_cone_deg=camera_cone_deg, rim_px=rim_px, supersample=supersample,
+            camera_cone_deg=cone, rim_px=rim_px, supersample=supersample,
             reflectance=view.sphere.reflectance)
         frac = float(sa[mv.confidence > 0].sum() / (4 * np.pi))
         if frac == 0:
             raise InputError(f"{tag}the ball shows no usable direction (all its pixels invalid or masked)",
                              view.images[0].path)
-        notes.append(f"{tag}{vr.note}; {geo.describe()}; saw {100 * frac:.1f}% of the sphere")
+        notes.append(f"{tag}{vr.note}; {geo.describe()}; saw {100 * frac:.1f}% of the sphere; camera cone "
+                     + (f"{cone:.1f} deg masked ({why})" if cone > 0 else "kept"))
         per_view.append({"sphere_source": geo.source, "center_px": geo.center_px.tolist(),
-                         "radius_px": geo.radius_px, "seen_fraction": frac})
+                         "radius_px": geo.radius_px, "seen_fraction": frac, "camera_cone_deg": cone})
         views.append(mv)
     merged = merge_mirror_views(views, power=weight_power)
     seen = merged.confidence > 0
@@ -90,8 +112,7 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float = CAMERA_CO
     bs = blind_spot(seen)
     cone_sr = float(sa[merged.camera_cone].sum())
     clipped = float(sa[merged.clipped].sum() / (4 * np.pi))
-    notes.append(bs.describe() + (f"; camera cone of {camera_cone_deg:g} deg masked ({cone_sr:.3f} sr)"
-                                  if camera_cone_deg > 0 else "") +
+    notes.append(bs.describe() + (f" (the camera cone's {cone_sr:.3f} sr included)" if cone_sr > 0 else "") +
                  ("; filled from the nearest seen directions" if fill == "nearest" and bs.solid_angle > 0 else ""))
     if clipped > 0:
         notes.append(f"{100 * clipped:.2f}% of the sphere seen only through clipped pixels (lower bounds): "

@@ -36,7 +36,9 @@ class SphereGeometry:
     radius_px : float
         Apparent radius, pixels.
     source : str
-        ``'probe.json'`` (world centre), ``'hint'`` or ``'auto'`` (found).
+        ``'probe.json'`` (world centre, or a stated pixel circle), ``'hint'`` or ``'auto'`` (found).
+    radius_known : bool
+        ``radius`` is the stated one (scene units), not the stand-in 1.
     """
 
     camera_model: str
@@ -48,6 +50,7 @@ class SphereGeometry:
     center_px: np.ndarray
     radius_px: float
     source: str
+    radius_known: bool = False
 
     def mask(self, shape, margin_px: float = 0.0) -> np.ndarray:
         """(H, W) bool: the pixels that see the sphere (``margin_px`` inside its outline)."""
@@ -86,7 +89,8 @@ def _given_circle(cam, T, sph) -> SphereGeometry:
     axis = pixel_rays(cpx[None], cam.K, cam.dist)[0]
     alpha = float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
     R = float(sph.radius) if sph.radius is not None else 1.0
-    return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, "probe.json")
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, "probe.json",
+                          sph.radius is not None)
 
 
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
@@ -130,7 +134,7 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
 
         cpx = project_points(C[None], cam.K, cam.dist)[0]
         rpx = float(np.mean(np.hypot(*(silhouette_px(cam.K, cam.dist, C, R) - cpx).T)))
-        return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json")
+        return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json", True)
     if sph.location == "pixel" and sph.radius_px is not None:
         return _given_circle(cam, T, sph)
     hints = None
@@ -164,4 +168,4 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                               float(ft.radius_px), "hint" if hints else "auto")
     return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(ft.center_cam, dtype=np.float64), float(R),
                           np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px),
-                          "hint" if hints else "auto")
+                          "hint" if hints else "auto", sph.radius is not None)
