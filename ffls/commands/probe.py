@@ -49,7 +49,8 @@ def _add_mirror(sub, common):
                         "0 keeps it (default 10)")
     p.add_argument("--rim", type=number(0.0, 100.0, unit="pixels"), default=1.0, metavar="PX",
                    help="leave out this rim of the ball, pixels (default 1)")
-    p.add_argument("--supersample", type=integer(1, 8), default=2, help="directions per texel side (default 2)")
+    p.add_argument("--supersample", type=integer(1, 16), default=None,
+                   help="directions per texel side, 1 to 16 (default: about 4 samples per pixel of the ball)")
     p.add_argument("--weight-power", type=number(0.0, 16.0), default=2.0, metavar="P",
                    help="views are merged with weights confidence**P (default 2)")
     p.add_argument("--fill", choices=("nearest", "zero"), default="nearest",

@@ -46,10 +46,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ffls.camera.projection import camera_arrays, project_points
-from ffls.conventions import latlong_directions, normalize
+from ffls.conventions import latlong_directions, latlong_uv_to_direction, normalize
 
 __all__ = ["MirrorView", "BlindSpot", "latlong_solid_angles", "mirror_ball_pixels",
-           "unwrap_mirror_ball_Debevec1998", "merge_mirror_views", "fill_unseen", "blind_spot",
+           "unwrap_mirror_ball_Debevec1998", "auto_supersample", "merge_mirror_views", "fill_unseen", "blind_spot",
            "CAMERA_CONE_DEG", "RIM_PX"]
 
 #: Default half-angle (degrees) of the cone around the direction toward the camera that is masked out.
@@ -205,7 +205,7 @@ def unwrap_mirror_ball_Debevec1998(image, camera_model: str = "pinhole", K=None,
                                    world_from_camera=None, center_cam=None, radius=None, center_px=None,
                                    radius_px=None, height: int = 128, valid=None, saturated=None,
                                    camera_cone_deg: float = CAMERA_CONE_DEG, rim_px: float = RIM_PX,
-                                   supersample: int = 2, reflectance: float = 1.0) -> MirrorView:
+                                   supersample: int | None = None, reflectance: float = 1.0) -> MirrorView:
     """Unwrap one photograph of a mirror ball into a lat-long radiance map with a confidence per direction.
 
     Parameters
@@ -230,9 +230,10 @@ def unwrap_mirror_ball_Debevec1998(image, camera_model: str = "pinhole", K=None,
         Half-angle of the masked cone around the direction toward the camera (0: none).
     rim_px : float
         Width of the rim given zero confidence, pixels.
-    supersample : int
+    supersample : int or None
         Directions per output texel side; the samples are averaged with their solid angles and
-        confidences (area-weighted, so the total power is kept).
+        confidences (area-weighted, so the total power is kept). None: :func:`auto_supersample`
+        (about 4 samples per pixel of the ball).
     reflectance : float
         The ball's reflectance; the map is the image divided by it.
 
@@ -242,35 +243,66 @@ def unwrap_mirror_ball_Debevec1998(image, camera_model: str = "pinhole", K=None,
     """
     img = np.asarray(image, dtype=np.float32)
     H_img, W_img = img.shape[:2]
-    h, s = int(height), max(int(supersample), 1)
-    hf = h * s
-    d_world = latlong_directions(2 * hf, hf).reshape(-1, 3)
+    h = int(height)
+    if camera_model == "orthographic":
+        r_px = float(radius_px)
+    else:
+        Kc, _ = camera_arrays(K, dist)
+        D = float(np.linalg.norm(center_cam)) / float(radius)
+        r_px = float(np.sqrt(Kc[0, 0] * Kc[1, 1]) * np.tan(np.arcsin(min(1.0 / D, 1.0))))
+    s = max(int(supersample), 1) if supersample is not None else auto_supersample(r_px, h)
     T = np.asarray(world_from_camera, dtype=np.float64)
     Rwc = T[:3, :3]
-    d_cam = d_world @ Rwc  # R^T w for each row
-    g = mirror_ball_pixels(d_cam, camera_model, K, dist, center_cam, radius, center_px, radius_px)
-    px = np.where(g["visible"][:, None], g["pixels"], -10.0)
-    shape = (hf, 2 * hf)
-    rad = _sample(img, px, shape) / float(reflectance)
     ok = np.ones((H_img, W_img), dtype=np.float32) if valid is None else np.asarray(valid, dtype=np.float32)
-    ok_s = _sample(ok, px, shape) > 0.999
-    toward = Rwc @ g["toward_camera"]
-    cone = (d_world @ toward) >= np.cos(np.radians(camera_cone_deg)) if camera_cone_deg > 0 \
-        else np.zeros(len(d_world), dtype=bool)
-    conf = np.where(g["visible"] & (g["rim_px"] >= rim_px) & ok_s.ravel() & ~cone, g["cos"], 0.0).reshape(shape)
-    clip = np.zeros(shape, dtype=bool) if saturated is None else \
-        (_sample(np.asarray(saturated, dtype=np.float32), px, shape) > 0) & (conf > 0)
-    sa = latlong_solid_angles(hf)
-    wgt = sa * conf
-    blk = (h, s, 2 * h, s)
-    wsum = wgt.reshape(blk).sum(axis=(1, 3))
-    num = (rad.astype(np.float64) * wgt[..., None]).reshape(h, s, 2 * h, s, 3).sum(axis=(1, 3))
-    out = num / np.where(wsum > 0, wsum, 1.0)[..., None]
-    conf_out = wsum / sa.reshape(blk).sum(axis=(1, 3))
-    clip_out = clip.reshape(blk).any(axis=(1, 3))
-    cone_out = cone.reshape(shape).reshape(blk).any(axis=(1, 3))
+    sat = None if saturated is None else np.asarray(saturated, dtype=np.float32)
+    cos_cone = np.cos(np.radians(camera_cone_deg)) if camera_cone_deg > 0 else None
+    hf, wf = h * s, 2 * h * s
+    t = np.linspace(0.0, np.pi, hf + 1)
+    row_sa = (2 * np.pi / wf) * (np.cos(t[:-1]) - np.cos(t[1:]))  # solid angle of a fine texel, per fine row
+    u = (np.arange(wf) + 0.5) / wf
+    out = np.zeros((h, 2 * h, 3))
+    conf_out = np.zeros((h, 2 * h))
+    clip_out = np.zeros((h, 2 * h), dtype=bool)
+    cone_out = np.zeros((h, 2 * h), dtype=bool)
+    toward = None
+    rows = max(1, int(2_000_000 // (wf * s)))  # output rows per chunk: about 2 M directions at a time
+    for r0 in range(0, h, rows):
+        r1 = min(h, r0 + rows)
+        v = (np.arange(r0 * s, r1 * s) + 0.5) / hf
+        uu, vv = np.meshgrid(u, v)
+        d_world = latlong_uv_to_direction(uu, vv).reshape(-1, 3)
+        g = mirror_ball_pixels(d_world @ Rwc, camera_model, K, dist, center_cam, radius, center_px, radius_px)
+        toward = Rwc @ g["toward_camera"]
+        px = np.where(g["visible"][:, None], g["pixels"], -10.0)
+        shape = ((r1 - r0) * s, wf)
+        rad = _sample(img, px, shape).astype(np.float64) / float(reflectance)
+        ok_s = (_sample(ok, px, shape) > 0.999).ravel()
+        cone = (d_world @ toward) >= cos_cone if cos_cone is not None else np.zeros(len(d_world), dtype=bool)
+        conf = np.where(g["visible"] & (g["rim_px"] >= rim_px) & ok_s & ~cone, g["cos"], 0.0).reshape(shape)
+        sa = np.repeat(row_sa[r0 * s:r1 * s, None], wf, axis=1)
+        wgt = sa * conf
+        blk = (r1 - r0, s, 2 * h, s)
+        wsum = wgt.reshape(blk).sum(axis=(1, 3))
+        num = (rad * wgt[..., None]).reshape(blk + (3,)).sum(axis=(1, 3))
+        out[r0:r1] = num / np.where(wsum > 0, wsum, 1.0)[..., None]
+        conf_out[r0:r1] = wsum / sa.reshape(blk).sum(axis=(1, 3))
+        if sat is not None:
+            clip_out[r0:r1] = ((_sample(sat, px, shape) > 0) & (conf > 0)).reshape(blk).any(axis=(1, 3))
+        cone_out[r0:r1] = cone.reshape(blk).any(axis=(1, 3))
     return MirrorView(np.where(conf_out[..., None] > 0, out, 0.0).astype(np.float32),
                       conf_out.astype(np.float32), clip_out & (conf_out > 0), toward, cone_out)
+
+
+def auto_supersample(radius_px: float, height: int, samples_per_pixel: float = 4.0, limit: int = 16) -> int:
+    """Directions per texel side so that the ball's pixels get about ``samples_per_pixel`` samples each.
+
+    The ball's disc (``pi r^2`` pixels) covers the sphere of directions (``2 (s h)^2`` fine texels)
+    with a nearly uniform density (the orthographic mirror ball is Lambert's equal-area projection),
+    so ``s = ceil(sqrt(samples_per_pixel * pi / 2) r / h)``, at least 1 and at most ``limit``. A
+    compact bright source of a pixel or two is then sampled often enough that its energy is kept.
+    """
+    s = int(np.ceil(np.sqrt(samples_per_pixel * np.pi / 2) * float(radius_px) / int(height)))
+    return int(min(max(s, 1), limit))
 
 
 def merge_mirror_views(views, power: float = 2.0) -> MirrorView:

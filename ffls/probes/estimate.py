@@ -42,7 +42,7 @@ def camera_cone(geo, camera_size: float = CAMERA_SIZE, fallback_deg: float = CAM
 
 
 def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = None, rim_px: float = RIM_PX,
-                    supersample: int = 2, weight_power: float = 2.0, fill: str = "nearest",
+                    supersample: int | None = None, weight_power: float = 2.0, fill: str = "nearest",
                     camera_size: float = CAMERA_SIZE) -> LightmapEstimate:
     """A light map from one or more photographs (or brackets) of a mirror ball (Debevec 1998).
 
@@ -57,8 +57,9 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
         distance ``D`` (:func:`camera_cone`), else 10 degrees.
     rim_px : float
         Width of the rim left out, pixels.
-    supersample : int
-        Directions per texel side.
+    supersample : int or None
+        Directions per texel side; None: about 4 samples per pixel of the ball
+        (:func:`ffls.probes.debevec.auto_supersample`).
     weight_power : float
         Views are merged with weights ``confidence ** weight_power``.
     fill : {'nearest', 'zero'}
