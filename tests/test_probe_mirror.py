@@ -226,3 +226,32 @@ def test_bad_input_is_one_line(tmp_path):
         estimate_lightmap(folder, "mirror")
     with pytest.raises(ValueError, match="unknown method"):
         estimate_lightmap(folder, "crystal")
+
+
+def test_bracketed_ball_matches_the_float_photo(tmp_path):
+    """A mirror ball as a bracket of 16-bit linear PNGs gives the map of the float photo."""
+    import cv2
+
+    lm = _smooth_map(32)
+    lm[2:4, 10:12] = 400.0  # a light no single exposure holds
+    kw = dict(world_from_camera=look_at([0, -1, 0]), center_px=(60.0, 60.0), radius_px=50)
+    img, _ = render_mirror_ball(lm, (120, 120), "orthographic", supersample=3, **kw)
+    times = (0.001, 0.01, 0.1)
+    for k, t in enumerate(times):
+        cv2.imwrite(str(tmp_path / f"b{k}.png"), np.rint(np.clip(img * t, 0, 1) * 65535).astype(np.uint16)[..., ::-1])
+    write_exr(tmp_path / "ball.exr", img)
+    sphere = {"center_px": [60.0, 60.0], "radius_px": 50}
+    doc = {"format": "ffls-probe", "version": 1, "images": ["ball.exr"], "sphere": sphere,
+           "camera": {"model": "orthographic", "world_from_camera": kw["world_from_camera"].tolist()}}
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    ref = estimate_lightmap(tmp_path, "mirror", height=32)
+    doc.update(images=[{"file": f"b{k}.png", "exposure_s": t} for k, t in enumerate(times)], encoding="linear")
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    br = estimate_lightmap(tmp_path, "mirror", height=32)
+    assert _rel(br.lightmap.data, ref.lightmap.data, ref.seen) < 0.01 and br.details["clipped_fraction"] == 0
+    assert any("bracket: 3 exposures" in n for n in br.notes)
+    # one exposure alone clips the light: flagged as lower bounds
+    doc.update(images=["b2.png"])
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    one = estimate_lightmap(tmp_path, "mirror", height=32)
+    assert one.details["clipped_fraction"] > 0 and any("clipped" in n for n in one.notes)
