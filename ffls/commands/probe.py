@@ -5,7 +5,7 @@ import argparse
 from pathlib import Path
 
 NAME = "probe"
-HELP = "estimate a light map from photos of a probe (mirror ball, ...), or merge an exposure bracket"
+HELP = "estimate a light map from photos of a probe (mirror, diffuse, shadow, pocs), or merge an exposure bracket"
 DESCRIPTION = (
     "probe METHOD FOLDER -o MAP.exr: FOLDER holds probe.json (docs/formats.md); the map is a lat-long "
     "EXR in the world frame whose alpha marks the directions the probe saw. "
@@ -58,6 +58,61 @@ def _add_mirror(sub, common):
     return p
 
 
+def _sources_arg(text: str):
+    """``--sources`` / ``--nodes``: a positive integer or 'auto'."""
+    t = str(text).strip().lower()
+    if t == "auto":
+        return t
+    try:
+        n = int(t)
+    except ValueError:
+        n = 0
+    if not 1 <= n <= 100000:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', not {text!r}")
+    return n
+
+
+def _add_inverse(sub, common):
+    from ffls.commands.common import integer, number
+
+    shared = argparse.ArgumentParser(add_help=False)
+    shared.add_argument("--criterion", choices=("cv", "bic"), default="cv",
+                        help="how the model size is chosen when 'auto': cross-validation (default) or BIC")
+    shared.add_argument("--smoothness", type=number(0.0, 1e6), default=0.0,
+                        help="first-difference penalty between neighbouring sources (default 0: the paper's fit)")
+    shared.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
+                        help="directions not seen: the method's own values (default) or black")
+    d = sub.add_parser("diffuse", parents=[common, shared], help="a diffuse sphere (Hougen-Ahuja 1993)",
+                       description="Least squares over model sources (5, 9, 17 rings or geodesic sets) with a "
+                                   "free ambient term, from a diffuse sphere.")
+    d.add_argument("--sources", type=_sources_arg, default="auto", metavar="N|auto",
+                   help="model sources: 5, 9, 17 (rings), any other count (geodesic), or auto (default)")
+    d.add_argument("--nonnegative", action="store_true", help="non-negative source intensities (scipy nnls)")
+    d.add_argument("--no-ambient", action="store_true", help="leave out the ambient term")
+    s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
+                       description="Dome node intensities from the shadow of a known occluder on a plane.")
+    s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto",
+                   help="dome nodes (e.g. 521), or auto (default)")
+    s.add_argument("--case", choices=("lambertian", "torrance_sparrow", "ratio"), default="lambertian",
+                   help="receiver model: Lambertian with known albedo (default), simplified Torrance-Sparrow, or "
+                        "the ratio to surface_image (unknown albedo)")
+    s.add_argument("--ks", type=number(0.0, 1e6), default=None, help="torrance_sparrow: specular coefficient K_s")
+    s.add_argument("--sigma", type=number(0.0, 90.0, lo_open=True, unit="degrees"), default=None,
+                   help="torrance_sparrow: lobe width, degrees")
+    s.add_argument("--unconstrained", action="store_true", help="plain least squares instead of NNLS")
+    q = sub.add_parser("pocs", parents=[common], help="a diffuse sphere by POCS (Singh-Ahuja)",
+                       description="Projections onto convex sets (amplitude and residual projections in random "
+                                   "order) from a diffuse sphere; the residual per iteration is reported.")
+    q.add_argument("--grid", type=integer(2, 256), default=16, help="height of the grid of unknowns (default 16)")
+    q.add_argument("--iterations", type=integer(1, 100000), default=50, help="sweeps (default 50)")
+    q.add_argument("--upper", type=number(0.0, None, lo_open=True), default=None,
+                   help="upper amplitude bound on the radiance (default none)")
+    q.add_argument("--order", choices=("random", "sequential"), default="random", help="projection order")
+    q.add_argument("--seed", type=integer(0, 2**32 - 1), default=0, help="seed of the random order")
+    q.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
+                   help="directions not seen: the method's own values (default) or black")
+
+
 def add_arguments(p):
     from ffls.commands.common import MAP_HEIGHT, float_list, output_path
 
@@ -70,6 +125,7 @@ def add_arguments(p):
                         help="map height, 4 to 16384 (width twice it; default 128)")
     common.add_argument("--half", action="store_true", help="write half floats")
     _add_mirror(sub, common)
+    _add_inverse(sub, common)
     m = sub.add_parser("merge", help="merge an exposure bracket into one HDR image",
                        description="Merge bracketed exposures (8-, 16-bit or float) with hat weights that fall to "
                                    "zero at the clipping limits; pixels clipped in every exposure get alpha 0.")
@@ -136,6 +192,16 @@ def method_knobs(args) -> dict:
     if args.method == "mirror":
         return {"camera_cone_deg": args.camera_cone, "rim_px": args.rim, "supersample": args.supersample,
                 "weight_power": args.weight_power, "fill": args.fill}
+    if args.method == "diffuse":
+        return {"sources": args.sources, "nonnegative": args.nonnegative, "ambient": not args.no_ambient,
+                "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill}
+    if args.method == "shadow":
+        return {"nodes": args.nodes, "case": args.case, "nonnegative": not args.unconstrained, "ks": args.ks,
+                "sigma_deg": args.sigma, "criterion": args.criterion, "smoothness": args.smoothness,
+                "fill": args.fill}
+    if args.method == "pocs":
+        return {"grid": args.grid, "iterations": args.iterations, "upper": args.upper, "order": args.order,
+                "seed": args.seed, "fill": args.fill}
     return {}
 
 

@@ -15,7 +15,8 @@ from ffls.probes.debevec import (CAMERA_CONE_DEG, RIM_PX, blind_spot, fill_unsee
 from ffls.probes.locate import locate_sphere
 from ffls.probes.result import LightmapEstimate
 
-__all__ = ["FILL_MODES", "CAMERA_SIZE", "camera_cone", "mirror_lightmap"]
+__all__ = ["FILL_MODES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
+           "pocs_lightmap", "shadow_pixels", "shadow_lightmap"]
 
 #: How unseen directions are filled: from the nearest seen ones, or left black.
 FILL_MODES = ("nearest", "zero")
@@ -122,3 +123,332 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
     details = {"views": per_view, "seen_fraction": float(1 - bs.fraction), "blind_spot_sr": bs.solid_angle,
                "blind_spot_fraction": bs.fraction, "camera_cone_sr": cone_sr, "clipped_fraction": clipped}
     return LightmapEstimate(lm, seen, merged.confidence, "mirror", notes, details)
+
+
+# ----------------------------------------------------------------------------- diffuse objects (Hougen-Ahuja, POCS)
+def _with_source(e: InputError, src) -> InputError:
+    """An InputError of an array function (no path) re-raised naming ``probe.json``."""
+    return InputError(e.message, src) if e.path is None else e
+
+
+def diffuse_pixels(probe, method: str, rim_px: float = 1.5, max_pixels: int | None = 20000, seed: int = 0):
+    """The usable pixels of a diffuse sphere over every view: world normals, radiance, albedo, notes.
+
+    Pixels within ``rim_px`` of the outline, invalid or clipped are left out; at most
+    ``max_pixels`` (a fixed-seed random subset) are returned.
+
+    Returns
+    -------
+    normals : (m, 3) float64
+    radiance : (m, 3) float64
+    albedo : float
+        ``sphere.albedo``, or 1 when not stated (then the map carries the unknown albedo as a scale).
+    notes : list of str
+    """
+    src = probe.json_path
+    if probe.object is not None:
+        raise InputError(f"object: the {method} method reads its normals from a sphere; a mesh object "
+                         f"({probe.object.path.name}) needs per-pixel normals rendered from the mesh, which this "
+                         f"version does not do: photograph a diffuse sphere, or remove \"object\"", src)
+    normals, values, notes = [], [], []
+    for k, view in enumerate(probe.views):
+        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
+        if view.sphere.material != "diffuse":
+            key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
+            raise InputError(f"{key}: the {method} method needs a diffuse sphere (\"material\": \"diffuse\"), this "
+                             f"one is {view.sphere.material!r} (use 'ffls probe mirror')", src)
+        vr = view_radiance(view, probe.encoding, probe.response, src)
+        geo = locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
+        mask = geo.mask(vr.radiance.shape, margin_px=rim_px) & vr.valid & ~vr.saturated
+        yy, xx = np.nonzero(mask)
+        n = geo.normals_world(np.stack([xx, yy], axis=1).astype(np.float64)) if len(yy) else np.zeros((0, 3))
+        ok = np.all(np.isfinite(n), axis=1)
+        normals.append(n[ok])
+        values.append(vr.radiance[yy[ok], xx[ok]].astype(np.float64))
+        notes.append(f"{tag}{vr.note}; {geo.describe()}; {int(ok.sum())} usable pixels")
+    N, V = np.concatenate(normals), np.concatenate(values)
+    if len(N) == 0:
+        raise InputError("the sphere shows no usable pixel (all clipped, invalid or at the rim)", src)
+    if max_pixels is not None and len(N) > max_pixels:
+        keep = np.sort(np.random.default_rng(seed).choice(len(N), int(max_pixels), replace=False))
+        N, V = N[keep], V[keep]
+        notes.append(f"used {max_pixels} of the pixels (a fixed-seed random subset)")
+    albedo = probe.view.sphere.albedo
+    if albedo is None:
+        notes.append("sphere.albedo not stated: the map is scaled by the unknown albedo (taken as 1)")
+        albedo = 1.0
+    return N, V, float(albedo), notes
+
+
+def _finish(radiance, confidence, threshold: float, method: str, probe, notes: list, details: dict, fill: str
+            ) -> LightmapEstimate:
+    """Clip negatives (counted), mask, fill and wrap a recovered lat-long map."""
+    from ffls.probes.sources import to_lightmap
+
+    conf = np.clip(np.asarray(confidence, dtype=np.float64), 0.0, 1.0)
+    seen = conf > threshold
+    lm, clipped = to_lightmap(np.asarray(radiance, dtype=np.float64), str(probe.folder))
+    data = lm.data
+    if fill == "zero":
+        data = np.where(seen[..., None], data, 0.0).astype(np.float32)
+    if clipped:
+        notes.append(f"{clipped} texels with negative radiance (unconstrained least squares) set to 0")
+    bs = blind_spot(seen)
+    notes.append(bs.describe().replace("blind spot", "poorly seen") + f" (confidence <= {threshold:g}; the map "
+                 "there is the method's extrapolation)")
+    details.update(seen_fraction=float(1 - bs.fraction), blind_spot_sr=bs.solid_angle,
+                   blind_spot_fraction=bs.fraction, negative_texels=int(clipped))
+    return LightmapEstimate(LightMap(data, "latlong", str(probe.folder)), seen, conf.astype(np.float32), method,
+                            notes, details)
+
+
+def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = False, ambient: bool = True,
+                     criterion: str = "cv", smoothness: float = 0.0, rim_px: float = 1.5,
+                     max_pixels: int | None = 20000, confidence_threshold: float = 0.2,
+                     fill: str = "nearest") -> LightmapEstimate:
+    """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
+
+    Parameters
+    ----------
+    probe : ffls.io.probe.Probe
+    height : int
+    sources : int or 'auto'
+        Model sources (5, 9, 17 rings, or geodesic sets of about that size), or chosen by
+        ``criterion`` among 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
+    nonnegative : bool
+        Non-negative source intensities (scipy ``nnls``).
+    ambient : bool
+        Fit the unconstrained ambient term.
+    criterion : {'cv', 'bic'}
+    smoothness : float
+        First-difference penalty between neighbouring sources (0: the paper).
+    rim_px, max_pixels
+        See :func:`diffuse_pixels`.
+    confidence_threshold : float
+        Directions with :func:`ffls.probes.hougen_ahuja.normal_confidence` at or below it are
+        reported as not seen (alpha 0).
+    fill : {'nearest', 'zero'}
+        ``'nearest'`` keeps the method's own values everywhere (the sources extend over the
+        whole domain); ``'zero'`` blacks out the directions not seen.
+    """
+    from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
+    from ffls.probes.selection import select_hougen_ahuja
+
+    src = probe.json_path
+    N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
+    kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness)
+    try:
+        if sources == "auto":
+            sel = select_hougen_ahuja(N, V, albedo, criterion=criterion, **kw)
+            fit, chosen = sel.fit, sel.chosen
+            notes.append(sel.note)
+        else:
+            fit, chosen = hougen_ahuja(N, V, albedo, sources=int(sources), **kw), int(sources)
+    except InputError as e:
+        raise _with_source(e, src) from None
+    notes.append(f"Hougen-Ahuja: {chosen} sources{' (non-negative)' if nonnegative else ''}, re-rendered "
+                 f"relative RMS {100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
+    details = {"sources": chosen, "relative_rms": float(fit.relative_rms), "condition": float(fit.condition)}
+    return _finish(fit.latlong(height), normal_confidence(N, height), confidence_threshold, "diffuse", probe, notes,
+                   details, fill)
+
+
+def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int = 50, upper: float | None = None,
+                  delta: float = 0.0, order: str = "random", seed: int = 0, rim_px: float = 1.5,
+                  max_pixels: int | None = 2000, confidence_threshold: float = 0.2,
+                  fill: str = "nearest") -> LightmapEstimate:
+    """A light map from a diffuse sphere by POCS (Singh and Ahuja, :mod:`ffls.probes.singh_ahuja`).
+
+    ``grid`` is the height of the lat-long grid of unknowns; ``height`` must be a multiple of it
+    (texels are repeated, the energy kept). The other knobs are :func:`ffls.probes.singh_ahuja.singh_ahuja`'s.
+    """
+    from ffls.probes.hougen_ahuja import normal_confidence
+    from ffls.probes.singh_ahuja import singh_ahuja
+
+    src = probe.json_path
+    if int(height) % int(grid):
+        raise InputError(f"--size {height} must be a multiple of the POCS grid height --grid {grid}")
+    N, V, albedo, notes = diffuse_pixels(probe, "pocs", rim_px, None)
+    try:
+        res = singh_ahuja(N, V, albedo, height=grid, iterations=iterations, upper=upper, delta=delta, order=order,
+                          seed=seed, max_pixels=max_pixels)
+    except InputError as e:
+        raise _with_source(e, src) from None
+    r = res.residuals
+    notes.append(f"POCS (Singh-Ahuja): {grid}x{2 * grid} grid, {res.iterations} iterations in {order} order over "
+                 f"{res.pixels_used} pixels; residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% (relative), "
+                 f"re-rendered relative RMS {100 * res.relative_rms:.2f}%")
+    details = {"grid": int(grid), "iterations": int(res.iterations), "residuals": [float(x) for x in r],
+               "relative_rms": float(res.relative_rms)}
+    return _finish(res.latlong(height), normal_confidence(N, height), confidence_threshold, "pocs", probe, notes,
+                   details, fill)
+
+
+# ----------------------------------------------------------------------------- cast shadows (Sato, Sato and Ikeuchi)
+def _segments_blocked(points, ends, occ) -> np.ndarray:
+    """(m,) bool: the segment from each point to its end (the camera) meets the occluder (box or mesh)."""
+    p = np.asarray(points, dtype=np.float64)
+    d = np.asarray(ends, dtype=np.float64) - p
+    if occ.kind == "box":
+        lo, hi = occ.center - occ.size / 2, occ.center + occ.size / 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d
+            t0, t1 = (lo - p) * inv, (hi - p) * inv
+        tmin = np.nanmax(np.minimum(t0, t1), axis=1)
+        tmax = np.nanmin(np.maximum(t0, t1), axis=1)
+        return (tmax >= np.maximum(tmin, 1e-9)) & (tmin <= 1.0)
+    tri = occ.mesh.vertices[occ.mesh.faces]
+    v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    out = np.zeros(len(p), dtype=bool)
+    rows = max(1, 2_000_000 // max(1, len(tri)))
+    for s in range(0, len(p), rows):  # Moeller-Trumbore, every segment against every triangle
+        ps, ds = p[s:s + rows, None, :], d[s:s + rows, None, :]
+        h = np.cross(ds, e2[None])
+        a = np.sum(e1[None] * h, axis=2)
+        ok = np.abs(a) > 1e-12
+        f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+        sv = ps - v0[None]
+        u = f * np.sum(sv * h, axis=2)
+        q = np.cross(sv, e1[None])
+        v = f * np.sum(ds * q, axis=2)
+        t = f * np.sum(e2[None] * q, axis=2)
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9) & (t < 1.0)
+        out[s:s + rows] = hit.any(axis=1)
+    return out
+
+
+def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surface: bool = False):
+    """The receiver pixels of a cast-shadow probe: world points on the plane, radiance, view directions.
+
+    Needs a pinhole camera (``K`` and ``world_from_camera``: the pixels are mapped onto the
+    plane), ``plane`` and ``occluder``. Pixels whose ray does not meet the plane in front of the
+    camera, or that see the occluder, or that are clipped or invalid, are left out.
+
+    Returns
+    -------
+    points, radiance, view_dirs : (m, 3) float64
+    surface : (m, 3) float64 or None
+        The same pixels of ``surface_image`` (when ``need_surface``).
+    notes : list of str
+    """
+    from ffls.camera.projection import pixel_rays
+    from ffls.io.images import read_image
+    from ffls.probes.bracket import check_encoding, decode_image
+
+    src = probe.json_path
+    if probe.plane is None:
+        raise InputError("plane: missing (the shadow method needs the receiving plane: point, normal, albedo)", src)
+    if probe.occluder is None:
+        raise InputError("occluder: missing (the shadow method needs the occluder: a box or a mesh)", src)
+    view = probe.view
+    cam = view.camera
+    if cam.model != "pinhole" or cam.K is None:
+        raise InputError("camera: the shadow method maps pixels onto the plane and needs a calibrated pinhole camera "
+                         "(camera.K and camera.world_from_camera)", src)
+    vr = view_radiance(view, probe.encoding, probe.response, src)
+    H, W = vr.radiance.shape[:2]
+    yy, xx = np.mgrid[0:H, 0:W]
+    px = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
+    T = cam.world_from_camera
+    o = T[:3, 3]
+    d = pixel_rays(px, cam.K, cam.dist) @ T[:3, :3].T
+    n, p0 = probe.plane.normal, probe.plane.point
+    den = d @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((p0 - o) @ n) / den
+    ok = np.isfinite(t) & (t > 0) & vr.valid.ravel() & ~vr.saturated.ravel()
+    pts = o + t[:, None] * d
+    ok[ok] &= ~_segments_blocked(pts[ok], np.broadcast_to(o, (int(ok.sum()), 3)), probe.occluder)
+    idx = np.flatnonzero(ok)
+    if len(idx) == 0:
+        raise InputError("no pixel shows the plane (check camera.world_from_camera and plane)", src)
+    notes = [f"{vr.note}; {len(idx)} pixels on the plane"]
+    if max_pixels is not None and len(idx) > max_pixels:
+        idx = np.sort(np.random.default_rng(seed).choice(idx, int(max_pixels), replace=False))
+        notes.append(f"used {max_pixels} of them (a fixed-seed random subset)")
+    rad = vr.radiance.reshape(-1, 3)[idx].astype(np.float64)
+    surface = None
+    if need_surface:
+        if probe.surface_image is None:
+            raise InputError("surface_image: missing (the ratio case divides by a shadow-free image of the surface)",
+                             src)
+        img = read_image(probe.surface_image)
+        check_encoding(img, probe.encoding, src)
+        if img.shape != (H, W):
+            raise InputError(f"surface_image: {img.shape[1]}x{img.shape[0]} differs from the photo's {W}x{H}", src)
+        surface = decode_image(img, probe.encoding, probe.response)[0].reshape(-1, 3)[idx].astype(np.float64)
+    views = o - pts[idx]
+    return pts[idx], rad, views / np.linalg.norm(views, axis=1, keepdims=True), surface, notes
+
+
+def _occluder_dict(occ) -> dict:
+    if occ.kind == "box":
+        return {"box": {"center": occ.center.tolist(), "size": occ.size.tolist()}}
+    return {"triangles": occ.mesh.vertices[occ.mesh.faces]}
+
+
+SHADOW_CASES = ("lambertian", "torrance_sparrow", "ratio")
+
+
+def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambertian", nonnegative: bool = True,
+                    smoothness: float = 0.0, criterion: str = "cv", ks: float | None = None,
+                    sigma_deg: float | None = None, max_pixels: int | None = 4000,
+                    confidence_threshold: float = 0.0, fill: str = "nearest") -> LightmapEstimate:
+    """A light map from the shadow of a known occluder on a plane (Sato, Sato and Ikeuchi 1999).
+
+    Parameters
+    ----------
+    probe : ffls.io.probe.Probe
+        With ``plane``, ``occluder`` and a pinhole camera; ``plane.albedo`` for the
+        ``'lambertian'`` and ``'torrance_sparrow'`` cases, ``surface_image`` for ``'ratio'``.
+    height : int
+    nodes : int or 'auto'
+        Dome nodes (e.g. 521), or chosen by ``criterion`` (:func:`ffls.probes.selection.select_sato_sato_ikeuchi`).
+    case : {'lambertian', 'torrance_sparrow', 'ratio'}
+    nonnegative : bool
+    smoothness : float
+    criterion : {'cv', 'bic'}
+    ks, sigma_deg : float
+        ``'torrance_sparrow'``: the specular lobe's ``K_s`` and width (degrees).
+    max_pixels : int or None
+    confidence_threshold : float
+        Directions whose node shadows at most this share of the pixels are reported as not seen.
+    fill : {'nearest', 'zero'}
+    """
+    from ffls.probes.sato_sato_ikeuchi import occluder_visibility, sato_sato_ikeuchi, shadow_confidence
+    from ffls.probes.selection import select_sato_sato_ikeuchi
+
+    src = probe.json_path
+    if case not in SHADOW_CASES:
+        raise ValueError(f"case must be one of {SHADOW_CASES}, not {case!r}")
+    pts, rad, views, surface, notes = shadow_pixels(probe, max_pixels, need_surface=case == "ratio")
+    kw: dict = {"case": case, "nonnegative": nonnegative, "smoothness": smoothness}
+    if case == "ratio":
+        kw["surface_radiance"] = surface
+    else:
+        if probe.plane.albedo is None:
+            raise InputError(f"plane.albedo: missing (the {case} case needs the receiver's albedo; with a shadow-free "
+                             f"surface_image use --case ratio)", src)
+        kw["albedo"] = probe.plane.albedo
+    if case == "torrance_sparrow":
+        if ks is None or sigma_deg is None:
+            raise InputError("the torrance_sparrow case needs the specular lobe: --ks and --sigma")
+        kw.update(view_dirs=views, specular={"ks": float(ks), "sigma": float(np.radians(sigma_deg))})
+    occ = _occluder_dict(probe.occluder)
+    try:
+        if nodes == "auto":
+            sel = select_sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, criterion=criterion, **kw)
+            fit, chosen = sel.fit, sel.chosen
+            notes.append(sel.note)
+        else:
+            fit = sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, nodes=int(nodes), **kw)
+            chosen = int(nodes)
+    except InputError as e:
+        raise _with_source(e, src) from None
+    notes.append(f"Sato-Sato-Ikeuchi ({case}): {chosen} dome nodes, re-rendered relative RMS "
+                 f"{100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
+    vis = occluder_visibility(pts, fit.directions, occ)
+    conf = shadow_confidence(fit.directions, vis, probe.plane.normal, height)
+    details = {"nodes": chosen, "case": case, "relative_rms": float(fit.relative_rms),
+               "condition": float(fit.condition)}
+    return _finish(fit.latlong(height), conf, confidence_threshold, "shadow", probe, notes, details, fill)

@@ -1,0 +1,200 @@
+"""Light maps from a diffuse sphere, cast shadows and POCS: errors and times over methods and parameters.
+
+    OMP_NUM_THREADS=1 python benchmarks/probes.py [--quick] [--noise 0.01]
+
+For each real HDR map (the bundled Poly Haven maps, area-averaged to 64 rows) it renders
+
+* a Lambertian ball seen by an orthographic camera (``ffls.synth.probe_scenes.diffuse_sphere_scene``,
+  80 px; the map integrated against the clamped cosine at every pixel), and
+* a box's shadow on the plane ``z = 0`` seen from straight above (``cast_shadow_scene``, 64 px,
+  the map reduced to 1024 distant lights with the synthetic renderer's shadow rays),
+
+then recovers the lighting with every method and parameter and reports, per row: the time (the
+median of 3 runs), the papers' re-render error (relative RMS of the input re-rendered from the
+recovered lighting), the relit error of a diffuse object (relative RMS of its irradiance under
+the recovered vs the true map, ``ffls.probes.evaluate.relit_error``) over the probe's own
+normals and over every normal of a sphere (the upper hemisphere for shadows, which see no light
+from below), and the map error. Then the limit: per spherical-harmonic order, the relative error
+of the recovered map's coefficients. Writes ``benchmarks/results/probes.json`` and
+``docs/images/probes.png``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import host_info, write_json
+from ffls.lightmaps.lightmap import builtin_lightmap
+from ffls.probes.evaluate import clamped_cosine_coefficients, clamped_cosine_energy, map_error, relit_error, sh_recovery
+from ffls.probes.hougen_ahuja import hougen_ahuja
+from ffls.probes.sato_sato_ikeuchi import box_visibility, dome_nodes, sato_sato_ikeuchi
+from ffls.probes.selection import select_hougen_ahuja, select_sato_sato_ikeuchi
+from ffls.probes.singh_ahuja import singh_ahuja
+from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
+
+ROOT = Path(__file__).resolve().parent.parent
+MAPS = ("courtyard", "studio", "sunrise", "night")
+H = 64
+
+
+def timed(fn, repeat=3):
+    ts, out = [], None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+        if ts[-1] > 3.0:
+            break
+    return out, float(np.median(ts))
+
+
+def upper_only(a):
+    a = a.copy()
+    a[a.shape[0] // 2:] = 0.0
+    return a
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="two maps, fewer parameters")
+    ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of each image's mean")
+    ap.add_argument("--json", default=str(ROOT / "benchmarks/results/probes.json"))
+    ap.add_argument("--plot", default=str(ROOT / "docs/images/probes.png"))
+    a = ap.parse_args(argv)
+    maps = MAPS[:2] if a.quick else MAPS
+    rng = np.random.default_rng(0)
+    rows, limit, conv = [], {}, {}
+
+    def noisy(x):
+        if a.noise <= 0:
+            return x
+        return x + rng.normal(0.0, a.noise * float(np.mean(x)), size=x.shape)
+
+    for name in maps:
+        lm = builtin_lightmap(name)
+        lm = lm.downsample(lm.res // H)
+        true = np.asarray(lm.data, dtype=np.float64)
+        sph = diffuse_sphere_scene(lm, 80, albedo=0.7)
+        rad = noisy(sph.radiance)
+
+        def add(method, params, fit_fn, fit, t, normals_own, full_true, hemi):
+            L = fit_fn(fit)
+            row = {"map": name, "method": method, "params": params, "time_s": t,
+                   "rerender": float(fit.relative_rms),
+                   "relit_own": relit_error(L, full_true, normals_own),
+                   "relit_sphere": relit_error(L, full_true, hemisphere=hemi),
+                   "map_error": map_error(L, full_true, hemisphere=hemi)}
+            rows.append(row)
+            print(f"{name:9s} {method:14s} {params:28s} {t:7.2f}s  rerender {row['rerender']:.4f}  relit own "
+                  f"{row['relit_own']:.4f}  sphere {row['relit_sphere']:.4f}  map {row['map_error']:.3f}", flush=True)
+            return L
+
+        # ------------------------------------------------------------ Hougen-Ahuja
+        ha = [(5, False, {}), (9, False, {}), (17, False, {}), (5, True, {}), (9, True, {}), (17, True, {}),
+              (162, False, {"rcond": 1e-3}), (42, True, {"ambient": "nonnegative"}),
+              (162, True, {"ambient": "nonnegative"}), (492, True, {"ambient": "nonnegative"})]
+        if a.quick:
+            ha = [h for h in ha if h[0] != 492]
+        for n, nn, kw in ha:
+            fit, t = timed(lambda: hougen_ahuja(sph.normals, rad, 0.7, n, nonnegative=nn, **kw))
+            L = add("hougen_ahuja", f"n={n} {'nnls' if nn else 'lstsq'} {' '.join(f'{k}={v}' for k, v in kw.items())}",
+                    lambda f: f.latlong(H), fit, t, sph.normals, true, "full")
+            if n == 162 and nn:
+                limit[f"{name} HA-162 nnls"] = sh_recovery(L, true, 8).relative_error.tolist()
+            if n == 17 and not nn:
+                limit[f"{name} HA-17 lstsq"] = sh_recovery(L, true, 8).relative_error.tolist()
+        sel, t = timed(lambda: select_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="nonnegative"), 1)
+        add("hougen_ahuja", f"auto (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals, true, "full")
+        # ------------------------------------------------------------ POCS
+        pocs_rows = [(8, 10, "random"), (8, 50, "random"), (16, 10, "random"), (16, 50, "random"),
+                     (16, 50, "sequential")]
+        if a.quick:
+            pocs_rows = pocs_rows[:3]
+        for h, it, order in pocs_rows:
+            r, t = timed(lambda: singh_ahuja(sph.normals, rad, 0.7, h, it, order=order, max_pixels=1000), 1)
+            L = add("singh_ahuja", f"grid {h}x{2 * h} it={it} {order}", lambda f: f.latlong(H), r, t, sph.normals,
+                    true, "full")
+            if (h, it) == (16, 50):
+                conv[f"{name} {order}"] = r.residuals.tolist()
+                if order == "random":
+                    limit[f"{name} POCS-16"] = sh_recovery(L, true, 8).relative_error.tolist()
+        # ------------------------------------------------------------ Sato, Sato and Ikeuchi
+        sc = cast_shadow_scene(lm, 64, albedo="checker")
+        occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
+        tu = upper_only(true)
+        up = np.array([[0.0, 0.0, 1.0]])
+        srad = noisy(sc.radiance)
+        nodes = (46, 126, 246, 526) if not a.quick else (46, 126)
+        for n in nodes:
+            d = dome_nodes(n)
+            V, tv = timed(lambda: box_visibility(sc.points, d, sc.box_center, sc.box_size), 1)
+            fit, t = timed(lambda: sato_sato_ikeuchi(sc.points, srad, occ, nodes=d, albedo=sc.albedo, visibility=V), 1)
+            add("sato", f"nodes={d.shape[0]} lambertian", lambda f: f.latlong(H), fit, t + tv, up, tu, "upper")
+        d = dome_nodes(246 if not a.quick else 126)
+        V = box_visibility(sc.points, d, sc.box_center, sc.box_size)
+        fit, t = timed(lambda: sato_sato_ikeuchi(sc.points, srad, occ, nodes=d, case="ratio", visibility=V,
+                                                 surface_radiance=noisy(sc.surface_radiance),
+                                                 reference_albedo=float(np.mean(sc.albedo)))
+                       , 1)
+        add("sato", f"nodes={d.shape[0]} ratio", lambda f: f.latlong(H), fit, t, up, tu, "upper")
+        spec = {"ks": 0.05, "sigma": 0.2}
+        scs = cast_shadow_scene(lm, 64, albedo=0.6, specular=spec)
+        fit, t = timed(lambda: sato_sato_ikeuchi(scs.points, noisy(scs.radiance), occ, nodes=d, case="torrance_sparrow",
+                                                 albedo=0.6, view_dirs=scs.view_dirs, specular=spec, visibility=V), 1)
+        add("sato", f"nodes={d.shape[0]} torrance_sparrow", lambda f: f.latlong(H), fit, t, up, tu, "upper")
+        sel, t = timed(lambda: select_sato_sato_ikeuchi(sc.points, srad, occ, candidates=nodes, albedo=sc.albedo), 1)
+        add("sato", f"auto (cv) -> {sel.fit.directions.shape[0]}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
+
+    kernel = {"energy_up_to_order": {str(l): clamped_cosine_energy(l) for l in range(7)},
+              "coefficients_2pi_c_l": (2 * np.pi * clamped_cosine_coefficients(8)).tolist()}
+    print("\nclamped-cosine energy up to order L:", {k: round(v, 5) for k, v in kernel["energy_up_to_order"].items()})
+    print("per-order relative error of the recovered map's SH coefficients (orders 0..8):")
+    for k, v in limit.items():
+        print(f"  {k:24s} " + " ".join(f"{x:5.2f}" for x in v))
+    doc = {"host": host_info(), "noise": a.noise, "map_height": H, "rows": rows, "sh_limit": limit,
+           "kernel": kernel, "pocs_convergence": conv, "command": " ".join(["python", "benchmarks/probes.py", *sys.argv[1:]])}
+    write_json(a.json, doc)
+    plot(rows, conv, a.plot)
+    print(f"wrote {a.json} and {a.plot}")
+
+
+def plot(rows, conv, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ffls.errors import atomic_output
+
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.6))
+    colours = {"hougen_ahuja": "tab:blue", "singh_ahuja": "tab:green", "sato": "tab:red"}
+    for m, c in colours.items():
+        r = [x for x in rows if x["method"] == m]
+        ax[0].scatter([x["time_s"] for x in r], [100 * x["relit_own"] for x in r], c=c, s=14, label=m)
+        ax[1].scatter([x["time_s"] for x in r], [100 * x["relit_sphere"] for x in r], c=c, s=14, label=m)
+    for a_, t in zip(ax[:2], ("relit error on the probe's own normals (%)",
+                              "relit error, every normal of a sphere (%; shadows: upper half)")):
+        a_.set_xscale("log")
+        a_.set_yscale("log")
+        a_.set_xlabel("time (s)")
+        a_.set_title(t, fontsize=9)
+        a_.grid(True, which="both", alpha=0.3)
+        a_.legend(fontsize=8)
+    for k, v in conv.items():
+        ax[2].semilogy(v, label=k, ls="-" if "random" in k else "--")
+    ax[2].set_xlabel("POCS iteration (16 x 32 grid)")
+    ax[2].set_title("relative residual |g - Hf| / |g|", fontsize=9)
+    ax[2].legend(fontsize=7)
+    ax[2].grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    with atomic_output(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,199 @@
+"""Illumination from a diffuse object of known geometry: Hougen and Ahuja's model sources.
+
+Hougen, Ahuja, "Estimation of the light source distribution and its use in integrated shape
+recovery from stereo and shading", ICCV 1993 (summarised in
+``shared/papers/illumination-estimation-survey.txt``, section 1). The illumination is a set of
+distant point sources at *fixed* directions (the model sources: 5, 9, 17, or a geodesic set)
+plus an ambient term. Each observed pixel gives one linear equation in their intensities,
+
+    I_i = rho / pi * (A + sum_k E_k max(0, n_i . l_k)),
+
+solved by least squares (unconstrained, "virtual sources" that may be negative) or with the
+intensities constrained non-negative (``scipy.optimize.nnls``); the ambient term ``A`` stays
+free either way (the paper's justification: the digitiser's offset). Sources at directions that
+carry no light come out near 0. Input: the pixels of a diffuse sphere (normals from its
+geometry) or of any diffuse object of known geometry: the function takes per-pixel normals.
+
+The recovered map is the sources spread over their Voronoi cells plus the ambient as uniform
+radiance (:func:`ffls.probes.sources.sources_to_latlong`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ffls.conventions import normalize
+from ffls.errors import InputError
+from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix, neighbour_edges, solve_sources
+from ffls.probes.sources import HOUGEN_AHUJA_SIZES, model_sources, sources_to_latlong
+
+__all__ = ["SourceFit", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals", "normal_confidence"]
+
+
+@dataclass(frozen=True)
+class SourceFit:
+    """Intensities of model sources recovered from an image, and the fit's quality.
+
+    Attributes
+    ----------
+    directions : (n, 3) float64
+        The model sources (world frame, unit).
+    intensities : (n, 3) float64
+        Irradiance at normal incidence of each source (W m^-2 in the image's radiance units
+        times pi / rho); may be negative when unconstrained.
+    ambient : (3,) float64
+        The free ambient irradiance ``A`` (0 when not fitted).
+    rendered : (m, 3) float64
+        The input pixels re-rendered from the recovered lighting.
+    rms : float
+        RMS of ``rendered - radiance`` over pixels and channels.
+    relative_rms : float
+        ``rms`` over the RMS of the input.
+    condition : float
+        Condition number of the (column-normalised) linear system.
+    method : str
+        ``'HougenAhuja1993'``, ``'SatoSatoIkeuchi1999'``...
+    hemisphere : str or dict
+        Domain of the sources (``'full'``, ``'upper'`` or ``{'axis': [x, y, z]}``): the map gets
+        no source light outside it (the ambient term still covers the whole sphere).
+    rank : int
+        Numerical rank of the system.
+    observed : (n,) bool
+        Sources that light at least one pixel (the others are 0).
+    """
+
+    directions: np.ndarray
+    intensities: np.ndarray
+    ambient: np.ndarray
+    rendered: np.ndarray
+    rms: float
+    relative_rms: float
+    condition: float
+    method: str
+    hemisphere: object = "full"
+    rank: int = 0
+    observed: np.ndarray | None = None
+
+    def latlong(self, height: int = 64) -> np.ndarray:
+        """The recovered lighting as lat-long radiance (height, 2 height, 3) float64 (may be negative)."""
+        return sources_to_latlong(self.directions, self.intensities, height, self.hemisphere, self.ambient)
+
+
+def check_normals(normals) -> np.ndarray:
+    """Unit normals (m, 3) float64; NaN, Inf or zero vectors are an InputError."""
+    n = np.asarray(normals, dtype=np.float64)
+    if n.ndim != 2 or n.shape[1] != 3:
+        raise ValueError(f"normals must be (m, 3), not {n.shape}")
+    if not np.all(np.isfinite(n)):
+        raise InputError("normals hold NaN or Inf (pixels off the object?)")
+    norm = np.linalg.norm(n, axis=1)
+    if np.any(norm < 1e-9):
+        raise InputError("normals hold zero vectors")
+    return normalize(n)
+
+
+def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True, nonnegative: bool = False,
+                 rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full",
+                 smoothness: float = 0.0) -> SourceFit:
+    """Recover model-source intensities from a diffuse object's pixels (Hougen and Ahuja 1993).
+
+    Parameters
+    ----------
+    normals : (m, 3) array_like
+        Unit world-frame normals of the observed pixels (a sphere: ``(P - C) / r``).
+    radiance : (m,) or (m, 3) array_like
+        Linear pixel values (saturated or shadowed pixels already removed by the caller).
+    albedo : float, (3,), (m,) or (m, 3) array_like
+        Diffuse albedo ``rho`` (pixel = ``rho / pi`` x irradiance). With an uncalibrated
+        camera the recovered intensities carry the camera's scale.
+    sources : int or (n, 3) array_like
+        The model sources: a size for :func:`ffls.probes.sources.model_sources` (5, 9, 17: rings
+        on the hemisphere around ``axis``; anything else: a geodesic sphere of about that size),
+        or explicit directions (their domain is then ``hemisphere``).
+    ambient : bool or {'free', 'nonnegative'}
+        Fit the ambient term: ``True``/``'free'`` leaves it unconstrained (the paper; it may come
+        out negative, and the map with it), ``'nonnegative'`` constrains it too when
+        ``nonnegative`` is set (then every texel of the map is >= 0), ``False`` leaves it out.
+    nonnegative : bool
+        Constrain the source intensities to be non-negative (NNLS).
+    rcond : float, optional
+        Unconstrained only: truncate singular values below ``rcond`` x the largest (needed
+        for large source sets, whose plain least-squares system is singular).
+    axis : (3,) array_like
+        Pole of the ring sets (5, 9, 17 sources), whose map then covers that hemisphere only.
+    hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
+        Domain of geodesic or explicit sources.
+    smoothness : float
+        Optional first-difference penalty between neighbouring sources
+        (:func:`ffls.probes.linear.solve_sources`); 0 is the paper's plain fit. It makes large
+        source sets well posed and fills the directions behind the object from their neighbours.
+
+    Returns
+    -------
+    SourceFit
+
+    Raises
+    ------
+    InputError
+        Non-finite input, fewer pixels than unknowns, or a singular system (sources that no
+        pixel sees, or that the pixels cannot tell apart).
+    """
+    n = check_normals(normals)
+    b = as_rgb_pixels(radiance, n.shape[0])
+    rho = broadcast_albedo(albedo, n.shape[0])
+    if isinstance(sources, (int, np.integer)):
+        dirs = model_sources(int(sources), hemisphere, axis)
+        if int(sources) in HOUGEN_AHUJA_SIZES:
+            hemisphere = {"axis": [float(v) for v in normalize(np.asarray(axis, dtype=np.float64))]}
+    else:
+        dirs = normalize(np.asarray(sources, dtype=np.float64).reshape(-1, 3))
+    if n.shape[0] == 0:
+        raise InputError("no pixels to fit")
+    # the model is linear in the irradiance; fit irradiance = pi I / rho (per-pixel albedo allowed)
+    target = np.pi * b / rho
+    M = lambert_matrix(n, dirs)
+    if ambient not in (True, False, "free", "nonnegative"):
+        raise ValueError(f"ambient must be True, False, 'free' or 'nonnegative', not {ambient!r}")
+    sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond,
+                        what=f"{dirs.shape[0]} sources{' + ambient' if ambient else ''}",
+                        smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 else None,
+                        ambient_nonnegative=ambient == "nonnegative")
+    rendered = sol.predicted * rho / np.pi
+    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
+    ref = float(np.sqrt(np.mean(b ** 2)))
+    return SourceFit(directions=dirs, intensities=sol.x, ambient=sol.ambient, rendered=rendered, rms=rms,
+                     relative_rms=rms / ref if ref > 0 else np.inf, condition=sol.condition,
+                     method="HougenAhuja1993", hemisphere=hemisphere, rank=sol.rank, observed=sol.observed)
+
+
+#: The colour-hdri style name of :func:`hougen_ahuja`.
+estimate_sources_HougenAhuja1993 = hougen_ahuja
+
+
+def normal_confidence(normals, height: int = 64, chunk: int = 4096) -> np.ndarray:
+    """How directly a diffuse object's pixels see each direction of a lat-long map.
+
+    Per texel direction ``w``: ``max_i max(0, n_i . w)`` over the pixels' normals. 1 where some
+    pixel faces ``w``; 0 for directions that light no pixel (behind a ball seen from one side:
+    exactly the camera's antipode); small values mark directions seen only at grazing angles,
+    whose light the data barely constrain. Use it as the map's mask/alpha (for example
+    ``> 0.2``) and report the rest as unseen.
+
+    Parameters
+    ----------
+    normals : (m, 3) array_like
+    height : int
+
+    Returns
+    -------
+    (height, 2 height) float64
+    """
+    from ffls.conventions import latlong_directions
+
+    n = check_normals(normals)
+    w = latlong_directions(2 * int(height), int(height)).reshape(-1, 3)
+    best = np.zeros(w.shape[0])
+    for s in range(0, n.shape[0], chunk):
+        best = np.maximum(best, (n[s:s + chunk] @ w.T).max(axis=0))
+    return np.clip(best, 0.0, 1.0).reshape(int(height), 2 * int(height))

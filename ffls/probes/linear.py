@@ -1,0 +1,262 @@
+"""The linear image-formation model shared by the inverse methods, and its solvers.
+
+A Lambertian point of albedo ``rho`` and normal ``n`` under distant sources ``l_k`` of
+irradiance ``E_k`` (at normal incidence) plus an ambient irradiance ``A`` has radiance
+
+    I = rho / pi * (A + sum_k E_k V_k max(0, n . l_k))
+
+with ``V_k`` the visibility of source ``k`` (1 without shadows). ffls' synthetic renderer uses
+the same ``kd / pi`` convention. Under a light map the irradiance is
+``E(n) = sum_texels L max(0, n . w) dw`` (:func:`irradiance_from_map`).
+
+Solvers (:func:`solve_sources`): plain least squares (``numpy.linalg.lstsq``, optionally
+truncated at a relative singular value ``rcond``), or non-negative least squares
+(``scipy.optimize.nnls``) with the ambient term left free by splitting it into two
+non-negative columns ``+1`` and ``-1`` (``A = a+ - a-``; the pair's minimum-norm choice is what
+NNLS returns, and the fit is the same as with a free column).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import nnls
+
+from ffls.errors import InputError
+
+__all__ = [
+    "lambert_matrix",
+    "irradiance_from_map",
+    "as_rgb_pixels",
+    "LinearSolution",
+    "solve_sources",
+    "neighbour_edges",
+    "broadcast_albedo",
+]
+
+
+def lambert_matrix(normals, directions, visibility=None) -> np.ndarray:
+    """Clamped cosines ``max(0, n_i . l_k)`` (times visibility) of every pixel and source.
+
+    Parameters
+    ----------
+    normals : (m, 3) array_like
+        Unit surface normals.
+    directions : (n, 3) array_like
+        Unit source directions.
+    visibility : (m, n) array_like of bool or float, optional
+        1 where source ``k`` reaches pixel ``i``.
+
+    Returns
+    -------
+    (m, n) float64
+    """
+    c = np.maximum(np.asarray(normals, dtype=np.float64) @ np.asarray(directions, dtype=np.float64).T, 0.0)
+    if visibility is not None:
+        c = c * np.asarray(visibility, dtype=np.float64)
+    return c
+
+
+def irradiance_from_map(normals, lightmap_or_samples, chunk: int = 4096) -> np.ndarray:
+    """Irradiance ``sum L max(0, n . w) dw`` of a light map on every normal (no shadows).
+
+    Parameters
+    ----------
+    normals : (m, 3) array_like
+        Unit normals.
+    lightmap_or_samples : LightMap or (dirs (M, 3), radiance (M, 3), solid_angle (M,))
+    chunk : int
+        Normals per block (memory ``chunk x M`` float64).
+
+    Returns
+    -------
+    (m, 3) float64
+    """
+    from ffls.lightmaps.lightmap import as_samples
+
+    dirs, rad, sa = as_samples(lightmap_or_samples)
+    p = rad * sa[:, None]
+    nz = np.any(p != 0, axis=1)
+    dirs, p = dirs[nz], p[nz]
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    out = np.empty((n.shape[0], 3))
+    for s in range(0, n.shape[0], chunk):
+        out[s:s + chunk] = np.maximum(n[s:s + chunk] @ dirs.T, 0.0) @ p
+    return out
+
+
+def as_rgb_pixels(radiance, m: int | None = None, name: str = "radiance") -> np.ndarray:
+    """Pixel values as (m, 3) float64: a single channel is repeated; NaN or Inf is an InputError."""
+    r = np.asarray(radiance, dtype=np.float64)
+    if r.ndim == 1:
+        r = np.repeat(r[:, None], 3, axis=1)
+    if r.ndim != 2 or r.shape[1] != 3:
+        raise ValueError(f"{name} must be (m,) or (m, 3), not {r.shape}")
+    if m is not None and r.shape[0] != m:
+        raise ValueError(f"{name} has {r.shape[0]} pixels, the geometry {m}")
+    if not np.all(np.isfinite(r)):
+        raise InputError(f"{name} holds NaN or Inf")
+    return r
+
+
+def broadcast_albedo(albedo, m: int) -> np.ndarray:
+    """Albedo as (m, 3) float64 from a scalar, (3,), (m,) or (m, 3); must be > 0 and finite."""
+    a = np.asarray(albedo, dtype=np.float64)
+    if a.ndim == 1 and a.shape[0] == m and m != 3:
+        a = a[:, None]
+    a = np.broadcast_to(a, (m, 3)).astype(np.float64)
+    if not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise InputError("albedo must be positive and finite")
+    return a
+
+
+@dataclass(frozen=True)
+class LinearSolution:
+    """A solved linear model, per channel.
+
+    Attributes
+    ----------
+    x : (n, 3) float64
+        Unknowns (without the ambient term); 0 for unobserved ones.
+    ambient : (3,) float64
+        The free constant term (0 when not fitted).
+    predicted : (m, 3) float64
+        The model's prediction of the data.
+    condition : float
+        Ratio of the largest to the smallest singular value of the (column-normalised) design
+        over the observed unknowns.
+    rank : int
+        Numerical rank of that design (singular values above ``1e-10`` x the largest).
+    observed : (n,) bool
+        Unknowns whose column is not all zero (an unknown that no pixel sees stays 0).
+    """
+
+    x: np.ndarray
+    ambient: np.ndarray
+    predicted: np.ndarray
+    condition: float
+    rank: int
+    observed: np.ndarray
+
+
+#: Relative singular value below which a design counts as rank deficient.
+RANK_TOL = 1e-10
+
+
+def neighbour_edges(directions, k: int = 6) -> np.ndarray:
+    """Edges (e, 2) int64 between each direction and its ``k`` nearest (by angle), each once."""
+    from scipy.spatial import cKDTree
+
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    kk = min(k + 1, d.shape[0])
+    if kk < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    _, idx = cKDTree(d).query(d, k=kk)
+    a = np.repeat(np.arange(d.shape[0]), kk - 1)
+    b = idx[:, 1:].ravel()
+    e = np.sort(np.stack([a, b], axis=1), axis=1)
+    return np.unique(e[e[:, 0] != e[:, 1]], axis=0)
+
+
+def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: float | None = None,
+                  what: str = "sources", smoothness: float = 0.0, edges=None,
+                  ambient_nonnegative: bool = False) -> LinearSolution:
+    """Solve ``b ~ M x + c a`` per channel, ``x >= 0`` with ``nonnegative``, ``a`` always free.
+
+    Unknowns whose column is all zero (a source that lights no pixel) are left out and set to 0.
+
+    Parameters
+    ----------
+    M : (m, n) array_like
+        Design matrix (one column per unknown).
+    b : (m, c) array_like
+        Data (``c`` channels, solved independently with the same design).
+    ambient_column : (m,) array_like, optional
+        The column ``c`` of a free term ``a`` (None: no such term).
+    nonnegative : bool
+        NNLS (``scipy.optimize.nnls``) on ``x``, the free term split as ``a = a+ - a-``.
+    rcond : float, optional
+        Unconstrained only: singular values below ``rcond x`` the largest are cut (truncated
+        SVD, the minimum-norm solution in the well-determined subspace). None: plain least
+        squares, which needs a full-rank design.
+    what : str
+        Names the unknowns in the error message.
+    smoothness : float
+        Tikhonov weight ``lambda`` of a first-difference penalty ``lambda^2 sum (x_i - x_j)^2``
+        over ``edges`` (neighbouring sources), relative to the data: the penalty rows are scaled
+        by the RMS column norm of ``M``, so ``lambda`` is unit-free. It fills the directions
+        the data cannot see (behind a probe, never shadowed) from their neighbours instead of
+        leaving them arbitrary; 0 is the papers' plain fit.
+    edges : (e, 2) array_like of int, optional
+        Pairs of neighbouring unknowns (:func:`neighbour_edges`); needed when ``smoothness > 0``.
+    ambient_nonnegative : bool
+        With ``nonnegative``: constrain the ambient term too (not split).
+
+    Returns
+    -------
+    LinearSolution
+
+    Raises
+    ------
+    InputError
+        Fewer rows than unknowns; no unknown seen by any pixel; or, for plain least squares
+        (``rcond=None``, unconstrained), a rank-deficient design (a singular system).
+    """
+    M = np.asarray(M, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if b.ndim == 1:
+        b = b[:, None]
+    m, n = M.shape
+    observed = np.any(M != 0, axis=0)
+    if not observed.any():
+        raise InputError(f"singular system: none of the {what} lights any pixel")
+    cols = [M[:, observed]] if ambient_column is None else \
+        [M[:, observed], np.asarray(ambient_column, dtype=np.float64).reshape(m, 1)]
+    D = np.concatenate(cols, axis=1)
+    k = D.shape[1]
+    if m < k:
+        raise InputError(f"singular system: {m} pixels for {k} unknowns ({what}); "
+                         f"use fewer sources or more pixels")
+    scale = np.linalg.norm(D, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    Ds = D / scale
+    s = np.linalg.svd(Ds, compute_uv=False)
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else np.inf
+    rank = int(np.count_nonzero(s > s[0] * RANK_TOL))
+    Dsolve, bsolve = Ds, b
+    if smoothness > 0:
+        if edges is None:
+            raise ValueError("smoothness needs the edges between neighbouring unknowns")
+        e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        remap = np.full(n, -1, dtype=np.int64)
+        remap[observed] = np.arange(int(observed.sum()))
+        e = remap[e]
+        e = e[(e >= 0).all(axis=1)]
+        if e.shape[0]:
+            G = np.zeros((e.shape[0], k))
+            rows = np.arange(e.shape[0])
+            ref = float(np.sqrt(np.mean(np.sum(M[:, observed] ** 2, axis=0))))
+            G[rows, e[:, 0]] = 1.0 / scale[e[:, 0]]
+            G[rows, e[:, 1]] = -1.0 / scale[e[:, 1]]
+            Dsolve = np.concatenate([Ds, float(smoothness) * ref * G], axis=0)
+            bsolve = np.concatenate([b, np.zeros((e.shape[0], b.shape[1]))], axis=0)
+    if nonnegative:
+        split = ambient_column is not None and not ambient_nonnegative
+        A = np.concatenate([Dsolve, -Dsolve[:, -1:]], axis=1) if split else Dsolve
+        sol = np.zeros((A.shape[1], b.shape[1]))
+        for c in range(b.shape[1]):
+            sol[:, c], _ = nnls(A, bsolve[:, c], maxiter=50 * A.shape[1])
+        if split:
+            sol = np.concatenate([sol[:-2], sol[-2:-1] - sol[-1:]], axis=0)
+    else:
+        if rcond is None and rank < k and not smoothness > 0:
+            raise InputError(f"singular system: the {m} pixels determine only {rank} of the {k} unknowns "
+                             f"({what}); use fewer sources, non-negativity, or a cut-off (rcond)")
+        sol, *_ = np.linalg.lstsq(Dsolve, bsolve, rcond=rcond)
+    sol = sol / scale[:, None]
+    pred = D @ sol
+    x = np.zeros((n, b.shape[1]))
+    nobs = int(observed.sum())
+    x[observed] = sol[:nobs]
+    amb = sol[nobs] if ambient_column is not None else np.zeros(b.shape[1])
+    return LinearSolution(x=x, ambient=amb, predicted=pred, condition=cond, rank=rank, observed=observed)
