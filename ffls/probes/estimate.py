@@ -425,6 +425,11 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
     kw: dict = {"case": case, "nonnegative": nonnegative, "smoothness": smoothness}
     if case == "ratio":
         kw["surface_radiance"] = surface
+        if probe.plane.albedo is not None:
+            kw["reference_albedo"] = probe.plane.albedo  # makes the surface image's scale absolute
+        else:
+            notes.append("plane.albedo not stated: the ratio case takes the surface as white (albedo 1); the map "
+                         "is scaled by the unknown albedo")
     else:
         if probe.plane.albedo is None:
             raise InputError(f"plane.albedo: missing (the {case} case needs the receiver's albedo; with a shadow-free "
