@@ -88,6 +88,7 @@ BAD = [
     ({"images": [{"file": "ball.exr"}, {"file": "ball2.exr", "exposure_s": 1}]}, "images[0].exposure_s"),
     ({"images": ["ball.exr", {"file": "ball2.exr", "exposure_s": 1}]}, "images[1]"),
     ({"images": ["../ball.exr"]}, "images[0]"),
+    ({"images": [{"file": "ball.exr", "exposure_s": 0.1}, {"file": "ball2.exr", "exposure_s": 0.1}]}, "equal"),
     ({"camera": {"K": [[1, 2], [3, 4]]}}, "camera.K"),
     ({"camera": {"model": "orthographic", "K": K}}, "camera"),
     ({"images": [{"images": ["ball.exr"], "camera": {"K": "no"}}]}, "images[0].camera.K"),

@@ -285,6 +285,9 @@ def _image_list(j: JsonReader, folder: Path, items, key: str) -> tuple:
         names = [p.path.name for p in out]
         if len(set(names)) != len(names):
             j.fail(key, "an image is listed twice in the bracket")
+        t = [p.exposure_s for p in out]
+        if max(t) - min(t) <= 1e-9 * max(t):
+            j.fail(key, f"all {len(t)} exposure times are equal ({t[0]:g} s): not a bracket")
     return tuple(out)
 
 
