@@ -127,3 +127,42 @@ def test_bad_input(diffuse_folder, shadow_folder, tmp_path):
         estimate_lightmap(tiny, "pocs", height=16)
     with pytest.raises(InputError, match="multiple of the POCS grid"):
         estimate_lightmap(diffuse_folder, "pocs", height=20, grid=16)
+
+
+def test_diffuse_object_of_known_geometry(tmp_path, truth):
+    """Hougen-Ahuja on a mesh object (an icosphere, scaled and moved by its pose) seen by a pinhole camera."""
+    import trimesh
+
+    from ffls.probes.linear import irradiance_from_map
+    from ffls.spheres.detect import sphere_normals
+    from ffls.synth.probe import look_at
+
+    T = look_at([0.0, -1.0, 0.3], target=(0.1, 0.0, 0.05))
+    K = np.array([[400.0, 0, 48], [0, 400.0, 48], [0, 0, 1]])
+    C = np.array([0.1, 0.0, 0.05])
+    Ti = np.linalg.inv(T)
+    Cc = Ti[:3, :3] @ C + Ti[:3, 3]
+    yy, xx = np.mgrid[0:96, 0:96]
+    px = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(float)
+    n = sphere_normals(px, K, None, Cc, 0.1)
+    hit = np.all(np.isfinite(n), axis=1)
+    img = np.zeros((96 * 96, 3), np.float32)
+    img[hit] = 0.7 / np.pi * irradiance_from_map(n[hit] @ T[:3, :3].T, truth)
+    write_exr(tmp_path / "obj.exr", img.reshape(96, 96, 3))
+    trimesh.creation.icosphere(subdivisions=3).export(tmp_path / "ball.ply")
+    pose = np.diag([0.1, 0.1, 0.1, 1.0])
+    pose[:3, 3] = C
+    doc = {"format": "ffls-probe", "version": 1, "images": ["obj.exr"],
+           "camera": {"K": K.tolist(), "world_from_camera": T.tolist()},
+           "object": {"mesh": "ball.ply", "world_from_object": pose.tolist(), "albedo": 0.7}}
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    mesh = estimate_lightmap(tmp_path, "diffuse", height=16, sources=9)
+    doc.pop("object")
+    doc["sphere"] = {"center": C.tolist(), "radius": 0.1, "material": "diffuse", "albedo": 0.7}
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    sphere = estimate_lightmap(tmp_path, "diffuse", height=16, sources=9)
+    from ffls.probes.evaluate import relit_error
+
+    assert any("pixels on the mesh ball.ply" in x for x in mesh.notes)
+    e_mesh, e_sphere = relit_error(mesh.lightmap, truth), relit_error(sphere.lightmap, truth)
+    assert e_mesh < e_sphere + 0.01

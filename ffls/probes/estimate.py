@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ffls.conventions import normalize
 from ffls.errors import InputError
 from ffls.lightmaps.lightmap import LightMap
 from ffls.probes.bracket import view_radiance
@@ -16,7 +17,7 @@ from ffls.probes.locate import locate_sphere
 from ffls.probes.result import LightmapEstimate
 
 __all__ = ["FILL_MODES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
-           "pocs_lightmap", "shadow_pixels", "shadow_lightmap"]
+           "pocs_lightmap", "shadow_pixels", "shadow_lightmap", "object_pixels"]
 
 #: How unseen directions are filled: from the nearest seen ones, or left black.
 FILL_MODES = ("nearest", "zero")
@@ -135,7 +136,8 @@ def diffuse_pixels(probe, method: str, rim_px: float = 1.5, max_pixels: int | No
     """The usable pixels of a diffuse sphere over every view: world normals, radiance, albedo, notes.
 
     Pixels within ``rim_px`` of the outline, invalid or clipped are left out; at most
-    ``max_pixels`` (a fixed-seed random subset) are returned.
+    ``max_pixels`` (a fixed-seed random subset) are returned. With a mesh ``object`` in
+    ``probe.json`` the pixels and normals are the object's (:func:`object_pixels`).
 
     Returns
     -------
@@ -147,9 +149,7 @@ def diffuse_pixels(probe, method: str, rim_px: float = 1.5, max_pixels: int | No
     """
     src = probe.json_path
     if probe.object is not None:
-        raise InputError(f"object: the {method} method reads its normals from a sphere; a mesh object "
-                         f"({probe.object.path.name}) needs per-pixel normals rendered from the mesh, which this "
-                         f"version does not do: photograph a diffuse sphere, or remove \"object\"", src)
+        return object_pixels(probe, max_pixels, seed)
     normals, values, notes = [], [], []
     for k, view in enumerate(probe.views):
         tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
@@ -176,6 +176,110 @@ def diffuse_pixels(probe, method: str, rim_px: float = 1.5, max_pixels: int | No
     albedo = probe.view.sphere.albedo
     if albedo is None:
         notes.append("sphere.albedo not stated: the map is scaled by the unknown albedo (taken as 1)")
+        albedo = 1.0
+    return N, V, float(albedo), notes
+
+
+def _closest_hits(origins, dirs, tri):
+    """Closest hit of rays with triangles (Moeller-Trumbore).
+
+    Returns face index (m,) int (-1 for a miss), distance (m,) and barycentric (u, v) (m, 2).
+    """
+    v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    m = len(dirs)
+    face = np.full(m, -1, dtype=np.int64)
+    best = np.full(m, np.inf)
+    bary = np.zeros((m, 2))
+    rows = max(1, 2_000_000 // max(1, len(tri)))
+    for s in range(0, m, rows):
+        o, d = origins[s:s + rows, None, :], dirs[s:s + rows, None, :]
+        h = np.cross(d, e2[None])
+        a = np.sum(e1[None] * h, axis=2)
+        ok = np.abs(a) > 1e-14
+        f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+        sv = o - v0[None]
+        u = f * np.sum(sv * h, axis=2)
+        q = np.cross(sv, e1[None])
+        v = f * np.sum(d * q, axis=2)
+        t = f * np.sum(e2[None] * q, axis=2)
+        t = np.where(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-12), t, np.inf)
+        k = np.argmin(t, axis=1)
+        tk = t[np.arange(len(k)), k]
+        hit = np.isfinite(tk)
+        face[s:s + rows] = np.where(hit, k, -1)
+        best[s:s + rows] = tk
+        r = np.arange(len(k))
+        bary[s:s + rows] = np.stack([u[r, k], v[r, k]], axis=1)
+    return face, best, bary
+
+
+def object_pixels(probe, max_pixels: int | None = 20000, seed: int = 0):
+    """The usable pixels of a diffuse mesh ``object`` (known geometry and pose) seen by a pinhole camera.
+
+    Each pixel's ray is met with the mesh (closest hit, Moeller-Trumbore on every triangle; the
+    pixels are subsampled first, to ``max_pixels`` of those inside the mesh's projected bounds);
+    the normal is interpolated from the vertex normals (area-weighted, ``trimesh``) where the
+    face is smooth (its vertex normals within 30 degrees of its face normal), else the face
+    normal (a crease), and turned toward the camera. Cast self-shadows are not modelled (a
+    convex object has none). Returns what :func:`diffuse_pixels` returns.
+    """
+    from ffls.camera.projection import pixel_rays, project_points
+
+    src = probe.json_path
+    mesh = probe.object
+    normals, values, notes = [], [], []
+    tri = mesh.vertices[mesh.faces]
+    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    import trimesh
+
+    vn = np.asarray(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).vertex_normals, dtype=np.float64)
+    fvn = vn[mesh.faces]  # (F, 3, 3)
+    smooth = np.all(np.abs(np.sum(fvn * fn[:, None, :], axis=2)) >= np.cos(np.radians(30.0)), axis=1)
+    fvn = fvn * np.sign(np.sum(fvn * fn[:, None, :], axis=2))[..., None]  # on the face normal's side
+    rng = np.random.default_rng(seed)
+    for k, view in enumerate(probe.views):
+        cam = view.camera
+        if cam.model != "pinhole" or cam.K is None:
+            raise InputError("camera: a mesh object needs a calibrated pinhole camera (camera.K and "
+                             "camera.world_from_camera) to find which pixels see which face", src)
+        vr = view_radiance(view, probe.encoding, probe.response, src)
+        H, W = vr.radiance.shape[:2]
+        T = cam.world_from_camera
+        Ti = np.linalg.inv(T)
+        vc = mesh.vertices @ Ti[:3, :3].T + Ti[:3, 3]
+        front = vc[:, 2] > 0
+        if not front.any():
+            raise InputError("object: the mesh is behind the camera (check world_from_object and the camera pose)",
+                             src)
+        uv = project_points(vc[front], cam.K, cam.dist)
+        x0, y0 = np.clip(np.floor(uv.min(axis=0)).astype(int), 0, [W - 1, H - 1])
+        x1, y1 = np.clip(np.ceil(uv.max(axis=0)).astype(int) + 1, 1, [W, H])
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        yy, xx = yy.ravel(), xx.ravel()
+        ok = vr.valid[yy, xx] & ~vr.saturated[yy, xx]
+        yy, xx = yy[ok], xx[ok]
+        cap = None if max_pixels is None else int(max_pixels) // len(probe.views)
+        if cap is not None and len(yy) > cap:
+            keep = np.sort(rng.choice(len(yy), cap, replace=False))
+            yy, xx = yy[keep], xx[keep]
+        d = pixel_rays(np.stack([xx, yy], axis=1).astype(np.float64), cam.K, cam.dist) @ T[:3, :3].T
+        face, _, bary = _closest_hits(np.broadcast_to(T[:3, 3], d.shape), d, tri)
+        hit = face >= 0
+        fh, (bu, bv) = face[hit], bary[hit].T
+        interp = normalize((1 - bu - bv)[:, None] * fvn[fh, 0] + bu[:, None] * fvn[fh, 1] + bv[:, None] * fvn[fh, 2])
+        n = np.where(smooth[fh][:, None], interp, fn[fh])
+        n = np.where((np.sum(n * d[hit], axis=1) > 0)[:, None], -n, n)
+        normals.append(n)
+        values.append(vr.radiance[yy[hit], xx[hit]].astype(np.float64))
+        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
+        notes.append(f"{tag}{vr.note}; {int(hit.sum())} pixels on the mesh {mesh.path.name} ({len(tri)} triangles)")
+    N, V = np.concatenate(normals), np.concatenate(values)
+    if len(N) == 0:
+        raise InputError("object: no pixel sees the mesh (check world_from_object and the camera pose)", src)
+    albedo = probe.object_albedo
+    if albedo is None:
+        notes.append("object.albedo not stated: the map is scaled by the unknown albedo (taken as 1)")
         albedo = 1.0
     return N, V, float(albedo), notes
 
