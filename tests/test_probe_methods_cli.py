@@ -58,7 +58,7 @@ def shadow_folder(tmp_path_factory, truth):
     return d
 
 
-@pytest.mark.parametrize("argv", [["diffuse", "--sources", "9"], ["diffuse", "--sources", "auto", "--criterion", "bic"],
+@pytest.mark.parametrize("argv", [["diffuse", "--sources", "9"], ["diffuse", "--sources", "auto", "--criterion", "bic"], ["diffuse", "--sources", "17", "--unconstrained", "--ambient", "free"],
                                   ["pocs", "--grid", "8", "--iterations", "10"]])
 def test_diffuse_methods_write_maps(diffuse_folder, tmp_path, capsys, argv):
     out = tmp_path / "m.exr"

@@ -87,8 +87,12 @@ def _add_inverse(sub, common):
                                    "free ambient term, from a diffuse sphere.")
     d.add_argument("--sources", type=_sources_arg, default="auto", metavar="N|auto",
                    help="model sources: 5, 9, 17 (rings), any other count (geodesic), or auto (default)")
-    d.add_argument("--nonnegative", action="store_true", help="non-negative source intensities (scipy nnls)")
-    d.add_argument("--no-ambient", action="store_true", help="leave out the ambient term")
+    d.add_argument("--unconstrained", action="store_true",
+                   help="plain least squares (the paper) instead of non-negative intensities (scipy nnls)")
+    d.add_argument("--ambient", choices=("nonnegative", "free", "none"), default="nonnegative",
+                   help="ambient term: non-negative (default), free (the paper's; may be negative) or none")
+    d.add_argument("--rcond", type=number(0.0, 1.0, lo_open=True), default=None,
+                   help="with --unconstrained: truncate singular values below RCOND x the largest")
     s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
                        description="Dome node intensities from the shadow of a known occluder on a plane.")
     s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto",
@@ -193,8 +197,9 @@ def method_knobs(args) -> dict:
         return {"camera_cone_deg": args.camera_cone, "rim_px": args.rim, "supersample": args.supersample,
                 "weight_power": args.weight_power, "fill": args.fill}
     if args.method == "diffuse":
-        return {"sources": args.sources, "nonnegative": args.nonnegative, "ambient": not args.no_ambient,
-                "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill}
+        ambient = {"nonnegative": "nonnegative", "free": True, "none": False}[args.ambient]
+        return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
+                "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill}
     if args.method == "shadow":
         return {"nodes": args.nodes, "case": args.case, "nonnegative": not args.unconstrained, "ks": args.ks,
                 "sigma_deg": args.sigma, "criterion": args.criterion, "smoothness": args.smoothness,

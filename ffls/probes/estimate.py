@@ -306,9 +306,9 @@ def _finish(radiance, confidence, threshold: float, method: str, probe, notes: l
                             notes, details)
 
 
-def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = False, ambient: bool = True,
-                     criterion: str = "cv", smoothness: float = 0.0, rim_px: float = 1.5,
-                     max_pixels: int | None = 20000, confidence_threshold: float = 0.2,
+def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="nonnegative",
+                     criterion: str = "cv", smoothness: float = 0.0, rcond: float | None = None, rim_px: float = 1.5,
+                     max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
                      fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
 
@@ -320,12 +320,18 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         Model sources (5, 9, 17 rings, or geodesic sets of about that size), or chosen by
         ``criterion`` among 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
     nonnegative : bool
-        Non-negative source intensities (scipy ``nnls``).
-    ambient : bool
-        Fit the unconstrained ambient term.
+        Non-negative source intensities (scipy ``nnls``; default). False is the paper's plain
+        least squares, whose negative lobes a saved map clips (counted in the notes).
+    ambient : {'nonnegative', True, False}
+        The ambient term: non-negative too (default, with ``nonnegative``), free (``True``, the
+        paper's; it may come out negative), or none. ``docs/probes.md`` measures why the default
+        is non-negative.
     criterion : {'cv', 'bic'}
     smoothness : float
         First-difference penalty between neighbouring sources (0: the paper).
+    rcond : float, optional
+        Unconstrained only: truncate singular values below ``rcond`` times the largest (large
+        source sets are rank deficient on a Lambertian sphere).
     rim_px, max_pixels
         See :func:`diffuse_pixels`.
     confidence_threshold : float
@@ -340,7 +346,7 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
 
     src = probe.json_path
     N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
-    kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness)
+    kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness, rcond=rcond)
     try:
         if sources == "auto":
             sel = select_hougen_ahuja(N, V, albedo, criterion=criterion, **kw)
