@@ -132,7 +132,7 @@ def _with_source(e: InputError, src) -> InputError:
     return InputError(e.message, src) if e.path is None else e
 
 
-def diffuse_pixels(probe, method: str, rim_px: float = 1.5, max_pixels: int | None = 20000, seed: int = 0):
+def diffuse_pixels(probe, method: str, rim_px: float = 0.5, max_pixels: int | None = 20000, seed: int = 0):
     """The usable pixels of a diffuse sphere over every view: world normals, radiance, albedo, notes.
 
     Pixels within ``rim_px`` of the outline, invalid or clipped are left out; at most
@@ -307,7 +307,7 @@ def _finish(radiance, confidence, threshold: float, method: str, probe, notes: l
 
 
 def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="nonnegative",
-                     criterion: str = "cv", smoothness: float = 0.0, rcond: float | None = None, rim_px: float = 1.5,
+                     criterion: str = "cv", smoothness: float = 0.0, rcond: float | None = None, rim_px: float = 0.5,
                      max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
                      fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
@@ -364,7 +364,7 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
 
 
 def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int = 50, upper: float | None = None,
-                  delta: float = 0.0, order: str = "random", seed: int = 0, rim_px: float = 1.5,
+                  delta: float = 0.0, order: str = "random", seed: int = 0, rim_px: float = 0.5,
                   max_pixels: int | None = 2000, confidence_threshold: float = 0.2,
                   fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere by POCS (Singh and Ahuja, :mod:`ffls.probes.singh_ahuja`).
