@@ -178,7 +178,7 @@ def main(argv=None):
            "kernel": kernel, "pocs_convergence": conv, "command": " ".join(["python", "benchmarks/probes.py", *sys.argv[1:]])}
     write_json(a.json, doc)
     plot(rows, conv, a.plot)
-    print(f"wrote {a.json} and {a.plot}")
+    print(f"wrote {a.plot}")
 
 
 def plot(rows, conv, path):
@@ -207,7 +207,8 @@ def plot(rows, conv, path):
         ax[2].semilogy(v, label=k, ls="-" if "random" in k else "--")
     ax[2].set_xlabel("POCS iteration (16 x 32 grid)")
     ax[2].set_title("relative residual |g - Hf| / |g|", fontsize=9)
-    ax[2].legend(fontsize=7)
+    if conv:
+        ax[2].legend(fontsize=7)
     ax[2].grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     with atomic_output(Path(path)) as tmp:

@@ -318,3 +318,17 @@ def test_confidence_maps(sphere, shadow):
     V = box_visibility(shadow.points, d, shadow.box_center, shadow.box_size)
     s = shadow_confidence(d, V, height=16)
     assert s[8:].max() == 0.0 and 0 < s.max() <= 1
+
+
+def test_rotated_box_visibility_matches_its_mesh():
+    from ffls.conventions import rotation_z
+
+    rng = np.random.default_rng(3)
+    pts = np.concatenate([rng.uniform(-1, 1, size=(300, 2)), np.zeros((300, 1))], axis=1)
+    R = rotation_z(30.0)
+    c, size = [0.1, -0.1, 0.3], [0.5, 0.2, 0.6]
+    d = dome_nodes(91)
+    a = box_visibility(pts, d, c, size, rotation=R)
+    b = mesh_visibility(pts, d, box_triangles(c, size, rotation=R))
+    inside = np.all(np.abs((pts - c) @ R) <= np.array(size) / 2, axis=1)
+    assert np.array_equal(a[~inside], b[~inside]) and (~a[~inside]).any()

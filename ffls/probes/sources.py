@@ -13,8 +13,8 @@ Source sets
   equal-solid-angle bands, so that every source stands for about ``2 pi / n`` sr.
 * :func:`geodesic_sources` -- the vertices of an icosahedron whose faces are cut into
   ``f x f`` triangles and pushed onto the sphere (class I geodesic), ``10 f^2 + 2`` on the
-  sphere; on a hemisphere (a dome) those with ``d . axis >= 0``. ``f = 10`` gives a 521-node
-  dome (the size Sato, Sato and Ikeuchi used). The cells' solid angles are near equal (their
+  sphere; on a hemisphere (a dome) those with ``d . axis >= 0``. ``f = 10`` gives a 526-node
+  dome (about the 521 nodes Sato, Sato and Ikeuchi used). The cells' solid angles are near equal (their
   max/min ratio is given by :func:`cell_solid_angles`, measured in ``docs/probes.md``).
 * :func:`model_sources` picks one by size.
 
