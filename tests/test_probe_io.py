@@ -91,6 +91,8 @@ BAD = [
     ({"images": [{"file": "ball.exr", "exposure_s": 0.1}, {"file": "ball2.exr", "exposure_s": 0.1}]}, "equal"),
     ({"camera": {"K": [[1, 2], [3, 4]]}}, "camera.K"),
     ({"camera": {"model": "orthographic", "K": K}}, "camera"),
+    ({"camera": {"K": K, "pixel_size": 0.01}}, "camera.pixel_size"),
+    ({"camera": {"model": "orthographic", "pixel_size": -1}}, "camera.pixel_size"),
     ({"images": [{"images": ["ball.exr"], "camera": {"K": "no"}}]}, "images[0].camera.K"),
     ({"images": [{"images": ["ball.exr"], "lens": 1}]}, "images[0]"),
     ({"encoding": "log"}, "encoding"),

@@ -88,6 +88,21 @@ def test_shadow_method(shadow_folder, tmp_path, case):
     assert not est.seen[12:].any() and est.seen[:8].any()
 
 
+def test_shadow_seen_by_an_orthographic_camera(shadow_folder, tmp_path):
+    """The same photo described as orthographic (camera.pixel_size) gives the pinhole's map."""
+    doc = json.loads((shadow_folder / "probe.json").read_text())
+    T = np.array(doc["camera"]["world_from_camera"])
+    T[:3, 3] = [0.0, 0.0, 5.0]
+    doc["camera"] = {"model": "orthographic", "pixel_size": 2.0 / 48, "world_from_camera": T.tolist()}
+    for name in ("shadow.exr", "surface.exr"):
+        (tmp_path / name).write_bytes((shadow_folder / name).read_bytes())
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    ortho = estimate_lightmap(tmp_path, "shadow", height=16, nodes=46)
+    pin = estimate_lightmap(shadow_folder, "shadow", height=16, nodes=46)
+    a, b = ortho.lightmap.data, pin.lightmap.data
+    assert np.sqrt(np.mean((a - b) ** 2)) < 0.02 * np.sqrt(np.mean(b ** 2))
+
+
 def test_bad_input(diffuse_folder, shadow_folder, tmp_path):
     doc = json.loads((shadow_folder / "probe.json").read_text())
     far = tmp_path / "far"
@@ -105,7 +120,7 @@ def test_bad_input(diffuse_folder, shadow_folder, tmp_path):
         with pytest.raises(InputError, match=key):
             estimate_lightmap(far, "shadow", height=16)
     (far / "probe.json").write_text(json.dumps(dict(doc, camera={"model": "orthographic"})))
-    with pytest.raises(InputError, match="pinhole"):
+    with pytest.raises(InputError, match="pixel_size"):
         estimate_lightmap(far, "shadow", height=16)
     # a singular system: too few pixels for the sources
     tiny = tmp_path / "tiny"

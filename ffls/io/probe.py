@@ -57,6 +57,11 @@ class ProbeCamera:
     world_from_camera : (4, 4) float64
         Rigid transform; :data:`ffls.conventions.DEFAULT_WORLD_FROM_CAMERA` when absent.
     world_from_camera_is_default : bool
+    pixel_size : float or None
+        Orthographic only (``camera.pixel_size``, a ``probe.json`` addition to the keys of
+        ``capture.json``): scene units per pixel, which puts the pixels in the world (pixel
+        ``(u, v)`` is at camera-frame ``((u - cx) s, (v - cy) s, 0)``, ``(cx, cy)`` the image
+        centre); needed to map a cast-shadow photo onto its plane.
     """
 
     model: str
@@ -64,6 +69,7 @@ class ProbeCamera:
     dist: np.ndarray
     world_from_camera: np.ndarray
     world_from_camera_is_default: bool = True
+    pixel_size: float | None = None
 
 
 @dataclass(frozen=True)
@@ -294,6 +300,13 @@ def _image_list(j: JsonReader, folder: Path, items, key: str) -> tuple:
 def _camera(j: JsonReader, value, key: str = "camera") -> ProbeCamera:
     if value is None:
         return ProbeCamera("pinhole", None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True)
+    pixel_size = None
+    if isinstance(value, dict) and "pixel_size" in value:
+        pixel_size = j.number(value["pixel_size"], key + ".pixel_size", positive=True)
+        if value.get("model") != "orthographic":
+            j.fail(key + ".pixel_size", "applies to an orthographic camera (\"model\": \"orthographic\"); a pinhole "
+                                        "camera's scale is its K")
+        value = {k: v for k, v in value.items() if k != "pixel_size"}
     if key != "camera":  # a view's camera: name the view's key in the message
         sub = JsonReader(j.path)
 
@@ -304,7 +317,7 @@ def _camera(j: JsonReader, value, key: str = "camera") -> ProbeCamera:
         K, dist, wfc, default, model = parse_camera(sub, value)
     else:
         K, dist, wfc, default, model = parse_camera(j, value)
-    return ProbeCamera(model, K, dist, wfc, default)
+    return ProbeCamera(model, K, dist, wfc, default, pixel_size)
 
 
 def _sphere(j: JsonReader, value, key: str = "sphere", base: ProbeSphere | None = None) -> ProbeSphere:

@@ -430,8 +430,9 @@ def _segments_blocked(points, ends, occ) -> np.ndarray:
 def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surface: bool = False):
     """The receiver pixels of a cast-shadow probe: world points on the plane, radiance, view directions.
 
-    Needs a pinhole camera (``K`` and ``world_from_camera``: the pixels are mapped onto the
-    plane), ``plane`` and ``occluder``. Pixels whose ray does not meet the plane in front of the
+    Needs a calibrated camera to map the pixels onto the plane: a pinhole camera (``K`` and
+    ``world_from_camera``) or an orthographic one with ``pixel_size``; and ``plane`` and
+    ``occluder``. Pixels whose ray does not meet the plane in front of the
     camera, or that see the occluder, or that are clipped or invalid, are left out.
 
     Returns
@@ -452,23 +453,33 @@ def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surf
         raise InputError("occluder: missing (the shadow method needs the occluder: a box or a mesh)", src)
     view = probe.view
     cam = view.camera
-    if cam.model != "pinhole" or cam.K is None:
-        raise InputError("camera: the shadow method maps pixels onto the plane and needs a calibrated pinhole camera "
-                         "(camera.K and camera.world_from_camera)", src)
+    if cam.model == "orthographic" and cam.pixel_size is None:
+        raise InputError("camera.pixel_size: missing (an orthographic camera needs its scale, scene units per pixel, "
+                         "to put the pixels on the plane)", src)
+    if cam.model == "pinhole" and cam.K is None:
+        raise InputError("camera.K: missing (the shadow method maps pixels onto the plane and needs a calibrated "
+                         "camera: K and world_from_camera, or an orthographic camera with pixel_size)", src)
     vr = view_radiance(view, probe.encoding, probe.response, src)
     H, W = vr.radiance.shape[:2]
     yy, xx = np.mgrid[0:H, 0:W]
     px = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
     T = cam.world_from_camera
-    o = T[:3, 3]
-    d = pixel_rays(px, cam.K, cam.dist) @ T[:3, :3].T
+    if cam.model == "orthographic":  # parallel rays through the pixels' positions
+        s_px = float(cam.pixel_size)
+        pc = np.concatenate([(px - [(W - 1) / 2.0, (H - 1) / 2.0]) * s_px, np.zeros((len(px), 1))], axis=1)
+        o = pc @ T[:3, :3].T + T[:3, 3]
+        d = np.broadcast_to(T[:3, 2], o.shape)
+    else:
+        o = T[:3, 3]
+        d = pixel_rays(px, cam.K, cam.dist) @ T[:3, :3].T
     n, p0 = probe.plane.normal, probe.plane.point
     den = d @ n
     with np.errstate(divide="ignore", invalid="ignore"):
         t = ((p0 - o) @ n) / den
     ok = np.isfinite(t) & (t > 0) & vr.valid.ravel() & ~vr.saturated.ravel()
     pts = o + t[:, None] * d
-    ok[ok] &= ~_segments_blocked(pts[ok], np.broadcast_to(o, (int(ok.sum()), 3)), probe.occluder)
+    cam_pts = np.broadcast_to(o, pts.shape)  # each pixel's ray origin (the camera, or its orthographic pixel)
+    ok[ok] &= ~_segments_blocked(pts[ok], cam_pts[ok], probe.occluder)
     idx = np.flatnonzero(ok)
     if len(idx) == 0:
         raise InputError("no pixel shows the plane (check camera.world_from_camera and plane)", src)
@@ -487,7 +498,7 @@ def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surf
         if img.shape != (H, W):
             raise InputError(f"surface_image: {img.shape[1]}x{img.shape[0]} differs from the photo's {W}x{H}", src)
         surface = decode_image(img, probe.encoding, probe.response)[0].reshape(-1, 3)[idx].astype(np.float64)
-    views = o - pts[idx]
+    views = -d[idx] if cam.model == "orthographic" else o - pts[idx]
     return pts[idx], rad, views / np.linalg.norm(views, axis=1, keepdims=True), surface, notes
 
 
