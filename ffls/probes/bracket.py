@@ -339,7 +339,7 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
         z = np.max(img.pixels, axis=-1)
         sat = (z >= SATURATION * clip) if clip is not None else np.zeros(z.shape, dtype=bool)
         alpha = img.alpha
-        depth = f"{img.bit_depth}-bit" if isinstance(img.bit_depth, int) else f"{img.bit_depth}-float"
+        depth = {"half": "half float", "float": "32-bit float"}.get(img.bit_depth, f"{img.bit_depth}-bit")
         note = f"{paths[0].name}: {depth}" + (f", {int(sat.sum())} pixels clipped" if sat.any() else "")
         what = paths[0].name
     valid = np.all(np.isfinite(rad), axis=-1)
