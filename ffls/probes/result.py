@@ -10,10 +10,7 @@ import numpy as np
 from ffls.io.images import write_exr
 from ffls.lightmaps.lightmap import LightMap
 
-__all__ = ["LightmapEstimate", "save_estimate", "MASK_SUFFIX"]
-
-#: Suffix of the sidecar mask written beside a ``.hdr`` map (an EXR map carries the mask as alpha).
-MASK_SUFFIX = ".seen.png"
+__all__ = ["LightmapEstimate", "save_estimate"]
 
 
 @dataclass
