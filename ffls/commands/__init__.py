@@ -21,7 +21,8 @@ __all__ = ["BUILTIN", "ENTRY_POINT_GROUP", "builtin_commands", "registered_comma
            "find_command"]
 
 #: The subcommand modules of this package, in the order ``ffls --help`` lists them.
-BUILTIN = ("demo", "synth", "relight", "render", "composite", "lights", "calibrate", "info", "lightmap", "ingest")
+BUILTIN = ("demo", "synth", "relight", "render", "composite", "lights", "probe", "calibrate", "info", "lightmap",
+           "ingest")
 #: Entry-point group through which other packages add subcommands (``name = "package.module"``).
 ENTRY_POINT_GROUP = "ffls.commands"
 

@@ -51,6 +51,10 @@ __all__ = [
     "apply_lights_encoding",
     "SPHERE_MATERIALS",
     "sphere_materials",
+    "JsonReader",
+    "parse_camera",
+    "parse_encoding",
+    "check_file_name",
 ]
 
 CAPTURE_FILE = "capture.json"
@@ -297,6 +301,25 @@ def _parse_gamma(j: _Json, value, key: str) -> float:
     return g
 
 
+def _parse_encoding(j: _Json, doc: dict, folder: Path) -> tuple:
+    """``doc["encoding"]``: (encoding, response table or None); ``'auto'`` when absent."""
+    encoding = doc.get("encoding", "auto")
+    response = None
+    if isinstance(encoding, dict) and set(encoding) == {"gamma"}:
+        encoding = {"gamma": _parse_gamma(j, encoding["gamma"], "encoding.gamma")}
+    elif isinstance(encoding, dict):
+        if set(encoding) != {"response"}:
+            j.fail("encoding", f"expected {_ENCODING_FORMS}")
+        rname = _check_name(j, encoding["response"], "encoding.response")
+        if not (folder / rname).is_file():
+            j.fail("encoding.response", f"response file {rname!r} not found")
+        response = load_response(folder / rname).astype(np.float64)
+        encoding = {"response": rname}
+    elif "encoding" in doc and encoding not in _ENCODINGS:
+        j.fail("encoding", f"expected {_ENCODING_FORMS}, got {_short(encoding)}")
+    return encoding, response
+
+
 def _parse_camera(j: _Json, cam) -> tuple:
     if not isinstance(cam, dict):
         j.fail("camera", f"expected an object, got {_short(cam)}")
@@ -473,21 +496,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
             j.fail("image_size", f"expected [width, height] positive integers, got {_short(s)}")
         image_size = (s[0], s[1])
 
-    encoding = doc.get("encoding", "auto")
-    response = None
-    if isinstance(encoding, dict) and set(encoding) == {"gamma"}:
-        encoding = {"gamma": _parse_gamma(j, encoding["gamma"], "encoding.gamma")}
-    elif isinstance(encoding, dict):
-        if set(encoding) != {"response"}:
-            j.fail("encoding", f"expected {_ENCODING_FORMS}")
-        rname = _check_name(j, encoding["response"], "encoding.response")
-        if not (folder / rname).is_file():
-            j.fail("encoding.response", f"response file {rname!r} not found")
-        response = load_response(folder / rname).astype(np.float64)
-        encoding = {"response": rname}
-    elif "encoding" in doc and encoding not in _ENCODINGS:
-        j.fail("encoding", f"expected {_ENCODING_FORMS}, got {_short(encoding)}")
-
+    encoding, response = _parse_encoding(j, doc, folder)
     K, dist, wfc, wfc_default, model = (None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True,
                                         "pinhole")
     if "camera" in doc:
@@ -1116,3 +1125,41 @@ def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
     from dataclasses import replace
 
     return replace(capture, encoding=encoding_from_record(lights.encoding))
+
+
+# ----------------------------------------------------------------------------- shared with other documents
+#: The validating reader of ffls' JSON documents (``JsonReader(path)``: ``load``, ``header``, ``require``,
+#: ``number``, ``array``, ``direction``, ``string``, ``fail``), shared with ``probe.json`` (:mod:`ffls.io.probe`).
+JsonReader = _Json
+
+
+def parse_camera(reader: JsonReader, cam) -> tuple:
+    """The ``camera`` object of ``capture.json`` (or of any document with the same keys).
+
+    Returns
+    -------
+    K : (3, 3) float64 or None
+    dist : (k,) float64
+    world_from_camera : (4, 4) float64
+    world_from_camera_is_default : bool
+    model : {'pinhole', 'orthographic'}
+
+    Raises
+    ------
+    InputError
+        Naming ``reader.path`` and the key (``camera.K``, ``camera.dist``, ...).
+    """
+    return _parse_camera(reader, cam)
+
+
+def parse_encoding(reader: JsonReader, doc: dict, folder) -> tuple:
+    """``doc["encoding"]`` as ``capture.json`` states it: (encoding, (256, 3) response table or None).
+
+    ``'auto'`` when the key is absent; a ``{"response": file}`` table is read from ``folder``.
+    """
+    return _parse_encoding(reader, doc, Path(folder))
+
+
+def check_file_name(reader: JsonReader, name, key: str) -> str:
+    """A file name relative to the document's folder, inside it (no absolute path, no ``..``)."""
+    return _check_name(reader, name, key)

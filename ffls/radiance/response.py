@@ -24,6 +24,7 @@ from ffls.io.response import save_response
 
 __all__ = [
     "recover_response_DebevecMalik1997",
+    "exif_exposure_time",
     "recover_response",
     "merge_hdr",
     "linearize",
@@ -169,7 +170,8 @@ def valid_pixel_mask(raw, bit_depth, low: float = 0.02, high: float = 0.98) -> n
 
 
 # ----------------------------------------------------------------------------- bracket folders
-def _exif_exposure(path: Path):
+def exif_exposure_time(path: Path):
+    """The EXIF ``ExposureTime`` (tag 33434, seconds) of an image read with Pillow, or None when absent."""
     try:
         from PIL import Image
     except ImportError:  # pragma: no cover
@@ -227,7 +229,7 @@ def read_bracket(folder: str | os.PathLike):
         paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
         times = []
         for p in paths:
-            t = _exif_exposure(p)
+            t = exif_exposure_time(p)
             if t is None or not t > 0:
                 raise InputError("no EXIF ExposureTime (add exposures.json to the folder)", p)
             times.append(t)

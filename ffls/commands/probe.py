@@ -1,0 +1,225 @@
+"""``ffls probe``: light maps from photographs of a probe (:func:`ffls.probes.estimate_lightmap`), and bracket merging."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "probe"
+HELP = "estimate a light map from photos of a probe (mirror, diffuse, shadow, pocs), or merge an exposure bracket"
+DESCRIPTION = (
+    "probe METHOD FOLDER -o MAP.exr: FOLDER holds probe.json (docs/formats.md); the map is a lat-long "
+    "EXR in the world frame whose alpha marks the directions the probe saw. "
+    "probe merge IMAGES... -o HDR.exr: merge an exposure bracket (Debevec-Malik hat weights, zero at "
+    "the clipping limits); exposure times from --exposures or the images' EXIF."
+)
+
+OUTPUT_SUFFIXES = (".exr",)
+ENCODING_FORMS = "srgb, linear, gamma=G, response=FILE.npy|.csv, or calibrate (8-bit brackets)"
+
+
+def _encoding_arg(text: str):
+    """``--encoding``: 'srgb', 'linear', 'gamma=G', 'response=FILE' or 'calibrate'."""
+    from ffls.io.capture import GAMMA_RANGE
+
+    t = str(text).strip()
+    if t in ("srgb", "linear", "calibrate"):
+        return t
+    if t.startswith("gamma="):
+        try:
+            g = float(t[6:])
+        except ValueError:
+            g = float("nan")
+        if not GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
+            raise argparse.ArgumentTypeError(f"gamma must be between {GAMMA_RANGE[0]} and {GAMMA_RANGE[1]}, "
+                                             f"not {t[6:]!r}")
+        return {"gamma": g}
+    if t.startswith("response=") and len(t) > 9:
+        return {"response": t[9:]}
+    raise argparse.ArgumentTypeError(f"expected {ENCODING_FORMS}, not {text!r}")
+
+
+def _add_mirror(sub, common):
+    from ffls.commands.common import integer, number
+
+    p = sub.add_parser("mirror", parents=[common], help="a mirror ball (Debevec 1998)",
+                       description="Unwrap one or more views of a mirror ball with exact perspective "
+                                   "(or orthographic) reflection; views are merged with a confidence per direction.")
+    p.add_argument("--camera-cone", type=number(0.0, 90.0, unit="degrees"), default=10.0, metavar="DEG",
+                   help="mask this cone around the direction toward the camera (camera and photographer); "
+                        "0 keeps it (default 10)")
+    p.add_argument("--rim", type=number(0.0, 100.0, unit="pixels"), default=1.0, metavar="PX",
+                   help="leave out this rim of the ball, pixels (default 1)")
+    p.add_argument("--supersample", type=integer(1, 16), default=None,
+                   help="directions per texel side, 1 to 16 (default: about 4 samples per pixel of the ball)")
+    p.add_argument("--weight-power", type=number(0.0, 16.0), default=2.0, metavar="P",
+                   help="views are merged with weights confidence**P (default 2)")
+    p.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
+                   help="unseen directions: from the nearest seen ones (default) or black")
+    return p
+
+
+def _sources_arg(text: str):
+    """``--sources`` / ``--nodes``: a positive integer or 'auto'."""
+    t = str(text).strip().lower()
+    if t == "auto":
+        return t
+    try:
+        n = int(t)
+    except ValueError:
+        n = 0
+    if not 1 <= n <= 100000:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', not {text!r}")
+    return n
+
+
+def _add_inverse(sub, common):
+    from ffls.commands.common import integer, number
+
+    shared = argparse.ArgumentParser(add_help=False)
+    shared.add_argument("--criterion", choices=("cv", "bic"), default="cv",
+                        help="how the model size is chosen when 'auto': cross-validation (default) or BIC")
+    shared.add_argument("--smoothness", type=number(0.0, 1e6), default=0.0,
+                        help="first-difference penalty between neighbouring sources (default 0: the paper's fit)")
+    shared.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
+                        help="directions not seen: the method's own values (default) or black")
+    d = sub.add_parser("diffuse", parents=[common, shared], help="a diffuse sphere (Hougen-Ahuja 1993)",
+                       description="Least squares over model sources (5, 9, 17 rings or geodesic sets) with a "
+                                   "free ambient term, from a diffuse sphere.")
+    d.add_argument("--sources", type=_sources_arg, default="auto", metavar="N|auto",
+                   help="model sources: 5, 9, 17 (rings), any other count (geodesic), or auto (default)")
+    d.add_argument("--unconstrained", action="store_true",
+                   help="plain least squares (the paper) instead of non-negative intensities (scipy nnls)")
+    d.add_argument("--ambient", choices=("nonnegative", "free", "none"), default="nonnegative",
+                   help="ambient term: non-negative (default), free (the paper's; may be negative) or none")
+    d.add_argument("--rcond", type=number(0.0, 1.0, lo_open=True), default=None,
+                   help="with --unconstrained: truncate singular values below RCOND x the largest")
+    s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
+                       description="Dome node intensities from the shadow of a known occluder on a plane.")
+    s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto",
+                   help="dome nodes (e.g. 521), or auto (default)")
+    s.add_argument("--case", choices=("lambertian", "torrance_sparrow", "ratio"), default="lambertian",
+                   help="receiver model: Lambertian with known albedo (default), simplified Torrance-Sparrow, or "
+                        "the ratio to surface_image (unknown albedo)")
+    s.add_argument("--ks", type=number(0.0, 1e6), default=None, help="torrance_sparrow: specular coefficient K_s")
+    s.add_argument("--sigma", type=number(0.0, 90.0, lo_open=True, unit="degrees"), default=None,
+                   help="torrance_sparrow: lobe width, degrees")
+    s.add_argument("--unconstrained", action="store_true", help="plain least squares instead of NNLS")
+    q = sub.add_parser("pocs", parents=[common], help="a diffuse sphere by POCS (Singh-Ahuja)",
+                       description="Projections onto convex sets (amplitude and residual projections in random "
+                                   "order) from a diffuse sphere; the residual per iteration is reported.")
+    q.add_argument("--grid", type=integer(2, 256), default=16, help="height of the grid of unknowns (default 16)")
+    q.add_argument("--iterations", type=integer(1, 100000), default=50, help="sweeps (default 50)")
+    q.add_argument("--upper", type=number(0.0, None, lo_open=True), default=None,
+                   help="upper amplitude bound on the radiance (default none)")
+    q.add_argument("--order", choices=("random", "sequential"), default="random", help="projection order")
+    q.add_argument("--seed", type=integer(0, 2**32 - 1), default=0, help="seed of the random order")
+    q.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
+                   help="directions not seen: the method's own values (default) or black")
+
+
+def add_arguments(p):
+    from ffls.commands.common import MAP_HEIGHT, float_list, output_path
+
+    sub = p.add_subparsers(dest="method", metavar="METHOD", required=True)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("folder", metavar="FOLDER", help="probe folder (probe.json)")
+    common.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES),
+                        help="output lat-long map, .exr (alpha: the directions seen)")
+    common.add_argument("--size", type=MAP_HEIGHT, default=128, metavar="H",
+                        help="map height, 4 to 16384 (width twice it; default 128)")
+    common.add_argument("--half", action="store_true", help="write half floats")
+    _add_mirror(sub, common)
+    _add_inverse(sub, common)
+    m = sub.add_parser("merge", help="merge an exposure bracket into one HDR image",
+                       description="Merge bracketed exposures (8-, 16-bit or float) with hat weights that fall to "
+                                   "zero at the clipping limits; pixels clipped in every exposure get alpha 0.")
+    m.add_argument("images", nargs="+", metavar="IMAGE", help="the bracketed images (two or more, one size)")
+    m.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output .exr")
+    m.add_argument("--exposures", type=float_list(0.0, None, min_len=2), default=None, metavar="T1,T2,...",
+                   help="exposure times in seconds, one per image (default: each image's EXIF ExposureTime)")
+    m.add_argument("--encoding", type=_encoding_arg, default="auto", metavar="ENC",
+                   help=f"how the stored values encode light: {ENCODING_FORMS}; required for 8/16-bit images "
+                        "(ffls does not guess), float images are linear")
+    m.add_argument("--half", action="store_true", help="write half floats")
+
+
+def _merge(args) -> int:
+    import numpy as np
+
+    from ffls.commands.common import print_notes
+    from ffls.errors import InputError
+    from ffls.io.images import read_image, write_exr
+    from ffls.io.response import load_response
+    from ffls.probes.bracket import exposure_from_exif, merge_bracket_files
+
+    paths = [Path(p) for p in args.images]
+    if len(paths) < 2:
+        raise InputError("a bracket needs at least two images", paths[0])
+    if args.exposures is not None:
+        if len(args.exposures) != len(paths):
+            raise InputError(f"--exposures: {len(args.exposures)} times for {len(paths)} images")
+        if min(args.exposures) <= 0:
+            raise InputError("--exposures: exposure times must be positive")
+        times = [float(t) for t in args.exposures]
+        how = "from --exposures"
+    else:
+        times = [exposure_from_exif(p) for p in paths]
+        how = "from EXIF"
+    enc, response = args.encoding, None
+    if isinstance(enc, dict) and "response" in enc:
+        response = load_response(enc["response"]).astype(np.float64)
+    elif enc == "calibrate":
+        from ffls.radiance.response import recover_response_DebevecMalik1997
+
+        imgs = [read_image(p) for p in paths]
+        bad = [im for im in imgs if im.bit_depth != 8]
+        if bad:
+            raise InputError("--encoding calibrate recovers the response of 8-bit images; this one is "
+                             f"{bad[0].bit_depth}", bad[0].path)
+        if np.ptp(times) <= 1e-9 * max(times):
+            raise InputError(f"all {len(times)} exposure times are equal ({times[0]:.6g} s): not a bracket", paths[0])
+        codes = [np.rint(im.pixels * 255).astype(np.uint8) for im in imgs]
+        response = recover_response_DebevecMalik1997(codes, np.asarray(times, dtype=np.float32)).astype(np.float64)
+        enc = {"response": "calibrated"}
+        print_notes(NAME, "camera response recovered from the bracket (Debevec-Malik 1997)")
+    m = merge_bracket_files(paths, times, enc, response, source=paths[0], key="--encoding")
+    alpha = (~m.saturated).astype(np.float32)
+    write_exr(args.out, m.radiance, half=args.half, alpha=alpha)
+    print_notes(NAME, f"exposure times {how}; " + m.describe())
+    print(f"wrote {args.out} ({m.radiance.shape[1]}x{m.radiance.shape[0]}, alpha 0 where saturated in every "
+          f"exposure)")
+    return 0
+
+
+def method_knobs(args) -> dict:
+    """The ``estimate_lightmap`` keyword arguments of the parsed method flags."""
+    if args.method == "mirror":
+        return {"camera_cone_deg": args.camera_cone, "rim_px": args.rim, "supersample": args.supersample,
+                "weight_power": args.weight_power, "fill": args.fill}
+    if args.method == "diffuse":
+        ambient = {"nonnegative": "nonnegative", "free": True, "none": False}[args.ambient]
+        return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
+                "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill}
+    if args.method == "shadow":
+        return {"nodes": args.nodes, "case": args.case, "nonnegative": not args.unconstrained, "ks": args.ks,
+                "sigma_deg": args.sigma, "criterion": args.criterion, "smoothness": args.smoothness,
+                "fill": args.fill}
+    if args.method == "pocs":
+        return {"grid": args.grid, "iterations": args.iterations, "upper": args.upper, "order": args.order,
+                "seed": args.seed, "fill": args.fill}
+    return {}
+
+
+def run(args) -> int:
+    from ffls.commands.common import print_notes
+    from ffls.probes import estimate_lightmap, save_estimate
+
+    if args.method == "merge":
+        return _merge(args)
+    est = estimate_lightmap(args.folder, method=args.method, height=args.size, **method_knobs(args))
+    save_estimate(est, args.out, half=args.half)
+    print_notes(NAME, *est.notes)
+    h = est.lightmap.data.shape[0]
+    print(f"wrote {args.out} ({2 * h}x{h} lat-long, {args.method}; alpha: the "
+          f"{100 * est.details.get('seen_fraction', float(est.seen.mean())):.1f}% of directions seen)")
+    return 0

@@ -1,0 +1,580 @@
+"""Light maps from a probe folder: the pipelines behind :func:`ffls.probes.estimate_lightmap`.
+
+Each pipeline reads a :class:`ffls.io.probe.Probe` (images, camera, sphere, geometry), runs one
+paper's method on arrays and returns a :class:`ffls.probes.result.LightmapEstimate`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ffls.conventions import normalize
+from ffls.errors import InputError
+from ffls.lightmaps.lightmap import LightMap
+from ffls.probes.bracket import view_radiance
+from ffls.probes.debevec import (CAMERA_CONE_DEG, RIM_PX, blind_spot, fill_unseen, latlong_solid_angles,
+                                 merge_mirror_views, unwrap_mirror_ball_Debevec1998)
+from ffls.probes.locate import locate_sphere
+from ffls.probes.result import LightmapEstimate
+
+__all__ = ["FILL_MODES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
+           "pocs_lightmap", "shadow_pixels", "shadow_lightmap", "object_pixels"]
+
+#: How unseen directions are filled: from the nearest seen ones, or left black.
+FILL_MODES = ("nearest", "zero")
+
+
+def _integer_images(view) -> bool:
+    return any(im.path.suffix.lower() not in (".exr", ".hdr", ".pic") for im in view.images)
+
+
+#: Default radius (scene units, metres) of what stands at the camera: the photographer and the tripod.
+CAMERA_SIZE = 0.5
+
+
+def camera_cone(geo, camera_size: float = CAMERA_SIZE, fallback_deg: float = CAMERA_CONE_DEG) -> tuple[float, str]:
+    """The half-angle (degrees) of the cone the camera and photographer fill, seen from the ball, and how it was set.
+
+    ``atan(camera_size / D)`` with ``D`` the camera's distance from the ball, when the ball is
+    located in scene units (a pinhole camera and a stated radius); otherwise ``fallback_deg``.
+    """
+    if geo.camera_model == "pinhole" and geo.radius_known:
+        D = float(np.linalg.norm(geo.center_cam))
+        return float(np.degrees(np.arctan(camera_size / D))), f"{camera_size:g} at {D:.3g} from the ball"
+    return float(fallback_deg), "camera distance unknown: default"
+
+
+def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = None, rim_px: float = RIM_PX,
+                    supersample: int | None = None, weight_power: float = 2.0, fill: str = "nearest",
+                    camera_size: float = CAMERA_SIZE) -> LightmapEstimate:
+    """A light map from one or more photographs (or brackets) of a mirror ball (Debevec 1998).
+
+    Parameters
+    ----------
+    probe : ffls.io.probe.Probe
+    height : int
+        Map height (width ``2 height``).
+    camera_cone_deg : float or None
+        Half-angle of the masked cone around the direction toward the camera (the camera and
+        photographer); 0 keeps it. None (default): ``atan(camera_size / D)`` for a ball at a known
+        distance ``D`` (:func:`camera_cone`), else 10 degrees.
+    rim_px : float
+        Width of the rim left out, pixels.
+    supersample : int or None
+        Directions per texel side; None: about 4 samples per pixel of the ball
+        (:func:`ffls.probes.debevec.auto_supersample`).
+    weight_power : float
+        Views are merged with weights ``confidence ** weight_power``.
+    fill : {'nearest', 'zero'}
+        Unseen directions: from the nearest seen ones (default), or black.
+    camera_size : float
+        Radius (scene units) of the camera and photographer, for the default cone.
+
+    Returns
+    -------
+    LightmapEstimate
+        ``details``: ``views`` (per view: sphere, seen fraction), ``seen_fraction``,
+        ``blind_spot_sr``, ``blind_spot_fraction``, ``camera_cone_sr``, ``clipped_fraction``.
+
+    Raises
+    ------
+    InputError
+        A view whose sphere is not a mirror, no sphere found, an unreadable or unusable image,
+        a view that shows no usable direction.
+    """
+    if fill not in FILL_MODES:
+        raise ValueError(f"fill must be one of {FILL_MODES}, not {fill!r}")
+    src = probe.json_path
+    views, notes, per_view = [], [], []
+    sa = latlong_solid_angles(int(height))
+    for k, view in enumerate(probe.views):
+        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
+        if view.sphere.material != "mirror":
+            key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
+            raise InputError(f"{key}: the mirror method needs a mirror ball, this one is {view.sphere.material!r} "
+                             f"(use 'ffls probe diffuse')", src)
+        vr = view_radiance(view, probe.encoding, probe.response, src)
+        geo = locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
+        cone, why = (float(camera_cone_deg), "given") if camera_cone_deg is not None else camera_cone(geo, camera_size)
+        mv = unwrap_mirror_ball_Debevec1998(
+            vr.radiance, geo.camera_model, geo.K, geo.dist, geo.world_from_camera, geo.center_cam, geo.radius,
+            geo.center_px, geo.radius_px, height=height, valid=vr.valid, saturated=vr.saturated,
+            camera_cone_deg=cone, rim_px=rim_px, supersample=supersample,
+            reflectance=view.sphere.reflectance)
+        frac = float(sa[mv.confidence > 0].sum() / (4 * np.pi))
+        if frac == 0:
+            raise InputError(f"{tag}the ball shows no usable direction (all its pixels invalid or masked)",
+                             view.images[0].path)
+        notes.append(f"{tag}{vr.note}; {geo.describe()}; saw {100 * frac:.1f}% of the sphere; camera cone "
+                     + (f"{cone:.1f} deg masked ({why})" if cone > 0 else "kept"))
+        per_view.append({"sphere_source": geo.source, "center_px": geo.center_px.tolist(),
+                         "radius_px": geo.radius_px, "seen_fraction": frac, "camera_cone_deg": cone})
+        views.append(mv)
+    merged = merge_mirror_views(views, power=weight_power)
+    seen = merged.confidence > 0
+    data = fill_unseen(merged.radiance, seen) if fill == "nearest" else merged.radiance
+    bs = blind_spot(seen)
+    cone_sr = float(sa[merged.camera_cone].sum())
+    clipped = float(sa[merged.clipped].sum() / (4 * np.pi))
+    notes.append(bs.describe() + (f" (the camera cone's {cone_sr:.3f} sr included)" if cone_sr > 0 else "") +
+                 ("; filled from the nearest seen directions" if fill == "nearest" and bs.solid_angle > 0 else ""))
+    if clipped > 0:
+        notes.append(f"{100 * clipped:.2f}% of the sphere seen only through clipped pixels (lower bounds): "
+                     f"use a bracket")
+    lm = LightMap(data, "latlong", str(probe.folder))
+    details = {"views": per_view, "seen_fraction": float(1 - bs.fraction), "blind_spot_sr": bs.solid_angle,
+               "blind_spot_fraction": bs.fraction, "camera_cone_sr": cone_sr, "clipped_fraction": clipped}
+    return LightmapEstimate(lm, seen, merged.confidence, "mirror", notes, details)
+
+
+# ----------------------------------------------------------------------------- diffuse objects (Hougen-Ahuja, POCS)
+def _with_source(e: InputError, src) -> InputError:
+    """An InputError of an array function (no path) re-raised naming ``probe.json``."""
+    return InputError(e.message, src) if e.path is None else e
+
+
+def diffuse_pixels(probe, method: str, rim_px: float = 0.5, max_pixels: int | None = 20000, seed: int = 0):
+    """The usable pixels of a diffuse sphere over every view: world normals, radiance, albedo, notes.
+
+    Pixels within ``rim_px`` of the outline, invalid or clipped are left out; at most
+    ``max_pixels`` (a fixed-seed random subset) are returned. With a mesh ``object`` in
+    ``probe.json`` the pixels and normals are the object's (:func:`object_pixels`).
+
+    Returns
+    -------
+    normals : (m, 3) float64
+    radiance : (m, 3) float64
+    albedo : float
+        ``sphere.albedo``, or 1 when not stated (then the map carries the unknown albedo as a scale).
+    notes : list of str
+    """
+    src = probe.json_path
+    if probe.object is not None:
+        return object_pixels(probe, max_pixels, seed)
+    normals, values, notes = [], [], []
+    for k, view in enumerate(probe.views):
+        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
+        if view.sphere.material != "diffuse":
+            key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
+            raise InputError(f"{key}: the {method} method needs a diffuse sphere (\"material\": \"diffuse\"), this "
+                             f"one is {view.sphere.material!r} (use 'ffls probe mirror')", src)
+        vr = view_radiance(view, probe.encoding, probe.response, src)
+        geo = locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
+        mask = geo.mask(vr.radiance.shape, margin_px=rim_px) & vr.valid & ~vr.saturated
+        yy, xx = np.nonzero(mask)
+        n = geo.normals_world(np.stack([xx, yy], axis=1).astype(np.float64)) if len(yy) else np.zeros((0, 3))
+        ok = np.all(np.isfinite(n), axis=1)
+        normals.append(n[ok])
+        values.append(vr.radiance[yy[ok], xx[ok]].astype(np.float64))
+        notes.append(f"{tag}{vr.note}; {geo.describe()}; {int(ok.sum())} usable pixels")
+    N, V = np.concatenate(normals), np.concatenate(values)
+    if len(N) == 0:
+        raise InputError("the sphere shows no usable pixel (all clipped, invalid or at the rim)", src)
+    if max_pixels is not None and len(N) > max_pixels:
+        keep = np.sort(np.random.default_rng(seed).choice(len(N), int(max_pixels), replace=False))
+        N, V = N[keep], V[keep]
+        notes.append(f"used {max_pixels} of the pixels (a fixed-seed random subset)")
+    albedo = probe.view.sphere.albedo
+    if albedo is None:
+        notes.append("sphere.albedo not stated: the map is scaled by the unknown albedo (taken as 1)")
+        albedo = 1.0
+    return N, V, float(albedo), notes
+
+
+def _closest_hits(origins, dirs, tri):
+    """Closest hit of rays with triangles (Moeller-Trumbore).
+
+    Returns face index (m,) int (-1 for a miss), distance (m,) and barycentric (u, v) (m, 2).
+    """
+    v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    m = len(dirs)
+    face = np.full(m, -1, dtype=np.int64)
+    best = np.full(m, np.inf)
+    bary = np.zeros((m, 2))
+    rows = max(1, 2_000_000 // max(1, len(tri)))
+    for s in range(0, m, rows):
+        o, d = origins[s:s + rows, None, :], dirs[s:s + rows, None, :]
+        h = np.cross(d, e2[None])
+        a = np.sum(e1[None] * h, axis=2)
+        ok = np.abs(a) > 1e-14
+        f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+        sv = o - v0[None]
+        u = f * np.sum(sv * h, axis=2)
+        q = np.cross(sv, e1[None])
+        v = f * np.sum(d * q, axis=2)
+        t = f * np.sum(e2[None] * q, axis=2)
+        t = np.where(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-12), t, np.inf)
+        k = np.argmin(t, axis=1)
+        tk = t[np.arange(len(k)), k]
+        hit = np.isfinite(tk)
+        face[s:s + rows] = np.where(hit, k, -1)
+        best[s:s + rows] = tk
+        r = np.arange(len(k))
+        bary[s:s + rows] = np.stack([u[r, k], v[r, k]], axis=1)
+    return face, best, bary
+
+
+def object_pixels(probe, max_pixels: int | None = 20000, seed: int = 0):
+    """The usable pixels of a diffuse mesh ``object`` (known geometry and pose) seen by a pinhole camera.
+
+    Each pixel's ray is met with the mesh (closest hit, Moeller-Trumbore on every triangle; the
+    pixels are subsampled first, to ``max_pixels`` of those inside the mesh's projected bounds);
+    the normal is interpolated from the vertex normals (area-weighted, ``trimesh``) where the
+    face is smooth (its vertex normals within 30 degrees of its face normal), else the face
+    normal (a crease), and turned toward the camera. Cast self-shadows are not modelled (a
+    convex object has none). Returns what :func:`diffuse_pixels` returns.
+    """
+    from ffls.camera.projection import pixel_rays, project_points
+
+    src = probe.json_path
+    mesh = probe.object
+    normals, values, notes = [], [], []
+    tri = mesh.vertices[mesh.faces]
+    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    import trimesh
+
+    vn = np.asarray(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).vertex_normals, dtype=np.float64)
+    fvn = vn[mesh.faces]  # (F, 3, 3)
+    smooth = np.all(np.abs(np.sum(fvn * fn[:, None, :], axis=2)) >= np.cos(np.radians(30.0)), axis=1)
+    fvn = fvn * np.sign(np.sum(fvn * fn[:, None, :], axis=2))[..., None]  # on the face normal's side
+    rng = np.random.default_rng(seed)
+    for k, view in enumerate(probe.views):
+        cam = view.camera
+        if cam.model != "pinhole" or cam.K is None:
+            raise InputError("camera: a mesh object needs a calibrated pinhole camera (camera.K and "
+                             "camera.world_from_camera) to find which pixels see which face", src)
+        vr = view_radiance(view, probe.encoding, probe.response, src)
+        H, W = vr.radiance.shape[:2]
+        T = cam.world_from_camera
+        Ti = np.linalg.inv(T)
+        vc = mesh.vertices @ Ti[:3, :3].T + Ti[:3, 3]
+        front = vc[:, 2] > 0
+        if not front.any():
+            raise InputError("object: the mesh is behind the camera (check world_from_object and the camera pose)",
+                             src)
+        uv = project_points(vc[front], cam.K, cam.dist)
+        x0, y0 = np.clip(np.floor(uv.min(axis=0)).astype(int), 0, [W - 1, H - 1])
+        x1, y1 = np.clip(np.ceil(uv.max(axis=0)).astype(int) + 1, 1, [W, H])
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        yy, xx = yy.ravel(), xx.ravel()
+        ok = vr.valid[yy, xx] & ~vr.saturated[yy, xx]
+        yy, xx = yy[ok], xx[ok]
+        cap = None if max_pixels is None else int(max_pixels) // len(probe.views)
+        if cap is not None and len(yy) > cap:
+            keep = np.sort(rng.choice(len(yy), cap, replace=False))
+            yy, xx = yy[keep], xx[keep]
+        d = pixel_rays(np.stack([xx, yy], axis=1).astype(np.float64), cam.K, cam.dist) @ T[:3, :3].T
+        face, _, bary = _closest_hits(np.broadcast_to(T[:3, 3], d.shape), d, tri)
+        hit = face >= 0
+        fh, (bu, bv) = face[hit], bary[hit].T
+        interp = normalize((1 - bu - bv)[:, None] * fvn[fh, 0] + bu[:, None] * fvn[fh, 1] + bv[:, None] * fvn[fh, 2])
+        n = np.where(smooth[fh][:, None], interp, fn[fh])
+        n = np.where((np.sum(n * d[hit], axis=1) > 0)[:, None], -n, n)
+        normals.append(n)
+        values.append(vr.radiance[yy[hit], xx[hit]].astype(np.float64))
+        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
+        notes.append(f"{tag}{vr.note}; {int(hit.sum())} pixels on the mesh {mesh.path.name} ({len(tri)} triangles)")
+    N, V = np.concatenate(normals), np.concatenate(values)
+    if len(N) == 0:
+        raise InputError("object: no pixel sees the mesh (check world_from_object and the camera pose)", src)
+    albedo = probe.object_albedo
+    if albedo is None:
+        notes.append("object.albedo not stated: the map is scaled by the unknown albedo (taken as 1)")
+        albedo = 1.0
+    return N, V, float(albedo), notes
+
+
+def _finish(radiance, confidence, threshold: float, method: str, probe, notes: list, details: dict, fill: str
+            ) -> LightmapEstimate:
+    """Clip negatives (counted), mask, fill and wrap a recovered lat-long map."""
+    from ffls.probes.sources import to_lightmap
+
+    conf = np.clip(np.asarray(confidence, dtype=np.float64), 0.0, 1.0)
+    seen = conf > threshold
+    lm, clipped = to_lightmap(np.asarray(radiance, dtype=np.float64), str(probe.folder))
+    data = lm.data
+    if fill == "zero":
+        data = np.where(seen[..., None], data, 0.0).astype(np.float32)
+    if clipped:
+        notes.append(f"{clipped} texels with negative radiance (unconstrained least squares) set to 0")
+    bs = blind_spot(seen)
+    notes.append(bs.describe().replace("blind spot", "poorly seen") + f" (confidence <= {threshold:g}; the map "
+                 "there is the method's extrapolation)")
+    details.update(seen_fraction=float(1 - bs.fraction), blind_spot_sr=bs.solid_angle,
+                   blind_spot_fraction=bs.fraction, negative_texels=int(clipped))
+    return LightmapEstimate(LightMap(data, "latlong", str(probe.folder)), seen, conf.astype(np.float32), method,
+                            notes, details)
+
+
+def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="nonnegative",
+                     criterion: str = "cv", smoothness: float = 0.0, rcond: float | None = None, rim_px: float = 0.5,
+                     max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
+                     fill: str = "nearest") -> LightmapEstimate:
+    """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
+
+    Parameters
+    ----------
+    probe : ffls.io.probe.Probe
+    height : int
+    sources : int or 'auto'
+        Model sources (5, 9, 17 rings, or geodesic sets of about that size), or chosen by
+        ``criterion`` among 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
+    nonnegative : bool
+        Non-negative source intensities (scipy ``nnls``; default). False is the paper's plain
+        least squares, whose negative lobes a saved map clips (counted in the notes).
+    ambient : {'nonnegative', True, False}
+        The ambient term: non-negative too (default, with ``nonnegative``), free (``True``, the
+        paper's; it may come out negative), or none. ``docs/probes.md`` measures why the default
+        is non-negative.
+    criterion : {'cv', 'bic'}
+    smoothness : float
+        First-difference penalty between neighbouring sources (0: the paper).
+    rcond : float, optional
+        Unconstrained only: truncate singular values below ``rcond`` times the largest (large
+        source sets are rank deficient on a Lambertian sphere).
+    rim_px, max_pixels
+        See :func:`diffuse_pixels`.
+    confidence_threshold : float
+        Directions with :func:`ffls.probes.hougen_ahuja.normal_confidence` at or below it are
+        reported as not seen (alpha 0).
+    fill : {'nearest', 'zero'}
+        ``'nearest'`` keeps the method's own values everywhere (the sources extend over the
+        whole domain); ``'zero'`` blacks out the directions not seen.
+    """
+    from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
+    from ffls.probes.selection import select_hougen_ahuja
+
+    src = probe.json_path
+    N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
+    kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness, rcond=rcond)
+    try:
+        if sources == "auto":
+            sel = select_hougen_ahuja(N, V, albedo, criterion=criterion, **kw)
+            fit, chosen = sel.fit, sel.chosen
+            notes.append(sel.note)
+        else:
+            fit, chosen = hougen_ahuja(N, V, albedo, sources=int(sources), **kw), int(sources)
+    except InputError as e:
+        raise _with_source(e, src) from None
+    notes.append(f"Hougen-Ahuja: {chosen} sources{' (non-negative)' if nonnegative else ''}, re-rendered "
+                 f"relative RMS {100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
+    details = {"sources": chosen, "relative_rms": float(fit.relative_rms), "condition": float(fit.condition)}
+    return _finish(fit.latlong(height), normal_confidence(N, height), confidence_threshold, "diffuse", probe, notes,
+                   details, fill)
+
+
+def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int = 50, upper: float | None = None,
+                  delta: float = 0.0, order: str = "random", seed: int = 0, rim_px: float = 0.5,
+                  max_pixels: int | None = 2000, confidence_threshold: float = 0.2,
+                  fill: str = "nearest") -> LightmapEstimate:
+    """A light map from a diffuse sphere by POCS (Singh and Ahuja, :mod:`ffls.probes.singh_ahuja`).
+
+    ``grid`` is the height of the lat-long grid of unknowns; ``height`` must be a multiple of it
+    (texels are repeated, the energy kept). The other knobs are :func:`ffls.probes.singh_ahuja.singh_ahuja`'s.
+    """
+    from ffls.probes.hougen_ahuja import normal_confidence
+    from ffls.probes.singh_ahuja import singh_ahuja
+
+    src = probe.json_path
+    if int(height) % int(grid):
+        raise InputError(f"--size {height} must be a multiple of the POCS grid height --grid {grid}")
+    N, V, albedo, notes = diffuse_pixels(probe, "pocs", rim_px, None)
+    try:
+        res = singh_ahuja(N, V, albedo, height=grid, iterations=iterations, upper=upper, delta=delta, order=order,
+                          seed=seed, max_pixels=max_pixels)
+    except InputError as e:
+        raise _with_source(e, src) from None
+    r = res.residuals
+    notes.append(f"POCS (Singh-Ahuja): {grid}x{2 * grid} grid, {res.iterations} iterations in {order} order over "
+                 f"{res.pixels_used} pixels; residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% (relative), "
+                 f"re-rendered relative RMS {100 * res.relative_rms:.2f}%")
+    details = {"grid": int(grid), "iterations": int(res.iterations), "residuals": [float(x) for x in r],
+               "relative_rms": float(res.relative_rms)}
+    return _finish(res.latlong(height), normal_confidence(N, height), confidence_threshold, "pocs", probe, notes,
+                   details, fill)
+
+
+# ----------------------------------------------------------------------------- cast shadows (Sato, Sato and Ikeuchi)
+def _segments_blocked(points, ends, occ) -> np.ndarray:
+    """(m,) bool: the segment from each point to its end (the camera) meets the occluder (box or mesh)."""
+    p = np.asarray(points, dtype=np.float64)
+    d = np.asarray(ends, dtype=np.float64) - p
+    if occ.kind == "box":
+        lo, hi = occ.center - occ.size / 2, occ.center + occ.size / 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d
+            t0, t1 = (lo - p) * inv, (hi - p) * inv
+        tmin = np.nanmax(np.minimum(t0, t1), axis=1)
+        tmax = np.nanmin(np.maximum(t0, t1), axis=1)
+        return (tmax >= np.maximum(tmin, 1e-9)) & (tmin <= 1.0)
+    tri = occ.mesh.vertices[occ.mesh.faces]
+    v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    out = np.zeros(len(p), dtype=bool)
+    rows = max(1, 2_000_000 // max(1, len(tri)))
+    for s in range(0, len(p), rows):  # Moeller-Trumbore, every segment against every triangle
+        ps, ds = p[s:s + rows, None, :], d[s:s + rows, None, :]
+        h = np.cross(ds, e2[None])
+        a = np.sum(e1[None] * h, axis=2)
+        ok = np.abs(a) > 1e-12
+        f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+        sv = ps - v0[None]
+        u = f * np.sum(sv * h, axis=2)
+        q = np.cross(sv, e1[None])
+        v = f * np.sum(ds * q, axis=2)
+        t = f * np.sum(e2[None] * q, axis=2)
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9) & (t < 1.0)
+        out[s:s + rows] = hit.any(axis=1)
+    return out
+
+
+def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surface: bool = False):
+    """The receiver pixels of a cast-shadow probe: world points on the plane, radiance, view directions.
+
+    Needs a calibrated camera to map the pixels onto the plane: a pinhole camera (``K`` and
+    ``world_from_camera``) or an orthographic one with ``pixel_size``; and ``plane`` and
+    ``occluder``. Pixels whose ray does not meet the plane in front of the
+    camera, or that see the occluder, or that are clipped or invalid, are left out.
+
+    Returns
+    -------
+    points, radiance, view_dirs : (m, 3) float64
+    surface : (m, 3) float64 or None
+        The same pixels of ``surface_image`` (when ``need_surface``).
+    notes : list of str
+    """
+    from ffls.camera.projection import pixel_rays
+    from ffls.io.images import read_image
+    from ffls.probes.bracket import check_encoding, decode_image
+
+    src = probe.json_path
+    if probe.plane is None:
+        raise InputError("plane: missing (the shadow method needs the receiving plane: point, normal, albedo)", src)
+    if probe.occluder is None:
+        raise InputError("occluder: missing (the shadow method needs the occluder: a box or a mesh)", src)
+    view = probe.view
+    cam = view.camera
+    if cam.model == "orthographic" and cam.pixel_size is None:
+        raise InputError("camera.pixel_size: missing (an orthographic camera needs its scale, scene units per pixel, "
+                         "to put the pixels on the plane)", src)
+    if cam.model == "pinhole" and cam.K is None:
+        raise InputError("camera.K: missing (the shadow method maps pixels onto the plane and needs a calibrated "
+                         "camera: K and world_from_camera, or an orthographic camera with pixel_size)", src)
+    vr = view_radiance(view, probe.encoding, probe.response, src)
+    H, W = vr.radiance.shape[:2]
+    yy, xx = np.mgrid[0:H, 0:W]
+    px = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
+    T = cam.world_from_camera
+    if cam.model == "orthographic":  # parallel rays through the pixels' positions
+        s_px = float(cam.pixel_size)
+        pc = np.concatenate([(px - [(W - 1) / 2.0, (H - 1) / 2.0]) * s_px, np.zeros((len(px), 1))], axis=1)
+        o = pc @ T[:3, :3].T + T[:3, 3]
+        d = np.broadcast_to(T[:3, 2], o.shape)
+    else:
+        o = T[:3, 3]
+        d = pixel_rays(px, cam.K, cam.dist) @ T[:3, :3].T
+    n, p0 = probe.plane.normal, probe.plane.point
+    den = d @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((p0 - o) @ n) / den
+    ok = np.isfinite(t) & (t > 0) & vr.valid.ravel() & ~vr.saturated.ravel()
+    pts = o + t[:, None] * d
+    cam_pts = np.broadcast_to(o, pts.shape)  # each pixel's ray origin (the camera, or its orthographic pixel)
+    ok[ok] &= ~_segments_blocked(pts[ok], cam_pts[ok], probe.occluder)
+    idx = np.flatnonzero(ok)
+    if len(idx) == 0:
+        raise InputError("no pixel shows the plane (check camera.world_from_camera and plane)", src)
+    notes = [f"{vr.note}; {len(idx)} pixels on the plane"]
+    if max_pixels is not None and len(idx) > max_pixels:
+        idx = np.sort(np.random.default_rng(seed).choice(idx, int(max_pixels), replace=False))
+        notes.append(f"used {max_pixels} of them (a fixed-seed random subset)")
+    rad = vr.radiance.reshape(-1, 3)[idx].astype(np.float64)
+    surface = None
+    if need_surface:
+        if probe.surface_image is None:
+            raise InputError("surface_image: missing (the ratio case divides by a shadow-free image of the surface)",
+                             src)
+        img = read_image(probe.surface_image)
+        check_encoding(img, probe.encoding, src)
+        if img.shape != (H, W):
+            raise InputError(f"surface_image: {img.shape[1]}x{img.shape[0]} differs from the photo's {W}x{H}", src)
+        surface = decode_image(img, probe.encoding, probe.response)[0].reshape(-1, 3)[idx].astype(np.float64)
+    views = -d[idx] if cam.model == "orthographic" else o - pts[idx]
+    return pts[idx], rad, views / np.linalg.norm(views, axis=1, keepdims=True), surface, notes
+
+
+def _occluder_dict(occ) -> dict:
+    if occ.kind == "box":
+        return {"box": {"center": occ.center.tolist(), "size": occ.size.tolist()}}
+    return {"triangles": occ.mesh.vertices[occ.mesh.faces]}
+
+
+SHADOW_CASES = ("lambertian", "torrance_sparrow", "ratio")
+
+
+def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambertian", nonnegative: bool = True,
+                    smoothness: float = 0.0, criterion: str = "cv", ks: float | None = None,
+                    sigma_deg: float | None = None, max_pixels: int | None = 4000,
+                    confidence_threshold: float = 0.0, fill: str = "nearest") -> LightmapEstimate:
+    """A light map from the shadow of a known occluder on a plane (Sato, Sato and Ikeuchi 1999).
+
+    Parameters
+    ----------
+    probe : ffls.io.probe.Probe
+        With ``plane``, ``occluder`` and a pinhole camera; ``plane.albedo`` for the
+        ``'lambertian'`` and ``'torrance_sparrow'`` cases, ``surface_image`` for ``'ratio'``.
+    height : int
+    nodes : int or 'auto'
+        Dome nodes (e.g. 521), or chosen by ``criterion`` (:func:`ffls.probes.selection.select_sato_sato_ikeuchi`).
+    case : {'lambertian', 'torrance_sparrow', 'ratio'}
+    nonnegative : bool
+    smoothness : float
+    criterion : {'cv', 'bic'}
+    ks, sigma_deg : float
+        ``'torrance_sparrow'``: the specular lobe's ``K_s`` and width (degrees).
+    max_pixels : int or None
+    confidence_threshold : float
+        Directions whose node shadows at most this share of the pixels are reported as not seen.
+    fill : {'nearest', 'zero'}
+    """
+    from ffls.probes.sato_sato_ikeuchi import occluder_visibility, sato_sato_ikeuchi, shadow_confidence
+    from ffls.probes.selection import select_sato_sato_ikeuchi
+
+    src = probe.json_path
+    if case not in SHADOW_CASES:
+        raise ValueError(f"case must be one of {SHADOW_CASES}, not {case!r}")
+    pts, rad, views, surface, notes = shadow_pixels(probe, max_pixels, need_surface=case == "ratio")
+    kw: dict = {"case": case, "nonnegative": nonnegative, "smoothness": smoothness}
+    if case == "ratio":
+        kw["surface_radiance"] = surface
+        if probe.plane.albedo is not None:
+            kw["reference_albedo"] = probe.plane.albedo  # makes the surface image's scale absolute
+        else:
+            notes.append("plane.albedo not stated: the ratio case takes the surface as white (albedo 1); the map "
+                         "is scaled by the unknown albedo")
+    else:
+        if probe.plane.albedo is None:
+            raise InputError(f"plane.albedo: missing (the {case} case needs the receiver's albedo; with a shadow-free "
+                             f"surface_image use --case ratio)", src)
+        kw["albedo"] = probe.plane.albedo
+    if case == "torrance_sparrow":
+        if ks is None or sigma_deg is None:
+            raise InputError("the torrance_sparrow case needs the specular lobe: --ks and --sigma")
+        kw.update(view_dirs=views, specular={"ks": float(ks), "sigma": float(np.radians(sigma_deg))})
+    occ = _occluder_dict(probe.occluder)
+    try:
+        if nodes == "auto":
+            sel = select_sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, criterion=criterion, **kw)
+            fit, chosen = sel.fit, sel.chosen
+            notes.append(sel.note)
+        else:
+            fit = sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, nodes=int(nodes), **kw)
+            chosen = int(nodes)
+    except InputError as e:
+        raise _with_source(e, src) from None
+    notes.append(f"Sato-Sato-Ikeuchi ({case}): {chosen} dome nodes, re-rendered relative RMS "
+                 f"{100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
+    vis = occluder_visibility(pts, fit.directions, occ)
+    conf = shadow_confidence(fit.directions, vis, probe.plane.normal, height)
+    details = {"nodes": chosen, "case": case, "relative_rms": float(fit.relative_rms),
+               "condition": float(fit.condition)}
+    return _finish(fit.latlong(height), conf, confidence_threshold, "shadow", probe, notes, details, fill)

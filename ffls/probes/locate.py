@@ -1,0 +1,171 @@
+"""Where the probe sphere is in one view: from ``probe.json``, a pixel hint, or found (issue 7's finder).
+
+:func:`locate_sphere` turns a view's :class:`ffls.io.probe.ProbeSphere` into the geometry the
+methods use: the centre in the camera frame and the radius (pinhole), or the disc in pixels
+(orthographic). A world centre is used as given (no detection); a pixel hint and the automatic
+case run :func:`ffls.spheres.detect.find_spheres` on the view's radiance (one sphere).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ffls.errors import InputError
+from ffls.spheres.detect import find_spheres, orthographic_normals, sphere_mask, sphere_normals, disc_mask
+
+__all__ = ["SphereGeometry", "locate_sphere"]
+
+
+@dataclass
+class SphereGeometry:
+    """The probe sphere in one view.
+
+    Attributes
+    ----------
+    camera_model : {'pinhole', 'orthographic'}
+    K, dist : camera (pinhole; None for orthographic)
+    world_from_camera : (4, 4) float64
+    center_cam : (3,) float64 or None
+        Centre, camera frame (pinhole), in the units of ``radius``.
+    radius : float or None
+        Radius (pinhole): the stated one, or 1 when the ball was located by pixels and no radius
+        was given (a mirror's reflection depends only on ``|C| / R``).
+    center_px : (2,) float64
+        The centre's image.
+    radius_px : float
+        Apparent radius, pixels.
+    source : str
+        ``'probe.json'`` (world centre, or a stated pixel circle), ``'hint'`` or ``'auto'`` (found).
+    radius_known : bool
+        ``radius`` is the stated one (scene units), not the stand-in 1.
+    """
+
+    camera_model: str
+    K: np.ndarray | None
+    dist: np.ndarray | None
+    world_from_camera: np.ndarray
+    center_cam: np.ndarray | None
+    radius: float | None
+    center_px: np.ndarray
+    radius_px: float
+    source: str
+    radius_known: bool = False
+
+    def mask(self, shape, margin_px: float = 0.0) -> np.ndarray:
+        """(H, W) bool: the pixels that see the sphere (``margin_px`` inside its outline)."""
+        if self.camera_model == "orthographic":
+            return disc_mask(shape, self.center_px, self.radius_px, margin_px)
+        return sphere_mask(shape, self.K, self.dist, self.center_cam, self.radius, margin_px)
+
+    def normals_world(self, pixels) -> np.ndarray:
+        """(n, 3) world-frame unit normals at ``pixels`` (n, 2); NaN off the sphere."""
+        n = orthographic_normals(pixels, self.center_px, self.radius_px) if self.camera_model == "orthographic" \
+            else sphere_normals(pixels, self.K, self.dist, self.center_cam, self.radius)
+        return n @ np.asarray(self.world_from_camera, dtype=np.float64)[:3, :3].T
+
+    def describe(self) -> str:
+        """One line."""
+        where = "as given in probe.json" if self.source == "probe.json" else \
+            ("found near the pixel hint" if self.source == "hint" else "found automatically")
+        return f"sphere {where}: centre ({self.center_px[0]:.1f}, {self.center_px[1]:.1f}) px, radius " \
+               f"{self.radius_px:.1f} px"
+
+
+def _given_circle(cam, T, sph) -> SphereGeometry:
+    """A disc stated in pixels (``center_px`` and ``radius_px``), used as it is.
+
+    Pinhole: the cone of viewing rays through the circle (axis through ``center_px``, half-angle
+    the mean angle to 72 points of the circle, with the distortion undone) gives the centre at
+    ``C = R / sin(alpha) * axis`` (``R`` the stated radius, or 1).
+    """
+    cpx, rpx = np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px)
+    if cam.model == "orthographic":
+        return SphereGeometry(cam.model, None, None, T, None, None, cpx, rpx, "probe.json")
+    from ffls.camera.projection import pixel_rays
+
+    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    ring = cpx + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
+    axis = pixel_rays(cpx[None], cam.K, cam.dist)[0]
+    alpha = float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
+    R = float(sph.radius) if sph.radius is not None else 1.0
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, "probe.json",
+                          sph.radius is not None)
+
+
+def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
+    """Locate the probe sphere of one view.
+
+    Parameters
+    ----------
+    view : ffls.io.probe.ProbeView
+    radiance : (H, W, 3) float
+        The view's linear radiance (for detection).
+    source : path-like
+        ``probe.json``, named in errors.
+    saturates : bool
+        The images are integer files that clip (passed to the finder's neutrality test).
+
+    Returns
+    -------
+    SphereGeometry
+
+    Raises
+    ------
+    InputError
+        No sphere found (one line saying where ffls looked and how to give a hint), a pinhole
+        camera without ``K``, a world centre behind the camera.
+    """
+    cam, sph = view.camera, view.sphere
+    T = np.asarray(cam.world_from_camera, dtype=np.float64)
+    shape = np.shape(radiance)[:2]
+    if cam.model == "pinhole" and cam.K is None:
+        raise InputError("camera.K: missing (a pinhole camera needs its intrinsics to unwrap the probe; for a "
+                         "long lens declare \"camera\": {\"model\": \"orthographic\"})", source)
+    if sph.location == "world":
+        Ti = np.linalg.inv(T)
+        C = Ti[:3, :3] @ sph.center + Ti[:3, 3]
+        R = float(sph.radius)
+        if not (C[2] > R and np.linalg.norm(C) > R):
+            raise InputError(f"sphere.center: {np.round(sph.center, 4).tolist()} is not in front of the camera "
+                             f"(camera frame {np.round(C, 4).tolist()}); check camera.world_from_camera", source)
+        from ffls.camera.projection import project_points
+        from ffls.spheres.detect import silhouette_px
+
+        cpx = project_points(C[None], cam.K, cam.dist)[0]
+        rpx = float(np.mean(np.hypot(*(silhouette_px(cam.K, cam.dist, C, R) - cpx).T)))
+        return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json", True)
+    if sph.location == "pixel" and sph.radius_px is not None:
+        return _given_circle(cam, T, sph)
+    hints = None
+    if sph.location == "pixel":
+        h = {"center_px": [float(x) for x in sph.center_px]}
+        if sph.radius_px is not None:
+            h["radius_px"] = float(sph.radius_px)
+        hints = [h]
+    R = sph.radius if sph.radius is not None else 1.0
+    # without a stated radius the scale is unknown: put the camera at the world origin so that the
+    # finder's scale check (camera distance against scene centre) has nothing to compare
+    Tf = T.copy()
+    if sph.radius is None:
+        Tf[:3, 3] = 0.0
+    # the finder looks for the outline on luminance: a mirror ball's colours are the scene's, not
+    # evidence of what it is (its neutrality criterion is for calibration spheres)
+    rad = np.asarray(radiance, dtype=np.float32)
+    lum = rad @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    try:
+        found = find_spheres(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, n_spheres=1, hints=hints,
+                             world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
+                             lit_limb=None)
+    except InputError as e:
+        msg = e.message.replace("capture.json", "probe.json").replace("\"spheres\": [{\"center_px\": [u, v]}] or "
+                                                                      "\"sphere_count\": n",
+                                                                      "\"sphere\": {\"center_px\": [u, v]}")
+        raise InputError(msg, source) from None
+    ft = found[0]
+    if cam.model == "orthographic":
+        return SphereGeometry(cam.model, None, None, T, None, None, np.asarray(ft.center_px, dtype=np.float64),
+                              float(ft.radius_px), "hint" if hints else "auto")
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(ft.center_cam, dtype=np.float64), float(R),
+                          np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px),
+                          "hint" if hints else "auto", sph.radius is not None)
