@@ -6,7 +6,7 @@ the virtual scene is rendered directly, with and without the object (ground albe
 rendered once (:func:`ffls.synth.scene.write_synthetic_capture`): the object and four spheres on a
 ground of albedo 0.3 under N lights, and the ground and spheres alone under N other lights. For
 each weighting scheme (``--schemes``, each a ``method=`` of
-:func:`ffls.weights.voronoi.integrate_weights`; schemes not in this build are listed as skipped),
+:func:`ffls.weights.weighting.integrate`, every scheme of :data:`ffls.weights.weighting.SCHEMES`),
 both captures are relit under the map and composited (:func:`ffls.relight.composite.composite`,
 both methods), and compared with the direct render:
 
@@ -51,10 +51,10 @@ from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import relight_fast
 from ffls.synth.scene import make_scene, render_lightmap, stratified_directions, write_synthetic_capture
 from ffls.synth.virtual import composite_masks, render_virtual_scene, wall_lightmap
-from ffls.weights.voronoi import integrate_weights
+from ffls.weights.weighting import SCHEMES, integrate
 
-#: Weighting schemes tried by default (``method=`` of integrate_weights); others may be named with --schemes.
-DEFAULT_SCHEMES = ("MasselusDutreAnrys2002", "antialiased", "barycentric", "gaussian")
+#: Weighting schemes tried by default (:mod:`ffls.weights.weighting`); --schemes names a subset.
+DEFAULT_SCHEMES = tuple(SCHEMES)
 CAPTURE_ALBEDO, SCENE_ALBEDO = 0.3, 0.5
 
 
@@ -77,12 +77,7 @@ def _virtual(cache: Path, name: str, lm, res: int, dirs: int):
 
 
 def _weights(lm, dirs, hemisphere, scheme):
-    try:
-        return integrate_weights(lm, dirs, None, hemisphere, method=scheme).weights
-    except ValueError as e:
-        if "method" in str(e):
-            return None
-        raise
+    return integrate(lm, dirs, None, hemisphere, scheme).weights
 
 
 def _rel(a, b, m):
@@ -110,7 +105,7 @@ def main():
     grow = max(2, int(round(0.02 * R)))
     near_sph = cv2.dilate(masks["spheres"].astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
-    rows, skipped = [], set()
+    rows = []
     t0 = time.perf_counter()
     captures = {}
     for n in (int(v) for v in a.lights.split(",")):
@@ -137,9 +132,6 @@ def main():
         for n, (((ob, od), oh), ((sb, sd), sh)) in captures.items():
             for scheme in a.schemes.split(","):
                 wo, ws = _weights(lm, od, oh, scheme), _weights(lm, sd, sh, scheme)
-                if wo is None or ws is None:
-                    skipped.add(scheme)
-                    continue
                 fields.append((n, scheme, relight_fast(wo, ob).astype(np.float64),
                                relight_fast(ws, sb).astype(np.float64)))
         for n, scheme, o, s in fields:
@@ -160,9 +152,8 @@ def main():
                       f"{100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
                       f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  "
                       f"({x['change_pixels']} px)", flush=True)
-    print(f"schemes not in this build (skipped): {', '.join(sorted(skipped)) or 'none'}")
     write_json(a.out, {"resolution": R, "truth_dirs": a.truth_dirs, "capture_albedo": CAPTURE_ALBEDO,
-                       "scene_albedo": SCENE_ALBEDO, "skipped_schemes": sorted(skipped), "host": host_info(),
+                       "scene_albedo": SCENE_ALBEDO, "host": host_info(),
                        "seconds": time.perf_counter() - t0, "rows": rows})
 
 
