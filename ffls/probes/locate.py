@@ -118,7 +118,6 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     """
     cam, sph = view.camera, view.sphere
     T = np.asarray(cam.world_from_camera, dtype=np.float64)
-    shape = np.shape(radiance)[:2]
     if cam.model == "pinhole" and cam.K is None:
         raise InputError("camera.K: missing (a pinhole camera needs its intrinsics to unwrap the probe; for a "
                          "long lens declare \"camera\": {\"model\": \"orthographic\"})", source)

@@ -740,7 +740,6 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     views = [None] * len(samples) if views is None else list(views)
     fitter.options["mirrors"] = [v if m == "mirror" else None for m, v in zip(materials, views)]
     terminator = fitter.options.get("terminator", 0.15)
-    up = fitter.options.get("up", UP)
     # with a calibrated bounce the first pass only feeds the centre refinement and the calibration
     # (per-sphere fits): its near photos skip the joint position fit, redone in the second pass
     joint = bounce == "free"
