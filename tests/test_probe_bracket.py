@@ -114,6 +114,8 @@ def test_cli_merge_with_exposures_and_exif(tmp_path, capsys):
         code = main(["probe", "merge", *map(str, paths), "-o", str(tmp_path / "x.exr"), *bad])
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and "error" in err[0], (bad, err)
+        if "--encoding" not in bad:  # the unstated encoding itself is named, not a default's parse error
+            assert "not stated" in err[0] and "does not guess" in err[0], err
         assert not (tmp_path / "x.exr").exists()
 
 
@@ -132,3 +134,20 @@ def test_cli_merge_calibrates_the_response(tmp_path, capsys):
         write_png(tmp_path / "w.png", np.zeros((4, 4, 3), np.uint8))
         write_exr(tmp_path / "f.exr", np.ones((4, 4, 3), np.float32))
         merge_bracket_files([tmp_path / "w.png", tmp_path / "f.exr"], (0.1, 0.2), "srgb")
+
+
+def test_cli_merge_of_float_files_needs_no_encoding(tmp_path, capsys):
+    """Float files are linear by definition: ``ffls probe merge`` takes them without ``--encoding``."""
+    L = _scene(np.random.default_rng(8))
+    paths = []
+    for k, t in enumerate(TIMES):
+        p = tmp_path / f"f{k}.exr"
+        write_exr(p, np.minimum(L * t / 50.0, 1.0).astype(np.float32))
+        paths.append(p)
+    out = tmp_path / "m.exr"
+    times = ",".join(str(t) for t in TIMES)
+    assert main(["probe", "merge", *map(str, paths), "-o", str(out), "--exposures", times]) == 0, capsys.readouterr()
+    m = read_image(out).pixels[..., :3].astype(np.float64) * 50.0
+    ok = np.ones(L.shape[:2], dtype=bool)
+    ok[:3, :3] = False  # the sun, clipped in every exposure
+    np.testing.assert_allclose(m[ok], L[ok], rtol=2e-3)

@@ -137,7 +137,7 @@ def add_arguments(p):
     m.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output .exr")
     m.add_argument("--exposures", type=float_list(0.0, None, min_len=2), default=None, metavar="T1,T2,...",
                    help="exposure times in seconds, one per image (default: each image's EXIF ExposureTime)")
-    m.add_argument("--encoding", type=_encoding_arg, default="auto", metavar="ENC",
+    m.add_argument("--encoding", type=_encoding_arg, default=None, metavar="ENC",
                    help=f"how the stored values encode light: {ENCODING_FORMS}; required for 8/16-bit images "
                         "(ffls does not guess), float images are linear")
     m.add_argument("--half", action="store_true", help="write half floats")
@@ -165,7 +165,7 @@ def _merge(args) -> int:
     else:
         times = [exposure_from_exif(p) for p in paths]
         how = "from EXIF"
-    enc, response = args.encoding, None
+    enc, response = ("auto" if args.encoding is None else args.encoding), None  # auto: not stated
     if isinstance(enc, dict) and "response" in enc:
         response = load_response(enc["response"]).astype(np.float64)
     elif enc == "calibrate":
