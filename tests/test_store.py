@@ -227,3 +227,28 @@ def test_bad_photo_is_one_line_and_leaves_an_incomplete_store(capture):
     write_exr(capture.image_paths[5], np.ones((40, 56, 3), dtype=np.float32))  # fixed: the ingest resumes
     rep = ingest_capture(capture, tile=16, progress=False)
     assert rep.built and rep.resumed == 5 and rep.staged == 2  # photos 0-4 were staged before photo 5 failed
+
+
+@pytest.mark.parametrize("kind", ["file", "folder", "other zarr"])
+def test_a_store_path_that_is_not_an_ffls_store_is_never_replaced(capture, tmp_path, capsys, kind):
+    """--store naming the user's file or folder: one line, status 2, and the thing left exactly as it was."""
+    from ffls.cli import main
+
+    target = {"file": capture.json_path, "folder": tmp_path / "mine", "other zarr": tmp_path / "other.zarr"}[kind]
+    if kind != "file":
+        target.mkdir()
+        (target / "keep.txt").write_text("the user's")
+        if kind == "other zarr":
+            (target / "zarr.json").write_text('{"zarr_format": 3, "node_type": "group"}')
+    before = sorted((p.name, p.read_bytes()) for p in ([target] if target.is_file() else target.iterdir()))
+    rc = main(["ingest", str(capture.folder), "--store", str(target), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "never replaces" in err[0], err
+    after = sorted((p.name, p.read_bytes()) for p in ([target] if target.is_file() else target.iterdir()))
+    assert after == before
+
+
+def test_a_store_in_a_missing_folder_is_refused(capture, tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        ingest_capture(capture, tmp_path / "missing" / "s.zarr", progress=False)
+    assert not (tmp_path / "missing").exists()

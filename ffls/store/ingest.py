@@ -204,6 +204,39 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
+def _group_format(path: Path):
+    """The ``format`` attribute of the Zarr group at ``path`` (an ffls store's, set when it is created), or None."""
+    doc = read_json(path / "zarr.json")
+    attrs = doc.get("attributes") if isinstance(doc, dict) else None
+    return attrs.get("format") if isinstance(attrs, dict) else None
+
+
+def check_store_path(path) -> None:
+    """Refuse a store path that ffls must not write: its folder missing, or something there that is not an ffls store.
+
+    An ingest replaces a stale or interrupted store of its own; anything else at ``path`` (a file,
+    or a folder without this format's marker or plan) is the user's and is never removed.
+
+    Raises
+    ------
+    ffls.errors.InputError
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise InputError(f"the store's folder {path.parent} does not exist", path)
+    if not path.exists():
+        return
+    marker = read_json(path / MARKER) if path.is_dir() else None
+    ours = path.is_dir() and ((isinstance(marker, dict) and marker.get("format") == FORMAT)
+                              or (marker is None and ((path / PLAN).is_file()  # an interrupted ingest
+                                                      or _group_format(path) == FORMAT)))
+    if not ours:
+        what = ("a file" if not path.is_dir()
+                else "a folder that is not an ffls store (no complete.json or plan.json of one)")
+        raise InputError(f"is {what}; the store must be a new path or an ffls store, and ffls never replaces "
+                         "anything else", path)
+
+
 def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, progress: bool = True,
                    rebuild: bool = False, min_level: int = MIN_LEVEL_SIZE) -> IngestReport:
     """Build (or resume, or check) the chunked store of ``capture``.
@@ -233,12 +266,14 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
     Raises
     ------
     InputError
-        A photo that cannot be read or linearised, of another size, or whose float16 conversion
+        ``path`` in a missing folder, or something there that is not an ffls store
+        (:func:`check_store_path`); a photo that cannot be read or linearised, of another size, or whose float16 conversion
         fails (:func:`ffls.store.float16.to_float16`); the staged photos are kept for a resume.
     """
     import zarr
 
     path = default_store_path(capture) if path is None else Path(path)
+    check_store_path(path)
     runner = SerialRunner(progress) if runner is None else runner
     prov = provenance(capture)
     n = len(capture.image_names)
@@ -268,6 +303,7 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
     t0 = time.perf_counter()
     if not path.exists():
         g = zarr.open_group(str(path), mode="w")
+        g.attrs["format"] = FORMAT  # what check_store_path recognises before a plan or a marker exists
         g.create_array(name="staging", shape=(n, *shape, 3), chunks=(1, tile, tile, 3), dtype="float16",
                        compressors=compressor(), fill_value=0)
         (path / PROGRESS).mkdir()
