@@ -243,7 +243,7 @@ def test_composite_turntable(cset, tmp_path, capfd):
     assert not np.array_equal(a, b)  # the scene's map turned
 
 
-def test_viewer_composite_mode(cset, gl_session):
+def test_viewer_composite_mode(cset, gl_session, tmp_path):
     """The viewer's composite mode: the background with the object and its shadow, live under rotation."""
     pytest.importorskip("imgui_bundle", reason="imgui-bundle is not installed")
     from ffls.errors import GLUnavailable
@@ -271,6 +271,8 @@ def test_viewer_composite_mode(cset, gl_session):
         assert np.array_equal(a[sph], bg[sph])  # the background, not the relit capture with its spheres
         ref = composite(bg, app.renderer.engine.read_hdr(), app.renderer.surface_engine.read_hdr(), om, sm)
         assert np.allclose(a, ref.image, rtol=1e-5, atol=1e-6)
+        _, exr = app.save_screenshot(tmp_path / "shot.png")  # the screenshot's HDR is the composite too
+        assert np.allclose(read_image(exr).pixels[..., :3], a, rtol=1e-3, atol=1e-6)
         st.yaw = 90.0
         app.step(dt=0.0)
         b = app.renderer.read_hdr()

@@ -456,7 +456,10 @@ class Renderer:
         return self.engine.read_hdr()
 
     def read_hdr_full(self) -> np.ndarray:
-        """The relit HDR at full resolution: the engine's, or the store's relit tile by tile with its weights."""
+        """The relit HDR at full resolution: the composite in composite mode, the engine's, or the store's relit
+        tile by tile with its weights."""
+        if self._composite_hdr is not None:
+            return self._composite_hdr
         if self.streamed is None:
             return self.engine.read_hdr()
         self.streamed.set_weights(self.engine.read_weights())
