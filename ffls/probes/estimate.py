@@ -15,6 +15,7 @@ from ffls.probes.debevec import (CAMERA_CONE_DEG, RIM_PX, blind_spot, fill_unsee
                                  merge_mirror_views, unwrap_mirror_ball_Debevec1998)
 from ffls.probes.locate import locate_sphere
 from ffls.probes.result import LightmapEstimate
+from ffls.probes.sato_sato_ikeuchi import ray_triangle
 
 __all__ = ["FILL_MODES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
            "pocs_lightmap", "shadow_pixels", "shadow_lightmap", "object_pixels"]
@@ -192,17 +193,9 @@ def _closest_hits(origins, dirs, tri):
     bary = np.zeros((m, 2))
     rows = max(1, 2_000_000 // max(1, len(tri)))
     for s in range(0, m, rows):
-        o, d = origins[s:s + rows, None, :], dirs[s:s + rows, None, :]
-        h = np.cross(d, e2[None])
-        a = np.sum(e1[None] * h, axis=2)
-        ok = np.abs(a) > 1e-14
-        f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
-        sv = o - v0[None]
-        u = f * np.sum(sv * h, axis=2)
-        q = np.cross(sv, e1[None])
-        v = f * np.sum(d * q, axis=2)
-        t = f * np.sum(e2[None] * q, axis=2)
-        t = np.where(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-12), t, np.inf)
+        inside, u, v, t = ray_triangle(origins[s:s + rows, None, :], dirs[s:s + rows, None, :], v0[None], e1[None],
+                                       e2[None], 1e-14)
+        t = np.where(inside & (t > 1e-12), t, np.inf)
         k = np.argmin(t, axis=1)
         tk = t[np.arange(len(k)), k]
         hit = np.isfinite(tk)
@@ -412,17 +405,9 @@ def _segments_blocked(points, ends, occ) -> np.ndarray:
     out = np.zeros(len(p), dtype=bool)
     rows = max(1, 2_000_000 // max(1, len(tri)))
     for s in range(0, len(p), rows):  # Moeller-Trumbore, every segment against every triangle
-        ps, ds = p[s:s + rows, None, :], d[s:s + rows, None, :]
-        h = np.cross(ds, e2[None])
-        a = np.sum(e1[None] * h, axis=2)
-        ok = np.abs(a) > 1e-12
-        f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
-        sv = ps - v0[None]
-        u = f * np.sum(sv * h, axis=2)
-        q = np.cross(sv, e1[None])
-        v = f * np.sum(ds * q, axis=2)
-        t = f * np.sum(e2[None] * q, axis=2)
-        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9) & (t < 1.0)
+        inside, _, _, t = ray_triangle(p[s:s + rows, None, :], d[s:s + rows, None, :], v0[None], e1[None], e2[None],
+                                       1e-12)
+        hit = inside & (t > 1e-9) & (t < 1.0)
         out[s:s + rows] = hit.any(axis=1)
     return out
 

@@ -48,6 +48,7 @@ __all__ = [
     "box_triangles",
     "box_visibility",
     "mesh_visibility",
+    "ray_triangle",
     "occluder_visibility",
     "shadow_kernel",
     "dome_nodes",
@@ -152,6 +153,37 @@ def box_visibility(points, directions, center, size, rotation=None, chunk: int =
     return out
 
 
+def ray_triangle(origins, directions, v0, e1, e2, det_eps: float):
+    """Moeller-Trumbore ray-triangle intersection, broadcast over any leading shapes.
+
+    Parameters
+    ----------
+    origins, directions : (..., 3) array_like
+        Rays ``x + t d``.
+    v0, e1, e2 : (..., 3) array_like
+        Each triangle's first vertex and its two edges from it.
+    det_eps : float
+        Rays closer to parallel (``|det| <= det_eps``) never hit.
+
+    Returns
+    -------
+    inside : (...) bool
+        The ray's line passes inside the triangle (and is not parallel to it).
+    u, v, t : (...) float
+        Barycentric coordinates of the crossing and its ray parameter (any sign).
+    """
+    h = np.cross(directions, e2)
+    a = np.sum(e1 * h, axis=-1)
+    ok = np.abs(a) > det_eps
+    f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+    sv = origins - v0
+    u = f * np.sum(sv * h, axis=-1)
+    q = np.cross(sv, e1)
+    v = f * np.sum(directions * q, axis=-1)
+    t = f * np.sum(e2 * q, axis=-1)
+    return ok & (u >= 0) & (v >= 0) & (u + v <= 1), u, v, t
+
+
 def mesh_visibility(points, directions, triangles, eps: float = 1e-9, chunk: int = 1 << 20) -> np.ndarray:
     """Whether each node reaches each point past a triangle mesh (Moeller-Trumbore, vectorised).
 
@@ -197,16 +229,8 @@ def mesh_visibility(points, directions, triangles, eps: float = 1e-9, chunk: int
         dd = d[ni]
         hit = np.zeros(ri.size, dtype=bool)
         for f in range(tri.shape[0]):
-            pv = np.cross(dd, e2[f])
-            det = pv @ e1[f]
-            ok = np.abs(det) > 1e-15
-            inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-            tv = o - v0[f]
-            u = np.einsum("ij,ij->i", tv, pv) * inv
-            qv = np.cross(tv, e1[f])
-            v = np.einsum("ij,ij->i", qv, dd) * inv
-            t = (qv @ e2[f]) * inv
-            hit |= ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > eps)
+            inside, _, _, t = ray_triangle(o, dd, v0[f], e1[f], e2[f], 1e-15)
+            hit |= inside & (t > eps)
         blk = out[s:s + rows]
         blk[ri[hit], ni[hit]] = False
     return out
