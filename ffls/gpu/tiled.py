@@ -99,21 +99,9 @@ class TiledEngine(WeightsInputs):
             del tile
         return out
 
-    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
-        """Pass 1 (when the light map or rotation changed), pass 2 over the tiles, then the display image on read."""
-        if self._lightmap is None and self._weights is None:
-            raise RuntimeError("TiledEngine.render: call set_lightmap(lm) or set_weights(w) first")
-        if self._weights is None:
-            self._integrator.run(self._rotation)
-            self._weights = np.asarray(self._integrator.read_weights(), dtype=np.float64)[:, :3]
-            self._hdr = None
-        if self._hdr is None:
-            self._hdr = self._pass2(self._weights)
-            self._display = None
-        key = (float(exposure), tonemap)
-        if key != self._display_key:
-            self._display = None
-            self._display_key = key
+    def _pass1(self) -> np.ndarray:
+        self._integrator.run(self._rotation)
+        return np.asarray(self._integrator.read_weights(), dtype=np.float64)[:, :3]
 
     @property
     def size(self) -> tuple[int, int]:
@@ -129,23 +117,14 @@ class TiledEngine(WeightsInputs):
         return {"dtype": self.dtype, "tiles": len(f.tiles(self.streamed.level)), "tile": f.tile,
                 "rank": None if self.streamed.compression is None else self.streamed.compression.rank}
 
-    def read_hdr(self) -> np.ndarray:
+    @property
+    def hdr(self) -> np.ndarray:
         if self._hdr is None:
             raise RuntimeError("TiledEngine: nothing rendered yet")
         return self._hdr
 
-    def read_display(self) -> np.ndarray:
-        from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
-
-        if self._display is None:
-            exposure, method = self._display_key if self._display_key is not None else (0.0, "srgb")
-            self._display = to_uint8(tonemap_np(self.read_hdr(), exposure, method))
-        return self._display
-
-    def read_weights(self) -> np.ndarray:
-        if self._weights is None:
-            raise RuntimeError("TiledEngine: nothing rendered yet")
-        return np.array(self._weights, dtype=np.float64)
+    def read_hdr(self) -> np.ndarray:
+        return self.hdr
 
     def release(self) -> None:
         if self._integrator is not None:

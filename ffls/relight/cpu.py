@@ -18,7 +18,6 @@ from __future__ import annotations
 import numpy as np
 
 from ffls.conventions import check_hemisphere
-from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
 from ffls.errors import InputError
 from ffls.relight.basis import capture_basis
 from ffls.relight.compress import CompressedBasis, compress_basis, load_or_compress
@@ -249,39 +248,22 @@ class CpuRelighter(WeightsInputs):
         self.weighting = scheme
 
     # ------------------------------------------------------------------ passes
-    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
-        """Compute what changed: the weights (pass 1), the relit image (pass 2), the display image.
+    def _pass1(self) -> np.ndarray:
+        if self._weighting is None:
+            self.last_weights = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
+                                                  cells=self.cells)
+        else:
+            self.last_weights = integrate_scheme(self._lightmap, self.directions, self._rotation, self.hemisphere,
+                                                 self.weighting, weighting=self._weighting,
+                                                 **self._weighting.options)
+        return self.last_weights.weights
 
-        Parameters
-        ----------
-        exposure : float
-            Stops applied before the tone curve (display image only; the HDR is unscaled).
-        tonemap : {'srgb', 'reinhard', 'aces'}
-        """
-        if self._lightmap is None and self._weights is None:
-            raise RuntimeError("CpuRelighter.render: call set_lightmap(lm) or set_weights(w) first")
-        if self._weights is None:
-            if self._weighting is None:
-                self.last_weights = integrate_weights(self._lightmap, self.directions, self._rotation, self.hemisphere,
-                                                      cells=self.cells)
-            else:
-                self.last_weights = integrate_scheme(self._lightmap, self.directions, self._rotation, self.hemisphere,
-                                                     self.weighting, weighting=self._weighting,
-                                                     **self._weighting.options)
-            self._weights = self.last_weights.weights
-            self._hdr = None
-        if self._hdr is None:
-            if self.compressed is not None:
-                self._hdr = self.compressed.relight(self._weights)
-            elif self.precision == "f64":
-                self._hdr = relight_reference(self._weights, self.basis)
-            else:
-                self._hdr = relight_fast(self._weights, self.basis)
-            self._display = None
-        key = (float(exposure), tonemap)
-        if key != self._display_key:
-            self._display = None
-            self._display_key = key
+    def _pass2(self, weights) -> np.ndarray:
+        if self.compressed is not None:
+            return self.compressed.relight(weights)
+        if self.precision == "f64":
+            return relight_reference(weights, self.basis)
+        return relight_fast(weights, self.basis)
 
     # ------------------------------------------------------------------ outputs
     @property
@@ -303,19 +285,6 @@ class CpuRelighter(WeightsInputs):
     def read_hdr(self) -> np.ndarray:
         """The relit image ``(H, W, 3)`` float32, row 0 = top row."""
         return self.hdr.astype(np.float32)
-
-    def read_display(self) -> np.ndarray:
-        """The display image ``(H, W, 3)`` uint8, sRGB-encoded."""
-        if self._display is None:  # tone-mapped on first read (an EXR-only caller never pays for it)
-            exposure, method = self._display_key if self._display_key is not None else (0.0, "srgb")
-            self._display = tonemap_np(self.hdr, exposure, method)
-        return to_uint8(self._display)
-
-    def read_weights(self) -> np.ndarray:
-        """The weights of the last render ``(n, 3)`` float64 (pass-1 output or :meth:`set_weights`)."""
-        if self._weights is None:
-            raise RuntimeError("CpuRelighter: nothing rendered yet")
-        return np.array(self._weights, dtype=np.float64)
 
     def release(self) -> None:
         """Drop the basis and the images (the GPU engine's counterpart frees GL objects)."""

@@ -422,28 +422,18 @@ class StreamedRelighter(WeightsInputs):
         self._lightmap = lm
         self._weights = None
 
-    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+    def _pass1(self) -> np.ndarray:  # as the in-memory relighters (the scheme and the map height)
         from ffls.relight.quality import integration_map
         from ffls.weights.weighting import integrate
 
-        if self._lightmap is None and self._weights is None:
-            raise RuntimeError("StreamedRelighter.render: call set_lightmap(lm) or set_weights(w) first")
-        if self._weights is None:  # pass 1, as the in-memory relighters (the scheme and the map height)
-            self.last_weights = integrate(integration_map(self._lightmap, self.map_res), self.directions,
-                                          self._rotation, self.hemisphere, self.weighting, cells=self.cells)
-            self._weights = self.last_weights.weights
-            self._hdr = None
-        if self._hdr is None:
-            self._hdr = None  # the previous image goes before the next is made (memory)
-            if self.compression is not None:
-                self._hdr = relight_compressed_field(self.compression, self._weights, self.level, self.progress)
-            else:
-                self._hdr = relight_field(self.field, self.rows, self._weights, self.level, self.progress)
-            self._display = None
-        key = (float(exposure), tonemap)
-        if key != self._display_key:
-            self._display = None
-            self._display_key = key
+        self.last_weights = integrate(integration_map(self._lightmap, self.map_res), self.directions,
+                                      self._rotation, self.hemisphere, self.weighting, cells=self.cells)
+        return self.last_weights.weights
+
+    def _pass2(self, weights) -> np.ndarray:
+        if self.compression is not None:
+            return relight_compressed_field(self.compression, weights, self.level, self.progress)
+        return relight_field(self.field, self.rows, weights, self.level, self.progress)
 
     @property
     def size(self) -> tuple[int, int]:
@@ -462,19 +452,6 @@ class StreamedRelighter(WeightsInputs):
 
     def read_hdr(self) -> np.ndarray:
         return self.hdr
-
-    def read_display(self) -> np.ndarray:
-        from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
-
-        if self._display is None:
-            exposure, method = self._display_key if self._display_key is not None else (0.0, "srgb")
-            self._display = to_uint8(tonemap_np(self.hdr, exposure, method))
-        return self._display
-
-    def read_weights(self) -> np.ndarray:
-        if self._weights is None:
-            raise RuntimeError("StreamedRelighter: nothing rendered yet")
-        return np.array(self._weights, dtype=np.float64)
 
     def release(self) -> None:
         self._hdr = self._display = self._weights = self.cells = None
