@@ -45,23 +45,10 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     ffls.io.capture.Lights
     """
     from ffls.io.capture import Lights, sphere_materials
-    from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_views
+    from ffls.spheres.estimate import capture_samples, check_estimable, estimate_photos, sphere_views
 
-    if getattr(capture, "camera_model", "pinhole") == "orthographic":
-        if model == "near":
-            raise InputError("model 'near' needs a pinhole camera (camera.K): an orthographic camera measures no "
-                             "depth to place a near light", capture.json_path)
-        model = "distant"
-        refine_options = {"fit_radius": True, **(refine_options or {})}
-    else:
-        if capture.K is None:
-            raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them",
-                             capture.json_path)
-        if capture.sphere_radius is None:
-            raise InputError("capture has no sphere_radius; light estimation needs it", capture.json_path)
+    model, refine_options = check_estimable(capture, model, refine_options)
     n = len(capture.image_names)
-    if n == 0:
-        raise InputError("capture lists no images", capture.json_path)
     if spheres is None:
         from ffls.spheres.detect import find_spheres_in_capture
 

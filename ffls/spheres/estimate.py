@@ -55,6 +55,7 @@ from ffls.spheres.uncertainty import ErrorModel, centre_floor_deg, fit_error_mod
 __all__ = [
     "BOUNCE_MODES",
     "BounceCalibration",
+    "check_estimable",
     "CaptureEstimate",
     "capture_samples",
     "sphere_views",
@@ -837,6 +838,38 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
                      refine_options=refine_options, materials=materials, views=views)
 
 
+def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict | None]:
+    """Check that light estimation can run on ``capture`` (camera, sphere radius, images), one line naming the file.
+
+    An orthographic camera gives directions only: the model becomes ``'distant'`` and the centre
+    refinement also fits the radius. Returns the ``(model, refine_options)`` to use.
+
+    Raises
+    ------
+    InputError
+        ``model='near'`` with an orthographic camera, a pinhole camera without ``K`` or a capture
+        without ``sphere_radius``, or no images.
+    """
+    if getattr(capture, "camera_model", "pinhole") == "orthographic":
+        # parallel rays: directions only (no depth for a near light; the photometric centre
+        # refinement runs from a virtual far camera centre, sphere_samples_orthographic);
+        # sphere_radius is optional
+        if model == "near":
+            raise InputError("model 'near' needs a pinhole camera (camera.K): an orthographic camera measures no "
+                             "depth to place a near light", capture.json_path)
+        model = "distant"
+        refine_options = {"fit_radius": True, **(refine_options or {})}
+    else:
+        if capture.K is None:
+            raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them, or declare "
+                             "\"camera\": {\"model\": \"orthographic\"} for a long lens", capture.json_path)
+        if capture.sphere_radius is None:
+            raise InputError("capture has no sphere_radius; light estimation needs it", capture.json_path)
+    if not capture.image_names:
+        raise InputError("capture lists no images", capture.json_path)
+    return model, refine_options
+
+
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None, **kwargs):
@@ -888,24 +921,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     from ffls.io.capture import Lights
 
     _check_modes(model, bounce)
-    if getattr(capture, "camera_model", "pinhole") == "orthographic":
-        # parallel rays: directions only (no depth for a near light; the photometric centre
-        # refinement runs from a virtual far camera centre, sphere_samples_orthographic);
-        # sphere_radius is optional
-        if model == "near":
-            raise InputError("model 'near' needs a pinhole camera (camera.K): an orthographic camera measures no "
-                             "depth to place a near light", capture.json_path)
-        model = "distant"
-        refine_options = {"fit_radius": True, **(refine_options or {})}
-    else:
-        if capture.K is None:
-            raise InputError("capture has no camera intrinsics (camera.K); light estimation needs them, or declare "
-                             "\"camera\": {\"model\": \"orthographic\"} for a long lens", capture.json_path)
-        if capture.sphere_radius is None:
-            raise InputError("capture has no sphere_radius; light estimation needs it", capture.json_path)
+    model, refine_options = check_estimable(capture, model, refine_options)
     n = len(capture.image_names)
-    if n == 0:
-        raise InputError("capture lists no images", capture.json_path)
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if spheres is None:
         from ffls.spheres.detect import find_spheres_in_capture
