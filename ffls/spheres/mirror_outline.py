@@ -212,6 +212,30 @@ def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float
     return best
 
 
+def _ray_profiles(log_lum, c, rs, n_angles: int, step_px: float):
+    """Bilinear samples of ``log_lum`` along ``n_angles`` rays from ``c`` at radii ``rs``, smoothed along each ray.
+
+    Returns ``inside`` (A, R) bool (the sample lies in the frame), the profiles (A, R) float, each
+    convolved with a 0.7-pixel Gaussian along its ray, and the rays' unit directions (A, 2).
+    """
+    H, W = log_lum.shape
+    t = np.arange(n_angles) / n_angles * 2 * np.pi
+    u = np.stack([np.cos(t), np.sin(t)], axis=1)
+    xy = c[None, None, :] + rs[None, :, None] * u[:, None, :]  # (A, R, 2)
+    inside = (xy[..., 0] >= 0) & (xy[..., 0] <= W - 1) & (xy[..., 1] >= 0) & (xy[..., 1] <= H - 1)
+    x = np.clip(xy[..., 0], 0, W - 1.000001)
+    y = np.clip(xy[..., 1], 0, H - 1.000001)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    img = np.asarray(log_lum, dtype=np.float64)
+    prof = ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x0 + 1])
+            + fy * ((1 - fx) * img[y0 + 1, x0] + fx * img[y0 + 1, x0 + 1]))
+    k = np.exp(-0.5 * (np.arange(-8, 9) * step_px / 0.7) ** 2)  # 0.7-pixel Gaussian along the ray
+    k /= k.sum()
+    pad = np.pad(prof, ((0, 0), (8, 8)), mode="edge")
+    return inside, np.stack([np.convolve(p, k, mode="valid") for p in pad]), u
+
+
 def radial_steps(log_lum, center, radius, *, r_range=(0.9, 1.3), n_angles: int = 180, step_px: float = 0.25,
                  min_step: float = 0.02) -> np.ndarray:
     """Every radial brightness step near a circle, sub-pixel: weak outline points of a mirror ball.
@@ -245,24 +269,9 @@ def radial_steps(log_lum, center, radius, *, r_range=(0.9, 1.3), n_angles: int =
     (m, 2) float
         Points (x, y) inside the image.
     """
-    H, W = log_lum.shape
     c = np.asarray(center, dtype=np.float64).reshape(2)
     rs = np.arange(r_range[0] * radius, r_range[1] * radius, step_px)
-    t = np.arange(n_angles) / n_angles * 2 * np.pi
-    u = np.stack([np.cos(t), np.sin(t)], axis=1)
-    xy = c[None, None, :] + rs[None, :, None] * u[:, None, :]  # (A, R, 2)
-    inside = (xy[..., 0] >= 0) & (xy[..., 0] <= W - 1) & (xy[..., 1] >= 0) & (xy[..., 1] <= H - 1)
-    x = np.clip(xy[..., 0], 0, W - 1.000001)
-    y = np.clip(xy[..., 1], 0, H - 1.000001)
-    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
-    fx, fy = x - x0, y - y0
-    img = np.asarray(log_lum, dtype=np.float64)
-    prof = ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x0 + 1])
-            + fy * ((1 - fx) * img[y0 + 1, x0] + fx * img[y0 + 1, x0 + 1]))
-    k = np.exp(-0.5 * (np.arange(-8, 9) * step_px / 0.7) ** 2)  # 0.7-pixel Gaussian along the ray
-    k /= k.sum()
-    pad = np.pad(prof, ((0, 0), (8, 8)), mode="edge")
-    sm = np.stack([np.convolve(p, k, mode="valid") for p in pad])
+    inside, sm, u = _ray_profiles(log_lum, c, rs, n_angles, step_px)
     g = np.abs(np.gradient(sm, step_px, axis=1))
     g[~inside] = 0.0
     noise = float(np.percentile(g[inside], 25)) if inside.any() else 0.0  # flat parts: most of a ray is structure
@@ -313,26 +322,11 @@ def limb_radius(log_lum, center, radius, *, r_range=(0.97, 1.1), n_angles: int =
     float or None
         Pixels.
     """
-    H, W = log_lum.shape
     c = np.asarray(center, dtype=np.float64).reshape(2)
     rs = np.arange(r_range[0] * radius, r_range[1] * radius, step_px)
     if rs.size < 5:
         return None
-    t = np.arange(n_angles) / n_angles * 2 * np.pi
-    u = np.stack([np.cos(t), np.sin(t)], axis=1)
-    xy = c[None, None, :] + rs[None, :, None] * u[:, None, :]
-    inside = (xy[..., 0] >= 0) & (xy[..., 0] <= W - 1) & (xy[..., 1] >= 0) & (xy[..., 1] <= H - 1)
-    x = np.clip(xy[..., 0], 0, W - 1.000001)
-    y = np.clip(xy[..., 1], 0, H - 1.000001)
-    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
-    fx, fy = x - x0, y - y0
-    img = np.asarray(log_lum, dtype=np.float64)
-    prof = ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x0 + 1])
-            + fy * ((1 - fx) * img[y0 + 1, x0] + fx * img[y0 + 1, x0 + 1]))
-    k = np.exp(-0.5 * (np.arange(-8, 9) * step_px / 0.7) ** 2)
-    k /= k.sum()
-    pad = np.pad(prof, ((0, 0), (8, 8)), mode="edge")
-    sm = np.stack([np.convolve(p, k, mode="valid") for p in pad])
+    inside, sm, u = _ray_profiles(log_lum, c, rs, n_angles, step_px)
     g = np.gradient(sm, step_px, axis=1)  # signed: > 0 where it brightens outward
     whole = np.all(inside, axis=1)  # rays wholly inside the frame
     if not whole.any():
