@@ -362,13 +362,9 @@ def gpu_frame_ms(ctx, basis, directions, lightmap, quality, hemisphere="upper", 
     basis of rank >= ``quality.rank`` to truncate instead of compressing again.
     """
     from ffls.conventions import rotation_z
-    from ffls.relight.quality import farthest_point_subset
+    from ffls.relight.quality import prepare_basis
 
-    b = np.asarray(basis)
-    d = np.asarray(directions, dtype=np.float64)
-    if quality.basis_subset is not None and quality.basis_subset < len(d):
-        idx = farthest_point_subset(d, quality.basis_subset)
-        b, d = b[idx], d[idx]
+    b, d, _ = prepare_basis(basis, directions, basis_subset=quality.basis_subset)
     cb = None
     if quality.rank is not None and compressed is not None and compressed.rank >= quality.rank \
             and compressed.n_lights == len(d):

@@ -37,7 +37,7 @@ import numpy as np
 from ffls.conventions import rotation_z
 from ffls.relight.compress import CompressedBasis, compress_basis, rank_range
 from ffls.relight.cpu import CpuRelighter, relight_reference
-from ffls.relight.quality import Quality, farthest_point_subset, integration_map
+from ffls.relight.quality import Quality, farthest_point_subset, integration_map, prepare_basis
 from ffls.relight.storage import store_basis
 from ffls.weights.weighting import SCHEMES, integrate as integrate_scheme, light_weights
 
@@ -198,11 +198,7 @@ def relight_quality(basis, directions, lightmap, rotation, quality: Quality, hem
     storage rounding and the rank are applied here. ``compressed`` (of rank >= ``quality.rank``)
     is truncated to the rank instead of compressing again.
     """
-    b = np.asarray(basis)
-    d = np.asarray(directions, dtype=np.float64)
-    if quality.basis_subset is not None and quality.basis_subset < len(d):
-        idx = farthest_point_subset(d, quality.basis_subset)
-        b, d = b[idx], d[idx]
+    b, d, _ = prepare_basis(basis, directions, basis_subset=quality.basis_subset)
     cb = None
     if quality.rank is not None:
         cb = compressed if compressed is not None and compressed.n_lights == len(d) else None
@@ -309,11 +305,7 @@ def shrink(basis, size: int | None) -> np.ndarray:
 
 def cpu_frame_ms(basis, directions, lightmap, quality: Quality, hemisphere="upper", repeats: int = 2) -> float:
     """Median ms per frame of the CPU relighter (float32 pass 2) for ``quality``, the map rotated each frame."""
-    b = np.asarray(basis)
-    d = np.asarray(directions, dtype=np.float64)
-    if quality.basis_subset is not None and quality.basis_subset < len(d):
-        idx = farthest_point_subset(d, quality.basis_subset)
-        b, d = b[idx], d[idx]
+    b, d, _ = prepare_basis(basis, directions, basis_subset=quality.basis_subset)
     r = CpuRelighter(b, d, hemisphere, rank=quality.rank, cell_res=quality.cell_res or 256,
                      storage=quality.precision, map_res=quality.map_res, weighting=quality.weighting)
     r.set_lightmap(lightmap)
