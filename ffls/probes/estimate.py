@@ -44,6 +44,22 @@ def camera_cone(geo, camera_size: float = CAMERA_SIZE, fallback_deg: float = CAM
     return float(fallback_deg), "camera distance unknown: default"
 
 
+def _located_views(probe, material: str, needs: str, other: str):
+    """Each view of ``probe``, checked to show a ``material`` sphere, with its radiance and the located sphere.
+
+    Yields ``(tag, view, radiance, geometry)``: ``tag`` prefixes notes ("view k: " with several views).
+    A view of another material is one line naming its key and ``ffls probe OTHER``.
+    """
+    src = probe.json_path
+    for k, view in enumerate(probe.views):
+        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
+        if view.sphere.material != material:
+            key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
+            raise InputError(f"{key}: {needs}, this one is {view.sphere.material!r} (use 'ffls probe {other}')", src)
+        vr = view_radiance(view, probe.encoding, probe.response, src)
+        yield tag, view, vr, locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
+
+
 def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = None, rim_px: float = RIM_PX,
                     supersample: int | None = None, weight_power: float = 2.0, fill: str = "nearest",
                     camera_size: float = CAMERA_SIZE) -> LightmapEstimate:
@@ -84,17 +100,9 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
     """
     if fill not in FILL_MODES:
         raise ValueError(f"fill must be one of {FILL_MODES}, not {fill!r}")
-    src = probe.json_path
     views, notes, per_view = [], [], []
     sa = latlong_solid_angles(int(height))
-    for k, view in enumerate(probe.views):
-        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
-        if view.sphere.material != "mirror":
-            key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
-            raise InputError(f"{key}: the mirror method needs a mirror ball, this one is {view.sphere.material!r} "
-                             f"(use 'ffls probe diffuse')", src)
-        vr = view_radiance(view, probe.encoding, probe.response, src)
-        geo = locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
+    for tag, view, vr, geo in _located_views(probe, "mirror", "the mirror method needs a mirror ball", "diffuse"):
         cone, why = (float(camera_cone_deg), "given") if camera_cone_deg is not None else camera_cone(geo, camera_size)
         mv = unwrap_mirror_ball_Debevec1998(
             vr.radiance, geo.camera_model, geo.K, geo.dist, geo.world_from_camera, geo.center_cam, geo.radius,
@@ -152,14 +160,8 @@ def diffuse_pixels(probe, method: str, rim_px: float = 0.5, max_pixels: int | No
     if probe.object is not None:
         return object_pixels(probe, max_pixels, seed)
     normals, values, notes = [], [], []
-    for k, view in enumerate(probe.views):
-        tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
-        if view.sphere.material != "diffuse":
-            key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
-            raise InputError(f"{key}: the {method} method needs a diffuse sphere (\"material\": \"diffuse\"), this "
-                             f"one is {view.sphere.material!r} (use 'ffls probe mirror')", src)
-        vr = view_radiance(view, probe.encoding, probe.response, src)
-        geo = locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
+    needs = f"the {method} method needs a diffuse sphere (\"material\": \"diffuse\")"
+    for tag, view, vr, geo in _located_views(probe, "diffuse", needs, "mirror"):
         mask = geo.mask(vr.radiance.shape, margin_px=rim_px) & vr.valid & ~vr.saturated
         yy, xx = np.nonzero(mask)
         n = geo.normals_world(np.stack([xx, yy], axis=1).astype(np.float64)) if len(yy) else np.zeros((0, 3))
