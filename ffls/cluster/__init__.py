@@ -68,6 +68,29 @@ class DaskRunner:
                 fut.release()
 
 
+def check_scheduler_address(text: str) -> str:
+    """``text`` if it is a dask.distributed scheduler address ``SCHEME://HOST:PORT``, else ValueError.
+
+    The address is parsed by distributed itself (``parse_address``, ``parse_host_port``); the
+    scheme must be one distributed can open (``registry.backends``: tcp, tls, ws, ...), the host
+    must be named and the port must lie in 1..65535. Nothing is connected.
+    """
+    from distributed.comm import registry
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    text = str(text).strip()
+    scheme, location = parse_address(text)  # ValueError on a malformed address
+    if scheme not in registry.backends or scheme == "inproc":
+        raise ValueError(f"unknown scheme {scheme!r} in {text!r} (expected one of "
+                         f"{', '.join(sorted(b for b in registry.backends if b != 'inproc'))})")
+    host, port = parse_host_port(location)  # ValueError without a port
+    if not host:
+        raise ValueError(f"no host in {text!r} (expected SCHEME://HOST:PORT)")
+    if not 1 <= int(port) <= 65535:
+        raise ValueError(f"port {port} in {text!r} is not in 1..65535")
+    return text
+
+
 @contextlib.contextmanager
 def open_client(workers: int | None = None, scheduler: str | None = None, progress: bool = True):
     """A :class:`DaskRunner` on a local cluster of ``workers`` processes, or on the cluster at ``scheduler``.
@@ -91,7 +114,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None, progre
     if scheduler:
         try:
             client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError) as e:
+        except (OSError, TimeoutError, ValueError) as e:
             raise InputError(f"cannot reach the Dask scheduler {scheduler}: {e}") from None
         try:
             yield DaskRunner(client, progress)

@@ -796,8 +796,30 @@ def add_scale_arguments(p, store: bool = True, memory: bool = True) -> None:
                        help="stream from the store even when the photos would fit in memory")
     p.add_argument("--workers", type=integer(1, 1024), default=None, metavar="N",
                    help="local Dask worker processes for the per-photo work (default every core; 1: in this process)")
-    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", type=scheduler_type(),
                    help="run the per-photo work on this dask.distributed cluster (docs/scale.md)")
+
+
+def scheduler_type(allow_local: bool = False):
+    """argparse type of ``--scheduler``: a checked ``SCHEME://HOST:PORT`` (or ``local`` when allowed).
+
+    Checked when the arguments are parsed, so a malformed address is one line before any work
+    (:func:`ffls.cluster.check_scheduler_address`).
+    """
+
+    def parse(text: str) -> str:
+        if allow_local and text == "local":
+            return text
+        from ffls.cluster import check_scheduler_address
+
+        try:
+            return check_scheduler_address(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(f"{e}; give a running scheduler as tcp://HOST:PORT"
+                                             + (" or 'local'" if allow_local else "")) from None
+
+    parse.__name__ = "scheduler address"
+    return parse
 
 
 def memory_from_args(args) -> int:

@@ -16,7 +16,7 @@ DESCRIPTION = ("Fit every photo's spheres (Lambert + ambient + ground bounce), c
 
 
 def add_arguments(p):
-    from ffls.commands.common import integer, output_path
+    from ffls.commands.common import integer, output_path, scheduler_type
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     p.add_argument("-o", "--output", default=None, type=output_path((".json",)),
@@ -27,7 +27,7 @@ def add_arguments(p):
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), or free per photo (default calibrated)")
     p.add_argument("--workers", type=integer(1, 1024), default=None, help="processes, 1 to 1024 (default: every core)")
-    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT|local",
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT|local", type=scheduler_type(allow_local=True),
                    help="read and linearise the photos on Dask: a dask.distributed cluster, or 'local' for a local "
                         "cluster of --workers processes (docs/scale.md)")
     p.add_argument("--plot", default=None, type=output_path((".png",)), metavar="PLOT.png",
