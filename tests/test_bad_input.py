@@ -210,6 +210,11 @@ CASES = [
     ("relight-cells-huge", L + ["--cells-res", "100000", "-o", "{out}/a.exr"], "--cells-res", "a.exr"),
     ("relight-cells-1", L + ["--cells-res", "1", "-o", "{out}/a.exr"], "--cells-res", "a.exr"),
     ("relight-out-suffix", L + ["-o", "{out}/a.jpg"], "a.jpg", "a.jpg"),
+    ("relight-layout-abc", L + ["--layout", "abc", "-o", "{out}/a.exr"], "--layout", "a.exr"),
+    ("relight-layout-builtin", L + ["--layout", "latlong", "-o", "{out}/a.exr"], "--layout", "a.exr"),
+    ("relight-lights-empty", L + ["--lights", "", "-o", "{out}/a.exr"], "--lights", "a.exr"),
+    ("relight-mask-empty", L + ["--mask", "", "-o", "{out}/a.exr"], "--mask", "a.exr"),
+    ("render-lights-map-empty", R + ["--lights-map", "", "-o", "{out}/a.png"], "--lights-map", "a.png"),
     # --- lightmap
     ("lm-height-0", ["lightmap", "make", "sky", "{out}/m.exr", "--height", "0"], "--height", "m.exr"),
     ("lm-height-neg", ["lightmap", "make", "sky", "{out}/m.exr", "--height", "-5"], "--height", "m.exr"),

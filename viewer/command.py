@@ -26,7 +26,7 @@ DESCRIPTION = (
 def add_arguments(p):
     from ffls.commands.common import (CELLS_RES, FRAMES, add_light_argument, add_lights_arguments,
                                       add_quality_arguments, add_rotation_arguments, add_weighting_argument,
-                                      exposure_arg, output_path)
+                                      exposure_arg, input_path, output_path)
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     add_lights_arguments(p)
@@ -45,7 +45,7 @@ def add_arguments(p):
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
                         "(default: full on a GPU, rank min(7, n-1) on a CPU rasteriser such as llvmpipe)")
-    p.add_argument("--mask", default=None, metavar="FILE",
+    p.add_argument("--mask", default=None, metavar="FILE", type=input_path,
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
     p.add_argument("--headless", action="store_true",

@@ -317,16 +317,27 @@ BASIS_SUBSET = integer(1, 1000000)
 MAX_ERROR = number(0.0, 10.0, lo_open=True)
 #: ``--target-fps F`` (``view``: also ``--fps``): frame-rate target of ``--quality auto``.
 TARGET_FPS = number(0.1, 1000.0)
+def input_path(text: str) -> str:
+    """argparse type of an optional input file: any non-empty text (the loader names a missing file).
+
+    An empty value (``--mask ""``, often an unset shell variable) is refused rather than read as
+    "not given", which would silently drop the input.
+    """
+    if not str(text).strip():
+        raise argparse.ArgumentTypeError("empty path")
+    return text
+
+
 #: A random seed (NumPy accepts non-negative integers).
 SEED = integer(0, 2**63 - 1)
 
 
 def add_lights_arguments(p) -> None:
     """``--lights`` (lights.json or .lp, default CAPTURE/lights.json) and ``--lights-map``."""
-    p.add_argument("--lights", default=None, metavar="FILE",
+    p.add_argument("--lights", default=None, metavar="FILE", type=input_path,
                    help="lights.json or RTI .lp file (default: CAPTURE/lights.json); another capture's lights "
                         "apply by name, by order when no name matches and the counts agree, or by --lights-map")
-    p.add_argument("--lights-map", default=None, metavar="MAP",
+    p.add_argument("--lights-map", default=None, metavar="MAP", type=input_path,
                    help="which light applies to which image: a JSON object {\"light image\": \"capture image\"} "
                         "given inline or as a .json file (docs/formats.md)")
 
@@ -391,12 +402,15 @@ def light_vector(az_el) -> "np.ndarray":
 
 def add_capture_arguments(p, probe_required: bool = True, probe_default: str | None = None) -> None:
     """``CAPTURE``, ``--lights``, ``--lights-map`` and ``--probe`` (and ``--layout`` for the map file)."""
+    from ffls.lightmaps.lightmap import LAYOUTS
+
     p.add_argument("capture", help="capture folder (with capture.json)")
     add_lights_arguments(p)
     p.add_argument("--probe", required=probe_required, default=probe_default, metavar="MAP",
                    help="HDR light map (.exr/.hdr) or a built-in name (courtyard, studio, sunrise, night, sky, paper)"
                         + (f"; default {probe_default}" if probe_default else ""))
-    p.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
+    p.add_argument("--layout", default=None, choices=LAYOUTS,
+                   help="layout of the light-map file (default: detected from the file)")
 
 
 # ----------------------------------------------------------------------------- rotation
@@ -563,7 +577,7 @@ def deferred_notes():
 # ----------------------------------------------------------------------------- loading
 def add_mask_argument(p) -> None:
     """``--mask MASK.png``: the object mask; the output gets alpha and ``--exposure auto`` meters it."""
-    p.add_argument("--mask", default=None, metavar="MASK.png",
+    p.add_argument("--mask", default=None, metavar="MASK.png", type=input_path,
                    help="object mask (white = object, same size as the photos): EXR output gets an A channel "
                         "(premultiplied RGB), PNG output RGBA, and --exposure auto meters the object only")
 

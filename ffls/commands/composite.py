@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, exposure_arg, output_path,
-                                  print_notes, flush_notes, rotation_from_args)
+                                  input_path, print_notes, flush_notes, rotation_from_args)
 
 NAME = "composite"
 HELP = "merge a relit object and its shadows into a virtual scene or photograph (differential rendering)"
@@ -32,19 +32,21 @@ BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
 
 
 def add_arguments(p):
+    from ffls.lightmaps.lightmap import LAYOUTS
     from ffls.relight.composite import METHODS, REGISTRATION_MODES
 
     g = p.add_argument_group("inputs")
     g.add_argument("--object", required=True, metavar="CAPTURE", help="capture folder of the object on the surface")
-    g.add_argument("--object-lights", default=None, metavar="FILE",
+    g.add_argument("--object-lights", default=None, metavar="FILE", type=input_path,
                    help="lights.json or .lp of the object capture (default CAPTURE/lights.json)")
     g.add_argument("--surface", required=True, metavar="CAPTURE",
                    help="capture folder of the surface alone (same camera; its own lights)")
-    g.add_argument("--surface-lights", default=None, metavar="FILE",
+    g.add_argument("--surface-lights", default=None, metavar="FILE", type=input_path,
                    help="lights.json or .lp of the surface capture (default CAPTURE/lights.json)")
     g.add_argument("--lightmap", required=True, metavar="MAP",
                    help="the scene's light map at the object's place (.exr/.hdr, or a built-in name)")
-    g.add_argument("--layout", default=None, help="light-map layout (default: detected from the file)")
+    g.add_argument("--layout", default=None, choices=LAYOUTS,
+                   help="layout of the light-map file (default: detected from the file)")
     g.add_argument("--background", required=True, metavar="BG.exr",
                    help="linear render or photograph of the scene without the object, from the captures' camera "
                         "(.exr or .hdr, same size as the photos)")

@@ -741,6 +741,9 @@ def lightmap_from_spec(spec, layout: str | None = None) -> LightMap:
         return load_lightmap(p, layout=layout)
     if p.suffix or os.sep in str(spec):
         raise InputError("light map not found", p)
+    if layout is not None:
+        raise InputError(f"a layout ({layout}) applies to a light-map file, and {spec!r} is a built-in map",
+                         "--layout")
     return builtin_lightmap(str(spec))
 
 
