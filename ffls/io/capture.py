@@ -80,6 +80,23 @@ class _Json:
     def fail(self, key: str, problem: str):
         raise InputError(f"{key}: {problem}" if key else problem, self.path)
 
+    @classmethod
+    def folder_document(cls, folder, filename: str, fmt: str, kind: str) -> tuple:
+        """``(folder, reader, doc)``: FOLDER (or FOLDER/filename itself), a reader of its document, the document.
+
+        The document is read and its header checked (``format`` is ``fmt``, ``version`` 1); a
+        missing folder is one line naming it as a ``kind`` folder.
+        """
+        folder = Path(folder)
+        if folder.name == filename and folder.is_file():
+            folder = folder.parent
+        if not folder.is_dir():
+            raise InputError(f"{kind} folder not found" if not folder.exists() else "not a folder", folder)
+        j = cls(folder / filename)
+        doc = j.load(filename)
+        j.header(doc, fmt)
+        return folder, j, doc
+
     def load(self, what: str) -> dict:
         if not self.path.exists():
             self.fail("", f"{what} not found")
@@ -466,14 +483,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         type or shape, an unreadable response table, or a listed image that does not exist --
         naming ``capture.json`` and the key or image.
     """
-    folder = Path(folder)
-    if folder.name == CAPTURE_FILE and folder.is_file():
-        folder = folder.parent
-    if not folder.is_dir():
-        raise InputError("capture folder not found" if not folder.exists() else "not a folder", folder)
-    j = _Json(folder / CAPTURE_FILE)
-    doc = j.load("capture.json")
-    j.header(doc, "ffls-capture")
+    folder, j, doc = _Json.folder_document(folder, CAPTURE_FILE, "ffls-capture", "capture")
     names = j.require(doc, "images")
     if not isinstance(names, list) or not names:
         j.fail("images", f"expected a non-empty list of file names, got {_short(names)}")

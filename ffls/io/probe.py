@@ -484,14 +484,7 @@ def load_probe(folder: str | os.PathLike) -> Probe:
         A missing folder, file or key, corrupt JSON, an unknown key, or a value of the wrong
         type, shape or range; one line naming ``probe.json`` (or the image or mesh) and the key.
     """
-    folder = Path(folder)
-    if folder.name == PROBE_FILE and folder.is_file():
-        folder = folder.parent
-    if not folder.is_dir():
-        raise InputError("probe folder not found" if not folder.exists() else "not a folder", folder)
-    j = JsonReader(folder / PROBE_FILE)
-    doc = j.load(PROBE_FILE)
-    j.header(doc, PROBE_FORMAT)
+    folder, j, doc = JsonReader.folder_document(folder, PROBE_FILE, PROBE_FORMAT, "probe")
     unknown = sorted(k for k in doc if k not in _TOP_KEYS and not k.startswith("x-"))
     if unknown:
         j.fail(unknown[0], f"unknown key (known: {', '.join(sorted(_TOP_KEYS))}; private keys start with 'x-')")
