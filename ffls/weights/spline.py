@@ -32,9 +32,15 @@ Properties:
   ``(1 - blend) e_v + blend s_v``; ``blend = 0`` is barycentric exactly.
 
 Degenerate neighbourhoods (fewer than 4 vertices, all on one plane, or an ill-conditioned
-system: nearly equal lights) fall back to the delta at ``v``, that is barycentric there. Vertices
-within ``MIN_SEPARATION`` (chord) of a vertex already in a neighbourhood are left out of it (a
-light barely off the horizon and its own mirror image).
+system) fall back to the delta at ``v``, that is barycentric there. Vertices within
+``MIN_SEPARATION`` (chord) of a vertex already in a neighbourhood are left out of it (a light
+barely off the horizon and its own mirror image), and nearly equal vertices share the local
+function of the first of them.
+
+Bounded: the Lebesgue function ``sum_j |w_j|`` of each vertex's spline is sampled on its star
+(the incident triangles, 14 points each) and, where it exceeds ``max_lebesgue``, the vertex's
+spline is blended toward its delta until ``(1 - b) + b L_v <= max_lebesgue``; the weights then
+stay within that bound (on the samples; between them, measured within 10 % in the tests).
 """
 from __future__ import annotations
 
@@ -52,7 +58,7 @@ MIN_SEPARATION = 1e-3
 #: Largest condition number of a local system accepted (else the vertex falls back to its delta).
 _MAX_COND = 1e10
 #: Bound on ``sum_j |w_j(p)|`` (the Lebesgue function) of each vertex's blended spline over its star.
-DEFAULT_MAX_LEBESGUE = 2.0
+DEFAULT_MAX_LEBESGUE = 8.0
 #: Barycentric coordinates of the points where each incident triangle is sampled for that bound.
 _STAR_SAMPLES = np.array([[1.0, 0.0, 0.0], [0.5, 0.5, 0.0], [0.5, 0.0, 0.5], [0.0, 0.5, 0.5], [0.0, 1.0, 0.0],
                           [0.0, 0.0, 1.0], [1 / 3, 1 / 3, 1 / 3], [0.75, 0.25, 0.0], [0.75, 0.0, 0.25],
@@ -120,7 +126,12 @@ class LocalSpline:
         delta[k, 0] = 1.0  # the delta at the vertex: weight 1 to itself, from the constant feature
         spline = np.zeros((n_pts, k + 4, k))
         ok = np.zeros(n_pts, dtype=bool)
+        # nearly equal vertices share one local function (the lowest index's), so a near pair
+        # takes one light's weight between them
+        canon = np.array([min(c) for c in tree.query_ball_point(pts, MIN_SEPARATION)], dtype=np.int64)
         for v in range(n_pts):
+            if canon[v] != v:
+                continue
             chosen = [v]
             for c in cand[v]:
                 if len(chosen) == k:
@@ -136,8 +147,11 @@ class LocalSpline:
             spline[v, :kk, :kk] = inv[:kk]
             spline[v, k:, :kk] = inv[kk:]
             ok[v] = True
+        nb, spline, ok = nb[canon], spline[canon], ok[canon]
         self.neighbours = nb
         lebesgue = self._star_lebesgue(spline)
+        np.maximum.at(lebesgue, canon, lebesgue.copy())  # a cluster's bound covers all its stars
+        lebesgue = lebesgue[canon]
         # (1 - b) e_v + b s_v has a Lebesgue function <= (1 - b) + b L_v: cap it at max_lebesgue
         share = np.full(n_pts, blend)
         over = lebesgue > max_lebesgue
