@@ -54,7 +54,8 @@ def spline_loo_choice(directions, basis, bounds=SPLINE_BOUNDS, n_held: int = 25,
         num = den = 0.0
         for j in held:
             others = np.delete(np.arange(n), j)
-            w = Weighting(directions[others], "spline", "upper", max_lebesgue=bound)(directions[j:j + 1]).dense(n - 1)[0]
+            wt = Weighting(directions[others], "spline", "upper", max_lebesgue=bound)
+            w = wt(directions[j:j + 1]).dense(n - 1)[0]
             num += float(np.sum((w @ flat[others] - flat[j]) ** 2))
             den += float(np.sum(flat[j] ** 2))
         errs[bound] = float(np.sqrt(num / den))

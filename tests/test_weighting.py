@@ -19,8 +19,8 @@ import pytest
 
 from ffls.conventions import rotation_ypr, rotation_z
 from ffls.lightmaps.lightmap import paper_map, sky_sun_map
-from ffls.weights.weighting import (ALL_SCHEMES, OPTIONS, SCHEMES, SMOOTH_SCHEMES, Weighting, bake_weights, cell_weights,
-                                    integrate, light_weights)
+from ffls.weights.weighting import (ALL_SCHEMES, OPTIONS, SCHEMES, SMOOTH_SCHEMES, Weighting, bake_weights,
+                                    cell_weights, integrate, light_weights)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 

@@ -51,7 +51,8 @@ from ffls.weights import spline as _sp
 from ffls.weights.barycentric import Barycentric
 from ffls.weights.voronoi import Weights, assign_cells, cell_map_name, integrate_weights, unique_directions
 
-__all__ = ["SCHEMES", "EXTRA_SCHEMES", "ALL_SCHEMES", "DEFAULT_SCHEME", "SMOOTH_SCHEMES", "OPTIONS", "SparseWeights", "Weighting",
+__all__ = ["SCHEMES", "EXTRA_SCHEMES", "ALL_SCHEMES", "DEFAULT_SCHEME", "SMOOTH_SCHEMES", "SIGNED_SCHEMES", "OPTIONS",
+           "SparseWeights", "Weighting",
            "cell_weights", "light_weights", "WeightTexture", "bake_weights", "integrate", "DEFAULT_TEXTURE_RES",
            "texture_slots"]
 
