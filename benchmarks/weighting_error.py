@@ -16,7 +16,8 @@ relights the basis (``ffls.weights.weighting.integrate``: exact weights, and, wi
 ``||relit - truth|| / ||truth||`` per map (mean over rotations), and the mean over maps; a
 gaussian width sweep is included (``gaussian:k=..,w=...``), and an experiment not shipped as a
 scheme: ordinary kriging (GP) weights with the kernel width chosen by leave-one-out on the capture
-(:func:`kriging_setup`). The library-only ``spline`` scheme (:mod:`ffls.weights.spline`) is measured
+(:func:`kriging_setup`); and a floor, the least-squares fit of the photos to the truth
+(:func:`oracle_weights`). The library-only ``spline`` scheme (:mod:`ffls.weights.spline`) is measured
 at its default, at other Lebesgue bounds, and at the bound chosen by leave-one-out on the capture
 itself (:func:`spline_loo_choice`: predict held-out photos from the others, no ground truth).
 Prints a table (with the ratio to ``barycentric`` and the worst per-map ratio to ``voronoi``)
@@ -32,10 +33,11 @@ import numpy as np
 from ffls.conventions import rotation_z
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.cpu import relight_fast
+from ffls.weights.spline import DEFAULT_MAX_LEBESGUE
 from ffls.weights.weighting import ALL_SCHEMES, Weighting, bake_weights, integrate
 
 #: Lebesgue bounds of the spline scheme measured, and offered to the leave-one-out choice.
-SPLINE_BOUNDS = (1.0, 1.5, 2.0, 3.0, 100.0)
+SPLINE_BOUNDS = (1.0, 1.5, 2.0, 3.0, DEFAULT_MAX_LEBESGUE, 100.0)
 
 
 def spline_loo_choice(directions, basis, bounds=SPLINE_BOUNDS, n_held: int = 25, seed: int = 0):
@@ -105,10 +107,28 @@ def kriging_weights(samples, directions, R, kr) -> np.ndarray:
     return kr["P"] @ c + kr["q"][:, None] * power.sum(axis=0)[None, :]
 
 
+#: The row of :func:`oracle_weights`.
+ORACLE = "oracle (lstsq on the truth)"
+
+
+def oracle_weights(basis, truth) -> np.ndarray:
+    """Per-light weights (n, 3) that fit the truth best (least squares per channel): a bound, not a scheme.
+
+    No weighting of the map can do better with these photos than the weights that minimise
+    ``||sum_i w_i B_i - truth||`` knowing the truth; its error is the floor under every scheme
+    (aliasing of hard shadows and highlights between the lights, which no interpolant undoes).
+    """
+    n = basis.shape[0]
+    b = np.asarray(basis, dtype=np.float64).reshape(n, -1, 3)
+    t = np.asarray(truth, dtype=np.float64).reshape(-1, 3)
+    return np.stack([np.linalg.lstsq(b[:, :, c].T, t[:, c], rcond=None)[0] for c in range(3)], axis=1)
+
+
 def variants(texture_res: int) -> list:
     """(label, scheme, options, texture_res or None) of every configuration measured."""
     out = [(s, s, {}, None) for s in ALL_SCHEMES]
-    out += [(f"spline:L={b:g}", "spline", {"max_lebesgue": b}, None) for b in SPLINE_BOUNDS if b != 2.0]
+    out += [(f"spline:L={b:g}", "spline", {"max_lebesgue": b}, None) for b in SPLINE_BOUNDS
+            if b != DEFAULT_MAX_LEBESGUE]
     out += [(f"gaussian:k={k},w={w}", "gaussian", {"k": k, "width": w}, None)
             for k, w in ((4, 0.2), (4, 0.5), (6, 0.3), (8, 0.25))]
     if texture_res:
@@ -145,9 +165,10 @@ def main(argv=None) -> int:
     loo_bound, loo_errs = spline_loo_choice(d, basis)
     print("spline leave-one-out on the capture: " + ", ".join(f"L={b:g} {e:.4f}" for b, e in loo_errs.items())
           + f" -> chosen L={loo_bound:g}")
-    loo_label = f"spline:L={loo_bound:g}" if loo_bound != 2.0 else "spline"
+    loo_label = f"spline:L={loo_bound:g}" if loo_bound != DEFAULT_MAX_LEBESGUE else "spline"
     table = {label: {} for label, *_ in cfgs}
     table["kriging (GP, LOO width)"] = {}
+    table[ORACLE] = {}
     t0 = time.perf_counter()
     names = []
     for spec in args.maps.split(","):
@@ -164,6 +185,7 @@ def main(argv=None) -> int:
         samples = lm.samples()
         errs = {label: [] for label, *_ in cfgs}
         errs["kriging (GP, LOO width)"] = []
+        errs[ORACLE] = []
         for a in rots:
             R = rotation_z(a)
             truth = render_lightmap(scene, samples, args.res, n_dirs=args.dirs, rotation=R).astype(np.float64)
@@ -173,6 +195,8 @@ def main(argv=None) -> int:
                 errs[label].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
             relit = relight_fast(kriging_weights(samples, d, R, kr), basis).astype(np.float64)
             errs["kriging (GP, LOO width)"].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
+            relit = relight_fast(oracle_weights(basis, truth), basis).astype(np.float64)
+            errs[ORACLE].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
         for label in errs:
             table[label][name] = float(np.mean(errs[label]))
     maps = names
