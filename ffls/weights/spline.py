@@ -27,7 +27,8 @@ Properties:
   ``v``: the light takes weight 1, as in barycentric.
 * **Continuous.** ``b`` is continuous and each ``s_v`` is one fixed function, so ``w`` is
   continuous across triangle edges (the third coordinate vanishes there).
-* **Local.** ``p`` takes at most the union of three neighbourhoods (about ``2k`` lights).
+* **Local.** ``p`` takes at most the union of three neighbourhoods (``3 k`` lights; they overlap,
+  so a :class:`ffls.weights.weighting.WeightTexture` keeps ``1.5 k`` slots, the largest).
 * **Blend.** ``blend`` in [0, 1] mixes each ``s_v`` with the delta at ``v``:
   ``(1 - blend) e_v + blend s_v``; ``blend = 0`` is barycentric exactly.
 
@@ -41,6 +42,10 @@ Bounded: the Lebesgue function ``sum_j |w_j|`` of each vertex's spline is sample
 (the incident triangles, 14 points each) and, where it exceeds ``max_lebesgue``, the vertex's
 spline is blended toward its delta until ``(1 - b) + b L_v <= max_lebesgue``; the weights then
 stay within that bound (on the samples; between them, measured within 10 % in the tests).
+
+Measured (docs/weighting.md): 0.90 of barycentric's relit error on four real HDR maps, 0.83 on
+the synthetic ones, flicker 24x below voronoi's; issue 12's goal (0.8) is not reached, so the
+scheme is library-only (:data:`ffls.weights.weighting.EXTRA_SCHEMES`).
 """
 from __future__ import annotations
 
