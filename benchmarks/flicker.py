@@ -8,6 +8,7 @@ Usage::
 A synthetic capture (``ffls.synth``: the default scene, ``--lights`` stratified upper-hemisphere
 directions, ``--res`` pixels) is relit under ``sky_sun_map`` (a 1-degree sun, 40 degrees up)
 rotated about +Z in ``--step``-degree steps over ``--frames`` frames, with every scheme
+(``ALL_SCHEMES``: the library-only ``spline`` too)
 (``ffls.weights.weighting.integrate``: the exact float64 weights, or with ``--texture-res R`` the
 baked weight texture the GPU reads). The measure (:func:`flicker`) is the RMS over frames and
 pixels of the second difference ``I[t+1] - 2 I[t] + I[t-1]`` over the RMS of the images: a box
@@ -24,7 +25,7 @@ import numpy as np
 from ffls.conventions import rotation_z
 from ffls.lightmaps.lightmap import sky_sun_map
 from ffls.relight.cpu import relight_fast
-from ffls.weights.weighting import SCHEMES, Weighting, bake_weights, integrate
+from ffls.weights.weighting import ALL_SCHEMES, Weighting, bake_weights, integrate
 
 __all__ = ["flicker", "rotation_frames", "scheme_flicker", "synthetic_basis"]
 
@@ -68,7 +69,7 @@ def rotation_frames(basis, directions, lightmap, scheme: str, angles_deg, hemisp
     return np.stack(out)
 
 
-def scheme_flicker(basis, directions, lightmap, schemes=SCHEMES, frames: int = 120, step_deg: float = 1.0,
+def scheme_flicker(basis, directions, lightmap, schemes=ALL_SCHEMES, frames: int = 120, step_deg: float = 1.0,
                    start_deg: float = 0.0, hemisphere="upper", texture_res: int | None = None) -> dict:
     """:func:`flicker` of every scheme for a rotation in ``step_deg`` steps; ``{scheme: value}``."""
     angles = start_deg + step_deg * np.arange(int(frames))

@@ -5,6 +5,9 @@ Usage::
     python benchmarks/weighting_error.py [--lights 120] [--res 64] [--maps sky,studio,courtyard]
         [--rotations 0,40] [--dirs 2048] [--texture-res 512] [--json benchmarks/results/weighting_error.json]
 
+``--maps`` takes built-in map names and light-map files (``.exr``/``.hdr``, e.g.
+``../shared/hdri/sunrise.exr``: real HDR maps, area-downsampled to ``--map-height`` rows).
+
 The default synthetic scene is rendered under ``--lights`` stratified upper-hemisphere directions
 (the basis) and, as the truth, lit directly by every light map (``ffls.synth.scene.render_lightmap``,
 the map reduced to ``--dirs`` clustered directions) for each rotation about +Z. Every scheme
@@ -13,7 +16,12 @@ relights the basis (``ffls.weights.weighting.integrate``: exact weights, and, wi
 ``||relit - truth|| / ||truth||`` per map (mean over rotations), and the mean over maps; a
 gaussian width sweep is included (``gaussian:k=..,w=...``), and an experiment not shipped as a
 scheme: ordinary kriging (GP) weights with the kernel width chosen by leave-one-out on the capture
-(:func:`kriging_setup`). Prints a table and writes JSON.
+(:func:`kriging_setup`); and a floor, the least-squares fit of the photos to the truth
+(:func:`oracle_weights`). The library-only ``spline`` scheme (:mod:`ffls.weights.spline`) is measured
+at its default, at other Lebesgue bounds, and at the bound chosen by leave-one-out on the capture
+itself (:func:`spline_loo_choice`: predict held-out photos from the others, no ground truth).
+Prints a table (with the ratio to ``barycentric`` and the worst per-map ratio to ``voronoi``)
+and writes JSON.
 """
 from __future__ import annotations
 
@@ -25,7 +33,35 @@ import numpy as np
 from ffls.conventions import rotation_z
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.cpu import relight_fast
-from ffls.weights.weighting import SCHEMES, Weighting, bake_weights, integrate
+from ffls.weights.spline import DEFAULT_MAX_LEBESGUE
+from ffls.weights.weighting import ALL_SCHEMES, Weighting, bake_weights, integrate
+
+#: Lebesgue bounds of the spline scheme measured, and offered to the leave-one-out choice.
+SPLINE_BOUNDS = (1.0, 1.5, 2.0, 3.0, DEFAULT_MAX_LEBESGUE, 100.0)
+
+
+def spline_loo_choice(directions, basis, bounds=SPLINE_BOUNDS, n_held: int = 25, seed: int = 0):
+    """The spline's ``max_lebesgue`` with the least leave-one-out error on the capture itself.
+
+    Each of ``n_held`` random photos ``B_j`` is predicted from the others with the spline
+    weights at ``d_j`` over the remaining lights; the error is ``sum ||B_j - pred||^2 /
+    sum ||B_j||^2`` (square-rooted). ``1.0`` is barycentric. Returns ``(best, {bound: error})``.
+    """
+    rng = np.random.default_rng(seed)
+    n = directions.shape[0]
+    held = rng.choice(n, min(n_held, n), replace=False)
+    flat = basis.reshape(n, -1).astype(np.float64)
+    errs = {}
+    for bound in bounds:
+        num = den = 0.0
+        for j in held:
+            others = np.delete(np.arange(n), j)
+            wt = Weighting(directions[others], "spline", "upper", max_lebesgue=bound)
+            w = wt(directions[j:j + 1]).dense(n - 1)[0]
+            num += float(np.sum((w @ flat[others] - flat[j]) ** 2))
+            den += float(np.sum(flat[j] ** 2))
+        errs[bound] = float(np.sqrt(num / den))
+    return min(errs, key=errs.get), errs
 
 
 def kriging_setup(directions, basis, sigmas_deg=(4, 6, 8, 11, 15, 20), nugget=1e-6, n_pixels=2000, seed=0):
@@ -71,18 +107,38 @@ def kriging_weights(samples, directions, R, kr) -> np.ndarray:
     return kr["P"] @ c + kr["q"][:, None] * power.sum(axis=0)[None, :]
 
 
+#: The row of :func:`oracle_weights`.
+ORACLE = "oracle (lstsq on the truth)"
+
+
+def oracle_weights(basis, truth) -> np.ndarray:
+    """Per-light weights (n, 3) that fit the truth best (least squares per channel): a bound, not a scheme.
+
+    No weighting of the map can do better with these photos than the weights that minimise
+    ``||sum_i w_i B_i - truth||`` knowing the truth; its error is the floor under every scheme
+    (aliasing of hard shadows and highlights between the lights, which no interpolant undoes).
+    """
+    n = basis.shape[0]
+    b = np.asarray(basis, dtype=np.float64).reshape(n, -1, 3)
+    t = np.asarray(truth, dtype=np.float64).reshape(-1, 3)
+    return np.stack([np.linalg.lstsq(b[:, :, c].T, t[:, c], rcond=None)[0] for c in range(3)], axis=1)
+
+
 def variants(texture_res: int) -> list:
     """(label, scheme, options, texture_res or None) of every configuration measured."""
-    out = [(s, s, {}, None) for s in SCHEMES]
+    out = [(s, s, {}, None) for s in ALL_SCHEMES]
+    out += [(f"spline:L={b:g}", "spline", {"max_lebesgue": b}, None) for b in SPLINE_BOUNDS
+            if b != DEFAULT_MAX_LEBESGUE]
     out += [(f"gaussian:k={k},w={w}", "gaussian", {"k": k, "width": w}, None)
             for k, w in ((4, 0.2), (4, 0.5), (6, 0.3), (8, 0.25))]
     if texture_res:
-        out += [(f"{s}@tex{texture_res}", s, {}, texture_res) for s in SCHEMES if s != "voronoi"]
+        out += [(f"{s}@tex{texture_res}", s, {}, texture_res) for s in ALL_SCHEMES if s != "voronoi"]
     return out
 
 
 def main(argv=None) -> int:
     from common import host_info, write_json  # benchmarks/common.py
+    from ffls.lightmaps.lightmap import load_lightmap
     from ffls.synth.scene import make_scene, render_lightmap, render_lights, stratified_directions
 
     ap = argparse.ArgumentParser()
@@ -106,17 +162,30 @@ def main(argv=None) -> int:
                            {"weighting": Weighting(d, s, "upper", **opts)} if s != "voronoi" else {})
     kr = kriging_setup(d, basis)
     print(f"kriging: sigma {kr['sigma_deg']} deg by leave-one-out (relative LOO error {kr['loo']:.3f})")
+    loo_bound, loo_errs = spline_loo_choice(d, basis)
+    print("spline leave-one-out on the capture: " + ", ".join(f"L={b:g} {e:.4f}" for b, e in loo_errs.items())
+          + f" -> chosen L={loo_bound:g}")
+    loo_label = f"spline:L={loo_bound:g}" if loo_bound != DEFAULT_MAX_LEBESGUE else "spline"
     table = {label: {} for label, *_ in cfgs}
     table["kriging (GP, LOO width)"] = {}
+    table[ORACLE] = {}
     t0 = time.perf_counter()
-    for name in args.maps.split(","):
-        lm = builtin_lightmap(name, args.map_height)
+    names = []
+    for spec in args.maps.split(","):
+        if spec.lower().endswith((".exr", ".hdr")):
+            lm = load_lightmap(spec)
+            name = spec.replace("\\", "/").rsplit("/", 1)[-1].rsplit(".", 1)[0]
+        else:
+            lm = builtin_lightmap(spec, args.map_height)
+            name = spec
+        names.append(name)
         h = lm.data.shape[0]
         if lm.layout == "latlong" and h > args.map_height and h % args.map_height == 0:
             lm = lm.downsample(h // args.map_height)
         samples = lm.samples()
         errs = {label: [] for label, *_ in cfgs}
         errs["kriging (GP, LOO width)"] = []
+        errs[ORACLE] = []
         for a in rots:
             R = rotation_z(a)
             truth = render_lightmap(scene, samples, args.res, n_dirs=args.dirs, rotation=R).astype(np.float64)
@@ -126,19 +195,29 @@ def main(argv=None) -> int:
                 errs[label].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
             relit = relight_fast(kriging_weights(samples, d, R, kr), basis).astype(np.float64)
             errs["kriging (GP, LOO width)"].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
+            relit = relight_fast(oracle_weights(basis, truth), basis).astype(np.float64)
+            errs[ORACLE].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
         for label in errs:
             table[label][name] = float(np.mean(errs[label]))
-    maps = args.maps.split(",")
+    maps = names
     print(f"{args.lights} lights, {args.res}^2, truth from {args.dirs} directions, rotations {args.rotations} "
           f"({time.perf_counter() - t0:.0f} s); relative RMS error")
-    print(f"{'scheme':>28} " + " ".join(f"{m:>10}" for m in maps) + f" {'mean':>8} {'/ voronoi':>9}")
+    print(f"{'scheme':>28} " + " ".join(f"{m:>10}" for m in maps)
+          + f" {'mean':>8} {'/ voronoi':>9} {'/ bary':>7} {'worst map / voronoi':>20}")
     ref = np.mean([table["voronoi"][m] for m in maps])
+    ref_b = np.mean([table["barycentric"][m] for m in maps])
     for label in table:
         mean = float(np.mean([table[label][m] for m in maps]))
+        worst = max(table[label][m] / table["voronoi"][m] for m in maps)
         table[label]["mean"] = mean
-        print(f"{label:>28} " + " ".join(f"{table[label][m]:>10.4f}" for m in maps) + f" {mean:>8.4f} {mean / ref:>9.3f}")
+        table[label]["worst_map_over_voronoi"] = float(worst)
+        print(f"{label:>28} " + " ".join(f"{table[label][m]:>10.4f}" for m in maps)
+              + f" {mean:>8.4f} {mean / ref:>9.3f} {mean / ref_b:>7.3f} {worst:>20.3f}")
+    print(f"spline, bound chosen by leave-one-out (L={loo_bound:g}): "
+          f"{table[loo_label]['mean'] / ref_b:.3f} of barycentric")
     write_json(args.json, {"args": vars(args), "host": host_info(), "rel_rmse": table,
-                           "kriging": {"sigma_deg": kr["sigma_deg"], "loo": kr["loo"]}})
+                           "kriging": {"sigma_deg": kr["sigma_deg"], "loo": kr["loo"]},
+                           "spline_loo": {"chosen": loo_bound, "errors": {str(b): e for b, e in loo_errs.items()}}})
     return 0
 
 

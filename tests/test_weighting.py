@@ -19,8 +19,8 @@ import pytest
 
 from ffls.conventions import rotation_ypr, rotation_z
 from ffls.lightmaps.lightmap import paper_map, sky_sun_map
-from ffls.weights.weighting import (OPTIONS, SCHEMES, SMOOTH_SCHEMES, Weighting, bake_weights, cell_weights, integrate,
-                                    light_weights)
+from ffls.weights.weighting import (ALL_SCHEMES, OPTIONS, SCHEMES, SMOOTH_SCHEMES, Weighting, bake_weights,
+                                    cell_weights, integrate, light_weights)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
@@ -143,7 +143,7 @@ def test_bad_scheme_and_options():
         Weighting(d, "box")
     with pytest.raises(ValueError, match="takes no option"):
         Weighting(d, "barycentric", k=3)
-    assert set(OPTIONS) == set(SCHEMES)
+    assert set(OPTIONS) == set(ALL_SCHEMES) and set(SCHEMES) <= set(ALL_SCHEMES)
     for scheme in SCHEMES:
         with pytest.raises(ValueError, match="zero vector|NaN"):
             cell_weights(d, [[0.0, 0.0, 0.0]], scheme)

@@ -156,19 +156,31 @@ class Barycentric:
             coef[s] = self._coeffs(p[s], f)
         return tri, coef
 
+    def coordinates(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Hull vertices and barycentric coordinates of unit directions ``p`` (m, 3).
+
+        Returns
+        -------
+        vertices : (m, 3) int64
+            The vertices (indices into :attr:`points`) of the triangle each ray crosses.
+        coords : (m, 3) float64
+            Their coordinates, >= 0, rows summing to 1.
+        """
+        tri, coef = self._locate(p)
+        b = np.maximum(coef, 0.0)
+        tot = b.sum(axis=1, keepdims=True)
+        bad = tot[:, 0] <= 0  # cannot happen for a located ray; keep the sum-to-one contract
+        b[bad] = 1.0 / 3.0
+        tot[bad] = 1.0
+        return self.simplices[tri], b / tot
+
     def __call__(self, p: np.ndarray, chunk: int = 1 << 16) -> tuple[np.ndarray, np.ndarray]:
         """Weights of unit directions ``p`` (m, 3): ``index (m, 3)`` lights, ``weight (m, 3)``, rows sum to 1."""
         m = p.shape[0]
         index = np.empty((m, 3), dtype=np.int64)
         weight = np.empty((m, 3))
         for a in range(0, m, chunk):
-            ps = p[a:a + chunk]
-            tri, coef = self._locate(ps)
-            b = np.maximum(coef, 0.0)
-            tot = b.sum(axis=1, keepdims=True)
-            bad = tot[:, 0] <= 0  # cannot happen for a located ray; keep the sum-to-one contract
-            b[bad] = 1.0 / 3.0
-            tot[bad] = 1.0
-            weight[a:a + chunk] = b / tot
-            index[a:a + chunk] = self.owner[self.simplices[tri]]
+            verts, b = self.coordinates(p[a:a + chunk])
+            weight[a:a + chunk] = b
+            index[a:a + chunk] = self.owner[verts]
         return index, weight

@@ -14,6 +14,14 @@ One entry point, :func:`cell_weights` (``scheme=``), over four schemes, each wit
     A von Mises-Fisher kernel over the ``k`` nearest lights, its width from the local light
     spacing (:mod:`ffls.weights.gaussian`).
 
+and one library-only scheme (:data:`EXTRA_SCHEMES`, not offered by ``--weighting``: it measured
+short of the issue's goal, docs/weighting.md):
+
+``'spline'``
+    Local thin-plate splines on the sphere blended by the barycentric coordinates (a partition
+    of unity over the Delaunay triangulation, :mod:`ffls.weights.spline`): higher order than
+    barycentric, interpolating, continuous; its weights may be negative.
+
 Every scheme gives each direction a sparse set of lights and weights that sum to 1, so
 integrating a light map (:func:`integrate`) conserves its power exactly: the weights summed over
 the lights plus the dropped power (outside the hemisphere) equal the map's total, to float64
@@ -39,33 +47,42 @@ from ffls.conventions import check_hemisphere, in_domain, is_rotation, rotate_di
 from ffls.lightmaps.lightmap import as_samples
 from ffls.weights import antialiased as _aa
 from ffls.weights import gaussian as _ga
+from ffls.weights import spline as _sp
 from ffls.weights.barycentric import Barycentric
 from ffls.weights.voronoi import Weights, assign_cells, cell_map_name, integrate_weights, unique_directions
 
-__all__ = ["SCHEMES", "DEFAULT_SCHEME", "SMOOTH_SCHEMES", "OPTIONS", "SparseWeights", "Weighting",
+__all__ = ["SCHEMES", "EXTRA_SCHEMES", "ALL_SCHEMES", "DEFAULT_SCHEME", "SMOOTH_SCHEMES", "SIGNED_SCHEMES", "OPTIONS",
+           "SparseWeights", "Weighting",
            "cell_weights", "light_weights", "WeightTexture", "bake_weights", "integrate", "DEFAULT_TEXTURE_RES",
            "texture_slots"]
 
 #: The weighting schemes (``--weighting``).
 SCHEMES = ("voronoi", "antialiased", "barycentric", "gaussian")
+#: Library-only schemes: measured, not offered by ``--weighting`` (docs/weighting.md).
+EXTRA_SCHEMES = ("spline",)
+#: Every scheme :class:`Weighting` accepts.
+ALL_SCHEMES = SCHEMES + EXTRA_SCHEMES
 #: The default (the paper's box filter) until the measurements say otherwise (docs/weighting.md).
 DEFAULT_SCHEME = "voronoi"
 #: Schemes whose weights are continuous in the direction.
 SMOOTH_SCHEMES = ("barycentric", "gaussian")
+#: Schemes whose weights may be negative (higher-order interpolants).
+SIGNED_SCHEMES = ("spline",)
 #: Options each scheme accepts, with their defaults.
 OPTIONS = {
     "voronoi": {},
     "antialiased": {"width_deg": _aa.DEFAULT_WIDTH_DEG, "samples": _aa.DEFAULT_SAMPLES},
     "barycentric": {},
     "gaussian": {"k": _ga.DEFAULT_K, "width": _ga.DEFAULT_WIDTH},
+    "spline": {"k": _sp.DEFAULT_K, "blend": _sp.DEFAULT_BLEND, "max_lebesgue": _sp.DEFAULT_MAX_LEBESGUE},
 }
 #: Default resolution of a :class:`WeightTexture` (texels per side).
 DEFAULT_TEXTURE_RES = 512
 
 
 def _check_scheme(scheme: str, options: dict) -> dict:
-    if scheme not in SCHEMES:
-        raise ValueError(f"weighting scheme must be one of {', '.join(SCHEMES)}, not {scheme!r}")
+    if scheme not in ALL_SCHEMES:
+        raise ValueError(f"weighting scheme must be one of {', '.join(ALL_SCHEMES)}, not {scheme!r}")
     bad = sorted(set(options) - set(OPTIONS[scheme]))
     if bad:
         raise ValueError(f"weighting {scheme!r} takes no option {', '.join(bad)} "
@@ -82,6 +99,8 @@ def texture_slots(scheme: str, **options) -> int:
         return 3
     if scheme == "gaussian":
         return int(opts["k"])
+    if scheme == "spline":  # the union of 3 overlapping neighbourhoods: rarely more than 1.5 k lights
+        return (3 * int(opts["k"]) + 1) // 2
     return 4  # antialiased: a cap rarely meets more than 3 cells; a 4th slot for vertices of 4
 
 
@@ -95,7 +114,8 @@ class SparseWeights:
         Light indices, ``-1`` padding (weight 0). An index may appear twice in a row (a light and
         its mirror image in one triangle); its weights add.
     weight : (m, K) float64
-        Weights >= 0; every row sums to 1 (to float64 rounding).
+        Weights >= 0 (may be negative for :data:`SIGNED_SCHEMES`); every row sums to 1 (to
+        float64 rounding).
     """
 
     index: np.ndarray
@@ -119,12 +139,14 @@ class Weighting:
     directions : (n, 3) array_like
         Light directions (world frame; normalised here). Exact duplicates: the first copy takes
         the weight, later ones get 0 (as :mod:`ffls.weights.voronoi`).
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
     **options
         Scheme options (:data:`OPTIONS`): ``antialiased``: ``width_deg`` (cap radius, degrees),
         ``samples``; ``gaussian``: ``k`` (lights per direction), ``width`` (sigma over the angle to
-        the (k+1)-th nearest light).
+        the (k+1)-th nearest light); ``spline``: ``k`` (vertices per local spline), ``blend``
+        (the splines' share against barycentric, in [0, 1]), ``max_lebesgue`` (bound on
+        ``sum |w|``).
     """
 
     def __init__(self, directions, scheme: str = DEFAULT_SCHEME, hemisphere="upper", **options):
@@ -133,7 +155,10 @@ class Weighting:
         self.hemisphere = check_hemisphere(hemisphere)
         self.directions, self._keep = unique_directions(directions)
         self._tree = cKDTree(self.directions[self._keep])
-        self._bary = Barycentric(self.directions, self._keep, self.hemisphere) if scheme == "barycentric" else None
+        self._bary = (Barycentric(self.directions, self._keep, self.hemisphere) if scheme in ("barycentric", "spline")
+                      else None)
+        self._spline = (_sp.LocalSpline(self._bary, self.options["k"], self.options["blend"],
+                                        self.options["max_lebesgue"]) if scheme == "spline" else None)
         self._density = (_ga.light_density(self.directions, self._keep, self._tree, self.options["k"],
                                            self.options["width"]) if scheme == "gaussian" else None)
 
@@ -143,7 +168,7 @@ class Weighting:
 
     @property
     def triangulation(self) -> Barycentric | None:
-        """The :class:`ffls.weights.barycentric.Barycentric` triangulation (``'barycentric'`` only)."""
+        """The :class:`ffls.weights.barycentric.Barycentric` triangulation (``'barycentric'``, ``'spline'``)."""
         return self._bary
 
     def _assign(self, q: np.ndarray) -> np.ndarray:
@@ -178,6 +203,8 @@ class Weighting:
                                              nearest2=self._nearest2)
         elif self.scheme == "barycentric":
             idx, w = self._bary(p)
+        elif self.scheme == "spline":
+            idx, w = self._spline(p)
         else:
             idx, w = _ga.weights_gaussian(p, self.directions, self._keep, self._tree, self.options["k"],
                                           self.options["width"], density=self._density)
@@ -193,7 +220,7 @@ def cell_weights(directions, query, scheme: str = DEFAULT_SCHEME, hemisphere="up
         Light directions.
     query : (m, 3) array_like
         Directions to weight (world frame).
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
     **options
         As :class:`Weighting`.
@@ -307,7 +334,7 @@ def _fit_slots(idx: np.ndarray, w: np.ndarray, slots: int) -> tuple[np.ndarray, 
         w[same, c] = 0.0
         idx[same, c] = -1
     w[idx < 0] = 0.0
-    order = np.argsort(-w, axis=1, kind="stable")
+    order = np.argsort(-np.abs(w), axis=1, kind="stable")  # the largest in magnitude (signed schemes)
     idx = np.take_along_axis(idx, order, 1)
     w = np.take_along_axis(w, order, 1)
     truncated = int(np.count_nonzero(w[:, slots:].max(axis=1, initial=0.0) > 0)) if k > slots else 0
@@ -329,7 +356,7 @@ def bake_weights(directions, scheme: str, hemisphere="upper", res: int = DEFAULT
     ----------
     directions : (n, 3) array_like
         Light directions (world frame).
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
         (``'voronoi'`` is baked too, with one slot, though the engine uses its exact cell texture.)
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
         ``upper``: the concentric map; otherwise the octahedral map.
@@ -385,7 +412,7 @@ def integrate(lightmap_or_samples, directions, rotation=None, hemisphere="upper"
     rotation : (3, 3) array_like, optional
         Light-map rotation (content at ``d`` moves to ``R d``).
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
     texture : WeightTexture, optional
         Look the weights up in this baked texture (the GPU's path) instead of evaluating them at
         every direction. Must be baked from the same directions, hemisphere and scheme.
