@@ -276,7 +276,9 @@ class Engine:
         -----
         :attr:`timings` gets the wall time (ms, after ``ctx.finish()``) of each pass that ran:
         ``pass1``, ``project`` (compressed basis), ``pass2``, ``tonemap``; passes that did not
-        need to run are absent (all are absent when :attr:`profile` is False).
+        need to run are absent (all are absent when :attr:`profile` is False). The packed pass 2
+        also writes the display image (``WeightedSum.run(display=)``), so ``tonemap`` runs on its
+        own only when just the exposure or the tone curve changed.
         """
         if self._lightmap is None and self._weights_source is None:
             raise RuntimeError("Engine.render: call set_lightmap(lm) or set_weights(w) first")
@@ -291,9 +293,14 @@ class Engine:
                 src = self._projector.coeffs_buffer
             else:
                 src = self._weights_source
-            self._timed("pass2", lambda: self._pass2.run(src))
+            key = (float(exposure), tonemap)
+            if self._pass2.fuses_display:  # pass 2 writes the display image too: no display pass
+                self._timed("pass2", lambda: self._pass2.run(src, display=(self._display.output, exposure, tonemap)))
+                self._display_key = key
+            else:
+                self._timed("pass2", lambda: self._pass2.run(src))
+                self._display_key = None
             self._hdr_dirty = False
-            self._display_key = None
         key = (float(exposure), tonemap)
         if key != self._display_key:
             self._timed("tonemap", lambda: self._display.run(self._pass2.output, exposure, tonemap))
