@@ -61,7 +61,7 @@ _PARTIAL_BUDGET = 1 << 22
 #: Most blocks of the counting sort ('sort'); each is walked serially by one invocation.
 _SORT_BLOCKS = 256
 #: Items per block aimed at: fewer blocks for a small map (the scan walks cells x blocks counts).
-_SORT_PER_BLOCK = 128
+_SORT_PER_BLOCK = 512
 
 
 class CellIntegrator:
