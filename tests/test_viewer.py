@@ -221,6 +221,12 @@ def test_preview_and_weights_mode(fresh):
 
     # +90 degrees of yaw moves the sun 90 degrees counter-clockwise: u - 1/4, 64 of 256 columns
     assert (sun_column(a) - sun_column(b)) % 256 == pytest.approx(64, abs=2)
+    # a yaw-only rotation turns the preview by whole columns (no per-texel lookup): the same image as
+    # the general lookup of a rotation that is not about +Z (a 0.001-degree pitch), up to ties
+    for yaw in (0.0, 17.3, -123.4, 90.0):
+        fast = r.preview_image(rotation_ypr(yaw, 0, 0), "lightmap")
+        general = r.preview_image(rotation_ypr(yaw, 1e-3, 0), "lightmap")
+        assert np.mean(np.any(fast != general, axis=-1)) < 0.01, yaw
     app.state.preview_mode = "weights"
     app.step(dt=0.0)
     w = r.preview_image(R, "weights")

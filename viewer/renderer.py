@@ -417,12 +417,21 @@ class Renderer:
             rgb = np.where((cid >= 0)[..., None], heat_colours(t[np.maximum(cid, 0)]), 0.05)
             img = to_uint8(rgb)
         else:
-            src = d @ np.asarray(R, dtype=np.float64)  # R^T d, row vectors
-            u, v = direction_to_latlong_uv(src)
+            R = np.asarray(R, dtype=np.float64)
             h, w = self._preview_latlong.shape[:2]
-            ii = np.clip((u * w).astype(int), 0, w - 1)
-            jj = np.clip((v * h).astype(int), 0, h - 1)
-            img = self._preview_latlong[jj, ii]  # tone-mapped once per map (Reinhard, exposed for its median)
+            if (h, w) == d.shape[:2] and abs(R[2, 2] - 1.0) < 1e-12:
+                # a rotation about +Z (yaw only: auto-rotation, turntable) turns the lat-long by whole
+                # columns: R^T d has azimuth phi - yaw, u + yaw / 360 (conventions.direction_to_latlong_uv),
+                # so column i shows column floor(i + 0.5 + w yaw / 360) mod w; no per-texel trigonometry
+                yaw = np.degrees(np.arctan2(R[1, 0], R[0, 0]))
+                cols = (np.arange(w) + int(np.floor(0.5 + w * yaw / 360.0))) % w
+                img = self._preview_latlong[:, cols]
+            else:
+                src = d @ R  # R^T d, row vectors
+                u, v = direction_to_latlong_uv(src)
+                ii = np.clip((u * w).astype(int), 0, w - 1)
+                jj = np.clip((v * h).astype(int), 0, h - 1)
+                img = self._preview_latlong[jj, ii]  # tone-mapped once per map (Reinhard, exposed for its median)
             if self.hemisphere != "full":  # dim what the capture does not cover
                 img[self._below] = img[self._below] // 3
         img[self._border] = (230, 230, 230)
