@@ -25,7 +25,8 @@
 // rgb; the same bytes as pass 1's std430 vec4 buffer), SSBO BASIS_BINDING = packed basis of
 // this band (or image unit BASIS_IMAGE_UNIT = the chunk's array), image unit 0 = output
 // rgba32f; with FUSED_TONEMAP image unit 1 = display rgba8 (exposure, tone curve, sRGB as
-// shaders/tonemap.glsl). Dispatch (ceil(W / LOCAL_X), rows of the band, 1).
+// shaders/tonemap.glsl), and with DISPLAY_ONLY as well the HDR is not stored (one chunk only: the
+// Engine stores it when it is read). Dispatch (ceil(W / LOCAL_X), rows of the band, 1).
 #if defined COMPUTE_SHADER
 #ifndef LOCAL_X
 #define LOCAL_X 64
@@ -115,7 +116,9 @@ void main() {
     if (u_accumulate != 0) {
         acc += imageLoad(u_out, p).rgb;
     }
+#ifndef DISPLAY_ONLY
     imageStore(u_out, p, vec4(acc, 1.0));
+#endif
 #ifdef FUSED_TONEMAP
     imageStore(u_display, p, vec4(tonemap(acc, u_exposure_scale, u_method), 1.0));
 #endif

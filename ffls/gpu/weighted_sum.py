@@ -142,13 +142,14 @@ class WeightedSum:
         if total:
             self._wscratch = self.ctx.buffer(reserve=total)
 
-    def _run_packed(self, weights_buffer, display=None):
+    def _run_packed(self, weights_buffer, display=None, hdr=True):
         ctx, b = self.ctx, self.basis
         self.output.bind_to_image(0, read=True, write=True)
         progs = list(self._progs)
         if display is not None:  # the last chunk also tone-maps into the display texture
             tex, exposure, method = display
-            last = load_program(ctx, "weighted_sum_packed.glsl", {**self._defines[-1], "FUSED_TONEMAP": True})
+            extra = {"FUSED_TONEMAP": True} if hdr else {"FUSED_TONEMAP": True, "DISPLAY_ONLY": True}
+            last = load_program(ctx, "weighted_sum_packed.glsl", {**self._defines[-1], **extra})
             last["u_exposure_scale"].value = float(2.0 ** float(exposure))
             last["u_method"].value = _TONEMAP_CODES[method]
             tex.bind_to_image(1, read=False, write=True)
@@ -181,7 +182,12 @@ class WeightedSum:
         """Whether :meth:`run` can also write the display image (``display=``): the packed method."""
         return self.method == "packed"
 
-    def run(self, weights_buffer, n_weights: int | None = None, display=None) -> None:
+    @property
+    def display_only(self) -> bool:
+        """Whether :meth:`run` can write the display image alone (``hdr=False``): packed, one chunk."""
+        return self.method == "packed" and self.basis.n_arrays == 1
+
+    def run(self, weights_buffer, n_weights: int | None = None, display=None, hdr: bool = True) -> None:
         """Compute the relit image into :attr:`output`.
 
         Parameters
@@ -194,11 +200,16 @@ class WeightedSum:
             ``(rgba8 texture of the same size, exposure, tone curve)``: the last dispatch also
             writes what :class:`ToneMapPass` would (same curves, ``shaders/include/tonemap_curves.glsl``),
             saving the display pass's read of the HDR. Only where :attr:`fuses_display`.
+        hdr : bool
+            False (with ``display``, where :attr:`display_only`): write the display image only;
+            :attr:`output` is then left as it was (its store is ~15 % of the pass on llvmpipe).
         """
         if n_weights is not None and n_weights < self.basis.n:
             raise ValueError(f"{n_weights} weights for a basis of {self.basis.n} layers")
         if weights_buffer.size < 16 * self.basis.n:
             raise ValueError(f"weights buffer holds {weights_buffer.size // 16} vec4, basis has {self.basis.n} layers")
+        if not hdr and (display is None or not self.display_only):
+            raise ValueError("hdr=False needs display= and a packed basis of one chunk")
         if display is not None:
             if not self.fuses_display:
                 raise ValueError(f"pass-2 method {self.method!r} does not write the display image")
@@ -207,7 +218,7 @@ class WeightedSum:
             if tuple(display[0].size) != tuple(self.size):
                 raise ValueError(f"display texture {display[0].size} is not the image size {self.size}")
         if self.method == "packed":
-            self._run_packed(weights_buffer, display)
+            self._run_packed(weights_buffer, display, hdr)
             return
         weights_buffer.bind_to_storage_buffer(WEIGHTS_BINDING)
         prog = self.prog
