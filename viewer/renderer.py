@@ -458,6 +458,13 @@ class Renderer:
         self.info.photo_tex = self._photo_tex.glo
 
     # ------------------------------------------------------------------ outputs
+    @property
+    def image_texture(self):
+        """The ``moderngl.Texture`` (RGBA8) whose name is ``info.image_tex``: the composite or the engine's display."""
+        if self._composite_tex is not None and self.info.image_tex == self._composite_tex.glo:
+            return self._composite_tex
+        return self.engine.display_texture if self.engine is not None else None
+
     def read_hdr(self) -> np.ndarray:
         """The relit HDR image ``(H, W, 3)`` float32 of the last :meth:`update` (the composite in composite mode)."""
         if self._composite_hdr is not None:
