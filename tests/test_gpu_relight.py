@@ -484,6 +484,7 @@ def test_auto_method_is_packed_on_llvmpipe_and_compute_on_a_gpu(ctx):
 def test_engine_stores_the_hdr_when_read(ctx, rng, rank):
     """A one-chunk packed pass 2 writes the display image alone; the HDR read afterwards is that of the
     last render, even after set_weights or a new weighting scheme (their buffers change later)."""
+    from ffls.conventions import rotation_z
     from ffls.gpu.engine import Engine
     from ffls.lightmaps.lightmap import sky_sun_map
     from ffls.display.tonemap import to_uint8, tonemap
@@ -501,24 +502,30 @@ def test_engine_stores_the_hdr_when_read(ctx, rng, rank):
         assert eng.basis_info["n_arrays"] == 1 and eng.basis_info["method"] == "packed"
         w1, w2 = rng.random((n, 3)), rng.random((n, 3))
         eng.set_weights(w1)
-        eng.render(exposure=0.5, tonemap="reinhard")
+        eng.render(exposure=0.5, tonemap="reinhard", hdr=False)
         disp1 = eng.read_display()
         eng.set_weights(w2)  # not rendered yet: the HDR is still w1's
         ref1 = relit(w1)
         h1 = eng.read_hdr().astype(np.float64)
         assert np.abs(h1 - ref1).max() <= TOL * np.abs(ref1).max()
         assert np.abs(disp1.astype(int) - to_uint8(tonemap(h1, 0.5, "reinhard"))).max() <= 1
-        eng.render(exposure=0.5, tonemap="reinhard")
+        eng.render(exposure=0.5, tonemap="reinhard", hdr=False)
         ref2 = relit(w2)
-        assert np.abs(eng.read_hdr() - ref2).max() <= TOL * np.abs(ref2).max()
-        eng.render(exposure=-1.0, tonemap="aces")  # the display pass only, from the weights
+        eng.render(exposure=-1.0, tonemap="aces", hdr=False)  # the display pass only, from the weights
         assert set(eng.timings) == {"tonemap"}
         assert np.abs(eng.read_display().astype(int) - to_uint8(tonemap(ref2, -1.0, "aces"))).max() <= 1
+        assert np.abs(eng.read_hdr() - ref2).max() <= TOL * np.abs(ref2).max()
         eng.set_lightmap(sky_sun_map(16))
-        eng.render()
+        eng.render()  # hdr=True: stored with the display image
         h3 = eng.read_hdr()
-        eng.render(exposure=1.0)
+        eng.set_rotation(rotation_z(30.0))
+        eng.render(exposure=1.0, hdr=False)
         eng.set_weighting("gaussian")  # releases pass 1's weights buffer, which the HDR is computed from
-        np.testing.assert_array_equal(eng.read_hdr(), h3)
+        h4 = eng.read_hdr()
+        assert np.abs(h4 - h3).max() > 1e-3 * np.abs(h3).max()  # the rotated map's, not the previous one
+        eng.set_rotation(rotation_z(30.0))
+        eng.set_weighting("voronoi")
+        eng.render(exposure=1.0)
+        np.testing.assert_allclose(eng.read_hdr(), h4, rtol=1e-5, atol=1e-6 * np.abs(h4).max())
     finally:
         eng.release()

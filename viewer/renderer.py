@@ -306,7 +306,7 @@ class Renderer:
                 eng.set_weights(self.single_light_weights(state))
                 self._light_key = key
                 self._pass1_key = None  # the light map comes back when the mode ends
-            eng.render(state.exposure, state.tonemap)
+            eng.render(state.exposure, state.tonemap, hdr=False)  # the HDR is computed when read (screenshot)
             self.info.image_tex = eng.display_texture.glo
             u, v = direction_to_latlong_uv(state.light_vector()[None, :])
             self.info.single_light_uv = (float(u[0]), float(v[0]))
@@ -322,7 +322,8 @@ class Renderer:
                 self._registration = None  # refitted under the new map
             if self._lightmap is not None:
                 eng.set_rotation(R)
-                eng.render(state.exposure, state.tonemap)
+                # the composite reads the HDR every frame; otherwise only a screenshot or exposure does
+                eng.render(state.exposure, state.tonemap, hdr=bool(state.composite and self.surface_engine is not None))
                 self.info.image_tex = eng.display_texture.glo
                 self._composite_hdr = None
                 if state.composite and self.surface_engine is not None:

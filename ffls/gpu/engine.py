@@ -271,7 +271,7 @@ class Engine:
         self.ctx.finish()
         self.timings[name] = (time.perf_counter() - t0) * 1e3
 
-    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+    def render(self, exposure: float = 0.0, tonemap: str = "srgb", hdr: bool = True) -> None:
         """Run what changed of pass 1, projection, pass 2 and the display pass.
 
         Parameters
@@ -279,6 +279,10 @@ class Engine:
         exposure : float
             Stops applied before the tone curve (display texture only; the HDR is unscaled).
         tonemap : {'srgb', 'reinhard', 'aces'}
+        hdr : bool
+            False: the caller shows the display image and rarely reads the HDR (the viewer). A
+            packed pass 2 of one chunk then writes the display image alone, and the HDR is
+            stored only if :meth:`read_hdr` or :attr:`hdr_texture` asks for it (one more pass 2).
 
         Notes
         -----
@@ -286,8 +290,8 @@ class Engine:
         ``pass1``, ``project`` (compressed basis), ``pass2``, ``tonemap``; passes that did not
         need to run are absent (all are absent when :attr:`profile` is False). The packed pass 2
         also writes the display image (``WeightedSum.run(display=)``), so ``tonemap`` runs on its
-        own only when just the exposure or the tone curve changed. With one chunk (a compressed
-        basis) it writes the display image alone, and the HDR is stored when read
+        own only when just the exposure or the tone curve changed. With ``hdr=False`` and one
+        chunk it writes the display image alone, and the HDR is stored when read
         (:meth:`read_hdr`, :attr:`hdr_texture`); ``tonemap`` is then that pass from the weights.
         """
         if self._lightmap is None and self._weights_source is None:
@@ -308,7 +312,7 @@ class Engine:
             else:
                 self._pass2_source = self._weights_source
             src = self._pass2_source
-            if self._pass2.display_only:  # the display image alone; the HDR is stored when it is read
+            if not hdr and self._pass2.display_only:  # the display image alone; the HDR is stored when read
                 self._timed("pass2", lambda: self._pass2.run(src, display=(self._display.output, exposure, tonemap),
                                                              hdr=False))
                 self._hdr_stored = False
