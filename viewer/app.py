@@ -7,8 +7,9 @@ This is one of the two places in ffls that create an OpenGL context (the other i
 2. advance time (auto-rotation, turntable step);
 3. :meth:`viewer.renderer.Renderer.update` (engine passes that the state made necessary);
 4. :func:`viewer.gui.draw_gui` (changes only the state);
-5. imgui draws into the default framebuffer; pending actions (screenshot, turntable frame,
-   fullscreen, open dialog, quit) are carried out; buffers are swapped.
+5. the relit image is drawn, opaque, where the GUI laid it out (``shaders/display_blit.glsl``),
+   then imgui draws over it into the default framebuffer; pending actions (screenshot,
+   turntable frame, fullscreen, open dialog, quit) are carried out; buffers are swapped.
 """
 from __future__ import annotations
 

@@ -349,8 +349,8 @@ class Engine:
     def hdr_texture(self):
         """RGBA32F ``moderngl.Texture`` (W, H): the last relit image, linear radiance (alpha 1).
 
-        A one-chunk packed pass 2 writes only the display image each frame; the HDR is written
-        here, when asked for (one more pass 2)."""
+        After ``render(hdr=False)`` a one-chunk packed pass 2 wrote only the display image; the
+        HDR is then written here, when asked for (one more pass 2)."""
         self._store_hdr()
         return self._pass2.output
 
