@@ -63,7 +63,7 @@ def add_arguments(p):
     c.add_argument("--surface-mask", default=None, metavar="SURF.png", help="surface region (white = surface)")
     c.add_argument("--composite", action="store_true", help="start in the composite mode")
     p.add_argument("--benchmark", action="store_true",
-                   help="with --frames: rotate the light map every frame and print frame-time statistics")
+                   help="with --frames: rotate the light map every frame and print frame-time and CPU-time statistics")
     p.add_argument("--profile", action="store_true",
                    help="with --benchmark: also time each engine pass (waits for the GPU after each, so slower frames)")
     add_quality_arguments(p, precision_default=None, fps_flags=("--fps", "--target-fps"), cells_res=CELLS_RES)
