@@ -259,18 +259,20 @@ class PackedBasis:
         try:
             for a, cnt, pb in zip(self.offsets, self.counts, pixel_bytes):
                 if storage == "image":  # one RGBA32UI array per chunk: layer 3 b + c = block b, channel c
-                    part = basis[a:a + cnt]
-                    if dtype == "f16":
-                        part, rep = to_float16(part, scale=self.scale, path=path, max_abs=max_abs)
-                        rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
-                    else:
-                        part = np.asarray(part, dtype=np.float32)
-                    words = pack_pixel_major(part, dtype)  # h, w, nb, 3, 4
-                    nb = words.shape[2]
-                    planes = np.ascontiguousarray(words.transpose(2, 3, 0, 1, 4))  # nb, 3, h, w, 4
-                    tex = ctx.texture_array((W, H, 3 * nb), 4, data=planes.tobytes(), dtype="u4")
+                    nb = -(-cnt // per)
+                    tex = ctx.texture_array((W, H, 3 * nb), 4, dtype="u4")
                     tex.filter = (0x2600, 0x2600)  # GL_NEAREST (read with imageLoad)
                     self.images.append(tex)
+                    for blk in range(nb):  # a block at a time: no second copy of the whole basis in memory
+                        part = basis[a + per * blk:a + min(cnt, per * (blk + 1))]
+                        if dtype == "f16":
+                            part, rep = to_float16(part, scale=self.scale, path=path, max_abs=max_abs)
+                            rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
+                        else:
+                            part = np.asarray(part, dtype=np.float32)
+                        words = pack_pixel_major(part, dtype)[:, :, 0]  # h, w, 3, 4
+                        planes = np.ascontiguousarray(words.transpose(2, 0, 1, 3))  # 3, h, w, 4
+                        tex.write(planes.tobytes(), viewport=(0, 0, 3 * blk, W, H, 3))
                     continue
                 if W * pb > limit:
                     raise InputError(f"one image row of {cnt} packed layers ({W * pb} bytes) exceeds the SSBO "
