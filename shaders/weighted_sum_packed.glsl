@@ -16,9 +16,17 @@
 // indices (the loop over blocks has a constant trip count and is unrolled), which llvmpipe
 // loads once per SIMD batch instead of once per lane.
 //
+// IMAGE_BASIS (storage 'image', the default): the same words in an RGBA32UI texture array,
+// layer 3 b + c = block b, channel c, read with imageLoad, which llvmpipe turns into one vector
+// gather per load instead of the per-lane scalar loop of an SSBO load (3x less CPU time at 8
+// layers, docs/gpu.md "Pass 2").
+//
 // Bindings: uniform block WEIGHTS_UBO_BINDING = weights of this chunk (std140 vec4[N_LAYERS],
 // rgb; the same bytes as pass 1's std430 vec4 buffer), SSBO BASIS_BINDING = packed basis of
-// this band, image unit 0 = output rgba32f. Dispatch (ceil(W / LOCAL_X), rows of the band, 1).
+// this band (or image unit BASIS_IMAGE_UNIT = the chunk's array), image unit 0 = output
+// rgba32f; with FUSED_TONEMAP image unit 1 = display rgba8 (exposure, tone curve, sRGB as
+// shaders/tonemap.glsl), and with DISPLAY_ONLY as well the HDR is not stored (one chunk only: the
+// Engine stores it when it is read). Dispatch (ceil(W / LOCAL_X), rows of the band, 1).
 #if defined COMPUTE_SHADER
 #ifndef LOCAL_X
 #define LOCAL_X 64
@@ -36,10 +44,24 @@ layout(local_size_x = LOCAL_X) in;
 layout(std140, binding = WEIGHTS_UBO_BINDING) uniform PackedWeights {
     vec4 w[N_LAYERS];
 };
+#ifdef IMAGE_BASIS
+// storage 'image': layer 3 b + c of this RGBA32UI array = block b, channel c of every pixel
+layout(rgba32ui, binding = BASIS_IMAGE_UNIT) readonly uniform uimage2DArray u_basis;
+#define LOAD(b, c) imageLoad(u_basis, ivec3(x, row, 3 * (b) + (c)))
+#else
 layout(std430, binding = BASIS_BINDING) readonly buffer PackedBasis {
     uvec4 B[];
 };
+#define LOAD(b, c) B[base + 3 * (b) + (c)]
+#endif
 layout(rgba32f, binding = 0) uniform image2D u_out;
+#ifdef FUSED_TONEMAP
+// the display pass of the last chunk, fused (shaders/tonemap.glsl's curves): the HDR need not be read back
+#include "tonemap_curves.glsl"
+layout(rgba8, binding = 1) writeonly uniform image2D u_display;
+uniform float u_exposure_scale;  // 2 ** exposure
+uniform int u_method;            // 0 srgb, 1 reinhard, 2 aces
+#endif
 uniform int u_width;       // image width W
 uniform int u_row0;        // first image row of this band
 uniform float u_inv_scale; // 1 / per-dataset float16 scale (1 for float32)
@@ -79,19 +101,26 @@ void main() {
         return;
     }
     int row = int(gl_GlobalInvocationID.y);
+#ifndef IMAGE_BASIS
     int base = (row * u_width + x) * (3 * N_BLOCKS);
+#endif
     vec3 acc = vec3(0.0);
     for (int b = 0; b < N_BLOCKS; ++b) {  // constant trip count: unrolled
         int i = b * LAYERS_PER_BLOCK;
-        acc.r += block_dot(B[base + 3 * b], i, 0);
-        acc.g += block_dot(B[base + 3 * b + 1], i, 1);
-        acc.b += block_dot(B[base + 3 * b + 2], i, 2);
+        acc.r += block_dot(LOAD(b, 0), i, 0);
+        acc.g += block_dot(LOAD(b, 1), i, 1);
+        acc.b += block_dot(LOAD(b, 2), i, 2);
     }
     acc *= u_inv_scale;
     ivec2 p = ivec2(x, u_row0 + row);
     if (u_accumulate != 0) {
         acc += imageLoad(u_out, p).rgb;
     }
+#ifndef DISPLAY_ONLY
     imageStore(u_out, p, vec4(acc, 1.0));
+#endif
+#ifdef FUSED_TONEMAP
+    imageStore(u_display, p, vec4(tonemap(acc, u_exposure_scale, u_method), 1.0));
+#endif
 }
 #endif

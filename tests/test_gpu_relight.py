@@ -195,6 +195,60 @@ def test_packed_chunks_and_bands_match_reference(ctx, rng, dtype):
     assert np.all(gpu[0, 0] == 0.0)
 
 
+@pytest.mark.gl
+@pytest.mark.parametrize("dtype", ["f16", "f32"])
+def test_packed_image_and_buffer_storage_agree(ctx, rng, dtype):
+    """The packed basis read through imageLoad (storage 'image', the default) and through SSBO
+    bands (storage 'buffer') give the same image, both within the tolerance of the reference;
+    several chunks (7 layers, padded blocks) accumulate in the image path as in the buffer path."""
+    from ffls.relight.cpu import relight_reference
+
+    n, H, W = 23, 9, 13
+    basis = _basis(rng, n, H, W) * rng.choice([-1.0, 1.0], size=(n, H, W, 3)).astype(np.float32)
+    w = rng.random((n, 3))
+    ref = relight_reference(w, basis)
+    img, n_img = _run_pass2(ctx, basis, w, dtype, "packed", max_layers=7, storage="image")
+    buf, n_buf = _run_pass2(ctx, basis, w, dtype, "packed", max_layers=7, storage="buffer")
+    assert n_img == n_buf == 4
+    assert np.abs(img - ref).max() <= TOL * np.abs(ref).max()
+    np.testing.assert_allclose(img, buf, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
+    with pytest.raises(ValueError, match="storage"):
+        _run_pass2(ctx, basis, w, dtype, "packed", storage="texture")
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("method", ["srgb", "reinhard", "aces"])
+def test_packed_pass2_fused_display_equals_display_pass(ctx, rng, method):
+    """WeightedSum.run(display=) writes, in its last chunk, the same display bytes as ToneMapPass
+    over the HDR it wrote (same curves); the HDR is unchanged by it."""
+    from ffls.gpu.basis import PackedBasis
+    from ffls.gpu.context import release_gl
+    from ffls.gpu.weighted_sum import ToneMapPass, WeightedSum, weights_to_vec4
+
+    n, H, W = 19, 11, 17
+    basis = _basis(rng, n, H, W) * 3.0
+    w = rng.random((n, 3))
+    pb = PackedBasis(ctx, basis, "f16", max_layers=8)
+    ws = WeightedSum(ctx, pb, "packed")
+    fused, sep = ToneMapPass(ctx, ws.size), ToneMapPass(ctx, ws.size)
+    buf = ctx.buffer(weights_to_vec4(w))
+    try:
+        for ev in (-1.0, 0.5):
+            ws.run(buf)
+            hdr = ws.read()
+            sep.run(ws.output, ev, method)
+            ws.run(buf, display=(fused.output, ev, method))
+            np.testing.assert_array_equal(ws.read(), hdr)
+            assert np.abs(fused.read().astype(int) - sep.read().astype(int)).max() <= 1
+            assert fused.read().any()
+        with pytest.raises(ValueError, match="tone-map"):
+            ws.run(buf, display=(fused.output, 0.0, "gamma"))
+    finally:
+        release_gl(buf)
+        for x in (fused, sep, ws, pb):
+            x.release()
+
+
 def test_pack_pixel_major_layout(rng):
     """Word k of block b, channel c holds layers 8b + 2k (low half) and 8b + 2k + 1 (high half)."""
     from ffls.gpu.basis import pack_pixel_major
@@ -316,7 +370,8 @@ def test_gpu_projection_and_compressed_pass2(ctx, rng):
         try:
             eng.set_weights(w)
             eng.render()
-            assert set(eng.timings) == {"project", "pass2", "tonemap"}
+            # the packed pass 2 writes the display image itself (no separate display pass)
+            assert set(eng.timings) == ({"project", "pass2"} if method == "packed" else {"project", "pass2", "tonemap"})
             gpu = eng.read_hdr().astype(np.float64)
             assert np.abs(gpu - ref).max() <= TOL * np.abs(ref).max()
         finally:
@@ -378,7 +433,7 @@ def test_engine_matches_cpu_pipeline(ctx, rng, dtype):
             eng.set_lightmap(lm)
             eng.set_rotation(R)
             eng.render(exposure=-1.0, tonemap="aces")
-            assert {"pass1", "pass2", "tonemap"} <= set(eng.timings)
+            assert {"pass1", "pass2"} <= set(eng.timings)  # the packed pass 2 also writes the display
             w = integrate_weights(lm, d, R, "upper", cells=cells).weights
             np.testing.assert_allclose(eng.read_weights(), w, rtol=1e-4, atol=1e-6 * np.abs(w).max())
             ref = relight_reference(w, basis)
@@ -422,3 +477,55 @@ def test_auto_method_is_packed_on_llvmpipe_and_compute_on_a_gpu(ctx):
     assert default_method(SimpleNamespace(info={"GL_RENDERER": "NVIDIA H100 80GB HBM3/PCIe/SSE2"})) == "compute"
     expected = "packed" if "llvmpipe" in ctx.info["GL_RENDERER"] else "compute"
     assert default_method(ctx) == expected
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("rank", [7, None])
+def test_engine_stores_the_hdr_when_read(ctx, rng, rank):
+    """A one-chunk packed pass 2 writes the display image alone; the HDR read afterwards is that of the
+    last render, even after set_weights or a new weighting scheme (their buffers change later)."""
+    from ffls.conventions import rotation_z
+    from ffls.gpu.engine import Engine
+    from ffls.lightmaps.lightmap import sky_sun_map
+    from ffls.display.tonemap import to_uint8, tonemap
+
+    n = 20
+    basis = _lowrank_basis(rng)[:n]
+    d = _directions(rng, n)
+    eng = Engine(ctx, basis, d, rank=rank, method="packed")
+    from ffls.relight.cpu import relight_reference
+
+    def relit(w):
+        return relight_reference(w, basis) if rank is None else eng.compressed.relight(w)
+
+    try:
+        assert eng.basis_info["n_arrays"] == 1 and eng.basis_info["method"] == "packed"
+        w1, w2 = rng.random((n, 3)), rng.random((n, 3))
+        eng.set_weights(w1)
+        eng.render(exposure=0.5, tonemap="reinhard", hdr=False)
+        disp1 = eng.read_display()
+        eng.set_weights(w2)  # not rendered yet: the HDR is still w1's
+        ref1 = relit(w1)
+        h1 = eng.read_hdr().astype(np.float64)
+        assert np.abs(h1 - ref1).max() <= TOL * np.abs(ref1).max()
+        assert np.abs(disp1.astype(int) - to_uint8(tonemap(h1, 0.5, "reinhard"))).max() <= 1
+        eng.render(exposure=0.5, tonemap="reinhard", hdr=False)
+        ref2 = relit(w2)
+        eng.render(exposure=-1.0, tonemap="aces", hdr=False)  # the display pass only, from the weights
+        assert set(eng.timings) == {"tonemap"}
+        assert np.abs(eng.read_display().astype(int) - to_uint8(tonemap(ref2, -1.0, "aces"))).max() <= 1
+        assert np.abs(eng.read_hdr() - ref2).max() <= TOL * np.abs(ref2).max()
+        eng.set_lightmap(sky_sun_map(16))
+        eng.render()  # hdr=True: stored with the display image
+        h3 = eng.read_hdr()
+        eng.set_rotation(rotation_z(30.0))
+        eng.render(exposure=1.0, hdr=False)
+        eng.set_weighting("gaussian")  # releases pass 1's weights buffer, which the HDR is computed from
+        h4 = eng.read_hdr()
+        assert np.abs(h4 - h3).max() > 1e-3 * np.abs(h3).max()  # the rotated map's, not the previous one
+        eng.set_rotation(rotation_z(30.0))
+        eng.set_weighting("voronoi")
+        eng.render(exposure=1.0)
+        np.testing.assert_allclose(eng.read_hdr(), h4, rtol=1e-5, atol=1e-6 * np.abs(h4).max())
+    finally:
+        eng.release()

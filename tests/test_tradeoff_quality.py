@@ -232,7 +232,7 @@ def test_exposure_changes_rerun_only_the_display_pass(ctx):
     try:
         eng.set_lightmap(sky_sun_map(64))
         eng.render(0.0)
-        assert {"pass1", "pass2", "tonemap"} <= set(eng.timings)
+        assert {"pass1", "pass2"} <= set(eng.timings)  # the packed pass 2 also writes the display
         eng.render(1.5)
         assert set(eng.timings) == {"tonemap"}
         eng.profile = False

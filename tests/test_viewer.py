@@ -186,6 +186,24 @@ def test_exposure_plus_one_ev_doubles_linear_values(fresh):
 
 
 @pytest.mark.viewer
+def test_window_draws_the_relit_image_where_the_gui_laid_it_out(fresh):
+    """The window draws the display texture itself (opaque, no imgui blend) in the rectangle the GUI
+    laid out: the window's pixels there are the display image, upright, resized."""
+    import cv2
+
+    app = fresh
+    app.step(dt=0.0)
+    assert app.renderer.info.image_drawn_by_window and app.state.image_rect is not None
+    x0, y0, x1, y1 = (int(round(v)) for v in app.state.image_rect)
+    win = app.read_window()[y0 + 2:y1 - 2, x0 + 2:x1 - 2].astype(float)
+    disp = app.renderer.read_display()
+    ref = cv2.resize(disp, (x1 - x0, y1 - y0), interpolation=cv2.INTER_LINEAR)[2:-2, 2:-2].astype(float)
+    assert np.abs(win - ref).mean() < 3.0
+    flipped = np.abs(win - ref[::-1]).mean()
+    assert flipped > 3 * max(np.abs(win - ref).mean(), 1.0)  # not upside down
+
+
+@pytest.mark.viewer
 def test_rotation_180_changes_and_360_restores(fresh):
     app = fresh
     h0 = app.renderer.read_hdr()
@@ -221,6 +239,12 @@ def test_preview_and_weights_mode(fresh):
 
     # +90 degrees of yaw moves the sun 90 degrees counter-clockwise: u - 1/4, 64 of 256 columns
     assert (sun_column(a) - sun_column(b)) % 256 == pytest.approx(64, abs=2)
+    # a yaw-only rotation turns the preview by whole columns (no per-texel lookup): the same image as
+    # the general lookup of a rotation that is not about +Z (a 0.001-degree pitch), up to ties
+    for yaw in (0.0, 17.3, -123.4, 90.0):
+        fast = r.preview_image(rotation_ypr(yaw, 0, 0), "lightmap")
+        general = r.preview_image(rotation_ypr(yaw, 1e-3, 0), "lightmap")
+        assert np.mean(np.any(fast != general, axis=-1)) < 0.01, yaw
     app.state.preview_mode = "weights"
     app.step(dt=0.0)
     w = r.preview_image(R, "weights")

@@ -63,7 +63,7 @@ def add_arguments(p):
     c.add_argument("--surface-mask", default=None, metavar="SURF.png", help="surface region (white = surface)")
     c.add_argument("--composite", action="store_true", help="start in the composite mode")
     p.add_argument("--benchmark", action="store_true",
-                   help="with --frames: rotate the light map every frame and print frame-time statistics")
+                   help="with --frames: rotate the light map every frame and print frame-time and CPU-time statistics")
     p.add_argument("--profile", action="store_true",
                    help="with --benchmark: also time each engine pass (waits for the GPU after each, so slower frames)")
     add_quality_arguments(p, precision_default=None, fps_flags=("--fps", "--target-fps"), cells_res=CELLS_RES)
@@ -232,7 +232,8 @@ def run(args) -> int:
                   f"{b.image_size[0]}x{b.image_size[1]}, {b.n_lights} lights, "
                   f"{'full basis' if b.basis_info.get('rank') is None else 'rank ' + str(b.basis_info['rank'])}")
             print(f"  frame time: mean {s['mean_ms']:.1f} ms, median {s['median_ms']:.1f} ms "
-                  f"({s['fps']:.1f} fps) over {s['frames']} frames; passes (ms, mean where run): {passes or 'none'}")
+                  f"({s['fps']:.1f} fps), CPU {s['cpu_ms']:.1f} ms per frame, over {s['frames']} frames; "
+                  f"passes (ms, mean where run): {passes or 'none'}")
             if args.screenshot:
                 print(f"  screenshot: {args.screenshot} (window) and {args.screenshot[:-4]}.exr (relit HDR)")
     finally:

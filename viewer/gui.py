@@ -164,8 +164,10 @@ def _image_window(state: ViewerState, view: ViewInfo, x, y, w, h) -> None:
     imgui.invisible_button("##relit", imgui.ImVec2(max(avail.x, 1.0), max(avail.y, 1.0)))
     _drag_rotate(state, state.drag_deg_per_px, state.drag_deg_per_px)
     dl = imgui.get_window_draw_list()
+    state.image_rect = (p0.x, p0.y, p1.x, p1.y)
     if view.image_tex:
-        dl.add_image(_tex(view.image_tex), p0, p1)
+        if not view.image_drawn_by_window:
+            dl.add_image(_tex(view.image_tex), p0, p1)
         if view.overlay_tex and not state.show_background:
             dl.add_image(_tex(view.overlay_tex), p0, p1)
     if view.recording:

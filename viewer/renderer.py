@@ -306,7 +306,7 @@ class Renderer:
                 eng.set_weights(self.single_light_weights(state))
                 self._light_key = key
                 self._pass1_key = None  # the light map comes back when the mode ends
-            eng.render(state.exposure, state.tonemap)
+            eng.render(state.exposure, state.tonemap, hdr=False)  # the HDR is computed when read (screenshot)
             self.info.image_tex = eng.display_texture.glo
             u, v = direction_to_latlong_uv(state.light_vector()[None, :])
             self.info.single_light_uv = (float(u[0]), float(v[0]))
@@ -322,7 +322,8 @@ class Renderer:
                 self._registration = None  # refitted under the new map
             if self._lightmap is not None:
                 eng.set_rotation(R)
-                eng.render(state.exposure, state.tonemap)
+                # the composite reads the HDR every frame; otherwise only a screenshot or exposure does
+                eng.render(state.exposure, state.tonemap, hdr=bool(state.composite and self.surface_engine is not None))
                 self.info.image_tex = eng.display_texture.glo
                 self._composite_hdr = None
                 if state.composite and self.surface_engine is not None:
@@ -417,12 +418,21 @@ class Renderer:
             rgb = np.where((cid >= 0)[..., None], heat_colours(t[np.maximum(cid, 0)]), 0.05)
             img = to_uint8(rgb)
         else:
-            src = d @ np.asarray(R, dtype=np.float64)  # R^T d, row vectors
-            u, v = direction_to_latlong_uv(src)
+            R = np.asarray(R, dtype=np.float64)
             h, w = self._preview_latlong.shape[:2]
-            ii = np.clip((u * w).astype(int), 0, w - 1)
-            jj = np.clip((v * h).astype(int), 0, h - 1)
-            img = self._preview_latlong[jj, ii]  # tone-mapped once per map (Reinhard, exposed for its median)
+            if (h, w) == d.shape[:2] and abs(R[2, 2] - 1.0) < 1e-12:
+                # a rotation about +Z (yaw only: auto-rotation, turntable) turns the lat-long by whole
+                # columns: R^T d has azimuth phi - yaw, u + yaw / 360 (conventions.direction_to_latlong_uv),
+                # so column i shows column floor(i + 0.5 + w yaw / 360) mod w; no per-texel trigonometry
+                yaw = np.degrees(np.arctan2(R[1, 0], R[0, 0]))
+                cols = (np.arange(w) + int(np.floor(0.5 + w * yaw / 360.0))) % w
+                img = self._preview_latlong[:, cols]
+            else:
+                src = d @ R  # R^T d, row vectors
+                u, v = direction_to_latlong_uv(src)
+                ii = np.clip((u * w).astype(int), 0, w - 1)
+                jj = np.clip((v * h).astype(int), 0, h - 1)
+                img = self._preview_latlong[jj, ii]  # tone-mapped once per map (Reinhard, exposed for its median)
             if self.hemisphere != "full":  # dim what the capture does not cover
                 img[self._below] = img[self._below] // 3
         img[self._border] = (230, 230, 230)
@@ -449,6 +459,13 @@ class Renderer:
         self.info.photo_tex = self._photo_tex.glo
 
     # ------------------------------------------------------------------ outputs
+    @property
+    def image_texture(self):
+        """The ``moderngl.Texture`` (RGBA8) whose name is ``info.image_tex``: the composite or the engine's display."""
+        if self._composite_tex is not None and self.info.image_tex == self._composite_tex.glo:
+            return self._composite_tex
+        return self.engine.display_texture if self.engine is not None else None
+
     def read_hdr(self) -> np.ndarray:
         """The relit HDR image ``(H, W, 3)`` float32 of the last :meth:`update` (the composite in composite mode)."""
         if self._composite_hdr is not None:

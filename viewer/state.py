@@ -237,6 +237,9 @@ class ViewerState:
     light_az, light_el : float
         The light's azimuth (degrees from +X toward +Y, wrapped to [-180, 180)) and elevation
         (degrees above the horizon, [-90, 90]), world frame.
+    image_rect : (x0, y0, x1, y1) or None
+        Where the GUI laid out the relit image in the last frame (window coordinates, y down);
+        the window draws it there when :attr:`ViewInfo.image_drawn_by_window` is set.
     """
 
     yaw: float = 0.0
@@ -269,6 +272,7 @@ class ViewerState:
     light_mode: bool = False
     light_az: float = 45.0
     light_el: float = 45.0
+    image_rect: tuple | None = None
 
     # ------------------------------------------------------------------ pure updates
     def rotate_by(self, dyaw: float = 0.0, dpitch: float = 0.0, droll: float = 0.0) -> None:
@@ -388,6 +392,9 @@ class ViewInfo:
         Whether a surface capture and background were given (enables the composite checkbox).
     registration : str
         The composite's registration (:meth:`ffls.relight.composite.Registration.describe`).
+    image_drawn_by_window : bool
+        The window draws the relit image itself (opaque, under the GUI, in ``state.image_rect``),
+        so the GUI only lays it out; False: the GUI draws it (imgui image, blended).
     """
 
     image_tex: int = 0
@@ -411,3 +418,4 @@ class ViewInfo:
     single_light_uv: tuple | None = None
     composite_available: bool = False
     registration: str = ""
+    image_drawn_by_window: bool = False

@@ -25,7 +25,7 @@ from ffls.gpu.context import release_gl
 from ffls.store.float16 import F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, to_float16
 
 __all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
-           "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "SSBO_BAND_BYTES"]
+           "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "SSBO_BAND_BYTES", "PACKED_STORAGES"]
 
 #: Default memory budget for basis textures, bytes (refused above it).
 DEFAULT_BUDGET = 4 * 1024 ** 3
@@ -33,6 +33,10 @@ DEFAULT_BUDGET = 4 * 1024 ** 3
 PACKED_LAYERS = 256
 #: Largest SSBO binding used for a band of :class:`PackedBasis` (Mesa's limit is 128 MiB).
 SSBO_BAND_BYTES = 128 * 1024 ** 2
+#: Where :class:`PackedBasis` keeps its words: ``'image'`` (an RGBA32UI texture array per chunk,
+#: read with ``imageLoad``: one vector gather per load on llvmpipe, the default) or ``'buffer'``
+#: (row bands of SSBOs: a per-lane scalar loop per load there; docs/gpu.md "Pass 2").
+PACKED_STORAGES = ("image", "buffer")
 
 
 def _check_basis(basis, dtype: str, path=None) -> np.ndarray:
@@ -162,13 +166,16 @@ def pack_pixel_major(layers: np.ndarray, dtype: str = "f16") -> np.ndarray:
 
 
 class PackedBasis:
-    """A basis ``(n, H, W, 3)`` resident on the GPU as pixel-major packed SSBOs (pass 2 ``'packed'``).
+    """A basis ``(n, H, W, 3)`` resident on the GPU as packed words (pass 2 ``'packed'``).
 
-    The layers are cut into chunks of at most ``max_layers`` (one dispatch each) and the rows of
-    each chunk into bands whose buffer fits one SSBO binding (``band_bytes``). A band buffer
-    holds, for each pixel, the chunk's layers as :func:`pack_pixel_major` lays them out:
-    ``ceil(3 m / 8)`` uvec4 of float16 (``m`` layers), or ``ceil(3 m / 4)`` of float32. Float16
-    uses the same checked power-of-two per-dataset scale as :class:`BasisTextures`.
+    The layers are cut into chunks of at most ``max_layers`` (one dispatch each). A chunk of
+    ``m`` layers is, per pixel, ``ceil(m / 8)`` blocks of 3 ``uvec4`` (one per channel) of
+    float16 pairs, or ``ceil(m / 4)`` blocks of float32 (:func:`pack_pixel_major`). With
+    ``storage='image'`` (default) a chunk is one RGBA32UI texture array of ``3 ceil(m / 8)``
+    layers (layer ``3 b + c`` = block ``b``, channel ``c``), read with ``imageLoad``; with
+    ``storage='buffer'`` its rows are cut into bands whose pixel-major buffer fits one SSBO
+    binding (``band_bytes``). Float16 uses the same checked power-of-two per-dataset scale as
+    :class:`BasisTextures`.
 
     Parameters
     ----------
@@ -182,29 +189,40 @@ class PackedBasis:
     budget_bytes : int
         Refuse (``InputError``) a basis whose GPU storage exceeds this.
     band_bytes : int, optional
-        Largest band buffer (default the device's SSBO block size, at most :data:`SSBO_BAND_BYTES`).
+        Largest band buffer (default the device's SSBO block size, at most :data:`SSBO_BAND_BYTES`);
+        ``storage='buffer'`` only.
+    storage : {'image', 'buffer'}
+        :data:`PACKED_STORAGES`: on llvmpipe ``imageLoad`` of a ``uvec4`` is a vector gather, an
+        SSBO load with per-invocation addresses a per-lane scalar loop (3x the CPU time of pass
+        2 at 8 layers, docs/gpu.md "Pass 2").
     path : path-like, optional
         Named in errors.
 
     Attributes
     ----------
+    images : list of moderngl.TextureArray
+        ``storage='image'``: ``images[j]`` holds chunk ``j`` (layers ``offsets[j] : offsets[j] + counts[j]``).
     bands : list of list of (row0, rows, moderngl.Buffer)
-        ``bands[j]`` holds chunk ``j`` (layers ``offsets[j] : offsets[j] + counts[j]``).
+        ``storage='buffer'``: ``bands[j]`` holds chunk ``j``.
     offsets, counts : list of int
     scale : float
         Stored value = radiance * scale; pass 2 multiplies by ``1 / scale``.
     report : Float16Report or None
         For ``dtype='f16'``.
     nbytes : int
-        Bytes of all band buffers.
+        Bytes of all images or band buffers.
     """
 
     def __init__(self, ctx, basis, dtype: str = "f16", *, max_layers: int | None = None,
-                 budget_bytes: int = DEFAULT_BUDGET, band_bytes: int | None = None, path=None):
+                 budget_bytes: int = DEFAULT_BUDGET, band_bytes: int | None = None, storage: str = "image",
+                 path=None):
         basis = _check_basis(basis, dtype, path)
+        if storage not in PACKED_STORAGES:
+            raise ValueError(f"storage must be one of {PACKED_STORAGES}, not {storage!r}")
         n, H, W, _ = basis.shape
         self.ctx = ctx
         self.dtype = dtype
+        self.storage = storage
         self.n = int(n)
         self.size = (int(W), int(H))
         self.max_layers = PACKED_LAYERS if max_layers is None else int(max_layers)
@@ -224,13 +242,38 @@ class PackedBasis:
             raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
         limit = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or SSBO_BAND_BYTES)
         limit = min(limit, SSBO_BAND_BYTES) if band_bytes is None else int(band_bytes)
+        if storage == "image":
+            max_tex = int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384)
+            max_arr = int(ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS") or 2048)
+            if W > max_tex or H > max_tex:
+                raise InputError(f"basis images {W}x{H} exceed GL_MAX_TEXTURE_SIZE {max_tex}", path)
+            if 3 * -(-max(self.counts) // per) > max_arr:
+                raise ValueError(f"{max(self.counts)} layers per chunk need more than GL_MAX_ARRAY_TEXTURE_LAYERS "
+                                 f"({max_arr}) image layers; use a smaller max_layers")
         max_abs = float(np.max(np.abs(basis)))
         self.scale = choose_scale(max_abs) if dtype == "f16" else 1.0
         self.report = None
         self.bands = []
+        self.images = []
         rel, n_flush = 0.0, 0
         try:
             for a, cnt, pb in zip(self.offsets, self.counts, pixel_bytes):
+                if storage == "image":  # one RGBA32UI array per chunk: layer 3 b + c = block b, channel c
+                    nb = -(-cnt // per)
+                    tex = ctx.texture_array((W, H, 3 * nb), 4, dtype="u4")
+                    tex.filter = (0x2600, 0x2600)  # GL_NEAREST (read with imageLoad)
+                    self.images.append(tex)
+                    for blk in range(nb):  # a block at a time: no second copy of the whole basis in memory
+                        part = basis[a + per * blk:a + min(cnt, per * (blk + 1))]
+                        if dtype == "f16":
+                            part, rep = to_float16(part, scale=self.scale, path=path, max_abs=max_abs)
+                            rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
+                        else:
+                            part = np.asarray(part, dtype=np.float32)
+                        words = pack_pixel_major(part, dtype)[:, :, 0]  # h, w, 3, 4
+                        planes = np.ascontiguousarray(words.transpose(2, 0, 1, 3))  # 3, h, w, 4
+                        tex.write(planes.tobytes(), viewport=(0, 0, 3 * blk, W, H, 3))
+                    continue
                 if W * pb > limit:
                     raise InputError(f"one image row of {cnt} packed layers ({W * pb} bytes) exceeds the SSBO "
                                      f"limit of {limit} bytes; use a smaller max_layers", path)
@@ -255,16 +298,21 @@ class PackedBasis:
     @property
     def n_arrays(self) -> int:
         """Number of layer chunks (one dispatch each per band), as :attr:`BasisTextures.n_arrays`."""
-        return len(self.bands)
+        return len(self.images) if self.storage == "image" else len(self.bands)
 
     @property
     def n_bands(self) -> int:
-        """Largest number of row bands of a chunk."""
+        """Largest number of row bands of a chunk (1 with ``storage='image'``)."""
+        if self.storage == "image":
+            return 1 if self.images else 0
         return max((len(c) for c in self.bands), default=0)
 
     def release(self) -> None:
-        """Release the buffers."""
+        """Release the buffers or images."""
         for chunk in self.bands:
             for _, _, buf in chunk:
                 release_gl(buf)
+        for tex in self.images:
+            release_gl(tex)
         self.bands = []
+        self.images = []

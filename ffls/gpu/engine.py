@@ -118,6 +118,9 @@ class Engine:
         self._weights_buffer = ctx.buffer(reserve=16 * self._n)
         self._cpu_weights = np.zeros((self._n, 3))
         self._cells = None
+        self._hdr_stored = True  # False while pass 2 has written only the display image (_store_hdr)
+        self._pass2_source = None  # the buffer pass 2 last read its weights from
+        self._pending_weights = None  # set_weights' bytes, written at the next render
         self.set_weighting(weighting, weights_res, **(weighting_options or {}))
         self._lightmap = None
         self._rotation = np.eye(3)
@@ -206,7 +209,9 @@ class Engine:
         w = checked_weights(weights, self._n)
         self._lightmap = None
         self._cpu_weights = w
-        self._weights_buffer.write(weights_to_vec4(w))
+        # written at the next render: until then the buffer holds the last render's weights, from
+        # which its HDR may still be stored (_store_hdr)
+        self._pending_weights = weights_to_vec4(w)
         self._weights_source = self._weights_buffer
         self._weights_dirty = False
         self._hdr_dirty = True
@@ -227,6 +232,9 @@ class Engine:
         self._weighting_key = key
         self.weighting = scheme
         if self._integrator is not None:
+            if self._pass2_source is self._integrator.weights_buffer:
+                self._store_hdr()  # its weights buffer goes: store the last render's HDR first
+                self._pass2_source = None
             self._integrator.release()
             self._integrator = None
         if scheme != "voronoi" or not hasattr(self._cells, "candidates"):
@@ -263,7 +271,7 @@ class Engine:
         self.ctx.finish()
         self.timings[name] = (time.perf_counter() - t0) * 1e3
 
-    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+    def render(self, exposure: float = 0.0, tonemap: str = "srgb", hdr: bool = True) -> None:
         """Run what changed of pass 1, projection, pass 2 and the display pass.
 
         Parameters
@@ -271,12 +279,20 @@ class Engine:
         exposure : float
             Stops applied before the tone curve (display texture only; the HDR is unscaled).
         tonemap : {'srgb', 'reinhard', 'aces'}
+        hdr : bool
+            False: the caller shows the display image and rarely reads the HDR (the viewer). A
+            packed pass 2 of one chunk then writes the display image alone, and the HDR is
+            stored only if :meth:`read_hdr` or :attr:`hdr_texture` asks for it (one more pass 2).
 
         Notes
         -----
         :attr:`timings` gets the wall time (ms, after ``ctx.finish()``) of each pass that ran:
         ``pass1``, ``project`` (compressed basis), ``pass2``, ``tonemap``; passes that did not
-        need to run are absent (all are absent when :attr:`profile` is False).
+        need to run are absent (all are absent when :attr:`profile` is False). The packed pass 2
+        also writes the display image (``WeightedSum.run(display=)``), so ``tonemap`` runs on its
+        own only when just the exposure or the tone curve changed. With ``hdr=False`` and one
+        chunk it writes the display image alone, and the HDR is stored when read
+        (:meth:`read_hdr`, :attr:`hdr_texture`); ``tonemap`` is then that pass from the weights.
         """
         if self._lightmap is None and self._weights_source is None:
             raise RuntimeError("Engine.render: call set_lightmap(lm) or set_weights(w) first")
@@ -285,24 +301,57 @@ class Engine:
             self._timed("pass1", self._run_pass1)
             self._weights_dirty = False
             self._hdr_dirty = True
+        key = (float(exposure), tonemap)
+        if self._pending_weights is not None:
+            self._weights_buffer.write(self._pending_weights)
+            self._pending_weights = None
         if self._hdr_dirty:
             if self._projector is not None:
                 self._timed("project", lambda: self._projector.run(self._weights_source))
-                src = self._projector.coeffs_buffer
+                self._pass2_source = self._projector.coeffs_buffer
             else:
-                src = self._weights_source
-            self._timed("pass2", lambda: self._pass2.run(src))
+                self._pass2_source = self._weights_source
+            src = self._pass2_source
+            if not hdr and self._pass2.display_only:  # the display image alone; the HDR is stored when read
+                self._timed("pass2", lambda: self._pass2.run(src, display=(self._display.output, exposure, tonemap),
+                                                             hdr=False))
+                self._hdr_stored = False
+                self._display_key = key
+            elif self._pass2.fuses_display:  # pass 2 writes the display image too: no display pass
+                self._timed("pass2", lambda: self._pass2.run(src, display=(self._display.output, exposure, tonemap)))
+                self._hdr_stored = True
+                self._display_key = key
+            else:
+                self._timed("pass2", lambda: self._pass2.run(src))
+                self._hdr_stored = True
+                self._display_key = None
             self._hdr_dirty = False
-            self._display_key = None
-        key = (float(exposure), tonemap)
         if key != self._display_key:
-            self._timed("tonemap", lambda: self._display.run(self._pass2.output, exposure, tonemap))
+            if self._hdr_stored:
+                self._timed("tonemap", lambda: self._display.run(self._pass2.output, exposure, tonemap))
+            else:  # the display pass from the weights (no HDR stored): the same curves, one dispatch
+                self._timed("tonemap", lambda: self._pass2.run(self._pass2_source,
+                                                               display=(self._display.output, exposure, tonemap),
+                                                               hdr=False))
             self._display_key = key
+
+    def _store_hdr(self) -> None:
+        """Write the HDR of the last render into :attr:`hdr_texture` if pass 2 wrote the display alone.
+
+        Its input buffers change only in :meth:`render` (pass 1, projection, :meth:`set_weights`'s
+        deferred write), so they still hold that render's weights."""
+        if not self._hdr_stored and self._pass2_source is not None:
+            self._pass2.run(self._pass2_source)
+            self._hdr_stored = True
 
     # ------------------------------------------------------------------ outputs
     @property
     def hdr_texture(self):
-        """RGBA32F ``moderngl.Texture`` (W, H): the last relit image, linear radiance (alpha 1)."""
+        """RGBA32F ``moderngl.Texture`` (W, H): the last relit image, linear radiance (alpha 1).
+
+        After ``render(hdr=False)`` a one-chunk packed pass 2 wrote only the display image; the
+        HDR is then written here, when asked for (one more pass 2)."""
+        self._store_hdr()
         return self._pass2.output
 
     @property
@@ -328,6 +377,7 @@ class Engine:
 
     def read_hdr(self) -> np.ndarray:
         """The relit image ``(H, W, 3)`` float32, row 0 = top row."""
+        self._store_hdr()
         return self._pass2.read()
 
     def read_display(self) -> np.ndarray:
@@ -346,6 +396,7 @@ class Engine:
             if o is not None:
                 o.release()
         release_gl(self._weights_buffer)
+        self._pass2_source = None
         self._cells = None
         self._integrator = self._projector = self._pass2 = self._display = self._textures = None
         self._weights_buffer = None

@@ -58,8 +58,10 @@ _LOCAL = 64
 _CHAIN = 128
 #: Budget of partial sums (cells x slices) for 'blend' and 'atomic' (16 bytes each).
 _PARTIAL_BUDGET = 1 << 22
-#: Blocks of the counting sort ('sort'); each is walked serially by one invocation.
+#: Most blocks of the counting sort ('sort'); each is walked serially by one invocation.
 _SORT_BLOCKS = 256
+#: Items per block aimed at: fewer blocks for a small map (the scan walks cells x blocks counts).
+_SORT_PER_BLOCK = 512
 
 
 class CellIntegrator:
@@ -293,9 +295,10 @@ class CellIntegrator:
     # ------------------------------------------------------------------ (c) sort
     def _setup_sort(self):
         ctx = self.ctx
-        self._blocks = _SORT_BLOCKS
-        self._sort_defines = {"N_LIGHTS": self.n, "N_BLOCKS": self._blocks}
         items = self.m * self._per_texel
+        # a stable sort: the order within a cell is texel order whatever the number of blocks
+        self._blocks = int(min(_SORT_BLOCKS, max(8, -(-items // _SORT_PER_BLOCK))))
+        self._sort_defines = {"N_LIGHTS": self.n, "N_BLOCKS": self._blocks}
         bins = self.n + (2 if self.sparse else 1)  # + the void bin of padded slots
         self._cell_ids = ctx.buffer(reserve=4 * items)
         self._counts = ctx.buffer(reserve=4 * bins * self._blocks)
@@ -344,7 +347,7 @@ class CellIntegrator:
         seg = load_program(ctx, "integrate_segment_sum.glsl", self._sort_defines)
         self.weights_buffer.bind_to_storage_buffer(0)
         self._stats.bind_to_storage_buffer(6)
-        seg.run(self.n + 1)
+        seg.run(-(-(self.n + 1) // _LOCAL))  # one invocation per cell (and the dropped one)
 
     # ------------------------------------------------------------------ public
     def run(self, R=None):

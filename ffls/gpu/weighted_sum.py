@@ -27,14 +27,17 @@ import numpy as np
 from ffls.gpu.context import default_framebuffer, release_gl
 from ffls.gpu.shaders import load_program
 
-__all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "METHODS", "DEFAULT_METHOD", "default_method", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4"]
+__all__ = ["WEIGHTS_BINDING", "WEIGHTS_UBO_BINDING", "BASIS_BINDING", "BASIS_IMAGE_UNIT", "METHODS", "DEFAULT_METHOD", "default_method", "WeightedSum", "ToneMapPass", "Projector", "weights_to_vec4"]
 
 #: SSBO binding point from which pass 2 (and the projector) read the weights.
 WEIGHTS_BINDING = 0
 #: Uniform-buffer binding of the weights for ``method='packed'`` (the same buffer as the SSBO).
 WEIGHTS_UBO_BINDING = 0
-#: SSBO binding of a band of the packed basis (``method='packed'``).
+#: SSBO binding of a band of the packed basis (``method='packed'``, storage ``'buffer'``).
 BASIS_BINDING = 1
+#: Image unit of a chunk of the packed basis (``method='packed'``, storage ``'image'``; 0 and 1 are
+#: the HDR output and the fused display).
+BASIS_IMAGE_UNIT = 2
 #: Pass-2 implementations: ``'compute'`` and ``'fragment'`` read a
 #: :class:`ffls.gpu.basis.BasisTextures`, ``'packed'`` a :class:`ffls.gpu.basis.PackedBasis`.
 METHODS = ("compute", "fragment", "packed")
@@ -115,12 +118,16 @@ class WeightedSum:
     def _init_packed(self):
         b = self.basis
         per = 8 if b.dtype == "f16" else 4
-        self._progs = []
+        self._progs, self._defines = [], []
         for cnt in b.counts:
             defines = {"N_LAYERS": cnt, "N_BLOCKS": -(-cnt // per), "WEIGHTS_UBO_BINDING": WEIGHTS_UBO_BINDING,
                        "BASIS_BINDING": BASIS_BINDING}
             if b.dtype == "f16":
                 defines["PACKED_F16"] = True
+            if b.storage == "image":
+                defines["IMAGE_BASIS"] = True
+                defines["BASIS_IMAGE_UNIT"] = BASIS_IMAGE_UNIT
+            self._defines.append(defines)
             self._progs.append(load_program(self.ctx, "weighted_sum_packed.glsl", defines))
         # uniform-block ranges must start at a multiple of the device's alignment: chunks whose
         # first weight is not aligned read a copy of their weights (a GPU-side copy, no read-back)
@@ -135,10 +142,22 @@ class WeightedSum:
         if total:
             self._wscratch = self.ctx.buffer(reserve=total)
 
-    def _run_packed(self, weights_buffer):
+    def _run_packed(self, weights_buffer, display=None, hdr=True):
         ctx, b = self.ctx, self.basis
         self.output.bind_to_image(0, read=True, write=True)
-        for j, (prog, off, cnt, slot, bands) in enumerate(zip(self._progs, b.offsets, b.counts, self._wslots, b.bands)):
+        progs = list(self._progs)
+        if display is not None:  # the last chunk also tone-maps into the display texture
+            tex, exposure, method = display
+            extra = {"FUSED_TONEMAP": True} if hdr else {"FUSED_TONEMAP": True, "DISPLAY_ONLY": True}
+            last = load_program(ctx, "weighted_sum_packed.glsl", {**self._defines[-1], **extra})
+            last["u_exposure_scale"].value = float(2.0 ** float(exposure))
+            last["u_method"].value = _TONEMAP_CODES[method]
+            tex.bind_to_image(1, read=False, write=True)
+            progs[-1] = last
+        images = b.images if b.storage == "image" else [None] * len(progs)
+        bands = b.bands if b.storage == "buffer" else [[(0, self.size[1], None)]] * len(progs)
+        for j, (prog, off, cnt, slot, chunk, img) in enumerate(zip(progs, b.offsets, b.counts, self._wslots, bands,
+                                                                   images)):
             if slot is None:
                 weights_buffer.bind_to_uniform_block(WEIGHTS_UBO_BINDING, offset=16 * off, size=16 * cnt)
             else:
@@ -149,13 +168,26 @@ class WeightedSum:
             prog["u_width"].value = self.size[0]  # programs are cached per context: this instance's size, each run
             prog["u_inv_scale"].value = 1.0 / b.scale
             prog["u_accumulate"].value = 1 if j else 0
-            for row0, rows, buf in bands:
-                buf.bind_to_storage_buffer(BASIS_BINDING)
+            if img is not None:
+                img.bind_to_image(BASIS_IMAGE_UNIT, read=True, write=False)
+            for row0, rows, buf in chunk:
+                if buf is not None:
+                    buf.bind_to_storage_buffer(BASIS_BINDING)
                 prog["u_row0"].value = row0
                 prog.run(-(-self.size[0] // 64), rows, 1)
         ctx.memory_barrier()
 
-    def run(self, weights_buffer, n_weights: int | None = None) -> None:
+    @property
+    def fuses_display(self) -> bool:
+        """Whether :meth:`run` can also write the display image (``display=``): the packed method."""
+        return self.method == "packed"
+
+    @property
+    def display_only(self) -> bool:
+        """Whether :meth:`run` can write the display image alone (``hdr=False``): packed, one chunk."""
+        return self.method == "packed" and self.basis.n_arrays == 1
+
+    def run(self, weights_buffer, n_weights: int | None = None, display=None, hdr: bool = True) -> None:
         """Compute the relit image into :attr:`output`.
 
         Parameters
@@ -164,13 +196,29 @@ class WeightedSum:
             std430 ``vec4 w[n]`` with at least ``basis.n`` entries (rgb used).
         n_weights : int, optional
             Entries in the buffer, checked against ``basis.n`` when given.
+        display : (moderngl.Texture, float, str), optional
+            ``(rgba8 texture of the same size, exposure, tone curve)``: the last dispatch also
+            writes what :class:`ToneMapPass` would (same curves, ``shaders/include/tonemap_curves.glsl``),
+            saving the display pass's read of the HDR. Only where :attr:`fuses_display`.
+        hdr : bool
+            False (with ``display``, where :attr:`display_only`): write the display image only;
+            :attr:`output` is then left as it was (its store is ~15 % of the pass on llvmpipe).
         """
         if n_weights is not None and n_weights < self.basis.n:
             raise ValueError(f"{n_weights} weights for a basis of {self.basis.n} layers")
         if weights_buffer.size < 16 * self.basis.n:
             raise ValueError(f"weights buffer holds {weights_buffer.size // 16} vec4, basis has {self.basis.n} layers")
+        if not hdr and (display is None or not self.display_only):
+            raise ValueError("hdr=False needs display= and a packed basis of one chunk")
+        if display is not None:
+            if not self.fuses_display:
+                raise ValueError(f"pass-2 method {self.method!r} does not write the display image")
+            if display[2] not in _TONEMAP_CODES:
+                raise ValueError(f"tone-map method must be one of {tuple(_TONEMAP_CODES)}, not {display[2]!r}")
+            if tuple(display[0].size) != tuple(self.size):
+                raise ValueError(f"display texture {display[0].size} is not the image size {self.size}")
         if self.method == "packed":
-            self._run_packed(weights_buffer)
+            self._run_packed(weights_buffer, display, hdr)
             return
         weights_buffer.bind_to_storage_buffer(WEIGHTS_BINDING)
         prog = self.prog

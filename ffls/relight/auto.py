@@ -42,7 +42,8 @@ from ffls.relight.storage import store_basis
 from ffls.weights.weighting import SCHEMES, integrate as integrate_scheme, light_weights
 
 __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor", "relight_quality",
-           "estimate_errors", "cpu_frame_ms", "shrink", "truncate", "relight_weights", "choose", "choose_quality", "BLOCK_RANKS", "point_light_weights"]
+           "estimate_errors", "cpu_frame_ms", "shrink", "truncate", "relight_weights", "choose", "choose_quality", "BLOCK_RANKS", "point_light_weights",
+           "no_costlier", "timed_candidates"]
 
 #: Ranks K whose K + 1 layers fill whole blocks of 8 float16 layers (the packed pass 2's unit).
 BLOCK_RANKS = (7, 15, 23, 31, 63)
@@ -365,7 +366,7 @@ def choose(candidates, errors, ms, max_error: float | None = None, fps: float | 
 def choose_quality(basis, directions, lightmap, rotation=None, *, max_error: float | None = None,
                    fps: float | None = None, timer=None, hemisphere="upper", base: Quality | None = None,
                    candidates=None, max_photos: int = 24, error_size: int | None = 128,
-                   error_map_height: int | None = 128) -> Choice:
+                   error_map_height: int | None = 128, prune: bool = True) -> Choice:
     """Measure every candidate on this capture and map, and :func:`choose`.
 
     Parameters
@@ -394,6 +395,9 @@ def choose_quality(basis, directions, lightmap, rotation=None, *, max_error: flo
         The errors are estimated on the map box-filtered to at most this height
         (:func:`ffls.relight.quality.integration_map`, integral kept): a smooth scheme's exact
         weights cost per texel. None = the map as given.
+    prune : bool
+        Time only the candidates that could be chosen (:func:`timed_candidates`; the others get
+        ``inf`` ms in ``Choice.table``); False times every candidate.
     """
     b = np.asarray(basis)
     d = np.asarray(directions, dtype=np.float64)
@@ -404,13 +408,120 @@ def choose_quality(basis, directions, lightmap, rotation=None, *, max_error: flo
     if timer is None:
         def timer(q, basis_, directions_):
             return cpu_frame_ms(basis_, directions_, lightmap, q, hemisphere)
-    ms = [float(timer(q, b, d)) for q in cands]
+    if prune:
+        ms = timed_candidates(cands, errs, lambda q: float(timer(q, b, d)), len(d), max_error, fps)
+    else:
+        ms = [float(timer(q, b, d)) for q in cands]
     choice = choose(cands, errs, ms, max_error, fps)
     q = choice.quality
     m = q.basis_subset if q.basis_subset is not None and q.basis_subset < len(d) else None
     floor = info["floors"].get((m, q.weighting), info["e0"])
+    n_timed = int(np.count_nonzero(np.isfinite(ms)))
     how = (f"error = its leave-one-out floor {100 * floor:.2f}% ({q.weighting}"
            f"{'' if m is None else f', {m} photos'}; up to {max_photos} photos held out) combined with its "
-           f"deviation from the full basis; times measured here")
+           f"deviation from the full basis; times measured here"
+           + (f" for {n_timed} of {len(cands)} candidates (the others cost more than a timed one with the "
+              f"same scheme and photos and could not be chosen)" if n_timed < len(cands) else ""))
     choice.reason = f"{choice.reason}\n  {how}"
     return choice
+
+
+def no_costlier(a: Quality, b: Quality, n_lights: int) -> bool:
+    """Whether ``a`` does no more work per frame than ``b``, by construction (no measurement).
+
+    Both have the same weighting scheme, basis subset, cell texture and near correction, and
+    ``a`` has no more pass-2 layers (K + 1 for rank K, else the photos), no wider storage
+    (float16 <= float32) and no larger pass-1 map (a height <= the map as loaded, ``None``)
+    than ``b``. Pass 1 then runs the same program over no more texels, the projection is
+    negligible, and pass 2 reads no more bytes per pixel (:func:`timed_candidates`).
+    """
+    if (a.weighting, a.basis_subset, a.cell_res, a.near_correction) != \
+            (b.weighting, b.basis_subset, b.cell_res, b.near_correction):
+        return False
+    photos = n_lights if a.basis_subset is None else min(int(a.basis_subset), n_lights)
+
+    def layers(q):
+        return photos if q.rank is None else min(int(q.rank) + 1, photos)
+
+    wide = {"f16": 0, "f32": 1}
+    if layers(a) > layers(b) or wide[a.precision] > wide[b.precision]:
+        return False
+    if b.map_res is None:
+        return True
+    return a.map_res is not None and int(a.map_res) <= int(b.map_res)
+
+
+def timed_candidates(candidates, errors, time_one, n_lights: int, max_error: float | None = None,
+                     fps: float | None = None) -> np.ndarray:
+    """Frame times of the candidates :func:`choose` could pick, ``inf`` for the others (never timed).
+
+    :func:`choose` with an error target picks the cheapest candidate meeting it (or, with none, the most
+    accurate, or with an fps target too the fastest of all); with only an fps target, the most
+    accurate within the frame time. A candidate ``b`` for which some other candidate ``a`` is
+    :func:`no_costlier` (and different in cost) is never the cheapest of a set holding ``a``, so
+    only the minimal candidates of the set that matters are timed; with only an fps target the
+    candidates are timed from the most accurate on, stopping at the first that fits, and every
+    candidate costlier than one that missed the budget is skipped. The choice is that of timing
+    every candidate, as long as more layers, wider storage or a larger map never run faster
+    (up to the timer's noise).
+
+    Parameters
+    ----------
+    candidates : list of Quality
+    errors : (n,) float
+    time_one : callable
+        ``time_one(quality) -> ms per frame``.
+    n_lights : int
+        Photos of the capture (before any subset).
+    max_error, fps : float, optional
+        As :func:`choose`.
+
+    Returns
+    -------
+    (n,) float64 ndarray
+        ms per frame; ``inf`` where not timed.
+    """
+    errors = np.asarray(errors, dtype=np.float64)
+    n = len(candidates)
+    ms = np.full(n, np.inf)
+    timed = np.zeros(n, dtype=bool)
+
+    def dominated(i, pool):  # some other candidate of the pool costs strictly less by construction
+        return any(j != i and no_costlier(candidates[j], candidates[i], n_lights)
+                   and not no_costlier(candidates[i], candidates[j], n_lights) for j in pool)
+
+    def time_minimal(pool):
+        pool = list(pool)
+        for i in pool:
+            if not timed[i] and not dominated(i, pool):
+                ms[i] = float(time_one(candidates[i]))
+                timed[i] = True
+
+    budget = None if fps is None else 1000.0 / float(fps)
+    if max_error is not None:
+        feasible = np.flatnonzero(errors <= max_error)
+        if feasible.size:
+            time_minimal(feasible)
+            if budget is None or np.any(ms[feasible] <= budget):
+                return ms
+        elif budget is None:  # nothing meets the error: choose() takes the most accurate
+            i = int(np.argmin(errors))
+            ms[i] = float(time_one(candidates[i]))
+            return ms
+        time_minimal(range(n))  # choose() falls back to the fastest of all
+        return ms
+    order = np.lexsort((np.arange(n), errors))  # most accurate first
+    best = None
+    for i in order:
+        if best is not None and errors[i] > best:
+            break
+        if any(timed[j] and ms[j] > budget and no_costlier(candidates[j], candidates[i], n_lights)
+               for j in range(n)):
+            continue  # costs at least as much as one that missed the budget
+        ms[i] = float(time_one(candidates[i]))
+        timed[i] = True
+        if ms[i] <= budget and best is None:
+            best = errors[i]  # the most accurate that fits; equal errors are timed too (ties: cheaper)
+    if best is None:
+        time_minimal(range(n))  # choose() falls back to the fastest of all
+    return ms
