@@ -49,6 +49,7 @@ from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.basis import accepted_basis
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import relight_fast
+from ffls.relight.lightflow import FlowInterpolator, relight_lightflow
 from ffls.synth.scene import make_scene, render_lightmap, stratified_directions, write_synthetic_capture
 from ffls.synth.virtual import composite_masks, render_virtual_scene, wall_lightmap
 from ffls.weights.weighting import SCHEMES, integrate
@@ -94,6 +95,9 @@ def main():
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite.json"))
     ap.add_argument("--oracle", action="store_true", help="also composite direct renders of the two capture scenes")
+    ap.add_argument("--lightflow", action="store_true",
+                    help="also relight with the compact sources interpolated by flow (scheme SCHEME+lightflow)")
+    ap.add_argument("--flow", default="dis", help="flow method of --lightflow (dis, farneback)")
     a = ap.parse_args()
     cache = Path(a.cache)
     cache.mkdir(parents=True, exist_ok=True)
@@ -108,6 +112,7 @@ def main():
     rows = []
     t0 = time.perf_counter()
     captures = {}
+    interpolators = {}
     for n in (int(v) for v in a.lights.split(",")):
         captures[n] = (_capture(cache / f"object_{R}_{n}", obj_scene, n, 0, R),
                        _capture(cache / f"surface_{R}_{n}", surf_scene, n, 1, R))
@@ -134,6 +139,15 @@ def main():
                 wo, ws = _weights(lm, od, oh, scheme), _weights(lm, sd, sh, scheme)
                 fields.append((n, scheme, relight_fast(wo, ob).astype(np.float64),
                                relight_fast(ws, sb).astype(np.float64)))
+                if a.lightflow:
+                    for key, b, d, h in (("o", ob, od, oh), ("s", sb, sd, sh)):
+                        if (n, key) not in interpolators:
+                            interpolators[n, key] = FlowInterpolator(b, d, h, flow=a.flow)
+                    t1 = time.perf_counter()
+                    o, split = relight_lightflow(ob, od, lm, None, oh, scheme=scheme, interpolator=interpolators[n, "o"])
+                    s, _ = relight_lightflow(sb, sd, lm, None, sh, scheme=scheme, interpolator=interpolators[n, "s"])
+                    print(f"{name} {n} {scheme}+lightflow: {split.describe()} ({time.perf_counter() - t1:.1f} s)")
+                    fields.append((n, f"{scheme}+lightflow", o.astype(np.float64), s.astype(np.float64)))
         for n, scheme, o, s in fields:
             paste = bg * (1 - om[..., None]) + o * om[..., None]
             for method in METHODS:
