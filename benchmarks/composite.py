@@ -22,12 +22,19 @@ both methods), and compared with the direct render:
   the background's mean there; the spheres themselves are outside the surface mask.
 
     python benchmarks/composite.py [--maps courtyard,sunrise,studio,sky] [--lights 50,100,200,400]
-        [--schemes MasselusDutreAnrys2002,...] [--res 256] [--truth-dirs 2048] [--cache DIR] [--oracle]
+        [--schemes voronoi,...] [--res 256] [--truth-dirs 2048] [--cache DIR] [--oracle]
+        [--lightflow [--flow dis|farneback]] [--exact-sources]
 
 ``--oracle`` adds rows (scheme ``direct``, lights 0) where the two fields are not relit captures but
 the capture scenes rendered directly under the map: the error of differential rendering itself
 (the captured ground's albedo in the object's bounce light, the registration), without the
 relighting's discretisation of the map over the lights.
+
+``--lightflow`` adds rows (scheme ``SCHEME+lightflow``) where the map's compact bright sources are
+split off and relit by optical-flow interpolation between the basis photos of their nearest lights
+(:func:`ffls.relight.lightflow.relight_lightflow`), the rest with the scheme. ``--exact-sources``
+adds rows (``SCHEME+exact``) with the same split but the sources rendered directly by ``ffls
+synth`` (what a perfect interpolation would give).
 
 Prints a table and writes ``benchmarks/results/composite.json``.
 """
@@ -49,8 +56,9 @@ from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.basis import accepted_basis
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import relight_fast
-from ffls.relight.lightflow import FlowInterpolator, relight_lightflow
-from ffls.synth.scene import make_scene, render_lightmap, stratified_directions, write_synthetic_capture
+from ffls.relight.lightflow import FlowInterpolator, relight_lightflow, split_compact_sources
+from ffls.synth.scene import (make_scene, render_light, render_lightmap, stratified_directions,
+                              write_synthetic_capture)
 from ffls.synth.virtual import composite_masks, render_virtual_scene, wall_lightmap
 from ffls.weights.weighting import SCHEMES, integrate
 
@@ -98,6 +106,9 @@ def main():
     ap.add_argument("--lightflow", action="store_true",
                     help="also relight with the compact sources interpolated by flow (scheme SCHEME+lightflow)")
     ap.add_argument("--flow", default="dis", help="flow method of --lightflow (dis, farneback)")
+    ap.add_argument("--exact-sources", action="store_true",
+                    help="also rows SCHEME+exact: the compact sources rendered directly (ffls synth) and the rest "
+                         "relit; the bound of --lightflow's split, without its interpolation error")
     a = ap.parse_args()
     cache = Path(a.cache)
     cache.mkdir(parents=True, exist_ok=True)
@@ -148,6 +159,16 @@ def main():
                     s, _ = relight_lightflow(sb, sd, lm, None, sh, scheme=scheme, interpolator=interpolators[n, "s"])
                     print(f"{name} {n} {scheme}+lightflow: {split.describe()} ({time.perf_counter() - t1:.1f} s)")
                     fields.append((n, f"{scheme}+lightflow", o.astype(np.float64), s.astype(np.float64)))
+                if a.exact_sources:
+                    split = split_compact_sources(lm, None, oh)
+                    pair = []
+                    for sc, b, d, h in ((obj_scene, ob, od, oh), (surf_scene, sb, sd, sh)):
+                        img = relight_fast(integrate(split.rest, d, None, h, scheme).weights, b).astype(np.float64)
+                        for src in split.sources:
+                            for sdir, sp in zip(src.sample_directions, src.sample_powers):
+                                img += render_light(sc, R, direction=sdir) * sp
+                        pair.append(img)
+                    fields.append((n, f"{scheme}+exact", *pair))
         for n, scheme, o, s in fields:
             paste = bg * (1 - om[..., None]) + o * om[..., None]
             for method in METHODS:

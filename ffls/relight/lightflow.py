@@ -251,7 +251,7 @@ def split_compact_sources(lightmap, rotation=None, hemisphere="upper", *, thresh
     return SourceSplit(replace(lightmap, data=rest_data), tuple(sources), peak)
 
 
-def reference_image(basis, percentile: float = 90.0, rows: int = 64) -> np.ndarray:
+def reference_image(basis, percentile: float = 90.0, chunk_values: int = 1 << 23) -> np.ndarray:
     """A light-independent image of a basis: per pixel and channel, a high percentile over the lights.
 
     The photos of a reflectance field share the surface's texture and differ in shading, shadows
@@ -266,8 +266,8 @@ def reference_image(basis, percentile: float = 90.0, rows: int = 64) -> np.ndarr
     ----------
     basis : (n, H, W, 3) float array
     percentile : float
-    rows : int
-        Image rows per chunk (bounds the temporary memory).
+    chunk_values : int
+        Values per chunk of rows (bounds the temporary memory: about 4 bytes each).
 
     Returns
     -------
@@ -275,6 +275,7 @@ def reference_image(basis, percentile: float = 90.0, rows: int = 64) -> np.ndarr
     """
     b = np.asarray(basis)
     out = np.empty(b.shape[1:], dtype=np.float32)
+    rows = max(1, int(chunk_values) // max(1, b.shape[0] * b.shape[2] * b.shape[3]))
     for r in range(0, b.shape[1], rows):
         out[r:r + rows] = np.percentile(b[:, r:r + rows].astype(np.float32), percentile, axis=0)
     return out
@@ -341,7 +342,8 @@ def _warp(img: np.ndarray, disp: np.ndarray) -> np.ndarray:
 
 
 def photo_flow(a, b, method: str = "dis", *, reference=None, blur_sigma: float | None = None,
-               consistency: float = 0.2, consistency_px: float = 2.0, max_fraction: float = 0.4) -> np.ndarray:
+               consistency: float = 0.2, consistency_px: float = 2.0, max_fraction: float = 0.4,
+               explain: bool = True) -> np.ndarray:
     """Dense flow from photo ``a`` to photo ``b``, 0 where it is not trustworthy.
 
     Parameters
@@ -368,6 +370,11 @@ def photo_flow(a, b, method: str = "dis", *, reference=None, blur_sigma: float |
         so that the flow goes to 0 smoothly.
     max_fraction : float
         Flows longer than this fraction of the image's larger side are set to 0.
+    explain : bool
+        Keep the flow only where it explains the change between the photos: ``b`` warped back by
+        it is closer to ``a`` than ``b`` itself (both differences blurred like the images). A
+        shading change with nothing moving (a curved surface turning away from the light) has
+        no flow that explains it better than none, and then the photos are blended, not warped.
 
     Returns
     -------
@@ -386,6 +393,12 @@ def photo_flow(a, b, method: str = "dis", *, reference=None, blur_sigma: float |
     mag = (fab ** 2).sum(-1) + (back ** 2).sum(-1)
     H, W = fab.shape[:2]
     keep = (err <= consistency * mag + consistency_px ** 2) & (np.sqrt((fab ** 2).sum(-1)) <= max_fraction * max(H, W))
+    if explain:
+        # the motion must explain the change: b moved back by the flow is closer to a than b is
+        fa, fb = a8.astype(np.float32), b8.astype(np.float32)
+        e_still = cv2.GaussianBlur(np.abs(fa - fb), (0, 0), float(blur_sigma))
+        e_moved = cv2.GaussianBlur(np.abs(fa - _warp(fb, fab)), (0, 0), float(blur_sigma))
+        keep &= e_moved < e_still
     k = keep.astype(np.float32)
     s = max(1.0, 0.01 * max(H, W))
     k = np.minimum(k, cv2.GaussianBlur(k, (0, 0), s))
@@ -610,4 +623,5 @@ class LightFlowRelighter:
         """Release the inner relighter and the cached flows."""
         self.inner.release()
         self.interpolator.clear()
+        self.interpolator = None
         self._hdr = self._display = None
