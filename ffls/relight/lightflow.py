@@ -530,10 +530,17 @@ def relight_lightflow(basis, directions, lightmap, rotation=None, hemisphere="up
 
 
 def _sources_image(fi: FlowInterpolator, sources) -> np.ndarray:
+    """Sum of the sources' samples, each its power times its interpolated photo.
+
+    A sample outside the hemisphere (a source straddling the horizon) adds nothing, as the
+    weighting drops the texels there.
+    """
     out = np.zeros(fi.basis.shape[1:], dtype=np.float32)
     for s in sources:
-        for d, p in zip(s.sample_directions, s.sample_powers):
-            out += fi.image(d) * p.astype(np.float32)
+        inside = in_domain(np.asarray(s.sample_directions, dtype=np.float64), fi.hemisphere)
+        for d, p, ok in zip(s.sample_directions, s.sample_powers, inside):
+            if ok:
+                out += fi.image(d) * p.astype(np.float32)
     return out
 
 
