@@ -22,12 +22,19 @@ both methods), and compared with the direct render:
   the background's mean there; the spheres themselves are outside the surface mask.
 
     python benchmarks/composite.py [--maps courtyard,sunrise,studio,sky] [--lights 50,100,200,400]
-        [--schemes MasselusDutreAnrys2002,...] [--res 256] [--truth-dirs 2048] [--cache DIR] [--oracle]
+        [--schemes voronoi,...] [--res 256] [--truth-dirs 2048] [--cache DIR] [--oracle]
+        [--lightflow [--flow dis|farneback]] [--exact-sources]
 
 ``--oracle`` adds rows (scheme ``direct``, lights 0) where the two fields are not relit captures but
 the capture scenes rendered directly under the map: the error of differential rendering itself
 (the captured ground's albedo in the object's bounce light, the registration), without the
 relighting's discretisation of the map over the lights.
+
+``--lightflow`` adds rows (scheme ``SCHEME+lightflow``) where the map's compact bright sources are
+split off and relit by optical-flow interpolation between the basis photos of their nearest lights
+(:func:`ffls.relight.lightflow.relight_lightflow`), the rest with the scheme. ``--exact-sources``
+adds rows (``SCHEME+exact``) with the same split but the sources rendered directly by ``ffls
+synth`` (what a perfect interpolation would give).
 
 Prints a table and writes ``benchmarks/results/composite.json``.
 """
@@ -49,7 +56,9 @@ from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.basis import accepted_basis
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import relight_fast
-from ffls.synth.scene import make_scene, render_lightmap, stratified_directions, write_synthetic_capture
+from ffls.relight.lightflow import FlowInterpolator, relight_lightflow, split_compact_sources
+from ffls.synth.scene import (make_scene, render_light, render_lightmap, stratified_directions,
+                              write_synthetic_capture)
 from ffls.synth.virtual import composite_masks, render_virtual_scene, wall_lightmap
 from ffls.weights.weighting import SCHEMES, integrate
 
@@ -94,6 +103,12 @@ def main():
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite.json"))
     ap.add_argument("--oracle", action="store_true", help="also composite direct renders of the two capture scenes")
+    ap.add_argument("--lightflow", action="store_true",
+                    help="also relight with the compact sources interpolated by flow (scheme SCHEME+lightflow)")
+    ap.add_argument("--flow", default="dis", help="flow method of --lightflow (dis, farneback)")
+    ap.add_argument("--exact-sources", action="store_true",
+                    help="also rows SCHEME+exact: the compact sources rendered directly (ffls synth) and the rest "
+                         "relit; the bound of --lightflow's split, without its interpolation error")
     a = ap.parse_args()
     cache = Path(a.cache)
     cache.mkdir(parents=True, exist_ok=True)
@@ -108,6 +123,7 @@ def main():
     rows = []
     t0 = time.perf_counter()
     captures = {}
+    interpolators = {}
     for n in (int(v) for v in a.lights.split(",")):
         captures[n] = (_capture(cache / f"object_{R}_{n}", obj_scene, n, 0, R),
                        _capture(cache / f"surface_{R}_{n}", surf_scene, n, 1, R))
@@ -134,6 +150,25 @@ def main():
                 wo, ws = _weights(lm, od, oh, scheme), _weights(lm, sd, sh, scheme)
                 fields.append((n, scheme, relight_fast(wo, ob).astype(np.float64),
                                relight_fast(ws, sb).astype(np.float64)))
+                if a.lightflow:
+                    for key, b, d, h in (("o", ob, od, oh), ("s", sb, sd, sh)):
+                        if (n, key) not in interpolators:
+                            interpolators[n, key] = FlowInterpolator(b, d, h, flow=a.flow)
+                    t1 = time.perf_counter()
+                    o, split = relight_lightflow(ob, od, lm, None, oh, scheme=scheme, interpolator=interpolators[n, "o"])
+                    s, _ = relight_lightflow(sb, sd, lm, None, sh, scheme=scheme, interpolator=interpolators[n, "s"])
+                    print(f"{name} {n} {scheme}+lightflow: {split.describe()} ({time.perf_counter() - t1:.1f} s)")
+                    fields.append((n, f"{scheme}+lightflow", o.astype(np.float64), s.astype(np.float64)))
+                if a.exact_sources:
+                    split = split_compact_sources(lm, None, oh)
+                    pair = []
+                    for sc, b, d, h in ((obj_scene, ob, od, oh), (surf_scene, sb, sd, sh)):
+                        img = relight_fast(integrate(split.rest, d, None, h, scheme).weights, b).astype(np.float64)
+                        for src in split.sources:
+                            for sdir, sp in zip(src.sample_directions, src.sample_powers):
+                                img += render_light(sc, R, direction=sdir) * sp
+                        pair.append(img)
+                    fields.append((n, f"{scheme}+exact", *pair))
         for n, scheme, o, s in fields:
             paste = bg * (1 - om[..., None]) + o * om[..., None]
             for method in METHODS:

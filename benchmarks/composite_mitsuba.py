@@ -22,7 +22,11 @@ truth differs from the background by more than 3%; pasting without the shadow; t
 the spheres).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
-        [--res 128] [--spp 16] [--truth-spp 256] [--cache DIR]
+        [--res 128] [--spp 16] [--truth-spp 256] [--cache DIR] [--schemes voronoi,...]
+        [--sources weights,lightflow]
+
+``--sources lightflow`` relights the map's compact sources by flow interpolation between the
+(path-traced, noisy) basis photos (:class:`ffls.relight.lightflow.LightFlowRelighter`).
 
 Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/composite_mitsuba.json``.
 """
@@ -45,6 +49,7 @@ from ffls.io.images import read_image, write_exr
 from ffls.lightmaps.lightmap import load_lightmap
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import CpuRelighter
+from ffls.relight.lightflow import LightFlowRelighter
 from ffls.synth.scene import stratified_directions
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -152,6 +157,9 @@ def main():
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--truth-spp", type=int, default=256)
     ap.add_argument("--map-height", type=int, default=128)
+    ap.add_argument("--schemes", default="voronoi", help="weighting schemes (ffls.weights.weighting.SCHEMES)")
+    ap.add_argument("--sources", default="weights,lightflow",
+                    help="how compact sources are relit: weights (every texel weighted), lightflow (ffls.relight.lightflow)")
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite_mitsuba")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite_mitsuba.json"))
     a = ap.parse_args()
@@ -197,13 +205,18 @@ def main():
         lt, lb = tr @ LUMINANCE, bg @ LUMINANCE
         change = sm_b & ~om_b & (np.abs(lt - lb) > 0.03 * lb)
         ring = near_sph & sm_b & ~change
-        for n, ((oc, ol), (sc_, sl)) in caps.items():
-            o = CpuRelighter.from_capture(oc, ol, precision="f64", cell_max_res=4096)
-            s = CpuRelighter.from_capture(sc_, sl, precision="f64", cell_max_res=4096)
+        for n, ((oc, ol), (sc_, sl)), scheme, sources in ((n, c, sch, src) for n, c in caps.items()
+                                                         for sch in a.schemes.split(",")
+                                                         for src in a.sources.split(",")):
+            o = CpuRelighter.from_capture(oc, ol, precision="f64", cell_max_res=4096, weighting=scheme)
+            s = CpuRelighter.from_capture(sc_, sl, precision="f64", cell_max_res=4096, weighting=scheme)
+            if sources == "lightflow":
+                o, s = LightFlowRelighter(o), LightFlowRelighter(s)
             for r in (o, s):
                 r.set_lightmap(lm)
                 r.render()
             oh, sh = o.read_hdr().astype(np.float64), s.read_hdr().astype(np.float64)
+            note = o.last_split.describe() if sources == "lightflow" else ""
             paste = bg * (1 - om[..., None]) + oh * om[..., None]
             for method in METHODS:
                 res = composite(bg, oh, sh, om, sm, method=method)
@@ -212,16 +225,18 @@ def main():
                 def rel(x, m):
                     return float(np.abs(x - tr)[m].sum() / max(tr[m].sum(), 1e-30))
 
-                rows.append({"map": name, "lights": n, "scheme": "MasselusDutreAnrys2002", "method": method,
+                rows.append({"map": name, "lights": n, "scheme": scheme, "sources": sources, "method": method,
                              "change": rel(c, change), "paste": rel(paste, change),
                              "overall": rel(c, np.ones_like(change)), "object": rel(c, om_b),
                              "sphere_trace": float((np.abs(c - bg)[ring] @ LUMINANCE).mean()
                                                    / (bg[ring] @ LUMINANCE).mean()),
-                             "change_pixels": int(change.sum()), "registration": res.registration.to_json()})
+                             "change_pixels": int(change.sum()), "registration": res.registration.to_json(),
+                             "compact_sources": note})
                 x = rows[-1]
-                print(f"{name:10s} {n:4d} {method:12s} change {100 * x['change']:5.1f}%  paste {100 * x['paste']:5.1f}%"
-                      f"  overall {100 * x['overall']:4.1f}%  object {100 * x['object']:4.1f}%  sphere trace "
-                      f"{100 * x['sphere_trace']:4.1f}%  ({x['change_pixels']} px)", flush=True)
+                print(f"{name:10s} {n:4d} {scheme:12s} {sources:9s} {method:12s} change {100 * x['change']:5.1f}%  "
+                      f"paste {100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
+                      f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  "
+                      f"({x['change_pixels']} px) {note}", flush=True)
     write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "capture_albedo": CAPTURE_ALBEDO,
                        "scene_albedo": SCENE_ALBEDO, "host": host_info(), "seconds": time.perf_counter() - t0,
                        "rows": rows})

@@ -13,8 +13,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, exposure_arg, output_path,
-                                  input_path, print_notes, flush_notes, rotation_from_args)
+from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, add_weighting_argument,
+                                  exposure_arg, input_path, output_path, print_notes, flush_notes,
+                                  rotation_from_args)
 
 NAME = "composite"
 HELP = "merge a relit object and its shadows into a virtual scene or photograph (differential rendering)"
@@ -28,6 +29,8 @@ DESCRIPTION = (
 )
 
 STILL_SUFFIXES = (".exr", ".png")
+#: ``--sources``: how the map's compact bright sources are relit.
+SOURCES = ("lightflow", "weights")
 BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
 
 
@@ -61,6 +64,14 @@ def add_arguments(p):
     c.add_argument("--registration", default="auto", choices=REGISTRATION_MODES,
                    help="fit background ~ scale * surface + offset on the surface (auto: the offset only where the "
                         "surface's brightness varies enough); none: scale 1")
+    add_weighting_argument(c)
+    c.add_argument("--sources", default="lightflow", choices=SOURCES,
+                   help="compact bright sources of the map (a sun, a window, a lamp): lightflow (default) relights "
+                        "each from the basis photos of its nearest lights warped toward it by optical flow (Chen and "
+                        "Lensch 2005; CPU, flows cached per pair of lights), the rest with --weighting; weights: "
+                        "every texel through --weighting")
+    c.add_argument("--flow", default="dis", choices=("dis", "farneback"),
+                   help="optical flow of --sources lightflow (OpenCV DIS or Farneback)")
     c.add_argument("--scale-object", action="store_true",
                    help="scale the relit object by the registration too (the mismatch is the exposure, e.g. a "
                         "photographed background; default: it is the surface's albedo)")
@@ -156,13 +167,20 @@ def load_inputs(args):
 
 
 def make_compositor(args, inputs):
-    """A :class:`ffls.relight.composite.Compositor` over two CPU relighters (float32 sums, or ``--rank K``)."""
+    """A :class:`ffls.relight.composite.Compositor` over two CPU relighters (float32 sums, or ``--rank K``).
+
+    With ``--sources lightflow`` each is a :class:`ffls.relight.lightflow.LightFlowRelighter`: the
+    compact sources by flow interpolation, the rest through the CPU relighter.
+    """
     from ffls.relight.composite import Compositor
     from ffls.relight.cpu import CpuRelighter
+    from ffls.relight.lightflow import LightFlowRelighter
 
     rel = [CpuRelighter.from_capture(*inputs[k], precision="f32", rank=args.rank, cell_res=args.cells_res,
-                                     cell_max_res=4096)
+                                     cell_max_res=4096, weighting=args.weighting)
            for k in ("object", "surface")]
+    if args.sources == "lightflow":
+        rel = [LightFlowRelighter(r, flow=args.flow) for r in rel]
     return Compositor(*rel, inputs["background"], inputs["object_mask"], inputs["surface_mask"],
                       method=args.method, registration=args.registration, object_scale=args.scale_object,
                       paths={"background": args.background, "object_mask": args.mask,
@@ -204,7 +222,13 @@ def run(args) -> int:
             report = {"format": "ffls-composite", "version": 1, "method": res.method,
                       "registration": reg.to_json(), "clamped_pixels": res.clamped_pixels,
                       "object": str(args.object), "surface": str(args.surface), "lightmap": str(args.lightmap),
-                      "background": str(args.background), "exposure": exposure}
+                      "background": str(args.background), "exposure": exposure, "weighting": args.weighting,
+                      "sources": args.sources}
+            split = getattr(comp.object, "last_split", None)
+            if split is not None:
+                report["compact_sources"] = [{"direction": s.direction.tolist(), "power": s.power.tolist(),
+                                              "solid_angle": s.solid_angle, "samples": len(s.sample_powers)}
+                                             for s in split.sources]
             with atomic_output(files[".json"]) as tmp:
                 tmp.write_text(json.dumps(report, indent=1) + "\n")
             what = f"{files['.exr']}, {files['.png'].name} and {files['.json'].name}"
@@ -222,7 +246,9 @@ def run(args) -> int:
                         res = comp.render()
                     sink.write(_display(res.image, exposure, args.tonemap))
             what = sink.describe()
-        print(f"ffls composite: {what} ({res.method}); {reg.describe()}"
+        split = getattr(comp.object, "last_split", None)
+        print(f"ffls composite: {what} ({res.method}, {args.weighting} weighting"
+              + (f", {split.describe()} relit by {args.flow} flow" if split is not None else "") + f"); {reg.describe()}"
               + (f"; {res.clamped_pixels} negative pixels set to 0" if res.clamped_pixels else ""))
     finally:
         comp.release()

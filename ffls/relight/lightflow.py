@@ -1,0 +1,634 @@
+"""Relighting a small bright source by optical-flow interpolation between basis photos (Chen and Lensch 2005).
+
+A light map with a sun, a window or a lamp puts most of its power into a few texels. The usual
+weighting (:mod:`ffls.weights.weighting`) hands that power to the nearest lights, so the sun's
+sharp shadow becomes a cross-fade of the neighbouring lights' shadows: two or three faint
+shadows side by side instead of one dark one. Interpolating the *photos* instead of blending them
+moves the shadow: Chen and Lensch, "Light Source Interpolation for Sparsely Sampled Reflectance
+Fields" (VMV 2005) compute the optical flow between the photos of neighbouring lights and warp
+each toward the intermediate light direction before blending (Fuchs et al., "Superresolution
+Reflectance Fields: Synthesizing images for intermediate light directions", Eurographics 2007,
+refine the idea). Neither paper is in the project's library; what follows is this module's own
+construction, measured in docs/composite.md. Here:
+
+* :func:`split_compact_sources` splits a light map into its compact bright sources (connected
+  texels of at least ``threshold`` times the peak radiance, small in solid angle and holding a
+  noticeable share of the power) and the rest (the map with those texels set to 0). The split
+  conserves energy: the rest's power plus the sources' equals the map's, per channel, to float64
+  rounding. An extended source is represented by a few power-weighted samples (k-means of its
+  texels), so a window casts a soft shadow.
+* :func:`reference_image` is a light-independent image of the basis (a high percentile over the
+  lights, per pixel): the photos divided by it keep their shadows and highlights, which move with
+  the light, and lose the texture, which does not.
+* :func:`photo_flow` is the dense flow between two basis photos: DIS (Kroeger, Timofte, Dai and
+  Van Gool, ECCV 2016) or Farneback (SCIA 2003), both from OpenCV, on the log of the blurred
+  ratio to the reference (log: a shadow and a lit surface are far apart whatever the exposure;
+  blur: the noise of a real photo, and a pyramid that can see a sharp shadow move farther than
+  its width), with a forward-backward consistency check: where the two flows disagree the flow
+  is set to 0, so the interpolation falls back to the plain blend there (occlusions, flat
+  regions, JPEG blocks).
+* :class:`FlowInterpolator` gives the photo for any direction ``d``: the lights of the spherical
+  Delaunay triangle around ``d`` (:class:`ffls.weights.barycentric.Barycentric`) with barycentric
+  weights ``w_v``; each photo's ratio to the reference ``I_v / A`` is warped by
+  ``-sum_u w_u F_{v->u}`` (backward warping with bilinear interpolation: no ringing, no new
+  extrema), multiplied back by ``A``, and the warped photos are blended with the same weights. At
+  a light's own direction it is that light's photo exactly.
+* :func:`relight_lightflow` is the relit image: the rest through the usual weights and basis sum,
+  plus each source's power times its interpolated photo. :class:`LightFlowRelighter` wraps a
+  :class:`ffls.relight.cpu.CpuRelighter` with the relighter interface (``set_lightmap``,
+  ``set_rotation``, ``render``, ``read_hdr``) for :class:`ffls.relight.composite.Compositor`.
+
+The flow is computed on the CPU (OpenCV) and cached per pair of lights; it does not run in the
+GPU engine's live loop.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+from scipy.cluster.vq import kmeans2
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from ffls.conventions import check_hemisphere, checked_rotation, in_domain
+from ffls.display.tonemap import to_uint8, tonemap as tonemap_np
+from ffls.lightmaps.sphere_maps import get_map
+from ffls.relight.cpu import relight_fast
+from ffls.weights.barycentric import Barycentric
+from ffls.weights.voronoi import unique_directions
+from ffls.weights.weighting import integrate
+
+__all__ = [
+    "FLOWS",
+    "BLUR_FRACTION",
+    "reference_image",
+    "LUMINANCE",
+    "CompactSource",
+    "SourceSplit",
+    "split_compact_sources",
+    "photo_flow",
+    "FlowInterpolator",
+    "relight_lightflow",
+    "LightFlowRelighter",
+]
+
+#: ``method=`` of :func:`photo_flow`.
+FLOWS = ("dis", "farneback")
+#: Default blur of :func:`photo_flow`, as a fraction of the image's larger side.
+BLUR_FRACTION = 0.02
+#: Barycentric weights at most this are dropped by :meth:`FlowInterpolator.weights`.
+WEIGHT_EPS = 1e-9
+#: Rec.709 luminance of linear RGB.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class CompactSource:
+    """One compact bright source of a light map (directions in the rotated, world frame).
+
+    Attributes
+    ----------
+    direction : (3,) float64
+        Power-weighted mean direction (unit).
+    power : (3,) float64
+        Its integral of radiance over solid angle, per channel (the map's units times sr).
+    solid_angle : float
+        Solid angle of its texels (sr).
+    texels : int
+        Number of texels.
+    sample_directions : (k, 3) float64
+        Unit directions of the samples that stand for it (k >= 1).
+    sample_powers : (k, 3) float64
+        Their powers; they sum to ``power``.
+    """
+
+    direction: np.ndarray
+    power: np.ndarray
+    solid_angle: float
+    texels: int
+    sample_directions: np.ndarray
+    sample_powers: np.ndarray
+
+    @property
+    def radius_deg(self) -> float:
+        """Angular radius (degrees) of a disc of its solid angle."""
+        return float(np.degrees(np.arccos(max(-1.0, 1.0 - self.solid_angle / (2 * np.pi)))))
+
+
+@dataclass(frozen=True)
+class SourceSplit:
+    """A light map split into compact sources and the rest.
+
+    Attributes
+    ----------
+    rest : ffls.lightmaps.lightmap.LightMap
+        The map with the sources' texels set to 0 (same layout and size; not rotated).
+    sources : tuple of CompactSource
+    peak : float
+        Peak luminance of the map inside the hemisphere (after the rotation).
+    """
+
+    rest: object
+    sources: tuple
+    peak: float
+
+    @property
+    def source_power(self) -> np.ndarray:
+        """(3,) total power of the sources."""
+        if not self.sources:
+            return np.zeros(3)
+        return np.sum([s.power for s in self.sources], axis=0)
+
+    def describe(self) -> str:
+        """One line: the sources' count, share of the power and size."""
+        if not self.sources:
+            return "no compact source"
+        tot = float(self.rest.total_power() @ LUMINANCE + self.source_power @ LUMINANCE)
+        parts = [f"{100 * float(s.power @ LUMINANCE) / max(tot, 1e-30):.0f}% in {s.radius_deg:.1f} deg "
+                 f"({len(s.sample_powers)} sample{'s' if len(s.sample_powers) > 1 else ''})" for s in self.sources]
+        return f"{len(self.sources)} compact source{'s' if len(self.sources) > 1 else ''}: " + ", ".join(parts)
+
+
+def split_compact_sources(lightmap, rotation=None, hemisphere="upper", *, threshold: float = 0.1,
+                          max_solid_angle: float = 0.05, min_power_fraction: float = 0.05,
+                          sample_spacing_deg: float = 2.0, max_samples: int = 8, seed: int = 0) -> SourceSplit:
+    """Split a light map into compact bright sources and the rest.
+
+    The texels of luminance at least ``threshold`` times the peak luminance inside the hemisphere
+    (after the rotation) are grouped into connected sets (neighbours within two texel sizes on
+    the sphere, so a source across the lat-long seam or a cube edge is one set). A set is a compact
+    source when its solid angle is at most ``max_solid_angle`` and its power at least
+    ``min_power_fraction`` of the map's power inside the hemisphere; every texel of it, bright or
+    not, stays in one of the two parts, so ``rest + sources == map`` exactly.
+
+    Parameters
+    ----------
+    lightmap : ffls.lightmaps.lightmap.LightMap
+    rotation : (3, 3) array_like, optional
+        Light-map rotation (content at ``d`` moves to ``R d``); the sources' directions are rotated.
+    hemisphere : {'upper', 'full'} or Hemisphere
+        Sources whose centre falls outside it are left in the rest (no light reaches them there).
+    threshold : float
+        Fraction of the peak luminance a texel needs (0 < threshold <= 1). It is a radiance
+        threshold, so a source's extent does not depend on the texel size; its power is the
+        solid-angle-weighted sum.
+    max_solid_angle : float
+        Largest solid angle (sr) of a compact source (0.05 sr is a disc of 7.2 degrees radius).
+    min_power_fraction : float
+        Smallest share of the power a source must carry to be split off.
+    sample_spacing_deg, max_samples : float, int
+        A source of angular radius r is represented by ``min(max_samples, 1 + r // spacing)``
+        k-means samples of its texels (power-weighted directions, summed powers).
+    seed : int
+        Seed of the k-means initialisation (the result is deterministic).
+
+    Returns
+    -------
+    SourceSplit
+    """
+    if not hasattr(lightmap, "layout"):
+        raise ValueError("split_compact_sources needs a LightMap (the rest keeps its layout)")
+    if not 0 < threshold <= 1:
+        raise ValueError(f"threshold must be in (0, 1], not {threshold}")
+    hemi = check_hemisphere(hemisphere)
+    R = np.eye(3) if rotation is None else checked_rotation(rotation)
+    m = get_map(lightmap.layout)
+    res = lightmap.res
+    valid = np.flatnonzero(np.asarray(m.valid_mask(res), dtype=bool).ravel())
+    d, rad, sa = lightmap.samples()
+    if d.shape[0] != valid.size:
+        raise ValueError("light map samples do not match its valid texels")
+    dr = d @ R.T
+    lum = rad @ LUMINANCE
+    inside = in_domain(dr, hemi)
+    peak = float(lum[inside].max()) if inside.any() else 0.0
+    rest_data = np.array(lightmap.data, dtype=np.float32, copy=True)
+    if peak <= 0:
+        return SourceSplit(replace(lightmap, data=rest_data), (), peak)
+    total = float((lum * sa)[inside].sum())
+    bright = np.flatnonzero(lum >= threshold * peak)
+    link = 2.0 * float(np.sqrt(4 * np.pi / d.shape[0])) * (1.0 if lightmap.layout != "latlong" else 1.3)
+    pairs = cKDTree(dr[bright]).query_pairs(link, output_type="ndarray")
+    nb = bright.size
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(nb, nb)) if len(pairs) else \
+        coo_matrix((nb, nb))
+    ncomp, label = connected_components(g, directed=False)
+    flat = rest_data.reshape(-1, 3)
+    sources = []
+    rng = np.random.default_rng(seed)
+    for c in range(ncomp):
+        t = bright[label == c]
+        omega = float(sa[t].sum())
+        p = rad[t] * sa[t, None]
+        pw = p.sum(0)
+        if omega > max_solid_angle or float(pw @ LUMINANCE) < min_power_fraction * total:
+            continue
+        lw = p @ LUMINANCE
+        centre = (dr[t] * lw[:, None]).sum(0)
+        if np.linalg.norm(centre) <= 0:
+            continue
+        centre = centre / np.linalg.norm(centre)
+        if not in_domain(centre[None], hemi)[0]:
+            continue
+        r_deg = float(np.degrees(np.arccos(max(-1.0, 1.0 - omega / (2 * np.pi)))))
+        k = int(min(max_samples, t.size, 1 + r_deg // sample_spacing_deg))
+        if k > 1:
+            _, lab = kmeans2(dr[t], k, minit="++", seed=rng, iter=20)
+            groups = [np.flatnonzero(lab == j) for j in range(k)]
+            groups = [q for q in groups if q.size]
+        else:
+            groups = [np.arange(t.size)]
+        sd, sp = [], []
+        for q in groups:
+            v = (dr[t[q]] * np.maximum(lw[q], 1e-30)[:, None]).sum(0)
+            sd.append(v / np.linalg.norm(v))
+            sp.append(p[q].sum(0))
+        flat[valid[t]] = 0.0
+        sources.append(CompactSource(centre, pw, omega, int(t.size), np.array(sd), np.array(sp)))
+    sources.sort(key=lambda s: -float(s.power @ LUMINANCE))
+    return SourceSplit(replace(lightmap, data=rest_data), tuple(sources), peak)
+
+
+def reference_image(basis, percentile: float = 90.0, chunk_values: int = 1 << 23) -> np.ndarray:
+    """A light-independent image of a basis: per pixel and channel, a high percentile over the lights.
+
+    The photos of a reflectance field share the surface's texture and differ in shading, shadows
+    and highlights. Dividing a photo by this image leaves its shading (``ratio``: about 1 where
+    lit like the brighter photos, near 0 in a shadow), so that the flow follows the shadows and
+    highlights that move with the light and not the texture that stays (a simple form of Weiss,
+    "Deriving intrinsic images from image sequences", ICCV 2001, who takes the median over the
+    illuminations of the log derivatives). A high percentile is robust to the noise of single
+    photos and to a highlight seen under a few lights.
+
+    Parameters
+    ----------
+    basis : (n, H, W, 3) float array
+    percentile : float
+    chunk_values : int
+        Values per chunk of rows (bounds the temporary memory: about 4 bytes each).
+
+    Returns
+    -------
+    (H, W, 3) float32
+    """
+    b = np.asarray(basis)
+    out = np.empty(b.shape[1:], dtype=np.float32)
+    rows = max(1, int(chunk_values) // max(1, b.shape[0] * b.shape[2] * b.shape[3]))
+    for r in range(0, b.shape[1], rows):
+        out[r:r + rows] = np.percentile(b[:, r:r + rows].astype(np.float32), percentile, axis=0)
+    return out
+
+
+def _ratio(img: np.ndarray, reference: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """``img / reference`` where the reference is above a floor (1e-3 of its median), else ``img / floor``."""
+    if reference is None:
+        return np.asarray(img, dtype=np.float32), None
+    ref = np.asarray(reference, dtype=np.float32)
+    pos = ref[ref > 0]
+    floor = np.float32(1e-3 * float(np.median(pos))) if pos.size else np.float32(1.0)
+    den = np.maximum(ref, floor)
+    return np.asarray(img, dtype=np.float32) / den, den
+
+
+def _flow_images(a: np.ndarray, b: np.ndarray, blur_sigma: float, reference=None) -> tuple[np.ndarray, np.ndarray]:
+    """8-bit images for the flow with one shared scale: the luminance ratio to ``reference`` or the log luminance."""
+    lum = LUMINANCE.astype(np.float32)
+    ra, _ = _ratio(a, reference)
+    rb, _ = _ratio(b, reference)
+    la, lb = np.maximum(ra @ lum, 0), np.maximum(rb @ lum, 0)
+    if blur_sigma > 0:
+        la = cv2.GaussianBlur(la, (0, 0), blur_sigma)
+        lb = cv2.GaussianBlur(lb, (0, 0), blur_sigma)
+    # log of the luminance relative to the pair's median, from 1/32 to 4 times it: a shadow and a
+    # lit surface are far apart, a highlight or a bright object does not squeeze the rest into a few levels
+    both = np.concatenate([la.ravel(), lb.ravel()])
+    pos = both[both > 0]
+    med = float(np.median(pos)) if pos.size else 1.0
+    lo, hi = np.log(1 / 32), np.log(4.0)
+
+    def u8(x):
+        g = np.log(np.maximum(x / med, 1 / 32))
+        return np.clip((g - lo) / (hi - lo) * 255, 0, 255).astype(np.uint8)
+
+    return u8(la), u8(lb)
+
+
+def _raw_flow(a8: np.ndarray, b8: np.ndarray, method: str) -> np.ndarray:
+    """OpenCV flow from ``a8`` to ``b8``, computed on images padded by half their size (edge replicated).
+
+    Without the margin DIS misses a shadow that moves by more than its width near the image's
+    border (its coarse pyramid levels have no room): the flow from a photo whose shadow is near
+    the left edge to one whose shadow is 25 pixels to the right came out 4 to 8 pixels the wrong
+    way at 96 pixels, and 25 pixels right with the margin.
+    """
+    pad = max(a8.shape[:2]) // 2
+    A = cv2.copyMakeBorder(a8, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
+    B = cv2.copyMakeBorder(b8, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
+    if method == "dis":
+        f = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM).calc(A, B, None)
+    else:
+        f = cv2.calcOpticalFlowFarneback(A, B, None, 0.5, 5, 15, 3, 5, 1.2, 0)
+    return np.ascontiguousarray(f[pad:pad + a8.shape[0], pad:pad + a8.shape[1]])
+
+
+def _warp(img: np.ndarray, disp: np.ndarray) -> np.ndarray:
+    """``img(x + disp(x))`` with bilinear interpolation (edges replicated)."""
+    H, W = disp.shape[:2]
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    return cv2.remap(np.ascontiguousarray(img, dtype=np.float32), gx + disp[..., 0], gy + disp[..., 1],
+                     interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def photo_flow(a, b, method: str = "dis", *, reference=None, blur_sigma: float | None = None,
+               consistency: float = 0.2, consistency_px: float = 2.0, max_fraction: float = 0.4,
+               explain: bool = True) -> np.ndarray:
+    """Dense flow from photo ``a`` to photo ``b``, 0 where it is not trustworthy.
+
+    Parameters
+    ----------
+    a, b : (H, W, 3) array_like
+        Linear photos (basis images of two lights).
+    method : {'dis', 'farneback'}
+        OpenCV's DIS flow (medium preset) or Farneback's.
+    reference : (H, W, 3) array_like, optional
+        A light-independent image of the same scene (:func:`reference_image`): the flow is
+        computed between the luminance ratios ``a / reference`` and ``b / reference``, which
+        keep the shadows and highlights and drop the texture. Without it, between the log
+        luminances.
+    blur_sigma : float, optional
+        Gaussian blur (pixels) of the luminance before the flow; default ``BLUR_FRACTION`` of the
+        image's larger side (at least 1 pixel). It suppresses the noise of real photos, and it
+        lets the coarse levels of the flow's pyramid see a sharp shadow that moves by more than
+        its own width (a hard-edged shadow moving 25 pixels is found from a blur of 1.5 pixels
+        on at 96 pixels, not below).
+    consistency, consistency_px : float
+        Forward-backward check: the flow at ``x`` is kept where
+        ``|F_ab(x) + F_ba(x + F_ab(x))|^2 <= consistency * (|F_ab|^2 + |F_ba|^2) + consistency_px^2``
+        (Sundaram, Brox and Keutzer, ECCV 2010); elsewhere it is 0. The kept-mask is blurred
+        so that the flow goes to 0 smoothly.
+    max_fraction : float
+        Flows longer than this fraction of the image's larger side are set to 0.
+    explain : bool
+        Keep the flow only where it explains the change between the photos: ``b`` warped back by
+        it is closer to ``a`` than ``b`` itself (both differences blurred like the images). A
+        shading change with nothing moving (a curved surface turning away from the light) has
+        no flow that explains it better than none, and then the photos are blended, not warped.
+
+    Returns
+    -------
+    (H, W, 2) float32
+        ``a(x) ~ b(x + flow(x))`` (x, y in pixels).
+    """
+    if method not in FLOWS:
+        raise ValueError(f"flow method must be one of {', '.join(FLOWS)}, not {method!r}")
+    if blur_sigma is None:
+        blur_sigma = max(1.0, BLUR_FRACTION * max(np.shape(a)[:2]))
+    a8, b8 = _flow_images(a, b, float(blur_sigma), reference)
+    fab = _raw_flow(a8, b8, method)
+    fba = _raw_flow(b8, a8, method)
+    back = _warp(fba, fab)
+    err = ((fab + back) ** 2).sum(-1)
+    mag = (fab ** 2).sum(-1) + (back ** 2).sum(-1)
+    H, W = fab.shape[:2]
+    keep = (err <= consistency * mag + consistency_px ** 2) & (np.sqrt((fab ** 2).sum(-1)) <= max_fraction * max(H, W))
+    if explain:
+        # the motion must explain the change: b moved back by the flow is closer to a than b is
+        fa, fb = a8.astype(np.float32), b8.astype(np.float32)
+        e_still = cv2.GaussianBlur(np.abs(fa - fb), (0, 0), float(blur_sigma))
+        e_moved = cv2.GaussianBlur(np.abs(fa - _warp(fb, fab)), (0, 0), float(blur_sigma))
+        keep &= e_moved < e_still
+    k = keep.astype(np.float32)
+    s = max(1.0, 0.01 * max(H, W))
+    k = np.minimum(k, cv2.GaussianBlur(k, (0, 0), s))
+    return (fab * k[..., None]).astype(np.float32)
+
+
+class FlowInterpolator:
+    """Photos for arbitrary light directions, by flow-warped barycentric interpolation of a basis.
+
+    Parameters
+    ----------
+    basis : (n, H, W, 3) float array
+        Linear basis photos.
+    directions : (n, 3) array_like
+        Their unit light directions.
+    hemisphere : {'upper', 'full'} or Hemisphere
+    flow : {'dis', 'farneback'}
+    texture : {'reference', 'photo'}
+        ``'reference'`` (default): the flows are computed between the photos' ratios to
+        :func:`reference_image` and the warps move those ratios, multiplied back by the reference
+        afterwards, so that shadows and highlights move and the texture stays. ``'photo'``: the
+        photos themselves are compared and warped (log luminance).
+    **flow_options
+        Options of :func:`photo_flow` (``blur_sigma``, ``consistency``, ...).
+
+    Notes
+    -----
+    Flows are cached per ordered pair of lights (``H * W * 2`` float32 each).
+    """
+
+    def __init__(self, basis, directions, hemisphere="upper", *, flow: str = "dis", texture: str = "reference",
+                 **flow_options):
+        if flow not in FLOWS:
+            raise ValueError(f"flow method must be one of {', '.join(FLOWS)}, not {flow!r}")
+        self.basis = basis
+        self.hemisphere = check_hemisphere(hemisphere)
+        unit, keep = unique_directions(directions)
+        self.directions = unit
+        self._tri = Barycentric(unit, keep, self.hemisphere)
+        self.flow_method = flow
+        self.flow_options = dict(flow_options)
+        if texture not in ("reference", "photo"):
+            raise ValueError(f"texture must be 'reference' or 'photo', not {texture!r}")
+        #: (H, W, 3) float32 light-independent image, or None (``texture='photo'``).
+        self.reference = reference_image(basis) if texture == "reference" else None
+        _, self._den = _ratio(np.zeros(1, np.float32), self.reference) if self.reference is not None else (None, None)
+        self._flows: dict = {}
+
+    def weights(self, direction) -> tuple[np.ndarray, np.ndarray]:
+        """Lights and barycentric weights of a unit direction: ``index (k,)``, ``weight (k,)``, k <= 3, sum 1.
+
+        Weights of at most :data:`WEIGHT_EPS` are dropped (rounding at a light's own direction or
+        on an edge), so that a light's own direction gives its photo unwarped.
+        """
+        p = np.asarray(direction, dtype=np.float64).reshape(1, 3)
+        p = p / np.linalg.norm(p)
+        idx, w = self._tri(p)
+        out: dict = {}
+        for i, v in zip(idx[0], w[0]):
+            out[int(i)] = out.get(int(i), 0.0) + float(v)
+        keys = np.array(sorted(k for k, v in out.items() if v > WEIGHT_EPS), dtype=np.int64)
+        ws = np.array([out[k] for k in keys])
+        return keys, ws / ws.sum()
+
+    def clear(self) -> None:
+        """Drop the cached flows."""
+        self._flows.clear()
+
+    def flow(self, a: int, b: int) -> np.ndarray:
+        """Cached :func:`photo_flow` from light ``a``'s photo to light ``b``'s."""
+        key = (int(a), int(b))
+        if key not in self._flows:
+            self._flows[key] = photo_flow(self.basis[a], self.basis[b], self.flow_method, reference=self.reference,
+                                          **self.flow_options)
+        return self._flows[key]
+
+    def image(self, direction) -> np.ndarray:
+        """The photo under a unit-power light from ``direction``: ``(H, W, 3)`` float32 (see the module notes)."""
+        idx, w = self.weights(direction)
+        out = np.zeros(self.basis.shape[1:], dtype=np.float32)
+        for v, bv in zip(idx, w):
+            disp = np.zeros(out.shape[:2] + (2,), dtype=np.float32)
+            for u, wu in zip(idx, w):
+                if u != v:
+                    disp -= np.float32(wu) * self.flow(v, u)
+            img = np.asarray(self.basis[v], dtype=np.float32)
+            if not np.any(disp):
+                out += np.float32(bv) * img
+            elif self._den is None:
+                out += np.float32(bv) * _warp(img, disp)
+            else:
+                out += np.float32(bv) * _warp(img / self._den, disp) * self._den
+        return out
+
+
+def relight_lightflow(basis, directions, lightmap, rotation=None, hemisphere="upper", *, scheme: str = "voronoi",
+                      interpolator: FlowInterpolator | None = None, split_options: dict | None = None,
+                      **scheme_options) -> tuple[np.ndarray, SourceSplit]:
+    """Relit image with the compact sources interpolated by flow and the rest weighted as usual.
+
+    Parameters
+    ----------
+    basis : (n, H, W, 3) float array
+    directions : (n, 3) array_like
+    lightmap : ffls.lightmaps.lightmap.LightMap
+    rotation : (3, 3) array_like, optional
+    hemisphere : {'upper', 'full'} or Hemisphere
+    scheme : str
+        Weighting scheme of the rest (:func:`ffls.weights.weighting.integrate`).
+    interpolator : FlowInterpolator, optional
+        Reuse its cached flows (built here otherwise).
+    split_options : dict, optional
+        Keyword arguments of :func:`split_compact_sources`.
+    **scheme_options
+        The scheme's options.
+
+    Returns
+    -------
+    image : (H, W, 3) float32
+    split : SourceSplit
+    """
+    split = split_compact_sources(lightmap, rotation, hemisphere, **(split_options or {}))
+    w = integrate(split.rest, directions, rotation, hemisphere, scheme, **scheme_options).weights
+    img = relight_fast(w, basis)
+    if split.sources:
+        fi = interpolator if interpolator is not None else FlowInterpolator(basis, directions, hemisphere)
+        img = img + _sources_image(fi, split.sources)
+    return img, split
+
+
+def _sources_image(fi: FlowInterpolator, sources) -> np.ndarray:
+    """Sum of the sources' samples, each its power times its interpolated photo.
+
+    A sample outside the hemisphere (a source straddling the horizon) adds nothing, as the
+    weighting drops the texels there.
+    """
+    out = np.zeros(fi.basis.shape[1:], dtype=np.float32)
+    for s in sources:
+        inside = in_domain(np.asarray(s.sample_directions, dtype=np.float64), fi.hemisphere)
+        for d, p, ok in zip(s.sample_directions, s.sample_powers, inside):
+            if ok:
+                out += fi.image(d) * p.astype(np.float32)
+    return out
+
+
+class LightFlowRelighter:
+    """A :class:`ffls.relight.cpu.CpuRelighter` whose compact sources are relit by :class:`FlowInterpolator`.
+
+    The inner relighter integrates the rest of the map (its weighting, precision, compression
+    and cell texture apply there); the sources' interpolated photos are added to its image.
+    Interface: ``set_lightmap``, ``set_rotation``, ``render``, ``read_hdr``, ``read_display``,
+    ``release``, as the relighters :class:`ffls.relight.composite.Compositor` drives.
+
+    Parameters
+    ----------
+    inner : ffls.relight.cpu.CpuRelighter
+    flow : {'dis', 'farneback'}
+    split_options : dict, optional
+        Keyword arguments of :func:`split_compact_sources`.
+    """
+
+    def __init__(self, inner, *, flow: str = "dis", split_options: dict | None = None):
+        self.inner = inner
+        self.interpolator = FlowInterpolator(inner.basis, inner.directions, inner.hemisphere, flow=flow)
+        self.split_options = dict(split_options or {})
+        self._lightmap = None
+        self._rotation = np.eye(3)
+        self._hdr = None
+        self._display = None
+        self._display_key = None
+        #: :class:`SourceSplit` of the last render.
+        self.last_split: SourceSplit | None = None
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.inner.size
+
+    @property
+    def n_lights(self) -> int:
+        return self.inner.n_lights
+
+    def set_lightmap(self, lm) -> None:
+        """Use light map ``lm`` (a :class:`ffls.lightmaps.lightmap.LightMap`)."""
+        if not hasattr(lm, "layout"):
+            raise ValueError("LightFlowRelighter needs a LightMap, not samples")
+        self._lightmap = lm
+        self._hdr = None
+
+    def set_rotation(self, R) -> None:
+        """Rotate the light map by ``R`` (content at d moves to R d)."""
+        R = checked_rotation(R)
+        if not np.array_equal(R, self._rotation):
+            self._rotation = R.copy()
+            self._hdr = None
+
+    def render(self, exposure: float = 0.0, tonemap: str = "srgb") -> None:
+        """Relight: the rest by the inner relighter, plus the sources' interpolated photos."""
+        if self._lightmap is None:
+            raise RuntimeError("LightFlowRelighter.render: call set_lightmap(lm) first")
+        if self._hdr is None:
+            split = split_compact_sources(self._lightmap, self._rotation, self.inner.hemisphere, **self.split_options)
+            self.inner.set_lightmap(split.rest)
+            self.inner.set_rotation(self._rotation)
+            self.inner.render()
+            img = self.inner.read_hdr()
+            if split.sources:
+                img = img + _sources_image(self.interpolator, split.sources)
+            self._hdr = img.astype(np.float32)
+            self.last_split = split
+            self._display = None
+        key = (float(exposure), tonemap)
+        if key != self._display_key:
+            self._display, self._display_key = None, key
+
+    def read_hdr(self) -> np.ndarray:
+        """The relit image ``(H, W, 3)`` float32."""
+        if self._hdr is None:
+            raise RuntimeError("LightFlowRelighter: nothing rendered yet")
+        return self._hdr
+
+    def read_display(self) -> np.ndarray:
+        """The tone-mapped image ``(H, W, 3)`` uint8."""
+        if self._display is None:
+            exposure, method = self._display_key if self._display_key is not None else (0.0, "srgb")
+            self._display = to_uint8(tonemap_np(self.read_hdr(), exposure, method))
+        return self._display
+
+    def release(self) -> None:
+        """Release the inner relighter and the cached flows."""
+        self.inner.release()
+        self.interpolator.clear()
+        self.interpolator = None
+        self._hdr = self._display = None
