@@ -98,7 +98,7 @@ FALLBACK_FLOOR_DEG = 1.0
 #: Significance below which a photo's scatter is trimmed from the error-model fit.
 TRIM_SIGNIFICANCE = 1e-3
 #: Fewest leave-one-out sphere offsets for the capture's own cone quantile (:func:`tail_factor`):
-#: the 95% quantile of 40 draws has a relative standard error of about 10%.
+#: the 95% quantile of 40 Rayleigh draws has a relative standard error of about 12%.
 MIN_TAIL_SAMPLES = 40
 
 
