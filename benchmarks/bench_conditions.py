@@ -10,6 +10,9 @@ conditions) no encoding. The table gives, against ``truth.json``:
 * the median and maximum angular error of the accepted photos (degrees);
 * the coverage: the share of accepted photos whose error is within their reported
   ``uncertainty_deg`` (the radius of the 95% cone; the goal is 90-98%), and the median cone;
+* the mean signed elevation error of the accepted photos (estimated minus true elevation above
+  the world's horizontal plane, degrees): an error shared by all spheres and photos, such as a
+  ground bounce that the model under- or over-states, shows here;
 * the encoding ``ffls lights`` reported (calibrated when the capture states none);
 * the time per photo of ``ffls lights`` (one process; detection, calibration and both passes).
 
@@ -163,6 +166,8 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) ->
                    dtype=np.float64)
     err = np.degrees(angle_between(est, np.asarray(truth["directions"], dtype=np.float64)))
     e, u = err[ok], unc[ok]
+    true_dirs = np.asarray(truth["directions"], dtype=np.float64)
+    elevation = np.degrees(np.arcsin(np.clip(est[ok, 2], -1.0, 1.0)) - np.arcsin(np.clip(true_dirs[ok, 2], -1.0, 1.0)))
     reasons: dict = {}
     for l in lights:
         if l.get("status", "ok") != "ok":
@@ -173,6 +178,7 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) ->
         "median_deg": float(np.median(e)) if e.size else None, "max_deg": float(e.max()) if e.size else None,
         "coverage": float(np.mean(e <= u)) if e.size else None,
         "median_cone_deg": float(np.median(u)) if e.size else None,
+        "elevation_bias_deg": float(np.mean(elevation)) if e.size else None,
         "encoding": enc, "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
     })
     return row
@@ -215,18 +221,21 @@ def main(argv=None):
                 print(f"{name:44s} ok   0/{r['n']} {r['rejected']}", flush=True)
                 continue
             print(f"{name:44s} ok {r['accepted']:3d}/{r['n']} median {r['median_deg']:.2f} max {r['max_deg']:.2f} deg "
-                  f"coverage {100 * r['coverage']:.0f}% cone {r['median_cone_deg']:.2f} enc {encoding_text(r['encoding'])} "
+                  f"coverage {100 * r['coverage']:.1f}% cone {r['median_cone_deg']:.2f} "
+                  f"elevation {r['elevation_bias_deg']:+.2f} enc {encoding_text(r['encoding'])} "
                   f"{r['ms_per_photo']:.0f} ms/photo {r['rejected'] or ''}", flush=True)
-    print("\n| condition | accepted | median / max error (deg) | 95% cone coverage (median cone) | encoding found | ms/photo | `ffls synth` flags |")
-    print("|---|---|---|---|---|---|---|")
+    print("\n| condition | accepted | median / max error (deg) | 95% cone coverage (median cone) | mean elevation error (deg) "
+          "| encoding found | ms/photo | `ffls synth` flags |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         flags = "`" + " ".join(r["flags"]) + "`" if r["flags"] else "(defaults)"
         if r["rc"] != 0:
-            print(f"| {r['condition']} | stopped: {r['error']} | | | | | {flags} |")
+            print(f"| {r['condition']} | stopped: {r['error']} | | | | | | {flags} |")
             continue
         med = "-" if r["median_deg"] is None else f"{r['median_deg']:.2f} / {r['max_deg']:.2f}"
         cov = "-" if r["coverage"] is None else f"{100 * r['coverage']:.0f}% ({r['median_cone_deg']:.2f})"
-        print(f"| {r['condition']} | {r['accepted']}/{r['n']} | {med} | {cov} | {encoding_text(r['encoding'])} | "
+        elev = "-" if r["elevation_bias_deg"] is None else f"{r['elevation_bias_deg']:+.2f}"
+        print(f"| {r['condition']} | {r['accepted']}/{r['n']} | {med} | {cov} | {elev} | {encoding_text(r['encoding'])} | "
               f"{r['ms_per_photo']:.0f} | {flags} |")
     write_json(a.out, {"benchmark": "bench_conditions", **host_info(), "resolution": a.res, "results": rows})
 

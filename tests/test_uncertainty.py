@@ -189,3 +189,56 @@ def test_one_sphere_capture_gets_finite_honest_cones(tmp_path):
     assert err.size >= 12
     assert np.all(np.isfinite(cone)) and np.all(cone >= CONE_FACTOR * FALLBACK_MODEL.floor_deg)
     assert np.mean(err <= cone) >= 0.9, (err, cone)
+
+
+def _heteroscedastic(rng, n_photos=300, k=4, tau_deg=0.5, spread=0.6):
+    """Like :func:`simulate`, but each photo's spheres share a random scale of their errors (a photo
+    lit from low is worse on every sphere): the capture's errors are heavier-tailed than Gaussian."""
+    res, sig, errs = [], [], []
+    for _ in range(n_photos):
+        lam = np.exp(spread * rng.normal())
+        s = rng.uniform(0.05, 0.3, size=k)
+        sd = np.radians(np.hypot(s, tau_deg)) * lam
+        e = rng.normal(size=(k, 2)) * sd[:, None]
+        w = 1.0 / sd ** 2
+        mean = (w[:, None] * e).sum(0) / w.sum()
+        res.append(e - mean)
+        sig.append(s)
+        errs.append(np.degrees(np.linalg.norm(mean)))
+    return res, sig, np.array(errs)
+
+
+def test_tail_factor_is_the_capture_quantile(rng=np.random.default_rng(11)):
+    """Gaussian errors: the capture's own 95% factor is the Gaussian 2.448. Photos of unequal
+    quality (heavier tails): the factor grows, and the cones under it cover 92-98% of the photos'
+    true errors where the Gaussian factor covers fewer."""
+    from ffls.spheres.uncertainty import MIN_TAIL_SAMPLES, tail_factor
+
+    res, sig, _ = simulate(rng, n_photos=400)
+    m = fit_error_model(res, sig, common_correlation=0.0)
+    assert m.n_tail == 4 * m.n_photos
+    assert m.cone_factor == pytest.approx(CONE_FACTOR, rel=0.08), m
+    assert m.as_dict()["cone_factor"] == pytest.approx(m.cone_factor)
+
+    res, sig, errs = _heteroscedastic(rng)
+    m = fit_error_model(res, sig, common_correlation=0.0, trim=0.0)
+    assert m.cone_factor > 1.05 * CONE_FACTOR, m
+    sd = np.array([np.sqrt(m.photo_sigma_deg(s) ** 2 - m.common_deg ** 2) for s in sig])
+    gauss, own = np.mean(errs <= cone_deg(sd)), np.mean(errs <= m.cone_deg(sd))
+    assert 0.92 <= own <= 0.98 and gauss < own, (gauss, own, m)
+
+    # too few offsets: the Gaussian factor, and none counted
+    f, n = tail_factor(res[:3], [np.full(4, 1e-4)] * 3)
+    assert (f, n) == (pytest.approx(CONE_FACTOR), 0) and 12 < MIN_TAIL_SAMPLES
+
+
+def test_tail_factor_leave_one_out_is_independent_of_the_photo_mean():
+    """Two spheres with equal variances v: each one's offset from the other has variance 2 v per
+    axis, whatever the photo's combined direction, so offsets of exactly sqrt(2 v) per axis give
+    radius sqrt(2) (not the radius against a mean that contains the sphere itself)."""
+    from ffls.spheres.uncertainty import tail_factor
+
+    v = 1e-4
+    r = np.array([[np.sqrt(v / 2), np.sqrt(v / 2)], [-np.sqrt(v / 2), -np.sqrt(v / 2)]])  # offsets from the mean
+    f, n = tail_factor([r] * 30, [np.full(2, v)] * 30, min_samples=10)
+    assert n == 60 and f == pytest.approx(np.sqrt(2.0), rel=1e-9)

@@ -37,7 +37,7 @@ from ffls.spheres.combine import combine_distant, fit_near_light, fit_near_light
 from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView, fit_highlight_samples
 from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
-from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel, cone_deg
+from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel
 
 __all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SphereResult", "LightHypothesis", "PhotoEstimate",
            "fit_spheres", "sphere_uncertainty_deg", "ray_origins", "fit_light_model", "near_fit_mask",
@@ -197,7 +197,7 @@ class PhotoEstimate:
         """
         stat = {i: s.fit.uncertainty_deg / np.sqrt(2.0) for i, s in enumerate(self.spheres)
                 if s.direction is not None and np.isfinite(s.fit.uncertainty_deg)}
-        spheres = [replace(s, uncertainty_deg=float(cone_deg(np.hypot(model.sphere_sigma_deg(stat[i], i),
+        spheres = [replace(s, uncertainty_deg=float(model.cone_deg(np.hypot(model.sphere_sigma_deg(stat[i], i),
                                                                        model.common_deg)))
                            if i in stat else None) for i, s in enumerate(self.spheres)]
         unc = self.uncertainty_deg
@@ -206,7 +206,7 @@ class PhotoEstimate:
             sigma = (model.photo_sigma_deg(np.asarray(used), self.used_spheres, self.weights) if used
                      else float("inf"))
             sigma = max(sigma, model.scale * self.joint_sigma_deg / np.sqrt(2.0))
-            unc = float(cone_deg(sigma))
+            unc = float(model.cone_deg(sigma))
         return replace(self, spheres=spheres, uncertainty_deg=unc)
 
     def sphere_directions(self) -> list[np.ndarray | None]:

@@ -40,9 +40,17 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
-(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus the common mode; the cone is ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` times it (a per-axis Gaussian on
-the tangent plane: the squared angle over the per-axis variance is chi-square with 2 degrees of
-freedom).
+(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus the common mode. The cone is a
+multiple of it, :attr:`ErrorModel.cone_factor`. A per-axis Gaussian on the tangent plane would
+give ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` (:data:`CONE_FACTOR`: the squared angle over the per-axis
+variance is chi-square with 2 degrees of freedom), but systematic errors are not Gaussian: bounded
+ones have lighter tails, a misfit that grows toward the terminator or the rim heavier ones. Where
+the spheres disagree in enough photos, the factor is **the capture's own 95% quantile**
+(:func:`tail_factor`): each used sphere's offset from the weighted mean of the photo's other
+spheres, divided by its standard deviation under the fitted model (leave one out, so the offset
+is independent of what it is compared with), is a draw of the standardised error's radius; the
+95% quantile of these radii over the capture replaces the Gaussian's 2.448. With too few such
+offsets (:data:`MIN_TAIL_SAMPLES`; one sphere) the Gaussian factor is used.
 
 Internally (:mod:`ffls.spheres.lambert`, :mod:`ffls.spheres.combine`, the consistency and
 outlier tests of :mod:`ffls.spheres.photo`) uncertainties stay 1-sigma RMS angles; only the
@@ -73,6 +81,8 @@ __all__ = [
     "common_mode_deg",
     "photo_residuals",
     "FALLBACK_MODEL",
+    "MIN_TAIL_SAMPLES",
+    "tail_factor",
 ]
 
 #: Confidence level of a reported cone.
@@ -87,6 +97,9 @@ COMMON_FLOOR_DEG = 0.1
 FALLBACK_FLOOR_DEG = 1.0
 #: Significance below which a photo's scatter is trimmed from the error-model fit.
 TRIM_SIGNIFICANCE = 1e-3
+#: Fewest leave-one-out sphere offsets for the capture's own cone quantile (:func:`tail_factor`):
+#: the 95% quantile of 40 Rayleigh draws has a relative standard error of about 12%.
+MIN_TAIL_SAMPLES = 40
 
 
 def cone_deg(sigma_axis_deg):
@@ -207,6 +220,14 @@ class ErrorModel:
         Photos with two or more spheres used in the fit.
     n_trimmed : int
         Of those, left out as improbable under the fitted model.
+    centre_deg : tuple of float
+        Per sphere, the per-axis standard deviation (degrees) its centre's uncertainty gives its
+        direction (:func:`centre_floor_deg`).
+    cone_factor : float
+        Radius of the 95% cone in per-axis standard deviations: the capture's own quantile
+        (:func:`tail_factor`), or the Gaussian :data:`CONE_FACTOR`.
+    n_tail : int
+        Leave-one-out sphere offsets that measured ``cone_factor`` (0: the Gaussian factor).
     """
 
     scale: float
@@ -216,6 +237,23 @@ class ErrorModel:
     n_photos: int = 0
     n_trimmed: int = 0
     centre_deg: tuple = ()
+    cone_factor: float = CONE_FACTOR
+    n_tail: int = 0
+
+    def cone_deg(self, sigma_axis_deg):
+        """95% cone radius (degrees) under this model: ``cone_factor * sigma_axis_deg``.
+
+        Parameters
+        ----------
+        sigma_axis_deg : float or array
+            Per-axis standard deviation (degrees) of a direction (:meth:`photo_sigma_deg`, or a
+            sphere's :meth:`sphere_sigma_deg` with the common mode).
+
+        Returns
+        -------
+        float or array
+        """
+        return cone_deg(sigma_axis_deg) * (float(self.cone_factor) / CONE_FACTOR)
 
     def centre_sigma_deg(self, spheres) -> np.ndarray:
         """Per-axis standard deviation (degrees) that each sphere's centre uncertainty gives its
@@ -285,7 +323,7 @@ class ErrorModel:
         return {"scale": float(self.scale), "floor_deg": float(self.floor_deg), "common_deg": float(self.common_deg),
                 "centre_deg": [float(x) for x in self.centre_deg],
                 "source": self.source, "n_photos": int(self.n_photos), "n_trimmed": int(self.n_trimmed),
-                "confidence": CONFIDENCE}
+                "cone_factor": float(self.cone_factor), "n_tail": int(self.n_tail), "confidence": CONFIDENCE}
 
 
 def centre_floor_deg(shift_px, radius_px) -> float:
@@ -352,6 +390,59 @@ def _fallback() -> ErrorModel:
 FALLBACK_MODEL = _fallback()
 
 
+def tail_factor(residuals: list[np.ndarray], variances: list[np.ndarray], confidence: float = CONFIDENCE,
+                min_samples: int = MIN_TAIL_SAMPLES) -> tuple[float, int]:
+    """Radius of the capture's own ``confidence`` cone, in per-axis standard deviations.
+
+    In each photo with ``k >= 2`` spheres, sphere ``i``'s tangent offset ``r_i`` is compared with
+    the inverse-variance mean of the photo's *other* spheres (leave one out, so the two are
+    independent): ``d_i = r_i - sum_{j != i} w_j r_j`` has per-axis variance
+    ``u_i = v_i + sum_{j != i} w_j^2 v_j`` under the model, and ``|d_i| / sqrt(u_i)`` is a draw of
+    the radius of a standardised 2-D error. Under a Gaussian model its ``confidence`` quantile is
+    ``sqrt(chi2.ppf(confidence, 2))`` (:data:`CONE_FACTOR` at 95%); the empirical quantile of the
+    draws measures the tails of the capture's actual errors instead (lighter for bounded
+    systematic errors, heavier for a misfit that grows toward the rim). The offsets of one photo
+    are correlated (for ``k = 2`` they are one offset twice), so ``min_samples`` counts draws,
+    not independent ones.
+
+    Parameters
+    ----------
+    residuals : list of (k_j, 2) float
+        Per photo, its spheres' tangent offsets from the photo's light (:func:`tangent_residuals`).
+    variances : list of (k_j,) float
+        Their per-axis variances under the model (same unit squared).
+    confidence : float
+    min_samples : int
+        Fewer draws give the Gaussian factor.
+
+    Returns
+    -------
+    factor : float
+        The quantile, or ``sqrt(chi2.ppf(confidence, 2))`` with too few draws.
+    n : int
+        The draws used (0 with too few).
+    """
+    gauss = float(np.sqrt(chdtri(2, 1.0 - confidence)))
+    z = []
+    for r, v in zip(residuals, variances):
+        r = np.asarray(r, dtype=np.float64).reshape(-1, 2)
+        v = np.asarray(v, dtype=np.float64).ravel()
+        k = r.shape[0]
+        if k < 2 or v.size != k or not (np.all(np.isfinite(r)) and np.all(np.isfinite(v)) and np.all(v > 0)):
+            continue
+        w = 1.0 / v
+        others = ~np.eye(k, dtype=bool)  # row i: the spheres other than i
+        wo = np.where(others, w[None, :], 0.0)
+        wo = wo / wo.sum(axis=1, keepdims=True)
+        d = r - wo @ r
+        u = v + (wo * wo) @ v
+        z.append(np.sqrt(np.sum(d * d, axis=1) / u))
+    z = np.concatenate(z) if z else np.zeros(0)
+    if z.size < max(int(min_samples), 1):
+        return gauss, 0
+    return float(np.quantile(z, confidence)), int(z.size)
+
+
 def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
                     common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
                     fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4,
@@ -388,7 +479,8 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     Returns
     -------
     ErrorModel
-        With ``centre_deg`` (also the fallback, where too few photos have 2+ spheres).
+        With ``centre_deg`` (also the fallback, where too few photos have 2+ spheres) and the
+        capture's own cone factor (:func:`tail_factor` on the kept photos).
     """
     centre = np.zeros(0) if centre_deg is None else np.asarray(centre_deg, dtype=np.float64)
     centre_rad2 = np.radians(np.nan_to_num(centre)) ** 2
@@ -451,9 +543,12 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     g2_med = float(np.median(np.concatenate([g2 for (_, _, g2), k in zip(data, keep) if k] or [np.zeros(1)])))
     sys_var = tau * tau + g2_med + max(scale * scale - 1.0, 0.0) * s2_med
     common = common_mode_deg(float(np.degrees(np.sqrt(sys_var))) ** 2, common_correlation)
+    # the cone's radius from the capture's own standardised leave-one-out offsets (kept photos)
+    factor, n_tail = tail_factor([r for (r, _, _), k in zip(data, keep) if k],
+                                 [scale * scale * s2 + g2 + tau * tau for (_, s2, g2), k in zip(data, keep) if k])
     return ErrorModel(scale=scale, floor_deg=float(np.degrees(tau)), common_deg=common,
                       source="disagreement", n_photos=int(keep.sum()), n_trimmed=n_trimmed,
-                      centre_deg=tuple(float(x) for x in centre))
+                      centre_deg=tuple(float(x) for x in centre), cone_factor=factor, n_tail=n_tail)
 
 
 def photo_residuals(directions: np.ndarray, light_direction: np.ndarray, position: np.ndarray | None = None,
