@@ -19,7 +19,9 @@ normals and over every normal of a sphere (the upper hemisphere for shadows, whi
 from below), the relit error of an ``ffls synth`` capture (150 distant lights over the upper
 hemisphere, 64 px; relative RMS over its lit pixels, the measure of ``benchmarks/probe_mirror.py``)
 relit by the CPU relighter under the recovered (negative texels clipped) vs the true map, and
-the map error. Then the limit: per spherical-harmonic order, the relative error
+the map error. Rows ``floor`` hold the true map as each method's unknowns can hold it (the
+power of every source cell, POCS grid texel or dome node exact): the error of the discretisation
+alone. Then the limit: per spherical-harmonic order, the relative error
 of the recovered map's coefficients. Writes ``benchmarks/results/probes.json`` and
 ``docs/images/probes.png``.
 """
@@ -35,7 +37,7 @@ import numpy as np
 
 from common import host_info, write_json
 from ffls.io.capture import load_capture_and_lights
-from ffls.probes.sources import to_lightmap
+from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong, to_lightmap
 from ffls.relight.cpu import relight_capture
 from ffls.synth.scene import write_synthetic_capture
 from ffls.lightmaps.lightmap import builtin_lightmap
@@ -121,10 +123,31 @@ def main(argv=None):
                   f"map {row['map_error']:.3f}", flush=True)
             return L
 
+        # ------------------------------------------------------------ discretisation floors
+        # the true map as each method's unknowns hold it (every unknown exact): the error no estimate
+        # on that discretisation can go below
+        def floor(label, L, hemi):
+            row = {"map": name, "method": "floor", "params": label, "time_s": 0.0, "rerender": 0.0,
+                   "relit_own": 0.0, "relit_sphere": relit_error(L, true, hemisphere=hemi),
+                   "map_error": map_error(L, true, hemisphere=hemi), "relit_capture": relit_capture_error(L, cap_truth)}
+            rows.append(row)
+            print(f"{name:9s} floor        {label:30s}          capture {row['relit_capture']:.4f}  "
+                  f"map {row['map_error']:.3f}", flush=True)
+
+        for n in (162, 492):
+            d = model_sources(n)
+            floor(f"HA cells n={d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
+        g = true.reshape(16, H // 16, 32, H // 16, 3)
+        sa = latlong_solid_angles(H).reshape(16, H // 16, 32, H // 16, 1)
+        grid = (g * sa).sum(axis=(1, 3)) / sa.sum(axis=(1, 3))
+        floor("POCS grid 16x32", np.repeat(np.repeat(grid, H // 16, axis=0), H // 16, axis=1), "full")
+        d = dome_nodes(526)
+        floor(f"Sato dome {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H, "upper"), "upper")
         # ------------------------------------------------------------ Hougen-Ahuja
         ha = [(5, False, {}), (9, False, {}), (17, False, {}), (5, True, {}), (9, True, {}), (17, True, {}),
               (162, False, {"rcond": 1e-3}), (42, True, {"ambient": "nonnegative"}),
-              (162, True, {"ambient": "nonnegative"}), (492, True, {"ambient": "nonnegative"})]
+              (162, True, {"ambient": "nonnegative"}), (492, True, {"ambient": "nonnegative"}),
+              (492, True, {"ambient": "nonnegative", "smoothness": 0.003})]
         if a.quick:
             ha = [h for h in ha if h[0] != 492]
         for n, nn, kw in ha:
