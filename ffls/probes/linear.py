@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import nnls
 
 from ffls.errors import InputError
@@ -162,7 +163,8 @@ def neighbour_edges(directions, k: int = 6) -> np.ndarray:
 def reduce_rows(A, b) -> tuple[np.ndarray, np.ndarray]:
     """An equivalent least-squares problem with at most as many rows as unknowns (thin QR).
 
-    With ``A = Q R`` (``Q`` orthonormal columns, ``R`` square upper triangular),
+    With ``A = Q R`` (``Q`` orthonormal columns, ``R`` square upper triangular; ``scipy.linalg.qr``
+    of ``[A | b]``, whose factor holds ``R`` and ``Q^T b``),
     ``|A x - b|^2 = |R x - Q^T b|^2 + |(1 - Q Q^T) b|^2`` for every ``x``: the second term does
     not depend on ``x``, so any constrained least-squares problem (NNLS) has the same minimiser
     on ``(R, Q^T b)``. For a tall system (thousands of pixels, hundreds of sources) each of the
@@ -182,10 +184,12 @@ def reduce_rows(A, b) -> tuple[np.ndarray, np.ndarray]:
     """
     A = np.asarray(A, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    if A.shape[0] <= A.shape[1]:
+    n = A.shape[1]
+    if A.shape[0] <= n:
         return A, b
-    Q, R = np.linalg.qr(A, mode="reduced")
-    return R, Q.T @ b
+    # the triangular factor of [A | b] holds R and Q^T b (its first n rows): Q is never formed
+    Rb = qr(np.concatenate([A, b.reshape(A.shape[0], -1)], axis=1), mode="r", overwrite_a=True, check_finite=False)[0]
+    return Rb[:n, :n], Rb[:n, n:].reshape((n,) + b.shape[1:])
 
 
 def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: float | None = None,
