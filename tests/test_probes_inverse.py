@@ -212,6 +212,21 @@ def test_selection_on_a_real_map_prefers_many_sources(sphere):
     assert np.all(np.diff(sel.scores) < 0)
 
 
+@pytest.mark.parametrize("criterion", ["cv", "bic"])
+def test_selected_fit_is_the_fit_on_every_pixel(sphere, shadow, criterion):
+    # the chosen model is returned fitted on all pixels (BIC's own fit reused, CV's refitted), never a fold's
+    sel = select_hougen_ahuja(sphere.normals, sphere.radiance, 0.7, candidates=(17, 42), criterion=criterion,
+                              nonnegative=True, ambient="nonnegative")
+    ref = hougen_ahuja(sphere.normals, sphere.radiance, 0.7, sel.chosen, nonnegative=True, ambient="nonnegative")
+    np.testing.assert_allclose(sel.fit.intensities, ref.intensities, rtol=1e-9, atol=1e-12)
+    assert sel.fit.rendered.shape == sphere.radiance.shape
+    occ = {"box": {"center": shadow.box_center.tolist(), "size": shadow.box_size.tolist()}}
+    ss = select_sato_sato_ikeuchi(shadow.points, shadow.radiance, occ, candidates=(46, 91), criterion=criterion,
+                                  albedo=shadow.albedo)
+    ref = sato_sato_ikeuchi(shadow.points, shadow.radiance, occ, nodes=int(ss.chosen), albedo=shadow.albedo)
+    np.testing.assert_allclose(ss.fit.intensities, ref.intensities, rtol=1e-9, atol=1e-12)
+
+
 # ----------------------------------------------------------------------------- Sato-Sato-Ikeuchi
 def test_box_and_mesh_visibility_agree(shadow):
     d = dome_nodes(126)
