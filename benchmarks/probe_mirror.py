@@ -1,8 +1,9 @@
 """Mirror-ball light maps (Debevec 1998): accuracy against the true map and as relit, and time.
 
 For each built-in HDR map, a mirror ball (radius 0.1 m, reflectance 0.7) is ray-traced by
-``ffls.synth.probe`` at 20 m (f = 14000 px) and at 1 m (f = 700 px) into a 256 x 256 photo, one
-view or two 90 degrees apart, and unwrapped by ``ffls probe mirror``'s library call. Reported:
+``ffls.synth.probe`` at 20 m (f = 14000 px) and at 1 m (f = 700 px) into a 256 x 256 photo, from
+the direction of the relit capture's camera (30 degrees above the horizon, as a probe photographed
+from the object camera's place), one view or two 90 degrees apart about the vertical, and unwrapped by ``ffls probe mirror``'s library call. Reported:
 
 * ``map``: relative RMS (solid-angle weighted) of the recovered map against the true one, both
   area-averaged to 16 x 32 texels (what a 70-pixel ball resolves);
@@ -68,7 +69,10 @@ def main():
             K = np.array([[f, 0, 128], [0, f, 128], [0, 0, 1.0]])
             folder = tmp / f"{name}_{dist:g}"
             views = []
-            for k, eye in enumerate(([0.0, -dist, 0.3 * dist], [dist, 0.0, 0.3 * dist])):
+            # the ball is photographed from the relit capture's camera direction (30 degrees down), the
+            # second view 90 degrees around the vertical from it
+            back = -scene.world_from_camera()[:3, 2]
+            for k, eye in enumerate((dist * back, dist * np.array([-back[1], back[0], back[2]]))):
                 T = look_at(eye)
                 write_mirror_probe(folder, full.downsample(2), (256, 256), K=K, world_from_camera=T, radius=0.1,
                                    reflectance=0.7, image_name=f"v{k}.exr")

@@ -5,9 +5,11 @@
 For each real HDR map (the bundled Poly Haven maps, area-averaged to 64 rows) it renders
 
 * a Lambertian ball seen by an orthographic camera (``ffls.synth.probe_scenes.diffuse_sphere_scene``,
-  80 px; the map integrated against the clamped cosine at every pixel), and
-* a box's shadow on the plane ``z = 0`` seen from straight above (``cast_shadow_scene``, 64 px,
-  the map reduced to 1024 distant lights with the synthetic renderer's shadow rays),
+  80 px; the map integrated against the clamped cosine at every pixel) looking the way the relit
+  capture's camera looks (30 degrees down), as a probe photographed from the object camera's place, and
+* a 0.2 m cube's shadow on the plane ``z = 0`` seen from straight above (``cast_shadow_scene``, 128 px
+  over 2.5 m x 2.5 m: a light 10 degrees high casts its whole shadow in view; the map reduced to 1024
+  distant lights with the synthetic renderer's shadow rays),
 
 then recovers the lighting with every method and parameter and reports, per row: the time (the
 median of 3 runs), the papers' re-render error (relative RMS of the input re-rendered from the
@@ -17,7 +19,9 @@ normals and over every normal of a sphere (the upper hemisphere for shadows, whi
 from below), the relit error of an ``ffls synth`` capture (150 distant lights over the upper
 hemisphere, 64 px; relative RMS over its lit pixels, the measure of ``benchmarks/probe_mirror.py``)
 relit by the CPU relighter under the recovered (negative texels clipped) vs the true map, and
-the map error. Then the limit: per spherical-harmonic order, the relative error
+the map error. Rows ``floor`` hold the true map as each method's unknowns can hold it (the
+power of every source cell, POCS grid texel or dome node exact): the error of the discretisation
+alone. Then the limit: per spherical-harmonic order, the relative error
 of the recovered map's coefficients. Writes ``benchmarks/results/probes.json`` and
 ``docs/images/probes.png``.
 """
@@ -33,7 +37,7 @@ import numpy as np
 
 from common import host_info, write_json
 from ffls.io.capture import load_capture_and_lights
-from ffls.probes.sources import to_lightmap
+from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong, to_lightmap
 from ffls.relight.cpu import relight_capture
 from ffls.synth.scene import write_synthetic_capture
 from ffls.lightmaps.lightmap import builtin_lightmap
@@ -47,6 +51,12 @@ from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
 ROOT = Path(__file__).resolve().parent.parent
 MAPS = ("courtyard", "studio", "sunrise", "night")
 H = 64
+#: The issue's cast-shadow set-up: a cube on a plane seen from straight above, with a margin: the view
+#: reaches 1.25 m from the cube's centre, so the whole shadow of a light 10 degrees above the horizon
+#: (0.1 + 0.2 / tan 10deg = 1.23 m) is seen along the axes; 128 px, 2 cm a pixel, 10 px across the cube.
+CUBE = 0.2
+SHADOW_GEOMETRY = {"extent": 1.25, "box_center": (0.0, 0.0, CUBE / 2), "box_size": (CUBE, CUBE, CUBE)}
+SHADOW_RES = 128
 
 
 def timed(fn, repeat=3):
@@ -95,7 +105,8 @@ def main(argv=None):
         lm = lm.downsample(lm.res // H)
         true = np.asarray(lm.data, dtype=np.float64)
         cap_truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
-        sph = diffuse_sphere_scene(lm, 80, albedo=0.7)
+        # the probe is photographed from the relit object's camera position (it looks the same way)
+        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
         rad = noisy(sph.radiance)
 
         def add(method, params, fit_fn, fit, t, normals_own, full_true, hemi):
@@ -112,10 +123,31 @@ def main(argv=None):
                   f"map {row['map_error']:.3f}", flush=True)
             return L
 
+        # ------------------------------------------------------------ discretisation floors
+        # the true map as each method's unknowns hold it (every unknown exact): the error no estimate
+        # on that discretisation can go below
+        def floor(label, L, hemi):
+            row = {"map": name, "method": "floor", "params": label, "time_s": 0.0, "rerender": 0.0,
+                   "relit_own": 0.0, "relit_sphere": relit_error(L, true, hemisphere=hemi),
+                   "map_error": map_error(L, true, hemisphere=hemi), "relit_capture": relit_capture_error(L, cap_truth)}
+            rows.append(row)
+            print(f"{name:9s} floor        {label:30s}          capture {row['relit_capture']:.4f}  "
+                  f"map {row['map_error']:.3f}", flush=True)
+
+        for n in (162, 492):
+            d = model_sources(n)
+            floor(f"HA cells n={d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
+        g = true.reshape(16, H // 16, 32, H // 16, 3)
+        sa = latlong_solid_angles(H).reshape(16, H // 16, 32, H // 16, 1)
+        grid = (g * sa).sum(axis=(1, 3)) / sa.sum(axis=(1, 3))
+        floor("POCS grid 16x32", np.repeat(np.repeat(grid, H // 16, axis=0), H // 16, axis=1), "full")
+        d = dome_nodes(526)
+        floor(f"Sato dome {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H, "upper"), "upper")
         # ------------------------------------------------------------ Hougen-Ahuja
         ha = [(5, False, {}), (9, False, {}), (17, False, {}), (5, True, {}), (9, True, {}), (17, True, {}),
               (162, False, {"rcond": 1e-3}), (42, True, {"ambient": "nonnegative"}),
-              (162, True, {"ambient": "nonnegative"}), (492, True, {"ambient": "nonnegative"})]
+              (162, True, {"ambient": "nonnegative"}), (492, True, {"ambient": "nonnegative"}),
+              (492, True, {"ambient": "nonnegative", "smoothness": 0.003})]
         if a.quick:
             ha = [h for h in ha if h[0] != 492]
         for n, nn, kw in ha:
@@ -142,7 +174,7 @@ def main(argv=None):
                 if order == "random":
                     limit[f"{name} POCS-16"] = sh_recovery(L, true, 8).relative_error.tolist()
         # ------------------------------------------------------------ Sato, Sato and Ikeuchi
-        sc = cast_shadow_scene(lm, 64, albedo="checker")
+        sc = cast_shadow_scene(lm, SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
         occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
         tu = upper_only(true)
         up = np.array([[0.0, 0.0, 1.0]])
@@ -161,7 +193,7 @@ def main(argv=None):
                        , 1)
         add("sato", f"nodes={d.shape[0]} ratio", lambda f: f.latlong(H), fit, t, up, tu, "upper")
         spec = {"ks": 0.05, "sigma": 0.2}
-        scs = cast_shadow_scene(lm, 64, albedo=0.6, specular=spec)
+        scs = cast_shadow_scene(lm, SHADOW_RES, albedo=0.6, specular=spec, **SHADOW_GEOMETRY)
         fit, t = timed(lambda: sato_sato_ikeuchi(scs.points, noisy(scs.radiance), occ, nodes=d, case="torrance_sparrow",
                                                  albedo=0.6, view_dirs=scs.view_dirs, specular=spec, visibility=V), 1)
         add("sato", f"nodes={d.shape[0]} torrance_sparrow", lambda f: f.latlong(H), fit, t, up, tu, "upper")

@@ -19,7 +19,7 @@ from ffls.probes.evaluate import (
     sphere_normals_uniform,
 )
 from ffls.probes.hougen_ahuja import hougen_ahuja
-from ffls.probes.linear import lambert_matrix
+from ffls.probes.linear import lambert_matrix, reduce_rows, solve_sources
 from ffls.probes.sato_sato_ikeuchi import (
     box_triangles,
     box_visibility,
@@ -31,6 +31,7 @@ from ffls.probes.sato_sato_ikeuchi import (
 from ffls.probes.selection import select_hougen_ahuja, select_sato_sato_ikeuchi
 from ffls.probes.singh_ahuja import pocs, singh_ahuja
 from ffls.probes.sources import (
+    cell_energies,
     cell_solid_angles,
     geodesic_sources,
     latlong_solid_angles,
@@ -98,6 +99,41 @@ def test_sources_to_latlong_conserves_energy(hemisphere):
         L = sources_to_latlong(d, e, h, hemisphere, ambient=[0.3, 0.2, 0.1])
         total = (L * latlong_solid_angles(h)[..., None]).sum(axis=(0, 1))
         np.testing.assert_allclose(total, e.sum(0) + 4 * np.array([0.3, 0.2, 0.1]), rtol=1e-10)
+
+
+def test_cell_energies_hold_the_power_of_each_cell(courtyard):
+    L = np.asarray(courtyard.data, dtype=np.float64)
+    sa = latlong_solid_angles(L.shape[0])[..., None]
+    d = model_sources(92)
+    E = cell_energies(d, L)
+    assert E.shape == (d.shape[0], 3)
+    np.testing.assert_allclose(E.sum(axis=0), (L * sa).sum(axis=(0, 1)), rtol=1e-9)
+    # spread back over the cells, the power of every cell is kept
+    back = sources_to_latlong(d, E, L.shape[0])
+    np.testing.assert_allclose(cell_energies(d, back), E, rtol=1e-6, atol=1e-9)
+    up = cell_energies(dome_nodes(46), L, "upper")
+    upper = (L * sa)[: L.shape[0] // 2].sum(axis=(0, 1))
+    np.testing.assert_allclose(up.sum(axis=0), upper, rtol=1e-9)
+
+
+def test_reduced_rows_give_the_same_least_squares_solutions():
+    rng = np.random.default_rng(3)
+    A = rng.random((400, 30))
+    b = rng.random((400, 2))
+    R, rhs = reduce_rows(A, b)
+    assert R.shape == (30, 30) and rhs.shape == (30, 2)
+    x = rng.normal(size=30)
+    # the two objectives differ by a constant: |Ax - b|^2 - |Rx - Q^T b|^2 does not depend on x
+    c0 = np.sum((A @ x - b[:, 0]) ** 2) - np.sum((R @ x - rhs[:, 0]) ** 2)
+    c1 = np.sum((A @ np.zeros(30) - b[:, 0]) ** 2) - np.sum(rhs[:, 0] ** 2)
+    assert c0 == pytest.approx(c1, rel=1e-9)
+    from scipy.optimize import nnls
+
+    for c in range(2):
+        np.testing.assert_allclose(solve_sources(A, b, nonnegative=True).x[:, c], nnls(A, b[:, c])[0], atol=1e-8)
+    np.testing.assert_allclose(solve_sources(A, b).x, np.linalg.lstsq(A, b, rcond=None)[0], atol=1e-9)
+    short = rng.random((10, 30))
+    assert reduce_rows(short, b[:10])[0] is short  # nothing to reduce
 
 
 def test_to_lightmap_counts_negative_texels():
@@ -174,6 +210,21 @@ def test_selection_on_a_real_map_prefers_many_sources(sphere):
                               ambient="nonnegative")
     assert sel.chosen == 162
     assert np.all(np.diff(sel.scores) < 0)
+
+
+@pytest.mark.parametrize("criterion", ["cv", "bic"])
+def test_selected_fit_is_the_fit_on_every_pixel(sphere, shadow, criterion):
+    # the chosen model is returned fitted on all pixels (BIC's own fit reused, CV's refitted), never a fold's
+    sel = select_hougen_ahuja(sphere.normals, sphere.radiance, 0.7, candidates=(17, 42), criterion=criterion,
+                              nonnegative=True, ambient="nonnegative")
+    ref = hougen_ahuja(sphere.normals, sphere.radiance, 0.7, sel.chosen, nonnegative=True, ambient="nonnegative")
+    np.testing.assert_allclose(sel.fit.intensities, ref.intensities, rtol=1e-9, atol=1e-12)
+    assert sel.fit.rendered.shape == sphere.radiance.shape
+    occ = {"box": {"center": shadow.box_center.tolist(), "size": shadow.box_size.tolist()}}
+    ss = select_sato_sato_ikeuchi(shadow.points, shadow.radiance, occ, candidates=(46, 91), criterion=criterion,
+                                  albedo=shadow.albedo)
+    ref = sato_sato_ikeuchi(shadow.points, shadow.radiance, occ, nodes=int(ss.chosen), albedo=shadow.albedo)
+    np.testing.assert_allclose(ss.fit.intensities, ref.intensities, rtol=1e-9, atol=1e-12)
 
 
 # ----------------------------------------------------------------------------- Sato-Sato-Ikeuchi

@@ -9,8 +9,8 @@ with ``V_k`` the visibility of source ``k`` (1 without shadows). ffls' synthetic
 the same ``kd / pi`` convention. Under a light map the irradiance is
 ``E(n) = sum_texels L max(0, n . w) dw`` (:func:`irradiance_from_map`).
 
-Solvers (:func:`solve_sources`): plain least squares (``numpy.linalg.lstsq``, optionally
-truncated at a relative singular value ``rcond``), or non-negative least squares
+Solvers (:func:`solve_sources`, on the thin-QR reduction of :func:`reduce_rows`): plain least
+squares (``numpy.linalg.lstsq``, optionally truncated at a relative singular value ``rcond``), or non-negative least squares
 (``scipy.optimize.nnls``) with the ambient term left free by splitting it into two
 non-negative columns ``+1`` and ``-1`` (``A = a+ - a-``; the pair's minimum-norm choice is what
 NNLS returns, and the fit is the same as with a free column).
@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import nnls
 
 from ffls.errors import InputError
@@ -30,6 +31,7 @@ __all__ = [
     "as_rgb_pixels",
     "LinearSolution",
     "solve_sources",
+    "reduce_rows",
     "neighbour_edges",
     "broadcast_albedo",
 ]
@@ -158,6 +160,38 @@ def neighbour_edges(directions, k: int = 6) -> np.ndarray:
     return np.unique(e[e[:, 0] != e[:, 1]], axis=0)
 
 
+def reduce_rows(A, b) -> tuple[np.ndarray, np.ndarray]:
+    """An equivalent least-squares problem with at most as many rows as unknowns (thin QR).
+
+    With ``A = Q R`` (``Q`` orthonormal columns, ``R`` square upper triangular; ``scipy.linalg.qr``
+    of ``[A | b]``, whose factor holds ``R`` and ``Q^T b``),
+    ``|A x - b|^2 = |R x - Q^T b|^2 + |(1 - Q Q^T) b|^2`` for every ``x``: the second term does
+    not depend on ``x``, so any constrained least-squares problem (NNLS) has the same minimiser
+    on ``(R, Q^T b)``. For a tall system (thousands of pixels, hundreds of sources) each of the
+    active-set solver's steps then costs ``n^2`` instead of ``m n``, and the factorisation is
+    shared by all channels.
+
+    Parameters
+    ----------
+    A : (m, n) array_like
+    b : (m, c) array_like
+
+    Returns
+    -------
+    R : (min(m, n), n) float64
+    rhs : (min(m, n), c) float64
+        ``A`` and ``b`` themselves when ``m <= n``.
+    """
+    A = np.asarray(A, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    n = A.shape[1]
+    if A.shape[0] <= n:
+        return A, b
+    # the triangular factor of [A | b] holds R and Q^T b (its first n rows): Q is never formed
+    Rb = qr(np.concatenate([A, b.reshape(A.shape[0], -1)], axis=1), mode="r", overwrite_a=True, check_finite=False)[0]
+    return Rb[:n, :n], Rb[:n, n:].reshape((n,) + b.shape[1:])
+
+
 def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: float | None = None,
                   what: str = "sources", smoothness: float = 0.0, edges=None,
                   ambient_nonnegative: bool = False) -> LinearSolution:
@@ -219,11 +253,12 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
                          f"use fewer sources or more pixels")
     scale = np.linalg.norm(D, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
-    Ds = D / scale
+    # every solve below runs on the thin-QR reduction (same minimiser, same singular values)
+    Ds, bq = reduce_rows(D / scale, b)
     s = np.linalg.svd(Ds, compute_uv=False)
     cond = float(s[0] / s[-1]) if s[-1] > 0 else np.inf
     rank = int(np.count_nonzero(s > s[0] * RANK_TOL))
-    Dsolve, bsolve = Ds, b
+    Dsolve, bsolve = Ds, bq
     if smoothness > 0:
         if edges is None:
             raise ValueError("smoothness needs the edges between neighbouring unknowns")
@@ -239,7 +274,7 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
             G[rows, e[:, 0]] = 1.0 / scale[e[:, 0]]
             G[rows, e[:, 1]] = -1.0 / scale[e[:, 1]]
             Dsolve = np.concatenate([Ds, float(smoothness) * ref * G], axis=0)
-            bsolve = np.concatenate([b, np.zeros((e.shape[0], b.shape[1]))], axis=0)
+            bsolve = np.concatenate([bq, np.zeros((e.shape[0], b.shape[1]))], axis=0)
     if nonnegative:
         split = ambient_column is not None and not ambient_nonnegative
         A = np.concatenate([Dsolve, -Dsolve[:, -1:]], axis=1) if split else Dsolve

@@ -191,8 +191,12 @@ def select_hougen_ahuja(normals, radiance, albedo=1.0, candidates=(5, 9, 17, 42,
     n = check_normals(normals)
     b = as_rgb_pixels(radiance, n.shape[0])
 
+    full = {}  # fits on every pixel (BIC's), reused for the chosen model
+
     def fp(c, train, test):
         fit = hougen_ahuja(n[train], b[train], albedo, int(c), **kwargs)
+        if train.size == n.shape[0]:
+            full[c] = fit
         rho = np.broadcast_to(np.asarray(albedo, dtype=np.float64), (3,))
         E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
         return E * rho / np.pi
@@ -201,7 +205,8 @@ def select_hougen_ahuja(normals, radiance, albedo=1.0, candidates=(5, 9, 17, 42,
         return int(c) + (1 if kwargs.get("ambient", True) else 0)
 
     sel = select_model(fp, candidates, b, k_of, criterion, folds, normal_blocks(n), tolerance, seed)
-    return _fill(sel, hougen_ahuja(n, b, albedo, int(sel.chosen), **kwargs))
+    fit = full.get(sel.chosen)
+    return _fill(sel, fit if fit is not None else hougen_ahuja(n, b, albedo, int(sel.chosen), **kwargs))
 
 
 def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0),
@@ -243,9 +248,13 @@ def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0,
             out[k] = a[idx] if a is not None and a.ndim >= 1 and a.shape[0] == m and m > 3 else v
         return out
 
+    full = {}  # fits on every pixel (BIC's), reused for the chosen model
+
     def fp(c, train, test):
         d, V = nodes_of(c)
         fit = sato_sato_ikeuchi(p[train], b[train], occluder, plane_normal, d, visibility=V[train], **split(train))
+        if train.size == m:
+            full[c] = fit
         if np.array_equal(train, test):
             return fit.rendered
         kw = split(test)
@@ -263,5 +272,7 @@ def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0,
 
     sel = select_model(fp, candidates, b, k_of, criterion, folds, position_blocks(p), tolerance, seed)
     d, V = nodes_of(sel.chosen)
-    fit: SourceFit = sato_sato_ikeuchi(p, b, occluder, plane_normal, d, visibility=V, **kwargs)
+    fit: SourceFit | None = full.get(sel.chosen)
+    if fit is None:
+        fit = sato_sato_ikeuchi(p, b, occluder, plane_normal, d, visibility=V, **kwargs)
     return _fill(sel, fit)

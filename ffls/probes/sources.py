@@ -39,6 +39,7 @@ from ffls.weights.voronoi import assign_cells, cell_solid_angles
 
 __all__ = [
     "HOUGEN_AHUJA_SIZES",
+    "cell_energies",
     "ring_sources",
     "geodesic_sources",
     "geodesic_count",
@@ -279,6 +280,41 @@ def sources_to_latlong(directions, intensities, height: int = 64, hemisphere="fu
     if ambient is not None:
         out += np.broadcast_to(np.asarray(ambient, dtype=np.float64), (3,)) / np.pi
     return out.reshape(h, 2 * h, 3)
+
+
+def cell_energies(directions, radiance, hemisphere="full") -> np.ndarray:
+    """The power of a lat-long map in each source's angular Voronoi cell: the map as the model holds it.
+
+    ``sources_to_latlong(directions, cell_energies(directions, L), h, hemisphere)`` is the best
+    a source model can do (every source exact): what it loses against ``L`` is the error of the
+    discretisation itself, not of the estimate.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Source directions.
+    radiance : (h, 2h, 3) array_like
+        Lat-long radiance.
+    hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
+        Texels outside the domain are left out.
+
+    Returns
+    -------
+    (n, 3) float64
+        ``sum L dw`` over each cell's texels (irradiance at normal incidence, the unit of
+        :class:`ffls.probes.hougen_ahuja.SourceFit` intensities).
+    """
+    L = np.asarray(radiance, dtype=np.float64)
+    h = L.shape[0]
+    if L.shape != (h, 2 * h, 3):
+        raise ValueError(f"radiance must be (h, 2h, 3), not {L.shape}")
+    d = normalize(np.asarray(directions, dtype=np.float64).reshape(-1, 3))
+    texels = latlong_directions(2 * h, h).reshape(-1, 3)
+    sa = latlong_solid_angles(h).ravel()
+    inside = in_domain(texels, hemisphere)
+    idx = assign_cells(texels[inside], d)
+    p = L.reshape(-1, 3)[inside] * sa[inside, None]
+    return np.stack([np.bincount(idx, weights=p[:, c], minlength=d.shape[0]) for c in range(3)], axis=1)
 
 
 def cells_to_latlong(directions, values, height: int = 64, hemisphere="full") -> np.ndarray:
