@@ -175,26 +175,53 @@ def _decode(raw: np.ndarray, curve) -> np.ndarray:
     return srgb_decode(raw) if curve == "srgb" else gamma_decode(raw, curve)
 
 
-def _grey_and_weight(raw: np.ndarray, curve, log_raw: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Grey linear value (mean of the decoded channels) and the weight ``1 / slope`` of each pixel.
+def _curve_tables(values: np.ndarray, curve, log_values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The decoded value ``f(x)`` and the squared slope ``f'(x)^2`` of each stored value ``x`` of ``values``.
 
-    The slope is the RMS over channels of ``f'(raw)``: the weighted residual is then in stored
-    values. For a gamma it is exact (``g x^(g-1)``, from ``log_raw`` when given); for the sRGB
+    For a gamma the slope is exact (``g x^(g-1)``, from ``log_values`` when given); for the sRGB
     curve a central difference.
     """
     if curve == "srgb":
-        y = _decode(raw, curve).mean(axis=1)
         h = _SLOPE_STEP
-        lo = np.maximum(raw - h, 0.0)
-        d = (_decode(raw + h, curve) - _decode(lo, curve)) / (raw + h - lo)
-    else:
-        g = float(curve)
-        lr = np.log(np.maximum(raw, _TINY)) if log_raw is None else log_raw
-        d = np.exp((g - 1.0) * lr)  # x^(g-1)
-        y = (raw * d).mean(axis=1)
-        d *= g
-    slope = np.sqrt(np.mean(d * d, axis=1))
+        lo = np.maximum(values - h, 0.0)
+        d = (_decode(values + h, curve) - _decode(lo, curve)) / (values + h - lo)
+        return _decode(values, curve), d * d
+    g = float(curve)
+    lv = np.log(np.maximum(values, _TINY)) if log_values is None else log_values
+    d = np.exp((g - 1.0) * lv)  # x^(g-1)
+    f = values * d
+    d *= g
+    return f, d * d
+
+
+def _grey_and_weight(codes: "_Codes", curve) -> tuple[np.ndarray, np.ndarray]:
+    """Grey linear value (mean of the decoded channels) and the weight ``1 / slope`` of each pixel.
+
+    The slope is the RMS over channels of ``f'(raw)``: the weighted residual is then in stored
+    values. The curve is evaluated once per distinct stored value (:class:`_Codes`: at most 256
+    of them for 8-bit files) and gathered, the same numbers as evaluating it at every pixel.
+    """
+    f, d2 = _curve_tables(codes.values, curve, None if curve == "srgb" else codes.log_values)
+    y = f[codes.index].mean(axis=0)
+    slope = np.sqrt(d2[codes.index].mean(axis=0))
     return y, 1.0 / np.maximum(slope, 1e-6)
+
+
+@dataclass
+class _Codes:
+    """Pixels' stored values (3, m), channel-first, as their distinct values and each one's index."""
+
+    values: np.ndarray  # (u,) sorted distinct stored values
+    log_values: np.ndarray  # (u,) their logarithms (floored at _TINY)
+    index: np.ndarray  # (3, m) into values
+
+    @classmethod
+    def of(cls, raw: np.ndarray) -> "_Codes":
+        values, index = np.unique(raw, return_inverse=True)
+        return cls(values, np.log(np.maximum(values, _TINY)), index.reshape(raw.shape))
+
+    def subset(self, selected: np.ndarray) -> "_Codes":
+        return _Codes(self.values, self.log_values, np.ascontiguousarray(self.index[:, selected]))
 
 
 def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -206,25 +233,26 @@ def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.
 
 @dataclass
 class _Unit:
-    """One (photo, sphere) pair: its pixels' stored values (m, 3) and normals (m, 3), and the selection."""
+    """One (photo, sphere) pair: its pixels' stored values (:class:`_Codes`) and normals (m, 3), and
+    the selection."""
 
     photo: int
     sphere: int
-    raw: np.ndarray
+    raw: _Codes
     A: np.ndarray  # (m, 4): normal and 1
     usable: np.ndarray  # (m,) bool: not clipped, not near black
     selected: np.ndarray | None = None
 
     def select(self, selected: np.ndarray) -> None:
-        """Fix the selection (and cache its values, their logarithms and design rows for :meth:`rss`)."""
+        """Fix the selection (and cache its values and design rows for :meth:`rss`)."""
         self.selected = selected
-        self._raw = self.raw[selected]
-        self._log = np.log(np.maximum(self._raw, _TINY))
-        self._A = self.A[selected]
+        self._raw = self.raw.subset(selected)
+        self._A = np.ascontiguousarray(self.A[selected])
+        self._AA = (self._A[:, :, None] * self._A[:, None, :]).reshape(-1, 16)  # (m, 16): a a^T per pixel
 
     def rss(self, curve) -> float:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
-        y, w = _grey_and_weight(self._raw, curve, None if curve == "srgb" else self._log)
+        y, w = _grey_and_weight(self._raw, curve)
         Aw = self._A * w[:, None]
         yw = y * w
         G = Aw.T @ Aw
@@ -236,20 +264,23 @@ class _Unit:
         return float(r @ r)
 
     def rss_grid(self, gammas: np.ndarray) -> np.ndarray:
-        """:meth:`rss` for every gamma of ``gammas`` (k,), at once: (k,) float."""
-        g = np.asarray(gammas, dtype=np.float64)[:, None, None]
-        d = np.exp((g - 1.0) * self._log[None])  # (k, m, 3): x^(g-1)
-        y = (self._raw[None] * d).mean(axis=2)
-        w = 1.0 / np.maximum(np.sqrt(np.mean(d * d, axis=2)) * g[:, :, 0], 1e-6)  # (k, m)
-        Aw = self._A[None] * w[:, :, None]
-        yw = y * w
-        G = np.einsum("kmi,kmj->kij", Aw, Aw)
-        b = np.einsum("kmi,km->ki", Aw, yw)
+        """:meth:`rss` for every gamma of ``gammas`` (k,), at once: (k,) float.
+
+        The normal equations of all the gammas are two matrix products (``w^2`` (k, m) times the
+        pixels' ``a a^T`` (m, 16) and ``a`` (m, 4)), not a loop of small solves."""
+        gammas = np.asarray(gammas, dtype=np.float64)
+        m = self._A.shape[0]
+        y, w = np.empty((len(gammas), m)), np.empty((len(gammas), m))
+        for j, g in enumerate(gammas):
+            y[j], w[j] = _grey_and_weight(self._raw, g)
+        w2 = w * w
+        G = (w2 @ self._AA).reshape(-1, 4, 4)
+        b = (w2 * y) @ self._A
         try:
             x = np.linalg.solve(G, b[..., None])[..., 0]
         except np.linalg.LinAlgError:
             return np.array([self.rss(float(v)) for v in gammas])
-        r = yw - np.einsum("kmi,ki->km", Aw, x)
+        r = w * (y - x @ self._A.T)
         return np.einsum("km,km->k", r, r)
 
 
@@ -379,7 +410,7 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
             finite = np.all(np.isfinite(v), axis=1)
             v = np.where(finite[:, None], v, 0.0)
             usable = finite & ~np.any(v >= 0.98, axis=1) & ~np.all(v <= 0.02, axis=1)
-            units.append(_Unit(p, k, np.clip(v, 0.0, 1.0), A[k], usable))
+            units.append(_Unit(p, k, _Codes.of(np.clip(v, 0.0, 1.0).T), A[k], usable))
 
     lo, hi = GAMMA_SEARCH
     coarse = np.arange(lo, hi + 0.5 * _COARSE_STEP, _COARSE_STEP)
@@ -487,7 +518,7 @@ def _ask(message: str) -> str:
 
 
 def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = "gamma", progress=None,
-                               **kwargs) -> tuple[EncodingCalibration, list]:
+                               decoded=None, **kwargs) -> tuple[EncodingCalibration, list]:
     """Calibrate the encoding of a capture whose ``capture.json`` states none.
 
     The spheres are found on the stored values (a monotone curve keeps their outlines), unless
@@ -504,6 +535,10 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     method : {'gamma'}
     progress : callable, optional
         A wrapper such as ``tqdm.tqdm``, called as ``progress(iterable, total=n, desc=...)``.
+    decoded : ffls.spheres.estimate.DecodedPhotos, optional
+        The photos decoded once, as stored (:func:`ffls.spheres.estimate.decode_photos` of this
+        capture: ``stored``): the spheres are found on its reductions and the spheres' values
+        read from its codes, no photo is read again (the same numbers as reading them).
     **kwargs
         Passed to the method.
 
@@ -526,6 +561,17 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     if first.bit_depth not in (8, 16):
         raise InputError(f"the images are {first.bit_depth} floating point, linear by definition: nothing to "
                          "calibrate", capture.image_paths[0])
+    if decoded is not None and not (decoded.stored and decoded.raw is not None and decoded.bit_depths == {first.bit_depth}):
+        decoded = None  # not the stored codes of every photo (over the memory budget, mixed depths): read them
+    if spheres is None and decoded is not None:
+        try:
+            spheres = find_spheres_in_capture(replace(capture, encoding="linear"), stats=decoded.stats,
+                                              bit_depths=decoded.bit_depths)
+        except InputError as first_error:  # as below: the sRGB-decoded values (read again, in this rare case)
+            try:
+                spheres = find_spheres_in_capture(replace(capture, encoding="srgb"))
+            except InputError:
+                raise first_error from None
     if spheres is None:
         # The outlines survive a monotone curve, but the detection's thresholds (edge noise, shading
         # ratio) are set for radiance: a curve that compresses contrast (gamma-encoded files on a
@@ -542,9 +588,14 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     h, w = first.shape
     samples = capture_samples(capture, spheres, (h, w))
     it = range(len(capture))
-    if progress is not None:
+    if progress is not None and decoded is None:
         it = progress(it, total=len(capture), desc="encoding")
     raw = []
+    if decoded is not None:  # the codes as ffls.io.images reads them (codes / top, float32), at the spheres' pixels
+        top = np.float32(2 ** first.bit_depth - 1)
+        it = ()
+        raw = [[(decoded.raw[i][s.rows, s.cols].astype(np.float32) / top).astype(np.float64) for s in samples]
+               for i in range(len(capture))]
     for i in it:
         img = first if i == 0 else read_image(capture.image_paths[i])
         if img.bit_depth != first.bit_depth:
