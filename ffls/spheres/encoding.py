@@ -198,36 +198,47 @@ def _grey_and_weight(codes: "_Codes", curve) -> tuple[np.ndarray, np.ndarray]:
     """Grey linear value (mean of the decoded channels) and the weight ``1 / slope`` of each pixel.
 
     The slope is the RMS over channels of ``f'(raw)``: the weighted residual is then in stored
-    values. The curve is evaluated once per distinct stored value (:class:`_Codes`: at most 256
-    of them for 8-bit files) and gathered, the same numbers as evaluating it at every pixel.
+    values. The curve is evaluated once per distinct stored value, the grey value and the weight
+    once per distinct (r, g, b) triple (:class:`_Codes`: a few hundred for an 8-bit sphere), and
+    gathered: the same numbers as evaluating them at every pixel.
     """
     f, d2 = _curve_tables(codes.values, curve, None if curve == "srgb" else codes.log_values)
-    y = f[codes.index].mean(axis=0)
-    slope = np.sqrt(d2[codes.index].mean(axis=0))
-    return y, 1.0 / np.maximum(slope, 1e-6)
+    y = f[codes.triples].mean(axis=0)
+    w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
+    return y[codes.index], w[codes.index]
 
 
 @dataclass
 class _Codes:
-    """Pixels' stored values (3, m), channel-first, as their distinct values and each one's index."""
+    """Pixels' stored values (3, m), channel-first, as their distinct values, their distinct
+    (r, g, b) triples, and each pixel's triple."""
 
     values: np.ndarray  # (u,) sorted distinct stored values
     log_values: np.ndarray  # (u,) their logarithms (floored at _TINY)
-    index: np.ndarray  # (3, m) into values
+    triples: np.ndarray  # (3, t) indices into values
+    index: np.ndarray  # (m,) each pixel's triple
 
     @classmethod
     def of(cls, raw: np.ndarray) -> "_Codes":
-        values, index = np.unique(raw, return_inverse=True)
-        return cls(values, np.log(np.maximum(values, _TINY)), index.reshape(raw.shape))
+        values, inv = np.unique(raw, return_inverse=True)
+        inv = inv.reshape(raw.shape).astype(np.int64)
+        u = len(values)
+        keys, index = np.unique((inv[0] * u + inv[1]) * u + inv[2], return_inverse=True)
+        triples = np.stack([keys // (u * u), (keys // u) % u, keys % u])
+        return cls(values, np.log(np.maximum(values, _TINY)), triples, index.reshape(-1))
 
     def subset(self, selected: np.ndarray) -> "_Codes":
-        return _Codes(self.values, self.log_values, np.ascontiguousarray(self.index[:, selected]))
+        return _Codes(self.values, self.log_values, self.triples, self.index[selected])
 
 
 def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted least squares ``min ||w (y - A x)||``; returns ``x`` and the weighted residuals."""
+    """Weighted least squares ``min ||w (y - A x)||`` (normal equations; ``A`` has 4 columns);
+    returns ``x`` and the weighted residuals."""
     Aw = A * w[:, None]
-    x, *_ = np.linalg.lstsq(Aw, y * w, rcond=None)
+    try:
+        x = np.linalg.solve(Aw.T @ Aw, Aw.T @ (y * w))
+    except np.linalg.LinAlgError:  # a degenerate design (all normals alike): the minimum-norm solution
+        x, *_ = np.linalg.lstsq(Aw, y * w, rcond=None)
     return x, w * (y - A @ x)
 
 
@@ -244,11 +255,19 @@ class _Unit:
     selected: np.ndarray | None = None
 
     def select(self, selected: np.ndarray) -> None:
-        """Fix the selection (and cache its values and design rows for :meth:`rss`)."""
+        """Fix the selection (and cache its values, design rows and per-triple sums for :meth:`rss`)."""
         self.selected = selected
         self._raw = self.raw.subset(selected)
         self._A = np.ascontiguousarray(self.A[selected])
-        self._AA = (self._A[:, :, None] * self._A[:, None, :]).reshape(-1, 16)  # (m, 16): a a^T per pixel
+        # the pixels' sums per (r, g, b) triple, whose grey value and weight they share: the count,
+        # sum a (t, 4) and sum a a^T (t, 16) of the design rows a = (n, 1)
+        t = self._raw.triples.shape[1]
+        idx = self._raw.index
+        self._count = np.bincount(idx, minlength=t).astype(np.float64)
+        A = self._A
+        self._sum_a = np.stack([np.bincount(idx, A[:, i], minlength=t) for i in range(4)], axis=1)
+        self._sum_aa = np.stack([np.bincount(idx, A[:, i] * A[:, j], minlength=t)
+                                 for i in range(4) for j in range(4)], axis=1)
 
     def rss(self, curve) -> float:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
@@ -266,22 +285,28 @@ class _Unit:
     def rss_grid(self, gammas: np.ndarray) -> np.ndarray:
         """:meth:`rss` for every gamma of ``gammas`` (k,), at once: (k,) float.
 
-        The normal equations of all the gammas are two matrix products (``w^2`` (k, m) times the
-        pixels' ``a a^T`` (m, 16) and ``a`` (m, 4)), not a loop of small solves."""
+        The pixels of one (r, g, b) triple share their grey value ``y`` and weight ``w``: with
+        their sums (:meth:`select`), each gamma's normal equations and residual cost one pass over
+        the triples, not the pixels (``rss = sum w^2 y^2 - x . b`` at the solution ``G x = b``,
+        which loses about 1e-12 of it: far below the grid's use, a profile minimum and its
+        bootstrap)."""
         gammas = np.asarray(gammas, dtype=np.float64)
-        m = self._A.shape[0]
-        y, w = np.empty((len(gammas), m)), np.empty((len(gammas), m))
+        codes = self._raw
+        t = codes.triples.shape[1]
+        y, w2 = np.empty((len(gammas), t)), np.empty((len(gammas), t))
         for j, g in enumerate(gammas):
-            y[j], w[j] = _grey_and_weight(self._raw, g)
-        w2 = w * w
-        G = (w2 @ self._AA).reshape(-1, 4, 4)
-        b = (w2 * y) @ self._A
+            f, d2 = _curve_tables(codes.values, float(g), codes.log_values)
+            y[j] = f[codes.triples].mean(axis=0)
+            w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
+            w2[j] = w * w
+        G = (w2 @ self._sum_aa).reshape(-1, 4, 4)
+        w2y = w2 * y
+        b = w2y @ self._sum_a
         try:
             x = np.linalg.solve(G, b[..., None])[..., 0]
         except np.linalg.LinAlgError:
             return np.array([self.rss(float(v)) for v in gammas])
-        r = w * (y - x @ self._A.T)
-        return np.einsum("km,km->k", r, r)
+        return np.maximum((w2y * y) @ self._count - np.einsum("ki,ki->k", x, b), 0.0)
 
 
 def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
