@@ -271,31 +271,21 @@ class _Unit:
 
     def rss(self, curve) -> float:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
-        y, w = _grey_and_weight(self._raw, curve)
-        Aw = self._A * w[:, None]
-        yw = y * w
-        G = Aw.T @ Aw
-        try:
-            x = np.linalg.solve(G, Aw.T @ yw)
-        except np.linalg.LinAlgError:
-            x, *_ = np.linalg.lstsq(Aw, yw, rcond=None)
-        r = yw - Aw @ x
-        return float(r @ r)
+        return float(self.rss_grid([curve])[0])
 
-    def rss_grid(self, gammas: np.ndarray) -> np.ndarray:
-        """:meth:`rss` for every gamma of ``gammas`` (k,), at once: (k,) float.
+    def rss_grid(self, curves) -> np.ndarray:
+        """:meth:`rss` for every curve of ``curves`` (k,: gammas, or ``'srgb'``), at once: (k,) float.
 
         The pixels of one (r, g, b) triple share their grey value ``y`` and weight ``w``: with
-        their sums (:meth:`select`), each gamma's normal equations and residual cost one pass over
+        their sums (:meth:`select`), each curve's normal equations and residual cost one pass over
         the triples, not the pixels (``rss = sum w^2 y^2 - x . b`` at the solution ``G x = b``,
-        which loses about 1e-12 of it: far below the grid's use, a profile minimum and its
-        bootstrap)."""
-        gammas = np.asarray(gammas, dtype=np.float64)
+        which loses about 1e-12 of it)."""
         codes = self._raw
         t = codes.triples.shape[1]
-        y, w2 = np.empty((len(gammas), t)), np.empty((len(gammas), t))
-        for j, g in enumerate(gammas):
-            f, d2 = _curve_tables(codes.values, float(g), codes.log_values)
+        y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
+        for j, curve in enumerate(curves):
+            f, d2 = _curve_tables(codes.values, curve if curve == "srgb" else float(curve),
+                                  None if curve == "srgb" else codes.log_values)
             y[j] = f[codes.triples].mean(axis=0)
             w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
             w2[j] = w * w
@@ -304,9 +294,16 @@ class _Unit:
         b = w2y @ self._sum_a
         try:
             x = np.linalg.solve(G, b[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            return np.array([self.rss(float(v)) for v in gammas])
+        except np.linalg.LinAlgError:  # a degenerate design: the minimum-norm solutions, pixel by pixel
+            return np.array([self._rss_pixels(c) for c in curves])
         return np.maximum((w2y * y) @ self._count - np.einsum("ki,ki->k", x, b), 0.0)
+
+    def _rss_pixels(self, curve) -> float:
+        y, w = _grey_and_weight(self._raw, curve)
+        Aw = self._A * w[:, None]
+        x, *_ = np.linalg.lstsq(Aw, y * w, rcond=None)
+        r = y * w - Aw @ x
+        return float(r @ r)
 
 
 def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
