@@ -113,6 +113,15 @@ def test_calibrate_encoding_on_arrays(true_gamma, curve):
     assert cal.n_photos == 8 and cal.n_spheres == 1
 
 
+def test_calibrate_encoding_same_for_any_workers():
+    """The (photo, sphere) pairs selected and profiled in 2 worker processes give the same calibration,
+    to the bit, as in this process."""
+    raw, normals = _sphere_shading(2.2, n_photos=40)
+    one = calibrate_encoding(raw, normals, code_step=1 / 255)
+    assert one.n_units == 40 and one.curve == "gamma"
+    assert calibrate_encoding(raw, normals, code_step=1 / 255, workers=2) == one
+
+
 def test_encoding_named_by_bic_or_half_a_code():
     """Naming: the best gamma must beat a named curve by more than the BIC's ln(n_eff); failing that,
     a named curve within half a code value of it is named all the same (the file cannot tell them

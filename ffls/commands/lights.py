@@ -151,7 +151,8 @@ def run(args) -> int:
         finally:
             if bar is not None:
                 bar.close()
-    cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress, decoded=decoded)
+    cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress, decoded=decoded,
+                                                     workers=args.workers or os.cpu_count() or 1)
     if calibration is not None:
         print(calibration.summary())
     if spheres is None:  # on the cluster the photos are read there for the fits; here for detection only
@@ -190,7 +191,7 @@ def run(args) -> int:
     return 0
 
 
-def calibrate_if_unknown(capture, progress: bool = False, decoded=None):
+def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers: int = 1):
     """``capture`` with its encoding calibrated from the spheres when ``capture.json`` states none.
 
     Floating-point images are linear by definition, and a stated ``"encoding"`` always wins:
@@ -199,7 +200,7 @@ def calibrate_if_unknown(capture, progress: bool = False, decoded=None):
     curve; the photos are then linearised with it for the light estimation.
 
     ``decoded`` (:func:`ffls.spheres.estimate.decode_photos` of ``capture``) gives the photos
-    already decoded: no photo is read again.
+    already decoded: no photo is read again. ``workers`` processes profile the spheres' pixels.
 
     Returns
     -------
@@ -223,7 +224,7 @@ def calibrate_if_unknown(capture, progress: bool = False, decoded=None):
         from tqdm import tqdm
 
         wrap = tqdm
-    calibration, spheres = calibrate_capture_encoding(capture, progress=wrap, decoded=decoded)
+    calibration, spheres = calibrate_capture_encoding(capture, progress=wrap, decoded=decoded, workers=workers)
     return replace(capture, encoding=calibration.encoding), spheres, calibration
 
 

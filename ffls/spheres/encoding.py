@@ -355,6 +355,56 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     return True
 
 
+_pool_units: list | None = None  # the units of the worker processes of _UnitPool (inherited when forked)
+
+
+def _set_pool_units(units) -> None:
+    global _pool_units
+    _pool_units = units
+
+
+def _select_and_profile_range(task) -> list:
+    """In a worker: per unit of ``_pool_units[start:stop]``, its selection and RSS curve (None, None: unusable)."""
+    (start, stop), curve, grid, terminator, min_pixels, min_r2 = task
+    out = []
+    for u in _pool_units[start:stop]:
+        ok = _select(u, curve, terminator, min_pixels, min_r2)
+        out.append((u.selected, u.rss_grid(grid)) if ok else (None, None))
+    return out
+
+
+class _UnitPool:
+    """Selects and profiles the units in this process or, with several workers, in forked processes
+    (each unit's work is independent; the parent then fixes the selections the workers chose)."""
+
+    CHUNK = 16
+
+    def __init__(self, units: list, workers: int = 1):
+        self.units, self.workers = units, max(1, int(workers))
+
+    def select_and_profile(self, curve, grid, terminator, min_pixels, min_r2) -> tuple[list, np.ndarray]:
+        """The usable units (selected with ``curve``) and their RSS over ``grid``: (used, (len(used), k))."""
+        if self.workers == 1 or len(self.units) < 2 * self.CHUNK:
+            used = [u for u in self.units if _select(u, curve, terminator, min_pixels, min_r2)]
+            curves = [u.rss_grid(grid) for u in used]
+        else:
+            from concurrent.futures import ProcessPoolExecutor
+
+            bounds = [(a, min(a + self.CHUNK, len(self.units))) for a in range(0, len(self.units), self.CHUNK)]
+            tasks = [(b, curve, grid, terminator, min_pixels, min_r2) for b in bounds]
+            with ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), initializer=_set_pool_units,
+                                     initargs=(self.units,)) as ex:
+                parts = list(ex.map(_select_and_profile_range, tasks))
+            used, curves = [], []
+            for (a, _), part in zip(bounds, parts):
+                for u, (sel, c) in zip(self.units[a:], part):
+                    if sel is not None:
+                        u.select(sel)
+                        used.append(u)
+                        curves.append(c)
+        return used, np.array(curves).reshape(len(used), len(grid))
+
+
 def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
     """Sub-grid minimum of ``f`` sampled on the regular grid ``g`` (parabola through the lowest point)."""
     k = int(np.argmin(f))
@@ -369,7 +419,7 @@ def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
-                             seed: int = 0, code_step: float | None = None) -> EncodingCalibration:
+                             seed: int = 0, code_step: float | None = None, workers: int = 1) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -401,6 +451,9 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         gamma but the linear or sRGB curve decodes every stored value within half a code of it,
         that curve is named all the same: the files cannot tell them apart (module docstring,
         "Naming").
+    workers : int
+        Processes (forked) that select and profile the (photo, sphere) pairs; the result does not
+        depend on it.
 
     Returns
     -------
@@ -438,10 +491,10 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     coarse = np.arange(lo, hi + 0.5 * _COARSE_STEP, _COARSE_STEP)
     curve = 0.5 * (lo + hi)  # pilot selection: the middle of the range
     used, grid = units, coarse
+    pool = _UnitPool(units, workers)
     for rnd in range(2):  # select with the current curve, profile, repeat with the best gamma
         # the pilot curve may be far off: the shading test (min_r2) waits for the first round's gamma
-        used = [u for u in units if _select(u, curve, terminator, min_pixels, min_r2 if rnd else -np.inf)]
-        curves = np.array([u.rss_grid(grid) for u in used]).reshape(len(used), len(grid))
+        used, curves = pool.select_and_profile(curve, grid, terminator, min_pixels, min_r2 if rnd else -np.inf)
         if len(used):
             # a (photo, sphere) pair that no curve fits well (a wrong lit side, a cast shadow or an
             # interreflection the model lacks) is left out: its best RMS residual is an outlier
