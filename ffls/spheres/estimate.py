@@ -993,6 +993,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
         if decoded is None:
             decoded = decode_photos(capture, workers)
+            if decoded.stored:  # integer photos and no encoding stated: its one-line refusal, before any work
+                read_photo(capture, 0)
         spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths)
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
