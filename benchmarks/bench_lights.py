@@ -17,7 +17,10 @@ and writes ``benchmarks/results/bench_lights.json``.
 
 ``--end-to-end WORKERS`` also times the whole command ``ffls lights CAPTURE --workers WORKERS``
 in a new process (imports, decoding once, sphere detection, both passes, writing lights.json):
-the throughput a user sees, in photos per second of wall time.
+the throughput a user sees, in photos per second of wall time, and its CPU seconds (user + sys,
+less sensitive to the machine's load). For a linear EXR configuration it is timed three times:
+as rendered, and stored as 8-bit sRGB PNGs with the encoding stated in ``capture.json`` and
+with none stated (then the encoding is calibrated from the spheres: :func:`eight_bit_copy`).
 """
 from __future__ import annotations
 
@@ -119,9 +122,38 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     }
 
 
-def end_to_end(folder, workers: int, n: int) -> dict:
+def eight_bit_copy(src, dst, state_encoding: bool) -> Path:
+    """``src`` (a rendered EXR capture) stored as 8-bit sRGB PNGs in ``dst``, as a camera writes them;
+    ``capture.json`` states ``"encoding": "srgb"`` when ``state_encoding``, else none (then ``ffls
+    lights`` calibrates it from the spheres). Kept when already there."""
+    import json
+
+    from ffls.io.images import read_image, write_png
+    from ffls.radiance.encoding import srgb_encode
+
+    src, dst = Path(src), Path(dst)
+    if (dst / "capture.json").is_file():
+        return dst
+    dst.mkdir(parents=True, exist_ok=True)
+    doc = json.loads((src / "capture.json").read_text())
+    names = []
+    for name in doc["images"]:
+        rgb = read_image(src / name).pixels
+        png = Path(name).with_suffix(".png").name
+        write_png(dst / png, np.rint(np.clip(srgb_encode(rgb), 0.0, 1.0) * 255).astype(np.uint8))
+        names.append(png)
+    doc["images"] = names
+    doc.pop("encoding", None)
+    if state_encoding:
+        doc["encoding"] = "srgb"
+    (dst / "capture.json").write_text(json.dumps(doc, indent=1) + "\n")
+    return dst
+
+
+def end_to_end(folder, workers: int, n: int, label: str = "") -> dict:
     """Wall and CPU time (this process's children) of ``ffls lights FOLDER --workers WORKERS`` as a
-    user runs it (a new Python process), and photos per second of wall time."""
+    user runs it (a new Python process), and photos per second of wall time; keys prefixed with
+    ``label``."""
     import resource
     import subprocess
     import sys
@@ -133,9 +165,10 @@ def end_to_end(folder, workers: int, n: int) -> dict:
                     "--no-progress"], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {"end_to_end_s": wall, "end_to_end_cpu_s": cpu, "end_to_end_photos_per_s": n / wall,
-            "end_to_end_workers": workers}
+    user, sys_ = after.ru_utime - before.ru_utime, after.ru_stime - before.ru_stime
+    p = f"end_to_end{label}"
+    return {f"{p}_s": wall, f"{p}_cpu_s": user + sys_, f"{p}_user_s": user, f"{p}_sys_s": sys_,
+            f"{p}_photos_per_s": n / wall, f"{p}_workers": workers}
 
 
 def main(argv=None):
@@ -162,9 +195,19 @@ def main(argv=None):
             r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(base, f"{name}_{a.res}"), a.bounce,
                            a.spheres, not a.no_refine)
             if a.end_to_end:
-                r.update(end_to_end(os.path.join(base, f"{name}_{a.res}"), a.end_to_end, r["n"]))
-                print(f"{name}: ffls lights --workers {a.end_to_end}: {r['end_to_end_s']:.2f} s wall, "
-                      f"{r['end_to_end_photos_per_s']:.1f} photos/s ({r['end_to_end_cpu_s']:.2f} s CPU)", flush=True)
+                folder = os.path.join(base, f"{name}_{a.res}")
+                runs = [("", folder, "as rendered")]
+                if CONFIGS[name].get("encoding", "linear") == "linear" and "photo" not in CONFIGS[name]:
+                    runs += [("_srgb8_stated", eight_bit_copy(folder, folder + "_srgb8_stated", True),
+                              "8-bit sRGB PNG, encoding stated"),
+                             ("_srgb8_unstated", eight_bit_copy(folder, folder + "_srgb8_unstated", False),
+                              "8-bit sRGB PNG, encoding unstated (calibrated)")]
+                for label, f, what in runs:
+                    r.update(end_to_end(f, a.end_to_end, r["n"], label))
+                    p = f"end_to_end{label}"
+                    print(f"{name} ({what}): ffls lights --workers {a.end_to_end}: {r[p + '_s']:.2f} s wall, "
+                          f"{r[p + '_photos_per_s']:.1f} photos/s ({r[p + '_cpu_s']:.2f} s CPU: "
+                          f"{r[p + '_user_s']:.2f} user + {r[p + '_sys_s']:.2f} sys)", flush=True)
             rows.append(r)
             tgt = TARGETS.get(name)
             print(f"{name:22s} spheres={a.spheres} refine={not a.no_refine} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "

@@ -113,6 +113,15 @@ def test_calibrate_encoding_on_arrays(true_gamma, curve):
     assert cal.n_photos == 8 and cal.n_spheres == 1
 
 
+def test_calibrate_encoding_same_for_any_workers():
+    """The (photo, sphere) pairs selected and profiled in 2 worker processes give the same calibration,
+    to the bit, as in this process."""
+    raw, normals = _sphere_shading(2.2, n_photos=40)
+    one = calibrate_encoding(raw, normals, code_step=1 / 255)
+    assert one.n_units == 40 and one.curve == "gamma"
+    assert calibrate_encoding(raw, normals, code_step=1 / 255, workers=2) == one
+
+
 def test_encoding_named_by_bic_or_half_a_code():
     """Naming: the best gamma must beat a named curve by more than the BIC's ln(n_eff); failing that,
     a named curve within half a code value of it is named all the same (the file cannot tell them
@@ -310,3 +319,70 @@ def test_gamma_files_on_a_grey_ground_are_calibrated(tmp_path):
     calibration, spheres = calibrate_capture_encoding(cap.load_capture(tmp_path))
     assert len(spheres) == 3
     assert calibration.curve == "gamma" and abs(calibration.gamma - 2.2) <= max(calibration.uncertainty, 0.05)
+
+
+# ----------------------------------------------------------------------------- decoding once
+def test_photos_decoded_once_calibrate_and_estimate_as_read(linear_captures, tmp_path, monkeypatch):
+    """decode_photos of a capture whose encoding is unstated keeps the stored codes; the encoding
+    calibration and the light estimation read the photos from them, with the same numbers as
+    reading the files: the same record, the same spheres' values, the same lights."""
+    from ffls.radiance.photos import read_photo
+    from ffls.spheres.estimate import capture_samples, decode_photos
+
+    src, _ = linear_captures["four"]
+    c = cap.load_capture(encoded_capture(src, tmp_path / "c", "srgb"))
+    decoded = decode_photos(c, workers=1)
+    assert decoded.stored and decoded.linear is None and decoded.raw.dtype == np.uint8
+    assert decoded.photo(0) is None  # the encoding is unknown until calibrated
+    import ffls.spheres.encoding as encoding_module
+
+    reads = []
+    real = encoding_module.read_image
+    monkeypatch.setattr(encoding_module, "read_image", lambda p, *a, **k: reads.append(p) or real(p, *a, **k))
+    cal_a, sph_a = calibrate_capture_encoding(c, decoded=decoded)
+    assert len(reads) == 1  # the first photo's bit depth only
+    monkeypatch.undo()
+    cal_b, sph_b = calibrate_capture_encoding(c)
+    ra, rb = cal_a.record(), cal_b.record()  # the spheres agree to rounding (chunked reductions): so do these
+    assert ra.keys() == rb.keys() and cal_a.curve == cal_b.curve == "srgb"
+    for key in ra:
+        assert ra[key] == (pytest.approx(rb[key], rel=1e-6, abs=1e-3) if isinstance(ra[key], float) else rb[key]), key
+    assert np.allclose([s.center_px for s in sph_a], [s.center_px for s in sph_b], atol=1e-6)
+    c2 = replace(c, encoding=cal_a.encoding)
+    samples = capture_samples(c2, sph_a, decoded.shape)
+    rows = np.concatenate([s.rows for s in samples])
+    cols = np.concatenate([s.cols for s in samples])
+    for i in (0, 5):
+        lin, codes, depth = decoded.photo(i, c2, (rows, cols))
+        ph = read_photo(c2, i)
+        assert depth == 8 and np.array_equal(lin[rows, cols], ph.linear[rows, cols])
+        assert np.array_equal(codes, np.rint(ph.raw * 255).astype(np.uint8))
+        assert np.array_equal(decoded.photo(i, c2)[0], ph.linear)  # the whole photo
+    a = estimate_lights(c2, spheres=sph_a, progress=False, workers=1, decoded=decoded)
+    b = estimate_lights(c2, spheres=sph_a, progress=False, workers=1)
+    assert np.array_equal(a.directions, b.directions) and a.status == b.status
+
+
+def test_cli_lights_reads_each_photo_once(linear_captures, tmp_path, monkeypatch, capsys):
+    """`ffls lights` on integer files with no stated encoding reads every photo once (decoding,
+    encoding calibration, detection and the first pass all use that decoding); the first photo
+    is opened again only to learn the bit depth."""
+    import ffls.io.images as images
+
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", 2.2)
+    reads = {}
+    real = images.read_image
+
+    def counting(path, *args, **kwargs):
+        name = str(path).rsplit("/", 1)[-1]
+        reads[name] = reads.get(name, 0) + 1
+        return real(path, *args, **kwargs)
+
+    for module in ("ffls.io.images", "ffls.radiance.photos", "ffls.spheres.encoding"):
+        monkeypatch.setattr(f"{module}.read_image", counting)
+    assert main(["lights", str(folder), "--no-progress", "--workers", "1"]) == 0
+    assert "encoding: gamma 2.2" in capsys.readouterr().out
+    names = json.loads((folder / "capture.json").read_text())["images"]
+    assert set(reads) == set(names)
+    assert all(reads[n] == 1 for n in names[1:]), reads

@@ -136,17 +136,9 @@ def run(args) -> int:
     from ffls.commands.common import print_notes
 
     cap = load_capture(args.capture)
-    cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress)
-    if calibration is not None:
-        print(calibration.summary())
     decoded = None
     cluster = bool(getattr(args, "scheduler", None))
-    if spheres is None and cluster:  # the photos are read on the cluster for the fits; here for detection only
-        from ffls.spheres.detect import find_spheres_in_capture
-
-        spheres = find_spheres_in_capture(cap)
-    elif spheres is None:  # every photo decoded once: the detection's reductions, then the first pass
-        from ffls.spheres.detect import find_spheres_in_capture
+    if not cluster:  # every photo decoded once: the encoding calibration, the detection's reductions, the first pass
         from ffls.spheres.estimate import decode_photos
 
         bar = None
@@ -159,7 +151,15 @@ def run(args) -> int:
         finally:
             if bar is not None:
                 bar.close()
-        spheres = find_spheres_in_capture(cap, stats=decoded.stats, bit_depths=decoded.bit_depths)
+    cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress, decoded=decoded,
+                                                     workers=args.workers or os.cpu_count() or 1)
+    if calibration is not None:
+        print(calibration.summary())
+    if spheres is None:  # on the cluster the photos are read there for the fits; here for detection only
+        from ffls.spheres.detect import find_spheres_in_capture
+
+        spheres = (find_spheres_in_capture(cap) if decoded is None else
+                   find_spheres_in_capture(cap, stats=decoded.stats, bit_depths=decoded.bit_depths))
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
     if cluster:
@@ -191,13 +191,16 @@ def run(args) -> int:
     return 0
 
 
-def calibrate_if_unknown(capture, progress: bool = False):
+def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers: int = 1):
     """``capture`` with its encoding calibrated from the spheres when ``capture.json`` states none.
 
     Floating-point images are linear by definition, and a stated ``"encoding"`` always wins:
     then nothing is done. Otherwise (integer images, no ``"encoding"``) the spheres are found
     on the stored values and :func:`ffls.spheres.encoding.calibrate_capture_encoding` names the
     curve; the photos are then linearised with it for the light estimation.
+
+    ``decoded`` (:func:`ffls.spheres.estimate.decode_photos` of ``capture``) gives the photos
+    already decoded: no photo is read again. ``workers`` processes profile the spheres' pixels.
 
     Returns
     -------
@@ -221,7 +224,7 @@ def calibrate_if_unknown(capture, progress: bool = False):
         from tqdm import tqdm
 
         wrap = tqdm
-    calibration, spheres = calibrate_capture_encoding(capture, progress=wrap)
+    calibration, spheres = calibrate_capture_encoding(capture, progress=wrap, decoded=decoded, workers=workers)
     return replace(capture, encoding=calibration.encoding), spheres, calibration
 
 

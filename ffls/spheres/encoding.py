@@ -175,82 +175,135 @@ def _decode(raw: np.ndarray, curve) -> np.ndarray:
     return srgb_decode(raw) if curve == "srgb" else gamma_decode(raw, curve)
 
 
-def _grey_and_weight(raw: np.ndarray, curve, log_raw: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Grey linear value (mean of the decoded channels) and the weight ``1 / slope`` of each pixel.
+def _curve_tables(values: np.ndarray, curve, log_values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The decoded value ``f(x)`` and the squared slope ``f'(x)^2`` of each stored value ``x`` of ``values``.
 
-    The slope is the RMS over channels of ``f'(raw)``: the weighted residual is then in stored
-    values. For a gamma it is exact (``g x^(g-1)``, from ``log_raw`` when given); for the sRGB
+    For a gamma the slope is exact (``g x^(g-1)``, from ``log_values`` when given); for the sRGB
     curve a central difference.
     """
     if curve == "srgb":
-        y = _decode(raw, curve).mean(axis=1)
         h = _SLOPE_STEP
-        lo = np.maximum(raw - h, 0.0)
-        d = (_decode(raw + h, curve) - _decode(lo, curve)) / (raw + h - lo)
-    else:
-        g = float(curve)
-        lr = np.log(np.maximum(raw, _TINY)) if log_raw is None else log_raw
-        d = np.exp((g - 1.0) * lr)  # x^(g-1)
-        y = (raw * d).mean(axis=1)
-        d *= g
-    slope = np.sqrt(np.mean(d * d, axis=1))
-    return y, 1.0 / np.maximum(slope, 1e-6)
+        lo = np.maximum(values - h, 0.0)
+        d = (_decode(values + h, curve) - _decode(lo, curve)) / (values + h - lo)
+        return _decode(values, curve), d * d
+    g = float(curve)
+    lv = np.log(np.maximum(values, _TINY)) if log_values is None else log_values
+    d = np.exp((g - 1.0) * lv)  # x^(g-1)
+    f = values * d
+    d *= g
+    return f, d * d
+
+
+def _grey_and_weight(codes: "_Codes", curve) -> tuple[np.ndarray, np.ndarray]:
+    """Grey linear value (mean of the decoded channels) and the weight ``1 / slope`` of each pixel.
+
+    The slope is the RMS over channels of ``f'(raw)``: the weighted residual is then in stored
+    values. The curve is evaluated once per distinct stored value, the grey value and the weight
+    once per distinct (r, g, b) triple (:class:`_Codes`: a few hundred for an 8-bit sphere), and
+    gathered: the same numbers as evaluating them at every pixel.
+    """
+    f, d2 = _curve_tables(codes.values, curve, None if curve == "srgb" else codes.log_values)
+    y = f[codes.triples].mean(axis=0)
+    w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
+    return y[codes.index], w[codes.index]
+
+
+@dataclass
+class _Codes:
+    """Pixels' stored values (3, m), channel-first, as their distinct values, their distinct
+    (r, g, b) triples, and each pixel's triple."""
+
+    values: np.ndarray  # (u,) sorted distinct stored values
+    log_values: np.ndarray  # (u,) their logarithms (floored at _TINY)
+    triples: np.ndarray  # (3, t) indices into values
+    index: np.ndarray  # (m,) each pixel's triple
+
+    @classmethod
+    def of(cls, raw: np.ndarray) -> "_Codes":
+        values, inv = np.unique(raw, return_inverse=True)
+        inv = inv.reshape(raw.shape).astype(np.int64)
+        u = len(values)
+        keys, index = np.unique((inv[0] * u + inv[1]) * u + inv[2], return_inverse=True)
+        triples = np.stack([keys // (u * u), (keys // u) % u, keys % u])
+        return cls(values, np.log(np.maximum(values, _TINY)), triples, index.reshape(-1))
+
+    def subset(self, selected: np.ndarray) -> "_Codes":
+        return _Codes(self.values, self.log_values, self.triples, self.index[selected])
 
 
 def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted least squares ``min ||w (y - A x)||``; returns ``x`` and the weighted residuals."""
+    """Weighted least squares ``min ||w (y - A x)||`` (normal equations; ``A`` has 4 columns);
+    returns ``x`` and the weighted residuals."""
     Aw = A * w[:, None]
-    x, *_ = np.linalg.lstsq(Aw, y * w, rcond=None)
+    try:
+        x = np.linalg.solve(Aw.T @ Aw, Aw.T @ (y * w))
+    except np.linalg.LinAlgError:  # a degenerate design (all normals alike): the minimum-norm solution
+        x, *_ = np.linalg.lstsq(Aw, y * w, rcond=None)
     return x, w * (y - A @ x)
 
 
 @dataclass
 class _Unit:
-    """One (photo, sphere) pair: its pixels' stored values (m, 3) and normals (m, 3), and the selection."""
+    """One (photo, sphere) pair: its pixels' stored values (:class:`_Codes`) and normals (m, 3), and
+    the selection."""
 
     photo: int
     sphere: int
-    raw: np.ndarray
+    raw: _Codes
     A: np.ndarray  # (m, 4): normal and 1
     usable: np.ndarray  # (m,) bool: not clipped, not near black
     selected: np.ndarray | None = None
 
     def select(self, selected: np.ndarray) -> None:
-        """Fix the selection (and cache its values, their logarithms and design rows for :meth:`rss`)."""
+        """Fix the selection (and cache its values, design rows and per-triple sums for :meth:`rss`)."""
         self.selected = selected
-        self._raw = self.raw[selected]
-        self._log = np.log(np.maximum(self._raw, _TINY))
-        self._A = self.A[selected]
+        self._raw = self.raw.subset(selected)
+        self._A = np.ascontiguousarray(self.A[selected])
+        # the pixels' sums per (r, g, b) triple, whose grey value and weight they share: the count,
+        # sum a (t, 4) and sum a a^T (t, 16) of the design rows a = (n, 1)
+        t = self._raw.triples.shape[1]
+        idx = self._raw.index
+        self._count = np.bincount(idx, minlength=t).astype(np.float64)
+        A = self._A
+        self._sum_a = np.stack([np.bincount(idx, A[:, i], minlength=t) for i in range(4)], axis=1)
+        self._sum_aa = np.stack([np.bincount(idx, A[:, i] * A[:, j], minlength=t)
+                                 for i in range(4) for j in range(4)], axis=1)
 
     def rss(self, curve) -> float:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
-        y, w = _grey_and_weight(self._raw, curve, None if curve == "srgb" else self._log)
-        Aw = self._A * w[:, None]
-        yw = y * w
-        G = Aw.T @ Aw
-        try:
-            x = np.linalg.solve(G, Aw.T @ yw)
-        except np.linalg.LinAlgError:
-            x, *_ = np.linalg.lstsq(Aw, yw, rcond=None)
-        r = yw - Aw @ x
-        return float(r @ r)
+        return float(self.rss_grid([curve])[0])
 
-    def rss_grid(self, gammas: np.ndarray) -> np.ndarray:
-        """:meth:`rss` for every gamma of ``gammas`` (k,), at once: (k,) float."""
-        g = np.asarray(gammas, dtype=np.float64)[:, None, None]
-        d = np.exp((g - 1.0) * self._log[None])  # (k, m, 3): x^(g-1)
-        y = (self._raw[None] * d).mean(axis=2)
-        w = 1.0 / np.maximum(np.sqrt(np.mean(d * d, axis=2)) * g[:, :, 0], 1e-6)  # (k, m)
-        Aw = self._A[None] * w[:, :, None]
-        yw = y * w
-        G = np.einsum("kmi,kmj->kij", Aw, Aw)
-        b = np.einsum("kmi,km->ki", Aw, yw)
+    def rss_grid(self, curves) -> np.ndarray:
+        """:meth:`rss` for every curve of ``curves`` (k,: gammas, or ``'srgb'``), at once: (k,) float.
+
+        The pixels of one (r, g, b) triple share their grey value ``y`` and weight ``w``: with
+        their sums (:meth:`select`), each curve's normal equations and residual cost one pass over
+        the triples, not the pixels (``rss = sum w^2 y^2 - x . b`` at the solution ``G x = b``,
+        which loses about 1e-12 of it)."""
+        codes = self._raw
+        t = codes.triples.shape[1]
+        y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
+        for j, curve in enumerate(curves):
+            f, d2 = _curve_tables(codes.values, curve if curve == "srgb" else float(curve),
+                                  None if curve == "srgb" else codes.log_values)
+            y[j] = f[codes.triples].mean(axis=0)
+            w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
+            w2[j] = w * w
+        G = (w2 @ self._sum_aa).reshape(-1, 4, 4)
+        w2y = w2 * y
+        b = w2y @ self._sum_a
         try:
             x = np.linalg.solve(G, b[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            return np.array([self.rss(float(v)) for v in gammas])
-        r = yw - np.einsum("kmi,ki->km", Aw, x)
-        return np.einsum("km,km->k", r, r)
+        except np.linalg.LinAlgError:  # a degenerate design: the minimum-norm solutions, pixel by pixel
+            return np.array([self._rss_pixels(c) for c in curves])
+        return np.maximum((w2y * y) @ self._count - np.einsum("ki,ki->k", x, b), 0.0)
+
+    def _rss_pixels(self, curve) -> float:
+        y, w = _grey_and_weight(self._raw, curve)
+        Aw = self._A * w[:, None]
+        x, *_ = np.linalg.lstsq(Aw, y * w, rcond=None)
+        r = y * w - Aw @ x
+        return float(r @ r)
 
 
 def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
@@ -302,6 +355,56 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     return True
 
 
+_pool_units: list | None = None  # the units of the worker processes of _UnitPool (inherited when forked)
+
+
+def _set_pool_units(units) -> None:
+    global _pool_units
+    _pool_units = units
+
+
+def _select_and_profile_range(task) -> list:
+    """In a worker: per unit of ``_pool_units[start:stop]``, its selection and RSS curve (None, None: unusable)."""
+    (start, stop), curve, grid, terminator, min_pixels, min_r2 = task
+    out = []
+    for u in _pool_units[start:stop]:
+        ok = _select(u, curve, terminator, min_pixels, min_r2)
+        out.append((u.selected, u.rss_grid(grid)) if ok else (None, None))
+    return out
+
+
+class _UnitPool:
+    """Selects and profiles the units in this process or, with several workers, in forked processes
+    (each unit's work is independent; the parent then fixes the selections the workers chose)."""
+
+    CHUNK = 16
+
+    def __init__(self, units: list, workers: int = 1):
+        self.units, self.workers = units, max(1, int(workers))
+
+    def select_and_profile(self, curve, grid, terminator, min_pixels, min_r2) -> tuple[list, np.ndarray]:
+        """The usable units (selected with ``curve``) and their RSS over ``grid``: (used, (len(used), k))."""
+        if self.workers == 1 or len(self.units) < 2 * self.CHUNK:
+            used = [u for u in self.units if _select(u, curve, terminator, min_pixels, min_r2)]
+            curves = [u.rss_grid(grid) for u in used]
+        else:
+            from concurrent.futures import ProcessPoolExecutor
+
+            bounds = [(a, min(a + self.CHUNK, len(self.units))) for a in range(0, len(self.units), self.CHUNK)]
+            tasks = [(b, curve, grid, terminator, min_pixels, min_r2) for b in bounds]
+            with ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), initializer=_set_pool_units,
+                                     initargs=(self.units,)) as ex:
+                parts = list(ex.map(_select_and_profile_range, tasks))
+            used, curves = [], []
+            for (a, _), part in zip(bounds, parts):
+                for u, (sel, c) in zip(self.units[a:], part):
+                    if sel is not None:
+                        u.select(sel)
+                        used.append(u)
+                        curves.append(c)
+        return used, np.array(curves).reshape(len(used), len(grid))
+
+
 def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
     """Sub-grid minimum of ``f`` sampled on the regular grid ``g`` (parabola through the lowest point)."""
     k = int(np.argmin(f))
@@ -316,7 +419,7 @@ def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
-                             seed: int = 0, code_step: float | None = None) -> EncodingCalibration:
+                             seed: int = 0, code_step: float | None = None, workers: int = 1) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -348,6 +451,9 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         gamma but the linear or sRGB curve decodes every stored value within half a code of it,
         that curve is named all the same: the files cannot tell them apart (module docstring,
         "Naming").
+    workers : int
+        Processes (forked) that select and profile the (photo, sphere) pairs; the result does not
+        depend on it.
 
     Returns
     -------
@@ -379,16 +485,16 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
             finite = np.all(np.isfinite(v), axis=1)
             v = np.where(finite[:, None], v, 0.0)
             usable = finite & ~np.any(v >= 0.98, axis=1) & ~np.all(v <= 0.02, axis=1)
-            units.append(_Unit(p, k, np.clip(v, 0.0, 1.0), A[k], usable))
+            units.append(_Unit(p, k, _Codes.of(np.clip(v, 0.0, 1.0).T), A[k], usable))
 
     lo, hi = GAMMA_SEARCH
     coarse = np.arange(lo, hi + 0.5 * _COARSE_STEP, _COARSE_STEP)
     curve = 0.5 * (lo + hi)  # pilot selection: the middle of the range
     used, grid = units, coarse
+    pool = _UnitPool(units, workers)
     for rnd in range(2):  # select with the current curve, profile, repeat with the best gamma
         # the pilot curve may be far off: the shading test (min_r2) waits for the first round's gamma
-        used = [u for u in units if _select(u, curve, terminator, min_pixels, min_r2 if rnd else -np.inf)]
-        curves = np.array([u.rss_grid(grid) for u in used]).reshape(len(used), len(grid))
+        used, curves = pool.select_and_profile(curve, grid, terminator, min_pixels, min_r2 if rnd else -np.inf)
         if len(used):
             # a (photo, sphere) pair that no curve fits well (a wrong lit side, a cast shadow or an
             # interreflection the model lacks) is left out: its best RMS residual is an outlier
@@ -487,7 +593,7 @@ def _ask(message: str) -> str:
 
 
 def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = "gamma", progress=None,
-                               **kwargs) -> tuple[EncodingCalibration, list]:
+                               decoded=None, **kwargs) -> tuple[EncodingCalibration, list]:
     """Calibrate the encoding of a capture whose ``capture.json`` states none.
 
     The spheres are found on the stored values (a monotone curve keeps their outlines), unless
@@ -504,6 +610,10 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     method : {'gamma'}
     progress : callable, optional
         A wrapper such as ``tqdm.tqdm``, called as ``progress(iterable, total=n, desc=...)``.
+    decoded : ffls.spheres.estimate.DecodedPhotos, optional
+        The photos decoded once, as stored (:func:`ffls.spheres.estimate.decode_photos` of this
+        capture: ``stored``): the spheres are found on its reductions and the spheres' values
+        read from its codes, no photo is read again (the same numbers as reading them).
     **kwargs
         Passed to the method.
 
@@ -526,6 +636,17 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     if first.bit_depth not in (8, 16):
         raise InputError(f"the images are {first.bit_depth} floating point, linear by definition: nothing to "
                          "calibrate", capture.image_paths[0])
+    if decoded is not None and not (decoded.stored and decoded.raw is not None and decoded.bit_depths == {first.bit_depth}):
+        decoded = None  # not the stored codes of every photo (over the memory budget, mixed depths): read them
+    if spheres is None and decoded is not None:
+        try:
+            spheres = find_spheres_in_capture(replace(capture, encoding="linear"), stats=decoded.stats,
+                                              bit_depths=decoded.bit_depths)
+        except InputError as first_error:  # as below: the sRGB-decoded values (read again, in this rare case)
+            try:
+                spheres = find_spheres_in_capture(replace(capture, encoding="srgb"))
+            except InputError:
+                raise first_error from None
     if spheres is None:
         # The outlines survive a monotone curve, but the detection's thresholds (edge noise, shading
         # ratio) are set for radiance: a curve that compresses contrast (gamma-encoded files on a
@@ -542,9 +663,14 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     h, w = first.shape
     samples = capture_samples(capture, spheres, (h, w))
     it = range(len(capture))
-    if progress is not None:
+    if progress is not None and decoded is None:
         it = progress(it, total=len(capture), desc="encoding")
     raw = []
+    if decoded is not None:  # the codes as ffls.io.images reads them (codes / top, float32), at the spheres' pixels
+        top = np.float32(2 ** first.bit_depth - 1)
+        it = ()
+        raw = [[(decoded.raw[i][s.rows, s.cols].astype(np.float32) / top).astype(np.float64) for s in samples]
+               for i in range(len(capture))]
     for i in it:
         img = first if i == 0 else read_image(capture.image_paths[i])
         if img.bit_depth != first.bit_depth:

@@ -445,25 +445,41 @@ class DecodedPhotos:
     """A capture's photos decoded once (:func:`decode_photos`): what the sphere detection needs of
     them, and (memory permitting) the decoded photos themselves for the first pass.
 
+    Float photos are kept linear (float32); integer photos as their stored codes only (a quarter
+    of the memory for 8 bits), linearised where they are read (:meth:`photo`: the spheres'
+    pixels), with the capture's encoding, or, when ``capture.json`` states none, with the
+    encoding calibrated from these same codes (:func:`ffls.spheres.encoding.calibrate_capture_encoding`).
+
     Attributes
     ----------
     stats : ffls.spheres.detect.SequenceStats
         The detection's reductions of the sequence (max image, brightest photo, mean luminance,
-        per-photo colour counts and edge evidence; :func:`ffls.spheres.detect.sequence_stats`).
+        per-photo colour counts and edge evidence; :func:`ffls.spheres.detect.sequence_stats`):
+        of the linear photos, or of the stored values when ``stored``.
     bit_depths : set
         The photos' stored bit depths.
     linear : (n, H, W, 3) float32 or None
-        The linear photos, in memory shared with the worker processes (None: over the budget,
-        the first pass decodes them again).
+        Float photos, in memory shared with the worker processes (None: integer photos, or over
+        the budget).
     raw : (n, H, W, 3) uint8 or uint16, or None
-        Integer photos' stored codes (what :func:`ffls.spheres.samples.sphere_values` reads for
-        saturation); None for float photos or when ``linear`` is None.
+        Integer photos' stored codes (None: float photos, or over the budget).
+    encoding : str or dict
+        The capture's encoding when decoded (``'auto'``: none stated).
+    response : ndarray or None
+        The capture's inverse response table, for ``{'response': ...}`` encodings.
+    stored : bool
+        The encoding was unknown when decoded (integer photos, none stated): ``stats`` are of the
+        stored values (scaled to [0, 1]), and the photos can be read only with an encoding given
+        (the calibrated one).
     """
 
     stats: SequenceStats
     bit_depths: set
     linear: np.ndarray | None = None
     raw: np.ndarray | None = None
+    encoding: object = "auto"
+    response: np.ndarray | None = None
+    stored: bool = False
 
     @property
     def n(self) -> int:
@@ -474,14 +490,50 @@ class DecodedPhotos:
         """(H, W) of the photos."""
         return self.stats.max.shape[:2]
 
-    def photo(self, i: int):
-        """Photo ``i`` as ``(linear, raw, bit_depth)`` from memory, or None where not kept."""
-        if self.linear is None:
+    def photo(self, i: int, capture=None, pixels: tuple | None = None):
+        """Photo ``i`` as ``(linear, raw, bit_depth)`` from memory, or None where not kept.
+
+        Parameters
+        ----------
+        i : int
+        capture : ffls.io.capture.Capture, optional
+            Its ``encoding`` and ``response`` linearise integer photos (default: the encoding
+            they were decoded with); an encoding still unknown gives None.
+        pixels : (rows, cols) of int arrays, optional
+            Linearise an integer photo at these pixels only (the others are 0), e.g. the spheres'.
+
+        Returns
+        -------
+        linear : (H, W, 3) float32
+        raw : (H, W, 3) uint8 or uint16, or None
+            The stored codes (None for float photos).
+        bit_depth : {8, 16, 'half', 'float'}
+        """
+        if len(self.bit_depths) != 1:
             return None
-        depth = next(iter(self.bit_depths)) if len(self.bit_depths) == 1 else None
-        if depth is None:
+        depth = next(iter(self.bit_depths))
+        if self.linear is not None:
+            return self.linear[i], None, depth
+        if self.raw is None:
             return None
-        return self.linear[i], (None if self.raw is None else self.raw[i]), depth
+        from ffls.io.images import ImageData
+        from ffls.radiance.photos import encoding_unknown, linearise
+
+        encoding = self.encoding if capture is None else capture.encoding
+        response = self.response if capture is None else capture.response
+        if encoding_unknown(encoding, depth):
+            return None
+        codes = self.raw[i]
+        top = np.float32(255 if codes.dtype == np.uint8 else 65535)
+        if pixels is None:  # the whole photo, as ffls.io.images reads it (codes / top, float32)
+            return np.asarray(linearise(ImageData(codes.astype(np.float32) / top, depth, "png", None), encoding,
+                                        response), dtype=np.float32), codes, depth
+        rows, cols = pixels
+        stored = codes[rows, cols].astype(np.float32)[:, None] / top
+        linear = np.zeros(codes.shape, np.float32)  # untouched pages of a large zeroed array cost nothing
+        linear[rows, cols] = np.asarray(linearise(ImageData(stored, depth, "png", None), encoding, response),
+                                        dtype=np.float32)[:, 0]
+        return linear, codes, depth
 
 
 def _available_memory() -> int:
@@ -532,11 +584,11 @@ def _decode_range(bounds: tuple[int, int]):
                              f"{ctx.shape[1]}x{ctx.shape[0]}: every photo must have the same size",
                              ctx.capture.image_paths[i])
         depths.add(ph.bit_depth)
-        if ctx.linear is not None:
+        if ctx.linear is not None and ph.bit_depth not in (8, 16):
             ctx.linear[i] = ph.linear
-            if ctx.raw is not None:
-                top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
-                ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
+        if ctx.raw is not None and ph.bit_depth in (8, 16):
+            top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
+            ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
         acc.add(ph.linear, i)
     return acc, depths
 
@@ -570,21 +622,27 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     InputError
         An unreadable photo, or one whose size differs from the first one's.
     """
-    from ffls.radiance.photos import read_photo
+    from ffls.io.images import read_image
+    from ffls.radiance.photos import encoding_unknown, read_photo
 
     n = len(capture.image_paths)
     if n == 0:
         raise InputError("capture lists no images", capture.json_path)
-    first = read_photo(capture, 0)
+    decoding = capture
+    stored = encoding_unknown(capture.encoding, read_image(capture.image_paths[0]).bit_depth)
+    if stored:  # no encoding stated: the stored values (what the encoding calibration finds the spheres on)
+        decoding = replace(capture, encoding="linear")
+    first = read_photo(decoding, 0)
     shape = first.linear.shape
     integer = first.bit_depth in (8, 16)
-    per_photo = first.linear.nbytes + (first.linear.size * (1 if first.bit_depth == 8 else 2) if integer else 0)
+    per_photo = first.linear.size * (1 if first.bit_depth == 8 else 2) if integer else first.linear.nbytes
     linear = raw = None
     if keep and n * per_photo <= DECODED_MEMORY_SHARE * _available_memory():
-        linear = _shared_array((n,) + shape, np.float32)
         if integer:
             raw = _shared_array((n,) + shape, np.uint8 if first.bit_depth == 8 else np.uint16)
-    context = _DecodeContext(capture, n, shape, linear, raw)
+        else:
+            linear = _shared_array((n,) + shape, np.float32)
+    context = _DecodeContext(decoding, n, shape, linear, raw)
     workers = max(1, min(int(workers), n))
     size = max(1, -(-n // DECODE_CHUNKS))  # the chunks do not depend on the workers: nor does the result
     chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
@@ -611,9 +669,10 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     for acc_k, depths_k in parts[1:]:  # in order: the earlier photo wins ties of the brightest
         acc.merge(acc_k)
         depths |= depths_k
-    if linear is not None and len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
+    if len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
         linear = raw = None
-    return DecodedPhotos(stats=acc.result(), bit_depths=depths, linear=linear, raw=raw)
+    return DecodedPhotos(stats=acc.result(), bit_depths=depths, linear=linear, raw=raw, encoding=capture.encoding,
+                         response=capture.response, stored=stored)
 
 
 # ----------------------------------------------------------------------------- running the photo fits
@@ -639,6 +698,11 @@ class _FitContext:
     options: dict  # estimate_photo keyword arguments (model, min_spheres, sigma_floor_deg, ...)
     decoded: DecodedPhotos | None = None  # photos decoded once (shared memory), else read here
 
+    def __post_init__(self):
+        # every sphere's pixels: where an integer photo kept as codes is linearised
+        self.pixels = (np.concatenate([s.rows for s in self.samples]).astype(np.intp),
+                       np.concatenate([s.cols for s in self.samples]).astype(np.intp)) if self.samples else None
+
 
 #: The context of the photo fits running in this process (set by :func:`_set_context`).
 _context: _FitContext | None = None
@@ -658,7 +722,7 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
                              terminator=ctx.options.get("terminator", 0.15), up=ctx.options.get("up", UP)), None
     values, read = task.values, task.values is None
     if read:
-        kept = None if ctx.decoded is None else ctx.decoded.photo(task.index)
+        kept = None if ctx.decoded is None else ctx.decoded.photo(task.index, ctx.capture, ctx.pixels)
         if kept is None:
             photo = read_photo(ctx.capture, task.index)
             kept = (photo.linear, photo.raw, photo.bit_depth)
@@ -929,6 +993,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
         if decoded is None:
             decoded = decode_photos(capture, workers)
+            if decoded.stored:  # integer photos and no encoding stated: its one-line refusal, before any work
+                read_photo(capture, 0)
         spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths)
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
