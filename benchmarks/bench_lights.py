@@ -150,10 +150,11 @@ def eight_bit_copy(src, dst, state_encoding: bool) -> Path:
     return dst
 
 
-def end_to_end(folder, workers: int, n: int, label: str = "") -> dict:
+def end_to_end(folder, workers: int, n: int, label: str = "", truth_dirs=None) -> dict:
     """Wall and CPU time (this process's children) of ``ffls lights FOLDER --workers WORKERS`` as a
     user runs it (a new Python process), and photos per second of wall time; keys prefixed with
-    ``label``."""
+    ``label``. With ``truth_dirs`` (n, 3) also the written lights' accuracy: accepted, median and
+    max error, coverage of the 95% cone, and the encoding record (calibrated when unstated)."""
     import resource
     import subprocess
     import sys
@@ -167,8 +168,23 @@ def end_to_end(folder, workers: int, n: int, label: str = "") -> dict:
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     user, sys_ = after.ru_utime - before.ru_utime, after.ru_stime - before.ru_stime
     p = f"end_to_end{label}"
-    return {f"{p}_s": wall, f"{p}_cpu_s": user + sys_, f"{p}_user_s": user, f"{p}_sys_s": sys_,
-            f"{p}_photos_per_s": n / wall, f"{p}_workers": workers}
+    row = {f"{p}_s": wall, f"{p}_cpu_s": user + sys_, f"{p}_user_s": user, f"{p}_sys_s": sys_,
+           f"{p}_photos_per_s": n / wall, f"{p}_workers": workers}
+    if truth_dirs is not None:
+        import json
+
+        from ffls.io.capture import load_lights
+
+        lights = load_lights(out)
+        idx, est = lights.accepted()
+        e = np.degrees(angle_between(est, np.asarray(truth_dirs)[idx]))
+        unc = np.array([lights.extra[i].get("uncertainty_deg", np.nan) for i in idx], dtype=np.float64)
+        row.update({f"{p}_accepted": int(len(idx)),
+                    f"{p}_median_deg": float(np.median(e)) if e.size else None,
+                    f"{p}_max_deg": float(e.max()) if e.size else None,
+                    f"{p}_coverage": float(np.mean(e <= unc)) if e.size else None,
+                    f"{p}_encoding": json.loads(Path(out).read_text()).get("encoding")})
+    return row
 
 
 def main(argv=None):
@@ -203,11 +219,16 @@ def main(argv=None):
                              ("_srgb8_unstated", eight_bit_copy(folder, folder + "_srgb8_unstated", False),
                               "8-bit sRGB PNG, encoding unstated (calibrated)")]
                 for label, f, what in runs:
-                    r.update(end_to_end(f, a.end_to_end, r["n"], label))
+                    r.update(end_to_end(f, a.end_to_end, r["n"], label, truth_dirs=dirs))
                     p = f"end_to_end{label}"
+                    enc = r[p + "_encoding"]
+                    enc = "as stated" if not enc else (f"gamma {enc['gamma']:.3f}" if enc.get("curve") == "gamma"
+                                                       else enc.get("curve"))
                     print(f"{name} ({what}): ffls lights --workers {a.end_to_end}: {r[p + '_s']:.2f} s wall, "
                           f"{r[p + '_photos_per_s']:.1f} photos/s ({r[p + '_cpu_s']:.2f} s CPU: "
-                          f"{r[p + '_user_s']:.2f} user + {r[p + '_sys_s']:.2f} sys)", flush=True)
+                          f"{r[p + '_user_s']:.2f} user + {r[p + '_sys_s']:.2f} sys); {r[p + '_accepted']} accepted, "
+                          f"median {r[p + '_median_deg']:.2f} max {r[p + '_max_deg']:.2f} deg, coverage "
+                          f"{100 * r[p + '_coverage']:.0f}%, encoding {enc}", flush=True)
             rows.append(r)
             tgt = TARGETS.get(name)
             print(f"{name:22s} spheres={a.spheres} refine={not a.no_refine} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "
