@@ -53,13 +53,13 @@ def test_enclosing_circle_on_arcs():
     pts = np.concatenate([top, horizon, bottom]) + rng.normal(0, 0.2, (len(top) + len(horizon) + len(bottom), 2))
     # the circle through the cap alone (what the max-image fit locks onto)
     cap_c, cap_r = np.array([100.0, 84.0]), 20.0
-    oc = enclosing_circle(pts, cap_c, cap_r, rng, shape=(200, 200))
+    oc = enclosing_circle(pts, cap_c, cap_r, shape=(200, 200))
     assert oc is not None
     assert np.hypot(*(oc.center - c)) < 0.5 and abs(oc.radius - R) < 0.5
     assert oc.coverage >= 0.5 and circle_coverage(pts, c, R) >= 0.5
     # a complete circle with nothing larger around it: no outer outline
     full = c + R * np.stack([np.cos(np.radians(np.arange(0, 360, 3.0))), np.sin(np.radians(np.arange(0, 360, 3.0)))], 1)
-    assert enclosing_circle(full, c, R, rng, shape=(200, 200)) is None
+    assert enclosing_circle(full, c, R, shape=(200, 200)) is None
 
 
 def test_mirror_ball_found_by_its_silhouette(mirror_capture):

@@ -142,12 +142,18 @@ def shading_change(brightest, L, rows, cols) -> float:
     return float(1.0 - counts.max() / lit.sum())
 
 
-def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3):
+def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3, L=None,
+                               highlight_fraction: float = 0.8):
     """Per photo, the light direction a sphere's brightest pixels suggest, as matte and as mirror.
 
     The pixels (inside 0.95 of the outline) whose brightest photo is ``k`` face light ``k``: for a
-    matte sphere their mean normal points near it (the light's cell among the others'), for a
-    mirror their mean reflected view ray points at it. Camera frame.
+    matte sphere their mean normal points near it (the light's cell among the others'). For a
+    mirror only the highlight among them points at it: a mirror's pixels that reflect the lit
+    table or room are brightest in whichever photo lights that most (under a near light on a
+    table, most of a chrome ball's lower half is brightest in the same photo), so their mean points
+    at the table. With the max image's luminance ``L``, a mirror's direction is the mean reflected
+    view ray of the pixels within ``highlight_fraction`` of the brightest of them (clipped
+    highlight pixels together); without it, of all of them. Camera frame.
 
     Parameters
     ----------
@@ -157,6 +163,9 @@ def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3
     n_photos : int
     min_pixels : int
         Photos with fewer of the sphere's pixels get NaN.
+    L : (H, W) float, optional
+        Luminance of the max image.
+    highlight_fraction : float
 
     Returns
     -------
@@ -179,12 +188,18 @@ def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3
     ok = np.all(np.isfinite(n), axis=1)
     refl = 2.0 * np.sum(n * v, axis=1)[:, None] * n - v
     b = np.where(ok, brightest[rows, cols], -1)
+    lum = None if L is None else np.asarray(L, dtype=np.float64)[rows, cols]
     for k in range(n_photos):
         sel = b == k
-        if sel.sum() >= min_pixels:
-            for out, d in ((matte, n), (mirror, refl)):
-                m = d[sel].mean(axis=0)
-                out[k] = m / max(np.linalg.norm(m), 1e-12)
+        if sel.sum() < min_pixels:
+            continue
+        m = n[sel].mean(axis=0)
+        matte[k] = m / max(np.linalg.norm(m), 1e-12)
+        if lum is not None:  # a mirror: the highlight, the brightest of these pixels (clipped ones together)
+            lk = lum[sel]
+            sel = np.flatnonzero(sel)[lk >= highlight_fraction * lk.max()]
+        m = refl[sel].mean(axis=0)
+        mirror[k] = m / max(np.linalg.norm(m), 1e-12)
     return matte, mirror
 
 
@@ -261,6 +276,26 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
                     / (1 + (ft.residual_px / 0.5) ** 2))
         round_.append((ft, neutral, rows, cols))
     round_.sort(key=lambda t: -t[0].score)
+    # Overlapping round outlines keep the best-scored one. A candidate that fails a test of its own
+    # suppresses the outlines it overlaps (a cropped sphere's highlight is no sphere); one set aside
+    # only by the group tests (size, lights) does not: the overlap is judged again without it (a
+    # chrome ball's highlight, a small sharp circle that outscores the ball's faint silhouette, is
+    # set aside by its size, and the silhouette it hid is then judged).
+    rejected, set_aside = [], set()
+    while True:
+        ok, alone = _judged_alone([t for t in round_ if id(t[0]) not in set_aside], brightest, L, n_photos,
+                                  min_visible, colour_counts)
+        group_rej, ok = _judged_together(ok, brightest, L, ortho, n_photos)
+        if not group_rej:
+            break
+        set_aside.update(id(ft) for ft, _ in group_rej)
+        rejected.extend(why for _, why in group_rej)
+    return ok, alone + rejected
+
+
+def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts):
+    """The distinct round outlines (best score first) that pass the tests of a single candidate, and the reasons of the others."""
+    crit = CRITERIA
     distinct = []
     for t in round_:
         ft = t[0]
@@ -286,6 +321,13 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
                             f" (the same photo is brightest on {1 - chg:.0%} of it)")
         else:
             ok.append(ft)
+    return ok, rejected
+
+
+def _judged_together(ok, brightest, L, ortho, n_photos):
+    """The candidates set aside by the group tests (size consistency, agreeing lights) as (fit, reason), and the rest."""
+    crit = CRITERIA
+    rejected = []
     if len(ok) > 1:  # size consistency: all spheres share sphere_radius
         size = np.array([ft.radius_px if ortho else ft.distance for ft in ok])
         tol = np.log(crit["size_ratio_ortho"] if ortho else crit["size_ratio_pinhole"])
@@ -297,11 +339,11 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
             if not k:
                 what = f"radius {s:.1f} px" if ortho else f"depth {s:.3g}"
                 ref_s = f"{ref:.1f} px" if ortho else f"{ref:.3g}"
-                rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
-                                f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})")
+                rejected.append((ft, f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                                f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})"))
         ok = [ft for ft, k in zip(ok, keep) if k]
     if len(ok) >= 3 and brightest is not None and n_photos >= 3:  # all spheres see the same lights
-        dirs = [light_directions_per_photo(ft, brightest, n_photos) for ft in ok]
+        dirs = [light_directions_per_photo(ft, brightest, n_photos, L=L) for ft in ok]
         closest = []
         for i in range(len(ok)):
             closest.append(min(_disagreement_deg(a, b) for j in range(len(ok)) if j != i
@@ -311,8 +353,8 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         if sum(agree) >= 2:
             for ft, a, c in zip(ok, agree, closest):
                 if not a:
-                    rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                    rejected.append((ft, f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
                                     f"{ft.radius_px:.0f} px: the lights its shading shows disagree with every other "
-                                    f"sphere's (median {c:.0f} deg > {lim:.0f} to the closest, as matte or mirror)")
+                                    f"sphere's (median {c:.0f} deg > {lim:.0f} to the closest, as matte or mirror)"))
             ok = [ft for ft, a in zip(ok, agree) if a]
-    return ok, rejected
+    return rejected, ok
