@@ -1612,6 +1612,9 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera):
         except ValueError:
             return ft
         gap = 0.5 * float(np.hypot(np.linalg.norm(new.center_px - ft.center_px), new.radius_px - ft.radius_px))
+        r_limb = limb_radius(log_l, new.center_px, new.radius_px)
+        if r_limb is not None and abs(r_limb / new.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
+            new = _with_radius(new, r_limb, cam)
         new.outline_sigma_px = max(gap, MIRROR_OUTLINE_FLOOR_PX)
         return new
     r_limb = limb_radius(log_l, ft.center_px, ft.radius_px)

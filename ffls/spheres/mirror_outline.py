@@ -496,3 +496,41 @@ def dark_cap(lum, center, radius, ratio: float = 0.7, quantile: float = 50.0) ->
     if inside.size < 5 or ring.size < 5:
         return False
     return bool(np.percentile(inside, quantile) < ratio * np.median(ring))
+
+
+def highlight_ratio(lum, center, radius) -> float | None:
+    """How much brighter a circle's brightest pixel is than its surroundings: a mirror ball's highlights.
+
+    A mirror reflects the lights themselves, whose radiance far exceeds that of any lit diffuse
+    surface around it, so in the max image a chrome or black glossy ball holds pixels many times
+    brighter than the ring just outside it (1049 and 85 times the ring's 95th percentile on
+    ``bench_lights.py --configs near_mixed`` at 384 px; 3.5 in an 8-bit file where the highlight
+    clips). A dark patch of a textured ground whose outline looks like a mirror's dark cap holds
+    none (1.02 on the busy JPEG). Returns the brightest pixel within 0.95 radii over the 95th
+    percentile of the ring from 1.15 to 1.4 radii (``lum``: the max image's luminance), or None
+    when either holds fewer than 5 pixels in the frame, or when the ring itself is clipped (its
+    95th percentile at 0.98 of the image's maximum or above: a saturated file gives no evidence).
+
+    Parameters
+    ----------
+    lum : (H, W) float
+    center : (2,) float
+    radius : float
+    """
+    H, W = lum.shape
+    cx, cy = float(center[0]), float(center[1])
+    R = 1.4 * float(radius)
+    x0, x1 = max(int(np.floor(cx - R)), 0), min(int(np.ceil(cx + R)) + 1, W)
+    y0, y1 = max(int(np.floor(cy - R)), 0), min(int(np.ceil(cy + R)) + 1, H)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d = np.hypot(xx - cx, yy - cy) / float(radius)
+    crop = np.asarray(lum, dtype=np.float64)[y0:y1, x0:x1]
+    disc, ring = crop[d <= 0.95], crop[(d >= 1.15) & (d <= 1.4)]
+    if disc.size < 5 or ring.size < 5:
+        return None
+    ring95 = float(np.percentile(ring, 95))
+    if ring95 >= 0.98 * float(np.max(lum)):
+        return None
+    return float(disc.max() / max(ring95, 1e-12))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap
+from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap, highlight_ratio
 
 __all__ = ["CRITERIA", "COLOUR_STEP", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "photo_neutrality",
            "shading_change", "select_spheres"]
@@ -31,6 +31,7 @@ CRITERIA = {
     "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
     "max_light_disagreement_deg": 40.0,  # per-photo light directions vs the closest other sphere (3+ spheres)
     "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
+    "min_highlight": 1.5,        # a mirror's brightest pixel over its surroundings' 95th percentile (max image)
 }
 
 
@@ -225,7 +226,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     ``min_visible`` of it inside), its centre is poorly constrained (standard error above
     ``max_center_sigma_px``), it is coloured (``min_neutral``), its shading does not change
     across the photos as a sphere's does (``min_shading_change``, with at least 3 photos; not asked
-    of a mirror ball's outer outline, whose reflected table is brightest in the same photo), or its
+    of a mirror ball's outer outline or dark cap, whose reflected table is brightest in the same
+    photo: such an outline must instead hold a highlight, its brightest pixel at least
+    ``min_highlight`` times its surroundings' 95th percentile, :func:`ffls.spheres.mirror_outline.highlight_ratio`), or its
     size disagrees with the other spheres' (all spheres share ``sphere_radius``: implied depths
     within ``size_ratio_pinhole``, or apparent radii within ``size_ratio_ortho`` for an
     orthographic camera; the consistent group with the largest total score wins).
@@ -314,8 +317,11 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts):
             judged = "median over its lit pixels in the photos" if colour_counts is not None else "in the max image"
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}, {judged}),"
                             f" not a white, grey or chrome sphere")
-        elif (brightest is not None and n_photos >= 3 and ft.source != OUTER_SOURCE  # a mirror shows its room
-              and not dark_cap(L, ft.center_px, ft.radius_px)
+        elif (mirror := ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)) and (
+                (hl := highlight_ratio(L, ft.center_px, ft.radius_px)) is not None and hl < crit["min_highlight"]):
+            rejected.append(f"{where}: outlined as a mirror ball's, but it holds no highlight (its brightest pixel is"
+                            f" {hl:.2f} x its surroundings' 95th percentile < {crit['min_highlight']})")
+        elif (brightest is not None and n_photos >= 3 and not mirror  # a mirror shows its room
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
             rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
                             f" (the same photo is brightest on {1 - chg:.0%} of it)")
