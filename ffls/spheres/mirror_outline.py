@@ -82,8 +82,8 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
     state). Every point votes, for each centre of a square grid (step ``s = max(tol, max_offset /
     8)``) within ``max_offset`` of ``center``, for its distance; votes are binned at ``w / 2``
     (``w = max(2 tol, 1.5 s)``, wide enough for the grid's centre error) and summed over
-    windows of ``w``. The highest windows (a window may not lie within ``s`` in centre and ``w`` in
-    radius of a higher one) are refined one by one by a robust geometric circle fit
+    windows of ``w``. The ``max(2 n_best, 3)`` highest windows (a window may not lie within ``s``
+    in centre and ``w`` in radius of a higher one) are refined one by one by a robust geometric circle fit
     (``scipy.optimize.least_squares``, ``soft_l1`` loss of scale ``tol``) to the points within
     ``w`` of the window's circle, and again to those within ``2 tol`` of that fit; each is then
     scored by its points within ``tol``. This replaces RANSAC over 3-point samples, whose
@@ -138,7 +138,7 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
     order = np.lexsort((np.arange(score.size), -score.ravel()))  # highest first, ties by grid index
     picked = []
     for idx in order:
-        if score.flat[idx] < 0 or len(picked) >= max(4 * n_best, 8):
+        if score.flat[idx] < 0 or len(picked) >= max(2 * n_best, 3):
             break
         ci, ri = divmod(int(idx), nb - 1)
         if any(np.hypot(*(cs[ci] - cs[cj])) <= s + 1e-9 and abs(radii[ri] - radii[rj]) <= w for cj, rj in picked):
@@ -148,6 +148,11 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
     def resid(p, Q):
         return np.hypot(Q[:, 0] - p[0], Q[:, 1] - p[1]) - p[2]
 
+    def jac(p, Q):
+        v = Q - p[:2]
+        dist = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
+        return np.column_stack([-v[:, 0] / dist, -v[:, 1] / dist, -np.ones(len(Q))])
+
     out = []
     for ci, ri in picked:
         p = np.array([cs[ci, 0], cs[ci, 1], radii[ri]])
@@ -155,7 +160,7 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
             Q = P[np.abs(resid(p, P)) <= band]
             if len(Q) < 3:
                 break
-            p = least_squares(resid, p, args=(Q,), loss="soft_l1", f_scale=tol, method="trf").x
+            p = least_squares(resid, p, jac=jac, args=(Q,), loss="soft_l1", f_scale=tol, method="trf").x
         else:
             if r_min <= p[2] <= r_max and np.hypot(*(p[:2] - c0)) <= max_offset + tol:
                 inl = np.abs(resid(p, P)) <= tol
@@ -206,7 +211,7 @@ def circle_coverage(points, center, radius, tol: float = 1.5, shape=None, n_bins
 
 def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
                      min_growth: float = 1.12, max_growth: float = 2.0, min_coverage: float = 0.5,
-                     min_new: float = 0.3, max_outside: float = 0.05, n_search: int = 8) -> OuterCircle | None:
+                     min_new: float = 0.3, max_outside: float = 0.05, n_search: int = 6) -> OuterCircle | None:
     """The outermost well-supported circle that encloses a candidate circle's outline, or None.
 
     The circles best supported by the edge points within ``max_growth`` radii of the candidate
