@@ -41,6 +41,7 @@ SIZE = (320, 240)  # width, height
 CENTER = np.array([0.0, 0.0, 0.1])
 RADIUS = 0.1
 #: (name, focal px, distance m, ball offset from the image centre (px), elevation deg)
+MAPS = ("courtyard", "night", "studio", "sunrise")  # map m is turned by 90 m + 120 k degrees in layout k
 LAYOUTS = [("wide", 400.0, 1.2, (-70.0, 10.0), 20.0),
            ("normal", 800.0, 4.0, (90.0, -55.0), 10.0),
            ("long", 1600.0, 4.0, (-60.0, 40.0), 30.0)]
@@ -85,7 +86,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for m, name in enumerate(a.maps.split(",")):
+        for name in a.maps.split(","):
+            m = MAPS.index(name) if name in MAPS else len(MAPS)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", LightMapWarning)  # the maps' few negative texels, clamped
                 lm = load_lightmap(HDRI / f"{name}.exr")

@@ -156,11 +156,11 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
     out = []
     for ci, ri in picked:
         p = np.array([cs[ci, 0], cs[ci, 1], radii[ri]])
-        for band in (w, 2.0 * tol):
+        for band, scale in ((w, tol), (2.0 * tol, tol)):
             Q = P[np.abs(resid(p, P)) <= band]
             if len(Q) < 3:
                 break
-            p = least_squares(resid, p, jac=jac, args=(Q,), loss="soft_l1", f_scale=tol, method="trf").x
+            p = least_squares(resid, p, jac=jac, args=(Q,), loss="soft_l1", f_scale=scale, method="trf").x
         else:
             if r_min <= p[2] <= r_max and np.hypot(*(p[:2] - c0)) <= max_offset + tol:
                 inl = np.abs(resid(p, P)) <= tol
