@@ -60,20 +60,6 @@ class OuterCircle:
     new_fraction: float
 
 
-def circumcircles(p1, p2, p3):
-    """Centres (m, 2) and radii (m,) of the circles through three points each (nan when collinear)."""
-    a = 2 * (p2 - p1)
-    b = 2 * (p3 - p1)
-    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    ra = np.sum(p2 ** 2 - p1 ** 2, axis=1)
-    rb = np.sum(p3 ** 2 - p1 ** 2, axis=1)
-    ok = np.abs(det) > 1e-9
-    det = np.where(ok, det, 1.0)
-    c = np.stack([(ra * b[:, 1] - rb * a[:, 1]) / det, (a[:, 0] * rb - b[:, 0] * ra) / det], axis=1)
-    r = np.where(ok, np.hypot(*(p1 - c).T), np.nan)
-    return c, r
-
-
 def circle_search(points, center, max_offset: float, r_min: float, r_max: float, *, tol: float = 1.0,
                   n_best: int = 1, per_radius: bool = False) -> list:
     """The best-supported circles near a centre: a Hough vote on a grid of centres, refined by least squares.
