@@ -1587,7 +1587,8 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera):
     disagreement with the limb's reflectance step (:func:`ffls.spheres.mirror_outline.mirror_silhouette`).
     A dark cap that no larger outline encloses (or a candidate only a quarter of whose cap is dark:
     a chrome ball's cap also holds highlights and the table's reflection) is refitted on the circle of the limb's reflectance
-    steps from 0.75 to 1.25 of its radius, when they cover :data:`MIRROR_STEP_COVERAGE` of it: under
+    steps from 0.75 to 1.25 of its radius, when they cover :data:`MIRROR_STEP_COVERAGE` of it and
+    fit better (:func:`outline_quality`, with the selection's support): under
     a chrome ball standing on a table the ball's lower half reflects the table and has no edge, and
     the cap's outline closes on the contact shadow instead (too low and too large)."""
     cap = dark_cap(L, ft.center_px, ft.radius_px)
@@ -1610,6 +1611,10 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera):
         try:
             new = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
         except ValueError:
+            return ft
+        # kept only if it fits better and has the support the selection asks (its points are one per ray)
+        if (outline_quality(new) <= outline_quality(ft)
+                or new.n_inliers < CRITERIA["min_support"] * 2 * np.pi * new.radius_px * new.visible_fraction):
             return ft
         gap = 0.5 * float(np.hypot(np.linalg.norm(new.center_px - ft.center_px), new.radius_px - ft.radius_px))
         r_limb = limb_radius(log_l, new.center_px, new.radius_px)

@@ -227,8 +227,10 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     ``max_center_sigma_px``), it is coloured (``min_neutral``), its shading does not change
     across the photos as a sphere's does (``min_shading_change``, with at least 3 photos; not asked
     of a mirror ball's outer outline or dark cap, whose reflected table is brightest in the same
-    photo: such an outline must instead hold a highlight, its brightest pixel at least
-    ``min_highlight`` times its surroundings' 95th percentile, :func:`ffls.spheres.mirror_outline.highlight_ratio`), or its
+    photo: with at least 3 photos, lit by lights, such an outline must instead hold a highlight, its
+    brightest pixel at least ``min_highlight`` times its surroundings' 95th percentile,
+    :func:`ffls.spheres.mirror_outline.highlight_ratio`; a single probe photo under a smooth sky
+    may show none), or its
     size disagrees with the other spheres' (all spheres share ``sphere_radius``: implied depths
     within ``size_ratio_pinhole``, or apparent radii within ``size_ratio_ortho`` for an
     orthographic camera; the consistent group with the largest total score wins).
@@ -317,7 +319,7 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts):
             judged = "median over its lit pixels in the photos" if colour_counts is not None else "in the max image"
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}, {judged}),"
                             f" not a white, grey or chrome sphere")
-        elif (mirror := ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)) and (
+        elif (mirror := ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)) and n_photos >= 3 and (
                 (hl := highlight_ratio(L, ft.center_px, ft.radius_px)) is not None and hl < crit["min_highlight"]):
             rejected.append(f"{where}: outlined as a mirror ball's, but it holds no highlight (its brightest pixel is"
                             f" {hl:.2f} x its surroundings' 95th percentile < {crit['min_highlight']})")
