@@ -13,7 +13,8 @@ import pytest
 from ffls.io.capture import load_capture
 from ffls.radiance.photos import load_photo
 from ffls.spheres.detect import extreme_images, find_spheres_in_capture
-from ffls.spheres.mirror_outline import OUTER_SOURCE, circle_coverage, dark_cap, enclosing_circle
+from ffls.spheres.mirror_outline import (OUTER_SOURCE, circle_coverage, circle_search, dark_cap, enclosing_circle,
+                                        highlight_ratio)
 from ffls.synth.photo import PhotoSettings
 from ffls.synth.scene import make_scene, write_synthetic_capture
 
@@ -53,14 +54,82 @@ def test_enclosing_circle_on_arcs():
     pts = np.concatenate([top, horizon, bottom]) + rng.normal(0, 0.2, (len(top) + len(horizon) + len(bottom), 2))
     # the circle through the cap alone (what the max-image fit locks onto)
     cap_c, cap_r = np.array([100.0, 84.0]), 20.0
-    oc = enclosing_circle(pts, cap_c, cap_r, rng, shape=(200, 200))
+    oc = enclosing_circle(pts, cap_c, cap_r, shape=(200, 200))
     assert oc is not None
     assert np.hypot(*(oc.center - c)) < 0.5 and abs(oc.radius - R) < 0.5
     assert oc.coverage >= 0.5 and circle_coverage(pts, c, R) >= 0.5
     # a complete circle with nothing larger around it: no outer outline
     full = c + R * np.stack([np.cos(np.radians(np.arange(0, 360, 3.0))), np.sin(np.radians(np.arange(0, 360, 3.0)))], 1)
-    assert enclosing_circle(full, c, R, rng, shape=(200, 200)) is None
+    assert enclosing_circle(full, c, R, shape=(200, 200)) is None
 
+
+
+def _cap_arcs_with_clutter(seed=3):
+    """The dark cap's outline of test_enclosing_circle_on_arcs plus 150 scattered edge points (not on the cap's circle)."""
+    rng = np.random.default_rng(seed)
+    c, R = np.array([100.0, 100.0]), 30.0
+    t = np.radians(np.arange(-160, -19, 2.0))
+    top = c + R * np.stack([np.cos(t), np.sin(t)], axis=1)
+    hx = np.linspace(top[0, 0], top[-1, 0], 40)
+    horizon = np.stack([hx, np.full_like(hx, c[1] - 0.1 * R)], axis=1)
+    t2 = np.radians(np.arange(40, 141, 3.0))
+    bottom = c + R * np.stack([np.cos(t2), np.sin(t2)], axis=1)
+    pts = np.concatenate([top, horizon, bottom])
+    pts = pts + rng.normal(0, 0.2, pts.shape)
+    clutter = rng.uniform(40, 160, (150, 2))
+    clutter = clutter[np.abs(np.hypot(*(clutter - [100, 84]).T) - 20) > 3]
+    return np.concatenate([pts, clutter]), c, R
+
+
+def test_outer_outline_is_deterministic_and_order_free():
+    """The same edge points in any order give the same outer outline, within 0.2 px of the silhouette
+    (RANSAC gave 0.09 to 1.47 px over 20 seeds and orders on these points)."""
+    pts, c, R = _cap_arcs_with_clutter()
+    first = None
+    for k in range(6):
+        p = pts[np.random.default_rng(100 + k).permutation(len(pts))]
+        oc = enclosing_circle(p, [100.0, 84.0], 20.0, shape=(200, 200))
+        assert oc is not None
+        assert np.hypot(*(oc.center - c)) < 0.2 and abs(oc.radius - R) < 0.2
+        if first is None:
+            first = oc
+        np.testing.assert_allclose(oc.center, first.center, atol=1e-9)
+        assert abs(oc.radius - first.radius) < 1e-9
+
+
+def test_circle_search_finds_a_partial_circle_among_clutter():
+    """A 200-degree arc among 300 random points: found to 0.2 px, the same for every order of the points."""
+    rng = np.random.default_rng(5)
+    c, R = np.array([60.0, 70.0]), 25.0
+    t = np.radians(np.arange(160, 360, 1.5))
+    arc = c + R * np.stack([np.cos(t), np.sin(t)], axis=1) + rng.normal(0, 0.15, (len(t), 2))
+    pts = np.concatenate([arc, rng.uniform(0, 140, (300, 2))])
+    out = [circle_search(pts[np.random.default_rng(k).permutation(len(pts))], c + [4.0, -3.0], 10.0, 15.0, 35.0)
+           for k in range(3)]
+    for found in out:
+        assert len(found) == 1
+        cc, rr, inl = found[0]
+        assert np.hypot(*(cc - c)) < 0.2 and abs(rr - R) < 0.2 and inl.sum() >= 0.9 * len(arc)
+        np.testing.assert_allclose(cc, out[0][0][0], atol=1e-9)
+    assert circle_search(pts[:2], c, 10.0, 15.0, 35.0) == []
+
+
+def test_highlight_ratio_tells_a_mirror_from_a_dark_patch():
+    """A disc holding a highlight far above its surroundings reads high; a dark patch of texture reads about 1;
+    a clipped surround gives no evidence."""
+    rng = np.random.default_rng(0)
+    lum = rng.uniform(0.2, 0.6, (120, 120))
+    yy, xx = np.mgrid[0:120, 0:120]
+    disc = np.hypot(xx - 60, yy - 60) <= 20
+    patch = lum.copy()
+    patch[disc] *= 0.3  # a dark patch: no pixel above the texture
+    assert highlight_ratio(patch, (60, 60), 20) < 1.5
+    ball = patch.copy()
+    ball[55:58, 62:65] = 40.0  # a light's reflection
+    assert highlight_ratio(ball, (60, 60), 20) > 10
+    clipped = np.minimum(ball, 0.5)
+    clipped[~disc] = 0.5
+    assert highlight_ratio(clipped, (60, 60), 20) is None
 
 def test_mirror_ball_found_by_its_silhouette(mirror_capture):
     """One chrome ball, no hints: the centre within 1 px of the truth (the dark cap's circle was 9 px off)."""

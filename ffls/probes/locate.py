@@ -14,7 +14,7 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.spheres.detect import find_spheres, orthographic_normals, sphere_mask, sphere_normals, disc_mask
 
-__all__ = ["SphereGeometry", "locate_sphere"]
+__all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "LIMB_STEP_COVERAGE"]
 
 
 @dataclass
@@ -73,24 +73,60 @@ class SphereGeometry:
 
 
 def _given_circle(cam, T, sph) -> SphereGeometry:
-    """A disc stated in pixels (``center_px`` and ``radius_px``), used as it is.
+    """A disc stated in pixels (``center_px`` and ``radius_px``), used as it is (:func:`_circle_geometry`)."""
+    return _circle_geometry(cam, T, np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px),
+                            sph.radius, "probe.json")
 
-    Pinhole: the cone of viewing rays through the circle (axis through ``center_px``, half-angle
-    the mean angle to 72 points of the circle, with the distortion undone) gives the centre at
-    ``C = R / sin(alpha) * axis`` (``R`` the stated radius, or 1).
+
+def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
+    """The sphere whose outline is the pixel circle (``cpx``, ``rpx``).
+
+    Pinhole: the cone of viewing rays through the circle (axis through ``cpx``, half-angle the
+    mean angle to 72 points of the circle, with the distortion undone) gives the centre at
+    ``C = R / sin(alpha) * axis`` (``R`` the stated ``radius``, or 1).
     """
-    cpx, rpx = np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px)
     if cam.model == "orthographic":
-        return SphereGeometry(cam.model, None, None, T, None, None, cpx, rpx, "probe.json")
+        return SphereGeometry(cam.model, None, None, T, None, None, cpx, rpx, source)
     from ffls.camera.projection import pixel_rays
 
     t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
     ring = cpx + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
     axis = pixel_rays(cpx[None], cam.K, cam.dist)[0]
     alpha = float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
-    R = float(sph.radius) if sph.radius is not None else 1.0
-    return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, "probe.json",
-                          sph.radius is not None)
+    R = float(radius) if radius is not None else 1.0
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, source,
+                          radius is not None)
+
+
+#: A found mirror ball is moved to the circle of its limb's reflectance steps
+#: (:func:`ffls.spheres.mirror_outline.mirror_silhouette`) when the steps cover this share of it.
+LIMB_STEP_COVERAGE = 0.85
+
+
+def mirror_limb(radiance, center_px, radius_px, shape):
+    """The circle (centre (2,), radius) of a mirror ball's limb near a found outline, or None.
+
+    A mirror ball in a probe photo shows the scene around it, so the strongest edges the finder
+    follows are often reflected ones just inside the limb (in ``benchmarks/probe_detect.py``, 2
+    to 3 px off on 5 of 12 renders). At the limb the ball shows what lies just behind it, dimmed by
+    its reflectance: the circle of radial brightness steps (``mirror_silhouette``, radii 0.75 to 1.25
+    of the found one, log luminance) is taken when its steps cover at least
+    :data:`LIMB_STEP_COVERAGE` of it and it stays within 15% of the found circle (centre and radius).
+    """
+    from ffls.spheres.mirror_outline import circle_coverage, mirror_silhouette
+
+    lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    log_l = np.log(np.maximum(lum, 1e-12))
+    sil = mirror_silhouette(log_l, center_px, radius_px, shape=shape, min_shrink=0.75,
+                            min_coverage=LIMB_STEP_COVERAGE)
+    if sil is None:
+        return None
+    pts, c, r = sil
+    if np.hypot(*(c - np.asarray(center_px))) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15:
+        return None
+    if circle_coverage(pts, c, r, 1.0, shape) < LIMB_STEP_COVERAGE:
+        return None
+    return np.asarray(c, dtype=np.float64), float(r)
 
 
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
@@ -162,6 +198,10 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                                                                       "\"sphere\": {\"center_px\": [u, v]}")
         raise InputError(msg, source) from None
     ft = found[0]
+    if view.sphere.material == "mirror":  # the limb's reflectance step rather than a reflected edge
+        limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2])
+        if limb is not None:
+            return _circle_geometry(cam, T, limb[0], limb[1], sph.radius, "hint" if hints else "auto")
     if cam.model == "orthographic":
         return SphereGeometry(cam.model, None, None, T, None, None, np.asarray(ft.center_px, dtype=np.float64),
                               float(ft.radius_px), "hint" if hints else "auto")

@@ -38,7 +38,7 @@ Method
    white sphere on a white ground merges with the ground in the max image).
 5. **Robustness.** Edge pixels that are not silhouette (a stand, an occluder, a shadow boundary,
    the terminator) are handled by (a) keeping only edges whose gradient is radial and of the
-   majority polarity, (b) a RANSAC circle search for the initial fit, (c) a ``soft_l1`` loss
+   majority polarity, (b) a deterministic circle search (a Hough vote refined by least squares, :func:`ffls.spheres.mirror_outline.circle_search`) for the initial fit, (c) a ``soft_l1`` loss
    with a 1-pixel scale, and (d) trimming at a robust multiple of the residual spread followed
    by a refit on the inliers.
 6. **Which outlines are spheres** (no hints, :mod:`ffls.spheres.select`): round
@@ -66,7 +66,7 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
 from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, select_spheres
-from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circumcircles, dark_cap,
+from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circle_search, dark_cap,
                                          enclosing_circle, limb_radius, mirror_silhouette)
 
 __all__ = [
@@ -872,29 +872,14 @@ def _radius_from_edges(pts, grads, cpx, r_max, r_min: float = 3.0):
 
 
 # ----------------------------------------------------------------------------- fitting
-def _ransac_circle(pts, r_expected, rng, n_iter=300, tol=1.5):
-    """Best-supported circle (centre (2,), radius) among 3-point samples, radius within 40 %.
+def _start_circle(pts, center, r_expected, tol=1.5):
+    """Best-supported circle (centre (2,), radius) near a candidate, radius within 40 %, or None.
 
-    All ``n_iter`` samples are evaluated at once (circumcentres in closed form, inlier counts by
-    broadcasting).
+    :func:`ffls.spheres.mirror_outline.circle_search` (deterministic) with the centre within half
+    the expected radius of ``center``.
     """
-    m = len(pts)
-    if m < 3:
-        return None
-    idx = np.stack([rng.choice(m, 3, replace=False) for _ in range(n_iter)]) if m < 6 else \
-        np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
-    if m >= 6:  # drop samples with a repeated point
-        idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
-    c, r = circumcircles(pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]])
-    ok = np.isfinite(r)
-    ok[ok] = (r[ok] >= 0.6 * r_expected) & (r[ok] <= 1.4 * r_expected)
-    if not ok.any():
-        return None
-    c, r = c[ok], r[ok]
-    d = np.hypot(pts[None, :, 0] - c[:, None, 0], pts[None, :, 1] - c[:, None, 1])
-    n_in = np.count_nonzero(np.abs(d - r[:, None]) < tol, axis=1)
-    k = int(np.argmax(n_in))
-    return c[k], float(r[k])
+    found = circle_search(pts, center, 0.5 * r_expected, 0.6 * r_expected, 1.4 * r_expected, tol=tol)
+    return (found[0][0], found[0][1]) if found else None
 
 
 def _cone_residuals(params, s, f):
@@ -1198,7 +1183,7 @@ def _check_duplicate_circles(circles, what, source) -> None:
 # ----------------------------------------------------------------------------- main entry
 def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, hints=None, overrides=None,
                  world_from_camera=None, scene_center=None, source: str | os.PathLike | None = None,
-                 max_residual_px: float = 1.5, min_coverage: float = 0.3, seed: int = 0,
+                 max_residual_px: float = 1.5, min_coverage: float = 0.3,
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
                  n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
                  saturates: bool = False, colour_counts=None, edge_tensor=None,
@@ -1247,8 +1232,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     max_residual_px, min_coverage : float
         Quality limits for hinted spheres: RMS outline residual (pixels) and outline coverage
         (fraction of the visible outline). Unhinted candidates need coverage 0.6 (:data:`CRITERIA`).
-    seed : int
-        RANSAC seed.
     lit_limb : float or None
         Refit each chosen sphere on its directly lit limb (:func:`_refine_on_lit_limb`); None: no refit.
     camera_model : {'pinhole', 'orthographic'}
@@ -1336,7 +1319,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     n_photos = int(n_photos) if n_photos is not None else n_img
     cam = _Camera(camera_model, K, dist, wfc, R, L.shape)
     edges = _edge_map(mx, L, source)
-    rng = np.random.default_rng(seed)
     rejected: list[str] = []
     if hints:
         hint_info = []
@@ -1347,21 +1329,21 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
         cands = _hinted_candidates(hint_info, edges, L.shape, source)
         _check_duplicate_circles(cands, "hint", source)
-        fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", rng)
-        fits = _with_consistent_edges(fits, tensor, L, cam, rng, max_residual_px)
+        fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint")
+        fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
         hint_info = []
         cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
                                          else None)
-        fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", rng)
-        fits = _with_outer_outlines(fits, edges, L, cam, rng)  # a mirror's dark cap -> its silhouette
+        fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto")
+        fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
         # ground's circles hold in every photo too) gains from them a score that hides a real sphere
         open_ = [ft.coverage < CRITERIA["min_closed"] * ft.visible_fraction for ft in fits]
-        refit = _with_consistent_edges([ft for ft, o in zip(fits, open_) if o], tensor, L, cam, rng, max_residual_px)
+        refit = _with_consistent_edges([ft for ft, o in zip(fits, open_) if o], tensor, L, cam, max_residual_px)
         it = iter(refit)
         fits = [next(it) if o else ft for ft, o in zip(fits, open_)]
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
@@ -1375,7 +1357,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = [ft if ft.source == OUTER_SOURCE or ft.outline_edges == PHOTO_EDGES
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
-        fits = _with_consistent_edges(fits, tensor, L, cam, rng, max_residual_px)
+        fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -1514,11 +1496,11 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     return cands[:max_candidates]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng):
+def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
-    majority polarity; RANSAC circle start; :func:`fit_sphere_center` (pinhole) or
+    majority polarity; a deterministic circle start (:func:`ffls.spheres.mirror_outline.circle_search`); :func:`fit_sphere_center` (pinhole) or
     :func:`fit_circle` (orthographic). Returns the fits and the failures ``(k, x, y, r, why)``.
     """
     pts, grads = edges.points, edges.grads
@@ -1545,7 +1527,9 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, rng
         if len(P) < 8:
             failures.append((k, cx, cy, r, f"only {len(P)} edge points"))
             continue
-        circ = _ransac_circle(und_all[sel], r, rng)
+        c_und = np.array([cx, cy]) if cam.ortho else project_points(pixel_rays(np.array([[cx, cy]]), cam.K, cam.dist),
+                                                                      K_und, None)[0]
+        circ = _start_circle(und_all[sel], c_und, r)
         if circ is None:
             failures.append((k, cx, cy, r, "no circle through the edge points"))
             continue
@@ -1566,7 +1550,7 @@ def outline_quality(ft) -> float:
     return float(ft.coverage) / (1.0 + (float(ft.residual_px) / 0.5) ** 2)
 
 
-def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
+def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera) -> list:
     """Each candidate grown to its outer outline (:func:`_outer_outline`); where a grown outline is
     the same circle (centre and radius within 15%) as a candidate fitted directly, the direct one is
     kept if it is round (RMS within ``CRITERIA['max_residual_px']``) and fits at least as well by
@@ -1574,7 +1558,7 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
     a matte sphere's own closed outline beats its inner circles grown to it, while a mirror ball's
     dark cap fitted directly together with its contact shadow below (a wider circle, 1.4 px off,
     RMS 0.76 px) loses to the outer outline of its silhouette (RMS 0.47 px, same coverage)."""
-    grown = [_outer_outline(ft, edges, L, cam, rng) for ft in fits]
+    grown = [_outer_outline(ft, edges, L, cam) for ft in fits]
     outer = [g for g in grown if g.source == OUTER_SOURCE]
     direct = [g for g in grown if g.source != OUTER_SOURCE]
 
@@ -1591,29 +1575,58 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera, rng) -> list:
     return keep_direct + keep_outer
 
 
-def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera, rng):
+#: Least share of its circumference a mirror ball's circle of reflectance steps must cover to replace a
+#: dark cap's outline that no larger outline encloses (:func:`_outer_outline`).
+MIRROR_STEP_COVERAGE = 0.75
+
+
+def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera):
     """A candidate that is a dark cap (:func:`ffls.spheres.mirror_outline.dark_cap`) inside a larger
     outline the edges support (a mirror ball's reflected dark room inside its silhouette, :func:`ffls.spheres.mirror_outline.enclosing_circle`) is refitted on that outline,
     again until no larger one is supported (at most 3 times); its ``outline_sigma_px`` is the
-    disagreement with the limb's reflectance step (:func:`ffls.spheres.mirror_outline.mirror_silhouette`)."""
-    if not dark_cap(L, ft.center_px, ft.radius_px):
+    disagreement with the limb's reflectance step (:func:`ffls.spheres.mirror_outline.mirror_silhouette`).
+    A dark cap that no larger outline encloses (or a candidate only a quarter of whose cap is dark:
+    a chrome ball's cap also holds highlights and the table's reflection) is refitted on the circle of the limb's reflectance
+    steps from 0.75 to 1.25 of its radius, when they cover :data:`MIRROR_STEP_COVERAGE` of it and
+    fit better (:func:`outline_quality`, with the selection's support): under
+    a chrome ball standing on a table the ball's lower half reflects the table and has no edge, and
+    the cap's outline closes on the contact shadow instead (too low and too large)."""
+    cap = dark_cap(L, ft.center_px, ft.radius_px)
+    if not cap and not dark_cap(L, ft.center_px, ft.radius_px, quantile=25.0):
         return ft
-    for _ in range(3):
-        oc = enclosing_circle(edges.points, ft.center_px, ft.radius_px, rng, shape=cam.shape)
+    for _ in range(3 if cap else 0):
+        oc = enclosing_circle(edges.points, ft.center_px, ft.radius_px, shape=cam.shape)
         if oc is None:
             break
         try:
             ft = _fit_outline(edges.points[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
         except ValueError:
             break
-    if ft.source != OUTER_SOURCE:
-        return ft
     log_l = np.log(np.maximum(L, 1e-12))
+    if ft.source != OUTER_SOURCE:  # no larger outline: the dark cap may include the contact shadow below
+        sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, shape=cam.shape, min_shrink=0.75,
+                                min_coverage=MIRROR_STEP_COVERAGE)
+        if sil is None:
+            return ft
+        try:
+            new = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
+        except ValueError:
+            return ft
+        # kept only if it fits better and has the support the selection asks (its points are one per ray)
+        if (outline_quality(new) <= outline_quality(ft)
+                or new.n_inliers < CRITERIA["min_support"] * 2 * np.pi * new.radius_px * new.visible_fraction):
+            return ft
+        gap = 0.5 * float(np.hypot(np.linalg.norm(new.center_px - ft.center_px), new.radius_px - ft.radius_px))
+        r_limb = limb_radius(log_l, new.center_px, new.radius_px)
+        if r_limb is not None and abs(r_limb / new.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
+            new = _with_radius(new, r_limb, cam)
+        new.outline_sigma_px = max(gap, MIRROR_OUTLINE_FLOOR_PX)
+        return new
     r_limb = limb_radius(log_l, ft.center_px, ft.radius_px)
     if r_limb is not None and abs(r_limb / ft.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
         ft = _with_radius(ft, r_limb, cam)
     ft.outline_sigma_px = MIRROR_OUTLINE_FLOOR_PX
-    sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, rng, shape=cam.shape)
+    sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, shape=cam.shape)
     if sil is not None:  # the limb's reflectance step: a second outline estimate
         try:
             limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
@@ -1731,7 +1744,7 @@ def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_
     return new
 
 
-def _with_consistent_edges(fits, tensor, L, cam: _Camera, rng, max_residual_px: float) -> list:
+def _with_consistent_edges(fits, tensor, L, cam: _Camera, max_residual_px: float) -> list:
     """Every fitted candidate refitted on the per-photo edge evidence ``tensor`` (the summed tensor and
     its photo count) where it fits better (:func:`_refine_on_consistent_edges`); unchanged without
     the evidence (None: a single image, or fewer than 3 photos). A mirror ball (an outer outline, or
@@ -1742,10 +1755,10 @@ def _with_consistent_edges(fits, tensor, L, cam: _Camera, rng, max_residual_px: 
         return fits
     cpts = consistent_edge_points(*tensor)
     return [ft if ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
-            else _refine_on_consistent_edges(ft, cpts, cam, rng, max_residual_px) for ft in fits]
+            else _refine_on_consistent_edges(ft, cpts, cam, max_residual_px) for ft in fits]
 
 
-def _refine_on_consistent_edges(ft, cpts, cam: _Camera, rng, max_residual_px: float, band: float = 0.1,
+def _refine_on_consistent_edges(ft, cpts, cam: _Camera, max_residual_px: float, band: float = 0.1,
                                 min_points: int = 8):
     """Refit a found sphere on the per-photo edge evidence (:func:`consistent_edge_points`), if it fits better.
 
@@ -1754,7 +1767,7 @@ def _refine_on_consistent_edges(ft, cpts, cam: _Camera, rng, max_residual_px: fl
     (on ``ffls synth --background white`` at 384 px, 2 of 4 spheres 1.4-1.7 px off). The edges
     that hold in the photos keep the silhouette all round. The ridge points within
     ``band`` radii (+ 2 px) of the current outline whose direction is radial (``|cos| > 0.7``) are
-    searched by RANSAC for a circle (1-pixel tolerance: a contact shadow's boundary runs a few
+    searched for the best-supported circle (:func:`ffls.spheres.mirror_outline.circle_search`, 1-pixel tolerance: a contact shadow's boundary runs a few
     pixels outside the silhouette); the points within 1.5 px of it are fitted
     (:func:`_fit_outline`). The refit replaces the fit when it is round (RMS within
     ``max_residual_px``), moves the centre by less than a quarter of the radius and has the
@@ -1771,7 +1784,7 @@ def _refine_on_consistent_edges(ft, cpts, cam: _Camera, rng, max_residual_px: fl
     if sel.sum() < min_points:
         return ft
     P = pts[sel]
-    circ = _ransac_circle(P, r0, rng, tol=1.0)
+    circ = _start_circle(P, c0, r0, tol=1.0)
     if circ is None:
         return ft
     Q = P[np.abs(np.hypot(P[:, 0] - circ[0][0], P[:, 1] - circ[0][1]) - circ[1]) <= 1.5]

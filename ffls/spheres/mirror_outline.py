@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.optimize import least_squares
 
 #: ``SphereFit.source`` of a sphere fitted to an outer outline found by :func:`enclosing_circle`.
 OUTER_SOURCE = "auto (outer outline)"
@@ -59,18 +60,100 @@ class OuterCircle:
     new_fraction: float
 
 
-def circumcircles(p1, p2, p3):
-    """Centres (m, 2) and radii (m,) of the circles through three points each (nan when collinear)."""
-    a = 2 * (p2 - p1)
-    b = 2 * (p3 - p1)
-    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    ra = np.sum(p2 ** 2 - p1 ** 2, axis=1)
-    rb = np.sum(p3 ** 2 - p1 ** 2, axis=1)
-    ok = np.abs(det) > 1e-9
-    det = np.where(ok, det, 1.0)
-    c = np.stack([(ra * b[:, 1] - rb * a[:, 1]) / det, (a[:, 0] * rb - b[:, 0] * ra) / det], axis=1)
-    r = np.where(ok, np.hypot(*(p1 - c).T), np.nan)
-    return c, r
+def circle_search(points, center, max_offset: float, r_min: float, r_max: float, *, tol: float = 1.0,
+                  n_best: int = 1, per_radius: bool = False) -> list:
+    """The best-supported circles near a centre: a Hough vote on a grid of centres, refined by least squares.
+
+    Deterministic: the answer depends only on the set of points (not their order, nor a random
+    state). Every point votes, for each centre of a square grid (step ``s = max(tol, max_offset /
+    8)``) within ``max_offset`` of ``center``, for its distance; votes are binned at ``w / 2``
+    (``w = max(2 tol, 1.5 s)``, wide enough for the grid's centre error) and summed over
+    windows of ``w``. The ``max(2 n_best, 3)`` highest windows (a window may not lie within ``s``
+    in centre and ``w`` in radius of a higher one) are refined one by one by a robust geometric circle fit
+    (``scipy.optimize.least_squares``, ``soft_l1`` loss of scale ``tol``) to the points within
+    ``w`` of the window's circle, and again to those within ``2 tol`` of that fit; each is then
+    scored by its points within ``tol``. This replaces RANSAC over 3-point samples, whose
+    answer changed with the seed where clutter competes with the outline.
+
+    Parameters
+    ----------
+    points : (n, 2) float
+        Edge points (x, y), pixels.
+    center : (2,) float
+        Where the circle's centre is expected, pixels.
+    max_offset : float
+        Largest distance of the centre from ``center``, pixels.
+    r_min, r_max : float
+        Radius range, pixels.
+    tol : float
+        Inlier distance, pixels.
+    n_best : int
+        Circles returned.
+    per_radius : bool
+        Rank by inliers per pixel of radius (a share of the circumference) rather than by count.
+
+    Returns
+    -------
+    list of (centre (2,), radius, inliers (n,) bool)
+        Best first (by the refined inliers, ties by the smaller centre offset); fewer, or none,
+        when fewer windows hold 3 points, or a refined circle leaves the radius range or moves its
+        centre beyond ``max_offset + tol``.
+    """
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    c0 = np.asarray(center, dtype=np.float64).reshape(2)
+    if len(P) < 3 or not (np.isfinite(r_min) and np.isfinite(r_max) and r_max > r_min >= 0):
+        return []
+    s = max(float(tol), float(max_offset) / 8.0)
+    k = int(np.ceil(max_offset / s))
+    g = np.arange(-k, k + 1) * s
+    off = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    off = off[np.hypot(off[:, 0], off[:, 1]) <= max_offset + 1e-9]
+    cs = c0 + off  # (C, 2)
+    w = max(2.0 * tol, 1.5 * s)
+    lo = r_min - 0.5 * w
+    nb = int(np.ceil((r_max + 0.5 * w - lo) / (0.5 * w))) + 1
+    d = np.hypot(P[None, :, 0] - cs[:, None, 0], P[None, :, 1] - cs[:, None, 1])  # (C, n)
+    b = np.floor((d - lo) / (0.5 * w)).astype(np.int64)
+    ok = (b >= 0) & (b < nb)
+    flat = (np.arange(len(cs))[:, None] * nb + b)[ok]
+    votes = np.bincount(flat, minlength=len(cs) * nb).reshape(len(cs), nb)
+    win = votes[:, :-1] + votes[:, 1:]  # window j covers [lo + j w/2, lo + (j + 2) w/2)
+    radii = lo + (np.arange(nb - 1) + 1.0) * 0.5 * w
+    score = win / np.maximum(radii, 1.0)[None, :] if per_radius else win.astype(np.float64)
+    score = np.where((win >= 3) & (radii >= r_min - 0.5 * w)[None, :] & (radii <= r_max + 0.5 * w)[None, :], score, -1)
+    order = np.lexsort((np.arange(score.size), -score.ravel()))  # highest first, ties by grid index
+    picked = []
+    for idx in order:
+        if score.flat[idx] < 0 or len(picked) >= max(2 * n_best, 3):
+            break
+        ci, ri = divmod(int(idx), nb - 1)
+        if any(np.hypot(*(cs[ci] - cs[cj])) <= s + 1e-9 and abs(radii[ri] - radii[rj]) <= w for cj, rj in picked):
+            continue
+        picked.append((ci, ri))
+
+    def resid(p, Q):
+        return np.hypot(Q[:, 0] - p[0], Q[:, 1] - p[1]) - p[2]
+
+    def jac(p, Q):
+        v = Q - p[:2]
+        dist = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
+        return np.column_stack([-v[:, 0] / dist, -v[:, 1] / dist, -np.ones(len(Q))])
+
+    out = []
+    for ci, ri in picked:
+        p = np.array([cs[ci, 0], cs[ci, 1], radii[ri]])
+        for band, scale in ((w, tol), (2.0 * tol, tol)):
+            Q = P[np.abs(resid(p, P)) <= band]
+            if len(Q) < 3:
+                break
+            p = least_squares(resid, p, jac=jac, args=(Q,), loss="soft_l1", f_scale=scale, method="trf").x
+        else:
+            if r_min <= p[2] <= r_max and np.hypot(*(p[:2] - c0)) <= max_offset + tol:
+                inl = np.abs(resid(p, P)) <= tol
+                out.append((p[:2].copy(), float(p[2]), inl))
+    rank = [(-(inl.sum() / max(r, 1.0) if per_radius else inl.sum()), float(np.hypot(*(c - c0))), i)
+            for i, (c, r, inl) in enumerate(out)]
+    return [out[t[2]] for t in sorted(rank)][:n_best]
 
 
 def _in_frame_bins(center, radius, shape, n_bins):
@@ -112,19 +195,21 @@ def circle_coverage(points, center, radius, tol: float = 1.5, shape=None, n_bins
     return float(np.count_nonzero(hit & vis) / np.count_nonzero(vis))
 
 
-def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float = 1.5,
+def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
                      min_growth: float = 1.12, max_growth: float = 2.0, min_coverage: float = 0.5,
-                     min_new: float = 0.3, max_outside: float = 0.05, n_iter: int = 800) -> OuterCircle | None:
+                     min_new: float = 0.3, max_outside: float = 0.05, n_search: int = 6) -> OuterCircle | None:
     """The outermost well-supported circle that encloses a candidate circle's outline, or None.
 
-    RANSAC over 3-point samples of the edge points within ``max_growth`` radii of the candidate.
-    A sample circle qualifies when its radius is ``min_growth`` to ``max_growth`` times the
-    candidate's, it contains the candidate's centre, at most ``max_outside`` of the candidate's
-    own outline points (within ``tol`` of the candidate circle) lie more than ``tol`` outside it,
-    at least ``min_new`` of its inliers are off the candidate circle, and its inliers cover at
-    least ``min_coverage`` of its in-frame circumference (:func:`circle_coverage`). Of the
-    qualifying circles the best covered wins (ties: the larger). The result is then refined by an
-    algebraic least-squares circle on its inliers (Kasa), re-checked against the same tests.
+    The circles best supported by the edge points within ``max_growth`` radii of the candidate
+    (:func:`circle_search`, ranked by inliers per pixel of radius; centres within ``max_growth -
+    1`` radii of the candidate's, radii ``min_growth`` to ``max_growth`` times its radius) are
+    tested. A circle qualifies when at most ``max_outside`` of the candidate's own outline points
+    (within ``tol`` of the candidate circle) lie more than ``tol`` outside it, at least ``min_new``
+    of its inliers are off the candidate circle, and its inliers cover at least ``min_coverage`` of
+    its in-frame circumference (:func:`circle_coverage`). Of the qualifying circles the best
+    covered wins (ties: the larger). The result is then refined by an algebraic least-squares
+    circle on its inliers (Kasa), re-checked against the same tests. Deterministic: the same
+    points in any order give the same circle.
 
     Parameters
     ----------
@@ -134,23 +219,20 @@ def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float
         The candidate circle's centre, pixels.
     radius : float
         Its radius, pixels.
-    rng : numpy.random.Generator, optional
-        Sampling (default seed 0: deterministic).
     shape : (H, W), optional
         Image size, for the in-frame circumference.
     tol : float
         Inlier distance, pixels.
     min_growth, max_growth, min_coverage, min_new, max_outside : float
         The tests above.
-    n_iter : int
-        RANSAC samples.
+    n_search : int
+        Circles of :func:`circle_search` tested.
 
     Returns
     -------
     OuterCircle or None
         None when no larger circle qualifies (the candidate is its own outline).
     """
-    rng = np.random.default_rng(0) if rng is None else rng
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     c0 = np.asarray(center, dtype=np.float64).reshape(2)
     r0 = float(radius)
@@ -158,22 +240,15 @@ def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float
         return None
     d0 = np.hypot(pts[:, 0] - c0[0], pts[:, 1] - c0[1])
     own = np.abs(d0 - r0) <= tol
-    near = d0 <= max_growth * r0 + 2 * tol
-    P = pts[near]
+    max_offset = (max_growth - 1) * r0 + tol
+    P = pts[d0 <= max_offset + max_growth * r0 + tol]  # every point a qualifying circle can pass through
     own_pts = pts[own]
-    m = len(P)
-    if m < 8 or len(own_pts) < 3:
+    if len(P) < 8 or len(own_pts) < 3:
         return None
-    idx = np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
-    idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
-    c, r = circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
-    ok = np.isfinite(r) & (r >= min_growth * r0) & (r <= max_growth * r0)
-    ok &= np.hypot(c[:, 0] - c0[0], c[:, 1] - c0[1]) < r
-    if not ok.any():
-        return None
-    c, r = c[ok], r[ok]
 
     def qualifies(cc, rr):
+        if not (min_growth * r0 <= rr <= max_growth * r0) or np.hypot(*(cc - c0)) >= rr:
+            return None
         d_own = np.hypot(own_pts[:, 0] - cc[0], own_pts[:, 1] - cc[1])
         if np.mean(d_own > rr + tol) > max_outside:
             return None
@@ -188,13 +263,10 @@ def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float
         return OuterCircle(center=np.asarray(cc, dtype=np.float64), radius=float(rr), inliers=inl, coverage=cov,
                            new_fraction=new)
 
-    # cheap pre-score: inlier counts among the nearby points, then the full tests on the best few
-    dd = np.hypot(P[None, :, 0] - c[:, None, 0], P[None, :, 1] - c[:, None, 1])
-    n_in = np.count_nonzero(np.abs(dd - r[:, None]) <= tol, axis=1)
-    order = np.argsort(-(n_in / r))[:60]
     best = None
-    for k in order:
-        q = qualifies(c[k], r[k])
+    for cc, rr, _ in circle_search(P, c0, max_offset, min_growth * r0, max_growth * r0, tol=tol,
+                                   n_best=n_search, per_radius=True):
+        q = qualifies(cc, rr)
         if q is not None and (best is None or (q.coverage, q.radius) > (best.coverage, best.radius)):
             best = q
     if best is None:
@@ -205,10 +277,9 @@ def enclosing_circle(points, center, radius, rng=None, *, shape=None, tol: float
     sol, *_ = np.linalg.lstsq(A, np.sum(Q ** 2, axis=1), rcond=None)
     cc = sol[:2]
     rr = float(np.sqrt(max(sol[2] + cc @ cc, 0.0)))
-    if min_growth * r0 <= rr <= max_growth * r0:
-        q = qualifies(cc, rr)
-        if q is not None and q.coverage >= best.coverage - 0.05:
-            best = q
+    q = qualifies(cc, rr)
+    if q is not None and q.coverage >= best.coverage - 0.05:
+        best = q
     return best
 
 
@@ -346,63 +417,52 @@ def limb_radius(log_lum, center, radius, *, r_range=(0.97, 1.1), n_angles: int =
     return float(np.median([v[0] for v in best.values()]))
 
 
-def best_circle(points, r_min, r_max, rng=None, *, tol: float = 1.0, n_iter: int = 600):
-    """The circle (centre (2,), radius, inliers (n,) bool) with most points within ``tol``, radius in range.
-
-    RANSAC over 3-point samples; None when fewer than 8 points or no sample qualifies.
-    """
-    rng = np.random.default_rng(0) if rng is None else rng
-    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    m = len(P)
-    if m < 8:
-        return None
-    idx = np.sort(rng.integers(0, m, size=(n_iter, 3)), axis=1)
-    idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 1] != idx[:, 2])]
-    c, r = circumcircles(P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]])
-    ok = np.isfinite(r) & (r >= r_min) & (r <= r_max)
-    if not ok.any():
-        return None
-    c, r = c[ok], r[ok]
-    d = np.hypot(P[None, :, 0] - c[:, None, 0], P[None, :, 1] - c[:, None, 1])
-    n_in = np.count_nonzero(np.abs(d - r[:, None]) <= tol, axis=1)
-    k = int(np.argmax(n_in))
-    inl = np.abs(np.hypot(P[:, 0] - c[k, 0], P[:, 1] - c[k, 1]) - r[k]) <= tol
-    return c[k], float(r[k]), inl
-
-
-def mirror_silhouette(log_lum, center, radius, rng=None, *, shape=None, min_coverage: float = 0.5,
-                      max_growth: float = 1.25, tol: float = 1.0):
+def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: float = 0.5,
+                      max_growth: float = 1.25, tol: float = 1.0, min_shrink: float = 0.97):
     """A mirror ball's silhouette near an outer outline: the circle of weak reflectance steps.
 
     The outline found from the image-wide edges (:func:`enclosing_circle`) follows the reflected
     room's strongest contrasts, which run just inside the limb (at 384 px the ball's radius came out
     1.4 px short, its centre 5 cm deep). The steps of :func:`radial_steps` within ``0.9`` to
-    ``max_growth`` radii are fitted by :func:`best_circle` (radius at least 0.97 of the outline's);
-    the result is kept when its inliers cover at least ``min_coverage`` of its in-frame
-    circumference.
+    ``max_growth`` radii (from ``min_shrink`` radii when that is smaller) are searched for the
+    circle with most of them within ``tol`` (:func:`circle_search`: radius at least ``min_shrink``
+    of the outline's, centre within ``max_growth - 0.9`` radii of its centre); the result is kept
+    when its inliers cover at least ``min_coverage`` of its in-frame circumference.
+
+    ``min_shrink`` below 1 serves an outline that is too large: a mirror ball's dark cap fitted
+    together with the contact shadow under the ball, where the ball's lower half reflects the table
+    it stands on and shows no silhouette in the edges (``bench_lights.py --configs near_mixed`` at
+    384 px: that fit was 1.8 px off and its radius 7 % large; the circle of steps from 0.75 radii
+    is 0.2 px off).
 
     Returns
     -------
     (points (m, 2), centre (2,), radius) or None
         The inlier points (for the sphere fit) and the circle.
     """
-    pts = radial_steps(log_lum, center, radius, r_range=(0.9, max_growth))
-    bc = best_circle(pts, 0.97 * radius, max_growth * radius, rng, tol=tol)
-    if bc is None:
+    lo = min(0.9, min_shrink)
+    pts = radial_steps(log_lum, center, radius, r_range=(lo, max_growth))
+    if len(pts) < 8:
         return None
-    c, r, inl = bc
-    if circle_coverage(pts[inl], c, r, tol, shape) < min_coverage:
+    found = circle_search(pts, center, (max_growth - lo) * radius, min_shrink * radius, max_growth * radius, tol=tol)
+    if not found:
+        return None
+    c, r, inl = found[0]
+    if inl.sum() < 8 or circle_coverage(pts[inl], c, r, tol, shape) < min_coverage:
         return None
     return pts[inl], c, r
 
 
-def dark_cap(lum, center, radius, ratio: float = 0.7) -> bool:
+def dark_cap(lum, center, radius, ratio: float = 0.7, quantile: float = 50.0) -> bool:
     """Whether a circle looks like a mirror ball's dark cap: darker inside than just around it.
 
     A chrome ball under a hand-held light reflects the dark room above the table: in the max image
     the cap (inside 0.7 radii) is darker than the ring just outside (1.15 to 1.4 radii), whose
     median it must stay below ``ratio`` times. A sphere's lit cap or a highlight is brighter than its
     surroundings; only a dark cap is grown to an outer outline (:func:`enclosing_circle`).
+    ``quantile`` (percent) is the share of the cap compared: 50 (its median) by default; 25 asks
+    only a quarter of it to be dark (a chrome ball whose cap also holds the highlights of many
+    lights and the lit table's reflection).
 
     Parameters
     ----------
@@ -411,6 +471,7 @@ def dark_cap(lum, center, radius, ratio: float = 0.7) -> bool:
     center : (2,) float
     radius : float
     ratio : float
+    quantile : float
     """
     H, W = lum.shape
     cx, cy = float(center[0]), float(center[1])
@@ -425,4 +486,42 @@ def dark_cap(lum, center, radius, ratio: float = 0.7) -> bool:
     inside, ring = crop[d <= 0.7], crop[(d >= 1.15) & (d <= 1.4)]
     if inside.size < 5 or ring.size < 5:
         return False
-    return bool(np.median(inside) < ratio * np.median(ring))
+    return bool(np.percentile(inside, quantile) < ratio * np.median(ring))
+
+
+def highlight_ratio(lum, center, radius) -> float | None:
+    """How much brighter a circle's brightest pixel is than its surroundings: a mirror ball's highlights.
+
+    A mirror reflects the lights themselves, whose radiance far exceeds that of any lit diffuse
+    surface around it, so in the max image a chrome or black glossy ball holds pixels many times
+    brighter than the ring just outside it (1049 and 85 times the ring's 95th percentile on
+    ``bench_lights.py --configs near_mixed`` at 384 px; 3.5 in an 8-bit file where the highlight
+    clips). A dark patch of a textured ground whose outline looks like a mirror's dark cap holds
+    none (1.02 on the busy JPEG). Returns the brightest pixel within 0.95 radii over the 95th
+    percentile of the ring from 1.15 to 1.4 radii (``lum``: the max image's luminance), or None
+    when either holds fewer than 5 pixels in the frame, or when the ring itself is clipped (its
+    95th percentile at 0.98 of the image's maximum or above: a saturated file gives no evidence).
+
+    Parameters
+    ----------
+    lum : (H, W) float
+    center : (2,) float
+    radius : float
+    """
+    H, W = lum.shape
+    cx, cy = float(center[0]), float(center[1])
+    R = 1.4 * float(radius)
+    x0, x1 = max(int(np.floor(cx - R)), 0), min(int(np.ceil(cx + R)) + 1, W)
+    y0, y1 = max(int(np.floor(cy - R)), 0), min(int(np.ceil(cy + R)) + 1, H)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d = np.hypot(xx - cx, yy - cy) / float(radius)
+    crop = np.asarray(lum, dtype=np.float64)[y0:y1, x0:x1]
+    disc, ring = crop[d <= 0.95], crop[(d >= 1.15) & (d <= 1.4)]
+    if disc.size < 5 or ring.size < 5:
+        return None
+    ring95 = float(np.percentile(ring, 95))
+    if ring95 >= 0.98 * float(np.max(lum)):
+        return None
+    return float(disc.max() / max(ring95, 1e-12))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap
+from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap, highlight_ratio
 
 __all__ = ["CRITERIA", "COLOUR_STEP", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "photo_neutrality",
            "shading_change", "select_spheres"]
@@ -31,6 +31,7 @@ CRITERIA = {
     "size_ratio_ortho": 1.25,    # apparent radii (orthographic) within this factor
     "max_light_disagreement_deg": 40.0,  # per-photo light directions vs the closest other sphere (3+ spheres)
     "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
+    "min_highlight": 1.5,        # a mirror's brightest pixel over its surroundings' 95th percentile (max image)
 }
 
 
@@ -142,12 +143,18 @@ def shading_change(brightest, L, rows, cols) -> float:
     return float(1.0 - counts.max() / lit.sum())
 
 
-def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3):
+def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3, L=None,
+                               highlight_fraction: float = 0.8):
     """Per photo, the light direction a sphere's brightest pixels suggest, as matte and as mirror.
 
     The pixels (inside 0.95 of the outline) whose brightest photo is ``k`` face light ``k``: for a
-    matte sphere their mean normal points near it (the light's cell among the others'), for a
-    mirror their mean reflected view ray points at it. Camera frame.
+    matte sphere their mean normal points near it (the light's cell among the others'). For a
+    mirror only the highlight among them points at it: a mirror's pixels that reflect the lit
+    table or room are brightest in whichever photo lights that most (under a near light on a
+    table, most of a chrome ball's lower half is brightest in the same photo), so their mean points
+    at the table. With the max image's luminance ``L``, a mirror's direction is the mean reflected
+    view ray of the pixels within ``highlight_fraction`` of the brightest of them (clipped
+    highlight pixels together); without it, of all of them. Camera frame.
 
     Parameters
     ----------
@@ -157,6 +164,9 @@ def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3
     n_photos : int
     min_pixels : int
         Photos with fewer of the sphere's pixels get NaN.
+    L : (H, W) float, optional
+        Luminance of the max image.
+    highlight_fraction : float
 
     Returns
     -------
@@ -179,12 +189,18 @@ def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3
     ok = np.all(np.isfinite(n), axis=1)
     refl = 2.0 * np.sum(n * v, axis=1)[:, None] * n - v
     b = np.where(ok, brightest[rows, cols], -1)
+    lum = None if L is None else np.asarray(L, dtype=np.float64)[rows, cols]
     for k in range(n_photos):
         sel = b == k
-        if sel.sum() >= min_pixels:
-            for out, d in ((matte, n), (mirror, refl)):
-                m = d[sel].mean(axis=0)
-                out[k] = m / max(np.linalg.norm(m), 1e-12)
+        if sel.sum() < min_pixels:
+            continue
+        m = n[sel].mean(axis=0)
+        matte[k] = m / max(np.linalg.norm(m), 1e-12)
+        if lum is not None:  # a mirror: the highlight, the brightest of these pixels (clipped ones together)
+            lk = lum[sel]
+            sel = np.flatnonzero(sel)[lk >= highlight_fraction * lk.max()]
+        m = refl[sel].mean(axis=0)
+        mirror[k] = m / max(np.linalg.norm(m), 1e-12)
     return matte, mirror
 
 
@@ -210,7 +226,11 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     ``min_visible`` of it inside), its centre is poorly constrained (standard error above
     ``max_center_sigma_px``), it is coloured (``min_neutral``), its shading does not change
     across the photos as a sphere's does (``min_shading_change``, with at least 3 photos; not asked
-    of a mirror ball's outer outline, whose reflected table is brightest in the same photo), or its
+    of a mirror ball's outer outline or dark cap, whose reflected table is brightest in the same
+    photo: with at least 3 photos, lit by lights, such an outline must instead hold a highlight, its
+    brightest pixel at least ``min_highlight`` times its surroundings' 95th percentile,
+    :func:`ffls.spheres.mirror_outline.highlight_ratio`; a single probe photo under a smooth sky
+    may show none), or its
     size disagrees with the other spheres' (all spheres share ``sphere_radius``: implied depths
     within ``size_ratio_pinhole``, or apparent radii within ``size_ratio_ortho`` for an
     orthographic camera; the consistent group with the largest total score wins).
@@ -261,6 +281,26 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
                     / (1 + (ft.residual_px / 0.5) ** 2))
         round_.append((ft, neutral, rows, cols))
     round_.sort(key=lambda t: -t[0].score)
+    # Overlapping round outlines keep the best-scored one. A candidate that fails a test of its own
+    # suppresses the outlines it overlaps (a cropped sphere's highlight is no sphere); one set aside
+    # only by the group tests (size, lights) does not: the overlap is judged again without it (a
+    # chrome ball's highlight, a small sharp circle that outscores the ball's faint silhouette, is
+    # set aside by its size, and the silhouette it hid is then judged).
+    rejected, set_aside = [], set()
+    while True:
+        ok, alone = _judged_alone([t for t in round_ if id(t[0]) not in set_aside], brightest, L, n_photos,
+                                  min_visible, colour_counts)
+        group_rej, ok = _judged_together(ok, brightest, L, ortho, n_photos)
+        if not group_rej:
+            break
+        set_aside.update(id(ft) for ft, _ in group_rej)
+        rejected.extend(why for _, why in group_rej)
+    return ok, alone + rejected
+
+
+def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts):
+    """The distinct round outlines (best score first) that pass the tests of a single candidate, and the reasons of the others."""
+    crit = CRITERIA
     distinct = []
     for t in round_:
         ft = t[0]
@@ -279,13 +319,23 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
             judged = "median over its lit pixels in the photos" if colour_counts is not None else "in the max image"
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}, {judged}),"
                             f" not a white, grey or chrome sphere")
-        elif (brightest is not None and n_photos >= 3 and ft.source != OUTER_SOURCE  # a mirror shows its room
-              and not dark_cap(L, ft.center_px, ft.radius_px)
+        elif (mirror := ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)) and n_photos >= 3 and (
+                (hl := highlight_ratio(L, ft.center_px, ft.radius_px)) is not None and hl < crit["min_highlight"]):
+            rejected.append(f"{where}: outlined as a mirror ball's, but it holds no highlight (its brightest pixel is"
+                            f" {hl:.2f} x its surroundings' 95th percentile < {crit['min_highlight']})")
+        elif (brightest is not None and n_photos >= 3 and not mirror  # a mirror shows its room
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
             rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
                             f" (the same photo is brightest on {1 - chg:.0%} of it)")
         else:
             ok.append(ft)
+    return ok, rejected
+
+
+def _judged_together(ok, brightest, L, ortho, n_photos):
+    """The candidates set aside by the group tests (size consistency, agreeing lights) as (fit, reason), and the rest."""
+    crit = CRITERIA
+    rejected = []
     if len(ok) > 1:  # size consistency: all spheres share sphere_radius
         size = np.array([ft.radius_px if ortho else ft.distance for ft in ok])
         tol = np.log(crit["size_ratio_ortho"] if ortho else crit["size_ratio_pinhole"])
@@ -297,11 +347,11 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
             if not k:
                 what = f"radius {s:.1f} px" if ortho else f"depth {s:.3g}"
                 ref_s = f"{ref:.1f} px" if ortho else f"{ref:.3g}"
-                rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
-                                f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})")
+                rejected.append((ft, f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                                f"{ft.radius_px:.0f} px: its size ({what}) disagrees with the other spheres' ({ref_s})"))
         ok = [ft for ft, k in zip(ok, keep) if k]
     if len(ok) >= 3 and brightest is not None and n_photos >= 3:  # all spheres see the same lights
-        dirs = [light_directions_per_photo(ft, brightest, n_photos) for ft in ok]
+        dirs = [light_directions_per_photo(ft, brightest, n_photos, L=L) for ft in ok]
         closest = []
         for i in range(len(ok)):
             closest.append(min(_disagreement_deg(a, b) for j in range(len(ok)) if j != i
@@ -311,8 +361,8 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         if sum(agree) >= 2:
             for ft, a, c in zip(ok, agree, closest):
                 if not a:
-                    rejected.append(f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
+                    rejected.append((ft, f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius "
                                     f"{ft.radius_px:.0f} px: the lights its shading shows disagree with every other "
-                                    f"sphere's (median {c:.0f} deg > {lim:.0f} to the closest, as matte or mirror)")
+                                    f"sphere's (median {c:.0f} deg > {lim:.0f} to the closest, as matte or mirror)"))
             ok = [ft for ft, a in zip(ok, agree) if a]
-    return ok, rejected
+    return rejected, ok
