@@ -23,24 +23,17 @@ from ffls.weights.weighting import (ALL_SCHEMES, OPTIONS, SCHEMES, SMOOTH_SCHEME
                                     cell_weights, integrate, light_weights)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-
-def _lights(n, seed=0, hemisphere="upper"):
-    rng = np.random.default_rng(seed)
-    d = rng.normal(size=(n, 3))
-    if hemisphere == "upper":
-        d[:, 2] = np.abs(d[:, 2])
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
+from directions import random_directions  # noqa: E402  (tests/directions.py, beside this file)
 
 
 def _queries(m, seed=1, hemisphere="upper"):
-    return _lights(m, seed, hemisphere)
+    return random_directions(m, seed, hemisphere)
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)
 @pytest.mark.parametrize("n", [1, 2, 3, 40])
 def test_weights_sum_to_one_and_are_non_negative(scheme, n):
-    d = _lights(n)
+    d = random_directions(n)
     sw = cell_weights(d, _queries(3000), scheme)
     assert sw.index.shape == sw.weight.shape
     assert np.all(sw.weight >= 0)
@@ -52,7 +45,7 @@ def test_weights_sum_to_one_and_are_non_negative(scheme, n):
 @pytest.mark.parametrize("scheme", SCHEMES)
 @pytest.mark.parametrize("hemisphere", ["upper", "full"])
 def test_power_is_conserved_exactly(scheme, hemisphere):
-    d = _lights(30, 2, hemisphere)
+    d = random_directions(30, 2, hemisphere)
     lm = paper_map(48)
     R = rotation_ypr(20, 35, -10)
     w = integrate(lm, d, R, hemisphere, scheme)
@@ -66,7 +59,7 @@ def test_power_is_conserved_exactly(scheme, hemisphere):
 
 
 def test_duplicates_get_no_weight_and_nearly_equal_lights_share():
-    d = _lights(12, 3)
+    d = random_directions(12, 3)
     dup = np.concatenate([d, d[:2]])
     for scheme in SCHEMES:
         sw = cell_weights(dup, _queries(2000), scheme)
@@ -80,7 +73,7 @@ def test_duplicates_get_no_weight_and_nearly_equal_lights_share():
 
 
 def test_barycentric_reproduces_each_light_and_covers_the_rim():
-    d = _lights(25, 4)
+    d = random_directions(25, 4)
     d[0] = [1.0, 0.0, 0.0]  # on the horizon
     sw = cell_weights(d, d, "barycentric").dense(25)
     np.testing.assert_allclose(sw, np.eye(25), atol=1e-9)
@@ -88,7 +81,7 @@ def test_barycentric_reproduces_each_light_and_covers_the_rim():
     sw = cell_weights(d, rim, "barycentric")
     np.testing.assert_allclose(sw.weight.sum(1), 1.0, atol=1e-12)
     # all lights inside a 10-degree cap of a full-sphere capture: virtual vertices cover the rest
-    cap = _lights(6, 5)
+    cap = random_directions(6, 5)
     cap[:, :2] *= 0.05
     cap /= np.linalg.norm(cap, axis=1, keepdims=True)
     b = Weighting(cap, "barycentric", "full")
@@ -99,7 +92,7 @@ def test_barycentric_reproduces_each_light_and_covers_the_rim():
 
 @pytest.mark.parametrize("scheme", SMOOTH_SCHEMES)
 def test_smooth_schemes_change_smoothly_with_tiny_rotations(scheme):
-    d = _lights(60, 7)
+    d = random_directions(60, 7)
     q = _queries(4000, 8)
     wt = Weighting(d, scheme)
     base = wt(q).dense(60)
@@ -113,7 +106,7 @@ def test_smooth_schemes_change_smoothly_with_tiny_rotations(scheme):
 
 
 def test_gaussian_is_continuous_when_the_neighbour_set_changes():
-    d = _lights(50, 9)
+    d = random_directions(50, 9)
     wt = Weighting(d, "gaussian", k=3)
     # walk a great circle in small steps: consecutive weights differ by O(step)
     t = np.radians(np.linspace(0, 80, 20001))
@@ -124,7 +117,7 @@ def test_gaussian_is_continuous_when_the_neighbour_set_changes():
 
 
 def test_light_weights_single_light():
-    d = _lights(20, 10)
+    d = random_directions(20, 10)
     for scheme in SCHEMES:
         w = light_weights(d, d[3], scheme)
         assert w.shape == (20,)
@@ -138,7 +131,7 @@ def test_light_weights_single_light():
 
 
 def test_bad_scheme_and_options():
-    d = _lights(5)
+    d = random_directions(5)
     with pytest.raises(ValueError, match="one of"):
         Weighting(d, "box")
     with pytest.raises(ValueError, match="takes no option"):
@@ -178,17 +171,20 @@ def test_flicker_smooth_schemes_at_least_5x_below_voronoi():
 
 # ----------------------------------------------------------------------------- GPU
 @pytest.mark.gl
-@pytest.mark.parametrize("scheme", ["antialiased", "barycentric", "gaussian"])
+@pytest.mark.parametrize("scheme", ["antialiased", "barycentric", "gaussian", "spline"])
 @pytest.mark.parametrize("hemisphere", ["upper", "full", {"axis": [0.0, 0.6, 0.8]}], ids=["upper", "full", "axis"])
 @pytest.mark.parametrize("method", ["sort", "blend"])
 def test_gpu_pass1_matches_the_texture_reference(ctx, scheme, hemisphere, method):
+    """Pass 1 of every smooth scheme against its NumPy reference (spline's signed weights included)."""
     from ffls.gpu.integrate import CellIntegrator
 
-    d = _lights(40, 11, "full" if hemisphere == "full" else "upper")
+    d = random_directions(40, 11, "full" if hemisphere == "full" else "upper")
     if isinstance(hemisphere, dict):
         d = d[d @ np.array(hemisphere["axis"]) >= 0]
     lm = sky_sun_map(48)
     tex = bake_weights(d, scheme, hemisphere, res=64)
+    if scheme == "spline":
+        assert np.any(tex.weight < 0)  # the signed weights go through the same pass
     gi = CellIntegrator(ctx, d, hemisphere, tex, method=method)
     try:
         gi.set_lightmap(lm)
@@ -214,7 +210,7 @@ def test_engine_switches_weighting_live(ctx):
     from ffls.relight.cpu import relight_reference
 
     rng = np.random.default_rng(12)
-    d = _lights(24, 12)
+    d = random_directions(24, 12)
     basis = rng.uniform(0, 1, size=(24, 8, 8, 3)).astype(np.float32)
     lm = sky_sun_map(32)
     eng = Engine(ctx, basis, d, "upper", dtype="f32", weighting="gaussian", weights_res=64)
@@ -261,7 +257,7 @@ def test_render_light_command(tmp_path, capsys):
 def test_hierarchical_cell_bake_equals_the_direct_one(hemisphere):
     from ffls.weights.voronoi import assign_cells, bake_cells
 
-    d = _lights(300, 13, hemisphere)
+    d = random_directions(300, 13, hemisphere)
     d = np.concatenate([d, d[:3]])  # duplicates
     fast = bake_cells(d, hemisphere, res=512)
     slow = bake_cells(d, hemisphere, res=512, method="direct")
@@ -278,7 +274,7 @@ def test_hierarchical_cell_bake_equals_the_direct_one(hemisphere):
 def test_texture_quantisation_shrinks_with_resolution(scheme):
     # the GPU's nearest-texel lookup against the exact weights, per light, as a share of the power:
     # a 1-degree sun is the worst case (its weight is that of one texel); <= 3 % at 512^2
-    d = _lights(60, 15)
+    d = random_directions(60, 15)
     lm = sky_sun_map(64)
     R = rotation_ypr(20, 10, 0)
     exact = integrate(lm, d, R, "upper", scheme).weights

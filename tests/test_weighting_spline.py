@@ -23,33 +23,26 @@ from ffls.weights.weighting import (EXTRA_SCHEMES, SCHEMES, Weighting, bake_weig
                                     light_weights, texture_slots)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-
-def _lights(n, seed=0, hemisphere="upper"):
-    rng = np.random.default_rng(seed)
-    d = rng.normal(size=(n, 3))
-    if hemisphere == "upper":
-        d[:, 2] = np.abs(d[:, 2])
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
+from directions import random_directions  # noqa: E402  (tests/directions.py, beside this file)
 
 
 def test_spline_is_library_only():
     assert "spline" in EXTRA_SCHEMES and "spline" not in SCHEMES
     assert texture_slots("spline") == 24
     with pytest.raises(ValueError, match="blend"):
-        Weighting(_lights(10), "spline", blend=1.5)
+        Weighting(random_directions(10), "spline", blend=1.5)
     with pytest.raises(ValueError, match="max_lebesgue"):
-        Weighting(_lights(10), "spline", max_lebesgue=0.5)
+        Weighting(random_directions(10), "spline", max_lebesgue=0.5)
     with pytest.raises(ValueError, match="k must be"):
-        Weighting(_lights(10), "spline", k=3)
+        Weighting(random_directions(10), "spline", k=3)
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 5, 40, 120])
 def test_sums_to_one_interpolates_and_is_bounded(n):
-    d = _lights(n, 1)
+    d = random_directions(n, 1)
     for bound in (8.0, 2.0):  # the default, and a tight one
         wt = Weighting(d, "spline", max_lebesgue=bound)
-        sw = wt(_lights(4000, 2))
+        sw = wt(random_directions(4000, 2))
         np.testing.assert_allclose(sw.weight.sum(axis=1), 1.0, rtol=0, atol=1e-12)
         assert np.all((sw.index >= 0) | (sw.weight == 0)) and sw.index.max() < n
         # the bound is enforced on samples of each star; between samples it may exceed it slightly
@@ -61,8 +54,8 @@ def test_sums_to_one_interpolates_and_is_bounded(n):
 
 
 def test_blend_zero_and_unit_bound_are_barycentric():
-    d = _lights(30, 3)
-    q = _lights(3000, 4)
+    d = random_directions(30, 3)
+    q = random_directions(3000, 4)
     bary = cell_weights(d, q, "barycentric").dense(30)
     for opts in ({"blend": 0.0}, {"max_lebesgue": 1.0}):
         np.testing.assert_allclose(cell_weights(d, q, "spline", **opts).dense(30), bary, atol=1e-12, err_msg=str(opts))
@@ -71,7 +64,7 @@ def test_blend_zero_and_unit_bound_are_barycentric():
 
 @pytest.mark.parametrize("hemisphere", ["upper", "full"])
 def test_power_is_conserved_exactly(hemisphere):
-    d = _lights(30, 5, hemisphere)
+    d = random_directions(30, 5, hemisphere)
     lm = paper_map(48)
     R = rotation_ypr(20, 35, -10)
     w = integrate(lm, d, R, hemisphere, "spline")
@@ -83,8 +76,8 @@ def test_power_is_conserved_exactly(hemisphere):
 
 
 def test_changes_smoothly_with_tiny_rotations():
-    d = _lights(60, 7)
-    q = _lights(4000, 8)
+    d = random_directions(60, 7)
+    q = random_directions(4000, 8)
     wt = Weighting(d, "spline")
     base = wt(q).dense(60)
     for eps_deg in (1e-3, 1e-5):
@@ -93,9 +86,9 @@ def test_changes_smoothly_with_tiny_rotations():
 
 
 def test_degenerate_captures():
-    q = _lights(2000, 9)
+    q = random_directions(2000, 9)
     # duplicates get nothing; a nearly equal pair shares one light's weight
-    d = _lights(12, 3)
+    d = random_directions(12, 3)
     sw = cell_weights(np.concatenate([d, d[:2]]), q, "spline")
     assert not np.isin(sw.index[sw.weight != 0], [12, 13]).any()
     near = np.concatenate([d, d[:1] + 1e-9])
@@ -103,7 +96,7 @@ def test_degenerate_captures():
     one = integrate(paper_map(32), d, None, "upper", "spline").weights
     np.testing.assert_allclose(w[0] + w[12], one[0], rtol=1e-5)
     # lights on the horizon, and barely above it (a light next to its own mirror image)
-    h = _lights(25, 4)
+    h = random_directions(25, 4)
     h[0] = [1.0, 0.0, 0.0]
     h[1] = [0.0, np.sqrt(1 - 1e-8), 1e-4]
     wt = Weighting(h, "spline")
@@ -113,10 +106,10 @@ def test_degenerate_captures():
     assert np.abs(sw.dense(25)).sum(1).max() <= 8.8
     np.testing.assert_allclose(wt(h).dense(25), np.eye(25), atol=1e-9)
     # all lights in a 10-degree cap of a full-sphere capture
-    cap = _lights(6, 5)
+    cap = random_directions(6, 5)
     cap[:, :2] *= 0.05
     cap /= np.linalg.norm(cap, axis=1, keepdims=True)
-    sw = cell_weights(cap, _lights(2000, 6, "full"), "spline", hemisphere="full")
+    sw = cell_weights(cap, random_directions(2000, 6, "full"), "spline", hemisphere="full")
     np.testing.assert_allclose(sw.weight.sum(1), 1.0, atol=1e-12)
     assert np.abs(sw.dense(6)).sum(1).max() <= 8.8
     w = light_weights(cap, cap[2], "spline", "full")
@@ -124,8 +117,8 @@ def test_degenerate_captures():
 
 
 def test_interpolates_a_smooth_function_better_than_barycentric():
-    d = _lights(150, 10)
-    q = _lights(5000, 11)
+    d = random_directions(150, 10)
+    q = random_directions(5000, 11)
     q = q[q[:, 2] > 0.2]  # away from the rim, where both extrapolate by mirroring
 
     def f(x):
@@ -146,27 +139,3 @@ def test_flicker_at_least_5x_below_voronoi():
     lm = sky_sun_map(96, sun_direction=(np.cos(el), 0.0, np.sin(el)))
     res = scheme_flicker(basis, d, lm, schemes=("voronoi", "spline"), frames=40, step_deg=1.0)
     assert res["voronoi"] >= 5.0 * res["spline"], res
-
-
-@pytest.mark.gl
-@pytest.mark.parametrize("hemisphere", ["upper", "full"])
-@pytest.mark.parametrize("method", ["sort", "blend"])
-def test_gpu_pass1_matches_the_texture_reference(ctx, hemisphere, method):
-    from ffls.gpu.integrate import CellIntegrator
-
-    d = _lights(40, 11, hemisphere)
-    lm = sky_sun_map(48)
-    tex = bake_weights(d, "spline", hemisphere, res=64)
-    assert np.any(tex.weight < 0)
-    gi = CellIntegrator(ctx, d, hemisphere, tex, method=method)
-    try:
-        gi.set_lightmap(lm)
-        for R in (np.eye(3), rotation_ypr(33, 21, 7)):
-            gi.run(R)
-            ref = integrate(lm, d, R, hemisphere, "spline", texture=tex)
-            g = gi.read_weights().astype(np.float64)
-            assert np.all(np.abs(g - ref.weights) <= 1e-5 * ref.total_power[None, :]), np.abs(g - ref.weights).max()
-            assert gi.dropped_texels == ref.dropped_texels
-            np.testing.assert_allclose(g.sum(0) + gi.dropped_power, ref.total_power, rtol=1e-5)
-    finally:
-        gi.release()

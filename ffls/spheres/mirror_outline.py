@@ -453,6 +453,21 @@ def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: floa
     return pts[inl], c, r
 
 
+def _disc_crop(lum, center, radius, outer: float = 1.4):
+    """``(crop, d)``: ``lum`` within ``outer`` radii of the circle (clipped to the frame) and each
+    pixel's distance from the centre in radii; ``(None, None)`` when nothing of it is in the frame."""
+    H, W = lum.shape
+    cx, cy = float(center[0]), float(center[1])
+    R = outer * float(radius)
+    x0, x1 = max(int(np.floor(cx - R)), 0), min(int(np.ceil(cx + R)) + 1, W)
+    y0, y1 = max(int(np.floor(cy - R)), 0), min(int(np.ceil(cy + R)) + 1, H)
+    if x1 <= x0 or y1 <= y0:
+        return None, None
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d = np.hypot(xx - cx, yy - cy) / float(radius)
+    return np.asarray(lum, dtype=np.float64)[y0:y1, x0:x1], d
+
+
 def dark_cap(lum, center, radius, ratio: float = 0.7, quantile: float = 50.0) -> bool:
     """Whether a circle looks like a mirror ball's dark cap: darker inside than just around it.
 
@@ -473,16 +488,9 @@ def dark_cap(lum, center, radius, ratio: float = 0.7, quantile: float = 50.0) ->
     ratio : float
     quantile : float
     """
-    H, W = lum.shape
-    cx, cy = float(center[0]), float(center[1])
-    R = 1.4 * float(radius)
-    x0, x1 = max(int(np.floor(cx - R)), 0), min(int(np.ceil(cx + R)) + 1, W)
-    y0, y1 = max(int(np.floor(cy - R)), 0), min(int(np.ceil(cy + R)) + 1, H)
-    if x1 <= x0 or y1 <= y0:
+    crop, d = _disc_crop(lum, center, radius)
+    if crop is None:
         return False
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    d = np.hypot(xx - cx, yy - cy) / float(radius)
-    crop = np.asarray(lum, dtype=np.float64)[y0:y1, x0:x1]
     inside, ring = crop[d <= 0.7], crop[(d >= 1.15) & (d <= 1.4)]
     if inside.size < 5 or ring.size < 5:
         return False
@@ -508,16 +516,9 @@ def highlight_ratio(lum, center, radius) -> float | None:
     center : (2,) float
     radius : float
     """
-    H, W = lum.shape
-    cx, cy = float(center[0]), float(center[1])
-    R = 1.4 * float(radius)
-    x0, x1 = max(int(np.floor(cx - R)), 0), min(int(np.ceil(cx + R)) + 1, W)
-    y0, y1 = max(int(np.floor(cy - R)), 0), min(int(np.ceil(cy + R)) + 1, H)
-    if x1 <= x0 or y1 <= y0:
+    crop, d = _disc_crop(lum, center, radius)
+    if crop is None:
         return None
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    d = np.hypot(xx - cx, yy - cy) / float(radius)
-    crop = np.asarray(lum, dtype=np.float64)[y0:y1, x0:x1]
     disc, ring = crop[d <= 0.95], crop[(d >= 1.15) & (d <= 1.4)]
     if disc.size < 5 or ring.size < 5:
         return None
