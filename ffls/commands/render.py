@@ -14,10 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
-                                  add_mask_argument, check_gpu_pass1, quality_from_args, add_quality_arguments, add_rotation_arguments,
-                                  add_scale_arguments, add_weighting_argument, check_mask_size, exposure_arg,
-                                  flush_notes, light_vector, load_relight_inputs, open_streamed_from_args,
-                                  output_path, resolve_quality, rotation_from_args, write_output)
+                                  add_mask_argument, add_quality_arguments, add_rotation_arguments,
+                                  add_scale_arguments, add_weighting_argument, check_gpu_pass1, check_mask_size,
+                                  exposure_arg, flush_notes, light_vector, load_relight_inputs,
+                                  open_streamed_from_args, output_path, quality_from_args, resolve_quality,
+                                  rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
