@@ -214,7 +214,8 @@ def plot(rows, map_names, path, device):
             q = r["quality"]
             colour = "C0" if q["rank"] is None else "C1"
             marker = "s" if q["basis_subset"] else ("^" if q["precision"] == "f32" else "o")
-            colour = {"voronoi": colour, "antialiased": "C2", "barycentric": "C3", "gaussian": "C4"}[q["weighting"]]
+            colour = {"voronoi": colour, "antialiased": "C2", "barycentric": "C3", "gaussian": "C4",
+                      "spline": "C5"}[q["weighting"]]
             ax.scatter(r["ms"], r[key], c=colour, marker=marker, s=36 if i in front else 14,
                        edgecolors="k" if i in front else "none", zorder=3)
         fr = sorted((pts[i] for i in front), key=lambda p: p[0])
@@ -226,7 +227,7 @@ def plot(rows, map_names, path, device):
         ax.grid(True, which="both", lw=0.3)
     axes[0].set_ylabel("relative RMS error")
     fig.suptitle(f"error against time per frame ({device}); voronoi blue (full) / orange (compressed), "
-                 f"antialiased green, barycentric red, gaussian purple; square: subset, triangle: float32; "
+                 f"antialiased green, barycentric red, gaussian purple, spline brown; square: subset, triangle: float32; "
                  f"ringed: Pareto front", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)

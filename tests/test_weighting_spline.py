@@ -1,4 +1,4 @@
-"""The library-only ``spline`` weighting (ffls.weights.spline): local thin-plate splines blended by
+"""The ``spline`` weighting (ffls.weights.spline): local thin-plate splines blended by
 the barycentric coordinates.
 
 Contracts tested: weights sum to 1 per direction (power conserved to 1e-10 relative, exact and
@@ -26,8 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from directions import random_directions  # noqa: E402  (tests/directions.py, beside this file)
 
 
-def test_spline_is_library_only():
-    assert "spline" in EXTRA_SCHEMES and "spline" not in SCHEMES
+def test_spline_is_offered_and_checks_its_options():
+    assert "spline" in SCHEMES and "spline" not in EXTRA_SCHEMES
     assert texture_slots("spline") == 24
     with pytest.raises(ValueError, match="blend"):
         Weighting(random_directions(10), "spline", blend=1.5)

@@ -116,8 +116,9 @@ def build_state(args):
 
 def choose_auto_quality(app, args, capture, lights) -> None:
     """``--quality auto``: measure this capture and map in the window's context, and set the panel."""
-    from ffls.commands.common import resolve_quality
+    from ffls.commands.common import check_gpu_pass1, resolve_quality
     from ffls.conventions import rotation_ypr
+    from ffls.errors import InputError
     from ffls.gpu.engine import gpu_frame_ms
     from ffls.lightmaps.lightmap import lightmap_from_spec
     from viewer.renderer import pass1_lightmap
@@ -128,6 +129,10 @@ def choose_auto_quality(app, args, capture, lights) -> None:
 
     def timer(q, basis, directions):
         app.make_current()
+        try:
+            check_gpu_pass1(app.ctx, lm, q)
+        except InputError:  # a candidate whose pass 1 cannot run here (spline over a large map): never chosen
+            return float("inf")
         return gpu_frame_ms(app.ctx, basis, directions, pass1_lightmap(lm, q.map_res), q.replace(map_res=None),
                             capture.hemisphere)
 

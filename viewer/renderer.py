@@ -295,6 +295,7 @@ class Renderer:
             self._load_lightmap(state.lightmap)
         R = rotation_ypr(state.yaw, state.pitch, state.roll)
         eng = self.engine
+        self._check_pass1_fits(state, eng)
         pass1_key = (self._lightmap_spec, state.quality.get("map_res", "full"))
         scheme = state.quality.get("weighting", "voronoi")
         eng.set_weighting(scheme)  # a no-op unless it changed (pass 1 reruns then)
@@ -333,6 +334,41 @@ class Renderer:
         self._update_photo(state)
         self.frame_ms = {"renderer": (time.perf_counter() - t0) * 1e3}
         return self.info
+
+    def _check_pass1_fits(self, state: ViewerState, eng) -> None:
+        """Refuse a weighting / pass-1 map pair the GPU's pass 1 cannot take (one line in the status bar).
+
+        A scheme with many weight-texture slots (``spline``: 24) over a large map passes the GPU's
+        storage-buffer limit (:func:`ffls.relight.quality.pass1_buffer_bytes`). A new weighting
+        knob value is then set back to the engine's scheme; a new pass-1 map height to the tallest
+        offered one that fits. Either way the status line says why and which height fits.
+        """
+        from ffls.relight.quality import pass1_buffer_bytes, pass1_fit_height
+
+        if self._lightmap is None:
+            return
+        scheme = state.quality.get("weighting", "voronoi")
+        height = state.quality.get("map_res", "full")
+        key = (self._lightmap_spec, height, scheme)
+        if key == getattr(self, "_fit_key", None):
+            return
+        limit = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
+        m = len(pass1_lightmap(self._lightmap, height).samples()[0])
+        if pass1_buffer_bytes(m, scheme) <= limit:
+            self._fit_key = key
+            return
+        h = pass1_fit_height(limit, scheme)
+        fits = [c for c in ("256", "128", "64", "32") if int(c) <= h]
+        why = (f"weighting {scheme}: the GPU's pass 1 cannot take a {m}-texel map "
+               f"({pass1_buffer_bytes(m, scheme) / 2 ** 20:.0f} MiB in one buffer, over {limit / 2 ** 20:.0f} MiB); ")
+        before = getattr(eng, "weighting", "voronoi")
+        if fits and scheme == before:  # the map height (or the map) changed under this scheme
+            state.quality["map_res"] = fits[0]
+            self.info.message = why + f"pass-1 map set to {fits[0]}"
+        else:  # the knob changed: back to the scheme in use (voronoi if that was this one)
+            state.quality["weighting"] = before if before != scheme else "voronoi"
+            self.info.message = why + (f"choose pass-1 map {fits[0]} or lower" if fits else "no map height fits")
+        self._fit_key = None
 
     def single_light_weights(self, state: ViewerState) -> np.ndarray:
         """Per-light RGB weights ``(n, 3)`` of the light mode's light under the ``weighting`` knob

@@ -66,6 +66,7 @@ __all__ = [
     "quality_from_args",
     "check_quality_args",
     "resolve_quality",
+    "check_gpu_pass1",
     "MEMORY",
     "add_scale_arguments",
     "runner_from_args",
@@ -344,15 +345,16 @@ def add_lights_arguments(p) -> None:
 
 #: Weighting schemes of pass 1 (``--weighting``; ffls.weights.weighting.SCHEMES, spelled here so
 #: that parsing imports no SciPy; a test keeps the two equal).
-WEIGHTINGS = ("voronoi", "antialiased", "barycentric", "gaussian")
+WEIGHTINGS = ("voronoi", "antialiased", "barycentric", "gaussian", "spline")
 
 
 def add_weighting_argument(p) -> None:
-    """``--weighting voronoi|antialiased|barycentric|gaussian`` (relight, render, view)."""
+    """``--weighting voronoi|antialiased|barycentric|gaussian|spline`` (relight, render, view, composite)."""
     p.add_argument("--weighting", default="voronoi", choices=WEIGHTINGS,
                    help="how a light-map direction is shared among the lights: voronoi (the paper's box filter, "
                         "default), antialiased (soft cell borders), barycentric (spherical triangles), gaussian "
-                        "(von Mises-Fisher kernel over the nearest lights); docs/weighting.md")
+                        "(von Mises-Fisher kernel over the nearest lights), spline (local thin-plate splines: the most "
+                        "accurate, signed weights, pass 1 4-10x barycentric's cost); docs/weighting.md")
 
 
 def light_direction(text: str) -> tuple[float, float]:
@@ -755,6 +757,39 @@ def resolve_quality(args, capture, lights, lightmap, rotation=None, timer=None, 
     for line in choice.reason.splitlines():
         print(f"ffls {command}: {line.strip()}" if command else line, file=sys.stderr)
     return choice.quality
+
+
+def check_gpu_pass1(ctx, lightmap, quality) -> None:
+    """Refuse, in one line naming ``--weighting`` and ``--map-res``, a light map the GPU's pass 1 cannot take.
+
+    Pass 1 keeps one 16-byte item per map texel and weight-texture slot in one storage buffer
+    (:func:`ffls.relight.quality.pass1_buffer_bytes`); past the device's block size
+    (``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``, 128 MiB on llvmpipe) it cannot run. ``spline`` has 24
+    slots: a 1024 x 512 map needs 192 MiB. The line says which ``--map-res`` fits.
+
+    Raises
+    ------
+    ffls.errors.InputError
+    """
+    from ffls.errors import InputError
+    from ffls.relight.quality import integration_map, pass1_buffer_bytes, pass1_fit_height
+    from ffls.weights.weighting import texture_slots
+
+    if lightmap is None:
+        return
+    limit = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
+    lm = integration_map(lightmap, quality.map_res)
+    dirs = lm.samples()[0] if hasattr(lm, "samples") else lm[0]
+    m = int(len(dirs))
+    need = pass1_buffer_bytes(m, quality.weighting)
+    if need <= limit:
+        return
+    slots = 1 if quality.weighting == "voronoi" else texture_slots(quality.weighting)
+    h = pass1_fit_height(limit, quality.weighting)
+    fix = f"give --map-res {h} or lower" if h else "no map height fits"
+    raise InputError(f"--weighting {quality.weighting}: the GPU's pass 1 cannot take this light map ({m} texels x "
+                     f"{slots} slot{'s' if slots > 1 else ''} need {need / 2 ** 20:.0f} MiB in one storage buffer, "
+                     f"over this GPU's {limit / 2 ** 20:.0f} MiB); {fix}, another --weighting, or --cpu")
 
 
 def check_mask_size(mask, shape, flag: str = "--mask") -> None:

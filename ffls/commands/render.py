@@ -15,9 +15,10 @@ import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
                                   add_mask_argument, add_quality_arguments, add_rotation_arguments,
-                                  add_scale_arguments, add_weighting_argument, check_mask_size, exposure_arg,
-                                  flush_notes, light_vector, load_relight_inputs, open_streamed_from_args,
-                                  output_path, resolve_quality, rotation_from_args, write_output)
+                                  add_scale_arguments, add_weighting_argument, check_gpu_pass1, check_mask_size,
+                                  exposure_arg, flush_notes, light_vector, load_relight_inputs,
+                                  open_streamed_from_args, output_path, quality_from_args, resolve_quality,
+                                  rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -74,13 +75,13 @@ def _make_renderer(args, capture, lights, lightmap=None, R0=None):
     if streamed is not None:
         if args.cpu:
             return streamed, None
-        return _tiled_gpu(args, streamed)
+        return _tiled_gpu(args, streamed, lightmap)
     if args.cpu:
         from ffls.relight.cpu import CpuRelighter
 
         q = resolve_quality(args, capture, lights, lightmap, R0, command=NAME)
         return CpuRelighter.from_capture(capture, lights, quality=q, precision="f64"), None
-    from ffls.errors import GLUnavailable
+    from ffls.errors import GLUnavailable, InputError
     from ffls.gpu.context import create_headless_context
     from ffls.gpu.engine import Engine, gpu_frame_ms
 
@@ -90,9 +91,14 @@ def _make_renderer(args, capture, lights, lightmap=None, R0=None):
         raise GLUnavailable(f"no GPU path ({e.message}); rerun with --cpu for the CPU reference path") from None
     try:
         def timer(q, basis, directions):
+            try:
+                check_gpu_pass1(ctx, lightmap, q)
+            except InputError:  # a candidate whose pass 1 cannot run here: never chosen
+                return float("inf")
             return gpu_frame_ms(ctx, basis, directions, lightmap, q, capture.hemisphere)
 
         q = resolve_quality(args, capture, lights, lightmap, R0, timer=timer, command=NAME)
+        check_gpu_pass1(ctx, lightmap, q)
         eng = Engine.from_capture(ctx, capture, lights, quality=q)
     except BaseException:
         ctx.release()
@@ -100,7 +106,7 @@ def _make_renderer(args, capture, lights, lightmap=None, R0=None):
     return eng, ctx
 
 
-def _tiled_gpu(args, streamed):
+def _tiled_gpu(args, streamed, lightmap=None):
     """The GPU engine tile by tile over the store (:class:`ffls.gpu.tiled.TiledEngine`)."""
     from ffls.errors import GLUnavailable
     from ffls.gpu.context import create_headless_context
@@ -113,6 +119,7 @@ def _tiled_gpu(args, streamed):
     try:
         from ffls.relight.storage import parse_storage
 
+        check_gpu_pass1(ctx, lightmap, quality_from_args(args))
         return TiledEngine(ctx, streamed, dtype=parse_storage(args.precision or "float16"),
                            cell_res=args.cells_res or 256), ctx
     except BaseException:

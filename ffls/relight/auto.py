@@ -22,7 +22,9 @@ for *this* capture and *this* light map from measurements made here, on the capt
 
 With ground truth (a benchmark), the caller passes the true errors instead.
 
-Candidates (:func:`candidate_qualities`): every weighting scheme; ranks whose K + 1 layers fill
+Candidates (:func:`candidate_qualities`): every weighting scheme of :data:`AUTO_WEIGHTINGS` (and
+the base quality's, ``--weighting``, when it is not one of them: ``spline`` is considered only
+when asked for, see :data:`AUTO_WEIGHTINGS`); ranks whose K + 1 layers fill
 whole blocks of 8 float16 layers (7, 15, 23, 31, 63: pass 2 reads blocks of 8, so K = 16 costs as
 much as K = 23); the full basis in float16 and float32; farthest-point subsets of 1/2 and 1/4 of
 the photos; pass-1 map heights full and 64.
@@ -43,10 +45,16 @@ from ffls.weights.weighting import SCHEMES, integrate as integrate_scheme, light
 
 __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor", "relight_quality",
            "estimate_errors", "cpu_frame_ms", "shrink", "truncate", "relight_weights", "choose", "choose_quality", "BLOCK_RANKS", "point_light_weights",
-           "no_costlier", "timed_candidates"]
+           "no_costlier", "timed_candidates", "AUTO_WEIGHTINGS"]
 
 #: Ranks K whose K + 1 layers fill whole blocks of 8 float16 layers (the packed pass 2's unit).
 BLOCK_RANKS = (7, 15, 23, 31, 63)
+#: Weighting schemes every automatic choice considers: all but ``spline``, which is added only when
+#: the base quality names it (``--weighting spline --quality auto``). Its leave-one-out floor, its
+#: exact-weight reference and its timing double the measurement (64 lights, 64 px, studio map:
+#: 2.5 s -> 5.4 s, the choice unchanged; docs/tradeoff.md), its pass 1 costs 4-10x barycentric's,
+#: and on llvmpipe its full-size map is refused (its candidates then time as ``inf``).
+AUTO_WEIGHTINGS = tuple(s for s in SCHEMES if s != "spline")
 #: Map heights tried for pass 1 (None = the map as given).
 MAP_HEIGHTS = (None, 64)
 
@@ -82,13 +90,16 @@ def candidate_qualities(n_lights: int, base: Quality | None = None, subsets: boo
                         map_heights=MAP_HEIGHTS, weightings=None) -> list[Quality]:
     """The configurations the automatic choice considers for ``n_lights`` photos.
 
-    Every weighting scheme (``weightings``, default :data:`ffls.weights.weighting.SCHEMES`) with
+    Every weighting scheme (``weightings``, default :data:`AUTO_WEIGHTINGS` plus ``base``'s scheme) with
     the full basis (float16 and float32) and the block ranks, at each map height; subsets with
     ``base``'s scheme. ``base`` gives the knobs not varied here (texture resolution, near
     correction).
     """
     base = Quality() if base is None else base
-    schemes = SCHEMES if weightings is None else tuple(weightings)
+    if weightings is None:
+        schemes = AUTO_WEIGHTINGS + (() if base.weighting in AUTO_WEIGHTINGS else (base.weighting,))
+    else:
+        schemes = tuple(weightings)
     hi = rank_range(n_lights)[1]
     out = []
     for mr in map_heights:

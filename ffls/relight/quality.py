@@ -37,7 +37,8 @@ from ffls.relight.storage import parse_storage
 from ffls.weights.weighting import SCHEMES
 
 __all__ = ["Quality", "near_light_scales", "near_light_directions", "apply_near_correction",
-           "farthest_point_subset", "integration_map", "prepare_basis", "WEIGHTINGS", "MAP_RES_CHOICES"]
+           "farthest_point_subset", "integration_map", "prepare_basis", "WEIGHTINGS", "MAP_RES_CHOICES",
+           "pass1_buffer_bytes", "pass1_fit_height"]
 
 #: Weighting schemes of pass 1 (:data:`ffls.weights.weighting.SCHEMES`).
 WEIGHTINGS = SCHEMES
@@ -51,7 +52,7 @@ class Quality:
 
     Attributes
     ----------
-    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
         Weighting scheme of pass 1 (:mod:`ffls.weights.weighting`; ``'voronoi'``: the paper's box
         filter per cell).
     precision : {'f16', 'f32'}
@@ -282,6 +283,32 @@ def integration_map(lightmap, height: int | None):
     want, got = lightmap.total_power(), small.total_power()
     scale = np.divide(want, got, out=np.ones(3), where=got > 0)
     return replace(small, data=(small.data * scale.astype(np.float32)).astype(np.float32))
+
+
+def pass1_buffer_bytes(n_texels: int, weighting: str, **options) -> int:
+    """Largest single GPU storage buffer (bytes) pass 1 needs for a map of ``n_texels`` texels.
+
+    :class:`ffls.gpu.integrate.CellIntegrator` (technique ``sort``) holds the texel directions
+    (float64 x 3: 24 bytes a texel) and, for a scheme with a weight texture, one 16-byte item per
+    texel and slot (:func:`ffls.weights.weighting.texture_slots`; ``voronoi``'s cell path: one item
+    per texel). Each must fit one storage block (``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``; 128 MiB on
+    llvmpipe), so a many-slot scheme (``spline``: 24) limits the map pass 1 can take.
+    """
+    from ffls.weights.weighting import texture_slots
+
+    slots = 1 if weighting == "voronoi" else texture_slots(weighting, **options)
+    return int(n_texels) * max(24, 16 * slots)
+
+
+def pass1_fit_height(max_bytes: int, weighting: str, **options) -> int:
+    """Tallest power-of-two lat-long height ``H`` (``H x 2H`` texels) whose pass 1 fits ``max_bytes``
+    per buffer (:func:`pass1_buffer_bytes`); 0 if not even ``H = 2`` fits."""
+    h = 2
+    if pass1_buffer_bytes(2 * h * h, weighting, **options) > max_bytes:
+        return 0
+    while pass1_buffer_bytes(2 * (2 * h) ** 2, weighting, **options) <= max_bytes:
+        h *= 2
+    return h
 
 
 # ----------------------------------------------------------------------------- all together

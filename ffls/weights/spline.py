@@ -44,8 +44,9 @@ spline is blended toward its delta until ``(1 - b) + b L_v <= max_lebesgue``; th
 stay within that bound (on the samples; between them, measured within 10 % in the tests).
 
 Measured (docs/weighting.md): 0.90 of barycentric's relit error on four real HDR maps, 0.83 on
-the synthetic ones, flicker 24x below voronoi's; issue 12's goal (0.8) is not reached, so the
-scheme is library-only (:data:`ffls.weights.weighting.EXTRA_SCHEMES`).
+the synthetic ones, flicker 24x below voronoi's; issue 12's goal (0.8) is not reached. It is
+offered by ``--weighting spline`` (:data:`ffls.weights.weighting.SCHEMES`), not the default: its
+pass 1 costs 4-10x barycentric's and the user makes that trade.
 """
 from __future__ import annotations
 

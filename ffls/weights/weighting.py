@@ -1,6 +1,6 @@
 """Weighting schemes: how a light-map direction is shared among the captured lights.
 
-One entry point, :func:`cell_weights` (``scheme=``), over four schemes, each with its own module:
+One entry point, :func:`cell_weights` (``scheme=``), over five schemes, each with its own module:
 
 ``'voronoi'``
     The paper's box filter (Masselus, Dutre, Anrys 2002, section 6; :mod:`ffls.weights.voronoi`):
@@ -13,9 +13,6 @@ One entry point, :func:`cell_weights` (``scheme=``), over four schemes, each wit
 ``'gaussian'``
     A von Mises-Fisher kernel over the ``k`` nearest lights, its width from the local light
     spacing (:mod:`ffls.weights.gaussian`).
-
-and one library-only scheme (:data:`EXTRA_SCHEMES`, not offered by ``--weighting``: it measured
-short of the issue's goal, docs/weighting.md):
 
 ``'spline'``
     Local thin-plate splines on the sphere blended by the barycentric coordinates (a partition
@@ -57,9 +54,9 @@ __all__ = ["SCHEMES", "EXTRA_SCHEMES", "ALL_SCHEMES", "DEFAULT_SCHEME", "SMOOTH_
            "texture_slots"]
 
 #: The weighting schemes (``--weighting``).
-SCHEMES = ("voronoi", "antialiased", "barycentric", "gaussian")
-#: Library-only schemes: measured, not offered by ``--weighting`` (docs/weighting.md).
-EXTRA_SCHEMES = ("spline",)
+SCHEMES = ("voronoi", "antialiased", "barycentric", "gaussian", "spline")
+#: Library-only schemes, not offered by ``--weighting`` (none: ``spline`` joined :data:`SCHEMES`).
+EXTRA_SCHEMES = ()
 #: Every scheme :class:`Weighting` accepts.
 ALL_SCHEMES = SCHEMES + EXTRA_SCHEMES
 #: The default (the paper's box filter) until the measurements say otherwise (docs/weighting.md).
