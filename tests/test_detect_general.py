@@ -253,3 +253,20 @@ def test_pinhole_capture_without_sphere_radius_is_one_line(tmp_path):
     with pytest.raises(InputError, match="no sphere_radius") as e:
         find_spheres_in_capture(cap)
     assert "capture.json" in str(e.value)
+
+
+def test_same_spheres_for_one_and_two_workers():
+    """The candidate outlines fitted in 2 forked processes (``workers=2``) give the very same spheres
+    as in this process, with and without hints: same circles to the bit, same set-aside list."""
+    scene = ds.layout(3, seed=24)
+    seq = ds.render(scene, LIGHTS, "texture", seed=3)
+    one = detect.find_spheres(seq, scene.K, None, 0.04)
+    two = detect.find_spheres(seq, scene.K, None, 0.04, workers=2)
+    assert len(one) == 3 and list(one.rejected) == list(two.rejected)
+    for a, b in zip(one, two, strict=True):
+        assert np.array_equal(a.center_px, b.center_px) and a.radius_px == b.radius_px
+        assert np.array_equal(a.center_cam, b.center_cam) and a.source == b.source
+    hints = [{"center_px": list(map(float, f.center_px))} for f in one]
+    h1 = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints)
+    h2 = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints, workers=2)
+    assert [tuple(f.center_px) for f in h1] == [tuple(f.center_px) for f in h2]

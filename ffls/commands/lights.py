@@ -159,7 +159,8 @@ def run(args) -> int:
         from ffls.spheres.detect import find_spheres_in_capture
 
         spheres = (find_spheres_in_capture(cap) if decoded is None else
-                   find_spheres_in_capture(cap, stats=decoded.stats, bit_depths=decoded.bit_depths))
+                   find_spheres_in_capture(cap, stats=decoded.stats, bit_depths=decoded.bit_depths,
+                                           workers=args.workers or os.cpu_count() or 1))
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
     if cluster:

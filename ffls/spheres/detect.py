@@ -1013,18 +1013,48 @@ def _hough_candidates(g8, min_r, max_r, scale):
     ``scale`` (levels per log unit, from :func:`_log8`) sets Hough's internal Canny threshold to
     a radiance ratio of about e^2 for ``HOUGH_GRADIENT_ALT`` (Scharr) and e for ``HOUGH_GRADIENT``.
     """
+    return _hough_candidates_many([(g8, min_r, max_r, scale)])[0]
+
+
+def _hough_calls(g8, min_r, max_r, scale) -> list:
+    """The three ``cv2.HoughCircles`` calls of :func:`_hough_candidates` on ``g8`` (zero-argument
+    callables, each returning its circles (m, 3), the plain gradient's first 30)."""
     blur = cv2.GaussianBlur(g8, (0, 0), 1.5)
-    found = []
-    for p2 in (0.8, 0.7):
-        c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=max(2 * min_r, 4),
-                             param1=1.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
-        if c is not None:
-            found.extend(c.reshape(-1, 3).tolist())
-    c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=scale,
-                         param2=20, minRadius=int(min_r), maxRadius=int(max_r))
-    if c is not None:
-        found.extend(c.reshape(-1, 3)[:30].tolist())
-    return np.array(found, dtype=np.float64).reshape(-1, 3)
+
+    def alt(p2):
+        return lambda: cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=max(2 * min_r, 4),
+                                        param1=1.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
+
+    def plain():
+        c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=scale,
+                             param2=20, minRadius=int(min_r), maxRadius=int(max_r))
+        return None if c is None else c.reshape(-1, 3)[:30]
+
+    return [alt(0.8), alt(0.7), plain]
+
+
+def _hough_candidates_many(images: list) -> list:
+    """:func:`_hough_candidates` of each ``(g8, min_r, max_r, scale)`` of ``images``, its Hough
+    transforms run concurrently in threads (OpenCV releases the GIL; each transform is
+    independent and deterministic, so the circles are those of the calls made one by one)."""
+    calls = [_hough_calls(*im) for im in images]
+    flat = [c for cs in calls for c in cs]
+    if len(flat) > 1 and (os.cpu_count() or 1) > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=min(len(flat), os.cpu_count() or 1)) as ex:
+            done = list(ex.map(lambda fn: fn(), flat))
+    else:
+        done = [fn() for fn in flat]
+    out, k = [], 0
+    for cs in calls:
+        found = []
+        for c in done[k:k + len(cs)]:
+            if c is not None:
+                found.extend(np.asarray(c).reshape(-1, 3).tolist())
+        k += len(cs)
+        out.append(np.array(found, dtype=np.float64).reshape(-1, 3))
+    return out
 
 
 # ----------------------------------------------------------------------------- camera of one search
@@ -1187,7 +1217,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
                  n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
                  saturates: bool = False, colour_counts=None, edge_tensor=None,
-                 edge_photos: int | None = None) -> Spheres:
+                 edge_photos: int | None = None, workers: int = 1) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -1262,6 +1292,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     min_visible : float
         A sphere cut by the frame edge is used when at least this fraction of its outline is
         inside the image; otherwise it is set aside (``Spheres.rejected``), or an error when hinted.
+    workers : int
+        Processes (forked) that fit the candidate outlines, which are independent: the same
+        spheres for any number (1: in this process).
 
     Returns
     -------
@@ -1329,7 +1362,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
         cands = _hinted_candidates(hint_info, edges, L.shape, source)
         _check_duplicate_circles(cands, "hint", source)
-        fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint")
+        fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", workers)
         fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
@@ -1337,7 +1370,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         hint_info = []
         cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
                                          else None)
-        fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto")
+        fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
@@ -1468,13 +1501,13 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     H, W = L.shape
     if len(edges.points) < 10:
         return []
-    hc = _hough_candidates(edges.log8, 3, min(H, W) / 2, edges.scale)
+    images = [(edges.log8, 3, min(H, W) / 2, edges.scale)]
     if ratio is not None:
         peak = float(np.percentile(ratio, 99.5))
         if peak > 0:
             sc = 255.0 / peak
-            hc = np.concatenate([hc, _hough_candidates(np.clip(ratio * sc, 0, 255).astype(np.uint8), 3,
-                                                       min(H, W) / 2, 0.5 * sc)])
+            images.append((np.clip(ratio * sc, 0, 255).astype(np.uint8), 3, min(H, W) / 2, 0.5 * sc))
+    hc = np.concatenate(_hough_candidates_many(images))  # both images' transforms at once
     # the outermost well-covered circle around each Hough centre too: a mirror ball's highlights and
     # reflections make inner circles that Hough may prefer to its faint outline
     outer = []
@@ -1496,48 +1529,92 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     return cands[:max_candidates]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label):
+def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, workers: int = 1):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
     majority polarity; a deterministic circle start (:func:`ffls.spheres.mirror_outline.circle_search`); :func:`fit_sphere_center` (pinhole) or
     :func:`fit_circle` (orthographic). Returns the fits and the failures ``(k, x, y, r, why)``.
+    The candidates are independent: with ``workers > 1`` they are fitted in that many forked
+    processes (the same fits, in the same order).
     """
-    pts, grads = edges.points, edges.grads
-    fits, failures = [], []
+    pts = edges.points
     if cam.ortho:
-        und_all = pts
+        und_all, K_und = pts, None
     else:
         f = cam.f
         K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])  # undistorted, square pixels
         und_all = project_points(pixel_rays(pts, cam.K, cam.dist), K_und, None) if len(pts) else pts
-    for k, (cx, cy, r) in enumerate(cands):
-        if len(pts) == 0:
-            failures.append((k, cx, cy, r, "no edges in the image"))
-            continue
-        d = np.hypot(pts[:, 0] - cx, pts[:, 1] - cy)
-        near = (d > (1 - search_tol) * r - 2) & (d < (1 + search_tol) * r + 2)
-        radial = np.stack([pts[:, 0] - cx, pts[:, 1] - cy], axis=1) / np.maximum(d, 1e-9)[:, None]
-        cosr = np.sum(radial * grads, axis=1)
-        sel = near & (np.abs(cosr) > 0.7)
-        if sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
-            inward = sel & (cosr < 0)
-            sel = inward if inward.sum() >= 0.5 * sel.sum() else sel & (cosr > 0)
-        P = pts[sel]
-        if len(P) < 8:
-            failures.append((k, cx, cy, r, f"only {len(P)} edge points"))
-            continue
-        c_und = np.array([cx, cy]) if cam.ortho else project_points(pixel_rays(np.array([[cx, cy]]), cam.K, cam.dist),
-                                                                      K_und, None)[0]
-        circ = _start_circle(und_all[sel], c_und, r)
-        if circ is None:
-            failures.append((k, cx, cy, r, "no circle through the edge points"))
-            continue
-        try:
-            fits.append(_fit_outline(P, cam, circ[0], circ[1], label))
-        except ValueError as e:
-            failures.append((k, cx, cy, r, str(e)))
+    context = _CandidateContext(list(cands), edges, cam, search_tol, label, und_all, K_und)
+    workers = max(1, min(int(workers), len(context.cands)))
+    global _candidate_context
+    _candidate_context = context  # inherited by the forked workers (nothing pickled)
+    try:
+        if workers > 1 and len(pts) and "fork" in _mp_methods():
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as ex:
+                done = list(ex.map(_fit_candidate, range(len(context.cands))))
+        else:
+            done = [_fit_candidate(k) for k in range(len(context.cands))]
+    finally:
+        _candidate_context = None
+    fits = [d for d in done if not isinstance(d, tuple)]
+    failures = [d for d in done if isinstance(d, tuple)]
     return fits, failures
+
+
+def _mp_methods() -> list:
+    import multiprocessing
+
+    return multiprocessing.get_all_start_methods()
+
+
+@dataclasses.dataclass
+class _CandidateContext:
+    """What every candidate fit of :func:`_fit_candidates` shares."""
+
+    cands: list
+    edges: _EdgeMap
+    cam: _Camera
+    search_tol: float
+    label: str
+    und_all: np.ndarray  # the edge points undistorted (square pixels), for the circle start
+    K_und: np.ndarray | None
+
+
+_candidate_context: _CandidateContext | None = None
+
+
+def _fit_candidate(k: int):
+    """Candidate ``k`` of the current :class:`_CandidateContext`: its SphereFit, or the failure
+    ``(k, x, y, r, why)``."""
+    ctx = _candidate_context
+    cam, pts, grads, search_tol = ctx.cam, ctx.edges.points, ctx.edges.grads, ctx.search_tol
+    cx, cy, r = ctx.cands[k]
+    if len(pts) == 0:
+        return (k, cx, cy, r, "no edges in the image")
+    d = np.hypot(pts[:, 0] - cx, pts[:, 1] - cy)
+    near = (d > (1 - search_tol) * r - 2) & (d < (1 + search_tol) * r + 2)
+    radial = np.stack([pts[:, 0] - cx, pts[:, 1] - cy], axis=1) / np.maximum(d, 1e-9)[:, None]
+    cosr = np.sum(radial * grads, axis=1)
+    sel = near & (np.abs(cosr) > 0.7)
+    if sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
+        inward = sel & (cosr < 0)
+        sel = inward if inward.sum() >= 0.5 * sel.sum() else sel & (cosr > 0)
+    P = pts[sel]
+    if len(P) < 8:
+        return (k, cx, cy, r, f"only {len(P)} edge points")
+    c_und = np.array([cx, cy]) if cam.ortho else project_points(pixel_rays(np.array([[cx, cy]]), cam.K, cam.dist),
+                                                                  ctx.K_und, None)[0]
+    circ = _start_circle(ctx.und_all[sel], c_und, r)
+    if circ is None:
+        return (k, cx, cy, r, "no circle through the edge points")
+    try:
+        return _fit_outline(P, cam, circ[0], circ[1], ctx.label)
+    except ValueError as e:
+        return (k, cx, cy, r, str(e))
 
 
 def outline_quality(ft) -> float:
@@ -1804,7 +1881,7 @@ def _refine_on_consistent_edges(ft, cpts, cam: _Camera, max_residual_px: float, 
 
 
 def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None,
-                            stats: SequenceStats | None = None, bit_depths=None) -> Spheres:
+                            stats: SequenceStats | None = None, bit_depths=None, workers: int = 1) -> Spheres:
     """:func:`find_spheres` on a loaded :class:`ffls.io.capture.Capture`, using its whole sequence.
 
     Uses ``capture.K``, ``.dist``, ``.camera_model``, ``.sphere_radius``, ``.spheres`` (hints),
@@ -1813,7 +1890,8 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
     memory at a time). ``progress`` is an optional wrapper such as ``tqdm.tqdm`` (called as
     ``progress(iterable, total=n)``). ``stats``, when given, is that reduction already made, with
     ``bit_depths`` the photos' stored bit depths (e.g. :func:`ffls.spheres.estimate.decode_photos`,
-    which decodes the photos once for detection and estimation): no photo is read.
+    which decodes the photos once for detection and estimation): no photo is read. ``workers``
+    processes fit the candidate outlines (:func:`find_spheres`; the same spheres for any number).
     """
     n = len(capture.image_paths)
     depths = set()
@@ -1849,4 +1927,4 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img,
                         mean_luminance=mean if n_img > 1 else None,
                         saturates=any(isinstance(d, int) for d in depths), colour_counts=st.colour_counts,
-                        edge_tensor=st.edge_tensor, edge_photos=st.edge_photos)
+                        edge_tensor=st.edge_tensor, edge_photos=st.edge_photos, workers=workers)

@@ -734,23 +734,69 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
     return est, (values if read else None)
 
 
+#: The decoded photos the worker processes of a :class:`_PhotoFitter` inherited when forked.
+_inherited_decoded: DecodedPhotos | None = None
+
+
+def _set_inherited(decoded: DecodedPhotos | None) -> None:
+    global _inherited_decoded
+    _inherited_decoded = decoded
+
+
+def _run_photo_chunk(job: tuple) -> list:
+    """A worker's share of a pass: ``(context, tasks)``, the context without its decoded photos
+    (inherited by the worker: :func:`_set_inherited`); :func:`_run_photo_task` of each task."""
+    context, tasks = job
+    if context.decoded is None:
+        context.decoded = _inherited_decoded
+    _set_context(context)
+    return [_run_photo_task(t) for t in tasks]
+
+
 class _PhotoFitter:
-    """Runs a pass's photo fits in this process (``workers == 1``) or in a pool of processes."""
+    """Runs a pass's photo fits in this process (``workers == 1``) or in a pool of processes.
+
+    One pool for every pass and the centre refinement: forked once, at the first parallel call,
+    inheriting the decoded photos (shared memory); each pass sends its context (the spheres'
+    samples and the fit options) with each chunk of photos. :meth:`close` ends it.
+    """
 
     def __init__(self, capture, scene_center, options: dict, workers: int = 1, progress_bar=None,
                  decoded: DecodedPhotos | None = None):
         self.capture, self.scene_center, self.options, self.decoded = capture, scene_center, options, decoded
         self.workers, self.progress_bar = max(1, int(workers)), progress_bar
+        self._pool = None
+
+    def _executor(self):
+        if self._pool is None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            methods = multiprocessing.get_all_start_methods()  # fork: the decoded photos are inherited
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_set_inherited,
+                                             initargs=(self.decoded,),
+                                             mp_context=multiprocessing.get_context("fork" if "fork" in methods
+                                                                                    else None))
+        return self._pool
+
+    def close(self) -> None:
+        """End the pool of processes (if any)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
 
     def map(self, fn, items) -> list:
         """``[fn(x) for x in items]``, in the pool of processes when there are several workers and items."""
         items = list(items)
         if self.workers == 1 or len(items) < 2:
             return [fn(x) for x in items]
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=min(self.workers, len(items))) as ex:
-            return list(ex.map(fn, items))
+        return list(self._executor().map(fn, items))
 
     def advance(self, n: int) -> None:
         if self.progress_bar is not None:
@@ -768,14 +814,13 @@ class _PhotoFitter:
                 if counted:
                     self.advance(1)
             return out
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), initializer=_set_context,
-                                 initargs=(context,)) as ex:
-            for r in ex.map(_run_photo_task, tasks, chunksize=max(1, len(tasks) // (8 * self.workers))):
-                out.append(r)
-                if counted:
-                    self.advance(1)
+        sent = replace(context, decoded=None)  # (the workers have the decoded photos)
+        size = max(1, len(tasks) // (8 * self.workers))
+        chunks = [tasks[a:a + size] for a in range(0, len(tasks), size)]
+        for part in self._executor().map(_run_photo_chunk, [(sent, c) for c in chunks]):
+            out.extend(part)
+            if counted:
+                self.advance(len(part))
         return out
 
 
@@ -995,7 +1040,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             decoded = decode_photos(capture, workers)
             if decoded.stored:  # integer photos and no encoding stated: its one-line refusal, before any work
                 read_photo(capture, 0)
-        spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths)
+        spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths,
+                                          workers=workers)
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
     if capture.image_size is not None:
@@ -1015,9 +1061,11 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
         bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        fitter = _PhotoFitter(capture, capture.scene_center, dict(model=model, **kwargs), workers, bar, decoded)
-        est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
-                        refine_options=refine_options, materials=materials, views=views, where=capture.json_path)
+        options = dict(model=model, **kwargs)
+        with _PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
+            est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
+                            refine_options=refine_options, materials=materials, views=views,
+                            where=capture.json_path)
     finally:
         if bar is not None:
             bar.close()
