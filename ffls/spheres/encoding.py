@@ -416,6 +416,37 @@ def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
     return float(g[k] + (0.5 * (a - c) / den * step if den > 0 else 0.0))
 
 
+def _sphere_heterogeneity_sd(grid: np.ndarray, per_sphere: np.ndarray, sd_pooled: float) -> float:
+    """Standard deviation of the pooled gamma under a random effect per sphere (DerSimonian & Laird 1986).
+
+    Each sphere's gamma ``g_k`` is the minimum of its ``RSS`` curve (``per_sphere``, (K, len(grid))),
+    its variance ``v_k`` the pooled variance ``sd_pooled ** 2`` scaled by the share of the profile's
+    curvature the sphere holds (its information). Cochran's ``Q = sum (g_k - g_bar)^2 / v_k`` beyond
+    its ``K - 1`` degrees of freedom gives the between-sphere variance ``tau^2``: a misfit of the
+    model that differs between spheres (interreflection from a neighbour, a near light seen from
+    each sphere's place), which the bootstrap over photos cannot see when every photo shares it.
+    The pooled gamma's variance is then ``1 / sum 1 / (v_k + tau^2)``. With one sphere, or a
+    curvature that cannot be read, it returns 0 (no evidence of heterogeneity).
+    """
+    K = len(per_sphere)
+    if K < 2 or not np.isfinite(sd_pooled) or sd_pooled <= 0:
+        return 0.0
+    step = float(grid[1] - grid[0])
+    g, curv = np.empty(K), np.empty(K)
+    for k, c in enumerate(per_sphere):
+        g[k] = _parabola_min(grid, c)
+        j = int(np.clip(np.argmin(c), 1, len(grid) - 2))
+        curv[k] = (c[j - 1] - 2 * c[j] + c[j + 1]) / (step * step)
+    if not np.all(curv > 0):
+        return 0.0
+    v = sd_pooled ** 2 * curv.sum() / curv
+    w = 1.0 / v
+    g_bar = float(w @ g / w.sum())
+    q = float(w @ (g - g_bar) ** 2)
+    tau2 = max(0.0, (q - (K - 1)) / (w.sum() - (w @ w) / w.sum()))
+    return float(math.sqrt(1.0 / np.sum(1.0 / (v + tau2))))
+
+
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
@@ -534,9 +565,17 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     draws = rng.integers(0, len(photos), size=(int(n_bootstrap), len(photos)))
     boot = np.array([_parabola_min(profiled, per_photo[d].sum(axis=0)) for d in draws])
     sd_boot = float(np.std(boot, ddof=1)) if len(boot) > 1 else float("inf")
-    sd = max(sd_curv, sd_boot)
+    # the spheres' own gammas: a misfit the model lacks that differs between spheres (interreflection,
+    # a near light across the scene) makes them disagree beyond the photos' noise (random effects)
+    sphere_index = sorted({u.sphere for u in used})
+    per_sphere = np.zeros((len(sphere_index), len(profiled)))
+    for u, c in zip(used, curves):
+        per_sphere[sphere_index.index(u.sphere)] += c
+    sd_spheres = _sphere_heterogeneity_sd(profiled, per_sphere, sd_boot)
+    sd_model = max(sd_boot, sd_spheres)
+    sd = max(sd_curv, sd_model)
     unc = 1.96 * sd
-    inflation = max(1.0, (sd_boot / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
+    inflation = max(1.0, (sd_model / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
     # model selection (BIC): a named curve has no free parameter, the best gamma one
     noise = s2 * inflation
     excess = (sum(u.rss("srgb") for u in used) - rss_best) / noise
