@@ -27,15 +27,25 @@ second candidate, scored the same way.
   noise (quantisation, sensor) lives, and so is comparable between curves. The sum over units is
   the profile objective ``RSS(gamma)``; :func:`scipy.optimize.minimize_scalar` finds its minimum,
   and a second round re-selects the pixels with that curve.
-* The uncertainty is the larger of two: the curvature of the profile likelihood
-  (``sd = sqrt(2 s^2 / RSS'')``) and a bootstrap over photos (each photo's ``RSS`` curve is
-  resampled, which keeps whatever misfit a photo shares across its pixels). It is reported as a
-  95% half-width (1.96 sd), the GUIDE's convention for uncertainties.
+* The uncertainty is the largest of three: the curvature of the profile likelihood
+  (``sd = sqrt(2 s^2 / RSS'')``), a bootstrap over photos (each photo's ``RSS`` curve is
+  resampled, which keeps whatever misfit a photo shares across its pixels), and the spheres'
+  disagreement. The model's misfit (interreflection, the bounce's shape, a near light seen from
+  each sphere's place) is shared by every photo of a sphere, so the bootstrap over photos cannot
+  see it, but it differs between spheres: each sphere's gamma (the minimum of its own ``RSS``
+  curve) is one draw of it. A random effect per sphere (DerSimonian & Laird 1986) estimates the
+  between-sphere variance ``tau^2`` from Cochran's ``Q`` (each sphere's variance: the bootstrap's,
+  scaled by its share of the profile's curvature), and the pooled gamma's sd is that of the
+  prediction for a new sphere (Higgins, Thompson & Spiegelhalter 2009),
+  ``sqrt(tau^2 + 1 / sum 1 / (v_k + tau^2))``: the spheres share the ground and the lights, so
+  their misfit need not average out. It is reported as a 95% half-width (1.96 sd), the GUIDE's
+  convention for uncertainties.
 * Naming is a model selection by the Bayesian information criterion (Schwarz 1978): a named curve
   (``linear``, gamma 1, or ``srgb``) has no free parameter, the best gamma has one. Each named
   curve's *excess* is its ``RSS`` above the best gamma's, in units of the noise variance inflated
-  by the bootstrap/curvature variance ratio (the residuals are correlated; the same inflation
-  gives the effective number of pixels ``n_eff = n / inflation``). The best gamma is worth its
+  by the ratio of the larger of the bootstrap's and the spheres' variance to the curvature's (the
+  residuals are correlated, and the misfit counts as noise; the same inflation gives the
+  effective number of pixels ``n_eff = n / inflation``). The best gamma is worth its
   parameter only when it lowers the misfit by more than the BIC's ``ln(n_eff)``: the curve with
   the smallest of (linear excess, sRGB excess, ``ln(n_eff)``) is named. An interval test (does
   the 95% interval hold 1?) would call a linear file ``gamma 1.004`` as soon as the pixels are
@@ -103,9 +113,12 @@ class EncodingCalibration:
     gamma : float
         The best gamma.
     uncertainty : float
-        95% half-width of ``gamma`` (1.96 times the larger of the curvature and bootstrap sd).
+        95% half-width of ``gamma`` (1.96 times the largest of the three sd below).
     sd_curvature, sd_bootstrap : float
-        The two standard deviations of ``gamma``.
+        Two standard deviations of ``gamma``: the profile's curvature, the bootstrap over photos.
+    sd_spheres : float
+        The third: the spheres' disagreement beyond the photos' noise (a random effect per sphere;
+        module docstring, on the uncertainty); 0 with one sphere or when they agree.
     srgb_excess, linear_excess : float
         The sRGB and the linear curve's excess misfit over the best gamma, in units of the
         (inflated) noise variance (module docstring, "Naming").
@@ -132,6 +145,7 @@ class EncodingCalibration:
     n_photos: int
     n_units: int
     n_pixels: int
+    sd_spheres: float = 0.0
 
     @property
     def encoding(self):
@@ -425,8 +439,10 @@ def _sphere_heterogeneity_sd(grid: np.ndarray, per_sphere: np.ndarray, sd_pooled
     its ``K - 1`` degrees of freedom gives the between-sphere variance ``tau^2``: a misfit of the
     model that differs between spheres (interreflection from a neighbour, a near light seen from
     each sphere's place), which the bootstrap over photos cannot see when every photo shares it.
-    The pooled gamma's variance is then ``1 / sum 1 / (v_k + tau^2)``. With one sphere, or a
-    curvature that cannot be read, it returns 0 (no evidence of heterogeneity).
+    The pooled gamma's variance is that of the prediction for a new sphere (Higgins, Thompson &
+    Spiegelhalter 2009), ``tau^2 + 1 / sum 1 / (v_k + tau^2)``: the spheres share the ground and
+    the lights, so their misfit need not average out. With one sphere, or a curvature that cannot
+    be read, it returns 0 (no evidence of heterogeneity).
     """
     K = len(per_sphere)
     if K < 2 or not np.isfinite(sd_pooled) or sd_pooled <= 0:
@@ -444,7 +460,7 @@ def _sphere_heterogeneity_sd(grid: np.ndarray, per_sphere: np.ndarray, sd_pooled
     g_bar = float(w @ g / w.sum())
     q = float(w @ (g - g_bar) ** 2)
     tau2 = max(0.0, (q - (K - 1)) / (w.sum() - (w @ w) / w.sum()))
-    return float(math.sqrt(1.0 / np.sum(1.0 / (v + tau2))))
+    return float(math.sqrt(tau2 + 1.0 / np.sum(1.0 / (v + tau2))))
 
 
 # ----------------------------------------------------------------------------- methods
@@ -595,7 +611,8 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         curve=name, gamma=best, uncertainty=unc, sd_curvature=sd_curv, sd_bootstrap=sd_boot,
         srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
         rms=math.sqrt(rss_best / n_pix), method="gamma",
-        n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix)
+        n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix,
+        sd_spheres=sd_spheres)
 
 
 def calibrate_encoding(raw, normals, method: str = "gamma", **kwargs) -> EncodingCalibration:
