@@ -84,7 +84,7 @@ def run_seed(args, seed: int) -> list:
             ref = estimate_lights(replace(cap, encoding=STATED[name]), spheres=spheres, progress=False, workers=1)
             e, r = errors_deg(got, truth), errors_deg(ref, truth)
             rows.append({"seed": seed, "true": name, "named": cal.curve, "gamma": cal.gamma,
-                         "uncertainty": cal.uncertainty, "srgb_excess": cal.srgb_excess,
+                         "uncertainty": cal.uncertainty, "sd_spheres": cal.sd_spheres, "srgb_excess": cal.srgb_excess,
                          "linear_excess": cal.linear_excess, "bic_penalty": cal.bic_penalty,
                          "spheres": cal.n_spheres, "photos": cal.n_photos,
                          "calibration_s": t_cal, "median_deg": float(np.median(e)), "max_deg": float(e.max()),

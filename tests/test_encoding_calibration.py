@@ -143,6 +143,45 @@ def test_encoding_named_by_bic_or_half_a_code():
     assert {"linear_excess", "srgb_excess", "bic_penalty"} <= set(rec)
 
 
+def _four_spheres_with_misfit(encode, eps, n_photos=40, seed=0):
+    """Stored values (rounding only, no noise) of four matte spheres whose shading has a small
+    non-affine term ``eps_k (n . l)^2`` that differs between spheres (as interreflection does)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(-0.95, 0.95, 60)
+    x, y = np.meshgrid(t, t)
+    inside = x * x + y * y < 0.95 ** 2
+    normals = np.column_stack([x[inside], -np.sqrt(1 - x[inside] ** 2 - y[inside] ** 2), y[inside]])
+    raw = []
+    for _ in range(n_photos):
+        light = rng.normal(size=3)
+        light[1] = -abs(light[1]) - 0.5
+        light /= np.linalg.norm(light)
+        c = np.maximum(normals @ light, 0)
+        raw.append([np.repeat(np.rint(encode(0.8 * c + 0.03 + e * c * c) * 255)[:, None], 3, axis=1) / 255
+                    for e in eps])
+    return raw, [normals] * len(eps)
+
+
+def test_spheres_disagreeing_widen_the_gamma_and_keep_the_named_curve():
+    """A misfit the model lacks that differs between spheres moves their gammas apart; the free
+    gamma must not win on it: an sRGB file is named srgb (the spheres' spread counts as noise,
+    and the interval widens to it), while a gamma-2.2 file with the same misfit is still gamma."""
+    eps = (-0.015, 0.015, -0.005, 0.01)
+    clean = calibrate_encoding(*_four_spheres_with_misfit(srgb_encode, (0, 0, 0, 0)), code_step=1 / 255)
+    cal = calibrate_encoding(*_four_spheres_with_misfit(srgb_encode, eps), code_step=1 / 255)
+    assert clean.curve == "srgb" and cal.curve == "srgb"
+    assert cal.srgb_excess < cal.bic_penalty and "half a code" not in cal.summary()
+    assert cal.uncertainty > 10 * clean.uncertainty
+    # the spheres' own gammas lie within the widened interval of the pooled one
+    for k in range(4):
+        raw, normals = _four_spheres_with_misfit(srgb_encode, eps)
+        one = calibrate_encoding([[r[k]] for r in raw], [normals[k]], code_step=1 / 255)
+        assert abs(one.gamma - cal.gamma) < cal.uncertainty
+    g22 = calibrate_encoding(*_four_spheres_with_misfit(lambda v: gamma_encode(v, 2.2), eps), code_step=1 / 255)
+    assert g22.curve == "gamma" and abs(g22.gamma - 2.2) <= g22.uncertainty
+    assert g22.srgb_excess > g22.bic_penalty
+
+
 def test_calibrate_encoding_refuses():
     raw, normals = _sphere_shading(2.2, n_photos=3)
     with pytest.raises(EncodingCalibrationError, match="only 3 photos"):

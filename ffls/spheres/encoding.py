@@ -27,15 +27,25 @@ second candidate, scored the same way.
   noise (quantisation, sensor) lives, and so is comparable between curves. The sum over units is
   the profile objective ``RSS(gamma)``; :func:`scipy.optimize.minimize_scalar` finds its minimum,
   and a second round re-selects the pixels with that curve.
-* The uncertainty is the larger of two: the curvature of the profile likelihood
-  (``sd = sqrt(2 s^2 / RSS'')``) and a bootstrap over photos (each photo's ``RSS`` curve is
-  resampled, which keeps whatever misfit a photo shares across its pixels). It is reported as a
-  95% half-width (1.96 sd), the GUIDE's convention for uncertainties.
+* The uncertainty is the largest of three: the curvature of the profile likelihood
+  (``sd = sqrt(2 s^2 / RSS'')``), a bootstrap over photos (each photo's ``RSS`` curve is
+  resampled, which keeps whatever misfit a photo shares across its pixels), and the spheres'
+  disagreement. The model's misfit (interreflection, the bounce's shape, a near light seen from
+  each sphere's place) is shared by every photo of a sphere, so the bootstrap over photos cannot
+  see it, but it differs between spheres: each sphere's gamma (the minimum of its own ``RSS``
+  curve) is one draw of it. A random effect per sphere (DerSimonian & Laird 1986) estimates the
+  between-sphere variance ``tau^2`` from Cochran's ``Q`` (each sphere's variance: the bootstrap's,
+  scaled by its share of the profile's curvature), and the pooled gamma's sd is that of the
+  prediction for a new sphere (Higgins, Thompson & Spiegelhalter 2009),
+  ``sqrt(tau^2 + 1 / sum 1 / (v_k + tau^2))``: the spheres share the ground and the lights, so
+  their misfit need not average out. It is reported as a 95% half-width (1.96 sd), the GUIDE's
+  convention for uncertainties.
 * Naming is a model selection by the Bayesian information criterion (Schwarz 1978): a named curve
   (``linear``, gamma 1, or ``srgb``) has no free parameter, the best gamma has one. Each named
   curve's *excess* is its ``RSS`` above the best gamma's, in units of the noise variance inflated
-  by the bootstrap/curvature variance ratio (the residuals are correlated; the same inflation
-  gives the effective number of pixels ``n_eff = n / inflation``). The best gamma is worth its
+  by the ratio of the larger of the bootstrap's and the spheres' variance to the curvature's (the
+  residuals are correlated, and the misfit counts as noise; the same inflation gives the
+  effective number of pixels ``n_eff = n / inflation``). The best gamma is worth its
   parameter only when it lowers the misfit by more than the BIC's ``ln(n_eff)``: the curve with
   the smallest of (linear excess, sRGB excess, ``ln(n_eff)``) is named. An interval test (does
   the 95% interval hold 1?) would call a linear file ``gamma 1.004`` as soon as the pixels are
@@ -103,9 +113,12 @@ class EncodingCalibration:
     gamma : float
         The best gamma.
     uncertainty : float
-        95% half-width of ``gamma`` (1.96 times the larger of the curvature and bootstrap sd).
+        95% half-width of ``gamma`` (1.96 times the largest of the three sd below).
     sd_curvature, sd_bootstrap : float
-        The two standard deviations of ``gamma``.
+        Two standard deviations of ``gamma``: the profile's curvature, the bootstrap over photos.
+    sd_spheres : float
+        The third: the spheres' disagreement beyond the photos' noise (a random effect per sphere;
+        module docstring, on the uncertainty); 0 with one sphere or when they agree.
     srgb_excess, linear_excess : float
         The sRGB and the linear curve's excess misfit over the best gamma, in units of the
         (inflated) noise variance (module docstring, "Naming").
@@ -132,6 +145,7 @@ class EncodingCalibration:
     n_photos: int
     n_units: int
     n_pixels: int
+    sd_spheres: float = 0.0
 
     @property
     def encoding(self):
@@ -416,6 +430,39 @@ def _parabola_min(g: np.ndarray, f: np.ndarray) -> float:
     return float(g[k] + (0.5 * (a - c) / den * step if den > 0 else 0.0))
 
 
+def _sphere_heterogeneity_sd(grid: np.ndarray, per_sphere: np.ndarray, sd_pooled: float) -> float:
+    """Standard deviation of the pooled gamma under a random effect per sphere (DerSimonian & Laird 1986).
+
+    Each sphere's gamma ``g_k`` is the minimum of its ``RSS`` curve (``per_sphere``, (K, len(grid))),
+    its variance ``v_k`` the pooled variance ``sd_pooled ** 2`` scaled by the share of the profile's
+    curvature the sphere holds (its information). Cochran's ``Q = sum (g_k - g_bar)^2 / v_k`` beyond
+    its ``K - 1`` degrees of freedom gives the between-sphere variance ``tau^2``: a misfit of the
+    model that differs between spheres (interreflection from a neighbour, a near light seen from
+    each sphere's place), which the bootstrap over photos cannot see when every photo shares it.
+    The pooled gamma's variance is that of the prediction for a new sphere (Higgins, Thompson &
+    Spiegelhalter 2009), ``tau^2 + 1 / sum 1 / (v_k + tau^2)``: the spheres share the ground and
+    the lights, so their misfit need not average out. With one sphere, or a curvature that cannot
+    be read, it returns 0 (no evidence of heterogeneity).
+    """
+    K = len(per_sphere)
+    if K < 2 or not np.isfinite(sd_pooled) or sd_pooled <= 0:
+        return 0.0
+    step = float(grid[1] - grid[0])
+    g, curv = np.empty(K), np.empty(K)
+    for k, c in enumerate(per_sphere):
+        g[k] = _parabola_min(grid, c)
+        j = int(np.clip(np.argmin(c), 1, len(grid) - 2))
+        curv[k] = (c[j - 1] - 2 * c[j] + c[j + 1]) / (step * step)
+    if not np.all(curv > 0):
+        return 0.0
+    v = sd_pooled ** 2 * curv.sum() / curv
+    w = 1.0 / v
+    g_bar = float(w @ g / w.sum())
+    q = float(w @ (g - g_bar) ** 2)
+    tau2 = max(0.0, (q - (K - 1)) / (w.sum() - (w @ w) / w.sum()))
+    return float(math.sqrt(tau2 + 1.0 / np.sum(1.0 / (v + tau2))))
+
+
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
@@ -534,9 +581,17 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     draws = rng.integers(0, len(photos), size=(int(n_bootstrap), len(photos)))
     boot = np.array([_parabola_min(profiled, per_photo[d].sum(axis=0)) for d in draws])
     sd_boot = float(np.std(boot, ddof=1)) if len(boot) > 1 else float("inf")
-    sd = max(sd_curv, sd_boot)
+    # the spheres' own gammas: a misfit the model lacks that differs between spheres (interreflection,
+    # a near light across the scene) makes them disagree beyond the photos' noise (random effects)
+    sphere_index = sorted({u.sphere for u in used})
+    per_sphere = np.zeros((len(sphere_index), len(profiled)))
+    for u, c in zip(used, curves):
+        per_sphere[sphere_index.index(u.sphere)] += c
+    sd_spheres = _sphere_heterogeneity_sd(profiled, per_sphere, sd_boot)
+    sd_model = max(sd_boot, sd_spheres)
+    sd = max(sd_curv, sd_model)
     unc = 1.96 * sd
-    inflation = max(1.0, (sd_boot / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
+    inflation = max(1.0, (sd_model / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
     # model selection (BIC): a named curve has no free parameter, the best gamma one
     noise = s2 * inflation
     excess = (sum(u.rss("srgb") for u in used) - rss_best) / noise
@@ -556,7 +611,8 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         curve=name, gamma=best, uncertainty=unc, sd_curvature=sd_curv, sd_bootstrap=sd_boot,
         srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
         rms=math.sqrt(rss_best / n_pix), method="gamma",
-        n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix)
+        n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix,
+        sd_spheres=sd_spheres)
 
 
 def calibrate_encoding(raw, normals, method: str = "gamma", **kwargs) -> EncodingCalibration:
