@@ -27,7 +27,6 @@ import argparse
 import contextlib
 import io
 import json
-import os
 import tempfile
 import time
 from pathlib import Path

@@ -93,7 +93,7 @@ def main(argv=None):
             release_gl(wbuf)
             bt.release()
             pb.release()
-            del basis
+            basis = None  # the host copy freed before the next size
         tm.release()
 
     # compressed basis rows: projection (n -> K + 1) + pass 2 over K + 1 layers

@@ -14,7 +14,7 @@ from ffls.io.capture import load_capture_and_lights
 from ffls.lightmaps.lightmap import LightMap, builtin_lightmap
 from ffls.relight.basis import accepted_basis
 from ffls.relight.cpu import CpuRelighter, relight_fast
-from ffls.relight.lightflow import (LUMINANCE, FlowInterpolator, LightFlowRelighter, photo_flow, relight_lightflow,
+from ffls.relight.lightflow import (FlowInterpolator, LightFlowRelighter, photo_flow, relight_lightflow,
                                     split_compact_sources)
 from ffls.weights.weighting import integrate
 

@@ -85,18 +85,28 @@ def _angles(lights, truth):
 
 
 # ----------------------------------------------------------------------------- the pure function
-def _sphere_shading(true_gamma, n_photos=8, seed=0):
-    """Stored values of one matte sphere (Lambert + ambient) under random lights, encoded with ``true_gamma``."""
-    rng = np.random.default_rng(seed)
+def _disc_normals():
+    """(m, 3) normals of a sphere's visible disc seen along +y, on a 60 x 60 grid."""
     t = np.linspace(-0.95, 0.95, 60)
     x, y = np.meshgrid(t, t)
     inside = x * x + y * y < 0.95 ** 2
-    normals = np.column_stack([x[inside], -np.sqrt(1 - x[inside] ** 2 - y[inside] ** 2), y[inside]])
+    return np.column_stack([x[inside], -np.sqrt(1 - x[inside] ** 2 - y[inside] ** 2), y[inside]])
+
+
+def _random_light(rng):
+    """A unit light direction on the camera's side (y < 0)."""
+    light = rng.normal(size=3)
+    light[1] = -abs(light[1]) - 0.5
+    return light / np.linalg.norm(light)
+
+
+def _sphere_shading(true_gamma, n_photos=8, seed=0):
+    """Stored values of one matte sphere (Lambert + ambient) under random lights, encoded with ``true_gamma``."""
+    rng = np.random.default_rng(seed)
+    normals = _disc_normals()
     raw = []
     for _ in range(n_photos):
-        light = rng.normal(size=3)
-        light[1] = -abs(light[1]) - 0.5
-        light /= np.linalg.norm(light)
+        light = _random_light(rng)
         lin = 0.8 * np.maximum(normals @ light, 0) + 0.03
         enc = gamma_encode(lin, true_gamma)[:, None] + rng.normal(0, 1 / 255, (len(lin), 3))
         raw.append([np.clip(np.rint(enc * 255), 0, 255) / 255])
@@ -147,15 +157,10 @@ def _four_spheres_with_misfit(encode, eps, n_photos=40, seed=0):
     """Stored values (rounding only, no noise) of four matte spheres whose shading has a small
     non-affine term ``eps_k (n . l)^2`` that differs between spheres (as interreflection does)."""
     rng = np.random.default_rng(seed)
-    t = np.linspace(-0.95, 0.95, 60)
-    x, y = np.meshgrid(t, t)
-    inside = x * x + y * y < 0.95 ** 2
-    normals = np.column_stack([x[inside], -np.sqrt(1 - x[inside] ** 2 - y[inside] ** 2), y[inside]])
+    normals = _disc_normals()
     raw = []
     for _ in range(n_photos):
-        light = rng.normal(size=3)
-        light[1] = -abs(light[1]) - 0.5
-        light /= np.linalg.norm(light)
+        light = _random_light(rng)
         c = np.maximum(normals @ light, 0)
         raw.append([np.repeat(np.rint(encode(0.8 * c + 0.03 + e * c * c) * 255)[:, None], 3, axis=1) / 255
                     for e in eps])

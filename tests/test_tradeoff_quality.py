@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from ffls.conventions import normalize
-from ffls.errors import InputError
 from ffls.lightmaps.lightmap import sky_sun_map
 from ffls.relight.auto import Choice, choose, choose_quality, leave_one_out_errors, loo_floor
 from ffls.relight.cpu import CpuRelighter
@@ -14,7 +13,7 @@ from ffls.relight.quality import (Quality, apply_near_correction, farthest_point
                                   near_light_scales)
 from ffls.weights.voronoi import integrate_weights
 
-from test_stability import elevation_ring, lambert_basis
+from test_stability import lambert_basis
 
 
 def fibonacci(n):

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from ffls.conventions import angle_between, normalize, spherical_to_direction, tangent_basis
+from ffls.conventions import angle_between, normalize, spherical_to_direction
 from ffls.spheres.uncertainty import (CONE_FACTOR, FALLBACK_MODEL, cone_deg, correlation_inflation,
                                       fit_error_model, photo_residuals)
 
