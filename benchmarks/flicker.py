@@ -8,7 +8,7 @@ Usage::
 A synthetic capture (``ffls.synth``: the default scene, ``--lights`` stratified upper-hemisphere
 directions, ``--res`` pixels) is relit under ``sky_sun_map`` (a 1-degree sun, 40 degrees up)
 rotated about +Z in ``--step``-degree steps over ``--frames`` frames, with every scheme
-(``ALL_SCHEMES``: the library-only ``spline`` too)
+(``ALL_SCHEMES``, ``spline`` included)
 (``ffls.weights.weighting.integrate``: the exact float64 weights, or with ``--texture-res R`` the
 baked weight texture the GPU reads). The measure (:func:`flicker`) is the RMS over frames and
 pixels of the second difference ``I[t+1] - 2 I[t] + I[t-1]`` over the RMS of the images: a box

@@ -17,7 +17,7 @@ relights the basis (``ffls.weights.weighting.integrate``: exact weights, and, wi
 gaussian width sweep is included (``gaussian:k=..,w=...``), and an experiment not shipped as a
 scheme: ordinary kriging (GP) weights with the kernel width chosen by leave-one-out on the capture
 (:func:`kriging_setup`); and a floor, the least-squares fit of the photos to the truth
-(:func:`oracle_weights`). The library-only ``spline`` scheme (:mod:`ffls.weights.spline`) is measured
+(:func:`oracle_weights`). The ``spline`` scheme (:mod:`ffls.weights.spline`) is measured
 at its default, at other Lebesgue bounds, and at the bound chosen by leave-one-out on the capture
 itself (:func:`spline_loo_choice`: predict held-out photos from the others, no ground truth).
 Prints a table (with the ratio to ``barycentric`` and the worst per-map ratio to ``voronoi``)

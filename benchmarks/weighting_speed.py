@@ -1,4 +1,4 @@
-"""Bake time and GPU pass-1 time of the weighting schemes, the library-only ``spline`` included.
+"""Bake time and GPU pass-1 time of the weighting schemes, the ``spline`` scheme included.
 
 Usage::
 

@@ -53,7 +53,7 @@ class Engine:
         Use a compressed basis of ``rank`` eigen-images (:mod:`ffls.relight.compress`).
     cell_res : int
         Resolution of the Voronoi cell-index texture (pass 1).
-    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
         Weighting scheme of pass 1 (:mod:`ffls.weights.weighting`); ``'voronoi'`` uses the exact
         candidate-cell texture, the others a baked :class:`ffls.weights.weighting.WeightTexture`.
     weights_res : int

@@ -138,7 +138,7 @@ class CpuRelighter(WeightsInputs):
     map_res : int, optional
         Height of the lat-long light map pass 1 integrates
         (:func:`ffls.relight.quality.integration_map`); None = the map as given.
-    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian'}
+    weighting : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
         Weighting scheme of pass 1 (:mod:`ffls.weights.weighting`). The smooth schemes are
         evaluated exactly at every rotated light-map direction (the float64 reference; the GPU
         looks them up in a baked texture).
