@@ -117,15 +117,6 @@ class TiledEngine(WeightsInputs):
         return {"dtype": self.dtype, "tiles": len(f.tiles(self.streamed.level)), "tile": f.tile,
                 "rank": None if self.streamed.compression is None else self.streamed.compression.rank}
 
-    @property
-    def hdr(self) -> np.ndarray:
-        if self._hdr is None:
-            raise RuntimeError("TiledEngine: nothing rendered yet")
-        return self._hdr
-
-    def read_hdr(self) -> np.ndarray:
-        return self.hdr
-
     def release(self) -> None:
         if self._integrator is not None:
             self._integrator.release()

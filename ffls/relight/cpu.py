@@ -275,15 +275,9 @@ class CpuRelighter(WeightsInputs):
     def n_lights(self) -> int:
         return int(self.basis.shape[0])
 
-    @property
-    def hdr(self) -> np.ndarray:
-        """The last relit image ``(H, W, 3)`` in its accumulation dtype (float32 for 'f32', else float64)."""
-        if self._hdr is None:
-            raise RuntimeError("CpuRelighter: nothing rendered yet")
-        return self._hdr
-
     def read_hdr(self) -> np.ndarray:
-        """The relit image ``(H, W, 3)`` float32, row 0 = top row."""
+        """The relit image ``(H, W, 3)`` float32, row 0 = top row (``hdr`` keeps the accumulation dtype:
+        float32 for 'f32', else float64)."""
         return self.hdr.astype(np.float32)
 
     def release(self) -> None:

@@ -4,7 +4,7 @@
 :class:`ffls.gpu.tiled.TiledEngine` have the :class:`ffls.gpu.engine.Engine`'s interface; this mix-in
 holds the part of it they do the same way. A class using it keeps ``_lightmap``, ``_rotation``,
 ``_weights`` (None: pass 1 reruns at the next render), ``_hdr``, ``_display``, ``_display_key`` and
-``last_weights``, has ``n_lights`` and ``hdr`` properties, and gives its two passes:
+``last_weights``, has an ``n_lights`` property, and gives its two passes:
 ``_pass1() -> (n, 3) weights`` and ``_pass2(weights) -> (H, W, 3) image``.
 """
 from __future__ import annotations
@@ -18,8 +18,8 @@ __all__ = ["WeightsInputs"]
 
 
 class WeightsInputs:
-    """``set_rotation``, ``set_weights``, ``render``, ``read_display`` and ``read_weights`` of a relighter whose
-    pass 1 gives its weights on the CPU."""
+    """``set_rotation``, ``set_weights``, ``render``, ``hdr``, ``read_hdr``, ``read_display`` and ``read_weights``
+    of a relighter whose pass 1 gives its weights on the CPU."""
 
     def set_rotation(self, R) -> None:
         """Rotate the light map by ``R`` (3, 3) (content at d moves to R d; conventions.rotation_z)."""
@@ -57,6 +57,17 @@ class WeightsInputs:
         if key != self._display_key:
             self._display = None
             self._display_key = key
+
+    @property
+    def hdr(self) -> np.ndarray:
+        """The last relit image ``(H, W, 3)`` (pass 2's output)."""
+        if self._hdr is None:
+            raise RuntimeError(f"{type(self).__name__}: nothing rendered yet")
+        return self._hdr
+
+    def read_hdr(self) -> np.ndarray:
+        """The relit image ``(H, W, 3)``, row 0 = top row."""
+        return self.hdr
 
     def read_display(self) -> np.ndarray:
         """The display image ``(H, W, 3)`` uint8, tone-mapped on first read (an EXR-only caller never pays for it)."""

@@ -444,15 +444,6 @@ class StreamedRelighter(WeightsInputs):
     def n_lights(self) -> int:
         return len(self.rows)
 
-    @property
-    def hdr(self) -> np.ndarray:
-        if self._hdr is None:
-            raise RuntimeError("StreamedRelighter: nothing rendered yet")
-        return self._hdr
-
-    def read_hdr(self) -> np.ndarray:
-        return self.hdr
-
     def release(self) -> None:
         self._hdr = self._display = self._weights = self.cells = None
 
