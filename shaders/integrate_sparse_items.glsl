@@ -18,37 +18,21 @@ layout(std430, binding = 5) writeonly buffer CellIds { int cell_id[]; };    // p
 layout(std430, binding = 9) writeonly buffer ItemPower { vec4 ipow[]; };    // per item
 uniform dmat3 R;
 uniform uint n_texels;
-#if defined HEMI_AXIS
-uniform dvec3 hemi_axis;
-#endif
+#include "hemisphere_texel.glsl"
 void main() {
     uint t = gl_GlobalInvocationID.x;
     if (t >= n_texels) return;
     uint base = t * uint(SLOTS);
     dvec3 d = dvec3(tdir[3u * t], tdir[3u * t + 1u], tdir[3u * t + 2u]);
-    dvec3 p = R * d;
-#if defined HEMI_UPPER
-    bool drop = p.z < 0.0LF;
-#elif defined HEMI_AXIS
-    precise double side = (p.x * hemi_axis.x + p.y * hemi_axis.y) + p.z * hemi_axis.z;
-    bool drop = side < 0.0LF;
-#else
-    bool drop = false;
-#endif
+    int texel = hemisphere_texel(R * d);
     vec4 pw = tpow[t];
-    if (drop) {
+    if (texel < 0) {
         cell_id[base] = N_LIGHTS;
         ipow[base] = vec4(pw.rgb, 0.0);
         for (int s = 1; s < SLOTS; ++s) { cell_id[base + uint(s)] = N_LIGHTS + 1; ipow[base + uint(s)] = vec4(0.0); }
         return;
     }
-#if defined HEMI_UPPER
-    vec2 uv = concentric_uv(vec3(p));
-#else
-    vec2 uv = octahedral_uv(vec3(p));
-#endif
-    ivec2 ij = clamp(ivec2(floor(uv * float(CELL_RES))), ivec2(0), ivec2(CELL_RES - 1));
-    int k = (ij.y * CELL_RES + ij.x) * SLOTS;
+    int k = texel * SLOTS;
     for (int s = 0; s < SLOTS; ++s) {
         int c = sidx[k + s];
         cell_id[base + uint(s)] = c < 0 ? N_LIGHTS + 1 : c;

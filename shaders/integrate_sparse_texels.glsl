@@ -9,25 +9,11 @@ layout(std430, binding = 1) readonly buffer TexelDirs { double tdir[]; };   // 3
 layout(std430, binding = 7) writeonly buffer WeightTexel { int wtexel[]; };
 uniform dmat3 R;
 uniform uint n_texels;
-#if defined HEMI_AXIS
-uniform dvec3 hemi_axis;
-#endif
+#include "hemisphere_texel.glsl"
 void main() {
     uint t = gl_GlobalInvocationID.x;
     if (t >= n_texels) return;
     dvec3 d = dvec3(tdir[3u * t], tdir[3u * t + 1u], tdir[3u * t + 2u]);
-    dvec3 p = R * d;
-#if defined HEMI_UPPER
-    if (p.z < 0.0LF) { wtexel[t] = -1; return; }
-    vec2 uv = concentric_uv(vec3(p));
-#else
-#if defined HEMI_AXIS
-    precise double side = (p.x * hemi_axis.x + p.y * hemi_axis.y) + p.z * hemi_axis.z;
-    if (side < 0.0LF) { wtexel[t] = -1; return; }
-#endif
-    vec2 uv = octahedral_uv(vec3(p));
-#endif
-    ivec2 ij = clamp(ivec2(floor(uv * float(CELL_RES))), ivec2(0), ivec2(CELL_RES - 1));
-    wtexel[t] = ij.y * CELL_RES + ij.x;
+    wtexel[t] = hemisphere_texel(R * d);
 }
 #endif

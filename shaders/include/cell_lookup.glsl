@@ -15,28 +15,16 @@ layout(std430, binding = 4) readonly buffer Candidates { int cand[]; };     // C
 
 uniform dmat3 R;           // light-map rotation: content at d moves to R d
 uniform uint n_texels;     // texels in the light map
-#if defined HEMI_AXIS
-uniform dvec3 hemi_axis;   // unit axis of the covered hemisphere (ffls.conventions.Hemisphere)
-#endif
+#include "hemisphere_texel.glsl"
 
 const int DROP_BIN = N_LIGHTS;
 
 int cell_of_texel(uint t) {
     dvec3 d = dvec3(tdir[3u * t], tdir[3u * t + 1u], tdir[3u * t + 2u]);
     dvec3 p = R * d;
-#if defined HEMI_UPPER
-    if (p.z < 0.0LF) return DROP_BIN;
-    vec2 uv = concentric_uv(vec3(p));
-#else
-#if defined HEMI_AXIS
-    // the reference's operation order (Hemisphere.side): (p.x a.x + p.y a.y) + p.z a.z
-    precise double side = (p.x * hemi_axis.x + p.y * hemi_axis.y) + p.z * hemi_axis.z;
-    if (side < 0.0LF) return DROP_BIN;
-#endif
-    vec2 uv = octahedral_uv(vec3(p));
-#endif
-    ivec2 ij = clamp(ivec2(floor(uv * float(CELL_RES))), ivec2(0), ivec2(CELL_RES - 1));
-    int base = (ij.y * CELL_RES + ij.x) * CELL_K;
+    int texel = hemisphere_texel(p);
+    if (texel < 0) return DROP_BIN;
+    int base = texel * CELL_K;
     int best = DROP_BIN;
     double best_dot = -3.0LF;
     for (int k = 0; k < CELL_K; ++k) {
