@@ -64,12 +64,7 @@ class TiledEngine(WeightsInputs):
         else:  # the smooth schemes' weight texture, as the Engine's pass 1
             table = bake_weights(self.directions, self.weighting, self.hemisphere, weights_res or DEFAULT_TEXTURE_RES)
         self._integrator = CellIntegrator(ctx, self.directions, self.hemisphere, table)
-        self._lightmap = None
-        self._rotation = np.eye(3)
-        self._weights = None
-        self._hdr = None
-        self._display = None
-        self._display_key = None
+        self._init_inputs()
         self.timings: dict = {}
 
     def set_lightmap(self, lm) -> None:

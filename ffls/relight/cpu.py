@@ -183,12 +183,7 @@ class CpuRelighter(WeightsInputs):
         self.set_weighting(weighting, **(weighting_options or {}))
         #: :class:`ffls.weights.voronoi.Weights` of the last render (None before the first, or after set_weights).
         self.last_weights: Weights | None = None
-        self._lightmap = None
-        self._rotation = np.eye(3)
-        self._weights = None
-        self._hdr = None
-        self._display = None
-        self._display_key = None
+        self._init_inputs()
 
     # ------------------------------------------------------------------ construction
     @classmethod

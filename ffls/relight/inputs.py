@@ -21,6 +21,15 @@ class WeightsInputs:
     """``set_rotation``, ``set_weights``, ``render``, ``hdr``, ``read_hdr``, ``read_display`` and ``read_weights``
     of a relighter whose pass 1 gives its weights on the CPU."""
 
+    def _init_inputs(self) -> None:
+        """No light map, no rotation, nothing rendered: the state a relighter starts in."""
+        self._lightmap = None
+        self._rotation = np.eye(3)
+        self._weights = None
+        self._hdr = None
+        self._display = None
+        self._display_key = None
+
     def set_rotation(self, R) -> None:
         """Rotate the light map by ``R`` (3, 3) (content at d moves to R d; conventions.rotation_z)."""
         R = checked_rotation(R)

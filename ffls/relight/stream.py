@@ -411,12 +411,7 @@ class StreamedRelighter(WeightsInputs):
         self.cells = None if cell_res is None or self.weighting != "voronoi" else bake_cells(
             self.directions, self.hemisphere, res=cell_res, k=cell_k, max_res=cell_max_res)
         self.last_weights = None
-        self._lightmap = None
-        self._rotation = np.eye(3)
-        self._weights = None
-        self._hdr = None
-        self._display = None
-        self._display_key = None
+        self._init_inputs()
 
     def set_lightmap(self, lm) -> None:
         self._lightmap = lm
