@@ -13,7 +13,9 @@ The error policy (``docs/reliability.md``), applied here once for every command:
   the file, status 2; running out of memory is one line, status 2;
 * Ctrl-C (SIGINT) and SIGTERM unwind the command (every output is atomic, so nothing partial is
   left) and print one line, status 130 or 143;
-* a Python warning (a light map's clamped negatives, ...) is one line, ``ffls COMMAND: warning: ...``;
+* a Python warning (a light map's clamped negatives, ...) is one line, ``ffls COMMAND: warning: ...``,
+  held with the informational lines until the inputs are loaded, so a command that fails prints
+  only its error line;
 * while a command runs, its inputs are protected: an output that would replace one is refused
   (:func:`ffls.errors.guard_inputs`).
 """
@@ -26,7 +28,7 @@ import sys
 import warnings
 
 from ffls.commands import command_modules
-from ffls.commands.common import deferred_notes
+from ffls.commands.common import deferred_notes, print_notes
 from ffls.errors import FflsError, guard_inputs, os_error_message
 
 __all__ = ["build_parser", "subcommands", "main", "OneLineParser", "Terminated"]
@@ -88,14 +90,19 @@ def _sigterm_as_interrupt():
 
 @contextlib.contextmanager
 def _one_line_warnings(command: str):
-    """Show every Python warning as one line ``ffls COMMAND: warning: ...`` (each text once)."""
+    """Show every Python warning as one line ``ffls COMMAND: warning: ...`` (each text once).
+
+    The lines go through :func:`ffls.commands.common.print_notes`: inside ``deferred_notes`` a
+    warning waits with the informational lines, so a command that then fails prints only its one
+    error line (a warning about an input the failed command never used is no answer).
+    """
     seen = set()
 
     def show(message, category, filename, lineno, file=None, line=None):
         text = " ".join(str(message).split())
         if text not in seen:
             seen.add(text)
-            print(f"ffls {command}: warning: {text}", file=sys.stderr)
+            print_notes(command, f"warning: {text}")
 
     with warnings.catch_warnings():
         if not sys.warnoptions:

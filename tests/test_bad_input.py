@@ -577,6 +577,22 @@ def test_clamped_negatives_warning_is_one_line(ws, tmp_path, capfd):
     assert "warnings.warn" not in err and "LightMapWarning" not in err
 
 
+def test_warning_before_a_failure_leaves_only_the_error_line(ws, tmp_path, capfd):
+    """A map's clamp warning, then a refused mask: the answer is the one error line, and no output."""
+    import cv2
+
+    data = np.ones((16, 32, 3), np.float32)
+    data[2, 3] = -1.0
+    write_exr(tmp_path / "neg.exr", data)
+    assert cv2.imwrite(str(tmp_path / "m.png"), np.full((5, 7), 255, np.uint8))
+    capfd.readouterr()
+    rc = main(["relight", str(ws["cap"]), "--probe", str(tmp_path / "neg.exr"), "--mask", str(tmp_path / "m.png"),
+               "-o", str(tmp_path / "a.exr")])
+    err = capfd.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "m.png" in err[0] and "error:" in err[0], err
+    assert not (tmp_path / "a.exr").exists()
+
+
 def test_turntable_never_replaces_a_folder_of_other_files(ws, tmp_path, capfd):
     d = tmp_path / "mine"
     d.mkdir()

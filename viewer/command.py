@@ -223,6 +223,9 @@ def run(args) -> int:
             choose_auto_quality(app, args, capture, lights)
         if args.exposure == "auto":  # expose the first frame for the object's log-average luminance
             app.auto_expose()
+        from ffls.commands.common import flush_notes
+
+        flush_notes()  # the window runs until closed: the informational lines and warnings now
         if args.benchmark:
             st.auto_rotate = True
             st.auto_rotate_speed = st.auto_rotate_speed if args.auto_rotate is not None else 30.0
