@@ -1648,6 +1648,12 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera) -> list:
                                                                                  CRITERIA["max_residual_px"])
 
     keep_outer = [g for g in outer if not any(same(g, d) and better(d, g) for d in direct)]
+    # one ball's outer outlines, grown from its several candidates, keep the best-fitting one
+    kept: list = []
+    for g in sorted(keep_outer, key=lambda g: -outline_quality(g)):
+        if not any(same(g, k) for k in kept):
+            kept.append(g)
+    keep_outer = [g for g in keep_outer if any(g is k for k in kept)]  # candidate order kept
     keep_direct = [d for d in direct if not any(same(g, d) for g in keep_outer)]
     return keep_direct + keep_outer
 
