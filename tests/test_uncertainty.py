@@ -246,9 +246,9 @@ def test_tail_factor_leave_one_out_is_independent_of_the_photo_mean():
 
 def test_common_mode_follows_the_spheres_that_carry_the_direction():
     """The common-mode bound is rho / (1 - rho) times the systematic variance of the spheres a
-    direction is made from, weighted as it was combined: a precise matte ball beside a mirror ball
-    whose highlight is uncertain by degrees gets the matte ball's bound, not the mirror's; equal
-    spheres get the capture-wide bound (common_mode_deg)."""
+    direction is made from, averaged with their inverse variances under the model: a precise matte
+    ball beside a mirror ball whose highlight is uncertain by degrees gets (nearly) the matte
+    ball's bound, not the mirror's; equal spheres get the capture-wide bound (common_mode_deg)."""
     from ffls.spheres.uncertainty import COMMON_FLOOR_DEG, ErrorModel, common_mode_deg
 
     m = ErrorModel(scale=2.0, floor_deg=0.3, common_deg=0.0, source="disagreement", common_ratio=1.0 / 3.0)
@@ -257,18 +257,18 @@ def test_common_mode_follows_the_spheres_that_carry_the_direction():
     assert m.systematic_var_deg2(0.05, 0) == pytest.approx(sys_matte)
     matte = m.common_sigma_deg([0.05], [0])
     assert matte == pytest.approx(common_mode_deg(sys_matte, 0.25, COMMON_FLOOR_DEG))
-    both = m.common_sigma_deg([0.05, 5.0], [0, 1])  # inverse-variance weights: the mirror has ~1e-3 of it
+    assert m.common_sigma_deg([0.05, 0.05], [0, 0]) == pytest.approx(matte)  # equal spheres: the same bound
+    both = m.common_sigma_deg([0.05, 5.0], [0, 1])
     v = m.sphere_sigma_deg(np.array([0.05, 5.0]), np.array([0, 1])) ** 2
-    w = (1.0 / v) / np.sum(1.0 / v)
+    w = (1.0 / v) / np.sum(1.0 / v)  # the mirror has ~1e-3 of the weight
     u = np.array([sys_matte, m.systematic_var_deg2(5.0, 1)])
     assert both == pytest.approx(np.sqrt(np.sum(w * u) / 3.0 + COMMON_FLOOR_DEG ** 2))
     mirror = m.common_sigma_deg([5.0], [1])
     assert matte < both < 1.5 * matte and mirror > 10.0 * both
-    # the combination's own weights: an equal-weight mean carries half of the mirror's systematic error
-    half = m.common_sigma_deg([0.05, 5.0], [0, 1], weights=[1.0, 1.0])
-    assert half == pytest.approx(np.sqrt((sys_matte + m.systematic_var_deg2(5.0, 1)) / 6.0 + COMMON_FLOOR_DEG ** 2))
-    # the photo's variance holds its own bound
+    # the photo's variance: its combination's variance plus its own bound
     assert m.photo_sigma_deg([0.05, 5.0], [0, 1]) == pytest.approx(np.sqrt(1.0 / np.sum(1.0 / v) + both ** 2))
+    eq = m.photo_sigma_deg([0.05, 5.0], [0, 1], weights=[1.0, 1.0])
+    assert eq == pytest.approx(np.sqrt(np.sum(v) / 4.0 + both ** 2))
     # without a ratio the fixed common_deg, as before
     fixed = ErrorModel(scale=1.0, floor_deg=0.3, common_deg=0.7, source="disagreement")
     assert fixed.common_sigma_deg([0.05, 5.0], [0, 1]) == 0.7

@@ -31,12 +31,13 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    a third of the unshared part's), so the common-mode variance is at most
    ``rho / (1 - rho) * tau_s^2``, where ``tau_s^2`` is the per-sphere systematic variance that
    the disagreement measured (``tau^2 + g_i^2`` plus the part of ``s^2 sigma_i^2`` beyond the fit
-   statistics, :meth:`ErrorModel.systematic_var_deg2`), averaged over the photo's spheres with the
-   weights its direction was made with (:meth:`ErrorModel.common_sigma_deg`): each photo (and each
-   sphere's own cone) gets the bound of the spheres that carry it. A capture-wide median over
-   all spheres let a sphere that a photo hardly uses set its bound: beside a matte ball, a mirror
-   ball whose highlight is uncertain by degrees gave the calibration shot of ``docs/spheres.md``
-   a common mode of 2.4 degrees per axis, ten times its matte ball's whole error; plus
+   statistics, :meth:`ErrorModel.systematic_var_deg2`), averaged over the photo's spheres with
+   their inverse variances under the fitted model (:meth:`ErrorModel.common_sigma_deg`): each
+   photo (and each sphere's own cone) gets the bound of the spheres that carry information. A
+   capture-wide median over all spheres let an uninformative sphere set the bound: beside a matte
+   ball, a mirror ball whose highlight is uncertain by degrees gave the calibration shot of
+   ``docs/spheres.md`` a common mode of 2.4 degrees per axis, ten times its matte ball's whole
+   error; plus
    ``COMMON_FLOOR_DEG`` (per axis) for the geometry shared by all spheres
    (camera pose, a bias of the detected radii) that even perfectly agreeing spheres carry. The
    bound was chosen on ffls synth renders (``docs/spheres.md``), where the measured common mode
@@ -315,33 +316,32 @@ class ErrorModel:
         g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
         return self.floor_deg ** 2 + g ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
 
-    def common_sigma_deg(self, stat_sigma_deg, spheres=None, weights=None) -> float:
+    def common_sigma_deg(self, stat_sigma_deg, spheres=None) -> float:
         """Per-axis standard deviation (degrees) of the common mode of a direction made from these
         spheres (module docstring, part 3).
 
-        The bound ``rho / (1 - rho)`` times the systematic variance of the spheres, averaged with
-        the weights the direction was made with (:meth:`systematic_var_deg2`; inverse variances
-        without ``weights``), plus ``common_floor_deg``: an error shared by the spheres is bounded
-        by the systematic error of the spheres that carry the direction, not by that of a sphere
-        it hardly uses (a precise matte ball beside a mirror ball whose highlight is uncertain by
-        degrees). Equal spheres give the capture-wide bound. With ``common_ratio`` None, the fixed
-        ``common_deg``.
+        The bound ``rho / (1 - rho)`` times the systematic variance of the spheres
+        (:meth:`systematic_var_deg2`) averaged with the spheres' inverse variances under this
+        model (:meth:`sphere_sigma_deg`: the information each carries), plus
+        ``common_floor_deg``. Equal spheres give the capture-wide bound; among unequal ones a
+        sphere the model finds uninformative (a mirror ball whose highlight is uncertain by
+        degrees beside a precise matte ball) cannot set the bound of the error they share. With
+        ``common_ratio`` None, the fixed ``common_deg``.
 
         Parameters
         ----------
         stat_sigma_deg : float or (k,) float
             The spheres' statistical per-axis standard deviations (degrees).
         spheres : int or (k,) int, optional
-        weights : (k,) float, optional
         """
         if self.common_ratio is None:
             return float(self.common_deg)
         s = np.atleast_1d(np.asarray(stat_sigma_deg, dtype=np.float64))
         idx = None if spheres is None else np.atleast_1d(spheres)
-        u = self.systematic_var_deg2(s, idx)
-        w = _weights(self.sphere_sigma_deg(s, idx) ** 2, weights)
+        w = _weights(self.sphere_sigma_deg(s, idx) ** 2)
         if w is None:
             return float("inf")
+        u = self.systematic_var_deg2(s, idx)
         return float(np.sqrt(self.common_ratio * float(np.sum(w * u)) + self.common_floor_deg ** 2))
 
     def photo_sigma_deg(self, stat_sigma_deg, spheres=None, weights=None) -> float:
@@ -367,7 +367,7 @@ class ErrorModel:
         w = _weights(v, weights)
         if w is None:
             return float("inf")
-        return float(np.sqrt(np.sum(w * w * v) + self.common_sigma_deg(stat, idx, w) ** 2))
+        return float(np.sqrt(np.sum(w * w * v) + self.common_sigma_deg(stat, idx) ** 2))
 
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
