@@ -36,9 +36,8 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    photo (and each sphere's own cone) gets the bound of the spheres that carry information. A
    capture-wide median over all spheres let an uninformative sphere set the bound: beside a matte
    ball, a mirror ball whose highlight is uncertain by degrees gave the calibration shot of
-   ``docs/spheres.md`` a common mode of 2.4 degrees per axis, ten times its matte ball's whole
-   error; plus
-   ``COMMON_FLOOR_DEG`` (per axis) for the geometry shared by all spheres
+   ``docs/spheres.md`` a common mode of 2.4 degrees per axis, eight times the 95th percentile of its
+   matte ball's error. Plus ``COMMON_FLOOR_DEG`` (per axis) for the geometry shared by all spheres
    (camera pose, a bias of the detected radii) that even perfectly agreeing spheres carry. The
    bound was chosen on ffls synth renders (``docs/spheres.md``), where the measured common mode
    lies in this range except where the estimator itself is biased (noisy dark pixels): that bias
