@@ -193,6 +193,16 @@ def encoding_text(enc) -> str:
     return str(enc)
 
 
+def coverage_summary(rows, low: float = 0.90, high: float = 0.98) -> str:
+    """One line: how many conditions' coverage lies in ``[low, high]`` (the goal), and which lie outside."""
+    done = [r for r in rows if r["rc"] == 0 and r.get("coverage") is not None]
+    inside = [r for r in done if low <= r["coverage"] <= high]
+    over = [f"{r['condition']} {100 * r['coverage']:.1f}%" for r in done if r["coverage"] > high]
+    under = [f"{r['condition']} {100 * r['coverage']:.1f}%" for r in done if r["coverage"] < low]
+    return (f"coverage in {100 * low:.0f}-{100 * high:.0f}%: {len(inside)} of {len(done)} conditions; "
+            f"over ({len(over)}): {'; '.join(over) or '-'}; under ({len(under)}): {'; '.join(under) or '-'}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=512)
@@ -236,6 +246,7 @@ def main(argv=None):
         elev = "-" if r["elevation_bias_deg"] is None else f"{r['elevation_bias_deg']:+.2f}"
         print(f"| {r['condition']} | {r['accepted']}/{r['n']} | {med} | {cov} | {elev} | {encoding_text(r['encoding'])} | "
               f"{r['ms_per_photo']:.0f} | {flags} |")
+    print("\n" + coverage_summary(rows))
     write_json(a.out, {"benchmark": "bench_conditions", **host_info(), "resolution": a.res, "results": rows})
 
 

@@ -242,3 +242,57 @@ def test_tail_factor_leave_one_out_is_independent_of_the_photo_mean():
     r = np.array([[np.sqrt(v / 2), np.sqrt(v / 2)], [-np.sqrt(v / 2), -np.sqrt(v / 2)]])  # offsets from the mean
     f, n = tail_factor([r] * 30, [np.full(2, v)] * 30, min_samples=10)
     assert n == 60 and f == pytest.approx(np.sqrt(2.0), rel=1e-9)
+
+
+def test_common_mode_follows_the_spheres_that_carry_the_direction():
+    """The common-mode bound is rho / (1 - rho) times the systematic variance of the spheres a
+    direction is made from, averaged with their inverse variances under the model: a precise matte
+    ball beside a mirror ball whose highlight is uncertain by degrees gets (nearly) the matte
+    ball's bound, not the mirror's; equal spheres get the capture-wide bound (common_mode_deg)."""
+    from ffls.spheres.uncertainty import COMMON_FLOOR_DEG, ErrorModel, common_mode_deg
+
+    m = ErrorModel(scale=2.0, floor_deg=0.3, common_deg=0.0, source="disagreement", common_ratio=1.0 / 3.0)
+    m = m.with_centres([0.2, 0.0])
+    sys_matte = 0.3 ** 2 + 0.2 ** 2 + 3.0 * 0.05 ** 2  # tau^2 + g^2 + (s^2 - 1) sigma^2
+    assert m.systematic_var_deg2(0.05, 0) == pytest.approx(sys_matte)
+    matte = m.common_sigma_deg([0.05], [0])
+    assert matte == pytest.approx(common_mode_deg(sys_matte, 0.25, COMMON_FLOOR_DEG))
+    assert m.common_sigma_deg([0.05, 0.05], [0, 0]) == pytest.approx(matte)  # equal spheres: the same bound
+    both = m.common_sigma_deg([0.05, 5.0], [0, 1])
+    v = m.sphere_sigma_deg(np.array([0.05, 5.0]), np.array([0, 1])) ** 2
+    w = (1.0 / v) / np.sum(1.0 / v)  # the mirror has ~1e-3 of the weight
+    u = np.array([sys_matte, m.systematic_var_deg2(5.0, 1)])
+    assert both == pytest.approx(np.sqrt(np.sum(w * u) / 3.0 + COMMON_FLOOR_DEG ** 2))
+    mirror = m.common_sigma_deg([5.0], [1])
+    assert matte < both < 1.5 * matte and mirror > 10.0 * both
+    # the photo's variance: its combination's variance plus its own bound
+    assert m.photo_sigma_deg([0.05, 5.0], [0, 1]) == pytest.approx(np.sqrt(1.0 / np.sum(1.0 / v) + both ** 2))
+    eq = m.photo_sigma_deg([0.05, 5.0], [0, 1], weights=[1.0, 1.0])
+    assert eq == pytest.approx(np.sqrt(np.sum(v) / 4.0 + both ** 2))
+    # without a ratio the fixed common_deg, as before
+    fixed = ErrorModel(scale=1.0, floor_deg=0.3, common_deg=0.7, source="disagreement")
+    assert fixed.common_sigma_deg([0.05, 5.0], [0, 1]) == 0.7
+
+
+def test_mixed_sphere_capture_bound_is_the_precise_spheres(rng=np.random.default_rng(12)):
+    """Photos of a precise matte sphere (~0.05 deg) and two imprecise mirrors (~3 deg) whose
+    statistics all understate their errors 1.5 times (the fitted scale): the capture-wide summary
+    ``common_deg`` is dominated by the mirrors' scaled statistics, but each photo's bound is the
+    matte sphere's, and the photos' cones still cover their true errors."""
+    res, sig, errs = [], [], []
+    for _ in range(200):
+        s = np.array([rng.uniform(0.03, 0.08), rng.uniform(2.0, 4.0), rng.uniform(2.0, 4.0)])
+        sd = np.radians(1.5 * s)
+        e = rng.normal(size=(3, 2)) * sd[:, None]
+        w = 1.0 / sd ** 2
+        mean = (w[:, None] * e).sum(0) / w.sum()
+        res.append(e - mean)
+        sig.append(s)
+        errs.append(np.degrees(np.linalg.norm(mean)))
+    m = fit_error_model(res, sig, spheres=[np.array([0, 1, 2])] * len(res))
+    assert m.scale == pytest.approx(1.5, rel=0.15), m
+    photo_common = m.common_sigma_deg([0.05, 3.0, 3.0], [0, 1, 2])
+    assert photo_common < 0.5 * m.common_deg, m
+    cones = np.array([m.cone_deg(m.photo_sigma_deg(s, [0, 1, 2])) for s in sig])
+    assert np.mean(np.array(errs) <= cones) >= 0.9
+    assert m.as_dict()["common_ratio"] == pytest.approx(1.0 / 3.0)

@@ -198,7 +198,7 @@ class PhotoEstimate:
         stat = {i: s.fit.uncertainty_deg / np.sqrt(2.0) for i, s in enumerate(self.spheres)
                 if s.direction is not None and np.isfinite(s.fit.uncertainty_deg)}
         spheres = [replace(s, uncertainty_deg=float(model.cone_deg(np.hypot(model.sphere_sigma_deg(stat[i], i),
-                                                                       model.common_deg)))
+                                                                       model.common_sigma_deg(stat[i], i))))
                            if i in stat else None) for i, s in enumerate(self.spheres)]
         unc = self.uncertainty_deg
         if self.ok:

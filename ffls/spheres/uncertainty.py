@@ -30,8 +30,14 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    systematic errors is at most ``COMMON_CORRELATION = 0.25`` (the shared part's variance at most
    a third of the unshared part's), so the common-mode variance is at most
    ``rho / (1 - rho) * tau_s^2``, where ``tau_s^2`` is the per-sphere systematic variance that
-   the disagreement measured (``tau^2`` plus the part of ``s^2 sigma^2`` beyond the fit
-   statistics); plus ``COMMON_FLOOR_DEG`` (per axis) for the geometry shared by all spheres
+   the disagreement measured (``tau^2 + g_i^2`` plus the part of ``s^2 sigma_i^2`` beyond the fit
+   statistics, :meth:`ErrorModel.systematic_var_deg2`), averaged over the photo's spheres with
+   their inverse variances under the fitted model (:meth:`ErrorModel.common_sigma_deg`): each
+   photo (and each sphere's own cone) gets the bound of the spheres that carry information. A
+   capture-wide median over all spheres let an uninformative sphere set the bound: beside a matte
+   ball, a mirror ball whose highlight is uncertain by degrees gave the calibration shot of
+   ``docs/spheres.md`` a common mode of 2.4 degrees per axis, eight times the 95th percentile of its
+   matte ball's error. Plus ``COMMON_FLOOR_DEG`` (per axis) for the geometry shared by all spheres
    (camera pose, a bias of the detected radii) that even perfectly agreeing spheres carry. The
    bound was chosen on ffls synth renders (``docs/spheres.md``), where the measured common mode
    lies in this range except where the estimator itself is biased (noisy dark pixels): that bias
@@ -40,7 +46,7 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
-(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus the common mode. The cone is a
+(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode. The cone is a
 multiple of it, :attr:`ErrorModel.cone_factor`. A per-axis Gaussian on the tangent plane would
 give ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` (:data:`CONE_FACTOR`: the squared angle over the per-axis
 variance is chi-square with 2 degrees of freedom), but systematic errors are not Gaussian: bounded
@@ -212,8 +218,9 @@ class ErrorModel:
     floor_deg : float
         ``tau``: per-axis standard deviation (degrees) added, in quadrature, to each sphere.
     common_deg : float
-        Per-axis standard deviation (degrees) of the error shared by all spheres of a photo,
-        added to the photo's.
+        Per-axis standard deviation (degrees) of the error shared by all spheres of a photo: the
+        bound for the capture's median sphere (a summary), or, with ``common_ratio`` None, the
+        value added to every photo.
     source : {'disagreement', 'fallback'}
         Measured from the spheres' disagreement, or the stated single-sphere fallback.
     n_photos : int
@@ -228,6 +235,13 @@ class ErrorModel:
         (:func:`tail_factor`), or the Gaussian :data:`CONE_FACTOR`.
     n_tail : int
         Leave-one-out sphere offsets that measured ``cone_factor`` (0: the Gaussian factor).
+    common_ratio : float or None
+        ``rho / (1 - rho)``: the common mode's variance bound as a multiple of the systematic
+        variance of the spheres a direction is made from (:meth:`common_sigma_deg`), so that a
+        photo (or a sphere) gets its own bound. None: the fixed ``common_deg`` everywhere.
+    common_floor_deg : float
+        Per-axis common-mode floor (degrees) added in quadrature to the bound (with
+        ``common_ratio``).
     """
 
     scale: float
@@ -239,6 +253,8 @@ class ErrorModel:
     centre_deg: tuple = ()
     cone_factor: float = CONE_FACTOR
     n_tail: int = 0
+    common_ratio: float | None = None
+    common_floor_deg: float = COMMON_FLOOR_DEG
 
     def cone_deg(self, sigma_axis_deg):
         """95% cone radius (degrees) under this model: ``cone_factor * sigma_axis_deg``.
@@ -286,6 +302,47 @@ class ErrorModel:
         g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
         return np.sqrt((self.scale * s) ** 2 + g ** 2 + self.floor_deg ** 2)
 
+    def systematic_var_deg2(self, stat_sigma_deg, spheres=None) -> np.ndarray:
+        """Per-axis variance (degrees squared) of each sphere's systematic error: what its variance
+        holds beyond its fit statistics, ``tau^2 + g^2 + max(s^2 - 1, 0) sigma^2``.
+
+        Parameters
+        ----------
+        stat_sigma_deg : float or (k,) float
+        spheres : int or (k,) int, optional
+        """
+        s = np.asarray(stat_sigma_deg, dtype=np.float64)
+        g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
+        return self.floor_deg ** 2 + g ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
+
+    def common_sigma_deg(self, stat_sigma_deg, spheres=None) -> float:
+        """Per-axis standard deviation (degrees) of the common mode of a direction made from these
+        spheres (module docstring, part 3).
+
+        The bound ``rho / (1 - rho)`` times the systematic variance of the spheres
+        (:meth:`systematic_var_deg2`) averaged with the spheres' inverse variances under this
+        model (:meth:`sphere_sigma_deg`: the information each carries), plus
+        ``common_floor_deg``. Equal spheres give the capture-wide bound; among unequal ones a
+        sphere the model finds uninformative (a mirror ball whose highlight is uncertain by
+        degrees beside a precise matte ball) cannot set the bound of the error they share. With
+        ``common_ratio`` None, the fixed ``common_deg``.
+
+        Parameters
+        ----------
+        stat_sigma_deg : float or (k,) float
+            The spheres' statistical per-axis standard deviations (degrees).
+        spheres : int or (k,) int, optional
+        """
+        if self.common_ratio is None:
+            return float(self.common_deg)
+        s = np.atleast_1d(np.asarray(stat_sigma_deg, dtype=np.float64))
+        idx = None if spheres is None else np.atleast_1d(spheres)
+        w = _weights(self.sphere_sigma_deg(s, idx) ** 2)
+        if w is None:
+            return float("inf")
+        u = self.systematic_var_deg2(s, idx)
+        return float(np.sqrt(self.common_ratio * float(np.sum(w * u)) + self.common_floor_deg ** 2))
+
     def photo_sigma_deg(self, stat_sigma_deg, spheres=None, weights=None) -> float:
         """Per-axis standard deviation (degrees) of a photo's direction from its used spheres.
 
@@ -303,14 +360,13 @@ class ErrorModel:
         weights : (k,) float, optional
             The combination's weights of these spheres (normalised here).
         """
-        v = self.sphere_sigma_deg(np.atleast_1d(stat_sigma_deg), None if spheres is None else np.atleast_1d(spheres)) ** 2
-        if v.size == 0 or not np.all(np.isfinite(v)):
+        stat = np.atleast_1d(np.asarray(stat_sigma_deg, dtype=np.float64))
+        idx = None if spheres is None else np.atleast_1d(spheres)
+        v = self.sphere_sigma_deg(stat, idx) ** 2
+        w = _weights(v, weights)
+        if w is None:
             return float("inf")
-        w = None if weights is None else np.atleast_1d(np.asarray(weights, dtype=np.float64))
-        if w is not None and w.size == v.size and np.all(np.isfinite(w)) and np.all(w >= 0) and w.sum() > 0:
-            w = w / w.sum()
-            return float(np.sqrt(np.sum(w * w * v) + self.common_deg ** 2))
-        return float(np.sqrt(1.0 / np.sum(1.0 / np.maximum(v, 1e-300)) + self.common_deg ** 2))
+        return float(np.sqrt(np.sum(w * w * v) + self.common_sigma_deg(stat, idx) ** 2))
 
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
@@ -323,7 +379,21 @@ class ErrorModel:
         return {"scale": float(self.scale), "floor_deg": float(self.floor_deg), "common_deg": float(self.common_deg),
                 "centre_deg": [float(x) for x in self.centre_deg],
                 "source": self.source, "n_photos": int(self.n_photos), "n_trimmed": int(self.n_trimmed),
-                "cone_factor": float(self.cone_factor), "n_tail": int(self.n_tail), "confidence": CONFIDENCE}
+                "cone_factor": float(self.cone_factor), "n_tail": int(self.n_tail), "confidence": CONFIDENCE,
+                "common_ratio": None if self.common_ratio is None else float(self.common_ratio),
+                "common_floor_deg": float(self.common_floor_deg)}
+
+
+def _weights(v: np.ndarray, weights=None) -> np.ndarray | None:
+    """Normalised combination weights of spheres with variances ``v``: ``weights`` where usable,
+    else the inverse variances; None where ``v`` is empty or not finite."""
+    v = np.atleast_1d(np.asarray(v, dtype=np.float64))
+    if v.size == 0 or not np.all(np.isfinite(v)):
+        return None
+    w = None if weights is None else np.atleast_1d(np.asarray(weights, dtype=np.float64))
+    if w is None or w.size != v.size or not (np.all(np.isfinite(w)) and np.all(w >= 0) and w.sum() > 0):
+        w = 1.0 / np.maximum(v, 1e-300)
+    return w / w.sum()
 
 
 def centre_floor_deg(shift_px, radius_px) -> float:
@@ -357,6 +427,12 @@ def centre_floor_deg(shift_px, radius_px) -> float:
     return float(np.degrees(0.5 * d / r))
 
 
+def _ratio(correlation: float) -> float:
+    """``rho / (1 - rho)`` of a correlation bound (clipped to [0, 0.99])."""
+    rho = float(np.clip(correlation, 0.0, 0.99))
+    return rho / (1.0 - rho)
+
+
 def common_mode_deg(systematic_var_deg2: float, correlation: float = COMMON_CORRELATION,
                     floor_deg: float = COMMON_FLOOR_DEG) -> float:
     """Per-axis bound (degrees) of the common-mode error (module docstring, part 3).
@@ -383,7 +459,8 @@ def _fallback() -> ErrorModel:
     # no disagreement to measure: the statistics as they are, plus the stated floor (RMS -> per
     # axis) and its common-mode share
     tau = FALLBACK_FLOOR_DEG / np.sqrt(2.0)
-    return ErrorModel(scale=1.0, floor_deg=tau, common_deg=common_mode_deg(tau * tau), source="fallback")
+    return ErrorModel(scale=1.0, floor_deg=tau, common_deg=common_mode_deg(tau * tau), source="fallback",
+                      common_ratio=_ratio(COMMON_CORRELATION))
 
 
 #: The single-sphere model (no disagreement to measure): statistics plus ``FALLBACK_FLOOR_DEG``.
@@ -548,7 +625,8 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
                                  [scale * scale * s2 + g2 + tau * tau for (_, s2, g2), k in zip(data, keep) if k])
     return ErrorModel(scale=scale, floor_deg=float(np.degrees(tau)), common_deg=common,
                       source="disagreement", n_photos=int(keep.sum()), n_trimmed=n_trimmed,
-                      centre_deg=tuple(float(x) for x in centre), cone_factor=factor, n_tail=n_tail)
+                      centre_deg=tuple(float(x) for x in centre), cone_factor=factor, n_tail=n_tail,
+                      common_ratio=_ratio(common_correlation))
 
 
 def photo_residuals(directions: np.ndarray, light_direction: np.ndarray, position: np.ndarray | None = None,
