@@ -273,6 +273,20 @@ def test_lights_round_trip(tmp_path, rng):
     np.testing.assert_allclose(d, dirs[[0, 2]], atol=1e-15)
 
 
+def test_lights_uncertainty_record_round_trip_and_checked(tmp_path, rng):
+    """The top-level ``uncertainty`` record (how the cones were sized) is kept; a non-object is refused."""
+    names, _ = _make(tmp_path / "c")
+    c = cap.load_capture(tmp_path / "c")
+    rec = {"cone_factor": 2.61, "n_tail": 120, "scale": 1.4, "floor_deg": 0.2, "source": "disagreement"}
+    p = cap.save_lights(cap.Lights(names, _unit(rng, 3), uncertainty=rec), tmp_path / "c" / "lights.json")
+    assert cap.load_lights(p, c).uncertainty == rec
+    doc = json.loads(p.read_text())
+    doc["uncertainty"] = [2.61]
+    p.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="uncertainty: expected an object"):
+        cap.load_lights(p, c)
+
+
 def test_lights_reordered_to_capture(tmp_path, rng):
     names, _ = _make(tmp_path / "c")
     c = cap.load_capture(tmp_path / "c")

@@ -232,6 +232,8 @@ def test_lights_calibrates_four_spheres(linear_captures, tmp_path, capsys, true)
     # the other commands find the calibrated encoding in lights.json
     c, l2 = cap.load_capture_and_lights(folder)
     assert c.encoding == cap.encoding_from_record(rec) and l2.encoding == rec
+    # and how the cones were sized (the error model of ffls.spheres.uncertainty)
+    assert l2.uncertainty["confidence"] == 0.95 and l2.uncertainty["cone_factor"] > 0
 
 
 @pytest.mark.parametrize("true", [2.2, "linear"])

@@ -71,4 +71,4 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     pos = np.array([r.position if r.position is not None else np.full(3, np.nan) for r in est.photos])
     return Lights(image_names=capture.image_names, directions=dirs, positions=pos,
                   status=[r.status for r in est.photos], reasons=[r.reason for r in est.photos],
-                  extra=est.records())
+                  extra=est.records(), uncertainty=None if est.error_model is None else est.error_model.as_dict())

@@ -574,6 +574,10 @@ class Lights:
     path : pathlib.Path or None
         The file the lights were read from (:func:`load_capture_and_lights`), named in errors
         about them (e.g. no light has status ok); not written.
+    uncertainty : dict or None
+        How ``ffls lights`` sized the cones (the top-level ``"uncertainty"`` record of
+        ``lights.json``: :meth:`ffls.spheres.uncertainty.ErrorModel.as_dict`, e.g. ``cone_factor``,
+        ``n_tail``, ``scale``, ``floor_deg``, ``source``); kept as read, None when absent.
     """
 
     image_names: list
@@ -585,6 +589,7 @@ class Lights:
     note: str | None = field(default=None, compare=False)
     encoding: dict | None = None
     path: Path | None = field(default=None, compare=False)
+    uncertainty: dict | None = None
 
     def __post_init__(self):
         if self.encoding is not None:
@@ -632,6 +637,8 @@ class Lights:
         doc = {"format": "ffls-lights", "version": 1}
         if self.encoding is not None:
             doc["encoding"] = dict(self.encoding)
+        if self.uncertainty is not None:
+            doc["uncertainty"] = dict(self.uncertainty)
         doc["lights"] = lights
         return doc
 
@@ -750,9 +757,13 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
             encoding_from_record(record)
         except ValueError as e:
             j.fail("encoding", str(e))
+    uncertainty = doc.get("uncertainty")
+    if uncertainty is not None and not isinstance(uncertainty, dict):
+        j.fail("uncertainty", f"expected an object, got {_short(uncertainty)}")
     order = np.arange(len(names)) if capture is None else _order_to_capture(j, names, capture)
     return Lights(
         encoding=record,
+        uncertainty=uncertainty,
         image_names=[names[i] for i in order],
         directions=np.array(dirs)[order],
         positions=np.array(pos)[order],

@@ -1073,7 +1073,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     pos = np.array([r.position if r.position is not None else np.full(3, np.nan) for r in est.photos])
     return Lights(image_names=capture.image_names, directions=dirs, positions=pos,
                   status=[r.status for r in est.photos], reasons=[r.reason for r in est.photos],
-                  extra=est.records())
+                  extra=est.records(), uncertainty=None if est.error_model is None else est.error_model.as_dict())
 
 
 #: The paper's method under its name (GUIDE: one paper per function).
