@@ -44,6 +44,7 @@ def test_local_cluster_estimates_the_same_lights(cluster, synth_capture):
     np.testing.assert_array_equal(there.directions, here.directions)
     assert there.status == here.status and there.reasons == here.reasons
     assert [e.get("uncertainty_deg") for e in there.extra] == [e.get("uncertainty_deg") for e in here.extra]
+    assert there.uncertainty == here.uncertainty and here.uncertainty["confidence"] == 0.95
 
 
 def test_ingest_on_the_cluster_equals_the_serial_one(cluster, tmp_path):
