@@ -228,3 +228,28 @@ def test_viewer_engine_shows_the_level_that_fits(ctx, tmp_path):
         assert streamed.read_hdr().shape == (40, 56, 3)
     finally:
         eng.release()
+
+
+def test_local_cluster_is_quiet_when_the_dashboard_port_is_taken():
+    """Another Dask cluster on the machine holds port 8787: ffls's cluster starts without a warning
+    (distributed's "Port 8787 is already in use" would be a library's warning line)."""
+    import socket
+    import warnings
+
+    from ffls.cluster import open_client
+
+    s = socket.socket()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        s.bind(("0.0.0.0", 8787))
+        s.listen()
+    except OSError:  # already held by another process: the condition under test holds as well
+        pass
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with open_client(workers=1, progress=False) as runner:
+                assert runner.map(abs, [-1, -2]) == [1, 2]
+    finally:
+        s.close()
+    assert not [str(w.message) for w in caught if "8787" in str(w.message) or "socket" in str(w.message)]

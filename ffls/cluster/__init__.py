@@ -122,7 +122,11 @@ def open_client(workers: int | None = None, scheduler: str | None = None, progre
             client.close()
         return
     n = default_workers() if workers is None else max(1, int(workers))
+    # no dashboard, and the scheduler's HTTP routes on a free port: with its default (8787) a second
+    # cluster on the machine (another ffls run, a notebook) made distributed warn "Port 8787 is
+    # already in use", a library's warning line
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                           scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
                            silence_logs=logging.ERROR)
     try:
         client = Client(cluster)
