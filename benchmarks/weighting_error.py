@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/weighting_error.py [--lights 120] [--res 64] [--maps sky,studio,courtyard]
         [--rotations 0,40] [--dirs 2048] [--texture-res 512] [--json benchmarks/results/weighting_error.json]
+        [--rows spline,kriging] [--cache /tmp/NAME]
 
 ``--maps`` takes built-in map names and light-map files (``.exr``/``.hdr``, e.g.
 ``../shared/hdri/sunrise.exr``: real HDR maps, area-downsampled to ``--map-height`` rows).
@@ -28,6 +29,8 @@ from __future__ import annotations
 
 import argparse
 import time
+
+from pathlib import Path
 
 import numpy as np
 
@@ -115,10 +118,17 @@ def main(argv=None) -> int:
     ap.add_argument("--map-height", type=int, default=256)
     ap.add_argument("--texture-res", type=int, default=512)
     ap.add_argument("--json", default="benchmarks/results/weighting_error.json")
+    ap.add_argument("--rows", default=None,
+                    help="comma list of row labels to measure (e.g. spline,kriging,kriging@tex512; voronoi and "
+                         "barycentric always; default all rows and the spline leave-one-out choice)")
+    ap.add_argument("--cache", default=None, help="folder keeping the basis and the truths between runs")
     args = ap.parse_args(argv)
     scene = make_scene()
     d = stratified_directions(args.lights, "upper", seed=0)
-    basis = render_lights(scene, args.res, d)
+    cache = (Path(args.cache) / f"weighting_error_{args.lights}_{args.res}_{args.dirs}_{args.map_height}.npz"
+             if args.cache else None)
+    cached = dict(np.load(cache)) if cache is not None and cache.exists() else {}
+    basis = cached["basis"] if "basis" in cached else render_lights(scene, args.res, d)
     rots = [float(a) for a in args.rotations.split(",")]
     t0 = time.perf_counter()
     fit = fit_kernel(d, basis)
@@ -126,14 +136,19 @@ def main(argv=None) -> int:
           f"({fit.length / fit.spacing:g} light spacings), nugget {fit.nugget:g}; relative LOO error {fit.loo:.4f} "
           f"({time.perf_counter() - t0:.1f} s)")
     cfgs = variants(args.texture_res, fit.options)
+    if args.rows:
+        keep = set(args.rows.split(",")) | {"voronoi", "barycentric"}
+        cfgs = [c for c in cfgs if c[0] in keep]
     prepared = {}
     for label, s, opts, tr in cfgs:
         prepared[label] = ({"texture": bake_weights(d, s, "upper", res=tr, **opts)} if tr else
                            {"weighting": Weighting(d, s, "upper", **opts)} if s != "voronoi" else {})
-    loo_bound, loo_errs = spline_loo_choice(d, basis)
-    print("spline leave-one-out on the capture: " + ", ".join(f"L={b:g} {e:.4f}" for b, e in loo_errs.items())
-          + f" -> chosen L={loo_bound:g}")
-    loo_label = f"spline:L={loo_bound:g}" if loo_bound != DEFAULT_MAX_LEBESGUE else "spline"
+    loo_bound, loo_errs, loo_label = None, {}, None
+    if not args.rows:
+        loo_bound, loo_errs = spline_loo_choice(d, basis)
+        print("spline leave-one-out on the capture: " + ", ".join(f"L={b:g} {e:.4f}" for b, e in loo_errs.items())
+              + f" -> chosen L={loo_bound:g}")
+        loo_label = f"spline:L={loo_bound:g}" if loo_bound != DEFAULT_MAX_LEBESGUE else "spline"
     table = {label: {} for label, *_ in cfgs}
     table[ORACLE] = {}
     t0 = time.perf_counter()
@@ -154,7 +169,10 @@ def main(argv=None) -> int:
         errs[ORACLE] = []
         for a in rots:
             R = rotation_z(a)
-            truth = render_lightmap(scene, samples, args.res, n_dirs=args.dirs, rotation=R).astype(np.float64)
+            key = f"truth {name} {a:g}"
+            if key not in cached:
+                cached[key] = render_lightmap(scene, samples, args.res, n_dirs=args.dirs, rotation=R)
+            truth = cached[key].astype(np.float64)
             for label, s, opts, tr in cfgs:
                 w = integrate(samples, d, R, "upper", s, **prepared[label], **opts).weights
                 relit = relight_fast(w, basis).astype(np.float64)
@@ -164,6 +182,9 @@ def main(argv=None) -> int:
         for label in errs:
             table[label][name] = float(np.mean(errs[label]))
     maps = names
+    if cache is not None and not cache.exists():
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(cache, basis=basis, **{k: v for k, v in cached.items() if k != "basis"})
     print(f"{args.lights} lights, {args.res}^2, truth from {args.dirs} directions, rotations {args.rotations} "
           f"({time.perf_counter() - t0:.0f} s); relative RMS error")
     print(f"{'scheme':>28} " + " ".join(f"{m:>10}" for m in maps)
@@ -177,8 +198,9 @@ def main(argv=None) -> int:
         table[label]["worst_map_over_voronoi"] = float(worst)
         print(f"{label:>28} " + " ".join(f"{table[label][m]:>10.4f}" for m in maps)
               + f" {mean:>8.4f} {mean / ref:>9.3f} {mean / ref_b:>7.3f} {worst:>20.3f}")
-    print(f"spline, bound chosen by leave-one-out (L={loo_bound:g}): "
-          f"{table[loo_label]['mean'] / ref_b:.3f} of barycentric")
+    if loo_label is not None:
+        print(f"spline, bound chosen by leave-one-out (L={loo_bound:g}): "
+              f"{table[loo_label]['mean'] / ref_b:.3f} of barycentric")
     write_json(args.json, {"args": vars(args), "host": host_info(), "rel_rmse": table,
                            "kriging": {**fit.options, "loo": fit.loo, "spacing": fit.spacing},
                            "spline_loo": {"chosen": loo_bound, "errors": {str(b): e for b, e in loo_errs.items()}}})
