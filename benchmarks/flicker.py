@@ -8,7 +8,8 @@ Usage::
 A synthetic capture (``ffls.synth``: the default scene, ``--lights`` stratified upper-hemisphere
 directions, ``--res`` pixels) is relit under ``sky_sun_map`` (a 1-degree sun, 40 degrees up)
 rotated about +Z in ``--step``-degree steps over ``--frames`` frames, with every scheme
-(``ALL_SCHEMES``, ``spline`` included)
+(``ALL_SCHEMES``, ``spline`` included; the library-only ``kriging`` with its kernel learnt from the
+basis photos by leave-one-out, ``ffls.weights.kriging.fit_kernel``)
 (``ffls.weights.weighting.integrate``: the exact float64 weights, or with ``--texture-res R`` the
 baked weight texture the GPU reads). The measure (:func:`flicker`) is the RMS over frames and
 pixels of the second difference ``I[t+1] - 2 I[t] + I[t-1]`` over the RMS of the images: a box
@@ -70,10 +71,17 @@ def rotation_frames(basis, directions, lightmap, scheme: str, angles_deg, hemisp
 
 
 def scheme_flicker(basis, directions, lightmap, schemes=ALL_SCHEMES, frames: int = 120, step_deg: float = 1.0,
-                   start_deg: float = 0.0, hemisphere="upper", texture_res: int | None = None) -> dict:
-    """:func:`flicker` of every scheme for a rotation in ``step_deg`` steps; ``{scheme: value}``."""
+                   start_deg: float = 0.0, hemisphere="upper", texture_res: int | None = None,
+                   options: dict | None = None) -> dict:
+    """:func:`flicker` of every scheme for a rotation in ``step_deg`` steps; ``{scheme: value}``.
+
+    ``options``: ``{scheme: {option: value}}`` for the schemes that take some (e.g. ``kriging``'s
+    fitted kernel).
+    """
     angles = start_deg + step_deg * np.arange(int(frames))
-    return {s: flicker(rotation_frames(basis, directions, lightmap, s, angles, hemisphere, texture_res))
+    options = options or {}
+    return {s: flicker(rotation_frames(basis, directions, lightmap, s, angles, hemisphere, texture_res,
+                                       **options.get(s, {})))
             for s in schemes}
 
 
@@ -101,8 +109,12 @@ def main(argv=None) -> int:
     basis, d = synthetic_basis(args.lights, args.res)
     el = np.radians(args.sun_elevation)
     lm = sky_sun_map(args.map_height, sun_direction=(np.cos(el), 0.0, np.sin(el)))
+    from ffls.weights.kriging import fit_kernel
+
+    fit = fit_kernel(d, basis)
     t0 = time.perf_counter()
-    res = scheme_flicker(basis, d, lm, frames=args.frames, step_deg=args.step, texture_res=args.texture_res or None)
+    res = scheme_flicker(basis, d, lm, frames=args.frames, step_deg=args.step, texture_res=args.texture_res or None,
+                         options={"kriging": fit.options})
     dt = time.perf_counter() - t0
     print(f"{args.lights} lights, {args.res}^2, sky_sun_map({args.map_height}) sun at {args.sun_elevation:g} deg, "
           f"{args.frames} frames of {args.step:g} deg, weights {'texture ' + str(args.texture_res) if args.texture_res else 'exact'} "
@@ -110,7 +122,7 @@ def main(argv=None) -> int:
     print(f"{'scheme':>12} {'flicker':>10} {'voronoi / scheme':>17}")
     for s, v in res.items():
         print(f"{s:>12} {v:>10.3e} {res['voronoi'] / v if v > 0 else float('inf'):>17.1f}")
-    write_json(args.json, {"args": vars(args), "host": host_info(), "flicker": res,
+    write_json(args.json, {"args": vars(args), "host": host_info(), "flicker": res, "kriging": fit.options,
                            "ratio_to_voronoi": {s: res["voronoi"] / v if v > 0 else None for s, v in res.items()}})
     return 0
 

@@ -50,7 +50,7 @@ from ffls.relight.auto import estimate_errors, relight_quality, truncate
 from ffls.relight.compress import compress_basis
 from ffls.relight.quality import Quality, apply_near_correction, farthest_point_subset
 from ffls.synth import scene as synth
-from ffls.weights.weighting import SCHEMES
+from ffls.weights.weighting import EXTRA_SCHEMES, SCHEMES
 
 from common import device_info, device_line, host_info, write_json  # benchmarks/common.py
 
@@ -172,6 +172,39 @@ def near_experiment(scene, res, n, oracle_dirs, lm, quick=False):
     return rows
 
 
+def library_rows(basis, dirs, maps, truths, schemes=("barycentric", "spline") + EXTRA_SCHEMES):
+    """Relit error of the library-only schemes next to ``barycentric`` and ``spline``, errors only.
+
+    The library-only schemes (:data:`ffls.weights.weighting.EXTRA_SCHEMES`: ``kriging``, its
+    kernel learnt from ``basis`` by leave-one-out) have no ``Quality`` and are not timed; all rows
+    here use the exact float64 weights (``integrate``) and the full float32 basis, so they
+    compare with each other (the grid's rows store the basis in float16).
+    """
+    from ffls.relight.cpu import relight_fast
+    from ffls.weights.kriging import fit_kernel
+    from ffls.weights.weighting import Weighting, integrate
+
+    fit = fit_kernel(dirs, basis)
+    print(f"  kriging kernel by leave-one-out: nu {fit.nu:g}, length {fit.length:.3f} "
+          f"({fit.length / fit.spacing:g} spacings), nugget {fit.nugget:g}, LOO error {fit.loo:.4f}")
+    rows = []
+    for s in schemes:
+        opts = fit.options if s == "kriging" else {}
+        wt = Weighting(dirs, s, "upper", **opts)
+        row = {"weighting": s, "options": {k: v for k, v in opts.items()}}
+        for name, lm in maps.items():
+            errs = [rel_rmse(relight_fast(integrate(lm, dirs, rotation_z(yaw), "upper", s, weighting=wt, **opts).weights,
+                                          basis).astype(np.float64), truths[(name, yaw)]) for yaw in YAWS]
+            row[f"rel_rmse[{name}]"] = float(np.mean(errs))
+        row["mean_rel_rmse"] = float(np.mean([row[f"rel_rmse[{m}]"] for m in maps]))
+        rows.append(row)
+        print(f"  library row {s:<12} mean rel RMSE {row['mean_rel_rmse']:.4f}")
+    ref = next(r["mean_rel_rmse"] for r in rows if r["weighting"] == "barycentric")
+    for r in rows:
+        r["over_barycentric"] = r["mean_rel_rmse"] / ref
+    return rows
+
+
 def flicker_rows(basis, dirs, lm, frames: int = 40):
     """Flicker (benchmarks/flicker.py's metric: RMS of the second difference over the RMS image) of
     each scheme under a map with a sun turning in 1-degree steps; None where flicker.py is absent."""
@@ -243,6 +276,9 @@ def main():
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="a small grid (tests)")
     ap.add_argument("--no-near", action="store_true")
+    ap.add_argument("--library-only", action="store_true",
+                    help="only the library-only schemes' error rows (printed, and written to "
+                         "benchmarks/results/tradeoff_library.json); no grid, no times, docs untouched")
     ap.add_argument("--map-height", type=int, default=128, help="the maps are resampled to this height first")
     ap.add_argument("--cache", default=None, help="folder keeping the capture and the truths between runs")
     ap.add_argument("--out", default=str(ROOT / "docs" / "tradeoff.md"))
@@ -272,6 +308,12 @@ def main():
     if cache is not None and not cached:
         cache.parent.mkdir(parents=True, exist_ok=True)
         np.savez(cache, basis=basis, **{f"truth {k[0]} {k[1]:g}": v for k, v in truths.items()})
+    if a.library_only:
+        library = library_rows(basis, dirs, maps, truths)
+        write_json(str(Path(a.json).with_name("tradeoff_library.json")),
+                   {"host": host_info(), "lights": n, "res": a.res, "oracle_dirs": a.oracle_dirs, "maps": dict(MAPS),
+                    "yaws": YAWS, "library": library, "seconds": time.perf_counter() - t_start})
+        return
     configs = configurations(n, a.quick)
     max_rank = max((q.rank for q in configs if q.rank is not None), default=None)
     cb_full = compress_basis(basis, max_rank) if max_rank else None
@@ -300,6 +342,7 @@ def main():
         row["mean_psnr"] = float(np.mean([row[f"psnr[{m}]"] for m in maps]))
         rows.append(row)
         print(f"  {q.label():<40} mean rel RMSE {row['mean_rel_rmse']:.4f}  PSNR {row['mean_psnr']:.1f} dB")
+    library = library_rows(basis, dirs, maps, truths)
     ms, dev = time_configs(configs, n, a.time_res, a.reps, maps["overcast"])
     for r, t in zip(rows, ms or [None] * len(rows)):
         r["ms"] = t
@@ -317,7 +360,7 @@ def main():
     device = device_line(dev) if dev else "no GL"
     doc = {"host": host_info(), "device": dev, "lights": n, "res": a.res, "time_res": a.time_res,
            "oracle_dirs": a.oracle_dirs, "maps": dict(MAPS), "yaws": YAWS, "rows": rows, "estimate": est_rows,
-           "near": near, "flicker": fl, "seconds": time.perf_counter() - t_start}
+           "near": near, "flicker": fl, "library": library, "seconds": time.perf_counter() - t_start}
     write_json(a.json, doc)
     img = ROOT / "docs" / "images" / "tradeoff_pareto.png"
     if ms is not None:
@@ -349,6 +392,12 @@ def write_markdown(a, doc, names, device, img):
         L.append(f"| {lab} | {t} | {cells} | {row['mean_rel_rmse']:.4f} |")
     if img is not None:
         L += ["", f"![error against ms per frame](images/{img.name})"]
+    L += ["", "### Library-only schemes (exact float64 weights, float32 basis; errors only, not timed)", "",
+          "| weighting | " + " | ".join(f"{m} rRMSE" for m in names) + " | mean rRMSE | / barycentric |",
+          "|---|" + "---:|" * len(names) + "---:|---:|"]
+    for r in doc.get("library", []):
+        cells = " | ".join(f"{r[f'rel_rmse[{m}]']:.4f}" for m in names)
+        L.append(f"| {r['weighting']} | {cells} | {r['mean_rel_rmse']:.4f} | {r['over_barycentric']:.3f} |")
     L += ["", "### Leave-one-out estimate against the truth (what `--quality auto` sees without truth)", "",
           "| map | configuration | estimate | true |", "|---|---|---:|---:|"]
     for r in doc["estimate"]:

@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/weighting_error.py [--lights 120] [--res 64] [--maps sky,studio,courtyard]
         [--rotations 0,40] [--dirs 2048] [--texture-res 512] [--json benchmarks/results/weighting_error.json]
+        [--rows spline,kriging] [--cache /tmp/NAME]
 
 ``--maps`` takes built-in map names and light-map files (``.exr``/``.hdr``, e.g.
 ``../shared/hdri/sunrise.exr``: real HDR maps, area-downsampled to ``--map-height`` rows).
@@ -14,9 +15,10 @@ the map reduced to ``--dirs`` clustered directions) for each rotation about +Z. 
 relights the basis (``ffls.weights.weighting.integrate``: exact weights, and, with
 ``--texture-res``, the GPU's baked-texture lookup). Reported: relative RMS error
 ``||relit - truth|| / ||truth||`` per map (mean over rotations), and the mean over maps; a
-gaussian width sweep is included (``gaussian:k=..,w=...``), and an experiment not shipped as a
-scheme: ordinary kriging (GP) weights with the kernel width chosen by leave-one-out on the capture
-(:func:`kriging_setup`); and a floor, the least-squares fit of the photos to the truth
+gaussian width sweep is included (``gaussian:k=..,w=...``); the library-only ``kriging`` scheme
+(:mod:`ffls.weights.kriging`) with its Matérn kernel and nugget learnt from the basis photos by
+leave-one-out (:func:`ffls.weights.kriging.fit_kernel`, no ground truth), with its default 24
+slots per direction, exact and through the baked texture; and a floor, the least-squares fit of the photos to the truth
 (:func:`oracle_weights`). The ``spline`` scheme (:mod:`ffls.weights.spline`) is measured
 at its default, at other Lebesgue bounds, and at the bound chosen by leave-one-out on the capture
 itself (:func:`spline_loo_choice`: predict held-out photos from the others, no ground truth).
@@ -28,11 +30,14 @@ from __future__ import annotations
 import argparse
 import time
 
+from pathlib import Path
+
 import numpy as np
 
 from ffls.conventions import rotation_z
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.cpu import relight_fast
+from ffls.weights.kriging import fit_kernel
 from ffls.weights.spline import DEFAULT_MAX_LEBESGUE
 from ffls.weights.weighting import ALL_SCHEMES, Weighting, bake_weights, integrate
 
@@ -64,49 +69,6 @@ def spline_loo_choice(directions, basis, bounds=SPLINE_BOUNDS, n_held: int = 25,
     return min(errs, key=errs.get), errs
 
 
-def kriging_setup(directions, basis, sigmas_deg=(4, 6, 8, 11, 15, 20), nugget=1e-6, n_pixels=2000, seed=0):
-    """Ordinary kriging (GP) weights, the kernel width chosen by leave-one-out on the capture.
-
-    Covariance ``k(a, b) = exp((a . b - 1) / sigma^2)``; ordinary kriging (weights sum to 1, a
-    Lagrange multiplier): ``w(p) = P k(p) + q`` from the bordered system ``[[K, 1], [1^T, 0]]``.
-    Integrated against a map, ``W = P c + q E`` with ``c_j = sum L omega k(p, l_j)`` and ``E`` the
-    map's power in the hemisphere: energy is conserved exactly (``1^T P = 0``, ``1^T q = 1``).
-    ``sigma`` minimises the leave-one-out error of predicting each photo from the others on
-    ``n_pixels`` random pixels (closed form: ``r_i = (A^-1 Y)_i / (A^-1)_ii``).
-    """
-    rng = np.random.default_rng(seed)
-    n = directions.shape[0]
-    flat = basis.reshape(n, -1)
-    Y = flat[:, rng.choice(flat.shape[1], min(n_pixels, flat.shape[1]), replace=False)].astype(np.float64)
-    best = None
-    for sd in sigmas_deg:
-        s2 = np.radians(sd) ** 2
-        K = np.exp((directions @ directions.T - 1.0) / s2) + nugget * np.eye(n)
-        A = np.block([[K, np.ones((n, 1))], [np.ones((1, n)), np.zeros((1, 1))]])
-        Ai = np.linalg.inv(A)
-        r = (Ai[:n, :n] @ Y) / np.diag(Ai)[:n, None]
-        loo = float(np.sqrt(np.mean(r * r)) / np.sqrt(np.mean(Y * Y)))
-        if best is None or loo < best[0]:
-            best = (loo, sd, Ai[:n, :n], Ai[:n, n])
-    return {"loo": best[0], "sigma_deg": best[1], "P": best[2], "q": best[3]}
-
-
-def kriging_weights(samples, directions, R, kr) -> np.ndarray:
-    """Per-light weights (n, 3) of a light map rotated by ``R`` under :func:`kriging_setup`'s GP."""
-    from ffls.conventions import rotate_directions
-
-    dirs, rad, sa = samples
-    p = rotate_directions(R, np.asarray(dirs, dtype=np.float64))
-    keep = p[:, 2] >= 0
-    power = np.asarray(rad, dtype=np.float64)[keep] * np.asarray(sa, dtype=np.float64)[keep, None]
-    s2 = np.radians(kr["sigma_deg"]) ** 2
-    c = np.zeros((directions.shape[0], 3))
-    for a in range(0, power.shape[0], 8192):
-        k = np.exp((p[keep][a:a + 8192] @ directions.T - 1.0) / s2)
-        c += k.T @ power[a:a + 8192]
-    return kr["P"] @ c + kr["q"][:, None] * power.sum(axis=0)[None, :]
-
-
 #: The row of :func:`oracle_weights`.
 ORACLE = "oracle (lstsq on the truth)"
 
@@ -124,15 +86,21 @@ def oracle_weights(basis, truth) -> np.ndarray:
     return np.stack([np.linalg.lstsq(b[:, :, c].T, t[:, c], rcond=None)[0] for c in range(3)], axis=1)
 
 
-def variants(texture_res: int) -> list:
-    """(label, scheme, options, texture_res or None) of every configuration measured."""
-    out = [(s, s, {}, None) for s in ALL_SCHEMES]
+def variants(texture_res: int, kriging_options: dict) -> list:
+    """(label, scheme, options, texture_res or None) of every configuration measured.
+
+    ``kriging_options``: the kernel :func:`ffls.weights.kriging.fit_kernel` learnt (``KernelFit.options``).
+    """
+    def opts(s):
+        return dict(kriging_options) if s == "kriging" else {}
+
+    out = [(s, s, opts(s), None) for s in ALL_SCHEMES]
     out += [(f"spline:L={b:g}", "spline", {"max_lebesgue": b}, None) for b in SPLINE_BOUNDS
             if b != DEFAULT_MAX_LEBESGUE]
     out += [(f"gaussian:k={k},w={w}", "gaussian", {"k": k, "width": w}, None)
             for k, w in ((4, 0.2), (4, 0.5), (6, 0.3), (8, 0.25))]
     if texture_res:
-        out += [(f"{s}@tex{texture_res}", s, {}, texture_res) for s in ALL_SCHEMES if s != "voronoi"]
+        out += [(f"{s}@tex{texture_res}", s, opts(s), texture_res) for s in ALL_SCHEMES if s != "voronoi"]
     return out
 
 
@@ -150,24 +118,38 @@ def main(argv=None) -> int:
     ap.add_argument("--map-height", type=int, default=256)
     ap.add_argument("--texture-res", type=int, default=512)
     ap.add_argument("--json", default="benchmarks/results/weighting_error.json")
+    ap.add_argument("--rows", default=None,
+                    help="comma list of row labels to measure (e.g. spline,kriging,kriging@tex512; voronoi and "
+                         "barycentric always; default all rows and the spline leave-one-out choice)")
+    ap.add_argument("--cache", default=None, help="folder keeping the basis and the truths between runs")
     args = ap.parse_args(argv)
     scene = make_scene()
     d = stratified_directions(args.lights, "upper", seed=0)
-    basis = render_lights(scene, args.res, d)
+    cache = (Path(args.cache) / f"weighting_error_{args.lights}_{args.res}_{args.dirs}_{args.map_height}.npz"
+             if args.cache else None)
+    cached = dict(np.load(cache)) if cache is not None and cache.exists() else {}
+    basis = cached["basis"] if "basis" in cached else render_lights(scene, args.res, d)
     rots = [float(a) for a in args.rotations.split(",")]
-    cfgs = variants(args.texture_res)
+    t0 = time.perf_counter()
+    fit = fit_kernel(d, basis)
+    print(f"kriging kernel by leave-one-out on the capture: Matern nu={fit.nu:g}, length {fit.length:.3f} "
+          f"({fit.length / fit.spacing:g} light spacings), nugget {fit.nugget:g}; relative LOO error {fit.loo:.4f} "
+          f"({time.perf_counter() - t0:.1f} s)")
+    cfgs = variants(args.texture_res, fit.options)
+    if args.rows:
+        keep = set(args.rows.split(",")) | {"voronoi", "barycentric"}
+        cfgs = [c for c in cfgs if c[0] in keep]
     prepared = {}
     for label, s, opts, tr in cfgs:
         prepared[label] = ({"texture": bake_weights(d, s, "upper", res=tr, **opts)} if tr else
                            {"weighting": Weighting(d, s, "upper", **opts)} if s != "voronoi" else {})
-    kr = kriging_setup(d, basis)
-    print(f"kriging: sigma {kr['sigma_deg']} deg by leave-one-out (relative LOO error {kr['loo']:.3f})")
-    loo_bound, loo_errs = spline_loo_choice(d, basis)
-    print("spline leave-one-out on the capture: " + ", ".join(f"L={b:g} {e:.4f}" for b, e in loo_errs.items())
-          + f" -> chosen L={loo_bound:g}")
-    loo_label = f"spline:L={loo_bound:g}" if loo_bound != DEFAULT_MAX_LEBESGUE else "spline"
+    loo_bound, loo_errs, loo_label = None, {}, None
+    if not args.rows:
+        loo_bound, loo_errs = spline_loo_choice(d, basis)
+        print("spline leave-one-out on the capture: " + ", ".join(f"L={b:g} {e:.4f}" for b, e in loo_errs.items())
+              + f" -> chosen L={loo_bound:g}")
+        loo_label = f"spline:L={loo_bound:g}" if loo_bound != DEFAULT_MAX_LEBESGUE else "spline"
     table = {label: {} for label, *_ in cfgs}
-    table["kriging (GP, LOO width)"] = {}
     table[ORACLE] = {}
     t0 = time.perf_counter()
     names = []
@@ -184,22 +166,25 @@ def main(argv=None) -> int:
             lm = lm.downsample(h // args.map_height)
         samples = lm.samples()
         errs = {label: [] for label, *_ in cfgs}
-        errs["kriging (GP, LOO width)"] = []
         errs[ORACLE] = []
         for a in rots:
             R = rotation_z(a)
-            truth = render_lightmap(scene, samples, args.res, n_dirs=args.dirs, rotation=R).astype(np.float64)
+            key = f"truth {name} {a:g}"
+            if key not in cached:
+                cached[key] = render_lightmap(scene, samples, args.res, n_dirs=args.dirs, rotation=R)
+            truth = cached[key].astype(np.float64)
             for label, s, opts, tr in cfgs:
                 w = integrate(samples, d, R, "upper", s, **prepared[label], **opts).weights
                 relit = relight_fast(w, basis).astype(np.float64)
                 errs[label].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
-            relit = relight_fast(kriging_weights(samples, d, R, kr), basis).astype(np.float64)
-            errs["kriging (GP, LOO width)"].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
             relit = relight_fast(oracle_weights(basis, truth), basis).astype(np.float64)
             errs[ORACLE].append(float(np.linalg.norm(relit - truth) / np.linalg.norm(truth)))
         for label in errs:
             table[label][name] = float(np.mean(errs[label]))
     maps = names
+    if cache is not None and not cache.exists():
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(cache, basis=basis, **{k: v for k, v in cached.items() if k != "basis"})
     print(f"{args.lights} lights, {args.res}^2, truth from {args.dirs} directions, rotations {args.rotations} "
           f"({time.perf_counter() - t0:.0f} s); relative RMS error")
     print(f"{'scheme':>28} " + " ".join(f"{m:>10}" for m in maps)
@@ -213,10 +198,11 @@ def main(argv=None) -> int:
         table[label]["worst_map_over_voronoi"] = float(worst)
         print(f"{label:>28} " + " ".join(f"{table[label][m]:>10.4f}" for m in maps)
               + f" {mean:>8.4f} {mean / ref:>9.3f} {mean / ref_b:>7.3f} {worst:>20.3f}")
-    print(f"spline, bound chosen by leave-one-out (L={loo_bound:g}): "
-          f"{table[loo_label]['mean'] / ref_b:.3f} of barycentric")
+    if loo_label is not None:
+        print(f"spline, bound chosen by leave-one-out (L={loo_bound:g}): "
+              f"{table[loo_label]['mean'] / ref_b:.3f} of barycentric")
     write_json(args.json, {"args": vars(args), "host": host_info(), "rel_rmse": table,
-                           "kriging": {"sigma_deg": kr["sigma_deg"], "loo": kr["loo"]},
+                           "kriging": {**fit.options, "loo": fit.loo, "spacing": fit.spacing},
                            "spline_loo": {"chosen": loo_bound, "errors": {str(b): e for b, e in loo_errs.items()}}})
     return 0
 

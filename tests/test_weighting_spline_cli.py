@@ -52,7 +52,7 @@ def test_spline_is_offered_by_every_command_and_the_panel():
     from viewer import command as view
     from viewer.state import QUALITY_KNOBS
 
-    assert "spline" in SCHEMES and "spline" in WEIGHTINGS and EXTRA_SCHEMES == ()
+    assert "spline" in SCHEMES and "spline" in WEIGHTINGS and "spline" not in EXTRA_SCHEMES
     knob = {k.key: k for k in QUALITY_KNOBS}["weighting"]
     assert "spline" in knob.choices and knob.default == "voronoi"
     assert Quality(weighting="spline").weighting == "spline"

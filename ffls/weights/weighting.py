@@ -19,6 +19,12 @@ One entry point, :func:`cell_weights` (``scheme=``), over five schemes, each wit
     of unity over the Delaunay triangulation, :mod:`ffls.weights.spline`): higher order than
     barycentric, interpolating, continuous; its weights may be negative.
 
+``'kriging'`` (library only, :data:`EXTRA_SCHEMES`)
+    Universal-kriging (Gaussian-process) weights with a Matérn kernel and a nugget, its
+    parameters learnt from the capture's photos by leave-one-out
+    (:func:`ffls.weights.kriging.fit_kernel`; :mod:`ffls.weights.kriging`): smooth, signed, the
+    ``slots`` largest weights per direction kept.
+
 Every scheme gives each direction a sparse set of lights and weights that sum to 1, so
 integrating a light map (:func:`integrate`) conserves its power exactly: the weights summed over
 the lights plus the dropped power (outside the hemisphere) equal the map's total, to float64
@@ -44,6 +50,7 @@ from ffls.conventions import check_hemisphere, in_domain, is_rotation, rotate_di
 from ffls.lightmaps.lightmap import as_samples
 from ffls.weights import antialiased as _aa
 from ffls.weights import gaussian as _ga
+from ffls.weights import kriging as _kr
 from ffls.weights import spline as _sp
 from ffls.weights.barycentric import Barycentric
 from ffls.weights.voronoi import Weights, assign_cells, cell_map_name, integrate_weights, unique_directions
@@ -55,8 +62,9 @@ __all__ = ["SCHEMES", "EXTRA_SCHEMES", "ALL_SCHEMES", "DEFAULT_SCHEME", "SMOOTH_
 
 #: The weighting schemes (``--weighting``).
 SCHEMES = ("voronoi", "antialiased", "barycentric", "gaussian", "spline")
-#: Library-only schemes, not offered by ``--weighting`` (none: ``spline`` joined :data:`SCHEMES`).
-EXTRA_SCHEMES = ()
+#: Library-only schemes, not offered by ``--weighting``: ``kriging`` needs the capture's photos to
+#: learn its kernel (:func:`ffls.weights.kriging.fit_kernel`), which the commands do not pass yet.
+EXTRA_SCHEMES = ("kriging",)
 #: Every scheme :class:`Weighting` accepts.
 ALL_SCHEMES = SCHEMES + EXTRA_SCHEMES
 #: The default (the paper's box filter) until the measurements say otherwise (docs/weighting.md).
@@ -64,7 +72,7 @@ DEFAULT_SCHEME = "voronoi"
 #: Schemes whose weights are continuous in the direction.
 SMOOTH_SCHEMES = ("barycentric", "gaussian")
 #: Schemes whose weights may be negative (higher-order interpolants).
-SIGNED_SCHEMES = ("spline",)
+SIGNED_SCHEMES = ("spline", "kriging")
 #: Options each scheme accepts, with their defaults.
 OPTIONS = {
     "voronoi": {},
@@ -72,6 +80,7 @@ OPTIONS = {
     "barycentric": {},
     "gaussian": {"k": _ga.DEFAULT_K, "width": _ga.DEFAULT_WIDTH},
     "spline": {"k": _sp.DEFAULT_K, "blend": _sp.DEFAULT_BLEND, "max_lebesgue": _sp.DEFAULT_MAX_LEBESGUE},
+    "kriging": {"nu": _kr.DEFAULT_NU, "length": None, "nugget": _kr.DEFAULT_NUGGET, "slots": _kr.DEFAULT_SLOTS},
 }
 #: Default resolution of a :class:`WeightTexture` (texels per side).
 DEFAULT_TEXTURE_RES = 512
@@ -98,6 +107,8 @@ def texture_slots(scheme: str, **options) -> int:
         return int(opts["k"])
     if scheme == "spline":  # the union of 3 overlapping neighbourhoods: rarely more than 1.5 k lights
         return (3 * int(opts["k"]) + 1) // 2
+    if scheme == "kriging":
+        return int(opts["slots"])
     return 4  # antialiased: a cap rarely meets more than 3 cells; a 4th slot for vertices of 4
 
 
@@ -136,14 +147,16 @@ class Weighting:
     directions : (n, 3) array_like
         Light directions (world frame; normalised here). Exact duplicates: the first copy takes
         the weight, later ones get 0 (as :mod:`ffls.weights.voronoi`).
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline', 'kriging'}
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
     **options
         Scheme options (:data:`OPTIONS`): ``antialiased``: ``width_deg`` (cap radius, degrees),
         ``samples``; ``gaussian``: ``k`` (lights per direction), ``width`` (sigma over the angle to
         the (k+1)-th nearest light); ``spline``: ``k`` (vertices per local spline), ``blend``
         (the splines' share against barycentric, in [0, 1]), ``max_lebesgue`` (bound on
-        ``sum |w|``).
+        ``sum |w|``); ``kriging``: ``nu``, ``length`` (chord; None: from the light spacing),
+        ``nugget``, ``slots`` (:class:`ffls.weights.kriging.Kriging`; learn the first three from the
+        photos with :func:`ffls.weights.kriging.fit_kernel`, ``KernelFit.options``).
     """
 
     def __init__(self, directions, scheme: str = DEFAULT_SCHEME, hemisphere="upper", **options):
@@ -158,6 +171,8 @@ class Weighting:
                                         self.options["max_lebesgue"]) if scheme == "spline" else None)
         self._density = (_ga.light_density(self.directions, self._keep, self._tree, self.options["k"],
                                            self.options["width"]) if scheme == "gaussian" else None)
+        self._kriging = (_kr.Kriging(self.directions, self._keep, self.options["nu"], self.options["length"],
+                                     self.options["nugget"], self.options["slots"]) if scheme == "kriging" else None)
 
     @property
     def n_lights(self) -> int:
@@ -202,6 +217,8 @@ class Weighting:
             idx, w = self._bary(p)
         elif self.scheme == "spline":
             idx, w = self._spline(p)
+        elif self.scheme == "kriging":
+            idx, w = self._kriging(p)
         else:
             idx, w = _ga.weights_gaussian(p, self.directions, self._keep, self._tree, self.options["k"],
                                           self.options["width"], density=self._density)
@@ -217,7 +234,7 @@ def cell_weights(directions, query, scheme: str = DEFAULT_SCHEME, hemisphere="up
         Light directions.
     query : (m, 3) array_like
         Directions to weight (world frame).
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline', 'kriging'}
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
     **options
         As :class:`Weighting`.
@@ -353,7 +370,7 @@ def bake_weights(directions, scheme: str, hemisphere="upper", res: int = DEFAULT
     ----------
     directions : (n, 3) array_like
         Light directions (world frame).
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline', 'kriging'}
         (``'voronoi'`` is baked too, with one slot, though the engine uses its exact cell texture.)
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
         ``upper``: the concentric map; otherwise the octahedral map.
@@ -409,7 +426,7 @@ def integrate(lightmap_or_samples, directions, rotation=None, hemisphere="upper"
     rotation : (3, 3) array_like, optional
         Light-map rotation (content at ``d`` moves to ``R d``).
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
-    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline'}
+    scheme : {'voronoi', 'antialiased', 'barycentric', 'gaussian', 'spline', 'kriging'}
     texture : WeightTexture, optional
         Look the weights up in this baked texture (the GPU's path) instead of evaluating them at
         every direction. Must be baked from the same directions, hemisphere and scheme.
