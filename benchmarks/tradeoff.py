@@ -172,7 +172,7 @@ def near_experiment(scene, res, n, oracle_dirs, lm, quick=False):
     return rows
 
 
-def library_rows(basis, dirs, maps, truths, schemes=("barycentric", "spline") + EXTRA_SCHEMES):
+def library_rows(basis, dirs, maps, truths, schemes=("barycentric", "spline", "kriging") + EXTRA_SCHEMES):
     """Relit error of the library-only schemes next to ``barycentric`` and ``spline``, errors only.
 
     The library-only schemes (:data:`ffls.weights.weighting.EXTRA_SCHEMES`: ``kriging``, its

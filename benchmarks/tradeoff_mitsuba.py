@@ -16,7 +16,8 @@ interreflections, contact shadows, the rough-plastic cube's gloss) renders
 * the truth again with another seed. The truth is the mean of the two; half their relative
   difference is its own noise, which is also given subtracted in quadrature.
 
-Each weighting scheme (:data:`ffls.weights.weighting.SCHEMES`) relights the capture on the CPU in
+Each weighting scheme (:data:`ffls.weights.weighting.ALL_SCHEMES`; ``kriging`` with its kernel
+learnt from the capture's photos, :func:`ffls.weights.kriging.fit_kernel`) relights the capture on the CPU in
 float64 from the true light directions (:class:`ffls.relight.cpu.CpuRelighter`: the reference the
 GPU passes are tested against), so the numbers are the schemes' accuracy alone, not the light
 estimation's. The error is ``tradeoff.py``'s relative RMSE and PSNR of the tone-mapped images.
@@ -46,7 +47,9 @@ from ffls.io.images import read_image, write_exr
 from ffls.lightmaps.lightmap import load_lightmap
 from ffls.relight.cpu import CpuRelighter
 from ffls.synth.scene import stratified_directions
-from ffls.weights.weighting import SCHEMES
+from ffls.radiance.photos import load_photos
+from ffls.weights.kriging import fit_kernel
+from ffls.weights.weighting import ALL_SCHEMES
 
 ROOT = Path(__file__).resolve().parents[1]
 FOV_DEG = 40.0
@@ -90,7 +93,7 @@ def main():
     ap.add_argument("--truth-spp", type=int, default=1024)
     ap.add_argument("--maps", default="sunrise.exr,studio.exr,courtyard.exr")
     ap.add_argument("--yaws", default="0,130")
-    ap.add_argument("--schemes", default=",".join(SCHEMES))
+    ap.add_argument("--schemes", default=",".join(ALL_SCHEMES))
     ap.add_argument("--threads", type=int, default=2, help="Mitsuba's threads (at least 2: with one, loading an "
                                                              "envmap scene hangs in Mitsuba 3.x)")
     ap.add_argument("--cache", default="/tmp/ffls_bench_tradeoff_mitsuba")
@@ -121,7 +124,13 @@ def main():
             scenes.append((mname, yaw, env, 0.5 * (truth + again), 0.5 * rel_rmse(again, truth)))
     print(f"truths ready ({time.perf_counter() - t0:.0f} s)", flush=True)
     schemes = [s for s in a.schemes.split(",") if s]
-    relighters = {s: CpuRelighter.from_capture(capture, lights, precision="f64", cell_max_res=4096, weighting=s)
+    options = {}
+    if "kriging" in schemes:  # its kernel learnt from the capture's own photos, by leave-one-out
+        fit = fit_kernel(dirs, load_photos(capture, progress=False))
+        options["kriging"] = fit.options
+        print(f"kriging kernel learnt from the photos by leave-one-out: {fit.describe()}", flush=True)
+    relighters = {s: CpuRelighter.from_capture(capture, lights, precision="f64", cell_max_res=4096, weighting=s,
+                                               weighting_options=options.get(s))
                   for s in schemes}
     rows = []
     for mname, yaw, env, truth, floor in scenes:
@@ -147,7 +156,8 @@ def main():
         print(f"  {s:12s} {m:.4f} / {c:.4f}{ratio}")
     write_json(a.out, {"lights": a.lights, "resolution": a.res, "spp": a.spp, "truth_spp": a.truth_spp,
                        "renderer": f"mitsuba {mi.__version__} scalar_rgb path max_depth 8", "host": host_info(),
-                       "seconds": time.perf_counter() - t0, "mean": summary, "rows": rows})
+                       "seconds": time.perf_counter() - t0, "kriging_kernel": options.get("kriging"),
+                       "mean": summary, "rows": rows})
 
 
 if __name__ == "__main__":

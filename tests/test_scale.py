@@ -139,7 +139,8 @@ def test_cli_streamed_relight_follows_the_quality_knobs(tmp_path, capsys, knobs)
     assert np.max(np.abs(y - z)) > 2 ** -8 * np.max(np.abs(x))  # the scheme did change the streamed result
 
 
-@pytest.mark.parametrize("flag", [["--basis-subset", "3"], ["--quality", "auto", "--max-error", "0.1"]])
+@pytest.mark.parametrize("flag", [["--basis-subset", "3"], ["--quality", "auto", "--max-error", "0.1"],
+                                  ["--weighting", "kriging"]])
 def test_cli_streamed_refuses_in_memory_knobs_in_one_line(tmp_path, capsys, flag):
     from ffls.cli import main
 

@@ -67,8 +67,9 @@ def test_duplicates_get_no_weight_and_nearly_equal_lights_share():
         near = np.concatenate([d, d[:1] + 1e-9])
         w = integrate(paper_map(32), near, None, "upper", scheme)
         one = integrate(paper_map(32), d, None, "upper", scheme)
-        # cells split exactly; the gaussian kernel is declustered by light density (about)
-        rtol = 0.2 if scheme == "gaussian" else 1e-5  # 14 % measured (12 lights, k = 4)
+        # cells split exactly; the gaussian kernel is declustered by light density (about); kriging
+        # with a nugget counts two photos at one direction as two noisy samples of it, worth more
+        rtol = {"gaussian": 0.2, "kriging": 0.1}.get(scheme, 1e-5)  # 14 % (12 lights, k = 4); 5.7 %
         np.testing.assert_allclose(w.weights[0] + w.weights[12], one.weights[0], rtol=rtol, err_msg=scheme)
 
 
@@ -124,6 +125,8 @@ def test_light_weights_single_light():
         assert np.isclose(w.sum(), 1.0)
         if scheme == "gaussian":  # a smoothing kernel: the light shares with its neighbours
             assert w[3] > 0.1
+        elif scheme == "kriging":  # its nugget smooths: the light keeps most, not all (0.92 here)
+            assert np.argmax(w) == 3 and 0.5 < w[3] < 1.0
         else:
             assert np.argmax(w) == 3 and np.isclose(w[3], 1.0)
     with pytest.raises(ValueError, match="outside"):

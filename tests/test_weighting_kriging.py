@@ -27,8 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from directions import random_directions  # noqa: E402  (tests/directions.py, beside this file)
 
 
-def test_kriging_is_a_library_scheme_and_checks_its_options():
-    assert "kriging" in EXTRA_SCHEMES and "kriging" not in SCHEMES and "kriging" in SIGNED_SCHEMES
+def test_kriging_is_offered_and_checks_its_options():
+    assert "kriging" in SCHEMES and "kriging" not in EXTRA_SCHEMES and "kriging" in SIGNED_SCHEMES
     assert texture_slots("kriging") == 24 and texture_slots("kriging", slots=8) == 8
     d = random_directions(20, 1)
     for bad in ({"nu": 1.0}, {"nugget": 0.0}, {"nugget": float("nan")}, {"length": -1.0}, {"slots": 0}):

@@ -59,7 +59,7 @@ def test_spline_is_offered_by_every_command_and_the_panel():
     for mod in (relight, render, view, composite):  # the shared flag: parsed, default voronoi
         p = argparse.ArgumentParser()
         mod.add_arguments(p)
-        assert "{voronoi,antialiased,barycentric,gaussian,spline}" in p.format_help(), mod.__name__
+        assert "{voronoi,antialiased,barycentric,gaussian,spline,kriging}" in p.format_help(), mod.__name__
         assert p.get_default("weighting") == "voronoi", mod.__name__
 
 

@@ -345,16 +345,18 @@ def add_lights_arguments(p) -> None:
 
 #: Weighting schemes of pass 1 (``--weighting``; ffls.weights.weighting.SCHEMES, spelled here so
 #: that parsing imports no SciPy; a test keeps the two equal).
-WEIGHTINGS = ("voronoi", "antialiased", "barycentric", "gaussian", "spline")
+WEIGHTINGS = ("voronoi", "antialiased", "barycentric", "gaussian", "spline", "kriging")
 
 
 def add_weighting_argument(p) -> None:
-    """``--weighting voronoi|antialiased|barycentric|gaussian|spline`` (relight, render, view, composite)."""
+    """``--weighting voronoi|antialiased|barycentric|gaussian|spline|kriging`` (relight, render, view, composite)."""
     p.add_argument("--weighting", default="voronoi", choices=WEIGHTINGS,
                    help="how a light-map direction is shared among the lights: voronoi (the paper's box filter, "
                         "default), antialiased (soft cell borders), barycentric (spherical triangles), gaussian "
                         "(von Mises-Fisher kernel over the nearest lights), spline (local thin-plate splines: the most "
-                        "accurate, signed weights, pass 1 4-10x barycentric's cost); docs/weighting.md")
+                        "accurate of the local schemes, signed weights, pass 1 4-10x barycentric's cost), kriging (a "
+                        "Gaussian process whose kernel is learnt from the photos by leave-one-out: the most accurate "
+                        "measured, signed weights, spline's pass-1 cost plus seconds to learn); docs/weighting.md")
 
 
 def light_direction(text: str) -> tuple[float, float]:

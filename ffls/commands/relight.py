@@ -69,6 +69,9 @@ def run(args) -> int:
     write_output(out, image, display, mask)
     kept = w.total_power.sum() - w.dropped_power.sum()
     frac = kept / w.total_power.sum() if w.total_power.sum() > 0 else 1.0
+    kernel = getattr(getattr(r, "kernel", None), "fit", None)
+    if kernel is not None:
+        print(f"ffls relight: kriging kernel learnt from the photos by leave-one-out: {kernel.describe()}")
     print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "
           f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used, {args.weighting} weighting)")
     return 0

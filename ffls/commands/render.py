@@ -222,6 +222,9 @@ def run(args) -> int:
         path = "cpu reference" if args.cpu else f"gpu {info.get('dtype', '')}"
         rank = info.get("rank") if not args.cpu else getattr(getattr(r, "compressed", None), "rank", None)
         what_light = (f"light az {args.light[0]:g} el {args.light[1]:g}, " if args.light is not None else "")
+        kernel = getattr(getattr(r, "kernel", None), "fit", None)
+        if kernel is not None:
+            print(f"ffls render: kriging kernel learnt from the photos by leave-one-out: {kernel.describe()}")
         print(f"ffls render: {what} ({path}, {r.n_lights} lights{'' if rank is None else f', rank {rank}'}, "
               f"{what_light}{getattr(r, 'weighting', args.weighting)} weighting)")
     finally:

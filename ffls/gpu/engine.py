@@ -31,6 +31,7 @@ from ffls.gpu.integrate import CellIntegrator
 from ffls.gpu.weighted_sum import DEFAULT_METHOD, Projector, ToneMapPass, WeightedSum, default_method, weights_to_vec4
 from ffls.relight.basis import capture_basis
 from ffls.relight.quality import integration_map
+from ffls.weights.kriging import KernelLearner
 
 __all__ = ["Engine", "gpu_frame_ms"]
 
@@ -121,6 +122,8 @@ class Engine:
         self._hdr_stored = True  # False while pass 2 has written only the display image (_store_hdr)
         self._pass2_source = None  # the buffer pass 2 last read its weights from
         self._pending_weights = None  # set_weights' bytes, written at the next render
+        #: Kriging's kernel, learnt from this basis when first chosen (:class:`ffls.weights.kriging.KernelLearner`).
+        self.kernel = KernelLearner(d, basis)
         self.set_weighting(weighting, weights_res, **(weighting_options or {}))
         self._lightmap = None
         self._rotation = np.eye(3)
@@ -221,10 +224,12 @@ class Engine:
 
         ``res``: resolution of the smooth schemes' weight texture (default
         :data:`ffls.weights.weighting.DEFAULT_TEXTURE_RES`); ``options``: the scheme's options.
-        The texture is baked at the next render.
+        The texture is baked at the next render. ``'kriging'`` without options uses the kernel
+        learnt from this basis (:class:`ffls.weights.kriging.KernelLearner`).
         """
         from ffls.weights.weighting import DEFAULT_TEXTURE_RES, texture_slots
 
+        options = self.kernel.options_for(scheme, options)
         texture_slots(scheme, **options)  # checks the scheme and its options
         key = (scheme, DEFAULT_TEXTURE_RES if res is None else int(res), tuple(sorted(options.items())))
         if key == getattr(self, "_weighting_key", None):

@@ -49,12 +49,13 @@ __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor",
 
 #: Ranks K whose K + 1 layers fill whole blocks of 8 float16 layers (the packed pass 2's unit).
 BLOCK_RANKS = (7, 15, 23, 31, 63)
-#: Weighting schemes every automatic choice considers: all but ``spline``, which is added only when
-#: the base quality names it (``--weighting spline --quality auto``). Its leave-one-out floor, its
+#: Weighting schemes every automatic choice considers: all but ``spline`` and ``kriging``, each added
+#: only when the base quality names it (``--weighting spline --quality auto``; kriging's candidates
+#: are measured with its default kernel, :data:`ffls.weights.kriging.DEFAULT_NU` etc.). Its leave-one-out floor, its
 #: exact-weight reference and its timing double the measurement (64 lights, 64 px, studio map:
 #: 2.5 s -> 5.4 s, the choice unchanged; docs/tradeoff.md), its pass 1 costs 4-10x barycentric's,
 #: and on llvmpipe its full-size map is refused (its candidates then time as ``inf``).
-AUTO_WEIGHTINGS = tuple(s for s in SCHEMES if s != "spline")
+AUTO_WEIGHTINGS = tuple(s for s in SCHEMES if s not in ("spline", "kriging"))
 #: Map heights tried for pass 1 (None = the map as given).
 MAP_HEIGHTS = (None, 64)
 

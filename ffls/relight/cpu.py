@@ -23,6 +23,7 @@ from ffls.relight.basis import capture_basis
 from ffls.relight.compress import CompressedBasis, compress_basis, load_or_compress
 from ffls.relight.quality import integration_map
 from ffls.relight.storage import store_basis
+from ffls.weights.kriging import KernelLearner
 from ffls.weights.voronoi import Weights, bake_cells, integrate_weights
 from ffls.weights.weighting import Weighting, integrate as integrate_scheme
 from ffls.relight.inputs import WeightsInputs
@@ -180,6 +181,8 @@ class CpuRelighter(WeightsInputs):
         self.cells = None
         self.weighting = None
         self._weighting = None
+        #: Kriging's kernel, learnt from this basis when first chosen (:class:`ffls.weights.kriging.KernelLearner`).
+        self.kernel = KernelLearner(d, basis)
         self.set_weighting(weighting, **(weighting_options or {}))
         #: :class:`ffls.weights.voronoi.Weights` of the last render (None before the first, or after set_weights).
         self.last_weights: Weights | None = None
@@ -228,7 +231,12 @@ class CpuRelighter(WeightsInputs):
         self._weights = None
 
     def set_weighting(self, scheme: str = "voronoi", **options) -> None:
-        """Use weighting ``scheme`` (:mod:`ffls.weights.weighting`) from the next render on."""
+        """Use weighting ``scheme`` (:mod:`ffls.weights.weighting`) from the next render on.
+
+        ``'kriging'`` without options uses the kernel learnt from this basis
+        (:class:`ffls.weights.kriging.KernelLearner`).
+        """
+        options = self.kernel.options_for(scheme, options)
         if scheme == "voronoi":
             if options:
                 raise ValueError("weighting 'voronoi' takes no options")

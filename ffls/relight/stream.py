@@ -407,6 +407,9 @@ class StreamedRelighter(WeightsInputs):
         self.level = int(level)
         self.progress = progress
         self.weighting = str(weighting)
+        if self.weighting == "kriging":  # its kernel is learnt from photos in memory (KernelLearner)
+            raise InputError("--weighting kriging learns its kernel from the photos in memory and is not "
+                             "available tile by tile from a store (--memory); choose another --weighting", field.path)
         self.map_res = None if map_res is None else int(map_res)
         self.cells = None if cell_res is None or self.weighting != "voronoi" else bake_cells(
             self.directions, self.hemisphere, res=cell_res, k=cell_k, max_res=cell_max_res)

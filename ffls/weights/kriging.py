@@ -44,8 +44,9 @@ with the capture; the nugget is a share of the field's variance (the weights dep
 Measured (docs/weighting.md, "Kriging with a kernel learnt from the capture"): 0.812 of
 barycentric's relit error on four real HDR maps (100 lights, three rotations; ``spline`` 0.903),
 0.610 on ``benchmarks/tradeoff.py``'s capture (``spline`` 0.700); issue 12's 0.8 is not reached
-on the first. Library only (:data:`ffls.weights.weighting.EXTRA_SCHEMES`): the commands do not
-pass the photos to learn the kernel from yet.
+on the first; 0.752 on independent Mitsuba renders (``benchmarks/tradeoff_mitsuba.py``).
+Offered by ``--weighting kriging``: each relighter learns the kernel from its own basis when the
+scheme is first chosen (:class:`KernelLearner`).
 """
 from __future__ import annotations
 
@@ -54,7 +55,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["NUS", "LENGTH_FACTORS", "NUGGETS", "DEFAULT_NU", "DEFAULT_LENGTH_FACTOR", "DEFAULT_NUGGET",
-           "DEFAULT_SLOTS", "matern", "light_spacing", "KernelFit", "loo_errors", "fit_kernel", "Kriging"]
+           "DEFAULT_SLOTS", "matern", "light_spacing", "KernelFit", "loo_errors", "fit_kernel", "Kriging",
+           "KernelLearner"]
 
 #: Matérn smoothness parameters offered (closed forms: exponential, once and twice differentiable).
 NUS = (0.5, 1.5, 2.5)
@@ -150,6 +152,12 @@ class KernelFit:
     def options(self) -> dict:
         """The :class:`ffls.weights.weighting.Weighting` options of this kernel."""
         return {"nu": self.nu, "length": self.length, "nugget": self.nugget}
+
+    def describe(self) -> str:
+        """One line: the kernel and its leave-one-out error."""
+        return (f"Matern nu {self.nu:g}, length {self.length:.3g} (chord; {self.length / self.spacing:.2g} light "
+                f"spacings), nugget {self.nugget:g}; "
+                f"leave-one-out error {self.loo:.3g}")
 
 
 def _sample_pixels(photos, n: int, n_pixels: int, seed: int) -> np.ndarray:
@@ -346,3 +354,53 @@ class Kriging:
             index[a:a + chunk, :s] = self.keep[top]
             weight[a:a + chunk, :s] = wt
         return index, weight
+
+
+class KernelLearner:
+    """The kriging kernel of one basis, learnt when first asked for (what the relighters hold).
+
+    A relighter keeps one: it samples the basis's pixels once (the few thousand :func:`fit_kernel`
+    uses, so the photos need not be kept) and learns the kernel the first time ``'kriging'`` is
+    chosen without options (``--weighting kriging``, the viewer's knob), then reuses it.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        The basis's light directions.
+    basis : (n, ...) array_like
+        The basis photos (linear).
+    """
+
+    def __init__(self, directions, basis):
+        self.directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        n = self.directions.shape[0]
+        self._pixels, self._why = None, None
+        if n < 5:
+            self._why = f"needs at least 5 lights, not {n}"
+        else:
+            try:
+                self._pixels = _sample_pixels(basis, n, _LOO_PIXELS, 0)  # the pixels fit_kernel(basis) uses
+            except ValueError as e:  # NaN or Inf in the photos
+                self._why = f"cannot use these photos: {e}"
+        #: The learnt :class:`KernelFit` (None until first needed).
+        self.fit: KernelFit | None = None
+
+    def options_for(self, scheme: str, options: dict) -> dict:
+        """``options``, or for ``'kriging'`` without options the kernel learnt from the basis.
+
+        Raises
+        ------
+        ffls.errors.InputError
+            Fewer than 5 lights (no kernel can be learnt by leave-one-out), or photos with NaN or Inf.
+        """
+        if scheme != "kriging" or options:
+            return dict(options)
+        if self.fit is None:
+            if self._pixels is None:
+                from ffls.errors import InputError
+
+                raise InputError(f"--weighting kriging learns its kernel from the photos by leave-one-out and "
+                                 f"{self._why}; choose another --weighting")
+            self.fit = fit_kernel(self.directions, self._pixels)
+        return self.fit.options
+

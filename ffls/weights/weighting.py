@@ -19,7 +19,7 @@ One entry point, :func:`cell_weights` (``scheme=``), over five schemes, each wit
     of unity over the Delaunay triangulation, :mod:`ffls.weights.spline`): higher order than
     barycentric, interpolating, continuous; its weights may be negative.
 
-``'kriging'`` (library only, :data:`EXTRA_SCHEMES`)
+``'kriging'``
     Universal-kriging (Gaussian-process) weights with a Matérn kernel and a nugget, its
     parameters learnt from the capture's photos by leave-one-out
     (:func:`ffls.weights.kriging.fit_kernel`; :mod:`ffls.weights.kriging`): smooth, signed, the
@@ -61,10 +61,10 @@ __all__ = ["SCHEMES", "EXTRA_SCHEMES", "ALL_SCHEMES", "DEFAULT_SCHEME", "SMOOTH_
            "texture_slots"]
 
 #: The weighting schemes (``--weighting``).
-SCHEMES = ("voronoi", "antialiased", "barycentric", "gaussian", "spline")
-#: Library-only schemes, not offered by ``--weighting``: ``kriging`` needs the capture's photos to
-#: learn its kernel (:func:`ffls.weights.kriging.fit_kernel`), which the commands do not pass yet.
-EXTRA_SCHEMES = ("kriging",)
+SCHEMES = ("voronoi", "antialiased", "barycentric", "gaussian", "spline", "kriging")
+#: Library-only schemes, not offered by ``--weighting`` (none now: ``kriging`` is offered, its kernel
+#: learnt by the relighters from their basis, :class:`ffls.weights.kriging.KernelLearner`).
+EXTRA_SCHEMES = ()
 #: Every scheme :class:`Weighting` accepts.
 ALL_SCHEMES = SCHEMES + EXTRA_SCHEMES
 #: The default (the paper's box filter) until the measurements say otherwise (docs/weighting.md).

@@ -1,0 +1,95 @@
+"""``--weighting kriging`` in the commands: the relighters learn its kernel from their own basis.
+
+Tolerances as ``tests/test_weighting_spline_cli.py``: the CPU relight equals
+``relight_reference`` of the exact float64 weights of the kernel that
+:func:`ffls.weights.kriging.fit_kernel` learns from the same photos, to 1e-4 of the image's
+maximum (float32 storage); the GPU render equals the reference of the weight-texture lookup
+(``integrate(..., texture=bake_weights(...))``) with that kernel, to 1e-4 of the maximum.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from test_weighting_spline_cli import _basis, _capture
+
+
+def _learnt(d, basis):
+    from ffls.weights.kriging import fit_kernel
+
+    return fit_kernel(d, basis).options
+
+
+def test_cli_relight_kriging_uses_the_kernel_learnt_from_the_photos(tmp_path, capsys):
+    from ffls.cli import main
+    from ffls.conventions import rotation_z
+    from ffls.io.images import read_image
+    from ffls.lightmaps.lightmap import lightmap_from_spec
+    from ffls.relight.cpu import relight_reference
+    from ffls.weights.weighting import integrate
+
+    folder = _capture(tmp_path)
+    capture, basis, d = _basis(folder)
+    opts = _learnt(d, basis)
+    out = tmp_path / "r.exr"
+    assert main(["relight", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "kriging",
+                 "-o", str(out)]) == 0
+    assert "kriging kernel learnt from the photos by leave-one-out: Matern nu" in capsys.readouterr().out
+    w = integrate(lightmap_from_spec("sky"), d, rotation_z(30), capture.hemisphere, "kriging", **opts)
+    ref = relight_reference(w.weights, basis)
+    got = read_image(out).pixels
+    np.testing.assert_allclose(got, ref, atol=1e-4 * np.abs(ref).max())
+    # a kernel other than the learnt one gives another image: the learning is what was used
+    other = {**opts, "length": 2.0 * opts["length"]}
+    w2 = integrate(lightmap_from_spec("sky"), d, rotation_z(30), capture.hemisphere, "kriging", **other)
+    assert np.abs(relight_reference(w2.weights, basis) - got).max() > 1e-3 * np.abs(ref).max()
+
+
+def test_relighter_learns_once_and_explicit_options_win():
+    from ffls.relight.cpu import CpuRelighter
+
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(12, 3))
+    d[:, 2] = np.abs(d[:, 2]) + 0.2
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    basis = rng.random((12, 6, 5, 3)).astype(np.float32)
+    CpuRelighter(basis, d, weighting="kriging")  # learns at construction, without error
+    from ffls.weights.kriging import KernelLearner
+
+    k = KernelLearner(d, basis)
+    assert k.fit is None
+    a = k.options_for("kriging", {})
+    assert k.fit is not None and k.options_for("kriging", {}) == a  # learnt once
+    assert k.options_for("kriging", {"nu": 0.5}) == {"nu": 0.5}  # explicit options win
+    assert k.options_for("spline", {}) == {}
+
+
+def test_kriging_needs_five_lights_in_one_line(tmp_path, capsys):
+    from ffls.cli import main
+
+    folder = _capture(tmp_path, n=4)
+    assert main(["relight", str(folder), "--probe", "sky", "--weighting", "kriging", "-o", str(tmp_path / "x.exr")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--weighting kriging" in err[0] and "at least 5 lights" in err[0], err
+    assert not (tmp_path / "x.exr").exists()
+
+
+@pytest.mark.gl
+def test_cli_render_kriging_on_the_gpu_matches_the_reference(ctx, tmp_path):
+    from ffls.cli import main
+    from ffls.conventions import rotation_z
+    from ffls.io.images import read_image
+    from ffls.lightmaps.lightmap import lightmap_from_spec
+    from ffls.relight.cpu import relight_reference
+    from ffls.weights.weighting import DEFAULT_TEXTURE_RES, bake_weights, integrate
+
+    folder = _capture(tmp_path)
+    capture, basis, d = _basis(folder)
+    opts = _learnt(d, basis)
+    gpu = tmp_path / "g.exr"
+    assert main(["render", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "kriging",
+                 "--dtype", "f32", "-o", str(gpu)]) == 0
+    tex = bake_weights(d, "kriging", capture.hemisphere, DEFAULT_TEXTURE_RES, **opts)
+    w = integrate(lightmap_from_spec("sky"), d, rotation_z(30), capture.hemisphere, "kriging", texture=tex, **opts)
+    ref = relight_reference(w.weights, basis)
+    np.testing.assert_allclose(read_image(gpu).pixels, ref, atol=1e-4 * np.abs(ref).max())
