@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test_weighting_spline_cli import _basis, _capture
+from test_weighting_spline_cli import capture_and_basis, small_capture
 
 
 def _learnt(d, basis):
@@ -28,8 +28,8 @@ def test_cli_relight_kriging_uses_the_kernel_learnt_from_the_photos(tmp_path, ca
     from ffls.relight.cpu import relight_reference
     from ffls.weights.weighting import integrate
 
-    folder = _capture(tmp_path)
-    capture, basis, d = _basis(folder)
+    folder = small_capture(tmp_path)
+    capture, basis, d = capture_and_basis(folder)
     opts = _learnt(d, basis)
     out = tmp_path / "r.exr"
     assert main(["relight", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "kriging",
@@ -67,7 +67,7 @@ def test_relighter_learns_once_and_explicit_options_win():
 def test_kriging_needs_five_lights_in_one_line(tmp_path, capsys):
     from ffls.cli import main
 
-    folder = _capture(tmp_path, n=4)
+    folder = small_capture(tmp_path, n=4)
     assert main(["relight", str(folder), "--probe", "sky", "--weighting", "kriging", "-o", str(tmp_path / "x.exr")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--weighting kriging" in err[0] and "at least 5 lights" in err[0], err
@@ -83,8 +83,8 @@ def test_cli_render_kriging_on_the_gpu_matches_the_reference(ctx, tmp_path):
     from ffls.relight.cpu import relight_reference
     from ffls.weights.weighting import DEFAULT_TEXTURE_RES, bake_weights, integrate
 
-    folder = _capture(tmp_path)
-    capture, basis, d = _basis(folder)
+    folder = small_capture(tmp_path)
+    capture, basis, d = capture_and_basis(folder)
     opts = _learnt(d, basis)
     gpu = tmp_path / "g.exr"
     assert main(["render", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "kriging",

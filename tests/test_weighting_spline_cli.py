@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 
-def _capture(tmp_path, n=20):
+def small_capture(tmp_path, n=20):
     from ffls.synth.scene import write_synthetic_capture
 
     folder = tmp_path / "cap"
@@ -24,7 +24,7 @@ def _capture(tmp_path, n=20):
     return folder
 
 
-def _basis(folder):
+def capture_and_basis(folder):
     from ffls.relight.basis import accepted_basis
     from viewer.app import open_capture
 
@@ -81,8 +81,8 @@ def test_cli_relight_spline_matches_the_numpy_reference(tmp_path, capsys):
     from ffls.relight.cpu import relight_reference
     from ffls.weights.weighting import integrate
 
-    folder = _capture(tmp_path)
-    capture, basis, d = _basis(folder)
+    folder = small_capture(tmp_path)
+    capture, basis, d = capture_and_basis(folder)
     out = tmp_path / "r.exr"
     assert main(["relight", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "spline",
                  "-o", str(out)]) == 0
@@ -106,8 +106,8 @@ def test_cli_render_spline_on_the_gpu_matches_the_reference(ctx, tmp_path, capsy
     from ffls.relight.cpu import relight_reference
     from ffls.weights.weighting import DEFAULT_TEXTURE_RES, bake_weights, integrate
 
-    folder = _capture(tmp_path)
-    capture, basis, d = _basis(folder)
+    folder = small_capture(tmp_path)
+    capture, basis, d = capture_and_basis(folder)
     gpu, cpu = tmp_path / "g.exr", tmp_path / "c.exr"
     assert main(["render", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "spline",
                  "--dtype", "f32", "-o", str(gpu)]) == 0
@@ -151,7 +151,7 @@ def test_cli_render_refuses_a_map_too_large_for_spline_in_one_line(ctx, tmp_path
 
     if pass1_buffer_bytes(2 * 512 * 512, "spline") <= int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 0):
         pytest.skip("this GPU's storage buffers take a 1024 x 512 map under spline")
-    folder = _capture(tmp_path, n=12)
+    folder = small_capture(tmp_path, n=12)
     probe = _big_map(tmp_path / "big.exr")
     out = tmp_path / "x.exr"
     capsys.readouterr()
@@ -176,9 +176,9 @@ def test_viewer_spline_knob_and_its_refusal(ctx, tmp_path):
     from viewer.renderer import Renderer, pass1_lightmap
     from viewer.state import ViewerState
 
-    folder = _capture(tmp_path, n=16)
+    folder = small_capture(tmp_path, n=16)
     capture, lights = open_capture(folder)
-    _, basis, d = _basis(folder)
+    _, basis, d = capture_and_basis(folder)
     st = ViewerState(lightmap="sky", tonemap="srgb", yaw=25.0)
     st.quality["method"] = "full f32"
     st.quality["weighting"] = "spline"
