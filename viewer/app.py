@@ -333,6 +333,14 @@ class ViewerApp:
         if others:
             render(sub_draw_data(dd, others))
 
+    def redraw(self) -> None:
+        """Draw the last frame's window again into the back buffer (the same imgui draw data), with
+        the control panel's texture brought up to date; nothing is stepped, polled or swapped."""
+        if self._frame is None:
+            raise RuntimeError("ViewerApp.redraw: no frame was drawn yet (call step first)")
+        self._make_current()
+        self._draw_window(*self._frame, force=True)
+
     def _draw_image(self, info, fbw: int, fbh: int):
         """The relit image, opaque, where the GUI laid it out (``state.image_rect``), under the GUI.
 
@@ -406,8 +414,9 @@ class ViewerApp:
         -------
         dict
             ``frames``, ``mean_ms``, ``median_ms``, ``fps`` (1000 / mean), ``cpu_ms`` (mean CPU
-            time per frame), and ``passes``: the mean ms of each engine pass and part of the frame
-            over the frames where it ran.
+            time per frame), ``panel_redraws`` (how many times the control panel was drawn into its
+            texture, over all frames; None without :attr:`gui_cache`), and ``passes``: the mean ms
+            of each engine pass and part of the frame over the frames where it ran.
         """
         rows = self.stats[skip:] if len(self.stats) > skip else self.stats
         ms = np.array([r["frame_ms"] for r in rows]) if rows else np.zeros(0)
@@ -416,7 +425,8 @@ class ViewerApp:
         mean = float(ms.mean()) if ms.size else float("nan")
         cpu = float(np.mean([r["cpu_ms"] for r in rows])) if rows else float("nan")
         return {"frames": int(ms.size), "mean_ms": mean, "median_ms": float(np.median(ms)) if ms.size else mean,
-                "fps": 1000.0 / mean if ms.size and mean > 0 else float("nan"), "cpu_ms": cpu, "passes": passes}
+                "fps": 1000.0 / mean if ms.size and mean > 0 else float("nan"), "cpu_ms": cpu, "passes": passes,
+                "panel_redraws": None if self.gui_cache is None else self.gui_cache.redraws}
 
     # ------------------------------------------------------------------ actions
     def read_window(self) -> np.ndarray:
