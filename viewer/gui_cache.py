@@ -38,6 +38,7 @@ __all__ = ["GuiCache", "PANEL_INTERVAL", "content_key", "list_bounds", "rects_ov
 #: Seconds between redraws of the panel's texture when only an animation changed it (10 a second).
 PANEL_INTERVAL = 0.1
 _VERT_FLOATS = 5  # ImDrawVert: pos (2 float), uv (2 float), col (uint32): 20 bytes
+_IDX_BYTES = 4  # ImDrawIdx: imgui-bundle builds imgui with 32-bit indices
 
 
 def _vertex_bytes(dl) -> bytes:
@@ -112,7 +113,7 @@ def content_key(lists) -> tuple:
     key = []
     for dl in lists:
         n_idx = dl.idx_buffer.size()
-        idx = ctypes.string_at(dl.idx_buffer.data_address(), 2 * n_idx) if n_idx else b""
+        idx = ctypes.string_at(dl.idx_buffer.data_address(), _IDX_BYTES * n_idx) if n_idx else b""
         cmds = tuple((c.clip_rect.x, c.clip_rect.y, c.clip_rect.z, c.clip_rect.w, int(c.get_tex_id()),
                       c.elem_count, c.idx_offset, c.vtx_offset) for c in dl.cmd_buffer)
         key.append((_vertex_bytes(dl), idx, cmds))
