@@ -203,6 +203,99 @@ def test_window_draws_the_relit_image_where_the_gui_laid_it_out(fresh):
     assert flipped > 3 * max(np.abs(win - ref).mean(), 1.0)  # not upside down
 
 
+def _window_of(app, cached: bool):
+    """The last frame's window redrawn with (True) or without (False) the panel's texture."""
+    cache = app.gui_cache
+    if not cached:
+        app.gui_cache = None
+    try:
+        app.redraw()
+        return app.read_window().astype(int)
+    finally:
+        app.gui_cache = cache
+
+
+@pytest.mark.viewer
+def test_cached_panel_draws_the_same_pixels_as_imgui(fresh):
+    """The control panel copied from its texture (viewer.gui_cache) is imgui's own draw of it, to
+    one 8-bit code value; so is the whole window (the image, the background around it)."""
+    app = fresh
+    assert app.gui_cache is not None
+    app.state.preview_mode = "lightmap"
+    app.state.yaw = 33.0
+    app.step(dt=0.0)
+    app.state.show_help = True  # a second window over the panel and the image: drawn live, on top
+    for _ in range(3):
+        app.step(dt=0.0)
+    try:
+        for _ in range(2):
+            cached, live = _window_of(app, True), _window_of(app, False)
+            diff = np.abs(cached - live)
+            assert diff.max() <= 1 and (diff > 0).mean() < 1e-3
+            assert cached[:, :300].std() > 10  # the panel is there (text, preview), not a flat colour
+            app.state.show_help = False
+            app.step(dt=0.0)
+    finally:
+        app.state.show_help = False
+    assert app.ctx.error == "GL_NO_ERROR"
+
+
+@pytest.mark.viewer
+def test_panel_redraws_at_once_when_used_and_ten_times_a_second_when_animated(fresh):
+    """Readouts that an animation moves (auto-rotation: the yaw slider, the frame-time plot) redraw
+    the panel's texture at most every PANEL_INTERVAL of the viewer's clock; with the mouse over the
+    panel every change is drawn at once; a read of the window always shows the current panel."""
+    from viewer.gui_cache import PANEL_INTERVAL
+
+    app = fresh
+    st = app.state
+    x0, y0, x1, y1 = (int(round(v)) for v in st.image_rect)
+    app.glfw.set_cursor_pos(app.window, (x0 + x1) / 2, (y0 + y1) / 2)  # over the image, not the panel
+    st.auto_rotate, st.auto_rotate_speed = True, 30.0
+    try:
+        app.step(dt=0.0)
+        app.step(dt=PANEL_INTERVAL)
+        n0, dt = app.gui_cache.redraws, PANEL_INTERVAL / 5
+        for _ in range(20):  # 4 intervals of the clock, the yaw changes every frame
+            app.step(dt=dt)
+        n = app.gui_cache.redraws - n0
+        assert 3 <= n <= 5
+        st.yaw = st.yaw + 10.0  # within PANEL_INTERVAL of the last redraw: put off
+        app.step(dt=0.0)
+        assert app.gui_cache.stale  # the last frame's yaw was not drawn yet ...
+        shown = app.read_window().astype(int)  # ... but a read of the window draws it first
+        assert not app.gui_cache.stale
+        assert np.abs(shown - _window_of(app, False)).max() <= 1
+        app.glfw.set_cursor_pos(app.window, 40.0, 40.0)  # over the panel: every change at once
+        n0 = app.gui_cache.redraws
+        for _ in range(5):
+            app.step(dt=dt)
+        assert app.gui_cache.redraws - n0 == 5 and not app.gui_cache.stale
+    finally:
+        st.auto_rotate = False
+        app.glfw.set_cursor_pos(app.window, -1.0, -1.0)
+
+
+def test_uncovered_is_the_window_less_the_rectangles():
+    from viewer.gui_cache import uncovered
+
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        w, h = (int(v) for v in rng.integers(1, 60, 2))
+        rects = []
+        for _ in range(int(rng.integers(0, 4))):
+            a, b = sorted(rng.integers(-5, w + 5, 2)), sorted(rng.integers(-5, h + 5, 2))
+            rects.append((a[0], b[0], a[1], b[1]))
+        covered = np.zeros((h, w), dtype=int)
+        for r in rects:
+            covered[max(r[1], 0):max(r[3], 0), max(r[0], 0):max(r[2], 0)] = 1
+        got = np.zeros((h, w), dtype=int)
+        for x, y, rw, rh in uncovered(w, h, rects + [None]):
+            assert rw > 0 and rh > 0
+            got[y:y + rh, x:x + rw] += 1
+        np.testing.assert_array_equal(got, 1 - covered)  # each uncovered pixel exactly once
+
+
 @pytest.mark.viewer
 def test_rotation_180_changes_and_360_restores(fresh):
     app = fresh

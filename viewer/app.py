@@ -24,7 +24,10 @@ from ffls.errors import GLUnavailable, InputError
 from viewer import headless as platforms
 from viewer.state import ViewerState
 
-__all__ = ["ViewerApp", "open_capture"]
+__all__ = ["ViewerApp", "open_capture", "CLEAR_COLOUR"]
+
+#: The window's background (RGBA), around the relit image and under the control panel.
+CLEAR_COLOUR = (0.09, 0.09, 0.1, 1.0)
 
 
 def open_capture(folder, lights=None, lights_map=None):
@@ -61,6 +64,9 @@ class ViewerApp:
     profile : bool
         Also wait for the GPU after each engine pass to time it (``ffls view --profile``); the
         passes then no longer overlap the frame's CPU work, so frames are slower.
+    cache_gui : bool
+        Draw the control panel into a texture when it changes and copy it to the window otherwise
+        (:mod:`viewer.gui_cache`); False: imgui draws it every frame.
 
     Attributes
     ----------
@@ -68,6 +74,8 @@ class ViewerApp:
     renderer : viewer.renderer.Renderer
     ctx : moderngl.Context
     platform : {'null', 'desktop'}
+    gui_cache : viewer.gui_cache.GuiCache or None
+        The control panel's texture (None when ``cache_gui`` is False).
     stats : list of dict
         Per frame: ``frame_ms`` (wall time of :meth:`step`), ``cpu_ms`` (CPU time of the process
         over it, llvmpipe's threads included), the engine passes that ran and the parts of the
@@ -76,7 +84,7 @@ class ViewerApp:
 
     def __init__(self, capture, lights, state: ViewerState | None = None, *, headless: bool | None = None,
                  mask_path=None, vsync: bool = True, title: str = "ffls view", timing: bool = False,
-                 composite=None, profile: bool = False):
+                 composite=None, profile: bool = False, cache_gui: bool = True):
         from viewer.renderer import Renderer, load_mask
 
         self.state = state if state is not None else ViewerState()
@@ -87,6 +95,8 @@ class ViewerApp:
         self.ctx = None
         self._dialog = None
         self._blit_vao = None
+        self.gui_cache = None
+        self._frame = None  # (ViewInfo, framebuffer width, height) of the last frame drawn
         self._sink = self._sink_job = None  # turntable FrameWriter and the job it records
         self.frames_rendered = 0
         self.stats: list[dict] = []
@@ -126,10 +136,15 @@ class ViewerApp:
 
             self._blit = load_program(self.ctx, "display_blit.glsl")
             self._blit_vao = self.ctx.vertex_array(self._blit, [])
+            if cache_gui:
+                from viewer.gui_cache import GuiCache
+
+                self.gui_cache = GuiCache(self.ctx)
             self.renderer.info.image_drawn_by_window = True
             self._init_imgui()
             glfw.set_drop_callback(self.window, self.on_drop)
             self._t_last = None
+            self._clock = 0.0  # seconds of animation (the sum of step's dt): paces the panel's redraws
         except BaseException:
             self.close()
             raise
@@ -207,6 +222,7 @@ class ViewerApp:
         if dt is None:
             dt = 0.0 if self._t_last is None else now - self._t_last
         self._t_last = now
+        self._clock += dt
         glfw.poll_events()
         st.window_size = tuple(glfw.get_window_size(self.window))
         self._poll_dialog()
@@ -229,11 +245,8 @@ class ViewerApp:
         imgui.render()
         t_draw, c_draw = time.perf_counter(), time.process_time()
 
-        self.ctx.screen.use()
-        self.ctx.viewport = (0, 0, fbw, fbh)
-        self.ctx.clear(0.09, 0.09, 0.1, 1.0)
-        self._draw_image(info, fbw, fbh)
-        imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
+        self._frame = (info, fbw, fbh)
+        self._draw_window(info, fbw, fbh, interactive=self._panel_interactive())
         if self.timing:
             self.ctx.finish()  # charge the window's drawing to this frame, not to the next pass 1
         t_swap, c_swap = time.perf_counter(), time.process_time()
@@ -257,8 +270,82 @@ class ViewerApp:
                            "cpu: update": (c_gui - c_update) * 1e3, "cpu: gui": (c_draw - c_gui) * 1e3,
                            "cpu: window draw": (c_swap - c_draw) * 1e3})
 
-    def _draw_image(self, info, fbw: int, fbh: int) -> None:
+    def _panel_lists(self):
+        """The control panel's imgui draw lists this frame (empty when it is hidden)."""
+        from imgui_bundle import imgui
+
+        from viewer.gui import PANEL_WINDOW
+
+        w = imgui.internal.find_window_by_name(PANEL_WINDOW)
+        return [w.draw_list] if w is not None and w.active else []
+
+    def _panel_interactive(self) -> bool:
+        """Whether the user works in the control panel this frame (:meth:`GuiCache.interactive`)."""
+        from imgui_bundle import imgui
+
+        from viewer.gui_cache import list_bounds
+
+        if self.gui_cache is None:
+            return True
+        boxes = [b for b in (list_bounds(dl) for dl in self._panel_lists()) if b is not None]
+        if not boxes:
+            return True
+        b = np.array(boxes)
+        return self.gui_cache.interactive(imgui.get_io(), (b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max()))
+
+    def _draw_window(self, info, fbw: int, fbh: int, interactive: bool = True, force: bool = False) -> None:
+        """Draw the window's back buffer: the relit image and imgui's draw data of this frame.
+
+        With :attr:`gui_cache`, the control panel comes from its texture (:mod:`viewer.gui_cache`)
+        and the other draw lists are drawn live over it; the pixels are the same as without it.
+        ``force`` redraws the panel's texture if its content changed (before the window is read).
+        """
+        from imgui_bundle import imgui
+
+        from viewer.gui_cache import rects_overlap, split_draw_lists, sub_draw_data, uncovered
+
+        render = imgui.backends.opengl3_render_draw_data
+        dd = imgui.get_draw_data()
+        self.ctx.screen.use()
+        self.ctx.viewport = (0, 0, fbw, fbh)
+        split = None
+        if self.gui_cache is not None:
+            split = split_draw_lists(dd.cmd_lists, self._panel_lists())
+            if split is not None and rects_overlap(split[2], self.state.image_rect):
+                split = None  # the image under the panel: the panel's texture holds the clear colour there
+            if split is None:
+                self.gui_cache.invalidate()
+        if split is None:
+            self.ctx.clear(*CLEAR_COLOUR)
+            self._draw_image(info, fbw, fbh)
+            render(dd)
+            return
+        render(sub_draw_data(dd, [], textures=True))  # the font atlas's pending updates, before reading lists
+        panel, others, bounds = split
+        copied = self.gui_cache.draw(dd, panel, bounds, version=info.panel_version, interactive=interactive,
+                                     now=self._clock, clear=CLEAR_COLOUR, render=render, force=force)
+        drawn = self._draw_image(info, fbw, fbh)
+        # the background only where neither the panel nor the image is (llvmpipe clears a scissored
+        # rectangle by drawing it: a few thin strips cost less than clearing the whole window)
+        for vp in uncovered(fbw, fbh, (copied, drawn)):
+            self.ctx.clear(*CLEAR_COLOUR, viewport=vp)
+        self.ctx.viewport = (0, 0, fbw, fbh)
+        if others:
+            render(sub_draw_data(dd, others))
+
+    def redraw(self) -> None:
+        """Draw the last frame's window again into the back buffer (the same imgui draw data), with
+        the control panel's texture brought up to date; nothing is stepped, polled or swapped."""
+        if self._frame is None:
+            raise RuntimeError("ViewerApp.redraw: no frame was drawn yet (call step first)")
+        self._make_current()
+        self._draw_window(*self._frame, force=True)
+
+    def _draw_image(self, info, fbw: int, fbh: int):
         """The relit image, opaque, where the GUI laid it out (``state.image_rect``), under the GUI.
+
+        Returns the rectangle drawn, framebuffer pixels ``(x0, y0, x1, y1)`` from the bottom-left
+        corner, or None.
 
         imgui would draw it as a blended textured quad; on llvmpipe this costs about a quarter less
         (no read of the framebuffer per fragment). Same texture, same bilinear filter.
@@ -267,18 +354,19 @@ class ViewerApp:
 
         rect, tex = self.state.image_rect, self.renderer.image_texture
         if not info.image_tex or rect is None or tex is None:
-            return
+            return None
         sx, sy = info.framebuffer_scale
         x0, y0 = int(round(rect[0] * sx)), int(round(rect[1] * sy))
         x1, y1 = int(round(rect[2] * sx)), int(round(rect[3] * sy))
         if x1 <= x0 or y1 <= y0:
-            return
+            return None
         self.ctx.viewport = (x0, fbh - y1, x1 - x0, y1 - y0)  # GL's origin is the bottom-left corner
         self.ctx.disable(moderngl.BLEND)
         tex.use(0)
         self._blit["u_image"].value = 0
         self._blit_vao.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.viewport = (0, 0, fbw, fbh)
+        return x0, fbh - y1, x1, fbh - y0
 
     def run(self, frames: int | None = None, screenshot=None, dt: float | None = None) -> None:
         """Run frames until the window closes, or ``frames`` frames; then save ``screenshot``.
@@ -326,8 +414,9 @@ class ViewerApp:
         -------
         dict
             ``frames``, ``mean_ms``, ``median_ms``, ``fps`` (1000 / mean), ``cpu_ms`` (mean CPU
-            time per frame), and ``passes``: the mean ms of each engine pass and part of the frame
-            over the frames where it ran.
+            time per frame), ``panel_redraws`` (how many times the control panel was drawn into its
+            texture, over all frames; None without :attr:`gui_cache`), and ``passes``: the mean ms
+            of each engine pass and part of the frame over the frames where it ran.
         """
         rows = self.stats[skip:] if len(self.stats) > skip else self.stats
         ms = np.array([r["frame_ms"] for r in rows]) if rows else np.zeros(0)
@@ -336,12 +425,15 @@ class ViewerApp:
         mean = float(ms.mean()) if ms.size else float("nan")
         cpu = float(np.mean([r["cpu_ms"] for r in rows])) if rows else float("nan")
         return {"frames": int(ms.size), "mean_ms": mean, "median_ms": float(np.median(ms)) if ms.size else mean,
-                "fps": 1000.0 / mean if ms.size and mean > 0 else float("nan"), "cpu_ms": cpu, "passes": passes}
+                "fps": 1000.0 / mean if ms.size and mean > 0 else float("nan"), "cpu_ms": cpu, "passes": passes,
+                "panel_redraws": None if self.gui_cache is None else self.gui_cache.redraws}
 
     # ------------------------------------------------------------------ actions
     def read_window(self) -> np.ndarray:
         """The default framebuffer (the whole window, GUI included) ``(H, W, 3)`` uint8, row 0 on top."""
         self._make_current()
+        if self.gui_cache is not None and self.gui_cache.stale and self._frame is not None:
+            self._draw_window(*self._frame, force=True)  # the panel as of the last frame, not as of its last redraw
         # moderngl's screen.read() selects GL_COLOR_ATTACHMENT0 as the read buffer, which is
         # GL_INVALID_OPERATION on the default framebuffer; a blit into an FBO reads GL_BACK.
         fbw, fbh = self.glfw.get_framebuffer_size(self.window)
@@ -459,6 +551,9 @@ class ViewerApp:
             implot.destroy_context(self._implot_ctx)
             imgui.destroy_context(self._imgui_ctx)
             self._imgui_ready = False
+        if getattr(self, "gui_cache", None) is not None:
+            self.gui_cache.release()
+            self.gui_cache = None
         if getattr(self, "_blit_vao", None) is not None:
             self._blit_vao.release()
             self._blit_vao = None

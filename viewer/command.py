@@ -242,6 +242,9 @@ def run(args) -> int:
             print(f"  frame time: mean {s['mean_ms']:.1f} ms, median {s['median_ms']:.1f} ms "
                   f"({s['fps']:.1f} fps), CPU {s['cpu_ms']:.1f} ms per frame, over {s['frames']} frames; "
                   f"passes (ms, mean where run): {passes or 'none'}")
+            if s["panel_redraws"] is not None:
+                print(f"  control panel drawn into its texture {s['panel_redraws']} times in "
+                      f"{app.frames_rendered} frames (docs/viewer.md, frame budget)")
             if args.screenshot:
                 print(f"  screenshot: {args.screenshot} (window) and {args.screenshot[:-4]}.exr (relit HDR)")
     finally:

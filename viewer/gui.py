@@ -16,10 +16,12 @@ from imgui_bundle import imgui, implot
 
 from viewer.state import BUILTIN_MAPS, QUALITY_KNOBS, TONEMAPS, TurntableJob, ViewerState, ViewInfo
 
-__all__ = ["draw_gui", "handle_shortcuts", "SHORTCUTS", "PANEL_WIDTH"]
+__all__ = ["draw_gui", "handle_shortcuts", "SHORTCUTS", "PANEL_WIDTH", "PANEL_WINDOW"]
 
 #: Width of the control panel in unscaled pixels.
 PANEL_WIDTH = 360
+#: imgui name of the control panel's window (viewer.gui_cache draws its draw list from a texture).
+PANEL_WINDOW = "ffls view"
 #: (keys, action) pairs shown in the help panel.
 SHORTCUTS = (
     ("drag image / preview", "rotate the light map (horizontal: yaw, vertical: pitch)"),
@@ -72,7 +74,7 @@ def draw_gui(state: ViewerState, view: ViewInfo) -> None:
         imgui.set_next_window_pos(imgui.ImVec2(vp.work_pos.x, vp.work_pos.y))
         imgui.set_next_window_size(imgui.ImVec2(panel_w, vp.work_size.y))
         flags = imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
-        imgui.begin("ffls view", None, flags)
+        imgui.begin(PANEL_WINDOW, None, flags)
         _lightmap_panel(state, view)
         _light_panel(state)
         _rotation_panel(state)

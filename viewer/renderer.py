@@ -429,6 +429,7 @@ class Renderer:
         rgb = self.preview_image(R, state.preview_mode)
         rgba = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=-1)
         self._preview_tex.write(np.ascontiguousarray(rgba).tobytes())
+        self.info.panel_version += 1
         self.info.preview_tex = self._preview_tex.glo
         self.info.preview_size = (2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT)
 
@@ -491,6 +492,7 @@ class Renderer:
                 self._photo_tex.release()
             self._photo_tex = self.ctx.texture(size, 4, dtype="f1")
         self._photo_tex.write(np.ascontiguousarray(rgba).tobytes())
+        self.info.panel_version += 1
         self._photo_key = sel
         self.info.photo_tex = self._photo_tex.glo
 

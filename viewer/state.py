@@ -395,6 +395,9 @@ class ViewInfo:
     image_drawn_by_window : bool
         The window draws the relit image itself (opaque, under the GUI, in ``state.image_rect``),
         so the GUI only lays it out; False: the GUI draws it (imgui image, blended).
+    panel_version : int
+        Changes whenever a texture the control panel shows (preview, basis photo) is rewritten: the
+        window's copy of the panel (:mod:`viewer.gui_cache`) is then out of date.
     """
 
     image_tex: int = 0
@@ -419,3 +422,4 @@ class ViewInfo:
     composite_available: bool = False
     registration: str = ""
     image_drawn_by_window: bool = False
+    panel_version: int = 0
