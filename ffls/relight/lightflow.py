@@ -597,12 +597,12 @@ def signed_distance(mask: np.ndarray) -> np.ndarray:
 
 
 def distance_flow(a: np.ndarray, b: np.ndarray, method: str = "dis", *, consistency: float = 0.2,
-                  consistency_px: float = 2.0) -> np.ndarray:
+                  consistency_px: float = 2.0, reach: float = 0.25) -> np.ndarray:
     """Dense flow between two shadows' signed distances (:func:`signed_distance`), 0 where not trustworthy.
 
     A signed distance is smooth and has a gradient everywhere, so the flow's pyramid sees a thin
     shadow that moves by more than its width (where the photos' flow, which only sees the
-    shadow's edges, loses it). The distances are clipped to a quarter of the image's larger side
+    shadow's edges, loses it). The distances are clipped (``reach``, a quarter of the image's larger side by default)
     and quantised to 8 bits for OpenCV; the flow is checked forward-backward as in
     :func:`photo_flow`.
 
@@ -613,6 +613,8 @@ def distance_flow(a: np.ndarray, b: np.ndarray, method: str = "dis", *, consiste
     method : {'dis', 'farneback'}
     consistency, consistency_px : float
         As in :func:`photo_flow`.
+    reach : float
+        The distances are clipped to this fraction of the image's larger side.
 
     Returns
     -------
@@ -622,7 +624,7 @@ def distance_flow(a: np.ndarray, b: np.ndarray, method: str = "dis", *, consiste
     if method not in FLOWS:
         raise ValueError(f"flow method must be one of {', '.join(FLOWS)}, not {method!r}")
     H, W = np.shape(a)[:2]
-    r = 0.25 * max(H, W)
+    r = float(reach) * max(H, W)
 
     def u8(x):
         return np.clip((np.asarray(x, dtype=np.float32) + r) / (2 * r) * 255, 0, 255).astype(np.uint8)
