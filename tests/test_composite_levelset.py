@@ -13,8 +13,8 @@ from ffls.io.capture import load_capture_and_lights
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.basis import accepted_basis
 from ffls.relight.cpu import CpuRelighter
-from ffls.relight.lightflow import (LevelSetInterpolator, LightFlowRelighter, distance_flow, relight_lightflow,
-                                    signed_distance, unshadowed_fit)
+from ffls.relight.lightflow import (FlowInterpolator, LevelSetInterpolator, LightFlowRelighter, distance_flow,
+                                    relight_lightflow, signed_distance, unshadowed_fit)
 
 H = W = 96
 
@@ -184,3 +184,15 @@ def test_composite_command_with_level_sets(tmp_path, capfd):
     assert rep["sources"] == "levelset" and len(rep["compact_sources"]) == 1
     assert "relit by shadow level sets (dis flow)" in text
     assert out.with_suffix(".png").exists()
+
+
+@pytest.mark.parametrize("size", [1, 4, 11])
+def test_tiny_images_are_interpolated_too(size):
+    # DIS needs 12 pixels on a side: the flows pad the images so that a thumbnail still works
+    rng = np.random.default_rng(size)
+    dirs = _lights()
+    basis = rng.random((len(dirs), size, size + 1, 3)).astype(np.float32)
+    t = _centre(dirs)
+    for interp in (LevelSetInterpolator(basis, dirs), FlowInterpolator(basis, dirs)):
+        img = interp.image(t)
+        assert img.shape == basis.shape[1:] and np.isfinite(img).all() and (img >= 0).all()

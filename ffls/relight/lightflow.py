@@ -33,13 +33,19 @@ construction, measured in docs/composite.md. Here:
   ``-sum_u w_u F_{v->u}`` (backward warping with bilinear interpolation: no ringing, no new
   extrema), multiplied back by ``A``, and the warped photos are blended with the same weights. At
   a light's own direction it is that light's photo exactly.
+* :class:`LevelSetInterpolator` is the alternative that moves only the cast shadows: each light's
+  shadow is estimated against a per-pixel linear model of the unshadowed photo
+  (:func:`unshadowed_fit`), described by its signed distance (:func:`signed_distance`), and the
+  shadow at ``d`` is the zero set of the blended signed distances, each warped toward ``d`` by the
+  flow between the distances (:func:`distance_flow`); the blend of the photos is corrected where
+  that shadow differs from the blend's cross-faded one.
 * :func:`relight_lightflow` is the relit image: the rest through the usual weights and basis sum,
   plus each source's power times its interpolated photo. :class:`LightFlowRelighter` wraps a
   :class:`ffls.relight.cpu.CpuRelighter` with the relighter interface (``set_lightmap``,
   ``set_rotation``, ``render``, ``read_hdr``) for :class:`ffls.relight.composite.Compositor`.
 
-The flow is computed on the CPU (OpenCV) and cached per pair of lights; it does not run in the
-GPU engine's live loop.
+The flow is computed on the CPU (OpenCV) and cached per pair of lights (the shadows per light); it
+does not run in the GPU engine's live loop.
 """
 from __future__ import annotations
 
@@ -331,9 +337,10 @@ def _raw_flow(a8: np.ndarray, b8: np.ndarray, method: str) -> np.ndarray:
     Without the margin DIS misses a shadow that moves by more than its width near the image's
     border (its coarse pyramid levels have no room): the flow from a photo whose shadow is near
     the left edge to one whose shadow is 25 pixels to the right came out 4 to 8 pixels the wrong
-    way at 96 pixels, and 25 pixels right with the margin.
+    way at 96 pixels, and 25 pixels right with the margin. The margin is at least 8 pixels, so that
+    an image smaller than DIS's smallest patch grid (12 pixels) still has a flow.
     """
-    pad = max(a8.shape[:2]) // 2
+    pad = max(max(a8.shape[:2]) // 2, 8)  # at least 8: DIS needs a side of 12 pixels or more
     A = cv2.copyMakeBorder(a8, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
     B = cv2.copyMakeBorder(b8, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
     if method == "dis":
@@ -794,9 +801,12 @@ class LevelSetInterpolator:
         s_morph = np.clip(0.5 - 0.5 * dist, 0, 1)
         v_in = sum(np.float32(wv) * s.shadow * s.visibility for wv, s in zip(w, sh))
         v_in = np.where(s_blend > 0, v_in / np.maximum(s_blend, 1e-12), 1.0)
+        lit = 1 - s_blend
+        v_out = sum(np.float32(wv) * (1 - s.shadow) * s.visibility for wv, s in zip(w, sh))
+        v_out = np.where(lit > 0, v_out / np.maximum(lit, 1e-12), 1.0)
         unshadowed = sum(np.float32(wv) * np.maximum(np.nan_to_num(np.einsum("hwci,i->hwc", s.model, d)), 0)
                          for wv, s in zip(w, sh))
-        corr = unshadowed * ((1 - v_in) * (s_blend - s_morph))[..., None]
+        corr = unshadowed * (np.maximum(v_out - v_in, 0) * (s_blend - s_morph))[..., None]
         return np.maximum(out + corr.astype(np.float32), 0)
 
 
