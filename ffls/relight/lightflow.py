@@ -681,19 +681,24 @@ class LevelSetInterpolator:
     set of the barycentric blend of those signed distances: distance-field metamorphosis (Cohen-Or,
     Solomovic and Levin, "Three-dimensional distance field metamorphosis", ACM TOG 1998), here in
     two dimensions and on the image. A shadow edge that moves between two lights is put at the
-    weighted place between its two positions, not faded from one to the other.
+    weighted place between its two positions, not faded from one to the other. With ``flow`` each
+    light's signed distance is first warped toward ``d`` by ``-sum_u w_u F_{v->u}``, ``F`` the flow
+    between the signed distances (:func:`distance_flow`), so that a shadow moving farther than its
+    own width between two lights still meets itself half-way.
 
     The photo at ``d`` is the blend ``B = sum_v w_v I_v`` corrected where the morphed shadow
     differs from the blend of the shadows:
 
-    ``I(d) = B + U(d) (1 - V_in) (sum_v w_v S_v - S(d))``
+    ``I(d) = B + U(d) max(V_out - V_in, 0) (sum_v w_v S_v - S(d))``
 
     with ``S_v`` the light's shadow (0/1), ``S(d) = clip(1/2 - 1/2 sum_v w_v D_v, 0, 1)`` the morphed
-    one (``D_v`` the signed distances), ``U(d) = sum_v w_v max(b_v . d, 0)`` the unshadowed model
-    at ``d`` and ``V_in`` the blended visibility inside the shadows (the light that reaches a shadow
-    anyway: bounce, penumbra). It is the blend exactly where no shadow boundary moves and at a
-    light's own direction; the morphed shadow lies inside the union of the lights' shadows and
-    contains their intersection, so it adds no shadow where none of the three lights has one.
+    one (``D_v`` the signed, possibly warped, distances), ``U(d) = sum_v w_v max(b_v . d, 0)`` the
+    unshadowed model at ``d``, and ``V_out``, ``V_in`` the blended visibilities of the lights that
+    see the pixel lit and shadowed (1 where there are none): the contrast of the shadow there, so
+    that light reaching a shadow anyway (bounce, penumbra) stays, and a pixel whose label flips on
+    noise (visibility near :data:`SHADOW_LEVEL` under every light) is barely changed. It is the
+    blend exactly at a light's own direction and wherever none of the three lights casts a shadow
+    on the pixel (``V_in = 1`` there).
 
     Why on the image, not per pixel on the sphere: per pixel, the lights' shadowed/lit labels give
     a boundary on the sphere only to within the spacing of the lights, and with two lights (one
@@ -710,12 +715,16 @@ class LevelSetInterpolator:
         Lights of each light's unshadowed model (:data:`FIT_NEIGHBOURS`).
     shadow_level : float
         :data:`SHADOW_LEVEL`.
+    flow : {'dis', 'farneback'} or None
+        Flow between the signed distances (cached per ordered pair of lights), or None for the
+        plain average of the distances.
 
     Notes
     -----
-    The morph follows a shadow that deforms or moves by less than its own width between
-    neighbouring lights; a thin shadow that jumps farther (the two shadows disjoint) gets no
-    shadow in between, only what the blend's faint copies leave where the correction is 0.
+    Without the flow the morph follows a shadow that deforms or moves by less than its own width
+    between neighbouring lights; a thin shadow that jumps farther (the two shadows disjoint) gets
+    no shadow in between. Where the distances' flow fails its forward-backward check it is 0 and
+    the plain average is used.
     """
 
     def __init__(self, basis, directions, hemisphere="upper", *, neighbours: int = FIT_NEIGHBOURS,
@@ -744,8 +753,9 @@ class LevelSetInterpolator:
         return _triangle_weights(self._tri, direction)
 
     def clear(self) -> None:
-        """Drop the cached shadows."""
+        """Drop the cached shadows and flows."""
         self._shadows.clear()
+        self._flows.clear()
 
     def shadow(self, v: int) -> LightShadow:
         """Cached :class:`LightShadow` of light ``v``."""
