@@ -56,7 +56,7 @@ from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.relight.basis import accepted_basis
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import relight_fast
-from ffls.relight.lightflow import FlowInterpolator, relight_lightflow, split_compact_sources
+from ffls.relight.lightflow import FlowInterpolator, LevelSetInterpolator, relight_lightflow, split_compact_sources
 from ffls.synth.scene import (make_scene, render_light, render_lightmap, stratified_directions,
                               write_synthetic_capture)
 from ffls.synth.virtual import composite_masks, render_virtual_scene, wall_lightmap
@@ -106,6 +106,9 @@ def main():
     ap.add_argument("--lightflow", action="store_true",
                     help="also relight with the compact sources interpolated by flow (scheme SCHEME+lightflow)")
     ap.add_argument("--flow", default="dis", help="flow method of --lightflow (dis, farneback)")
+    ap.add_argument("--levelset", action="store_true",
+                    help="also relight with the compact sources interpolated by shadow level sets "
+                         "(ffls.relight.lightflow.LevelSetInterpolator; scheme SCHEME+levelset)")
     ap.add_argument("--exact-sources", action="store_true",
                     help="also rows SCHEME+exact: the compact sources rendered directly (ffls synth) and the rest "
                          "relit; the bound of --lightflow's split, without its interpolation error")
@@ -159,6 +162,17 @@ def main():
                     s, _ = relight_lightflow(sb, sd, lm, None, sh, scheme=scheme, interpolator=interpolators[n, "s"])
                     print(f"{name} {n} {scheme}+lightflow: {split.describe()} ({time.perf_counter() - t1:.1f} s)")
                     fields.append((n, f"{scheme}+lightflow", o.astype(np.float64), s.astype(np.float64)))
+                if a.levelset:
+                    for key, b, d, h in (("o", ob, od, oh), ("s", sb, sd, sh)):
+                        if (n, key, "levelset") not in interpolators:
+                            interpolators[n, key, "levelset"] = LevelSetInterpolator(b, d, h)
+                    t1 = time.perf_counter()
+                    o, split = relight_lightflow(ob, od, lm, None, oh, scheme=scheme,
+                                                 interpolator=interpolators[n, "o", "levelset"])
+                    s, _ = relight_lightflow(sb, sd, lm, None, sh, scheme=scheme,
+                                             interpolator=interpolators[n, "s", "levelset"])
+                    print(f"{name} {n} {scheme}+levelset: {split.describe()} ({time.perf_counter() - t1:.1f} s)")
+                    fields.append((n, f"{scheme}+levelset", o.astype(np.float64), s.astype(np.float64)))
                 if a.exact_sources:
                     split = split_compact_sources(lm, None, oh)
                     pair = []

@@ -23,10 +23,11 @@ the spheres).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
         [--res 128] [--spp 16] [--truth-spp 256] [--cache DIR] [--schemes voronoi,...]
-        [--sources weights,lightflow]
+        [--sources weights,lightflow,levelset]
 
 ``--sources lightflow`` relights the map's compact sources by flow interpolation between the
-(path-traced, noisy) basis photos (:class:`ffls.relight.lightflow.LightFlowRelighter`).
+(path-traced, noisy) basis photos, ``--sources levelset`` by moving the basis photos' cast shadows
+(:class:`ffls.relight.lightflow.LightFlowRelighter`, ``interpolation='flow'`` or ``'levelset'``).
 
 Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/composite_mitsuba.json``.
 """
@@ -159,7 +160,8 @@ def main():
     ap.add_argument("--map-height", type=int, default=128)
     ap.add_argument("--schemes", default="voronoi", help="weighting schemes (ffls.weights.weighting.SCHEMES)")
     ap.add_argument("--sources", default="weights,lightflow",
-                    help="how compact sources are relit: weights (every texel weighted), lightflow (ffls.relight.lightflow)")
+                    help="how compact sources are relit: weights (every texel weighted), lightflow (photos warped by "
+                         "their flow), levelset (cast shadows moved by their signed distances; ffls.relight.lightflow)")
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite_mitsuba")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite_mitsuba.json"))
     a = ap.parse_args()
@@ -210,13 +212,14 @@ def main():
                                                          for src in a.sources.split(",")):
             o = CpuRelighter.from_capture(oc, ol, precision="f64", cell_max_res=4096, weighting=scheme)
             s = CpuRelighter.from_capture(sc_, sl, precision="f64", cell_max_res=4096, weighting=scheme)
-            if sources == "lightflow":
-                o, s = LightFlowRelighter(o), LightFlowRelighter(s)
+            if sources in ("lightflow", "levelset"):
+                kind = "flow" if sources == "lightflow" else "levelset"
+                o, s = LightFlowRelighter(o, interpolation=kind), LightFlowRelighter(s, interpolation=kind)
             for r in (o, s):
                 r.set_lightmap(lm)
                 r.render()
             oh, sh = o.read_hdr().astype(np.float64), s.read_hdr().astype(np.float64)
-            note = o.last_split.describe() if sources == "lightflow" else ""
+            note = o.last_split.describe() if sources != "weights" else ""
             paste = bg * (1 - om[..., None]) + oh * om[..., None]
             for method in METHODS:
                 res = composite(bg, oh, sh, om, sm, method=method)

@@ -30,7 +30,7 @@ DESCRIPTION = (
 
 STILL_SUFFIXES = (".exr", ".png")
 #: ``--sources``: how the map's compact bright sources are relit.
-SOURCES = ("lightflow", "weights")
+SOURCES = ("lightflow", "levelset", "weights")
 BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
 
 
@@ -68,10 +68,12 @@ def add_arguments(p):
     c.add_argument("--sources", default="lightflow", choices=SOURCES,
                    help="compact bright sources of the map (a sun, a window, a lamp): lightflow (default) relights "
                         "each from the basis photos of its nearest lights warped toward it by optical flow (Chen and "
-                        "Lensch 2005; CPU, flows cached per pair of lights), the rest with --weighting; weights: "
-                        "every texel through --weighting")
+                        "Lensch 2005; CPU, flows cached per pair of lights), the rest with --weighting; levelset: the "
+                        "blend of the nearest lights' photos with their cast shadows moved by interpolating the "
+                        "shadows' signed distances (CPU); weights: every texel through --weighting")
     c.add_argument("--flow", default="dis", choices=("dis", "farneback"),
-                   help="optical flow of --sources lightflow (OpenCV DIS or Farneback)")
+                   help="optical flow of --sources lightflow (between the photos) and levelset (between the "
+                        "shadows' signed distances): OpenCV DIS or Farneback")
     c.add_argument("--scale-object", action="store_true",
                    help="scale the relit object by the registration too (the mismatch is the exposure, e.g. a "
                         "photographed background; default: it is the surface's albedo)")
@@ -169,8 +171,8 @@ def load_inputs(args):
 def make_compositor(args, inputs):
     """A :class:`ffls.relight.composite.Compositor` over two CPU relighters (float32 sums, or ``--rank K``).
 
-    With ``--sources lightflow`` each is a :class:`ffls.relight.lightflow.LightFlowRelighter`: the
-    compact sources by flow interpolation, the rest through the CPU relighter.
+    With ``--sources lightflow`` or ``levelset`` each is a :class:`ffls.relight.lightflow.LightFlowRelighter`:
+    the compact sources by flow or shadow level-set interpolation, the rest through the CPU relighter.
     """
     from ffls.relight.composite import Compositor
     from ffls.relight.cpu import CpuRelighter
@@ -179,8 +181,9 @@ def make_compositor(args, inputs):
     rel = [CpuRelighter.from_capture(*inputs[k], precision="f32", rank=args.rank, cell_res=args.cells_res,
                                      cell_max_res=4096, weighting=args.weighting)
            for k in ("object", "surface")]
-    if args.sources == "lightflow":
-        rel = [LightFlowRelighter(r, flow=args.flow) for r in rel]
+    if args.sources in ("lightflow", "levelset"):
+        kind = "flow" if args.sources == "lightflow" else "levelset"
+        rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind) for r in rel]
     return Compositor(*rel, inputs["background"], inputs["object_mask"], inputs["surface_mask"],
                       method=args.method, registration=args.registration, object_scale=args.scale_object,
                       paths={"background": args.background, "object_mask": args.mask,
@@ -248,7 +251,9 @@ def run(args) -> int:
             what = sink.describe()
         split = getattr(comp.object, "last_split", None)
         print(f"ffls composite: {what} ({res.method}, {args.weighting} weighting"
-              + (f", {split.describe()} relit by {args.flow} flow" if split is not None else "") + f"); {reg.describe()}"
+              + (f", {split.describe()} relit by " + (f"{args.flow} flow" if args.sources == "lightflow" else
+                                                       f"shadow level sets ({args.flow} flow)")
+                 if split is not None else "") + f"); {reg.describe()}"
               + (f"; {res.clamped_pixels} negative pixels set to 0" if res.clamped_pixels else ""))
     finally:
         comp.release()

@@ -33,13 +33,19 @@ construction, measured in docs/composite.md. Here:
   ``-sum_u w_u F_{v->u}`` (backward warping with bilinear interpolation: no ringing, no new
   extrema), multiplied back by ``A``, and the warped photos are blended with the same weights. At
   a light's own direction it is that light's photo exactly.
+* :class:`LevelSetInterpolator` is the alternative that moves only the cast shadows: each light's
+  shadow is estimated against a per-pixel linear model of the unshadowed photo
+  (:func:`unshadowed_fit`), described by its signed distance (:func:`signed_distance`), and the
+  shadow at ``d`` is the zero set of the blended signed distances, each warped toward ``d`` by the
+  flow between the distances (:func:`distance_flow`); the blend of the photos is corrected where
+  that shadow differs from the blend's cross-faded one.
 * :func:`relight_lightflow` is the relit image: the rest through the usual weights and basis sum,
   plus each source's power times its interpolated photo. :class:`LightFlowRelighter` wraps a
   :class:`ffls.relight.cpu.CpuRelighter` with the relighter interface (``set_lightmap``,
   ``set_rotation``, ``render``, ``read_hdr``) for :class:`ffls.relight.composite.Compositor`.
 
-The flow is computed on the CPU (OpenCV) and cached per pair of lights; it does not run in the
-GPU engine's live loop.
+The flow is computed on the CPU (OpenCV) and cached per pair of lights (the shadows per light); it
+does not run in the GPU engine's live loop.
 """
 from __future__ import annotations
 
@@ -62,6 +68,9 @@ from ffls.weights.weighting import integrate
 
 __all__ = [
     "FLOWS",
+    "INTERPOLATIONS",
+    "FIT_NEIGHBOURS",
+    "SHADOW_LEVEL",
     "BLUR_FRACTION",
     "reference_image",
     "LUMINANCE",
@@ -70,12 +79,19 @@ __all__ = [
     "split_compact_sources",
     "photo_flow",
     "FlowInterpolator",
+    "unshadowed_fit",
+    "signed_distance",
+    "distance_flow",
+    "LightShadow",
+    "LevelSetInterpolator",
     "relight_lightflow",
     "LightFlowRelighter",
 ]
 
 #: ``method=`` of :func:`photo_flow`.
 FLOWS = ("dis", "farneback")
+#: ``interpolation=`` of :class:`LightFlowRelighter`: :class:`FlowInterpolator`, :class:`LevelSetInterpolator`.
+INTERPOLATIONS = ("flow", "levelset")
 #: Default blur of :func:`photo_flow`, as a fraction of the image's larger side.
 BLUR_FRACTION = 0.02
 #: Barycentric weights at most this are dropped by :meth:`FlowInterpolator.weights`.
@@ -321,9 +337,10 @@ def _raw_flow(a8: np.ndarray, b8: np.ndarray, method: str) -> np.ndarray:
     Without the margin DIS misses a shadow that moves by more than its width near the image's
     border (its coarse pyramid levels have no room): the flow from a photo whose shadow is near
     the left edge to one whose shadow is 25 pixels to the right came out 4 to 8 pixels the wrong
-    way at 96 pixels, and 25 pixels right with the margin.
+    way at 96 pixels, and 25 pixels right with the margin. The margin is at least 8 pixels, so that
+    an image smaller than DIS's smallest patch grid (12 pixels) still has a flow.
     """
-    pad = max(a8.shape[:2]) // 2
+    pad = max(max(a8.shape[:2]) // 2, 8)  # at least 8: DIS needs a side of 12 pixels or more
     A = cv2.copyMakeBorder(a8, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
     B = cv2.copyMakeBorder(b8, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
     if method == "dis":
@@ -405,6 +422,19 @@ def photo_flow(a, b, method: str = "dis", *, reference=None, blur_sigma: float |
     return (fab * k[..., None]).astype(np.float32)
 
 
+def _triangle_weights(tri, direction) -> tuple[np.ndarray, np.ndarray]:
+    """Lights and barycentric weights (``tri``: a :class:`Barycentric`) of a direction, tiny weights dropped."""
+    p = np.asarray(direction, dtype=np.float64).reshape(1, 3)
+    p = p / np.linalg.norm(p)
+    idx, w = tri(p)
+    out: dict = {}
+    for i, v in zip(idx[0], w[0]):
+        out[int(i)] = out.get(int(i), 0.0) + float(v)
+    keys = np.array(sorted(k for k, v in out.items() if v > WEIGHT_EPS), dtype=np.int64)
+    ws = np.array([out[k] for k in keys])
+    return keys, ws / ws.sum()
+
+
 class FlowInterpolator:
     """Photos for arbitrary light directions, by flow-warped barycentric interpolation of a basis.
 
@@ -453,15 +483,7 @@ class FlowInterpolator:
         Weights of at most :data:`WEIGHT_EPS` are dropped (rounding at a light's own direction or
         on an edge), so that a light's own direction gives its photo unwarped.
         """
-        p = np.asarray(direction, dtype=np.float64).reshape(1, 3)
-        p = p / np.linalg.norm(p)
-        idx, w = self._tri(p)
-        out: dict = {}
-        for i, v in zip(idx[0], w[0]):
-            out[int(i)] = out.get(int(i), 0.0) + float(v)
-        keys = np.array(sorted(k for k, v in out.items() if v > WEIGHT_EPS), dtype=np.int64)
-        ws = np.array([out[k] for k in keys])
-        return keys, ws / ws.sum()
+        return _triangle_weights(self._tri, direction)
 
     def clear(self) -> None:
         """Drop the cached flows."""
@@ -494,6 +516,310 @@ class FlowInterpolator:
         return out
 
 
+#: Lights of the local model of :func:`unshadowed_fit` (about the first two rings of a light's
+#: neighbours on the sphere: a linear model has 3 unknowns per channel and up to half the lights
+#: around a shadow boundary are shadowed).
+FIT_NEIGHBOURS = 12
+#: A pixel is in a light's shadow where its photo is below this fraction of the unshadowed model:
+#: the umbra's edge of a point light is where half of it is hidden, so the boundary between lit and
+#: shadowed is the level 1/2 of the visibility.
+SHADOW_LEVEL = 0.5
+
+
+def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, iterations: int = 4) -> np.ndarray:
+    """Per pixel, a linear model of the unshadowed photo as a function of the light direction.
+
+    Over a small cap of the sphere any smooth reflectance is, to first order, linear in the light
+    direction, ``I(l) ~ b . l`` per channel (a Lambertian surface is exactly so while lit: ``b`` is
+    its albedo times its normal, as in photometric stereo, Woodham 1980). A cast shadow breaks the
+    model only downward, so the fit is iterated: the photos below ``shadow_level`` times the current
+    model (luminance) are dropped and the rest refitted (weighted least squares per pixel, 3x3
+    normal equations).
+
+    Parameters
+    ----------
+    photos : (k, H, W, 3) float array
+        The photos of ``k`` lights near each other on the sphere.
+    directions : (k, 3) float array
+        Their unit directions.
+    shadow_level : float
+    iterations : int
+
+    Returns
+    -------
+    (H, W, 3, 3) float32
+        ``b[y, x, c]``: the model of channel ``c`` is ``b[y, x, c] @ l``; NaN where fewer than
+        three photos are left lit (no model: every light around is shadowed, or the pixel faces
+        away from them).
+    """
+    y = np.asarray(photos, dtype=np.float32)
+    k, H, W, _ = y.shape
+    L = np.asarray(directions, dtype=np.float64).reshape(k, 3)
+    y = y.reshape(k, H * W, 3).transpose(1, 0, 2)  # (P, k, 3)
+    lum = y @ LUMINANCE.astype(np.float32)  # (P, k)
+    LL = np.einsum("ki,kj->kij", L, L)  # (k, 3, 3)
+    m = np.ones(lum.shape, dtype=np.float64)
+    ridge = 1e-9 * np.eye(3)
+    b = None
+    for _ in range(max(1, int(iterations))):
+        M = np.einsum("pk,kij->pij", m, LL) + ridge
+        rhs = np.einsum("pk,ki,pkc->pic", m, L, y)
+        ok = m.sum(1) >= 3
+        b = np.full((H * W, 3, 3), np.nan)
+        if ok.any():
+            b[ok] = np.linalg.solve(M[ok], rhs[ok]).transpose(0, 2, 1)  # (P, channel, 3)
+        pred = np.einsum("pci,ki->pkc", np.nan_to_num(b), L) @ LUMINANCE  # (P, k)
+        new = ((lum >= shadow_level * pred) | (pred <= 0)).astype(np.float64)
+        if np.array_equal(new, m):
+            break
+        m = new
+    return b.reshape(H, W, 3, 3).astype(np.float32)
+
+
+def signed_distance(mask: np.ndarray) -> np.ndarray:
+    """Signed distance (pixels) to the boundary of a binary mask: negative inside, positive outside.
+
+    ``distance to the nearest inside pixel - distance to the nearest outside pixel`` (OpenCV's exact
+    Euclidean distance transform), so the zero level lies half-way between an inside and an
+    outside pixel (values +-1 on either side of the boundary). An empty mask is ``+2 max(H, W)``
+    everywhere, a full one ``-2 max(H, W)``.
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+
+    Returns
+    -------
+    (H, W) float32
+    """
+    m = np.asarray(mask, dtype=bool)
+    big = np.float32(2 * max(m.shape))
+    if not m.any():
+        return np.full(m.shape, big, np.float32)
+    if m.all():
+        return np.full(m.shape, -big, np.float32)
+    out = cv2.distanceTransform((~m).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    inside = cv2.distanceTransform(m.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return (out - inside).astype(np.float32)
+
+
+def distance_flow(a: np.ndarray, b: np.ndarray, method: str = "dis", *, consistency: float = 0.2,
+                  consistency_px: float = 2.0, reach: float = 0.25) -> np.ndarray:
+    """Dense flow between two shadows' signed distances (:func:`signed_distance`), 0 where not trustworthy.
+
+    A signed distance is smooth and has a gradient everywhere, so the flow's pyramid sees a thin
+    shadow that moves by more than its width (where the photos' flow, which only sees the
+    shadow's edges, loses it). The distances are clipped (``reach``, a quarter of the image's larger side by default)
+    and quantised to 8 bits for OpenCV; the flow is checked forward-backward as in
+    :func:`photo_flow`.
+
+    Parameters
+    ----------
+    a, b : (H, W) float array
+        Signed distances (pixels).
+    method : {'dis', 'farneback'}
+    consistency, consistency_px : float
+        As in :func:`photo_flow`.
+    reach : float
+        The distances are clipped to this fraction of the image's larger side.
+
+    Returns
+    -------
+    (H, W, 2) float32
+        ``a(x) ~ b(x + flow(x))``.
+    """
+    if method not in FLOWS:
+        raise ValueError(f"flow method must be one of {', '.join(FLOWS)}, not {method!r}")
+    H, W = np.shape(a)[:2]
+    r = float(reach) * max(H, W)
+
+    def u8(x):
+        return np.clip((np.asarray(x, dtype=np.float32) + r) / (2 * r) * 255, 0, 255).astype(np.uint8)
+
+    a8, b8 = u8(a), u8(b)
+    fab = _raw_flow(a8, b8, method)
+    fba = _raw_flow(b8, a8, method)
+    back = _warp(fba, fab)
+    err = ((fab + back) ** 2).sum(-1)
+    mag = (fab ** 2).sum(-1) + (back ** 2).sum(-1)
+    keep = (err <= consistency * mag + consistency_px ** 2).astype(np.float32)
+    s = max(1.0, 0.01 * max(H, W))
+    keep = np.minimum(keep, cv2.GaussianBlur(keep, (0, 0), s))
+    return (fab * keep[..., None]).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class LightShadow:
+    """One basis light's cast shadow, as :class:`LevelSetInterpolator` estimates it.
+
+    Attributes
+    ----------
+    model : (H, W, 3, 3) float32
+        :func:`unshadowed_fit` around the light (NaN where there is none).
+    visibility : (H, W) float32
+        The photo's luminance over the model's at the light, in [0, 1] (1 where there is no model).
+    shadow : (H, W) bool
+        ``visibility < SHADOW_LEVEL``.
+    distance : (H, W) float32
+        :func:`signed_distance` of ``shadow``.
+    """
+
+    model: np.ndarray
+    visibility: np.ndarray
+    shadow: np.ndarray
+    distance: np.ndarray
+
+
+class LevelSetInterpolator:
+    """Photos for arbitrary light directions, with the cast shadows moved by level-set interpolation.
+
+    The plain barycentric blend of the three lights around a direction ``d`` turns a sharp shadow
+    into three faint ones (a cross-fade). Here each basis light's cast shadow is estimated on its
+    own (:func:`unshadowed_fit` over its :data:`FIT_NEIGHBOURS` nearest lights: a pixel is shadowed
+    where its photo falls below :data:`SHADOW_LEVEL` of the unshadowed model), described by the
+    signed distance to its boundary (:func:`signed_distance`), and the shadow at ``d`` is the zero
+    set of the barycentric blend of those signed distances: distance-field metamorphosis (Cohen-Or,
+    Solomovic and Levin, "Three-dimensional distance field metamorphosis", ACM TOG 1998), here in
+    two dimensions and on the image. A shadow edge that moves between two lights is put at the
+    weighted place between its two positions, not faded from one to the other. With ``flow`` each
+    light's signed distance is first warped toward ``d`` by ``-sum_u w_u F_{v->u}``, ``F`` the flow
+    between the signed distances (:func:`distance_flow`), so that a shadow moving farther than its
+    own width between two lights still meets itself half-way.
+
+    The photo at ``d`` is the blend ``B = sum_v w_v I_v`` corrected where the morphed shadow
+    differs from the blend of the shadows:
+
+    ``I(d) = B + U(d) max(V_out - V_in, 0) (sum_v w_v S_v - S(d))``
+
+    with ``S_v`` the light's shadow (0/1), ``S(d) = clip(1/2 - 1/2 sum_v w_v D_v, 0, 1)`` the morphed
+    one (``D_v`` the signed, possibly warped, distances), ``U(d) = sum_v w_v max(b_v . d, 0)`` the
+    unshadowed model at ``d``, and ``V_out``, ``V_in`` the blended visibilities of the lights that
+    see the pixel lit and shadowed (1 where there are none): the contrast of the shadow there, so
+    that light reaching a shadow anyway (bounce, penumbra) stays, and a pixel whose label flips on
+    noise (visibility near :data:`SHADOW_LEVEL` under every light) is barely changed. It is the
+    blend exactly at a light's own direction and wherever none of the three lights casts a shadow
+    on the pixel (``V_in = 1`` there).
+
+    Why on the image, not per pixel on the sphere: per pixel, the lights' shadowed/lit labels give
+    a boundary on the sphere only to within the spacing of the lights, and with two lights (one
+    shadowed, one lit) any per-pixel interpolation of the labels is the nearest light's; the
+    image's signed distance says how far each pixel is from the edge, which places the edge
+    between its two positions.
+
+    Parameters
+    ----------
+    basis : (n, H, W, 3) float array
+    directions : (n, 3) array_like
+    hemisphere : {'upper', 'full'} or Hemisphere
+    neighbours : int
+        Lights of each light's unshadowed model (:data:`FIT_NEIGHBOURS`).
+    shadow_level : float
+        :data:`SHADOW_LEVEL`.
+    flow : {'dis', 'farneback'} or None
+        Flow between the signed distances (cached per ordered pair of lights), or None for the
+        plain average of the distances.
+
+    Notes
+    -----
+    Without the flow the morph follows a shadow that deforms or moves by less than its own width
+    between neighbouring lights; a thin shadow that jumps farther (the two shadows disjoint) gets
+    no shadow in between. Where the distances' flow fails its forward-backward check it is 0 and
+    the plain average is used.
+    """
+
+    def __init__(self, basis, directions, hemisphere="upper", *, neighbours: int = FIT_NEIGHBOURS,
+                 shadow_level: float = SHADOW_LEVEL, flow: str | None = "dis"):
+        if not 0 < shadow_level < 1:
+            raise ValueError(f"shadow_level must be in (0, 1), not {shadow_level}")
+        if int(neighbours) < 3:
+            raise ValueError(f"neighbours must be at least 3, not {neighbours}")
+        self.basis = basis
+        self.hemisphere = check_hemisphere(hemisphere)
+        unit, keep = unique_directions(directions)
+        self.directions = unit
+        self._keep = keep
+        self._tree = cKDTree(unit[keep])
+        self._tri = Barycentric(unit, keep, self.hemisphere)
+        self.neighbours = int(neighbours)
+        self.shadow_level = float(shadow_level)
+        if flow is not None and flow not in FLOWS:
+            raise ValueError(f"flow method must be one of {', '.join(FLOWS)} or None, not {flow!r}")
+        self.flow = flow
+        self._shadows: dict = {}
+        self._flows: dict = {}
+
+    def weights(self, direction) -> tuple[np.ndarray, np.ndarray]:
+        """Lights and barycentric weights of a unit direction (as :meth:`FlowInterpolator.weights`)."""
+        return _triangle_weights(self._tri, direction)
+
+    def clear(self) -> None:
+        """Drop the cached shadows and flows."""
+        self._shadows.clear()
+        self._flows.clear()
+
+    def shadow(self, v: int) -> LightShadow:
+        """Cached :class:`LightShadow` of light ``v``."""
+        v = int(v)
+        if v not in self._shadows:
+            k = min(self.neighbours, self._keep.size)
+            _, j = self._tree.query(self.directions[v], k=k)
+            idx = self._keep[np.atleast_1d(j)]
+            if v not in idx:
+                idx = np.concatenate([[v], idx[:-1]])
+            b = unshadowed_fit(np.asarray(self.basis[idx], dtype=np.float32), self.directions[idx],
+                               shadow_level=self.shadow_level)
+            pred = np.einsum("hwci,i->hwc", b, self.directions[v]) @ LUMINANCE
+            lum = np.asarray(self.basis[v], dtype=np.float32) @ LUMINANCE
+            good = np.isfinite(pred) & (pred > 0)
+            vis = np.ones(lum.shape, dtype=np.float32)
+            vis[good] = np.clip(lum[good] / pred[good], 0, 1)
+            sh = vis < self.shadow_level
+            self._shadows[v] = LightShadow(b, vis, sh, signed_distance(sh))
+        return self._shadows[v]
+
+    def distance_flow(self, a: int, b: int) -> np.ndarray:
+        """Cached flow from light ``a``'s signed distance to light ``b``'s (:func:`distance_flow`)."""
+        key = (int(a), int(b))
+        if key not in self._flows:
+            self._flows[key] = distance_flow(self.shadow(a).distance, self.shadow(b).distance, self.flow)
+        return self._flows[key]
+
+    def image(self, direction) -> np.ndarray:
+        """The photo under a unit-power light from ``direction``: ``(H, W, 3)`` float32 (see the class notes)."""
+        d = np.asarray(direction, dtype=np.float64).reshape(3)
+        d = d / np.linalg.norm(d)
+        idx, w = self.weights(d)
+        out = np.zeros(self.basis.shape[1:], dtype=np.float32)
+        for v, wv in zip(idx, w):
+            out += np.float32(wv) * np.asarray(self.basis[v], dtype=np.float32)
+        if idx.size < 2:
+            return out
+        sh = [self.shadow(v) for v in idx]
+        s_blend = sum(np.float32(wv) * s.shadow for wv, s in zip(w, sh))
+        if not np.any(s_blend > 0):
+            return out
+        if self.flow is None:
+            dist = sum(np.float32(wv) * s.distance for wv, s in zip(w, sh))
+        else:
+            dist = np.zeros(out.shape[:2], dtype=np.float32)
+            for v, wv, s in zip(idx, w, sh):
+                disp = np.zeros(out.shape[:2] + (2,), dtype=np.float32)
+                for u, wu in zip(idx, w):
+                    if u != v:
+                        disp -= np.float32(wu) * self.distance_flow(v, u)
+                dist += np.float32(wv) * (_warp(s.distance, disp) if np.any(disp) else s.distance)
+        s_morph = np.clip(0.5 - 0.5 * dist, 0, 1)
+        v_in = sum(np.float32(wv) * s.shadow * s.visibility for wv, s in zip(w, sh))
+        v_in = np.where(s_blend > 0, v_in / np.maximum(s_blend, 1e-12), 1.0)
+        lit = 1 - s_blend
+        v_out = sum(np.float32(wv) * (1 - s.shadow) * s.visibility for wv, s in zip(w, sh))
+        v_out = np.where(lit > 0, v_out / np.maximum(lit, 1e-12), 1.0)
+        unshadowed = sum(np.float32(wv) * np.maximum(np.nan_to_num(np.einsum("hwci,i->hwc", s.model, d)), 0)
+                         for wv, s in zip(w, sh))
+        corr = unshadowed * (np.maximum(v_out - v_in, 0) * (s_blend - s_morph))[..., None]
+        return np.maximum(out + corr.astype(np.float32), 0)
+
+
 def relight_lightflow(basis, directions, lightmap, rotation=None, hemisphere="upper", *, scheme: str = "voronoi",
                       interpolator: FlowInterpolator | None = None, split_options: dict | None = None,
                       **scheme_options) -> tuple[np.ndarray, SourceSplit]:
@@ -508,8 +834,8 @@ def relight_lightflow(basis, directions, lightmap, rotation=None, hemisphere="up
     hemisphere : {'upper', 'full'} or Hemisphere
     scheme : str
         Weighting scheme of the rest (:func:`ffls.weights.weighting.integrate`).
-    interpolator : FlowInterpolator, optional
-        Reuse its cached flows (built here otherwise).
+    interpolator : FlowInterpolator or LevelSetInterpolator, optional
+        Reuse its cached flows or shadows (a :class:`FlowInterpolator` is built here otherwise).
     split_options : dict, optional
         Keyword arguments of :func:`split_compact_sources`.
     **scheme_options
@@ -558,11 +884,19 @@ class LightFlowRelighter:
     flow : {'dis', 'farneback'}
     split_options : dict, optional
         Keyword arguments of :func:`split_compact_sources`.
+    interpolation : {'flow', 'levelset'}
+        :class:`FlowInterpolator` (the photos warped by their flow) or :class:`LevelSetInterpolator`
+        (the cast shadows moved by their signed distances, warped by the distances' flow).
     """
 
-    def __init__(self, inner, *, flow: str = "dis", split_options: dict | None = None):
+    def __init__(self, inner, *, flow: str = "dis", split_options: dict | None = None,
+                 interpolation: str = "flow"):
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, not {interpolation!r}")
         self.inner = inner
-        self.interpolator = FlowInterpolator(inner.basis, inner.directions, inner.hemisphere, flow=flow)
+        cls = FlowInterpolator if interpolation == "flow" else LevelSetInterpolator
+        self.interpolation = interpolation
+        self.interpolator = cls(inner.basis, inner.directions, inner.hemisphere, flow=flow)
         self.split_options = dict(split_options or {})
         self._lightmap = None
         self._rotation = np.eye(3)
