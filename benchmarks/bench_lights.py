@@ -9,8 +9,9 @@ fraction of accepted photos whose error is at most their ``uncertainty_deg`` (ta
 truth`` gives them from the renderer's truth (the estimator alone). ``--no-refine`` switches off
 the photometric centre refinement. Both passes of :func:`ffls.spheres.estimate.estimate_photos` (free bounce, then the
 capture-wide ground ratio imposed; ``--bounce free``: one pass) run in one process; the time per
-image covers both passes and the sphere pixel extraction, not the image decoding. Prints a table
-and writes ``benchmarks/results/bench_lights.json``.
+image covers both passes and the sphere pixel extraction, not the image decoding (wall time, and
+this process's CPU time, which other jobs' load inflates much less). Prints a table and writes
+``benchmarks/results/bench_lights.json``.
 
     python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--cache DIR]
         [--spheres detect|truth] [--no-refine] [--end-to-end WORKERS]
@@ -87,7 +88,7 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     shape = load_photo(cap, 0).shape[:2]
     samples = capture_samples(cap, sph, shape)
     imgs = [load_photo(cap, i) for i in range(len(dirs))]
-    t = time.perf_counter()
+    t, t_cpu = time.perf_counter(), time.process_time()
     vals = [sphere_values(im, samples) for im in imgs]
     if spheres == "detect":
         from ffls.io.capture import sphere_materials
@@ -100,6 +101,7 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
     result = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine,
                              materials=materials, views=views)
     dt = (time.perf_counter() - t) / len(imgs)
+    dt_cpu = (time.process_time() - t_cpu) / len(imgs)  # (this process's CPU: not inflated by other jobs' load)
     res_, refs = result.photos, result.refinements or []
     calib = None if result.calibration is None else [dataclasses.asdict(c) for c in result.calibration]
     est = np.array([r.direction for r in res_])
@@ -118,6 +120,7 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
         "models": {m: sum(1 for r in res_ if r.model == m) for m in ("distant", "near")},
         "bounce": bounce, "spheres": spheres, "refine_centres": refine,
         "centre_shift_px": [r.shift_norm_px for r in refs], "calibration": calib, "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
+        "cpu_ms_per_image": 1e3 * dt_cpu,
         "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
     }
 
@@ -234,7 +237,8 @@ def main(argv=None):
             print(f"{name:22s} spheres={a.spheres} refine={not a.no_refine} n={r['n']:3d} ok={r['accepted']:3d} median={r['median_deg']:.2f} "
                   f"p90={r['p90_deg']:.2f} max={r['max_deg']:.2f} deg  cone95~{r['median_uncertainty_deg']:.2f} "
                   f"coverage {100 * r['coverage']:.0f}%  "
-                  f"{r['ms_per_image']:.0f} ms/img ({r['images_per_second_per_core']:.1f} img/s/core)"
+                  f"{r['ms_per_image']:.0f} ms/img ({r['images_per_second_per_core']:.1f} img/s/core, "
+                  f"{r['cpu_ms_per_image']:.0f} ms CPU/img)"
                   f" shift px {[round(x, 2) for x in r['centre_shift_px']]}"
                   + (f"  target max {tgt[0]} median {tgt[1]}" if tgt else ""), flush=True)
     doc = {"benchmark": "bench_lights", **host_info(),

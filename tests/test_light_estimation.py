@@ -640,3 +640,77 @@ def test_decode_photos_names_a_photo_of_another_size(tmp_path):
     with pytest.raises(InputError) as e:
         decode_photos(load_capture(tmp_path), workers=1)
     assert names[3] in str(e.value.path) and "same size" in str(e.value)
+
+
+# ----------------------------------------------------------------------------- the fit's fixed point
+def _least_squares_of_own_pixels(n, y, g, fit):
+    """The linear least-squares solution of ``fit``'s model on ``fit``'s own pixels (``inliers``),
+    classified lit / shadow by its direction, solved from the design (not normal equations)."""
+    use = fit.inliers
+    lit = use & (n @ fit.direction > 0)
+    cols = [n * lit[:, None], np.ones((n.shape[0], 1))]
+    if fit.model == "bounce":
+        cols.append(g[:, None])
+    A = np.concatenate(cols, axis=1)[use]
+    if fit.model == "plain":
+        A = A[:, :3]
+    x = np.linalg.lstsq(A, y[use], rcond=None)[0]
+    return x
+
+
+@pytest.mark.parametrize("noise", [0.02, 0.001])  # above and below the 1% relative noise floor
+@pytest.mark.parametrize("start_offset_deg", [None, 2.0, 50.0])
+def test_fit_lambert_is_the_least_squares_fit_of_its_own_pixels(noise, start_offset_deg):
+    """The classification iterations end at a fixed point whose normal equations (updated pixel by
+    pixel between iterations) are those of its final pixels; the robust scale, above or below the
+    noise floor, rejects the speckle and keeps the noise; any start reaches the same fixed point."""
+    rng = np.random.default_rng(3)
+    n = normalize(rng.normal(size=(12000, 3)))
+    n = n[n[:, 1] < -0.05]
+    l = normalize(np.array([0.4, -0.5, 0.6]))
+    g = ground_bounce(n)
+    y = 0.5 * np.maximum(n @ l, 0.0) + 0.01 + 0.05 * g + rng.normal(0, noise * 0.5, n.shape[0])
+    speck = rng.random(n.shape[0]) < 0.03
+    y[speck] += 0.3  # highlights / specks: outliers
+    start = None
+    if start_offset_deg is not None:
+        axis = normalize(np.cross(l, [0.0, 0.0, 1.0]))
+        t = np.radians(start_offset_deg)
+        start = l * np.cos(t) + np.cross(axis, l) * np.sin(t)
+    fit = fit_lambert(n, y, g=g, start=start)
+    assert fit.status == "ok" and fit.model == "bounce"
+    x = _least_squares_of_own_pixels(n, y, g, fit)
+    np.testing.assert_allclose(x[:3] / np.linalg.norm(x[:3]), fit.direction, atol=1e-9)
+    np.testing.assert_allclose([np.linalg.norm(x[:3]), x[3], x[4]], [fit.intensity, fit.ambient, fit.bounce],
+                               rtol=1e-7, atol=1e-10)
+    assert not (fit.non_outliers & speck).any()  # every speck (0.3 above) rejected
+    kept = fit.non_outliers[~speck & np.isfinite(y)].mean()
+    assert kept > 0.8  # the noise is kept (the rest: the darkest shadow, censored by the model)
+    assert np.degrees(angle_between(fit.direction, l)) < (0.3 if noise > 0.01 else 0.05)
+    if start_offset_deg is not None:  # the same fixed point as from the least-squares start
+        ref = fit_lambert(n, y, g=g)
+        np.testing.assert_allclose(fit.direction, ref.direction, atol=1e-9)
+        assert np.array_equal(fit.non_outliers, ref.non_outliers)
+
+
+def test_sphere_kinds_subtract_the_per_pixel_median_with_or_without_nan(samples):
+    """'auto' spheres: each pixel's median over the photos is subtracted before the compactness
+    (the median of the finite values where a pixel is non-finite in some photo); matte balls stay matte."""
+    from ffls.spheres.estimate import sphere_kinds
+    from ffls.spheres.highlight import classify_sphere, highlight_compactness
+
+    values = [sphere_values(render(direction=light(t, p)), samples) for t, p in ((10, 0), (40, 60), (60, 200))]
+
+    def reference(vals):
+        out = []
+        for k, s in enumerate(samples):
+            grey = np.stack([np.asarray(v[k][0], dtype=np.float64) for v in vals])
+            grey = grey - np.nanmedian(grey, axis=0)
+            out.append(classify_sphere([highlight_compactness(s.rows, s.cols, g) for g in grey]))
+        return out
+
+    kinds = sphere_kinds(["auto"] * len(samples), samples, values)
+    assert kinds == reference(values) and all(k.kind == "matte" for k in kinds)
+    values[1][2].grey[:25] = np.nan  # a few non-finite pixels in one photo
+    kinds = sphere_kinds(["auto"] * len(samples), samples, values)
+    assert kinds == reference(values) and all(k.kind == "matte" and np.isfinite(k.statistic) for k in kinds)

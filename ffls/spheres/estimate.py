@@ -217,9 +217,12 @@ def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: lis
             continue
         grey = np.stack([np.asarray(v[k][0], dtype=np.float64) for v in values])
         if len(grey) >= 3:  # the static part (a mirror's reflected room or table) removed: what moves is the light
-            with warnings.catch_warnings():  # a pixel non-finite in every photo stays NaN (then ignored)
-                warnings.simplefilter("ignore", RuntimeWarning)
-                grey = grey - np.nanmedian(grey, axis=0)
+            if not np.isnan(grey).any():  # (the same medians; nanmedian is ~3x slower, even without a NaN)
+                grey = grey - np.median(grey, axis=0)
+            else:
+                with warnings.catch_warnings():  # a pixel non-finite in every photo stays NaN (then ignored)
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    grey = grey - np.nanmedian(grey, axis=0)
         stats = [highlight_compactness(s.rows, s.cols, g) for g in grey]
         out.append(classify_sphere(stats))
     return out

@@ -307,14 +307,36 @@ _TRIU = np.triu_indices(5)
 _S_IDX = (12, 13, 14)
 
 
-def _median(x: np.ndarray) -> float:
-    """``np.median`` of a 1-d array (same value), without its overhead."""
+def _median(x: np.ndarray, overwrite: bool = False) -> float:
+    """``np.median`` of a 1-d array (same value), without its overhead; ``overwrite``: partition
+    ``x`` in place (its order changes) instead of a copy."""
     n = x.size
     h = n // 2
+    kth = h if n % 2 else (h - 1, h)
+    if overwrite:
+        x.partition(kth)
+        p = x
+    else:
+        p = np.partition(x, kth)
     if n % 2:
-        return float(np.partition(x, h)[h])
-    p = np.partition(x, (h - 1, h))
+        return float(p[h])
     return float(np.mean(p[h - 1:h + 1]))
+
+
+def _robust_sigma(r: np.ndarray, floor: float) -> float:
+    """``max(1.4826 MAD(r), floor)``: the robust standard deviation of residuals ``r`` (m,), at least ``floor``.
+
+    ``r`` is overwritten. The same value as the two medians written out, but the second median is
+    only computed where it can exceed the floor: a count of the deviations above the floor's
+    equivalent shows when fewer than half of them are (then the MAD is below it, and the floor wins).
+    """
+    r -= _median(r, overwrite=True)
+    np.abs(r, out=r)
+    n = r.size
+    t = floor / 1.4826 * (1.0 - 1e-9)  # (a margin for the rounding of the comparison in the scaled units)
+    if n and int(np.count_nonzero(r > t)) <= n - n // 2 - 1:  # the middle order statistics are <= t
+        return float(floor)
+    return max(1.4826 * _median(r, overwrite=True), floor)
 
 
 def _percentile(x: np.ndarray, q: float) -> float:
@@ -350,13 +372,8 @@ def _design_products(normals, g, y):
     return _product_table(F, y)
 
 
-def _gram(Tb, lit, shadow):
-    """Normal equations of the full design ``[n [lit], 1, g]``: ``A^T A``, ``A^T y``, ``y^T y``, and the counts.
-
-    ``Tb`` is :func:`_product_table`; shadow-side rows only have the last two columns.
-    """
-    sl = Tb @ lit.astype(np.float64)
-    ss = Tb[12:] @ shadow.astype(np.float64)  # rows (3,3), (3,4), (4,4), f y (5), y^2: entries 12..20
+def _gram_from_sums(sl, ss):
+    """:func:`_gram`'s result from the lit sums ``sl`` (21,) and the shadow sums ``ss`` (rows 12..20, (9,))."""
     G5 = np.empty((5, 5))
     G5[_TRIU] = sl[:15]
     G5[3, 3] += ss[0]
@@ -366,6 +383,53 @@ def _gram(Tb, lit, shadow):
     h5 = sl[15:20].copy()
     h5[3:] += ss[6:8]
     return G5, h5, float(sl[20] + ss[8]), int(round(sl[12])), int(round(ss[0]))
+
+
+def _gram(Tb, lit, shadow):
+    """Normal equations of the full design ``[n [lit], 1, g]``: ``A^T A``, ``A^T y``, ``y^T y``, and the counts.
+
+    ``Tb`` is :func:`_product_table`; shadow-side rows only have the last two columns.
+    """
+    sl = Tb @ lit.astype(np.float64)
+    ss = Tb[12:] @ shadow.astype(np.float64)  # rows (3,3), (3,4), (4,4), f y (5), y^2: entries 12..20
+    return _gram_from_sums(sl, ss)
+
+
+class _Gram:
+    """:func:`_gram` over the iterations of one fit, updated with the pixels whose class changed.
+
+    Between two iterations only pixels near the terminator and near the rejection threshold change
+    class: their products are added or removed (a gather of a few columns of ``Tb``) instead of
+    summing every pixel again. Where many changed (the first iterations from a poor start), the
+    sums are made afresh (one product of ``Tb`` with both masks).
+    """
+
+    #: Above this share of changed pixels the sums are recomputed over all pixels.
+    REFRESH = 0.125
+
+    def __init__(self, Tb):
+        self.Tb = Tb
+        self.lit = self.shadow = None
+        self.S = None  # (21, 2): lit sums, shadow sums
+
+    def __call__(self, lit, shadow):
+        Tb = self.Tb
+        m = Tb.shape[1]
+        if self.S is not None:
+            dl = np.flatnonzero(lit != self.lit)
+            ds = np.flatnonzero(shadow != self.shadow)
+        if self.S is None or dl.size + ds.size > self.REFRESH * m:
+            W = np.empty((m, 2))
+            W[:, 0] = lit
+            W[:, 1] = shadow
+            self.S = Tb @ W
+        else:
+            if dl.size:  # +1 where the pixel became lit, -1 where it left
+                self.S[:, 0] += Tb[:, dl] @ (2.0 * lit[dl] - 1.0)
+            if ds.size:
+                self.S[:, 1] += Tb[:, ds] @ (2.0 * shadow[ds] - 1.0)
+        self.lit, self.shadow = lit, shadow
+        return _gram_from_sums(self.S[:, 0], self.S[12:, 1])
 
 
 def _fits(models, G5, h5, yy, k, ratio):
@@ -418,10 +482,15 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
     if Tb is None:
         Tb = _design_products(normals, g, y)
     nl = normals @ ldir
+    gram = _Gram(Tb)
     for _ in range(max_iter):
         lit = inl & (nl > terminator)
         shadow = inl & (nl < -terminator)
-        G5, h5, yy, n_lit, n_shadow = _gram(Tb, lit, shadow)
+        if best is not None and np.array_equal(lit, best["lit"]) and np.array_equal(shadow, best["shadow"]):
+            # the same classes give the same normal equations: this iteration would repeat the last
+            # one exactly (same fit, same inliers) and find it stable, so the last one is the fixed point
+            break
+        G5, h5, yy, n_lit, n_shadow = gram(lit, shadow)
         if n_lit < min_lit:
             break
         use = lit | shadow
@@ -439,21 +508,20 @@ def _iterate(normals, y, g, ok, ldir, models, terminator, min_lit, clip_sigma, r
         res *= a
         res += fit.b
         res += fit.c * g
-        pred = res.copy()
+        if has_floor:
+            pred = res.copy()
+        else:  # pixels predicted in the darkest shadow
+            censored = res < max(dark_fraction * a, 0.0)
         np.subtract(y, res, out=res)
         if has_floor:  # the noise near the floor: residuals of the dark unclipped pixels, whatever their class
             dark = ok & (pred < 0.1 * a)
             rd = res[dark] if dark.sum() >= min_lit else res[use]
             floor_noise = 1.4826 * _median(np.abs(rd - _median(rd)))
-        r = res[use]  # the residuals of the fitted pixels
-        r -= _median(r)
-        np.abs(r, out=r)
-        noise = 1.4826 * _median(r)
-        sigma = max(noise, rel_noise_floor * a)
+            censored = pred < max(dark_fraction * a, floor_sigma * floor_noise)
+        sigma = _robust_sigma(res[use], rel_noise_floor * a)  # (of the fitted pixels' residuals)
         np.abs(res, out=res)
         new_inl = res <= clip_sigma * sigma
         new_inl &= usable
-        censored = pred < max(dark_fraction * a, floor_sigma * floor_noise if has_floor else 0.0)
         new_inl &= ~censored
         best = dict(model=mdl, fit=fit, fits=fits, G5=G5, lit=lit, shadow=shadow, use=use, dir=new_dir, a=a, nl=nl,
                     censored=censored)
@@ -531,7 +599,9 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     normals = np.asarray(normals, dtype=np.float64)
     y_all = np.asarray(values, dtype=np.float64)
     m = y_all.shape[0]
-    ok = np.isfinite(y_all) & np.isfinite(normals.sum(axis=1))  # (a sum is finite iff its terms are)
+    # (a sum is finite iff its terms are; written out: numpy's sum over a length-3 axis is ~40x slower)
+    finite = np.isfinite(y_all) & np.isfinite(normals[:, 0] + normals[:, 1] + normals[:, 2])
+    ok = finite.copy()
     if valid is not None:
         ok &= np.asarray(valid, dtype=bool)
     n_invalid = int(m - ok.sum())
@@ -547,7 +617,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
             if mdl not in MODELS:
                 raise ValueError(f"unknown model {mdl!r}; expected one of {MODELS}")
     # pixels clipped at the black floor (pixel_validity): censor by the prediction too
-    floor = np.isfinite(y_all) & np.isfinite(normals.sum(axis=1)) & ~ok & (y_all <= 0.0)
+    floor = finite & ~ok & (y_all <= 0.0)
     if ok.sum() < min_lit:
         base.status = "saturated" if n_saturated >= max(min_lit, 0.5 * (m - ok.sum())) and n_saturated > 0 else "too_dark"
         return base
