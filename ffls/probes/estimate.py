@@ -311,9 +311,12 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     ----------
     probe : ffls.io.probe.Probe
     height : int
-    sources : int or 'auto'
-        Model sources (5, 9, 17 rings, or geodesic sets of about that size), or chosen by
-        ``criterion`` among 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
+    sources : int, 'auto' or 'uniform'
+        Model sources (5, 9, 17 rings, or geodesic sets of about that size). ``'auto'``
+        (default): an adaptive geodesic set, refined where the recovered light is and stopped by
+        ``criterion`` (:func:`ffls.probes.selection.adaptive_hougen_ahuja`; ``docs/probes.md``
+        measures why it is the default). ``'uniform'``: chosen by ``criterion`` among the uniform
+        sets 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
     nonnegative : bool
         Non-negative source intensities (scipy ``nnls``; default). False is the paper's plain
         least squares, whose negative lobes a saved map clips (counted in the notes).
@@ -337,14 +340,15 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         whole domain); ``'zero'`` blacks out the directions not seen.
     """
     from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
-    from ffls.probes.selection import select_hougen_ahuja
+    from ffls.probes.selection import adaptive_hougen_ahuja, select_hougen_ahuja
 
     src = probe.json_path
     N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
     kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness, rcond=rcond)
     try:
-        if sources == "auto":
-            sel = select_hougen_ahuja(N, V, albedo, criterion=criterion, **kw)
+        if sources in ("auto", "uniform"):
+            select = adaptive_hougen_ahuja if sources == "auto" else select_hougen_ahuja
+            sel = select(N, V, albedo, criterion=criterion, **kw)
             fit, chosen = sel.fit, sel.chosen
             notes.append(sel.note)
         else:
