@@ -11,6 +11,7 @@ import pytest
 from ffls.lightmaps.lightmap import sky_sun_map
 from ffls.probes.evaluate import relit_error
 from ffls.probes.hougen_ahuja import hougen_ahuja
+from ffls.probes.sato_sato_ikeuchi import box_triangles, shadow_in_view
 from ffls.probes.selection import adaptive_hougen_ahuja, adaptive_sato_sato_ikeuchi, bic, refine_sources
 from ffls.probes.sources import cell_energies, geodesic_level, geodesic_sources, sources_to_latlong, split_sources
 from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
@@ -147,3 +148,22 @@ def test_adaptive_sato_refines_towards_the_sun(sun_map):
     w = sel.fit.intensities.sum(axis=1)
     assert angle_deg(d[np.argmax(w)], SUN) < 6.0
     assert np.sum(angle_deg(d, SUN) < 15.0) > 4
+
+
+def test_shadow_in_view_is_false_for_shadows_longer_than_the_view():
+    g = np.linspace(-1.0, 1.0, 41)
+    x, y = np.meshgrid(g, g)
+    pts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    occ = {"box": {"center": [0.0, 0.0, 0.1], "size": [0.2, 0.2, 0.2]}}
+
+    def node(elev_deg, az_deg=0.0):
+        e, a = np.radians(elev_deg), np.radians(az_deg)
+        return [np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)]
+
+    # the far end of the shadow is 0.1 + 0.2 / tan(elevation) from the centre (along an axis)
+    d = np.array([node(90.0), node(30.0), node(15.0), node(9.0), node(3.0), node(0.0), node(30.0, 45.0)])
+    got = shadow_in_view(pts, d, occ)
+    assert got.tolist() == [True, True, True, False, False, False, True]
+    # a mesh occluder gives the same answer as the box
+    tri = box_triangles([0.0, 0.0, 0.1], [0.2, 0.2, 0.2])
+    assert shadow_in_view(pts, d, {"triangles": tri}).tolist() == got.tolist()

@@ -311,9 +311,9 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     ----------
     probe : ffls.io.probe.Probe
     height : int
-    sources : int, 'auto' or 'uniform'
+    sources : int, 'auto', 'adaptive' or 'uniform'
         Model sources (5, 9, 17 rings, or geodesic sets of about that size). ``'auto'``
-        (default): an adaptive geodesic set, refined where the recovered light is and stopped by
+        (default) or ``'adaptive'``: an adaptive geodesic set, refined where the recovered light is and stopped by
         ``criterion`` (:func:`ffls.probes.selection.adaptive_hougen_ahuja`; ``docs/probes.md``
         measures why it is the default). ``'uniform'``: chosen by ``criterion`` among the uniform
         sets 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
@@ -346,8 +346,8 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
     kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness, rcond=rcond)
     try:
-        if sources in ("auto", "uniform"):
-            select = adaptive_hougen_ahuja if sources == "auto" else select_hougen_ahuja
+        if sources in ("auto", "adaptive", "uniform"):
+            select = select_hougen_ahuja if sources == "uniform" else adaptive_hougen_ahuja
             sel = select(N, V, albedo, criterion=criterion, **kw)
             fit, chosen = sel.fit, sel.chosen
             notes.append(sel.note)
@@ -514,8 +514,12 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
         With ``plane``, ``occluder`` and a pinhole camera; ``plane.albedo`` for the
         ``'lambertian'`` and ``'torrance_sparrow'`` cases, ``surface_image`` for ``'ratio'``.
     height : int
-    nodes : int or 'auto'
-        Dome nodes (e.g. 521), or chosen by ``criterion`` (:func:`ffls.probes.selection.select_sato_sato_ikeuchi`).
+    nodes : int, 'auto', 'uniform' or 'adaptive'
+        Dome nodes (e.g. 521), or chosen by ``criterion``: ``'uniform'`` among uniform domes of
+        46 to 526 nodes (:func:`ffls.probes.selection.select_sato_sato_ikeuchi`), ``'adaptive'``
+        over an adaptive dome refined where the recovered light is
+        (:func:`ffls.probes.selection.adaptive_sato_sato_ikeuchi`). ``'auto'`` (default) is
+        ``'uniform'``: ``docs/probes.md`` measures why.
     case : {'lambertian', 'torrance_sparrow', 'ratio'}
     nonnegative : bool
     smoothness : float
@@ -528,7 +532,7 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
     fill : {'nearest', 'zero'}
     """
     from ffls.probes.sato_sato_ikeuchi import occluder_visibility, sato_sato_ikeuchi, shadow_confidence
-    from ffls.probes.selection import select_sato_sato_ikeuchi
+    from ffls.probes.selection import adaptive_sato_sato_ikeuchi, select_sato_sato_ikeuchi
 
     src = probe.json_path
     if case not in SHADOW_CASES:
@@ -553,9 +557,10 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
         kw.update(view_dirs=views, specular={"ks": float(ks), "sigma": float(np.radians(sigma_deg))})
     occ = _occluder_dict(probe.occluder)
     try:
-        if nodes == "auto":
-            sel = select_sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, criterion=criterion, **kw)
-            fit, chosen = sel.fit, sel.chosen
+        if nodes in ("auto", "uniform", "adaptive"):
+            select = adaptive_sato_sato_ikeuchi if nodes == "adaptive" else select_sato_sato_ikeuchi
+            sel = select(pts, rad, occ, probe.plane.normal, criterion=criterion, **kw)
+            fit, chosen = sel.fit, int(sel.fit.directions.shape[0])
             notes.append(sel.note)
         else:
             fit = sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, nodes=int(nodes), **kw)

@@ -27,7 +27,8 @@ from ffls.errors import InputError
 from ffls.probes.hougen_ahuja import SourceFit, check_normals, hougen_ahuja
 from ffls.conventions import normalize
 from ffls.probes.linear import as_rgb_pixels, broadcast_albedo
-from ffls.probes.sato_sato_ikeuchi import dome_nodes, occluder_visibility, sato_sato_ikeuchi, shadow_kernel
+from ffls.probes.sato_sato_ikeuchi import (dome_nodes, occluder_visibility, sato_sato_ikeuchi, shadow_in_view,
+                                           shadow_kernel)
 from ffls.probes.sources import geodesic_sources
 
 __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_hougen_ahuja",
@@ -324,7 +325,7 @@ def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0,
 
 def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", max_sources: int = 500,
                    max_level: int = 3, power_share: float = 0.5, patience: int = 2, criterion: str = "cv",
-                   tolerance: float = 0.05) -> Selection:
+                   tolerance: float = 0.05, can_split=None) -> Selection:
     """Adaptive source sets: refine the geodesic hierarchy where the recovered light is, stop by CV or BIC.
 
     Start from level 0 of the hierarchy (:func:`ffls.probes.sources.geodesic_level`). Each round
@@ -361,6 +362,9 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
         How the round is chosen from the scores.
     tolerance : float
         CV's tolerance.
+    can_split : callable, optional
+        ``can_split(directions) -> (n,) bool``: sources the data can resolve finer (for a cast
+        shadow, :func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view`); the others are never split.
 
     Returns
     -------
@@ -395,6 +399,8 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
                 break
         w = np.abs(np.asarray(fit.intensities, dtype=np.float64)).sum(axis=1)
         w[lev >= int(max_level)] = 0.0
+        if can_split is not None:
+            w[~np.asarray(can_split(d), dtype=bool)] = 0.0
         if not np.any(w > 0):
             break
         order = np.argsort(-w, kind="stable")
@@ -467,11 +473,14 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
 def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0), base_frequency: int = 3,
                                max_sources: int = 526, max_level: int = 3, criterion: str = "cv", folds: int = 5,
                                tolerance: float = 0.05, seed: int = 0, power_share: float = 0.5, patience: int = 2,
-                               **kwargs) -> Selection:
+                               resolved_only: bool = True, **kwargs) -> Selection:
     """Sato-Sato-Ikeuchi over an adaptive geodesic dome (:func:`refine_sources`).
 
     Each node's shadow (its visibility from every pixel) is traced once, when the node first
-    appears.
+    appears. Only nodes whose whole shadow falls in view are split
+    (:func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view`): a node low over the horizon casts a
+    shadow longer than the view, whose far end (its elevation) the photograph does not show, and
+    finer nodes there only trade elevation against intensity.
 
     Parameters
     ----------
@@ -482,6 +491,8 @@ def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.
         46 nodes; the default ``max_sources`` is the paper's dome size).
     criterion, folds, tolerance, seed
         As :func:`select_model`; CV blocks are a 6 x 6 grid over the receiver.
+    resolved_only : bool
+        Split only nodes whose whole shadow is in view (default); False splits any.
     **kwargs
         Passed on (``case``, ``albedo``, ``surface_radiance``...).
 
@@ -512,5 +523,6 @@ def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.
         return sato_sato_ikeuchi(p, b, occluder, plane_normal, d, visibility=vis_of(d), **kwargs)
 
     score = _scorer(criterion, fp, b, position_blocks(p), folds, seed, 0)
+    can_split = (lambda d: shadow_in_view(p, d, occluder, plane_normal)) if resolved_only else None
     return refine_sources(fit_all, score, base_frequency, hemi, max_sources, max_level, power_share, patience,
-                          criterion, tolerance)
+                          criterion, tolerance, can_split)
