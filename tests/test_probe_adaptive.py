@@ -167,3 +167,11 @@ def test_shadow_in_view_is_false_for_shadows_longer_than_the_view():
     # a mesh occluder gives the same answer as the box
     tri = box_triangles([0.0, 0.0, 0.1], [0.2, 0.2, 0.2])
     assert shadow_in_view(pts, d, {"triangles": tri}).tolist() == got.tolist()
+
+
+def test_adaptive_on_few_pixels_starts_coarser(sun_sphere):
+    # 60 pixels cannot hold the 92 sources of frequency 3: the refinement starts from 42 (frequency 2)
+    idx = np.random.default_rng(0).choice(sun_sphere.normals.shape[0], 60, replace=False)
+    sel = adaptive_hougen_ahuja(sun_sphere.normals[idx], sun_sphere.radiance[idx], 0.7, nonnegative=True,
+                                ambient="nonnegative")
+    assert sel.candidates[0] == 42 and sel.fit.rendered.shape == (60, 3)

@@ -97,8 +97,8 @@ def _add_inverse(sub, common):
     s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
                        description="Dome node intensities from the shadow of a known occluder on a plane.")
     s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto|adaptive|uniform",
-                   help="dome nodes (e.g. 521), uniform = auto (default: a uniform dome chosen by --criterion), or "
-                        "adaptive (a dome refined where the light is)")
+                   help="dome nodes (e.g. 521), uniform (a uniform dome chosen by --criterion), or adaptive = auto "
+                        "(default: a dome refined where the light is and its shadow in view)")
     s.add_argument("--case", choices=("lambertian", "torrance_sparrow", "ratio"), default="lambertian",
                    help="receiver model: Lambertian with known albedo (default), simplified Torrance-Sparrow, or "
                         "the ratio to surface_image (unknown albedo)")

@@ -518,8 +518,9 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
         Dome nodes (e.g. 521), or chosen by ``criterion``: ``'uniform'`` among uniform domes of
         46 to 526 nodes (:func:`ffls.probes.selection.select_sato_sato_ikeuchi`), ``'adaptive'``
         over an adaptive dome refined where the recovered light is
-        (:func:`ffls.probes.selection.adaptive_sato_sato_ikeuchi`). ``'auto'`` (default) is
-        ``'uniform'``: ``docs/probes.md`` measures why.
+        (:func:`ffls.probes.selection.adaptive_sato_sato_ikeuchi`; only nodes whose whole shadow
+        is in view are split). ``'auto'`` (default) is ``'adaptive'``: ``docs/probes.md``
+        measures why.
     case : {'lambertian', 'torrance_sparrow', 'ratio'}
     nonnegative : bool
     smoothness : float
@@ -558,7 +559,7 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
     occ = _occluder_dict(probe.occluder)
     try:
         if nodes in ("auto", "uniform", "adaptive"):
-            select = adaptive_sato_sato_ikeuchi if nodes == "adaptive" else select_sato_sato_ikeuchi
+            select = select_sato_sato_ikeuchi if nodes == "uniform" else adaptive_sato_sato_ikeuchi
             sel = select(pts, rad, occ, probe.plane.normal, criterion=criterion, **kw)
             fit, chosen = sel.fit, int(sel.fit.directions.shape[0])
             notes.append(sel.note)

@@ -427,6 +427,17 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
     return Selection(chosen=sizes[i], candidates=sizes, scores=s, criterion=criterion, fit=fits[i], note=note)
 
 
+def _base_frequency(base_frequency: int, m: int, hemisphere, extra: int) -> int:
+    """The largest frequency up to ``base_frequency`` whose level 0 leaves a CV fold (4/5 of the
+    ``m`` pixels) more pixels than unknowns (1 at least: the icosahedron)."""
+    from ffls.probes.sources import geodesic_level
+
+    f = max(int(base_frequency), 1)
+    while f > 1 and geodesic_level(f, 0, hemisphere).shape[0] + extra > 0.8 * m:
+        f -= 1
+    return f
+
+
 def _scorer(criterion, fit_predict, data, blocks, folds, seed, extra_params):
     """``score(directions, fit)`` for :func:`refine_sources`: CV on fixed folds, or BIC."""
     if criterion == "bic":
@@ -445,7 +456,8 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
     normals, radiance, albedo
         As :func:`ffls.probes.hougen_ahuja.hougen_ahuja`.
     base_frequency, max_sources, max_level, power_share, patience
-        As :func:`refine_sources` (the sources cover the whole sphere).
+        As :func:`refine_sources` (the sources cover the whole sphere). With few pixels the base
+        frequency is lowered until a CV fold (4/5 of the pixels) holds more pixels than unknowns.
     criterion, folds, tolerance, seed
         As :func:`select_model`; CV blocks group the pixels by normal direction.
     **kwargs
@@ -465,7 +477,9 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
         E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
         return E * rho[test] / np.pi
 
-    score = _scorer(criterion, fp, b, normal_blocks(n), folds, seed, 1 if kwargs.get("ambient", True) else 0)
+    extra = 1 if kwargs.get("ambient", True) else 0
+    score = _scorer(criterion, fp, b, normal_blocks(n), folds, seed, extra)
+    base_frequency = _base_frequency(base_frequency, n.shape[0], "full", extra)
     return refine_sources(lambda d: hougen_ahuja(n, b, rho, d, **kwargs), score, base_frequency, "full",
                           max_sources, max_level, power_share, patience, criterion, tolerance)
 
@@ -488,7 +502,8 @@ def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.
         As :func:`ffls.probes.sato_sato_ikeuchi.sato_sato_ikeuchi`.
     base_frequency, max_sources, max_level, power_share, patience
         As :func:`refine_sources`, over the dome around ``plane_normal`` (level 0, frequency 3:
-        46 nodes; the default ``max_sources`` is the paper's dome size).
+        46 nodes, lowered for few pixels as in :func:`adaptive_hougen_ahuja`; the default
+        ``max_sources`` is the paper's dome size).
     criterion, folds, tolerance, seed
         As :func:`select_model`; CV blocks are a 6 x 6 grid over the receiver.
     resolved_only : bool
@@ -523,6 +538,7 @@ def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.
         return sato_sato_ikeuchi(p, b, occluder, plane_normal, d, visibility=vis_of(d), **kwargs)
 
     score = _scorer(criterion, fp, b, position_blocks(p), folds, seed, 0)
+    base_frequency = _base_frequency(base_frequency, p.shape[0], hemi, 0)
     can_split = (lambda d: shadow_in_view(p, d, occluder, plane_normal)) if resolved_only else None
     return refine_sources(fit_all, score, base_frequency, hemi, max_sources, max_level, power_share, patience,
                           criterion, tolerance, can_split)
