@@ -11,8 +11,9 @@ For each real HDR map (the bundled Poly Haven maps, area-averaged to 64 rows) it
   over 2.5 m x 2.5 m: a light 10 degrees high casts its whole shadow in view; the map reduced to 1024
   distant lights with the synthetic renderer's shadow rays),
 
-then recovers the lighting with every method and parameter and reports, per row: the time (the
-median of 3 runs), the papers' re-render error (relative RMS of the input re-rendered from the
+then recovers the lighting with every method and parameter and reports, per row: the time (CPU
+seconds of this process, the median of 3 runs; ``OMP_NUM_THREADS=1`` makes it single-threaded, and
+CPU time is not inflated by other load on the machine), the papers' re-render error (relative RMS of the input re-rendered from the
 recovered lighting), the relit error of a diffuse object (relative RMS of its irradiance under
 the recovered vs the true map, ``ffls.probes.evaluate.relit_error``) over the probe's own
 normals and over every normal of a sphere (the upper hemisphere for shadows, which see no light
@@ -21,7 +22,11 @@ hemisphere, 64 px; relative RMS over its lit pixels, the measure of ``benchmarks
 relit by the CPU relighter under the recovered (negative texels clipped) vs the true map, and
 the map error. Rows ``floor`` hold the true map as each method's unknowns can hold it (the
 power of every source cell, POCS grid texel or dome node exact): the error of the discretisation
-alone. Then the limit: per spherical-harmonic order, the relative error
+alone; ``HA adaptive`` and ``Sato adaptive`` floors are the adaptive sets refined by the true
+map's cell powers (``oracle_adaptive``), and ``... set N`` floors the sets the adaptive estimates
+chose. Hougen-Ahuja and Sato-Sato-Ikeuchi are also run with their sizes chosen from the data:
+``uniform`` over uniform sets, ``adaptive`` over the adaptive sets of
+``ffls.probes.selection.refine_sources``. Then the limit: per spherical-harmonic order, the relative error
 of the recovered map's coefficients. Writes ``benchmarks/results/probes.json`` and
 ``docs/images/probes.png``.
 """
@@ -44,7 +49,8 @@ from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.evaluate import clamped_cosine_coefficients, clamped_cosine_energy, map_error, relit_error, sh_recovery
 from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.sato_sato_ikeuchi import box_visibility, dome_nodes, sato_sato_ikeuchi
-from ffls.probes.selection import select_hougen_ahuja, select_sato_sato_ikeuchi
+from ffls.probes.selection import (adaptive_hougen_ahuja, adaptive_sato_sato_ikeuchi, refine_sources,
+                                   select_hougen_ahuja, select_sato_sato_ikeuchi)
 from ffls.probes.singh_ahuja import singh_ahuja
 from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
 
@@ -62,12 +68,25 @@ SHADOW_RES = 128
 def timed(fn, repeat=3):
     ts, out = [], None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t = time.process_time()
         out = fn()
-        ts.append(time.perf_counter() - t)
+        ts.append(time.process_time() - t)
         if ts[-1] > 3.0:
             break
     return out, float(np.median(ts))
+
+
+def oracle_adaptive(true, hemisphere, max_sources):
+    """The adaptive set refined by the true map's cell powers (``refine_sources`` with every cell exact)."""
+
+    class Exact:
+        def __init__(self, d):
+            self.directions = d
+            self.intensities = cell_energies(d, true, hemisphere)
+
+    sel = refine_sources(Exact, lambda d, f: -float(d.shape[0]), hemisphere=hemisphere, max_sources=max_sources,
+                         criterion="bic")
+    return sel.fit.directions
 
 
 def upper_only(a):
@@ -141,8 +160,13 @@ def main(argv=None):
         sa = latlong_solid_angles(H).reshape(16, H // 16, 32, H // 16, 1)
         grid = (g * sa).sum(axis=(1, 3)) / sa.sum(axis=(1, 3))
         floor("POCS grid 16x32", np.repeat(np.repeat(grid, H // 16, axis=0), H // 16, axis=1), "full")
+        d = oracle_adaptive(true, "full", 500)
+        floor(f"HA adaptive n={d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
         d = dome_nodes(526)
         floor(f"Sato dome {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H, "upper"), "upper")
+        d = oracle_adaptive(true, "upper", 526)
+        floor(f"Sato adaptive {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H, "upper"),
+              "upper")
         # ------------------------------------------------------------ Hougen-Ahuja
         ha = [(5, False, {}), (9, False, {}), (17, False, {}), (5, True, {}), (9, True, {}), (17, True, {}),
               (162, False, {"rcond": 1e-3}), (42, True, {"ambient": "nonnegative"}),
@@ -159,7 +183,15 @@ def main(argv=None):
             if n == 17 and not nn:
                 limit[f"{name} HA-17 lstsq"] = sh_recovery(L, true, 8).relative_error.tolist()
         sel, t = timed(lambda: select_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="nonnegative"), 1)
-        add("hougen_ahuja", f"auto (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals, true, "full")
+        add("hougen_ahuja", f"uniform (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals, true,
+            "full")
+        for crit in ("bic", "cv"):
+            sel, t = timed(lambda: adaptive_hougen_ahuja(sph.normals, rad, 0.7, criterion=crit, nonnegative=True,
+                                                         ambient="nonnegative"), 1)
+            add("hougen_ahuja", f"adaptive ({crit}) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals,
+                true, "full")
+            d = sel.fit.directions
+            floor(f"HA adaptive ({crit}) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
         # ------------------------------------------------------------ POCS
         pocs_rows = [(8, 10, "random"), (8, 50, "random"), (16, 10, "random"), (16, 50, "random"),
                      (16, 50, "sequential")]
@@ -197,8 +229,16 @@ def main(argv=None):
         fit, t = timed(lambda: sato_sato_ikeuchi(scs.points, noisy(scs.radiance), occ, nodes=d, case="torrance_sparrow",
                                                  albedo=0.6, view_dirs=scs.view_dirs, specular=spec, visibility=V), 1)
         add("sato", f"nodes={d.shape[0]} torrance_sparrow", lambda f: f.latlong(H), fit, t, up, tu, "upper")
-        sel, t = timed(lambda: select_sato_sato_ikeuchi(sc.points, srad, occ, candidates=nodes, albedo=sc.albedo), 1)
-        add("sato", f"auto (cv) -> {sel.fit.directions.shape[0]}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
+        for crit in ("cv", "bic"):
+            sel, t = timed(lambda: select_sato_sato_ikeuchi(sc.points, srad, occ, candidates=nodes, criterion=crit,
+                                                            albedo=sc.albedo), 1)
+            add("sato", f"uniform ({crit}) -> {sel.fit.directions.shape[0]}", lambda f: f.latlong(H), sel.fit, t, up,
+                tu, "upper")
+        sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points, srad, occ, criterion="bic", albedo=sc.albedo), 1)
+        add("sato", f"adaptive (bic) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
+        d = sel.fit.directions
+        floor(f"Sato adaptive (bic) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H,
+                                                                          "upper"), "upper")
 
     kernel = {"energy_up_to_order": {str(l): clamped_cosine_energy(l) for l in range(7)},
               "coefficients_2pi_c_l": (2 * np.pi * clamped_cosine_coefficients(8)).tolist()}

@@ -6,7 +6,8 @@ The scenes and the measure are those of ``benchmarks/probes.py`` (its geometry c
 imported): a Lambertian ball seen from the relit capture's camera direction, a 0.2 m cube's shadow
 seen from above, the four bundled maps at 64 rows, and the ``ffls synth`` capture (150 lights)
 relit under the recovered vs the true map. For the main setting of each method (Hougen-Ahuja, 492
-sources, NNLS; POCS 16 x 32, 50 sweeps; Sato-Sato-Ikeuchi, 526 nodes) it reports the relit error
+sources, NNLS, and its adaptive set chosen by BIC; POCS 16 x 32, 50 sweeps; Sato-Sato-Ikeuchi, 526
+nodes, and its adaptive dome chosen by BIC) it reports the relit error
 
 * ``all``: of the recovered map;
 * ``band a-b``: of the true map with only the directions between elevations ``a`` and ``b``
@@ -15,7 +16,7 @@ sources, NNLS; POCS 16 x 32, 50 sweeps; Sato-Sato-Ikeuchi, 526 nodes) it reports
   truth (``normal_confidence <= 0.2`` for the ball; for the shadow, nodes hidden from fewer than
   1% of the receiver pixels): what is left is the ambiguity among the directions it does see;
 * ``floor``: of the true map as the method's unknowns hold it (``cell_energies``; the POCS grid
-  area-averaged).
+  area-averaged; for the adaptive rows, the set the estimate chose).
 
 Writes ``benchmarks/results/probes_attribution.json``.
 """
@@ -32,7 +33,9 @@ from ffls.conventions import latlong_directions
 from ffls.io.capture import load_capture_and_lights
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
-from ffls.probes.sato_sato_ikeuchi import box_visibility, dome_nodes, sato_sato_ikeuchi, shadow_confidence
+from ffls.probes.sato_sato_ikeuchi import (box_visibility, dome_nodes, occluder_visibility, sato_sato_ikeuchi,
+                                           shadow_confidence)
+from ffls.probes.selection import adaptive_hougen_ahuja, adaptive_sato_sato_ikeuchi
 from ffls.probes.singh_ahuja import singh_ahuja
 from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong, to_lightmap
 from ffls.relight.cpu import relight_capture
@@ -80,6 +83,10 @@ def main():
         fit = hougen_ahuja(sph.normals, sph.radiance, 0.7, 492, nonnegative=True, ambient="nonnegative")
         d = model_sources(492)
         report("HA 492 nnls", fit.latlong(H), poor, sources_to_latlong(d, cell_energies(d, true), H))
+        sel = adaptive_hougen_ahuja(sph.normals, sph.radiance, 0.7, criterion="bic", nonnegative=True,
+                                    ambient="nonnegative")
+        d = sel.fit.directions
+        report(f"HA adapt {d.shape[0]}", sel.fit.latlong(H), poor, sources_to_latlong(d, cell_energies(d, true), H))
         r = singh_ahuja(sph.normals, sph.radiance, 0.7, 16, 50, max_pixels=1000)
         grid = (true.reshape(16, H // 16, 32, H // 16, 3) * sa).sum(axis=(1, 3)) / sa.sum(axis=(1, 3))
         report("POCS 16x32", r.latlong(H), poor, np.repeat(np.repeat(grid, H // 16, axis=0), H // 16, axis=1))
@@ -90,6 +97,11 @@ def main():
         fit = sato_sato_ikeuchi(sc.points, sc.radiance, occ, nodes=d, albedo=sc.albedo, visibility=V)
         poor = shadow_confidence(d, V, height=H) < 0.01
         report("Sato 526", fit.latlong(H), poor, sources_to_latlong(d, cell_energies(d, true, "upper"), H, "upper"))
+        sel = adaptive_sato_sato_ikeuchi(sc.points, sc.radiance, occ, criterion="bic", albedo=sc.albedo)
+        d = sel.fit.directions
+        poor = shadow_confidence(d, occluder_visibility(sc.points, d, occ), height=H) < 0.01
+        report(f"Sato adapt {d.shape[0]}", sel.fit.latlong(H), poor,
+               sources_to_latlong(d, cell_energies(d, true, "upper"), H, "upper"))
     write_json(ROOT / "benchmarks/results/probes_attribution.json",
                {"host": host_info(), "map_height": H, "bands_deg": BANDS, "rows": out,
                 "command": "OMP_NUM_THREADS=1 python benchmarks/probes_attribution.py"})

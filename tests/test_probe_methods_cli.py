@@ -59,6 +59,7 @@ def shadow_folder(tmp_path_factory, truth):
 
 
 @pytest.mark.parametrize("argv", [["diffuse", "--sources", "9"], ["diffuse", "--sources", "auto", "--criterion", "bic"], ["diffuse", "--sources", "17", "--unconstrained", "--ambient", "free"],
+                                  ["diffuse", "--sources", "uniform"], ["diffuse", "--sources", "adaptive", "--criterion", "bic"],
                                   ["pocs", "--grid", "8", "--iterations", "10"]])
 def test_diffuse_methods_write_maps(diffuse_folder, tmp_path, capsys, argv):
     out = tmp_path / "m.exr"
@@ -181,3 +182,20 @@ def test_diffuse_object_of_known_geometry(tmp_path, truth):
     assert any("pixels on the mesh ball.ply" in x for x in mesh.notes)
     e_mesh, e_sphere = relit_error(mesh.lightmap, truth), relit_error(sphere.lightmap, truth)
     assert e_mesh < e_sphere + 0.01
+
+
+def test_shadow_adaptive_nodes(shadow_folder, tmp_path, capsys):
+    out = tmp_path / "a.exr"
+    assert main(["probe", "shadow", str(shadow_folder), "-o", str(out), "--size", "16", "--nodes", "adaptive",
+                 "--criterion", "bic"]) == 0
+    assert "adaptive sources, BIC" in capsys.readouterr().err
+    est = estimate_lightmap(shadow_folder, "shadow", height=16, nodes="adaptive", criterion="bic")
+    assert est.details["nodes"] >= 46 and est.lightmap.data.min() >= 0
+
+
+@pytest.mark.parametrize("value", ["many", "0", "-3"])
+def test_bad_sources_value_is_one_line(diffuse_folder, tmp_path, capsys, value):
+    assert main(["probe", "diffuse", str(diffuse_folder), "-o", str(tmp_path / "x.exr"), "--sources", value]) == 2
+    err = capsys.readouterr().err
+    assert "--sources" in err and "'auto', 'adaptive' or 'uniform'" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.exr").exists()

@@ -59,16 +59,16 @@ def _add_mirror(sub, common):
 
 
 def _sources_arg(text: str):
-    """``--sources`` / ``--nodes``: a positive integer or 'auto'."""
+    """``--sources`` / ``--nodes``: a positive integer, 'auto', 'adaptive' or 'uniform'."""
     t = str(text).strip().lower()
-    if t == "auto":
+    if t in ("auto", "adaptive", "uniform"):
         return t
     try:
         n = int(t)
     except ValueError:
         n = 0
     if not 1 <= n <= 100000:
-        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', not {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a positive integer, 'auto', 'adaptive' or 'uniform', not {text!r}")
     return n
 
 
@@ -85,8 +85,9 @@ def _add_inverse(sub, common):
     d = sub.add_parser("diffuse", parents=[common, shared], help="a diffuse sphere (Hougen-Ahuja 1993)",
                        description="Least squares over model sources (5, 9, 17 rings or geodesic sets) with a "
                                    "free ambient term, from a diffuse sphere.")
-    d.add_argument("--sources", type=_sources_arg, default="auto", metavar="N|auto",
-                   help="model sources: 5, 9, 17 (rings), any other count (geodesic), or auto (default)")
+    d.add_argument("--sources", type=_sources_arg, default="auto", metavar="N|auto|adaptive|uniform",
+                   help="model sources: 5, 9, 17 (rings), any other count (geodesic), uniform (a uniform set chosen "
+                        "by --criterion), or adaptive = auto (default: a geodesic set refined where the light is)")
     d.add_argument("--unconstrained", action="store_true",
                    help="plain least squares (the paper) instead of non-negative intensities (scipy nnls)")
     d.add_argument("--ambient", choices=("nonnegative", "free", "none"), default="nonnegative",
@@ -95,8 +96,9 @@ def _add_inverse(sub, common):
                    help="with --unconstrained: truncate singular values below RCOND x the largest")
     s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
                        description="Dome node intensities from the shadow of a known occluder on a plane.")
-    s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto",
-                   help="dome nodes (e.g. 521), or auto (default)")
+    s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto|adaptive|uniform",
+                   help="dome nodes (e.g. 521), uniform (a uniform dome chosen by --criterion), or adaptive = auto "
+                        "(default: a dome refined where the light is and its shadow in view)")
     s.add_argument("--case", choices=("lambertian", "torrance_sparrow", "ratio"), default="lambertian",
                    help="receiver model: Lambertian with known albedo (default), simplified Torrance-Sparrow, or "
                         "the ratio to surface_image (unknown albedo)")

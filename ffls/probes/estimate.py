@@ -311,9 +311,12 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     ----------
     probe : ffls.io.probe.Probe
     height : int
-    sources : int or 'auto'
-        Model sources (5, 9, 17 rings, or geodesic sets of about that size), or chosen by
-        ``criterion`` among 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
+    sources : int, 'auto', 'adaptive' or 'uniform'
+        Model sources (5, 9, 17 rings, or geodesic sets of about that size). ``'auto'``
+        (default) or ``'adaptive'``: an adaptive geodesic set, refined where the recovered light is and stopped by
+        ``criterion`` (:func:`ffls.probes.selection.adaptive_hougen_ahuja`; ``docs/probes.md``
+        measures why it is the default). ``'uniform'``: chosen by ``criterion`` among the uniform
+        sets 5, 9, 17, 42, 92, 162, 252 (:func:`ffls.probes.selection.select_hougen_ahuja`).
     nonnegative : bool
         Non-negative source intensities (scipy ``nnls``; default). False is the paper's plain
         least squares, whose negative lobes a saved map clips (counted in the notes).
@@ -337,14 +340,15 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         whole domain); ``'zero'`` blacks out the directions not seen.
     """
     from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
-    from ffls.probes.selection import select_hougen_ahuja
+    from ffls.probes.selection import adaptive_hougen_ahuja, select_hougen_ahuja
 
     src = probe.json_path
     N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
     kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness, rcond=rcond)
     try:
-        if sources == "auto":
-            sel = select_hougen_ahuja(N, V, albedo, criterion=criterion, **kw)
+        if sources in ("auto", "adaptive", "uniform"):
+            select = select_hougen_ahuja if sources == "uniform" else adaptive_hougen_ahuja
+            sel = select(N, V, albedo, criterion=criterion, **kw)
             fit, chosen = sel.fit, sel.chosen
             notes.append(sel.note)
         else:
@@ -510,8 +514,13 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
         With ``plane``, ``occluder`` and a pinhole camera; ``plane.albedo`` for the
         ``'lambertian'`` and ``'torrance_sparrow'`` cases, ``surface_image`` for ``'ratio'``.
     height : int
-    nodes : int or 'auto'
-        Dome nodes (e.g. 521), or chosen by ``criterion`` (:func:`ffls.probes.selection.select_sato_sato_ikeuchi`).
+    nodes : int, 'auto', 'uniform' or 'adaptive'
+        Dome nodes (e.g. 521), or chosen by ``criterion``: ``'uniform'`` among uniform domes of
+        46 to 526 nodes (:func:`ffls.probes.selection.select_sato_sato_ikeuchi`), ``'adaptive'``
+        over an adaptive dome refined where the recovered light is
+        (:func:`ffls.probes.selection.adaptive_sato_sato_ikeuchi`; only nodes whose whole shadow
+        is in view are split). ``'auto'`` (default) is ``'adaptive'``: ``docs/probes.md``
+        measures why.
     case : {'lambertian', 'torrance_sparrow', 'ratio'}
     nonnegative : bool
     smoothness : float
@@ -524,7 +533,7 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
     fill : {'nearest', 'zero'}
     """
     from ffls.probes.sato_sato_ikeuchi import occluder_visibility, sato_sato_ikeuchi, shadow_confidence
-    from ffls.probes.selection import select_sato_sato_ikeuchi
+    from ffls.probes.selection import adaptive_sato_sato_ikeuchi, select_sato_sato_ikeuchi
 
     src = probe.json_path
     if case not in SHADOW_CASES:
@@ -549,9 +558,10 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
         kw.update(view_dirs=views, specular={"ks": float(ks), "sigma": float(np.radians(sigma_deg))})
     occ = _occluder_dict(probe.occluder)
     try:
-        if nodes == "auto":
-            sel = select_sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, criterion=criterion, **kw)
-            fit, chosen = sel.fit, sel.chosen
+        if nodes in ("auto", "uniform", "adaptive"):
+            select = select_sato_sato_ikeuchi if nodes == "uniform" else adaptive_sato_sato_ikeuchi
+            sel = select(pts, rad, occ, probe.plane.normal, criterion=criterion, **kw)
+            fit, chosen = sel.fit, int(sel.fit.directions.shape[0])
             notes.append(sel.note)
         else:
             fit = sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, nodes=int(nodes), **kw)

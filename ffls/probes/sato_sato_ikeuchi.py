@@ -36,6 +36,7 @@ them from their neighbours (:func:`ffls.probes.linear.solve_sources`).
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from ffls.conventions import normalize
 from ffls.errors import InputError
@@ -45,6 +46,7 @@ from ffls.probes.sources import geodesic_frequency_for, geodesic_sources
 
 __all__ = [
     "CASES",
+    "shadow_in_view",
     "box_triangles",
     "box_visibility",
     "mesh_visibility",
@@ -259,6 +261,67 @@ def occluder_visibility(points, directions, occluder) -> np.ndarray:
             return mesh_visibility(points, directions, occluder["triangles"])
         raise ValueError("occluder must hold 'box' or 'triangles'")
     return mesh_visibility(points, directions, occluder)
+
+
+def shadow_in_view(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Whether each node casts its *whole* shadow inside the observed receiver.
+
+    The shadow of a node low over the horizon runs past the view: the photograph then shows its
+    sides but not its far end, so the node's elevation (and with it its intensity, seen on the
+    plane only as ``E cos(theta)``) is not resolved by the data. A node's shadow is in view when
+    every vertex of the occluder's convex hull, projected along the node's direction onto the
+    plane, lands within two pixel spacings (the median distance between neighbouring receiver
+    points, twice: a point inside the observed area is within one spacing of a pixel; twice
+    allows for the gaps of subsampled pixels) of a receiver point.
+
+    Parameters
+    ----------
+    points : (m, 3) array_like
+        Receiver points (on the plane).
+    directions : (n, 3) array_like
+        Unit node directions.
+    occluder : dict or (F, 3, 3) array_like
+        As :func:`occluder_visibility`.
+    plane_normal : (3,) array_like
+
+    Returns
+    -------
+    (n,) bool
+        False also for nodes at or below the horizon.
+    """
+    p = _check_points(points)
+    d = normalize(np.asarray(directions, dtype=np.float64).reshape(-1, 3))
+    nrm = normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))
+    if isinstance(occluder, dict):
+        if "box" in occluder:
+            b = occluder["box"]
+            tri = box_triangles(b["center"], b["size"], b.get("rotation"))
+        elif "triangles" in occluder:
+            tri = np.asarray(occluder["triangles"], dtype=np.float64)
+        else:
+            raise ValueError("occluder must hold 'box' or 'triangles'")
+    else:
+        tri = np.asarray(occluder, dtype=np.float64)
+    v = np.unique(tri.reshape(-1, 3), axis=0)
+    if v.shape[0] >= 4:
+        try:
+            v = v[ConvexHull(v).vertices]
+        except QhullError:  # a flat occluder (coplanar vertices): every vertex stands
+            pass
+    p0 = p.mean(axis=0)
+    tree = cKDTree(p)
+    spacing = float(np.median(tree.query(p, k=2)[0][:, 1])) if p.shape[0] > 1 else 0.0
+    height = (v - p0) @ nrm  # (k,) above the plane
+    cos = d @ nrm  # (n,)
+    out = np.zeros(d.shape[0], dtype=bool)
+    up = cos > 1e-9
+    if not np.any(up):
+        return out
+    t = np.maximum(height, 0.0)[None, :] / cos[up, None]  # (n', k)
+    proj = v[None, :, :] - t[..., None] * d[up, None, :]
+    dist, _ = tree.query(proj.reshape(-1, 3))
+    out[up] = np.all(dist.reshape(t.shape) <= 2.0 * spacing, axis=1)
+    return out
 
 
 def shadow_kernel(directions, visibility, plane_normal, case: str = "lambertian", albedo=1.0, view_dirs=None,

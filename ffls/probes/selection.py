@@ -25,11 +25,14 @@ from scipy.spatial import cKDTree
 
 from ffls.errors import InputError
 from ffls.probes.hougen_ahuja import SourceFit, check_normals, hougen_ahuja
-from ffls.probes.linear import as_rgb_pixels
-from ffls.probes.sato_sato_ikeuchi import dome_nodes, occluder_visibility, sato_sato_ikeuchi, shadow_kernel
+from ffls.conventions import normalize
+from ffls.probes.linear import as_rgb_pixels, broadcast_albedo
+from ffls.probes.sato_sato_ikeuchi import (dome_nodes, occluder_visibility, sato_sato_ikeuchi, shadow_in_view,
+                                           shadow_kernel)
 from ffls.probes.sources import geodesic_sources
 
-__all__ = ["Selection", "select_model", "normal_blocks", "position_blocks", "select_hougen_ahuja",
+__all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_hougen_ahuja",
+           "adaptive_sato_sato_ikeuchi", "normal_blocks", "position_blocks", "select_hougen_ahuja",
            "select_sato_sato_ikeuchi", "CRITERIA"]
 
 #: Model-selection criteria.
@@ -120,29 +123,14 @@ def select_model(fit_predict, candidates, data, n_params=None, criterion: str = 
     rng = np.random.default_rng(seed)
     scores = np.full(len(cands), np.inf)
     if criterion == "cv":
-        lab = np.arange(m) if blocks is None else np.asarray(blocks, dtype=np.int64)
-        ub = np.unique(lab)
-        k = min(int(folds), ub.size)
-        if k < 2:
-            raise InputError("cross-validation needs at least two blocks of pixels")
-        fold_of_block = rng.permutation(ub.size) % k
-        fold = fold_of_block[np.searchsorted(ub, lab)]
+        fold, k, n_blocks = _cv_folds(m, blocks, folds, rng)
         for ci, c in enumerate(cands):
-            err = 0.0
-            try:
-                for f in range(k):
-                    test = np.flatnonzero(fold == f)
-                    train = np.flatnonzero(fold != f)
-                    pred = fit_predict(c, train, test)
-                    err += float(np.sum((pred - y[test]) ** 2))
-            except InputError:
-                continue  # this candidate cannot be fitted on a fold: not a choice
-            scores[ci] = np.sqrt(err / y.size) / max(float(np.sqrt(np.mean(y ** 2))), 1e-300)
+            scores[ci] = _cv_score(fit_predict, c, fold, k, y)
         best = np.nanmin(scores)
         if not np.isfinite(best):
             raise InputError("no candidate model could be fitted on the cross-validation folds")
         chosen_i = int(np.flatnonzero(scores <= best * (1.0 + tolerance))[0])
-        note = (f"cross-validation ({k} folds over {ub.size} blocks) chose {cands[chosen_i]!r}: held-out "
+        note = (f"cross-validation ({k} folds over {n_blocks} blocks) chose {cands[chosen_i]!r}: held-out "
                 f"relative RMS {scores[chosen_i]:.4f} (best {best:.4f}, tolerance {tolerance:.0%})")
     else:
         if n_params is None:
@@ -153,13 +141,58 @@ def select_model(fit_predict, candidates, data, n_params=None, criterion: str = 
                 pred = fit_predict(c, idx, idx)
             except InputError:
                 continue
-            rss = np.maximum(np.sum((pred - y) ** 2, axis=0), 1e-300)
-            scores[ci] = float(np.sum(m * np.log(rss / m) + n_params(c) * np.log(m)))
+            scores[ci] = bic(pred, y, n_params(c))
         if not np.isfinite(scores).any():
             raise InputError("no candidate model could be fitted")
         chosen_i = int(np.argmin(scores))
         note = f"BIC chose {cands[chosen_i]!r} (BIC {scores[chosen_i]:.1f})"
     return Selection(chosen=cands[chosen_i], candidates=cands, scores=scores, criterion=criterion, note=note)
+
+
+def _cv_folds(m: int, blocks, folds: int, rng) -> tuple[np.ndarray, int, int]:
+    """Fold (m,) of every pixel (whole blocks per fold), the number of folds and of blocks."""
+    lab = np.arange(m) if blocks is None else np.asarray(blocks, dtype=np.int64)
+    ub = np.unique(lab)
+    k = min(int(folds), ub.size)
+    if k < 2:
+        raise InputError("cross-validation needs at least two blocks of pixels")
+    fold_of_block = rng.permutation(ub.size) % k
+    return fold_of_block[np.searchsorted(ub, lab)], k, int(ub.size)
+
+
+def _cv_score(fit_predict, c, fold, k: int, y) -> float:
+    """Held-out relative RMS of candidate ``c`` over the folds (inf if a fold cannot be fitted)."""
+    err = 0.0
+    try:
+        for f in range(k):
+            test = np.flatnonzero(fold == f)
+            train = np.flatnonzero(fold != f)
+            pred = fit_predict(c, train, test)
+            err += float(np.sum((pred - y[test]) ** 2))
+    except InputError:
+        return np.inf  # this candidate cannot be fitted on a fold: not a choice
+    return float(np.sqrt(err / y.size) / max(float(np.sqrt(np.mean(y ** 2))), 1e-300))
+
+
+def bic(predicted, data, n_params: int) -> float:
+    """The Bayesian information criterion ``m log(RSS / m) + k log m`` per channel, summed.
+
+    Parameters
+    ----------
+    predicted, data : (m, c) array_like
+    n_params : int
+        Unknowns of the model (``k``).
+
+    Returns
+    -------
+    float
+    """
+    y = np.asarray(data, dtype=np.float64)
+    y = y[:, None] if y.ndim == 1 else y
+    pred = np.asarray(predicted, dtype=np.float64).reshape(y.shape)
+    m = y.shape[0]
+    rss = np.maximum(np.sum((pred - y) ** 2, axis=0), 1e-300)
+    return float(np.sum(m * np.log(rss / m) + int(n_params) * np.log(m)))
 
 
 def _fill(sel: Selection, fit) -> Selection:
@@ -209,6 +242,34 @@ def select_hougen_ahuja(normals, radiance, albedo=1.0, candidates=(5, 9, 17, 42,
     return _fill(sel, fit if fit is not None else hougen_ahuja(n, b, albedo, int(sel.chosen), **kwargs))
 
 
+def _sato_predictor(p, b, occluder, plane_normal, kwargs):
+    """``predict(d, V, train, test) -> (fit on train, prediction at test)`` for Sato-Sato-Ikeuchi."""
+    m = p.shape[0]
+
+    def split(idx):
+        out = {}
+        for k, v in kwargs.items():
+            a = np.asarray(v) if isinstance(v, (list, tuple, np.ndarray)) else None
+            out[k] = a[idx] if a is not None and a.ndim >= 1 and a.shape[0] == m and m > 3 else v
+        return out
+
+    def predict(d, V, train, test):
+        fit = sato_sato_ikeuchi(p[train], b[train], occluder, plane_normal, d, visibility=V[train], **split(train))
+        if np.array_equal(train, test):
+            return fit, fit.rendered
+        kw = split(test)
+        case = kw.get("case", "lambertian")
+        K = shadow_kernel(d, V[test], plane_normal, case, kw.get("albedo", 1.0), kw.get("view_dirs"), kw.get("specular"))
+        E = fit.intensities
+        if case == "ratio":
+            s_all = as_rgb_pixels(kwargs["surface_radiance"], m, "surface image")
+            e0 = np.pi * np.mean(s_all[train], axis=0) / float(kwargs.get("reference_albedo", 1.0))
+            return fit, np.einsum("xnc,nc->xc", K, E / e0) * s_all[test]
+        return fit, np.einsum("xnc,nc->xc", K, E)
+
+    return predict
+
+
 def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0),
                              candidates=(46, 91, 126, 196, 246, 341, 526), criterion: str = "cv", folds: int = 5,
                              tolerance: float = 0.05, seed: int = 0, **kwargs) -> Selection:
@@ -241,31 +302,15 @@ def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0,
             vis[c] = (d, occluder_visibility(p, d, occluder))
         return vis[c]
 
-    def split(idx):
-        out = {}
-        for k, v in kwargs.items():
-            a = np.asarray(v) if isinstance(v, (list, tuple, np.ndarray)) else None
-            out[k] = a[idx] if a is not None and a.ndim >= 1 and a.shape[0] == m and m > 3 else v
-        return out
-
     full = {}  # fits on every pixel (BIC's), reused for the chosen model
+    predict = _sato_predictor(p, b, occluder, plane_normal, kwargs)
 
     def fp(c, train, test):
         d, V = nodes_of(c)
-        fit = sato_sato_ikeuchi(p[train], b[train], occluder, plane_normal, d, visibility=V[train], **split(train))
+        fit, pred = predict(d, V, train, test)
         if train.size == m:
             full[c] = fit
-        if np.array_equal(train, test):
-            return fit.rendered
-        kw = split(test)
-        case = kw.get("case", "lambertian")
-        K = shadow_kernel(d, V[test], plane_normal, case, kw.get("albedo", 1.0), kw.get("view_dirs"), kw.get("specular"))
-        E = fit.intensities
-        if case == "ratio":
-            s_all = as_rgb_pixels(kwargs["surface_radiance"], m, "surface image")
-            e0 = np.pi * np.mean(s_all[train], axis=0) / float(kwargs.get("reference_albedo", 1.0))
-            return np.einsum("xnc,nc->xc", K, E / e0) * s_all[test]
-        return np.einsum("xnc,nc->xc", K, E)
+        return pred
 
     def k_of(c):
         return int(nodes_of(c)[0].shape[0])
@@ -276,3 +321,224 @@ def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0,
     if fit is None:
         fit = sato_sato_ikeuchi(p, b, occluder, plane_normal, d, visibility=V, **kwargs)
     return _fill(sel, fit)
+
+
+def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", max_sources: int = 500,
+                   max_level: int = 3, power_share: float = 0.5, patience: int = 2, criterion: str = "cv",
+                   tolerance: float = 0.05, can_split=None) -> Selection:
+    """Adaptive source sets: refine the geodesic hierarchy where the recovered light is, stop by CV or BIC.
+
+    Start from level 0 of the hierarchy (:func:`ffls.probes.sources.geodesic_level`). Each round
+    fits every pixel, scores the fit, and splits (:func:`ffls.probes.sources.split_sources`) the
+    fewest sources that together carry ``power_share`` of the recovered power (among those not
+    yet at ``max_level``): a small bright light gets cells a few degrees wide while the rest of
+    the sky stays coarse, which a uniform set of the same size cannot do (``docs/probes.md``
+    measures the floors). The rounds stop when the score has not improved for ``patience``
+    rounds, when nothing is left to split, or at ``max_sources``; the chosen round is the one
+    :func:`select_model` would choose among them (CV: the smallest within ``tolerance`` of the
+    best; BIC: the lowest).
+
+    Parameters
+    ----------
+    fit_all : callable
+        ``fit_all(directions) -> SourceFit`` on all pixels.
+    score : callable
+        ``score(directions, fit) -> float``, lower is better (held-out relative RMS, or BIC).
+    base_frequency : int
+        Frequency of level 0 (3: 92 directions on the sphere, 46 on a dome).
+    hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
+    max_sources : int
+        No round grows the set past this (the issue's "geodesic sets up to about 500").
+    max_level : int
+        Levels of splitting (3 from frequency 3: nodes 2.6 degrees apart at the finest, about a
+        texel of a 64-row map).
+    power_share : float
+        In (0, 1]: the share of the recovered power split each round (0.5: the number of rounds
+        grows with the log of the number of lights, not their count).
+    patience : int
+        Rounds without a better score before stopping (2: a split can help only once the next
+        level of the same light is split too).
+    criterion : {'cv', 'bic'}
+        How the round is chosen from the scores.
+    tolerance : float
+        CV's tolerance.
+    can_split : callable, optional
+        ``can_split(directions) -> (n,) bool``: sources the data can resolve finer (for a cast
+        shadow, :func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view`); the others are never split.
+
+    Returns
+    -------
+    Selection
+        ``chosen`` and ``candidates`` are source counts (one per round), ``fit`` the chosen round's fit.
+    """
+    from ffls.probes.sources import geodesic_level, split_sources
+
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}, not {criterion!r}")
+    if not 0.0 < float(power_share) <= 1.0:
+        raise ValueError(f"power_share must be in (0, 1], not {power_share!r}")
+    d = np.array(geodesic_level(base_frequency, 0, hemisphere))
+    lev = np.zeros(d.shape[0], dtype=np.int64)
+    fits, scores = [], []
+    best, since = np.inf, 0
+    while True:
+        try:
+            fit = fit_all(d)
+        except InputError:
+            if not fits:
+                raise
+            break  # the finer set cannot be fitted (too few pixels for it): the coarser ones stand
+        sc = float(score(d, fit))
+        fits.append(fit)
+        scores.append(sc)
+        if sc < best:
+            best, since = sc, 0
+        else:
+            since += 1
+            if since >= patience:
+                break
+        w = np.abs(np.asarray(fit.intensities, dtype=np.float64)).sum(axis=1)
+        w[lev >= int(max_level)] = 0.0
+        if can_split is not None:
+            w[~np.asarray(can_split(d), dtype=bool)] = 0.0
+        if not np.any(w > 0):
+            break
+        order = np.argsort(-w, kind="stable")
+        order = order[w[order] > 0]
+        k = int(np.searchsorted(np.cumsum(w[order]) / w[order].sum(), float(power_share) - 1e-12)) + 1
+        k = min(k, order.size)
+        while k >= 1:
+            d2, lev2 = split_sources(d, lev, order[:k], base_frequency, hemisphere)
+            if d2.shape[0] <= int(max_sources):
+                break
+            k //= 2
+        if k < 1:
+            break
+        d, lev = d2, lev2
+    s = np.asarray(scores)
+    sizes = [int(f.directions.shape[0]) for f in fits]
+    if criterion == "cv":
+        i = int(np.flatnonzero(s <= np.min(s) * (1.0 + tolerance))[0])
+        note = (f"adaptive sources, cross-validation over {len(fits)} refinements ({sizes[0]}..{max(sizes)} sources) "
+                f"chose {sizes[i]}: held-out relative RMS {s[i]:.4f} (best {np.min(s):.4f}, tolerance {tolerance:.0%})")
+    else:
+        i = int(np.argmin(s))
+        note = f"adaptive sources, BIC over {len(fits)} refinements ({sizes[0]}..{max(sizes)} sources) chose {sizes[i]}"
+    return Selection(chosen=sizes[i], candidates=sizes, scores=s, criterion=criterion, fit=fits[i], note=note)
+
+
+def _base_frequency(base_frequency: int, m: int, hemisphere, extra: int) -> int:
+    """The largest frequency up to ``base_frequency`` whose level 0 leaves a CV fold (4/5 of the
+    ``m`` pixels) more pixels than unknowns (1 at least: the icosahedron)."""
+    from ffls.probes.sources import geodesic_level
+
+    f = max(int(base_frequency), 1)
+    while f > 1 and geodesic_level(f, 0, hemisphere).shape[0] + extra > 0.8 * m:
+        f -= 1
+    return f
+
+
+def _scorer(criterion, fit_predict, data, blocks, folds, seed, extra_params):
+    """``score(directions, fit)`` for :func:`refine_sources`: CV on fixed folds, or BIC."""
+    if criterion == "bic":
+        return lambda d, fit: bic(fit.rendered, data, d.shape[0] + extra_params)
+    fold, k, _ = _cv_folds(data.shape[0], blocks, folds, np.random.default_rng(seed))
+    return lambda d, fit: _cv_score(fit_predict, d, fold, k, data)
+
+
+def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3, max_sources: int = 500,
+                          max_level: int = 3, criterion: str = "cv", folds: int = 5, tolerance: float = 0.05,
+                          seed: int = 0, power_share: float = 0.5, patience: int = 2, **kwargs) -> Selection:
+    """Hougen-Ahuja over an adaptive geodesic source set (:func:`refine_sources`).
+
+    Parameters
+    ----------
+    normals, radiance, albedo
+        As :func:`ffls.probes.hougen_ahuja.hougen_ahuja`.
+    base_frequency, max_sources, max_level, power_share, patience
+        As :func:`refine_sources` (the sources cover the whole sphere). With few pixels the base
+        frequency is lowered until a CV fold (4/5 of the pixels) holds more pixels than unknowns.
+    criterion, folds, tolerance, seed
+        As :func:`select_model`; CV blocks group the pixels by normal direction.
+    **kwargs
+        Passed to :func:`~ffls.probes.hougen_ahuja.hougen_ahuja` (``nonnegative``, ``ambient``...).
+
+    Returns
+    -------
+    Selection
+        ``chosen`` is the number of sources; ``fit.directions`` the adaptive set.
+    """
+    n = check_normals(normals)
+    b = as_rgb_pixels(radiance, n.shape[0])
+    rho = broadcast_albedo(albedo, n.shape[0])  # (m, 3): per-pixel albedo is split with the pixels
+
+    def fp(d, train, test):
+        fit = hougen_ahuja(n[train], b[train], rho[train], d, **kwargs)
+        E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
+        return E * rho[test] / np.pi
+
+    extra = 1 if kwargs.get("ambient", True) else 0
+    score = _scorer(criterion, fp, b, normal_blocks(n), folds, seed, extra)
+    base_frequency = _base_frequency(base_frequency, n.shape[0], "full", extra)
+    return refine_sources(lambda d: hougen_ahuja(n, b, rho, d, **kwargs), score, base_frequency, "full",
+                          max_sources, max_level, power_share, patience, criterion, tolerance)
+
+
+def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0), base_frequency: int = 3,
+                               max_sources: int = 526, max_level: int = 3, criterion: str = "cv", folds: int = 5,
+                               tolerance: float = 0.05, seed: int = 0, power_share: float = 0.5, patience: int = 2,
+                               resolved_only: bool = True, **kwargs) -> Selection:
+    """Sato-Sato-Ikeuchi over an adaptive geodesic dome (:func:`refine_sources`).
+
+    Each node's shadow (its visibility from every pixel) is traced once, when the node first
+    appears. Only nodes whose whole shadow falls in view are split
+    (:func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view`): a node low over the horizon casts a
+    shadow longer than the view, whose far end (its elevation) the photograph does not show, and
+    finer nodes there only trade elevation against intensity.
+
+    Parameters
+    ----------
+    points, radiance, occluder, plane_normal
+        As :func:`ffls.probes.sato_sato_ikeuchi.sato_sato_ikeuchi`.
+    base_frequency, max_sources, max_level, power_share, patience
+        As :func:`refine_sources`, over the dome around ``plane_normal`` (level 0, frequency 3:
+        46 nodes, lowered for few pixels as in :func:`adaptive_hougen_ahuja`; the default
+        ``max_sources`` is the paper's dome size).
+    criterion, folds, tolerance, seed
+        As :func:`select_model`; CV blocks are a 6 x 6 grid over the receiver.
+    resolved_only : bool
+        Split only nodes whose whole shadow is in view (default); False splits any.
+    **kwargs
+        Passed on (``case``, ``albedo``, ``surface_radiance``...).
+
+    Returns
+    -------
+    Selection
+    """
+    p = np.asarray(points, dtype=np.float64)
+    b = as_rgb_pixels(radiance, p.shape[0])
+    hemi = {"axis": [float(v) for v in normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))]}
+    cols: dict = {}
+
+    def vis_of(d):
+        keys = [tuple(k) for k in np.round(d * 1e9).astype(np.int64)]
+        missing = [i for i, k in enumerate(keys) if k not in cols]
+        if missing:
+            V = np.asarray(occluder_visibility(p, d[missing], occluder))
+            for j, i in enumerate(missing):
+                cols[keys[i]] = V[:, j]
+        return np.stack([cols[k] for k in keys], axis=1)
+
+    predict = _sato_predictor(p, b, occluder, plane_normal, kwargs)
+
+    def fp(d, train, test):
+        return predict(d, vis_of(d), train, test)[1]
+
+    def fit_all(d):
+        return sato_sato_ikeuchi(p, b, occluder, plane_normal, d, visibility=vis_of(d), **kwargs)
+
+    score = _scorer(criterion, fp, b, position_blocks(p), folds, seed, 0)
+    base_frequency = _base_frequency(base_frequency, p.shape[0], hemi, 0)
+    can_split = (lambda d: shadow_in_view(p, d, occluder, plane_normal)) if resolved_only else None
+    return refine_sources(fit_all, score, base_frequency, hemi, max_sources, max_level, power_share, patience,
+                          criterion, tolerance, can_split)

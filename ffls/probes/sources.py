@@ -17,6 +17,12 @@ Source sets
   dome (about the 521 nodes Sato, Sato and Ikeuchi used). The cells' solid angles are near equal (their
   max/min ratio is given by :func:`cell_solid_angles`, measured in ``docs/probes.md``).
 * :func:`model_sources` picks one by size.
+* :func:`split_sources` -- adaptive sets: the geodesic sets of frequencies ``f0, 2 f0, 4 f0...``
+  are nested (every vertex of one is a vertex of the next, the others are the midpoints of its
+  edges), so they form a hierarchy, a quadtree on the sphere. A source of level ``L`` is split into
+  its *children*: itself and the level ``L + 1`` midpoints of its edges (5 or 6, half its spacing). Split
+  only where the light is, a small bright sun gets fine cells and the rest of the sky stays
+  coarse (:func:`ffls.probes.selection.adaptive_hougen_ahuja` chooses where and how far).
 
 To a light map
 --------------
@@ -29,7 +35,10 @@ resolution. An ambient term ``A`` (irradiance on any unshadowed normal) is unifo
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ffls.conventions import check_hemisphere, in_domain, latlong_directions, normalize, rotation_about_axis
 from ffls.errors import InputError
@@ -44,6 +53,8 @@ __all__ = [
     "geodesic_sources",
     "geodesic_count",
     "geodesic_frequency_for",
+    "geodesic_level",
+    "split_sources",
     "model_sources",
     "frame_to_axis",
     "latlong_solid_angles",
@@ -221,6 +232,109 @@ def model_sources(n: int, hemisphere="full", axis=(0.0, 0.0, 1.0)) -> np.ndarray
     if n in HOUGEN_AHUJA_SIZES:
         return ring_sources(n, axis)
     return geodesic_sources(geodesic_frequency_for(n, hemisphere), hemisphere)
+
+
+@functools.lru_cache(maxsize=32)
+def _level_cached(frequency: int, axis) -> tuple[np.ndarray, cKDTree]:
+    d = geodesic_sources(frequency, "full" if axis is None else {"axis": list(axis)})
+    d.setflags(write=False)
+    return d, cKDTree(d)
+
+
+@functools.lru_cache(maxsize=32)
+def _parents(frequency: int, axis) -> np.ndarray:
+    """Parents (n_fine, 2) in the frequency-``f`` set of every vertex of the frequency-``2 f`` set.
+
+    A vertex of both sets is its own parent (twice); a new vertex is the midpoint of an edge of
+    the coarse set, and its parents are that edge's ends: its two nearest coarse vertices (the
+    triangle's third vertex is sqrt(3) times farther). On a dome, a vertex whose edge's other end
+    lies below the horizon goes to its two nearest dome vertices: the set still tiles the dome.
+    """
+    fine, _ = _level_cached(2 * frequency, axis)
+    _, tree = _level_cached(frequency, axis)
+    dist, idx = tree.query(fine, k=2)
+    old = dist[:, 0] < 1e-9
+    idx[old, 1] = idx[old, 0]
+    idx.setflags(write=False)
+    return idx
+
+
+def geodesic_level(base_frequency: int, level: int, hemisphere="full") -> np.ndarray:
+    """Level ``level`` of the geodesic hierarchy: :func:`geodesic_sources` of frequency ``base_frequency * 2**level``.
+
+    Parameters
+    ----------
+    base_frequency : int
+        Frequency of level 0 (3: 92 directions on the sphere, 51 on a dome).
+    level : int
+        ``>= 0``; every level holds the one before it.
+    hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
+
+    Returns
+    -------
+    (n, 3) float64, read-only
+    """
+    if int(level) < 0:
+        raise ValueError(f"level must be >= 0, not {level!r}")
+    hemi = check_hemisphere(hemisphere)
+    return _level_cached(int(base_frequency) * 2 ** int(level), hemi.axis)[0]
+
+
+def split_sources(directions, levels, split, base_frequency: int, hemisphere="full"):
+    """Replace the sources ``split`` of an adaptive set by their children one level finer.
+
+    The children of a level-``L`` source ``s`` are ``s`` itself and the vertices of level
+    ``L + 1`` (:func:`geodesic_level`) at the midpoints of the level-``L`` edges out of ``s``
+    (an edge's midpoint is a child of both its ends and is kept once). The set stays a subset of the hierarchy's vertices, and
+    its Voronoi cells tile the domain as before, finer where split.
+
+    Parameters
+    ----------
+    directions : (n, 3) array_like
+        Vertices of the hierarchy (a level, or an earlier output of this function).
+    levels : (n,) array_like of int
+        The level of each source.
+    split : sequence of int or (n,) bool
+        Sources to split.
+    base_frequency : int
+    hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
+
+    Returns
+    -------
+    directions : (n', 3) float64
+        The sources not split, in their order, then the children of each split source.
+    levels : (n',) int64
+
+    Raises
+    ------
+    ValueError
+        A source that is not a vertex of its level.
+    """
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    lev = np.asarray(levels, dtype=np.int64).reshape(-1)
+    if lev.shape[0] != d.shape[0]:
+        raise ValueError(f"levels must be ({d.shape[0]},), not {lev.shape}")
+    mask = np.zeros(d.shape[0], dtype=bool)
+    mask[np.asarray(split).reshape(-1) if np.asarray(split).dtype != bool else np.flatnonzero(split)] = True
+    hemi = check_hemisphere(hemisphere)
+    keep_d, keep_l = [d[~mask]], [lev[~mask]]
+    for s in np.flatnonzero(mask):
+        L = int(lev[s])
+        _, tree = _level_cached(int(base_frequency) * 2 ** L, hemi.axis)
+        dist, _ = tree.query(d[s])
+        if dist > 1e-9:
+            raise ValueError(f"source {s} is not a vertex of level {L} of the frequency-{base_frequency} hierarchy")
+        fine, _ = _level_cached(int(base_frequency) * 2 ** (L + 1), hemi.axis)
+        _, own = tree.query(d[s])
+        # an edge's midpoint is a child of both its ends
+        kids = fine[np.any(_parents(int(base_frequency) * 2 ** L, hemi.axis) == own, axis=1)]
+        keep_d.append(kids)
+        keep_l.append(np.full(kids.shape[0], L + 1, dtype=np.int64))
+    out_d, out_l = np.concatenate(keep_d), np.concatenate(keep_l)
+    # a midpoint shared by two split sources is kept once
+    _, first = np.unique(np.round(out_d * 1e9).astype(np.int64), axis=0, return_index=True)
+    first = np.sort(first)
+    return out_d[first], out_l[first]
 
 
 def latlong_solid_angles(height: int) -> np.ndarray:
