@@ -66,9 +66,9 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import least_squares, minimize_scalar
 
-from ffls.conventions import UP
+from ffls.conventions import UP, tangent_basis
 from ffls.errors import InputError
 from ffls.io.capture import CAPTURE_FILE
 from ffls.io.images import read_image
@@ -127,6 +127,12 @@ class EncodingCalibration:
         (inflated) noise variance (module docstring, "Naming").
     bic_penalty : float
         ``ln(n_eff)``: a named curve whose excess is below it is preferred to the free gamma.
+    shading : {'distant', 'near'}
+        The shading model the curve was calibrated with (module docstring, "Near lights").
+    shading_excess : float
+        The distant model's BIC over the near model's, in units of the distant model's inflated
+        noise variance: positive chose the near light; NaN when no near model was tried (no
+        sphere geometry, or no photo with two spheres).
     rms : float
         RMS residual at the best gamma, in stored values (full scale 1).
     method : str
@@ -166,7 +172,8 @@ class EncodingCalibration:
                 "spheres": int(self.n_spheres), "photos": int(self.n_photos), "pixels": int(self.n_pixels),
                 "srgb_excess": round(float(self.srgb_excess), 3),
                 "linear_excess": round(float(self.linear_excess), 3),
-                "bic_penalty": round(float(self.bic_penalty), 3), "rms": float(f"{self.rms:.4g}")}
+                "bic_penalty": round(float(self.bic_penalty), 3), "rms": float(f"{self.rms:.4g}"),
+                "shading": self.shading}
 
     def summary(self) -> str:
         """One line naming the curve and the test, e.g. ``encoding: linear (fits as well as the best gamma
@@ -181,6 +188,8 @@ class EncodingCalibration:
         if self.curve == "linear" and self.linear_excess > self.bic_penalty or \
                 self.curve == "srgb" and self.srgb_excess > self.bic_penalty:
             test += "; within half a code value of the best gamma"
+        if self.shading == "near":
+            test += f"; shading of a near light (BIC {self.shading_excess:.0f} over a distant one)"
         if self.curve == "linear":
             return f"encoding: linear (fits as well as the best {g}; {test}; {src})"
         if self.curve == "srgb":
@@ -541,33 +550,53 @@ def _near_columns(normals: np.ndarray, points: np.ndarray, up: np.ndarray, m: np
     return np.column_stack([s_, ground_bounce(normals, up), np.ones(len(s_))])
 
 
-def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, curve: float):
+def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.ndarray, curve: float):
     """A point light ``(m, rho, center)`` for one photo's units (two or more spheres) at ``curve``.
 
-    Each unit's distant fit (``v . n + b``) gives the light's direction from its sphere, ``v / |v|``;
-    the rays from the spheres' centres along them meet at the light
-    (:func:`ffls.spheres.combine.fit_ray_convergence`, the "best fitted intersection" of Masselus,
-    Dutre & Anrys 2002): ``m`` its direction from the spheres' mean centre ``center``, ``rho`` its
-    inverse distance (0: a distant light). The light is placed by the parallax between the spheres,
-    never by the shading's bend along ``n . l``: a wrong curve bends it too, so a distance fitted to
-    the pixels trades against the gamma (on near-light renders it came out 0.7 times the true
-    inverse distance, the gamma 0.09 too low), while a monotone curve hardly turns a sphere's
-    direction. None when a direction cannot be read or the spheres coincide.
+    * **Distance, from the parallax.** Each unit's distant fit (``v . n + b``) gives the light's
+      direction from its sphere, ``v / |v|``; the rays from the spheres' centres along them meet
+      at the light (:func:`ffls.spheres.combine.fit_ray_convergence`, the "best fitted
+      intersection" of Masselus, Dutre & Anrys 2002): ``rho``, the inverse distance from the
+      spheres' mean centre ``center`` (0: a distant light). The distance is never fitted to the
+      shading's bend along ``n . l``: a wrong curve bends it too, so the two trade (fitted to the
+      pixels, the inverse distance came out 0.7 times the true one on near-light renders and the
+      gamma 0.09 too low), while a monotone curve hardly turns a sphere's direction.
+    * **Direction, from the pixels.** The ground bounce pulls every ``v`` toward the ground, so
+      the direction ``m`` is refined (two tangent offsets, :func:`scipy.optimize.least_squares`)
+      to the units' weighted residuals under :func:`_near_columns` at that distance, each unit's
+      coefficients in closed form. A curve bends the shading symmetrically about the light, so it
+      does not trade with ``m``.
+
+    None when a direction cannot be read or the spheres coincide.
     """
-    dirs = []
+    dirs, data = [], []
     for u in units:
+        n = u.A[u.selected, :3]
         y, w = _grey_and_weight(u._raw, curve)
         x, _ = _solve(u.A[u.selected], y, w)
         nv = float(np.linalg.norm(x[:3]))
         if not np.isfinite(nv) or nv <= 0:
             return None
         dirs.append(x[:3] / nv)
+        data.append((n, centers[u.sphere] + radii[u.sphere] * n, y, w))
     c = np.array([centers[u.sphere] for u in units])
     center = c.mean(axis=0)
     if not float(np.max(np.linalg.norm(c - center, axis=1))) > 0:  # no parallax to place a light
         return None
     start = fit_ray_convergence(c, np.array(dirs), np.ones(len(dirs)), center)
-    return start.direction, start.rho, center
+    m0, rho = start.direction, start.rho
+    e1, e2 = tangent_basis(m0)
+
+    def direction(t):
+        m = m0 + t[0] * e1 + t[1] * e2
+        return m / np.sqrt(m @ m)
+
+    def residuals(t):
+        m = direction(t)
+        return np.concatenate([_solve(_near_columns(n, P, up, m, rho, center), y, w)[1] for n, P, y, w in data])
+
+    # x_scale: tangent offsets of a few degrees (0.05 rad) at most, the bounce's pull
+    return direction(least_squares(residuals, np.zeros(2), x_scale=0.05).x), rho, center
 
 
 def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, hi: float):
@@ -593,7 +622,7 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
     for rnd in range(2):  # the lights at the current gamma, then the gamma under those lights
         units, n_near = list(used), 0
         for ix in by_photo.values():
-            light = _fit_near_photo([used[i] for i in ix], centers, radii, best) if len(ix) >= 2 else None
+            light = _fit_near_photo([used[i] for i in ix], centers, radii, up, best) if len(ix) >= 2 else None
             if light is None:
                 continue
             n_near += 1
@@ -719,9 +748,6 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         # the second round's grid (for the bootstrap): fine, around the first round's minimum
         grid = np.arange(max(lo, best - _FINE_HALF_WIDTH), min(hi, best + _FINE_HALF_WIDTH) + 0.5 * _GRID_STEP,
                          _GRID_STEP)
-    if best <= lo + _GRID_STEP or best >= hi - _GRID_STEP:
-        raise EncodingCalibrationError(
-            f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})")
     rss_best = float(res.fun)
     fit = _profile_statistics(used, curves, profiled, best, rss_best, 0, n_bootstrap, seed)
     shading, shading_excess = "distant", float("nan")
@@ -738,9 +764,11 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
                 used, curves, profiled, best, rss_best = near_used, near_curves, near_grid, near_best, near_rss
                 fit = _profile_statistics(used, curves, profiled, best, rss_best, _NEAR_PHOTO_PARAMS * n_near,
                                           n_bootstrap, seed)
-                if best <= lo + _GRID_STEP or best >= hi - _GRID_STEP:
-                    raise EncodingCalibrationError(
-                        f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})")
+    # (checked only now: a near light can bend a linear file's shading past the range's end under
+    # the distant model)
+    if best <= lo + _GRID_STEP or best >= hi - _GRID_STEP:
+        raise EncodingCalibrationError(
+            f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})")
     photos = sorted({u.photo for u in used})
     n_pix, s2, inflation, sd_curv, sd_boot, sd_spheres = (fit.n_pixels, fit.s2, fit.inflation, fit.sd_curvature,
                                                           fit.sd_bootstrap, fit.sd_spheres)
