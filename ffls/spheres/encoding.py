@@ -56,6 +56,24 @@ second candidate, scored the same way.
   a code value of it (``code_step``: 1/255 for 8-bit files), that curve is named, since the file
   cannot tell them apart.
 
+Near lights. A light at a few metres from spheres a few centimetres in radius has a direction and
+an irradiance (``1/r^2``) that vary over each sphere: the shading bends along ``n . l``, and the
+affine model reads the bend as a curve (8-bit sRGB renders lit from 2 m were named ``gamma
+2.00``). When the spheres' world centres and radii are known (``geometry``; a pinhole camera:
+:func:`calibrate_capture_encoding` passes them), a second shading model is fitted on the same
+pixels: per photo a point light at ``center + m / rho`` (:func:`_fit_near_photo`: its distance
+from the parallax between the spheres' directions, never from the bend, which the curve shares;
+its direction refined on the pixels), and per (photo, sphere) pair
+``I = a max(0, n . (S - P)) / |S - P|^3 + c (1 - n_z) / 2 + b`` at every surface point ``P``,
+the point-light model of :func:`ffls.spheres.combine.fit_near_light` (free bounce). A photo with
+one usable sphere keeps the distant model. The gamma is profiled again under the near model (the
+lights refitted once at its best gamma), and the model is chosen by the BIC: the near model's
+parameters are three per unit plus three per light, the distant model's four per unit; its
+excess misfit over the near model, in the distant model's inflated noise units, less the
+difference in parameters times ``ln(n_eff)``, is ``shading_excess``, and the near model is used
+when it is positive. Under a distant light the near model gains nothing and the distant one is
+kept (or, when the near model wins on a small misfit, the gamma is the same within its interval).
+
 :func:`calibrate_encoding` is the entry point on arrays (``method=``);
 :func:`calibrate_capture_encoding` runs it on a capture: spheres found on the stored values (edges
 survive a monotone curve), their pixels read from every photo.
@@ -687,6 +705,11 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     workers : int
         Processes (forked) that select and profile the (photo, sphere) pairs; the result does not
         depend on it.
+    geometry : sequence of (center (3,), radius), optional
+        Per sphere, its centre and radius in the frame of ``normals`` (world units). Given, a near
+        light is also tried (module docstring, "Near lights") in photos with two or more spheres.
+    up : (3,) float
+        The ground's normal in that frame (world ``+Z``), for the near model's bounce term.
 
     Returns
     -------
@@ -833,7 +856,9 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     """Calibrate the encoding of a capture whose ``capture.json`` states none.
 
     The spheres are found on the stored values (a monotone curve keeps their outlines), unless
-    given; their pixels are read from every photo and passed to :func:`calibrate_encoding`.
+    given; their pixels are read from every photo and passed to :func:`calibrate_encoding`, with
+    their world centres and radii (``geometry``: a near light is tried) unless the camera is
+    orthographic (no depth, so no light position).
 
     Parameters
     ----------
