@@ -316,6 +316,10 @@ class _Unit:
         self._sum_aa = np.stack([np.bincount(idx, A[:, i] * A[:, j], minlength=t)
                                  for i in range(p) for j in range(p)], axis=1)
 
+    def selected_values(self, curve) -> tuple[np.ndarray, np.ndarray]:
+        """Grey linear value and weight of each selected pixel under ``curve`` (:func:`_grey_and_weight`)."""
+        return _grey_and_weight(self._raw, curve)
+
     def rss(self, curve) -> float:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
         return float(self.rss_grid([curve])[0])
@@ -590,7 +594,7 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
     dirs, data = [], []
     for u in units:
         n = u.A[u.selected, :3]
-        y, w = _grey_and_weight(u._raw, curve)
+        y, w = u.selected_values(curve)
         x, _ = _solve(u.A[u.selected], y, w)
         nv = float(np.linalg.norm(x[:3]))
         if not np.isfinite(nv) or nv <= 0:
