@@ -147,10 +147,10 @@ class EncodingCalibration:
         ``ln(n_eff)``: a named curve whose excess is below it is preferred to the free gamma.
     shading : {'distant', 'near'}
         The shading model the curve was calibrated with (module docstring, "Near lights").
-    shading_excess : float
+    shading_excess : float or None
         The distant model's BIC over the near model's, in units of the distant model's inflated
-        noise variance: positive chose the near light; NaN when no near model was tried (no
-        sphere geometry, or no photo with two spheres).
+        noise variance: positive chose the near light; None when no near model was tried (no sphere
+        geometry, or no photo with two spheres).
     rms : float
         RMS residual at the best gamma, in stored values (full scale 1).
     method : str
@@ -174,7 +174,7 @@ class EncodingCalibration:
     n_pixels: int
     sd_spheres: float = 0.0
     shading: str = "distant"
-    shading_excess: float = float("nan")
+    shading_excess: float | None = None
 
     @property
     def encoding(self):
@@ -777,7 +777,7 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
                          _GRID_STEP)
     rss_best = float(res.fun)
     fit = _profile_statistics(used, curves, profiled, best, rss_best, 0, n_bootstrap, seed)
-    shading, shading_excess = "distant", float("nan")
+    shading, shading_excess = "distant", None
     if geometry is not None:
         # the near-light model (module docstring, "Near lights"): chosen by the BIC over the distant one
         near_fit = _near_model(used, geometry, up, best, lo, hi)
@@ -819,7 +819,8 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
         rms=math.sqrt(rss_best / n_pix), method="gamma",
         n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix,
-        sd_spheres=sd_spheres, shading=shading, shading_excess=float(shading_excess))
+        sd_spheres=sd_spheres, shading=shading,
+        shading_excess=None if shading_excess is None else float(shading_excess))
 
 
 def calibrate_encoding(raw, normals, method: str = "gamma", **kwargs) -> EncodingCalibration:
