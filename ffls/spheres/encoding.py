@@ -589,7 +589,13 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
       coefficients in closed form. A curve bends the shading symmetrically about the light, so it
       does not trade with ``m``.
 
-    None when a direction cannot be read or the spheres coincide.
+    None (the photo keeps the distant model) when a direction cannot be read, the spheres
+    coincide, or the light's parallax (``rho`` times the spheres' largest distance from ``center``:
+    the angle their spread subtends at the light) does not exceed the RMS angle between the
+    spheres' directions and the rays' meeting point: the rays are then parallel within their
+    scatter, and a distant light explains them. (Without this test the BIC chose a near light for
+    distant-light captures whose spheres disagree, crediting the near model's fewer coefficients,
+    and widened their gamma's interval until a gamma-2.2 file was named srgb.)
     """
     dirs, data = [], []
     for u in units:
@@ -607,6 +613,15 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
         return None
     start = fit_ray_convergence(c, np.array(dirs), np.ones(len(dirs)), center)
     m0, rho = start.direction, start.rho
+    # a light is near only where its parallax (the angle the spheres' spread subtends at it) exceeds
+    # the scatter of the spheres' directions about the rays' meeting point: otherwise the rays are
+    # parallel within their noise, and the photo keeps the distant model
+    pred = m0[None, :] - rho * (c - center)
+    pred /= np.linalg.norm(pred, axis=1)[:, None]
+    scatter = math.sqrt(float(np.mean(np.arccos(np.clip(np.sum(pred * np.array(dirs), axis=1), -1.0, 1.0)) ** 2)))
+    parallax = rho * float(np.max(np.linalg.norm(c - center, axis=1)))
+    if not parallax > scatter:
+        return None
     e1, e2 = tangent_basis(m0)
 
     def direction(t):
