@@ -63,7 +63,8 @@ affine model reads the bend as a curve (8-bit sRGB renders lit from 2 m were nam
 :func:`calibrate_capture_encoding` passes them), a second shading model is fitted on the same
 pixels: per photo a point light at ``center + m / rho`` (:func:`_fit_near_photo`: its distance
 from the parallax between the spheres' directions, never from the bend, which the curve shares;
-its direction refined on the pixels), and per (photo, sphere) pair
+its direction refined on the pixels; a photo whose rays are parallel within the scatter of the
+spheres' directions has no near light), and per (photo, sphere) pair
 ``I = a max(0, n . (S - P)) / |S - P|^3 + c (1 - n_z) / 2 + b`` at every surface point ``P``,
 the point-light model of :func:`ffls.spheres.combine.fit_near_light` (free bounce). A photo with
 one usable sphere keeps the distant model. The gamma is profiled again under the near model (the
