@@ -56,6 +56,25 @@ second candidate, scored the same way.
   a code value of it (``code_step``: 1/255 for 8-bit files), that curve is named, since the file
   cannot tell them apart.
 
+Near lights. A light at a few metres from spheres a few centimetres in radius has a direction and
+an irradiance (``1/r^2``) that vary over each sphere: the shading bends along ``n . l``, and the
+affine model reads the bend as a curve (8-bit sRGB renders lit from 2 m were named ``gamma
+2.00``). When the spheres' world centres and radii are known (``geometry``; a pinhole camera:
+:func:`calibrate_capture_encoding` passes them), a second shading model is fitted on the same
+pixels: per photo a point light at ``center + m / rho`` (:func:`_fit_near_photo`: its distance
+from the parallax between the spheres' directions, never from the bend, which the curve shares;
+its direction refined on the pixels; a photo whose rays are parallel within the scatter of the
+spheres' directions has no near light), and per (photo, sphere) pair
+``I = a max(0, n . (S - P)) / |S - P|^3 + c (1 - n_z) / 2 + b`` at every surface point ``P``,
+the point-light model of :func:`ffls.spheres.combine.fit_near_light` (free bounce). A photo with
+one usable sphere keeps the distant model. The gamma is profiled again under the near model (the
+lights refitted once at its best gamma), and the model is chosen by the BIC: the near model's
+parameters are three per unit plus three per light, the distant model's four per unit; its
+excess misfit over the near model, in the distant model's inflated noise units, less the
+difference in parameters times ``ln(n_eff)``, is ``shading_excess``, and the near model is used
+when it is positive. Under a distant light the near model gains nothing and the distant one is
+kept (or, when the near model wins on a small misfit, the gamma is the same within its interval).
+
 :func:`calibrate_encoding` is the entry point on arrays (``method=``);
 :func:`calibrate_capture_encoding` runs it on a capture: spheres found on the stored values (edges
 survive a monotone curve), their pixels read from every photo.
@@ -66,12 +85,15 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import least_squares, minimize_scalar
 
+from ffls.conventions import UP, tangent_basis
 from ffls.errors import InputError
 from ffls.io.capture import CAPTURE_FILE
 from ffls.io.images import read_image
 from ffls.radiance.encoding import gamma_decode, srgb_decode
+from ffls.spheres.combine import fit_ray_convergence
+from ffls.spheres.samples import ground_bounce
 
 __all__ = [
     "METHODS",
@@ -124,6 +146,12 @@ class EncodingCalibration:
         (inflated) noise variance (module docstring, "Naming").
     bic_penalty : float
         ``ln(n_eff)``: a named curve whose excess is below it is preferred to the free gamma.
+    shading : {'distant', 'near'}
+        The shading model the curve was calibrated with (module docstring, "Near lights").
+    shading_excess : float or None
+        The distant model's BIC over the near model's, in units of the distant model's inflated
+        noise variance: positive chose the near light; None when no near model was tried (no sphere
+        geometry, or no photo with two spheres).
     rms : float
         RMS residual at the best gamma, in stored values (full scale 1).
     method : str
@@ -146,6 +174,8 @@ class EncodingCalibration:
     n_units: int
     n_pixels: int
     sd_spheres: float = 0.0
+    shading: str = "distant"
+    shading_excess: float | None = None
 
     @property
     def encoding(self):
@@ -161,7 +191,8 @@ class EncodingCalibration:
                 "spheres": int(self.n_spheres), "photos": int(self.n_photos), "pixels": int(self.n_pixels),
                 "srgb_excess": round(float(self.srgb_excess), 3),
                 "linear_excess": round(float(self.linear_excess), 3),
-                "bic_penalty": round(float(self.bic_penalty), 3), "rms": float(f"{self.rms:.4g}")}
+                "bic_penalty": round(float(self.bic_penalty), 3), "rms": float(f"{self.rms:.4g}"),
+                "shading": self.shading}
 
     def summary(self) -> str:
         """One line naming the curve and the test, e.g. ``encoding: linear (fits as well as the best gamma
@@ -176,6 +207,8 @@ class EncodingCalibration:
         if self.curve == "linear" and self.linear_excess > self.bic_penalty or \
                 self.curve == "srgb" and self.srgb_excess > self.bic_penalty:
             test += "; within half a code value of the best gamma"
+        if self.shading == "near":
+            test += f"; shading of a near light (BIC {self.shading_excess:.0f} over a distant one)"
         if self.curve == "linear":
             return f"encoding: linear (fits as well as the best {g}; {test}; {src})"
         if self.curve == "srgb":
@@ -246,7 +279,7 @@ class _Codes:
 
 
 def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted least squares ``min ||w (y - A x)||`` (normal equations; ``A`` has 4 columns);
+    """Weighted least squares ``min ||w (y - A x)||`` (normal equations; ``A`` has a few columns);
     returns ``x`` and the weighted residuals."""
     Aw = A * w[:, None]
     try:
@@ -264,7 +297,7 @@ class _Unit:
     photo: int
     sphere: int
     raw: _Codes
-    A: np.ndarray  # (m, 4): normal and 1
+    A: np.ndarray  # (m, p): the shading model's columns (distant: normal and 1)
     usable: np.ndarray  # (m,) bool: not clipped, not near black
     selected: np.ndarray | None = None
 
@@ -274,14 +307,19 @@ class _Unit:
         self._raw = self.raw.subset(selected)
         self._A = np.ascontiguousarray(self.A[selected])
         # the pixels' sums per (r, g, b) triple, whose grey value and weight they share: the count,
-        # sum a (t, 4) and sum a a^T (t, 16) of the design rows a = (n, 1)
+        # sum a (t, p) and sum a a^T (t, p^2) of the design rows a (distant: (n, 1))
         t = self._raw.triples.shape[1]
         idx = self._raw.index
         self._count = np.bincount(idx, minlength=t).astype(np.float64)
         A = self._A
-        self._sum_a = np.stack([np.bincount(idx, A[:, i], minlength=t) for i in range(4)], axis=1)
+        p = A.shape[1]
+        self._sum_a = np.stack([np.bincount(idx, A[:, i], minlength=t) for i in range(p)], axis=1)
         self._sum_aa = np.stack([np.bincount(idx, A[:, i] * A[:, j], minlength=t)
-                                 for i in range(4) for j in range(4)], axis=1)
+                                 for i in range(p) for j in range(p)], axis=1)
+
+    def selected_values(self, curve) -> tuple[np.ndarray, np.ndarray]:
+        """Grey linear value and weight of each selected pixel under ``curve`` (:func:`_grey_and_weight`)."""
+        return _grey_and_weight(self._raw, curve)
 
     def rss(self, curve) -> float:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
@@ -303,7 +341,8 @@ class _Unit:
             y[j] = f[codes.triples].mean(axis=0)
             w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
             w2[j] = w * w
-        G = (w2 @ self._sum_aa).reshape(-1, 4, 4)
+        p = self._A.shape[1]
+        G = (w2 @ self._sum_aa).reshape(-1, p, p)
         w2y = w2 * y
         b = w2y @ self._sum_a
         try:
@@ -463,10 +502,195 @@ def _sphere_heterogeneity_sd(grid: np.ndarray, per_sphere: np.ndarray, sd_pooled
     return float(math.sqrt(tau2 + 1.0 / np.sum(1.0 / (v + tau2))))
 
 
+@dataclass(frozen=True)
+class _ProfileFit:
+    """The statistics of a profiled gamma (:func:`_profile_statistics`)."""
+
+    n_pixels: int
+    s2: float  # residual variance (stored values squared)
+    sd_curvature: float
+    sd_bootstrap: float
+    sd_spheres: float
+    inflation: float  # the larger model variance over the curvature's (>= 1)
+    noise: float  # s2 * inflation: the unit of the excess misfits
+    penalty: float  # ln(n_eff), n_eff = n_pixels / inflation: the BIC's price of one parameter
+
+
+def _profile_statistics(used: list, curves: np.ndarray, grid: np.ndarray, best: float, rss_best: float,
+                        extra_params: int, n_bootstrap: int, seed: int) -> _ProfileFit:
+    """Noise, the three standard deviations of the best gamma and the BIC's penalty (module docstring).
+
+    ``curves`` (len(used), len(grid)) are the units' ``RSS`` over ``grid``; ``extra_params`` the
+    model's parameters besides the units' linear coefficients and the gamma (the near lights').
+    """
+    photos = sorted({u.photo for u in used})
+    n_pix = int(sum(int(u.selected.sum()) for u in used))
+    dof = max(n_pix - sum(u.A.shape[1] for u in used) - extra_params - 1, 1)
+    s2 = rss_best / dof
+    h = 0.01
+    d2 = (sum(u.rss(best + h) for u in used) - 2 * rss_best + sum(u.rss(best - h) for u in used)) / (h * h)
+    sd_curv = math.sqrt(2 * s2 / d2) if d2 > 0 else float("inf")
+    # bootstrap over photos: resample whole photos' RSS curves
+    photo_index = {p: i for i, p in enumerate(photos)}
+    per_photo = np.zeros((len(photos), len(grid)))
+    for u, c in zip(used, curves):
+        per_photo[photo_index[u.photo]] += c
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, len(photos), size=(int(n_bootstrap), len(photos)))
+    boot = np.array([_parabola_min(grid, per_photo[d].sum(axis=0)) for d in draws])
+    sd_boot = float(np.std(boot, ddof=1)) if len(boot) > 1 else float("inf")
+    # the spheres' own gammas: a misfit the model lacks that differs between spheres (interreflection,
+    # a near light across the scene) makes them disagree beyond the photos' noise (random effects)
+    sphere_index = sorted({u.sphere for u in used})
+    per_sphere = np.zeros((len(sphere_index), len(grid)))
+    for u, c in zip(used, curves):
+        per_sphere[sphere_index.index(u.sphere)] += c
+    sd_spheres = _sphere_heterogeneity_sd(grid, per_sphere, sd_boot)
+    sd_model = max(sd_boot, sd_spheres)
+    inflation = max(1.0, (sd_model / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
+    n_eff = max(n_pix / inflation, math.e)
+    return _ProfileFit(n_pixels=n_pix, s2=s2, sd_curvature=sd_curv, sd_bootstrap=sd_boot, sd_spheres=sd_spheres,
+                       inflation=inflation, noise=s2 * inflation, penalty=math.log(n_eff))
+
+
+# ----------------------------------------------------------------------------- near lights
+#: Parameters of a near light per photo: its direction from the spheres' centre (2) and inverse distance (1).
+_NEAR_PHOTO_PARAMS = 3
+
+
+def _near_columns(normals: np.ndarray, points: np.ndarray, up: np.ndarray, m: np.ndarray, rho: float,
+                  center: np.ndarray) -> np.ndarray:
+    """Design columns ``(s, g, 1)`` (k, 3) of a sphere's pixels under a point light at ``center + m / rho``.
+
+    ``s = max(0, n . q) / |q|^3`` with ``q = m + rho (center - P)``, which is ``rho^-2`` times a
+    point light's irradiance ``max(0, n . (S - P)) / |S - P|^3`` at the surface point ``P`` (so
+    ``rho = 0`` is a distant light along ``m``); ``g = (1 - n . up) / 2`` the ground bounce
+    (:func:`ffls.spheres.samples.ground_bounce`), and 1 the ambient term.
+    """
+    q = m[None, :] + rho * (center[None, :] - points)
+    qq = np.einsum("ij,ij->i", q, q)
+    s_ = np.maximum(np.einsum("ij,ij->i", normals, q), 0.0) / (qq * np.sqrt(qq))
+    return np.column_stack([s_, ground_bounce(normals, up), np.ones(len(s_))])
+
+
+def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.ndarray, curve: float):
+    """A point light ``(m, rho, center)`` for one photo's units (two or more spheres) at ``curve``.
+
+    * **Distance, from the parallax.** Each unit's distant fit (``v . n + b``) gives the light's
+      direction from its sphere, ``v / |v|``; the rays from the spheres' centres along them meet
+      at the light (:func:`ffls.spheres.combine.fit_ray_convergence`, the "best fitted
+      intersection" of Masselus, Dutre & Anrys 2002): ``rho``, the inverse distance from the
+      spheres' mean centre ``center`` (0: a distant light). The distance is never fitted to the
+      shading's bend along ``n . l``: a wrong curve bends it too, so the two trade (fitted to the
+      pixels, the inverse distance came out 0.7 times the true one on near-light renders and the
+      gamma 0.09 too low), while a monotone curve hardly turns a sphere's direction.
+    * **Direction, from the pixels.** The ground bounce pulls every ``v`` toward the ground, so
+      the direction ``m`` is refined (two tangent offsets, :func:`scipy.optimize.least_squares`)
+      to the units' weighted residuals under :func:`_near_columns` at that distance, each unit's
+      coefficients in closed form. A curve bends the shading symmetrically about the light, so it
+      does not trade with ``m``.
+
+    None (the photo keeps the distant model) when a direction cannot be read, the spheres
+    coincide, or the light's parallax (``rho`` times the spheres' largest distance from ``center``:
+    the angle their spread subtends at the light) does not exceed the RMS angle between the
+    spheres' directions and the rays' meeting point: the rays are then parallel within their
+    scatter, and a distant light explains them. (Without this test the BIC chose a near light for
+    distant-light captures whose spheres disagree, crediting the near model's fewer coefficients,
+    and widened their gamma's interval until a gamma-2.2 file was named srgb.)
+    """
+    dirs, data = [], []
+    for u in units:
+        n = u.A[u.selected, :3]
+        y, w = u.selected_values(curve)
+        x, _ = _solve(u.A[u.selected], y, w)
+        nv = float(np.linalg.norm(x[:3]))
+        if not np.isfinite(nv) or nv <= 0:
+            return None
+        dirs.append(x[:3] / nv)
+        data.append((n, centers[u.sphere] + radii[u.sphere] * n, y, w))
+    c = np.array([centers[u.sphere] for u in units])
+    center = c.mean(axis=0)
+    if not float(np.max(np.linalg.norm(c - center, axis=1))) > 0:  # no parallax to place a light
+        return None
+    start = fit_ray_convergence(c, np.array(dirs), np.ones(len(dirs)), center)
+    m0, rho = start.direction, start.rho
+    # a light is near only where its parallax (the angle the spheres' spread subtends at it) exceeds
+    # the scatter of the spheres' directions about the rays' meeting point: otherwise the rays are
+    # parallel within their noise, and the photo keeps the distant model
+    pred = m0[None, :] - rho * (c - center)
+    pred /= np.linalg.norm(pred, axis=1)[:, None]
+    scatter = math.sqrt(float(np.mean(np.arccos(np.clip(np.sum(pred * np.array(dirs), axis=1), -1.0, 1.0)) ** 2)))
+    parallax = rho * float(np.max(np.linalg.norm(c - center, axis=1)))
+    if not parallax > scatter:
+        return None
+    e1, e2 = tangent_basis(m0)
+
+    def direction(t):
+        m = m0 + t[0] * e1 + t[1] * e2
+        return m / np.sqrt(m @ m)
+
+    def residuals(t):
+        m = direction(t)
+        return np.concatenate([_solve(_near_columns(n, P, up, m, rho, center), y, w)[1] for n, P, y, w in data])
+
+    # x_scale: tangent offsets of a few degrees (0.05 rad) at most, the bounce's pull
+    return direction(least_squares(residuals, np.zeros(2), x_scale=0.05).x), rho, center
+
+
+def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, hi: float):
+    """The used units under the near-light model: ``(units, curves, grid, best, rss_best, n_photos)`` or None.
+
+    In every photo with two or more spheres a point light is fitted (:func:`_fit_near_photo`) at the
+    gamma ``curve`` and each unit gets the columns :func:`_near_columns` on the same pixels; a photo
+    with one sphere keeps the distant model. The gamma is profiled over the whole range ``lo..hi``
+    (the near light's shading may move it far from the distant model's), the lights refitted at the
+    best gamma and the profile repeated on the fine grid around it (``curves`` over ``grid``, as the
+    distant model's second round). ``n_photos`` counts the photos with a light. None when no photo
+    has two spheres.
+    """
+    centers = np.array([np.asarray(c, dtype=np.float64).reshape(3) for c, _ in geometry])
+    radii = np.array([float(r) for _, r in geometry])
+    by_photo: dict[int, list[int]] = {}
+    for i, u in enumerate(used):
+        by_photo.setdefault(u.photo, []).append(i)
+    if not any(len(ix) >= 2 for ix in by_photo.values()):
+        return None
+    best = curve
+    grid = np.arange(lo, hi + 0.5 * _COARSE_STEP, _COARSE_STEP)
+    for rnd in range(2):  # the lights at the current gamma, then the gamma under those lights
+        units, n_near = list(used), 0
+        for ix in by_photo.values():
+            light = _fit_near_photo([used[i] for i in ix], centers, radii, up, best) if len(ix) >= 2 else None
+            if light is None:
+                continue
+            n_near += 1
+            m, rho, center = light
+            for i in ix:
+                u = used[i]
+                n = u.A[:, :3]
+                A = _near_columns(n, centers[u.sphere] + radii[u.sphere] * n, up, m, rho, center)
+                nu = _Unit(u.photo, u.sphere, u.raw, A, u.usable)
+                nu.select(u.selected)
+                units[i] = nu
+        if n_near == 0:
+            return None
+        curves = np.array([u.rss_grid(grid) for u in units])
+        k = int(np.argmin(curves.sum(axis=0)))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        res = minimize_scalar(lambda g: sum(u.rss(g) for u in units), bounds=(max(a, lo), min(b, hi)),
+                              method="bounded", options={"xatol": 1e-4})
+        best = float(res.x)
+        if rnd == 0:
+            grid = np.arange(max(lo, best - _FINE_HALF_WIDTH), min(hi, best + _FINE_HALF_WIDTH) + 0.5 * _GRID_STEP,
+                             _GRID_STEP)
+    return units, curves, grid, best, float(res.fun), n_near
+
+
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
-                             seed: int = 0, code_step: float | None = None, workers: int = 1) -> EncodingCalibration:
+                             seed: int = 0, code_step: float | None = None, workers: int = 1, geometry=None,
+                             up=UP) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -501,6 +725,11 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     workers : int
         Processes (forked) that select and profile the (photo, sphere) pairs; the result does not
         depend on it.
+    geometry : sequence of (center (3,), radius), optional
+        Per sphere, its centre and radius in the frame of ``normals`` (world units). Given, a near
+        light is also tried (module docstring, "Near lights") in photos with two or more spheres.
+    up : (3,) float
+        The ground's normal in that frame (world ``+Z``), for the near model's bounce term.
 
     Returns
     -------
@@ -562,42 +791,36 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         # the second round's grid (for the bootstrap): fine, around the first round's minimum
         grid = np.arange(max(lo, best - _FINE_HALF_WIDTH), min(hi, best + _FINE_HALF_WIDTH) + 0.5 * _GRID_STEP,
                          _GRID_STEP)
+    rss_best = float(res.fun)
+    fit = _profile_statistics(used, curves, profiled, best, rss_best, 0, n_bootstrap, seed)
+    shading, shading_excess = "distant", None
+    if geometry is not None:
+        # the near-light model (module docstring, "Near lights"): chosen by the BIC over the distant one
+        near_fit = _near_model(used, geometry, up, best, lo, hi)
+        if near_fit is not None:
+            near_used, near_curves, near_grid, near_best, near_rss, n_near = near_fit
+            k_distant = sum(u.A.shape[1] for u in used)
+            k_near = sum(u.A.shape[1] for u in near_used) + _NEAR_PHOTO_PARAMS * n_near
+            shading_excess = (rss_best - near_rss) / fit.noise - (k_near - k_distant) * fit.penalty
+            if shading_excess > 0:
+                shading = "near"
+                used, curves, profiled, best, rss_best = near_used, near_curves, near_grid, near_best, near_rss
+                fit = _profile_statistics(used, curves, profiled, best, rss_best, _NEAR_PHOTO_PARAMS * n_near,
+                                          n_bootstrap, seed)
+    # (checked only now: a near light can bend a linear file's shading past the range's end under
+    # the distant model)
     if best <= lo + _GRID_STEP or best >= hi - _GRID_STEP:
         raise EncodingCalibrationError(
             f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})")
-    n_pix = int(sum(int(u.selected.sum()) for u in used))
-    rss_best = float(res.fun)
-    dof = max(n_pix - 4 * len(used) - 1, 1)
-    s2 = rss_best / dof
-    h = 0.01
-    d2 = (sum(u.rss(best + h) for u in used) - 2 * rss_best + sum(u.rss(best - h) for u in used)) / (h * h)
-    sd_curv = math.sqrt(2 * s2 / d2) if d2 > 0 else float("inf")
-    # bootstrap over photos: resample whole photos' RSS curves
-    photo_index = {p: i for i, p in enumerate(photos)}
-    per_photo = np.zeros((len(photos), len(profiled)))
-    for u, c in zip(used, curves):
-        per_photo[photo_index[u.photo]] += c
-    rng = np.random.default_rng(seed)
-    draws = rng.integers(0, len(photos), size=(int(n_bootstrap), len(photos)))
-    boot = np.array([_parabola_min(profiled, per_photo[d].sum(axis=0)) for d in draws])
-    sd_boot = float(np.std(boot, ddof=1)) if len(boot) > 1 else float("inf")
-    # the spheres' own gammas: a misfit the model lacks that differs between spheres (interreflection,
-    # a near light across the scene) makes them disagree beyond the photos' noise (random effects)
-    sphere_index = sorted({u.sphere for u in used})
-    per_sphere = np.zeros((len(sphere_index), len(profiled)))
-    for u, c in zip(used, curves):
-        per_sphere[sphere_index.index(u.sphere)] += c
-    sd_spheres = _sphere_heterogeneity_sd(profiled, per_sphere, sd_boot)
-    sd_model = max(sd_boot, sd_spheres)
-    sd = max(sd_curv, sd_model)
-    unc = 1.96 * sd
-    inflation = max(1.0, (sd_model / sd_curv) ** 2) if np.isfinite(sd_curv) and sd_curv > 0 else 1.0
+    photos = sorted({u.photo for u in used})
+    n_pix, s2, inflation, sd_curv, sd_boot, sd_spheres = (fit.n_pixels, fit.s2, fit.inflation, fit.sd_curvature,
+                                                          fit.sd_bootstrap, fit.sd_spheres)
+    unc = 1.96 * max(sd_curv, sd_boot, sd_spheres)
     # model selection (BIC): a named curve has no free parameter, the best gamma one
     noise = s2 * inflation
     excess = (sum(u.rss("srgb") for u in used) - rss_best) / noise
     lin_excess = (sum(u.rss(1.0) for u in used) - rss_best) / noise
-    n_eff = max(n_pix / inflation, math.e)
-    penalty = math.log(n_eff)
+    penalty = fit.penalty
     name, _ = min((("linear", lin_excess), ("srgb", excess), ("gamma", penalty)), key=lambda t: t[1])
     if name == "gamma" and code_step is not None:
         # a named curve that decodes every stored value within half a code of the best gamma is the
@@ -612,7 +835,8 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
         rms=math.sqrt(rss_best / n_pix), method="gamma",
         n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix,
-        sd_spheres=sd_spheres)
+        sd_spheres=sd_spheres, shading=shading,
+        shading_excess=None if shading_excess is None else float(shading_excess))
 
 
 def calibrate_encoding(raw, normals, method: str = "gamma", **kwargs) -> EncodingCalibration:
@@ -653,7 +877,9 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     """Calibrate the encoding of a capture whose ``capture.json`` states none.
 
     The spheres are found on the stored values (a monotone curve keeps their outlines), unless
-    given; their pixels are read from every photo and passed to :func:`calibrate_encoding`.
+    given; their pixels are read from every photo and passed to :func:`calibrate_encoding`, with
+    their world centres and radii (``geometry``: a near light is tried) unless the camera is
+    orthographic (no depth, so no light position).
 
     Parameters
     ----------
@@ -737,6 +963,9 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
         raw.append([np.asarray(img.pixels[s.rows, s.cols], dtype=np.float64) for s in samples])
     try:
         kwargs.setdefault("code_step", 1.0 / (2 ** first.bit_depth - 1))
+        if getattr(capture, "camera_model", "pinhole") != "orthographic":
+            # the spheres' world centres and radii place a near light (an orthographic camera sees no depth)
+            kwargs.setdefault("geometry", [(s.center, s.radius) for s in samples])
         cal = calibrate_encoding(raw, [s.normals for s in samples], method=method, matte=matte, **kwargs)
     except EncodingCalibrationError as e:
         raise InputError(_ask(str(e)), capture.json_path) from None
