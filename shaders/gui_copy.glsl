@@ -2,10 +2,7 @@
 // The panel texture is the size of the window's framebuffer, so gl_FragCoord addresses it directly;
 // the viewport (the panel's rectangle) limits the copy (viewer/gui_cache.py).
 #if defined VERTEX_SHADER
-void main() {
-    vec2 v = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
-    gl_Position = vec4(v * 2.0 - 1.0, 0.0, 1.0);
-}
+#include "fullscreen_triangle.glsl"
 #endif
 
 #if defined FRAGMENT_SHADER

@@ -2,10 +2,7 @@
 // are summed with additive blending (GL_ONE, GL_ONE). Same uniforms as weighted_sum.glsl.
 // Framebuffer row y is image row y (no flip): gl_FragCoord indexes the basis texels directly.
 #if defined VERTEX_SHADER
-void main() {
-    vec2 v = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
-    gl_Position = vec4(v * 2.0 - 1.0, 0.0, 1.0);
-}
+#include "fullscreen_triangle.glsl"
 #endif
 
 #if defined FRAGMENT_SHADER

@@ -15,27 +15,14 @@ from ffls.relight.basis import accepted_basis
 from ffls.relight.cpu import CpuRelighter
 from ffls.relight.lightflow import (FlowInterpolator, LevelSetInterpolator, LightFlowRelighter, distance_flow,
                                     relight_lightflow, signed_distance, unshadowed_fit)
+from test_composite_lightflow import ring_lights, shadow_photo
 
 H = W = 96
 
 
 def _photo(d, rng=None, noise=0.0):
     """A textured Lambertian ground (normal +Z) with a sharp cast shadow (a disc) that follows the light."""
-    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
-    tex = 0.6 + 0.15 * np.sin(x / 5.0) * np.cos(y / 7.0)
-    cx, cy = W / 2 - 60 * d[0], H / 2 - 60 * d[1]
-    shade = np.where((x - cx) ** 2 + (y - cy) ** 2 < 12 ** 2, 0.15, 1.0)
-    img = (tex * shade * d[2])[..., None] * np.array([1.0, 0.9, 0.8])
-    if noise:
-        img = img * (1 + noise * rng.standard_normal(img.shape))
-    return img.astype(np.float32)
-
-
-def _lights():
-    az = np.radians(np.arange(0, 360, 60))
-    el = np.radians(65.0)
-    d = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.full(6, np.sin(el))]
-    return np.r_[[[0.0, 0.0, 1.0]], d]
+    return shadow_photo(d, rng, noise, lambert=True)
 
 
 def _centre(dirs):
@@ -88,7 +75,7 @@ def test_distance_flow_follows_a_thin_shadow_farther_than_its_width():
 
 @pytest.mark.parametrize("flow", [None, "dis"])
 def test_interpolation_is_exact_at_a_light_and_moves_the_shadow(flow):
-    dirs = _lights()
+    dirs = ring_lights()
     basis = np.stack([_photo(d) for d in dirs])
     li = LevelSetInterpolator(basis, dirs, "upper", flow=flow)
     assert np.array_equal(li.image(dirs[3]), basis[3])
@@ -116,7 +103,7 @@ def test_interpolation_is_exact_at_a_light_and_moves_the_shadow(flow):
 
 def test_interpolation_on_noisy_jpeg_photos_stays_honest():
     rng = np.random.default_rng(3)
-    dirs = _lights()
+    dirs = ring_lights()
     clean = np.stack([_photo(d) for d in dirs])
     noisy = []
     for d in dirs:
@@ -135,7 +122,7 @@ def test_interpolation_on_noisy_jpeg_photos_stays_honest():
 
 
 def test_bad_options_are_refused():
-    dirs = _lights()
+    dirs = ring_lights()
     basis = np.zeros((len(dirs), 8, 8, 3), np.float32)
     for kw in ({"shadow_level": 0.0}, {"shadow_level": 1.0}, {"neighbours": 2}, {"flow": "sift"}):
         with pytest.raises(ValueError):
@@ -190,7 +177,7 @@ def test_composite_command_with_level_sets(tmp_path, capfd):
 def test_tiny_images_are_interpolated_too(size):
     # DIS needs 12 pixels on a side: the flows pad the images so that a thumbnail still works
     rng = np.random.default_rng(size)
-    dirs = _lights()
+    dirs = ring_lights()
     basis = rng.random((len(dirs), size, size + 1, 3)).astype(np.float32)
     t = _centre(dirs)
     for interp in (LevelSetInterpolator(basis, dirs), FlowInterpolator(basis, dirs)):

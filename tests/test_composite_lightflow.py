@@ -70,19 +70,24 @@ def test_no_compact_source_in_a_smooth_or_dark_map():
 H = W = 96
 
 
-def _photo(d, rng=None, noise=0.0):
-    """A textured ground with a sharp dark disc (a shadow) whose place follows the light direction."""
+def shadow_photo(d, rng=None, noise=0.0, lambert: bool = False):
+    """A textured ground with a sharp dark disc (a shadow) whose place follows the light direction.
+
+    Its brightness is ``0.5 + 0.5 d_z`` (half ambient), or ``d_z`` (a Lambertian ground of normal +Z)
+    with ``lambert``. Shared by ``tests/test_composite_levelset.py``.
+    """
     y, x = np.mgrid[0:H, 0:W].astype(np.float64)
     tex = 0.6 + 0.15 * np.sin(x / 5.0) * np.cos(y / 7.0)
     cx, cy = W / 2 - 60 * d[0], H / 2 - 60 * d[1]
     shade = np.where((x - cx) ** 2 + (y - cy) ** 2 < 12 ** 2, 0.15, 1.0)
-    img = (tex * shade * (0.5 + 0.5 * d[2]))[..., None] * np.array([1.0, 0.9, 0.8])
+    img = (tex * shade * (d[2] if lambert else 0.5 + 0.5 * d[2]))[..., None] * np.array([1.0, 0.9, 0.8])
     if noise:
         img = img * (1 + noise * rng.standard_normal(img.shape))
     return img.astype(np.float32)
 
 
-def _lights():
+def ring_lights():
+    """The zenith and six lights 65 degrees high, 60 degrees apart."""
     az = np.radians(np.arange(0, 360, 60))
     el = np.radians(65.0)
     d = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.full(6, np.sin(el))]
@@ -90,15 +95,15 @@ def _lights():
 
 
 def test_interpolation_is_exact_at_a_light_and_moves_the_shadow():
-    dirs = _lights()
-    basis = np.stack([_photo(d) for d in dirs])
+    dirs = ring_lights()
+    basis = np.stack([shadow_photo(d) for d in dirs])
     fi = FlowInterpolator(basis, dirs, "upper")
     assert np.array_equal(fi.image(dirs[3]), basis[3])
     t = dirs[0] + dirs[1] + dirs[2]
     t /= np.linalg.norm(t)
     idx, w = fi.weights(t)
     assert sorted(idx) == [0, 1, 2] and w.sum() == pytest.approx(1.0)
-    truth = _photo(t)
+    truth = shadow_photo(t)
     blend = sum(wi * basis[i] for i, wi in zip(idx, w))
     flow = fi.image(t)
     e_flow = np.abs(flow - truth).sum() / truth.sum()
@@ -111,11 +116,11 @@ def test_interpolation_is_exact_at_a_light_and_moves_the_shadow():
 
 def test_interpolation_on_noisy_jpeg_photos_stays_honest():
     rng = np.random.default_rng(3)
-    dirs = _lights()
-    clean = np.stack([_photo(d) for d in dirs])
+    dirs = ring_lights()
+    clean = np.stack([shadow_photo(d) for d in dirs])
     noisy = []
     for d in dirs:
-        img = _photo(d, rng, 0.05)
+        img = shadow_photo(d, rng, 0.05)
         ok, buf = cv2.imencode(".jpg", np.clip(img * 255, 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 80])
         noisy.append(cv2.imdecode(buf, cv2.IMREAD_COLOR).astype(np.float32) / 255)
     noisy = np.stack(noisy)
@@ -123,7 +128,7 @@ def test_interpolation_on_noisy_jpeg_photos_stays_honest():
     t /= np.linalg.norm(t)
     fi = FlowInterpolator(noisy, dirs, "upper")
     idx, w = fi.weights(t)
-    truth = _photo(t)
+    truth = shadow_photo(t)
     blend = sum(wi * clean[i] for i, wi in zip(idx, w))
     e_flow = np.abs(fi.image(t) - truth).sum() / truth.sum()
     e_blend = np.abs(blend - truth).sum() / truth.sum()

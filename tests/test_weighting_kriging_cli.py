@@ -14,10 +14,20 @@ import pytest
 from test_weighting_spline_cli import capture_and_basis, small_capture
 
 
-def _learnt(d, basis):
+def _reference(folder, texture: bool):
+    """(capture, basis, d, learnt options, reference image) of the sky map turned 30 degrees:
+    the exact kriging weights, or (``texture``) the GPU's weight-texture lookup."""
+    from ffls.conventions import rotation_z
+    from ffls.lightmaps.lightmap import lightmap_from_spec
+    from ffls.relight.cpu import relight_reference
     from ffls.weights.kriging import fit_kernel
+    from ffls.weights.weighting import DEFAULT_TEXTURE_RES, bake_weights, integrate
 
-    return fit_kernel(d, basis).options
+    capture, basis, d = capture_and_basis(folder)
+    opts = fit_kernel(d, basis).options
+    tex = bake_weights(d, "kriging", capture.hemisphere, DEFAULT_TEXTURE_RES, **opts) if texture else None
+    w = integrate(lightmap_from_spec("sky"), d, rotation_z(30), capture.hemisphere, "kriging", texture=tex, **opts)
+    return capture, basis, d, opts, relight_reference(w.weights, basis)
 
 
 def test_cli_relight_kriging_uses_the_kernel_learnt_from_the_photos(tmp_path, capsys):
@@ -29,14 +39,11 @@ def test_cli_relight_kriging_uses_the_kernel_learnt_from_the_photos(tmp_path, ca
     from ffls.weights.weighting import integrate
 
     folder = small_capture(tmp_path)
-    capture, basis, d = capture_and_basis(folder)
-    opts = _learnt(d, basis)
+    capture, basis, d, opts, ref = _reference(folder, texture=False)
     out = tmp_path / "r.exr"
     assert main(["relight", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "kriging",
                  "-o", str(out)]) == 0
     assert "kriging kernel learnt from the photos by leave-one-out: Matern nu" in capsys.readouterr().out
-    w = integrate(lightmap_from_spec("sky"), d, rotation_z(30), capture.hemisphere, "kriging", **opts)
-    ref = relight_reference(w.weights, basis)
     got = read_image(out).pixels
     np.testing.assert_allclose(got, ref, atol=1e-4 * np.abs(ref).max())
     # a kernel other than the learnt one gives another image: the learning is what was used
@@ -77,19 +84,11 @@ def test_kriging_needs_five_lights_in_one_line(tmp_path, capsys):
 @pytest.mark.gl
 def test_cli_render_kriging_on_the_gpu_matches_the_reference(ctx, tmp_path):
     from ffls.cli import main
-    from ffls.conventions import rotation_z
     from ffls.io.images import read_image
-    from ffls.lightmaps.lightmap import lightmap_from_spec
-    from ffls.relight.cpu import relight_reference
-    from ffls.weights.weighting import DEFAULT_TEXTURE_RES, bake_weights, integrate
 
     folder = small_capture(tmp_path)
-    capture, basis, d = capture_and_basis(folder)
-    opts = _learnt(d, basis)
+    ref = _reference(folder, texture=True)[-1]
     gpu = tmp_path / "g.exr"
     assert main(["render", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "kriging",
                  "--dtype", "f32", "-o", str(gpu)]) == 0
-    tex = bake_weights(d, "kriging", capture.hemisphere, DEFAULT_TEXTURE_RES, **opts)
-    w = integrate(lightmap_from_spec("sky"), d, rotation_z(30), capture.hemisphere, "kriging", texture=tex, **opts)
-    ref = relight_reference(w.weights, basis)
     np.testing.assert_allclose(read_image(gpu).pixels, ref, atol=1e-4 * np.abs(ref).max())
