@@ -172,7 +172,7 @@ def near_experiment(scene, res, n, oracle_dirs, lm, quick=False):
     return rows
 
 
-def library_rows(basis, dirs, maps, truths, schemes=("barycentric", "spline", "kriging") + EXTRA_SCHEMES):
+def library_rows(basis, dirs, maps, truths, schemes=("barycentric", "spline") + EXTRA_SCHEMES):
     """Relit error of the library-only schemes next to ``barycentric`` and ``spline``, errors only.
 
     The library-only schemes (:data:`ffls.weights.weighting.EXTRA_SCHEMES`: ``kriging``, its
@@ -248,7 +248,7 @@ def plot(rows, map_names, path, device):
             colour = "C0" if q["rank"] is None else "C1"
             marker = "s" if q["basis_subset"] else ("^" if q["precision"] == "f32" else "o")
             colour = {"voronoi": colour, "antialiased": "C2", "barycentric": "C3", "gaussian": "C4",
-                      "spline": "C5"}[q["weighting"]]
+                      "spline": "C5", "kriging": "C6"}[q["weighting"]]
             ax.scatter(r["ms"], r[key], c=colour, marker=marker, s=36 if i in front else 14,
                        edgecolors="k" if i in front else "none", zorder=3)
         fr = sorted((pts[i] for i in front), key=lambda p: p[0])
@@ -260,7 +260,8 @@ def plot(rows, map_names, path, device):
         ax.grid(True, which="both", lw=0.3)
     axes[0].set_ylabel("relative RMS error")
     fig.suptitle(f"error against time per frame ({device}); voronoi blue (full) / orange (compressed), "
-                 f"antialiased green, barycentric red, gaussian purple, spline brown; square: subset, triangle: float32; "
+                 f"antialiased green, barycentric red, gaussian purple, spline brown, kriging pink; square: subset, "
+                 f"triangle: float32; "
                  f"ringed: Pareto front", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)

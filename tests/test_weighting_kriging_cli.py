@@ -92,3 +92,40 @@ def test_cli_render_kriging_on_the_gpu_matches_the_reference(ctx, tmp_path):
     assert main(["render", str(folder), "--probe", "sky", "--rotate-z", "30", "--weighting", "kriging",
                  "--dtype", "f32", "-o", str(gpu)]) == 0
     np.testing.assert_allclose(read_image(gpu).pixels, ref, atol=1e-4 * np.abs(ref).max())
+
+
+@pytest.mark.gl
+def test_viewer_kriging_knob_learns_and_its_refusal_keeps_the_scheme(ctx, tmp_path):
+    """The knob relights with the learnt kernel (light mode too); with 4 lights the knob goes back,
+    and the status line says why."""
+    pytest.importorskip("imgui_bundle", reason="imgui-bundle is not installed")
+    from ffls.weights.weighting import light_weights
+    from viewer.app import open_capture
+    from viewer.renderer import Renderer
+    from viewer.state import ViewerState
+
+    folder = small_capture(tmp_path / "a", n=16)
+    capture, lights = open_capture(folder)
+    _, basis, d = capture_and_basis(folder)
+    st = ViewerState(lightmap="sky", tonemap="srgb", light_mode=True, light_az=60.0, light_el=40.0)
+    st.quality["method"] = "full f32"
+    st.quality["weighting"] = "kriging"
+    r = Renderer(ctx, capture, lights)
+    try:
+        r.update(st)
+        opts = r.engine.kernel.fit.options
+        lw = light_weights(d, st.light_vector(), "kriging", capture.hemisphere, **opts)
+        np.testing.assert_allclose(r.engine.read_weights(), np.repeat(lw[:, None], 3, 1), atol=1e-12)
+    finally:
+        r.release()
+    few = small_capture(tmp_path / "b", n=4)
+    capture, lights = open_capture(few)
+    st = ViewerState(lightmap="sky", tonemap="srgb")
+    r = Renderer(ctx, capture, lights)
+    try:
+        r.update(st)
+        st.quality["weighting"] = "kriging"
+        info = r.update(st)
+        assert st.quality["weighting"] == "voronoi" and "at least 5 lights" in info.message
+    finally:
+        r.release()

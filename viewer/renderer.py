@@ -298,9 +298,13 @@ class Renderer:
         self._check_pass1_fits(state, eng)
         pass1_key = (self._lightmap_spec, state.quality.get("map_res", "full"))
         scheme = state.quality.get("weighting", "voronoi")
-        eng.set_weighting(scheme)  # a no-op unless it changed (pass 1 reruns then)
-        if self.surface_engine is not None:
-            self.surface_engine.set_weighting(scheme)
+        try:
+            eng.set_weighting(scheme)  # a no-op unless it changed (pass 1 reruns then)
+            if self.surface_engine is not None:
+                self.surface_engine.set_weighting(scheme)
+        except FflsError as e:  # kriging with too few lights, or no photos in memory to learn its kernel from
+            self.info.message = f"weighting {scheme}: {e}"
+            scheme = state.quality["weighting"] = eng.weighting
         if state.light_mode:  # RTI style: one directional light, weights from the scheme
             key = (state.light_az, state.light_el, scheme)
             if key != self._light_key:
@@ -380,7 +384,8 @@ class Renderer:
         if not in_domain(d[None, :], self.hemisphere)[0] or len(self.directions) == 0:
             return np.zeros((len(self.directions), 3))
         if scheme not in self._light_weightings:
-            self._light_weightings[scheme] = Weighting(self.directions, scheme, self.hemisphere)
+            self._light_weightings[scheme] = Weighting(self.directions, scheme, self.hemisphere,
+                                                       **self.engine.kernel.options_for(scheme, {}))
         wt = self._light_weightings[scheme]
         w = wt(d[None, :]).dense(wt.n_lights)[0]
         return np.repeat(w[:, None], 3, axis=1)

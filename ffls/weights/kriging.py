@@ -382,6 +382,9 @@ class KernelLearner:
                 self._pixels = _sample_pixels(basis, n, _LOO_PIXELS, 0)  # the pixels fit_kernel(basis) uses
             except ValueError as e:  # NaN or Inf in the photos
                 self._why = f"cannot use these photos: {e}"
+            else:
+                if not np.any(self._pixels):  # e.g. an engine over a store's pyramid holds no photos
+                    self._pixels, self._why = None, "has no photo values to learn from (the photos are not in memory)"
         #: The learnt :class:`KernelFit` (None until first needed).
         self.fit: KernelFit | None = None
 
