@@ -393,12 +393,13 @@ def write_markdown(a, doc, names, device, img):
         L.append(f"| {lab} | {t} | {cells} | {row['mean_rel_rmse']:.4f} |")
     if img is not None:
         L += ["", f"![error against ms per frame](images/{img.name})"]
-    L += ["", "### Library-only schemes (exact float64 weights, float32 basis; errors only, not timed)", "",
-          "| weighting | " + " | ".join(f"{m} rRMSE" for m in names) + " | mean rRMSE | / barycentric |",
-          "|---|" + "---:|" * len(names) + "---:|---:|"]
-    for r in doc.get("library", []):
-        cells = " | ".join(f"{r[f'rel_rmse[{m}]']:.4f}" for m in names)
-        L.append(f"| {r['weighting']} | {cells} | {r['mean_rel_rmse']:.4f} | {r['over_barycentric']:.3f} |")
+    if EXTRA_SCHEMES:  # library-only schemes (none while every scheme is offered by --weighting)
+        L += ["", "### Library-only schemes (exact float64 weights, float32 basis; errors only, not timed)", "",
+              "| weighting | " + " | ".join(f"{m} rRMSE" for m in names) + " | mean rRMSE | / barycentric |",
+              "|---|" + "---:|" * len(names) + "---:|---:|"]
+        for r in doc.get("library", []):
+            cells = " | ".join(f"{r[f'rel_rmse[{m}]']:.4f}" for m in names)
+            L.append(f"| {r['weighting']} | {cells} | {r['mean_rel_rmse']:.4f} | {r['over_barycentric']:.3f} |")
     L += ["", "### Leave-one-out estimate against the truth (what `--quality auto` sees without truth)", "",
           "| map | configuration | estimate | true |", "|---|---|---:|---:|"]
     for r in doc["estimate"]:
