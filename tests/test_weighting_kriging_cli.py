@@ -129,3 +129,22 @@ def test_viewer_kriging_knob_learns_and_its_refusal_keeps_the_scheme(ctx, tmp_pa
         assert st.quality["weighting"] == "voronoi" and "at least 5 lights" in info.message
     finally:
         r.release()
+
+
+def test_cli_render_light_kriging_uses_the_learnt_kernel(tmp_path):
+    """``render --light AZ,EL --weighting kriging --cpu``: the single light's weights come from the
+    learnt kernel, so the image is the photos weighted by ``light_weights`` with it."""
+    from ffls.cli import main
+    from ffls.commands.common import light_vector
+    from ffls.io.images import read_image
+    from ffls.relight.cpu import relight_reference
+    from ffls.weights.kriging import fit_kernel
+    from ffls.weights.weighting import light_weights
+
+    folder = small_capture(tmp_path)
+    capture, basis, d = capture_and_basis(folder)
+    out = tmp_path / "l.exr"
+    assert main(["render", str(folder), "--light", "40,35", "--weighting", "kriging", "--cpu", "-o", str(out)]) == 0
+    w = light_weights(d, light_vector((40.0, 35.0)), "kriging", capture.hemisphere, **fit_kernel(d, basis).options)
+    ref = relight_reference(np.repeat(w[:, None], 3, 1), basis)
+    np.testing.assert_allclose(read_image(out).pixels, ref, atol=1e-4 * np.abs(ref).max())

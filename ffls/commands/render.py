@@ -140,7 +140,8 @@ def _auto_exposure(r, args, mask) -> float:
 
 
 def single_light_weights(r, args, R) -> np.ndarray:
-    """Per-light RGB weights ``(n, 3)`` of ``--light AZ,EL`` rotated by ``R``, under ``--weighting``.
+    """Per-light RGB weights ``(n, 3)`` of ``--light AZ,EL`` rotated by ``R``, under ``--weighting``
+    (``kriging`` with the kernel the relighter learnt).
 
     A light outside the capture's hemisphere gives no light (all zero).
     """
@@ -150,7 +151,9 @@ def single_light_weights(r, args, R) -> np.ndarray:
     d = R @ light_vector(args.light)
     if not in_domain(d[None, :], r.hemisphere)[0]:
         return np.zeros((r.n_lights, 3))
-    w = light_weights(r.directions, d, args.weighting, r.hemisphere)
+    kernel = getattr(r, "kernel", None)  # kriging: the kernel the relighter learnt from its photos
+    options = {} if kernel is None else kernel.options_for(args.weighting, {})
+    w = light_weights(r.directions, d, args.weighting, r.hemisphere, **options)
     return np.repeat(w[:, None], 3, axis=1)
 
 
