@@ -181,6 +181,10 @@ def make_compositor(args, inputs):
     rel = [CpuRelighter.from_capture(*inputs[k], precision="f32", rank=args.rank, cell_res=args.cells_res,
                                      cell_max_res=4096, weighting=args.weighting)
            for k in ("object", "surface")]
+    for k, r in zip(("object", "surface"), rel):
+        if r.kernel.fit is not None:  # --weighting kriging: each field's kernel, learnt from its own photos
+            print(f"ffls composite: {k}: kriging kernel learnt from the photos by leave-one-out: "
+                  f"{r.kernel.fit.describe()}")
     if args.sources in ("lightflow", "levelset"):
         kind = "flow" if args.sources == "lightflow" else "levelset"
         rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind) for r in rel]
