@@ -208,3 +208,24 @@ def test_describe_context_and_info(ctx, capsys):
     assert info["max_ssbo_bytes"] >= 1 << 24
     text = format_info(info)
     assert info["renderer"] in text and "float atomics" in text
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_cells_of_more_than_65535_texels(ctx, method):
+    """A 1024 x 512 map shared by 3 lights: each cell (and the dropped half) holds more than 65535
+    texels. llvmpipe cuts an invocation's loops at 65535 iterations, so the sort's segment sum
+    summed such a cell short (by up to half here) until it was split into chunks."""
+    from ffls.gpu.integrate import CellIntegrator
+
+    d = _lights(3, "upper", seed=5)
+    cells = _cells((3, "upper"), d, "upper")
+    lm = sky_sun_map(512)
+    gpu = CellIntegrator(ctx, d, "upper", cells, method=method)
+    try:
+        gpu.set_lightmap(lm)
+        gpu.run(np.eye(3))
+        ref = integrate_weights(lm, d, np.eye(3), "upper", cells=cells)
+        assert ref.dropped_texels > 65535
+        _check(gpu, ref, ref.total_power)
+    finally:
+        gpu.release()

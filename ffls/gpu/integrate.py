@@ -62,6 +62,9 @@ _PARTIAL_BUDGET = 1 << 22
 _SORT_BLOCKS = 256
 #: Items per block aimed at: fewer blocks for a small map (the scan walks cells x blocks counts).
 _SORT_PER_BLOCK = 512
+#: Items one invocation sums in the segment sum: under llvmpipe's 65535 loop iterations per
+#: invocation (a longer loop is cut short there, silently).
+_SEG_CHUNK = 32768
 
 
 class CellIntegrator:
@@ -226,6 +229,7 @@ class CellIntegrator:
             self._bind_common(look, R)
             self._wtexel.bind_to_storage_buffer(7)
             look.run(-(-self.m // _LOCAL))
+            ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
         prog = load_program(ctx, self._program, self._defines)
         self._bind_common(prog, R)
         prog["texels_per_slice"].value = self._per_slice
@@ -257,6 +261,7 @@ class CellIntegrator:
         self.weights_buffer.bind_to_storage_buffer(0)
         self._stats.bind_to_storage_buffer(6)
         red.run(self.n + 1)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
 
     # ------------------------------------------------------------------ (b) atomic
     def _setup_atomic(self):
@@ -287,10 +292,12 @@ class CellIntegrator:
         self._partial.bind_to_storage_buffer(5)
         self._stats.bind_to_storage_buffer(6)
         prog.run(self._groups)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
         red = load_program(ctx, "integrate_reduce.glsl", self._defines)
         red["n_slices"].value = self._groups
         self.weights_buffer.bind_to_storage_buffer(0)
         red.run(self.n + 1)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
 
     # ------------------------------------------------------------------ (c) sort
     def _setup_sort(self):
@@ -298,12 +305,17 @@ class CellIntegrator:
         items = self.m * self._per_texel
         # a stable sort: the order within a cell is texel order whatever the number of blocks
         self._blocks = int(min(_SORT_BLOCKS, max(8, -(-items // _SORT_PER_BLOCK))))
-        self._sort_defines = {"N_LIGHTS": self.n, "N_BLOCKS": self._blocks}
+        # a cell's segment is summed in chunks of _SEG_CHUNK items (integrate_segment_sum.glsl:
+        # llvmpipe cuts an invocation's loops at 65535 iterations)
+        self._seg_chunks = max(1, -(-items // _SEG_CHUNK))
+        self._sort_defines = {"N_LIGHTS": self.n, "N_BLOCKS": self._blocks, "N_CHUNKS": self._seg_chunks,
+                              "SEG_CHUNK": _SEG_CHUNK}
         bins = self.n + (2 if self.sparse else 1)  # + the void bin of padded slots
         self._cell_ids = ctx.buffer(reserve=4 * items)
         self._counts = ctx.buffer(reserve=4 * bins * self._blocks)
         self._sorted = ctx.buffer(reserve=16 * items)
-        self._objects += [self._cell_ids, self._counts, self._sorted]
+        self._seg_partial = ctx.buffer(reserve=16 * (self.n + 1) * self._seg_chunks)
+        self._objects += [self._cell_ids, self._counts, self._sorted, self._seg_partial]
         if self.sparse:
             if 16 * items > self._max_ssbo:
                 raise ValueError(f"light map of {self.m} texels x {self._per_texel} slots exceeds the SSBO limit; "
@@ -323,12 +335,14 @@ class CellIntegrator:
             self._cell_ids.bind_to_storage_buffer(5)
             self._item_power.bind_to_storage_buffer(9)
             ids.run(-(-self.m // _LOCAL))
+            ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
             power = self._item_power
         else:
             ids = load_program(ctx, "integrate_cell_ids.glsl", self._defines)
             self._bind_common(ids, R)
             self._cell_ids.bind_to_storage_buffer(5)
             ids.run(-(-self.m // _LOCAL))
+            ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
             power = self._tpow
         self._counts.clear()
         self._counts.bind_to_storage_buffer(7)
@@ -337,17 +351,25 @@ class CellIntegrator:
         hist = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "HISTOGRAM": 1})
         hist["n_texels"].value = items
         hist.run(groups)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
         scan = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCAN": 1})
         scan["n_counts"].value = bins * self._blocks
         scan.run(1)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
         scat = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCATTER": 1})
         scat["n_texels"].value = items
         power.bind_to_storage_buffer(2)
         scat.run(groups)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        self._seg_partial.bind_to_storage_buffer(10)
+        part = load_program(ctx, "integrate_segment_sum.glsl", {**self._sort_defines, "PARTIAL": 1})
+        part.run(-(-((self.n + 1) * self._seg_chunks) // _LOCAL))  # one invocation per (cell, chunk)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
         seg = load_program(ctx, "integrate_segment_sum.glsl", self._sort_defines)
         self.weights_buffer.bind_to_storage_buffer(0)
         self._stats.bind_to_storage_buffer(6)
         seg.run(-(-(self.n + 1) // _LOCAL))  # one invocation per cell (and the dropped one)
+        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
 
     # ------------------------------------------------------------------ public
     def run(self, R=None):
