@@ -281,9 +281,15 @@ def test_lights_uncertainty_record_round_trip_and_checked(tmp_path, rng):
     p = cap.save_lights(cap.Lights(names, _unit(rng, 3), uncertainty=rec), tmp_path / "c" / "lights.json")
     assert cap.load_lights(p, c).uncertainty == rec
     doc = json.loads(p.read_text())
-    doc["uncertainty"] = [2.61]
+    for bad in ([2.61], None):  # null too: the record is an object or absent
+        doc["uncertainty"] = bad
+        p.write_text(json.dumps(doc))
+        with pytest.raises(InputError, match="uncertainty: expected an object"):
+            cap.load_lights(p, c)
+    del doc["uncertainty"]
+    doc["lights"][0]["uncertainty_deg"] = -1.0  # a cone radius cannot be negative
     p.write_text(json.dumps(doc))
-    with pytest.raises(InputError, match="uncertainty: expected an object"):
+    with pytest.raises(InputError, match="uncertainty_deg: a cone radius must be >= 0"):
         cap.load_lights(p, c)
 
 

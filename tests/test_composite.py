@@ -309,3 +309,15 @@ def test_mitsuba_latlong_sensor_and_envmap_follow_the_guide():
     assert img.shape == data.shape
     assert np.abs(img - data).mean() < 0.04 and np.abs(img - data).max() < 0.15  # pixel filter and bilinear lookup
     assert np.abs(img[:, ::-1] - data).mean() > 0.2 and np.abs(img[::-1] - data).mean() > 0.2  # not mirrored
+
+
+def test_flow_with_sources_weights_is_refused_in_one_line(cset, tmp_path, capfd):
+    """--flow has no effect with --sources weights: naming it there is refused, not ignored."""
+    out = tmp_path / "c.exr"
+    rc = main(["composite", "--object", str(cset / "object"), "--surface", str(cset / "surface"), "--lightmap",
+               str(cset / "scene_map.exr"), "--background", str(cset / "background.exr"), "--mask",
+               str(cset / "object_mask.png"), "--surface-mask", str(cset / "surface_mask.png"),
+               "--sources", "weights", "--flow", "farneback", "-o", str(out)])
+    err = capfd.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--flow farneback" in err[0] and "--sources weights" in err[0], err
+    assert not out.exists()

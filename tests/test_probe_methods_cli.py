@@ -199,3 +199,22 @@ def test_bad_sources_value_is_one_line(diffuse_folder, tmp_path, capsys, value):
     err = capsys.readouterr().err
     assert "--sources" in err and "'auto', 'adaptive' or 'uniform'" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.exr").exists()
+
+
+def test_a_count_no_set_has_reports_the_size_used(diffuse_folder, shadow_folder, tmp_path, capsys):
+    """--nodes 1 / --sources 2: the nearest geodesic set is used, and the output says which size."""
+    assert main(["probe", "shadow", str(shadow_folder), "-o", str(tmp_path / "s.exr"), "--size", "16",
+                 "--nodes", "1"]) == 0
+    err = capsys.readouterr().err
+    est = estimate_lightmap(shadow_folder, "shadow", height=16, nodes=1)
+    n = est.details["nodes"]
+    assert n > 1 and f"--nodes 1: no geodesic dome has that size; the nearest has {n}" in err
+    assert f"{n} dome nodes" in err and " 1 dome nodes" not in err
+    est = estimate_lightmap(diffuse_folder, "diffuse", height=16, sources=2)
+    assert est.details["sources"] > 2 and any("--sources 2: no model set has that size" in x for x in est.notes)
+
+
+def test_sources_over_the_limit_says_the_limit(diffuse_folder, tmp_path, capsys):
+    assert main(["probe", "diffuse", str(diffuse_folder), "-o", str(tmp_path / "x.exr"), "--sources", "1000000"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "at most 100000" in err[0], err

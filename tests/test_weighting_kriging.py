@@ -236,3 +236,25 @@ def test_engine_renders_kriging_like_the_reference(ctx):
             np.testing.assert_allclose(eng.read_hdr(), img, atol=1e-4 * np.abs(img).max())
     finally:
         eng.release()
+
+
+def test_weights_are_bounded_where_the_lights_cover_poorly():
+    """All 20 lights within 0.2 degrees of the zenith: unbounded, the linear trend extrapolated to
+    weights of 1e5 over the hemisphere; the sum of |w| is now at most MAX_LEBESGUE, rows sum to 1."""
+    from ffls.weights.kriging import MAX_LEBESGUE
+
+    rng = np.random.default_rng(3)
+    off = rng.normal(scale=np.radians(0.1), size=(20, 2))
+    d = np.c_[off, np.ones(20)]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    q = random_directions(500, 8)
+    for nugget in (0.3, 0.03):
+        wt = Weighting(d, "kriging", nugget=nugget, length=1e-3)
+        sw = wt(q)
+        dense = sw.dense(20)
+        np.testing.assert_allclose(dense.sum(1), 1.0, atol=1e-9)
+        assert np.abs(dense).sum(1).max() <= MAX_LEBESGUE + 1e-9
+    # a well-spread capture is untouched by the bound
+    d = random_directions(60, 2)
+    k = Weighting(d, "kriging")
+    assert np.abs(k(q).dense(60)).sum(1).max() < MAX_LEBESGUE

@@ -148,3 +148,23 @@ def test_cli_render_light_kriging_uses_the_learnt_kernel(tmp_path):
     w = light_weights(d, light_vector((40.0, 35.0)), "kriging", capture.hemisphere, **fit_kernel(d, basis).options)
     ref = relight_reference(np.repeat(w[:, None], 3, 1), basis)
     np.testing.assert_allclose(read_image(out).pixels, ref, atol=1e-4 * np.abs(ref).max())
+
+
+def test_kriging_with_few_distinct_directions_is_one_line(tmp_path, capsys):
+    """20 photos lit from 3 directions (repeated): no kernel can be learnt; one line naming --weighting."""
+    import json
+
+    from ffls.cli import main
+
+    folder = small_capture(tmp_path)
+    doc = json.loads((folder / "lights.json").read_text())
+    dirs = [[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, 0.6, 0.8]]
+    for i, item in enumerate(doc["lights"]):
+        item["direction"] = dirs[i % 3]
+        item.pop("position", None)
+    (tmp_path / "grp3.json").write_text(json.dumps(doc))
+    rc = main(["relight", str(folder), "--lights", str(tmp_path / "grp3.json"), "--probe", "sky",
+               "--weighting", "kriging", "-o", str(tmp_path / "x.exr")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--weighting kriging" in err[0] and "5 distinct" in err[0], err
+    assert not (tmp_path / "x.exr").exists()

@@ -71,9 +71,10 @@ def add_arguments(p):
                         "Lensch 2005; CPU, flows cached per pair of lights), the rest with --weighting; levelset: the "
                         "blend of the nearest lights' photos with their cast shadows moved by interpolating the "
                         "shadows' signed distances (CPU); weights: every texel through --weighting")
-    c.add_argument("--flow", default="dis", choices=("dis", "farneback"),
+    c.add_argument("--flow", default=None, choices=("dis", "farneback"),
                    help="optical flow of --sources lightflow (between the photos) and levelset (between the "
-                        "shadows' signed distances): OpenCV DIS or Farneback")
+                        "shadows' signed distances): OpenCV DIS (default) or Farneback; refused with --sources "
+                        "weights, which uses no flow")
     c.add_argument("--scale-object", action="store_true",
                    help="scale the relit object by the registration too (the mismatch is the exposure, e.g. a "
                         "photographed background; default: it is the surface's albedo)")
@@ -212,6 +213,10 @@ def run(args) -> int:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
     if args.turntable is not None and out.suffix.lower() in STILL_SUFFIXES:
         raise InputError("--turntable writes a video (.mp4) or a folder of PNGs, not a still", out)
+    if args.flow is not None and args.sources == "weights":
+        raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
+                         "no flow")
+    args.flow = args.flow or "dis"
     R0 = rotation_from_args(args)
     inputs = load_inputs(args)
     files = _siblings(out) if args.turntable is None else None  # after the inputs are known: none is replaced

@@ -67,7 +67,9 @@ def _sources_arg(text: str):
         n = int(t)
     except ValueError:
         n = 0
-    if not 1 <= n <= 100000:
+    if n > 100000:
+        raise argparse.ArgumentTypeError(f"at most 100000, not {text!r}")
+    if n < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, 'auto', 'adaptive' or 'uniform', not {text!r}")
     return n
 

@@ -745,6 +745,8 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         ex = {kk: v for kk, v in it.items() if kk not in ("image", "direction", "position", "status", "reason")}
         if ex.get("uncertainty_deg") is not None:  # null: a rejected light has none
             ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
+            if ex["uncertainty_deg"] < 0:
+                j.fail(key + ": uncertainty_deg", f"a cone radius must be >= 0, got {ex['uncertainty_deg']:g}")
         names.append(name)
         dirs.append(d / norm)
         pos.append(p)
@@ -758,7 +760,7 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         except ValueError as e:
             j.fail("encoding", str(e))
     uncertainty = doc.get("uncertainty")
-    if uncertainty is not None and not isinstance(uncertainty, dict):
+    if "uncertainty" in doc and not isinstance(uncertainty, dict):
         j.fail("uncertainty", f"expected an object, got {_short(uncertainty)}")
     order = np.arange(len(names)) if capture is None else _order_to_capture(j, names, capture)
     return Lights(

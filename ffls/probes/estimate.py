@@ -352,7 +352,11 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
             fit, chosen = sel.fit, sel.chosen
             notes.append(sel.note)
         else:
-            fit, chosen = hougen_ahuja(N, V, albedo, sources=int(sources), **kw), int(sources)
+            fit = hougen_ahuja(N, V, albedo, sources=int(sources), **kw)
+            chosen = int(fit.directions.shape[0])  # a geodesic set has the size nearest the one asked
+            if chosen != int(sources):
+                notes.append(f"--sources {int(sources)}: no model set has that size; the nearest geodesic set "
+                             f"has {chosen}")
     except InputError as e:
         raise _with_source(e, src) from None
     notes.append(f"Hougen-Ahuja: {chosen} sources{' (non-negative)' if nonnegative else ''}, re-rendered "
@@ -565,7 +569,9 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
             notes.append(sel.note)
         else:
             fit = sato_sato_ikeuchi(pts, rad, occ, probe.plane.normal, nodes=int(nodes), **kw)
-            chosen = int(nodes)
+            chosen = int(fit.directions.shape[0])  # the geodesic dome nearest the count asked
+            if chosen != int(nodes):
+                notes.append(f"--nodes {int(nodes)}: no geodesic dome has that size; the nearest has {chosen}")
     except InputError as e:
         raise _with_source(e, src) from None
     notes.append(f"Sato-Sato-Ikeuchi ({case}): {chosen} dome nodes, re-rendered relative RMS "

@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["NUS", "LENGTH_FACTORS", "NUGGETS", "DEFAULT_NU", "DEFAULT_LENGTH_FACTOR", "DEFAULT_NUGGET",
-           "DEFAULT_SLOTS", "matern", "light_spacing", "KernelFit", "loo_errors", "fit_kernel", "Kriging",
+           "DEFAULT_SLOTS", "MAX_LEBESGUE", "matern", "light_spacing", "KernelFit", "loo_errors", "fit_kernel", "Kriging",
            "KernelLearner"]
 
 #: Matérn smoothness parameters offered (closed forms: exponential, once and twice differentiable).
@@ -247,6 +247,32 @@ def fit_kernel(directions, photos, nus=NUS, length_factors=LENGTH_FACTORS, nugge
     return KernelFit(nu=nu, length=f * h, nugget=tau, loo=best, spacing=h, table=table)
 
 
+#: Largest sum of |weights| a direction may have (its Lebesgue constant: how much the photos'
+#: noise and misfit can be amplified); the same bound as ``spline``'s
+#: (:data:`ffls.weights.spline.DEFAULT_MAX_LEBESGUE`). Well-spread captures stay far below it.
+MAX_LEBESGUE = 8.0
+
+
+def _bounded(w: np.ndarray) -> np.ndarray:
+    """Rows of ``w`` (summing to 1) blended toward their normalised positive part where their sum
+    of magnitudes exceeds :data:`MAX_LEBESGUE`, just enough to meet it: ``b w + (1 - b) w+/sum(w+)``
+    has magnitude sum at most ``b L + (1 - b)``. Continuous in ``w``; rows still sum to 1.
+
+    Where the lights cover the hemisphere poorly (all in a small cap, or a few lights), the linear
+    trend extrapolates, and unbounded weights reached 1e5 (photos of 0.6 relit to +-2e5)."""
+    lam = np.abs(w).sum(axis=1)
+    over = lam > MAX_LEBESGUE
+    if not over.any():
+        return w
+    wo = w[over]
+    pos = np.maximum(wo, 0.0)
+    pos /= pos.sum(axis=1, keepdims=True)  # > 0: the row sums to 1
+    b = ((MAX_LEBESGUE - 1.0) / (lam[over] - 1.0))[:, None]
+    out = w.copy()
+    out[over] = b * wo + (1.0 - b) * pos
+    return out
+
+
 class Kriging:
     """Universal-kriging weights over a set of lights.
 
@@ -303,7 +329,7 @@ class Kriging:
     def dense(self, p: np.ndarray) -> np.ndarray:
         """Untruncated weights ``(m, n)`` over all ``directions`` (0 for dropped duplicates); rows sum to 1."""
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
-        w = self._features(p) @ self.coeffs
+        w = _bounded(self._features(p) @ self.coeffs)
         out = np.zeros((p.shape[0], self.directions.shape[0]))
         out[:, self.keep] = w
         top = self.keep[np.argmax(np.abs(w), axis=1)]
@@ -330,7 +356,7 @@ class Kriging:
         weight = np.zeros((m, self.slots))
         rows = np.arange(min(chunk, m))
         for a in range(0, m, chunk):
-            w = self._features(p[a:a + chunk]) @ self.coeffs
+            w = _bounded(self._features(p[a:a + chunk]) @ self.coeffs)
             r = rows[:w.shape[0]]
             if s < n:
                 part = np.argpartition(-np.abs(w), s, axis=1)[:, :s + 1]
@@ -374,9 +400,12 @@ class KernelLearner:
     def __init__(self, directions, basis):
         self.directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         n = self.directions.shape[0]
+        distinct = np.unique(np.round(self.directions, 9), axis=0).shape[0] if n else 0
         self._pixels, self._why = None, None
         if n < 5:
             self._why = f"needs at least 5 lights, not {n}"
+        elif distinct < 5:
+            self._why = f"needs at least 5 distinct light directions, not {distinct} ({n} lights)"
         else:
             try:
                 self._pixels = _sample_pixels(basis, n, _LOO_PIXELS, 0)  # the pixels fit_kernel(basis) uses
@@ -404,6 +433,12 @@ class KernelLearner:
 
                 raise InputError(f"--weighting kriging learns its kernel from the photos by leave-one-out and "
                                  f"{self._why}; choose another --weighting")
-            self.fit = fit_kernel(self.directions, self._pixels)
+            try:
+                self.fit = fit_kernel(self.directions, self._pixels)
+            except ValueError as e:  # every candidate's system singular (lights nearly coincident)
+                from ffls.errors import InputError
+
+                raise InputError(f"--weighting kriging: {e}; the light directions are too close together to "
+                                 "learn a kernel from; choose another --weighting") from None
         return self.fit.options
 
