@@ -14,6 +14,8 @@ import numpy as np
 
 DEFAULT_MAPS = ("courtyard", "studio", "sunrise", "night", "sky", "paper")
 DEFAULT_ROTATIONS = (0.0, 90.0, 180.0, 270.0)
+#: What a demo folder holds; a folder holding anything else is not replaced.
+DEMO_ENTRIES = ("capture", "renders", "contact_sheet.png")
 
 
 @dataclass
@@ -28,6 +30,16 @@ class DemoResult:
     backend: str = "cpu"  # 'gpu: <renderer>' or 'cpu'
     note: str | None = None  # why use_gpu='auto' fell back to the CPU (for the caller to report)
     seconds: dict = field(default_factory=dict)
+
+    def moved(self, src: Path, dst: Path) -> "DemoResult":
+        """The same result with every path under ``src`` (the staging folder) under ``dst``."""
+        def move(p):
+            return None if p is None else dst / Path(p).relative_to(src)
+
+        return DemoResult(out_dir=dst, capture_dir=move(self.capture_dir),
+                          images={k: move(v) for k, v in self.images.items()},
+                          exrs={k: move(v) for k, v in self.exrs.items()}, contact_sheet=move(self.contact_sheet),
+                          backend=self.backend, note=self.note, seconds=dict(self.seconds))
 
 
 def _relighter(capture, lights, use_gpu):
@@ -100,8 +112,10 @@ def run_demo(out_dir="ffls-demo", n_lights: int = 160, resolution: int = 256, ma
     Parameters
     ----------
     out_dir : path
-        Created if needed; holds ``capture/``, ``renders/<map>_rot<deg>.{png,exr}`` and
-        ``contact_sheet.png``.
+        Holds ``capture/``, ``renders/<map>_rot<deg>.{png,exr}`` and ``contact_sheet.png``. It is
+        written as a whole in a staging folder and swapped in only when complete
+        (:func:`ffls.errors.atomic_folder`): an interrupted demo leaves the old output or nothing.
+        A folder holding anything else is refused (:class:`ffls.errors.InputError`).
     n_lights, resolution : int
         Size of the synthetic capture.
     maps : sequence of str
@@ -109,6 +123,20 @@ def run_demo(out_dir="ffls-demo", n_lights: int = 160, resolution: int = 256, ma
     use_gpu : {'auto', True, False}
         'auto' uses the GPU engine where an OpenGL 4.3 context exists, else the CPU path.
     """
+    from ffls.errors import InputError, atomic_folder
+
+    out = Path(out_dir)
+    if out.is_dir():
+        other = sorted(p.name for p in out.iterdir() if p.name not in DEMO_ENTRIES)
+        if other:
+            raise InputError(f"holds other files than a demo's ({other[0]!r}, ...); refusing to replace it", out)
+    with atomic_folder(out) as stage:
+        res = _run_demo_into(Path(stage), n_lights, resolution, maps, rotations, use_gpu, seed, progress)
+    return res.moved(Path(stage), out)
+
+
+def _run_demo_into(out: Path, n_lights, resolution, maps, rotations, use_gpu, seed, progress) -> DemoResult:
+    """:func:`run_demo`'s work, every file written under ``out`` (the staging folder)."""
     from ffls.io.capture import load_capture, load_lights
     from ffls.io.images import write_exr, write_png
     from ffls.lightmaps.lightmap import builtin_lightmap
@@ -116,8 +144,6 @@ def run_demo(out_dir="ffls-demo", n_lights: int = 160, resolution: int = 256, ma
     from ffls.conventions import rotation_z
     from ffls.display.tonemap import auto_exposure, tonemap, to_uint8
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     cap_dir = out / "capture"
     res = DemoResult(out_dir=out, capture_dir=cap_dir)
 

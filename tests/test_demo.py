@@ -67,3 +67,36 @@ def test_auto_exposure_maps_log_average_to_key():
     img = np.full((4, 4, 3), 0.36, np.float32)
     assert auto_exposure(img) == pytest.approx(-1.0, abs=1e-6)
     assert auto_exposure(np.zeros((4, 4, 3), np.float32)) == 0.0
+
+
+def test_an_interrupted_demo_leaves_the_old_output_or_nothing(tmp_path, monkeypatch):
+    """Ctrl-C while the demo renders: no folder where there was none; the old one, untouched,
+    where there was one (the demo is written in a staging folder and swapped in when complete)."""
+    import ffls.demo as demo
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    out = tmp_path / "demo"
+    with monkeypatch.context() as m:
+        m.setattr(demo, "contact_sheet", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            run_demo(out, use_gpu=False, **SMALL)
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+    first = run_demo(out, use_gpu=False, **SMALL)
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*")}
+    with monkeypatch.context() as m:
+        m.setattr(demo, "contact_sheet", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            run_demo(out, use_gpu=False, seed=5, **SMALL)
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before and first.contact_sheet.is_file()
+    assert [p.name for p in tmp_path.iterdir()] == ["demo"]
+
+
+def test_demo_refuses_a_folder_of_other_files(tmp_path):
+    from ffls.errors import InputError
+
+    (tmp_path / "notes.txt").write_text("keep me")
+    with pytest.raises(InputError, match="refusing to replace it"):
+        run_demo(tmp_path, use_gpu=False, **SMALL)
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]

@@ -58,7 +58,7 @@ def rank_range(n_lights: int) -> tuple[int, int]:
 def default_rank(n_lights: int, preferred: int = DEFAULT_RANK) -> int:
     """``preferred`` capped to the valid range of :func:`rank_range`: always a valid rank.
 
-    E.g. 16 for 100 lights, 11 for 12 lights (exact: K = n - 1), 1 for 2 lights.
+    E.g. 7 for 100 lights, 7 for 12 lights, 1 for 2 lights (the range is 1..n-1).
     """
     lo, hi = rank_range(n_lights)
     return int(min(max(int(preferred), lo), hi))
