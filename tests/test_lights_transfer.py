@@ -115,7 +115,13 @@ def test_lp_export_round_trip_and_lp_by_order(calib, tmp_path):
     assert line == f"wrote {lp} ({N - 1} lights; 1 rejected left out)"
     names, _ = read_lp(lp)
     assert names == [n for k, n in enumerate(cap.image_names) if k != 3]
-    # the calibration capture reads its own .lp back by name (all images needed: write all)
+    # the calibration capture reads that .lp back by name: the photo left out is rejected, and said
+    part = lights_from_lp(lp, cap)
+    assert part.status[3] == "rejected" and part.status.count("ok") == N - 1 and "1 of the capture's" in part.note
+    from ffls.cli import main
+
+    out = tmp_path / "r.exr"
+    assert main(["relight", str(calib), "--lights", str(lp), "--probe", "paper", "-o", str(out)]) == 0 and out.is_file()
     lights.status[3] = "ok"
     export_lp(lights, cap, lp)
     back = lights_from_lp(lp, cap)

@@ -925,7 +925,10 @@ def lights_from_lp(path: str | os.PathLike, capture: Capture) -> Lights:
     """Lights of a capture from an RTI ``.lp`` file, converted to the world frame.
 
     ``.lp`` file names are matched to the capture's images by base name (``.lp`` files often
-    hold absolute or Windows paths). Every capture image needs exactly one line.
+    hold absolute or Windows paths). A capture image the file does not list gets a rejected light
+    (an ``.lp`` holds no status: ``ffls lights --lp`` leaves rejected photos out, so its own
+    capture, or the object shots of the same lights, would otherwise be refused); :attr:`Lights.note`
+    says how many and which, and the commands print it.
 
     Parameters
     ----------
@@ -936,7 +939,7 @@ def lights_from_lp(path: str | os.PathLike, capture: Capture) -> Lights:
     Returns
     -------
     Lights
-        In the capture's image order, all ``'ok'``.
+        In the capture's image order: ``'ok'`` where the file has a line, else ``'rejected'``.
     """
     path = Path(path)
     names, d = read_lp(path)
@@ -950,11 +953,18 @@ def lights_from_lp(path: str | os.PathLike, capture: Capture) -> Lights:
     if len(set(mapped)) != len(mapped):
         raise InputError("an image is listed twice", path)
     missing = [n for n in capture.image_names if n not in set(mapped)]
-    if missing:
+    if len(missing) == len(capture.image_names):
         raise InputError(f"capture image {missing[0]!r} has no light", path)
     pos = {n: k for k, n in enumerate(mapped)}
-    order = [pos[n] for n in capture.image_names]
-    return Lights(list(capture.image_names), lp_to_world(d[order], capture.world_from_camera))
+    world = lp_to_world(d, capture.world_from_camera)
+    dirs = np.array([world[pos[n]] if n in pos else conventions.UP for n in capture.image_names], dtype=np.float64)
+    why = f"no light in {path.name} (an .lp lists only accepted lights)"
+    out = Lights(list(capture.image_names), dirs, status=["ok" if n in pos else "rejected" for n in capture.image_names],
+                 reasons=[None if n in pos else why for n in capture.image_names])
+    if missing:
+        out.note = (f"lights: {path.name} has no light for {len(missing)} of the capture's {len(capture.image_names)} "
+                    f"images ({missing[0]!r}{', ...' if len(missing) > 1 else ''}): they are left out")
+    return out
 
 
 def _base(name: str) -> str:
