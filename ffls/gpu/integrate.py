@@ -67,6 +67,14 @@ _SORT_PER_BLOCK = 512
 _SEG_CHUNK = 32768
 
 
+def _dispatch(prog, groups: int) -> None:
+    """Run compute program ``prog`` over ``groups`` workgroups, then a memory barrier: the next
+    dispatch reads what this one wrote to storage buffers (GL 4.3 section 7.13 requires the
+    barrier; llvmpipe happens to serialise without it, a real GPU does not)."""
+    prog.run(groups)
+    prog.ctx.memory_barrier()
+
+
 class CellIntegrator:
     """Per-cell integration of a rotated light map on the GPU (pass 1).
 
@@ -228,8 +236,7 @@ class CellIntegrator:
             look = load_program(ctx, "integrate_sparse_texels.glsl", self._defines)
             self._bind_common(look, R)
             self._wtexel.bind_to_storage_buffer(7)
-            look.run(-(-self.m // _LOCAL))
-            ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+            _dispatch(look, -(-self.m // _LOCAL))
         prog = load_program(ctx, self._program, self._defines)
         self._bind_common(prog, R)
         prog["texels_per_slice"].value = self._per_slice
@@ -260,8 +267,7 @@ class CellIntegrator:
         red["n_slices"].value = self._slices
         self.weights_buffer.bind_to_storage_buffer(0)
         self._stats.bind_to_storage_buffer(6)
-        red.run(self.n + 1)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(red, self.n + 1)
 
     # ------------------------------------------------------------------ (b) atomic
     def _setup_atomic(self):
@@ -291,13 +297,11 @@ class CellIntegrator:
         self._stats.clear()
         self._partial.bind_to_storage_buffer(5)
         self._stats.bind_to_storage_buffer(6)
-        prog.run(self._groups)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(prog, self._groups)
         red = load_program(ctx, "integrate_reduce.glsl", self._defines)
         red["n_slices"].value = self._groups
         self.weights_buffer.bind_to_storage_buffer(0)
-        red.run(self.n + 1)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(red, self.n + 1)
 
     # ------------------------------------------------------------------ (c) sort
     def _setup_sort(self):
@@ -334,15 +338,13 @@ class CellIntegrator:
             self._slot_weights.bind_to_storage_buffer(4)
             self._cell_ids.bind_to_storage_buffer(5)
             self._item_power.bind_to_storage_buffer(9)
-            ids.run(-(-self.m // _LOCAL))
-            ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+            _dispatch(ids, -(-self.m // _LOCAL))
             power = self._item_power
         else:
             ids = load_program(ctx, "integrate_cell_ids.glsl", self._defines)
             self._bind_common(ids, R)
             self._cell_ids.bind_to_storage_buffer(5)
-            ids.run(-(-self.m // _LOCAL))
-            ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+            _dispatch(ids, -(-self.m // _LOCAL))
             power = self._tpow
         self._counts.clear()
         self._counts.bind_to_storage_buffer(7)
@@ -350,26 +352,21 @@ class CellIntegrator:
         groups = -(-self._blocks // 8)
         hist = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "HISTOGRAM": 1})
         hist["n_texels"].value = items
-        hist.run(groups)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(hist, groups)
         scan = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCAN": 1})
         scan["n_counts"].value = bins * self._blocks
-        scan.run(1)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(scan, 1)
         scat = load_program(ctx, "integrate_sort.glsl", {**self._sort_defines, "SCATTER": 1})
         scat["n_texels"].value = items
         power.bind_to_storage_buffer(2)
-        scat.run(groups)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(scat, groups)
         self._seg_partial.bind_to_storage_buffer(10)
         part = load_program(ctx, "integrate_segment_sum.glsl", {**self._sort_defines, "PARTIAL": 1})
-        part.run(-(-((self.n + 1) * self._seg_chunks) // _LOCAL))  # one invocation per (cell, chunk)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(part, -(-((self.n + 1) * self._seg_chunks) // _LOCAL))  # one invocation per (cell, chunk)
         seg = load_program(ctx, "integrate_segment_sum.glsl", self._sort_defines)
         self.weights_buffer.bind_to_storage_buffer(0)
         self._stats.bind_to_storage_buffer(6)
-        seg.run(-(-(self.n + 1) // _LOCAL))  # one invocation per cell (and the dropped one)
-        ctx.memory_barrier()  # its SSBO writes visible to the next dispatch (GL 4.3 7.13)
+        _dispatch(seg, -(-(self.n + 1) // _LOCAL))  # one invocation per cell (and the dropped one)
 
     # ------------------------------------------------------------------ public
     def run(self, R=None):
