@@ -120,3 +120,16 @@ def print_error_table(errors_deg, phis, thetas) -> None:
     e = np.array([np.nan if x is None else x for x in errors_deg]).reshape(len(phis), len(thetas))
     for p_, row in zip(phis, e):
         print(f"| {p_:.0f} | " + " | ".join("rej" if np.isnan(x) else f"{x:.2f}" for x in row) + " |")
+
+
+def mitsuba_latlong_module():
+    """``scripts/mitsuba_latlong.py`` (its ``latlong_sensor``, ``register``, ``ENVMAP_TO_WORLD``),
+    loaded from its file: the Mitsuba benchmarks' lat-long sensor and envmap frame."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "mitsuba_latlong.py"
+    spec = importlib.util.spec_from_file_location("mitsuba_latlong", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+

@@ -34,7 +34,6 @@ Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import math
 import time
 from pathlib import Path
@@ -42,7 +41,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from common import host_info, write_json
+from common import host_info, mitsuba_latlong_module, write_json
 
 from ffls.assets import builtin_lightmaps
 from ffls.io.capture import Capture, Lights, load_capture_and_lights, save_capture, save_lights
@@ -53,18 +52,10 @@ from ffls.relight.cpu import CpuRelighter
 from ffls.relight.lightflow import LightFlowRelighter
 from ffls.synth.scene import stratified_directions
 
-ROOT = Path(__file__).resolve().parents[1]
 CAPTURE_ALBEDO, SCENE_ALBEDO = 0.3, 0.5
 WALL_ALBEDO = (0.6, 0.35, 0.25)
 CAM_ORIGIN, CAM_TARGET, FOV = (0.0, -0.866, 0.55), (0.0, 0.0, 0.05), 46.0
 SPHERES = ((-0.25, -0.25), (0.25, -0.25), (0.25, 0.25), (-0.25, 0.25))
-
-
-def _latlong_module():
-    spec = importlib.util.spec_from_file_location("mitsuba_latlong", ROOT / "scripts" / "mitsuba_latlong.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _diffuse(rgb):
@@ -168,7 +159,7 @@ def main():
     import mitsuba as mi
 
     mi.set_variant("scalar_rgb")
-    ll = _latlong_module()
+    ll = mitsuba_latlong_module()
     ll.register()
     cache = Path(a.cache)
     cache.mkdir(parents=True, exist_ok=True)

@@ -31,14 +31,13 @@ Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import time
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, write_json  # benchmarks/common.py
+from common import host_info, mitsuba_latlong_module, write_json  # benchmarks/common.py
 from independent_mitsuba import SPHERE_RADIUS, build_scene, render_capture
 from tradeoff import map_path, psnr_tonemapped, rel_rmse
 
@@ -51,16 +50,7 @@ from ffls.radiance.photos import load_photos
 from ffls.weights.kriging import fit_kernel
 from ffls.weights.weighting import ALL_SCHEMES
 
-ROOT = Path(__file__).resolve().parents[1]
 FOV_DEG = 40.0
-
-
-def latlong_module():
-    """``scripts/mitsuba_latlong.py`` (``ENVMAP_TO_WORLD``), loaded from its file."""
-    spec = importlib.util.spec_from_file_location("mitsuba_latlong", ROOT / "scripts" / "mitsuba_latlong.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def upper_map(src: Path, yaw_deg: float, out: Path) -> Path:
@@ -102,7 +92,7 @@ def main():
     import mitsuba as mi
 
     mi.set_variant("scalar_rgb")
-    ll = latlong_module()
+    ll = mitsuba_latlong_module()
     t0 = time.perf_counter()
     cache = Path(a.cache)
     folder = cache / f"capture_{a.res}_{a.lights}_{a.spp}"
