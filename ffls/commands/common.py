@@ -25,6 +25,7 @@ import os
 import sys
 
 __all__ = [
+    "learnt_kernel",
     "CELLS_RES",
     "CELLS_RES_OR_EXACT",
     "RANK",
@@ -357,6 +358,13 @@ def add_weighting_argument(p) -> None:
                         "accurate of the local schemes, signed weights, pass 1 4-10x barycentric's cost), kriging (a "
                         "Gaussian process whose kernel is learnt from the photos by leave-one-out: the most accurate "
                         "measured, signed weights, spline's pass-1 cost plus seconds to learn); docs/weighting.md")
+
+
+def learnt_kernel(relighter) -> str | None:
+    """The line saying which kriging kernel ``relighter`` learnt from its photos, or None (another
+    scheme, or a relighter without photos: :class:`ffls.weights.kriging.KernelLearner`)."""
+    fit = getattr(getattr(relighter, "kernel", None), "fit", None)
+    return None if fit is None else f"kriging kernel learnt from the photos by leave-one-out: {fit.describe()}"
 
 
 def light_direction(text: str) -> tuple[float, float]:

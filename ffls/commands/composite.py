@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, add_weighting_argument,
-                                  exposure_arg, input_path, output_path, print_notes, flush_notes,
+                                  exposure_arg, input_path, learnt_kernel, output_path, print_notes, flush_notes,
                                   rotation_from_args)
 
 NAME = "composite"
@@ -182,10 +182,9 @@ def make_compositor(args, inputs):
     rel = [CpuRelighter.from_capture(*inputs[k], precision="f32", rank=args.rank, cell_res=args.cells_res,
                                      cell_max_res=4096, weighting=args.weighting)
            for k in ("object", "surface")]
-    for k, r in zip(("object", "surface"), rel):
-        if r.kernel.fit is not None:  # --weighting kriging: each field's kernel, learnt from its own photos
-            print(f"ffls composite: {k}: kriging kernel learnt from the photos by leave-one-out: "
-                  f"{r.kernel.fit.describe()}")
+    for k, r in zip(("object", "surface"), rel):  # --weighting kriging: each field learns its own kernel
+        if learnt_kernel(r):
+            print(f"ffls composite: {k}: {learnt_kernel(r)}")
     if args.sources in ("lightflow", "levelset"):
         kind = "flow" if args.sources == "lightflow" else "levelset"
         rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind) for r in rel]

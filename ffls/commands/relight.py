@@ -5,7 +5,7 @@ from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument,
                                   add_quality_arguments, add_rotation_arguments, add_scale_arguments,
-                                  add_weighting_argument, check_mask_size, exposure_arg, load_relight_inputs,
+                                  add_weighting_argument, check_mask_size, exposure_arg, learnt_kernel, load_relight_inputs,
                                   open_streamed_from_args, output_path, resolve_quality, rotation_from_args,
                                   write_output)
 
@@ -69,9 +69,8 @@ def run(args) -> int:
     write_output(out, image, display, mask)
     kept = w.total_power.sum() - w.dropped_power.sum()
     frac = kept / w.total_power.sum() if w.total_power.sum() > 0 else 1.0
-    kernel = getattr(getattr(r, "kernel", None), "fit", None)
-    if kernel is not None:
-        print(f"ffls relight: kriging kernel learnt from the photos by leave-one-out: {kernel.describe()}")
+    if learnt_kernel(r):
+        print(f"ffls relight: {learnt_kernel(r)}")
     print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "
           f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used, {args.weighting} weighting)")
     return 0

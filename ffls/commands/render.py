@@ -16,7 +16,7 @@ import numpy as np
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
                                   add_mask_argument, add_quality_arguments, add_rotation_arguments,
                                   add_scale_arguments, add_weighting_argument, check_gpu_pass1, check_mask_size,
-                                  exposure_arg, flush_notes, light_vector, load_relight_inputs,
+                                  exposure_arg, flush_notes, learnt_kernel, light_vector, load_relight_inputs,
                                   open_streamed_from_args, output_path, quality_from_args, resolve_quality,
                                   rotation_from_args, write_output)
 
@@ -225,9 +225,8 @@ def run(args) -> int:
         path = "cpu reference" if args.cpu else f"gpu {info.get('dtype', '')}"
         rank = info.get("rank") if not args.cpu else getattr(getattr(r, "compressed", None), "rank", None)
         what_light = (f"light az {args.light[0]:g} el {args.light[1]:g}, " if args.light is not None else "")
-        kernel = getattr(getattr(r, "kernel", None), "fit", None)
-        if kernel is not None:
-            print(f"ffls render: kriging kernel learnt from the photos by leave-one-out: {kernel.describe()}")
+        if learnt_kernel(r):
+            print(f"ffls render: {learnt_kernel(r)}")
         print(f"ffls render: {what} ({path}, {r.n_lights} lights{'' if rank is None else f', rank {rank}'}, "
               f"{what_light}{getattr(r, 'weighting', args.weighting)} weighting)")
     finally:
