@@ -126,9 +126,12 @@ def _quiet_opencv() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    parser, parsers = _build()
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # named by the subcommand that was given them, not by ``ffls``
+            (parsers.get(getattr(args, "command", None)) or parser).error(
+                f"unrecognized arguments: {' '.join(extra)}")
     except SystemExit as e:  # a bad argument: one line already printed; --help and --version exit as usual
         if e.code in (0, None):
             raise

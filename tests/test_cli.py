@@ -41,6 +41,26 @@ def test_no_command_prints_help(capsys):
 
 
 @pytest.mark.parametrize("argv", [
+    ["info"],
+    ["lights", "cap"],
+    ["relight", "cap", "--probe", "sky", "-o", "out.exr"],
+    ["probe", "mirror", "folder", "-o", "map.exr"],
+    ["view", "cap"],
+])
+def test_an_unknown_flag_is_named_by_its_subcommand(argv, capsys):
+    name = argv[0]
+    assert main(argv + ["--no-such-flag"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err
+    assert err == f"ffls {name}: error: unrecognized arguments: --no-such-flag (see ffls {name} --help)"
+
+
+def test_an_unknown_flag_before_the_command_is_named_by_ffls(capsys):
+    assert main(["--no-such-flag"]) == 2
+    assert capsys.readouterr().err.startswith("ffls: error: unrecognized arguments: --no-such-flag")
+
+
+@pytest.mark.parametrize("argv", [
     ["relight", "{missing}", "--probe", "sky", "-o", "{tmp}/out.exr"],
     ["render", "{missing}", "--probe", "sky", "-o", "{tmp}/out.exr"],
     ["lights", "{missing}"],
