@@ -26,6 +26,7 @@ import sys
 
 __all__ = [
     "learnt_kernel",
+    "negative_pixels_note",
     "CELLS_RES",
     "CELLS_RES_OR_EXACT",
     "RANK",
@@ -809,6 +810,27 @@ def check_mask_size(mask, shape, flag: str = "--mask") -> None:
 
         raise InputError(f"{flag}: the mask is {mask.shape[1]}x{mask.shape[0]}, the relit image "
                          f"{shape[1]}x{shape[0]}")
+
+
+def negative_pixels_note(hdr, out) -> str:
+    """The line saying how many pixels of a relit still went below zero, or ``""`` when none did.
+
+    Weights that are not a partition of non-negative cells (barycentric outside the hull, spline,
+    kriging) may be negative for some lights, and photos may hold negative values (a subtracted dark
+    frame), so a pixel may sum below zero. The EXR keeps such
+    values as they are (compositing tools carry negatives); the PNG's tone map shows them as black.
+    """
+    from pathlib import Path
+
+    import numpy as np
+
+    n = int(np.count_nonzero(np.any(np.asarray(hdr)[..., :3] < 0, axis=-1)))
+    if not n:
+        return ""
+    total = int(np.prod(np.asarray(hdr).shape[:2]))
+    kept = "kept as they are" if Path(out).suffix.lower() == ".exr" else "black in the PNG"
+    return (f"{n} of {total} pixels ({100 * n / total:.2g}%) are negative (a smooth weighting's negative lobes, "
+            f"or negative photo values); {kept}")
 
 
 def write_output(out, hdr, display8=None, mask=None) -> None:

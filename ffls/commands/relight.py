@@ -7,7 +7,7 @@ from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add
                                   add_quality_arguments, add_rotation_arguments, add_scale_arguments,
                                   add_weighting_argument, check_mask_size, exposure_arg, learnt_kernel, load_relight_inputs,
                                   open_streamed_from_args, output_path, resolve_quality, rotation_from_args,
-                                  write_output)
+                                  negative_pixels_note, print_notes, write_output)
 
 NAME = "relight"
 HELP = "relight a capture under an HDR light map and write an EXR (linear) or PNG (tone-mapped)"
@@ -67,6 +67,7 @@ def run(args) -> int:
         exposure = auto_exposure(image, mask=mask) if args.exposure == "auto" else args.exposure
         display = to_uint8(tonemap(image, exposure=exposure, method=args.tonemap))
     write_output(out, image, display, mask)
+    print_notes(NAME, negative_pixels_note(image, out))
     kept = w.total_power.sum() - w.dropped_power.sum()
     frac = kept / w.total_power.sum() if w.total_power.sum() > 0 else 1.0
     if learnt_kernel(r):

@@ -18,7 +18,7 @@ from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_argu
                                   add_scale_arguments, add_weighting_argument, check_gpu_pass1, check_mask_size,
                                   exposure_arg, flush_notes, learnt_kernel, light_vector, load_relight_inputs,
                                   open_streamed_from_args, output_path, quality_from_args, resolve_quality,
-                                  rotation_from_args, write_output)
+                                  negative_pixels_note, print_notes, rotation_from_args, write_output)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -166,7 +166,9 @@ def _apply(r, args, R) -> None:
 
 
 def _write_still(out: Path, r, args, mask=None):
-    write_output(out, r.read_hdr(), None if out.suffix.lower() == ".exr" else r.read_display(), mask)
+    hdr = r.read_hdr()
+    write_output(out, hdr, None if out.suffix.lower() == ".exr" else r.read_display(), mask)
+    print_notes(NAME, negative_pixels_note(hdr, out))
 
 
 def _write_turntable(out: Path, r, R0, args, exposure: float = 0.0):
