@@ -7,11 +7,13 @@ import pytest
 
 from ffls.conventions import normalize
 from ffls.lightmaps.lightmap import sky_sun_map
-from ffls.relight.auto import Choice, choose, choose_quality, leave_one_out_errors, loo_floor
+from ffls.relight.auto import Choice, choose, choose_quality, estimate_errors, leave_one_out_errors, loo_floor
 from ffls.relight.cpu import CpuRelighter
 from ffls.relight.quality import (Quality, apply_near_correction, farthest_point_subset, integration_map,
                                   near_light_scales)
+from ffls.weights.kriging import KernelLearner
 from ffls.weights.voronoi import integrate_weights
+from ffls.weights.weighting import integrate
 
 from test_stability import lambert_basis
 
@@ -140,6 +142,20 @@ def test_choose_quality_measures_this_capture():
     assert errs["barycentric f32 full map-full"] < errs["voronoi f32 full map-full"]
     slow = max(r["ms"] for r in c.table)
     assert c.ms <= slow
+
+
+def test_kriging_candidates_are_measured_with_the_kernel_learnt_from_the_photos():
+    d = fibonacci(40)
+    b = lambert_basis(d, size=16)
+    lm = sky_sun_map(32)
+    errs, info = estimate_errors(b, d, lm, None, [Quality(weighting="kriging", precision="f32")],
+                                 weighting="kriging", max_photos=8)
+    learnt = KernelLearner(d, b).options_for("kriging", {})
+    floor, _ = loo_floor(b, d, integrate(lm, d, scheme="kriging", **learnt).weights, "kriging", max_photos=8,
+                         **learnt)
+    assert info["e0"] == pytest.approx(floor, rel=1e-9) and errs[0] == pytest.approx(floor, rel=1e-6)
+    default, _ = loo_floor(b, d, integrate(lm, d, scheme="kriging").weights, "kriging", max_photos=8)
+    assert abs(default - floor) > 0.01 * floor  # the default kernel would have given another floor
 
 
 # ----------------------------------------------------------------------------- CLI

@@ -41,6 +41,7 @@ from ffls.relight.compress import CompressedBasis, compress_basis, rank_range
 from ffls.relight.cpu import CpuRelighter, relight_reference
 from ffls.relight.quality import Quality, farthest_point_subset, integration_map, prepare_basis
 from ffls.relight.storage import store_basis
+from ffls.weights.kriging import KernelLearner
 from ffls.weights.weighting import SCHEMES, integrate as integrate_scheme, light_weights
 
 __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor", "relight_quality",
@@ -51,7 +52,7 @@ __all__ = ["Choice", "candidate_qualities", "leave_one_out_errors", "loo_floor",
 BLOCK_RANKS = (7, 15, 23, 31, 63)
 #: Weighting schemes every automatic choice considers: all but ``spline`` and ``kriging``, each added
 #: only when the base quality names it (``--weighting spline --quality auto``; kriging's candidates
-#: are measured with its default kernel, :data:`ffls.weights.kriging.DEFAULT_NU` etc.). Its leave-one-out floor, its
+#: are measured with the kernel learnt from the photos, as the relighters use). Its leave-one-out floor, its
 #: exact-weight reference and its timing double the measurement (64 lights, 64 px, studio map:
 #: 2.5 s -> 5.4 s, the choice unchanged; docs/tradeoff.md), its pass 1 costs 4-10x barycentric's,
 #: and on llvmpipe its full-size map is refused (its candidates then time as ``inf``).
@@ -119,13 +120,15 @@ def candidate_qualities(n_lights: int, base: Quality | None = None, subsets: boo
     return out
 
 
-def point_light_weights(directions, d, weighting: str = "voronoi", hemisphere="upper") -> np.ndarray:
+def point_light_weights(directions, d, weighting: str = "voronoi", hemisphere="upper", **options) -> np.ndarray:
     """Weights ``(n,)`` that a weighting scheme gives the ``n`` lights for one point light at ``d``
-    (:func:`ffls.weights.weighting.light_weights`; ``'voronoi'``: all to the nearest light)."""
-    return light_weights(directions, d, weighting, hemisphere)
+    (:func:`ffls.weights.weighting.light_weights`, with the scheme's ``options``; ``'voronoi'``: all
+    to the nearest light)."""
+    return light_weights(directions, d, weighting, hemisphere, **options)
 
 
-def leave_one_out_errors(basis, directions, held_out, weighting: str = "voronoi", hemisphere="upper") -> np.ndarray:
+def leave_one_out_errors(basis, directions, held_out, weighting: str = "voronoi", hemisphere="upper",
+                         **options) -> np.ndarray:
     """Relative error ``||B_j - sum_{i != j} p_i B_i|| / ||B_j||`` of each held-out photo.
 
     Parameters
@@ -136,6 +139,8 @@ def leave_one_out_errors(basis, directions, held_out, weighting: str = "voronoi"
         Indices of the photos to predict, each from all the others.
     weighting : str
         Scheme of :func:`point_light_weights`.
+    **options
+        The scheme's options (e.g. kriging's kernel).
 
     Returns
     -------
@@ -151,7 +156,7 @@ def leave_one_out_errors(basis, directions, held_out, weighting: str = "voronoi"
         if others.size == 0:
             out[t] = np.nan
             continue
-        p = point_light_weights(dirs[others], dirs[j], weighting, hemisphere)
+        p = point_light_weights(dirs[others], dirs[j], weighting, hemisphere, **options)
         pred = np.zeros(b.shape[1:], dtype=np.float64)
         for i, wi in zip(others[p != 0], p[p != 0]):
             pred += wi * b[i].astype(np.float64)
@@ -162,7 +167,7 @@ def leave_one_out_errors(basis, directions, held_out, weighting: str = "voronoi"
 
 
 def loo_floor(basis, directions, weights, weighting: str = "voronoi", hemisphere="upper", max_photos: int = 24,
-              relit=None) -> tuple[float, dict]:
+              relit=None, **options) -> tuple[float, dict]:
     """The error floor ``e0`` of relighting under a map whose weights are ``weights`` (module docstring).
 
     Parameters
@@ -176,6 +181,8 @@ def loo_floor(basis, directions, weights, weighting: str = "voronoi", hemisphere
         most of the relit image); the rest is taken at their mean relative miss.
     relit : (H, W, 3) float, optional
         ``sum_j w_j B_j`` if already computed.
+    **options
+        The scheme's options (e.g. kriging's kernel), for its point-light weights.
 
     Returns
     -------
@@ -192,7 +199,7 @@ def loo_floor(basis, directions, weights, weighting: str = "voronoi", hemisphere
     if n < 2 or contrib.sum() <= 0:
         return (0.0 if n >= 1 else np.nan), {"held_out": np.zeros(0, int), "eps": np.zeros(0), "share": 0.0}
     order = np.argsort(-contrib, kind="stable")[:max_photos]
-    eps = leave_one_out_errors(b, directions, order, weighting, hemisphere)
+    eps = leave_one_out_errors(b, directions, order, weighting, hemisphere, **options)
     eps = np.where(np.isfinite(eps), eps, 0.0)
     eps_all = np.full(n, float(np.mean(eps)))
     eps_all[order] = eps
@@ -256,7 +263,8 @@ def estimate_errors(basis, directions, lightmap, rotation, candidates, hemispher
     reference (float32, every photo of the subset, full rank, the map as given, the scheme) and
     its own leave-one-out floor on the subset's photos with the scheme's point-light weights, so
     that a coarser sampling or a better interpolation shows in the floor. ``weighting`` names the
-    scheme whose floor is reported as ``e0``.
+    scheme whose floor is reported as ``e0``. ``'kriging'`` uses the kernel each group learns from
+    its own photos (:class:`ffls.weights.kriging.KernelLearner`), as the relighters do.
 
     Returns
     -------
@@ -278,15 +286,17 @@ def estimate_errors(basis, directions, lightmap, rotation, candidates, hemispher
         idx = np.arange(len(d)) if m is None else farthest_point_subset(d, m)
         bs, ds = b[idx], d[idx]
         weights = {}  # one pass 1 per map height: rank and storage change only pass 2
+        options = KernelLearner(ds, bs).options_for(scheme, {}) if scheme == "kriging" else {}
 
-        def weights_at(mr, ds=ds, scheme=scheme, weights=weights):
+        def weights_at(mr, ds=ds, scheme=scheme, weights=weights, options=options):
             if mr not in weights:
-                weights[mr] = integrate_scheme(integration_map(lightmap, mr), ds, rotation, hemisphere, scheme).weights
+                weights[mr] = integrate_scheme(integration_map(lightmap, mr), ds, rotation, hemisphere, scheme,
+                                               **options).weights
             return weights[mr]
 
         w = weights_at(None)
         ref = relight_weights(bs, w, Quality(precision="f32"))
-        e0, loo = loo_floor(bs, ds, w, scheme, hemisphere, max_photos, relit=ref)
+        e0, loo = loo_floor(bs, ds, w, scheme, hemisphere, max_photos, relit=ref, **options)
         floors[(m, scheme)] = e0
         if m is None and (loo_all is None or scheme == weighting):
             loo_all = loo
