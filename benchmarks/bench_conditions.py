@@ -14,7 +14,11 @@ conditions) no encoding. The table gives, against ``truth.json``:
   the world's horizontal plane, degrees): an error shared by all spheres and photos, such as a
   ground bounce that the model under- or over-states, shows here;
 * the encoding ``ffls lights`` reported (calibrated when the capture states none);
-* the time per photo of ``ffls lights`` (one process; detection, calibration and both passes).
+* the time per photo of ``ffls lights`` (one process; detection, calibration and both passes);
+* the cone budget (:func:`cone_budget`): the median per-axis terms of the cones (fit, centre,
+  floor, common mode, :meth:`ffls.spheres.uncertainty.ErrorModel.budget`) and the cone factor,
+  against the photos' per-axis RMS error and the factor 95% coverage would need: which term makes
+  a condition's cones too wide or too narrow.
 
 A condition that makes ``ffls lights`` stop gets its one-line error in the table. Prints a
 Markdown table (for docs/spheres.md) and writes JSON.
