@@ -14,7 +14,11 @@ conditions) no encoding. The table gives, against ``truth.json``:
   the world's horizontal plane, degrees): an error shared by all spheres and photos, such as a
   ground bounce that the model under- or over-states, shows here;
 * the encoding ``ffls lights`` reported (calibrated when the capture states none);
-* the time per photo of ``ffls lights`` (one process; detection, calibration and both passes).
+* the time per photo of ``ffls lights`` (one process; detection, calibration and both passes);
+* the cone budget (:func:`cone_budget`): the median per-axis terms of the cones (fit, centre,
+  floor, common mode, :meth:`ffls.spheres.uncertainty.ErrorModel.budget`) and the cone factor,
+  against the photos' per-axis RMS error and the factor 95% coverage would need: which term makes
+  a condition's cones too wide or too narrow.
 
 A condition that makes ``ffls lights`` stop gets its one-line error in the table. Prints a
 Markdown table (for docs/spheres.md) and writes JSON.
@@ -172,6 +176,7 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) ->
         if l.get("status", "ok") != "ok":
             reasons[l.get("reason")] = reasons.get(l.get("reason"), 0) + 1
     enc = doc.get("encoding")
+    row["budget"] = cone_budget(doc, lights, ok, err)
     row.update({
         "accepted": int(ok.sum()), "rejected": reasons,
         "median_deg": float(np.median(e)) if e.size else None, "max_deg": float(e.max()) if e.size else None,
@@ -181,6 +186,61 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) ->
         "encoding": enc, "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
     })
     return row
+
+
+#: The per-axis terms of a photo's cone (:meth:`ffls.spheres.uncertainty.ErrorModel.budget`).
+BUDGET_TERMS = ("fit_deg", "centre_deg", "floor_deg", "common_deg")
+
+
+def cone_budget(doc: dict, lights: list, ok: np.ndarray, err: np.ndarray) -> dict | None:
+    """Which term makes the cones of a condition wide or narrow.
+
+    Per accepted photo, :meth:`ErrorModel.budget` of the error model ``lights.json`` reports, from
+    its used spheres' fit statistics (``sigma_deg``, RMS) and their inverse variances under the
+    model (``lights.json`` does not keep the combination's weights; a near light's joint-fit
+    statistics are not included). Returns the medians of the per-axis terms, the cone factor, the
+    error model's source, and two measures against the truth: ``photo_rms_deg``, the photos'
+    per-axis RMS error (what ``sigma_deg`` should be if the model's variance is right), and
+    ``needed_factor``, the 95% quantile of error / ``sigma_deg`` (the cone factor that would give
+    95% coverage with these sigmas). None without an error model or accepted photos.
+    """
+    from ffls.spheres.uncertainty import ErrorModel
+
+    if not doc.get("uncertainty") or not ok.any():
+        return None
+    model = ErrorModel.from_dict(doc["uncertainty"])
+    terms = []
+    for l, good in zip(lights, ok):
+        if not good:
+            terms.append(None)
+            continue
+        used = list(l.get("used_spheres") or [])
+        stat = [(l["spheres"][i].get("sigma_deg") or np.inf) / np.sqrt(2.0) for i in used]
+        terms.append(model.budget(np.asarray(stat), np.asarray(used, dtype=np.intp)) if used else None)
+    have = np.array([t is not None and np.isfinite(t["sigma_deg"]) for t in terms])
+    if not have.any():
+        return None
+    med = {k: float(np.median([t[k] for t, h in zip(terms, have) if h])) for k in (*BUDGET_TERMS, "sigma_deg")}
+    sig = np.array([t["sigma_deg"] for t, h in zip(terms, have) if h])
+    e = err[have]
+    return {**med, "cone_factor": float(model.cone_factor), "source": model.source,
+            "photo_rms_deg": float(np.sqrt(np.mean(e * e) / 2.0)),
+            "model_rms_deg": float(np.sqrt(np.mean(sig * sig))),
+            "needed_factor": float(np.quantile(e / sig, 0.95))}
+
+
+def budget_table(rows) -> list[str]:
+    """Markdown lines: per condition, the median per-axis terms of the cones and the evidence."""
+    out = ["| condition | source | fit | centre | floor | common | cone factor | model sigma (RMS) | "
+           "photos' per-axis RMS error | factor for 95% |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        b = r.get("budget")
+        if not b:
+            continue
+        out.append(f"| {r['condition']} | {b['source']} | " + " | ".join(f"{b[k]:.3f}" for k in BUDGET_TERMS)
+                   + f" | {b['cone_factor']:.2f} | {b['model_rms_deg']:.3f} | {b['photo_rms_deg']:.3f} | "
+                   f"{b['needed_factor']:.2f} |")
+    return out
 
 
 def encoding_text(enc) -> str:
@@ -246,6 +306,8 @@ def main(argv=None):
         elev = "-" if r["elevation_bias_deg"] is None else f"{r['elevation_bias_deg']:+.2f}"
         print(f"| {r['condition']} | {r['accepted']}/{r['n']} | {med} | {cov} | {elev} | {encoding_text(r['encoding'])} | "
               f"{r['ms_per_photo']:.0f} | {flags} |")
+    print("\nCone budget (median per-axis terms, degrees; ErrorModel.budget):\n")
+    print("\n".join(budget_table(rows)))
     print("\n" + coverage_summary(rows))
     write_json(a.out, {"benchmark": "bench_conditions", **host_info(), "resolution": a.res, "results": rows})
 

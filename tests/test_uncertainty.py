@@ -296,3 +296,51 @@ def test_mixed_sphere_capture_bound_is_the_precise_spheres(rng=np.random.default
     cones = np.array([m.cone_deg(m.photo_sigma_deg(s, [0, 1, 2])) for s in sig])
     assert np.mean(np.array(errs) <= cones) >= 0.9
     assert m.as_dict()["common_ratio"] == pytest.approx(1.0 / 3.0)
+
+
+def test_budget_terms_add_up_to_the_cone(rng=np.random.default_rng(21)):
+    """``ErrorModel.budget`` splits a photo's per-axis sigma into the fit, centre, floor and common
+    terms: their root sum of squares is ``photo_sigma_deg`` and its cone the one reported; the
+    floor term is the capture's floor through the weighted mean, and a larger centre term of one
+    sphere raises only the centre term."""
+    res, sig, _ = simulate(rng, n_photos=120)
+    spheres = [np.arange(4)] * len(res)
+    m = fit_error_model(res, sig, spheres=spheres, centre_deg=[0.05, 0.05, 0.4, 0.05])
+    stat, idx = np.array([0.1, 0.2, 0.15, 0.05]), np.arange(4)
+    b = m.budget(stat, idx)
+    parts = np.array([b[k] for k in ("fit_deg", "centre_deg", "floor_deg", "common_deg")])
+    assert np.sqrt(np.sum(parts ** 2)) == pytest.approx(b["sigma_deg"], rel=1e-9)
+    assert b["sigma_deg"] == pytest.approx(m.photo_sigma_deg(stat, idx), rel=1e-12)
+    assert b["cone_deg"] == pytest.approx(m.cone_deg(m.photo_sigma_deg(stat, idx)), rel=1e-12)
+    assert b["cone_factor"] == pytest.approx(m.cone_factor) and b["common_floor_deg"] == pytest.approx(0.1)
+    v = m.sphere_sigma_deg(stat, idx) ** 2
+    w = (1 / v) / np.sum(1 / v)
+    assert b["floor_deg"] == pytest.approx(m.floor_deg * np.sqrt(np.sum(w * w)), rel=1e-9)
+    # given weights are used (all weight on sphere 0: its own terms)
+    b0 = m.budget(stat, idx, weights=[1.0, 0.0, 0.0, 0.0])
+    assert b0["fit_deg"] == pytest.approx(m.scale * 0.1) and b0["centre_deg"] == pytest.approx(0.05)
+    assert b0["floor_deg"] == pytest.approx(m.floor_deg)
+    # without finite statistics: infinite terms, no exception
+    assert not np.isfinite(m.budget(np.array([np.inf, 0.1]), np.arange(2))["sigma_deg"])
+
+
+def test_fallback_budget_is_the_stated_floor():
+    """One sphere: the budget holds the stated fallback floor (1 deg RMS: 0.707 per axis)."""
+    m = FALLBACK_MODEL.with_centres([0.2])
+    b = m.budget(np.array([0.03]), np.array([0]))
+    assert b["floor_deg"] == pytest.approx(1.0 / np.sqrt(2.0)) and b["centre_deg"] == pytest.approx(0.2)
+    assert b["cone_factor"] == pytest.approx(CONE_FACTOR)
+
+
+def test_error_model_round_trips_through_its_dict(rng=np.random.default_rng(22)):
+    """``ErrorModel.from_dict(m.as_dict())`` (as ``lights.json`` stores it) gives the same model and
+    the same cones; the JSON text too."""
+    from ffls.spheres.uncertainty import ErrorModel
+
+    res, sig, _ = simulate(rng, n_photos=80)
+    m = fit_error_model(res, sig, spheres=[np.arange(4)] * len(res), centre_deg=[0.1, 0.2, 0.0, 0.3])
+    back = ErrorModel.from_dict(json.loads(json.dumps(m.as_dict())))
+    assert back == m
+    stat, idx = np.array([0.1, 0.2, 0.15, 0.05]), np.arange(4)
+    assert back.cone_deg(back.photo_sigma_deg(stat, idx)) == pytest.approx(m.cone_deg(m.photo_sigma_deg(stat, idx)))
+    assert ErrorModel.from_dict(FALLBACK_MODEL.as_dict()) == FALLBACK_MODEL

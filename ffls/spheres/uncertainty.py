@@ -368,6 +368,71 @@ class ErrorModel:
             return float("inf")
         return float(np.sqrt(np.sum(w * w * v) + self.common_sigma_deg(stat, idx) ** 2))
 
+    def budget(self, stat_sigma_deg, spheres=None, weights=None) -> dict:
+        """The terms of a photo's cone (:meth:`photo_sigma_deg`), each a per-axis standard deviation
+        (degrees) of the photo's weighted mean, so that ``sigma_deg`` is their root sum of squares.
+
+        Parameters
+        ----------
+        stat_sigma_deg : (k,) float
+            The used spheres' statistical per-axis standard deviations (degrees).
+        spheres : (k,) int, optional
+            Their indices (for their centre terms).
+        weights : (k,) float, optional
+            The combination's weights (normalised here); the inverse variances under this model
+            when omitted.
+
+        Returns
+        -------
+        dict
+            ``fit_deg`` (the fit statistics scaled by ``s``: ``sqrt(sum w^2 s^2 sigma^2)``),
+            ``centre_deg`` (the centres' terms ``g``), ``floor_deg`` (the per-sphere floor
+            ``tau``), ``common_deg`` (the common-mode bound, its floor included),
+            ``common_floor_deg``, ``sigma_deg`` (:meth:`photo_sigma_deg`), ``cone_factor`` and
+            ``cone_deg`` (:meth:`cone_deg` of ``sigma_deg``). Infinite terms where the spheres'
+            variances are not finite.
+        """
+        stat = np.atleast_1d(np.asarray(stat_sigma_deg, dtype=np.float64))
+        idx = None if spheres is None else np.atleast_1d(spheres)
+        v = self.sphere_sigma_deg(stat, idx) ** 2
+        w = _weights(v, weights)
+        common_floor = float(self.common_floor_deg) if self.common_ratio is not None else 0.0
+        if w is None:
+            inf = float("inf")
+            return {"fit_deg": inf, "centre_deg": inf, "floor_deg": inf, "common_deg": inf,
+                    "common_floor_deg": common_floor, "sigma_deg": inf, "cone_factor": float(self.cone_factor),
+                    "cone_deg": inf}
+        g = np.zeros(stat.shape) if idx is None else self.centre_sigma_deg(idx).reshape(stat.shape)
+        w2 = w * w
+        sigma = self.photo_sigma_deg(stat, idx, weights)
+        return {"fit_deg": float(np.sqrt(np.sum(w2 * (self.scale * stat) ** 2))),
+                "centre_deg": float(np.sqrt(np.sum(w2 * g * g))),
+                "floor_deg": float(np.sqrt(np.sum(w2)) * self.floor_deg),
+                "common_deg": float(self.common_sigma_deg(stat, idx)), "common_floor_deg": common_floor,
+                "sigma_deg": float(sigma), "cone_factor": float(self.cone_factor),
+                "cone_deg": float(self.cone_deg(sigma))}
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> "ErrorModel":
+        """The model :meth:`as_dict` wrote (``lights.json``'s ``uncertainty``).
+
+        Parameters
+        ----------
+        doc : dict
+
+        Returns
+        -------
+        ErrorModel
+        """
+        ratio = doc.get("common_ratio")
+        return cls(scale=float(doc["scale"]), floor_deg=float(doc["floor_deg"]), common_deg=float(doc["common_deg"]),
+                   source=str(doc["source"]), n_photos=int(doc.get("n_photos", 0)),
+                   n_trimmed=int(doc.get("n_trimmed", 0)),
+                   centre_deg=tuple(float(x) for x in doc.get("centre_deg", ())),
+                   cone_factor=float(doc.get("cone_factor", CONE_FACTOR)), n_tail=int(doc.get("n_tail", 0)),
+                   common_ratio=None if ratio is None else float(ratio),
+                   common_floor_deg=float(doc.get("common_floor_deg", COMMON_FLOOR_DEG)))
+
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
         from dataclasses import replace
