@@ -251,3 +251,46 @@ def test_to_uint8():
     np.testing.assert_array_equal(tonemap.to_uint8(np.array([0.0, 0.5, 1.0, 2.0, -1.0])), [0, 128, 255, 255, 0])
     with pytest.raises(ValueError, match="non-finite"):
         tonemap.to_uint8(np.array([np.nan]))
+
+
+# ----------------------------------------------------------------------------- integer codes and their tables
+@pytest.mark.parametrize("dtype, top, name", [(np.uint8, 255, "a.png"), (np.uint16, 65535, "a.png"),
+                                              (np.uint16, 65535, "a.tif")])
+@pytest.mark.parametrize("channels", [1, 3, 4])
+def test_integer_codes_kept_and_tables_match_the_curves(tmp_path, rng, dtype, top, name, channels):
+    """An integer file keeps its codes (RGB), its pixels are codes / top, and linearise's table of
+    the codes gives bit for bit what the curve gives evaluated at every pixel."""
+    import cv2
+
+    from ffls.radiance.photos import linearise
+
+    shape = (23, 37) if channels == 1 else (23, 37, channels)
+    stored = rng.integers(0, top + 1, shape, dtype=np.int64).astype(dtype)
+    stored.reshape(-1)[:256] = np.arange(256)  # every 8-bit code, at odd offsets
+    assert cv2.imwrite(str(tmp_path / name), stored)
+    img = imageio.read_image(tmp_path / name)
+    rgb = np.repeat(stored[:, :, None], 3, axis=2) if channels == 1 else stored[:, :, 2::-1][:, :, -3:]
+    assert img.codes.dtype == dtype and img.codes.shape == (23, 37, 3)
+    np.testing.assert_array_equal(img.codes, rgb)
+    np.testing.assert_array_equal(img.pixels, rgb.astype(np.float32) / np.float32(top))
+    assert img.pixels.flags.c_contiguous and img.pixels.dtype == np.float32
+    for enc, curve in (("srgb", encoding.srgb_decode), ({"gamma": 2.2}, lambda v: encoding.gamma_decode(v, 2.2)),
+                       ({"gamma": 0.45}, lambda v: encoding.gamma_decode(v, 0.45))):
+        lin = linearise(img, enc)
+        assert lin.dtype == np.float32
+        np.testing.assert_array_equal(lin, curve(img.pixels))
+    if dtype == np.uint8:  # a response table is read at the same codes
+        response = np.linspace(0.0, 1.0, 256 * 3).reshape(3, 256).T.copy()
+        lin = linearise(img, {"response": "cam"}, response)
+        np.testing.assert_array_equal(lin[..., 1], response[rgb[..., 1], 1].astype(np.float32))
+
+
+def test_float_files_have_no_codes_and_a_bad_gamma_is_still_refused(tmp_path, rng):
+    from ffls.radiance.photos import linearise
+
+    imageio.write_exr(tmp_path / "a.exr", rng.random((4, 5, 3)).astype(np.float32))
+    assert imageio.read_image(tmp_path / "a.exr").codes is None
+    imageio.write_png(tmp_path / "b.png", rng.integers(0, 256, (4, 5, 3), dtype=np.uint8))
+    img = imageio.read_image(tmp_path / "b.png")
+    with pytest.raises(ValueError, match="gamma"):
+        linearise(img, {"gamma": 100.0})

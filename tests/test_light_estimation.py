@@ -182,6 +182,57 @@ def test_pixel_validity_saturation_plateau():
     assert valid[1:20].all()  # dark but not clipped: data
 
 
+def _validity_by_definition(p, min_plateau=4, saturation=None):
+    """pixel_validity's rules written out on the (m, c) array: finite; not on a plateau of at least
+    ``min_plateau`` pixels at a channel's maximum (or at or above 0.999 of ``saturation``); not on
+    such a plateau at a channel's minimum where that is at most 0."""
+    finite = np.all(np.isfinite(p), axis=1)
+    sat = np.zeros(len(p), bool)
+    floor = np.zeros(len(p), bool)
+    for ch in range(p.shape[1]):
+        c = p[:, ch]
+        top = np.max(c[finite]) if finite.any() else -np.inf
+        at_top = finite & (c >= top * (1 - 1e-6))
+        if top > 0 and at_top.sum() >= min_plateau:
+            sat |= at_top
+        if saturation is not None:
+            sat |= finite & (c >= 0.999 * saturation)
+        low = np.min(c[finite]) if finite.any() else np.inf
+        at_low = finite & (c <= low)
+        if low <= 0 and at_low.sum() >= min_plateau:
+            floor |= at_low
+    return finite & ~sat & ~floor, int((sat & finite).sum())
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_pixel_validity_and_sphere_values_follow_the_definition(samples, seed):
+    """Validity, saturated count and grey values are those of the rules applied pixel by pixel,
+    with NaN, Inf, clipped tops and floors; sphere_values reads the same pixels of a contiguous
+    photo and of a strided view of it."""
+    rng = np.random.default_rng(seed)
+    px = rng.normal(0.3, 0.2, (400, 3))
+    px[rng.integers(0, 400, 12), rng.integers(0, 3, 12)] = np.nan
+    px[rng.integers(0, 400, 3), 1] = np.inf
+    px[:, 0] = np.minimum(px[:, 0], 0.6)  # a clipped top in one channel
+    px[:, 2] = np.maximum(px[:, 2], 0.0)  # a clipped floor in another
+    for kw in ({}, {"saturation": 0.7}, {"min_plateau": 50}):
+        valid, nsat = pixel_validity(px, **kw)
+        want, want_sat = _validity_by_definition(px, **kw)
+        np.testing.assert_array_equal(valid, want)
+        assert nsat == want_sat
+    img = render(direction=light(20, 30)).astype(np.float32)
+    img[5, 5] = np.nan
+    wide = np.zeros((img.shape[0], img.shape[1], 6), np.float32)
+    wide[..., ::2] = img
+    for got in (sphere_values(img, samples), sphere_values(wide[..., ::2], samples)):
+        for s, (grey, valid, nsat) in zip(samples, got):
+            p = img[s.rows, s.cols].astype(np.float64)
+            np.testing.assert_array_equal(grey, p.mean(axis=1))
+            want, want_sat = _validity_by_definition(p)
+            np.testing.assert_array_equal(valid, want)
+            assert nsat == want_sat
+
+
 def test_pixel_validity_keeps_noisy_dark_pixels_and_drops_the_clipped_floor():
     rng = np.random.default_rng(0)
     dark = rng.normal(0.002, 0.01, 500)  # a dark region under sensor noise: negative values too

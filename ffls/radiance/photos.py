@@ -13,6 +13,7 @@ it in ``lights.json``, where the other commands find it
 """
 from __future__ import annotations
 
+import functools
 import os
 import sys
 from dataclasses import dataclass
@@ -96,19 +97,55 @@ def linearise(img: ImageData, encoding, response=None) -> np.ndarray:
     if enc == "srgb":
         if img.is_hdr:
             raise InputError(f"{CAPTURE_FILE} says encoding 'srgb' but the image is floating point", img.path)
-        return srgb_decode(img.pixels)
+        return _decode_codes(img, "srgb", 0.0) if _codes_of(img) is not None else srgb_decode(img.pixels)
     if isinstance(enc, dict) and "gamma" in enc:
         if img.is_hdr:
             raise InputError(f"{CAPTURE_FILE} says encoding {{\"gamma\": {enc['gamma']}}} but the image is floating "
                              "point (linear by definition)", img.path)
+        if _codes_of(img) is not None:  # (the table is made by gamma_decode: the same range check)
+            return _decode_codes(img, "gamma", float(enc["gamma"]))
         return gamma_decode(img.pixels, enc["gamma"])
     if img.bit_depth != 8:
         raise InputError(f"an inverse response table applies to 8-bit images, this one is {img.bit_depth}", img.path)
-    codes = np.rint(img.pixels * 255).astype(np.intp)
+    codes = _codes_of(img)
+    codes = np.rint(img.pixels * 255).astype(np.intp) if codes is None else codes
     out = np.empty(img.pixels.shape, dtype=np.float32)
     for c in range(3):
         out[..., c] = response[codes[..., c], c]
     return out
+
+
+def _codes_of(img: ImageData) -> np.ndarray | None:
+    """The stored integer codes of ``img`` where the reader kept them (and they match its pixels' shape)."""
+    codes = getattr(img, "codes", None)
+    if codes is None or codes.shape != np.shape(img.pixels) or codes.dtype not in (np.uint8, np.uint16):
+        return None
+    return codes
+
+
+@functools.lru_cache(maxsize=16)
+def _code_table(curve: str, gamma: float, dtype: str) -> np.ndarray:
+    """The linear value of every code of ``dtype`` (uint8 or uint16) under ``curve``: the decode
+    evaluated at the float32 values ``k / top`` that :func:`ffls.io.images.read_image` gives."""
+    top = np.iinfo(np.dtype(dtype)).max
+    values = np.arange(top + 1, dtype=np.float32) / np.float32(top)
+    table = srgb_decode(values) if curve == "srgb" else gamma_decode(values, gamma)
+    table = np.asarray(table, dtype=np.float32)
+    table.setflags(write=False)
+    return table
+
+
+def _decode_codes(img: ImageData, curve: str, gamma: float) -> np.ndarray:
+    """:func:`ffls.radiance.encoding.srgb_decode` or ``gamma_decode`` of an integer image's
+    pixels, by a table of its codes (the same float32 values; one lookup per pixel instead of a
+    power)."""
+    import cv2
+
+    codes = _codes_of(img)
+    table = _code_table(curve, gamma, codes.dtype.name)
+    if codes.dtype == np.uint8 and codes.ndim == 3 and codes.shape[2] <= 4:
+        return cv2.LUT(np.ascontiguousarray(codes), table)
+    return table[codes]
 
 
 def _check_size(capture, i: int, img: ImageData) -> None:

@@ -16,7 +16,7 @@ import numpy as np
 from ffls.camera.projection import pixel_rays
 from ffls.conventions import UP, normalize
 
-__all__ = ["ORTHO_VIRTUAL_DISTANCE", "SphereSamples", "SphereValues", "ground_bounce", "sphere_samples", "sphere_samples_orthographic",
+__all__ = ["ORTHO_VIRTUAL_DISTANCE", "SphereSamples", "SphereValues", "channel_mean", "ground_bounce", "sphere_samples", "sphere_samples_orthographic",
            "pixel_validity", "sphere_values"]
 
 
@@ -243,6 +243,20 @@ class SphereValues(NamedTuple):
         return SphereValues(self.grey[index], self.valid[index], self.n_saturated)
 
 
+def _columns(p: np.ndarray) -> list[np.ndarray]:
+    """The columns of an (m, c) array, each contiguous (m,)."""
+    return list(np.ascontiguousarray(p.T))
+
+
+def channel_mean(chans: list[np.ndarray]) -> np.ndarray:
+    """The mean of channel columns ``(c0 + c1 + ...) / c``: what ``mean(axis=1)`` of the (m, c)
+    array gives (numpy sums so few terms in order), on contiguous columns (several times faster)."""
+    total = chans[0].copy()
+    for c in chans[1:]:
+        total += c
+    return total / float(len(chans))
+
+
 def pixel_validity(pixels: np.ndarray, black_fraction: float | None = None, min_plateau: int = 4,
                    saturation: float | None = None) -> tuple[np.ndarray, int]:
     """Usable pixels of one sphere: finite, not saturated, not clipped at the black floor.
@@ -280,28 +294,32 @@ def pixel_validity(pixels: np.ndarray, black_fraction: float | None = None, min_
     p = np.asarray(pixels, dtype=np.float64)
     if p.ndim == 1:
         p = p[:, None]
-    finite = np.all(np.isfinite(p), axis=1)
+    chans = _columns(p)  # contiguous channels: reductions over a last axis of 3 are slow
+    finite = np.isfinite(chans[0])
+    for c in chans[1:]:
+        finite &= np.isfinite(c)
     sat = np.zeros(p.shape[0], dtype=bool)
     floor = np.zeros(p.shape[0], dtype=bool)
     if finite.any():
-        q = np.where(finite[:, None], p, -np.inf)
-        qlo = np.where(finite[:, None], p, np.inf)
-        for ch in range(p.shape[1]):
-            top = float(q[:, ch].max())
+        every = bool(finite.all())
+        for c in chans:
+            q = c if every else np.where(finite, c, -np.inf)
+            top = float(q.max())
             if top > 0:
-                at_top = q[:, ch] >= top * (1.0 - 1e-6)
-                if at_top.sum() >= min_plateau:
+                at_top = q >= top * (1.0 - 1e-6)
+                if np.count_nonzero(at_top) >= min_plateau:
                     sat |= at_top
             if saturation is not None:
-                sat |= q[:, ch] >= 0.999 * saturation
-            low = float(qlo[:, ch].min())
+                sat |= q >= 0.999 * saturation
+            qlo = c if every else np.where(finite, c, np.inf)
+            low = float(qlo.min())
             if low <= 0.0:
-                at_low = qlo[:, ch] <= low
-                if at_low.sum() >= min_plateau:
+                at_low = qlo <= low
+                if np.count_nonzero(at_low) >= min_plateau:
                     floor |= at_low
     ok = finite & ~sat & ~floor
     if black_fraction is not None:
-        grey = np.where(finite, p.mean(axis=1), 0.0)
+        grey = np.where(finite, channel_mean(chans), 0.0)
         ref = float(np.percentile(grey[ok], 99)) if ok.any() else 0.0
         ok &= grey > max(black_fraction * ref, 0.0)
     return ok, int((sat & finite).sum())
@@ -336,9 +354,13 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
     from ffls.radiance.response import valid_pixel_mask
 
     img = np.asarray(image)
+    flat = img.reshape(-1, img.shape[2]) if img.ndim == 3 and img.flags.c_contiguous else None
     out = []
     for s in samples:
-        px = img[s.rows, s.cols].astype(np.float64)
+        if flat is not None:  # one row gather of the flattened photo (the same values as img[rows, cols])
+            px = np.take(flat, s.rows.astype(np.intp) * img.shape[1] + s.cols, axis=0).astype(np.float64)
+        else:
+            px = img[s.rows, s.cols].astype(np.float64)
         valid, nsat = pixel_validity(px, saturation=saturation)
         if raw is not None and bit_depth is not None:
             rp = np.asarray(raw)[s.rows, s.cols]
@@ -349,6 +371,6 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
                 nsat = max(nsat, int((~not_sat).sum()))
             # float data: no top code, and near-zero or negative (noisy) values are data
             # (pixel_validity; the non-finite are already invalid)
-        grey = px.mean(axis=1) if px.ndim == 2 else px
+        grey = channel_mean(_columns(px)) if px.ndim == 2 else px
         out.append(SphereValues(grey, valid, int(nsat)))
     return out
