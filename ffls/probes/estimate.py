@@ -62,7 +62,7 @@ def _located_views(probe, material: str, needs: str, other: str):
 
 def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = None, rim_px: float = RIM_PX,
                     supersample: int | None = None, weight_power: float = 2.0, fill: str = "nearest",
-                    camera_size: float = CAMERA_SIZE) -> LightmapEstimate:
+                    camera_size: float = CAMERA_SIZE, resample: str = "splat") -> LightmapEstimate:
     """A light map from one or more photographs (or brackets) of a mirror ball (Debevec 1998).
 
     Parameters
@@ -85,6 +85,10 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
         Unseen directions: from the nearest seen ones (default), or black.
     camera_size : float
         Radius (scene units) of the camera and photographer, for the default cone.
+    resample : {'splat', 'bilinear'}
+        How the photo's pixels become texels (:func:`ffls.probes.debevec.unwrap_mirror_ball_Debevec1998`):
+        each pixel spread over the directions its footprint reflects (default), or the photo sampled
+        bilinearly at each direction.
 
     Returns
     -------
@@ -108,7 +112,7 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
             vr.radiance, geo.camera_model, geo.K, geo.dist, geo.world_from_camera, geo.center_cam, geo.radius,
             geo.center_px, geo.radius_px, height=height, valid=vr.valid, saturated=vr.saturated,
             camera_cone_deg=cone, rim_px=rim_px, supersample=supersample,
-            reflectance=view.sphere.reflectance)
+            reflectance=view.sphere.reflectance, resample=resample)
         frac = float(sa[mv.confidence > 0].sum() / (4 * np.pi))
         if frac == 0:
             raise InputError(f"{tag}the ball shows no usable direction (all its pixels invalid or masked)",
