@@ -338,8 +338,9 @@ def splat_mirror_ball(image, camera_model: str = "pinhole", K=None, dist=None, w
     into it. Each pixel is cut into ``S x S`` sub-pixels, each traced to the ball and reflected
     (exactly: the ray from the camera, its intersection with the sphere, the mirror direction),
     and given the pixel's value with the weight of the area it covers on the ball seen across the
-    ray (``t^2 (v . z)^3``, ``t`` the distance to the ball, ``v`` the unit ray: the solid angle a
-    mirror ball reflects is 4 / R^2 times that area; 1 for an orthographic camera). A texel gets
+    ray (``t^2 (v . z)^3``, ``t`` the distance to the ball, ``v`` the unit ray, the distortion's
+    change of pixel area neglected: the solid angle a mirror ball reflects is 4 / R^2 times that
+    area; 1 for an orthographic camera). A texel gets
     the weighted mean of the sub-pixels landing in it. Unlike sampling the photo bilinearly at each
     direction, this adds no blur beyond the pixel's own footprint: a small bright lamp stays in the
     texels its pixels reflect, and every pixel's power is kept.
