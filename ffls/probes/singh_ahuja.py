@@ -143,12 +143,12 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
     rng = np.random.default_rng(seed)
     d = float(delta)
     gram = H[rows] @ H[rows].T if rows.size <= BLOCK and d == 0 else None
+    Hn = H / np.where(norm2 > 0, norm2, 1.0)[:, None] if d > 0 else None
     pos = np.full(m, -1, dtype=np.int64)
     pos[rows] = np.arange(rows.size)
     for _ in range(int(iterations)):
         seq = rng.permutation(rows) if order == "random" else rows
         if d > 0:
-            Hn = H / np.where(norm2 > 0, norm2, 1.0)[:, None]
             for i in seq:
                 r = g[i] - H[i] @ f
                 r = np.where(r > d, r - d, np.where(r < -d, r + d, 0.0))
