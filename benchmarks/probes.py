@@ -26,7 +26,8 @@ alone; ``HA adaptive`` and ``Sato adaptive`` floors are the adaptive sets refine
 map's cell powers (``oracle_adaptive``), and ``... set N`` floors the sets the adaptive estimates
 chose. Hougen-Ahuja and Sato-Sato-Ikeuchi are also run with their sizes chosen from the data:
 ``uniform`` over uniform sets, ``adaptive`` over the adaptive sets of
-``ffls.probes.selection.refine_sources``. Then the limit: per spherical-harmonic order, the relative error
+``ffls.probes.selection.refine_sources`` (POCS too: ``adaptive`` rows, ``adaptive_singh_ahuja``, with the floor of
+the set each chose). Then the limit: per spherical-harmonic order, the relative error
 of the recovered map's coefficients. Writes ``benchmarks/results/probes.json`` and
 ``docs/images/probes.png``.
 """
@@ -51,7 +52,7 @@ from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.sato_sato_ikeuchi import box_visibility, dome_nodes, sato_sato_ikeuchi
 from ffls.probes.selection import (adaptive_hougen_ahuja, adaptive_sato_sato_ikeuchi, refine_sources,
                                    select_hougen_ahuja, select_sato_sato_ikeuchi)
-from ffls.probes.singh_ahuja import singh_ahuja
+from ffls.probes.singh_ahuja import adaptive_singh_ahuja, singh_ahuja
 from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -205,6 +206,15 @@ def main(argv=None):
                 conv[f"{name} {order}"] = r.residuals.tolist()
                 if order == "random":
                     limit[f"{name} POCS-16"] = sh_recovery(L, true, 8).relative_error.tolist()
+        for crit in ("bic", "cv"):
+            sel, t = timed(lambda: adaptive_singh_ahuja(sph.normals, rad, 0.7, criterion=crit, max_pixels=1000), 1)
+            L = add("singh_ahuja", f"adaptive ({crit}) -> {sel.chosen} it=50 random", lambda f: f.latlong(H), sel.fit,
+                    t, sph.normals, true, "full")
+            conv[f"{name} adaptive {crit}"] = sel.fit.residuals.tolist()
+            if crit == "cv":
+                limit[f"{name} POCS adaptive"] = sh_recovery(L, true, 8).relative_error.tolist()
+            d = sel.fit.directions
+            floor(f"POCS adaptive ({crit}) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
         # ------------------------------------------------------------ Sato, Sato and Ikeuchi
         sc = cast_shadow_scene(lm, SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
         occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
@@ -276,8 +286,8 @@ def plot(rows, conv, path):
         a_.grid(True, which="both", alpha=0.3)
         a_.legend(fontsize=8)
     for k, v in conv.items():
-        ax[2].semilogy(v, label=k, ls="-" if "random" in k else "--")
-    ax[2].set_xlabel("POCS iteration (16 x 32 grid)")
+        ax[2].semilogy(v, label=k, ls=":" if "adaptive" in k else "-" if "random" in k else "--")
+    ax[2].set_xlabel("POCS iteration (16 x 32 grid; dotted: the adaptive set chosen)")
     ax[2].set_title("relative residual |g - Hf| / |g|", fontsize=9)
     if conv:
         ax[2].legend(fontsize=7)

@@ -60,7 +60,8 @@ def shadow_folder(tmp_path_factory, truth):
 
 @pytest.mark.parametrize("argv", [["diffuse", "--sources", "9"], ["diffuse", "--sources", "auto", "--criterion", "bic"], ["diffuse", "--sources", "17", "--unconstrained", "--ambient", "free"],
                                   ["diffuse", "--sources", "uniform"], ["diffuse", "--sources", "adaptive", "--criterion", "bic"],
-                                  ["pocs", "--grid", "8", "--iterations", "10"]])
+                                  ["pocs", "--sources", "grid", "--grid", "8", "--iterations", "10"],
+                                  ["pocs", "--criterion", "bic", "--iterations", "10"]])
 def test_diffuse_methods_write_maps(diffuse_folder, tmp_path, capsys, argv):
     out = tmp_path / "m.exr"
     assert main(["probe", argv[0], str(diffuse_folder), "-o", str(out), "--size", "16", *argv[1:]]) == 0
@@ -73,7 +74,7 @@ def test_diffuse_methods_write_maps(diffuse_folder, tmp_path, capsys, argv):
 
 
 def test_pocs_reports_convergence(diffuse_folder):
-    est = estimate_lightmap(diffuse_folder, "pocs", height=16, grid=8, iterations=8)
+    est = estimate_lightmap(diffuse_folder, "pocs", height=16, grid=8, iterations=8, sources="grid")
     r = est.details["residuals"]
     assert len(r) == 9 and r[-1] < r[0]
 
@@ -142,7 +143,7 @@ def test_bad_input(diffuse_folder, shadow_folder, tmp_path):
     with pytest.raises(InputError, match="diffuse sphere"):
         estimate_lightmap(tiny, "pocs", height=16)
     with pytest.raises(InputError, match="multiple of the POCS grid"):
-        estimate_lightmap(diffuse_folder, "pocs", height=20, grid=16)
+        estimate_lightmap(diffuse_folder, "pocs", height=20, grid=16, sources="grid")
 
 
 def test_diffuse_object_of_known_geometry(tmp_path, truth):

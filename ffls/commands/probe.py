@@ -111,7 +111,13 @@ def _add_inverse(sub, common):
     q = sub.add_parser("pocs", parents=[common], help="a diffuse sphere by POCS (Singh-Ahuja)",
                        description="Projections onto convex sets (amplitude and residual projections in random "
                                    "order) from a diffuse sphere; the residual per iteration is reported.")
-    q.add_argument("--grid", type=integer(2, 256), default=16, help="height of the grid of unknowns (default 16)")
+    q.add_argument("--sources", choices=("auto", "adaptive", "grid"), default="auto",
+                   help="unknowns: a geodesic source set refined where the light is, chosen by --criterion "
+                        "(adaptive = auto, default), or the paper's lat-long grid of --grid rows (grid)")
+    q.add_argument("--criterion", choices=("cv", "bic"), default="cv",
+                   help="how the adaptive set's refinement is chosen: cross-validation (default) or BIC")
+    q.add_argument("--grid", type=integer(2, 256), default=16,
+                   help="with --sources grid: height of the grid of unknowns (default 16)")
     q.add_argument("--iterations", type=integer(1, 100000), default=50, help="sweeps (default 50)")
     q.add_argument("--upper", type=number(0.0, None, lo_open=True), default=None,
                    help="upper amplitude bound on the radiance (default none)")
@@ -210,7 +216,7 @@ def method_knobs(args) -> dict:
                 "fill": args.fill}
     if args.method == "pocs":
         return {"grid": args.grid, "iterations": args.iterations, "upper": args.upper, "order": args.order,
-                "seed": args.seed, "fill": args.fill}
+                "seed": args.seed, "fill": args.fill, "sources": args.sources, "criterion": args.criterion}
     return {}
 
 

@@ -49,7 +49,8 @@ from ffls.camera.projection import camera_arrays, project_points
 from ffls.conventions import latlong_directions, latlong_uv_to_direction, normalize
 
 __all__ = ["MirrorView", "BlindSpot", "latlong_solid_angles", "mirror_ball_pixels",
-           "unwrap_mirror_ball_Debevec1998", "auto_supersample", "merge_mirror_views", "fill_unseen", "blind_spot",
+           "unwrap_mirror_ball_Debevec1998", "auto_supersample", "splat_mirror_ball", "splat_supersample",
+           "RESAMPLE_MODES", "merge_mirror_views", "fill_unseen", "blind_spot",
            "CAMERA_CONE_DEG", "RIM_PX"]
 
 #: Default half-angle (degrees) of the cone around the direction toward the camera that is masked out.
@@ -205,7 +206,8 @@ def unwrap_mirror_ball_Debevec1998(image, camera_model: str = "pinhole", K=None,
                                    world_from_camera=None, center_cam=None, radius=None, center_px=None,
                                    radius_px=None, height: int = 128, valid=None, saturated=None,
                                    camera_cone_deg: float = CAMERA_CONE_DEG, rim_px: float = RIM_PX,
-                                   supersample: int | None = None, reflectance: float = 1.0) -> MirrorView:
+                                   supersample: int | None = None, reflectance: float = 1.0,
+                                   resample: str = "splat") -> MirrorView:
     """Unwrap one photograph of a mirror ball into a lat-long radiance map with a confidence per direction.
 
     Parameters
@@ -236,11 +238,20 @@ def unwrap_mirror_ball_Debevec1998(image, camera_model: str = "pinhole", K=None,
         (about 4 samples per pixel of the ball).
     reflectance : float
         The ball's reflectance; the map is the image divided by it.
+    resample : {'splat', 'bilinear'}
+        The radiance of a texel: ``'splat'`` (default) the mean of the pixels whose footprints
+        reflect its directions (:func:`splat_mirror_ball`; texels smaller than a sub-pixel's
+        footprint, which no sub-pixel lands in, keep the bilinear value); ``'bilinear'`` the photo
+        sampled bilinearly at the texel's ``S x S`` directions (which blurs a lamp over a pixel more
+        than the pixel's own footprint; ``docs/probes.md`` measures both). Which directions are
+        seen, and the confidence, come from the backward map either way.
 
     Returns
     -------
     MirrorView
     """
+    if resample not in RESAMPLE_MODES:
+        raise ValueError(f"resample must be one of {RESAMPLE_MODES}, not {resample!r}")
     img = np.asarray(image, dtype=np.float32)
     H_img, W_img = img.shape[:2]
     h = int(height)
@@ -289,8 +300,156 @@ def unwrap_mirror_ball_Debevec1998(image, camera_model: str = "pinhole", K=None,
         if sat is not None:
             clip_out[r0:r1] = ((_sample(sat, px, shape) > 0) & (conf > 0)).reshape(blk).any(axis=(1, 3))
         cone_out[r0:r1] = cone.reshape(blk).any(axis=(1, 3))
+    if resample == "splat":
+        spl, wsp = splat_mirror_ball(img, camera_model, K, dist, T, center_cam, radius, center_px, radius_px, h,
+                                     valid, rim_px, toward, camera_cone_deg, None, reflectance)
+        out = np.where((wsp > 0)[..., None], spl, out)
     return MirrorView(np.where(conf_out[..., None] > 0, out, 0.0).astype(np.float32),
                       conf_out.astype(np.float32), clip_out & (conf_out > 0), toward, cone_out)
+
+
+#: How :func:`unwrap_mirror_ball_Debevec1998` resamples the photo: ``'splat'`` spreads every pixel
+#: over the directions its footprint reflects (:func:`splat_mirror_ball`); ``'bilinear'`` samples the
+#: photo bilinearly at each direction (the backward map alone).
+RESAMPLE_MODES = ("splat", "bilinear")
+
+
+def splat_supersample(radius_px: float, height: int, limit: int = 16) -> int:
+    """Sub-pixels per pixel side for :func:`splat_mirror_ball`: sub-pixel footprints a third of a texel or less.
+
+    A pixel of a mirror ball of radius ``r`` pixels reflects ``4 / r^2`` sr (orthographically, at
+    every point of the disc), a square of side about ``2 / r`` radians; a texel of a lat-long map
+    of height ``h`` is ``pi / h`` radians high. ``ceil(3 (2 / r) / (pi / h))``, at least 8 (each
+    pixel's power is then shared among the texels its footprint covers to 1/64: with 4, a sun
+    smaller than a pixel was shared unevenly enough to relight sunrise 0.66% wrong instead of
+    0.28%, and 16 gave the same as 8, ``docs/probes.md``) and at most ``limit``.
+    """
+    s = int(np.ceil(6.0 * int(height) / (np.pi * max(float(radius_px), 1e-9))))
+    return int(min(max(s, 8), limit))
+
+
+def splat_mirror_ball(image, camera_model: str = "pinhole", K=None, dist=None, world_from_camera=None,
+                      center_cam=None, radius=None, center_px=None, radius_px=None, height: int = 128, valid=None,
+                      rim_px: float = RIM_PX, toward=None, camera_cone_deg: float = 0.0,
+                      supersample: int | None = None, reflectance: float = 1.0, rows_per_chunk: int = 64):
+    """Spread the pixels of a mirror ball over the directions they reflect (forward resampling).
+
+    A pixel's value is the mean radiance over its footprint: the directions the ball reflects
+    into it. Each pixel is cut into ``S x S`` sub-pixels, each traced to the ball and reflected
+    (exactly: the ray from the camera, its intersection with the sphere, the mirror direction),
+    and given the pixel's value with the weight of the area it covers on the ball seen across the
+    ray (``t^2 (v . z)^3``, ``t`` the distance to the ball, ``v`` the unit ray, the distortion's
+    change of pixel area neglected: the solid angle a mirror ball reflects is 4 / R^2 times that
+    area; 1 for an orthographic camera). A texel gets
+    the weighted mean of the sub-pixels landing in it. Unlike sampling the photo bilinearly at each
+    direction, this adds no blur beyond the pixel's own footprint: a small bright lamp stays in the
+    texels its pixels reflect, and every pixel's power is kept.
+
+    Parameters
+    ----------
+    image : (H_img, W_img, 3) float
+        Linear radiance.
+    camera_model, K, dist, world_from_camera, center_cam, radius, center_px, radius_px, height, reflectance
+        As :func:`unwrap_mirror_ball_Debevec1998`.
+    valid : (H_img, W_img) bool, optional
+        Usable pixels.
+    rim_px : float
+        Pixels whose centre lies within ``rim_px`` of the outline, or whose footprint is not all on
+        the ball, are left out (they mix ball and background).
+    toward : (3,) float, optional
+        World direction from the ball toward the camera; with ``camera_cone_deg > 0`` sub-pixels
+        reflecting directions within that cone of it are left out.
+    supersample : int or None
+        ``S``; None: :func:`splat_supersample`.
+    rows_per_chunk : int
+        Image rows traced at a time (bounds the memory: ``rows x W x S^2`` sub-pixels).
+
+    Returns
+    -------
+    radiance : (height, 2 height, 3) float64
+        The weighted mean per texel (0 where no sub-pixel landed).
+    weight : (height, 2 height) float64
+        The summed weights (0: the texel is not covered; use the backward sample there).
+    """
+    from ffls.camera.projection import pixel_rays
+    from ffls.conventions import direction_to_latlong_uv
+
+    img = np.asarray(image, dtype=np.float64)
+    H_img, W_img = img.shape[:2]
+    h = int(height)
+    Rwc = np.asarray(world_from_camera, dtype=np.float64)[:3, :3]
+    ok = np.ones((H_img, W_img), dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+    if camera_model == "orthographic":
+        c_px = np.asarray(center_px, dtype=np.float64).reshape(2)
+        r_px = float(radius_px)
+        cx, cy = c_px
+    else:
+        Kc, dc = camera_arrays(K, dist)
+        C = np.asarray(center_cam, dtype=np.float64).reshape(3) / float(radius)  # unit radius
+        D = float(np.linalg.norm(C))
+        f = float(np.sqrt(Kc[0, 0] * Kc[1, 1]))
+        alpha = np.arcsin(1.0 / D)
+        r_px = f * np.tan(alpha)
+        cx, cy = project_points(C[None], Kc, dc)[0]
+    S = max(int(supersample), 1) if supersample is not None else splat_supersample(r_px, h)
+    m = 1.2 * r_px + 3.0  # the disc's bounding box, with room for distortion
+    x0, x1 = max(int(np.floor(cx - m)), 0), min(int(np.ceil(cx + m)) + 1, W_img)
+    y0, y1 = max(int(np.floor(cy - m)), 0), min(int(np.ceil(cy + m)) + 1, H_img)
+    num = np.zeros((h * 2 * h, 3))
+    wsum = np.zeros(h * 2 * h)
+    if x1 <= x0 or y1 <= y0:
+        return num.reshape(h, 2 * h, 3), wsum.reshape(h, 2 * h)
+    cos_cone = np.cos(np.radians(camera_cone_deg)) if camera_cone_deg > 0 and toward is not None else None
+    off = (np.arange(S) + 0.5) / S - 0.5
+    xs = np.arange(x0, x1)
+    for r0 in range(y0, y1, max(1, int(rows_per_chunk))):
+        r1 = min(y1, r0 + max(1, int(rows_per_chunk)))
+        yy, xx = np.meshgrid(np.arange(r0, r1), xs, indexing="ij")
+        ny, nx = yy.shape
+        # sub-pixel positions (ny, S, nx, S)
+        sy = (yy[:, None, :, None] + off[None, :, None, None]) + 0.0 * off[None, None, None, :]
+        sx = (xx[:, None, :, None] + off[None, None, None, :]) + 0.0 * off[None, :, None, None]
+        sub = np.stack([sx.ravel(), sy.ravel()], axis=1)
+        if camera_model == "orthographic":
+            ab = (sub - c_px) / r_px
+            q = 1.0 - np.sum(ab * ab, axis=1)
+            hit = q > 0
+            n = np.concatenate([ab, -np.sqrt(np.clip(q, 0.0, None))[:, None]], axis=1)
+            v = np.broadcast_to(np.array([0.0, 0.0, 1.0]), n.shape)
+            wgt = np.ones(len(sub))
+            centre = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
+            rim = r_px - np.hypot(centre[:, 0] - cx, centre[:, 1] - cy)
+        else:
+            v = pixel_rays(sub, Kc, dc)
+            b = v @ C
+            disc = b * b - (C @ C - 1.0)
+            hit = (disc >= 0) & (b > 0)
+            t = b - np.sqrt(np.where(hit, disc, 0.0))
+            n = t[:, None] * v - C
+            wgt = t ** 2 * np.clip(v[:, 2], 0.0, None) ** 3
+            vc = pixel_rays(np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64), Kc, dc)
+            rim = f * (alpha - np.arccos(np.clip(vc @ (C / D), -1.0, 1.0)))
+        r = v - 2.0 * np.sum(v * n, axis=1, keepdims=True) * n
+        wd = r @ Rwc.T
+        # a pixel is used when its centre is rim_px inside the outline, all its footprint on the ball, and it is valid
+        use_px = (rim >= float(rim_px)) & ok[r0:r1, x0:x1].ravel()
+        use_px &= hit.reshape(ny, S, nx, S).all(axis=(1, 3)).ravel()
+        use = np.broadcast_to(use_px.reshape(ny, 1, nx, 1), (ny, S, nx, S)).ravel() & hit
+        if cos_cone is not None:
+            use &= (wd @ np.asarray(toward, dtype=np.float64)) < cos_cone
+        if not use.any():
+            continue
+        u, vv = direction_to_latlong_uv(wd[use])
+        col = np.clip((np.asarray(u) * 2 * h).astype(np.int64), 0, 2 * h - 1)
+        row = np.clip((np.asarray(vv) * h).astype(np.int64), 0, h - 1)
+        idx = row * 2 * h + col
+        val = np.broadcast_to(img[r0:r1, x0:x1][:, None, :, None, :], (ny, S, nx, S, 3)).reshape(-1, 3)[use]
+        w = wgt[use]
+        wsum += np.bincount(idx, weights=w, minlength=h * 2 * h)
+        for c in range(3):
+            num[:, c] += np.bincount(idx, weights=w * val[:, c], minlength=h * 2 * h)
+    out = num / np.where(wsum > 0, wsum, 1.0)[:, None] / float(reflectance)
+    return out.reshape(h, 2 * h, 3), wsum.reshape(h, 2 * h)
 
 
 def auto_supersample(radius_px: float, height: int, samples_per_pixel: float = 4.0, limit: int = 16) -> int:

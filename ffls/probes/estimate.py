@@ -17,7 +17,7 @@ from ffls.probes.locate import locate_sphere
 from ffls.probes.result import LightmapEstimate
 from ffls.probes.sato_sato_ikeuchi import ray_triangle
 
-__all__ = ["FILL_MODES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
+__all__ = ["FILL_MODES", "POCS_SOURCES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
            "pocs_lightmap", "shadow_pixels", "shadow_lightmap", "object_pixels"]
 
 #: How unseen directions are filled: from the nearest seen ones, or left black.
@@ -62,7 +62,7 @@ def _located_views(probe, material: str, needs: str, other: str):
 
 def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = None, rim_px: float = RIM_PX,
                     supersample: int | None = None, weight_power: float = 2.0, fill: str = "nearest",
-                    camera_size: float = CAMERA_SIZE) -> LightmapEstimate:
+                    camera_size: float = CAMERA_SIZE, resample: str = "splat") -> LightmapEstimate:
     """A light map from one or more photographs (or brackets) of a mirror ball (Debevec 1998).
 
     Parameters
@@ -85,6 +85,10 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
         Unseen directions: from the nearest seen ones (default), or black.
     camera_size : float
         Radius (scene units) of the camera and photographer, for the default cone.
+    resample : {'splat', 'bilinear'}
+        How the photo's pixels become texels (:func:`ffls.probes.debevec.unwrap_mirror_ball_Debevec1998`):
+        each pixel spread over the directions its footprint reflects (default), or the photo sampled
+        bilinearly at each direction.
 
     Returns
     -------
@@ -108,7 +112,7 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
             vr.radiance, geo.camera_model, geo.K, geo.dist, geo.world_from_camera, geo.center_cam, geo.radius,
             geo.center_px, geo.radius_px, height=height, valid=vr.valid, saturated=vr.saturated,
             camera_cone_deg=cone, rim_px=rim_px, supersample=supersample,
-            reflectance=view.sphere.reflectance)
+            reflectance=view.sphere.reflectance, resample=resample)
         frac = float(sa[mv.confidence > 0].sum() / (4 * np.pi))
         if frac == 0:
             raise InputError(f"{tag}the ball shows no usable direction (all its pixels invalid or masked)",
@@ -366,35 +370,76 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
                    details, fill)
 
 
+#: How ``pocs_lightmap`` builds its unknowns: an adaptive geodesic source set (``'auto'`` = ``'adaptive'``)
+#: or the paper's fixed lat-long grid (``'grid'``).
+POCS_SOURCES = ("auto", "adaptive", "grid")
+
+
 def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int = 50, upper: float | None = None,
                   delta: float = 0.0, order: str = "random", seed: int = 0, rim_px: float = 0.5,
                   max_pixels: int | None = 2000, confidence_threshold: float = 0.2,
-                  fill: str = "nearest") -> LightmapEstimate:
+                  fill: str = "nearest", sources: str = "auto", criterion: str = "cv") -> LightmapEstimate:
     """A light map from a diffuse sphere by POCS (Singh and Ahuja, :mod:`ffls.probes.singh_ahuja`).
 
-    ``grid`` is the height of the lat-long grid of unknowns; ``height`` must be a multiple of it
-    (texels are repeated, the energy kept). The other knobs are :func:`ffls.probes.singh_ahuja.singh_ahuja`'s.
+    Parameters
+    ----------
+    probe : ffls.io.probe.Probe
+    height : int
+        Map height.
+    grid : int
+        ``sources='grid'``: the height of the lat-long grid of unknowns; ``height`` must be a
+        multiple of it (texels are repeated, the energy kept).
+    iterations, upper, delta, order, seed, max_pixels
+        :func:`ffls.probes.singh_ahuja.singh_ahuja`'s (``delta`` applies to the grid only).
+    rim_px : float
+        See :func:`diffuse_pixels`.
+    confidence_threshold : float
+        Directions with :func:`ffls.probes.hougen_ahuja.normal_confidence` at or below it are
+        reported as not seen (alpha 0).
+    fill : {'nearest', 'zero'}
+    sources : {'auto', 'adaptive', 'grid'}
+        ``'adaptive'`` (``'auto'``, the default): POCS over a geodesic source set refined where the
+        recovered light is, the round chosen by ``criterion``
+        (:func:`ffls.probes.singh_ahuja.adaptive_singh_ahuja`); ``'grid'``: the paper's
+        ``grid x 2 grid`` lat-long grid. ``docs/probes.md`` measures why adaptive is the default.
+    criterion : {'cv', 'bic'}
+        How the adaptive round is chosen.
     """
     from ffls.probes.hougen_ahuja import normal_confidence
-    from ffls.probes.singh_ahuja import singh_ahuja
+    from ffls.probes.singh_ahuja import adaptive_singh_ahuja, singh_ahuja
 
     src = probe.json_path
-    if int(height) % int(grid):
+    if sources not in POCS_SOURCES:
+        raise ValueError(f"sources must be one of {POCS_SOURCES}, not {sources!r}")
+    if sources == "grid" and int(height) % int(grid):
         raise InputError(f"--size {height} must be a multiple of the POCS grid height --grid {grid}")
     N, V, albedo, notes = diffuse_pixels(probe, "pocs", rim_px, None)
     try:
-        res = singh_ahuja(N, V, albedo, height=grid, iterations=iterations, upper=upper, delta=delta, order=order,
-                          seed=seed, max_pixels=max_pixels)
+        if sources == "grid":
+            res = singh_ahuja(N, V, albedo, height=grid, iterations=iterations, upper=upper, delta=delta,
+                              order=order, seed=seed, max_pixels=max_pixels)
+            model, data = f"{grid}x{2 * grid} grid", res.latlong(height)
+        else:
+            sel = adaptive_singh_ahuja(N, V, albedo, iterations=iterations, upper=upper, order=order, seed=seed,
+                                       max_pixels=max_pixels, criterion=criterion)
+            res = sel.fit
+            notes.append(sel.note)
+            model, data = f"{sel.chosen} adaptive sources", res.latlong(height)
     except InputError as e:
         raise _with_source(e, src) from None
     r = res.residuals
-    notes.append(f"POCS (Singh-Ahuja): {grid}x{2 * grid} grid, {res.iterations} iterations in {order} order over "
+    notes.append(f"POCS (Singh-Ahuja): {model}, {res.iterations} iterations in {order} order over "
                  f"{res.pixels_used} pixels; residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% (relative), "
                  f"re-rendered relative RMS {100 * res.relative_rms:.2f}%")
-    details = {"grid": int(grid), "iterations": int(res.iterations), "residuals": [float(x) for x in r],
+    details = {"iterations": int(res.iterations), "residuals": [float(x) for x in r],
                "relative_rms": float(res.relative_rms)}
-    return _finish(res.latlong(height), normal_confidence(N, height), confidence_threshold, "pocs", probe, notes,
-                   details, fill)
+    if sources == "grid":
+        details["grid"] = int(grid)
+    else:
+        details.update({"sources": int(sel.chosen), "criterion": criterion,
+                        "rounds": [int(c) for c in sel.candidates],
+                        "round_scores": [float(x) for x in sel.scores]})
+    return _finish(data, normal_confidence(N, height), confidence_threshold, "pocs", probe, notes, details, fill)
 
 
 # ----------------------------------------------------------------------------- cast shadows (Sato, Sato and Ikeuchi)

@@ -27,9 +27,12 @@ from ffls.conventions import latlong_directions
 from ffls.errors import InputError
 from ffls.probes.hougen_ahuja import check_normals
 from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix
-from ffls.probes.sources import latlong_solid_angles
+from ffls.probes.selection import CRITERIA, Selection, bic, normal_blocks, refine_sources
+from ffls.probes.sources import geodesic_level, latlong_solid_angles, sources_to_latlong
 
-__all__ = ["PocsResult", "pocs", "singh_ahuja", "estimate_lighting_SinghAhuja"]
+__all__ = ["BLOCK", "PocsResult", "PocsSources", "pocs", "pixel_subset", "singh_ahuja", "singh_ahuja_sources",
+           "adaptive_singh_ahuja",
+           "estimate_lighting_SinghAhuja"]
 
 
 @dataclass(frozen=True)
@@ -73,9 +76,24 @@ class PocsResult:
         return np.repeat(np.repeat(self.radiance, k, axis=0), k, axis=1)
 
 
-def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper: float | None = None, delta: float = 0.0,
+#: Rows of the residual projections solved together in one triangular system (see :func:`pocs`):
+#: their Gram matrix is ``BLOCK x BLOCK`` float64 (32 MB).
+BLOCK = 2048
+
+
+def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: float = 0.0,
          order: str = "random", seed: int = 0, x0=None) -> tuple[np.ndarray, np.ndarray]:
     """Projections onto convex sets for ``g ~ H f`` with ``lower <= f <= upper``.
+
+    One sweep applies the residual projection of every row ``i`` once, in order,
+    ``f += h_i (g_i - h_i . f) / |h_i|^2`` (``delta = 0``), then the amplitude projection (clipping).
+    With ``delta = 0`` the step of row ``i`` is ``c_i = r_i / |h_i|^2`` with ``r_i`` the residual
+    left by the rows before it, ``r_i = r0_i - sum_{k before i} (h_i . h_k) c_k``: the steps of a
+    sweep solve the lower-triangular system ``(D + L) c = r0`` of the rows' Gram matrix in the
+    sweep's order, and ``f += H^T c``. That is exactly the sequence of projections (the same
+    arithmetic in another association), solved by ``scipy.linalg.solve_triangular`` in blocks of
+    :data:`BLOCK` rows (``f`` is updated between blocks), instead of a Python loop over rows.
+    ``delta > 0`` (a soft threshold per row) runs the projections one by one.
 
     Parameters
     ----------
@@ -85,8 +103,10 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper: float | None = N
         Data, ``c`` channels (solved together, one projection per row for all channels).
     iterations : int
         Sweeps; each applies every row's residual projection once, then the amplitude one.
-    lower, upper : float
-        Amplitude bounds (``upper=None``: no upper bound).
+    lower : float
+        Lower amplitude bound.
+    upper : float, (J,) array_like or None
+        Upper amplitude bound, one for all unknowns or one each (``None``: no upper bound).
     delta : float
         Allowed residual magnitude per pixel (0 in the paper's experiments).
     order : {'random', 'sequential'}
@@ -102,6 +122,8 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper: float | None = N
     residuals : (iterations + 1,) float64
         ``|g - H f| / |g|`` (Frobenius) at the start and after every sweep.
     """
+    from scipy.linalg import solve_triangular
+
     H = np.ascontiguousarray(H, dtype=np.float64)
     g = np.asarray(g, dtype=np.float64)
     if g.ndim == 1:
@@ -111,22 +133,33 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper: float | None = N
         raise ValueError(f"order must be 'random' or 'sequential', not {order!r}")
     norm2 = np.einsum("ij,ij->i", H, H)
     if not np.any(norm2 > 0):
-        raise InputError("singular system: no pixel is lit by any direction of the POCS grid")
+        raise InputError("singular system: no pixel is lit by any direction of the POCS model")
     rows = np.flatnonzero(norm2 > 0)
-    Hn = H / np.where(norm2 > 0, norm2, 1.0)[:, None]
     f = np.zeros((J, g.shape[1])) if x0 is None else np.array(x0, dtype=np.float64).reshape(J, g.shape[1])
-    hi = np.inf if upper is None else float(upper)
+    hi = np.inf if upper is None else np.asarray(upper, dtype=np.float64)
+    hi = hi.reshape(-1, 1) if np.ndim(hi) == 1 else hi
     gn = float(np.linalg.norm(g)) or 1.0
     res = [float(np.linalg.norm(g - H @ f)) / gn]
     rng = np.random.default_rng(seed)
     d = float(delta)
+    gram = H[rows] @ H[rows].T if rows.size <= BLOCK and d == 0 else None
+    Hn = H / np.where(norm2 > 0, norm2, 1.0)[:, None] if d > 0 else None
+    pos = np.full(m, -1, dtype=np.int64)
+    pos[rows] = np.arange(rows.size)
     for _ in range(int(iterations)):
         seq = rng.permutation(rows) if order == "random" else rows
-        for i in seq:
-            r = g[i] - H[i] @ f
-            if d > 0:
+        if d > 0:
+            for i in seq:
+                r = g[i] - H[i] @ f
                 r = np.where(r > d, r - d, np.where(r < -d, r + d, 0.0))
-            f += np.outer(Hn[i], r)
+                f += np.outer(Hn[i], r)
+        else:
+            for s in range(0, seq.size, BLOCK):
+                blk = seq[s:s + BLOCK]
+                Hb = H[blk]
+                G = np.take(np.take(gram, pos[blk], axis=0), pos[blk], axis=1) if gram is not None else Hb @ Hb.T
+                c = solve_triangular(G, g[blk] - Hb @ f, lower=True, check_finite=False)
+                f += Hb.T @ c
         np.clip(f, lower, hi, out=f)
         res.append(float(np.linalg.norm(g - H @ f)) / gn)
     return f, np.asarray(res)
@@ -193,3 +226,193 @@ def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int
 
 #: The colour-hdri style name of :func:`singh_ahuja`.
 estimate_lighting_SinghAhuja = singh_ahuja
+
+
+# ----------------------------------------------------------------------------- adaptive source sets
+@dataclass(frozen=True)
+class PocsSources:
+    """Source powers recovered by POCS over a set of source directions (an adaptive geodesic set).
+
+    Attributes
+    ----------
+    directions : (n, 3) float64
+        The sources (world frame, unit).
+    intensities : (n, 3) float64
+        Irradiance at normal incidence of each source (its cell's power), ``>= 0``.
+    rendered : (m, 3) float64
+        Every input pixel re-rendered from the result.
+    rms, relative_rms : float
+        RMS of ``rendered - radiance``, and that over the input's RMS.
+    residuals : (iterations + 1,) float64
+        Relative residual ``|g - H f| / |g|`` over the pixels used, before the first and after every sweep.
+    iterations, pixels_used : int
+    hemisphere : str or dict
+        Domain of the sources.
+    method : str
+    """
+
+    directions: np.ndarray
+    intensities: np.ndarray
+    rendered: np.ndarray
+    rms: float
+    relative_rms: float
+    residuals: np.ndarray
+    iterations: int
+    pixels_used: int
+    hemisphere: object = "full"
+    method: str = "SinghAhuja"
+
+    def latlong(self, height: int = 64) -> np.ndarray:
+        """The lighting as lat-long radiance (height, 2 height, 3): each source spread over its Voronoi cell."""
+        return sources_to_latlong(self.directions, self.intensities, height, self.hemisphere)
+
+
+def pixel_subset(m: int, max_pixels: int | None, seed: int = 0) -> np.ndarray:
+    """Sorted indices of at most ``max_pixels`` of ``m`` pixels (a fixed-seed random subset; all if None)."""
+    if max_pixels is None or m <= int(max_pixels):
+        return np.arange(m)
+    return np.sort(np.random.default_rng(seed).choice(m, int(max_pixels), replace=False))
+
+
+def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iterations: int = 50, upper=None,
+                        delta: float = 0.0, order: str = "random", seed: int = 0, max_pixels: int | None = 2000,
+                        x0=None) -> PocsSources:
+    """POCS (Singh and Ahuja's projections) over a kernel built on explicit source directions.
+
+    The unknown ``f_j >= 0`` is the power of source ``j`` (the irradiance it gives a surface
+    facing it), and the kernel is ``H(x, j) = max(0, n_x . w_j)``: the same residual and amplitude
+    projections as :func:`singh_ahuja`, on a source set instead of the lat-long grid (each source
+    then stands for its angular Voronoi cell, :meth:`PocsSources.latlong`).
+
+    Parameters
+    ----------
+    normals, radiance, albedo
+        As :func:`singh_ahuja`.
+    directions : (n, 3) array_like
+        Unit source directions.
+    iterations, delta, order, seed, max_pixels
+        As :func:`singh_ahuja`.
+    upper : float, optional
+        Upper amplitude bound on the *radiance*: source ``j`` is bounded by ``upper`` times its
+        cell's solid angle (:func:`ffls.probes.sources.cell_solid_angles`).
+    x0 : (n, 3) array_like, optional
+        Start of the iterations (zeros by default).
+
+    Returns
+    -------
+    PocsSources
+    """
+    from ffls.probes.sources import cell_solid_angles
+
+    n = check_normals(normals)
+    m = n.shape[0]
+    if m == 0:
+        raise InputError("no pixels to fit")
+    if directions is None:
+        raise ValueError("directions are required")
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    b = as_rgb_pixels(radiance, m)
+    rho = broadcast_albedo(albedo, m)
+    g = np.pi * b / rho  # irradiance
+    H = lambert_matrix(n, d)
+    use = pixel_subset(m, max_pixels, seed)
+    hi = None if upper is None else float(upper) * cell_solid_angles(d, "full")
+    f, res = pocs(H[use], g[use], iterations, 0.0, hi, delta, order, seed, x0)
+    rendered = (H @ f) * rho / np.pi
+    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
+    ref = float(np.sqrt(np.mean(b ** 2)))
+    return PocsSources(directions=d, intensities=f, rendered=rendered, rms=rms,
+                       relative_rms=rms / ref if ref > 0 else np.inf, residuals=res, iterations=int(iterations),
+                       pixels_used=int(use.size))
+
+
+def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, upper=None, order: str = "random",
+                         seed: int = 0, max_pixels: int | None = 2000, criterion: str = "cv", folds: int = 5,
+                         tolerance: float = 0.05, base_frequency: int = 3, max_sources: int = 500, max_level: int = 3,
+                         power_share: float = 0.5, patience: int = 2):
+    """POCS over an adaptive geodesic source set: Singh and Ahuja's projections where the light is.
+
+    The set is grown by :func:`ffls.probes.selection.refine_sources`, as for Hougen and Ahuja
+    (:func:`ffls.probes.selection.adaptive_hougen_ahuja`): 92 directions at first, then each round
+    splits the fewest sources that carry half the power POCS recovered, down to nodes 2.6 degrees
+    apart, and the round is chosen by blocked cross-validation (the pixels grouped by the
+    direction of their normal; each fold is fitted by POCS on the other folds' pixels and
+    scored on its own) or by BIC on the fit to all pixels. Every round runs ``iterations``
+    sweeps from zero (as the paper's grid; starting a round from the previous round's powers was
+    worse on every map of ``benchmarks/probes.py``, ``docs/probes.md``); the chosen round's residual
+    after every sweep is kept (``fit.residuals``).
+
+    Parameters
+    ----------
+    normals, radiance, albedo
+        As :func:`singh_ahuja`.
+    iterations, upper, order, seed
+        As :func:`singh_ahuja_sources`.
+    max_pixels : int, optional
+        The selection and every fit use at most this many pixels (a fixed-seed random subset);
+        the result re-renders all.
+    criterion : {'cv', 'bic'}
+    folds, tolerance
+        As :func:`ffls.probes.selection.select_model`.
+    base_frequency, max_sources, max_level, power_share, patience
+        As :func:`ffls.probes.selection.refine_sources`.
+
+    Returns
+    -------
+    ffls.probes.selection.Selection
+        ``fit`` is the chosen round's :class:`PocsSources` (on all pixels), ``chosen`` its number
+        of sources, ``candidates`` and ``scores`` the rounds', ``note`` one line for the user.
+    """
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}, not {criterion!r}")
+    n = check_normals(normals)
+    m = n.shape[0]
+    if m == 0:
+        raise InputError("no pixels to fit")
+    b = as_rgb_pixels(radiance, m)
+    rho = broadcast_albedo(albedo, m)
+    use = pixel_subset(m, max_pixels, seed)
+    kw = dict(iterations=iterations, upper=upper, order=order, seed=seed, max_pixels=None)
+
+    def fit_all(d):
+        return singh_ahuja_sources(n[use], b[use], rho[use], d, **kw)
+
+    if criterion == "bic":
+        def score(d, fit):
+            return bic(fit.rendered, b[use], d.shape[0])
+    else:
+        lab = normal_blocks(n[use])
+        ub, inv = np.unique(lab, return_inverse=True)
+        k = min(int(folds), ub.size)
+        if k < 2:
+            raise InputError("cross-validation needs at least two blocks of pixels")
+        fold = (np.random.default_rng(seed).permutation(ub.size) % k)[inv.ravel()]
+        y = b[use]
+        scale = max(float(np.sqrt(np.mean(y ** 2))), 1e-300)
+
+        def score(d, fit):
+            err = 0.0
+            for j in range(k):
+                tr, te = use[fold != j], use[fold == j]
+                f = singh_ahuja_sources(n[tr], b[tr], rho[tr], d, **kw).intensities
+                err += float(np.sum((lambert_matrix(n[te], d) @ f * rho[te] / np.pi - b[te]) ** 2))
+            return float(np.sqrt(err / y.size)) / scale
+
+    # with few pixels, start coarser (as adaptive_hougen_ahuja): a fold must hold more pixels than unknowns
+    f0 = max(int(base_frequency), 1)
+    while f0 > 1 and geodesic_level(f0, 0, "full").shape[0] > 0.8 * use.size:
+        f0 -= 1
+    sel = refine_sources(fit_all, score, f0, "full", max_sources, max_level, power_share, patience, criterion,
+                         tolerance)
+    # the chosen round's sources, re-rendered on every pixel
+    fit = sel.fit
+    rendered = lambert_matrix(n, fit.directions) @ fit.intensities * rho / np.pi
+    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
+    ref = float(np.sqrt(np.mean(b ** 2)))
+    full = PocsSources(directions=fit.directions, intensities=fit.intensities, rendered=rendered, rms=rms,
+                       relative_rms=rms / ref if ref > 0 else np.inf, residuals=fit.residuals,
+                       iterations=fit.iterations, pixels_used=fit.pixels_used)
+    note = sel.note.replace("adaptive sources", "POCS over adaptive sources", 1)
+    return Selection(chosen=sel.chosen, candidates=sel.candidates, scores=sel.scores, criterion=sel.criterion,
+                     fit=full, note=note)
