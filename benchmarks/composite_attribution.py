@@ -93,10 +93,10 @@ def main():
     cache.mkdir(parents=True, exist_ok=True)
     R, n, osp = a.res, a.lights, a.oracle_spp
     t0 = time.perf_counter()
-    om_b, sm_b, _ = cm._masks(mi, R)
+    om_b, sm_b, _ = cm.cast_masks(mi, R)
     om, sm = om_b.astype(np.float64), sm_b.astype(np.float64)
     kinds = (("object", 0, True), ("surface", 1, False))
-    caps = {spp: {k: cm._capture(mi, cache / f"{k}_{R}_{n}_{spp}", n, seed, obj, R, spp,
+    caps = {spp: {k: cm.render_capture(mi, cache / f"{k}_{R}_{n}_{spp}", n, seed, obj, R, spp,
                                  seed_offset=0 if spp == a.spp else 50000)
                   for k, seed, obj in kinds}
             for spp in ([a.spp] + ([a.clean_spp] if a.clean_spp else []))}
@@ -106,8 +106,8 @@ def main():
         return {"type": "envmap", "filename": str(path), "to_world": mi.ScalarTransform4f(ll.ENVMAP_TO_WORLD)}
 
     def capture_render(env_or_light, with_object, albedo, spp, seed):
-        sc = {"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "sensor": cm._sensor(mi, R, spp),
-              **cm._shapes(mi, albedo, with_object, True, False), **env_or_light}
+        sc = {"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "sensor": cm.camera_sensor(mi, R, spp),
+              **cm.scene_shapes(mi, albedo, with_object, True, False), **env_or_light}
         return np.array(mi.render(mi.load_dict(sc), seed=seed))
 
     for name in a.maps.split(","):

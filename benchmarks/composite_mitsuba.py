@@ -62,7 +62,7 @@ def _diffuse(rgb):
     return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(rgb) if np.ndim(rgb) else rgb}}
 
 
-def _shapes(mi, ground_albedo, with_object, spheres, wall):
+def scene_shapes(mi, ground_albedo, with_object, spheres, wall):
     T = mi.ScalarTransform4f
     s = {"ground": {"type": "rectangle", "to_world": T().scale([3.0, 3.0, 1.0]), "bsdf": _diffuse(ground_albedo)}}
     if with_object:
@@ -82,7 +82,7 @@ def _shapes(mi, ground_albedo, with_object, spheres, wall):
     return s
 
 
-def _sensor(mi, res, spp):
+def camera_sensor(mi, res, spp):
     T = mi.ScalarTransform4f
     return {"type": "perspective", "fov": FOV, "fov_axis": "x",
             "to_world": T().look_at(origin=list(CAM_ORIGIN), target=list(CAM_TARGET), up=[0, 0, 1]),
@@ -104,15 +104,15 @@ def _camera(res):
     return K, M
 
 
-def _capture(mi, folder: Path, n, seed, with_object, res, spp, seed_offset=0):
+def render_capture(mi, folder: Path, n, seed, with_object, res, spp, seed_offset=0):
     """Render (once, cached in ``folder``) a capture of ``n`` directional lights; ``seed`` picks the
     directions, ``seed_offset`` shifts the renders' sampler seeds (an independent set of the same lights)."""
     folder.mkdir(parents=True, exist_ok=True)
     dirs = stratified_directions(n, "upper", seed)
     names = [f"img_{i:04d}.exr" for i in range(n)]
     if not (folder / "capture.json").exists():
-        base = {"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "sensor": _sensor(mi, res, spp),
-                **_shapes(mi, CAPTURE_ALBEDO, with_object, True, False)}
+        base = {"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "sensor": camera_sensor(mi, res, spp),
+                **scene_shapes(mi, CAPTURE_ALBEDO, with_object, True, False)}
         for i, d in enumerate(dirs):
             sc = mi.load_dict({**base, "light": {"type": "directional", "direction": list(-d),
                                                  "irradiance": {"type": "rgb", "value": 1.0}}})
@@ -125,9 +125,9 @@ def _capture(mi, folder: Path, n, seed, with_object, res, spp, seed_offset=0):
     return load_capture_and_lights(folder)
 
 
-def _masks(mi, res):
+def cast_masks(mi, res):
     """Object, surface (ground, no spheres) and sphere masks by casting the camera's pixel-centre rays."""
-    scene = mi.load_dict({"type": "scene", "sensor": _sensor(mi, res, 1), **_shapes(mi, 0.3, True, True, False)})
+    scene = mi.load_dict({"type": "scene", "sensor": camera_sensor(mi, res, 1), **scene_shapes(mi, 0.3, True, True, False)})
     sensor = scene.sensors()[0]
     ids = {}
     for k, sh in enumerate(scene.shapes()):
@@ -153,9 +153,9 @@ def scene_render(mi, ll, name, res, spp, *, with_object=False, seed=7, latlong_h
         sensor = {**ll.latlong_sensor((0.0, 0.0, 0.08), latlong_height),
                   "sampler": {"type": "independent", "sample_count": spp}}
     else:
-        sensor = _sensor(mi, res, spp)
+        sensor = camera_sensor(mi, res, spp)
     sc = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "env": env, "sensor": sensor,
-                       **_shapes(mi, SCENE_ALBEDO, with_object, False, True)})
+                       **scene_shapes(mi, SCENE_ALBEDO, with_object, False, True)})
     return np.array(mi.render(sc, seed=seed))
 
 
@@ -206,15 +206,15 @@ def main():
     cache.mkdir(parents=True, exist_ok=True)
     R = a.res
     t0 = time.perf_counter()
-    om_b, sm_b, sph = _masks(mi, R)
+    om_b, sm_b, sph = cast_masks(mi, R)
     om, sm = om_b.astype(np.float64), sm_b.astype(np.float64)
     grow = max(2, int(round(0.02 * R)))
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
     caps = {}
     for n in (int(v) for v in a.lights.split(",")):
-        caps[n] = (_capture(mi, cache / f"object_{R}_{n}_{a.spp}", n, 0, True, R, a.spp),
-                   _capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
+        caps[n] = (render_capture(mi, cache / f"object_{R}_{n}_{a.spp}", n, 0, True, R, a.spp),
+                   render_capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
         print(f"captures of {n} lights ready ({time.perf_counter() - t0:.0f} s)", flush=True)
     rows = []
     for name in a.maps.split(","):
