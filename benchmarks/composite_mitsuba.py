@@ -22,7 +22,7 @@ truth differs from the background by more than 3%; pasting without the shadow; t
 the spheres).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
-        [--res 128] [--spp 16] [--truth-spp 256] [--cache DIR] [--schemes voronoi,...]
+        [--res 128] [--spp 16] [--truth-spp 1024] [--map-spp 256] [--cache DIR] [--schemes voronoi,...]
         [--sources weights,lightflow,levelset]
 
 ``--sources lightflow`` relights the map's compact sources by flow interpolation between the
@@ -62,7 +62,7 @@ def _diffuse(rgb):
     return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(rgb) if np.ndim(rgb) else rgb}}
 
 
-def _shapes(mi, ground_albedo, with_object, spheres, wall):
+def scene_shapes(mi, ground_albedo, with_object, spheres, wall):
     T = mi.ScalarTransform4f
     s = {"ground": {"type": "rectangle", "to_world": T().scale([3.0, 3.0, 1.0]), "bsdf": _diffuse(ground_albedo)}}
     if with_object:
@@ -82,7 +82,7 @@ def _shapes(mi, ground_albedo, with_object, spheres, wall):
     return s
 
 
-def _sensor(mi, res, spp):
+def camera_sensor(mi, res, spp):
     T = mi.ScalarTransform4f
     return {"type": "perspective", "fov": FOV, "fov_axis": "x",
             "to_world": T().look_at(origin=list(CAM_ORIGIN), target=list(CAM_TARGET), up=[0, 0, 1]),
@@ -104,17 +104,19 @@ def _camera(res):
     return K, M
 
 
-def _capture(mi, folder: Path, n, seed, with_object, res, spp):
+def render_capture(mi, folder: Path, n, seed, with_object, res, spp, seed_offset=0):
+    """Render (once, cached in ``folder``) a capture of ``n`` directional lights; ``seed`` picks the
+    directions, ``seed_offset`` shifts the renders' sampler seeds (an independent set of the same lights)."""
     folder.mkdir(parents=True, exist_ok=True)
     dirs = stratified_directions(n, "upper", seed)
     names = [f"img_{i:04d}.exr" for i in range(n)]
     if not (folder / "capture.json").exists():
-        base = {"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "sensor": _sensor(mi, res, spp),
-                **_shapes(mi, CAPTURE_ALBEDO, with_object, True, False)}
+        base = {"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "sensor": camera_sensor(mi, res, spp),
+                **scene_shapes(mi, CAPTURE_ALBEDO, with_object, True, False)}
         for i, d in enumerate(dirs):
             sc = mi.load_dict({**base, "light": {"type": "directional", "direction": list(-d),
                                                  "irradiance": {"type": "rgb", "value": 1.0}}})
-            write_exr(folder / names[i], np.array(mi.render(sc, seed=seed * 100003 + i)), half=False)
+            write_exr(folder / names[i], np.array(mi.render(sc, seed=seed * 100003 + seed_offset + i)), half=False)
         K, M = _camera(res)
         save_lights(Lights(image_names=names, directions=dirs), folder / "lights.json")
         save_capture(Capture(folder=folder, image_names=names, encoding="linear", K=K, dist=np.zeros(5),
@@ -123,9 +125,9 @@ def _capture(mi, folder: Path, n, seed, with_object, res, spp):
     return load_capture_and_lights(folder)
 
 
-def _masks(mi, res):
+def cast_masks(mi, res):
     """Object, surface (ground, no spheres) and sphere masks by casting the camera's pixel-centre rays."""
-    scene = mi.load_dict({"type": "scene", "sensor": _sensor(mi, res, 1), **_shapes(mi, 0.3, True, True, False)})
+    scene = mi.load_dict({"type": "scene", "sensor": camera_sensor(mi, res, 1), **scene_shapes(mi, 0.3, True, True, False)})
     sensor = scene.sensors()[0]
     ids = {}
     for k, sh in enumerate(scene.shapes()):
@@ -141,14 +143,53 @@ def _masks(mi, res):
     return obj, label == "ground", sph
 
 
+
+def scene_render(mi, ll, name, res, spp, *, with_object=False, seed=7, latlong_height=None):
+    """The virtual scene (ground ``SCENE_ALBEDO``, the wall, no spheres) under built-in map ``name``:
+    from the camera (``res``), or with ``latlong_height`` the map at the object's place (8 cm up, no object)."""
+    env = {"type": "envmap", "filename": str(builtin_lightmaps()[name]),
+           "to_world": mi.ScalarTransform4f(ll.ENVMAP_TO_WORLD)}
+    if latlong_height:
+        sensor = {**ll.latlong_sensor((0.0, 0.0, 0.08), latlong_height),
+                  "sampler": {"type": "independent", "sample_count": spp}}
+    else:
+        sensor = camera_sensor(mi, res, spp)
+    sc = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "env": env, "sensor": sensor,
+                       **scene_shapes(mi, SCENE_ALBEDO, with_object, False, True)})
+    return np.array(mi.render(sc, seed=seed))
+
+
+def scene_renders(mi, ll, cache: Path, name, res, truth_spp, map_height, map_spp=256):
+    """Background, truth (``res`` x ``res``, ``truth_spp``) and the scene's light map (``map_spp``), rendered
+    once into ``cache``."""
+    files = {k: cache / f"{name}_{k}_{res}_{truth_spp}.exr" for k in ("background", "truth")}
+    files["map"] = cache / f"{name}_map_{res}_{map_spp}.exr"
+    for key, with_object in (("background", False), ("truth", True)):
+        if not files[key].exists():
+            write_exr(files[key], scene_render(mi, ll, name, res, truth_spp, with_object=with_object, seed=7), half=False)
+    if not files["map"].exists():
+        write_exr(files["map"], scene_render(mi, ll, name, res, map_spp, seed=11, latlong_height=map_height),
+                  half=False)
+    bg = read_image(files["background"]).pixels.astype(np.float64)
+    tr = read_image(files["truth"]).pixels.astype(np.float64)
+    return bg, tr, load_lightmap(files["map"])
+
+
+def change_region(truth, background, surface, obj, threshold=0.03):
+    """Surface pixels off the object where the truth's luminance differs from the background's by more than 3%."""
+    lt, lb = truth @ LUMINANCE, background @ LUMINANCE
+    return surface & ~obj & (np.abs(lt - lb) > threshold * lb)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--maps", default="courtyard,sunrise,studio")
     ap.add_argument("--lights", default="100,200")
     ap.add_argument("--res", type=int, default=128)
     ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--truth-spp", type=int, default=256)
+    ap.add_argument("--truth-spp", type=int, default=1024)
     ap.add_argument("--map-height", type=int, default=128)
+    ap.add_argument("--map-spp", type=int, default=256, help="samples per pixel of the scene's light map")
     ap.add_argument("--schemes", default="voronoi", help="weighting schemes (ffls.weights.weighting.SCHEMES)")
     ap.add_argument("--sources", default="weights,lightflow",
                     help="how compact sources are relit: weights (every texel weighted), lightflow (photos warped by "
@@ -165,38 +206,20 @@ def main():
     cache.mkdir(parents=True, exist_ok=True)
     R = a.res
     t0 = time.perf_counter()
-    om_b, sm_b, sph = _masks(mi, R)
+    om_b, sm_b, sph = cast_masks(mi, R)
     om, sm = om_b.astype(np.float64), sm_b.astype(np.float64)
     grow = max(2, int(round(0.02 * R)))
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
     caps = {}
     for n in (int(v) for v in a.lights.split(",")):
-        caps[n] = (_capture(mi, cache / f"object_{R}_{n}_{a.spp}", n, 0, True, R, a.spp),
-                   _capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
+        caps[n] = (render_capture(mi, cache / f"object_{R}_{n}_{a.spp}", n, 0, True, R, a.spp),
+                   render_capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
         print(f"captures of {n} lights ready ({time.perf_counter() - t0:.0f} s)", flush=True)
     rows = []
-    maps = builtin_lightmaps()
     for name in a.maps.split(","):
-        env = {"type": "envmap", "filename": str(maps[name]), "to_world": mi.ScalarTransform4f(ll.ENVMAP_TO_WORLD)}
-        files = {k: cache / f"{name}_{k}_{R}_{a.truth_spp}.exr" for k in ("background", "truth", "map")}
-        for key, with_object in (("background", False), ("truth", True)):
-            if not files[key].exists():
-                sc = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "env": env,
-                                   "sensor": _sensor(mi, R, a.truth_spp),
-                                   **_shapes(mi, SCENE_ALBEDO, with_object, False, True)})
-                write_exr(files[key], np.array(mi.render(sc, seed=7)), half=False)
-        if not files["map"].exists():
-            sc = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 6}, "env": env,
-                               "sensor": {**ll.latlong_sensor((0.0, 0.0, 0.08), a.map_height),
-                                          "sampler": {"type": "independent", "sample_count": a.truth_spp}},
-                               **_shapes(mi, SCENE_ALBEDO, False, False, True)})
-            write_exr(files["map"], np.array(mi.render(sc, seed=11)), half=False)
-        bg = read_image(files["background"]).pixels.astype(np.float64)
-        tr = read_image(files["truth"]).pixels.astype(np.float64)
-        lm = load_lightmap(files["map"])
-        lt, lb = tr @ LUMINANCE, bg @ LUMINANCE
-        change = sm_b & ~om_b & (np.abs(lt - lb) > 0.03 * lb)
+        bg, tr, lm = scene_renders(mi, ll, cache, name, R, a.truth_spp, a.map_height, a.map_spp)
+        change = change_region(tr, bg, sm_b, om_b)
         ring = near_sph & sm_b & ~change
         for n, ((oc, ol), (sc_, sl)), scheme, sources in ((n, c, sch, src) for n, c in caps.items()
                                                          for sch in a.schemes.split(",")
@@ -231,7 +254,8 @@ def main():
                       f"paste {100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
                       f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  "
                       f"({x['change_pixels']} px) {note}", flush=True)
-    write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "capture_albedo": CAPTURE_ALBEDO,
+    write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "map_spp": a.map_spp,
+                       "capture_albedo": CAPTURE_ALBEDO,
                        "scene_albedo": SCENE_ALBEDO, "host": host_info(), "seconds": time.perf_counter() - t0,
                        "rows": rows})
 
