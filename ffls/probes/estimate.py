@@ -18,7 +18,7 @@ from ffls.probes.result import LightmapEstimate
 from ffls.probes.sato_sato_ikeuchi import ray_triangle
 
 __all__ = ["FILL_MODES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
-           "pocs_lightmap", "shadow_pixels", "shadow_lightmap", "object_pixels"]
+           "pocs_lightmap", "pixel_grid_subset", "shadow_pixels", "shadow_lightmap", "object_pixels"]
 
 #: How unseen directions are filled: from the nearest seen ones, or left black.
 FILL_MODES = ("nearest", "zero")
@@ -422,13 +422,45 @@ def _segments_blocked(points, ends, occ) -> np.ndarray:
     return out
 
 
-def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surface: bool = False):
+def pixel_grid_subset(pixel_xy, max_pixels: int | None) -> tuple[np.ndarray, int]:
+    """A regular grid of pixels, every ``s``-th column and row, about ``max_pixels`` of them.
+
+    A cast shadow is told apart from its neighbouring nodes' shadows by its edges: a regular
+    grid samples every edge at the same spacing, while a random subset leaves gaps of random
+    size along them (``docs/probes.md`` measures the difference), and the spacing that
+    :func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view` infers stays that of the grid.
+
+    Parameters
+    ----------
+    pixel_xy : (m, 2) array_like of int
+        Column and row of every candidate pixel.
+    max_pixels : int or None
+        The budget; the stride is the integer nearest ``sqrt(m / max_pixels)`` (at least 1), so
+        the subset holds between about 0.56 and 2.25 times ``max_pixels``. None keeps all.
+
+    Returns
+    -------
+    keep : (m',) int64
+        Indices into ``pixel_xy``, in their order.
+    stride : int
+    """
+    xy = np.asarray(pixel_xy, dtype=np.int64).reshape(-1, 2)
+    if max_pixels is not None and int(max_pixels) < 1:
+        raise ValueError(f"max_pixels must be >= 1 or None, not {max_pixels!r}")
+    if max_pixels is None or xy.shape[0] <= int(max_pixels):
+        return np.arange(xy.shape[0]), 1
+    s = max(1, int(round(float(np.sqrt(xy.shape[0] / int(max_pixels))))))
+    return np.flatnonzero((xy[:, 0] % s == 0) & (xy[:, 1] % s == 0)), s
+
+
+def shadow_pixels(probe, max_pixels: int | None = 4000, need_surface: bool = False):
     """The receiver pixels of a cast-shadow probe: world points on the plane, radiance, view directions.
 
     Needs a calibrated camera to map the pixels onto the plane: a pinhole camera (``K`` and
     ``world_from_camera``) or an orthographic one with ``pixel_size``; and ``plane`` and
     ``occluder``. Pixels whose ray does not meet the plane in front of the
-    camera, or that see the occluder, or that are clipped or invalid, are left out.
+    camera, or that see the occluder, or that are clipped or invalid, are left out. More than
+    ``max_pixels`` are thinned to a regular grid (:func:`pixel_grid_subset`).
 
     Returns
     -------
@@ -479,9 +511,11 @@ def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surf
     if len(idx) == 0:
         raise InputError("no pixel shows the plane (check camera.world_from_camera and plane)", src)
     notes = [f"{vr.note}; {len(idx)} pixels on the plane"]
-    if max_pixels is not None and len(idx) > max_pixels:
-        idx = np.sort(np.random.default_rng(seed).choice(idx, int(max_pixels), replace=False))
-        notes.append(f"used {max_pixels} of them (a fixed-seed random subset)")
+    keep, stride = pixel_grid_subset(px[idx], max_pixels)
+    if stride > 1:
+        idx = idx[keep]
+        notes.append(f"used one pixel in {stride} along each row and column of them: {len(idx)} pixels, a regular "
+                     f"grid (budget {max_pixels})")
     rad = vr.radiance.reshape(-1, 3)[idx].astype(np.float64)
     surface = None
     if need_surface:
@@ -532,6 +566,7 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
     ks, sigma_deg : float
         ``'torrance_sparrow'``: the specular lobe's ``K_s`` and width (degrees).
     max_pixels : int or None
+        Pixel budget: more receiver pixels are thinned to a regular grid (:func:`pixel_grid_subset`).
     confidence_threshold : float
         Directions whose node shadows at most this share of the pixels are reported as not seen.
     fill : {'nearest', 'zero'}
