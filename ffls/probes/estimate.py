@@ -613,6 +613,40 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
                  f"{100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
     vis = occluder_visibility(pts, fit.directions, occ)
     conf = shadow_confidence(fit.directions, vis, probe.plane.normal, height)
+    share, note = _unresolved_elevation(pts, fit, occ, probe.plane.normal)
+    if note:
+        notes.append(note)
     details = {"nodes": chosen, "case": case, "relative_rms": float(fit.relative_rms),
-               "condition": float(fit.condition)}
+               "condition": float(fit.condition), "unresolved_elevation_share": share}
     return _finish(fit.latlong(height), conf, confidence_threshold, "shadow", probe, notes, details, fill)
+
+
+def _unresolved_elevation(points, fit, occluder, plane_normal) -> tuple[float, str]:
+    """The share of the recovered light on the plane whose elevation the view does not fix, and a note.
+
+    A node below :func:`ffls.probes.sato_sato_ikeuchi.elevation_limit` casts a shadow that runs
+    past the photograph: its azimuth and ``E sin(elevation)`` are measured, its elevation (and so
+    the light it sends sideways onto a relit object) is not.
+    """
+    from ffls.probes.sato_sato_ikeuchi import elevation_limit
+
+    nrm = normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))
+    d = np.asarray(fit.directions, dtype=np.float64)
+    sin_el = d @ nrm
+    power = np.maximum(np.asarray(fit.intensities, dtype=np.float64), 0.0).mean(axis=1) * np.maximum(sin_el, 0.0)
+    up = sin_el > 1e-9
+    lim = np.full(d.shape[0], np.nan)
+    lim[up] = elevation_limit(points, d[up], occluder, nrm)
+    el = np.arcsin(np.clip(sin_el, -1.0, 1.0))
+    low = up & ~(el >= lim)  # below the limit, or no elevation at that azimuth is seen whole (NaN)
+    total = float(power.sum())
+    share = float(power[low].sum() / total) if total > 0 else 0.0
+    if not np.any(low & (power > 0)):
+        return share, ""
+    seen = lim[up][np.isfinite(lim[up])]
+    bound = (f"below {np.degrees(seen.min()):.1f}-{np.degrees(seen.max()):.1f} deg, by azimuth" if seen.size else
+             "at azimuths where no shadow is wholly in view")
+    return share, (f"{int(np.count_nonzero(low & (power > 0)))} lit dome nodes, {100 * share:.1f}% of the light on the "
+                   f"plane, are {bound}: their shadows run past the photograph, which fixes their azimuth and "
+                   f"E sin(elevation) but not their elevation, nor with it their power (E scales as 1 / sin): the "
+                   f"light a relit object gets from the side there is uncertain")

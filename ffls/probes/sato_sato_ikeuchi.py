@@ -47,6 +47,7 @@ from ffls.probes.sources import geodesic_frequency_for, geodesic_sources
 __all__ = [
     "CASES",
     "shadow_in_view",
+    "elevation_limit",
     "box_triangles",
     "box_visibility",
     "mesh_visibility",
@@ -321,6 +322,53 @@ def shadow_in_view(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0)) -
     proj = v[None, :, :] - t[..., None] * d[up, None, :]
     dist, _ = tree.query(proj.reshape(-1, 3))
     out[up] = np.all(dist.reshape(t.shape) <= 2.0 * spacing, axis=1)
+    return out
+
+
+def elevation_limit(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0), step_deg: float = 0.5) -> np.ndarray:
+    """Per direction: the lowest elevation, at its azimuth, whose whole shadow is in view.
+
+    Below it the shadow runs past the photograph: its sides (the azimuth) are seen, and the
+    lit plane gives the light's ``E sin(elevation)``, but no pixel shows where it ends, so any
+    lower elevation with the power scaled by ``sin`` explains the image as well. A light found
+    there has an elevation the data do not fix, and its power (``1 / sin``) with it:
+    ``benchmarks/probes_shadow_limit.py`` measures how far apart such maps relight an object.
+
+    Parameters
+    ----------
+    points : (m, 3) array_like
+        Receiver points (on the plane).
+    directions : (n, 3) array_like
+        Only their azimuth about ``plane_normal`` is used.
+    occluder : dict or (F, 3, 3) array_like
+        As :func:`occluder_visibility`.
+    plane_normal : (3,) array_like
+    step_deg : float
+        Elevations tried, from ``step_deg`` up to 90 degrees (the shadow's far end moves by
+        about ``h step / sin^2(elevation)`` a step, for an occluder ``h`` high).
+
+    Returns
+    -------
+    (n,) float64
+        Radians; 0 along the normal (no azimuth); NaN where no elevation's shadow is wholly in
+        view.
+    """
+    d = normalize(np.asarray(directions, dtype=np.float64).reshape(-1, 3))
+    nrm = normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))
+    if not 0.0 < float(step_deg) < 90.0:
+        raise ValueError(f"step_deg must be in (0, 90), not {step_deg!r}")
+    flat = d - (d @ nrm)[:, None] * nrm
+    norm = np.linalg.norm(flat, axis=1)
+    out = np.zeros(d.shape[0])
+    has = norm > 1e-9
+    if not np.any(has):
+        return out
+    a = flat[has] / norm[has, None]
+    el = np.radians(np.arange(float(step_deg), 90.0, float(step_deg)))
+    cand = np.cos(el)[None, :, None] * a[:, None, :] + np.sin(el)[None, :, None] * nrm  # (n', e, 3)
+    ok = shadow_in_view(points, cand.reshape(-1, 3), occluder, nrm).reshape(cand.shape[:2])
+    first = np.argmax(ok, axis=1)
+    out[has] = np.where(ok.any(axis=1), el[first], np.nan)
     return out
 
 

@@ -325,7 +325,7 @@ def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0,
 
 def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", max_sources: int = 500,
                    max_level: int = 3, power_share: float = 0.5, patience: int = 2, criterion: str = "cv",
-                   tolerance: float = 0.05, can_split=None, split_levels: bool = False) -> Selection:
+                   tolerance: float = 0.05, can_split=None) -> Selection:
     """Adaptive source sets: refine the geodesic hierarchy where the recovered light is, stop by CV or BIC.
 
     Start from level 0 of the hierarchy (:func:`ffls.probes.sources.geodesic_level`). Each round
@@ -365,9 +365,6 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
     can_split : callable, optional
         ``can_split(directions) -> (n,) bool``: sources the data can resolve finer (for a cast
         shadow, :func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view`); the others are never split.
-    split_levels : bool
-        Call ``can_split(directions, levels)`` instead, with the (n,) int level of every source
-        (to test a source's children, :func:`ffls.probes.sources.split_sources`).
 
     Returns
     -------
@@ -403,8 +400,7 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
         w = np.abs(np.asarray(fit.intensities, dtype=np.float64)).sum(axis=1)
         w[lev >= int(max_level)] = 0.0
         if can_split is not None:
-            ok = can_split(d, lev) if split_levels else can_split(d)
-            w[~np.asarray(ok, dtype=bool)] = 0.0
+            w[~np.asarray(can_split(d), dtype=bool)] = 0.0
         if not np.any(w > 0):
             break
         order = np.argsort(-w, kind="stable")
