@@ -643,10 +643,10 @@ def _unresolved_elevation(points, fit, occluder, plane_normal) -> tuple[float, s
     share = float(power[low].sum() / total) if total > 0 else 0.0
     if not np.any(low & (power > 0)):
         return share, ""
-    seen = lim[up][np.isfinite(lim[up])]
-    bound = (f"below {np.degrees(seen.min()):.1f}-{np.degrees(seen.max()):.1f} deg, by azimuth" if seen.size else
-             "at azimuths where no shadow is wholly in view")
+    seen = lim[low & np.isfinite(lim)]
+    bound = (f"below their azimuth's elevation limit ({np.degrees(seen.min()):.1f}-{np.degrees(seen.max()):.1f} deg)"
+             if seen.size else "at azimuths where no shadow is wholly in view")
     return share, (f"{int(np.count_nonzero(low & (power > 0)))} lit dome nodes, {100 * share:.1f}% of the light on the "
-                   f"plane, are {bound}: their shadows run past the photograph, which fixes their azimuth and "
+                   f"plane, are {bound}: their shadows run past the photograph (or end at its edge), which fixes their azimuth and "
                    f"E sin(elevation) but not their elevation, nor with it their power (E scales as 1 / sin): the "
                    f"light a relit object gets from the side there is uncertain")
