@@ -83,7 +83,8 @@ def main():
         occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
         lim = elevation_limit(sc.points, dirs[H // 2 - 1], occ)  # one direction per column: its azimuth
         below = upper & (el < lim[None, :])
-        limit_row = np.array([np.flatnonzero(upper[:, 0] & (el[:, c] >= lim[c])).max() for c in range(2 * H)])
+        limit_row = np.array([np.flatnonzero(upper[:, 0] & (el[:, c] >= lim[c])).max()
+                              for c in range(2 * H)])
         w = (true * (np.maximum(sin_el, 0.0) * sa)[..., None]).sum(-1)
         row = {"map": name, "limit_deg": [float(np.degrees(lim.min())), float(np.degrees(lim.max()))],
                "plane_share_below": float(w[below].sum() / w.sum())}

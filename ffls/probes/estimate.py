@@ -647,6 +647,6 @@ def _unresolved_elevation(points, fit, occluder, plane_normal) -> tuple[float, s
     bound = (f"below their azimuth's elevation limit ({np.degrees(seen.min()):.1f}-{np.degrees(seen.max()):.1f} deg)"
              if seen.size else "at azimuths where no shadow is wholly in view")
     return share, (f"{int(np.count_nonzero(low & (power > 0)))} lit dome nodes, {100 * share:.1f}% of the light on the "
-                   f"plane, are {bound}: their shadows run past the photograph (or end at its edge), which fixes their azimuth and "
-                   f"E sin(elevation) but not their elevation, nor with it their power (E scales as 1 / sin): the "
-                   f"light a relit object gets from the side there is uncertain")
+                   f"plane, are {bound}: their shadows run past the photograph (or end at its edge), which fixes "
+                   f"their azimuth and E sin(elevation) but not their elevation, nor with it their power (E scales "
+                   f"as 1 / sin): the light a relit object gets from the side there is uncertain")
