@@ -34,6 +34,7 @@ of the recovered map's coefficients. Writes ``benchmarks/results/probes.json`` a
 from __future__ import annotations
 
 import argparse
+import inspect
 import sys
 import tempfile
 import time
@@ -47,6 +48,7 @@ from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sourc
 from ffls.relight.cpu import relight_capture
 from ffls.synth.scene import write_synthetic_capture
 from ffls.lightmaps.lightmap import builtin_lightmap
+from ffls.probes.estimate import pixel_grid_subset, shadow_lightmap
 from ffls.probes.evaluate import clamped_cosine_coefficients, clamped_cosine_energy, map_error, relit_error, sh_recovery
 from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.sato_sato_ikeuchi import box_visibility, dome_nodes, sato_sato_ikeuchi
@@ -64,6 +66,8 @@ H = 64
 CUBE = 0.2
 SHADOW_GEOMETRY = {"extent": 1.25, "box_center": (0.0, 0.0, CUBE / 2), "box_size": (CUBE, CUBE, CUBE)}
 SHADOW_RES = 128
+#: ``ffls probe shadow``'s pixel budget (the CLI passes none: ``shadow_lightmap``'s default).
+SHADOW_CLI_PIXELS = inspect.signature(shadow_lightmap).parameters["max_pixels"].default
 
 
 def timed(fn, repeat=3):
@@ -249,6 +253,19 @@ def main(argv=None):
         d = sel.fit.directions
         floor(f"Sato adaptive (bic) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H,
                                                                           "upper"), "upper")
+        # what `ffls probe shadow` runs by default: adaptive, CV, the pixels thinned to the CLI's budget
+        # by the same regular grid (ffls.probes.estimate.pixel_grid_subset); BIC on them beside it
+        rows_px, cols_px = np.nonzero(sc.mask)  # row-major, as sc.points
+        keep, stride = pixel_grid_subset(np.stack([cols_px, rows_px], axis=1), SHADOW_CLI_PIXELS)
+        for crit in ("cv", "bic") if not a.quick else ("cv",):
+            sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points[keep], srad[keep], occ, criterion=crit,
+                                                              albedo=sc.albedo[keep]), 1)
+            add("sato", f"adaptive ({crit}, {keep.size} px{', default' if crit == 'cv' else ''}) -> {sel.chosen}",
+                lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
+        if not a.quick:
+            sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points, srad, occ, criterion="cv", albedo=sc.albedo),
+                           1)
+            add("sato", f"adaptive (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
 
     kernel = {"energy_up_to_order": {str(l): clamped_cosine_energy(l) for l in range(7)},
               "coefficients_2pi_c_l": (2 * np.pi * clamped_cosine_coefficients(8)).tolist()}

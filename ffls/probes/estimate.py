@@ -17,8 +17,8 @@ from ffls.probes.locate import locate_sphere
 from ffls.probes.result import LightmapEstimate
 from ffls.probes.sato_sato_ikeuchi import ray_triangle
 
-__all__ = ["FILL_MODES", "POCS_SOURCES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels", "diffuse_lightmap",
-           "pocs_lightmap", "shadow_pixels", "shadow_lightmap", "object_pixels"]
+__all__ = ["FILL_MODES", "POCS_SOURCES", "CAMERA_SIZE", "SHADOW_CASES", "camera_cone", "mirror_lightmap", "diffuse_pixels",
+           "diffuse_lightmap", "pocs_lightmap", "pixel_grid_subset", "shadow_pixels", "shadow_lightmap", "object_pixels"]
 
 #: How unseen directions are filled: from the nearest seen ones, or left black.
 FILL_MODES = ("nearest", "zero")
@@ -467,13 +467,45 @@ def _segments_blocked(points, ends, occ) -> np.ndarray:
     return out
 
 
-def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surface: bool = False):
+def pixel_grid_subset(pixel_xy, max_pixels: int | None) -> tuple[np.ndarray, int]:
+    """A regular grid of pixels, every ``s``-th column and row, about ``max_pixels`` of them.
+
+    A cast shadow is told apart from its neighbouring nodes' shadows by its edges: a regular
+    grid samples every edge at the same spacing, while a random subset leaves gaps of random
+    size along them (``docs/probes.md`` measures the difference), and the spacing that
+    :func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view` infers stays that of the grid.
+
+    Parameters
+    ----------
+    pixel_xy : (m, 2) array_like of int
+        Column and row of every candidate pixel.
+    max_pixels : int or None
+        The budget; the stride is the integer nearest ``sqrt(m / max_pixels)`` (at least 1), so
+        the subset holds between about 0.56 and 2.25 times ``max_pixels``. None keeps all.
+
+    Returns
+    -------
+    keep : (m',) int64
+        Indices into ``pixel_xy``, in their order.
+    stride : int
+    """
+    xy = np.asarray(pixel_xy, dtype=np.int64).reshape(-1, 2)
+    if max_pixels is not None and int(max_pixels) < 1:
+        raise ValueError(f"max_pixels must be >= 1 or None, not {max_pixels!r}")
+    if max_pixels is None or xy.shape[0] <= int(max_pixels):
+        return np.arange(xy.shape[0]), 1
+    s = max(1, int(round(float(np.sqrt(xy.shape[0] / int(max_pixels))))))
+    return np.flatnonzero((xy[:, 0] % s == 0) & (xy[:, 1] % s == 0)), s
+
+
+def shadow_pixels(probe, max_pixels: int | None = 4000, need_surface: bool = False):
     """The receiver pixels of a cast-shadow probe: world points on the plane, radiance, view directions.
 
     Needs a calibrated camera to map the pixels onto the plane: a pinhole camera (``K`` and
     ``world_from_camera``) or an orthographic one with ``pixel_size``; and ``plane`` and
     ``occluder``. Pixels whose ray does not meet the plane in front of the
-    camera, or that see the occluder, or that are clipped or invalid, are left out.
+    camera, or that see the occluder, or that are clipped or invalid, are left out. More than
+    ``max_pixels`` are thinned to a regular grid (:func:`pixel_grid_subset`).
 
     Returns
     -------
@@ -524,9 +556,11 @@ def shadow_pixels(probe, max_pixels: int | None = 4000, seed: int = 0, need_surf
     if len(idx) == 0:
         raise InputError("no pixel shows the plane (check camera.world_from_camera and plane)", src)
     notes = [f"{vr.note}; {len(idx)} pixels on the plane"]
-    if max_pixels is not None and len(idx) > max_pixels:
-        idx = np.sort(np.random.default_rng(seed).choice(idx, int(max_pixels), replace=False))
-        notes.append(f"used {max_pixels} of them (a fixed-seed random subset)")
+    keep, stride = pixel_grid_subset(px[idx], max_pixels)
+    if stride > 1:
+        idx = idx[keep]
+        notes.append(f"used one pixel in {stride} along each row and column of them: {len(idx)} pixels, a regular "
+                     f"grid (budget {max_pixels})")
     rad = vr.radiance.reshape(-1, 3)[idx].astype(np.float64)
     surface = None
     if need_surface:
@@ -577,6 +611,7 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
     ks, sigma_deg : float
         ``'torrance_sparrow'``: the specular lobe's ``K_s`` and width (degrees).
     max_pixels : int or None
+        Pixel budget: more receiver pixels are thinned to a regular grid (:func:`pixel_grid_subset`).
     confidence_threshold : float
         Directions whose node shadows at most this share of the pixels are reported as not seen.
     fill : {'nearest', 'zero'}
@@ -623,6 +658,40 @@ def shadow_lightmap(probe, height: int = 128, nodes="auto", case: str = "lambert
                  f"{100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
     vis = occluder_visibility(pts, fit.directions, occ)
     conf = shadow_confidence(fit.directions, vis, probe.plane.normal, height)
+    share, note = _unresolved_elevation(pts, fit, occ, probe.plane.normal)
+    if note:
+        notes.append(note)
     details = {"nodes": chosen, "case": case, "relative_rms": float(fit.relative_rms),
-               "condition": float(fit.condition)}
+               "condition": float(fit.condition), "unresolved_elevation_share": share}
     return _finish(fit.latlong(height), conf, confidence_threshold, "shadow", probe, notes, details, fill)
+
+
+def _unresolved_elevation(points, fit, occluder, plane_normal) -> tuple[float, str]:
+    """The share of the recovered light on the plane whose elevation the view does not fix, and a note.
+
+    A node below :func:`ffls.probes.sato_sato_ikeuchi.elevation_limit` casts a shadow that runs
+    past the photograph: its azimuth and ``E sin(elevation)`` are measured, its elevation (and so
+    the light it sends sideways onto a relit object) is not.
+    """
+    from ffls.probes.sato_sato_ikeuchi import elevation_limit
+
+    nrm = normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))
+    d = np.asarray(fit.directions, dtype=np.float64)
+    sin_el = d @ nrm
+    power = np.maximum(np.asarray(fit.intensities, dtype=np.float64), 0.0).mean(axis=1) * np.maximum(sin_el, 0.0)
+    up = sin_el > 1e-9
+    lim = np.full(d.shape[0], np.nan)
+    lim[up] = elevation_limit(points, d[up], occluder, nrm)
+    el = np.arcsin(np.clip(sin_el, -1.0, 1.0))
+    low = up & ~(el >= lim)  # below the limit, or no elevation at that azimuth is seen whole (NaN)
+    total = float(power.sum())
+    share = float(power[low].sum() / total) if total > 0 else 0.0
+    if not np.any(low & (power > 0)):
+        return share, ""
+    seen = lim[low & np.isfinite(lim)]
+    bound = (f"below their azimuth's elevation limit ({np.degrees(seen.min()):.1f}-{np.degrees(seen.max()):.1f} deg)"
+             if seen.size else "at azimuths where no shadow is wholly in view")
+    return share, (f"{int(np.count_nonzero(low & (power > 0)))} lit dome nodes, {100 * share:.1f}% of the light on the "
+                   f"plane, are {bound}: their shadows run past the photograph (or end at its edge), which fixes "
+                   f"their azimuth and E sin(elevation) but not their elevation, nor with it their power (E scales "
+                   f"as 1 / sin): the light a relit object gets from the side there is uncertain")

@@ -47,6 +47,7 @@ from ffls.probes.sources import geodesic_frequency_for, geodesic_sources
 __all__ = [
     "CASES",
     "shadow_in_view",
+    "elevation_limit",
     "box_triangles",
     "box_visibility",
     "mesh_visibility",
@@ -263,7 +264,7 @@ def occluder_visibility(points, directions, occluder) -> np.ndarray:
     return mesh_visibility(points, directions, occluder)
 
 
-def shadow_in_view(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0)) -> np.ndarray:
+def shadow_in_view(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0), margin: float = 0.0) -> np.ndarray:
     """Whether each node casts its *whole* shadow inside the observed receiver.
 
     The shadow of a node low over the horizon runs past the view: the photograph then shows its
@@ -283,6 +284,11 @@ def shadow_in_view(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0)) -
     occluder : dict or (F, 3, 3) array_like
         As :func:`occluder_visibility`.
     plane_normal : (3,) array_like
+    margin : float
+        Pixel spacings of observed plane wanted around every projected vertex (0: the test
+        above): with ``margin > 0`` the points ``margin`` spacings away from it along the plane
+        (four of them, on two axes in the plane) must pass the same test, so the shadow's end is
+        seen with plane beyond it.
 
     Returns
     -------
@@ -318,9 +324,68 @@ def shadow_in_view(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0)) -
     if not np.any(up):
         return out
     t = np.maximum(height, 0.0)[None, :] / cos[up, None]  # (n', k)
-    proj = v[None, :, :] - t[..., None] * d[up, None, :]
-    dist, _ = tree.query(proj.reshape(-1, 3))
-    out[up] = np.all(dist.reshape(t.shape) <= 2.0 * spacing, axis=1)
+    proj = v[None, :, :] - t[..., None] * d[up, None, :]  # (n', k, 3)
+    probes = proj[:, :, None, :]
+    if margin > 0:
+        a = normalize(np.cross(nrm, [1.0, 0.0, 0.0] if abs(nrm[0]) < 0.9 else [0.0, 1.0, 0.0]))
+        b = np.cross(nrm, a)
+        off = float(margin) * spacing * np.stack([a, -a, b, -b])
+        probes = probes + np.concatenate([np.zeros((1, 3)), off])[None, None, :, :]
+    dist, _ = tree.query(probes.reshape(-1, 3))
+    out[up] = np.all(dist.reshape(probes.shape[:3]) <= 2.0 * spacing, axis=(1, 2))
+    return out
+
+
+def elevation_limit(points, directions, occluder, plane_normal=(0.0, 0.0, 1.0), step_deg: float = 0.5,
+                    margin: float = 2.0) -> np.ndarray:
+    """Per direction: the lowest elevation, at its azimuth, whose whole shadow is seen to end in view.
+
+    Below it the shadow runs past the photograph: its sides (the azimuth) are seen, and the
+    lit plane gives the light's ``E sin(elevation)``, but no pixel shows where it ends, so any
+    lower elevation with the power scaled by ``sin`` explains the image as well. A light found
+    there has an elevation the data do not fix, and its power (``1 / sin``) with it:
+    ``benchmarks/probes_shadow_limit.py`` measures how far apart such maps relight an object.
+
+    Parameters
+    ----------
+    points : (m, 3) array_like
+        Receiver points (on the plane).
+    directions : (n, 3) array_like
+        Only their azimuth about ``plane_normal`` is used.
+    occluder : dict or (F, 3, 3) array_like
+        As :func:`occluder_visibility`.
+    plane_normal : (3,) array_like
+    step_deg : float
+        Elevations tried, from ``step_deg`` up to 90 degrees (the shadow's far end moves by
+        about ``h step / sin^2(elevation)`` a step, for an occluder ``h`` high).
+    margin : float
+        :func:`shadow_in_view`'s margin: 2 pixel spacings of plane beyond the shadow's far end
+        (a fit can put a light whose shadow runs out of the view on a node whose shadow ends a
+        pixel or two short of the edge, at a small cost in residual: such a node is no more
+        resolved than one below it).
+
+    Returns
+    -------
+    (n,) float64
+        Radians; 0 along the normal (no azimuth); NaN where no elevation's shadow is wholly in
+        view.
+    """
+    d = normalize(np.asarray(directions, dtype=np.float64).reshape(-1, 3))
+    nrm = normalize(np.asarray(plane_normal, dtype=np.float64).reshape(3))
+    if not 0.0 < float(step_deg) < 90.0:
+        raise ValueError(f"step_deg must be in (0, 90), not {step_deg!r}")
+    flat = d - (d @ nrm)[:, None] * nrm
+    norm = np.linalg.norm(flat, axis=1)
+    out = np.zeros(d.shape[0])
+    has = norm > 1e-9
+    if not np.any(has):
+        return out
+    a = flat[has] / norm[has, None]
+    el = np.radians(np.arange(float(step_deg), 90.0, float(step_deg)))
+    cand = np.cos(el)[None, :, None] * a[:, None, :] + np.sin(el)[None, :, None] * nrm  # (n', e, 3)
+    ok = shadow_in_view(points, cand.reshape(-1, 3), occluder, nrm, margin).reshape(cand.shape[:2])
+    first = np.argmax(ok, axis=1)
+    out[has] = np.where(ok.any(axis=1), el[first], np.nan)
     return out
 
 
