@@ -46,7 +46,7 @@ WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
 KW = {"nonnegative": True, "ambient": "nonnegative"}
 
 
-def describe(d, w, i):
+def describe(d, i):
     el = np.degrees(np.arcsin(np.clip(d[i, 2], -1, 1)))
     az = np.degrees(np.arctan2(d[i, 1], d[i, 0]))
     return {"elevation": float(el), "azimuth": float(az)}
@@ -85,9 +85,9 @@ def main(argv=None):
         top_r, top_t = np.argsort(-rec)[:5], np.argsort(-tru)[:5]
         conc = {"recovered_top10_share": float(np.sort(rec)[::-1][:10].sum() / rec.sum()),
                 "true_top10_share": float(np.sort(tru)[::-1][:10].sum() / tru.sum()),
-                "strongest_recovered": [{**describe(d, rec, i), "recovered": float(rec[i] / rec.sum()),
+                "strongest_recovered": [{**describe(d, i), "recovered": float(rec[i] / rec.sum()),
                                          "true": float(tru[i] / tru.sum())} for i in top_r],
-                "strongest_true": [{**describe(d, tru, i), "recovered": float(rec[i] / rec.sum()),
+                "strongest_true": [{**describe(d, i), "recovered": float(rec[i] / rec.sum()),
                                     "true": float(tru[i] / tru.sum())} for i in top_t]}
         row = {"map": name, "sources": int(d.shape[0]), "concentration": conc, "sweep": {}, "chosen": {}}
         print(f"{name}: adaptive CV chose {d.shape[0]} sources; top-10 share recovered "

@@ -13,7 +13,9 @@ Solvers (:func:`solve_sources`, on the thin-QR reduction of :func:`reduce_rows`)
 squares (``numpy.linalg.lstsq``, optionally truncated at a relative singular value ``rcond``), or non-negative least squares
 (``scipy.optimize.nnls``) with the ambient term left free by splitting it into two
 non-negative columns ``+1`` and ``-1`` (``A = a+ - a-``; the pair's minimum-norm choice is what
-NNLS returns, and the fit is the same as with a free column).
+NNLS returns, and the fit is the same as with a free column). Optional Tikhonov rows: a
+first-difference ``smoothness`` between neighbouring unknowns and a minimum-``energy`` term on the
+radiance of each source's cell.
 """
 from __future__ import annotations
 
