@@ -26,9 +26,10 @@ import numpy as np
 from ffls.conventions import normalize
 from ffls.errors import InputError
 from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix, neighbour_edges, solve_sources
-from ffls.probes.sources import HOUGEN_AHUJA_SIZES, model_sources, sources_to_latlong
+from ffls.probes.sources import HOUGEN_AHUJA_SIZES, cell_energies, model_sources, sources_to_latlong
 
-__all__ = ["SourceFit", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals", "normal_confidence"]
+__all__ = ["SourceFit", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals", "normal_confidence",
+           "cell_solid_angles"]
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,7 @@ def check_normals(normals) -> np.ndarray:
 
 def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True, nonnegative: bool = False,
                  rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full",
-                 smoothness: float = 0.0) -> SourceFit:
+                 smoothness: float = 0.0, energy: float = 0.0) -> SourceFit:
     """Recover model-source intensities from a diffuse object's pixels (Hougen and Ahuja 1993).
 
     Parameters
@@ -128,6 +129,13 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
         Optional first-difference penalty between neighbouring sources
         (:func:`ffls.probes.linear.solve_sources`); 0 is the paper's plain fit. It makes large
         source sets well posed and fills the directions behind the object from their neighbours.
+    energy : float
+        Optional minimum-energy penalty on the map's squared radiance, each source spread over
+        its Voronoi cell (:func:`ffls.probes.linear.solve_sources`, :func:`cell_solid_angles`);
+        0 is the paper's plain fit. Of the maps a diffuse object cannot tell apart it prefers
+        the most evenly spread: NNLS alone returns a vertex of the solution set, which can
+        gather light spread over many directions into a few sources at their mean direction
+        (``docs/probes.md``, *Regularised Hougen-Ahuja*).
 
     Returns
     -------
@@ -158,7 +166,8 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
     sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond,
                         what=f"{dirs.shape[0]} sources{' + ambient' if ambient else ''}",
                         smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 else None,
-                        ambient_nonnegative=ambient == "nonnegative")
+                        ambient_nonnegative=ambient == "nonnegative", energy=energy,
+                        cell_solid_angles=cell_solid_angles(dirs, hemisphere) if energy > 0 else None)
     rendered = sol.predicted * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
@@ -169,6 +178,19 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
 
 #: The colour-hdri style name of :func:`hougen_ahuja`.
 estimate_sources_HougenAhuja1993 = hougen_ahuja
+
+
+def cell_solid_angles(directions, hemisphere="full", height: int = 256) -> np.ndarray:
+    """Solid angle (n,) float64 of each source's Voronoi cell (sr) within ``hemisphere``.
+
+    Counted on a lat-long grid of ``height`` rows (256: texels of 0.7 degrees, under a third of
+    the finest adaptive spacing, 2.6 degrees); a cell that holds no texel gets the solid angle of
+    one equatorial texel, the resolution of the count.
+    """
+    h = int(height)
+    om = cell_energies(directions, np.ones((h, 2 * h, 3)), hemisphere)[:, 0]
+    texel = (np.pi / h) * (np.pi / h)
+    return np.maximum(om, texel)
 
 
 def normal_confidence(normals, height: int = 64, chunk: int = 4096) -> np.ndarray:

@@ -13,7 +13,9 @@ Solvers (:func:`solve_sources`, on the thin-QR reduction of :func:`reduce_rows`)
 squares (``numpy.linalg.lstsq``, optionally truncated at a relative singular value ``rcond``), or non-negative least squares
 (``scipy.optimize.nnls``) with the ambient term left free by splitting it into two
 non-negative columns ``+1`` and ``-1`` (``A = a+ - a-``; the pair's minimum-norm choice is what
-NNLS returns, and the fit is the same as with a free column).
+NNLS returns, and the fit is the same as with a free column). Optional Tikhonov rows: a
+first-difference ``smoothness`` between neighbouring unknowns and a minimum-``energy`` term on the
+radiance of each source's cell.
 """
 from __future__ import annotations
 
@@ -194,7 +196,7 @@ def reduce_rows(A, b) -> tuple[np.ndarray, np.ndarray]:
 
 def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: float | None = None,
                   what: str = "sources", smoothness: float = 0.0, edges=None,
-                  ambient_nonnegative: bool = False) -> LinearSolution:
+                  ambient_nonnegative: bool = False, energy: float = 0.0, cell_solid_angles=None) -> LinearSolution:
     """Solve ``b ~ M x + c a`` per channel, ``x >= 0`` with ``nonnegative``, ``a`` always free.
 
     Unknowns whose column is all zero (a source that lights no pixel) are left out and set to 0.
@@ -225,6 +227,15 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
         Pairs of neighbouring unknowns (:func:`neighbour_edges`); needed when ``smoothness > 0``.
     ambient_nonnegative : bool
         With ``nonnegative``: constrain the ambient term too (not split).
+    energy : float
+        Tikhonov weight ``lambda`` of a minimum-energy penalty on the map the unknowns make:
+        ``lambda^2 sum_k (x_k / Omega_k)^2 Omega_k mean(Omega)``, the integral of the squared
+        radiance of source ``k`` spread over its cell of solid angle ``Omega_k``, relative to the
+        data as ``smoothness`` is. Of the maps the data cannot tell apart it prefers the one
+        whose power is spread most evenly (a vertex solution of NNLS concentrates spread light
+        into a few sources); 0 is the papers' plain fit.
+    cell_solid_angles : (n,) array_like, optional
+        ``Omega_k`` (:func:`ffls.probes.hougen_ahuja.cell_solid_angles`); needed when ``energy > 0``.
 
     Returns
     -------
@@ -275,6 +286,19 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
             G[rows, e[:, 1]] = -1.0 / scale[e[:, 1]]
             Dsolve = np.concatenate([Ds, float(smoothness) * ref * G], axis=0)
             bsolve = np.concatenate([bq, np.zeros((e.shape[0], b.shape[1]))], axis=0)
+    if energy > 0:
+        if cell_solid_angles is None:
+            raise ValueError("energy needs the cells' solid angles")
+        om = np.asarray(cell_solid_angles, dtype=np.float64).reshape(-1)
+        if om.shape[0] != n or not np.all(np.isfinite(om)) or np.any(om <= 0):
+            raise ValueError(f"cell_solid_angles must be ({n},) positive, not {om.shape}")
+        om = om[observed]
+        nobs = om.shape[0]
+        ref = float(np.sqrt(np.mean(np.sum(M[:, observed] ** 2, axis=0))))
+        G = np.zeros((nobs, k))
+        G[np.arange(nobs), np.arange(nobs)] = np.sqrt(np.mean(om) / om) / scale[:nobs]
+        Dsolve = np.concatenate([Dsolve, float(energy) * ref * G], axis=0)
+        bsolve = np.concatenate([bsolve, np.zeros((nobs, b.shape[1]))], axis=0)
     if nonnegative:
         split = ambient_column is not None and not ambient_nonnegative
         A = np.concatenate([Dsolve, -Dsolve[:, -1:]], axis=1) if split else Dsolve
@@ -284,7 +308,7 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
         if split:
             sol = np.concatenate([sol[:-2], sol[-2:-1] - sol[-1:]], axis=0)
     else:
-        if rcond is None and rank < k and not smoothness > 0:
+        if rcond is None and rank < k and not (smoothness > 0 or energy > 0):
             raise InputError(f"singular system: the {m} pixels determine only {rank} of the {k} unknowns "
                              f"({what}); use fewer sources, non-negativity, or a cut-off (rcond)")
         sol, *_ = np.linalg.lstsq(Dsolve, bsolve, rcond=rcond)

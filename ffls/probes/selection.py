@@ -33,10 +33,12 @@ from ffls.probes.sources import geodesic_sources
 
 __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_hougen_ahuja",
            "adaptive_sato_sato_ikeuchi", "normal_blocks", "position_blocks", "select_hougen_ahuja",
-           "select_sato_sato_ikeuchi", "CRITERIA"]
+           "select_sato_sato_ikeuchi", "select_regularization", "CRITERIA", "REGULARIZERS"]
 
 #: Model-selection criteria.
 CRITERIA = ("cv", "bic")
+#: Penalties :func:`select_regularization` chooses the weight of.
+REGULARIZERS = ("energy", "smoothness")
 
 
 @dataclass(frozen=True)
@@ -542,3 +544,80 @@ def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.
     can_split = (lambda d: shadow_in_view(p, d, occluder, plane_normal)) if resolved_only else None
     return refine_sources(fit_all, score, base_frequency, hemi, max_sources, max_level, power_share, patience,
                           criterion, tolerance, can_split)
+
+
+def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0.001, 0.003, 0.01, 0.03),
+                          penalty: str = "energy", rule: str = "one_se", folds: int = 5, seed: int = 0,
+                          **kwargs) -> Selection:
+    """Choose the weight of a Hougen-Ahuja penalty on a fixed source set by blocked cross-validation.
+
+    A diffuse object sees only the low orders of its lighting, so many maps fit its pixels; NNLS
+    returns a vertex of that set. A penalty (``'energy'``: minimum squared radiance;
+    ``'smoothness'``: first differences between neighbouring sources; both of
+    :func:`ffls.probes.hougen_ahuja.hougen_ahuja`) picks another member of it. Its weight is
+    chosen from the data: every weight is fitted on the blocked folds of :func:`select_model`
+    (pixels grouped by normal) and scored by the squared error of its prediction of the held-out
+    pixels.
+
+    Parameters
+    ----------
+    normals, radiance, albedo
+        As :func:`ffls.probes.hougen_ahuja.hougen_ahuja`.
+    directions : (n, 3) array_like
+        The source set (for example ``adaptive_hougen_ahuja(...).fit.directions``).
+    weights : sequence of float
+        Candidate weights, 0 (the plain fit) first, increasing.
+    penalty : {'energy', 'smoothness'}
+    rule : {'one_se', 'min'}
+        ``'min'``: the weight with the lowest held-out error. ``'one_se'`` (default): the largest
+        weight whose held-out error is within one standard error of the lowest (the standard
+        error of a sum of ``K`` fold errors, ``sqrt(K)`` times their standard deviation): the
+        most regularised map the held-out pixels cannot tell from the best.
+    folds, seed
+        As :func:`select_model`.
+    **kwargs
+        Passed to :func:`~ffls.probes.hougen_ahuja.hougen_ahuja` (``nonnegative``, ``ambient``).
+
+    Returns
+    -------
+    Selection
+        ``chosen`` is the weight, ``scores`` the held-out relative RMS per weight, ``fit`` the fit
+        on all pixels with the chosen weight.
+    """
+    if penalty not in REGULARIZERS:
+        raise ValueError(f"penalty must be one of {REGULARIZERS}, not {penalty!r}")
+    if rule not in ("one_se", "min"):
+        raise ValueError(f"rule must be 'one_se' or 'min', not {rule!r}")
+    w = [float(x) for x in weights]
+    if not w or any(not np.isfinite(x) or x < 0 for x in w) or any(b <= a for a, b in zip(w, w[1:])):
+        raise ValueError(f"weights must be finite, >= 0 and increasing, not {weights!r}")
+    n = check_normals(normals)
+    b = as_rgb_pixels(radiance, n.shape[0])
+    rho = broadcast_albedo(albedo, n.shape[0])
+    d = normalize(np.asarray(directions, dtype=np.float64).reshape(-1, 3))
+    fold, k, n_blocks = _cv_folds(n.shape[0], normal_blocks(n), folds, np.random.default_rng(seed))
+    sse = np.full((len(w), k), np.inf)
+    for i, lam in enumerate(w):
+        try:
+            for f in range(k):
+                test, train = fold == f, fold != f
+                fit = hougen_ahuja(n[train], b[train], rho[train], d, **{penalty: lam}, **kwargs)
+                E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
+                sse[i, f] = float(np.sum((E * rho[test] / np.pi - b[test]) ** 2))
+        except InputError:
+            continue  # this weight cannot be fitted on a fold: not a choice
+    total = sse.sum(axis=1)
+    if not np.isfinite(total).any():
+        raise InputError("no penalty weight could be fitted on the cross-validation folds")
+    best = int(np.argmin(total))
+    if rule == "min":
+        chosen = best
+    else:
+        se = float(np.sqrt(k) * np.std(sse[best], ddof=1))
+        chosen = int(np.flatnonzero(total <= total[best] + se)[-1])
+    ref = max(float(np.sqrt(np.mean(b ** 2))), 1e-300)
+    scores = np.sqrt(total / b.size) / ref
+    note = (f"{penalty} penalty: cross-validation ({k} folds over {n_blocks} blocks, rule {rule}) chose weight "
+            f"{w[chosen]:g}: held-out relative RMS {scores[chosen]:.4f} (lowest {scores[best]:.4f} at {w[best]:g})")
+    fit = hougen_ahuja(n, b, rho, d, **{penalty: w[chosen]}, **kwargs)
+    return Selection(chosen=w[chosen], candidates=w, scores=scores, criterion="cv", fit=fit, note=note)
