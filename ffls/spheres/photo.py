@@ -35,7 +35,7 @@ from scipy.special import chdtrc, chdtri  # chi-square survival function and its
 from ffls.conventions import UP, normalize
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_near_light_mixed, fit_ray_convergence
 from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView, fit_highlight_samples
-from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
+from ffls.spheres.lambert import LambertFit, fit_lambert, shadowed_ground_bounce, tangent_uncertainty_deg
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
 from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel
 
@@ -492,6 +492,11 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     pending = hyp.model == "near" and not joint
     if hyp.model == "near" and joint:
         matte = [i for i in used if isinstance(fits[i], LambertFit)]
+        # the bounce's form factor of the per-sphere fits: less each sphere's own shadow (its light
+        # direction from the start position; the fit moves it by far less than the shadow changes)
+        samples = [replace(s, ground=shadowed_ground_bounce(s.normals, position - s.center, up,
+                                                             s.ground_factor(up)))
+                   if isinstance(f, LambertFit) else s for s, f in zip(samples, fits)]
         if shading_only:
             jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
                                 [near_fit_mask(fits[i]) for i in used], position,
