@@ -108,6 +108,7 @@ def test_free_fit_with_the_own_shadow_finds_the_ground_ratio(backlit):
     assert fit.model == "bounce" and fit.status == "ok"
     assert abs(fit.ground_ratio - 0.3) < 0.01, fit.ground_ratio
     assert np.degrees(angle_between(fit.direction, light)) < 0.1
+    assert fit.own_shadow and fit.as_dict()["own_shadow"] is True
     # the infinite-ground form factor: the shadow side looks too dark for it, the ratio is lost
     # and the difference goes into the ambient and the direction
     plain = fit_lambert(n, y, own_shadow=False)
@@ -134,5 +135,6 @@ def test_black_ground_directions_do_not_change():
     b = fit_lambert(n, y, own_shadow=False)
     assert np.degrees(angle_between(a.direction, b.direction)) < 1e-3
     assert np.degrees(angle_between(a.direction, light)) < 1e-3
+    assert not a.own_shadow and a.as_dict()["own_shadow"] is False  # no bounce fitted: nothing taken out
     c = fit_lambert(n, y, bounce_ratio=0.0)
     assert np.degrees(angle_between(c.direction, light)) < 1e-3

@@ -470,7 +470,7 @@ def test_near_fit_pixel_lattice_matches_all_pixels(samples):
     """The joint fit on every 4th pixel (default ``stride``) agrees with the fit on all pixels far
     within the statistical uncertainty of the direction."""
     S = SCENE_CENTER + 2.0 * light(40, 30)
-    v = sphere_values(render(position=S), samples)
+    v = sphere_values(render(position=S, own_shadow=False), samples)
     r = estimate_photo(None, samples, SCENE_CENTER, values=v)
     fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples, v)]
     kw = {"terms": None, "terminator": 0.15}
@@ -537,7 +537,7 @@ def test_near_fit_mixed_matte_pixels_and_mirror_rays(samples):
     from ffls.spheres.combine import fit_near_light_mixed
 
     S = SCENE_CENTER + 2.0 * light(40, 30)
-    v = sphere_values(render(position=S), samples[:2])
+    v = sphere_values(render(position=S, own_shadow=False), samples[:2])
     fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples[:2], v)]
     points = [CENTERS[k] + R_SPH * normalize(S - CENTERS[k]) for k in (2, 3)]
     sig = np.radians(0.3) / np.sqrt(2.0)

@@ -129,6 +129,9 @@ class LambertFit:
         photo shows no shadow side and ``c`` is confounded with ``b`` and ``l``.
     bounce_ratio : float or None
         The calibrated ratio imposed in this fit (None: free bounce).
+    own_shadow : bool
+        Whether the bounce's form factor had the sphere's own shadow on the ground taken out
+        (:func:`shadowed_ground_bounce`; only where the model has a bounce).
     """
 
     status: str
@@ -151,6 +154,7 @@ class LambertFit:
     ground_ratio: float = float("nan")
     ground_ratio_sigma: float = float("inf")
     bounce_ratio: float | None = None
+    own_shadow: bool = False
 
     def as_dict(self) -> dict:
         """JSON-ready summary (without the pixel mask)."""
@@ -168,6 +172,7 @@ class LambertFit:
             "n_invalid": int(self.n_invalid), "n_saturated": int(self.n_saturated),
             "ground_ratio": num(self.ground_ratio), "ground_ratio_sigma": num(self.ground_ratio_sigma),
             "bounce_ratio": None if self.bounce_ratio is None else num(self.bounce_ratio),
+            "own_shadow": bool(self.own_shadow),
         }
 
 
@@ -812,8 +817,8 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
                              clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=Tb)
         cos_tol = np.cos(np.radians(own_shadow_tol_deg))
         for _ in range(2 if shade else 0):  # the shadow of the fitted light, until the light stays
-            if best is None or float(best["dir"] @ l_g) >= cos_tol:
-                break
+            if best is None or best["fit"].c <= 0.0 or float(best["dir"] @ l_g) >= cos_tol:
+                break  # (no bounce in the chosen model: its form factor does not matter)
             g_new = shadowed_ground_bounce(normals, best["dir"], up, g_plain, shadow)
             nb, ni = _iterate(normals, y, g_new, ok, best["dir"], models, terminator, min_lit, clip_sigma,
                               rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=_design_products(normals, g_new, y))
@@ -861,7 +866,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         n_rejected=int((ok & ~inl & ~best["censored"]).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
         non_outliers=inl,
         ground_ratio=ratio_est, ground_ratio_sigma=ratio_sd,
-        bounce_ratio=None if bounce_ratio is None else float(bounce_ratio),
+        bounce_ratio=None if bounce_ratio is None else float(bounce_ratio), own_shadow=bool(shade and fit.c > 0),
     )
     # a sphere whose expected lit area is largely outlying is in a cast shadow
     if cand_lit.sum() and n_rej > max_reject_fraction * cand_lit.sum():
