@@ -1016,7 +1016,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         the first pass reads them from memory. Made here when ``spheres`` is None.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
-        ``sigma_floor_deg``, ``terminator``, ``saturation``).
+        ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
+        off where ``capture.world_from_camera_is_default``, as the ground's normal is then unknown).
 
     Returns
     -------
@@ -1064,7 +1065,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
         bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        options = dict(model=model, **kwargs)
+        # the own shadow needs the ground's normal: without a world frame, up is only the image's
+        options = {"model": model, "own_shadow": not getattr(capture, "world_from_camera_is_default", False),
+                   **kwargs}
         with _PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
             est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
                             refine_options=refine_options, materials=materials, views=views,
