@@ -302,10 +302,24 @@ def own_shadow_factor(normals: np.ndarray, light: np.ndarray, up: np.ndarray = U
 
 def shadowed_ground_bounce(normals: np.ndarray, light: np.ndarray, up: np.ndarray = UP,
                            g: np.ndarray | None = None, shadow: OwnShadow | None = None) -> np.ndarray:
-    """The ground bounce's form factor less the sphere's own shadow: ``g(n) - S(n, l)`` (m,), in [0, 1].
+    """The ground bounce's form factor less the sphere's own shadow: ``g(n) - S(n, l)``.
 
-    ``g`` (m,): precomputed :func:`ffls.spheres.samples.ground_bounce` of ``normals``;
-    ``S``: :func:`own_shadow_factor` (``shadow``: its :class:`OwnShadow` of ``normals``, reused).
+    Parameters
+    ----------
+    normals : (m, 3) float, unit, world frame
+    light : (3,) float
+        Direction toward the (distant) light.
+    up : (3,) float, unit
+        World up.
+    g : (m,) float, optional
+        Precomputed :func:`ffls.spheres.samples.ground_bounce` of ``normals``.
+    shadow : OwnShadow, optional
+        :class:`OwnShadow` of ``normals`` (reused over the lights of a fit).
+
+    Returns
+    -------
+    (m,) float in [0, 1]
+        ``g`` less :func:`own_shadow_factor`.
     """
     g = ground_bounce(normals, up) if g is None else np.asarray(g, dtype=np.float64)
     shadow = OwnShadow(normals, up) if shadow is None else shadow
