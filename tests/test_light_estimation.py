@@ -1,6 +1,7 @@
 """Light estimation from the spheres (issue 3): per-sphere Lambert fits, combination, rejection.
 
-Analytic renders here (Lambertian spheres + ambient + a ground bounce of an infinite plane, 2x2
+Analytic renders here (Lambertian spheres + ambient + a ground bounce of an infinite plane, less
+the view factor of each sphere's own shadow on it, as the spheres rest on the ground; 2x2
 supersampled) keep the tests fast and independent of ffls.synth.scene; one test uses ffls.synth.scene.
 """
 from __future__ import annotations
@@ -15,7 +16,7 @@ from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize
 from ffls.errors import InputError
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
 from ffls.spheres.estimate import BounceCalibration, calibrate_bounce, estimate_photos
-from ffls.spheres.lambert import fit_lambert
+from ffls.spheres.lambert import fit_lambert, own_shadow_factor
 from ffls.spheres.photo import REASONS, estimate_photo, near_fit_mask
 from ffls.spheres.samples import ground_bounce, pixel_validity, sphere_samples, sphere_values
 
@@ -41,8 +42,11 @@ def _cam(c_world, wfc=WFC):
 
 
 def render(direction=None, position=None, ambient=0.02, bounce=0.3, K=None, wfc=WFC, centers=CENTERS, ss=2,
-           intensity=1.0):
-    """Spheres only: E max(0, n.l) (1/r^2 for a point light) * 0.8 + ambient + bounce * E_z * g(n)."""
+           intensity=1.0, own_shadow=True):
+    """Spheres only: E max(0, n.l) (1/r^2 for a point light) * 0.8 + ambient + bounce * E_z * g(n).
+
+    ``g`` is the ground's form factor less, with ``own_shadow``, the view factor of the sphere's
+    own shadow (the light's direction from the sphere's centre)."""
     K = _K() if K is None else K
     img = np.zeros((RES, RES, 3), np.float32)
     off = (np.arange(ss) + 0.5) / ss - 0.5
@@ -69,7 +73,10 @@ def render(direction=None, position=None, ambient=0.02, bounce=0.3, K=None, wfc=
                 else:
                     E = intensity * np.maximum(n @ direction, 0)
                     ez = max(direction[2], 0)
-                val = 0.8 * (E + ambient + bounce * ez * ground_bounce(n.reshape(-1, 3)).reshape(n.shape[:2]))
+                g = ground_bounce(n.reshape(-1, 3))
+                if own_shadow:
+                    g = g - own_shadow_factor(n.reshape(-1, 3), direction if position is None else position - c)
+                val = 0.8 * (E + ambient + bounce * ez * g.reshape(n.shape[:2]))
                 acc += np.where(hit, val, 0)
         img += (acc / ss ** 2)[..., None]
     return img
@@ -514,7 +521,7 @@ def test_near_fit_pixel_lattice_matches_all_pixels(samples):
     """The joint fit on every 4th pixel (default ``stride``) agrees with the fit on all pixels far
     within the statistical uncertainty of the direction."""
     S = SCENE_CENTER + 2.0 * light(40, 30)
-    v = sphere_values(render(position=S), samples)
+    v = sphere_values(render(position=S, own_shadow=False), samples)
     r = estimate_photo(None, samples, SCENE_CENTER, values=v)
     fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples, v)]
     kw = {"terms": None, "terminator": 0.15}
@@ -563,10 +570,10 @@ def test_fit_lambert_clipped_black_floor_is_censored_by_the_model():
         y = np.clip(np.round(x * 255), 0, 255) / 255
         valid, nsat = pixel_validity(y)
         clipped += int((~valid & (y == 0)).sum())
-        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g)
+        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g, own_shadow=False)
         errs.append(np.degrees(angle_between(f.direction, l)))
         valid, nsat = pixel_validity(y, black_fraction=0.02)  # the former rule: censored by value
-        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g)
+        f = fit_lambert(n, y, valid, n_saturated=nsat, g=g, own_shadow=False)
         errs_by_value.append(np.degrees(angle_between(f.direction, l)))
     assert clipped > 0
     assert np.mean(errs) < 0.15, errs
@@ -581,7 +588,7 @@ def test_near_fit_mixed_matte_pixels_and_mirror_rays(samples):
     from ffls.spheres.combine import fit_near_light_mixed
 
     S = SCENE_CENTER + 2.0 * light(40, 30)
-    v = sphere_values(render(position=S), samples[:2])
+    v = sphere_values(render(position=S, own_shadow=False), samples[:2])
     fits = [fit_lambert(s.normals, g, ok, g=s.ground) for s, (g, ok, _) in zip(samples[:2], v)]
     points = [CENTERS[k] + R_SPH * normalize(S - CENTERS[k]) for k in (2, 3)]
     sig = np.radians(0.3) / np.sqrt(2.0)
@@ -728,7 +735,7 @@ def test_fit_lambert_is_the_least_squares_fit_of_its_own_pixels(noise, start_off
         axis = normalize(np.cross(l, [0.0, 0.0, 1.0]))
         t = np.radians(start_offset_deg)
         start = l * np.cos(t) + np.cross(axis, l) * np.sin(t)
-    fit = fit_lambert(n, y, g=g, start=start)
+    fit = fit_lambert(n, y, g=g, start=start, own_shadow=False)
     assert fit.status == "ok" and fit.model == "bounce"
     x = _least_squares_of_own_pixels(n, y, g, fit)
     np.testing.assert_allclose(x[:3] / np.linalg.norm(x[:3]), fit.direction, atol=1e-9)
@@ -739,7 +746,7 @@ def test_fit_lambert_is_the_least_squares_fit_of_its_own_pixels(noise, start_off
     assert kept > 0.8  # the noise is kept (the rest: the darkest shadow, censored by the model)
     assert np.degrees(angle_between(fit.direction, l)) < (0.3 if noise > 0.01 else 0.05)
     if start_offset_deg is not None:  # the same fixed point as from the least-squares start
-        ref = fit_lambert(n, y, g=g)
+        ref = fit_lambert(n, y, g=g, own_shadow=False)
         np.testing.assert_allclose(fit.direction, ref.direction, atol=1e-9)
         assert np.array_equal(fit.non_outliers, ref.non_outliers)
 

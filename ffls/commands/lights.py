@@ -171,6 +171,9 @@ def run(args) -> int:
         with open_client(args.workers, remote, progress=not args.no_progress) as runner:
             lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce)
     else:
+        if cap.world_from_camera_is_default:
+            print_notes(NAME, "capture.json gives no camera.world_from_camera: the world's up is taken as the "
+                              "image's, so the ground bounce is fitted without the spheres' own shadows")
         lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
                                  model=args.model, bounce=args.bounce, decoded=decoded)
     if calibration is not None:

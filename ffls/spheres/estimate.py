@@ -396,7 +396,7 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
 
 def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: list,
                   refinements: list[CentreRefinement], *, terminator: float = 0.15,
-                  up: np.ndarray = UP) -> PhotoEstimate:
+                  up: np.ndarray = UP, own_shadow: bool = True) -> PhotoEstimate:
     """A photo's first-pass ``result`` with the free-bounce fits of the recentred spheres redone.
 
     What the capture-wide bounce calibration needs after a centre refinement
@@ -416,6 +416,8 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
     refinements : list of CentreRefinement
     terminator : float
     up : (3,) float
+    own_shadow : bool
+        The bounce less the sphere's own shadow (:func:`ffls.spheres.lambert.fit_lambert`).
 
     Returns
     -------
@@ -429,7 +431,8 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
         if not ref.accepted or old.kind != "matte":
             continue
         f = fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
-                        g=s.ground_factor(up), start=old.direction)  # (no uncertainty needed: no pixels)
+                        g=s.ground_factor(up), start=old.direction,
+                        own_shadow=own_shadow)  # (no uncertainty needed: no pixels)
         spheres[k] = SphereResult(f, f.status if old.status == "ok" else old.status)
     return replace(result, spheres=spheres)
 
@@ -722,7 +725,8 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
     ctx = _context
     if task.refit is not None:
         return refit_spheres(task.refit[0], ctx.samples, task.values, task.refit[1],
-                             terminator=ctx.options.get("terminator", 0.15), up=ctx.options.get("up", UP)), None
+                             terminator=ctx.options.get("terminator", 0.15), up=ctx.options.get("up", UP),
+                             own_shadow=ctx.options.get("own_shadow", True)), None
     values, read = task.values, task.values is None
     if read:
         kept = None if ctx.decoded is None else ctx.decoded.photo(task.index, ctx.capture, ctx.pixels)
@@ -1016,7 +1020,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         the first pass reads them from memory. Made here when ``spheres`` is None.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
-        ``sigma_floor_deg``, ``terminator``, ``saturation``).
+        ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
+        off where ``capture.world_from_camera_is_default``, as the ground's normal is then unknown).
 
     Returns
     -------
@@ -1064,7 +1069,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
 
         bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        options = dict(model=model, **kwargs)
+        # the own shadow needs the ground's normal: without a world frame, up is only the image's
+        options = {"model": model, "own_shadow": not getattr(capture, "world_from_camera_is_default", False),
+                   **kwargs}
         with _PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
             est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
                             refine_options=refine_options, materials=materials, views=views,

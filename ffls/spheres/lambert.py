@@ -33,9 +33,11 @@ The pixels and their world-frame normals come from :func:`ffls.spheres.samples.s
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import map_coordinates
 
 from ffls.conventions import UP
 from ffls.spheres.samples import ground_bounce
@@ -47,6 +49,9 @@ __all__ = [
     "LambertFit",
     "fit_lambert",
     "fit_lambert_MasselusDutreAnrys2002",
+    "OwnShadow",
+    "own_shadow_factor",
+    "shadowed_ground_bounce",
     "solve_normal_equations",
     "tangent_uncertainty_deg",
 ]
@@ -124,6 +129,9 @@ class LambertFit:
         photo shows no shadow side and ``c`` is confounded with ``b`` and ``l``.
     bounce_ratio : float or None
         The calibrated ratio imposed in this fit (None: free bounce).
+    own_shadow : bool
+        Whether the bounce's form factor had the sphere's own shadow on the ground taken out
+        (:func:`shadowed_ground_bounce`; only where the model has a bounce).
     """
 
     status: str
@@ -146,6 +154,7 @@ class LambertFit:
     ground_ratio: float = float("nan")
     ground_ratio_sigma: float = float("inf")
     bounce_ratio: float | None = None
+    own_shadow: bool = False
 
     def as_dict(self) -> dict:
         """JSON-ready summary (without the pixel mask)."""
@@ -163,7 +172,158 @@ class LambertFit:
             "n_invalid": int(self.n_invalid), "n_saturated": int(self.n_saturated),
             "ground_ratio": num(self.ground_ratio), "ground_ratio_sigma": num(self.ground_ratio_sigma),
             "bounce_ratio": None if self.bounce_ratio is None else num(self.bounce_ratio),
+            "own_shadow": bool(self.own_shadow),
         }
+
+
+#: Grid of the own-shadow table (:func:`own_shadow_factor`): ``n . up`` from -1 to 1, the light's
+#: elevation from :data:`OWN_SHADOW_MIN_ELEVATION_DEG` to 90 degrees, and the cosine of the azimuth
+#: between the light and the normal from -1 to 1; and the cosine-weighted directions per entry (a side).
+_OS_GRID = (49, 30, 25)
+_OS_SIDE = 24
+#: Lowest light elevation of the table (degrees); lower lights use it (the ground's irradiance,
+#: ``l . up``, which scales the bounce, is then small anyway).
+OWN_SHADOW_MIN_ELEVATION_DEG = 3.0
+
+
+@functools.lru_cache(maxsize=1)
+def _own_shadow_table() -> np.ndarray:
+    """(nz, elevation, cos azimuth) table of :func:`own_shadow_factor` (built once per process, ~0.2 s of CPU).
+
+    A unit sphere rests on the plane ``z = -1``. From the point of normal ``n`` (``n_z`` on the
+    first axis, azimuth 0), stratified cosine-weighted directions (Malley's method: the share of
+    them in a region is its view factor) are cast down to the plane; a hit is in the sphere's
+    shadow when the ray from it toward the light (elevation on the second axis, the cosine of
+    its azimuth on the third) meets the sphere.
+    """
+    nz_n, el_n, az_n = _OS_GRID
+    k = _OS_SIDE
+    u = (np.arange(k) + 0.5) / k
+    u1, u2 = (x.ravel() for x in np.meshgrid(u, u))
+    r, ph = np.sqrt(u1), 2.0 * np.pi * u2
+    local = np.stack([r * np.cos(ph), r * np.sin(ph), np.sqrt(1.0 - u1)], axis=1)  # (k^2, 3)
+    el = np.radians(np.linspace(OWN_SHADOW_MIN_ELEVATION_DEG, 90.0, el_n))
+    az = np.arccos(np.linspace(-1.0, 1.0, az_n))
+    E, A = np.meshgrid(el, az, indexing="ij")
+    L = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], axis=-1).reshape(-1, 3)
+    out = np.zeros((nz_n, el_n * az_n))
+    for i, z in enumerate(np.linspace(-1.0, 1.0, nz_n)):
+        s = np.sqrt(max(0.0, 1.0 - z * z))
+        n = np.array([s, 0.0, z])
+        t1 = np.array([-z, 0.0, s]) if s > 0 else np.array([1.0, 0.0, 0.0])
+        D = local @ np.stack([t1, np.cross(n, t1), n])  # (k^2, 3) world directions
+        Dd = D[D[:, 2] < -1e-12]
+        X = n + ((-1.0 - z) / Dd[:, 2])[:, None] * Dd  # hits on the plane
+        tc = -X @ L.T  # along the light from the hit to the centre
+        d2 = np.einsum("ij,ij->i", X, X)[:, None] - tc * tc
+        out[i] = np.count_nonzero((tc > 0) & (d2 < 1.0), axis=0) / D.shape[0]
+    return out.reshape(nz_n, el_n, az_n)
+
+
+class OwnShadow:
+    """:func:`own_shadow_factor` of fixed normals for any light: what depends on the normals alone
+    (their height and horizontal direction) is computed once (a fit evaluates several lights).
+
+    Parameters
+    ----------
+    normals : (m, 3) float, unit, world frame
+    up : (3,) float, unit
+        World up (the ground's normal).
+    """
+
+    def __init__(self, normals: np.ndarray, up: np.ndarray = UP):
+        normals = np.asarray(normals, dtype=np.float64)
+        self.up = np.asarray(up, dtype=np.float64)
+        nz = np.clip(normals @ self.up, -1.0, 1.0)
+        nh = normals - nz[:, None] * self.up
+        norm = np.linalg.norm(nh, axis=1)
+        self.vertical = norm <= 1e-9  # (any azimuth: the table's azimuth 0)
+        self.horizontal = nh / np.where(self.vertical, 1.0, norm)[:, None]
+        nz_n = _OS_GRID[0]
+        self.coords = np.empty((2, normals.shape[0]))
+        self.coords[0] = (nz + 1.0) * 0.5 * (nz_n - 1)
+
+    def __call__(self, light: np.ndarray) -> np.ndarray:
+        """(m,) view factor of the own shadow under the distant ``light`` (3,), in [0, 1]."""
+        light = np.asarray(light, dtype=np.float64)
+        m = self.coords.shape[1]
+        nl = float(np.linalg.norm(light))
+        if not np.isfinite(nl) or nl == 0.0:
+            return np.zeros(m)
+        light = light / nl
+        lz = float(light @ self.up)
+        if lz <= 0.0:
+            return np.zeros(m)
+        table = _own_shadow_table()
+        _, el_n, az_n = table.shape
+        lh = light - lz * self.up
+        lhn = float(np.linalg.norm(lh))
+        c = self.horizontal @ (lh / lhn) if lhn > 1e-9 else np.ones(m)  # a vertical light: any azimuth
+        c[self.vertical] = 1.0
+        # the light's elevation is one for all pixels: blend its two table slices, then bilinear
+        e = (max(float(np.degrees(np.arcsin(min(lz, 1.0)))), OWN_SHADOW_MIN_ELEVATION_DEG)
+             - OWN_SHADOW_MIN_ELEVATION_DEG) / (90.0 - OWN_SHADOW_MIN_ELEVATION_DEG) * (el_n - 1)
+        j = min(int(e), el_n - 2)
+        t = e - j
+        plane = (1.0 - t) * table[:, j] + t * table[:, j + 1]
+        self.coords[1] = (np.clip(c, -1.0, 1.0) + 1.0) * 0.5 * (az_n - 1)
+        return np.clip(map_coordinates(plane, self.coords, order=1, mode="nearest"), 0.0, 1.0)
+
+
+def own_shadow_factor(normals: np.ndarray, light: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
+    """View factor from sphere points to the sphere's own shadow on the ground it rests on.
+
+    The ground bounce of :func:`ffls.spheres.samples.ground_bounce`, ``(1 - n . up) / 2``, is the
+    view factor of an infinite, uniformly lit ground. A sphere resting on the ground shades it
+    (for a distant light ``l``: the sphere's projection along ``l``, from the contact point away
+    from the light), and its points that face that shadow (the lower shadow side; with a light
+    behind the sphere, the side the camera sees) receive less bounce. This is the view factor of
+    that shadow: the share of the ground's view factor that is dark. It depends on ``n . up``,
+    the light's elevation and the azimuth between them only (the sphere's size cancels); it is
+    interpolated (trilinear) in a table of cosine-weighted quadrature (:func:`_own_shadow_table`).
+    Lights below :data:`OWN_SHADOW_MIN_ELEVATION_DEG` use that elevation; lights below the
+    horizon give no shadow (and no ground irradiance). :class:`OwnShadow` evaluates it for
+    several lights.
+
+    Parameters
+    ----------
+    normals : (m, 3) float, unit, world frame
+    light : (3,) float
+        Direction toward the (distant) light.
+    up : (3,) float, unit
+        World up (the ground's normal).
+
+    Returns
+    -------
+    (m,) float in [0, 1]
+    """
+    return OwnShadow(normals, up)(light)
+
+
+def shadowed_ground_bounce(normals: np.ndarray, light: np.ndarray, up: np.ndarray = UP,
+                           g: np.ndarray | None = None, shadow: OwnShadow | None = None) -> np.ndarray:
+    """The ground bounce's form factor less the sphere's own shadow: ``g(n) - S(n, l)``.
+
+    Parameters
+    ----------
+    normals : (m, 3) float, unit, world frame
+    light : (3,) float
+        Direction toward the (distant) light.
+    up : (3,) float, unit
+        World up.
+    g : (m,) float, optional
+        Precomputed :func:`ffls.spheres.samples.ground_bounce` of ``normals``.
+    shadow : OwnShadow, optional
+        :class:`OwnShadow` of ``normals`` (reused over the lights of a fit).
+
+    Returns
+    -------
+    (m,) float in [0, 1]
+        ``g`` less :func:`own_shadow_factor`.
+    """
+    g = ground_bounce(normals, up) if g is None else np.asarray(g, dtype=np.float64)
+    shadow = OwnShadow(normals, up) if shadow is None else shadow
+    return np.clip(g - shadow(light), 0.0, 1.0)
 
 
 def _model_map(model: str, ratio: float) -> np.ndarray:
@@ -538,7 +698,8 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
                 clip_sigma: float = 4.0, rel_noise_floor: float = 0.01, up: np.ndarray = UP,
                 min_lit: int = 30, max_reject_fraction: float = 0.25, max_iter: int = 8,
                 bounce_ratio: float | None = None, g: np.ndarray | None = None, min_shadow: int = 1,
-                start: np.ndarray | None = None, pixels: tuple[np.ndarray, np.ndarray] | None = None) -> LambertFit:
+                start: np.ndarray | None = None, pixels: tuple[np.ndarray, np.ndarray] | None = None,
+                own_shadow: bool = True, own_shadow_tol_deg: float = 0.1) -> LambertFit:
     """Fit ``I(n) = a max(0, n . l) + b + c g(n)`` to one sphere's pixels.
 
     Parameters
@@ -591,6 +752,16 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         The pixels' rows and columns: the covariance is then inflated by the residuals' spatial
         correlation (:func:`ffls.spheres.uncertainty.correlation_inflation`); without them the
         residuals are taken as independent.
+    own_shadow : bool
+        The bounce's form factor is ``g`` less the view factor of the sphere's own shadow on the
+        ground (:func:`shadowed_ground_bounce`, for the sphere resting on the ground): it depends
+        on the light, so it is made for the start direction and made again, and the fit repeated
+        from there, while the fitted direction moves more than ``own_shadow_tol_deg`` (at most
+        twice). Without it a photo whose light is behind the sphere (its shadow side, facing the
+        camera, looks at its shadow) shows a weak bounce, and the capture's ground ratio comes
+        out low (docs/spheres.md, "Ground bounce").
+    own_shadow_tol_deg : float
+        See ``own_shadow`` (the form factor's change over such a move is below the pixels' noise).
 
     Returns
     -------
@@ -623,6 +794,9 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         return base
     y = np.where(ok | floor, y_all, 0.0)
     g = ground_bounce(normals, up) if g is None else np.asarray(g, dtype=np.float64)
+    g_plain = g
+    # a bounce in the model: its form factor has the sphere's own shadow taken out (needs a light)
+    shade = own_shadow and (bounce_ratio is None and "bounce" in models or bounce_ratio is not None and ratio > 0)
     # initial classification: clearly bright pixels are lit
     peak = _percentile(y[ok], 99.0)
     if not peak > 0:
@@ -648,8 +822,23 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     # solutions that the other spheres then confirmed; a rejection is safer than a wrong light)
     best, inl = None, ok
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
-        best, inl = _iterate(normals, y, g, ok, v0 / np.linalg.norm(v0), models, terminator, min_lit,
+        l_g = v0 / np.linalg.norm(v0)
+        if shade:
+            shadow = OwnShadow(normals, up)
+            g = shadowed_ground_bounce(normals, l_g, up, g_plain, shadow)
+            Tb = _design_products(normals, g, y)
+        best, inl = _iterate(normals, y, g, ok, l_g, models, terminator, min_lit,
                              clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=Tb)
+        cos_tol = np.cos(np.radians(own_shadow_tol_deg))
+        for _ in range(2 if shade else 0):  # the shadow of the fitted light, until the light stays
+            if best is None or best["fit"].c <= 0.0 or float(best["dir"] @ l_g) >= cos_tol:
+                break  # (no bounce in the chosen model: its form factor does not matter)
+            g_new = shadowed_ground_bounce(normals, best["dir"], up, g_plain, shadow)
+            nb, ni = _iterate(normals, y, g_new, ok, best["dir"], models, terminator, min_lit, clip_sigma,
+                              rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=_design_products(normals, g_new, y))
+            if nb is None:  # (keeps the last fit and its form factor)
+                break
+            l_g, g, best, inl = best["dir"], g_new, nb, ni
     if best is None:
         base.status = "too_dark"
         return base
@@ -691,7 +880,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         n_rejected=int((ok & ~inl & ~best["censored"]).sum()), n_invalid=n_invalid, n_saturated=int(n_saturated), inliers=use,
         non_outliers=inl,
         ground_ratio=ratio_est, ground_ratio_sigma=ratio_sd,
-        bounce_ratio=None if bounce_ratio is None else float(bounce_ratio),
+        bounce_ratio=None if bounce_ratio is None else float(bounce_ratio), own_shadow=bool(shade and fit.c > 0),
     )
     # a sphere whose expected lit area is largely outlying is in a cast shadow
     if cand_lit.sum() and n_rej > max_reject_fraction * cand_lit.sum():

@@ -35,7 +35,7 @@ from scipy.special import chdtrc, chdtri  # chi-square survival function and its
 from ffls.conventions import UP, normalize
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_near_light_mixed, fit_ray_convergence
 from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView, fit_highlight_samples
-from ffls.spheres.lambert import LambertFit, fit_lambert, tangent_uncertainty_deg
+from ffls.spheres.lambert import LambertFit, fit_lambert, shadowed_ground_bounce, tangent_uncertainty_deg
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
 from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel
 
@@ -236,7 +236,8 @@ class PhotoEstimate:
 # ----------------------------------------------------------------------------- stages
 def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, terminator: float = 0.15,
                 up: np.ndarray = UP, bounce_ratio: list | None = None, start: list | None = None,
-                mirrors: list | None = None, mirror_floor_deg: float = 0.1) -> list[LambertFit | HighlightFit]:
+                mirrors: list | None = None, mirror_floor_deg: float = 0.1,
+                own_shadow: bool = True) -> list[LambertFit | HighlightFit]:
     """Step 1: every sphere's own fit (:func:`ffls.spheres.lambert.fit_lambert`, or for a mirror
     sphere :func:`ffls.spheres.highlight.fit_highlight_samples`).
 
@@ -254,6 +255,9 @@ def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, ter
         Per sphere, the view of a mirror sphere (None: matte).
     mirror_floor_deg : float
         RMS floor of a mirror sphere's uncertainty (:func:`ffls.spheres.highlight.fit_highlight`).
+    own_shadow : bool
+        The bounce less the sphere's own shadow (:func:`ffls.spheres.lambert.fit_lambert`); off
+        where the world's up is not known.
 
     Returns
     -------
@@ -269,7 +273,8 @@ def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, ter
             out.append(fit_highlight_samples(view, s, grey, valid, floor_deg=mirror_floor_deg))
         else:
             out.append(fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
-                                   bounce_ratio=rho, g=s.ground_factor(up), start=l0, pixels=(s.rows, s.cols)))
+                                   bounce_ratio=rho, g=s.ground_factor(up), start=l0, pixels=(s.rows, s.cols),
+                                   own_shadow=own_shadow))
     return out
 
 
@@ -407,7 +412,8 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
                    model: str = "auto", min_spheres: int | None = None, sigma_floor_deg: float = 1.0,
                    terminator: float = 0.15, saturation: float | None = None, up: np.ndarray = UP,
                    bounce_ratio: list | None = None, values: list | None = None, start: list | None = None,
-                   joint: bool = True, mirrors: list | None = None, mirror_floor_deg: float = 0.1) -> PhotoEstimate:
+                   joint: bool = True, mirrors: list | None = None, mirror_floor_deg: float = 0.1,
+                   own_shadow: bool = True) -> PhotoEstimate:
     """Estimate the light of one photograph from its spheres.
 
     Parameters
@@ -451,6 +457,10 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     mirror_floor_deg : float
         RMS floor of a mirror sphere's uncertainty (what the highlight model leaves out: the
         ball's roundness and radius).
+    own_shadow : bool
+        The matte spheres' ground bounce less each one's own shadow (:func:`fit_spheres`; the
+        joint near fit too); :func:`ffls.spheres.estimate.estimate_lights` turns it off where
+        the capture gives no world frame (its up is then the image's).
 
     Returns
     -------
@@ -464,7 +474,7 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
             raise ValueError("estimate_photo needs an image or its sphere values")
         values = sphere_values(image, samples, saturation=saturation)
     fits = fit_spheres(samples, values, terminator=terminator, up=up, bounce_ratio=bounce_ratio, start=start,
-                       mirrors=mirrors, mirror_floor_deg=mirror_floor_deg)
+                       mirrors=mirrors, mirror_floor_deg=mirror_floor_deg, own_shadow=own_shadow)
     # a mirror that cannot show this light (behind it: no highlight, or one at the rim) is not missing
     blind = sum(isinstance(f, HighlightFit) and f.status in ("no_highlight", "highlight_at_rim") for f in fits)
     need = max(min(2, n_sph - blind), 1) if min_spheres is None else int(min_spheres)
@@ -492,6 +502,12 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     pending = hyp.model == "near" and not joint
     if hyp.model == "near" and joint:
         matte = [i for i in used if isinstance(fits[i], LambertFit)]
+        # the bounce's form factor of the per-sphere fits: less each sphere's own shadow (its light
+        # direction from the start position; the fit moves it by far less than the shadow changes)
+        if own_shadow:
+            samples = [replace(s, ground=shadowed_ground_bounce(s.normals, position - s.center, up,
+                                                                 s.ground_factor(up)))
+                       if isinstance(f, LambertFit) else s for s, f in zip(samples, fits)]
         if shading_only:
             jf = fit_near_light([samples[i] for i in used], [values[i][0] for i in used],
                                 [near_fit_mask(fits[i]) for i in used], position,
