@@ -286,6 +286,16 @@ def test_ray_convergence_finds_point():
     np.testing.assert_allclose(conv.position, S, atol=1e-4)
 
 
+def test_ray_convergence_counts_an_opposite_direction_as_180_degrees():
+    """A sphere whose direction is opposite to the others' (a mirror ball's highlight taken on the
+    wrong side) cannot be made consistent by placing the light on its side: its residual is its
+    angle (the projection of p - d alone, sin(angle), vanishes at 180 degrees)."""
+    d = np.tile(light(30, 10), (3, 1))
+    d = np.vstack([d, -light(30, 10)])
+    conv = fit_ray_convergence(CENTERS, d, np.array([0.5, 0.5, 0.5, 10.0]), SCENE_CENTER)
+    assert conv.chi2 > 100  # (180 / (10 / sqrt 2))^2 / ... : far beyond any chi-square threshold
+
+
 # ----------------------------------------------------------------------------- photos
 GRID = [(0, 0), (40, 30), (30, 90), (10, 180), (60, 60), (45, 0), (50, 20), (20, -10)]
 GRID_FRONTAL = [(20, -90), (60, -150), (70, -60)]

@@ -213,8 +213,18 @@ def fit_ray_convergence(centers: np.ndarray, directions: np.ndarray, uncertainty
         return p / np.sqrt(np.einsum("ij,ij->i", p, p))[:, None], m
 
     def residuals(x):
+        # the log map of the predicted direction at each observed one: its length is the angle
+        # between them, so a prediction opposite to a sphere's direction costs 180 degrees (the
+        # projection of p - d alone, sin(angle), falls back to 0 there and let a mirror ball's
+        # highlight 162 degrees off pass as consistent)
         p, _ = predicted(x)
-        return (np.einsum("kij,kj->ki", tangents, p - d) / sig[:, None]).ravel()
+        c = np.einsum("ij,ij->i", p, d)
+        t = p - c[:, None] * d
+        nt = np.sqrt(np.einsum("ij,ij->i", t, t))
+        stretch = np.arccos(np.clip(c, -1.0, 1.0)) / np.maximum(nt, 1e-12)
+        r = np.einsum("kij,kj->ki", tangents, t) * np.where(nt > 1e-12, stretch, 1.0)[:, None]
+        r[(nt <= 1e-12) & (c < 0), 0] = np.pi  # exactly opposite: 180 degrees, along any tangent axis
+        return (r / sig[:, None]).ravel()
 
     best = None
     for rho0 in (0.0, 0.1, 0.5):
