@@ -788,10 +788,13 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
         r = total([theta, *(theta + shifts)]) / scale
         return float(r[0]), (r[1:] - r[0]) / _POLY_STEP
 
-    res = minimize(fun, theta0, jac=True, method="SLSQP",
+    theta0[0] = min(theta0[0], GAMMA_SEARCH[1])
+    bounds = [(POLYNOMIAL_MIN_SLOPE, GAMMA_SEARCH[1])] + [(None, None)] * order
+    res = minimize(fun, theta0, jac=True, method="SLSQP", bounds=bounds,
                    constraints=[{"type": "ineq", "fun": lambda t: C @ t - POLYNOMIAL_MIN_SLOPE, "jac": lambda t: C}],
                    options={"maxiter": 200, "ftol": 1e-10})
-    theta = res.x if np.all(C @ res.x >= POLYNOMIAL_MIN_SLOPE - 1e-9) else theta0
+    ok = np.all(C @ res.x >= POLYNOMIAL_MIN_SLOPE - 1e-9) and res.x[0] <= GAMMA_SEARCH[1] + 1e-9
+    theta = res.x if ok else theta0
     rss = float(total([theta])[0])
     if rss > scale:  # never worse than the start (a lower order's optimum)
         theta, rss = theta0, scale
