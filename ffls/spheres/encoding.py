@@ -68,8 +68,8 @@ increasing by construction (linear constraints on its log-log slope), by SLSQP
 the same units as the named curves': ``RSS`` above the best gamma's over the gamma's inflated
 noise, plus ``(K + 1) ln(n_eff)``; the lowest of linear (0 parameters), sRGB (0), gamma (1) and the
 best order (``K + 1``) is named, provided every sphere alone would pay for the polynomial: its
-``RSS`` under the best gamma less that under the polynomial, over the noise, exceeds ``K ln(n_eff)``
-on each sphere (a tone curve is the camera's and bends every sphere alike; a misfit of the shading
+``RSS`` under the curve named without it less that under the polynomial, over the noise, exceeds
+the extra parameters times ``ln(n_eff)`` on each sphere (a tone curve is the camera's and bends every sphere alike; a misfit of the shading
 model that the polynomial absorbs, a near light or an interreflection, is each sphere's own: on
 a linear file lit from near, an order-4 polynomial won the total BIC by 47 without this test).
 The noise is the gamma's (larger when the gamma misfits), which
@@ -983,10 +983,13 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
             # a tone curve is the camera's: every sphere alone must pay for its parameters. A misfit
             # of the shading model (a near light, interreflection) that the polynomial absorbs is
             # each sphere's own, and does not lower every sphere's misfit that much (module docstring)
+            # over the curve that would be named without it (linear, sRGB: no parameter; the gamma: one)
+            base, _ = min(scores, key=lambda t: t[1])
+            base_curve, base_params = {"linear": (1.0, 0), "srgb": ("srgb", 0), "gamma": (best, 1)}[base]
             gain: dict[int, float] = {}
             for u in used:
-                gain[u.sphere] = gain.get(u.sphere, 0.0) + u.rss(best) - u.rss(coefs)
-            if min(gain.values()) / noise > order * penalty:
+                gain[u.sphere] = gain.get(u.sphere, 0.0) + u.rss(base_curve) - u.rss(coefs)
+            if min(gain.values()) / noise > (order + 1 - base_params) * penalty:
                 scores.append(("polynomial", penalty + score))
     name, _ = min(scores, key=lambda t: t[1])
     if at_end and name != "polynomial":
