@@ -1,7 +1,8 @@
 """Encoding calibration from the spheres: recovered curve and light-direction error per true encoding.
 
 Renders one linear capture of the built-in scene (``write_synthetic_capture``, noise free), then
-stores it as integer PNGs encoded linear, sRGB and gamma 2.2 (plus sensor-like noise of
+stores it as integer PNGs encoded linear, sRGB, gamma 2.2 and (``--filmic``) a camera-like S-shaped
+tone curve, :func:`ffls.synth.photo.filmic_encode`, that must be named ``polynomial`` (plus sensor-like noise of
 ``--noise`` code values added to the stored value), with no ``encoding`` in ``capture.json``. For
 each it runs what ``ffls lights`` runs (:func:`ffls.commands.lights.calibrate_if_unknown`, then
 :func:`ffls.spheres.estimate.estimate_lights`) and, as the reference, the same estimation with the
@@ -37,10 +38,31 @@ from ffls.io.capture import load_capture
 from ffls.io.images import read_image, write_png
 from ffls.radiance.encoding import gamma_encode, srgb_encode
 from ffls.spheres.estimate import estimate_lights
+from ffls.synth.photo import filmic_encode, response_table
 from ffls.synth.scene import write_synthetic_capture
 
 TRUE = {"linear": "linear", "srgb": "srgb", "gamma2.2": 2.2}
-STATED = {"linear": "linear", "srgb": "srgb", "gamma2.2": {"gamma": 2.2}}
+STATED = {"linear": "linear", "srgb": "srgb", "gamma2.2": {"gamma": 2.2}, "filmic": {"response": "response.npy"}}
+#: The curve each true encoding must be named.
+EXPECTED = {"linear": "linear", "srgb": "srgb", "gamma2.2": "gamma", "filmic": "polynomial"}
+
+
+def encode_values(lin: np.ndarray, true) -> np.ndarray:
+    """Linear values in [0, 1] stored with the curve ``true``."""
+    if true == "linear":
+        return lin
+    if true == "srgb":
+        return srgb_encode(lin)
+    if true == "filmic":
+        return filmic_encode(lin)
+    return gamma_encode(lin, true)
+
+
+def stated(cap, name):
+    """``cap`` with its true encoding stated (the filmic curve as its 8-bit response table)."""
+    if name == "filmic":
+        return replace(cap, encoding=STATED[name], response=np.repeat(response_table("filmic")[:, None], 3, axis=1))
+    return replace(cap, encoding=STATED[name])
 
 
 def encode_capture(src: Path, dst: Path, true, bits: int, noise: float, seed: int) -> Path:
@@ -55,7 +77,7 @@ def encode_capture(src: Path, dst: Path, true, bits: int, noise: float, seed: in
     names = []
     for nm, im in zip(doc["images"], imgs):
         lin = np.clip(im * exposure, 0.0, None)
-        enc = lin if true == "linear" else srgb_encode(lin) if true == "srgb" else gamma_encode(lin, true)
+        enc = encode_values(np.clip(lin, 0.0, 1.0), true)
         enc = enc + rng.normal(0.0, noise, enc.shape)
         png = nm.replace(".exr", ".png")
         write_png(dst / png, np.rint(np.clip(enc, 0, 1) * top).astype(np.uint8 if bits == 8 else np.uint16))
@@ -80,7 +102,7 @@ def run_seed(args, seed: int) -> list:
         info = write_synthetic_capture(tmp / "source", n_lights=args.lights, resolution=args.res, progress=False,
                                        seed=seed, **light)
         truth = info["directions"]
-        for k, (name, true) in enumerate(TRUE.items()):
+        for k, (name, true) in enumerate(curves(args).items()):
             folder = encode_capture(tmp / "source", tmp / name, true, args.bits, args.noise / 255, seed + k)
             cap = load_capture(folder)
             t0 = time.perf_counter()
@@ -92,12 +114,13 @@ def run_seed(args, seed: int) -> list:
                 continue
             t_cal = time.perf_counter() - t0
             got = estimate_lights(cal_cap, spheres=spheres, progress=False, workers=1)
-            ref = estimate_lights(replace(cap, encoding=STATED[name]), spheres=spheres, progress=False, workers=1)
+            ref = estimate_lights(stated(cap, name), spheres=spheres, progress=False, workers=1)
             e, r = errors_deg(got, truth), errors_deg(ref, truth)
             rows.append({"seed": seed, "true": name, "named": cal.curve, "gamma": cal.gamma,
                          "uncertainty": cal.uncertainty, "sd_spheres": cal.sd_spheres, "srgb_excess": cal.srgb_excess,
                          "linear_excess": cal.linear_excess, "bic_penalty": cal.bic_penalty,
                          "spheres": cal.n_spheres, "photos": cal.n_photos, "shading": cal.shading,
+                         "order": cal.order, "polynomial_excess": cal.polynomial_excess,
                          "calibration_s": t_cal, "median_deg": float(np.median(e)), "max_deg": float(e.max()),
                          "accepted": int(got.ok_mask.sum()), "stated_median_deg": float(np.median(r)),
                          "stated_max_deg": float(r.max()), "summary": cal.summary()})
@@ -118,12 +141,12 @@ def detect_scenes_naming(args) -> list:
             b.albedo = (0.45, 0.45, 0.45)
         imgs = ds.render(sc, ds.lights(args.lights, seed=seed + 1), background="grey", noise=0.004, seed=seed + 2)
         imgs = np.clip(imgs / np.percentile(imgs, 99.5) * 0.9, 0, 1)
-        for name, true in TRUE.items():
+        for name, true in TRUE.items():  # not the filmic curve: the detection finds no sphere in it (docs/spheres.md)
             with tempfile.TemporaryDirectory() as tmp:
                 tmp = Path(tmp)
                 names = []
                 for i, im in enumerate(imgs):
-                    enc = im if true == "linear" else srgb_encode(im) if true == "srgb" else gamma_encode(im, true)
+                    enc = encode_values(im, true)
                     names.append(f"p{i:02d}.png")
                     write_png(tmp / names[-1], np.rint(np.clip(enc, 0, 1) * 255).astype(np.uint8))
                 (tmp / "capture.json").write_text(json.dumps({
@@ -133,6 +156,11 @@ def detect_scenes_naming(args) -> list:
             rows.append({"seed": seed, "true": name, "named": cal.curve, "summary": cal.summary()})
             print(f"seed {seed} {name:9} -> {cal.summary()}", flush=True)
     return rows
+
+
+def curves(args) -> dict:
+    """The true encodings to store: linear, sRGB and gamma 2.2, and the filmic curve with ``--filmic``."""
+    return {**TRUE, "filmic": "filmic"} if args.filmic else dict(TRUE)
 
 
 def main(argv=None) -> int:
@@ -147,9 +175,14 @@ def main(argv=None) -> int:
     ap.add_argument("--near", type=float, default=None, metavar="D",
                     help="near lights (radius 5 cm) D metres from the scene centre instead of distant ones")
     ap.add_argument("--detect-scenes", action="store_true", help="captures made without ffls synth (naming only)")
+    ap.add_argument("--filmic", action="store_true",
+                    help="also store a camera-like S-shaped tone curve (ffls.synth.photo.filmic_encode), to be named "
+                         "polynomial")
     args = ap.parse_args(argv)
     if args.detect_scenes:
         rows = detect_scenes_naming(args)
+        right = sum(r["named"] == EXPECTED[r["true"]] for r in rows)
+        print(f"named right {right}/{len(rows)}")
         if args.json:
             Path(args.json).write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
         return 0
@@ -157,20 +190,23 @@ def main(argv=None) -> int:
     for seed in range(args.seed, args.seed + args.repeat):
         rows += run_seed(args, seed)
     print(f"{args.lights} lights, {args.res} px, {args.bits}-bit PNG, noise {args.noise} code values")
-    print(f"{'true':9} {'named':7} {'gamma':>13} {'lin exc':>9} {'sRGB exc':>9} {'ln n_eff':>8} {'median':>7} {'max':>6} {'acc':>5} "
+    print(f"{'true':9} {'named':10} {'gamma':>13} {'lin exc':>9} {'sRGB exc':>9} {'ln n_eff':>8} {'median':>7} {'max':>6} {'acc':>5} "
           f"{'stated med':>10} {'stated max':>10} {'cal s':>6} {'shading':>8}")
     for r in rows:
         if r["named"] == "refused":
             print(f"{r['true']:9} refused")
             continue
-        print(f"{r['true']:9} {r['named']:7} {r['gamma']:6.3f}+-{r['uncertainty']:.3f} {r['linear_excess']:9.1f} "
+        named = r["named"] + (f" {r['order']}" if r["named"] == "polynomial" else "")
+        print(f"{r['true']:9} {named:10} {r['gamma']:6.3f}+-{r['uncertainty']:.3f} {r['linear_excess']:9.1f} "
               f"{r['srgb_excess']:9.1f} {r['bic_penalty']:8.1f} "
               f"{r['median_deg']:7.2f} {r['max_deg']:6.2f} {r['accepted']:5d} {r['stated_median_deg']:10.2f} "
               f"{r['stated_max_deg']:10.2f} {r['calibration_s']:6.1f} {r['shading']:>8}")
     if args.repeat > 1:
-        for name, g in (("linear", 1.0), ("srgb", None), ("gamma2.2", 2.2)):
+        for name, g in (("linear", 1.0), ("srgb", None), ("gamma2.2", 2.2), ("filmic", None)):
             rs = [r for r in rows if r["true"] == name]
-            named = sum(r["named"] == ("gamma" if name == "gamma2.2" else name) for r in rs)
+            if not rs:
+                continue
+            named = sum(r["named"] == EXPECTED[name] for r in rs)
             rs_cal = [r for r in rs if r["named"] != "refused"]
             inside = sum(abs(r["gamma"] - g) <= r["uncertainty"] for r in rs_cal) if g is not None else 0
             cover = "" if g is None else f", true gamma inside the 95% interval {inside}/{len(rs)}"

@@ -214,8 +214,6 @@ def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers:
         The spheres found for the calibration (None when not calibrated: found later).
     calibration : EncodingCalibration or None
     """
-    from dataclasses import replace
-
     from ffls.io.images import read_image
     from ffls.radiance.photos import encoding_unknown
 
@@ -229,7 +227,7 @@ def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers:
 
         wrap = tqdm
     calibration, spheres = calibrate_capture_encoding(capture, progress=wrap, decoded=decoded, workers=workers)
-    return replace(capture, encoding=calibration.encoding), spheres, calibration
+    return calibration.apply(capture), spheres, calibration
 
 
 def export_lp(lights, capture, path) -> str:

@@ -139,9 +139,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     f.add_argument("--format", dest="file_format", type=_choice("exr", "png8", "png16", "tiff16", "jpeg"),
                    default=None, metavar="{exr,png8,png16,tiff16,jpeg}",
                    help="exr (linear half float, default), png8, png16, tiff16 or jpeg")
-    f.add_argument("--encoding", type=_choice("srgb", "linear", "gamma2.2"), default=None,
-                   metavar="{srgb,linear,gamma2.2}",
-                   help="transfer curve of integer files (default srgb; exr is linear)")
+    f.add_argument("--encoding", type=_choice("srgb", "linear", "gamma2.2", "filmic"), default=None,
+                   metavar="{srgb,linear,gamma2.2,filmic}",
+                   help="transfer curve of integer files (default srgb; exr is linear); filmic is a camera-like "
+                        "S-shaped tone curve, Hable's filmic operator then sRGB (neither sRGB nor a gamma)")
     f.add_argument("--unstated-encoding", action="store_true",
                    help="leave the encoding out of capture.json (truth.json still records it)")
     f.add_argument("--jpeg-quality", type=integer(0, 100), default=90, metavar="Q", help="JPEG quality 0..100 (default 90)")
@@ -177,8 +178,8 @@ def photo_settings(args: argparse.Namespace):
     if fmt == "exr" and curve not in (None, "linear"):
         raise InputError(f"--encoding {curve}: EXR files are linear; choose --format png8, png16, tiff16 or jpeg")
     curve = curve or ("linear" if fmt == "exr" else "srgb")
-    if curve == "gamma2.2" and fmt in ("png16", "tiff16") and not args.unstated_encoding:
-        raise InputError("--encoding gamma2.2 with a 16-bit --format cannot be stated in capture.json (its response "
+    if curve in ("gamma2.2", "filmic") and fmt in ("png16", "tiff16") and not args.unstated_encoding:
+        raise InputError(f"--encoding {curve} with a 16-bit --format cannot be stated in capture.json (its response "
                          "table is 8-bit): add --unstated-encoding or use png8/jpeg")
     if args.jpeg_quality != 90 and fmt != "jpeg":
         raise InputError("--jpeg-quality needs --format jpeg")

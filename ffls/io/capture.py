@@ -24,7 +24,7 @@ import numpy as np
 
 from ffls import conventions
 from ffls.errors import InputError, atomic_output, register_input
-from ffls.io.response import load_response
+from ffls.io.response import load_response, polynomial_response_table
 
 __all__ = [
     "CAPTURE_FILE",
@@ -47,6 +47,8 @@ __all__ = [
     "ENCODING_CURVES",
     "GAMMA_RANGE",
     "encoding_from_record",
+    "record_response",
+    "CALIBRATED_RESPONSE",
     "apply_lights_encoding",
     "SPHERE_MATERIALS",
     "sphere_materials",
@@ -643,7 +645,10 @@ class Lights:
         return doc
 
 
-ENCODING_CURVES = ("linear", "srgb", "gamma")
+ENCODING_CURVES = ("linear", "srgb", "gamma", "polynomial")
+#: ``Capture.encoding`` of a capture linearised with a calibrated ``"polynomial"`` curve: its table
+#: (:func:`ffls.io.response.polynomial_response_table`) is ``Capture.response``.
+CALIBRATED_RESPONSE = {"response": "lights.json:polynomial"}
 
 
 def encoding_from_record(record: dict):
@@ -657,19 +662,25 @@ def encoding_from_record(record: dict):
     Returns
     -------
     str or dict
-        ``'linear'``, ``'srgb'`` or ``{'gamma': g}``.
+        ``'linear'``, ``'srgb'``, ``{'gamma': g}`` or, for a ``"polynomial"`` curve (its
+        ``"coefficients"``: :func:`ffls.io.response.polynomial_response`),
+        :data:`CALIBRATED_RESPONSE`, whose table :func:`record_response` gives.
 
     Raises
     ------
     ValueError
-        Not a dict, an unknown ``curve``, or a ``gamma`` curve without a finite gamma in
-        :data:`GAMMA_RANGE`.
+        Not a dict, an unknown ``curve``, a ``gamma`` curve without a finite gamma in
+        :data:`GAMMA_RANGE`, or a ``polynomial`` curve whose coefficients are not 2 to 6 finite
+        numbers making an increasing curve.
     """
     if not isinstance(record, dict):
         raise ValueError(f"expected an object, got {_short(record)}")
     curve = record.get("curve")
     if curve not in ENCODING_CURVES:
         raise ValueError(f"curve must be one of {ENCODING_CURVES}, got {_short(curve)}")
+    if curve == "polynomial":
+        record_response(record)  # ValueError when malformed
+        return dict(CALIBRATED_RESPONSE)
     if curve != "gamma":
         return curve
     g = record.get("gamma")
@@ -677,6 +688,24 @@ def encoding_from_record(record: dict):
             or not GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
         raise ValueError(f"gamma must be a number between {GAMMA_RANGE[0]} and {GAMMA_RANGE[1]}, got {_short(g)}")
     return {"gamma": float(g)}
+
+
+def record_response(record: dict) -> np.ndarray | None:
+    """The (256, 3) inverse response table of a ``"polynomial"`` encoding record; None for other curves.
+
+    Raises
+    ------
+    ValueError
+        ``"coefficients"`` not a list of 2 to 6 finite numbers, or a curve not increasing over
+        the 8-bit codes.
+    """
+    if not isinstance(record, dict) or record.get("curve") != "polynomial":
+        return None
+    c = record.get("coefficients")
+    if not isinstance(c, list) or not 2 <= len(c) <= 6 or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in c):
+        raise ValueError(f"coefficients must be a list of 2 to 6 numbers (g, a_1, ...), got {_short(c)}")
+    return polynomial_response_table(c)
 
 
 def _order_to_capture(j: _Json, names: list, capture: Capture) -> np.ndarray:
@@ -1156,7 +1185,7 @@ def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
         return capture  # floating-point images are linear by definition
     from dataclasses import replace
 
-    return replace(capture, encoding=encoding_from_record(lights.encoding))
+    return replace(capture, encoding=encoding_from_record(lights.encoding), response=record_response(lights.encoding))
 
 
 # ----------------------------------------------------------------------------- shared with other documents

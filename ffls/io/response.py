@@ -3,6 +3,11 @@
 The table is the linear exposure (relative units) that produces each 8-bit code, per channel
 (RGB). :mod:`ffls.radiance.response` recovers it; ``capture.json`` names it with
 ``"encoding": {"response": "response.npy"}``.
+
+:func:`polynomial_response` evaluates the response family that :mod:`ffls.spheres.encoding`
+calibrates from matte spheres (a gamma times the exponential of a low-order polynomial) and
+:func:`polynomial_response_table` tabulates it for 8-bit codes: the table that linearises photos
+whose ``lights.json`` names such a curve (``"curve": "polynomial"``, ``docs/formats.md``).
 """
 from __future__ import annotations
 
@@ -13,7 +18,71 @@ import numpy as np
 
 from ffls.errors import InputError, atomic_output
 
-__all__ = ["save_response", "load_response"]
+__all__ = ["save_response", "load_response", "polynomial_response", "polynomial_response_table",
+           "POLYNOMIAL_MIN_SLOPE"]
+
+#: Least local log-log slope ``d ln f / d ln x`` of a polynomial response over (0, 1]: the curve is
+#: strictly increasing (a camera's response is monotone, Mitsunaga & Nayar 1999), and no range of
+#: codes is flattened onto almost one radiance (a slope of 0.1 is a tenth of a linear file's).
+POLYNOMIAL_MIN_SLOPE = 0.1
+_TINY = 1e-6
+
+
+def polynomial_response(x, coefficients, derivative: bool = False):
+    """Inverse response ``f(x) = x ** g * exp(sum_j a_j (x ** j - 1))`` of normalised codes ``x``.
+
+    A gamma (``g``) times the exponential of a polynomial of order ``K`` in the code, which is 0 at
+    full scale, so ``f(1) = 1`` (the scale is the lights'). ``K = 0`` is the pure gamma; the
+    polynomial bends it into a camera's toe and shoulder (an S-shaped tone curve). It is the
+    low-order polynomial inverse response of Mitsunaga & Nayar (1999), written in the logarithm
+    so that it nests the gamma family and its order can be chosen by the BIC.
+
+    Parameters
+    ----------
+    x : (...) array_like
+        Stored values normalised to [0, 1].
+    coefficients : sequence of float
+        ``(g, a_1, ..., a_K)``.
+    derivative : bool
+        Also return ``f'(x)``.
+
+    Returns
+    -------
+    f : (...) float64 ndarray
+    df : (...) float64 ndarray
+        Only when ``derivative``.
+    """
+    c = np.asarray(coefficients, dtype=np.float64).ravel()
+    if c.size < 1 or not np.all(np.isfinite(c)):
+        raise ValueError(f"coefficients must be finite numbers (g, a_1, ..., a_K), got {coefficients!r}")
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, None)
+    lx = np.log(np.maximum(x, _TINY))
+    poly = np.zeros_like(x)
+    dpoly = np.zeros_like(x)  # x * d poly / dx
+    xj = np.ones_like(x)
+    for j, a in enumerate(c[1:], start=1):
+        xj = xj * x
+        poly += a * (xj - 1.0)
+        dpoly += j * a * xj
+    base = np.exp((c[0] - 1.0) * lx + poly)  # f / x
+    f = np.where(x > 0, base * x, 0.0)
+    if not derivative:
+        return f
+    return f, base * (c[0] + dpoly)
+
+
+def polynomial_response_table(coefficients) -> np.ndarray:
+    """(256, 3) float32 inverse response table of :func:`polynomial_response` for 8-bit codes.
+
+    Raises
+    ------
+    ValueError
+        Malformed coefficients, or a curve that is not increasing over the codes.
+    """
+    f = polynomial_response(np.arange(256) / 255.0, coefficients)
+    if not np.all(np.diff(f) > 0):
+        raise ValueError("the polynomial response must increase over the 8-bit codes")
+    return np.repeat(f[:, None], 3, axis=1).astype(np.float32)
 
 
 def save_response(path: str | os.PathLike, curve) -> Path:

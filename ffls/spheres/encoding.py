@@ -15,7 +15,7 @@ Debevec & Malik (1997) with known geometry in place of known exposures.
 
 Method ``'gamma'`` (:func:`calibrate_encoding_gamma`): ``f(x) = x ** gamma`` on values normalised to
 [0, 1], with ``gamma`` continuous in :data:`GAMMA_SEARCH`; the sRGB curve (IEC 61966-2-1) is a
-second candidate, scored the same way.
+second candidate, scored the same way, and a polynomial tone curve a third ("Tone curves" below).
 
 * Every (photo, sphere) pair is a *unit*: its lit pixels (``n . l > terminator``, not clipped in
   any channel, not near black, no robust outlier) are chosen once per round with the current
@@ -56,6 +56,29 @@ second candidate, scored the same way.
   a code value of it (``code_step``: 1/255 for 8-bit files), that curve is named, since the file
   cannot tell them apart.
 
+Tone curves. A camera's JPEG is rarely a pure gamma or the sRGB curve: its tone curve has a toe
+(shadows darkened) and a shoulder (highlights rolled off), an S in the logarithm, and a gamma fitted
+to it bends the spheres' shading and so their light directions. A third family is fitted on the
+same units, after the shading model is chosen: the polynomial inverse response
+``f(x) = x^g exp(sum_j a_j (x^j - 1))`` of order ``K`` (:func:`ffls.io.response.polynomial_response`;
+Mitsunaga & Nayar 1999 fit a polynomial inverse response, here in the logarithm so that ``K = 0`` is
+the gamma), jointly with every unit's lights (profiled out in closed form, as for the gamma),
+increasing by construction (linear constraints on its log-log slope), by SLSQP
+(:func:`_fit_polynomial`), for ``K`` = 1 to :data:`MAX_POLYNOMIAL_ORDER`. Its score is the BIC in
+the same units as the named curves': ``RSS`` above the best gamma's over the gamma's inflated
+noise, plus ``(K + 1) ln(n_eff)``; the lowest of linear (0 parameters), sRGB (0), gamma (1) and the
+best order (``K + 1``) is named, provided every sphere alone would pay for the polynomial: its
+``RSS`` under the curve named without it less that under the polynomial, over the noise, exceeds
+the extra parameters times ``ln(n_eff)`` on each sphere (a tone curve is the camera's and bends every sphere alike; a misfit of the shading
+model that the polynomial absorbs, a near light or an interreflection, is each sphere's own: on
+a linear file lit from near, an order-4 polynomial won the total BIC by 47 without this test).
+The noise is the gamma's (larger when the gamma misfits), which
+makes the test conservative against the curve. As for the gamma, a polynomial that decodes every
+stored value within half a code value of the best gamma, the linear or the sRGB curve is named as
+that curve. A polynomial curve is used through its 256-entry table (8-bit files; 16-bit files try
+none) and written into ``lights.json`` with its order and coefficients (``docs/formats.md``). A
+best gamma at an end of :data:`GAMMA_SEARCH` is refused only when no polynomial wins.
+
 Near lights. A light at a few metres from spheres a few centimetres in radius has a direction and
 an irradiance (``1/r^2``) that vary over each sphere: the shading bends along ``n . l``, and the
 affine model reads the bend as a curve (8-bit sRGB renders lit from 2 m were named ``gamma
@@ -85,12 +108,13 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares, minimize_scalar
+from scipy.optimize import least_squares, minimize, minimize_scalar
 
 from ffls.conventions import UP, tangent_basis
 from ffls.errors import InputError
-from ffls.io.capture import CAPTURE_FILE
+from ffls.io.capture import CALIBRATED_RESPONSE, CAPTURE_FILE
 from ffls.io.images import read_image
+from ffls.io.response import POLYNOMIAL_MIN_SLOPE, polynomial_response, polynomial_response_table
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 from ffls.spheres.combine import fit_ray_convergence
 from ffls.spheres.samples import ground_bounce
@@ -118,6 +142,11 @@ _FINE_HALF_WIDTH = 0.2
 _MAX_RMS_RATIO = 2.5  # a pair whose best RMS residual exceeds the median pair's by more is left out
 _SLOPE_STEP = 1e-4
 _TINY = 1e-6  # below the smallest 16-bit code (1.5e-5): log of a zero channel stays finite
+#: Highest order of the polynomial response tried (:func:`ffls.io.response.polynomial_response`); the
+#: BIC chooses among 1..this. Order 3 follows a filmic S-curve to a quarter of a code value
+#: (docs/spheres.md); a fifth coefficient rarely pays its ln(n_eff) on spheres' shading.
+MAX_POLYNOMIAL_ORDER = 4
+_POLY_STEP = 1e-5  # forward-difference step of the polynomial's coefficients (objective scaled to ~1)
 
 
 class EncodingCalibrationError(ValueError):
@@ -130,7 +159,7 @@ class EncodingCalibration:
 
     Attributes
     ----------
-    curve : {'linear', 'srgb', 'gamma'}
+    curve : {'linear', 'srgb', 'gamma', 'polynomial'}
         The name given to the calibrated curve (module docstring, "Naming").
     gamma : float
         The best gamma.
@@ -154,6 +183,16 @@ class EncodingCalibration:
         geometry, or no photo with two spheres).
     rms : float
         RMS residual at the best gamma, in stored values (full scale 1).
+    order : int
+        Order of the best polynomial response (module docstring, "Tone curves"); 0 when none was tried.
+    coefficients : tuple of float
+        Its coefficients ``(g, a_1, ..., a_order)`` (:func:`ffls.io.response.polynomial_response`).
+    polynomial_excess : float or None
+        Its BIC score less the best gamma's, in the same noise units as ``srgb_excess``
+        (``(RSS_poly - RSS_gamma) / noise + order * ln(n_eff)``): negative chose it over the gamma.
+        None when no polynomial was tried (16-bit files, ``max_order`` 0).
+    polynomial_rms : float or None
+        RMS residual under the best polynomial, in stored values.
     method : str
     n_spheres, n_photos, n_units, n_pixels : int
         Spheres and photos that contributed, their (photo, sphere) pairs, and pixels used.
@@ -176,23 +215,50 @@ class EncodingCalibration:
     sd_spheres: float = 0.0
     shading: str = "distant"
     shading_excess: float | None = None
+    order: int = 0
+    coefficients: tuple = ()
+    polynomial_excess: float | None = None
+    polynomial_rms: float | None = None
 
     @property
     def encoding(self):
-        """The ``Capture.encoding`` to use: ``'linear'``, ``'srgb'`` or ``{'gamma': g}``."""
+        """The ``Capture.encoding`` to use: ``'linear'``, ``'srgb'``, ``{'gamma': g}`` or, for a
+        polynomial curve, :data:`ffls.io.capture.CALIBRATED_RESPONSE` (with :attr:`response`)."""
         if self.curve == "gamma":
             return {"gamma": round(float(self.gamma), 4)}
+        if self.curve == "polynomial":
+            return dict(CALIBRATED_RESPONSE)
         return self.curve
+
+    @property
+    def response(self):
+        """The ``Capture.response`` to use: the (256, 3) table of a polynomial curve, else None."""
+        if self.curve != "polynomial":
+            return None
+        return polynomial_response_table(self._rounded_coefficients())
+
+    def _rounded_coefficients(self) -> list:
+        return [float(f"{c:.6g}") for c in self.coefficients]
+
+    def apply(self, capture):
+        """``capture`` with this encoding (and the polynomial's response table) set: a copy."""
+        return replace(capture, encoding=self.encoding, response=self.response)
 
     def record(self) -> dict:
         """The top-level ``"encoding"`` record of ``lights.json`` (``docs/formats.md``)."""
-        return {"curve": self.curve, "gamma": round(float(self.gamma), 4),
+        rec = {"curve": self.curve, "gamma": round(float(self.gamma), 4),
                 "uncertainty": round(float(self.uncertainty), 4), "method": f"spheres:{self.method}",
                 "spheres": int(self.n_spheres), "photos": int(self.n_photos), "pixels": int(self.n_pixels),
                 "srgb_excess": round(float(self.srgb_excess), 3),
                 "linear_excess": round(float(self.linear_excess), 3),
                 "bic_penalty": round(float(self.bic_penalty), 3), "rms": float(f"{self.rms:.4g}"),
                 "shading": self.shading}
+        if self.polynomial_excess is not None:
+            rec["polynomial_excess"] = round(float(self.polynomial_excess), 3)
+            rec["order"] = int(self.order)
+            rec["coefficients"] = self._rounded_coefficients()
+            rec["polynomial_rms"] = float(f"{self.polynomial_rms:.4g}")
+        return rec
 
     def summary(self) -> str:
         """One line naming the curve and the test, e.g. ``encoding: linear (fits as well as the best gamma
@@ -204,6 +270,8 @@ class EncodingCalibration:
         g = f"gamma {self.gamma:.{nd}f} +- {self.uncertainty:.{nd}f}"
         test = (f"BIC: excess misfit linear {self.linear_excess:.1f}, sRGB {self.srgb_excess:.1f}, "
                 f"free gamma's penalty {self.bic_penalty:.1f}")
+        if self.polynomial_excess is not None:
+            test += f", polynomial order {self.order} {self.polynomial_excess:+.1f}"
         if self.curve == "linear" and self.linear_excess > self.bic_penalty or \
                 self.curve == "srgb" and self.srgb_excess > self.bic_penalty:
             test += "; within half a code value of the best gamma"
@@ -213,22 +281,32 @@ class EncodingCalibration:
             return f"encoding: linear (fits as well as the best {g}; {test}; {src})"
         if self.curve == "srgb":
             return f"encoding: srgb (fits as well as the best {g}; {test}; {src})"
+        if self.curve == "polynomial":
+            return (f"encoding: curve (polynomial order {self.order}: a toe or shoulder no gamma has, best {g} "
+                    f"fits worse; {test}; {src})")
         return f"encoding: {g} (linear and sRGB fit worse; {test}; {src})"
 
 
 # ----------------------------------------------------------------------------- curves
 def _decode(raw: np.ndarray, curve) -> np.ndarray:
-    """Linear values of ``raw`` (float64, normalised) under ``curve`` (a gamma, or ``'srgb'``)."""
-    return srgb_decode(raw) if curve == "srgb" else gamma_decode(raw, curve)
+    """Linear values of ``raw`` (float64, normalised) under ``curve`` (a gamma, ``'srgb'``, or a
+    polynomial response's coefficients as a tuple)."""
+    if isinstance(curve, tuple):
+        return polynomial_response(raw, curve)
+    return srgb_decode(raw) if isinstance(curve, str) and curve == "srgb" else gamma_decode(raw, curve)
 
 
 def _curve_tables(values: np.ndarray, curve, log_values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The decoded value ``f(x)`` and the squared slope ``f'(x)^2`` of each stored value ``x`` of ``values``.
 
-    For a gamma the slope is exact (``g x^(g-1)``, from ``log_values`` when given); for the sRGB
-    curve a central difference.
+    For a gamma the slope is exact (``g x^(g-1)``, from ``log_values`` when given), and for a
+    polynomial response (``curve`` a tuple of its coefficients, :func:`ffls.io.response.polynomial_response`)
+    too; for the sRGB curve a central difference.
     """
-    if curve == "srgb":
+    if isinstance(curve, tuple):
+        f, d = polynomial_response(values, curve, derivative=True)
+        return f, d * d
+    if isinstance(curve, str) and curve == "srgb":
         h = _SLOPE_STEP
         lo = np.maximum(values - h, 0.0)
         d = (_decode(values + h, curve) - _decode(lo, curve)) / (values + h - lo)
@@ -249,7 +327,7 @@ def _grey_and_weight(codes: "_Codes", curve) -> tuple[np.ndarray, np.ndarray]:
     once per distinct (r, g, b) triple (:class:`_Codes`: a few hundred for an 8-bit sphere), and
     gathered: the same numbers as evaluating them at every pixel.
     """
-    f, d2 = _curve_tables(codes.values, curve, None if curve == "srgb" else codes.log_values)
+    f, d2 = _curve_tables(codes.values, curve, codes.log_values)
     y = f[codes.triples].mean(axis=0)
     w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
     return y[codes.index], w[codes.index]
@@ -336,8 +414,9 @@ class _Unit:
         t = codes.triples.shape[1]
         y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
         for j, curve in enumerate(curves):
-            f, d2 = _curve_tables(codes.values, curve if curve == "srgb" else float(curve),
-                                  None if curve == "srgb" else codes.log_values)
+            if not isinstance(curve, (str, tuple)):
+                curve = float(curve)
+            f, d2 = _curve_tables(codes.values, curve, codes.log_values)
             y[j] = f[codes.triples].mean(axis=0)
             w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
             w2[j] = w * w
@@ -686,11 +765,71 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
     return units, curves, grid, best, float(res.fun), n_near
 
 
+# ----------------------------------------------------------------------------- tone curves
+def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]:
+    """The polynomial response of ``order`` that minimises the units' summed ``RSS``: (coefficients, RSS).
+
+    ``start`` (a lower order's coefficients, or ``(gamma,)``) is padded with zeros. The units'
+    selections and shading columns are fixed, each unit's coefficients profiled out in closed form
+    (:meth:`_Unit.rss_grid`), so the objective is a smooth function of the ``order + 1``
+    coefficients; :func:`scipy.optimize.minimize` (SLSQP) minimises it under the linear
+    constraints that keep the curve increasing (the local log-log slope ``g + sum_j j a_j x^j`` at
+    least :data:`ffls.io.response.POLYNOMIAL_MIN_SLOPE` on 65 codes across [0, 1]), with the
+    gradient by forward differences, every shifted curve evaluated in the same pass over the units.
+    """
+    theta0 = np.zeros(order + 1)
+    theta0[:len(start)] = start[:order + 1]
+    x = np.linspace(0.0, 1.0, 65)
+    C = np.column_stack([np.ones_like(x)] + [j * x ** j for j in range(1, order + 1)])
+
+    def total(thetas) -> np.ndarray:
+        curves = [tuple(float(v) for v in t) for t in thetas]
+        return np.sum([u.rss_grid(curves) for u in used], axis=0)
+
+    scale = float(total([theta0])[0]) or 1.0
+    shifts = _POLY_STEP * np.eye(order + 1)
+
+    def fun(theta):
+        r = total([theta, *(theta + shifts)]) / scale
+        return float(r[0]), (r[1:] - r[0]) / _POLY_STEP
+
+    theta0[0] = min(theta0[0], GAMMA_SEARCH[1])
+    bounds = [(POLYNOMIAL_MIN_SLOPE, GAMMA_SEARCH[1])] + [(None, None)] * order
+    res = minimize(fun, theta0, jac=True, method="SLSQP", bounds=bounds,
+                   constraints=[{"type": "ineq", "fun": lambda t: C @ t - POLYNOMIAL_MIN_SLOPE, "jac": lambda t: C}],
+                   options={"maxiter": 200, "ftol": 1e-10})
+    ok = np.all(C @ res.x >= POLYNOMIAL_MIN_SLOPE - 1e-9) and res.x[0] <= GAMMA_SEARCH[1] + 1e-9
+    theta = res.x if ok else theta0
+    rss = float(total([theta])[0])
+    if rss > scale:  # never worse than the start (a lower order's optimum)
+        theta, rss = theta0, scale
+    return tuple(float(v) for v in theta), rss
+
+
+def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, penalty: float,
+                     max_order: int) -> tuple[int, tuple, float, float]:
+    """The polynomial response whose order the BIC chooses: (order, coefficients, RSS, score).
+
+    Orders 1..``max_order`` are fitted in turn, each started from the last; the score is the BIC
+    over the best gamma's, ``(RSS - RSS_gamma) / noise + order * penalty`` (the order's extra
+    parameters over the gamma; ``noise`` the gamma's inflated noise variance, as for the named
+    curves). The lowest score wins; ties keep the lower order.
+    """
+    best = (0, (gamma,), rss_gamma, float("inf"))
+    theta = (gamma,)
+    for order in range(1, max_order + 1):
+        theta, rss = _fit_polynomial(used, theta, order)
+        score = (rss - rss_gamma) / noise + order * penalty
+        if score < best[3]:
+            best = (order, theta, rss, score)
+    return best
+
+
 # ----------------------------------------------------------------------------- methods
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
                              seed: int = 0, code_step: float | None = None, workers: int = 1, geometry=None,
-                             up=UP) -> EncodingCalibration:
+                             up=UP, max_order: int = MAX_POLYNOMIAL_ORDER) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -730,6 +869,9 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         light is also tried (module docstring, "Near lights") in photos with two or more spheres.
     up : (3,) float
         The ground's normal in that frame (world ``+Z``), for the near model's bounce term.
+    max_order : int
+        Highest order of the polynomial response tried (module docstring, "Tone curves"); 0 tries
+        none (the gamma family and sRGB only).
 
     Returns
     -------
@@ -788,6 +930,17 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         res = minimize_scalar(lambda g: sum(u.rss(g) for u in used), bounds=(a, b), method="bounded",
                               options={"xatol": 1e-4})
         best = curve = float(res.x)
+        if rnd == 0 and max_order >= 1:
+            # a tone curve no gamma follows: the second round selects the pixels (and tests each
+            # unit's shading, min_r2) with the polynomial when it would be named (a rough BIC: the
+            # residual variance uninflated); the naming below is made on the final pixels
+            n_sel = sum(int(u.selected.sum()) for u in used)
+            s2_pilot = float(res.fun) / max(n_sel - sum(u.A.shape[1] for u in used) - 1, 1)
+            pen = math.log(max(n_sel, 3))
+            order, coefs, _, score = _best_polynomial(used, best, float(res.fun), s2_pilot, pen, max_order)
+            named = min((sum(u.rss(c) for u in used) - float(res.fun)) / s2_pilot for c in (1.0, "srgb"))
+            if order and pen + score < min(named, pen):
+                curve = coefs
         # the second round's grid (for the bootstrap): fine, around the first round's minimum
         grid = np.arange(max(lo, best - _FINE_HALF_WIDTH), min(hi, best + _FINE_HALF_WIDTH) + 0.5 * _GRID_STEP,
                          _GRID_STEP)
@@ -808,10 +961,8 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
                 fit = _profile_statistics(used, curves, profiled, best, rss_best, _NEAR_PHOTO_PARAMS * n_near,
                                           n_bootstrap, seed)
     # (checked only now: a near light can bend a linear file's shading past the range's end under
-    # the distant model)
-    if best <= lo + _GRID_STEP or best >= hi - _GRID_STEP:
-        raise EncodingCalibrationError(
-            f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})")
+    # the distant model; and a polynomial curve may still fit: checked after it)
+    at_end = best <= lo + _GRID_STEP or best >= hi - _GRID_STEP
     photos = sorted({u.photo for u in used})
     n_pix, s2, inflation, sd_curv, sd_boot, sd_spheres = (fit.n_pixels, fit.s2, fit.inflation, fit.sd_curvature,
                                                           fit.sd_bootstrap, fit.sd_spheres)
@@ -821,7 +972,39 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     excess = (sum(u.rss("srgb") for u in used) - rss_best) / noise
     lin_excess = (sum(u.rss(1.0) for u in used) - rss_best) / noise
     penalty = fit.penalty
-    name, _ = min((("linear", lin_excess), ("srgb", excess), ("gamma", penalty)), key=lambda t: t[1])
+    scores = [("linear", lin_excess), ("srgb", excess), ("gamma", penalty)]
+    order, coefs, poly_excess, poly_rms = 0, (), None, None
+    if max_order >= 1:
+        # a camera's tone curve (toe, shoulder) that no gamma follows: a polynomial response, its order
+        # chosen by the BIC, scored against the named curves in the same units (module docstring)
+        order, coefs, rss_poly, score = _best_polynomial(used, best, rss_best, noise, penalty, max_order)
+        if order:
+            poly_excess, poly_rms = score, math.sqrt(rss_poly / n_pix)
+            # a tone curve is the camera's: every sphere alone must pay for its parameters. A misfit
+            # of the shading model (a near light, interreflection) that the polynomial absorbs is
+            # each sphere's own, and does not lower every sphere's misfit that much (module docstring)
+            # over the curve that would be named without it (linear, sRGB: no parameter; the gamma: one)
+            base, _ = min(scores, key=lambda t: t[1])
+            base_curve, base_params = {"linear": (1.0, 0), "srgb": ("srgb", 0), "gamma": (best, 1)}[base]
+            gain: dict[int, float] = {}
+            for u in used:
+                gain[u.sphere] = gain.get(u.sphere, 0.0) + u.rss(base_curve) - u.rss(coefs)
+            if min(gain.values()) / noise > (order + 1 - base_params) * penalty:
+                scores.append(("polynomial", penalty + score))
+    name, _ = min(scores, key=lambda t: t[1])
+    if at_end and name != "polynomial":
+        raise EncodingCalibrationError(
+            f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})"
+            + ("" if poly_excess is None else " and no polynomial curve fits better"))
+    if name == "polynomial" and code_step is not None:
+        # as below: a simpler curve that decodes every stored value within half a code of the
+        # polynomial is the same curve as far as the file can tell
+        x = np.linspace(0.0, 1.0, 1025)
+        fx = polynomial_response(x, coefs)
+        gap, closest = min((float(np.max(np.abs(_decode(x, c) - fx))), n)
+                           for c, n in ((best, "gamma"), (1.0, "linear"), ("srgb", "srgb")))
+        if gap <= 0.5 * code_step:
+            name = closest
     if name == "gamma" and code_step is not None:
         # a named curve that decodes every stored value within half a code of the best gamma is the
         # same curve as far as the file can tell (the BIC is blind to a misfit the model shares)
@@ -836,7 +1019,9 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
         rms=math.sqrt(rss_best / n_pix), method="gamma",
         n_spheres=len({u.sphere for u in used}), n_photos=len(photos), n_units=len(used), n_pixels=n_pix,
         sd_spheres=sd_spheres, shading=shading,
-        shading_excess=None if shading_excess is None else float(shading_excess))
+        shading_excess=None if shading_excess is None else float(shading_excess),
+        order=order, coefficients=coefs, polynomial_excess=None if poly_excess is None else float(poly_excess),
+        polynomial_rms=poly_rms)
 
 
 def calibrate_encoding(raw, normals, method: str = "gamma", **kwargs) -> EncodingCalibration:
@@ -963,6 +1148,9 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
         raw.append([np.asarray(img.pixels[s.rows, s.cols], dtype=np.float64) for s in samples])
     try:
         kwargs.setdefault("code_step", 1.0 / (2 ** first.bit_depth - 1))
+        if first.bit_depth != 8:
+            # a polynomial curve linearises the photos through a 256-entry response table (8-bit codes)
+            kwargs.setdefault("max_order", 0)
         if getattr(capture, "camera_model", "pinhole") != "orthographic":
             # the spheres' world centres and radii place a near light (an orthographic camera sees no depth)
             kwargs.setdefault("geometry", [(s.center, s.radius) for s in samples])

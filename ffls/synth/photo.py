@@ -11,7 +11,8 @@ Each effect is one pure function on arrays, applied in the order a camera applie
    noise modeling and fitting for single-image raw-data", IEEE TIP 2008): shot noise of variance
    ``gain * x`` plus read noise of standard deviation ``read_noise``, in full-scale units;
 4. :func:`encode`: clipping at full scale (the sensor saturates) and the transfer curve
-   (``'linear'``, ``'srgb'`` IEC 61966-2-1, or ``'gamma2.2'``, ``x ** (1 / 2.2)``);
+   (``'linear'``, ``'srgb'`` IEC 61966-2-1, ``'gamma2.2'``, ``x ** (1 / 2.2)``, or ``'filmic'``, a
+   camera-like S-shaped tone curve that is neither sRGB nor a gamma: :func:`filmic_encode`);
 5. :func:`quantise`: to 8 or 16 bits;
 6. :func:`write_photo`: EXR (linear half or float), PNG (8/16 bits), TIFF (16 bits) or JPEG at a
    given quality (``cv2.imencode``), always written atomically.
@@ -45,10 +46,17 @@ __all__ = [
     "develop",
     "write_photo",
     "gamma_response_table",
+    "filmic_encode",
+    "filmic_decode",
+    "response_table",
 ]
 
 #: Transfer curves of :func:`encode`.
-CURVES = ("linear", "srgb", "gamma2.2")
+CURVES = ("linear", "srgb", "gamma2.2", "filmic")
+#: Hable's (2010) filmic curve: shoulder strength, linear strength, linear angle, toe strength, toe
+#: numerator and denominator, and the linear white point (the scene value that reaches full scale).
+_HABLE = (0.15, 0.50, 0.10, 0.20, 0.02, 0.30)
+_HABLE_WHITE = 11.2
 #: File formats: name -> (extension, bits per channel; None = float EXR).
 FORMATS = {"exr": ("exr", None), "png8": ("png", 8), "png16": ("png", 16), "tiff16": ("tiff", 16),
            "jpeg": ("jpg", 8)}
@@ -63,7 +71,7 @@ class PhotoSettings:
     Parameters
     ----------
     file_format : {'exr', 'png8', 'png16', 'tiff16', 'jpeg'}
-    curve : {'linear', 'srgb', 'gamma2.2'}
+    curve : {'linear', 'srgb', 'gamma2.2', 'filmic'}
         Transfer curve of integer formats; EXR is always linear.
     exposure : float
         Scale from scene radiance to full scale (1.0 saturates).
@@ -198,6 +206,41 @@ def sensor_noise(img, rng: np.random.Generator, shot_gain: float, read_noise: fl
     return x
 
 
+def _hable(x: np.ndarray) -> np.ndarray:
+    A, B, C, D, E, F = _HABLE
+    return (x * (A * x + C * B) + D * E) / (x * (A * x + B) + D * F) - E / F
+
+
+def filmic_encode(x) -> np.ndarray:
+    """A camera-like tone curve: Hable's filmic operator (2010), then the sRGB encoding.
+
+    ``encoded = srgb(h(W x) / h(W))`` with Hable's ``h(x) = (x (A x + C B) + D E) / (x (A x + B) +
+    D F) - E / F`` and his published constants (``A`` 0.15, ``B`` 0.50, ``C`` 0.10, ``D`` 0.20,
+    ``E`` 0.02, ``F`` 0.30, white point ``W`` 11.2). Its toe darkens the shadows and its shoulder
+    rolls off the highlights: an S-shaped curve in the logarithm, as in-camera JPEG rendering
+    applies, that no gamma and not the sRGB curve follows (from 5 to 8 code values apart on
+    [0.03, 0.97]). Full scale stays 1.
+
+    Parameters
+    ----------
+    x : (...) array_like
+        Linear values in [0, 1] (clipped).
+
+    Returns
+    -------
+    (...) float64 ndarray in [0, 1]
+    """
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.clip(srgb_encode(_hable(_HABLE_WHITE * x) / _hable(np.float64(_HABLE_WHITE))), 0.0, 1.0)
+
+
+def filmic_decode(values) -> np.ndarray:
+    """Inverse of :func:`filmic_encode` on [0, 1] values (float64): monotone interpolation of a
+    dense table of the curve (2^16 + 1 samples; it is strictly increasing)."""
+    t = np.linspace(0.0, 1.0, 65537)
+    return np.interp(np.asarray(values, dtype=np.float64), filmic_encode(t), t)
+
+
 def encode(img, curve: str) -> np.ndarray:
     """Clip a linear image to [0, 1] (saturation) and apply the transfer curve; float64 in [0, 1]."""
     x = np.clip(np.asarray(img, dtype=np.float64), 0.0, 1.0)
@@ -207,6 +250,8 @@ def encode(img, curve: str) -> np.ndarray:
         return np.clip(srgb_encode(x), 0.0, 1.0)
     if curve == "gamma2.2":
         return x ** (1.0 / _GAMMA)
+    if curve == "filmic":
+        return filmic_encode(x)
     raise ValueError(f"curve must be one of {CURVES}, not {curve!r}")
 
 
@@ -219,6 +264,8 @@ def decode(values, curve: str) -> np.ndarray:
         return srgb_decode(x).astype(np.float64)
     if curve == "gamma2.2":
         return np.clip(x, 0.0, None) ** _GAMMA
+    if curve == "filmic":
+        return filmic_decode(x)
     raise ValueError(f"curve must be one of {CURVES}, not {curve!r}")
 
 
@@ -282,3 +329,9 @@ def gamma_response_table(gamma: float = _GAMMA) -> np.ndarray:
     The ``{"response": file}`` form of ``capture.json``'s ``encoding`` (docs/formats.md).
     """
     return (np.arange(256) / 255.0) ** float(gamma)
+
+
+def response_table(curve: str) -> np.ndarray:
+    """(256,) float64 inverse response of 8-bit codes under ``curve`` (:func:`decode` of ``v / 255``):
+    what ``capture.json`` states, as ``{"response": file}``, for curves that are neither sRGB nor linear."""
+    return decode(np.arange(256) / 255.0, curve)

@@ -51,7 +51,7 @@ from ffls.conventions import check_hemisphere, in_domain, normalize
 from ffls.errors import InputError, atomic_output
 from ffls.lightmaps.lightmap import as_samples
 from ffls.synth.geometry import Box, Capsule, Ground, Material, Sphere, closest_hit, occluded
-from ffls.synth.photo import PhotoSettings, develop, gamma_response_table, write_photo
+from ffls.synth.photo import PhotoSettings, develop, response_table, write_photo
 
 __all__ = [
     "SynthScene",
@@ -1176,16 +1176,17 @@ def _write_json(path: Path, obj):
 
 
 def _capture_encoding(folder: Path, photo: PhotoSettings):
-    """``capture.json``'s ``encoding`` for ``photo`` ("auto" = left out); writes ``response.npy`` for gamma 2.2."""
+    """``capture.json``'s ``encoding`` for ``photo`` ("auto" = left out); writes ``response.npy`` for gamma 2.2
+    and the filmic curve."""
     if not photo.state_encoding:
         return "auto"
-    if photo.curve != "gamma2.2":
+    if photo.curve not in ("gamma2.2", "filmic"):
         return photo.curve
     if photo.bits != 8:
-        raise ValueError("capture.json can state gamma 2.2 only for 8-bit files (a 256-entry response); "
-                         "use state_encoding=False for 16-bit gamma 2.2")
+        raise ValueError(f"capture.json can state {photo.curve} only for 8-bit files (a 256-entry response); "
+                         f"use state_encoding=False for 16-bit {photo.curve}")
     with atomic_output(folder / RESPONSE_FILE) as tmp:
-        np.save(tmp, gamma_response_table())
+        np.save(tmp, response_table(photo.curve))
     return {"response": RESPONSE_FILE}
 
 
