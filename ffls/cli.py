@@ -125,12 +125,22 @@ def _quiet_opencv() -> None:
             cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
 
 
+def _innermost(p: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The deepest parser ``args`` went through (``ffls probe pocs``, not ``ffls probe``)."""
+    while True:
+        subs = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        chosen = getattr(args, subs[0].dest, None) if subs else None
+        if chosen not in (subs[0].choices if subs else {}):
+            return p
+        p = subs[0].choices[chosen]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser, parsers = _build()
     try:
         args, extra = parser.parse_known_args(argv)
-        if extra:  # named by the subcommand that was given them, not by ``ffls``
-            (parsers.get(getattr(args, "command", None)) or parser).error(
+        if extra:  # named by the (innermost) subcommand that was given them, not by ``ffls``
+            _innermost(parsers.get(getattr(args, "command", None)) or parser, args).error(
                 f"unrecognized arguments: {' '.join(extra)}")
     except SystemExit as e:  # a bad argument: one line already printed; --help and --version exit as usual
         if e.code in (0, None):

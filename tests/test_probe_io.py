@@ -102,6 +102,8 @@ BAD = [
     ({"sphere": {"center": [0, 0, 0]}}, "sphere.radius"),
     ({"sphere": {"center": [0, 0]}, "x": 1}, "sphere.center"),
     ({"sphere": {"radius_px": 3}}, "sphere.radius_px"),
+    ({"sphere": {"center_px": [10, 10], "radius_px": 1e308}}, "sphere.radius_px"),
+    ({"sphere": {"center_px": [1e300, 10]}}, "sphere.center_px"),
     ({"sphere": {"reflectance": 0}}, "sphere.reflectance"),
     ({"sphere": {"size": 1}}, "sphere"),
     ({"camera": {"model": "orthographic"}, "sphere": {"center": [0, 0, 0], "radius": 1}}, "sphere.center"),

@@ -46,6 +46,7 @@ def run(args) -> int:
     R = rotation_from_args(args)
     copies = 2 if out.suffix.lower() == ".exr" and mask is None else 4  # the result, the writer's copy, the tone map's
     r = open_streamed_from_args(args, capture, lights, NAME, copies)
+    weighting = args.weighting  # the scheme used (--quality auto may choose another)
     if r is not None:  # tile by tile from the store
         r.set_lightmap(lightmap)
         r.set_rotation(R)
@@ -54,6 +55,7 @@ def run(args) -> int:
         r.release()
     else:
         q = resolve_quality(args, capture, lights, lightmap, R, command=NAME)
+        weighting = q.weighting
         storage = None if args.precision is None and args.quality != "auto" else q.precision
         r = CpuRelighter.from_capture(capture, lights, quality=q, storage=storage, cell_res=args.cells_res or None,
                                       cell_k=4, cell_max_res=1024)
@@ -73,5 +75,5 @@ def run(args) -> int:
     if learnt_kernel(r):
         print(f"ffls relight: {learnt_kernel(r)}")
     print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "
-          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used, {args.weighting} weighting)")
+          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used, {weighting} weighting)")
     return 0

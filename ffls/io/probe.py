@@ -30,7 +30,7 @@ from ffls.errors import InputError, register_input
 from ffls.io.capture import JsonReader, check_file_name, parse_camera, parse_encoding
 
 __all__ = ["PROBE_FILE", "PROBE_FORMAT", "SPHERE_MATERIALS", "ProbeCamera", "ProbeSphere", "ProbeImage", "ProbeView",
-           "ProbePlane", "ProbeMesh", "ProbeOccluder", "Probe", "load_probe", "read_mesh"]
+           "ProbePlane", "ProbeMesh", "ProbeOccluder", "Probe", "load_probe", "read_mesh", "MAX_PIXELS"]
 
 PROBE_FILE = "probe.json"
 PROBE_FORMAT = "ffls-probe"
@@ -38,6 +38,8 @@ PROBE_FORMAT = "ffls-probe"
 SPHERE_MATERIALS = ("mirror", "diffuse")
 _TOP_KEYS = {"format", "version", "images", "camera", "encoding", "sphere", "plane", "occluder", "object",
              "surface_image"}
+#: The largest pixel coordinate or radius a pixel hint may give (no sensor is wider).
+MAX_PIXELS = 1e6
 _SPHERE_KEYS = {"center", "radius", "center_px", "radius_px", "material", "albedo", "reflectance"}
 _MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
@@ -333,11 +335,13 @@ def _sphere(j: JsonReader, value, key: str = "sphere", base: ProbeSphere | None 
     if "radius" in s:
         kw["radius"] = j.number(s["radius"], key + ".radius", positive=True)
     if "center_px" in s:
-        kw["center_px"] = j.array(s["center_px"], key + ".center_px", (2,))
+        kw["center_px"] = j.array(s["center_px"], key + ".center_px", (2,), max_abs=MAX_PIXELS)
     if "radius_px" in s:
         if "center_px" not in s:
             j.fail(key + ".radius_px", "given without center_px")
         kw["radius_px"] = j.number(s["radius_px"], key + ".radius_px", positive=True)
+        if kw["radius_px"] > MAX_PIXELS:
+            j.fail(key + ".radius_px", f"must be at most {MAX_PIXELS:g} px (a pixel circle), got {s['radius_px']!r}")
     if "center" in kw and kw.get("radius") is None:
         j.fail(key + ".radius", "missing key (a world centre needs the sphere's radius)")
     if "material" in s:
