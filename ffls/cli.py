@@ -126,13 +126,13 @@ def _quiet_opencv() -> None:
 
 
 def _innermost(p: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
-    """The deepest parser ``args`` went through (``ffls probe pocs``, not ``ffls probe``)."""
-    while True:
-        subs = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
-        chosen = getattr(args, subs[0].dest, None) if subs else None
-        if chosen not in (subs[0].choices if subs else {}):
-            return p
-        p = subs[0].choices[chosen]
+    """A parser named after the deepest subcommand ``args`` went through (``ffls probe pocs``, not
+    ``ffls probe``): a command module with subcommands names their attribute ``SUBCOMMAND_DEST``."""
+    from ffls.commands import find_command
+
+    mod = find_command(getattr(args, "command", None) or "")
+    chosen = getattr(args, getattr(mod, "SUBCOMMAND_DEST", ""), None) if mod is not None else None
+    return OneLineParser(prog=f"{p.prog} {chosen}") if isinstance(chosen, str) else p
 
 
 def main(argv: list[str] | None = None) -> int:

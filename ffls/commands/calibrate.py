@@ -5,6 +5,8 @@ import json
 import sys
 
 NAME = "calibrate"
+#: The attribute that names the chosen subcommand (``ffls calibrate WHAT``).
+SUBCOMMAND_DEST = "what"
 HELP = "calibrate the camera: response curve (bracketed photos) or intrinsics (ChArUco/chessboard photos)"
 DESCRIPTION = (
     "ffls calibrate response BRACKET_DIR [-o response.npy]: Debevec-Malik inverse response from a folder of "

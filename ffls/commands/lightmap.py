@@ -5,6 +5,8 @@ import warnings
 from pathlib import Path
 
 NAME = "lightmap"
+#: The attribute that names the chosen subcommand (``ffls lightmap ACTION``).
+SUBCOMMAND_DEST = "action"
 HELP = "inspect, convert or make light maps (info | convert | make)"
 DESCRIPTION = (
     "info MAP: size, layout, statistics and integrated irradiance of a light map (a file or a "

@@ -5,6 +5,8 @@ import argparse
 from pathlib import Path
 
 NAME = "probe"
+#: The attribute that names the chosen method (``ffls probe METHOD``): error lines name ``ffls probe METHOD``.
+SUBCOMMAND_DEST = "method"
 HELP = "estimate a light map from photos of a probe (mirror, diffuse, shadow, pocs), or merge an exposure bracket"
 DESCRIPTION = (
     "probe METHOD FOLDER -o MAP.exr: FOLDER holds probe.json (docs/formats.md); the map is a lat-long "
