@@ -360,13 +360,18 @@ class ErrorModel:
         weights : (k,) float, optional
             The combination's weights of these spheres (normalised here).
         """
-        stat = np.atleast_1d(np.asarray(stat_sigma_deg, dtype=np.float64))
-        idx = None if spheres is None else np.atleast_1d(spheres)
-        v = self.sphere_sigma_deg(stat, idx) ** 2
-        w = _weights(v, weights)
+        stat, idx, v, w = self._combination(stat_sigma_deg, spheres, weights)
         if w is None:
             return float("inf")
         return float(np.sqrt(np.sum(w * w * v) + self.common_sigma_deg(stat, idx) ** 2))
+
+    def _combination(self, stat_sigma_deg, spheres, weights):
+        """``(stat, idx, v, w)``: the spheres' statistics and indices as arrays, their variances
+        under this model and the combination's normalised weights (None when not finite)."""
+        stat = np.atleast_1d(np.asarray(stat_sigma_deg, dtype=np.float64))
+        idx = None if spheres is None else np.atleast_1d(spheres)
+        v = self.sphere_sigma_deg(stat, idx) ** 2
+        return stat, idx, v, _weights(v, weights)
 
     def budget(self, stat_sigma_deg, spheres=None, weights=None) -> dict:
         """The terms of a photo's cone (:meth:`photo_sigma_deg`), each a per-axis standard deviation
@@ -392,10 +397,7 @@ class ErrorModel:
             ``cone_deg`` (:meth:`cone_deg` of ``sigma_deg``). Infinite terms where the spheres'
             variances are not finite.
         """
-        stat = np.atleast_1d(np.asarray(stat_sigma_deg, dtype=np.float64))
-        idx = None if spheres is None else np.atleast_1d(spheres)
-        v = self.sphere_sigma_deg(stat, idx) ** 2
-        w = _weights(v, weights)
+        stat, idx, v, w = self._combination(stat_sigma_deg, spheres, weights)
         common_floor = float(self.common_floor_deg) if self.common_ratio is not None else 0.0
         if w is None:
             inf = float("inf")
@@ -404,11 +406,12 @@ class ErrorModel:
                     "cone_deg": inf}
         g = np.zeros(stat.shape) if idx is None else self.centre_sigma_deg(idx).reshape(stat.shape)
         w2 = w * w
-        sigma = self.photo_sigma_deg(stat, idx, weights)
+        common = float(self.common_sigma_deg(stat, idx))
+        sigma = np.sqrt(np.sum(w2 * v) + common ** 2)  # photo_sigma_deg's, without computing v and w again
         return {"fit_deg": float(np.sqrt(np.sum(w2 * (self.scale * stat) ** 2))),
                 "centre_deg": float(np.sqrt(np.sum(w2 * g * g))),
                 "floor_deg": float(np.sqrt(np.sum(w2)) * self.floor_deg),
-                "common_deg": float(self.common_sigma_deg(stat, idx)), "common_floor_deg": common_floor,
+                "common_deg": common, "common_floor_deg": common_floor,
                 "sigma_deg": float(sigma), "cone_factor": float(self.cone_factor),
                 "cone_deg": float(self.cone_deg(sigma))}
 
