@@ -165,6 +165,20 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
     return f, np.asarray(res)
 
 
+def _pixels(normals, radiance, albedo):
+    """``(n, b, rho, g)``: checked normals ``(m, 3)``, RGB radiance, albedo and irradiance ``pi b / rho``.
+
+    Raises ``InputError`` with no pixels.
+    """
+    n = check_normals(normals)
+    m = n.shape[0]
+    if m == 0:
+        raise InputError("no pixels to fit")
+    b = as_rgb_pixels(radiance, m)
+    rho = broadcast_albedo(albedo, m)
+    return n, b, rho, np.pi * b / rho
+
+
 def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int = 50, upper: float | None = None,
                 delta: float = 0.0, order: str = "random", seed: int = 0, max_pixels: int | None = 2000,
                 visibility=None) -> PocsResult:
@@ -199,18 +213,13 @@ def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int
     -------
     PocsResult
     """
-    n = check_normals(normals)
+    n, b, rho, g = _pixels(normals, radiance, albedo)
     m = n.shape[0]
-    if m == 0:
-        raise InputError("no pixels to fit")
-    b = as_rgb_pixels(radiance, m)
-    rho = broadcast_albedo(albedo, m)
     h = int(height)
     if h < 2:
         raise ValueError(f"POCS grid height must be >= 2, not {height!r}")
     dirs = latlong_directions(2 * h, h).reshape(-1, 3)
     sa = latlong_solid_angles(h).ravel()
-    g = np.pi * b / rho  # irradiance
     H = lambert_matrix(n, dirs, visibility) * sa[None, :]
     use = np.arange(m)
     if max_pixels is not None and m > int(max_pixels):
@@ -304,17 +313,12 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
     """
     from ffls.probes.sources import cell_solid_angles
 
-    n = check_normals(normals)
+    n, b, rho, g = _pixels(normals, radiance, albedo)
     m = n.shape[0]
-    if m == 0:
-        raise InputError("no pixels to fit")
     if directions is None:
         raise ValueError("directions are required")
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
-    b = as_rgb_pixels(radiance, m)
-    rho = broadcast_albedo(albedo, m)
-    g = np.pi * b / rho  # irradiance
     H = lambert_matrix(n, d)
     use = pixel_subset(m, max_pixels, seed)
     hi = None if upper is None else float(upper) * cell_solid_angles(d, "full")
