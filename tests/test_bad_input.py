@@ -710,3 +710,13 @@ def test_synth_refuses_a_folder_that_is_not_a_capture(tmp_path, capfd):
     assert (d / "notes.txt").read_text() == "keep me"
     err = capfd.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "capture.json" in err[0]
+
+
+def test_lights_error_in_a_child_process_is_one_line_without_progress_bars(ws, tmp_path):
+    # stderr is a pipe here, as in a log or CI: no bar may be drawn before the one-line answer
+    p = _child(["lights", ws["few_nan"], "-o", tmp_path / "l.json"], tmp_path)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ffls lights: error: ") and "img_0005" in lines[0], err
+    assert not (tmp_path / "l.json").exists()

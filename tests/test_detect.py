@@ -239,6 +239,21 @@ def test_wrong_radius_against_scene_scale():
         detect.find_spheres(img, K0, DIST0, R0 * 3, hints=hints_w)
 
 
+def test_a_radius_or_focal_length_off_by_orders_of_magnitude_is_named_before_any_search():
+    img = render(K0, DIST0, CENTRES0, R0)
+    wfc = np.array(detect.DEFAULT_WORLD_FROM_CAMERA)
+    wfc[:3, 3] = [0.0, -1.2, 0.0]
+    # no sphere of this radius can lie near the scene at any pixel radius the photo can hold
+    with pytest.raises(InputError, match=r"sphere_radius or camera.K in capture.json looks wrong: .* but the scene "
+                                         r"centre is at 1.2"):
+        detect.find_spheres(img, K0, DIST0, R0 * 1e4, world_from_camera=wfc)
+    # overflowing distances are named even where the default frame gives no scene scale
+    with pytest.raises(InputError, match="beyond any number"):
+        detect.find_spheres(img, K0, DIST0, 1e308)
+    with pytest.raises(InputError, match="beyond any number"):
+        detect.find_spheres(img, K0, DIST0, 1e308, world_from_camera=wfc)
+
+
 def test_nonpositive_radius():
     with pytest.raises(InputError, match="sphere_radius"):
         detect.find_spheres(np.ones((10, 10, 3)), K0, None, -1.0)

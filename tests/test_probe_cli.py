@@ -81,3 +81,18 @@ def test_bad_input_one_line(tmp_path, capsys, case):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "error" in err[0] and "Traceback" not in err[0], err
     assert not (tmp_path / "m.exr").exists()
+
+
+def test_a_coarse_map_still_reports_the_blind_spot(probe_map):
+    # at --size 4 a texel is 45 degrees tall: it holds the camera cone whole and was seen through its
+    # other directions, so the blind spot is measured on a finer unwrap, the same as a fine map's
+    from ffls.probes import estimate_lightmap
+
+    folder = probe_map.parent
+    fine = estimate_lightmap(folder, method="mirror", height=64)
+    coarse = estimate_lightmap(folder, method="mirror", height=4)
+    assert fine.details["blind_spot_sr"] > 0.05
+    assert coarse.details["blind_spot_sr"] == pytest.approx(fine.details["blind_spot_sr"], rel=1e-6)
+    assert coarse.details["camera_cone_sr"] == pytest.approx(fine.details["camera_cone_sr"], rel=1e-6)
+    assert not any("blind spot: none" in n for n in coarse.notes), coarse.notes
+    assert coarse.seen.shape == (4, 8)

@@ -117,6 +117,12 @@ def test_bad_input(diffuse_folder, shadow_folder, tmp_path):
     with pytest.raises(InputError) as e:
         estimate_lightmap(far, "shadow", height=16, nodes=46)
     assert "shadow" in str(e.value) and "probe.json" in str(e.value) and "\n" not in str(e.value)
+    # an occluder so large that it stands between the camera and every pixel of the plane
+    huge = dict(doc, occluder={"box": {"center": [0, 0, 0.25], "size": [1e308, 1e308, 1e308]}})
+    (far / "probe.json").write_text(json.dumps(huge))
+    with pytest.raises(InputError, match="occluder.box hides every pixel of the plane") as e:
+        estimate_lightmap(far, "shadow", height=16, nodes=46)
+    assert "\n" not in str(e.value)
     for drop, key in (("plane", "plane"), ("occluder", "occluder")):
         (far / "probe.json").write_text(json.dumps({k: v for k, v in doc.items() if k != drop}))
         with pytest.raises(InputError, match=key):

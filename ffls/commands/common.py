@@ -552,6 +552,15 @@ def check_cells_res(res, directions, hemisphere, flag: str = "--cells-res") -> N
 _NOTES: contextvars.ContextVar = contextvars.ContextVar("ffls_notes", default=None)
 
 
+def show_progress(args) -> bool:
+    """Whether a command draws progress bars on stderr.
+
+    Only for a person at a terminal: not with ``--no-progress``, not when stderr is a file or a
+    pipe, and not under CI (``CI`` set), where a bar's lines would bury the one-line answer.
+    """
+    return not getattr(args, "no_progress", False) and sys.stderr.isatty() and not os.environ.get("CI")
+
+
 def print_notes(command: str, *notes) -> None:
     """Print each non-empty informational line as ``ffls COMMAND: NOTE`` on stderr.
 

@@ -32,7 +32,7 @@ def add_arguments(p):
                         "cluster of --workers processes (docs/scale.md)")
     p.add_argument("--plot", default=None, type=output_path((".png",)), metavar="PLOT.png",
                    help="draw the accepted directions and their Voronoi cells on the hemisphere")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (bars are drawn only on a terminal, and not when CI is set)")
     p.add_argument("--lp", default=None, type=output_path((".lp",)), metavar="OUT.lp",
                    help="also write the accepted lights as an RTI .lp file (camera frame; docs/formats.md)")
 
@@ -133,16 +133,17 @@ def run(args) -> int:
     from ffls.io.capture import load_capture, save_lights
     from ffls.spheres.estimate import estimate_lights
 
-    from ffls.commands.common import print_notes
+    from ffls.commands.common import print_notes, show_progress
 
     cap = load_capture(args.capture)
+    progress = show_progress(args)
     decoded = None
     cluster = bool(getattr(args, "scheduler", None))
     if not cluster:  # every photo decoded once: the encoding calibration, the detection's reductions, the first pass
         from ffls.spheres.estimate import decode_photos
 
         bar = None
-        if not args.no_progress:
+        if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=len(cap.image_paths), desc="decoding", unit="img")
@@ -151,7 +152,7 @@ def run(args) -> int:
         finally:
             if bar is not None:
                 bar.close()
-    cap, spheres, calibration = calibrate_if_unknown(cap, progress=not args.no_progress, decoded=decoded,
+    cap, spheres, calibration = calibrate_if_unknown(cap, progress=progress, decoded=decoded,
                                                      workers=args.workers or os.cpu_count() or 1)
     if calibration is not None:
         print(calibration.summary())
@@ -168,13 +169,13 @@ def run(args) -> int:
         from ffls.cluster.lights import estimate_lights_dask
 
         remote = None if args.scheduler == "local" else args.scheduler
-        with open_client(args.workers, remote, progress=not args.no_progress) as runner:
+        with open_client(args.workers, remote, progress=progress) as runner:
             lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce)
     else:
         if cap.world_from_camera_is_default:
             print_notes(NAME, "capture.json gives no camera.world_from_camera: the world's up is taken as the "
                               "image's, so the ground bounce is fitted without the spheres' own shadows")
-        lights = estimate_lights(cap, spheres=spheres, progress=not args.no_progress, workers=args.workers,
+        lights = estimate_lights(cap, spheres=spheres, progress=progress, workers=args.workers,
                                  model=args.model, bounce=args.bounce, decoded=decoded)
     if calibration is not None:
         lights.encoding = calibration.record()

@@ -28,6 +28,7 @@ from ffls.io.response import load_response, polynomial_response_table
 
 __all__ = [
     "CAPTURE_FILE",
+    "MAX_FOCAL_PX",
     "LIGHTS_FILE",
     "Capture",
     "load_capture",
@@ -68,6 +69,9 @@ _ENCODING_FORMS = "'srgb', 'linear', {\"gamma\": g} or {\"response\": \"file.npy
 #: Gammas accepted in ``{"gamma": g}`` (also by :func:`ffls.radiance.encoding.gamma_decode`): wider is no camera's.
 GAMMA_RANGE = (0.2, 5.0)
 _DIST_LENGTHS = (4, 5, 8, 12, 14)
+#: The largest entry of ``camera.K`` (pixels): a 100 m focal length on 1 um pixels; beyond it no
+#: lens and sensor exist, and the projection's products overflow.
+MAX_FOCAL_PX = 1e8
 _CAPTURE_KEYS = {"format", "version", "images", "image_size", "encoding", "camera", "sphere_radius",
                  "spheres", "sphere_count", "scene_center", "hemisphere", "units"}
 
@@ -344,7 +348,7 @@ def _parse_camera(j: _Json, cam) -> tuple:
     K = None
     dist = np.zeros(5)
     if "K" in cam:
-        K = j.array(cam["K"], "camera.K", (3, 3))
+        K = j.array(cam["K"], "camera.K", (3, 3), max_abs=MAX_FOCAL_PX)
         if not (K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1])):
             j.fail("camera.K", "expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
     elif "dist" in cam:

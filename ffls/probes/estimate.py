@@ -5,6 +5,7 @@ paper's method on arrays and returns a :class:`ffls.probes.result.LightmapEstima
 """
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from ffls.conventions import normalize
@@ -30,6 +31,10 @@ def _integer_images(view) -> bool:
 
 #: Default radius (scene units, metres) of what stands at the camera: the photographer and the tripod.
 CAMERA_SIZE = 0.5
+#: The coarsest map height at which the mirror method measures its blind spot: below it a texel
+#: (45 degrees tall at height 4) holds the camera cone whole and counts as seen through its other
+#: directions, so smaller maps are measured on a second unwrap at this height.
+BLIND_SPOT_HEIGHT = 64
 
 
 def camera_cone(geo, camera_size: float = CAMERA_SIZE, fallback_deg: float = CAMERA_CONE_DEG) -> tuple[float, str]:
@@ -106,13 +111,20 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
         raise ValueError(f"fill must be one of {FILL_MODES}, not {fill!r}")
     views, notes, per_view = [], [], []
     sa = latlong_solid_angles(int(height))
+    located = []
     for tag, view, vr, geo in _located_views(probe, "mirror", "the mirror method needs a mirror ball", "diffuse"):
         cone, why = (float(camera_cone_deg), "given") if camera_cone_deg is not None else camera_cone(geo, camera_size)
-        mv = unwrap_mirror_ball_Debevec1998(
+        located.append((tag, view, vr, geo, cone, why))
+
+    def unwrap(view, vr, geo, cone, h):
+        return unwrap_mirror_ball_Debevec1998(
             vr.radiance, geo.camera_model, geo.K, geo.dist, geo.world_from_camera, geo.center_cam, geo.radius,
-            geo.center_px, geo.radius_px, height=height, valid=vr.valid, saturated=vr.saturated,
+            geo.center_px, geo.radius_px, height=h, valid=vr.valid, saturated=vr.saturated,
             camera_cone_deg=cone, rim_px=rim_px, supersample=supersample,
             reflectance=view.sphere.reflectance, resample=resample)
+
+    for tag, view, vr, geo, cone, why in located:
+        mv = unwrap(view, vr, geo, cone, height)
         frac = float(sa[mv.confidence > 0].sum() / (4 * np.pi))
         if frac == 0:
             raise InputError(f"{tag}the ball shows no usable direction (all its pixels invalid or masked)",
@@ -125,8 +137,17 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
     merged = merge_mirror_views(views, power=weight_power)
     seen = merged.confidence > 0
     data = fill_unseen(merged.radiance, seen) if fill == "nearest" else merged.radiance
-    bs = blind_spot(seen)
-    cone_sr = float(sa[merged.camera_cone].sum())
+    if height >= BLIND_SPOT_HEIGHT:
+        bs, cone_sr = blind_spot(seen), float(sa[merged.camera_cone].sum())
+    else:  # a coarse texel holds the blind spot whole and counts as seen through its other directions
+        fine = merge_mirror_views([unwrap(v, r, g, c, BLIND_SPOT_HEIGHT) for _, v, r, g, c, _ in located],
+                                  power=weight_power)
+        bs = blind_spot(fine.confidence > 0)
+        cone_sr = float(latlong_solid_angles(BLIND_SPOT_HEIGHT)[fine.camera_cone].sum())
+        # the alpha: a texel is seen where most of it was (its share of the fine texels seen)
+        share = cv2.resize((fine.confidence > 0).astype(np.float32), (2 * int(height), int(height)),
+                           interpolation=cv2.INTER_AREA)
+        seen = share >= 0.5
     clipped = float(sa[merged.clipped].sum() / (4 * np.pi))
     notes.append(bs.describe() + (f" (the camera cone's {cone_sr:.3f} sr included)" if cone_sr > 0 else "") +
                  ("; filled from the nearest seen directions" if fill == "nearest" and bs.solid_angle > 0 else ""))
@@ -449,7 +470,7 @@ def _segments_blocked(points, ends, occ) -> np.ndarray:
     d = np.asarray(ends, dtype=np.float64) - p
     if occ.kind == "box":
         lo, hi = occ.center - occ.size / 2, occ.center + occ.size / 2
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # slabs at +-inf compare right
             inv = 1.0 / d
             t0, t1 = (lo - p) * inv, (hi - p) * inv
         tmin = np.nanmax(np.minimum(t0, t1), axis=1)
@@ -551,10 +572,14 @@ def shadow_pixels(probe, max_pixels: int | None = 4000, need_surface: bool = Fal
     ok = np.isfinite(t) & (t > 0) & vr.valid.ravel() & ~vr.saturated.ravel()
     pts = o + t[:, None] * d
     cam_pts = np.broadcast_to(o, pts.shape)  # each pixel's ray origin (the camera, or its orthographic pixel)
+    if not ok.any():
+        raise InputError("no pixel shows the plane (check camera.world_from_camera and plane)", src)
     ok[ok] &= ~_segments_blocked(pts[ok], cam_pts[ok], probe.occluder)
     idx = np.flatnonzero(ok)
     if len(idx) == 0:
-        raise InputError("no pixel shows the plane (check camera.world_from_camera and plane)", src)
+        what = "occluder.box" if probe.occluder.kind == "box" else "occluder.mesh"
+        raise InputError(f"{what} hides every pixel of the plane from the camera (the occluder stands between them "
+                         "everywhere: check its size and position)", src)
     notes = [f"{vr.note}; {len(idx)} pixels on the plane"]
     keep, stride = pixel_grid_subset(px[idx], max_pixels)
     if stride > 1:

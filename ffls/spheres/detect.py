@@ -1350,6 +1350,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     if mean_luminance is not None:
         mean = np.asarray(mean_luminance, dtype=np.float64)
     n_photos = int(n_photos) if n_photos is not None else n_img
+    if not ortho:
+        _check_scale(K, wfc, R, L.shape, source, scene_center)
     cam = _Camera(camera_model, K, dist, wfc, R, L.shape)
     edges = _edge_map(mx, L, source)
     rejected: list[str] = []
@@ -1785,6 +1787,33 @@ def _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visibl
                              f" {closed:.0%} of the visible outline)", source)
 
 
+def _scene_distance(wfc, scene_center) -> float:
+    centre = np.zeros(3) if scene_center is None else np.asarray(scene_center, dtype=np.float64).reshape(3)
+    return float(np.linalg.norm(wfc[:3, 3] - centre))  # camera to scene centre
+
+
+def _check_scale(K, wfc, R, shape, source, scene_center=None):
+    """Before any search: can a sphere of radius ``R`` be seen at the scene's distance at all?
+
+    A sphere ``r`` px in radius lies about ``f R / r`` from the camera. Over every radius a photo
+    can hold (1 px to its longer side) that distance must meet the band :func:`_check_radius`
+    allows after the fit (a quarter to four times the camera's distance to the scene centre), and
+    be a finite number: a radius or focal length off by many orders of magnitude (``1e308``) would
+    otherwise overflow in every fit and be reported as "no sphere found".
+    """
+    f_lo, f_hi = float(min(K[0, 0], K[1, 1])), float(max(K[0, 0], K[1, 1]))
+    with np.errstate(over="ignore"):
+        near, far = f_lo * R / float(max(shape)), f_hi * R
+    cam_dist = _scene_distance(wfc, scene_center)
+    if not (np.isfinite(near) and np.isfinite(far)):
+        raise InputError(f"sphere_radius ({R:g}) and camera.K (focal length {f_hi:g} px) in capture.json put the "
+                         f"spheres at a distance beyond any number: one of them is wrong", source)
+    if cam_dist > 0 and (far < 0.25 * cam_dist or near > 4.0 * cam_dist):
+        raise InputError(f"sphere_radius or camera.K in capture.json looks wrong: a sphere of radius {R:g} under a "
+                         f"focal length of {f_hi:g} px, 1 to {max(shape)} px in radius in the photo, lies {near:.3g} to "
+                         f"{far:.3g} from the camera, but the scene centre is at {cam_dist:.3g}", source)
+
+
 def _check_radius(fits, hint_info, wfc, R, source, scene_center=None):
     """Catch a ``sphere_radius`` inconsistent with the scene scale (depth ratio outside 1/2..2)."""
     msg = "sphere_radius in capture.json looks wrong"
@@ -1794,8 +1823,7 @@ def _check_radius(fits, hint_info, wfc, R, source, scene_center=None):
             if not 0.5 <= ratio <= 2.0:
                 raise InputError(f"{msg}: sphere {k} fits at {ft.distance:.3g} from the camera but its hinted"
                                  f" centre is at {np.linalg.norm(hint_info[k][2]):.3g} (radius {R:g})", source)
-    centre = np.zeros(3) if scene_center is None else np.asarray(scene_center, dtype=np.float64).reshape(3)
-    cam_dist = float(np.linalg.norm(wfc[:3, 3] - centre))  # camera to scene centre
+    cam_dist = _scene_distance(wfc, scene_center)
     if cam_dist > 0 and fits:
         ratio = np.median([ft.distance for ft in fits]) / cam_dist
         if not 0.25 <= ratio <= 4.0:
