@@ -106,6 +106,9 @@ TRIM_SIGNIFICANCE = 1e-3
 #: Fewest leave-one-out sphere offsets for the capture's own cone quantile (:func:`tail_factor`):
 #: the 95% quantile of 40 Rayleigh draws has a relative standard error of about 12%.
 MIN_TAIL_SAMPLES = 40
+#: Nodes per parameter of the coarse grid whose best node starts the error-model fit beside the
+#: usual start (:func:`fit_error_model`; the restricted likelihood can have two local minima).
+START_GRID = 9
 
 
 def cone_deg(sigma_axis_deg):
@@ -315,6 +318,19 @@ class ErrorModel:
         g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
         return self.floor_deg ** 2 + g ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
 
+    def shared_var_deg2(self, stat_sigma_deg) -> np.ndarray:
+        """Per-axis variance (degrees squared) of the part of each sphere's systematic error that
+        other spheres may share, the base of the common-mode bound: ``tau^2 + max(s^2 - 1, 0)
+        sigma^2`` (:meth:`systematic_var_deg2` without the centre term ``g``: a centre error is
+        each sphere's own, from its own outline and shading, and no other sphere shares it).
+
+        Parameters
+        ----------
+        stat_sigma_deg : float or (k,) float
+        """
+        s = np.asarray(stat_sigma_deg, dtype=np.float64)
+        return self.floor_deg ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
+
     def common_sigma_deg(self, stat_sigma_deg, spheres=None) -> float:
         """Per-axis standard deviation (degrees) of the common mode of a direction made from these
         spheres (module docstring, part 3).
@@ -340,7 +356,7 @@ class ErrorModel:
         w = _weights(self.sphere_sigma_deg(s, idx) ** 2)
         if w is None:
             return float("inf")
-        u = self.systematic_var_deg2(s, idx)
+        u = self.shared_var_deg2(s)
         return float(np.sqrt(self.common_ratio * float(np.sum(w * u)) + self.common_floor_deg ** 2))
 
     def photo_sigma_deg(self, stat_sigma_deg, spheres=None, weights=None) -> float:
@@ -670,12 +686,20 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     def objective(x, subset):
         return float(np.sum(terms(x)[0][subset]))
 
+    # the likelihood has two basins (the disagreement as a scale of the statistics, or as a floor
+    # beside them): start from the best node of a coarse grid over the box, not from one point
+    grid = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], START_GRID if fit_scale else 1),
+                                np.linspace(lo[1], hi[1], START_GRID), indexing="ij"), axis=-1).reshape(-1, 2)
     for _ in range(max_rounds):
         if keep.sum() < min_photos:
             break
-        res = minimize(objective, np.clip(x0, lo, hi), args=(keep,), method="L-BFGS-B",
-                       bounds=list(zip(lo, hi)))
-        x = res.x
+        f_grid = np.array([objective(g, keep) for g in grid]).reshape(-1, START_GRID)
+        # per scale node its best floor node: one start in each basin the grid can separate
+        starts_x = [np.clip(x0, lo, hi)] + [grid.reshape(-1, START_GRID, 2)[i, int(np.argmin(f_grid[i]))]
+                                            for i in range(f_grid.shape[0])]
+        fits = [minimize(objective, s0, args=(keep,), method="L-BFGS-B", bounds=list(zip(lo, hi)))
+                for s0 in starts_x]
+        x = min(fits, key=lambda f: f.fun).x
         p = chdtrc(2 * (k_all - 1), terms(x)[1])
         new_keep = p >= trim / len(data)  # family-wise (Bonferroni): a wild photo, not the model's tail
         if np.array_equal(new_keep, keep):
@@ -685,8 +709,7 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     scale, tau = float(np.exp(x[0])), float(np.exp(x[1]))
     # the systematic per-sphere variance: the floor, plus what the scale adds beyond the statistics
     s2_med = float(np.median(np.concatenate([s2 for (_, s2, _), k in zip(data, keep) if k] or [np.zeros(1)])))
-    g2_med = float(np.median(np.concatenate([g2 for (_, _, g2), k in zip(data, keep) if k] or [np.zeros(1)])))
-    sys_var = tau * tau + g2_med + max(scale * scale - 1.0, 0.0) * s2_med
+    sys_var = tau * tau + max(scale * scale - 1.0, 0.0) * s2_med  # shared_var_deg2: no centre term
     common = common_mode_deg(float(np.degrees(np.sqrt(sys_var))) ** 2, common_correlation)
     # the cone's radius from the capture's own standardised leave-one-out offsets (kept photos)
     factor, n_tail = tail_factor([r for (r, _, _), k in zip(data, keep) if k],
