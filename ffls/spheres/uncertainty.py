@@ -19,7 +19,9 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    see (:func:`fit_error_model`): a scale ``s`` of the statistical standard deviations and an
    added per-sphere floor ``tau`` (per axis), ``var_i = s^2 sigma_i^2 + g_i^2 + tau^2``, by
    restricted maximum likelihood (the photo's direction is estimated from the same spheres,
-   Patterson & Thompson 1971) over all photos, trimmed: photos whose scatter is improbable under
+   Patterson & Thompson 1971) over all photos (from several starts: the likelihood can have a
+   basin where the disagreement is a scale of the statistics and one where it is a floor beside
+   them, and the global minimum is kept), trimmed: photos whose scatter is improbable under
    the fitted model at a family-wise level (``p < 1e-3 / n_photos``) are left out and the fit
    repeated. ``g_i`` is the sphere's centre uncertainty propagated to its direction
    (:func:`centre_floor_deg`: the outline and the shading place the centre ``shift`` apart), a
@@ -30,9 +32,10 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    systematic errors is at most ``COMMON_CORRELATION = 0.25`` (the shared part's variance at most
    a third of the unshared part's), so the common-mode variance is at most
    ``rho / (1 - rho) * tau_s^2``, where ``tau_s^2`` is the per-sphere systematic variance that
-   the disagreement measured (``tau^2 + g_i^2`` plus the part of ``s^2 sigma_i^2`` beyond the fit
-   statistics, :meth:`ErrorModel.systematic_var_deg2`), averaged over the photo's spheres with
-   their inverse variances under the fitted model (:meth:`ErrorModel.common_sigma_deg`): each
+   the disagreement measured and that other spheres can share (``tau^2`` plus the part of
+   ``s^2 sigma_i^2`` beyond the fit statistics, :meth:`ErrorModel.shared_var_deg2`; not the centre
+   term ``g_i^2``: a centre error comes from the sphere's own outline and shading), averaged over
+   the photo's spheres with their inverse variances under the fitted model (:meth:`ErrorModel.common_sigma_deg`): each
    photo (and each sphere's own cone) gets the bound of the spheres that carry information. A
    capture-wide median over all spheres let an uninformative sphere set the bound: beside a matte
    ball, a mirror ball whose highlight is uncertain by degrees gave the calibration shot of
