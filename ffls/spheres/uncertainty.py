@@ -697,9 +697,13 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         if keep.sum() < min_photos:
             break
         f_grid = np.array([objective(g, keep) for g in grid]).reshape(-1, START_GRID)
-        # per scale node its best floor node: one start in each basin the grid can separate
+        # the profile over the scale nodes (each with its best floor node): a start at each of its
+        # local minima, one in each basin the grid can separate
+        prof = f_grid.min(axis=1)
+        padded = np.concatenate([[np.inf], prof, [np.inf]])
+        rows = np.flatnonzero((prof <= padded[:-2]) & (prof <= padded[2:]))
         starts_x = [np.clip(x0, lo, hi)] + [grid.reshape(-1, START_GRID, 2)[i, int(np.argmin(f_grid[i]))]
-                                            for i in range(f_grid.shape[0])]
+                                            for i in rows]
         fits = [minimize(objective, s0, args=(keep,), method="L-BFGS-B", bounds=list(zip(lo, hi)))
                 for s0 in starts_x]
         x = min(fits, key=lambda f: f.fun).x
