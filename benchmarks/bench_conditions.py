@@ -24,6 +24,10 @@ A condition that makes ``ffls lights`` stop gets its one-line error in the table
 Markdown table (for docs/spheres.md) and writes JSON.
 
     python benchmarks/bench_conditions.py [--res 512] [--only NAME ...] [--cache DIR] [--out FILE]
+
+With ``--recalibrate`` (and a ``--cache`` of earlier runs) no ``ffls lights`` runs: the cones of
+each stored run are made again by the current error model from the photo estimates it recorded
+(:func:`recalibrate`): a cone-only change measured in seconds instead of a full run.
 """
 from __future__ import annotations
 
@@ -138,8 +142,61 @@ def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
                             light_distance=2.0 if args.near is None else args.near, light_radius=args.light_radius)
 
 
-def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) -> dict:
-    """``flags``: ``ffls synth`` flags, or a :data:`SCENES` tuple (rendered by tests/detect_scenes.py)."""
+#: The combination's floor of a matte sphere (``ffls.spheres.photo.estimate_photo``'s ``sigma_floor_deg``).
+MATTE_WEIGHT_FLOOR_DEG = 1.0
+
+
+def recalibrate(doc: dict) -> dict:
+    """``doc`` (a ``lights.json`` of ``ffls lights``) with its cones made again by the current
+    :mod:`ffls.spheres.uncertainty` from the photo estimates it records, without running the fits.
+
+    As :func:`ffls.spheres.estimate.calibrate_uncertainty` does: each accepted photo with 2+ used
+    spheres gives their offsets from its light (:func:`~ffls.spheres.uncertainty.photo_residuals`;
+    a near light's position seen from each sphere's recorded centre) and their fit statistics
+    (``sigma_deg`` / sqrt 2); :func:`~ffls.spheres.uncertainty.fit_error_model` with the recorded
+    centre terms gives the model, and each photo's cone is its
+    :meth:`~ffls.spheres.uncertainty.ErrorModel.photo_sigma_deg` with the combination's weights
+    (``photo.sphere_uncertainty_deg``: a matte sphere's ``sigma_deg`` with the 1 deg floor in
+    quadrature, a highlight fit's own) times the cone factor. A near light's joint-fit statistics
+    are not recorded, so its cone here can be below the one ``ffls lights`` would report.
+    """
+    from ffls.spheres.uncertainty import fit_error_model, photo_residuals
+
+    lights = doc["lights"]
+    old = doc.get("uncertainty") or {}
+    centre = np.asarray(old.get("centre_deg", ()), dtype=np.float64)
+    res, stats, used_all = [], [], []
+    for l in lights:
+        used = list(l.get("used_spheres") or [])
+        if l.get("status", "ok") != "ok" or len(used) < 2:
+            continue
+        sph = [l["spheres"][i] for i in used]
+        near = l.get("model") == "near" and l.get("position") is not None
+        res.append(photo_residuals(np.array([s["direction"] for s in sph]), np.asarray(l["direction"]),
+                                   np.asarray(l["position"]) if near else None,
+                                   np.array([s["center"] for s in sph]) if near else None))
+        stats.append(np.array([s["sigma_deg"] for s in sph]) / np.sqrt(2.0))
+        used_all.append(np.asarray(used))
+    model = fit_error_model(res, stats, spheres=used_all, centre_deg=centre)  # the fallback for one sphere
+    out = []
+    for l in lights:
+        used = list(l.get("used_spheres") or [])
+        if l.get("status", "ok") != "ok" or not used:
+            out.append(l)
+            continue
+        sph = [l["spheres"][i] for i in used]
+        sig = np.array([s.get("sigma_deg") or np.inf for s in sph])
+        highlight = np.array([s.get("kind") not in (None, "matte") for s in sph])
+        w = np.where(highlight, sig ** -2.0, 1.0 / (sig ** 2 + MATTE_WEIGHT_FLOOR_DEG ** 2))
+        sigma = model.photo_sigma_deg(sig / np.sqrt(2.0), np.asarray(used), w)
+        out.append({**l, "uncertainty_deg": float(model.cone_deg(sigma))})
+    return {**doc, "lights": out, "uncertainty": model.as_dict()}
+
+
+def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, recalibrate_only: bool = False) -> dict:
+    """``flags``: ``ffls synth`` flags, or a :data:`SCENES` tuple (rendered by tests/detect_scenes.py).
+    ``recalibrate_only``: no ``ffls lights`` run; the cones of the cached ``lights_estimated.json``
+    made again (:func:`recalibrate`)."""
     folder = Path(folder)
     if isinstance(flags, tuple):
         spec = flags
@@ -152,8 +209,13 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) ->
     out = folder / "lights_estimated.json"
     stdout, stderr = io.StringIO(), io.StringIO()
     t0 = time.perf_counter()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        rc = ffls_main(["lights", str(folder), "-o", str(out), "--workers", "1", "--no-progress"])
+    if recalibrate_only:
+        rc = 0 if out.exists() else 1
+        if rc:
+            stderr.write(f"{out}: no stored run to recalibrate")
+    else:
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            rc = ffls_main(["lights", str(folder), "-o", str(out), "--workers", "1", "--no-progress"])
     dt = (time.perf_counter() - t0) / len(truth["directions"])
     row = {"condition": name, "flags": flags, "command": command,
            "resolution": res, "n": int(len(truth["directions"])), "rc": rc, "ms_per_photo": 1e3 * dt,
@@ -162,6 +224,9 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path) ->
         row["error"] = (row["stderr"] or ["(no message)"])[-1]
         return row
     doc = json.loads(out.read_text())
+    if recalibrate_only:
+        row["recalibrated"] = True
+        doc = recalibrate(doc)
     lights = doc["lights"]
     est = np.array([l["direction"] for l in lights], dtype=np.float64)
     ok = np.array([l.get("status", "ok") == "ok" for l in lights])
@@ -270,6 +335,9 @@ def main(argv=None):
     ap.add_argument("--theta-step", type=int, default=10)
     ap.add_argument("--only", nargs="*", default=None, help="names (substrings) of the conditions to run")
     ap.add_argument("--cache", default=None, help="keep (and reuse) the renders in this folder")
+    ap.add_argument("--recalibrate", action="store_true",
+                    help="no ffls lights run: make the cones of each cached run's lights_estimated.json again with "
+                         "the current error model (directions unchanged; needs --cache with earlier runs)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_conditions.json"))
     a = ap.parse_args(argv)
     _, _, dirs = grid(a.phi_step, a.theta_step)
@@ -281,7 +349,7 @@ def main(argv=None):
         for name, flags, sub in jobs:
             if a.only and not any(o in name for o in a.only):
                 continue
-            r = run_condition(name, flags, a.res, dirs, base / sub)
+            r = run_condition(name, flags, a.res, dirs, base / sub, recalibrate_only=a.recalibrate)
             rows.append(r)
             if r["rc"] != 0:
                 print(f"{name:44s} ERROR {r['error']}", flush=True)

@@ -19,7 +19,9 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    see (:func:`fit_error_model`): a scale ``s`` of the statistical standard deviations and an
    added per-sphere floor ``tau`` (per axis), ``var_i = s^2 sigma_i^2 + g_i^2 + tau^2``, by
    restricted maximum likelihood (the photo's direction is estimated from the same spheres,
-   Patterson & Thompson 1971) over all photos, trimmed: photos whose scatter is improbable under
+   Patterson & Thompson 1971) over all photos (from several starts: the likelihood can have a
+   basin where the disagreement is a scale of the statistics and one where it is a floor beside
+   them, and the global minimum is kept), trimmed: photos whose scatter is improbable under
    the fitted model at a family-wise level (``p < 1e-3 / n_photos``) are left out and the fit
    repeated. ``g_i`` is the sphere's centre uncertainty propagated to its direction
    (:func:`centre_floor_deg`: the outline and the shading place the centre ``shift`` apart), a
@@ -30,9 +32,10 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    systematic errors is at most ``COMMON_CORRELATION = 0.25`` (the shared part's variance at most
    a third of the unshared part's), so the common-mode variance is at most
    ``rho / (1 - rho) * tau_s^2``, where ``tau_s^2`` is the per-sphere systematic variance that
-   the disagreement measured (``tau^2 + g_i^2`` plus the part of ``s^2 sigma_i^2`` beyond the fit
-   statistics, :meth:`ErrorModel.systematic_var_deg2`), averaged over the photo's spheres with
-   their inverse variances under the fitted model (:meth:`ErrorModel.common_sigma_deg`): each
+   the disagreement measured and that other spheres can share (``tau^2`` plus the part of
+   ``s^2 sigma_i^2`` beyond the fit statistics, :meth:`ErrorModel.shared_var_deg2`; not the centre
+   term ``g_i^2``: a centre error comes from the sphere's own outline and shading), averaged over
+   the photo's spheres with their inverse variances under the fitted model (:meth:`ErrorModel.common_sigma_deg`): each
    photo (and each sphere's own cone) gets the bound of the spheres that carry information. A
    capture-wide median over all spheres let an uninformative sphere set the bound: beside a matte
    ball, a mirror ball whose highlight is uncertain by degrees gave the calibration shot of
@@ -106,6 +109,9 @@ TRIM_SIGNIFICANCE = 1e-3
 #: Fewest leave-one-out sphere offsets for the capture's own cone quantile (:func:`tail_factor`):
 #: the 95% quantile of 40 Rayleigh draws has a relative standard error of about 12%.
 MIN_TAIL_SAMPLES = 40
+#: Nodes per parameter of the coarse grid whose best node starts the error-model fit beside the
+#: usual start (:func:`fit_error_model`; the restricted likelihood can have two local minima).
+START_GRID = 9
 
 
 def cone_deg(sigma_axis_deg):
@@ -315,6 +321,19 @@ class ErrorModel:
         g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
         return self.floor_deg ** 2 + g ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
 
+    def shared_var_deg2(self, stat_sigma_deg) -> np.ndarray:
+        """Per-axis variance (degrees squared) of the part of each sphere's systematic error that
+        other spheres may share, the base of the common-mode bound: ``tau^2 + max(s^2 - 1, 0)
+        sigma^2`` (:meth:`systematic_var_deg2` without the centre term ``g``: a centre error is
+        each sphere's own, from its own outline and shading, and no other sphere shares it).
+
+        Parameters
+        ----------
+        stat_sigma_deg : float or (k,) float
+        """
+        s = np.asarray(stat_sigma_deg, dtype=np.float64)
+        return self.floor_deg ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
+
     def common_sigma_deg(self, stat_sigma_deg, spheres=None) -> float:
         """Per-axis standard deviation (degrees) of the common mode of a direction made from these
         spheres (module docstring, part 3).
@@ -340,7 +359,7 @@ class ErrorModel:
         w = _weights(self.sphere_sigma_deg(s, idx) ** 2)
         if w is None:
             return float("inf")
-        u = self.systematic_var_deg2(s, idx)
+        u = self.shared_var_deg2(s)
         return float(np.sqrt(self.common_ratio * float(np.sum(w * u)) + self.common_floor_deg ** 2))
 
     def photo_sigma_deg(self, stat_sigma_deg, spheres=None, weights=None) -> float:
@@ -670,12 +689,24 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     def objective(x, subset):
         return float(np.sum(terms(x)[0][subset]))
 
+    # the likelihood has two basins (the disagreement as a scale of the statistics, or as a floor
+    # beside them): start from the best node of a coarse grid over the box, not from one point
+    grid = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], START_GRID if fit_scale else 1),
+                                np.linspace(lo[1], hi[1], START_GRID), indexing="ij"), axis=-1).reshape(-1, 2)
     for _ in range(max_rounds):
         if keep.sum() < min_photos:
             break
-        res = minimize(objective, np.clip(x0, lo, hi), args=(keep,), method="L-BFGS-B",
-                       bounds=list(zip(lo, hi)))
-        x = res.x
+        f_grid = np.array([objective(g, keep) for g in grid]).reshape(-1, START_GRID)
+        # the profile over the scale nodes (each with its best floor node): a start at each of its
+        # local minima, one in each basin the grid can separate
+        prof = f_grid.min(axis=1)
+        padded = np.concatenate([[np.inf], prof, [np.inf]])
+        rows = np.flatnonzero((prof <= padded[:-2]) & (prof <= padded[2:]))
+        starts_x = [np.clip(x0, lo, hi)] + [grid.reshape(-1, START_GRID, 2)[i, int(np.argmin(f_grid[i]))]
+                                            for i in rows]
+        fits = [minimize(objective, s0, args=(keep,), method="L-BFGS-B", bounds=list(zip(lo, hi)))
+                for s0 in starts_x]
+        x = min(fits, key=lambda f: f.fun).x
         p = chdtrc(2 * (k_all - 1), terms(x)[1])
         new_keep = p >= trim / len(data)  # family-wise (Bonferroni): a wild photo, not the model's tail
         if np.array_equal(new_keep, keep):
@@ -685,8 +716,7 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     scale, tau = float(np.exp(x[0])), float(np.exp(x[1]))
     # the systematic per-sphere variance: the floor, plus what the scale adds beyond the statistics
     s2_med = float(np.median(np.concatenate([s2 for (_, s2, _), k in zip(data, keep) if k] or [np.zeros(1)])))
-    g2_med = float(np.median(np.concatenate([g2 for (_, _, g2), k in zip(data, keep) if k] or [np.zeros(1)])))
-    sys_var = tau * tau + g2_med + max(scale * scale - 1.0, 0.0) * s2_med
+    sys_var = tau * tau + max(scale * scale - 1.0, 0.0) * s2_med  # shared_var_deg2: no centre term
     common = common_mode_deg(float(np.degrees(np.sqrt(sys_var))) ** 2, common_correlation)
     # the cone's radius from the capture's own standardised leave-one-out offsets (kept photos)
     factor, n_tail = tail_factor([r for (r, _, _), k in zip(data, keep) if k],
