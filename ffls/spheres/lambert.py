@@ -37,7 +37,6 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import map_coordinates
 
 from ffls.conventions import UP
 from ffls.spheres.samples import ground_bounce
@@ -239,14 +238,18 @@ class OwnShadow:
         norm = np.linalg.norm(nh, axis=1)
         self.vertical = norm <= 1e-9  # (any azimuth: the table's azimuth 0)
         self.horizontal = nh / np.where(self.vertical, 1.0, norm)[:, None]
+        # bilinear lookup in the (n . up, cos azimuth) plane of the table: the n . up cell and
+        # weight are the normals' own (the azimuth's depend on the light)
         nz_n = _OS_GRID[0]
-        self.coords = np.empty((2, normals.shape[0]))
-        self.coords[0] = (nz + 1.0) * 0.5 * (nz_n - 1)
+        x = (nz + 1.0) * 0.5 * (nz_n - 1)
+        i0 = np.minimum(np.floor(x).astype(np.intp), nz_n - 2)
+        self.row = i0 * _OS_GRID[2]  # flat index of the cell's first row in an (nz, az) plane
+        self.fx = x - i0
 
     def __call__(self, light: np.ndarray) -> np.ndarray:
         """(m,) view factor of the own shadow under the distant ``light`` (3,), in [0, 1]."""
         light = np.asarray(light, dtype=np.float64)
-        m = self.coords.shape[1]
+        m = self.row.shape[0]
         nl = float(np.linalg.norm(light))
         if not np.isfinite(nl) or nl == 0.0:
             return np.zeros(m)
@@ -265,9 +268,18 @@ class OwnShadow:
              - OWN_SHADOW_MIN_ELEVATION_DEG) / (90.0 - OWN_SHADOW_MIN_ELEVATION_DEG) * (el_n - 1)
         j = min(int(e), el_n - 2)
         t = e - j
-        plane = (1.0 - t) * table[:, j] + t * table[:, j + 1]
-        self.coords[1] = (np.clip(c, -1.0, 1.0) + 1.0) * 0.5 * (az_n - 1)
-        return np.clip(map_coordinates(plane, self.coords, order=1, mode="nearest"), 0.0, 1.0)
+        plane = ((1.0 - t) * table[:, j] + t * table[:, j + 1]).ravel()
+        y = (np.clip(c, -1.0, 1.0) + 1.0) * 0.5 * (az_n - 1)
+        j0 = np.minimum(y.astype(np.intp), az_n - 2)  # (y >= 0: truncation is the floor)
+        fy = y - j0
+        k = self.row + j0
+        lo = plane[k]  # the cell's corners: (i0, j0), (i0, j0 + 1), (i0 + 1, j0), (i0 + 1, j0 + 1)
+        lo += fy * (plane[k + 1] - lo)
+        k += az_n
+        hi = plane[k]
+        hi += fy * (plane[k + 1] - hi)
+        lo += self.fx * (hi - lo)
+        return np.clip(lo, 0.0, 1.0, out=lo)
 
 
 def own_shadow_factor(normals: np.ndarray, light: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
