@@ -231,13 +231,14 @@ class OwnShadow:
     """
 
     def __init__(self, normals: np.ndarray, up: np.ndarray = UP):
-        normals = np.asarray(normals, dtype=np.float64)
+        nt = np.ascontiguousarray(np.asarray(normals, dtype=np.float64).T)  # (3, m): rows, not a last axis of 3
         self.up = np.asarray(up, dtype=np.float64)
-        nz = np.clip(normals @ self.up, -1.0, 1.0)
-        nh = normals - nz[:, None] * self.up
-        norm = np.linalg.norm(nh, axis=1)
+        nz = np.clip(self.up @ nt, -1.0, 1.0)
+        nh = nt - self.up[:, None] * nz
+        norm = np.sqrt(nh[0] * nh[0] + nh[1] * nh[1] + nh[2] * nh[2])
         self.vertical = norm <= 1e-9  # (any azimuth: the table's azimuth 0)
-        self.horizontal = nh / np.where(self.vertical, 1.0, norm)[:, None]
+        nh /= np.where(self.vertical, 1.0, norm)
+        self.horizontal = nh  # (3, m) unit horizontal directions
         # bilinear lookup in the (n . up, cos azimuth) plane of the table: the n . up cell and
         # weight are the normals' own (the azimuth's depend on the light)
         nz_n = _OS_GRID[0]
@@ -261,7 +262,7 @@ class OwnShadow:
         _, el_n, az_n = table.shape
         lh = light - lz * self.up
         lhn = float(np.linalg.norm(lh))
-        c = self.horizontal @ (lh / lhn) if lhn > 1e-9 else np.ones(m)  # a vertical light: any azimuth
+        c = (lh / lhn) @ self.horizontal if lhn > 1e-9 else np.ones(m)  # a vertical light: any azimuth
         c[self.vertical] = 1.0
         # the light's elevation is one for all pixels: blend its two table slices, then bilinear
         e = (max(float(np.degrees(np.arcsin(min(lz, 1.0)))), OWN_SHADOW_MIN_ELEVATION_DEG)
