@@ -420,9 +420,17 @@ class _Unit:
             if getattr(self, "_grid", None) is not grid:  # the triples as indices into the grid
                 self._grid, self._grid_triples = grid, np.searchsorted(grid, codes.values)[codes.triples]
             tg = self._grid_triples
-            # (C order, as the loop below fills them: the products below then sum in the same order)
-            y = np.ascontiguousarray(F[:, tg].mean(axis=1))
-            w2 = np.ascontiguousarray(1.0 / np.maximum(np.sqrt(D2[:, tg].mean(axis=1)), 1e-6))
+            # the mean over a triple's three channels as np.mean sums them (in order, then / 3),
+            # in C order as the loop below fills them (the products below then sum in the same order)
+            y = np.take(F, tg[0], axis=1)  # (np.take: C order; F[:, i] is not)
+            y += np.take(F, tg[1], axis=1)
+            y += np.take(F, tg[2], axis=1)
+            y /= 3.0
+            d2 = np.take(D2, tg[0], axis=1)
+            d2 += np.take(D2, tg[1], axis=1)
+            d2 += np.take(D2, tg[2], axis=1)
+            d2 /= 3.0
+            w2 = 1.0 / np.maximum(np.sqrt(d2), 1e-6)
             w2 *= w2
         else:
             t = codes.triples.shape[1]
