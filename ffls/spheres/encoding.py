@@ -395,6 +395,11 @@ class _Unit:
         self._sum_aa = np.stack([np.bincount(idx, A[:, i] * A[:, j], minlength=t)
                                  for i in range(p) for j in range(p)], axis=1)
 
+    @property
+    def stored_values(self) -> np.ndarray:
+        """(u,) the distinct stored values of the selected pixels (sorted)."""
+        return self._raw.values
+
     def selected_values(self, curve) -> tuple[np.ndarray, np.ndarray]:
         """Grey linear value and weight of each selected pixel under ``curve`` (:func:`_grey_and_weight`)."""
         return _grey_and_weight(self._raw, curve)
@@ -805,7 +810,7 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
     C = np.column_stack([np.ones_like(x)] + [j * x ** j for j in range(1, order + 1)])
 
     # every unit's stored values (8 bit: at most 256): each curve is evaluated once on them, not per unit
-    grid = np.unique(np.concatenate([u._raw.values for u in used])) if used else np.zeros(0)
+    grid = np.unique(np.concatenate([u.stored_values for u in used])) if used else np.zeros(0)
 
     def total(thetas) -> np.ndarray:
         curves = [tuple(float(v) for v in t) for t in thetas]
