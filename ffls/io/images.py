@@ -216,7 +216,8 @@ def _kind_of(path: Path) -> str:
     )
 
 
-def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfinite: bool = False) -> ImageData:
+def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfinite: bool = False,
+               out: np.ndarray | None = None) -> ImageData:
     """Read an image file as RGB float32.
 
     Parameters
@@ -228,6 +229,10 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         Rec.709, D65) and say so in ``colour_note`` (default). False returns the stored values.
     allow_nonfinite : bool
         Return NaN/Inf values as stored instead of raising (default: an error with the count).
+    out : (H, W, 3) float32 ndarray, optional
+        Where an EXR's pixels are widened to float32 when its size matches (``pixels`` is then
+        ``out``, unless a colour conversion made a new array): a caller that keeps the photo, e.g.
+        in shared memory, saves a copy. Ignored for other formats and other sizes.
 
     Returns
     -------
@@ -247,7 +252,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
     if not path.is_file():
         raise InputError("image file not found" if not path.exists() else "not a file", path)
     register_input(path)
-    img = read_exr(path, working_space=working_space) if kind == "exr" else _read_cv2(path, kind)
+    img = read_exr(path, working_space=working_space, out=out) if kind == "exr" else _read_cv2(path, kind)
     if not allow_nonfinite:
         why = nonfinite_message(img.pixels)
         if why is None and img.alpha is not None and not np.all(np.isfinite(img.alpha)):
@@ -257,7 +262,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
     return img
 
 
-def read_exr(path: str | os.PathLike, working_space: bool = True) -> ImageData:
+def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarray | None = None) -> ImageData:
     """Read an OpenEXR file (half or float channels) as RGB float32.
 
     Takes the ``R``, ``G``, ``B`` channels, or replicates ``Y`` for luminance-only files, and
@@ -271,6 +276,8 @@ def read_exr(path: str | os.PathLike, working_space: bool = True) -> ImageData:
         Convert RGB from the space of the ``chromaticities`` attribute (when present and not
         Rec.709/D65) to the working space, reporting it in ``colour_note``
         (:func:`ffls.io.colourspace.convert_to_working_space`).
+    out : (H, W, 3) float32 ndarray, optional
+        Where the pixels are widened when the file's size matches (:func:`read_image`).
 
     Returns
     -------
@@ -336,7 +343,13 @@ def read_exr(path: str | os.PathLike, working_space: bool = True) -> ImageData:
         alpha = planes.pop().astype(np.float32)
     # interleaved in the stored type, then widened (exact): half the bytes through the strided
     # interleave, which costs more than the decompression itself
-    rgb = np.stack(planes, axis=-1).astype(np.float32, copy=False)
+    rgb = np.stack(planes, axis=-1)
+    if (out is not None and out.shape == rgb.shape and out.dtype == np.float32
+            and out.flags.c_contiguous and out.flags.writeable):
+        np.copyto(out, rgb)  # (exact: half and float32 values are float32 values)
+        rgb = out
+    else:
+        rgb = rgb.astype(np.float32, copy=False)
     chroma = header.get("chromaticities")
     note = None
     if chroma is not None:

@@ -40,11 +40,15 @@ class Photo:
     raw : (H, W, 3) float32 ndarray
         The stored values scaled to [0, 1] (for saturation and validity masks).
     bit_depth : {8, 16, 'half', 'float'}
+    codes : (H, W, 3) uint8 or uint16 ndarray or None
+        An integer file's stored codes (``raw`` is ``codes / 255`` or ``codes / 65535``); None
+        for floating-point files.
     """
 
     linear: np.ndarray
     raw: np.ndarray
     bit_depth: int | str
+    codes: np.ndarray | None = None
 
 
 def unknown_encoding_message(bit_depth) -> str:
@@ -158,18 +162,21 @@ def _check_size(capture, i: int, img: ImageData) -> None:
             )
 
 
-def read_photo(capture, i: int) -> Photo:
+def read_photo(capture, i: int, out: np.ndarray | None = None) -> Photo:
     """Photo ``i`` of ``capture``: linear radiance, raw values and bit depth.
+
+    ``out`` (H, W, 3) float32, optional: where an EXR photo is widened (:func:`ffls.io.images.read_image`;
+    its ``linear`` is then ``out`` when no colour conversion applies).
 
     Raises
     ------
     InputError
         Unreadable image, or a size that differs from the capture's ``image_size``.
     """
-    img = read_image(capture.image_paths[i])
+    img = read_image(capture.image_paths[i], out=out)
     _check_size(capture, i, img)
     linear = np.asarray(linearise(img, capture.encoding, capture.response), dtype=np.float32)
-    return Photo(linear, img.pixels, img.bit_depth)
+    return Photo(linear, img.pixels, img.bit_depth, img.codes)
 
 
 def load_photo(capture, i: int) -> np.ndarray:

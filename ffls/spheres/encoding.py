@@ -395,6 +395,11 @@ class _Unit:
         self._sum_aa = np.stack([np.bincount(idx, A[:, i] * A[:, j], minlength=t)
                                  for i in range(p) for j in range(p)], axis=1)
 
+    @property
+    def stored_values(self) -> np.ndarray:
+        """(u,) the distinct stored values of the selected pixels (sorted)."""
+        return self._raw.values
+
     def selected_values(self, curve) -> tuple[np.ndarray, np.ndarray]:
         """Grey linear value and weight of each selected pixel under ``curve`` (:func:`_grey_and_weight`)."""
         return _grey_and_weight(self._raw, curve)
@@ -403,23 +408,45 @@ class _Unit:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
         return float(self.rss_grid([curve])[0])
 
-    def rss_grid(self, curves) -> np.ndarray:
+    def rss_grid(self, curves, tables: tuple | None = None) -> np.ndarray:
         """:meth:`rss` for every curve of ``curves`` (k,: gammas, or ``'srgb'``), at once: (k,) float.
 
         The pixels of one (r, g, b) triple share their grey value ``y`` and weight ``w``: with
         their sums (:meth:`select`), each curve's normal equations and residual cost one pass over
         the triples, not the pixels (``rss = sum w^2 y^2 - x . b`` at the solution ``G x = b``,
-        which loses about 1e-12 of it)."""
+        which loses about 1e-12 of it).
+
+        ``tables`` ``(grid, F, D2)``, optional: the curves' :func:`_curve_tables` evaluated once
+        on ``grid`` (sorted, holding every stored value of this unit), ``F`` and ``D2`` (k, len(grid)),
+        shared by the units of a fit (:func:`_fit_polynomial`): gathered here, the same numbers."""
         codes = self._raw
-        t = codes.triples.shape[1]
-        y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
-        for j, curve in enumerate(curves):
-            if not isinstance(curve, (str, tuple)):
-                curve = float(curve)
-            f, d2 = _curve_tables(codes.values, curve, codes.log_values)
-            y[j] = f[codes.triples].mean(axis=0)
-            w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
-            w2[j] = w * w
+        if tables is not None:
+            grid, F, D2 = tables
+            if getattr(self, "_grid", None) is not grid:  # the triples as indices into the grid
+                self._grid, self._grid_triples = grid, np.searchsorted(grid, codes.values)[codes.triples]
+            tg = self._grid_triples
+            # the mean over a triple's three channels as np.mean sums them (in order, then / 3),
+            # in C order as the loop below fills them (the products below then sum in the same order)
+            y = np.take(F, tg[0], axis=1)  # (np.take: C order; F[:, i] is not)
+            y += np.take(F, tg[1], axis=1)
+            y += np.take(F, tg[2], axis=1)
+            y /= 3.0
+            d2 = np.take(D2, tg[0], axis=1)
+            d2 += np.take(D2, tg[1], axis=1)
+            d2 += np.take(D2, tg[2], axis=1)
+            d2 /= 3.0
+            w2 = 1.0 / np.maximum(np.sqrt(d2), 1e-6)
+            w2 *= w2
+        else:
+            t = codes.triples.shape[1]
+            y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
+            for j, curve in enumerate(curves):
+                if not isinstance(curve, (str, tuple)):
+                    curve = float(curve)
+                f, d2 = _curve_tables(codes.values, curve, codes.log_values)
+                y[j] = f[codes.triples].mean(axis=0)
+                w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
+                w2[j] = w * w
         p = self._A.shape[1]
         G = (w2 @ self._sum_aa).reshape(-1, p, p)
         w2y = w2 * y
@@ -782,9 +809,14 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
     x = np.linspace(0.0, 1.0, 65)
     C = np.column_stack([np.ones_like(x)] + [j * x ** j for j in range(1, order + 1)])
 
+    # every unit's stored values (8 bit: at most 256): each curve is evaluated once on them, not per unit
+    grid = np.unique(np.concatenate([u.stored_values for u in used])) if used else np.zeros(0)
+
     def total(thetas) -> np.ndarray:
         curves = [tuple(float(v) for v in t) for t in thetas]
-        return np.sum([u.rss_grid(curves) for u in used], axis=0)
+        tabs = [_curve_tables(grid, c) for c in curves]
+        tables = (grid, np.array([f for f, _ in tabs]), np.array([d2 for _, d2 in tabs]))
+        return np.sum([u.rss_grid(curves, tables) for u in used], axis=0)
 
     scale = float(total([theta0])[0]) or 1.0
     shifts = _POLY_STEP * np.eye(order + 1)

@@ -584,17 +584,21 @@ def _decode_range(bounds: tuple[int, int]):
     acc = SequenceAccumulator(n_images=ctx.n)
     depths = set()
     for i in range(start, stop):
-        ph = read_photo(ctx.capture, i)
+        slot = None if ctx.linear is None else ctx.linear[i]  # an EXR is widened in place (no copy)
+        ph = read_photo(ctx.capture, i, out=slot)
         if ph.linear.shape != ctx.shape:
             raise InputError(f"image is {ph.linear.shape[1]}x{ph.linear.shape[0]}, the capture's first is "
                              f"{ctx.shape[1]}x{ctx.shape[0]}: every photo must have the same size",
                              ctx.capture.image_paths[i])
         depths.add(ph.bit_depth)
-        if ctx.linear is not None and ph.bit_depth not in (8, 16):
+        if ctx.linear is not None and ph.bit_depth not in (8, 16) and ph.linear is not slot:
             ctx.linear[i] = ph.linear
         if ctx.raw is not None and ph.bit_depth in (8, 16):
-            top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
-            ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
+            if ph.codes is not None and ph.codes.dtype == ctx.raw.dtype:
+                ctx.raw[i] = ph.codes
+            else:
+                top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
+                ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
         acc.add(ph.linear, i)
     return acc, depths
 

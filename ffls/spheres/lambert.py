@@ -37,7 +37,6 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import map_coordinates
 
 from ffls.conventions import UP
 from ffls.spheres.samples import ground_bounce
@@ -232,21 +231,26 @@ class OwnShadow:
     """
 
     def __init__(self, normals: np.ndarray, up: np.ndarray = UP):
-        normals = np.asarray(normals, dtype=np.float64)
+        nt = np.ascontiguousarray(np.asarray(normals, dtype=np.float64).T)  # (3, m): rows, not a last axis of 3
         self.up = np.asarray(up, dtype=np.float64)
-        nz = np.clip(normals @ self.up, -1.0, 1.0)
-        nh = normals - nz[:, None] * self.up
-        norm = np.linalg.norm(nh, axis=1)
+        nz = np.clip(self.up @ nt, -1.0, 1.0)
+        nh = nt - self.up[:, None] * nz
+        norm = np.sqrt(nh[0] * nh[0] + nh[1] * nh[1] + nh[2] * nh[2])
         self.vertical = norm <= 1e-9  # (any azimuth: the table's azimuth 0)
-        self.horizontal = nh / np.where(self.vertical, 1.0, norm)[:, None]
+        nh /= np.where(self.vertical, 1.0, norm)
+        self.horizontal = nh  # (3, m) unit horizontal directions
+        # bilinear lookup in the (n . up, cos azimuth) plane of the table: the n . up cell and
+        # weight are the normals' own (the azimuth's depend on the light)
         nz_n = _OS_GRID[0]
-        self.coords = np.empty((2, normals.shape[0]))
-        self.coords[0] = (nz + 1.0) * 0.5 * (nz_n - 1)
+        x = (nz + 1.0) * 0.5 * (nz_n - 1)
+        i0 = np.minimum(np.floor(x).astype(np.intp), nz_n - 2)
+        self.row = i0 * _OS_GRID[2]  # flat index of the cell's first row in an (nz, az) plane
+        self.fx = x - i0
 
     def __call__(self, light: np.ndarray) -> np.ndarray:
         """(m,) view factor of the own shadow under the distant ``light`` (3,), in [0, 1]."""
         light = np.asarray(light, dtype=np.float64)
-        m = self.coords.shape[1]
+        m = self.row.shape[0]
         nl = float(np.linalg.norm(light))
         if not np.isfinite(nl) or nl == 0.0:
             return np.zeros(m)
@@ -258,16 +262,25 @@ class OwnShadow:
         _, el_n, az_n = table.shape
         lh = light - lz * self.up
         lhn = float(np.linalg.norm(lh))
-        c = self.horizontal @ (lh / lhn) if lhn > 1e-9 else np.ones(m)  # a vertical light: any azimuth
+        c = (lh / lhn) @ self.horizontal if lhn > 1e-9 else np.ones(m)  # a vertical light: any azimuth
         c[self.vertical] = 1.0
         # the light's elevation is one for all pixels: blend its two table slices, then bilinear
         e = (max(float(np.degrees(np.arcsin(min(lz, 1.0)))), OWN_SHADOW_MIN_ELEVATION_DEG)
              - OWN_SHADOW_MIN_ELEVATION_DEG) / (90.0 - OWN_SHADOW_MIN_ELEVATION_DEG) * (el_n - 1)
         j = min(int(e), el_n - 2)
         t = e - j
-        plane = (1.0 - t) * table[:, j] + t * table[:, j + 1]
-        self.coords[1] = (np.clip(c, -1.0, 1.0) + 1.0) * 0.5 * (az_n - 1)
-        return np.clip(map_coordinates(plane, self.coords, order=1, mode="nearest"), 0.0, 1.0)
+        plane = ((1.0 - t) * table[:, j] + t * table[:, j + 1]).ravel()
+        y = (np.clip(c, -1.0, 1.0) + 1.0) * 0.5 * (az_n - 1)
+        j0 = np.minimum(y.astype(np.intp), az_n - 2)  # (y >= 0: truncation is the floor)
+        fy = y - j0
+        k = self.row + j0
+        lo = plane[k]  # the cell's corners: (i0, j0), (i0, j0 + 1), (i0 + 1, j0), (i0 + 1, j0 + 1)
+        lo += fy * (plane[k + 1] - lo)
+        k += az_n
+        hi = plane[k]
+        hi += fy * (plane[k + 1] - hi)
+        lo += self.fx * (hi - lo)
+        return np.clip(lo, 0.0, 1.0, out=lo)
 
 
 def own_shadow_factor(normals: np.ndarray, light: np.ndarray, up: np.ndarray = UP) -> np.ndarray:

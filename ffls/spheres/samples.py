@@ -8,6 +8,7 @@ and marks the usable ones (:func:`pixel_validity`: finite, not saturated, not cl
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -325,6 +326,28 @@ def pixel_validity(pixels: np.ndarray, black_fraction: float | None = None, min_
     return ok, int((sat & finite).sum())
 
 
+@functools.lru_cache(maxsize=4)
+def _saturated_code(bit_depth: int, high: float) -> int:
+    """The lowest code ``k`` of ``bit_depth`` with ``k / top >= high`` (top 255 or 65535), as
+    :func:`ffls.radiance.response.valid_pixel_mask` computes the fraction (float64)."""
+    top = 255 if bit_depth == 8 else 65535
+    return int(np.searchsorted(np.arange(top + 1, dtype=np.float64) / float(top), high, side="left"))
+
+
+def _code_masks(codes: np.ndarray, bit_depth: int, high: float = 0.98) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) saturated (a channel's code at or above ``high`` of full scale) and clipped-black
+    (every channel 0) masks of integer ``codes`` (m, c): :func:`ffls.radiance.response.valid_pixel_mask`
+    with ``low=0`` on the codes, without converting them to float."""
+    k = _saturated_code(bit_depth, high)
+    chans = [codes[:, c] for c in range(codes.shape[1])]  # (reductions over a last axis of 3 are slow)
+    sat = chans[0] >= k
+    black = chans[0] == 0
+    for ch in chans[1:]:
+        sat |= ch >= k
+        black &= ch == 0
+    return sat, black
+
+
 def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: float | None = None,
                   raw: np.ndarray | None = None, bit_depth=None) -> list[SphereValues]:
     """The spheres' pixels of one photo: grey values, validity, saturated count.
@@ -365,7 +388,13 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
         if raw is not None and bit_depth is not None:
             rp = np.asarray(raw)[s.rows, s.cols]
             rp = rp.reshape(1, -1, rp.shape[-1] if rp.ndim == 2 else 1)
-            if bit_depth in (8, 16):  # saturated codes of any channel; code 0 in every channel (clipped)
+            if bit_depth in (8, 16) and np.issubdtype(rp.dtype, np.integer):
+                # valid_pixel_mask's test of the codes themselves (no float copy): saturated where
+                # any channel is at or above its top code fraction, clipped where every channel is 0
+                sat, black = _code_masks(rp[0], bit_depth)
+                valid &= ~sat & ~black
+                nsat = max(nsat, int(np.count_nonzero(sat)))
+            elif bit_depth in (8, 16):  # saturated codes of any channel; code 0 in every channel (clipped)
                 not_sat = valid_pixel_mask(rp, bit_depth, low=-1.0)[0]
                 valid &= valid_pixel_mask(rp, bit_depth, low=0.0)[0]
                 nsat = max(nsat, int((~not_sat).sum()))

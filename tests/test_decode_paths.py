@@ -1,0 +1,97 @@
+"""The decoding shortcuts of `ffls lights` give the same numbers as the plain paths.
+
+- ``read_image(out=...)`` widens an EXR into the caller's array (no copy), with the same values;
+- ``read_photo`` keeps an integer file's codes (``Photo.codes``), equal to ``raw`` re-quantised;
+- ``sphere_values`` judges integer codes (saturated, clipped black) without a float copy, with
+  the validity and saturated count of the float path (:func:`ffls.radiance.response.valid_pixel_mask`).
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ffls.io.images import read_image, write_exr, write_png
+from ffls.radiance.photos import read_photo
+from ffls.spheres.samples import SphereSamples, sphere_values
+
+
+def _exr(tmp_path, half=True):
+    rng = np.random.default_rng(3)
+    rgb = rng.uniform(0.0, 4.0, (24, 32, 3)).astype(np.float32)
+    return write_exr(tmp_path / "a.exr", rgb, half=half)
+
+
+@pytest.mark.parametrize("half", [True, False])
+def test_read_image_widens_exr_into_out(tmp_path, half):
+    path = _exr(tmp_path, half)
+    plain = read_image(path)
+    out = np.full((24, 32, 3), -1.0, np.float32)
+    img = read_image(path, out=out)
+    assert img.pixels is out
+    np.testing.assert_array_equal(out, plain.pixels)
+    assert img.bit_depth == plain.bit_depth == ("half" if half else "float")
+
+
+def test_read_image_out_of_another_shape_or_type_is_ignored(tmp_path):
+    path = _exr(tmp_path)
+    plain = read_image(path)
+    for out in (np.zeros((24, 31, 3), np.float32), np.zeros((24, 32, 3), np.float64),
+                np.zeros((32, 24, 3), np.float32).transpose(1, 0, 2)):
+        before = out.copy()
+        img = read_image(path, out=out)
+        assert img.pixels is not out
+        np.testing.assert_array_equal(img.pixels, plain.pixels)
+        np.testing.assert_array_equal(out, before)  # untouched
+
+
+def _capture(tmp_path, name, codes, encoding="srgb"):
+    write_png(tmp_path / name, codes)
+    (tmp_path / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": [name], "encoding": encoding}))
+    from ffls.io.capture import load_capture
+
+    return load_capture(tmp_path)
+
+
+@pytest.mark.parametrize("dtype,top", [(np.uint8, 255), (np.uint16, 65535)])
+def test_read_photo_keeps_the_codes(tmp_path, dtype, top):
+    rng = np.random.default_rng(0)
+    codes = rng.integers(0, top + 1, (16, 20, 3)).astype(dtype)
+    ph = read_photo(_capture(tmp_path, "a.png", codes), 0)
+    assert ph.codes is not None and ph.codes.dtype == dtype
+    np.testing.assert_array_equal(ph.codes, codes)
+    np.testing.assert_array_equal(np.rint(np.clip(ph.raw, 0.0, 1.0) * top).astype(dtype), ph.codes)
+
+
+def test_read_photo_of_an_exr_has_no_codes(tmp_path):
+    path = _exr(tmp_path)
+    (tmp_path / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": [path.name]}))
+    from ffls.io.capture import load_capture
+
+    ph = read_photo(load_capture(tmp_path), 0)
+    assert ph.codes is None
+
+
+@pytest.mark.parametrize("bit_depth,dtype,top", [(8, np.uint8, 255), (16, np.uint16, 65535)])
+def test_sphere_values_of_integer_codes_match_the_float_path(bit_depth, dtype, top):
+    rng = np.random.default_rng(7)
+    h, w = 40, 50
+    codes = rng.integers(0, top + 1, (h, w, 3)).astype(dtype)
+    codes[:5] = 0  # clipped black in every channel
+    codes[5:8, :, 1] = top  # one saturated channel
+    k = int(np.ceil(0.98 * top))  # around the saturation threshold (0.98 of full scale)
+    codes[8:10, :, 2] = rng.integers(k - 2, k + 2, (2, w))
+    codes[10:12, :, :2] = 0  # black in two channels only: not clipped
+    codes[10:12, :, 2] = rng.integers(1, 4, (2, w))
+    rows, cols = (x.ravel() for x in np.mgrid[0:h, 0:w])
+    m = rows.size
+    normals = np.tile([0.0, 0.0, 1.0], (m, 1))
+    s = SphereSamples(rows, cols, normals, np.zeros((m, 3)), np.zeros(3), 1.0, 10.0)
+    image = codes.astype(np.float32) / np.float32(top)
+    (a,) = sphere_values(image, [s], raw=codes, bit_depth=bit_depth)
+    (b,) = sphere_values(image, [s], raw=image, bit_depth=bit_depth)  # the stored values as floats
+    np.testing.assert_array_equal(a.valid, b.valid)
+    assert a.n_saturated == b.n_saturated > 0
+    np.testing.assert_array_equal(a.grey, b.grey)
+    assert not a.valid[:5 * w].any() and not a.valid[5 * w:8 * w].any()
