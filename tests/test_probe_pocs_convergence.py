@@ -123,3 +123,47 @@ def test_bad_options_are_refused(noisy_system, kw):
     H, g = noisy_system
     with pytest.raises(ValueError):
         pocs(H, g, 2, **kw)
+
+
+@pytest.fixture(scope="module")
+def ball_folder(tmp_path_factory):
+    import json
+
+    from ffls.io.images import write_exr
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.synth.probe_scenes import diffuse_sphere_scene
+
+    d = tmp_path_factory.mktemp("pocs_ball")
+    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=48, albedo=0.7)
+    write_exr(d / "ball.exr", sc.image)
+    doc = {"format": "ffls-probe", "version": 1, "images": ["ball.exr"],
+           "camera": {"model": "orthographic", "world_from_camera": sc.world_from_camera.tolist()},
+           "sphere": {"center_px": sc.center_px.tolist(), "radius_px": sc.radius_px, "material": "diffuse",
+                      "albedo": 0.7}}
+    (d / "probe.json").write_text(json.dumps(doc))
+    return d
+
+
+def test_cli_extrapolated_scheme_with_a_stopping_rule(ball_folder, tmp_path, capsys):
+    from ffls.cli import main
+    from ffls.lightmaps.lightmap import load_lightmap
+
+    out = tmp_path / "m.exr"
+    assert main(["probe", "pocs", str(ball_folder), "-o", str(out), "--size", "16", "--sources", "grid", "--grid", "8",
+                 "--scheme", "extrapolated", "--iterations", "20000", "--tol", "1e-4"]) == 0
+    err = capsys.readouterr().err
+    assert "parallel, extrapolated" in err and "stopped at a change below 0.0001" in err
+    assert load_lightmap(out).data.min() >= 0
+
+
+@pytest.mark.parametrize("flags, words", [(["--scheme", "extrapolated", "--relaxation", "1.5"], "--relaxation"),
+                                          (["--relaxation", "2"], "--relaxation"),
+                                          (["--scheme", "parallel"], "--scheme"),
+                                          (["--tol", "0"], "--tol")])
+def test_cli_bad_solver_flags_get_one_line(ball_folder, tmp_path, capsys, flags, words):
+    from ffls.cli import main
+
+    out = tmp_path / "m.exr"
+    assert main(["probe", "pocs", str(ball_folder), "-o", str(out), "--size", "16", *flags]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and not out.exists()
