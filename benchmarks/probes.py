@@ -147,12 +147,17 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two maps, fewer parameters")
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of each image's mean")
+    ap.add_argument("--maps", default=None, help="comma-separated subset of " + ",".join(MAPS))
     ap.add_argument("--pocs-only", action="store_true",
                     help="only the POCS rows and their convergence study (write to another --json / --plot)")
     ap.add_argument("--json", default=str(ROOT / "benchmarks/results/probes.json"))
     ap.add_argument("--plot", default=str(ROOT / "docs/images/probes.png"))
     a = ap.parse_args(argv)
     maps = MAPS[:2] if a.quick else MAPS
+    if a.maps:
+        maps = tuple(m for m in a.maps.split(",") if m)
+        if not set(maps) <= set(MAPS):
+            ap.error(f"--maps: choose from {','.join(MAPS)}")
     rng = np.random.default_rng(0)
     rows, limit, conv, curve = [], {}, {}, {}
     tmp = Path(tempfile.mkdtemp(prefix="ffls_probes_"))
