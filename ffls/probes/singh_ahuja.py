@@ -16,6 +16,11 @@ fixed order leaves artefacts and converges more slowly), then the amplitude proj
 :func:`pocs` is the solver on any kernel (a cast-shadow kernel works too); :func:`singh_ahuja`
 builds the kernel of a diffuse object from its normals. The relative residual after every
 iteration is returned to show the convergence.
+
+Noise, or a model that cannot render the data exactly, leaves the residual sets with no common point,
+and the sweeps then cycle. :func:`pocs` also offers relaxed projections and Combettes' extrapolated
+parallel projections (``scheme='extrapolated'``), which converge to the least-squares point of the
+amplitude set, and a stopping rule on the change per sweep (``tol``); the paper's scheme is the default.
 """
 from __future__ import annotations
 
