@@ -54,7 +54,7 @@ from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.sato_sato_ikeuchi import box_visibility, dome_nodes, sato_sato_ikeuchi
 from ffls.probes.selection import (adaptive_hougen_ahuja, adaptive_sato_sato_ikeuchi, refine_sources,
                                    select_hougen_ahuja, select_sato_sato_ikeuchi)
-from ffls.probes.singh_ahuja import adaptive_singh_ahuja, singh_ahuja
+from ffls.probes.singh_ahuja import adaptive_singh_ahuja, singh_ahuja, singh_ahuja_sources
 from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -94,6 +94,49 @@ def oracle_adaptive(true, hemisphere, max_sources):
     return sel.fit.directions
 
 
+#: Cap on the extrapolated POCS iterations of the benchmark's rows (each two J x J products).
+EXTRAPOLATED_SWEEPS = 3000
+#: Sweep counts of the convergence curve.
+CURVE_SWEEPS = (10, 50, 200, 1000, 3000)
+
+
+def convergence_curve(normals, radiance, directions, relit_capture_error, cap_truth, height):
+    """Error vs sweeps and CPU time on one source set: the paper's sweeps (relaxation 1 and 1.9), the
+    extrapolated parallel projections, and scipy's NNLS on the same pixels as the reference."""
+    from scipy.optimize import nnls
+
+    from ffls.probes.linear import lambert_matrix
+    from ffls.probes.singh_ahuja import pixel_subset
+
+    out = {"sources": int(directions.shape[0]), "sweeps": list(CURVE_SWEEPS)}
+    for label, kw in (("sequential", {}), ("sequential relaxation=1.9", {"relaxation": 1.9}),
+                      ("extrapolated", {"scheme": "extrapolated"})):
+        errs, times, res = [], [], []
+        for it in CURVE_SWEEPS:
+            if label != "extrapolated" and it > 1000:
+                continue
+            fit, t = timed(lambda: singh_ahuja_sources(normals, radiance, 0.7, directions, iterations=it,
+                                                       max_pixels=1000, **kw), 1)
+            errs.append(relit_capture_error(fit.latlong(height), cap_truth))
+            times.append(t)
+            res.append(float(fit.residuals[-1]))
+            print(f"  curve {label:26s} {it:5d} sweeps  {t:6.2f} s  residual {100 * res[-1]:.3f}%  relit capture "
+                  f"{100 * errs[-1]:.2f}%", flush=True)
+        out[label] = {"relit_capture": errs, "cpu_s": times, "residual": res}
+    use = pixel_subset(normals.shape[0], 1000, 0)
+    A = lambert_matrix(normals[use], directions)
+    g = np.pi * np.asarray(radiance)[use] / 0.7
+    t = time.process_time()
+    f = np.stack([nnls(A, g[:, c], maxiter=50 * A.shape[1])[0] for c in range(3)], axis=1)
+    t = time.process_time() - t
+    e = relit_capture_error(sources_to_latlong(directions, f, height), cap_truth)
+    out["nnls"] = {"relit_capture": e, "cpu_s": t,
+                   "residual": float(np.linalg.norm(g - A @ f) / np.linalg.norm(g))}
+    print(f"  curve NNLS (scipy)                          {t:6.2f} s  residual {100 * out['nnls']['residual']:.3f}%  "
+          f"relit capture {100 * e:.2f}%", flush=True)
+    return out
+
+
 def upper_only(a):
     a = a.copy()
     a[a.shape[0] // 2:] = 0.0
@@ -104,12 +147,19 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two maps, fewer parameters")
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of each image's mean")
+    ap.add_argument("--maps", default=None, help="comma-separated subset of " + ",".join(MAPS))
+    ap.add_argument("--pocs-only", action="store_true",
+                    help="only the POCS rows and their convergence study (write to another --json / --plot)")
     ap.add_argument("--json", default=str(ROOT / "benchmarks/results/probes.json"))
     ap.add_argument("--plot", default=str(ROOT / "docs/images/probes.png"))
     a = ap.parse_args(argv)
     maps = MAPS[:2] if a.quick else MAPS
+    if a.maps:
+        maps = tuple(m for m in a.maps.split(",") if m)
+        if not set(maps) <= set(MAPS):
+            ap.error(f"--maps: choose from {','.join(MAPS)}")
     rng = np.random.default_rng(0)
-    rows, limit, conv = [], {}, {}
+    rows, limit, conv, curve = [], {}, {}, {}
     tmp = Path(tempfile.mkdtemp(prefix="ffls_probes_"))
     write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
     cap, lights = load_capture_and_lights(tmp / "cap")
@@ -172,31 +222,32 @@ def main(argv=None):
         d = oracle_adaptive(true, "upper", 526)
         floor(f"Sato adaptive {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H, "upper"),
               "upper")
-        # ------------------------------------------------------------ Hougen-Ahuja
-        ha = [(5, False, {}), (9, False, {}), (17, False, {}), (5, True, {}), (9, True, {}), (17, True, {}),
-              (162, False, {"rcond": 1e-3}), (42, True, {"ambient": "nonnegative"}),
-              (162, True, {"ambient": "nonnegative"}), (492, True, {"ambient": "nonnegative"}),
-              (492, True, {"ambient": "nonnegative", "smoothness": 0.003})]
-        if a.quick:
-            ha = [h for h in ha if h[0] != 492]
-        for n, nn, kw in ha:
-            fit, t = timed(lambda: hougen_ahuja(sph.normals, rad, 0.7, n, nonnegative=nn, **kw))
-            L = add("hougen_ahuja", f"n={n} {'nnls' if nn else 'lstsq'} {' '.join(f'{k}={v}' for k, v in kw.items())}",
-                    lambda f: f.latlong(H), fit, t, sph.normals, true, "full")
-            if n == 162 and nn:
-                limit[f"{name} HA-162 nnls"] = sh_recovery(L, true, 8).relative_error.tolist()
-            if n == 17 and not nn:
-                limit[f"{name} HA-17 lstsq"] = sh_recovery(L, true, 8).relative_error.tolist()
-        sel, t = timed(lambda: select_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="nonnegative"), 1)
-        add("hougen_ahuja", f"uniform (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals, true,
-            "full")
-        for crit in ("bic", "cv"):
-            sel, t = timed(lambda: adaptive_hougen_ahuja(sph.normals, rad, 0.7, criterion=crit, nonnegative=True,
-                                                         ambient="nonnegative"), 1)
-            add("hougen_ahuja", f"adaptive ({crit}) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals,
-                true, "full")
-            d = sel.fit.directions
-            floor(f"HA adaptive ({crit}) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
+        if not a.pocs_only:
+            # ------------------------------------------------------------ Hougen-Ahuja
+            ha = [(5, False, {}), (9, False, {}), (17, False, {}), (5, True, {}), (9, True, {}), (17, True, {}),
+                  (162, False, {"rcond": 1e-3}), (42, True, {"ambient": "nonnegative"}),
+                  (162, True, {"ambient": "nonnegative"}), (492, True, {"ambient": "nonnegative"}),
+                  (492, True, {"ambient": "nonnegative", "smoothness": 0.003})]
+            if a.quick:
+                ha = [h for h in ha if h[0] != 492]
+            for n, nn, kw in ha:
+                fit, t = timed(lambda: hougen_ahuja(sph.normals, rad, 0.7, n, nonnegative=nn, **kw))
+                L = add("hougen_ahuja", f"n={n} {'nnls' if nn else 'lstsq'} {' '.join(f'{k}={v}' for k, v in kw.items())}",
+                        lambda f: f.latlong(H), fit, t, sph.normals, true, "full")
+                if n == 162 and nn:
+                    limit[f"{name} HA-162 nnls"] = sh_recovery(L, true, 8).relative_error.tolist()
+                if n == 17 and not nn:
+                    limit[f"{name} HA-17 lstsq"] = sh_recovery(L, true, 8).relative_error.tolist()
+            sel, t = timed(lambda: select_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="nonnegative"), 1)
+            add("hougen_ahuja", f"uniform (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals, true,
+                "full")
+            for crit in ("bic", "cv"):
+                sel, t = timed(lambda: adaptive_hougen_ahuja(sph.normals, rad, 0.7, criterion=crit, nonnegative=True,
+                                                             ambient="nonnegative"), 1)
+                add("hougen_ahuja", f"adaptive ({crit}) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals,
+                    true, "full")
+                d = sel.fit.directions
+                floor(f"HA adaptive ({crit}) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
         # ------------------------------------------------------------ POCS
         pocs_rows = [(8, 10, "random"), (8, 50, "random"), (16, 10, "random"), (16, 50, "random"),
                      (16, 50, "sequential")]
@@ -219,53 +270,65 @@ def main(argv=None):
                 limit[f"{name} POCS adaptive"] = sh_recovery(L, true, 8).relative_error.tolist()
             d = sel.fit.directions
             floor(f"POCS adaptive ({crit}) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
-        # ------------------------------------------------------------ Sato, Sato and Ikeuchi
-        sc = cast_shadow_scene(lm, SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
-        occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
-        tu = upper_only(true)
-        up = np.array([[0.0, 0.0, 1.0]])
-        srad = noisy(sc.radiance)
-        nodes = (46, 126, 246, 526) if not a.quick else (46, 126)
-        for n in nodes:
-            d = dome_nodes(n)
-            V, tv = timed(lambda: box_visibility(sc.points, d, sc.box_center, sc.box_size), 1)
-            fit, t = timed(lambda: sato_sato_ikeuchi(sc.points, srad, occ, nodes=d, albedo=sc.albedo, visibility=V), 1)
-            add("sato", f"nodes={d.shape[0]} lambertian", lambda f: f.latlong(H), fit, t + tv, up, tu, "upper")
-        d = dome_nodes(246 if not a.quick else 126)
-        V = box_visibility(sc.points, d, sc.box_center, sc.box_size)
-        fit, t = timed(lambda: sato_sato_ikeuchi(sc.points, srad, occ, nodes=d, case="ratio", visibility=V,
-                                                 surface_radiance=noisy(sc.surface_radiance),
-                                                 reference_albedo=float(np.mean(sc.albedo)))
-                       , 1)
-        add("sato", f"nodes={d.shape[0]} ratio", lambda f: f.latlong(H), fit, t, up, tu, "upper")
-        spec = {"ks": 0.05, "sigma": 0.2}
-        scs = cast_shadow_scene(lm, SHADOW_RES, albedo=0.6, specular=spec, **SHADOW_GEOMETRY)
-        fit, t = timed(lambda: sato_sato_ikeuchi(scs.points, noisy(scs.radiance), occ, nodes=d, case="torrance_sparrow",
-                                                 albedo=0.6, view_dirs=scs.view_dirs, specular=spec, visibility=V), 1)
-        add("sato", f"nodes={d.shape[0]} torrance_sparrow", lambda f: f.latlong(H), fit, t, up, tu, "upper")
-        for crit in ("cv", "bic"):
-            sel, t = timed(lambda: select_sato_sato_ikeuchi(sc.points, srad, occ, candidates=nodes, criterion=crit,
-                                                            albedo=sc.albedo), 1)
-            add("sato", f"uniform ({crit}) -> {sel.fit.directions.shape[0]}", lambda f: f.latlong(H), sel.fit, t, up,
-                tu, "upper")
-        sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points, srad, occ, criterion="bic", albedo=sc.albedo), 1)
-        add("sato", f"adaptive (bic) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
-        d = sel.fit.directions
-        floor(f"Sato adaptive (bic) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H,
-                                                                          "upper"), "upper")
-        # what `ffls probe shadow` runs by default: adaptive, CV, the pixels thinned to the CLI's budget
-        # by the same regular grid (ffls.probes.estimate.pixel_grid_subset); BIC on them beside it
-        rows_px, cols_px = np.nonzero(sc.mask)  # row-major, as sc.points
-        keep, stride = pixel_grid_subset(np.stack([cols_px, rows_px], axis=1), SHADOW_CLI_PIXELS)
-        for crit in ("cv", "bic") if not a.quick else ("cv",):
-            sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points[keep], srad[keep], occ, criterion=crit,
-                                                              albedo=sc.albedo[keep]), 1)
-            add("sato", f"adaptive ({crit}, {keep.size} px{', default' if crit == 'cv' else ''}) -> {sel.chosen}",
-                lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
-        if not a.quick:
-            sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points, srad, occ, criterion="cv", albedo=sc.albedo),
-                           1)
-            add("sato", f"adaptive (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
+        # extrapolated parallel projections (Combettes), a fixed count and the stopping rule
+        for crit, it, tol in (("bic", EXTRAPOLATED_SWEEPS, None), ("cv", EXTRAPOLATED_SWEEPS, None),
+                              ("bic", 20000, 1e-6)):
+            sel, t = timed(lambda: adaptive_singh_ahuja(sph.normals, rad, 0.7, criterion=crit, max_pixels=1000,
+                                                        scheme="extrapolated", iterations=it, tol=tol), 1)
+            add("singh_ahuja", f"adaptive ({crit}) -> {sel.chosen} extrapolated it={sel.fit.iterations}"
+                f"{f' tol={tol:g}' if tol else ''}", lambda f: f.latlong(H), sel.fit, t, sph.normals, true, "full")
+            conv[f"{name} adaptive {crit} extrapolated{' tol' if tol else ''}"] = sel.fit.residuals.tolist()
+        # the convergence curve on one fixed set (the paper's scheme's BIC set): error vs sweeps and CPU time
+        sel = adaptive_singh_ahuja(sph.normals, rad, 0.7, criterion="bic", max_pixels=1000)
+        curve[name] = convergence_curve(sph.normals, rad, sel.fit.directions, relit_capture_error, cap_truth, H)
+        if not a.pocs_only:
+            # ------------------------------------------------------------ Sato, Sato and Ikeuchi
+            sc = cast_shadow_scene(lm, SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
+            occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
+            tu = upper_only(true)
+            up = np.array([[0.0, 0.0, 1.0]])
+            srad = noisy(sc.radiance)
+            nodes = (46, 126, 246, 526) if not a.quick else (46, 126)
+            for n in nodes:
+                d = dome_nodes(n)
+                V, tv = timed(lambda: box_visibility(sc.points, d, sc.box_center, sc.box_size), 1)
+                fit, t = timed(lambda: sato_sato_ikeuchi(sc.points, srad, occ, nodes=d, albedo=sc.albedo, visibility=V), 1)
+                add("sato", f"nodes={d.shape[0]} lambertian", lambda f: f.latlong(H), fit, t + tv, up, tu, "upper")
+            d = dome_nodes(246 if not a.quick else 126)
+            V = box_visibility(sc.points, d, sc.box_center, sc.box_size)
+            fit, t = timed(lambda: sato_sato_ikeuchi(sc.points, srad, occ, nodes=d, case="ratio", visibility=V,
+                                                     surface_radiance=noisy(sc.surface_radiance),
+                                                     reference_albedo=float(np.mean(sc.albedo)))
+                           , 1)
+            add("sato", f"nodes={d.shape[0]} ratio", lambda f: f.latlong(H), fit, t, up, tu, "upper")
+            spec = {"ks": 0.05, "sigma": 0.2}
+            scs = cast_shadow_scene(lm, SHADOW_RES, albedo=0.6, specular=spec, **SHADOW_GEOMETRY)
+            fit, t = timed(lambda: sato_sato_ikeuchi(scs.points, noisy(scs.radiance), occ, nodes=d, case="torrance_sparrow",
+                                                     albedo=0.6, view_dirs=scs.view_dirs, specular=spec, visibility=V), 1)
+            add("sato", f"nodes={d.shape[0]} torrance_sparrow", lambda f: f.latlong(H), fit, t, up, tu, "upper")
+            for crit in ("cv", "bic"):
+                sel, t = timed(lambda: select_sato_sato_ikeuchi(sc.points, srad, occ, candidates=nodes, criterion=crit,
+                                                                albedo=sc.albedo), 1)
+                add("sato", f"uniform ({crit}) -> {sel.fit.directions.shape[0]}", lambda f: f.latlong(H), sel.fit, t, up,
+                    tu, "upper")
+            sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points, srad, occ, criterion="bic", albedo=sc.albedo), 1)
+            add("sato", f"adaptive (bic) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
+            d = sel.fit.directions
+            floor(f"Sato adaptive (bic) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true, "upper"), H,
+                                                                              "upper"), "upper")
+            # what `ffls probe shadow` runs by default: adaptive, CV, the pixels thinned to the CLI's budget
+            # by the same regular grid (ffls.probes.estimate.pixel_grid_subset); BIC on them beside it
+            rows_px, cols_px = np.nonzero(sc.mask)  # row-major, as sc.points
+            keep, stride = pixel_grid_subset(np.stack([cols_px, rows_px], axis=1), SHADOW_CLI_PIXELS)
+            for crit in ("cv", "bic") if not a.quick else ("cv",):
+                sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points[keep], srad[keep], occ, criterion=crit,
+                                                                  albedo=sc.albedo[keep]), 1)
+                add("sato", f"adaptive ({crit}, {keep.size} px{', default' if crit == 'cv' else ''}) -> {sel.chosen}",
+                    lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
+            if not a.quick:
+                sel, t = timed(lambda: adaptive_sato_sato_ikeuchi(sc.points, srad, occ, criterion="cv", albedo=sc.albedo),
+                               1)
+                add("sato", f"adaptive (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, up, tu, "upper")
 
     kernel = {"energy_up_to_order": {str(l): clamped_cosine_energy(l) for l in range(7)},
               "coefficients_2pi_c_l": (2 * np.pi * clamped_cosine_coefficients(8)).tolist()}
@@ -274,7 +337,8 @@ def main(argv=None):
     for k, v in limit.items():
         print(f"  {k:24s} " + " ".join(f"{x:5.2f}" for x in v))
     doc = {"host": host_info(), "noise": a.noise, "map_height": H, "rows": rows, "sh_limit": limit,
-           "kernel": kernel, "pocs_convergence": conv, "command": " ".join(["python", "benchmarks/probes.py", *sys.argv[1:]])}
+           "kernel": kernel, "pocs_convergence": conv,
+           "pocs_convergence_curve": curve, "command": " ".join(["python", "benchmarks/probes.py", *sys.argv[1:]])}
     write_json(a.json, doc)
     plot(rows, conv, a.plot)
     print(f"wrote {a.plot}")

@@ -120,7 +120,15 @@ def _add_inverse(sub, common):
                    help="how the adaptive set's refinement is chosen: cross-validation (default) or BIC")
     q.add_argument("--grid", type=integer(2, 256), default=16,
                    help="with --sources grid: height of the grid of unknowns (default 16)")
-    q.add_argument("--iterations", type=integer(1, 100000), default=50, help="sweeps (default 50)")
+    q.add_argument("--iterations", type=integer(1, 100000), default=None,
+                   help="sweeps (default 50; 3000 with --scheme extrapolated); the cap with --tol")
+    q.add_argument("--scheme", choices=("sequential", "extrapolated"), default="sequential",
+                   help="the paper's sweeps of row projections (default), or extrapolated parallel projections "
+                        "(Combettes), which converge to the least-squares point when noise leaves no common point")
+    q.add_argument("--relaxation", type=number(0.0, 2.0, lo_open=True, hi_open=True), default=1.0,
+                   help="relaxation of the projections, in (0, 2); at most 1 with --scheme extrapolated")
+    q.add_argument("--tol", type=number(0.0, 1.0, lo_open=True), default=None,
+                   help="stop when a sweep changes the estimate by less than this fraction (default: fixed sweeps)")
     q.add_argument("--upper", type=number(0.0, None, lo_open=True), default=None,
                    help="upper amplitude bound on the radiance (default none)")
     q.add_argument("--order", choices=("random", "sequential"), default="random", help="projection order")
@@ -218,7 +226,8 @@ def method_knobs(args) -> dict:
                 "fill": args.fill}
     if args.method == "pocs":
         return {"grid": args.grid, "iterations": args.iterations, "upper": args.upper, "order": args.order,
-                "seed": args.seed, "fill": args.fill, "sources": args.sources, "criterion": args.criterion}
+                "seed": args.seed, "fill": args.fill, "sources": args.sources, "criterion": args.criterion,
+                "scheme": args.scheme, "relaxation": args.relaxation, "tol": args.tol}
     return {}
 
 

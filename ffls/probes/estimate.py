@@ -396,10 +396,17 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
 POCS_SOURCES = ("auto", "adaptive", "grid")
 
 
-def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int = 50, upper: float | None = None,
-                  delta: float = 0.0, order: str = "random", seed: int = 0, rim_px: float = 0.5,
-                  max_pixels: int | None = 2000, confidence_threshold: float = 0.2,
-                  fill: str = "nearest", sources: str = "auto", criterion: str = "cv") -> LightmapEstimate:
+#: ``pocs_lightmap``'s sweep count when none is given, per scheme: the paper's 50 sweeps; the extrapolated
+#: scheme's iterations cost two J x J products each (not m row projections), and its relit error on
+#: ``benchmarks/probes.py`` still falls between 1000 and 3000 (``docs/probes.md``, "POCS").
+POCS_ITERATIONS = {"sequential": 50, "extrapolated": 3000}
+
+
+def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | None = None,
+                  upper: float | None = None, delta: float = 0.0, order: str = "random", seed: int = 0,
+                  rim_px: float = 0.5, max_pixels: int | None = 2000, confidence_threshold: float = 0.2,
+                  fill: str = "nearest", sources: str = "auto", criterion: str = "cv", scheme: str = "sequential",
+                  relaxation: float = 1.0, tol: float | None = None) -> LightmapEstimate:
     """A light map from a diffuse sphere by POCS (Singh and Ahuja, :mod:`ffls.probes.singh_ahuja`).
 
     Parameters
@@ -410,8 +417,9 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int = 50
     grid : int
         ``sources='grid'``: the height of the lat-long grid of unknowns; ``height`` must be a
         multiple of it (texels are repeated, the energy kept).
-    iterations, upper, delta, order, seed, max_pixels
-        :func:`ffls.probes.singh_ahuja.singh_ahuja`'s (``delta`` applies to the grid only).
+    iterations, upper, delta, order, seed, max_pixels, scheme, relaxation, tol
+        :func:`ffls.probes.singh_ahuja.singh_ahuja`'s (``delta`` applies to the grid only; ``iterations``
+        ``None``: :data:`POCS_ITERATIONS` of the scheme; with ``tol`` it is the cap).
     rim_px : float
         See :func:`diffuse_pixels`.
     confidence_threshold : float
@@ -434,25 +442,37 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int = 50
         raise ValueError(f"sources must be one of {POCS_SOURCES}, not {sources!r}")
     if sources == "grid" and int(height) % int(grid):
         raise InputError(f"--size {height} must be a multiple of the POCS grid height --grid {grid}")
+    if scheme not in POCS_ITERATIONS:
+        raise ValueError(f"scheme must be one of {tuple(POCS_ITERATIONS)}, not {scheme!r}")
+    if iterations is None:
+        iterations = POCS_ITERATIONS[scheme]
+    if scheme == "extrapolated" and not 0.0 < float(relaxation) <= 1.0:
+        raise InputError(f"--relaxation {relaxation:g} must be in (0, 1] with --scheme extrapolated")
+    if scheme == "extrapolated" and float(delta) != 0.0:
+        raise InputError("--scheme extrapolated projects onto the residual hyperplanes: delta must be 0")
+    solver = dict(scheme=scheme, relaxation=relaxation, tol=tol)
     N, V, albedo, notes = diffuse_pixels(probe, "pocs", rim_px, None)
     try:
         if sources == "grid":
             res = singh_ahuja(N, V, albedo, height=grid, iterations=iterations, upper=upper, delta=delta,
-                              order=order, seed=seed, max_pixels=max_pixels)
+                              order=order, seed=seed, max_pixels=max_pixels, **solver)
             model, data = f"{grid}x{2 * grid} grid", res.latlong(height)
         else:
             sel = adaptive_singh_ahuja(N, V, albedo, iterations=iterations, upper=upper, order=order, seed=seed,
-                                       max_pixels=max_pixels, criterion=criterion)
+                                       max_pixels=max_pixels, criterion=criterion, **solver)
             res = sel.fit
             notes.append(sel.note)
             model, data = f"{sel.chosen} adaptive sources", res.latlong(height)
     except InputError as e:
         raise _with_source(e, src) from None
     r = res.residuals
-    notes.append(f"POCS (Singh-Ahuja): {model}, {res.iterations} iterations in {order} order over "
+    how = (f"{order} order" if scheme == "sequential" else "parallel, extrapolated") + (
+        f", relaxation {relaxation:g}" if relaxation != 1.0 else "") + (
+        f", stopped at a change below {tol:g}" if tol is not None and res.iterations < iterations else "")
+    notes.append(f"POCS (Singh-Ahuja): {model}, {res.iterations} iterations ({how}) over "
                  f"{res.pixels_used} pixels; residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% (relative), "
                  f"re-rendered relative RMS {100 * res.relative_rms:.2f}%")
-    details = {"iterations": int(res.iterations), "residuals": [float(x) for x in r],
+    details = {"iterations": int(res.iterations), "scheme": scheme, "residuals": [float(x) for x in r],
                "relative_rms": float(res.relative_rms)}
     if sources == "grid":
         details["grid"] = int(grid)

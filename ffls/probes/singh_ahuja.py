@@ -16,6 +16,11 @@ fixed order leaves artefacts and converges more slowly), then the amplitude proj
 :func:`pocs` is the solver on any kernel (a cast-shadow kernel works too); :func:`singh_ahuja`
 builds the kernel of a diffuse object from its normals. The relative residual after every
 iteration is returned to show the convergence.
+
+Noise, or a model that cannot render the data exactly, leaves the residual sets with no common point,
+and the sweeps then cycle. :func:`pocs` also offers relaxed projections and Combettes' extrapolated
+parallel projections (``scheme='extrapolated'``), which converge to the least-squares point of the
+amplitude set, and a stopping rule on the change per sweep (``tol``); the paper's scheme is the default.
 """
 from __future__ import annotations
 
@@ -30,7 +35,7 @@ from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix
 from ffls.probes.selection import CRITERIA, Selection, bic, normal_blocks, refine_sources
 from ffls.probes.sources import geodesic_level, latlong_solid_angles, sources_to_latlong
 
-__all__ = ["BLOCK", "PocsResult", "PocsSources", "pocs", "pixel_subset", "singh_ahuja", "singh_ahuja_sources",
+__all__ = ["BLOCK", "SCHEMES", "PocsResult", "PocsSources", "pocs", "pixel_subset", "singh_ahuja", "singh_ahuja_sources",
            "adaptive_singh_ahuja",
            "estimate_lighting_SinghAhuja"]
 
@@ -81,8 +86,13 @@ class PocsResult:
 BLOCK = 2048
 
 
+#: The schemes of :func:`pocs`: the paper's sequential sweeps, or extrapolated parallel projections.
+SCHEMES = ("sequential", "extrapolated")
+
+
 def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: float = 0.0,
-         order: str = "random", seed: int = 0, x0=None) -> tuple[np.ndarray, np.ndarray]:
+         order: str = "random", seed: int = 0, x0=None, scheme: str = "sequential", relaxation: float = 1.0,
+         tol: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Projections onto convex sets for ``g ~ H f`` with ``lower <= f <= upper``.
 
     One sweep applies the residual projection of every row ``i`` once, in order,
@@ -93,7 +103,27 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
     sweep's order, and ``f += H^T c``. That is exactly the sequence of projections (the same
     arithmetic in another association), solved by ``scipy.linalg.solve_triangular`` in blocks of
     :data:`BLOCK` rows (``f`` is updated between blocks), instead of a Python loop over rows.
-    ``delta > 0`` (a soft threshold per row) runs the projections one by one.
+    ``delta > 0`` (a soft threshold per row) runs the projections one by one. A relaxation
+    ``lambda`` in (0, 2) moves each row ``lambda`` times its projection's step (``lambda = 1``: the
+    paper; the triangular system's diagonal is divided by ``lambda``).
+
+    ``scheme='extrapolated'``: the residual projections in parallel, extrapolated (Combettes 1997,
+    "Convex set theoretic image recovery by extrapolated iterations of parallel subgradient
+    projections"), then the amplitude projection. The mean of the ``m`` row projections moves ``f`` by
+    ``(1/m) Hn^T (gn - Hn f)`` (``Hn``, ``gn``: the rows scaled to unit norm, the preconditioning the
+    projections imply). Combettes' extrapolation factor ``L(f) = m |gn - Hn f|^2 / |Hn^T (gn - Hn f)|^2``
+    is at least ``m / s^2`` (``s`` the largest singular value of ``Hn``) for every ``f``; that bound
+    is the factor used, times ``relaxation`` (in (0, 1] here), so that the step is the same at every
+    iterate and an inertial extrapolation over iterations (Nesterov's, as in Beck and Teboulle's FISTA,
+    restarted when it moves against the last step) can be added. With inconsistent sets (noise, a
+    model that cannot render the data exactly) it converges to the point of the amplitude set nearest
+    to the residual sets in the mean squared distance (Combettes 1994), i.e. the row-normalised
+    non-negative least squares, where sequential sweeps of unrelaxed projections cycle. Each iteration
+    costs two ``J x J`` products (the rows' Gram matrix ``Hn^T Hn`` is formed once), not ``m`` rows.
+    ``delta`` must be 0.
+
+    ``tol``: stop when a sweep changes ``f`` by less than ``tol`` times ``|f|`` (Frobenius), with
+    ``iterations`` as the cap; ``None`` runs exactly ``iterations`` sweeps (the paper).
 
     Parameters
     ----------
@@ -115,12 +145,18 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
         Seed of the permutations.
     x0 : (J, c) array_like, optional
         Start (zeros by default).
+    scheme : {'sequential', 'extrapolated'}
+        The paper's sweeps of row projections, or extrapolated parallel projections (above).
+    relaxation : float
+        ``lambda``: in (0, 2) for ``'sequential'``, (0, 1] for ``'extrapolated'``.
+    tol : float, optional
+        Stopping rule on the relative change of ``f`` per sweep (``None``: a fixed sweep count).
 
     Returns
     -------
     f : (J, c) float64
-    residuals : (iterations + 1,) float64
-        ``|g - H f| / |g|`` (Frobenius) at the start and after every sweep.
+    residuals : (sweeps + 1,) float64
+        ``|g - H f| / |g|`` (Frobenius) at the start and after every sweep run.
     """
     from scipy.linalg import solve_triangular
 
@@ -131,6 +167,13 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
     m, J = H.shape
     if order not in ("random", "sequential"):
         raise ValueError(f"order must be 'random' or 'sequential', not {order!r}")
+    if scheme not in SCHEMES:
+        raise ValueError(f"scheme must be one of {SCHEMES}, not {scheme!r}")
+    lam = float(relaxation)
+    if not (0.0 < lam < 2.0) or (scheme == "extrapolated" and lam > 1.0):
+        raise ValueError(f"relaxation {relaxation!r} must be in (0, 2) (sequential) or (0, 1] (extrapolated)")
+    if scheme == "extrapolated" and float(delta) != 0.0:
+        raise ValueError("scheme='extrapolated' projects onto the residual hyperplanes: delta must be 0")
     norm2 = np.einsum("ij,ij->i", H, H)
     if not np.any(norm2 > 0):
         raise InputError("singular system: no pixel is lit by any direction of the POCS model")
@@ -144,24 +187,65 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
     d = float(delta)
     gram = H[rows] @ H[rows].T if rows.size <= BLOCK and d == 0 else None
     Hn = H / np.where(norm2 > 0, norm2, 1.0)[:, None] if d > 0 else None
+    if scheme == "extrapolated":
+        return _extrapolated(H[rows], g[rows], norm2[rows], f, lower, hi, lam, int(iterations), tol, g, gn, res)
     pos = np.full(m, -1, dtype=np.int64)
     pos[rows] = np.arange(rows.size)
     for _ in range(int(iterations)):
+        prev = f.copy() if tol is not None else None
         seq = rng.permutation(rows) if order == "random" else rows
         if d > 0:
             for i in seq:
                 r = g[i] - H[i] @ f
                 r = np.where(r > d, r - d, np.where(r < -d, r + d, 0.0))
-                f += np.outer(Hn[i], r)
+                f += lam * np.outer(Hn[i], r)
         else:
             for s in range(0, seq.size, BLOCK):
                 blk = seq[s:s + BLOCK]
                 Hb = H[blk]
                 G = np.take(np.take(gram, pos[blk], axis=0), pos[blk], axis=1) if gram is not None else Hb @ Hb.T
+                if lam != 1.0:
+                    G[np.diag_indices_from(G)] /= lam
                 c = solve_triangular(G, g[blk] - Hb @ f, lower=True, check_finite=False)
                 f += Hb.T @ c
         np.clip(f, lower, hi, out=f)
         res.append(float(np.linalg.norm(g - H @ f)) / gn)
+        if prev is not None and _settled(f, prev, tol):
+            break
+    return f, np.asarray(res)
+
+
+def _settled(f, prev, tol) -> bool:
+    """Whether the last sweep moved ``f`` by less than ``tol`` times its norm."""
+    return float(np.linalg.norm(f - prev)) <= float(tol) * max(float(np.linalg.norm(f)), 1e-300)
+
+
+def _extrapolated(Hr, gr, norm2, f, lower, hi, lam, iterations, tol, g, gn, res):
+    """:func:`pocs`'s ``scheme='extrapolated'`` on the rows that constrain (``norm2 > 0``)."""
+    s = np.sqrt(norm2)[:, None]
+    Hn, gnr = Hr / s, gr / s
+    A = Hn.T @ Hn                              # J x J: the mean projection is (b - A f) / m
+    b = Hn.T @ gnr
+    smax2 = float(np.linalg.eigvalsh(A)[-1])   # the largest singular value of Hn, squared
+    step = lam / smax2                         # (lam m / s^2) x the mean projection's 1/m
+    # the residual over all rows, |g - H f|^2 = |g|^2 - 2 <H^T g, f> + <f, H^T H f>, from J x J products
+    HtH, Htg, g2 = Hr.T @ Hr, Hr.T @ gr, float(np.sum(g * g))
+
+    def resid(x):
+        return float(np.sqrt(max(g2 - 2.0 * np.sum(Htg * x) + np.sum(x * (HtH @ x)), 0.0))) / gn
+
+    y, t = f.copy(), 1.0
+    for _ in range(iterations):
+        fn = np.clip(y + step * (b - A @ y), lower, hi)
+        if np.sum((y - fn) * (fn - f)) > 0.0:   # the inertia moves against the step: restart it
+            t = 1.0
+        tn = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
+        y = fn + ((t - 1.0) / tn) * (fn - f)
+        done = tol is not None and _settled(fn, f, tol)
+        f, t = fn, tn
+        res.append(resid(f))
+        if done:
+            break
     return f, np.asarray(res)
 
 
@@ -181,7 +265,8 @@ def _pixels(normals, radiance, albedo):
 
 def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int = 50, upper: float | None = None,
                 delta: float = 0.0, order: str = "random", seed: int = 0, max_pixels: int | None = 2000,
-                visibility=None) -> PocsResult:
+                visibility=None, scheme: str = "sequential", relaxation: float = 1.0,
+                tol: float | None = None) -> PocsResult:
     """Recover a lat-long map from a Lambertian object's pixels by POCS (Singh and Ahuja).
 
     Parameters
@@ -208,6 +293,8 @@ def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int
         bound the time of the sequential sweeps; ``rendered`` covers every pixel.
     visibility : (m, h * 2h) array_like of bool, optional
         Occlusion of each grid direction at each pixel (a cast-shadow kernel); none by default.
+    scheme, relaxation, tol
+        As :func:`pocs` (the defaults: the paper's sequential sweeps, a fixed count).
 
     Returns
     -------
@@ -224,12 +311,13 @@ def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int
     use = np.arange(m)
     if max_pixels is not None and m > int(max_pixels):
         use = np.sort(np.random.default_rng(seed).choice(m, int(max_pixels), replace=False))
-    f, res = pocs(H[use], g[use], iterations, 0.0, upper, delta, order, seed)
+    f, res = pocs(H[use], g[use], iterations, 0.0, upper, delta, order, seed, scheme=scheme,
+                  relaxation=relaxation, tol=tol)
     rendered = (H @ f) * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
     return PocsResult(radiance=f.reshape(h, 2 * h, 3), residuals=res, rendered=rendered, rms=rms,
-                      relative_rms=rms / ref if ref > 0 else np.inf, iterations=int(iterations),
+                      relative_rms=rms / ref if ref > 0 else np.inf, iterations=int(res.size - 1),
                       pixels_used=int(use.size))
 
 
@@ -285,7 +373,8 @@ def pixel_subset(m: int, max_pixels: int | None, seed: int = 0) -> np.ndarray:
 
 def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iterations: int = 50, upper=None,
                         delta: float = 0.0, order: str = "random", seed: int = 0, max_pixels: int | None = 2000,
-                        x0=None) -> PocsSources:
+                        x0=None, scheme: str = "sequential", relaxation: float = 1.0,
+                        tol: float | None = None) -> PocsSources:
     """POCS (Singh and Ahuja's projections) over a kernel built on explicit source directions.
 
     The unknown ``f_j >= 0`` is the power of source ``j`` (the irradiance it gives a surface
@@ -306,6 +395,8 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
         cell's solid angle (:func:`ffls.probes.sources.cell_solid_angles`).
     x0 : (n, 3) array_like, optional
         Start of the iterations (zeros by default).
+    scheme, relaxation, tol
+        As :func:`pocs`.
 
     Returns
     -------
@@ -322,19 +413,20 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
     H = lambert_matrix(n, d)
     use = pixel_subset(m, max_pixels, seed)
     hi = None if upper is None else float(upper) * cell_solid_angles(d, "full")
-    f, res = pocs(H[use], g[use], iterations, 0.0, hi, delta, order, seed, x0)
+    f, res = pocs(H[use], g[use], iterations, 0.0, hi, delta, order, seed, x0, scheme, relaxation, tol)
     rendered = (H @ f) * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
     return PocsSources(directions=d, intensities=f, rendered=rendered, rms=rms,
-                       relative_rms=rms / ref if ref > 0 else np.inf, residuals=res, iterations=int(iterations),
+                       relative_rms=rms / ref if ref > 0 else np.inf, residuals=res, iterations=int(res.size - 1),
                        pixels_used=int(use.size))
 
 
 def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, upper=None, order: str = "random",
                          seed: int = 0, max_pixels: int | None = 2000, criterion: str = "cv", folds: int = 5,
                          tolerance: float = 0.05, base_frequency: int = 3, max_sources: int = 500, max_level: int = 3,
-                         power_share: float = 0.5, patience: int = 2):
+                         power_share: float = 0.5, patience: int = 2, scheme: str = "sequential",
+                         relaxation: float = 1.0, tol: float | None = None):
     """POCS over an adaptive geodesic source set: Singh and Ahuja's projections where the light is.
 
     The set is grown by :func:`ffls.probes.selection.refine_sources`, as for Hougen and Ahuja
@@ -361,6 +453,8 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
         As :func:`ffls.probes.selection.select_model`.
     base_frequency, max_sources, max_level, power_share, patience
         As :func:`ffls.probes.selection.refine_sources`.
+    scheme, relaxation, tol
+        As :func:`pocs`, for every fit.
 
     Returns
     -------
@@ -377,7 +471,8 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     b = as_rgb_pixels(radiance, m)
     rho = broadcast_albedo(albedo, m)
     use = pixel_subset(m, max_pixels, seed)
-    kw = dict(iterations=iterations, upper=upper, order=order, seed=seed, max_pixels=None)
+    kw = dict(iterations=iterations, upper=upper, order=order, seed=seed, max_pixels=None, scheme=scheme,
+              relaxation=relaxation, tol=tol)
 
     def fit_all(d):
         return singh_ahuja_sources(n[use], b[use], rho[use], d, **kw)
