@@ -19,7 +19,13 @@ Then ``ffls composite``'s library path (:func:`ffls.commands.composite.make_comp
 :class:`ffls.relight.cpu.CpuRelighter` per capture, :func:`ffls.relight.composite.composite`) and
 the errors of ``benchmarks/composite.py`` (change region: surface pixels off the object where the
 truth differs from the background by more than 3%; pasting without the shadow; the ring around
-the spheres).
+the spheres) and the spheres' *shadow trace*: the composite's relative difference from the
+background over the surface pixels off the change region and off the spheres' ring where the relit
+surface-alone capture is more than 3% darker (over the background) than its median, i.e. in the
+calibration spheres' shadows, which the virtual scene does not have. ``lit_trace`` is the same over
+the other such pixels: the floor the shadow trace is read against. The change-region error is
+also split at the same shadows (``change_in_shadows``, ``change_off_shadows``): inside them neither
+capture holds the light the spheres block, so what the object blocks of it is in neither.
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
         [--res 128] [--spp 16] [--truth-spp 1024] [--map-spp 256] [--cache DIR] [--schemes voronoi,...]
@@ -221,6 +227,7 @@ def main():
         bg, tr, lm = scene_renders(mi, ll, cache, name, R, a.truth_spp, a.map_height, a.map_spp)
         change = change_region(tr, bg, sm_b, om_b)
         ring = near_sph & sm_b & ~change
+        rest = sm_b & ~change & ~near_sph
         for n, ((oc, ol), (sc_, sl)), scheme, sources in ((n, c, sch, src) for n, c in caps.items()
                                                          for sch in a.schemes.split(",")
                                                          for src in a.sources.split(",")):
@@ -235,6 +242,12 @@ def main():
             oh, sh = o.read_hdr().astype(np.float64), s.read_hdr().astype(np.float64)
             note = o.last_split.describe() if sources != "weights" else ""
             paste = bg * (1 - om[..., None]) + oh * om[..., None]
+            # The spheres' shadows in the relit surface-alone capture: its luminance over the background's
+            # more than 3% (the change region's threshold) below its median over the surface, whatever
+            # the albedos' ratio; the composite should equal the background there (no trace).
+            q = (sh @ LUMINANCE) / np.maximum(bg @ LUMINANCE, 1e-12)
+            in_shadow = sm_b & ~near_sph & (q < 0.97 * np.median(q[rest]))
+            shadowed, lit = rest & in_shadow, rest & ~in_shadow
             for method in METHODS:
                 res = composite(bg, oh, sh, om, sm, method=method)
                 c = res.image.astype(np.float64)
@@ -242,17 +255,28 @@ def main():
                 def rel(x, m):
                     return float(np.abs(x - tr)[m].sum() / max(tr[m].sum(), 1e-30))
 
+                def trace(x, m):
+                    return float(np.abs(x - bg)[m].sum() / max(bg[m].sum(), 1e-30)) if m.any() else float("nan")
+
                 rows.append({"map": name, "lights": n, "scheme": scheme, "sources": sources, "method": method,
                              "change": rel(c, change), "paste": rel(paste, change),
                              "overall": rel(c, np.ones_like(change)), "object": rel(c, om_b),
                              "sphere_trace": float((np.abs(c - bg)[ring] @ LUMINANCE).mean()
                                                    / (bg[ring] @ LUMINANCE).mean()),
+                             "shadow_trace": trace(c, shadowed), "lit_trace": trace(c, lit),
+                             "shadow_pixels": int(shadowed.sum()),
+                             "change_in_shadows": rel(c, change & in_shadow),
+                             "change_off_shadows": rel(c, change & ~in_shadow),
+                             "change_pixels_in_shadows": int((change & in_shadow).sum()),
                              "change_pixels": int(change.sum()), "registration": res.registration.to_json(),
                              "compact_sources": note})
                 x = rows[-1]
                 print(f"{name:10s} {n:4d} {scheme:12s} {sources:9s} {method:12s} change {100 * x['change']:5.1f}%  "
                       f"paste {100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
-                      f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  "
+                      f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  shadow trace "
+                      f"{100 * x['shadow_trace']:4.1f}% ({x['shadow_pixels']} px, lit {100 * x['lit_trace']:4.1f}%)  "
+                      f"change in / off the spheres' shadows {100 * x['change_in_shadows']:4.1f} / "
+                      f"{100 * x['change_off_shadows']:4.1f}% ({x['change_pixels_in_shadows']} px in)  "
                       f"({x['change_pixels']} px) {note}", flush=True)
     write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "map_spp": a.map_spp,
                        "capture_albedo": CAPTURE_ALBEDO,
