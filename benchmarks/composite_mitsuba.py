@@ -19,7 +19,16 @@ Then ``ffls composite``'s library path (:func:`ffls.commands.composite.make_comp
 :class:`ffls.relight.cpu.CpuRelighter` per capture, :func:`ffls.relight.composite.composite`) and
 the errors of ``benchmarks/composite.py`` (change region: surface pixels off the object where the
 truth differs from the background by more than 3%; pasting without the shadow; the ring around
-the spheres).
+the spheres) and the spheres' *shadow trace*: the composite's relative difference from the
+background over the surface pixels off the change region and off the spheres' ring where the relit
+surface-alone capture is more than 3% darker (over the background) than its median, i.e. in the
+calibration spheres' shadows, which the virtual scene does not have. ``lit_trace`` is the same over
+the other such pixels: the floor the shadow trace is read against. The change-region error is
+also split at the same shadows (``change_in_shadows``, ``change_off_shadows``): inside them neither
+capture holds the light the spheres block, so what the object blocks of it is in neither. For
+``--sources lightflow``/``levelset`` each compact source's own sphere shadows are also found from
+the geometry (:func:`sphere_shadows`: the spheres, the camera, the source's direction and angular
+radius) and the change error split there (``source_shadows``).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
         [--res 128] [--spp 16] [--truth-spp 1024] [--map-spp 256] [--cache DIR] [--schemes voronoi,...]
@@ -125,6 +134,44 @@ def render_capture(mi, folder: Path, n, seed, with_object, res, spp, seed_offset
     return load_capture_and_lights(folder)
 
 
+def sphere_shadows(res, direction, radius_deg):
+    """Ground pixels in the calibration spheres' shadows from a distant source (geometry, no render).
+
+    Parameters
+    ----------
+    res : int
+        Image width and height, pixels.
+    direction : (3,) array_like
+        Direction towards the source (world frame, z up).
+    radius_deg : float
+        The source's angular radius: the shadow widens by ``t tan(radius)`` at distance ``t`` from
+        the sphere (its penumbra).
+
+    Returns
+    -------
+    (res, res) bool array
+        Pixels whose ground point (z = 0 along the camera's pixel-centre ray) sees the source
+        through one of :data:`SPHERES` (radius 5 cm, centres 5 cm above the ground).
+    """
+    K, M = _camera(res)
+    jj, ii = np.mgrid[0:res, 0:res].astype(np.float64)
+    rays = np.stack([(ii - K[0, 2]) / K[0, 0], (jj - K[1, 2]) / K[1, 1], np.ones_like(ii)], -1) @ M[:3, :3].T
+    origin = M[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -origin[2] / rays[..., 2]
+    ground = origin + np.where(t > 0, t, np.nan)[..., None] * rays
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    hidden = np.zeros((res, res), dtype=bool)
+    for x, y in SPHERES:
+        v = np.array([x, y, 0.05]) - ground
+        along = v @ d
+        off = np.linalg.norm(v - along[..., None] * d, axis=-1)
+        with np.errstate(invalid="ignore"):
+            hidden |= (along > 0) & (off < 0.05 + along * math.tan(math.radians(radius_deg)))
+    return hidden
+
+
 def cast_masks(mi, res):
     """Object, surface (ground, no spheres) and sphere masks by casting the camera's pixel-centre rays."""
     scene = mi.load_dict({"type": "scene", "sensor": camera_sensor(mi, res, 1), **scene_shapes(mi, 0.3, True, True, False)})
@@ -221,6 +268,7 @@ def main():
         bg, tr, lm = scene_renders(mi, ll, cache, name, R, a.truth_spp, a.map_height, a.map_spp)
         change = change_region(tr, bg, sm_b, om_b)
         ring = near_sph & sm_b & ~change
+        rest = sm_b & ~change & ~near_sph
         for n, ((oc, ol), (sc_, sl)), scheme, sources in ((n, c, sch, src) for n, c in caps.items()
                                                          for sch in a.schemes.split(",")
                                                          for src in a.sources.split(",")):
@@ -235,6 +283,16 @@ def main():
             oh, sh = o.read_hdr().astype(np.float64), s.read_hdr().astype(np.float64)
             note = o.last_split.describe() if sources != "weights" else ""
             paste = bg * (1 - om[..., None]) + oh * om[..., None]
+            # The spheres' shadows in the relit surface-alone capture: its luminance over the background's
+            # more than 3% (the change region's threshold) below its median over the surface, whatever
+            # the albedos' ratio; the composite should equal the background there (no trace).
+            q = (sh @ LUMINANCE) / np.maximum(bg @ LUMINANCE, 1e-12)
+            in_shadow = sm_b & ~near_sph & (q < 0.97 * np.median(q[rest]))
+            shadowed, lit = rest & in_shadow, rest & ~in_shadow
+            # Each compact source's own (hard) sphere shadows, from the scene's geometry: there the
+            # captures hold none of that source's light, so the object's shadow from it is in neither.
+            hard = [(src, sphere_shadows(R, src.direction, src.radius_deg) & sm_b)
+                    for src in (o.last_split.sources if sources != "weights" else ())]
             for method in METHODS:
                 res = composite(bg, oh, sh, om, sm, method=method)
                 c = res.image.astype(np.float64)
@@ -242,18 +300,43 @@ def main():
                 def rel(x, m):
                     return float(np.abs(x - tr)[m].sum() / max(tr[m].sum(), 1e-30))
 
+                def trace(x, m):
+                    return float(np.abs(x - bg)[m].sum() / max(bg[m].sum(), 1e-30)) if m.any() else float("nan")
+
                 rows.append({"map": name, "lights": n, "scheme": scheme, "sources": sources, "method": method,
                              "change": rel(c, change), "paste": rel(paste, change),
                              "overall": rel(c, np.ones_like(change)), "object": rel(c, om_b),
                              "sphere_trace": float((np.abs(c - bg)[ring] @ LUMINANCE).mean()
                                                    / (bg[ring] @ LUMINANCE).mean()),
+                             "shadow_trace": trace(c, shadowed), "lit_trace": trace(c, lit),
+                             "shadow_pixels": int(shadowed.sum()),
+                             "change_in_shadows": rel(c, change & in_shadow),
+                             "change_off_shadows": rel(c, change & ~in_shadow),
+                             "change_pixels_in_shadows": int((change & in_shadow).sum()),
                              "change_pixels": int(change.sum()), "registration": res.registration.to_json(),
                              "compact_sources": note})
+                total = max(float(np.abs(c - tr)[change].sum()), 1e-30)
+                rows[-1]["source_shadows"] = [
+                    {"direction": src.direction.tolist(), "radius_deg": src.radius_deg,
+                     "power_share": float(src.power @ LUMINANCE) / max(float(
+                         o.last_split.rest.total_power() @ LUMINANCE + o.last_split.source_power @ LUMINANCE), 1e-30),
+                     "change_pixels_in": int((change & h).sum()), "change_in": rel(c, change & h),
+                     "change_off": rel(c, change & ~h),
+                     "error_share_in": float(np.abs(c - tr)[change & h].sum() / total),
+                     "trace": trace(c, h & ~change & ~near_sph)} for src, h in hard]
                 x = rows[-1]
                 print(f"{name:10s} {n:4d} {scheme:12s} {sources:9s} {method:12s} change {100 * x['change']:5.1f}%  "
                       f"paste {100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
-                      f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  "
+                      f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  shadow trace "
+                      f"{100 * x['shadow_trace']:4.1f}% ({x['shadow_pixels']} px, lit {100 * x['lit_trace']:4.1f}%)  "
+                      f"change in / off the spheres' shadows {100 * x['change_in_shadows']:4.1f} / "
+                      f"{100 * x['change_off_shadows']:4.1f}% ({x['change_pixels_in_shadows']} px in)  "
                       f"({x['change_pixels']} px) {note}", flush=True)
+                for k, h in enumerate(x["source_shadows"]):
+                    print(f"    source {k}: its spheres' shadows hold {h['change_pixels_in']} change px, error "
+                          f"{100 * h['change_in']:4.1f}% there ({100 * h['error_share_in']:3.0f}% of the change "
+                          f"error), {100 * h['change_off']:4.1f}% off them; trace there {100 * h['trace']:4.1f}%",
+                          flush=True)
     write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "map_spp": a.map_spp,
                        "capture_albedo": CAPTURE_ALBEDO,
                        "scene_albedo": SCENE_ALBEDO, "host": host_info(), "seconds": time.perf_counter() - t0,
