@@ -79,6 +79,33 @@ that curve. A polynomial curve is used through its 256-entry table (8-bit files;
 none) and written into ``lights.json`` with its order and coefficients (``docs/formats.md``). A
 best gamma at an end of :data:`GAMMA_SEARCH` is refused only when no polynomial wins.
 
+The shadow side and the offset. On the lit side alone the curve is fixed only up to an affine map
+of the radiance, ``a f + c``: each unit's ambient term absorbs any offset ``c`` (and ``a`` is the
+lights' scale). A gamma cannot bend into such a map, but a polynomial can, and the light estimator
+(:mod:`ffls.spheres.lambert`) then reads the offset where the map fails: the dark side, which it
+fits too, and its ambient term, bounded at 0 (an S-curve fitted to the lit sides of
+``ffls synth --encoding filmic`` files matched ``1.12 f_true - 0.014``, and the directions were
+2-4 deg off). Two things pin it, both true of a camera and of the physics, neither of the renders:
+
+* **The attached-shadow side** (``n . l < -terminator``) joins each unit that shows ``min_pixels``
+  of it (:class:`_ShadowSide`), with the estimator's own model, ``[n . l > 0] v . n + b + c g(n)``
+  (``g`` the ground bounce less the sphere's own shadow, :func:`ffls.spheres.lambert.shadowed_ground_bounce`,
+  where the world frame is known): the same ``b`` and ``c`` on both sides, so the curve must make
+  the dark side's codes (the toe) affine in the bounce's form factor and continuous with the lit
+  side across the terminator. The curve is then fitted over the codes the estimator reads, down
+  to the darkest the spheres show.
+* **Black is black, and no tone curve raises contrast beyond a linear file's**: a fitted tone
+  curve's log-log slope ``d ln f / d ln x`` is at least :data:`TONE_MIN_SLOPE` (1) at every code,
+  so ``f(x) / x`` does not decrease and ``f(0) = 0`` is approached no faster than linearly.
+  Every camera encoding stores a value at or above a linear file's (sRGB: slope 1 at black, up to
+  2.3; a gamma ``g >= 1``; Hable's filmic curve then sRGB: 1.0 to 10). An offset ``c > 0`` would
+  need ``f / x`` to fall in the toe, an offset ``c < 0`` a dark side that is not affine: the
+  remaining offset is below the toe's own values.
+
+With both, the filmic files' curve matched ``1.04 f_true + 0.0016`` and their directions came
+within 0.06 deg of the stated curve's (docs/spheres.md); either alone left them 3.6 deg off (the
+slope bound alone) or one photo 100 deg off (the shadow side alone: the curve jumped at black).
+
 Near lights. A light at a few metres from spheres a few centimetres in radius has a direction and
 an irradiance (``1/r^2``) that vary over each sphere: the shading bends along ``n . l``, and the
 affine model reads the bend as a curve (8-bit sRGB renders lit from 2 m were named ``gamma
@@ -117,6 +144,7 @@ from ffls.io.images import read_image
 from ffls.io.response import POLYNOMIAL_MIN_SLOPE, polynomial_response, polynomial_response_table
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 from ffls.spheres.combine import fit_ray_convergence
+from ffls.spheres.lambert import shadowed_ground_bounce
 from ffls.spheres.samples import ground_bounce
 
 __all__ = [
@@ -146,6 +174,8 @@ _TINY = 1e-6  # below the smallest 16-bit code (1.5e-5): log of a zero channel s
 #: BIC chooses among 1..this. Order 3 follows a filmic S-curve to a quarter of a code value
 #: (docs/spheres.md); a fifth coefficient rarely pays its ln(n_eff) on spheres' shading.
 MAX_POLYNOMIAL_ORDER = 4
+#: Least local log-log slope ``d ln f / d ln x`` of a fitted tone curve (module docstring, "The offset").
+TONE_MIN_SLOPE = 1.0
 _POLY_STEP = 1e-5  # forward-difference step of the polynomial's coefficients (objective scaled to ~1)
 
 
@@ -192,7 +222,13 @@ class EncodingCalibration:
         (``(RSS_poly - RSS_gamma) / noise + order * ln(n_eff)``): negative chose it over the gamma.
         None when no polynomial was tried (16-bit files, ``max_order`` 0).
     polynomial_rms : float or None
-        RMS residual under the best polynomial, in stored values.
+        RMS residual under the best polynomial (of the lit sides), in stored values.
+    bits : int
+        The files' bit depth (8 or 16): the rows of :attr:`response`, ``2 ** bits``.
+    dark_sides : bool
+        Whether the polynomial's coefficients were fitted on the lit and the attached-shadow sides
+        with the slope bound (module docstring, "The shadow side and the offset"); its order and the
+        naming are the lit sides'.
     method : str
     n_spheres, n_photos, n_units, n_pixels : int
         Spheres and photos that contributed, their (photo, sphere) pairs, and pixels used.
@@ -219,6 +255,8 @@ class EncodingCalibration:
     coefficients: tuple = ()
     polynomial_excess: float | None = None
     polynomial_rms: float | None = None
+    bits: int = 8
+    dark_sides: bool = False
 
     @property
     def encoding(self):
@@ -232,10 +270,10 @@ class EncodingCalibration:
 
     @property
     def response(self):
-        """The ``Capture.response`` to use: the (256, 3) table of a polynomial curve, else None."""
+        """The ``Capture.response`` to use: the (2 ** bits, 3) table of a polynomial curve, else None."""
         if self.curve != "polynomial":
             return None
-        return polynomial_response_table(self._rounded_coefficients())
+        return polynomial_response_table(self._rounded_coefficients(), self.bits)
 
     def _rounded_coefficients(self) -> list:
         return [float(f"{c:.6g}") for c in self.coefficients]
@@ -258,6 +296,9 @@ class EncodingCalibration:
             rec["order"] = int(self.order)
             rec["coefficients"] = self._rounded_coefficients()
             rec["polynomial_rms"] = float(f"{self.polynomial_rms:.4g}")
+            rec["dark_sides"] = bool(self.dark_sides)
+            if self.bits != 8:
+                rec["bits"] = int(self.bits)  # the table's rows (ffls.io.capture.record_response)
         return rec
 
     def summary(self) -> str:
@@ -375,9 +416,19 @@ class _Unit:
     photo: int
     sphere: int
     raw: _Codes
-    A: np.ndarray  # (m, p): the shading model's columns (distant: normal and 1)
+    A: np.ndarray  # (m, p): the shading model's columns (distant: normal and 1; with the shadow side, 5)
     usable: np.ndarray  # (m,) bool: not clipped, not near black
     selected: np.ndarray | None = None
+    base: np.ndarray | None = None  # (m, 4): the lit side's columns (normal, 1); A when not given
+
+    def __post_init__(self):
+        if self.base is None:
+            self.base = self.A
+
+    @property
+    def normals(self) -> np.ndarray:
+        """(m, 3) the pixels' unit normals."""
+        return self.base[:, :3]
 
     def select(self, selected: np.ndarray) -> None:
         """Fix the selection (and cache its values, design rows and per-triple sums for :meth:`rss`)."""
@@ -438,7 +489,8 @@ class _Unit:
         return float(r @ r)
 
 
-def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
+def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5,
+            shadow: "_ShadowSide | None" = None) -> bool:
     """Choose ``unit``'s lit pixels with ``curve`` (iterating the fit); False when the unit is unusable.
 
     Start from the pixels within ``acos(terminator)`` of the mean normal of the brightest tenth,
@@ -447,12 +499,18 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     unit is unusable with fewer than ``min_pixels`` pixels, a normal range too narrow to show the
     curve (``n . l`` spanning less than 0.4), or a fit explaining less than ``min_r2`` of the
     variance (no Lambertian shading: a mirror ball, a shadowed or flat sphere).
+
+    With ``shadow`` (:class:`_ShadowSide`), the attached-shadow side joins the unit when it has
+    ``min_pixels`` pixels with ``n . l < -terminator``: the model becomes the light estimator's,
+    ``[n . l > 0] v . n + b + c g(n)`` (:mod:`ffls.spheres.lambert`), and its columns replace the
+    unit's (module docstring, "The shadow side").
     """
     ok = unit.usable
     if ok.sum() < min_pixels:
         return False
     y_all, w_all = _grey_and_weight(unit.raw, curve)
-    normals = unit.A[:, :3]
+    normals = unit.normals
+    base = unit.base
     top = ok & (y_all >= np.percentile(y_all[ok], 90))  # the brightest tenth: around the light's direction
     start = normals[top].sum(axis=0)
     if not np.linalg.norm(start) > 0:
@@ -462,12 +520,12 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     for _ in range(5):
         if sel.sum() < min_pixels:
             return False
-        x, _ = _solve(unit.A[sel], y_all[sel], w_all[sel])
+        x, _ = _solve(base[sel], y_all[sel], w_all[sel])
         nv = float(np.linalg.norm(x[:3]))
         if not np.isfinite(nv) or nv <= 0:
             return False
         cos = normals @ (x[:3] / nv)
-        r = w_all * (y_all - unit.A @ x)
+        r = w_all * (y_all - base @ x)
         lit = ok & (cos > terminator)
         if lit.sum() < min_pixels:
             return False
@@ -478,13 +536,49 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
         sel = new
     if sel.sum() < min_pixels or float(np.ptp(cos[sel])) < 0.4:
         return False
+    A = base
+    if shadow is not None:
+        dark = ok & (cos < -terminator)
+        if dark.sum() >= min_pixels:
+            A = shadow.columns(normals, x[:3] / nv, cos > 0)
+            lit_sel, both = sel, sel | dark
+            for _ in range(5):
+                xs, _ = _solve(A[both], y_all[both], w_all[both])
+                r = w_all * (y_all - A @ xs)
+                med = float(np.median(r[both]))
+                mad = 1.4826 * float(np.median(np.abs(r[both] - med)))
+                new = (lit_sel | dark) & (np.abs(r - med) <= clip * max(mad, 1e-12))
+                if np.array_equal(new, both):
+                    break
+                both = new
+            if (both & dark).sum() >= min_pixels and (both & lit_sel).sum() >= min_pixels:
+                sel = both
+            else:
+                A = base
     yw = y_all[sel] * w_all[sel]
-    _, r = _solve(unit.A[sel], y_all[sel], w_all[sel])
+    _, r = _solve(A[sel], y_all[sel], w_all[sel])
     tot = float(np.sum((yw - yw.mean()) ** 2))
     if tot <= 0 or 1.0 - float(r @ r) / tot < min_r2:
         return False
+    unit.A = A
     unit.select(sel)
     return True
+
+
+@dataclass(frozen=True)
+class _ShadowSide:
+    """The attached-shadow side's model (module docstring, "The shadow side"): the ground bounce
+    ``g(n)`` less the sphere's own shadow on the ground (:func:`ffls.spheres.lambert.shadowed_ground_bounce`,
+    as the light estimator) or, with ``own_shadow`` False, the plain bounce."""
+
+    up: np.ndarray
+    own_shadow: bool = True
+
+    def columns(self, normals: np.ndarray, light: np.ndarray, lit: np.ndarray) -> np.ndarray:
+        """Design columns ``([lit] n, 1, g)`` (m, 5) of a unit's pixels for the light ``light``."""
+        g = (shadowed_ground_bounce(normals, light, self.up) if self.own_shadow
+             else ground_bounce(normals, self.up))
+        return np.column_stack([normals * lit[:, None], np.ones(len(normals)), g])
 
 
 _pool_units: list | None = None  # the units of the worker processes of _UnitPool (inherited when forked)
@@ -497,11 +591,11 @@ def _set_pool_units(units) -> None:
 
 def _select_and_profile_range(task) -> list:
     """In a worker: per unit of ``_pool_units[start:stop]``, its selection and RSS curve (None, None: unusable)."""
-    (start, stop), curve, grid, terminator, min_pixels, min_r2 = task
+    (start, stop), curve, grid, terminator, min_pixels, min_r2, shadow = task
     out = []
     for u in _pool_units[start:stop]:
-        ok = _select(u, curve, terminator, min_pixels, min_r2)
-        out.append((u.selected, u.rss_grid(grid)) if ok else (None, None))
+        ok = _select(u, curve, terminator, min_pixels, min_r2, shadow=shadow)
+        out.append((u.selected, u.A, u.rss_grid(grid)) if ok else (None, None, None))
     return out
 
 
@@ -514,23 +608,24 @@ class _UnitPool:
     def __init__(self, units: list, workers: int = 1):
         self.units, self.workers = units, max(1, int(workers))
 
-    def select_and_profile(self, curve, grid, terminator, min_pixels, min_r2) -> tuple[list, np.ndarray]:
+    def select_and_profile(self, curve, grid, terminator, min_pixels, min_r2, shadow=None) -> tuple[list, np.ndarray]:
         """The usable units (selected with ``curve``) and their RSS over ``grid``: (used, (len(used), k))."""
         if self.workers == 1 or len(self.units) < 2 * self.CHUNK:
-            used = [u for u in self.units if _select(u, curve, terminator, min_pixels, min_r2)]
+            used = [u for u in self.units if _select(u, curve, terminator, min_pixels, min_r2, shadow=shadow)]
             curves = [u.rss_grid(grid) for u in used]
         else:
             from concurrent.futures import ProcessPoolExecutor
 
             bounds = [(a, min(a + self.CHUNK, len(self.units))) for a in range(0, len(self.units), self.CHUNK)]
-            tasks = [(b, curve, grid, terminator, min_pixels, min_r2) for b in bounds]
+            tasks = [(b, curve, grid, terminator, min_pixels, min_r2, shadow) for b in bounds]
             with ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), initializer=_set_pool_units,
                                      initargs=(self.units,)) as ex:
                 parts = list(ex.map(_select_and_profile_range, tasks))
             used, curves = [], []
             for (a, _), part in zip(bounds, parts):
-                for u, (sel, c) in zip(self.units[a:], part):
+                for u, (sel, A, c) in zip(self.units[a:], part):
                     if sel is not None:
+                        u.A = A
                         u.select(sel)
                         used.append(u)
                         curves.append(c)
@@ -679,7 +774,7 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
     """
     dirs, data = [], []
     for u in units:
-        n = u.A[u.selected, :3]
+        n = u.normals[u.selected]
         y, w = u.selected_values(curve)
         x, _ = _solve(u.A[u.selected], y, w)
         nv = float(np.linalg.norm(x[:3]))
@@ -746,9 +841,9 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
             m, rho, center = light
             for i in ix:
                 u = used[i]
-                n = u.A[:, :3]
+                n = u.normals
                 A = _near_columns(n, centers[u.sphere] + radii[u.sphere] * n, up, m, rho, center)
-                nu = _Unit(u.photo, u.sphere, u.raw, A, u.usable)
+                nu = _Unit(u.photo, u.sphere, u.raw, A, u.usable, base=u.base)
                 nu.select(u.selected)
                 units[i] = nu
         if n_near == 0:
@@ -766,7 +861,7 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
 
 
 # ----------------------------------------------------------------------------- tone curves
-def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]:
+def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POLYNOMIAL_MIN_SLOPE) -> tuple[tuple, float]:
     """The polynomial response of ``order`` that minimises the units' summed ``RSS``: (coefficients, RSS).
 
     ``start`` (a lower order's coefficients, or ``(gamma,)``) is padded with zeros. The units'
@@ -774,7 +869,7 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
     (:meth:`_Unit.rss_grid`), so the objective is a smooth function of the ``order + 1``
     coefficients; :func:`scipy.optimize.minimize` (SLSQP) minimises it under the linear
     constraints that keep the curve increasing (the local log-log slope ``g + sum_j j a_j x^j`` at
-    least :data:`ffls.io.response.POLYNOMIAL_MIN_SLOPE` on 65 codes across [0, 1]), with the
+    least ``min_slope`` on 65 codes across [0, 1]; ``g`` itself too), with the
     gradient by forward differences, every shifted curve evaluated in the same pass over the units.
     """
     theta0 = np.zeros(order + 1)
@@ -794,11 +889,12 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
         return float(r[0]), (r[1:] - r[0]) / _POLY_STEP
 
     theta0[0] = min(theta0[0], GAMMA_SEARCH[1])
-    bounds = [(POLYNOMIAL_MIN_SLOPE, GAMMA_SEARCH[1])] + [(None, None)] * order
+    lo = min_slope
+    bounds = [(lo, GAMMA_SEARCH[1])] + [(None, None)] * order
     res = minimize(fun, theta0, jac=True, method="SLSQP", bounds=bounds,
-                   constraints=[{"type": "ineq", "fun": lambda t: C @ t - POLYNOMIAL_MIN_SLOPE, "jac": lambda t: C}],
+                   constraints=[{"type": "ineq", "fun": lambda t: C @ t - lo, "jac": lambda t: C}],
                    options={"maxiter": 200, "ftol": 1e-10})
-    ok = np.all(C @ res.x >= POLYNOMIAL_MIN_SLOPE - 1e-9) and res.x[0] <= GAMMA_SEARCH[1] + 1e-9
+    ok = np.all(C @ res.x >= lo - 1e-9) and res.x[0] <= GAMMA_SEARCH[1] + 1e-9
     theta = res.x if ok else theta0
     rss = float(total([theta])[0])
     if rss > scale:  # never worse than the start (a lower order's optimum)
@@ -807,7 +903,7 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
 
 
 def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, penalty: float,
-                     max_order: int) -> tuple[int, tuple, float, float]:
+                     max_order: int, min_slope: float = POLYNOMIAL_MIN_SLOPE) -> tuple[int, tuple, float, float]:
     """The polynomial response whose order the BIC chooses: (order, coefficients, RSS, score).
 
     Orders 1..``max_order`` are fitted in turn, each started from the last; the score is the BIC
@@ -818,7 +914,7 @@ def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, p
     best = (0, (gamma,), rss_gamma, float("inf"))
     theta = (gamma,)
     for order in range(1, max_order + 1):
-        theta, rss = _fit_polynomial(used, theta, order)
+        theta, rss = _fit_polynomial(used, theta, order, min_slope=min_slope)
         score = (rss - rss_gamma) / noise + order * penalty
         if score < best[3]:
             best = (order, theta, rss, score)
@@ -829,7 +925,8 @@ def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, p
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
                              seed: int = 0, code_step: float | None = None, workers: int = 1, geometry=None,
-                             up=UP, max_order: int = MAX_POLYNOMIAL_ORDER) -> EncodingCalibration:
+                             up=UP, max_order: int = MAX_POLYNOMIAL_ORDER, shadow_side: bool = True,
+                             own_shadow: bool = True) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -882,6 +979,26 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     EncodingCalibrationError
         Too few usable photos, or a best gamma at an end of :data:`GAMMA_SEARCH`.
     """
+    kwargs = dict(matte=matte, terminator=terminator, min_pixels=min_pixels, min_r2=min_r2, min_photos=min_photos,
+                  n_bootstrap=n_bootstrap, seed=seed, code_step=code_step, workers=workers, geometry=geometry, up=up,
+                  max_order=max_order, own_shadow=own_shadow)
+    lit = _calibrate_encoding_gamma(raw, normals, shadow_side=False, **kwargs)
+    if not shadow_side or lit.curve != "polynomial" or lit.shading != "distant":
+        return lit
+    # the lit sides named a tone curve: its offset comes from the dark sides and the slope bound
+    # (module docstring, "The shadow side and the offset"); the naming and its statistics stay the lit sides'
+    try:
+        dark = _calibrate_encoding_gamma(raw, normals, shadow_side=True, **kwargs)
+    except EncodingCalibrationError:
+        return lit
+    if dark.curve != "polynomial":
+        return lit
+    return replace(lit, order=dark.order, coefficients=dark.coefficients, dark_sides=True)
+
+
+def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, min_r2, min_photos, n_bootstrap, seed,
+                              code_step, workers, geometry, up, max_order, shadow_side, own_shadow) -> EncodingCalibration:
+    """:func:`calibrate_encoding_gamma`, on the lit sides alone or (``shadow_side``) with the dark sides."""
     normals = [np.asarray(n, dtype=np.float64).reshape(-1, 3) for n in normals]
     n_sph = len(normals)
     matte = [True] * n_sph if matte is None else [bool(m) for m in matte]
@@ -910,9 +1027,12 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     curve = 0.5 * (lo + hi)  # pilot selection: the middle of the range
     used, grid = units, coarse
     pool = _UnitPool(units, workers)
+    shadow = _ShadowSide(np.asarray(up, dtype=np.float64).reshape(3), bool(own_shadow)) if shadow_side else None
+    min_slope = TONE_MIN_SLOPE if shadow_side else POLYNOMIAL_MIN_SLOPE
     for rnd in range(2):  # select with the current curve, profile, repeat with the best gamma
         # the pilot curve may be far off: the shading test (min_r2) waits for the first round's gamma
-        used, curves = pool.select_and_profile(curve, grid, terminator, min_pixels, min_r2 if rnd else -np.inf)
+        used, curves = pool.select_and_profile(curve, grid, terminator, min_pixels, min_r2 if rnd else -np.inf,
+                                               shadow=shadow)
         if len(used):
             # a (photo, sphere) pair that no curve fits well (a wrong lit side, a cast shadow or an
             # interreflection the model lacks) is left out: its best RMS residual is an outlier
@@ -937,7 +1057,7 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
             n_sel = sum(int(u.selected.sum()) for u in used)
             s2_pilot = float(res.fun) / max(n_sel - sum(u.A.shape[1] for u in used) - 1, 1)
             pen = math.log(max(n_sel, 3))
-            order, coefs, _, score = _best_polynomial(used, best, float(res.fun), s2_pilot, pen, max_order)
+            order, coefs, _, score = _best_polynomial(used, best, float(res.fun), s2_pilot, pen, max_order, min_slope)
             named = min((sum(u.rss(c) for u in used) - float(res.fun)) / s2_pilot for c in (1.0, "srgb"))
             if order and pen + score < min(named, pen):
                 curve = coefs
@@ -977,7 +1097,8 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     if max_order >= 1:
         # a camera's tone curve (toe, shoulder) that no gamma follows: a polynomial response, its order
         # chosen by the BIC, scored against the named curves in the same units (module docstring)
-        order, coefs, rss_poly, score = _best_polynomial(used, best, rss_best, noise, penalty, max_order)
+        order, coefs, rss_poly, score = _best_polynomial(used, best, rss_best, noise, penalty, max_order,
+                                                          min_slope)
         if order:
             poly_excess, poly_rms = score, math.sqrt(rss_poly / n_pix)
             # a tone curve is the camera's: every sphere alone must pay for its parameters. A misfit
@@ -1148,13 +1269,13 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
         raw.append([np.asarray(img.pixels[s.rows, s.cols], dtype=np.float64) for s in samples])
     try:
         kwargs.setdefault("code_step", 1.0 / (2 ** first.bit_depth - 1))
-        if first.bit_depth != 8:
-            # a polynomial curve linearises the photos through a 256-entry response table (8-bit codes)
-            kwargs.setdefault("max_order", 0)
+        # the estimator's shadow-side bounce takes the sphere's own shadow where the world frame is known
+        kwargs.setdefault("own_shadow", not getattr(capture, "world_from_camera_is_default", False))
         if getattr(capture, "camera_model", "pinhole") != "orthographic":
             # the spheres' world centres and radii place a near light (an orthographic camera sees no depth)
             kwargs.setdefault("geometry", [(s.center, s.radius) for s in samples])
         cal = calibrate_encoding(raw, [s.normals for s in samples], method=method, matte=matte, **kwargs)
     except EncodingCalibrationError as e:
         raise InputError(_ask(str(e)), capture.json_path) from None
-    return cal, spheres
+    # a polynomial curve linearises the photos through a table of every code of their depth
+    return replace(cal, bits=int(first.bit_depth)), spheres
