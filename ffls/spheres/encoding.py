@@ -397,6 +397,22 @@ class _Codes:
         return _Codes(self.values, self.log_values, self.triples, self.index[selected])
 
 
+class _SharedValues:
+    """The distinct stored values of several units, and the curves' tables on them: a curve is
+    evaluated once for all the units (an 8-bit capture has at most 256 values), not once per unit."""
+
+    def __init__(self, units: list):
+        self.values = np.unique(np.concatenate([u._raw.values for u in units]))
+        self.log_values = np.log(np.maximum(self.values, _TINY))
+        self.index = {id(u): np.searchsorted(self.values, u._raw.values) for u in units}
+        self.tables: list = []
+
+    def evaluate(self, curves) -> "_SharedValues":
+        """Tabulate ``curves`` (:func:`_curve_tables`) on the shared values; returns self."""
+        self.tables = [_curve_tables(self.values, c, self.log_values) for c in curves]
+        return self
+
+
 def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted least squares ``min ||w (y - A x)||`` (normal equations; ``A`` has a few columns);
     returns ``x`` and the weighted residuals."""
@@ -454,22 +470,27 @@ class _Unit:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
         return float(self.rss_grid([curve])[0])
 
-    def rss_grid(self, curves) -> np.ndarray:
+    def rss_grid(self, curves, shared: "_SharedValues | None" = None) -> np.ndarray:
         """:meth:`rss` for every curve of ``curves`` (k,: gammas, or ``'srgb'``), at once: (k,) float.
 
         The pixels of one (r, g, b) triple share their grey value ``y`` and weight ``w``: with
         their sums (:meth:`select`), each curve's normal equations and residual cost one pass over
         the triples, not the pixels (``rss = sum w^2 y^2 - x . b`` at the solution ``G x = b``,
-        which loses about 1e-12 of it)."""
+        which loses about 1e-12 of it). With ``shared`` (:class:`_SharedValues` of these units,
+        its curves ``curves``), the curves' tables are read from it, not evaluated again."""
         codes = self._raw
         t = codes.triples.shape[1]
         y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
+        tr = codes.triples if shared is None else shared.index[id(self)][codes.triples]
         for j, curve in enumerate(curves):
-            if not isinstance(curve, (str, tuple)):
-                curve = float(curve)
-            f, d2 = _curve_tables(codes.values, curve, codes.log_values)
-            y[j] = f[codes.triples].mean(axis=0)
-            w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
+            if shared is not None:
+                f, d2 = shared.tables[j]
+            else:
+                if not isinstance(curve, (str, tuple)):
+                    curve = float(curve)
+                f, d2 = _curve_tables(codes.values, curve, codes.log_values)
+            y[j] = f[tr].mean(axis=0)
+            w = 1.0 / np.maximum(np.sqrt(d2[tr].mean(axis=0)), 1e-6)
             w2[j] = w * w
         p = self._A.shape[1]
         G = (w2 @ self._sum_aa).reshape(-1, p, p)
@@ -877,9 +898,12 @@ def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POL
     x = np.linspace(0.0, 1.0, 65)
     C = np.column_stack([np.ones_like(x)] + [j * x ** j for j in range(1, order + 1)])
 
+    shared = _SharedValues(used)
+
     def total(thetas) -> np.ndarray:
         curves = [tuple(float(v) for v in t) for t in thetas]
-        return np.sum([u.rss_grid(curves) for u in used], axis=0)
+        shared.evaluate(curves)
+        return np.sum([u.rss_grid(curves, shared) for u in used], axis=0)
 
     scale = float(total([theta0])[0]) or 1.0
     shifts = _POLY_STEP * np.eye(order + 1)
@@ -988,7 +1012,9 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     # the lit sides named a tone curve: its offset comes from the dark sides and the slope bound
     # (module docstring, "The shadow side and the offset"); the naming and its statistics stay the lit sides'
     try:
-        dark = _calibrate_encoding_gamma(raw, normals, shadow_side=True, **kwargs)
+        # (the lit sides chose the distant shading; the dark run's bootstrap only sizes its BIC's noise)
+        dark = _calibrate_encoding_gamma(raw, normals, shadow_side=True,
+                                         **{**kwargs, "geometry": None, "n_bootstrap": min(n_bootstrap, 100)})
     except EncodingCalibrationError:
         return lit
     if dark.curve != "polynomial":
