@@ -75,8 +75,8 @@ a linear file lit from near, an order-4 polynomial won the total BIC by 47 witho
 The noise is the gamma's (larger when the gamma misfits), which
 makes the test conservative against the curve. As for the gamma, a polynomial that decodes every
 stored value within half a code value of the best gamma, the linear or the sRGB curve is named as
-that curve. A polynomial curve is used through its 256-entry table (8-bit files; 16-bit files try
-none) and written into ``lights.json`` with its order and coefficients (``docs/formats.md``). A
+that curve. A polynomial curve is used through its table of every code (256 rows for 8-bit files, 65536
+for 16-bit ones) and written into ``lights.json`` with its order and coefficients (``docs/formats.md``). A
 best gamma at an end of :data:`GAMMA_SEARCH` is refused only when no polynomial wins.
 
 The shadow side and the offset. On the lit side alone the curve is fixed only up to an affine map
@@ -102,7 +102,11 @@ fits too, and its ambient term, bounded at 0 (an S-curve fitted to the lit sides
   need ``f / x`` to fall in the toe, an offset ``c < 0`` a dark side that is not affine: the
   remaining offset is below the toe's own values.
 
-With both, the filmic files' curve matched ``1.04 f_true + 0.0016`` and their directions came
+The lit sides still name the curve and choose its order (the dark side's model, rougher than
+the lit side's, moved gamma-2.2 files' gamma by 0.015); only when they name a polynomial under a
+distant light is the calibration run again with the dark sides and the bound
+(:func:`calibrate_encoding_gamma`, ``shadow_side``), and its coefficients are used
+(:attr:`EncodingCalibration.dark_sides`). With both, the filmic files' curve matched ``1.04 f_true + 0.0016`` and their directions came
 within 0.06 deg of the stated curve's (docs/spheres.md); either alone left them 3.6 deg off (the
 slope bound alone) or one photo 100 deg off (the shadow side alone: the curve jumped at black).
 
@@ -993,6 +997,12 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     max_order : int
         Highest order of the polynomial response tried (module docstring, "Tone curves"); 0 tries
         none (the gamma family and sRGB only).
+    shadow_side : bool
+        Refit a polynomial that the lit sides name on the lit and attached-shadow sides, its
+        log-log slope at least :data:`TONE_MIN_SLOPE` (module docstring, "The shadow side and the
+        offset"); False keeps the lit sides' coefficients.
+    own_shadow : bool
+        The dark side's bounce less the sphere's own shadow on the ground (the world frame known).
 
     Returns
     -------
