@@ -180,7 +180,6 @@ _TINY = 1e-6  # below the smallest 16-bit code (1.5e-5): log of a zero channel s
 MAX_POLYNOMIAL_ORDER = 4
 #: Least local log-log slope ``d ln f / d ln x`` of a fitted tone curve (module docstring, "The offset").
 TONE_MIN_SLOPE = 1.0
-_POLY_STEP = 1e-5  # forward-difference step of the polynomial's coefficients (objective scaled to ~1)
 
 
 class EncodingCalibrationError(ValueError):
@@ -406,10 +405,30 @@ class _SharedValues:
     evaluated once for all the units (an 8-bit capture has at most 256 values), not once per unit."""
 
     def __init__(self, units: list):
-        self.values = np.unique(np.concatenate([u._raw.values for u in units]))
+        self.values = np.unique(np.concatenate([u.selected_codes.values for u in units]))
         self.log_values = np.log(np.maximum(self.values, _TINY))
-        self.index = {id(u): np.searchsorted(self.values, u._raw.values) for u in units}
+        self.index = {id(u): np.searchsorted(self.values, u.selected_codes.values) for u in units}
         self.tables: list = []
+
+    def evaluate_partials(self, theta) -> "_SharedValues":
+        """``partials``: the polynomial response ``f`` of coefficients ``theta`` on the shared values,
+        its slope ``f'`` and their derivatives in ``theta`` ((P, U) each; :func:`ffls.io.response.polynomial_response`:
+        ``d f / d g = f ln x``, ``d f / d a_j = f (x^j - 1)``, and for ``f' = (f / x)(g + D)``,
+        ``D = sum_j j a_j x^j``, the same factors plus ``f / x`` and ``(f / x) j x^j``)."""
+        theta = np.asarray(theta, dtype=np.float64)
+        x, lx = self.values, self.log_values
+        f, d = polynomial_response(x, theta, derivative=True)
+        g = theta[0]
+        powers = [x ** j for j in range(1, len(theta))]
+        poly = sum((a * (xj - 1.0) for a, xj in zip(theta[1:], powers)), np.zeros_like(x))
+        D = sum((j * a * xj for j, (a, xj) in enumerate(zip(theta[1:], powers), start=1)), np.zeros_like(x))
+        base = np.exp((g - 1.0) * lx + poly)  # f / x (as polynomial_response computes it)
+        fx = np.where(x > 0, f, 0.0)
+        df = np.stack([fx * lx] + [fx * (xj - 1.0) for xj in powers])
+        dd = np.stack([base * lx * (g + D) + base]
+                      + [base * ((xj - 1.0) * (g + D) + j * xj) for j, xj in enumerate(powers, start=1)])
+        self.partials = (f, d, df, dd)
+        return self
 
     def evaluate(self, curves) -> "_SharedValues":
         """Tabulate ``curves`` (:func:`_curve_tables`) on the shared values; returns self."""
@@ -466,6 +485,11 @@ class _Unit:
         self._sum_aa = np.stack([np.bincount(idx, A[:, i] * A[:, j], minlength=t)
                                  for i in range(p) for j in range(p)], axis=1)
 
+    @property
+    def selected_codes(self) -> _Codes:
+        """The selected pixels' stored values (:meth:`select`)."""
+        return self._raw
+
     def selected_values(self, curve) -> tuple[np.ndarray, np.ndarray]:
         """Grey linear value and weight of each selected pixel under ``curve`` (:func:`_grey_and_weight`)."""
         return _grey_and_weight(self._raw, curve)
@@ -505,6 +529,38 @@ class _Unit:
         except np.linalg.LinAlgError:  # a degenerate design: the minimum-norm solutions, pixel by pixel
             return np.array([self._rss_pixels(c) for c in curves])
         return np.maximum((w2y * y) @ self._count - np.einsum("ki,ki->k", x, b), 0.0)
+
+    def rss_and_gradient(self, shared: "_SharedValues") -> tuple[float, np.ndarray]:
+        """:meth:`rss` under the polynomial curve whose partials ``shared`` holds
+        (:meth:`_SharedValues.evaluate_partials`), and its gradient in the curve's coefficients.
+
+        With the unit's coefficients ``x`` profiled out, the envelope theorem leaves the partial
+        derivatives at fixed ``x``: per triple, ``rss_t = w_t^2 Q_t`` with ``Q_t = n_t y_t^2 - 2 y_t
+        s_t . x + x^T S_t x`` (``n_t``, ``s_t``, ``S_t`` its pixels' count, design sums and products), so
+        ``d rss = sum_t (d w_t^2) Q_t + 2 w_t^2 (n_t y_t - s_t . x) d y_t``."""
+        codes = self._raw
+        tr = shared.index[id(self)][codes.triples]
+        f, d, df, dd = shared.partials
+        y = f[tr].mean(axis=0)
+        dt = d[tr]
+        m = (dt * dt).mean(axis=0)
+        floor = m < 1e-12  # the weight's floor (as rss_grid's): no derivative there
+        w2 = 1.0 / np.maximum(m, 1e-12)
+        dy = df[:, tr].mean(axis=1)  # (P, t)
+        dm = 2.0 * (dt[None] * dd[:, tr]).mean(axis=1)
+        dw2 = np.where(floor, 0.0, -dm * w2 * w2)
+        p = self._A.shape[1]
+        G = (w2 @ self._sum_aa).reshape(p, p)
+        bvec = (w2 * y) @ self._sum_a
+        try:
+            x = np.linalg.solve(G, bvec)
+        except np.linalg.LinAlgError:
+            x, *_ = np.linalg.lstsq(G, bvec, rcond=None)
+        sx = self._sum_a @ x
+        q = self._count * y * y - 2.0 * y * sx + self._sum_aa @ np.outer(x, x).ravel()
+        rss = max(float(w2 @ q), 0.0)
+        grad = dw2 @ q + dy @ (2.0 * w2 * (self._count * y - sx))
+        return rss, grad
 
     def _rss_pixels(self, curve) -> float:
         y, w = _grey_and_weight(self._raw, curve)
@@ -895,7 +951,7 @@ def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POL
     coefficients; :func:`scipy.optimize.minimize` (SLSQP) minimises it under the linear
     constraints that keep the curve increasing (the local log-log slope ``g + sum_j j a_j x^j`` at
     least ``min_slope`` on 65 codes across [0, 1]; ``g`` itself too), with the
-    gradient by forward differences, every shifted curve evaluated in the same pass over the units.
+    analytic gradient (:meth:`_Unit.rss_and_gradient`), the curve evaluated once over the units' shared values.
     """
     theta0 = np.zeros(order + 1)
     theta0[:len(start)] = start[:order + 1]
@@ -910,11 +966,11 @@ def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POL
         return np.sum([u.rss_grid(curves, shared) for u in used], axis=0)
 
     scale = float(total([theta0])[0]) or 1.0
-    shifts = _POLY_STEP * np.eye(order + 1)
 
     def fun(theta):
-        r = total([theta, *(theta + shifts)]) / scale
-        return float(r[0]), (r[1:] - r[0]) / _POLY_STEP
+        shared.evaluate_partials(theta)
+        parts = [u.rss_and_gradient(shared) for u in used]
+        return sum(r for r, _ in parts) / scale, np.sum([g for _, g in parts], axis=0) / scale
 
     theta0[0] = min(theta0[0], GAMMA_SEARCH[1])
     lo = min_slope
