@@ -38,7 +38,7 @@ from ffls.io.capture import load_capture
 from ffls.io.images import read_image, write_png
 from ffls.radiance.encoding import gamma_encode, srgb_encode
 from ffls.spheres.estimate import estimate_lights
-from ffls.synth.photo import filmic_encode, response_table
+from ffls.synth.photo import filmic_decode, filmic_encode, response_table
 from ffls.synth.scene import write_synthetic_capture
 
 TRUE = {"linear": "linear", "srgb": "srgb", "gamma2.2": 2.2}
@@ -58,10 +58,12 @@ def encode_values(lin: np.ndarray, true) -> np.ndarray:
     return gamma_encode(lin, true)
 
 
-def stated(cap, name):
-    """``cap`` with its true encoding stated (the filmic curve as its 8-bit response table)."""
+def stated(cap, name, bits: int = 8):
+    """``cap`` with its true encoding stated (the filmic curve as its response table: 8-bit, or every
+    16-bit code's :func:`ffls.synth.photo.filmic_decode`)."""
     if name == "filmic":
-        return replace(cap, encoding=STATED[name], response=np.repeat(response_table("filmic")[:, None], 3, axis=1))
+        table = response_table("filmic") if bits == 8 else filmic_decode(np.arange(65536) / 65535.0)
+        return replace(cap, encoding=STATED[name], response=np.repeat(np.asarray(table)[:, None], 3, axis=1))
     return replace(cap, encoding=STATED[name])
 
 
@@ -114,7 +116,7 @@ def run_seed(args, seed: int) -> list:
                 continue
             t_cal = time.perf_counter() - t0
             got = estimate_lights(cal_cap, spheres=spheres, progress=False, workers=1)
-            ref = estimate_lights(stated(cap, name), spheres=spheres, progress=False, workers=1)
+            ref = estimate_lights(stated(cap, name, args.bits), spheres=spheres, progress=False, workers=1)
             e, r = errors_deg(got, truth), errors_deg(ref, truth)
             rows.append({"seed": seed, "true": name, "named": cal.curve, "gamma": cal.gamma,
                          "uncertainty": cal.uncertainty, "sd_spheres": cal.sd_spheres, "srgb_excess": cal.srgb_excess,

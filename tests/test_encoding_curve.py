@@ -6,7 +6,10 @@ import pytest
 
 from ffls.cli import main
 from ffls.io import capture as cap
+from ffls.errors import InputError
+from ffls.io.images import ImageData
 from ffls.io.response import polynomial_response, polynomial_response_table
+from ffls.radiance.photos import linearise
 from ffls.radiance.encoding import gamma_encode, srgb_encode
 from ffls.spheres.encoding import EncodingCalibrationError, calibrate_encoding
 from ffls.synth.photo import filmic_decode, filmic_encode
@@ -117,14 +120,44 @@ def test_polynomial_record_applies_its_table(tmp_path):
     assert applied.encoding == cap.CALIBRATED_RESPONSE and applied.response.shape == (256, 3)
 
 
+def test_sixteen_bit_polynomial_table_record_and_linearise(tmp_path):
+    """A curve calibrated on 16-bit files is tabulated for every 16-bit code, recorded with its
+    ``bits``, and linearises 16-bit photos; a table's rows must match the photo's depth."""
+    c = [1.9, 0.4, -0.2]
+    t16 = polynomial_response_table(c, 16)
+    assert t16.shape == (65536, 3) and np.all(np.diff(t16[:, 0]) > 0)
+    np.testing.assert_allclose(t16[::257, 0], polynomial_response_table(c)[:, 0], rtol=1e-6)
+    rec = {"curve": "polynomial", "gamma": 2.0, "uncertainty": 0.02, "method": "spheres:gamma", "order": 2,
+           "coefficients": c, "bits": 16}
+    assert cap.record_response(rec).shape == (65536, 3)
+    for bad in (12, "16", True):
+        with pytest.raises(ValueError, match="bits"):
+            cap.record_response({**rec, "bits": bad})
+    codes = np.array([[[0, 1000, 65535]]], dtype=np.uint16)
+    img = ImageData(codes.astype(np.float32) / 65535, 16, "png", tmp_path / "a.png")
+    out = linearise(img, cap.CALIBRATED_RESPONSE, t16)
+    np.testing.assert_allclose(out[0, 0], polynomial_response(np.array([0, 1000, 65535]) / 65535, c), rtol=1e-5)
+    with pytest.raises(InputError, match="256 codes applies to 8-bit"):
+        linearise(img, cap.CALIBRATED_RESPONSE, polynomial_response_table(c))
+
+
+def test_sixteen_bit_s_curve_named_polynomial():
+    """16-bit files are offered the polynomial too (they were limited to the gamma family)."""
+    rng = np.random.default_rng(0)
+    raw, normals = _shading(filmic_encode)
+    raw16 = [[np.clip(np.rint((r[0] + rng.normal(0, 0.25 / 255, r[0].shape)) * 65535), 0, 65535) / 65535]
+             for r in raw]
+    cal = calibrate_encoding(raw16, normals, code_step=1 / 65535)
+    assert cal.curve == "polynomial", cal.summary()
+
+
 # ----------------------------------------------------------------------------- end to end
 def test_synth_filmic_lights_named_curve(tmp_path, capsys):
     """A camera-like S-curve, unstated, is named a polynomial curve and linearises the photos.
 
-    Its directions are biased (about 2 deg median at 256 px, against 0.3-0.4 with the true curve
-    stated): the lit sides fix the curve only up to an affine map of the radiance, and the offset
-    that the polynomial takes on moves the estimator (docs/spheres.md, step 9). The bound below
-    guards that bias from growing; it is not the goal of 1 deg."""
+    The lit sides fix the curve only up to an affine map of the radiance; the spheres' dark sides
+    and the slope bound fix the offset (docs/spheres.md, step 9). Before them the directions were
+    about 2 deg off at 256 px (0.3-0.4 with the true curve stated); the bound below is the old one."""
     folder = tmp_path / "film"
     assert main(["synth", str(folder), "--lights", "16", "--resolution", "256", "--format", "png8", "--encoding",
                  "filmic", "--unstated-encoding", "--quiet", "--seed", "2"]) == 0

@@ -244,7 +244,8 @@ class Capture:
         Expected (width, height) of every image, checked when images are read.
     units : str or None
     response : (256, 3) float64 ndarray or None
-        Inverse camera response: linear value of each 8-bit code, per channel.
+        Inverse camera response: linear value of each 8-bit code, per channel ((65536, 3) for a
+        curve calibrated on 16-bit files, :func:`record_response`).
     extra : dict
         Unknown top-level keys, kept for round trips.
     """
@@ -695,7 +696,8 @@ def encoding_from_record(record: dict):
 
 
 def record_response(record: dict) -> np.ndarray | None:
-    """The (256, 3) inverse response table of a ``"polynomial"`` encoding record; None for other curves.
+    """The inverse response table of a ``"polynomial"`` encoding record, (256, 3), or (65536, 3) when its
+    ``"bits"`` is 16; None for other curves.
 
     Raises
     ------
@@ -709,7 +711,10 @@ def record_response(record: dict) -> np.ndarray | None:
     if not isinstance(c, list) or not 2 <= len(c) <= 6 or any(
             isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in c):
         raise ValueError(f"coefficients must be a list of 2 to 6 numbers (g, a_1, ...), got {_short(c)}")
-    return polynomial_response_table(c)
+    bits = record.get("bits", 8)  # the files' bit depth the curve was calibrated on: the table's rows
+    if bits not in (8, 16) or isinstance(bits, bool):
+        raise ValueError(f"bits must be 8 or 16, got {_short(bits)}")
+    return polynomial_response_table(c, bits)
 
 
 def _order_to_capture(j: _Json, names: list, capture: Capture) -> np.ndarray:

@@ -6,7 +6,7 @@ The table is the linear exposure (relative units) that produces each 8-bit code,
 
 :func:`polynomial_response` evaluates the response family that :mod:`ffls.spheres.encoding`
 calibrates from matte spheres (a gamma times the exponential of a low-order polynomial) and
-:func:`polynomial_response_table` tabulates it for 8-bit codes: the table that linearises photos
+:func:`polynomial_response_table` tabulates it for 8- or 16-bit codes: the table that linearises photos
 whose ``lights.json`` names such a curve (``"curve": "polynomial"``, ``docs/formats.md``).
 """
 from __future__ import annotations
@@ -71,17 +71,21 @@ def polynomial_response(x, coefficients, derivative: bool = False):
     return f, base * (c[0] + dpoly)
 
 
-def polynomial_response_table(coefficients) -> np.ndarray:
-    """(256, 3) float32 inverse response table of :func:`polynomial_response` for 8-bit codes.
+def polynomial_response_table(coefficients, bits: int = 8) -> np.ndarray:
+    """(2 ** bits, 3) float32 inverse response table of :func:`polynomial_response`: the linear value
+    of every code of ``bits``-bit files (256 rows for 8 bits, 65536 for 16).
 
     Raises
     ------
     ValueError
-        Malformed coefficients, or a curve that is not increasing over the codes.
+        Malformed coefficients or ``bits`` (8 or 16), or a curve that is not increasing over the codes.
     """
-    f = polynomial_response(np.arange(256) / 255.0, coefficients)
+    if bits not in (8, 16):
+        raise ValueError(f"bits must be 8 or 16, got {bits!r}")
+    top = 2 ** bits - 1
+    f = polynomial_response(np.arange(top + 1) / float(top), coefficients)
     if not np.all(np.diff(f) > 0):
-        raise ValueError("the polynomial response must increase over the 8-bit codes")
+        raise ValueError(f"the polynomial response must increase over the {bits}-bit codes")
     return np.repeat(f[:, None], 3, axis=1).astype(np.float32)
 
 

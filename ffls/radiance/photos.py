@@ -78,8 +78,9 @@ def linearise(img: ImageData, encoding, response=None) -> np.ndarray:
         ``'auto'`` (none stated) is linear for floating-point images and an error for integer
         ones (:func:`unknown_encoding_message`); ``{'gamma': g}`` is ``pixels ** g``;
         ``{'response': name}`` uses ``response``.
-    response : (256, 3) ndarray, optional
-        Inverse response table (linear value of each 8-bit code, per channel).
+    response : (256, 3) or (65536, 3) ndarray, optional
+        Inverse response table (linear value of each 8- or 16-bit code, per channel); its rows
+        must match the image's bit depth.
 
     Returns
     -------
@@ -109,10 +110,12 @@ def linearise(img: ImageData, encoding, response=None) -> np.ndarray:
         if _codes_of(img) is not None:  # (the table is made by gamma_decode: the same range check)
             return _decode_codes(img, "gamma", float(enc["gamma"]))
         return gamma_decode(img.pixels, enc["gamma"])
-    if img.bit_depth != 8:
-        raise InputError(f"an inverse response table applies to 8-bit images, this one is {img.bit_depth}", img.path)
+    rows = len(response)  # 256 (a table from a file, or calibrated on 8-bit files) or 65536 (calibrated on 16-bit)
+    if img.bit_depth not in (8, 16) or rows != 2 ** img.bit_depth:
+        raise InputError(f"an inverse response table of {rows} codes applies to {int(rows).bit_length() - 1}-bit "
+                         f"images, this one is {img.bit_depth}", img.path)
     codes = _codes_of(img)
-    codes = np.rint(img.pixels * 255).astype(np.intp) if codes is None else codes
+    codes = np.rint(img.pixels * (rows - 1)).astype(np.intp) if codes is None else codes
     out = np.empty(img.pixels.shape, dtype=np.float32)
     for c in range(3):
         out[..., c] = response[codes[..., c], c]

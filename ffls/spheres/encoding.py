@@ -75,9 +75,40 @@ a linear file lit from near, an order-4 polynomial won the total BIC by 47 witho
 The noise is the gamma's (larger when the gamma misfits), which
 makes the test conservative against the curve. As for the gamma, a polynomial that decodes every
 stored value within half a code value of the best gamma, the linear or the sRGB curve is named as
-that curve. A polynomial curve is used through its 256-entry table (8-bit files; 16-bit files try
-none) and written into ``lights.json`` with its order and coefficients (``docs/formats.md``). A
+that curve. A polynomial curve is used through its table of every code (256 rows for 8-bit files, 65536
+for 16-bit ones) and written into ``lights.json`` with its order and coefficients (``docs/formats.md``). A
 best gamma at an end of :data:`GAMMA_SEARCH` is refused only when no polynomial wins.
+
+The shadow side and the offset. On the lit side alone the curve is fixed only up to an affine map
+of the radiance, ``a f + c``: each unit's ambient term absorbs any offset ``c`` (and ``a`` is the
+lights' scale). A gamma cannot bend into such a map, but a polynomial can, and the light estimator
+(:mod:`ffls.spheres.lambert`) then reads the offset where the map fails: the dark side, which it
+fits too, and its ambient term, bounded at 0 (an S-curve fitted to the lit sides of
+``ffls synth --encoding filmic`` files matched ``1.12 f_true - 0.014``, and the directions were
+2-4 deg off). Two things pin it, both true of a camera and of the physics, neither of the renders:
+
+* **The attached-shadow side** (``n . l < -terminator``) joins each unit that shows ``min_pixels``
+  of it (:class:`_ShadowSide`), with the estimator's own model, ``[n . l > 0] v . n + b + c g(n)``
+  (``g`` the ground bounce less the sphere's own shadow, :func:`ffls.spheres.lambert.shadowed_ground_bounce`,
+  where the world frame is known): the same ``b`` and ``c`` on both sides, so the curve must make
+  the dark side's codes (the toe) affine in the bounce's form factor and continuous with the lit
+  side across the terminator. The curve is then fitted over the codes the estimator reads, down
+  to the darkest the spheres show.
+* **Black is black, and no tone curve raises contrast beyond a linear file's**: a fitted tone
+  curve's log-log slope ``d ln f / d ln x`` is at least :data:`TONE_MIN_SLOPE` (1) at every code,
+  so ``f(x) / x`` does not decrease and ``f(0) = 0`` is approached no faster than linearly.
+  Every camera encoding stores a value at or above a linear file's (sRGB: slope 1 at black, up to
+  2.3; a gamma ``g >= 1``; Hable's filmic curve then sRGB: 1.0 to 10). An offset ``c > 0`` would
+  need ``f / x`` to fall in the toe, an offset ``c < 0`` a dark side that is not affine: the
+  remaining offset is below the toe's own values.
+
+The lit sides still name the curve and choose its order (the dark side's model, rougher than
+the lit side's, moved gamma-2.2 files' gamma by 0.015); only when they name a polynomial under a
+distant light is the calibration run again with the dark sides and the bound
+(:func:`calibrate_encoding_gamma`, ``shadow_side``), and its coefficients are used
+(:attr:`EncodingCalibration.dark_sides`). With both, the filmic files' curve matched ``1.04 f_true + 0.0016`` and their directions came
+within 0.06 deg of the stated curve's (docs/spheres.md); either alone left them 3.6 deg off (the
+slope bound alone) or one photo 100 deg off (the shadow side alone: the curve jumped at black).
 
 Near lights. A light at a few metres from spheres a few centimetres in radius has a direction and
 an irradiance (``1/r^2``) that vary over each sphere: the shading bends along ``n . l``, and the
@@ -117,6 +148,7 @@ from ffls.io.images import read_image
 from ffls.io.response import POLYNOMIAL_MIN_SLOPE, polynomial_response, polynomial_response_table
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 from ffls.spheres.combine import fit_ray_convergence
+from ffls.spheres.lambert import shadowed_ground_bounce
 from ffls.spheres.samples import ground_bounce
 
 __all__ = [
@@ -146,7 +178,8 @@ _TINY = 1e-6  # below the smallest 16-bit code (1.5e-5): log of a zero channel s
 #: BIC chooses among 1..this. Order 3 follows a filmic S-curve to a quarter of a code value
 #: (docs/spheres.md); a fifth coefficient rarely pays its ln(n_eff) on spheres' shading.
 MAX_POLYNOMIAL_ORDER = 4
-_POLY_STEP = 1e-5  # forward-difference step of the polynomial's coefficients (objective scaled to ~1)
+#: Least local log-log slope ``d ln f / d ln x`` of a fitted tone curve (module docstring, "The offset").
+TONE_MIN_SLOPE = 1.0
 
 
 class EncodingCalibrationError(ValueError):
@@ -192,7 +225,13 @@ class EncodingCalibration:
         (``(RSS_poly - RSS_gamma) / noise + order * ln(n_eff)``): negative chose it over the gamma.
         None when no polynomial was tried (16-bit files, ``max_order`` 0).
     polynomial_rms : float or None
-        RMS residual under the best polynomial, in stored values.
+        RMS residual under the best polynomial (of the lit sides), in stored values.
+    bits : int
+        The files' bit depth (8 or 16): the rows of :attr:`response`, ``2 ** bits``.
+    dark_sides : bool
+        Whether the polynomial's coefficients were fitted on the lit and the attached-shadow sides
+        with the slope bound (module docstring, "The shadow side and the offset"); its order and the
+        naming are the lit sides'.
     method : str
     n_spheres, n_photos, n_units, n_pixels : int
         Spheres and photos that contributed, their (photo, sphere) pairs, and pixels used.
@@ -219,6 +258,8 @@ class EncodingCalibration:
     coefficients: tuple = ()
     polynomial_excess: float | None = None
     polynomial_rms: float | None = None
+    bits: int = 8
+    dark_sides: bool = False
 
     @property
     def encoding(self):
@@ -232,10 +273,10 @@ class EncodingCalibration:
 
     @property
     def response(self):
-        """The ``Capture.response`` to use: the (256, 3) table of a polynomial curve, else None."""
+        """The ``Capture.response`` to use: the (2 ** bits, 3) table of a polynomial curve, else None."""
         if self.curve != "polynomial":
             return None
-        return polynomial_response_table(self._rounded_coefficients())
+        return polynomial_response_table(self._rounded_coefficients(), self.bits)
 
     def _rounded_coefficients(self) -> list:
         return [float(f"{c:.6g}") for c in self.coefficients]
@@ -258,6 +299,9 @@ class EncodingCalibration:
             rec["order"] = int(self.order)
             rec["coefficients"] = self._rounded_coefficients()
             rec["polynomial_rms"] = float(f"{self.polynomial_rms:.4g}")
+            rec["dark_sides"] = bool(self.dark_sides)
+            if self.bits != 8:
+                rec["bits"] = int(self.bits)  # the table's rows (ffls.io.capture.record_response)
         return rec
 
     def summary(self) -> str:
@@ -356,6 +400,42 @@ class _Codes:
         return _Codes(self.values, self.log_values, self.triples, self.index[selected])
 
 
+class _SharedValues:
+    """The distinct stored values of several units, and the curves' tables on them: a curve is
+    evaluated once for all the units (an 8-bit capture has at most 256 values), not once per unit."""
+
+    def __init__(self, units: list):
+        self.values = np.unique(np.concatenate([u.selected_codes.values for u in units]))
+        self.log_values = np.log(np.maximum(self.values, _TINY))
+        self.index = {id(u): np.searchsorted(self.values, u.selected_codes.values) for u in units}
+        self.tables: list = []
+
+    def evaluate_partials(self, theta) -> "_SharedValues":
+        """``partials``: the polynomial response ``f`` of coefficients ``theta`` on the shared values,
+        its slope ``f'`` and their derivatives in ``theta`` ((P, U) each; :func:`ffls.io.response.polynomial_response`:
+        ``d f / d g = f ln x``, ``d f / d a_j = f (x^j - 1)``, and for ``f' = (f / x)(g + D)``,
+        ``D = sum_j j a_j x^j``, the same factors plus ``f / x`` and ``(f / x) j x^j``)."""
+        theta = np.asarray(theta, dtype=np.float64)
+        x, lx = self.values, self.log_values
+        f, d = polynomial_response(x, theta, derivative=True)
+        g = theta[0]
+        powers = [x ** j for j in range(1, len(theta))]
+        poly = sum((a * (xj - 1.0) for a, xj in zip(theta[1:], powers)), np.zeros_like(x))
+        D = sum((j * a * xj for j, (a, xj) in enumerate(zip(theta[1:], powers), start=1)), np.zeros_like(x))
+        base = np.exp((g - 1.0) * lx + poly)  # f / x (as polynomial_response computes it)
+        fx = np.where(x > 0, f, 0.0)
+        df = np.stack([fx * lx] + [fx * (xj - 1.0) for xj in powers])
+        dd = np.stack([base * lx * (g + D) + base]
+                      + [base * ((xj - 1.0) * (g + D) + j * xj) for j, xj in enumerate(powers, start=1)])
+        self.partials = (f, d, df, dd)
+        return self
+
+    def evaluate(self, curves) -> "_SharedValues":
+        """Tabulate ``curves`` (:func:`_curve_tables`) on the shared values; returns self."""
+        self.tables = [_curve_tables(self.values, c, self.log_values) for c in curves]
+        return self
+
+
 def _solve(A: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted least squares ``min ||w (y - A x)||`` (normal equations; ``A`` has a few columns);
     returns ``x`` and the weighted residuals."""
@@ -375,9 +455,19 @@ class _Unit:
     photo: int
     sphere: int
     raw: _Codes
-    A: np.ndarray  # (m, p): the shading model's columns (distant: normal and 1)
+    A: np.ndarray  # (m, p): the shading model's columns (distant: normal and 1; with the shadow side, 5)
     usable: np.ndarray  # (m,) bool: not clipped, not near black
     selected: np.ndarray | None = None
+    base: np.ndarray | None = None  # (m, 4): the lit side's columns (normal, 1); A when not given
+
+    def __post_init__(self):
+        if self.base is None:
+            self.base = self.A
+
+    @property
+    def normals(self) -> np.ndarray:
+        """(m, 3) the pixels' unit normals."""
+        return self.base[:, :3]
 
     def select(self, selected: np.ndarray) -> None:
         """Fix the selection (and cache its values, design rows and per-triple sums for :meth:`rss`)."""
@@ -396,9 +486,9 @@ class _Unit:
                                  for i in range(p) for j in range(p)], axis=1)
 
     @property
-    def stored_values(self) -> np.ndarray:
-        """(u,) the distinct stored values of the selected pixels (sorted)."""
-        return self._raw.values
+    def selected_codes(self) -> _Codes:
+        """The selected pixels' stored values (:meth:`select`)."""
+        return self._raw
 
     def selected_values(self, curve) -> tuple[np.ndarray, np.ndarray]:
         """Grey linear value and weight of each selected pixel under ``curve`` (:func:`_grey_and_weight`)."""
@@ -408,45 +498,28 @@ class _Unit:
         """Weighted residual sum of squares (stored-value units) of the selected pixels under ``curve``."""
         return float(self.rss_grid([curve])[0])
 
-    def rss_grid(self, curves, tables: tuple | None = None) -> np.ndarray:
+    def rss_grid(self, curves, shared: "_SharedValues | None" = None) -> np.ndarray:
         """:meth:`rss` for every curve of ``curves`` (k,: gammas, or ``'srgb'``), at once: (k,) float.
 
         The pixels of one (r, g, b) triple share their grey value ``y`` and weight ``w``: with
         their sums (:meth:`select`), each curve's normal equations and residual cost one pass over
         the triples, not the pixels (``rss = sum w^2 y^2 - x . b`` at the solution ``G x = b``,
-        which loses about 1e-12 of it).
-
-        ``tables`` ``(grid, F, D2)``, optional: the curves' :func:`_curve_tables` evaluated once
-        on ``grid`` (sorted, holding every stored value of this unit), ``F`` and ``D2`` (k, len(grid)),
-        shared by the units of a fit (:func:`_fit_polynomial`): gathered here, the same numbers."""
+        which loses about 1e-12 of it). With ``shared`` (:class:`_SharedValues` of these units,
+        its curves ``curves``), the curves' tables are read from it, not evaluated again."""
         codes = self._raw
-        if tables is not None:
-            grid, F, D2 = tables
-            if getattr(self, "_grid", None) is not grid:  # the triples as indices into the grid
-                self._grid, self._grid_triples = grid, np.searchsorted(grid, codes.values)[codes.triples]
-            tg = self._grid_triples
-            # the mean over a triple's three channels as np.mean sums them (in order, then / 3),
-            # in C order as the loop below fills them (the products below then sum in the same order)
-            y = np.take(F, tg[0], axis=1)  # (np.take: C order; F[:, i] is not)
-            y += np.take(F, tg[1], axis=1)
-            y += np.take(F, tg[2], axis=1)
-            y /= 3.0
-            d2 = np.take(D2, tg[0], axis=1)
-            d2 += np.take(D2, tg[1], axis=1)
-            d2 += np.take(D2, tg[2], axis=1)
-            d2 /= 3.0
-            w2 = 1.0 / np.maximum(np.sqrt(d2), 1e-6)
-            w2 *= w2
-        else:
-            t = codes.triples.shape[1]
-            y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
-            for j, curve in enumerate(curves):
+        t = codes.triples.shape[1]
+        y, w2 = np.empty((len(curves), t)), np.empty((len(curves), t))
+        tr = codes.triples if shared is None else shared.index[id(self)][codes.triples]
+        for j, curve in enumerate(curves):
+            if shared is not None:
+                f, d2 = shared.tables[j]
+            else:
                 if not isinstance(curve, (str, tuple)):
                     curve = float(curve)
                 f, d2 = _curve_tables(codes.values, curve, codes.log_values)
-                y[j] = f[codes.triples].mean(axis=0)
-                w = 1.0 / np.maximum(np.sqrt(d2[codes.triples].mean(axis=0)), 1e-6)
-                w2[j] = w * w
+            y[j] = f[tr].mean(axis=0)
+            w = 1.0 / np.maximum(np.sqrt(d2[tr].mean(axis=0)), 1e-6)
+            w2[j] = w * w
         p = self._A.shape[1]
         G = (w2 @ self._sum_aa).reshape(-1, p, p)
         w2y = w2 * y
@@ -457,6 +530,38 @@ class _Unit:
             return np.array([self._rss_pixels(c) for c in curves])
         return np.maximum((w2y * y) @ self._count - np.einsum("ki,ki->k", x, b), 0.0)
 
+    def rss_and_gradient(self, shared: "_SharedValues") -> tuple[float, np.ndarray]:
+        """:meth:`rss` under the polynomial curve whose partials ``shared`` holds
+        (:meth:`_SharedValues.evaluate_partials`), and its gradient in the curve's coefficients.
+
+        With the unit's coefficients ``x`` profiled out, the envelope theorem leaves the partial
+        derivatives at fixed ``x``: per triple, ``rss_t = w_t^2 Q_t`` with ``Q_t = n_t y_t^2 - 2 y_t
+        s_t . x + x^T S_t x`` (``n_t``, ``s_t``, ``S_t`` its pixels' count, design sums and products), so
+        ``d rss = sum_t (d w_t^2) Q_t + 2 w_t^2 (n_t y_t - s_t . x) d y_t``."""
+        codes = self._raw
+        tr = shared.index[id(self)][codes.triples]
+        f, d, df, dd = shared.partials
+        y = f[tr].mean(axis=0)
+        dt = d[tr]
+        m = (dt * dt).mean(axis=0)
+        floor = m < 1e-12  # the weight's floor (as rss_grid's): no derivative there
+        w2 = 1.0 / np.maximum(m, 1e-12)
+        dy = df[:, tr].mean(axis=1)  # (P, t)
+        dm = 2.0 * (dt[None] * dd[:, tr]).mean(axis=1)
+        dw2 = np.where(floor, 0.0, -dm * w2 * w2)
+        p = self._A.shape[1]
+        G = (w2 @ self._sum_aa).reshape(p, p)
+        bvec = (w2 * y) @ self._sum_a
+        try:
+            x = np.linalg.solve(G, bvec)
+        except np.linalg.LinAlgError:
+            x, *_ = np.linalg.lstsq(G, bvec, rcond=None)
+        sx = self._sum_a @ x
+        q = self._count * y * y - 2.0 * y * sx + self._sum_aa @ np.outer(x, x).ravel()
+        rss = max(float(w2 @ q), 0.0)
+        grad = dw2 @ q + dy @ (2.0 * w2 * (self._count * y - sx))
+        return rss, grad
+
     def _rss_pixels(self, curve) -> float:
         y, w = _grey_and_weight(self._raw, curve)
         Aw = self._A * w[:, None]
@@ -465,7 +570,8 @@ class _Unit:
         return float(r @ r)
 
 
-def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5) -> bool:
+def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: float, clip: float = 3.5,
+            shadow: "_ShadowSide | None" = None) -> bool:
     """Choose ``unit``'s lit pixels with ``curve`` (iterating the fit); False when the unit is unusable.
 
     Start from the pixels within ``acos(terminator)`` of the mean normal of the brightest tenth,
@@ -474,12 +580,18 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     unit is unusable with fewer than ``min_pixels`` pixels, a normal range too narrow to show the
     curve (``n . l`` spanning less than 0.4), or a fit explaining less than ``min_r2`` of the
     variance (no Lambertian shading: a mirror ball, a shadowed or flat sphere).
+
+    With ``shadow`` (:class:`_ShadowSide`), the attached-shadow side joins the unit when it has
+    ``min_pixels`` pixels with ``n . l < -terminator``: the model becomes the light estimator's,
+    ``[n . l > 0] v . n + b + c g(n)`` (:mod:`ffls.spheres.lambert`), and its columns replace the
+    unit's (module docstring, "The shadow side").
     """
     ok = unit.usable
     if ok.sum() < min_pixels:
         return False
     y_all, w_all = _grey_and_weight(unit.raw, curve)
-    normals = unit.A[:, :3]
+    normals = unit.normals
+    base = unit.base
     top = ok & (y_all >= np.percentile(y_all[ok], 90))  # the brightest tenth: around the light's direction
     start = normals[top].sum(axis=0)
     if not np.linalg.norm(start) > 0:
@@ -489,12 +601,12 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
     for _ in range(5):
         if sel.sum() < min_pixels:
             return False
-        x, _ = _solve(unit.A[sel], y_all[sel], w_all[sel])
+        x, _ = _solve(base[sel], y_all[sel], w_all[sel])
         nv = float(np.linalg.norm(x[:3]))
         if not np.isfinite(nv) or nv <= 0:
             return False
         cos = normals @ (x[:3] / nv)
-        r = w_all * (y_all - unit.A @ x)
+        r = w_all * (y_all - base @ x)
         lit = ok & (cos > terminator)
         if lit.sum() < min_pixels:
             return False
@@ -505,13 +617,49 @@ def _select(unit: _Unit, curve, terminator: float, min_pixels: int, min_r2: floa
         sel = new
     if sel.sum() < min_pixels or float(np.ptp(cos[sel])) < 0.4:
         return False
+    A = base
+    if shadow is not None:
+        dark = ok & (cos < -terminator)
+        if dark.sum() >= min_pixels:
+            A = shadow.columns(normals, x[:3] / nv, cos > 0)
+            lit_sel, both = sel, sel | dark
+            for _ in range(5):
+                xs, _ = _solve(A[both], y_all[both], w_all[both])
+                r = w_all * (y_all - A @ xs)
+                med = float(np.median(r[both]))
+                mad = 1.4826 * float(np.median(np.abs(r[both] - med)))
+                new = (lit_sel | dark) & (np.abs(r - med) <= clip * max(mad, 1e-12))
+                if np.array_equal(new, both):
+                    break
+                both = new
+            if (both & dark).sum() >= min_pixels and (both & lit_sel).sum() >= min_pixels:
+                sel = both
+            else:
+                A = base
     yw = y_all[sel] * w_all[sel]
-    _, r = _solve(unit.A[sel], y_all[sel], w_all[sel])
+    _, r = _solve(A[sel], y_all[sel], w_all[sel])
     tot = float(np.sum((yw - yw.mean()) ** 2))
     if tot <= 0 or 1.0 - float(r @ r) / tot < min_r2:
         return False
+    unit.A = A
     unit.select(sel)
     return True
+
+
+@dataclass(frozen=True)
+class _ShadowSide:
+    """The attached-shadow side's model (module docstring, "The shadow side"): the ground bounce
+    ``g(n)`` less the sphere's own shadow on the ground (:func:`ffls.spheres.lambert.shadowed_ground_bounce`,
+    as the light estimator) or, with ``own_shadow`` False, the plain bounce."""
+
+    up: np.ndarray
+    own_shadow: bool = True
+
+    def columns(self, normals: np.ndarray, light: np.ndarray, lit: np.ndarray) -> np.ndarray:
+        """Design columns ``([lit] n, 1, g)`` (m, 5) of a unit's pixels for the light ``light``."""
+        g = (shadowed_ground_bounce(normals, light, self.up) if self.own_shadow
+             else ground_bounce(normals, self.up))
+        return np.column_stack([normals * lit[:, None], np.ones(len(normals)), g])
 
 
 _pool_units: list | None = None  # the units of the worker processes of _UnitPool (inherited when forked)
@@ -524,11 +672,11 @@ def _set_pool_units(units) -> None:
 
 def _select_and_profile_range(task) -> list:
     """In a worker: per unit of ``_pool_units[start:stop]``, its selection and RSS curve (None, None: unusable)."""
-    (start, stop), curve, grid, terminator, min_pixels, min_r2 = task
+    (start, stop), curve, grid, terminator, min_pixels, min_r2, shadow = task
     out = []
     for u in _pool_units[start:stop]:
-        ok = _select(u, curve, terminator, min_pixels, min_r2)
-        out.append((u.selected, u.rss_grid(grid)) if ok else (None, None))
+        ok = _select(u, curve, terminator, min_pixels, min_r2, shadow=shadow)
+        out.append((u.selected, u.A, u.rss_grid(grid)) if ok else (None, None, None))
     return out
 
 
@@ -541,23 +689,24 @@ class _UnitPool:
     def __init__(self, units: list, workers: int = 1):
         self.units, self.workers = units, max(1, int(workers))
 
-    def select_and_profile(self, curve, grid, terminator, min_pixels, min_r2) -> tuple[list, np.ndarray]:
+    def select_and_profile(self, curve, grid, terminator, min_pixels, min_r2, shadow=None) -> tuple[list, np.ndarray]:
         """The usable units (selected with ``curve``) and their RSS over ``grid``: (used, (len(used), k))."""
         if self.workers == 1 or len(self.units) < 2 * self.CHUNK:
-            used = [u for u in self.units if _select(u, curve, terminator, min_pixels, min_r2)]
+            used = [u for u in self.units if _select(u, curve, terminator, min_pixels, min_r2, shadow=shadow)]
             curves = [u.rss_grid(grid) for u in used]
         else:
             from concurrent.futures import ProcessPoolExecutor
 
             bounds = [(a, min(a + self.CHUNK, len(self.units))) for a in range(0, len(self.units), self.CHUNK)]
-            tasks = [(b, curve, grid, terminator, min_pixels, min_r2) for b in bounds]
+            tasks = [(b, curve, grid, terminator, min_pixels, min_r2, shadow) for b in bounds]
             with ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), initializer=_set_pool_units,
                                      initargs=(self.units,)) as ex:
                 parts = list(ex.map(_select_and_profile_range, tasks))
             used, curves = [], []
             for (a, _), part in zip(bounds, parts):
-                for u, (sel, c) in zip(self.units[a:], part):
+                for u, (sel, A, c) in zip(self.units[a:], part):
                     if sel is not None:
+                        u.A = A
                         u.select(sel)
                         used.append(u)
                         curves.append(c)
@@ -706,7 +855,7 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
     """
     dirs, data = [], []
     for u in units:
-        n = u.A[u.selected, :3]
+        n = u.normals[u.selected]
         y, w = u.selected_values(curve)
         x, _ = _solve(u.A[u.selected], y, w)
         nv = float(np.linalg.norm(x[:3]))
@@ -773,9 +922,9 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
             m, rho, center = light
             for i in ix:
                 u = used[i]
-                n = u.A[:, :3]
+                n = u.normals
                 A = _near_columns(n, centers[u.sphere] + radii[u.sphere] * n, up, m, rho, center)
-                nu = _Unit(u.photo, u.sphere, u.raw, A, u.usable)
+                nu = _Unit(u.photo, u.sphere, u.raw, A, u.usable, base=u.base)
                 nu.select(u.selected)
                 units[i] = nu
         if n_near == 0:
@@ -793,7 +942,7 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
 
 
 # ----------------------------------------------------------------------------- tone curves
-def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]:
+def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POLYNOMIAL_MIN_SLOPE) -> tuple[tuple, float]:
     """The polynomial response of ``order`` that minimises the units' summed ``RSS``: (coefficients, RSS).
 
     ``start`` (a lower order's coefficients, or ``(gamma,)``) is padded with zeros. The units'
@@ -801,36 +950,35 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
     (:meth:`_Unit.rss_grid`), so the objective is a smooth function of the ``order + 1``
     coefficients; :func:`scipy.optimize.minimize` (SLSQP) minimises it under the linear
     constraints that keep the curve increasing (the local log-log slope ``g + sum_j j a_j x^j`` at
-    least :data:`ffls.io.response.POLYNOMIAL_MIN_SLOPE` on 65 codes across [0, 1]), with the
-    gradient by forward differences, every shifted curve evaluated in the same pass over the units.
+    least ``min_slope`` on 65 codes across [0, 1]; ``g`` itself too), with the
+    analytic gradient (:meth:`_Unit.rss_and_gradient`), the curve evaluated once over the units' shared values.
     """
     theta0 = np.zeros(order + 1)
     theta0[:len(start)] = start[:order + 1]
     x = np.linspace(0.0, 1.0, 65)
     C = np.column_stack([np.ones_like(x)] + [j * x ** j for j in range(1, order + 1)])
 
-    # every unit's stored values (8 bit: at most 256): each curve is evaluated once on them, not per unit
-    grid = np.unique(np.concatenate([u.stored_values for u in used])) if used else np.zeros(0)
+    shared = _SharedValues(used)
 
     def total(thetas) -> np.ndarray:
         curves = [tuple(float(v) for v in t) for t in thetas]
-        tabs = [_curve_tables(grid, c) for c in curves]
-        tables = (grid, np.array([f for f, _ in tabs]), np.array([d2 for _, d2 in tabs]))
-        return np.sum([u.rss_grid(curves, tables) for u in used], axis=0)
+        shared.evaluate(curves)
+        return np.sum([u.rss_grid(curves, shared) for u in used], axis=0)
 
     scale = float(total([theta0])[0]) or 1.0
-    shifts = _POLY_STEP * np.eye(order + 1)
 
     def fun(theta):
-        r = total([theta, *(theta + shifts)]) / scale
-        return float(r[0]), (r[1:] - r[0]) / _POLY_STEP
+        shared.evaluate_partials(theta)
+        parts = [u.rss_and_gradient(shared) for u in used]
+        return sum(r for r, _ in parts) / scale, np.sum([g for _, g in parts], axis=0) / scale
 
     theta0[0] = min(theta0[0], GAMMA_SEARCH[1])
-    bounds = [(POLYNOMIAL_MIN_SLOPE, GAMMA_SEARCH[1])] + [(None, None)] * order
+    lo = min_slope
+    bounds = [(lo, GAMMA_SEARCH[1])] + [(None, None)] * order
     res = minimize(fun, theta0, jac=True, method="SLSQP", bounds=bounds,
-                   constraints=[{"type": "ineq", "fun": lambda t: C @ t - POLYNOMIAL_MIN_SLOPE, "jac": lambda t: C}],
+                   constraints=[{"type": "ineq", "fun": lambda t: C @ t - lo, "jac": lambda t: C}],
                    options={"maxiter": 200, "ftol": 1e-10})
-    ok = np.all(C @ res.x >= POLYNOMIAL_MIN_SLOPE - 1e-9) and res.x[0] <= GAMMA_SEARCH[1] + 1e-9
+    ok = np.all(C @ res.x >= lo - 1e-9) and res.x[0] <= GAMMA_SEARCH[1] + 1e-9
     theta = res.x if ok else theta0
     rss = float(total([theta])[0])
     if rss > scale:  # never worse than the start (a lower order's optimum)
@@ -839,7 +987,7 @@ def _fit_polynomial(used: list, start: tuple, order: int) -> tuple[tuple, float]
 
 
 def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, penalty: float,
-                     max_order: int) -> tuple[int, tuple, float, float]:
+                     max_order: int, min_slope: float = POLYNOMIAL_MIN_SLOPE) -> tuple[int, tuple, float, float]:
     """The polynomial response whose order the BIC chooses: (order, coefficients, RSS, score).
 
     Orders 1..``max_order`` are fitted in turn, each started from the last; the score is the BIC
@@ -850,7 +998,7 @@ def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, p
     best = (0, (gamma,), rss_gamma, float("inf"))
     theta = (gamma,)
     for order in range(1, max_order + 1):
-        theta, rss = _fit_polynomial(used, theta, order)
+        theta, rss = _fit_polynomial(used, theta, order, min_slope=min_slope)
         score = (rss - rss_gamma) / noise + order * penalty
         if score < best[3]:
             best = (order, theta, rss, score)
@@ -861,7 +1009,8 @@ def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, p
 def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.2, min_pixels: int = 40,
                              min_r2: float = 0.9, min_photos: int = MIN_PHOTOS, n_bootstrap: int = 400,
                              seed: int = 0, code_step: float | None = None, workers: int = 1, geometry=None,
-                             up=UP, max_order: int = MAX_POLYNOMIAL_ORDER) -> EncodingCalibration:
+                             up=UP, max_order: int = MAX_POLYNOMIAL_ORDER, shadow_side: bool = True,
+                             own_shadow: bool = True) -> EncodingCalibration:
     """A gamma (and the sRGB curve) from the lit sides of matte spheres, profiled jointly with every light.
 
     Parameters
@@ -904,6 +1053,12 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     max_order : int
         Highest order of the polynomial response tried (module docstring, "Tone curves"); 0 tries
         none (the gamma family and sRGB only).
+    shadow_side : bool
+        Refit a polynomial that the lit sides name on the lit and attached-shadow sides, its
+        log-log slope at least :data:`TONE_MIN_SLOPE` (module docstring, "The shadow side and the
+        offset"); False keeps the lit sides' coefficients.
+    own_shadow : bool
+        The dark side's bounce less the sphere's own shadow on the ground (the world frame known).
 
     Returns
     -------
@@ -914,6 +1069,28 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     EncodingCalibrationError
         Too few usable photos, or a best gamma at an end of :data:`GAMMA_SEARCH`.
     """
+    kwargs = dict(matte=matte, terminator=terminator, min_pixels=min_pixels, min_r2=min_r2, min_photos=min_photos,
+                  n_bootstrap=n_bootstrap, seed=seed, code_step=code_step, workers=workers, geometry=geometry, up=up,
+                  max_order=max_order, own_shadow=own_shadow)
+    lit = _calibrate_encoding_gamma(raw, normals, shadow_side=False, **kwargs)
+    if not shadow_side or lit.curve != "polynomial" or lit.shading != "distant":
+        return lit
+    # the lit sides named a tone curve: its offset comes from the dark sides and the slope bound
+    # (module docstring, "The shadow side and the offset"); the naming and its statistics stay the lit sides'
+    try:
+        # (the lit sides chose the distant shading; the dark run's bootstrap only sizes its BIC's noise)
+        dark = _calibrate_encoding_gamma(raw, normals, shadow_side=True,
+                                         **{**kwargs, "geometry": None, "n_bootstrap": min(n_bootstrap, 100)})
+    except EncodingCalibrationError:
+        return lit
+    if dark.curve != "polynomial":
+        return lit
+    return replace(lit, order=dark.order, coefficients=dark.coefficients, dark_sides=True)
+
+
+def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, min_r2, min_photos, n_bootstrap, seed,
+                              code_step, workers, geometry, up, max_order, shadow_side, own_shadow) -> EncodingCalibration:
+    """:func:`calibrate_encoding_gamma`, on the lit sides alone or (``shadow_side``) with the dark sides."""
     normals = [np.asarray(n, dtype=np.float64).reshape(-1, 3) for n in normals]
     n_sph = len(normals)
     matte = [True] * n_sph if matte is None else [bool(m) for m in matte]
@@ -942,9 +1119,12 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     curve = 0.5 * (lo + hi)  # pilot selection: the middle of the range
     used, grid = units, coarse
     pool = _UnitPool(units, workers)
+    shadow = _ShadowSide(np.asarray(up, dtype=np.float64).reshape(3), bool(own_shadow)) if shadow_side else None
+    min_slope = TONE_MIN_SLOPE if shadow_side else POLYNOMIAL_MIN_SLOPE
     for rnd in range(2):  # select with the current curve, profile, repeat with the best gamma
         # the pilot curve may be far off: the shading test (min_r2) waits for the first round's gamma
-        used, curves = pool.select_and_profile(curve, grid, terminator, min_pixels, min_r2 if rnd else -np.inf)
+        used, curves = pool.select_and_profile(curve, grid, terminator, min_pixels, min_r2 if rnd else -np.inf,
+                                               shadow=shadow)
         if len(used):
             # a (photo, sphere) pair that no curve fits well (a wrong lit side, a cast shadow or an
             # interreflection the model lacks) is left out: its best RMS residual is an outlier
@@ -969,7 +1149,7 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
             n_sel = sum(int(u.selected.sum()) for u in used)
             s2_pilot = float(res.fun) / max(n_sel - sum(u.A.shape[1] for u in used) - 1, 1)
             pen = math.log(max(n_sel, 3))
-            order, coefs, _, score = _best_polynomial(used, best, float(res.fun), s2_pilot, pen, max_order)
+            order, coefs, _, score = _best_polynomial(used, best, float(res.fun), s2_pilot, pen, max_order, min_slope)
             named = min((sum(u.rss(c) for u in used) - float(res.fun)) / s2_pilot for c in (1.0, "srgb"))
             if order and pen + score < min(named, pen):
                 curve = coefs
@@ -1009,7 +1189,8 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
     if max_order >= 1:
         # a camera's tone curve (toe, shoulder) that no gamma follows: a polynomial response, its order
         # chosen by the BIC, scored against the named curves in the same units (module docstring)
-        order, coefs, rss_poly, score = _best_polynomial(used, best, rss_best, noise, penalty, max_order)
+        order, coefs, rss_poly, score = _best_polynomial(used, best, rss_best, noise, penalty, max_order,
+                                                          min_slope)
         if order:
             poly_excess, poly_rms = score, math.sqrt(rss_poly / n_pix)
             # a tone curve is the camera's: every sphere alone must pay for its parameters. A misfit
@@ -1180,13 +1361,13 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
         raw.append([np.asarray(img.pixels[s.rows, s.cols], dtype=np.float64) for s in samples])
     try:
         kwargs.setdefault("code_step", 1.0 / (2 ** first.bit_depth - 1))
-        if first.bit_depth != 8:
-            # a polynomial curve linearises the photos through a 256-entry response table (8-bit codes)
-            kwargs.setdefault("max_order", 0)
+        # the estimator's shadow-side bounce takes the sphere's own shadow where the world frame is known
+        kwargs.setdefault("own_shadow", not getattr(capture, "world_from_camera_is_default", False))
         if getattr(capture, "camera_model", "pinhole") != "orthographic":
             # the spheres' world centres and radii place a near light (an orthographic camera sees no depth)
             kwargs.setdefault("geometry", [(s.center, s.radius) for s in samples])
         cal = calibrate_encoding(raw, [s.normals for s in samples], method=method, matte=matte, **kwargs)
     except EncodingCalibrationError as e:
         raise InputError(_ask(str(e)), capture.json_path) from None
-    return cal, spheres
+    # a polynomial curve linearises the photos through a table of every code of their depth
+    return replace(cal, bits=int(first.bit_depth)), spheres
