@@ -870,7 +870,7 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise), the view takes
     its geometry (pinhole: the centre from the tangent cone and the sphere's radius;
     orthographic: the circle) and its centre uncertainty, with :data:`LIMB_MODEL_FLOOR_PX` in
-    quadrature. Otherwise (a chrome ball, whose limb reflects its own background) the view is
+    quadrature, or the detected outline's where that is larger. Otherwise (a chrome ball, whose limb reflects its own background) the view is
     returned as it is.
 
     Parameters
@@ -890,7 +890,10 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
                             center_cam=view.center_cam, radius=view.radius)
     if limb is None or not np.any(np.isfinite(limb.jump_snr)) or np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR:
         return view, limb
-    sigma = float(np.sqrt(limb.center_sigma_px ** 2 + limb.radius_sigma_px ** 2 + LIMB_MODEL_FLOOR_PX ** 2))
+    # the step's own precision and the model's floor; never below the detected outline's uncertainty
+    # (a second estimate of the outline, whose residual bias at the tenth of a pixel the renders show)
+    sigma = float(max(np.sqrt(limb.center_sigma_px ** 2 + limb.radius_sigma_px ** 2 + LIMB_MODEL_FLOOR_PX ** 2),
+                      view.center_sigma_px))
     if view.model == "pinhole":
         return replace(view, center_px=limb.center_px, center_cam=limb.center_cam, center_sigma_px=sigma), limb
     return replace(view, center_px=limb.center_px, radius_px=limb.radius_px, center_sigma_px=sigma), limb
