@@ -45,8 +45,9 @@ def main(argv=None) -> int:
     spheres = find_spheres_in_capture(cap, stats=dec.stats, bit_depths=dec.bit_depths)
     views = sphere_views(cap, spheres)
     for k, (s, view) in enumerate(zip(spheres, views)):
-        records = [(i, L["spheres"][k]) for i, L in enumerate(est["lights"]) if len(L.get("spheres", [])) == len(spheres)
-                   and L["spheres"][k].get("kind") == "mirror" and L["spheres"][k].get("highlight_px") is not None]
+        records = [(i, L["spheres"][k]) for i, L in enumerate(est["lights"])
+                   if len(L.get("spheres", [])) == len(spheres) and L["spheres"][k].get("kind") == "mirror"
+                   and L["spheres"][k].get("highlight_px") is not None]
         if not records:
             continue
         cw = R @ np.asarray(s.center_cam) + t
@@ -78,7 +79,8 @@ def main(argv=None) -> int:
         print(f"sphere {k} ({q['material']}, truth {j}): {len(a_)} photos; limb step "
               f"{'used' if limb_view is not view else 'not used'}")
         print("  median error deg: detected %.2f  limb %.2f  true sphere %.2f" % tuple(np.median(a_[:, :3], axis=0)))
-        print("  mean tilt error deg: detected %+.2f  limb %+.2f  true sphere %+.2f" % tuple(np.mean(a_[:, 3:6], axis=0)))
+        print("  mean tilt error deg: detected %+.2f  limb %+.2f  true sphere %+.2f"
+              % tuple(np.mean(a_[:, 3:6], axis=0)))
         print("  highlight pixel off the true reflection: median %.2f px" % np.nanmedian(a_[:, 6]))
     return 0
 

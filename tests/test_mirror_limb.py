@@ -141,7 +141,8 @@ def test_glossy_ball_outline_moves_to_its_limb(glossy_capture):
     f = float(cap.K[0, 0])
 
     def radius_error_px(c):
-        return f * (np.arcsin(cap.sphere_radius / np.linalg.norm(c)) - np.arcsin(cap.sphere_radius / np.linalg.norm(true_c)))
+        R = cap.sphere_radius
+        return f * (np.arcsin(R / np.linalg.norm(c)) - np.arcsin(R / np.linalg.norm(true_c)))
 
     assert abs(radius_error_px(new.center_cam)) < 0.3
     assert abs(radius_error_px(new.center_cam)) < abs(radius_error_px(view.center_cam))

@@ -870,8 +870,8 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise), the view takes
     its geometry (pinhole: the centre from the tangent cone and the sphere's radius;
     orthographic: the circle) and its centre uncertainty, with :data:`LIMB_MODEL_FLOOR_PX` in
-    quadrature, or the detected outline's where that is larger. Otherwise (a chrome ball, whose limb reflects its own background) the view is
-    returned as it is.
+    quadrature, or the detected outline's where that is larger. Otherwise (a chrome ball, whose
+    limb reflects its own background) the view is returned as it is.
 
     Parameters
     ----------

@@ -558,8 +558,8 @@ class LimbFit:
     radius_sigma_px : float
         Standard deviation of the radius (pixels).
     shift_px : float
-        How far the outline moved from the circle it started from: the largest radial change
-        over the circumference (pixels).
+        How far the outline moved from the circle it started from: at most this many pixels
+        anywhere on the circumference (the centre's move plus the radius's change).
     sector_offsets_px : (n,) float
         Radial offset of each sector's own step from the fitted outline (NaN: the sector's jump is
         below :data:`LIMB_MIN_JUMP_SNR` times the noise, or it has too few pixels).
@@ -739,11 +739,9 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
         keep[j] = np.count_nonzero(sj & (t0 < -1)) >= 6 and np.count_nonzero(sj & (t0 > 1)) >= 6
     if np.count_nonzero(keep) < 3:
         return None
-    sel = band & keep[sector]
-    idx = np.flatnonzero(sel)
-    sec_ids = np.unique(sector[idx])
-    col_of = {int(j): k for k, j in enumerate(sec_ids)}
-    sec = np.array([col_of[int(j)] for j in sector[idx]])
+    idx = np.flatnonzero(band & keep[sector])
+    idx = idx[np.argsort(sector[idx], kind="stable")]  # grouped by sector (for np.add.reduceat)
+    sec_ids, sec = np.unique(sector[idx], return_inverse=True)
     y = vals[idx]
     # the band's pixels only from here on (signed() reads these names)
     if pinhole:
@@ -751,15 +749,7 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
     else:
         px = px[idx]
     n_s = len(sec_ids)
-
     lim = 0.5 * band_px  # how far the outline may move
-
-    order = np.argsort(sec, kind="stable")  # the band's pixels grouped by sector (for np.add.reduceat)
-    y, sec = y[order], sec[order]
-    if pinhole:
-        rays = rays[order]
-    else:
-        px = px[order]
     starts = np.flatnonzero(np.r_[True, sec[1:] != sec[:-1]])
 
     def terms(theta, w):
@@ -831,10 +821,9 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
         Cn = float(radius) / np.sin(alpha) * u
         cpx = project_points(Cn[None], K, dist)[0]
         rpx = f * np.tan(alpha)
-        shift = float(np.hypot(g[0], g[1]) + abs(g[2]))
     else:
         Cn, cpx, rpx = None, c0 + g[:2], r0 + g[2]
-        shift = float(np.hypot(g[0], g[1]) + abs(g[2]))
+    shift = float(np.hypot(g[0], g[1]) + abs(g[2]))
     return LimbFit(center_px=np.asarray(cpx, dtype=np.float64), radius_px=float(rpx), center_cam=Cn, blur_px=blur,
                    center_sigma_px=float(c_sig), radius_sigma_px=float(r_sig), shift_px=shift,
                    sector_offsets_px=offsets, noise=noise, jump_snr=snr)
