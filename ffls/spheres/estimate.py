@@ -44,7 +44,7 @@ from ffls.conventions import UP, normalize
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
-from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness
+from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness, refine_view_limb
 from ffls.spheres.lambert import fit_lambert
 from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
@@ -849,16 +849,23 @@ def _check_highlights(results: list[PhotoEstimate], kinds: list[SphereKind], whe
 
 def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
-              views: list | None = None, where=None) -> CaptureEstimate:
+              views: list | None = None, where=None, limb_image=None) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
     ``views`` (per sphere its :class:`~ffls.spheres.highlight.SphereView`) decide each sphere's
-    fit; ``where`` is the path named by a capture-wide error."""
+    fit; ``where`` is the path named by a capture-wide error. ``limb_image`` (the sequence's mean
+    luminance), when given, places each mirror sphere's outline at its limb's step
+    (:func:`ffls.spheres.highlight.refine_view_limb`)."""
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
     views = [None] * len(samples) if views is None else list(views)
+
+    def limb(v):
+        return v if limb_image is None or v is None else refine_view_limb(v, limb_image)[0]
+
+    views = [limb(v) if m == "mirror" else v for m, v in zip(materials, views)]
     fitter.options["mirrors"] = [v if m == "mirror" else None for m, v in zip(materials, views)]
     terminator = fitter.options.get("terminator", 0.15)
     # with a calibrated bounce the first pass only feeds the centre refinement and the calibration
@@ -871,6 +878,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         first = fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)], samples)
     results = [r for r, _ in first]
     kinds = sphere_kinds(materials, samples, values)
+    views = [limb(v) if kd.kind == "mirror" and m != "mirror" else v for kd, m, v in zip(kinds, materials, views)]
     mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views)]
     if mirrors != fitter.options["mirrors"]:  # classified mirrors: their first-pass fits from the highlight
         fitter.options["mirrors"] = mirrors
@@ -1079,7 +1087,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         with _PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
             est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
                             refine_options=refine_options, materials=materials, views=views,
-                            where=capture.json_path)
+                            where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean)
     finally:
         if bar is not None:
             bar.close()

@@ -40,7 +40,7 @@ small for a mirror or glossy ball (a compact blob) and large for a matte one (a 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -48,6 +48,7 @@ import numpy as np
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
 from ffls.io.capture import SPHERE_MATERIALS
+from ffls.spheres.mirror_outline import LimbFit, fit_limb_profile
 
 __all__ = [
     "MATERIALS",
@@ -72,6 +73,9 @@ __all__ = [
     "highlight_compactness",
     "classify_sphere",
     "saturated_pixels",
+    "LIMB_CLEAR_SNR",
+    "LIMB_MODEL_FLOOR_PX",
+    "refine_view_limb",
 ]
 
 #: Sphere materials of ``capture.json`` (``'auto'``: classified from the photos).
@@ -837,3 +841,59 @@ def classify_sphere(compactness, threshold: float = MIRROR_COMPACTNESS) -> Spher
         return SphereKind("matte", "classified", None, threshold, 0)
     med = float(np.median(c))
     return SphereKind("mirror" if med < threshold else "matte", "classified", med, threshold, int(c.size))
+
+
+#: Median, over a ball's sectors, of the brightness jump at its limb in units of the noise
+#: (:attr:`ffls.spheres.mirror_outline.LimbFit.jump_snr`) from which the limb's step, and not the
+#: detected outline, places a mirror or glossy ball. A black glossy ball on any lit background
+#: shows a clear step all round (30 to 40 on ``ffls synth --sphere-material glossy_black``); a chrome
+#: ball reflects, at grazing, the very background it stands against, so its step is weak (median 5
+#: on ``--sphere-material mirror``) and what the fit follows there is the reflected scene inside the
+#: rim (a dark band of the ground the ball itself occludes), not the limb. At a jump of 10 noise
+#: units a single sector's step is located to a tenth of the blur, so the step is the limb's.
+LIMB_CLEAR_SNR = 10.0
+#: Per-axis floor (pixels) of the limb step's position: the rim's Fresnel rise toward grazing is
+#: steeper in its last pixel than the fit's quadratic (its slope is unbounded at the limb), which
+#: leaves the step 0.13 to 0.17 px inside the silhouette on the glossy black renders of
+#: ``benchmarks/bench_conditions.py`` at 384 px (docs/spheres.md).
+LIMB_MODEL_FLOOR_PX = 0.15
+
+
+def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, LimbFit | None]:
+    """A mirror or glossy ball's view with its outline at the step of its limb, where that step is clear.
+
+    The detected outline of a black glossy ball lies up to a pixel inside its silhouette (the
+    brightening Fresnel rim moves the edge inward), and every direction from its highlights
+    inherits that error (3 % of the radius: 2 degrees). :func:`ffls.spheres.mirror_outline.fit_limb_profile`
+    locates the silhouette as the step of the brightness across the limb in ``image`` (a
+    reduction of the whole sequence: the outline is fixed while the lights move). Where the step
+    is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise), the view takes
+    its geometry (pinhole: the centre from the tangent cone and the sphere's radius;
+    orthographic: the circle) and its centre uncertainty, with :data:`LIMB_MODEL_FLOOR_PX` in
+    quadrature, or the detected outline's where that is larger. Otherwise (a chrome ball, whose
+    limb reflects its own background) the view is returned as it is.
+
+    Parameters
+    ----------
+    view : SphereView
+    image : (H, W) float
+        The sequence's mean luminance (linear preferred).
+
+    Returns
+    -------
+    view : SphereView
+        Refined, or ``view`` itself.
+    limb : LimbFit or None
+        The limb fit (None where it failed); the view used it when ``view`` changed.
+    """
+    limb = fit_limb_profile(image, view.center_px, view.radius_px, model=view.model, K=view.K, dist=view.dist,
+                            center_cam=view.center_cam, radius=view.radius)
+    if limb is None or not np.any(np.isfinite(limb.jump_snr)) or np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR:
+        return view, limb
+    # the step's own precision and the model's floor; never below the detected outline's uncertainty
+    # (a second estimate of the outline, whose residual bias at the tenth of a pixel the renders show)
+    sigma = float(max(np.sqrt(limb.center_sigma_px ** 2 + limb.radius_sigma_px ** 2 + LIMB_MODEL_FLOOR_PX ** 2),
+                      view.center_sigma_px))
+    if view.model == "pinhole":
+        return replace(view, center_px=limb.center_px, center_cam=limb.center_cam, center_sigma_px=sigma), limb
+    return replace(view, center_px=limb.center_px, radius_px=limb.radius_px, center_sigma_px=sigma), limb

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, minimize_scalar
 
 #: ``SphereFit.source`` of a sphere fitted to an outer outline found by :func:`enclosing_circle`.
 OUTER_SOURCE = "auto (outer outline)"
@@ -526,3 +526,304 @@ def highlight_ratio(lum, center, radius) -> float | None:
     if ring95 >= 0.98 * float(np.max(lum)):
         return None
     return float(disc.max() / max(ring95, 1e-12))
+
+
+#: Half-width (pixels) of the band around the outline in which :func:`fit_limb_profile` models the
+#: brightness: the blurred step and the ramps on either side (a glossy ball's Fresnel rim brightens
+#: over 2-3 px at 384 px) within it, the ball's reflected contents beyond it.
+LIMB_BAND_PX = 5.0
+#: Least brightness jump of a sector at the limb, in units of the band's noise, for its edge to
+#: count in the outline's uncertainty (:attr:`LimbFit.sector_offsets_px`).
+LIMB_MIN_JUMP_SNR = 3.0
+
+
+@dataclasses.dataclass(frozen=True)
+class LimbFit:
+    """A sphere's silhouette located by the brightness step at its limb (:func:`fit_limb_profile`).
+
+    Attributes
+    ----------
+    center_px : (2,) float
+        The centre of the silhouette's apparent circle (orthographic) or the image of the
+        sphere's centre (pinhole), pixels.
+    radius_px : float
+        Apparent radius (orthographic), or ``f tan(alpha)`` (pinhole: ``alpha`` the tangent cone's
+        half-angle, ``f`` the mean focal length), pixels.
+    center_cam : (3,) float or None
+        Pinhole: the sphere's centre in the camera frame, from the cone and the sphere's radius.
+    blur_px : float
+        The fitted Gaussian blur of the step (optics, pixel area, demosaicing), pixels.
+    center_sigma_px : float
+        Per-axis standard deviation of the centre (pixels), from the scatter of the sectors' edges.
+    radius_sigma_px : float
+        Standard deviation of the radius (pixels).
+    shift_px : float
+        How far the outline moved from the circle it started from: at most this many pixels
+        anywhere on the circumference (the centre's move plus the radius's change).
+    sector_offsets_px : (n,) float
+        Radial offset of each sector's own step from the fitted outline (NaN: the sector's jump is
+        below :data:`LIMB_MIN_JUMP_SNR` times the noise, or it has too few pixels).
+    noise : float
+        Robust spread of the model's residuals in the band.
+    jump_snr : (n,) float
+        Each sector's brightness jump at the outline (background less rim) over ``noise``
+        (NaN: a sector without pixels on both sides).
+    """
+
+    center_px: np.ndarray
+    radius_px: float
+    center_cam: np.ndarray | None
+    blur_px: float
+    center_sigma_px: float
+    radius_sigma_px: float
+    shift_px: float
+    sector_offsets_px: np.ndarray
+    noise: float
+    jump_snr: np.ndarray
+
+
+def limb_basis(t: np.ndarray, blur: float) -> np.ndarray:
+    """The blurred limb's five brightness terms at signed distances ``t`` from the outline.
+
+    The brightness across the limb is ``a + b t + c t^2`` inside (``t < 0``: the ball's rim, where
+    a glossy ball's Fresnel reflectance rises toward grazing) and ``d + e t`` outside (the
+    background), seen through a Gaussian blur of standard deviation ``blur``: each term is the
+    expectation of its piece over ``X ~ N(t, blur^2)`` restricted to its side, in closed form
+    (``Phi``, ``phi`` the normal CDF and density, ``z = t / blur``): ``Phi(-z)``,
+    ``t Phi(-z) - s phi(z)``, ``(t^2 + s^2) Phi(-z) - t s phi(z)``, ``Phi(z)``, ``t Phi(z) + s phi(z)``.
+
+    Parameters
+    ----------
+    t : (m,) float
+        Signed distance from the outline (pixels; negative inside).
+    blur : float
+        Standard deviation of the blur (pixels, > 0).
+
+    Returns
+    -------
+    (m, 5) float
+        The terms multiplying ``(a, b, c, d, e)``.
+    """
+    from scipy.special import ndtr
+
+    t = np.asarray(t, dtype=np.float64)
+    s = float(blur)
+    z = t / s
+    cin, cout = ndtr(-z), ndtr(z)
+    pdf = np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
+    return np.stack([cin, t * cin - s * pdf, (t * t + s * s) * cin - t * s * pdf, cout, t * cout + s * pdf], axis=1)
+
+
+def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic", K=None, dist=None,
+                     center_cam=None, radius=None, band_px: float | None = None,
+                     n_sectors: int | None = None) -> LimbFit | None:
+    """A mirror or glossy ball's silhouette from the brightness step at its limb, sub-pixel.
+
+    Edge detectors put a chrome or black glossy ball's outline where the brightness changes
+    fastest, which is not the limb: toward grazing, the ball's reflectance rises (Fresnel) and its
+    rim brightens over a few pixels toward the background it reflects, so the steepest change, and
+    the edge, lie up to a pixel inside the silhouette (on ``ffls synth --sphere-material
+    glossy_black`` at 384 px, 0.8 px: 3 % of the radius, 2 degrees of light direction). Here the
+    limb is the position of a *discontinuity*: around the outline, in ``n_sectors`` sectors
+    each with its own brightness on either side, the band of pixels within ``band_px`` of the
+    outline is fitted with a step of smooth sides under a Gaussian blur (:func:`limb_basis`; the
+    parametric blurred-edge model of Nalwa and Binford, "On Detecting Edges", PAMI 1986, on a
+    circle), by robust least squares (``scipy.optimize.least_squares``, ``soft_l1``) over the
+    outline's geometry, the blur and every sector's five brightness terms. The image should be a
+    reduction of the whole sequence (the mean luminance of the photos): the silhouette is fixed,
+    the lights move.
+
+    Geometry: orthographic, the apparent circle (centre, radius; ``t`` the distance to it);
+    pinhole, the sphere's tangent cone (its axis and half-angle ``alpha``, ``t`` the angle of the
+    pixel's viewing ray (:func:`ffls.camera.projection.camera_rays`, with distortion) to the axis
+    less ``alpha``, times the focal length): the silhouette's ellipse, exactly.
+
+    Uncertainty: each sector's own step (its radial offset, fitted with the rest held) scatters
+    about the outline; with ``m`` sectors whose jump exceeds :data:`LIMB_MIN_JUMP_SNR` times the
+    noise and robust spread ``s`` of their offsets, the centre's per-axis sigma is
+    ``s sqrt(2 / m)`` and the radius's ``s / sqrt(m)`` (a circle fitted to ``m`` evenly spread
+    points).
+
+    Parameters
+    ----------
+    image : (H, W) float
+        Brightness (linear preferred: a blurred step mixes linear light).
+    center_px : (2,) float
+        The starting outline's centre (pixels, x right, y down).
+    radius_px : float
+        Its apparent radius (pixels).
+    model : {'orthographic', 'pinhole'}
+    K, dist
+        Pinhole intrinsics and OpenCV distortion.
+    center_cam : (3,) float, optional
+        Pinhole: the starting sphere centre (camera frame; required with ``radius``).
+    radius : float, optional
+        Pinhole: the sphere's radius (scene units).
+    band_px : float, optional
+        Half-width of the band (pixels); default the larger of :data:`LIMB_BAND_PX` and 15 % of the
+        radius (the rim's ramp scales with the ball). The outline may move by half of it; a fit
+        that reaches that bound found another edge, and gives None.
+    n_sectors : int, optional
+        Sectors around the outline; default one per 8 px of circumference, 8 to 36.
+
+    Returns
+    -------
+    LimbFit or None
+        None where the band holds too few pixels in the frame, fewer than 3 sectors show a jump, or
+        the fit does not converge.
+    """
+
+    from ffls.camera.projection import camera_rays, project_points
+    from ffls.conventions import normalize, tangent_basis
+
+    img = np.asarray(image, dtype=np.float64)
+    H, W = img.shape
+    c0 = np.asarray(center_px, dtype=np.float64)
+    r0 = float(radius_px)
+    if not (np.all(np.isfinite(c0)) and np.isfinite(r0) and r0 > 2):
+        return None
+    pinhole = model == "pinhole"
+    band_px = max(LIMB_BAND_PX, 0.15 * r0) if band_px is None else float(band_px)
+    if pinhole and (K is None or center_cam is None or radius is None):
+        raise ValueError("a pinhole limb fit needs K, center_cam and radius")
+    reach = r0 * 1.25 + band_px + 2
+    x0, x1 = max(int(np.floor(c0[0] - reach)), 0), min(int(np.ceil(c0[0] + reach)), W - 1)
+    y0, y1 = max(int(np.floor(c0[1] - reach)), 0), min(int(np.ceil(c0[1] + reach)), H - 1)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    px = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
+    vals = img[yy.ravel(), xx.ravel()]
+    if pinhole:
+        K = np.asarray(K, dtype=np.float64)
+        f = 0.5 * (K[0, 0] + K[1, 1])
+        C = np.asarray(center_cam, dtype=np.float64)
+        dC = float(np.linalg.norm(C))
+        if not dC > float(radius):
+            return None
+        u0 = C / dC
+        alpha0 = float(np.arcsin(float(radius) / dC))
+        e1, e2 = tangent_basis(u0)
+        rays = camera_rays(px, "pinhole", K, dist)
+
+        def geometry(g):
+            u = normalize(u0 + (g[0] * e1 + g[1] * e2) / f)
+            return u, alpha0 + g[2] / f
+
+        def signed(g):
+            u, alpha = geometry(g)
+            return (np.arccos(np.clip(rays @ u, -1.0, 1.0)) - alpha) * f
+
+        def azimuth(g):
+            u, _ = geometry(g)
+            return np.arctan2(rays @ e2, rays @ e1)
+    else:
+        def signed(g):
+            return np.hypot(px[:, 0] - c0[0] - g[0], px[:, 1] - c0[1] - g[1]) - (r0 + g[2])
+
+        def azimuth(g):
+            return np.arctan2(px[:, 1] - c0[1] - g[1], px[:, 0] - c0[0] - g[0])
+
+    g0 = np.zeros(3)
+    t0 = signed(g0)
+    band = np.abs(t0) <= band_px
+    if not np.all(np.isfinite(vals[band])):
+        band &= np.isfinite(vals)
+    circumference = 2 * np.pi * r0
+    n_sec = int(np.clip(round(circumference / 8.0), 8, 36)) if n_sectors is None else int(n_sectors)
+    sector = np.floor((azimuth(g0) + np.pi) / (2 * np.pi) * n_sec).astype(int) % n_sec
+    # a sector needs pixels on both sides of its step to have one
+    keep = np.zeros(n_sec, dtype=bool)
+    for j in range(n_sec):
+        sj = band & (sector == j)
+        keep[j] = np.count_nonzero(sj & (t0 < -1)) >= 6 and np.count_nonzero(sj & (t0 > 1)) >= 6
+    if np.count_nonzero(keep) < 3:
+        return None
+    idx = np.flatnonzero(band & keep[sector])
+    idx = idx[np.argsort(sector[idx], kind="stable")]  # grouped by sector (for np.add.reduceat)
+    sec_ids, sec = np.unique(sector[idx], return_inverse=True)
+    y = vals[idx]
+    # the band's pixels only from here on (signed() reads these names)
+    if pinhole:
+        rays = rays[idx]
+    else:
+        px = px[idx]
+    n_s = len(sec_ids)
+    lim = 0.5 * band_px  # how far the outline may move
+    starts = np.flatnonzero(np.r_[True, sec[1:] != sec[:-1]])
+
+    def terms(theta, w):
+        """Each sector's five brightness terms by weighted least squares, for the geometry and blur ``theta``."""
+        B = limb_basis(signed(theta[:3]), np.exp(theta[3]))
+        A = B * w[:, None]
+        G = np.add.reduceat(A[:, :, None] * A[:, None, :], starts, axis=0)
+        h = np.add.reduceat(A * (w * y)[:, None], starts, axis=0)
+        G = G + 1e-12 * np.trace(G, axis1=1, axis2=2)[:, None, None] * np.eye(5)
+        return B, np.linalg.solve(G, h[:, :, None])[:, :, 0]
+
+    def residuals(theta, w):
+        B, lin = terms(theta, w)
+        return w * (np.sum(B * lin[sec], axis=1) - y)
+
+    # variable projection (the terms are linear given the geometry: solved inside), with the robust
+    # soft-L1 loss by reweighting (its weights 1 / sqrt(1 + (r / scale)^2) from the previous round)
+    theta = np.array([0.0, 0.0, 0.0, np.log(0.7)])
+    lo, hi = np.array([-lim, -lim, -lim, np.log(0.2)]), np.array([lim, lim, lim, np.log(3.0)])
+    w = np.ones(y.size)
+    for _ in range(3):
+        try:
+            sol = least_squares(residuals, theta, args=(w,), bounds=(lo, hi), x_scale=np.array([1.0, 1.0, 1.0, 0.5]),
+                                diff_step=1e-4, max_nfev=100)
+        except (ValueError, np.linalg.LinAlgError):
+            return None
+        if sol.status <= 0 or not np.all(np.isfinite(sol.x)):
+            return None
+        theta = sol.x
+        B, lin = terms(theta, w)
+        res = np.sum(B * lin[sec], axis=1) - y
+        scale = max(1.4826 * float(np.median(np.abs(res))), 1e-9 * max(float(np.abs(y).max()), 1e-12))
+        w = (1.0 + (res / scale) ** 2) ** -0.25  # sqrt of the soft-L1 weight
+    if np.any(np.abs(theta[:3]) >= 0.98 * lim):  # at the window's edge: another edge than the limb's pulled it
+        return None
+    g, blur = theta[:3], float(np.exp(theta[3]))
+    noise = max(1.4826 * float(np.median(np.abs(res))), 1e-12)
+    # each sector's own step: its offset along t, the others held
+    t_fit = signed(g)
+    offsets, snr = np.full(n_sec, np.nan), np.full(n_sec, np.nan)
+    for k, j in enumerate(sec_ids):
+        m = sec == k
+        snr[int(j)] = abs(lin[k, 3] - lin[k, 0]) / noise  # the background over the rim, at the outline
+        if snr[int(j)] < LIMB_MIN_JUMP_SNR:
+            continue
+
+        wm, ym, tm = w[m], y[m], t_fit[m]
+
+        def cost(q, wm=wm, ym=ym, tm=tm):
+            A = limb_basis(tm - q, blur) * wm[:, None]
+            x = np.linalg.lstsq(A, wm * ym, rcond=None)[0]
+            return float(np.sum((A @ x - wm * ym) ** 2))
+
+        sk = minimize_scalar(cost, bounds=(-lim, lim), method="bounded", options={"xatol": 1e-3})
+        if sk.success and abs(sk.x) < 0.95 * lim:  # at the bound: no step of its own within reach
+            offsets[int(j)] = sk.x
+    good = np.isfinite(offsets)
+    m_good = int(np.count_nonzero(good))
+    if m_good < 3:
+        return None
+    spread = 1.4826 * float(np.median(np.abs(offsets[good] - np.median(offsets[good]))))
+    # at least the scatter a single sector's step would have alone (its own fit's precision)
+    spread = max(spread, blur / np.sqrt(max(idx.size / n_s, 1.0)))
+    c_sig, r_sig = spread * np.sqrt(2.0 / m_good), spread / np.sqrt(m_good)
+    if pinhole:
+        u, alpha = geometry(g)
+        if not 0 < alpha < np.pi / 2:
+            return None
+        Cn = float(radius) / np.sin(alpha) * u
+        cpx = project_points(Cn[None], K, dist)[0]
+        rpx = f * np.tan(alpha)
+    else:
+        Cn, cpx, rpx = None, c0 + g[:2], r0 + g[2]
+    shift = float(np.hypot(g[0], g[1]) + abs(g[2]))
+    return LimbFit(center_px=np.asarray(cpx, dtype=np.float64), radius_px=float(rpx), center_cam=Cn, blur_px=blur,
+                   center_sigma_px=float(c_sig), radius_sigma_px=float(r_sig), shift_px=shift,
+                   sector_offsets_px=offsets, noise=noise, jump_snr=snr)
