@@ -1,5 +1,4 @@
-"""The ground bounce under a near (point) light (ffls.spheres.lambert.near_ground_bounce,
-near_ground_ratio) and its capture-wide calibration (ffls.spheres.estimate.calibrate_bounce_near).
+"""The ground bounce under a near (point) light (ffls.spheres.lambert.near_ground_bounce).
 
 The form factor is checked against an independent computation: an area integral over the ground
 (polar lattice around the contact point, point-light irradiance with cosine and inverse square,
@@ -11,7 +10,7 @@ import numpy as np
 import pytest
 
 from ffls.conventions import normalize
-from ffls.spheres.lambert import fit_lambert, near_ground_bounce, near_ground_ratio, shadowed_ground_bounce
+from ffls.spheres.lambert import near_ground_bounce, shadowed_ground_bounce
 
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -91,37 +90,3 @@ def test_near_form_factor_tends_to_the_distant_one_and_differs_for_a_near_light(
     assert np.mean(near[toward] - distant[toward]) > np.mean(near[away] - distant[away]) + 0.02
     # a light below the contact point lights no ground
     assert np.all(near_ground_bounce(p, n, center, radius, center - 0.2 * UP) == 0.0)
-
-
-def _point_lit_sphere(light, rho, n_pix=3000, seed=0):
-    """A sphere (radius 0.05 at 2 m from the light) under a point light with a ground of ratio ``rho``
-    (the bounce from the area integral's model at a fine quadrature), seen from -Y, raised 30 degrees."""
-    rng = np.random.default_rng(seed)
-    center, radius = np.array([0.25, -0.25, 0.05]), 0.05
-    view = normalize(np.array([0.0, -np.cos(np.radians(30)), np.sin(np.radians(30))]))
-    n = normalize(rng.normal(size=(4 * n_pix, 3)))
-    n = n[n @ view > 0.1][:n_pix]
-    p = center + radius * n
-    S = center + 2.0 * normalize(np.asarray(light, dtype=np.float64))
-    d = S - p
-    r = np.linalg.norm(d, axis=1)
-    scale = float(np.sum((S - center) ** 2)) ** 1.5
-    direct = np.maximum(np.einsum("ij,ij->i", n, d) / r, 0.0) / r ** 2 * scale
-    G = center - radius * UP
-    h = float((S - G) @ UP) / float(np.linalg.norm(S - G)) ** 3 * scale
-    y = 0.8 * (direct + rho * h * near_ground_bounce(p, n, center, radius, S, side=32, nodes=None)) + 0.01
-    return p, n, y, center, radius, S
-
-
-@pytest.mark.parametrize("light", [(0.0, 0.6, 0.8), (0.5, 0.5, 0.4), (0.0, -0.6, 0.8)])
-def test_near_ground_ratio_recovers_the_ratio_that_the_distant_fit_misses(light):
-    rho = 0.3
-    p, n, y, center, radius, S = _point_lit_sphere(light, rho)
-    q, sd = near_ground_ratio(p, n, y, np.ones(len(y), dtype=bool), center, radius, S)
-    assert abs(q - rho) < 0.02 and 0 < sd < 0.01, (q, sd)
-    # the per-sphere fit, which takes the light as distant, reads a ratio further off (0-0.28)
-    f = fit_lambert(n, y, models=("bounce",))
-    assert abs(f.ground_ratio - rho) > max(0.02, 2.0 * abs(q - rho)), (f.ground_ratio, q)
-    # a light below the contact point: no ratio
-    assert np.isnan(near_ground_ratio(p, n, y, np.ones(len(y), dtype=bool), center, radius,
-                                      center - 0.5 * UP)[0])

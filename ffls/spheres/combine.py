@@ -527,13 +527,17 @@ def fit_near_light_mixed(samples: list[SphereSamples], values: list[np.ndarray],
         return np.concatenate([shading.residuals(S) * pixel_scale, r])
 
     def per_sphere_scale(S):
-        """Per selected pixel, 1 / (robust residual sd of its sphere * sqrt(its inflation))."""
+        """Per selected pixel, 1 / (robust residual sd of its sphere * sqrt(its inflation)), that
+        deviation never below the spheres' median: a sphere the model misses (part of it in a cast
+        shadow) is weighted down, but none is weighted up for small residuals (a dark, vignetted
+        sphere's are small in absolute units, and its shading is no truer for it)."""
         res, X = shading.solve(S)
-        out = []
+        devs = []
         for k, rk in enumerate(np.split(res, np.cumsum(shading.counts)[:-1])):
             sd = 1.4826 * float(np.median(np.abs(rk - np.median(rk)))) if rk.size else 1.0
-            sd = max(sd, 1e-3 * abs(float(X[k, 0])), 1e-12)
-            out.append(np.full(rk.size, 1.0 / (sd * np.sqrt(infl[k]))))
+            devs.append(max(sd, 1e-3 * abs(float(X[k, 0])), 1e-12) * np.sqrt(infl[k]))
+        floor = float(np.median(devs)) if devs else 1.0
+        out = [np.full(n, 1.0 / max(d, floor)) for n, d in zip(shading.counts, devs)]
         return np.concatenate(out) if out else np.zeros(0)
 
     x = S0.copy()

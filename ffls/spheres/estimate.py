@@ -45,8 +45,8 @@ from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness, refine_view_limb
-from ffls.spheres.lambert import fit_lambert, near_ground_ratio
-from ffls.spheres.photo import JOINT_STRIDE, LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo, near_fit_mask
+from ffls.spheres.lambert import fit_lambert
+from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values)
@@ -61,7 +61,6 @@ __all__ = [
     "sphere_views",
     "sphere_kinds",
     "calibrate_bounce",
-    "calibrate_bounce_near",
     "refine_sphere_centres",
     "refit_spheres",
     "calibrate_uncertainty",
@@ -289,69 +288,6 @@ def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
     med = float(est[o][np.searchsorted(cw, 0.5 * cw[-1])])
     spread = float(1.4826 * np.median(np.abs(est - med)))
     return BounceCalibration(ratio=float(np.clip(med, 0.0, 1.0)), spread=spread, n_photos=int(len(est)))
-
-
-#: Most photos whose joint near-light fit recalibrates the ground ratios (:func:`calibrate_bounce_near`).
-NEAR_CALIBRATION_PHOTOS = 10
-
-
-def calibrate_bounce_near(first: list[PhotoEstimate], joint: list[PhotoEstimate], samples: list[SphereSamples],
-                          values: list, calibration: list[BounceCalibration], up: np.ndarray = UP,
-                          terminator: float = 0.15, max_sigma: float = 0.05, min_photos: int = 3,
-                          min_lz: float = 0.2) -> list[BounceCalibration]:
-    """Each sphere's ground ratio under near lights, from the photos' joint-fit light positions.
-
-    :func:`calibrate_bounce` reads the per-sphere fits' ``c / (a l_z)``, whose model is a distant
-    light: under a light 2 m away it came out 17% low (0.24-0.25 for a ground of albedo 0.3), and
-    the joint fit, given that ratio, pulled the directions 0.5 degrees down. Here, in the photos
-    whose light is near, each sphere's ratio is fitted again with the point light's shading and
-    the near ground's form factor at the photo's joint-fit position
-    (:func:`ffls.spheres.lambert.near_ground_ratio`, on the joint fit's pixel lattice and the
-    pixels the first pass did not reject), and the weighted median is taken as in
-    :func:`calibrate_bounce`. A sphere with fewer than ``min_photos`` such photos keeps its
-    calibration.
-
-    Parameters
-    ----------
-    first : list of PhotoEstimate
-        The first pass (free bounce): which photos and spheres show the ratio (the selection of
-        :func:`calibrate_bounce`: ``ground_ratio_sigma <= max_sigma``, ``l_z >= min_lz``) and the
-        pixels to use.
-    joint : list of PhotoEstimate
-        The same photos (same order) fitted with the joint near-light fit: their ``position``;
-        photos that are not ``ok`` and ``near`` are skipped.
-    samples : list of SphereSamples
-    values : list
-        Per photo, per sphere ``(grey, valid, n_saturated)``.
-    calibration : list of BounceCalibration
-        :func:`calibrate_bounce`'s, per sphere.
-    up : (3,) float
-    terminator, max_sigma, min_photos, min_lz :
-        As :func:`ffls.spheres.lambert.near_ground_ratio` and :func:`calibrate_bounce`.
-
-    Returns
-    -------
-    list of BounceCalibration
-    """
-    est = [[] for _ in samples]
-    w = [[] for _ in samples]
-    for r1, rj, v in zip(first, joint, values):
-        if rj.status != "ok" or rj.model != "near" or rj.position is None or not np.all(np.isfinite(rj.position)):
-            continue
-        for k, (s, sp) in enumerate(zip(samples, r1.spheres)):
-            f = sp.fit
-            if (sp.kind != "matte" or sp.status != "ok" or sp.direction is None or sp.direction[2] < min_lz
-                    or not f.ground_ratio_sigma <= max_sigma):
-                continue
-            lattice = np.arange(0, len(s), JOINT_STRIDE)
-            use = near_fit_mask(f)[lattice] & np.asarray(v[k][1], dtype=bool)[lattice]
-            q, sd = near_ground_ratio(s.points[lattice], s.normals[lattice], np.asarray(v[k][0])[lattice], use,
-                                      s.center, s.radius, rj.position, up, terminator=terminator)
-            if np.isfinite(q) and np.isfinite(sd):
-                est[k].append(q)
-                w[k].append(1.0 / max(sd, 1e-6) ** 2)
-    return [_weighted_median_ratio(e, ww) if len(e) >= min_photos else c
-            for e, ww, c in zip(est, w, calibration)]
 
 
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
@@ -975,17 +911,6 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
-    if fitter.options.get("own_shadow", True) and any(r is not None for r in ratios):
-        # near lights: the ratios again with the point light's shading, at joint-fit positions
-        near = [i for i, r in enumerate(results) if r.status == "ok" and r.model == "near"]
-        if near:
-            pick = [near[j] for j in np.unique(np.linspace(0, len(near) - 1, min(len(near), NEAR_CALIBRATION_PHOTOS))
-                                               .round().astype(int))]
-            joint_fits = refit(pick, ratios, counted=False)
-            calibration = calibrate_bounce_near([results[i] for i in pick], joint_fits, samples,
-                                                [values[i] for i in pick], calibration,
-                                                up=fitter.options.get("up", UP), terminator=terminator)
-            ratios = [c.ratio for c in calibration]
     if any(r is not None for r in ratios):
         results = refit(range(n_photos), ratios, counted=True)
     elif refinements is not None and any(r.accepted for r in refinements):

@@ -52,7 +52,6 @@ __all__ = [
     "own_shadow_factor",
     "shadowed_ground_bounce",
     "near_ground_bounce",
-    "near_ground_ratio",
     "NEAR_BOUNCE_SIDE",
     "NEAR_BOUNCE_NODES",
     "solve_normal_equations",
@@ -458,86 +457,6 @@ def near_ground_bounce(points: np.ndarray, normals: np.ndarray, center: np.ndarr
         out[outside] = values[cKDTree(uv[at]).query(uv[outside])[1]]
     out[at] = values
     return np.maximum(out, 0.0)
-
-
-def near_ground_ratio(points: np.ndarray, normals: np.ndarray, values: np.ndarray, use: np.ndarray,
-                      center: np.ndarray, radius: float, light_position: np.ndarray, up: np.ndarray = UP,
-                      terminator: float = 0.15, rel_noise_floor: float = 0.01,
-                      side: int = NEAR_BOUNCE_SIDE) -> tuple[float, float]:
-    """A sphere's ground ratio ``rho_g`` under a point light at a known position, and its standard deviation.
-
-    The per-sphere fit (:func:`fit_lambert`) takes the light as distant: under a near light its
-    free bounce ``c / (a l_z)`` is not the ground ratio (the sphere's lit side is less than a
-    hemisphere, ``n . (S - p)`` falls off as ``|S - p|^-3``, and the ground near the light is
-    brighter), and the ratio calibrated from it came out 17% low on a ground of albedo 0.3 at
-    2 m, which pulled the joint fit's directions 0.5 degrees down (docs/spheres.md). Here the
-    pixels are fitted with the point light's shading, as the joint fit
-    (:func:`ffls.spheres.combine.fit_near_light`) models them::
-
-        I = a max(0, n . d) / |d|^3 + b + c F(n),        d = S - p,
-
-    ``F`` the near form factor (:func:`near_ground_bounce`), linear in ``a, b, c``; the ratio is
-    ``c / (a h)`` with ``h = max(0, (S - G) . up) / |S - G|^3`` the light's irradiance of the ground
-    at the contact point ``G``. Pixels with ``|cos| <= terminator`` (the angle to ``d``) are left out.
-
-    Parameters
-    ----------
-    points, normals : (m, 3) float
-        The sphere's surface points and unit normals (world).
-    values : (m,) float
-        Linear intensities.
-    use : (m,) bool
-        Pixels that may be used (valid, not outliers of the sphere's own fit).
-    center : (3,) float
-    radius : float
-    light_position : (3,) float
-        The photo's light position (e.g. its ray-convergence estimate).
-    up : (3,) float, unit
-    terminator : float
-    rel_noise_floor : float
-        Lower bound of the residuals' deviation relative to the shading's peak, as in
-        :func:`fit_lambert`.
-    side : int
-        Quadrature of :func:`near_ground_bounce`.
-
-    Returns
-    -------
-    ratio, sigma : float
-        NaN and infinity where the light is below the contact point, too few pixels are usable, or
-        the fit is degenerate.
-    """
-    points = np.asarray(points, dtype=np.float64)
-    normals = np.asarray(normals, dtype=np.float64)
-    y = np.asarray(values, dtype=np.float64)
-    S = np.asarray(light_position, dtype=np.float64)
-    up = np.asarray(up, dtype=np.float64)
-    G = np.asarray(center, dtype=np.float64) - radius * up
-    hG = float((S - G) @ up)
-    fail = (float("nan"), float("inf"))
-    if not (np.isfinite(hG) and hG > 0.0):
-        return fail
-    d = S - points
-    r = np.linalg.norm(d, axis=1)
-    cos = np.einsum("ij,ij->i", normals, d) / r
-    sel = np.asarray(use, dtype=bool) & np.isfinite(y) & (np.abs(cos) > terminator)
-    if int(sel.sum()) < 10:
-        return fail
-    scale = float(np.sum((S - np.asarray(center, dtype=np.float64)) ** 2)) ** 1.5  # a in image units
-    f = np.maximum(cos[sel], 0.0) / (r[sel] ** 2) * scale
-    F = near_ground_bounce(points[sel], normals[sel], center, radius, S, up, side)
-    A = np.column_stack([f, np.ones_like(f), F])
-    x, *_ = np.linalg.lstsq(A, y[sel], rcond=None)
-    a, c = float(x[0]), float(x[2])
-    h = hG / float(np.linalg.norm(S - G)) ** 3 * scale
-    if not (np.isfinite(a) and a > 0.0 and np.isfinite(c)):
-        return fail
-    res = y[sel] - A @ x
-    s = max(float(np.sqrt(res @ res / max(res.size - 3, 1))), rel_noise_floor * a)
-    try:
-        var_c = float(np.linalg.inv(A.T @ A)[2, 2])
-    except np.linalg.LinAlgError:
-        return fail
-    return c / (a * h), float(s * np.sqrt(max(var_c, 0.0)) / (a * h))
 
 
 def _model_map(model: str, ratio: float) -> np.ndarray:
