@@ -11,7 +11,7 @@ from ffls.errors import InputError
 from ffls.io.images import read_image, write_exr
 from ffls.lightmaps.lightmap import builtin_lightmap, load_lightmap
 from ffls.probes import estimate_lightmap
-from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
+from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene, write_diffuse_probe
 
 
 @pytest.fixture(scope="module")
@@ -21,15 +21,8 @@ def truth():
 
 @pytest.fixture(scope="module")
 def diffuse_folder(tmp_path_factory, truth):
-    d = tmp_path_factory.mktemp("diffuse")
     sc = diffuse_sphere_scene(truth, resolution=64, albedo=0.7)
-    write_exr(d / "ball.exr", sc.image)
-    doc = {"format": "ffls-probe", "version": 1, "images": ["ball.exr"],
-           "camera": {"model": "orthographic", "world_from_camera": sc.world_from_camera.tolist()},
-           "sphere": {"center_px": sc.center_px.tolist(), "radius_px": sc.radius_px, "material": "diffuse",
-                      "albedo": 0.7}}
-    (d / "probe.json").write_text(json.dumps(doc))
-    return d
+    return write_diffuse_probe(tmp_path_factory.mktemp("diffuse"), sc)
 
 
 def _top_view(res, extent, height=1000.0):

@@ -127,21 +127,11 @@ def test_bad_options_are_refused(noisy_system, kw):
 
 @pytest.fixture(scope="module")
 def ball_folder(tmp_path_factory):
-    import json
-
-    from ffls.io.images import write_exr
     from ffls.lightmaps.lightmap import builtin_lightmap
-    from ffls.synth.probe_scenes import diffuse_sphere_scene
+    from ffls.synth.probe_scenes import diffuse_sphere_scene, write_diffuse_probe
 
-    d = tmp_path_factory.mktemp("pocs_ball")
     sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=48, albedo=0.7)
-    write_exr(d / "ball.exr", sc.image)
-    doc = {"format": "ffls-probe", "version": 1, "images": ["ball.exr"],
-           "camera": {"model": "orthographic", "world_from_camera": sc.world_from_camera.tolist()},
-           "sphere": {"center_px": sc.center_px.tolist(), "radius_px": sc.radius_px, "material": "diffuse",
-                      "albedo": 0.7}}
-    (d / "probe.json").write_text(json.dumps(doc))
-    return d
+    return write_diffuse_probe(tmp_path_factory.mktemp("pocs_ball"), sc)
 
 
 def test_cli_extrapolated_scheme_with_a_stopping_rule(ball_folder, tmp_path, capsys):

@@ -16,16 +16,20 @@ The camera convention is GUIDE section 1: pixel ``(x, y)`` with ``x`` right and 
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, normalize
+from ffls.errors import atomic_output
+from ffls.io.images import write_exr
 from ffls.lightmaps.lightmap import as_samples
 from ffls.synth.geometry import Box, Material, occluded
 from ffls.synth.scene import cluster_lightmap
 
-__all__ = ["SphereProbeScene", "diffuse_sphere_scene", "ShadowScene", "cast_shadow_scene", "checker_albedo"]
+__all__ = ["SphereProbeScene", "diffuse_sphere_scene", "write_diffuse_probe", "ShadowScene", "cast_shadow_scene", "checker_albedo"]
 
 
 @dataclass(frozen=True)
@@ -107,6 +111,27 @@ def diffuse_sphere_scene(lightmap, resolution: int = 128, albedo: float = 0.7, w
     img[mask] = rad
     return SphereProbeScene(image=img, mask=mask, normals=normals, radiance=rad, albedo=float(albedo),
                             center_px=c, radius_px=float(r), world_from_camera=T)
+
+
+def write_diffuse_probe(folder, scene: SphereProbeScene, image_name: str = "ball.exr") -> Path:
+    """Write ``scene`` as a probe folder for ``ffls probe diffuse | pocs``: its image (EXR) and a
+    ``probe.json`` with its orthographic camera and the sphere's pixel circle and albedo.
+
+    Returns
+    -------
+    Path
+        ``folder`` (made if missing).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_exr(folder / image_name, scene.image)
+    doc = {"format": "ffls-probe", "version": 1, "images": [image_name],
+           "camera": {"model": "orthographic", "world_from_camera": np.asarray(scene.world_from_camera).tolist()},
+           "sphere": {"center_px": np.asarray(scene.center_px).tolist(), "radius_px": float(scene.radius_px),
+                      "material": "diffuse", "albedo": float(scene.albedo)}}
+    with atomic_output(folder / "probe.json") as tmp:
+        tmp.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    return folder
 
 
 def checker_albedo(points: np.ndarray, period: float = 0.1, low: float = 0.35, high: float = 0.8) -> np.ndarray:
