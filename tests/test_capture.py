@@ -165,6 +165,7 @@ def test_corrupt_json(tmp_path):
     ({"images": ["../outside.png"]}, "inside it"),
     ({"camera": {"K": [[1, 0], [0, 1]]}}, "camera.K"),
     ({"camera": {"K": [[1e308, 0, 3], [0, 1e308, 2], [0, 0, 1]]}}, "camera.K: values beyond +-1e+08"),
+    ({"camera": {"K": [[1e7, 0, 3], [0, 100, 2], [0, 0, 1]]}}, "camera.K: fx / fy = 100000"),
     ({"camera": {"K": [[100, 0, 3], [0, 100, 2], [0, 0, 1]], "dist": [1, 2]}}, "camera.dist"),
     ({"camera": {"world_from_camera": np.eye(4).tolist() * 1 + [[0, 0, 0, 1]]}}, "camera.world_from_camera"),
     ({"camera": {"world_from_camera": (2 * np.eye(4)).tolist()}}, "rigid"),

@@ -254,6 +254,24 @@ def test_a_radius_or_focal_length_off_by_orders_of_magnitude_is_named_before_any
         detect.find_spheres(img, K0, DIST0, 1e308, world_from_camera=wfc)
 
 
+def test_a_camera_matrix_no_lens_has_is_named():
+    img = render(K0, DIST0, CENTRES0, R0)
+    h, w = img.shape[:2]
+    far_centre = np.array(K0, dtype=np.float64)
+    far_centre[0, 2] = 10.0 * w
+    with pytest.raises(InputError, match=r"camera.K in capture.json looks wrong: its principal point"):
+        detect.find_spheres(img, far_centre, DIST0, R0)
+    tiny_f = np.array(K0, dtype=np.float64)
+    tiny_f[0, 0] = tiny_f[1, 1] = 0.001
+    with pytest.raises(InputError, match=r"camera.K in capture.json looks wrong: a focal length of 0.001 px"):
+        detect.find_spheres(img, tiny_f, DIST0, R0)
+    wfc = np.array(detect.DEFAULT_WORLD_FROM_CAMERA)
+    wfc[0, 3] = 1e300
+    with pytest.raises(InputError, match="camera.world_from_camera in capture.json puts the camera at a distance "
+                                         "beyond any number"):
+        detect.find_spheres(img, K0, DIST0, R0, world_from_camera=wfc)
+
+
 def test_nonpositive_radius():
     with pytest.raises(InputError, match="sphere_radius"):
         detect.find_spheres(np.ones((10, 10, 3)), K0, None, -1.0)

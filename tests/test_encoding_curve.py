@@ -133,6 +133,10 @@ def test_sixteen_bit_polynomial_table_record_and_linearise(tmp_path):
     for bad in (12, "16", True):
         with pytest.raises(ValueError, match="bits"):
             cap.record_response({**rec, "bits": bad})
+    assert cap.record_response({**rec, "dark_sides": True}).shape == (65536, 3)
+    for bad in ("yes", None, 1):
+        with pytest.raises(ValueError, match="dark_sides must be true or false"):
+            cap.record_response({**rec, "dark_sides": bad})
     codes = np.array([[[0, 1000, 65535]]], dtype=np.uint16)
     img = ImageData(codes.astype(np.float32) / 65535, 16, "png", tmp_path / "a.png")
     out = linearise(img, cap.CALIBRATED_RESPONSE, t16)

@@ -218,3 +218,17 @@ def test_sources_over_the_limit_says_the_limit(diffuse_folder, tmp_path, capsys)
     assert main(["probe", "diffuse", str(diffuse_folder), "-o", str(tmp_path / "x.exr"), "--sources", "1000000"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "at most 100000" in err[0], err
+
+
+@pytest.mark.parametrize("flags,named", [
+    (["--grid", "4"], "--grid applies with --sources grid"),
+    (["--sources", "adaptive", "--grid", "4"], "--grid applies with --sources grid"),
+    (["--scheme", "extrapolated", "--order", "sequential"], "--order applies with --scheme sequential"),
+    (["--scheme", "extrapolated", "--seed", "5"], "--seed applies with --scheme sequential"),
+    (["--order", "sequential", "--seed", "5"], "--seed applies with a random projection order"),
+])
+def test_pocs_flags_of_another_setting_are_refused_not_ignored(diffuse_folder, tmp_path, capsys, flags, named):
+    assert main(["probe", "pocs", str(diffuse_folder), "-o", str(tmp_path / "x.exr"), "--size", "8", *flags]) == 2
+    err = capsys.readouterr().err
+    assert named in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert not (tmp_path / "x.exr").exists()

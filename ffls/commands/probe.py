@@ -118,7 +118,7 @@ def _add_inverse(sub, common):
                         "(adaptive = auto, default), or the paper's lat-long grid of --grid rows (grid)")
     q.add_argument("--criterion", choices=("cv", "bic"), default="cv",
                    help="how the adaptive set's refinement is chosen: cross-validation (default) or BIC")
-    q.add_argument("--grid", type=integer(2, 256), default=16,
+    q.add_argument("--grid", type=integer(2, 256), default=None,
                    help="with --sources grid: height of the grid of unknowns (default 16)")
     q.add_argument("--iterations", type=integer(1, 100000), default=None,
                    help="sweeps (default 50; 3000 with --scheme extrapolated); the cap with --tol")
@@ -131,8 +131,10 @@ def _add_inverse(sub, common):
                    help="stop when a sweep changes the estimate by less than this fraction (default: fixed sweeps)")
     q.add_argument("--upper", type=number(0.0, None, lo_open=True), default=None,
                    help="upper amplitude bound on the radiance (default none)")
-    q.add_argument("--order", choices=("random", "sequential"), default="random", help="projection order")
-    q.add_argument("--seed", type=integer(0, 2**32 - 1), default=0, help="seed of the random order")
+    q.add_argument("--order", choices=("random", "sequential"), default=None,
+                   help="with --scheme sequential: projection order (default random)")
+    q.add_argument("--seed", type=integer(0, 2**32 - 1), default=None,
+                   help="with --scheme sequential and a random order: seed of the order (default 0)")
     q.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
                    help="directions not seen: the method's own values (default) or black")
 
@@ -225,9 +227,21 @@ def method_knobs(args) -> dict:
                 "sigma_deg": args.sigma, "criterion": args.criterion, "smoothness": args.smoothness,
                 "fill": args.fill}
     if args.method == "pocs":
-        return {"grid": args.grid, "iterations": args.iterations, "upper": args.upper, "order": args.order,
-                "seed": args.seed, "fill": args.fill, "sources": args.sources, "criterion": args.criterion,
-                "scheme": args.scheme, "relaxation": args.relaxation, "tol": args.tol}
+        from ffls.errors import InputError
+
+        # a flag of another setting would be ignored: refused, not dropped in silence
+        if args.grid is not None and args.sources != "grid":
+            raise InputError(f"--grid applies with --sources grid (the grid of unknowns), not --sources {args.sources}")
+        if args.scheme == "extrapolated":
+            for flag, value in (("--order", args.order), ("--seed", args.seed)):
+                if value is not None:
+                    raise InputError(f"{flag} applies with --scheme sequential (the sweeps' projection order); "
+                                     "--scheme extrapolated projects onto every set at once")
+        elif args.seed is not None and args.order == "sequential":
+            raise InputError("--seed applies with a random projection order, not --order sequential")
+        return {"grid": 16 if args.grid is None else args.grid, "iterations": args.iterations, "upper": args.upper,
+                "order": args.order or "random", "seed": args.seed or 0, "fill": args.fill, "sources": args.sources,
+                "criterion": args.criterion, "scheme": args.scheme, "relaxation": args.relaxation, "tol": args.tol}
     return {}
 
 

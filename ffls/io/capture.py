@@ -29,6 +29,7 @@ from ffls.io.response import load_response, polynomial_response_table
 __all__ = [
     "CAPTURE_FILE",
     "MAX_FOCAL_PX",
+    "MAX_PIXEL_ASPECT",
     "LIGHTS_FILE",
     "Capture",
     "load_capture",
@@ -72,6 +73,8 @@ _DIST_LENGTHS = (4, 5, 8, 12, 14)
 #: The largest entry of ``camera.K`` (pixels): a 100 m focal length on 1 um pixels; beyond it no
 #: lens and sensor exist, and the projection's products overflow.
 MAX_FOCAL_PX = 1e8
+#: The largest ``fx / fy`` (or ``fy / fx``) of ``camera.K``: anamorphic lenses squeeze by 2 at most.
+MAX_PIXEL_ASPECT = 3.0
 _CAPTURE_KEYS = {"format", "version", "images", "image_size", "encoding", "camera", "sphere_radius",
                  "spheres", "sphere_count", "scene_center", "hemisphere", "units"}
 
@@ -352,6 +355,9 @@ def _parse_camera(j: _Json, cam) -> tuple:
         K = j.array(cam["K"], "camera.K", (3, 3), max_abs=MAX_FOCAL_PX)
         if not (K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1])):
             j.fail("camera.K", "expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+        if not 1.0 / MAX_PIXEL_ASPECT <= K[0, 0] / K[1, 1] <= MAX_PIXEL_ASPECT:
+            j.fail("camera.K", f"fx / fy = {K[0, 0] / K[1, 1]:.6g}: pixels that far from square are no camera's "
+                               f"(an anamorphic lens squeezes 2x; at most {MAX_PIXEL_ASPECT:g} is taken)")
     elif "dist" in cam:
         j.fail("camera.K", "missing key (camera.dist is given)")
     if "dist" in cam:
@@ -714,6 +720,8 @@ def record_response(record: dict) -> np.ndarray | None:
     bits = record.get("bits", 8)  # the files' bit depth the curve was calibrated on: the table's rows
     if bits not in (8, 16) or isinstance(bits, bool):
         raise ValueError(f"bits must be 8 or 16, got {_short(bits)}")
+    if "dark_sides" in record and not isinstance(record["dark_sides"], bool):
+        raise ValueError(f"dark_sides must be true or false, got {_short(record['dark_sides'])}")
     return polynomial_response_table(c, bits)
 
 

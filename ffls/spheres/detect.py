@@ -1787,9 +1787,15 @@ def _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visibl
                              f" {closed:.0%} of the visible outline)", source)
 
 
+#: The shortest focal length (a fraction of the photo's longer side) of a pinhole camera: a field
+#: of view of 170 degrees across the photo, ``1 / (2 tan 85 deg)``.
+MIN_FOCAL_FRACTION = 1.0 / (2.0 * np.tan(np.radians(85.0)))
+
+
 def _scene_distance(wfc, scene_center) -> float:
     centre = np.zeros(3) if scene_center is None else np.asarray(scene_center, dtype=np.float64).reshape(3)
-    return float(np.linalg.norm(wfc[:3, 3] - centre))  # camera to scene centre
+    with np.errstate(over="ignore"):  # a translation beyond any number is named by the caller
+        return float(np.linalg.norm(wfc[:3, 3] - centre))  # camera to scene centre
 
 
 def _check_scale(K, wfc, R, shape, source, scene_center=None):
@@ -1802,9 +1808,21 @@ def _check_scale(K, wfc, R, shape, source, scene_center=None):
     otherwise overflow in every fit and be reported as "no sphere found".
     """
     f_lo, f_hi = float(min(K[0, 0], K[1, 1])), float(max(K[0, 0], K[1, 1]))
+    h, w = shape[:2]
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    if not (-w <= cx <= 2 * w and -h <= cy <= 2 * h):
+        raise InputError(f"camera.K in capture.json looks wrong: its principal point ({cx:g}, {cy:g}) px lies more "
+                         f"than a photo's size outside the {w}x{h} photos", source)
+    if f_lo < MIN_FOCAL_FRACTION * max(w, h):
+        raise InputError(f"camera.K in capture.json looks wrong: a focal length of {f_lo:g} px would give the {w}x{h} "
+                         f"photos a field of view over 170 deg, which no pinhole lens has (fisheye models are not "
+                         f"supported)", source)
     with np.errstate(over="ignore"):
         near, far = f_lo * R / float(max(shape)), f_hi * R
     cam_dist = _scene_distance(wfc, scene_center)
+    if not np.isfinite(cam_dist):
+        raise InputError("camera.world_from_camera in capture.json puts the camera at a distance beyond any number "
+                         "from the scene centre", source)
     if not (np.isfinite(near) and np.isfinite(far)):
         raise InputError(f"sphere_radius ({R:g}) and camera.K (focal length {f_hi:g} px) in capture.json put the "
                          f"spheres at a distance beyond any number: one of them is wrong", source)
