@@ -464,12 +464,8 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     """
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}, not {criterion!r}")
-    n = check_normals(normals)
+    n, b, rho, _ = _pixels(normals, radiance, albedo)
     m = n.shape[0]
-    if m == 0:
-        raise InputError("no pixels to fit")
-    b = as_rgb_pixels(radiance, m)
-    rho = broadcast_albedo(albedo, m)
     use = pixel_subset(m, max_pixels, seed)
     kw = dict(iterations=iterations, upper=upper, order=order, seed=seed, max_pixels=None, scheme=scheme,
               relaxation=relaxation, tol=tol)
