@@ -113,6 +113,33 @@ def cached_capture(folder, directions, render) -> dict:
     return json.loads(truth_file.read_text())
 
 
+def probe_benchmark_capture(prefix: str):
+    """The capture the probe benchmarks relight under recovered and true maps: ``ffls synth`` with
+    150 distant lights at 64 px (seed 1), written to a new temporary folder named with ``prefix``.
+
+    Returns ``(capture, lights)``.
+    """
+    import tempfile
+
+    from ffls.io.capture import load_capture_and_lights
+    from ffls.synth.scene import write_synthetic_capture
+
+    tmp = Path(tempfile.mkdtemp(prefix=prefix))
+    write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
+    return load_capture_and_lights(tmp / "cap")
+
+
+def relit_capture_error(capture, lights, latlong, truth) -> float:
+    """Relative RMS error of ``capture`` relit (CPU) under the lat-long radiance ``latlong`` against
+    ``truth`` (the float64 image relit under the true map), over the truth's lit pixels."""
+    from ffls.probes.sources import to_lightmap
+    from ffls.relight.cpu import relight_capture
+
+    img = relight_capture(capture, lights, to_lightmap(latlong)[0])[0].astype(np.float64)
+    lit = truth.sum(-1) > 0
+    return float(np.sqrt(((img - truth) ** 2)[lit].sum() / (truth ** 2)[lit].sum()))
+
+
 def print_error_table(errors_deg, phis, thetas) -> None:
     """Print per-light errors (degrees; None = rejected) as a Markdown table, phi rows x theta columns."""
     print("| phi \\ theta | " + " | ".join(f"{t:.0f}" for t in thetas) + " |")

@@ -36,17 +36,15 @@ from __future__ import annotations
 import argparse
 import inspect
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, write_json
-from ffls.io.capture import load_capture_and_lights
-from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong, to_lightmap
+from common import host_info, probe_benchmark_capture, write_json
+from common import relit_capture_error as relit_error_of
+from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong
 from ffls.relight.cpu import relight_capture
-from ffls.synth.scene import write_synthetic_capture
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.estimate import pixel_grid_subset, shadow_lightmap
 from ffls.probes.evaluate import clamped_cosine_coefficients, clamped_cosine_energy, map_error, relit_error, sh_recovery
@@ -160,14 +158,10 @@ def main(argv=None):
             ap.error(f"--maps: choose from {','.join(MAPS)}")
     rng = np.random.default_rng(0)
     rows, limit, conv, curve = [], {}, {}, {}
-    tmp = Path(tempfile.mkdtemp(prefix="ffls_probes_"))
-    write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
-    cap, lights = load_capture_and_lights(tmp / "cap")
+    cap, lights = probe_benchmark_capture("ffls_probes_")
 
     def relit_capture_error(L, truth_img):
-        img = relight_capture(cap, lights, to_lightmap(L)[0])[0].astype(np.float64)
-        m = truth_img.sum(-1) > 0
-        return float(np.sqrt(((img - truth_img) ** 2)[m].sum() / (truth_img ** 2)[m].sum()))
+        return relit_error_of(cap, lights, L, truth_img)
 
     def noisy(x):
         if a.noise <= 0:

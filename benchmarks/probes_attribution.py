@@ -22,34 +22,29 @@ Writes ``benchmarks/results/probes_attribution.json``.
 """
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, write_json
+from common import host_info, probe_benchmark_capture, relit_capture_error, write_json
 from probes import H, MAPS, SHADOW_GEOMETRY, SHADOW_RES
 from ffls.conventions import latlong_directions
-from ffls.io.capture import load_capture_and_lights
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
 from ffls.probes.sato_sato_ikeuchi import (box_visibility, dome_nodes, occluder_visibility, sato_sato_ikeuchi,
                                            shadow_confidence)
 from ffls.probes.selection import adaptive_hougen_ahuja, adaptive_sato_sato_ikeuchi
 from ffls.probes.singh_ahuja import singh_ahuja
-from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong, to_lightmap
+from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong
 from ffls.relight.cpu import relight_capture
 from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
-from ffls.synth.scene import write_synthetic_capture
 
 ROOT = Path(__file__).resolve().parent.parent
 BANDS = ((0, 10), (10, 30), (30, 90))
 
 
 def main():
-    tmp = Path(tempfile.mkdtemp(prefix="ffls_probes_attr_"))
-    write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
-    cap, lights = load_capture_and_lights(tmp / "cap")
+    cap, lights = probe_benchmark_capture("ffls_probes_attr_")
     elev = np.degrees(np.arcsin(latlong_directions(2 * H, H)[..., 2]))
     sa = latlong_solid_angles(H).reshape(16, H // 16, 32, H // 16, 1)
     out = []
@@ -60,11 +55,9 @@ def main():
         lm = lm.downsample(lm.res // H)
         true = np.asarray(lm.data, dtype=np.float64)
         truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
-        lit = truth.sum(-1) > 0
 
         def err(L):
-            img = relight_capture(cap, lights, to_lightmap(L)[0])[0].astype(np.float64)
-            return float(np.sqrt(((img - truth) ** 2)[lit].sum() / (truth ** 2)[lit].sum()))
+            return relit_capture_error(cap, lights, L, truth)
 
         def report(method, L, poorly_seen, floor_map):
             row = {"map": name, "method": method, "all": err(L)}

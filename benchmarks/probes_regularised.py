@@ -24,22 +24,19 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, write_json
+from common import host_info, probe_benchmark_capture, relit_capture_error, write_json
 from probes import H, MAPS
-from ffls.io.capture import load_capture_and_lights
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.evaluate import relit_error
 from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.selection import adaptive_hougen_ahuja, select_regularization
-from ffls.probes.sources import cell_energies, to_lightmap
+from ffls.probes.sources import cell_energies
 from ffls.relight.cpu import relight_capture
 from ffls.synth.probe_scenes import diffuse_sphere_scene
-from ffls.synth.scene import write_synthetic_capture
 
 ROOT = Path(__file__).resolve().parent.parent
 WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
@@ -59,20 +56,16 @@ def main(argv=None):
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     rng = np.random.default_rng(0)
-    tmp = Path(tempfile.mkdtemp(prefix="ffls_probes_reg_"))
-    write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
-    cap, lights = load_capture_and_lights(tmp / "cap")
+    cap, lights = probe_benchmark_capture("ffls_probes_reg_")
     out = []
     for name in a.maps.split(","):
         lm = builtin_lightmap(name)
         lm = lm.downsample(lm.res // H)
         true = np.asarray(lm.data, dtype=np.float64)
         truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
-        lit = truth.sum(-1) > 0
 
         def err(L):
-            img = relight_capture(cap, lights, to_lightmap(L)[0])[0].astype(np.float64)
-            return float(np.sqrt(((img - truth) ** 2)[lit].sum() / (truth ** 2)[lit].sum()))
+            return relit_capture_error(cap, lights, L, truth)
 
         sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
         rad = sph.radiance

@@ -23,21 +23,18 @@ relit image) from one of the two. Writes
 """
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, write_json
+from common import host_info, probe_benchmark_capture, relit_capture_error, write_json
 from probes import H, MAPS, SHADOW_GEOMETRY, SHADOW_RES
 from ffls.conventions import latlong_directions
-from ffls.io.capture import load_capture_and_lights
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.sato_sato_ikeuchi import elevation_limit
 from ffls.probes.sources import latlong_solid_angles, to_lightmap
 from ffls.relight.cpu import relight_capture
 from ffls.synth.probe_scenes import cast_shadow_scene
-from ffls.synth.scene import write_synthetic_capture
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -58,9 +55,7 @@ def moved(true, below, target_row, sin_el, sa):
 
 
 def main():
-    tmp = Path(tempfile.mkdtemp(prefix="ffls_probes_limit_"))
-    write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
-    cap, lights = load_capture_and_lights(tmp / "cap")
+    cap, lights = probe_benchmark_capture("ffls_probes_limit_")
     dirs = latlong_directions(2 * H, H)
     sin_el = np.clip(dirs[..., 2], -1.0, 1.0)
     el = np.arcsin(sin_el)
@@ -73,11 +68,9 @@ def main():
         true = np.asarray(lm.data, dtype=np.float64).copy()
         true[H // 2:] = 0.0
         truth = relight_capture(cap, lights, to_lightmap(true)[0])[0].astype(np.float64)
-        lit = truth.sum(-1) > 0
 
         def relit(L):
-            img = relight_capture(cap, lights, to_lightmap(L)[0])[0].astype(np.float64)
-            return float(np.sqrt(((img - truth) ** 2)[lit].sum() / (truth ** 2)[lit].sum()))
+            return relit_capture_error(cap, lights, L, truth)
 
         sc = cast_shadow_scene(to_lightmap(true)[0], SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
         occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}

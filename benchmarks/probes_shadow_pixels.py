@@ -19,22 +19,18 @@ from __future__ import annotations
 import argparse
 import inspect
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, write_json
+from common import host_info, probe_benchmark_capture, relit_capture_error, write_json
 from probes import H, MAPS, SHADOW_GEOMETRY, SHADOW_RES
-from ffls.io.capture import load_capture_and_lights
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.estimate import pixel_grid_subset, shadow_lightmap
 from ffls.probes.selection import adaptive_sato_sato_ikeuchi
-from ffls.probes.sources import to_lightmap
 from ffls.relight.cpu import relight_capture
 from ffls.synth.probe_scenes import cast_shadow_scene
-from ffls.synth.scene import write_synthetic_capture
 
 ROOT = Path(__file__).resolve().parent.parent
 BUDGET = inspect.signature(shadow_lightmap).parameters["max_pixels"].default
@@ -45,15 +41,12 @@ def main(argv=None):
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of the image's mean")
     a = ap.parse_args(argv)
     rng = np.random.default_rng(0)
-    tmp = Path(tempfile.mkdtemp(prefix="ffls_probes_px_"))
-    write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
-    cap, lights = load_capture_and_lights(tmp / "cap")
+    cap, lights = probe_benchmark_capture("ffls_probes_px_")
     out = []
     for name in MAPS:
         lm = builtin_lightmap(name)
         lm = lm.downsample(lm.res // H)
         truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
-        lit = truth.sum(-1) > 0
         sc = cast_shadow_scene(lm, SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
         occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
         rad = sc.radiance
@@ -68,8 +61,7 @@ def main(argv=None):
                 sel = adaptive_sato_sato_ikeuchi(sc.points[keep], rad[keep], occ, criterion=crit,
                                                  albedo=sc.albedo[keep])
                 t = time.process_time() - t
-                img = relight_capture(cap, lights, to_lightmap(sel.fit.latlong(H))[0])[0].astype(np.float64)
-                err = float(np.sqrt(((img - truth) ** 2)[lit].sum() / (truth ** 2)[lit].sum()))
+                err = relit_capture_error(cap, lights, sel.fit.latlong(H), truth)
                 out.append({"map": name, "subset": subset, "pixels": int(keep.size), "criterion": crit,
                             "nodes": int(sel.chosen), "relit_capture": err, "cpu_s": t})
                 print(f"{name:9s} {subset:6s} {keep.size:5d} px {crit:3s} -> {sel.chosen:3d} nodes  relit "
