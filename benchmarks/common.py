@@ -129,6 +129,20 @@ def probe_benchmark_capture(prefix: str):
     return load_capture_and_lights(tmp / "cap")
 
 
+def probe_benchmark_map(name: str, height: int, capture, lights):
+    """A bundled light map at ``height`` rows, as the probe benchmarks use it as the truth.
+
+    Returns ``(lightmap, radiance, truth)``: the downsampled ``LightMap``, its lat-long radiance
+    as float64, and ``capture`` relit (CPU) under it, as float64.
+    """
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.relight.cpu import relight_capture
+
+    lm = builtin_lightmap(name)
+    lm = lm.downsample(lm.res // height)
+    return lm, np.asarray(lm.data, dtype=np.float64), relight_capture(capture, lights, lm)[0].astype(np.float64)
+
+
 def relit_capture_error(capture, lights, latlong, truth) -> float:
     """Relative RMS error of ``capture`` relit (CPU) under the lat-long radiance ``latlong`` against
     ``truth`` (the float64 image relit under the true map), over the truth's lit pixels."""

@@ -41,11 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, write_json
+from common import host_info, probe_benchmark_capture, probe_benchmark_map, write_json
 from common import relit_capture_error as relit_error_of
 from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong
-from ffls.relight.cpu import relight_capture
-from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.estimate import pixel_grid_subset, shadow_lightmap
 from ffls.probes.evaluate import clamped_cosine_coefficients, clamped_cosine_energy, map_error, relit_error, sh_recovery
 from ffls.probes.hougen_ahuja import hougen_ahuja
@@ -169,10 +167,7 @@ def main(argv=None):
         return x + rng.normal(0.0, a.noise * float(np.mean(x)), size=x.shape)
 
     for name in maps:
-        lm = builtin_lightmap(name)
-        lm = lm.downsample(lm.res // H)
-        true = np.asarray(lm.data, dtype=np.float64)
-        cap_truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
+        lm, true, cap_truth = probe_benchmark_map(name, H, cap, lights)
         # the probe is photographed from the relit object's camera position (it looks the same way)
         sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
         rad = noisy(sph.radiance)

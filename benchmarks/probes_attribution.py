@@ -26,17 +26,15 @@ from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, relit_capture_error, write_json
+from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
 from probes import H, MAPS, SHADOW_GEOMETRY, SHADOW_RES
 from ffls.conventions import latlong_directions
-from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
 from ffls.probes.sato_sato_ikeuchi import (box_visibility, dome_nodes, occluder_visibility, sato_sato_ikeuchi,
                                            shadow_confidence)
 from ffls.probes.selection import adaptive_hougen_ahuja, adaptive_sato_sato_ikeuchi
 from ffls.probes.singh_ahuja import singh_ahuja
 from ffls.probes.sources import cell_energies, latlong_solid_angles, model_sources, sources_to_latlong
-from ffls.relight.cpu import relight_capture
 from ffls.synth.probe_scenes import cast_shadow_scene, diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -51,10 +49,7 @@ def main():
     print(f"{'map':9s} {'method':14s} {'all':>6s} " + " ".join(f"{f'band {a}-{b}':>10s}" for a, b in BANDS)
           + f" {'seen only':>9s} {'floor':>6s}")
     for name in MAPS:
-        lm = builtin_lightmap(name)
-        lm = lm.downsample(lm.res // H)
-        true = np.asarray(lm.data, dtype=np.float64)
-        truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
+        lm, true, truth = probe_benchmark_map(name, H, cap, lights)
 
         def err(L):
             return relit_capture_error(cap, lights, L, truth)

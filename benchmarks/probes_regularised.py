@@ -28,14 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, relit_capture_error, write_json
+from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
 from probes import H, MAPS
-from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.evaluate import relit_error
 from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.selection import adaptive_hougen_ahuja, select_regularization
 from ffls.probes.sources import cell_energies
-from ffls.relight.cpu import relight_capture
 from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -59,10 +57,7 @@ def main(argv=None):
     cap, lights = probe_benchmark_capture("ffls_probes_reg_")
     out = []
     for name in a.maps.split(","):
-        lm = builtin_lightmap(name)
-        lm = lm.downsample(lm.res // H)
-        true = np.asarray(lm.data, dtype=np.float64)
-        truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
+        lm, true, truth = probe_benchmark_map(name, H, cap, lights)
 
         def err(L):
             return relit_capture_error(cap, lights, L, truth)

@@ -24,12 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, relit_capture_error, write_json
+from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
 from probes import H, MAPS, SHADOW_GEOMETRY, SHADOW_RES
-from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.estimate import pixel_grid_subset, shadow_lightmap
 from ffls.probes.selection import adaptive_sato_sato_ikeuchi
-from ffls.relight.cpu import relight_capture
 from ffls.synth.probe_scenes import cast_shadow_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -44,9 +42,7 @@ def main(argv=None):
     cap, lights = probe_benchmark_capture("ffls_probes_px_")
     out = []
     for name in MAPS:
-        lm = builtin_lightmap(name)
-        lm = lm.downsample(lm.res // H)
-        truth = relight_capture(cap, lights, lm)[0].astype(np.float64)
+        lm, _, truth = probe_benchmark_map(name, H, cap, lights)
         sc = cast_shadow_scene(lm, SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
         occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
         rad = sc.radiance
