@@ -428,3 +428,18 @@ def test_load_capture_and_lights_says_how_to_make_missing_lights(tmp_path):
     with pytest.raises(InputError, match="ffls lights") as e:
         cap.load_capture_and_lights(tmp_path / "c")
     _one_line(e.value, "lights.json")
+
+
+def test_lights_calibrated_on_sixteen_bit_files_refused_on_eight_bit_photos(tmp_path):
+    """A calibrated table's rows must match the capture's photos; the error names the lights file
+    (its ``"bits"``), not a photo."""
+    write_png(tmp_path / "a.png", np.full((4, 4, 3), 128, np.uint8))
+    rec = {"curve": "polynomial", "gamma": 2.0, "uncertainty": 0.02, "method": "spheres:gamma", "order": 2,
+           "coefficients": [1.9, 0.4, -0.2], "bits": 16}
+    lights = cap.Lights(["a.png"], np.array([[0.0, 0.0, 1.0]]), encoding=rec, path=tmp_path / "l16.json")
+    c = cap.Capture(folder=tmp_path, image_names=["a.png"], encoding="auto")
+    with pytest.raises(InputError, match=r'calibrated on 16-bit files \("bits": 16\).*8-bit') as e:
+        cap.apply_lights_encoding(c, lights)
+    assert e.value.path == tmp_path / "l16.json"
+    assert cap.apply_lights_encoding(c, cap.Lights(["a.png"], np.array([[0.0, 0.0, 1.0]]),
+                                                   encoding={**rec, "bits": 8})).response.shape == (256, 3)

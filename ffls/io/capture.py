@@ -1195,6 +1195,12 @@ def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
     -------
     Capture
         A copy with ``encoding`` set (the input is not modified), or ``capture`` itself.
+
+    Raises
+    ------
+    InputError
+        (naming ``lights.path``) a calibrated response table made for files of another bit depth
+        than the capture's first image.
     """
     if capture.encoding != "auto" or lights.encoding is None:
         return capture
@@ -1202,7 +1208,17 @@ def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
         return capture  # floating-point images are linear by definition
     from dataclasses import replace
 
-    return replace(capture, encoding=encoding_from_record(lights.encoding), response=record_response(lights.encoding))
+    response = record_response(lights.encoding)
+    if response is not None and capture.image_paths and Path(capture.image_paths[0]).is_file():
+        from ffls.io.images import read_image
+
+        depth = read_image(capture.image_paths[0]).bit_depth
+        bits = int(len(response)).bit_length() - 1
+        if depth != bits:
+            raise InputError(f"its encoding was calibrated on {bits}-bit files (\"bits\": {bits}), but the capture's "
+                             f"images are {depth}-bit: use the lights of a capture with {depth}-bit files, or state "
+                             "the encoding in capture.json", lights.path)
+    return replace(capture, encoding=encoding_from_record(lights.encoding), response=response)
 
 
 # ----------------------------------------------------------------------------- shared with other documents
