@@ -151,3 +151,25 @@ def test_cli_merge_of_float_files_needs_no_encoding(tmp_path, capsys):
     ok = np.ones(L.shape[:2], dtype=bool)
     ok[:3, :3] = False  # the sun, clipped in every exposure
     np.testing.assert_allclose(m[ok], L[ok], rtol=2e-3)
+
+
+def test_cli_merge_refuses_times_no_camera_gives_and_a_file_twice(tmp_path, capsys):
+    """Exposure times outside a microsecond to a day (a typo, a broken EXIF tag) would overflow or
+    zero the merged radiance; a file listed twice is no bracket. One line each, nothing written."""
+    from PIL import Image
+
+    paths = _write_bracket(tmp_path, _scene(np.random.default_rng(6)), 8, TIMES[:2])
+    bad_exif = tmp_path / "z.jpg"
+    ex = Image.Exif()
+    ex[33434] = 0.0
+    Image.open(paths[0]).save(bad_exif, exif=ex)
+    cases = [(paths, ["--exposures", "1e-300,0.04"], "--exposures: 1e-300 s is not an exposure time"),
+             (paths, ["--exposures", "1e300,1e308"], "--exposures: 1e+300 s is not an exposure time"),
+             ([paths[0], paths[0]], ["--exposures", "0.01,0.04"], "listed twice in the bracket"),
+             ([bad_exif, paths[1]], [], "EXIF ExposureTime: 0 s is not an exposure time")]
+    for files, extra, msg in cases:
+        capsys.readouterr()
+        code = main(["probe", "merge", *map(str, files), "-o", str(tmp_path / "x.exr"), "--encoding", "srgb", *extra])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and msg in err[0], (extra, err)
+        assert not (tmp_path / "x.exr").exists()

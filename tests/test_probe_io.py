@@ -85,6 +85,8 @@ BAD = [
     ({"images": ["ball.exr", "ball2.exr"]}, "exposure_s"),
     ({"images": [{"file": "ball.exr", "exposure_s": 0.1}]}, "at least two"),
     ({"images": [{"file": "ball.exr", "exposure_s": -1}, {"file": "ball2.exr", "exposure_s": 1}]}, "images[0].exposure_s"),
+    ({"images": [{"file": "ball.exr", "exposure_s": 1e-300}, {"file": "ball2.exr", "exposure_s": 1}]},
+     "images[0].exposure_s: 1e-300 s is not an exposure time"),
     ({"images": [{"file": "ball.exr"}, {"file": "ball2.exr", "exposure_s": 1}]}, "images[0].exposure_s"),
     ({"images": ["ball.exr", {"file": "ball2.exr", "exposure_s": 1}]}, "images[1]"),
     ({"images": ["../ball.exr"]}, "images[0]"),

@@ -172,16 +172,26 @@ def _merge(args) -> int:
     from ffls.errors import InputError
     from ffls.io.images import read_image, write_exr
     from ffls.io.response import load_response
+    from ffls.io.probe import exposure_time_problem
     from ffls.probes.bracket import exposure_from_exif, merge_bracket_files
 
     paths = [Path(p) for p in args.images]
     if len(paths) < 2:
         raise InputError("a bracket needs at least two images", paths[0])
+    seen = {}
+    for p in paths:
+        key = p.resolve()
+        if key in seen:
+            also = f" (also as {seen[key]})" if str(seen[key]) != str(p) else ""
+            raise InputError(f"listed twice in the bracket{also}", p)
+        seen[key] = p
     if args.exposures is not None:
         if len(args.exposures) != len(paths):
             raise InputError(f"--exposures: {len(args.exposures)} times for {len(paths)} images")
-        if min(args.exposures) <= 0:
-            raise InputError("--exposures: exposure times must be positive")
+        for t in args.exposures:
+            why = exposure_time_problem(t)
+            if why:
+                raise InputError(f"--exposures: {why}")
         times = [float(t) for t in args.exposures]
         how = "from --exposures"
     else:

@@ -30,7 +30,8 @@ from ffls.errors import InputError, register_input
 from ffls.io.capture import JsonReader, check_file_name, parse_camera, parse_encoding
 
 __all__ = ["PROBE_FILE", "PROBE_FORMAT", "SPHERE_MATERIALS", "ProbeCamera", "ProbeSphere", "ProbeImage", "ProbeView",
-           "ProbePlane", "ProbeMesh", "ProbeOccluder", "Probe", "load_probe", "read_mesh", "MAX_PIXELS"]
+           "ProbePlane", "ProbeMesh", "ProbeOccluder", "Probe", "load_probe", "read_mesh", "MAX_PIXELS",
+           "EXPOSURE_RANGE_S", "exposure_time_problem"]
 
 PROBE_FILE = "probe.json"
 PROBE_FORMAT = "ffls-probe"
@@ -40,6 +41,10 @@ _TOP_KEYS = {"format", "version", "images", "camera", "encoding", "sphere", "pla
              "surface_image"}
 #: The largest pixel coordinate or radius a pixel hint may give (no sensor is wider).
 MAX_PIXELS = 1e6
+#: Exposure times a camera can give, seconds: from a microsecond (the fastest electronic shutters,
+#: 1/32000 s and flash durations, lie above it) to about a day (long astronomical exposures).
+#: A time outside is a typo or a broken EXIF tag, and would overflow or zero the merged radiance.
+EXPOSURE_RANGE_S = (1e-6, 1e5)
 _SPHERE_KEYS = {"center", "radius", "center_px", "radius_px", "material", "albedo", "reflectance"}
 _MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
@@ -237,6 +242,19 @@ def _short(value, n: int = 60) -> str:
     return s if len(s) <= n else s[: n - 3] + "..."
 
 
+def exposure_time_problem(t) -> str | None:
+    """Why ``t`` is not an exposure time in seconds (not a finite number inside
+    :data:`EXPOSURE_RANGE_S`), or None when it is one."""
+    try:
+        t = float(t)
+    except (TypeError, ValueError, ZeroDivisionError):
+        return f"{t!r} is not a number of seconds"
+    lo, hi = EXPOSURE_RANGE_S
+    if not np.isfinite(t) or not lo <= t <= hi:
+        return f"{t:g} s is not an exposure time (expected {lo:g} to {hi:g} s)"
+    return None
+
+
 def _object(j: JsonReader, value, key: str, allowed: set) -> dict:
     if not isinstance(value, dict):
         j.fail(key, f"expected an object, got {_short(value)}")
@@ -280,6 +298,9 @@ def _image_list(j: JsonReader, folder: Path, items, key: str) -> tuple:
             _object(j, it, ik, {"file", "exposure_s"})
             path = _file(j, folder, j.require(it, "file", ik + "."), ik + ".file", READ_EXTENSIONS)
             t = j.number(j.require(it, "exposure_s", ik + "."), ik + ".exposure_s", positive=True)
+            why = exposure_time_problem(t)
+            if why:
+                j.fail(ik + ".exposure_s", why)
             out.append(ProbeImage(path, t))
         else:
             out.append(ProbeImage(_file(j, folder, it, ik, READ_EXTENSIONS)))

@@ -354,10 +354,15 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
 
 
 def exposure_from_exif(path: str | os.PathLike) -> float:
-    """The EXIF ``ExposureTime`` of an image (seconds); InputError naming the file when it has none."""
+    """The EXIF ``ExposureTime`` of an image (seconds); InputError naming the file when it has none,
+    or one that is not an exposure time (:func:`ffls.io.probe.exposure_time_problem`)."""
+    from ffls.io.probe import exposure_time_problem
     from ffls.radiance.response import exif_exposure_time
 
     t = exif_exposure_time(Path(path))
-    if t is None or not (np.isfinite(t) and t > 0):
+    if t is None:
         raise InputError("no EXIF ExposureTime: give the exposure times (--exposures t1,t2,...)", path)
+    why = exposure_time_problem(t)
+    if why:
+        raise InputError(f"EXIF ExposureTime: {why}: give the exposure times (--exposures t1,t2,...)", path)
     return float(t)

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from ffls.errors import InputError
+from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
 
 __all__ = [
@@ -171,7 +172,8 @@ def valid_pixel_mask(raw, bit_depth, low: float = 0.02, high: float = 0.98) -> n
 
 # ----------------------------------------------------------------------------- bracket folders
 def exif_exposure_time(path: Path):
-    """The EXIF ``ExposureTime`` (tag 33434, seconds) of an image read with Pillow, or None when absent."""
+    """The EXIF ``ExposureTime`` (tag 33434, seconds) of an image read with Pillow: a float (NaN
+    when the tag is there but not a number, e.g. ``1/0``), or None when absent."""
     try:
         from PIL import Image
     except ImportError:  # pragma: no cover
@@ -185,7 +187,7 @@ def exif_exposure_time(path: Path):
     try:
         return float(t) if t is not None else None
     except (TypeError, ValueError, ZeroDivisionError):
-        return None
+        return float("nan")
 
 
 def read_bracket(folder: str | os.PathLike):
@@ -217,12 +219,10 @@ def read_bracket(folder: str | os.PathLike):
             p = folder / name
             if not p.is_file():
                 raise InputError(f"image {name!r} listed in exposures.json not found", p)
-            try:
-                t = float(t)
-            except (TypeError, ValueError):
-                raise InputError(f"exposure of {name!r} is not a number: {t!r}", jpath) from None
-            if not (np.isfinite(t) and t > 0):
-                raise InputError(f"exposure of {name!r} must be positive seconds, got {t!r}", jpath)
+            why = exposure_time_problem(t)
+            if why:
+                raise InputError(f"exposure of {name!r}: {why}", jpath)
+            t = float(t)
             paths.append(p)
             times.append(t)
     else:
@@ -230,8 +230,11 @@ def read_bracket(folder: str | os.PathLike):
         times = []
         for p in paths:
             t = exif_exposure_time(p)
-            if t is None or not t > 0:
+            if t is None:
                 raise InputError("no EXIF ExposureTime (add exposures.json to the folder)", p)
+            why = exposure_time_problem(t)
+            if why:
+                raise InputError(f"EXIF ExposureTime: {why} (add exposures.json to the folder)", p)
             times.append(t)
     if len(paths) < 2:
         raise InputError(f"need at least two bracketed images, found {len(paths)}", folder)
