@@ -69,6 +69,18 @@ def ws(tmp_path_factory):
     data = (c / "img_0002.exr").read_bytes()
     (c / "img_0002.exr").write_bytes(data[: len(data) // 2])
     w["cap_trunc"] = c
+    # an 8-bit photo among float ones with no encoding stated; a folder named like a listed photo
+    c = copy("cap_mixed")
+    doc = json.loads((c / "capture.json").read_text())
+    write_png(c / "img_0001.png", np.full((24, 24, 3), 90, np.uint8))
+    doc["images"][1] = "img_0001.png"
+    doc.pop("encoding", None)
+    (c / "capture.json").write_text(json.dumps(doc))
+    w["cap_mixed"] = c
+    c = copy("cap_dirimg")
+    (c / "img_0002.exr").unlink()
+    (c / "img_0002.exr").mkdir()
+    w["cap_dirimg"] = c
     # lights.json documents
     lights = json.loads((cap / "lights.json").read_text())
 
@@ -278,6 +290,10 @@ CASES = [
     ("synth-out-file", ["synth", "{root}/afile", "--lights", "2", "--resolution", "8"], "afile", ""),
     ("synth-out-missing", ["synth", "{out}/no/s"], "no", "no"),
     # --- lights
+    ("lights-mixed-depths", ["lights", "{cap_mixed}", "-o", "{out}/l.json"],
+     "img_0001.png: bit depth 8 differs from the first image's (half)", "l.json"),
+    ("lights-folder-as-image", ["lights", "{cap_dirimg}", "-o", "{out}/l.json"],
+     "listed image 'img_0002.exr' is a folder, not a file", "l.json"),
     ("lights-workers-0", ["lights", "{cap}", "--workers", "0", "-o", "{out}/l.json"], "--workers", "l.json"),
     ("lights-workers-neg", ["lights", "{cap}", "--workers", "-2", "-o", "{out}/l.json"], "--workers", "l.json"),
     ("lights-plot-missing", ["lights", "{cap}", "-o", "{out}/l.json", "--plot", "{out}/missing/p.png"],

@@ -383,6 +383,8 @@ def test_lp_round_trip(tmp_path, rng):
     ("two\na.jpg 0 0 1\n", "number of lights"),
     ("1\na.jpg 0 zero 1\n", "line 2"),
     ("1\na.jpg 0 0 2\n", "not a unit vector"),
+    ("1\na.jpg nan 0 1\n", "line 2: direction of 'a.jpg' has a component that is not a finite number"),
+    ("0\n", "says 0 lights: an .lp file lists at least one"),
     ("", "empty"),
 ])
 def test_bad_lp(tmp_path, text, match):

@@ -61,6 +61,18 @@ def test_exr_luminance_only_is_replicated(tmp_path):
         np.testing.assert_array_equal(img.pixels[..., c], y)
 
 
+def test_exr_luminance_chroma_is_refused_not_read_as_grey(tmp_path):
+    import OpenEXR
+
+    ones = np.ones((2, 2), np.float32)
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                      {"Y": ones, "RY": 0.2 * ones, "BY": -0.1 * ones}) as f:
+        f.write(str(tmp_path / "yc.exr"))
+    with pytest.raises(InputError, match=r"luminance and chroma channels \(BY, RY, Y\).*convert it to RGB") as e:
+        imageio.read_image(tmp_path / "yc.exr")
+    _one_line(e.value, "yc.exr")
+
+
 def test_exr_without_colour_channels_rejected(tmp_path):
     import OpenEXR
 

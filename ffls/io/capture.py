@@ -509,7 +509,8 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     paths = [folder / n for n in names]
     for n, p in zip(names, paths):
         if not p.is_file():
-            j.fail("images", f"listed image {n!r} not found in {folder}")
+            j.fail("images", f"listed image {n!r} is a folder, not a file" if p.is_dir()
+                   else f"listed image {n!r} not found in {folder}")
 
     image_size = None
     if "image_size" in doc:
@@ -916,8 +917,10 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
         n = int(rows[0][1])
     except ValueError:
         raise InputError(f"line {rows[0][0]}: expected the number of lights, got {rows[0][1][:40]!r}", path) from None
-    if n <= 0 or n != len(rows) - 1:
+    if n != len(rows) - 1:
         raise InputError(f"the count on line {rows[0][0]} says {n} lights but {len(rows) - 1} follow", path)
+    if n <= 0:
+        raise InputError(f"the count on line {rows[0][0]} says {n} lights: an .lp file lists at least one", path)
     names, dirs = [], []
     for lineno, text in rows[1:]:
         parts = text.rsplit(None, 3)
@@ -927,7 +930,10 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
             d = np.array([float(v) for v in parts[1:]])
         except ValueError:
             raise InputError(f"line {lineno}: expected 'filename x y z', got {text[:60]!r}", path) from None
-        finite = bool(np.all(np.isfinite(d))) and float(np.max(np.abs(d))) <= 2.0
+        if not np.all(np.isfinite(d)):
+            raise InputError(f"line {lineno}: direction of {parts[0]!r} has a component that is not a finite "
+                             f"number ({' '.join(parts[1:])})", path)
+        finite = float(np.max(np.abs(d))) <= 2.0
         norm = float(np.linalg.norm(d)) if finite else float("inf")
         if not finite or abs(norm - 1) > UNIT_TOLERANCE:
             raise InputError(f"line {lineno}: direction of {parts[0]!r} is not a unit vector (norm {norm:.6g})", path)

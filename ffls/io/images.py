@@ -266,7 +266,8 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
     """Read an OpenEXR file (half or float channels) as RGB float32.
 
     Takes the ``R``, ``G``, ``B`` channels, or replicates ``Y`` for luminance-only files, and
-    ``A`` as alpha; other channels (depth, ...) are ignored.
+    ``A`` as alpha; other channels (depth, ...) are ignored. Luminance-chroma files (``Y``,
+    ``RY``, ``BY``) are refused rather than read as grey.
 
     Parameters
     ----------
@@ -287,7 +288,7 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
     Raises
     ------
     InputError
-        Missing, corrupt, or without R/G/B or Y channels, or with integer/subsampled channels,
+        Missing, corrupt, or without R/G/B or Y channels, luminance-chroma, or with integer/subsampled channels,
         or with a ``chromaticities`` attribute that is not a convertible colour space.
     """
     import OpenEXR
@@ -312,6 +313,9 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
     names = set(channels)
     if {"R", "G", "B"} <= names:
         use = ["R", "G", "B"]
+    elif names & {"RY", "BY"}:  # luminance + chroma (OpenEXR's YCA mode): reading Y alone would drop the colour
+        raise InputError(f"OpenEXR file stores luminance and chroma channels ({', '.join(sorted(names))}); ffls "
+                         "reads RGB or luminance-only (Y) files: convert it to RGB", path)
     elif "Y" in names:
         use = ["Y", "Y", "Y"]
     else:

@@ -165,19 +165,25 @@ def _check_size(capture, i: int, img: ImageData) -> None:
             )
 
 
-def read_photo(capture, i: int, out: np.ndarray | None = None) -> Photo:
+def read_photo(capture, i: int, out: np.ndarray | None = None, depth: int | str | None = None) -> Photo:
     """Photo ``i`` of ``capture``: linear radiance, raw values and bit depth.
 
     ``out`` (H, W, 3) float32, optional: where an EXR photo is widened (:func:`ffls.io.images.read_image`;
-    its ``linear`` is then ``out`` when no colour conversion applies).
+    its ``linear`` is then ``out`` when no colour conversion applies). ``depth``, optional: the
+    bit depth of the capture's first photo, which this one must share when ``capture.json``
+    states no encoding (checked before the encoding is applied, so that a mixed capture is named
+    as such rather than as an unstated encoding).
 
     Raises
     ------
     InputError
-        Unreadable image, or a size that differs from the capture's ``image_size``.
+        Unreadable image, a size that differs from the capture's ``image_size``, or a bit depth
+        that differs from ``depth`` with no stated encoding.
     """
     img = read_image(capture.image_paths[i], out=out)
     _check_size(capture, i, img)
+    if depth is not None and capture.encoding == "auto" and img.bit_depth != depth:
+        raise InputError(_mixed_depth_message(img.bit_depth, depth), img.path)
     linear = np.asarray(linearise(img, capture.encoding, capture.response), dtype=np.float32)
     return Photo(linear, img.pixels, img.bit_depth, img.codes)
 
@@ -228,8 +234,11 @@ def load_photos(capture, indices=None, progress: bool = True) -> np.ndarray:
                 f"image is {w}x{h} but the first image {capture.image_names[idx[0]]!r} is "
                 f"{out.shape[2]}x{out.shape[1]}", img.path)
         elif capture.encoding == "auto" and img.bit_depth != depth0:
-            raise InputError(
-                f"bit depth {img.bit_depth} differs from the first image's ({depth0}); with no "
-                f"'encoding' in {CAPTURE_FILE} a capture must not mix depths", img.path)
+            raise InputError(_mixed_depth_message(img.bit_depth, depth0), img.path)
         out[n] = linearise(img, capture.encoding, capture.response)
     return out
+
+
+def _mixed_depth_message(depth, first) -> str:
+    return (f"bit depth {depth} differs from the first image's ({first}); with no 'encoding' in {CAPTURE_FILE} "
+            "a capture must not mix depths")

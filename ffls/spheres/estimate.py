@@ -569,6 +569,7 @@ class _DecodeContext:
     shape: tuple
     linear: np.ndarray | None
     raw: np.ndarray | None
+    depth: int | str | None = None  # the bit depth every photo must have (no encoding stated), else None
 
 
 _decode_context: _DecodeContext | None = None
@@ -590,7 +591,7 @@ def _decode_range(bounds: tuple[int, int]):
     depths = set()
     for i in range(start, stop):
         slot = None if ctx.linear is None else ctx.linear[i]  # an EXR is widened in place (no copy)
-        ph = read_photo(ctx.capture, i, out=slot)
+        ph = read_photo(ctx.capture, i, out=slot, depth=ctx.depth)
         if ph.linear.shape != ctx.shape:
             raise InputError(f"image is {ph.linear.shape[1]}x{ph.linear.shape[0]}, the capture's first is "
                              f"{ctx.shape[1]}x{ctx.shape[0]}: every photo must have the same size",
@@ -657,7 +658,7 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
             raw = _shared_array((n,) + shape, np.uint8 if first.bit_depth == 8 else np.uint16)
         else:
             linear = _shared_array((n,) + shape, np.float32)
-    context = _DecodeContext(decoding, n, shape, linear, raw)
+    context = _DecodeContext(decoding, n, shape, linear, raw, first.bit_depth if capture.encoding == "auto" else None)
     workers = max(1, min(int(workers), n))
     size = max(1, -(-n // DECODE_CHUNKS))  # the chunks do not depend on the workers: nor does the result
     chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
