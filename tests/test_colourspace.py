@@ -120,3 +120,26 @@ def test_capture_photos_in_acescg_relight_in_rec709(tmp_path, capsys):
     _, w = relight_capture(cap, lights, builtin_lightmap("sky"))
     np.testing.assert_allclose(read_image(out).pixels, relight_reference(w.weights, conv.apply(basis0)),
                                rtol=1e-4, atol=1e-6)
+
+
+def test_probe_merge_and_probe_photos_in_acescg_are_reported(tmp_path, capsys):
+    """``ffls probe merge`` and ``ffls probe METHOD`` convert ACEScg EXRs and say so, as relight does."""
+    from ffls.cli import main
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.synth.probe_scenes import diffuse_sphere_scene, write_diffuse_probe
+
+    rng = np.random.default_rng(3)
+    scene = rng.uniform(0.1, 1.0, (8, 12, 3))
+    paths = [_write(tmp_path / f"b{k}.exr", scene * t, ACESCG) for k, t in enumerate((1.0, 4.0))]
+    assert main(["probe", "merge", *map(str, paths), "--exposures", "1,4", "-o", str(tmp_path / "m.exr")]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "colour" in ln]
+    assert len(lines) == 1 and lines[0].startswith("ffls probe: colour: 2 of 2 images: colour space ACEScg"), lines
+    folder = write_diffuse_probe(tmp_path / "probe", diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16),
+                                                                          resolution=48))
+    import json
+
+    for name in json.loads((folder / "probe.json").read_text())["images"]:
+        _write(folder / name, read_image(folder / name).pixels, ACESCG)
+    assert main(["probe", "diffuse", str(folder), "-o", str(tmp_path / "d.exr"), "--size", "16", "--sources", "9"]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "colour" in ln]
+    assert len(lines) == 1 and "colour space ACEScg" in lines[0], lines

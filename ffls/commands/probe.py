@@ -170,7 +170,7 @@ def _merge(args) -> int:
 
     from ffls.commands.common import print_notes
     from ffls.errors import InputError
-    from ffls.io.images import read_image, write_exr
+    from ffls.io.images import colour_summary, read_image, write_exr
     from ffls.io.response import load_response
     from ffls.io.probe import exposure_time_problem
     from ffls.probes.bracket import exposure_from_exif, merge_bracket_files
@@ -217,7 +217,7 @@ def _merge(args) -> int:
     m = merge_bracket_files(paths, times, enc, response, source=paths[0], key="--encoding")
     alpha = (~m.saturated).astype(np.float32)
     write_exr(args.out, m.radiance, half=args.half, alpha=alpha)
-    print_notes(NAME, f"exposure times {how}; " + m.describe())
+    print_notes(NAME, f"exposure times {how}; " + m.describe(), colour_summary(paths))
     print(f"wrote {args.out} ({m.radiance.shape[1]}x{m.radiance.shape[0]}, alpha 0 where saturated in every "
           f"exposure)")
     return 0
@@ -255,6 +255,17 @@ def method_knobs(args) -> dict:
     return {}
 
 
+def _probe_colour_note(folder) -> str | None:
+    """The ``colour:`` line of a probe folder's photos converted to the working space on reading
+    (:func:`ffls.io.images.colour_summary`), as ``relight`` prints it for a capture."""
+    from ffls.io.images import colour_summary
+    from ffls.io.probe import load_probe
+
+    probe = load_probe(folder)
+    paths = [im.path for view in probe.views for im in view.images]
+    return colour_summary(paths + ([probe.surface_image] if probe.surface_image is not None else []))
+
+
 def run(args) -> int:
     from ffls.commands.common import print_notes
     from ffls.probes import estimate_lightmap, save_estimate
@@ -263,7 +274,7 @@ def run(args) -> int:
         return _merge(args)
     est = estimate_lightmap(args.folder, method=args.method, height=args.size, **method_knobs(args))
     save_estimate(est, args.out, half=args.half)
-    print_notes(NAME, *est.notes)
+    print_notes(NAME, *est.notes, _probe_colour_note(args.folder))
     h = est.lightmap.data.shape[0]
     print(f"wrote {args.out} ({2 * h}x{h} lat-long, {args.method}; alpha: the "
           f"{100 * est.details.get('seen_fraction', float(est.seen.mean())):.1f}% of directions seen)")
