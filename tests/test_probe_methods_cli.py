@@ -182,6 +182,18 @@ def test_diffuse_object_of_known_geometry(tmp_path, truth):
     assert any("pixels on the mesh ball.ply" in x for x in mesh.notes)
     e_mesh, e_sphere = relit_error(mesh.lightmap, truth), relit_error(sphere.lightmap, truth)
     assert e_mesh < e_sphere + 0.01
+    # a pixel circle given beside the world centre must agree with it, not be ignored
+    from ffls.camera.projection import project_points
+
+    at = project_points(Cc[None], K, np.zeros(5))[0]
+    for px, ok in (([at[0] + 1.0, at[1]], True), ([5.0, 5.0], False)):
+        doc["sphere"]["center_px"] = [float(v) for v in px]
+        (tmp_path / "probe.json").write_text(json.dumps(doc))
+        if ok:
+            estimate_lightmap(tmp_path, "diffuse", height=16, sources=9)
+        else:
+            with pytest.raises(InputError, match=r"sphere.center_px \(5, 5\) px disagrees with sphere.center"):
+                estimate_lightmap(tmp_path, "diffuse", height=16, sources=9)
 
 
 def test_shadow_adaptive_nodes(shadow_folder, tmp_path, capsys):

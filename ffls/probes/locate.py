@@ -150,7 +150,8 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     ------
     InputError
         No sphere found (one line saying where ffls looked and how to give a hint), a pinhole
-        camera without ``K``, a world centre behind the camera.
+        camera without ``K``, a world centre behind the camera, or a pixel circle that
+        disagrees with the world centre.
     """
     cam, sph = view.camera, view.sphere
     T = np.asarray(cam.world_from_camera, dtype=np.float64)
@@ -169,6 +170,14 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
 
         cpx = project_points(C[None], cam.K, cam.dist)[0]
         rpx = float(np.mean(np.hypot(*(silhouette_px(cam.K, cam.dist, C, R) - cpx).T)))
+        if sph.center_px is not None:  # both given: they must agree (the capture hints' rule), not one ignored
+            hpx = np.asarray(sph.center_px, dtype=np.float64)
+            hr = None if sph.radius_px is None else float(sph.radius_px)
+            if np.hypot(*(hpx - cpx)) > 0.5 * rpx + 2 or (hr is not None and not 1 / 1.5 <= hr / rpx <= 1.5):
+                raise InputError(f"sphere.center_px ({hpx[0]:.0f}, {hpx[1]:.0f}) px"
+                                 f"{f', radius_px {hr:.0f}' if hr is not None else ''} disagrees with sphere.center, "
+                                 f"which projects to ({cpx[0]:.0f}, {cpx[1]:.0f}) px, radius {rpx:.0f} px: give "
+                                 "one of them, or correct it", source)
         return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json", True)
     if sph.location == "pixel" and sph.radius_px is not None:
         return _given_circle(cam, T, sph)
