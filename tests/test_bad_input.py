@@ -140,6 +140,7 @@ def ws(tmp_path_factory):
     # composite: backgrounds, surface masks, and a capture of another camera (K changed)
     write_exr(root / "bg.exr", np.full((24, 24, 3), 0.2, np.float32))
     write_exr(root / "bg_small.exr", np.full((20, 24, 3), 0.2, np.float32))
+    write_exr(root / "bg_negative.exr", np.full((24, 24, 3), -9.8, np.float32))
     write_png(root / "bg.png", np.full((24, 24, 3), 50, np.uint8))
     sm = np.zeros((24, 24), np.uint8)
     sm[18:, :] = 255
@@ -386,6 +387,10 @@ CASES = [
     ("comp-bg-size", ["composite", "--object", "{cap}", "--surface", "{few}", "--lightmap", "sky", "--background",
                       "{root}/bg_small.exr", "--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "-o",
                       "{out}/c.exr"], "bg_small.exr", "c.exr"),
+    ("comp-bg-negative", ["composite", "--object", "{cap}", "--surface", "{few}", "--lightmap", "sky", "--background",
+                          "{root}/bg_negative.exr", "--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png",
+                          "-o", "{out}/c.exr"], "bg_negative.exr: the background has negative values in 100.0%",
+     "c.exr"),
     ("comp-bg-png", ["composite", "--object", "{cap}", "--surface", "{few}", "--lightmap", "sky", "--background",
                      "{root}/bg.png", "--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png", "-o",
                      "{out}/c.exr"], "bg.png", "c.exr"),

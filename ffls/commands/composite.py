@@ -13,6 +13,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, add_weighting_argument,
                                   exposure_arg, input_path, learnt_kernel, output_path, print_notes, flush_notes,
                                   rotation_from_args)
@@ -32,6 +34,10 @@ STILL_SUFFIXES = (".exr", ".png")
 #: ``--sources``: how the map's compact bright sources are relit.
 SOURCES = ("lightflow", "levelset", "weights")
 BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
+#: Share of a background's pixels that may hold a negative value: a renderer's reconstruction
+#: filter (Lanczos, Mitchell) rings below zero beside bright edges, on a few pixels; more than this
+#: is not radiance (an offset image, a difference image).
+MAX_NEGATIVE_BACKGROUND = 0.01
 
 
 def add_arguments(p):
@@ -155,6 +161,11 @@ def load_inputs(args):
     if (bg.pixels.shape[1], bg.pixels.shape[0]) != size:
         raise InputError(f"the background is {bg.pixels.shape[1]}x{bg.pixels.shape[0]}, the captures' photos "
                          f"{size[0]}x{size[1]} (render the scene from the capture's camera at its size)", bg_path)
+    neg = np.any(bg.pixels < 0, axis=-1)
+    if neg.mean() > MAX_NEGATIVE_BACKGROUND:  # a filter's ringing touches a few pixels; more is not radiance
+        raise InputError(f"the background has negative values in {100 * neg.mean():.1f}% of its pixels (lowest "
+                         f"{float(bg.pixels.min()):.4g}): a linear radiance image has none (at most "
+                         f"{100 * MAX_NEGATIVE_BACKGROUND:g}% from a reconstruction filter's ringing)", bg_path)
     if getattr(bg, "colour_note", None):
         notes.append(f"colour: background: {bg.colour_note}")
     om = read_mask(args.mask, size=size)
