@@ -193,3 +193,9 @@ def test_coverage_numbers():
     # far = the dome's half of the cap z < -sin 30 (half of 2 pi (1 - cos 60) = pi / 2): 25% of 2 pi, plus
     # what the random lights near z = 0 leave uncovered
     assert 25 <= share <= 30
+    # a light outside the domain (below the horizon of an upper capture) is said first, not kept silently
+    below = np.vstack([stratified_directions(200), [[0.0, 0.866, -0.5], [0.0, 0.0, -1.0]]])
+    lines = coverage_warnings(below, "upper")
+    assert lines[0].startswith("coverage: 2 lights outside the capture's upper hemisphere (farthest at az 0 el -90, "
+                               "90 deg beyond its edge)"), lines
+    assert not any("outside" in ln for ln in coverage_warnings(below, "full"))

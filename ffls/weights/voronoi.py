@@ -772,7 +772,8 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
       deg at az 120 el 10)"`` (azimuth from +X toward +Y, elevation above the xy plane, world
       frame, of the widest cell's light);
     * more than ``far_share`` of the domain farther than ``far_deg`` from every light:
-      ``"coverage: 18% of the domain is more than 30 deg from every light (farthest 52 deg)"``.
+      ``"coverage: 18% of the domain is more than 30 deg from every light (farthest 52 deg)"``;
+    * lights outside the hemisphere (e.g. below the horizon of ``'upper'``), first.
 
     Parameters
     ----------
@@ -788,6 +789,18 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
     unit = _check_directions(directions)
     c = coverage(unit, hemisphere, far_deg)
     out = []
+    hemi = check_hemisphere(hemisphere)
+    outside = np.flatnonzero(~in_domain(unit, hemi))
+    if outside.size:  # e.g. a light below the horizon of an 'upper' capture: said, not silently kept
+        axis = np.asarray(hemi.axis, dtype=np.float64)
+        i = int(outside[np.argmin(unit[outside] @ axis)])
+        az = np.degrees(np.arctan2(unit[i, 1], unit[i, 0]))
+        el = np.degrees(np.arcsin(np.clip(unit[i, 2], -1.0, 1.0)))
+        k = outside.size
+        out.append(f"coverage: {k} light{'s' if k > 1 else ''} outside the capture's {hemi.name} hemisphere "
+                   f"(farthest at az {az:.0f} el {el:.0f}, {np.degrees(np.arcsin(-(unit[i] @ axis))):.0f} deg beyond its "
+                   f"edge): {'their cells keep' if k > 1 else 'its cell keeps'} only the domain nearest; if the "
+                   "lights were there, declare \"hemisphere\": \"full\" in capture.json")
     wide = np.flatnonzero(c.cell_width_deg > wide_deg)
     if wide.size:
         i = int(np.argmax(c.cell_width_deg))
