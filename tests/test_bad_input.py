@@ -77,6 +77,18 @@ def ws(tmp_path_factory):
     doc.pop("encoding", None)
     (c / "capture.json").write_text(json.dumps(doc))
     w["cap_mixed"] = c
+    c = copy("cap_alpha")  # a 16-bit PNG photo with transparent rows (stated linear, as the others)
+    doc = json.loads((c / "capture.json").read_text())
+    rgba = np.full((24, 24, 4), 30000, np.uint16)
+    rgba[:10, :, 3] = 0
+    rgba[10:, :, 3] = 65535
+    import cv2
+
+    cv2.imwrite(str(c / "img_0004.png"), rgba)
+    doc["images"][4] = "img_0004.png"
+    (c / "capture.json").write_text(json.dumps(doc))
+    (c / "lights.json").write_text((c / "lights.json").read_text().replace("img_0004.exr", "img_0004.png"))
+    w["cap_alpha"] = c
     c = copy("cap_dirimg")
     (c / "img_0002.exr").unlink()
     (c / "img_0002.exr").mkdir()
@@ -293,6 +305,10 @@ CASES = [
     # --- lights
     ("lights-mixed-depths", ["lights", "{cap_mixed}", "-o", "{out}/l.json"],
      "img_0001.png: bit depth 8 differs from the first image's (half)", "l.json"),
+    ("lights-transparent-photo", ["lights", "{cap_alpha}", "-o", "{out}/l.json"],
+     "img_0004.png: has transparent pixels (alpha below 1 in 41.7% of them)", "l.json"),
+    ("relight-transparent-photo", ["relight", "{cap_alpha}", "--probe", "sky", "-o", "{out}/r.exr"],
+     "img_0004.png: has transparent pixels", "r.exr"),
     ("lights-folder-as-image", ["lights", "{cap_dirimg}", "-o", "{out}/l.json"],
      "listed image 'img_0002.exr' is a folder, not a file", "l.json"),
     ("lights-workers-0", ["lights", "{cap}", "--workers", "0", "-o", "{out}/l.json"], "--workers", "l.json"),

@@ -156,6 +156,15 @@ def _decode_codes(img: ImageData, curve: str, gamma: float) -> np.ndarray:
 
 
 def _check_size(capture, i: int, img: ImageData) -> None:
+    """The photo's size against ``image_size``, and no transparency in an integer photo: a PNG's or
+    TIFF's colour is not premultiplied, so under alpha < 1 it is undefined (an EXR's is
+    premultiplied by convention: its RGB is the radiance, and its alpha is ignored)."""
+    if img.alpha is not None and img.bit_depth in (8, 16):
+        clear = float(np.mean(img.alpha < 1.0))
+        if clear > 0:
+            raise InputError(f"has transparent pixels (alpha below 1 in {100 * clear:.3g}% of them): the colour under "
+                             "an unpremultiplied alpha is undefined; export the photos without alpha (an object's mask "
+                             "goes to --mask)", capture.image_paths[i])
     if capture.image_size is not None:
         h, w = img.shape
         if (w, h) != tuple(capture.image_size):
