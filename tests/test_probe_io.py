@@ -90,6 +90,7 @@ BAD = [
     ({"images": [{"file": "ball.exr"}, {"file": "ball2.exr", "exposure_s": 1}]}, "images[0].exposure_s"),
     ({"images": ["ball.exr", {"file": "ball2.exr", "exposure_s": 1}]}, "images[1]"),
     ({"images": ["../ball.exr"]}, "images[0]"),
+    ({"images": ["/tmp/ball.exr"]}, "images[0]: file name '/tmp/ball.exr' must be a path relative to the folder of probe.json"),
     ({"images": [{"file": "ball.exr", "exposure_s": 0.1}, {"file": "ball2.exr", "exposure_s": 0.1}]}, "equal"),
     ({"camera": {"K": [[1, 2], [3, 4]]}}, "camera.K"),
     ({"camera": {"model": "orthographic", "K": K}}, "camera"),

@@ -193,7 +193,7 @@ def _check_name(j: _Json, name, key: str) -> str:
     name = j.string(name, key)
     p = PurePosixPath(name.replace("\\", "/"))
     if p.is_absolute() or ".." in p.parts or ":" in name:
-        j.fail(key, f"image name {name!r} must be a path relative to the capture folder, inside it")
+        j.fail(key, f"file name {name!r} must be a path relative to the folder of {j.path.name}, inside it")
     return name
 
 
