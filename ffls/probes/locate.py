@@ -180,6 +180,10 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                                  "one of them, or correct it", source)
         return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json", True)
     if sph.location == "pixel" and sph.radius_px is not None:
+        h, w = np.shape(radiance)[:2]
+        if float(sph.radius_px) > max(h, w):
+            raise InputError(f"sphere.radius_px: {float(sph.radius_px):g} px is larger than the photo ({w}x{h} px): "
+                             "a circle measured in the photo has a radius of at most its size", source)
         return _given_circle(cam, T, sph)
     hints = None
     if sph.location == "pixel":
