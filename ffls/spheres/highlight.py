@@ -937,8 +937,14 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise), the view takes
     its geometry (pinhole: the centre from the tangent cone and the sphere's radius;
     orthographic: the circle) and its centre uncertainty, with :data:`LIMB_MODEL_FLOOR_PX` in
-    quadrature, or the detected outline's where that is larger. Otherwise (a chrome ball, whose
-    limb reflects its own background) the view is returned as it is.
+    quadrature, or the detected outline's where that is larger; its radius uncertainty is the
+    step's with the same floor. Otherwise (a chrome ball, whose limb reflects its own background,
+    so that the step lies where the reflected backdrop ends, not at the silhouette) the detected
+    outline is kept, uncertain by its gap to the step: the centre's sigma is the distance between
+    the two centres, the radius's the difference of their :func:`apparent_radius_px`, each with
+    the step's own precision and the floor in quadrature. A gap beyond half of
+    :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another edge), or no fit,
+    leaves the view as it is.
 
     Parameters
     ----------
@@ -949,9 +955,9 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     Returns
     -------
     view : SphereView
-        Refined, or ``view`` itself.
+        Refined (geometry, or only its uncertainty), or ``view`` itself.
     limb : LimbFit or None
-        The limb fit (None where it failed); the view used it when ``view`` changed.
+        The limb fit (None where it failed).
     """
     limb = fit_limb_profile(image, view.center_px, view.radius_px, model=view.model, K=view.K, dist=view.dist,
                             center_cam=view.center_cam, radius=view.radius)
