@@ -77,7 +77,7 @@ def main(argv=None) -> int:
                         + [tilt(d) - tilt(tdirs[i]) for d in ds] + [float(np.hypot(*(px - ideal)))])
         a_ = np.asarray(rows)
         print(f"sphere {k} ({q['material']}, truth {j}): {len(a_)} photos; limb step "
-              f"{'used' if limb_view is not view else 'not used'}")
+              f"{'used' if not np.array_equal(limb_view.center_px, view.center_px) else 'not used'}")
         print("  median error deg: detected %.2f  limb %.2f  true sphere %.2f" % tuple(np.median(a_[:, :3], axis=0)))
         print("  mean tilt error deg: detected %+.2f  limb %+.2f  true sphere %+.2f"
               % tuple(np.mean(a_[:, 3:6], axis=0)))

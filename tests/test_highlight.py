@@ -291,6 +291,37 @@ def test_classification_mirror_glossy_matte():
     assert classify_sphere([np.nan, np.nan]).kind == "matte"
 
 
+def test_a_small_balls_two_pixel_highlight_is_compact_and_a_hot_pixel_is_not():
+    """A small chrome ball (18 px) with its highlight on 2 clipped pixels, and the lit table it
+    reflects over its lower half at a quarter of the clip: compact (a mirror). A matte ball's lit
+    cap with a lone hot pixel at the clip: not compact."""
+    yy, xx = np.mgrid[0:40, 0:40]
+    disc = np.hypot(xx - 19.5, yy - 19.5) <= 18
+    rows, cols = np.nonzero(disc)
+    chrome = np.where(yy > 24, 0.25, 0.02).astype(np.float64)
+    chrome[12, 20:22] = 1.0
+    assert highlight_compactness(rows, cols, chrome[rows, cols]) < MIRROR_COMPACTNESS / 5
+    matte = np.clip(np.cos(np.radians(2.5 * np.hypot(xx - 14, yy - 15))), 0, None) * 0.4
+    matte[30, 20] = 1.0  # hot pixel
+    assert highlight_compactness(rows, cols, matte[rows, cols]) > 5 * MIRROR_COMPACTNESS
+
+
+def test_outline_uncertainty_grows_toward_the_rim_with_the_radius():
+    """A radius error moves a highlight near the rim, not one at the centre: the cone of a
+    highlight near the rim grows with ``radius_sigma_px``; a centre error moves both."""
+    K, s, view = _disc_view()
+    c = np.asarray(view.center_px)
+    r = view.radius_px
+    J_mid, J_rim = view.outline_jacobian(c + [0.05 * r, 0.0]), view.outline_jacobian(c + [0.9 * r, 0.0])
+    assert np.linalg.norm(J_mid[:, 2]) < 0.1 * np.linalg.norm(J_rim[:, 2])
+    # a centre shift of 1 px tilts the normal at the centre by 1/r, its reflection by 2/r
+    assert np.linalg.norm(J_mid[:, 0]) == pytest.approx(2.0 / r, rel=0.2)
+    outside = c[None] + [[r + 0.5, 0.0]]
+    assert np.all(np.isnan(view.reflect(outside)[0]))
+    assert np.all(np.isfinite(view.with_outline((0.0, 0.0), 1.0).reflect(outside)[0]))  # the grown outline holds it
+    assert np.all(np.isfinite(view.with_outline((0.7, 0.0), 0.0).reflect(outside)[0]))  # so does the shifted one
+
+
 def test_sphere_materials_from_capture_json(tmp_path):
     def cap(doc):
         d = tmp_path / str(len(list(tmp_path.iterdir())))

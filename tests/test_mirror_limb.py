@@ -103,8 +103,14 @@ def test_no_step_no_fit_and_a_weak_step_leaves_the_view():
     view = SphereView(center_px=c, radius_px=r, model="orthographic")
     weak = _render(lambda p: np.hypot(p[:, 0] - c[0], p[:, 1] - c[1]) / r, 100, 100, jump=0.01, noise=0.004,
                    ramp=False)
-    new, _ = refine_view_limb(view, weak)
-    assert new is view
+    new, limb = refine_view_limb(view, weak)
+    # a weak step (a chrome ball's) does not move the outline; where it was fitted, the gap between
+    # the two outlines is the outline's uncertainty (centre and radius)
+    np.testing.assert_array_equal(new.center_px, view.center_px)
+    assert new.radius_px == view.radius_px
+    if limb is not None:
+        assert new.center_sigma_px >= np.hypot(*(limb.center_px - c))
+        assert new.radius_sigma_px >= abs(limb.radius_px - r)
 
 
 def test_a_limb_out_of_reach_is_no_fit():
@@ -125,13 +131,21 @@ def glossy_capture(tmp_path_factory):
     return folder, json.loads((folder / "truth.json").read_text())
 
 
-def test_glossy_ball_outline_moves_to_its_limb(glossy_capture):
-    """On ``ffls synth``'s black glossy ball the detected outline is inside the silhouette; the
-    limb's step puts the sphere's depth (its apparent size) within 0.3 px of the truth."""
-    folder, truth = glossy_capture
+@pytest.fixture(scope="module")
+def glossy_detected(glossy_capture):
+    """The glossy capture loaded, decoded, its ball found and its view."""
+    folder, _ = glossy_capture
     cap = load_capture(folder)
     dec = decode_photos(cap, 1)
     spheres = find_spheres_in_capture(cap, stats=dec.stats, bit_depths=dec.bit_depths)
+    return cap, dec, spheres
+
+
+def test_glossy_ball_outline_moves_to_its_limb(glossy_capture, glossy_detected):
+    """On ``ffls synth``'s black glossy ball the detected outline is inside the silhouette; the
+    limb's step puts the sphere's depth (its apparent size) within 0.3 px of the truth."""
+    _, truth = glossy_capture
+    cap, dec, spheres = glossy_detected
     assert len(spheres) == 1
     view = sphere_views(cap, spheres)[0]
     new, limb = refine_view_limb(view, dec.stats.mean)
@@ -160,3 +174,38 @@ def test_glossy_ball_lights_end_to_end(glossy_capture):
     assert ok.sum() >= 11
     err = np.degrees(np.arccos(np.clip(np.sum(lights.directions * np.asarray(truth["directions"]), axis=1), -1, 1)))[ok]
     assert np.median(err) < 1.4 and err.max() < 4.5
+
+
+def test_the_dask_path_has_the_local_mean_image_around_each_ball(glossy_detected):
+    """``ffls lights --scheduler`` reads the photos on workers: each returns its luminance in a
+    window around each ball (``limb_window``), and their mean is the local run's mean image there,
+    so a glossy ball's limb fit, and its lights, are the local run's."""
+    from ffls.cluster.lights import mean_window_image, photo_values_and_windows
+    from ffls.spheres.estimate import capture_samples
+    from ffls.spheres.mirror_outline import limb_window
+
+    cap, dec, spheres = glossy_detected
+    view = sphere_views(cap, spheres)[0]
+    shape = dec.stats.mean.shape
+    windows = [limb_window(view.center_px, view.radius_px, shape)]
+    samples = capture_samples(cap, spheres, shape)
+    crops = [photo_values_and_windows(cap, samples, None, windows, i)[1] for i in range(len(cap.image_names))]
+    mean = mean_window_image(shape, windows, crops)
+    x0, x1, y0, y1 = windows[0]
+    np.testing.assert_allclose(mean[y0:y1 + 1, x0:x1 + 1], dec.stats.mean[y0:y1 + 1, x0:x1 + 1], rtol=1e-6, atol=1e-9)
+    assert np.isnan(mean).sum() == mean.size - (x1 - x0 + 1) * (y1 - y0 + 1)
+    here, _ = refine_view_limb(view, dec.stats.mean)
+    there, _ = refine_view_limb(view, mean)
+    np.testing.assert_allclose(there.center_cam, here.center_cam, atol=1e-9)
+
+
+def test_limb_fit_on_a_stack_shares_the_outline_across_photos():
+    """Each photo's brightness on either side of the limb is its own (the reflected scene changes
+    with the light); the stack's fit finds the one outline they share."""
+    c, r = np.array([50.0, 50.0]), 20.0
+    inside = lambda p: np.hypot(p[:, 0] - c[0] - 0.4, p[:, 1] - c[1] + 0.3) / r  # noqa: E731
+    stack = np.stack([_render(inside, 100, 100, jump=j, seed=s, ramp=False) for s, j in enumerate((0.1, -0.08, 0.15))])
+    fit = fit_limb_profile(stack, c, r, model="orthographic")
+    assert fit is not None
+    np.testing.assert_allclose(fit.center_px, c + [0.4, -0.3], atol=0.1)
+    assert abs(fit.radius_px - r) < 0.1

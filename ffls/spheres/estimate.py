@@ -953,7 +953,8 @@ def _check_modes(model: str, bounce: str) -> None:
 # ----------------------------------------------------------------------------- entry points
 def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np.ndarray,
                     bounce: str = "calibrated", refine_centres: bool = True, refine_options: dict | None = None,
-                    materials: list | None = None, views: list | None = None, **kwargs) -> CaptureEstimate:
+                    materials: list | None = None, views: list | None = None, limb_image=None,
+                    **kwargs) -> CaptureEstimate:
     """The two passes of :func:`estimate_lights` on photos whose sphere values are given, in this process.
 
     Parameters
@@ -972,6 +973,9 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
         Per sphere (all matte when None).
     views : list of SphereView, optional
         Per sphere (needed for ``'mirror'`` and ``'auto'``).
+    limb_image : (H, W) float, optional
+        The sequence's mean luminance (NaN where not read), as :func:`estimate_lights` uses it: a
+        mirror sphere's outline at its limb's step (:func:`ffls.spheres.highlight.refine_view_limb`).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``model``, ``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``up``, ``mirror_floor_deg``).
@@ -983,7 +987,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     _check_modes(kwargs.get("model", "auto"), bounce)
     fitter = _PhotoFitter(None, scene_center, kwargs)
     return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
-                     refine_options=refine_options, materials=materials, views=views)
+                     refine_options=refine_options, materials=materials, views=views, limb_image=limb_image)
 
 
 def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict | None]:

@@ -48,7 +48,7 @@ import numpy as np
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
 from ffls.io.capture import SPHERE_MATERIALS
-from ffls.spheres.mirror_outline import LimbFit, fit_limb_profile
+from ffls.spheres.mirror_outline import LIMB_BAND_PX, LimbFit, fit_limb_profile
 
 __all__ = [
     "MATERIALS",
@@ -76,6 +76,7 @@ __all__ = [
     "LIMB_CLEAR_SNR",
     "LIMB_MODEL_FLOOR_PX",
     "refine_view_limb",
+    "apparent_radius_px",
 ]
 
 #: Sphere materials of ``capture.json`` (``'auto'``: classified from the photos).
@@ -129,6 +130,11 @@ class SphereView:
         Identity when None.
     center_sigma_px : float
         Per-axis standard deviation of ``center_px`` (from the detection's silhouette fit).
+    radius_sigma_px : float
+        Standard deviation of the apparent radius (pixels; pinhole: of ``f tan(alpha)``, ``alpha``
+        the tangent cone's half-angle, which sets the sphere's depth). A radius error tilts every
+        direction toward or away from the camera, the more toward the rim
+        (:meth:`outline_jacobian`).
     """
 
     center_px: np.ndarray
@@ -140,6 +146,7 @@ class SphereView:
     radius: float | None = None
     world_from_camera: np.ndarray | None = None
     center_sigma_px: float = 0.1
+    radius_sigma_px: float = 0.0
 
     def __post_init__(self):
         if self.model not in CAMERA_MODELS:
@@ -153,7 +160,8 @@ class SphereView:
         ``center_px``, ``radius_px``, ``center_cam``, ``radius`` and optionally ``residual_px``,
         ``n_inliers``, ``outline_sigma_px``); its centre's uncertainty is the silhouette's RMS residual
         (a mirror's outline points are edges of its reflections, whose misfit is shared, not
-        independent), with its outline ambiguity (``outline_sigma_px``) in quadrature."""
+        independent), with its outline ambiguity (``outline_sigma_px``) in quadrature. Its radius's
+        uncertainty is left at 0: the limb's step sets it (:func:`refine_view_limb`)."""
         res = float(getattr(sphere, "residual_px", 0.0) or 0.0)
         n = int(getattr(sphere, "n_inliers", 0) or 0)
         # a mirror's outline is its reflections' edges: their misfit moves the centre as a whole (not
@@ -167,6 +175,40 @@ class SphereView:
                    center_cam=None if cc is None else np.asarray(cc, dtype=np.float64),
                    radius=None if getattr(sphere, "radius", None) is None else float(sphere.radius),
                    world_from_camera=world_from_camera, center_sigma_px=float(max(sig, 0.02)))
+
+    def with_outline(self, shift_px=(0.0, 0.0), radius_change_px: float = 0.0) -> "SphereView":
+        """The same sphere with its outline moved: its centre's image by ``shift_px`` (x, y) and its
+        apparent radius by ``radius_change_px``.
+
+        Orthographic: the circle. Pinhole: the centre ``C`` moves to the ray through the shifted
+        image of the centre (:func:`ffls.camera.projection.camera_rays`, with distortion), at the
+        depth where the tangent cone's ``f tan(alpha)`` (``f`` the mean focal length) changed by
+        ``radius_change_px``: ``|C| = radius / sin(alpha)``.
+        """
+        d = np.asarray(shift_px, dtype=np.float64).reshape(2)
+        c = np.asarray(self.center_px, dtype=np.float64) + d
+        if self.model == "orthographic":
+            cc = None if self.center_cam is None else np.asarray(self.center_cam, dtype=np.float64)
+            return replace(self, center_px=c, radius_px=float(self.radius_px) + float(radius_change_px), center_cam=cc)
+        K = np.asarray(self.K, dtype=np.float64)
+        f = 0.5 * (K[0, 0] + K[1, 1])
+        C = np.asarray(self.center_cam, dtype=np.float64)
+        alpha = float(np.arcsin(min(float(self.radius) / float(np.linalg.norm(C)), 1.0)))
+        alpha = float(np.arctan((f * np.tan(alpha) + float(radius_change_px)) / f))
+        u = camera_rays(c.reshape(1, 2), "pinhole", K, self.dist)[0]
+        return replace(self, center_px=c, center_cam=float(self.radius) / np.sin(alpha) * normalize(u))
+
+    def outline_jacobian(self, pixel, h: float = 0.1) -> np.ndarray:
+        """``d l / d (c_x, c_y, r)`` (3, 3): how the reflected direction of image point ``pixel``
+        moves with the outline (its centre's image and its apparent radius, :meth:`with_outline`),
+        by central differences of ``h`` pixels; NaN where a moved outline misses ``pixel``."""
+        p = np.asarray(pixel, dtype=np.float64).reshape(1, 2)
+        cols = []
+        for e in np.eye(3) * h:
+            lp = self.with_outline(e[:2], e[2]).reflect(p)[0][0]
+            lm = self.with_outline(-e[:2], -e[2]).reflect(p)[0][0]
+            cols.append((lp - lm) / (2 * h))
+        return np.stack(cols, axis=1)
 
     def _rotation(self) -> tuple[np.ndarray, np.ndarray]:
         if self.world_from_camera is None:
@@ -643,16 +685,19 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
     take its centre (:func:`highlight_centre_Debevec1998`) and reflect the viewing ray there about
     the sphere's normal (:meth:`SphereView.reflect`).
 
-    The centre's per-axis pixel uncertainty is
-    ``sqrt(sigma_noise^2 + c^2 + q^2 + sigma_c^2 + s0^2)``: ``sigma_noise`` the
+    The highlight centre's own per-axis pixel uncertainty is
+    ``sqrt(sigma_noise^2 + c^2 + q^2 + s0^2)``: ``sigma_noise`` the
     background's spread (noise and clutter) propagated through the weighted mean, ``c =``
     :data:`CLIP_SIGMA_PX` where the core is clipped (:data:`CENSORED_SIGMA_PX` where the censored
     fit :func:`highlight_centre_Tobin1958` located it: cores of :data:`MIN_CENSORED_PX` or more
     clipped pixels with an unclipped shoulder), ``q = 1/sqrt(12)`` px where a clipped core
-    has no unclipped shoulder, ``sigma_c`` the sphere
-    centre's uncertainty (``view.center_sigma_px``) and ``s0 =`` :data:`PIXEL_FLOOR_PX`. It is
-    mapped to directions by the numerical Jacobian of the pixel-to-direction map; ``floor_deg``
-    is added in quadrature.
+    has no unclipped shoulder, and ``s0 =`` :data:`PIXEL_FLOOR_PX`. It is
+    mapped to directions by the numerical Jacobian of the pixel-to-direction map. The sphere's
+    outline adds its own part: its centre's per-axis uncertainty (``view.center_sigma_px``) and
+    its radius's (``view.radius_sigma_px``) through :meth:`SphereView.outline_jacobian` at the
+    highlight (a radius error moves a highlight near the rim far more than one at the centre).
+    ``floor_deg`` is added in quadrature. ``pixel_sigma`` is the highlight's own part with the
+    centre's in quadrature.
 
     Parameters
     ----------
@@ -684,22 +729,29 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
     if not np.all(np.isfinite(J)):
         return HighlightFit(status="fit_failed", **base)
     norm_J = float(np.sqrt(np.sum(J * J)))  # sqrt(trace(J sigma^2 I J^T)) / sigma
-    common = float(np.hypot(view.center_sigma_px, PIXEL_FLOOR_PX))
+    # the outline's part: its centre (per axis) and radius through the exact map, at this pixel
+    Jo = view.outline_jacobian(pixel)
+    if not np.all(np.isfinite(Jo)):  # a moved outline misses the pixel (at the rim): the centre's part alone
+        Jo = np.concatenate([-J, np.zeros((3, 1))], axis=1)
+    outline_deg = float(np.degrees(np.sqrt(view.center_sigma_px ** 2 * np.sum(Jo[:, :2] ** 2)
+                                           + view.radius_sigma_px ** 2 * np.sum(Jo[:, 2] ** 2))))
     px = np.stack([spot.cols + float(origin_px[0]), spot.rows + float(origin_px[1])], axis=1)
     wsum = float(spot.weights.sum())
     var_noise = float(spot.noise ** 2 * np.sum((px - pixel) ** 2, axis=0).mean() / wsum ** 2) if wsum > 0 else np.inf
     clip = CLIP_SIGMA_PX if spot.n_saturated > 0 else 0.0
     quant = 0.0 if spot.shoulder else 1.0 / np.sqrt(12.0)  # an outline without shoulder: a pixel's quantisation
-    sigma = float(np.sqrt(var_noise + clip ** 2 + quant ** 2 + common ** 2))
+    own = float(np.sqrt(var_noise + clip ** 2 + quant ** 2 + PIXEL_FLOOR_PX ** 2))  # the highlight centre's own
+    sigma = float(np.sqrt(own ** 2 + view.center_sigma_px ** 2))
     method = "centroid"
     if spot.n_saturated >= MIN_CENSORED_PX and spot.shoulder:  # the clipped core's profile is lost: fit its outline
         dc = highlight_centre_Tobin1958(view, spot, d, origin_px)
         # kept where it lies within 3 sigma of the centroid (a source far from a soft disc may not fit)
         if np.all(np.isfinite(dc)) and angle_between(dc, d) <= 3.0 * sigma * norm_J:
             d, method = dc, "censored"
-            sigma = float(np.sqrt(var_noise + CENSORED_SIGMA_PX ** 2 + common ** 2))
+            own = float(np.sqrt(var_noise + CENSORED_SIGMA_PX ** 2 + PIXEL_FLOOR_PX ** 2))
+            sigma = float(np.sqrt(own ** 2 + view.center_sigma_px ** 2))
     _, point = highlight_direction(view, pixel)
-    stat = float(np.degrees(sigma * norm_J))
+    stat = float(np.hypot(np.degrees(own * norm_J), outline_deg))
     return HighlightFit(status=spot.status, direction=d, point=point, uncertainty_deg=float(np.hypot(stat, floor_deg)),
                         pixel=pixel, pixel_sigma=sigma, method=method, **base)
 
@@ -760,6 +812,13 @@ def highlight_compactness(rows: np.ndarray, cols: np.ndarray, grey: np.ndarray) 
     it in a compact highlight (a fraction of a percent of the disc); a matte ball spreads it
     over its lit cap (tens of percent). NaN when the disc has no signal (an unlit sphere).
 
+    The brightest signal is the larger of the 3x3 mean's peak and the brightest pixel with an
+    8-neighbour carrying at least half its signal: a lone hot pixel is no highlight, but a small
+    ball's highlight of two or three clipped pixels is (the 3x3 mean alone dims it to a quarter,
+    below the ball's moving reflection of the lit ground: ``ffls synth --resolution 256
+    --spheres 1 --sphere-material mirror --format png8 --encoding srgb --exposure 3``, a chrome ball
+    of 18 px radius, gave a median of 0.039 and was taken as matte; 0.012 with the pair).
+
     Parameters
     ----------
     rows, cols : (m,) int
@@ -781,7 +840,15 @@ def highlight_compactness(rows: np.ndarray, cols: np.ndarray, grey: np.ndarray) 
     num = cv2.blur(z, (3, 3), borderType=cv2.BORDER_CONSTANT)
     den = cv2.blur(disc.astype(np.float32), (3, 3), borderType=cv2.BORDER_CONSTANT)
     smooth = np.where(disc, num / np.maximum(den, 1e-6), -np.inf)
-    top = float(smooth.max()) - med
+    # the brightest signal: the 3x3 mean's peak (a hot pixel is no highlight), or the brightest pixel
+    # with a neighbour carrying half its signal (a highlight of 2 pixels or more, which the 3x3 mean
+    # would dim to 2/9: a small ball's highlight from a small light, whose ball then counted as matte)
+    sig = np.where(disc, img - med, -np.inf).astype(np.float32)
+    ring = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], dtype=np.uint8)
+    neighbour = cv2.dilate(np.where(disc, sig, np.float32(-3e38)), ring, borderType=cv2.BORDER_CONSTANT,
+                           borderValue=-3e38)
+    paired = np.where(disc & (sig > 0) & (neighbour >= 0.5 * sig), sig, -np.inf)
+    top = max(float(smooth.max()) - med, float(paired.max()))
     if not top > 1e-12 * max(abs(med), 1e-30):
         return float("nan")
     return float(np.count_nonzero(disc & (img >= med + 0.5 * top)) / max(int(disc.sum()), 1))
@@ -870,8 +937,14 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise), the view takes
     its geometry (pinhole: the centre from the tangent cone and the sphere's radius;
     orthographic: the circle) and its centre uncertainty, with :data:`LIMB_MODEL_FLOOR_PX` in
-    quadrature, or the detected outline's where that is larger. Otherwise (a chrome ball, whose
-    limb reflects its own background) the view is returned as it is.
+    quadrature, or the detected outline's where that is larger; its radius uncertainty is the
+    step's with the same floor. Otherwise (a chrome ball, whose limb reflects its own background,
+    so that the step lies where the reflected backdrop ends, not at the silhouette) the detected
+    outline is kept, uncertain by its gap to the step: the centre's sigma is the distance between
+    the two centres, the radius's the difference of their :func:`apparent_radius_px`, each with
+    the step's own precision and the floor in quadrature. A gap beyond half of
+    :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another edge), or no fit,
+    leaves the view as it is.
 
     Parameters
     ----------
@@ -882,18 +955,42 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     Returns
     -------
     view : SphereView
-        Refined, or ``view`` itself.
+        Refined (geometry, or only its uncertainty), or ``view`` itself.
     limb : LimbFit or None
-        The limb fit (None where it failed); the view used it when ``view`` changed.
+        The limb fit (None where it failed).
     """
     limb = fit_limb_profile(image, view.center_px, view.radius_px, model=view.model, K=view.K, dist=view.dist,
                             center_cam=view.center_cam, radius=view.radius)
-    if limb is None or not np.any(np.isfinite(limb.jump_snr)) or np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR:
+    if limb is None or not np.any(np.isfinite(limb.jump_snr)):
         return view, limb
-    # the step's own precision and the model's floor; never below the detected outline's uncertainty
-    # (a second estimate of the outline, whose residual bias at the tenth of a pixel the renders show)
-    sigma = float(max(np.sqrt(limb.center_sigma_px ** 2 + limb.radius_sigma_px ** 2 + LIMB_MODEL_FLOOR_PX ** 2),
-                      view.center_sigma_px))
+    c_own = float(np.hypot(limb.center_sigma_px, LIMB_MODEL_FLOOR_PX))
+    r_own = float(np.hypot(limb.radius_sigma_px, LIMB_MODEL_FLOOR_PX))
+    if np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR:
+        # a chrome ball: two estimates of its outline, the detected one (its reflections' edges) and
+        # the weak step; the detected one is kept, uncertain by their gap (centre and radius)
+        gap_c = float(np.linalg.norm(np.asarray(limb.center_px) - np.asarray(view.center_px)))
+        gap_r = abs(float(limb.radius_px) - apparent_radius_px(view))
+        if not (np.isfinite(gap_c) and np.isfinite(gap_r)) or max(gap_c, gap_r) > 0.5 * LIMB_BAND_PX:
+            return view, limb  # the step found another edge than the limb: the detected outline's own uncertainty
+        return replace(view, center_sigma_px=float(np.hypot(gap_c, c_own)),
+                       radius_sigma_px=float(np.hypot(gap_r, r_own))), limb
+    # the centre's: never below the detected outline's uncertainty (a second estimate of the outline,
+    # whose residual bias at the tenth of a pixel the renders show; with the step's own 0.15 px, the
+    # glossy balls of 8 mixed spheres outweighed the matte ones for errors of 2 deg: docs/spheres.md)
+    c_sig = float(max(np.hypot(c_own, limb.radius_sigma_px), view.center_sigma_px))
     if view.model == "pinhole":
-        return replace(view, center_px=limb.center_px, center_cam=limb.center_cam, center_sigma_px=sigma), limb
-    return replace(view, center_px=limb.center_px, radius_px=limb.radius_px, center_sigma_px=sigma), limb
+        return replace(view, center_px=limb.center_px, center_cam=limb.center_cam, center_sigma_px=c_sig,
+                       radius_sigma_px=r_own), limb
+    return replace(view, center_px=limb.center_px, radius_px=limb.radius_px, center_sigma_px=c_sig,
+                   radius_sigma_px=r_own), limb
+
+
+def apparent_radius_px(view: SphereView) -> float:
+    """A view's apparent radius in the unit of :attr:`SphereView.radius_sigma_px`: orthographic its
+    circle's radius, pinhole ``f tan(alpha)`` (``f`` the mean focal length, ``alpha`` the tangent
+    cone's half-angle)."""
+    if view.model != "pinhole":
+        return float(view.radius_px)
+    K = np.asarray(view.K, dtype=np.float64)
+    alpha = np.arcsin(min(float(view.radius) / float(np.linalg.norm(view.center_cam)), 1.0))
+    return float(0.5 * (K[0, 0] + K[1, 1]) * np.tan(alpha))

@@ -582,6 +582,24 @@ class LimbFit:
     jump_snr: np.ndarray
 
 
+def limb_window(center_px, radius_px: float, shape, band_px: float | None = None) -> tuple[int, int, int, int]:
+    """The pixels :func:`fit_limb_profile` reads around a ball: ``(x0, x1, y0, y1)``, inclusive.
+
+    A square of half-width ``1.25 radius_px + band_px + 2`` around ``center_px``, clipped to the
+    image ``shape`` (H, W); ``band_px`` as :func:`fit_limb_profile`'s default when None. Where the
+    whole photo is not at hand (the Dask path, :mod:`ffls.cluster.lights`), this window of every
+    photo is all the limb fit needs.
+    """
+    c0 = np.asarray(center_px, dtype=np.float64)
+    r0 = float(radius_px)
+    band_px = max(LIMB_BAND_PX, 0.15 * r0) if band_px is None else float(band_px)
+    H, W = int(shape[0]), int(shape[1])
+    reach = r0 * 1.25 + band_px + 2
+    x0, x1 = max(int(np.floor(c0[0] - reach)), 0), min(int(np.ceil(c0[0] + reach)), W - 1)
+    y0, y1 = max(int(np.floor(c0[1] - reach)), 0), min(int(np.ceil(c0[1] + reach)), H - 1)
+    return x0, x1, y0, y1
+
+
 def limb_basis(t: np.ndarray, blur: float) -> np.ndarray:
     """The blurred limb's five brightness terms at signed distances ``t`` from the outline.
 
@@ -646,8 +664,11 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
 
     Parameters
     ----------
-    image : (H, W) float
-        Brightness (linear preferred: a blurred step mixes linear light).
+    image : (H, W) or (n, H, W) float
+        Brightness (linear preferred: a blurred step mixes linear light): a reduction of the
+        sequence, or a stack of ``n`` photos, each sector of each photo then with brightness
+        terms of its own and the outline shared (its jump, :attr:`LimbFit.jump_snr`, the RMS
+        over the photos). Pixels may be NaN (not read).
     center_px : (2,) float
         The starting outline's centre (pixels, x right, y down).
     radius_px : float
@@ -677,7 +698,9 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
     from ffls.conventions import normalize, tangent_basis
 
     img = np.asarray(image, dtype=np.float64)
-    H, W = img.shape
+    if img.ndim == 2:
+        img = img[None]
+    n_img, H, W = img.shape
     c0 = np.asarray(center_px, dtype=np.float64)
     r0 = float(radius_px)
     if not (np.all(np.isfinite(c0)) and np.isfinite(r0) and r0 > 2):
@@ -686,14 +709,12 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
     band_px = max(LIMB_BAND_PX, 0.15 * r0) if band_px is None else float(band_px)
     if pinhole and (K is None or center_cam is None or radius is None):
         raise ValueError("a pinhole limb fit needs K, center_cam and radius")
-    reach = r0 * 1.25 + band_px + 2
-    x0, x1 = max(int(np.floor(c0[0] - reach)), 0), min(int(np.ceil(c0[0] + reach)), W - 1)
-    y0, y1 = max(int(np.floor(c0[1] - reach)), 0), min(int(np.ceil(c0[1] + reach)), H - 1)
+    x0, x1, y0, y1 = limb_window(c0, r0, (H, W), band_px)
     if x1 <= x0 or y1 <= y0:
         return None
     yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
     px = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
-    vals = img[yy.ravel(), xx.ravel()]
+    vals = img[:, yy.ravel(), xx.ravel()]  # (n_img, pixels)
     if pinhole:
         K = np.asarray(K, dtype=np.float64)
         f = 0.5 * (K[0, 0] + K[1, 1])
@@ -727,8 +748,8 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
     g0 = np.zeros(3)
     t0 = signed(g0)
     band = np.abs(t0) <= band_px
-    if not np.all(np.isfinite(vals[band])):
-        band &= np.isfinite(vals)
+    if not np.all(np.isfinite(vals[:, band])):
+        band &= np.all(np.isfinite(vals), axis=0)
     circumference = 2 * np.pi * r0
     n_sec = int(np.clip(round(circumference / 8.0), 8, 36)) if n_sectors is None else int(n_sectors)
     sector = np.floor((azimuth(g0) + np.pi) / (2 * np.pi) * n_sec).astype(int) % n_sec
@@ -742,7 +763,7 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
     idx = np.flatnonzero(band & keep[sector])
     idx = idx[np.argsort(sector[idx], kind="stable")]  # grouped by sector (for np.add.reduceat)
     sec_ids, sec = np.unique(sector[idx], return_inverse=True)
-    y = vals[idx]
+    y = vals[:, idx].ravel()  # photo by photo, each grouped by sector
     # the band's pixels only from here on (signed() reads these names)
     if pinhole:
         rays = rays[idx]
@@ -750,11 +771,13 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
         px = px[idx]
     n_s = len(sec_ids)
     lim = 0.5 * band_px  # how far the outline may move
-    starts = np.flatnonzero(np.r_[True, sec[1:] != sec[:-1]])
+    # every photo's sectors have brightness terms of their own: group (photo, sector)
+    grp = (np.arange(n_img)[:, None] * n_s + sec[None, :]).ravel()
+    starts = np.flatnonzero(np.r_[True, grp[1:] != grp[:-1]])
 
     def terms(theta, w):
-        """Each sector's five brightness terms by weighted least squares, for the geometry and blur ``theta``."""
-        B = limb_basis(signed(theta[:3]), np.exp(theta[3]))
+        """Each group's five brightness terms by weighted least squares, for the geometry and blur ``theta``."""
+        B = np.tile(limb_basis(signed(theta[:3]), np.exp(theta[3])), (n_img, 1))
         A = B * w[:, None]
         G = np.add.reduceat(A[:, :, None] * A[:, None, :], starts, axis=0)
         h = np.add.reduceat(A * (w * y)[:, None], starts, axis=0)
@@ -763,7 +786,7 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
 
     def residuals(theta, w):
         B, lin = terms(theta, w)
-        return w * (np.sum(B * lin[sec], axis=1) - y)
+        return w * (np.sum(B * lin[grp], axis=1) - y)
 
     # variable projection (the terms are linear given the geometry: solved inside), with the robust
     # soft-L1 loss by reweighting (its weights 1 / sqrt(1 + (r / scale)^2) from the previous round)
@@ -780,7 +803,7 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
             return None
         theta = sol.x
         B, lin = terms(theta, w)
-        res = np.sum(B * lin[sec], axis=1) - y
+        res = np.sum(B * lin[grp], axis=1) - y
         scale = max(1.4826 * float(np.median(np.abs(res))), 1e-9 * max(float(np.abs(y).max()), 1e-12))
         w = (1.0 + (res / scale) ** 2) ** -0.25  # sqrt of the soft-L1 weight
     if np.any(np.abs(theta[:3]) >= 0.98 * lim):  # at the window's edge: another edge than the limb's pulled it
@@ -790,18 +813,23 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
     # each sector's own step: its offset along t, the others held
     t_fit = signed(g)
     offsets, snr = np.full(n_sec, np.nan), np.full(n_sec, np.nan)
+    w2, y2 = w.reshape(n_img, -1), y.reshape(n_img, -1)
+    lin2 = lin.reshape(n_img, n_s, 5)
     for k, j in enumerate(sec_ids):
         m = sec == k
-        snr[int(j)] = abs(lin[k, 3] - lin[k, 0]) / noise  # the background over the rim, at the outline
+        # the background over the rim at the outline, RMS over the photos
+        snr[int(j)] = float(np.sqrt(np.mean((lin2[:, k, 3] - lin2[:, k, 0]) ** 2))) / noise
         if snr[int(j)] < LIMB_MIN_JUMP_SNR:
             continue
 
-        wm, ym, tm = w[m], y[m], t_fit[m]
+        wm, ym, tm = w2[:, m], y2[:, m], t_fit[m]
 
         def cost(q, wm=wm, ym=ym, tm=tm):
-            A = limb_basis(tm - q, blur) * wm[:, None]
-            x = np.linalg.lstsq(A, wm * ym, rcond=None)[0]
-            return float(np.sum((A @ x - wm * ym) ** 2))
+            A = limb_basis(tm - q, blur)[None] * wm[:, :, None]  # (photos, pixels, 5)
+            G = np.einsum("pik,pil->pkl", A, A)
+            G = G + 1e-12 * np.trace(G, axis1=1, axis2=2)[:, None, None] * np.eye(5)
+            x = np.linalg.solve(G, np.einsum("pik,pi->pk", A, wm * ym)[:, :, None])[:, :, 0]
+            return float(np.sum((np.einsum("pik,pk->pi", A, x) - wm * ym) ** 2))
 
         sk = minimize_scalar(cost, bounds=(-lim, lim), method="bounded", options={"xatol": 1e-3})
         if sk.success and abs(sk.x) < 0.95 * lim:  # at the bound: no step of its own within reach
