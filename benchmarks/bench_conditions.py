@@ -151,7 +151,7 @@ def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
 MATTE_WEIGHT_FLOOR_DEG = 1.0
 
 
-def recalibrate(doc: dict) -> dict:
+def recalibrate(doc: dict, common_correlation: float | None = None) -> dict:
     """``doc`` (a ``lights.json`` of ``ffls lights``) with its cones made again by the current
     :mod:`ffls.spheres.uncertainty` from the photo estimates it records, without running the fits.
 
@@ -164,6 +164,8 @@ def recalibrate(doc: dict) -> dict:
     (``photo.sphere_uncertainty_deg``: a matte sphere's ``sigma_deg`` with the 1 deg floor in
     quadrature, a highlight fit's own) times the cone factor. A near light's joint-fit statistics
     are not recorded, so its cone here can be below the one ``ffls lights`` would report.
+    ``common_correlation``: the common-mode bound's correlation (default the module's
+    ``COMMON_CORRELATION``), to replay the cones under another bound.
     """
     from ffls.spheres.uncertainty import fit_error_model, photo_residuals
 
@@ -182,7 +184,16 @@ def recalibrate(doc: dict) -> dict:
                                    np.array([s["center"] for s in sph]) if near else None))
         stats.append(np.array([s["sigma_deg"] for s in sph]) / np.sqrt(2.0))
         used_all.append(np.asarray(used))
-    model = fit_error_model(res, stats, spheres=used_all, centre_deg=centre)  # the fallback for one sphere
+    from ffls.spheres.uncertainty import COMMON_CORRELATION
+
+    rho = COMMON_CORRELATION if common_correlation is None else float(common_correlation)
+    model = fit_error_model(res, stats, spheres=used_all, centre_deg=centre, common_correlation=rho)
+    if model.source == "fallback" and common_correlation is not None:  # one sphere: its common share too
+        from dataclasses import replace
+
+        from ffls.spheres.uncertainty import common_mode_deg
+
+        model = replace(model, common_ratio=rho / (1.0 - rho), common_deg=common_mode_deg(model.floor_deg ** 2, rho))
     out = []
     for l in lights:
         used = list(l.get("used_spheres") or [])
@@ -283,7 +294,8 @@ def shared_check(folder: Path) -> dict:
             "common_deg": float((doc.get("uncertainty") or {}).get("common_deg", np.nan))}
 
 
-def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, recalibrate_only: bool = False) -> dict:
+def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, recalibrate_only: bool = False,
+                  common_correlation: float | None = None) -> dict:
     """``flags``: ``ffls synth`` flags, or a :data:`SCENES` tuple (rendered by tests/detect_scenes.py).
     ``recalibrate_only``: no ``ffls lights`` run; the cones of the cached ``lights_estimated.json``
     made again (:func:`recalibrate`)."""
@@ -316,7 +328,7 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, re
     doc = json.loads(out.read_text())
     if recalibrate_only:
         row["recalibrated"] = True
-        doc = recalibrate(doc)
+        doc = recalibrate(doc, common_correlation)
     lights = doc["lights"]
     est = np.array([l["direction"] for l in lights], dtype=np.float64)
     ok = np.array([l.get("status", "ok") == "ok" for l in lights])
@@ -428,6 +440,8 @@ def main(argv=None):
     ap.add_argument("--recalibrate", action="store_true",
                     help="no ffls lights run: make the cones of each cached run's lights_estimated.json again with "
                          "the current error model (directions unchanged; needs --cache with earlier runs)")
+    ap.add_argument("--common-correlation", type=float, default=None,
+                    help="with --recalibrate: the common-mode bound's correlation to replay the cones with")
     ap.add_argument("--shared-check", action="store_true",
                     help="no ffls lights run: the capture's shared, fitted parameters propagated to the photos' "
                          "directions against their actual errors (shared_check; needs --cache with earlier runs)")
@@ -444,7 +458,8 @@ def main(argv=None):
         for name, flags, sub in jobs:
             if a.only and not any(o in name for o in a.only):
                 continue
-            r = run_condition(name, flags, a.res, dirs, base / sub, recalibrate_only=a.recalibrate)
+            r = run_condition(name, flags, a.res, dirs, base / sub, recalibrate_only=a.recalibrate,
+                              common_correlation=a.common_correlation)
             rows.append(r)
             if r["rc"] != 0:
                 print(f"{name:44s} ERROR {r['error']}", flush=True)
