@@ -230,13 +230,15 @@ def shared_check(folder: Path) -> dict:
       misfit, a bound rather than a standard error).
 
     Returns the medians of these per-axis terms over the photos, and, from the truth, the photos'
-    per-axis RMS error (``photo_rms_deg``) and their mean signed elevation error.
+    per-axis RMS error (``photo_rms_deg``) and their mean signed elevation error. Captures with
+    mirror or glossy spheres (a highlight fit has none of these parameters) or an orthographic
+    camera are skipped (``{"skipped": reason}``).
     """
     from dataclasses import replace
     from types import SimpleNamespace
 
     from ffls.conventions import UP
-    from ffls.io.capture import encoding_from_record, load_capture
+    from ffls.io.capture import encoding_from_record, load_capture, record_response
     from ffls.radiance.photos import load_photo
     from ffls.spheres.estimate import capture_samples, estimate_photos
     from ffls.spheres.samples import sphere_values
@@ -250,10 +252,15 @@ def shared_check(folder: Path) -> dict:
     rec = doc.get("encoding")
     gamma_rel = 0.0
     if isinstance(rec, dict):
-        cap = replace(cap, encoding=encoding_from_record(rec))
+        cap = replace(cap, encoding=encoding_from_record(rec), response=record_response(rec))
         if rec.get("gamma") and rec.get("uncertainty") is not None:
             gamma_rel = float(rec["uncertainty"]) / float(rec["gamma"])
     first = next(l for l in doc["lights"] if l.get("spheres"))
+    kinds = {s.get("kind") for l in doc["lights"] for s in l.get("spheres") or []} - {None}
+    if kinds - {"matte"} or getattr(cap, "camera_model", "pinhole") != "pinhole":
+        # a highlight fit has none of these parameters; an orthographic camera's samples need the
+        # detected pixel circles, which lights.json does not keep
+        return {"skipped": "mirror or glossy spheres" if kinds - {"matte"} else "orthographic camera"}
     M = np.linalg.inv(cap.world_from_camera)
     spheres = [SimpleNamespace(center_cam=M[:3, :3] @ np.asarray(s["center"]) + M[:3, 3], radius=cap.sphere_radius)
                for s in first["spheres"]]
@@ -506,6 +513,9 @@ def main_shared_check(a) -> None:
             continue
         r = {"condition": name, **shared_check(folder)}
         out.append(r)
+        if "skipped" in r:
+            print(f"| {name} | skipped: {r['skipped']} | | | | | | |", flush=True)
+            continue
         print(f"| {name} | {r['photos']} | {r['encoding_deg']:.4f} | {r['ratio_deg']:.4f} | {r['ratio_spread_deg']:.3f} | "
               f"{r['common_deg']:.3f} | {r['photo_rms_deg']:.3f} | {r['elevation_bias_deg']:+.2f} |", flush=True)
     print("\nper-axis standard deviations, medians over the accepted photos; RMS error per axis, from the truth")
