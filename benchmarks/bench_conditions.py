@@ -516,8 +516,9 @@ def main_shared_check(a) -> None:
         if "skipped" in r:
             print(f"| {name} | skipped: {r['skipped']} | | | | | | |", flush=True)
             continue
-        print(f"| {name} | {r['photos']} | {r['encoding_deg']:.4f} | {r['ratio_deg']:.4f} | {r['ratio_spread_deg']:.3f} | "
-              f"{r['common_deg']:.3f} | {r['photo_rms_deg']:.3f} | {r['elevation_bias_deg']:+.2f} |", flush=True)
+        print(f"| {name} | {r['photos']} | {r['encoding_deg']:.4f} | {r['ratio_deg']:.4f} | "
+              f"{r['ratio_spread_deg']:.3f} | {r['common_deg']:.3f} | {r['photo_rms_deg']:.3f} | "
+              f"{r['elevation_bias_deg']:+.2f} |", flush=True)
     print("\nper-axis standard deviations, medians over the accepted photos; RMS error per axis, from the truth")
     write_json(a.out, {"benchmark": "bench_conditions --shared-check", **host_info(), "resolution": a.res,
                        "results": out})

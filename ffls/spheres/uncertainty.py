@@ -49,9 +49,9 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    :func:`shared_parameter_deg`, :func:`own_parameter_deg`), the encoding's exponent and the ground
    ratios move the directions by 0.002-0.06 degrees, 6-90 times less than the common errors
    measured against renders' truth, which come from the model's misfit (``docs/spheres.md``,
-   "The common mode from the capture's fitted parameters"). With one sphere there is no disagreement: the fit statistics plus a
-   stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
-   (:data:`FALLBACK_MODEL`).
+   "The common mode from the capture's fitted parameters"). With one sphere there is no
+   disagreement: the fit statistics plus a stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS)
+   and its common-mode share are used (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
 (``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode. The cone is a
