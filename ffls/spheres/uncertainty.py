@@ -47,7 +47,7 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    is not bounded by it. The capture's fitted parameters cannot size it instead: propagated by
    their standard errors (a GUM type-B evaluation, :func:`shading_shift`,
    :func:`shared_parameter_deg`, :func:`own_parameter_deg`), the encoding's exponent and the ground
-   ratios move the directions by 0.002-0.06 degrees, 6-90 times less than the common errors
+   ratios move the directions by at most 0.06 degrees, 6-90 times less than the common errors
    measured against renders' truth, which come from the model's misfit (``docs/spheres.md``,
    "The common mode from the capture's fitted parameters"). With one sphere there is no
    disagreement: the fit statistics plus a stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS)
