@@ -25,6 +25,11 @@ Markdown table (for docs/spheres.md) and writes JSON.
 
     python benchmarks/bench_conditions.py [--res 512] [--only NAME ...] [--cache DIR] [--out FILE]
 
+With ``--shared-check`` (and a ``--cache`` of earlier runs) the capture's shared, fitted parameters
+(the calibrated encoding's exponent, the spheres' ground ratios) are propagated to each photo's
+direction by their standard errors (:func:`shared_check`, a GUM type-B propagation) and set
+against the photos' actual errors: how much of the common error they could explain.
+
 With ``--recalibrate`` (and a ``--cache`` of earlier runs) no ``ffls lights`` runs: the cones of
 each stored run are made again by the current error model from the photo estimates it recorded
 (:func:`recalibrate`): a cone-only change measured in seconds instead of a full run.
@@ -146,7 +151,7 @@ def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
 MATTE_WEIGHT_FLOOR_DEG = 1.0
 
 
-def recalibrate(doc: dict) -> dict:
+def recalibrate(doc: dict, common_correlation: float | None = None) -> dict:
     """``doc`` (a ``lights.json`` of ``ffls lights``) with its cones made again by the current
     :mod:`ffls.spheres.uncertainty` from the photo estimates it records, without running the fits.
 
@@ -159,6 +164,8 @@ def recalibrate(doc: dict) -> dict:
     (``photo.sphere_uncertainty_deg``: a matte sphere's ``sigma_deg`` with the 1 deg floor in
     quadrature, a highlight fit's own) times the cone factor. A near light's joint-fit statistics
     are not recorded, so its cone here can be below the one ``ffls lights`` would report.
+    ``common_correlation``: the common-mode bound's correlation (default the module's
+    ``COMMON_CORRELATION``), to replay the cones under another bound.
     """
     from ffls.spheres.uncertainty import fit_error_model, photo_residuals
 
@@ -177,7 +184,16 @@ def recalibrate(doc: dict) -> dict:
                                    np.array([s["center"] for s in sph]) if near else None))
         stats.append(np.array([s["sigma_deg"] for s in sph]) / np.sqrt(2.0))
         used_all.append(np.asarray(used))
-    model = fit_error_model(res, stats, spheres=used_all, centre_deg=centre)  # the fallback for one sphere
+    from ffls.spheres.uncertainty import COMMON_CORRELATION
+
+    rho = COMMON_CORRELATION if common_correlation is None else float(common_correlation)
+    model = fit_error_model(res, stats, spheres=used_all, centre_deg=centre, common_correlation=rho)
+    if model.source == "fallback" and common_correlation is not None:  # one sphere: its common share too
+        from dataclasses import replace
+
+        from ffls.spheres.uncertainty import common_mode_deg
+
+        model = replace(model, common_ratio=rho / (1.0 - rho), common_deg=common_mode_deg(model.floor_deg ** 2, rho))
     out = []
     for l in lights:
         used = list(l.get("used_spheres") or [])
@@ -193,7 +209,100 @@ def recalibrate(doc: dict) -> dict:
     return {**doc, "lights": out, "uncertainty": model.as_dict()}
 
 
-def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, recalibrate_only: bool = False) -> dict:
+def shared_check(folder: Path) -> dict:
+    """The capture's shared, fitted parameters propagated to its photos' directions, against the truth.
+
+    The capture's spheres (their recorded world centres) and photos (linearised with the encoding
+    ``ffls lights`` recorded, where the capture states none) are fitted again through the public
+    API (:func:`ffls.spheres.estimate.estimate_photos`), which returns each sphere's calibrated
+    ground ratio with its spread over the photos that determined it. Per accepted photo:
+
+    * ``encoding_deg``: the encoding exponent's standard error (``lights.json`` ``encoding``
+      ``uncertainty``) propagated to the photo's direction
+      (:func:`~ffls.spheres.uncertainty.shading_shift` of
+      :func:`~ffls.spheres.uncertainty.encoding_perturbation`, combined with the photo's weights:
+      :func:`~ffls.spheres.uncertainty.shared_parameter_deg`; shared by all spheres);
+    * ``ratio_deg``: each sphere's ground-ratio standard error (``1.2533 spread / sqrt(n)``, that
+      of a median) propagated the same way (:func:`~ffls.spheres.uncertainty.own_parameter_deg`;
+      one parameter per sphere);
+    * ``ratio_spread_deg``: the same with the ratio's spread over the photos instead of its
+      standard error (how far one photo's own bounce is from the capture's ratio: the model's
+      misfit, a bound rather than a standard error).
+
+    Returns the medians of these per-axis terms over the photos, and, from the truth, the photos'
+    per-axis RMS error (``photo_rms_deg``) and their mean signed elevation error. Captures with
+    mirror or glossy spheres (a highlight fit has none of these parameters) or an orthographic
+    camera are skipped (``{"skipped": reason}``).
+    """
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from ffls.conventions import UP
+    from ffls.io.capture import encoding_from_record, load_capture, record_response
+    from ffls.radiance.photos import load_photo
+    from ffls.spheres.estimate import capture_samples, estimate_photos
+    from ffls.spheres.samples import sphere_values
+    from ffls.spheres.uncertainty import (bounce_perturbation, encoding_perturbation, own_parameter_deg,
+                                          shading_shift, shared_parameter_deg, tangent_residuals)
+
+    folder = Path(folder)
+    doc = json.loads((folder / "lights_estimated.json").read_text())
+    truth = np.asarray(json.loads((folder / "truth.json").read_text())["directions"], dtype=np.float64)
+    cap = load_capture(folder)
+    rec = doc.get("encoding")
+    gamma_rel = 0.0
+    if isinstance(rec, dict):
+        cap = replace(cap, encoding=encoding_from_record(rec), response=record_response(rec))
+        if rec.get("gamma") and rec.get("uncertainty") is not None:
+            gamma_rel = float(rec["uncertainty"]) / float(rec["gamma"])
+    first = next(l for l in doc["lights"] if l.get("spheres"))
+    kinds = {s.get("kind") for l in doc["lights"] for s in l.get("spheres") or []} - {None}
+    if kinds - {"matte"} or getattr(cap, "camera_model", "pinhole") != "pinhole":
+        # a highlight fit has none of these parameters; an orthographic camera's samples need the
+        # detected pixel circles, which lights.json does not keep
+        return {"skipped": "mirror or glossy spheres" if kinds - {"matte"} else "orthographic camera"}
+    M = np.linalg.inv(cap.world_from_camera)
+    spheres = [SimpleNamespace(center_cam=M[:3, :3] @ np.asarray(s["center"]) + M[:3, 3], radius=cap.sphere_radius)
+               for s in first["spheres"]]
+    samples = capture_samples(cap, spheres, load_photo(cap, 0).shape[:2])
+    vals = [sphere_values(load_photo(cap, i), samples) for i in range(len(cap.image_names))]
+    est = estimate_photos(vals, samples, cap.scene_center)
+    calib = est.calibration or [None] * len(samples)
+    rows = []
+    for p, t in zip(est.photos, truth):
+        if not p.ok or not p.used_spheres or p.weights is None:
+            continue
+        used = list(p.used_spheres)
+        enc, rat, se, spread = [], [], [], []
+        for k in used:
+            sp, c = p.spheres[k], calib[k]
+            if sp.direction is None or sp.kind != "matte":
+                enc.append(np.zeros(3)), rat.append(np.zeros(3)), se.append(0.0), spread.append(0.0)
+                continue
+            n, l = samples[k].normals, np.asarray(sp.direction, dtype=np.float64)
+            g = samples[k].ground_factor(UP)
+            ratio = c.ratio if c is not None and c.ratio is not None else 0.0
+            dv_b = bounce_perturbation(g, l, UP)
+            enc.append(shading_shift(n, l, encoding_perturbation(np.maximum(n @ l, 0.0) + ratio * dv_b)))
+            rat.append(shading_shift(n, l, dv_b))
+            ok = c is not None and c.ratio is not None and c.spread is not None and c.n_photos > 0
+            spread.append(float(c.spread) if ok else 0.0)
+            se.append(1.2533 * float(c.spread) / np.sqrt(c.n_photos) if ok else 0.0)
+        w = np.asarray(p.weights, dtype=np.float64)
+        e = np.degrees(tangent_residuals(np.asarray(p.direction)[None], t[None])[0])
+        elev = np.degrees(np.arcsin(np.clip(p.direction[2], -1, 1)) - np.arcsin(np.clip(t[2], -1, 1)))
+        rows.append((shared_parameter_deg(enc, w, gamma_rel), own_parameter_deg(rat, w, se),
+                     own_parameter_deg(rat, w, spread), float(e @ e) / 2.0, elev))
+    r = np.array(rows)
+    return {"photos": int(len(r)), "gamma_relative_se": gamma_rel,
+            "encoding_deg": float(np.median(r[:, 0])), "ratio_deg": float(np.median(r[:, 1])),
+            "ratio_spread_deg": float(np.median(r[:, 2])), "photo_rms_deg": float(np.sqrt(np.mean(r[:, 3]))),
+            "elevation_bias_deg": float(np.mean(r[:, 4])),
+            "common_deg": float((doc.get("uncertainty") or {}).get("common_deg", np.nan))}
+
+
+def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, recalibrate_only: bool = False,
+                  common_correlation: float | None = None) -> dict:
     """``flags``: ``ffls synth`` flags, or a :data:`SCENES` tuple (rendered by tests/detect_scenes.py).
     ``recalibrate_only``: no ``ffls lights`` run; the cones of the cached ``lights_estimated.json``
     made again (:func:`recalibrate`)."""
@@ -226,7 +335,7 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, re
     doc = json.loads(out.read_text())
     if recalibrate_only:
         row["recalibrated"] = True
-        doc = recalibrate(doc)
+        doc = recalibrate(doc, common_correlation)
     lights = doc["lights"]
     est = np.array([l["direction"] for l in lights], dtype=np.float64)
     ok = np.array([l.get("status", "ok") == "ok" for l in lights])
@@ -338,9 +447,16 @@ def main(argv=None):
     ap.add_argument("--recalibrate", action="store_true",
                     help="no ffls lights run: make the cones of each cached run's lights_estimated.json again with "
                          "the current error model (directions unchanged; needs --cache with earlier runs)")
+    ap.add_argument("--common-correlation", type=float, default=None,
+                    help="with --recalibrate: the common-mode bound's correlation to replay the cones with")
+    ap.add_argument("--shared-check", action="store_true",
+                    help="no ffls lights run: the capture's shared, fitted parameters propagated to the photos' "
+                         "directions against their actual errors (shared_check; needs --cache with earlier runs)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_conditions.json"))
     a = ap.parse_args(argv)
     _, _, dirs = grid(a.phi_step, a.theta_step)
+    if a.shared_check:
+        return main_shared_check(a)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(a.cache or tmp)
@@ -349,7 +465,8 @@ def main(argv=None):
         for name, flags, sub in jobs:
             if a.only and not any(o in name for o in a.only):
                 continue
-            r = run_condition(name, flags, a.res, dirs, base / sub, recalibrate_only=a.recalibrate)
+            r = run_condition(name, flags, a.res, dirs, base / sub, recalibrate_only=a.recalibrate,
+                              common_correlation=a.common_correlation)
             rows.append(r)
             if r["rc"] != 0:
                 print(f"{name:44s} ERROR {r['error']}", flush=True)
@@ -378,6 +495,33 @@ def main(argv=None):
     print("\n".join(budget_table(rows)))
     print("\n" + coverage_summary(rows))
     write_json(a.out, {"benchmark": "bench_conditions", **host_info(), "resolution": a.res, "results": rows})
+
+
+def main_shared_check(a) -> None:
+    """``--shared-check``: :func:`shared_check` on each cached run; a Markdown table and JSON."""
+    if not a.cache:
+        raise SystemExit("--shared-check needs --cache (a folder of earlier runs)")
+    jobs = [(name, f"c{i:02d}_{a.res}") for i, name in enumerate(CONDITIONS)]
+    jobs += [(name, f"ds{i:02d}") for i, name in enumerate(SCENES)]
+    out = []
+    print("| condition | photos | encoding exponent (deg) | ground ratios' SE (deg) | ground ratios' spread (deg) | "
+          "common-mode bound now (deg) | photos' RMS error (deg) | mean elevation error (deg) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, sub in jobs:
+        folder = Path(a.cache) / sub
+        if (a.only and not any(o in name for o in a.only)) or not (folder / "lights_estimated.json").exists():
+            continue
+        r = {"condition": name, **shared_check(folder)}
+        out.append(r)
+        if "skipped" in r:
+            print(f"| {name} | skipped: {r['skipped']} | | | | | | |", flush=True)
+            continue
+        print(f"| {name} | {r['photos']} | {r['encoding_deg']:.4f} | {r['ratio_deg']:.4f} | "
+              f"{r['ratio_spread_deg']:.3f} | {r['common_deg']:.3f} | {r['photo_rms_deg']:.3f} | "
+              f"{r['elevation_bias_deg']:+.2f} |", flush=True)
+    print("\nper-axis standard deviations, medians over the accepted photos; RMS error per axis, from the truth")
+    write_json(a.out, {"benchmark": "bench_conditions --shared-check", **host_info(), "resolution": a.res,
+                       "results": out})
 
 
 if __name__ == "__main__":

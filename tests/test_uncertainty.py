@@ -390,3 +390,58 @@ def test_error_model_fit_reaches_the_global_minimum():
                for t in np.exp(np.linspace(np.log(1e-3), np.log(5.0), 40)))
     assert fitted <= grid + 0.5, (m, fitted, grid)
     assert fitted < _restricted_nll(res, sig, centre, sph, 0.945, 0.572) - 10.0
+
+
+# ----------------------------------------------------------------------------- type B: fitted parameters
+def _visible_normals(n=4000, seed=0):
+    """Normals of the half of a sphere facing a camera on +z."""
+    u = normalize(np.random.default_rng(seed).normal(size=(n, 3)))
+    return u[u[:, 2] > 0.0]
+
+
+def test_shading_shift_recovers_a_change_of_the_direction_columns():
+    """Values changed by ``n . (e t)`` (the shading of a light turned by ``e`` along ``t``) move the
+    fitted direction by exactly ``e t``; a change of the ambient moves it not at all."""
+    from ffls.spheres.uncertainty import shading_shift
+
+    n = _visible_normals()
+    l = normalize(np.array([0.3, -0.2, 0.9]))
+    t = normalize(np.cross(l, [1.0, 0.0, 0.0]))
+    assert np.allclose(shading_shift(n, l, n @ (0.01 * t)), 0.01 * t, atol=1e-12)
+    assert np.allclose(shading_shift(n, l, np.full(len(n), 0.05)), 0.0, atol=1e-12)
+    assert np.allclose(shading_shift(n[:3], l, np.ones(3)), 0.0)  # too few lit pixels: no shift
+
+
+def test_encoding_perturbation_is_scale_free_and_symmetric_about_a_head_on_light():
+    """``v ln v`` and ``(k v) ln (k v)`` differ by a multiple of ``v`` (absorbed by the intensity):
+    the same shift; for a light on the camera axis the lit cap is symmetric about it, so a wrong
+    exponent changes the intensity, not the direction; off-axis it turns the direction."""
+    from ffls.spheres.uncertainty import encoding_perturbation, shading_shift
+
+    n = _visible_normals()
+    l = normalize(np.array([0.0, 0.8, 0.6]))
+    s = np.maximum(n @ l, 0.0)
+    a = shading_shift(n, l, encoding_perturbation(s))
+    b = shading_shift(n, l, encoding_perturbation(3.0 * s) / 3.0)
+    assert np.linalg.norm(a) > 1e-3 and np.allclose(a, b, atol=1e-12)
+    axis = np.array([0.0, 0.0, 1.0])
+    sym = np.concatenate([n, n * [-1.0, 1.0, 1.0], n * [1.0, -1.0, 1.0], n * [-1.0, -1.0, 1.0]])
+    assert np.linalg.norm(shading_shift(sym, axis, encoding_perturbation(np.maximum(sym @ axis, 0.0)))) < 1e-12
+    assert encoding_perturbation(np.array([0.0, -1.0]))[0] == 0.0
+
+
+def test_shared_and_own_parameters_combine_over_the_photo():
+    """A shared parameter moves equal spheres together (no averaging down); one parameter per
+    sphere averages down as independent errors do; a bounce needs a light above the ground."""
+    from ffls.spheres.uncertainty import bounce_perturbation, own_parameter_deg, shared_parameter_deg
+
+    t = np.radians([[1.0, 0.0, 0.0]] * 4)
+    w = np.ones(4)
+    assert shared_parameter_deg(t, w, 0.1) == pytest.approx(0.1 / np.sqrt(2.0))
+    assert own_parameter_deg(t, w, np.full(4, 0.1)) == pytest.approx(0.1 / np.sqrt(2.0) / 2.0)
+    # opposite shifts of a shared parameter cancel in the mean
+    assert shared_parameter_deg(np.radians([[1.0, 0, 0], [-1.0, 0, 0]]), [1.0, 1.0], 1.0) == pytest.approx(0.0)
+    assert shared_parameter_deg(np.zeros((0, 3)), [], 1.0) == 0.0
+    g = np.array([0.2, 0.5])
+    assert np.allclose(bounce_perturbation(g, [0.0, 0.6, 0.8], [0.0, 0.0, 1.0]), 0.8 * g)
+    assert np.allclose(bounce_perturbation(g, [0.0, 0.6, -0.8], [0.0, 0.0, 1.0]), 0.0)

@@ -44,9 +44,14 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    (camera pose, a bias of the detected radii) that even perfectly agreeing spheres carry. The
    bound was chosen on ffls synth renders (``docs/spheres.md``), where the measured common mode
    lies in this range except where the estimator itself is biased (noisy dark pixels): that bias
-   is not bounded by it. With one sphere there is no disagreement: the fit statistics plus a
-   stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
-   (:data:`FALLBACK_MODEL`).
+   is not bounded by it. The capture's fitted parameters cannot size it instead: propagated by
+   their standard errors (a GUM type-B evaluation, :func:`shading_shift`,
+   :func:`shared_parameter_deg`, :func:`own_parameter_deg`), the encoding's exponent and the ground
+   ratios move the directions by at most 0.06 degrees, 6-90 times less than the common errors
+   measured against renders' truth, which come from the model's misfit (``docs/spheres.md``,
+   "The common mode from the capture's fitted parameters"). With one sphere there is no
+   disagreement: the fit statistics plus a stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS)
+   and its common-mode share are used (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
 (``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode. The cone is a
@@ -92,6 +97,11 @@ __all__ = [
     "FALLBACK_MODEL",
     "MIN_TAIL_SAMPLES",
     "tail_factor",
+    "shading_shift",
+    "encoding_perturbation",
+    "bounce_perturbation",
+    "shared_parameter_deg",
+    "own_parameter_deg",
 ]
 
 #: Confidence level of a reported cone.
@@ -754,3 +764,147 @@ def photo_residuals(directions: np.ndarray, light_direction: np.ndarray, positio
     else:
         pred = np.repeat(normalize(np.asarray(light_direction, dtype=np.float64))[None, :], len(d), axis=0)
     return tangent_residuals(d, pred)
+
+
+# ----------------------------------------------------------------------------- type B: fitted parameters
+def shading_shift(normals: np.ndarray, direction: np.ndarray, dvalues: np.ndarray, terminator: float = 0.15,
+                  ambient: bool = True) -> np.ndarray:
+    """Shift of a matte sphere's fitted direction when its pixel values change by ``dvalues``.
+
+    The sensitivity ``d(direction) / d(parameter)`` of a shared, fitted parameter of the capture
+    (the encoding's exponent, a ground ratio; a GUM "type B" propagation, JCGM 100:2008 section
+    5.1) by linearisation: on the lit pixels (``n . l > terminator``) the shading is linear in
+    ``m = a l`` and the ambient ``b`` (columns ``[n, 1]``), so a change ``dv`` of the values moves
+    the least-squares solution by ``(A^T A)^-1 A^T dv`` (Gauss-Newton, exact to first order), and
+    the direction by the part of ``dm / a`` across ``l``. ``dvalues`` is in units of the light's
+    coefficient ``a`` (the shading of a sphere lit with ``a = 1``).
+
+    Parameters
+    ----------
+    normals : (m, 3) float, unit
+        The sphere's pixels' normals (world).
+    direction : (3,) float, unit
+        The sphere's fitted light direction.
+    dvalues : (m,) float
+        Change of each pixel's value per unit parameter, over ``a``.
+    terminator : float
+        Pixels with ``n . l`` at most this are left out (as the fit does).
+    ambient : bool
+        Fit an ambient column.
+
+    Returns
+    -------
+    (3,) float
+        The direction's shift (radians, a tangent vector at ``direction``) per unit parameter;
+        zeros where fewer than 4 pixels are lit.
+    """
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    l = normalize(np.asarray(direction, dtype=np.float64))
+    dv = np.asarray(dvalues, dtype=np.float64).ravel()
+    lit = (n @ l > terminator) & np.isfinite(dv)
+    if lit.sum() < 4:
+        return np.zeros(3)
+    A = np.column_stack([n[lit], np.ones(int(lit.sum()))]) if ambient else n[lit]
+    dm = np.linalg.lstsq(A, dv[lit], rcond=None)[0][:3]
+    return dm - (dm @ l) * l
+
+
+def encoding_perturbation(shading: np.ndarray) -> np.ndarray:
+    """Change of linear values per unit relative change of a power-law encoding's exponent.
+
+    Values decoded as ``v = code^gamma`` become ``v^(1 + e)`` with the exponent ``gamma (1 + e)``:
+    ``dv / de = v ln v``. Scale-free: with ``v`` in other units the change differs by a multiple
+    of ``v``, which the fit's intensity absorbs.
+
+    Parameters
+    ----------
+    shading : (m,) float
+        The modelled values (e.g. ``max(n . l, 0)`` plus the bounce, with ``a = 1``).
+
+    Returns
+    -------
+    (m,) float
+        0 where the value is not positive.
+    """
+    v = np.asarray(shading, dtype=np.float64)
+    out = np.zeros(v.shape)
+    pos = v > 0
+    out[pos] = v[pos] * np.log(v[pos])
+    return out
+
+
+def bounce_perturbation(bounce_factor: np.ndarray, direction: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Change of values per unit change of a sphere's calibrated ground ratio ``rho_g``.
+
+    The ground bounce of the calibrated model is ``rho_g a max(l . up, 0) g(n)``
+    (:func:`ffls.spheres.estimate.calibrate_bounce`), so ``dv / d rho_g = max(l . up, 0) g(n)`` over ``a``.
+
+    Parameters
+    ----------
+    bounce_factor : (m,) float
+        ``g(n)``, the pixels' form factor to the ground.
+    direction : (3,) float, unit
+    up : (3,) float, unit
+
+    Returns
+    -------
+    (m,) float
+    """
+    lz = max(float(np.asarray(direction, dtype=np.float64) @ np.asarray(up, dtype=np.float64)), 0.0)
+    return lz * np.asarray(bounce_factor, dtype=np.float64)
+
+
+def shared_parameter_deg(shifts: np.ndarray, weights, standard_error: float) -> float:
+    """Per-axis standard deviation (degrees) of a photo's direction from one parameter all its spheres share.
+
+    A shared parameter off by ``delta`` moves every sphere by ``delta`` times its shift, so the
+    photo's weighted mean moves by ``delta sum_k w_k t_k``: a 2-D error along one axis, of
+    variance ``|sum_k w_k t_k|^2 se^2``, written as a per-axis standard deviation (half that
+    variance on each tangent axis). Such an error is the same on every sphere (a common mode), so
+    the spheres' disagreement never shows it.
+
+    Parameters
+    ----------
+    shifts : (k, 3) float
+        Per used sphere, its direction's shift (radians) per unit parameter (:func:`shading_shift`).
+    weights : (k,) float
+        The combination's weights (normalised here).
+    standard_error : float
+        The parameter's standard error.
+
+    Returns
+    -------
+    float
+    """
+    t = np.asarray(shifts, dtype=np.float64).reshape(-1, 3)
+    w = np.asarray(weights, dtype=np.float64).ravel()
+    if t.shape[0] == 0 or w.size != t.shape[0] or not w.sum() > 0:
+        return 0.0
+    v = (w / w.sum()) @ t
+    return float(np.degrees(np.linalg.norm(v) * abs(float(standard_error)) / np.sqrt(2.0)))
+
+
+def own_parameter_deg(shifts: np.ndarray, weights, standard_errors) -> float:
+    """Per-axis standard deviation (degrees) of a photo's direction from one parameter per sphere.
+
+    Each sphere's own fitted parameter (its ground ratio) has an independent error: the photo's
+    variance is ``sum_k w_k^2 |t_k|^2 se_k^2``, per axis half of it. Such an error differs from
+    sphere to sphere, so the disagreement measures it already (part of the floor ``tau``).
+
+    Parameters
+    ----------
+    shifts : (k, 3) float
+    weights : (k,) float
+    standard_errors : (k,) float
+
+    Returns
+    -------
+    float
+    """
+    t = np.asarray(shifts, dtype=np.float64).reshape(-1, 3)
+    w = np.asarray(weights, dtype=np.float64).ravel()
+    se = np.asarray(standard_errors, dtype=np.float64).ravel()
+    if t.shape[0] == 0 or w.size != t.shape[0] or se.size != t.shape[0] or not w.sum() > 0:
+        return 0.0
+    w = w / w.sum()
+    return float(np.degrees(np.sqrt(np.sum((w * np.linalg.norm(t, axis=1) * se) ** 2) / 2.0)))
