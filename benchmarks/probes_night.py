@@ -6,9 +6,9 @@ The scenes and the measure are those of ``benchmarks/probes.py`` (a Lambertian b
 80 px, seen from the relit capture's camera; the four bundled maps at 64 rows; the ``ffls synth``
 capture, 150 lights, relit under the recovered vs the true map; relative RMS). Per map:
 
-1. **the low-order limit**: the true map cut to its spherical-harmonic orders 0-2, 0-4 (the even
-   orders a Lambertian ball sees, 0-2 and 4) and 0-6, relit (negative texels clipped): what the
-   best possible low-order recovery relights to;
+1. **the low-order limit**: the true map cut to its spherical-harmonic orders 0-2, 0-4 and 0-6,
+   relit (negative texels clipped): what the best possible low-order recovery relights to (orders
+   0-2 hold 99.2% of the clamped cosine's energy);
 2. the default estimate before this round (adaptive set by CV, NNLS, ``ambient='nonnegative'``) and
    with ``ambient='auto'`` (no ambient with sources over the whole sphere), by CV and by BIC, with
    the ambient's share of the recovered power;
