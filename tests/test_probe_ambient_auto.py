@@ -92,6 +92,9 @@ def test_smoothness_chosen_by_cv(folder, tmp_path, capsys):
     assert main(["probe", "diffuse", str(folder), "-o", str(out), "--size", "16", "--sources", "42",
                  "--smoothness", "cv"]) == 0
     assert "smoothness penalty" in capsys.readouterr().err
+    # with the rings the refit keeps their hemisphere and their ambient
+    ring = estimate_lightmap(folder, "diffuse", height=16, sources=9, smoothness="cv")
+    assert any("non-negative ambient" in s for s in ring.notes) and ring.details["sources"] == 9
     with pytest.raises(ValueError, match="smoothness must be"):
         estimate_lightmap(folder, "diffuse", height=16, sources=42, smoothness="gcv")
 

@@ -398,8 +398,10 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
                 notes.append(f"--sources {int(sources)}: no model set has that size; the nearest geodesic set "
                              f"has {chosen}")
         if by_cv:
+            # the set's own domain and ambient (the rings keep theirs: explicit directions default to the sphere)
             reg = select_regularization(N, V, albedo, fit.directions, SMOOTHNESS_WEIGHTS, "smoothness",
-                                        nonnegative=nonnegative, ambient=ambient, rcond=rcond)
+                                        nonnegative=nonnegative, rcond=rcond, hemisphere=fit.hemisphere,
+                                        ambient=resolve_ambient(ambient, nonnegative, fit.hemisphere))
             fit = reg.fit
             notes.append(reg.note)
     except InputError as e:
