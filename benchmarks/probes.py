@@ -230,13 +230,15 @@ def main(argv=None):
             sel, t = timed(lambda: select_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="nonnegative"), 1)
             add("hougen_ahuja", f"uniform (cv) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals, true,
                 "full")
-            for crit in ("bic", "cv"):
+            # ambient 'nonnegative' (the default before) and 'auto' (none with these full-sphere sets, the default now)
+            for crit, amb in (("bic", "nonnegative"), ("cv", "nonnegative"), ("bic", "auto"), ("cv", "auto")):
                 sel, t = timed(lambda: adaptive_hougen_ahuja(sph.normals, rad, 0.7, criterion=crit, nonnegative=True,
-                                                             ambient="nonnegative"), 1)
-                add("hougen_ahuja", f"adaptive ({crit}) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals,
+                                                             ambient=amb), 1)
+                tag = crit if amb == "nonnegative" else f"{crit}, ambient auto"
+                add("hougen_ahuja", f"adaptive ({tag}) -> {sel.chosen}", lambda f: f.latlong(H), sel.fit, t, sph.normals,
                     true, "full")
                 d = sel.fit.directions
-                floor(f"HA adaptive ({crit}) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
+                floor(f"HA adaptive ({tag}) set {d.shape[0]}", sources_to_latlong(d, cell_energies(d, true), H), "full")
         # ------------------------------------------------------------ POCS
         pocs_rows = [(8, 10, "random"), (8, 50, "random"), (16, 10, "random"), (16, 50, "random"),
                      (16, 50, "sequential")]

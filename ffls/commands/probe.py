@@ -82,8 +82,9 @@ def _add_inverse(sub, common):
     shared = argparse.ArgumentParser(add_help=False)
     shared.add_argument("--criterion", choices=("cv", "bic"), default="cv",
                         help="how the model size is chosen when 'auto': cross-validation (default) or BIC")
-    shared.add_argument("--smoothness", type=number(0.0, 1e6), default=0.0,
-                        help="first-difference penalty between neighbouring sources (default 0: the paper's fit)")
+    shared.add_argument("--smoothness", type=number(0.0, 1e6, special=("cv",)), default=0.0,
+                        help="first-difference penalty between neighbouring sources (default 0: the paper's fit); "
+                             "diffuse also takes cv: the weight chosen by blocked cross-validation")
     shared.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
                         help="directions not seen: the method's own values (default) or black")
     d = sub.add_parser("diffuse", parents=[common, shared], help="a diffuse sphere (Hougen-Ahuja 1993)",
@@ -94,8 +95,10 @@ def _add_inverse(sub, common):
                         "by --criterion), or adaptive = auto (default: a geodesic set refined where the light is)")
     d.add_argument("--unconstrained", action="store_true",
                    help="plain least squares (the paper) instead of non-negative intensities (scipy nnls)")
-    d.add_argument("--ambient", choices=("nonnegative", "free", "none"), default="nonnegative",
-                   help="ambient term: non-negative (default), free (the paper's; may be negative) or none")
+    d.add_argument("--ambient", choices=("auto", "nonnegative", "free", "none"), default="auto",
+                   help="ambient term: auto (default: none when the sources cover the sphere, as geodesic and "
+                        "adaptive sets do; non-negative with the 5, 9, 17 rings), non-negative, free (the paper's; "
+                        "may be negative) or none")
     d.add_argument("--rcond", type=number(0.0, 1.0, lo_open=True), default=None,
                    help="with --unconstrained: truncate singular values below RCOND x the largest")
     s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
@@ -229,10 +232,15 @@ def method_knobs(args) -> dict:
         return {"camera_cone_deg": args.camera_cone, "rim_px": args.rim, "supersample": args.supersample,
                 "weight_power": args.weight_power, "fill": args.fill}
     if args.method == "diffuse":
-        ambient = {"nonnegative": "nonnegative", "free": True, "none": False}[args.ambient]
+        ambient = {"auto": "auto", "nonnegative": "nonnegative", "free": True, "none": False}[args.ambient]
         return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
                 "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill}
     if args.method == "shadow":
+        if args.smoothness == "cv":
+            from ffls.errors import InputError
+
+            raise InputError("--smoothness cv applies to diffuse (a weight chosen on the ball's pixels); give shadow "
+                             "a number")
         return {"nodes": args.nodes, "case": args.case, "nonnegative": not args.unconstrained, "ks": args.ks,
                 "sigma_deg": args.sigma, "criterion": args.criterion, "smoothness": args.smoothness,
                 "fill": args.fill}

@@ -326,8 +326,14 @@ def _finish(radiance, confidence, threshold: float, method: str, probe, notes: l
                             notes, details)
 
 
-def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="nonnegative",
-                     criterion: str = "cv", smoothness: float = 0.0, rcond: float | None = None, rim_px: float = 0.5,
+#: ``diffuse_lightmap(smoothness='cv')``'s candidate weights: ``select_regularization``'s default, 0 (the
+#: plain fit) and steps of about 3 up to 0.03, the range ``docs/probes.md`` measures.
+SMOOTHNESS_WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
+
+
+def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="auto",
+                     criterion: str = "cv", smoothness: float | str = 0.0, rcond: float | None = None,
+                     rim_px: float = 0.5,
                      max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
                      fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
@@ -345,13 +351,19 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     nonnegative : bool
         Non-negative source intensities (scipy ``nnls``; default). False is the paper's plain
         least squares, whose negative lobes a saved map clips (counted in the notes).
-    ambient : {'nonnegative', True, False}
-        The ambient term: non-negative too (default, with ``nonnegative``), free (``True``, the
-        paper's; it may come out negative), or none. ``docs/probes.md`` measures why the default
-        is non-negative.
+    ambient : {'auto', 'nonnegative', True, False}
+        The ambient term. ``'auto'`` (default): none with sources over the whole sphere (geodesic
+        and adaptive sets, which hold any uniform light themselves), non-negative with the ring
+        sets 5, 9, 17 (:func:`ffls.probes.hougen_ahuja.resolve_ambient`); ``'nonnegative'``
+        (with ``nonnegative``), free (``True``, the paper's; it may come out negative), or none.
+        ``docs/probes.md`` (*The ambient term*) measures why.
     criterion : {'cv', 'bic'}
-    smoothness : float
-        First-difference penalty between neighbouring sources (0: the paper).
+    smoothness : float or 'cv'
+        First-difference penalty between neighbouring sources (0: the paper). ``'cv'``: the
+        source set is chosen without it, then its weight among ``SMOOTHNESS_WEIGHTS`` by blocked
+        cross-validation on that set (:func:`ffls.probes.selection.select_regularization`, rule
+        ``one_se``: the largest weight the held-out pixels cannot tell from the best);
+        ``docs/probes.md`` (*The ambient term*) measures it.
     rcond : float, optional
         Unconstrained only: truncate singular values below ``rcond`` times the largest (large
         source sets are rank deficient on a Lambertian sphere).
@@ -364,12 +376,15 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         ``'nearest'`` keeps the method's own values everywhere (the sources extend over the
         whole domain); ``'zero'`` blacks out the directions not seen.
     """
-    from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence
-    from ffls.probes.selection import adaptive_hougen_ahuja, select_hougen_ahuja
+    from ffls.probes.hougen_ahuja import hougen_ahuja, normal_confidence, resolve_ambient
+    from ffls.probes.selection import adaptive_hougen_ahuja, select_hougen_ahuja, select_regularization
 
     src = probe.json_path
     N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
-    kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=smoothness, rcond=rcond)
+    by_cv = isinstance(smoothness, str)
+    if by_cv and smoothness != "cv":
+        raise ValueError(f"smoothness must be a number >= 0 or 'cv', not {smoothness!r}")
+    kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=0.0 if by_cv else smoothness, rcond=rcond)
     try:
         if sources in ("auto", "adaptive", "uniform"):
             select = select_hougen_ahuja if sources == "uniform" else adaptive_hougen_ahuja
@@ -382,11 +397,22 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
             if chosen != int(sources):
                 notes.append(f"--sources {int(sources)}: no model set has that size; the nearest geodesic set "
                              f"has {chosen}")
+        if by_cv:
+            # the set's own domain and ambient (the rings keep theirs: explicit directions default to the sphere)
+            reg = select_regularization(N, V, albedo, fit.directions, SMOOTHNESS_WEIGHTS, "smoothness",
+                                        nonnegative=nonnegative, rcond=rcond, hemisphere=fit.hemisphere,
+                                        ambient=resolve_ambient(ambient, nonnegative, fit.hemisphere))
+            fit = reg.fit
+            notes.append(reg.note)
     except InputError as e:
         raise _with_source(e, src) from None
-    notes.append(f"Hougen-Ahuja: {chosen} sources{' (non-negative)' if nonnegative else ''}, re-rendered "
+    amb = {False: "no ambient", "nonnegative": "non-negative ambient", True: "free ambient", "free": "free ambient"}[
+        resolve_ambient(ambient, nonnegative, fit.hemisphere)]
+    notes.append(f"Hougen-Ahuja: {chosen} sources{' (non-negative)' if nonnegative else ''}, {amb}, re-rendered "
                  f"relative RMS {100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
     details = {"sources": chosen, "relative_rms": float(fit.relative_rms), "condition": float(fit.condition)}
+    if by_cv:
+        details["smoothness"] = float(reg.chosen)
     return _finish(fit.latlong(height), normal_confidence(N, height), confidence_threshold, "diffuse", probe, notes,
                    details, fill)
 

@@ -94,7 +94,44 @@ def check_normals(normals) -> np.ndarray:
     return normalize(n)
 
 
-def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True, nonnegative: bool = False,
+#: The ``ambient`` settings of :func:`hougen_ahuja`.
+AMBIENTS = (True, False, "free", "nonnegative", "auto")
+
+
+def resolve_ambient(ambient, nonnegative: bool, hemisphere="full"):
+    """The ambient setting ``'auto'`` stands for, given the sources' domain (others are returned as given).
+
+    With sources over the **whole sphere** (geodesic sets, adaptive sets) a uniform ambient is
+    already a non-negative combination of the sources: each source spread over its Voronoi cell
+    with the same radiance sums to a uniform map. A separate ambient column is then redundant,
+    and it is not neutral: a non-negative fit uses it to explain the isotropic part of the shading
+    with light spread evenly over every direction, also below the horizon and at the zenith, where
+    a night sky or a room has little (``docs/probes.md``, *The ambient term*), so ``'auto'`` leaves
+    it out (``False``). With sources over a **hemisphere** (the paper's 5, 9 and 17 rings, or a
+    dome) the ambient stands for the light from the other half, which no source holds: ``'auto'``
+    keeps it, non-negative with ``nonnegative`` (``'nonnegative'``), else free (``True``).
+
+    Parameters
+    ----------
+    ambient : bool or {'free', 'nonnegative', 'auto'}
+    nonnegative : bool
+    hemisphere : Hemisphere, {'full', 'upper'} or {'axis': [x, y, z]}
+        The sources' domain.
+
+    Returns
+    -------
+    bool or {'free', 'nonnegative'}
+    """
+    if ambient not in AMBIENTS or isinstance(ambient, (int, float)) and not isinstance(ambient, bool):
+        raise ValueError(f"ambient must be one of {AMBIENTS}, not {ambient!r}")
+    if ambient != "auto":
+        return ambient
+    if isinstance(hemisphere, str) and hemisphere == "full":
+        return False
+    return "nonnegative" if nonnegative else True
+
+
+def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str = True, nonnegative: bool = False,
                  rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full",
                  smoothness: float = 0.0, energy: float = 0.0) -> SourceFit:
     """Recover model-source intensities from a diffuse object's pixels (Hougen and Ahuja 1993).
@@ -116,6 +153,8 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
         Fit the ambient term: ``True``/``'free'`` leaves it unconstrained (the paper; it may come
         out negative, and the map with it), ``'nonnegative'`` constrains it too when
         ``nonnegative`` is set (then every texel of the map is >= 0), ``False`` leaves it out.
+        ``'auto'``: out when the sources cover the whole sphere, which already hold any uniform
+        light, else ``'nonnegative'`` (with ``nonnegative``) or free (:func:`resolve_ambient`).
     nonnegative : bool
         Constrain the source intensities to be non-negative (NNLS).
     rcond : float, optional
@@ -161,8 +200,7 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool = True
     # the model is linear in the irradiance; fit irradiance = pi I / rho (per-pixel albedo allowed)
     target = np.pi * b / rho
     M = lambert_matrix(n, dirs)
-    if ambient not in (True, False, "free", "nonnegative"):
-        raise ValueError(f"ambient must be True, False, 'free' or 'nonnegative', not {ambient!r}")
+    ambient = resolve_ambient(ambient, nonnegative, hemisphere)
     sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond,
                         what=f"{dirs.shape[0]} sources{' + ambient' if ambient else ''}",
                         smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 else None,

@@ -24,12 +24,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ffls.errors import InputError
-from ffls.probes.hougen_ahuja import SourceFit, check_normals, hougen_ahuja
+from ffls.probes.hougen_ahuja import SourceFit, check_normals, hougen_ahuja, resolve_ambient
 from ffls.conventions import normalize
 from ffls.probes.linear import as_rgb_pixels, broadcast_albedo
 from ffls.probes.sato_sato_ikeuchi import (dome_nodes, occluder_visibility, sato_sato_ikeuchi, shadow_in_view,
                                            shadow_kernel)
-from ffls.probes.sources import geodesic_sources
+from ffls.probes.sources import HOUGEN_AHUJA_SIZES, geodesic_sources
 
 __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_hougen_ahuja",
            "adaptive_sato_sato_ikeuchi", "normal_blocks", "position_blocks", "select_hougen_ahuja",
@@ -236,8 +236,10 @@ def select_hougen_ahuja(normals, radiance, albedo=1.0, candidates=(5, 9, 17, 42,
         E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
         return E * rho / np.pi
 
-    def k_of(c):
-        return int(c) + (1 if kwargs.get("ambient", True) else 0)
+    def k_of(c):  # the ring sets (5, 9, 17) cover a hemisphere: 'auto' keeps their ambient
+        dom = "upper" if int(c) in HOUGEN_AHUJA_SIZES else kwargs.get("hemisphere", "full")
+        return int(c) + (1 if resolve_ambient(kwargs.get("ambient", True), kwargs.get("nonnegative", False), dom)
+                         else 0)
 
     sel = select_model(fp, candidates, b, k_of, criterion, folds, normal_blocks(n), tolerance, seed)
     fit = full.get(sel.chosen)
@@ -479,7 +481,7 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
         E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
         return E * rho[test] / np.pi
 
-    extra = 1 if kwargs.get("ambient", True) else 0
+    extra = 1 if resolve_ambient(kwargs.get("ambient", True), kwargs.get("nonnegative", False), "full") else 0
     score = _scorer(criterion, fp, b, normal_blocks(n), folds, seed, extra)
     base_frequency = _base_frequency(base_frequency, n.shape[0], "full", extra)
     return refine_sources(lambda d: hougen_ahuja(n, b, rho, d, **kwargs), score, base_frequency, "full",

@@ -1,0 +1,108 @@
+"""Hougen-Ahuja on the night map: where the error sits, and the ambient term of full-sphere source sets.
+
+    OMP_NUM_THREADS=1 python benchmarks/probes_night.py [--noise 0.01] [--maps night,studio]
+
+The scenes and the measure are those of ``benchmarks/probes.py`` (a Lambertian ball of albedo 0.7,
+80 px, seen from the relit capture's camera; the four bundled maps at 64 rows; the ``ffls synth``
+capture, 150 lights, relit under the recovered vs the true map; relative RMS). Per map:
+
+1. **the low-order limit**: the true map cut to its spherical-harmonic orders 0-2, 0-4 and 0-6,
+   relit (negative texels clipped): what the best possible low-order recovery relights to (orders
+   0-2 hold 99.2% of the clamped cosine's energy);
+2. the default estimate before this round (adaptive set by CV, NNLS, ``ambient='nonnegative'``) and
+   with ``ambient='auto'`` (no ambient with sources over the whole sphere), by CV and by BIC, with
+   the ambient's share of the recovered power;
+3. ``ambient='auto'`` plus the first-difference smoothness chosen by blocked CV
+   (``select_regularization(..., 'smoothness')``, rule ``one_se``): ``diffuse_lightmap(smoothness='cv')``.
+
+Times are CPU seconds of this process (``time.process_time``). Writes
+``benchmarks/results/probes_night.json`` (``..._noise.json`` with ``--noise``).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
+from probes import H, MAPS
+from ffls.probes.evaluate import relit_error, sh_basis
+from ffls.probes.selection import adaptive_hougen_ahuja, select_regularization
+from ffls.probes.sources import latlong_solid_angles
+from ffls.conventions import latlong_directions
+from ffls.synth.probe_scenes import diffuse_sphere_scene
+
+ROOT = Path(__file__).resolve().parent.parent
+ORDERS = (2, 4, 6)
+
+
+def low_orders(true, order):
+    """The lat-long map ``true`` (h, 2h, 3) cut to its SH orders 0..``order`` (exact texel solid angles)."""
+    h = true.shape[0]
+    d = latlong_directions(2 * h, h).reshape(-1, 3)
+    B = sh_basis(d, order)
+    c = B.T @ (true.reshape(-1, 3) * latlong_solid_angles(h).reshape(-1, 1))
+    return (B @ c).reshape(true.shape)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of the image's mean")
+    ap.add_argument("--maps", default=",".join(MAPS))
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    rng = np.random.default_rng(0)
+    cap, lights = probe_benchmark_capture("ffls_probes_night_")
+    out = []
+    for name in a.maps.split(","):
+        lm, true, truth = probe_benchmark_map(name, H, cap, lights)
+
+        def err(L):
+            return relit_capture_error(cap, lights, L, truth)
+
+        row = {"map": name, "low_order_limit": {str(o): err(low_orders(true, o)) for o in ORDERS}, "rows": []}
+        print(f"{name}: true map cut to SH orders 0-2 / 0-4 / 0-6 relights "
+              + " / ".join(f"{100 * row['low_order_limit'][str(o)]:.1f}%" for o in ORDERS), flush=True)
+        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
+        rad = sph.radiance
+        if a.noise > 0:
+            rad = rad + rng.normal(0.0, a.noise * float(np.mean(rad)), size=rad.shape)
+        for crit in ("cv", "bic"):
+            for amb in ("nonnegative", "auto"):
+                t = time.process_time()
+                sel = adaptive_hougen_ahuja(sph.normals, rad, 0.7, criterion=crit, nonnegative=True, ambient=amb)
+                cpu = time.process_time() - t
+                L = sel.fit.latlong(H)
+                power = float(np.abs(sel.fit.intensities).sum() + 4 * np.sum(sel.fit.ambient))
+                r = {"criterion": crit, "ambient": amb, "smoothness": 0.0, "sources": sel.chosen,
+                     "relit_capture": err(L), "relit_sphere": relit_error(L, true),
+                     "ambient_share": float(4 * np.sum(sel.fit.ambient) / power), "cpu_s": cpu}
+                row["rows"].append(r)
+                print(f"   {crit} ambient={amb:11s} {sel.chosen:3d} sources: capture {100 * r['relit_capture']:5.1f}%  "
+                      f"sphere {100 * r['relit_sphere']:6.1f}%  ambient share {r['ambient_share']:.3f}  "
+                      f"{cpu:.1f} CPU s", flush=True)
+                if crit == "cv" and amb == "auto":
+                    t = time.process_time()
+                    reg = select_regularization(sph.normals, rad, 0.7, sel.fit.directions, penalty="smoothness",
+                                                nonnegative=True, ambient=amb)
+                    cpu2 = cpu + time.process_time() - t
+                    L = reg.fit.latlong(H)
+                    r = {"criterion": crit, "ambient": amb, "smoothness": "cv", "chosen_weight": reg.chosen,
+                         "sources": sel.chosen, "relit_capture": err(L), "relit_sphere": relit_error(L, true),
+                         "cpu_s": cpu2}
+                    row["rows"].append(r)
+                    print(f"   {crit} ambient={amb:11s} smoothness cv ({reg.chosen:g}): capture "
+                          f"{100 * r['relit_capture']:5.1f}%  sphere {100 * r['relit_sphere']:6.1f}%  {cpu2:.1f} CPU s",
+                          flush=True)
+        out.append(row)
+    path = a.json or str(ROOT / f"benchmarks/results/probes_night{'_noise' if a.noise > 0 else ''}.json")
+    write_json(path, {"host": host_info(), "noise": a.noise, "map_height": H, "rows": out,
+                      "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_night.py", *sys.argv[1:]])})
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
