@@ -149,7 +149,9 @@ def test_cli_extrapolated_scheme_with_a_stopping_rule(ball_folder, tmp_path, cap
 @pytest.mark.parametrize("flags, words", [(["--scheme", "extrapolated", "--relaxation", "1.5"], "--relaxation"),
                                           (["--relaxation", "2"], "--relaxation"),
                                           (["--scheme", "parallel"], "--scheme"),
-                                          (["--tol", "0"], "--tol")])
+                                          (["--tol", "0"], "--tol"),
+                                          (["--sources", "grid", "--grid", "8", "--relaxation", "1e-300"],
+                                           "POCS made no progress")])
 def test_cli_bad_solver_flags_get_one_line(ball_folder, tmp_path, capsys, flags, words):
     from ffls.cli import main
 

@@ -492,6 +492,10 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
     except InputError as e:
         raise _with_source(e, src) from None
     r = res.residuals
+    if not r[-1] < r[0] * (1.0 - 1e-6) or not np.any(np.asarray(data) > 0):  # a black map: no output to write
+        raise InputError(f"POCS made no progress: residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% after "
+                         f"{res.iterations} iterations" + (f"; --relaxation {relaxation:g} is too small to move the "
+                                                           "estimate" if relaxation < 1.0 else ""), src)
     how = (f"{order} order" if scheme == "sequential" else "parallel, extrapolated") + (
         f", relaxation {relaxation:g}" if relaxation != 1.0 else "") + (
         f", stopped at a change below {tol:g}" if tol is not None and res.iterations < iterations else "")
