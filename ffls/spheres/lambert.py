@@ -939,12 +939,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     if bright.sum() < min_lit:
         base.status = "saturated" if n_saturated > bright.sum() else "too_dark"
         return base
-    # the per-pixel products of the design, once for the start and every iteration
-    Tb = _design_products(normals, g, y)
+    # the per-pixel products of the design, once for the start and every iteration (made here
+    # only where the start or the iterations use them: a bounce with the own shadow makes its own)
+    Tb = None
     # start from least squares on the bright pixels (I = n . v + b), from the product table
     if start is not None and np.all(np.isfinite(start)) and np.linalg.norm(start) > 0:
         v0 = np.asarray(start, dtype=np.float64)
     else:
+        Tb = _design_products(normals, g, y)
         G5, h5 = _gram(Tb, bright, np.zeros_like(bright))[:2]
         try:
             v0 = np.linalg.solve(G5[:4, :4], h5[:4])[:3]
@@ -959,6 +961,8 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         if shade:
             shadow = OwnShadow(normals, up)
             g = shadowed_ground_bounce(normals, l_g, up, g_plain, shadow)
+            Tb = _design_products(normals, g, y)
+        elif Tb is None:
             Tb = _design_products(normals, g, y)
         best, inl = _iterate(normals, y, g, ok, l_g, models, terminator, min_lit,
                              clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=Tb)
