@@ -384,6 +384,10 @@ def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.
     return E.sum(axis=1) / (loc.shape[0] * e_ref)
 
 
+#: :func:`near_ground_bounce`'s triangulations of its nodes, by the nodes' coordinates (bytes).
+_NODE_TRIANGULATIONS: dict = {}
+
+
 def near_ground_bounce(points: np.ndarray, normals: np.ndarray, center: np.ndarray, radius: float,
                        light_position: np.ndarray, up: np.ndarray = UP, side: int = NEAR_BOUNCE_SIDE,
                        nodes: int | None = NEAR_BOUNCE_NODES) -> np.ndarray:
@@ -451,7 +455,18 @@ def near_ground_bounce(points: np.ndarray, normals: np.ndarray, center: np.ndarr
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(axis, e1)
     uv = normals @ np.stack([e1, e2], axis=1)
-    out = LinearNDInterpolator(uv[at], values)(uv)
+    # the nodes' triangulation depends on the sphere's pixels only: made once per sphere and
+    # process, not for every photo (the same Delaunay, so the same interpolation to the bit)
+    nodes_uv = np.ascontiguousarray(uv[at])
+    key = nodes_uv.tobytes()
+    tri = _NODE_TRIANGULATIONS.get(key)
+    if tri is None:
+        from scipy.spatial import Delaunay
+
+        if len(_NODE_TRIANGULATIONS) >= 64:
+            _NODE_TRIANGULATIONS.clear()
+        tri = _NODE_TRIANGULATIONS[key] = Delaunay(nodes_uv)
+    out = LinearNDInterpolator(tri, values)(uv)
     outside = ~np.isfinite(out)
     if outside.any():
         out[outside] = values[cKDTree(uv[at]).query(uv[outside])[1]]
