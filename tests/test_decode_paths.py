@@ -46,6 +46,22 @@ def test_read_image_out_of_another_shape_or_type_is_ignored(tmp_path):
         np.testing.assert_array_equal(out, before)  # untouched
 
 
+def test_read_image_widens_every_half_value_exactly(tmp_path):
+    """Every finite half value (subnormals, -0 and both infinities too) reads back as the same
+    float32, bit for bit, into ``out`` or not: the widening is exact."""
+    halves = np.arange(65536, dtype=np.uint16).view(np.float16)
+    halves = halves[~np.isnan(halves)]
+    rgb = np.concatenate([halves, np.zeros(-halves.size % 192, np.float16)]).reshape(64, -1, 3)
+    path = write_exr(tmp_path / "all.exr", rgb.astype(np.float32), half=True)
+    want = rgb.astype(np.float32).view(np.uint32)
+    img = read_image(path, allow_nonfinite=True)
+    assert img.bit_depth == "half" and img.pixels.dtype == np.float32
+    np.testing.assert_array_equal(img.pixels.view(np.uint32), want)
+    out = np.empty(rgb.shape, np.float32)
+    assert read_image(path, allow_nonfinite=True, out=out).pixels is out
+    np.testing.assert_array_equal(out.view(np.uint32), want)
+
+
 def _capture(tmp_path, name, codes, encoding="srgb"):
     write_png(tmp_path / name, codes)
     (tmp_path / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": [name], "encoding": encoding}))
@@ -95,3 +111,31 @@ def test_sphere_values_of_integer_codes_match_the_float_path(bit_depth, dtype, t
     assert a.n_saturated == b.n_saturated > 0
     np.testing.assert_array_equal(a.grey, b.grey)
     assert not a.valid[:5 * w].any() and not a.valid[5 * w:8 * w].any()
+
+
+def test_sequence_accumulator_stowed_in_buffers_gives_the_same_stats():
+    """A worker's reductions handed over through buffers (``stow``, pickled without its arrays,
+    ``unstow``) merge to exactly what the accumulators give directly."""
+    import pickle
+
+    from ffls.spheres.detect import SequenceAccumulator
+
+    rng = np.random.default_rng(5)
+    photos = rng.uniform(0.0, 1.0, (6, 40, 56, 3)).astype(np.float32)
+    direct, parts = [], []
+    for lo, hi in ((0, 3), (3, 6)):
+        a, b = SequenceAccumulator(n_images=6), SequenceAccumulator(n_images=6)
+        for i in range(lo, hi):
+            a.add(photos[i], i)
+            b.add(photos[i], i)
+        direct.append(a)
+        buffers = {k: np.zeros(shape, dtype) for k, (shape, dtype) in b.layout(photos.shape[1:]).items()}
+        assert set(buffers) == set(SequenceAccumulator.ARRAYS)
+        sent = pickle.dumps(b.stow(buffers))
+        assert len(sent) < 2000  # the arrays are in the buffers, not in the pickle
+        parts.append(pickle.loads(sent).unstow(buffers, copy=not parts))
+    want = direct[0].merge(direct[1]).result()
+    got = parts[0].merge(parts[1]).result()
+    for name in ("max", "brightest", "mean", "colour_counts", "edge_tensor"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+    assert (got.n, got.edge_photos) == (want.n, want.edge_photos)

@@ -218,7 +218,11 @@ def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers:
     from ffls.io.images import read_image
     from ffls.radiance.photos import encoding_unknown
 
-    if capture.encoding != "auto" or not encoding_unknown("auto", read_image(capture.image_paths[0]).bit_depth):
+    if capture.encoding != "auto":
+        return capture, None, None
+    # (decoded: the first photo's bit depth was read there, not read again here)
+    if not (decoded.stored if decoded is not None else
+            encoding_unknown("auto", read_image(capture.image_paths[0]).bit_depth)):
         return capture, None, None
     from ffls.spheres.encoding import calibrate_capture_encoding
 

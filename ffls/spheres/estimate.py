@@ -570,6 +570,7 @@ class _DecodeContext:
     linear: np.ndarray | None
     raw: np.ndarray | None
     depth: int | str | None = None  # the bit depth every photo must have (no encoding stated), else None
+    slots: dict | None = None  # per chunk start: shared buffers its reductions are stowed in (workers)
 
 
 _decode_context: _DecodeContext | None = None
@@ -606,6 +607,8 @@ def _decode_range(bounds: tuple[int, int]):
                 top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
                 ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
         acc.add(ph.linear, i)
+    if ctx.slots is not None:  # handed over in shared memory, not through the pipe
+        acc.stow(ctx.slots[start])
     return acc, depths
 
 
@@ -662,12 +665,21 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     workers = max(1, min(int(workers), n))
     size = max(1, -(-n // DECODE_CHUNKS))  # the chunks do not depend on the workers: nor does the result
     chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
-    parts = []
+    acc = depths = None
+
+    def fold(part):  # in order: the earlier photo wins ties of the brightest
+        nonlocal acc, depths
+        if acc is None:
+            acc, depths = part
+        else:
+            acc.merge(part[0])
+            depths |= part[1]
+
     if workers == 1:
         _set_decode_context(context)
         try:
             for c in chunks:
-                parts.append(_decode_range(c))
+                fold(_decode_range(c))
                 if progress_bar is not None:
                     progress_bar.update(c[1] - c[0])
         finally:
@@ -675,16 +687,15 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     else:
         from concurrent.futures import ProcessPoolExecutor
 
+        layout = SequenceAccumulator(n_images=n).layout(shape)
+        context.slots = {c[0]: {k: _shared_array(*v) for k, v in layout.items()} for c in chunks}
         with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), initializer=_set_decode_context,
                                  initargs=(context,)) as ex:
-            for part, c in zip(ex.map(_decode_range, chunks), chunks):
-                parts.append(part)
+            for (part, d), c in zip(ex.map(_decode_range, chunks), chunks):
+                fold((part.unstow(context.slots[c[0]], copy=acc is None), d))  # (the first is merged into)
+                del context.slots[c[0]]  # (its shared memory is freed)
                 if progress_bar is not None:
                     progress_bar.update(c[1] - c[0])
-    acc, depths = parts[0]
-    for acc_k, depths_k in parts[1:]:  # in order: the earlier photo wins ties of the brightest
-        acc.merge(acc_k)
-        depths |= depths_k
     if len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
         linear = raw = None
     return DecodedPhotos(stats=acc.result(), bit_depths=depths, linear=linear, raw=raw, encoding=capture.encoding,

@@ -384,6 +384,10 @@ def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.
     return E.sum(axis=1) / (loc.shape[0] * e_ref)
 
 
+#: :func:`near_ground_bounce`'s triangulations of its nodes, by the nodes' coordinates (bytes).
+_NODE_TRIANGULATIONS: dict = {}
+
+
 def near_ground_bounce(points: np.ndarray, normals: np.ndarray, center: np.ndarray, radius: float,
                        light_position: np.ndarray, up: np.ndarray = UP, side: int = NEAR_BOUNCE_SIDE,
                        nodes: int | None = NEAR_BOUNCE_NODES) -> np.ndarray:
@@ -451,7 +455,18 @@ def near_ground_bounce(points: np.ndarray, normals: np.ndarray, center: np.ndarr
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(axis, e1)
     uv = normals @ np.stack([e1, e2], axis=1)
-    out = LinearNDInterpolator(uv[at], values)(uv)
+    # the nodes' triangulation depends on the sphere's pixels only: made once per sphere and
+    # process, not for every photo (the same Delaunay, so the same interpolation to the bit)
+    nodes_uv = np.ascontiguousarray(uv[at])
+    key = nodes_uv.tobytes()
+    tri = _NODE_TRIANGULATIONS.get(key)
+    if tri is None:
+        from scipy.spatial import Delaunay
+
+        if len(_NODE_TRIANGULATIONS) >= 64:
+            _NODE_TRIANGULATIONS.clear()
+        tri = _NODE_TRIANGULATIONS[key] = Delaunay(nodes_uv)
+    out = LinearNDInterpolator(tri, values)(uv)
     outside = ~np.isfinite(out)
     if outside.any():
         out[outside] = values[cKDTree(uv[at]).query(uv[outside])[1]]
@@ -939,12 +954,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     if bright.sum() < min_lit:
         base.status = "saturated" if n_saturated > bright.sum() else "too_dark"
         return base
-    # the per-pixel products of the design, once for the start and every iteration
-    Tb = _design_products(normals, g, y)
+    # the per-pixel products of the design, once for the start and every iteration (made here
+    # only where the start or the iterations use them: a bounce with the own shadow makes its own)
+    Tb = None
     # start from least squares on the bright pixels (I = n . v + b), from the product table
     if start is not None and np.all(np.isfinite(start)) and np.linalg.norm(start) > 0:
         v0 = np.asarray(start, dtype=np.float64)
     else:
+        Tb = _design_products(normals, g, y)
         G5, h5 = _gram(Tb, bright, np.zeros_like(bright))[:2]
         try:
             v0 = np.linalg.solve(G5[:4, :4], h5[:4])[:3]
@@ -959,6 +976,8 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         if shade:
             shadow = OwnShadow(normals, up)
             g = shadowed_ground_bounce(normals, l_g, up, g_plain, shadow)
+            Tb = _design_products(normals, g, y)
+        elif Tb is None:
             Tb = _design_products(normals, g, y)
         best, inl = _iterate(normals, y, g, ok, l_g, models, terminator, min_lit,
                              clip_sigma, rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=Tb)
