@@ -120,3 +120,14 @@ def test_too_few_photos_give_no_fall_off(samples):
     f = calibrate_flat_field(est.photos, samples, vals, LENS)
     assert np.all(f.n_photos <= 3) and not f.applied and np.all(np.isnan(f.measured))
     assert not calibrate_flat_field([], samples, [], LENS).applied
+
+
+def test_lens_centre_of_a_pinhole_and_of_an_orthographic_camera():
+    from types import SimpleNamespace
+
+    from ffls.spheres.estimate import lens_centre
+
+    pin = SimpleNamespace(K=np.array([[400.0, 0, 100.0], [0, 100.0, 50.0], [0, 0, 1]]), camera_model="pinhole")
+    assert lens_centre(pin, (120, 200)) == (100.0, 50.0, 200.0)
+    ortho = SimpleNamespace(K=None, camera_model="orthographic")
+    assert lens_centre(ortho, (300, 400)) == (199.5, 149.5, 250.0)

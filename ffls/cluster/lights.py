@@ -45,7 +45,7 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     ffls.io.capture.Lights
     """
     from ffls.io.capture import Lights, sphere_materials
-    from ffls.spheres.estimate import capture_samples, check_estimable, estimate_photos, sphere_views
+    from ffls.spheres.estimate import capture_samples, check_estimable, estimate_photos, lens_centre, sphere_views
 
     model, refine_options = check_estimable(capture, model, refine_options)
     n = len(capture.image_names)
@@ -64,8 +64,9 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     samples = capture_samples(capture, spheres, shape)
     values = runner.map(partial(photo_sphere_values, capture, samples, kwargs.get("saturation")), range(n),
                         desc="lights: photos")
+    flat = lens_centre(capture, shape) if kwargs.pop("flat_field", True) else None  # as estimate_lights
     est = estimate_photos(values, samples, capture.scene_center, bounce=bounce, refine_centres=refine_centres,
-                          refine_options=refine_options, materials=sphere_materials(capture, len(spheres)),
+                          refine_options=refine_options, flat_field=flat, materials=sphere_materials(capture, len(spheres)),
                           views=sphere_views(capture, spheres), model=model, **kwargs)
     dirs = np.array([normalize(r.direction) if np.all(np.isfinite(r.direction)) else UP for r in est.photos])
     pos = np.array([r.position if r.position is not None else np.full(3, np.nan) for r in est.photos])
