@@ -45,7 +45,7 @@ from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness, refine_view_limb
-from ffls.spheres.lambert import LambertFit, fit_lambert, flat_field_terms, shadowed_ground_bounce
+from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
 from ffls.spheres.photo import LIGHT_MODELS, SIGNIFICANCE, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
@@ -341,7 +341,8 @@ class FlatField:
 
 
 #: Rounds of the flat-field fit and first pass in :func:`_two_pass` (the fit is one Gauss-Newton
-#: step from the photos' fits: on a 7% per radius gradient the first round found 87% of it).
+#: step from the photos' fits, biased by the gradient: on a 7% per radius gradient the first
+#: step found 87% of it, the second 98%).
 FLAT_FIELD_ROUNDS = 2
 #: Fewest photos for a sphere's measured gradient (two unknowns and a covariance from their scatter).
 FLAT_FIELD_MIN_PHOTOS = 4
@@ -387,9 +388,8 @@ def _measured_gradient(results, k, s, values, up, min_photos):
                 and f.inliers is not None and f.intensity > 0):
             continue
         if offsets is None:
-            offsets = flat_field_offsets(s)
-        g = shadowed_ground_bounce(s.normals, f.direction, up, s.ground_factor(up)) if f.own_shadow else \
-            s.ground_factor(up)
+            offsets, g0, shadow = flat_field_offsets(s), s.ground_factor(up), OwnShadow(s.normals, up)
+        g = shadowed_ground_bounce(s.normals, f.direction, up, g0, shadow) if f.own_shadow else g0
         Ap, bp = flat_field_terms(s.normals, vals[k][0], f, offsets, g)
         A.append(Ap)
         b.append(bp)

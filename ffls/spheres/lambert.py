@@ -1070,16 +1070,21 @@ def flat_field_terms(normals: np.ndarray, values: np.ndarray, fit: LambertFit, o
     use = np.asarray(fit.inliers, dtype=bool)
     n = np.asarray(normals, dtype=np.float64)[use]
     nl = n @ np.asarray(fit.direction, dtype=np.float64)
-    lit = (nl > 0.0).astype(np.float64)
     a = float(fit.intensity)
-    model = np.maximum(nl, 0.0) + (fit.ambient + fit.bounce * np.asarray(g, dtype=np.float64)[use]) / a
-    r = np.asarray(values, dtype=np.float64)[use] / a - model
-    X = np.column_stack([lit[:, None] * n, np.ones_like(nl), np.asarray(g, dtype=np.float64)[use], model * nl])
-    K = model[:, None] * np.asarray(offsets, dtype=np.float64)[use]
-    # an orthonormal basis of the photo's own columns (the bounce's is collinear with the others
-    # where no shadow side is in view: dropped by its singular value)
-    U, sv = np.linalg.svd(X, full_matrices=False)[:2]
-    Q = U[:, sv > sv[0] * 1e-9]
-    Kp = K - Q @ (Q.T @ K)
-    rp = r - Q @ (Q.T @ r)
-    return Kp.T @ Kp, Kp.T @ rp
+    gu = np.asarray(g, dtype=np.float64)[use]
+    model = np.maximum(nl, 0.0) + (fit.ambient + fit.bounce * gu) / a
+    # the photo's own columns (6), the gradient's (2) and the relative residual, as one product
+    Z = np.empty((nl.size, 9))
+    Z[:, :3] = n * (nl > 0.0)[:, None]
+    Z[:, 3], Z[:, 4], Z[:, 5] = 1.0, gu, model * nl
+    Z[:, 6:8] = model[:, None] * np.asarray(offsets, dtype=np.float64)[use]
+    Z[:, 8] = np.asarray(values, dtype=np.float64)[use] / a - model
+    G = Z.T @ Z
+    # the projection off the photo's columns through their Gram matrix: a pseudo-inverse, since
+    # the bounce's column is collinear with the others where no shadow side is in view
+    w, V = np.linalg.eigh(G[:6, :6])
+    keep = w > w[-1] * 1e-12
+    P = (V[:, keep] / w[keep]) @ V[:, keep].T
+    C = G[:6, 6:9]  # X^T [K, r]
+    R = G[6:9, 6:9] - C.T @ P @ C
+    return R[:2, :2], R[:2, 2]
