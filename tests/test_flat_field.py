@@ -131,3 +131,17 @@ def test_lens_centre_of_a_pinhole_and_of_an_orthographic_camera():
     assert lens_centre(pin, (120, 200)) == (100.0, 50.0, 200.0)
     ortho = SimpleNamespace(K=None, camera_model="orthographic")
     assert lens_centre(ortho, (300, 400)) == (199.5, 149.5, 250.0)
+
+
+def test_the_disagreement_change_counts_the_photos_accepted_both_times():
+    from types import SimpleNamespace
+
+    from ffls.spheres.estimate import disagreement_change
+
+    def photo(status, chi2):
+        return SimpleNamespace(status=status, chi2=chi2)
+
+    before = [photo("ok", 10.0), photo("ok", 8.0), photo("rejected", 50.0)]
+    after = [photo("ok", 4.0), photo("rejected", 0.0), photo("ok", 1.0)]
+    assert disagreement_change(before, after) == -6.0
+    assert disagreement_change(after, before) == 6.0

@@ -67,6 +67,7 @@ __all__ = [
     "cos4_gradient",
     "lens_centre",
     "flat_field_values",
+    "disagreement_change",
     "refine_sphere_centres",
     "refit_spheres",
     "calibrate_uncertainty",
@@ -314,7 +315,8 @@ class FlatField:
         One-sided significance of a fall-off (``strength > 0``; Student's t over the photos).
     applied : bool
         ``p <`` :data:`ffls.spheres.photo.SIGNIFICANCE`: every matte sphere's values are divided
-        by its ``gradients`` before its directions are fitted.
+        by its ``gradients`` before its directions are fitted; :func:`_two_pass` then keeps the
+        division only where the spheres agree better with it (:func:`disagreement_change`).
     gradients : (k, 2) float
         Per sphere, the law's gradient across its disk (zeros where not applied, and for
         mirror spheres).
@@ -487,6 +489,17 @@ def calibrate_flat_field(results: list[PhotoEstimate], samples: list[SphereSampl
     grads = np.array([strength * cos4_gradient(s, lens) if applied and m else np.zeros(2)
                       for s, m in zip(samples, matte)]).reshape(k, 2)
     return FlatField(strength if applied else 0.0, sigma, p, applied, grads, meas, sig, count)
+
+
+def disagreement_change(before: list[PhotoEstimate], after: list[PhotoEstimate]) -> float:
+    """The change of the spheres' disagreement (the sum of the photos' chi-square of their light
+    model) over the photos accepted both before and after a change of the values.
+
+    A lens's fall-off tilts each sphere's direction its own way (toward the lens's centre), so
+    dividing it out makes the spheres agree; a gradient that is the scene's (an object's light on
+    one side of a sphere in every photo) does not. Negative: they agree better."""
+    both = [(b, a) for b, a in zip(before, after) if b.status == "ok" and a.status == "ok"]
+    return float(sum(a.chi2 for _, a in both) - sum(b.chi2 for b, _ in both))
 
 
 def flat_field_values(values: list, samples: list[SphereSamples], field: FlatField) -> list:
@@ -1119,12 +1132,17 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         up = fitter.options.get("up", UP)
         for _ in range(FLAT_FIELD_ROUNDS):
             step = calibrate_flat_field(results, samples, values, flat_field, up)
+            if step.applied:
+                corrected = flat_field_values(values, samples, step)
+                refitted = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint)
+                                                      for i, v in enumerate(corrected)], samples, counted=False)]
+                if disagreement_change(results, refitted) < 0.0:
+                    values, results = corrected, refitted
+                else:  # the spheres agree no better: the gradients were the scene's, not the lens's
+                    step = replace(step, strength=0.0, applied=False, gradients=np.zeros_like(step.gradients))
             flat = step if flat is None else _compose_flat(flat, step)
             if not step.applied:
                 break
-            values = flat_field_values(values, samples, step)
-            results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],
-                                                samples, counted=False)]
 
     def refit(indices, ratios, counted):
         tasks = [_PhotoTask(i, values=values[i], bounce_ratio=ratios, start=_starts(results[i])) for i in indices]
