@@ -344,7 +344,7 @@ class FlatField:
 
 #: Rounds of the flat-field fit and first pass in :func:`_two_pass` (the fit is one Gauss-Newton
 #: step from the photos' fits, biased by the gradient: on a 7% per radius gradient the first
-#: step found 87% of it, the second 98%).
+#: step found 87-92% of it; a second is kept only where the spheres then agree better).
 FLAT_FIELD_ROUNDS = 2
 #: Fewest photos for a sphere's measured gradient (two unknowns and a covariance from their scatter).
 FLAT_FIELD_MIN_PHOTOS = 4
