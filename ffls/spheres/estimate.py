@@ -11,7 +11,9 @@ sequence. The stages, each in its own module:
 * this module runs them over the capture in two passes (:func:`estimate_lights`, in a process
   pool, and :func:`estimate_photos`, in this process, share one driver):
 
-  1. every photo is fitted with a free ground bounce;
+  1. every photo is fitted with a free ground bounce; the lens's fall-off (vignetting) across
+     the spheres is fitted over those fits and, where significant and where the spheres then
+     agree better, divided out and the photos fitted again (:func:`calibrate_flat_field`);
   2. optionally each sphere's centre is refined from the first pass's shading
      (:func:`refine_sphere_centres`, :mod:`ffls.spheres.refine`) and the recentred spheres'
      fits are redone (:func:`refit_spheres`);
