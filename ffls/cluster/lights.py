@@ -83,7 +83,7 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     ffls.io.capture.Lights
     """
     from ffls.io.capture import Lights, sphere_materials
-    from ffls.spheres.estimate import capture_samples, check_estimable, estimate_photos, sphere_views
+    from ffls.spheres.estimate import capture_samples, check_estimable, estimate_photos, lens_centre, sphere_views
     from ffls.spheres.mirror_outline import limb_window
 
     model, refine_options = check_estimable(capture, model, refine_options)
@@ -109,9 +109,10 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
                      desc="lights: photos")
     values = [o[0] for o in out]
     limb_image = mean_window_image(shape, windows, [o[1] for o in out]) if windows else None
+    flat = lens_centre(capture, shape) if kwargs.pop("flat_field", True) else None  # as estimate_lights
     est = estimate_photos(values, samples, capture.scene_center, bounce=bounce, refine_centres=refine_centres,
-                          refine_options=refine_options, materials=materials, views=views, model=model,
-                          limb_image=limb_image, **kwargs)
+                          refine_options=refine_options, flat_field=flat, materials=materials, views=views,
+                          model=model, limb_image=limb_image, **kwargs)
     dirs = np.array([normalize(r.direction) if np.all(np.isfinite(r.direction)) else UP for r in est.photos])
     pos = np.array([r.position if r.position is not None else np.full(3, np.nan) for r in est.photos])
     return Lights(image_names=capture.image_names, directions=dirs, positions=pos,

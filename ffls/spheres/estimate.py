@@ -11,7 +11,9 @@ sequence. The stages, each in its own module:
 * this module runs them over the capture in two passes (:func:`estimate_lights`, in a process
   pool, and :func:`estimate_photos`, in this process, share one driver):
 
-  1. every photo is fitted with a free ground bounce;
+  1. every photo is fitted with a free ground bounce; the lens's fall-off (vignetting) across
+     the spheres is fitted over those fits and, where significant and where the spheres then
+     agree better, divided out and the photos fitted again (:func:`calibrate_flat_field`);
   2. optionally each sphere's centre is refined from the first pass's shading
      (:func:`refine_sphere_centres`, :mod:`ffls.spheres.refine`) and the recentred spheres'
      fits are redone (:func:`refit_spheres`);
@@ -45,8 +47,8 @@ from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness, refine_view_limb
-from ffls.spheres.lambert import fit_lambert
-from ffls.spheres.photo import LIGHT_MODELS, PhotoEstimate, SphereResult, estimate_photo
+from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
+from ffls.spheres.photo import LIGHT_MODELS, SIGNIFICANCE, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values)
@@ -61,6 +63,13 @@ __all__ = [
     "sphere_views",
     "sphere_kinds",
     "calibrate_bounce",
+    "FlatField",
+    "flat_field_offsets",
+    "calibrate_flat_field",
+    "cos4_gradient",
+    "lens_centre",
+    "flat_field_values",
+    "disagreement_change",
     "refine_sphere_centres",
     "refit_spheres",
     "calibrate_uncertainty",
@@ -113,6 +122,9 @@ class CaptureEstimate:
         ``uncertainty_deg`` are 95% cones under it.
     kinds : list of SphereKind or None
         Per sphere, its material as used and how it was decided.
+    flat_field : FlatField or None
+        The lens's fall-off across the spheres found over the photos, and divided out where
+        significant (:func:`calibrate_flat_field`; None where not fitted).
     """
 
     photos: list[PhotoEstimate]
@@ -121,6 +133,7 @@ class CaptureEstimate:
     samples: list[SphereSamples]
     error_model: ErrorModel | None = None
     kinds: list[SphereKind] | None = None
+    flat_field: FlatField | None = None
 
     def records(self) -> list[dict]:
         """Per photo, its ``lights.json`` ``extra`` (:meth:`PhotoEstimate.record`); each sphere's
@@ -130,6 +143,9 @@ class CaptureEstimate:
             for rep, kind in zip(rec["spheres"], self.kinds or []):
                 rep["kind_source"] = kind.source
                 rep["compactness"] = kind.statistic
+            if self.flat_field is not None:
+                for rep, g in zip(rec["spheres"], self.flat_field.gradients):
+                    rep["flat_field"] = [float(x) for x in g] if np.any(g != 0) else None
         return out
 
 
@@ -278,6 +294,225 @@ def calibrate_bounce(results: list[PhotoEstimate], n_spheres: int, max_sigma: fl
             continue
         out.append(_weighted_median_ratio(est, w))
     return out
+
+
+@dataclass(frozen=True)
+class FlatField:
+    """A capture's lens fall-off (vignetting) as its spheres see it (:func:`calibrate_flat_field`).
+
+    The fall-off is the ``cos^4`` law of the lens, ``V(rho) = (1 + rho^2)^(-2 strength)`` with
+    ``rho`` the distance from the lens's centre over its focal length in pixels (natural
+    vignetting is ``strength`` 1; a lens's barrel adds to it). Across a sphere's disk it is the
+    gradient ``1 + gradient . d`` (``d`` the offset from the disk's centre in apparent radii,
+    columns then rows).
+
+    Attributes
+    ----------
+    strength : float
+        The law's exponent over the natural one, fitted to the spheres' measured gradients (0
+        where not applied).
+    sigma : float
+        Its standard error.
+    p : float
+        One-sided significance of a fall-off (``strength > 0``; Student's t over the photos).
+    applied : bool
+        ``p <`` :data:`ffls.spheres.photo.SIGNIFICANCE`: every matte sphere's values are divided
+        by its ``gradients`` before its directions are fitted; :func:`_two_pass` then keeps the
+        division only where the spheres agree better with it (:func:`disagreement_change`).
+    gradients : (k, 2) float
+        Per sphere, the law's gradient across its disk (zeros where not applied, and for
+        mirror spheres).
+    measured : (k, 2) float
+        Per sphere, the gradient fitted freely over the photos (NaN with too few photos).
+    measured_sigma : (k, 2) float
+        Its standard errors, from the photos' scatter.
+    n_photos : (k,) int
+        Per sphere, the photos whose fit took part.
+    """
+
+    strength: float
+    sigma: float
+    p: float
+    applied: bool
+    gradients: np.ndarray
+    measured: np.ndarray
+    measured_sigma: np.ndarray
+    n_photos: np.ndarray
+
+    def as_dict(self) -> dict:
+        return {"model": "cos4", "strength": float(self.strength), "sigma": float(self.sigma), "p": float(self.p),
+                "applied": bool(self.applied), "gradients": np.asarray(self.gradients, dtype=float).tolist()}
+
+
+#: Rounds of the flat-field fit and first pass in :func:`_two_pass` (the fit is one Gauss-Newton
+#: step from the photos' fits, biased by the gradient: on a 7% per radius gradient the first
+#: step found 87-92% of it; a second is kept only where the spheres then agree better).
+FLAT_FIELD_ROUNDS = 2
+#: Fewest photos for a sphere's measured gradient (two unknowns and a covariance from their scatter).
+FLAT_FIELD_MIN_PHOTOS = 4
+
+
+def _compose_flat(a: FlatField, b: FlatField) -> FlatField:
+    """Two rounds' fields as one (the gradients are small: their sum)."""
+    return FlatField(a.strength + b.strength, b.sigma, min(a.p, b.p), a.applied or b.applied,
+                     a.gradients + b.gradients, a.measured, a.measured_sigma, a.n_photos)
+
+
+def flat_field_offsets(s: SphereSamples) -> np.ndarray:
+    """(m, 2) offsets of a sphere's pixels from its disk's centre (the pixels' mean), columns then
+    rows, in apparent radii."""
+    r = float(s.radius_px) if s.radius_px > 0 else 1.0
+    return np.column_stack([(s.cols - s.cols.mean()) / r, (s.rows - s.rows.mean()) / r])
+
+
+def cos4_gradient(s: SphereSamples, lens: tuple) -> np.ndarray:
+    """(2,) the relative gradient per radius of the natural ``cos^4`` fall-off across a sphere's disk.
+
+    Parameters
+    ----------
+    s : SphereSamples
+    lens : (cx, cy, f)
+        The lens's centre (pixels) and focal length (pixels).
+    """
+    cx, cy, f = (float(x) for x in lens)
+    x, y = (float(s.cols.mean()) - cx) / f, (float(s.rows.mean()) - cy) / f
+    # d ln (1 + x^2 + y^2)^-2 = -4 (x, y) / (1 + x^2 + y^2), per pixel over f, times the radius
+    return -4.0 * np.array([x, y]) / (1.0 + x * x + y * y) * float(s.radius_px) / f
+
+
+def _measured_gradient(results, k, s, values, up, min_photos):
+    """One sphere's gradient fitted freely over the photos: ``(gradient, covariance, n_photos)``."""
+    offsets, A, b = None, [], []
+    for r, vals in zip(results, values):
+        if not r.spheres or k >= len(r.spheres):
+            continue
+        sr = r.spheres[k]
+        f = sr.fit
+        if not (isinstance(f, LambertFit) and f.status == "ok" and sr.status != "shadowed"
+                and f.inliers is not None and f.intensity > 0):
+            continue
+        if offsets is None:
+            offsets, g0, shadow = flat_field_offsets(s), s.ground_factor(up), OwnShadow(s.normals, up)
+        g = shadowed_ground_bounce(s.normals, f.direction, up, g0, shadow) if f.own_shadow else g0
+        Ap, bp = flat_field_terms(s.normals, vals[k][0], f, offsets, g)
+        A.append(Ap)
+        b.append(bp)
+    n = len(A)
+    if n < max(int(min_photos), 3):
+        return np.full(2, np.nan), np.full((2, 2), np.nan), n
+    A, b = np.array(A), np.array(b)
+    try:
+        Ainv = np.linalg.inv(A.sum(axis=0))
+    except np.linalg.LinAlgError:
+        return np.full(2, np.nan), np.full((2, 2), np.nan), n
+    grad = Ainv @ b.sum(axis=0)
+    scores = b - A @ grad  # each photo's share: the photos as independent draws (the sandwich)
+    return grad, Ainv @ (scores.T @ scores * (n / (n - 1.0))) @ Ainv, n
+
+
+def lens_centre(capture, shape: tuple[int, int]) -> tuple[float, float, float]:
+    """The lens's centre and focal length in pixels, ``(cx, cy, f)``, for :func:`calibrate_flat_field`:
+    a pinhole's principal point and focal length (the geometric mean of ``fx`` and ``fy``); an
+    orthographic camera's image centre and half diagonal (its fall-off is the barrel's)."""
+    K = getattr(capture, "K", None)
+    if getattr(capture, "camera_model", "pinhole") != "orthographic" and K is not None:
+        K = np.asarray(K, dtype=np.float64)
+        return float(K[0, 2]), float(K[1, 2]), float(np.sqrt(abs(K[0, 0] * K[1, 1])))
+    H, W = int(shape[0]), int(shape[1])
+    return 0.5 * (W - 1), 0.5 * (H - 1), 0.5 * float(np.hypot(W, H))
+
+
+def calibrate_flat_field(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, lens: tuple,
+                         up: np.ndarray = UP, min_photos: int = FLAT_FIELD_MIN_PHOTOS) -> FlatField:
+    """The capture's lens fall-off, fitted over all photos' shading fits of its matte spheres.
+
+    A lens's fall-off (vignetting) is the same in every photo of a capture: across a sphere's
+    disk it is a fixed multiplicative gradient, which one photo confounds with its light (a tilt
+    of the direction of about the gradient per radius, in radians: 3.5 degrees at 7%), but many
+    photos under different lights separate, as the encoding curve shared over photos is.
+
+    1. Each sphere's gradient is fitted freely: the joint least squares of every photo's own
+       parameters and the sphere's shared gradient, with the photos' parameters eliminated
+       (:func:`ffls.spheres.lambert.flat_field_terms`: one Gauss-Newton step from the photos'
+       fits). Its covariance is the photos' sandwich: a misfit inside a photo counts once.
+    2. A lens's gradients are not free: they point to the lens's centre and grow away from it.
+       The spheres' gradients are explained by the ``cos^4`` law with one exponent, fitted by
+       generalised least squares (:func:`cos4_gradient`). A sphere's systematic misfit that is
+       no lens's (an object's interreflection on one side, in every photo) gives gradients that
+       the law does not share, and a law that brightens outward is no fall-off.
+    3. The law is applied where its exponent is a significant fall-off (one-sided,
+       p < :data:`ffls.spheres.photo.SIGNIFICANCE`): a capture without vignetting keeps its values.
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+        The photos' fits (a pass of :func:`_two_pass`).
+    samples : list of SphereSamples
+    values : list
+        Per photo, its :func:`ffls.spheres.samples.sphere_values`.
+    lens : (cx, cy, f)
+        The lens's centre and focal length in pixels (an orthographic capture: the image's centre
+        and half diagonal).
+    up : (3,) float
+        World up (the bounce's form factor).
+    min_photos : int
+        Fewer usable photos of a sphere leave it out of the law's fit.
+
+    Returns
+    -------
+    FlatField
+    """
+    from scipy.special import stdtr
+
+    k = len(samples)
+    meas, sig, count = np.full((k, 2), np.nan), np.full((k, 2), np.inf), np.zeros(k, dtype=int)
+    matte = np.zeros(k, dtype=bool)
+    num = den = 0.0
+    dof = None
+    for i, s in enumerate(samples):
+        matte[i] = any(r.spheres and i < len(r.spheres) and isinstance(r.spheres[i].fit, LambertFit) for r in results)
+        grad, cov, count[i] = _measured_gradient(results, i, s, values, up, min_photos)
+        if not np.all(np.isfinite(grad)):
+            continue
+        meas[i], sig[i] = grad, np.sqrt(np.maximum(np.diag(cov), 0.0))
+        h = cos4_gradient(s, lens)
+        try:
+            w = np.linalg.solve(cov, h)
+        except np.linalg.LinAlgError:
+            continue
+        num, den = num + float(w @ grad), den + float(w @ h)
+        dof = count[i] - 1 if dof is None else min(dof, count[i] - 1)
+    none = np.zeros((k, 2))
+    if not den > 0 or dof is None:
+        return FlatField(0.0, float("inf"), 1.0, False, none, meas, sig, count)
+    strength, sigma = num / den, den ** -0.5
+    p = float(stdtr(dof, -strength / sigma))  # one-sided: only a fall-off is a lens's
+    applied = bool(p < SIGNIFICANCE)
+    grads = np.array([strength * cos4_gradient(s, lens) if applied and m else np.zeros(2)
+                      for s, m in zip(samples, matte)]).reshape(k, 2)
+    return FlatField(strength if applied else 0.0, sigma, p, applied, grads, meas, sig, count)
+
+
+def disagreement_change(before: list[PhotoEstimate], after: list[PhotoEstimate]) -> float:
+    """The change of the spheres' disagreement (the sum of the photos' chi-square of their light
+    model) over the photos accepted both before and after a change of the values.
+
+    A lens's fall-off tilts each sphere's direction its own way (toward the lens's centre), so
+    dividing it out makes the spheres agree; a gradient that is the scene's (an object's light on
+    one side of a sphere in every photo) does not. Negative: they agree better."""
+    both = [(b, a) for b, a in zip(before, after) if b.status == "ok" and a.status == "ok"]
+    return float(sum(a.chi2 for _, a in both) - sum(b.chi2 for b, _ in both))
+
+
+def flat_field_values(values: list, samples: list[SphereSamples], field: FlatField) -> list:
+    """The photos' sphere values divided by the capture's applied flat field (:class:`FlatField`)."""
+    if not field.applied:
+        return values
+    # (the guard keeps a divisor positive: a gradient of a radius or more is no lens's)
+    div = [np.maximum(1.0 + flat_field_offsets(s) @ g, 1e-3) if np.any(g != 0) else None
+           for s, g in zip(samples, field.gradients)]
+    return [[v if d is None else SphereValues((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2])
+             for v, d in zip(vals, div)] for vals in values]
 
 
 def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
@@ -866,14 +1101,18 @@ def _check_highlights(results: list[PhotoEstimate], kinds: list[SphereKind], whe
 
 def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
-              views: list | None = None, where=None, limb_image=None) -> CaptureEstimate:
+              views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
     ``views`` (per sphere its :class:`~ffls.spheres.highlight.SphereView`) decide each sphere's
     fit; ``where`` is the path named by a capture-wide error. ``limb_image`` (the sequence's mean
     luminance), when given, places each mirror sphere's outline at its limb's step
-    (:func:`ffls.spheres.highlight.refine_view_limb`)."""
+    (:func:`ffls.spheres.highlight.refine_view_limb`). ``flat_field`` (the lens's ``(cx, cy, f)``,
+    or None: not fitted): after the first pass, the lens's fall-off is fitted over the photos
+    (:func:`calibrate_flat_field`) and, where significant, divided out of the matte spheres'
+    values and the first pass run again (at most :data:`FLAT_FIELD_ROUNDS` times: the fit is one
+    Gauss-Newton step from the photos' fits)."""
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
@@ -902,6 +1141,22 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],
                                             samples, counted=False)]
     _check_highlights(results, kinds, where)
+    flat = None
+    if flat_field is not None:  # the lens's fall-off across each sphere, shared by all photos, divided out
+        up = fitter.options.get("up", UP)
+        for _ in range(FLAT_FIELD_ROUNDS):
+            step = calibrate_flat_field(results, samples, values, flat_field, up)
+            if step.applied:
+                corrected = flat_field_values(values, samples, step)
+                refitted = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint)
+                                                      for i, v in enumerate(corrected)], samples, counted=False)]
+                if disagreement_change(results, refitted) < 0.0:
+                    values, results = corrected, refitted
+                else:  # the spheres agree no better: the gradients were the scene's, not the lens's
+                    step = replace(step, strength=0.0, applied=False, gradients=np.zeros_like(step.gradients))
+            flat = step if flat is None else _compose_flat(flat, step)
+            if not step.applied:
+                break
 
     def refit(indices, ratios, counted):
         tasks = [_PhotoTask(i, values=values[i], bounce_ratio=ratios, start=_starts(results[i])) for i in indices]
@@ -920,7 +1175,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                                                     samples, counted=False)]
     if bounce == "free":
         error_model, results = calibrate_uncertainty(results, samples, refinements)
-        return CaptureEstimate(results, None, refinements, samples, error_model, kinds)
+        return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
     if any(r is not None for r in ratios):
@@ -936,7 +1191,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                 results[i] = r
         fitter.advance(n_photos)
     error_model, results = calibrate_uncertainty(results, samples, refinements)
-    return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds)
+    return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 
 def _starts(result: PhotoEstimate) -> list:
@@ -965,6 +1220,7 @@ def _check_modes(model: str, bounce: str) -> None:
 def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np.ndarray,
                     bounce: str = "calibrated", refine_centres: bool = True, refine_options: dict | None = None,
                     materials: list | None = None, views: list | None = None, limb_image=None,
+                    flat_field: tuple | None = None,
                     **kwargs) -> CaptureEstimate:
     """The two passes of :func:`estimate_lights` on photos whose sphere values are given, in this process.
 
@@ -987,6 +1243,9 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     limb_image : (H, W) float, optional
         The sequence's mean luminance (NaN where not read), as :func:`estimate_lights` uses it: a
         mirror sphere's outline at its limb's step (:func:`ffls.spheres.highlight.refine_view_limb`).
+    flat_field : (cx, cy, f), optional
+        The lens's centre and focal length (pixels): its fall-off (vignetting) is fitted over the
+        photos and divided out where significant (:func:`calibrate_flat_field`). None: not fitted.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``model``, ``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``up``, ``mirror_floor_deg``).
@@ -998,7 +1257,8 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     _check_modes(kwargs.get("model", "auto"), bounce)
     fitter = _PhotoFitter(None, scene_center, kwargs)
     return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
-                     refine_options=refine_options, materials=materials, views=views, limb_image=limb_image)
+                     refine_options=refine_options, materials=materials, views=views, limb_image=limb_image,
+                     flat_field=flat_field)
 
 
 def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict | None]:
@@ -1035,7 +1295,8 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
 
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
-                    refine_options: dict | None = None, decoded: DecodedPhotos | None = None, **kwargs):
+                    refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
+                    flat_field: bool = True, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -1065,6 +1326,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     decoded : DecodedPhotos, optional
         The photos decoded once (:func:`decode_photos`, which the sphere detection also used):
         the first pass reads them from memory. Made here when ``spheres`` is None.
+    flat_field : bool
+        Fit the lens's fall-off (vignetting) over the photos and divide it out where significant
+        (:func:`calibrate_flat_field`, :func:`lens_centre`).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -1077,7 +1341,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         (:data:`ffls.spheres.photo.REASONS`), and per light ``extra``: ``uncertainty_deg`` (the
         radius of the 95% cone, calibrated over the capture: :func:`calibrate_uncertainty`),
         ``model``, ``used_spheres``, ``spheres`` (per-sphere ``kind``, ``kind_source`` and
-        ``compactness``, direction, residual or highlight, uncertainty,
+        ``compactness``, ``flat_field``: the gradient divided out or None, direction, residual
+        or highlight, uncertainty,
         pixel counts, ground ratio estimate and the imposed ``bounce_ratio``; with
         ``refine_centres`` also the sphere's world ``center``, ``center_shift_px`` and
         ``center_refined``).
@@ -1122,7 +1387,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         with _PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
             est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
                             refine_options=refine_options, materials=materials, views=views,
-                            where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean)
+                            where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
+                            flat_field=lens_centre(capture, shape) if flat_field else None)
     finally:
         if bar is not None:
             bar.close()

@@ -56,6 +56,7 @@ __all__ = [
     "NEAR_BOUNCE_NODES",
     "solve_normal_equations",
     "tangent_uncertainty_deg",
+    "flat_field_terms",
 ]
 
 #: Per-sphere shading models, simplest first (free bounce term).
@@ -1046,3 +1047,63 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
 
 #: The paper's per-sphere method, under its name (GUIDE: one paper per function).
 fit_lambert_MasselusDutreAnrys2002 = fit_lambert
+
+
+def flat_field_terms(normals: np.ndarray, values: np.ndarray, fit: LambertFit, offsets: np.ndarray,
+                     g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One photo's share of a sphere's flat-field gradient: the normal equations of a fixed
+    multiplicative gradient ``1 + offsets @ k`` across the sphere's disk, with this photo's own
+    parameters projected out.
+
+    A lens's fall-off (vignetting) multiplies every photo of a capture by the same smooth field;
+    across one sphere's disk it is, to first order, ``1 + k . d`` with ``d`` the pixel's offset
+    from the disk's centre in radii. In one photo it is confounded with the light (a gradient
+    across the disk tilts the fitted direction by about ``|k|`` radians: 3.5 degrees at 7% per
+    radius); over many photos and lights it is not. The joint least squares of the per-photo
+    parameters and the shared ``k`` is solved by eliminating the per-photo ones (the Schur
+    complement): here, the gradient's columns ``m d`` (``m`` the fitted model, since the field
+    multiplies all of it) and the residual, both relative to the fitted intensity, are projected
+    off the photo's own columns ``[n . l > 0] n`` (direction and intensity), ``1`` (ambient),
+    ``g`` (bounce) and ``m (n . l)`` (a near light's inverse-square fall-off across the sphere,
+    whose distance is the photo's own: a near light is not taken for a lens's gradient).
+
+    Parameters
+    ----------
+    normals : (m, 3) float
+    values : (m,) float
+        The photo's linear values of the sphere's pixels.
+    fit : LambertFit
+        The sphere's fit in this photo (``status == 'ok'``); its ``inliers`` are used.
+    offsets : (m, 2) float
+        The pixels' offsets from the disk's centre (columns, rows), in apparent radii.
+    g : (m,) float
+        The bounce's form factor of the fit (with its own shadow taken out where it was).
+
+    Returns
+    -------
+    A : (2, 2) float
+        ``Kp^T Kp`` of the projected gradient columns ``Kp``.
+    b : (2,) float
+        ``Kp^T rp`` of the projected relative residual ``rp``.
+    """
+    use = np.asarray(fit.inliers, dtype=bool)
+    n = np.asarray(normals, dtype=np.float64)[use]
+    nl = n @ np.asarray(fit.direction, dtype=np.float64)
+    a = float(fit.intensity)
+    gu = np.asarray(g, dtype=np.float64)[use]
+    model = np.maximum(nl, 0.0) + (fit.ambient + fit.bounce * gu) / a
+    # the photo's own columns (6), the gradient's (2) and the relative residual, as one product
+    Z = np.empty((nl.size, 9))
+    Z[:, :3] = n * (nl > 0.0)[:, None]
+    Z[:, 3], Z[:, 4], Z[:, 5] = 1.0, gu, model * nl
+    Z[:, 6:8] = model[:, None] * np.asarray(offsets, dtype=np.float64)[use]
+    Z[:, 8] = np.asarray(values, dtype=np.float64)[use] / a - model
+    G = Z.T @ Z
+    # the projection off the photo's columns through their Gram matrix: a pseudo-inverse, since
+    # the bounce's column is collinear with the others where no shadow side is in view
+    w, V = np.linalg.eigh(G[:6, :6])
+    keep = w > w[-1] * 1e-12
+    P = (V[:, keep] / w[keep]) @ V[:, keep].T
+    C = G[:6, 6:9]  # X^T [K, r]
+    R = G[6:9, 6:9] - C.T @ P @ C
+    return R[:2, :2], R[:2, 2]
