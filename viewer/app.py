@@ -73,8 +73,8 @@ def check_window_size(ctx, size, flag: str = "--size") -> None:
     limit, key = framebuffer_limit(ctx)
     w, h = (int(v) for v in size)
     if w > limit or h > limit:
-        raise InputError(f"{flag}: a {w}x{h} framebuffer is beyond this OpenGL context's limit of {limit} pixels a side "
-                         f"({key}; ffls info lists the limits)")
+        raise InputError(f"{flag}: a {w}x{h} framebuffer is beyond this OpenGL context's limit of {limit} pixels "
+                         f"a side ({key}; ffls info lists the limits)")
 
 
 class ViewerApp:

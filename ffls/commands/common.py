@@ -862,7 +862,8 @@ def check_display_flags(args, out) -> None:
     if still and getattr(args, "fps", None) is not None:
         raise InputError("--fps applies to a --turntable video; a still has no frame rate")
     if still and Path(out).suffix.lower() == ".exr":
-        given = [f for f, k in (("--exposure", "exposure"), ("--tonemap", "tonemap")) if getattr(args, k, None) is not None]
+        given = [f for f, k in (("--exposure", "exposure"), ("--tonemap", "tonemap"))
+                 if getattr(args, k, None) is not None]
         if given:
             raise InputError(f"{' and '.join(given)} shape{'s' if len(given) == 1 else ''} the tone-mapped PNG; "
                              f"{Path(out).name} is written linear (write a .png, or leave "
