@@ -159,6 +159,9 @@ def ws(tmp_path_factory):
     write_png(root / "surf.png", sm)
     write_png(root / "surf_empty.png", np.zeros((24, 24), np.uint8))
     write_png(root / "mask_small.png", np.full((20, 20), 255, np.uint8))
+    write_png(root / "mask_empty.png", np.zeros((24, 24), np.uint8))
+    w["cap_copy"] = copy("cap_copy")  # the object capture copied: composite's --surface must not be it
+    (root / "shot.exr").mkdir()  # a screenshot's sibling HDR path taken by a folder
     c = root / "few_cam"
     shutil.copytree(few, c)
     doc = json.loads((c / "capture.json").read_text())
@@ -436,6 +439,42 @@ CASES = [
      "--wall-albedo", "s"),
     ("render-missing-capture", ["render", "{root}/nocap", "--probe", "sky", "--cpu", "-o", "{out}/a.png"],
      "nocap", "a.png"),
+]
+
+
+# Found by the round-7 tester (briefs s7/fixview): each exited 0, left a partial output, hung, or
+# printed a traceback before.
+_M = ["--mask", "{root}/mask.png", "--surface-mask", "{root}/surf.png"]
+CASES += [
+    ("view-size-0", ["view", "{cap}", "--headless", "--frames", "1", "--size", "0x0"], "--size", ""),
+    ("view-auto-rotate-nan", ["view", "{cap}", "--headless", "--frames", "1", "--auto-rotate", "nan"],
+     "--auto-rotate", ""),
+    ("view-auto-rotate-inf", ["view", "{cap}", "--headless", "--frames", "1", "--auto-rotate", "inf"],
+     "--auto-rotate", ""),
+    ("view-auto-rotate-1e300", ["view", "{cap}", "--headless", "--frames", "1", "--auto-rotate", "1e300"],
+     "--auto-rotate", ""),
+    ("view-screenshot-sibling-folder", ["view", "{cap}", "--headless", "--frames", "1", "--screenshot",
+                                        "{root}/shot.png"], "shot.exr", ""),
+    ("view-headless-no-frames", ["view", "{cap}", "--headless", "--screenshot", "{out}/c.png"], "--frames", "c.png"),
+    ("view-headless-fullscreen", ["view", "{cap}", "--headless", "--frames", "1", "--fullscreen"], "--fullscreen",
+     ""),
+    ("view-light-and-probe", ["view", "{cap}", "--headless", "--frames", "1", "--light", "10,45", "--probe",
+                              "studio"], "--light", ""),
+    ("relight-mask-all-black", L + ["--mask", "{root}/mask_empty.png", "--exposure", "auto", "-o", "{out}/b.png"],
+     "mask_empty.png", "b.png"),
+    ("render-mask-all-black", R + ["--mask", "{root}/mask_empty.png", "--exposure", "auto", "-o", "{out}/b.png"],
+     "mask_empty.png", "b.png"),
+    ("comp-mask-all-black", C + ["--mask", "{root}/mask_empty.png", "--surface-mask", "{root}/surf.png", "-o",
+                             "{out}/c.png"], "mask_empty.png", "c.png"),
+    ("comp-surface-same-folder", ["composite", "--object", "{cap}", "--surface", "{cap}", *C[5:], *_M, "-o",
+                                  "{out}/c.png"], "--surface", "c.png"),
+    ("comp-surface-copy", ["composite", "--object", "{cap}", "--surface", "{cap_copy}", *C[5:], *_M, "-o",
+                           "{out}/c.png"], "--surface", "c.png"),
+    ("relight-exr-exposure", L + ["--exposure", "3", "--tonemap", "aces", "-o", "{out}/e.exr"], "--exposure", "e.exr"),
+    ("relight-exr-tonemap", L + ["--tonemap", "aces", "-o", "{out}/e.exr"], "--tonemap", "e.exr"),
+    ("render-exr-exposure-auto", R + ["--exposure", "auto", "-o", "{out}/e.exr"], "--exposure", "e.exr"),
+    ("render-still-fps", R + ["--fps", "24", "-o", "{out}/p.png"], "--fps", "p.png"),
+    ("comp-still-fps", C + [*_M, "--fps", "5", "-o", "{out}/o.png"], "--fps", "o.png"),
 ]
 
 

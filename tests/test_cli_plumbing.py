@@ -206,3 +206,16 @@ def test_view_rank_out_of_range_is_one_line_before_any_window(cap, capsys):
     rc = main(["view", str(cap), "--headless", "--frames", "1", "--rank", "9"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and err[-1] == "ffls view: error: --rank 9 is out of range: it must be in [1, 7] for 8 lights"
+
+
+def test_render_light_summary_reports_the_rotated_light(cap, tmp_path, capsys):
+    """--rotate turns --light as it turns a map (docs/weighting.md): the image is that of the turned
+    light, and the summary says so (it said the unturned 'light az 10 el 45')."""
+    turned, direct = tmp_path / "t.png", tmp_path / "d.png"
+    assert main(["render", str(cap), "--light", "10,45", "--rotate", "90,0,0", "--cpu", "-o", str(turned)]) == 0
+    text = capsys.readouterr().out
+    assert "light az 100 el 45 (--light 10,45 turned by --rotate/--rotate-z)" in text, text
+    assert main(["render", str(cap), "--light", "100,45", "--cpu", "-o", str(direct)]) == 0
+    text = capsys.readouterr().out
+    assert "light az 100 el 45," in text and "turned" not in text, text
+    np.testing.assert_array_equal(read_image(turned).pixels, read_image(direct).pixels)

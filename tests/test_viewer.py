@@ -486,3 +486,39 @@ def test_auto_method_is_full_on_a_gpu_and_compressed_on_llvmpipe():
     assert resolve_method("auto", "NVIDIA H100 80GB HBM3/PCIe/SSE2") == "full f16"
     assert resolve_method("full f32", "llvmpipe") == "full f32"
     assert resolve_method("compressed", "NVIDIA H100") == "compressed"
+
+
+@pytest.mark.viewer
+def test_cli_size_beyond_the_gl_limits_is_one_line(capture_dir, app, tmp_path, capfd):
+    """A window beyond GL_MAX_TEXTURE_SIZE / RENDERBUFFER / VIEWPORT (queried) is refused naming
+    --size, before a frame or a screenshot (it was a moderngl traceback, 'framebuffer is not complete')."""
+    from ffls.cli import main
+
+    info = app.ctx.info
+    limit = min(int(info["GL_MAX_TEXTURE_SIZE"]), int(info["GL_MAX_RENDERBUFFER_SIZE"]),
+                *(int(v) for v in info["GL_MAX_VIEWPORT_DIMS"]))
+    out = tmp_path / "d.png"
+    capfd.readouterr()
+    rc = main(["view", str(capture_dir), "--headless", "--frames", "2", "--size", f"{limit + 1}x10",
+               "--screenshot", str(out)])
+    err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and "--size" in err[0] and f"limit of {limit} pixels" in err[0], err
+    assert not out.exists() and not out.with_suffix(".exr").exists()
+    app.step(dt=0.0)  # the module's window still works
+    assert app.ctx.error == "GL_NO_ERROR"
+
+
+@pytest.mark.viewer
+def test_cli_empty_mask_is_one_line(capture_dir, app, tmp_path, capfd):
+    """An all-black --mask (no object) is refused naming the file, as relight and render refuse it."""
+    from ffls.cli import main
+    from ffls.io.images import write_png
+
+    empty = tmp_path / "empty.png"
+    write_png(empty, np.zeros((64, 64), np.uint8))
+    capfd.readouterr()
+    rc = main(["view", str(capture_dir), "--headless", "--frames", "1", "--size", "320x200", "--mask", str(empty)])
+    err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and "empty.png" in err[0] and "empty" in err[0], err
+    app.step(dt=0.0)
+    assert app.ctx.error == "GL_NO_ERROR"

@@ -24,7 +24,7 @@ from ffls.errors import GLUnavailable, InputError
 from viewer import headless as platforms
 from viewer.state import ViewerState
 
-__all__ = ["ViewerApp", "open_capture", "CLEAR_COLOUR"]
+__all__ = ["ViewerApp", "open_capture", "CLEAR_COLOUR", "framebuffer_limit", "check_window_size"]
 
 #: The window's background (RGBA), around the relit image and under the control panel.
 CLEAR_COLOUR = (0.09, 0.09, 0.1, 1.0)
@@ -36,6 +36,45 @@ def open_capture(folder, lights=None, lights_map=None):
     from ffls.io.capture import load_capture_and_lights
 
     return load_capture_and_lights(folder, lights, lights_map)
+
+
+def framebuffer_limit(ctx) -> tuple[int, str]:
+    """The largest width and height of a framebuffer that ``ctx`` can draw and read, and the limit that sets it.
+
+    The window's default framebuffer is read through a texture of its size (:meth:`ViewerApp.read_window`,
+    the control panel's cache), drawn through a viewport of its size, and may be a renderbuffer:
+    the smallest of ``GL_MAX_TEXTURE_SIZE``, ``GL_MAX_RENDERBUFFER_SIZE`` and ``GL_MAX_VIEWPORT_DIMS``
+    (queried from the context; 16384 each on llvmpipe).
+
+    Returns
+    -------
+    (int, str)
+        The limit in pixels and the name of the GL limit that gave it.
+    """
+    info = ctx.info
+    limits = {}
+    for key in ("GL_MAX_TEXTURE_SIZE", "GL_MAX_RENDERBUFFER_SIZE", "GL_MAX_VIEWPORT_DIMS"):
+        v = info.get(key)
+        if v:
+            limits[key] = int(min(v)) if isinstance(v, (tuple, list)) else int(v)
+    if not limits:
+        return 2 ** 31 - 1, "none reported"
+    key = min(limits, key=limits.get)
+    return limits[key], key
+
+
+def check_window_size(ctx, size, flag: str = "--size") -> None:
+    """Refuse a framebuffer ``size`` (W, H) beyond :func:`framebuffer_limit` of ``ctx``, in one line naming ``flag``.
+
+    Raises
+    ------
+    ffls.errors.InputError
+    """
+    limit, key = framebuffer_limit(ctx)
+    w, h = (int(v) for v in size)
+    if w > limit or h > limit:
+        raise InputError(f"{flag}: a {w}x{h} framebuffer is beyond this OpenGL context's limit of {limit} pixels "
+                         f"a side ({key}; ffls info lists the limits)")
 
 
 class ViewerApp:
@@ -128,6 +167,7 @@ class ViewerApp:
                 self.ctx = moderngl.create_context(require=430, context=DefaultLoader())
             except Exception as e:  # moderngl raises plain Exception
                 raise GLUnavailable(f"the window's context is not OpenGL 4.3: {e}") from None
+            check_window_size(self.ctx, glfw.get_framebuffer_size(self.window))
             mask = load_mask(capture, mask_path, size=self._image_size(capture))
             reason = "" if mask is not None else "this capture has no object mask"
             self.renderer = Renderer(self.ctx, capture, lights, mask=mask, mask_reason=reason, composite=composite,

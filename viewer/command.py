@@ -26,31 +26,36 @@ DESCRIPTION = (
 def add_arguments(p):
     from ffls.commands.common import (CELLS_RES, FRAMES, add_light_argument, add_lights_arguments,
                                       add_quality_arguments, add_rotation_arguments, add_weighting_argument,
-                                      exposure_arg, input_path, output_path)
+                                      exposure_arg, input_path, number, output_path)
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     add_lights_arguments(p)
     add_weighting_argument(p)
     add_light_argument(p)
-    p.add_argument("--probe", default="courtyard", metavar="MAP",
-                   help="light map: a file (.exr/.hdr) or a built-in name (default courtyard)")
+    p.add_argument("--probe", default=None, metavar="MAP",
+                   help="light map: a file (.exr/.hdr) or a built-in name (default courtyard; excludes --light)")
     add_rotation_arguments(p, default="0,0,0")
-    p.add_argument("--auto-rotate", type=float, default=None, metavar="DEG_PER_S",
+    p.add_argument("--auto-rotate", type=number(-1e6, 1e6, unit="degrees per second"), default=None,
+                   metavar="DEG_PER_S",
                    help="start auto-rotating the yaw at this speed")
     p.add_argument("--exposure", type=exposure_arg, default="auto", metavar="EV|auto",
                    help="exposure in stops (default auto: the first frame metered on the object, the --mask when "
                         "given)")
     p.add_argument("--tonemap", default="aces", choices=("srgb", "reinhard", "aces"))
-    p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in screen coordinates")
+    p.add_argument("--size", type=_size_type, default="1280x800", metavar="WxH",
+                   help="window size in screen coordinates (at most the OpenGL context's texture, renderbuffer "
+                        "and viewport limits; ffls info lists them)")
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
                         "(default: full on a GPU, rank min(7, n-1) on a CPU rasteriser such as llvmpipe)")
     p.add_argument("--mask", default=None, metavar="FILE", type=input_path,
                    help="object mask image (white = object): enables hiding the background")
-    p.add_argument("--fullscreen", action="store_true", help="start fullscreen on the primary monitor")
+    p.add_argument("--fullscreen", action="store_true",
+                   help="start fullscreen on the primary monitor (needs a display: refused with --headless)")
     p.add_argument("--headless", action="store_true",
-                   help="glfw's null platform with EGL (automatic when no display is set)")
-    p.add_argument("--frames", type=FRAMES, default=None, metavar="N", help="run N frames and exit")
+                   help="glfw's null platform with EGL (automatic when no display is set); needs --frames N")
+    p.add_argument("--frames", type=FRAMES, default=None, metavar="N",
+                   help="run N frames and exit (needed on the null platform, where nothing can close the window)")
     p.add_argument("--screenshot", type=output_path((".png",)), default=None, metavar="OUT.png",
                    help="after the last frame save the window (PNG) and the relit HDR (OUT.exr)")
     c = p.add_argument_group("composite mode (docs/composite.md)")
@@ -69,6 +74,19 @@ def add_arguments(p):
     add_quality_arguments(p, precision_default=None, fps_flags=("--fps", "--target-fps"), cells_res=CELLS_RES)
 
 
+def _size_type(text: str) -> tuple[int, int]:
+    """argparse type of ``--size``: ``WxH``, both positive (the OpenGL limits are checked once the
+    window's context exists: :class:`viewer.app.ViewerApp`)."""
+    import argparse
+
+    from viewer.state import parse_size
+
+    try:
+        return parse_size(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def build_state(args):
     """The initial :class:`viewer.state.ViewerState` from the parsed arguments."""
     from ffls.commands.common import rotation_angles
@@ -76,11 +94,11 @@ def build_state(args):
     from viewer.state import ViewerState, parse_size
 
     try:
-        size = parse_size(args.size)
+        size = tuple(args.size) if isinstance(args.size, tuple) else parse_size(args.size)
     except ValueError as e:
-        raise InputError(str(e)) from None
+        raise InputError(f"--size: {e}") from None
     yaw, pitch, roll = rotation_angles(args)
-    st = ViewerState(yaw=yaw, pitch=pitch, roll=roll, tonemap=args.tonemap, lightmap=args.probe,
+    st = ViewerState(yaw=yaw, pitch=pitch, roll=roll, tonemap=args.tonemap, lightmap=args.probe or "courtyard",
                      window_size=size, fullscreen=bool(args.fullscreen))
     if args.exposure != "auto":
         st.exposure = float(args.exposure)
@@ -182,6 +200,7 @@ def composite_inputs(args, capture):
                               ("--mask", args.mask)) if v is None]
     if missing:
         raise InputError(f"--composite-surface needs {' and '.join(missing)}")
+    from ffls.commands.common import check_mask_not_empty
     from ffls.io.images import read_image, read_mask
     from ffls.relight.composite import check_same_camera
     from viewer.app import open_capture
@@ -195,10 +214,41 @@ def composite_inputs(args, capture):
         raise InputError(f"the background is {bg.pixels.shape[1]}x{bg.pixels.shape[0]}, the captures' photos "
                          f"{size[0]}x{size[1]}", args.background)
     om = read_mask(args.mask, size=size)
+    check_mask_not_empty(om, args.mask)
     sm = read_mask(args.surface_mask, size=size)
     if not ((sm > 0.5) & (om < 0.5)).any():
         raise InputError("the surface mask has no surface pixel outside the object's mask", args.surface_mask)
     return CompositeInputs(scap, slights, bg.pixels, om, sm)
+
+
+def check_window_args(args) -> None:
+    """Refuse flags that the chosen window platform or each other make meaningless, and check the
+    outputs of ``--screenshot`` (the PNG and its sibling ``.exr``) before anything is written.
+
+    * the null platform (``--headless``, or no display) without ``--frames N``: nobody can close
+      its window, so the command would never end;
+    * ``--fullscreen`` on the null platform: there is no monitor;
+    * ``--light`` with ``--probe``: light mode relights with one light, not the map (as ``render``).
+
+    Raises
+    ------
+    ffls.errors.InputError, ffls.errors.OutputError
+    """
+    from pathlib import Path
+
+    from ffls.errors import InputError, check_output_path
+    from viewer.headless import choose_platform
+
+    null = choose_platform(True if args.headless else None) == "null"
+    why = "--headless" if args.headless else "no DISPLAY or WAYLAND_DISPLAY: the null platform"
+    if null and args.frames is None:
+        raise InputError(f"{why} needs --frames N: nothing can close its window")
+    if null and args.fullscreen:
+        raise InputError(f"--fullscreen needs a display ({why} has no monitor)")
+    if getattr(args, "light", None) is not None and args.probe is not None:
+        raise InputError("--probe and --light exclude each other: give one")
+    if args.screenshot is not None:
+        check_output_path(Path(args.screenshot).with_suffix(".exr"))
 
 
 def run(args) -> int:
@@ -209,6 +259,7 @@ def run(args) -> int:
         raise InputError(f"--frames must be >= 1, not {args.frames}")
     if args.benchmark and args.frames is None:
         raise InputError("--benchmark needs --frames N")
+    check_window_args(args)
     st = build_state(args)
     capture, lights = open_capture(args.capture, args.lights, getattr(args, "lights_map", None))
     _check_and_report(args, capture, lights)

@@ -59,7 +59,8 @@ def load_mask(capture, path=None, size=None) -> np.ndarray | None:
         An explicit mask image: white (> 0.5 after reading, any channel) is the object
         (:func:`ffls.io.images.read_mask`).
     size : (int, int), optional
-        Expected (W, H); a mask of another size raises :class:`ffls.errors.InputError`.
+        Expected (W, H); a mask of another size raises :class:`ffls.errors.InputError`, and so
+        does an empty one (no object pixel: the background could only be hidden entirely).
     """
     from ffls.io.images import read_mask
 
@@ -68,7 +69,12 @@ def load_mask(capture, path=None, size=None) -> np.ndarray | None:
         if not rel:
             return None
         path = Path(capture.folder) / str(rel)
-    return read_mask(path, size=size) > 0.5
+    mask = read_mask(path, size=size) > 0.5
+    if not mask.any():
+        from ffls.errors import InputError
+
+        raise InputError("the mask is empty (no object pixel: white = object)", path)
+    return mask
 
 
 def resolve_method(method: str, renderer: str) -> str:

@@ -59,6 +59,8 @@ __all__ = [
     "add_mask_argument",
     "load_relight_inputs",
     "check_mask_size",
+    "check_mask_not_empty",
+    "check_display_flags",
     "write_output",
     "MAP_RES",
     "BASIS_SUBSET",
@@ -633,6 +635,7 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
     mask = None
     if getattr(args, "mask", None):
         mask = read_mask(args.mask, size=capture.image_size)
+        check_mask_not_empty(mask, args.mask)
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
     notes.append(None if lm is None or not lm.colour_note else f"colour: light map: {lm.colour_note}")
     if len(idx):
@@ -819,6 +822,52 @@ def check_mask_size(mask, shape, flag: str = "--mask") -> None:
 
         raise InputError(f"{flag}: the mask is {mask.shape[1]}x{mask.shape[0]}, the relit image "
                          f"{shape[1]}x{shape[0]}")
+
+
+def check_mask_not_empty(mask, path, flag: str = "--mask", what: str = "object") -> None:
+    """Refuse a mask with no ``what`` pixel (none above 0.5, the threshold every mask user applies:
+    :func:`viewer.renderer.load_mask`, the composite's surface mask).
+
+    An all-black mask would give an output with alpha 0 everywhere (and nothing to meter for
+    ``--exposure auto``): a wrong file, not a request.
+
+    Raises
+    ------
+    ffls.errors.InputError
+        One line naming ``flag`` and the file.
+    """
+    import numpy as np
+
+    if mask is not None and not np.any(np.asarray(mask) > 0.5):
+        from ffls.errors import InputError
+
+        raise InputError(f"{flag} is empty: no {what} pixel (white = {what})", path)
+
+
+def check_display_flags(args, out) -> None:
+    """Refuse ``--exposure`` / ``--tonemap`` given with a linear ``.exr`` still (they shape only the
+    tone-mapped PNG or video: the EXR is written linear), and ``--fps`` without ``--turntable``.
+
+    The commands give these flags ``default=None`` so that a flag given is told from one left out.
+
+    Raises
+    ------
+    ffls.errors.InputError
+    """
+    from pathlib import Path
+
+    from ffls.errors import InputError
+
+    still = getattr(args, "turntable", None) is None
+    if still and getattr(args, "fps", None) is not None:
+        raise InputError("--fps applies to a --turntable video; a still has no frame rate")
+    if still and Path(out).suffix.lower() == ".exr":
+        given = [f for f, k in (("--exposure", "exposure"), ("--tonemap", "tonemap"))
+                 if getattr(args, k, None) is not None]
+        if given:
+            raise InputError(f"{' and '.join(given)} shape{'s' if len(given) == 1 else ''} the tone-mapped PNG; "
+                             f"{Path(out).name} is written linear (write a .png, or leave "
+                             f"{'it' if len(given) == 1 else 'them'} out)")
 
 
 def negative_pixels_note(hdr, out) -> str:

@@ -94,7 +94,8 @@ def add_arguments(p):
                    help="cell-texture resolution, 16 to 4096 (default 256)")
     o.add_argument("--turntable", type=FRAMES, default=None, metavar="N",
                    help="write N frames rotating the scene's map 360 degrees about +Z: -o OUT.mp4 or a folder")
-    o.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
+    o.add_argument("--fps", type=FPS, default=None,
+                   help="frames per second of the --turntable video, 0.1 to 1000 (default 30; refused for a still)")
     o.add_argument("-o", "--out", required=True, type=output_path((".exr", ".png", ".mp4"), folder_ok=True),
                    help="OUT.exr or OUT.png (both are written, and OUT.json), or .mp4 / DIR/ with --turntable")
 
@@ -118,6 +119,46 @@ def _image_size(capture) -> tuple[int, int]:
     return w, h
 
 
+def check_distinct_captures(object_capture, surface_capture) -> None:
+    """Refuse ``--surface`` naming the object capture: the same folder, the same photo files, or a copy.
+
+    Differential rendering subtracts the relit surface from the relit object; the same capture
+    twice makes the difference zero and the composite is the background with the object pasted
+    over it, no shadow: a mistake, never a request.
+
+    Raises
+    ------
+    ffls.errors.InputError
+    """
+    import os
+
+    from ffls.errors import InputError
+
+    def identity(p):
+        try:
+            st = os.stat(p)
+        except OSError:
+            return None
+        return st.st_dev, st.st_ino
+
+    folder = Path(surface_capture.folder)
+    if identity(folder) is not None and identity(folder) == identity(object_capture.folder):
+        raise InputError("--surface is the --object capture: give the capture of the surface alone", folder)
+    photos = {identity(p) for p in object_capture.image_paths} - {None}
+    shared = [p for p in surface_capture.image_paths if identity(p) in photos]
+    if shared:
+        raise InputError(f"--surface shares {len(shared)} photo file(s) with --object ({Path(shared[0]).name}, ...): "
+                         "give the capture of the surface alone", folder)
+    # a copy of the object capture: its first photo is byte for byte the object's (two real
+    # photographs, even of one scene, never are: sensor noise)
+    import filecmp
+
+    first = surface_capture.image_paths[:1] + object_capture.image_paths[:1]
+    if len(first) == 2 and all(Path(p).is_file() for p in first) and filecmp.cmp(*first, shallow=False):
+        raise InputError(f"--surface's photo {Path(first[0]).name} is byte for byte --object's {Path(first[1]).name}: "
+                         "a copy of the object capture? give the capture of the surface alone", folder)
+
+
 def load_inputs(args):
     """The two captures and lights, light map, background and masks of ``args``, checked before any relighting.
 
@@ -127,7 +168,7 @@ def load_inputs(args):
         ``object``, ``surface`` ((capture, lights) each), ``lightmap``, ``background`` (H, W, 3),
         ``object_mask``, ``surface_mask`` ((H, W) float32), ``notes`` (informational lines).
     """
-    from ffls.commands.common import check_cells_res, check_rank_arg
+    from ffls.commands.common import check_cells_res, check_mask_not_empty, check_rank_arg
     from ffls.errors import InputError
     from ffls.io.capture import load_capture_and_lights
     from ffls.io.images import colour_summary, read_image, read_mask
@@ -147,6 +188,7 @@ def load_inputs(args):
         notes += [li.note, colour_summary([cap.image_paths[i] for i in idx])]
         notes += [f"{key}: {w}" for w in coverage_warnings(dirs, cap.hemisphere)] if len(idx) else []
     (ocap, _), (scap, _) = fields["object"], fields["surface"]
+    check_distinct_captures(ocap, scap)
     check_same_camera(ocap, scap, Path(scap.folder) / "capture.json")
     size = _image_size(ocap)
     ssize = _image_size(scap)
@@ -169,6 +211,7 @@ def load_inputs(args):
     if getattr(bg, "colour_note", None):
         notes.append(f"colour: background: {bg.colour_note}")
     om = read_mask(args.mask, size=size)
+    check_mask_not_empty(om, args.mask)
     sm = read_mask(args.surface_mask, size=size)
     if not ((sm > 0.5) & (om < 0.5)).any():
         raise InputError("the surface mask has no surface pixel outside the object's mask (white = surface)",
@@ -226,7 +269,9 @@ def run(args) -> int:
     if args.flow is not None and args.sources == "weights":
         raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
                          "no flow")
-    args.flow = args.flow or "dis"
+    if args.turntable is None and args.fps is not None:
+        raise InputError("--fps applies to a --turntable video; a still has no frame rate")
+    args.flow, args.fps = args.flow or "dis", args.fps or 30.0
     R0 = rotation_from_args(args)
     inputs = load_inputs(args)
     files = _siblings(out) if args.turntable is None else None  # after the inputs are known: none is replaced

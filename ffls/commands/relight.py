@@ -5,7 +5,8 @@ from pathlib import Path
 
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument,
                                   add_quality_arguments, add_rotation_arguments, add_scale_arguments,
-                                  add_weighting_argument, check_mask_size, exposure_arg, learnt_kernel, load_relight_inputs,
+                                  add_weighting_argument, check_display_flags, check_mask_size, exposure_arg,
+                                  learnt_kernel, load_relight_inputs,
                                   open_streamed_from_args, output_path, resolve_quality, rotation_from_args,
                                   negative_pixels_note, print_notes, write_output)
 
@@ -22,10 +23,12 @@ OUTPUT_SUFFIXES = (".exr", ".png")
 def add_arguments(p):
     add_capture_arguments(p)
     add_rotation_arguments(p)
-    p.add_argument("--exposure", type=exposure_arg, default=0.0, metavar="EV|auto",
-                   help="exposure in stops for PNG output; auto meters the object (the --mask when given)")
+    p.add_argument("--exposure", type=exposure_arg, default=None, metavar="EV|auto",
+                   help="exposure in stops of PNG output (default 0; refused with .exr output, which is linear); "
+                        "auto meters the object (the --mask when given)")
     add_mask_argument(p)
-    p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve for PNG output")
+    p.add_argument("--tonemap", default=None, choices=("srgb", "reinhard", "aces"),
+                   help="tone curve of PNG output (default srgb; refused with .exr output, which is linear)")
     p.add_argument("--cells-res", type=CELLS_RES_OR_EXACT, default=256,
                    help="cell-texture resolution, 16 to 4096, or 0 for the exact k-d tree (default 256)")
     add_weighting_argument(p)
@@ -42,6 +45,9 @@ def run(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(OUTPUT_SUFFIXES)}", out)
+    check_display_flags(args, out)
+    args.exposure = 0.0 if args.exposure is None else args.exposure
+    args.tonemap = args.tonemap or "srgb"
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME)
     R = rotation_from_args(args)
     copies = 2 if out.suffix.lower() == ".exr" and mask is None else 4  # the result, the writer's copy, the tone map's

@@ -15,7 +15,8 @@ import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
                                   add_mask_argument, add_quality_arguments, add_rotation_arguments,
-                                  add_scale_arguments, add_weighting_argument, check_gpu_pass1, check_mask_size,
+                                  add_scale_arguments, add_weighting_argument, check_display_flags, check_gpu_pass1,
+                                  check_mask_size,
                                   exposure_arg, flush_notes, learnt_kernel, light_vector, load_relight_inputs,
                                   open_streamed_from_args, output_path, quality_from_args, resolve_quality,
                                   negative_pixels_note, print_notes, rotation_from_args, write_output)
@@ -38,10 +39,12 @@ def add_arguments(p):
     add_light_argument(p)
     add_weighting_argument(p)
     add_rotation_arguments(p)
-    p.add_argument("--exposure", type=exposure_arg, default=0.0, metavar="EV|auto",
-                   help="exposure in stops (PNG/video); auto meters the object (the --mask when given)")
+    p.add_argument("--exposure", type=exposure_arg, default=None, metavar="EV|auto",
+                   help="exposure in stops of a PNG or video (default 0; refused with an .exr still, which is "
+                        "linear); auto meters the object (the --mask when given)")
     add_mask_argument(p)
-    p.add_argument("--tonemap", default="srgb", choices=("srgb", "reinhard", "aces"), help="tone curve (PNG/video)")
+    p.add_argument("--tonemap", default=None, choices=("srgb", "reinhard", "aces"),
+                   help="tone curve of a PNG or video (default srgb; refused with an .exr still)")
     p.add_argument("--rank", type=RANK, default=None, metavar="K",
                    help="use a compressed basis of K eigen-images, 1 <= K <= n-1 for n lights (computed once, "
                         "saved in the capture folder)")
@@ -50,7 +53,8 @@ def add_arguments(p):
                         "coarse for the lights is refused) or a smooth scheme's weight texture (default 512)")
     p.add_argument("--turntable", type=FRAMES, default=None, metavar="N",
                    help="write N frames over 360 degrees about +Z: -o OUT.mp4 or a folder of PNGs")
-    p.add_argument("--fps", type=FPS, default=30.0, help="frames per second of the turntable video (0.1 to 1000)")
+    p.add_argument("--fps", type=FPS, default=None,
+                   help="frames per second of the --turntable video, 0.1 to 1000 (default 30; refused for a still)")
     p.add_argument("--cpu", action="store_true", help="use the CPU reference path instead of the GPU")
     add_quality_arguments(p, precision_default="float16")
     add_scale_arguments(p)
@@ -157,6 +161,20 @@ def single_light_weights(r, args, R) -> np.ndarray:
     return np.repeat(w[:, None], 3, axis=1)
 
 
+def light_summary(light, R) -> str:
+    """``light az A el E`` of ``--light AZ,EL`` as relit: rotated by ``R`` (``--rotate``/``--rotate-z``
+    turn the light as they turn a map; docs/weighting.md), with the given value when they moved it."""
+    import math
+
+    d = R @ light_vector(light)
+    az = math.degrees(math.atan2(d[1], d[0])) if math.hypot(d[0], d[1]) > 1e-12 else 0.0
+    el = math.degrees(math.asin(max(-1.0, min(1.0, float(d[2])))))
+    text = f"light az {az:.4g} el {el:.4g}"
+    if not np.allclose(R, np.eye(3)):
+        text += f" (--light {light[0]:g},{light[1]:g} turned by --rotate/--rotate-z)"
+    return text
+
+
 def _apply(r, args, R) -> None:
     """Set the frame's rotation (light map) or its single light's weights (``--light``)."""
     if args.light is None:
@@ -196,6 +214,9 @@ def run(args) -> int:
     out = Path(args.out)
     if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
+    check_display_flags(args, out)
+    args.exposure = 0.0 if args.exposure is None else args.exposure
+    args.tonemap, args.fps = args.tonemap or "srgb", args.fps or 30.0
     R0 = rotation_from_args(args)
     if (args.light is None) == (args.probe is None):
         raise InputError("give either --probe MAP or --light AZ,EL" if args.light is None
@@ -226,7 +247,7 @@ def run(args) -> int:
         info = getattr(r, "basis_info", {})
         path = "cpu reference" if args.cpu else f"gpu {info.get('dtype', '')}"
         rank = info.get("rank") if not args.cpu else getattr(getattr(r, "compressed", None), "rank", None)
-        what_light = (f"light az {args.light[0]:g} el {args.light[1]:g}, " if args.light is not None else "")
+        what_light = "" if args.light is None else f"{light_summary(args.light, R0)}, "
         if learnt_kernel(r):
             print(f"ffls render: {learnt_kernel(r)}")
         print(f"ffls render: {what} ({path}, {r.n_lights} lights{'' if rank is None else f', rank {rank}'}, "
