@@ -101,3 +101,17 @@ def test_source_fill_only_where_the_source_is_hidden():
     out = f.source_image(img, sun, [0, 1, 2], basis)
     assert np.all(out[~here] == 0)
     np.testing.assert_allclose(out[here], 1.0, rtol=1e-9)
+    # the same through an interpolator (as FlowInterpolator.image_from): called with the visible
+    # triangle and weights summing to 1, its image scaled as the plain blend's weights
+    calls = []
+
+    def blend(idx, w):
+        calls.append((np.asarray(idx), np.asarray(w)))
+        return np.einsum("k,khwc->hwc", w, basis[idx])
+
+    out2 = f.source_image(img, sun, [0, 1, 2], basis, interpolate=blend)
+    np.testing.assert_allclose(out2, out, rtol=1e-9)
+    assert calls and all(abs(w.sum() - 1) < 1e-12 for _, w in calls)
+    hid = hidden_photos(g, [(0.0, 0.0, 0.1)], 0.1, directions=d, dilate_px=0).reshape(80, -1)
+    for idx, _ in calls:  # the photos it blends see the pixels it fills
+        assert not np.any(hid[np.ix_(idx, np.flatnonzero(here.ravel()))].all(axis=1))

@@ -499,7 +499,14 @@ class FlowInterpolator:
 
     def image(self, direction) -> np.ndarray:
         """The photo under a unit-power light from ``direction``: ``(H, W, 3)`` float32 (see the module notes)."""
-        idx, w = self.weights(direction)
+        return self.image_from(*self.weights(direction))
+
+    def image_from(self, idx, w) -> np.ndarray:
+        """The flow-warped blend of photos ``idx`` (k,) with weights ``w`` (k,) summing to 1: ``(H, W, 3)`` float32.
+
+        :meth:`image` with the lights and weights given (e.g. a triangle of the photos that see a
+        pixel, :class:`ffls.relight.sphere_shadows.SphereShadowFill`).
+        """
         out = np.zeros(self.basis.shape[1:], dtype=np.float32)
         for v, bv in zip(idx, w):
             disp = np.zeros(out.shape[:2] + (2,), dtype=np.float32)
@@ -870,7 +877,8 @@ def _sources_image(fi: FlowInterpolator, sources, fill=None) -> np.ndarray:
             if ok:
                 img = fi.image(d)
                 if fill is not None:
-                    img = fill.source_image(img, d, fi.weights(d)[0], fi.basis).astype(np.float32)
+                    img = fill.source_image(img, d, fi.weights(d)[0], fi.basis,
+                                            interpolate=getattr(fi, "image_from", None)).astype(np.float32)
                 out += img * p.astype(np.float32)
     return out
 

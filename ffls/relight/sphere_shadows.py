@@ -288,7 +288,7 @@ class SphereShadowFill:
             flat[pix] += np.einsum("kc,kqc->qc", delta, B[photos][:, pix].astype(np.float64))
         return out
 
-    def source_image(self, image, direction, triangle, basis) -> np.ndarray:
+    def source_image(self, image, direction, triangle, basis, interpolate=None) -> np.ndarray:
         """A compact source's unit-power image with the fill where its triangle's photos are hidden.
 
         Parameters
@@ -299,6 +299,10 @@ class SphereShadowFill:
         triangle : (k,) int
             The photos it was interpolated from.
         basis : (n, H, W, 3) float array
+        interpolate : callable, optional
+            ``interpolate(idx, w) -> (H, W, 3)``: the photos ``idx`` blended with weights ``w`` summing
+            to 1 (:meth:`ffls.relight.lightflow.FlowInterpolator.image_from`: warped by their flow, so
+            that the visible triangle's shadows move to ``direction``); the plain blend otherwise.
 
         Returns
         -------
@@ -316,6 +320,7 @@ class SphereShadowFill:
         d = d / np.linalg.norm(d)
         tri_set = np.asarray(triangle, dtype=np.int64)
         here = self.hidden_for(d[0])
+        cache: dict = {}
         here = None if here is None else here.ravel()
         for hid, pix, tri in self.groups:
             if tri is None:
@@ -327,6 +332,16 @@ class SphereShadowFill:
             elif not np.isin(tri_set, hid).any():
                 continue
             idx, b = self._redistribution(d, tri)
-            flat[pix] = np.einsum("k,kqc->qc", b[0], B[idx[0]][:, pix].astype(np.float64))
+            if interpolate is None:
+                flat[pix] = np.einsum("k,kqc->qc", b[0], B[idx[0]][:, pix].astype(np.float64))
+                continue
+            order = np.argsort(idx[0])
+            key = tuple(int(v) for v in idx[0][order])
+            total = float(b[0].sum())
+            if key not in cache:
+                keep = b[0][order] > 0
+                cache[key] = np.asarray(interpolate(np.asarray(key)[keep], b[0][order][keep] / total),
+                                        dtype=np.float64).reshape(-1, 3)
+            flat[pix] = total * cache[key][pix]
         return out
 
