@@ -32,11 +32,15 @@ radius) and the change error split there (``source_shadows``).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
         [--res 128] [--spp 16] [--truth-spp 1024] [--map-spp 256] [--cache DIR] [--schemes voronoi,...]
-        [--sources weights,lightflow,levelset]
+        [--sources weights,lightflow,levelset] [--fill none,rest,all]
 
 ``--sources lightflow`` relights the map's compact sources by flow interpolation between the
 (path-traced, noisy) basis photos, ``--sources levelset`` by moving the basis photos' cast shadows
 (:class:`ffls.relight.lightflow.LightFlowRelighter`, ``interpolation='flow'`` or ``'levelset'``).
+``--fill rest`` fills the calibration spheres' shadows in both captures
+(:class:`ffls.relight.sphere_shadows.SphereShadowFill`, from the spheres' centres and radius, the
+ground and the camera): a photo's weight at a pixel it sees through a sphere goes to the photos that
+see the pixel; ``--fill all`` also fills the compact sources' photos where they are hidden.
 
 Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/composite_mitsuba.json``.
 """
@@ -59,6 +63,7 @@ from ffls.lightmaps.lightmap import load_lightmap
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import CpuRelighter
 from ffls.relight.lightflow import LightFlowRelighter
+from ffls.relight.sphere_shadows import SphereShadowFill, ground_points
 from ffls.synth.scene import stratified_directions
 
 CAPTURE_ALBEDO, SCENE_ALBEDO = 0.3, 0.5
@@ -241,6 +246,9 @@ def main():
     ap.add_argument("--sources", default="weights,lightflow",
                     help="how compact sources are relit: weights (every texel weighted), lightflow (photos warped by "
                          "their flow), levelset (cast shadows moved by their signed distances; ffls.relight.lightflow)")
+    ap.add_argument("--fill", default="none",
+                    help="the calibration spheres' shadows filled (ffls.relight.sphere_shadows) in both captures, "
+                         "with --sources lightflow/levelset: none, rest (the rest's weights), all (and the sources)")
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite_mitsuba")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite_mitsuba.json"))
     a = ap.parse_args()
@@ -258,10 +266,16 @@ def main():
     grow = max(2, int(round(0.02 * R)))
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
-    caps = {}
+    caps, fills = {}, {}
+    K, M = _camera(R)
+    ground = ground_points(K, M, (R, R))
+    ground[~sm_b] = np.nan  # the ground the camera sees: neither the object nor a sphere
+    centres = [(x, y, 0.05) for x, y in SPHERES]
     for n in (int(v) for v in a.lights.split(",")):
         caps[n] = (render_capture(mi, cache / f"object_{R}_{n}_{a.spp}", n, 0, True, R, a.spp),
                    render_capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
+        fills[n] = tuple(SphereShadowFill.from_geometry(ground, centres, 0.05, lights.directions)
+                         for _, lights in caps[n])
         print(f"captures of {n} lights ready ({time.perf_counter() - t0:.0f} s)", flush=True)
     rows = []
     for name in a.maps.split(","):
@@ -269,14 +283,18 @@ def main():
         change = change_region(tr, bg, sm_b, om_b)
         ring = near_sph & sm_b & ~change
         rest = sm_b & ~change & ~near_sph
-        for n, ((oc, ol), (sc_, sl)), scheme, sources in ((n, c, sch, src) for n, c in caps.items()
-                                                         for sch in a.schemes.split(",")
-                                                         for src in a.sources.split(",")):
+        for n, ((oc, ol), (sc_, sl)), scheme, sources, fill in (
+                (n, c, sch, src, f) for n, c in caps.items() for sch in a.schemes.split(",")
+                for src in a.sources.split(",") for f in a.fill.split(",")):
+            if fill != "none" and sources == "weights":
+                continue
             o = CpuRelighter.from_capture(oc, ol, precision="f64", cell_max_res=4096, weighting=scheme)
             s = CpuRelighter.from_capture(sc_, sl, precision="f64", cell_max_res=4096, weighting=scheme)
             if sources in ("lightflow", "levelset"):
                 kind = "flow" if sources == "lightflow" else "levelset"
-                o, s = LightFlowRelighter(o, interpolation=kind), LightFlowRelighter(s, interpolation=kind)
+                fo, fs = fills[n] if fill != "none" else (None, None)
+                o = LightFlowRelighter(o, interpolation=kind, fill=fo, fill_sources=fill == "all")
+                s = LightFlowRelighter(s, interpolation=kind, fill=fs, fill_sources=fill == "all")
             for r in (o, s):
                 r.set_lightmap(lm)
                 r.render()
@@ -303,7 +321,8 @@ def main():
                 def trace(x, m):
                     return float(np.abs(x - bg)[m].sum() / max(bg[m].sum(), 1e-30)) if m.any() else float("nan")
 
-                rows.append({"map": name, "lights": n, "scheme": scheme, "sources": sources, "method": method,
+                rows.append({"map": name, "lights": n, "scheme": scheme, "sources": sources, "fill": fill,
+                             "method": method,
                              "change": rel(c, change), "paste": rel(paste, change),
                              "overall": rel(c, np.ones_like(change)), "object": rel(c, om_b),
                              "sphere_trace": float((np.abs(c - bg)[ring] @ LUMINANCE).mean()
@@ -325,7 +344,7 @@ def main():
                      "error_share_in": float(np.abs(c - tr)[change & h].sum() / total),
                      "trace": trace(c, h & ~change & ~near_sph)} for src, h in hard]
                 x = rows[-1]
-                print(f"{name:10s} {n:4d} {scheme:12s} {sources:9s} {method:12s} change {100 * x['change']:5.1f}%  "
+                print(f"{name:10s} {n:4d} {scheme:12s} {sources:9s} fill {fill:4s} {method:12s} change {100 * x['change']:5.1f}%  "
                       f"paste {100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
                       f"{100 * x['object']:4.1f}%  sphere trace {100 * x['sphere_trace']:4.1f}%  shadow trace "
                       f"{100 * x['shadow_trace']:4.1f}% ({x['shadow_pixels']} px, lit {100 * x['lit_trace']:4.1f}%)  "

@@ -499,7 +499,14 @@ class FlowInterpolator:
 
     def image(self, direction) -> np.ndarray:
         """The photo under a unit-power light from ``direction``: ``(H, W, 3)`` float32 (see the module notes)."""
-        idx, w = self.weights(direction)
+        return self.image_from(*self.weights(direction))
+
+    def image_from(self, idx, w) -> np.ndarray:
+        """The flow-warped blend of photos ``idx`` (k,) with weights ``w`` (k,) summing to 1: ``(H, W, 3)`` float32.
+
+        :meth:`image` with the lights and weights given (e.g. a triangle of the photos that see a
+        pixel, :class:`ffls.relight.sphere_shadows.SphereShadowFill`).
+        """
         out = np.zeros(self.basis.shape[1:], dtype=np.float32)
         for v, bv in zip(idx, w):
             disp = np.zeros(out.shape[:2] + (2,), dtype=np.float32)
@@ -855,18 +862,24 @@ def relight_lightflow(basis, directions, lightmap, rotation=None, hemisphere="up
     return img, split
 
 
-def _sources_image(fi: FlowInterpolator, sources) -> np.ndarray:
+def _sources_image(fi: FlowInterpolator, sources, fill=None) -> np.ndarray:
     """Sum of the sources' samples, each its power times its interpolated photo.
 
     A sample outside the hemisphere (a source straddling the horizon) adds nothing, as the
-    weighting drops the texels there.
+    weighting drops the texels there. With ``fill`` (:class:`ffls.relight.sphere_shadows.SphereShadowFill`)
+    a sample's photo is, where one of its triangle's photos has the pixel in a calibration sphere's
+    shadow, the blend of the photos that see it.
     """
     out = np.zeros(fi.basis.shape[1:], dtype=np.float32)
     for s in sources:
         inside = in_domain(np.asarray(s.sample_directions, dtype=np.float64), fi.hemisphere)
         for d, p, ok in zip(s.sample_directions, s.sample_powers, inside):
             if ok:
-                out += fi.image(d) * p.astype(np.float32)
+                img = fi.image(d)
+                if fill is not None:
+                    img = fill.source_image(img, d, fi.weights(d)[0], fi.basis,
+                                            interpolate=getattr(fi, "image_from", None)).astype(np.float32)
+                out += img * p.astype(np.float32)
     return out
 
 
@@ -887,10 +900,17 @@ class LightFlowRelighter:
     interpolation : {'flow', 'levelset'}
         :class:`FlowInterpolator` (the photos warped by their flow) or :class:`LevelSetInterpolator`
         (the cast shadows moved by their signed distances, warped by the distances' flow).
+    fill : ffls.relight.sphere_shadows.SphereShadowFill, optional
+        The calibration spheres' shadows to fill: where a photo has a pixel in one, the rest's
+        weight of that photo there goes to the photos that see the pixel.
+    fill_sources : bool
+        Also fill a compact source's photo where the source itself would be hidden by a sphere
+        (the visible photos' blend at its direction, tens of degrees away: measured worse on the
+        Mitsuba benchmark, docs/composite.md, so off by default).
     """
 
     def __init__(self, inner, *, flow: str = "dis", split_options: dict | None = None,
-                 interpolation: str = "flow"):
+                 interpolation: str = "flow", fill=None, fill_sources: bool = False):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, not {interpolation!r}")
         self.inner = inner
@@ -898,6 +918,8 @@ class LightFlowRelighter:
         self.interpolation = interpolation
         self.interpolator = cls(inner.basis, inner.directions, inner.hemisphere, flow=flow)
         self.split_options = dict(split_options or {})
+        self.fill = fill
+        self.fill_sources = bool(fill_sources)
         self._lightmap = None
         self._rotation = np.eye(3)
         self._hdr = None
@@ -938,8 +960,10 @@ class LightFlowRelighter:
             self.inner.set_rotation(self._rotation)
             self.inner.render()
             img = self.inner.read_hdr()
+            if self.fill is not None:
+                img = self.fill.relight(img, self.inner.read_weights(), self.inner.basis)
             if split.sources:
-                img = img + _sources_image(self.interpolator, split.sources)
+                img = img + _sources_image(self.interpolator, split.sources, self.fill if self.fill_sources else None)
             self._hdr = img.astype(np.float32)
             self.last_split = split
             self._display = None
