@@ -1329,6 +1329,7 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         raise EncodingCalibrationError(
             f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})"
             + ("" if poly_excess is None else " and no polynomial curve fits better"))
+    naming = "bic"
     if name == "polynomial" and code_step is not None:
         # as below: a simpler curve that decodes every stored value within half a code of the
         # polynomial is the same curve as far as the file can tell
@@ -1337,9 +1338,7 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         gap, closest = min((float(np.max(np.abs(_decode(x, c) - fx))), n)
                            for c, n in ((best, "gamma"), (1.0, "linear"), ("srgb", "srgb")))
         if gap <= 0.5 * code_step:
-            name = closest
-    naming = "bic"
-    values, counts = _shown_values(used)
+            name, naming = closest, "half_code"
     if name == "gamma" and code_step is not None:
         # a named curve that decodes every stored value within half a code of the best gamma is the
         # same curve as far as the file can tell (the BIC is blind to a misfit the model shares)
@@ -1361,6 +1360,7 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
                                for c, n in ((1.0, "linear"), ("srgb", "srgb")))
             if gap <= _shading_bend(used, best):
                 name, naming = closest, "shown_codes"
+    values, _ = _shown_values(used)
     return EncodingCalibration(
         curve=name, gamma=best, uncertainty=unc, sd_curvature=sd_curv, sd_bootstrap=sd_boot,
         srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
