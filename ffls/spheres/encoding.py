@@ -54,7 +54,15 @@ second candidate, scored the same way, and a polynomial tone curve a third ("Ton
   can leave a linear file a few hundredths of a code value from gamma 1 yet "significantly" off:
   so when the free gamma wins but the linear or sRGB curve decodes every stored value within half
   a code value of it (``code_step``: 1/255 for 8-bit files), that curve is named, since the file
-  cannot tell them apart.
+  cannot tell them apart. The shading model sees a curve only up to a scale and an offset, and
+  only over the codes the lit sides show: when the named curve is, over each pair's codes, the
+  best gamma's closest affine map to within the bend the pairs' shading shows beyond the model
+  anyway (:func:`_shading_bend`, the median change a ``(n . l)^2`` column makes; the median pair's
+  gap, :func:`_affine_gap`), it is named too (``naming`` ``'shown_codes'``): an sRGB file exposed so
+  that its lit sides hold codes 0.44-0.91 only is gamma 2.275 there within 0.11 code, and a bend
+  the spheres share decides the BIC. For sRGB the dark sides are then asked
+  (:func:`calibrate_encoding_gamma`): they show the toe, where sRGB and a gamma differ, and the
+  gamma is named when they reject sRGB (``'dark_sides'``); its value and interval are the lit sides'.
 
 Tone curves. A camera's JPEG is rarely a pure gamma or the sRGB curve: its tone curve has a toe
 (shadows darkened) and a shoulder (highlights rolled off), an S in the logarithm, and a gamma fitted
