@@ -153,7 +153,8 @@ from ffls.conventions import UP, tangent_basis
 from ffls.errors import InputError
 from ffls.io.capture import CALIBRATED_RESPONSE, CAPTURE_FILE
 from ffls.io.images import read_image
-from ffls.io.response import POLYNOMIAL_MIN_SLOPE, polynomial_response, polynomial_response_table
+from ffls.io.response import (POLYNOMIAL_MIN_SLOPE, polynomial_response, polynomial_response_partials,
+                              polynomial_response_table)
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 from ffls.spheres.combine import fit_ray_convergence
 from ffls.spheres.lambert import shadowed_ground_bounce
@@ -519,22 +520,9 @@ class _SharedValues:
 
     def evaluate_partials(self, theta) -> "_SharedValues":
         """``partials``: the polynomial response ``f`` of coefficients ``theta`` on the shared values,
-        its slope ``f'`` and their derivatives in ``theta`` ((P, U) each; :func:`ffls.io.response.polynomial_response`:
-        ``d f / d g = f ln x``, ``d f / d a_j = f (x^j - 1)``, and for ``f' = (f / x)(g + D)``,
-        ``D = sum_j j a_j x^j``, the same factors plus ``f / x`` and ``(f / x) j x^j``)."""
-        theta = np.asarray(theta, dtype=np.float64)
-        x, lx = self.values, self.log_values
-        f, d = polynomial_response(x, theta, derivative=True)
-        g = theta[0]
-        powers = [x ** j for j in range(1, len(theta))]
-        poly = sum((a * (xj - 1.0) for a, xj in zip(theta[1:], powers)), np.zeros_like(x))
-        D = sum((j * a * xj for j, (a, xj) in enumerate(zip(theta[1:], powers), start=1)), np.zeros_like(x))
-        base = np.exp((g - 1.0) * lx + poly)  # f / x (as polynomial_response computes it)
-        fx = np.where(x > 0, f, 0.0)
-        df = np.stack([fx * lx] + [fx * (xj - 1.0) for xj in powers])
-        dd = np.stack([base * lx * (g + D) + base]
-                      + [base * ((xj - 1.0) * (g + D) + j * xj) for j, xj in enumerate(powers, start=1)])
-        self.partials = (f, d, df, dd)
+        its slope ``f'`` and their derivatives in ``theta`` ((P, U) each;
+        :func:`ffls.io.response.polynomial_response_partials`)."""
+        self.partials = polynomial_response_partials(self.values, theta)
         return self
 
     def evaluate(self, curves) -> "_SharedValues":
