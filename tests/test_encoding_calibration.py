@@ -2,6 +2,7 @@
 import json
 import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -439,8 +440,6 @@ def _exposed_capture(tag):
     """Stored values and normals of the four spheres of a ``bench_conditions`` capture exposed 3x
     (``ffls synth --format png8 --unstated-encoding --exposure 3``, 384 px; every third photo,
     every second pixel): ``c02`` sRGB, ``c04`` gamma 2.2. Their lit sides show codes 0.44-0.91 only."""
-    from pathlib import Path
-
     data = np.load(Path(__file__).parent / "data" / "encoding_exposed_srgb_gamma22.npz")
     raw = [data[f"{tag}_raw_{k}"] for k in range(4)]
     return ([[raw[k][p] / 255.0 for k in range(4)] for p in range(len(raw[0]))],
