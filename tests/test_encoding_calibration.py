@@ -2,6 +2,7 @@
 import json
 import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -433,3 +434,30 @@ def test_cli_lights_reads_each_photo_once(linear_captures, tmp_path, monkeypatch
     names = json.loads((folder / "capture.json").read_text())["images"]
     assert set(reads) == set(names)
     assert all(reads[n] == 1 for n in names[1:]), reads
+
+
+def _exposed_capture(tag):
+    """Stored values and normals of the four spheres of a ``bench_conditions`` capture exposed 3x
+    (``ffls synth --format png8 --unstated-encoding --exposure 3``, 384 px; every third photo,
+    every second pixel): ``c02`` sRGB, ``c04`` gamma 2.2. Their lit sides show codes 0.44-0.91 only."""
+    data = np.load(Path(__file__).parent / "data" / "encoding_exposed_srgb_gamma22.npz")
+    raw = [data[f"{tag}_raw_{k}"] for k in range(4)]
+    return ([[raw[k][p] / 255.0 for k in range(4)] for p in range(len(raw[0]))],
+            [data[f"{tag}_normals_{k}"].astype(np.float64) for k in range(4)])
+
+
+def test_srgb_named_where_the_lit_codes_cannot_tell_it_from_a_gamma():
+    """On codes 0.44-0.91 the sRGB curve is gamma 2.28 up to a scale and an offset (what each pair's
+    light and ambient term absorb) within 0.1 code, less than the pairs' shading bends beyond the
+    model: the BIC's preference for the free gamma there is the model's misfit, and sRGB is named
+    (the dark sides, which show the toe, agree). A gamma-2.2 file exposed alike is still a gamma."""
+    cal = calibrate_encoding(*_exposed_capture("c02"), code_step=1 / 255)
+    assert cal.srgb_excess > cal.bic_penalty  # the BIC alone names the gamma
+    assert cal.curve == "srgb" and cal.naming == "shown_codes"
+    assert 0.4 < cal.shown_codes[0] < 0.5 and 0.85 < cal.shown_codes[1] < 0.95
+    assert cal.dark_srgb_excess is not None and cal.dark_srgb_excess < cal.dark_bic_penalty
+    assert "cannot tell it from the best gamma" in cal.summary() and "dark sides agree" in cal.summary()
+    rec = cal.record()
+    assert rec["naming"] == "shown_codes" and len(rec["shown_codes"]) == 2 and "dark_srgb_excess" in rec
+    g22 = calibrate_encoding(*_exposed_capture("c04"), code_step=1 / 255)
+    assert g22.curve == "gamma" and g22.naming == "bic" and g22.dark_srgb_excess is None

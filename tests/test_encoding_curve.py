@@ -8,7 +8,7 @@ from ffls.cli import main
 from ffls.io import capture as cap
 from ffls.errors import InputError
 from ffls.io.images import ImageData
-from ffls.io.response import polynomial_response, polynomial_response_table
+from ffls.io.response import polynomial_response, polynomial_response_partials, polynomial_response_table
 from ffls.radiance.photos import linearise
 from ffls.radiance.encoding import gamma_encode, srgb_encode
 from ffls.spheres.encoding import EncodingCalibrationError, calibrate_encoding
@@ -183,3 +183,22 @@ def test_synth_filmic_stated_needs_eight_bits(tmp_path, capsys):
     assert main(["synth", str(tmp_path / "x"), "--format", "png16", "--encoding", "filmic", "--lights", "4"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--unstated-encoding" in err
+
+
+def test_polynomial_response_partials_match_finite_differences():
+    """The response, its slope and their coefficient derivatives from one evaluation: the same values
+    as polynomial_response, and derivatives equal to central differences of it."""
+    x = np.concatenate([[0.0], np.linspace(0.01, 1.0, 60)])
+    theta = np.array([2.1, 0.4, -0.3, 0.2])
+    f, d, df, dd = polynomial_response_partials(x, theta)
+    f_ref, d_ref = polynomial_response(x, theta, derivative=True)
+    assert np.array_equal(f, f_ref) and np.array_equal(d, d_ref)
+    assert df.shape == dd.shape == (4, len(x))
+    h = 1e-6
+    for i in range(4):
+        e = np.zeros(4)
+        e[i] = h
+        fp, dp = polynomial_response(x, theta + e, derivative=True)
+        fm, dm = polynomial_response(x, theta - e, derivative=True)
+        assert np.allclose(df[i], (fp - fm) / (2 * h), rtol=1e-6, atol=1e-8)
+        assert np.allclose(dd[i][1:], ((dp - dm) / (2 * h))[1:], rtol=1e-6, atol=1e-8)

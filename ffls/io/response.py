@@ -18,8 +18,8 @@ import numpy as np
 
 from ffls.errors import InputError, atomic_output
 
-__all__ = ["save_response", "load_response", "polynomial_response", "polynomial_response_table",
-           "POLYNOMIAL_MIN_SLOPE"]
+__all__ = ["save_response", "load_response", "polynomial_response", "polynomial_response_partials",
+           "polynomial_response_table", "POLYNOMIAL_MIN_SLOPE"]
 
 #: Least local log-log slope ``d ln f / d ln x`` of a polynomial response over (0, 1]: the curve is
 #: strictly increasing (a camera's response is monotone, Mitsunaga & Nayar 1999), and no range of
@@ -69,6 +69,43 @@ def polynomial_response(x, coefficients, derivative: bool = False):
     if not derivative:
         return f
     return f, base * (c[0] + dpoly)
+
+
+def polynomial_response_partials(x, coefficients) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`polynomial_response` ``f`` and its slope ``f'`` at ``x``, with their derivatives in
+    the coefficients, from one evaluation (what a fit of the coefficients needs for its gradient).
+
+    With ``D = sum_j j a_j x^j`` (so ``f' = (f / x)(g + D)``): ``d f / d g = f ln x``,
+    ``d f / d a_j = f (x^j - 1)``, ``d f' / d g = (f / x)(ln x (g + D) + 1)`` and
+    ``d f' / d a_j = (f / x)((x^j - 1)(g + D) + j x^j)``. At ``x = 0`` ``f`` and its partials are 0.
+
+    Parameters
+    ----------
+    x : (U,) array_like
+        Stored values normalised to [0, 1].
+    coefficients : sequence of float
+        ``(g, a_1, ..., a_K)``.
+
+    Returns
+    -------
+    f, df : (U,) float64 ndarray
+        :func:`polynomial_response` with ``derivative=True``.
+    f_partials, df_partials : (K + 1, U) float64 ndarray
+        ``d f / d c`` and ``d f' / d c`` for each coefficient ``c``.
+    """
+    c = np.asarray(coefficients, dtype=np.float64).ravel()
+    f, d = polynomial_response(x, c, derivative=True)
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, None)
+    lx = np.log(np.maximum(x, _TINY))
+    powers = [x ** j for j in range(1, c.size)]
+    poly = sum((a * (xj - 1.0) for a, xj in zip(c[1:], powers)), np.zeros_like(x))
+    slope = c[0] + sum((j * a * xj for j, (a, xj) in enumerate(zip(c[1:], powers), start=1)), np.zeros_like(x))
+    base = np.exp((c[0] - 1.0) * lx + poly)  # f / x
+    f0 = np.where(x > 0, f, 0.0)
+    df = np.stack([f0 * lx] + [f0 * (xj - 1.0) for xj in powers])
+    dd = np.stack([base * (lx * slope + 1.0)]
+                  + [base * ((xj - 1.0) * slope + j * xj) for j, xj in enumerate(powers, start=1)])
+    return f, d, df, dd
 
 
 def polynomial_response_table(coefficients, bits: int = 8) -> np.ndarray:

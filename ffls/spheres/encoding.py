@@ -54,7 +54,15 @@ second candidate, scored the same way, and a polynomial tone curve a third ("Ton
   can leave a linear file a few hundredths of a code value from gamma 1 yet "significantly" off:
   so when the free gamma wins but the linear or sRGB curve decodes every stored value within half
   a code value of it (``code_step``: 1/255 for 8-bit files), that curve is named, since the file
-  cannot tell them apart.
+  cannot tell them apart. The shading model sees a curve only up to a scale and an offset, and
+  only over the codes the lit sides show: when the named curve is, over each pair's codes, the
+  best gamma's closest affine map to within the bend the pairs' shading shows beyond the model
+  anyway (:func:`_shading_bend`, the median change a ``(n . l)^2`` column makes; the median pair's
+  gap, :func:`_affine_gap`), it is named too (``naming`` ``'shown_codes'``): an sRGB file exposed so
+  that its lit sides hold codes 0.44-0.91 only is gamma 2.275 there within 0.11 code, and a bend
+  the spheres share decides the BIC. For sRGB the dark sides are then asked
+  (:func:`calibrate_encoding_gamma`): they show the toe, where sRGB and a gamma differ, and the
+  gamma is named when they reject sRGB (``'dark_sides'``); its value and interval are the lit sides'.
 
 Tone curves. A camera's JPEG is rarely a pure gamma or the sRGB curve: its tone curve has a toe
 (shadows darkened) and a shoulder (highlights rolled off), an S in the logarithm, and a gamma fitted
@@ -145,7 +153,8 @@ from ffls.conventions import UP, tangent_basis
 from ffls.errors import InputError
 from ffls.io.capture import CALIBRATED_RESPONSE, CAPTURE_FILE
 from ffls.io.images import read_image
-from ffls.io.response import POLYNOMIAL_MIN_SLOPE, polynomial_response, polynomial_response_table
+from ffls.io.response import (POLYNOMIAL_MIN_SLOPE, polynomial_response, polynomial_response_partials,
+                              polynomial_response_table)
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 from ffls.spheres.combine import fit_ray_convergence
 from ffls.spheres.lambert import shadowed_ground_bounce
@@ -232,6 +241,19 @@ class EncodingCalibration:
         Whether the polynomial's coefficients were fitted on the lit and the attached-shadow sides
         with the slope bound (module docstring, "The shadow side and the offset"); its order and the
         naming are the lit sides'.
+    naming : {'bic', 'half_code', 'shown_codes', 'dark_sides'}
+        What named the curve (module docstring, "Naming"): the BIC; a named curve within half a code
+        value of the best gamma at every stored value; a named curve that the lit sides' codes
+        cannot tell from the best gamma (up to a scale and an offset, within the shading's own bend
+        along ``n . l``); or the dark sides, asked when the lit sides could not tell sRGB from the
+        gamma and rejecting sRGB.
+    shown_codes : (2,) float
+        The lowest and highest stored value the lit sides' selected pixels show (any channel).
+    dark_srgb_excess, dark_bic_penalty : float or None
+        The sRGB curve's excess and the free gamma's penalty on the lit and dark sides together,
+        when the dark sides were asked (``naming`` ``'shown_codes'`` with sRGB, or ``'dark_sides'``).
+    n_dark_units : int
+        (photo, sphere) pairs that showed their dark side to that run (0: not asked, or none showed it).
     method : str
     n_spheres, n_photos, n_units, n_pixels : int
         Spheres and photos that contributed, their (photo, sphere) pairs, and pixels used.
@@ -260,6 +282,11 @@ class EncodingCalibration:
     polynomial_rms: float | None = None
     bits: int = 8
     dark_sides: bool = False
+    naming: str = "bic"
+    shown_codes: tuple = (0.0, 1.0)
+    dark_srgb_excess: float | None = None
+    dark_bic_penalty: float | None = None
+    n_dark_units: int = 0
 
     @property
     def encoding(self):
@@ -293,7 +320,11 @@ class EncodingCalibration:
                 "srgb_excess": round(float(self.srgb_excess), 3),
                 "linear_excess": round(float(self.linear_excess), 3),
                 "bic_penalty": round(float(self.bic_penalty), 3), "rms": float(f"{self.rms:.4g}"),
-                "shading": self.shading}
+                "shading": self.shading, "naming": self.naming,
+                "shown_codes": [round(float(v), 4) for v in self.shown_codes]}
+        if self.dark_srgb_excess is not None:
+            rec["dark_srgb_excess"] = round(float(self.dark_srgb_excess), 3)
+            rec["dark_bic_penalty"] = round(float(self.dark_bic_penalty), 3)
         if self.polynomial_excess is not None:
             rec["polynomial_excess"] = round(float(self.polynomial_excess), 3)
             rec["order"] = int(self.order)
@@ -316,7 +347,17 @@ class EncodingCalibration:
                 f"free gamma's penalty {self.bic_penalty:.1f}")
         if self.polynomial_excess is not None:
             test += f", polynomial order {self.order} {self.polynomial_excess:+.1f}"
-        if self.curve == "linear" and self.linear_excess > self.bic_penalty or \
+        lo, hi = self.shown_codes
+        if self.naming == "shown_codes":
+            test += (f"; the lit sides' codes ({lo:.2f}-{hi:.2f}) cannot tell it from the best gamma: within the "
+                     "shading's own bend, up to scale and offset")
+            if self.dark_srgb_excess is not None:
+                test += (f"; the dark sides agree (sRGB excess {self.dark_srgb_excess:.1f}, "
+                         f"penalty {self.dark_bic_penalty:.1f})")
+        elif self.naming == "dark_sides":
+            test += (f"; the lit sides' codes ({lo:.2f}-{hi:.2f}) cannot tell sRGB from it, the dark sides can "
+                     f"(sRGB excess {self.dark_srgb_excess:.1f}, penalty {self.dark_bic_penalty:.1f})")
+        elif self.curve == "linear" and self.linear_excess > self.bic_penalty or \
                 self.curve == "srgb" and self.srgb_excess > self.bic_penalty:
             test += "; within half a code value of the best gamma"
         if self.shading == "near":
@@ -332,6 +373,73 @@ class EncodingCalibration:
 
 
 # ----------------------------------------------------------------------------- curves
+def _shown_values(used: list) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct stored values (any channel) of the used units' selected pixels, sorted, and how
+    many pixel channels hold each: (u,), (u,)."""
+    vals, counts = [], []
+    for u in used:
+        c = u.selected_codes
+        per_triple = np.bincount(c.index, minlength=c.triples.shape[1]).astype(np.float64)
+        for ch in range(3):
+            vals.append(c.values[c.triples[ch]])
+            counts.append(per_triple)
+    if not vals:
+        return np.zeros(1), np.ones(1)
+    values, inv = np.unique(np.concatenate(vals), return_inverse=True)
+    counts = np.bincount(inv.reshape(-1), weights=np.concatenate(counts), minlength=len(values))
+    held = counts > 0  # (a unit's codes list the values of all its pixels, selected or not)
+    return values[held], counts[held]
+
+
+def _shading_bend(used: list, curve) -> float:
+    """How much the pairs' shading bends along ``n . l`` beyond their model, in stored values: the
+    median over the used units of the largest change, over a unit's selected pixels, that a column
+    ``(n . l)^2`` (weighted, as the unit's fit) adds to its fit under ``curve``.
+
+    A curve's shape and such a bend trade on the lit side: two curves that differ by less than
+    it, up to a scale and an offset, cannot be told apart by these pixels (the model's own misfit,
+    interreflection or a bounce of another shape, bends them as much). ``n . l`` is the unit's
+    fitted direction's (distant shading: the first three columns), or its point light's irradiance
+    column over its largest value (near shading). 0 when no unit can be read.
+    """
+    amps = []
+    for u in used:
+        A = u.A[u.selected]
+        y, w = u.selected_values(curve)
+        x, _ = _solve(A, y, w)
+        if A.shape[1] == 3:  # near shading: (s, g, 1)
+            c = A[:, 0] / max(float(np.max(A[:, 0])), 1e-12)
+        else:
+            nv = float(np.linalg.norm(x[:3]))
+            if not np.isfinite(nv) or nv <= 0:
+                continue
+            c = A[:, :3] @ (x[:3] / nv)
+        Q = np.column_stack([A, c * c])
+        xq, _ = _solve(Q, y, w)
+        amps.append(float(np.max(np.abs(w * (Q @ xq - A @ x)))))
+    return float(np.median(amps)) if amps else 0.0
+
+
+def _affine_gap(values: np.ndarray, counts: np.ndarray, curve, other) -> float:
+    """How far ``curve`` is from ``other`` as the shading model sees them: the largest difference,
+    in stored values, between ``curve`` and the affine map ``s f_other + c`` closest to it over
+    ``values`` (weighted least squares, weights ``counts``; each difference divided by ``curve``'s
+    slope, as the residuals of :meth:`_Unit.rss_grid` are).
+
+    Every (photo, sphere) pair's shading model has its own scale and offset, so one map for all is
+    an upper bound on what the pairs' maps absorb. 0 for fewer than three values.
+    """
+    if len(values) < 3:
+        return 0.0
+    f, d2 = _curve_tables(values, curve)
+    g, _ = _curve_tables(values, other)
+    inv_slope = 1.0 / np.maximum(np.sqrt(d2), 1e-6)
+    A = np.column_stack([g, np.ones_like(g)]) * inv_slope[:, None]
+    sw = np.sqrt(np.asarray(counts, dtype=np.float64))
+    coef, *_ = np.linalg.lstsq(A * sw[:, None], f * inv_slope * sw, rcond=None)
+    return float(np.max(np.abs(f * inv_slope - A @ coef)))
+
+
 def _decode(raw: np.ndarray, curve) -> np.ndarray:
     """Linear values of ``raw`` (float64, normalised) under ``curve`` (a gamma, ``'srgb'``, or a
     polynomial response's coefficients as a tuple)."""
@@ -412,22 +520,9 @@ class _SharedValues:
 
     def evaluate_partials(self, theta) -> "_SharedValues":
         """``partials``: the polynomial response ``f`` of coefficients ``theta`` on the shared values,
-        its slope ``f'`` and their derivatives in ``theta`` ((P, U) each; :func:`ffls.io.response.polynomial_response`:
-        ``d f / d g = f ln x``, ``d f / d a_j = f (x^j - 1)``, and for ``f' = (f / x)(g + D)``,
-        ``D = sum_j j a_j x^j``, the same factors plus ``f / x`` and ``(f / x) j x^j``)."""
-        theta = np.asarray(theta, dtype=np.float64)
-        x, lx = self.values, self.log_values
-        f, d = polynomial_response(x, theta, derivative=True)
-        g = theta[0]
-        powers = [x ** j for j in range(1, len(theta))]
-        poly = sum((a * (xj - 1.0) for a, xj in zip(theta[1:], powers)), np.zeros_like(x))
-        D = sum((j * a * xj for j, (a, xj) in enumerate(zip(theta[1:], powers), start=1)), np.zeros_like(x))
-        base = np.exp((g - 1.0) * lx + poly)  # f / x (as polynomial_response computes it)
-        fx = np.where(x > 0, f, 0.0)
-        df = np.stack([fx * lx] + [fx * (xj - 1.0) for xj in powers])
-        dd = np.stack([base * lx * (g + D) + base]
-                      + [base * ((xj - 1.0) * (g + D) + j * xj) for j, xj in enumerate(powers, start=1)])
-        self.partials = (f, d, df, dd)
+        its slope ``f'`` and their derivatives in ``theta`` ((P, U) each;
+        :func:`ffls.io.response.polynomial_response_partials`)."""
+        self.partials = polynomial_response_partials(self.values, theta)
         return self
 
     def evaluate(self, curves) -> "_SharedValues":
@@ -662,6 +757,7 @@ class _ShadowSide:
         return np.column_stack([normals * lit[:, None], np.ones(len(normals)), g])
 
 
+_DARK_COLUMNS = 5  # a unit with its dark side: ([lit] n, 1, g)
 _pool_units: list | None = None  # the units of the worker processes of _UnitPool (inherited when forked)
 
 
@@ -1073,7 +1169,27 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
                   n_bootstrap=n_bootstrap, seed=seed, code_step=code_step, workers=workers, geometry=geometry, up=up,
                   max_order=max_order, own_shadow=own_shadow)
     lit = _calibrate_encoding_gamma(raw, normals, shadow_side=False, **kwargs)
-    if not shadow_side or lit.curve != "polynomial" or lit.shading != "distant":
+    if not shadow_side or lit.shading != "distant":
+        return lit
+    if lit.curve == "srgb" and lit.naming == "shown_codes":
+        # the sRGB curve against the free gamma, where the lit sides show only codes on which the two
+        # are alike up to a scale and an offset: the dark sides show the toe, where they differ, and
+        # the gamma is named when they reject the sRGB curve (module docstring, "Naming"). The
+        # gamma's value and interval stay the lit sides'
+        try:
+            dark = _calibrate_encoding_gamma(raw, normals, shadow_side=True,
+                                             **{**kwargs, "geometry": None, "max_order": 0,
+                                                "n_bootstrap": min(n_bootstrap, 100)})
+        except EncodingCalibrationError:
+            return lit
+        if dark.n_dark_units == 0:
+            return lit
+        out = replace(lit, dark_srgb_excess=dark.srgb_excess, dark_bic_penalty=dark.bic_penalty,
+                      n_dark_units=dark.n_dark_units)
+        if dark.curve in ("srgb", "gamma") and dark.curve != lit.curve:
+            out = replace(out, curve=dark.curve, naming="dark_sides")
+        return out
+    if lit.curve != "polynomial":
         return lit
     # the lit sides named a tone curve: its offset comes from the dark sides and the slope bound
     # (module docstring, "The shadow side and the offset"); the naming and its statistics stay the lit sides'
@@ -1209,6 +1325,7 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         raise EncodingCalibrationError(
             f"the spheres' shading fits no gamma between {lo} and {hi} (best at {best:.2f})"
             + ("" if poly_excess is None else " and no polynomial curve fits better"))
+    naming = "bic"
     if name == "polynomial" and code_step is not None:
         # as below: a simpler curve that decodes every stored value within half a code of the
         # polynomial is the same curve as far as the file can tell
@@ -1217,7 +1334,7 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         gap, closest = min((float(np.max(np.abs(_decode(x, c) - fx))), n)
                            for c, n in ((best, "gamma"), (1.0, "linear"), ("srgb", "srgb")))
         if gap <= 0.5 * code_step:
-            name = closest
+            name, naming = closest, "half_code"
     if name == "gamma" and code_step is not None:
         # a named curve that decodes every stored value within half a code of the best gamma is the
         # same curve as far as the file can tell (the BIC is blind to a misfit the model shares)
@@ -1225,7 +1342,21 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         near = [(float(np.max(np.abs(_decode(x, c) - _decode(x, best)))), n) for c, n in ((1.0, "linear"), ("srgb", "srgb"))]
         gap, closest = min(near)
         if gap <= 0.5 * code_step:
-            name = closest
+            name, naming = closest, "half_code"
+        else:
+            # the shading model sees a curve only up to a scale (the light's) and an offset (the
+            # ambient term), and only over the codes the spheres show, where what is left of the
+            # difference between two curves is a bend of the shading along n . l. A named curve
+            # that is the best gamma's affine map, over those codes, within the bend the pairs'
+            # shading shows beyond their model anyway cannot be told from it by these pixels (an
+            # sRGB file whose lit sides hold codes 0.44-0.91 is gamma 2.275 there to 0.14 of a code,
+            # and its pairs bend by 0.17), and the one with no free parameter is named (module
+            # docstring, "Naming")
+            gap, closest = min((float(np.median([_affine_gap(*_shown_values([u]), c, best) for u in used])), n)
+                               for c, n in ((1.0, "linear"), ("srgb", "srgb")))
+            if gap <= _shading_bend(used, best):
+                name, naming = closest, "shown_codes"
+    values, _ = _shown_values(used)
     return EncodingCalibration(
         curve=name, gamma=best, uncertainty=unc, sd_curvature=sd_curv, sd_bootstrap=sd_boot,
         srgb_excess=float(excess), linear_excess=float(lin_excess), bic_penalty=penalty,
@@ -1234,7 +1365,8 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         sd_spheres=sd_spheres, shading=shading,
         shading_excess=None if shading_excess is None else float(shading_excess),
         order=order, coefficients=coefs, polynomial_excess=None if poly_excess is None else float(poly_excess),
-        polynomial_rms=poly_rms)
+        polynomial_rms=poly_rms, naming=naming, shown_codes=(float(values[0]), float(values[-1])),
+        n_dark_units=sum(1 for u in used if u.A.shape[1] == _DARK_COLUMNS))
 
 
 def calibrate_encoding(raw, normals, method: str = "gamma", **kwargs) -> EncodingCalibration:
