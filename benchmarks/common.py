@@ -143,6 +143,18 @@ def probe_benchmark_map(name: str, height: int, capture, lights):
     return lm, np.asarray(lm.data, dtype=np.float64), relight_capture(capture, lights, lm)[0].astype(np.float64)
 
 
+def probe_benchmark_args(doc: str, maps, argv=None):
+    """The arguments shared by the probe benchmarks that loop over maps: ``--noise`` (Gaussian,
+    as a fraction of the image's mean), ``--maps`` (comma-separated, default ``maps``) and ``--json``."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of the image's mean")
+    ap.add_argument("--maps", default=",".join(maps))
+    ap.add_argument("--json", default=None)
+    return ap.parse_args(argv)
+
+
 def relit_capture_error(capture, lights, latlong, truth) -> float:
     """Relative RMS error of ``capture`` relit (CPU) under the lat-long radiance ``latlong`` against
     ``truth`` (the float64 image relit under the true map), over the truth's lit pixels."""

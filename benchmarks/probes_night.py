@@ -20,14 +20,14 @@ Times are CPU seconds of this process (``time.process_time``). Writes
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
+from common import (host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map, relit_capture_error,
+                    write_json)
 from probes import H, MAPS
 from ffls.probes.evaluate import relit_error, sh_basis
 from ffls.probes.selection import adaptive_hougen_ahuja, select_regularization
@@ -49,11 +49,7 @@ def low_orders(true, order):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of the image's mean")
-    ap.add_argument("--maps", default=",".join(MAPS))
-    ap.add_argument("--json", default=None)
-    a = ap.parse_args(argv)
+    a = probe_benchmark_args(__doc__, MAPS, argv)
     rng = np.random.default_rng(0)
     cap, lights = probe_benchmark_capture("ffls_probes_night_")
     out = []

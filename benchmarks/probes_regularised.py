@@ -22,13 +22,13 @@ Writes ``benchmarks/results/probes_regularised.json`` (``..._noise.json`` with `
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
+from common import (host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map, relit_capture_error,
+                    write_json)
 from probes import H, MAPS
 from ffls.probes.evaluate import relit_error
 from ffls.probes.hougen_ahuja import hougen_ahuja
@@ -48,11 +48,7 @@ def describe(d, i):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise, as a fraction of the image's mean")
-    ap.add_argument("--maps", default=",".join(MAPS))
-    ap.add_argument("--json", default=None)
-    a = ap.parse_args(argv)
+    a = probe_benchmark_args(__doc__, MAPS, argv)
     rng = np.random.default_rng(0)
     cap, lights = probe_benchmark_capture("ffls_probes_reg_")
     out = []
