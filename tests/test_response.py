@@ -153,5 +153,5 @@ def test_bracket_errors_name_files(tmp_path, bracket, capsys):
     assert main(["calibrate", "response", str(tmp_path)]) == 2
     assert "missing.png" in capsys.readouterr().err
     (tmp_path / "exposures.json").write_text(json.dumps({"b0.png": 0.1, "b1.png": -1}))
-    with pytest.raises(InputError, match="positive"):
+    with pytest.raises(InputError, match=r"exposure of .b1.png.: -1 s is not an exposure time"):
         rsp.read_bracket(tmp_path)
