@@ -1,5 +1,6 @@
 """A chrome ball's outline must hold every photo's highlight
-(ffls.spheres.highlight.outline_holding_highlights, highlights_outside).
+(ffls.spheres.highlight.outline_holding_highlights, highlights_outside), and a small highlight on a
+bright reflection (highlight_centre_Debevec1998).
 
 An area-sampled ball with a limb step at its true silhouette; a detected outline 1.2 px off and
 short, so that highlights near the true limb fall off it. The limb step's outline holds them and is
@@ -10,7 +11,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ffls.spheres.highlight import SphereView, highlights_outside, outline_holding_highlights
+from ffls.spheres.highlight import (HighlightSpot, SphereView, highlight_centre_Debevec1998, highlight_direction,
+                                   highlights_outside, outline_holding_highlights)
 
 SUB = 4
 
@@ -65,3 +67,22 @@ def test_a_limb_holding_no_more_highlights_is_not_taken():
     pixels = np.array([[c[0] + r + 6.0, c[1]], [c[0], c[1] - r - 6.0]])
     view, before, after = outline_holding_highlights(detected, img, pixels)
     assert view is detected and before == after == 2
+
+
+def test_a_highlight_whose_signed_signal_sums_below_zero_is_the_centroid_of_its_positive_part():
+    """A 2-pixel core over a shoulder the background plane overshoots (signed sum < 0): the
+    source's radiance is never negative, so the centre is the positive core's, not a failure."""
+    view = SphereView(center_px=np.array([30.0, 30.0]), radius_px=15.0, model="orthographic")
+    rr, cc = np.mgrid[24:31, 34:41]
+    rows, cols = rr.ravel(), cc.ravel()
+    weights = np.full(rows.size, -0.02)
+    core = ((rows == 27) & (cols == 37)) | ((rows == 27) & (cols == 38))
+    weights[core] = [0.2, 0.1]
+    spot = HighlightSpot(found=True, status="ok", peak=0.2, rows=rows, cols=cols, weights=weights)
+    assert np.sum(weights) < 0
+    d, pixel = highlight_centre_Debevec1998(view, spot)
+    assert np.all(np.isfinite(d))
+    # the core's weighted centre (x between 37 and 38, nearer 37), the magnification nearly flat there
+    assert 37.0 < pixel[0] < 37.5 and abs(pixel[1] - 27.0) < 1e-9
+    want, _ = highlight_direction(view, pixel)
+    assert np.degrees(np.arccos(np.clip(np.dot(d, want), -1, 1))) < 1.0

@@ -482,6 +482,11 @@ def highlight_centre_Debevec1998(view: SphereView, spot: HighlightSpot, origin_p
     omega = np.linalg.norm(np.cross((Lx - L) / h, (Ly - L) / h), axis=1)
     w = spot.weights * omega
     ok = np.all(np.isfinite(L), axis=1) & np.isfinite(w)
+    if ok.any() and not np.sum(w[ok]) > 0:
+        # the signal above the background plane sums to nothing (a small highlight on a bright
+        # reflection, the plane above its shoulder): the source's radiance is never negative, its
+        # centroid is that of the positive signal (the core above the plane)
+        w = np.clip(spot.weights, 0.0, None) * omega
     if not ok.any() or not np.sum(w[ok]) > 0:
         return np.full(3, np.nan), np.full(2, np.nan)
     d = normalize(np.sum(w[ok, None] * L[ok], axis=0))
@@ -746,6 +751,8 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
                                            + view.radius_sigma_px ** 2 * np.sum(Jo[:, 2] ** 2))))
     px = np.stack([spot.cols + float(origin_px[0]), spot.rows + float(origin_px[1])], axis=1)
     wsum = float(spot.weights.sum())
+    if not wsum > 0:  # as the centroid (highlight_centre_Debevec1998): the positive signal's
+        wsum = float(np.clip(spot.weights, 0.0, None).sum())
     var_noise = float(spot.noise ** 2 * np.sum((px - pixel) ** 2, axis=0).mean() / wsum ** 2) if wsum > 0 else np.inf
     clip = CLIP_SIGMA_PX if spot.n_saturated > 0 else 0.0
     quant = 0.0 if spot.shoulder else 1.0 / np.sqrt(12.0)  # an outline without shoulder: a pixel's quantisation
