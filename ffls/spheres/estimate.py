@@ -46,7 +46,8 @@ from ffls.conventions import UP, normalize
 from ffls.errors import InputError
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
-from ffls.spheres.highlight import SphereKind, SphereView, classify_sphere, highlight_compactness, refine_view_limb
+from ffls.spheres.highlight import (SphereKind, SphereView, classify_sphere, highlight_compactness,
+                                   outline_holding_highlights, refine_view_limb)
 from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
 from ffls.spheres.photo import LIGHT_MODELS, SIGNIFICANCE, PhotoEstimate, SphereResult, estimate_photo
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
@@ -1099,6 +1100,20 @@ def _check_highlights(results: list[PhotoEstimate], kinds: list[SphereKind], whe
                              f"saturation level", where)
 
 
+def _outlines_holding_highlights(results: list[PhotoEstimate], mirrors: list, limb_image) -> list:
+    """Per sphere its view, the mirror ones' outline chosen to hold the photos' highlights
+    (:func:`ffls.spheres.highlight.outline_holding_highlights`); None where not a mirror."""
+    out = []
+    for k, v in enumerate(mirrors):
+        if v is None:
+            out.append(None)
+            continue
+        pixels = [getattr(r.spheres[k].fit, "pixel", (np.nan, np.nan)) for r in results
+                  if r.spheres and r.spheres[k].fit is not None]
+        out.append(outline_holding_highlights(v, limb_image, np.reshape(pixels, (-1, 2)))[0] if pixels else v)
+    return out
+
+
 def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None) -> CaptureEstimate:
@@ -1140,6 +1155,13 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         fitter.options["mirrors"] = mirrors
         results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],
                                             samples, counted=False)]
+    if limb_image is not None:  # a chrome ball's outline must hold every photo's highlight
+        held = _outlines_holding_highlights(results, mirrors, limb_image)
+        if held != mirrors:
+            fitter.options["mirrors"] = mirrors = held
+            views = [h if h is not None else v for h, v in zip(held, views)]
+            results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],
+                                                samples, counted=False)]
     _check_highlights(results, kinds, where)
     flat = None
     if flat_field is not None:  # the lens's fall-off across each sphere, shared by all photos, divided out

@@ -76,6 +76,9 @@ __all__ = [
     "LIMB_CLEAR_SNR",
     "LIMB_MODEL_FLOOR_PX",
     "refine_view_limb",
+    "limb_view",
+    "highlights_outside",
+    "outline_holding_highlights",
     "apparent_radius_px",
 ]
 
@@ -479,6 +482,11 @@ def highlight_centre_Debevec1998(view: SphereView, spot: HighlightSpot, origin_p
     omega = np.linalg.norm(np.cross((Lx - L) / h, (Ly - L) / h), axis=1)
     w = spot.weights * omega
     ok = np.all(np.isfinite(L), axis=1) & np.isfinite(w)
+    if ok.any() and not np.sum(w[ok]) > 0:
+        # the signal above the background plane sums to nothing (a small highlight on a bright
+        # reflection, the plane above its shoulder): the source's radiance is never negative, its
+        # centroid is that of the positive signal (the core above the plane)
+        w = np.clip(spot.weights, 0.0, None) * omega
     if not ok.any() or not np.sum(w[ok]) > 0:
         return np.full(3, np.nan), np.full(2, np.nan)
     d = normalize(np.sum(w[ok, None] * L[ok], axis=0))
@@ -720,11 +728,17 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
     spot = find_highlight(image, disc, saturated, **kwargs)
     base = dict(intensity=spot.peak, n_blob=int(spot.rows.size), n_core=spot.n_core, n_saturated=spot.n_saturated,
                 clipped=spot.n_saturated > 0, rim_px=spot.rim_px)
+    # a highlight at the rim or off the outline: the blob's plain weighted centre is kept (where the
+    # light was seen), which tells the capture's outline where it is too small (outline_holding_highlights)
+    px = np.stack([spot.cols + float(origin_px[0]), spot.rows + float(origin_px[1])], axis=1)
+    w = np.clip(spot.weights, 0.0, None)
+    blob = np.sum(w[:, None] * px, axis=0) / w.sum() if px.size and w.sum() > 0 else np.full(2, np.nan)
     if not spot.found:
-        return HighlightFit(status=spot.status, **base)
+        return HighlightFit(status=spot.status, pixel=blob if spot.status == "highlight_at_rim" else np.full(2, np.nan),
+                            **base)
     d, pixel = highlight_centre_Debevec1998(view, spot, origin_px)
     if not (np.all(np.isfinite(d)) and np.all(np.isfinite(pixel))):
-        return HighlightFit(status="fit_failed", **base)
+        return HighlightFit(status="fit_failed", pixel=blob, **base)
     J = _pixel_jacobian(view, pixel)
     if not np.all(np.isfinite(J)):
         return HighlightFit(status="fit_failed", **base)
@@ -737,6 +751,8 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
                                            + view.radius_sigma_px ** 2 * np.sum(Jo[:, 2] ** 2))))
     px = np.stack([spot.cols + float(origin_px[0]), spot.rows + float(origin_px[1])], axis=1)
     wsum = float(spot.weights.sum())
+    if not wsum > 0:  # as the centroid (highlight_centre_Debevec1998): the positive signal's
+        wsum = float(np.clip(spot.weights, 0.0, None).sum())
     var_noise = float(spot.noise ** 2 * np.sum((px - pixel) ** 2, axis=0).mean() / wsum ** 2) if wsum > 0 else np.inf
     clip = CLIP_SIGMA_PX if spot.n_saturated > 0 else 0.0
     quant = 0.0 if spot.shoulder else 1.0 / np.sqrt(12.0)  # an outline without shoulder: a pixel's quantisation
@@ -983,6 +999,76 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
                        radius_sigma_px=r_own), limb
     return replace(view, center_px=limb.center_px, radius_px=limb.radius_px, center_sigma_px=c_sig,
                    radius_sigma_px=r_own), limb
+
+
+def limb_view(view: SphereView, limb: LimbFit) -> SphereView:
+    """``view`` with its outline moved to the limb fit's (pinhole: the image of the centre and
+    ``center_cam``; orthographic: the circle); its uncertainties are left as they are."""
+    if view.model == "pinhole":
+        return replace(view, center_px=np.asarray(limb.center_px, dtype=np.float64),
+                       center_cam=np.asarray(limb.center_cam, dtype=np.float64))
+    return replace(view, center_px=np.asarray(limb.center_px, dtype=np.float64), radius_px=float(limb.radius_px))
+
+
+def highlights_outside(view: SphereView, pixels) -> int:
+    """How many of the highlight centres ``pixels`` ((n, 2) x, y; NaN rows skipped) lie off the
+    view's outline (their pixel's ray misses the sphere: no reflected direction)."""
+    p = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if p.size == 0:
+        return 0
+    L, _ = view.reflect(p)
+    return int(np.count_nonzero(~np.all(np.isfinite(L), axis=1)))
+
+
+def outline_holding_highlights(view: SphereView, image: np.ndarray, pixels) -> tuple[SphereView, int, int]:
+    """A chrome ball's outline chosen by its highlights: every photo's light is seen on the ball.
+
+    A highlight is a reflection on the sphere, so its centre lies inside the silhouette in every
+    photo, and over a sequence whose lights reach grazing the highlights' envelope bounds the
+    silhouette from inside (a property of the geometry, not of the renderer or the scene). A chrome
+    ball has two estimates of its outline: the detected one (its reflections' edges) and the step
+    at its limb (:func:`ffls.spheres.mirror_outline.fit_limb_profile`, which finds where the
+    reflected backdrop meets the reflected sky, within a pixel or two of the silhouette). The
+    detected outline is kept unless it leaves more of the highlights off the ball than the limb
+    step's outline does; then the limb's geometry is taken (its uncertainties, the two outlines'
+    gap, :func:`refine_view_limb`, stay). A limb step beyond half of
+    :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` from the detected outline (another edge) is
+    never taken.
+
+    Parameters
+    ----------
+    view : SphereView
+        The sphere's view as the pipeline fitted it (after :func:`refine_view_limb`).
+    image : (H, W) float
+        The sequence's mean luminance.
+    pixels : (n, 2) float
+        The photos' highlight centres (x, y; NaN where none), those off the outline included
+        (:attr:`HighlightFit.pixel` of a ``'fit_failed'`` fit).
+
+    Returns
+    -------
+    view : SphereView
+        ``view``, or its outline moved to the limb step's.
+    outside_before, outside_after : int
+        Highlights off the outline of ``view`` and of the returned view.
+    """
+    before = highlights_outside(view, pixels)
+    if before == 0:
+        return view, 0, 0
+    limb = fit_limb_profile(image, view.center_px, view.radius_px, model=view.model, K=view.K, dist=view.dist,
+                            center_cam=view.center_cam, radius=view.radius)
+    if limb is None or not np.all(np.isfinite(limb.center_px)) or not np.isfinite(limb.radius_px):
+        return view, before, before
+    if view.model == "pinhole" and (limb.center_cam is None or not np.all(np.isfinite(limb.center_cam))):
+        return view, before, before
+    gap_c = float(np.linalg.norm(np.asarray(limb.center_px) - np.asarray(view.center_px)))
+    gap_r = abs(float(limb.radius_px) - apparent_radius_px(view))
+    if max(gap_c, gap_r) > 0.5 * LIMB_BAND_PX:
+        return view, before, before
+    moved = limb_view(view, limb)
+    after = highlights_outside(moved, pixels)
+    return (moved, before, after) if after < before else (view, before, before)
 
 
 def apparent_radius_px(view: SphereView) -> float:
