@@ -445,3 +445,20 @@ def test_lights_calibrated_on_sixteen_bit_files_refused_on_eight_bit_photos(tmp_
     assert e.value.path == tmp_path / "l16.json"
     assert cap.apply_lights_encoding(c, cap.Lights(["a.png"], np.array([[0.0, 0.0, 1.0]]),
                                                    encoding={**rec, "bits": 8})).response.shape == (256, 3)
+
+
+@pytest.mark.parametrize("key,value,match", [
+    ("naming", 5, "naming must be one of"), ("naming", "foo", "naming must be one of"),
+    ("shown_codes", "x", "shown_codes must be"), ("shown_codes", [0.9, 0.1], "shown_codes must be"),
+    ("shown_codes", [0.1, 0.5, 0.9], "shown_codes must be"), ("dark_srgb_excess", "a", "dark_srgb_excess"),
+    ("dark_srgb_excess", float("nan"), "dark_srgb_excess"), ("dark_bic_penalty", -3, "dark_bic_penalty"),
+    ("dark_bic_penalty", [1], "dark_bic_penalty"),
+])
+def test_encoding_record_naming_keys_are_checked(tmp_path, key, value, match):
+    """The naming keys of ``lights.json``'s encoding record are validated, not ignored (docs/formats.md:
+    "a malformed record is an error naming lights.json and encoding")."""
+    ok = {"curve": "srgb", "naming": "shown_codes", "shown_codes": [0.44, 0.91], "dark_srgb_excess": 3.5,
+          "dark_bic_penalty": 4.7}
+    assert cap.encoding_from_record(ok) == "srgb"
+    with pytest.raises(ValueError, match=match):
+        cap.encoding_from_record({**ok, key: value})

@@ -47,6 +47,7 @@ __all__ = [
     "load_capture_and_lights",
     "UNIT_TOLERANCE",
     "ENCODING_CURVES",
+    "ENCODING_NAMINGS",
     "GAMMA_RANGE",
     "encoding_from_record",
     "record_response",
@@ -687,6 +688,7 @@ def encoding_from_record(record: dict):
     """
     if not isinstance(record, dict):
         raise ValueError(f"expected an object, got {_short(record)}")
+    _check_naming_keys(record)
     curve = record.get("curve")
     if curve not in ENCODING_CURVES:
         raise ValueError(f"curve must be one of {ENCODING_CURVES}, got {_short(curve)}")
@@ -700,6 +702,31 @@ def encoding_from_record(record: dict):
             or not GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
         raise ValueError(f"gamma must be a number between {GAMMA_RANGE[0]} and {GAMMA_RANGE[1]}, got {_short(g)}")
     return {"gamma": float(g)}
+
+
+#: What named a calibrated curve (the encoding record's ``"naming"``, ``docs/formats.md``).
+ENCODING_NAMINGS = ("bic", "half_code", "shown_codes", "dark_sides")
+
+
+def _finite_number(v) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+
+
+def _check_naming_keys(record: dict) -> None:
+    """The naming keys of an encoding record, where present: ``naming``, ``shown_codes``,
+    ``dark_srgb_excess``, ``dark_bic_penalty`` (ValueError naming the key)."""
+    if "naming" in record and record["naming"] not in ENCODING_NAMINGS:
+        raise ValueError(f"naming must be one of {ENCODING_NAMINGS}, got {_short(record['naming'])}")
+    if "shown_codes" in record:
+        c = record["shown_codes"]
+        if not (isinstance(c, list) and len(c) == 2 and all(_finite_number(v) for v in c)
+                and 0.0 <= c[0] <= c[1] <= 1.0):
+            raise ValueError(f"shown_codes must be [lo, hi] with 0 <= lo <= hi <= 1, got {_short(c)}")
+    if "dark_srgb_excess" in record and not _finite_number(record["dark_srgb_excess"]):
+        raise ValueError(f"dark_srgb_excess must be a finite number, got {_short(record['dark_srgb_excess'])}")
+    if "dark_bic_penalty" in record and not (_finite_number(record["dark_bic_penalty"])
+                                             and record["dark_bic_penalty"] >= 0):
+        raise ValueError(f"dark_bic_penalty must be a number >= 0, got {_short(record['dark_bic_penalty'])}")
 
 
 def record_response(record: dict) -> np.ndarray | None:
