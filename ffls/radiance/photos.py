@@ -155,7 +155,7 @@ def _decode_codes(img: ImageData, curve: str, gamma: float) -> np.ndarray:
     return table[codes]
 
 
-def _check_size(capture, i: int, img: ImageData) -> None:
+def _check_photo(capture, i: int, img: ImageData) -> None:
     """The photo's size against ``image_size``, and no transparency in an integer photo: a PNG's or
     TIFF's colour is not premultiplied, so under alpha < 1 it is undefined (an EXR's is
     premultiplied by convention: its RGB is the radiance, and its alpha is ignored)."""
@@ -190,7 +190,7 @@ def read_photo(capture, i: int, out: np.ndarray | None = None, depth: int | str 
         that differs from ``depth`` with no stated encoding.
     """
     img = read_image(capture.image_paths[i], out=out)
-    _check_size(capture, i, img)
+    _check_photo(capture, i, img)
     if depth is not None and capture.encoding == "auto" and img.bit_depth != depth:
         raise InputError(_mixed_depth_message(img.bit_depth, depth), img.path)
     linear = np.asarray(linearise(img, capture.encoding, capture.response), dtype=np.float32)
@@ -233,7 +233,7 @@ def load_photos(capture, indices=None, progress: bool = True) -> np.ndarray:
     depth0 = None
     for n, i in enumerate(tqdm(idx, desc="loading images", unit="img", disable=disable, leave=False)):
         img = read_image(capture.image_paths[i])
-        _check_size(capture, i, img)
+        _check_photo(capture, i, img)
         if out is None:
             out = np.empty((len(idx), *img.pixels.shape), dtype=np.float32)
             depth0 = img.bit_depth
