@@ -698,8 +698,7 @@ def encoding_from_record(record: dict):
     if curve != "gamma":
         return curve
     g = record.get("gamma")
-    if isinstance(g, bool) or not isinstance(g, (int, float)) or not math.isfinite(g) \
-            or not GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
+    if not _finite_number(g) or not GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
         raise ValueError(f"gamma must be a number between {GAMMA_RANGE[0]} and {GAMMA_RANGE[1]}, got {_short(g)}")
     return {"gamma": float(g)}
 
@@ -709,6 +708,7 @@ ENCODING_NAMINGS = ("bic", "half_code", "shown_codes", "dark_sides")
 
 
 def _finite_number(v) -> bool:
+    """A JSON number that is finite (not a bool, a string, NaN or infinity)."""
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
 
 
@@ -742,8 +742,7 @@ def record_response(record: dict) -> np.ndarray | None:
     if not isinstance(record, dict) or record.get("curve") != "polynomial":
         return None
     c = record.get("coefficients")
-    if not isinstance(c, list) or not 2 <= len(c) <= 6 or any(
-            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in c):
+    if not isinstance(c, list) or not 2 <= len(c) <= 6 or not all(_finite_number(v) for v in c):
         raise ValueError(f"coefficients must be a list of 2 to 6 numbers (g, a_1, ...), got {_short(c)}")
     bits = record.get("bits", 8)  # the files' bit depth the curve was calibrated on: the table's rows
     if bits not in (8, 16) or isinstance(bits, bool):
