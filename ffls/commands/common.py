@@ -61,6 +61,7 @@ __all__ = [
     "check_mask_size",
     "check_mask_not_empty",
     "check_display_flags",
+    "check_fps_flag",
     "write_output",
     "MAP_RES",
     "BASIS_SUBSET",
@@ -844,6 +845,20 @@ def check_mask_not_empty(mask, path, flag: str = "--mask", what: str = "object")
         raise InputError(f"{flag} is empty: no {what} pixel (white = {what})", path)
 
 
+def check_fps_flag(args) -> None:
+    """Refuse ``--fps`` without ``--turntable`` (the flag defaults to None so that a given one is
+    told from one left out; a still has no frame rate).
+
+    Raises
+    ------
+    ffls.errors.InputError
+    """
+    if getattr(args, "turntable", None) is None and getattr(args, "fps", None) is not None:
+        from ffls.errors import InputError
+
+        raise InputError("--fps applies to a --turntable video; a still has no frame rate")
+
+
 def check_display_flags(args, out) -> None:
     """Refuse ``--exposure`` / ``--tonemap`` given with a linear ``.exr`` still (they shape only the
     tone-mapped PNG or video: the EXR is written linear), and ``--fps`` without ``--turntable``.
@@ -858,10 +873,8 @@ def check_display_flags(args, out) -> None:
 
     from ffls.errors import InputError
 
-    still = getattr(args, "turntable", None) is None
-    if still and getattr(args, "fps", None) is not None:
-        raise InputError("--fps applies to a --turntable video; a still has no frame rate")
-    if still and Path(out).suffix.lower() == ".exr":
+    check_fps_flag(args)
+    if getattr(args, "turntable", None) is None and Path(out).suffix.lower() == ".exr":
         given = [f for f, k in (("--exposure", "exposure"), ("--tonemap", "tonemap"))
                  if getattr(args, k, None) is not None]
         if given:

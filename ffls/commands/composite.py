@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, add_weighting_argument,
+                                  check_fps_flag,
                                   exposure_arg, input_path, learnt_kernel, output_path, print_notes, flush_notes,
                                   rotation_from_args)
 
@@ -269,8 +270,7 @@ def run(args) -> int:
     if args.flow is not None and args.sources == "weights":
         raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
                          "no flow")
-    if args.turntable is None and args.fps is not None:
-        raise InputError("--fps applies to a --turntable video; a still has no frame rate")
+    check_fps_flag(args)
     args.flow, args.fps = args.flow or "dis", args.fps or 30.0
     R0 = rotation_from_args(args)
     inputs = load_inputs(args)
