@@ -275,20 +275,25 @@ def test_lights_round_trip(tmp_path, rng):
     np.testing.assert_allclose(d, dirs[[0, 2]], atol=1e-15)
 
 
-def test_lights_uncertainty_record_round_trip_and_checked(tmp_path, rng):
-    """The top-level ``uncertainty`` record (how the cones were sized) is kept; a non-object is refused."""
+@pytest.mark.parametrize("key, rec", [
+    ("uncertainty", {"cone_factor": 2.61, "n_tail": 120, "scale": 1.4, "floor_deg": 0.2, "source": "disagreement"}),
+    ("flat_field", {"model": "cos4", "strength": 1.02, "applied": True, "gradients": [[0.05, -0.01]],
+                    "measured": [None], "photos": [3]}),
+])
+def test_lights_capture_records_round_trip_and_checked(tmp_path, rng, key, rec):
+    """The top-level ``uncertainty`` (how the cones were sized) and ``flat_field`` (the lens's
+    fall-off) records are kept; a non-object is refused, naming the key."""
     names, _ = _make(tmp_path / "c")
     c = cap.load_capture(tmp_path / "c")
-    rec = {"cone_factor": 2.61, "n_tail": 120, "scale": 1.4, "floor_deg": 0.2, "source": "disagreement"}
-    p = cap.save_lights(cap.Lights(names, _unit(rng, 3), uncertainty=rec), tmp_path / "c" / "lights.json")
-    assert cap.load_lights(p, c).uncertainty == rec
+    p = cap.save_lights(cap.Lights(names, _unit(rng, 3), **{key: rec}), tmp_path / "c" / "lights.json")
+    assert getattr(cap.load_lights(p, c), key) == rec
     doc = json.loads(p.read_text())
     for bad in ([2.61], None):  # null too: the record is an object or absent
-        doc["uncertainty"] = bad
+        doc[key] = bad
         p.write_text(json.dumps(doc))
-        with pytest.raises(InputError, match="uncertainty: expected an object"):
+        with pytest.raises(InputError, match=f"{key}: expected an object"):
             cap.load_lights(p, c)
-    del doc["uncertainty"]
+    del doc[key]
     doc["lights"][0]["uncertainty_deg"] = -1.0  # a cone radius cannot be negative
     p.write_text(json.dumps(doc))
     with pytest.raises(InputError, match="uncertainty_deg: a cone radius must be >= 0"):

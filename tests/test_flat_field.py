@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, spherical_to_direction
+from ffls.io.capture import load_lights, save_lights
 from ffls.spheres.estimate import (calibrate_flat_field, cos4_gradient, estimate_photos, flat_field_offsets,
                                    flat_field_values)
 from ffls.spheres.samples import SphereValues, ground_bounce, sphere_samples
@@ -72,7 +73,7 @@ def errors(est, dirs):
                      for r, d in zip(est.photos, dirs)])
 
 
-def test_a_lens_fall_off_is_found_and_divided_out(samples):
+def test_a_lens_fall_off_is_found_and_divided_out(samples, tmp_path):
     dirs = [spherical_to_direction(np.radians(th), np.radians(ph)) for th, ph in LIGHTS]
     vals = [photo_values(samples, d, vignetting=1, seed=i) for i, d in enumerate(dirs)]
     before = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False, bounce="free", own_shadow=False)
@@ -92,6 +93,14 @@ def test_a_lens_fall_off_is_found_and_divided_out(samples):
         assert np.all(np.isfinite(m)) and np.all(sd > 0)
     rep = after.records()[0]["spheres"][0]["flat_field"]
     assert rep == [float(x) for x in f.gradients[0]]
+    # the capture-wide record (top-level "flat_field" of lights.json) survives a round trip
+    names = [f"p{i}.exr" for i in range(len(dirs))]
+    path = tmp_path / "lights.json"
+    save_lights(after.lights(names), path)
+    rec = load_lights(path).flat_field
+    assert rec["applied"] and rec["photos"] == [int(n) for n in f.n_photos]
+    assert np.allclose(rec["measured"], f.measured) and np.allclose(rec["measured_sigma"], f.measured_sigma)
+    assert np.allclose(rec["gradients"], f.gradients) and rec["strength"] == pytest.approx(f.strength)
 
 
 @pytest.mark.parametrize("case", ["none", "near", "brightening outward"])

@@ -17,7 +17,6 @@ from functools import partial
 
 import numpy as np
 
-from ffls.conventions import UP, normalize
 from ffls.errors import InputError
 
 __all__ = ["photo_sphere_values", "photo_values_and_windows", "mean_window_image", "estimate_lights_dask"]
@@ -82,7 +81,7 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     -------
     ffls.io.capture.Lights
     """
-    from ffls.io.capture import Lights, sphere_materials
+    from ffls.io.capture import sphere_materials
     from ffls.spheres.estimate import capture_samples, check_estimable, estimate_photos, lens_centre, sphere_views
     from ffls.spheres.mirror_outline import limb_window
 
@@ -113,8 +112,4 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     est = estimate_photos(values, samples, capture.scene_center, bounce=bounce, refine_centres=refine_centres,
                           refine_options=refine_options, flat_field=flat, materials=materials, views=views,
                           model=model, limb_image=limb_image, **kwargs)
-    dirs = np.array([normalize(r.direction) if np.all(np.isfinite(r.direction)) else UP for r in est.photos])
-    pos = np.array([r.position if r.position is not None else np.full(3, np.nan) for r in est.photos])
-    return Lights(image_names=capture.image_names, directions=dirs, positions=pos,
-                  status=[r.status for r in est.photos], reasons=[r.reason for r in est.photos],
-                  extra=est.records(), uncertainty=None if est.error_model is None else est.error_model.as_dict())
+    return est.lights(capture.image_names)

@@ -593,6 +593,11 @@ class Lights:
         How ``ffls lights`` sized the cones (the top-level ``"uncertainty"`` record of
         ``lights.json``: :meth:`ffls.spheres.uncertainty.ErrorModel.as_dict`, e.g. ``cone_factor``,
         ``n_tail``, ``scale``, ``floor_deg``, ``source``); kept as read, None when absent.
+    flat_field : dict or None
+        The lens's fall-off that ``ffls lights`` fitted over the spheres (the top-level
+        ``"flat_field"`` record: :meth:`ffls.spheres.estimate.FlatField.as_dict`, e.g. ``strength``,
+        ``p``, ``applied``, and per sphere its ``gradients`` and freely ``measured`` gradients);
+        kept as read, None when absent.
     """
 
     image_names: list
@@ -605,6 +610,7 @@ class Lights:
     encoding: dict | None = None
     path: Path | None = field(default=None, compare=False)
     uncertainty: dict | None = None
+    flat_field: dict | None = None
 
     def __post_init__(self):
         if self.encoding is not None:
@@ -654,6 +660,8 @@ class Lights:
             doc["encoding"] = dict(self.encoding)
         if self.uncertainty is not None:
             doc["uncertainty"] = dict(self.uncertainty)
+        if self.flat_field is not None:
+            doc["flat_field"] = dict(self.flat_field)
         doc["lights"] = lights
         return doc
 
@@ -835,10 +843,14 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
     uncertainty = doc.get("uncertainty")
     if "uncertainty" in doc and not isinstance(uncertainty, dict):
         j.fail("uncertainty", f"expected an object, got {_short(uncertainty)}")
+    flat = doc.get("flat_field")
+    if "flat_field" in doc and not isinstance(flat, dict):
+        j.fail("flat_field", f"expected an object, got {_short(flat)}")
     order = np.arange(len(names)) if capture is None else _order_to_capture(j, names, capture)
     return Lights(
         encoding=record,
         uncertainty=uncertainty,
+        flat_field=flat,
         image_names=[names[i] for i in order],
         directions=np.array(dirs)[order],
         positions=np.array(pos)[order],

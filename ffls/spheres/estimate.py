@@ -44,6 +44,7 @@ import numpy as np
 
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
+from ffls.io.capture import Lights
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (SphereKind, SphereView, classify_sphere, highlight_compactness,
@@ -148,6 +149,17 @@ class CaptureEstimate:
                 for rep, g in zip(rec["spheres"], self.flat_field.gradients):
                     rep["flat_field"] = [float(x) for x in g] if np.any(g != 0) else None
         return out
+
+    def lights(self, image_names: list) -> Lights:
+        """The ``lights.json`` contents of these estimates for a capture's images (in photo order):
+        directions (rejected or failed photos: world up, status ``rejected``), near positions, the
+        per-photo records, the error model and the flat field."""
+        dirs = np.array([normalize(r.direction) if np.all(np.isfinite(r.direction)) else UP for r in self.photos])
+        pos = np.array([r.position if r.position is not None else np.full(3, np.nan) for r in self.photos])
+        return Lights(image_names=list(image_names), directions=dirs, positions=pos,
+                      status=[r.status for r in self.photos], reasons=[r.reason for r in self.photos],
+                      extra=self.records(), uncertainty=None if self.error_model is None else self.error_model.as_dict(),
+                      flat_field=None if self.flat_field is None else self.flat_field.as_dict())
 
 
 # ----------------------------------------------------------------------------- capture stages
@@ -341,8 +353,17 @@ class FlatField:
     n_photos: np.ndarray
 
     def as_dict(self) -> dict:
-        return {"model": "cos4", "strength": float(self.strength), "sigma": float(self.sigma), "p": float(self.p),
-                "applied": bool(self.applied), "gradients": np.asarray(self.gradients, dtype=float).tolist()}
+        """The top-level ``"flat_field"`` record of ``lights.json`` (``docs/formats.md``); a
+        sphere's freely measured gradient is ``null`` where it had too few photos."""
+        def pairs(a):
+            return [[float(v) for v in row] if np.all(np.isfinite(row)) else None
+                    for row in np.asarray(a, dtype=float).reshape(-1, 2)]
+
+        return {"model": "cos4", "strength": float(self.strength),
+                "sigma": float(self.sigma) if np.isfinite(self.sigma) else None, "p": float(self.p),
+                "applied": bool(self.applied), "gradients": pairs(self.gradients), "measured": pairs(self.measured),
+                "measured_sigma": pairs(self.measured_sigma),
+                "photos": [int(n) for n in np.asarray(self.n_photos).ravel()]}
 
 
 #: Rounds of the flat-field fit and first pass in :func:`_two_pass` (the fit is one Gauss-Newton
@@ -1369,8 +1390,6 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         ``refine_centres`` also the sphere's world ``center``, ``center_shift_px`` and
         ``center_refined``).
     """
-    from ffls.io.capture import Lights
-
     _check_modes(model, bounce)
     model, refine_options = check_estimable(capture, model, refine_options)
     n = len(capture.image_names)
@@ -1414,11 +1433,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     finally:
         if bar is not None:
             bar.close()
-    dirs = np.array([normalize(r.direction) if np.all(np.isfinite(r.direction)) else UP for r in est.photos])
-    pos = np.array([r.position if r.position is not None else np.full(3, np.nan) for r in est.photos])
-    return Lights(image_names=capture.image_names, directions=dirs, positions=pos,
-                  status=[r.status for r in est.photos], reasons=[r.reason for r in est.photos],
-                  extra=est.records(), uncertainty=None if est.error_model is None else est.error_model.as_dict())
+    return est.lights(capture.image_names)
 
 
 #: The paper's method under its name (GUIDE: one paper per function).
