@@ -75,6 +75,8 @@ __all__ = [
     "refine_sphere_centres",
     "refit_spheres",
     "calibrate_uncertainty",
+    "CAPTURE_SHADOW_RATIO",
+    "reject_shadowed_photos",
     "DecodedPhotos",
     "decode_photos",
     "estimate_photos",
@@ -1217,7 +1219,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                                                      for i, (r, v) in enumerate(zip(results, values))],
                                                     samples, counted=False)]
     if bounce == "free":
-        error_model, results = calibrate_uncertainty(results, samples, refinements)
+        error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
@@ -1233,8 +1235,65 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
             for i, r in zip(pending, refit(pending, None, counted=False)):
                 results[i] = r
         fitter.advance(n_photos)
-    error_model, results = calibrate_uncertainty(results, samples, refinements)
+    error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
+
+
+#: A photo whose used matte spheres are all lit at less than this fraction of each sphere's median
+#: intensity over the capture's accepted photos is rejected as ``shadowed``
+#: (:func:`reject_shadowed_photos`). A lamp's irradiance falls with the square of its distance,
+#: so 1/25 is the lamp five times farther than usual: beyond the range of distances of a light
+#: moved by hand around an object, while a cast shadow (the object, a person, the lamp turned
+#: away) leaves only the bounce and ambient light, 60-250 times below (the grazing lights of a
+#: 128 px ``ffls synth`` capture, whose every sphere lay in the object's shadow).
+CAPTURE_SHADOW_RATIO = 1.0 / 25.0
+#: Fewest accepted photos of a sphere for its capture median in :func:`reject_shadowed_photos`.
+CAPTURE_SHADOW_MIN_PHOTOS = 5
+
+
+def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = CAPTURE_SHADOW_RATIO,
+                           min_photos: int = CAPTURE_SHADOW_MIN_PHOTOS) -> list[PhotoEstimate]:
+    """The photos with every sphere in a cast shadow, rejected as ``shadowed``.
+
+    :func:`ffls.spheres.photo.estimate_photo` sets a sphere aside that is far darker than the
+    photo's other spheres; when every sphere of a photo is in shadow, none is darker than the
+    others, and their faint shading (the ground's bounce, the ambient) gives a direction, with a
+    cone, that has nothing to do with the lamp. Against the capture it shows: each matte sphere's
+    fitted intensity is compared with its median over the accepted photos where it was used.
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+    ratio : float
+        A used matte sphere below ``ratio`` times its median is dark (:data:`CAPTURE_SHADOW_RATIO`).
+    min_photos : int
+        A sphere with fewer accepted photos has no median, and its photos are kept.
+
+    Returns
+    -------
+    list of PhotoEstimate
+        ``results`` with the photos whose used spheres are all dark (and none is a mirror)
+        rejected, their spheres marked ``shadowed``.
+    """
+    k = max((len(r.spheres) for r in results), default=0)
+    lit = [[] for _ in range(k)]
+    for r in results:
+        for i in r.used_spheres if r.ok else ():
+            if isinstance(r.spheres[i].fit, LambertFit):
+                lit[i].append(float(r.spheres[i].fit.intensity))
+    med = [float(np.median(v)) if len(v) >= min_photos else np.nan for v in lit]
+    out = []
+    for r in results:
+        used = list(r.used_spheres) if r.ok else []
+        dark = [i for i in used if isinstance(r.spheres[i].fit, LambertFit) and med[i] > 0
+                and r.spheres[i].fit.intensity < ratio * med[i]]
+        if not used or len(dark) < len(used):
+            out.append(r)
+            continue
+        spheres = [replace(s, status="shadowed") if i in dark else s for i, s in enumerate(r.spheres)]
+        out.append(replace(r, status="rejected", reason="shadowed", model=None, used_spheres=[], spheres=spheres,
+                           position=None, uncertainty_deg=float("inf"), weights=None))
+    return out
 
 
 def _starts(result: PhotoEstimate) -> list:

@@ -1,0 +1,76 @@
+"""A photo whose every sphere lies in a cast shadow is rejected against the capture
+(:func:`ffls.spheres.estimate.reject_shadowed_photos`): within the photo no sphere is darker than
+the others, so only the spheres' brightness in the capture's other photos shows it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, spherical_to_direction
+from ffls.spheres.estimate import CAPTURE_SHADOW_RATIO, estimate_photos, reject_shadowed_photos
+from ffls.spheres.samples import SphereValues, ground_bounce, sphere_samples
+
+RES = 200
+R_SPH = 0.05
+CENTERS = np.array([[-0.25, 0.55, 0.05], [0.25, 0.55, 0.05], [0.25, 1.05, 0.05], [-0.25, 1.05, 0.05]])
+SCENE_CENTER = np.array([0.0, 0.8, 0.0])
+WFC = np.eye(4)
+_c, _s = np.cos(np.radians(25)), np.sin(np.radians(25))
+WFC[:3, :3] = np.array([[1, 0, 0], [0, _c, _s], [0, -_s, _c]]) @ DEFAULT_WORLD_FROM_CAMERA[:3, :3]
+WFC[:3, 3] = [0.0, -0.2, 0.45]
+K = np.array([[190.0, 0, (RES - 1) / 2], [0, 190.0, (RES - 1) / 2], [0, 0, 1.0]])
+LIGHTS = [(th, ph) for th in (20, 40, 60) for ph in (-150, -30, 30, 90, 150)]
+
+
+@pytest.fixture(scope="module")
+def samples():
+    M = np.linalg.inv(WFC)
+    return [sphere_samples((RES, RES), K, None, M[:3, :3] @ c + M[:3, 3], R_SPH, WFC) for c in CENTERS]
+
+
+def values(samples, direction, lamp=1.0, direct=1.0, seed=0):
+    """The lamp's Lambert shading and its bounce off the ground (times ``lamp``: a lamp farther
+    away), of which ``direct`` reaches the spheres (a shadow on the spheres leaves the ground's
+    bounce), plus the room's ambient and a little noise."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for s in samples:
+        y = 0.8 * (lamp * (direct * np.maximum(s.normals @ direction, 0.0)
+                           + 0.3 * max(direction[2], 0.0) * ground_bounce(s.normals)) + 0.02)
+        y = y + 0.0005 * rng.standard_normal(y.shape)
+        out.append(SphereValues(y.astype(np.float32), np.ones(y.shape, bool), 0))
+    return out
+
+
+@pytest.fixture(scope="module")
+def capture(samples):
+    dirs = [spherical_to_direction(np.radians(th), np.radians(ph)) for th, ph in LIGHTS]
+    # photo 0: every sphere in a cast shadow (2% of the lamp through); photo 1: the lamp three
+    # times farther than in the others (1/9 of the light), which is no shadow
+    lamp, direct = [1.0, 1.0 / 9.0] + [1.0] * (len(dirs) - 2), [0.02] + [1.0] * (len(dirs) - 1)
+    vals = [values(samples, d, a, b, seed=i) for i, (d, a, b) in enumerate(zip(dirs, lamp, direct))]
+    return estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False, bounce="free"), dirs
+
+
+def test_a_photo_with_every_sphere_shadowed_is_rejected(capture):
+    est, _ = capture
+    shadowed = est.photos[0]
+    assert shadowed.status == "rejected" and shadowed.reason == "shadowed", shadowed.reason
+    assert all(s.status == "shadowed" for s in shadowed.spheres if s.fit.status == "ok"), [s.status for s in shadowed.spheres]
+    assert not np.isfinite(shadowed.uncertainty_deg)
+    # a lamp three times farther is dimmer by 9, far above the ratio: kept; no other photo is
+    # taken for shadowed (some are rejected for their own reasons: low lights on a bright ground)
+    assert CAPTURE_SHADOW_RATIO < 1.0 / 9.0
+    assert est.photos[1].status == "ok", est.photos[1].reason
+    assert [i for i, r in enumerate(est.photos) if r.reason == "shadowed"] == [0]
+
+
+def test_without_the_capture_test_the_shadowed_photo_passes(capture, samples):
+    """The test the capture adds is what rejects it: within the photo its spheres agree."""
+    est, dirs = capture
+    again = estimate_photos([values(samples, dirs[0], direct=0.02, seed=0)], samples, SCENE_CENTER, refine_centres=False,
+                            bounce="free")
+    assert again.photos[0].status == "ok"  # one photo alone has no capture to compare with
+    assert reject_shadowed_photos(again.photos) == again.photos
+    # a ratio of 0 keeps every photo
+    assert reject_shadowed_photos(est.photos, ratio=0.0) == est.photos
