@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, spherical_to_direction
-from ffls.spheres.estimate import CAPTURE_SHADOW_RATIO, estimate_photos, reject_shadowed_photos
+from ffls.spheres.estimate import estimate_photos, reject_shadowed_photos
+from ffls.spheres.photo import SHADOW_RATIO
 from ffls.spheres.samples import SphereValues, ground_bounce, sphere_samples
 
 RES = 200
@@ -42,35 +43,46 @@ def values(samples, direction, lamp=1.0, direct=1.0, seed=0):
     return out
 
 
-@pytest.fixture(scope="module")
-def capture(samples):
+def capture(samples, lamp):
+    """Photo 0 has every sphere in a cast shadow (2% of the lamp reaches them); ``lamp`` gives
+    each photo's lamp brightness (its distance)."""
     dirs = [spherical_to_direction(np.radians(th), np.radians(ph)) for th, ph in LIGHTS]
-    # photo 0: every sphere in a cast shadow (2% of the lamp through); photo 1: the lamp three
-    # times farther than in the others (1/9 of the light), which is no shadow
-    lamp, direct = [1.0, 1.0 / 9.0] + [1.0] * (len(dirs) - 2), [0.02] + [1.0] * (len(dirs) - 1)
+    direct = [0.02] + [1.0] * (len(dirs) - 1)
     vals = [values(samples, d, a, b, seed=i) for i, (d, a, b) in enumerate(zip(dirs, lamp, direct))]
     return estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False, bounce="free"), dirs
 
 
-def test_a_photo_with_every_sphere_shadowed_is_rejected(capture):
-    est, _ = capture
-    shadowed = est.photos[0]
-    assert shadowed.status == "rejected" and shadowed.reason == "shadowed", shadowed.reason
-    assert all(s.status == "shadowed" for s in shadowed.spheres if s.fit.status == "ok"), [s.status for s in shadowed.spheres]
-    assert not np.isfinite(shadowed.uncertainty_deg)
-    # a lamp three times farther is dimmer by 9, far above the ratio: kept; no other photo is
-    # taken for shadowed (some are rejected for their own reasons: low lights on a bright ground)
-    assert CAPTURE_SHADOW_RATIO < 1.0 / 9.0
+def shadowed(est):
+    return [i for i, r in enumerate(est.photos) if r.reason == "shadowed"]
+
+
+def test_a_photo_with_every_sphere_shadowed_is_rejected(samples):
+    """At one lamp distance the shadowed photo and a lone photo with the lamp three times farther
+    (1/9 of the light, below :data:`SHADOW_RATIO` and outside the capture's spread) are rejected."""
+    lamp = [1.0, 1.0 / 9.0] + [1.0] * (len(LIGHTS) - 2)
+    est, _ = capture(samples, lamp)
+    photo = est.photos[0]
+    assert photo.status == "rejected" and not np.isfinite(photo.uncertainty_deg)
+    assert all(s.status == "shadowed" for s in photo.spheres if s.fit.status == "ok"), [s.status for s in photo.spheres]
+    assert 1.0 / 9.0 < SHADOW_RATIO
+    # no other photo is taken for shadowed (some are rejected for their own reasons: low lights)
+    assert shadowed(est) == [0, 1]
+
+
+def test_a_lamp_moved_nearer_and_farther_is_no_shadow(samples):
+    """With the lamp's brightness spread over 1/9-1 (distances over 1-3 times), the photo at 1/9 is
+    within the capture's spread: kept; the shadowed photo is still rejected."""
+    lamp = np.exp(np.linspace(0.0, np.log(1.0 / 9.0), len(LIGHTS)))
+    lamp = np.r_[1.0, lamp[-1], lamp[1:-1]]  # photo 1 the farthest
+    est, _ = capture(samples, lamp)
     assert est.photos[1].status == "ok", est.photos[1].reason
-    assert [i for i, r in enumerate(est.photos) if r.reason == "shadowed"] == [0]
+    assert shadowed(est) == [0]
 
 
-def test_without_the_capture_test_the_shadowed_photo_passes(capture, samples):
+def test_without_the_capture_the_shadowed_photo_passes(samples):
     """The test the capture adds is what rejects it: within the photo its spheres agree."""
-    est, dirs = capture
-    again = estimate_photos([values(samples, dirs[0], direct=0.02, seed=0)], samples, SCENE_CENTER, refine_centres=False,
+    d = spherical_to_direction(np.radians(LIGHTS[0][0]), np.radians(LIGHTS[0][1]))
+    again = estimate_photos([values(samples, d, direct=0.02, seed=0)], samples, SCENE_CENTER, refine_centres=False,
                             bounce="free")
     assert again.photos[0].status == "ok"  # one photo alone has no capture to compare with
     assert reject_shadowed_photos(again.photos) == again.photos
-    # a ratio of 0 keeps every photo
-    assert reject_shadowed_photos(est.photos, ratio=0.0) == est.photos

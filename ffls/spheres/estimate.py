@@ -50,7 +50,8 @@ from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (SphereKind, SphereView, classify_sphere, highlight_compactness,
                                    outline_holding_highlights, refine_view_limb)
 from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
-from ffls.spheres.photo import LIGHT_MODELS, SIGNIFICANCE, PhotoEstimate, SphereResult, estimate_photo
+from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
+                               estimate_photo)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values)
@@ -75,7 +76,6 @@ __all__ = [
     "refine_sphere_centres",
     "refit_spheres",
     "calibrate_uncertainty",
-    "CAPTURE_SHADOW_RATIO",
     "reject_shadowed_photos",
     "DecodedPhotos",
     "decode_photos",
@@ -1239,35 +1239,35 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 
-#: A photo whose used matte spheres are all lit at less than this fraction of each sphere's median
-#: intensity over the capture's accepted photos is rejected as ``shadowed``
-#: (:func:`reject_shadowed_photos`). A lamp's irradiance falls with the square of its distance,
-#: so 1/25 is the lamp five times farther than usual: beyond the range of distances of a light
-#: moved by hand around an object, while a cast shadow (the object, a person, the lamp turned
-#: away) leaves only the bounce and ambient light, 60-250 times below (the grazing lights of a
-#: 128 px ``ffls synth`` capture, whose every sphere lay in the object's shadow).
-CAPTURE_SHADOW_RATIO = 1.0 / 25.0
-#: Fewest accepted photos of a sphere for its capture median in :func:`reject_shadowed_photos`.
+#: Fewest accepted photos of a sphere for its capture statistics in :func:`reject_shadowed_photos`.
 CAPTURE_SHADOW_MIN_PHOTOS = 5
 
 
-def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = CAPTURE_SHADOW_RATIO,
+def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_RATIO,
+                           level: float = SIGNIFICANCE,
                            min_photos: int = CAPTURE_SHADOW_MIN_PHOTOS) -> list[PhotoEstimate]:
     """The photos with every sphere in a cast shadow, rejected as ``shadowed``.
 
     :func:`ffls.spheres.photo.estimate_photo` sets a sphere aside that is far darker than the
-    photo's other spheres; when every sphere of a photo is in shadow, none is darker than the
-    others, and their faint shading (the ground's bounce, the ambient) gives a direction, with a
-    cone, that has nothing to do with the lamp. Against the capture it shows: each matte sphere's
-    fitted intensity is compared with its median over the accepted photos where it was used.
+    photo's other spheres (below ``SHADOW_RATIO`` of them); when every sphere of a photo is in
+    shadow, none is darker than the others, and their faint shading (the ground's bounce, the
+    room's ambient) gives a direction, with a cone, that has nothing to do with the lamp. Against
+    the capture it shows: a used matte sphere is dark when its fitted intensity is both below
+    ``ratio`` times its median over the capture's accepted photos (the same test as within a
+    photo) and an outlier of its own spread over them, ``log`` intensity below the median by
+    more than the one-sided normal quantile of ``level`` in robust standard deviations (1.4826
+    times the median absolute deviation): a lamp moved nearer and farther by hand spreads the
+    intensities, and a photo within that spread is no shadow.
 
     Parameters
     ----------
     results : list of PhotoEstimate
     ratio : float
-        A used matte sphere below ``ratio`` times its median is dark (:data:`CAPTURE_SHADOW_RATIO`).
+        The fraction of the sphere's median (:data:`ffls.spheres.photo.SHADOW_RATIO`).
+    level : float
+        One-sided significance of the outlier test (:data:`ffls.spheres.photo.SIGNIFICANCE`).
     min_photos : int
-        A sphere with fewer accepted photos has no median, and its photos are kept.
+        A sphere with fewer accepted photos has no statistics, and its photos are kept.
 
     Returns
     -------
@@ -1275,22 +1275,35 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = CAPTURE_
         ``results`` with the photos whose used spheres are all dark (and none is a mirror)
         rejected, their spheres marked ``shadowed``.
     """
+    from scipy.special import ndtri
+
     k = max((len(r.spheres) for r in results), default=0)
-    lit = [[] for _ in range(k)]
+    logs = [[] for _ in range(k)]
     for r in results:
         for i in r.used_spheres if r.ok else ():
-            if isinstance(r.spheres[i].fit, LambertFit):
-                lit[i].append(float(r.spheres[i].fit.intensity))
-    med = [float(np.median(v)) if len(v) >= min_photos else np.nan for v in lit]
+            f = r.spheres[i].fit
+            if isinstance(f, LambertFit) and f.intensity > 0:
+                logs[i].append(np.log(float(f.intensity)))
+    z = -float(ndtri(level))
+    stats = [(np.median(v), 1.4826 * np.median(np.abs(np.asarray(v) - np.median(v))))
+             if len(v) >= min_photos else None for v in logs]
+
+    def dark(f, st):
+        if not isinstance(f, LambertFit) or st is None:
+            return False
+        if not f.intensity > 0:
+            return True
+        d = np.log(float(f.intensity)) - st[0]
+        return bool(d < np.log(ratio) and d < -z * st[1])
+
     out = []
     for r in results:
         used = list(r.used_spheres) if r.ok else []
-        dark = [i for i in used if isinstance(r.spheres[i].fit, LambertFit) and med[i] > 0
-                and r.spheres[i].fit.intensity < ratio * med[i]]
-        if not used or len(dark) < len(used):
+        shaded = [i for i in used if dark(r.spheres[i].fit, stats[i])]
+        if not used or len(shaded) < len(used):
             out.append(r)
             continue
-        spheres = [replace(s, status="shadowed") if i in dark else s for i, s in enumerate(r.spheres)]
+        spheres = [replace(s, status="shadowed") if i in shaded else s for i, s in enumerate(r.spheres)]
         out.append(replace(r, status="rejected", reason="shadowed", model=None, used_spheres=[], spheres=spheres,
                            position=None, uncertainty_deg=float("inf"), weights=None))
     return out

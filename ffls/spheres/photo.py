@@ -41,7 +41,7 @@ from ffls.spheres.lambert import (LambertFit, fit_lambert, near_ground_bounce, s
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
 from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel
 
-__all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SphereResult", "LightHypothesis", "PhotoEstimate",
+__all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SHADOW_RATIO", "SphereResult", "LightHypothesis", "PhotoEstimate",
            "fit_spheres", "sphere_uncertainty_deg", "ray_origins", "fit_light_model", "near_fit_mask",
            "estimate_photo"]
 
@@ -280,6 +280,11 @@ def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, ter
     return out
 
 
+#: A matte sphere lit at less than this fraction of the photo's other usable matte spheres
+#: (their median intensity) is in a cast shadow (``'shadowed'``).
+SHADOW_RATIO = 0.25
+
+
 def _mark_shadowed(fits: list) -> tuple[list[str], list[int]]:
     """Statuses and usable spheres: a matte sphere far darker than the other usable matte ones is
     in a shadow (a mirror's highlight brightness says nothing about a cast shadow's)."""
@@ -289,7 +294,7 @@ def _mark_shadowed(fits: list) -> tuple[list[str], list[int]]:
     if len(matte) >= 2:
         med = float(np.median([fits[i].intensity for i in matte]))
         for i in matte:
-            if fits[i].intensity < 0.25 * med:
+            if fits[i].intensity < SHADOW_RATIO * med:
                 status[i] = "shadowed"
                 ok.remove(i)
     return status, ok
