@@ -5,33 +5,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, spherical_to_direction
+from ffls.conventions import angle_between, spherical_to_direction
 from ffls.io.capture import load_lights, save_lights
 from ffls.spheres.estimate import (calibrate_flat_field, cos4_gradient, estimate_photos, flat_field_offsets,
                                    flat_field_values)
-from ffls.spheres.samples import SphereValues, ground_bounce, sphere_samples
+from ffls.spheres.samples import SphereValues, ground_bounce
+from sphere_rig import SCENE_CENTER, camera, rig_samples
 
 RES = 320
-R_SPH = 0.05
-CENTERS = np.array([[-0.25, 0.55, 0.05], [0.25, 0.55, 0.05], [0.25, 1.05, 0.05], [-0.25, 1.05, 0.05]])
-SCENE_CENTER = np.array([0.0, 0.8, 0.0])
-WFC = np.eye(4)
-_c, _s = np.cos(np.radians(25)), np.sin(np.radians(25))
-WFC[:3, :3] = np.array([[1, 0, 0], [0, _c, _s], [0, -_s, _c]]) @ DEFAULT_WORLD_FROM_CAMERA[:3, :3]
-WFC[:3, 3] = [0.0, -0.2, 0.45]
-K = np.array([[300.0, 0, (RES - 1) / 2], [0, 300.0, (RES - 1) / 2], [0, 0, 1.0]])
+K = camera(RES, 300.0)
 LENS = (K[0, 2], K[1, 2], K[0, 0])
 LIGHTS = [(th, ph) for th in (15, 35, 55) for ph in (-150, -30, 30, 90, 150)]
 
 
-def _cam(c):
-    M = np.linalg.inv(WFC)
-    return M[:3, :3] @ c + M[:3, 3]
-
-
 @pytest.fixture(scope="module")
 def samples():
-    return [sphere_samples((RES, RES), K, None, _cam(c), R_SPH, WFC) for c in CENTERS]
+    return rig_samples(RES, 300.0)
 
 
 def cos4(s):

@@ -6,27 +6,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, spherical_to_direction
+from ffls.conventions import spherical_to_direction
 from ffls.spheres.estimate import estimate_photos, reject_shadowed_photos
 from ffls.spheres.photo import SHADOW_RATIO
-from ffls.spheres.samples import SphereValues, ground_bounce, sphere_samples
+from ffls.spheres.samples import SphereValues, ground_bounce
+from sphere_rig import SCENE_CENTER, rig_samples
 
-RES = 200
-R_SPH = 0.05
-CENTERS = np.array([[-0.25, 0.55, 0.05], [0.25, 0.55, 0.05], [0.25, 1.05, 0.05], [-0.25, 1.05, 0.05]])
-SCENE_CENTER = np.array([0.0, 0.8, 0.0])
-WFC = np.eye(4)
-_c, _s = np.cos(np.radians(25)), np.sin(np.radians(25))
-WFC[:3, :3] = np.array([[1, 0, 0], [0, _c, _s], [0, -_s, _c]]) @ DEFAULT_WORLD_FROM_CAMERA[:3, :3]
-WFC[:3, 3] = [0.0, -0.2, 0.45]
-K = np.array([[190.0, 0, (RES - 1) / 2], [0, 190.0, (RES - 1) / 2], [0, 0, 1.0]])
 LIGHTS = [(th, ph) for th in (20, 40, 60) for ph in (-150, -30, 30, 90, 150)]
 
 
 @pytest.fixture(scope="module")
 def samples():
-    M = np.linalg.inv(WFC)
-    return [sphere_samples((RES, RES), K, None, M[:3, :3] @ c + M[:3, 3], R_SPH, WFC) for c in CENTERS]
+    return rig_samples(200, 190.0)
 
 
 def values(samples, direction, lamp=1.0, direct=1.0, seed=0):
