@@ -30,6 +30,11 @@ With ``--shared-check`` (and a ``--cache`` of earlier runs) the capture's shared
 direction by their standard errors (:func:`shared_check`, a GUM type-B propagation) and set
 against the photos' actual errors: how much of the common error they could explain.
 
+With ``--truth-check`` (and a ``--cache`` of earlier runs) each part of the stored runs' cones is set
+against the renders' truth (:func:`truth_check`): the spheres' errors and their correlation within
+photos, the photos' errors against the independent-sphere part and the common-mode bound, the cone
+factor against the one 95% coverage needs.
+
 With ``--recalibrate`` (and a ``--cache`` of earlier runs) no ``ffls lights`` runs: the cones of
 each stored run are made again by the current error model from the photo estimates it recorded
 (:func:`recalibrate`): a cone-only change measured in seconds instead of a full run.
@@ -301,6 +306,194 @@ def shared_check(folder: Path) -> dict:
             "common_deg": float((doc.get("uncertainty") or {}).get("common_deg", np.nan))}
 
 
+def _combination_weights(sph: list) -> np.ndarray:
+    """The combination's weights of a photo's used spheres, as :func:`recalibrate` rebuilds them
+    (``lights.json`` does not keep them): a matte sphere's ``sigma_deg`` with the 1 deg floor in
+    quadrature, a highlight fit's own."""
+    sig = np.array([s.get("sigma_deg") or np.inf for s in sph], dtype=np.float64)
+    highlight = np.array([s.get("kind") not in (None, "matte") for s in sph])
+    return np.where(highlight, sig ** -2.0, 1.0 / (sig ** 2 + MATTE_WEIGHT_FLOOR_DEG ** 2))
+
+
+def truth_check(folder: Path) -> dict:
+    """Each part of the cones of a stored run against the render's truth (``truth.json``).
+
+    Per accepted photo with two or more used spheres, from ``lights_estimated.json`` and its error
+    model (:meth:`ErrorModel.budget` with the combination's weights, :func:`_combination_weights`):
+
+    * each sphere's error against the truth (a tangent 2-vector, degrees; a near light's truth at a
+      sphere is its position seen from the true centre nearest the recorded one), set against the
+      sphere's per-axis sd under the model (``sphere_ratio``: the median of ``|e| / (1.1774 sd)``,
+      1 for a Gaussian of that sd; 1.1774 = the median of a Rayleigh radius);
+    * ``pair_correlation``: per pair of spheres, the correlation of their errors over the photos
+      that use both (uncentred: ``sum e_i . e_j / sqrt(sum |e_i|^2 sum |e_j|^2)``), averaged over
+      the pairs. The model takes the spheres' errors as independent beside a common mode bounded
+      by a correlation of at most ``COMMON_CORRELATION``;
+    * ``photo_over_independent``: the median over the photos of the photo's squared per-axis error
+      ``|E|^2 / 2`` over the variance the independent-sphere part predicts for it (``sum w^2 v``,
+      the budget's sigma without the common mode): 1 if the spheres' errors are independent,
+      below 1 if they cancel in the mean, above if they add;
+    * ``needed_factor``: the 95% quantile of ``|E| / sigma`` (the factor 95% coverage needs on
+      these sigmas), against the capture's ``cone_factor``; ``needed_factor_independent`` the same
+      on the independent-sphere part alone; ``shape_factor``: that quantile over the RMS of
+      ``|E| / sigma`` per axis (2.448 for a Gaussian: the photo errors' own tail, whatever their
+      scale);
+    * ``away_mean_deg`` / ``away_share``: the spheres' errors resolved along the horizontal
+      direction from the centre of the spheres' layout to each sphere (on the light's tangent
+      plane; photos where that direction's tangent part is under 0.2 are left out): its mean, and
+      its share of the errors' mean square. Errors that point away from the layout's centre (an
+      object between the spheres hiding part of each sphere's ground) cancel in the mean of
+      spheres placed around it.
+
+    Returns medians and these measures; ``{"skipped": reason}`` without a fitted model or photos
+    with 2+ spheres.
+    """
+    from ffls.conventions import normalize
+    from ffls.spheres.uncertainty import ErrorModel, tangent_residuals
+
+    folder = Path(folder)
+    doc = json.loads((folder / "lights_estimated.json").read_text())
+    truth = json.loads((folder / "truth.json").read_text())
+    if not doc.get("uncertainty"):
+        return {"skipped": "no error model"}
+    model = ErrorModel.from_dict(doc["uncertainty"])
+    T = np.asarray(truth["directions"], dtype=np.float64)
+    pos = np.asarray(truth["positions"], dtype=np.float64) if truth.get("light_model") == "near" else None
+    true_centres = np.asarray(truth.get("sphere_centers") or np.zeros((0, 3)), dtype=np.float64)
+    n_spheres = max(len(l.get("spheres") or []) for l in doc["lights"])
+    first = next(l for l in doc["lights"] if l.get("spheres"))
+    layout = np.mean([s["center"] for s in first["spheres"]], axis=0)
+    per = np.full((len(doc["lights"]), n_spheres, 2), np.nan)
+    rows, away = [], []
+    for j, l in enumerate(doc["lights"]):
+        used = list(l.get("used_spheres") or [])
+        if l.get("status", "ok") != "ok" or len(used) < 2:
+            continue
+        sph = [l["spheres"][i] for i in used]
+        dirs = np.array([s["direction"] for s in sph], dtype=np.float64)
+        centres = np.array([s["center"] for s in sph], dtype=np.float64)
+        if pos is not None:
+            near = [int(np.argmin(np.linalg.norm(true_centres - c, axis=1))) for c in centres]
+            at = normalize(pos[j][None, :] - true_centres[near])
+        else:
+            at = np.repeat(T[j][None, :], len(used), axis=0)
+        e = np.degrees(tangent_residuals(dirs, at))
+        per[j, used] = e
+        E = np.degrees(tangent_residuals(np.asarray(l["direction"], dtype=np.float64)[None], T[j][None]))[0]
+        stat = np.array([s.get("sigma_deg") or np.inf for s in sph]) / np.sqrt(2.0)
+        b = model.budget(stat, np.asarray(used, dtype=np.intp), _combination_weights(sph))
+        if not np.isfinite(b["sigma_deg"]):
+            continue
+        sd = model.sphere_sigma_deg(stat, np.asarray(used, dtype=np.intp))
+        indep = b["sigma_deg"] ** 2 - b["common_deg"] ** 2
+        rows.append((E, b, indep, np.linalg.norm(e, axis=1) / (1.1774 * sd)))
+        for k, c in enumerate(centres):
+            h = c - layout
+            h[2] = 0.0
+            if np.linalg.norm(h) == 0:
+                continue
+            h = normalize(h)
+            ht = h - (h @ at[k]) * at[k]
+            if np.linalg.norm(ht) < 0.2:
+                continue
+            d = normalize(dirs[k])
+            err = d - (d @ at[k]) * at[k]  # tangent error (radians, to first order)
+            away.append((np.degrees(err @ normalize(ht)), np.degrees(np.linalg.norm(err))))
+    if not rows:
+        return {"skipped": "no photo with 2+ spheres"}
+    E = np.array([r[0] for r in rows])
+    sig = np.array([r[1]["sigma_deg"] for r in rows])
+    indep = np.array([r[2] for r in rows])
+    rad = np.linalg.norm(E, axis=1)
+    z = rad / sig
+    corr = []
+    for a in range(n_spheres):
+        for c in range(a + 1, n_spheres):
+            both = np.all(np.isfinite(per[:, a]), axis=1) & np.all(np.isfinite(per[:, c]), axis=1)
+            if both.sum() >= 5:
+                x, y = per[both, a], per[both, c]
+                corr.append(float(np.sum(x * y) / np.sqrt(np.sum(x * x) * np.sum(y * y))))
+    aw = np.array(away) if away else np.zeros((0, 2))
+    med = {k: float(np.median([r[1][k] for r in rows])) for k in (*BUDGET_TERMS, "sigma_deg")}
+    centre_ratio = _centre_check(folder, truth, first, model)
+    return {"photos": int(len(rows)), "scale": float(model.scale), "floor": float(model.floor_deg),
+            "cone_factor": float(model.cone_factor), "source": model.source, **med,
+            "sphere_ratio": float(np.median(np.concatenate([r[3] for r in rows]))),
+            "pair_correlation": float(np.mean(corr)) if corr else None,
+            "photo_over_independent": float(np.median(np.sum(E * E, axis=1) / 2.0 / indep)),
+            "photo_rms_deg": float(np.sqrt(np.mean(E * E))),
+            "independent_deg": float(np.sqrt(np.median(indep))),
+            "needed_factor": float(np.quantile(z, 0.95)),
+            "needed_factor_independent": float(np.quantile(rad / np.sqrt(indep), 0.95)),
+            "shape_factor": float(np.quantile(z, 0.95) / np.sqrt(np.mean(z * z) / 2.0)),
+            "away_mean_deg": float(aw[:, 0].mean()) if len(aw) else None,
+            "away_share": float(np.sum(aw[:, 0] ** 2) / np.sum(aw[:, 1] ** 2)) if len(aw) else None,
+            "centre_ratio": centre_ratio}
+
+
+def _centre_check(folder: Path, truth: dict, first: dict, model) -> list | None:
+    """Per sphere, its recorded centre's actual error against the truth, as the per-axis angle it
+    turns the normals by (``|dc_px| / sqrt 2 / r_px``, degrees), over the centre term ``g`` of the
+    error model (:func:`ffls.spheres.uncertainty.centre_floor_deg`); None for a camera without
+    ``K`` or a truth without the spheres' pixel circles. The centres are compared through the
+    camera (the projection of the recorded world centre against that of the true one), so an error
+    along the viewing ray, which does not turn the normals, does not count."""
+    cap = json.loads((folder / "capture.json").read_text())
+    cam = cap.get("camera") or {}
+    if "K" not in cam or not truth.get("sphere_radii_px") or not truth.get("sphere_centers"):
+        return None
+    K = np.asarray(cam["K"], dtype=np.float64)
+    M = np.linalg.inv(np.asarray(cam.get("world_from_camera", np.eye(4)), dtype=np.float64))
+
+    def project(X):
+        Y = M[:3, :3] @ X + M[:3, 3]
+        return (K @ Y)[:2] / Y[2]
+
+    true_centres = np.asarray(truth["sphere_centers"], dtype=np.float64)
+    g = model.centre_sigma_deg(np.arange(len(first["spheres"])))
+    out = []
+    for k, s in enumerate(first["spheres"]):
+        c = np.asarray(s["center"], dtype=np.float64)
+        i = int(np.argmin(np.linalg.norm(true_centres - c, axis=1)))
+        actual = np.degrees(np.linalg.norm(project(c) - project(true_centres[i])) / np.sqrt(2.0)
+                            / float(truth["sphere_radii_px"][i]))
+        out.append(float(actual / g[k]) if g[k] > 0 else None)
+    return out
+
+
+def main_truth_check(a) -> None:
+    """``--truth-check``: :func:`truth_check` on each cached run; a Markdown table and JSON."""
+    if not a.cache:
+        raise SystemExit("--truth-check needs --cache (a folder of earlier runs)")
+    jobs = [(name, f"c{i:02d}_{a.res}") for i, name in enumerate(CONDITIONS)]
+    jobs += [(name, f"ds{i:02d}") for i, name in enumerate(SCENES)]
+    out = []
+    print("| condition | s | tau | sphere error / model sd | pair correlation | photo / independent variance | "
+          "photos' RMS error | independent part | common bound | cone factor | factor needed | "
+          "needed, independent part only | shape factor | away from layout centre: mean, share | "
+          "actual centre error / g, per sphere |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for name, sub in jobs:
+        folder = Path(a.cache) / sub
+        if (a.only and not any(o in name for o in a.only)) or not (folder / "lights_estimated.json").exists():
+            continue
+        r = {"condition": name, **truth_check(folder)}
+        out.append(r)
+        if "skipped" in r:
+            print(f"| {name} | skipped: {r['skipped']} | | | | | | | | | | | | | |", flush=True)
+            continue
+        pc = "-" if r["pair_correlation"] is None else f"{r['pair_correlation']:+.2f}"
+        cr = "-" if not r["centre_ratio"] else " / ".join("-" if x is None else f"{x:.1f}" for x in r["centre_ratio"])
+        aw = "-" if r["away_mean_deg"] is None else f"{r['away_mean_deg']:+.2f}, {100 * r['away_share']:.0f}%"
+        print(f"| {name} | {r['scale']:.2f} | {r['floor']:.2f} | {r['sphere_ratio']:.2f} | {pc} | "
+              f"{r['photo_over_independent']:.2f} | {r['photo_rms_deg']:.3f} | {r['independent_deg']:.3f} | "
+              f"{r['common_deg']:.3f} | {r['cone_factor']:.2f} | {r['needed_factor']:.2f} | "
+              f"{r['needed_factor_independent']:.2f} | {r['shape_factor']:.2f} | {aw} | {cr} |", flush=True)
+    print("\nper-axis degrees; medians over the accepted photos with 2+ spheres (truth_check)")
+    write_json(a.out, {"benchmark": "bench_conditions --truth-check", **host_info(), "resolution": a.res,
+                       "results": out})
+
+
 def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, recalibrate_only: bool = False,
                   common_correlation: float | None = None) -> dict:
     """``flags``: ``ffls synth`` flags, or a :data:`SCENES` tuple (rendered by tests/detect_scenes.py).
@@ -452,11 +645,16 @@ def main(argv=None):
     ap.add_argument("--shared-check", action="store_true",
                     help="no ffls lights run: the capture's shared, fitted parameters propagated to the photos' "
                          "directions against their actual errors (shared_check; needs --cache with earlier runs)")
+    ap.add_argument("--truth-check", action="store_true",
+                    help="no ffls lights run: each part of the stored runs' cones against the renders' truth "
+                         "(truth_check; needs --cache with earlier runs)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_conditions.json"))
     a = ap.parse_args(argv)
     _, _, dirs = grid(a.phi_step, a.theta_step)
     if a.shared_check:
         return main_shared_check(a)
+    if a.truth_check:
+        return main_truth_check(a)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(a.cache or tmp)
