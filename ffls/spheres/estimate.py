@@ -927,7 +927,12 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
         context.slots = {c[0]: {k: _shared_array(*v) for k, v in layout.items()} for c in chunks}
         with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), initializer=_set_decode_context,
                                  initargs=(context,)) as ex:
-            for (part, d), c in zip(ex.map(_decode_range, chunks), chunks):
+            parts = ex.map(_decode_range, chunks)  # (every chunk submitted: the workers are forked now)
+            # the detection and the fits after the decoding need SciPy's optimisers, which this
+            # package's modules import where they are used (about 1 s of import): imported here,
+            # while the workers decode, instead of before they start
+            import scipy.optimize  # noqa: F401
+            for (part, d), c in zip(parts, chunks):
                 fold((part.unstow(context.slots[c[0]], copy=acc is None), d))  # (the first is merged into)
                 del context.slots[c[0]]  # (its shared memory is freed)
                 if progress_bar is not None:
