@@ -826,3 +826,12 @@ def test_first_pass_on_some_photos_without_a_calibration_fits_the_others(samples
     for a, b in zip(full.photos, some.photos):
         assert a.status == b.status and b.spheres
         assert np.degrees(angle_between(a.direction, b.direction)) < 1e-6
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "many"])
+def test_first_pass_flag_out_of_range_is_one_line(value, tmp_path, capsys):
+    from ffls.cli import main
+
+    assert main(["lights", str(tmp_path), "--first-pass", value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--first-pass" in err, err
