@@ -14,7 +14,7 @@ this process's CPU time, which other jobs' load inflates much less). Prints a ta
 ``benchmarks/results/bench_lights.json``.
 
     python benchmarks/bench_lights.py [--res 768] [--phi-step 20] [--theta-step 10] [--cache DIR]
-        [--spheres detect|truth] [--no-refine] [--end-to-end WORKERS]
+        [--spheres detect|truth] [--no-refine] [--end-to-end WORKERS] [--first-pass N|all]
 
 ``--end-to-end WORKERS`` also times the whole command ``ffls lights CAPTURE --workers WORKERS``
 in a new process (imports, decoding once, sphere detection, both passes, writing lights.json):
@@ -37,7 +37,7 @@ import numpy as np
 
 from ffls.io.capture import load_capture
 from ffls.conventions import angle_between, spherical_to_direction
-from ffls.spheres.estimate import capture_samples, estimate_photos, sphere_views
+from ffls.spheres.estimate import FIRST_PASS_PHOTOS, capture_samples, estimate_photos, sphere_views
 from ffls.spheres.samples import sphere_values
 from ffls.synth.scene import SynthScene, make_scene, write_synthetic_capture
 from ffls.radiance.photos import load_photo
@@ -72,7 +72,7 @@ def grid(phi_step, theta_step):
     return phis, thetas, d
 
 
-def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detect", refine=True):
+def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detect", refine=True, first_pass=FIRST_PASS_PHOTOS):
     folder = Path(folder)
     truth = cached_capture(folder, dirs, lambda f: write_synthetic_capture(f, resolution=res, directions=dirs,
                                                                           progress=False, **cfg))
@@ -99,7 +99,7 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
                      for t in truth.get("spheres", [{}] * len(sph))]
     views = sphere_views(cap, sph) if any(m != "matte" for m in materials) else None
     result = estimate_photos(vals, samples, cap.scene_center, bounce=bounce, refine_centres=refine,
-                             materials=materials, views=views)
+                             materials=materials, views=views, first_pass=first_pass)
     dt = (time.perf_counter() - t) / len(imgs)
     dt_cpu = (time.process_time() - t_cpu) / len(imgs)  # (this process's CPU: not inflated by other jobs' load)
     res_, refs = result.photos, result.refinements or []
@@ -118,7 +118,7 @@ def run_config(name, cfg, res, dirs, folder, bounce="calibrated", spheres="detec
         "median_uncertainty_deg": float(np.median(unc)) if e.size else None,
         "coverage": float(np.mean(e <= unc)) if e.size else None,
         "models": {m: sum(1 for r in res_ if r.model == m) for m in ("distant", "near")},
-        "bounce": bounce, "spheres": spheres, "refine_centres": refine,
+        "bounce": bounce, "spheres": spheres, "refine_centres": refine, "first_pass": first_pass,
         "centre_shift_px": [r.shift_norm_px for r in refs], "calibration": calib, "ms_per_image": 1e3 * dt, "images_per_second_per_core": 1.0 / dt,
         "cpu_ms_per_image": 1e3 * dt_cpu,
         "errors_deg": [float(x) if o else None for x, o in zip(err, ok)],
@@ -153,11 +153,12 @@ def eight_bit_copy(src, dst, state_encoding: bool) -> Path:
     return dst
 
 
-def end_to_end(folder, workers: int, n: int, label: str = "", truth_dirs=None) -> dict:
+def end_to_end(folder, workers: int, n: int, label: str = "", truth_dirs=None, first_pass: str | None = None) -> dict:
     """Wall and CPU time (this process's children) of ``ffls lights FOLDER --workers WORKERS`` as a
     user runs it (a new Python process), and photos per second of wall time; keys prefixed with
     ``label``. With ``truth_dirs`` (n, 3) also the written lights' accuracy: accepted, median and
-    max error, coverage of the 95% cone, and the encoding record (calibrated when unstated)."""
+    max error, coverage of the 95% cone, and the encoding record (calibrated when unstated).
+    ``first_pass`` (``N`` or ``'all'``) is passed as ``--first-pass`` (None: the command's default)."""
     import resource
     import subprocess
     import sys
@@ -166,7 +167,7 @@ def end_to_end(folder, workers: int, n: int, label: str = "", truth_dirs=None) -
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     subprocess.run([sys.executable, "-m", "ffls.cli", "lights", str(folder), "-o", out, "--workers", str(workers),
-                    "--no-progress"], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                    "--no-progress"] + ([] if first_pass is None else ["--first-pass", str(first_pass)]), check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     user, sys_ = after.ru_utime - before.ru_utime, after.ru_stime - before.ru_stime
@@ -204,15 +205,20 @@ def main(argv=None):
     ap.add_argument("--end-to-end", type=int, default=0, metavar="WORKERS",
                     help="also time the whole command `ffls lights CAPTURE --workers WORKERS` (a new process: "
                          "imports, decoding, detection, both passes, writing) and report photos/s")
+    ap.add_argument("--first-pass", default=None, metavar="N|all",
+                    help="photos the first pass fits (estimate_photos first_pass, ffls lights --first-pass; "
+                         "default: FIRST_PASS_PHOTOS)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_lights.json"))
     a = ap.parse_args(argv)
+    first_pass = (FIRST_PASS_PHOTOS if a.first_pass is None else None if a.first_pass == "all"
+                  else int(a.first_pass))
     phis, thetas, dirs = grid(a.phi_step, a.theta_step)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in a.configs.split(","):
             base = a.cache or tmp
             r = run_config(name, CONFIGS[name], a.res, dirs, os.path.join(base, f"{name}_{a.res}"), a.bounce,
-                           a.spheres, not a.no_refine)
+                           a.spheres, not a.no_refine, first_pass)
             if a.end_to_end:
                 folder = os.path.join(base, f"{name}_{a.res}")
                 runs = [("", folder, "as rendered")]
@@ -222,7 +228,7 @@ def main(argv=None):
                              ("_srgb8_unstated", eight_bit_copy(folder, folder + "_srgb8_unstated", False),
                               "8-bit sRGB PNG, encoding unstated (calibrated)")]
                 for label, f, what in runs:
-                    r.update(end_to_end(f, a.end_to_end, r["n"], label, truth_dirs=dirs))
+                    r.update(end_to_end(f, a.end_to_end, r["n"], label, truth_dirs=dirs, first_pass=a.first_pass))
                     p = f"end_to_end{label}"
                     enc = r[p + "_encoding"]
                     enc = "as stated" if not enc else (f"gamma {enc['gamma']:.3f}" if enc.get("curve") == "gamma"

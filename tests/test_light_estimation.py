@@ -782,3 +782,56 @@ def test_sphere_kinds_subtract_the_per_pixel_median_with_or_without_nan(samples)
     values[1][2].grey[:25] = np.nan  # a few non-finite pixels in one photo
     kinds = sphere_kinds(["auto"] * len(samples), samples, values)
     assert kinds == reference(values) and all(k.kind == "matte" and np.isfinite(k.statistic) for k in kinds)
+
+
+# ----------------------------------------------------------------------------- first pass on some photos
+def test_first_pass_photos_are_spread_over_the_sequence():
+    from ffls.spheres.estimate import first_pass_photos
+
+    assert first_pass_photos(80, None) == list(range(80))
+    assert first_pass_photos(12, 40) == list(range(12))
+    sub = first_pass_photos(80, 40)
+    assert len(sub) == 40 and sub[0] == 0 and sub[-1] == 79 and sub == sorted(set(sub))
+    assert max(np.diff(sub)) <= 3  # evenly spaced: no stretch of the sequence left out
+    assert first_pass_photos(5, 1) == [0]
+    with pytest.raises(ValueError):
+        first_pass_photos(5, 0)
+
+
+def test_first_pass_on_some_photos_fits_every_photo_in_the_second(samples, grid_values):
+    """The first pass on 6 of 11 photos: the calibration reads those, the second pass fits all 11,
+    with the same statuses and directions within 0.05 deg of the first pass on every photo."""
+    dirs, vals = grid_values
+    full = estimate_photos(vals, samples, SCENE_CENTER)
+    some = estimate_photos(vals, samples, SCENE_CENTER, first_pass=6)
+    assert len(some.photos) == len(vals)
+    assert all(c.n_photos <= 6 for c in some.calibration)
+    assert [c.n_photos for c in full.calibration] != [c.n_photos for c in some.calibration]
+    for c in some.calibration:
+        assert abs(c.ratio - 0.3) < 0.01, some.calibration
+    assert [r.status for r in some.photos] == [r.status for r in full.photos]
+    for a, b in zip(full.photos, some.photos):
+        if a.status == "ok":
+            assert np.degrees(angle_between(a.direction, b.direction)) < 0.05
+            assert all(sp.fit.bounce_ratio is not None for sp in b.spheres if sp.status == "ok")
+
+
+def test_first_pass_on_some_photos_without_a_calibration_fits_the_others(samples, grid_values):
+    """Two photos cannot calibrate (min_photos = 3) and the first pass fitted one: the other is
+    fitted afterwards (free bounce), as with every photo in the first pass."""
+    dirs, vals = grid_values
+    full = estimate_photos(vals[-2:], samples, SCENE_CENTER, refine_centres=False)
+    some = estimate_photos(vals[-2:], samples, SCENE_CENTER, refine_centres=False, first_pass=1)
+    assert all(c.ratio is None for c in some.calibration)
+    for a, b in zip(full.photos, some.photos):
+        assert a.status == b.status and b.spheres
+        assert np.degrees(angle_between(a.direction, b.direction)) < 1e-6
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "many"])
+def test_first_pass_flag_out_of_range_is_one_line(value, tmp_path, capsys):
+    from ffls.cli import main
+
+    assert main(["lights", str(tmp_path), "--first-pass", value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--first-pass" in err, err

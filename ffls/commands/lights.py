@@ -27,6 +27,11 @@ def add_arguments(p):
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), or free per photo (default calibrated)")
     p.add_argument("--workers", type=integer(1, 1024), default=None, help="processes, 1 to 1024 (default: every core)")
+    p.add_argument("--first-pass", type=integer(1, 1_000_000, special={"all": 0}), default=None, metavar="N|all",
+                   help="with --bounce calibrated, fit only N photos spread over the sequence in the first pass (it "
+                        "feeds the centre refinement, the flat field and the bounce calibration; the second pass "
+                        "fits every photo), or all of them (default: ffls.spheres.estimate.FIRST_PASS_PHOTOS; "
+                        "docs/spheres.md, Speed)")
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT|local", type=scheduler_type(allow_local=True),
                    help="read and linearise the photos on Dask: a dask.distributed cluster, or 'local' for a local "
                         "cluster of --workers processes (docs/scale.md)")
@@ -139,6 +144,8 @@ def run(args) -> int:
     progress = show_progress(args)
     decoded = None
     cluster = bool(getattr(args, "scheduler", None))
+    # --first-pass given: N photos, or every photo ("all"); not given: the estimation's default
+    first_pass = {} if args.first_pass is None else {"first_pass": args.first_pass or None}
     if not cluster:  # every photo decoded once: the encoding calibration, the detection's reductions, the first pass
         from ffls.spheres.estimate import decode_photos
 
@@ -170,13 +177,14 @@ def run(args) -> int:
 
         remote = None if args.scheduler == "local" else args.scheduler
         with open_client(args.workers, remote, progress=progress) as runner:
-            lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce)
+            lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce,
+                                          **first_pass)
     else:
         if cap.world_from_camera_is_default:
             print_notes(NAME, "capture.json gives no camera.world_from_camera: the world's up is taken as the "
                               "image's, so the ground bounce is fitted without the spheres' own shadows")
         lights = estimate_lights(cap, spheres=spheres, progress=progress, workers=args.workers,
-                                 model=args.model, bounce=args.bounce, decoded=decoded)
+                                 model=args.model, bounce=args.bounce, decoded=decoded, **first_pass)
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"

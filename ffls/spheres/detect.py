@@ -59,7 +59,6 @@ import os
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_basis
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
@@ -971,6 +970,7 @@ def _trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
     """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
     to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
     on the rest. Returns the parameters and the inlier mask (n,) of the last round."""
+    from scipy.optimize import least_squares
     p = p0
     inl = np.ones(len(pts), dtype=bool)
     for _ in range(3):

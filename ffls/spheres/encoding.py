@@ -147,7 +147,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares, minimize, minimize_scalar
 
 from ffls.conventions import UP, tangent_basis
 from ffls.errors import InputError
@@ -949,6 +948,7 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
     distant-light captures whose spheres disagree, crediting the near model's fewer coefficients,
     and widened their gamma's interval until a gamma-2.2 file was named srgb.)
     """
+    from scipy.optimize import least_squares
     dirs, data = [], []
     for u in units:
         n = u.normals[u.selected]
@@ -999,6 +999,7 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
     distant model's second round). ``n_photos`` counts the photos with a light. None when no photo
     has two spheres.
     """
+    from scipy.optimize import minimize_scalar
     centers = np.array([np.asarray(c, dtype=np.float64).reshape(3) for c, _ in geometry])
     radii = np.array([float(r) for _, r in geometry])
     by_photo: dict[int, list[int]] = {}
@@ -1049,6 +1050,7 @@ def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POL
     least ``min_slope`` on 65 codes across [0, 1]; ``g`` itself too), with the
     analytic gradient (:meth:`_Unit.rss_and_gradient`), the curve evaluated once over the units' shared values.
     """
+    from scipy.optimize import minimize
     theta0 = np.zeros(order + 1)
     theta0[:len(start)] = start[:order + 1]
     x = np.linspace(0.0, 1.0, 65)
@@ -1207,6 +1209,7 @@ def calibrate_encoding_gamma(raw, normals, *, matte=None, terminator: float = 0.
 def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, min_r2, min_photos, n_bootstrap, seed,
                               code_step, workers, geometry, up, max_order, shadow_side, own_shadow) -> EncodingCalibration:
     """:func:`calibrate_encoding_gamma`, on the lit sides alone or (``shadow_side``) with the dark sides."""
+    from scipy.optimize import minimize_scalar
     normals = [np.asarray(n, dtype=np.float64).reshape(-1, 3) for n in normals]
     n_sph = len(normals)
     matte = [True] * n_sph if matte is None else [bool(m) for m in matte]

@@ -11,7 +11,9 @@ sequence. The stages, each in its own module:
 * this module runs them over the capture in two passes (:func:`estimate_lights`, in a process
   pool, and :func:`estimate_photos`, in this process, share one driver):
 
-  1. every photo is fitted with a free ground bounce; the lens's fall-off (vignetting) across
+  1. every photo is fitted with a free ground bounce (with a calibrated bounce, optionally only
+     some photos spread over the sequence, :func:`first_pass_photos`: this pass only feeds steps
+     2 and 3; the other photos' values are read); the lens's fall-off (vignetting) across
      the spheres is fitted over those fits and, where significant and where the spheres then
      agree better, divided out and the photos fitted again (:func:`calibrate_flat_field`);
   2. optionally each sphere's centre is refined from the first pass's shading
@@ -82,10 +84,46 @@ __all__ = [
     "estimate_photos",
     "estimate_lights",
     "estimate_lights_MasselusDutreAnrys2002",
+    "first_pass_photos",
+    "FIRST_PASS_PHOTOS",
 ]
 
 #: Ground-bounce handling of the driver: calibrated over the capture (two passes) or free per photo.
 BOUNCE_MODES = ("calibrated", "free")
+#: Default number of photos the first pass fits with a calibrated bounce (:func:`first_pass_photos`;
+#: None: every photo). That pass only feeds the capture-wide steps, each a statistic over photos:
+#: the centre refinement reads at most 20 of them (:func:`refine_sphere_centres`), the bounce
+#: calibration a weighted median of the photos that determine the ratio, the flat field a sum over
+#: photos; the second pass fits every photo. Every photo by default: with 40 of 80 the 768 px near
+#: capture's errors grew from 0.50 / 1.10 to 0.53 / 1.21 deg (median / max; docs/spheres.md, Speed),
+#: a near light's direction being sensitive to the capture-wide parameters.
+FIRST_PASS_PHOTOS = None
+
+
+def first_pass_photos(n_photos: int, limit: int | None) -> list[int]:
+    """The photos the first pass fits: ``limit`` of the ``n_photos``, spread evenly over the sequence.
+
+    A capture's photos are taken in the order the light moves (a sweep, rings of a dome), so
+    photos evenly spaced in the sequence are spread over the lights; the capture-wide steps the
+    first pass feeds (the centre refinement, the bounce calibration, the flat field) are
+    statistics over photos that do not need every photo.
+
+    Parameters
+    ----------
+    n_photos : int
+    limit : int or None
+        Photos to fit (None, or at least ``n_photos``: every photo).
+
+    Returns
+    -------
+    list of int
+        Increasing photo indices, ``min(limit, n_photos)`` of them.
+    """
+    if limit is None or int(limit) >= n_photos:
+        return list(range(n_photos))
+    if int(limit) < 1:
+        raise ValueError(f"limit must be at least 1, got {limit!r}")
+    return [int(i) for i in np.unique(np.round(np.linspace(0.0, n_photos - 1.0, int(limit))).astype(np.intp))]
 
 
 @dataclass(frozen=True)
@@ -608,7 +646,8 @@ def _refine_one(args) -> CentreRefinement:
 
 
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
-                          terminator: float = 0.15, map_fn=map, **kwargs) -> tuple[list[SphereSamples], list, list]:
+                          terminator: float = 0.15, map_fn=map, photos: list[int] | None = None,
+                          **kwargs) -> tuple[list[SphereSamples], list, list]:
     """Refine every sphere's centre from the first-pass shading of all photos.
 
     :func:`ffls.spheres.refine.refine_sphere_centre` per sphere (photos where that sphere's fit
@@ -626,6 +665,10 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
     map_fn : callable
         ``map``-like: runs the spheres' refinements (independent of each other), e.g. in a pool
         of processes.
+    photos : list of int, optional
+        The photos (indices into ``values``) that ``results`` are of, when only some were fitted
+        (:func:`first_pass_photos`); None: ``results`` are of every photo. Every photo's values
+        are subset to the new pixels.
     **kwargs
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
 
@@ -644,7 +687,8 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         for r in results:
             sp = r.spheres[k] if r.spheres else None
             dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
-        tasks.append((s, [v[k] for v in values], dirs, terminator, kwargs))
+        fitted = values if photos is None else [values[i] for i in photos]
+        tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
     refinements = list(map_fn(_refine_one, tasks))
     for s, ref in zip(samples, refinements):
         if ref.accepted:
@@ -950,7 +994,12 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
         context.slots = {c[0]: {k: _shared_array(*v) for k, v in layout.items()} for c in chunks}
         with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), initializer=_set_decode_context,
                                  initargs=(context,)) as ex:
-            for (part, d), c in zip(ex.map(_decode_range, chunks), chunks):
+            parts = ex.map(_decode_range, chunks)  # (every chunk submitted: the workers are forked now)
+            # the detection and the fits after the decoding need SciPy's optimisers, which this
+            # package's modules import where they are used (about 1 s of import): imported here,
+            # while the workers decode, instead of before they start
+            import scipy.optimize  # noqa: F401
+            for (part, d), c in zip(parts, chunks):
                 fold((part.unstow(context.slots[c[0]], copy=acc is None), d))  # (the first is merged into)
                 del context.slots[c[0]]  # (its shared memory is freed)
                 if progress_bar is not None:
@@ -972,6 +1021,7 @@ class _PhotoTask(NamedTuple):
     start: list | None = None
     joint: bool = True
     refit: tuple | None = None  # (first-pass estimate, refinements): refit_spheres instead of a fit
+    fit: bool = True  # False: only read the photo's values (the estimate is None)
 
 
 @dataclass
@@ -1016,6 +1066,8 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
         values = sphere_values(kept[0], ctx.samples, saturation=ctx.options.get("saturation"), raw=kept[1],
                                bit_depth=kept[2])
         values = [SphereValues(v.grey.astype(np.float32), v.valid, v.n_saturated) for v in values]
+    if not task.fit:
+        return None, (values if read else None)
     est = estimate_photo(None, ctx.samples, ctx.scene_center, values=values, bounce_ratio=task.bounce_ratio,
                          start=task.start, joint=task.joint, **ctx.options)
     return est, (values if read else None)
@@ -1139,7 +1191,8 @@ def _outlines_holding_highlights(results: list[PhotoEstimate], mirrors: list, li
 
 def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
-              views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None) -> CaptureEstimate:
+              views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
+              first_pass: int | None = FIRST_PASS_PHOTOS) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
@@ -1150,7 +1203,10 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     or None: not fitted): after the first pass, the lens's fall-off is fitted over the photos
     (:func:`calibrate_flat_field`) and, where significant, divided out of the matte spheres'
     values and the first pass run again (at most :data:`FLAT_FIELD_ROUNDS` times: the fit is one
-    Gauss-Newton step from the photos' fits)."""
+    Gauss-Newton step from the photos' fits). ``first_pass`` (None: every photo): with a calibrated
+    bounce the first pass fits only that many photos (:func:`first_pass_photos`; the others' values
+    are read) and the steps it feeds use those; the second pass fits every photo. A capture with a
+    mirror sphere has every photo fitted in the first pass (its highlight checks read them all)."""
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
@@ -1165,36 +1221,50 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     # with a calibrated bounce the first pass only feeds the centre refinement and the calibration
     # (per-sphere fits): its near photos skip the joint position fit, redone in the second pass
     joint = bounce == "free"
+    # the photos the first pass fits (with a calibrated bounce, first_pass of them; the others are
+    # only read); ``results`` holds their estimates, in that order, until the second pass
+    fitted = first_pass_photos(n_photos, first_pass if bounce == "calibrated" else None)
+    chosen = set(fitted)
+
+    def run_fitted(vals, counted=False):  # the fitted photos' first-pass fits from ``vals`` (every photo's)
+        return [r for r, _ in fitter.run([_PhotoTask(i, values=vals[i], joint=joint) for i in fitted], samples,
+                                         counted=counted)]
+
+    first = fitter.run([_PhotoTask(i, values=None if values is None else values[i], joint=joint, fit=i in chosen)
+                        for i in range(n_photos)], samples)
     if values is None:
-        first = fitter.run([_PhotoTask(i, joint=joint) for i in range(n_photos)], samples)
         values = [v for _, v in first]
-    else:
-        first = fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)], samples)
-    results = [r for r, _ in first]
+    results = [r for r, _ in first if r is not None]
     kinds = sphere_kinds(materials, samples, values)
     views = [limb(v) if kd.kind == "mirror" and m != "mirror" else v for kd, m, v in zip(kinds, materials, views)]
     mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views)]
+    if len(fitted) < n_photos and any(kd.kind == "mirror" for kd in kinds):
+        # a mirror sphere: every photo's first-pass fit (the highlight checks read them all)
+        if mirrors == fitter.options["mirrors"]:  # the others' fits (else all are fitted again just below)
+            rest = [i for i in range(n_photos) if i not in chosen]
+            done = dict(zip(fitted, results))
+            done.update(zip(rest, [r for r, _ in fitter.run([_PhotoTask(i, values=values[i], joint=joint)
+                                                              for i in rest], samples, counted=False)]))
+            results = [done[i] for i in range(n_photos)]
+        fitted = list(range(n_photos))
     if mirrors != fitter.options["mirrors"]:  # classified mirrors: their first-pass fits from the highlight
         fitter.options["mirrors"] = mirrors
-        results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],
-                                            samples, counted=False)]
+        results = run_fitted(values)
     if limb_image is not None:  # a chrome ball's outline must hold every photo's highlight
         held = _outlines_holding_highlights(results, mirrors, limb_image)
         if held != mirrors:
             fitter.options["mirrors"] = mirrors = held
             views = [h if h is not None else v for h, v in zip(held, views)]
-            results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint) for i, v in enumerate(values)],
-                                                samples, counted=False)]
+            results = run_fitted(values)
     _check_highlights(results, kinds, where)
     flat = None
     if flat_field is not None:  # the lens's fall-off across each sphere, shared by all photos, divided out
         up = fitter.options.get("up", UP)
         for _ in range(FLAT_FIELD_ROUNDS):
-            step = calibrate_flat_field(results, samples, values, flat_field, up)
+            step = calibrate_flat_field(results, samples, [values[i] for i in fitted], flat_field, up)
             if step.applied:
                 corrected = flat_field_values(values, samples, step)
-                refitted = [r for r, _ in fitter.run([_PhotoTask(i, values=v, joint=joint)
-                                                      for i, v in enumerate(corrected)], samples, counted=False)]
+                refitted = run_fitted(corrected)
                 if disagreement_change(results, refitted) < 0.0:
                     values, results = corrected, refitted
                 else:  # the spheres agree no better: the gradients were the scene's, not the lens's
@@ -1202,22 +1272,26 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
             flat = step if flat is None else _compose_flat(flat, step)
             if not step.applied:
                 break
+    by_photo = dict(zip(fitted, results))
 
     def refit(indices, ratios, counted):
-        tasks = [_PhotoTask(i, values=values[i], bounce_ratio=ratios, start=_starts(results[i])) for i in indices]
+        tasks = [_PhotoTask(i, values=values[i], bounce_ratio=ratios,
+                            start=_starts(by_photo[i]) if i in by_photo else None) for i in indices]
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
     refinements = None
     if refine_centres:
         samples, values, refinements = refine_sphere_centres(samples, results, values, terminator=terminator,
-                                                             map_fn=fitter.map, **(refine_options or {}))
+                                                             map_fn=fitter.map, photos=fitted,
+                                                             **(refine_options or {}))
         if any(r.accepted for r in refinements):
             if bounce == "free":
                 results = refit(range(n_photos), None, counted=False)
             else:  # only what the bounce calibration reads: the recentred spheres' fits
-                results = [r for r, _ in fitter.run([_PhotoTask(i, values=v, refit=(r, refinements))
-                                                     for i, (r, v) in enumerate(zip(results, values))],
+                results = [r for r, _ in fitter.run([_PhotoTask(i, values=values[i], refit=(r, refinements))
+                                                     for i, r in zip(fitted, results)],
                                                     samples, counted=False)]
+            by_photo = dict(zip(fitted, results))
     if bounce == "free":
         error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
@@ -1229,11 +1303,13 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         # no calibration, but recentred spheres: the first pass's combinations (directions, used
         # spheres) are of the old centres, so every photo is fitted again (free bounce)
         results = refit(range(n_photos), None, counted=True)
-    else:  # no calibration: the first pass is final; its near photos get their joint fit now
-        pending = [i for i, r in enumerate(results) if r.joint_pending]
+    else:  # no calibration: the first pass is final; its near photos get their joint fit now, and
+        # the photos it did not fit their fit
+        pending = [i for i in range(n_photos) if i not in by_photo or by_photo[i].joint_pending]
         if pending:
             for i, r in zip(pending, refit(pending, None, counted=False)):
-                results[i] = r
+                by_photo[i] = r
+        results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
     error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
@@ -1335,7 +1411,7 @@ def _check_modes(model: str, bounce: str) -> None:
 def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np.ndarray,
                     bounce: str = "calibrated", refine_centres: bool = True, refine_options: dict | None = None,
                     materials: list | None = None, views: list | None = None, limb_image=None,
-                    flat_field: tuple | None = None,
+                    flat_field: tuple | None = None, first_pass: int | None = FIRST_PASS_PHOTOS,
                     **kwargs) -> CaptureEstimate:
     """The two passes of :func:`estimate_lights` on photos whose sphere values are given, in this process.
 
@@ -1361,6 +1437,9 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     flat_field : (cx, cy, f), optional
         The lens's centre and focal length (pixels): its fall-off (vignetting) is fitted over the
         photos and divided out where significant (:func:`calibrate_flat_field`). None: not fitted.
+    first_pass : int, optional
+        With a calibrated bounce, the first pass fits this many photos, spread over the sequence
+        (:func:`first_pass_photos`); None: every photo.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``model``, ``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``up``, ``mirror_floor_deg``).
@@ -1373,7 +1452,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     fitter = _PhotoFitter(None, scene_center, kwargs)
     return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
                      refine_options=refine_options, materials=materials, views=views, limb_image=limb_image,
-                     flat_field=flat_field)
+                     flat_field=flat_field, first_pass=first_pass)
 
 
 def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict | None]:
@@ -1411,7 +1490,7 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
-                    flat_field: bool = True, **kwargs):
+                    flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -1444,6 +1523,11 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     flat_field : bool
         Fit the lens's fall-off (vignetting) over the photos and divide it out where significant
         (:func:`calibrate_flat_field`, :func:`lens_centre`).
+    first_pass : int, optional
+        With a calibrated bounce, the first pass fits this many photos, spread over the sequence
+        (:func:`first_pass_photos`; the others are only read), and the centre refinement, the
+        flat field and the bounce calibration use those; the second pass fits every photo.
+        None: every photo.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -1501,7 +1585,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
-                            flat_field=lens_centre(capture, shape) if flat_field else None)
+                            flat_field=lens_centre(capture, shape) if flat_field else None,
+                            first_pass=first_pass)
     finally:
         if bar is not None:
             bar.close()

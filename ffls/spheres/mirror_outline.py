@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.optimize import least_squares, minimize_scalar
 
 #: ``SphereFit.source`` of a sphere fitted to an outer outline found by :func:`enclosing_circle`.
 OUTER_SOURCE = "auto (outer outline)"
@@ -99,6 +98,7 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
         when fewer windows hold 3 points, or a refined circle leaves the radius range or moves its
         centre beyond ``max_offset + tol``.
     """
+    from scipy.optimize import least_squares
     P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     c0 = np.asarray(center, dtype=np.float64).reshape(2)
     if len(P) < 3 or not (np.isfinite(r_min) and np.isfinite(r_max) and r_max > r_min >= 0):
@@ -693,6 +693,7 @@ def fit_limb_profile(image, center_px, radius_px, *, model: str = "orthographic"
         None where the band holds too few pixels in the frame, fewer than 3 sectors show a jump, or
         the fit does not converge.
     """
+    from scipy.optimize import least_squares, minimize_scalar
 
     from ffls.camera.projection import camera_rays, project_points
     from ffls.conventions import normalize, tangent_basis

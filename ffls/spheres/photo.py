@@ -31,7 +31,6 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse (scipy.stats imports slowly)
 
 from ffls.conventions import UP, normalize
 from ffls.spheres.combine import combine_distant, fit_near_light_mixed, fit_ray_convergence
@@ -347,6 +346,7 @@ def fit_light_model(spheres: list[int], fits: list, centers: np.ndarray, sigma_f
     -------
     LightHypothesis
     """
+    from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse
     dirs = np.array([fits[i].direction for i in spheres])
     unc = np.array([sphere_uncertainty_deg(fits[i], sigma_floor_deg) for i in spheres])
     mean, u_mean, chi_d, dof_d = combine_distant(dirs, unc)

@@ -44,7 +44,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ffls.conventions import UP, normalize, tangent_basis
 from ffls.spheres.samples import SphereSamples, ground_bounce
@@ -251,6 +250,7 @@ def refine_sphere_centre_shading(samples: SphereSamples, values: list, direction
     -------
     CentreRefinement
     """
+    from scipy.optimize import least_squares
     O, C0, D, alpha, f, d_all = _geometry(samples)
     R = float(samples.radius)
     up = np.asarray(up, dtype=np.float64)

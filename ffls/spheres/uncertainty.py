@@ -75,8 +75,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
-from scipy.special import chdtrc, chdtri  # chi-square survival function and its inverse (scipy.stats imports slowly)
 
 from ffls.conventions import normalize, tangent_basis
 
@@ -106,8 +104,10 @@ __all__ = [
 
 #: Confidence level of a reported cone.
 CONFIDENCE = 0.95
-#: Radius of the 95% cone in per-axis standard deviations: ``sqrt(chi2.ppf(0.95, 2))``.
-CONE_FACTOR = float(np.sqrt(chdtri(2, 1.0 - CONFIDENCE)))
+#: Radius of the 95% cone in per-axis standard deviations: ``sqrt(chi2.ppf(0.95, 2))``, in closed
+#: form (the chi-square of 2 degrees of freedom is exponential: ``ppf(p) = -2 ln(1 - p)``; the same
+#: float as ``scipy.special.chdtri(2, 0.05)``, without importing SciPy with this module).
+CONE_FACTOR = float(np.sqrt(-2.0 * np.log(1.0 - CONFIDENCE)))
 #: Assumed upper bound of the correlation between two spheres' systematic errors (module docstring).
 COMMON_CORRELATION = 0.25
 #: Per-axis standard deviation (degrees) of the common-mode error of even perfectly agreeing spheres.
@@ -596,6 +596,7 @@ def tail_factor(residuals: list[np.ndarray], variances: list[np.ndarray], confid
     n : int
         The draws used (0 with too few).
     """
+    from scipy.special import chdtri
     gauss = float(np.sqrt(chdtri(2, 1.0 - confidence)))
     z = []
     for r, v in zip(residuals, variances):
@@ -656,6 +657,8 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         With ``centre_deg`` (also the fallback, where too few photos have 2+ spheres) and the
         capture's own cone factor (:func:`tail_factor` on the kept photos).
     """
+    from scipy.optimize import minimize
+    from scipy.special import chdtrc
     centre = np.zeros(0) if centre_deg is None else np.asarray(centre_deg, dtype=np.float64)
     centre_rad2 = np.radians(np.nan_to_num(centre)) ** 2
     data = []
