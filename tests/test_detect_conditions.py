@@ -189,6 +189,19 @@ def test_colour_judged_per_photo_not_on_the_max_image():
     assert photo_neutrality(grey.colour_counts, rows[:0], cols[:0]) is None
 
 
+def test_colour_counts_of_noise_below_black():
+    """A float photo's sensor noise goes below 0 around black: a lit pixel with one negative channel
+    has no colour left to count (min/max below 0), bin 0, instead of an index before the table."""
+    from ffls.spheres.detect import COLOUR_BINS, COLOUR_STEP, photo_colour_counts
+
+    rng = np.random.default_rng(0)
+    im = (0.2 + 0.05 * rng.standard_normal((32, 32, 3))).astype(np.float32)
+    im[..., 2] -= 0.3  # blue below black on most pixels
+    counts = np.zeros((COLOUR_BINS, -(-32 // COLOUR_STEP), -(-32 // COLOUR_STEP)), np.uint16)
+    photo_colour_counts(im, im[..., :3].mean(axis=2), counts)
+    assert counts.sum() > 0 and counts[0].sum() >= 0.9 * counts.sum()
+
+
 def test_white_ground_spheres_found_on_the_edges_that_hold_in_the_photos(tmp_path):
     """White spheres on a white ground under a half-azimuth grid of lights (the paper's Table 1 grid,
     coarser): in the max image their tops merge with the ground and their bottoms meet the contact

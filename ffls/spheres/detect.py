@@ -578,7 +578,8 @@ def photo_colour_counts(im, lum, counts, lit_fraction: float = 0.1, clip_fractio
     if flat.size == 0:
         return
     lo = np.minimum(np.minimum(chans[0], chans[1]), chans[2])
-    ratio = lo.reshape(-1)[flat] / hi.reshape(-1)[flat]
+    # a channel below 0 (sensor noise around black in a float photo) has no colour left: bin 0
+    ratio = np.clip(lo.reshape(-1)[flat] / hi.reshape(-1)[flat], 0.0, 1.0)
     b = np.minimum((ratio * COLOUR_BINS).astype(np.int64), COLOUR_BINS - 1)
     cf = counts.reshape(-1)
     cf[b * (counts.shape[1] * counts.shape[2]) + flat] += 1  # one bin per pixel: no repeated index
