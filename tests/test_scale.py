@@ -94,7 +94,7 @@ def test_parse_memory():
     assert parse_memory("512M") == 512 * 2 ** 20
     assert parse_memory("1.5GiB") == 3 * 2 ** 29
     assert parse_memory("4096") == 4096
-    for bad in ("", "-1G", "lots", "nanG", "0"):
+    for bad in ("", "-1G", "lots", "nanG", "0", "1e308G", "2e6P"):
         with pytest.raises(ValueError):
             parse_memory(bad)
 

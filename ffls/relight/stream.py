@@ -40,13 +40,17 @@ from ffls.store.field import compressor, read_json, tile_slices, write_json_atom
 from ffls.store.float16 import choose_scale, to_float16
 from ffls.store.ingest import SerialRunner, build_pyramid
 
-__all__ = ["parse_memory", "default_memory", "tile_working_set", "check_budget", "relight_field",
+__all__ = ["MAX_MEMORY", "parse_memory", "default_memory", "tile_working_set", "check_budget", "relight_field",
            "StoredCompression", "compress_field", "load_or_compress_field", "relight_compressed_field",
            "load_compressed_level", "compression_key", "gram_tiles", "layer_tiles", "StreamedRelighter", "in_memory_bytes", "open_streamed"]
 
 
 # ----------------------------------------------------------------------------- memory
 _UNITS = {"": 1, "b": 1, "k": 2 ** 10, "m": 2 ** 20, "g": 2 ** 30, "t": 2 ** 40}
+
+
+#: The largest memory budget :func:`parse_memory` takes (1 EiB): a larger one is a typo.
+MAX_MEMORY = 2 ** 60
 
 
 def parse_memory(text) -> int:
@@ -66,7 +70,10 @@ def parse_memory(text) -> int:
         raise ValueError(f"expected a size such as 1G, 512M or 800K, not {text!r}") from None
     if not np.isfinite(v) or v <= 0:
         raise ValueError(f"expected a positive size such as 1G, not {text!r}")
-    return int(v * _UNITS[unit])
+    size = v * _UNITS[unit]
+    if not size <= MAX_MEMORY:  # (an overflow to inf too)
+        raise ValueError(f"{text!r} is more than any machine has (at most {MAX_MEMORY // 2 ** 50} PiB)")
+    return int(size)
 
 
 def default_memory(available: int) -> int:
