@@ -315,6 +315,7 @@ CASES = [
     ("lights-folder-as-image", ["lights", "{cap_dirimg}", "-o", "{out}/l.json"],
      "listed image 'img_0002.exr' is a folder, not a file", "l.json"),
     ("lights-workers-0", ["lights", "{cap}", "--workers", "0", "-o", "{out}/l.json"], "--workers", "l.json"),
+    ("lights-workers-1000", ["lights", "{cap}", "--workers", "1000", "-o", "{out}/l.json"], "--workers", "l.json"),
     ("lights-workers-neg", ["lights", "{cap}", "--workers", "-2", "-o", "{out}/l.json"], "--workers", "l.json"),
     ("lights-plot-missing", ["lights", "{cap}", "-o", "{out}/l.json", "--plot", "{out}/missing/p.png"],
      "missing", "l.json"),

@@ -917,6 +917,14 @@ def write_output(out, hdr, display8=None, mask=None) -> None:
         write_png(out, display8 if mask is None else with_alpha(display8, mask))
 
 
+#: Local worker processes per core at most (``--workers``): each process imports NumPy, OpenCV and
+#: its share of the photos, so 1000 of them on 2 cores ran for minutes before any work.
+WORKERS_PER_CORE = 4
+#: ``--workers N``: local processes, 1 to :data:`WORKERS_PER_CORE` per core of this machine.
+WORKERS = integer(1, WORKERS_PER_CORE * (os.cpu_count() or 1))
+WORKERS.__name__ = "processes"
+
+
 # ----------------------------------------------------------------------------- captures of any size (docs/scale.md)
 def _memory_type(text):
     from ffls.relight.stream import parse_memory
@@ -946,8 +954,9 @@ def add_scale_arguments(p, store: bool = True, memory: bool = True) -> None:
                        help="the chunked store of the photos (default CAPTURE/field.zarr; built on first use)")
         p.add_argument("--tiles", action="store_true",
                        help="stream from the store even when the photos would fit in memory")
-    p.add_argument("--workers", type=integer(1, 1024), default=None, metavar="N",
-                   help="local Dask worker processes for the per-photo work (default every core; 1: in this process)")
+    p.add_argument("--workers", type=WORKERS, default=None, metavar="N",
+                   help="local Dask worker processes for the per-photo work (default every core; 1: in this process; "
+                        "at most 4 per core)")
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", type=scheduler_type(),
                    help="run the per-photo work on this dask.distributed cluster (docs/scale.md)")
 

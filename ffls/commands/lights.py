@@ -16,7 +16,7 @@ DESCRIPTION = ("Fit every photo's spheres (Lambert + ambient + ground bounce), c
 
 
 def add_arguments(p):
-    from ffls.commands.common import integer, output_path, scheduler_type
+    from ffls.commands.common import WORKERS, integer, output_path, scheduler_type
 
     p.add_argument("capture", help="capture folder (with capture.json)")
     p.add_argument("-o", "--output", default=None, type=output_path((".json",)),
@@ -26,7 +26,8 @@ def add_arguments(p):
     p.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated",
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), or free per photo (default calibrated)")
-    p.add_argument("--workers", type=integer(1, 1024), default=None, help="processes, 1 to 1024 (default: every core)")
+    p.add_argument("--workers", type=WORKERS, default=None,
+                   help="processes, 1 to 4 per core (default: every core)")
     p.add_argument("--first-pass", type=integer(1, 1_000_000, special={"all": 0}), default=None, metavar="N|all",
                    help="with --bounce calibrated, fit only N photos spread over the sequence in the first pass (it "
                         "feeds the centre refinement, the flat field and the bounce calibration; the second pass "
