@@ -81,6 +81,26 @@ def test_nan_inf_rejected_with_count(tmp_path, bad):
     _one_line(e.value, "bad.exr")
 
 
+def test_overflowing_and_black_maps_refused(tmp_path):
+    """A texel near float32's limit (3e38) made Inf pixels in ``ffls render`` and was written to a
+    .hdr as 0; a map black everywhere lit nothing without a word. Each is one line naming the file."""
+    data = np.ones((8, 16, 3), np.float32)
+    data[2, 3] = 3e38
+    write_exr(tmp_path / "fmax.exr", data)
+    with pytest.raises(InputError, match="radiance up to 3e.38: beyond 1e.30") as e:
+        lightmap.load_lightmap(tmp_path / "fmax.exr")
+    _one_line(e.value, "fmax.exr")
+    write_exr(tmp_path / "zero.exr", np.zeros((8, 16, 3), np.float32))
+    assert lightmap.load_lightmap(tmp_path / "zero.exr").data.max() == 0  # (ffls lightmap info shows it)
+    with pytest.raises(InputError, match="black everywhere") as e:
+        lightmap.lightmap_from_spec(str(tmp_path / "zero.exr"))
+    _one_line(e.value, "zero.exr")
+    bright = LightMap(np.full((8, 16, 3), 2e38, np.float32), "latlong")
+    with pytest.raises(FflsError, match="Radiance .hdr range"):
+        lightmap.save_lightmap(bright, tmp_path / "b.hdr")
+    assert not (tmp_path / "b.hdr").exists()
+
+
 def test_negatives_clamped_with_count(tmp_path):
     data = np.ones((8, 16, 3), np.float32)
     data[0, 0, 1] = -0.5

@@ -42,6 +42,8 @@ __all__ = [
     "load_lightmap",
     "save_lightmap",
     "detect_layout",
+    "MAX_RADIANCE",
+    "RGBE_MAX",
     "validate_radiance",
     "cross_directions",
     "cube_to_cross",
@@ -441,8 +443,13 @@ def detect_layout(height: int, width: int, layout: str | None = None) -> str:
     return layout
 
 
+#: The largest radiance a light map may hold: the sun is about 1e9 in cd/m^2; a texel near
+#: float32's limit (3.4e38) overflows the relighting's 32-bit sums to Inf.
+MAX_RADIANCE = 1e30
+
+
 def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
-    """Reject NaN/Inf and clamp negatives of light-map data.
+    """Reject NaN/Inf and values above :data:`MAX_RADIANCE`, and clamp negatives of light-map data.
 
     Parameters
     ----------
@@ -461,7 +468,7 @@ def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
     Raises
     ------
     InputError
-        If any value is NaN or infinite.
+        If any value is NaN, infinite or above :data:`MAX_RADIANCE`.
     """
     data = np.asarray(data, dtype=np.float32)
     bad = ~np.isfinite(data)
@@ -472,6 +479,10 @@ def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
             f"({int(np.isnan(data).sum())} NaN, {int(np.isinf(data).sum())} Inf channel values)",
             path,
         )
+    top = float(data.max()) if data.size else 0.0
+    if top > MAX_RADIANCE:
+        raise InputError(f"light map radiance up to {top:.3g}: beyond {MAX_RADIANCE:.0e}, which no light map holds "
+                         "(the renderer's 32-bit sums would overflow); scale it down", path)
     neg = data < 0
     clamped = int(np.count_nonzero(neg.any(axis=-1)))
     if clamped:
@@ -532,6 +543,11 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
     return LightMap(data, layout, str(path), clamped, colour_note=img.colour_note)
 
 
+#: The largest value a Radiance RGBE pixel holds (mantissa 255/256 at exponent 127): a larger one
+#: is written as 0 by OpenCV, the brightest texel turned black.
+RGBE_MAX = 255.0 / 256.0 * 2.0 ** 127
+
+
 def save_lightmap(lm: LightMap, path: str | os.PathLike, half: bool = False) -> Path:
     """Save a light map as OpenEXR (``.exr``) or Radiance (``.hdr``), chosen by the extension.
 
@@ -561,6 +577,9 @@ def save_lightmap(lm: LightMap, path: str | os.PathLike, half: bool = False) -> 
     if ext in (".hdr", ".pic"):
         if half:
             raise FflsError("half precision applies to .exr output only", path)
+        top = float(np.max(img)) if img.size else 0.0
+        if top > RGBE_MAX:
+            raise FflsError(f"values up to {top:.6g} exceed the Radiance .hdr range ({RGBE_MAX:.3g}): write .exr", path)
         return write_hdr(path, img)
     raise FflsError(f"cannot save a light map as {ext or '(no extension)'!r}; use .exr or .hdr", path)
 
@@ -733,12 +752,16 @@ def builtin_lightmap(name: str, height: int = 256) -> LightMap:
 def lightmap_from_spec(spec, layout: str | None = None) -> LightMap:
     """A light map from a file path or a built-in name (:func:`builtin_lightmap`).
 
-    An existing file wins; a path-like spec (with a suffix or a folder) that does not exist is an
-    error naming it; anything else is looked up among the built-in maps, whose error lists them.
+    An existing file wins (a map black everywhere is an error: it would light nothing); a
+    path-like spec (with a suffix or a folder) that does not exist is an error naming it; anything
+    else is looked up among the built-in maps, whose error lists them.
     """
     p = Path(spec).expanduser()
     if p.is_file():
-        return load_lightmap(p, layout=layout)
+        lm = load_lightmap(p, layout=layout)
+        if not np.any(lm.data > 0):
+            raise InputError("the light map is black everywhere: it lights nothing", p)
+        return lm
     if p.suffix or os.sep in str(spec):
         raise InputError("light map not found", p)
     if layout is not None:
