@@ -84,6 +84,29 @@ def test_exr_without_colour_channels_rejected(tmp_path):
     _one_line(e.value, "z.exr")
 
 
+def test_exr_multi_part_and_offset_data_window_refused(tmp_path):
+    """Only the first part of a multi-part file was read, as if it were the image; a data window
+    other than the display window was read at the origin, its pixels misplaced."""
+    import OpenEXR
+
+    head = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    rgb = {c: np.ones((6, 6), np.float32) for c in "RGB"}
+    parts = [OpenEXR.Part(dict(head, name="black"), {c: np.zeros((6, 6), np.float32) for c in "RGB"}),
+             OpenEXR.Part(dict(head, name="photo"), rgb)]
+    with OpenEXR.File(parts) as f:
+        f.write(str(tmp_path / "two.exr"))
+    with pytest.raises(InputError, match="has 2 parts") as e:
+        imageio.read_image(tmp_path / "two.exr")
+    _one_line(e.value, "two.exr")
+    window = dict(head, dataWindow=(np.array([2, 2], np.int32), np.array([7, 7], np.int32)),
+                  displayWindow=(np.array([0, 0], np.int32), np.array([5, 5], np.int32)))
+    with OpenEXR.File(window, rgb) as f:
+        f.write(str(tmp_path / "win.exr"))
+    with pytest.raises(InputError, match=r"data window \(2,2\)-\(7,7\) differs from its display window") as e:
+        imageio.read_image(tmp_path / "win.exr")
+    _one_line(e.value, "win.exr")
+
+
 def test_hdr_round_trip(tmp_path, rng):
     rgb = (rng.random((8, 16, 3)) * 50 + 0.01).astype(np.float32)
     rgb[0, 0] = [10.0, 0.5, 0.02]  # distinct channels catch a BGR/RGB swap

@@ -314,7 +314,8 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
     ------
     InputError
         Missing, corrupt, or without R/G/B or Y channels, luminance-chroma, or with integer/subsampled channels,
-        or with a ``chromaticities`` attribute that is not a convertible colour space.
+        multi-part, with a data window other than its display window, or with a ``chromaticities``
+        attribute that is not a convertible colour space.
     """
     import OpenEXR
 
@@ -335,6 +336,18 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
         why = cap.first_line().replace(str(path) + ": ", "")
         raise InputError(f"cannot read OpenEXR file, corrupt or truncated ({why or f'{type(err).__name__}: {err}'})",
                          path) from None
+    n_parts = len(getattr(f, "parts", [None]))
+    if n_parts > 1:  # only the first part would be read, as if it were the image
+        raise InputError(f"OpenEXR file has {n_parts} parts; ffls reads single-part files: write the image as "
+                         "one part", path)
+    data_window, display_window = header.get("dataWindow"), header.get("displayWindow")
+    if data_window is not None and display_window is not None and not all(
+            np.array_equal(a, b) for a, b in zip(data_window, display_window)):
+        (x0, y0), (x1, y1) = (tuple(int(v) for v in c) for c in data_window)
+        (u0, v0), (u1, v1) = (tuple(int(v) for v in c) for c in display_window)
+        raise InputError(f"OpenEXR data window ({x0},{y0})-({x1},{y1}) differs from its display window "
+                         f"({u0},{v0})-({u1},{v1}); its pixels would be placed at the wrong position: crop or pad it "
+                         "to the display window", path)
     names = set(channels)
     if {"R", "G", "B"} <= names:
         use = ["R", "G", "B"]
