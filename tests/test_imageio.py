@@ -107,6 +107,22 @@ def test_exr_multi_part_and_offset_data_window_refused(tmp_path):
     _one_line(e.value, "win.exr")
 
 
+def test_tiff_grey_alpha_keeps_its_alpha(tmp_path):
+    """OpenCV decodes a grey + alpha TIFF as grey and drops the alpha: it is read by Pillow, so a
+    transparent photo is seen as such (as a grey + alpha PNG is)."""
+    from PIL import Image
+
+    grey = np.full((6, 8), 120, np.uint8)
+    alpha = np.full((6, 8), 255, np.uint8)
+    alpha[:3] = 0
+    Image.merge("LA", (Image.fromarray(grey), Image.fromarray(alpha))).save(tmp_path / "la.tif")
+    img = imageio.read_image(tmp_path / "la.tif")
+    assert img.alpha is not None and img.alpha[:3].max() == 0 and img.alpha[3:].min() == 1
+    assert np.all(img.pixels == img.pixels[0, 0]) and img.pixels.shape == (6, 8, 3)
+    Image.fromarray(grey).save(tmp_path / "l.tif")  # no alpha: none made up
+    assert imageio.read_image(tmp_path / "l.tif").alpha is None
+
+
 def test_hdr_round_trip(tmp_path, rng):
     rgb = (rng.random((8, 16, 3)) * 50 + 0.01).astype(np.float32)
     rgb[0, 0] = [10.0, 0.5, 0.02]  # distinct channels catch a BGR/RGB swap

@@ -406,6 +406,21 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
     return ImageData(rgb, depth, "exr", path, alpha=alpha, chromaticities=chroma, colour_note=note)
 
 
+def _tiff_alpha_dropped(path: Path, shape: tuple) -> np.ndarray | None:
+    """The alpha of a TIFF whose alpha OpenCV drops on decoding (grey + alpha, ``LA``), read by
+    Pillow from the same file; None where the file has none (Pillow reads the header only)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            if "A" not in im.getbands():
+                return None
+            a = np.asarray(im.getchannel("A"))
+    except (OSError, ValueError):
+        return None  # (a TIFF that Pillow cannot read: OpenCV's decoding stands)
+    return a if a.shape == tuple(shape) else None
+
+
 def _read_cv2(path: Path, kind: str) -> ImageData:
     import cv2
 
@@ -425,6 +440,8 @@ def _read_cv2(path: Path, kind: str) -> ImageData:
     if img is None or "incomplete" in cap.text or "libpng error" in cap.text:
         raise InputError(f"cannot decode {kind.upper()} image (corrupt, truncated or not a {kind.upper()} file)", path)
     alpha = None
+    if kind == "tiff" and (img.ndim == 2 or img.shape[2] in (1, 3)):
+        alpha = _tiff_alpha_dropped(path, img.shape[:2])
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
     elif img.shape[2] == 2:  # grey + alpha
