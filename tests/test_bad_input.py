@@ -476,6 +476,8 @@ CASES += [
     ("render-exr-exposure-auto", R + ["--exposure", "auto", "-o", "{out}/e.exr"], "--exposure", "e.exr"),
     ("render-still-fps", R + ["--fps", "24", "-o", "{out}/p.png"], "--fps", "p.png"),
     ("comp-still-fps", C + [*_M, "--fps", "5", "-o", "{out}/o.png"], "--fps", "o.png"),
+    ("render-frames-fps", R + ["--turntable", "3", "--fps", "24", "-o", "{out}/frames"], "--fps", "frames"),
+    ("comp-frames-fps", C + [*_M, "--turntable", "3", "--fps", "5", "-o", "{out}/frames"], "--fps", "frames"),
 ]
 
 

@@ -845,18 +845,23 @@ def check_mask_not_empty(mask, path, flag: str = "--mask", what: str = "object")
         raise InputError(f"{flag} is empty: no {what} pixel (white = {what})", path)
 
 
-def check_fps_flag(args) -> None:
-    """Refuse ``--fps`` without ``--turntable`` (the flag defaults to None so that a given one is
-    told from one left out; a still has no frame rate).
+def check_fps_flag(args, out=None) -> None:
+    """Refuse ``--fps`` without ``--turntable``, and with a turntable written as a folder of PNG
+    frames when the output ``out`` is known (the flag defaults to None so that a given one is told
+    from one left out; a still, or a folder of frames, has no frame rate).
 
     Raises
     ------
     ffls.errors.InputError
     """
-    if getattr(args, "turntable", None) is None and getattr(args, "fps", None) is not None:
-        from ffls.errors import InputError
+    if getattr(args, "fps", None) is None:
+        return
+    from ffls.errors import InputError
 
+    if getattr(args, "turntable", None) is None:
         raise InputError("--fps applies to a --turntable video; a still has no frame rate")
+    if out is not None and os.path.splitext(str(out))[1].lower() != ".mp4":
+        raise InputError("--fps applies to an .mp4 turntable; a folder of PNG frames has no frame rate", out)
 
 
 def check_display_flags(args, out) -> None:
@@ -873,7 +878,7 @@ def check_display_flags(args, out) -> None:
 
     from ffls.errors import InputError
 
-    check_fps_flag(args)
+    check_fps_flag(args, out)
     if getattr(args, "turntable", None) is None and Path(out).suffix.lower() == ".exr":
         given = [f for f, k in (("--exposure", "exposure"), ("--tonemap", "tonemap"))
                  if getattr(args, k, None) is not None]

@@ -270,7 +270,7 @@ def run(args) -> int:
     if args.flow is not None and args.sources == "weights":
         raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
                          "no flow")
-    check_fps_flag(args)
+    check_fps_flag(args, out)
     args.flow, args.fps = args.flow or "dis", args.fps or 30.0
     R0 = rotation_from_args(args)
     inputs = load_inputs(args)
