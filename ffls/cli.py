@@ -29,7 +29,7 @@ import warnings
 
 from ffls.commands import command_modules
 from ffls.commands.common import deferred_notes, print_notes
-from ffls.errors import FflsError, guard_inputs, os_error_message
+from ffls.errors import FflsError, guard_inputs, interrupt_note, os_error_message
 
 __all__ = ["build_parser", "subcommands", "main", "OneLineParser", "Terminated"]
 
@@ -157,11 +157,11 @@ def main(argv: list[str] | None = None) -> int:
     except FflsError as e:
         print(f"{name}: error: {e}", file=sys.stderr)
         return 2
-    except Terminated:
-        print(f"{name}: terminated; nothing partial was left", file=sys.stderr)
+    except Terminated as e:
+        print(f"{name}: terminated; {interrupt_note(e) or 'nothing partial was left'}", file=sys.stderr)
         return 143
-    except KeyboardInterrupt:
-        print(f"{name}: interrupted; nothing partial was left", file=sys.stderr)
+    except KeyboardInterrupt as e:
+        print(f"{name}: interrupted; {interrupt_note(e) or 'nothing partial was left'}", file=sys.stderr)
         return 130
     except BrokenPipeError:  # e.g. `ffls info | head`: the reader left; say nothing more
         import os

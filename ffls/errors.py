@@ -19,7 +19,8 @@ import tempfile
 from pathlib import Path
 
 __all__ = ["FflsError", "InputError", "OutputError", "GLUnavailable", "atomic_output", "atomic_folder",
-           "check_output_path", "os_error_message", "register_input", "guard_inputs"]
+           "check_output_path", "os_error_message", "register_input", "guard_inputs", "kept_on_interrupt",
+           "interrupt_note"]
 
 
 class FflsError(Exception):
@@ -88,6 +89,24 @@ def register_input(path: str | os.PathLike) -> None:
         ident = _identity(Path(path))
         if ident is not None:
             reg[ident] = Path(path)
+
+
+@contextlib.contextmanager
+def kept_on_interrupt(note: str):
+    """While active, an interruption (Ctrl-C, SIGTERM: a :class:`KeyboardInterrupt`) carries
+    ``note``, what the work keeps on purpose (a resumable store's staged photos), which the command
+    line says instead of "nothing partial was left" (:func:`interrupt_note`)."""
+    try:
+        yield
+    except KeyboardInterrupt as e:
+        if interrupt_note(e) is None:
+            e.ffls_kept = str(note)
+        raise
+
+
+def interrupt_note(e: BaseException) -> str | None:
+    """What an interrupted command kept on purpose (:func:`kept_on_interrupt`), or None."""
+    return getattr(e, "ffls_kept", None)
 
 
 @contextlib.contextmanager

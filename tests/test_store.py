@@ -166,6 +166,24 @@ _INGEST_SCRIPT = textwrap.dedent("""
 """)
 
 
+def test_an_interrupted_ingest_says_what_it_kept(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during an ingest keeps the staged photos on purpose (the next run resumes): the last
+    line says so, instead of "nothing partial was left"."""
+    import ffls.store.ingest as ingest
+    from ffls.cli import main
+
+    cap = make_capture(tmp_path / "cap", n=4)
+
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ingest, "build_tile", stop)
+    assert main(["ingest", str(cap.folder), "--workers", "1", "--no-progress"]) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "interrupted; the unfinished store" in err[0] and "the next run resumes it" in err[0], err
+    assert (cap.folder / "field.zarr" / "staging").exists()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
 def test_interrupted_ingest_resumes_cleanly(tmp_path, sig):
     cap = make_capture(tmp_path / "cap", n=8)

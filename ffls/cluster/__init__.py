@@ -127,7 +127,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None, progre
     # already in use", a library's warning line
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                            scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.CRITICAL)
     try:
         client = Client(cluster)
         try:

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError
+from ffls.errors import InputError, kept_on_interrupt
 from ffls.store.field import (FORMAT, MARKER, MIN_LEVEL_SIZE, VERSION, ReflectanceField, choose_tile, compressor, default_store_path,
                               level_shapes, open_field, photo_record, provenance, read_json, stale_reason,
                               tile_slices, write_json_atomic)
@@ -300,47 +300,49 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
         if old != plan or not (path / "staging").exists():
             note = f"an interrupted ingest of other settings was found; restarting {path}"
             _remove(path)
-    t0 = time.perf_counter()
-    if not path.exists():
-        g = zarr.open_group(str(path), mode="w")
-        g.attrs["format"] = FORMAT  # what check_store_path recognises before a plan or a marker exists
-        g.create_array(name="staging", shape=(n, *shape, 3), chunks=(1, tile, tile, 3), dtype="float16",
-                       compressors=compressor(), fill_value=0)
-        (path / PROGRESS).mkdir()
-        write_json_atomic(path / PLAN, plan)
-    records = {}
-    for i, cur in enumerate(prov["images"]):
-        rec = read_json(path / PROGRESS / f"{i}.json")
-        if rec is not None and rec.get("photo") == cur:
-            records[i] = rec
-    resumed = len(records)
-    todo = [i for i in range(n) if i not in records]
-    for rec in runner.map(partial(stage_photo, path, capture), todo, desc="ingest: photos"):
-        records[int(rec["index"])] = rec
-    t1 = time.perf_counter()
-    max_abs = max(r["max_abs"] for r in records.values())
-    scale = choose_scale(max_abs)
-    g = zarr.open_group(str(path), mode="r+")
-    g.create_array(name="basis", shape=(n, *shape, 3), chunks=(n, tile, tile, 3), dtype="float16",
-                   compressors=compressor(), fill_value=0, overwrite=True)
-    photo_scales = [records[i]["scale"] for i in range(n)]
-    reports = runner.map(partial(build_tile, path, photo_scales, scale, max_abs), tile_slices(*shape, tile),
-                         desc="ingest: tiles")
-    t2 = time.perf_counter()
-    shapes = build_pyramid(path, "", n, shape, tile, runner, min_level)
-    t3 = time.perf_counter()
-    seconds = {"photos": t1 - t0, "tiles": t2 - t1, "pyramid": t3 - t2}
-    g["basis"].attrs["scale"] = scale
-    doc = {"format": FORMAT, "version": VERSION, "names": list(capture.image_names), "shape": list(shape),
-           "tile": tile, "scale": scale, "max_abs": max_abs, "levels": [list(s) for s in shapes],
-           "provenance": {**prov, "images": [records[i]["photo"] for i in range(n)]},
-           "float16": {"n_flushed": int(sum(r["n_flushed"] for r in reports)),
-                       "max_rel_error": float(max((r["max_rel_error"] for r in reports), default=0.0))},
-           "seconds": seconds}
-    write_json_atomic(path / MARKER, doc)  # last: from here on the store reads as complete
-    for leftover in ("staging", PROGRESS, PLAN):
-        _remove(path / leftover)
-    return IngestReport(open_field(path), built=True, resumed=resumed, staged=len(todo), note=note, seconds=seconds)
+    # an interruption from here keeps the unfinished store on purpose: the next run resumes it
+    with kept_on_interrupt(f"the unfinished store {path} is kept: the next run resumes it"):
+        t0 = time.perf_counter()
+        if not path.exists():
+            g = zarr.open_group(str(path), mode="w")
+            g.attrs["format"] = FORMAT  # what check_store_path recognises before a plan or a marker exists
+            g.create_array(name="staging", shape=(n, *shape, 3), chunks=(1, tile, tile, 3), dtype="float16",
+                           compressors=compressor(), fill_value=0)
+            (path / PROGRESS).mkdir()
+            write_json_atomic(path / PLAN, plan)
+        records = {}
+        for i, cur in enumerate(prov["images"]):
+            rec = read_json(path / PROGRESS / f"{i}.json")
+            if rec is not None and rec.get("photo") == cur:
+                records[i] = rec
+        resumed = len(records)
+        todo = [i for i in range(n) if i not in records]
+        for rec in runner.map(partial(stage_photo, path, capture), todo, desc="ingest: photos"):
+            records[int(rec["index"])] = rec
+        t1 = time.perf_counter()
+        max_abs = max(r["max_abs"] for r in records.values())
+        scale = choose_scale(max_abs)
+        g = zarr.open_group(str(path), mode="r+")
+        g.create_array(name="basis", shape=(n, *shape, 3), chunks=(n, tile, tile, 3), dtype="float16",
+                       compressors=compressor(), fill_value=0, overwrite=True)
+        photo_scales = [records[i]["scale"] for i in range(n)]
+        reports = runner.map(partial(build_tile, path, photo_scales, scale, max_abs), tile_slices(*shape, tile),
+                             desc="ingest: tiles")
+        t2 = time.perf_counter()
+        shapes = build_pyramid(path, "", n, shape, tile, runner, min_level)
+        t3 = time.perf_counter()
+        seconds = {"photos": t1 - t0, "tiles": t2 - t1, "pyramid": t3 - t2}
+        g["basis"].attrs["scale"] = scale
+        doc = {"format": FORMAT, "version": VERSION, "names": list(capture.image_names), "shape": list(shape),
+               "tile": tile, "scale": scale, "max_abs": max_abs, "levels": [list(s) for s in shapes],
+               "provenance": {**prov, "images": [records[i]["photo"] for i in range(n)]},
+               "float16": {"n_flushed": int(sum(r["n_flushed"] for r in reports)),
+                           "max_rel_error": float(max((r["max_rel_error"] for r in reports), default=0.0))},
+               "seconds": seconds}
+        write_json_atomic(path / MARKER, doc)  # last: from here on the store reads as complete
+        for leftover in ("staging", PROGRESS, PLAN):
+            _remove(path / leftover)
+        return IngestReport(open_field(path), built=True, resumed=resumed, staged=len(todo), note=note, seconds=seconds)
 
 
 def ensure_field(capture, path=None, *, runner=None, progress: bool = True) -> IngestReport:
