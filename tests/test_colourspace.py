@@ -61,6 +61,21 @@ def test_rec709_chromaticities_and_none_are_not_converted(tmp_path):
     assert colour_summary([tmp_path / "rec709.exr", tmp_path / "plain.exr"]) is None
 
 
+def test_aces2065_with_its_imaginary_blue_primary_is_converted():
+    """ACES2065-1 (AP0), the ACES interchange EXR's space, has a blue primary below the spectral
+    locus (y -0.077); it was refused as "not a colour space"."""
+    import colour
+
+    space = colour.RGB_COLOURSPACES["ACES2065-1"]
+    c = np.r_[np.ravel(space.primaries), space.whitepoint]
+    assert c[5] < 0
+    conv = working_space_conversion(c)
+    assert conv.name == "ACES2065-1"
+    expected = colour.RGB_to_RGB([0.2, 0.5, 0.1], space, colour.RGB_COLOURSPACES["ITU-R BT.709"],
+                                 chromatic_adaptation_transform="Bradford")
+    np.testing.assert_allclose(conv.apply(np.array([[[0.2, 0.5, 0.1]]]))[0, 0], expected, rtol=1e-6)
+
+
 def test_same_white_needs_no_adaptation():
     rec2020 = (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290)
     conv = working_space_conversion(rec2020)
@@ -71,7 +86,9 @@ def test_same_white_needs_no_adaptation():
 
 @pytest.mark.parametrize("bad, match", [
     ((0.1, 0.1, 0.2, 0.2, 0.3, 0.3, 0.3127, 0.329), "degenerate primaries"),
-    ((0.64, 0.33, 0.30, 0.60, 0.15, 0.0, 0.3127, 0.329), "every y must be positive"),
+    ((0.64, 0.33, 0.30, 0.60, 0.15, 0.0, 0.3127, 0.329), "a primary with a y of 0"),
+    ((0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.9, 0.9), r"white point \(0.9, 0.9\) that no colour has"),
+    ((0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.9, 0.05), "outside the triangle of its primaries"),
     ((0.64, 0.33, 0.30, 0.60, 0.15, 0.06, float("nan"), 0.329), "non-finite"),
 ])
 def test_unconvertible_space_is_an_error_not_rec709(tmp_path, bad, match):

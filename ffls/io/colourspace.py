@@ -91,9 +91,26 @@ def _check_chromaticities(chromaticities, path) -> np.ndarray:
     if not np.all(np.isfinite(c)):
         raise InputError("chromaticities attribute has non-finite values; refusing to read the file as Rec.709", path)
     xy = c.reshape(4, 2)
-    if np.any(xy[:, 1] <= 0) or np.any(xy[:, 0] < -1) or np.any(xy > 2):
-        raise InputError(f"chromaticities attribute is not a colour space (xy {xy.round(4).tolist()}: every y must "
-                         "be positive); refusing to read the file as Rec.709", path)
+    if np.any(xy < -1) or np.any(xy > 2):
+        raise InputError(f"chromaticities attribute is not a colour space (xy {xy.round(4).tolist()}: values beyond "
+                         "-1..2); refusing to read the file as Rec.709", path)
+    # the primaries may be imaginary (ACES2065-1's blue has y -0.077), the white may not: a real
+    # chromaticity (x, y, z = 1 - x - y all positive) inside the primaries' triangle, where white
+    # is a positive mix of them
+    (wx, wy), tri = xy[3], xy[:3]
+    if np.any(np.abs(tri[:, 1]) < 1e-9):
+        raise InputError(f"chromaticities attribute has a primary with a y of 0 ({tri.round(4).tolist()}): it has no "
+                         "finite XYZ; refusing to read the file as Rec.709", path)
+    edge, to_white = np.roll(tri, -1, axis=0) - tri, xy[3] - tri
+    side = edge[:, 0] * to_white[:, 1] - edge[:, 1] * to_white[:, 0]  # (2-D cross products)
+    if abs(edge[0, 0] * edge[1, 1] - edge[0, 1] * edge[1, 0]) < 1e-9:
+        return c  # collinear primaries: named as degenerate by working_space_conversion
+    if not (wx > 0 and wy > 0 and wx + wy < 1):
+        raise InputError(f"chromaticities attribute has a white point ({wx:.4g}, {wy:.4g}) that no colour has (x, y "
+                         "and 1 - x - y must be positive); refusing to read the file as Rec.709", path)
+    if not (all(v > 0 for v in side) or all(v < 0 for v in side)):
+        raise InputError(f"chromaticities attribute has its white point ({wx:.4g}, {wy:.4g}) outside the triangle of "
+                         f"its primaries ({tri.round(4).tolist()}); refusing to read the file as Rec.709", path)
     return c
 
 
@@ -117,8 +134,9 @@ def working_space_conversion(chromaticities, path=None) -> ColourConversion | No
     Raises
     ------
     InputError
-        Malformed values (not 8 finite numbers, a y <= 0) or degenerate primaries (collinear:
-        no RGB -> XYZ matrix).
+        Malformed values (not 8 finite numbers, beyond -1..2), a white point that is no real
+        chromaticity or lies outside the primaries' triangle, or degenerate primaries (collinear:
+        no RGB -> XYZ matrix). Imaginary primaries (ACES2065-1's AP0) are converted.
     """
     import colour
 
