@@ -168,3 +168,29 @@ def test_relight_takes_lp_and_other_captures_lights(calib, tmp_path, capsys):
                "--probe", "paper", "-o", str(tmp_path / "x.exr")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "\n" not in err and "--lights-map" in err and not (tmp_path / "x.exr").exists()
+
+
+def test_lp_with_rejected_lights_left_out_applies_by_a_map(calib, tmp_path):
+    """An .lp from ``ffls lights --lp`` lists only the accepted lights: by order it cannot apply to a
+    capture of all the photos, and a name map that names every photo (or only the listed ones)
+    was refused; the photos without a light are rejected, and the note says how many."""
+    from ffls.commands.lights import export_lp
+
+    cap, lights = load_capture_and_lights(calib)
+    lights.status[3], lights.reasons[3] = "rejected", "test"
+    lp = tmp_path / "calib.lp"
+    export_lp(lights, cap, lp)
+    (tmp_path / "obj").mkdir()
+    obj = load_capture(_object_capture(calib, tmp_path / "obj"))
+    full = {n: f"obj_{k:02d}.exr" for k, n in enumerate(cap.image_names)}
+    listed = {k: v for k, v in full.items() if k != cap.image_names[3]}
+    for m in (full, listed):
+        out = load_lights_any(lp, obj, m)
+        assert out.status[3] == "rejected" and "only accepted lights" in out.reasons[3]
+        assert out.status.count("ok") == N - 1 and "1 images without a light in it are left out" in out.note
+        np.testing.assert_allclose(out.directions[[0, 1, 2, 4]], lights.directions[[0, 1, 2, 4]], atol=1e-6)
+    with pytest.raises(InputError, match="has no light in --lights-map"):  # a map that maps nothing there
+        load_lights_any(lp, obj, {cap.image_names[3]: "obj_00.exr"})
+    # a lights.json lists every photo, rejected ones too: an image the map leaves out is still an error
+    with pytest.raises(InputError, match="'obj_03.exr' has no light"):
+        load_lights_any(calib / "lights.json", obj, listed)

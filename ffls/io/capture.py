@@ -1134,7 +1134,9 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
 
     1. ``lights_map`` given: light ``k`` (named by its image in the file; for ``.lp`` also by
        base name) applies to capture image ``lights_map[k]``; lights the map leaves out are
-       unused; every capture image needs one.
+       unused; every capture image needs one, except from an ``.lp``, which lists only accepted
+       lights: there a capture image without a light (unmapped, or mapped to a light the file
+       lacks) gets a rejected light, and the note says how many.
     2. The file's image names are the capture's (``.lp``: by base name): matched by name.
     3. None of the names is an image of the capture and the counts agree: by order (light
        ``i`` to image ``i``), and :attr:`Lights.note` says so.
@@ -1174,18 +1176,28 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
         known = set(cap_names)
         pos = {}
         for key, target in m.items():
-            if key not in index:
-                raise InputError(f"--lights-map names light {key!r}, which is not in the lights file", path)
             if target not in known:
                 raise InputError(f"--lights-map maps {key!r} to {target!r}, which is not an image of the capture", path)
-            pos[target] = index[key]
+            if key in index:
+                pos[target] = index[key]
+            elif not lp:
+                raise InputError(f"--lights-map names light {key!r}, which is not in the lights file", path)
+        # an .lp lists only accepted lights (ffls lights --lp leaves the rejected out): a capture image
+        # whose light it lacks is rejected, as when matching by name; a lights.json lists them all
         missing = [n for n in cap_names if n not in pos]
-        if missing:
+        if missing and (not lp or len(missing) == len(cap_names)):
             raise InputError(f"capture image {missing[0]!r} has no light in --lights-map", path)
-        out = _select(raw, [pos[n] for n in cap_names])
+        out = _select(raw, [pos.get(n, 0) for n in cap_names])
         out.image_names = cap_names
-        out.note = (f"lights: {len(cap_names)} of the {len(raw)} lights in {path.name} applied to this capture's "
-                    f"images by the name map")
+        why = f"no light in {path.name} (an .lp lists only accepted lights)"
+        for i, n in enumerate(cap_names):
+            if n not in pos:
+                out.directions[i], out.positions[i] = conventions.UP, np.nan
+                out.status[i], out.reasons[i], out.extra[i] = "rejected", why, {}
+        out.note = (f"lights: {len(pos)} of the {len(raw)} lights in {path.name} applied to this capture's "
+                    f"images by the name map" + (f"; {len(missing)} images without a light in it are left out "
+                                                 f"({missing[0]!r}{', ...' if len(missing) > 1 else ''})"
+                                                 if missing else ""))
         return out
     key = _base if lp else (lambda n: n)
     cap_key = {key(n): n for n in cap_names}
