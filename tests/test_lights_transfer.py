@@ -194,3 +194,27 @@ def test_lp_with_rejected_lights_left_out_applies_by_a_map(calib, tmp_path):
     # a lights.json lists every photo, rejected ones too: an image the map leaves out is still an error
     with pytest.raises(InputError, match="'obj_03.exr' has no light"):
         load_lights_any(calib / "lights.json", obj, listed)
+
+
+def test_a_file_with_more_lights_than_the_capture_applies_by_name(calib, tmp_path):
+    """A lights file that names every image of the capture and more (a calibration set with extra
+    shots) applies by name, the others unused and said; names that match only partly suggest
+    --lights-map (the error named the first unknown image and stopped)."""
+    doc = json.loads((calib / "capture.json").read_text())
+    (tmp_path / "few").mkdir()
+    for src in doc["images"][:5]:
+        shutil.copy(calib / src, tmp_path / "few" / src)
+    few = dict(doc, images=doc["images"][:5])
+    (tmp_path / "few" / "capture.json").write_text(json.dumps(few))
+    cal = load_lights(calib / "lights.json")
+    cap, lights = load_capture_and_lights(tmp_path / "few", calib / "lights.json")
+    assert lights.image_names == cap.image_names and f"the other {N - 5} are not" in lights.note
+    np.testing.assert_array_equal(lights.directions, cal.directions[:5])
+    (tmp_path / "mix").mkdir()
+    names = doc["images"][:3] + ["other_a.exr", "other_b.exr"]
+    for src, dst in zip(doc["images"][:5], names):
+        shutil.copy(calib / src, tmp_path / "mix" / dst)
+    (tmp_path / "mix" / "capture.json").write_text(json.dumps(dict(doc, images=names)))
+    with pytest.raises(InputError, match=r"3 of the 8 lights name images of the capture.*--lights-map") as e:
+        load_capture_and_lights(tmp_path / "mix", calib / "lights.json")
+    assert "\n" not in str(e.value)

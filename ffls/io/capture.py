@@ -1212,7 +1212,27 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
         raise InputError(f"none of the {len(raw)} lights names an image of the capture ({len(cap_names)} images), so "
                          "they cannot apply by order either; give --lights-map '{\"light image\": \"capture image\"}'",
                          path)
-    return lights_from_lp(path, capture) if lp else load_lights(path, capture)
+    first = {}
+    for k, n in enumerate(raw.image_names):
+        first.setdefault(key(n), k)
+    named = [first[k] for k in cap_key if k in first]
+    extra = len(raw) - len(named)
+    if len(named) == len(cap_names) and extra > 0 and len(set(raw.image_names)) == len(raw):
+        # the file names every image of the capture and more (a calibration set with extra shots):
+        # by name, the others unused, and said
+        out = _select(raw, named)
+        out.image_names = cap_names
+        out.note = (f"lights: {path.name} holds {len(raw)} lights; the {len(cap_names)} that name this capture's "
+                    f"images are used by name, the other {extra} are not")
+        return out
+    try:
+        return lights_from_lp(path, capture) if lp else load_lights(path, capture)
+    except InputError as e:
+        if hits < len(raw):  # names that match only partly: the map is the way
+            raise InputError(f"{e.message}; {hits} of the {len(raw)} lights name images of the capture: to apply "
+                             "them otherwise, give --lights-map '{\"light image\": \"capture image\"}'",
+                             e.path) from None
+        raise
 
 
 def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Capture, Lights]:
