@@ -388,6 +388,9 @@ def test_lp_round_trip(tmp_path, rng):
     ("two\na.jpg 0 0 1\n", "number of lights"),
     ("1\na.jpg 0 zero 1\n", "line 2"),
     ("1\na.jpg 0 0 2\n", "not a unit vector"),
+    ("1\na.jpg 0 0 5\n", r"not a unit vector \(norm 5\)"),  # (it said norm inf beyond 2)
+    ("1\na.jpg 0.23 0.87 0.43 0.1 0.2\n", "line 2: more than three numbers after the file name"),
+    ("2\na.jpg 0 0 1\na.jpg 0 1 0\n", r"line 3: 'a.jpg' is listed twice \(first on line 2\)"),
     ("1\na.jpg nan 0 1\n", "line 2: direction of 'a.jpg' has a component that is not a finite number"),
     ("0\n", "says 0 lights: an .lp file lists at least one"),
     ("", "empty"),

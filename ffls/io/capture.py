@@ -917,6 +917,14 @@ def world_to_lp(directions, world_from_camera=None) -> np.ndarray:
     return np.asarray(directions, dtype=np.float64) @ R  # R orthonormal: inverse is R.T
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
     """Read an RTI ``.lp`` light-position file.
 
@@ -959,7 +967,7 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
         raise InputError(f"the count on line {rows[0][0]} says {n} lights but {len(rows) - 1} follow", path)
     if n <= 0:
         raise InputError(f"the count on line {rows[0][0]} says {n} lights: an .lp file lists at least one", path)
-    names, dirs = [], []
+    names, dirs, seen = [], [], {}
     for lineno, text in rows[1:]:
         parts = text.rsplit(None, 3)
         try:
@@ -971,10 +979,17 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
         if not np.all(np.isfinite(d)):
             raise InputError(f"line {lineno}: direction of {parts[0]!r} has a component that is not a finite "
                              f"number ({' '.join(parts[1:])})", path)
-        finite = float(np.max(np.abs(d))) <= 2.0
-        norm = float(np.linalg.norm(d)) if finite else float("inf")
-        if not finite or abs(norm - 1) > UNIT_TOLERANCE:
+        head = parts[0].rsplit(None, 1)
+        if len(head) == 2 and _is_number(head[1]):  # (a file name may hold spaces, not a trailing number)
+            raise InputError(f"line {lineno}: more than three numbers after the file name ({text[:60]!r}): expected "
+                             "'filename x y z'", path)
+        with np.errstate(over="ignore"):
+            norm = float(np.linalg.norm(d))
+        if abs(norm - 1) > UNIT_TOLERANCE:
             raise InputError(f"line {lineno}: direction of {parts[0]!r} is not a unit vector (norm {norm:.6g})", path)
+        if parts[0] in seen:
+            raise InputError(f"line {lineno}: {parts[0]!r} is listed twice (first on line {seen[parts[0]]})", path)
+        seen[parts[0]] = lineno
         names.append(parts[0])
         dirs.append(d / norm)
     return names, np.array(dirs)
@@ -1040,8 +1055,10 @@ def lights_from_lp(path: str | os.PathLike, capture: Capture) -> Lights:
         if b not in by_base:
             raise InputError(f"image {b!r} is not in the capture's {CAPTURE_FILE}", path)
         mapped.append(by_base[b])
-    if len(set(mapped)) != len(mapped):
-        raise InputError("an image is listed twice", path)
+    if len(set(mapped)) != len(mapped):  # two paths with one base name (a/x.png, b/x.png)
+        twice = next(m for k, m in enumerate(mapped) if m in mapped[:k])
+        lines = ", ".join(repr(n) for n, m in zip(names, mapped) if m == twice)
+        raise InputError(f"capture image {twice!r} is listed twice ({lines})", path)
     missing = [n for n in capture.image_names if n not in set(mapped)]
     if len(missing) == len(capture.image_names):
         raise InputError(f"capture image {missing[0]!r} has no light", path)
