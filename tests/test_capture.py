@@ -383,6 +383,20 @@ def test_lp_round_trip(tmp_path, rng):
     np.testing.assert_allclose(d2, d, atol=1e-8)
 
 
+def test_lights_given_a_folder_or_an_image(tmp_path):
+    """``--lights`` given a folder or a photo: said as such (it was an IsADirectoryError or a
+    UnicodeDecodeError in brackets, or ".lp file not found" for a folder named x.lp)."""
+    (tmp_path / "d.lp").mkdir()
+    (tmp_path / "p.exr").write_bytes(b"\x76\x2f\x31\x01\x02\xff\xfe\x00")
+    with pytest.raises(InputError, match="is a folder, not lights.json"):
+        cap.load_lights(tmp_path)
+    with pytest.raises(InputError, match="is a folder, not an .lp file"):
+        cap.read_lp(tmp_path / "d.lp")
+    with pytest.raises(InputError, match="is not a JSON text file") as e:
+        cap.load_lights(tmp_path / "p.exr")
+    _one_line(e.value, "p.exr")
+
+
 @pytest.mark.parametrize("text,match", [
     ("3\na.jpg 0 0 1\nb.jpg 0 1 0\n", "says 3 lights but 2 follow"),
     ("two\na.jpg 0 0 1\n", "number of lights"),

@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ffls import conventions
-from ffls.errors import InputError, atomic_output, register_input
+from ffls.errors import InputError, atomic_output, os_error_message, register_input
 from ffls.io.response import load_response, polynomial_response_table
 
 __all__ = [
@@ -110,11 +110,16 @@ class _Json:
     def load(self, what: str) -> dict:
         if not self.path.exists():
             self.fail("", f"{what} not found")
+        if self.path.is_dir():
+            self.fail("", f"is a folder, not {what}" + (" (a capture's lights are its lights.json)"
+                                                         if what == LIGHTS_FILE else ""))
         register_input(self.path)
         try:
             text = self.path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as e:
-            self.fail("", f"cannot read {what} ({type(e).__name__}: {e})")
+        except UnicodeDecodeError:
+            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 text")
+        except OSError as e:
+            self.fail("", f"cannot read {what} ({os_error_message(e)})")
         try:
             doc = json.loads(text)
         except json.JSONDecodeError as e:
@@ -950,7 +955,7 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError(".lp file not found", path)
+        raise InputError("is a folder, not an .lp file" if path.is_dir() else ".lp file not found", path)
     register_input(path)
     try:
         lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
