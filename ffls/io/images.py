@@ -357,7 +357,7 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
     elif "Y" in names:
         use = ["Y", "Y", "Y"]
     else:
-        raise InputError(f"OpenEXR file has no R, G, B or Y channels (has {sorted(names)})", path)
+        raise InputError(f"OpenEXR file needs the channels R, G and B, or Y (luminance); it has {sorted(names)}", path)
     planes = []
     depth = "half"
     for name in use:
