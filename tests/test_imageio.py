@@ -123,6 +123,26 @@ def test_tiff_grey_alpha_keeps_its_alpha(tmp_path):
     assert imageio.read_image(tmp_path / "l.tif").alpha is None
 
 
+def test_undecodable_files_say_why(tmp_path):
+    """A valid file OpenCV does not decode is told from a corrupt one: a PNG header claiming
+    34000 x 34000 pixels (beyond OpenCV's limit), a TIFF of a sample format it does not read."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 34000, 34000, 8, 0, 0, 0, 0))
+    (tmp_path / "huge.png").write_bytes(png + chunk(b"IEND", b""))
+    with pytest.raises(InputError, match="OpenCV did not decode .its limit is 2.30 pixels.") as e:
+        imageio.read_image(tmp_path / "huge.png")
+    _one_line(e.value, "huge.png")
+    (tmp_path / "junk.tif").write_bytes(b"II*\x00junk")
+    with pytest.raises(InputError, match="sample format such as 16-bit float") as e:
+        imageio.read_image(tmp_path / "junk.tif")
+    _one_line(e.value, "junk.tif")
+
+
 def test_hdr_round_trip(tmp_path, rng):
     rgb = (rng.random((8, 16, 3)) * 50 + 0.01).astype(np.float32)
     rgb[0, 0] = [10.0, 0.5, 0.02]  # distinct channels catch a BGR/RGB swap

@@ -421,6 +421,36 @@ def _tiff_alpha_dropped(path: Path, shape: tuple) -> np.ndarray | None:
     return a if a.shape == tuple(shape) else None
 
 
+def _undecodable(path: Path, kind: str, whole: bool) -> str:
+    """Why OpenCV decoded nothing: a valid file beyond its pixel limit or in a sample format it
+    does not read (asked of Pillow, which reads the header only), else corrupt or truncated."""
+    import warnings
+
+    from PIL import Image
+
+    what = f"cannot decode {kind.upper()} image"
+    if whole:  # (a partly decoded image is a truncated one)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # (Pillow's own size warning: judged here)
+                with Image.open(path) as im:
+                    (w, h), mode = im.size, im.mode
+        except Image.DecompressionBombError:
+            return (f"{what}: over {2 * Image.MAX_IMAGE_PIXELS} pixels, which OpenCV did not decode (its limit is "
+                    "2^30 pixels)")
+        except (OSError, ValueError, SyntaxError):
+            pass
+        else:
+            if w * h >= 2 ** 30:
+                return f"{what}: {w}x{h} is beyond OpenCV's limit of 2^30 pixels"
+            return (f"{what}: a {w}x{h} {kind.upper()} of sample format {mode!r}, which OpenCV does not read; "
+                    "convert it to 8- or 16-bit integer or 32-bit float (or EXR)")
+    if kind == "tiff":  # (a TIFF's sample formats are many: 16-bit float, 1-bit, ...)
+        return (f"{what} (corrupt, truncated, not a TIFF file, or in a sample format such as 16-bit float that "
+                "OpenCV does not read: convert it to 8- or 16-bit integer or 32-bit float, or EXR)")
+    return f"{what} (corrupt, truncated or not a {kind.upper()} file)"
+
+
 def _read_cv2(path: Path, kind: str) -> ImageData:
     import cv2
 
@@ -438,7 +468,7 @@ def _read_cv2(path: Path, kind: str) -> ImageData:
         except cv2.error:
             img = None
     if img is None or "incomplete" in cap.text or "libpng error" in cap.text:
-        raise InputError(f"cannot decode {kind.upper()} image (corrupt, truncated or not a {kind.upper()} file)", path)
+        raise InputError(_undecodable(path, kind, img is None), path)
     alpha = None
     if kind == "tiff" and (img.ndim == 2 or img.shape[2] in (1, 3)):
         alpha = _tiff_alpha_dropped(path, img.shape[:2])
