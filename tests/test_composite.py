@@ -230,6 +230,19 @@ def test_composite_command_transfers_the_shadow_and_leaves_no_sphere_trace(cset,
     assert (np.abs(c - bg)[ring] @ LUMINANCE).mean() < 0.08 * (bg[ring] @ LUMINANCE).mean()
 
 
+def test_composite_does_not_replace_a_sibling_it_did_not_write(cset, tmp_path, capfd):
+    """``-o DIR/truth.png`` writes truth.exr and truth.json too: an existing truth.exr that no
+    earlier composite wrote (the synthetic set's truth) is not replaced."""
+    (tmp_path / "truth.exr").write_bytes(b"not ours")
+    rc = main(["composite", "--object", str(cset / "object"), "--surface", str(cset / "surface"), "--lightmap",
+               str(cset / "scene_map.exr"), "--background", str(cset / "background.exr"), "--mask",
+               str(cset / "object_mask.png"), "--surface-mask", str(cset / "surface_mask.png"),
+               "-o", str(tmp_path / "truth.png")])
+    err = capfd.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "truth.exr exists, not from an earlier composite" in err[0], err
+    assert (tmp_path / "truth.exr").read_bytes() == b"not ours" and not (tmp_path / "truth.png").exists()
+
+
 def test_composite_turntable(cset, tmp_path, capfd):
     frames = tmp_path / "frames"
     rc = main(["composite", "--object", str(cset / "object"), "--surface", str(cset / "surface"), "--lightmap",

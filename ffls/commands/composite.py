@@ -102,11 +102,29 @@ def add_arguments(p):
 
 
 def _siblings(out: Path) -> dict:
-    from ffls.errors import check_output_path
+    """The still's three files (``.exr``, ``.png``, ``.json`` beside ``out``), each a valid output.
+
+    A sibling the user did not name is replaced only when it is an earlier composite's (its
+    ``.json`` is an ``ffls-composite`` record): ``-o set/truth.png`` would have replaced the
+    synthetic set's ``truth.exr`` and written ``truth.json`` beside it.
+    """
+    import json
+
+    from ffls.errors import InputError, check_output_path
 
     files = {s: out.with_suffix(s) for s in (".exr", ".png", ".json")}
     for p in files.values():
         check_output_path(p)
+    others = [p for p in files.values() if p != out and p.exists()]
+    if others:
+        try:
+            ours = json.loads(files[".json"].read_text()).get("format") == "ffls-composite"
+        except (OSError, ValueError, AttributeError):
+            ours = False
+        if not ours:
+            raise InputError(f"ffls composite writes {files['.exr'].name}, {files['.png'].name} and "
+                             f"{files['.json'].name}, and {others[0].name} exists, not from an earlier composite: "
+                             "choose another name", out)
     return files
 
 
