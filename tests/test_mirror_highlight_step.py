@@ -45,3 +45,14 @@ def test_a_highlight_on_a_smooth_gradient_keeps_the_plane_background():
     np.testing.assert_allclose(spot.background_at, 0.05 + 0.004 * (spot.cols - 30.0) + 0.003 * (spot.rows - 30.0),
                                atol=1e-9)
     np.testing.assert_allclose(_centre(spot), [27.3, 31.6], atol=0.02)
+
+
+def test_a_glint_on_a_reflected_edge_is_no_highlight():
+    # a light behind the ball: no highlight, only a pixel twice the level of the reflected table on
+    # its edge (a renderer's or sensor's glint); it does not stand above the step around it
+    disc = _disc()
+    yy, xx = np.mgrid[0:60, 0:60]
+    img = np.where(yy - 30 > 0.8 * (30 - xx), 0.029, 0.0)
+    img[29, 31] = 0.064
+    spot = find_highlight(img, disc)
+    assert not spot.found and spot.status == "no_highlight"
