@@ -330,16 +330,27 @@ def saturated_pixels(grey: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return ~np.asarray(valid, dtype=bool) & fin & (g >= 0.5 * top) & (top > 0)
 
 
-def _background_plane(img, ring, at, med, spread):
+def _background_plane(img, ring, at, med, spread, robust_start=True):
     """A plane ``b0 + bx (x - x0) + by (y - y0)`` fitted to the ring around the blob (one round of
     3-sigma rejection) and the residuals' robust spread: the ball's reflection of the room varies
-    across the blob, and a constant level would tilt the centroid toward the brighter side."""
+    across the blob, and a constant level would tilt the centroid toward the brighter side.
+    ``robust_start=False`` starts from every ring pixel instead of the median's neighbours: its
+    spread then includes a step crossing the ring (the clutter a highlight must stand above)."""
     rr, cc = np.nonzero(ring)
     if rr.size < 8:
         return np.array([med, 0.0, 0.0]), spread
     v = img[rr, cc]
     A = np.stack([np.ones(rr.size), cc - at[1], rr - at[0]], axis=1).astype(np.float64)
-    keep = np.ones(rr.size, dtype=bool)
+    # a high-breakdown start: the ring's median level and spread. A least-squares plane through
+    # every ring pixel is tilted by a step in the reflection (a mirror ball's reflected horizon or
+    # table edge crossing the ring), and the highlight's centroid, weighted by the signal above that
+    # plane, is pulled toward where the plane dips below the true level (up to 2.5 px on a
+    # one-pixel highlight). The pixels on the majority's side of the step are the background at
+    # the highlight's level; a smooth gradient keeps every ring pixel (3 MADs reach its ends).
+    dev = np.abs(v - np.median(v))
+    keep = dev <= 3.0 * max(1.4826 * float(np.median(dev)), spread, 1e-12)
+    if keep.sum() < 8 or not robust_start:
+        keep = np.ones(rr.size, dtype=bool)
     for _ in range(2):
         coef = np.linalg.lstsq(A[keep], v[keep], rcond=None)[0]
         res = v - A @ coef
@@ -426,14 +437,19 @@ def find_highlight(image: np.ndarray, disc: np.ndarray, saturated: np.ndarray | 
     ring = disc & (dist_core > r_core + 3.0) & (dist_core <= 2.0 * r_core + 8.0)
     if ring.sum() < 8:
         ring = disc & ~core
-    b_plane, noise = _background_plane(img, ring, (r0, c0), med, spread)
+    # the background under the blob: the plane of the ring's majority (a reflected step crossing
+    # the ring does not tilt it); whether the peak is a highlight at all: against the plane through
+    # the whole ring and its spread, the clutter of reflections around it (a renderer's or sensor's
+    # one-pixel glint on a reflected edge is no light)
+    b_plane, _ = _background_plane(img, ring, (r0, c0), med, spread)
+    clutter_plane, noise = _background_plane(img, ring, (r0, c0), med, spread, robust_start=False)
     shoulder = 3.0 + 0.5 * r_core
     blob = disc & (dist_core <= shoulder)
     rr, cc = np.nonzero(blob)
     back = b_plane[0] + b_plane[1] * (cc - c0) + b_plane[2] * (rr - r0)
     w = img[rr, cc] - back  # not clamped: the noise of the shoulder averages out
     b = float(b_plane[0])
-    if not peak_val - b > min_snr * max(noise, spread):  # not above the reflections around it: no highlight
+    if not peak_val - float(clutter_plane[0]) > min_snr * max(noise, spread):  # not above the reflections around it
         return HighlightSpot(False, "no_highlight", peak=max(peak_val - b, 0.0), background=b, noise=noise)
     n_sat = int((sat & core).sum())
     # distance of the signal-carrying blob pixels to the disc's edge (outside the disc = 0)
