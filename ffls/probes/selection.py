@@ -33,12 +33,15 @@ from ffls.probes.sources import HOUGEN_AHUJA_SIZES, geodesic_sources
 
 __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_hougen_ahuja",
            "adaptive_sato_sato_ikeuchi", "normal_blocks", "position_blocks", "select_hougen_ahuja",
-           "select_sato_sato_ikeuchi", "select_regularization", "CRITERIA", "REGULARIZERS"]
+           "select_sato_sato_ikeuchi", "select_regularization", "choose_weight", "CRITERIA", "REGULARIZERS",
+           "WEIGHT_RULES"]
 
 #: Model-selection criteria.
 CRITERIA = ("cv", "bic")
 #: Penalties :func:`select_regularization` chooses the weight of.
 REGULARIZERS = ("energy", "smoothness")
+#: Rules :func:`choose_weight` applies to the held-out errors of a sweep of penalty weights.
+WEIGHT_RULES = ("one_se", "paired_se", "min")
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,9 @@ class Selection:
         The chosen model fitted on all pixels (None if the caller only asked for scores).
     note : str
         One line saying what was chosen and why (for the caller to report).
+    fold_errors : (k, K) float64 or None
+        Held-out sum of squared errors per candidate and CV fold (:func:`select_regularization`
+        only; None elsewhere).
     """
 
     chosen: object
@@ -65,6 +71,7 @@ class Selection:
     criterion: str
     fit: object = field(default=None)
     note: str = ""
+    fold_errors: np.ndarray | None = None
 
 
 def normal_blocks(normals, n_blocks: int = 42) -> np.ndarray:
@@ -548,6 +555,51 @@ def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.
                           criterion, tolerance, can_split)
 
 
+def choose_weight(fold_errors, rule: str = "one_se") -> tuple[int, int]:
+    """Choose a penalty weight from its held-out errors on the same CV folds.
+
+    Parameters
+    ----------
+    fold_errors : (w, K) array_like
+        Held-out sum of squared errors of each of ``w`` weights (least regularised first) on
+        each of ``K`` folds; a weight that could not be fitted has ``inf`` in its row.
+    rule : {'one_se', 'paired_se', 'min'}
+        ``'min'``: the lowest total. ``'one_se'``: the largest weight whose total is within one
+        standard error of the lowest, that error taken as the spread of the best weight's own fold
+        errors (``sqrt(K)`` times their standard deviation, the standard error of a sum of ``K``
+        independent terms). ``'paired_se'``: the largest weight whose excess over the lowest total
+        is within one standard error *of that excess*, estimated from the ``K`` paired fold
+        differences (``sqrt(K)`` times their standard deviation). All weights are scored on the same
+        folds, so what a fold holds (how many pixels, how bright, how hard to predict) is common to
+        them and cancels in their difference; ``'one_se'`` counts it as uncertainty about the
+        difference and so accepts weights the folds consistently reject.
+
+    Returns
+    -------
+    chosen, best : int
+        Index of the chosen weight and of the lowest total.
+    """
+    if rule not in WEIGHT_RULES:
+        raise ValueError(f"rule must be one of {WEIGHT_RULES}, not {rule!r}")
+    S = np.asarray(fold_errors, dtype=np.float64)
+    if S.ndim != 2 or S.shape[1] < 2:
+        raise ValueError(f"fold_errors must be (weights, folds) with 2 folds at least, not {S.shape}")
+    total = S.sum(axis=1)
+    if not np.isfinite(total).any():
+        raise InputError("no penalty weight could be fitted on the cross-validation folds")
+    best = int(np.nanargmin(np.where(np.isfinite(total), total, np.nan)))
+    if rule == "min":
+        return best, best
+    k = S.shape[1]
+    if rule == "one_se":
+        within = total <= total[best] + np.sqrt(k) * np.std(S[best], ddof=1)
+    else:
+        with np.errstate(invalid="ignore"):
+            D = S - S[best]
+            within = np.isfinite(total) & (D.sum(axis=1) <= np.sqrt(k) * np.std(D, axis=1, ddof=1))
+    return int(np.flatnonzero(within)[-1]), best
+
+
 def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0.001, 0.003, 0.01, 0.03),
                           penalty: str = "energy", rule: str = "one_se", folds: int = 5, seed: int = 0,
                           **kwargs) -> Selection:
@@ -570,11 +622,12 @@ def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0
     weights : sequence of float
         Candidate weights, 0 (the plain fit) first, increasing.
     penalty : {'energy', 'smoothness'}
-    rule : {'one_se', 'min'}
-        ``'min'``: the weight with the lowest held-out error. ``'one_se'`` (default): the largest
-        weight whose held-out error is within one standard error of the lowest (the standard
-        error of a sum of ``K`` fold errors, ``sqrt(K)`` times their standard deviation): the
-        most regularised map the held-out pixels cannot tell from the best.
+    rule : {'one_se', 'paired_se', 'min'}
+        :func:`choose_weight`. ``'min'``: the weight with the lowest held-out error. ``'one_se'``
+        (default): the largest weight whose held-out error is within one standard error of the
+        lowest (the standard error of a sum of ``K`` fold errors, ``sqrt(K)`` times their standard
+        deviation): the most regularised map the held-out pixels cannot tell from the best.
+        ``'paired_se'``: the same with the standard error of the paired fold differences.
     folds, seed
         As :func:`select_model`.
     **kwargs
@@ -584,12 +637,13 @@ def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0
     -------
     Selection
         ``chosen`` is the weight, ``scores`` the held-out relative RMS per weight, ``fit`` the fit
-        on all pixels with the chosen weight.
+        on all pixels with the chosen weight, ``fold_errors`` the held-out squared errors per
+        weight and fold.
     """
     if penalty not in REGULARIZERS:
         raise ValueError(f"penalty must be one of {REGULARIZERS}, not {penalty!r}")
-    if rule not in ("one_se", "min"):
-        raise ValueError(f"rule must be 'one_se' or 'min', not {rule!r}")
+    if rule not in WEIGHT_RULES:
+        raise ValueError(f"rule must be one of {WEIGHT_RULES}, not {rule!r}")
     w = [float(x) for x in weights]
     if not w or any(not np.isfinite(x) or x < 0 for x in w) or any(b <= a for a, b in zip(w, w[1:])):
         raise ValueError(f"weights must be finite, >= 0 and increasing, not {weights!r}")
@@ -609,17 +663,11 @@ def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0
         except InputError:
             continue  # this weight cannot be fitted on a fold: not a choice
     total = sse.sum(axis=1)
-    if not np.isfinite(total).any():
-        raise InputError("no penalty weight could be fitted on the cross-validation folds")
-    best = int(np.argmin(total))
-    if rule == "min":
-        chosen = best
-    else:
-        se = float(np.sqrt(k) * np.std(sse[best], ddof=1))
-        chosen = int(np.flatnonzero(total <= total[best] + se)[-1])
+    chosen, best = choose_weight(sse, rule)
     ref = max(float(np.sqrt(np.mean(b ** 2))), 1e-300)
     scores = np.sqrt(total / b.size) / ref
     note = (f"{penalty} penalty: cross-validation ({k} folds over {n_blocks} blocks, rule {rule}) chose weight "
             f"{w[chosen]:g}: held-out relative RMS {scores[chosen]:.4f} (lowest {scores[best]:.4f} at {w[best]:g})")
     fit = hougen_ahuja(n, b, rho, d, **{penalty: w[chosen]}, **kwargs)
-    return Selection(chosen=w[chosen], candidates=w, scores=scores, criterion="cv", fit=fit, note=note)
+    return Selection(chosen=w[chosen], candidates=w, scores=scores, criterion="cv", fit=fit, note=note,
+                     fold_errors=sse)
