@@ -199,3 +199,8 @@ def test_coverage_numbers():
     assert lines[0].startswith("coverage: 2 lights outside the capture's upper hemisphere (farthest at az 0 el -90, "
                                "90 deg beyond its edge)"), lines
     assert not any("outside" in ln for ln in coverage_warnings(below, "full"))
+    # lights repeating an earlier one's direction get no weight (only the first takes the cell): said first
+    even = stratified_directions(200)
+    lines = coverage_warnings(np.vstack([even, np.repeat(even[:1], 3, axis=0)]), "upper")
+    assert lines == ["coverage: 3 lights repeat the direction of an earlier one and get no weight (200 distinct "
+                     "directions of 203)"], lines

@@ -773,7 +773,9 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
       frame, of the widest cell's light);
     * more than ``far_share`` of the domain farther than ``far_deg`` from every light:
       ``"coverage: 18% of the domain is more than 30 deg from every light (farthest 52 deg)"``;
-    * lights outside the hemisphere (e.g. below the horizon of ``'upper'``), first.
+    * lights outside the hemisphere (e.g. below the horizon of ``'upper'``), first;
+    * before them, lights that repeat an earlier light's direction exactly (they get no weight:
+      :func:`unique_directions`).
 
     Parameters
     ----------
@@ -789,6 +791,12 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
     unit = _check_directions(directions)
     c = coverage(unit, hemisphere, far_deg)
     out = []
+    _, keep = unique_directions(unit)
+    if keep.size < len(unit):  # only the first of equal directions takes a cell: said, not silent
+        k = len(unit) - keep.size
+        out.append(f"coverage: {k} light{'s' if k > 1 else ''} repeat{'' if k > 1 else 's'} the direction of "
+                   f"an earlier one and get{'' if k > 1 else 's'} no weight ({keep.size} distinct directions of "
+                   f"{len(unit)})")
     hemi = check_hemisphere(hemisphere)
     outside = np.flatnonzero(~in_domain(unit, hemi))
     if outside.size:  # e.g. a light below the horizon of an 'upper' capture: said, not silently kept
