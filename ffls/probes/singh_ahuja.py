@@ -252,10 +252,10 @@ def residual_bound(H, g, lower: float = 0.0, upper=None) -> np.ndarray:
     for c in range(g.shape[1]):
         x = lsq_linear(H, g[:, c], bounds=(lo, hi), method="bvls").x
         k = int(np.count_nonzero((x > lo + 1e-12 * np.maximum(1.0, np.abs(lo))) & (x < hi)))
-        if k >= m:
-            raise InputError(f"singular system: {m} pixels cannot bound the residual of a fit with {k} free unknowns")
         r2 = float(np.sum((g[:, c] - H @ x) ** 2))
-        eps[c] = np.sqrt(r2 * m / (m - k))
+        # k >= m: the fit spends every degree of freedom of the data, and no noise can be estimated; the set is
+        # then the fit's own residual (the narrowest that is not empty)
+        eps[c] = np.sqrt(r2 * m / (m - k)) if k < m else np.sqrt(r2)
     return eps
 
 
