@@ -21,6 +21,9 @@ Noise, or a model that cannot render the data exactly, leaves the residual sets 
 and the sweeps then cycle. :func:`pocs` also offers relaxed projections and Combettes' extrapolated
 parallel projections (``scheme='extrapolated'``), which converge to the least-squares point of the
 amplitude set, and a stopping rule on the change per sweep (``tol``); the paper's scheme is the default.
+:func:`dykstra_pocs` (``scheme='dykstra'``) gives a definite answer instead of wherever the path ends: the
+projection of the start (zero: the least-norm map) onto the amplitude set and a residual-energy set whose
+bound comes from the data (:func:`residual_bound`).
 """
 from __future__ import annotations
 
@@ -146,8 +149,9 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
         Seed of the permutations.
     x0 : (J, c) array_like, optional
         Start (zeros by default).
-    scheme : {'sequential', 'extrapolated'}
-        The paper's sweeps of row projections, or extrapolated parallel projections (above).
+    scheme : {'sequential', 'extrapolated', 'dykstra'}
+        The paper's sweeps of row projections, extrapolated parallel projections (above), or
+        :func:`dykstra_pocs` (the feasible point nearest ``x0``; ``delta`` 0 and ``relaxation`` 1).
     relaxation : float
         ``lambda``: in (0, 2) for ``'sequential'``, (0, 1] for ``'extrapolated'``.
     tol : float, optional
