@@ -124,10 +124,11 @@ def _add_inverse(sub, common):
     q.add_argument("--grid", type=integer(2, 256), default=None,
                    help="with --sources grid: height of the grid of unknowns (default 16)")
     q.add_argument("--iterations", type=integer(1, 100000), default=None,
-                   help="sweeps (default 50; 3000 with --scheme extrapolated); the cap with --tol")
-    q.add_argument("--scheme", choices=("sequential", "extrapolated"), default="sequential",
-                   help="the paper's sweeps of row projections (default), or extrapolated parallel projections "
-                        "(Combettes), which converge to the least-squares point when noise leaves no common point")
+                   help="sweeps (default 50; 3000 with --scheme extrapolated or dykstra); the cap with --tol")
+    q.add_argument("--scheme", choices=("sequential", "extrapolated", "dykstra"), default="sequential",
+                   help="the paper's sweeps of row projections (default), extrapolated parallel projections "
+                        "(Combettes), which converge to the least-squares point when noise leaves no common point, "
+                        "or Dykstra's best approximation: the least-norm map within the residual the data allow")
     q.add_argument("--relaxation", type=number(0.0, 2.0, lo_open=True, hi_open=True), default=1.0,
                    help="relaxation of the projections, in (0, 2); at most 1 with --scheme extrapolated")
     q.add_argument("--tol", type=number(0.0, 1.0, lo_open=True), default=None,
@@ -250,11 +251,11 @@ def method_knobs(args) -> dict:
         # a flag of another setting would be ignored: refused, not dropped in silence
         if args.grid is not None and args.sources != "grid":
             raise InputError(f"--grid applies with --sources grid (the grid of unknowns), not --sources {args.sources}")
-        if args.scheme == "extrapolated":
+        if args.scheme != "sequential":
             for flag, value in (("--order", args.order), ("--seed", args.seed)):
                 if value is not None:
                     raise InputError(f"{flag} applies with --scheme sequential (the sweeps' projection order); "
-                                     "--scheme extrapolated projects onto every set at once")
+                                     f"--scheme {args.scheme} has no order of projections")
         elif args.seed is not None and args.order == "sequential":
             raise InputError("--seed applies with a random projection order, not --order sequential")
         return {"grid": 16 if args.grid is None else args.grid, "iterations": args.iterations, "upper": args.upper,

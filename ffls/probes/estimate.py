@@ -424,8 +424,9 @@ POCS_SOURCES = ("auto", "adaptive", "grid")
 
 #: ``pocs_lightmap``'s sweep count when none is given, per scheme: the paper's 50 sweeps; the extrapolated
 #: scheme's iterations cost two J x J products each (not m row projections), and its relit error on
-#: ``benchmarks/probes.py`` still falls between 1000 and 3000 (``docs/probes.md``, "POCS").
-POCS_ITERATIONS = {"sequential": 50, "extrapolated": 3000}
+#: ``benchmarks/probes.py`` still falls between 1000 and 3000 (``docs/probes.md``, "POCS"); Dykstra's cycles
+#: (two exact projections each) are capped as the extrapolated scheme's.
+POCS_ITERATIONS = {"sequential": 50, "extrapolated": 3000, "dykstra": 3000}
 
 
 def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | None = None,
@@ -476,6 +477,8 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
         raise InputError(f"--relaxation {relaxation:g} must be in (0, 1] with --scheme extrapolated")
     if scheme == "extrapolated" and float(delta) != 0.0:
         raise InputError("--scheme extrapolated projects onto the residual hyperplanes: delta must be 0")
+    if scheme == "dykstra" and float(relaxation) != 1.0:
+        raise InputError(f"--relaxation {relaxation:g} does not apply with --scheme dykstra (exact projections)")
     solver = dict(scheme=scheme, relaxation=relaxation, tol=tol)
     N, V, albedo, notes = diffuse_pixels(probe, "pocs", rim_px, None)
     try:
@@ -496,7 +499,8 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
         raise InputError(f"POCS made no progress: residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% after "
                          f"{res.iterations} iterations" + (f"; --relaxation {relaxation:g} is too small to move the "
                                                            "estimate" if relaxation < 1.0 else ""), src)
-    how = (f"{order} order" if scheme == "sequential" else "parallel, extrapolated") + (
+    how = {"sequential": f"{order} order", "extrapolated": "parallel, extrapolated",
+           "dykstra": "Dykstra, the least-norm feasible map"}[scheme] + (
         f", relaxation {relaxation:g}" if relaxation != 1.0 else "") + (
         f", stopped at a change below {tol:g}" if tol is not None and res.iterations < iterations else "")
     notes.append(f"POCS (Singh-Ahuja): {model}, {res.iterations} iterations ({how}) over "

@@ -21,6 +21,9 @@ Noise, or a model that cannot render the data exactly, leaves the residual sets 
 and the sweeps then cycle. :func:`pocs` also offers relaxed projections and Combettes' extrapolated
 parallel projections (``scheme='extrapolated'``), which converge to the least-squares point of the
 amplitude set, and a stopping rule on the change per sweep (``tol``); the paper's scheme is the default.
+:func:`dykstra_pocs` (``scheme='dykstra'``) gives a definite answer instead of wherever the path ends: the
+projection of the start (zero: the least-norm map) onto the amplitude set and a residual-energy set whose
+bound comes from the data (:func:`residual_bound`).
 """
 from __future__ import annotations
 
@@ -35,7 +38,7 @@ from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix
 from ffls.probes.selection import CRITERIA, Selection, bic, normal_blocks, refine_sources
 from ffls.probes.sources import geodesic_level, latlong_solid_angles, sources_to_latlong
 
-__all__ = ["BLOCK", "SCHEMES", "PocsResult", "PocsSources", "pocs", "pixel_subset", "singh_ahuja", "singh_ahuja_sources",
+__all__ = ["BLOCK", "SCHEMES", "PocsResult", "PocsSources", "pocs", "dykstra_pocs", "residual_bound", "ResidualEnergySet", "pixel_subset", "singh_ahuja", "singh_ahuja_sources",
            "adaptive_singh_ahuja",
            "estimate_lighting_SinghAhuja"]
 
@@ -86,8 +89,9 @@ class PocsResult:
 BLOCK = 2048
 
 
-#: The schemes of :func:`pocs`: the paper's sequential sweeps, or extrapolated parallel projections.
-SCHEMES = ("sequential", "extrapolated")
+#: The schemes of :func:`pocs`: the paper's sequential sweeps, extrapolated parallel projections, or Dykstra's
+#: best approximation (the feasible map nearest the start, :func:`dykstra_pocs`).
+SCHEMES = ("sequential", "extrapolated", "dykstra")
 
 
 def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: float = 0.0,
@@ -145,8 +149,9 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
         Seed of the permutations.
     x0 : (J, c) array_like, optional
         Start (zeros by default).
-    scheme : {'sequential', 'extrapolated'}
-        The paper's sweeps of row projections, or extrapolated parallel projections (above).
+    scheme : {'sequential', 'extrapolated', 'dykstra'}
+        The paper's sweeps of row projections, extrapolated parallel projections (above), or
+        :func:`dykstra_pocs` (the feasible point nearest ``x0``; ``delta`` 0 and ``relaxation`` 1).
     relaxation : float
         ``lambda``: in (0, 2) for ``'sequential'``, (0, 1] for ``'extrapolated'``.
     tol : float, optional
@@ -187,6 +192,10 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
     d = float(delta)
     gram = H[rows] @ H[rows].T if rows.size <= BLOCK and d == 0 else None
     Hn = H / np.where(norm2 > 0, norm2, 1.0)[:, None] if d > 0 else None
+    if scheme == "dykstra":
+        if d != 0.0 or lam != 1.0:
+            raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
+        return dykstra_pocs(H, g, iterations, lower, upper, x0=x0, tol=tol)
     if scheme == "extrapolated":
         return _extrapolated(H[rows], g[rows], norm2[rows], f, lower, hi, lam, int(iterations), tol, g, gn, res)
     pos = np.full(m, -1, dtype=np.int64)
@@ -213,6 +222,183 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
         if prev is not None and _settled(f, prev, tol):
             break
     return f, np.asarray(res)
+
+
+def residual_bound(H, g, lower: float = 0.0, upper=None) -> np.ndarray:
+    """Per channel, the bound ``eps`` of the residual-energy set ``{f : |g - H f| <= eps}`` from the data.
+
+    ``r`` is the residual of the bounded least-squares fit (``scipy.optimize.lsq_linear``, the amplitude
+    set's bounds), ``k`` the number of its unknowns strictly inside their bounds (the degrees of freedom
+    the fit used). The noise variance is then estimated without bias as ``s^2 = r^2 / (m - k)`` and the
+    set admits the residual a map would leave in that noise, ``eps^2 = m s^2`` (Morozov's discrepancy
+    principle; Trussell and Civanlar's residual set). Model error (a source set that cannot render the
+    true map) counts as noise: it is what no map on the set can fit.
+
+    Parameters
+    ----------
+    H : (m, J) array_like
+    g : (m, c) array_like
+    lower, upper
+        The amplitude set's bounds, as :func:`pocs`.
+
+    Returns
+    -------
+    eps : (c,) float64
+    """
+    from scipy.optimize import lsq_linear
+
+    H = np.asarray(H, dtype=np.float64)
+    g = np.asarray(g, dtype=np.float64).reshape(H.shape[0], -1)
+    m, J = H.shape
+    lo = np.broadcast_to(np.asarray(lower, dtype=np.float64), (J,))
+    hi = np.broadcast_to(np.inf if upper is None else np.asarray(upper, dtype=np.float64), (J,))
+    eps = np.empty(g.shape[1])
+    for c in range(g.shape[1]):
+        x = lsq_linear(H, g[:, c], bounds=(lo, hi), method="bvls").x
+        k = int(np.count_nonzero((x > lo + 1e-12 * np.maximum(1.0, np.abs(lo))) & (x < hi)))
+        r2 = float(np.sum((g[:, c] - H @ x) ** 2))
+        # k >= m: the fit spends every degree of freedom of the data, and no noise can be estimated; the set is
+        # then the fit's own residual (the narrowest that is not empty)
+        eps[c] = np.sqrt(r2 * m / (m - k)) if k < m else np.sqrt(r2)
+    return eps
+
+
+class ResidualEnergySet:
+    """The residual-energy set ``{f : |g_c - H f_c| <= eps_c}`` per channel ``c``, and its exact projection.
+
+    With ``H = U S V^T`` (thin SVD), the projection of ``z`` is ``(I + mu H^T H)^{-1} (z + mu H^T g)``
+    with ``mu >= 0`` the root of ``|g - H P(z)| = eps`` (``scipy.optimize.brentq`` on ``log mu``, in the
+    singular basis), ``mu = 0`` when ``z`` is in the set, and the projection onto the exact-fit affine set
+    when ``eps`` is the least-squares residual.
+
+    Parameters
+    ----------
+    H : (m, J) array_like
+    g : (m, c) array_like
+    eps : float or (c,) array_like
+        At least the unconstrained least-squares residual of each channel (else the set is empty).
+    """
+
+    def __init__(self, H, g, eps):
+        H = np.asarray(H, dtype=np.float64)
+        g = np.asarray(g, dtype=np.float64)
+        self.g = g[:, None] if g.ndim == 1 else g
+        self.H = H
+        nc = self.g.shape[1]
+        self.eps = np.broadcast_to(np.asarray(eps, dtype=np.float64), (nc,)).copy()
+        U, s, Vt = np.linalg.svd(H, full_matrices=False)
+        keep = s > s[0] * 1e-12 if s.size else s > 0
+        self.U, self.s, self.Vt = U[:, keep], s[keep], Vt[keep]
+        self.bc = self.U.T @ self.g                                # (k, c)
+        self.gperp2 = np.sum((self.g - self.U @ self.bc) ** 2, axis=0)   # what no f can fit
+        slack = 1e-9 * self.gperp2 + 1e-24 * np.sum(self.g ** 2, axis=0)
+        if np.any(~np.isfinite(self.eps)) or np.any(self.eps ** 2 < self.gperp2 - slack):
+            raise ValueError("eps is below the least-squares residual: the residual set is empty")
+
+    def contains(self, f, rtol: float = 1e-9) -> bool:
+        """Whether every channel of ``f`` (J, c) leaves a residual within its bound."""
+        f = np.asarray(f, dtype=np.float64).reshape(self.H.shape[1], -1)
+        r = np.linalg.norm(self.g - self.H @ f, axis=0)
+        return bool(np.all(r <= self.eps * (1.0 + rtol) + 1e-12 * np.linalg.norm(self.g, axis=0)))
+
+    def project(self, z) -> np.ndarray:
+        """The nearest point of the set to ``z`` (J, c), in the Euclidean norm."""
+        from scipy.optimize import brentq
+
+        z = np.asarray(z, dtype=np.float64).reshape(self.H.shape[1], -1)
+        s, s2, Vt, bc = self.s, self.s * self.s, self.Vt, self.bc
+        out = z.copy()
+        zc = Vt @ z
+        for c in range(z.shape[1]):
+            a = s * zc[:, c] - bc[:, c]
+            e2 = self.eps[c] ** 2 - self.gperp2[c]
+
+            def excess(t, a=a, e2=e2):
+                return float(np.sum((a / (1.0 + np.exp(t) * s2)) ** 2)) - e2
+            if float(np.sum(a * a)) <= e2:
+                continue
+            if e2 <= 0.0 or excess(200.0) > 0.0:                 # the exact-fit (affine) set
+                fc = bc[:, c] / s
+            else:
+                mu = np.exp(brentq(excess, -690.0, 200.0, xtol=1e-12))
+                fc = (zc[:, c] + mu * s * bc[:, c]) / (1.0 + mu * s2)
+            out[:, c] += Vt.T @ (fc - zc[:, c])
+        return out
+
+
+def dykstra_pocs(H, g, iterations: int = 3000, lower: float = 0.0, upper=None, x0=None, weights=None, eps=None,
+                 tol: float | None = 1e-7) -> tuple[np.ndarray, np.ndarray]:
+    """The feasible map nearest a stated prior point: Dykstra's alternating projections (best approximation).
+
+    Two convex sets: Singh and Ahuja's amplitude set ``A = {lower <= f <= upper}`` and the residual-energy
+    set ``R = {f : |g - H f| <= eps}`` (the paper's per-pixel residual sets summed in squares, Trussell and
+    Civanlar 1984; ``eps`` from the data, :func:`residual_bound`). Plain POCS stops at *some* point of
+    ``A`` and ``R``, which depends on the start and the order: for a Lambertian ball that set is wide along
+    the directions the ball cannot tell apart. Dykstra's algorithm (Boyle and Dykstra 1986) adds a
+    correction per set to the alternating projections and converges to the *projection* of the start
+    ``x0`` onto ``A`` and ``R``: with ``x0 = 0`` (the default) the feasible map of least energy
+    ``sum_j w_j f_j^2``, a definite answer that no path changes.
+
+    The projection onto ``R`` is exact: with ``H' = U S V^T`` (the rows in the weighted variables
+    ``u = sqrt(w) f``), ``P_R(z) = (I + mu H'^T H')^{-1} (z + mu H'^T g)`` with ``mu >= 0`` the root of
+    ``|g - H' P_R(z)| = eps`` (``scipy.optimize.brentq`` on the singular values; ``mu = 0`` when ``z``
+    is in ``R``). Each channel is solved on its own.
+
+    Parameters
+    ----------
+    H : (m, J) array_like
+    g : (m, c) array_like
+    iterations : int
+        Cap on Dykstra cycles (each: one projection onto each set).
+    lower, upper
+        The amplitude set, as :func:`pocs`.
+    x0 : (J, c) array_like, optional
+        The prior point (zeros: minimum energy).
+    weights : (J,) array_like, optional
+        ``w`` of the energy ``sum w_j (f_j - x0_j)^2`` (ones by default; the solid-angle metric for radiance).
+    eps : (c,) array_like, optional
+        Residual bound per channel (default :func:`residual_bound`).
+    tol : float, optional
+        Stop when a cycle moves ``f`` by less than ``tol |f|``.
+
+    Returns
+    -------
+    f : (J, c) float64
+    residuals : (cycles + 1,) float64
+        ``|g - H f| / |g|`` at the start and after every cycle.
+    """
+    H = np.asarray(H, dtype=np.float64)
+    g = np.asarray(g, dtype=np.float64)
+    g = g[:, None] if g.ndim == 1 else g
+    m, J = H.shape
+    nc = g.shape[1]
+    w = np.ones(J) if weights is None else np.asarray(weights, dtype=np.float64).reshape(J)
+    if not np.all(np.isfinite(w) & (w > 0)):
+        raise ValueError("weights must be finite and positive")
+    sw = np.sqrt(w)
+    lo = np.broadcast_to(np.asarray(lower, dtype=np.float64), (J,)) * sw
+    hi = np.broadcast_to(np.inf if upper is None else np.asarray(upper, dtype=np.float64), (J,)) * sw
+    Hw = H / sw[None, :]
+    if eps is None:
+        eps = residual_bound(Hw, g, lo, None if upper is None else hi)
+    eps = np.broadcast_to(np.asarray(eps, dtype=np.float64), (nc,))
+    R = ResidualEnergySet(Hw, g, eps)
+
+    u = np.zeros((J, nc)) if x0 is None else np.array(x0, dtype=np.float64).reshape(J, nc) * sw[:, None]
+    gn = float(np.linalg.norm(g)) or 1.0
+    res = [float(np.linalg.norm(g - Hw @ u)) / gn]
+    p = np.zeros_like(u)
+    q = np.zeros_like(u)
+    for _ in range(int(iterations)):
+        prev = u
+        y = R.project(u + p)
+        p = u + p - y
+        u = np.clip(y + q, lo[:, None], hi[:, None])
+        q = y + q - u
+        res.append(float(np.linalg.norm(g - Hw @ u)) / gn)
+        if tol is not None and _settled(u, prev, tol):
+            break
+    return u / sw[:, None], np.asarray(res)
 
 
 def _settled(f, prev, tol) -> bool:
@@ -311,8 +497,13 @@ def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int
     use = np.arange(m)
     if max_pixels is not None and m > int(max_pixels):
         use = np.sort(np.random.default_rng(seed).choice(m, int(max_pixels), replace=False))
-    f, res = pocs(H[use], g[use], iterations, 0.0, upper, delta, order, seed, scheme=scheme,
-                  relaxation=relaxation, tol=tol)
+    if scheme == "dykstra":   # the feasible radiances of least Euclidean norm
+        if float(delta) != 0.0 or float(relaxation) != 1.0:
+            raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
+        f, res = dykstra_pocs(H[use], g[use], iterations, 0.0, upper, tol=tol)
+    else:
+        f, res = pocs(H[use], g[use], iterations, 0.0, upper, delta, order, seed, scheme=scheme,
+                      relaxation=relaxation, tol=tol)
     rendered = (H @ f) * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
@@ -413,7 +604,12 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
     H = lambert_matrix(n, d)
     use = pixel_subset(m, max_pixels, seed)
     hi = None if upper is None else float(upper) * cell_solid_angles(d, "full")
-    f, res = pocs(H[use], g[use], iterations, 0.0, hi, delta, order, seed, x0, scheme, relaxation, tol)
+    if scheme == "dykstra":   # the feasible powers of least Euclidean norm
+        if float(delta) != 0.0 or float(relaxation) != 1.0:
+            raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
+        f, res = dykstra_pocs(H[use], g[use], iterations, 0.0, hi, x0, tol=tol)
+    else:
+        f, res = pocs(H[use], g[use], iterations, 0.0, hi, delta, order, seed, x0, scheme, relaxation, tol)
     rendered = (H @ f) * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
