@@ -288,6 +288,8 @@ CASES = [
     ("demo-lights-0", ["demo", "-o", "{out}/d", "--lights", "0", "--no-view"], "--lights", "d"),
     ("demo-res-huge", ["demo", "-o", "{out}/d", "--resolution", "100000", "--no-view"], "--resolution", "d"),
     ("demo-seed-neg", ["demo", "-o", "{out}/d", "--seed", "-1", "--no-view"], "--seed", "d"),
+    ("demo-maps-repeat", ["demo", "-o", "{out}/d", "--maps", "studio,studio", "--no-view"], "--maps", "d"),
+    ("demo-rot-repeat", ["demo", "-o", "{out}/d", "--rotations", "0,360", "--no-view"], "--rotations", "d"),
     ("demo-out-missing", ["demo", "-o", "{out}/no/d", "--no-view"], "no", "no"),
     # --- synth
     ("synth-res-huge", ["synth", "{out}/s", "--resolution", "100000"], "--resolution", "s"),
