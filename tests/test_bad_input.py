@@ -439,6 +439,13 @@ CASES = [
     ("synth-composite-map", ["synth", "{out}/s", "--composite-set", "nosuchmap"], "nosuchmap", "s"),
     ("synth-composite-wall", ["synth", "{out}/s", "--composite-set", "sky", "--wall-albedo", "1,2"],
      "--wall-albedo", "s"),
+    ("synth-surface-lights-alone", ["synth", "{out}/s", "--surface-lights", "5"], "--surface-lights", "s"),
+    ("synth-scene-albedo-alone", ["synth", "{out}/s", "--scene-albedo", "0.4"], "--scene-albedo", "s"),
+    ("synth-wall-alone", ["synth", "{out}/s", "--wall-albedo", "none"], "--wall-albedo", "s"),
+    ("synth-truth-dirs-alone", ["synth", "{out}/s", "--truth-dirs", "100"], "--truth-dirs", "s"),
+    ("synth-radius-distant", ["synth", "{out}/s", "--light-radius", "0.1"], "--light-radius", "s"),
+    ("synth-sphere-out-of-frame", ["synth", "{out}/s", "--sphere-xy=-0.25,-0.25;100,100", "--lights", "2",
+                                   "--resolution", "16"], "--sphere-xy 100,100", "s"),
     ("render-missing-capture", ["render", "{root}/nocap", "--probe", "sky", "--cpu", "-o", "{out}/a.png"],
      "nocap", "a.png"),
 ]
