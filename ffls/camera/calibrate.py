@@ -16,7 +16,7 @@ import numpy as np
 
 from ffls.errors import InputError, atomic_output
 
-__all__ = ["CameraCalibration", "make_board", "detect_board", "calibrate_camera", "write_camera_to_capture"]
+__all__ = ["CameraCalibration", "aruco_dictionary", "charuco_problem", "make_board", "detect_board", "calibrate_camera", "write_camera_to_capture"]
 
 
 @dataclasses.dataclass
@@ -49,20 +49,44 @@ class CameraCalibration:
                 "image_size": list(self.image_size), "used": list(self.used), "skipped": list(self.skipped)}
 
 
-def _dictionary(dictionary):
+def aruco_dictionary(dictionary):
+    """The :class:`cv2.aruco.Dictionary` of an OpenCV name (``'DICT_5X5_100'``, or ``'5X5_100'``).
+
+    Raises ValueError naming the known dictionaries when the name is not one of OpenCV's.
+    """
     if isinstance(dictionary, str):
         name = dictionary if dictionary.startswith("DICT_") else f"DICT_{dictionary}"
-        if not hasattr(cv2.aruco, name):
-            raise ValueError(f"unknown ArUco dictionary {dictionary!r}")
+        if not name.startswith("DICT_") or not isinstance(getattr(cv2.aruco, name, None), int):
+            known = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and n == n.upper())
+            raise ValueError(f"unknown ArUco dictionary {dictionary!r}; OpenCV's are {', '.join(known)}")
         return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
     return dictionary
+
+
+def charuco_problem(squares, square_size: float, marker_size: float, dictionary) -> str | None:
+    """Why a ChArUco board cannot be built, or None.
+
+    A marker sits inside a white square, so it must be smaller than the square (OpenCV raises a
+    SystemError otherwise), and the board's ``columns * rows // 2`` markers need as many ids in
+    the dictionary (OpenCV builds the board and then cannot detect the ids past the end).
+    """
+    if not marker_size < square_size:
+        return f"the marker side {marker_size:g} must be smaller than the square side {square_size:g}"
+    n = int(squares[0]) * int(squares[1]) // 2
+    have = aruco_dictionary(dictionary).bytesList.shape[0]
+    if n > have:
+        return f"a {squares[0]}x{squares[1]} board has {n} markers but the dictionary has {have}"
+    return None
 
 
 def make_board(squares=(7, 5), square_size: float = 0.03, marker_size: float = 0.022,
                dictionary="DICT_5X5_100"):
     """A :class:`cv2.aruco.CharucoBoard` of ``squares`` = (columns, rows) squares."""
+    why = charuco_problem(squares, square_size, marker_size, dictionary)
+    if why:
+        raise ValueError(why)
     return cv2.aruco.CharucoBoard((int(squares[0]), int(squares[1])), float(square_size), float(marker_size),
-                                  _dictionary(dictionary))
+                                  aruco_dictionary(dictionary))
 
 
 def detect_board(gray, board: str = "charuco", squares=(7, 5), square_size: float = 0.03,
