@@ -276,6 +276,8 @@ CASES = [
      "--smoothness", "r.npy"),
     ("cal-smooth-neg", ["calibrate", "response", "{bracket}", "--smoothness=-1", "-o", "{out}/r.npy"],
      "--smoothness", "r.npy"),
+    ("cal-samples-grid", ["calibrate", "response", "{bracket}", "--samples", "300", "-o", "{out}/r.npy"],
+     "--samples 300", "r.npy"),
     ("cal-out-suffix", ["calibrate", "response", "{bracket}", "-o", "{out}/r.txt"], "r.txt", "r.txt"),
     ("cal-squares-0", ["calibrate", "camera", "{maps}/good.exr", "--squares", "0x5"], "--squares", ""),
     ("cal-squares-abc", ["calibrate", "camera", "{maps}/good.exr", "--squares", "abc"], "--squares", ""),

@@ -31,6 +31,8 @@ __all__ = [
     "linearize",
     "valid_pixel_mask",
     "read_bracket",
+    "grid_samples_fit",
+    "max_grid_samples",
     "calibrate_response_folder",
 ]
 
@@ -253,9 +255,33 @@ def read_bracket(folder: str | os.PathLike):
     return images, np.asarray(times, dtype=np.float32), paths
 
 
+def grid_samples_fit(samples: int, width: int, height: int) -> bool:
+    """Whether OpenCV's ``CalibrateDebevec`` (``random=False``) can place ``samples`` on a
+    ``width`` x ``height`` image.
+
+    Its grid has ``x = floor(sqrt(samples * width / height))`` columns and ``samples // x`` rows,
+    and asserts ``0 < x <= width`` and ``0 < rows <= height`` (``cv2.error ... x_points <= cols``).
+    """
+    w, h, n = int(width), int(height), int(samples)
+    x = int(np.sqrt(n * w / h))
+    return 0 < x <= w and 0 < n // x <= h
+
+
+def max_grid_samples(width: int, height: int) -> int:
+    """The largest ``n`` such that every sample count up to ``n`` fits (:func:`grid_samples_fit`)."""
+    n = 0
+    while grid_samples_fit(n + 1, width, height):
+        n += 1
+    return n
+
+
 def calibrate_response_folder(folder, output, samples: int = 70, smoothness: float = 10.0) -> np.ndarray:
     """Recover the inverse response from a bracket folder and save it; returns the (256, 3) curve."""
     images, times, _ = read_bracket(folder)
+    h, w = images[0].shape[:2]
+    if not grid_samples_fit(samples, w, h):
+        raise InputError(f"--samples {samples} is more than the {w}x{h} photos can give"
+                         f" (at most {max_grid_samples(w, h)})", folder)
     if len(set(np.round(times, 9).tolist())) < 2:
         raise InputError("all exposure times are equal: not a bracket", folder)
     curve = recover_response_DebevecMalik1997(images, times, samples=samples, smoothness=smoothness)
