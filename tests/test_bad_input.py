@@ -180,6 +180,10 @@ def ws(tmp_path_factory):
         write_png(br / f"b{k}.png", (np.random.default_rng(k).random((16, 16, 3)) * 255).astype(np.uint8))
     (br / "exposures.json").write_text(json.dumps({f"b{k}.png": t for k, t in enumerate((0.01, 0.04, 0.16))}))
     w["bracket"] = br
+    brm = root / "bracket_unlisted"  # exposures.json leaves a photo out
+    shutil.copytree(br, brm)
+    (brm / "exposures.json").write_text(json.dumps({"b0.png": 0.01, "b2.png": 0.16}))
+    w["bracket_unlisted"] = brm
     return w
 
 
@@ -278,6 +282,7 @@ CASES = [
      "--smoothness", "r.npy"),
     ("cal-samples-grid", ["calibrate", "response", "{bracket}", "--samples", "300", "-o", "{out}/r.npy"],
      "--samples 300", "r.npy"),
+    ("cal-photo-unlisted", ["calibrate", "response", "{bracket_unlisted}", "-o", "{out}/r.npy"], "b1.png", "r.npy"),
     ("cal-out-suffix", ["calibrate", "response", "{bracket}", "-o", "{out}/r.txt"], "r.txt", "r.txt"),
     ("cal-squares-0", ["calibrate", "camera", "{maps}/good.exr", "--squares", "0x5"], "--squares", ""),
     ("cal-squares-abc", ["calibrate", "camera", "{maps}/good.exr", "--squares", "abc"], "--squares", ""),

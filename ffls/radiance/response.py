@@ -196,8 +196,8 @@ def read_bracket(folder: str | os.PathLike):
     """Read a folder of bracketed 8-bit photos and their exposure times.
 
     Exposure times come from ``exposures.json`` in the folder when present (an object mapping
-    file name to seconds, e.g. ``{"a.jpg": 0.01, "b.jpg": 0.04}``; only the files named are
-    used), otherwise from each image's EXIF ``ExposureTime`` (tag 33434, read with Pillow).
+    file name to seconds, e.g. ``{"a.jpg": 0.01, "b.jpg": 0.04}``, naming every photo of the
+    folder: one left out is refused, not skipped), otherwise from each image's EXIF ``ExposureTime`` (tag 33434, read with Pillow).
 
     Returns
     -------
@@ -227,6 +227,10 @@ def read_bracket(folder: str | os.PathLike):
             t = float(t)
             paths.append(p)
             times.append(t)
+        unlisted = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.name not in doc)
+        if unlisted:
+            raise InputError(f"photo {unlisted[0]!r} has no exposure time in exposures.json (list every photo of the"
+                             " bracket, or move the others out)", folder / unlisted[0])
     else:
         paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
         times = []
