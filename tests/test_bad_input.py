@@ -184,6 +184,16 @@ def ws(tmp_path_factory):
     shutil.copytree(br, brm)
     (brm / "exposures.json").write_text(json.dumps({"b0.png": 0.01, "b2.png": 0.16}))
     w["bracket_unlisted"] = brm
+    # brackets that cannot calibrate a response: one photo copied three times, all black, all saturated
+    for name, make in (("ident", lambda k: (np.random.default_rng(0).random((16, 16, 3)) * 255).astype(np.uint8)),
+                       ("black", lambda k: np.zeros((16, 16, 3), np.uint8)),
+                       ("sat", lambda k: np.full((16, 16, 3), 255, np.uint8))):
+        b = root / f"bracket_{name}"
+        b.mkdir()
+        for k in range(3):
+            write_png(b / f"b{k}.png", make(k))
+        (b / "exposures.json").write_text((br / "exposures.json").read_text())
+        w[f"bracket_{name}"] = b
     return w
 
 
@@ -283,6 +293,15 @@ CASES = [
     ("cal-samples-grid", ["calibrate", "response", "{bracket}", "--samples", "300", "-o", "{out}/r.npy"],
      "--samples 300", "r.npy"),
     ("cal-photo-unlisted", ["calibrate", "response", "{bracket_unlisted}", "-o", "{out}/r.npy"], "b1.png", "r.npy"),
+    ("cal-bracket-identical", ["calibrate", "response", "{bracket_ident}", "-o", "{out}/r.npy"],
+     "bracket_ident: the 3 photos are identical", "r.npy"),
+    ("cal-bracket-black", ["calibrate", "response", "{bracket_black}", "-o", "{out}/r.npy"],
+     "bracket_black: every pixel", "r.npy"),
+    ("cal-bracket-saturated", ["calibrate", "response", "{bracket_sat}", "-o", "{out}/r.npy"],
+     "bracket_sat: every pixel", "r.npy"),
+    ("merge-calibrate-identical", ["probe", "merge", "{bracket_ident}/b0.png", "{bracket_ident}/b1.png",
+                                   "{bracket_ident}/b2.png", "--exposures", "0.01,0.04,0.16", "--encoding",
+                                   "calibrate", "-o", "{out}/m.exr"], "photos are identical", "m.exr"),
     ("cal-out-suffix", ["calibrate", "response", "{bracket}", "-o", "{out}/r.txt"], "r.txt", "r.txt"),
     ("cal-squares-0", ["calibrate", "camera", "{maps}/good.exr", "--squares", "0x5"], "--squares", ""),
     ("cal-squares-abc", ["calibrate", "camera", "{maps}/good.exr", "--squares", "abc"], "--squares", ""),

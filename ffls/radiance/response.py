@@ -32,6 +32,7 @@ __all__ = [
     "valid_pixel_mask",
     "read_bracket",
     "grid_samples_fit",
+    "bracket_problem",
     "max_grid_samples",
     "calibrate_response_folder",
 ]
@@ -259,6 +260,31 @@ def read_bracket(folder: str | os.PathLike):
     return images, np.asarray(times, dtype=np.float32), paths
 
 
+def bracket_problem(images) -> str | None:
+    """Why a bracket of 8-bit photos cannot calibrate a response, or None.
+
+    The Debevec-Malik solve links codes through the change of a pixel's code with the exposure:
+
+    * with every code at 0 or 255 (black or saturated everywhere) no sample lies on the curve and
+      the solve returns a flat table (every code -> 1.0);
+    * photos that are identical although their exposure times differ (the same file copied, or a
+      camera that ignored the exposure setting) contradict the model; the solve returns NaN or
+      negative values.
+
+    Parameters
+    ----------
+    images : list of (H, W, 3) uint8
+    """
+    imgs = [np.asarray(im) for im in images]
+    if not any(np.any((im > 0) & (im < 255)) for im in imgs):
+        return ("every pixel of every photo is black (0) or saturated (255): nothing between them to calibrate a "
+                "response from")
+    if all(np.array_equal(im, imgs[0]) for im in imgs[1:]):
+        return (f"the {len(imgs)} photos are identical although their exposure times differ: photos that do not "
+                "change with the exposure cannot calibrate a response")
+    return None
+
+
 def grid_samples_fit(samples: int, width: int, height: int) -> bool:
     """Whether OpenCV's ``CalibrateDebevec`` (``random=False``) can place ``samples`` on a
     ``width`` x ``height`` image.
@@ -288,6 +314,9 @@ def calibrate_response_folder(folder, output, samples: int = 70, smoothness: flo
                          f" (at most {max_grid_samples(w, h)})", folder)
     if len(set(np.round(times, 9).tolist())) < 2:
         raise InputError("all exposure times are equal: not a bracket", folder)
+    why = bracket_problem(images)
+    if why:
+        raise InputError(why, folder)
     curve = recover_response_DebevecMalik1997(images, times, samples=samples, smoothness=smoothness)
     save_response(output, curve)
     return curve
