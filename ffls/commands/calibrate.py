@@ -98,7 +98,7 @@ def run(args) -> int:
 
     cal = calibrate_camera(args.photos, **board_flags(args))
     if args.capture:
-        path = write_camera_to_capture(args.capture, cal.K, cal.dist)
+        path = write_camera_to_capture(args.capture, cal.K, cal.dist, cal.image_size)
         print(f"wrote camera.K and camera.dist to {path} (rms {cal.rms:.3f} px, {len(cal.used)} views"
               f", {len(cal.skipped)} skipped)")
     else:
