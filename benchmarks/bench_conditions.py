@@ -149,7 +149,7 @@ def render(folder: Path, flags: list, res: int, dirs: np.ndarray) -> None:
     args = build_parser().parse_args(["synth", str(folder), "--resolution", str(res), "--quiet", *flags])
     write_synthetic_capture(folder, directions=dirs, resolution=res, scene=scene_of(args), photo=photo_settings(args),
                             progress=False, light_model="distant" if args.near is None else "near",
-                            light_distance=2.0 if args.near is None else args.near, light_radius=args.light_radius)
+                            light_distance=2.0 if args.near is None else args.near, light_radius=args.light_radius or 0.0)
 
 
 #: The combination's floor of a matte sphere (``ffls.spheres.photo.estimate_photo``'s ``sigma_floor_deg``).

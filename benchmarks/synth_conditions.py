@@ -79,7 +79,7 @@ def main():
                 synth.write_synthetic_capture(
                     os.path.join(tmp, f"p{i}"), directions=dirs[i:i + 1], resolution=a.resolution, scene=scene,
                     photo=photo, progress=False, light_model="distant" if args.near is None else "near",
-                    light_distance=2.0 if args.near is None else args.near, light_radius=args.light_radius)
+                    light_distance=2.0 if args.near is None else args.near, light_radius=args.light_radius or 0.0)
                 per.append(time.perf_counter() - t0)
         cmd = "ffls synth OUT --resolution %d %s" % (a.resolution, " ".join(flags))
         rows.append({"condition": name, "command": cmd.strip(), "gbuffer_s": t_gb,

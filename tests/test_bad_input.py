@@ -180,6 +180,20 @@ def ws(tmp_path_factory):
         write_png(br / f"b{k}.png", (np.random.default_rng(k).random((16, 16, 3)) * 255).astype(np.uint8))
     (br / "exposures.json").write_text(json.dumps({f"b{k}.png": t for k, t in enumerate((0.01, 0.04, 0.16))}))
     w["bracket"] = br
+    brm = root / "bracket_unlisted"  # exposures.json leaves a photo out
+    shutil.copytree(br, brm)
+    (brm / "exposures.json").write_text(json.dumps({"b0.png": 0.01, "b2.png": 0.16}))
+    w["bracket_unlisted"] = brm
+    # brackets that cannot calibrate a response: one photo copied three times, all black, all saturated
+    for name, make in (("ident", lambda k: (np.random.default_rng(0).random((16, 16, 3)) * 255).astype(np.uint8)),
+                       ("black", lambda k: np.zeros((16, 16, 3), np.uint8)),
+                       ("sat", lambda k: np.full((16, 16, 3), 255, np.uint8))):
+        b = root / f"bracket_{name}"
+        b.mkdir()
+        for k in range(3):
+            write_png(b / f"b{k}.png", make(k))
+        (b / "exposures.json").write_text((br / "exposures.json").read_text())
+        w[f"bracket_{name}"] = b
     return w
 
 
@@ -276,11 +290,33 @@ CASES = [
      "--smoothness", "r.npy"),
     ("cal-smooth-neg", ["calibrate", "response", "{bracket}", "--smoothness=-1", "-o", "{out}/r.npy"],
      "--smoothness", "r.npy"),
+    ("cal-samples-grid", ["calibrate", "response", "{bracket}", "--samples", "300", "-o", "{out}/r.npy"],
+     "--samples 300", "r.npy"),
+    ("cal-photo-unlisted", ["calibrate", "response", "{bracket_unlisted}", "-o", "{out}/r.npy"], "b1.png", "r.npy"),
+    ("cal-bracket-identical", ["calibrate", "response", "{bracket_ident}", "-o", "{out}/r.npy"],
+     "bracket_ident: the 3 photos are identical", "r.npy"),
+    ("cal-bracket-black", ["calibrate", "response", "{bracket_black}", "-o", "{out}/r.npy"],
+     "bracket_black: every pixel", "r.npy"),
+    ("cal-bracket-saturated", ["calibrate", "response", "{bracket_sat}", "-o", "{out}/r.npy"],
+     "bracket_sat: every pixel", "r.npy"),
+    ("merge-calibrate-identical", ["probe", "merge", "{bracket_ident}/b0.png", "{bracket_ident}/b1.png",
+                                   "{bracket_ident}/b2.png", "--exposures", "0.01,0.04,0.16", "--encoding",
+                                   "calibrate", "-o", "{out}/m.exr"], "photos are identical", "m.exr"),
     ("cal-out-suffix", ["calibrate", "response", "{bracket}", "-o", "{out}/r.txt"], "r.txt", "r.txt"),
     ("cal-squares-0", ["calibrate", "camera", "{maps}/good.exr", "--squares", "0x5"], "--squares", ""),
     ("cal-squares-abc", ["calibrate", "camera", "{maps}/good.exr", "--squares", "abc"], "--squares", ""),
     ("cal-square-nan", ["calibrate", "camera", "{maps}/good.exr", "--square-size", "nan"], "--square-size", ""),
     ("cal-marker-neg", ["calibrate", "camera", "{maps}/good.exr", "--marker-size=-1"], "--marker-size", ""),
+    ("cal-dictionary-unknown", ["calibrate", "camera", "{maps}/good.exr", "--dictionary", "DICT_FOO"], "--dictionary",
+     ""),
+    ("cal-marker-over-square", ["calibrate", "camera", "{maps}/good.exr", "--marker-size", "0.05", "--square-size",
+                                "0.03"], "--marker-size", ""),
+    ("cal-marker-chessboard", ["calibrate", "camera", "{maps}/good.exr", "--board", "chessboard", "--marker-size",
+                               "0.5"], "--marker-size", ""),
+    ("cal-dictionary-chessboard", ["calibrate", "camera", "{maps}/good.exr", "--board", "chessboard", "--dictionary",
+                                   "DICT_4X4_50"], "--dictionary", ""),
+    ("cal-dictionary-small", ["calibrate", "camera", "{maps}/good.exr", "--squares", "20x20", "--dictionary",
+                              "DICT_4X4_50"], "--dictionary", ""),
     # --- demo
     ("demo-rot-abc", ["demo", "-o", "{out}/d", "--rotations", "abc", "--no-view"], "--rotations", "d"),
     ("demo-rot-nan", ["demo", "-o", "{out}/d", "--rotations", "0,nan", "--no-view"], "--rotations", "d"),
@@ -288,6 +324,8 @@ CASES = [
     ("demo-lights-0", ["demo", "-o", "{out}/d", "--lights", "0", "--no-view"], "--lights", "d"),
     ("demo-res-huge", ["demo", "-o", "{out}/d", "--resolution", "100000", "--no-view"], "--resolution", "d"),
     ("demo-seed-neg", ["demo", "-o", "{out}/d", "--seed", "-1", "--no-view"], "--seed", "d"),
+    ("demo-maps-repeat", ["demo", "-o", "{out}/d", "--maps", "studio,studio", "--no-view"], "--maps", "d"),
+    ("demo-rot-repeat", ["demo", "-o", "{out}/d", "--rotations", "0,360", "--no-view"], "--rotations", "d"),
     ("demo-out-missing", ["demo", "-o", "{out}/no/d", "--no-view"], "no", "no"),
     # --- synth
     ("synth-res-huge", ["synth", "{out}/s", "--resolution", "100000"], "--resolution", "s"),
@@ -438,6 +476,13 @@ CASES = [
     ("synth-composite-map", ["synth", "{out}/s", "--composite-set", "nosuchmap"], "nosuchmap", "s"),
     ("synth-composite-wall", ["synth", "{out}/s", "--composite-set", "sky", "--wall-albedo", "1,2"],
      "--wall-albedo", "s"),
+    ("synth-surface-lights-alone", ["synth", "{out}/s", "--surface-lights", "5"], "--surface-lights", "s"),
+    ("synth-scene-albedo-alone", ["synth", "{out}/s", "--scene-albedo", "0.4"], "--scene-albedo", "s"),
+    ("synth-wall-alone", ["synth", "{out}/s", "--wall-albedo", "none"], "--wall-albedo", "s"),
+    ("synth-truth-dirs-alone", ["synth", "{out}/s", "--truth-dirs", "100"], "--truth-dirs", "s"),
+    ("synth-radius-distant", ["synth", "{out}/s", "--light-radius", "0.1"], "--light-radius", "s"),
+    ("synth-sphere-out-of-frame", ["synth", "{out}/s", "--sphere-xy=-0.25,-0.25;100,100", "--lights", "2",
+                                   "--resolution", "16"], "--sphere-xy 100,100", "s"),
     ("render-missing-capture", ["render", "{root}/nocap", "--probe", "sky", "--cpu", "-o", "{out}/a.png"],
      "nocap", "a.png"),
 ]

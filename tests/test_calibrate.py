@@ -100,3 +100,39 @@ def test_too_few_boards_names_folder(tmp_path):
 def test_write_camera_needs_capture(tmp_path):
     with pytest.raises(InputError, match="capture.json not found"):
         cal.write_camera_to_capture(tmp_path, np.eye(3), np.zeros(5))
+
+
+def test_same_view_twice_is_refused(views):
+    with pytest.raises(InputError, match="the same image as v0.png") as e:
+        cal.calibrate_camera(["v0.png", "v1.png", "v2.png", "v0b.png"], images=[views[0], views[1], views[2], views[0]])
+    assert "v0b.png" in str(e.value)
+
+
+def test_two_photos_of_one_view_are_refused(views):
+    # one view, three files that differ in one pixel: calibrateCamera returned fx ~5e7 px (~1e10 px
+    # for a chessboard): the corners of each are within SAME_VIEW_PX of the first's
+    alike = []
+    for k in range(3):
+        v = views[0].copy()
+        v[0, k] ^= 1
+        alike.append(v)
+    with pytest.raises(InputError, match=r"b.png: shows the board where a.png does"):
+        cal.calibrate_camera(["a.png", "b.png", "c.png"], images=alike)
+
+
+def test_camera_matrix_bounds_are_capture_json_ones():
+    assert cal.camera_matrix_problem([[820.0, 0, 331], [0, 820.0, 236], [0, 0, 1]]) is None
+    assert "beyond 1e+08 px" in cal.camera_matrix_problem([[1.26e10, 0, 240], [0, 8.2e9, 200], [0, 0, 1]])
+    assert "far from square" in cal.camera_matrix_problem([[5000.0, 0, 240], [0, 500.0, 200], [0, 0, 1]])
+    assert "not positive" in cal.camera_matrix_problem([[-5.0, 0, 240], [0, 500.0, 200], [0, 0, 1]])
+
+
+def test_capture_of_another_size_is_refused(tmp_path):
+    doc = {"format": "ffls-capture", "image_size": [96, 96], "camera": {}}
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    K = [[500.0, 0, 240], [0, 500.0, 200], [0, 0, 1]]
+    with pytest.raises(InputError, match="image_size 96x96 differs from the 480x400 board photos"):
+        cal.write_camera_to_capture(tmp_path, K, np.zeros(5), image_size=(480, 400))
+    assert json.loads((tmp_path / "capture.json").read_text()) == doc
+    cal.write_camera_to_capture(tmp_path, K, np.zeros(5), image_size=(96, 96))
+    assert json.loads((tmp_path / "capture.json").read_text())["camera"]["K"] == K

@@ -8,6 +8,7 @@ implemented by :func:`cv2.calibrateCamera`. Corners come from :class:`cv2.aruco.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 from pathlib import Path
 
@@ -15,8 +16,10 @@ import cv2
 import numpy as np
 
 from ffls.errors import InputError, atomic_output
+from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT
 
-__all__ = ["CameraCalibration", "make_board", "detect_board", "calibrate_camera", "write_camera_to_capture"]
+__all__ = ["CameraCalibration", "aruco_dictionary", "charuco_problem", "camera_matrix_problem", "make_board",
+           "detect_board", "calibrate_camera", "write_camera_to_capture"]
 
 
 @dataclasses.dataclass
@@ -49,20 +52,74 @@ class CameraCalibration:
                 "image_size": list(self.image_size), "used": list(self.used), "skipped": list(self.skipped)}
 
 
-def _dictionary(dictionary):
+def aruco_dictionary(dictionary):
+    """The :class:`cv2.aruco.Dictionary` of an OpenCV name (``'DICT_5X5_100'``, or ``'5X5_100'``).
+
+    Raises ValueError naming the known dictionaries when the name is not one of OpenCV's.
+    """
     if isinstance(dictionary, str):
         name = dictionary if dictionary.startswith("DICT_") else f"DICT_{dictionary}"
-        if not hasattr(cv2.aruco, name):
-            raise ValueError(f"unknown ArUco dictionary {dictionary!r}")
+        if not name.startswith("DICT_") or not isinstance(getattr(cv2.aruco, name, None), int):
+            known = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and n == n.upper())
+            raise ValueError(f"unknown ArUco dictionary {dictionary!r}; OpenCV's are {', '.join(known)}")
         return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
     return dictionary
+
+
+def charuco_problem(squares, square_size: float, marker_size: float, dictionary) -> str | None:
+    """Why a ChArUco board cannot be built, or None.
+
+    A marker sits inside a white square, so it must be smaller than the square (OpenCV raises a
+    SystemError otherwise), and the board's ``columns * rows // 2`` markers need as many ids in
+    the dictionary (OpenCV builds the board and then cannot detect the ids past the end).
+    """
+    if not marker_size < square_size:
+        return f"the marker side {marker_size:g} must be smaller than the square side {square_size:g}"
+    n = int(squares[0]) * int(squares[1]) // 2
+    have = aruco_dictionary(dictionary).bytesList.shape[0]
+    if n > have:
+        return f"a {squares[0]}x{squares[1]} board has {n} markers but the dictionary has {have}"
+    return None
+
+
+#: Two views whose matched corners all lie within this many pixels are one view: corner detection
+#: repeats to ~0.1 px, and a board moved or turned between photos shifts its corners by pixels.
+SAME_VIEW_PX = 0.5
+
+
+def _same_view(obj_a, img_a, obj_b, img_b) -> bool:
+    """Whether two detections put the same board corners at the same pixels (within SAME_VIEW_PX)."""
+    a = {tuple(np.round(p, 9)): q for p, q in zip(np.asarray(obj_a, np.float64), img_a)}
+    pairs = [(a[k], q) for k, q in zip(map(tuple, np.round(np.asarray(obj_b, np.float64), 9)), img_b) if k in a]
+    if len(pairs) < 4:
+        return False
+    d = np.array([np.hypot(*(np.asarray(p, np.float64) - q)) for p, q in pairs])
+    return bool(np.max(d) <= SAME_VIEW_PX)
+
+
+def camera_matrix_problem(K) -> str | None:
+    """Why a calibrated ``K`` is no camera's, or None: the bounds that loading ``capture.json`` applies
+    (:data:`ffls.io.capture.MAX_FOCAL_PX`, :data:`ffls.io.capture.MAX_PIXEL_ASPECT`), so that a
+    calibration never writes a ``camera.K`` that the capture then refuses."""
+    K = np.asarray(K, dtype=np.float64)
+    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        return f"fx = {K[0, 0]:.6g}, fy = {K[1, 1]:.6g} px: not positive finite focal lengths"
+    if np.max(np.abs(K)) > MAX_FOCAL_PX:
+        return (f"fx = {K[0, 0]:.6g}, fy = {K[1, 1]:.6g} px: beyond {MAX_FOCAL_PX:g} px (a 100 m lens on 1 um "
+                "pixels)")
+    if not 1.0 / MAX_PIXEL_ASPECT <= K[0, 0] / K[1, 1] <= MAX_PIXEL_ASPECT:
+        return f"fx / fy = {K[0, 0] / K[1, 1]:.6g}: pixels that far from square are no camera's"
+    return None
 
 
 def make_board(squares=(7, 5), square_size: float = 0.03, marker_size: float = 0.022,
                dictionary="DICT_5X5_100"):
     """A :class:`cv2.aruco.CharucoBoard` of ``squares`` = (columns, rows) squares."""
+    why = charuco_problem(squares, square_size, marker_size, dictionary)
+    if why:
+        raise ValueError(why)
     return cv2.aruco.CharucoBoard((int(squares[0]), int(squares[1])), float(square_size), float(marker_size),
-                                  _dictionary(dictionary))
+                                  aruco_dictionary(dictionary))
 
 
 def detect_board(gray, board: str = "charuco", squares=(7, 5), square_size: float = 0.03,
@@ -129,11 +186,14 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
     Raises
     ------
     InputError
-        An unreadable image, images of different sizes, or fewer than 3 views with a board.
+        An unreadable image, images of different sizes, the same image twice or two photos of one
+        view (every corner within SAME_VIEW_PX: a copy adds no view), fewer than 3 views with a
+        board, or a K that is no camera's (:func:`camera_matrix_problem`).
     """
     paths = [Path(p) for p in image_paths]
     obj_pts, img_pts, used, skipped = [], [], [], []
     size = None
+    seen = {}
     n = len(images) if images is not None else len(paths)
     for i in range(n):
         name = paths[i] if i < len(paths) else Path(f"image {i}")
@@ -155,6 +215,15 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
         if found is None:
             skipped.append(str(name))
             continue
+        digest = hashlib.sha1(np.ascontiguousarray(im).tobytes()).hexdigest()
+        if digest in seen:
+            raise InputError(f"the same image as {seen[digest]}: a photo given twice is not a second view of the"
+                             " board", name)
+        seen[digest] = name
+        for o, q, u in zip(obj_pts, img_pts, used):
+            if _same_view(o, q, found[0], found[1]):
+                raise InputError(f"shows the board where {u} does (every corner within {SAME_VIEW_PX:g} px): not a"
+                                 " second view; move the board or the camera between photos", name)
         obj_pts.append(found[0])
         img_pts.append(found[1])
         used.append(str(name))
@@ -164,14 +233,21 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
                          f" {n} photos; need at least 3", where)
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
     rms, K, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None, flags=flags)
+    why = camera_matrix_problem(K)
+    if why:
+        raise InputError(f"the calibration from {', '.join(Path(u).name for u in used)} is no camera's ({why}):"
+                         " the views are too alike; photograph the board from several angles", paths[0].parent
+                         if paths else None)
     return CameraCalibration(K=np.asarray(K, dtype=np.float64), dist=np.asarray(dist, dtype=np.float64).ravel()[:5],
                              rms=float(rms), image_size=size, used=used, skipped=skipped)
 
 
-def write_camera_to_capture(capture_dir, K, dist) -> Path:
+def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
     """Set ``camera.K`` and ``camera.dist`` in ``CAPTURE_DIR/capture.json``, keeping every other key.
 
-    The file is read, modified and written back atomically.
+    The file is read, modified and written back atomically. With ``image_size`` (W, H), the size
+    of the board photos, a capture whose ``image_size`` differs is refused: K is in the pixels of
+    the photos it was calibrated on.
     """
     path = Path(capture_dir) / "capture.json"
     if not path.is_file():
@@ -182,6 +258,10 @@ def write_camera_to_capture(capture_dir, K, dist) -> Path:
         raise InputError(f"cannot read JSON ({e})", path) from None
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object", path)
+    have = doc.get("image_size")
+    if image_size is not None and isinstance(have, list) and len(have) == 2 and list(have) != [int(v) for v in image_size]:
+        raise InputError(f"image_size {have[0]}x{have[1]} differs from the {image_size[0]}x{image_size[1]} board "
+                         "photos: K calibrated on them is not this capture's camera", path)
     cam = doc.get("camera") or {}
     if not isinstance(cam, dict):
         raise InputError("'camera' must be an object", path)

@@ -17,6 +17,51 @@ DESCRIPTION = (
 )
 
 
+#: ChArUco defaults of ``calibrate camera`` (None in the parsed flags when not given, so that a
+#: chessboard refuses them).
+MARKER_SIZE = 0.022
+DICTIONARY = "DICT_5X5_100"
+
+
+def _dictionary_name(text: str) -> str:
+    """argparse type: an OpenCV ArUco dictionary name."""
+    import argparse
+
+    from ffls.camera.calibrate import aruco_dictionary
+
+    try:
+        aruco_dictionary(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return text
+
+
+def board_flags(args) -> dict:
+    """The board keywords of :func:`ffls.camera.calibrate.calibrate_camera` from the parsed flags.
+
+    Raises InputError (one line naming the flag) for a ChArUco flag with ``--board chessboard``
+    (it would do nothing) and for a ChArUco board OpenCV cannot build.
+    """
+    from ffls.camera.calibrate import charuco_problem
+    from ffls.errors import InputError
+
+    if args.board == "chessboard":
+        for flag, v in (("--marker-size", args.marker_size), ("--dictionary", args.dictionary)):
+            if v is not None:
+                raise InputError(f"{flag} is for --board charuco: a chessboard has no markers")
+        return dict(board="chessboard", squares=args.squares, square_size=args.square_size)
+    marker = MARKER_SIZE if args.marker_size is None else args.marker_size
+    dictionary = DICTIONARY if args.dictionary is None else args.dictionary
+    if not marker < args.square_size:
+        raise InputError(f"--marker-size {marker:g} must be smaller than --square-size {args.square_size:g}"
+                         " (a marker sits inside a square)")
+    why = charuco_problem(args.squares, args.square_size, marker, dictionary)
+    if why:
+        raise InputError(f"--squares {args.squares[0]}x{args.squares[1]} with --dictionary {dictionary}: {why}")
+    return dict(board="charuco", squares=args.squares, square_size=args.square_size, marker_size=marker,
+                dictionary=dictionary)
+
+
 def add_arguments(p):
     from ffls.commands.common import integer, number, output_path, size_wxh
 
@@ -34,8 +79,10 @@ def add_arguments(p):
     c.add_argument("--board", choices=("charuco", "chessboard"), default="charuco")
     c.add_argument("--squares", type=size_wxh(2, 100), default=(7, 5), help="squares along x and y, e.g. 7x5")
     c.add_argument("--square-size", type=number(0.0, 1e3, lo_open=True), default=0.03, help="square side, scene units (default 0.03)")
-    c.add_argument("--marker-size", type=number(0.0, 1e3, lo_open=True), default=0.022, help="ArUco marker side (default 0.022)")
-    c.add_argument("--dictionary", default="DICT_5X5_100", help="ArUco dictionary (default DICT_5X5_100)")
+    c.add_argument("--marker-size", type=number(0.0, 1e3, lo_open=True), default=None,
+                   help=f"ArUco marker side, smaller than --square-size (charuco only; default {MARKER_SIZE})")
+    c.add_argument("--dictionary", type=_dictionary_name, default=None,
+                   help=f"ArUco dictionary, OpenCV's name (charuco only; default {DICTIONARY})")
     c.add_argument("--capture", help="capture folder whose capture.json gets camera.K and camera.dist")
 
 
@@ -49,10 +96,9 @@ def run(args) -> int:
         return 0
     from ffls.camera.calibrate import calibrate_camera, write_camera_to_capture
 
-    cal = calibrate_camera(args.photos, board=args.board, squares=args.squares, square_size=args.square_size,
-                           marker_size=args.marker_size, dictionary=args.dictionary)
+    cal = calibrate_camera(args.photos, **board_flags(args))
     if args.capture:
-        path = write_camera_to_capture(args.capture, cal.K, cal.dist)
+        path = write_camera_to_capture(args.capture, cal.K, cal.dist, cal.image_size)
         print(f"wrote camera.K and camera.dist to {path} (rms {cal.rms:.3f} px, {len(cal.used)} views"
               f", {len(cal.skipped)} skipped)")
     else:

@@ -205,7 +205,7 @@ def _merge(args) -> int:
     if isinstance(enc, dict) and "response" in enc:
         response = load_response(enc["response"]).astype(np.float64)
     elif enc == "calibrate":
-        from ffls.radiance.response import recover_response_DebevecMalik1997
+        from ffls.radiance.response import bracket_problem, recover_response_DebevecMalik1997
 
         imgs = [read_image(p) for p in paths]
         bad = [im for im in imgs if im.bit_depth != 8]
@@ -215,6 +215,9 @@ def _merge(args) -> int:
         if np.ptp(times) <= 1e-9 * max(times):
             raise InputError(f"all {len(times)} exposure times are equal ({times[0]:.6g} s): not a bracket", paths[0])
         codes = [np.rint(im.pixels * 255).astype(np.uint8) for im in imgs]
+        why = bracket_problem(codes)
+        if why:
+            raise InputError(f"--encoding calibrate: {why}", paths[0])
         response = recover_response_DebevecMalik1997(codes, np.asarray(times, dtype=np.float32)).astype(np.float64)
         enc = {"response": "calibrated"}
         print_notes(NAME, "camera response recovered from the bracket (Debevec-Malik 1997)")

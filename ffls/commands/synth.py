@@ -24,6 +24,11 @@ DESCRIPTION = (
 )
 
 _MATERIALS = ("matte", "grey", "mirror", "glossy_black")
+#: Defaults of the ``--composite-set`` flags (None in the parsed arguments when not given, so that a
+#: flag given without ``--composite-set``, where it would do nothing, is refused).
+SCENE_ALBEDO = 0.5
+WALL_ALBEDO = (0.6, 0.35, 0.25)
+TRUTH_DIRS = 2048
 
 
 # ----------------------------------------------------------------------------- argument types
@@ -70,9 +75,9 @@ def _vignetting(text: str):
 
 
 def _wall(text: str):
-    """``none`` or ``R,G,B`` albedo in [0, 1]."""
+    """``none`` (returned as the word: no wall) or ``R,G,B`` albedo in [0, 1]."""
     if text == "none":
-        return None
+        return text
     from ffls.commands.common import float_list
 
     return float_list(0.0, 1.0, min_len=3, max_len=3)(text)
@@ -95,8 +100,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resolution", type=SYNTH_RES, default=256, metavar="R", help="image width and height (default 256)")
     p.add_argument("--near", type=number(0.0, 1e6, lo_open=True), default=None, metavar="DIST",
                    help="point lights at DIST metres from the scene centre instead of distant lights")
-    p.add_argument("--light-radius", type=number(0.0, 1e6), default=0.0, metavar="M",
-                   help="radius of a spherical near light (soft shadows; default 0 = point)")
+    p.add_argument("--light-radius", type=number(0.0, 1e6), default=None, metavar="M",
+                   help="radius of a spherical near light, with --near (soft shadows; default 0 = point)")
     p.add_argument("--light-angle", type=number(0.0, 90.0, lo_open=True, hi_open=True, unit="degrees"), default=0.5,
                    metavar="DEG",
                    help="angular radius of the light as mirror spheres see it (distant lights, and point near "
@@ -127,13 +132,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write OUT_DIR/object (object and spheres), OUT_DIR/surface (ground and spheres alone, other "
                         "lights), and a virtual scene under MAP (a light-map file or built-in name) with a wall and "
                         "another ground albedo: scene_map.exr, background.exr, truth.exr and the masks")
-    c.add_argument("--scene-albedo", type=number(0.0, 1.0), default=0.5, metavar="A",
+    c.add_argument("--scene-albedo", type=number(0.0, 1.0), default=None, metavar="A",
                    help="ground albedo of the virtual scene (default 0.5; the captures' is --ground-albedo)")
-    c.add_argument("--wall-albedo", type=_wall, default=(0.6, 0.35, 0.25), metavar="R,G,B|none",
+    c.add_argument("--wall-albedo", type=_wall, default=None, metavar="R,G,B|none",
                    help="albedo of the virtual scene's wall (default 0.6,0.35,0.25), or none")
     c.add_argument("--surface-lights", type=N_LIGHTS, default=None, metavar="N",
                    help="lights of the surface capture (default --lights)")
-    c.add_argument("--truth-dirs", type=integer(16, 100000), default=2048, metavar="N",
+    c.add_argument("--truth-dirs", type=integer(16, 100000), default=None, metavar="N",
                    help="distant lights the map is reduced to for the direct renders (default 2048)")
     f = p.add_argument_group("photograph")
     f.add_argument("--format", dest="file_format", type=_choice("exr", "png8", "png16", "tiff16", "jpeg"),
@@ -218,6 +223,54 @@ def scene_of(args: argparse.Namespace):
                       with_object=not args.no_object, sphere_xy=args.sphere_xy, sphere_radius=args.sphere_radius, **kw)
 
 
+def _wall_albedo(args: argparse.Namespace):
+    """The wall albedo of ``--wall-albedo``: its default when not given, None for ``none``."""
+    if args.wall_albedo is None:
+        return WALL_ALBEDO
+    return None if args.wall_albedo == "none" else args.wall_albedo
+
+
+def check_flags_in_effect(args: argparse.Namespace) -> None:
+    """Refuse a flag that would change nothing (InputError naming it), as ``--jpeg-quality`` without jpeg.
+
+    ``--surface-lights``, ``--scene-albedo``, ``--wall-albedo`` and ``--truth-dirs`` shape only the
+    ``--composite-set`` scene; ``--light-radius`` is the radius of a near light (``--near``).
+    """
+    from ffls.errors import InputError
+
+    if args.composite_set is None:
+        for flag, dest in (("--surface-lights", "surface_lights"), ("--scene-albedo", "scene_albedo"),
+                           ("--wall-albedo", "wall_albedo"), ("--truth-dirs", "truth_dirs")):
+            if getattr(args, dest) is not None:
+                raise InputError(f"{flag} needs --composite-set (it shapes only the composite test set)")
+    if args.light_radius is not None and args.near is None:
+        raise InputError("--light-radius needs --near (distant lights have no radius; see --light-angle)")
+
+
+def check_spheres_in_frame(args: argparse.Namespace, scene) -> None:
+    """Refuse ``--sphere-xy`` positions whose sphere has no pixel in the image (InputError naming the flag).
+
+    The frame test is :func:`ffls.synth.scene.sphere_silhouettes` (each sphere alone, rays through
+    the pixel centres): a sphere out of frame would be written into truth.json with 0 pixels.
+    """
+    import numpy as np
+
+    from ffls.errors import InputError
+    from ffls.synth.scene import sphere_silhouettes
+
+    if args.sphere_xy is None or scene.n_spheres == 0:
+        return
+    c = (scene.sphere_centers - scene.camera_center())
+    if np.any(np.linalg.norm(c, axis=1) <= scene.sphere_radius):
+        raise InputError("--sphere-xy puts a sphere around the camera")
+    _, in_frame = sphere_silhouettes(scene, args.resolution)
+    out = np.flatnonzero(in_frame == 0)
+    if out.size:
+        x, y = args.sphere_xy[out[0]]
+        raise InputError(f"--sphere-xy {x:g},{y:g} puts sphere {out[0]} out of the frame (no pixel of it in the "
+                         f"{args.resolution}x{args.resolution} image)")
+
+
 def _synth(args: argparse.Namespace, folder) -> dict:
     from ffls.synth.scene import write_calibration_pair, write_synthetic_capture
 
@@ -225,7 +278,7 @@ def _synth(args: argparse.Namespace, folder) -> dict:
         resolution=args.resolution,
         light_model="distant" if args.near is None else "near",
         light_distance=2.0 if args.near is None else args.near,
-        light_radius=args.light_radius,
+        light_radius=args.light_radius or 0.0,
         light_angular_radius_deg=args.light_angle,
         seed=args.seed,
         hemisphere="full" if args.full_sphere else "upper",
@@ -241,8 +294,9 @@ def _synth(args: argparse.Namespace, folder) -> dict:
 
         return write_composite_set(folder, lightmap_from_spec(args.composite_set), n_object_lights=args.lights,
                                    n_surface_lights=args.surface_lights, resolution=args.resolution,
-                                   scene_albedo=args.scene_albedo, wall_albedo=args.wall_albedo, seed=args.seed,
-                                   truth_dirs=args.truth_dirs, photo=kw["photo"], progress=kw["progress"],
+                                   scene_albedo=SCENE_ALBEDO if args.scene_albedo is None else args.scene_albedo,
+                                   wall_albedo=_wall_albedo(args), seed=args.seed,
+                                   truth_dirs=TRUTH_DIRS if args.truth_dirs is None else args.truth_dirs, photo=kw["photo"], progress=kw["progress"],
                                    scene=kw["scene"])
     return write_synthetic_capture(folder, n_lights=args.lights, **kw)
 
@@ -259,10 +313,12 @@ def run(args: argparse.Namespace) -> int:
 
     from ffls.errors import InputError, atomic_folder
 
-    if args.near is not None and args.light_radius >= args.near:
+    check_flags_in_effect(args)
+    if args.near is not None and args.light_radius is not None and args.light_radius >= args.near:
         raise InputError(f"--light-radius {args.light_radius:g} must be smaller than --near {args.near:g} "
                          "(the light would enclose the scene)")
-    photo_settings(args), scene_of(args)  # conflicting flags: one line before anything is written
+    photo_settings(args)  # conflicting flags: one line before anything is written
+    check_spheres_in_frame(args, scene_of(args))
     if args.composite_set is not None:
         from ffls.lightmaps.lightmap import lightmap_from_spec
 

@@ -31,6 +31,9 @@ __all__ = [
     "linearize",
     "valid_pixel_mask",
     "read_bracket",
+    "grid_samples_fit",
+    "bracket_problem",
+    "max_grid_samples",
     "calibrate_response_folder",
 ]
 
@@ -194,8 +197,8 @@ def read_bracket(folder: str | os.PathLike):
     """Read a folder of bracketed 8-bit photos and their exposure times.
 
     Exposure times come from ``exposures.json`` in the folder when present (an object mapping
-    file name to seconds, e.g. ``{"a.jpg": 0.01, "b.jpg": 0.04}``; only the files named are
-    used), otherwise from each image's EXIF ``ExposureTime`` (tag 33434, read with Pillow).
+    file name to seconds, e.g. ``{"a.jpg": 0.01, "b.jpg": 0.04}``, naming every photo of the
+    folder: one left out is refused, not skipped), otherwise from each image's EXIF ``ExposureTime`` (tag 33434, read with Pillow).
 
     Returns
     -------
@@ -225,6 +228,10 @@ def read_bracket(folder: str | os.PathLike):
             t = float(t)
             paths.append(p)
             times.append(t)
+        unlisted = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.name not in doc)
+        if unlisted:
+            raise InputError(f"photo {unlisted[0]!r} has no exposure time in exposures.json (list every photo of the"
+                             " bracket, or move the others out)", folder / unlisted[0])
     else:
         paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
         times = []
@@ -253,11 +260,63 @@ def read_bracket(folder: str | os.PathLike):
     return images, np.asarray(times, dtype=np.float32), paths
 
 
+def bracket_problem(images) -> str | None:
+    """Why a bracket of 8-bit photos cannot calibrate a response, or None.
+
+    The Debevec-Malik solve links codes through the change of a pixel's code with the exposure:
+
+    * with every code at 0 or 255 (black or saturated everywhere) no sample lies on the curve and
+      the solve returns a flat table (every code -> 1.0);
+    * photos that are identical although their exposure times differ (the same file copied, or a
+      camera that ignored the exposure setting) contradict the model; the solve returns NaN or
+      negative values.
+
+    Parameters
+    ----------
+    images : list of (H, W, 3) uint8
+    """
+    imgs = [np.asarray(im) for im in images]
+    if not any(np.any((im > 0) & (im < 255)) for im in imgs):
+        return ("every pixel of every photo is black (0) or saturated (255): nothing between them to calibrate a "
+                "response from")
+    if all(np.array_equal(im, imgs[0]) for im in imgs[1:]):
+        return (f"the {len(imgs)} photos are identical although their exposure times differ: photos that do not "
+                "change with the exposure cannot calibrate a response")
+    return None
+
+
+def grid_samples_fit(samples: int, width: int, height: int) -> bool:
+    """Whether OpenCV's ``CalibrateDebevec`` (``random=False``) can place ``samples`` on a
+    ``width`` x ``height`` image.
+
+    Its grid has ``x = floor(sqrt(samples * width / height))`` columns and ``samples // x`` rows,
+    and asserts ``0 < x <= width`` and ``0 < rows <= height`` (``cv2.error ... x_points <= cols``).
+    """
+    w, h, n = int(width), int(height), int(samples)
+    x = int(np.sqrt(n * w / h))
+    return 0 < x <= w and 0 < n // x <= h
+
+
+def max_grid_samples(width: int, height: int) -> int:
+    """The largest ``n`` such that every sample count up to ``n`` fits (:func:`grid_samples_fit`)."""
+    n = 0
+    while grid_samples_fit(n + 1, width, height):
+        n += 1
+    return n
+
+
 def calibrate_response_folder(folder, output, samples: int = 70, smoothness: float = 10.0) -> np.ndarray:
     """Recover the inverse response from a bracket folder and save it; returns the (256, 3) curve."""
     images, times, _ = read_bracket(folder)
+    h, w = images[0].shape[:2]
+    if not grid_samples_fit(samples, w, h):
+        raise InputError(f"--samples {samples} is more than the {w}x{h} photos can give"
+                         f" (at most {max_grid_samples(w, h)})", folder)
     if len(set(np.round(times, 9).tolist())) < 2:
         raise InputError("all exposure times are equal: not a bracket", folder)
+    why = bracket_problem(images)
+    if why:
+        raise InputError(why, folder)
     curve = recover_response_DebevecMalik1997(images, times, samples=samples, smoothness=smoothness)
     save_response(output, curve)
     return curve
