@@ -1602,6 +1602,13 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float) -> tupl
     more = []
     for x, y, r in hc:
         ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
+        for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
+            if ft is None:
+                break
+            again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, cpts, cam, "auto")
+            if again is None or outline_quality(again) <= outline_quality(ft):
+                break
+            ft = again
         if (ft is None or ft.residual_px > max_residual_px
                 or any(np.hypot(*(ft.center_px - o.center_px)) <= 0.8 * (ft.radius_px + o.radius_px)
                        for o in fits + more)):
