@@ -1414,7 +1414,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         if tensor is not None and tensor[1] >= 3:  # outlines the max image leaves out (white on white)
-            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px)
+            more, n_more = _photo_edge_fits(fits, tensor, cam)
             fits, n_cands = fits + more, n_cands + n_more
         # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
@@ -1573,7 +1573,15 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     return cands[:max_candidates]
 
 
-def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float) -> tuple[list, int]:
+#: Largest RMS (px) of an outline that only the photos' edges show (:func:`_photo_edge_fits`): the
+#: residual at which :func:`outline_quality` halves. Its points are sub-pixel ridge maxima of an edge
+#: that stands still in every photo, so a silhouette fits them to a fraction of a pixel (0.15-0.37 px
+#: on the 12 white-ground spheres of docs/spheres.md); arcs of moving shadows and shading joined into
+#: a circle fit loosely (0.50-0.75 px there), and one, under a near light, passed every other test.
+PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
+
+
+def _photo_edge_fits(fits, tensor, cam: _Camera) -> tuple[list, int]:
     """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
 
     In the max image every pixel reads its best light, so a white matte sphere on a white ground
@@ -1582,8 +1590,9 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float) -> tupl
     each photo, though, its limb and the ground behind it differ (which is brighter changes), so
     the per-photo edge evidence (:func:`consistent_edge_strength`) outlines it in full. Circles are
     proposed by Hough on that strength (8 bit over its robust peak) and each is fitted on the
-    ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`). A fit
-    that overlaps an outline already fitted on the max image is dropped (the max image's outline is
+    ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
+    again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
+    most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. A fit that overlaps an outline already fitted on the max image is dropped (the max image's outline is
     judged, and refitted on these edges, as before); the others join the candidates with
     ``outline_edges`` :data:`PHOTO_EDGES`, so they must close :data:`ffls.spheres.select.CRITERIA`
     ``min_closed_photos`` of their outline, and are judged by the same criteria. Returns those fits
@@ -1609,17 +1618,10 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float) -> tupl
             if again is None or outline_quality(again) <= outline_quality(ft):
                 break
             ft = again
-        if (ft is None or ft.residual_px > max_residual_px
+        if (ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX
                 or any(np.hypot(*(ft.center_px - o.center_px)) <= 0.8 * (ft.radius_px + o.radius_px)
                        for o in fits + more)):
             continue
-        # closure as Hough's support is judged: the ridge runs within 1.5 px of the outline (the robust
-        # fit trims a side where a shadow's boundary pulls the ridge out by a pixel: it still closes)
-        pts, dirs, _ = cpts
-        v = pts - ft.center_px
-        d = np.hypot(v[:, 0], v[:, 1])
-        on = (np.abs(d - ft.radius_px) <= 1.5) & (np.abs(np.sum(v * dirs, axis=1)) > 0.7 * np.maximum(d, 1e-9))
-        ft.coverage = max(ft.coverage, _coverage(pts[on], ft.center_px))
         ft.outline_edges = PHOTO_EDGES
         more.append(ft)
     return more, len(hc)
