@@ -1412,7 +1412,11 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
                                          else None)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
+        n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
+        if tensor is not None and tensor[1] >= 3:  # outlines the max image leaves out (white on white)
+            more, n_more = _photo_edge_fits(fits, tensor, cam)
+            fits, n_cands = fits + more, n_cands + n_more
         # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
         # ground's circles hold in every photo too) gains from them a score that hides a real sphere
@@ -1425,7 +1429,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
         if not fits or (n_spheres is not None and len(fits) < n_spheres):
-            raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, len(cands)), source)
+            raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands), source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
         fits = [ft if ft.source == OUTER_SOURCE or ft.outline_edges == PHOTO_EDGES
@@ -1568,6 +1572,60 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
         if all(np.hypot(x - cx, y - cy) > 0.2 * r or abs(r - cr) > 0.2 * r for cx, cy, cr in cands):
             cands.append((x, y, r))
     return cands[:max_candidates]
+
+
+#: Largest RMS (px) of an outline that only the photos' edges show (:func:`_photo_edge_fits`): the
+#: residual at which :func:`outline_quality` halves. Its points are sub-pixel ridge maxima of an edge
+#: that stands still in every photo, so a silhouette fits them to a fraction of a pixel (0.15-0.37 px
+#: on the 12 white-ground spheres of docs/spheres.md); arcs of moving shadows and shading joined into
+#: a circle fit loosely (0.50-0.75 px there), and one, under a near light, passed every other test.
+PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
+
+
+def _photo_edge_fits(fits, tensor, cam: _Camera) -> tuple[list, int]:
+    """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
+
+    In the max image every pixel reads its best light, so a white matte sphere on a white ground
+    is about as bright as the ground all round its silhouette (both face some light head-on): the
+    max image has no edge there, Hough proposes no circle, and the sphere is never a candidate. In
+    each photo, though, its limb and the ground behind it differ (which is brighter changes), so
+    the per-photo edge evidence (:func:`consistent_edge_strength`) outlines it in full. Circles are
+    proposed by Hough on that strength (8 bit over its robust peak) and each is fitted on the
+    ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
+    again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
+    most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. A fit that overlaps an outline already fitted on the max image is dropped (the max image's outline is
+    judged, and refitted on these edges, as before); the others join the candidates with
+    ``outline_edges`` :data:`PHOTO_EDGES`, so they must close :data:`ffls.spheres.select.CRITERIA`
+    ``min_closed_photos`` of their outline, and are judged by the same criteria. Returns those fits
+    and how many circles were proposed.
+    """
+    S, _ = consistent_edge_strength(*tensor)
+    H, W = S.shape
+    peak = _robust_peak(S)
+    if not peak > 0:
+        return [], 0
+    sc = 255.0 / peak
+    g8 = np.clip(S * sc, 0, 255).astype(np.uint8)
+    # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio)
+    hc = np.concatenate(_hough_candidates_many([(g8, 3, min(H, W) / 2, 0.5 * sc)]))
+    cpts = consistent_edge_points(*tensor)
+    more = []
+    for x, y, r in hc:
+        ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
+        for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
+            if ft is None:
+                break
+            again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, cpts, cam, "auto")
+            if again is None or outline_quality(again) <= outline_quality(ft):
+                break
+            ft = again
+        if (ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX
+                or any(np.hypot(*(ft.center_px - o.center_px)) <= 0.8 * (ft.radius_px + o.radius_px)
+                       for o in fits + more)):
+            continue
+        ft.outline_edges = PHOTO_EDGES
+        more.append(ft)
+    return more, len(hc)
 
 
 def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, workers: int = 1):
@@ -1935,6 +1993,38 @@ def _with_consistent_edges(fits, tensor, L, cam: _Camera, max_residual_px: float
             else _refine_on_consistent_edges(ft, cpts, cam, max_residual_px) for ft in fits]
 
 
+def _fit_on_consistent_edges(c0, r0: float, cpts, cam: _Camera, source: str, band: float = 0.1,
+                             min_points: int = 8):
+    """A sphere fitted on the ridge points ``cpts`` (:func:`consistent_edge_points`) near the circle
+    ``(c0, r0)`` (pixels), or None.
+
+    The points within ``band`` radii (+ 2 px) of the circle whose direction is radial
+    (``|cos| > 0.7``) are searched for the best-supported circle (:func:`_start_circle`, 1-pixel
+    tolerance: a contact shadow's boundary runs a few pixels outside the silhouette); the points
+    within 1.5 px of it are fitted (:func:`_fit_outline`).
+    """
+    pts, dirs, _ = cpts
+    if len(pts) < min_points:
+        return None
+    v = pts - c0
+    d = np.hypot(v[:, 0], v[:, 1])
+    cosr = np.abs(np.sum(v * dirs, axis=1)) / np.maximum(d, 1e-9)
+    sel = (np.abs(d - r0) < band * r0 + 2.0) & (cosr > 0.7)
+    if sel.sum() < min_points:
+        return None
+    P = pts[sel]
+    circ = _start_circle(P, c0, r0, tol=1.0)
+    if circ is None:
+        return None
+    Q = P[np.abs(np.hypot(P[:, 0] - circ[0][0], P[:, 1] - circ[0][1]) - circ[1]) <= 1.5]
+    if len(Q) < min_points:
+        return None
+    try:
+        return _fit_outline(Q, cam, circ[0], circ[1], source)
+    except ValueError:
+        return None
+
+
 def _refine_on_consistent_edges(ft, cpts, cam: _Camera, max_residual_px: float, band: float = 0.1,
                                 min_points: int = 8):
     """Refit a found sphere on the per-photo edge evidence (:func:`consistent_edge_points`), if it fits better.
@@ -1950,28 +2040,11 @@ def _refine_on_consistent_edges(ft, cpts, cam: _Camera, max_residual_px: float, 
     ``max_residual_px``), moves the centre by less than a quarter of the radius and has the
     higher :func:`outline_quality`; otherwise the fit is returned unchanged.
     """
-    pts, dirs, _ = cpts
-    if ft.source == "override" or len(pts) < min_points:
+    if ft.source == "override":
         return ft
     c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
-    v = pts - c0
-    d = np.hypot(v[:, 0], v[:, 1])
-    cosr = np.abs(np.sum(v * dirs, axis=1)) / np.maximum(d, 1e-9)
-    sel = (np.abs(d - r0) < band * r0 + 2.0) & (cosr > 0.7)
-    if sel.sum() < min_points:
-        return ft
-    P = pts[sel]
-    circ = _start_circle(P, c0, r0, tol=1.0)
-    if circ is None:
-        return ft
-    Q = P[np.abs(np.hypot(P[:, 0] - circ[0][0], P[:, 1] - circ[0][1]) - circ[1]) <= 1.5]
-    if len(Q) < min_points:
-        return ft
-    try:
-        new = _fit_outline(Q, cam, circ[0], circ[1], ft.source)
-    except ValueError:
-        return ft
-    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
+    new = _fit_on_consistent_edges(c0, r0, cpts, cam, ft.source, band, min_points)
+    if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
             or outline_quality(new) <= outline_quality(ft)):
         return ft
     new.score = ft.score
