@@ -36,3 +36,14 @@ def ctx(gl_session):
 @pytest.fixture
 def rng():
     return np.random.default_rng(20021)
+
+
+@pytest.fixture(scope="session")
+def courtyard_ball_folder(tmp_path_factory):
+    """A diffuse probe folder: a 48 px ball of albedo 0.7 under the courtyard map (cut to 16 rows),
+    read by the ``ffls probe pocs`` CLI tests (never written into)."""
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.synth.probe_scenes import diffuse_sphere_scene, write_diffuse_probe
+
+    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=48, albedo=0.7)
+    return write_diffuse_probe(tmp_path_factory.mktemp("courtyard_ball"), sc)

@@ -125,22 +125,13 @@ def test_bad_options_are_refused(noisy_system, kw):
         pocs(H, g, 2, **kw)
 
 
-@pytest.fixture(scope="module")
-def ball_folder(tmp_path_factory):
-    from ffls.lightmaps.lightmap import builtin_lightmap
-    from ffls.synth.probe_scenes import diffuse_sphere_scene, write_diffuse_probe
-
-    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=48, albedo=0.7)
-    return write_diffuse_probe(tmp_path_factory.mktemp("pocs_ball"), sc)
-
-
-def test_cli_extrapolated_scheme_with_a_stopping_rule(ball_folder, tmp_path, capsys):
+def test_cli_extrapolated_scheme_with_a_stopping_rule(courtyard_ball_folder, tmp_path, capsys):
     from ffls.cli import main
     from ffls.lightmaps.lightmap import load_lightmap
 
     out = tmp_path / "m.exr"
-    assert main(["probe", "pocs", str(ball_folder), "-o", str(out), "--size", "16", "--sources", "grid", "--grid", "8",
-                 "--scheme", "extrapolated", "--iterations", "20000", "--tol", "1e-4"]) == 0
+    assert main(["probe", "pocs", str(courtyard_ball_folder), "-o", str(out), "--size", "16", "--sources", "grid",
+                 "--grid", "8", "--scheme", "extrapolated", "--iterations", "20000", "--tol", "1e-4"]) == 0
     err = capsys.readouterr().err
     assert "parallel, extrapolated" in err and "stopped at a change below 0.0001" in err
     assert load_lightmap(out).data.min() >= 0
@@ -152,10 +143,10 @@ def test_cli_extrapolated_scheme_with_a_stopping_rule(ball_folder, tmp_path, cap
                                           (["--tol", "0"], "--tol"),
                                           (["--sources", "grid", "--grid", "8", "--relaxation", "1e-300"],
                                            "POCS made no progress")])
-def test_cli_bad_solver_flags_get_one_line(ball_folder, tmp_path, capsys, flags, words):
+def test_cli_bad_solver_flags_get_one_line(courtyard_ball_folder, tmp_path, capsys, flags, words):
     from ffls.cli import main
 
     out = tmp_path / "m.exr"
-    assert main(["probe", "pocs", str(ball_folder), "-o", str(out), "--size", "16", *flags]) == 2
+    assert main(["probe", "pocs", str(courtyard_ball_folder), "-o", str(out), "--size", "16", *flags]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and not out.exists()

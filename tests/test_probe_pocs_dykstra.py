@@ -93,32 +93,23 @@ def test_dykstra_refuses_options_it_does_not_take():
         ResidualEnergySet(H, g, 0.0)
 
 
-@pytest.fixture(scope="module")
-def ball_folder(tmp_path_factory):
-    from ffls.lightmaps.lightmap import builtin_lightmap
-    from ffls.synth.probe_scenes import diffuse_sphere_scene, write_diffuse_probe
-
-    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=48, albedo=0.7)
-    return write_diffuse_probe(tmp_path_factory.mktemp("pocs_dykstra_ball"), sc)
-
-
-def test_cli_dykstra_scheme(ball_folder, tmp_path, capsys):
+def test_cli_dykstra_scheme(courtyard_ball_folder, tmp_path, capsys):
     from ffls.cli import main
     from ffls.lightmaps.lightmap import load_lightmap
 
     out = tmp_path / "m.exr"
-    assert main(["probe", "pocs", str(ball_folder), "-o", str(out), "--size", "16", "--sources", "grid", "--grid", "8",
-                 "--scheme", "dykstra", "--iterations", "300", "--tol", "1e-5"]) == 0
+    assert main(["probe", "pocs", str(courtyard_ball_folder), "-o", str(out), "--size", "16", "--sources", "grid",
+                 "--grid", "8", "--scheme", "dykstra", "--iterations", "300", "--tol", "1e-5"]) == 0
     assert "Dykstra, the least-norm feasible map" in capsys.readouterr().err
     assert load_lightmap(out).data.min() >= 0
 
 
 @pytest.mark.parametrize("flags, words", [(["--scheme", "dykstra", "--relaxation", "0.5"], "--relaxation"),
                                           (["--scheme", "dykstra", "--order", "random"], "--order")])
-def test_cli_dykstra_refuses_flags_it_does_not_take(ball_folder, tmp_path, capsys, flags, words):
+def test_cli_dykstra_refuses_flags_it_does_not_take(courtyard_ball_folder, tmp_path, capsys, flags, words):
     from ffls.cli import main
 
     out = tmp_path / "m.exr"
-    assert main(["probe", "pocs", str(ball_folder), "-o", str(out), "--size", "16", *flags]) == 2
+    assert main(["probe", "pocs", str(courtyard_ball_folder), "-o", str(out), "--size", "16", *flags]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and not out.exists()
