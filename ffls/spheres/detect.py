@@ -64,7 +64,7 @@ from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, tangent_b
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
-from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, select_spheres
+from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circle_search, dark_cap,
                                          enclosing_circle, limb_radius, mirror_silhouette)
 
@@ -1416,7 +1416,12 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         if tensor is not None and tensor[1] >= 3:  # outlines the max image leaves out (white on white)
             more, n_more = _photo_edge_fits(fits, tensor, cam)
-            fits, n_cands = fits + more, n_cands + n_more
+            # one the photos' edges outline precisely but leave open (a textured ground's patches
+            # match the sphere's limb in some photos) is a circle the max image's Hough transform
+            # may have missed among the texture's: it is fitted on the max image's edges too
+            seeds = [(*ft.center_px, ft.radius_px) for ft in more if not round_outline(ft, max_residual_px)]
+            again, _ = _fit_candidates(seeds, edges, cam, 0.3, "auto", workers) if seeds else ([], [])
+            fits, n_cands = fits + more + again, n_cands + n_more
         # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
         # ground's circles hold in every photo too) gains from them a score that hides a real sphere
@@ -1569,9 +1574,14 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     scored.sort(key=lambda s: -s[0])
     cands = []  # drop near-duplicates only; overlapping circles are resolved after fitting
     for sc, x, y, r in scored:
-        if all(np.hypot(x - cx, y - cy) > 0.2 * r or abs(r - cr) > 0.2 * r for cx, cy, cr in cands):
+        if not any(_same_circle((x, y, r), c) for c in cands):
             cands.append((x, y, r))
     return cands[:max_candidates]
+
+
+def _same_circle(a, b) -> bool:
+    """Whether circle ``a = (x, y, r)`` is a near-duplicate of ``b``: centre and radius within 20 % of ``a``'s radius."""
+    return bool(np.hypot(a[0] - b[0], a[1] - b[1]) <= 0.2 * a[2] and abs(a[2] - b[2]) <= 0.2 * a[2])
 
 
 #: Largest RMS (px) of an outline that only the photos' edges show (:func:`_photo_edge_fits`): the
@@ -1620,7 +1630,7 @@ def _photo_edge_fits(fits, tensor, cam: _Camera) -> tuple[list, int]:
                 break
             ft = again
         if (ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX
-                or any(np.hypot(*(ft.center_px - o.center_px)) <= 0.8 * (ft.radius_px + o.radius_px)
+                or any(_same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px))
                        for o in fits + more)):
             continue
         ft.outline_edges = PHOTO_EDGES

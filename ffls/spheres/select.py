@@ -212,6 +212,22 @@ def _disagreement_deg(a, b) -> float:
     return float(np.degrees(np.median(np.arccos(np.clip(np.sum(a[both] * b[both], axis=1), -1, 1)))))
 
 
+def round_outline(ft, max_residual_px: float) -> bool:
+    """Whether a fitted candidate is a round outline at all: the first test of :func:`select_spheres`.
+
+    Its edge points fit within ``max_residual_px`` RMS, and they close (``min_closed``; for an
+    outline found on the photos' edges ``min_closed_photos``: a silhouette holds in every photo all
+    round, a contact shadow's boundary is an arc) and support (``min_support``) its part inside the
+    image. A candidate that fails takes no part in any later test.
+    """
+    crit = CRITERIA
+    vis = max(ft.visible_fraction, 1e-6)
+    closed = min(ft.coverage / vis, 1.0)
+    support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
+    min_closed = crit["min_closed_photos"] if ft.outline_edges == "photos" else crit["min_closed"]
+    return bool(ft.residual_px <= max_residual_px and closed >= min_closed and support >= crit["min_support"])
+
+
 def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible,
                    saturates: bool = False, colour_counts=None):
     """Stage 5 without hints: which fitted round outlines are calibration spheres.
@@ -265,13 +281,11 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     round_ = []
     clip = clip_levels(mx) if saturates and mx.ndim == 3 and mx.shape[2] >= 3 else None
     for ft in fits:
+        if not round_outline(ft, max_residual_px):
+            continue
         vis = max(ft.visible_fraction, 1e-6)
         closed = min(ft.coverage / vis, 1.0)
         support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
-        # a silhouette holds in every photo all round; a contact shadow's boundary is an arc
-        min_closed = crit["min_closed_photos"] if ft.outline_edges == "photos" else crit["min_closed"]
-        if ft.residual_px > max_residual_px or closed < min_closed or support < crit["min_support"]:
-            continue
         rows, cols = disc_pixels(ft, shape)
         if rows.size < 5:
             continue
