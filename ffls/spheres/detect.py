@@ -423,6 +423,9 @@ COLOUR_BINS = 16
 #: (:func:`photo_edge_tensor`): a silhouette holds in nearly all of them, so a score of photos is
 #: plenty, and the cost stays bounded for long sequences.
 EDGE_PHOTOS = 24
+#: Rows of the per-photo edge evidence (:func:`photo_edge_tensor`): ``[sum gx^2, sum gx gy, sum gy^2,
+#: sum gx, sum gy]``.
+EDGE_TENSOR_ROWS = 5
 
 
 @dataclasses.dataclass
@@ -443,7 +446,7 @@ class SequenceStats:
         Per sampled pixel, how many photos put it in each bin of the min/max channel ratio,
         counting only the photos where it is lit and unclipped (:func:`photo_colour_counts`); None
         for a single image or a single-channel sequence.
-    edge_tensor : (3, H, W) float32 or None
+    edge_tensor : (EDGE_TENSOR_ROWS, H, W) float32 or None
         The per-photo edge evidence (:func:`photo_edge_tensor`) of at most :data:`EDGE_PHOTOS`
         photos; None for a single image.
     edge_photos : int
@@ -478,12 +481,18 @@ def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> N
     keeps the consistent edges strong whatever their polarity (a summed gradient would cancel
     them) and spreads the moving ones thin (:func:`consistent_edge_points`).
 
+    The summed gradient itself is kept too (rows 3 and 4): the covariance of the gradient over the
+    photos (``centered`` in :func:`consistent_edge_strength`) drops what is the same in every photo.
+    A textured ground's edges are in ``ln`` units its albedo's, the same under every light, and
+    vanish there; a silhouette's limb-to-ground contrast changes with the light, and stays.
+
     Parameters
     ----------
     lum : (H, W) float
         The photo's luminance.
-    tensor : (3, H, W) float32
-        ``[sum gx^2, sum gx gy, sum gy^2]``, gradients in natural-log units per pixel.
+    tensor : (3, H, W) or (5, H, W) float32
+        ``[sum gx^2, sum gx gy, sum gy^2]`` and, with 5 rows, ``sum gx, sum gy``: gradients in
+        natural-log units per pixel.
     sigma, floor : float
     """
     peak = _robust_peak(lum)
@@ -495,29 +504,39 @@ def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> N
     tensor[0] += gx * gx
     tensor[1] += gx * gy
     tensor[2] += gy * gy
+    if len(tensor) >= 5:
+        tensor[3] += gx
+        tensor[4] += gy
 
 
-def consistent_edge_strength(tensor, n_photos: int) -> tuple[np.ndarray, np.ndarray]:
+def consistent_edge_strength(tensor, n_photos: int, centered: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Strength ``sqrt(lambda_1 / n)`` (H, W) and angle (H, W, radians) of the principal direction
-    ``e_1`` of the summed per-photo structure tensor (:func:`photo_edge_tensor`)."""
-    jxx, jxy, jyy = (np.asarray(t, dtype=np.float64) / max(int(n_photos), 1) for t in tensor)
+    ``e_1`` of the summed per-photo structure tensor (:func:`photo_edge_tensor`); ``centered``: of
+    the gradient's covariance over the photos instead (the tensor's 5 rows needed)."""
+    n = max(int(n_photos), 1)
+    jxx, jxy, jyy = (np.asarray(t, dtype=np.float64) / n for t in tensor[:3])
+    if centered:
+        mx, my = (np.asarray(t, dtype=np.float64) / n for t in tensor[3:5])
+        jxx, jxy, jyy = jxx - mx * mx, jxy - mx * my, jyy - my * my
     half_tr = 0.5 * (jxx + jyy)
     l1 = half_tr + np.sqrt(np.maximum(half_tr ** 2 - (jxx * jyy - jxy ** 2), 0.0))
     return np.sqrt(np.maximum(l1, 0.0)), 0.5 * np.arctan2(2 * jxy, jxx - jyy)
 
 
-def consistent_edge_points(tensor, n_photos: int):
+def consistent_edge_points(tensor, n_photos: int, centered: bool = False):
     """Ridge points of the per-photo edge evidence (:func:`photo_edge_tensor`), sub-pixel.
 
     The strength is ``sqrt(lambda_1 / n)``, the RMS over the photos of the log-luminance gradient
     along the tensor's principal direction ``e_1``. A point is kept where the strength is a local
     maximum along ``e_1`` and above 3 times its median over the image; its position is refined by
-    a parabola through its two neighbours along ``e_1``.
+    a parabola through its two neighbours along ``e_1``. ``centered``: of the gradient's
+    covariance over the photos (:func:`consistent_edge_strength`).
 
     Parameters
     ----------
-    tensor : (3, H, W) float
+    tensor : (3, H, W) or (5, H, W) float
     n_photos : int
+    centered : bool
 
     Returns
     -------
@@ -527,7 +546,7 @@ def consistent_edge_points(tensor, n_photos: int):
         Unit ``e_1`` (across the edge; its sign is arbitrary).
     strength : (m,) float64
     """
-    S, ang = consistent_edge_strength(tensor, n_photos)
+    S, ang = consistent_edge_strength(tensor, n_photos, centered)
     H, W = S.shape
     ys, xs = np.mgrid[0:H, 0:W]
     thr = 3.0 * float(np.median(S))
@@ -640,7 +659,7 @@ class SequenceAccumulator:
             if self.colour and im.ndim == 3 and im.shape[2] >= 3:
                 self.counts = np.zeros((COLOUR_BINS, *lum[::COLOUR_STEP, ::COLOUR_STEP].shape), np.uint16)
             if self.edges:
-                self.tensor = np.zeros((3, *lum.shape), np.float32)
+                self.tensor = np.zeros((EDGE_TENSOR_ROWS, *lum.shape), np.float32)
         elif im.shape != self.max.shape:
             raise ValueError(f"image shapes differ: {im.shape} vs {self.max.shape}")
         else:
@@ -668,7 +687,7 @@ class SequenceAccumulator:
         if self.colour and len(image_shape) == 3 and image_shape[2] >= 3:
             out["counts"] = ((COLOUR_BINS, -(-H // COLOUR_STEP), -(-W // COLOUR_STEP)), np.dtype(np.uint16))
         if self.edges:
-            out["tensor"] = ((3, H, W), np.dtype(np.float32))
+            out["tensor"] = ((EDGE_TENSOR_ROWS, H, W), np.dtype(np.float32))
         return out
 
     def stow(self, buffers: dict) -> "SequenceAccumulator":
@@ -1415,7 +1434,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         if tensor is not None and tensor[1] >= 3:  # outlines the max image leaves out (white on white)
-            more, n_more = _photo_edge_fits(fits, tensor, cam)
+            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px)
             # one the photos' edges outline precisely but leave open (a textured ground's patches
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
             # may have missed among the texture's: it is fitted on the max image's edges too
@@ -1592,7 +1611,7 @@ def _same_circle(a, b) -> bool:
 PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
 
 
-def _photo_edge_fits(fits, tensor, cam: _Camera) -> tuple[list, int]:
+def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float) -> tuple[list, int]:
     """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
 
     In the max image every pixel reads its best light, so a white matte sphere on a white ground
@@ -1609,33 +1628,42 @@ def _photo_edge_fits(fits, tensor, cam: _Camera) -> tuple[list, int]:
     ``min_closed_photos`` of their outline, and are judged by the same criteria. Returns those fits
     and how many circles were proposed.
     """
-    S, _ = consistent_edge_strength(*tensor)
-    H, W = S.shape
-    peak = _robust_peak(S)
-    if not peak > 0:
-        return [], 0
-    sc = 255.0 / peak
-    g8 = np.clip(S * sc, 0, 255).astype(np.uint8)
-    # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio)
-    hc = np.concatenate(_hough_candidates_many([(g8, 3, min(H, W) / 2, 0.5 * sc)]))
-    cpts = consistent_edge_points(*tensor)
-    more = []
-    for x, y, r in hc:
-        ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
-        for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
-            if ft is None:
-                break
-            again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, cpts, cam, "auto")
-            if again is None or outline_quality(again) <= outline_quality(ft):
-                break
-            ft = again
-        if (ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX
-                or any(_same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px))
-                       for o in fits + more)):
+    more, n_proposed = [], 0
+    round_ = [ft for ft in fits if round_outline(ft, max_residual_px)]
+    # the edges that hold in the photos, then the ones whose contrast changes with the light (the
+    # gradient's covariance: a textured ground's edges, the same in every photo, drop out of it)
+    for centered in (False, True)[:1 + (len(tensor[0]) >= EDGE_TENSOR_ROWS)]:
+        S, _ = consistent_edge_strength(*tensor, centered=centered)
+        H, W = S.shape
+        peak = _robust_peak(S)
+        if not peak > 0:
             continue
-        ft.outline_edges = PHOTO_EDGES
-        more.append(ft)
-    return more, len(hc)
+        sc = 255.0 / peak
+        g8 = np.clip(S * sc, 0, 255).astype(np.uint8)
+        # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio)
+        hc = np.concatenate(_hough_candidates_many([(g8, 3, min(H, W) / 2, 0.5 * sc)]))
+        n_proposed += len(hc)
+        cpts = consistent_edge_points(*tensor, centered=centered)
+        for x, y, r in hc:
+            ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
+            for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
+                if ft is None:
+                    break
+                again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, cpts, cam, "auto")
+                if again is None or outline_quality(again) <= outline_quality(ft):
+                    break
+                ft = again
+            if ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX or any(
+                    _same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px)) for o in round_):
+                continue
+            ft.outline_edges = PHOTO_EDGES
+            same = [k for k, o in enumerate(more)
+                    if _same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px))]
+            if not same:
+                more.append(ft)
+            elif outline_quality(ft) > outline_quality(more[same[0]]):  # the better outline of the same circle
+                more[same[0]] = ft
+    return more, n_proposed
 
 
 def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, workers: int = 1):
