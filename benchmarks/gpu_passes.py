@@ -22,7 +22,9 @@ clock around the submission plus ``ctx.finish()`` (``wall_ms``). Rows:
   made by ``ffls synth`` (``--capture-lights``, ``--capture-res``), process start included.
 
 ``python benchmarks/gpu_passes.py --preset h100 --out benchmarks/results/gpu_passes_h100.json``
-(sizes of real captures; needs ~40 GiB of host memory and ~9 GiB of GPU memory);
+(sizes of real captures; needs ~40 GiB of host memory and ~9 GiB of GPU memory; on an H100
+the whole preset takes longer than one 10-minute device call, mostly building the large bases on
+the host, so run it in parts with ``--only``, ``--p2`` and ``--frame``);
 ``--preset llvmpipe`` runs the same rows at sizes a CPU rasteriser finishes.
 """
 from __future__ import annotations
