@@ -147,8 +147,7 @@ def bandwidth(ctx, mib: int, reps: int) -> dict:
     return row
 
 
-def bench_pass1(ctx, rng, lights, heights, reps) -> list:
-    rows = []
+def bench_pass1(ctx, rng, lights, heights, reps, rec) -> None:
     for n in lights:
         d = upper_directions(rng, n)
         cells = bake_cells(d, "upper", 256, k=8)
@@ -162,16 +161,15 @@ def bench_pass1(ctx, rng, lights, heights, reps) -> list:
                 t = timed(ctx, lambda: integ.run(state["R"]), reps, setup=lambda k: state.update(R=Rs[k]))
                 a = integ.run(Rs[0]).read()
                 t["repeatable"] = a == integ.run(Rs[0]).read()
-                rows.append({"n": n, "map": f"{2 * h}x{h}", "texels": 2 * h * h, "method": m, **t})
+                rec("pass1", {"n": n, "map": f"{2 * h}x{h}", "texels": 2 * h * h, "method": m, **t})
                 print(f"pass1 N={n:5d} map {2 * h:5d}x{h:<5d} {m:7s} {t['ms']:8.3f} ms  "
                       f"wall {t['wall_ms']:8.3f} ms  repeatable {t['repeatable']}", flush=True)
                 integ.release()
                 ctx.gc()
-    return rows
 
 
-def bench_pass2(ctx, rng, sizes, reps, read_bps, packed_mib, fragment_mib, chunk_layers=()) -> tuple[list, list]:
-    rows, tone = [], []
+def bench_pass2(ctx, rng, sizes, reps, read_bps, packed_mib, fragment_mib, chunk_layers, rec) -> None:
+    tone = set()
     for n, s in sizes:
         basis = random_basis(rng, n, s)
         w = rng.random((n, 3)) / n
@@ -199,14 +197,15 @@ def bench_pass2(ctx, rng, sizes, reps, read_bps, packed_mib, fragment_mib, chunk
             row = {"n": n, "size": s, "method": label, "basis_bytes": read, "upload_s": upload_s, **t,
                    "floor_ms": floor_ms, "floor_frac": floor_ms / t["ms"],
                    "GBps": (read + s * s * 16) / (t["ms"] * 1e-3) / 1e9}
-            rows.append(row)
+            rec("pass2", row)
             print(f"pass2 N={n:5d} {s:5d}^2 {label:12s} {t['ms']:8.3f} ms  wall {t['wall_ms']:8.3f} ms  "
                   f"{row['GBps']:7.1f} GB/s  floor {floor_ms:7.3f} ms = {100 * row['floor_frac']:5.1f}%",
                   flush=True)
-            if method == "compute" and not any(r["size"] == s for r in tone):
+            if method == "compute" and s not in tone:
                 tm = ToneMapPass(ctx, (s, s))
                 tt = timed(ctx, lambda: tm.run(ws.output, 0.5, "aces"), reps)
-                tone.append({"size": s, **tt})
+                tone.add(s)
+                rec("tonemap", {"size": s, **tt})
                 print(f"tonemap {s:5d}^2 {tt['ms']:8.3f} ms  wall {tt['wall_ms']:8.3f} ms", flush=True)
                 tm.release()
             ws.release()
@@ -216,11 +215,9 @@ def bench_pass2(ctx, rng, sizes, reps, read_bps, packed_mib, fragment_mib, chunk
         release_gl(wbuf)
         basis = None
         ctx.gc()
-    return rows, tone
 
 
-def bench_compressed(ctx, rng, n, sizes, ranks, reps, read_bps) -> list:
-    rows = []
+def bench_compressed(ctx, rng, n, sizes, ranks, reps, read_bps, rec) -> None:
     w = rng.random((n, 3)) / n
     wbuf = ctx.buffer(weights_to_vec4(w))
     for s in sizes:
@@ -234,7 +231,7 @@ def bench_compressed(ctx, rng, n, sizes, ranks, reps, read_bps) -> list:
             ws = WeightedSum(ctx, bt, "compute")
             t = timed(ctx, lambda: ws.run(proj.coeffs_buffer), reps)
             floor_ms = (bt.nbytes + s * s * 16) / read_bps * 1e3
-            rows.append({"n": n, "size": s, "K": K, "project_ms": tp["ms"], "project_wall_ms": tp["wall_ms"],
+            rec("compressed", {"n": n, "size": s, "K": K, "project_ms": tp["ms"], "project_wall_ms": tp["wall_ms"],
                          **t, "floor_ms": floor_ms, "floor_frac": floor_ms / t["ms"]})
             print(f"compressed N={n} {s:5d}^2 K={K:3d}: project {tp['ms']:7.3f} ms, pass2 compute "
                   f"{t['ms']:7.3f} ms wall {t['wall_ms']:7.3f} ms, floor {100 * floor_ms / t['ms']:5.1f}%",
@@ -242,11 +239,9 @@ def bench_compressed(ctx, rng, n, sizes, ranks, reps, read_bps) -> list:
             for o in (ws, bt, proj):
                 o.release()
     release_gl(wbuf)
-    return rows
 
 
-def bench_frames(ctx, rng, sizes, reps) -> list:
-    rows = []
+def bench_frames(ctx, rng, sizes, reps, rec) -> None:
     lm = sky_sun_map(512)
     for n, s in sizes:
         basis = random_basis(rng, n, s, np.float32)
@@ -257,31 +252,27 @@ def bench_frames(ctx, rng, sizes, reps) -> list:
             eng = Engine(ctx, basis, d, "upper", method=method, budget_bytes=1 << 62)
             eng.set_lightmap(lm)
             per = {}
-            state = {"k": 0}
-
-            def frame():
-                eng.render(0.0, "aces")
 
             def setup(k):
                 eng.set_rotation(rotation_z(5.0 * (k + 1)))
-                if k:  # the previous frame's per-pass times (profile=True: finish after each pass)
+                if k > 1:  # frame k - 1's per-pass times (profile=True: finish after each pass); 0 is the warm-up
                     for name, v in eng.timings.items():
                         per.setdefault(name, []).append(v)
-                state["k"] = k
 
-            t = timed(ctx, frame, reps, setup=setup)
+            t = timed(ctx, lambda: eng.render(0.0, "aces"), reps, setup=setup)
+            for name, v in eng.timings.items():  # the last frame's
+                per.setdefault(name, []).append(v)
             row = {"n": n, "size": s, "method": eng.method, **t,
                    "pass_wall_ms": {k: float(statistics.median(v)) for k, v in per.items()}}
-            rows.append(row)
+            rec("frame", row)
             print(f"frame N={n:5d} {s:5d}^2 {eng.method:8s} {t['ms']:8.3f} ms  wall {t['wall_ms']:8.3f} ms  "
                   + "  ".join(f"{k} {v:.3f}" for k, v in row["pass_wall_ms"].items()), flush=True)
             eng.release()
             ctx.gc()
         basis = None
-    return rows
 
 
-def bench_auto(ctx, rng, n, s) -> list:
+def bench_auto(ctx, rng, n, s, rec) -> None:
     from ffls.relight.auto import candidate_qualities
     from ffls.relight.compress import compress_basis
 
@@ -291,16 +282,14 @@ def bench_auto(ctx, rng, n, s) -> list:
     cands = candidate_qualities(n)
     kmax = max((q.rank for q in cands if q.rank is not None), default=None)
     comp = compress_basis(basis, kmax) if kmax else None
-    rows = []
     for q in cands:
         ms = gpu_frame_ms(ctx, basis, d, lm, q, frames=5, compressed=comp)
-        rows.append({"quality": q.__dict__ if hasattr(q, "__dict__") else str(q), "ms": ms})
+        rec("auto", {"quality": q.__dict__, "ms": ms})
         print(f"auto N={n} {s}^2 {q.weighting:11s} {q.precision} rank {q.rank} subset {q.basis_subset} "
               f"map {q.map_res}: {ms:8.3f} ms/frame", flush=True)
-    return rows
 
 
-def bench_cli(lights, res, turntable) -> dict:
+def bench_cli(lights, res, turntable, rec) -> None:
     exe = [sys.executable, "-m", "ffls"]
     with tempfile.TemporaryDirectory() as tmp:
         cap = Path(tmp) / "cap"
@@ -318,7 +307,7 @@ def bench_cli(lights, res, turntable) -> dict:
                 ts.append(time.perf_counter() - t0)
             row[f"{name}_s"] = float(statistics.median(ts))
             print(f"cli {name} ({lights} lights, {res}^2): {row[f'{name}_s']:.2f} s", flush=True)
-    return row
+        rec("cli", row)
 
 
 def main(argv=None):
@@ -344,8 +333,9 @@ def main(argv=None):
     doc = {"device": info, "preset": args.preset, "reps": args.reps, "command": " ".join(sys.argv)}
     out = Path(args.out)
 
-    def save():
-        write_json(out, doc)
+    def rec(key, row):  # every row is written at once: a run cut by a time limit keeps its rows
+        doc.setdefault(key, []).append(row)
+        write_json(out, doc, quiet=True)
 
     bw = bandwidth(ctx, P["read_mib"], args.reps)
     doc["bandwidth"] = bw
@@ -354,27 +344,21 @@ def main(argv=None):
     print(f"bandwidth: read {bw['read_Bps'] / 1e9:.1f} GB/s, copy_buffer (read+write) {bw['copy_Bps'] / 1e9:.1f} GB/s; "
           f"floors at {peak / 1e9:.1f} GB/s", flush=True)
     if "pass1" in args.only:
-        doc["pass1"] = bench_pass1(ctx, rng, P["p1_lights"], P["p1_heights"], args.reps)
-        save()
+        bench_pass1(ctx, rng, P["p1_lights"], P["p1_heights"], args.reps, rec)
     if "pass2" in args.only:
         p2 = [tuple(int(v) for v in x.split(",")) for x in args.p2] if args.p2 else P["p2"]
-        doc["pass2"], doc["tonemap"] = bench_pass2(ctx, rng, p2, args.reps, peak, P["packed_mib"],
-                                                   P["fragment_mib"], P["chunk_layers"])
-        save()
+        bench_pass2(ctx, rng, p2, args.reps, peak, P["packed_mib"], P["fragment_mib"], P["chunk_layers"], rec)
     if "compressed" in args.only:
-        doc["compressed"] = bench_compressed(ctx, rng, P["comp_n"], P["comp_sizes"], P["ranks"], args.reps, peak)
-        save()
+        bench_compressed(ctx, rng, P["comp_n"], P["comp_sizes"], P["ranks"], args.reps, peak, rec)
     if "cli" in args.only:
         lights, res = P["capture"]
-        doc["cli"] = bench_cli(lights, res, P["turntable"])
-        save()
+        bench_cli(lights, res, P["turntable"], rec)
     if "auto" in args.only:
-        doc["auto"] = bench_auto(ctx, rng, *P["auto"])
-        save()
+        bench_auto(ctx, rng, *P["auto"], rec)
     if "frame" in args.only:
         fr = [tuple(int(v) for v in x.split(",")) for x in args.frame] if args.frame else P["frame"]
-        doc["frame"] = bench_frames(ctx, rng, fr, args.reps)
-    save()
+        bench_frames(ctx, rng, fr, args.reps, rec)
+    write_json(out, doc)
     ctx.release()
 
 
