@@ -86,13 +86,14 @@ def device_line(info: dict) -> str:
     return f"device: {info['renderer']} | GL {info['version']} | {info['cpu_count']} CPUs"
 
 
-def write_json(path, doc, indent: int = 1) -> Path:
-    """Write a benchmark's results atomically (creating the folder) and say where."""
+def write_json(path, doc, indent: int = 1, quiet: bool = False) -> Path:
+    """Write a benchmark's results atomically (creating the folder) and say where (unless ``quiet``)."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output(out) as t:
         Path(t).write_text(json.dumps(doc, indent=indent))
-    print(f"wrote {out}")
+    if not quiet:
+        print(f"wrote {out}")
     return out
 
 

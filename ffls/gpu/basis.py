@@ -11,7 +11,8 @@ The conversion is checked, never silent (:class:`Float16Report`): a non-finite i
 an overflow to ``inf`` raises, and a *significant* value (``|x| >= SIGNIFICANT_REL * max|x|``)
 that becomes zero or subnormal raises.
 
-Limits: if ``n`` exceeds ``GL_MAX_ARRAY_TEXTURE_LAYERS`` (or ``max_layers``) the basis is split
+Limits: if ``n`` exceeds :data:`ARRAY_LAYERS` (or ``max_layers``; at most the device's
+``GL_MAX_ARRAY_TEXTURE_LAYERS``) the basis is split
 into several arrays and pass 2 sums over all of them; if the whole basis exceeds the memory
 budget it is refused with a one-line :class:`ffls.errors.InputError`. Nothing is ever truncated.
 """
@@ -25,8 +26,12 @@ from ffls.gpu.context import release_gl
 from ffls.store.float16 import F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, to_float16
 
 __all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
-           "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "SSBO_BAND_BYTES", "PACKED_STORAGES"]
+           "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "ARRAY_LAYERS", "SSBO_BAND_BYTES", "PACKED_STORAGES"]
 
+#: Layers per texture array of :class:`BasisTextures` by default (fewer where the device allows
+#: fewer): on an NVIDIA H100 the compute pass 2 over 1024 photos at 1024^2 read one 1024-layer
+#: array at 725 GB/s and four 256-layer arrays at 1519 GB/s (docs/gpu.md, "On an NVIDIA H100").
+ARRAY_LAYERS = 256
 #: Default memory budget for basis textures, bytes (refused above it).
 DEFAULT_BUDGET = 4 * 1024 ** 3
 #: Layers summed by one pass-2 dispatch of :class:`PackedBasis` (its shader is unrolled over them).
@@ -61,7 +66,8 @@ class BasisTextures:
     dtype : {'f16', 'f32'}
         Storage: RGBA16F with a power-of-two per-dataset scale, or RGBA32F with scale 1.
     max_layers : int, optional
-        Layers per array; default ``GL_MAX_ARRAY_TEXTURE_LAYERS``. Larger ``n`` is split.
+        Layers per array; default :data:`ARRAY_LAYERS` (at most ``GL_MAX_ARRAY_TEXTURE_LAYERS``).
+        Larger ``n`` is split.
     budget_bytes : int
         Refuse (``InputError``) a basis whose GPU storage exceeds this.
     path : path-like, optional
@@ -90,7 +96,7 @@ class BasisTextures:
         if W > max_tex or H > max_tex:
             raise InputError(f"basis images {W}x{H} exceed GL_MAX_TEXTURE_SIZE {max_tex}", path)
         hw_layers = int(ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS") or 256)
-        self.max_layers = hw_layers if max_layers is None else min(int(max_layers), hw_layers)
+        self.max_layers = min(ARRAY_LAYERS if max_layers is None else int(max_layers), hw_layers)
         if self.max_layers < 1:
             raise ValueError("max_layers must be >= 1")
         itemsize = 2 if dtype == "f16" else 4

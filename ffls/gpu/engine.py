@@ -71,8 +71,8 @@ class Engine:
         arrays (docs/gpu.md "Pass 2"). ``'auto'`` (default): packed on a CPU rasteriser, compute
         on a GPU (:func:`ffls.gpu.weighted_sum.default_method`).
     max_layers : int, optional
-        Layers per texture array (default the device limit) or per packed chunk (default
-        :data:`ffls.gpu.basis.PACKED_LAYERS`); more lights split the basis.
+        Layers per texture array (default :data:`ffls.gpu.basis.ARRAY_LAYERS`) or per packed
+        chunk (default :data:`ffls.gpu.basis.PACKED_LAYERS`); more lights split the basis.
     budget_bytes : int
         GPU memory allowed for the basis; more raises :class:`ffls.errors.InputError`.
     map_res : int, optional

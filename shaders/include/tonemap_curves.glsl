@@ -26,5 +26,9 @@ vec3 tonemap(vec3 rgb, float exposure_scale, int method) {
     } else {
         y = clamp(x, 0.0, 1.0);
     }
-    return clamp(srgb_encode(y), 0.0, 1.0);
+    // An exact code value k / 255: GL lets the float -> UNORM8 conversion of an rgba8 image round
+    // either way (GL 4.6, 2.3.5.2), and an NVIDIA H100 moved ~2 % of values by one code from the
+    // round-to-nearest reference (docs/gpu.md, "On an NVIDIA H100"); k / 255 converts to k on any
+    // conforming implementation, so every driver stores the same code values.
+    return round(clamp(srgb_encode(y), 0.0, 1.0) * 255.0) / 255.0;
 }
