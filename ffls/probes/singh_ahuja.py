@@ -41,10 +41,9 @@ from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix
 from ffls.probes.selection import CRITERIA, Selection, bic, normal_blocks, refine_sources
 from ffls.probes.sources import geodesic_level, latlong_solid_angles, sources_to_latlong
 
-__all__ = ["BLOCK", "SCHEMES", "PocsResult", "PocsSources", "pocs", "dykstra_pocs", "least_power_pocs",
-           "residual_bound", "residual_l1_bound", "ResidualEnergySet", "pixel_subset", "singh_ahuja",
-           "singh_ahuja_sources",
-           "adaptive_singh_ahuja",
+__all__ = ["BLOCK", "SCHEMES", "PROJECTION_SCHEMES", "PocsResult", "PocsSources", "pocs", "dykstra_pocs",
+           "least_power_pocs", "residual_bound", "residual_l1_bound", "ResidualEnergySet", "pixel_subset",
+           "singh_ahuja", "singh_ahuja_sources", "adaptive_singh_ahuja",
            "estimate_lighting_SinghAhuja"]
 
 
@@ -98,6 +97,9 @@ BLOCK = 2048
 #: best approximation (the feasible map nearest the start, :func:`dykstra_pocs`), or the feasible map of least
 #: total power (:func:`least_power_pocs`).
 SCHEMES = ("sequential", "extrapolated", "dykstra", "least-power")
+#: The schemes of :func:`pocs` that iterate projections from a start ``x0`` (with a stopping rule ``tol``); the
+#: least-power scheme solves one linear programme instead.
+PROJECTION_SCHEMES = SCHEMES[:3]
 
 
 def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: float = 0.0,
