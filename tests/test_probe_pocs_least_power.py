@@ -120,3 +120,41 @@ def test_cli_least_power_refuses_flags_it_does_not_take(courtyard_ball_folder, t
                  "--scheme", "least-power", *flags]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and not out.exists()
+
+
+@pytest.mark.parametrize("scale", [1e-7, 1e5])
+def test_least_power_does_not_depend_on_the_exposure(scale):
+    # the programme is homogeneous in the data; solved at the data's own scale, HiGHS's absolute tolerances
+    # would swamp a dark photograph's values
+    n = _ball(300, seed=4)
+    d = model_sources(42)
+    L = np.zeros((d.shape[0], 3))
+    L[[3, 17, 30]] = [[2.0, 1.5, 1.0], [0.5, 0.5, 0.8], [0.2, 0.3, 0.1]]
+    H = lambert_matrix(n, d)
+    g = H @ L + np.random.default_rng(5).normal(0.0, 0.01, size=(n.shape[0], 3))
+    f, _ = least_power_pocs(H, g)
+    fs, _ = least_power_pocs(H, g * scale)
+    np.testing.assert_allclose(fs / scale, f, atol=1e-6 * np.abs(f).max())
+    np.testing.assert_allclose(residual_l1_bound(H, g * scale) / scale, residual_l1_bound(H, g), rtol=1e-6)
+
+
+def test_grid_least_power_minimises_power_not_radiance(monkeypatch):
+    # x + y = 2 seen by three pixels: the least power is the unknown whose unit costs least
+    H = np.ones((3, 2))
+    for w, want in (([1.0, 3.0], [2.0, 0.0]), ([3.0, 1.0], [0.0, 2.0])):
+        f, _ = least_power_pocs(H, np.full(3, 2.0), weights=w)
+        np.testing.assert_allclose(f[:, 0], want, atol=1e-7)
+    # on the lat-long grid the unknowns are radiances: a texel's power is its radiance times its solid angle
+    import ffls.probes.singh_ahuja as sa_mod
+    from ffls.probes.sources import latlong_solid_angles
+
+    seen = {}
+
+    def spy(*args, **kw):
+        seen.update(kw)
+        return least_power_pocs(*args, **kw)
+
+    monkeypatch.setattr(sa_mod, "least_power_pocs", spy)
+    n = _ball(200, seed=6)
+    sa_mod.singh_ahuja(n, np.full((n.shape[0], 3), 0.1), 0.7, height=4, scheme="least-power", max_pixels=None)
+    np.testing.assert_allclose(seen["weights"], latlong_solid_angles(4).ravel())

@@ -207,9 +207,7 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
             raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
         return dykstra_pocs(H, g, iterations, lower, upper, x0=x0, tol=tol)
     if scheme == "least-power":
-        if d != 0.0 or lam != 1.0 or tol is not None or x0 is not None:
-            raise ValueError("scheme='least-power' solves one linear programme: delta must be 0, relaxation 1, "
-                             "and it takes no tol or x0")
+        _check_least_power(d, lam, tol, x0)
         return least_power_pocs(H, g, lower, upper)
     if scheme == "extrapolated":
         return _extrapolated(H[rows], g[rows], norm2[rows], f, lower, hi, lam, int(iterations), tol, g, gn, res)
@@ -449,7 +447,7 @@ def residual_l1_bound(H, g, lower: float = 0.0, upper=None) -> np.ndarray:
     return eps
 
 
-def least_power_pocs(H, g, lower: float = 0.0, upper=None, eps=None) -> tuple[np.ndarray, np.ndarray]:
+def least_power_pocs(H, g, lower: float = 0.0, upper=None, eps=None, weights=None) -> tuple[np.ndarray, np.ndarray]:
     """The feasible map of least total power: Singh and Ahuja's sets and a power set, solved as one LP.
 
     Three convex sets: the amplitude set ``A = {lower <= f <= upper}``; the residual set
@@ -478,6 +476,11 @@ def least_power_pocs(H, g, lower: float = 0.0, upper=None, eps=None) -> tuple[np
     eps : (c,) array_like, optional
         The L1 residual bound per channel (default :func:`residual_l1_bound`); at least the least
         absolute residual of a map in ``A``, else the sets do not meet.
+    weights : (J,) array_like, optional
+        The power of a unit of each unknown (ones: the unknowns are powers; a texel's solid angle when they
+        are radiances, as :func:`singh_ahuja`'s grid). Each channel is solved scaled to unit mean absolute
+        value (the LP is homogeneous in ``g``; HiGHS's tolerances are absolute), so the answer does not
+        depend on the photograph's exposure.
 
     Returns
     -------
@@ -492,20 +495,31 @@ def least_power_pocs(H, g, lower: float = 0.0, upper=None, eps=None) -> tuple[np
     m, J = H.shape
     eps = residual_l1_bound(H, g, lo, hi) if eps is None else np.broadcast_to(
         np.asarray(eps, dtype=np.float64), (g.shape[1],))
-    A_eq, bounds = _l1_programme(H, lo, hi)
+    w = np.ones(J) if weights is None else np.asarray(weights, dtype=np.float64).reshape(J)
+    if not np.all(np.isfinite(w) & (w > 0)):
+        raise ValueError("weights must be finite and positive")
     A_ub = sparse.csr_matrix(np.r_[np.zeros(J), np.ones(2 * m)][None, :])
-    cost = np.r_[np.ones(J), np.zeros(2 * m)]
+    cost = np.r_[w, np.zeros(2 * m)]
     f = np.empty((J, g.shape[1]))
     for c in range(g.shape[1]):
+        k = _unit_scale(g[:, c])
+        A_eq, bounds = _l1_programme(H, lo / k, hi / k)
         # a hair of slack over the bound: at the least absolute residual the feasible set is a single face
-        e = float(eps[c]) * (1.0 + 1e-9) + 1e-12 * float(np.sum(np.abs(g[:, c])))
-        sol = linprog(cost, A_ub=A_ub, b_ub=[e], A_eq=A_eq, b_eq=g[:, c], bounds=bounds, method="highs")
+        e = float(eps[c]) / k * (1.0 + 1e-9) + 1e-12 * m
+        sol = linprog(cost, A_ub=A_ub, b_ub=[e], A_eq=A_eq, b_eq=g[:, c] / k, bounds=bounds, method="highs")
         if sol.status != 0:
             raise InputError(f"the least-power programme has no solution ({sol.message.strip()}): the residual "
                              f"bound {eps[c]:.4g} is below the least absolute residual the amplitude set allows")
-        f[:, c] = np.clip(sol.x[:J], lo, hi)
+        f[:, c] = np.clip(sol.x[:J] * k, lo, hi)
     gn = float(np.linalg.norm(g)) or 1.0
     return f, np.array([float(np.linalg.norm(g)) / gn, float(np.linalg.norm(g - H @ f)) / gn])
+
+
+def _check_least_power(delta, relaxation, tol, x0=None) -> None:
+    """Refuse the options of the iterative schemes, which the least-power programme does not take."""
+    if float(delta) != 0.0 or float(relaxation) != 1.0 or tol is not None or x0 is not None:
+        raise ValueError("scheme='least-power' solves one linear programme: delta must be 0, relaxation 1, "
+                         "and it takes no tol or x0")
 
 
 def _lp_arrays(H, g, lower, upper):
@@ -533,12 +547,19 @@ def _least_absolute_deviation(H, g, lo, hi) -> tuple[np.ndarray, float]:
     from scipy.optimize import linprog
 
     m, J = H.shape
-    A_eq, bounds = _l1_programme(H, lo, hi)
-    sol = linprog(np.r_[np.zeros(J), np.ones(2 * m)], A_eq=A_eq, b_eq=g, bounds=bounds, method="highs")
+    k = _unit_scale(g)
+    A_eq, bounds = _l1_programme(H, lo / k, hi / k)
+    sol = linprog(np.r_[np.zeros(J), np.ones(2 * m)], A_eq=A_eq, b_eq=g / k, bounds=bounds, method="highs")
     if sol.status != 0:
         raise InputError(f"the least-absolute-deviation fit has no solution ({sol.message.strip()})")
-    x = np.clip(sol.x[:J], lo, hi)
+    x = np.clip(sol.x[:J] * k, lo, hi)
     return x, float(np.sum(np.abs(g - H @ x)))
+
+
+def _unit_scale(g) -> float:
+    """The mean absolute value of ``g`` (1 if zero): the LPs are solved on ``g`` over it."""
+    k = float(np.mean(np.abs(g)))
+    return k if k > 0 and np.isfinite(k) else 1.0
 
 
 def _settled(f, prev, tol) -> bool:
@@ -641,6 +662,9 @@ def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int
         if float(delta) != 0.0 or float(relaxation) != 1.0:
             raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
         f, res = dykstra_pocs(H[use], g[use], iterations, 0.0, upper, tol=tol)
+    elif scheme == "least-power":   # the unknowns are radiances: a texel's power is its radiance times its solid angle
+        _check_least_power(delta, relaxation, tol)
+        f, res = least_power_pocs(H[use], g[use], 0.0, upper, weights=sa)
     else:
         f, res = pocs(H[use], g[use], iterations, 0.0, upper, delta, order, seed, scheme=scheme,
                       relaxation=relaxation, tol=tol)
