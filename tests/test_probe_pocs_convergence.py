@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from ffls.probes.singh_ahuja import SCHEMES, pocs, singh_ahuja_sources
+from ffls.probes.singh_ahuja import PROJECTION_SCHEMES, pocs, singh_ahuja_sources
 
 
 def _kernel(rng, pixels=400, sources=60):
@@ -56,7 +56,7 @@ def test_extrapolated_is_faster_than_the_sweeps_at_equal_work(noisy_system):
     assert res_new[-1] < res_old[-1]
 
 
-@pytest.mark.parametrize("scheme", SCHEMES)
+@pytest.mark.parametrize("scheme", PROJECTION_SCHEMES)
 def test_one_residual_projection_projects(scheme):
     """One row: a sweep lands on the row's hyperplane (feasible) and a second sweep moves nothing (idempotent)."""
     rng = np.random.default_rng(1)
@@ -69,7 +69,7 @@ def test_one_residual_projection_projects(scheme):
     np.testing.assert_allclose(f2, f, rtol=1e-12, atol=1e-15)
 
 
-@pytest.mark.parametrize("scheme", SCHEMES)
+@pytest.mark.parametrize("scheme", PROJECTION_SCHEMES)
 def test_amplitude_projection_keeps_the_bounds(noisy_system, scheme):
     H, g = noisy_system
     f, _ = pocs(H, g, 30, upper=0.5, scheme=scheme)
@@ -93,7 +93,7 @@ def test_relaxed_sweep_is_the_relaxed_row_projections(noisy_system):
     np.testing.assert_allclose(f, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
 
 
-@pytest.mark.parametrize("scheme", SCHEMES)
+@pytest.mark.parametrize("scheme", PROJECTION_SCHEMES)
 def test_stopping_rule_stops_when_the_estimate_settles(noisy_system, scheme):
     """tol: the run stops at the first sweep that moves f by less than tol |f| (fixed order: the sweeps settle too)."""
     H, g = noisy_system

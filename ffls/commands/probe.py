@@ -124,11 +124,13 @@ def _add_inverse(sub, common):
     q.add_argument("--grid", type=integer(2, 256), default=None,
                    help="with --sources grid: height of the grid of unknowns (default 16)")
     q.add_argument("--iterations", type=integer(1, 100000), default=None,
-                   help="sweeps (default 50; 3000 with --scheme extrapolated or dykstra); the cap with --tol")
-    q.add_argument("--scheme", choices=("sequential", "extrapolated", "dykstra"), default="sequential",
+                   help="sweeps (default 50; 3000 with --scheme extrapolated or dykstra; with least-power, the "
+                        "sweeps that grow the adaptive set); the cap with --tol")
+    q.add_argument("--scheme", choices=("sequential", "extrapolated", "dykstra", "least-power"), default="sequential",
                    help="the paper's sweeps of row projections (default), extrapolated parallel projections "
                         "(Combettes), which converge to the least-squares point when noise leaves no common point, "
-                        "or Dykstra's best approximation: the least-norm map within the residual the data allow")
+                        "Dykstra's best approximation: the least-norm map within the residual the data allow, or "
+                        "the map of least total power within the L1 residual the data allow (a linear programme)")
     q.add_argument("--relaxation", type=number(0.0, 2.0, lo_open=True, hi_open=True), default=1.0,
                    help="relaxation of the projections, in (0, 2); at most 1 with --scheme extrapolated")
     q.add_argument("--tol", type=number(0.0, 1.0, lo_open=True), default=None,

@@ -425,8 +425,9 @@ POCS_SOURCES = ("auto", "adaptive", "grid")
 #: ``pocs_lightmap``'s sweep count when none is given, per scheme: the paper's 50 sweeps; the extrapolated
 #: scheme's iterations cost two J x J products each (not m row projections), and its relit error on
 #: ``benchmarks/probes.py`` still falls between 1000 and 3000 (``docs/probes.md``, "POCS"); Dykstra's cycles
-#: (two exact projections each) are capped as the extrapolated scheme's.
-POCS_ITERATIONS = {"sequential": 50, "extrapolated": 3000, "dykstra": 3000}
+#: (two exact projections each) are capped as the extrapolated scheme's. The least-power scheme solves one linear
+#: programme; its adaptive set is grown and chosen by the paper's 50 sweeps.
+POCS_ITERATIONS = {"sequential": 50, "extrapolated": 3000, "dykstra": 3000, "least-power": 50}
 
 
 def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | None = None,
@@ -471,6 +472,13 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
         raise InputError(f"--size {height} must be a multiple of the POCS grid height --grid {grid}")
     if scheme not in POCS_ITERATIONS:
         raise ValueError(f"scheme must be one of {tuple(POCS_ITERATIONS)}, not {scheme!r}")
+    if scheme == "least-power":
+        # one linear programme: a flag of the iterations would be ignored, so it is refused
+        for flag, value, unset in (("--relaxation", relaxation, 1.0), ("--tol", tol, None),
+                                   ("--iterations", None if sources != "grid" else iterations, None)):
+            if value != unset:
+                raise InputError(f"{flag} does not apply with --scheme least-power" + (
+                    " --sources grid" if flag == "--iterations" else "") + " (one linear programme, solved exactly)")
     if iterations is None:
         iterations = POCS_ITERATIONS[scheme]
     if scheme == "extrapolated" and not 0.0 < float(relaxation) <= 1.0:
@@ -500,10 +508,13 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
                          f"{res.iterations} iterations" + (f"; --relaxation {relaxation:g} is too small to move the "
                                                            "estimate" if relaxation < 1.0 else ""), src)
     how = {"sequential": f"{order} order", "extrapolated": "parallel, extrapolated",
-           "dykstra": "Dykstra, the least-norm feasible map"}[scheme] + (
+           "dykstra": "Dykstra, the least-norm feasible map",
+           "least-power": "the least total power within the L1 residual the data allow" + (
+               "" if sources == "grid" else f"; the set grown by {iterations} {order}-order sweeps")}[scheme] + (
         f", relaxation {relaxation:g}" if relaxation != 1.0 else "") + (
         f", stopped at a change below {tol:g}" if tol is not None and res.iterations < iterations else "")
-    notes.append(f"POCS (Singh-Ahuja): {model}, {res.iterations} iterations ({how}) over "
+    runs = "one linear programme per channel" if scheme == "least-power" else f"{res.iterations} iterations"
+    notes.append(f"POCS (Singh-Ahuja): {model}, {runs} ({how}) over "
                  f"{res.pixels_used} pixels; residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% (relative), "
                  f"re-rendered relative RMS {100 * res.relative_rms:.2f}%")
     details = {"iterations": int(res.iterations), "scheme": scheme, "residuals": [float(x) for x in r],

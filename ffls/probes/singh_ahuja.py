@@ -23,7 +23,10 @@ parallel projections (``scheme='extrapolated'``), which converge to the least-sq
 amplitude set, and a stopping rule on the change per sweep (``tol``); the paper's scheme is the default.
 :func:`dykstra_pocs` (``scheme='dykstra'``) gives a definite answer instead of wherever the path ends: the
 projection of the start (zero: the least-norm map) onto the amplitude set and a residual-energy set whose
-bound comes from the data (:func:`residual_bound`).
+bound comes from the data (:func:`residual_bound`). :func:`least_power_pocs` (``scheme='least-power'``) adds a
+third set, the maps of total power at most ``E``, with ``E`` the least at which it meets the amplitude set and an
+L1 residual set bounded from the data (:func:`residual_l1_bound`): the sparsest map that fits, one linear
+programme (HiGHS).
 """
 from __future__ import annotations
 
@@ -38,8 +41,9 @@ from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix
 from ffls.probes.selection import CRITERIA, Selection, bic, normal_blocks, refine_sources
 from ffls.probes.sources import geodesic_level, latlong_solid_angles, sources_to_latlong
 
-__all__ = ["BLOCK", "SCHEMES", "PocsResult", "PocsSources", "pocs", "dykstra_pocs", "residual_bound", "ResidualEnergySet", "pixel_subset", "singh_ahuja", "singh_ahuja_sources",
-           "adaptive_singh_ahuja",
+__all__ = ["BLOCK", "SCHEMES", "PROJECTION_SCHEMES", "PocsResult", "PocsSources", "pocs", "dykstra_pocs",
+           "least_power_pocs", "residual_bound", "residual_l1_bound", "ResidualEnergySet", "pixel_subset",
+           "singh_ahuja", "singh_ahuja_sources", "adaptive_singh_ahuja",
            "estimate_lighting_SinghAhuja"]
 
 
@@ -89,9 +93,13 @@ class PocsResult:
 BLOCK = 2048
 
 
-#: The schemes of :func:`pocs`: the paper's sequential sweeps, extrapolated parallel projections, or Dykstra's
-#: best approximation (the feasible map nearest the start, :func:`dykstra_pocs`).
-SCHEMES = ("sequential", "extrapolated", "dykstra")
+#: The schemes of :func:`pocs`: the paper's sequential sweeps, extrapolated parallel projections, Dykstra's
+#: best approximation (the feasible map nearest the start, :func:`dykstra_pocs`), or the feasible map of least
+#: total power (:func:`least_power_pocs`).
+SCHEMES = ("sequential", "extrapolated", "dykstra", "least-power")
+#: The schemes of :func:`pocs` that iterate projections from a start ``x0`` (with a stopping rule ``tol``); the
+#: least-power scheme solves one linear programme instead.
+PROJECTION_SCHEMES = SCHEMES[:3]
 
 
 def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: float = 0.0,
@@ -149,9 +157,11 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
         Seed of the permutations.
     x0 : (J, c) array_like, optional
         Start (zeros by default).
-    scheme : {'sequential', 'extrapolated', 'dykstra'}
-        The paper's sweeps of row projections, extrapolated parallel projections (above), or
-        :func:`dykstra_pocs` (the feasible point nearest ``x0``; ``delta`` 0 and ``relaxation`` 1).
+    scheme : {'sequential', 'extrapolated', 'dykstra', 'least-power'}
+        The paper's sweeps of row projections, extrapolated parallel projections (above),
+        :func:`dykstra_pocs` (the feasible point nearest ``x0``; ``delta`` 0 and ``relaxation`` 1), or
+        :func:`least_power_pocs` (one linear programme: ``iterations`` and ``order`` unused; ``delta`` 0,
+        ``relaxation`` 1, no ``tol`` or ``x0``).
     relaxation : float
         ``lambda``: in (0, 2) for ``'sequential'``, (0, 1] for ``'extrapolated'``.
     tol : float, optional
@@ -196,6 +206,9 @@ def pocs(H, g, iterations: int = 50, lower: float = 0.0, upper=None, delta: floa
         if d != 0.0 or lam != 1.0:
             raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
         return dykstra_pocs(H, g, iterations, lower, upper, x0=x0, tol=tol)
+    if scheme == "least-power":
+        _check_least_power(d, lam, tol, x0)
+        return least_power_pocs(H, g, lower, upper)
     if scheme == "extrapolated":
         return _extrapolated(H[rows], g[rows], norm2[rows], f, lower, hi, lam, int(iterations), tol, g, gn, res)
     pos = np.full(m, -1, dtype=np.int64)
@@ -401,6 +414,154 @@ def dykstra_pocs(H, g, iterations: int = 3000, lower: float = 0.0, upper=None, x
     return u / sw[:, None], np.asarray(res)
 
 
+def residual_l1_bound(H, g, lower: float = 0.0, upper=None) -> np.ndarray:
+    """Per channel, the bound ``eps`` of the residual set ``{f : sum_i |g_i - h_i . f| <= eps}`` from the data.
+
+    The L1 counterpart of :func:`residual_bound`: ``r`` is the least total absolute residual of a map in the
+    amplitude set (the non-negative least-absolute-deviation fit, a linear programme solved by HiGHS through
+    ``scipy.optimize.linprog``), ``k`` the number of its unknowns strictly inside their bounds, and the set
+    admits the residual a map leaves in that much noise, ``eps = r m / (m - k)`` (Morozov's discrepancy
+    principle; ``eps = r`` when ``k >= m``). Unlike the largest residual of a fit, the bound does not grow
+    with the one worst pixel, and an outlier pixel (a highlight, a JPEG block) weighs in it as its distance,
+    not its square.
+
+    Parameters
+    ----------
+    H : (m, J) array_like
+    g : (m, c) array_like
+    lower, upper
+        The amplitude set's bounds, as :func:`pocs`.
+
+    Returns
+    -------
+    eps : (c,) float64
+    """
+    H, g, lo, hi = _lp_arrays(H, g, lower, upper)
+    m, J = H.shape
+    eps = np.empty(g.shape[1])
+    for c in range(g.shape[1]):
+        x, r = _least_absolute_deviation(H, g[:, c], lo, hi)
+        tiny = 1e-9 * max(float(np.max(np.abs(x))), 1e-300)
+        k = int(np.count_nonzero((x > lo + tiny) & (x < hi - tiny)))
+        eps[c] = r * m / (m - k) if k < m else r
+    return eps
+
+
+def least_power_pocs(H, g, lower: float = 0.0, upper=None, eps=None, weights=None) -> tuple[np.ndarray, np.ndarray]:
+    """The feasible map of least total power: Singh and Ahuja's sets and a power set, solved as one LP.
+
+    Three convex sets: the amplitude set ``A = {lower <= f <= upper}``; the residual set
+    ``R1 = {f : sum_i |g_i - h_i . f| <= eps}`` (the paper's per-pixel residual sets, eq. 9-10, held in
+    total rather than pixel by pixel, with ``eps`` from the data, :func:`residual_l1_bound`); and the
+    power set ``P = {f : sum_j f_j <= E}`` with ``E`` the least value at which the three meet. With
+    ``f_j`` a source's power (``singh_ahuja_sources``) ``sum_j f_j`` is the total power of the light; a
+    Lambertian probe cannot tell apart many maps that fit it equally well, and the one of least power
+    is the sparsest among them (few sources lit, as lamps and a sun are). The three sets then meet in a
+    single point, which alternating projections reach only arbitrarily slowly; every set is a
+    polyhedron, so the point is the solution of the linear programme
+    ``min sum_j f_j`` subject to ``H f + p - q = g``, ``sum_i (p_i + q_i) <= eps``, ``p, q >= 0`` and
+    ``f`` in ``A``, solved exactly (HiGHS through ``scipy.optimize.linprog``), one per channel.
+
+    Why the residual is bounded in total: the paper's slabs ``|g_i - h_i . f| <= delta`` must be as wide as
+    the largest noise sample to meet, and then admit a smooth error of that size on every pixel at once,
+    which the least-power answer spends on moving light between the directions the ball barely tells apart
+    (``docs/probes.md``, "The least total power").
+
+    Parameters
+    ----------
+    H : (m, J) array_like
+    g : (m, c) array_like
+    lower, upper
+        The amplitude set, as :func:`pocs`.
+    eps : (c,) array_like, optional
+        The L1 residual bound per channel (default :func:`residual_l1_bound`); at least the least
+        absolute residual of a map in ``A``, else the sets do not meet.
+    weights : (J,) array_like, optional
+        The power of a unit of each unknown (ones: the unknowns are powers; a texel's solid angle when they
+        are radiances, as :func:`singh_ahuja`'s grid). Each channel is solved scaled to unit mean absolute
+        value (the LP is homogeneous in ``g``; HiGHS's tolerances are absolute), so the answer does not
+        depend on the photograph's exposure.
+
+    Returns
+    -------
+    f : (J, c) float64
+    residuals : (2,) float64
+        ``|g - H f| / |g|`` (Frobenius) at zero and at the answer.
+    """
+    from scipy import sparse
+    from scipy.optimize import linprog
+
+    H, g, lo, hi = _lp_arrays(H, g, lower, upper)
+    m, J = H.shape
+    eps = residual_l1_bound(H, g, lo, hi) if eps is None else np.broadcast_to(
+        np.asarray(eps, dtype=np.float64), (g.shape[1],))
+    w = np.ones(J) if weights is None else np.asarray(weights, dtype=np.float64).reshape(J)
+    if not np.all(np.isfinite(w) & (w > 0)):
+        raise ValueError("weights must be finite and positive")
+    A_ub = sparse.csr_matrix(np.r_[np.zeros(J), np.ones(2 * m)][None, :])
+    cost = np.r_[w, np.zeros(2 * m)]
+    f = np.empty((J, g.shape[1]))
+    for c in range(g.shape[1]):
+        k = _unit_scale(g[:, c])
+        A_eq, bounds = _l1_programme(H, lo / k, hi / k)
+        # a hair of slack over the bound: at the least absolute residual the feasible set is a single face
+        e = float(eps[c]) / k * (1.0 + 1e-9) + 1e-12 * m
+        sol = linprog(cost, A_ub=A_ub, b_ub=[e], A_eq=A_eq, b_eq=g[:, c] / k, bounds=bounds, method="highs")
+        if sol.status != 0:
+            raise InputError(f"the least-power programme has no solution ({sol.message.strip()}): the residual "
+                             f"bound {eps[c]:.4g} is below the least absolute residual the amplitude set allows")
+        f[:, c] = np.clip(sol.x[:J] * k, lo, hi)
+    gn = float(np.linalg.norm(g)) or 1.0
+    return f, np.array([float(np.linalg.norm(g)) / gn, float(np.linalg.norm(g - H @ f)) / gn])
+
+
+def _check_least_power(delta, relaxation, tol, x0=None) -> None:
+    """Refuse the options of the iterative schemes, which the least-power programme does not take."""
+    if float(delta) != 0.0 or float(relaxation) != 1.0 or tol is not None or x0 is not None:
+        raise ValueError("scheme='least-power' solves one linear programme: delta must be 0, relaxation 1, "
+                         "and it takes no tol or x0")
+
+
+def _lp_arrays(H, g, lower, upper):
+    """``(H, g, lo, hi)`` as float64: ``g`` (m, c), the bounds broadcast to (J,) (``inf`` with no upper)."""
+    H = np.asarray(H, dtype=np.float64)
+    g = np.asarray(g, dtype=np.float64).reshape(H.shape[0], -1)
+    J = H.shape[1]
+    lo = np.array(np.broadcast_to(np.asarray(lower, dtype=np.float64), (J,)))
+    hi = np.array(np.broadcast_to(np.inf if upper is None else np.asarray(upper, dtype=np.float64).ravel(), (J,)))
+    return H, g, lo, hi
+
+
+def _l1_programme(H, lo, hi):
+    """``(A_eq, bounds)`` of the variables ``[f, p, q]`` with ``H f + p - q = g``: ``f`` in ``[lo, hi]``,
+    ``p, q >= 0`` (the residual's two parts, ``sum p + q`` its L1 norm at the optimum)."""
+    from scipy import sparse
+
+    m = H.shape[0]
+    A_eq = sparse.hstack([sparse.csr_matrix(H), sparse.identity(m), -sparse.identity(m)], format="csr")
+    return A_eq, np.r_[np.c_[lo, hi], np.tile([0.0, np.inf], (2 * m, 1))]
+
+
+def _least_absolute_deviation(H, g, lo, hi) -> tuple[np.ndarray, float]:
+    """``(x, r)``: ``x`` in ``[lo, hi]`` of least ``r = sum_i |g_i - h_i . x|`` (one channel; HiGHS)."""
+    from scipy.optimize import linprog
+
+    m, J = H.shape
+    k = _unit_scale(g)
+    A_eq, bounds = _l1_programme(H, lo / k, hi / k)
+    sol = linprog(np.r_[np.zeros(J), np.ones(2 * m)], A_eq=A_eq, b_eq=g / k, bounds=bounds, method="highs")
+    if sol.status != 0:
+        raise InputError(f"the least-absolute-deviation fit has no solution ({sol.message.strip()})")
+    x = np.clip(sol.x[:J] * k, lo, hi)
+    return x, float(np.sum(np.abs(g - H @ x)))
+
+
+def _unit_scale(g) -> float:
+    """The mean absolute value of ``g`` (1 if zero): the LPs are solved on ``g`` over it."""
+    k = float(np.mean(np.abs(g)))
+    return k if k > 0 and np.isfinite(k) else 1.0
+
+
 def _settled(f, prev, tol) -> bool:
     """Whether the last sweep moved ``f`` by less than ``tol`` times its norm."""
     return float(np.linalg.norm(f - prev)) <= float(tol) * max(float(np.linalg.norm(f)), 1e-300)
@@ -501,6 +662,9 @@ def singh_ahuja(normals, radiance, albedo=1.0, height: int = 16, iterations: int
         if float(delta) != 0.0 or float(relaxation) != 1.0:
             raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
         f, res = dykstra_pocs(H[use], g[use], iterations, 0.0, upper, tol=tol)
+    elif scheme == "least-power":   # the unknowns are radiances: a texel's power is its radiance times its solid angle
+        _check_least_power(delta, relaxation, tol)
+        f, res = least_power_pocs(H[use], g[use], 0.0, upper, weights=sa)
     else:
         f, res = pocs(H[use], g[use], iterations, 0.0, upper, delta, order, seed, scheme=scheme,
                       relaxation=relaxation, tol=tol)
@@ -650,7 +814,9 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     base_frequency, max_sources, max_level, power_share, patience
         As :func:`ffls.probes.selection.refine_sources`.
     scheme, relaxation, tol
-        As :func:`pocs`, for every fit.
+        As :func:`pocs`, for every fit; with ``scheme='least-power'`` the rounds are fitted and chosen by the
+        paper's sweeps (``iterations``, ``order``, ``seed``, ``relaxation``, ``tol``), and the chosen set's
+        powers are then :func:`least_power_pocs`'s.
 
     Returns
     -------
@@ -663,8 +829,11 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     n, b, rho, _ = _pixels(normals, radiance, albedo)
     m = n.shape[0]
     use = pixel_subset(m, max_pixels, seed)
-    kw = dict(iterations=iterations, upper=upper, order=order, seed=seed, max_pixels=None, scheme=scheme,
-              relaxation=relaxation, tol=tol)
+    # least-power: the rounds are grown and chosen by the paper's sweeps, whose spread-out powers show where the
+    # light is; the chosen set's powers are then the least-power map (its sparse powers, refined, lock the set
+    # onto the wrong directions: docs/probes.md, "The least total power")
+    kw = dict(iterations=iterations, upper=upper, order=order, seed=seed, max_pixels=None,
+              scheme="sequential" if scheme == "least-power" else scheme, relaxation=relaxation, tol=tol)
 
     def fit_all(d):
         return singh_ahuja_sources(n[use], b[use], rho[use], d, **kw)
@@ -698,6 +867,9 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
                          tolerance)
     # the chosen round's sources, re-rendered on every pixel
     fit = sel.fit
+    if scheme == "least-power":
+        fit = singh_ahuja_sources(n[use], b[use], rho[use], fit.directions, upper=upper, max_pixels=None,
+                                  scheme=scheme)
     rendered = lambert_matrix(n, fit.directions) @ fit.intensities * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))

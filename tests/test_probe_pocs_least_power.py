@@ -1,0 +1,160 @@
+"""POCS's least-power scheme: the feasible map of least total power, one linear programme (HiGHS)."""
+import numpy as np
+import pytest
+from scipy.optimize import nnls
+
+from ffls.errors import InputError
+from ffls.probes.linear import lambert_matrix
+from ffls.probes.singh_ahuja import (adaptive_singh_ahuja, dykstra_pocs, least_power_pocs, pocs, residual_l1_bound,
+                                     singh_ahuja_sources)
+from ffls.probes.sources import model_sources
+
+
+def _ball(m=400, seed=0):
+    """Unit normals of the half of a ball a camera on -Y sees (the other half is dark to it)."""
+    n = np.random.default_rng(seed).normal(size=(m, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n[:, 1] = -np.abs(n[:, 1])
+    return n
+
+
+def test_least_power_is_the_sparsest_fit_where_least_norm_spreads():
+    # x + 2 y = 2 (three identical pixels): every point of the segment fits exactly. Least power: (0, 1);
+    # Dykstra's least norm: (0.4, 0.8)
+    H = np.array([[1.0, 2.0]] * 3)
+    f, res = least_power_pocs(H, np.full(3, 2.0))
+    np.testing.assert_allclose(f[:, 0], [0.0, 1.0], atol=1e-7)
+    assert res[0] == pytest.approx(1.0) and res[-1] < 1e-7
+    fd, _ = dykstra_pocs(H, np.full(3, 2.0), iterations=2000)
+    np.testing.assert_allclose(fd[:, 0], [0.4, 0.8], atol=1e-4)
+    # the amplitude set holds: with y <= 0.5 the least power is x = 1, y = 0.5
+    f, _ = least_power_pocs(H, np.full(3, 2.0), upper=[10.0, 0.5])
+    np.testing.assert_allclose(f[:, 0], [1.0, 0.5], atol=1e-7)
+    # pocs() dispatches to it
+    f2, _ = pocs(H, np.full(3, 2.0), scheme="least-power")
+    np.testing.assert_allclose(f2[:, 0], [0.0, 1.0], atol=1e-7)
+
+
+def test_residual_l1_bound_is_zero_on_exact_data_and_above_the_fit_with_noise():
+    rng = np.random.default_rng(1)
+    H = np.abs(rng.normal(size=(80, 10)))
+    g = H @ np.abs(rng.normal(size=(10, 2)))
+    np.testing.assert_allclose(residual_l1_bound(H, g), 0.0, atol=1e-7 * np.abs(g).sum())
+    g = g + 0.05 * rng.normal(size=g.shape)
+    eps = residual_l1_bound(H, g)
+    # the least absolute residual of a non-negative map (a reference by NNLS: its L1 residual is no smaller)
+    r_nnls = np.array([np.abs(g[:, c] - H @ nnls(H, g[:, c])[0]).sum() for c in range(2)])
+    m, J = H.shape
+    assert np.all(eps > 0) and np.all(eps <= r_nnls * m / (m - J) * (1 + 1e-9))
+    f, _ = least_power_pocs(H, g, eps=eps)
+    assert np.all(np.abs(g - H @ f).sum(axis=0) <= eps * (1 + 1e-6))   # the answer is in the residual set
+    assert np.all(f >= 0)
+
+
+def test_least_power_recovers_two_lamps_on_a_noisy_ball():
+    # two lamps of a 92-source set seen by half a ball, 1% noise: the least-power map relights a sphere of normals
+    # within 5% (NNLS on the same pixels: about 3 times that), its power within 3% of the truth
+    from ffls.probes.evaluate import relit_error
+    from ffls.probes.sources import sources_to_latlong
+
+    n = _ball(600)
+    d = model_sources(92)
+    L = np.zeros((d.shape[0], 3))
+    L[[5, 40]] = [[3.0, 2.5, 2.0], [0.6, 0.7, 1.0]]
+    rad = lambert_matrix(n, d) @ L * 0.7 / np.pi
+    rad = rad + np.random.default_rng(2).normal(0.0, 0.01 * rad.mean(), size=rad.shape)
+    fit = singh_ahuja_sources(n, rad, 0.7, d, scheme="least-power", max_pixels=None)
+    true = sources_to_latlong(d, L, 32)
+    err = relit_error(sources_to_latlong(d, fit.intensities, 32), true)
+    g = np.pi * rad / 0.7
+    f_nnls = np.stack([nnls(lambert_matrix(n, d), g[:, c])[0] for c in range(3)], axis=1)
+    err_nnls = relit_error(sources_to_latlong(d, f_nnls, 32), true)
+    assert err < 0.05 and err < err_nnls
+    np.testing.assert_allclose(fit.intensities.sum(axis=0), L.sum(axis=0), rtol=0.03)
+    assert fit.iterations == 1 and fit.residuals.shape == (2,)
+
+
+def test_adaptive_least_power_keeps_the_sweeps_set():
+    # the set is grown and chosen by the paper's sweeps; only the chosen set's powers change
+    n = _ball(300, seed=3)
+    d = model_sources(42)
+    L = np.zeros((d.shape[0], 3))
+    L[[3, 17]] = [[2.0, 1.5, 1.0], [0.5, 0.5, 0.8]]
+    rad = lambert_matrix(n, d) @ L * 0.7 / np.pi
+    a = adaptive_singh_ahuja(n, rad, 0.7, criterion="bic", max_pixels=None, max_level=1)
+    b = adaptive_singh_ahuja(n, rad, 0.7, criterion="bic", max_pixels=None, max_level=1, scheme="least-power")
+    np.testing.assert_allclose(b.fit.directions, a.fit.directions, atol=1e-12)   # (renormalised)
+    assert a.candidates == b.candidates and b.fit.iterations == 1
+    assert b.fit.relative_rms < 1e-3
+
+
+def test_least_power_refuses_options_it_does_not_take():
+    H = np.ones((3, 2))
+    for kw, word in ((dict(relaxation=0.5), "relaxation"), (dict(tol=1e-6), "tol"), (dict(delta=0.1), "delta"),
+                     (dict(x0=np.ones((2, 1))), "x0")):
+        with pytest.raises(ValueError, match=word):
+            pocs(H, np.ones(3), scheme="least-power", **kw)
+    with pytest.raises(InputError, match="no solution"):   # a residual bound below what any map leaves
+        least_power_pocs(np.array([[1.0], [1.0]]), np.array([0.0, 2.0]), eps=[0.5])
+
+
+def test_cli_least_power_scheme(courtyard_ball_folder, tmp_path, capsys):
+    from ffls.cli import main
+    from ffls.lightmaps.lightmap import load_lightmap
+
+    out = tmp_path / "m.exr"
+    assert main(["probe", "pocs", str(courtyard_ball_folder), "-o", str(out), "--size", "16", "--sources", "grid",
+                 "--grid", "8", "--scheme", "least-power"]) == 0
+    assert "the least total power within the L1 residual" in capsys.readouterr().err
+    assert load_lightmap(out).data.min() >= 0
+
+
+@pytest.mark.parametrize("flags, words", [(["--tol", "1e-5"], "--tol"), (["--relaxation", "0.5"], "--relaxation"),
+                                          (["--sources", "grid", "--iterations", "10"], "--iterations"),
+                                          (["--order", "random"], "--order")])
+def test_cli_least_power_refuses_flags_it_does_not_take(courtyard_ball_folder, tmp_path, capsys, flags, words):
+    from ffls.cli import main
+
+    out = tmp_path / "m.exr"
+    assert main(["probe", "pocs", str(courtyard_ball_folder), "-o", str(out), "--size", "16",
+                 "--scheme", "least-power", *flags]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and not out.exists()
+
+
+@pytest.mark.parametrize("scale", [1e-7, 1e5])
+def test_least_power_does_not_depend_on_the_exposure(scale):
+    # the programme is homogeneous in the data; solved at the data's own scale, HiGHS's absolute tolerances
+    # would swamp a dark photograph's values
+    n = _ball(300, seed=4)
+    d = model_sources(42)
+    L = np.zeros((d.shape[0], 3))
+    L[[3, 17, 30]] = [[2.0, 1.5, 1.0], [0.5, 0.5, 0.8], [0.2, 0.3, 0.1]]
+    H = lambert_matrix(n, d)
+    g = H @ L + np.random.default_rng(5).normal(0.0, 0.01, size=(n.shape[0], 3))
+    f, _ = least_power_pocs(H, g)
+    fs, _ = least_power_pocs(H, g * scale)
+    np.testing.assert_allclose(fs / scale, f, atol=1e-6 * np.abs(f).max())
+    np.testing.assert_allclose(residual_l1_bound(H, g * scale) / scale, residual_l1_bound(H, g), rtol=1e-6)
+
+
+def test_grid_least_power_minimises_power_not_radiance(monkeypatch):
+    # x + y = 2 seen by three pixels: the least power is the unknown whose unit costs least
+    H = np.ones((3, 2))
+    for w, want in (([1.0, 3.0], [2.0, 0.0]), ([3.0, 1.0], [0.0, 2.0])):
+        f, _ = least_power_pocs(H, np.full(3, 2.0), weights=w)
+        np.testing.assert_allclose(f[:, 0], want, atol=1e-7)
+    # on the lat-long grid the unknowns are radiances: a texel's power is its radiance times its solid angle
+    import ffls.probes.singh_ahuja as sa_mod
+    from ffls.probes.sources import latlong_solid_angles
+
+    seen = {}
+
+    def spy(*args, **kw):
+        seen.update(kw)
+        return least_power_pocs(*args, **kw)
+
+    monkeypatch.setattr(sa_mod, "least_power_pocs", spy)
+    n = _ball(200, seed=6)
+    sa_mod.singh_ahuja(n, np.full((n.shape[0], 3), 0.1), 0.7, height=4, scheme="least-power", max_pixels=None)
+    np.testing.assert_allclose(seen["weights"], latlong_solid_angles(4).ravel())
