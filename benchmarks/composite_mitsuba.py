@@ -63,13 +63,17 @@ from ffls.lightmaps.lightmap import load_lightmap
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import CpuRelighter
 from ffls.relight.lightflow import LightFlowRelighter
-from ffls.relight.sphere_shadows import SphereShadowFill, ground_points
+from ffls.relight.basis import accepted_basis
+from ffls.relight.shadow_hull import ShadowHull
+from ffls.relight.sphere_shadows import SphereShadowFill, ground_points, hidden_photos
 from ffls.synth.scene import stratified_directions
 
 CAPTURE_ALBEDO, SCENE_ALBEDO = 0.3, 0.5
 WALL_ALBEDO = (0.6, 0.35, 0.25)
 CAM_ORIGIN, CAM_TARGET, FOV = (0.0, -0.866, 0.55), (0.0, 0.0, 0.05), 46.0
 SPHERES = ((-0.25, -0.25), (0.25, -0.25), (0.25, 0.25), (-0.25, 0.25))
+#: ``--fill`` values that fill the rest's weights.
+FILL_REST = ("rest", "all", "rest+model")
 
 
 def _diffuse(rgb):
@@ -266,7 +270,7 @@ def main():
     grow = max(2, int(round(0.02 * R)))
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
-    caps, fills = {}, {}
+    caps, fills, hulls = {}, {}, {}
     K, M = _camera(R)
     ground = ground_points(K, M, (R, R))
     ground[~sm_b] = np.nan  # the ground the camera sees: neither the object nor a sphere
@@ -276,6 +280,13 @@ def main():
                    render_capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
         fills[n] = tuple(SphereShadowFill.from_geometry(ground, centres, 0.05, lights.directions)
                          for _, lights in caps[n])
+        if any(f in ("model", "rest+model") for f in a.fill.split(",")):
+            basis, dirs = accepted_basis(*caps[n][0])
+            hulls[n] = ShadowHull.carve(basis, dirs, om_b, K, M, ground=sm_b,
+                                        hidden=hidden_photos(ground, centres, 0.05, dirs))
+            print(f"shadow hull of the {n}-light object capture: {int(hulls[n].occupancy.sum())} voxels of "
+                  f"{1000 * hulls[n].voxel:.1f} mm, umbra {hulls[n].umbra:.2f} ({time.perf_counter() - t0:.0f} s)",
+                  flush=True)
         print(f"captures of {n} lights ready ({time.perf_counter() - t0:.0f} s)", flush=True)
     rows = []
     for name in a.maps.split(","):
@@ -293,8 +304,10 @@ def main():
             if sources in ("lightflow", "levelset"):
                 kind = "flow" if sources == "lightflow" else "levelset"
                 fo, fs = fills[n] if fill != "none" else (None, None)
-                o = LightFlowRelighter(o, interpolation=kind, fill=fo, fill_sources=fill == "all")
-                s = LightFlowRelighter(s, interpolation=kind, fill=fs, fill_sources=fill == "all")
+                mode = {"all": "blend", "model": "model", "rest+model": "model"}.get(fill, False)
+                o = LightFlowRelighter(o, interpolation=kind, fill=fo, fill_sources=mode, fill_rest=fill in FILL_REST,
+                                       hull=hulls[n] if mode == "model" else None)
+                s = LightFlowRelighter(s, interpolation=kind, fill=fs, fill_sources=mode, fill_rest=fill in FILL_REST)
             for r in (o, s):
                 r.set_lightmap(lm)
                 r.render()
