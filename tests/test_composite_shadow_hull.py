@@ -3,12 +3,15 @@ object's shadow where a calibration sphere hides the ground from a light (Sphere
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from ffls.errors import InputError
-from ffls.relight.lightflow import unshadowed_fit
+from ffls.lightmaps.lightmap import LightMap
+from ffls.relight.cpu import CpuRelighter
+from ffls.relight.lightflow import LightFlowRelighter, unshadowed_fit
 from ffls.relight.shadow_hull import ShadowHull, lit_photos
 from ffls.relight.sphere_shadows import SphereShadowFill, ground_points, hidden_photos
 from ffls.synth.scene import stratified_directions
@@ -131,3 +134,42 @@ def test_source_model_puts_the_objects_shadow_inside_a_spheres_shadow():
     assert np.abs(without - truth)[..., 0][both].mean() > 0.9 * src[2]
     # pixels the sphere does not hide are the image as given
     assert np.array_equal(with_hull[~here], dark[~here])
+
+
+def test_relighter_fills_a_hidden_sun_with_the_model_and_the_hull():
+    """LightFlowRelighter(fill_sources='model'): where the sphere hides the sun, the object capture
+    relit under a sun map shows the box's shadow (hull) and the lit ground; without the fill, the
+    sphere's shadow."""
+    d = stratified_directions(150, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    c, r = SPHERE
+    hull = ShadowHull.carve(basis, d, obj, K, M, ground=ground, hidden=hidden_photos(pts, [c], r, directions=d))
+    e = math.radians(15)
+    sun = np.array([-math.cos(e), 0.0, math.sin(e)])
+    lm = LightMap(np.full((64, 128, 3), 1e-4, np.float32), "latlong")
+    dirs, _, _ = lm.samples()
+    data = lm.data.reshape(-1, 3).copy()
+    data[np.argmax(dirs @ sun)] = 2e4                    # a sun of one texel
+    lm = replace(lm, data=data.reshape(lm.data.shape))
+    fill = SphereShadowFill.from_geometry(pts, [c], r, d)
+    images = {}
+    for mode, h in (("model", hull), (False, None)):
+        rel = LightFlowRelighter(CpuRelighter(basis, d, weighting="barycentric"), fill=fill, fill_sources=mode,
+                                 fill_rest=False, hull=h)
+        rel.set_lightmap(lm)
+        rel.render()
+        images[mode] = rel.read_hdr()[..., 0]
+        assert len(rel.last_split.sources) == 1
+    sun = rel.last_split.sources[0].sample_directions[0]  # the texel's centre
+    here = fill.hidden_for(sun)
+    box_shadow = _hits_box(np.nan_to_num(pts.reshape(-1, 3)), sun).reshape(RES, RES) & ground
+    lit_here, shade_here = here & ~box_shadow, here & box_shadow
+    lit_far = ground & ~here & ~box_shadow
+    assert lit_here.sum() >= 5 and shade_here.sum() >= 5
+    level = np.median(images["model"][lit_far])
+    assert np.median(images["model"][lit_here]) > 0.85 * level
+    assert np.median(images["model"][shade_here]) < 0.2 * level
+    assert np.median(images[False][lit_here]) < 0.2 * level
+    with pytest.raises(ValueError):
+        LightFlowRelighter(CpuRelighter(basis, d), fill=fill, fill_sources="hull")
