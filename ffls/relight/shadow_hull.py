@@ -14,10 +14,12 @@ object's mask: Laurentini's visual hull, 1994). What is left contains the object
 object is never seen through), so its shadows contain the object's shadows; with many lights it
 is close to them except in concavities that no shadow reveals.
 
-* :func:`lit_photos` says, per photo and ground pixel, whether the photo sees the pixel lit: its
-  luminance at least :data:`ffls.relight.lightflow.SHADOW_LEVEL` of the pixel's unshadowed linear
-  model (:func:`ffls.relight.lightflow.unshadowed_fit` over all photos, the sphere-hidden ones left
-  out), and whether it says anything there at all (ground the camera sees, not hidden by a sphere).
+* :func:`lit_photos` gives, per photo and ground pixel, the photo's visibility of its light: its
+  luminance over the pixel's unshadowed linear model's (:func:`ffls.relight.lightflow.unshadowed_fit`
+  over all photos, the sphere-hidden ones left out), and whether it says anything there at all
+  (ground the camera sees, not hidden by a sphere). A pixel is lit at
+  :data:`ffls.relight.lightflow.SHADOW_LEVEL` or more; carving reads the visibility bilinearly at a
+  voxel's projection, so the shadows' edges are placed between pixels.
 * :class:`ShadowHull` is the carved voxel grid (:meth:`ShadowHull.carve`) and the query
   :meth:`ShadowHull.shadow`: the fraction of a ray from ground points toward a direction that the
   hull blocks (trilinear occupancy, the maximum along the ray).
@@ -64,10 +66,11 @@ def lit_photos(basis, directions, ground, hidden=None, *, shadow_level: float = 
 
     Returns
     -------
-    lit, known : (n, H, W) bool
-        ``known``: the photo says whether the object shadows the pixel (ground, not hidden, a model
-        that predicts light); ``lit``: it is known and the photo is at least ``shadow_level`` of the
-        unshadowed model.
+    visibility : (n, H, W) float32
+        The photo's luminance over the unshadowed model's, clipped to [0, 1]; 0 where not known.
+    known : (n, H, W) bool
+        The photo says whether the object shadows the pixel (ground, not hidden, a model that
+        predicts light). The pixel is lit where it is known and ``visibility >= shadow_level``.
     umbra : float
         The median visibility (photo over model) of the known pixels that are not lit: the light
         that reaches the object's shadows anyway (bounce from the object and the ground); 0 where
@@ -78,7 +81,7 @@ def lit_photos(basis, directions, ground, hidden=None, *, shadow_level: float = 
     g = np.asarray(ground, dtype=bool)
     if g.shape != (H, W):
         raise InputError(f"the ground mask {g.shape} does not match the photos ({H}, {W})")
-    lit = np.zeros((n, H, W), dtype=bool)
+    vis = np.zeros((n, H, W), dtype=np.float32)
     known = np.zeros((n, H, W), dtype=bool)
     dark = []
     rows = max(1, _FIT_PIXELS // max(W, 1))
@@ -95,11 +98,11 @@ def lit_photos(basis, directions, ground, hidden=None, *, shadow_level: float = 
             ok &= prior.astype(bool)
         lum = photos @ LUMINANCE.astype(np.float32)
         known[:, sl] = ok
-        lit[:, sl] = ok & (lum >= shadow_level * pred)
-        shade = ok & ~lit[:, sl]
-        dark.append(lum[shade] / pred[shade])
+        v = np.where(ok, lum / np.where(ok, pred, 1.0), 0.0)
+        vis[:, sl] = np.clip(v, 0.0, 1.0)
+        dark.append(v[ok & (v < shadow_level)])
     dark = np.concatenate(dark) if dark else np.zeros(0)
-    return lit, known, float(np.clip(np.median(dark), 0.0, 1.0)) if dark.size else 0.0
+    return vis, known, float(np.clip(np.median(dark), 0.0, 1.0)) if dark.size else 0.0
 
 
 class ShadowHull:
@@ -199,13 +202,14 @@ class ShadowHull:
         lo[2], hi[2] = 0.0, top
         focal = float(np.asarray(K, dtype=np.float64)[0, 0])
         footprint = float(np.median(np.linalg.norm(G - C, axis=-1))) / focal
-        lit, known, umbra = lit_photos(basis, d, ground, hidden, shadow_level=shadow_level)
+        vis, known, umbra = lit_photos(basis, d, ground, hidden, shadow_level=shadow_level)
         hull = None
         for _ in range(2):
             # Coarse to fine: the first grid spans every place the camera allows, the second the
             # first one's hull (plus two voxels), at the pixels' footprint where the cap allows.
             voxel = max(footprint, float((hi - lo).max()) / max_cells)
-            hull = cls._carved(lo, hi, voxel, sil, lit, known, d, K, M, dist, int(min_votes), umbra)
+            hull = cls._carved(lo, hi, voxel, sil, vis, known, d, K, M, dist, int(min_votes), umbra,
+                               float(shadow_level))
             occ = np.argwhere(hull.occupancy > 0)
             if occ.size == 0 or voxel <= footprint:
                 break
@@ -214,7 +218,7 @@ class ShadowHull:
         return hull
 
     @classmethod
-    def _carved(cls, lo, hi, voxel, sil, lit, known, d, K, M, dist, min_votes, umbra) -> "ShadowHull":
+    def _carved(cls, lo, hi, voxel, sil, vis, known, d, K, M, dist, min_votes, umbra, level) -> "ShadowHull":
         """One carving of the box ``lo``-``hi`` at ``voxel`` (see :meth:`carve`)."""
         shape = np.maximum(np.ceil((hi - lo) / voxel).astype(int), 1)
         origin = lo + 0.5 * voxel
@@ -229,7 +233,7 @@ class ShadowHull:
                 continue
             g = Xc - (Xc[:, 2] / d[i, 2])[:, None] * d[i]
             q = _pixels(g, K, M, dist)
-            votes += (_lookup(known[i], q) & _lookup(lit[i], q)).astype(np.int32)
+            votes += (_lookup(known[i], q) & (_bilinear(vis[i], q) >= level)).astype(np.int32)
         occ = np.zeros(X.shape[0], dtype=np.float32)
         occ[cand] = (votes < min_votes).astype(np.float32)
         all_votes = np.zeros(X.shape[0], dtype=np.int32)
@@ -298,6 +302,15 @@ def _pixels(X, K, M, dist) -> np.ndarray:
     if front.any():
         px[front] = project_points(cam[front], K, dist)
     return px
+
+
+def _bilinear(image, px) -> np.ndarray:
+    """(m,) ``image`` (H, W) read bilinearly at pixels ``px`` (m, 2) (0 outside the image or NaN)."""
+    ok = np.all(np.isfinite(px), axis=-1)
+    out = np.zeros(px.shape[0])
+    if ok.any():
+        out[ok] = map_coordinates(image, [px[ok, 1], px[ok, 0]], order=1, mode="constant", cval=0.0)
+    return out
 
 
 def _lookup(mask, px) -> np.ndarray:
