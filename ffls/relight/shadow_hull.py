@@ -15,9 +15,10 @@ object is never seen through), so its shadows contain the object's shadows; with
 is close to them except in concavities that no shadow reveals.
 
 * :func:`lit_photos` gives, per photo and ground pixel, the photo's visibility of its light: its
-  luminance over the pixel's unshadowed linear model's (:func:`ffls.relight.lightflow.unshadowed_fit`
-  over all photos, the sphere-hidden ones left out), and whether it says anything there at all
-  (ground the camera sees, not hidden by a sphere). A pixel is lit at
+  luminance over the pixel's unshadowed linear model's
+  (:func:`ffls.relight.lightflow.unshadowed_fit` over all photos, the sphere-hidden ones left
+  out), and whether it says anything there at all (ground the camera sees, not hidden by a
+  sphere). A pixel is lit at
   :data:`ffls.relight.lightflow.SHADOW_LEVEL` or more; carving reads the visibility bilinearly at a
   voxel's projection, so the shadows' edges are placed between pixels.
 * :class:`ShadowHull` is the carved voxel grid (:meth:`ShadowHull.carve`) and the query
@@ -90,7 +91,9 @@ def lit_photos(basis, directions, ground, hidden=None, *, shadow_level: float = 
         if not g[sl].any():
             continue
         photos = np.asarray(basis[:, sl], dtype=np.float32)
-        prior = None if hidden is None else (~np.asarray(hidden[:, sl], dtype=bool)).astype(np.float64)
+        prior = None
+        if hidden is not None:
+            prior = (~np.asarray(hidden[:, sl], dtype=bool)).astype(np.float64)
         b = unshadowed_fit(photos, d, shadow_level=shadow_level, prior=prior)
         pred = np.einsum("hwci,ki->khwc", np.nan_to_num(b), d) @ LUMINANCE
         ok = g[sl][None] & np.all(np.isfinite(b), axis=(-2, -1))[None] & (pred > 0)
@@ -139,8 +142,8 @@ class ShadowHull:
         return float(self.origin[2] + (self.occupancy.shape[2] - 0.5) * self.voxel)
 
     @classmethod
-    def carve(cls, basis, directions, object_mask, K, world_from_camera, *, ground=None, hidden=None,
-              dist=None, max_height: float | None = None, min_votes: int = MIN_VOTES,
+    def carve(cls, basis, directions, object_mask, K, world_from_camera, *, ground=None,
+              hidden=None, dist=None, max_height: float | None = None, min_votes: int = MIN_VOTES,
               max_cells: int = MAX_CELLS, shadow_level: float = SHADOW_LEVEL) -> "ShadowHull":
         """Carve the hull of an object standing on the plane z = 0 from its capture.
 
@@ -185,7 +188,8 @@ class ShadowHull:
             raise InputError("the object mask is empty: no hull to carve")
         C = M[:3, 3]
         if not C[2] > 0:
-            raise InputError("the camera must be above the ground (z > 0) to carve the object's hull")
+            raise InputError("the camera must be above the ground (z > 0) to carve the object's "
+                             "hull")
         pts = ground_points(K, M, (W, H), dist=dist)
         on_plane = np.all(np.isfinite(pts), axis=-1)
         if ground is None:
@@ -218,7 +222,8 @@ class ShadowHull:
         return hull
 
     @classmethod
-    def _carved(cls, lo, hi, voxel, sil, vis, known, d, K, M, dist, min_votes, umbra, level) -> "ShadowHull":
+    def _carved(cls, lo, hi, voxel, sil, vis, known, d, K, M, dist, min_votes, umbra,
+                level) -> "ShadowHull":
         """One carving of the box ``lo``-``hi`` at ``voxel`` (see :meth:`carve`)."""
         shape = np.maximum(np.ceil((hi - lo) / voxel).astype(int), 1)
         origin = lo + 0.5 * voxel
@@ -305,7 +310,7 @@ def _pixels(X, K, M, dist) -> np.ndarray:
 
 
 def _bilinear(image, px) -> np.ndarray:
-    """(m,) ``image`` (H, W) read bilinearly at pixels ``px`` (m, 2) (0 outside the image or NaN)."""
+    """(m,) ``image`` (H, W) read bilinearly at pixels ``px`` (m, 2) (0 outside or at NaN)."""
     ok = np.all(np.isfinite(px), axis=-1)
     out = np.zeros(px.shape[0])
     if ok.any():
