@@ -32,7 +32,7 @@ radius) and the change error split there (``source_shadows``).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
         [--res 128] [--spp 16] [--truth-spp 1024] [--map-spp 256] [--cache DIR] [--schemes voronoi,...]
-        [--sources weights,lightflow,levelset] [--fill none,rest,all]
+        [--sources weights,lightflow,levelset] [--fill none,rest,all,model,rest+model]
 
 ``--sources lightflow`` relights the map's compact sources by flow interpolation between the
 (path-traced, noisy) basis photos, ``--sources levelset`` by moving the basis photos' cast shadows
@@ -40,7 +40,12 @@ radius) and the change error split there (``source_shadows``).
 ``--fill rest`` fills the calibration spheres' shadows in both captures
 (:class:`ffls.relight.sphere_shadows.SphereShadowFill`, from the spheres' centres and radius, the
 ground and the camera): a photo's weight at a pixel it sees through a sphere goes to the photos that
-see the pixel; ``--fill all`` also fills the compact sources' photos where they are hidden.
+see the pixel; ``--fill all`` also fills the compact sources' photos where they are hidden (the visible
+photos' blend). ``--fill model`` fills only the compact sources where a sphere hides them, with the
+visible photos' unshadowed model times the object's visibility through its shadow hull
+(:class:`ffls.relight.shadow_hull.ShadowHull`, carved from the object capture's own shadows; the
+surface capture gets the model alone), and checks the hull's shadow of each source against a render
+(:func:`hull_shadow_check`); ``--fill rest+model`` also fills the rest's weights.
 
 Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/composite_mitsuba.json``.
 """
@@ -63,13 +68,17 @@ from ffls.lightmaps.lightmap import load_lightmap
 from ffls.relight.composite import LUMINANCE, METHODS, composite
 from ffls.relight.cpu import CpuRelighter
 from ffls.relight.lightflow import LightFlowRelighter
-from ffls.relight.sphere_shadows import SphereShadowFill, ground_points
+from ffls.relight.basis import accepted_basis
+from ffls.relight.shadow_hull import ShadowHull
+from ffls.relight.sphere_shadows import SphereShadowFill, ground_points, hidden_photos
 from ffls.synth.scene import stratified_directions
 
 CAPTURE_ALBEDO, SCENE_ALBEDO = 0.3, 0.5
 WALL_ALBEDO = (0.6, 0.35, 0.25)
 CAM_ORIGIN, CAM_TARGET, FOV = (0.0, -0.866, 0.55), (0.0, 0.0, 0.05), 46.0
 SPHERES = ((-0.25, -0.25), (0.25, -0.25), (0.25, 0.25), (-0.25, 0.25))
+#: ``--fill`` values that fill the rest's weights.
+FILL_REST = ("rest", "all", "rest+model")
 
 
 def _diffuse(rgb):
@@ -177,6 +186,28 @@ def sphere_shadows(res, direction, radius_deg):
     return hidden
 
 
+def hull_shadow_check(mi, res, hull, ground, surface, direction, spp=8):
+    """The shadow hull's shadow against the object's real one under a distant light from ``direction``.
+
+    Renders the object on the ground (no spheres) with and without the object under one
+    ``directional`` light; the real shadow is the surface pixels where the first is below half the
+    second; the hull's, where :meth:`ffls.relight.shadow_hull.ShadowHull.shadow` > 1/2 at the
+    pixels' ground points. Returns ``{"iou", "true_px", "hull_px", "missed", "extra"}``.
+    """
+    base = {"type": "scene", "integrator": {"type": "path", "max_depth": 2}, "sensor": camera_sensor(mi, res, spp)}
+    lum = []
+    for obj in (True, False):
+        sc = mi.load_dict({**base, **scene_shapes(mi, CAPTURE_ALBEDO, obj, False, False),
+                           "light": {"type": "directional", "direction": list(-np.asarray(direction, dtype=float)),
+                                     "irradiance": {"type": "rgb", "value": 1.0}}})
+        lum.append(np.array(mi.render(sc, seed=5)) @ LUMINANCE)
+    true = surface & (lum[0] < 0.5 * lum[1])
+    got = surface & (hull.shadow(ground.reshape(-1, 3), direction).reshape(surface.shape) > 0.5)
+    union = int((true | got).sum())
+    return {"iou": float((true & got).sum() / union) if union else float("nan"), "true_px": int(true.sum()),
+            "hull_px": int(got.sum()), "missed": int((true & ~got).sum()), "extra": int((got & ~true).sum())}
+
+
 def cast_masks(mi, res):
     """Object, surface (ground, no spheres) and sphere masks by casting the camera's pixel-centre rays."""
     scene = mi.load_dict({"type": "scene", "sensor": camera_sensor(mi, res, 1), **scene_shapes(mi, 0.3, True, True, False)})
@@ -248,7 +279,9 @@ def main():
                          "their flow), levelset (cast shadows moved by their signed distances; ffls.relight.lightflow)")
     ap.add_argument("--fill", default="none",
                     help="the calibration spheres' shadows filled (ffls.relight.sphere_shadows) in both captures, "
-                         "with --sources lightflow/levelset: none, rest (the rest's weights), all (and the sources)")
+                         "with --sources lightflow/levelset: none, rest (the rest's weights), all (and the sources), "
+                         "model (the sources alone, from the unshadowed model and the object's shadow hull), "
+                         "rest+model")
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite_mitsuba")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite_mitsuba.json"))
     a = ap.parse_args()
@@ -266,7 +299,7 @@ def main():
     grow = max(2, int(round(0.02 * R)))
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
-    caps, fills = {}, {}
+    caps, fills, hulls = {}, {}, {}
     K, M = _camera(R)
     ground = ground_points(K, M, (R, R))
     ground[~sm_b] = np.nan  # the ground the camera sees: neither the object nor a sphere
@@ -276,6 +309,13 @@ def main():
                    render_capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
         fills[n] = tuple(SphereShadowFill.from_geometry(ground, centres, 0.05, lights.directions)
                          for _, lights in caps[n])
+        if any(f in ("model", "rest+model") for f in a.fill.split(",")):
+            basis, dirs = accepted_basis(*caps[n][0])
+            hulls[n] = ShadowHull.carve(basis, dirs, om_b, K, M, ground=sm_b,
+                                        hidden=hidden_photos(ground, centres, 0.05, dirs))
+            print(f"shadow hull of the {n}-light object capture: {int(hulls[n].occupancy.sum())} voxels of "
+                  f"{1000 * hulls[n].voxel:.1f} mm, umbra {hulls[n].umbra:.2f} ({time.perf_counter() - t0:.0f} s)",
+                  flush=True)
         print(f"captures of {n} lights ready ({time.perf_counter() - t0:.0f} s)", flush=True)
     rows = []
     for name in a.maps.split(","):
@@ -293,8 +333,10 @@ def main():
             if sources in ("lightflow", "levelset"):
                 kind = "flow" if sources == "lightflow" else "levelset"
                 fo, fs = fills[n] if fill != "none" else (None, None)
-                o = LightFlowRelighter(o, interpolation=kind, fill=fo, fill_sources=fill == "all")
-                s = LightFlowRelighter(s, interpolation=kind, fill=fs, fill_sources=fill == "all")
+                mode = {"all": "blend", "model": "model", "rest+model": "model"}.get(fill, False)
+                o = LightFlowRelighter(o, interpolation=kind, fill=fo, fill_sources=mode, fill_rest=fill in FILL_REST,
+                                       hull=hulls[n] if mode == "model" else None)
+                s = LightFlowRelighter(s, interpolation=kind, fill=fs, fill_sources=mode, fill_rest=fill in FILL_REST)
             for r in (o, s):
                 r.set_lightmap(lm)
                 r.render()
@@ -311,6 +353,14 @@ def main():
             # captures hold none of that source's light, so the object's shadow from it is in neither.
             hard = [(src, sphere_shadows(R, src.direction, src.radius_deg) & sm_b)
                     for src in (o.last_split.sources if sources != "weights" else ())]
+            checked = {}
+
+            def hull_checks(direction):
+                key = tuple(np.round(direction, 9))
+                if key not in checked:
+                    checked[key] = hull_shadow_check(mi, R, hulls[n], ground, sm_b, direction)
+                return checked[key]
+
             for method in METHODS:
                 res = composite(bg, oh, sh, om, sm, method=method)
                 c = res.image.astype(np.float64)
@@ -342,7 +392,9 @@ def main():
                      "change_pixels_in": int((change & h).sum()), "change_in": rel(c, change & h),
                      "change_off": rel(c, change & ~h),
                      "error_share_in": float(np.abs(c - tr)[change & h].sum() / total),
-                     "trace": trace(c, h & ~change & ~near_sph)} for src, h in hard]
+                     "trace": trace(c, h & ~change & ~near_sph),
+                     "hull_shadow": hull_checks(src.direction) if fill in ("model", "rest+model") else None}
+                    for src, h in hard]
                 x = rows[-1]
                 print(f"{name:10s} {n:4d} {scheme:12s} {sources:9s} fill {fill:4s} {method:12s} change {100 * x['change']:5.1f}%  "
                       f"paste {100 * x['paste']:5.1f}%  overall {100 * x['overall']:4.1f}%  object "
@@ -352,10 +404,14 @@ def main():
                       f"{100 * x['change_off_shadows']:4.1f}% ({x['change_pixels_in_shadows']} px in)  "
                       f"({x['change_pixels']} px) {note}", flush=True)
                 for k, h in enumerate(x["source_shadows"]):
+                    hs = h["hull_shadow"]
+                    hull_note = "" if hs is None else (
+                        f"; the hull's shadow of it: IoU {hs['iou']:.2f} with a render ({hs['true_px']} px, "
+                        f"{hs['missed']} missed, {hs['extra']} extra)")
                     print(f"    source {k}: its spheres' shadows hold {h['change_pixels_in']} change px, error "
                           f"{100 * h['change_in']:4.1f}% there ({100 * h['error_share_in']:3.0f}% of the change "
-                          f"error), {100 * h['change_off']:4.1f}% off them; trace there {100 * h['trace']:4.1f}%",
-                          flush=True)
+                          f"error), {100 * h['change_off']:4.1f}% off them; trace there {100 * h['trace']:4.1f}%"
+                          f"{hull_note}", flush=True)
     write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "map_spp": a.map_spp,
                        "capture_albedo": CAPTURE_ALBEDO,
                        "scene_albedo": SCENE_ALBEDO, "host": host_info(), "seconds": time.perf_counter() - t0,

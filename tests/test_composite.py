@@ -364,3 +364,36 @@ def test_mitsuba_benchmark_sphere_shadows_match_a_render(monkeypatch):
         assert (dark & geo).sum() / (dark | geo).sum() > 0.8  # 0.91-0.93 measured: pixel-edge coverage only
         mirrored = cm.sphere_shadows(res, d * [-1, -1, 1], 0.0)  # the light from the other side
         assert (mirrored & dark).sum() < 0.1 * dark.sum()
+
+
+def test_mitsuba_benchmark_shadow_hull_casts_the_objects_shadow(monkeypatch, tmp_path):
+    """The object's shadow hull carved from a small path-traced capture casts the object's shadow
+    for a light the capture does not have (benchmarks/composite_mitsuba.py's hull_shadow_check)."""
+    mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (pip install mitsuba)")
+    import importlib.util
+    from pathlib import Path
+
+    from ffls.relight.basis import accepted_basis
+    from ffls.relight.shadow_hull import ShadowHull
+    from ffls.relight.sphere_shadows import ground_points, hidden_photos
+
+    mi.set_variant("scalar_rgb")
+    bench = Path(__file__).resolve().parents[1] / "benchmarks"
+    monkeypatch.syspath_prepend(str(bench))  # its `common` module
+    spec = importlib.util.spec_from_file_location("composite_mitsuba", bench / "composite_mitsuba.py")
+    cm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cm)
+    res = 64
+    obj, ground, _ = cm.cast_masks(mi, res)
+    cap, lights = cm.render_capture(mi, tmp_path / "object", 80, 0, True, res, 4)
+    basis, dirs = accepted_basis(cap, lights)
+    pts = ground_points(cap.K, cap.world_from_camera, (res, res))
+    pts[~ground] = np.nan
+    centres = [(x, y, 0.05) for x, y in cm.SPHERES]
+    hull = ShadowHull.carve(basis, dirs, obj, cap.K, cap.world_from_camera, ground=ground,
+                            hidden=hidden_photos(pts, centres, 0.05, dirs))
+    for elevation, azimuth in ((12.0, 30.0), (35.0, 200.0)):
+        e, a = np.radians(elevation), np.radians(azimuth)
+        d = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+        check = cm.hull_shadow_check(mi, res, hull, pts, ground, d)
+        assert check["true_px"] > 30 and check["iou"] > 0.6, check

@@ -533,7 +533,8 @@ FIT_NEIGHBOURS = 12
 SHADOW_LEVEL = 0.5
 
 
-def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, iterations: int = 4) -> np.ndarray:
+def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, iterations: int = 4,
+                   prior=None) -> np.ndarray:
     """Per pixel, a linear model of the unshadowed photo as a function of the light direction.
 
     Over a small cap of the sphere any smooth reflectance is, to first order, linear in the light
@@ -551,6 +552,10 @@ def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, it
         Their unit directions.
     shadow_level : float
     iterations : int
+    prior : (k, H, W) float array, optional
+        Per photo and pixel, a weight >= 0 of the least squares (0: a photo known to hold nothing
+        of the unshadowed surface there, e.g. a calibration sphere's shadow from the geometry; a
+        kernel of the photos' angle to a direction of interest). Default: 1.
 
     Returns
     -------
@@ -565,18 +570,24 @@ def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, it
     y = y.reshape(k, H * W, 3).transpose(1, 0, 2)  # (P, k, 3)
     lum = y @ LUMINANCE.astype(np.float32)  # (P, k)
     LL = np.einsum("ki,kj->kij", L, L)  # (k, 3, 3)
-    m = np.ones(lum.shape, dtype=np.float64)
+    if prior is None:
+        w0 = np.ones(lum.shape, dtype=np.float64)
+    else:
+        w0 = np.asarray(prior, dtype=np.float64).reshape(k, H * W).T
+        if w0.shape != lum.shape or not np.all(w0 >= 0):
+            raise ValueError(f"prior must be ({k}, {H}, {W}) weights >= 0")
+    m = w0.copy()
     ridge = 1e-9 * np.eye(3)
     b = None
     for _ in range(max(1, int(iterations))):
         M = np.einsum("pk,kij->pij", m, LL) + ridge
         rhs = np.einsum("pk,ki,pkc->pic", m, L, y)
-        ok = m.sum(1) >= 3
+        ok = (m > 0).sum(1) >= 3
         b = np.full((H * W, 3, 3), np.nan)
         if ok.any():
             b[ok] = np.linalg.solve(M[ok], rhs[ok]).transpose(0, 2, 1)  # (P, channel, 3)
         pred = np.einsum("pci,ki->pkc", np.nan_to_num(b), L) @ LUMINANCE  # (P, k)
-        new = ((lum >= shadow_level * pred) | (pred <= 0)).astype(np.float64)
+        new = ((lum >= shadow_level * pred) | (pred <= 0)) * w0
         if np.array_equal(new, m):
             break
         m = new
@@ -862,13 +873,14 @@ def relight_lightflow(basis, directions, lightmap, rotation=None, hemisphere="up
     return img, split
 
 
-def _sources_image(fi: FlowInterpolator, sources, fill=None) -> np.ndarray:
+def _sources_image(fi: FlowInterpolator, sources, fill=None, mode: str = "blend", hull=None) -> np.ndarray:
     """Sum of the sources' samples, each its power times its interpolated photo.
 
     A sample outside the hemisphere (a source straddling the horizon) adds nothing, as the
     weighting drops the texels there. With ``fill`` (:class:`ffls.relight.sphere_shadows.SphereShadowFill`)
-    a sample's photo is, where one of its triangle's photos has the pixel in a calibration sphere's
-    shadow, the blend of the photos that see it.
+    a sample's photo is, where the sample is hidden by a calibration sphere, the blend of the
+    photos that see the pixel (``mode='blend'``) or their unshadowed model times the object's
+    ``hull`` visibility (``mode='model'``: :meth:`ffls.relight.sphere_shadows.SphereShadowFill.source_model`).
     """
     out = np.zeros(fi.basis.shape[1:], dtype=np.float32)
     for s in sources:
@@ -876,7 +888,9 @@ def _sources_image(fi: FlowInterpolator, sources, fill=None) -> np.ndarray:
         for d, p, ok in zip(s.sample_directions, s.sample_powers, inside):
             if ok:
                 img = fi.image(d)
-                if fill is not None:
+                if fill is not None and mode == "model":
+                    img = fill.source_model(img, d, fi.basis, hull=hull).astype(np.float32)
+                elif fill is not None:
                     img = fill.source_image(img, d, fi.weights(d)[0], fi.basis,
                                             interpolate=getattr(fi, "image_from", None)).astype(np.float32)
                 out += img * p.astype(np.float32)
@@ -903,23 +917,35 @@ class LightFlowRelighter:
     fill : ffls.relight.sphere_shadows.SphereShadowFill, optional
         The calibration spheres' shadows to fill: where a photo has a pixel in one, the rest's
         weight of that photo there goes to the photos that see the pixel.
-    fill_sources : bool
-        Also fill a compact source's photo where the source itself would be hidden by a sphere
-        (the visible photos' blend at its direction, tens of degrees away: measured worse on the
-        Mitsuba benchmark, docs/composite.md, so off by default).
+    fill_sources : bool or {'blend', 'model'}
+        Also fill a compact source's photo where the source itself would be hidden by a sphere:
+        True or ``'blend'``, the visible photos' blend at its direction, tens of degrees away
+        (measured worse on the Mitsuba benchmark, docs/composite.md, so off by default);
+        ``'model'``, the visible photos' unshadowed model at its direction times ``hull``'s
+        visibility (:meth:`ffls.relight.sphere_shadows.SphereShadowFill.source_model`). Needs
+        ``fill``.
+    hull : ffls.relight.shadow_hull.ShadowHull, optional
+        The object's shadow hull, for ``fill_sources='model'`` (None: a capture without the object).
+    fill_rest : bool
+        With ``fill``, fill the rest's weights (default); False fills the sources alone.
     """
 
     def __init__(self, inner, *, flow: str = "dis", split_options: dict | None = None,
-                 interpolation: str = "flow", fill=None, fill_sources: bool = False):
+                 interpolation: str = "flow", fill=None, fill_sources=False, hull=None,
+                 fill_rest: bool = True):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, not {interpolation!r}")
+        if fill_sources not in (False, True, "blend", "model"):
+            raise ValueError(f"fill_sources must be False, True, 'blend' or 'model', not {fill_sources!r}")
         self.inner = inner
         cls = FlowInterpolator if interpolation == "flow" else LevelSetInterpolator
         self.interpolation = interpolation
         self.interpolator = cls(inner.basis, inner.directions, inner.hemisphere, flow=flow)
         self.split_options = dict(split_options or {})
         self.fill = fill
-        self.fill_sources = bool(fill_sources)
+        self.fill_sources = {False: None, True: "blend"}.get(fill_sources, fill_sources)
+        self.hull = hull
+        self.fill_rest = bool(fill_rest)
         self._lightmap = None
         self._rotation = np.eye(3)
         self._hdr = None
@@ -960,10 +986,12 @@ class LightFlowRelighter:
             self.inner.set_rotation(self._rotation)
             self.inner.render()
             img = self.inner.read_hdr()
-            if self.fill is not None:
+            if self.fill is not None and self.fill_rest:
                 img = self.fill.relight(img, self.inner.read_weights(), self.inner.basis)
             if split.sources:
-                img = img + _sources_image(self.interpolator, split.sources, self.fill if self.fill_sources else None)
+                img = img + _sources_image(self.interpolator, split.sources,
+                                           self.fill if self.fill_sources else None,
+                                           self.fill_sources or "blend", self.hull)
             self._hdr = img.astype(np.float32)
             self.last_split = split
             self._display = None

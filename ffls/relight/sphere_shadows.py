@@ -37,6 +37,7 @@ import numpy as np
 from ffls.camera.projection import camera_rays
 from ffls.conventions import check_hemisphere
 from ffls.errors import InputError
+from ffls.relight.lightflow import FIT_NEIGHBOURS, unshadowed_fit
 from ffls.weights.barycentric import Barycentric
 from ffls.weights.voronoi import unique_directions
 
@@ -191,6 +192,8 @@ class SphereShadowFill:
         flat = hid.reshape(self.n, -1)
         any_hidden = np.flatnonzero(flat.any(axis=0))
         self.groups = []
+        #: Per flat pixel, its index in :attr:`groups` (-1: no photo hidden there).
+        self.group_of = np.full(flat.shape[1], -1, dtype=np.int32)
         if any_hidden.size == 0:
             return
         packed = np.packbits(flat[:, any_hidden], axis=0).T.copy()
@@ -205,6 +208,7 @@ class SphereShadowFill:
             h = np.flatnonzero(flat[:, pix[0]])
             visible = np.flatnonzero(kept & ~flat[:, pix[0]])
             tri = Barycentric(unit, visible, self.hemisphere) if visible.size >= 3 else None
+            self.group_of[pix] = len(self.groups)
             self.groups.append((h, pix, tri))
 
     @classmethod
@@ -286,6 +290,62 @@ class SphereShadowFill:
         B = np.asarray(basis).reshape(self.n, -1, 3)
         for pix, photos, delta in self.weights_correction(weights):
             flat[pix] += np.einsum("kc,kqc->qc", delta, B[photos][:, pix].astype(np.float64))
+        return out
+
+    def model_width_deg(self) -> float:
+        """Gaussian width (degrees) of :meth:`source_model`'s local fit: the cap that holds
+        2 x :data:`ffls.relight.lightflow.FIT_NEIGHBOURS` of the photos on average."""
+        area = (4 * np.pi if self.hemisphere.axis is None else 2 * np.pi) * min(1.0, 2 * FIT_NEIGHBOURS / self.n)
+        return float(np.degrees(np.arccos(1.0 - area / (2 * np.pi))))
+
+    def source_model(self, image, direction, basis, *, hull=None) -> np.ndarray:
+        """A compact source's unit-power image with its sphere shadows replaced by the unshadowed model.
+
+        Where a light from ``direction`` would be hidden by a sphere (:meth:`hidden_for`) no photo
+        holds the pixel under that light. Its unshadowed brightness is the local linear model
+        (:func:`ffls.relight.lightflow.unshadowed_fit`) of the photos that see the pixel (the
+        pixel's hidden photos left out), weighted by a Gaussian of their angle to ``direction``
+        (:meth:`model_width_deg`), evaluated at ``direction``: exact for a Lambertian surface. The
+        object's shadow there comes from its geometry: times ``hull.visibility(points, direction)``
+        (:class:`ffls.relight.shadow_hull.ShadowHull`) where a hull is given (the object capture),
+        1 without (the surface-alone capture).
+
+        Parameters
+        ----------
+        image : (H, W, 3) float array
+            The interpolated photo for ``direction``.
+        direction : (3,) array_like
+        basis : (n, H, W, 3) float array
+        hull : ShadowHull, optional
+
+        Returns
+        -------
+        (H, W, 3) float64
+        """
+        out = np.array(image, dtype=np.float64)
+        d = np.asarray(direction, dtype=np.float64).reshape(3)
+        d = d / np.linalg.norm(d)
+        here = self.hidden_for(d)
+        if here is None:
+            raise ValueError("source_model needs the spheres' geometry (SphereShadowFill.from_geometry)")
+        pix = np.flatnonzero(here.ravel())
+        if pix.size == 0:
+            return out
+        prior = np.ones((self.n, pix.size))
+        groups = self.group_of[pix]
+        for g in np.unique(groups[groups >= 0]):
+            prior[np.ix_(self.groups[g][0], np.flatnonzero(groups == g))] = 0.0
+        angle = np.degrees(np.arccos(np.clip(self.directions @ d, -1.0, 1.0)))
+        prior *= np.exp(-0.5 * (angle / self.model_width_deg()) ** 2)[:, None]
+        B = np.asarray(basis).reshape(self.n, -1, 3)[:, pix].astype(np.float32)
+        b = unshadowed_fit(B[:, :, None], self.directions, prior=prior[:, :, None])[:, 0]
+        model = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
+        good = np.all(np.isfinite(model), axis=-1)
+        if hull is not None:
+            pts = np.asarray(self.geometry["points"], dtype=np.float64).reshape(-1, 3)[pix]
+            model *= hull.visibility(pts, d)[:, None]
+        flat = out.reshape(-1, 3)
+        flat[pix[good]] = model[good]
         return out
 
     def source_image(self, image, direction, triangle, basis, interpolate=None) -> np.ndarray:

@@ -1,0 +1,175 @@
+"""The object's shadow hull (ffls.relight.shadow_hull): carved from its cast shadows, it gives the
+object's shadow where a calibration sphere hides the ground from a light (SphereShadowFill.source_model)."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ffls.errors import InputError
+from ffls.lightmaps.lightmap import LightMap
+from ffls.relight.cpu import CpuRelighter
+from ffls.relight.lightflow import LightFlowRelighter, unshadowed_fit
+from ffls.relight.shadow_hull import ShadowHull, lit_photos
+from ffls.relight.sphere_shadows import SphereShadowFill, ground_points, hidden_photos
+from ffls.synth.scene import stratified_directions
+
+RES = 96
+BOX = (np.array([-0.06, -0.04, 0.0]), np.array([0.06, 0.04, 0.16]))  # the object: a box on the ground
+SPHERE = ((0.25, 0.0, 0.05), 0.05)                                      # a calibration sphere beside it
+
+
+def _camera():
+    """A camera 1 m up, 0.4 m to the -y side, looking at the origin (OpenCV axes), 60 degrees wide."""
+    f = 0.5 * RES / math.tan(math.radians(30))
+    K = np.array([[f, 0, 0.5 * (RES - 1)], [0, f, 0.5 * (RES - 1)], [0, 0, 1.0]])
+    o = np.array([0.0, -0.4, 1.0])
+    z = -o / np.linalg.norm(o)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    M = np.eye(4)
+    M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, np.cross(z, x), z, o
+    return K, M
+
+
+def _hits_box(p, d):
+    """(m,) bool: rays from points p (m, 3) along d (3,) or (m, 3) meet the box."""
+    lo, hi = BOX
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (lo - p) / d, (hi - p) / d
+    tn = np.where(np.isnan(t0), -np.inf, np.minimum(t0, t1)).max(-1)
+    tf = np.where(np.isnan(t1), np.inf, np.maximum(t0, t1)).min(-1)
+    return (tf > np.maximum(tn, 1e-9))
+
+
+def _scene(directions):
+    """Photos of a white Lambertian ground (n . d) with the box's and the sphere's hard shadows."""
+    K, M = _camera()
+    g = ground_points(K, M, (RES, RES))
+    jj, ii = np.mgrid[0:RES, 0:RES].astype(np.float64)
+    rays = np.stack([(ii - K[0, 2]) / K[0, 0], (jj - K[1, 2]) / K[1, 1], np.ones_like(ii)], -1) @ M[:3, :3].T
+    cam = np.broadcast_to(M[:3, 3], rays.shape)
+    obj = _hits_box(cam.reshape(-1, 3), rays.reshape(-1, 3)).reshape(RES, RES)
+    c, r = SPHERE
+    v = np.asarray(c) - cam
+    along = np.einsum("hwi,hwi->hw", v, rays) / np.einsum("hwi,hwi->hw", rays, rays)
+    sph = np.linalg.norm(cam + along[..., None] * rays - c, axis=-1) < r
+    ground = ~obj & ~sph
+    pts = np.where(ground[..., None], g, np.nan)
+    hid = hidden_photos(pts, [c], r, directions=directions, dilate_px=0)
+    basis = np.zeros((len(directions), RES, RES, 3))
+    for i, d in enumerate(directions):
+        lit = ~_hits_box(g.reshape(-1, 3), d).reshape(RES, RES) & ~hid[i]
+        basis[i] = (max(d[2], 0.0) * lit * ground)[..., None]
+    return K, M, obj, ground, pts, basis
+
+
+def test_unshadowed_fit_prior_leaves_out_photos_known_to_be_dark():
+    """A photo with prior 0 does not pull the model, however many are dark (a sphere's cone)."""
+    d = stratified_directions(60, "upper", 0)
+    photos = np.broadcast_to(d[:, 2][:, None, None, None], (60, 1, 2, 3)).copy()
+    dark = np.degrees(np.arccos(d[:, 2])) < 40
+    photos[dark, :, 0] = 0.0
+    prior = np.ones((60, 1, 2))
+    prior[dark, :, 0] = 0.0
+    b = unshadowed_fit(photos, d, prior=prior)
+    np.testing.assert_allclose(b[0, 0, :, 2], 1.0, atol=1e-6)
+    np.testing.assert_allclose(b[0, 1, :, 2], 1.0, atol=1e-6)
+    with pytest.raises(ValueError):
+        unshadowed_fit(photos, d, prior=-prior)
+
+
+def test_carved_hull_casts_the_objects_shadow_for_a_new_light():
+    d = stratified_directions(150, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    vis, known, umbra = lit_photos(basis, d, ground)
+    assert known.any() and (vis[known] >= 0.5).mean() > 0.5 and umbra == 0.0 and np.all(vis[~known] == 0)
+    hull = ShadowHull.carve(basis, d, obj, K, M, ground=ground)
+    # a light the capture does not have, low (20 degrees), between capture lights
+    e, a = math.radians(20), math.radians(37)
+    new = np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+    g = pts.reshape(-1, 3)
+    ok = ground.ravel()
+    truth = _hits_box(np.nan_to_num(g), new) & ok
+    got = (hull.shadow(g, new) > 0.5) & ok
+    iou = (truth & got).sum() / (truth | got).sum()
+    assert truth.sum() > 40 and iou > 0.8, (truth.sum(), got.sum(), iou)
+    assert np.median(hull.visibility(g[truth & got], new)) < 0.05
+    # nothing in the hull far from the box
+    far = hull.shadow(np.array([[0.4, 0.4, 0.0]]), np.array([0.0, 0.0, 1.0]))
+    assert far[0] == 0.0
+    with pytest.raises(InputError):
+        ShadowHull.carve(basis, d, np.zeros_like(obj), K, M)
+
+
+def test_source_model_puts_the_objects_shadow_inside_a_spheres_shadow():
+    """A light the sphere hides from part of the box's shadow: both captures' photos are dark there;
+    the model fill with the hull gives the object's shadow there and the lit ground around it."""
+    d = stratified_directions(150, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    c, r = SPHERE
+    hid = hidden_photos(pts, [c], r, directions=d, dilate_px=0)
+    hull = ShadowHull.carve(basis, d, obj, K, M, ground=ground, hidden=hid)
+    # the light from -x at 15 degrees: the box's shadow runs toward +x, through the sphere's
+    e = math.radians(15)
+    src = np.array([-math.cos(e), 0.0, math.sin(e)])
+    here = hidden_photos(pts, [c], r, directions=src[None], dilate_px=0)[0]
+    g = pts.reshape(-1, 3)
+    box_shadow = _hits_box(np.nan_to_num(g), src).reshape(RES, RES) & ground
+    both = here & box_shadow
+    assert both.sum() >= 5 and (here & ~box_shadow).sum() >= 5
+    fill = SphereShadowFill.from_geometry(pts, [c], r, d, dilate_px=0)
+    dark = np.zeros((RES, RES, 3))
+    truth = (src[2] * ~box_shadow)[..., None] * np.ones(3)
+    with_hull = fill.source_model(dark, src, basis, hull=hull)
+    without = fill.source_model(dark, src, basis)
+    err = np.abs(with_hull - truth)[..., 0]
+    assert err[both].mean() < 0.2 * src[2], err[both].mean()
+    assert err[here & ~box_shadow].mean() < 0.05 * src[2]
+    # without the hull the object's shadow there is lost (the surface-alone capture's fill)
+    assert np.abs(without - truth)[..., 0][both].mean() > 0.9 * src[2]
+    # pixels the sphere does not hide are the image as given
+    assert np.array_equal(with_hull[~here], dark[~here])
+
+
+def test_relighter_fills_a_hidden_sun_with_the_model_and_the_hull():
+    """LightFlowRelighter(fill_sources='model'): where the sphere hides the sun, the object capture
+    relit under a sun map shows the box's shadow (hull) and the lit ground; without the fill, the
+    sphere's shadow."""
+    d = stratified_directions(150, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    c, r = SPHERE
+    hull = ShadowHull.carve(basis, d, obj, K, M, ground=ground, hidden=hidden_photos(pts, [c], r, directions=d))
+    e = math.radians(15)
+    sun = np.array([-math.cos(e), 0.0, math.sin(e)])
+    lm = LightMap(np.full((64, 128, 3), 1e-4, np.float32), "latlong")
+    dirs, _, _ = lm.samples()
+    data = lm.data.reshape(-1, 3).copy()
+    data[np.argmax(dirs @ sun)] = 2e4                    # a sun of one texel
+    lm = replace(lm, data=data.reshape(lm.data.shape))
+    fill = SphereShadowFill.from_geometry(pts, [c], r, d)
+    images = {}
+    for mode, h in (("model", hull), (False, None)):
+        rel = LightFlowRelighter(CpuRelighter(basis, d, weighting="barycentric"), fill=fill, fill_sources=mode,
+                                 fill_rest=False, hull=h)
+        rel.set_lightmap(lm)
+        rel.render()
+        images[mode] = rel.read_hdr()[..., 0]
+        assert len(rel.last_split.sources) == 1
+    sun = rel.last_split.sources[0].sample_directions[0]  # the texel's centre
+    here = fill.hidden_for(sun)
+    box_shadow = _hits_box(np.nan_to_num(pts.reshape(-1, 3)), sun).reshape(RES, RES) & ground
+    lit_here, shade_here = here & ~box_shadow, here & box_shadow
+    lit_far = ground & ~here & ~box_shadow
+    assert lit_here.sum() >= 5 and shade_here.sum() >= 5
+    level = np.median(images["model"][lit_far])
+    assert np.median(images["model"][lit_here]) > 0.85 * level
+    assert np.median(images["model"][shade_here]) < 0.2 * level
+    assert np.median(images[False][lit_here]) < 0.2 * level
+    with pytest.raises(ValueError):
+        LightFlowRelighter(CpuRelighter(basis, d), fill=fill, fill_sources="hull")
