@@ -171,7 +171,8 @@ def number(lo: float | None = None, hi: float | None = None, lo_open: bool = Fal
     return parse
 
 
-def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str = "", special: dict | None = None):
+def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str = "", special: dict | None = None,
+            why: str = ""):
     """argparse type: an integer in ``[lo, hi]``, optionally within the machine's memory.
 
     Parameters
@@ -185,6 +186,8 @@ def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str
         What the value is, for the memory message (``"cell texture"``).
     special : dict, optional
         Words or values accepted outside the range, mapped to what they mean (``{"0": 0}``).
+    why : str
+        Why the range is what it is, said after it in the message.
     """
     special = dict(special or {})
 
@@ -198,7 +201,8 @@ def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str
             v = None
         if v is None or not _in_range(v, lo, hi, False, False):
             extra = "".join(f" or {k}" for k in special)
-            raise argparse.ArgumentTypeError(f"expected an integer {_range_text(lo, hi)}{extra}, not {text!r}")
+            raise argparse.ArgumentTypeError(f"expected an integer {_range_text(lo, hi)}{extra}"
+                                             f"{f' ({why})' if why else ''}, not {text!r}")
         if memory is not None:
             check_memory(memory(v), f"{v}" + (f" ({what})" if what else ""))
         return v

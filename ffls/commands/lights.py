@@ -135,6 +135,21 @@ def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path
     return Path(path)
 
 
+def check_first_pass(first_pass, bounce: str, n_photos: int) -> None:
+    """``--first-pass N`` against the capture: N above its photo count meant every photo silently,
+    and with ``--bounce free`` there is no first pass (every photo is fitted once)."""
+    from ffls.errors import InputError
+
+    if not first_pass:  # (not given, or "all": every photo, as --bounce free fits them)
+        return
+    if bounce != "calibrated":
+        raise InputError(f"--first-pass applies only with --bounce calibrated (--bounce {bounce} fits every photo "
+                         "once)")
+    if first_pass > n_photos:
+        raise InputError(f"--first-pass {first_pass} is more than the capture's {n_photos} photos: give at most "
+                         f"{n_photos}, or --first-pass all")
+
+
 def run(args) -> int:
     from ffls.io.capture import load_capture, save_lights
     from ffls.spheres.estimate import estimate_lights
@@ -142,6 +157,7 @@ def run(args) -> int:
     from ffls.commands.common import print_notes, show_progress
 
     cap = load_capture(args.capture)
+    check_first_pass(args.first_pass, args.bounce, len(cap))
     progress = show_progress(args)
     decoded = None
     cluster = bool(getattr(args, "scheduler", None))

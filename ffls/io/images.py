@@ -23,6 +23,7 @@ does not report every failure (a full disk), so its return value and the file ar
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import os
 import sys
@@ -33,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError, OutputError, atomic_output, register_input, run_uninterrupted
+from ffls.errors import (InputError, OutputError, atomic_output, os_error_message, register_input,
+                         run_uninterrupted)
 
 __all__ = [
     "ImageData",
@@ -49,6 +51,8 @@ __all__ = [
     "premultiply",
     "with_alpha",
     "quiet_native_output",
+    "ImageHeader",
+    "image_header",
     "nonfinite_message",
 ]
 
@@ -536,6 +540,77 @@ def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
     return np.clip(m, 0.0, 1.0).astype(np.float32)
 
 
+@dataclass(frozen=True)
+class ImageHeader:
+    """What an image file's header says, read without decoding its pixels (:func:`image_header`).
+
+    Attributes
+    ----------
+    width, height : int
+        The size in pixels.
+    grey : bool
+        One colour channel (grey, or grey + alpha; an EXR of ``Y`` only): :func:`read_image`
+        replicates it to RGB.
+    """
+
+    width: int
+    height: int
+    grey: bool
+
+
+# Pillow modes of one colour channel (with or without alpha)
+_GREY_MODES = {"1", "L", "LA", "La", "I", "F", "I;16", "I;16B", "I;16L", "I;16N", "PA"}
+
+
+def image_header(path: str | os.PathLike) -> ImageHeader | None:
+    """Size and channel count of an image file from its header alone, without decoding it.
+
+    OpenEXR through its bindings' header-only read, PNG/JPEG/TIFF through Pillow (which reads
+    the header lazily), Radiance ``.hdr`` from its resolution line. A check of a photo's size
+    thus costs a fraction of a millisecond, where decoding a 12000x12000 PNG to find it takes
+    seconds and gigabytes.
+
+    Returns
+    -------
+    ImageHeader or None
+        None where the header cannot be read here (a sample format Pillow does not know, such as
+        a float TIFF, a corrupt file, an ``.hdr`` in another orientation): :func:`read_image`
+        then decodes the file and reports what is wrong with it.
+    """
+    path = Path(path)
+    kind = _KINDS.get(path.suffix.lower())
+    try:
+        if kind == "exr":
+            import OpenEXR
+
+            with quiet_native_output():
+                header = OpenEXR.File(str(path), header_only=True).header()
+            (x0, y0), (x1, y1) = (tuple(int(v) for v in c) for c in header["dataWindow"])
+            names = {ch.name for ch in header["channels"]}
+            grey = not {"R", "G", "B"} <= names and "Y" in names and not names & {"RY", "BY"}
+            return ImageHeader(x1 - x0 + 1, y1 - y0 + 1, grey)
+        if kind == "hdr":  # text lines, a blank line, then e.g. "-Y 480 +X 640"
+            with open(path, "rb") as f:
+                head = f.read(4096).split(b"\n\n", 1)
+            words = head[1].split(b"\n", 1)[0].split() if len(head) == 2 else []
+            if len(words) == 4 and words[0] == b"-Y" and words[2] == b"+X":
+                return ImageHeader(int(words[3]), int(words[1]), False)
+            return None
+        if kind in ("png", "jpeg", "tiff"):
+            from PIL import JpegImagePlugin, PngImagePlugin, TiffImagePlugin
+
+            # the format's own reader, not Image.open: that refuses (or warns about) large sizes,
+            # which are the caller's to judge
+            reader = {"png": PngImagePlugin.PngImageFile, "jpeg": JpegImagePlugin.JpegImageFile,
+                      "tiff": TiffImagePlugin.TiffImageFile}[kind]
+            with reader(path) as im:
+                (w, h), mode = im.size, im.mode
+            return ImageHeader(int(w), int(h), mode in _GREY_MODES)
+    except Exception:  # (unreadable here: read_image decodes it and names what is wrong)
+        return None
+    return None
+
+
 def exr_chromaticities(path: str | os.PathLike) -> tuple | None:
     """The ``chromaticities`` attribute of an OpenEXR file (8 floats), read from the header only; None when absent."""
     import OpenEXR
@@ -692,7 +767,10 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> P
             except Exception as e:  # a full disk, ...: the bindings raise RuntimeError
                 err = e
         if err is not None:
-            raise OutputError(f"cannot write OpenEXR file ({cap.first_line() or err})", path) from None
+            why = cap.first_line() or str(err)
+            if "No space left" in why:  # (OpenEXR's text names the temporary file)
+                why = os_error_message(OSError(errno.ENOSPC, why))
+            raise OutputError(f"cannot write OpenEXR file ({why})", path) from None
     return path
 
 
