@@ -234,9 +234,7 @@ def check_window_args(args) -> None:
     ------
     ffls.errors.InputError, ffls.errors.OutputError
     """
-    from pathlib import Path
-
-    from ffls.errors import InputError, check_output_path
+    from ffls.errors import InputError
     from viewer.headless import choose_platform
 
     null = choose_platform(True if args.headless else None) == "null"
@@ -247,7 +245,20 @@ def check_window_args(args) -> None:
         raise InputError(f"--fullscreen needs a display ({why} has no monitor)")
     if getattr(args, "light", None) is not None and args.probe is not None:
         raise InputError("--probe and --light exclude each other: give one")
+    check_screenshot_paths(args)
+
+
+def check_screenshot_paths(args) -> None:
+    """Both outputs of ``--screenshot`` (the PNG and its sibling ``.exr``) can be written and
+    replace no input (:func:`ffls.errors.check_output_path`). Checked again once the capture is
+    open, its photos then being registered inputs: ``--screenshot CAP/img_0000.png`` was refused
+    only when the screenshot was written, after the window's informational lines."""
+    from pathlib import Path
+
+    from ffls.errors import check_output_path
+
     if args.screenshot is not None:
+        check_output_path(args.screenshot)
         check_output_path(Path(args.screenshot).with_suffix(".exr"))
 
 
@@ -262,6 +273,7 @@ def run(args) -> int:
     check_window_args(args)
     st = build_state(args)
     capture, lights = open_capture(args.capture, args.lights, getattr(args, "lights_map", None))
+    check_screenshot_paths(args)
     _check_and_report(args, capture, lights)
     if args.profile and not args.benchmark:
         raise InputError("--profile needs --benchmark")

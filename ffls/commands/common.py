@@ -23,6 +23,7 @@ import contextvars
 import math
 import os
 import sys
+from pathlib import Path
 
 __all__ = [
     "learnt_kernel",
@@ -55,6 +56,7 @@ __all__ = [
     "check_cells_res",
     "print_notes",
     "flush_notes",
+    "check_output_kind",
     "deferred_notes",
     "add_mask_argument",
     "load_relight_inputs",
@@ -847,6 +849,25 @@ def check_mask_not_empty(mask, path, flag: str = "--mask", what: str = "object")
         from ffls.errors import InputError
 
         raise InputError(f"{flag} is empty: no {what} pixel (white = {what})", path)
+
+
+#: What a still (no ``--turntable``) is written as.
+STILL_SUFFIXES = (".exr", ".png")
+
+
+def check_output_kind(args, out) -> None:
+    """``-o`` against ``--turntable``: a still is .exr/.png, a turntable an .mp4 or a folder.
+
+    Checked before anything is loaded: a turntable into ``OUT.png`` was refused only when its
+    frames were about to be written, after its coverage lines (two lines for one error).
+    """
+    from ffls.errors import InputError
+
+    suffix = Path(out).suffix.lower()
+    if args.turntable is None and suffix not in STILL_SUFFIXES:
+        raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
+    if args.turntable is not None and suffix and suffix != ".mp4":
+        raise InputError(f"--turntable writes a video (.mp4) or a folder of PNGs (no extension), not {suffix}", out)
 
 
 def check_fps_flag(args, out=None) -> None:

@@ -121,9 +121,9 @@ class _Json:
         except OSError as e:
             self.fail("", f"cannot read {what} ({os_error_message(e)})")
         try:
-            doc = json.loads(text)
-        except json.JSONDecodeError as e:
-            self.fail("", f"corrupt JSON at line {e.lineno} column {e.colno}: {e.msg}")
+            doc = parse_json(text)
+        except ValueError as e:
+            self.fail("", str(e))
         if not isinstance(doc, dict):
             self.fail("", f"{what} must hold a JSON object, not {type(doc).__name__}")
         return doc
@@ -175,6 +175,23 @@ class _Json:
         if not isinstance(value, str) or not value:
             self.fail(key, f"expected a non-empty string, got {_short(value)}")
         return value
+
+
+def parse_json(text: str):
+    """``json.loads(text)``, every failure one ``ValueError`` of one line.
+
+    Besides corrupt text (``corrupt JSON at line L column C: ...``), Python's parser fails on a
+    document nested deeper than its recursion limit (``RecursionError``, a traceback before) and
+    on an integer of more than 4300 digits (a ``ValueError`` of three sentences).
+    """
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"corrupt JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    except RecursionError:
+        raise ValueError("corrupt JSON: nested deeper than Python's parser goes") from None
+    except ValueError:  # (int: "Exceeds the limit (4300 digits) for integer string conversion ...")
+        raise ValueError("corrupt JSON: a number of more than 4300 digits") from None
 
 
 def _all_numbers(value) -> bool:
@@ -549,6 +566,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         if not p.is_file():
             j.fail("images", f"listed image {n!r} is a folder, not a file" if p.is_dir()
                    else f"listed image {n!r} not found in {folder}")
+        register_input(p)  # (an output onto a photo is refused from now on, not only once it was read)
 
     image_size = None
     if "image_size" in doc:
@@ -1143,9 +1161,9 @@ def parse_lights_map(spec) -> dict:
         text = str(spec)
         if text.lstrip().startswith("{"):
             try:
-                doc = json.loads(text)
-            except json.JSONDecodeError as e:
-                raise InputError(f"--lights-map: not valid JSON ({e.msg} at column {e.colno})") from None
+                doc = parse_json(text)
+            except ValueError as e:
+                raise InputError(f"--lights-map: not valid JSON ({e})") from None
         else:
             where = Path(text)
             doc = _Json(where).load("lights map")

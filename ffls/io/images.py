@@ -425,6 +425,11 @@ def _tiff_alpha_dropped(path: Path, shape: tuple) -> np.ndarray | None:
     return a if a.shape == tuple(shape) else None
 
 
+# Pillow modes of files OpenCV decodes (a header of another, e.g. 'F' or 'I;16S', is a sample
+# format OpenCV does not read)
+_CV2_MODES = {"1", "L", "LA", "P", "PA", "RGB", "RGBA", "CMYK", "YCbCr", "I;16", "I;16B", "I;16L"}
+
+
 def _undecodable(path: Path, kind: str, whole: bool) -> str:
     """Why OpenCV decoded nothing: a valid file beyond its pixel limit or in a sample format it
     does not read (asked of Pillow, which reads the header only), else corrupt or truncated."""
@@ -447,6 +452,8 @@ def _undecodable(path: Path, kind: str, whole: bool) -> str:
         else:
             if w * h >= 2 ** 30:
                 return f"{what}: {w}x{h} is beyond OpenCV's limit of 2^30 pixels"
+            if mode in _CV2_MODES:  # a header OpenCV reads: the data after it is what failed
+                return f"{what}: its {w}x{h} header is valid but the data is corrupt or truncated"
             return (f"{what}: a {w}x{h} {kind.upper()} of sample format {mode!r}, which OpenCV does not read; "
                     "convert it to 8- or 16-bit integer or 32-bit float (or EXR)")
     if kind == "tiff":  # (a TIFF's sample formats are many: 16-bit float, 1-bit, ...)
