@@ -203,7 +203,8 @@ def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str
             v = None
         if v is None or not _in_range(v, lo, hi, False, False):
             extra = "".join(f" or {k}" for k in special)
-            raise argparse.ArgumentTypeError(f"expected an integer {_range_text(lo, hi)}{extra}"
+            rng = _range_text(lo, hi)
+            raise argparse.ArgumentTypeError(f"expected an integer{'' if rng == 'finite' else ' ' + rng}{extra}"
                                              f"{f' ({why})' if why else ''}, not {text!r}")
         if memory is not None:
             check_memory(memory(v), f"{v}" + (f" ({what})" if what else ""))

@@ -151,6 +151,7 @@ def check_first_pass(first_pass, bounce: str, n_photos: int) -> None:
 
 
 def run(args) -> int:
+    from ffls.errors import check_output_path
     from ffls.io.capture import load_capture, save_lights
     from ffls.spheres.estimate import estimate_lights
 
@@ -158,6 +159,9 @@ def run(args) -> int:
 
     cap = load_capture(args.capture)
     check_first_pass(args.first_pass, args.bounce, len(cap))
+    for out in (args.output, args.plot, args.lp):  # onto capture.json or a photo: refused before the fits
+        if out:
+            check_output_path(out)
     progress = show_progress(args)
     decoded = None
     cluster = bool(getattr(args, "scheduler", None))
