@@ -253,3 +253,102 @@ def test_ctrl_c_while_the_cluster_starts_is_one_line(tmp_path):
     lines = err.strip().splitlines()
     assert p.returncode == 130 and len(lines) == 1 and "interrupted" in lines[0], err
     assert not (tmp_path / "l.json").exists()
+
+
+# ----------------------------------------------------------------------------- the table of round 10
+@pytest.fixture(scope="module")
+def ws(cap, tmp_path_factory):
+    """Broken files beside the good capture ``cap``."""
+    root = tmp_path_factory.mktemp("r10ws")
+    w = {"cap": cap, "root": root}
+    lights = (cap / "lights.json").read_text()
+    (root / "deep.json").write_text("[" * 100000 + "]" * 100000)
+    (root / "bigint.json").write_text(lights.replace('"version": 1', '"version": ' + "1" * 5000, 1))
+    for name, text in (("cap_deep", "[" * 100000 + "]" * 100000),
+                       ("cap_bigint", (cap / "capture.json").read_text().replace('"version": 1',
+                                                                                   '"version": ' + "1" * 5000, 1))):
+        shutil.copytree(cap, root / name)
+        (root / name / "capture.json").write_text(text)
+    br = root / "bracket"  # exposures.json nested too deep
+    br.mkdir()
+    for k in range(3):
+        write_png(br / f"b{k}.png", np.full((16, 16, 3), 40 * (k + 1), np.uint8))
+    (br / "exposures.json").write_text('{"a":' * 50000 + "1" + "}" * 50000)
+    rng = np.random.default_rng(1)
+    for ext in ("png", "jpg"):  # valid headers, the data cut in half
+        import cv2
+
+        assert cv2.imwrite(str(root / f"whole.{ext}"), rng.integers(0, 255, (40, 48, 3), dtype=np.uint8))
+        data = (root / f"whole.{ext}").read_bytes()
+        (root / f"cut.{ext}").write_bytes(data[: len(data) // 2])
+    return w
+
+
+L10 = ["relight", "{cap}", "--probe", "sky"]
+CASES10 = [
+    # JSON that Python's parser fails on with a traceback (RecursionError; a 4300-digit ValueError)
+    ("lights-json-deep", L10 + ["--lights", "{root}/deep.json", "-o", "{out}/a.exr"], "deep.json: corrupt JSON: nested"),
+    ("lights-json-bigint", L10 + ["--lights", "{root}/bigint.json", "-o", "{out}/a.exr"],
+     "bigint.json: corrupt JSON: a number of more than 4300 digits"),
+    ("capture-json-deep", ["relight", "{root}/cap_deep", "--probe", "sky", "-o", "{out}/a.exr"],
+     "capture.json: corrupt JSON: nested"),
+    ("capture-json-bigint", ["relight", "{root}/cap_bigint", "--probe", "sky", "-o", "{out}/a.exr"],
+     "capture.json: corrupt JSON: a number of more"),
+    ("lights-map-deep", L10 + ["--lights-map", '{"a":' + "[" * 100000 + "]" * 100000 + "}", "-o", "{out}/a.exr"],
+     "--lights-map: not valid JSON (corrupt JSON: nested"),
+    ("exposures-json-deep", ["calibrate", "response", "{root}/bracket", "-o", "{out}/r.npy"],
+     "exposures.json: cannot read exposures (corrupt JSON: nested"),
+    # a truncated PNG/JPEG was called "a sample format OpenCV does not read"
+    ("mask-png-truncated", L10 + ["--mask", "{root}/cut.png", "-o", "{out}/a.png"],
+     "cut.png: cannot decode PNG image: its 48x40 header is valid but the data is corrupt or truncated"),
+    ("mask-jpg-truncated", L10 + ["--mask", "{root}/cut.jpg", "-o", "{out}/a.png"],
+     "cut.jpg: cannot decode JPEG image: its 48x40 header is valid but the data is corrupt or truncated"),
+    # a turntable into a still's file was refused after its coverage lines (two lines)
+    ("render-turntable-png", ["render", "{cap}", "--probe", "sky", "--cpu", "--turntable", "2", "-o", "{out}/t.png"],
+     "t.png: --turntable writes a video (.mp4) or a folder of PNGs (no extension), not .png"),
+    # abbreviated flags: --light (render's) was "ambiguous" in relight, --exp silently --exposure
+    ("relight-abbrev-light", L10 + ["--light", "10,45", "-o", "{out}/a.png"], "unrecognized arguments: --light"),
+    ("relight-abbrev-exp", L10 + ["--exp", "2", "-o", "{out}/a.png"], "unrecognized arguments: --exp 2"),
+    ("calibrate-abbrev", ["calibrate", "response", "{root}/bracket", "--samp", "20", "-o", "{out}/r.npy"],
+     "unrecognized arguments: --samp 20"),
+    # a negative value after a space, and the integer wording
+    ("render-rotate-negative", ["render", "{cap}", "--probe", "sky", "--cpu", "--rotate", "-90,0,0", "-o",
+                                "{out}/a.png"], "given as --rotate=-90,0,0"),
+    ("render-rank-hex", ["render", "{cap}", "--probe", "sky", "--cpu", "--rank", "0x3", "-o", "{out}/a.png"],
+     "expected an integer, not '0x3'"),
+    # lights onto capture.json was refused only after every fit
+    ("lights-onto-capture", ["lights", "{cap}", "--workers", "1", "-o", "{cap}/capture.json"],
+     "capture.json: refusing to overwrite an input"),
+]
+
+
+@pytest.mark.parametrize("argv,names", [pytest.param(a, n, id=i) for i, a, n in CASES10])
+def test_round10_bad_input_is_one_line(ws, tmp_path, capfd, monkeypatch, argv, names):
+    import ffls.spheres.estimate
+
+    def no_fit(*a, **k):
+        raise AssertionError("the lights were fitted before the output was checked")
+
+    monkeypatch.setattr(ffls.spheres.estimate, "estimate_lights", no_fit)
+    out = tmp_path / "out"
+    out.mkdir()
+    keys = {k: str(v) for k, v in ws.items()}
+    args = [a if a.startswith('{"a"') else a.format(out=out, **keys) for a in argv]
+    before = {p: sorted(q.name for q in p.iterdir()) for p in (out, ws["cap"], ws["root"])}
+    rc, line = _one_line(capfd, args)
+    assert rc == 2 and "error" in line and names in line, line
+    for p, names_before in before.items():  # nothing written, no temporary left
+        assert sorted(q.name for q in p.iterdir()) == names_before, p
+
+
+def test_store_in_a_read_only_folder_is_one_line(cap, tmp_path, capfd, monkeypatch):
+    """An ingest into a read-only folder said "cannot write the store (read-only file system); the
+    unfinished store is kept" of a store that was never made (mocked: root ignores permissions)."""
+    import ffls.store.ingest
+
+    real = ffls.store.ingest.os.access
+    monkeypatch.setattr(ffls.store.ingest.os, "access",
+                        lambda p, mode: False if Path(p) == tmp_path else real(p, mode))
+    rc, line = _one_line(capfd, ["ingest", cap, "--store", tmp_path / "s.zarr"])
+    assert rc == 2 and f"{tmp_path}: folder is not writable" in line, line
+    assert list(tmp_path.iterdir()) == []

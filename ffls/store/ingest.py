@@ -225,6 +225,8 @@ def check_store_path(path) -> None:
     path = Path(path)
     if not path.parent.is_dir():
         raise InputError(f"the store's folder {path.parent} does not exist", path)
+    if not os.access(path.parent, os.W_OK | os.X_OK):  # (the ingest's first write failed, naming no file)
+        raise OutputError("folder is not writable (permission denied or read-only)", path.parent)
     if not path.exists():
         return
     marker = read_json(path / MARKER) if path.is_dir() else None
@@ -247,8 +249,8 @@ def _store_os_errors(path: Path):
     except FflsError:
         raise
     except OSError as e:
-        raise OutputError(f"cannot write the store ({os_error_message(e)}); the unfinished store is kept: the next "
-                          "run resumes it", path) from None
+        kept = "; the unfinished store is kept: the next run resumes it" if path.exists() else ""
+        raise OutputError(f"cannot write the store ({os_error_message(e)}){kept}", path) from None
 
 
 def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, progress: bool = True,
