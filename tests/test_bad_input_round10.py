@@ -316,6 +316,12 @@ CASES10 = [
                                 "{out}/a.png"], "given as --rotate=-90,0,0"),
     ("render-rank-hex", ["render", "{cap}", "--probe", "sky", "--cpu", "--rank", "0x3", "-o", "{out}/a.png"],
      "expected an integer, not '0x3'"),
+    # an empty path (an unset shell variable) was the working folder: synth wrote there, relight read its capture.json
+    ("synth-empty-out", ["synth", "", "--lights", "2", "--resolution", "8"], "argument OUT_DIR: empty path"),
+    ("relight-empty-capture", ["relight", "", "--probe", "sky", "-o", "{out}/a.png"], "argument capture: empty path"),
+    ("lightmap-info-empty", ["lightmap", "info", ""], "argument map: empty path"),
+    ("probe-empty-folder", ["probe", "mirror", "", "-o", "{out}/m.exr"], "argument FOLDER: empty path"),
+    ("relight-empty-out", L10 + ["-o", ""], "argument -o/--out: empty path"),
     # lights onto capture.json was refused only after every fit
     ("lights-onto-capture", ["lights", "{cap}", "--workers", "1", "-o", "{cap}/capture.json"],
      "capture.json: refusing to overwrite an input"),

@@ -28,7 +28,7 @@ def add_arguments(p):
                                       add_quality_arguments, add_rotation_arguments, add_weighting_argument,
                                       exposure_arg, input_path, number, output_path)
 
-    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     add_lights_arguments(p)
     add_weighting_argument(p)
     add_light_argument(p)

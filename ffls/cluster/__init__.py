@@ -97,14 +97,14 @@ def _quiet_cluster_atexit() -> None:
     A Ctrl-C while ``LocalCluster`` starts leaves a cluster whose workers never left their
     ``init`` state; at exit the hook's ``cluster.close`` then fails an assertion and Python printed
     "Exception ignored in atexit callback" and a 25-line traceback after ffls's one line. The hook
-    is registered again with its errors suppressed: the worker processes are daemonic, and
-    multiprocessing's own exit hook ends them.
+    is registered again with its errors suppressed (once per process): the worker processes are
+    daemonic, and multiprocessing's own exit hook ends them.
     """
     import atexit
 
     from distributed.deploy import spec
 
-    if getattr(spec.close_clusters, "_ffls_quiet", False):
+    if _QUIET_HOOKS:
         return
     hook = spec.close_clusters
 
@@ -112,10 +112,13 @@ def _quiet_cluster_atexit() -> None:
         with contextlib.suppress(Exception):
             hook()
 
-    close_clusters._ffls_quiet = True
     atexit.unregister(hook)
     atexit.register(close_clusters)
-    spec.close_clusters = close_clusters
+    _QUIET_HOOKS.append(close_clusters)
+
+
+#: The quiet exit hook of :func:`_quiet_cluster_atexit`, once installed.
+_QUIET_HOOKS: list = []
 
 
 @contextlib.contextmanager

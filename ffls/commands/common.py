@@ -284,6 +284,8 @@ def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = T
     def parse(text):
         from ffls.errors import FflsError, check_output_path
 
+        if not str(text).strip():  # (Path("") is the working folder: an unset shell variable wrote there)
+            raise argparse.ArgumentTypeError("empty path")
         p = Path(text)
         is_file = file_ok and (not suffixes or p.suffix.lower() in suffixes)
         if not is_file and not folder_ok:
@@ -427,7 +429,7 @@ def add_capture_arguments(p, probe_required: bool = True, probe_default: str | N
     """``CAPTURE``, ``--lights``, ``--lights-map`` and ``--probe`` (and ``--layout`` for the map file)."""
     from ffls.lightmaps.lightmap import LAYOUTS
 
-    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     add_lights_arguments(p)
     p.add_argument("--probe", required=probe_required, default=probe_default, metavar="MAP",
                    help="HDR light map (.exr/.hdr) or a built-in name (courtyard, studio, sunrise, night, sky, paper)"

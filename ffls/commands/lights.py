@@ -16,9 +16,9 @@ DESCRIPTION = ("Fit every photo's spheres (Lambert + ambient + ground bounce), c
 
 
 def add_arguments(p):
-    from ffls.commands.common import WORKERS, integer, output_path, scheduler_type
+    from ffls.commands.common import WORKERS, input_path, integer, output_path, scheduler_type
 
-    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     p.add_argument("-o", "--output", default=None, type=output_path((".json",)),
                    help="lights.json to write (default: CAPTURE/lights.json)")
     p.add_argument("--model", choices=("auto", "distant", "near"), default="auto",

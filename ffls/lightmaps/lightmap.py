@@ -439,7 +439,8 @@ def detect_layout(height: int, width: int, layout: str | None = None) -> str:
     if layout not in LAYOUTS:
         raise ValueError(f"unknown light-map layout {layout!r}; one of {LAYOUTS}")
     if layout not in found:
-        raise ValueError(f"a {width}x{height} image cannot be a {layout} map (it looks like {found[0]})")
+        article = "an" if layout[0] in "aeiou" else "a"
+        raise ValueError(f"a {width}x{height} image cannot be {article} {layout} map (it looks like {found[0]})")
     return layout
 
 
