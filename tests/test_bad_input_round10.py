@@ -274,6 +274,9 @@ def ws(cap, tmp_path_factory):
     for k in range(3):
         write_png(br / f"b{k}.png", np.full((16, 16, 3), 40 * (k + 1), np.uint8))
     (br / "exposures.json").write_text('{"a":' * 50000 + "1" + "}" * 50000)
+    from ffls.io.images import write_exr
+
+    write_exr(root / "neg.exr", -np.ones((32, 64, 3), np.float32))
     rng = np.random.default_rng(1)
     for ext in ("png", "jpg"):  # valid headers, the data cut in half
         import cv2
@@ -322,6 +325,9 @@ CASES10 = [
     ("lightmap-info-empty", ["lightmap", "info", ""], "argument map: empty path"),
     ("probe-empty-folder", ["probe", "mirror", "", "-o", "{out}/m.exr"], "argument FOLDER: empty path"),
     ("relight-empty-out", L10 + ["-o", ""], "argument -o/--out: empty path"),
+    # a map of negative values only was "black everywhere", its negative pixels unsaid
+    ("probe-all-negative", L10[:3] + ["{root}/neg.exr", "-o", "{out}/a.exr"],
+     "black everywhere: it lights nothing (2048 pixels were negative and clamped to 0"),
     # lights onto capture.json was refused only after every fit
     ("lights-onto-capture", ["lights", "{cap}", "--workers", "1", "-o", "{cap}/capture.json"],
      "capture.json: refusing to overwrite an input"),
