@@ -592,7 +592,8 @@ def image_header(path: str | os.PathLike) -> ImageHeader | None:
 
             with quiet_native_output():
                 header = OpenEXR.File(str(path), header_only=True).header()
-            (x0, y0), (x1, y1) = (tuple(int(v) for v in c) for c in header["dataWindow"])
+            # the display window: a data window that differs is refused by read_exr, which says so
+            (x0, y0), (x1, y1) = (tuple(int(v) for v in c) for c in header["displayWindow"])
             names = {ch.name for ch in header["channels"]}
             grey = not {"R", "G", "B"} <= names and "Y" in names and not names & {"RY", "BY"}
             return ImageHeader(x1 - x0 + 1, y1 - y0 + 1, grey)
