@@ -328,6 +328,11 @@ CASES10 = [
     # a map of negative values only was "black everywhere", its negative pixels unsaid
     ("probe-all-negative", L10[:3] + ["{root}/neg.exr", "-o", "{out}/a.exr"],
      "black everywhere: it lights nothing (2048 pixels were negative and clamped to 0"),
+    # view --probe of a missing or bad map rendered black with status 0 (the error only in the panel)
+    ("view-probe-missing", ["view", "{cap}", "--headless", "--frames", "1", "--probe", "{root}/nope.exr"],
+     "nope.exr: light map not found"),
+    ("view-probe-negative", ["view", "{cap}", "--headless", "--frames", "1", "--probe", "{root}/neg.exr"],
+     "neg.exr: the light map is black everywhere"),
     # lights onto capture.json was refused only after every fit
     ("lights-onto-capture", ["lights", "{cap}", "--workers", "1", "-o", "{cap}/capture.json"],
      "capture.json: refusing to overwrite an input"),

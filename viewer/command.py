@@ -271,6 +271,10 @@ def run(args) -> int:
     if args.benchmark and args.frames is None:
         raise InputError("--benchmark needs --frames N")
     check_window_args(args)
+    if args.probe is not None:  # a bad --probe is one line here: the window shows a failed map only in its panel,
+        from ffls.lightmaps.lightmap import lightmap_from_spec  # and a missing one rendered black with status 0
+
+        lightmap_from_spec(args.probe)
     st = build_state(args)
     capture, lights = open_capture(args.capture, args.lights, getattr(args, "lights_map", None))
     check_screenshot_paths(args)
