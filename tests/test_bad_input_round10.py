@@ -277,6 +277,9 @@ def ws(cap, tmp_path_factory):
     from ffls.io.images import write_exr
 
     write_exr(root / "neg.exr", -np.ones((32, 64, 3), np.float32))
+    (root / "json_as.lp").write_text(lights)  # each kind of lights file under the other's extension
+    names = [it["image"] for it in json.loads(lights)["lights"]]
+    (root / "lp_as.json").write_text(f"{len(names)}\n" + "".join(f"{n} 0 0 1\n" for n in names))
     rng = np.random.default_rng(1)
     for ext in ("png", "jpg"):  # valid headers, the data cut in half
         import cv2
@@ -333,6 +336,11 @@ CASES10 = [
      "nope.exr: light map not found"),
     ("view-probe-negative", ["view", "{cap}", "--headless", "--frames", "1", "--probe", "{root}/neg.exr"],
      "neg.exr: the light map is black everywhere"),
+    # a lights file of the other kind than its extension: a bare parse error
+    ("lights-json-named-lp", L10 + ["--lights", "{root}/json_as.lp", "-o", "{out}/a.exr"],
+     "its text is JSON (a lights.json?): name it .json"),
+    ("lights-lp-named-json", L10 + ["--lights", "{root}/lp_as.json", "-o", "{out}/a.exr"],
+     "its text is an RTI .lp file"),
     # lights onto capture.json was refused only after every fit
     ("lights-onto-capture", ["lights", "{cap}", "--workers", "1", "-o", "{cap}/capture.json"],
      "capture.json: refusing to overwrite an input"),

@@ -1181,11 +1181,37 @@ def parse_lights_map(spec) -> dict:
 
 
 def _read_lights_file(path: Path, capture: Capture) -> Lights:
-    """Lights in file order: ``lights.json`` as written, or ``.lp`` converted to the capture's world frame."""
-    if path.suffix.lower() == ".lp":
-        names, d = read_lp(path)
-        return Lights(names, lp_to_world(d, capture.world_from_camera))
-    return load_lights(path)
+    """Lights in file order: ``lights.json`` as written, or ``.lp`` converted to the capture's world frame.
+
+    The extension says which; a file whose text is the other kind (an ``.lp`` named ``.json``, a
+    ``lights.json`` named ``.lp``) is named as such in its one error line.
+    """
+    is_lp = path.suffix.lower() == ".lp"
+    try:
+        if is_lp:
+            names, d = read_lp(path)
+            return Lights(names, lp_to_world(d, capture.world_from_camera))
+        return load_lights(path)
+    except InputError as e:
+        other = _looks_like(path)
+        if other is None or other == ("lp" if is_lp else "json"):
+            raise
+        hint = ("its text is JSON (a lights.json?): name it .json" if other == "json"
+                else "its text is an RTI .lp file (a count, then 'file x y z' lines): name it .lp")
+        raise InputError(f"{e.message}; {hint}", path) from None
+
+
+def _looks_like(path: Path) -> str | None:
+    """``'json'`` or ``'lp'`` by the first characters of a lights file, None when neither."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(256).lstrip()
+    except OSError:
+        return None
+    if head[:1] in (b"{", b"["):
+        return "json"
+    first = head.split(b"\n", 1)[0].strip()
+    return "lp" if first.isdigit() else None
 
 
 def _select(lights: Lights, order) -> Lights:
