@@ -20,7 +20,7 @@ from pathlib import Path
 
 __all__ = ["FflsError", "InputError", "OutputError", "GLUnavailable", "atomic_output", "atomic_folder",
            "check_output_path", "os_error_message", "register_input", "guard_inputs", "kept_on_interrupt",
-           "interrupt_note", "name_output", "disk_full"]
+           "interrupt_note", "name_output", "disk_full", "available_memory"]
 
 
 class FflsError(Exception):
@@ -187,6 +187,21 @@ def disk_full(folder: str | os.PathLike, need: int = 1 << 20) -> bool:
         return shutil.disk_usage(folder).free < need
     except OSError:
         return False
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation (``MemAvailable``; total physical memory as fallback)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 1 << 62
 
 
 def _raise_os(e: OSError, path: Path):

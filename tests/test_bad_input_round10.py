@@ -377,3 +377,21 @@ def test_store_in_a_read_only_folder_is_one_line(cap, tmp_path, capfd, monkeypat
     rc, line = _one_line(capfd, ["ingest", cap, "--store", tmp_path / "s.zarr"])
     assert rc == 2 and f"{tmp_path}: folder is not writable" in line, line
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("ext", ["exr", "hdr", "png"])
+def test_image_beyond_the_memory_is_refused_from_its_header(tmp_path, capfd, monkeypatch, ext):
+    """A light map too large for the memory was decoded until the system ran out of it; now its
+    header is enough (the memory made small here instead of the map huge)."""
+    import cv2
+
+    import ffls.errors
+    from ffls.io.images import write_exr, write_hdr
+
+    m = np.ones((32, 64, 3), np.float32)
+    {"exr": write_exr, "hdr": write_hdr, "png": lambda p, a: write_png(p, (a * 255).astype(np.uint8))}[ext](
+        tmp_path / f"m.{ext}", m)
+    monkeypatch.setattr(ffls.errors, "available_memory", lambda: 32 * 64 * 10)
+    monkeypatch.setattr(cv2, "imdecode", None)  # nothing is decoded
+    with pytest.raises(InputError, match=rf"m.{ext}: a 64x32 image needs about .* GiB to decode, more than the"):
+        read_image(tmp_path / f"m.{ext}")

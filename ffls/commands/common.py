@@ -25,6 +25,8 @@ import os
 import sys
 from pathlib import Path
 
+from ffls.errors import available_memory
+
 __all__ = [
     "learnt_kernel",
     "negative_pixels_note",
@@ -103,21 +105,6 @@ def _in_range(v, lo, hi, lo_open, hi_open) -> bool:
     if hi is not None and (v >= hi if hi_open else v > hi):
         return False
     return True
-
-
-def available_memory() -> int:
-    """Bytes of memory available to a new allocation (``MemAvailable``; total physical memory as fallback)."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return 1 << 62
 
 
 def check_memory(nbytes: float, what: str) -> None:

@@ -281,6 +281,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
     if not path.is_file():
         raise InputError("image file not found" if not path.exists() else "not a file", path)
     register_input(path)
+    _check_decodable_size(path)
     img = read_exr(path, working_space=working_space, out=out) if kind == "exr" else _read_cv2(path, kind)
     if not allow_nonfinite:
         why = nonfinite_message(img.pixels)
@@ -289,6 +290,26 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         if why:
             raise InputError(f"image has {why}", path)
     return img
+
+
+#: Bytes per pixel that decoding an image takes at its peak: float32 RGB (12) and the decoder's
+#: own array (up to 12 more for a float file).
+DECODE_BYTES_PER_PIXEL = 24
+
+
+def _check_decodable_size(path: Path) -> None:
+    """Refuse, from its header, an image whose decoding needs more memory than is available
+    (a huge light map or background, which was decoded until the system ran out of memory)."""
+    from ffls.errors import available_memory
+
+    head = image_header(path)
+    if head is None:
+        return
+    need = float(head.width) * float(head.height) * DECODE_BYTES_PER_PIXEL
+    have = available_memory()
+    if need > have:
+        raise InputError(f"a {head.width}x{head.height} image needs about {need / 2**30:.3g} GiB to decode, more "
+                         f"than the {have / 2**30:.3g} GiB of memory available", path)
 
 
 def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarray | None = None) -> ImageData:
