@@ -366,6 +366,22 @@ def test_round10_bad_input_is_one_line(ws, tmp_path, capfd, monkeypatch, argv, n
         assert sorted(q.name for q in p.iterdir()) == names_before, p
 
 
+def test_lights_into_a_read_only_capture_is_refused_before_the_fits(cap, capfd, monkeypatch):
+    """The default output CAP/lights.json in a read-only folder was refused after every fit
+    (mocked: root ignores permissions)."""
+    import ffls.errors
+    import ffls.spheres.estimate
+
+    def no_fit(*a, **k):
+        raise AssertionError("the lights were fitted before the output was checked")
+
+    real = ffls.errors.os.access
+    monkeypatch.setattr(ffls.errors.os, "access", lambda p, mode: False if Path(p) == cap else real(p, mode))
+    monkeypatch.setattr(ffls.spheres.estimate, "estimate_lights", no_fit)
+    rc, line = _one_line(capfd, ["lights", cap, "--workers", "1"])
+    assert rc == 2 and f"{cap}: folder is not writable" in line, line
+
+
 def test_store_in_a_read_only_folder_is_one_line(cap, tmp_path, capfd, monkeypatch):
     """An ingest into a read-only folder said "cannot write the store (read-only file system); the
     unfinished store is kept" of a store that was never made (mocked: root ignores permissions)."""

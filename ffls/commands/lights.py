@@ -159,7 +159,8 @@ def run(args) -> int:
 
     cap = load_capture(args.capture)
     check_first_pass(args.first_pass, args.bounce, len(cap))
-    for out in (args.output, args.plot, args.lp):  # onto capture.json or a photo: refused before the fits
+    # onto capture.json or a photo, or into a read-only capture folder: refused before the fits
+    for out in (args.output or cap.folder / "lights.json", args.plot, args.lp):
         if out:
             check_output_path(out)
     progress = show_progress(args)
