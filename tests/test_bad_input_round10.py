@@ -341,6 +341,9 @@ CASES10 = [
      "its text is JSON (a lights.json?): name it .json"),
     ("lights-lp-named-json", L10 + ["--lights", "{root}/lp_as.json", "-o", "{out}/a.exr"],
      "its text is an RTI .lp file"),
+    # --lights-map '[]' was looked for as a file ("[]: lights map not found")
+    ("lights-map-list", L10 + ["--lights-map", '["a"]', "-o", "{out}/a.exr"],
+     "--lights-map: expected a non-empty JSON object"),
     # lights onto capture.json was refused only after every fit
     ("lights-onto-capture", ["lights", "{cap}", "--workers", "1", "-o", "{cap}/capture.json"],
      "capture.json: refusing to overwrite an input"),
@@ -358,7 +361,7 @@ def test_round10_bad_input_is_one_line(ws, tmp_path, capfd, monkeypatch, argv, n
     out = tmp_path / "out"
     out.mkdir()
     keys = {k: str(v) for k, v in ws.items()}
-    args = [a if a.startswith('{"a"') else a.format(out=out, **keys) for a in argv]
+    args = [a if a.startswith(('{"a"', '["')) else a.format(out=out, **keys) for a in argv]
     before = {p: sorted(q.name for q in p.iterdir()) for p in (out, ws["cap"], ws["root"])}
     rc, line = _one_line(capfd, args)
     assert rc == 2 and "error" in line and names in line, line

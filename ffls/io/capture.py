@@ -1159,7 +1159,7 @@ def parse_lights_map(spec) -> dict:
         doc = spec
     else:
         text = str(spec)
-        if text.lstrip().startswith("{"):
+        if text.lstrip().startswith(("{", "[")):  # (inline JSON; '[]' was looked for as a file)
             try:
                 doc = parse_json(text)
             except ValueError as e:
