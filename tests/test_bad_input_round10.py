@@ -414,3 +414,20 @@ def test_image_beyond_the_memory_is_refused_from_its_header(tmp_path, capfd, mon
     monkeypatch.setattr(cv2, "imdecode", None)  # nothing is decoded
     with pytest.raises(InputError, match=rf"m.{ext}: a 64x32 image needs about .* GiB to decode, more than the"):
         read_image(tmp_path / f"m.{ext}")
+
+
+def test_utf8_bom_is_no_content(cap, tmp_path, capfd):
+    """A UTF-8 BOM (Windows Notepad writes one) made lights.json, capture.json and .lp files
+    unreadable: "Unexpected UTF-8 BOM (decode using utf-8-sig)", "expected the number of lights"."""
+    bom = b"\xef\xbb\xbf"
+    c = tmp_path / "cap"
+    shutil.copytree(cap, c)
+    (c / "capture.json").write_bytes(bom + (cap / "capture.json").read_bytes())
+    (c / "lights.json").write_bytes(bom + (cap / "lights.json").read_bytes())
+    lights = json.loads((cap / "lights.json").read_text())["lights"]
+    lp = "".join(f"{it['image']} 0 0 1\n" for it in lights)
+    (tmp_path / "l.lp").write_bytes(bom + f"{len(lights)}\n{lp}".encode())
+    for extra in ([], ["--lights", tmp_path / "l.lp"]):
+        capfd.readouterr()
+        assert main([str(a) for a in ["relight", c, "--probe", "sky", *extra, "-o", tmp_path / "a.exr"]]) == 0, \
+            capfd.readouterr().err

@@ -253,7 +253,7 @@ def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
     if not path.is_file():
         raise InputError("capture.json not found", path)
     try:
-        doc = parse_json(path.read_text(encoding="utf-8"))
+        doc = parse_json(path.read_text(encoding="utf-8-sig"))
     except (OSError, ValueError) as e:
         raise InputError(f"cannot read JSON ({e})", path) from None
     if not isinstance(doc, dict):

@@ -72,7 +72,8 @@ def add_arguments(p):
 
     sub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
     r = sub.add_parser("response", help="inverse camera response from bracketed photos (Debevec-Malik 1997)")
-    r.add_argument("bracket_dir", type=input_path, help="folder of bracketed 8-bit photos (+ exposures.json, or EXIF exposure times)")
+    r.add_argument("bracket_dir", type=input_path,
+                   help="folder of bracketed 8-bit photos (+ exposures.json, or EXIF exposure times)")
     r.add_argument("-o", "--output", default="response.npy", type=output_path((".npy", ".csv")),
                    help="output table, .npy or .csv (default response.npy)")
     # OpenCV's solve grows with the cube of the samples (3 photos: 1000 in 8 s, 1600 in 23 s), and

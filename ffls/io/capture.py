@@ -115,7 +115,7 @@ class _Json:
                                                          if what == LIGHTS_FILE else ""))
         register_input(self.path)
         try:
-            text = self.path.read_text(encoding="utf-8")
+            text = self.path.read_text(encoding="utf-8-sig")  # (a BOM, as Notepad writes, is no content)
         except UnicodeDecodeError:
             self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 text")
         except OSError as e:
@@ -1009,7 +1009,7 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
         raise InputError("is a folder, not an .lp file" if path.is_dir() else ".lp file not found", path)
     register_input(path)
     try:
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        lines = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()
     except OSError as e:
         raise InputError(f"cannot read .lp file ({e})", path) from None
     rows = [(k + 1, ln.strip()) for k, ln in enumerate(lines) if ln.strip()]

@@ -212,7 +212,7 @@ def read_bracket(folder: str | os.PathLike):
     jpath = folder / "exposures.json"
     if jpath.is_file():
         try:
-            doc = parse_json(jpath.read_text(encoding="utf-8"))
+            doc = parse_json(jpath.read_text(encoding="utf-8-sig"))
         except (OSError, ValueError) as e:  # (a UnicodeDecodeError is a ValueError)
             raise InputError(f"cannot read exposures ({e})", jpath) from None
         if not isinstance(doc, dict) or not doc:
