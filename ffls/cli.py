@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import re
 import signal
 import sys
 import warnings
@@ -39,10 +40,35 @@ class Terminated(KeyboardInterrupt):
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An ArgumentParser whose usage errors are one line (``PROG: error: ...``) and exit status 2."""
+    """An ArgumentParser whose usage errors are one line (``PROG: error: ...``) and exit status 2.
+
+    Flags are never abbreviated (``allow_abbrev=False``, inherited by every subparser): argparse
+    read ``relight --light 10,45`` (a flag of ``render``) as an ambiguous prefix of ``--lights``
+    and ``--lights-map``, and a unique prefix (``--exp 2``) silently as the flag it starts.
+    """
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._given = list(sys.argv[1:] if args is None else args)  # (for the hint in error)
+        return super().parse_known_args(args, namespace)
+
+    def _dash_value_hint(self, message: str) -> str:
+        """``--rotate -90,0,0``: argparse takes the value for a flag ("expected one argument");
+        say how to give it, with the user's own flag and value."""
+        m = re.fullmatch(r"argument (\S+): expected one argument", message)
+        given = getattr(self, "_given", [])
+        for flag in (m.group(1).split("/") if m else ()):
+            for k, a in enumerate(given[:-1]):
+                if a == flag and given[k + 1].startswith("-") and len(given[k + 1]) > 1:
+                    return f" (a value that starts with '-' is given as {flag}={given[k + 1]})"
+        return ""
 
     def error(self, message):
         message = " ".join(str(message).split())
+        message += self._dash_value_hint(message)
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 __all__ = ["FflsError", "InputError", "OutputError", "GLUnavailable", "atomic_output", "atomic_folder",
            "check_output_path", "os_error_message", "register_input", "guard_inputs", "kept_on_interrupt",
-           "interrupt_note"]
+           "interrupt_note", "name_output", "disk_full", "available_memory"]
 
 
 class FflsError(Exception):
@@ -162,6 +162,48 @@ def check_output_path(path: str | os.PathLike, folder: bool = False) -> Path:
     return path
 
 
+def name_output(e: BaseException, staged: Path, path: Path) -> BaseException:
+    """Say the user's output ``path`` where the error ``e`` names the temporary ``staged`` path.
+
+    A writer inside :func:`atomic_output` or :func:`atomic_folder` sees only the temporary file
+    or staging folder, and a library's message (OpenEXR's "Failed to write pixel data to image
+    file .a.x1y2.tmp.exr") names it; the user gave ``path``. ``e`` (an :class:`FflsError`) is
+    changed in place and returned; other exceptions are returned as they are.
+    """
+    if not isinstance(e, FflsError):
+        return e
+    old, new = str(staged), str(path)
+    if e.path is not None and str(e.path).startswith(old):
+        e.path = Path(new + str(e.path)[len(old):])
+    e.message = e.message.replace(old, new)
+    e.args = (f"{e.path}: {e.message}" if e.path is not None else e.message,)
+    return e
+
+
+def disk_full(folder: str | os.PathLike, need: int = 1 << 20) -> bool:
+    """Whether the file system of ``folder`` has less than ``need`` bytes free (1 MiB): what a
+    writer that reports no reason (OpenCV's ``VideoWriter`` that does not open) most likely met."""
+    try:
+        return shutil.disk_usage(folder).free < need
+    except OSError:
+        return False
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation (``MemAvailable``; total physical memory as fallback)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 1 << 62
+
+
 def _raise_os(e: OSError, path: Path):
     raise OutputError(f"cannot write ({os_error_message(e)})", path) from None
 
@@ -207,6 +249,8 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None):
         except FileNotFoundError:
             size = -1
         if size <= 0:
+            if disk_full(parent):
+                raise OutputError(f"cannot write ({_WHY[errno.ENOSPC]})", path)
             raise OutputError("the writer left " + ("no file" if size < 0 else "an empty file")
                               + " (disk full or a library error)", path)
         try:
@@ -214,9 +258,10 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None):
             os.replace(tmp, path)
         except OSError as e:
             _raise_os(e, path)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        name_output(e, tmp, path)
         raise
 
 
@@ -259,8 +304,9 @@ def atomic_folder(path: str | os.PathLike):
                 if old is not None and (old / path.name).exists() and not path.exists():
                     os.replace(old / path.name, path)  # put the old output back
                 _raise_os(e, path)
-    except BaseException:
+    except BaseException as e:
         shutil.rmtree(stage, ignore_errors=True)
+        name_output(e, stage, path)
         raise
     finally:
         if old is not None:

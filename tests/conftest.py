@@ -1,6 +1,11 @@
 """Shared fixtures. GL contexts for tests are created here and nowhere else."""
 from __future__ import annotations
 
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -47,3 +52,18 @@ def courtyard_ball_folder(tmp_path_factory):
 
     sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=48, albedo=0.7)
     return write_diffuse_probe(tmp_path_factory.mktemp("courtyard_ball"), sc)
+
+
+@pytest.fixture
+def tiny_tmpfs():
+    """A 64 kB tmpfs (needs root and mount); skipped where it cannot be mounted."""
+    d = Path(tempfile.mkdtemp(prefix="ffls-tmpfs-"))
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)], capture_output=True)
+    if r.returncode != 0:
+        d.rmdir()
+        pytest.skip("cannot mount a tmpfs here (needs root)")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], capture_output=True)
+        shutil.rmtree(d, ignore_errors=True)

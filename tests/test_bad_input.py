@@ -13,7 +13,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -618,21 +617,6 @@ def test_imwrite_that_fails_silently_leaves_nothing(tmp_path, monkeypatch, capfd
     with pytest.raises(OutputError, match="empty file"):
         write_png(tmp_path / "a.png", np.zeros((4, 4, 3), np.uint8))
     assert list(tmp_path.iterdir()) == []
-
-
-@pytest.fixture
-def tiny_tmpfs():
-    """A 64 kB tmpfs (needs root and mount); skipped where it cannot be mounted."""
-    d = Path(tempfile.mkdtemp(prefix="ffls-tmpfs-"))
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)], capture_output=True)
-    if r.returncode != 0:
-        d.rmdir()
-        pytest.skip("cannot mount a tmpfs here (needs root)")
-    try:
-        yield d
-    finally:
-        subprocess.run(["umount", str(d)], capture_output=True)
-        shutil.rmtree(d, ignore_errors=True)
 
 
 @pytest.mark.parametrize("cmd", ["lightmap-exr", "lightmap-hdr", "relight-png", "relight-exr"])

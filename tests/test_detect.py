@@ -267,9 +267,12 @@ def test_a_camera_matrix_no_lens_has_is_named():
         detect.find_spheres(img, tiny_f, DIST0, R0)
     wfc = np.array(detect.DEFAULT_WORLD_FROM_CAMERA)
     wfc[0, 3] = 1e300
-    with pytest.raises(InputError, match="camera.world_from_camera in capture.json puts the camera at a distance "
-                                         "beyond any number"):
+    with pytest.raises(InputError, match="camera.world_from_camera and scene_center in capture.json put the camera "
+                                         "at a distance beyond any number"):
         detect.find_spheres(img, K0, DIST0, R0, world_from_camera=wfc)
+    # the scene centre far away names it too (it was blamed on world_from_camera alone)
+    with pytest.raises(InputError, match="scene_center in capture.json put the camera at a distance beyond"):
+        detect.find_spheres(img, K0, DIST0, R0, scene_center=np.array([1e308, 1e308, 0.0]))
 
 
 def test_nonpositive_radius():

@@ -28,7 +28,7 @@ def add_arguments(p):
                                       add_quality_arguments, add_rotation_arguments, add_weighting_argument,
                                       exposure_arg, input_path, number, output_path)
 
-    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     add_lights_arguments(p)
     add_weighting_argument(p)
     add_light_argument(p)
@@ -234,9 +234,7 @@ def check_window_args(args) -> None:
     ------
     ffls.errors.InputError, ffls.errors.OutputError
     """
-    from pathlib import Path
-
-    from ffls.errors import InputError, check_output_path
+    from ffls.errors import InputError
     from viewer.headless import choose_platform
 
     null = choose_platform(True if args.headless else None) == "null"
@@ -247,7 +245,20 @@ def check_window_args(args) -> None:
         raise InputError(f"--fullscreen needs a display ({why} has no monitor)")
     if getattr(args, "light", None) is not None and args.probe is not None:
         raise InputError("--probe and --light exclude each other: give one")
+    check_screenshot_paths(args)
+
+
+def check_screenshot_paths(args) -> None:
+    """Both outputs of ``--screenshot`` (the PNG and its sibling ``.exr``) can be written and
+    replace no input (:func:`ffls.errors.check_output_path`). Checked again once the capture is
+    open, its photos then being registered inputs: ``--screenshot CAP/img_0000.png`` was refused
+    only when the screenshot was written, after the window's informational lines."""
+    from pathlib import Path
+
+    from ffls.errors import check_output_path
+
     if args.screenshot is not None:
+        check_output_path(args.screenshot)
         check_output_path(Path(args.screenshot).with_suffix(".exr"))
 
 
@@ -260,8 +271,13 @@ def run(args) -> int:
     if args.benchmark and args.frames is None:
         raise InputError("--benchmark needs --frames N")
     check_window_args(args)
+    if args.probe is not None:  # a bad --probe is one line here: the window shows a failed map only in its panel,
+        from ffls.lightmaps.lightmap import lightmap_from_spec  # and a missing one rendered black with status 0
+
+        lightmap_from_spec(args.probe)
     st = build_state(args)
     capture, lights = open_capture(args.capture, args.lights, getattr(args, "lights_map", None))
+    check_screenshot_paths(args)
     _check_and_report(args, capture, lights)
     if args.profile and not args.benchmark:
         raise InputError("--profile needs --benchmark")

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from ffls.errors import InputError, atomic_output
-from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT
+from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT, parse_json
 
 __all__ = ["CameraCalibration", "aruco_dictionary", "charuco_problem", "camera_matrix_problem", "make_board",
            "detect_board", "calibrate_camera", "write_camera_to_capture"]
@@ -253,7 +253,7 @@ def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
     if not path.is_file():
         raise InputError("capture.json not found", path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc = parse_json(path.read_text(encoding="utf-8-sig"))
     except (OSError, ValueError) as e:
         raise InputError(f"cannot read JSON ({e})", path) from None
     if not isinstance(doc, dict):

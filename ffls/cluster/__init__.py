@@ -91,6 +91,36 @@ def check_scheduler_address(text: str) -> str:
     return text
 
 
+def _quiet_cluster_atexit() -> None:
+    """Make distributed's exit hook, which closes the local clusters still open, quiet.
+
+    A Ctrl-C while ``LocalCluster`` starts leaves a cluster whose workers never left their
+    ``init`` state; at exit the hook's ``cluster.close`` then fails an assertion and Python printed
+    "Exception ignored in atexit callback" and a 25-line traceback after ffls's one line. The hook
+    is registered again with its errors suppressed (once per process): the worker processes are
+    daemonic, and multiprocessing's own exit hook ends them.
+    """
+    import atexit
+
+    from distributed.deploy import spec
+
+    if _QUIET_HOOKS:
+        return
+    hook = spec.close_clusters
+
+    def close_clusters():
+        with contextlib.suppress(Exception):
+            hook()
+
+    atexit.unregister(hook)
+    atexit.register(close_clusters)
+    _QUIET_HOOKS.append(close_clusters)
+
+
+#: The quiet exit hook of :func:`_quiet_cluster_atexit`, once installed.
+_QUIET_HOOKS: list = []
+
+
 @contextlib.contextmanager
 def open_client(workers: int | None = None, scheduler: str | None = None, progress: bool = True):
     """A :class:`DaskRunner` on a local cluster of ``workers`` processes, or on the cluster at ``scheduler``.
@@ -122,12 +152,19 @@ def open_client(workers: int | None = None, scheduler: str | None = None, progre
             client.close()
         return
     n = default_workers() if workers is None else max(1, int(workers))
+    _quiet_cluster_atexit()
     # no dashboard, and the scheduler's HTTP routes on a free port: with its default (8787) a second
     # cluster on the machine (another ffls run, a notebook) made distributed warn "Port 8787 is
     # already in use", a library's warning line
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
-                           silence_logs=logging.CRITICAL)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
+                               silence_logs=logging.CRITICAL)
+    except KeyboardInterrupt:  # (Ctrl-C, SIGTERM) while it starts: its unfinished start-up tasks are
+        # collected at exit, and asyncio logged each ("Task exception was never retrieved ... Nanny
+        # failed to start") after ffls's one line
+        logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
+        raise
     try:
         client = Client(cluster)
         try:

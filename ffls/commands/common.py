@@ -23,6 +23,9 @@ import contextvars
 import math
 import os
 import sys
+from pathlib import Path
+
+from ffls.errors import available_memory
 
 __all__ = [
     "learnt_kernel",
@@ -55,6 +58,7 @@ __all__ = [
     "check_cells_res",
     "print_notes",
     "flush_notes",
+    "check_output_kind",
     "deferred_notes",
     "add_mask_argument",
     "load_relight_inputs",
@@ -101,21 +105,6 @@ def _in_range(v, lo, hi, lo_open, hi_open) -> bool:
     if hi is not None and (v >= hi if hi_open else v > hi):
         return False
     return True
-
-
-def available_memory() -> int:
-    """Bytes of memory available to a new allocation (``MemAvailable``; total physical memory as fallback)."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return 1 << 62
 
 
 def check_memory(nbytes: float, what: str) -> None:
@@ -171,7 +160,8 @@ def number(lo: float | None = None, hi: float | None = None, lo_open: bool = Fal
     return parse
 
 
-def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str = "", special: dict | None = None):
+def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str = "", special: dict | None = None,
+            why: str = ""):
     """argparse type: an integer in ``[lo, hi]``, optionally within the machine's memory.
 
     Parameters
@@ -185,6 +175,8 @@ def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str
         What the value is, for the memory message (``"cell texture"``).
     special : dict, optional
         Words or values accepted outside the range, mapped to what they mean (``{"0": 0}``).
+    why : str
+        Why the range is what it is, said after it in the message.
     """
     special = dict(special or {})
 
@@ -198,7 +190,9 @@ def integer(lo: int | None = None, hi: int | None = None, memory=None, what: str
             v = None
         if v is None or not _in_range(v, lo, hi, False, False):
             extra = "".join(f" or {k}" for k in special)
-            raise argparse.ArgumentTypeError(f"expected an integer {_range_text(lo, hi)}{extra}, not {text!r}")
+            rng = _range_text(lo, hi)
+            raise argparse.ArgumentTypeError(f"expected an integer{'' if rng == 'finite' else ' ' + rng}{extra}"
+                                             f"{f' ({why})' if why else ''}, not {text!r}")
         if memory is not None:
             check_memory(memory(v), f"{v}" + (f" ({what})" if what else ""))
         return v
@@ -277,6 +271,8 @@ def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = T
     def parse(text):
         from ffls.errors import FflsError, check_output_path
 
+        if not str(text).strip():  # (Path("") is the working folder: an unset shell variable wrote there)
+            raise argparse.ArgumentTypeError("empty path")
         p = Path(text)
         is_file = file_ok and (not suffixes or p.suffix.lower() in suffixes)
         if not is_file and not folder_ok:
@@ -420,7 +416,7 @@ def add_capture_arguments(p, probe_required: bool = True, probe_default: str | N
     """``CAPTURE``, ``--lights``, ``--lights-map`` and ``--probe`` (and ``--layout`` for the map file)."""
     from ffls.lightmaps.lightmap import LAYOUTS
 
-    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     add_lights_arguments(p)
     p.add_argument("--probe", required=probe_required, default=probe_default, metavar="MAP",
                    help="HDR light map (.exr/.hdr) or a built-in name (courtyard, studio, sunrise, night, sky, paper)"
@@ -843,6 +839,25 @@ def check_mask_not_empty(mask, path, flag: str = "--mask", what: str = "object")
         from ffls.errors import InputError
 
         raise InputError(f"{flag} is empty: no {what} pixel (white = {what})", path)
+
+
+#: What a still (no ``--turntable``) is written as.
+STILL_SUFFIXES = (".exr", ".png")
+
+
+def check_output_kind(args, out) -> None:
+    """``-o`` against ``--turntable``: a still is .exr/.png, a turntable an .mp4 or a folder.
+
+    Checked before anything is loaded: a turntable into ``OUT.png`` was refused only when its
+    frames were about to be written, after its coverage lines (two lines for one error).
+    """
+    from ffls.errors import InputError
+
+    suffix = Path(out).suffix.lower()
+    if args.turntable is None and suffix not in STILL_SUFFIXES:
+        raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
+    if args.turntable is not None and suffix and suffix != ".mp4":
+        raise InputError(f"--turntable writes a video (.mp4) or a folder of PNGs (no extension), not {suffix}", out)
 
 
 def check_fps_flag(args, out=None) -> None:

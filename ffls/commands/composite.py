@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, add_weighting_argument,
-                                  check_fps_flag,
+                                  check_fps_flag, check_output_kind,
                                   exposure_arg, input_path, learnt_kernel, output_path, print_notes, flush_notes,
                                   rotation_from_args)
 
@@ -31,7 +31,6 @@ DESCRIPTION = (
     "OUT.json; --turntable N rotates the scene's map 360 degrees about +Z (mp4 or folder of PNGs)."
 )
 
-STILL_SUFFIXES = (".exr", ".png")
 #: ``--sources``: how the map's compact bright sources are relit.
 SOURCES = ("lightflow", "levelset", "weights")
 BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
@@ -281,10 +280,7 @@ def run(args) -> int:
     from ffls.io.images import write_exr, write_png
 
     out = Path(args.out)
-    if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
-        raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
-    if args.turntable is not None and out.suffix.lower() in STILL_SUFFIXES:
-        raise InputError("--turntable writes a video (.mp4) or a folder of PNGs, not a still", out)
+    check_output_kind(args, out)
     if args.flow is not None and args.sources == "weights":
         raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
                          "no flow")

@@ -12,9 +12,9 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    from ffls.commands.common import add_lights_arguments, add_scale_arguments, integer
+    from ffls.commands.common import add_lights_arguments, add_scale_arguments, input_path, integer
 
-    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     add_lights_arguments(p)
     add_scale_arguments(p, store=False, memory=False)
     p.add_argument("--store", default=None, metavar="DIR.zarr", help="the store (default CAPTURE/field.zarr)")

@@ -16,15 +16,15 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    from ffls.commands.common import MAP_HEIGHT, output_path
+    from ffls.commands.common import MAP_HEIGHT, input_path, output_path
 
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     info = sub.add_parser("info", help="print size, layout, min/max/mean and irradiance")
-    info.add_argument("map", help="light-map file (.exr/.hdr) or built-in name (courtyard, sky, ...)")
+    info.add_argument("map", type=input_path, help="light-map file (.exr/.hdr) or built-in name (courtyard, sky, ...)")
     info.add_argument("--layout", choices=("latlong", "angular", "mirrorball", "cube"), default=None,
                       help="layout of the input (default: from the aspect ratio; square = angular)")
     conv = sub.add_parser("convert", help="convert between .exr and .hdr (and optionally to lat-long)")
-    conv.add_argument("input")
+    conv.add_argument("input", type=input_path)
     conv.add_argument("output", type=output_path((".exr", ".hdr", ".pic")), help=".exr or .hdr")
     conv.add_argument("--layout", choices=("latlong", "angular", "mirrorball", "cube"), default=None,
                       help="layout of the input (default: from the aspect ratio; square = angular)")

@@ -16,9 +16,9 @@ DESCRIPTION = ("Fit every photo's spheres (Lambert + ambient + ground bounce), c
 
 
 def add_arguments(p):
-    from ffls.commands.common import WORKERS, integer, output_path, scheduler_type
+    from ffls.commands.common import WORKERS, input_path, integer, output_path, scheduler_type
 
-    p.add_argument("capture", help="capture folder (with capture.json)")
+    p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     p.add_argument("-o", "--output", default=None, type=output_path((".json",)),
                    help="lights.json to write (default: CAPTURE/lights.json)")
     p.add_argument("--model", choices=("auto", "distant", "near"), default="auto",
@@ -135,13 +135,34 @@ def plot_lights(lights, path, hemisphere: str = "upper", res: int = 400) -> Path
     return Path(path)
 
 
+def check_first_pass(first_pass, bounce: str, n_photos: int) -> None:
+    """``--first-pass N`` against the capture: N above its photo count meant every photo silently,
+    and with ``--bounce free`` there is no first pass (every photo is fitted once)."""
+    from ffls.errors import InputError
+
+    if not first_pass:  # (not given, or "all": every photo, as --bounce free fits them)
+        return
+    if bounce != "calibrated":
+        raise InputError(f"--first-pass applies only with --bounce calibrated (--bounce {bounce} fits every photo "
+                         "once)")
+    if first_pass > n_photos:
+        raise InputError(f"--first-pass {first_pass} is more than the capture's {n_photos} photos: give at most "
+                         f"{n_photos}, or --first-pass all")
+
+
 def run(args) -> int:
+    from ffls.errors import check_output_path
     from ffls.io.capture import load_capture, save_lights
     from ffls.spheres.estimate import estimate_lights
 
     from ffls.commands.common import print_notes, show_progress
 
     cap = load_capture(args.capture)
+    check_first_pass(args.first_pass, args.bounce, len(cap))
+    # onto capture.json or a photo, or into a read-only capture folder: refused before the fits
+    for out in (args.output or cap.folder / "lights.json", args.plot, args.lp):
+        if out:
+            check_output_path(out)
     progress = show_progress(args)
     decoded = None
     cluster = bool(getattr(args, "scheduler", None))

@@ -146,11 +146,11 @@ def _add_inverse(sub, common):
 
 
 def add_arguments(p):
-    from ffls.commands.common import MAP_HEIGHT, float_list, output_path
+    from ffls.commands.common import MAP_HEIGHT, float_list, input_path, output_path
 
     sub = p.add_subparsers(dest="method", metavar="METHOD", required=True)
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("folder", metavar="FOLDER", help="probe folder (probe.json)")
+    common.add_argument("folder", metavar="FOLDER", type=input_path, help="probe folder (probe.json)")
     common.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES),
                         help="output lat-long map, .exr (alpha: the directions seen)")
     common.add_argument("--size", type=MAP_HEIGHT, default=128, metavar="H",
@@ -161,7 +161,8 @@ def add_arguments(p):
     m = sub.add_parser("merge", help="merge an exposure bracket into one HDR image",
                        description="Merge bracketed exposures (8-, 16-bit or float) with hat weights that fall to "
                                    "zero at the clipping limits; pixels clipped in every exposure get alpha 0.")
-    m.add_argument("images", nargs="+", metavar="IMAGE", help="the bracketed images (two or more, one size)")
+    m.add_argument("images", nargs="+", metavar="IMAGE", type=input_path,
+                   help="the bracketed images (two or more, one size)")
     m.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES), help="output .exr")
     m.add_argument("--exposures", type=float_list(0.0, None, min_len=2), default=None, metavar="T1,T2,...",
                    help="exposure times in seconds, one per image (default: each image's EXIF ExposureTime)")

@@ -16,7 +16,7 @@ import numpy as np
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_arguments, add_light_argument,
                                   add_mask_argument, add_quality_arguments, add_rotation_arguments,
                                   add_scale_arguments, add_weighting_argument, check_display_flags, check_gpu_pass1,
-                                  check_mask_size,
+                                  check_mask_size, check_output_kind,
                                   exposure_arg, flush_notes, learnt_kernel, light_vector, load_relight_inputs,
                                   open_streamed_from_args, output_path, quality_from_args, resolve_quality,
                                   negative_pixels_note, print_notes, rotation_from_args, write_output)
@@ -31,7 +31,6 @@ DESCRIPTION = (
     "with --weighting."
 )
 
-STILL_SUFFIXES = (".exr", ".png")
 
 
 def add_arguments(p):
@@ -212,8 +211,7 @@ def run(args) -> int:
     from ffls.errors import InputError
 
     out = Path(args.out)
-    if args.turntable is None and out.suffix.lower() not in STILL_SUFFIXES:
-        raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
+    check_output_kind(args, out)
     check_display_flags(args, out)
     args.exposure = 0.0 if args.exposure is None else args.exposure
     args.tonemap, args.fps = args.tonemap or "srgb", args.fps or 30.0

@@ -115,15 +115,15 @@ class _Json:
                                                          if what == LIGHTS_FILE else ""))
         register_input(self.path)
         try:
-            text = self.path.read_text(encoding="utf-8")
+            text = self.path.read_text(encoding="utf-8-sig")  # (a BOM, as Notepad writes, is no content)
         except UnicodeDecodeError:
             self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 text")
         except OSError as e:
             self.fail("", f"cannot read {what} ({os_error_message(e)})")
         try:
-            doc = json.loads(text)
-        except json.JSONDecodeError as e:
-            self.fail("", f"corrupt JSON at line {e.lineno} column {e.colno}: {e.msg}")
+            doc = parse_json(text)
+        except ValueError as e:
+            self.fail("", str(e))
         if not isinstance(doc, dict):
             self.fail("", f"{what} must hold a JSON object, not {type(doc).__name__}")
         return doc
@@ -175,6 +175,23 @@ class _Json:
         if not isinstance(value, str) or not value:
             self.fail(key, f"expected a non-empty string, got {_short(value)}")
         return value
+
+
+def parse_json(text: str):
+    """``json.loads(text)``, every failure one ``ValueError`` of one line.
+
+    Besides corrupt text (``corrupt JSON at line L column C: ...``), Python's parser fails on a
+    document nested deeper than its recursion limit (``RecursionError``, a traceback before) and
+    on an integer of more than 4300 digits (a ``ValueError`` of three sentences).
+    """
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"corrupt JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    except RecursionError:
+        raise ValueError("corrupt JSON: nested deeper than Python's parser goes") from None
+    except ValueError:  # (int: "Exceeds the limit (4300 digits) for integer string conversion ...")
+        raise ValueError("corrupt JSON: a number of more than 4300 digits") from None
 
 
 def _all_numbers(value) -> bool:
@@ -482,6 +499,38 @@ def sphere_materials(capture: Capture, n_spheres: int) -> list[str]:
     return out
 
 
+def _check_image_headers(names: list, paths: list, image_size) -> None:
+    """Every photo's size and channel count from its header, before any photo is decoded.
+
+    A photo of another size than ``image_size`` (or, without it, than the first photo) is
+    refused here, where its header costs a fraction of a millisecond: decoding a 12000x12000 PNG
+    to find its size took 7 s and 2.6 GB. A capture that mixes grey (one-channel) and colour
+    photos is refused too: a grey photo would be replicated to RGB, a colourless light among
+    coloured ones, and such a mix is almost always a wrong export. The minority is named.
+    Headers that cannot be read here are left to the decoder (:func:`ffls.io.images.image_header`).
+    """
+    from ffls.io.images import image_header
+
+    heads = [image_header(p) for p in paths]
+    ref = None if image_size is None else (tuple(image_size), f"{CAPTURE_FILE} says image_size")
+    for n, p, h in zip(names, paths, heads):
+        if h is None:
+            continue
+        if ref is None:
+            ref = ((h.width, h.height), f"the first image {n!r} is")
+        elif (h.width, h.height) != ref[0]:
+            raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}", p)
+    grey = [k for k, h in enumerate(heads) if h is not None and h.grey]
+    colour = [k for k, h in enumerate(heads) if h is not None and not h.grey]
+    if grey and colour:
+        few, many = (grey, "colour") if len(grey) <= len(colour) else (colour, "grey")
+        what = "grey (one channel)" if many == "colour" else "colour"
+        raise InputError(f"is {what} but {len(colour if many == 'colour' else grey)} of the {len(grey) + len(colour)}"
+                         f" photos are {many} (e.g. {names[(colour if many == 'colour' else grey)[0]]!r}): a capture "
+                         f"mixing grey and colour photos is almost always a wrong export; export every photo "
+                         f"{'in colour' if many == 'colour' else 'grey'}", paths[few[0]])
+
+
 def load_capture(folder: str | os.PathLike) -> Capture:
     """Load and validate a capture folder.
 
@@ -517,6 +566,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         if not p.is_file():
             j.fail("images", f"listed image {n!r} is a folder, not a file" if p.is_dir()
                    else f"listed image {n!r} not found in {folder}")
+        register_input(p)  # (an output onto a photo is refused from now on, not only once it was read)
 
     image_size = None
     if "image_size" in doc:
@@ -524,6 +574,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         if not (isinstance(s, list) and len(s) == 2 and all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in s)):
             j.fail("image_size", f"expected [width, height] positive integers, got {_short(s)}")
         image_size = (s[0], s[1])
+    _check_image_headers(names, paths, image_size)
 
     encoding, response = _parse_encoding(j, doc, folder)
     K, dist, wfc, wfc_default, model = (None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True,
@@ -958,7 +1009,7 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
         raise InputError("is a folder, not an .lp file" if path.is_dir() else ".lp file not found", path)
     register_input(path)
     try:
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        lines = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()
     except OSError as e:
         raise InputError(f"cannot read .lp file ({e})", path) from None
     rows = [(k + 1, ln.strip()) for k, ln in enumerate(lines) if ln.strip()]
@@ -1108,11 +1159,11 @@ def parse_lights_map(spec) -> dict:
         doc = spec
     else:
         text = str(spec)
-        if text.lstrip().startswith("{"):
+        if text.lstrip().startswith(("{", "[")):  # (inline JSON; '[]' was looked for as a file)
             try:
-                doc = json.loads(text)
-            except json.JSONDecodeError as e:
-                raise InputError(f"--lights-map: not valid JSON ({e.msg} at column {e.colno})") from None
+                doc = parse_json(text)
+            except ValueError as e:
+                raise InputError(f"--lights-map: not valid JSON ({e})") from None
         else:
             where = Path(text)
             doc = _Json(where).load("lights map")
@@ -1130,11 +1181,37 @@ def parse_lights_map(spec) -> dict:
 
 
 def _read_lights_file(path: Path, capture: Capture) -> Lights:
-    """Lights in file order: ``lights.json`` as written, or ``.lp`` converted to the capture's world frame."""
-    if path.suffix.lower() == ".lp":
-        names, d = read_lp(path)
-        return Lights(names, lp_to_world(d, capture.world_from_camera))
-    return load_lights(path)
+    """Lights in file order: ``lights.json`` as written, or ``.lp`` converted to the capture's world frame.
+
+    The extension says which; a file whose text is the other kind (an ``.lp`` named ``.json``, a
+    ``lights.json`` named ``.lp``) is named as such in its one error line.
+    """
+    is_lp = path.suffix.lower() == ".lp"
+    try:
+        if is_lp:
+            names, d = read_lp(path)
+            return Lights(names, lp_to_world(d, capture.world_from_camera))
+        return load_lights(path)
+    except InputError as e:
+        other = _looks_like(path)
+        if other is None or other == ("lp" if is_lp else "json"):
+            raise
+        hint = ("its text is JSON (a lights.json?): name it .json" if other == "json"
+                else "its text is an RTI .lp file (a count, then 'file x y z' lines): name it .lp")
+        raise InputError(f"{e.message}; {hint}", path) from None
+
+
+def _looks_like(path: Path) -> str | None:
+    """``'json'`` or ``'lp'`` by the first characters of a lights file, None when neither."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(256).lstrip()
+    except OSError:
+        return None
+    if head[:1] in (b"{", b"["):
+        return "json"
+    first = head.split(b"\n", 1)[0].strip()
+    return "lp" if first.isdigit() else None
 
 
 def _select(lights: Lights, order) -> Lights:

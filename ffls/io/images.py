@@ -23,6 +23,7 @@ does not report every failure (a full disk), so its return value and the file ar
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import os
 import sys
@@ -33,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError, OutputError, atomic_output, register_input, run_uninterrupted
+from ffls.errors import (InputError, OutputError, atomic_output, os_error_message, register_input,
+                         run_uninterrupted)
 
 __all__ = [
     "ImageData",
@@ -49,6 +51,8 @@ __all__ = [
     "premultiply",
     "with_alpha",
     "quiet_native_output",
+    "ImageHeader",
+    "image_header",
     "nonfinite_message",
 ]
 
@@ -277,6 +281,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
     if not path.is_file():
         raise InputError("image file not found" if not path.exists() else "not a file", path)
     register_input(path)
+    _check_decodable_size(path)
     img = read_exr(path, working_space=working_space, out=out) if kind == "exr" else _read_cv2(path, kind)
     if not allow_nonfinite:
         why = nonfinite_message(img.pixels)
@@ -285,6 +290,28 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         if why:
             raise InputError(f"image has {why}", path)
     return img
+
+
+#: Bytes per pixel that decoding an image takes at its peak: float32 RGB (12) and the decoder's
+#: own array (up to 12 more for a float file).
+DECODE_BYTES_PER_PIXEL = 24
+
+
+def _check_decodable_size(path: Path) -> None:
+    """Refuse, from its header, an image whose decoding needs more memory than is available
+    (a huge light map or background, which was decoded until the system ran out of memory)."""
+    from ffls.errors import available_memory
+
+    head = image_header(path)
+    if head is None:
+        return
+    if path.suffix.lower() != ".exr" and head.width * head.height >= 2 ** 30:
+        return  # (OpenCV refuses it without decoding, and _undecodable says so, the same on every machine)
+    need = float(head.width) * float(head.height) * DECODE_BYTES_PER_PIXEL
+    have = available_memory()
+    if need > have:
+        raise InputError(f"a {head.width}x{head.height} image needs about {need / 2**30:.3g} GiB to decode, more "
+                         f"than the {have / 2**30:.3g} GiB of memory available", path)
 
 
 def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarray | None = None) -> ImageData:
@@ -421,6 +448,11 @@ def _tiff_alpha_dropped(path: Path, shape: tuple) -> np.ndarray | None:
     return a if a.shape == tuple(shape) else None
 
 
+# Pillow modes of files OpenCV decodes (a header of another, e.g. 'F' or 'I;16S', is a sample
+# format OpenCV does not read)
+_CV2_MODES = {"1", "L", "LA", "P", "PA", "RGB", "RGBA", "CMYK", "YCbCr", "I;16", "I;16B", "I;16L"}
+
+
 def _undecodable(path: Path, kind: str, whole: bool) -> str:
     """Why OpenCV decoded nothing: a valid file beyond its pixel limit or in a sample format it
     does not read (asked of Pillow, which reads the header only), else corrupt or truncated."""
@@ -443,6 +475,8 @@ def _undecodable(path: Path, kind: str, whole: bool) -> str:
         else:
             if w * h >= 2 ** 30:
                 return f"{what}: {w}x{h} is beyond OpenCV's limit of 2^30 pixels"
+            if mode in _CV2_MODES:  # a header OpenCV reads: the data after it is what failed
+                return f"{what}: its {w}x{h} header is valid but the data is corrupt or truncated"
             return (f"{what}: a {w}x{h} {kind.upper()} of sample format {mode!r}, which OpenCV does not read; "
                     "convert it to 8- or 16-bit integer or 32-bit float (or EXR)")
     if kind == "tiff":  # (a TIFF's sample formats are many: 16-bit float, 1-bit, ...)
@@ -534,6 +568,78 @@ def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
     if size is not None and (m.shape[1], m.shape[0]) != tuple(size):
         raise InputError(f"mask is {m.shape[1]}x{m.shape[0]}, the images are {size[0]}x{size[1]}", path)
     return np.clip(m, 0.0, 1.0).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class ImageHeader:
+    """What an image file's header says, read without decoding its pixels (:func:`image_header`).
+
+    Attributes
+    ----------
+    width, height : int
+        The size in pixels.
+    grey : bool
+        One colour channel (grey, or grey + alpha; an EXR of ``Y`` only): :func:`read_image`
+        replicates it to RGB.
+    """
+
+    width: int
+    height: int
+    grey: bool
+
+
+# Pillow modes of one colour channel (with or without alpha)
+_GREY_MODES = {"1", "L", "LA", "La", "I", "F", "I;16", "I;16B", "I;16L", "I;16N", "PA"}
+
+
+def image_header(path: str | os.PathLike) -> ImageHeader | None:
+    """Size and channel count of an image file from its header alone, without decoding it.
+
+    OpenEXR through its bindings' header-only read, PNG/JPEG/TIFF through Pillow (which reads
+    the header lazily), Radiance ``.hdr`` from its resolution line. A check of a photo's size
+    thus costs a fraction of a millisecond, where decoding a 12000x12000 PNG to find it takes
+    seconds and gigabytes.
+
+    Returns
+    -------
+    ImageHeader or None
+        None where the header cannot be read here (a sample format Pillow does not know, such as
+        a float TIFF, a corrupt file, an ``.hdr`` in another orientation): :func:`read_image`
+        then decodes the file and reports what is wrong with it.
+    """
+    path = Path(path)
+    kind = _KINDS.get(path.suffix.lower())
+    try:
+        if kind == "exr":
+            import OpenEXR
+
+            with quiet_native_output():
+                header = OpenEXR.File(str(path), header_only=True).header()
+            # the display window: a data window that differs is refused by read_exr, which says so
+            (x0, y0), (x1, y1) = (tuple(int(v) for v in c) for c in header["displayWindow"])
+            names = {ch.name for ch in header["channels"]}
+            grey = not {"R", "G", "B"} <= names and "Y" in names and not names & {"RY", "BY"}
+            return ImageHeader(x1 - x0 + 1, y1 - y0 + 1, grey)
+        if kind == "hdr":  # text lines, a blank line, then e.g. "-Y 480 +X 640"
+            with open(path, "rb") as f:
+                head = f.read(4096).split(b"\n\n", 1)
+            words = head[1].split(b"\n", 1)[0].split() if len(head) == 2 else []
+            if len(words) == 4 and words[0] == b"-Y" and words[2] == b"+X":
+                return ImageHeader(int(words[3]), int(words[1]), False)
+            return None
+        if kind in ("png", "jpeg", "tiff"):
+            from PIL import JpegImagePlugin, PngImagePlugin, TiffImagePlugin
+
+            # the format's own reader, not Image.open: that refuses (or warns about) large sizes,
+            # which are the caller's to judge
+            reader = {"png": PngImagePlugin.PngImageFile, "jpeg": JpegImagePlugin.JpegImageFile,
+                      "tiff": TiffImagePlugin.TiffImageFile}[kind]
+            with reader(path) as im:
+                (w, h), mode = im.size, im.mode
+            return ImageHeader(int(w), int(h), mode in _GREY_MODES)
+    except Exception:  # (unreadable here: read_image decodes it and names what is wrong)
+        return None
+    return None
 
 
 def exr_chromaticities(path: str | os.PathLike) -> tuple | None:
@@ -692,7 +798,10 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> P
             except Exception as e:  # a full disk, ...: the bindings raise RuntimeError
                 err = e
         if err is not None:
-            raise OutputError(f"cannot write OpenEXR file ({cap.first_line() or err})", path) from None
+            why = cap.first_line() or str(err)
+            if "No space left" in why:  # (OpenEXR's text names the temporary file)
+                why = os_error_message(OSError(errno.ENOSPC, why))
+            raise OutputError(f"cannot write OpenEXR file ({why})", path) from None
     return path
 
 

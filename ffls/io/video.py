@@ -10,12 +10,14 @@ output stays as it was.
 from __future__ import annotations
 
 import contextlib
+import errno
 import re
 from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import FflsError, InputError, atomic_folder, atomic_output
+from ffls.errors import (FflsError, InputError, OutputError, atomic_folder, atomic_output, disk_full,
+                         os_error_message)
 
 
 #: Names of the frames a PNG folder holds (an existing folder of only these may be replaced).
@@ -74,6 +76,8 @@ class FrameWriter:
                 h, w = self._size
                 self._writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
                 if not self._writer.isOpened():
+                    if disk_full(self.out.parent if str(self.out.parent) else Path(".")):
+                        raise OutputError(f"cannot write ({os_error_message(OSError(errno.ENOSPC, ''))})", self.out)
                     raise FflsError("OpenCV cannot write mp4 (mp4v) here; write PNG frames to a folder instead",
                                     self.out)
             self._writer.write(np.ascontiguousarray(rgb[..., ::-1]))
@@ -103,15 +107,20 @@ class FrameWriter:
             return f"{self.out} ({self.frames} frames, {self.fps:g} fps)"
         return f"{self.out}/frame_0000..{max(self.frames - 1, 0):04d}.png"
 
-    def abort(self) -> None:
-        """Stop without output: a partial mp4 or PNG folder is removed; an existing output stays."""
+    def abort(self, exc: BaseException | None = None) -> None:
+        """Stop without output: a partial mp4 or PNG folder is removed; an existing output stays.
+
+        ``exc``, the error that stopped the writing, is passed through the output policy, which
+        names the output where the error named a temporary path (:func:`ffls.errors.name_output`).
+        """
         if self._writer is not None:
             self._writer.release()
             self._writer = None
         if self._atomic is not None:
             atomic, self._atomic = self._atomic, None
+            exc = exc if isinstance(exc, Exception) else RuntimeError("aborted")
             with contextlib.suppress(Exception):
-                atomic.__exit__(RuntimeError, RuntimeError("aborted"), None)
+                atomic.__exit__(type(exc), exc, None)
 
     def __enter__(self):
         return self
@@ -120,5 +129,5 @@ class FrameWriter:
         if exc_type is None:
             self.close()
         else:
-            self.abort()
+            self.abort(exc)
         return False

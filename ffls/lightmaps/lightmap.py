@@ -439,7 +439,8 @@ def detect_layout(height: int, width: int, layout: str | None = None) -> str:
     if layout not in LAYOUTS:
         raise ValueError(f"unknown light-map layout {layout!r}; one of {LAYOUTS}")
     if layout not in found:
-        raise ValueError(f"a {width}x{height} image cannot be a {layout} map (it looks like {found[0]})")
+        article = "an" if layout[0] in "aeiou" else "a"
+        raise ValueError(f"a {width}x{height} image cannot be {article} {layout} map (it looks like {found[0]})")
     return layout
 
 
@@ -760,7 +761,10 @@ def lightmap_from_spec(spec, layout: str | None = None) -> LightMap:
     if p.is_file():
         lm = load_lightmap(p, layout=layout)
         if not np.any(lm.data > 0):
-            raise InputError("the light map is black everywhere: it lights nothing", p)
+            neg = int(lm.clamped_negatives)
+            why = (f" ({neg} pixels were negative and clamped to 0, the others are 0: a map of negative values, "
+                   "perhaps a difference image?)" if neg else "")
+            raise InputError(f"the light map is black everywhere: it lights nothing{why}", p)
         return lm
     if p.suffix or os.sep in str(spec):
         raise InputError("light map not found", p)

@@ -12,7 +12,6 @@ the images given (RGB in ffls). It is the table that :mod:`ffls.io.capture` read
 """
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -20,6 +19,7 @@ import cv2
 import numpy as np
 
 from ffls.errors import InputError
+from ffls.io.capture import parse_json
 from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
 
@@ -212,8 +212,8 @@ def read_bracket(folder: str | os.PathLike):
     jpath = folder / "exposures.json"
     if jpath.is_file():
         try:
-            doc = json.loads(jpath.read_text())
-        except (OSError, ValueError) as e:
+            doc = parse_json(jpath.read_text(encoding="utf-8-sig"))
+        except (OSError, ValueError) as e:  # (a UnicodeDecodeError is a ValueError)
             raise InputError(f"cannot read exposures ({e})", jpath) from None
         if not isinstance(doc, dict) or not doc:
             raise InputError('expected an object {"file name": seconds, ...}', jpath)

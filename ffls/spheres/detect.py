@@ -1956,8 +1956,8 @@ def _check_scale(K, wfc, R, shape, source, scene_center=None):
         near, far = f_lo * R / float(max(shape)), f_hi * R
     cam_dist = _scene_distance(wfc, scene_center)
     if not np.isfinite(cam_dist):
-        raise InputError("camera.world_from_camera in capture.json puts the camera at a distance beyond any number "
-                         "from the scene centre", source)
+        raise InputError("camera.world_from_camera and scene_center in capture.json put the camera at a distance "
+                         "beyond any number from the scene centre", source)
     if not (np.isfinite(near) and np.isfinite(far)):
         raise InputError(f"sphere_radius ({R:g}) and camera.K (focal length {f_hi:g} px) in capture.json put the "
                          f"spheres at a distance beyond any number: one of them is wrong", source)

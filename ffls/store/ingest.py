@@ -28,6 +28,7 @@ A complete store whose photos changed since (:func:`ffls.store.field.stale_reaso
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import sys
@@ -38,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError, kept_on_interrupt
+from ffls.errors import FflsError, InputError, OutputError, kept_on_interrupt, os_error_message
 from ffls.store.field import (FORMAT, MARKER, MIN_LEVEL_SIZE, VERSION, ReflectanceField, choose_tile, compressor, default_store_path,
                               level_shapes, open_field, photo_record, provenance, read_json, stale_reason,
                               tile_slices, write_json_atomic)
@@ -224,6 +225,8 @@ def check_store_path(path) -> None:
     path = Path(path)
     if not path.parent.is_dir():
         raise InputError(f"the store's folder {path.parent} does not exist", path)
+    if not os.access(path.parent, os.W_OK | os.X_OK):  # (the ingest's first write failed, naming no file)
+        raise OutputError("folder is not writable (permission denied or read-only)", path.parent)
     if not path.exists():
         return
     marker = read_json(path / MARKER) if path.is_dir() else None
@@ -235,6 +238,19 @@ def check_store_path(path) -> None:
                 else "a folder that is not an ffls store (no complete.json or plan.json of one)")
         raise InputError(f"is {what}; the store must be a new path or an ffls store, and ffls never replaces "
                          "anything else", path)
+
+
+@contextlib.contextmanager
+def _store_os_errors(path: Path):
+    """An OS error while the store is written (a full disk: zarr's error names no file) as one
+    line naming the store; what was staged is kept, as after an interruption, for a resume."""
+    try:
+        yield
+    except FflsError:
+        raise
+    except OSError as e:
+        kept = "; the unfinished store is kept: the next run resumes it" if path.exists() else ""
+        raise OutputError(f"cannot write the store ({os_error_message(e)}){kept}", path) from None
 
 
 def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, progress: bool = True,
@@ -301,7 +317,7 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
             note = f"an interrupted ingest of other settings was found; restarting {path}"
             _remove(path)
     # an interruption from here keeps the unfinished store on purpose: the next run resumes it
-    with kept_on_interrupt(f"the unfinished store {path} is kept: the next run resumes it"):
+    with kept_on_interrupt(f"the unfinished store {path} is kept: the next run resumes it"), _store_os_errors(path):
         t0 = time.perf_counter()
         if not path.exists():
             g = zarr.open_group(str(path), mode="w")
