@@ -61,7 +61,8 @@ def main(argv=None):
         out.append(row)
         print(f"{name}: one orientation each "
               + " ".join(f"{100 * e:.1f}" for e in single)
-              + " % (the first is the default's); average of " + ", ".join(f"{j}: {100 * e:.1f}%" for j, e in avg.items())
+              + " % (the first is the default's); average of "
+              + ", ".join(f"{j}: {100 * e:.1f}%" for j, e in avg.items())
               + f"; sources {'/'.join(map(str, sel.chosen))}; {cpu:.1f} CPU s", flush=True)
     tag = ("_noise" if a.noise > 0 else "") + (f"_seed{own.seed}" if own.seed else "")
     path = a.json or str(ROOT / f"benchmarks/results/probes_orientation{tag}.json")

@@ -245,8 +245,9 @@ def method_knobs(args) -> dict:
 
             raise InputError(f"--orientations applies to --sources auto or adaptive without --smoothness cv, not "
                              f"--sources {args.sources}" + (" --smoothness cv" if args.smoothness == "cv" else ""))
-        return {"orientations": args.orientations, "sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
-                "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill}
+        return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
+                "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill,
+                "orientations": args.orientations}
     if args.method == "shadow":
         if args.smoothness == "cv":
             from ffls.errors import InputError

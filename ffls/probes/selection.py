@@ -479,7 +479,9 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
         and the fits are averaged (:func:`ffls.probes.hougen_ahuja.average_fits`). Which
         non-negative map NNLS returns among those that fit the ball depends on where the sources
         lie, not on the data (``docs/probes.md``, *The orientation of the source set*); the average
-        removes that part of the error for spread light and costs ``K`` estimates.
+        removes that part of the error for spread light (night), but turned sets can move lamps a few
+        degrees above the horizon below it (studio), and it costs ``K`` estimates: an option, not
+        the default.
     orientation_seed : int
         Seed of the random rotations.
     **kwargs
@@ -490,7 +492,8 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
     Selection
         ``chosen`` is the number of sources; ``fit.directions`` the adaptive set. With
         ``orientations > 1``: ``chosen`` is the tuple of the members' sizes, ``candidates`` their
-        rounds' sizes (one list per member) and ``fit`` a
+        rounds' sizes (one list per member), ``scores`` the score of each member's chosen round and
+        ``fit`` a
         :class:`~ffls.probes.hougen_ahuja.SourceEnsemble`.
     """
     n = check_normals(normals)
@@ -533,13 +536,14 @@ def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: 
         # the hierarchy fixed, the pixels turned by R: its sources d' are the world's R^T d'
         sel = adaptive_hougen_ahuja(normals if i == 0 else n @ R.T, radiance, albedo, **kwargs)
         sels.append(sel)
-        fits.append(sel.fit if i == 0 else dataclasses.replace(sel.fit, directions=normalize(sel.fit.directions @ R)))
+        fits.append(sel.fit if i == 0 else
+                    dataclasses.replace(sel.fit, directions=normalize(sel.fit.directions @ R)))
     sizes = tuple(int(s.chosen) for s in sels)
     note = (f"adaptive sources in {k} orientations of the geodesic hierarchy (the first its own, the others "
             f"random), averaged: {', '.join(map(str, sizes))} sources chosen ({sels[0].note})")
-    return Selection(chosen=sizes, candidates=[s.candidates for s in sels],
-                     scores=np.array([float(s.scores[list(s.candidates).index(s.chosen)]) for s in sels]), criterion=sels[0].criterion,
-                     fit=average_fits(fits, radiance), note=note)
+    scores = np.array([float(s.scores[list(s.candidates).index(s.chosen)]) for s in sels])
+    return Selection(chosen=sizes, candidates=[s.candidates for s in sels], scores=scores,
+                     criterion=sels[0].criterion, fit=average_fits(fits, radiance), note=note)
 
 
 def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0), base_frequency: int = 3,
