@@ -101,6 +101,9 @@ def _add_inverse(sub, common):
                         "may be negative) or none")
     d.add_argument("--rcond", type=number(0.0, 1.0, lo_open=True), default=None,
                    help="with --unconstrained: truncate singular values below RCOND x the largest")
+    d.add_argument("--orientations", type=integer(1, 64), default=1,
+                   help="with adaptive sources: average the estimate over this many orientations of the geodesic "
+                        "source set (default 1: one estimate; costs as many estimates)")
     s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
                        description="Dome node intensities from the shadow of a known occluder on a plane.")
     s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto|adaptive|uniform",
@@ -240,8 +243,14 @@ def method_knobs(args) -> dict:
                 "weight_power": args.weight_power, "fill": args.fill}
     if args.method == "diffuse":
         ambient = {"auto": "auto", "nonnegative": "nonnegative", "free": True, "none": False}[args.ambient]
+        if args.orientations > 1 and (args.sources not in ("auto", "adaptive") or args.smoothness == "cv"):
+            from ffls.errors import InputError
+
+            raise InputError(f"--orientations applies to --sources auto or adaptive without --smoothness cv, not "
+                             f"--sources {args.sources}" + (" --smoothness cv" if args.smoothness == "cv" else ""))
         return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
-                "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill}
+                "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill,
+                "orientations": args.orientations}
     if args.method == "shadow":
         if args.smoothness == "cv":
             from ffls.errors import InputError

@@ -333,7 +333,7 @@ SMOOTHNESS_WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
 
 def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="auto",
                      criterion: str = "cv", smoothness: float | str = 0.0, rcond: float | None = None,
-                     rim_px: float = 0.5,
+                     orientations: int = 1, rim_px: float = 0.5,
                      max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
                      fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
@@ -367,6 +367,10 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     rcond : float, optional
         Unconstrained only: truncate singular values below ``rcond`` times the largest (large
         source sets are rank deficient on a Lambertian sphere).
+    orientations : int
+        Adaptive sources only: average the estimate over this many orientations of the geodesic
+        hierarchy (:func:`ffls.probes.selection.adaptive_hougen_ahuja`; 1, the default, is one
+        estimate; ``docs/probes.md``, *The orientation of the source set*, measures the trade).
     rim_px, max_pixels
         See :func:`diffuse_pixels`.
     confidence_threshold : float
@@ -384,11 +388,16 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     by_cv = isinstance(smoothness, str)
     if by_cv and smoothness != "cv":
         raise ValueError(f"smoothness must be a number >= 0 or 'cv', not {smoothness!r}")
+    if int(orientations) != orientations or orientations < 1:
+        raise ValueError(f"orientations must be an integer >= 1, not {orientations!r}")
+    if orientations > 1 and (sources not in ("auto", "adaptive") or by_cv):
+        raise ValueError("orientations > 1 applies to adaptive sources without smoothness='cv'")
     kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=0.0 if by_cv else smoothness, rcond=rcond)
     try:
         if sources in ("auto", "adaptive", "uniform"):
             select = select_hougen_ahuja if sources == "uniform" else adaptive_hougen_ahuja
-            sel = select(N, V, albedo, criterion=criterion, **kw)
+            extra = {"orientations": int(orientations)} if orientations > 1 else {}
+            sel = select(N, V, albedo, criterion=criterion, **kw, **extra)
             fit, chosen = sel.fit, sel.chosen
             notes.append(sel.note)
         else:
@@ -408,9 +417,14 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         raise _with_source(e, src) from None
     amb = {False: "no ambient", "nonnegative": "non-negative ambient", True: "free ambient", "free": "free ambient"}[
         resolve_ambient(ambient, nonnegative, fit.hemisphere)]
-    notes.append(f"Hougen-Ahuja: {chosen} sources{' (non-negative)' if nonnegative else ''}, {amb}, re-rendered "
+    count = (f"{chosen} sources" if orientations == 1 else
+             f"the mean of {len(chosen)} fits ({', '.join(map(str, chosen))} sources)")
+    notes.append(f"Hougen-Ahuja: {count}{' (non-negative)' if nonnegative else ''}, {amb}, re-rendered "
                  f"relative RMS {100 * fit.relative_rms:.2f}%, condition {fit.condition:.3g}")
-    details = {"sources": chosen, "relative_rms": float(fit.relative_rms), "condition": float(fit.condition)}
+    details = {"sources": chosen if orientations == 1 else list(chosen), "relative_rms": float(fit.relative_rms),
+               "condition": float(fit.condition)}
+    if orientations > 1:
+        details["orientations"] = int(orientations)
     if by_cv:
         details["smoothness"] = float(reg.chosen)
     return _finish(fit.latlong(height), normal_confidence(N, height), confidence_threshold, "diffuse", probe, notes,

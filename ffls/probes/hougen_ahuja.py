@@ -28,8 +28,8 @@ from ffls.errors import InputError
 from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix, neighbour_edges, solve_sources
 from ffls.probes.sources import HOUGEN_AHUJA_SIZES, cell_energies, model_sources, sources_to_latlong
 
-__all__ = ["SourceFit", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals", "normal_confidence",
-           "cell_solid_angles"]
+__all__ = ["SourceFit", "SourceEnsemble", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals",
+           "normal_confidence", "cell_solid_angles", "average_fits"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,56 @@ class SourceFit:
     def latlong(self, height: int = 64) -> np.ndarray:
         """The recovered lighting as lat-long radiance (height, 2 height, 3) float64 (may be negative)."""
         return sources_to_latlong(self.directions, self.intensities, height, self.hemisphere, self.ambient)
+
+
+@dataclass(frozen=True)
+class SourceEnsemble(SourceFit):
+    """The average of several :class:`SourceFit` of the same pixels (for example over orientations of the
+    source set, :func:`ffls.probes.selection.adaptive_hougen_ahuja`).
+
+    ``directions`` and ``intensities`` hold every member's sources, the intensities divided by the
+    number of members, so a point-source rendering of them (``rendered``) is the members' mean;
+    :meth:`latlong` averages the members' own maps (each source spread over its own set's Voronoi
+    cell, not over a cell of the union). ``members`` holds the fits.
+    """
+
+    members: tuple = ()
+
+    def latlong(self, height: int = 64) -> np.ndarray:
+        """The mean of the members' lat-long maps (height, 2 height, 3) float64."""
+        return np.mean([f.latlong(height) for f in self.members], axis=0)
+
+
+def average_fits(fits, radiance) -> SourceEnsemble:
+    """The mean of fits of the same ``radiance`` (m, 3) pixels as a :class:`SourceEnsemble`.
+
+    Parameters
+    ----------
+    fits : sequence of SourceFit
+        Fits of the same pixels, in the same order (their ``rendered`` rows match).
+    radiance : (m,) or (m, 3) array_like
+        Those pixels (for the ensemble's ``rms``).
+
+    Returns
+    -------
+    SourceEnsemble
+    """
+    fits = tuple(fits)
+    if not fits:
+        raise ValueError("no fits to average")
+    k = len(fits)
+    b = as_rgb_pixels(radiance, fits[0].rendered.shape[0])
+    rendered = np.mean([f.rendered for f in fits], axis=0)
+    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
+    ref = float(np.sqrt(np.mean(b ** 2)))
+    observed = [f.observed if f.observed is not None else np.ones(f.directions.shape[0], bool) for f in fits]
+    return SourceEnsemble(directions=np.concatenate([f.directions for f in fits]),
+                          intensities=np.concatenate([f.intensities for f in fits]) / k,
+                          ambient=np.mean([f.ambient for f in fits], axis=0), rendered=rendered, rms=rms,
+                          relative_rms=rms / ref if ref > 0 else np.inf,
+                          condition=float(max(f.condition for f in fits)), method=fits[0].method,
+                          hemisphere=fits[0].hemisphere, rank=int(max(f.rank for f in fits)),
+                          observed=np.concatenate(observed), members=fits)
 
 
 def check_normals(normals) -> np.ndarray:

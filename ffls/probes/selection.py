@@ -459,7 +459,8 @@ def _scorer(criterion, fit_predict, data, blocks, folds, seed, extra_params):
 
 def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3, max_sources: int = 500,
                           max_level: int = 3, criterion: str = "cv", folds: int = 5, tolerance: float = 0.05,
-                          seed: int = 0, power_share: float = 0.5, patience: int = 2, **kwargs) -> Selection:
+                          seed: int = 0, power_share: float = 0.5, patience: int = 2, orientations: int = 1,
+                          orientation_seed: int = 0, **kwargs) -> Selection:
     """Hougen-Ahuja over an adaptive geodesic source set (:func:`refine_sources`).
 
     Parameters
@@ -471,17 +472,40 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
         frequency is lowered until a CV fold (4/5 of the pixels) holds more pixels than unknowns.
     criterion, folds, tolerance, seed
         As :func:`select_model`; CV blocks group the pixels by normal direction.
+    orientations : int
+        1 (default): the geodesic hierarchy in its own orientation (a vertex on +Z). ``K > 1``: the
+        whole estimate (refinement and choice) is made ``K`` times, the hierarchy turned by ``K``
+        rotations (the first the identity, the others uniformly random from ``orientation_seed``),
+        and the fits are averaged (:func:`ffls.probes.hougen_ahuja.average_fits`). Which
+        non-negative map NNLS returns among those that fit the ball depends on where the sources
+        lie, not on the data (``docs/probes.md``, *The orientation of the source set*); the average
+        removes that part of the error for spread light (night), but turned sets can move lamps a few
+        degrees above the horizon below it (studio), and it costs ``K`` estimates: an option, not
+        the default.
+    orientation_seed : int
+        Seed of the random rotations.
     **kwargs
         Passed to :func:`~ffls.probes.hougen_ahuja.hougen_ahuja` (``nonnegative``, ``ambient``...).
 
     Returns
     -------
     Selection
-        ``chosen`` is the number of sources; ``fit.directions`` the adaptive set.
+        ``chosen`` is the number of sources; ``fit.directions`` the adaptive set. With
+        ``orientations > 1``: ``chosen`` is the tuple of the members' sizes, ``candidates`` their
+        rounds' sizes (one list per member), ``scores`` the score of each member's chosen round and
+        ``fit`` a
+        :class:`~ffls.probes.hougen_ahuja.SourceEnsemble`.
     """
     n = check_normals(normals)
     b = as_rgb_pixels(radiance, n.shape[0])
     rho = broadcast_albedo(albedo, n.shape[0])  # (m, 3): per-pixel albedo is split with the pixels
+    k_or = int(orientations)
+    if k_or != orientations or k_or < 1:
+        raise ValueError(f"orientations must be an integer >= 1, not {orientations!r}")
+    if k_or > 1:
+        return _oriented_ensemble(normals, radiance, albedo, n, k_or, orientation_seed, dict(
+            base_frequency=base_frequency, max_sources=max_sources, max_level=max_level, criterion=criterion,
+            folds=folds, tolerance=tolerance, seed=seed, power_share=power_share, patience=patience, **kwargs))
 
     def fp(d, train, test):
         fit = hougen_ahuja(n[train], b[train], rho[train], d, **kwargs)
@@ -493,6 +517,33 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
     base_frequency = _base_frequency(base_frequency, n.shape[0], "full", extra)
     return refine_sources(lambda d: hougen_ahuja(n, b, rho, d, **kwargs), score, base_frequency, "full",
                           max_sources, max_level, power_share, patience, criterion, tolerance)
+
+
+def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: dict) -> Selection:
+    """:func:`adaptive_hougen_ahuja` in ``k`` orientations of the source hierarchy, averaged (``n``: the
+    checked normals; the first member gets the caller's arrays as given, so that it is the plain estimate to
+    the last bit: NNLS can return another of its equally good vertices after a change in the last bits)."""
+    import dataclasses
+
+    from scipy.spatial.transform import Rotation
+
+    from ffls.probes.hougen_ahuja import average_fits
+
+    rots = Rotation.random(k, random_state=int(seed)).as_matrix()
+    rots[0] = np.eye(3)
+    sels, fits = [], []
+    for i, R in enumerate(rots):
+        # the hierarchy fixed, the pixels turned by R: its sources d' are the world's R^T d'
+        sel = adaptive_hougen_ahuja(normals if i == 0 else n @ R.T, radiance, albedo, **kwargs)
+        sels.append(sel)
+        fits.append(sel.fit if i == 0 else
+                    dataclasses.replace(sel.fit, directions=normalize(sel.fit.directions @ R)))
+    sizes = tuple(int(s.chosen) for s in sels)
+    note = (f"adaptive sources in {k} orientations of the geodesic hierarchy (the first its own, the others "
+            f"random), averaged: {', '.join(map(str, sizes))} sources chosen ({sels[0].note})")
+    scores = np.array([float(s.scores[list(s.candidates).index(s.chosen)]) for s in sels])
+    return Selection(chosen=sizes, candidates=[s.candidates for s in sels], scores=scores,
+                     criterion=sels[0].criterion, fit=average_fits(fits, radiance), note=note)
 
 
 def adaptive_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0, 1.0), base_frequency: int = 3,
