@@ -111,10 +111,7 @@ def mirror_limb(radiance, center_px, radius_px, shape):
     to 3 px off on 5 of 12 renders). At the limb the ball shows what lies just behind it, dimmed by
     its reflectance: the circle of radial brightness steps (``mirror_silhouette``, radii 0.75 to 1.25
     of the found one, log luminance) is taken when its steps cover at least
-    :data:`LIMB_STEP_COVERAGE` of it and it stays within 15% of the found circle (centre and radius),
-    and when it is not inside the found circle: the limb is the ball's outermost circle, so a step
-    circle more than a pixel smaller is a reflected edge (under the night map the found outer
-    outline was 0.06 px from the true centre and the step circle 1.7 px off, 1.7 px smaller).
+    :data:`LIMB_STEP_COVERAGE` of it and it stays within 15% of the found circle (centre and radius).
     """
     from ffls.spheres.mirror_outline import circle_coverage, mirror_silhouette
 
@@ -125,8 +122,7 @@ def mirror_limb(radiance, center_px, radius_px, shape):
     if sil is None:
         return None
     pts, c, r = sil
-    if (np.hypot(*(c - np.asarray(center_px))) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15
-            or r < radius_px - 1.0):
+    if np.hypot(*(c - np.asarray(center_px))) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15:
         return None
     if circle_coverage(pts, c, r, 1.0, shape) < LIMB_STEP_COVERAGE:
         return None
