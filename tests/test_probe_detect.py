@@ -38,9 +38,15 @@ def _located(folder, name):
 
 
 def test_mirror_ball_found_without_hint(tmp_path):
+    """Within 2 px: the finder's outer outline is 0.06-0.43 px from the true centre, and
+    ``mirror_limb`` then takes a circle of limb steps 0.9 px off (NumPy's AVX2 kernels) or 1.7 px off
+    (its AVX-512 kernels, e.g. on an AMD EPYC): the steps of the limb and of a reflected edge just
+    inside it score alike, so the last bits of the arithmetic choose (docs/probes.md). A reflected
+    circle taken for the ball (sunrise below: 5.7 px) or another round outline (studio: 30 px)
+    fails it."""
     geo, c_true = _located(tmp_path, "night")
     assert geo.source == "auto"
-    assert np.hypot(*(geo.center_px - c_true)) < 1.0
+    assert np.hypot(*(geo.center_px - c_true)) < 2.0
 
 
 @pytest.mark.xfail(strict=True, reason="known limitation (docs/probes.md): under the sunrise map the finder takes a "

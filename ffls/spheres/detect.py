@@ -1434,7 +1434,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         if tensor is not None and tensor[1] >= 3:  # outlines the max image leaves out (white on white)
-            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px)
+            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges)
             # one the photos' edges outline precisely but leave open (a textured ground's patches
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
             # may have missed among the texture's: it is fitted on the max image's edges too
@@ -1560,6 +1560,10 @@ def shading_ratio(L_max, L_mean) -> np.ndarray:
     return np.log((L_max + eps) / (np.minimum(L_mean, L_max) + eps))
 
 
+#: Least share of a candidate circle's outline within 1.5 px of a max-image edge (:func:`_score_circle`).
+MIN_EDGE_SUPPORT = 0.35
+
+
 def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio=None) -> list[tuple[float, float, float]]:
     """Stage 3 without hints: Hough circles scored by edge support, near-duplicates dropped.
 
@@ -1588,7 +1592,7 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     scored = []
     for x, y, r in hc:
         support, visible = _score_circle(x, y, r, edges.distance)
-        if support >= 0.35 and visible >= 0.4:
+        if support >= MIN_EDGE_SUPPORT and visible >= 0.4:
             scored.append((support * min(visible / 0.8, 1.0), x, y, r))
     scored.sort(key=lambda s: -s[0])
     cands = []  # drop near-duplicates only; overlapping circles are resolved after fitting
@@ -1611,7 +1615,7 @@ def _same_circle(a, b) -> bool:
 PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
 
 
-def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float) -> tuple[list, int]:
+def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: _EdgeMap) -> tuple[list, int]:
     """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
 
     In the max image every pixel reads its best light, so a white matte sphere on a white ground
@@ -1655,6 +1659,19 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float) -> tupl
                 ft = again
             if ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX or any(
                     _same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px)) for o in round_):
+                continue
+            # edges that change with the light also trace the envelope of moving cast shadows round
+            # an object's foot, and such arcs join into circles that overlap the object's outline:
+            # a circle only the changing edges show, or one overlapping an outline fitted on the max
+            # image, must be one the max image's edges support as a Hough candidate's must (a
+            # silhouette is an edge there; a textured ground's circles only crowd it out of Hough's
+            # proposals, and the fit of a circle Hough put near it may be a loose one many times
+            # its size). A white sphere on a white ground, which the max image does not outline,
+            # overlaps none.
+            overlaps = any(np.hypot(*(ft.center_px - o.center_px)) <= 0.8 * (ft.radius_px + o.radius_px)
+                           for o in fits)
+            if ((centered or overlaps)
+                    and _score_circle(*ft.center_px, ft.radius_px, edges.distance)[0] < MIN_EDGE_SUPPORT):
                 continue
             ft.outline_edges = PHOTO_EDGES
             same = [k for k, o in enumerate(more)
