@@ -270,3 +270,21 @@ def test_same_spheres_for_one_and_two_workers():
     h1 = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints)
     h2 = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints, workers=2)
     assert [tuple(f.center_px) for f in h1] == [tuple(f.center_px) for f in h2]
+
+
+def test_cone_residuals_of_unit_rays_are_the_same_floats():
+    """The outline fit's residual on rays normalised once (``_unit_cone_residuals``) gives the
+    very floats of the definition, ``f (angle_between(s, c) - alpha)`` with ``c`` the cone's axis."""
+    from ffls.conventions import angle_between, normalize
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        s = rng.normal(size=(int(rng.integers(1, 300)), 3)) * rng.uniform(0.1, 10)
+        s[:, 2] = np.abs(s[:, 2]) + 5
+        p = rng.normal(size=3) * [50, 50, 5] + [0, 0, 60]
+        f = rng.uniform(200, 3000)
+        x, y, a = p / f
+        axis = np.array([x, y, 1.0]) / np.linalg.norm([x, y, 1.0])
+        want = f * (angle_between(s, axis) - a)
+        assert np.array_equal(detect._unit_cone_residuals(p, normalize(s), f), want)
+        assert np.array_equal(detect._cone_residuals(p, s, f), want)
