@@ -461,3 +461,23 @@ def test_srgb_named_where_the_lit_codes_cannot_tell_it_from_a_gamma():
     assert rec["naming"] == "shown_codes" and len(rec["shown_codes"]) == 2 and "dark_srgb_excess" in rec
     g22 = calibrate_encoding(*_exposed_capture("c04"), code_step=1 / 255)
     assert g22.curve == "gamma" and g22.naming == "bic" and g22.dark_srgb_excess is None
+
+
+def test_encoding_calibration_finds_the_spheres_with_its_workers(linear_captures, tmp_path, monkeypatch):
+    """``calibrate_capture_encoding(..., workers=2)`` (``ffls lights`` on 8-bit photos with no
+    encoding stated) passes its workers to the sphere detection, whose outline fits then run in
+    forked processes instead of the main one; the spheres and the record are the same."""
+    from ffls.spheres import detect
+    from ffls.spheres.estimate import decode_photos
+
+    src, _ = linear_captures["four"]
+    c = cap.load_capture(encoded_capture(src, tmp_path / "c", "srgb"))
+    decoded = decode_photos(c, workers=1)
+    cal_1, sph_1 = calibrate_capture_encoding(c, decoded=decoded)
+    seen = []
+    real = detect.find_spheres_in_capture
+    monkeypatch.setattr(detect, "find_spheres_in_capture", lambda *a, **k: seen.append(k.get("workers")) or real(*a, **k))
+    cal_2, sph_2 = calibrate_capture_encoding(c, decoded=decoded, workers=2)
+    assert seen == [2]
+    assert cal_2.record() == cal_1.record()
+    assert [tuple(s.center_px) for s in sph_2] == [tuple(s.center_px) for s in sph_1]

@@ -1430,7 +1430,8 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
         capture: ``stored``): the spheres are found on its reductions and the spheres' values
         read from its codes, no photo is read again (the same numbers as reading them).
     **kwargs
-        Passed to the method.
+        Passed to the method; ``workers`` also to the sphere detection
+        (:func:`ffls.spheres.detect.find_spheres_in_capture`).
 
     Returns
     -------
@@ -1447,6 +1448,7 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     from ffls.spheres.detect import find_spheres_in_capture
     from ffls.spheres.estimate import capture_samples
 
+    workers = kwargs.get("workers", 1)  # (also the detection's: the same spheres for any number)
     first = read_image(capture.image_paths[0])
     if first.bit_depth not in (8, 16):
         raise InputError(f"the images are {first.bit_depth} floating point, linear by definition: nothing to "
@@ -1456,10 +1458,10 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     if spheres is None and decoded is not None:
         try:
             spheres = find_spheres_in_capture(replace(capture, encoding="linear"), stats=decoded.stats,
-                                              bit_depths=decoded.bit_depths)
+                                              bit_depths=decoded.bit_depths, workers=workers)
         except InputError as first_error:  # as below: the sRGB-decoded values (read again, in this rare case)
             try:
-                spheres = find_spheres_in_capture(replace(capture, encoding="srgb"))
+                spheres = find_spheres_in_capture(replace(capture, encoding="srgb"), workers=workers)
             except InputError:
                 raise first_error from None
     if spheres is None:
@@ -1469,10 +1471,10 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
         # decoded as sRGB, which undoes most of a camera's compression; this only finds the
         # spheres, the encoding is still calibrated from them below.
         try:
-            spheres = find_spheres_in_capture(replace(capture, encoding="linear"))
+            spheres = find_spheres_in_capture(replace(capture, encoding="linear"), workers=workers)
         except InputError as first_error:
             try:
-                spheres = find_spheres_in_capture(replace(capture, encoding="srgb"))
+                spheres = find_spheres_in_capture(replace(capture, encoding="srgb"), workers=workers)
             except InputError:
                 raise first_error from None
     h, w = first.shape
