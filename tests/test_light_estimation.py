@@ -705,9 +705,9 @@ def test_decode_photos_names_a_photo_of_another_size(tmp_path):
 
     names = _png_capture(tmp_path)
     cv2.imwrite(str(tmp_path / names[3]), np.zeros((20, 32, 3), np.uint8))
-    with pytest.raises(InputError) as e:
+    with pytest.raises(InputError) as e:  # the capture's load reads each photo's header and says so
         decode_photos(load_capture(tmp_path), workers=1)
-    assert names[3] in str(e.value.path) and "same size" in str(e.value)
+    assert names[3] in str(e.value.path) and "32x20" in str(e.value) and names[0] in str(e.value)
 
 
 # ----------------------------------------------------------------------------- the fit's fixed point

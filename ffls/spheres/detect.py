@@ -88,6 +88,7 @@ __all__ = [
     "SequenceAccumulator",
     "photo_colour_counts",
     "photo_edge_tensor",
+    "unit_cone_residuals",
     "consistent_edge_points",
     "consistent_edge_strength",
     "COLOUR_BINS",
@@ -941,11 +942,12 @@ def _start_circle(pts, center, r_expected, tol=1.5):
 
 def _cone_residuals(params, s, f):
     """Signed distances (pixels) of the rays ``s`` (n, 3) from the cone ``params`` = f (x, y, alpha)."""
-    return _unit_cone_residuals(params, normalize(s), f)
+    return unit_cone_residuals(params, normalize(s), f)
 
 
-def _unit_cone_residuals(params, s, f):
-    """:func:`_cone_residuals` of rays ``s`` already normalised (:func:`ffls.conventions.normalize`).
+def unit_cone_residuals(params, s, f):
+    """Signed distances (pixels) of the unit rays ``s`` (n, 3; :func:`ffls.conventions.normalize`)
+    from the cone ``params`` = f (x, y, alpha): the outline fit's residual.
 
     :func:`ffls.conventions.angle_between` written out for (n, 3) unit rows against one direction:
     the same operations in the same order (so the same floats), without normalising the rays
@@ -996,7 +998,7 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     s = np.asarray(rays, dtype=np.float64)
     d = np.asarray(init_dir, dtype=np.float64)
     p0 = f * np.array([d[0] / d[2], d[1] / d[2], init_alpha])
-    p, inl = _trimmed_fit(lambda q, pts: _unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim)
+    p, inl = _trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim)
     x, y, a = p / f
     if not (0 < a < np.pi / 2):
         raise ValueError("fitted apparent radius is not in (0, 90) degrees")

@@ -276,7 +276,6 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     chosen : list of SphereFit
     rejected : list of str
     """
-    crit = CRITERIA
     shape = L.shape
     round_ = []
     clip = clip_levels(mx) if saturates and mx.ndim == 3 and mx.shape[2] >= 3 else None
