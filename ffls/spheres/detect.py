@@ -1647,9 +1647,17 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     proposed by Hough on that strength (8 bit over its robust peak) and each is fitted on the
     ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
-    most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. A fit that overlaps an outline already fitted on the max image is dropped (the max image's outline is
-    judged, and refitted on these edges, as before); the others join the candidates with
-    ``outline_edges`` :data:`PHOTO_EDGES`, so they must close :data:`ffls.spheres.select.CRITERIA`
+    most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
+    with the light (``centered``, the gradient's covariance over the photos), where a textured
+    ground's edges, the same in every photo, drop out.
+
+    A fit that is a near-duplicate (:func:`_same_circle`) of a round outline already fitted on the
+    max image is dropped (that outline is judged, and refitted on these edges, as before); of two
+    near-duplicate fits here the better outline is kept. A fit from the changing edges, or one that
+    overlaps an outline fitted on the max image, must have the max image's edge support that a
+    Hough candidate needs (:data:`MIN_EDGE_SUPPORT`): changing edges also trace the envelope of
+    cast shadows round an object's foot. The others join the candidates with ``outline_edges``
+    :data:`PHOTO_EDGES`, so they must close :data:`ffls.spheres.select.CRITERIA`
     ``min_closed_photos`` of their outline, and are judged by the same criteria. Returns those fits
     and how many circles were proposed.
     """
