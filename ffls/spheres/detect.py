@@ -1095,21 +1095,22 @@ def _hough_candidates(g8, min_r, max_r, scale):
     return _hough_candidates_many([(g8, min_r, max_r, scale)])[0]
 
 
-def _hough_calls(g8, min_r, max_r, scale) -> list:
+def _hough_calls(g8, min_r, max_r, scale, plain: bool = True) -> list:
     """The three ``cv2.HoughCircles`` calls of :func:`_hough_candidates` on ``g8`` (zero-argument
-    callables, each returning its circles (m, 3), the plain gradient's first 30)."""
+    callables, each returning its circles (m, 3), the plain gradient's first 30; without
+    ``plain``, the two ``HOUGH_GRADIENT_ALT`` calls only)."""
     blur = cv2.GaussianBlur(g8, (0, 0), 1.5)
 
     def alt(p2):
         return lambda: cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=max(2 * min_r, 4),
                                         param1=1.0 * scale, param2=p2, minRadius=int(min_r), maxRadius=int(max_r))
 
-    def plain():
+    def gradient():
         c = cv2.HoughCircles(blur, cv2.HOUGH_GRADIENT, dp=1, minDist=max(2 * min_r, 4), param1=scale,
                              param2=20, minRadius=int(min_r), maxRadius=int(max_r))
         return None if c is None else c.reshape(-1, 3)[:30]
 
-    return [alt(0.8), alt(0.7), plain]
+    return [alt(0.8), alt(0.7)] + ([gradient] if plain else [])
 
 
 def _hough_candidates_many(images: list) -> list:
@@ -1674,7 +1675,9 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
         sc = 255.0 / peak
         g8 = np.clip(S * sc, 0, 255).astype(np.uint8)
         # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio)
-        hc = np.concatenate(_hough_candidates_many([(g8, 3, min(H, W) / 2, 0.5 * sc)]))
+        # on the changing edges, only the ALT transform's well-formed circles: its plain gradient's
+        # 30 there are mostly arcs of moving shadows, each a fit (and the pass's cost) for nothing
+        hc = np.concatenate(_hough_candidates_many([(g8, 3, min(H, W) / 2, 0.5 * sc, not centered)]))
         n_proposed += len(hc)
         cpts = consistent_edge_points(*tensor, centered=centered)
         for x, y, r in hc:
