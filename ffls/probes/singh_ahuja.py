@@ -260,11 +260,8 @@ def residual_bound(H, g, lower: float = 0.0, upper=None) -> np.ndarray:
     """
     from scipy.optimize import lsq_linear
 
-    H = np.asarray(H, dtype=np.float64)
-    g = np.asarray(g, dtype=np.float64).reshape(H.shape[0], -1)
-    m, J = H.shape
-    lo = np.broadcast_to(np.asarray(lower, dtype=np.float64), (J,))
-    hi = np.broadcast_to(np.inf if upper is None else np.asarray(upper, dtype=np.float64), (J,))
+    H, g, lo, hi = _lp_arrays(H, g, lower, upper)
+    m = H.shape[0]
     eps = np.empty(g.shape[1])
     for c in range(g.shape[1]):
         x = lsq_linear(H, g[:, c], bounds=(lo, hi), method="bvls").x
@@ -523,7 +520,8 @@ def _check_least_power(delta, relaxation, tol, x0=None) -> None:
 
 
 def _lp_arrays(H, g, lower, upper):
-    """``(H, g, lo, hi)`` as float64: ``g`` (m, c), the bounds broadcast to (J,) (``inf`` with no upper)."""
+    """``(H, g, lo, hi)`` as float64: ``g`` (m, c), the bounds broadcast to (J,) (``inf`` with no upper);
+    the arrays of :func:`residual_bound` and the linear programmes alike."""
     H = np.asarray(H, dtype=np.float64)
     g = np.asarray(g, dtype=np.float64).reshape(H.shape[0], -1)
     J = H.shape[1]
