@@ -505,7 +505,7 @@ def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> N
     tensor[0] += gx * gx
     tensor[1] += gx * gy
     tensor[2] += gy * gy
-    if len(tensor) >= 5:
+    if len(tensor) >= EDGE_TENSOR_ROWS:
         tensor[3] += gx
         tensor[4] += gy
 
@@ -547,7 +547,11 @@ def consistent_edge_points(tensor, n_photos: int, centered: bool = False):
         Unit ``e_1`` (across the edge; its sign is arbitrary).
     strength : (m,) float64
     """
-    S, ang = consistent_edge_strength(tensor, n_photos, centered)
+    return _ridge_points(*consistent_edge_strength(tensor, n_photos, centered))
+
+
+def _ridge_points(S, ang):
+    """:func:`consistent_edge_points` of the strength ``S`` and angle ``ang`` (:func:`consistent_edge_strength`)."""
     H, W = S.shape
     ys, xs = np.mgrid[0:H, 0:W]
     thr = 3.0 * float(np.median(S))
@@ -1667,7 +1671,7 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     # the edges that hold in the photos, then the ones whose contrast changes with the light (the
     # gradient's covariance: a textured ground's edges, the same in every photo, drop out of it)
     for centered in (False, True)[:1 + (len(tensor[0]) >= EDGE_TENSOR_ROWS)]:
-        S, _ = consistent_edge_strength(*tensor, centered=centered)
+        S, ang = consistent_edge_strength(*tensor, centered=centered)
         H, W = S.shape
         peak = _robust_peak(S)
         if not peak > 0:
@@ -1679,7 +1683,7 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
         # 30 there are mostly arcs of moving shadows, each a fit (and the pass's cost) for nothing
         hc = np.concatenate(_hough_candidates_many([(g8, 3, min(H, W) / 2, 0.5 * sc, not centered)]))
         n_proposed += len(hc)
-        cpts = consistent_edge_points(*tensor, centered=centered)
+        cpts = _ridge_points(S, ang)
         for x, y, r in hc:
             ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
             for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
