@@ -15,7 +15,7 @@ import numpy as np
 from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap, highlight_ratio
 
 __all__ = ["CRITERIA", "COLOUR_STEP", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "photo_neutrality",
-           "shading_change", "select_spheres"]
+           "shading_change", "select_spheres", "round_outline", "outline_closure"]
 
 
 #: Criteria an unhinted round outline must meet to count as a calibration sphere
@@ -221,11 +221,16 @@ def round_outline(ft, max_residual_px: float) -> bool:
     image. A candidate that fails takes no part in any later test.
     """
     crit = CRITERIA
-    vis = max(ft.visible_fraction, 1e-6)
-    closed = min(ft.coverage / vis, 1.0)
-    support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
+    closed, support = outline_closure(ft)
     min_closed = crit["min_closed_photos"] if ft.outline_edges == "photos" else crit["min_closed"]
     return bool(ft.residual_px <= max_residual_px and closed >= min_closed and support >= crit["min_support"])
+
+
+def outline_closure(ft) -> tuple[float, float]:
+    """``(closed, support)`` of a fitted outline over its part inside the image: the share of its
+    angular bins its edge points cover (at most 1), and its inlier edge points per pixel of outline."""
+    vis = max(ft.visible_fraction, 1e-6)
+    return min(ft.coverage / vis, 1.0), ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
 
 
 def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible,
@@ -282,9 +287,7 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     for ft in fits:
         if not round_outline(ft, max_residual_px):
             continue
-        vis = max(ft.visible_fraction, 1e-6)
-        closed = min(ft.coverage / vis, 1.0)
-        support = ft.n_inliers / (2 * np.pi * ft.radius_px * vis)
+        closed, support = outline_closure(ft)
         rows, cols = disc_pixels(ft, shape)
         if rows.size < 5:
             continue
