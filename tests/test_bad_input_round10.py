@@ -91,41 +91,37 @@ def test_grey_photo_among_colour_ones_is_refused(cap, tmp_path, capfd, grey):
     assert not out.exists()
 
 
-def test_colour_photo_among_grey_ones_names_the_colour_one(cap, tmp_path):
-    """The minority is named: one colour photo in a grey capture is the odd one."""
+def _grey_copy(cap: Path, g: Path, colour: int | None = None) -> Path:
+    """A copy of ``cap`` at ``g`` whose photos are 16-bit grey PNGs ``p{k}.png``, photo ``colour`` (if
+    given) written as the same grey in three channels."""
     import cv2
 
-    from ffls.io.capture import load_capture
-
-    g = tmp_path / "g"
     shutil.copytree(cap, g)
     doc = json.loads((g / "capture.json").read_text())
     for k, name in enumerate(doc["images"]):
         px = read_image(g / name).pixels
-        new = f"p{k}.png"
         grey = (np.clip(px.mean(axis=-1), 0, 1) * 65535).astype(np.uint16)
-        assert cv2.imwrite(str(g / new), grey if k != 7 else np.repeat(grey[..., None], 3, axis=-1))
-        doc["images"][k] = new
+        assert cv2.imwrite(str(g / f"p{k}.png"), grey if k != colour else np.repeat(grey[..., None], 3, axis=-1))
+        doc["images"][k] = f"p{k}.png"
     (g / "capture.json").write_text(json.dumps(doc))
+    return g
+
+
+def test_colour_photo_among_grey_ones_names_the_colour_one(cap, tmp_path):
+    """The minority is named: one colour photo in a grey capture is the odd one."""
+    from ffls.io.capture import load_capture
+
+    g = _grey_copy(cap, tmp_path / "g", colour=7)
     with pytest.raises(InputError, match=r"p7.png: is colour but 11 of the 12 photos are grey"):
         load_capture(g)
 
 
 def test_all_grey_capture_is_read(cap, tmp_path):
     """Grey throughout is a choice, not a mistake: replicated to RGB as before."""
-    import cv2
-
     from ffls.io.capture import load_capture
     from ffls.radiance.photos import load_photos
 
-    g = tmp_path / "g"
-    shutil.copytree(cap, g)
-    doc = json.loads((g / "capture.json").read_text())
-    for k, name in enumerate(doc["images"]):
-        px = read_image(g / name).pixels
-        assert cv2.imwrite(str(g / f"p{k}.png"), (np.clip(px.mean(axis=-1), 0, 1) * 65535).astype(np.uint16))
-        doc["images"][k] = f"p{k}.png"
-    (g / "capture.json").write_text(json.dumps(doc))
+    g = _grey_copy(cap, tmp_path / "g")
     photos = load_photos(load_capture(g), progress=False)
     assert photos.shape == (12, 24, 24, 3) and np.array_equal(photos[..., 0], photos[..., 2])
 
