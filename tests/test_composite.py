@@ -336,8 +336,9 @@ def test_flow_with_sources_weights_is_refused_in_one_line(cset, tmp_path, capfd)
     assert not out.exists()
 
 
-def test_mitsuba_benchmark_sphere_shadows_match_a_render(monkeypatch):
-    """benchmarks/composite_mitsuba.py's geometric sphere shadows are where Mitsuba renders them."""
+def _composite_mitsuba(monkeypatch):
+    """``(mitsuba, benchmarks/composite_mitsuba.py as a module)``, Mitsuba on its ``scalar_rgb`` variant;
+    the test is skipped without Mitsuba."""
     mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (pip install mitsuba)")
     import importlib.util
     from pathlib import Path
@@ -348,6 +349,12 @@ def test_mitsuba_benchmark_sphere_shadows_match_a_render(monkeypatch):
     spec = importlib.util.spec_from_file_location("composite_mitsuba", bench / "composite_mitsuba.py")
     cm = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(cm)
+    return mi, cm
+
+
+def test_mitsuba_benchmark_sphere_shadows_match_a_render(monkeypatch):
+    """benchmarks/composite_mitsuba.py's geometric sphere shadows are where Mitsuba renders them."""
+    mi, cm = _composite_mitsuba(monkeypatch)
     res = 48
     _, ground, _ = cm.cast_masks(mi, res)
     for elevation in (15.0, 40.0):
@@ -369,20 +376,11 @@ def test_mitsuba_benchmark_sphere_shadows_match_a_render(monkeypatch):
 def test_mitsuba_benchmark_shadow_hull_casts_the_objects_shadow(monkeypatch, tmp_path):
     """The object's shadow hull carved from a small path-traced capture casts the object's shadow
     for a light the capture does not have (benchmarks/composite_mitsuba.py's hull_shadow_check)."""
-    mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (pip install mitsuba)")
-    import importlib.util
-    from pathlib import Path
-
     from ffls.relight.basis import accepted_basis
     from ffls.relight.shadow_hull import ShadowHull
     from ffls.relight.sphere_shadows import ground_points, hidden_photos
 
-    mi.set_variant("scalar_rgb")
-    bench = Path(__file__).resolve().parents[1] / "benchmarks"
-    monkeypatch.syspath_prepend(str(bench))  # its `common` module
-    spec = importlib.util.spec_from_file_location("composite_mitsuba", bench / "composite_mitsuba.py")
-    cm = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cm)
+    mi, cm = _composite_mitsuba(monkeypatch)
     res = 64
     obj, ground, _ = cm.cast_masks(mi, res)
     cap, lights = cm.render_capture(mi, tmp_path / "object", 80, 0, True, res, 4)
