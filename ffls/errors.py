@@ -134,18 +134,32 @@ def _check_not_input(path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- output policy
+def _through_link(path: Path) -> Path:
+    """The file a symbolic link ``path`` points to (an output is written through the link, as cp,
+    ffmpeg and oiiotool do); ``path`` itself when it is no link. A dangling link is refused, as
+    GNU cp refuses to write through one: its target's folder may not be what the user meant."""
+    if not path.is_symlink():
+        return path
+    target = Path(os.path.realpath(path))
+    if not target.exists():
+        raise OutputError(f"is a symbolic link to {target}, which does not exist; ffls writes through a link "
+                          "only to an existing file or folder (as cp does)", path)
+    return target
+
+
 def check_output_path(path: str | os.PathLike, folder: bool = False) -> Path:
     """Check, before any work, that ``path`` can be written as a file (or, ``folder=True``, a folder).
 
     The parent folder must exist and be a writable folder; an existing ``path`` must be a file
-    (a folder for ``folder=True``) and not an input (:func:`guard_inputs`).
+    (a folder for ``folder=True``) and not an input (:func:`guard_inputs`). A symbolic link is
+    written through: the path returned is the link's target, which must exist.
 
     Raises
     ------
     OutputError
         One line naming the path and the problem.
     """
-    path = Path(path)
+    path = _through_link(Path(path))
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.exists():
         raise OutputError("output folder does not exist", parent)

@@ -34,7 +34,7 @@ def test_minimal_probe_defaults(tmp_path):
     p = load_probe(_folder(tmp_path, {}))
     assert len(p.views) == 1 and not p.view.is_bracket
     assert p.view.camera.model == "pinhole" and p.view.camera.K is None
-    assert p.view.sphere.location == "auto" and p.view.sphere.material == "mirror"
+    assert p.view.sphere.location == "auto" and p.view.sphere.material is None  # the command says what it is
     assert p.encoding == "auto" and p.plane is None and p.occluder is None and p.surface_image is None
 
 

@@ -264,7 +264,8 @@ def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = T
         False: the path must be a folder output.
 
     The parent folder must exist; an existing path must be of the right kind (a file is not a
-    folder and a folder is not a file). Whether it is an input is checked when writing.
+    folder and a folder is not a file), and a file must not be a photo that a ``capture.json``
+    lists (:func:`ffls.io.capture.capture_listing`). Whether it is an input is checked when writing.
     """
     from pathlib import Path
 
@@ -284,6 +285,13 @@ def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = T
             check_output_path(p, folder=not is_file)
         except FflsError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
+        if is_file:
+            from ffls.io.capture import capture_listing
+
+            owner = capture_listing(p)
+            if owner is not None:  # (lightmap make has no capture among its inputs to refuse it)
+                raise argparse.ArgumentTypeError(f"{text}: is a photo of the capture {owner}; refusing to "
+                                                 "overwrite it")
         return str(p)
 
     parse.__name__ = "output path"

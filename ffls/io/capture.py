@@ -34,6 +34,10 @@ __all__ = [
     "Capture",
     "load_capture",
     "save_capture",
+    "distortion_problem",
+    "MAX_DISTORTION_SCALE",
+    "capture_listing",
+    "CAPTURE_SEARCH_DEPTH",
     "Lights",
     "load_lights",
     "save_lights",
@@ -369,7 +373,67 @@ def _parse_encoding(j: _Json, doc: dict, folder: Path) -> tuple:
     return encoding, response
 
 
-def _parse_camera(j: _Json, cam) -> tuple:
+#: A lens may move an image corner at most this factor nearer to or farther from the principal
+#: point (:func:`distortion_problem`). A lens that OpenCV's pinhole model describes stays well
+#: inside it; a fisheye (over 180 degrees) is not such a lens at all.
+MAX_DISTORTION_SCALE = 4.0
+
+
+def distortion_problem(K, dist, image_size=None, samples: int = 512) -> str | None:
+    """Why OpenCV distortion coefficients ``dist`` cannot be a lens's over the image, or None.
+
+    The photo's pixels are distorted positions; undistorting one inverts the model along its
+    ray from the principal point. That inverse exists over the image only when the distorted
+    radius grows monotonically with the undistorted one until it reaches the image's farthest
+    corner, and a plausible lens gets there with a radial scale (distorted / undistorted radius)
+    within [1 / MAX_DISTORTION_SCALE, MAX_DISTORTION_SCALE]. Checked along 16 rays of
+    ``samples`` steps each with OpenCV's own model (``cv2.projectPoints``).
+
+    Parameters
+    ----------
+    K : (3, 3) float
+    dist : (k,) float, finite
+    image_size : (width, height) or None
+        None: the image is taken to be centred on the principal point (2 cx + 1 by 2 cy + 1).
+    """
+    import cv2
+
+    K = np.asarray(K, np.float64)
+    d = np.asarray(dist, np.float64).ravel()
+    if not np.any(d):
+        return None
+    w, h = image_size if image_size is not None else (2 * K[0, 2] + 1, 2 * K[1, 2] + 1)
+    corners = np.array([[-0.5, -0.5, 1], [w - 0.5, -0.5, 1], [-0.5, h - 0.5, 1], [w - 0.5, h - 0.5, 1]])
+    rd_max = float(np.max(np.linalg.norm((np.linalg.solve(K, corners.T).T)[:, :2], axis=1)))
+    if not rd_max > 0:
+        return None
+    r = np.linspace(0.0, MAX_DISTORTION_SCALE * rd_max, samples)[1:]
+    a = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+    pts = np.stack([np.outer(np.cos(a), r), np.outer(np.sin(a), r), np.ones((a.size, r.size))], axis=-1)
+    with np.errstate(all="ignore"):
+        try:
+            xy, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), np.eye(3), d)
+        except cv2.error:
+            return f"not OpenCV distortion coefficients ({len(d)} numbers)"
+        rho = np.linalg.norm(xy.reshape(a.size, r.size, 2), axis=-1)
+    for rho_ray in rho:
+        if not np.all(np.isfinite(rho_ray)):
+            return "the distorted positions overflow over the image"
+        reach = np.nonzero(rho_ray >= rd_max)[0]
+        end = reach[0] if reach.size else rho_ray.size - 1
+        if np.any(np.diff(rho_ray[: end + 1]) <= 0):
+            return (f"the distortion is not monotonic over the image (the distorted radius stops growing at "
+                    f"{rho_ray[np.argmax(np.diff(rho_ray) <= 0)]:.3g} of the corners' {rd_max:.3g}, in normalised "
+                    "units): no lens maps its image this way")
+        scale = rd_max / r[end]
+        if not reach.size or not 1 / MAX_DISTORTION_SCALE <= scale <= MAX_DISTORTION_SCALE:
+            return (f"scales the image corners' distance from the principal point by "
+                    f"{f'{scale:.3g}' if reach.size else f'less than {1 / MAX_DISTORTION_SCALE:g}'}, outside "
+                    f"[{1 / MAX_DISTORTION_SCALE:g}, {MAX_DISTORTION_SCALE:g}]: no lens does")
+    return None
+
+
+def _parse_camera(j: _Json, cam, image_size=None) -> tuple:
     if not isinstance(cam, dict):
         j.fail("camera", f"expected an object, got {_short(cam)}")
     K = None
@@ -389,6 +453,10 @@ def _parse_camera(j: _Json, cam) -> tuple:
         if n not in _DIST_LENGTHS:
             j.fail("camera.dist", f"expected a list of {', '.join(map(str, _DIST_LENGTHS))} numbers (OpenCV), got {_short(d)}")
         dist = j.array(d, "camera.dist", (n,))
+        if K is not None:
+            why = distortion_problem(K, dist, image_size)
+            if why:
+                j.fail("camera.dist", why)
     wfc = conventions.DEFAULT_WORLD_FROM_CAMERA.copy()
     default = True
     if "world_from_camera" in cam:
@@ -580,7 +648,7 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     K, dist, wfc, wfc_default, model = (None, np.zeros(5), conventions.DEFAULT_WORLD_FROM_CAMERA.copy(), True,
                                         "pinhole")
     if "camera" in doc:
-        K, dist, wfc, wfc_default, model = _parse_camera(j, doc["camera"])
+        K, dist, wfc, wfc_default, model = _parse_camera(j, doc["camera"], image_size)
 
     radius = None
     if "sphere_radius" in doc:
@@ -602,6 +670,36 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         scene_center=center, hemisphere=hemisphere, spheres=spheres, image_size=image_size,
         units=units, response=response, extra=extra, camera_model=model, sphere_count=sphere_count,
     )
+
+
+#: How many folders up from a file :func:`capture_listing` looks for a ``capture.json`` that lists it.
+CAPTURE_SEARCH_DEPTH = 3
+
+
+def capture_listing(path: str | os.PathLike) -> Path | None:
+    """The ``capture.json`` that lists the existing file ``path`` as one of its photos, or None.
+
+    Looks in the file's folder and up to :data:`CAPTURE_SEARCH_DEPTH` folders above it (a
+    capture may keep its photos in a subfolder). A ``capture.json`` that cannot be read is
+    skipped: this only protects a capture's photos from being overwritten by an output (a
+    command that has no capture among its inputs, ``ffls lightmap make``, would otherwise
+    replace one), it does not check the capture.
+    """
+    p = Path(path)
+    if not p.is_file():
+        return None
+    target = p.resolve()
+    for folder in list(target.parents)[:CAPTURE_SEARCH_DEPTH + 1]:
+        cj = folder / CAPTURE_FILE
+        try:
+            doc = parse_json(cj.read_text(encoding="utf-8-sig")) if cj.is_file() else None
+        except (OSError, ValueError):
+            continue
+        names = doc.get("images") if isinstance(doc, dict) else None
+        if isinstance(names, list) and any(isinstance(n, str) and n and (folder / n.replace("\\", "/")).resolve()
+                                           == target for n in names):
+            return cj
+    return None
 
 
 def save_capture(capture: Capture) -> Path:

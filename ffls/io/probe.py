@@ -98,7 +98,9 @@ class ProbeSphere:
         Pixel hint (x right, y down).
     radius_px : float or None
         Apparent radius hint, pixels.
-    material : {'mirror', 'diffuse'}
+    material : {'mirror', 'diffuse'} or None
+        None when ``probe.json`` does not state it: the command (``ffls probe mirror`` or
+        ``diffuse``) says what the sphere is, and its notes say it was taken so.
     albedo : float or None
         Diffuse albedo in (0, 1] (``material`` ``'diffuse'``); None when not stated.
     reflectance : float
@@ -110,7 +112,7 @@ class ProbeSphere:
     radius: float | None = None
     center_px: np.ndarray | None = None
     radius_px: float | None = None
-    material: str = "mirror"
+    material: str | None = None
     albedo: float | None = None
     reflectance: float = 1.0
 
@@ -374,7 +376,7 @@ def _sphere(j: JsonReader, value, key: str = "sphere", base: ProbeSphere | None 
         kw["albedo"] = _fraction(j, s["albedo"], key + ".albedo")
     if "reflectance" in s:
         kw["reflectance"] = _fraction(j, s["reflectance"], key + ".reflectance")
-    if "albedo" in kw and kw.get("material", "mirror") != "diffuse" and "albedo" in s:
+    if "albedo" in kw and kw.get("material") != "diffuse" and "albedo" in s:
         j.fail(key + ".albedo", "applies to a diffuse sphere (\"material\": \"diffuse\")")
     return ProbeSphere(**kw)
 

@@ -54,14 +54,23 @@ def _located_views(probe, material: str, needs: str, other: str):
 
     Yields ``(tag, view, radiance, geometry)``: ``tag`` prefixes notes ("view k: " with several views).
     A view of another material is one line naming its key and ``ffls probe OTHER``.
+    A view whose ``probe.json`` states no material is taken to show a ``material`` sphere (the
+    command says what the sphere is), and its note says so.
     """
+    from dataclasses import replace
+
     src = probe.json_path
     for k, view in enumerate(probe.views):
         tag = "" if len(probe.views) == 1 else f"view {k + 1}: "
-        if view.sphere.material != material:
-            key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
+        key = "sphere.material" if len(probe.views) == 1 else f"images[{k}].sphere.material"
+        stated = view.sphere.material is not None
+        if stated and view.sphere.material != material:
             raise InputError(f"{key}: {needs}, this one is {view.sphere.material!r} (use 'ffls probe {other}')", src)
+        if not stated:
+            view = replace(view, sphere=replace(view.sphere, material=material))
         vr = view_radiance(view, probe.encoding, probe.response, src)
+        if not stated:
+            vr.note += f"; {key} not stated in probe.json: taken as {material!r} (ffls probe {material})"
         yield tag, view, vr, locate_sphere(view, vr.radiance, src, saturates=_integer_images(view))
 
 

@@ -46,8 +46,11 @@ from ffls.store.field import (FORMAT, MARKER, MIN_LEVEL_SIZE, VERSION, Reflectan
 from ffls.store.float16 import choose_scale, to_float16
 
 __all__ = ["SerialRunner", "IngestReport", "ingest_capture", "ensure_field", "stage_photo", "build_tile",
-           "build_level_tile", "build_pyramid", "PLAN", "PROGRESS"]
+           "build_level_tile", "build_pyramid", "PLAN", "PROGRESS", "STORE_SUFFIX",
+           "check_store_path"]
 
+#: The extension of a new store's folder (a store may also be named without one).
+STORE_SUFFIX = ".zarr"
 #: The plan of an ingest under way (what a resumed ingest must match).
 PLAN = "plan.json"
 #: Folder of the per-photo records of the staged photos.
@@ -228,6 +231,9 @@ def check_store_path(path) -> None:
     if not os.access(path.parent, os.W_OK | os.X_OK):  # (the ingest's first write failed, naming no file)
         raise OutputError("folder is not writable (permission denied or read-only)", path.parent)
     if not path.exists():
+        if path.suffix and path.suffix.lower() != STORE_SUFFIX:  # (--store x.exr made a zarr folder named x.exr)
+            raise InputError(f"a store is a folder: its name ends with {STORE_SUFFIX} or has no extension, "
+                             f"not {path.suffix}", path)
         return
     marker = read_json(path / MARKER) if path.is_dir() else None
     ours = path.is_dir() and ((isinstance(marker, dict) and marker.get("format") == FORMAT)
