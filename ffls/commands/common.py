@@ -58,6 +58,7 @@ __all__ = [
     "check_cells_res",
     "print_notes",
     "flush_notes",
+    "compressed_note",
     "check_output_kind",
     "deferred_notes",
     "add_mask_argument",
@@ -583,6 +584,12 @@ def print_notes(command: str, *notes) -> None:
                 print(line, file=sys.stderr)
             else:
                 pending.append(line)
+
+
+def compressed_note(relighter) -> str:
+    """The line of a relighter's compressed basis (``--rank K``) that could not be kept in a read-only
+    capture (:func:`ffls.relight.compress.load_or_compress`), or ``""``."""
+    return getattr(getattr(relighter, "compressed", None), "note", "")
 
 
 def flush_notes() -> None:

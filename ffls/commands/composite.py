@@ -18,7 +18,7 @@ import numpy as np
 from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arguments, add_weighting_argument,
                                   check_fps_flag, check_output_kind,
                                   exposure_arg, input_path, learnt_kernel, output_path, print_notes, flush_notes,
-                                  rotation_from_args)
+                                  rotation_from_args, compressed_note)
 
 NAME = "composite"
 HELP = "merge a relit object and its shadows into a virtual scene or photograph (differential rendering)"
@@ -255,6 +255,7 @@ def make_compositor(args, inputs):
                                      cell_max_res=4096, weighting=args.weighting)
            for k in ("object", "surface")]
     for k, r in zip(("object", "surface"), rel):  # --weighting kriging: each field learns its own kernel
+        print_notes(NAME, compressed_note(r) and f"{k}: {compressed_note(r)}")
         if learnt_kernel(r):
             print(f"ffls composite: {k}: {learnt_kernel(r)}")
     if args.sources in ("lightflow", "levelset"):

@@ -6,7 +6,7 @@ from pathlib import Path
 from ffls.commands.common import (CELLS_RES_OR_EXACT, add_capture_arguments, add_mask_argument,
                                   add_quality_arguments, add_rotation_arguments, add_scale_arguments,
                                   add_weighting_argument, check_display_flags, check_mask_size, exposure_arg,
-                                  learnt_kernel, load_relight_inputs,
+                                  compressed_note, learnt_kernel, load_relight_inputs,
                                   open_streamed_from_args, output_path, resolve_quality, rotation_from_args,
                                   negative_pixels_note, print_notes, write_output)
 
@@ -64,7 +64,9 @@ def run(args) -> int:
         weighting = q.weighting
         storage = None if args.precision is None and args.quality != "auto" else q.precision
         r = CpuRelighter.from_capture(capture, lights, quality=q, storage=storage, cell_res=args.cells_res or None,
+                                      save_compressed=True,  # --rank K: kept in the capture, as render and view do
                                       cell_k=4, cell_max_res=1024)
+        print_notes(NAME, compressed_note(r))
         r.set_lightmap(lightmap)
         r.set_rotation(R)
         r.render()

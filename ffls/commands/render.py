@@ -19,7 +19,8 @@ from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_capture_argu
                                   check_mask_size, check_output_kind,
                                   exposure_arg, flush_notes, learnt_kernel, light_vector, load_relight_inputs,
                                   open_streamed_from_args, output_path, quality_from_args, resolve_quality,
-                                  negative_pixels_note, print_notes, rotation_from_args, write_output)
+                                  negative_pixels_note, print_notes, rotation_from_args, write_output,
+                                  compressed_note)
 
 NAME = "render"
 HELP = "relight a capture on the GPU: an EXR/PNG still, or a light-map turntable (mp4 or PNG folder)"
@@ -229,6 +230,7 @@ def run(args) -> int:
     if args.light is not None and args.quality == "auto":
         raise InputError("--quality auto measures a light map: give --probe MAP, not --light")
     r, ctx = _make_renderer(args, capture, lights, lightmap, R0)
+    print_notes(NAME, compressed_note(r))
     if args.turntable is not None:
         flush_notes()  # a long job: the informational lines now (a still's wait for its success)
     try:

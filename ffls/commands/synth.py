@@ -29,6 +29,14 @@ _MATERIALS = ("matte", "grey", "mirror", "glossy_black")
 SCENE_ALBEDO = 0.5
 WALL_ALBEDO = (0.6, 0.35, 0.25)
 TRUTH_DIRS = 2048
+#: Cost of one image on the 2-core team machine (docs/synth.md "Speed"; ``ffls synth`` of 500 and
+#: 2000 lights at 8 px, 500 at 64 px, 200 at 256 px): about 9 ms each plus 0.3 us a pixel, the
+#: pixel part about 10 times more for a near light (9 sample points).
+SECONDS_PER_IMAGE, SECONDS_PER_PIXEL, NEAR_FACTOR = 9e-3, 3e-7, 10.0
+#: Bytes a pixel at most, per ``--format`` (RGB; EXR half floats; a JPEG is far smaller than 3).
+BYTES_PER_PIXEL = {"exr": 6, "png8": 3, "png16": 6, "tiff16": 6, "jpeg": 3}
+#: An estimate above this many seconds is said before the rendering starts.
+ESTIMATE_NOTE_S = 60.0
 
 
 # ----------------------------------------------------------------------------- argument types
@@ -301,6 +309,42 @@ def _synth(args: argparse.Namespace, folder) -> dict:
     return write_synthetic_capture(folder, n_lights=args.lights, **kw)
 
 
+def check_estimate(args: argparse.Namespace, out) -> None:
+    """Refuse a capture larger than the free space of OUT_DIR's file system; say, before it starts,
+    the time and size of one estimated above :data:`ESTIMATE_NOTE_S` (``--lights 100000`` ran for
+    many minutes without a word).
+
+    Raises
+    ------
+    ffls.errors.InputError
+        The images need more than the free space (the old capture is replaced only at the end, so
+        both must fit).
+    """
+    import shutil
+
+    from ffls.commands.common import flush_notes, print_notes
+    from ffls.errors import InputError
+
+    n = args.lights * (2 if args.calibration_pair else 1)
+    if args.composite_set is not None:
+        n = args.lights + (args.lights if args.surface_lights is None else args.surface_lights)
+    px = args.resolution ** 2
+    seconds = n * (SECONDS_PER_IMAGE + SECONDS_PER_PIXEL * px * (NEAR_FACTOR if args.near is not None else 1.0))
+    size = n * (BYTES_PER_PIXEL[photo_settings(args).file_format] * px + 1024)
+    try:
+        free = shutil.disk_usage(out.parent if str(out.parent) else ".").free
+    except OSError:
+        free = None
+    what = f"--lights {args.lights} at --resolution {args.resolution}: {n} images"
+    if free is not None and size > free:
+        raise InputError(f"{what} need up to {size / 2**30:.3g} GiB, more than the {free / 2**30:.3g} GiB free "
+                         "on its file system", out)
+    if seconds > ESTIMATE_NOTE_S:
+        print_notes(NAME, f"estimate: {what}, about {seconds / 60:.0f} min and up to {size / 2**20:.0f} MiB on a "
+                          "2-core machine (docs/synth.md); Ctrl-C stops it and leaves the output as it was")
+        flush_notes()
+
+
 def run(args: argparse.Namespace) -> int:
     """Render into a staging folder beside OUT_DIR and swap it in when complete.
 
@@ -319,6 +363,9 @@ def run(args: argparse.Namespace) -> int:
                          "(the light would enclose the scene)")
     photo_settings(args)  # conflicting flags: one line before anything is written
     check_spheres_in_frame(args, scene_of(args))
+    if args.near is not None and args.near <= scene_of(args).reach():  # (1e-300: a ZeroDivisionError traceback)
+        raise InputError(f"--near {args.near:g} puts the lights inside the scene: its object and spheres reach "
+                         f"{scene_of(args).reach():.3g} m from the centre")
     if args.composite_set is not None:
         from ffls.lightmaps.lightmap import lightmap_from_spec
 
@@ -329,6 +376,7 @@ def run(args: argparse.Namespace) -> int:
     captures = [out / "capture.json", out / "calibration" / "capture.json", out / "composite.json"]
     if out.is_dir() and any(out.iterdir()) and not any(c.is_file() for c in captures):
         raise InputError("exists, is not empty and holds no capture.json: refusing to replace it", out)
+    check_estimate(args, out)
     t = time.perf_counter()
     with atomic_folder(out) as stage:
         res = _synth(args, stage)

@@ -181,15 +181,34 @@ class _Json:
         return value
 
 
+class _DuplicateKey(Exception):
+    pass
+
+
+def _unique_keys(pairs) -> dict:
+    """A JSON object as a dict, refusing a key given twice (``json`` keeps the last one silently)."""
+    d = dict(pairs)
+    if len(d) != len(pairs):
+        seen = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return d
+
+
 def parse_json(text: str):
     """``json.loads(text)``, every failure one ``ValueError`` of one line.
+
+    A key given twice in one object (``"encoding": "srgb", "encoding": "linear"``) is refused:
+    Python's parser keeps the last silently, where the writer may have meant the first.
 
     Besides corrupt text (``corrupt JSON at line L column C: ...``), Python's parser fails on a
     document nested deeper than its recursion limit (``RecursionError``, a traceback before) and
     on an integer of more than 4300 digits (a ``ValueError`` of three sentences).
     """
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=_unique_keys)
+    except _DuplicateKey as e:
+        raise ValueError(f"corrupt JSON: the key {e.args[0]!r} is given twice in one object (which one is "
+                         "meant?)") from None
     except json.JSONDecodeError as e:
         raise ValueError(f"corrupt JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
     except RecursionError:

@@ -485,6 +485,12 @@ def _undecodable(path: Path, kind: str, whole: bool) -> str:
     return f"{what} (corrupt, truncated or not a {kind.upper()} file)"
 
 
+#: What the decoders print (and OpenCV decodes past, filling the rest grey) when the data after a
+#: valid header is cut or damaged: libpng, libjpeg ("Corrupt JPEG data: 216 extraneous bytes before
+#: marker 0xc4" of bytes zeroed in the middle), OpenCV's own "incomplete" warnings.
+_CORRUPT_DATA_LINES = ("incomplete", "libpng error", "Corrupt JPEG data", "Premature end of JPEG file")
+
+
 def _read_cv2(path: Path, kind: str) -> ImageData:
     import cv2
 
@@ -501,8 +507,10 @@ def _read_cv2(path: Path, kind: str) -> ImageData:
             img = cv2.imdecode(buf, flags)
         except cv2.error:
             img = None
-    if img is None or "incomplete" in cap.text or "libpng error" in cap.text:
-        raise InputError(_undecodable(path, kind, img is None), path)
+    if img is None or any(m in cap.text for m in _CORRUPT_DATA_LINES):
+        said = next((ln for ln in cap.text.splitlines() if "Corrupt JPEG" in ln or "Premature end" in ln), "")
+        raise InputError(_undecodable(path, kind, img is None) + (f" (libjpeg: {said.strip()})" if said else ""),
+                         path)
     alpha = None
     if kind == "tiff" and (img.ndim == 2 or img.shape[2] in (1, 3)):
         alpha = _tiff_alpha_dropped(path, img.shape[:2])

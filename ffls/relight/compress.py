@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError, atomic_output
+from ffls.errors import FflsError, InputError, atomic_output, os_error_message
 
 __all__ = ["CompressedBasis", "compress_basis", "randomized_svd_Halko2011", "save_compressed",
            "load_compressed", "load_or_compress", "basis_checksum", "COMPRESSED_FILENAME", "MODES", "DEFAULT_RANK",
@@ -81,6 +81,9 @@ class CompressedBasis:
     info : dict
         Parameters (seed, oversample, power_iters), timing, and the relative Frobenius error of
         the reconstruction when it was measured.
+    note : str
+        One line for the user, not saved: why a new compression could not be kept in the
+        capture folder (:func:`load_or_compress`), or empty.
     """
 
     mean: np.ndarray
@@ -89,6 +92,7 @@ class CompressedBasis:
     singular_values: np.ndarray
     mode: str = "per_channel"
     info: dict = field(default_factory=dict)
+    note: str = ""
 
     @property
     def rank(self) -> int:
@@ -350,8 +354,8 @@ def load_or_compress(folder, basis, rank: int, save: bool = True) -> CompressedB
     basis : (n, H, W, 3) array
     rank : int
     save : bool
-        Save a newly computed compression in ``folder`` (skipped silently if the folder is
-        read-only or gone).
+        Save a newly computed compression in ``folder``. Where that fails (a read-only capture)
+        the compression is used from memory and its ``note`` says so and why.
 
     Returns
     -------
@@ -365,6 +369,8 @@ def load_or_compress(folder, basis, rank: int, save: bool = True) -> CompressedB
     if save:
         try:
             save_compressed(cb, folder)
-        except (OSError, InputError):
-            pass
+        except (OSError, InputError) as e:
+            why = e.message if isinstance(e, FflsError) else os_error_message(e)
+            cb.note = (f"the compressed basis (rank {cb.rank}) was computed in memory and not kept in {folder} "
+                       f"({why}): it is computed again on every run")
     return cb

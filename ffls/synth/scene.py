@@ -285,6 +285,21 @@ class SynthScene:
             prims.append(Sphere(tuple(c), self.sphere_radius, self.sphere_material(k), LABEL_SPHERE0 + k))
         return prims
 
+    def reach(self) -> float:
+        """The largest distance (m) from the scene centre (the origin) of a point of the object or a
+        sphere: a near light must be farther away to light the scene from outside it."""
+        from ffls.synth.geometry import Box, Capsule, Sphere
+
+        r = 0.0
+        for p in self.primitives():
+            if isinstance(p, Sphere):
+                r = max(r, float(np.linalg.norm(p.center)) + p.radius)
+            elif isinstance(p, Box):
+                r = max(r, float(np.linalg.norm(np.maximum(np.abs(p.lo), np.abs(p.hi)))))
+            elif isinstance(p, Capsule):
+                r = max(r, max(float(np.linalg.norm(p.a)), float(np.linalg.norm(p.b))) + p.radius)
+        return r
+
     def ground_albedo_at(self, xy) -> np.ndarray:
         """(n,) albedo of the ground at points (n, 2) (m): ``ground_albedo``, or its texture.
 
