@@ -66,6 +66,20 @@ class OneLineParser(argparse.ArgumentParser):
                     return f" (a value that starts with '-' is given as {flag}={given[k + 1]})"
         return ""
 
+    def _print_message(self, message, file=None):
+        """argparse's, except that a failed write of ``--help`` to standard output (``> /dev/full``) is
+        one error line and status 2; argparse ignored it and exited 0 with the text lost."""
+        if file is not sys.stdout or not message:
+            return super()._print_message(message, file)
+        try:
+            file.write(message)
+            file.flush()
+        except BrokenPipeError:  # (`ffls --help | head -1`: the reader had what it wanted)
+            pass
+        except OSError as e:
+            _drop_stdout()
+            self.exit(2, f"{self.prog}: error: standard output: cannot write ({os_error_message(e)})\n")
+
     def error(self, message):
         message = " ".join(str(message).split())
         message += self._dash_value_hint(message)
@@ -140,6 +154,52 @@ def _one_line_warnings(command: str):
             warnings.showwarning = old
 
 
+def _drop_stdout() -> None:
+    """Point standard output at the null device: what is still buffered for a reader that left or a
+    full disk is dropped, not reported again by the interpreter at exit ("Exception ignored")."""
+    import os
+
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
+class _NamedStdout:
+    """``sys.stdout`` whose write errors name it: ``ffls info > /dev/full`` said "file: no space left"."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _checked(self, op, *a):
+        try:
+            return op(*a)
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            _drop_stdout()
+            raise FflsError(f"cannot write ({os_error_message(e)})", "standard output") from None
+
+    def write(self, text):
+        return self._checked(self._stream.write, text)
+
+    def flush(self):
+        return self._checked(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _named_stdout():
+    """While active, a failed write to standard output is one error line naming it (flushed at the end,
+    so a full disk behind ``>`` is found here, not by the interpreter's exit)."""
+    if sys.stdout is None:  # (started with stdout closed: print writes nowhere)
+        yield
+        return
+    with contextlib.redirect_stdout(_NamedStdout(sys.stdout)):
+        yield
+        sys.stdout.flush()
+
+
 def _quiet_opencv() -> None:
     """OpenCV logs nothing to the terminal (its failures are reported by the reader, naming the file)."""
     import os
@@ -178,7 +238,8 @@ def main(argv: list[str] | None = None) -> int:
     name = f"ffls {args.command}"
     _quiet_opencv()
     try:
-        with _sigterm_as_interrupt(), _one_line_warnings(args.command), guard_inputs(), deferred_notes():
+        with _sigterm_as_interrupt(), _one_line_warnings(args.command), guard_inputs(), deferred_notes(), \
+                _named_stdout():  # (innermost: its last flush fails before the notes are printed)
             return int(args.handler(args) or 0)
     except FflsError as e:
         print(f"{name}: error: {e}", file=sys.stderr)
@@ -190,9 +251,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}: interrupted; {interrupt_note(e) or 'nothing partial was left'}", file=sys.stderr)
         return 130
     except BrokenPipeError:  # e.g. `ffls info | head`: the reader left; say nothing more
-        import os
-
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        _drop_stdout()
         return 141
     except MemoryError:
         print(f"{name}: error: out of memory; ask for a smaller size or resolution", file=sys.stderr)

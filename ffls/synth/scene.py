@@ -288,8 +288,6 @@ class SynthScene:
     def reach(self) -> float:
         """The largest distance (m) from the scene centre (the origin) of a point of the object or a
         sphere: a near light must be farther away to light the scene from outside it."""
-        from ffls.synth.geometry import Box, Capsule, Sphere
-
         r = 0.0
         for p in self.primitives():
             if isinstance(p, Sphere):
