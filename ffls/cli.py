@@ -154,6 +154,15 @@ def _one_line_warnings(command: str):
             warnings.showwarning = old
 
 
+def _quiet_after_interrupt() -> None:
+    """After an interrupt, the tasks a library left unfinished on its event loop (a Dask cluster
+    starting, zarr's writes) are collected at exit, and asyncio logged each ("Task was destroyed but
+    it is pending!", "Task exception was never retrieved") after the one line."""
+    import logging
+
+    logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
+
+
 def _drop_stdout() -> None:
     """Point standard output at the null device: what is still buffered for a reader that left or a
     full disk is dropped, not reported again by the interpreter at exit ("Exception ignored")."""
@@ -222,6 +231,15 @@ def _innermost(p: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run ``ffls ARGV``; the exit status (0, 2 for an error, 130 Ctrl-C, 143 SIGTERM)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # (Ctrl-C while the parser was built, before a command ran: a traceback)
+        print("ffls: interrupted; nothing was done", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None = None) -> int:
     parser, parsers = _build()
     try:
         args, extra = parser.parse_known_args(argv)
@@ -244,12 +262,12 @@ def main(argv: list[str] | None = None) -> int:
     except FflsError as e:
         print(f"{name}: error: {e}", file=sys.stderr)
         return 2
-    except Terminated as e:
-        print(f"{name}: terminated; {interrupt_note(e) or 'nothing partial was left'}", file=sys.stderr)
-        return 143
-    except KeyboardInterrupt as e:
-        print(f"{name}: interrupted; {interrupt_note(e) or 'nothing partial was left'}", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (Terminated)
+        _quiet_after_interrupt()
+        term = isinstance(e, Terminated)
+        print(f"{name}: {'terminated' if term else 'interrupted'}; {interrupt_note(e) or 'nothing partial was left'}",
+              file=sys.stderr)
+        return 143 if term else 130
     except BrokenPipeError:  # e.g. `ffls info | head`: the reader left; say nothing more
         _drop_stdout()
         return 141

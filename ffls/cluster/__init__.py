@@ -156,15 +156,11 @@ def open_client(workers: int | None = None, scheduler: str | None = None, progre
     # no dashboard, and the scheduler's HTTP routes on a free port: with its default (8787) a second
     # cluster on the machine (another ffls run, a notebook) made distributed warn "Port 8787 is
     # already in use", a library's warning line
-    try:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
-                               silence_logs=logging.CRITICAL)
-    except KeyboardInterrupt:  # (Ctrl-C, SIGTERM) while it starts: its unfinished start-up tasks are
-        # collected at exit, and asyncio logged each ("Task exception was never retrieved ... Nanny
-        # failed to start") after ffls's one line
-        logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
-        raise
+    # (Ctrl-C while it starts leaves unfinished start-up tasks that asyncio logs at exit: the CLI
+    # silences that logger on an interrupt, ffls.cli.main)
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                           scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
+                           silence_logs=logging.CRITICAL)
     try:
         client = Client(cluster)
         try:
