@@ -33,7 +33,7 @@ def load_capture_for_ingest(args):
     from ffls.io.capture import LIGHTS_FILE, apply_lights_encoding, load_capture, load_lights_any
 
     capture = load_capture(args.capture)
-    path = Path(args.lights) if args.lights else Path(args.capture) / LIGHTS_FILE
+    path = Path(args.lights) if args.lights else capture.folder / LIGHTS_FILE
     if not path.exists():
         if args.lights:
             from ffls.errors import InputError

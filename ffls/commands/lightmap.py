@@ -39,10 +39,10 @@ def add_arguments(p):
 
 
 def _load(spec: str, layout):
-    from ffls.lightmaps.lightmap import LightMapWarning, builtin_lightmap, load_lightmap
+    from ffls.lightmaps.lightmap import LightMapWarning, lightmap_from_spec, load_lightmap
 
-    if not Path(spec).exists() and Path(spec).suffix == "":
-        return builtin_lightmap(spec)
+    if not Path(spec).exists() and Path(spec).suffix == "":  # a built-in name (--layout refused, as relight does)
+        return lightmap_from_spec(spec, layout=layout)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LightMapWarning)  # the count is kept in lm.clamped_negatives
         return load_lightmap(spec, layout=layout)

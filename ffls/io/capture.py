@@ -1465,7 +1465,7 @@ def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Captu
         to make one (``ffls lights``).
     """
     capture = load_capture(folder)
-    path = Path(lights) if lights else Path(folder) / LIGHTS_FILE
+    path = Path(lights) if lights else capture.folder / LIGHTS_FILE  # (FOLDER may name capture.json itself)
     if not path.exists():
         if lights:
             raise InputError("lights file not found", path)
