@@ -309,6 +309,10 @@ def _synth(args: argparse.Namespace, folder) -> dict:
     return write_synthetic_capture(folder, n_lights=args.lights, **kw)
 
 
+def _mib(nbytes: float) -> str:
+    return f"{nbytes / 2**20:.3g} MiB" if nbytes < 2**30 else f"{nbytes / 2**30:.3g} GiB"
+
+
 def check_estimate(args: argparse.Namespace, out) -> None:
     """Refuse a capture larger than the free space of OUT_DIR's file system; say, before it starts,
     the time and size of one estimated above :data:`ESTIMATE_NOTE_S` (``--lights 100000`` ran for
@@ -323,7 +327,7 @@ def check_estimate(args: argparse.Namespace, out) -> None:
     import shutil
 
     from ffls.commands.common import flush_notes, print_notes
-    from ffls.errors import InputError
+    from ffls.errors import InputError, disk_full
 
     n = args.lights * (2 if args.calibration_pair else 1)
     if args.composite_set is not None:
@@ -337,10 +341,10 @@ def check_estimate(args: argparse.Namespace, out) -> None:
         free = None
     what = f"--lights {args.lights} at --resolution {args.resolution}: {n} images"
     if free is not None and size > free:
-        raise InputError(f"{what} need up to {size / 2**30:.3g} GiB, more than the {free / 2**30:.3g} GiB free "
-                         "on its file system", out)
+        raise InputError(f"{what} need up to {_mib(size)}, more than the {_mib(free)} free on its file system"
+                         + (" (disk full)" if disk_full(out.parent if str(out.parent) else ".") else ""), out)
     if seconds > ESTIMATE_NOTE_S:
-        print_notes(NAME, f"estimate: {what}, about {seconds / 60:.0f} min and up to {size / 2**20:.0f} MiB on a "
+        print_notes(NAME, f"estimate: {what}, about {seconds / 60:.0f} min and up to {_mib(size)} on a "
                           "2-core machine (docs/synth.md); Ctrl-C stops it and leaves the output as it was")
         flush_notes()
 
