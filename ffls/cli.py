@@ -66,16 +66,16 @@ class OneLineParser(argparse.ArgumentParser):
                     return f" (a value that starts with '-' is given as {flag}={given[k + 1]})"
         return ""
 
-    def _print_message(self, message, file=None):
+    def print_help(self, file=None):
         """argparse's, except that a failed write of ``--help`` to standard output (``> /dev/full``) is
         one error line and status 2; argparse ignored it and exited 0 with the text lost."""
-        if file is not sys.stdout or not message:
-            return super()._print_message(message, file)
+        if file is not None or sys.stdout is None:
+            return super().print_help(file)
         try:
-            file.write(message)
-            file.flush()
+            sys.stdout.write(self.format_help())
+            sys.stdout.flush()
         except BrokenPipeError:  # (`ffls --help | head -1`: the reader had what it wanted)
-            pass
+            _drop_stdout()
         except OSError as e:
             _drop_stdout()
             self.exit(2, f"{self.prog}: error: standard output: cannot write ({os_error_message(e)})\n")

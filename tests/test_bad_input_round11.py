@@ -230,10 +230,11 @@ def test_synth_of_many_lights_says_its_time_and_size_first(tmp_path, capfd, monk
 
 def test_synth_beyond_the_free_space_is_refused(tmp_path, capfd, monkeypatch):
     import shutil as sh
+    from types import SimpleNamespace
 
     import ffls.commands.synth as synth
 
-    monkeypatch.setattr(sh, "disk_usage", lambda p: sh._ntuple_diskusage(1 << 30, 1 << 30, 1 << 20))
+    monkeypatch.setattr(sh, "disk_usage", lambda p: SimpleNamespace(total=1 << 30, used=1 << 30, free=1 << 20))
     monkeypatch.setattr(synth, "_synth", lambda *a: pytest.fail("rendered before the size was checked"))
     rc, line = _one_line(capfd, ["synth", tmp_path / "s", "--lights", "100", "--resolution", "64"])
     assert rc == 2 and "s: --lights 100 at --resolution 64: 100 images need up to 2.44 MiB, more than the 1 MiB free " \
