@@ -71,6 +71,11 @@ def ws(cap, tmp_path_factory):
     for k in range(3):
         assert cv2.imwrite(str(br / f"b{k}.png"), np.full((16, 16, 3), 40 * (k + 1), np.uint8))
     (br / "exposures.json").write_text('{"b0.png": 0.01, "b0.png": 0.02, "b1.png": 0.02, "b2.png": 0.04}')
+    cut = root / "bracket_cut"  # a truncated photo in a good bracket
+    shutil.copytree(br, cut)
+    (cut / "exposures.json").write_text('{"b0.png": 0.01, "b1.png": 0.02, "b2.png": 0.04}')
+    data = (cut / "b1.png").read_bytes()
+    (cut / "b1.png").write_bytes(data[: len(data) // 2])
     rng = np.random.default_rng(0)
     assert cv2.imwrite(str(root / "whole.jpg"), rng.integers(0, 255, (24, 24, 3), dtype=np.uint8))
     data = (root / "whole.jpg").read_bytes()
@@ -110,6 +115,13 @@ CASES11 = [
      "lights_dup.json: corrupt JSON: the key 'version' is given twice"),
     ("exposures-json-dup-key", ["calibrate", "response", "{root}/bracket", "-o", "{out}/r.npy"],
      "exposures.json: cannot read exposures (corrupt JSON: the key 'b0.png' is given twice"),
+    # calibrate read its photos with cv2.imread: "cannot read image" for a missing, truncated or folder path
+    ("calibrate-response-truncated", ["calibrate", "response", "{root}/bracket_cut", "-o", "{out}/r.npy"],
+     "b1.png: cannot decode PNG image: its 16x16 header is valid but the data is corrupt or truncated"),
+    ("calibrate-camera-folder", ["calibrate", "camera", "{root}/bracket", "--capture", "{cap}"],
+     "bracket: is a folder, not an image file"),
+    ("calibrate-camera-missing", ["calibrate", "camera", "{root}/bracket/b0.png", "{root}/nope.png", "--capture",
+                                  "{cap}"], "nope.png: image file not found"),
     # a near light inside the scene: a ZeroDivisionError traceback (1e-300) or lights inside the object
     ("synth-near-tiny", ["synth", "{out}/s", "--lights", "2", "--resolution", "8", "--near", "1e-300"],
      "--near 1e-300 puts the lights inside the scene"),

@@ -92,7 +92,7 @@ def test_too_few_boards_names_folder(tmp_path):
     blank = np.full((120, 160), 128, np.uint8)
     with pytest.raises(InputError, match="found in 0 of 3 photos"):
         cal.calibrate_camera([tmp_path / f"b{i}.png" for i in range(3)], images=[blank] * 3)
-    with pytest.raises(InputError, match="cannot read image") as e:
+    with pytest.raises(InputError, match="image file not found") as e:
         cal.calibrate_camera([tmp_path / "missing.png"])
     assert "missing.png" in str(e.value)
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from ffls.errors import InputError, atomic_output
 from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT, parse_json
+from ffls.io.images import read_image
 
 __all__ = ["CameraCalibration", "aruco_dictionary", "charuco_problem", "camera_matrix_problem", "make_board",
            "detect_board", "calibrate_camera", "write_camera_to_capture"]
@@ -200,9 +201,9 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
         if images is not None:
             im = np.asarray(images[i])
         else:
-            im = cv2.imread(str(name), cv2.IMREAD_GRAYSCALE)
-            if im is None:
-                raise InputError("cannot read image", name)
+            # (read_image's one line: not found, a folder, truncated, ...; any depth, as 8-bit grey)
+            grey = cv2.cvtColor(read_image(name, working_space=False).pixels, cv2.COLOR_RGB2GRAY)
+            im = np.clip(np.rint(grey * 255), 0, 255).astype(np.uint8)
         if im.ndim == 3:
             im = cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)
         if im.dtype != np.uint8:

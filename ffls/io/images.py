@@ -277,6 +277,8 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         pixels (the message gives the count).
     """
     path = Path(path)
+    if path.is_dir():  # (a folder without an extension was "unsupported image format '(no extension)'")
+        raise InputError("is a folder, not an image file", path)
     kind = _kind_of(path)
     if not path.is_file():
         raise InputError("image file not found" if not path.exists() else "not a file", path)

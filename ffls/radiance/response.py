@@ -20,6 +20,7 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.io.capture import parse_json
+from ffls.io.images import image_header, read_image
 from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
 
@@ -247,12 +248,12 @@ def read_bracket(folder: str | os.PathLike):
         raise InputError(f"need at least two bracketed images, found {len(paths)}", folder)
     images = []
     for p in paths:
-        im = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        if im is None:
-            raise InputError("cannot read image", p)
-        if im.dtype != np.uint8 or im.ndim != 3 or im.shape[2] not in (3, 4):
-            raise InputError(f"bracketed images must be 8-bit RGB, got {im.dtype} with shape {im.shape}", p)
-        im = cv2.cvtColor(im[..., :3], cv2.COLOR_BGR2RGB)
+        data = read_image(p, working_space=False)  # (its one line: not found, a folder, truncated, ...)
+        header = image_header(p)
+        if data.bit_depth != 8 or (header is not None and header.grey):
+            raise InputError(f"bracketed images must be 8-bit RGB, got a {data.bit_depth}-bit "
+                             f"{'grey' if header is not None and header.grey else 'RGB'} image", p)
+        im = data.codes
         if images and im.shape != images[0].shape:
             raise InputError(f"image size {im.shape[1]}x{im.shape[0]} differs from"
                              f" {images[0].shape[1]}x{images[0].shape[0]} of {paths[0].name}", p)
