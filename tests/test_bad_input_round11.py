@@ -115,6 +115,9 @@ CASES11 = [
      "lights_dup.json: corrupt JSON: the key 'version' is given twice"),
     ("exposures-json-dup-key", ["calibrate", "response", "{root}/bracket", "-o", "{out}/r.npy"],
      "exposures.json: cannot read exposures (corrupt JSON: the key 'b0.png' is given twice"),
+    # a turntable into a folder of other files (the capture itself) was refused after its coverage lines
+    ("render-turntable-into-capture", ["render", "{cap}", "--probe", "sky", "--cpu", "--turntable", "2", "-o",
+                                       "{cap}"], "the folder holds other files than frames"),
     # calibrate read its photos with cv2.imread: "cannot read image" for a missing, truncated or folder path
     ("calibrate-response-truncated", ["calibrate", "response", "{root}/bracket_cut", "-o", "{out}/r.npy"],
      "b1.png: cannot decode PNG image: its 16x16 header is valid but the data is corrupt or truncated"),

@@ -873,6 +873,12 @@ def check_output_kind(args, out) -> None:
         raise InputError(f"output must end with {' or '.join(STILL_SUFFIXES)} (or use --turntable N)", out)
     if args.turntable is not None and suffix and suffix != ".mp4":
         raise InputError(f"--turntable writes a video (.mp4) or a folder of PNGs (no extension), not {suffix}", out)
+    if args.turntable is not None and not suffix:
+        from ffls.io.video import frame_folder_problem
+
+        why = frame_folder_problem(out)  # (render -o CAPTURE --turntable 2 was refused after its coverage lines)
+        if why:
+            raise InputError(why, out)
 
 
 def check_fps_flag(args, out=None) -> None:

@@ -24,6 +24,19 @@ from ffls.errors import (FflsError, InputError, OutputError, atomic_folder, atom
 _FRAME = re.compile(r"frame_\d{4,}\.png")
 
 
+def frame_folder_problem(out) -> str | None:
+    """Why the folder ``out`` may not receive a turntable's frames (it holds other files than
+    ``frame_NNNN.png``, which a new turntable would replace), or None."""
+    out = Path(out)
+    if not out.is_dir():
+        return None
+    other = [p.name for p in out.iterdir() if not _FRAME.fullmatch(p.name)]
+    if other:
+        return (f"the folder holds other files than frames ({other[0]!r}, ...); refusing to replace it: choose a "
+                "new or empty folder")
+    return None
+
+
 class FrameWriter:
     """Write RGB frames to ``OUT.mp4`` or to ``DIR/frame_NNNN.png``.
 
@@ -52,11 +65,9 @@ class FrameWriter:
         self._tmp = None
         self._writer = None
         self._size = None
-        if not self.is_video and self.out.is_dir():
-            other = [p.name for p in self.out.iterdir() if not _FRAME.fullmatch(p.name)]
-            if other:
-                raise InputError(f"the folder holds other files than frames ({other[0]!r}, ...); refusing to "
-                                 "replace it: choose a new or empty folder", self.out)
+        why = None if self.is_video else frame_folder_problem(self.out)
+        if why:
+            raise InputError(why, self.out)
         self._atomic = atomic_output(self.out) if self.is_video else atomic_folder(self.out)
         self._tmp = self._atomic.__enter__()
 
