@@ -66,6 +66,7 @@ def ws(cap, tmp_path_factory):
                                                                 '"encoding": "srgb", "encoding": "linear"', 1))
     (root / "lights_dup.json").write_text((cap / "lights.json").read_text().replace('"version": 1',
                                                                                     '"version": 1, "version": 1', 1))
+    (root / "empty.json").write_text("")
     br = root / "bracket"
     br.mkdir()
     for k in range(3):
@@ -113,6 +114,8 @@ CASES11 = [
      "capture.json: corrupt JSON: the key 'encoding' is given twice in one object"),
     ("lights-json-dup-key", L11 + ["--lights", "{root}/lights_dup.json", "-o", "{out}/a.exr"],
      "lights_dup.json: corrupt JSON: the key 'version' is given twice"),
+    ("lights-json-empty", L11 + ["--lights", "{root}/empty.json", "-o", "{out}/a.exr"],
+     "empty.json: the file is empty (no JSON in it)"),
     ("exposures-json-dup-key", ["calibrate", "response", "{root}/bracket", "-o", "{out}/r.npy"],
      "exposures.json: cannot read exposures (corrupt JSON: the key 'b0.png' is given twice"),
     # a turntable into a folder of other files (the capture itself) was refused after its coverage lines

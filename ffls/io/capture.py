@@ -204,6 +204,8 @@ def parse_json(text: str):
     document nested deeper than its recursion limit (``RecursionError``, a traceback before) and
     on an integer of more than 4300 digits (a ``ValueError`` of three sentences).
     """
+    if not text.strip():  # (a 0-byte file said "corrupt JSON at line 1 column 1: Expecting value")
+        raise ValueError("the file is empty (no JSON in it)")
     try:
         return json.loads(text, object_pairs_hook=_unique_keys)
     except _DuplicateKey as e:
