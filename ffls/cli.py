@@ -71,8 +71,12 @@ class OneLineParser(argparse.ArgumentParser):
         one error line and status 2; argparse ignored it and exited 0 with the text lost."""
         if file is not None or sys.stdout is None:
             return super().print_help(file)
+        self.write_stdout(self.format_help())
+
+    def write_stdout(self, text: str) -> None:
+        """Write ``text`` to standard output; a failure (a full disk) is one error line and status 2."""
         try:
-            sys.stdout.write(self.format_help())
+            sys.stdout.write(text)
             sys.stdout.flush()
         except BrokenPipeError:  # (`ffls --help | head -1`: the reader had what it wanted)
             _drop_stdout()
@@ -86,11 +90,24 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+class _Version(argparse.Action):
+    """``--version``: argparse's, written as ``--help`` is (:meth:`OneLineParser.write_stdout`)."""
+
+    def __init__(self, option_strings, version, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help="show program's version number and exit"):
+        super().__init__(option_strings=option_strings, dest=dest, default=default, nargs=0, help=help)
+        self.version = version
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser.write_stdout(self.version + "\n")
+        parser.exit()
+
+
 def _build() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
     from ffls import __version__
 
     parser = OneLineParser(prog="ffls", description="Free-form Light Stage: relight objects from photographs.")
-    parser.add_argument("--version", action="version", version=f"ffls {__version__}")
+    parser.add_argument("--version", action=_Version, version=f"ffls {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     parsers = {}
     for mod in command_modules():
