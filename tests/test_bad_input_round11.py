@@ -284,6 +284,19 @@ def test_rank_in_a_read_only_capture_says_the_basis_is_not_kept(cap, tmp_path, c
     assert (c / COMPRESSED_FILENAME).is_file()
 
 
+def test_tiles_in_a_read_only_capture_say_where_the_store_can_go(cap, tmp_path, capfd, monkeypatch):
+    """``relight --tiles`` in a read-only capture named the folder without saying that ``--store``
+    puts the store elsewhere (round 10's leftover; mocked: root ignores permissions)."""
+    import ffls.store.ingest
+
+    real = ffls.store.ingest.os.access
+    monkeypatch.setattr(ffls.store.ingest.os, "access", lambda p, mode: False if Path(p) == cap else real(p, mode))
+    rc, line = _one_line(capfd, ["relight", cap, "--probe", "sky", "--tiles", "--workers", "1", "-o",
+                                 tmp_path / "a.exr"])
+    assert rc == 2 and f"{cap}: folder is not writable" in line and "with --store DIR.zarr" in line, line
+    assert not (cap / "field.zarr").exists() and list(tmp_path.iterdir()) == []
+
+
 # ----------------------------------------------------------------------------- standard output, Ctrl-C
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
 @pytest.mark.parametrize("buffered", [False, True])

@@ -295,7 +295,13 @@ def ingest_capture(capture, path=None, *, tile: int | None = None, runner=None, 
     import zarr
 
     path = default_store_path(capture) if path is None else Path(path)
-    check_store_path(path)
+    try:
+        check_store_path(path)
+    except OutputError as e:
+        if path != default_store_path(capture):
+            raise
+        # a read-only capture: say where else the store can go
+        raise OutputError(f"{e.message}; put the store in a writable folder with --store DIR.zarr", e.path) from None
     runner = SerialRunner(progress) if runner is None else runner
     prov = provenance(capture)
     n = len(capture.image_names)
