@@ -121,6 +121,11 @@ CASES11 = [
     # a turntable into a folder of other files (the capture itself) was refused after its coverage lines
     ("render-turntable-into-capture", ["render", "{cap}", "--probe", "sky", "--cpu", "--turntable", "2", "-o",
                                        "{cap}"], "the folder holds other files than frames"),
+    # a folder output named like a file: demo -o d.exr made a folder d.exr
+    ("demo-folder-named-exr", ["demo", "-o", "{out}/d.exr", "--no-view"],
+     "d.exr: the output is a folder; a name ending with .exr is a file's"),
+    ("synth-folder-named-json", ["synth", "{out}/s.json", "--lights", "2", "--resolution", "8"],
+     "s.json: the output is a folder; a name ending with .json is a file's"),
     # calibrate read its photos with cv2.imread: "cannot read image" for a missing, truncated or folder path
     ("calibrate-response-truncated", ["calibrate", "response", "{root}/bracket_cut", "-o", "{out}/r.npy"],
      "b1.png: cannot decode PNG image: its 16x16 header is valid but the data is corrupt or truncated"),

@@ -252,6 +252,12 @@ def builtin_map_names(text) -> tuple:
     return names
 
 
+#: Extensions of the files ffls reads or writes: a folder output (``synth OUT_DIR``, ``demo -o``) with one
+#: of them would be a folder named like a file.
+FILE_SUFFIXES = (".exr", ".hdr", ".pic", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".tga", ".mp4", ".json",
+                 ".lp", ".npy", ".npz", ".csv")
+
+
 def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = True):
     """argparse type: an output path, checked before any work (:func:`ffls.errors.check_output_path`).
 
@@ -282,6 +288,9 @@ def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = T
         if not is_file and p.suffix and file_ok:
             raise argparse.ArgumentTypeError(
                 f"{text}: must end with {' or '.join(suffixes)}, or name a folder (no extension)")
+        if not file_ok and p.suffix.lower() in FILE_SUFFIXES:  # (demo -o d.exr made a folder named d.exr)
+            raise argparse.ArgumentTypeError(f"{text}: the output is a folder; a name ending with {p.suffix} is a "
+                                             "file's: name the folder without it")
         try:
             check_output_path(p, folder=not is_file)
         except FflsError as e:
