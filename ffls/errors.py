@@ -159,7 +159,16 @@ def check_output_path(path: str | os.PathLike, folder: bool = False) -> Path:
     OutputError
         One line naming the path and the problem.
     """
-    path = _through_link(Path(path))
+    try:
+        return _check_output_path(Path(path), folder)
+    except OSError as e:  # (a name over the file system's limit: ENAMETOOLONG from a stat, a traceback)
+        if isinstance(e, OutputError):
+            raise
+        raise OutputError(f"cannot use this path ({os_error_message(e)})", path) from None
+
+
+def _check_output_path(path: Path, folder: bool) -> Path:
+    path = _through_link(path)
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.exists():
         raise OutputError("output folder does not exist", parent)

@@ -121,6 +121,12 @@ CASES11 = [
     # a turntable into a folder of other files (the capture itself) was refused after its coverage lines
     ("render-turntable-into-capture", ["render", "{cap}", "--probe", "sky", "--cpu", "--turntable", "2", "-o",
                                        "{cap}"], "the folder holds other files than frames"),
+    # a file name over the file system's limit: an OSError traceback while the arguments were parsed
+    ("output-name-too-long", ["lightmap", "make", "sky", "{out}/" + "a" * 300 + ".exr", "--height", "8"],
+     ".exr: cannot use this path (file name too long)"),
+    # a trailing slash (a folder) on a file output: Path drops it, and the file o/a.exr was written
+    ("output-file-with-slash", ["lightmap", "make", "sky", "{out}/a.exr/", "--height", "8"],
+     "a.exr/: ends with '/', a folder, but names a .exr file"),
     # a folder output named like a file: demo -o d.exr made a folder d.exr
     ("demo-folder-named-exr", ["demo", "-o", "{out}/d.exr", "--no-view"],
      "d.exr: the output is a folder; a name ending with .exr is a file's"),

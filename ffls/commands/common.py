@@ -288,6 +288,8 @@ def output_path(suffixes: tuple = (), folder_ok: bool = False, file_ok: bool = T
         if not is_file and p.suffix and file_ok:
             raise argparse.ArgumentTypeError(
                 f"{text}: must end with {' or '.join(suffixes)}, or name a folder (no extension)")
+        if is_file and str(text).endswith(("/", os.sep)):  # (Path drops the slash: o/a.exr/ wrote the file o/a.exr)
+            raise argparse.ArgumentTypeError(f"{text}: ends with '/', a folder, but names a {p.suffix} file")
         if not file_ok and p.suffix.lower() in FILE_SUFFIXES:  # (demo -o d.exr made a folder named d.exr)
             raise argparse.ArgumentTypeError(f"{text}: the output is a folder; a name ending with {p.suffix} is a "
                                              "file's: name the folder without it")
