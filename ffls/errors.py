@@ -20,7 +20,7 @@ from pathlib import Path
 
 __all__ = ["FflsError", "InputError", "OutputError", "GLUnavailable", "atomic_output", "atomic_folder",
            "check_output_path", "os_error_message", "register_input", "guard_inputs", "kept_on_interrupt",
-           "interrupt_note", "name_output", "disk_full", "available_memory"]
+           "interrupt_note", "name_output", "disk_full", "available_memory", "atomic_outputs"]
 
 
 class FflsError(Exception):
@@ -278,13 +278,52 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None):
                               + " (disk full or a library error)", path)
         try:
             os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
-            os.replace(tmp, path)
+            group = _GROUP.get()
+            if group is not None:  # renamed with the group's other outputs (atomic_outputs)
+                group.append((tmp, path))
+            else:
+                os.replace(tmp, path)
         except OSError as e:
             _raise_os(e, path)
     except BaseException as e:
         with contextlib.suppress(OSError):
             tmp.unlink()
         name_output(e, tmp, path)
+        raise
+
+
+_GROUP: contextvars.ContextVar = contextvars.ContextVar("ffls_output_group", default=None)
+
+
+@contextlib.contextmanager
+def atomic_outputs():
+    """While active, the files :func:`atomic_output` completes are renamed onto their paths together,
+    when the block succeeds: a command that writes several files (``ffls lights``: lights.json, the
+    ``--lp`` export and the ``--plot``) leaves all of them new or none, never new ones beside old ones.
+
+    The renames run with Ctrl-C and SIGTERM held. On an error or interruption every completed
+    temporary file is removed and each path is left as it was. Nothing inside the block may read
+    back an output it wrote (it is not there yet).
+    """
+    pending: list = []
+    token = _GROUP.set(pending)
+    try:
+        try:
+            yield
+        finally:
+            _GROUP.reset(token)
+        with _signals_deferred():
+            while pending:
+                tmp, path = pending[0]
+                try:
+                    os.replace(tmp, path)
+                except OSError as e:
+                    _raise_os(e, path)
+                pending.pop(0)
+    except BaseException:
+        for tmp, _ in pending:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
         raise
 
 

@@ -203,6 +203,37 @@ def test_capture_given_as_its_capture_json_finds_its_lights(cap, tmp_path, capfd
         capfd.readouterr().err
 
 
+def test_lights_outputs_appear_together_or_not_at_all(cap, tmp_path, capfd, monkeypatch):
+    """``ffls lights -o L.json --lp L.lp``: a failure writing the .lp left a new lights.json beside an
+    old (or no) .lp, and an old lights.json was replaced although the command failed."""
+    import ffls.io.capture
+    import ffls.spheres.detect
+    import ffls.spheres.estimate
+    from ffls.errors import OutputError
+
+    def no_fit(monkeypatch):  # (the detection and the fit are not what is tested)
+        monkeypatch.setattr(ffls.spheres.detect, "find_spheres_in_capture", lambda capture, **kw: [])
+        monkeypatch.setattr(ffls.spheres.estimate, "estimate_lights",
+                            lambda capture, **kw: ffls.io.capture.load_lights(cap / "lights.json", capture))
+
+    no_fit(monkeypatch)
+
+    def full(path, *a, **k):
+        raise OutputError("cannot write (no space left on the device (disk full))", path)
+
+    out, lp = tmp_path / "l.json", tmp_path / "l.lp"
+    out.write_text("old")
+    monkeypatch.setattr(ffls.io.capture, "write_lp", full)
+    rc, line = _one_line(capfd, ["lights", cap, "--workers", "1", "-o", out, "--lp", lp])
+    assert rc == 2 and f"{lp}: cannot write" in line, line
+    assert out.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["l.json"]
+    monkeypatch.undo()
+    no_fit(monkeypatch)
+    assert main(["lights", str(cap), "--workers", "1", "-o", str(out), "--lp", str(lp)]) == 0
+    assert out.read_text() != "old" and lp.is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["l.json",
+                                                                                                          "l.lp"]
+
+
 # ----------------------------------------------------------------------------- camera.dist
 @pytest.mark.parametrize("dist,ok", [
     ([-0.3, 0.1, 0.001, 0.001, 0.0], True),  # a wide-angle lens, barrel

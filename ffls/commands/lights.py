@@ -210,14 +210,19 @@ def run(args) -> int:
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"
-    save_lights(lights, out)
+    from ffls.errors import atomic_outputs
+
+    with atomic_outputs():  # lights.json, --plot and --lp appear together or not at all
+        save_lights(lights, out)
+        if args.plot:
+            plot_lights(lights, args.plot, hemisphere=cap.hemisphere)
+        lp_line = export_lp(lights, cap, args.lp) if args.lp else None
     print(summary(lights))
     print(f"wrote {out}")
     if args.plot:
-        plot_lights(lights, args.plot, hemisphere=cap.hemisphere)
         print(f"wrote {args.plot}")
-    if args.lp:
-        print(export_lp(lights, cap, args.lp))
+    if lp_line:
+        print(lp_line)
     idx, dirs = lights.accepted()
     if len(idx):
         from ffls.weights.voronoi import coverage_warnings
