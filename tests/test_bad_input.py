@@ -582,6 +582,26 @@ def test_disk_full_mocked_is_one_line(ws, tmp_path, capfd, monkeypatch, kind):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_composite_outputs_appear_together_or_not_at_all(ws, tmp_path, capfd, monkeypatch):
+    """OUT.exr, OUT.png and OUT.json: a failure writing the PNG left a new OUT.exr alone (round 11,
+    ``ffls.errors.atomic_outputs``)."""
+    import ffls.io.images
+    from ffls.errors import OutputError
+
+    def full(path, *a, **k):
+        raise OutputError("cannot write (no space left on the device (disk full))", path)
+
+    monkeypatch.setattr(ffls.io.images, "write_png", full)
+    argv = [a.format(**{k: str(v) for k, v in ws.items()}) for a in C] + [
+        "--mask", str(ws["root"] / "mask.png"), "--surface-mask", str(ws["root"] / "surf.png"),
+        "-o", str(tmp_path / "c.exr")]
+    capfd.readouterr()
+    rc = main(argv)
+    err = [ln for ln in capfd.readouterr().err.splitlines() if "error" in ln]
+    assert rc == 2 and len(err) == 1 and "disk full" in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_permission_denied_mocked_is_one_line(ws, tmp_path, capfd, monkeypatch):
     """A read-only folder (mocked: root ignores permission bits) gives one line naming the output."""
     import ffls.errors

@@ -277,7 +277,7 @@ def _display(img, exposure, tonemap):
 def run(args) -> int:
     from ffls.conventions import rotation_z
     from ffls.display.tonemap import auto_exposure
-    from ffls.errors import InputError, atomic_output
+    from ffls.errors import InputError, atomic_output, atomic_outputs
     from ffls.io.images import write_exr, write_png
 
     out = Path(args.out)
@@ -299,20 +299,21 @@ def run(args) -> int:
         exposure = auto_exposure(res.image) if args.exposure == "auto" else float(args.exposure)
         reg = res.registration
         if args.turntable is None:
-            write_exr(files[".exr"], res.image)
-            write_png(files[".png"], _display(res.image, exposure, args.tonemap))
-            report = {"format": "ffls-composite", "version": 1, "method": res.method,
-                      "registration": reg.to_json(), "clamped_pixels": res.clamped_pixels,
-                      "object": str(args.object), "surface": str(args.surface), "lightmap": str(args.lightmap),
-                      "background": str(args.background), "exposure": exposure, "weighting": args.weighting,
-                      "sources": args.sources}
-            split = getattr(comp.object, "last_split", None)
-            if split is not None:
-                report["compact_sources"] = [{"direction": s.direction.tolist(), "power": s.power.tolist(),
-                                              "solid_angle": s.solid_angle, "samples": len(s.sample_powers)}
-                                             for s in split.sources]
-            with atomic_output(files[".json"]) as tmp:
-                tmp.write_text(json.dumps(report, indent=1) + "\n")
+            with atomic_outputs():  # OUT.exr, OUT.png and OUT.json appear together or not at all
+                write_exr(files[".exr"], res.image)
+                write_png(files[".png"], _display(res.image, exposure, args.tonemap))
+                report = {"format": "ffls-composite", "version": 1, "method": res.method,
+                          "registration": reg.to_json(), "clamped_pixels": res.clamped_pixels,
+                          "object": str(args.object), "surface": str(args.surface), "lightmap": str(args.lightmap),
+                          "background": str(args.background), "exposure": exposure, "weighting": args.weighting,
+                          "sources": args.sources}
+                split = getattr(comp.object, "last_split", None)
+                if split is not None:
+                    report["compact_sources"] = [{"direction": s.direction.tolist(), "power": s.power.tolist(),
+                                                  "solid_angle": s.solid_angle, "samples": len(s.sample_powers)}
+                                                 for s in split.sources]
+                with atomic_output(files[".json"]) as tmp:
+                    tmp.write_text(json.dumps(report, indent=1) + "\n")
             what = f"{files['.exr']}, {files['.png'].name} and {files['.json'].name}"
         else:
             from tqdm import tqdm
