@@ -12,7 +12,12 @@ Evaluation", IJCV 2007; here with the ground plane as the shadow receiver, as in
 reconstruction from a turntable's cast shadows), intersected with the camera's silhouette (the
 object's mask: Laurentini's visual hull, 1994). What is left contains the object (a point of the
 object is never seen through), so its shadows contain the object's shadows; with many lights it
-is close to them except in concavities that no shadow reveals.
+is close to them except in concavities that no shadow reveals. It also keeps the space whose
+shadows no photo shows at all: ground the camera does not see (behind the object, behind and
+under a calibration sphere) or that a sphere shades under every light that would reach it. Such a
+voxel is not evidence of the object, and beside a sphere its shadow runs along the sphere's own,
+where the hull is used (:data:`MIN_SHADOWS`): a voxel stays only where some photos see its
+projection in shadow.
 
 * :func:`lit_photos` gives, per photo and ground pixel, the photo's visibility of its light: its
   luminance over the pixel's unshadowed linear model's
@@ -38,13 +43,19 @@ from ffls.errors import InputError
 from ffls.relight.lightflow import LUMINANCE, SHADOW_LEVEL, unshadowed_fit
 from ffls.relight.sphere_shadows import ground_points
 
-__all__ = ["MAX_CELLS", "MIN_VOTES", "lit_photos", "ShadowHull"]
+__all__ = ["MAX_CELLS", "MIN_VOTES", "MIN_SHADOWS", "lit_photos", "ShadowHull"]
 
 #: The hull's grid has at most this many voxels along its longest side.
 MAX_CELLS = 160
 #: A voxel is carved when at least this many photos see its ground projection lit: one photo lit
 #: by mistake (noise, a light direction a little off at a shadow's edge) does not carve the object.
 MIN_VOTES = 2
+#: A voxel stays only where at least this many photos see its ground projection in shadow: a voxel
+#: whose shadow no photo shows (ground hidden from the camera by the object or a calibration sphere,
+#: or in a sphere's shadow, under every light) is not evidence of the object. Uncarved and unseen, it
+#: would cast a shadow where the captures saw none; beside a sphere it casts it along the sphere's
+#: own shadow, where the fill then darkens the ground (docs/composite.md).
+MIN_SHADOWS = 2
 #: Rows of pixels per chunk of :func:`lit_photos` (the fit holds (rows x W x n) values).
 _FIT_PIXELS = 1 << 14
 
@@ -144,7 +155,8 @@ class ShadowHull:
     @classmethod
     def carve(cls, basis, directions, object_mask, K, world_from_camera, *, ground=None,
               hidden=None, dist=None, max_height: float | None = None, min_votes: int = MIN_VOTES,
-              max_cells: int = MAX_CELLS, shadow_level: float = SHADOW_LEVEL) -> "ShadowHull":
+              min_shadows: int = MIN_SHADOWS, max_cells: int = MAX_CELLS,
+              shadow_level: float = SHADOW_LEVEL) -> "ShadowHull":
         """Carve the hull of an object standing on the plane z = 0 from its capture.
 
         Parameters
@@ -169,6 +181,9 @@ class ShadowHull:
             The grid's top (default: 0.9 of the camera's height above the ground).
         min_votes : int
             :data:`MIN_VOTES`.
+        min_shadows : int
+            :data:`MIN_SHADOWS` (0 keeps every voxel no photo sees lit: the strict hull, which
+            contains the object and the space whose shadows no photo shows).
         max_cells : int
             :data:`MAX_CELLS`.
         shadow_level : float
@@ -212,8 +227,8 @@ class ShadowHull:
             # Coarse to fine: the first grid spans every place the camera allows, the second the
             # first one's hull (plus two voxels), at the pixels' footprint where the cap allows.
             voxel = max(footprint, float((hi - lo).max()) / max_cells)
-            hull = cls._carved(lo, hi, voxel, sil, vis, known, d, K, M, dist, int(min_votes), umbra,
-                               float(shadow_level))
+            hull = cls._carved(lo, hi, voxel, sil, vis, known, d, K, M, dist, int(min_votes),
+                               int(min_shadows), umbra, float(shadow_level))
             occ = np.argwhere(hull.occupancy > 0)
             if occ.size == 0 or voxel <= footprint:
                 break
@@ -222,7 +237,7 @@ class ShadowHull:
         return hull
 
     @classmethod
-    def _carved(cls, lo, hi, voxel, sil, vis, known, d, K, M, dist, min_votes, umbra,
+    def _carved(cls, lo, hi, voxel, sil, vis, known, d, K, M, dist, min_votes, min_shadows, umbra,
                 level) -> "ShadowHull":
         """One carving of the box ``lo``-``hi`` at ``voxel`` (see :meth:`carve`)."""
         shape = np.maximum(np.ceil((hi - lo) / voxel).astype(int), 1)
@@ -232,15 +247,19 @@ class ShadowHull:
         # The camera's silhouette (visual hull).
         cand = np.flatnonzero(_lookup(sil, _pixels(X, K, M, dist)))
         votes = np.zeros(cand.size, dtype=np.int32)
+        shadows = np.zeros(cand.size, dtype=np.int32)
         Xc = X[cand]
         for i in range(d.shape[0]):
             if not d[i, 2] > 0:
                 continue
             g = Xc - (Xc[:, 2] / d[i, 2])[:, None] * d[i]
             q = _pixels(g, K, M, dist)
-            votes += (_lookup(known[i], q) & (_bilinear(vis[i], q) >= level)).astype(np.int32)
+            seen = _lookup(known[i], q)
+            lit = _bilinear(vis[i], q) >= level
+            votes += seen & lit
+            shadows += seen & ~lit
         occ = np.zeros(X.shape[0], dtype=np.float32)
-        occ[cand] = (votes < min_votes).astype(np.float32)
+        occ[cand] = ((votes < min_votes) & (shadows >= min_shadows)).astype(np.float32)
         all_votes = np.zeros(X.shape[0], dtype=np.int32)
         all_votes[cand] = votes
         return cls(occ.reshape(shape), origin, voxel, umbra, all_votes.reshape(shape))
