@@ -243,6 +243,46 @@ def test_composite_does_not_replace_a_sibling_it_did_not_write(cset, tmp_path, c
     assert (tmp_path / "truth.exr").read_bytes() == b"not ours" and not (tmp_path / "truth.png").exists()
 
 
+def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, tmp_path, capfd):
+    """``--fill model``: the spheres' world centres from capture.json, each capture's sphere shadows and
+    the object's shadow hull; under a sun the composite changes where a sphere hides the sun from the
+    ground and nowhere off the surface. Without the spheres' radius it is one line."""
+    import shutil
+
+    caps = {}
+    for k in ("object", "surface"):
+        caps[k] = tmp_path / k
+        shutil.copytree(cset / k, caps[k])
+        doc = json.loads((caps[k] / "capture.json").read_text())
+        truth = json.loads((caps[k] / "truth.json").read_text())
+        doc["spheres"] = [{"center": c} for c in truth["sphere_centers"]]
+        (caps[k] / "capture.json").write_text(json.dumps(doc))
+    common = ["composite", "--object", str(caps["object"]), "--surface", str(caps["surface"]), "--lightmap",
+              "sunrise", "--background", str(cset / "background.exr"), "--mask", str(cset / "object_mask.png"),
+              "--surface-mask", str(cset / "surface_mask.png")]
+    images = {}
+    for fill in ("none", "model"):
+        out = tmp_path / f"c_{fill}.exr"
+        rc = main(common + ["--fill", fill, "-o", str(out)])
+        text = capfd.readouterr().out
+        assert rc == 0, text
+        rep = json.loads(out.with_suffix(".json").read_text())
+        assert rep["fill"] == fill and len(rep["compact_sources"]) >= 1
+        images[fill] = read_image(out).pixels
+    assert "object: 4 spheres (capture.json), ground at z = 0" in text and "shadow hull" in text, text
+    sm = read_mask(cset / "surface_mask.png") > 0.5
+    changed = np.any(images["model"] != images["none"], axis=-1)
+    assert changed[sm].sum() >= 10 and not changed[~sm].any()
+    # a capture that does not state its spheres' radius: their shadows cannot be placed
+    doc = json.loads((caps["surface"] / "capture.json").read_text())
+    del doc["sphere_radius"]
+    (caps["surface"] / "capture.json").write_text(json.dumps(doc))
+    rc = main(common + ["--fill", "model", "-o", str(tmp_path / "c_bad.exr")])
+    err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and "--fill needs sphere_radius" in err[0], err
+    assert not (tmp_path / "c_bad.exr").exists()
+
+
 def test_composite_turntable(cset, tmp_path, capfd):
     frames = tmp_path / "frames"
     rc = main(["composite", "--object", str(cset / "object"), "--surface", str(cset / "surface"), "--lightmap",
