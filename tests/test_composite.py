@@ -170,6 +170,36 @@ def test_check_same_camera(tmp_path):
         check_same_camera(a, dataclasses.replace(a, world_from_camera=M))
 
 
+def test_fill_sphere_geometry_from_capture_json(tmp_path):
+    """``--fill``'s spheres and ground (ffls.commands.composite.sphere_geometry): the centres stated in
+    capture.json, the ground under them; one line for what the fill cannot do without."""
+    from ffls.commands.composite import sphere_geometry
+    from ffls.io.capture import Lights
+
+    K = np.array([[100.0, 0, 31.5], [0, 100.0, 31.5], [0, 0, 1]])
+    M = np.eye(4)
+    M[:3, :3] = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
+    M[:3, 3] = [0.0, 0.0, 1.2]
+    centres = [[-0.2, 0.0, 0.07], [0.2, 0.0, 0.07], [0.0, 0.2, 0.072]]
+    cap = Capture(folder=tmp_path, image_names=["a.exr", "b.exr"], K=K, image_size=(64, 64), world_from_camera=M,
+                  world_from_camera_is_default=False, sphere_radius=0.05, spheres=[{"center": c} for c in centres])
+    lights = Lights(image_names=["a.exr", "b.exr"], directions=np.array([[0, 0, 1.0], [0.6, 0, 0.8]]),
+                    extra=[{"uncertainty_deg": 1.5}, {}])
+    geo = sphere_geometry(cap, lights)
+    assert geo["source"] == "capture.json" and geo["radius"] == 0.05
+    assert geo["ground_z"] == pytest.approx(0.02) and np.allclose(geo["margin_deg"], [1.5, 0.0])
+    for change, what in ((dict(world_from_camera_is_default=True), "world_from_camera"),
+                         (dict(sphere_radius=None), "sphere_radius"), (dict(K=None), "pinhole"),
+                         (dict(spheres=[{"center": c} for c in centres[:2] + [[0.0, 0.2, 0.2]]]),
+                          "not on one ground plane")):
+        with pytest.raises(InputError, match=what):
+            sphere_geometry(dataclasses.replace(cap, **change), lights)
+    near = Lights(image_names=["a.exr", "b.exr"], directions=lights.directions,
+                  positions=np.array([[0.0, 0.0, 1.0], [np.nan] * 3]))
+    with pytest.raises(InputError, match="distant lights"):
+        sphere_geometry(cap, near)
+
+
 # ----------------------------------------------------------------------------- end to end on ffls synth
 @pytest.fixture(scope="module")
 def cset(tmp_path_factory):

@@ -246,6 +246,9 @@ def sphere_geometry(capture, lights) -> dict:
         except InputError as e:
             raise InputError(f"--fill needs the calibration spheres' world centres: {e.message}", e.path) from None
         centres, source = np.array([s.center_world for s in found], dtype=np.float64).reshape(-1, 3), "found"
+    if not len(centres):
+        raise InputError("--fill needs the calibration spheres' world centres: none found in the photos; give "
+                         "them in capture.json, \"spheres\": [{\"center\": [x, y, z]}, ...]", where)
     r = float(capture.sphere_radius)
     bottoms = centres[:, 2] - r
     ground = float(np.median(bottoms))
@@ -355,12 +358,12 @@ def load_inputs(args):
     if not ((sm > 0.5) & (om < 0.5)).any():
         raise InputError("the surface mask has no surface pixel outside the object's mask (white = surface)",
                          args.surface_mask)
-    geometry = {}
-    if getattr(args, "fill", "none") != "none":
-        geometry = {k: sphere_geometry(*fields[k]) for k in ("object", "surface")}
     lm = lightmap_from_spec(args.lightmap, args.layout)
     if lm.colour_note:
         notes.append(f"colour: light map: {lm.colour_note}")
+    geometry = {}  # last: finding the spheres reads every photo
+    if getattr(args, "fill", "none") != "none":
+        geometry = {k: sphere_geometry(*fields[k]) for k in ("object", "surface")}
     return {**fields, "lightmap": lm, "background": bg.pixels, "object_mask": om, "surface_mask": sm,
             "fill_geometry": geometry, "notes": notes}
 
