@@ -43,8 +43,8 @@ from ffls.errors import InputError
 from ffls.relight.lightflow import LUMINANCE, SHADOW_LEVEL, unshadowed_fit
 from ffls.relight.sphere_shadows import ground_points
 
-__all__ = ["MAX_CELLS", "MIN_VOTES", "MIN_SHADOWS", "VISIBILITY_STEPS", "lit_photos", "visibility_codes",
-           "ShadowHull"]
+__all__ = ["MAX_CELLS", "MIN_VOTES", "MIN_SHADOWS", "VISIBILITY_STEPS", "lit_photos",
+           "visibility_codes", "ShadowHull"]
 
 #: The hull's grid has at most this many voxels along its longest side.
 MAX_CELLS = 160
@@ -52,10 +52,10 @@ MAX_CELLS = 160
 #: by mistake (noise, a light direction a little off at a shadow's edge) does not carve the object.
 MIN_VOTES = 2
 #: A voxel stays only where at least this many photos see its ground projection in shadow: a voxel
-#: whose shadow no photo shows (ground hidden from the camera by the object or a calibration sphere,
-#: or in a sphere's shadow, under every light) is not evidence of the object. Uncarved and unseen, it
-#: would cast a shadow where the captures saw none; beside a sphere it casts it along the sphere's
-#: own shadow, where the fill then darkens the ground (docs/composite.md).
+#: whose shadow no photo shows (ground hidden from the camera by the object or a calibration
+#: sphere, or in a sphere's shadow, under every light) is not evidence of the object. Uncarved and
+#: unseen, it would cast a shadow where the captures saw none; beside a sphere it casts it along
+#: the sphere's own shadow, where the fill then darkens the ground (docs/composite.md).
 MIN_SHADOWS = 2
 #: Visibility is held in steps of 1 / VISIBILITY_STEPS (:func:`visibility_codes`: one byte per photo
 #: and pixel, 0 meaning not known).
@@ -146,11 +146,11 @@ def visibility_codes(basis, directions, ground, hidden=None, *,
 
 
 def _decoded(codes) -> tuple[np.ndarray, np.ndarray]:
-    """Visibility (float32, 0 where not known) and known (bool) of :func:`visibility_codes`' codes."""
+    """Visibility (float32, 0 where not known) and known (bool) of :func:`visibility_codes`."""
     codes = np.asarray(codes)
     known = codes > 0
-    vis = np.where(known, (codes.astype(np.float32) - 1.0) / VISIBILITY_STEPS, 0.0).astype(np.float32)
-    return vis, known
+    vis = np.where(known, (codes.astype(np.float32) - 1.0) / VISIBILITY_STEPS, 0.0)
+    return vis.astype(np.float32), known
 
 
 class ShadowHull:
