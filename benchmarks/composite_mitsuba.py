@@ -65,7 +65,7 @@ import numpy as np
 from common import host_info, mitsuba_latlong_module, write_json
 
 from ffls.assets import builtin_lightmaps
-from ffls.commands.composite import sphere_geometry
+from ffls.commands.composite import ground_world, sphere_geometry
 from ffls.io.capture import Capture, Lights, load_capture_and_lights, save_capture, save_lights
 from ffls.io.images import read_image, write_exr
 from ffls.lightmaps.lightmap import load_lightmap
@@ -320,11 +320,8 @@ def main():
             geometry = []
             for cap in caps[n]:
                 geo = sphere_geometry(*cap)
-                Mk = M.copy()
-                Mk[2, 3] -= geo["ground_z"]
-                pk = ground_points(K, Mk, (R, R))
-                pk[~sm_b] = np.nan
-                geometry.append((pk, geo["centres"] - [0.0, 0.0, geo["ground_z"]], Mk))
+                Mk, ck, pk = ground_world(cap[0], geo, sm_b)
+                geometry.append((pk, ck, Mk))
                 print(f"{len(geo['centres'])} spheres found in {cap[0].folder.name}, "
                       f"{1000 * max(np.linalg.norm(np.subtract(centres, c), axis=1).min() for c in geo['centres']):.1f}"
                       f" mm off at most; ground at z = {geo['ground_z']:.4f}", flush=True)

@@ -263,6 +263,37 @@ def sphere_geometry(capture, lights) -> dict:
     return {"centres": centres, "radius": r, "ground_z": ground, "source": source, "margin_deg": margin}
 
 
+def ground_world(capture, geometry: dict, ground_px) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A capture's camera and spheres in its world shifted to put the ground at z = 0.
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+    geometry : dict
+        :func:`sphere_geometry` of the capture.
+    ground_px : (H, W) bool
+        The pixels that see the ground (the surface mask off the object).
+
+    Returns
+    -------
+    world_from_camera : (4, 4) float64
+    centres : (k, 3) float64
+        The spheres' centres.
+    points : (H, W, 3) float64
+        The ground points of ``ground_px`` (:func:`ffls.relight.sphere_shadows.ground_points`), NaN
+        elsewhere.
+    """
+    from ffls.relight.sphere_shadows import ground_points
+
+    M = np.array(capture.world_from_camera, dtype=np.float64)
+    M[2, 3] -= geometry["ground_z"]
+    centres = np.asarray(geometry["centres"], dtype=np.float64) - [0.0, 0.0, geometry["ground_z"]]
+    H, W = np.shape(ground_px)
+    pts = ground_points(capture.K, M, (W, H), dist=capture.dist)
+    pts[~np.asarray(ground_px, dtype=bool)] = np.nan
+    return M, centres, pts
+
+
 def make_fills(args, inputs, relighters) -> tuple[list, object, str]:
     """``--fill``'s :class:`ffls.relight.sphere_shadows.SphereShadowFill` per capture and the object's
     :class:`ffls.relight.shadow_hull.ShadowHull`, and a line describing them.
@@ -272,20 +303,14 @@ def make_fills(args, inputs, relighters) -> tuple[list, object, str]:
     the ground is z = 0. The hull is carved from the object relighter's basis.
     """
     from ffls.relight.shadow_hull import ShadowHull
-    from ffls.relight.sphere_shadows import SphereShadowFill, ground_points, hidden_photos
+    from ffls.relight.sphere_shadows import SphereShadowFill, hidden_photos
 
-    ocap = inputs["object"][0]
-    size = _image_size(ocap)
     ground_px = (inputs["surface_mask"] > 0.5) & (inputs["object_mask"] < 0.5)
     fills, hull, lines = [], None, []
     for key, rel in zip(("object", "surface"), relighters):
         cap = inputs[key][0]
         geo = inputs["fill_geometry"][key]
-        M = np.array(cap.world_from_camera, dtype=np.float64)
-        M[2, 3] -= geo["ground_z"]
-        centres = geo["centres"] - np.array([0.0, 0.0, geo["ground_z"]])
-        pts = ground_points(cap.K, M, size, dist=cap.dist)
-        pts[~ground_px] = np.nan
+        M, centres, pts = ground_world(cap, geo, ground_px)
         hidden = hidden_photos(pts, centres, geo["radius"], rel.directions, margin_deg=geo["margin_deg"])
         fills.append(SphereShadowFill(hidden, rel.directions, cap.hemisphere,
                                       geometry={"points": pts, "centres": centres, "radius": geo["radius"],
