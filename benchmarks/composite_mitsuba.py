@@ -32,7 +32,7 @@ radius) and the change error split there (``source_shadows``).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
         [--res 128] [--spp 16] [--truth-spp 1024] [--map-spp 256] [--cache DIR] [--schemes voronoi,...]
-        [--sources weights,lightflow,levelset] [--fill none,rest,all,model,rest+model]
+        [--sources weights,lightflow,levelset] [--fill none,rest,all,model,rest+model] [--spheres scene|found]
 
 ``--sources lightflow`` relights the map's compact sources by flow interpolation between the
 (path-traced, noisy) basis photos, ``--sources levelset`` by moving the basis photos' cast shadows
@@ -45,7 +45,10 @@ photos' blend). ``--fill model`` fills only the compact sources where a sphere h
 visible photos' unshadowed model times the object's visibility through its shadow hull
 (:class:`ffls.relight.shadow_hull.ShadowHull`, carved from the object capture's own shadows; the
 surface capture gets the model alone), and checks the hull's shadow of each source against a render
-(:func:`hull_shadow_check`); ``--fill rest+model`` also fills the rest's weights.
+(:func:`hull_shadow_check`); ``--fill rest+model`` also fills the rest's weights. The fills take the
+scene's sphere centres, or with ``--spheres found`` each capture's spheres found in its photos and
+the ground under them, as ``ffls composite --fill`` does
+(:func:`ffls.commands.composite.sphere_geometry`); the errors are measured on the scene's geometry.
 
 Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/composite_mitsuba.json``.
 """
@@ -62,6 +65,7 @@ import numpy as np
 from common import host_info, mitsuba_latlong_module, write_json
 
 from ffls.assets import builtin_lightmaps
+from ffls.commands.composite import ground_world, sphere_geometry
 from ffls.io.capture import Capture, Lights, load_capture_and_lights, save_capture, save_lights
 from ffls.io.images import read_image, write_exr
 from ffls.lightmaps.lightmap import load_lightmap
@@ -282,6 +286,10 @@ def main():
                          "with --sources lightflow/levelset: none, rest (the rest's weights), all (and the sources), "
                          "model (the sources alone, from the unshadowed model and the object's shadow hull), "
                          "rest+model")
+    ap.add_argument("--spheres", default="scene", choices=("scene", "found"),
+                    help="the calibration spheres' centres for --fill: the scene's (default), or found in each "
+                         "capture's photos as ffls composite --fill does (ffls.commands.composite.sphere_geometry; "
+                         "the ground under them)")
     ap.add_argument("--cache", default="/tmp/ffls_bench_composite_mitsuba")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "composite_mitsuba.json"))
     a = ap.parse_args()
@@ -299,7 +307,7 @@ def main():
     grow = max(2, int(round(0.02 * R)))
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
-    caps, fills, hulls = {}, {}, {}
+    caps, fills, hulls, hull_points = {}, {}, {}, {}
     K, M = _camera(R)
     ground = ground_points(K, M, (R, R))
     ground[~sm_b] = np.nan  # the ground the camera sees: neither the object nor a sphere
@@ -307,12 +315,23 @@ def main():
     for n in (int(v) for v in a.lights.split(",")):
         caps[n] = (render_capture(mi, cache / f"object_{R}_{n}_{a.spp}", n, 0, True, R, a.spp),
                    render_capture(mi, cache / f"surface_{R}_{n}_{a.spp}", n, 1, False, R, a.spp))
-        fills[n] = tuple(SphereShadowFill.from_geometry(ground, centres, 0.05, lights.directions)
-                         for _, lights in caps[n])
+        geometry = [(ground, centres, M)] * 2
+        if a.spheres == "found":  # each capture's own spheres, the world shifted to put the ground at z = 0
+            geometry = []
+            for cap in caps[n]:
+                geo = sphere_geometry(*cap)
+                Mk, ck, pk = ground_world(cap[0], geo, sm_b)
+                geometry.append((pk, ck, Mk))
+                print(f"{len(geo['centres'])} spheres found in {cap[0].folder.name}, "
+                      f"{1000 * max(np.linalg.norm(np.subtract(centres, c), axis=1).min() for c in geo['centres']):.1f}"
+                      f" mm off at most; ground at z = {geo['ground_z']:.4f}", flush=True)
+        fills[n] = tuple(SphereShadowFill.from_geometry(g, c, 0.05, lights.directions)
+                         for (_, lights), (g, c, _) in zip(caps[n], geometry))
         if any(f in ("model", "rest+model") for f in a.fill.split(",")):
             basis, dirs = accepted_basis(*caps[n][0])
-            hulls[n] = ShadowHull.carve(basis, dirs, om_b, K, M, ground=sm_b,
-                                        hidden=hidden_photos(ground, centres, 0.05, dirs))
+            g, c, Mo = geometry[0]
+            hulls[n] = ShadowHull.carve(basis, dirs, om_b, K, Mo, ground=sm_b, hidden=hidden_photos(g, c, 0.05, dirs))
+            hull_points[n] = g  # the hull's world: the ground points it casts its shadow onto
             print(f"shadow hull of the {n}-light object capture: {int(hulls[n].occupancy.sum())} voxels of "
                   f"{1000 * hulls[n].voxel:.1f} mm, umbra {hulls[n].umbra:.2f} ({time.perf_counter() - t0:.0f} s)",
                   flush=True)
@@ -358,7 +377,7 @@ def main():
             def hull_checks(direction):
                 key = tuple(np.round(direction, 9))
                 if key not in checked:
-                    checked[key] = hull_shadow_check(mi, R, hulls[n], ground, sm_b, direction)
+                    checked[key] = hull_shadow_check(mi, R, hulls[n], hull_points[n], sm_b, direction)
                 return checked[key]
 
             for method in METHODS:
@@ -412,7 +431,7 @@ def main():
                           f"{100 * h['change_in']:4.1f}% there ({100 * h['error_share_in']:3.0f}% of the change "
                           f"error), {100 * h['change_off']:4.1f}% off them; trace there {100 * h['trace']:4.1f}%"
                           f"{hull_note}", flush=True)
-    write_json(a.out, {"resolution": R, "spp": a.spp, "truth_spp": a.truth_spp, "map_spp": a.map_spp,
+    write_json(a.out, {"resolution": R, "spp": a.spp, "spheres": a.spheres, "truth_spp": a.truth_spp, "map_spp": a.map_spp,
                        "capture_albedo": CAPTURE_ALBEDO,
                        "scene_albedo": SCENE_ALBEDO, "host": host_info(), "seconds": time.perf_counter() - t0,
                        "rows": rows})

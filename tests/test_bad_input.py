@@ -524,6 +524,15 @@ CASES += [
     ("comp-frames-fps", C + [*_M, "--turntable", "3", "--fps", "5", "-o", "{out}/frames"], "--fps", "frames"),
 ]
 
+# --fill (round 11): the fill relights the compact sources where the spheres hide them, from the
+# spheres' world centres (capture.json or found in the photos; none at 24 px)
+CASES += [
+    ("comp-fill-weights", C + [*_M, "--sources", "weights", "--fill", "model", "-o", "{out}/c.exr"],
+     "--fill model", "c.exr"),
+    ("comp-fill-no-spheres", C + [*_M, "--fill", "rest+model", "-o", "{out}/c.exr"],
+     "--fill needs the calibration spheres' world centres", "c.exr"),
+]
+
 
 def _fill(argv, ws, out):
     keys = {k: str(v) for k, v in ws.items()}

@@ -170,6 +170,36 @@ def test_check_same_camera(tmp_path):
         check_same_camera(a, dataclasses.replace(a, world_from_camera=M))
 
 
+def test_fill_sphere_geometry_from_capture_json(tmp_path):
+    """``--fill``'s spheres and ground (ffls.commands.composite.sphere_geometry): the centres stated in
+    capture.json, the ground under them; one line for what the fill cannot do without."""
+    from ffls.commands.composite import sphere_geometry
+    from ffls.io.capture import Lights
+
+    K = np.array([[100.0, 0, 31.5], [0, 100.0, 31.5], [0, 0, 1]])
+    M = np.eye(4)
+    M[:3, :3] = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
+    M[:3, 3] = [0.0, 0.0, 1.2]
+    centres = [[-0.2, 0.0, 0.07], [0.2, 0.0, 0.07], [0.0, 0.2, 0.072]]
+    cap = Capture(folder=tmp_path, image_names=["a.exr", "b.exr"], K=K, image_size=(64, 64), world_from_camera=M,
+                  world_from_camera_is_default=False, sphere_radius=0.05, spheres=[{"center": c} for c in centres])
+    lights = Lights(image_names=["a.exr", "b.exr"], directions=np.array([[0, 0, 1.0], [0.6, 0, 0.8]]),
+                    extra=[{"uncertainty_deg": 1.5}, {}])
+    geo = sphere_geometry(cap, lights)
+    assert geo["source"] == "capture.json" and geo["radius"] == 0.05
+    assert geo["ground_z"] == pytest.approx(0.02) and np.allclose(geo["margin_deg"], [1.5, 0.0])
+    for change, what in ((dict(world_from_camera_is_default=True), "world_from_camera"),
+                         (dict(sphere_radius=None), "sphere_radius"), (dict(K=None), "pinhole"),
+                         (dict(spheres=[{"center": c} for c in centres[:2] + [[0.0, 0.2, 0.2]]]),
+                          "not on one ground plane")):
+        with pytest.raises(InputError, match=what):
+            sphere_geometry(dataclasses.replace(cap, **change), lights)
+    near = Lights(image_names=["a.exr", "b.exr"], directions=lights.directions,
+                  positions=np.array([[0.0, 0.0, 1.0], [np.nan] * 3]))
+    with pytest.raises(InputError, match="distant lights"):
+        sphere_geometry(cap, near)
+
+
 # ----------------------------------------------------------------------------- end to end on ffls synth
 @pytest.fixture(scope="module")
 def cset(tmp_path_factory):
@@ -241,6 +271,46 @@ def test_composite_does_not_replace_a_sibling_it_did_not_write(cset, tmp_path, c
     err = capfd.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "truth.exr exists, not from an earlier composite" in err[0], err
     assert (tmp_path / "truth.exr").read_bytes() == b"not ours" and not (tmp_path / "truth.png").exists()
+
+
+def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, tmp_path, capfd):
+    """``--fill model``: the spheres' world centres from capture.json, each capture's sphere shadows and
+    the object's shadow hull; under a sun the composite changes where a sphere hides the sun from the
+    ground and nowhere off the surface. Without the spheres' radius it is one line."""
+    import shutil
+
+    caps = {}
+    for k in ("object", "surface"):
+        caps[k] = tmp_path / k
+        shutil.copytree(cset / k, caps[k])
+        doc = json.loads((caps[k] / "capture.json").read_text())
+        truth = json.loads((caps[k] / "truth.json").read_text())
+        doc["spheres"] = [{"center": c} for c in truth["sphere_centers"]]
+        (caps[k] / "capture.json").write_text(json.dumps(doc))
+    common = ["composite", "--object", str(caps["object"]), "--surface", str(caps["surface"]), "--lightmap",
+              "sunrise", "--background", str(cset / "background.exr"), "--mask", str(cset / "object_mask.png"),
+              "--surface-mask", str(cset / "surface_mask.png")]
+    images = {}
+    for fill in ("none", "model"):
+        out = tmp_path / f"c_{fill}.exr"
+        rc = main(common + ["--fill", fill, "-o", str(out)])
+        text = capfd.readouterr().out
+        assert rc == 0, text
+        rep = json.loads(out.with_suffix(".json").read_text())
+        assert rep["fill"] == fill and len(rep["compact_sources"]) >= 1
+        images[fill] = read_image(out).pixels
+    assert "object: 4 spheres (capture.json), ground at z = 0" in text and "shadow hull" in text, text
+    sm = read_mask(cset / "surface_mask.png") > 0.5
+    changed = np.any(images["model"] != images["none"], axis=-1)
+    assert changed[sm].sum() >= 10 and not changed[~sm].any()
+    # a capture that does not state its spheres' radius: their shadows cannot be placed
+    doc = json.loads((caps["surface"] / "capture.json").read_text())
+    del doc["sphere_radius"]
+    (caps["surface"] / "capture.json").write_text(json.dumps(doc))
+    rc = main(common + ["--fill", "model", "-o", str(tmp_path / "c_bad.exr")])
+    err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and "--fill needs sphere_radius" in err[0], err
+    assert not (tmp_path / "c_bad.exr").exists()
 
 
 def test_composite_turntable(cset, tmp_path, capfd):

@@ -115,3 +115,36 @@ def test_source_fill_only_where_the_source_is_hidden():
     hid = hidden_photos(g, [(0.0, 0.0, 0.1)], 0.1, directions=d, dilate_px=0).reshape(80, -1)
     for idx, _ in calls:  # the photos it blends see the pixels it fills
         assert not np.any(hid[np.ix_(idx, np.flatnonzero(here.ravel()))].all(axis=1))
+
+
+def test_triangulations_are_built_only_for_the_fills_that_use_them(monkeypatch):
+    """The model fill (source_model) uses no group's triangulation: building one per group of hidden
+    photos took a minute and 0.7 GB for 200 lights at 128 px (docs/composite.md); the rest's fill
+    builds each group's once."""
+    import ffls.relight.sphere_shadows as ss
+
+    built = []
+
+    class Counting(ss.Barycentric):
+        def __init__(self, *a, **k):
+            built.append(1)
+            super().__init__(*a, **k)
+
+    monkeypatch.setattr(ss, "Barycentric", Counting)
+    R = 32
+    K = np.array([[40.0, 0, 15.5], [0, 40.0, 15.5], [0, 0, 1]])
+    M = np.eye(4)
+    M[:3, :3] = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]      # looking straight down from 1 m
+    M[:3, 3] = [0, 0, 1.0]
+    pts = ground_points(K, M, (R, R))
+    d = stratified_directions(80, "upper", 1)
+    f = SphereShadowFill.from_geometry(pts, [(0.1, 0.0, 0.05)], 0.05, d)
+    assert len(f.groups) > 3 and built == []
+    basis = np.broadcast_to(d[:, 2][:, None, None, None], (80, R, R, 3)).copy()
+    sun = np.array([-0.9, 0.0, 0.3]) / np.linalg.norm([-0.9, 0.0, 0.3])
+    f.source_model(np.zeros((R, R, 3)), sun, basis)
+    assert built == []
+    f.relight(np.zeros((R, R, 3)), np.full((80, 3), 1 / 80), basis)
+    assert len(built) == sum(v.size >= 3 for _, _, v in f.groups)
+    f.relight(np.zeros((R, R, 3)), np.full((80, 3), 1 / 80), basis)
+    assert len(built) == sum(v.size >= 3 for _, _, v in f.groups)  # built once

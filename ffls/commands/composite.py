@@ -33,6 +33,13 @@ DESCRIPTION = (
 
 #: ``--sources``: how the map's compact bright sources are relit.
 SOURCES = ("lightflow", "levelset", "weights")
+#: ``--fill``: what is filled where a calibration sphere hides a light from the ground
+#: (docs/composite.md, "The object's shadow inside the spheres' shadows"): nothing; the compact
+#: sources, from the unshadowed model and the object's shadow hull; that and the rest's weights.
+FILLS = ("none", "model", "rest+model")
+#: The spheres' bottoms (centre height less the radius) may spread this many radii around their
+#: median and still be read as one ground plane (``--fill``).
+GROUND_SPREAD_RADII = 0.5
 BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
 #: Share of a background's pixels that may hold a negative value: a renderer's reconstruction
 #: filter (Lanczos, Mitchell) rings below zero beside bright edges, on a few pixels; more than this
@@ -81,6 +88,14 @@ def add_arguments(p):
                    help="optical flow of --sources lightflow (between the photos) and levelset (between the "
                         "shadows' signed distances): OpenCV DIS (default) or Farneback; refused with --sources "
                         "weights, which uses no flow")
+    c.add_argument("--fill", default="none", choices=FILLS,
+                   help="where a calibration sphere hides a compact source from the ground, no photo holds the "
+                        "object's shadow: model relights the source there from the ground's unshadowed model "
+                        "times the object's shadow hull, carved from the object capture's own shadows; "
+                        "rest+model also moves the rest's weights off the photos a sphere hides. Needs --sources "
+                        "lightflow or levelset, distant lights, and capture.json's camera (K, world_from_camera, "
+                        "+Z up) and sphere_radius; the spheres' world centres come from capture.json's "
+                        "spheres[].center, or are found in the photos. Default none")
     c.add_argument("--scale-object", action="store_true",
                    help="scale the relit object by the registration too (the mismatch is the exposure, e.g. a "
                         "photographed background; default: it is the surface's albedo)")
@@ -177,6 +192,140 @@ def check_distinct_captures(object_capture, surface_capture) -> None:
                          "a copy of the object capture? give the capture of the surface alone", folder)
 
 
+def sphere_geometry(capture, lights) -> dict:
+    """The calibration spheres and the ground of a capture, in its world, for ``--fill``.
+
+    The spheres' world centres are ``capture.json``'s ``spheres[].center`` where every hint gives
+    one, else the spheres found in the photos (:func:`ffls.spheres.detect.find_spheres_in_capture`).
+    The ground is the plane z = const under them: the median of their bottoms (centre height less
+    the radius), the world's +Z up (``world_from_camera``).
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+    lights : ffls.io.capture.Lights
+
+    Returns
+    -------
+    dict
+        ``centres`` (k, 3) float64, ``radius`` float, ``ground_z`` float, ``source`` (str: where
+        the centres come from), ``margin_deg`` (m,) float64: each accepted light's 95% cone
+        (``uncertainty_deg`` of ``lights.json``, 0 where not stated).
+
+    Raises
+    ------
+    ffls.errors.InputError
+        One line: no pinhole camera, no ``world_from_camera``, no ``sphere_radius``, near lights,
+        no sphere found, spheres not on one ground, a camera below the ground.
+    """
+    from ffls.errors import InputError
+
+    where = capture.json_path
+    if getattr(capture, "camera_model", "pinhole") != "pinhole" or capture.K is None:
+        raise InputError("--fill needs a pinhole camera with K in capture.json (the ground's pixels are placed "
+                         "along their rays)", where)
+    if capture.world_from_camera_is_default:
+        raise InputError("--fill needs camera.world_from_camera in capture.json (the camera, the ground and the "
+                         "lights in one world, +Z up)", where)
+    if capture.sphere_radius is None:
+        raise InputError("--fill needs sphere_radius in capture.json (the spheres' shadows are cast from their "
+                         "size)", where)
+    idx, _ = lights.accepted()
+    near = np.all(np.isfinite(lights.positions[idx]), axis=1)
+    if near.any():
+        raise InputError(f"--fill needs distant lights (the shadow hull is carved along light directions); "
+                         f"{int(near.sum())} lights have near positions", getattr(lights, "path", None) or where)
+    hints = list(capture.spheres or [])
+    if hints and all("center" in h for h in hints):
+        centres, source = np.array([h["center"] for h in hints], dtype=np.float64), "capture.json"
+    else:
+        from ffls.spheres.detect import find_spheres_in_capture
+
+        try:
+            found = find_spheres_in_capture(capture)
+        except InputError as e:
+            raise InputError(f"--fill needs the calibration spheres' world centres: {e.message}", e.path) from None
+        centres, source = np.array([s.center_world for s in found], dtype=np.float64).reshape(-1, 3), "found"
+    if not len(centres):
+        raise InputError("--fill needs the calibration spheres' world centres: none found in the photos; give "
+                         "them in capture.json, \"spheres\": [{\"center\": [x, y, z]}, ...]", where)
+    r = float(capture.sphere_radius)
+    bottoms = centres[:, 2] - r
+    ground = float(np.median(bottoms))
+    if np.abs(bottoms - ground).max() > GROUND_SPREAD_RADII * r:
+        raise InputError("--fill: the spheres' bottoms lie at z = " + ", ".join(f"{z:.4g}" for z in bottoms)
+                         + f" ({source}): not on one ground plane; the fill needs the spheres on the ground and "
+                           "world_from_camera's +Z up", where)
+    if not capture.world_from_camera[2, 3] > ground:
+        raise InputError(f"--fill: the camera (z = {capture.world_from_camera[2, 3]:.4g}) is not above the ground "
+                         f"the spheres stand on (z = {ground:.4g})", where)
+    margin = np.array([(lights.extra[i] or {}).get("uncertainty_deg") or 0.0 for i in idx], dtype=np.float64)
+    return {"centres": centres, "radius": r, "ground_z": ground, "source": source, "margin_deg": margin}
+
+
+def ground_world(capture, geometry: dict, ground_px) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A capture's camera and spheres in its world shifted to put the ground at z = 0.
+
+    Parameters
+    ----------
+    capture : ffls.io.capture.Capture
+    geometry : dict
+        :func:`sphere_geometry` of the capture.
+    ground_px : (H, W) bool
+        The pixels that see the ground (the surface mask off the object).
+
+    Returns
+    -------
+    world_from_camera : (4, 4) float64
+    centres : (k, 3) float64
+        The spheres' centres.
+    points : (H, W, 3) float64
+        The ground points of ``ground_px`` (:func:`ffls.relight.sphere_shadows.ground_points`), NaN
+        elsewhere.
+    """
+    from ffls.relight.sphere_shadows import ground_points
+
+    M = np.array(capture.world_from_camera, dtype=np.float64)
+    M[2, 3] -= geometry["ground_z"]
+    centres = np.asarray(geometry["centres"], dtype=np.float64) - [0.0, 0.0, geometry["ground_z"]]
+    H, W = np.shape(ground_px)
+    pts = ground_points(capture.K, M, (W, H), dist=capture.dist)
+    pts[~np.asarray(ground_px, dtype=bool)] = np.nan
+    return M, centres, pts
+
+
+def make_fills(args, inputs, relighters) -> tuple[list, object, str]:
+    """``--fill``'s :class:`ffls.relight.sphere_shadows.SphereShadowFill` per capture and the object's
+    :class:`ffls.relight.shadow_hull.ShadowHull`, and a line describing them.
+
+    Each capture's spheres (:func:`sphere_geometry`, in ``inputs['fill_geometry']``) hide its photos'
+    lights from the ground pixels of the surface mask (off the object); the world is shifted so that
+    the ground is z = 0. The hull is carved from the object relighter's basis.
+    """
+    from ffls.relight.shadow_hull import ShadowHull
+    from ffls.relight.sphere_shadows import SphereShadowFill, hidden_photos
+
+    ground_px = (inputs["surface_mask"] > 0.5) & (inputs["object_mask"] < 0.5)
+    fills, hull, lines = [], None, []
+    for key, rel in zip(("object", "surface"), relighters):
+        cap = inputs[key][0]
+        geo = inputs["fill_geometry"][key]
+        M, centres, pts = ground_world(cap, geo, ground_px)
+        hidden = hidden_photos(pts, centres, geo["radius"], rel.directions, margin_deg=geo["margin_deg"])
+        fills.append(SphereShadowFill(hidden, rel.directions, cap.hemisphere,
+                                      geometry={"points": pts, "centres": centres, "radius": geo["radius"],
+                                                "dilate_px": 1}))
+        lines.append(f"{key}: {len(centres)} spheres ({geo['source']}), ground at z = {geo['ground_z']:.4g}")
+        if key == "object":
+            hull = ShadowHull.carve(rel.basis, rel.directions, inputs["object_mask"], cap.K, M, ground=ground_px,
+                                    hidden=hidden, dist=cap.dist)
+            units = f" {cap.units}" if getattr(cap, "units", None) else ""
+            note = (f"the object's shadow hull: {int(hull.occupancy.sum())} voxels of {hull.voxel:.3g}{units}, "
+                    f"umbra {hull.umbra:.2f}")
+        del hidden
+    return fills, hull, "fill " + args.fill + ": " + "; ".join(lines + [note])
+
+
 def load_inputs(args):
     """The two captures and lights, light map, background and masks of ``args``, checked before any relighting.
 
@@ -237,8 +386,11 @@ def load_inputs(args):
     lm = lightmap_from_spec(args.lightmap, args.layout)
     if lm.colour_note:
         notes.append(f"colour: light map: {lm.colour_note}")
+    geometry = {}  # last: finding the spheres reads every photo
+    if getattr(args, "fill", "none") != "none":
+        geometry = {k: sphere_geometry(*fields[k]) for k in ("object", "surface")}
     return {**fields, "lightmap": lm, "background": bg.pixels, "object_mask": om, "surface_mask": sm,
-            "notes": notes}
+            "fill_geometry": geometry, "notes": notes}
 
 
 def make_compositor(args, inputs):
@@ -260,7 +412,15 @@ def make_compositor(args, inputs):
             print(f"ffls composite: {k}: {learnt_kernel(r)}")
     if args.sources in ("lightflow", "levelset"):
         kind = "flow" if args.sources == "lightflow" else "levelset"
-        rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind) for r in rel]
+        fill = getattr(args, "fill", "none")
+        if fill == "none":
+            rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind) for r in rel]
+        else:
+            fills, hull, line = make_fills(args, inputs, rel)
+            print(f"ffls composite: {line}")
+            rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind, fill=f, fill_sources="model",
+                                      fill_rest=fill == "rest+model", hull=hull if k == 0 else None)
+                   for k, (r, f) in enumerate(zip(rel, fills))]
     return Compositor(*rel, inputs["background"], inputs["object_mask"], inputs["surface_mask"],
                       method=args.method, registration=args.registration, object_scale=args.scale_object,
                       paths={"background": args.background, "object_mask": args.mask,
@@ -285,6 +445,9 @@ def run(args) -> int:
     if args.flow is not None and args.sources == "weights":
         raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
                          "no flow")
+    if args.fill != "none" and args.sources == "weights":
+        raise InputError(f"--fill {args.fill} relights the compact sources where the spheres hide them: it needs "
+                         "--sources lightflow or levelset, not weights")
     check_fps_flag(args, out)
     args.flow, args.fps = args.flow or "dis", args.fps or 30.0
     R0 = rotation_from_args(args)
@@ -306,7 +469,7 @@ def run(args) -> int:
                           "registration": reg.to_json(), "clamped_pixels": res.clamped_pixels,
                           "object": str(args.object), "surface": str(args.surface), "lightmap": str(args.lightmap),
                           "background": str(args.background), "exposure": exposure, "weighting": args.weighting,
-                          "sources": args.sources}
+                          "sources": args.sources, "fill": args.fill}
                 split = getattr(comp.object, "last_split", None)
                 if split is not None:
                     report["compact_sources"] = [{"direction": s.direction.tolist(), "power": s.power.tolist(),

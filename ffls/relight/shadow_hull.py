@@ -12,7 +12,12 @@ Evaluation", IJCV 2007; here with the ground plane as the shadow receiver, as in
 reconstruction from a turntable's cast shadows), intersected with the camera's silhouette (the
 object's mask: Laurentini's visual hull, 1994). What is left contains the object (a point of the
 object is never seen through), so its shadows contain the object's shadows; with many lights it
-is close to them except in concavities that no shadow reveals.
+is close to them except in concavities that no shadow reveals. It also keeps the space whose
+shadows no photo shows at all: ground the camera does not see (behind the object, behind and
+under a calibration sphere) or that a sphere shades under every light that would reach it. Such a
+voxel is not evidence of the object, and beside a sphere its shadow runs along the sphere's own,
+where the hull is used (:data:`MIN_SHADOWS`): a voxel stays only where some photos see its
+projection in shadow.
 
 * :func:`lit_photos` gives, per photo and ground pixel, the photo's visibility of its light: its
   luminance over the pixel's unshadowed linear model's
@@ -38,13 +43,23 @@ from ffls.errors import InputError
 from ffls.relight.lightflow import LUMINANCE, SHADOW_LEVEL, unshadowed_fit
 from ffls.relight.sphere_shadows import ground_points
 
-__all__ = ["MAX_CELLS", "MIN_VOTES", "lit_photos", "ShadowHull"]
+__all__ = ["MAX_CELLS", "MIN_VOTES", "MIN_SHADOWS", "VISIBILITY_STEPS", "lit_photos",
+           "visibility_codes", "ShadowHull"]
 
 #: The hull's grid has at most this many voxels along its longest side.
 MAX_CELLS = 160
 #: A voxel is carved when at least this many photos see its ground projection lit: one photo lit
 #: by mistake (noise, a light direction a little off at a shadow's edge) does not carve the object.
 MIN_VOTES = 2
+#: A voxel stays only where at least this many photos see its ground projection in shadow: a voxel
+#: whose shadow no photo shows (ground hidden from the camera by the object or a calibration
+#: sphere, or in a sphere's shadow, under every light) is not evidence of the object. Uncarved and
+#: unseen, it would cast a shadow where the captures saw none; beside a sphere it casts it along
+#: the sphere's own shadow, where the fill then darkens the ground (docs/composite.md).
+MIN_SHADOWS = 2
+#: Visibility is held in steps of 1 / VISIBILITY_STEPS (:func:`visibility_codes`: one byte per photo
+#: and pixel, 0 meaning not known).
+VISIBILITY_STEPS = 254
 #: Rows of pixels per chunk of :func:`lit_photos` (the fit holds (rows x W x n) values).
 _FIT_PIXELS = 1 << 14
 
@@ -68,7 +83,8 @@ def lit_photos(basis, directions, ground, hidden=None, *, shadow_level: float = 
     Returns
     -------
     visibility : (n, H, W) float32
-        The photo's luminance over the unshadowed model's, clipped to [0, 1]; 0 where not known.
+        The photo's luminance over the unshadowed model's, clipped to [0, 1] (in steps of
+        1 / :data:`VISIBILITY_STEPS`); 0 where not known.
     known : (n, H, W) bool
         The photo says whether the object shadows the pixel (ground, not hidden, a model that
         predicts light). The pixel is lit where it is known and ``visibility >= shadow_level``.
@@ -77,14 +93,33 @@ def lit_photos(basis, directions, ground, hidden=None, *, shadow_level: float = 
         that reaches the object's shadows anyway (bounce from the object and the ground); 0 where
         no pixel is shadowed.
     """
+    codes, umbra = visibility_codes(basis, directions, ground, hidden, shadow_level=shadow_level)
+    vis, known = _decoded(codes)
+    return vis, known, umbra
+
+
+def visibility_codes(basis, directions, ground, hidden=None, *,
+                     shadow_level: float = SHADOW_LEVEL) -> tuple[np.ndarray, float]:
+    """:func:`lit_photos` in one byte per photo and pixel: 0 where not known, else
+    ``1 + round(visibility * VISIBILITY_STEPS)``.
+
+    The carving reads every photo whole, while the unshadowed fit needs every photo of a pixel, so
+    the visibilities are held for all photos at once: one byte each (1 GiB for 1000 photos of
+    1024 x 1024 px, where float32 and a mask took 5). Same parameters as :func:`lit_photos`.
+
+    Returns
+    -------
+    codes : (n, H, W) uint8
+    umbra : float
+        As :func:`lit_photos` (the median from a histogram of 1 / :data:`VISIBILITY_STEPS` bins).
+    """
     n, H, W, _ = basis.shape
     d = np.asarray(directions, dtype=np.float64).reshape(n, 3)
     g = np.asarray(ground, dtype=bool)
     if g.shape != (H, W):
         raise InputError(f"the ground mask {g.shape} does not match the photos ({H}, {W})")
-    vis = np.zeros((n, H, W), dtype=np.float32)
-    known = np.zeros((n, H, W), dtype=bool)
-    dark = []
+    codes = np.zeros((n, H, W), dtype=np.uint8)
+    dark = np.zeros(VISIBILITY_STEPS + 1, dtype=np.int64)
     rows = max(1, _FIT_PIXELS // max(W, 1))
     for y0 in range(0, H, rows):
         sl = slice(y0, min(H, y0 + rows))
@@ -100,12 +135,22 @@ def lit_photos(basis, directions, ground, hidden=None, *, shadow_level: float = 
         if prior is not None:
             ok &= prior.astype(bool)
         lum = photos @ LUMINANCE.astype(np.float32)
-        known[:, sl] = ok
         v = np.where(ok, lum / np.where(ok, pred, 1.0), 0.0)
-        vis[:, sl] = np.clip(v, 0.0, 1.0)
-        dark.append(v[ok & (v < shadow_level)])
-    dark = np.concatenate(dark) if dark else np.zeros(0)
-    return vis, known, float(np.clip(np.median(dark), 0.0, 1.0)) if dark.size else 0.0
+        steps = np.rint(np.clip(v, 0.0, 1.0) * VISIBILITY_STEPS).astype(np.int64)
+        codes[:, sl] = np.where(ok, 1 + steps, 0).astype(np.uint8)
+        dark += np.bincount(steps[ok & (v < shadow_level)], minlength=VISIBILITY_STEPS + 1)
+    umbra = 0.0
+    if dark.sum():
+        umbra = float(np.searchsorted(np.cumsum(dark), 0.5 * dark.sum())) / VISIBILITY_STEPS
+    return codes, float(np.clip(umbra, 0.0, 1.0))
+
+
+def _decoded(codes) -> tuple[np.ndarray, np.ndarray]:
+    """Visibility (float32, 0 where not known) and known (bool) of :func:`visibility_codes`."""
+    codes = np.asarray(codes)
+    known = codes > 0
+    vis = np.where(known, (codes.astype(np.float32) - 1.0) / VISIBILITY_STEPS, 0.0)
+    return vis.astype(np.float32), known
 
 
 class ShadowHull:
@@ -144,7 +189,8 @@ class ShadowHull:
     @classmethod
     def carve(cls, basis, directions, object_mask, K, world_from_camera, *, ground=None,
               hidden=None, dist=None, max_height: float | None = None, min_votes: int = MIN_VOTES,
-              max_cells: int = MAX_CELLS, shadow_level: float = SHADOW_LEVEL) -> "ShadowHull":
+              min_shadows: int = MIN_SHADOWS, max_cells: int = MAX_CELLS,
+              shadow_level: float = SHADOW_LEVEL) -> "ShadowHull":
         """Carve the hull of an object standing on the plane z = 0 from its capture.
 
         Parameters
@@ -169,6 +215,9 @@ class ShadowHull:
             The grid's top (default: 0.9 of the camera's height above the ground).
         min_votes : int
             :data:`MIN_VOTES`.
+        min_shadows : int
+            :data:`MIN_SHADOWS` (0 keeps every voxel no photo sees lit: the strict hull, which
+            contains the object and the space whose shadows no photo shows).
         max_cells : int
             :data:`MAX_CELLS`.
         shadow_level : float
@@ -206,14 +255,14 @@ class ShadowHull:
         lo[2], hi[2] = 0.0, top
         focal = float(np.asarray(K, dtype=np.float64)[0, 0])
         footprint = float(np.median(np.linalg.norm(G - C, axis=-1))) / focal
-        vis, known, umbra = lit_photos(basis, d, ground, hidden, shadow_level=shadow_level)
+        codes, umbra = visibility_codes(basis, d, ground, hidden, shadow_level=shadow_level)
         hull = None
         for _ in range(2):
             # Coarse to fine: the first grid spans every place the camera allows, the second the
             # first one's hull (plus two voxels), at the pixels' footprint where the cap allows.
             voxel = max(footprint, float((hi - lo).max()) / max_cells)
-            hull = cls._carved(lo, hi, voxel, sil, vis, known, d, K, M, dist, int(min_votes), umbra,
-                               float(shadow_level))
+            hull = cls._carved(lo, hi, voxel, sil, codes, d, K, M, dist, int(min_votes),
+                               int(min_shadows), umbra, float(shadow_level))
             occ = np.argwhere(hull.occupancy > 0)
             if occ.size == 0 or voxel <= footprint:
                 break
@@ -222,7 +271,7 @@ class ShadowHull:
         return hull
 
     @classmethod
-    def _carved(cls, lo, hi, voxel, sil, vis, known, d, K, M, dist, min_votes, umbra,
+    def _carved(cls, lo, hi, voxel, sil, codes, d, K, M, dist, min_votes, min_shadows, umbra,
                 level) -> "ShadowHull":
         """One carving of the box ``lo``-``hi`` at ``voxel`` (see :meth:`carve`)."""
         shape = np.maximum(np.ceil((hi - lo) / voxel).astype(int), 1)
@@ -232,15 +281,20 @@ class ShadowHull:
         # The camera's silhouette (visual hull).
         cand = np.flatnonzero(_lookup(sil, _pixels(X, K, M, dist)))
         votes = np.zeros(cand.size, dtype=np.int32)
+        shadows = np.zeros(cand.size, dtype=np.int32)
         Xc = X[cand]
         for i in range(d.shape[0]):
             if not d[i, 2] > 0:
                 continue
             g = Xc - (Xc[:, 2] / d[i, 2])[:, None] * d[i]
             q = _pixels(g, K, M, dist)
-            votes += (_lookup(known[i], q) & (_bilinear(vis[i], q) >= level)).astype(np.int32)
+            vis, known = _decoded(codes[i])
+            seen = _lookup(known, q)
+            lit = _bilinear(vis, q) >= level
+            votes += seen & lit
+            shadows += seen & ~lit
         occ = np.zeros(X.shape[0], dtype=np.float32)
-        occ[cand] = (votes < min_votes).astype(np.float32)
+        occ[cand] = ((votes < min_votes) & (shadows >= min_shadows)).astype(np.float32)
         all_votes = np.zeros(X.shape[0], dtype=np.int32)
         all_votes[cand] = votes
         return cls(occ.reshape(shape), origin, voxel, umbra, all_votes.reshape(shape))
