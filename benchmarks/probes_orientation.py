@@ -1,7 +1,7 @@
 """Hougen-Ahuja's default estimate in several orientations of its source set, and their average.
 
     OMP_NUM_THREADS=1 python benchmarks/probes_orientation.py [--noise 0.01 [--seed 1]] [--maps night,studio]
-        [--orientations 8]
+        [--orientations 8] [--ground]
 
 The scenes and the measure are those of ``benchmarks/probes.py`` and ``benchmarks/probes_night.py`` (a
 Lambertian ball of albedo 0.7, 80 px, seen from the relit capture's camera; the four bundled maps at 64
@@ -12,6 +12,9 @@ own, and averaged): the relit error of every member (one orientation each) and o
 first 2, 4 and ``K``, the members' held-out relative RMS (the CV score of the round each chose, on its
 own folds), and the CPU seconds of the whole ensemble (``time.process_time``). Writes
 ``benchmarks/results/probes_orientation.json`` (``..._noise[_seedS].json`` with ``--noise``).
+``--ground``: the estimate with a ground plane ``z = 0`` (``ground=(0, 0, 1)``: sources on a dome over it,
+the light below it uniform), its orientations turned about +Z (random azimuths, seed 0); ``_ground`` is
+added to the file name.
 """
 from __future__ import annotations
 
@@ -37,6 +40,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(add_help=False)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--orientations", type=int, default=8)
+    ap.add_argument("--ground", action="store_true")
     own, rest = ap.parse_known_args(argv if argv is not None else sys.argv[1:])
     a = probe_benchmark_args(__doc__, MAPS, rest)
     rng = np.random.default_rng(own.seed)
@@ -50,7 +54,7 @@ def main(argv=None):
             rad = rad + rng.normal(0.0, a.noise * float(np.mean(rad)), size=rad.shape)
         t = time.process_time()
         sel = adaptive_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="auto",
-                                    orientations=own.orientations)
+                                    orientations=own.orientations, ground=(0.0, 0.0, 1.0) if own.ground else None)
         cpu = time.process_time() - t
         members = sel.fit.members
         single = [relit_capture_error(cap, lights, f.latlong(H), truth) for f in members]
@@ -64,9 +68,11 @@ def main(argv=None):
               + " % (the first is the default's); average of "
               + ", ".join(f"{j}: {100 * e:.1f}%" for j, e in avg.items())
               + f"; sources {'/'.join(map(str, sel.chosen))}; {cpu:.1f} CPU s", flush=True)
-    tag = ("_noise" if a.noise > 0 else "") + (f"_seed{own.seed}" if own.seed else "")
+    tag = ("_noise" if a.noise > 0 else "") + (f"_seed{own.seed}" if own.seed else "") + (
+        "_ground" if own.ground else "")
     path = a.json or str(ROOT / f"benchmarks/results/probes_orientation{tag}.json")
     write_json(path, {"host": host_info(), "noise": a.noise, "seed": own.seed, "orientations": own.orientations,
+                      "ground": own.ground,
                       "map_height": H, "rows": out,
                       "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_orientation.py",
                                            *sys.argv[1:]])})

@@ -104,6 +104,9 @@ def _add_inverse(sub, common):
     d.add_argument("--orientations", type=integer(1, 64), default=1,
                    help="with adaptive sources: average the estimate over this many orientations of the geodesic "
                         "source set (default 1: one estimate; costs as many estimates)")
+    d.add_argument("--ground", action="store_true",
+                   help="sources only above the ground plane (probe.json's plane, else the world +Z), the light "
+                        "below it one uniform term")
     s = sub.add_parser("shadow", parents=[common, shared], help="a cast shadow (Sato-Sato-Ikeuchi 1999)",
                        description="Dome node intensities from the shadow of a known occluder on a plane.")
     s.add_argument("--nodes", type=_sources_arg, default="auto", metavar="N|auto|adaptive|uniform",
@@ -250,7 +253,7 @@ def method_knobs(args) -> dict:
                              f"--sources {args.sources}" + (" --smoothness cv" if args.smoothness == "cv" else ""))
         return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
                 "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill,
-                "orientations": args.orientations}
+                "orientations": args.orientations, "ground": args.ground}
     if args.method == "shadow":
         if args.smoothness == "cv":
             from ffls.errors import InputError

@@ -342,7 +342,7 @@ SMOOTHNESS_WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
 
 def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="auto",
                      criterion: str = "cv", smoothness: float | str = 0.0, rcond: float | None = None,
-                     orientations: int = 1, rim_px: float = 0.5,
+                     orientations: int = 1, ground: bool = False, rim_px: float = 0.5,
                      max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
                      fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
@@ -380,6 +380,11 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         Adaptive sources only: average the estimate over this many orientations of the geodesic
         hierarchy (:func:`ffls.probes.selection.adaptive_hougen_ahuja`; 1, the default, is one
         estimate; ``docs/probes.md``, *The orientation of the source set*, measures the trade).
+    ground : bool
+        Sources only above a ground plane (``probe.plane``'s normal; without a plane, the world's
+        +Z, GUIDE section 1), the light from below it one uniform term
+        (:func:`ffls.probes.hougen_ahuja.hougen_ahuja`'s ``ground``; ``docs/probes.md``, *A ground
+        plane*, measures it). False (default): sources over the whole sphere.
     rim_px, max_pixels
         See :func:`diffuse_pixels`.
     confidence_threshold : float
@@ -402,6 +407,13 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     if orientations > 1 and (sources not in ("auto", "adaptive") or by_cv):
         raise ValueError("orientations > 1 applies to adaptive sources without smoothness='cv'")
     kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=0.0 if by_cv else smoothness, rcond=rcond)
+    up = None
+    if ground:
+        up = np.asarray(probe.plane.normal if probe.plane is not None else (0.0, 0.0, 1.0), dtype=np.float64)
+        kw["ground"] = up
+        notes.append(f"ground plane: sources above the plane of normal ({up[0]:+.2f}, {up[1]:+.2f}, {up[2]:+.2f})"
+                     f"{'' if probe.plane is not None else ' (no plane in probe.json: the world +Z)'}, the light "
+                     f"below it uniform")
     try:
         if sources in ("auto", "adaptive", "uniform"):
             select = select_hougen_ahuja if sources == "uniform" else adaptive_hougen_ahuja
@@ -417,15 +429,17 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
                              f"has {chosen}")
         if by_cv:
             # the set's own domain and ambient (the rings keep theirs: explicit directions default to the sphere)
+            amb_set = False if up is not None and ambient == "auto" else resolve_ambient(ambient, nonnegative,
+                                                                                          fit.hemisphere)
             reg = select_regularization(N, V, albedo, fit.directions, SMOOTHNESS_WEIGHTS, "smoothness",
                                         nonnegative=nonnegative, rcond=rcond, hemisphere=fit.hemisphere,
-                                        ambient=resolve_ambient(ambient, nonnegative, fit.hemisphere))
+                                        ambient=amb_set, **({} if up is None else {"ground": up}))
             fit = reg.fit
             notes.append(reg.note)
     except InputError as e:
         raise _with_source(e, src) from None
     amb = {False: "no ambient", "nonnegative": "non-negative ambient", True: "free ambient", "free": "free ambient"}[
-        resolve_ambient(ambient, nonnegative, fit.hemisphere)]
+        False if up is not None and ambient == "auto" else resolve_ambient(ambient, nonnegative, fit.hemisphere)]
     count = (f"{chosen} sources" if orientations == 1 else
              f"the mean of {len(chosen)} fits ({', '.join(map(str, chosen))} sources)")
     notes.append(f"Hougen-Ahuja: {count}{' (non-negative)' if nonnegative else ''}, {amb}, re-rendered "
@@ -434,6 +448,8 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
                "condition": float(fit.condition)}
     if orientations > 1:
         details["orientations"] = int(orientations)
+    if up is not None:
+        details["ground"] = [float(g) for g in fit.ground]
     if by_cv:
         details["smoothness"] = float(reg.chosen)
     return _finish(fit.latlong(height), normal_confidence(N, height), confidence_threshold, "diffuse", probe, notes,

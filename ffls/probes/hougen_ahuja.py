@@ -29,7 +29,7 @@ from ffls.probes.linear import as_rgb_pixels, broadcast_albedo, lambert_matrix, 
 from ffls.probes.sources import HOUGEN_AHUJA_SIZES, cell_energies, model_sources, sources_to_latlong
 
 __all__ = ["SourceFit", "SourceEnsemble", "hougen_ahuja", "estimate_sources_HougenAhuja1993", "check_normals",
-           "normal_confidence", "cell_solid_angles", "average_fits"]
+           "normal_confidence", "cell_solid_angles", "average_fits", "ground_column", "ground_axis"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,10 @@ class SourceFit:
         Numerical rank of the system.
     observed : (n,) bool
         Sources that light at least one pixel (the others are 0).
+    ground : (3,) float64 or None
+        With :func:`hougen_ahuja`'s ``ground``: the power (W m^-2, as an intensity) of the light
+        from below the ground plane, uniform radiance over the directions outside ``hemisphere``;
+        None without.
     """
 
     directions: np.ndarray
@@ -75,10 +79,20 @@ class SourceFit:
     hemisphere: object = "full"
     rank: int = 0
     observed: np.ndarray | None = None
+    ground: np.ndarray | None = None
 
     def latlong(self, height: int = 64) -> np.ndarray:
         """The recovered lighting as lat-long radiance (height, 2 height, 3) float64 (may be negative)."""
-        return sources_to_latlong(self.directions, self.intensities, height, self.hemisphere, self.ambient)
+        return sources_to_latlong(self.directions, self.intensities, height, self.hemisphere, self.ambient,
+                                  outside=self.ground)
+
+    def irradiance(self, normals) -> np.ndarray:
+        """Irradiance (m, 3) float64 of the recovered lighting on unit ``normals`` (m, 3), unshadowed."""
+        n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        E = np.maximum(n @ self.directions.T, 0.0) @ self.intensities + self.ambient
+        if self.ground is not None:
+            E = E + ground_column(n, self.hemisphere["axis"])[:, None] * self.ground
+        return E
 
 
 @dataclass(frozen=True)
@@ -122,13 +136,17 @@ def average_fits(fits, radiance) -> SourceEnsemble:
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
     observed = [f.observed if f.observed is not None else np.ones(f.directions.shape[0], bool) for f in fits]
+    grounds = [f.ground for f in fits]
+    if any(g is not None for g in grounds) and not all(g is not None for g in grounds):
+        raise ValueError("fits with and without a ground term cannot be averaged")
     return SourceEnsemble(directions=np.concatenate([f.directions for f in fits]),
                           intensities=np.concatenate([f.intensities for f in fits]) / k,
                           ambient=np.mean([f.ambient for f in fits], axis=0), rendered=rendered, rms=rms,
                           relative_rms=rms / ref if ref > 0 else np.inf,
                           condition=float(max(f.condition for f in fits)), method=fits[0].method,
                           hemisphere=fits[0].hemisphere, rank=int(max(f.rank for f in fits)),
-                          observed=np.concatenate(observed), members=fits)
+                          observed=np.concatenate(observed), members=fits,
+                          ground=None if grounds[0] is None else np.mean(grounds, axis=0))
 
 
 def check_normals(normals) -> np.ndarray:
@@ -181,9 +199,26 @@ def resolve_ambient(ambient, nonnegative: bool, hemisphere="full"):
     return "nonnegative" if nonnegative else True
 
 
+def ground_axis(ground) -> np.ndarray:
+    """The unit up vector (3,) float64 of a ``ground`` argument (the ground plane's normal)."""
+    up = np.asarray(ground, dtype=np.float64).reshape(-1)
+    if up.shape != (3,) or not np.all(np.isfinite(up)) or np.linalg.norm(up) < 1e-12:
+        raise ValueError(f"ground must be the plane's normal, a non-zero 3-vector, not {ground!r}")
+    return normalize(up)
+
+
+def ground_column(normals, up) -> np.ndarray:
+    """Irradiance (m,) float64 on unit ``normals`` (m, 3) per unit power of uniform radiance below the plane
+    of normal ``up``: a power ``P`` over the lower hemisphere is radiance ``P / (2 pi)``, whose irradiance on
+    a normal ``n`` is ``pi (P / 2 pi) (1 - n . up) / 2 = P (1 - n . up) / 4`` (all of it facing straight
+    down, half of it on a vertical normal, none facing up)."""
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    return 0.25 * (1.0 - np.clip(n @ ground_axis(up), -1.0, 1.0))
+
+
 def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str = True, nonnegative: bool = False,
                  rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full",
-                 smoothness: float = 0.0, energy: float = 0.0) -> SourceFit:
+                 smoothness: float = 0.0, energy: float = 0.0, ground=None) -> SourceFit:
     """Recover model-source intensities from a diffuse object's pixels (Hougen and Ahuja 1993).
 
     Parameters
@@ -225,6 +260,16 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str 
         the most evenly spread: NNLS alone returns a vertex of the solution set, which can
         gather light spread over many directions into a few sources at their mean direction
         (``docs/probes.md``, *Regularised Hougen-Ahuja*).
+    ground : (3,) array_like, optional
+        The normal (up) of a ground plane. The model sources then lie on or above that plane
+        (the hemisphere around it: ``hemisphere`` and ``axis`` are set to it), and the light from
+        below it is one more unknown, uniform radiance over the lower hemisphere
+        (:func:`ground_column`; non-negative with ``nonnegative``): the ground and what stands on
+        it, seen by the downward normals. A ball seen from above cannot tell a lamp a few degrees
+        above the horizon from one a few degrees below; with sources on both sides, which side
+        NNLS chooses depends on where the sources happen to lie (``docs/probes.md``, *The
+        orientation of the source set*). ``ambient='auto'`` then means no ambient (the sources
+        and the ground hold any uniform light). None (default): sources over ``hemisphere``.
 
     Returns
     -------
@@ -239,29 +284,43 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str 
     n = check_normals(normals)
     b = as_rgb_pixels(radiance, n.shape[0])
     rho = broadcast_albedo(albedo, n.shape[0])
+    up = None
+    if ground is not None:
+        up = ground_axis(ground)
+        axis = up
+        hemisphere = {"axis": [float(v) for v in up]}
+        if ambient == "auto":
+            ambient = False
     if isinstance(sources, (int, np.integer)):
         dirs = model_sources(int(sources), hemisphere, axis)
         if int(sources) in HOUGEN_AHUJA_SIZES:
             hemisphere = {"axis": [float(v) for v in normalize(np.asarray(axis, dtype=np.float64))]}
     else:
         dirs = normalize(np.asarray(sources, dtype=np.float64).reshape(-1, 3))
+        if up is not None and np.any(dirs @ up < -1e-9):
+            raise ValueError("with a ground plane the sources must lie on or above it (d . ground >= 0)")
     if n.shape[0] == 0:
         raise InputError("no pixels to fit")
     # the model is linear in the irradiance; fit irradiance = pi I / rho (per-pixel albedo allowed)
     target = np.pi * b / rho
     M = lambert_matrix(n, dirs)
+    om = cell_solid_angles(dirs, hemisphere) if energy > 0 else None
+    if up is not None:  # the ground's power: one more non-negative unknown, a cell of 2 pi sr
+        M = np.concatenate([M, ground_column(n, up)[:, None]], axis=1)
+        om = None if om is None else np.append(om, 2.0 * np.pi)
     ambient = resolve_ambient(ambient, nonnegative, hemisphere)
-    sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond,
-                        what=f"{dirs.shape[0]} sources{' + ambient' if ambient else ''}",
+    what = f"{dirs.shape[0]} sources{' + ground' if up is not None else ''}{' + ambient' if ambient else ''}"
+    sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond, what=what,
                         smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 else None,
-                        ambient_nonnegative=ambient == "nonnegative", energy=energy,
-                        cell_solid_angles=cell_solid_angles(dirs, hemisphere) if energy > 0 else None)
+                        ambient_nonnegative=ambient == "nonnegative", energy=energy, cell_solid_angles=om)
+    k = dirs.shape[0]
     rendered = sol.predicted * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
     ref = float(np.sqrt(np.mean(b ** 2)))
-    return SourceFit(directions=dirs, intensities=sol.x, ambient=sol.ambient, rendered=rendered, rms=rms,
+    return SourceFit(directions=dirs, intensities=sol.x[:k], ambient=sol.ambient, rendered=rendered, rms=rms,
                      relative_rms=rms / ref if ref > 0 else np.inf, condition=sol.condition,
-                     method="HougenAhuja1993", hemisphere=hemisphere, rank=sol.rank, observed=sol.observed)
+                     method="HougenAhuja1993", hemisphere=hemisphere, rank=sol.rank, observed=sol.observed[:k],
+                     ground=None if up is None else sol.x[k].copy())
 
 
 #: The colour-hdri style name of :func:`hougen_ahuja`.

@@ -24,8 +24,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ffls.errors import InputError
-from ffls.probes.hougen_ahuja import SourceFit, check_normals, hougen_ahuja, resolve_ambient
-from ffls.conventions import normalize
+from ffls.probes.hougen_ahuja import SourceFit, check_normals, ground_axis, hougen_ahuja, resolve_ambient
+from ffls.conventions import normalize, rotation_about_axis
 from ffls.probes.linear import as_rgb_pixels, broadcast_albedo
 from ffls.probes.sato_sato_ikeuchi import (dome_nodes, occluder_visibility, sato_sato_ikeuchi, shadow_in_view,
                                            shadow_kernel)
@@ -240,8 +240,7 @@ def select_hougen_ahuja(normals, radiance, albedo=1.0, candidates=(5, 9, 17, 42,
         if train.size == n.shape[0]:
             full[c] = fit
         rho = np.broadcast_to(np.asarray(albedo, dtype=np.float64), (3,))
-        E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
-        return E * rho / np.pi
+        return fit.irradiance(n[test]) * rho / np.pi
 
     def k_of(c):  # the ring sets (5, 9, 17) cover a hemisphere: 'auto' keeps their ambient
         dom = "upper" if int(c) in HOUGEN_AHUJA_SIZES else kwargs.get("hemisphere", "full")
@@ -460,7 +459,7 @@ def _scorer(criterion, fit_predict, data, blocks, folds, seed, extra_params):
 def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3, max_sources: int = 500,
                           max_level: int = 3, criterion: str = "cv", folds: int = 5, tolerance: float = 0.05,
                           seed: int = 0, power_share: float = 0.5, patience: int = 2, orientations: int = 1,
-                          orientation_seed: int = 0, **kwargs) -> Selection:
+                          orientation_seed: int = 0, ground=None, **kwargs) -> Selection:
     """Hougen-Ahuja over an adaptive geodesic source set (:func:`refine_sources`).
 
     Parameters
@@ -481,9 +480,15 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
         lie, not on the data (``docs/probes.md``, *The orientation of the source set*); the average
         removes that part of the error for spread light (night), but turned sets can move lamps a few
         degrees above the horizon below it (studio), and it costs ``K`` estimates: an option, not
-        the default.
+        the default. With ``ground`` the rotations are about the plane's normal (uniformly random
+        azimuths), which keeps the sources above the plane.
     orientation_seed : int
         Seed of the random rotations.
+    ground : (3,) array_like, optional
+        The normal (up) of a ground plane: the hierarchy is a dome over it (a vertex on the normal)
+        and the light from below it one uniform term (:func:`~ffls.probes.hougen_ahuja.hougen_ahuja`'s
+        ``ground``). The dome is fixed by the plane up to an azimuth, and a lamp just above the
+        horizon cannot move below it (``docs/probes.md``, *A ground plane*).
     **kwargs
         Passed to :func:`~ffls.probes.hougen_ahuja.hougen_ahuja` (``nonnegative``, ``ambient``...).
 
@@ -505,17 +510,24 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
     if k_or > 1:
         return _oriented_ensemble(normals, radiance, albedo, n, k_or, orientation_seed, dict(
             base_frequency=base_frequency, max_sources=max_sources, max_level=max_level, criterion=criterion,
-            folds=folds, tolerance=tolerance, seed=seed, power_share=power_share, patience=patience, **kwargs))
+            folds=folds, tolerance=tolerance, seed=seed, power_share=power_share, patience=patience,
+            ground=ground, **kwargs))
+    dom = "full"
+    if ground is not None:
+        kwargs["ground"] = ground_axis(ground)
+        dom = {"axis": [float(v) for v in kwargs["ground"]]}
+        if kwargs.get("ambient", True) == "auto":
+            kwargs["ambient"] = False  # the dome and the ground hold any uniform light
 
     def fp(d, train, test):
         fit = hougen_ahuja(n[train], b[train], rho[train], d, **kwargs)
-        E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
-        return E * rho[test] / np.pi
+        return fit.irradiance(n[test]) * rho[test] / np.pi
 
     extra = 1 if resolve_ambient(kwargs.get("ambient", True), kwargs.get("nonnegative", False), "full") else 0
+    extra += 0 if ground is None else 1
     score = _scorer(criterion, fp, b, normal_blocks(n), folds, seed, extra)
-    base_frequency = _base_frequency(base_frequency, n.shape[0], "full", extra)
-    return refine_sources(lambda d: hougen_ahuja(n, b, rho, d, **kwargs), score, base_frequency, "full",
+    base_frequency = _base_frequency(base_frequency, n.shape[0], dom, extra)
+    return refine_sources(lambda d: hougen_ahuja(n, b, rho, d, **kwargs), score, base_frequency, dom,
                           max_sources, max_level, power_share, patience, criterion, tolerance)
 
 
@@ -529,7 +541,13 @@ def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: 
 
     from ffls.probes.hougen_ahuja import average_fits
 
-    rots = Rotation.random(k, random_state=int(seed)).as_matrix()
+    up = kwargs.get("ground")
+    if up is None:
+        rots = Rotation.random(k, random_state=int(seed)).as_matrix()
+    else:  # about the plane's normal: the dome stays over the plane
+        up = ground_axis(up)
+        az = np.random.default_rng(int(seed)).uniform(0.0, 360.0, k)
+        rots = np.stack([rotation_about_axis(up, a) for a in az])
     rots[0] = np.eye(3)
     sels, fits = [], []
     for i, R in enumerate(rots):
@@ -709,7 +727,7 @@ def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0
             for f in range(k):
                 test, train = fold == f, fold != f
                 fit = hougen_ahuja(n[train], b[train], rho[train], d, **{penalty: lam}, **kwargs)
-                E = np.maximum(n[test] @ fit.directions.T, 0.0) @ fit.intensities + fit.ambient
+                E = fit.irradiance(n[test])
                 sse[i, f] = float(np.sum((E * rho[test] / np.pi - b[test]) ** 2))
         except InputError:
             continue  # this weight cannot be fitted on a fold: not a choice

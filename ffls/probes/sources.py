@@ -343,7 +343,8 @@ def latlong_solid_angles(height: int) -> np.ndarray:
     return np.asarray(get_map("latlong").solid_angles(h), dtype=np.float64).reshape(h, 2 * h)
 
 
-def sources_to_latlong(directions, intensities, height: int = 64, hemisphere="full", ambient=None) -> np.ndarray:
+def sources_to_latlong(directions, intensities, height: int = 64, hemisphere="full", ambient=None,
+                       outside=None) -> np.ndarray:
     """Spread source intensities over their angular Voronoi cells on a lat-long map.
 
     Parameters
@@ -359,6 +360,10 @@ def sources_to_latlong(directions, intensities, height: int = 64, hemisphere="fu
         Texels outside the domain get no source light (0).
     ambient : float or (3,) array_like, optional
         Ambient irradiance ``A``: uniform radiance ``A / pi`` added to every texel of the sphere.
+    outside : float or (3,) array_like, optional
+        Power spread as uniform radiance over the texels outside ``hemisphere`` (the light from
+        below a ground plane, :func:`ffls.probes.hougen_ahuja.hougen_ahuja`'s ``ground``), exact
+        in energy like the sources' cells.
 
     Returns
     -------
@@ -391,6 +396,8 @@ def sources_to_latlong(directions, intensities, height: int = 64, hemisphere="fu
         cand = np.flatnonzero(inside) if inside.any() else np.arange(texels.shape[0])
         t = cand[np.argmax(texels[cand] @ normalize(d[k]))]
         out[t] += e[k] / sa[t]
+    if outside is not None and not inside.all():
+        out[~inside] += np.broadcast_to(np.asarray(outside, dtype=np.float64), (3,)) / sa[~inside].sum()
     if ambient is not None:
         out += np.broadcast_to(np.asarray(ambient, dtype=np.float64), (3,)) / np.pi
     return out.reshape(h, 2 * h, 3)
