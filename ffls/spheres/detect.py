@@ -909,6 +909,118 @@ def _radius_from_edges(pts, grads, cpx, r_max, r_min: float = 3.0):
     return float(np.nonzero(frac >= 0.6 * frac.max())[0].max())
 
 
+# ----------------------------------------------------------------------------- sub-pixel outline
+#: Offsets (pixels) along each radial profile of :func:`step_edges`: 3 px either side of the edge
+#: point, every quarter pixel.
+PROFILE_T = np.arange(-3.0, 3.0 + 1e-9, 0.25)
+#: Candidate edge positions (pixels from the edge point) and blur scales (the step's Gaussian
+#: sigma, pixels: an aliased pixel step is about 0.3, a defocused lens several tenths more) searched
+#: by :func:`step_edges`.
+PROFILE_EDGES = np.arange(-1.5, 1.5 + 1e-9, 0.05)
+PROFILE_BLURS = np.array([0.3, 0.45, 0.65, 0.9, 1.25, 1.7])
+
+
+def _step_projectors(t, edges, blurs) -> np.ndarray:
+    """(len(edges), len(blurs), m, m) residual projectors ``I - X X^+`` of the blurred-step model
+    (:func:`step_edges`) at offsets ``t`` (m,)."""
+    from scipy.special import ndtr
+
+    m = t.size
+    out = np.empty((edges.size, blurs.size, m, m))
+    for i, e in enumerate(edges):
+        for j, s in enumerate(blurs):
+            phi = ndtr((t - e) / s)
+            X = np.stack([1 - phi, (t - e) * (1 - phi), phi, (t - e) * phi], axis=1)
+            out[i, j] = np.eye(m) - X @ np.linalg.pinv(X)
+    return out
+
+
+_PROJECTORS: list = []
+
+
+def _profile_projectors() -> np.ndarray:
+    """:func:`_step_projectors` of :data:`PROFILE_T`, :data:`PROFILE_EDGES` and :data:`PROFILE_BLURS`, made once."""
+    if not _PROJECTORS:
+        _PROJECTORS.append(_step_projectors(PROFILE_T, PROFILE_EDGES, PROFILE_BLURS))
+    return _PROJECTORS[0]
+
+
+def step_edges(L, points, dirs, noise: float = 0.0):
+    """Sub-pixel edge of each radial profile: a blurred step between two sloped sides, fitted in linear radiance.
+
+    Where the sphere meets its background, the image is a step blurred by the lens and the pixels:
+    an anti-aliased pixel straddling the outline holds the *linear* mix of both sides, so the edge
+    is where the linear radiance crosses half-way between them, whatever the blur. The maximum of
+    the gradient of a log (or otherwise tone-mapped) image is not there: a log curve moves it
+    toward the dark side, and a limb that shades off toward its edge (a matte sphere whose light
+    grazes it, in one photo or in the max image) moves it inward, by 0.1-0.3 px on ``ffls synth``
+    renders. Along each profile ``v(t) = L(p + t u)`` (``t`` in :data:`PROFILE_T`), the model
+
+        ``v(t) = (a0 + a1 (t - e)) (1 - Phi((t - e) / s)) + (b0 + b1 (t - e)) Phi((t - e) / s)``
+
+    (``Phi`` the standard normal CDF: a Gaussian-blurred step at ``e`` between two sides of their
+    own level and slope) is fitted by least squares: linear in ``a0, a1, b0, b1``, searched over
+    the edge ``e`` (:data:`PROFILE_EDGES`, refined by a parabola) and the blur ``s``
+    (:data:`PROFILE_BLURS`).
+
+    Parameters
+    ----------
+    L : (H, W) float
+        Linear luminance.
+    points : (n, 2) float
+        Approximate edge points (x, y), pixels.
+    dirs : (n, 2) float
+        Unit directions across the edge (e.g. radial, outward).
+    noise : float
+        Pixel noise of ``L`` (standard deviation): a profile whose step ``|b0 - a0|`` is below 4
+        times it, or below 4 times the fit's RMS residual, is not an edge.
+
+    Returns
+    -------
+    points : (n, 2) float64
+        The edge points moved along ``dirs`` to the fitted step.
+    ok : (n,) bool
+        A step was found within the search range, with the contrast above.
+    """
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    U = np.asarray(dirs, dtype=np.float64).reshape(-1, 2)
+    if len(P) == 0:
+        return P.copy(), np.zeros(0, dtype=bool)
+    t = PROFILE_T
+    Lf = np.asarray(L, dtype=np.float64)
+    q = P[:, None, :] + t[None, :, None] * U[:, None, :]
+    V = _bilinear(Lf, q.reshape(-1, 2)).reshape(len(P), t.size)
+    proj = _profile_projectors()
+    m = t.size
+    flat = proj.reshape(-1, m)
+    sse = np.empty((len(P), PROFILE_EDGES.size, PROFILE_BLURS.size))
+    for a in range(0, len(P), 256):  # v^T M v (M a symmetric projector), in chunks of profiles
+        W = (V[a:a + 256] @ flat.T).reshape(-1, PROFILE_EDGES.size, PROFILE_BLURS.size, m)
+        sse[a:a + 256] = np.einsum("nijk,nk->nij", W, V[a:a + 256])
+    best_s = np.argmin(sse.min(axis=1), axis=1)
+    curve = sse[np.arange(len(P)), :, best_s]  # (n, edges) at the best blur
+    i = np.argmin(curve, axis=1)
+    inner = (i > 0) & (i < PROFILE_EDGES.size - 1)
+    ic = np.clip(i, 1, PROFILE_EDGES.size - 2)
+    ym, y0, yp = (curve[np.arange(len(P)), ic + d] for d in (-1, 0, 1))
+    den = ym - 2 * y0 + yp
+    off = np.where(den > 0, 0.5 * (ym - yp) / np.where(den > 0, den, 1.0), 0.0)
+    step = PROFILE_EDGES[1] - PROFILE_EDGES[0]
+    e = PROFILE_EDGES[ic] + np.clip(off, -1.0, 1.0) * step
+    # the sides' levels at the edge, for the contrast test
+    from scipy.special import ndtr
+
+    s = PROFILE_BLURS[best_s]
+    phi = ndtr((t[None, :] - e[:, None]) / s[:, None])
+    te = t[None, :] - e[:, None]
+    X = np.stack([1 - phi, te * (1 - phi), phi, te * phi], axis=2)  # (n, m, 4)
+    coef = np.stack([np.linalg.lstsq(X[k], V[k], rcond=None)[0] for k in range(len(P))])
+    rms = np.sqrt(np.einsum("nm,nm->n", *(2 * [V - np.einsum("nmk,nk->nm", X, coef)])) / t.size)
+    contrast = np.abs(coef[:, 2] - coef[:, 0])
+    ok = inner & (contrast > 4.0 * np.maximum(rms, float(noise)))
+    return P + e[:, None] * U, ok
+
+
 # ----------------------------------------------------------------------------- fitting
 def _start_circle(pts, center, r_expected, tol=1.5):
     """Best-supported circle (centre (2,), radius) near a candidate, radius within 40 %, or None.
@@ -1436,6 +1548,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
+    noise = _pixel_noise(L)  # every outline's points moved to the step of the linear max image
+    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, noise, max_residual_px)
+            for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -1976,6 +2091,43 @@ def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_
     except ValueError:
         return ft
     new.score = ft.score
+    return new
+
+
+def _pixel_noise(L) -> float:
+    """Pixel noise (standard deviation) of an image: the MAD of its difference from its 3x3 median."""
+    L32 = np.ascontiguousarray(np.nan_to_num(np.asarray(L, dtype=np.float64)), dtype=np.float32)
+    return 1.4826 * float(np.median(np.abs(L32 - cv2.medianBlur(L32, 3))))
+
+
+def _refine_on_profiles(ft, L, cam: _Camera, noise: float, max_residual_px: float, min_points: int = 8):
+    """Refit a found sphere on its outline points moved to the step of the linear max image (:func:`step_edges`).
+
+    Each inlier outline point is moved along the ray from the fitted centre to where a blurred
+    step between the sphere and its background, each side with its own level and slope, best fits
+    the luminance profile ``L`` of the max image; points where the profile shows no step (a white
+    sphere's top on a white ground, seen only in the photos' edges) keep their place. The refit
+    replaces the fit when it is round (RMS within ``max_residual_px``) and moves the outline by
+    less than a pixel (centre and radius); otherwise the fit is returned unchanged.
+    """
+    P = ft.edge_px
+    if P is None or len(P) < min_points:
+        return ft
+    c = np.asarray(ft.center_px, dtype=np.float64)
+    v = P - c
+    u = v / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)[:, None]
+    Q, ok = step_edges(L, P, u, noise)
+    if ok.sum() < min_points:
+        return ft
+    Q = np.where(ok[:, None], Q, P)
+    try:
+        new = _fit_outline(Q, cam, c, ft.radius_px, ft.source, n_edge=ft.n_edge_points)
+    except ValueError:
+        return ft
+    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c)) > 1.0
+            or abs(new.radius_px - ft.radius_px) > 1.0):
+        return ft
+    new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
     return new
 
 
