@@ -918,6 +918,10 @@ PROFILE_T = np.arange(-3.0, 3.0 + 1e-9, 0.25)
 #: by :func:`step_edges`.
 PROFILE_EDGES = np.arange(-1.5, 1.5 + 1e-9, 0.05)
 PROFILE_BLURS = np.array([0.3, 0.45, 0.65, 0.9, 1.25, 1.7])
+#: Least radiance ratio across a step that :func:`step_edges` takes for an edge: the ratio that the
+#: high threshold of :func:`edge_points` stands for (a white sphere's limb against a white ground,
+#: 1.1 in the max image, is left to the photos' edges).
+MIN_STEP_RATIO = 1.2
 
 
 def _step_projectors(t, edges, blurs) -> np.ndarray:
@@ -973,7 +977,8 @@ def step_edges(L, points, dirs, noise: float = 0.0):
         Unit directions across the edge (e.g. radial, outward).
     noise : float
         Pixel noise of ``L`` (standard deviation): a profile whose step ``|b0 - a0|`` is below 4
-        times it, or below 4 times the fit's RMS residual, is not an edge.
+        times it, or below 4 times the fit's RMS residual, is not an edge; nor is one whose sides
+        differ by a ratio below :data:`MIN_STEP_RATIO`.
 
     Returns
     -------
@@ -1016,8 +1021,8 @@ def step_edges(L, points, dirs, noise: float = 0.0):
     X = np.stack([1 - phi, te * (1 - phi), phi, te * phi], axis=2)  # (n, m, 4)
     coef = np.stack([np.linalg.lstsq(X[k], V[k], rcond=None)[0] for k in range(len(P))])
     rms = np.sqrt(np.einsum("nm,nm->n", *(2 * [V - np.einsum("nmk,nk->nm", X, coef)])) / t.size)
-    contrast = np.abs(coef[:, 2] - coef[:, 0])
-    ok = inner & (contrast > 4.0 * np.maximum(rms, float(noise)))
+    lo, hi = np.minimum(coef[:, 0], coef[:, 2]), np.maximum(coef[:, 0], coef[:, 2])
+    ok = inner & (hi - lo > 4.0 * np.maximum(rms, float(noise))) & (hi >= MIN_STEP_RATIO * np.maximum(lo, 0.0))
     return P + e[:, None] * U, ok
 
 
