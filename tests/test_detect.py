@@ -363,3 +363,25 @@ def test_step_edges_leave_a_faint_step_alone():
     img = np.where(np.arange(40)[None, :] < 20.3, 1.0, 1.5) * np.ones((40, 1))
     moved, ok = detect.step_edges(img, pts, np.array([[1.0, 0.0]]))
     assert ok[0] and abs(moved[0, 0] - 20.5) < 0.05  # the pixel step between columns 20 and 21
+
+
+@pytest.mark.parametrize("inside, outside", [(1.0, 0.2), (0.2, 1.0)])
+def test_step_edges_under_defocus_blur(inside, outside):
+    """A disc blurred by a defocused lens (Gaussian sigma 2 px, noise 1 %): its log edge lies 0.8-1.4 px
+    toward the dark side; ``step_edges`` (its soft scale, and the curvature term with ``radius``)
+    puts the fitted radius within 0.2 px."""
+    import cv2
+
+    rng = np.random.default_rng(4)
+    for r in (12.3, 19.6):
+        c = np.array([40.2, 39.7])
+        yy, xx = (np.mgrid[0:640, 0:640] + 0.5) / 8 - 0.5
+        img = np.where(np.hypot(xx - c[0], yy - c[1]) < r, inside, outside).reshape(80, 8, 80, 8).mean(axis=(1, 3))
+        img = cv2.GaussianBlur(img, (0, 0), 2.0) + rng.normal(0, 0.01, (80, 80))
+        pts, _ = detect.edge_points(img)
+        pts = pts[np.abs(np.hypot(*(pts - c).T) - r) < 4]
+        _, rad_log, _, _ = detect.fit_circle(pts, c, r)
+        u = (pts - c) / np.hypot(*(pts - c).T)[:, None]
+        moved, ok = detect.step_edges(img, pts, u, 0.01, radius=r)
+        _, rad, _, _ = detect.fit_circle(moved[ok], c, r)
+        assert abs(rad_log - r) > 0.5 and abs(rad - r) < 0.2, (rad_log - r, rad - r)

@@ -910,62 +910,110 @@ def _radius_from_edges(pts, grads, cpx, r_max, r_min: float = 3.0):
 
 
 # ----------------------------------------------------------------------------- sub-pixel outline
-#: Offsets (pixels) along each radial profile of :func:`step_edges`: 3 px either side of the edge
-#: point, every quarter pixel.
-PROFILE_T = np.arange(-3.0, 3.0 + 1e-9, 0.25)
-#: Candidate edge positions (pixels from the edge point) and blur scales (the step's Gaussian
-#: sigma, pixels: an aliased pixel step is about 0.3, a defocused lens several tenths more) searched
-#: by :func:`step_edges`.
-PROFILE_EDGES = np.arange(-1.5, 1.5 + 1e-9, 0.05)
-PROFILE_BLURS = np.array([0.3, 0.45, 0.65, 0.9, 1.25, 1.7])
+@dataclasses.dataclass(frozen=True)
+class _StepSearch:
+    """One scale of :func:`step_edges`: the offsets ``t`` (pixels) along each profile, the candidate
+    edge positions (pixels from the point) and the blurs (the step's Gaussian sigma, pixels)."""
+
+    t: np.ndarray
+    edges: np.ndarray
+    blurs: np.ndarray
+
+
+#: The scales of :func:`step_edges`. Sharp: 3 px either side every quarter pixel, the edge within
+#: 1.5 px, blur sigma 0.3 (an aliased pixel step) to 1.7. Soft, for the profiles the sharp scale
+#: finds blurred by 1.25 px or more (a defocused lens): 6 px either side every half pixel, the edge
+#: within 3 px, sigma 1.25-4: a step blurred that much does not fit in the sharp window, and its
+#: log edge lies 1-2 px toward the dark side.
+STEP_SEARCHES = (
+    _StepSearch(np.arange(-3.0, 3.0 + 1e-9, 0.25), np.arange(-1.5, 1.5 + 1e-9, 0.05),
+                np.array([0.3, 0.45, 0.65, 0.9, 1.25, 1.7])),
+    _StepSearch(np.arange(-6.0, 6.0 + 1e-9, 0.5), np.arange(-3.0, 3.0 + 1e-9, 0.1),
+                np.array([1.25, 1.7, 2.3, 3.0, 4.0])),
+)
 #: Least radiance ratio across a step that :func:`step_edges` takes for an edge: the ratio that the
 #: high threshold of :func:`edge_points` stands for (a white sphere's limb against a white ground,
 #: 1.1 in the max image, is left to the photos' edges).
 MIN_STEP_RATIO = 1.2
 
 
-def _step_projectors(t, edges, blurs) -> np.ndarray:
-    """(len(edges), len(blurs), m, m) residual projectors ``I - X X^+`` of the blurred-step model
-    (:func:`step_edges`) at offsets ``t`` (m,)."""
+def _step_design(t, e, s) -> np.ndarray:
+    """(..., m, 4) design of the blurred-step model of :func:`step_edges` at offsets ``t`` (..., m),
+    edges ``e`` and blurs ``s`` (broadcast): columns ``1 - Phi``, ``(t - e)(1 - Phi)``, ``Phi``,
+    ``(t - e) Phi`` with ``Phi = Phi((t - e) / s)``."""
     from scipy.special import ndtr
 
-    m = t.size
-    out = np.empty((edges.size, blurs.size, m, m))
-    for i, e in enumerate(edges):
-        for j, s in enumerate(blurs):
-            phi = ndtr((t - e) / s)
-            X = np.stack([1 - phi, (t - e) * (1 - phi), phi, (t - e) * phi], axis=1)
-            out[i, j] = np.eye(m) - X @ np.linalg.pinv(X)
-    return out
+    te = np.asarray(t) - e
+    phi = ndtr(te / s)
+    return np.stack([1 - phi, te * (1 - phi), phi, te * phi], axis=-1)
 
 
-_PROJECTORS: list = []
+_PROJECTORS: dict = {}
 
 
-def _profile_projectors() -> np.ndarray:
-    """:func:`_step_projectors` of :data:`PROFILE_T`, :data:`PROFILE_EDGES` and :data:`PROFILE_BLURS`, made once."""
-    if not _PROJECTORS:
-        _PROJECTORS.append(_step_projectors(PROFILE_T, PROFILE_EDGES, PROFILE_BLURS))
-    return _PROJECTORS[0]
+def _step_projectors(k: int) -> np.ndarray:
+    """(edges, blurs, m, m) residual projectors ``I - X X^+`` of :data:`STEP_SEARCHES` ``[k]``, made once."""
+    if k not in _PROJECTORS:
+        sc = STEP_SEARCHES[k]
+        X = _step_design(sc.t, sc.edges[:, None, None], sc.blurs[None, :, None])  # (edges, blurs, m, 4)
+        _PROJECTORS[k] = np.eye(sc.t.size) - X @ np.linalg.pinv(X)
+    return _PROJECTORS[k]
 
 
-def step_edges(L, points, dirs, noise: float = 0.0):
+def _fit_steps(Lf, P, U, k: int, noise: float, radius=None):
+    """:func:`step_edges` at one scale ``k`` of :data:`STEP_SEARCHES`: the moved points (n, 2), whether
+    each is an edge (n,) and its fitted blur (n,)."""
+    sc = STEP_SEARCHES[k]
+    t, n, m = sc.t, len(P), sc.t.size
+    V = _bilinear(Lf, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(n, m)
+    flat = _step_projectors(k).reshape(-1, m)
+    sse = np.empty((n, sc.edges.size, sc.blurs.size))
+    for a in range(0, n, 256):  # v^T M v (M a symmetric projector), in chunks of profiles
+        W = (V[a:a + 256] @ flat.T).reshape(-1, sc.edges.size, sc.blurs.size, m)
+        sse[a:a + 256] = np.einsum("nijk,nk->nij", W, V[a:a + 256])
+    best_s = np.argmin(sse.min(axis=1), axis=1)
+    rows = np.arange(n)
+    curve = sse[rows, :, best_s]  # (n, edges) at the best blur
+    i = np.argmin(curve, axis=1)
+    inner = (i > 0) & (i < sc.edges.size - 1)
+    ic = np.clip(i, 1, sc.edges.size - 2)
+    ym, y0, yp = (curve[rows, ic + d] for d in (-1, 0, 1))
+    den = ym - 2 * y0 + yp
+    off = np.where(den > 0, 0.5 * (ym - yp) / np.where(den > 0, den, 1.0), 0.0)
+    e = sc.edges[ic] + np.clip(off, -1.0, 1.0) * (sc.edges[1] - sc.edges[0])
+    s = sc.blurs[best_s]
+    X = _step_design(t[None, :], e[:, None], s[:, None])  # (n, m, 4): the sides' levels at the edge
+    coef = (np.linalg.pinv(X) @ V[:, :, None])[:, :, 0]
+    r = V - np.einsum("nmk,nk->nm", X, coef)
+    rms = np.sqrt(np.einsum("nm,nm->n", r, r) / m)
+    lo, hi = np.minimum(coef[:, 0], coef[:, 2]), np.maximum(coef[:, 0], coef[:, 2])
+    ok = inner & (hi - lo > 4.0 * np.maximum(rms, float(noise))) & (hi >= MIN_STEP_RATIO * np.maximum(lo, 0.0))
+    if radius is not None:  # the half-way level of a blurred disc lies s^2 / 2r inside its edge
+        e = e + s ** 2 / (2.0 * np.asarray(radius, dtype=np.float64))
+    return P + e[:, None] * U, ok, s
+
+
+def step_edges(L, points, dirs, noise: float = 0.0, radius=None):
     """Sub-pixel edge of each radial profile: a blurred step between two sloped sides, fitted in linear radiance.
 
     Where the sphere meets its background, the image is a step blurred by the lens and the pixels:
     an anti-aliased pixel straddling the outline holds the *linear* mix of both sides, so the edge
     is where the linear radiance crosses half-way between them, whatever the blur. The maximum of
     the gradient of a log (or otherwise tone-mapped) image is not there: a log curve moves it
-    toward the dark side, and a limb that shades off toward its edge (a matte sphere whose light
-    grazes it, in one photo or in the max image) moves it inward, by 0.1-0.3 px on ``ffls synth``
-    renders. Along each profile ``v(t) = L(p + t u)`` (``t`` in :data:`PROFILE_T`), the model
+    toward the dark side (by 1-2 px under a defocus blur of 2-3 px), and a limb that shades off
+    toward its edge (a matte sphere whose light grazes it, in one photo or in the max image) moves
+    it inward, by 0.1-0.3 px on ``ffls synth`` renders. Along each profile ``v(t) = L(p + t u)``,
+    the model
 
         ``v(t) = (a0 + a1 (t - e)) (1 - Phi((t - e) / s)) + (b0 + b1 (t - e)) Phi((t - e) / s)``
 
     (``Phi`` the standard normal CDF: a Gaussian-blurred step at ``e`` between two sides of their
     own level and slope) is fitted by least squares: linear in ``a0, a1, b0, b1``, searched over
-    the edge ``e`` (:data:`PROFILE_EDGES`, refined by a parabola) and the blur ``s``
-    (:data:`PROFILE_BLURS`).
+    the edge ``e`` (refined by a parabola) and the blur ``s``, at the sharp scale of
+    :data:`STEP_SEARCHES`, and again at the soft scale where the sharp one finds a blur of 1.25 px
+    or more (or no step). Where the edge is a circle of known ``radius`` (``dirs`` pointing out of
+    it), the half-way crossing is moved out by ``s^2 / (2 radius)``: a Gaussian blur of a disc
+    puts its half-way level that far inside the edge (to first order in the curvature).
 
     Parameters
     ----------
@@ -979,6 +1027,8 @@ def step_edges(L, points, dirs, noise: float = 0.0):
         Pixel noise of ``L`` (standard deviation): a profile whose step ``|b0 - a0|`` is below 4
         times it, or below 4 times the fit's RMS residual, is not an edge; nor is one whose sides
         differ by a ratio below :data:`MIN_STEP_RATIO`.
+    radius : float or (n,) float, optional
+        Radius of curvature of the edge, pixels (``dirs`` pointing away from its centre).
 
     Returns
     -------
@@ -991,39 +1041,15 @@ def step_edges(L, points, dirs, noise: float = 0.0):
     U = np.asarray(dirs, dtype=np.float64).reshape(-1, 2)
     if len(P) == 0:
         return P.copy(), np.zeros(0, dtype=bool)
-    t = PROFILE_T
     Lf = np.asarray(L, dtype=np.float64)
-    q = P[:, None, :] + t[None, :, None] * U[:, None, :]
-    V = _bilinear(Lf, q.reshape(-1, 2)).reshape(len(P), t.size)
-    proj = _profile_projectors()
-    m = t.size
-    flat = proj.reshape(-1, m)
-    sse = np.empty((len(P), PROFILE_EDGES.size, PROFILE_BLURS.size))
-    for a in range(0, len(P), 256):  # v^T M v (M a symmetric projector), in chunks of profiles
-        W = (V[a:a + 256] @ flat.T).reshape(-1, PROFILE_EDGES.size, PROFILE_BLURS.size, m)
-        sse[a:a + 256] = np.einsum("nijk,nk->nij", W, V[a:a + 256])
-    best_s = np.argmin(sse.min(axis=1), axis=1)
-    curve = sse[np.arange(len(P)), :, best_s]  # (n, edges) at the best blur
-    i = np.argmin(curve, axis=1)
-    inner = (i > 0) & (i < PROFILE_EDGES.size - 1)
-    ic = np.clip(i, 1, PROFILE_EDGES.size - 2)
-    ym, y0, yp = (curve[np.arange(len(P)), ic + d] for d in (-1, 0, 1))
-    den = ym - 2 * y0 + yp
-    off = np.where(den > 0, 0.5 * (ym - yp) / np.where(den > 0, den, 1.0), 0.0)
-    step = PROFILE_EDGES[1] - PROFILE_EDGES[0]
-    e = PROFILE_EDGES[ic] + np.clip(off, -1.0, 1.0) * step
-    # the sides' levels at the edge, for the contrast test
-    from scipy.special import ndtr
-
-    s = PROFILE_BLURS[best_s]
-    phi = ndtr((t[None, :] - e[:, None]) / s[:, None])
-    te = t[None, :] - e[:, None]
-    X = np.stack([1 - phi, te * (1 - phi), phi, te * phi], axis=2)  # (n, m, 4)
-    coef = np.stack([np.linalg.lstsq(X[k], V[k], rcond=None)[0] for k in range(len(P))])
-    rms = np.sqrt(np.einsum("nm,nm->n", *(2 * [V - np.einsum("nmk,nk->nm", X, coef)])) / t.size)
-    lo, hi = np.minimum(coef[:, 0], coef[:, 2]), np.maximum(coef[:, 0], coef[:, 2])
-    ok = inner & (hi - lo > 4.0 * np.maximum(rms, float(noise))) & (hi >= MIN_STEP_RATIO * np.maximum(lo, 0.0))
-    return P + e[:, None] * U, ok
+    rad = None if radius is None else np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(P),))
+    Q, ok, s = _fit_steps(Lf, P, U, 0, noise, rad)
+    soft = ~ok | (s >= STEP_SEARCHES[1].blurs[0])
+    if soft.any():
+        Qs, oks, _ = _fit_steps(Lf, P[soft], U[soft], 1, noise, None if rad is None else rad[soft])
+        Q[soft] = np.where(oks[:, None], Qs, Q[soft])
+        ok[soft] = oks | ok[soft]
+    return Q, ok
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -2128,7 +2154,7 @@ def _refine_on_profiles(ft, images, cam: _Camera, max_residual_px: float, min_po
     for img, noise in images:
         if ok.all():
             break
-        Qi, oki = step_edges(img, P[~ok], u[~ok], noise)
+        Qi, oki = step_edges(img, P[~ok], u[~ok], noise, radius=ft.radius_px)
         Q[~ok] = np.where(oki[:, None], Qi, P[~ok])
         ok[~ok] = oki
     if ok.sum() < min_points:
