@@ -962,7 +962,7 @@ def _step_projectors(k: int) -> np.ndarray:
 
 def _fit_steps(Lf, P, U, k: int, noise: float, radius=None):
     """:func:`step_edges` at one scale ``k`` of :data:`STEP_SEARCHES`: the moved points (n, 2), whether
-    each is an edge (n,) and its fitted blur (n,)."""
+    each is an edge (n,), its fitted blur (n,) and whether its edge lies inside the search range (n,)."""
     sc = STEP_SEARCHES[k]
     t, n, m = sc.t, len(P), sc.t.size
     V = _bilinear(Lf, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(n, m)
@@ -990,7 +990,7 @@ def _fit_steps(Lf, P, U, k: int, noise: float, radius=None):
     ok = inner & (hi - lo > 4.0 * np.maximum(rms, float(noise))) & (hi >= MIN_STEP_RATIO * np.maximum(lo, 0.0))
     if radius is not None:  # the half-way level of a blurred disc lies s^2 / 2r inside its edge
         e = e + s ** 2 / (2.0 * np.asarray(radius, dtype=np.float64))
-    return P + e[:, None] * U, ok, s
+    return P + e[:, None] * U, ok, s, inner
 
 
 def step_edges(L, points, dirs, noise: float = 0.0, radius=None):
@@ -1011,7 +1011,7 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None):
     own level and slope) is fitted by least squares: linear in ``a0, a1, b0, b1``, searched over
     the edge ``e`` (refined by a parabola) and the blur ``s``, at the sharp scale of
     :data:`STEP_SEARCHES`, and again at the soft scale where the sharp one finds a blur of 1.25 px
-    or more (or no step). Where the edge is a circle of known ``radius`` (``dirs`` pointing out of
+    or more, or its best edge at the end of its range (a faint step stays faint at any scale). Where the edge is a circle of known ``radius`` (``dirs`` pointing out of
     it), the half-way crossing is moved out by ``s^2 / (2 radius)``: a Gaussian blur of a disc
     puts its half-way level that far inside the edge (to first order in the curvature).
 
@@ -1043,10 +1043,10 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None):
         return P.copy(), np.zeros(0, dtype=bool)
     Lf = np.asarray(L, dtype=np.float64)
     rad = None if radius is None else np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(P),))
-    Q, ok, s = _fit_steps(Lf, P, U, 0, noise, rad)
-    soft = ~ok | (s >= STEP_SEARCHES[1].blurs[0])
+    Q, ok, s, inner = _fit_steps(Lf, P, U, 0, noise, rad)
+    soft = (ok & (s >= STEP_SEARCHES[1].blurs[0])) | ~inner
     if soft.any():
-        Qs, oks, _ = _fit_steps(Lf, P[soft], U[soft], 1, noise, None if rad is None else rad[soft])
+        Qs, oks, _, _ = _fit_steps(Lf, P[soft], U[soft], 1, noise, None if rad is None else rad[soft])
         Q[soft] = np.where(oks[:, None], Qs, Q[soft])
         ok[soft] = oks | ok[soft]
     return Q, ok
