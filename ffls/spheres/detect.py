@@ -993,7 +993,7 @@ def _fit_steps(Lf, P, U, k: int, noise: float, radius=None):
     return P + e[:, None] * U, ok, s, inner
 
 
-def step_edges(L, points, dirs, noise: float = 0.0, radius=None):
+def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | None = None):
     """Sub-pixel edge of each radial profile: a blurred step between two sloped sides, fitted in linear radiance.
 
     Where the sphere meets its background, the image is a step blurred by the lens and the pixels:
@@ -1029,6 +1029,9 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None):
         differ by a ratio below :data:`MIN_STEP_RATIO`.
     radius : float or (n,) float, optional
         Radius of curvature of the edge, pixels (``dirs`` pointing away from its centre).
+    clip : float, optional
+        The level at or above which ``L`` is clipped (an integer file's largest code): a profile
+        that reaches it is not used (a clipped side's level, hence the half-way level, is unknown).
 
     Returns
     -------
@@ -1043,13 +1046,25 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None):
         return P.copy(), np.zeros(0, dtype=bool)
     Lf = np.asarray(L, dtype=np.float64)
     rad = None if radius is None else np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(P),))
+    unclipped = np.ones(len(P), dtype=bool)
+    if clip is not None:  # over the soft scale's window, the wider one
+        t = STEP_SEARCHES[1].t
+        V = _bilinear(Lf, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(len(P), -1)
+        unclipped = V.max(axis=1) < clip
+        if not unclipped.any():
+            return P.copy(), np.zeros(len(P), dtype=bool)
+        P, U = P[unclipped], U[unclipped]
+        rad = None if rad is None else rad[unclipped]
     Q, ok, s, inner = _fit_steps(Lf, P, U, 0, noise, rad)
     soft = (ok & (s >= STEP_SEARCHES[1].blurs[0])) | ~inner
     if soft.any():
         Qs, oks, _, _ = _fit_steps(Lf, P[soft], U[soft], 1, noise, None if rad is None else rad[soft])
         Q[soft] = np.where(oks[:, None], Qs, Q[soft])
-        ok[soft] = oks | ok[soft]
-    return Q, ok
+        ok[soft] = oks
+    Q_all = np.asarray(points, dtype=np.float64).reshape(-1, 2).copy()
+    ok_all = np.zeros(len(Q_all), dtype=bool)
+    Q_all[unclipped], ok_all[unclipped] = Q, ok
+    return Q_all, ok_all
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -1579,9 +1594,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
-    steps = [(L, _pixel_noise(L))]  # every outline's points moved to the step of the linear max (or mean) image
-    if mean is not None:
-        steps.append((mean, _pixel_noise(mean)))
+    # every outline's points moved to the step of the linear max (or mean) image; an integer file's
+    # clipped pixels read its largest code, the max image's maximum (select.clip_levels)
+    steps = [(L, _pixel_noise(L), 0.98 * float(L.max()) if saturates else None)]
     fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, steps, cam, max_residual_px)
             for ft in fits]
     if not ortho:
@@ -2138,8 +2153,8 @@ def _refine_on_profiles(ft, images, cam: _Camera, max_residual_px: float, min_po
 
     Each inlier outline point is moved along the ray from the fitted centre to where a blurred
     step between the sphere and its background, each side with its own level and slope, best fits
-    the luminance profile of the first of ``images`` (``(image, noise)`` pairs: the max image, then
-    the mean image) that shows a step there; points where none does (a white sphere's top on a
+    the luminance profile of the first of ``images`` (``(image, noise, clip level or None)``: the
+    max image, then the mean image) that shows a step there; points where none does (a white sphere's top on a
     white ground, seen only in the photos' edges) keep their place. The refit
     replaces the fit when it is round (RMS within ``max_residual_px``) and moves the outline by
     less than a pixel (centre and radius); otherwise the fit is returned unchanged.
@@ -2151,10 +2166,10 @@ def _refine_on_profiles(ft, images, cam: _Camera, max_residual_px: float, min_po
     v = P - c
     u = v / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)[:, None]
     Q, ok = P.copy(), np.zeros(len(P), dtype=bool)
-    for img, noise in images:
+    for img, noise, clip in images:
         if ok.all():
             break
-        Qi, oki = step_edges(img, P[~ok], u[~ok], noise, radius=ft.radius_px)
+        Qi, oki = step_edges(img, P[~ok], u[~ok], noise, radius=ft.radius_px, clip=clip)
         Q[~ok] = np.where(oki[:, None], Qi, P[~ok])
         ok[~ok] = oki
     if ok.sum() < min_points:
