@@ -385,3 +385,14 @@ def test_step_edges_under_defocus_blur(inside, outside):
         moved, ok = detect.step_edges(img, pts, u, 0.01, radius=r)
         _, rad, _, _ = detect.fit_circle(moved[ok], c, r)
         assert abs(rad_log - r) > 0.5 and abs(rad - r) < 0.2, (rad_log - r, rad - r)
+
+
+def test_step_edges_refuse_a_clipped_side():
+    """A side at an integer file's clip level has no known level, hence no half-way level: with
+    ``clip`` the profile is not used (clipped 8-bit balls fall off inside their limb, and their
+    step lay 0.27-0.33 px inside the outline, bench_conditions' ``ds:`` rows)."""
+    img = np.where(np.arange(40)[None, :] < 20.3, 1.0, 0.5) * np.ones((40, 1))
+    pts, u = np.array([[19.6, 20.0]]), np.array([[1.0, 0.0]])
+    assert detect.step_edges(img, pts, u)[1][0]
+    moved, ok = detect.step_edges(img, pts, u, clip=0.98)
+    assert not ok[0] and np.allclose(moved, pts)

@@ -1594,11 +1594,11 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
-    # every outline's points moved to the step of the linear max (or mean) image; an integer file's
-    # clipped pixels read its largest code, the max image's maximum (select.clip_levels)
-    steps = [(L, _pixel_noise(L), 0.98 * float(L.max()) if saturates else None)]
-    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, steps, cam, max_residual_px)
-            for ft in fits]
+    # every outline's points moved to the step of the linear max image; an integer file's clipped
+    # pixels read its largest code, the max image's maximum (as select.clip_levels)
+    noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
+    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
+                                                                                     clip) for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -2148,14 +2148,15 @@ def _pixel_noise(L) -> float:
     return 1.4826 * float(np.median(np.abs(L32 - cv2.medianBlur(L32, 3))))
 
 
-def _refine_on_profiles(ft, images, cam: _Camera, max_residual_px: float, min_points: int = 8):
-    """Refit a found sphere on its outline points moved to the step of a linear image (:func:`step_edges`).
+def _refine_on_profiles(ft, L, cam: _Camera, max_residual_px: float, noise: float = 0.0, clip=None,
+                        min_points: int = 8):
+    """Refit a found sphere on its outline points moved to the step of the linear max image (:func:`step_edges`).
 
     Each inlier outline point is moved along the ray from the fitted centre to where a blurred
     step between the sphere and its background, each side with its own level and slope, best fits
-    the luminance profile of the first of ``images`` (``(image, noise, clip level or None)``: the
-    max image, then the mean image) that shows a step there; points where none does (a white sphere's top on a
-    white ground, seen only in the photos' edges) keep their place. The refit
+    the luminance profile of ``L`` (pixel noise ``noise``, clipped at ``clip`` or never); points
+    where it shows no usable step (a white sphere's top on a white ground, seen only in the
+    photos' edges; a clipped limb) keep their place. The refit
     replaces the fit when it is round (RMS within ``max_residual_px``) and moves the outline by
     less than a pixel (centre and radius); otherwise the fit is returned unchanged.
     """
@@ -2165,15 +2166,10 @@ def _refine_on_profiles(ft, images, cam: _Camera, max_residual_px: float, min_po
     c = np.asarray(ft.center_px, dtype=np.float64)
     v = P - c
     u = v / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)[:, None]
-    Q, ok = P.copy(), np.zeros(len(P), dtype=bool)
-    for img, noise, clip in images:
-        if ok.all():
-            break
-        Qi, oki = step_edges(img, P[~ok], u[~ok], noise, radius=ft.radius_px, clip=clip)
-        Q[~ok] = np.where(oki[:, None], Qi, P[~ok])
-        ok[~ok] = oki
+    Q, ok = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip)
     if ok.sum() < min_points:
         return ft
+    Q = np.where(ok[:, None], Q, P)
     try:
         new = _fit_outline(Q, cam, c, ft.radius_px, ft.source, n_edge=ft.n_edge_points)
     except ValueError:
