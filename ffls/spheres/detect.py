@@ -1011,9 +1011,10 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | N
     own level and slope) is fitted by least squares: linear in ``a0, a1, b0, b1``, searched over
     the edge ``e`` (refined by a parabola) and the blur ``s``, at the sharp scale of
     :data:`STEP_SEARCHES`, and again at the soft scale where the sharp one finds a blur of 1.25 px
-    or more, or its best edge at the end of its range (a faint step stays faint at any scale). Where the edge is a circle of known ``radius`` (``dirs`` pointing out of
-    it), the half-way crossing is moved out by ``s^2 / (2 radius)``: a Gaussian blur of a disc
-    puts its half-way level that far inside the edge (to first order in the curvature).
+    or more, or its best edge at the end of its range (a faint step stays faint at any scale).
+    Where the edge is a circle of known ``radius`` (``dirs`` pointing out of it), the half-way
+    crossing is moved out by ``s^2 / (2 radius)``: a Gaussian blur of a disc puts its half-way
+    level that far inside the edge (to first order in the curvature).
 
     Parameters
     ----------
