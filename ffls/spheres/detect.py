@@ -41,6 +41,11 @@ Method
    majority polarity, (b) a deterministic circle search (a Hough vote refined by least squares, :func:`ffls.spheres.mirror_outline.circle_search`) for the initial fit, (c) a ``soft_l1`` loss
    with a 1-pixel scale, and (d) trimming at a robust multiple of the residual spread followed
    by a refit on the inliers.
+5b. **The outline at the linear step** (:func:`step_edges`, once the spheres are chosen): each
+   outline point is moved along its ray from the centre to the Gaussian-blurred step between
+   sphere and background fitted to the linear max image's profile, and the outline refitted. The
+   gradient maximum of the log image lies toward the dark side of an anti-aliased or defocused
+   edge, and inside a limb that shades off (0.1-0.3 px on ``ffls synth`` renders).
 6. **Which outlines are spheres** (no hints, :mod:`ffls.spheres.select`): round
    (fit RMS), closed and supported (coverage of the visible outline), visible enough (a sphere
    cut by the frame edge is used when 60 % of its outline is inside), neutral in colour, shading
@@ -81,6 +86,7 @@ __all__ = [
     "silhouette_px",
     "to_world",
     "edge_points",
+    "step_edges",
     "Spheres",
     "extreme_images",
     "sequence_stats",
