@@ -332,6 +332,7 @@ def test_outline_is_the_silhouette_not_the_log_edge(scene0):
         ft = min(fits, key=lambda g: np.linalg.norm(g.center_cam - C))
         err = f * (np.arcsin(R0 / ft.distance) - np.arcsin(R0 / np.linalg.norm(C)))
         assert abs(err) < 0.1, err
+        assert ft.outline_at_step and ft.to_dict()["outline_at_step"]  # (its centre is then not refined)
 
 
 @pytest.mark.parametrize("inside, outside, limb", [(1.0, 0.01, 1.0), (0.2, 1.0, 1.0)])

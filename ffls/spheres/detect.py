@@ -167,6 +167,10 @@ class SphereFit:
     outline_edges : {'max image', 'photos'}
         Where the outline's points come from: the max image's edges, or the edges that hold in the
         photos (:data:`PHOTO_EDGES`, :func:`consistent_edge_points`).
+    outline_at_step : bool
+        The outline was refitted on its points moved to the step of the linear max image
+        (:func:`step_edges`): its centre needs no photometric correction
+        (:func:`ffls.spheres.estimate.centres_to_refine`).
     """
 
     center_cam: np.ndarray
@@ -190,6 +194,7 @@ class SphereFit:
     center_sigma_px: float = 0.0
     outline_sigma_px: float = 0.0
     outline_edges: str = "max image"
+    outline_at_step: bool = False
 
     @property
     def distance(self) -> float:
@@ -231,6 +236,7 @@ class SphereFit:
             "center_sigma_px": float(self.center_sigma_px),
             "outline_sigma_px": float(self.outline_sigma_px),
             "outline_edges": self.outline_edges,
+            "outline_at_step": bool(self.outline_at_step),
         }
 
 
@@ -2276,6 +2282,7 @@ def _refine_on_profiles(ft, L, cam: _Camera, max_residual_px: float, noise: floa
             or abs(new.radius_px - ft.radius_px) > 1.0):
         return ft
     new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
+    new.outline_at_step = True
     return new
 
 
