@@ -169,11 +169,8 @@ class SphereFit:
         photos (:data:`PHOTO_EDGES`, :func:`consistent_edge_points`).
     outline_at_step : bool
         The outline was refitted on its points moved to the step of the linear max image
-        (:func:`step_edges`).
-    outline_gap_px : float
-        Where ``outline_at_step``: the distance between the projected centres of the outline on
-        the edges and of its refit at the linear step, pixels (two estimates of the centre, whose
-        gap measures their uncertainty: :func:`ffls.spheres.estimate.centres_to_refine`); else 0.
+        (:func:`step_edges`): its centre needs no photometric correction
+        (:func:`ffls.spheres.estimate.centres_to_refine`).
     """
 
     center_cam: np.ndarray
@@ -198,7 +195,6 @@ class SphereFit:
     outline_sigma_px: float = 0.0
     outline_edges: str = "max image"
     outline_at_step: bool = False
-    outline_gap_px: float = 0.0
 
     @property
     def distance(self) -> float:
@@ -241,7 +237,6 @@ class SphereFit:
             "outline_sigma_px": float(self.outline_sigma_px),
             "outline_edges": self.outline_edges,
             "outline_at_step": bool(self.outline_at_step),
-            "outline_gap_px": float(self.outline_gap_px),
         }
 
 
@@ -2287,7 +2282,7 @@ def _refine_on_profiles(ft, L, cam: _Camera, max_residual_px: float, noise: floa
             or abs(new.radius_px - ft.radius_px) > 1.0):
         return ft
     new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
-    new.outline_at_step, new.outline_gap_px = True, float(np.hypot(*(new.center_px - c)))
+    new.outline_at_step = True
     return new
 
 

@@ -72,7 +72,6 @@ __all__ = [
     "flat_field_offsets",
     "calibrate_flat_field",
     "centres_to_refine",
-    "CHI2_95_2D",
     "cos4_gradient",
     "lens_centre",
     "flat_field_values",
@@ -647,33 +646,23 @@ def _refine_one(args) -> CentreRefinement:
     return refine_sphere_centre(sample, vals, dirs, terminator=terminator, **kwargs)
 
 
-#: The 95 % quantile of chi-square with 2 degrees of freedom (``-2 ln 0.05``): a 2-D offset inside
-#: the 95 % region of an isotropic error of per-axis sd ``sigma`` is shorter than
-#: ``sqrt(CHI2_95_2D) sigma``.
-CHI2_95_2D = float(-2.0 * np.log(0.05))
-
-
-def centres_to_refine(spheres) -> list:
-    """Per sphere, how far its photometric centre refinement may move it (:func:`refine_sphere_centres`).
+def centres_to_refine(spheres) -> list[bool]:
+    """Per sphere, whether its centre is refined from the shading (:func:`refine_sphere_centres`).
 
     The refinement corrects an outline found inside its limb (the log image's edge where the limb
-    is dimly lit): None, no bound, for those. An outline refitted at the step of the linear max
-    image (``SphereFit.outline_at_step``, :func:`ffls.spheres.detect.step_edges`) is not inside
-    it, and the shading's centre is then taken only inside the outline's own 95 % region: a
-    shading centre beyond it is pulled by light the Lambert model leaves out (the ground bounce's
-    cast shadows, interreflections), not by the outline's error (docs/spheres.md, "The outline at
-    the linear step and the centre refinement"). The outline's per-axis sd is, as in
-    :func:`ffls.spheres.uncertainty.centre_floor_deg`, half the gap between its two estimates
-    (``outline_gap_px``: on the edges, at the step), with its fit's standard error
-    (``center_sigma_px``) in quadrature; the bound is ``sqrt(CHI2_95_2D)`` times that.
+    is dimly lit). An outline refitted at the step of the linear max image
+    (``SphereFit.outline_at_step``, :func:`ffls.spheres.detect.step_edges`) is not inside it,
+    and the shading is the weaker estimate of its centre: the Lambert model leaves out light the
+    scene sends (the ground bounce's own shadows, interreflections), and on ``ffls synth``'s grey
+    ground the refinement started from the true centres moves them 0.05-0.19 px
+    (docs/spheres.md, "The outline at the linear step and the centre refinement").
     """
-    return [float(np.sqrt(CHI2_95_2D) * np.hypot(0.5 * s.outline_gap_px, s.center_sigma_px))
-            if s.outline_at_step else None for s in spheres]
+    return [not s.outline_at_step for s in spheres]
 
 
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
                           terminator: float = 0.15, map_fn=map, photos: list[int] | None = None,
-                          bounds: list | None = None, **kwargs) -> tuple[list[SphereSamples], list, list]:
+                          which: list[bool] | None = None, **kwargs) -> tuple[list[SphereSamples], list, list]:
     """Refine every sphere's centre from the first-pass shading of all photos.
 
     :func:`ffls.spheres.refine.refine_sphere_centre` per sphere (photos where that sphere's fit
@@ -695,9 +684,9 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         The photos (indices into ``values``) that ``results`` are of, when only some were fitted
         (:func:`first_pass_photos`); None: ``results`` are of every photo. Every photo's values
         are subset to the new pixels.
-    bounds : list of (float or None), optional
-        Per sphere, the longest shift (pixels) that is accepted (:func:`centres_to_refine`; None:
-        any shift within the refinement's own ``max_shift_px``). None: no bounds.
+    which : list of bool, optional
+        Per sphere, whether to refine it (:func:`centres_to_refine`); the others get a refinement
+        not accepted. None: every sphere.
     **kwargs
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
 
@@ -710,20 +699,22 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
     refinements : list of CentreRefinement
     """
     new_samples, kept = [], []
+    which = [True] * len(samples) if which is None else list(which)
     tasks = []
     for k, s in enumerate(samples):
+        if not which[k]:
+            continue
         dirs = []
         for r in results:
             sp = r.spheres[k] if r.spheres else None
             dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
         fitted = values if photos is None else [values[i] for i in photos]
         tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
-    refinements = list(map_fn(_refine_one, tasks))
-    for ref, bound in zip(refinements, bounds or [None] * len(samples)):
-        if ref.accepted and bound is not None and np.linalg.norm(ref.shift_px) > bound:
-            ref.accepted, ref.center = False, ref.center_initial.copy()
-            ref.message = (f"shift {np.linalg.norm(ref.shift_px):.3f} px beyond the outline's 95% region "
-                           f"({bound:.3f} px)")
+    done = iter(map_fn(_refine_one, tasks))
+    refinements = [next(done) if w else CentreRefinement(center=np.array(s.center, dtype=np.float64),
+                                                         center_initial=np.array(s.center, dtype=np.float64),
+                                                         shift_px=np.zeros(2), message="outline at the linear step")
+                   for s, w in zip(samples, which)]
     for s, ref in zip(samples, refinements):
         if ref.accepted:
             s2, idx = recentre_samples(s, ref.center)
@@ -1314,10 +1305,10 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
     refinements = None
-    bounds = None if isinstance(refine_centres, bool) else list(refine_centres)
-    if bounds is not None or refine_centres:
+    which = None if isinstance(refine_centres, bool) else [bool(w) for w in refine_centres]
+    if which is not None or refine_centres:
         samples, values, refinements = refine_sphere_centres(samples, results, values, terminator=terminator,
-                                                             map_fn=fitter.map, photos=fitted, bounds=bounds,
+                                                             map_fn=fitter.map, photos=fitted, which=which,
                                                              **(refine_options or {}))
         if any(r.accepted for r in refinements):
             if bounce == "free":
@@ -1457,10 +1448,10 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     samples : list of SphereSamples
     scene_center : (3,) float
     bounce : {'calibrated', 'free'}
-    refine_centres : bool or list of (float or None)
-        Refine the spheres' centres from the first pass's shading and fit the photos again before
-        the bounce calibration (:func:`refine_sphere_centres`); a list: per sphere the longest
-        shift accepted (:func:`centres_to_refine`).
+    refine_centres : bool or list of bool
+        Refine the spheres' centres (all, or per sphere: :func:`centres_to_refine`) from the first
+        pass's shading and fit the photos again before the bounce calibration
+        (:func:`refine_sphere_centres`).
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
     materials : list of {'matte', 'mirror', 'auto'}, optional
@@ -1549,9 +1540,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     bounce : {'calibrated', 'free'}
         Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo.
     refine_centres : bool
-        After the first pass, refine each sphere's centre from the shading of up to 20 photos
-        (:func:`refine_sphere_centres`; an outline at the linear step moved only inside its own
-        95% region, :func:`centres_to_refine`) and repeat the first pass with the new centres.
+        After the first pass, refine the centre of each sphere whose outline is not at the linear
+        step (:func:`centres_to_refine`) from the shading of up to 20 photos
+        (:func:`refine_sphere_centres`) and repeat the first pass with the new centres.
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
     decoded : DecodedPhotos, optional
