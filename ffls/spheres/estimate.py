@@ -653,11 +653,12 @@ def centres_to_refine(spheres) -> list[bool]:
     is dimly lit). An outline refitted at the step of the linear max image
     (``SphereFit.outline_at_step``, :func:`ffls.spheres.detect.step_edges`) is not inside it,
     and the shading is the weaker estimate of its centre: the Lambert model leaves out light the
-    scene sends (the ground bounce's own shadows, interreflections), and on ``ffls synth``'s grey
+    scene sends (the ground bounce's cast shadows, interreflections), and on ``ffls synth``'s grey
     ground the refinement started from the true centres moves them 0.05-0.19 px
-    (docs/spheres.md, "The outline at the linear step and the centre refinement").
+    (docs/spheres.md, "The outline at the linear step and the centre refinement"). A sphere given
+    without ``outline_at_step`` (any object with a ``center_cam`` and a ``radius``) is refined.
     """
-    return [not s.outline_at_step for s in spheres]
+    return [not getattr(s, "outline_at_step", False) for s in spheres]
 
 
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
