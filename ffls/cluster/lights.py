@@ -82,8 +82,8 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     ffls.io.capture.Lights
     """
     from ffls.io.capture import sphere_materials
-    from ffls.spheres.estimate import (capture_samples, centres_to_refine, check_estimable, estimate_photos, lens_centre,
-                                       sphere_views)
+    from ffls.spheres.estimate import (capture_samples, centres_to_refine, check_estimable, estimate_photos,
+                                       lens_centre, sphere_views)
     from ffls.spheres.mirror_outline import limb_window
 
     model, refine_options = check_estimable(capture, model, refine_options)

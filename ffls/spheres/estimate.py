@@ -663,7 +663,8 @@ def centres_to_refine(spheres) -> list[bool]:
 
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
                           terminator: float = 0.15, map_fn=map, photos: list[int] | None = None,
-                          which: list[bool] | None = None, **kwargs) -> tuple[list[SphereSamples], list, list]:
+                          which: list[bool] | None = None,
+                          **kwargs) -> tuple[list[SphereSamples], list, list]:
     """Refine every sphere's centre from the first-pass shading of all photos.
 
     :func:`ffls.spheres.refine.refine_sphere_centre` per sphere (photos where that sphere's fit
@@ -712,10 +713,12 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         fitted = values if photos is None else [values[i] for i in photos]
         tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
     done = iter(map_fn(_refine_one, tasks))
-    refinements = [next(done) if w else CentreRefinement(center=np.array(s.center, dtype=np.float64),
-                                                         center_initial=np.array(s.center, dtype=np.float64),
-                                                         shift_px=np.zeros(2), message="outline at the linear step")
-                   for s, w in zip(samples, which)]
+    refinements = []
+    for s, w in zip(samples, which):  # a sphere not refined: its detected centre, as not accepted
+        centre = np.array(s.center, dtype=np.float64)
+        refinements.append(next(done) if w else CentreRefinement(center=centre, center_initial=centre.copy(),
+                                                                 shift_px=np.zeros(2),
+                                                                 message="outline at the linear step"))
     for s, ref in zip(samples, refinements):
         if ref.accepted:
             s2, idx = recentre_samples(s, ref.center)
