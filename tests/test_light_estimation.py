@@ -15,7 +15,7 @@ import pytest
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize, spherical_to_direction
 from ffls.errors import InputError
 from ffls.spheres.combine import combine_distant, fit_near_light, fit_ray_convergence
-from ffls.spheres.estimate import BounceCalibration, calibrate_bounce, estimate_photos
+from ffls.spheres.estimate import BounceCalibration, calibrate_bounce, centres_to_refine, estimate_photos
 from ffls.spheres.lambert import fit_lambert, own_shadow_factor
 from ffls.spheres.photo import REASONS, estimate_photo, near_fit_mask
 from ffls.spheres.samples import ground_bounce, pixel_validity, sphere_samples, sphere_values
@@ -320,6 +320,22 @@ def test_distant_accuracy_frontal_lights(samples, grid_values):
     nf = len(GRID_FRONTAL)
     assert errs[-nf:].max() < 0.3 and np.sum(errs[:-nf] > 0.3) <= 1, errs
     assert all(sp.fit.bounce_ratio is not None for r in res for sp in r.spheres if sp.status == "ok")
+
+
+def test_centre_refined_only_where_the_outline_is_not_at_the_linear_step(samples, grid_values):
+    """A sphere whose outline was refitted at the step of the linear max image keeps its centre
+    (the shading's centre is pulled by light the Lambert model leaves out); the others are refined
+    as before. ``centres_to_refine`` reads it from the fits (``SphereFit.outline_at_step``)."""
+    which = centres_to_refine([SimpleNamespace(outline_at_step=k == 0) for k in range(len(samples))])
+    assert which == [False] + [True] * (len(samples) - 1)
+    _, vals = grid_values
+    est = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=which)
+    kept = est.refinements[0]
+    assert not kept.accepted and kept.message == "outline at the linear step"
+    assert np.array_equal(est.samples[0].center, samples[0].center)
+    assert np.array_equal(est.samples[0].normals, samples[0].normals)
+    assert all(r.message != "outline at the linear step" for r in est.refinements[1:])
+    assert any(r.accepted for r in est.refinements[1:])
 
 
 def test_calibration_falls_back_with_few_photos(samples, grid_values):

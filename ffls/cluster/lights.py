@@ -82,7 +82,8 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     ffls.io.capture.Lights
     """
     from ffls.io.capture import sphere_materials
-    from ffls.spheres.estimate import capture_samples, check_estimable, estimate_photos, lens_centre, sphere_views
+    from ffls.spheres.estimate import (capture_samples, centres_to_refine, check_estimable, estimate_photos,
+                                       lens_centre, sphere_views)
     from ffls.spheres.mirror_outline import limb_window
 
     model, refine_options = check_estimable(capture, model, refine_options)
@@ -109,7 +110,8 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     values = [o[0] for o in out]
     limb_image = mean_window_image(shape, windows, [o[1] for o in out]) if windows else None
     flat = lens_centre(capture, shape) if kwargs.pop("flat_field", True) else None  # as estimate_lights
-    est = estimate_photos(values, samples, capture.scene_center, bounce=bounce, refine_centres=refine_centres,
+    est = estimate_photos(values, samples, capture.scene_center, bounce=bounce,
+                          refine_centres=centres_to_refine(spheres) if refine_centres else False,
                           refine_options=refine_options, flat_field=flat, materials=materials, views=views,
                           model=model, limb_image=limb_image, **kwargs)
     return est.lights(capture.image_names)

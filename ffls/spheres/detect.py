@@ -41,6 +41,11 @@ Method
    majority polarity, (b) a deterministic circle search (a Hough vote refined by least squares, :func:`ffls.spheres.mirror_outline.circle_search`) for the initial fit, (c) a ``soft_l1`` loss
    with a 1-pixel scale, and (d) trimming at a robust multiple of the residual spread followed
    by a refit on the inliers.
+5b. **The outline at the linear step** (:func:`step_edges`, once the spheres are chosen): each
+   outline point is moved along its ray from the centre to the Gaussian-blurred step between
+   sphere and background fitted to the linear max image's profile, and the outline refitted. The
+   gradient maximum of the log image lies toward the dark side of an anti-aliased or defocused
+   edge, and inside a limb that shades off (0.1-0.3 px on ``ffls synth`` renders).
 6. **Which outlines are spheres** (no hints, :mod:`ffls.spheres.select`): round
    (fit RMS), closed and supported (coverage of the visible outline), visible enough (a sphere
    cut by the frame edge is used when 60 % of its outline is inside), neutral in colour, shading
@@ -81,6 +86,7 @@ __all__ = [
     "silhouette_px",
     "to_world",
     "edge_points",
+    "step_edges",
     "Spheres",
     "extreme_images",
     "sequence_stats",
@@ -161,6 +167,10 @@ class SphereFit:
     outline_edges : {'max image', 'photos'}
         Where the outline's points come from: the max image's edges, or the edges that hold in the
         photos (:data:`PHOTO_EDGES`, :func:`consistent_edge_points`).
+    outline_at_step : bool
+        The outline was refitted on its points moved to the step of the linear max image
+        (:func:`step_edges`): its centre needs no photometric correction
+        (:func:`ffls.spheres.estimate.centres_to_refine`).
     """
 
     center_cam: np.ndarray
@@ -184,6 +194,7 @@ class SphereFit:
     center_sigma_px: float = 0.0
     outline_sigma_px: float = 0.0
     outline_edges: str = "max image"
+    outline_at_step: bool = False
 
     @property
     def distance(self) -> float:
@@ -225,6 +236,7 @@ class SphereFit:
             "center_sigma_px": float(self.center_sigma_px),
             "outline_sigma_px": float(self.outline_sigma_px),
             "outline_edges": self.outline_edges,
+            "outline_at_step": bool(self.outline_at_step),
         }
 
 
@@ -933,6 +945,165 @@ def _radius_from_edges(pts, grads, cpx, r_max, r_min: float = 3.0):
     return float(np.nonzero(frac >= 0.6 * frac.max())[0].max())
 
 
+# ----------------------------------------------------------------------------- sub-pixel outline
+@dataclasses.dataclass(frozen=True)
+class _StepSearch:
+    """One scale of :func:`step_edges`: the offsets ``t`` (pixels) along each profile, the candidate
+    edge positions (pixels from the point) and the blurs (the step's Gaussian sigma, pixels)."""
+
+    t: np.ndarray
+    edges: np.ndarray
+    blurs: np.ndarray
+
+
+#: The scales of :func:`step_edges`. Sharp: 3 px either side every quarter pixel, the edge within
+#: 1.5 px, blur sigma 0.3 (an aliased pixel step) to 1.7. Soft, for the profiles the sharp scale
+#: finds blurred by 1.25 px or more (a defocused lens): 6 px either side every half pixel, the edge
+#: within 3 px, sigma 1.25-4: a step blurred that much does not fit in the sharp window, and its
+#: log edge lies 1-2 px toward the dark side.
+STEP_SEARCHES = (
+    _StepSearch(np.arange(-3.0, 3.0 + 1e-9, 0.25), np.arange(-1.5, 1.5 + 1e-9, 0.05),
+                np.array([0.3, 0.45, 0.65, 0.9, 1.25, 1.7])),
+    _StepSearch(np.arange(-6.0, 6.0 + 1e-9, 0.5), np.arange(-3.0, 3.0 + 1e-9, 0.1),
+                np.array([1.25, 1.7, 2.3, 3.0, 4.0])),
+)
+#: Least radiance ratio across a step that :func:`step_edges` takes for an edge: the ratio that the
+#: high threshold of :func:`edge_points` stands for (a white sphere's limb against a white ground,
+#: 1.1 in the max image, is left to the photos' edges).
+MIN_STEP_RATIO = 1.2
+
+
+def _step_design(t, e, s) -> np.ndarray:
+    """(..., m, 4) design of the blurred-step model of :func:`step_edges` at offsets ``t`` (..., m),
+    edges ``e`` and blurs ``s`` (broadcast): columns ``1 - Phi``, ``(t - e)(1 - Phi)``, ``Phi``,
+    ``(t - e) Phi`` with ``Phi = Phi((t - e) / s)``."""
+    from scipy.special import ndtr
+
+    te = np.asarray(t) - e
+    phi = ndtr(te / s)
+    return np.stack([1 - phi, te * (1 - phi), phi, te * phi], axis=-1)
+
+
+_PROJECTORS: dict = {}
+
+
+def _step_projectors(k: int) -> np.ndarray:
+    """(edges, blurs, m, m) residual projectors ``I - X X^+`` of :data:`STEP_SEARCHES` ``[k]``, made once."""
+    if k not in _PROJECTORS:
+        sc = STEP_SEARCHES[k]
+        X = _step_design(sc.t, sc.edges[:, None, None], sc.blurs[None, :, None])  # (edges, blurs, m, 4)
+        _PROJECTORS[k] = np.eye(sc.t.size) - X @ np.linalg.pinv(X)
+    return _PROJECTORS[k]
+
+
+def _fit_steps(Lf, P, U, k: int, noise: float, radius=None):
+    """:func:`step_edges` at one scale ``k`` of :data:`STEP_SEARCHES`: the moved points (n, 2), whether
+    each is an edge (n,), its fitted blur (n,) and whether its edge lies inside the search range (n,)."""
+    sc = STEP_SEARCHES[k]
+    t, n, m = sc.t, len(P), sc.t.size
+    V = _bilinear(Lf, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(n, m)
+    flat = _step_projectors(k).reshape(-1, m)
+    sse = np.empty((n, sc.edges.size, sc.blurs.size))
+    for a in range(0, n, 256):  # v^T M v (M a symmetric projector), in chunks of profiles
+        W = (V[a:a + 256] @ flat.T).reshape(-1, sc.edges.size, sc.blurs.size, m)
+        sse[a:a + 256] = np.einsum("nijk,nk->nij", W, V[a:a + 256])
+    best_s = np.argmin(sse.min(axis=1), axis=1)
+    rows = np.arange(n)
+    curve = sse[rows, :, best_s]  # (n, edges) at the best blur
+    i = np.argmin(curve, axis=1)
+    inner = (i > 0) & (i < sc.edges.size - 1)
+    ic = np.clip(i, 1, sc.edges.size - 2)
+    ym, y0, yp = (curve[rows, ic + d] for d in (-1, 0, 1))
+    den = ym - 2 * y0 + yp
+    off = np.where(den > 0, 0.5 * (ym - yp) / np.where(den > 0, den, 1.0), 0.0)
+    e = sc.edges[ic] + np.clip(off, -1.0, 1.0) * (sc.edges[1] - sc.edges[0])
+    s = sc.blurs[best_s]
+    X = _step_design(t[None, :], e[:, None], s[:, None])  # (n, m, 4): the sides' levels at the edge
+    coef = (np.linalg.pinv(X) @ V[:, :, None])[:, :, 0]
+    r = V - np.einsum("nmk,nk->nm", X, coef)
+    rms = np.sqrt(np.einsum("nm,nm->n", r, r) / m)
+    lo, hi = np.minimum(coef[:, 0], coef[:, 2]), np.maximum(coef[:, 0], coef[:, 2])
+    ok = inner & (hi - lo > 4.0 * np.maximum(rms, float(noise))) & (hi >= MIN_STEP_RATIO * np.maximum(lo, 0.0))
+    if radius is not None:  # the half-way level of a blurred disc lies s^2 / 2r inside its edge
+        e = e + s ** 2 / (2.0 * np.asarray(radius, dtype=np.float64))
+    return P + e[:, None] * U, ok, s, inner
+
+
+def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | None = None):
+    """Sub-pixel edge of each radial profile: a blurred step between two sloped sides, fitted in linear radiance.
+
+    Where the sphere meets its background, the image is a step blurred by the lens and the pixels:
+    an anti-aliased pixel straddling the outline holds the *linear* mix of both sides, so the edge
+    is where the linear radiance crosses half-way between them, whatever the blur. The maximum of
+    the gradient of a log (or otherwise tone-mapped) image is not there: a log curve moves it
+    toward the dark side (by 1-2 px under a defocus blur of 2-3 px), and a limb that shades off
+    toward its edge (a matte sphere whose light grazes it, in one photo or in the max image) moves
+    it inward, by 0.1-0.3 px on ``ffls synth`` renders. Along each profile ``v(t) = L(p + t u)``,
+    the model
+
+        ``v(t) = (a0 + a1 (t - e)) (1 - Phi((t - e) / s)) + (b0 + b1 (t - e)) Phi((t - e) / s)``
+
+    (``Phi`` the standard normal CDF: a Gaussian-blurred step at ``e`` between two sides of their
+    own level and slope) is fitted by least squares: linear in ``a0, a1, b0, b1``, searched over
+    the edge ``e`` (refined by a parabola) and the blur ``s``, at the sharp scale of
+    :data:`STEP_SEARCHES`, and again at the soft scale where the sharp one finds a blur of 1.25 px
+    or more, or its best edge at the end of its range (a faint step stays faint at any scale).
+    Where the edge is a circle of known ``radius`` (``dirs`` pointing out of it), the half-way
+    crossing is moved out by ``s^2 / (2 radius)``: a Gaussian blur of a disc puts its half-way
+    level that far inside the edge (to first order in the curvature).
+
+    Parameters
+    ----------
+    L : (H, W) float
+        Linear luminance.
+    points : (n, 2) float
+        Approximate edge points (x, y), pixels.
+    dirs : (n, 2) float
+        Unit directions across the edge (e.g. radial, outward).
+    noise : float
+        Pixel noise of ``L`` (standard deviation): a profile whose step ``|b0 - a0|`` is below 4
+        times it, or below 4 times the fit's RMS residual, is not an edge; nor is one whose sides
+        differ by a ratio below :data:`MIN_STEP_RATIO`.
+    radius : float or (n,) float, optional
+        Radius of curvature of the edge, pixels (``dirs`` pointing away from its centre).
+    clip : float, optional
+        The level at or above which ``L`` is clipped (an integer file's largest code): a profile
+        that reaches it is not used (a clipped side's level, hence the half-way level, is unknown).
+
+    Returns
+    -------
+    points : (n, 2) float64
+        The edge points moved along ``dirs`` to the fitted step.
+    ok : (n,) bool
+        A step was found within the search range, with the contrast above.
+    """
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    U = np.asarray(dirs, dtype=np.float64).reshape(-1, 2)
+    if len(P) == 0:
+        return P.copy(), np.zeros(0, dtype=bool)
+    Lf = np.asarray(L, dtype=np.float64)
+    rad = None if radius is None else np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(P),))
+    unclipped = np.ones(len(P), dtype=bool)
+    if clip is not None:  # over the soft scale's window, the wider one
+        t = STEP_SEARCHES[1].t
+        V = _bilinear(Lf, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(len(P), -1)
+        unclipped = V.max(axis=1) < clip
+        if not unclipped.any():
+            return P.copy(), np.zeros(len(P), dtype=bool)
+        P, U = P[unclipped], U[unclipped]
+        rad = None if rad is None else rad[unclipped]
+    Q, ok, s, inner = _fit_steps(Lf, P, U, 0, noise, rad)
+    soft = (ok & (s >= STEP_SEARCHES[1].blurs[0])) | ~inner
+    if soft.any():
+        Qs, oks, _, _ = _fit_steps(Lf, P[soft], U[soft], 1, noise, None if rad is None else rad[soft])
+        Q[soft] = np.where(oks[:, None], Qs, Q[soft])
+        ok[soft] = oks
+    Q_all = np.asarray(points, dtype=np.float64).reshape(-1, 2).copy()
+    ok_all = np.zeros(len(Q_all), dtype=bool)
+    Q_all[unclipped], ok_all[unclipped] = Q, ok
+    return Q_all, ok_all
+
+
 # ----------------------------------------------------------------------------- fitting
 def _start_circle(pts, center, r_expected, tol=1.5):
     """Best-supported circle (centre (2,), radius) near a candidate, radius within 40 %, or None.
@@ -1486,6 +1657,11 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
+    # every outline's points moved to the step of the linear max image; an integer file's clipped
+    # pixels read its largest code, the max image's maximum (as select.clip_levels)
+    noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
+    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
+                                                                                     clip) for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -2067,6 +2243,46 @@ def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_
     except ValueError:
         return ft
     new.score = ft.score
+    return new
+
+
+def _pixel_noise(L) -> float:
+    """Pixel noise (standard deviation) of an image: the MAD of its difference from its 3x3 median."""
+    L32 = np.ascontiguousarray(np.nan_to_num(np.asarray(L, dtype=np.float64)), dtype=np.float32)
+    return 1.4826 * float(np.median(np.abs(L32 - cv2.medianBlur(L32, 3))))
+
+
+def _refine_on_profiles(ft, L, cam: _Camera, max_residual_px: float, noise: float = 0.0, clip=None,
+                        min_points: int = 8):
+    """Refit a found sphere on its outline points moved to the step of the linear max image (:func:`step_edges`).
+
+    Each inlier outline point is moved along the ray from the fitted centre to where a blurred
+    step between the sphere and its background, each side with its own level and slope, best fits
+    the luminance profile of ``L`` (pixel noise ``noise``, clipped at ``clip`` or never); points
+    where it shows no usable step (a white sphere's top on a white ground, seen only in the
+    photos' edges; a clipped limb) keep their place. The refit
+    replaces the fit when it is round (RMS within ``max_residual_px``) and moves the outline by
+    less than a pixel (centre and radius); otherwise the fit is returned unchanged.
+    """
+    P = ft.edge_px
+    if P is None or len(P) < min_points:
+        return ft
+    c = np.asarray(ft.center_px, dtype=np.float64)
+    v = P - c
+    u = v / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)[:, None]
+    Q, ok = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip)
+    if ok.sum() < min_points:
+        return ft
+    Q = np.where(ok[:, None], Q, P)
+    try:
+        new = _fit_outline(Q, cam, c, ft.radius_px, ft.source, n_edge=ft.n_edge_points)
+    except ValueError:
+        return ft
+    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c)) > 1.0
+            or abs(new.radius_px - ft.radius_px) > 1.0):
+        return ft
+    new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
+    new.outline_at_step = True
     return new
 
 

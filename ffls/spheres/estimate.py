@@ -71,6 +71,7 @@ __all__ = [
     "FlatField",
     "flat_field_offsets",
     "calibrate_flat_field",
+    "centres_to_refine",
     "cos4_gradient",
     "lens_centre",
     "flat_field_values",
@@ -645,8 +646,24 @@ def _refine_one(args) -> CentreRefinement:
     return refine_sphere_centre(sample, vals, dirs, terminator=terminator, **kwargs)
 
 
+def centres_to_refine(spheres) -> list[bool]:
+    """Per sphere, whether its centre is refined from the shading (:func:`refine_sphere_centres`).
+
+    The refinement corrects an outline found inside its limb (the log image's edge where the limb
+    is dimly lit). An outline refitted at the step of the linear max image
+    (``SphereFit.outline_at_step``, :func:`ffls.spheres.detect.step_edges`) is not inside it,
+    and the shading is the weaker estimate of its centre: the Lambert model leaves out light the
+    scene sends (the ground bounce's cast shadows, interreflections), and on ``ffls synth``'s grey
+    ground the refinement started from the true centres moves them 0.05-0.19 px
+    (docs/spheres.md, "The outline at the linear step and the centre refinement"). A sphere given
+    without ``outline_at_step`` (any object with a ``center_cam`` and a ``radius``) is refined.
+    """
+    return [not getattr(s, "outline_at_step", False) for s in spheres]
+
+
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
                           terminator: float = 0.15, map_fn=map, photos: list[int] | None = None,
+                          which: list[bool] | None = None,
                           **kwargs) -> tuple[list[SphereSamples], list, list]:
     """Refine every sphere's centre from the first-pass shading of all photos.
 
@@ -669,6 +686,9 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         The photos (indices into ``values``) that ``results`` are of, when only some were fitted
         (:func:`first_pass_photos`); None: ``results`` are of every photo. Every photo's values
         are subset to the new pixels.
+    which : list of bool, optional
+        Per sphere, whether to refine it (:func:`centres_to_refine`); the others get a refinement
+        not accepted. None: every sphere.
     **kwargs
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
 
@@ -681,15 +701,24 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
     refinements : list of CentreRefinement
     """
     new_samples, kept = [], []
+    which = [True] * len(samples) if which is None else list(which)
     tasks = []
     for k, s in enumerate(samples):
+        if not which[k]:
+            continue
         dirs = []
         for r in results:
             sp = r.spheres[k] if r.spheres else None
             dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
         fitted = values if photos is None else [values[i] for i in photos]
         tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
-    refinements = list(map_fn(_refine_one, tasks))
+    done = iter(map_fn(_refine_one, tasks))
+    refinements = []
+    for s, w in zip(samples, which):  # a sphere not refined: its detected centre, as not accepted
+        centre = np.array(s.center, dtype=np.float64)
+        refinements.append(next(done) if w else CentreRefinement(center=centre, center_initial=centre.copy(),
+                                                                 shift_px=np.zeros(2),
+                                                                 message="outline at the linear step"))
     for s, ref in zip(samples, refinements):
         if ref.accepted:
             s2, idx = recentre_samples(s, ref.center)
@@ -1280,9 +1309,10 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
     refinements = None
-    if refine_centres:
+    which = None if isinstance(refine_centres, bool) else [bool(w) for w in refine_centres]
+    if which is not None or refine_centres:
         samples, values, refinements = refine_sphere_centres(samples, results, values, terminator=terminator,
-                                                             map_fn=fitter.map, photos=fitted,
+                                                             map_fn=fitter.map, photos=fitted, which=which,
                                                              **(refine_options or {}))
         if any(r.accepted for r in refinements):
             if bounce == "free":
@@ -1422,9 +1452,10 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     samples : list of SphereSamples
     scene_center : (3,) float
     bounce : {'calibrated', 'free'}
-    refine_centres : bool
-        Refine the spheres' centres from the first pass's shading and fit the photos again before
-        the bounce calibration (:func:`refine_sphere_centres`).
+    refine_centres : bool or list of bool
+        Refine the spheres' centres (all, or per sphere: :func:`centres_to_refine`) from the first
+        pass's shading and fit the photos again before the bounce calibration
+        (:func:`refine_sphere_centres`).
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
     materials : list of {'matte', 'mirror', 'auto'}, optional
@@ -1513,7 +1544,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     bounce : {'calibrated', 'free'}
         Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo.
     refine_centres : bool
-        After the first pass, refine each sphere's centre from the shading of up to 20 photos
+        After the first pass, refine the centre of each sphere whose outline is not at the linear
+        step (:func:`centres_to_refine`) from the shading of up to 20 photos
         (:func:`refine_sphere_centres`) and repeat the first pass with the new centres.
     refine_options : dict, optional
         Passed to :func:`ffls.spheres.refine.refine_sphere_centre`.
@@ -1582,7 +1614,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         options = {"model": model, "own_shadow": not getattr(capture, "world_from_camera_is_default", False),
                    **kwargs}
         with _PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
-            est = _two_pass(fitter, samples, None, n, bounce=bounce, refine_centres=refine_centres,
+            est = _two_pass(fitter, samples, None, n, bounce=bounce,
+                            refine_centres=centres_to_refine(spheres) if refine_centres else False,
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
                             flat_field=lens_centre(capture, shape) if flat_field else None,
