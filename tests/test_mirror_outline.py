@@ -131,6 +131,48 @@ def test_highlight_ratio_tells_a_mirror_from_a_dark_patch():
     clipped[~disc] = 0.5
     assert highlight_ratio(clipped, (60, 60), 20) is None
 
+def _candidate(cx, cy, r):
+    """A fitted round outline as select_spheres reads it: closed, supported, well constrained, outlined
+    as a mirror's (its dark cap grown to the silhouette)."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(center_px=np.array([cx, cy], float), radius_px=float(r), residual_px=0.2, coverage=1.0,
+                           visible_fraction=1.0, n_inliers=int(2 * np.pi * r), outline_edges="max",
+                           source=OUTER_SOURCE, center_sigma_px=0.01, distance=10.0, score=0.0)
+
+
+def test_clipped_ground_patch_is_no_mirror_ball():
+    """An 8-bit textured ground clips in the max image all around a dark patch: the max image gives no
+    highlight evidence there (``highlight_ratio`` None), and the patch, outlined like a chrome ball's dark
+    cap, was kept as a sphere (12 photos of one grey ball on a textured ground, sRGB 8-bit: 3 "spheres",
+    a median cone of 76 deg). Max over mean of the photos tells them apart: a diffuse patch is as bright
+    in every photo as its ground (about 1), a mirror's highlight is lit in one photo only."""
+    from ffls.spheres.select import select_spheres
+
+    rng = np.random.default_rng(3)
+    H = W = 120
+    yy, xx = np.mgrid[0:H, 0:W]
+    albedo = rng.uniform(0.5, 1.0, (H, W))
+    patch = np.hypot(xx - 40, yy - 60) <= 15
+    albedo[patch] = 0.15
+    ball = np.hypot(xx - 85, yy - 60) <= 15
+    albedo[ball] = 0.1  # a chrome ball's dark cap, holding one light's reflection per photo
+    irr = np.linspace(1.0, 3.0, 12)  # each photo's irradiance of the ground: the ground clips at 1
+    stack = np.minimum(albedo[None] * irr[:, None, None], 1.0)
+    for k in range(12):
+        a = 2 * np.pi * k / 12
+        stack[k, int(60 + 8 * np.sin(a)), int(85 + 8 * np.cos(a))] = 1.0  # the highlight, clipped too
+    L = stack.max(axis=0)
+    mx = np.repeat(L[..., None], 3, axis=2)
+    assert highlight_ratio(L, (40, 60), 15) is None and highlight_ratio(L, (85, 60), 15) is None
+    fits = [_candidate(40, 60, 15), _candidate(85, 60, 15)]
+    chosen, rejected = select_spheres(fits, mx, stack.argmax(axis=0), L, False, 12, 1.5, 0.6,
+                                      max_over_mean=L / stack.mean(axis=0))
+    assert [tuple(ft.center_px) for ft in chosen] == [(85.0, 60.0)]
+    assert len(rejected) == 1 and "(40, 60)" in rejected[0] and "holds no highlight" in rejected[0]
+    assert "max over mean of the photos" in rejected[0]
+
+
 def test_mirror_ball_found_by_its_silhouette(mirror_capture):
     """One chrome ball, no hints: the centre within 1 px of the truth (the dark cap's circle was 9 px off)."""
     folder, truth = mirror_capture

@@ -1625,8 +1625,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
         hint_info = []
-        cands = _hough_circle_candidates(edges, L, ratio=shading_ratio(L, mean) if mean is not None and n_photos >= 3
-                                         else None)
+        ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
+        cands = _hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
@@ -1646,7 +1646,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         it = iter(refit)
         fits = [next(it) if o else ft for ft, o in zip(fits, open_)]
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
-                                        saturates=saturates, colour_counts=colour)
+                                        saturates=saturates, colour_counts=colour,
+                                        max_over_mean=None if ratio is None else np.exp(ratio))
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
         if not fits or (n_spheres is not None and len(fits) < n_spheres):

@@ -234,7 +234,7 @@ def outline_closure(ft) -> tuple[float, float]:
 
 
 def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_px, min_visible,
-                   saturates: bool = False, colour_counts=None):
+                   saturates: bool = False, colour_counts=None, max_over_mean=None):
     """Stage 5 without hints: which fitted round outlines are calibration spheres.
 
     A candidate is a *round outline* when its fit residual is at most ``max_residual_px``, its
@@ -251,7 +251,9 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     photo: with at least 3 photos, lit by lights, such an outline must instead hold a highlight, its
     brightest pixel at least ``min_highlight`` times its surroundings' 95th percentile,
     :func:`ffls.spheres.mirror_outline.highlight_ratio`; a single probe photo under a smooth sky
-    may show none), or its
+    may show none; where the max image's surroundings clip and so give no evidence, the same ratio
+    is taken on ``max_over_mean``, where each highlight, lit in one photo only, stands out of a
+    clipped diffuse ground as much as of a dark one), or its
     size disagrees with the other spheres' (all spheres share ``sphere_radius``: implied depths
     within ``size_ratio_pinhole``, or apparent radii within ``size_ratio_ortho`` for an
     orthographic camera; the consistent group with the largest total score wins).
@@ -275,6 +277,10 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
         (:func:`clip_levels`, :func:`neutrality`; without ``colour_counts``).
     colour_counts : (B, H, W) int, optional
         Per-photo colour evidence (:func:`ffls.spheres.detect.photo_colour_counts`).
+    max_over_mean : (H, W) float, optional
+        The max over the mean luminance of the photos (``exp`` of
+        :func:`ffls.spheres.detect.shading_ratio`): the mirror test's evidence where the max
+        image's is clipped.
 
     Returns
     -------
@@ -305,7 +311,7 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     rejected, set_aside = [], set()
     while True:
         ok, alone = _judged_alone([t for t in round_ if id(t[0]) not in set_aside], brightest, L, n_photos,
-                                  min_visible, colour_counts)
+                                  min_visible, colour_counts, max_over_mean)
         group_rej, ok = _judged_together(ok, brightest, L, ortho, n_photos)
         if not group_rej:
             break
@@ -314,7 +320,16 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     return ok, alone + rejected
 
 
-def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts):
+def _highlight_evidence(L, max_over_mean, ft) -> tuple[float | None, str]:
+    """A mirror candidate's :func:`highlight_ratio`, and where it was judged: on the max image, or,
+    where that image clips around the circle, on the max over the mean of the photos."""
+    hl = highlight_ratio(L, ft.center_px, ft.radius_px)
+    if hl is None and max_over_mean is not None:
+        return highlight_ratio(max_over_mean, ft.center_px, ft.radius_px), " (max over mean of the photos)"
+    return hl, ""
+
+
+def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts, max_over_mean=None):
     """The distinct round outlines (best score first) that pass the tests of a single candidate, and the reasons of the others."""
     crit = CRITERIA
     distinct = []
@@ -336,9 +351,9 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts):
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}, {judged}),"
                             f" not a white, grey or chrome sphere")
         elif (mirror := ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)) and n_photos >= 3 and (
-                (hl := highlight_ratio(L, ft.center_px, ft.radius_px)) is not None and hl < crit["min_highlight"]):
+                (hl := _highlight_evidence(L, max_over_mean, ft))[0] is not None and hl[0] < crit["min_highlight"]):
             rejected.append(f"{where}: outlined as a mirror ball's, but it holds no highlight (its brightest pixel is"
-                            f" {hl:.2f} x its surroundings' 95th percentile < {crit['min_highlight']})")
+                            f" {hl[0]:.2f} x its surroundings' 95th percentile < {crit['min_highlight']}{hl[1]})")
         elif (brightest is not None and n_photos >= 3 and not mirror  # a mirror shows its room
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
             rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
