@@ -997,24 +997,26 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
         return view, limb
     c_own = float(np.hypot(limb.center_sigma_px, LIMB_MODEL_FLOOR_PX))
     r_own = float(np.hypot(limb.radius_sigma_px, LIMB_MODEL_FLOOR_PX))
+    # two estimates of the outline, the detected one and the limb's step: which one holds is not
+    # known (a chrome ball's step can follow its reflected backdrop inside the rim, 1.4 px short on
+    # a 28 px ball of 8 mixed spheres), so whichever is kept is uncertain by at least their gap
+    gap_c = float(np.linalg.norm(np.asarray(limb.center_px) - np.asarray(view.center_px)))
+    gap_r = abs(float(limb.radius_px) - apparent_radius_px(view))
+    if not (np.isfinite(gap_c) and np.isfinite(gap_r)) or max(gap_c, gap_r) > 0.5 * LIMB_BAND_PX:
+        return view, limb  # the step found another edge than the limb: the detected outline's own uncertainty
+    # never below the detected outline's own uncertainty (a second estimate that agrees with it
+    # does not make it better: the limb's step can lie on the same wrong edge)
+    c_sig = float(max(np.hypot(gap_c, c_own), view.center_sigma_px))
+    r_sig = float(max(np.hypot(gap_r, r_own), view.radius_sigma_px))
     if np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR:
-        # a chrome ball: two estimates of its outline, the detected one (its reflections' edges) and
-        # the weak step; the detected one is kept, uncertain by their gap (centre and radius)
-        gap_c = float(np.linalg.norm(np.asarray(limb.center_px) - np.asarray(view.center_px)))
-        gap_r = abs(float(limb.radius_px) - apparent_radius_px(view))
-        if not (np.isfinite(gap_c) and np.isfinite(gap_r)) or max(gap_c, gap_r) > 0.5 * LIMB_BAND_PX:
-            return view, limb  # the step found another edge than the limb: the detected outline's own uncertainty
-        return replace(view, center_sigma_px=float(np.hypot(gap_c, c_own)),
-                       radius_sigma_px=float(np.hypot(gap_r, r_own))), limb
-    # the centre's: never below the detected outline's uncertainty (a second estimate of the outline,
-    # whose residual bias at the tenth of a pixel the renders show; with the step's own 0.15 px, the
-    # glossy balls of 8 mixed spheres outweighed the matte ones for errors of 2 deg: docs/spheres.md)
-    c_sig = float(max(np.hypot(c_own, limb.radius_sigma_px), view.center_sigma_px))
+        # a chrome ball (a weak step): the detected outline (its reflections' edges) is kept
+        return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb
+    c_sig = float(max(c_sig, np.hypot(c_own, limb.radius_sigma_px)))
     if view.model == "pinhole":
         return replace(view, center_px=limb.center_px, center_cam=limb.center_cam, center_sigma_px=c_sig,
-                       radius_sigma_px=r_own), limb
+                       radius_sigma_px=r_sig), limb
     return replace(view, center_px=limb.center_px, radius_px=limb.radius_px, center_sigma_px=c_sig,
-                   radius_sigma_px=r_own), limb
+                   radius_sigma_px=r_sig), limb
 
 
 def limb_view(view: SphereView, limb: LimbFit) -> SphereView:

@@ -196,7 +196,7 @@ def circle_coverage(points, center, radius, tol: float = 1.5, shape=None, n_bins
 
 
 def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
-                     min_growth: float = 1.12, max_growth: float = 2.0, min_coverage: float = 0.5,
+                     min_growth: float = 1.05, max_growth: float = 2.0, min_coverage: float = 0.5,
                      min_new: float = 0.3, max_outside: float = 0.05, n_search: int = 6) -> OuterCircle | None:
     """The outermost well-supported circle that encloses a candidate circle's outline, or None.
 
