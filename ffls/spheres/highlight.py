@@ -48,7 +48,7 @@ import numpy as np
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
 from ffls.io.capture import SPHERE_MATERIALS
-from ffls.spheres.mirror_outline import LIMB_BAND_PX, LimbFit, fit_limb_profile
+from ffls.spheres.mirror_outline import LIMB_BAND_PX, LimbFit, dark_cap, fit_limb_profile
 
 __all__ = [
     "MATERIALS",
@@ -74,6 +74,7 @@ __all__ = [
     "classify_sphere",
     "saturated_pixels",
     "LIMB_CLEAR_SNR",
+    "LIMB_DARK_BODY_RATIO",
     "LIMB_MODEL_FLOOR_PX",
     "refine_view_limb",
     "limb_view",
@@ -956,6 +957,14 @@ LIMB_CLEAR_SNR = 10.0
 #: leaves the step 0.13 to 0.17 px inside the silhouette on the glossy black renders of
 #: ``benchmarks/bench_conditions.py`` at 384 px (docs/spheres.md).
 LIMB_MODEL_FLOOR_PX = 0.15
+#: The limb's step places a ball only where its body is dark against what surrounds it: 90 % of
+#: the disc (inside 0.7 radii of the sequence's mean image) below this fraction of the ring just
+#: outside it (:func:`ffls.spheres.mirror_outline.dark_cap`). A black glossy ball (a dielectric:
+#: about 4 % reflectance) reads 0.10-0.12 on the renders of ``bench_conditions.py``; a chrome ball
+#: reflects its surroundings at their own brightness somewhere on its disc (0.96-4.9), and a clear
+#: step there can be a reflected edge inside the rim (the chrome balls of the 8 mixed spheres and
+#: of the grey + mirror shot: a jump of 18 and 10 noise units, the step 1.4 and 1.9 px short).
+LIMB_DARK_BODY_RATIO = 0.5
 
 
 def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, LimbFit | None]:
@@ -1008,8 +1017,10 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     # does not make it better: the limb's step can lie on the same wrong edge)
     c_sig = float(max(np.hypot(gap_c, c_own), view.center_sigma_px))
     r_sig = float(max(np.hypot(gap_r, r_own), view.radius_sigma_px))
-    if np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR:
-        # a chrome ball (a weak step): the detected outline (its reflections' edges) is kept
+    if (np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR
+            or not dark_cap(image, view.center_px, view.radius_px, ratio=LIMB_DARK_BODY_RATIO, quantile=90.0)):
+        # a chrome ball (a weak step, or a body that reflects its surroundings): the detected
+        # outline (its reflections' edges) is kept
         return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb
     c_sig = float(max(c_sig, np.hypot(c_own, limb.radius_sigma_px)))
     if view.model == "pinhole":
