@@ -211,9 +211,9 @@ def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
     (within ``tol`` of the candidate circle) lie more than ``tol`` outside it, at least ``min_new``
     of its inliers are off the candidate circle, and its inliers cover at least ``min_coverage`` of
     its in-frame circumference (:func:`circle_coverage`). Of the qualifying circles the best
-    covered wins (coverages within :data:`COVERAGE_TIE` tie: the better supported wins). The result is then refined by an algebraic least-squares
-    circle on its inliers (Kasa), re-checked against the same tests. Deterministic: the same
-    points in any order give the same circle.
+    covered wins (coverages within :data:`COVERAGE_TIE` tie: the better supported wins). The
+    result is then refined by an algebraic least-squares circle on its inliers (Kasa), re-checked
+    against the same tests. Deterministic: the same points in any order give the same circle.
 
     Parameters
     ----------
