@@ -195,12 +195,8 @@ def circle_coverage(points, center, radius, tol: float = 1.5, shape=None, n_bins
     return float(np.count_nonzero(hit & vis) / np.count_nonzero(vis))
 
 
-#: Coverages (shares of the circumference) closer than this are a tie in :func:`enclosing_circle`.
-COVERAGE_TIE = 0.05
-
-
 def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
-                     min_growth: float = 1.05, max_growth: float = 2.0, min_coverage: float = 0.5,
+                     min_growth: float = 1.12, max_growth: float = 2.0, min_coverage: float = 0.5,
                      min_new: float = 0.3, max_outside: float = 0.05, n_search: int = 6) -> OuterCircle | None:
     """The outermost well-supported circle that encloses a candidate circle's outline, or None.
 
@@ -211,9 +207,9 @@ def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
     (within ``tol`` of the candidate circle) lie more than ``tol`` outside it, at least ``min_new``
     of its inliers are off the candidate circle, and its inliers cover at least ``min_coverage`` of
     its in-frame circumference (:func:`circle_coverage`). Of the qualifying circles the best
-    covered wins (coverages within :data:`COVERAGE_TIE` tie: the better supported wins). The
-    result is then refined by an algebraic least-squares circle on its inliers (Kasa), re-checked
-    against the same tests. Deterministic: the same points in any order give the same circle.
+    covered wins (ties: the larger). The result is then refined by an algebraic least-squares
+    circle on its inliers (Kasa), re-checked against the same tests. Deterministic: the same
+    points in any order give the same circle.
 
     Parameters
     ----------
@@ -271,9 +267,7 @@ def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
     for cc, rr, _ in circle_search(P, c0, max_offset, min_growth * r0, max_growth * r0, tol=tol,
                                    n_best=n_search, per_radius=True):
         q = qualifies(cc, rr)
-        # coverages within COVERAGE_TIE are a tie (a few of the 72 bins filled by clutter): the
-        # search's order, best supported first, stands
-        if q is not None and (best is None or q.coverage > best.coverage + COVERAGE_TIE):
+        if q is not None and (best is None or (q.coverage, q.radius) > (best.coverage, best.radius)):
             best = q
     if best is None:
         return None
@@ -284,7 +278,7 @@ def enclosing_circle(points, center, radius, *, shape=None, tol: float = 1.5,
     cc = sol[:2]
     rr = float(np.sqrt(max(sol[2] + cc @ cc, 0.0)))
     q = qualifies(cc, rr)
-    if q is not None and q.coverage >= best.coverage - COVERAGE_TIE:
+    if q is not None and q.coverage >= best.coverage - 0.05:
         best = q
     return best
 
