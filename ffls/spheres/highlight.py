@@ -962,8 +962,8 @@ LIMB_MODEL_FLOOR_PX = 0.15
 #: outside it (:func:`ffls.spheres.mirror_outline.dark_cap`). A black glossy ball (a dielectric:
 #: about 4 % reflectance) reads 0.10-0.12 on the renders of ``bench_conditions.py``; a chrome ball
 #: reflects its surroundings at their own brightness somewhere on its disc (0.96-4.9), and a clear
-#: step there can be a reflected edge inside the rim (the chrome balls of the 8 mixed spheres and
-#: of the grey + mirror shot: a jump of 18 and 10 noise units, the step 1.4 and 1.9 px short).
+#: step there can be a reflected edge inside the rim (a chrome ball of the 8 mixed spheres: a jump
+#: of 18 noise units, the step 1.4 px short where the detected outline was 0.46 px short).
 LIMB_DARK_BODY_RATIO = 0.5
 
 
@@ -975,17 +975,17 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     inherits that error (3 % of the radius: 2 degrees). :func:`ffls.spheres.mirror_outline.fit_limb_profile`
     locates the silhouette as the step of the brightness across the limb in ``image`` (a
     reduction of the whole sequence: the outline is fixed while the lights move). Where the step
-    is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise), the view takes
-    its geometry (pinhole: the centre from the tangent cone and the sphere's radius;
-    orthographic: the circle) and its centre uncertainty, with :data:`LIMB_MODEL_FLOOR_PX` in
-    quadrature, or the detected outline's where that is larger; its radius uncertainty is the
-    step's with the same floor. Otherwise (a chrome ball, whose limb reflects its own background,
-    so that the step lies where the reflected backdrop ends, not at the silhouette) the detected
-    outline is kept, uncertain by its gap to the step: the centre's sigma is the distance between
-    the two centres, the radius's the difference of their :func:`apparent_radius_px`, each with
-    the step's own precision and the floor in quadrature. A gap beyond half of
-    :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another edge), or no fit,
-    leaves the view as it is.
+    is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise) and the ball's
+    body is dark against its surroundings (:data:`LIMB_DARK_BODY_RATIO`), the view takes its
+    geometry (pinhole: the centre from the tangent cone and the sphere's radius; orthographic:
+    the circle). Otherwise (a chrome ball, whose limb reflects its own background, so that the
+    step lies where the reflected backdrop ends, not at the silhouette) the detected outline is
+    kept. Either way the kept outline is uncertain by at least the gap between the two: the
+    centre's sigma at least the distance between their centres, the radius's the difference of
+    their :func:`apparent_radius_px`, each with the step's own precision and
+    :data:`LIMB_MODEL_FLOOR_PX` in quadrature, and neither below the detected outline's own. A
+    gap beyond half of :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another
+    edge), or no fit, leaves the view as it is.
 
     Parameters
     ----------
