@@ -85,6 +85,8 @@ CONDITIONS = {
     "long lens (10 m, 4.8 deg)": ["--lens", "long"],
     "orthographic": ["--lens", "orthographic"],
     "calibration shot: grey + mirror, no object": ["--no-object", "--spheres", "2", "--sphere-material", "grey,mirror"],
+    # appended (the cache folders are numbered by position)
+    "one mirror ball, textured ground": ["--spheres", "1", "--sphere-material", "mirror", "--background", "textured"],
 }
 
 

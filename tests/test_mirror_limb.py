@@ -209,3 +209,27 @@ def test_limb_fit_on_a_stack_shares_the_outline_across_photos():
     assert fit is not None
     np.testing.assert_allclose(fit.center_px, c + [0.4, -0.3], atol=0.1)
     assert abs(fit.radius_px - r) < 0.1
+
+
+def test_the_kept_outline_is_uncertain_by_at_least_the_gap_between_the_two():
+    """Two estimates of the outline, the detected one and the limb's step: whichever is kept is
+    uncertain by at least their gap, and never below the detected outline's own uncertainty. A
+    chrome ball's clear step can follow its reflected backdrop inside the rim (1.4 px short on a
+    28 px ball of ``bench_conditions.py``'s 8 mixed spheres, where the cone said 0.2 px)."""
+    c, r = np.array([61.3, 58.6]), 26.4
+    img = _render(lambda p: np.hypot(p[:, 0] - c[0], p[:, 1] - c[1]) / r, 120, 124)
+    # a clear step, the detected outline 0.9 px inside it: the step is taken, uncertain by the gap
+    view = SphereView(center_px=c + [0.3, -0.2], radius_px=r - 0.9, model="orthographic", center_sigma_px=0.1)
+    new, limb = refine_view_limb(view, img)
+    assert limb is not None and np.nanmedian(limb.jump_snr) > LIMB_CLEAR_SNR
+    assert abs(new.radius_px - r) < 0.12
+    assert new.radius_sigma_px >= abs(limb.radius_px - view.radius_px)
+    assert new.center_sigma_px >= np.hypot(*(limb.center_px - view.center_px))
+    # a weak step (a chrome ball's) next to a detected outline that is itself uncertain by 2 px:
+    # agreeing with the step does not make the detected outline better than its own 2 px
+    weak = _render(lambda p: np.hypot(p[:, 0] - c[0], p[:, 1] - c[1]) / r, 120, 124, jump=0.02, noise=0.004,
+                   ramp=False)
+    unsure = SphereView(center_px=c, radius_px=r, model="orthographic", center_sigma_px=2.0, radius_sigma_px=1.5)
+    new, limb = refine_view_limb(unsure, weak)
+    np.testing.assert_array_equal(new.center_px, unsure.center_px)
+    assert new.center_sigma_px >= 2.0 and new.radius_sigma_px >= 1.5

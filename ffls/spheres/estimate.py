@@ -49,7 +49,7 @@ from ffls.errors import InputError
 from ffls.io.capture import Lights
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
-from ffls.spheres.highlight import (SphereKind, SphereView, classify_sphere, highlight_compactness,
+from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
                                    outline_holding_highlights, refine_view_limb)
 from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
@@ -1352,7 +1352,7 @@ CAPTURE_SHADOW_MIN_PHOTOS = 5
 def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_RATIO,
                            level: float = SIGNIFICANCE,
                            min_photos: int = CAPTURE_SHADOW_MIN_PHOTOS) -> list[PhotoEstimate]:
-    """The photos with every sphere in a cast shadow, rejected as ``shadowed``.
+    """The photos with every sphere in a cast shadow (or every mirror without the lamp's highlight), rejected.
 
     :func:`ffls.spheres.photo.estimate_photo` sets a sphere aside that is far darker than the
     photo's other spheres (below ``SHADOW_RATIO`` of them); when every sphere of a photo is in
@@ -1364,6 +1364,13 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
     more than the one-sided normal quantile of ``level`` in robust standard deviations (1.4826
     times the median absolute deviation): a lamp moved nearer and farther by hand spreads the
     intensities, and a photo within that spread is no shadow.
+
+    A mirror sphere's highlight is held to the same test (its ``intensity``, the highlight's
+    signal, against the capture's): where the light is behind the ball or off, the brightest
+    compact blob left is a reflection of the room (a lit patch of the ground in a chrome ball,
+    thousands of times fainter than the lamp's highlights: ``ffls synth --background textured``,
+    one photo 165 degrees off), not the lamp. Such a sphere is marked ``no_highlight``; a photo
+    whose used spheres are all dark is rejected, as ``no_highlight`` when they are all mirrors.
 
     Parameters
     ----------
@@ -1378,8 +1385,8 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
     Returns
     -------
     list of PhotoEstimate
-        ``results`` with the photos whose used spheres are all dark (and none is a mirror)
-        rejected, their spheres marked ``shadowed``.
+        ``results`` with the photos whose used spheres are all dark rejected, their spheres
+        marked ``shadowed`` (matte) or ``no_highlight`` (mirror).
     """
     from scipy.special import ndtri
 
@@ -1388,14 +1395,14 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
     for r in results:
         for i in r.used_spheres if r.ok else ():
             f = r.spheres[i].fit
-            if isinstance(f, LambertFit) and f.intensity > 0:
+            if isinstance(f, (LambertFit, HighlightFit)) and f.intensity > 0:
                 logs[i].append(np.log(float(f.intensity)))
     z = -float(ndtri(level))
     stats = [(np.median(v), 1.4826 * np.median(np.abs(np.asarray(v) - np.median(v))))
              if len(v) >= min_photos else None for v in logs]
 
     def dark(f, st):
-        if not isinstance(f, LambertFit) or st is None:
+        if not isinstance(f, (LambertFit, HighlightFit)) or st is None:
             return False
         if not f.intensity > 0:
             return True
@@ -1409,8 +1416,11 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
         if not used or len(shaded) < len(used):
             out.append(r)
             continue
-        spheres = [replace(s, status="shadowed") if i in shaded else s for i, s in enumerate(r.spheres)]
-        out.append(replace(r, status="rejected", reason="shadowed", model=None, used_spheres=[], spheres=spheres,
+        mirror = [isinstance(r.spheres[i].fit, HighlightFit) for i in shaded]
+        spheres = [replace(s, status="no_highlight" if isinstance(s.fit, HighlightFit) else "shadowed")
+                   if i in shaded else s for i, s in enumerate(r.spheres)]
+        reason = "no_highlight" if all(mirror) else "shadowed"
+        out.append(replace(r, status="rejected", reason=reason, model=None, used_spheres=[], spheres=spheres,
                            position=None, uncertainty_deg=float("inf"), weights=None))
     return out
 

@@ -48,7 +48,7 @@ import numpy as np
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
 from ffls.io.capture import SPHERE_MATERIALS
-from ffls.spheres.mirror_outline import LIMB_BAND_PX, LimbFit, fit_limb_profile
+from ffls.spheres.mirror_outline import LIMB_BAND_PX, LimbFit, dark_cap, fit_limb_profile
 
 __all__ = [
     "MATERIALS",
@@ -74,6 +74,7 @@ __all__ = [
     "classify_sphere",
     "saturated_pixels",
     "LIMB_CLEAR_SNR",
+    "LIMB_DARK_BODY_RATIO",
     "LIMB_MODEL_FLOOR_PX",
     "refine_view_limb",
     "limb_view",
@@ -956,6 +957,14 @@ LIMB_CLEAR_SNR = 10.0
 #: leaves the step 0.13 to 0.17 px inside the silhouette on the glossy black renders of
 #: ``benchmarks/bench_conditions.py`` at 384 px (docs/spheres.md).
 LIMB_MODEL_FLOOR_PX = 0.15
+#: The limb's step places a ball only where its body is dark against what surrounds it: 90 % of
+#: the disc (inside 0.7 radii of the sequence's mean image) below this fraction of the ring just
+#: outside it (:func:`ffls.spheres.mirror_outline.dark_cap`). A black glossy ball (a dielectric:
+#: about 4 % reflectance) reads 0.10-0.12 on the renders of ``bench_conditions.py``; a chrome ball
+#: reflects its surroundings at their own brightness somewhere on its disc (0.96-4.9), and a clear
+#: step there can be a reflected edge inside the rim (a chrome ball of the 8 mixed spheres: a jump
+#: of 18 noise units, the step 1.4 px short where the detected outline was 0.46 px short).
+LIMB_DARK_BODY_RATIO = 0.5
 
 
 def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, LimbFit | None]:
@@ -966,17 +975,17 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     inherits that error (3 % of the radius: 2 degrees). :func:`ffls.spheres.mirror_outline.fit_limb_profile`
     locates the silhouette as the step of the brightness across the limb in ``image`` (a
     reduction of the whole sequence: the outline is fixed while the lights move). Where the step
-    is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise), the view takes
-    its geometry (pinhole: the centre from the tangent cone and the sphere's radius;
-    orthographic: the circle) and its centre uncertainty, with :data:`LIMB_MODEL_FLOOR_PX` in
-    quadrature, or the detected outline's where that is larger; its radius uncertainty is the
-    step's with the same floor. Otherwise (a chrome ball, whose limb reflects its own background,
-    so that the step lies where the reflected backdrop ends, not at the silhouette) the detected
-    outline is kept, uncertain by its gap to the step: the centre's sigma is the distance between
-    the two centres, the radius's the difference of their :func:`apparent_radius_px`, each with
-    the step's own precision and the floor in quadrature. A gap beyond half of
-    :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another edge), or no fit,
-    leaves the view as it is.
+    is clear (median sector jump at least :data:`LIMB_CLEAR_SNR` times the noise) and the ball's
+    body is dark against its surroundings (:data:`LIMB_DARK_BODY_RATIO`), the view takes its
+    geometry (pinhole: the centre from the tangent cone and the sphere's radius; orthographic:
+    the circle). Otherwise (a chrome ball, whose limb reflects its own background, so that the
+    step lies where the reflected backdrop ends, not at the silhouette) the detected outline is
+    kept. Either way the kept outline is uncertain by at least the gap between the two: the
+    centre's sigma at least the distance between their centres, the radius's the difference of
+    their :func:`apparent_radius_px`, each with the step's own precision and
+    :data:`LIMB_MODEL_FLOOR_PX` in quadrature, and neither below the detected outline's own. A
+    gap beyond half of :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another
+    edge), or no fit, leaves the view as it is.
 
     Parameters
     ----------
@@ -997,24 +1006,28 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
         return view, limb
     c_own = float(np.hypot(limb.center_sigma_px, LIMB_MODEL_FLOOR_PX))
     r_own = float(np.hypot(limb.radius_sigma_px, LIMB_MODEL_FLOOR_PX))
-    if np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR:
-        # a chrome ball: two estimates of its outline, the detected one (its reflections' edges) and
-        # the weak step; the detected one is kept, uncertain by their gap (centre and radius)
-        gap_c = float(np.linalg.norm(np.asarray(limb.center_px) - np.asarray(view.center_px)))
-        gap_r = abs(float(limb.radius_px) - apparent_radius_px(view))
-        if not (np.isfinite(gap_c) and np.isfinite(gap_r)) or max(gap_c, gap_r) > 0.5 * LIMB_BAND_PX:
-            return view, limb  # the step found another edge than the limb: the detected outline's own uncertainty
-        return replace(view, center_sigma_px=float(np.hypot(gap_c, c_own)),
-                       radius_sigma_px=float(np.hypot(gap_r, r_own))), limb
-    # the centre's: never below the detected outline's uncertainty (a second estimate of the outline,
-    # whose residual bias at the tenth of a pixel the renders show; with the step's own 0.15 px, the
-    # glossy balls of 8 mixed spheres outweighed the matte ones for errors of 2 deg: docs/spheres.md)
-    c_sig = float(max(np.hypot(c_own, limb.radius_sigma_px), view.center_sigma_px))
+    # two estimates of the outline, the detected one and the limb's step: which one holds is not
+    # known (a chrome ball's step can follow its reflected backdrop inside the rim, 1.4 px short on
+    # a 28 px ball of 8 mixed spheres), so whichever is kept is uncertain by at least their gap
+    gap_c = float(np.linalg.norm(np.asarray(limb.center_px) - np.asarray(view.center_px)))
+    gap_r = abs(float(limb.radius_px) - apparent_radius_px(view))
+    if not (np.isfinite(gap_c) and np.isfinite(gap_r)) or max(gap_c, gap_r) > 0.5 * LIMB_BAND_PX:
+        return view, limb  # the step found another edge than the limb: the detected outline's own uncertainty
+    # never below the detected outline's own uncertainty (a second estimate that agrees with it
+    # does not make it better: the limb's step can lie on the same wrong edge)
+    c_sig = float(max(np.hypot(gap_c, c_own), view.center_sigma_px))
+    r_sig = float(max(np.hypot(gap_r, r_own), view.radius_sigma_px))
+    if (np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR
+            or not dark_cap(image, view.center_px, view.radius_px, ratio=LIMB_DARK_BODY_RATIO, quantile=90.0)):
+        # a chrome ball (a weak step, or a body that reflects its surroundings): the detected
+        # outline (its reflections' edges) is kept
+        return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb
+    c_sig = float(max(c_sig, np.hypot(c_own, limb.radius_sigma_px)))
     if view.model == "pinhole":
         return replace(view, center_px=limb.center_px, center_cam=limb.center_cam, center_sigma_px=c_sig,
-                       radius_sigma_px=r_own), limb
+                       radius_sigma_px=r_sig), limb
     return replace(view, center_px=limb.center_px, radius_px=limb.radius_px, center_sigma_px=c_sig,
-                   radius_sigma_px=r_own), limb
+                   radius_sigma_px=r_sig), limb
 
 
 def limb_view(view: SphereView, limb: LimbFit) -> SphereView:
