@@ -1668,8 +1668,8 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     max image has no edge there, Hough proposes no circle, and the sphere is never a candidate. In
     each photo, though, its limb and the ground behind it differ (which is brighter changes), so
     the per-photo edge evidence (:func:`consistent_edge_strength`; ``held``, read once by
-    :func:`find_spheres`) outlines it in full. Circles are proposed by Hough on that strength (8 bit over its
-    robust peak) and each is fitted on the
+    :func:`find_spheres`) outlines it in full. Circles are proposed by Hough's ``HOUGH_GRADIENT_ALT`` transforms
+    on that strength (8 bit over its robust peak) and each is fitted on the
     ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
@@ -1702,11 +1702,12 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
             continue
         sc = 255.0 / peak
         g8 = np.clip(ev.strength * sc, 0, 255).astype(np.uint8)
-        # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio)
-        # on the changing edges, only the ALT transform's well-formed circles: its plain gradient's
-        # 30 there are mostly arcs of moving shadows, each a fit (and the pass's cost) for nothing
+        # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio);
+        # only the ALT transform's well-formed circles: the plain gradient's 30 (of some 5,000 it
+        # rates on a busy capture's strength) are mostly arcs of moving shadows, and the transform
+        # and their fits were a quarter of the search's cost for no sphere found (docs/spheres.md)
         passes.append((centered, ev.points))
-        images.append((g8, 3, min(H, W) / 2, 0.5 * sc, not centered))
+        images.append((g8, 3, min(H, W) / 2, 0.5 * sc, False))
     found = _hough_candidates_many(images)  # every pass's transforms at once
     circles = [(k, x, y, r) for k, hc in enumerate(found) for x, y, r in hc]
     global _photo_edge_context
