@@ -89,7 +89,6 @@ __all__ = [
     "photo_colour_counts",
     "photo_edge_tensor",
     "unit_cone_residuals",
-    "unit_cone_jacobian",
     "consistent_edge_points",
     "consistent_edge_strength",
     "COLOUR_BINS",
@@ -988,28 +987,6 @@ def unit_cone_residuals(params, s, f):
     return f * (np.arctan2(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), s0 * c[0] + s1 * c[1] + s2 * c[2]) - a)
 
 
-def unit_cone_jacobian(params, s, f):
-    """(n, 3) Jacobian of :func:`unit_cone_residuals` with respect to ``params`` = f (x, y, alpha).
-
-    With the axis ``c = u / |u|``, ``u = (x, y, 1)``, and each ray's part across it
-    ``s_perp = s - (s . c) c``, the angle ``theta = angle(s, c)`` changes by
-    ``-s_perp . dc / |s_perp|``, and ``dc / dx = (I - c c^T) e_x / |u|``; so ``d r / d(f x) =
-    -s_perp_x / (|s_perp| |u|)``, likewise for y, and ``d r / d(f alpha) = -1``. (The outline fits
-    of a capture make thousands of ``least_squares`` calls: the exact Jacobian saves the three
-    residual evaluations of each forward-difference one.)"""
-    x, y, _ = params / f
-    u = np.array([x, y, 1.0])
-    nu = float(np.linalg.norm(u))
-    c = u / nu
-    sp = s - (s @ c)[:, None] * c
-    k = -1.0 / (np.maximum(np.sqrt(np.einsum("ij,ij->i", sp, sp)), 1e-12) * nu)
-    J = np.empty((len(s), 3))
-    J[:, 0] = sp[:, 0] * k
-    J[:, 1] = sp[:, 1] * k
-    J[:, 2] = -1.0
-    return J
-
-
 def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, trim: float = 3.0):
     """Robust fit of a sphere centre to silhouette rays (equation 1 in geometric form).
 
@@ -1041,8 +1018,7 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     s = np.asarray(rays, dtype=np.float64)
     d = np.asarray(init_dir, dtype=np.float64)
     p0 = f * np.array([d[0] / d[2], d[1] / d[2], init_alpha])
-    p, inl = _trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim,
-                          jac=lambda q, pts: unit_cone_jacobian(q, pts, f))
+    p, inl = _trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim)
     x, y, a = p / f
     if not (0 < a < np.pi / 2):
         raise ValueError("fitted apparent radius is not in (0, 90) degrees")
@@ -1051,17 +1027,16 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     return R / np.sin(a) * c, inl, _cone_residuals(p, s, f)
 
 
-def _trimmed_fit(residuals, p0, pts, f_scale: float, trim: float, jac="2-point"):
+def _trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
     """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
     to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
-    on the rest. ``jac``: its Jacobian ``jac(p, pts)``, or forward differences. Returns the
-    parameters and the inlier mask (n,) of the last round."""
+    on the rest. Returns the parameters and the inlier mask (n,) of the last round."""
     from scipy.optimize import least_squares
     p = p0
     inl = np.ones(len(pts), dtype=bool)
     for _ in range(3):
-        p = least_squares(residuals, p, jac=jac, args=(pts[inl],), loss="soft_l1", f_scale=f_scale,
-                          x_scale=1.0, method="trf").x
+        p = least_squares(residuals, p, args=(pts[inl],), loss="soft_l1", f_scale=f_scale, x_scale=1.0,
+                          method="trf").x
         r = residuals(p, pts)
         sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
         new = np.abs(r) < max(trim * sigma, 1.0)
