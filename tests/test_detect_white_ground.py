@@ -66,3 +66,53 @@ def test_white_ground_outline_is_in_the_photos_edges_not_the_max_image(tmp_path)
         step_max = np.abs(np.log(ring(L, 0.8)[top] / ring(L, 1.25)[top]))
         assert np.median(step_max) < 0.4  # under the radiance ratio of 1.5 the max image's edges need
         assert np.median(ring(S, 1.0)) > 2 * np.median(S)  # the photos' edges hold on the silhouette
+
+
+def test_photo_edge_fits_in_two_workers_are_the_same(tmp_path, monkeypatch):
+    """``workers=2``: the photo-edge circles are fitted in forked processes (the serial part of
+    the detection on 2 cores): most outline fits run outside this process, and the spheres are
+    the very same as in this process."""
+    import os
+
+    from ffls.spheres import detect
+
+    _white_capture(tmp_path)
+    cap = load_capture(tmp_path)
+    one = find_spheres_in_capture(cap)
+    pids = tmp_path / "pids.txt"
+    fit = detect.fit_sphere_center
+
+    def logged(*a, **k):  # (inherited by the forked workers: each appends its process id)
+        with open(pids, "a") as f:
+            f.write(f"{os.getpid()}\n")
+        return fit(*a, **k)
+
+    monkeypatch.setattr(detect, "fit_sphere_center", logged)
+    two = find_spheres_in_capture(cap, workers=2)
+    assert len(one) == 4 and list(one.rejected) == list(two.rejected)
+    for a, b in zip(one, two, strict=True):
+        assert np.array_equal(a.center_px, b.center_px) and a.radius_px == b.radius_px
+        assert np.array_equal(a.center_cam, b.center_cam) and a.outline_edges == b.outline_edges
+    calls = pids.read_text().split()
+    here = calls.count(str(os.getpid()))
+    assert here < len(calls) - here, (here, len(calls))  # before: the photo-edge fits, most of them, here
+
+
+def test_photo_edges_read_once_per_search(tmp_path, monkeypatch):
+    """The edges that hold in the photos (strength, angle, ridge points) are read once per
+    ``find_spheres`` and shared by the photo-edge search and both refits on them (before: three
+    times), and the changing edges once."""
+    from ffls.spheres import detect
+
+    _white_capture(tmp_path)
+    cap = load_capture(tmp_path)
+    calls = []
+    strength = detect.consistent_edge_strength
+
+    def counted(*a, **k):
+        calls.append(bool(k.get("centered", a[2] if len(a) > 2 else False)))
+        return strength(*a, **k)
+
+    monkeypatch.setattr(detect, "consistent_edge_strength", counted)
+    assert len(find_spheres_in_capture(cap)) == 4
+    assert calls.count(False) == 1 and calls.count(True) <= 1, calls

@@ -579,6 +579,22 @@ def _ridge_points(S, ang):
     return p[ridge] + off[ridge, None] * e[ridge], e[ridge], s0[ridge]
 
 
+@dataclasses.dataclass
+class _ConsistentEdges:
+    """One reading of the per-photo edge evidence: its strength and angle
+    (:func:`consistent_edge_strength`) and ridge points (:func:`consistent_edge_points`), made once
+    per :func:`find_spheres` and shared by the photo-edge search and every refit on these edges."""
+
+    strength: np.ndarray
+    angle: np.ndarray
+    points: tuple
+
+    @classmethod
+    def of(cls, tensor, n_photos: int, centered: bool = False) -> "_ConsistentEdges":
+        S, ang = consistent_edge_strength(tensor, n_photos, centered)
+        return cls(S, ang, _ridge_points(S, ang))
+
+
 def photo_colour_counts(im, lum, counts, lit_fraction: float = 0.1, clip_fraction: float = 0.98) -> None:
     """Add one photo's colour evidence to ``counts`` (in place): per pixel, its min/max channel bin.
 
@@ -1609,6 +1625,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_scale(K, wfc, R, L.shape, source, scene_center)
     cam = _Camera(camera_model, K, dist, wfc, R, L.shape)
     edges = _edge_map(mx, L, source)
+    # the edges that hold in the photos (None: a single image, or fewer than 3 photos), read once
+    held = _ConsistentEdges.of(*tensor) if tensor is not None and tensor[1] >= 3 else None
     rejected: list[str] = []
     if hints:
         hint_info = []
@@ -1620,7 +1638,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         cands = _hinted_candidates(hint_info, edges, L.shape, source)
         _check_duplicate_circles(cands, "hint", source)
         fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", workers)
-        fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
+        fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
@@ -1630,8 +1648,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
-        if tensor is not None and tensor[1] >= 3:  # outlines the max image leaves out (white on white)
-            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges)
+        if held is not None:  # outlines the max image leaves out (white on white)
+            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers)
             # one the photos' edges outline precisely but leave open (a textured ground's patches
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
             # may have missed among the texture's: it is fitted on the max image's edges too
@@ -1642,7 +1660,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
         # ground's circles hold in every photo too) gains from them a score that hides a real sphere
         open_ = [ft.coverage < CRITERIA["min_closed"] * ft.visible_fraction for ft in fits]
-        refit = _with_consistent_edges([ft for ft, o in zip(fits, open_) if o], tensor, L, cam, max_residual_px)
+        refit = _with_consistent_edges([ft for ft, o in zip(fits, open_) if o], held, L, cam, max_residual_px)
         it = iter(refit)
         fits = [next(it) if o else ft for ft, o in zip(fits, open_)]
         fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
@@ -1657,7 +1675,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = [ft if ft.source == OUTER_SOURCE or ft.outline_edges == PHOTO_EDGES
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
-        fits = _with_consistent_edges(fits, tensor, L, cam, max_residual_px)
+        fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
     noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
@@ -1818,15 +1836,17 @@ def _same_circle(a, b) -> bool:
 PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
 
 
-def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: _EdgeMap) -> tuple[list, int]:
+def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: _EdgeMap,
+                     held: _ConsistentEdges, workers: int = 1) -> tuple[list, int]:
     """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
 
     In the max image every pixel reads its best light, so a white matte sphere on a white ground
     is about as bright as the ground all round its silhouette (both face some light head-on): the
     max image has no edge there, Hough proposes no circle, and the sphere is never a candidate. In
     each photo, though, its limb and the ground behind it differ (which is brighter changes), so
-    the per-photo edge evidence (:func:`consistent_edge_strength`) outlines it in full. Circles are
-    proposed by Hough on that strength (8 bit over its robust peak) and each is fitted on the
+    the per-photo edge evidence (:func:`consistent_edge_strength`; ``held``, read once by
+    :func:`find_spheres`) outlines it in full. Circles are proposed by Hough's ``HOUGH_GRADIENT_ALT`` transforms
+    on that strength (8 bit over its robust peak) and each is fitted on the
     ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
@@ -1842,58 +1862,102 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     :data:`PHOTO_EDGES`, so they must close :data:`ffls.spheres.select.CRITERIA`
     ``min_closed_photos`` of their outline, and are judged by the same criteria. Returns those fits
     and how many circles were proposed.
+
+    The circles' fits are independent of each other and of the judging: with ``workers > 1`` they
+    are made in that many forked processes (:func:`_forked_map`), then judged here in order, so the
+    result is the same for any number.
     """
-    more, n_proposed = [], 0
     round_ = [ft for ft in fits if round_outline(ft, max_residual_px)]
     # the edges that hold in the photos, then the ones whose contrast changes with the light (the
     # gradient's covariance: a textured ground's edges, the same in every photo, drop out of it)
+    passes, images = [], []
     for centered in (False, True)[:1 + (len(tensor[0]) >= EDGE_TENSOR_ROWS)]:
-        S, ang = consistent_edge_strength(*tensor, centered=centered)
-        H, W = S.shape
-        peak = _robust_peak(S)
+        ev = _ConsistentEdges.of(*tensor, centered=True) if centered else held
+        H, W = ev.strength.shape
+        peak = _robust_peak(ev.strength)
         if not peak > 0:
             continue
         sc = 255.0 / peak
-        g8 = np.clip(S * sc, 0, 255).astype(np.uint8)
-        # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio)
-        # on the changing edges, only the ALT transform's well-formed circles: its plain gradient's
-        # 30 there are mostly arcs of moving shadows, each a fit (and the pass's cost) for nothing
-        hc = np.concatenate(_hough_candidates_many([(g8, 3, min(H, W) / 2, 0.5 * sc, not centered)]))
-        n_proposed += len(hc)
-        cpts = _ridge_points(S, ang)
-        for x, y, r in hc:
-            ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
-            for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
-                if ft is None:
-                    break
-                again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, cpts, cam, "auto")
-                if again is None or outline_quality(again) <= outline_quality(ft):
-                    break
-                ft = again
-            if ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX or any(
-                    _same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px)) for o in round_):
-                continue
-            # edges that change with the light also trace the envelope of moving cast shadows round
-            # an object's foot, and such arcs join into circles that overlap the object's outline:
-            # a circle only the changing edges show, or one overlapping an outline fitted on the max
-            # image, must be one the max image's edges support as a Hough candidate's must (a
-            # silhouette is an edge there; a textured ground's circles only crowd it out of Hough's
-            # proposals, and the fit of a circle Hough put near it may be a loose one many times
-            # its size). A white sphere on a white ground, which the max image does not outline,
-            # overlaps none.
-            overlaps = any(np.hypot(*(ft.center_px - o.center_px)) <= 0.8 * (ft.radius_px + o.radius_px)
-                           for o in fits)
-            if ((centered or overlaps)
-                    and _score_circle(*ft.center_px, ft.radius_px, edges.distance)[0] < MIN_EDGE_SUPPORT):
-                continue
-            ft.outline_edges = PHOTO_EDGES
-            same = [k for k, o in enumerate(more)
-                    if _same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px))]
-            if not same:
-                more.append(ft)
-            elif outline_quality(ft) > outline_quality(more[same[0]]):  # the better outline of the same circle
-                more[same[0]] = ft
-    return more, n_proposed
+        g8 = np.clip(ev.strength * sc, 0, 255).astype(np.uint8)
+        # Hough's edge threshold: half the robust peak of the strength (as for the shading ratio);
+        # only the ALT transform's well-formed circles: the plain gradient's 30 (of some 5,000 it
+        # rates on a busy capture's strength) are mostly arcs of moving shadows, and the transform
+        # and their fits were a quarter of the search's cost for no sphere found (docs/spheres.md)
+        passes.append((centered, ev.points))
+        images.append((g8, 3, min(H, W) / 2, 0.5 * sc, False))
+    found = _hough_candidates_many(images)  # every pass's transforms at once
+    circles = [(k, x, y, r) for k, hc in enumerate(found) for x, y, r in hc]
+    global _photo_edge_context
+    _photo_edge_context = (circles, [cpts for _, cpts in passes], cam)  # inherited by forked workers
+    try:
+        done = _forked_map(_photo_edge_fit, len(circles), workers)
+    finally:
+        _photo_edge_context = None
+    more = []
+    for (p, *_), ft in zip(circles, done):
+        centered = passes[p][0]
+        if ft is None or ft.residual_px > PHOTO_EDGE_MAX_RESIDUAL_PX or any(
+                _same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px)) for o in round_):
+            continue
+        # edges that change with the light also trace the envelope of moving cast shadows round
+        # an object's foot, and such arcs join into circles that overlap the object's outline:
+        # a circle only the changing edges show, or one overlapping an outline fitted on the max
+        # image, must be one the max image's edges support as a Hough candidate's must (a
+        # silhouette is an edge there; a textured ground's circles only crowd it out of Hough's
+        # proposals, and the fit of a circle Hough put near it may be a loose one many times
+        # its size). A white sphere on a white ground, which the max image does not outline,
+        # overlaps none.
+        overlaps = any(np.hypot(*(ft.center_px - o.center_px)) <= 0.8 * (ft.radius_px + o.radius_px)
+                       for o in fits)
+        if ((centered or overlaps)
+                and _score_circle(*ft.center_px, ft.radius_px, edges.distance)[0] < MIN_EDGE_SUPPORT):
+            continue
+        ft.outline_edges = PHOTO_EDGES
+        same = [k for k, o in enumerate(more)
+                if _same_circle((*ft.center_px, ft.radius_px), (*o.center_px, o.radius_px))]
+        if not same:
+            more.append(ft)
+        elif outline_quality(ft) > outline_quality(more[same[0]]):  # the better outline of the same circle
+            more[same[0]] = ft
+    return more, len(circles)
+
+
+#: ``(circles [(pass, x, y, r)], each pass's ridge points, camera)`` of the running
+#: :func:`_photo_edge_fits`, inherited by its forked workers.
+_photo_edge_context: tuple | None = None
+
+
+def _photo_edge_fit(k: int):
+    """Circle ``k`` of :data:`_photo_edge_context` fitted on its pass's ridge points
+    (:func:`_fit_on_consistent_edges`), searched again from its own fit while that improves
+    :func:`outline_quality`; None where there is no fit."""
+    circles, ridges, cam = _photo_edge_context
+    p, x, y, r = circles[k]
+    cpts = ridges[p]
+    ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
+    for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
+        if ft is None:
+            break
+        again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, cpts, cam, "auto")
+        if again is None or outline_quality(again) <= outline_quality(ft):
+            break
+        ft = again
+    return ft
+
+
+def _forked_map(fn, n: int, workers: int) -> list:
+    """``[fn(k) for k in range(n)]``, made in ``workers`` forked processes where that is more than
+    one (and the platform forks). ``fn`` reads what it shares from a module global set before the
+    call, which the workers inherit: only ``k`` and the results are pickled. The same results, in
+    the same order, for any number."""
+    workers = max(1, min(int(workers), n))
+    if workers > 1 and "fork" in _mp_methods():
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as ex:
+            return list(ex.map(fn, range(n), chunksize=max(1, n // (4 * workers))))
+    return [fn(k) for k in range(n)]
 
 
 def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, workers: int = 1):
@@ -1913,18 +1977,10 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, wor
         K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])  # undistorted, square pixels
         und_all = project_points(pixel_rays(pts, cam.K, cam.dist), K_und, None) if len(pts) else pts
     context = _CandidateContext(list(cands), edges, cam, search_tol, label, und_all, K_und)
-    workers = max(1, min(int(workers), len(context.cands)))
     global _candidate_context
     _candidate_context = context  # inherited by the forked workers (nothing pickled)
     try:
-        if workers > 1 and len(pts) and "fork" in _mp_methods():
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-
-            with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as ex:
-                done = list(ex.map(_fit_candidate, range(len(context.cands))))
-        else:
-            done = [_fit_candidate(k) for k in range(len(context.cands))]
+        done = _forked_map(_fit_candidate, len(context.cands), workers if len(pts) else 1)
     finally:
         _candidate_context = None
     fits = [d for d in done if not isinstance(d, tuple)]
@@ -2287,16 +2343,16 @@ def _refine_on_profiles(ft, L, cam: _Camera, max_residual_px: float, noise: floa
     return new
 
 
-def _with_consistent_edges(fits, tensor, L, cam: _Camera, max_residual_px: float) -> list:
-    """Every fitted candidate refitted on the per-photo edge evidence ``tensor`` (the summed tensor and
-    its photo count) where it fits better (:func:`_refine_on_consistent_edges`); unchanged without
-    the evidence (None: a single image, or fewer than 3 photos). A mirror ball (an outer outline, or
+def _with_consistent_edges(fits, held: _ConsistentEdges | None, L, cam: _Camera, max_residual_px: float) -> list:
+    """Every fitted candidate refitted on the per-photo edge evidence ``held`` (its ridge points)
+    where it fits better (:func:`_refine_on_consistent_edges`); unchanged without the evidence
+    (None: a single image, or fewer than 3 photos). A mirror ball (an outer outline, or
     a dark cap, :func:`ffls.spheres.mirror_outline.dark_cap`, on ``L``, the max image's luminance)
     is left as it is: its silhouette's contrast, the step of its reflectance, is the same in every
     photo as the reflected contrasts inside it; its outline is the max image's (:func:`_outer_outline`)."""
-    if tensor is None or tensor[1] < 3 or not fits:
+    if held is None or not fits:
         return fits
-    cpts = consistent_edge_points(*tensor)
+    cpts = held.points
     return [ft if ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
             else _refine_on_consistent_edges(ft, cpts, cam, max_residual_px) for ft in fits]
 
