@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_lines import one_line as _one_line
 from ffls.cli import main
 from ffls.errors import InputError
 from ffls.io.images import read_image, write_png
@@ -39,16 +40,6 @@ def _edited(cap: Path, dst: Path, index: int, name: str, pixels) -> Path:
     doc["images"][index] = name
     (dst / "capture.json").write_text(json.dumps(doc))
     return dst
-
-
-def _one_line(capfd, argv) -> tuple[int, str]:
-    capfd.readouterr()
-    rc = main([str(a) for a in argv])
-    out, err = capfd.readouterr()
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert "Traceback" not in err + out
-    assert len(lines) == 1, err
-    return rc, lines[0]
 
 
 # ----------------------------------------------------------------------------- photo headers

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_lines import one_line as _one_line
 from ffls.cli import main
 
 
@@ -29,16 +30,6 @@ def cap(tmp_path_factory):
     root = tmp_path_factory.mktemp("r11")
     write_synthetic_capture(root / "cap", n_lights=12, resolution=24, progress=False, seed=3)
     return root / "cap"
-
-
-def _one_line(capfd, argv) -> tuple[int, str]:
-    capfd.readouterr()
-    rc = main([str(a) for a in argv])
-    out, err = capfd.readouterr()
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert "Traceback" not in err + out
-    assert len(lines) == 1, err
-    return rc, lines[0]
 
 
 def _edited_capture(cap: Path, dst: Path, edit) -> Path:
