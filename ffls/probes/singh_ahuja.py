@@ -30,7 +30,7 @@ programme (HiGHS).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,7 +42,8 @@ from ffls.probes.selection import CRITERIA, Selection, bic, normal_blocks, refin
 from ffls.probes.sources import geodesic_level, latlong_solid_angles, sources_to_latlong
 
 __all__ = ["BLOCK", "SCHEMES", "PROJECTION_SCHEMES", "PocsResult", "PocsSources", "pocs", "dykstra_pocs",
-           "least_power_pocs", "residual_bound", "residual_l1_bound", "ResidualEnergySet", "pixel_subset",
+           "least_power_pocs", "averaged_least_power", "residual_bound", "residual_l1_bound", "ResidualEnergySet",
+           "pixel_subset", "pixel_subsets",
            "singh_ahuja", "singh_ahuja_sources", "adaptive_singh_ahuja",
            "estimate_lighting_SinghAhuja"]
 
@@ -724,6 +725,30 @@ def pixel_subset(m: int, max_pixels: int | None, seed: int = 0) -> np.ndarray:
     return np.sort(np.random.default_rng(seed).choice(m, int(max_pixels), replace=False))
 
 
+def pixel_subsets(m: int, max_pixels: int | None, count: int, seed: int = 0) -> list[np.ndarray]:
+    """Up to ``count`` disjoint sorted index sets of ``m`` pixels, each of about ``max_pixels``.
+
+    The first is :func:`pixel_subset`'s (``seed``); the others split the remaining pixels (a permutation from
+    ``default_rng(seed)``) into as many parts of about ``max_pixels`` as they fill (the count rounded: each part
+    holds 0.67 to 1.5 times ``max_pixels``), at most ``count - 1``, of exactly ``max_pixels`` when capped. All
+    pixels in one set when ``max_pixels`` is None or at least ``m``.
+    """
+    count = int(count)
+    if count < 1:
+        raise ValueError(f"count must be >= 1, not {count!r}")
+    first = pixel_subset(m, max_pixels, seed)
+    if count == 1 or first.size == m:
+        return [first]
+    size = int(max_pixels)
+    rest = np.setdiff1d(np.arange(m), first)
+    fill = int(round(rest.size / size))
+    k = min(count - 1, fill)
+    if k < 1:
+        return [first]
+    perm = np.random.default_rng(seed).permutation(rest)[:rest.size if k == fill else k * size]
+    return [first] + [np.sort(part) for part in np.array_split(perm, k)]
+
+
 def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iterations: int = 50, upper=None,
                         delta: float = 0.0, order: str = "random", seed: int = 0, max_pixels: int | None = 2000,
                         x0=None, scheme: str = "sequential", relaxation: float = 1.0,
@@ -780,11 +805,62 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
                        pixels_used=int(use.size))
 
 
+def averaged_least_power(normals, radiance, albedo, directions, upper=None, max_pixels: int | None = 2000,
+                         subsets: int = 4, seed: int = 0) -> PocsSources:
+    """The least-power powers of a source set (:func:`least_power_pocs`), averaged over disjoint pixel subsets.
+
+    One programme per subset of :func:`pixel_subsets` (``max_pixels``, ``subsets``, ``seed``; the first subset
+    is :func:`pixel_subset`'s, the pixels an adaptive set is chosen on), and the mean of their maps. A least-power
+    map is a vertex of its programme, and noise moves it from vertex to vertex (power jumps between sources the
+    ball barely tells apart); the mean over independent pixels averages those jumps out, where one programme
+    over all the pixels costs far more and was no better (``docs/probes.md``, "Noise: the least-power map
+    averaged over pixel subsets").
+
+    Parameters
+    ----------
+    normals, radiance, albedo, directions, upper
+        As :func:`singh_ahuja_sources`.
+    max_pixels : int, optional
+        Pixels per programme (None: one programme over all).
+    subsets : int
+        At most this many programmes (1: :func:`singh_ahuja_sources` with ``scheme='least-power'``).
+    seed : int
+
+    Returns
+    -------
+    PocsSources
+        ``residuals`` over the first subset (at zero and at the mean), ``pixels_used`` over all subsets,
+        ``rendered`` every pixel.
+    """
+    if int(subsets) != subsets or subsets < 1:
+        raise ValueError(f"subsets must be an integer >= 1, not {subsets!r}")
+    n, b, rho, g = _pixels(normals, radiance, albedo)
+    parts = pixel_subsets(n.shape[0], max_pixels, subsets, seed)
+    fits = [singh_ahuja_sources(n[p], b[p], rho[p], directions, upper=upper, max_pixels=None, scheme="least-power")
+            for p in parts]
+    d = fits[0].directions
+    f = np.mean([x.intensities for x in fits], axis=0)
+    g0 = g[parts[0]]
+    gn = float(np.linalg.norm(g0)) or 1.0
+    res = np.array([float(np.linalg.norm(g0)) / gn,
+                    float(np.linalg.norm(g0 - lambert_matrix(n[parts[0]], d) @ f)) / gn])
+    rendered = lambert_matrix(n, d) @ f * rho / np.pi
+    return replace(fits[0], intensities=f, rendered=rendered, residuals=res, pixels_used=sum(p.size for p in parts),
+                   **_rms_of(rendered, b))
+
+
+def _rms_of(rendered, b) -> dict:
+    """``rms`` and ``relative_rms`` of ``rendered`` against the pixels ``b``, as keyword arguments."""
+    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
+    ref = float(np.sqrt(np.mean(b ** 2)))
+    return dict(rms=rms, relative_rms=rms / ref if ref > 0 else np.inf)
+
+
 def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, upper=None, order: str = "random",
                          seed: int = 0, max_pixels: int | None = 2000, criterion: str = "cv", folds: int = 5,
                          tolerance: float = 0.05, base_frequency: int = 3, max_sources: int = 500, max_level: int = 3,
                          power_share: float = 0.5, patience: int = 2, scheme: str = "sequential",
-                         relaxation: float = 1.0, tol: float | None = None):
+                         relaxation: float = 1.0, tol: float | None = None, subsets: int = 4):
     """POCS over an adaptive geodesic source set: Singh and Ahuja's projections where the light is.
 
     The set is grown by :func:`ffls.probes.selection.refine_sources`, as for Hougen and Ahuja
@@ -814,7 +890,15 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     scheme, relaxation, tol
         As :func:`pocs`, for every fit; with ``scheme='least-power'`` the rounds are fitted and chosen by the
         paper's sweeps (``iterations``, ``order``, ``seed``, ``relaxation``, ``tol``), and the chosen set's
-        powers are then :func:`least_power_pocs`'s.
+        powers are then :func:`least_power_pocs`'s, averaged over ``subsets`` pixel subsets.
+    subsets : int
+        ``scheme='least-power'``: the least-power map is solved on up to this many disjoint subsets of about
+        ``max_pixels`` pixels (:func:`pixel_subsets`: the first the one the set was chosen on, the others from
+        the remaining pixels, as many as they fill) and the maps are averaged. A least-power map is a vertex of
+        its programme, and noise moves it from vertex to vertex (power jumps between sources the ball barely
+        tells apart); the mean over independent pixels averages that out, where one programme over all the
+        pixels is too slow and no better (``docs/probes.md``, "Noise: the least-power map averaged over pixel
+        subsets"). 1: one programme, on the selection's pixels.
 
     Returns
     -------
@@ -824,6 +908,8 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     """
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}, not {criterion!r}")
+    if int(subsets) != subsets or subsets < 1:
+        raise ValueError(f"subsets must be an integer >= 1, not {subsets!r}")
     n, b, rho, _ = _pixels(normals, radiance, albedo)
     m = n.shape[0]
     use = pixel_subset(m, max_pixels, seed)
@@ -866,14 +952,10 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     # the chosen round's sources, re-rendered on every pixel
     fit = sel.fit
     if scheme == "least-power":
-        fit = singh_ahuja_sources(n[use], b[use], rho[use], fit.directions, upper=upper, max_pixels=None,
-                                  scheme=scheme)
-    rendered = lambert_matrix(n, fit.directions) @ fit.intensities * rho / np.pi
-    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
-    ref = float(np.sqrt(np.mean(b ** 2)))
-    full = PocsSources(directions=fit.directions, intensities=fit.intensities, rendered=rendered, rms=rms,
-                       relative_rms=rms / ref if ref > 0 else np.inf, residuals=fit.residuals,
-                       iterations=fit.iterations, pixels_used=fit.pixels_used)
+        full = averaged_least_power(n, b, rho, fit.directions, upper, max_pixels, subsets, seed)
+    else:
+        rendered = lambert_matrix(n, fit.directions) @ fit.intensities * rho / np.pi
+        full = replace(fit, rendered=rendered, **_rms_of(rendered, b))
     note = sel.note.replace("adaptive sources", "POCS over adaptive sources", 1)
     return Selection(chosen=sel.chosen, candidates=sel.candidates, scores=sel.scores, criterion=sel.criterion,
                      fit=full, note=note)
