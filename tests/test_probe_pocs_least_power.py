@@ -219,3 +219,13 @@ def test_adaptive_least_power_averages_over_subsets():
     assert sel.fit.pixels_used == 900
     with pytest.raises(ValueError, match="subsets"):
         adaptive_singh_ahuja(n, rad, 0.7, scheme="least-power", subsets=0)
+
+
+def test_pocs_lightmap_least_power_reports_the_averaged_subsets(courtyard_ball_folder):
+    from ffls.io.probe import load_probe
+    from ffls.probes.estimate import pocs_lightmap
+
+    est = pocs_lightmap(load_probe(courtyard_ball_folder), height=16, max_pixels=600, criterion="bic",
+                        scheme="least-power")
+    line = next(x for x in est.notes if x.startswith("POCS (Singh-Ahuja)"))
+    assert "disjoint subset of about 600 pixels, averaged" in line and "over 600 pixels" not in line

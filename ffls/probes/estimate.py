@@ -528,6 +528,8 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
         f", relaxation {relaxation:g}" if relaxation != 1.0 else "") + (
         f", stopped at a change below {tol:g}" if tol is not None and res.iterations < iterations else "")
     runs = "one linear programme per channel" if scheme == "least-power" else f"{res.iterations} iterations"
+    if scheme == "least-power" and sources != "grid" and max_pixels is not None and res.pixels_used > max_pixels:
+        runs += f" and disjoint subset of about {max_pixels} pixels, averaged"   # averaged_least_power
     notes.append(f"POCS (Singh-Ahuja): {model}, {runs} ({how}) over "
                  f"{res.pixels_used} pixels; residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% (relative), "
                  f"re-rendered relative RMS {100 * res.relative_rms:.2f}%")
