@@ -2,20 +2,24 @@
 mean of programmes over disjoint pixel subsets, beside the default.
 
     OMP_NUM_THREADS=1 python benchmarks/probes_pocs_noise.py [--maps studio] [--conditions 0:0,0.01:0,0.01:1]
-        [--orientations 3] [--subsets 4]
+        [--orientations 0,1,2] [--subsets 4]
 
 The ball and measure of ``benchmarks/probes_pocs_least_power.py`` (a Lambertian ball of albedo 0.7, 80 px, seen
 from the relit capture's camera; the bundled map at 64 rows; Gaussian noise of ``noise`` times the image's mean from
 ``numpy.random.default_rng(seed)`` for each map and seed; the set chosen on 1000 pixels, ``max_pixels=1000``;
 the ``ffls synth`` capture, 150 lights, relit under the recovered vs the true map, relative RMS). Orientations as
 ``benchmarks/probes_orientation.py``: the geodesic hierarchy fixed, the pixels' normals turned by ``R`` (the first
-the identity, the others ``scipy.spatial.transform.Rotation.random(K, random_state=0)``) and the sources turned back.
+the identity, orientation ``i`` the ``i``-th of ``scipy.spatial.transform.Rotation.random(10, random_state=0)``) and
+the sources turned back.
 Rows per map, condition and orientation:
 
 * ``default``: ``adaptive_singh_ahuja`` (CV, the paper's 50 sweeps), the default of ``ffls probe pocs``;
-* ``least-power x1``: ``averaged_least_power(..., subsets=1)`` on that set (one programme, on the set's pixels:
-  the least-power scheme before the subsets);
-* ``least-power xK``: ``averaged_least_power(..., subsets=K)`` (what ``scheme='least-power'`` does now).
+* ``least-power x1``: ``averaged_least_power(..., subsets=1, refit=False)`` on that set (one programme, on the
+  set's pixels: the least-power scheme before this round);
+* ``least-power xK``: ``averaged_least_power(..., subsets=K, refit=False)``, the mean of the programmes on ``K``
+  disjoint pixel subsets;
+* ``least-power xK refit``: the same with ``refit=True`` (each programme's lit sources refitted by bounded least
+  squares before the mean): what ``scheme='least-power'`` does now.
 
 Time: CPU seconds of this process (one thread), the least-power rows' including the set's. Writes
 ``benchmarks/results/probes_pocs_noise.json``.
@@ -46,7 +50,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--maps", default=",".join(MAPS))
     ap.add_argument("--conditions", default="0:0,0.01:0,0.01:1", help="noise:seed pairs, comma-separated")
-    ap.add_argument("--orientations", type=int, default=3)
+    ap.add_argument("--orientations", default="0,1,2", help="indices of the orientations (0: the identity)")
     ap.add_argument("--subsets", type=int, default=4)
     ap.add_argument("--json", default=str(ROOT / "benchmarks/results/probes_pocs_noise.json"))
     a = ap.parse_args(argv)
@@ -54,7 +58,8 @@ def main(argv=None):
     if not set(maps) <= set(MAPS):
         ap.error(f"--maps: choose from {','.join(MAPS)}")
     conditions = [(float(x.split(":")[0]), int(x.split(":")[1])) for x in a.conditions.split(",") if x]
-    rots = Rotation.random(a.orientations, random_state=0).as_matrix()
+    orients = [int(x) for x in a.orientations.split(",") if x]
+    rots = Rotation.random(10, random_state=0).as_matrix()
     rots[0] = np.eye(3)
     cap, lights = probe_benchmark_capture("ffls_probes_pocs_noise_")
     rows = []
@@ -65,26 +70,29 @@ def main(argv=None):
             rad = sph.radiance
             if noise > 0:
                 rad = rad + np.random.default_rng(seed).normal(0.0, noise * float(np.mean(rad)), size=rad.shape)
-            for o, R in enumerate(rots):
+            for o in orients:
+                R = rots[o]
                 n = sph.normals @ R.T
                 t = time.process_time()
                 sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="cv", max_pixels=PIXELS)
                 t_set = time.process_time() - t
                 fits = [("default", sel.fit, t_set)]
-                for k in (1, a.subsets):
+                for k, refit in ((1, False), (a.subsets, False), (a.subsets, True)):   # x1: the old scheme
                     t = time.process_time()
-                    fit = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=PIXELS, subsets=k)
-                    fits.append((f"least-power x{k}", fit, t_set + time.process_time() - t))
+                    fit = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=PIXELS, subsets=k,
+                                               refit=refit)
+                    fits.append((f"least-power x{k}" + (" refit" if refit else ""), fit,
+                                 t_set + time.process_time() - t))
                 for method, fit, cpu in fits:
                     err = relit_capture_error(cap, lights, sources_to_latlong(fit.directions @ R, fit.intensities, H),
                                               truth)
                     rows.append({"map": name, "noise": noise, "seed": seed, "orientation": o, "method": method,
                                  "chosen": int(sel.chosen), "pixels": int(fit.pixels_used), "relit_capture": err,
                                  "cpu_s": cpu})
-                    print(f"{name:9s} noise {noise:g} seed {seed} orientation {o}  {method:16s} {sel.chosen:4d}  "
+                    print(f"{name:9s} noise {noise:g} seed {seed} orientation {o}  {method:22s} {sel.chosen:4d}  "
                           f"relit {100 * err:5.1f}%  {cpu:6.2f} s", flush=True)
     write_json(a.json, {"host": host_info(), "map_height": H, "pixels": PIXELS, "subsets": a.subsets,
-                        "orientations": a.orientations, "rows": rows,
+                        "orientations": orients, "rows": rows,
                         "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_pocs_noise.py",
                                              *sys.argv[1:]])})
     print("wrote", a.json)
