@@ -2,7 +2,7 @@
 mean of programmes over disjoint pixel subsets, beside the default.
 
     OMP_NUM_THREADS=1 python benchmarks/probes_pocs_noise.py [--maps studio] [--conditions 0:0,0.01:0,0.01:1]
-        [--orientations 0,1,2] [--subsets 4]
+        [--orientations 0,1,2] [--subsets 4] [--plain]
 
 The ball and measure of ``benchmarks/probes_pocs_least_power.py`` (a Lambertian ball of albedo 0.7, 80 px, seen
 from the relit capture's camera; the bundled map at 64 rows; Gaussian noise of ``noise`` times the image's mean from
@@ -16,8 +16,8 @@ Rows per map, condition and orientation:
 * ``default``: ``adaptive_singh_ahuja`` (CV, the paper's 50 sweeps), the default of ``ffls probe pocs``;
 * ``least-power x1``: ``averaged_least_power(..., subsets=1, refit=False)`` on that set (one programme, on the
   set's pixels: the least-power scheme before this round);
-* ``least-power xK``: ``averaged_least_power(..., subsets=K, refit=False)``, the mean of the programmes on ``K``
-  disjoint pixel subsets;
+* ``least-power xK`` (with ``--plain``): ``averaged_least_power(..., subsets=K, refit=False)``, the mean of the
+  programmes on ``K`` disjoint pixel subsets;
 * ``least-power xK refit``: the same with ``refit=True`` (each programme's lit sources refitted by bounded least
   squares before the mean): what ``scheme='least-power'`` does now.
 
@@ -52,6 +52,7 @@ def main(argv=None):
     ap.add_argument("--conditions", default="0:0,0.01:0,0.01:1", help="noise:seed pairs, comma-separated")
     ap.add_argument("--orientations", default="0,1,2", help="indices of the orientations (0: the identity)")
     ap.add_argument("--subsets", type=int, default=4)
+    ap.add_argument("--plain", action="store_true", help="also the mean of the programmes without the refit")
     ap.add_argument("--json", default=str(ROOT / "benchmarks/results/probes_pocs_noise.json"))
     a = ap.parse_args(argv)
     maps = [m for m in a.maps.split(",") if m]
@@ -77,7 +78,8 @@ def main(argv=None):
                 sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="cv", max_pixels=PIXELS)
                 t_set = time.process_time() - t
                 fits = [("default", sel.fit, t_set)]
-                for k, refit in ((1, False), (a.subsets, False), (a.subsets, True)):   # x1: the old scheme
+                runs = ((1, False),) + (((a.subsets, False),) if a.plain else ()) + ((a.subsets, True),)
+                for k, refit in runs:   # x1: the scheme before this round
                     t = time.process_time()
                     fit = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=PIXELS, subsets=k,
                                                refit=refit)
@@ -95,7 +97,6 @@ def main(argv=None):
                         "orientations": orients, "rows": rows,
                         "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_pocs_noise.py",
                                              *sys.argv[1:]])})
-    print("wrote", a.json)
 
 
 if __name__ == "__main__":

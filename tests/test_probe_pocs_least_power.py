@@ -235,3 +235,14 @@ def test_pocs_lightmap_least_power_reports_the_averaged_subsets(courtyard_ball_f
                         scheme="least-power")
     line = next(x for x in est.notes if x.startswith("POCS (Singh-Ahuja)"))
     assert "disjoint subset of about 600 pixels, averaged" in line and "over 600 pixels" not in line
+
+
+def test_refit_support_gives_back_shrunk_power_on_the_lit_unknowns_only():
+    from ffls.probes.singh_ahuja import refit_support
+
+    # x + 2 y = 2: a shrunk answer (0, 0.9) is refitted to (0, 1); x stays 0; the amplitude bound holds
+    H = np.array([[1.0, 2.0]] * 3)
+    np.testing.assert_allclose(refit_support(H, np.full(3, 2.0), [[0.0], [0.9]])[:, 0], [0.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(refit_support(H, np.full(3, 2.0), [[0.0], [0.9]], upper=[10.0, 0.5])[:, 0],
+                               [0.0, 0.5], atol=1e-9)
+    np.testing.assert_array_equal(refit_support(H, np.full(3, 2.0), np.zeros((2, 1))), np.zeros((2, 1)))
