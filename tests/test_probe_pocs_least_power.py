@@ -235,6 +235,7 @@ def test_pocs_lightmap_least_power_reports_the_averaged_subsets(courtyard_ball_f
                         scheme="least-power")
     line = next(x for x in est.notes if x.startswith("POCS (Singh-Ahuja)"))
     assert "disjoint subset of about 600 pixels, averaged" in line and "over 600 pixels" not in line
+    assert "its lit sources refitted" in line
 
 
 def test_refit_support_gives_back_shrunk_power_on_the_lit_unknowns_only():

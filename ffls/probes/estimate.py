@@ -524,7 +524,8 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
     how = {"sequential": f"{order} order", "extrapolated": "parallel, extrapolated",
            "dykstra": "Dykstra, the least-norm feasible map",
            "least-power": "the least total power within the L1 residual the data allow" + (
-               "" if sources == "grid" else f"; the set grown by {iterations} {order}-order sweeps")}[scheme] + (
+               "" if sources == "grid" else f", its lit sources refitted; the set grown by {iterations} {order}-order "
+                                            "sweeps")}[scheme] + (
         f", relaxation {relaxation:g}" if relaxation != 1.0 else "") + (
         f", stopped at a change below {tol:g}" if tol is not None and res.iterations < iterations else "")
     runs = "one linear programme per channel" if scheme == "least-power" else f"{res.iterations} iterations"

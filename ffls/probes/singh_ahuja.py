@@ -26,7 +26,9 @@ projection of the start (zero: the least-norm map) onto the amplitude set and a 
 bound comes from the data (:func:`residual_bound`). :func:`least_power_pocs` (``scheme='least-power'``) adds a
 third set, the maps of total power at most ``E``, with ``E`` the least at which it meets the amplitude set and an
 L1 residual set bounded from the data (:func:`residual_l1_bound`): the sparsest map that fits, one linear
-programme (HiGHS).
+programme (HiGHS). Under noise that map loses power to the residual budget and jumps between vertices;
+:func:`averaged_least_power` (the adaptive least-power scheme) refits each programme's lit sources and averages
+the programmes of disjoint pixel subsets.
 """
 from __future__ import annotations
 
