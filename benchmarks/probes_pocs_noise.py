@@ -2,11 +2,12 @@
 mean of programmes over disjoint pixel subsets, beside the default.
 
     OMP_NUM_THREADS=1 python benchmarks/probes_pocs_noise.py [--maps studio] [--conditions 0:0,0.01:0,0.01:1]
-        [--orientations 0,1,2] [--subsets 4] [--plain]
+        [--orientations 0,1,2] [--subsets 4] [--plain] [--pixels 1000]
 
 The ball and measure of ``benchmarks/probes_pocs_least_power.py`` (a Lambertian ball of albedo 0.7, 80 px, seen
 from the relit capture's camera; the bundled map at 64 rows; Gaussian noise of ``noise`` times the image's mean from
-``numpy.random.default_rng(seed)`` for each map and seed; the set chosen on 1000 pixels, ``max_pixels=1000``;
+``numpy.random.default_rng(seed)`` for each map and seed; the set chosen on ``--pixels`` pixels, ``max_pixels``, 1000
+by default, 2000 the CLI's;
 the ``ffls synth`` capture, 150 lights, relit under the recovered vs the true map, relative RMS). Orientations as
 ``benchmarks/probes_orientation.py``: the geodesic hierarchy fixed, the pixels' normals turned by ``R`` (the first
 the identity, orientation ``i`` the ``i``-th of ``scipy.spatial.transform.Rotation.random(10, random_state=0)``) and
@@ -53,6 +54,7 @@ def main(argv=None):
     ap.add_argument("--orientations", default="0,1,2", help="indices of the orientations (0: the identity)")
     ap.add_argument("--subsets", type=int, default=4)
     ap.add_argument("--plain", action="store_true", help="also the mean of the programmes without the refit")
+    ap.add_argument("--pixels", type=int, default=PIXELS, help="max_pixels: of the set's choice and of each programme")
     ap.add_argument("--json", default=str(ROOT / "benchmarks/results/probes_pocs_noise.json"))
     a = ap.parse_args(argv)
     maps = [m for m in a.maps.split(",") if m]
@@ -75,13 +77,13 @@ def main(argv=None):
                 R = rots[o]
                 n = sph.normals @ R.T
                 t = time.process_time()
-                sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="cv", max_pixels=PIXELS)
+                sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="cv", max_pixels=a.pixels)
                 t_set = time.process_time() - t
                 fits = [("default", sel.fit, t_set)]
                 runs = ((1, False),) + (((a.subsets, False),) if a.plain else ()) + ((a.subsets, True),)
                 for k, refit in runs:   # x1: the scheme before this round
                     t = time.process_time()
-                    fit = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=PIXELS, subsets=k,
+                    fit = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=a.pixels, subsets=k,
                                                refit=refit)
                     fits.append((f"least-power x{k}" + (" refit" if refit else ""), fit,
                                  t_set + time.process_time() - t))
@@ -93,7 +95,7 @@ def main(argv=None):
                                  "cpu_s": cpu})
                     print(f"{name:9s} noise {noise:g} seed {seed} orientation {o}  {method:22s} {sel.chosen:4d}  "
                           f"relit {100 * err:5.1f}%  {cpu:6.2f} s", flush=True)
-    write_json(a.json, {"host": host_info(), "map_height": H, "pixels": PIXELS, "subsets": a.subsets,
+    write_json(a.json, {"host": host_info(), "map_height": H, "pixels": a.pixels, "subsets": a.subsets,
                         "orientations": orients, "rows": rows,
                         "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_pocs_noise.py",
                                              *sys.argv[1:]])})
