@@ -8,9 +8,10 @@ the image's mean drawn by ``numpy.random.default_rng(seed)`` for each map and se
 Rows, each over 1000 pixels (``max_pixels=1000``):
 
 * ``default``: ``adaptive_singh_ahuja`` (CV, the paper's 50 sweeps), the default of ``ffls probe pocs``;
-* ``least-power cv``: the same set, its powers by ``least_power_pocs`` (what ``scheme='least-power'`` does:
-  the set is grown and chosen by the sweeps, ``tests/test_probe_pocs_least_power.py`` checks it is the same);
-  its time is the default's plus the programme's;
+* ``least-power cv``: the same set, its powers by one ``least_power_pocs`` on the set's pixels (what
+  ``scheme='least-power'`` did before it averaged refitted programmes over pixel subsets, which
+  ``benchmarks/probes_pocs_noise.py`` measures; the set is grown and chosen by the sweeps); its time is the
+  default's plus the programme's;
 * ``bic`` and ``least-power bic``: the same with the set chosen by BIC;
 * ``dykstra``: ``scheme='dykstra'``, BIC, cap 3000, tol 1e-6 (the Dykstra row of ``benchmarks/probes.py``);
 * ``linf slab``: on the BIC set, the least total power within the paper's per-pixel slabs

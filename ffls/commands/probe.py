@@ -136,7 +136,8 @@ def _add_inverse(sub, common):
                    help="the paper's sweeps of row projections (default), extrapolated parallel projections "
                         "(Combettes), which converge to the least-squares point when noise leaves no common point, "
                         "Dykstra's best approximation: the least-norm map within the residual the data allow, or "
-                        "the map of least total power within the L1 residual the data allow (a linear programme)")
+                        "the map of least total power within the L1 residual the data allow (a linear programme; "
+                        "on adaptive sources, its lit sources refitted and averaged over pixel subsets)")
     q.add_argument("--relaxation", type=number(0.0, 2.0, lo_open=True, hi_open=True), default=1.0,
                    help="relaxation of the projections, in (0, 2); at most 1 with --scheme extrapolated")
     q.add_argument("--tol", type=number(0.0, 1.0, lo_open=True), default=None,

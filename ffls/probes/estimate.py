@@ -549,10 +549,13 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
     how = {"sequential": f"{order} order", "extrapolated": "parallel, extrapolated",
            "dykstra": "Dykstra, the least-norm feasible map",
            "least-power": "the least total power within the L1 residual the data allow" + (
-               "" if sources == "grid" else f"; the set grown by {iterations} {order}-order sweeps")}[scheme] + (
+               "" if sources == "grid" else f", its lit sources refitted; the set grown by {iterations} {order}-order "
+                                            "sweeps")}[scheme] + (
         f", relaxation {relaxation:g}" if relaxation != 1.0 else "") + (
         f", stopped at a change below {tol:g}" if tol is not None and res.iterations < iterations else "")
     runs = "one linear programme per channel" if scheme == "least-power" else f"{res.iterations} iterations"
+    if scheme == "least-power" and sources != "grid" and max_pixels is not None and res.pixels_used > max_pixels:
+        runs += f" and disjoint subset of about {max_pixels} pixels, averaged"   # averaged_least_power
     notes.append(f"POCS (Singh-Ahuja): {model}, {runs} ({how}) over "
                  f"{res.pixels_used} pixels; residual {100 * r[0]:.2f}% -> {100 * r[-1]:.2f}% (relative), "
                  f"re-rendered relative RMS {100 * res.relative_rms:.2f}%")

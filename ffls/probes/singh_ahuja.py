@@ -26,11 +26,13 @@ projection of the start (zero: the least-norm map) onto the amplitude set and a 
 bound comes from the data (:func:`residual_bound`). :func:`least_power_pocs` (``scheme='least-power'``) adds a
 third set, the maps of total power at most ``E``, with ``E`` the least at which it meets the amplitude set and an
 L1 residual set bounded from the data (:func:`residual_l1_bound`): the sparsest map that fits, one linear
-programme (HiGHS).
+programme (HiGHS). Under noise that map loses power to the residual budget and jumps between vertices;
+:func:`averaged_least_power` (the adaptive least-power scheme) refits each programme's lit sources and averages
+the programmes of disjoint pixel subsets.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,7 +44,8 @@ from ffls.probes.selection import CRITERIA, Selection, bic, normal_blocks, refin
 from ffls.probes.sources import geodesic_level, latlong_solid_angles, sources_to_latlong
 
 __all__ = ["BLOCK", "SCHEMES", "PROJECTION_SCHEMES", "PocsResult", "PocsSources", "pocs", "dykstra_pocs",
-           "least_power_pocs", "residual_bound", "residual_l1_bound", "ResidualEnergySet", "pixel_subset",
+           "least_power_pocs", "averaged_least_power", "refit_support", "residual_bound", "residual_l1_bound",
+           "ResidualEnergySet", "pixel_subset", "pixel_subsets",
            "singh_ahuja", "singh_ahuja_sources", "adaptive_singh_ahuja",
            "estimate_lighting_SinghAhuja"]
 
@@ -724,6 +727,30 @@ def pixel_subset(m: int, max_pixels: int | None, seed: int = 0) -> np.ndarray:
     return np.sort(np.random.default_rng(seed).choice(m, int(max_pixels), replace=False))
 
 
+def pixel_subsets(m: int, max_pixels: int | None, count: int, seed: int = 0) -> list[np.ndarray]:
+    """Up to ``count`` disjoint sorted index sets of ``m`` pixels, each of about ``max_pixels``.
+
+    The first is :func:`pixel_subset`'s (``seed``); the others split the remaining pixels (a permutation from
+    ``default_rng(seed)``) into as many parts of about ``max_pixels`` as they fill (the count rounded: each part
+    holds 0.67 to 1.5 times ``max_pixels``), at most ``count - 1``, of exactly ``max_pixels`` when capped. All
+    pixels in one set when ``max_pixels`` is None or at least ``m``.
+    """
+    count = int(count)
+    if count < 1:
+        raise ValueError(f"count must be >= 1, not {count!r}")
+    first = pixel_subset(m, max_pixels, seed)
+    if count == 1 or first.size == m:
+        return [first]
+    size = int(max_pixels)
+    rest = np.setdiff1d(np.arange(m), first)
+    fill = int(round(rest.size / size))
+    k = min(count - 1, fill)
+    if k < 1:
+        return [first]
+    perm = np.random.default_rng(seed).permutation(rest)[:rest.size if k == fill else k * size]
+    return [first] + [np.sort(part) for part in np.array_split(perm, k)]
+
+
 def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iterations: int = 50, upper=None,
                         delta: float = 0.0, order: str = "random", seed: int = 0, max_pixels: int | None = 2000,
                         x0=None, scheme: str = "sequential", relaxation: float = 1.0,
@@ -755,8 +782,6 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
     -------
     PocsSources
     """
-    from ffls.probes.sources import cell_solid_angles
-
     n, b, rho, g = _pixels(normals, radiance, albedo)
     m = n.shape[0]
     if directions is None:
@@ -765,7 +790,7 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     H = lambert_matrix(n, d)
     use = pixel_subset(m, max_pixels, seed)
-    hi = None if upper is None else float(upper) * cell_solid_angles(d, "full")
+    hi = _source_upper(d, upper)
     if scheme == "dykstra":   # the feasible powers of least Euclidean norm
         if float(delta) != 0.0 or float(relaxation) != 1.0:
             raise ValueError("scheme='dykstra' projects exactly onto its two sets: delta must be 0, relaxation 1")
@@ -780,11 +805,104 @@ def singh_ahuja_sources(normals, radiance, albedo=1.0, directions=None, iteratio
                        pixels_used=int(use.size))
 
 
+def _source_upper(directions, upper):
+    """The amplitude bound of each source's power: ``upper`` (a radiance) times its cell's solid angle."""
+    from ffls.probes.sources import cell_solid_angles
+
+    return None if upper is None else float(upper) * cell_solid_angles(directions, "full")
+
+
+def refit_support(H, g, f, lower: float = 0.0, upper=None) -> np.ndarray:
+    """The least-squares powers on the unknowns ``f`` lights, within the amplitude set (per channel).
+
+    ``f`` (J, c): a sparse answer (the least-power map). Its nonzero unknowns (above ``1e-9`` of the channel's
+    largest) are refitted by bounded least squares (``scipy.optimize.lsq_linear``, BVLS), the others stay 0:
+    the sources the programme chose keep, the power the L1 residual budget took from them is given back (the
+    relaxed lasso's refit, Meinshausen 2007).
+
+    Returns
+    -------
+    (J, c) float64
+    """
+    from scipy.optimize import lsq_linear
+
+    H, g, lo, hi = _lp_arrays(H, g, lower, upper)
+    f = np.asarray(f, dtype=np.float64).reshape(H.shape[1], g.shape[1])
+    out = np.zeros_like(f)
+    for c in range(g.shape[1]):
+        S = np.flatnonzero(f[:, c] > 1e-9 * max(float(f[:, c].max()), 1e-300))
+        if S.size:
+            out[S, c] = np.clip(lsq_linear(H[:, S], g[:, c], bounds=(lo[S], hi[S]), method="bvls").x, lo[S], hi[S])
+    return out
+
+
+def averaged_least_power(normals, radiance, albedo, directions, upper=None, max_pixels: int | None = 2000,
+                         subsets: int = 4, seed: int = 0, refit: bool = True) -> PocsSources:
+    """The least-power powers of a source set (:func:`least_power_pocs`), averaged over disjoint pixel subsets.
+
+    One programme per subset of :func:`pixel_subsets` (``max_pixels``, ``subsets``, ``seed``; the first subset
+    is :func:`pixel_subset`'s, the pixels an adaptive set is chosen on), the sources each lights refitted by
+    bounded least squares on its pixels (:func:`refit_support`), and the mean of their maps. Noise does two things
+    to a least-power map: the residual budget it allows is spent on removing power (the L1 shrinkage of the
+    lasso: studio relit with 8% less power than its true cells), which the refit gives back; and the answer, a
+    vertex of its programme, jumps from vertex to vertex (power moved between sources the ball barely tells
+    apart), which the mean over independent pixels averages out, where one programme over all the pixels costs
+    far more and was no better (``docs/probes.md``, "Noise: refitted least-power maps averaged over pixel
+    subsets").
+
+    Parameters
+    ----------
+    normals, radiance, albedo, directions, upper
+        As :func:`singh_ahuja_sources`.
+    max_pixels : int, optional
+        Pixels per programme (None: one programme over all).
+    subsets : int
+        At most this many programmes.
+    seed : int
+    refit : bool
+        Refit each programme's lit sources (default); False with ``subsets=1``: :func:`singh_ahuja_sources` with
+        ``scheme='least-power'``.
+
+    Returns
+    -------
+    PocsSources
+        ``residuals`` over the first subset (at zero and at the mean), ``pixels_used`` over all subsets,
+        ``rendered`` every pixel.
+    """
+    if int(subsets) != subsets or subsets < 1:
+        raise ValueError(f"subsets must be an integer >= 1, not {subsets!r}")
+    n, b, rho, g = _pixels(normals, radiance, albedo)
+    parts = pixel_subsets(n.shape[0], max_pixels, subsets, seed)
+    fits = [singh_ahuja_sources(n[p], b[p], rho[p], directions, upper=upper, max_pixels=None, scheme="least-power")
+            for p in parts]
+    d = fits[0].directions
+    if refit:
+        hi = _source_upper(d, upper)
+        f = np.mean([refit_support(lambert_matrix(n[p], d), g[p], x.intensities, 0.0, hi)
+                     for p, x in zip(parts, fits)], axis=0)
+    else:
+        f = np.mean([x.intensities for x in fits], axis=0)
+    g0 = g[parts[0]]
+    gn = float(np.linalg.norm(g0)) or 1.0
+    res = np.array([float(np.linalg.norm(g0)) / gn,
+                    float(np.linalg.norm(g0 - lambert_matrix(n[parts[0]], d) @ f)) / gn])
+    rendered = lambert_matrix(n, d) @ f * rho / np.pi
+    return replace(fits[0], intensities=f, rendered=rendered, residuals=res, pixels_used=sum(p.size for p in parts),
+                   **_rms_of(rendered, b))
+
+
+def _rms_of(rendered, b) -> dict:
+    """``rms`` and ``relative_rms`` of ``rendered`` against the pixels ``b``, as keyword arguments."""
+    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
+    ref = float(np.sqrt(np.mean(b ** 2)))
+    return dict(rms=rms, relative_rms=rms / ref if ref > 0 else np.inf)
+
+
 def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, upper=None, order: str = "random",
                          seed: int = 0, max_pixels: int | None = 2000, criterion: str = "cv", folds: int = 5,
                          tolerance: float = 0.05, base_frequency: int = 3, max_sources: int = 500, max_level: int = 3,
                          power_share: float = 0.5, patience: int = 2, scheme: str = "sequential",
-                         relaxation: float = 1.0, tol: float | None = None):
+                         relaxation: float = 1.0, tol: float | None = None, subsets: int = 4):
     """POCS over an adaptive geodesic source set: Singh and Ahuja's projections where the light is.
 
     The set is grown by :func:`ffls.probes.selection.refine_sources`, as for Hougen and Ahuja
@@ -814,7 +932,13 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     scheme, relaxation, tol
         As :func:`pocs`, for every fit; with ``scheme='least-power'`` the rounds are fitted and chosen by the
         paper's sweeps (``iterations``, ``order``, ``seed``, ``relaxation``, ``tol``), and the chosen set's
-        powers are then :func:`least_power_pocs`'s.
+        powers are then :func:`averaged_least_power`'s: :func:`least_power_pocs` on up to ``subsets`` disjoint
+        pixel subsets, each map's lit sources refitted, averaged.
+    subsets : int
+        ``scheme='least-power'``: the least-power map is solved on up to this many disjoint subsets of about
+        ``max_pixels`` pixels (:func:`pixel_subsets`: the first the one the set was chosen on, the others from
+        the remaining pixels, as many as they fill), as :func:`averaged_least_power`. 1: one programme, on the
+        selection's pixels (refitted).
 
     Returns
     -------
@@ -824,6 +948,8 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     """
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}, not {criterion!r}")
+    if int(subsets) != subsets or subsets < 1:
+        raise ValueError(f"subsets must be an integer >= 1, not {subsets!r}")
     n, b, rho, _ = _pixels(normals, radiance, albedo)
     m = n.shape[0]
     use = pixel_subset(m, max_pixels, seed)
@@ -866,14 +992,10 @@ def adaptive_singh_ahuja(normals, radiance, albedo=1.0, iterations: int = 50, up
     # the chosen round's sources, re-rendered on every pixel
     fit = sel.fit
     if scheme == "least-power":
-        fit = singh_ahuja_sources(n[use], b[use], rho[use], fit.directions, upper=upper, max_pixels=None,
-                                  scheme=scheme)
-    rendered = lambert_matrix(n, fit.directions) @ fit.intensities * rho / np.pi
-    rms = float(np.sqrt(np.mean((rendered - b) ** 2)))
-    ref = float(np.sqrt(np.mean(b ** 2)))
-    full = PocsSources(directions=fit.directions, intensities=fit.intensities, rendered=rendered, rms=rms,
-                       relative_rms=rms / ref if ref > 0 else np.inf, residuals=fit.residuals,
-                       iterations=fit.iterations, pixels_used=fit.pixels_used)
+        full = averaged_least_power(n, b, rho, fit.directions, upper, max_pixels, subsets, seed)
+    else:
+        rendered = lambert_matrix(n, fit.directions) @ fit.intensities * rho / np.pi
+        full = replace(fit, rendered=rendered, **_rms_of(rendered, b))
     note = sel.note.replace("adaptive sources", "POCS over adaptive sources", 1)
     return Selection(chosen=sel.chosen, candidates=sel.candidates, scores=sel.scores, criterion=sel.criterion,
                      fit=full, note=note)
