@@ -68,6 +68,8 @@ __all__ = [
     "sphere_views",
     "sphere_kinds",
     "calibrate_bounce",
+    "calibrate_bounce_shape",
+    "shaped_samples",
     "FlatField",
     "flat_field_offsets",
     "calibrate_flat_field",
@@ -139,11 +141,15 @@ class BounceCalibration:
         Robust standard deviation of the photos' estimates.
     n_photos : int
         Photos that determined it.
+    gradient : (float, float) or None
+        The bounce's horizontal gradient ``beta`` along world x, y (:func:`calibrate_bounce_shape`),
+        imposed in the second pass; None where not determined.
     """
 
     ratio: float | None
     spread: float | None
     n_photos: int
+    gradient: tuple | None = None
 
 
 @dataclass
@@ -576,6 +582,74 @@ def flat_field_values(values: list, samples: list[SphereSamples], field: FlatFie
            for s, g in zip(samples, field.gradients)]
     return [[v if d is None else SphereValues((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2])
              for v, d in zip(vals, div)] for vals in values]
+
+
+#: Fewest photos whose shadow side shows a sphere's bounce for its shape (:func:`calibrate_bounce_shape`).
+BOUNCE_SHAPE_MIN_PHOTOS = 5
+#: Fewest shadow-side pixels of a photo for :func:`calibrate_bounce_shape`.
+BOUNCE_SHAPE_MIN_PIXELS = 20
+
+
+def calibrate_bounce_shape(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                           terminator: float = 0.15, min_photos: int = BOUNCE_SHAPE_MIN_PHOTOS,
+                           min_pixels: int = BOUNCE_SHAPE_MIN_PIXELS) -> list[np.ndarray | None]:
+    """Each matte sphere's horizontal gradient of the ground's light, from its shadow sides over the photos.
+
+    The bounce model is an infinite uniform ground (``g``, less the sphere's own shadow). A
+    textured ground, or an object that hides part of a sphere's ground, is brighter on one side:
+    the bounce is ``g (1 + beta . n_h)`` with ``n_h`` the normal's horizontal part (world x, y) and
+    ``beta`` a constant of the capture for each sphere, like its ground ratio. Where no direct light
+    falls (``n . l < -terminator``) the residual of a free-bounce fit is ``c g beta . n_h``: one
+    linear least-squares problem over all photos (docs/spheres.md, "The ground bounce's shape").
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+        Fitted with a free bounce (the first pass), one per entry of ``values``.
+    samples : list of SphereSamples
+    values : list
+        Per photo of ``results``, its :func:`ffls.spheres.samples.sphere_values`.
+    terminator : float
+    min_photos, min_pixels : int
+        A sphere needs ``min_photos`` photos with at least ``min_pixels`` shadow-side pixels.
+
+    Returns
+    -------
+    list of (2,) float or None
+        Per sphere ``beta`` (along world x, y), or None where too few photos show it.
+    """
+    out = []
+    for k, s in enumerate(samples):
+        n = s.normals
+        g0, own = s.ground_factor(UP), OwnShadow(n, UP)
+        A, y = [], []
+        for r, vals in zip(results, values):
+            if not r.spheres:
+                continue
+            sp = r.spheres[k]
+            f = sp.fit
+            if sp.status != "ok" or sp.kind != "matte" or not isinstance(f, LambertFit) or not f.bounce > 0:
+                continue
+            v = vals[k]
+            side = np.asarray(v.valid, bool) & np.isfinite(v.grey) & (n @ f.direction < -terminator)
+            if side.sum() < min_pixels:
+                continue
+            g = shadowed_ground_bounce(n, f.direction, UP, g0, own)[side]
+            A.append(np.stack([g * n[side, 0], g * n[side, 1]], axis=1) * (f.bounce / f.intensity))
+            y.append((v.grey[side] - f.ambient - f.bounce * g) / f.intensity)
+        if len(A) < min_photos:
+            out.append(None)
+            continue
+        beta = np.linalg.lstsq(np.concatenate(A), np.concatenate(y), rcond=None)[0]
+        out.append(beta if np.all(np.isfinite(beta)) else None)
+    return out
+
+
+def shaped_samples(samples: list[SphereSamples], shapes: list) -> list[SphereSamples]:
+    """The spheres' samples with each one's bounce factor ``g`` times ``1 + beta . n_h``
+    (:func:`calibrate_bounce_shape`; None: unchanged)."""
+    return [s if b is None else replace(s, ground=s.ground_factor(UP) * (1.0 + s.normals[:, :2] @ b))
+            for s, b in zip(samples, shapes)]
 
 
 def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
@@ -1327,6 +1401,12 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
+    if np.array_equal(fitter.options.get("up", UP), UP):  # (the shape is of the world's ground, +Z up)
+        shapes = calibrate_bounce_shape(results, samples, [values[i] for i in fitted], terminator=terminator)
+        if any(b is not None for b in shapes):
+            samples = shaped_samples(samples, shapes)
+            calibration = [replace(c, gradient=None if b is None else tuple(float(x) for x in b))
+                           for c, b in zip(calibration, shapes)]
     if any(r is not None for r in ratios):
         results = refit(range(n_photos), ratios, counted=True)
     elif refinements is not None and any(r.accepted for r in refinements):
