@@ -634,7 +634,7 @@ def calibrate_bounce_shape(results: list[PhotoEstimate], samples: list[SphereSam
             side = np.asarray(v.valid, bool) & np.isfinite(v.grey) & (n @ f.direction < -terminator)
             if side.sum() < min_pixels:
                 continue
-            g = shadowed_ground_bounce(n, f.direction, UP, g0, own)[side]
+            g = (shadowed_ground_bounce(n, f.direction, UP, g0, own) if f.own_shadow else g0)[side]
             A.append(np.stack([g * n[side, 0], g * n[side, 1]], axis=1) * (f.bounce / f.intensity))
             y.append((v.grey[side] - f.ambient - f.bounce * g) / f.intensity)
         if len(A) < min_photos:
@@ -1295,7 +1295,7 @@ def _outlines_holding_highlights(results: list[PhotoEstimate], mirrors: list, li
 def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
-              first_pass: int | None = FIRST_PASS_PHOTOS) -> CaptureEstimate:
+              first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool = True) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
@@ -1401,7 +1401,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
-    if np.array_equal(fitter.options.get("up", UP), UP):  # (the shape is of the world's ground, +Z up)
+    if bounce_shape and np.array_equal(fitter.options.get("up", UP), UP):  # (the world's ground, +Z up)
         shapes = calibrate_bounce_shape(results, samples, [values[i] for i in fitted], terminator=terminator)
         if any(b is not None for b in shapes):
             samples = shaped_samples(samples, shapes)
@@ -1532,6 +1532,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
                     bounce: str = "calibrated", refine_centres: bool = True, refine_options: dict | None = None,
                     materials: list | None = None, views: list | None = None, limb_image=None,
                     flat_field: tuple | None = None, first_pass: int | None = FIRST_PASS_PHOTOS,
+                    bounce_shape: bool = True,
                     **kwargs) -> CaptureEstimate:
     """The two passes of :func:`estimate_lights` on photos whose sphere values are given, in this process.
 
@@ -1561,6 +1562,10 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     first_pass : int, optional
         With a calibrated bounce, the first pass fits this many photos, spread over the sequence
         (:func:`first_pass_photos`); None: every photo.
+    bounce_shape : bool
+        With a calibrated bounce, each matte sphere's bounce is also given the horizontal gradient
+        its shadow sides show over the first pass (:func:`calibrate_bounce_shape`), imposed in the
+        second; False: the uniform ground's shape.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``model``, ``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``up``, ``mirror_floor_deg``).
@@ -1573,7 +1578,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     fitter = _PhotoFitter(None, scene_center, kwargs)
     return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
                      refine_options=refine_options, materials=materials, views=views, limb_image=limb_image,
-                     flat_field=flat_field, first_pass=first_pass)
+                     flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape)
 
 
 def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict | None]:
@@ -1611,7 +1616,8 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
-                    flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, **kwargs):
+                    flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool = True,
+                    **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -1650,6 +1656,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         (:func:`first_pass_photos`; the others are only read), and the centre refinement, the
         flat field and the bounce calibration use those; the second pass fits every photo.
         None: every photo.
+    bounce_shape : bool
+        Give each matte sphere's calibrated bounce its horizontal gradient
+        (:func:`calibrate_bounce_shape`); False: the uniform ground's shape.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -1709,7 +1718,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
                             flat_field=lens_centre(capture, shape) if flat_field else None,
-                            first_pass=first_pass)
+                            first_pass=first_pass, bounce_shape=bounce_shape)
     finally:
         if bar is not None:
             bar.close()
