@@ -42,7 +42,7 @@ def _median_error(est, dirs):
 def test_bounce_gradient_is_recovered_and_removes_the_bias(capture):
     samples, dirs, vals = capture
     kw = dict(refine_centres=False, own_shadow=False, first_pass=None)
-    shaped = estimate_photos(vals, samples, SCENE_CENTER, **kw)
+    shaped = estimate_photos(vals, samples, SCENE_CENTER, bounce_shape=True, **kw)
     for cal, b in zip(shaped.calibration, BETAS):
         # one round from the first pass's free-bounce fits, which absorb part of the gradient into
         # the light: found on the side it is, at most its size (0.28 of 0.40 along x for sphere 0)
@@ -58,7 +58,33 @@ def test_bounce_gradient_is_recovered_and_removes_the_bias(capture):
 def test_a_uniform_ground_gets_no_gradient(capture):
     samples, dirs, _ = capture
     vals = [_values(samples, d, np.zeros_like(BETAS), i) for i, d in enumerate(dirs)]
-    est = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False, own_shadow=False, first_pass=None)
+    est = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False, own_shadow=False, first_pass=None,
+                          bounce_shape=True)
     for cal in est.calibration:
         assert cal.gradient is not None and np.hypot(*cal.gradient) < 0.02
     assert _median_error(est, dirs) < 0.05
+
+
+def test_auto_shapes_a_lone_matte_sphere_only(capture):
+    """By default (``bounce_shape=None``) the gradient is fitted only where one matte sphere gives
+    the photo's light: with several, their biases partly cancel around an object."""
+    samples, dirs, vals = capture
+    kw = dict(refine_centres=False, own_shadow=False, first_pass=None)
+    four = estimate_photos(vals, samples, SCENE_CENTER, **kw)
+    assert all(c.gradient is None for c in four.calibration)
+    one = estimate_photos([v[:1] for v in vals], samples[:1], SCENE_CENTER, **kw)
+    assert one.calibration[0].gradient is not None
+
+
+def test_cli_bounce_shape_needs_the_calibrated_bounce(tmp_path, capfd):
+    from ffls.cli import main
+    from ffls.synth.scene import write_synthetic_capture
+
+    cap = tmp_path / "cap"
+    write_synthetic_capture(cap, n_lights=6, resolution=48, progress=False, seed=2)
+    before = (cap / "lights.json").read_bytes()
+    capfd.readouterr()
+    assert main(["lights", str(cap), "--bounce", "free", "--bounce-shape", "on", "--workers", "1"]) == 2
+    err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and "--bounce-shape on" in err[0] and "--bounce calibrated" in err[0], err
+    assert (cap / "lights.json").read_bytes() == before

@@ -26,6 +26,10 @@ def add_arguments(p):
     p.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated",
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), or free per photo (default calibrated)")
+    p.add_argument("--bounce-shape", choices=("auto", "on", "off"), default="auto",
+                   help="with --bounce calibrated, give each matte sphere's bounce the horizontal gradient its "
+                        "shadow sides show over the capture (a textured ground, an object hiding part of it): "
+                        "on, off, or auto, on only with one matte sphere (default auto; docs/spheres.md)")
     p.add_argument("--workers", type=WORKERS, default=None,
                    help="processes, 1 to 4 per core (default: every core)")
     p.add_argument("--first-pass", type=integer(1, 1_000_000, special={"all": 0}), default=None, metavar="N|all",
@@ -168,6 +172,12 @@ def run(args) -> int:
     cluster = bool(getattr(args, "scheduler", None))
     # --first-pass given: N photos, or every photo ("all"); not given: the estimation's default
     first_pass = {} if args.first_pass is None else {"first_pass": args.first_pass or None}
+    shape = {"auto": None, "on": True, "off": False}[args.bounce_shape]
+    if shape and args.bounce != "calibrated":
+        from ffls.errors import InputError
+
+        raise InputError("--bounce-shape on applies only with --bounce calibrated (the shape is calibrated over "
+                         "the capture with the ground ratio)", cap.json_path)
     if not cluster:  # every photo decoded once: the encoding calibration, the detection's reductions, the first pass
         from ffls.spheres.estimate import decode_photos
 
@@ -200,13 +210,14 @@ def run(args) -> int:
         remote = None if args.scheduler == "local" else args.scheduler
         with open_client(args.workers, remote, progress=progress) as runner:
             lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce,
-                                          **first_pass)
+                                          bounce_shape=shape, **first_pass)
     else:
         if cap.world_from_camera_is_default:
             print_notes(NAME, "capture.json gives no camera.world_from_camera: the world's up is taken as the "
                               "image's, so the ground bounce is fitted without the spheres' own shadows")
         lights = estimate_lights(cap, spheres=spheres, progress=progress, workers=args.workers,
-                                 model=args.model, bounce=args.bounce, decoded=decoded, **first_pass)
+                                 model=args.model, bounce=args.bounce, decoded=decoded, bounce_shape=shape,
+                                 **first_pass)
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"

@@ -1295,7 +1295,7 @@ def _outlines_holding_highlights(results: list[PhotoEstimate], mirrors: list, li
 def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
-              first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool = True) -> CaptureEstimate:
+              first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
@@ -1401,6 +1401,8 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
+    if bounce_shape is None:  # auto: with one matte sphere nothing cancels its bias (docs/spheres.md)
+        bounce_shape = sum(kd.kind == "matte" for kd in kinds) == 1
     if bounce_shape and np.array_equal(fitter.options.get("up", UP), UP):  # (the world's ground, +Z up)
         shapes = calibrate_bounce_shape(results, samples, [values[i] for i in fitted], terminator=terminator)
         if any(b is not None for b in shapes):
@@ -1532,7 +1534,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
                     bounce: str = "calibrated", refine_centres: bool = True, refine_options: dict | None = None,
                     materials: list | None = None, views: list | None = None, limb_image=None,
                     flat_field: tuple | None = None, first_pass: int | None = FIRST_PASS_PHOTOS,
-                    bounce_shape: bool = True,
+                    bounce_shape: bool | None = None,
                     **kwargs) -> CaptureEstimate:
     """The two passes of :func:`estimate_lights` on photos whose sphere values are given, in this process.
 
@@ -1562,10 +1564,12 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     first_pass : int, optional
         With a calibrated bounce, the first pass fits this many photos, spread over the sequence
         (:func:`first_pass_photos`); None: every photo.
-    bounce_shape : bool
+    bounce_shape : bool, optional
         With a calibrated bounce, each matte sphere's bounce is also given the horizontal gradient
         its shadow sides show over the first pass (:func:`calibrate_bounce_shape`), imposed in the
-        second; False: the uniform ground's shape.
+        second; False: the uniform ground's shape; None (default): only where the capture has one
+        matte sphere (with several, their biases partly cancel in the photo's mean around an
+        object, and the gradient cost ``ffls synth``'s 4-sphere layout 0.02-0.07 deg of median).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``model``, ``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``up``, ``mirror_floor_deg``).
@@ -1616,7 +1620,7 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
-                    flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool = True,
+                    flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
                     **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
@@ -1656,9 +1660,10 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         (:func:`first_pass_photos`; the others are only read), and the centre refinement, the
         flat field and the bounce calibration use those; the second pass fits every photo.
         None: every photo.
-    bounce_shape : bool
+    bounce_shape : bool, optional
         Give each matte sphere's calibrated bounce its horizontal gradient
-        (:func:`calibrate_bounce_shape`); False: the uniform ground's shape.
+        (:func:`calibrate_bounce_shape`); False: the uniform ground's shape; None (default): only
+        with one matte sphere (as :func:`estimate_photos`).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
