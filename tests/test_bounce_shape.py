@@ -49,8 +49,11 @@ def test_bounce_gradient_is_recovered_and_removes_the_bias(capture):
         assert cal.gradient is not None
         g = np.asarray(cal.gradient)
         assert g @ b > 0 and np.hypot(*g) <= 1.2 * np.hypot(*b), (g, b)
+    rec = shaped.records()[0]["spheres"]
+    assert [r["bounce_gradient"] for r in rec] == [list(c.gradient) for c in shaped.calibration]
     uniform = estimate_photos(vals, samples, SCENE_CENTER, bounce_shape=False, **kw)
     assert all(c.gradient is None for c in uniform.calibration)
+    assert all(r["bounce_gradient"] is None for r in uniform.records()[0]["spheres"])
     e_shaped, e_uniform = _median_error(shaped, dirs), _median_error(uniform, dirs)
     assert e_shaped < 0.5 * e_uniform, (e_shaped, e_uniform)
 

@@ -186,7 +186,9 @@ class CaptureEstimate:
 
     def records(self) -> list[dict]:
         """Per photo, its ``lights.json`` ``extra`` (:meth:`PhotoEstimate.record`); each sphere's
-        report also says how its kind was decided (``kind_source``, ``compactness``)."""
+        report also says how its kind was decided (``kind_source``, ``compactness``), the lens's
+        fall-off divided out (``flat_field``) and its bounce's gradient (``bounce_gradient``,
+        :func:`calibrate_bounce_shape`; None where not imposed)."""
         out = [p.record(self.refinements) for p in self.photos]
         for rec in out:
             for rep, kind in zip(rec["spheres"], self.kinds or []):
@@ -195,6 +197,9 @@ class CaptureEstimate:
             if self.flat_field is not None:
                 for rep, g in zip(rec["spheres"], self.flat_field.gradients):
                     rep["flat_field"] = [float(x) for x in g] if np.any(g != 0) else None
+            if self.calibration is not None:
+                for rep, cal in zip(rec["spheres"], self.calibration):
+                    rep["bounce_gradient"] = None if cal.gradient is None else [float(x) for x in cal.gradient]
         return out
 
     def lights(self, image_names: list) -> Lights:
