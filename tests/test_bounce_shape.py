@@ -91,3 +91,14 @@ def test_cli_bounce_shape_needs_the_calibrated_bounce(tmp_path, capfd):
     err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and "--bounce-shape on" in err[0] and "--bounce calibrated" in err[0], err
     assert (cap / "lights.json").read_bytes() == before
+
+
+def test_summary_names_the_shaped_spheres(capture):
+    from ffls.commands.lights import summary
+
+    samples, dirs, vals = capture
+    kw = dict(refine_centres=False, own_shadow=False, first_pass=None)
+    names = [f"img_{i}.png" for i in range(len(vals))]
+    text = summary(estimate_photos(vals, samples, SCENE_CENTER, bounce_shape=True, **kw).lights(names))
+    assert "ground bounce shaped (--bounce-shape): sphere 0 gradient (+0." in text, text
+    assert "ground bounce" not in summary(estimate_photos(vals, samples, SCENE_CENTER, **kw).lights(names))

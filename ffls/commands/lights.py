@@ -61,6 +61,11 @@ def summary(lights) -> str:
         lines.append("rejected: " + ", ".join(f"{k} {v}" for k, v in reasons.most_common()))
     if unc:
         lines.append(f"median uncertainty {float(np.median(unc)):.2f} deg (radius of the 95% cone)")
+    shapes = next((e["spheres"] for e in lights.extra if e and e.get("spheres")), [])
+    shaped = [(k, r["bounce_gradient"]) for k, r in enumerate(shapes) if r.get("bounce_gradient") is not None]
+    if shaped:
+        lines.append("ground bounce shaped (--bounce-shape): " + "; ".join(
+            f"sphere {k} gradient ({g[0]:+.3f}, {g[1]:+.3f})" for k, g in shaped))
     return "\n".join(lines)
 
 
