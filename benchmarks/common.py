@@ -144,6 +144,24 @@ def probe_benchmark_map(name: str, height: int, capture, lights):
     return lm, np.asarray(lm.data, dtype=np.float64), relight_capture(capture, lights, lm)[0].astype(np.float64)
 
 
+def noisy_diffuse_probes(maps, height: int, capture, lights, conditions: str):
+    """The POCS benchmarks' scenes: per map of ``maps`` and per ``noise:seed`` pair of ``conditions``
+    (comma-separated), the map's name, :func:`probe_benchmark_map`'s ``(lightmap, radiance, truth)``,
+    the 80 px diffuse ball (albedo 0.7) under it, the noise, the seed, and the ball's radiance with
+    Gaussian noise of ``noise`` times its mean added (seeded by ``seed``; none where ``noise`` is 0)."""
+    from ffls.synth.probe_scenes import diffuse_sphere_scene
+
+    pairs = [(float(x.split(":")[0]), int(x.split(":")[1])) for x in conditions.split(",") if x]
+    for name in maps:
+        truth = probe_benchmark_map(name, height, capture, lights)
+        sph = diffuse_sphere_scene(truth[0], 80, albedo=0.7, world_from_camera=capture.world_from_camera)
+        for noise, seed in pairs:
+            rad = sph.radiance
+            if noise > 0:
+                rad = rad + np.random.default_rng(seed).normal(0.0, noise * float(np.mean(rad)), size=rad.shape)
+            yield name, truth, sph, noise, seed, rad
+
+
 def probe_benchmark_args(doc: str, maps, argv=None):
     """The arguments shared by the probe benchmarks that loop over maps: ``--noise`` (Gaussian,
     as a fraction of the image's mean), ``--maps`` (comma-separated, default ``maps``) and ``--json``."""

@@ -32,12 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, probe_benchmark_map, write_json
+from common import host_info, noisy_diffuse_probes, probe_benchmark_capture, write_json
 from common import relit_capture_error as relit_error_of
 from ffls.probes.linear import lambert_matrix
 from ffls.probes.singh_ahuja import adaptive_singh_ahuja, pixel_subset, singh_ahuja_sources
 from ffls.probes.sources import cell_energies, sources_to_latlong
-from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 MAPS = ("courtyard", "studio", "sunrise", "night")
@@ -78,47 +77,41 @@ def main(argv=None):
     maps = [m for m in a.maps.split(",") if m]
     if not set(maps) <= set(MAPS):
         ap.error(f"--maps: choose from {','.join(MAPS)}")
-    conditions = [(float(x.split(":")[0]), int(x.split(":")[1])) for x in a.conditions.split(",") if x]
     cap, lights = probe_benchmark_capture("ffls_probes_lp_")
     rows = []
-    for name in maps:
-        lm, true, cap_truth = probe_benchmark_map(name, H, cap, lights)
-        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
-        for noise, seed in conditions:
-            rad = sph.radiance
-            if noise > 0:
-                rad = rad + np.random.default_rng(seed).normal(0.0, noise * float(np.mean(rad)), size=rad.shape)
-            use = pixel_subset(rad.shape[0], PIXELS, 0)
+    for name, (_, true, cap_truth), sph, noise, seed, rad in noisy_diffuse_probes(maps, H, cap, lights,
+                                                                                 a.conditions):
+        use = pixel_subset(rad.shape[0], PIXELS, 0)
 
-            def add(method, directions, powers, t, chosen):
-                row = {"map": name, "noise": noise, "seed": seed, "method": method, "chosen": int(chosen),
-                       "time_s": t, "relit_capture": relit_error_of(cap, lights, sources_to_latlong(
-                           directions, powers, H), cap_truth),
-                       "bands": band_powers(directions, powers),
-                       "true_bands": band_powers(directions, cell_energies(directions, true))}
-                rows.append(row)
-                print(f"{name:9s} noise {noise:g} seed {seed}  {method:16s} {chosen:4d}  relit "
-                      f"{100 * row['relit_capture']:5.1f}%  {t:6.2f} s  bands "
-                      + " ".join(f"{x:.2f}" for x in row["bands"]) + "  true "
-                      + " ".join(f"{x:.2f}" for x in row["true_bands"]), flush=True)
+        def add(method, directions, powers, t, chosen):
+            row = {"map": name, "noise": noise, "seed": seed, "method": method, "chosen": int(chosen),
+                   "time_s": t, "relit_capture": relit_error_of(cap, lights, sources_to_latlong(
+                       directions, powers, H), cap_truth),
+                   "bands": band_powers(directions, powers),
+                   "true_bands": band_powers(directions, cell_energies(directions, true))}
+            rows.append(row)
+            print(f"{name:9s} noise {noise:g} seed {seed}  {method:16s} {chosen:4d}  relit "
+                  f"{100 * row['relit_capture']:5.1f}%  {t:6.2f} s  bands "
+                  + " ".join(f"{x:.2f}" for x in row["bands"]) + "  true "
+                  + " ".join(f"{x:.2f}" for x in row["true_bands"]), flush=True)
 
-            for crit in ("cv", "bic"):
-                t = time.process_time()
-                sel = adaptive_singh_ahuja(sph.normals, rad, 0.7, criterion=crit, max_pixels=PIXELS)
-                t_set = time.process_time() - t
-                d = sel.fit.directions
-                add("default" if crit == "cv" else "bic", d, sel.fit.intensities, t_set, sel.chosen)
-                t = time.process_time()
-                lp = singh_ahuja_sources(sph.normals[use], rad[use], 0.7, d, max_pixels=None, scheme="least-power")
-                add(f"least-power {crit}", d, lp.intensities, t_set + time.process_time() - t, sel.chosen)
-                if crit == "bic":
-                    t = time.process_time()
-                    f = linf_slab(sph.normals, rad, d)
-                    add("linf slab", d, f, time.process_time() - t, sel.chosen)
+        for crit in ("cv", "bic"):
             t = time.process_time()
-            sel = adaptive_singh_ahuja(sph.normals, rad, 0.7, criterion="bic", max_pixels=PIXELS, scheme="dykstra",
-                                       iterations=3000, tol=1e-6)
-            add("dykstra", sel.fit.directions, sel.fit.intensities, time.process_time() - t, sel.chosen)
+            sel = adaptive_singh_ahuja(sph.normals, rad, 0.7, criterion=crit, max_pixels=PIXELS)
+            t_set = time.process_time() - t
+            d = sel.fit.directions
+            add("default" if crit == "cv" else "bic", d, sel.fit.intensities, t_set, sel.chosen)
+            t = time.process_time()
+            lp = singh_ahuja_sources(sph.normals[use], rad[use], 0.7, d, max_pixels=None, scheme="least-power")
+            add(f"least-power {crit}", d, lp.intensities, t_set + time.process_time() - t, sel.chosen)
+            if crit == "bic":
+                t = time.process_time()
+                f = linf_slab(sph.normals, rad, d)
+                add("linf slab", d, f, time.process_time() - t, sel.chosen)
+        t = time.process_time()
+        sel = adaptive_singh_ahuja(sph.normals, rad, 0.7, criterion="bic", max_pixels=PIXELS, scheme="dykstra",
+                                   iterations=3000, tol=1e-6)
+        add("dykstra", sel.fit.directions, sel.fit.intensities, time.process_time() - t, sel.chosen)
     write_json(a.json, {"host": host_info(), "map_height": H, "pixels": PIXELS, "rows": rows})
     print("wrote", a.json)
 

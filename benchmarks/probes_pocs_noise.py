@@ -34,10 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
+from common import host_info, noisy_diffuse_probes, probe_benchmark_capture, relit_capture_error, write_json
 from ffls.probes.singh_ahuja import adaptive_singh_ahuja, averaged_least_power
 from ffls.probes.sources import sources_to_latlong
-from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 MAPS = ("courtyard", "studio", "sunrise", "night")
@@ -60,41 +59,34 @@ def main(argv=None):
     maps = [m for m in a.maps.split(",") if m]
     if not set(maps) <= set(MAPS):
         ap.error(f"--maps: choose from {','.join(MAPS)}")
-    conditions = [(float(x.split(":")[0]), int(x.split(":")[1])) for x in a.conditions.split(",") if x]
     orients = [int(x) for x in a.orientations.split(",") if x]
     rots = Rotation.random(10, random_state=0).as_matrix()
     rots[0] = np.eye(3)
     cap, lights = probe_benchmark_capture("ffls_probes_pocs_noise_")
     rows = []
-    for name in maps:
-        lm, _, truth = probe_benchmark_map(name, H, cap, lights)
-        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
-        for noise, seed in conditions:
-            rad = sph.radiance
-            if noise > 0:
-                rad = rad + np.random.default_rng(seed).normal(0.0, noise * float(np.mean(rad)), size=rad.shape)
-            for o in orients:
-                R = rots[o]
-                n = sph.normals @ R.T
+    for name, (_, _, truth), sph, noise, seed, rad in noisy_diffuse_probes(maps, H, cap, lights, a.conditions):
+        for o in orients:
+            R = rots[o]
+            n = sph.normals @ R.T
+            t = time.process_time()
+            sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="cv", max_pixels=a.pixels)
+            t_set = time.process_time() - t
+            fits = [("default", sel.fit, t_set)]
+            runs = ((1, False),) + (((a.subsets, False),) if a.plain else ()) + ((a.subsets, True),)
+            for k, refit in runs:   # x1: the scheme before this round
                 t = time.process_time()
-                sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="cv", max_pixels=a.pixels)
-                t_set = time.process_time() - t
-                fits = [("default", sel.fit, t_set)]
-                runs = ((1, False),) + (((a.subsets, False),) if a.plain else ()) + ((a.subsets, True),)
-                for k, refit in runs:   # x1: the scheme before this round
-                    t = time.process_time()
-                    fit = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=a.pixels, subsets=k,
-                                               refit=refit)
-                    fits.append((f"least-power x{k}" + (" refit" if refit else ""), fit,
-                                 t_set + time.process_time() - t))
-                for method, fit, cpu in fits:
-                    err = relit_capture_error(cap, lights, sources_to_latlong(fit.directions @ R, fit.intensities, H),
-                                              truth)
-                    rows.append({"map": name, "noise": noise, "seed": seed, "orientation": o, "method": method,
-                                 "chosen": int(sel.chosen), "pixels": int(fit.pixels_used), "relit_capture": err,
-                                 "cpu_s": cpu})
-                    print(f"{name:9s} noise {noise:g} seed {seed} orientation {o}  {method:22s} {sel.chosen:4d}  "
-                          f"relit {100 * err:5.1f}%  {cpu:6.2f} s", flush=True)
+                fit = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=a.pixels, subsets=k,
+                                           refit=refit)
+                fits.append((f"least-power x{k}" + (" refit" if refit else ""), fit,
+                             t_set + time.process_time() - t))
+            for method, fit, cpu in fits:
+                err = relit_capture_error(cap, lights, sources_to_latlong(fit.directions @ R, fit.intensities, H),
+                                          truth)
+                rows.append({"map": name, "noise": noise, "seed": seed, "orientation": o, "method": method,
+                             "chosen": int(sel.chosen), "pixels": int(fit.pixels_used), "relit_capture": err,
+                             "cpu_s": cpu})
+                print(f"{name:9s} noise {noise:g} seed {seed} orientation {o}  {method:22s} {sel.chosen:4d}  "
+                      f"relit {100 * err:5.1f}%  {cpu:6.2f} s", flush=True)
     write_json(a.json, {"host": host_info(), "map_height": H, "pixels": a.pixels, "subsets": a.subsets,
                         "orientations": orients, "rows": rows,
                         "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_pocs_noise.py",
