@@ -18,6 +18,16 @@ def _ball(m=400, seed=0):
     return n
 
 
+def _two_lights(m, seed):
+    """A ball's normals (:func:`_ball`) and its radiance (albedo 0.7) under two sources of a
+    42-source set."""
+    n = _ball(m, seed=seed)
+    d = model_sources(42)
+    L = np.zeros((d.shape[0], 3))
+    L[[3, 17]] = [[2.0, 1.5, 1.0], [0.5, 0.5, 0.8]]
+    return n, lambert_matrix(n, d) @ L * 0.7 / np.pi
+
+
 def test_least_power_is_the_sparsest_fit_where_least_norm_spreads():
     # x + 2 y = 2 (three identical pixels): every point of the segment fits exactly. Least power: (0, 1);
     # Dykstra's least norm: (0.4, 0.8)
@@ -76,11 +86,7 @@ def test_least_power_recovers_two_lamps_on_a_noisy_ball():
 
 def test_adaptive_least_power_keeps_the_sweeps_set():
     # the set is grown and chosen by the paper's sweeps; only the chosen set's powers change
-    n = _ball(300, seed=3)
-    d = model_sources(42)
-    L = np.zeros((d.shape[0], 3))
-    L[[3, 17]] = [[2.0, 1.5, 1.0], [0.5, 0.5, 0.8]]
-    rad = lambert_matrix(n, d) @ L * 0.7 / np.pi
+    n, rad = _two_lights(300, seed=3)
     a = adaptive_singh_ahuja(n, rad, 0.7, criterion="bic", max_pixels=None, max_level=1)
     b = adaptive_singh_ahuja(n, rad, 0.7, criterion="bic", max_pixels=None, max_level=1, scheme="least-power")
     np.testing.assert_allclose(b.fit.directions, a.fit.directions, atol=1e-12)   # (renormalised)
@@ -213,11 +219,7 @@ def test_adaptive_least_power_averages_over_subsets():
     # scheme='least-power' solves the chosen set on up to `subsets` pixel subsets and averages them
     from ffls.probes.singh_ahuja import averaged_least_power
 
-    n = _ball(900, seed=7)
-    d = model_sources(42)
-    L = np.zeros((d.shape[0], 3))
-    L[[3, 17]] = [[2.0, 1.5, 1.0], [0.5, 0.5, 0.8]]
-    rad = lambert_matrix(n, d) @ L * 0.7 / np.pi
+    n, rad = _two_lights(900, seed=7)
     rad = rad + np.random.default_rng(8).normal(0.0, 0.01 * rad.mean(), size=rad.shape)
     sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="bic", max_pixels=300, max_level=1, scheme="least-power")
     want = averaged_least_power(n, rad, 0.7, sel.fit.directions, max_pixels=300, subsets=4)
