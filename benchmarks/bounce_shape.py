@@ -12,7 +12,8 @@ writes; an 8-bit one must state its ``encoding``) it prints:
    per sphere by the capture's ground ratio. A textured ground, or an object that hides part of
    a sphere's ground, makes the bounce brighter on one side. Per sphere the script fits, over all
    photos at once, a horizontal gradient ``beta`` of that bounce from the shadow side's residuals
-   (where no direct light falls: ``r = beta_x c g n_x + beta_y c g n_y``), then refits each photo
+   (where no direct light falls: ``r = beta_x c g n_x + beta_y c g n_y``;
+   :func:`ffls.spheres.estimate.calibrate_bounce_shape`), then refits each photo
    with the bounce ``g (1 + beta . n_h)`` (:func:`ffls.spheres.lambert.fit_lambert`, the capture's
    ratio imposed) and prints the sphere's own median / max error before and after.
 
@@ -31,11 +32,10 @@ import numpy as np
 from ffls.io.capture import load_capture
 from ffls.radiance.photos import read_photo
 from ffls.spheres.detect import find_spheres_in_capture
-from ffls.spheres.estimate import capture_samples, estimate_photos
-from ffls.spheres.lambert import OwnShadow, fit_lambert, shadowed_ground_bounce
-from ffls.spheres.samples import ground_bounce, sphere_values
+from ffls.spheres.estimate import calibrate_bounce_shape, capture_samples, estimate_photos, shaped_samples
+from ffls.spheres.lambert import fit_lambert
+from ffls.spheres.samples import sphere_values
 
-UP = np.array([0.0, 0.0, 1.0])
 #: Shadow-side pixels: ``n . l`` below minus this (the fits' terminator band).
 TERMINATOR = 0.15
 
@@ -53,28 +53,6 @@ def _photo_errors(est, truth) -> dict:
             "max_deg": float(e.max()), "coverage": float(cov)}
 
 
-def _gradient(est, values, k) -> tuple[np.ndarray | None, int]:
-    """The sphere's bounce gradient ``beta`` (2,) from its shadow sides over the photos, and the photos used."""
-    s = est.samples[k]
-    n = s.normals
-    g0, own = ground_bounce(n, UP), OwnShadow(n, UP)
-    A, y = [], []
-    for i, ph in enumerate(est.photos):
-        f = ph.spheres[k].fit
-        if ph.spheres[k].status != "ok" or getattr(f, "bounce", 0.0) is None or not f.bounce > 0:
-            continue
-        v = values[i][k]
-        side = v.valid & np.isfinite(v.grey) & (n @ f.direction < -TERMINATOR)
-        if side.sum() < 20:
-            continue
-        g = shadowed_ground_bounce(n, f.direction, UP, g0, own)[side]
-        A.append(np.stack([g * n[side, 0], g * n[side, 1]], axis=1) * (f.bounce / f.intensity))
-        y.append((v.grey[side] - f.ambient - f.bounce * g) / f.intensity)
-    if not A:
-        return None, 0
-    return np.linalg.lstsq(np.concatenate(A), np.concatenate(y), rcond=None)[0], len(A)
-
-
 def diagnose(folder: Path) -> dict:
     cap = load_capture(folder)
     truth = np.asarray(json.loads((folder / "truth.json").read_text())["directions"], dtype=np.float64)
@@ -84,19 +62,20 @@ def diagnose(folder: Path) -> dict:
     values = [sphere_values(p.linear, samples, raw=p.raw if p.codes is not None else None, bit_depth=p.bit_depth)
               for p in photos]
     out = {"capture": str(folder), "spheres": len(spheres)}
-    runs = {rc: estimate_photos(values, samples, cap.scene_center, flat_field=None, refine_centres=rc)
+    runs = {rc: estimate_photos(values, samples, cap.scene_center, flat_field=None, refine_centres=rc,
+                                bounce_shape=False)  # (the uniform ground's bounce, diagnosed)
             for rc in (True, False)}
     out["refined"], out["unrefined"] = _photo_errors(runs[True], truth), _photo_errors(runs[False], truth)
     out["shifts_px"] = [float(r.shift_norm_px) for r in runs[True].refinements or []]
     est = runs[False]
     out["per_sphere"] = []
-    for k, s in enumerate(est.samples):
-        beta, used = _gradient(est, values, k)
+    betas = calibrate_bounce_shape(est.photos, est.samples, values, terminator=TERMINATOR)
+    for k, (s, beta, shaped) in enumerate(zip(est.samples, betas, shaped_samples(est.samples, betas))):
         ratio = est.calibration[k].ratio if est.calibration else None
         if beta is None or ratio is None:
             out["per_sphere"].append({"sphere": k, "beta": None})
             continue
-        g = ground_bounce(s.normals, UP) * (1.0 + beta[0] * s.normals[:, 0] + beta[1] * s.normals[:, 1])
+        g = shaped.ground
         pairs = []
         for i, ph in enumerate(est.photos):
             sr = ph.spheres[k]
@@ -108,7 +87,7 @@ def diagnose(folder: Path) -> dict:
             if fit.status == "ok":
                 pairs.append((_angle(sr.fit.direction, truth[i]), _angle(fit.direction, truth[i])))
         p = np.array(pairs)
-        out["per_sphere"].append({"sphere": k, "beta": beta.tolist(), "photos_for_beta": used, "refits": len(p),
+        out["per_sphere"].append({"sphere": k, "beta": beta.tolist(), "refits": len(p),
                                   "before": [float(np.median(p[:, 0])), float(p[:, 0].max())],
                                   "after": [float(np.median(p[:, 1])), float(p[:, 1].max())]})
     return out
@@ -132,8 +111,7 @@ def main() -> None:
             if s["beta"] is None:
                 print(f"  sphere {s['sphere']}: no gradient (no calibrated ratio or no shadow side)")
                 continue
-            print(f"  sphere {s['sphere']}: beta ({s['beta'][0]:+.3f}, {s['beta'][1]:+.3f}) from "
-                  f"{s['photos_for_beta']} photos; its own fits {s['before'][0]:.2f} / {s['before'][1]:.2f} -> "
+            print(f"  sphere {s['sphere']}: beta ({s['beta'][0]:+.3f}, {s['beta'][1]:+.3f}); its own fits {s['before'][0]:.2f} / {s['before'][1]:.2f} -> "
                   f"{s['after'][0]:.2f} / {s['after'][1]:.2f} deg ({s['refits']} photos)")
     if args.out is not None:
         tmp = args.out.with_suffix(".tmp")
