@@ -340,6 +340,13 @@ def truth_check(folder: Path) -> dict:
       on the independent-sphere part alone; ``shape_factor``: that quantile over the RMS of
       ``|E| / sigma`` per axis (2.448 for a Gaussian: the photo errors' own tail, whatever their
       scale);
+    * ``sphere_coverage``: the share of the used spheres whose error lies within the sphere's own
+      95% cone (:meth:`ffls.spheres.photo.PhotoEstimate.with_error_model`: ``f sqrt(v_i +
+      common_i^2)``), ``sphere_coverage_independent`` the same without the common mode (what the
+      disagreement measures, calibrated by ``f``), and ``photo_coverage`` that of the photos'
+      cones (``f`` times the budget's sigma). Near 95% per sphere while the photos are at 100%:
+      the spheres' errors cancel in the photo's mean more than independent ones would; per sphere
+      well under 95% without the common mode: they share an error the disagreement cannot see;
     * ``away_mean_deg`` / ``away_share``: the spheres' errors resolved along the horizontal
       direction from the centre of the spheres' layout to each sphere (on the light's tangent
       plane; photos where that direction's tangent part is under 0.2 are left out): its mean, and
@@ -366,7 +373,7 @@ def truth_check(folder: Path) -> dict:
     first = next(l for l in doc["lights"] if l.get("spheres"))
     layout = np.mean([s["center"] for s in first["spheres"]], axis=0)
     per = np.full((len(doc["lights"]), n_spheres, 2), np.nan)
-    rows, away = [], []
+    rows, away, own = [], [], []
     for j, l in enumerate(doc["lights"]):
         used = list(l.get("used_spheres") or [])
         if l.get("status", "ok") != "ok" or len(used) < 2:
@@ -389,6 +396,10 @@ def truth_check(folder: Path) -> dict:
         sd = model.sphere_sigma_deg(stat, np.asarray(used, dtype=np.intp))
         indep = b["sigma_deg"] ** 2 - b["common_deg"] ** 2
         rows.append((E, b, indep, np.linalg.norm(e, axis=1) / (1.1774 * sd)))
+        # each sphere against its own cone (PhotoEstimate.with_error_model), with and without its common mode
+        common = np.array([model.common_sigma_deg(st, i) for st, i in zip(stat, used)])
+        rad_i = np.linalg.norm(e, axis=1)
+        own.append(np.stack([rad_i <= model.cone_deg(np.hypot(sd, common)), rad_i <= model.cone_deg(sd)], axis=1))
         for k, c in enumerate(centres):
             h = c - layout
             h[2] = 0.0
@@ -428,6 +439,9 @@ def truth_check(folder: Path) -> dict:
             "needed_factor": float(np.quantile(z, 0.95)),
             "needed_factor_independent": float(np.quantile(rad / np.sqrt(indep), 0.95)),
             "shape_factor": float(np.quantile(z, 0.95) / np.sqrt(np.mean(z * z) / 2.0)),
+            "sphere_coverage": float(np.mean(np.concatenate(own)[:, 0])),
+            "sphere_coverage_independent": float(np.mean(np.concatenate(own)[:, 1])),
+            "photo_coverage": float(np.mean(rad <= np.array([r[1]["cone_deg"] for r in rows]))),
             "away_mean_deg": float(aw[:, 0].mean()) if len(aw) else None,
             "away_share": float(np.sum(aw[:, 0] ** 2) / np.sum(aw[:, 1] ** 2)) if len(aw) else None,
             "centre_ratio": centre_ratio}
@@ -473,8 +487,8 @@ def main_truth_check(a) -> None:
     print("| condition | s | tau | sphere error / model sd | pair correlation | photo / independent variance | "
           "photos' RMS error | independent part | common bound | cone factor | factor needed | "
           "needed, independent part only | shape factor | away from layout centre: mean, share | "
-          "actual centre error / g, per sphere |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "actual centre error / g, per sphere | sphere coverage (without common mode) | photo coverage |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, sub in jobs:
         folder = Path(a.cache) / sub
         if (a.only and not any(o in name for o in a.only)) or not (folder / "lights_estimated.json").exists():
@@ -482,7 +496,7 @@ def main_truth_check(a) -> None:
         r = {"condition": name, **truth_check(folder)}
         out.append(r)
         if "skipped" in r:
-            print(f"| {name} | skipped: {r['skipped']} | | | | | | | | | | | | | |", flush=True)
+            print(f"| {name} | skipped: {r['skipped']} | | | | | | | | | | | | | | | |", flush=True)
             continue
         pc = "-" if r["pair_correlation"] is None else f"{r['pair_correlation']:+.2f}"
         cr = "-" if not r["centre_ratio"] else " / ".join("-" if x is None else f"{x:.1f}" for x in r["centre_ratio"])
@@ -490,7 +504,9 @@ def main_truth_check(a) -> None:
         print(f"| {name} | {r['scale']:.2f} | {r['floor']:.2f} | {r['sphere_ratio']:.2f} | {pc} | "
               f"{r['photo_over_independent']:.2f} | {r['photo_rms_deg']:.3f} | {r['independent_deg']:.3f} | "
               f"{r['common_deg']:.3f} | {r['cone_factor']:.2f} | {r['needed_factor']:.2f} | "
-              f"{r['needed_factor_independent']:.2f} | {r['shape_factor']:.2f} | {aw} | {cr} |", flush=True)
+              f"{r['needed_factor_independent']:.2f} | {r['shape_factor']:.2f} | {aw} | {cr} | "
+              f"{100 * r['sphere_coverage']:.1f}% ({100 * r['sphere_coverage_independent']:.1f}%) | "
+              f"{100 * r['photo_coverage']:.1f}% |", flush=True)
     print("\nper-axis degrees; medians over the accepted photos with 2+ spheres (truth_check)")
     write_json(a.out, {"benchmark": "bench_conditions --truth-check", **host_info(), "resolution": a.res,
                        "results": out})
@@ -561,54 +577,93 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, re
 BUDGET_TERMS = ("fit_deg", "centre_deg", "floor_deg", "common_deg")
 
 
+#: Parts of a photo's cone that :func:`cone_budget` leaves out one at a time (its ``coverage_without``).
+WITHOUT = ("common_bound", "common_floor", "common", "floor", "gaussian_factor")
+
+
 def cone_budget(doc: dict, lights: list, ok: np.ndarray, err: np.ndarray) -> dict | None:
     """Which term makes the cones of a condition wide or narrow.
 
     Per accepted photo, :meth:`ErrorModel.budget` of the error model ``lights.json`` reports, from
-    its used spheres' fit statistics (``sigma_deg``, RMS) and their inverse variances under the
-    model (``lights.json`` does not keep the combination's weights; a near light's joint-fit
-    statistics are not included). Returns the medians of the per-axis terms, the cone factor, the
-    error model's source, and two measures against the truth: ``photo_rms_deg``, the photos'
-    per-axis RMS error (what ``sigma_deg`` should be if the model's variance is right), and
-    ``needed_factor``, the 95% quantile of error / ``sigma_deg`` (the cone factor that would give
-    95% coverage with these sigmas). None without an error model or accepted photos.
+    its used spheres' fit statistics (``sigma_deg``, RMS) and the combination's weights
+    (:func:`_combination_weights`, as :func:`recalibrate` rebuilds them: the weights the photo's
+    cone was made with; a near light's joint-fit statistics are not included). Returns the medians
+    of the per-axis terms (the common mode also split into its bound, ``common_bound_deg``, and
+    its floor), the cone factor, the error model's source, and against the truth:
+
+    * ``photo_rms_deg``, the photos' per-axis RMS error (what ``sigma_deg`` should be if the
+      model's variance is right), and ``needed_factor``, the 95% quantile of error /
+      ``sigma_deg`` (the cone factor that would give 95% coverage with these sigmas);
+    * ``coverage_budget``: the coverage of the budget's cones (``cone_factor * sigma_deg``), and
+      ``coverage_without``: the same with one part left out of the root sum of squares
+      (:data:`WITHOUT`: the common-mode bound, the common floor, both, the per-sphere floor
+      ``tau``) or with the Gaussian factor 2.448 in place of the capture's (``gaussian_factor``);
+    * ``share``: per term, the median over the photos of its share of the photo's variance.
+
+    None without an error model or accepted photos.
     """
-    from ffls.spheres.uncertainty import ErrorModel
+    from ffls.spheres.uncertainty import CONE_FACTOR, ErrorModel
 
     if not doc.get("uncertainty") or not ok.any():
         return None
     model = ErrorModel.from_dict(doc["uncertainty"])
     terms = []
     for l, good in zip(lights, ok):
-        if not good:
+        used = list(l.get("used_spheres") or []) if good else []
+        if not used:
             terms.append(None)
             continue
-        used = list(l.get("used_spheres") or [])
-        stat = [(l["spheres"][i].get("sigma_deg") or np.inf) / np.sqrt(2.0) for i in used]
-        terms.append(model.budget(np.asarray(stat), np.asarray(used, dtype=np.intp)) if used else None)
+        sph = [l["spheres"][i] for i in used]
+        stat = np.array([s.get("sigma_deg") or np.inf for s in sph], dtype=np.float64) / np.sqrt(2.0)
+        b = model.budget(stat, np.asarray(used, dtype=np.intp), _combination_weights(sph))
+        b["common_bound_deg"] = float(np.sqrt(max(b["common_deg"] ** 2 - b["common_floor_deg"] ** 2, 0.0)))
+        terms.append(b)
     have = np.array([t is not None and np.isfinite(t["sigma_deg"]) for t in terms])
     if not have.any():
         return None
-    med = {k: float(np.median([t[k] for t, h in zip(terms, have) if h])) for k in (*BUDGET_TERMS, "sigma_deg")}
-    sig = np.array([t["sigma_deg"] for t, h in zip(terms, have) if h])
+    kept = [t for t, h in zip(terms, have) if h]
+    med = {k: float(np.median([t[k] for t in kept]))
+           for k in (*BUDGET_TERMS, "common_bound_deg", "common_floor_deg", "sigma_deg")}
+    sig = np.array([t["sigma_deg"] for t in kept])
     e = err[have]
-    return {**med, "cone_factor": float(model.cone_factor), "source": model.source,
+    f = float(model.cone_factor)
+
+    def part(k):
+        return np.array([t[k] for t in kept]) ** 2
+
+    var = sig * sig
+    left = {"common_bound": var - part("common_bound_deg"), "common_floor": var - part("common_floor_deg"),
+            "common": var - part("common_deg"), "floor": var - part("floor_deg"), "gaussian_factor": var}
+    without = {}
+    for k in WITHOUT:
+        factor = CONE_FACTOR if k == "gaussian_factor" else f
+        without[k] = float(np.mean(e <= factor * np.sqrt(np.maximum(left[k], 0.0))))
+    share = {k: float(np.median(part(k) / var)) for k in ("fit_deg", "centre_deg", "floor_deg", "common_bound_deg",
+                                                          "common_floor_deg")}
+    return {**med, "cone_factor": f, "source": model.source, "weights": "combination",
             "photo_rms_deg": float(np.sqrt(np.mean(e * e) / 2.0)),
-            "model_rms_deg": float(np.sqrt(np.mean(sig * sig))),
-            "needed_factor": float(np.quantile(e / sig, 0.95))}
+            "model_rms_deg": float(np.sqrt(np.mean(var))),
+            "needed_factor": float(np.quantile(e / sig, 0.95)),
+            "coverage_budget": float(np.mean(e <= f * sig)), "coverage_without": without, "share": share}
 
 
 def budget_table(rows) -> list[str]:
-    """Markdown lines: per condition, the median per-axis terms of the cones and the evidence."""
-    out = ["| condition | source | fit | centre | floor | common | cone factor | model sigma (RMS) | "
-           "photos' per-axis RMS error | factor for 95% |", "|---|---|---|---|---|---|---|---|---|---|"]
+    """Markdown lines: per condition, the median per-axis terms of the cones, the coverage with
+    each part left out (:func:`cone_budget`) and the evidence."""
+    out = ["| condition | source | fit | centre | floor | common bound | common floor | cone factor | "
+           "photos' per-axis RMS error | model sigma (RMS) | factor for 95% | coverage | without common bound | "
+           "without common floor | without common mode | without floor | Gaussian factor |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         b = r.get("budget")
         if not b:
             continue
-        out.append(f"| {r['condition']} | {b['source']} | " + " | ".join(f"{b[k]:.3f}" for k in BUDGET_TERMS)
-                   + f" | {b['cone_factor']:.2f} | {b['model_rms_deg']:.3f} | {b['photo_rms_deg']:.3f} | "
-                   f"{b['needed_factor']:.2f} |")
+        terms = ("fit_deg", "centre_deg", "floor_deg", "common_bound_deg", "common_floor_deg")
+        w = b.get("coverage_without") or {}
+        out.append(f"| {r['condition']} | {b['source']} | " + " | ".join(f"{b.get(k, np.nan):.3f}" for k in terms)
+                   + f" | {b['cone_factor']:.2f} | {b['photo_rms_deg']:.3f} | {b['model_rms_deg']:.3f} | "
+                   f"{b['needed_factor']:.2f} | {100 * b.get('coverage_budget', np.nan):.0f}% | "
+                   + " | ".join(f"{100 * w.get(k, np.nan):.0f}%" for k in WITHOUT) + " |")
     return out
 
 

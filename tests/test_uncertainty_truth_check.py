@@ -85,3 +85,66 @@ def test_without_photos_of_two_spheres_the_check_says_so(tmp_path):
         l["used_spheres"] = [0]
     (tmp_path / "lights_estimated.json").write_text(json.dumps(doc))
     assert bench_conditions.truth_check(tmp_path) == {"skipped": "no photo with 2+ spheres"}
+
+
+def test_sphere_coverage_tells_cancelling_from_shared_errors(tmp_path):
+    """Errors that cancel in the mean: each sphere's own cone holds its error no more often than the
+    photo's does; a shared error: without the common mode the spheres' own cones miss it."""
+    _stored_run(tmp_path / "away", radial_deg=1.0, common_deg=0.0)
+    r = bench_conditions.truth_check(tmp_path / "away")
+    assert r["photo_coverage"] == 1.0
+    assert r["sphere_coverage_independent"] <= r["sphere_coverage"] <= 1.0
+    # 1.5 deg shared by every sphere, beyond a sphere's own cone (2.448 x the 0.5 deg floor)
+    _stored_run(tmp_path / "shared", radial_deg=0.0, common_deg=1.5)
+    r = bench_conditions.truth_check(tmp_path / "shared")
+    assert r["sphere_coverage_independent"] <= r["sphere_coverage"]
+    assert r["sphere_coverage_independent"] < 0.5
+
+
+def _budget_doc(n: int = 40):
+    """A stored run of ``n`` photos with two matte spheres of unequal fit statistics (0.1 and 2 deg
+    RMS), the second sphere's error 1.2 deg and the photo's error 0.3 deg, under an error model
+    with a floor, a common-mode bound and its floor."""
+    model = ErrorModel(scale=2.0, floor_deg=0.2, common_deg=0.2, source="disagreement", n_photos=n,
+                       centre_deg=(0.0, 0.0), common_ratio=1.0 / 3.0, common_floor_deg=0.1, cone_factor=2.2)
+    spheres = [{"status": "ok", "kind": "matte", "direction": [0.0, 0.0, 1.0], "sigma_deg": 0.1},
+               {"status": "ok", "kind": "matte", "direction": [0.0, 0.0, 1.0], "sigma_deg": 2.0}]
+    lights = [{"direction": [0.0, 0.0, 1.0], "status": "ok", "model": "distant", "used_spheres": [0, 1],
+               "spheres": spheres, "uncertainty_deg": 1.0} for _ in range(n)]
+    return {"lights": lights, "uncertainty": model.as_dict()}, model
+
+
+def test_cone_budget_uses_the_combination_weights():
+    """The budget's terms are those of the cone the photo got: the combination's weights (a matte
+    sphere's statistics with the 1 deg floor), not the model's inverse variances, which give the
+    precise sphere nearly all the weight and a fit term several times smaller."""
+    doc, model = _budget_doc()
+    ok = np.ones(len(doc["lights"]), dtype=bool)
+    err = np.full(len(doc["lights"]), 0.3)
+    b = bench_conditions.cone_budget(doc, doc["lights"], ok, err)
+    stat = np.array([0.1, 2.0]) / np.sqrt(2.0)
+    want = model.budget(stat, np.array([0, 1]), bench_conditions._combination_weights(doc["lights"][0]["spheres"]))
+    smallest = model.budget(stat, np.array([0, 1]))  # the inverse variances under the model
+    assert b["weights"] == "combination"
+    assert b["fit_deg"] == pytest.approx(want["fit_deg"]) and b["sigma_deg"] == pytest.approx(want["sigma_deg"])
+    assert b["fit_deg"] > 3.0 * smallest["fit_deg"]
+    assert b["common_bound_deg"] ** 2 + b["common_floor_deg"] ** 2 == pytest.approx(b["common_deg"] ** 2)
+    # the cone holds the 0.3 deg error; every photo's cone is the same, so coverage is 0 or 1
+    assert b["coverage_budget"] == 1.0
+    assert set(b["coverage_without"]) == set(bench_conditions.WITHOUT)
+    assert sum(b["share"].values()) == pytest.approx(1.0)
+
+
+def test_cone_budget_coverage_without_each_part():
+    """Leaving out a part narrows the cone by exactly that part: an error between the cone without
+    the common mode and the whole cone is covered only with the common mode."""
+    doc, model = _budget_doc()
+    ok = np.ones(len(doc["lights"]), dtype=bool)
+    b0 = bench_conditions.cone_budget(doc, doc["lights"], ok, np.zeros(len(doc["lights"])))
+    f = model.cone_factor
+    indep = np.sqrt(b0["sigma_deg"] ** 2 - b0["common_deg"] ** 2)
+    err = np.full(len(doc["lights"]), f * 0.5 * (indep + b0["sigma_deg"]))  # between the two cones
+    b = bench_conditions.cone_budget(doc, doc["lights"], ok, err)
+    assert b["coverage_budget"] == 1.0
+    assert b["coverage_without"]["common"] == 0.0
+    assert b["needed_factor"] == pytest.approx(err[0] / b["sigma_deg"])
