@@ -16,9 +16,10 @@ conditions) no encoding. The table gives, against ``truth.json``:
 * the encoding ``ffls lights`` reported (calibrated when the capture states none);
 * the time per photo of ``ffls lights`` (one process; detection, calibration and both passes);
 * the cone budget (:func:`cone_budget`): the median per-axis terms of the cones (fit, centre,
-  floor, common mode, :meth:`ffls.spheres.uncertainty.ErrorModel.budget`) and the cone factor,
-  against the photos' per-axis RMS error and the factor 95% coverage would need: which term makes
-  a condition's cones too wide or too narrow.
+  floor, common-mode bound and floor, :meth:`ffls.spheres.uncertainty.ErrorModel.budget` with the
+  combination's weights) and the cone factor, against the photos' per-axis RMS error and the
+  factor 95% coverage would need, and the coverage with each part left out: which term makes a
+  condition's cones too wide or too narrow.
 
 A condition that makes ``ffls lights`` stop gets its one-line error in the table. Prints a
 Markdown table (for docs/spheres.md) and writes JSON.
@@ -33,7 +34,7 @@ against the photos' actual errors: how much of the common error they could expla
 With ``--truth-check`` (and a ``--cache`` of earlier runs) each part of the stored runs' cones is set
 against the renders' truth (:func:`truth_check`): the spheres' errors and their correlation within
 photos, the photos' errors against the independent-sphere part and the common-mode bound, the cone
-factor against the one 95% coverage needs.
+factor against the one 95% coverage needs, each sphere against its own cone.
 
 With ``--recalibrate`` (and a ``--cache`` of earlier runs) no ``ffls lights`` runs: the cones of
 each stored run are made again by the current error model from the photo estimates it recorded
