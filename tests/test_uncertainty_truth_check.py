@@ -102,9 +102,9 @@ def test_sphere_coverage_tells_cancelling_from_shared_errors(tmp_path):
 
 
 def _budget_doc(n: int = 40):
-    """A stored run of ``n`` photos with two matte spheres of unequal fit statistics (0.1 and 2 deg
-    RMS), the second sphere's error 1.2 deg and the photo's error 0.3 deg, under an error model
-    with a floor, a common-mode bound and its floor."""
+    """A stored run of ``n`` equal photos with two matte spheres of unequal fit statistics (0.1 and
+    2 deg RMS) under an error model with a floor, a common-mode bound and its floor (the photos'
+    errors are passed to :func:`bench_conditions.cone_budget` apart)."""
     model = ErrorModel(scale=2.0, floor_deg=0.2, common_deg=0.2, source="disagreement", n_photos=n,
                        centre_deg=(0.0, 0.0), common_ratio=1.0 / 3.0, common_floor_deg=0.1, cone_factor=2.2)
     spheres = [{"status": "ok", "kind": "matte", "direction": [0.0, 0.0, 1.0], "sigma_deg": 0.1},
@@ -123,10 +123,12 @@ def test_cone_budget_uses_the_combination_weights():
     err = np.full(len(doc["lights"]), 0.3)
     b = bench_conditions.cone_budget(doc, doc["lights"], ok, err)
     stat = np.array([0.1, 2.0]) / np.sqrt(2.0)
-    want = model.budget(stat, np.array([0, 1]), bench_conditions._combination_weights(doc["lights"][0]["spheres"]))
+    combination = 1.0 / (np.array([0.1, 2.0]) ** 2 + 1.0)  # photo.estimate_photo: the 1 deg matte floor
+    want = model.budget(stat, np.array([0, 1]), combination)
     smallest = model.budget(stat, np.array([0, 1]))  # the inverse variances under the model
     assert b["weights"] == "combination"
-    assert b["fit_deg"] == pytest.approx(want["fit_deg"]) and b["sigma_deg"] == pytest.approx(want["sigma_deg"])
+    assert b["fit_deg"] == pytest.approx(want["fit_deg"])
+    assert b["sigma_deg"] == pytest.approx(want["sigma_deg"])
     assert b["fit_deg"] > 3.0 * smallest["fit_deg"]
     assert b["common_bound_deg"] ** 2 + b["common_floor_deg"] ** 2 == pytest.approx(b["common_deg"] ** 2)
     # the cone holds the 0.3 deg error; every photo's cone is the same, so coverage is 0 or 1
