@@ -589,8 +589,9 @@ def cone_budget(doc: dict, lights: list, ok: np.ndarray, err: np.ndarray) -> dic
     its used spheres' fit statistics (``sigma_deg``, RMS) and the combination's weights
     (:func:`_combination_weights`, as :func:`recalibrate` rebuilds them: the weights the photo's
     cone was made with; a near light's joint-fit statistics are not included). Returns the medians
-    of the per-axis terms (the common mode also split into its bound, ``common_bound_deg``, and
-    its floor), the cone factor, the error model's source, and against the truth:
+    of the per-axis terms (``stat_deg`` the fit statistics before the scale ``s``, ``fit_deg``
+    after it; the common mode also split into its bound, ``common_bound_deg``, and its floor), of
+    the budget's sigma and cone, the cone factor, the error model's source, and against the truth:
 
     * ``photo_rms_deg``, the photos' per-axis RMS error (what ``sigma_deg`` should be if the
       model's variance is right), and ``needed_factor``, the 95% quantile of error /
@@ -618,13 +619,14 @@ def cone_budget(doc: dict, lights: list, ok: np.ndarray, err: np.ndarray) -> dic
         stat = np.array([s.get("sigma_deg") or np.inf for s in sph], dtype=np.float64) / np.sqrt(2.0)
         b = model.budget(stat, np.asarray(used, dtype=np.intp), _combination_weights(sph))
         b["common_bound_deg"] = float(np.sqrt(max(b["common_deg"] ** 2 - b["common_floor_deg"] ** 2, 0.0)))
+        b["stat_deg"] = b["fit_deg"] / model.scale  # the fit statistics as they are, before the scale s
         terms.append(b)
     have = np.array([t is not None and np.isfinite(t["sigma_deg"]) for t in terms])
     if not have.any():
         return None
     kept = [t for t, h in zip(terms, have) if h]
     med = {k: float(np.median([t[k] for t in kept]))
-           for k in (*BUDGET_TERMS, "common_bound_deg", "common_floor_deg", "sigma_deg")}
+           for k in (*BUDGET_TERMS, "stat_deg", "common_bound_deg", "common_floor_deg", "sigma_deg", "cone_deg")}
     sig = np.array([t["sigma_deg"] for t in kept])
     e = err[have]
     f = float(model.cone_factor)
@@ -651,18 +653,19 @@ def cone_budget(doc: dict, lights: list, ok: np.ndarray, err: np.ndarray) -> dic
 def budget_table(rows) -> list[str]:
     """Markdown lines: per condition, the median per-axis terms of the cones, the coverage with
     each part left out (:func:`cone_budget`) and the evidence."""
-    out = ["| condition | source | fit | centre | floor | common bound | common floor | cone factor | "
-           "photos' per-axis RMS error | model sigma (RMS) | factor for 95% | coverage | without common bound | "
-           "without common floor | without common mode | without floor | Gaussian factor |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    out = ["| condition | source | statistics | fit | centre | floor | common bound | common floor | cone factor | "
+           "median cone | photos' per-axis RMS error | model sigma (RMS) | factor for 95% | coverage | "
+           "without common bound | without common floor | without common mode | without floor | Gaussian factor |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         b = r.get("budget")
         if not b:
             continue
-        terms = ("fit_deg", "centre_deg", "floor_deg", "common_bound_deg", "common_floor_deg")
+        terms = ("stat_deg", "fit_deg", "centre_deg", "floor_deg", "common_bound_deg", "common_floor_deg")
         w = b.get("coverage_without") or {}
         out.append(f"| {r['condition']} | {b['source']} | " + " | ".join(f"{b.get(k, np.nan):.3f}" for k in terms)
-                   + f" | {b['cone_factor']:.2f} | {b['photo_rms_deg']:.3f} | {b['model_rms_deg']:.3f} | "
+                   + f" | {b['cone_factor']:.2f} | {b.get('cone_deg', np.nan):.2f} | {b['photo_rms_deg']:.3f} | "
+                   f"{b['model_rms_deg']:.3f} | "
                    f"{b['needed_factor']:.2f} | {100 * b.get('coverage_budget', np.nan):.0f}% | "
                    + " | ".join(f"{100 * w.get(k, np.nan):.0f}%" for k in WITHOUT) + " |")
     return out

@@ -130,6 +130,8 @@ def test_cone_budget_uses_the_combination_weights():
     assert b["fit_deg"] == pytest.approx(want["fit_deg"])
     assert b["sigma_deg"] == pytest.approx(want["sigma_deg"])
     assert b["fit_deg"] > 3.0 * smallest["fit_deg"]
+    assert b["stat_deg"] == pytest.approx(want["fit_deg"] / model.scale)
+    assert b["cone_deg"] == pytest.approx(want["cone_deg"])
     assert b["common_bound_deg"] ** 2 + b["common_floor_deg"] ** 2 == pytest.approx(b["common_deg"] ** 2)
     # the cone holds the 0.3 deg error; every photo's cone is the same, so coverage is 0 or 1
     assert b["coverage_budget"] == 1.0
