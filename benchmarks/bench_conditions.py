@@ -88,6 +88,9 @@ CONDITIONS = {
     "calibration shot: grey + mirror, no object": ["--no-object", "--spheres", "2", "--sphere-material", "grey,mirror"],
     # appended (the cache folders are numbered by position)
     "one mirror ball, textured ground": ["--spheres", "1", "--sphere-material", "mirror", "--background", "textured"],
+    # the spheres on one side of the object: their errors (each away from the object) add in the
+    # photo's mean instead of cancelling as on the ring (docs/spheres.md, "The cones too wide")
+    "4 white in a row in front of the object": ["--sphere-xy=-0.3,-0.25;-0.1,-0.25;0.1,-0.25;0.3,-0.25"],
 }
 
 
