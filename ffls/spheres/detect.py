@@ -1627,6 +1627,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     edges = _edge_map(mx, L, source)
     # the edges that hold in the photos (None: a single image, or fewer than 3 photos), read once
     held = _ConsistentEdges.of(*tensor) if tensor is not None and tensor[1] >= 3 else None
+    # and the ones whose contrast changes with the light (a mirror ball's silhouette on a textured ground)
+    changing = (_ConsistentEdges.of(*tensor, centered=True)
+                if held is not None and len(tensor[0]) >= EDGE_TENSOR_ROWS else None)
     rejected: list[str] = []
     if hints:
         hint_info = []
@@ -1639,6 +1642,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_duplicate_circles(cands, "hint", source)
         fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", workers)
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
+        fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
@@ -1676,6 +1680,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
+        fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
     noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
@@ -2355,6 +2360,61 @@ def _with_consistent_edges(fits, held: _ConsistentEdges | None, L, cam: _Camera,
     cpts = held.points
     return [ft if ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
             else _refine_on_consistent_edges(ft, cpts, cam, max_residual_px) for ft in fits]
+
+
+#: Band (radii, + 2 px) around a mirror ball's outline searched for its silhouette on the edges
+#: that change with the light (:func:`_with_changing_edges`): the outline from the max image can be
+#: 4 px off on a 27 px ball (a chrome ball on a textured ground, ``bench_conditions.py`` c18).
+MIRROR_CHANGING_BAND = 0.2
+#: Least share of its outline a mirror ball's circle on the changing edges must cover
+#: (:func:`_with_changing_edges`).
+MIRROR_CHANGING_COVERAGE = 0.75
+
+
+def _is_mirror_outline(ft, L) -> bool:
+    """A fit outlined as a mirror ball's: an outer outline (:func:`_outer_outline`) or a dark cap
+    (:func:`ffls.spheres.mirror_outline.dark_cap`) on ``L``, the max image's luminance."""
+    return ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
+
+
+def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camera,
+                         max_residual_px: float) -> list:
+    """Each mirror ball's outline refitted on the edges whose contrast changes with the light.
+
+    A chrome ball's limb reflects the ground just behind it, so in the max image (and in each
+    photo) its silhouette has only the contrast of its reflectance, which a textured ground's own
+    edges drown: the outline from the max image follows the reflected contrasts inside the limb
+    and the texture outside it (a chrome ball on ``ffls synth --background textured`` at 384 px:
+    4.2 px off, radius 1.1 px short, 19 degrees of light direction). In the gradient's covariance
+    over the photos (``changing``: :func:`consistent_edge_strength` ``centered``) the ground's
+    texture drops out (its log contrast is its albedo's, the same under every light), while the
+    ball's silhouette stays: the ball shows other parts of the scene, shadowed and lit at other
+    times than the ground beside it, and the sky with the lights' highlights. The ridge points
+    within :data:`MIRROR_CHANGING_BAND` radii (+ 2 px) of each mirror outline
+    (:func:`_is_mirror_outline`) are searched for the best-supported circle and fitted
+    (:func:`_fit_on_consistent_edges`); the refit replaces the outline when it is round (RMS within
+    ``max_residual_px``), covers :data:`MIRROR_CHANGING_COVERAGE` of its outline, moves the centre
+    by less than a quarter of the radius and has the higher :func:`outline_quality`. Unchanged
+    without the evidence (None: fewer than 3 photos, or a tensor without the summed gradient).
+    """
+    if changing is None or not fits:
+        return fits
+    out = []
+    for ft in fits:
+        if ft.source == "override" or not _is_mirror_outline(ft, L):
+            out.append(ft)
+            continue
+        c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+        new = _fit_on_consistent_edges(c0, r0, changing.points, cam, ft.source, MIRROR_CHANGING_BAND)
+        if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
+                or new.coverage < MIRROR_CHANGING_COVERAGE * new.visible_fraction
+                or outline_quality(new) <= outline_quality(ft)):
+            out.append(ft)
+            continue
+        new.score, new.outline_edges = ft.score, PHOTO_EDGES
+        new.outline_sigma_px = max(ft.outline_sigma_px, MIRROR_OUTLINE_FLOOR_PX)
+        out.append(new)
+    return out
 
 
 def _fit_on_consistent_edges(c0, r0: float, cpts, cam: _Camera, source: str, band: float = 0.1,
