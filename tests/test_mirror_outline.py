@@ -12,7 +12,7 @@ import pytest
 
 from ffls.io.capture import load_capture
 from ffls.radiance.photos import load_photo
-from ffls.spheres.detect import extreme_images, find_spheres_in_capture
+from ffls.spheres.detect import SphereFit, extreme_images, find_spheres_in_capture, outline_support
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circle_coverage, circle_search,
                                         dark_cap, enclosing_circle, highlight_ratio)
 from ffls.synth.photo import PhotoSettings
@@ -269,3 +269,23 @@ def test_pixel_hint_on_a_mirror_ball(textured_mirror, tmp_path):
     sp = find_spheres_in_capture(load_capture(tmp_path))
     assert len(sp) == 1
     assert np.hypot(*(np.asarray(sp[0].center_px) - t["center_px"])) < 1.0
+
+
+def _ortho_fit(center, radius):
+    return SphereFit(center_cam=np.zeros(3), center_world=np.zeros(3), radius=1.0,
+                     center_px=np.asarray(center, dtype=np.float64), radius_px=float(radius), residual_px=0.0,
+                     n_edge_points=0, n_inliers=0, inlier_fraction=1.0, coverage=1.0, source="test",
+                     edge_px=np.zeros((0, 2)), K=None, dist=None, world_from_camera=np.eye(4),
+                     camera_model="orthographic")
+
+
+def test_outline_support_is_the_share_of_the_outline_on_the_edges():
+    """Half a circle's outline on edge points: 0.5; the points 2 px outside it: 0; cut by the frame,
+    the share of the visible part."""
+    t = np.radians(np.arange(180.0, 360.0, 0.5))
+    arc = np.stack([50 + 20 * np.cos(t), 50 + 20 * np.sin(t)], axis=1)  # y down: the upper half
+    ft = _ortho_fit((50, 50), 20)
+    assert outline_support(ft, arc) == pytest.approx(0.5, abs=0.02)
+    assert outline_support(ft, 50 + (arc - 50) * 22 / 20) == 0.0
+    assert outline_support(ft, arc, shape=(51, 200)) > 0.97  # the frame shows that half (and its ends)
+    assert outline_support(ft, np.zeros((0, 2))) == 0.0
