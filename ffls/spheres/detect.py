@@ -1628,9 +1628,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     edges = _edge_map(mx, L, source)
     # the edges that hold in the photos (None: a single image, or fewer than 3 photos), read once
     held = _ConsistentEdges.of(*tensor) if tensor is not None and tensor[1] >= 3 else None
-    # and the ones whose contrast changes with the light (a mirror ball's silhouette on a textured ground)
-    changing = (_ConsistentEdges.of(*tensor, centered=True)
-                if held is not None and len(tensor[0]) >= EDGE_TENSOR_ROWS else None)
+    # and whether those whose contrast changes with the light can be read (a mirror ball's silhouette
+    # on a textured ground; the photo-edge search reads them too)
+    with_changing = held is not None and len(tensor[0]) >= EDGE_TENSOR_ROWS
     rejected: list[str] = []
     if hints:
         hint_info = []
@@ -1643,18 +1643,20 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_duplicate_circles(cands, "hint", source)
         fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", workers)
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
-        fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
+        if with_changing and any(_is_mirror_outline(ft, L) for ft in fits):
+            fits = _with_changing_edges(fits, _ConsistentEdges.of(*tensor, centered=True), L, cam, max_residual_px)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
         hint_info = []
+        changing = _ConsistentEdges.of(*tensor, centered=True) if with_changing else None
         ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
         cands = _hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         if held is not None:  # outlines the max image leaves out (white on white)
-            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers)
+            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers, changing)
             # one the photos' edges outline precisely but leave open (a textured ground's patches
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
             # may have missed among the texture's: it is fitted on the max image's edges too
@@ -1843,7 +1845,8 @@ PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
 
 
 def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: _EdgeMap,
-                     held: _ConsistentEdges, workers: int = 1) -> tuple[list, int]:
+                     held: _ConsistentEdges, workers: int = 1,
+                     changing: _ConsistentEdges | None = None) -> tuple[list, int]:
     """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
 
     In the max image every pixel reads its best light, so a white matte sphere on a white ground
@@ -1856,8 +1859,9 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
-    with the light (``centered``, the gradient's covariance over the photos), where a textured
-    ground's edges, the same in every photo, drop out.
+    with the light (``centered``, the gradient's covariance over the photos; ``changing``, read
+    once by :func:`find_spheres`, or read here when None), where a textured ground's edges, the
+    same in every photo, drop out.
 
     A fit that is a near-duplicate (:func:`_same_circle`) of a round outline already fitted on the
     max image is dropped (that outline is judged, and refitted on these edges, as before); of two
@@ -1878,7 +1882,9 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     # gradient's covariance: a textured ground's edges, the same in every photo, drop out of it)
     passes, images = [], []
     for centered in (False, True)[:1 + (len(tensor[0]) >= EDGE_TENSOR_ROWS)]:
-        ev = _ConsistentEdges.of(*tensor, centered=True) if centered else held
+        if centered and changing is None:
+            changing = _ConsistentEdges.of(*tensor, centered=True)
+        ev = changing if centered else held
         H, W = ev.strength.shape
         peak = _robust_peak(ev.strength)
         if not peak > 0:
