@@ -289,3 +289,19 @@ def test_outline_support_is_the_share_of_the_outline_on_the_edges():
     assert outline_support(ft, 50 + (arc - 50) * 22 / 20) == 0.0
     assert outline_support(ft, arc, shape=(51, 200)) > 0.97  # the frame shows that half (and its ends)
     assert outline_support(ft, np.zeros((0, 2))) == 0.0
+
+
+def test_pixel_hint_on_a_chrome_ball_finds_its_silhouette(mirror_capture, tmp_path):
+    """A pixel hint on the chrome ball on the grey table: its silhouette, as found without hints
+    (the hinted circle alone is the reflected room's dark cap, inside it)."""
+    folder, truth = mirror_capture
+    t = truth["spheres"][0]
+    doc = json.loads((folder / "capture.json").read_text())
+    doc["spheres"] = [{"center_px": [t["center_px"][0] + 3, t["center_px"][1] - 3]}]
+    for name in doc["images"]:
+        (tmp_path / name).symlink_to(folder / name)
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    sp = find_spheres_in_capture(load_capture(tmp_path))
+    assert len(sp) == 1
+    assert np.hypot(*(np.asarray(sp[0].center_px) - t["center_px"])) < 1.0
+    assert sp[0].source == OUTER_SOURCE
