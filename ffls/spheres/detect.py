@@ -106,6 +106,7 @@ __all__ = [
     "gradient_noise",
     "shading_ratio",
     "outline_quality",
+    "outline_support",
     "PHOTO_EDGES",
     "CRITERIA",
 ]
@@ -1627,6 +1628,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     edges = _edge_map(mx, L, source)
     # the edges that hold in the photos (None: a single image, or fewer than 3 photos), read once
     held = _ConsistentEdges.of(*tensor) if tensor is not None and tensor[1] >= 3 else None
+    # and whether those whose contrast changes with the light can be read (a mirror ball's silhouette
+    # on a textured ground; the photo-edge search reads them too)
+    with_changing = held is not None and len(tensor[0]) >= EDGE_TENSOR_ROWS
     rejected: list[str] = []
     if hints:
         hint_info = []
@@ -1639,17 +1643,29 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_duplicate_circles(cands, "hint", source)
         fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", workers)
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
+        mirror = [_is_mirror_outline(ft, L) for ft in fits]
+        if any(mirror):  # a mirror's outline: on the changing edges where they decide, else grown as unhinted
+            changing = _ConsistentEdges.of(*tensor, centered=True) if with_changing else None
+            refit = _with_changing_edges(fits, changing, L, cam, max_residual_px)
+            grow = [m and r is f for m, r, f in zip(mirror, refit, fits)]
+            if any(grow):
+                ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
+                grown = _hinted_mirror_outlines([f for f, g in zip(fits, grow) if g], edges, L, cam, ratio, workers)
+                it = iter(_with_changing_edges(grown, changing, L, cam, max_residual_px))
+                refit = [next(it) if g else r for r, g in zip(refit, grow)]
+            fits = refit
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
         hint_info = []
+        changing = _ConsistentEdges.of(*tensor, centered=True) if with_changing else None
         ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
         cands = _hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         if held is not None:  # outlines the max image leaves out (white on white)
-            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers)
+            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers, changing)
             # one the photos' edges outline precisely but leave open (a textured ground's patches
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
             # may have missed among the texture's: it is fitted on the max image's edges too
@@ -1676,6 +1692,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
+        fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
     noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
@@ -1837,7 +1854,8 @@ PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
 
 
 def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: _EdgeMap,
-                     held: _ConsistentEdges, workers: int = 1) -> tuple[list, int]:
+                     held: _ConsistentEdges, workers: int = 1,
+                     changing: _ConsistentEdges | None = None) -> tuple[list, int]:
     """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
 
     In the max image every pixel reads its best light, so a white matte sphere on a white ground
@@ -1850,8 +1868,9 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
-    with the light (``centered``, the gradient's covariance over the photos), where a textured
-    ground's edges, the same in every photo, drop out.
+    with the light (``centered``, the gradient's covariance over the photos; ``changing``, read
+    once by :func:`find_spheres`, or read here when None), where a textured ground's edges, the
+    same in every photo, drop out.
 
     A fit that is a near-duplicate (:func:`_same_circle`) of a round outline already fitted on the
     max image is dropped (that outline is judged, and refitted on these edges, as before); of two
@@ -1872,7 +1891,9 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     # gradient's covariance: a textured ground's edges, the same in every photo, drop out of it)
     passes, images = [], []
     for centered in (False, True)[:1 + (len(tensor[0]) >= EDGE_TENSOR_ROWS)]:
-        ev = _ConsistentEdges.of(*tensor, centered=True) if centered else held
+        if centered and changing is None:
+            changing = _ConsistentEdges.of(*tensor, centered=True)
+        ev = changing if centered else held
         H, W = ev.strength.shape
         peak = _robust_peak(ev.strength)
         if not peak > 0:
@@ -2089,6 +2110,33 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera) -> list:
 #: Least share of its circumference a mirror ball's circle of reflectance steps must cover to replace a
 #: dark cap's outline that no larger outline encloses (:func:`_outer_outline`).
 MIRROR_STEP_COVERAGE = 0.75
+
+
+def _hinted_mirror_outlines(fits, edges: _EdgeMap, L, cam: _Camera, ratio=None, workers: int = 1) -> list:
+    """Each hinted sphere outlined as a mirror ball's (:func:`_is_mirror_outline`) found as an
+    unhinted one would be: the candidate circles of the search without hints
+    (:func:`_hough_circle_candidates`) whose centres lie within half the hinted fit's radius of
+    its centre and whose radii are within a factor 2 of it are fitted and grown to their outer
+    outlines (:func:`_with_outer_outlines`), with the hinted fit; the outer outline of the best
+    :func:`outline_quality` within half a radius replaces the hinted fit where it fits better.
+    A chrome ball's dark cap fitted from the hint alone is the reflected room's outline, inside
+    the silhouette (the lone chrome ball of ``bench_conditions.py``: 2.0 px off, where the search
+    without hints finds it 0.44 px off); the search's candidates, caps of several sizes, grow to
+    its silhouette."""
+    mirror = [_is_mirror_outline(ft, L) for ft in fits]
+    if not any(mirror):
+        return fits
+    cands = _hough_circle_candidates(edges, L, ratio=ratio)
+    out = []
+    for ft, m in zip(fits, mirror):
+        c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+        near = [c for c in cands if np.hypot(c[0] - c0[0], c[1] - c0[1]) < 0.5 * r0 and 0.5 * r0 < c[2] < 2 * r0]
+        got = _fit_candidates(near, edges, cam, 0.3, "auto", workers)[0] if m and near else []
+        grown = [g for g in _with_outer_outlines(got + [ft], edges, L, cam) if g.source == OUTER_SOURCE
+                 and np.hypot(*(g.center_px - c0)) < 0.25 * r0] if m else []
+        best = max(grown, key=outline_quality, default=None)
+        out.append(best if best is not None and outline_quality(best) > outline_quality(ft) else ft)
+    return out
 
 
 def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera):
@@ -2355,6 +2403,93 @@ def _with_consistent_edges(fits, held: _ConsistentEdges | None, L, cam: _Camera,
     cpts = held.points
     return [ft if ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
             else _refine_on_consistent_edges(ft, cpts, cam, max_residual_px) for ft in fits]
+
+
+#: Band (radii, + 2 px) around a mirror ball's outline searched for its silhouette on the edges
+#: that change with the light (:func:`_with_changing_edges`): the outline from the max image can be
+#: 4 px off on a 27 px ball (a chrome ball on a textured ground, ``bench_conditions.py`` c18).
+MIRROR_CHANGING_BAND = 0.2
+#: How many times more of its outline a mirror ball's refit on the changing edges must have on them
+#: than the outline it replaces (:func:`_with_changing_edges`, :func:`outline_support`).
+MIRROR_CHANGING_GAIN = 1.5
+
+
+def _is_mirror_outline(ft, L) -> bool:
+    """A fit outlined as a mirror ball's: an outer outline (:func:`_outer_outline`) or a dark cap
+    (:func:`ffls.spheres.mirror_outline.dark_cap`) on ``L``, the max image's luminance."""
+    return ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
+
+
+def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144) -> float:
+    """Share of a fitted sphere's outline within ``tol`` pixels of an edge point.
+
+    The outline is sampled at ``n`` points (pinhole: the tangent cone's ellipse,
+    :func:`silhouette_px`; orthographic: the circle); each counts when an edge point of ``points``
+    ((m, 2) x, y) lies within ``tol`` of it. With the image ``shape`` (H, W) the share is of the
+    samples in the frame. 0 without points or samples.
+    """
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if ft.camera_model == "orthographic":
+        t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        P = np.asarray(ft.center_px, dtype=np.float64) + ft.radius_px * np.stack([np.cos(t), np.sin(t)], axis=1)
+    else:
+        P = silhouette_px(ft.K, ft.dist, ft.center_cam, ft.radius, n=n)
+    if shape is not None:
+        H, W = shape[:2]
+        P = P[(P[:, 0] >= 0) & (P[:, 0] <= W - 1) & (P[:, 1] >= 0) & (P[:, 1] <= H - 1)]
+    if len(pts) == 0 or len(P) == 0:
+        return 0.0
+    d, _ = cKDTree(pts).query(P, distance_upper_bound=tol + 1e-9)
+    return float(np.mean(d <= tol))
+
+
+def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camera,
+                         max_residual_px: float) -> list:
+    """Each mirror ball's outline refitted on the edges whose contrast changes with the light,
+    where the outline it has is not on them.
+
+    A chrome ball's limb reflects the ground just behind it, so in the max image (and in each
+    photo) its silhouette has only the contrast of its reflectance, which a textured ground's own
+    edges drown: the outline from the max image follows the reflected contrasts inside the limb
+    and the texture outside it (a chrome ball on ``ffls synth --background textured`` at 384 px:
+    4.2 px off, radius 1.1 px short, 19 degrees of light direction). In the gradient's covariance
+    over the photos (``changing``: :func:`consistent_edge_strength` ``centered``) the ground's
+    texture drops out (its log contrast is its albedo's, the same under every light), while the
+    ball's silhouette stays: the ball shows other parts of the scene, shadowed and lit at other
+    times than the ground beside it, and the sky with the lights' highlights. The ridge points
+    within :data:`MIRROR_CHANGING_BAND` radii (+ 2 px) of each mirror outline
+    (:func:`_is_mirror_outline`) are searched for the best-supported circle and fitted
+    (:func:`_fit_on_consistent_edges`). The refit replaces the outline when it is round (RMS within
+    ``max_residual_px``), moves the centre by less than a quarter of the radius, and has
+    :data:`MIRROR_CHANGING_GAIN` times the share of its outline on the changing edges that the
+    outline it replaces has (:func:`outline_support`, 1 px): the two outlines judged on the same
+    evidence. Inside a chrome ball the changing edges also trace reflected circles; where the
+    max image's outline already lies on the changing edges (0.53-0.65 of it on the renders of
+    ``bench_conditions.py``, against 0.64-0.67 for the refit) the refit is one of several circles
+    of equal support, and 1-2 sphere radii off in depth. Where it is replaced the old outline had
+    0.25-0.42 of it, the refit 0.71-0.94. Unchanged without the evidence (None: fewer than 3
+    photos, or a tensor without the summed gradient).
+    """
+    if changing is None or not fits:
+        return fits
+    pts = changing.points[0]
+    out = []
+    for ft in fits:
+        if ft.source == "override" or not _is_mirror_outline(ft, L):
+            out.append(ft)
+            continue
+        c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+        new = _fit_on_consistent_edges(c0, r0, changing.points, cam, ft.source, MIRROR_CHANGING_BAND)
+        if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
+                or outline_support(new, pts, cam.shape) < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape)):
+            out.append(ft)
+            continue
+        new.score, new.outline_edges = ft.score, PHOTO_EDGES
+        new.outline_sigma_px = max(ft.outline_sigma_px, MIRROR_OUTLINE_FLOOR_PX)
+        out.append(new)
+    return out
 
 
 def _fit_on_consistent_edges(c0, r0: float, cpts, cam: _Camera, source: str, band: float = 0.1,
