@@ -1,0 +1,257 @@
+"""The ground bounce from the photograph itself: each sphere's ground, as the camera sees it.
+
+The bounce model of :mod:`ffls.spheres.lambert` is an infinite uniform ground, ``c g(n)`` with
+``g(n) = (1 - n . up) / 2``. A real ground is not uniform: the object's cast shadow falls on it,
+its albedo varies, the object hides part of it. But the camera sees most of the ground around
+each sphere, in every photo. Here the ground plane under a sphere (the plane through its lowest
+point, normal to ``up``: the sphere rests on it) is sampled along a set of equal-solid-angle
+directions ``w`` of the lower hemisphere, seen from the sphere's centre; each direction's ground
+point is projected into the photo (the capture's camera, pinhole or orthographic) and read there
+where the camera sees it (in the frame, not behind or on a sphere, within
+:data:`GROUND_REACH` sphere radii of the contact point). The bounce at a normal ``n`` is the
+cosine-weighted integral of that radiance over the ground part of ``n``'s hemisphere,
+
+    ``B(n) = 1/pi sum_w L(w) max(n . w, 0) dOmega``;
+
+a uniform ground gives ``L (1 - n . up) / 2``: the uniform model, scaled by the ground's
+radiance. The directions start at the centre, not at each surface point
+(the ground's near part is then seen from slightly the wrong place; exact for a uniform ground).
+Where the ground is seen, only its departure from the uniform model (its radiance over that of
+the lit ground around the sphere, the median ``L_ref``) is taken from the photo
+(:func:`observed_bounce`); where not, the uniform model and its own shadow
+(:func:`ffls.spheres.lambert.shadowed_ground_bounce`) stand, so that the form factor keeps the
+uniform one's scale and the capture's ground ratio its meaning. The object is not masked (its
+outline is unknown): :data:`GROUND_REACH` keeps the ground read near the sphere.
+Measured in docs/spheres.md, "The ground bounce from the photograph".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ffls.camera.projection import project_points
+from ffls.conventions import UP
+
+__all__ = ["GROUND_DIRECTIONS", "GROUND_MARGIN_PX", "GROUND_REACH", "GroundView", "ground_pixels", "ground_radiance",
+           "ground_views", "observed_bounce", "own_shadow_mask"]
+
+#: Directions of the lower hemisphere at which each sphere's ground is read (equal solid angles).
+GROUND_DIRECTIONS = 1024
+#: Farthest ground point read, in sphere radii from the contact point along the ground. From the
+#: sphere's lowest point (``n = -up``) the ground within ``rho`` radii of the contact holds
+#: ``rho^2 / (rho^2 + 1)`` of the cosine-weighted bounce (the centre is one radius up): 94% at 4;
+#: farther ground is more likely another object's (an object's ground point, hidden from the
+#: sphere or from the camera, is not the sphere's ground) and is filled with the seen mean.
+GROUND_REACH = 4.0
+#: Margin around each sphere's outline, in pixels, within which the ground is not read (the
+#: outline's pixels mix sphere and ground).
+GROUND_MARGIN_PX = 2.0
+
+
+def _lower_directions(n: int) -> np.ndarray:
+    """``n`` unit directions of the lower hemisphere (``z < 0``) with equal solid angles (a
+    Fibonacci lattice: rings of equal area in ``z``, golden-angle azimuths)."""
+    i = np.arange(n, dtype=np.float64)
+    z = -(i + 0.5) / n
+    phi = i * np.pi * (3.0 - np.sqrt(5.0))
+    s = np.sqrt(1.0 - z * z)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+
+
+@dataclass(frozen=True)
+class GroundView:
+    """Where one sphere's ground is seen in the photos (fixed per capture: camera and sphere).
+
+    Attributes
+    ----------
+    rows, cols : (p, 4) int
+        The four pixels of each seen direction's bilinear read.
+    weights : (p, 4) float
+        Their bilinear weights.
+    seen : (D,) bool
+        Which of the directions are read (the others are filled with the mean of these).
+    kernel : (m, p) float32
+        ``max(n . w, 0) dOmega / pi`` for the sphere's sample normals (rows) and seen directions.
+    offsets : (p, 3) float
+        The seen directions' ground points, from the sphere's centre, in sphere radii.
+    """
+
+    rows: np.ndarray
+    cols: np.ndarray
+    weights: np.ndarray
+    seen: np.ndarray
+    kernel: np.ndarray
+    offsets: np.ndarray
+
+    @property
+    def n_seen(self) -> int:
+        return int(len(self.offsets))
+
+
+def _camera_frame(world_from_camera) -> tuple[np.ndarray, np.ndarray]:
+    M = np.asarray(world_from_camera, dtype=np.float64)
+    return M[:3, :3], M[:3, 3]
+
+
+def _hidden_by_spheres(origin, targets, centers, radii) -> np.ndarray:
+    """Whether each segment ``origin -> target`` (origins (3,) or one per target) passes through
+    any sphere (centres, inflated radii)."""
+    hidden = np.zeros(len(targets), bool)
+    origin = np.broadcast_to(origin, targets.shape)
+    for c, r in zip(centers, radii):
+        d = targets - origin
+        length = np.linalg.norm(d, axis=1)
+        u = d / length[:, None]
+        t = np.clip(np.einsum("ij,ij->i", c - origin, u), 0.0, length)
+        closest = origin + u * t[:, None]
+        hidden |= np.linalg.norm(closest - c, axis=1) < r
+    return hidden
+
+
+def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, world_from_camera,
+                 up: np.ndarray = UP, n_dirs: int = GROUND_DIRECTIONS, reach: float = GROUND_REACH,
+                 margin_px: float = GROUND_MARGIN_PX) -> list[GroundView]:
+    """Each sphere's :class:`GroundView`: where its ground plane's points are seen in the photos.
+
+    Parameters
+    ----------
+    samples : list of :class:`ffls.spheres.samples.SphereSamples`
+        Every sphere of the capture (each one's ground is read where no sphere hides it).
+    shape : (H, W)
+    camera_model : {'pinhole', 'orthographic'}
+    K, dist : the pinhole camera (ignored for an orthographic one)
+    world_from_camera : (4, 4)
+    up : (3,) float
+        World up (``+Z``): the ground is normal to it.
+    n_dirs : int
+    reach : float
+        :data:`GROUND_REACH`.
+    margin_px : float
+        :data:`GROUND_MARGIN_PX`.
+    """
+    H, W = int(shape[0]), int(shape[1])
+    up = np.asarray(up, dtype=np.float64)
+    Rw, tw = _camera_frame(world_from_camera)
+    base = _lower_directions(n_dirs)
+    # the lattice is about world z: turn it about up (a rotation taking +Z to up)
+    if not np.allclose(up, UP):
+        v = np.cross(UP, up)
+        c = float(UP @ up)
+        vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+        base = base @ (np.eye(3) + vx + vx @ vx / (1.0 + c)).T
+    d_omega = 2.0 * np.pi / n_dirs
+    ortho = camera_model == "orthographic"
+    centers = np.array([s.center for s in samples], dtype=np.float64)
+    scale_px = []  # pixels per world unit near each sphere (for the margin)
+    for s in samples:
+        if ortho:
+            scale_px.append(s.radius_px / s.radius)
+        else:
+            depth = float(Rw[:, 2] @ (s.center - tw))
+            scale_px.append(0.5 * (K[0][0] + K[1][1]) / depth)
+    views = []
+    for k, s in enumerate(samples):
+        height = s.radius  # the centre's height above the ground it rests on
+        cos_down = -(base @ up)  # > 0
+        t = height / cos_down
+        reach_ok = t * np.sqrt(np.maximum(1.0 - cos_down ** 2, 0.0)) <= reach * s.radius
+        X = s.center + base * t[:, None]
+        Xc = (X - tw) @ Rw  # camera frame
+        if ortho:  # pixel offsets from the sphere's centre pixel, at the sphere's scale
+            c_cam = (s.center - tw) @ Rw
+            n_cam = s.normals @ Rw
+            cx = float(np.mean(s.cols - s.radius_px * n_cam[:, 0]))
+            cy = float(np.mean(s.rows - s.radius_px * n_cam[:, 1]))
+            px = np.stack([cx + (Xc[:, 0] - c_cam[0]) * scale_px[k], cy + (Xc[:, 1] - c_cam[1]) * scale_px[k]],
+                          axis=1)
+            view_dir = Rw[:, 2]
+            origin = X - view_dir * (100.0 * s.radius + np.abs((X - s.center) @ view_dir)).max()
+            in_front = np.ones(len(X), bool)
+        else:
+            in_front = Xc[:, 2] > 1e-9
+            px = np.full((len(X), 2), -1.0)
+            if in_front.any():
+                px[in_front] = project_points(Xc[in_front], K, dist)
+            origin = tw
+        radii = np.array([sm.radius + margin_px / sc for sm, sc in zip(samples, scale_px)])
+        ok = reach_ok & in_front & np.isfinite(px).all(axis=1)
+        ok &= (px[:, 0] >= 0) & (px[:, 0] <= W - 1) & (px[:, 1] >= 0) & (px[:, 1] <= H - 1)
+        if ok.any():
+            idx = np.flatnonzero(ok)
+            o = origin[idx] if np.ndim(origin) == 2 else origin
+            ok[idx[_hidden_by_spheres(o, X[idx], centers, radii)]] = False
+        x0 = np.clip(np.floor(px[ok, 0]).astype(np.intp), 0, max(W - 2, 0))
+        y0 = np.clip(np.floor(px[ok, 1]).astype(np.intp), 0, max(H - 2, 0))
+        fx, fy = px[ok, 0] - x0, px[ok, 1] - y0
+        rows = np.stack([y0, y0, y0 + 1, y0 + 1], axis=1)
+        cols = np.stack([x0, x0 + 1, x0, x0 + 1], axis=1)
+        wts = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], axis=1)
+        kernel = (np.maximum(s.normals @ base[ok].T, 0.0) * (d_omega / np.pi)).astype(np.float32)
+        views.append(GroundView(rows=np.minimum(rows, H - 1), cols=np.minimum(cols, W - 1), weights=wts, seen=ok,
+                                kernel=kernel, offsets=(X[ok] - s.center) / s.radius))
+    return views
+
+
+def ground_pixels(views: list[GroundView]) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels every view reads (rows, cols), e.g. to linearise an integer photo there."""
+    if not views:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    return (np.concatenate([v.rows.ravel() for v in views]).astype(np.intp),
+            np.concatenate([v.cols.ravel() for v in views]).astype(np.intp))
+
+
+def ground_radiance(view: GroundView, image: np.ndarray) -> np.ndarray | None:
+    """(p,) float64: the seen directions' ground radiance in one photo's linear ``image`` (H, W[, C])
+    (grey: the channels' mean); None where none is seen or a value is not finite."""
+    if view.n_seen == 0:
+        return None
+    px = np.asarray(image)[view.rows, view.cols].astype(np.float64)
+    if px.ndim == 3:
+        px = px.mean(axis=-1)
+    L = np.sum(px * view.weights, axis=1)
+    return L if np.all(np.isfinite(L)) else None
+
+
+def own_shadow_mask(view: GroundView, light: np.ndarray) -> np.ndarray:
+    """(p,) bool: the seen ground points in the sphere's own shadow under the distant ``light``."""
+    light = np.asarray(light, dtype=np.float64)
+    light = light / np.linalg.norm(light)
+    tc = -view.offsets @ light  # along the light from the ground point to the centre
+    d2 = np.einsum("ij,ij->i", view.offsets, view.offsets) - tc * tc
+    return (tc > 0) & (d2 < 1.0)
+
+
+def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.ndarray,
+                    uniform: np.ndarray) -> np.ndarray:
+    """The bounce's form factor (m,) with the photographed ground in place of a uniform one.
+
+    ``uniform`` is the uniform ground's form factor less the sphere's own shadow under ``light``
+    (:func:`ffls.spheres.lambert.shadowed_ground_bounce`), for a ground of radiance ``L_ref``: the
+    median of the seen ground outside the own shadow. Where the ground is seen, its departure from
+    that model, ``L(w) / L_ref - (1 - shadow(w))``, is added with its cosine weights; where it is
+    not seen (behind the sphere, out of the frame or of reach), the uniform model stands. A
+    uniform ground gives ``uniform`` back, so the ground ratio of
+    :func:`ffls.spheres.estimate.calibrate_bounce` keeps its meaning (``L_ref`` is the uniform
+    ground's radiance).
+
+    Parameters
+    ----------
+    view : GroundView
+    radiance : (p,) float or None
+        :func:`ground_radiance` of the photo (None: ``uniform`` is returned).
+    light : (3,) float
+        The light's direction (the own shadow's).
+    uniform : (m,) float
+    """
+    uniform = np.asarray(uniform, dtype=np.float64)
+    if radiance is None:
+        return uniform
+    lit = ~own_shadow_mask(view, light)
+    if lit.sum() < 3:
+        return uniform
+    ref = float(np.median(radiance[lit]))
+    if not ref > 0:
+        return uniform
+    dev = radiance / ref - lit
+    return np.maximum(uniform + view.kernel.astype(np.float64) @ dev, 0.0)
