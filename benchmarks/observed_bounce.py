@@ -75,7 +75,7 @@ def measure(folder: str) -> dict:
             L = ground_radiance(gv, img)
             light = fu.direction if fu.status == "ok" else np.array([0.0, 0.0, 1.0])
             for _ in range(2):
-                B = observed_bounce(gv, L, light, shadowed_ground_bounce(s.normals, light, g=s.ground))
+                B = observed_bounce(gv, L, light, shadowed_ground_bounce(s.normals, light, g=s.ground), s.normals)
                 fo = fit_lambert(s.normals, v.grey, v.valid, g=B, own_shadow=False, **kw)
                 light = fo.direction if fo.status == "ok" else light
             row.append((v, fu, B, fo))

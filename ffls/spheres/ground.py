@@ -26,9 +26,11 @@ Measured in docs/spheres.md, "The ground bounce from the photograph".
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from scipy.spatial import cKDTree
 
 from ffls.camera.projection import project_points
 from ffls.conventions import UP
@@ -44,6 +46,8 @@ GROUND_DIRECTIONS = 1024
 #: farther ground is more likely another object's (an object's ground point, hidden from the
 #: sphere or from the camera, is not the sphere's ground) and is filled with the seen mean.
 GROUND_REACH = 4.0
+#: Seen ground points whose radiance a hidden one (behind the sphere) takes, by inverse distance.
+FILL_NEIGHBOURS = 4
 #: Margin around each sphere's outline, in pixels, within which the ground is not read (the
 #: outline's pixels mix sphere and ground).
 GROUND_MARGIN_PX = 2.0
@@ -71,22 +75,54 @@ class GroundView:
         Their bilinear weights.
     seen : (D,) bool
         Which of the directions are read (the others are filled with the mean of these).
-    kernel : (m, p) float32
-        ``max(n . w, 0) dOmega / pi`` for the sphere's sample normals (rows) and seen directions.
-    offsets : (p, 3) float
-        The seen directions' ground points, from the sphere's centre, in sphere radii.
+    offsets : (p + h, 3) float
+        The ground points, from the sphere's centre, in sphere radii: the ``p`` seen ones, then the
+        ``h`` hidden ones within reach (behind a sphere, out of the frame).
+    areas : (p + h,) float
+        The ground area each stands for, in square sphere radii (``dOmega / |w . up|^3``).
+    fill_index, fill_weights : (h, k) int, float
+        Each hidden point's nearest seen points along the ground and their weights (inverse
+        distance, summing to 1): its ground is taken as theirs (:func:`observed_bounce`).
+    up : (3,) float
+        World up (the ground's normal).
     """
 
     rows: np.ndarray
     cols: np.ndarray
     weights: np.ndarray
     seen: np.ndarray
-    kernel: np.ndarray
     offsets: np.ndarray
+    areas: np.ndarray
+    fill_index: np.ndarray
+    fill_weights: np.ndarray
+    up: np.ndarray
+    _kernels: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def n_seen(self) -> int:
-        return int(len(self.offsets))
+        return int(len(self.offsets) - len(self.fill_index))
+
+    def kernel(self, normals: np.ndarray) -> np.ndarray:
+        """(m, p + h) float32: the form factor from each sphere point (its unit ``normals``; the point
+        is the centre plus a radius along it) to each seen ground patch, as a disc of the patch's
+        area facing up: ``cos_p cos_g dA / (pi |r|^2 + dA)`` (Wallace, Elmquist, Haines 1989),
+        ``r`` from the point to the patch in radii (a patch near the point is then not an
+        infinitely bright point). Kept per ``normals`` array (a capture's fits reuse their
+        samples' normals)."""
+        hit = self._kernels.get(id(normals))
+        if hit is not None and hit[0] is normals:
+            return hit[1]
+        n = np.asarray(normals, dtype=np.float64)
+        out = np.empty((len(n), len(self.offsets)), np.float32)
+        for a in range(0, len(n), 1024):  # (in blocks: three (block, p) temporaries)
+            r = self.offsets[None, :, :] - n[a:a + 1024, None, :]
+            r2 = np.einsum("ijk,ijk->ij", r, r)
+            cos_p = np.maximum(np.einsum("ijk,ik->ij", r, n[a:a + 1024]), 0.0)
+            out[a:a + 1024] = cos_p * np.maximum(-(r @ self.up), 0.0) / r2 * self.areas / (np.pi * r2 + self.areas)
+        if len(self._kernels) > 8:  # (recentred samples replace the first ones)
+            self._kernels.clear()
+        self._kernels[id(normals)] = (normals, out)
+        return out
 
 
 def _camera_frame(world_from_camera) -> tuple[np.ndarray, np.ndarray]:
@@ -187,9 +223,21 @@ def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, wo
         rows = np.stack([y0, y0, y0 + 1, y0 + 1], axis=1)
         cols = np.stack([x0, x0 + 1, x0, x0 + 1], axis=1)
         wts = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], axis=1)
-        kernel = (np.maximum(s.normals @ base[ok].T, 0.0) * (d_omega / np.pi)).astype(np.float32)
+        # the ground within reach that the camera does not see: as its nearest seen neighbours
+        hidden = reach_ok & ~ok
+        fill_index = np.zeros((0, FILL_NEIGHBOURS), np.intp)
+        fill_weights = np.zeros((0, FILL_NEIGHBOURS))
+        if hidden.any() and ok.sum() >= FILL_NEIGHBOURS:
+            dist_, fill_index = cKDTree(X[ok]).query(X[hidden], k=FILL_NEIGHBOURS)
+            w = 1.0 / np.maximum(dist_, 1e-9 * s.radius)
+            fill_weights = w / w.sum(axis=1, keepdims=True)
+        else:
+            hidden[:] = False
+        pts = np.concatenate([X[ok], X[hidden]])
         views.append(GroundView(rows=np.minimum(rows, H - 1), cols=np.minimum(cols, W - 1), weights=wts, seen=ok,
-                                kernel=kernel, offsets=(X[ok] - s.center) / s.radius))
+                                offsets=(pts - s.center) / s.radius,
+                                areas=d_omega / np.concatenate([cos_down[ok], cos_down[hidden]]) ** 3,
+                                fill_index=fill_index, fill_weights=fill_weights, up=up))
     return views
 
 
@@ -222,8 +270,8 @@ def own_shadow_mask(view: GroundView, light: np.ndarray) -> np.ndarray:
     return (tc > 0) & (d2 < 1.0)
 
 
-def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.ndarray,
-                    uniform: np.ndarray) -> np.ndarray:
+def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.ndarray, uniform: np.ndarray,
+                    normals: np.ndarray) -> np.ndarray:
     """The bounce's form factor (m,) with the photographed ground in place of a uniform one.
 
     ``uniform`` is the uniform ground's form factor less the sphere's own shadow under ``light``
@@ -243,15 +291,32 @@ def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.nda
     light : (3,) float
         The light's direction (the own shadow's).
     uniform : (m,) float
+    normals : (m, 3) float
+        The sphere's sample normals (world frame).
+
+    Returns
+    -------
+    (m,) float, >= 0
     """
     uniform = np.asarray(uniform, dtype=np.float64)
     if radiance is None:
         return uniform
     lit = ~own_shadow_mask(view, light)
-    if lit.sum() < 3:
+    p = view.n_seen
+    seen_lit = lit[:p]
+    if seen_lit.sum() < 3:
         return uniform
-    ref = float(np.median(radiance[lit]))
+    ref = float(np.median(radiance[seen_lit]))
     if not ref > 0:
         return uniform
-    dev = radiance / ref - lit
-    return np.maximum(uniform + view.kernel.astype(np.float64) @ dev, 0.0)
+    q = radiance / ref
+    # a hidden point (behind the sphere) is lit as the model has it (its own shadow), its ground
+    # as bright as its seen neighbours' that are lit (none: as the reference)
+    w = view.fill_weights * seen_lit[view.fill_index]
+    total = w.sum(axis=1)
+    near = np.where(total > 0, (w * q[view.fill_index]).sum(axis=1) / np.where(total > 0, total, 1.0), 1.0)
+    dev = np.concatenate([q - seen_lit, lit[p:] * (near - 1.0)])
+    # (the ground out of reach stays as the uniform model has it: filling all the unseen ground
+    # with the seen ground's mean spread a cast shadow beside the sphere all round it, and
+    # tripled the test's errors, tests/test_observed_bounce.py)
+    return np.maximum(uniform + view.kernel(normals) @ dev, 0.0)
