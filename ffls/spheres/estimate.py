@@ -57,7 +57,7 @@ from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoE
                                estimate_photo)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
-                                  sphere_values)
+                                  sphere_values, sphere_values_of)
 from ffls.spheres.uncertainty import ErrorModel, centre_floor_deg, fit_error_model, photo_residuals
 
 __all__ = [
@@ -600,8 +600,8 @@ def flat_field_values(values: list, samples: list[SphereSamples], field: FlatFie
     # (the guard keeps a divisor positive: a gradient of a radius or more is no lens's)
     div = [np.maximum(1.0 + flat_field_offsets(s) @ g, 1e-3) if np.any(g != 0) else None
            for s, g in zip(samples, field.gradients)]
-    return [[v if d is None else SphereValues((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2],
-                                              v[3] if len(v) > 3 else None)
+    return [[v if d is None else sphere_values_of((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2],
+                                                  getattr(v, "ground", None))
              for v, d in zip(vals, div)] for vals in values]
 
 
@@ -822,7 +822,8 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         else:
             new_samples.append(s)
             kept.append(None)
-    new_values = [[SphereValues(*vk).subset(i) if i is not None else vk for vk, i in zip(v, kept)] for v in values]
+    new_values = [[(vk if isinstance(vk, SphereValues) else SphereValues(*vk)).subset(i) if i is not None else vk
+                   for vk, i in zip(v, kept)] for v in values]
     return new_samples, new_values, refinements
 
 
@@ -862,7 +863,8 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
         old = result.spheres[k]
         if not ref.accepted or old.kind != "matte":
             continue
-        ground = None if s.ground_view is None or len(v) < 4 or v[3] is None else (s.ground_view, v[3])
+        g = getattr(v, "ground", None)
+        ground = None if s.ground_view is None or g is None else (s.ground_view, g)
         f = fit_lambert(s.normals, v[0], v[1], n_saturated=v[2], terminator=terminator, up=up,
                         g=s.ground_factor(up), start=old.direction,
                         own_shadow=own_shadow, ground=ground)  # (no uncertainty needed: no pixels)
@@ -1194,7 +1196,7 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
             kept = (photo.linear, photo.raw, photo.bit_depth)
         values = sphere_values(kept[0], ctx.samples, saturation=ctx.options.get("saturation"), raw=kept[1],
                                bit_depth=kept[2])
-        values = [SphereValues(v.grey.astype(np.float32), v.valid, v.n_saturated, v.ground) for v in values]
+        values = [sphere_values_of(v.grey.astype(np.float32), v.valid, v.n_saturated, v.ground) for v in values]
     if not task.fit:
         return None, (values if read else None)
     est = estimate_photo(None, ctx.samples, ctx.scene_center, values=values, bounce_ratio=task.bounce_ratio,

@@ -281,7 +281,7 @@ def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, ter
 
 def _ground(s: SphereSamples, v: SphereValues) -> tuple | None:
     """The sphere's photographed ground for :func:`ffls.spheres.lambert.fit_lambert` (None: not read)."""
-    g = v[3] if len(v) > 3 else None
+    g = getattr(v, "ground", None)
     return None if s.ground_view is None or g is None else (s.ground_view, g)
 
 
