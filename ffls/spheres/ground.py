@@ -8,20 +8,16 @@ point, normal to ``up``: the sphere rests on it) is sampled along a set of equal
 directions ``w`` of the lower hemisphere, seen from the sphere's centre; each direction's ground
 point is projected into the photo (the capture's camera, pinhole or orthographic) and read there
 where the camera sees it (in the frame, not behind or on a sphere, within
-:data:`GROUND_REACH` sphere radii of the contact point). The bounce at a normal ``n`` is the
-cosine-weighted integral of that radiance over the ground part of ``n``'s hemisphere,
-
-    ``B(n) = 1/pi sum_w L(w) max(n . w, 0) dOmega``;
-
-a uniform ground gives ``L (1 - n . up) / 2``: the uniform model, scaled by the ground's
-radiance. The directions start at the centre, not at each surface point
-(the ground's near part is then seen from slightly the wrong place; exact for a uniform ground).
-Where the ground is seen, only its departure from the uniform model (its radiance over that of
-the lit ground around the sphere, the median ``L_ref``) is taken from the photo
-(:func:`observed_bounce`); where not, the uniform model and its own shadow
-(:func:`ffls.spheres.lambert.shadowed_ground_bounce`) stand, so that the form factor keeps the
-uniform one's scale and the capture's ground ratio its meaning. The object is not masked (its
-outline is unknown): :data:`GROUND_REACH` keeps the ground read near the sphere.
+:data:`GROUND_REACH` sphere radii of the contact point). Those points are patches of the ground;
+from each sphere point, the bounce is the sum over them of their radiance times the point's form
+factor to the patch (:meth:`GroundView.kernel`). Only the ground's departure from the uniform
+model is taken from the photo (its radiance over ``L_ref``, the median of the lit ground seen
+around the sphere, against the uniform model's own shadow; :func:`observed_bounce`): the hidden
+ground within reach (behind the sphere) as its nearest seen neighbours, the ground out of reach
+as the uniform model has it. A uniform ground then gives the uniform form factor less the own
+shadow (:func:`ffls.spheres.lambert.shadowed_ground_bounce`) back, its scale and the capture's
+ground ratio their meaning. The object is not masked (its outline is unknown):
+:data:`GROUND_REACH` keeps the ground read near the sphere.
 Measured in docs/spheres.md, "The ground bounce from the photograph".
 """
 from __future__ import annotations
@@ -29,7 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from scipy.spatial import cKDTree
 
 from ffls.camera.projection import project_points
@@ -44,7 +39,7 @@ GROUND_DIRECTIONS = 1024
 #: sphere's lowest point (``n = -up``) the ground within ``rho`` radii of the contact holds
 #: ``rho^2 / (rho^2 + 1)`` of the cosine-weighted bounce (the centre is one radius up): 94% at 4;
 #: farther ground is more likely another object's (an object's ground point, hidden from the
-#: sphere or from the camera, is not the sphere's ground) and is filled with the seen mean.
+#: sphere or from the camera, is not the sphere's ground) and is left to the uniform model.
 GROUND_REACH = 4.0
 #: Seen ground points whose radiance a hidden one (behind the sphere) takes, by inverse distance.
 FILL_NEIGHBOURS = 4
@@ -74,7 +69,7 @@ class GroundView:
     weights : (p, 4) float
         Their bilinear weights.
     seen : (D,) bool
-        Which of the directions are read (the others are filled with the mean of these).
+        Which of the directions are read (in the frame, not behind a sphere, within reach).
     offsets : (p + h, 3) float
         The ground points, from the sphere's centre, in sphere radii: the ``p`` seen ones, then the
         ``h`` hidden ones within reach (behind a sphere, out of the frame).
@@ -262,7 +257,8 @@ def ground_radiance(view: GroundView, image: np.ndarray) -> np.ndarray | None:
 
 
 def own_shadow_mask(view: GroundView, light: np.ndarray) -> np.ndarray:
-    """(p,) bool: the seen ground points in the sphere's own shadow under the distant ``light``."""
+    """(p + h,) bool: the ground points (seen, then hidden) in the sphere's own shadow under the
+    distant ``light``."""
     light = np.asarray(light, dtype=np.float64)
     light = light / np.linalg.norm(light)
     tc = -view.offsets @ light  # along the light from the ground point to the centre
@@ -278,7 +274,9 @@ def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.nda
     (:func:`ffls.spheres.lambert.shadowed_ground_bounce`), for a ground of radiance ``L_ref``: the
     median of the seen ground outside the own shadow. Where the ground is seen, its departure from
     that model, ``L(w) / L_ref - (1 - shadow(w))``, is added with its cosine weights; where it is
-    not seen (behind the sphere, out of the frame or of reach), the uniform model stands. A
+    hidden within reach (behind the sphere, out of the frame), it is taken as bright as its
+    nearest seen points that are lit (:attr:`GroundView.fill_index`); out of reach, the uniform
+    model stands. A
     uniform ground gives ``uniform`` back, so the ground ratio of
     :func:`ffls.spheres.estimate.calibrate_bounce` keeps its meaning (``L_ref`` is the uniform
     ground's radiance).
