@@ -13,7 +13,12 @@ and every photo is fitted (:func:`ffls.spheres.lambert.fit_lambert`) with two bo
 
 Each is fitted twice: with a free bounce coefficient, and with the sphere's ground ratio imposed
 (the median over the photos of its free fits' ``ground_ratio``, clipped to [0, 1], the same rule
-for both models). Printed per capture: every sphere's fits pooled, median / max angle to the true
+for both models). A third model, ``two terms``, splits the bounce: the SEEN ground's, measured in
+the photo's own units (:func:`ffls.spheres.ground.seen_bounce`) times the sphere's albedo
+``kappa``, one constant per sphere (the median over the photos of the free bounce coefficient
+with the column ``seen + L_ref hidden``), subtracted from the pixels; and the hidden ground's
+(:func:`ffls.spheres.ground.hidden_form_factor`), its ground ratio calibrated (the median of the
+free fits of what is left) and imposed. Printed per capture: every sphere's fits pooled, median / max angle to the true
 direction, and each sphere's median, over the fits that all four modes accept.
 
 Usage (``OMP_NUM_THREADS=1`` advised)::
@@ -30,11 +35,12 @@ import numpy as np
 
 from ffls.io.capture import load_capture
 from ffls.radiance.photos import read_photo
-from ffls.spheres.ground import ground_radiance, ground_views, observed_bounce
+from ffls.spheres.ground import (ground_radiance, ground_views, hidden_form_factor, observed_bounce,
+                                 own_shadow_mask, seen_bounce)
 from ffls.spheres.lambert import fit_lambert, shadowed_ground_bounce
 from ffls.spheres.samples import sphere_samples, sphere_samples_orthographic, sphere_values
 
-MODES = ("uniform free", "observed free", "uniform calibrated", "observed calibrated")
+MODES = ("uniform free", "observed free", "uniform calibrated", "observed calibrated", "two terms calibrated")
 
 
 def true_samples(cap, truth):
@@ -78,7 +84,12 @@ def measure(folder: str) -> dict:
                 B = observed_bounce(gv, L, light, shadowed_ground_bounce(s.normals, light, g=s.ground), s.normals)
                 fo = fit_lambert(s.normals, v.grey, v.valid, g=B, own_shadow=False, **kw)
                 light = fo.direction if fo.status == "ok" else light
-            row.append((v, fu, B, fo))
+            # two terms, for the light of the observed fit: the seen ground's bounce (photo units),
+            # the hidden ground's form factor, and the lit seen ground's median (L_ref)
+            lit = ~own_shadow_mask(gv, light)[:gv.n_seen]
+            hid = hidden_form_factor(gv, light, shadowed_ground_bounce(s.normals, light, g=s.ground), s.normals)
+            two = (seen_bounce(gv, L, s.normals), hid, float(np.median(L[lit])) if lit.any() else 0.0)
+            row.append((v, fu, B, fo, two))
         fits.append(row)
     errors = {m: {} for m in MODES}  # (sphere, photo) -> angle to the truth
 
@@ -86,7 +97,7 @@ def measure(folder: str) -> dict:
         if f.status == "ok":
             errors[mode][k, i] = float(np.degrees(np.arccos(np.clip(f.direction @ dirs[i], -1.0, 1.0))))
 
-    ratios = []
+    ratios, kappas = [], []
     for k, s in enumerate(samples):
         kw = dict(pixels=(s.rows, s.cols))
         rho = []
@@ -94,17 +105,36 @@ def measure(folder: str) -> dict:
             r = [row[k][j].ground_ratio for row in fits if row[k][j].status == "ok"
                  and np.isfinite(row[k][j].ground_ratio)]
             rho.append(float(np.clip(np.median(r), 0.0, 1.0)) if r else 0.0)
+        # two terms: the sphere's albedo kappa from free fits of the column seen + L_ref hidden,
+        # then the hidden ground's ratio from free fits of the pixels less kappa seen
+        c = []
+        for row in fits:
+            v, _, _, _, (bs, hid, lref) = row[k]
+            f = fit_lambert(s.normals, v.grey, v.valid, g=bs + lref * hid, own_shadow=False, **kw)
+            if f.status == "ok" and f.model == "bounce" and f.bounce > 0:
+                c.append(f.bounce)
+        kappa = float(np.median(c)) if c else 0.0
+        r = []
+        for row in fits:
+            v, _, _, _, (bs, hid, lref) = row[k]
+            f = fit_lambert(s.normals, v.grey - kappa * bs, v.valid, g=hid, own_shadow=False, **kw)
+            if f.status == "ok" and np.isfinite(f.ground_ratio):
+                r.append(f.ground_ratio)
+        rho.append(float(np.clip(np.median(r), 0.0, 1.0)) if r else 0.0)
         ratios.append(rho)
+        kappas.append(kappa)
         for i, row in enumerate(fits):
-            v, fu, B, fo = row[k]
+            v, fu, B, fo, (bs, hid, _) = row[k]
             add("uniform free", k, i, fu)
             add("observed free", k, i, fo)
             add("uniform calibrated", k, i,
                 fit_lambert(s.normals, v.grey, v.valid, g=s.ground, bounce_ratio=rho[0], **kw))
             add("observed calibrated", k, i,
                 fit_lambert(s.normals, v.grey, v.valid, g=B, bounce_ratio=rho[1], own_shadow=False, **kw))
+            add("two terms calibrated", k, i, fit_lambert(s.normals, v.grey - kappa * bs, v.valid, g=hid,
+                                                          bounce_ratio=rho[2], own_shadow=False, **kw))
     out = {"capture": str(folder), "spheres": idx, "seen_directions": [v.n_seen for v in views],
-           "ground_ratios": ratios}
+           "ground_ratios": ratios, "kappas": kappas}
     # only the fits that every mode accepts (a mode's extra acceptances, e.g. a sphere in the
     # object's shadow, would not be compared)
     common = sorted(set.intersection(*(set(e) for e in errors.values())))
@@ -127,7 +157,8 @@ def main(argv=None):
         r = measure(c)
         rows.append(r)
         print(f"{c}: spheres {r['spheres']}, seen directions {r['seen_directions']}, ground ratios "
-              f"(uniform, observed) {[[round(x, 3) for x in p] for p in r['ground_ratios']]}, "
+              f"(uniform, observed, two terms' hidden) {[[round(x, 3) for x in p] for p in r['ground_ratios']]}, "
+              f"albedos (two terms) {[round(x, 3) for x in r['kappas']]}, "
               f"{r['compared']} fits compared")
         for m in MODES:
             e = r[m]

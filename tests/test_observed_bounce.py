@@ -190,3 +190,30 @@ def test_observed_needs_a_world_frame(tmp_path, capsys):
     rc = main(["lights", str(cap), "--bounce", "observed"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "--bounce observed needs camera.world_from_camera" in err[0], err
+
+
+def test_two_terms_seen_bounce_and_hidden_form_factor(rig):
+    """The bounce split in two (docs/spheres.md, "Two terms"): the seen ground's, in the photo's
+    units, times the ball's albedo, plus the hidden ground's form factor at the ground ratio. On a
+    uniform ground the two add up to the uniform model; on the shadowed ground, with the ball's
+    albedo and the ground's ratio, the fits lose the uniform model's bias."""
+    from ffls.spheres.ground import ground_radiance, hidden_form_factor, seen_bounce
+
+    s, K, M = rig
+    light = LIGHTS[3]
+    img = _render(light, s, K, M, dark_side=False, n_rays=2)
+    L = ground_radiance(s.ground_view, img[..., None])
+    uniform = shadowed_ground_bounce(s.normals, light, g=s.ground)
+    ref = RHO_G / np.pi * light[2]  # the lit ground's radiance
+    total = seen_bounce(s.ground_view, L, s.normals) / ref + hidden_form_factor(s.ground_view, light, uniform,
+                                                                              s.normals)
+    assert np.percentile(np.abs(total - uniform), 99) < 0.03
+    errors = []
+    for i, light in enumerate(LIGHTS):
+        v = _photo_values(rig, i, True)[0]
+        bs = seen_bounce(s.ground_view, v.ground, s.normals)
+        hid = hidden_form_factor(s.ground_view, light, shadowed_ground_bounce(s.normals, light, g=s.ground),
+                                 s.normals)
+        f = fit_lambert(s.normals, v.grey - RHO_S * bs, v.valid, g=hid, bounce_ratio=RHO_G, own_shadow=False)
+        errors.append(np.degrees(angle_between(f.direction, light)))
+    assert np.median(errors) < 0.15 and max(errors) < 0.25, errors  # (uniform model: 0.53 / 0.99)

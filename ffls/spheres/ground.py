@@ -31,7 +31,7 @@ from ffls.camera.projection import project_points
 from ffls.conventions import UP
 
 __all__ = ["GROUND_DIRECTIONS", "GROUND_MARGIN_PX", "GROUND_REACH", "GroundView", "ground_pixels", "ground_radiance",
-           "ground_views", "observed_bounce", "own_shadow_mask"]
+           "ground_views", "hidden_form_factor", "observed_bounce", "own_shadow_mask", "seen_bounce"]
 
 #: Directions of the lower hemisphere at which each sphere's ground is read (equal solid angles).
 GROUND_DIRECTIONS = 1024
@@ -318,3 +318,22 @@ def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.nda
     # with the seen ground's mean spread a cast shadow beside the sphere all round it, and
     # tripled the test's errors, tests/test_observed_bounce.py)
     return np.maximum(uniform + view.kernel(normals) @ dev, 0.0)
+
+
+def seen_bounce(view: GroundView, radiance: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(m,) float: the irradiance over pi that the SEEN ground sends each sphere point, in the
+    photo's own linear units (``sum_j K_j L_j``): times the sphere's albedo, its pixels' bounce
+    from that ground. The albedo is one constant of the sphere for the capture (measured in
+    docs/spheres.md, "Two terms")."""
+    return view.kernel(normals)[:, :view.n_seen].astype(np.float64) @ np.asarray(radiance, dtype=np.float64)
+
+
+def hidden_form_factor(view: GroundView, light: np.ndarray, uniform: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(m,) float: the form factor of the ground the camera does NOT see (behind the sphere, out of
+    the frame or of reach), lit, under ``light``: the uniform model less the own shadow
+    (``uniform``, :func:`ffls.spheres.lambert.shadowed_ground_bounce`) less the seen points'
+    lit share. With :func:`seen_bounce` it splits the bounce into a measured part and one whose
+    ground ratio is calibrated over the capture like the uniform model's."""
+    lit = ~own_shadow_mask(view, light)[:view.n_seen]
+    K = view.kernel(normals)[:, :view.n_seen]
+    return np.maximum(np.asarray(uniform, dtype=np.float64) - K @ lit, 0.0)
