@@ -51,7 +51,7 @@ from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
                                    outline_holding_highlights, refine_view_limb)
-from ffls.spheres.ground import ground_pixels, ground_views
+from ffls.spheres.ground import ground_pixels, ground_views, reference_radiance
 from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
                                estimate_photo)
@@ -67,6 +67,7 @@ __all__ = [
     "CaptureEstimate",
     "capture_samples",
     "observed_ground_samples",
+    "calibrate_ground_albedo",
     "sphere_views",
     "sphere_kinds",
     "calibrate_bounce",
@@ -671,6 +672,42 @@ def shaped_samples(samples: list[SphereSamples], shapes: list) -> list[SphereSam
     (:func:`calibrate_bounce_shape`; None: unchanged)."""
     return [s if b is None else replace(s, ground=s.ground_factor(UP) * (1.0 + s.normals[:, :2] @ b))
             for s, b in zip(samples, shapes)]
+
+
+#: Fewest photos whose free fit gives a sphere's albedo for its seen ground (:func:`calibrate_ground_albedo`).
+GROUND_ALBEDO_MIN_PHOTOS = 3
+
+
+def calibrate_ground_albedo(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                            min_photos: int = GROUND_ALBEDO_MIN_PHOTOS) -> list[float | None]:
+    """Each matte sphere's albedo ``kappa`` for the bounce of its seen ground (``bounce='observed'``).
+
+    The first pass fits the bounce ``c B`` with the form factor of
+    :func:`ffls.spheres.ground.observed_bounce`, the ground relative to ``L_ref`` (the lit seen
+    ground's median): ``c / L_ref`` is the sphere's albedo in the photo's units, the same in every
+    photo. Its median over the photos whose free fit has a bounce (docs/spheres.md, "Two terms").
+
+    Returns
+    -------
+    list of float or None
+        Per sphere (None: no ground view, or fewer than ``min_photos`` photos).
+    """
+    out = []
+    for k, s in enumerate(samples):
+        est = []
+        for r, vals in zip(results, values):
+            if s.ground_view is None or not r.spheres:
+                continue
+            sp, ground = r.spheres[k], getattr(vals[k], "ground", None)
+            f = sp.fit
+            if (ground is None or sp.status != "ok" or sp.kind != "matte" or not isinstance(f, LambertFit)
+                    or f.model != "bounce" or not f.bounce > 0):
+                continue
+            ref = reference_radiance(s.ground_view, ground, f.direction)
+            if ref > 0:
+                est.append(f.bounce / ref)
+        out.append(float(np.median(est)) if len(est) >= min_photos else None)
+    return out
 
 
 def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
@@ -1427,6 +1464,13 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     if bounce == "free":
         error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
+    if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
+        kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
+        if any(k is not None for k in kappas):
+            samples = [s if k is None else replace(s, ground_view=replace(s.ground_view, kappa=k))
+                       for s, k in zip(samples, kappas)]
+            results = run_fitted(values)  # the free fits of the hidden ground's bounce, for its ratio
+            by_photo = dict(zip(fitted, results))
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
     if bounce_shape is None:  # auto: with one matte sphere nothing cancels its bias (docs/spheres.md)

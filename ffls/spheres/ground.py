@@ -31,7 +31,8 @@ from ffls.camera.projection import project_points
 from ffls.conventions import UP
 
 __all__ = ["GROUND_DIRECTIONS", "GROUND_MARGIN_PX", "GROUND_REACH", "GroundView", "ground_pixels", "ground_radiance",
-           "ground_views", "hidden_form_factor", "observed_bounce", "own_shadow_mask", "seen_bounce"]
+           "ground_views", "hidden_form_factor", "observed_bounce", "own_shadow_mask", "reference_radiance",
+           "seen_bounce"]
 
 #: Directions of the lower hemisphere at which each sphere's ground is read (equal solid angles).
 GROUND_DIRECTIONS = 1024
@@ -80,6 +81,11 @@ class GroundView:
         distance, summing to 1): its ground is taken as theirs (:func:`observed_bounce`).
     up : (3,) float
         World up (the ground's normal).
+    kappa : float or None
+        The sphere's albedo for its seen ground's bounce (:func:`seen_bounce`), calibrated over the
+        capture (:func:`ffls.spheres.estimate.calibrate_ground_albedo`): the fits then subtract
+        the seen ground's bounce and fit the hidden ground's (:func:`hidden_form_factor`). None:
+        the bounce is :func:`observed_bounce`'s (the first pass).
     """
 
     rows: np.ndarray
@@ -91,6 +97,7 @@ class GroundView:
     fill_index: np.ndarray
     fill_weights: np.ndarray
     up: np.ndarray
+    kappa: float | None = None
     _kernels: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -318,6 +325,13 @@ def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.nda
     # with the seen ground's mean spread a cast shadow beside the sphere all round it, and
     # tripled the test's errors, tests/test_observed_bounce.py)
     return np.maximum(uniform + view.kernel(normals) @ dev, 0.0)
+
+
+def reference_radiance(view: GroundView, radiance: np.ndarray, light: np.ndarray) -> float:
+    """``L_ref`` of :func:`observed_bounce`: the median radiance of the seen ground outside the
+    sphere's own shadow under ``light`` (NaN where fewer than 3 such points)."""
+    lit = ~own_shadow_mask(view, light)[:view.n_seen]
+    return float(np.median(np.asarray(radiance)[lit])) if lit.sum() >= 3 else float("nan")
 
 
 def seen_bounce(view: GroundView, radiance: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ffls.conventions import UP
-from ffls.spheres.ground import observed_bounce
+from ffls.spheres.ground import hidden_form_factor, observed_bounce, seen_bounce
 from ffls.spheres.samples import ground_bounce
 from ffls.spheres.uncertainty import correlation_inflation
 
@@ -916,7 +916,10 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         The sphere's ground as photographed (:mod:`ffls.spheres.ground`: its view and this photo's
         radiance there): with ``own_shadow``, the form factor less the own shadow is then that of
         :func:`ffls.spheres.ground.observed_bounce` (the seen ground's departure from the uniform
-        one added), made for each light as the own shadow is.
+        one added), made for each light as the own shadow is; where the view has its sphere's
+        albedo (``kappa``), the seen ground's bounce (:func:`ffls.spheres.ground.seen_bounce`)
+        is subtracted from ``values`` and the form factor is the hidden ground's
+        (:func:`ffls.spheres.ground.hidden_form_factor`).
 
     Returns
     -------
@@ -924,6 +927,9 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     """
     normals = np.asarray(normals, dtype=np.float64)
     y_all = np.asarray(values, dtype=np.float64)
+    split = ground is not None and ground[0].kappa is not None
+    if split:  # the seen ground's bounce is measured: subtracted (the hidden ground's is fitted)
+        y_all = y_all - ground[0].kappa * seen_bounce(ground[0], ground[1], normals)
     m = y_all.shape[0]
     # (a sum is finite iff its terms are; written out: numpy's sum over a length-3 axis is ~40x slower)
     finite = np.isfinite(y_all) & np.isfinite(normals[:, 0] + normals[:, 1] + normals[:, 2])
@@ -985,7 +991,11 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
 
             def form(light):  # the bounce's form factor under ``light``
                 g_l = shadowed_ground_bounce(normals, light, up, g_plain, shadow)
-                return g_l if ground is None else observed_bounce(ground[0], ground[1], light, g_l, normals)
+                if ground is None:
+                    return g_l
+                if split:
+                    return hidden_form_factor(ground[0], light, g_l, normals)
+                return observed_bounce(ground[0], ground[1], light, g_l, normals)
 
             g = form(l_g)
             Tb = _design_products(normals, g, y)
