@@ -176,7 +176,8 @@ def test_the_ground_view_reads_only_ground(rig):
 
 
 def test_observed_needs_a_world_frame(tmp_path, capsys):
-    """``ffls lights --bounce observed`` without camera.world_from_camera: one line, exit 2."""
+    """``ffls lights --bounce observed`` without camera.world_from_camera, or without ``--model
+    distant``: one line, exit 2."""
     from ffls.cli import main
 
     cap = tmp_path / "cap"
@@ -187,9 +188,15 @@ def test_observed_needs_a_world_frame(tmp_path, capsys):
         cv2.imwrite(str(cap / f"img_{i}.png"), np.zeros((32, 32, 3), np.uint8))
     (cap / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "encoding": "srgb",
                                                   "images": [f"img_{i}.png" for i in range(3)]}))
-    rc = main(["lights", str(cap), "--bounce", "observed"])
+    rc = main(["lights", str(cap), "--bounce", "observed", "--model", "distant"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "--bounce observed needs camera.world_from_camera" in err[0], err
+    doc = json.loads((cap / "capture.json").read_text())
+    doc["camera"] = {"world_from_camera": np.eye(4).tolist()}
+    (cap / "capture.json").write_text(json.dumps(doc))
+    rc = main(["lights", str(cap), "--bounce", "observed"])  # (--model auto: a near light's fit)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--bounce observed needs --model distant" in err[0], err
 
 
 def test_two_terms_seen_bounce_and_hidden_form_factor(rig):

@@ -26,7 +26,8 @@ def add_arguments(p):
     p.add_argument("--bounce", choices=("calibrated", "free", "observed"), default="calibrated",
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
                         "(two passes), free per photo, or observed: calibrated, with each sphere's bounce from "
-                        "the ground photographed around it (needs camera.world_from_camera; docs/spheres.md) "
+                        "the ground photographed around it (needs camera.world_from_camera and --model distant; "
+                        "docs/spheres.md) "
                         "(default calibrated)")
     p.add_argument("--bounce-shape", choices=("auto", "on", "off"), default="auto",
                    help="with --bounce calibrated, give each matte sphere's bounce the horizontal gradient its "
@@ -192,6 +193,9 @@ def run(args) -> int:
         if cap.world_from_camera_is_default:
             raise InputError("--bounce observed needs camera.world_from_camera in capture.json (the ground is the "
                              "plane under each sphere, normal to the world's +Z)", cap.json_path)
+        if args.model != "distant" and getattr(cap, "camera_model", "pinhole") != "orthographic":
+            raise InputError("--bounce observed needs --model distant (the near light's joint fit keeps the uniform "
+                             "ground)", cap.json_path)
         if cluster:
             raise InputError("--bounce observed is not available with --scheduler (the cluster reads the "
                              "spheres' pixels only)", cap.json_path)

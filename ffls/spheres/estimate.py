@@ -1724,7 +1724,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo;
         ``'observed'``: calibrated, with each sphere's bounce from the ground photographed around
         it (:mod:`ffls.spheres.ground`, :func:`observed_ground_samples`; needs the camera's
-        ``world_from_camera``: the ground is the plane under each sphere; no ``bounce_shape``).
+        ``world_from_camera``: the ground is the plane under each sphere, and ``model``
+        ``'distant'``; no ``bounce_shape``).
     refine_centres : bool
         After the first pass, refine the centre of each sphere whose outline is not at the linear
         step (:func:`centres_to_refine`) from the shading of up to 20 photos
@@ -1766,6 +1767,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     """
     _check_modes(model, bounce)
     model, refine_options = check_estimable(capture, model, refine_options)
+    if bounce == "observed" and model != "distant":
+        raise InputError("bounce 'observed' needs model 'distant' (the near light's joint fit keeps the uniform "
+                         "ground)", capture.json_path)
     n = len(capture.image_names)
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if spheres is None:
