@@ -23,9 +23,12 @@ def add_arguments(p):
                    help="lights.json to write (default: CAPTURE/lights.json)")
     p.add_argument("--model", choices=("auto", "distant", "near"), default="auto",
                    help="light model: chosen per photo (auto), distant or near (default auto)")
-    p.add_argument("--bounce", choices=("calibrated", "free"), default="calibrated",
+    p.add_argument("--bounce", choices=("calibrated", "free", "observed"), default="calibrated",
                    help="ground bounce: each sphere's ground ratio calibrated over the capture and imposed "
-                        "(two passes), or free per photo (default calibrated)")
+                        "(two passes), free per photo, or observed: calibrated, with each sphere's bounce from "
+                        "the ground photographed around it (needs camera.world_from_camera and --model distant; "
+                        "docs/spheres.md) "
+                        "(default calibrated)")
     p.add_argument("--bounce-shape", choices=("auto", "on", "off"), default="auto",
                    help="with --bounce calibrated, give each matte sphere's bounce the horizontal gradient its "
                         "shadow sides show over the capture (a textured ground, an object hiding part of it): "
@@ -151,9 +154,9 @@ def check_first_pass(first_pass, bounce: str, n_photos: int) -> None:
 
     if not first_pass:  # (not given, or "all": every photo, as --bounce free fits them)
         return
-    if bounce != "calibrated":
-        raise InputError(f"--first-pass applies only with --bounce calibrated (--bounce {bounce} fits every photo "
-                         "once)")
+    if bounce not in ("calibrated", "observed"):
+        raise InputError(f"--first-pass applies only with --bounce calibrated or observed (--bounce {bounce} fits "
+                         "every photo once)")
     if first_pass > n_photos:
         raise InputError(f"--first-pass {first_pass} is more than the capture's {n_photos} photos: give at most "
                          f"{n_photos}, or --first-pass all")
@@ -182,7 +185,20 @@ def run(args) -> int:
         from ffls.errors import InputError
 
         raise InputError("--bounce-shape on applies only with --bounce calibrated (the shape is calibrated over "
-                         "the capture with the ground ratio)", cap.json_path)
+                         "the capture with the ground ratio; --bounce observed reads it from the photos)",
+                         cap.json_path)
+    if args.bounce == "observed":
+        from ffls.errors import InputError
+
+        if cap.world_from_camera_is_default:
+            raise InputError("--bounce observed needs camera.world_from_camera in capture.json (the ground is the "
+                             "plane under each sphere, normal to the world's +Z)", cap.json_path)
+        if args.model != "distant" and getattr(cap, "camera_model", "pinhole") != "orthographic":
+            raise InputError("--bounce observed needs --model distant (the near light's joint fit keeps the uniform "
+                             "ground)", cap.json_path)
+        if cluster:
+            raise InputError("--bounce observed is not available with --scheduler (the cluster reads the "
+                             "spheres' pixels only)", cap.json_path)
     if not cluster:  # every photo decoded once: the encoding calibration, the detection's reductions, the first pass
         from ffls.spheres.estimate import decode_photos
 

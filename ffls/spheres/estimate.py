@@ -51,12 +51,13 @@ from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
                                    outline_holding_highlights, refine_view_limb)
+from ffls.spheres.ground import ground_pixels, ground_views, reference_radiance
 from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
                                estimate_photo)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
-                                  sphere_values)
+                                  sphere_values, sphere_values_of)
 from ffls.spheres.uncertainty import ErrorModel, centre_floor_deg, fit_error_model, photo_residuals
 
 __all__ = [
@@ -65,6 +66,8 @@ __all__ = [
     "check_estimable",
     "CaptureEstimate",
     "capture_samples",
+    "observed_ground_samples",
+    "calibrate_ground_albedo",
     "sphere_views",
     "sphere_kinds",
     "calibrate_bounce",
@@ -92,7 +95,7 @@ __all__ = [
 ]
 
 #: Ground-bounce handling of the driver: calibrated over the capture (two passes) or free per photo.
-BOUNCE_MODES = ("calibrated", "free")
+BOUNCE_MODES = ("calibrated", "free", "observed")
 #: Default number of photos the first pass fits with a calibrated bounce (:func:`first_pass_photos`;
 #: None: every photo). That pass only feeds the capture-wide steps, each a statistic over photos:
 #: the centre refinement reads at most 20 of them (:func:`refine_sphere_centres`), the bounce
@@ -234,6 +237,19 @@ def capture_samples(capture, spheres, shape: tuple[int, int]) -> list[SphereSamp
             raise InputError(f"sphere {k} covers only {len(out[-1])} pixels; too small to estimate a light",
                              capture.folder)
     return out
+
+
+def observed_ground_samples(capture, samples: list[SphereSamples], shape: tuple[int, int]) -> list[SphereSamples]:
+    """The spheres' samples with their ground views (:func:`ffls.spheres.ground.ground_views`): the
+    photos' values then carry each sphere's photographed ground, and the fits take the bounce from
+    it (``bounce='observed'``). The ground is the plane under each sphere, normal to the world's
+    up: the capture must give ``world_from_camera`` (InputError otherwise)."""
+    if getattr(capture, "world_from_camera_is_default", False):
+        raise InputError("bounce 'observed' needs camera.world_from_camera (the ground under the spheres is "
+                         "the plane normal to the world's +Z)", capture.json_path)
+    views = ground_views(samples, shape, getattr(capture, "camera_model", "pinhole"), capture.K, capture.dist,
+                         capture.world_from_camera)
+    return [replace(s, ground_view=v) for s, v in zip(samples, views)]
 
 
 def sphere_views(capture, spheres) -> list[SphereView]:
@@ -585,7 +601,8 @@ def flat_field_values(values: list, samples: list[SphereSamples], field: FlatFie
     # (the guard keeps a divisor positive: a gradient of a radius or more is no lens's)
     div = [np.maximum(1.0 + flat_field_offsets(s) @ g, 1e-3) if np.any(g != 0) else None
            for s, g in zip(samples, field.gradients)]
-    return [[v if d is None else SphereValues((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2])
+    return [[v if d is None else sphere_values_of((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2],
+                                                  getattr(v, "ground", None))
              for v, d in zip(vals, div)] for vals in values]
 
 
@@ -655,6 +672,42 @@ def shaped_samples(samples: list[SphereSamples], shapes: list) -> list[SphereSam
     (:func:`calibrate_bounce_shape`; None: unchanged)."""
     return [s if b is None else replace(s, ground=s.ground_factor(UP) * (1.0 + s.normals[:, :2] @ b))
             for s, b in zip(samples, shapes)]
+
+
+#: Fewest photos whose free fit gives a sphere's albedo for its seen ground (:func:`calibrate_ground_albedo`).
+GROUND_ALBEDO_MIN_PHOTOS = 3
+
+
+def calibrate_ground_albedo(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                            min_photos: int = GROUND_ALBEDO_MIN_PHOTOS) -> list[float | None]:
+    """Each matte sphere's albedo ``kappa`` for the bounce of its seen ground (``bounce='observed'``).
+
+    The first pass fits the bounce ``c B`` with the form factor of
+    :func:`ffls.spheres.ground.observed_bounce`, the ground relative to ``L_ref`` (the lit seen
+    ground's median): ``c / L_ref`` is the sphere's albedo in the photo's units, the same in every
+    photo. Its median over the photos whose free fit has a bounce (docs/spheres.md, "Two terms").
+
+    Returns
+    -------
+    list of float or None
+        Per sphere (None: no ground view, or fewer than ``min_photos`` photos).
+    """
+    out = []
+    for k, s in enumerate(samples):
+        est = []
+        for r, vals in zip(results, values):
+            if s.ground_view is None or not r.spheres:
+                continue
+            sp, ground = r.spheres[k], getattr(vals[k], "ground", None)
+            f = sp.fit
+            if (ground is None or sp.status != "ok" or sp.kind != "matte" or not isinstance(f, LambertFit)
+                    or f.model != "bounce" or not f.bounce > 0):
+                continue
+            ref = reference_radiance(s.ground_view, ground, f.direction)
+            if ref > 0:
+                est.append(f.bounce / ref)
+        out.append(float(np.median(est)) if len(est) >= min_photos else None)
+    return out
 
 
 def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
@@ -806,7 +859,8 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         else:
             new_samples.append(s)
             kept.append(None)
-    new_values = [[SphereValues(*vk).subset(i) if i is not None else vk for vk, i in zip(v, kept)] for v in values]
+    new_values = [[(vk if isinstance(vk, SphereValues) else SphereValues(*vk)).subset(i) if i is not None else vk
+                   for vk, i in zip(v, kept)] for v in values]
     return new_samples, new_values, refinements
 
 
@@ -842,13 +896,15 @@ def refit_spheres(result: PhotoEstimate, samples: list[SphereSamples], values: l
     if not result.spheres:
         return replace(result)
     spheres = list(result.spheres)
-    for k, (s, (grey, valid, nsat), ref) in enumerate(zip(samples, values, refinements)):
+    for k, (s, v, ref) in enumerate(zip(samples, values, refinements)):
         old = result.spheres[k]
         if not ref.accepted or old.kind != "matte":
             continue
-        f = fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
+        g = getattr(v, "ground", None)
+        ground = None if s.ground_view is None or g is None else (s.ground_view, g)
+        f = fit_lambert(s.normals, v[0], v[1], n_saturated=v[2], terminator=terminator, up=up,
                         g=s.ground_factor(up), start=old.direction,
-                        own_shadow=own_shadow)  # (no uncertainty needed: no pixels)
+                        own_shadow=own_shadow, ground=ground)  # (no uncertainty needed: no pixels)
         spheres[k] = SphereResult(f, f.status if old.status == "ok" else old.status)
     return replace(result, spheres=spheres)
 
@@ -1146,6 +1202,10 @@ class _FitContext:
         # every sphere's pixels: where an integer photo kept as codes is linearised
         self.pixels = (np.concatenate([s.rows for s in self.samples]).astype(np.intp),
                        np.concatenate([s.cols for s in self.samples]).astype(np.intp)) if self.samples else None
+        seen = [s.ground_view for s in self.samples if s.ground_view is not None]
+        if seen and self.pixels is not None:  # and their grounds' pixels (bounce 'observed')
+            rows, cols = ground_pixels(seen)
+            self.pixels = (np.concatenate([self.pixels[0], rows]), np.concatenate([self.pixels[1], cols]))
 
 
 #: The context of the photo fits running in this process (set by :func:`_set_context`).
@@ -1173,7 +1233,7 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
             kept = (photo.linear, photo.raw, photo.bit_depth)
         values = sphere_values(kept[0], ctx.samples, saturation=ctx.options.get("saturation"), raw=kept[1],
                                bit_depth=kept[2])
-        values = [SphereValues(v.grey.astype(np.float32), v.valid, v.n_saturated) for v in values]
+        values = [sphere_values_of(v.grey.astype(np.float32), v.valid, v.n_saturated, v.ground) for v in values]
     if not task.fit:
         return None, (values if read else None)
     est = estimate_photo(None, ctx.samples, ctx.scene_center, values=values, bounce_ratio=task.bounce_ratio,
@@ -1404,6 +1464,13 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     if bounce == "free":
         error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
+    if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
+        kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
+        if any(k is not None for k in kappas):
+            samples = [s if k is None else replace(s, ground_view=replace(s.ground_view, kappa=k))
+                       for s, k in zip(samples, kappas)]
+            results = run_fitted(values)  # the free fits of the hidden ground's bounce, for its ratio
+            by_photo = dict(zip(fitted, results))
     calibration = calibrate_bounce(results, len(samples))
     ratios = [c.ratio for c in calibration]
     if bounce_shape is None:  # auto: with one matte sphere nothing cancels its bias (docs/spheres.md)
@@ -1549,7 +1616,10 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
         Per photo, its :func:`ffls.spheres.samples.sphere_values`.
     samples : list of SphereSamples
     scene_center : (3,) float
-    bounce : {'calibrated', 'free'}
+    bounce : {'calibrated', 'free', 'observed'}
+        ``'observed'``: calibrated, each sphere's bounce from its photographed ground (the
+        samples carry their :attr:`~ffls.spheres.samples.SphereSamples.ground_view`, the values
+        their ground's radiance: :func:`observed_ground_samples`); no gradient (``bounce_shape``).
     refine_centres : bool or list of bool
         Refine the spheres' centres (all, or per sphere: :func:`centres_to_refine`) from the first
         pass's shading and fit the photos again before the bounce calibration
@@ -1584,6 +1654,10 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
     CaptureEstimate
     """
     _check_modes(kwargs.get("model", "auto"), bounce)
+    if bounce == "observed":
+        if not all(s.ground_view is not None for s in samples):
+            raise ValueError("bounce 'observed' needs every sphere's ground_view (observed_ground_samples)")
+        bounce, bounce_shape = "calibrated", False
     fitter = _PhotoFitter(None, scene_center, kwargs)
     return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
                      refine_options=refine_options, materials=materials, views=views, limb_image=limb_image,
@@ -1646,8 +1720,12 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     workers : int, optional
         Processes; default every core. 1 runs in this process.
     model : {'auto', 'distant', 'near'}
-    bounce : {'calibrated', 'free'}
-        Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo.
+    bounce : {'calibrated', 'free', 'observed'}
+        Two passes with the capture-wide ground ratio, or one pass with a free bounce per photo;
+        ``'observed'``: calibrated, with each sphere's bounce from the ground photographed around
+        it (:mod:`ffls.spheres.ground`, :func:`observed_ground_samples`; needs the camera's
+        ``world_from_camera``: the ground is the plane under each sphere, and ``model``
+        ``'distant'``; no ``bounce_shape``).
     refine_centres : bool
         After the first pass, refine the centre of each sphere whose outline is not at the linear
         step (:func:`centres_to_refine`) from the shading of up to 20 photos
@@ -1689,6 +1767,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     """
     _check_modes(model, bounce)
     model, refine_options = check_estimable(capture, model, refine_options)
+    if bounce == "observed" and model != "distant":
+        raise InputError("bounce 'observed' needs model 'distant' (the near light's joint fit keeps the uniform "
+                         "ground)", capture.json_path)
     n = len(capture.image_names)
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if spheres is None:
@@ -1709,6 +1790,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     else:
         shape = load_photo(capture, 0).shape[:2]
     samples = capture_samples(capture, spheres, shape)
+    if bounce == "observed":
+        samples = observed_ground_samples(capture, samples, shape)
+        bounce, bounce_shape = "calibrated", False
     from ffls.io.capture import sphere_materials
 
     materials = sphere_materials(capture, len(spheres))

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ffls.conventions import UP
+from ffls.spheres.ground import hidden_form_factor, observed_bounce, seen_bounce
 from ffls.spheres.samples import ground_bounce
 from ffls.spheres.uncertainty import correlation_inflation
 
@@ -848,7 +849,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
                 min_lit: int = 30, max_reject_fraction: float = 0.25, max_iter: int = 8,
                 bounce_ratio: float | None = None, g: np.ndarray | None = None, min_shadow: int = 1,
                 start: np.ndarray | None = None, pixels: tuple[np.ndarray, np.ndarray] | None = None,
-                own_shadow: bool = True, own_shadow_tol_deg: float = 0.1) -> LambertFit:
+                own_shadow: bool = True, own_shadow_tol_deg: float = 0.1, ground: tuple | None = None) -> LambertFit:
     """Fit ``I(n) = a max(0, n . l) + b + c g(n)`` to one sphere's pixels.
 
     Parameters
@@ -911,6 +912,14 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         out low (docs/spheres.md, "Ground bounce").
     own_shadow_tol_deg : float
         See ``own_shadow`` (the form factor's change over such a move is below the pixels' noise).
+    ground : (GroundView, (p,) float), optional
+        The sphere's ground as photographed (:mod:`ffls.spheres.ground`: its view and this photo's
+        radiance there): with ``own_shadow``, the form factor less the own shadow is then that of
+        :func:`ffls.spheres.ground.observed_bounce` (the seen ground's departure from the uniform
+        one added), made for each light as the own shadow is; where the view has its sphere's
+        albedo (``kappa``), the seen ground's bounce (:func:`ffls.spheres.ground.seen_bounce`)
+        is subtracted from ``values`` and the form factor is the hidden ground's
+        (:func:`ffls.spheres.ground.hidden_form_factor`).
 
     Returns
     -------
@@ -918,6 +927,9 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     """
     normals = np.asarray(normals, dtype=np.float64)
     y_all = np.asarray(values, dtype=np.float64)
+    split = ground is not None and ground[0].kappa is not None
+    if split:  # the seen ground's bounce is measured: subtracted (the hidden ground's is fitted)
+        y_all = y_all - ground[0].kappa * seen_bounce(ground[0], ground[1], normals)
     m = y_all.shape[0]
     # (a sum is finite iff its terms are; written out: numpy's sum over a length-3 axis is ~40x slower)
     finite = np.isfinite(y_all) & np.isfinite(normals[:, 0] + normals[:, 1] + normals[:, 2])
@@ -976,7 +988,16 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         l_g = v0 / np.linalg.norm(v0)
         if shade:
             shadow = OwnShadow(normals, up)
-            g = shadowed_ground_bounce(normals, l_g, up, g_plain, shadow)
+
+            def form(light):  # the bounce's form factor under ``light``
+                g_l = shadowed_ground_bounce(normals, light, up, g_plain, shadow)
+                if ground is None:
+                    return g_l
+                if split:
+                    return hidden_form_factor(ground[0], light, g_l, normals)
+                return observed_bounce(ground[0], ground[1], light, g_l, normals)
+
+            g = form(l_g)
             Tb = _design_products(normals, g, y)
         elif Tb is None:
             Tb = _design_products(normals, g, y)
@@ -986,7 +1007,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         for _ in range(2 if shade else 0):  # the shadow of the fitted light, until the light stays
             if best is None or best["fit"].c <= 0.0 or float(best["dir"] @ l_g) >= cos_tol:
                 break  # (no bounce in the chosen model: its form factor does not matter)
-            g_new = shadowed_ground_bounce(normals, best["dir"], up, g_plain, shadow)
+            g_new = form(best["dir"])
             nb, ni = _iterate(normals, y, g_new, ok, best["dir"], models, terminator, min_lit, clip_sigma,
                               rel_noise_floor, max_iter, ratio, min_shadow, floor, Tb=_design_products(normals, g_new, y))
             if nb is None:  # (keeps the last fit and its form factor)

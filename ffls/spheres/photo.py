@@ -269,14 +269,20 @@ def fit_spheres(samples: list[SphereSamples], values: list[SphereValues], *, ter
     start = [None] * n if start is None else start
     mirrors = [None] * n if mirrors is None else mirrors
     out = []
-    for s, (grey, valid, nsat), rho, l0, view in zip(samples, values, bounce_ratio, start, mirrors):
+    for s, v, rho, l0, view in zip(samples, values, bounce_ratio, start, mirrors):
         if isinstance(view, SphereView):
-            out.append(fit_highlight_samples(view, s, grey, valid, floor_deg=mirror_floor_deg))
+            out.append(fit_highlight_samples(view, s, v[0], v[1], floor_deg=mirror_floor_deg))
         else:
-            out.append(fit_lambert(s.normals, grey, valid, n_saturated=nsat, terminator=terminator, up=up,
-                                   bounce_ratio=rho, g=s.ground_factor(up), start=l0, pixels=(s.rows, s.cols),
-                                   own_shadow=own_shadow))
+            out.append(fit_lambert(s.normals, v[0], v[1], n_saturated=v[2], terminator=terminator,
+                                   up=up, bounce_ratio=rho, g=s.ground_factor(up), start=l0, pixels=(s.rows, s.cols),
+                                   own_shadow=own_shadow, ground=_ground(s, v)))
     return out
+
+
+def _ground(s: SphereSamples, v: SphereValues) -> tuple | None:
+    """The sphere's photographed ground for :func:`ffls.spheres.lambert.fit_lambert` (None: not read)."""
+    g = getattr(v, "ground", None)
+    return None if s.ground_view is None or g is None else (s.ground_view, g)
 
 
 #: A matte sphere lit at less than this fraction of the photo's other usable matte spheres

@@ -16,8 +16,9 @@ import numpy as np
 
 from ffls.camera.projection import pixel_rays
 from ffls.conventions import UP, normalize
+from ffls.spheres.ground import GroundView, ground_radiance
 
-__all__ = ["ORTHO_VIRTUAL_DISTANCE", "SphereSamples", "SphereValues", "channel_mean", "ground_bounce", "sphere_samples", "sphere_samples_orthographic",
+__all__ = ["ORTHO_VIRTUAL_DISTANCE", "GroundedValues", "SphereSamples", "SphereValues", "sphere_values_of", "channel_mean", "ground_bounce", "sphere_samples", "sphere_samples_orthographic",
            "pixel_validity", "sphere_values"]
 
 
@@ -65,6 +66,9 @@ class SphereSamples:
         World-frame camera centre (the pixels' rays start there; needed by
         :mod:`ffls.spheres.refine`); for an orthographic camera a virtual one far behind the
         sphere (:data:`ORTHO_VIRTUAL_DISTANCE`).
+    ground_view : ffls.spheres.ground.GroundView or None
+        Where the sphere's ground is seen in the photos: :func:`sphere_values` then reads it, and
+        the fits take the bounce from it (``bounce='observed'``, :mod:`ffls.spheres.ground`).
     """
 
     rows: np.ndarray
@@ -76,6 +80,7 @@ class SphereSamples:
     radius_px: float
     ground: np.ndarray | None = None
     origin: np.ndarray | None = None
+    ground_view: GroundView | None = None
 
     def values(self, image: np.ndarray) -> np.ndarray:
         """Grey intensity (m,) float64 of these pixels: the mean of the channels of ``image`` (H, W[, C])."""
@@ -233,15 +238,38 @@ class SphereValues(NamedTuple):
         Usable pixels (finite, not saturated, not clipped at the black floor).
     n_saturated : int
         Saturated pixels among the sphere's.
+    ground : (p,) float or None
+        Not a field (the values stay a triple): the photographed radiance of the sphere's ground
+        (:func:`ffls.spheres.ground.ground_radiance` of its :attr:`SphereSamples.ground_view`),
+        on :class:`GroundedValues`; None here.
     """
 
     grey: np.ndarray
     valid: np.ndarray
     n_saturated: int
+    ground = None  # (a class attribute: GroundedValues sets its own)
 
     def subset(self, index: np.ndarray) -> "SphereValues":
-        """The values of the pixels ``index`` (the saturated count is kept: it describes the photo)."""
-        return SphereValues(self.grey[index], self.valid[index], self.n_saturated)
+        """The values of the pixels ``index`` (the saturated count is kept: it describes the photo,
+        and the ground: it is not the sphere's pixels)."""
+        return sphere_values_of(self.grey[index], self.valid[index], self.n_saturated, self.ground)
+
+
+class GroundedValues(SphereValues):
+    """:class:`SphereValues` with the sphere's photographed ground (``bounce='observed'``) as the
+    attribute ``ground``; still the triple ``(grey, valid, n_saturated)``."""
+
+    def __new__(cls, grey, valid, n_saturated, ground):
+        self = super().__new__(cls, grey, valid, n_saturated)
+        self.ground = ground
+        return self
+
+
+def sphere_values_of(grey, valid, n_saturated, ground=None) -> SphereValues:
+    """A :class:`SphereValues`, or a :class:`GroundedValues` where ``ground`` is given."""
+    if ground is None:
+        return SphereValues(grey, valid, n_saturated)
+    return GroundedValues(grey, valid, n_saturated, ground)
 
 
 def _columns(p: np.ndarray) -> list[np.ndarray]:
@@ -401,5 +429,6 @@ def sphere_values(image: np.ndarray, samples: list[SphereSamples], saturation: f
             # float data: no top code, and near-zero or negative (noisy) values are data
             # (pixel_validity; the non-finite are already invalid)
         grey = channel_mean(_columns(px)) if px.ndim == 2 else px
-        out.append(SphereValues(grey, valid, int(nsat)))
+        ground = None if s.ground_view is None else ground_radiance(s.ground_view, img)
+        out.append(sphere_values_of(grey, valid, int(nsat), ground))
     return out
