@@ -273,10 +273,9 @@ def test_composite_does_not_replace_a_sibling_it_did_not_write(cset, tmp_path, c
     assert (tmp_path / "truth.exr").read_bytes() == b"not ours" and not (tmp_path / "truth.png").exists()
 
 
-def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, tmp_path, capfd):
-    """``--fill model``: the spheres' world centres from capture.json, each capture's sphere shadows and
-    the object's shadow hull; under a sun the composite changes where a sphere hides the sun from the
-    ground and nowhere off the surface. Without the spheres' radius it is one line."""
+def _fill_args(cset, tmp_path, lightmap="sunrise"):
+    """Copies of the set's captures whose capture.json states the spheres' centres, and the
+    ``ffls composite`` arguments that merge them under ``lightmap``: (captures, argv)."""
     import shutil
 
     caps = {}
@@ -287,9 +286,16 @@ def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, t
         truth = json.loads((caps[k] / "truth.json").read_text())
         doc["spheres"] = [{"center": c} for c in truth["sphere_centers"]]
         (caps[k] / "capture.json").write_text(json.dumps(doc))
-    common = ["composite", "--object", str(caps["object"]), "--surface", str(caps["surface"]), "--lightmap",
-              "sunrise", "--background", str(cset / "background.exr"), "--mask", str(cset / "object_mask.png"),
-              "--surface-mask", str(cset / "surface_mask.png")]
+    return caps, ["composite", "--object", str(caps["object"]), "--surface", str(caps["surface"]), "--lightmap",
+                  lightmap, "--background", str(cset / "background.exr"), "--mask", str(cset / "object_mask.png"),
+                  "--surface-mask", str(cset / "surface_mask.png")]
+
+
+def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, tmp_path, capfd):
+    """``--fill model``: the spheres' world centres from capture.json, each capture's sphere shadows and
+    the object's shadow hull; under a sun the composite changes where a sphere hides the sun from the
+    ground and nowhere off the surface. Without the spheres' radius it is one line."""
+    caps, common = _fill_args(cset, tmp_path)
     images = {}
     for fill in ("none", "model"):
         out = tmp_path / f"c_{fill}.exr"
@@ -311,6 +317,40 @@ def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, t
     err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
     assert rc == 2 and len(err) == 1 and "--fill needs sphere_radius" in err[0], err
     assert not (tmp_path / "c_bad.exr").exists()
+
+
+def test_composite_fill_auto_relights_the_ground_where_it_can_and_says_why_not(cset, tmp_path, capfd):
+    """``--fill auto`` (the default): ``ground`` (the sources on every ground pixel from the model and
+    the hull) where both captures state what it needs and the map has a compact source, as
+    ``--fill ground`` does; otherwise ``none``, with the reason in one line, and no refusal."""
+    caps, common = _fill_args(cset, tmp_path)
+    images = {}
+    for fill in ("auto", "ground", "none"):
+        out = tmp_path / f"c_{fill}.exr"
+        rc = main(common + ([] if fill == "auto" else ["--fill", fill]) + ["-o", str(out)])
+        cap = capfd.readouterr()
+        assert rc == 0, cap.err
+        images[fill] = read_image(out).pixels
+        assert json.loads(out.with_suffix(".json").read_text())["fill"] == ("ground" if fill == "auto" else fill)
+        if fill == "auto":
+            assert "fill auto: ground (1 compact source" in cap.err and "fill ground: object: 4 spheres" in cap.out
+    assert np.array_equal(images["auto"], images["ground"])
+    sm = read_mask(cset / "surface_mask.png") > 0.5
+    changed = np.any(images["ground"] != images["none"], axis=-1)
+    assert changed[sm].sum() >= 10 and not changed[~sm].any()
+    # the map without a compact source (the set's courtyard), and a capture without sphere_radius
+    for k, (argv, why) in enumerate((
+            (common[:6] + [str(cset / "scene_map.exr")] + common[7:], "the light map has no compact source"),
+            (common, "--fill needs sphere_radius in capture.json"))):
+        if k == 1:
+            doc = json.loads((caps["surface"] / "capture.json").read_text())
+            del doc["sphere_radius"]
+            (caps["surface"] / "capture.json").write_text(json.dumps(doc))
+        out = tmp_path / f"c_none{k}.exr"
+        rc = main(argv + ["-o", str(out)])
+        err = [ln for ln in capfd.readouterr().err.splitlines() if "fill auto" in ln]
+        assert rc == 0 and len(err) == 1 and err[0].startswith("ffls composite: fill auto: none (") and why in err[0]
+        assert json.loads(out.with_suffix(".json").read_text())["fill"] == "none"
 
 
 def test_composite_turntable(cset, tmp_path, capfd):

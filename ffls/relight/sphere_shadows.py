@@ -310,7 +310,13 @@ class SphereShadowFill:
         area = (4 * np.pi if self.hemisphere.axis is None else 2 * np.pi) * min(1.0, 2 * FIT_NEIGHBOURS / self.n)
         return float(np.degrees(np.arccos(1.0 - area / (2 * np.pi))))
 
-    def source_model(self, image, direction, basis, *, hull=None) -> np.ndarray:
+    def ground_pixels(self) -> np.ndarray:
+        """(H, W) bool: the pixels with a ground point (``geometry['points']`` finite)."""
+        if self.geometry is None:
+            raise ValueError("ground_pixels needs the spheres' geometry (SphereShadowFill.from_geometry)")
+        return np.all(np.isfinite(np.asarray(self.geometry["points"], dtype=np.float64)), axis=-1)
+
+    def source_model(self, image, direction, basis, *, hull=None, everywhere: bool = False) -> np.ndarray:
         """A compact source's unit-power image with its sphere shadows replaced by the unshadowed model.
 
         Where a light from ``direction`` would be hidden by a sphere (:meth:`hidden_for`) no photo
@@ -320,7 +326,10 @@ class SphereShadowFill:
         (:meth:`model_width_deg`), evaluated at ``direction``: exact for a Lambertian surface. The
         object's shadow there comes from its geometry: times ``hull.visibility(points, direction)``
         (:class:`ffls.relight.shadow_hull.ShadowHull`) where a hull is given (the object capture),
-        1 without (the surface-alone capture).
+        1 without (the surface-alone capture). With ``everywhere`` every ground pixel
+        (:meth:`ground_pixels`) is relit so, not only the hidden ones: the object's shadow from the
+        source is then placed by the hull's geometry instead of being interpolated between the photos
+        of the nearest lights, tens of degrees apart with 100 lights (docs/composite.md).
 
         Parameters
         ----------
@@ -329,6 +338,8 @@ class SphereShadowFill:
         direction : (3,) array_like
         basis : (n, H, W, 3) float array
         hull : ShadowHull, optional
+        everywhere : bool
+            Relight every ground pixel, not only those a sphere hides from ``direction``.
 
         Returns
         -------
@@ -340,6 +351,8 @@ class SphereShadowFill:
         here = self.hidden_for(d)
         if here is None:
             raise ValueError("source_model needs the spheres' geometry (SphereShadowFill.from_geometry)")
+        if everywhere:
+            here = here | self.ground_pixels()
         pix = np.flatnonzero(here.ravel())
         if pix.size == 0:
             return out
