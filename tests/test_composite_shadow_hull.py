@@ -214,7 +214,7 @@ def test_ground_fill_places_the_objects_shadow_by_its_hull_on_the_whole_ground()
     lights is relit on every ground pixel from the model times the hull, so the box's shadow falls
     where its geometry puts it, closer to the truth than the photos' interpolation; ``'model'``
     leaves the pixels no sphere hides as interpolated."""
-    d = stratified_directions(60, "upper", 3)                # lights about 25 degrees apart
+    d = stratified_directions(60, "upper", 3)                # 48 lights above 12 degrees
     d = d[d[:, 2] > math.sin(math.radians(12))]
     K, M, obj, ground, pts, basis = _scene(d)
     c, r = SPHERE
