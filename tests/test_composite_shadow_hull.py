@@ -249,3 +249,20 @@ def test_ground_fill_places_the_objects_shadow_by_its_hull_on_the_whole_ground()
     assert np.array_equal(images["model"][~here], images[False][~here])
     with pytest.raises(ValueError):
         SphereShadowFill(np.zeros((len(d), RES, RES), bool), d).ground_pixels()
+
+
+def test_source_model_in_chunks_is_the_same(monkeypatch):
+    """``source_model(everywhere=True)`` fits the ground in chunks of pixels (a large photo's whole
+    ground would not fit in memory at once): the same image for any chunk size."""
+    import ffls.relight.sphere_shadows as ss
+
+    d = stratified_directions(60, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    c, r = SPHERE
+    fill = SphereShadowFill.from_geometry(pts, [c], r, d, dilate_px=0)
+    src = np.array([0.5, 0.5, 0.7]) / np.linalg.norm([0.5, 0.5, 0.7])
+    whole = fill.source_model(np.zeros((RES, RES, 3)), src, basis, everywhere=True)
+    monkeypatch.setattr(ss, "MODEL_CHUNK_VALUES", 7 * len(d) + 3)   # 7 pixels a chunk
+    chunked = fill.source_model(np.zeros((RES, RES, 3)), src, basis, everywhere=True)
+    assert np.array_equal(whole, chunked) and (whole[ground][:, 0] > 0).mean() > 0.9

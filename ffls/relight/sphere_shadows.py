@@ -157,6 +157,12 @@ def hidden_photos(points, centres, radius, directions=None, positions=None, marg
     return out
 
 
+#: Photo x pixel values per chunk of :meth:`SphereShadowFill.source_model`'s fit (float32 photos and a
+#: float64 prior: about 170 MB), so that relighting every ground pixel of a large photo
+#: (``everywhere``) holds one chunk at a time.
+MODEL_CHUNK_VALUES = 1 << 23
+
+
 class SphereShadowFill:
     """Per-pixel re-weighting over the photos that see each pixel (see the module notes).
 
@@ -356,15 +362,20 @@ class SphereShadowFill:
         pix = np.flatnonzero(here.ravel())
         if pix.size == 0:
             return out
-        prior = np.ones((self.n, pix.size))
-        groups = self.group_of[pix]
-        for g in np.unique(groups[groups >= 0]):
-            prior[np.ix_(self.groups[g][0], np.flatnonzero(groups == g))] = 0.0
         angle = np.degrees(np.arccos(np.clip(self.directions @ d, -1.0, 1.0)))
-        prior *= np.exp(-0.5 * (angle / self.model_width_deg()) ** 2)[:, None]
-        B = np.asarray(basis).reshape(self.n, -1, 3)[:, pix].astype(np.float32)
-        b = unshadowed_fit(B[:, :, None], self.directions, prior=prior[:, :, None])[:, 0]
-        model = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
+        near = np.exp(-0.5 * (angle / self.model_width_deg()) ** 2)[:, None]
+        flat_basis = np.asarray(basis).reshape(self.n, -1, 3)
+        model = np.empty((pix.size, 3))
+        step = max(1, MODEL_CHUNK_VALUES // self.n)  # pixels per chunk: the whole ground of a large photo
+        for lo in range(0, pix.size, step):
+            p = pix[lo:lo + step]
+            prior = np.repeat(near, p.size, axis=1)
+            groups = self.group_of[p]
+            for g in np.unique(groups[groups >= 0]):
+                prior[np.ix_(self.groups[g][0], np.flatnonzero(groups == g))] = 0.0
+            B = flat_basis[:, p].astype(np.float32)
+            b = unshadowed_fit(B[:, :, None], self.directions, prior=prior[:, :, None])[:, 0]
+            model[lo:lo + step] = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
         good = np.all(np.isfinite(model), axis=-1)
         if hull is not None:
             pts = np.asarray(self.geometry["points"], dtype=np.float64).reshape(-1, 3)[pix]
