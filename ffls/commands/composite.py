@@ -489,8 +489,8 @@ def run(args) -> int:
         raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
                          "no flow")
     if args.fill not in ("auto", "none") and args.sources == "weights":
-        raise InputError(f"--fill {args.fill} relights the compact sources where the spheres hide them: it needs "
-                         "--sources lightflow or levelset, not weights")
+        raise InputError(f"--fill {args.fill} relights the compact sources on the ground: it needs --sources "
+                         "lightflow or levelset, not weights")
     check_fps_flag(args, out)
     args.flow, args.fps = args.flow or "dis", args.fps or 30.0
     R0 = rotation_from_args(args)
