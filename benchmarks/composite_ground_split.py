@@ -57,7 +57,7 @@ def main():
     cache, R, t0 = Path(a.cache), a.res, time.perf_counter()
     om_b, sm_b, _ = cm.cast_masks(mi, R)
     om, sm = om_b.astype(np.float64), sm_b.astype(np.float64)
-    K, M = cm._camera(R)
+    K, M = cm.camera_matrices(R)
     ground = ground_points(K, M, (R, R))
     ground[~sm_b] = np.nan
     centres = [(x, y, 0.05) for x, y in cm.SPHERES]

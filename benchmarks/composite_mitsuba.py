@@ -120,7 +120,7 @@ def camera_sensor(mi, res, spp):
             "sampler": {"type": "independent", "sample_count": spp}}
 
 
-def _camera(res):
+def camera_matrices(res):
     """K and world_from_camera (OpenCV axes) of the Mitsuba camera."""
     f = 0.5 * res / math.tan(math.radians(FOV) / 2)
     K = np.array([[f, 0, 0.5 * (res - 1)], [0, f, 0.5 * (res - 1)], [0, 0, 1.0]])
@@ -147,7 +147,7 @@ def render_capture(mi, folder: Path, n, seed, with_object, res, spp, seed_offset
             sc = mi.load_dict({**base, "light": {"type": "directional", "direction": list(-d),
                                                  "irradiance": {"type": "rgb", "value": 1.0}}})
             write_exr(folder / names[i], np.array(mi.render(sc, seed=seed * 100003 + seed_offset + i)), half=False)
-        K, M = _camera(res)
+        K, M = camera_matrices(res)
         save_lights(Lights(image_names=names, directions=dirs), folder / "lights.json")
         save_capture(Capture(folder=folder, image_names=names, encoding="linear", K=K, dist=np.zeros(5),
                              world_from_camera=M, world_from_camera_is_default=False, sphere_radius=0.05,
@@ -174,7 +174,7 @@ def sphere_shadows(res, direction, radius_deg):
         Pixels whose ground point (z = 0 along the camera's pixel-centre ray) sees the source
         through one of :data:`SPHERES` (radius 5 cm, centres 5 cm above the ground).
     """
-    K, M = _camera(res)
+    K, M = camera_matrices(res)
     jj, ii = np.mgrid[0:res, 0:res].astype(np.float64)
     rays = np.stack([(ii - K[0, 2]) / K[0, 0], (jj - K[1, 2]) / K[1, 1], np.ones_like(ii)], -1) @ M[:3, :3].T
     origin = M[:3, 3]
@@ -311,7 +311,7 @@ def main():
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
     caps, fills, hulls, hull_points = {}, {}, {}, {}
-    K, M = _camera(R)
+    K, M = camera_matrices(R)
     ground = ground_points(K, M, (R, R))
     ground[~sm_b] = np.nan  # the ground the camera sees: neither the object nor a sphere
     centres = [(x, y, 0.05) for x, y in SPHERES]
