@@ -335,7 +335,7 @@ class SphereShadowFill:
         1 without (the surface-alone capture). With ``everywhere`` every ground pixel
         (:meth:`ground_pixels`) is relit so, not only the hidden ones: the object's shadow from the
         source is then placed by the hull's geometry instead of being interpolated between the photos
-        of the nearest lights, tens of degrees apart with 100 lights (docs/composite.md).
+        of the nearest lights, whose shadows change shape between them (docs/composite.md).
 
         Parameters
         ----------
