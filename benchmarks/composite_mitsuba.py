@@ -32,7 +32,7 @@ radius) and the change error split there (``source_shadows``).
 
     python benchmarks/composite_mitsuba.py [--maps courtyard,sunrise,studio] [--lights 100,200]
         [--res 128] [--spp 16] [--truth-spp 1024] [--map-spp 256] [--cache DIR] [--schemes voronoi,...]
-        [--sources weights,lightflow,levelset] [--fill none,rest,all,model,rest+model] [--spheres scene|found]
+        [--sources weights,lightflow,levelset] [--fill none,rest,all,model,rest+model,ground] [--spheres scene|found]
 
 ``--sources lightflow`` relights the map's compact sources by flow interpolation between the
 (path-traced, noisy) basis photos, ``--sources levelset`` by moving the basis photos' cast shadows
@@ -45,9 +45,10 @@ photos' blend). ``--fill model`` fills only the compact sources where a sphere h
 visible photos' unshadowed model times the object's visibility through its shadow hull
 (:class:`ffls.relight.shadow_hull.ShadowHull`, carved from the object capture's own shadows; the
 surface capture gets the model alone), and checks the hull's shadow of each source against a render
-(:func:`hull_shadow_check`); ``--fill rest+model`` also fills the rest's weights. The fills take the
-scene's sphere centres, or with ``--spheres found`` each capture's spheres found in its photos and
-the ground under them, as ``ffls composite --fill`` does
+(:func:`hull_shadow_check`); ``--fill rest+model`` also fills the rest's weights; ``--fill ground``
+relights the compact sources from the model times the hull on every ground pixel, not only in the
+spheres' shadows. The fills take the scene's sphere centres, or with ``--spheres found`` each
+capture's spheres found in its photos and the ground under them, as ``ffls composite --fill`` does
 (:func:`ffls.commands.composite.sphere_geometry`); the errors are measured on the scene's geometry.
 
 Needs ``pip install mitsuba`` (``ffls[validate]``). Writes ``benchmarks/results/composite_mitsuba.json``.
@@ -83,6 +84,8 @@ CAM_ORIGIN, CAM_TARGET, FOV = (0.0, -0.866, 0.55), (0.0, 0.0, 0.05), 46.0
 SPHERES = ((-0.25, -0.25), (0.25, -0.25), (0.25, 0.25), (-0.25, 0.25))
 #: ``--fill`` values that fill the rest's weights.
 FILL_REST = ("rest", "all", "rest+model")
+#: ``--fill`` values that relight the compact sources from the unshadowed model and the shadow hull.
+MODEL_FILLS = ("model", "rest+model", "ground")
 
 
 def _diffuse(rgb):
@@ -117,7 +120,7 @@ def camera_sensor(mi, res, spp):
             "sampler": {"type": "independent", "sample_count": spp}}
 
 
-def _camera(res):
+def camera_matrices(res):
     """K and world_from_camera (OpenCV axes) of the Mitsuba camera."""
     f = 0.5 * res / math.tan(math.radians(FOV) / 2)
     K = np.array([[f, 0, 0.5 * (res - 1)], [0, f, 0.5 * (res - 1)], [0, 0, 1.0]])
@@ -144,7 +147,7 @@ def render_capture(mi, folder: Path, n, seed, with_object, res, spp, seed_offset
             sc = mi.load_dict({**base, "light": {"type": "directional", "direction": list(-d),
                                                  "irradiance": {"type": "rgb", "value": 1.0}}})
             write_exr(folder / names[i], np.array(mi.render(sc, seed=seed * 100003 + seed_offset + i)), half=False)
-        K, M = _camera(res)
+        K, M = camera_matrices(res)
         save_lights(Lights(image_names=names, directions=dirs), folder / "lights.json")
         save_capture(Capture(folder=folder, image_names=names, encoding="linear", K=K, dist=np.zeros(5),
                              world_from_camera=M, world_from_camera_is_default=False, sphere_radius=0.05,
@@ -171,7 +174,7 @@ def sphere_shadows(res, direction, radius_deg):
         Pixels whose ground point (z = 0 along the camera's pixel-centre ray) sees the source
         through one of :data:`SPHERES` (radius 5 cm, centres 5 cm above the ground).
     """
-    K, M = _camera(res)
+    K, M = camera_matrices(res)
     jj, ii = np.mgrid[0:res, 0:res].astype(np.float64)
     rays = np.stack([(ii - K[0, 2]) / K[0, 0], (jj - K[1, 2]) / K[1, 1], np.ones_like(ii)], -1) @ M[:3, :3].T
     origin = M[:3, 3]
@@ -285,7 +288,7 @@ def main():
                     help="the calibration spheres' shadows filled (ffls.relight.sphere_shadows) in both captures, "
                          "with --sources lightflow/levelset: none, rest (the rest's weights), all (and the sources), "
                          "model (the sources alone, from the unshadowed model and the object's shadow hull), "
-                         "rest+model")
+                         "rest+model, ground (the sources from the model and the hull on every ground pixel)")
     ap.add_argument("--spheres", default="scene", choices=("scene", "found"),
                     help="the calibration spheres' centres for --fill: the scene's (default), or found in each "
                          "capture's photos as ffls composite --fill does (ffls.commands.composite.sphere_geometry; "
@@ -308,7 +311,7 @@ def main():
     near_sph = cv2.dilate(sph.astype(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
     caps, fills, hulls, hull_points = {}, {}, {}, {}
-    K, M = _camera(R)
+    K, M = camera_matrices(R)
     ground = ground_points(K, M, (R, R))
     ground[~sm_b] = np.nan  # the ground the camera sees: neither the object nor a sphere
     centres = [(x, y, 0.05) for x, y in SPHERES]
@@ -327,7 +330,7 @@ def main():
                       f" mm off at most; ground at z = {geo['ground_z']:.4f}", flush=True)
         fills[n] = tuple(SphereShadowFill.from_geometry(g, c, 0.05, lights.directions)
                          for (_, lights), (g, c, _) in zip(caps[n], geometry))
-        if any(f in ("model", "rest+model") for f in a.fill.split(",")):
+        if any(f in MODEL_FILLS for f in a.fill.split(",")):
             basis, dirs = accepted_basis(*caps[n][0])
             g, c, Mo = geometry[0]
             hulls[n] = ShadowHull.carve(basis, dirs, om_b, K, Mo, ground=sm_b, hidden=hidden_photos(g, c, 0.05, dirs))
@@ -352,9 +355,9 @@ def main():
             if sources in ("lightflow", "levelset"):
                 kind = "flow" if sources == "lightflow" else "levelset"
                 fo, fs = fills[n] if fill != "none" else (None, None)
-                mode = {"all": "blend", "model": "model", "rest+model": "model"}.get(fill, False)
+                mode = {"all": "blend", "model": "model", "rest+model": "model", "ground": "ground"}.get(fill, False)
                 o = LightFlowRelighter(o, interpolation=kind, fill=fo, fill_sources=mode, fill_rest=fill in FILL_REST,
-                                       hull=hulls[n] if mode == "model" else None)
+                                       hull=hulls[n] if fill in MODEL_FILLS else None)
                 s = LightFlowRelighter(s, interpolation=kind, fill=fs, fill_sources=mode, fill_rest=fill in FILL_REST)
             for r in (o, s):
                 r.set_lightmap(lm)
@@ -412,7 +415,7 @@ def main():
                      "change_off": rel(c, change & ~h),
                      "error_share_in": float(np.abs(c - tr)[change & h].sum() / total),
                      "trace": trace(c, h & ~change & ~near_sph),
-                     "hull_shadow": hull_checks(src.direction) if fill in ("model", "rest+model") else None}
+                     "hull_shadow": hull_checks(src.direction) if fill in MODEL_FILLS else None}
                     for src, h in hard]
                 x = rows[-1]
                 print(f"{name:10s} {n:4d} {scheme:12s} {sources:9s} fill {fill:4s} {method:12s} change {100 * x['change']:5.1f}%  "

@@ -200,6 +200,27 @@ def test_fill_sphere_geometry_from_capture_json(tmp_path):
         sphere_geometry(cap, near)
 
 
+def test_fill_finds_all_four_spheres_of_a_96_px_set(tmp_path):
+    """``--fill`` finds the spheres in the photos (ffls.spheres' finder) when capture.json does not
+    state them: at 96 px the two back spheres are 4.5 px wide in radius, below what the finder's
+    Hough transforms resolve at the image's own pixels; it found 2 of the 4 before it also sought
+    small circles on the upsampled images."""
+    from ffls.commands.composite import sphere_geometry
+    from ffls.io.capture import load_capture_and_lights
+
+    root = tmp_path / "set"
+    assert main(["synth", str(root), "--composite-set", "sunrise", "--lights", "40", "--surface-lights", "30",
+                 "--resolution", "96", "--truth-dirs", "64", "--quiet"]) == 0
+    for k in ("object", "surface"):
+        truth = np.array(json.loads((root / k / "truth.json").read_text())["sphere_centers"])
+        geo = sphere_geometry(*load_capture_and_lights(root / k))
+        assert geo["source"] == "found" and len(geo["centres"]) == 4, geo
+        # each true centre has a found one within 0.7 radius (the back ones are 4.5 px in radius)
+        off = np.linalg.norm(truth[:, None] - geo["centres"][None], axis=-1).min(1)
+        assert off.max() < 0.7 * geo["radius"], off
+        assert abs(geo["ground_z"]) < 0.25 * geo["radius"]
+
+
 # ----------------------------------------------------------------------------- end to end on ffls synth
 @pytest.fixture(scope="module")
 def cset(tmp_path_factory):
@@ -273,10 +294,9 @@ def test_composite_does_not_replace_a_sibling_it_did_not_write(cset, tmp_path, c
     assert (tmp_path / "truth.exr").read_bytes() == b"not ours" and not (tmp_path / "truth.png").exists()
 
 
-def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, tmp_path, capfd):
-    """``--fill model``: the spheres' world centres from capture.json, each capture's sphere shadows and
-    the object's shadow hull; under a sun the composite changes where a sphere hides the sun from the
-    ground and nowhere off the surface. Without the spheres' radius it is one line."""
+def _fill_args(cset, tmp_path, lightmap="sunrise"):
+    """Copies of the set's captures whose capture.json states the spheres' centres, and the
+    ``ffls composite`` arguments that merge them under ``lightmap``: (captures, argv)."""
     import shutil
 
     caps = {}
@@ -287,9 +307,16 @@ def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, t
         truth = json.loads((caps[k] / "truth.json").read_text())
         doc["spheres"] = [{"center": c} for c in truth["sphere_centers"]]
         (caps[k] / "capture.json").write_text(json.dumps(doc))
-    common = ["composite", "--object", str(caps["object"]), "--surface", str(caps["surface"]), "--lightmap",
-              "sunrise", "--background", str(cset / "background.exr"), "--mask", str(cset / "object_mask.png"),
-              "--surface-mask", str(cset / "surface_mask.png")]
+    return caps, ["composite", "--object", str(caps["object"]), "--surface", str(caps["surface"]), "--lightmap",
+                  lightmap, "--background", str(cset / "background.exr"), "--mask", str(cset / "object_mask.png"),
+                  "--surface-mask", str(cset / "surface_mask.png")]
+
+
+def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, tmp_path, capfd):
+    """``--fill model``: the spheres' world centres from capture.json, each capture's sphere shadows and
+    the object's shadow hull; under a sun the composite changes where a sphere hides the sun from the
+    ground and nowhere off the surface. Without the spheres' radius it is one line."""
+    caps, common = _fill_args(cset, tmp_path)
     images = {}
     for fill in ("none", "model"):
         out = tmp_path / f"c_{fill}.exr"
@@ -311,6 +338,40 @@ def test_composite_fill_model_relights_the_sun_where_the_spheres_hide_it(cset, t
     err = [ln for ln in capfd.readouterr().err.splitlines() if ln.strip()]
     assert rc == 2 and len(err) == 1 and "--fill needs sphere_radius" in err[0], err
     assert not (tmp_path / "c_bad.exr").exists()
+
+
+def test_composite_fill_auto_relights_the_ground_where_it_can_and_says_why_not(cset, tmp_path, capfd):
+    """``--fill auto`` (the default): ``ground`` (the sources on every ground pixel from the model and
+    the hull) where both captures state what it needs and the map has a compact source, as
+    ``--fill ground`` does; otherwise ``none``, with the reason in one line, and no refusal."""
+    caps, common = _fill_args(cset, tmp_path)
+    images = {}
+    for fill in ("auto", "ground", "none"):
+        out = tmp_path / f"c_{fill}.exr"
+        rc = main(common + ([] if fill == "auto" else ["--fill", fill]) + ["-o", str(out)])
+        cap = capfd.readouterr()
+        assert rc == 0, cap.err
+        images[fill] = read_image(out).pixels
+        assert json.loads(out.with_suffix(".json").read_text())["fill"] == ("ground" if fill == "auto" else fill)
+        if fill == "auto":
+            assert "fill auto: ground (1 compact source" in cap.err and "fill ground: object: 4 spheres" in cap.out
+    assert np.array_equal(images["auto"], images["ground"])
+    sm = read_mask(cset / "surface_mask.png") > 0.5
+    changed = np.any(images["ground"] != images["none"], axis=-1)
+    assert changed[sm].sum() >= 10 and not changed[~sm].any()
+    # the map without a compact source (the set's courtyard), and a capture without sphere_radius
+    for k, (argv, why) in enumerate((
+            (common[:6] + [str(cset / "scene_map.exr")] + common[7:], "the light map has no compact source"),
+            (common, "--fill needs sphere_radius in capture.json"))):
+        if k == 1:
+            doc = json.loads((caps["surface"] / "capture.json").read_text())
+            del doc["sphere_radius"]
+            (caps["surface"] / "capture.json").write_text(json.dumps(doc))
+        out = tmp_path / f"c_none{k}.exr"
+        rc = main(argv + ["-o", str(out)])
+        err = [ln for ln in capfd.readouterr().err.splitlines() if "fill auto" in ln]
+        assert rc == 0 and len(err) == 1 and err[0].startswith("ffls composite: fill auto: none (") and why in err[0]
+        assert json.loads(out.with_suffix(".json").read_text())["fill"] == "none"
 
 
 def test_composite_turntable(cset, tmp_path, capfd):

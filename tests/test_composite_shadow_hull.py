@@ -207,3 +207,62 @@ def test_relighter_fills_a_hidden_sun_with_the_model_and_the_hull():
     assert np.median(images[False][lit_here]) < 0.2 * level
     with pytest.raises(ValueError):
         LightFlowRelighter(CpuRelighter(basis, d), fill=fill, fill_sources="hull")
+
+
+def test_ground_fill_places_the_objects_shadow_by_its_hull_on_the_whole_ground():
+    """``fill_sources='ground'`` (``source_model(everywhere=True)``): a sun between sparse capture
+    lights is relit on every ground pixel from the model times the hull, so the box's shadow falls
+    where its geometry puts it, closer to the truth than the photos' interpolation; ``'model'``
+    leaves the pixels no sphere hides as interpolated."""
+    d = stratified_directions(60, "upper", 3)                # 48 lights above 12 degrees
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    c, r = SPHERE
+    hull = ShadowHull.carve(basis, d, obj, K, M, ground=ground, hidden=hidden_photos(pts, [c], r, directions=d))
+    # the sun as far from the capture's lights as the upper sky 20-40 degrees up allows
+    az, el = np.meshgrid(np.radians(np.arange(0, 360, 5)), np.radians(np.arange(20, 41, 5)))
+    cand = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], -1).reshape(-1, 3)
+    sun = cand[np.argmax(np.arccos(np.clip(cand @ d.T, -1, 1)).min(1))]
+    lm = LightMap(np.full((64, 128, 3), 1e-4, np.float32), "latlong")
+    dirs, _, _ = lm.samples()
+    data = lm.data.reshape(-1, 3).copy()
+    data[np.argmax(dirs @ sun)] = 2e4                        # a sun of one texel
+    lm = replace(lm, data=data.reshape(lm.data.shape))
+    fill = SphereShadowFill.from_geometry(pts, [c], r, d)
+    images = {}
+    for mode in ("ground", "model", False):
+        rel = LightFlowRelighter(CpuRelighter(basis, d, weighting="barycentric"), fill=fill, fill_sources=mode,
+                                 fill_rest=False, hull=hull)
+        rel.set_lightmap(lm)
+        rel.render()
+        images[mode] = rel.read_hdr()[..., 0].astype(np.float64)
+    sun = rel.last_split.sources[0].sample_directions[0]
+    power = float(rel.last_split.sources[0].sample_powers[0][0])
+    box_shadow = _hits_box(np.nan_to_num(pts.reshape(-1, 3)), sun).reshape(RES, RES) & ground
+    here = fill.hidden_for(sun)
+    off = ground & ~here                                     # the ground no sphere hides from the sun
+    truth = power * sun[2] * ~box_shadow
+    err = {m: np.abs(images[m] - truth)[off & box_shadow].mean() / (power * sun[2]) for m in images}
+    assert box_shadow[off].sum() >= 20
+    assert err["ground"] < 0.5 * err[False] and err["ground"] < 0.15, err
+    # 'model' changes only the pixels a sphere hides from the sun
+    assert np.array_equal(images["model"][~here], images[False][~here])
+    with pytest.raises(ValueError):
+        SphereShadowFill(np.zeros((len(d), RES, RES), bool), d).ground_pixels()
+
+
+def test_source_model_in_chunks_is_the_same(monkeypatch):
+    """``source_model(everywhere=True)`` fits the ground in chunks of pixels (a large photo's whole
+    ground would not fit in memory at once): the same image for any chunk size."""
+    import ffls.relight.sphere_shadows as ss
+
+    d = stratified_directions(60, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    c, r = SPHERE
+    fill = SphereShadowFill.from_geometry(pts, [c], r, d, dilate_px=0)
+    src = np.array([0.5, 0.5, 0.7]) / np.linalg.norm([0.5, 0.5, 0.7])
+    whole = fill.source_model(np.zeros((RES, RES, 3)), src, basis, everywhere=True)
+    monkeypatch.setattr(ss, "MODEL_CHUNK_VALUES", 7 * len(d) + 3)   # 7 pixels a chunk
+    chunked = fill.source_model(np.zeros((RES, RES, 3)), src, basis, everywhere=True)
+    assert np.array_equal(whole, chunked) and (whole[ground][:, 0] > 0).mean() > 0.9

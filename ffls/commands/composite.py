@@ -33,10 +33,15 @@ DESCRIPTION = (
 
 #: ``--sources``: how the map's compact bright sources are relit.
 SOURCES = ("lightflow", "levelset", "weights")
-#: ``--fill``: what is filled where a calibration sphere hides a light from the ground
-#: (docs/composite.md, "The object's shadow inside the spheres' shadows"): nothing; the compact
-#: sources, from the unshadowed model and the object's shadow hull; that and the rest's weights.
-FILLS = ("none", "model", "rest+model")
+#: ``--fill``: how the compact sources reach the ground (docs/composite.md, "The object's shadow
+#: inside the spheres' shadows" and "The compact sources on the whole ground"): ``ground`` where
+#: the captures have what it needs, else ``none`` (``auto``, the default); as interpolated (none);
+#: from the ground's unshadowed model and the object's shadow hull where a sphere hides them
+#: (model), and also the rest's weights (rest+model); from the model and the hull on every ground
+#: pixel (ground).
+FILLS = ("auto", "none", "model", "rest+model", "ground")
+#: What ``--fill`` gives ``LightFlowRelighter``'s ``fill_sources``.
+FILL_SOURCES = {"model": "model", "rest+model": "model", "ground": "ground"}
 #: The spheres' bottoms (centre height less the radius) may spread this many radii around their
 #: median and still be read as one ground plane (``--fill``).
 GROUND_SPREAD_RADII = 0.5
@@ -88,14 +93,17 @@ def add_arguments(p):
                    help="optical flow of --sources lightflow (between the photos) and levelset (between the "
                         "shadows' signed distances): OpenCV DIS (default) or Farneback; refused with --sources "
                         "weights, which uses no flow")
-    c.add_argument("--fill", default="none", choices=FILLS,
-                   help="where a calibration sphere hides a compact source from the ground, no photo holds the "
-                        "object's shadow: model relights the source there from the ground's unshadowed model "
-                        "times the object's shadow hull, carved from the object capture's own shadows; "
-                        "rest+model also moves the rest's weights off the photos a sphere hides. Needs --sources "
-                        "lightflow or levelset, distant lights, and capture.json's camera (K, world_from_camera, "
-                        "+Z up) and sphere_radius; the spheres' world centres come from capture.json's "
-                        "spheres[].center, or are found in the photos. Default none")
+    c.add_argument("--fill", default="auto", choices=FILLS,
+                   help="how the map's compact sources light the ground: ground relights them on every ground "
+                        "pixel from the ground's unshadowed model times the object's shadow hull, carved from the "
+                        "object capture's own shadows (the object's shadow placed by its geometry, not "
+                        "interpolated between the nearest lights' photos); model does so only where a calibration "
+                        "sphere hides a source from the ground (no photo holds the object's shadow there); "
+                        "rest+model also moves the rest's weights off the photos a sphere hides; none: as "
+                        "interpolated. These need --sources lightflow or levelset, distant lights, and "
+                        "capture.json's camera (K, world_from_camera, +Z up) and sphere_radius; the spheres' "
+                        "world centres come from capture.json's spheres[].center, or are found in the photos. "
+                        "auto (default): ground where the captures and the map allow it, else none, saying why")
     c.add_argument("--scale-object", action="store_true",
                    help="scale the relit object by the registration too (the mismatch is the exposure, e.g. a "
                         "photographed background; default: it is the surface's albedo)")
@@ -326,6 +334,38 @@ def make_fills(args, inputs, relighters) -> tuple[list, object, str]:
     return fills, hull, "fill " + args.fill + ": " + "; ".join(lines + [note])
 
 
+def auto_fill(args, fields: dict, lightmap) -> tuple[str, dict, str]:
+    """``--fill auto``: ``ground`` where the captures and the map allow it, else ``none``.
+
+    The fill relights the map's compact sources (``--sources lightflow`` or ``levelset``, a map
+    with one) from each capture's geometry (:func:`sphere_geometry`: a pinhole ``K``,
+    ``world_from_camera``, ``sphere_radius``, distant lights, the spheres stated or found).
+
+    Returns
+    -------
+    fill : {'ground', 'none'}
+    geometry : dict
+        :func:`sphere_geometry` of ``'object'`` and ``'surface'`` (empty for ``none``).
+    why : str
+        One clause: what allowed it, or why not.
+    """
+    from ffls.errors import InputError
+    from ffls.relight.lightflow import split_compact_sources
+
+    if args.sources == "weights":
+        return "none", {}, "--sources weights splits off no compact source to relight"
+    cap = fields["object"][0]
+    split = split_compact_sources(lightmap, rotation_from_args(args), cap.hemisphere)
+    if not split.sources:
+        return "none", {}, "the light map has no compact source"
+    try:
+        geometry = {k: sphere_geometry(*fields[k]) for k in ("object", "surface")}
+    except InputError as e:
+        return "none", {}, str(e)
+    return "ground", geometry, (f"{split.describe()}; both captures state their camera and sphere_radius, "
+                                "and have distant lights and spheres")
+
+
 def load_inputs(args):
     """The two captures and lights, light map, background and masks of ``args``, checked before any relighting.
 
@@ -387,7 +427,10 @@ def load_inputs(args):
     if lm.colour_note:
         notes.append(f"colour: light map: {lm.colour_note}")
     geometry = {}  # last: finding the spheres reads every photo
-    if getattr(args, "fill", "none") != "none":
+    if getattr(args, "fill", "none") == "auto":
+        args.fill, geometry, why = auto_fill(args, fields, lm)
+        notes.append(f"fill auto: {args.fill} ({why})")
+    elif getattr(args, "fill", "none") != "none":
         geometry = {k: sphere_geometry(*fields[k]) for k in ("object", "surface")}
     return {**fields, "lightmap": lm, "background": bg.pixels, "object_mask": om, "surface_mask": sm,
             "fill_geometry": geometry, "notes": notes}
@@ -413,12 +456,12 @@ def make_compositor(args, inputs):
     if args.sources in ("lightflow", "levelset"):
         kind = "flow" if args.sources == "lightflow" else "levelset"
         fill = getattr(args, "fill", "none")
-        if fill == "none":
+        if fill in ("none", "auto"):  # auto is resolved by load_inputs
             rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind) for r in rel]
         else:
             fills, hull, line = make_fills(args, inputs, rel)
             print(f"ffls composite: {line}")
-            rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind, fill=f, fill_sources="model",
+            rel = [LightFlowRelighter(r, flow=args.flow, interpolation=kind, fill=f, fill_sources=FILL_SOURCES[fill],
                                       fill_rest=fill == "rest+model", hull=hull if k == 0 else None)
                    for k, (r, f) in enumerate(zip(rel, fills))]
     return Compositor(*rel, inputs["background"], inputs["object_mask"], inputs["surface_mask"],
@@ -445,9 +488,9 @@ def run(args) -> int:
     if args.flow is not None and args.sources == "weights":
         raise InputError(f"--flow {args.flow} applies to --sources lightflow or levelset; --sources weights uses "
                          "no flow")
-    if args.fill != "none" and args.sources == "weights":
-        raise InputError(f"--fill {args.fill} relights the compact sources where the spheres hide them: it needs "
-                         "--sources lightflow or levelset, not weights")
+    if args.fill not in ("auto", "none") and args.sources == "weights":
+        raise InputError(f"--fill {args.fill} relights the compact sources on the ground: it needs --sources "
+                         "lightflow or levelset, not weights")
     check_fps_flag(args, out)
     args.flow, args.fps = args.flow or "dis", args.fps or 30.0
     R0 = rotation_from_args(args)

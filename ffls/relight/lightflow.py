@@ -880,7 +880,8 @@ def _sources_image(fi: FlowInterpolator, sources, fill=None, mode: str = "blend"
     weighting drops the texels there. With ``fill`` (:class:`ffls.relight.sphere_shadows.SphereShadowFill`)
     a sample's photo is, where the sample is hidden by a calibration sphere, the blend of the
     photos that see the pixel (``mode='blend'``) or their unshadowed model times the object's
-    ``hull`` visibility (``mode='model'``: :meth:`ffls.relight.sphere_shadows.SphereShadowFill.source_model`).
+    ``hull`` visibility (``mode='model'``: :meth:`ffls.relight.sphere_shadows.SphereShadowFill.source_model`);
+    ``mode='ground'``: the same on every ground pixel.
     """
     out = np.zeros(fi.basis.shape[1:], dtype=np.float32)
     for s in sources:
@@ -888,8 +889,8 @@ def _sources_image(fi: FlowInterpolator, sources, fill=None, mode: str = "blend"
         for d, p, ok in zip(s.sample_directions, s.sample_powers, inside):
             if ok:
                 img = fi.image(d)
-                if fill is not None and mode == "model":
-                    img = fill.source_model(img, d, fi.basis, hull=hull).astype(np.float32)
+                if fill is not None and mode in ("model", "ground"):
+                    img = fill.source_model(img, d, fi.basis, hull=hull, everywhere=mode == "ground").astype(np.float32)
                 elif fill is not None:
                     img = fill.source_image(img, d, fi.weights(d)[0], fi.basis,
                                             interpolate=getattr(fi, "image_from", None)).astype(np.float32)
@@ -917,15 +918,18 @@ class LightFlowRelighter:
     fill : ffls.relight.sphere_shadows.SphereShadowFill, optional
         The calibration spheres' shadows to fill: where a photo has a pixel in one, the rest's
         weight of that photo there goes to the photos that see the pixel.
-    fill_sources : bool or {'blend', 'model'}
+    fill_sources : bool or {'blend', 'model', 'ground'}
         Also fill a compact source's photo where the source itself would be hidden by a sphere:
         True or ``'blend'``, the visible photos' blend at its direction, tens of degrees away
         (measured worse on the Mitsuba benchmark, docs/composite.md, so off by default);
         ``'model'``, the visible photos' unshadowed model at its direction times ``hull``'s
-        visibility (:meth:`ffls.relight.sphere_shadows.SphereShadowFill.source_model`). Needs
-        ``fill``.
+        visibility (:meth:`ffls.relight.sphere_shadows.SphereShadowFill.source_model`);
+        ``'ground'``, the model times the hull on every ground pixel, the spheres' shadows or not
+        (``everywhere=True``): the object's shadow from the source is placed by the hull instead
+        of interpolated between the nearest lights' photos. Needs ``fill``.
     hull : ffls.relight.shadow_hull.ShadowHull, optional
-        The object's shadow hull, for ``fill_sources='model'`` (None: a capture without the object).
+        The object's shadow hull, for ``fill_sources='model'`` or ``'ground'`` (None: a capture
+        without the object).
     fill_rest : bool
         With ``fill``, fill the rest's weights (default); False fills the sources alone.
     """
@@ -935,8 +939,8 @@ class LightFlowRelighter:
                  fill_rest: bool = True):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, not {interpolation!r}")
-        if fill_sources not in (False, True, "blend", "model"):
-            raise ValueError(f"fill_sources must be False, True, 'blend' or 'model', not {fill_sources!r}")
+        if fill_sources not in (False, True, "blend", "model", "ground"):
+            raise ValueError(f"fill_sources must be False, True, 'blend', 'model' or 'ground', not {fill_sources!r}")
         self.inner = inner
         cls = FlowInterpolator if interpolation == "flow" else LevelSetInterpolator
         self.interpolation = interpolation

@@ -157,6 +157,12 @@ def hidden_photos(points, centres, radius, directions=None, positions=None, marg
     return out
 
 
+#: Photo x pixel values per chunk of :meth:`SphereShadowFill.source_model`'s fit (float32 photos and a
+#: float64 prior: about 170 MB), so that relighting every ground pixel of a large photo
+#: (``everywhere``) holds one chunk at a time.
+MODEL_CHUNK_VALUES = 1 << 23
+
+
 class SphereShadowFill:
     """Per-pixel re-weighting over the photos that see each pixel (see the module notes).
 
@@ -310,7 +316,13 @@ class SphereShadowFill:
         area = (4 * np.pi if self.hemisphere.axis is None else 2 * np.pi) * min(1.0, 2 * FIT_NEIGHBOURS / self.n)
         return float(np.degrees(np.arccos(1.0 - area / (2 * np.pi))))
 
-    def source_model(self, image, direction, basis, *, hull=None) -> np.ndarray:
+    def ground_pixels(self) -> np.ndarray:
+        """(H, W) bool: the pixels with a ground point (``geometry['points']`` finite)."""
+        if self.geometry is None:
+            raise ValueError("ground_pixels needs the spheres' geometry (SphereShadowFill.from_geometry)")
+        return np.all(np.isfinite(np.asarray(self.geometry["points"], dtype=np.float64)), axis=-1)
+
+    def source_model(self, image, direction, basis, *, hull=None, everywhere: bool = False) -> np.ndarray:
         """A compact source's unit-power image with its sphere shadows replaced by the unshadowed model.
 
         Where a light from ``direction`` would be hidden by a sphere (:meth:`hidden_for`) no photo
@@ -320,7 +332,10 @@ class SphereShadowFill:
         (:meth:`model_width_deg`), evaluated at ``direction``: exact for a Lambertian surface. The
         object's shadow there comes from its geometry: times ``hull.visibility(points, direction)``
         (:class:`ffls.relight.shadow_hull.ShadowHull`) where a hull is given (the object capture),
-        1 without (the surface-alone capture).
+        1 without (the surface-alone capture). With ``everywhere`` every ground pixel
+        (:meth:`ground_pixels`) is relit so, not only the hidden ones: the object's shadow from the
+        source is then placed by the hull's geometry instead of being interpolated between the photos
+        of the nearest lights, whose shadows change shape between them (docs/composite.md).
 
         Parameters
         ----------
@@ -329,6 +344,8 @@ class SphereShadowFill:
         direction : (3,) array_like
         basis : (n, H, W, 3) float array
         hull : ShadowHull, optional
+        everywhere : bool
+            Relight every ground pixel, not only those a sphere hides from ``direction``.
 
         Returns
         -------
@@ -340,18 +357,25 @@ class SphereShadowFill:
         here = self.hidden_for(d)
         if here is None:
             raise ValueError("source_model needs the spheres' geometry (SphereShadowFill.from_geometry)")
+        if everywhere:
+            here = here | self.ground_pixels()
         pix = np.flatnonzero(here.ravel())
         if pix.size == 0:
             return out
-        prior = np.ones((self.n, pix.size))
-        groups = self.group_of[pix]
-        for g in np.unique(groups[groups >= 0]):
-            prior[np.ix_(self.groups[g][0], np.flatnonzero(groups == g))] = 0.0
         angle = np.degrees(np.arccos(np.clip(self.directions @ d, -1.0, 1.0)))
-        prior *= np.exp(-0.5 * (angle / self.model_width_deg()) ** 2)[:, None]
-        B = np.asarray(basis).reshape(self.n, -1, 3)[:, pix].astype(np.float32)
-        b = unshadowed_fit(B[:, :, None], self.directions, prior=prior[:, :, None])[:, 0]
-        model = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
+        near = np.exp(-0.5 * (angle / self.model_width_deg()) ** 2)[:, None]
+        flat_basis = np.asarray(basis).reshape(self.n, -1, 3)
+        model = np.empty((pix.size, 3))
+        step = max(1, MODEL_CHUNK_VALUES // self.n)  # pixels per chunk: the whole ground of a large photo
+        for lo in range(0, pix.size, step):
+            p = pix[lo:lo + step]
+            prior = np.repeat(near, p.size, axis=1)
+            groups = self.group_of[p]
+            for g in np.unique(groups[groups >= 0]):
+                prior[np.ix_(self.groups[g][0], np.flatnonzero(groups == g))] = 0.0
+            B = flat_basis[:, p].astype(np.float32)
+            b = unshadowed_fit(B[:, :, None], self.directions, prior=prior[:, :, None])[:, 0]
+            model[lo:lo + step] = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
         good = np.all(np.isfinite(model), axis=-1)
         if hull is not None:
             pts = np.asarray(self.geometry["points"], dtype=np.float64).reshape(-1, 3)[pix]

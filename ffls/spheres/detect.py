@@ -1287,10 +1287,10 @@ def _hough_candidates(g8, min_r, max_r, scale):
     return _hough_candidates_many([(g8, min_r, max_r, scale)])[0]
 
 
-def _hough_calls(g8, min_r, max_r, scale, plain: bool = True) -> list:
+def _hough_calls(g8, min_r, max_r, scale, plain: bool = True, alt_calls: bool = True) -> list:
     """The three ``cv2.HoughCircles`` calls of :func:`_hough_candidates` on ``g8`` (zero-argument
     callables, each returning its circles (m, 3), the plain gradient's first 30; without
-    ``plain``, the two ``HOUGH_GRADIENT_ALT`` calls only)."""
+    ``plain``, the two ``HOUGH_GRADIENT_ALT`` calls only; without ``alt_calls``, the plain one only)."""
     blur = cv2.GaussianBlur(g8, (0, 0), 1.5)
 
     def alt(p2):
@@ -1302,11 +1302,12 @@ def _hough_calls(g8, min_r, max_r, scale, plain: bool = True) -> list:
                              param2=20, minRadius=int(min_r), maxRadius=int(max_r))
         return None if c is None else c.reshape(-1, 3)[:30]
 
-    return [alt(0.8), alt(0.7)] + ([gradient] if plain else [])
+    return ([alt(0.8), alt(0.7)] if alt_calls else []) + ([gradient] if plain else [])
 
 
 def _hough_candidates_many(images: list) -> list:
-    """:func:`_hough_candidates` of each ``(g8, min_r, max_r, scale)`` of ``images``, its Hough
+    """:func:`_hough_candidates` of each ``(g8, min_r, max_r, scale[, plain, alt_calls])`` of ``images``
+    (:func:`_hough_calls`' arguments), its Hough
     transforms run concurrently in threads (OpenCV releases the GIL; each transform is
     independent and deterministic, so the circles are those of the calls made one by one)."""
     calls = [_hough_calls(*im) for im in images]
@@ -1800,6 +1801,14 @@ def shading_ratio(L_max, L_mean) -> np.ndarray:
 
 #: Least share of a candidate circle's outline within 1.5 px of a max-image edge (:func:`_score_circle`).
 MIN_EDGE_SUPPORT = 0.35
+#: Circles of radius up to this many pixels are also sought on the images upsampled
+#: :data:`SMALL_CIRCLE_UPSAMPLE` times (:func:`_hough_circle_candidates`): the Hough transforms'
+#: 1.5 px blur and 1.5 px accumulator cells wash out a smaller outline (a 4.5 px sphere at the back
+#: of a 96 px photo gave no circle at all). Only the plain gradient transform runs there: over so
+#: few radii it costs little (0.3 s on a 1152 px image where the ``HOUGH_GRADIENT_ALT`` pair took
+#: 53 s and the whole first pass 146 s, on the loaded 2-core build machine).
+SMALL_CIRCLE_PX = 8.0
+SMALL_CIRCLE_UPSAMPLE = 2
 
 
 def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio=None) -> list[tuple[float, float, float]]:
@@ -1818,7 +1827,12 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
         if peak > 0:
             sc = 255.0 / peak
             images.append((np.clip(ratio * sc, 0, 255).astype(np.uint8), 3, min(H, W) / 2, 0.5 * sc))
-    hc = np.concatenate(_hough_candidates_many(images))  # both images' transforms at once
+    # small circles on the images upsampled too; Canny's threshold follows the per-pixel gradient
+    u = SMALL_CIRCLE_UPSAMPLE
+    small = [(cv2.resize(g8, None, fx=u, fy=u, interpolation=cv2.INTER_LINEAR), u * lo, u * SMALL_CIRCLE_PX, sc / u,
+              True, False) for g8, lo, hi, sc in images if hi > lo and SMALL_CIRCLE_PX > lo]
+    found = _hough_candidates_many(images + small)  # all the transforms at once
+    hc = np.concatenate(found[:len(images)])
     # the outermost well-covered circle around each Hough centre too: a mirror ball's highlights and
     # reflections make inner circles that Hough may prefer to its faint outline
     outer = []
@@ -1827,11 +1841,23 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
         if r2 is not None:
             outer.append((x, y, r2))
     hc = np.concatenate([hc, np.array(outer).reshape(-1, 3)])
-    scored = []
-    for x, y, r in hc:
-        support, visible = _score_circle(x, y, r, edges.distance)
-        if support >= MIN_EDGE_SUPPORT and visible >= 0.4:
-            scored.append((support * min(visible / 0.8, 1.0), x, y, r))
+
+    def scored_circles(circles):
+        out = []
+        for x, y, r in circles:
+            support, visible = _score_circle(x, y, r, edges.distance)
+            if support >= MIN_EDGE_SUPPORT and visible >= 0.4:
+                out.append((support * min(visible / 0.8, 1.0), x, y, r))
+        return out
+
+    scored = scored_circles(hc)
+    # the upsampled images' circles, back in the image's pixels (a resized pixel x's centre is the
+    # image's (x + 0.5) / u - 0.5), where no circle of the first pass surrounds them: inside one
+    # they are its texture or highlights (a glossy ball's cluster), not a sphere too small for it
+    tiny = np.concatenate([c / u - [0.5 - 0.5 / u, 0.5 - 0.5 / u, 0.0] for c in found[len(images):]]
+                          + [np.zeros((0, 3))])
+    scored += [t for t in scored_circles(tiny)
+               if not any(np.hypot(t[1] - x, t[2] - y) < r for _, x, y, r in scored)]
     scored.sort(key=lambda s: -s[0])
     cands = []  # drop near-duplicates only; overlapping circles are resolved after fitting
     for sc, x, y, r in scored:
