@@ -120,8 +120,9 @@ def _add_inverse(sub, common):
                    help="torrance_sparrow: lobe width, degrees")
     s.add_argument("--unconstrained", action="store_true", help="plain least squares instead of NNLS")
     q = sub.add_parser("pocs", parents=[common], help="a diffuse sphere by POCS (Singh-Ahuja)",
-                       description="Projections onto convex sets from a diffuse sphere. By default the map of least "
-                                   "total power within the residual the data allow (--scheme least-power); "
+                       description="Projections onto convex sets from a diffuse sphere. By default (adaptive sources) the "
+                                   "map of least total power within the residual the data allow (--scheme "
+                                   "least-power); "
                                    "--scheme sequential is Singh and Ahuja's method (amplitude and residual "
                                    "projections in random order), whose residual per iteration is reported.")
     q.add_argument("--sources", choices=("auto", "adaptive", "grid"), default="auto",
