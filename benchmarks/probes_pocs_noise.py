@@ -1,5 +1,5 @@
 """POCS's least-power scheme under noise, in several orientations of the source set: one programme against the
-mean of programmes over disjoint pixel subsets, beside the default.
+mean of programmes over disjoint pixel subsets, beside the paper's sweeps.
 
     OMP_NUM_THREADS=1 python benchmarks/probes_pocs_noise.py [--maps studio] [--conditions 0:0,0.01:0,0.01:1]
         [--orientations 0,1,2] [--subsets 4] [--plain] [--pixels 1000]
@@ -14,13 +14,14 @@ the identity, orientation ``i`` the ``i``-th of ``scipy.spatial.transform.Rotati
 the sources turned back.
 Rows per map, condition and orientation:
 
-* ``default``: ``adaptive_singh_ahuja`` (CV, the paper's 50 sweeps), the default of ``ffls probe pocs``;
+* ``sequential``: ``adaptive_singh_ahuja`` (CV, the paper's 50 sweeps), ``ffls probe pocs --scheme sequential`` (the
+  default before least power);
 * ``least-power x1``: ``averaged_least_power(..., subsets=1, refit=False)`` on that set (one programme, on the
   set's pixels: the least-power scheme before this round);
 * ``least-power xK`` (with ``--plain``): ``averaged_least_power(..., subsets=K, refit=False)``, the mean of the
   programmes on ``K`` disjoint pixel subsets;
 * ``least-power xK refit``: the same with ``refit=True`` (each programme's lit sources refitted by bounded least
-  squares before the mean): what ``scheme='least-power'`` does now.
+  squares before the mean): what ``scheme='least-power'`` does, the default of ``ffls probe pocs``.
 
 Time: CPU seconds of this process (one thread), the least-power rows' including the set's. Writes
 ``benchmarks/results/probes_pocs_noise.json``.
@@ -71,7 +72,7 @@ def main(argv=None):
             t = time.process_time()
             sel = adaptive_singh_ahuja(n, rad, 0.7, criterion="cv", max_pixels=a.pixels)
             t_set = time.process_time() - t
-            fits = [("default", sel.fit, t_set)]
+            fits = [("sequential", sel.fit, t_set)]
             runs = ((1, False),) + (((a.subsets, False),) if a.plain else ()) + ((a.subsets, True),)
             for k, refit in runs:   # x1: the scheme before this round
                 t = time.process_time()

@@ -34,6 +34,19 @@ def test_exr_non_contiguous_input(tmp_path, rng):
     np.testing.assert_array_equal(imageio.read_image(tmp_path / "a.exr").pixels, rgb)
 
 
+def test_exr_string_attributes_round_trip_and_bad_ones_are_refused(tmp_path, rng):
+    import OpenEXR
+
+    rgb = rng.random((4, 6, 3)).astype(np.float32)
+    p = imageio.write_exr(tmp_path / "a.exr", rgb, attributes={"ffls:pocs_scheme": "least-power"})
+    assert OpenEXR.File(str(p)).header()["ffls:pocs_scheme"] == "least-power"
+    assert np.array_equal(imageio.read_image(p).pixels, rgb)
+    for bad in ({"ffls:n": 3}, {"compression": "none"}, {"dataWindow": "x"}):
+        with pytest.raises(ValueError, match="attribute"):
+            imageio.write_exr(tmp_path / "b.exr", rgb, attributes=bad)
+    assert not (tmp_path / "b.exr").exists()
+
+
 def test_exr_half_round_trip(tmp_path, rng):
     rgb = (rng.random((6, 8, 3)) * 1000).astype(np.float32)
     imageio.write_exr(tmp_path / "h.exr", rgb, half=True)

@@ -53,8 +53,8 @@ def shadow_folder(tmp_path_factory, truth):
 
 @pytest.mark.parametrize("argv", [["diffuse", "--sources", "9"], ["diffuse", "--sources", "auto", "--criterion", "bic"], ["diffuse", "--sources", "17", "--unconstrained", "--ambient", "free"],
                                   ["diffuse", "--sources", "uniform"], ["diffuse", "--sources", "adaptive", "--criterion", "bic"],
-                                  ["pocs", "--sources", "grid", "--grid", "8", "--iterations", "10"],
-                                  ["pocs", "--criterion", "bic", "--iterations", "10"]])
+                                  ["pocs", "--sources", "grid", "--grid", "8", "--iterations", "10", "--scheme", "sequential"],
+                                  ["pocs", "--criterion", "bic", "--iterations", "10", "--scheme", "sequential"]])
 def test_diffuse_methods_write_maps(diffuse_folder, tmp_path, capsys, argv):
     out = tmp_path / "m.exr"
     assert main(["probe", argv[0], str(diffuse_folder), "-o", str(out), "--size", "16", *argv[1:]]) == 0
@@ -67,7 +67,8 @@ def test_diffuse_methods_write_maps(diffuse_folder, tmp_path, capsys, argv):
 
 
 def test_pocs_reports_convergence(diffuse_folder):
-    est = estimate_lightmap(diffuse_folder, "pocs", height=16, grid=8, iterations=8, sources="grid")
+    est = estimate_lightmap(diffuse_folder, "pocs", height=16, grid=8, iterations=8, sources="grid",
+                            scheme="sequential")
     r = est.details["residuals"]
     assert len(r) == 9 and r[-1] < r[0]
 
@@ -243,7 +244,9 @@ def test_sources_over_the_limit_says_the_limit(diffuse_folder, tmp_path, capsys)
     (["--sources", "adaptive", "--grid", "4"], "--grid applies with --sources grid"),
     (["--scheme", "extrapolated", "--order", "sequential"], "--order applies with --scheme sequential"),
     (["--scheme", "extrapolated", "--seed", "5"], "--seed applies with --scheme sequential"),
-    (["--order", "sequential", "--seed", "5"], "--seed applies with a random projection order"),
+    (["--scheme", "sequential", "--order", "sequential", "--seed", "5"],
+     "--seed applies with a random projection order"),
+    (["--order", "random"], "--order applies with --scheme sequential"),   # the default is least-power
 ])
 def test_pocs_flags_of_another_setting_are_refused_not_ignored(diffuse_folder, tmp_path, capsys, flags, named):
     assert main(["probe", "pocs", str(diffuse_folder), "-o", str(tmp_path / "x.exr"), "--size", "8", *flags]) == 2

@@ -141,8 +141,8 @@ def test_cli_extrapolated_scheme_with_a_stopping_rule(courtyard_ball_folder, tmp
                                           (["--relaxation", "2"], "--relaxation"),
                                           (["--scheme", "parallel"], "--scheme"),
                                           (["--tol", "0"], "--tol"),
-                                          (["--sources", "grid", "--grid", "8", "--relaxation", "1e-300"],
-                                           "POCS made no progress")])
+                                          (["--sources", "grid", "--grid", "8", "--relaxation", "1e-300",
+                                            "--scheme", "sequential"], "POCS made no progress")])
 def test_cli_bad_solver_flags_get_one_line(courtyard_ball_folder, tmp_path, capsys, flags, words):
     from ffls.cli import main
 

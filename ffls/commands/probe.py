@@ -120,8 +120,11 @@ def _add_inverse(sub, common):
                    help="torrance_sparrow: lobe width, degrees")
     s.add_argument("--unconstrained", action="store_true", help="plain least squares instead of NNLS")
     q = sub.add_parser("pocs", parents=[common], help="a diffuse sphere by POCS (Singh-Ahuja)",
-                       description="Projections onto convex sets (amplitude and residual projections in random "
-                                   "order) from a diffuse sphere; the residual per iteration is reported.")
+                       description="Projections onto convex sets from a diffuse sphere. By default (adaptive sources) the "
+                                   "map of least total power within the residual the data allow (--scheme "
+                                   "least-power); "
+                                   "--scheme sequential is Singh and Ahuja's method (amplitude and residual "
+                                   "projections in random order), whose residual per iteration is reported.")
     q.add_argument("--sources", choices=("auto", "adaptive", "grid"), default="auto",
                    help="unknowns: a geodesic source set refined where the light is, chosen by --criterion "
                         "(adaptive = auto, default), or the paper's lat-long grid of --grid rows (grid)")
@@ -132,12 +135,14 @@ def _add_inverse(sub, common):
     q.add_argument("--iterations", type=integer(1, 100000), default=None,
                    help="sweeps (default 50; 3000 with --scheme extrapolated or dykstra; with least-power, the "
                         "sweeps that grow the adaptive set); the cap with --tol")
-    q.add_argument("--scheme", choices=("sequential", "extrapolated", "dykstra", "least-power"), default="sequential",
-                   help="the paper's sweeps of row projections (default), extrapolated parallel projections "
-                        "(Combettes), which converge to the least-squares point when noise leaves no common point, "
-                        "Dykstra's best approximation: the least-norm map within the residual the data allow, or "
-                        "the map of least total power within the L1 residual the data allow (a linear programme; "
-                        "on adaptive sources, its lit sources refitted and averaged over pixel subsets)")
+    q.add_argument("--scheme", choices=("least-power", "sequential", "extrapolated", "dykstra"), default=None,
+                   help="least-power (the default on adaptive sources): the map of least total power within the "
+                        "L1 residual the data allow (a linear programme; on adaptive sources, grown by the paper's "
+                        "sweeps, its lit sources refitted and averaged over pixel subsets); sequential: the paper's "
+                        "method, Singh and Ahuja's sweeps of row projections (the default with --sources grid); "
+                        "extrapolated parallel projections (Combettes), which converge to the least-squares point "
+                        "when noise leaves no common point; or Dykstra's best approximation: the least-norm map "
+                        "within the residual the data allow")
     q.add_argument("--relaxation", type=number(0.0, 2.0, lo_open=True, hi_open=True), default=1.0,
                    help="relaxation of the projections, in (0, 2); at most 1 with --scheme extrapolated")
     q.add_argument("--tol", type=number(0.0, 1.0, lo_open=True), default=None,
@@ -270,16 +275,19 @@ def method_knobs(args) -> dict:
         # a flag of another setting would be ignored: refused, not dropped in silence
         if args.grid is not None and args.sources != "grid":
             raise InputError(f"--grid applies with --sources grid (the grid of unknowns), not --sources {args.sources}")
-        if args.scheme != "sequential":
+        # the default scheme of the sources (ffls.probes.estimate.POCS_DEFAULT_SCHEME, not imported here: 2 s)
+        scheme = args.scheme or ("sequential" if args.sources == "grid" else "least-power")
+        if scheme != "sequential":
             for flag, value in (("--order", args.order), ("--seed", args.seed)):
                 if value is not None:
                     raise InputError(f"{flag} applies with --scheme sequential (the sweeps' projection order); "
-                                     f"--scheme {args.scheme} has no order of projections")
+                                     f"--scheme {scheme} has no order of projections" + (
+                                         " (the default on adaptive sources)" if args.scheme is None else ""))
         elif args.seed is not None and args.order == "sequential":
             raise InputError("--seed applies with a random projection order, not --order sequential")
         return {"grid": 16 if args.grid is None else args.grid, "iterations": args.iterations, "upper": args.upper,
                 "order": args.order or "random", "seed": args.seed or 0, "fill": args.fill, "sources": args.sources,
-                "criterion": args.criterion, "scheme": args.scheme, "relaxation": args.relaxation, "tol": args.tol}
+                "criterion": args.criterion, "scheme": scheme, "relaxation": args.relaxation, "tol": args.tol}
     return {}
 
 

@@ -754,7 +754,7 @@ def _imwrite(path: Path, data: np.ndarray) -> None:
                               path)
 
 
-def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> Path:
+def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None, attributes=None) -> Path:
     """Write an RGB (or RGBA) OpenEXR file with ZIP compression, atomically.
 
     Parameters
@@ -768,6 +768,9 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> P
         Store 16-bit half floats instead of 32-bit floats.
     alpha : (H, W) array_like, optional
         Coverage in [0, 1], written as channel ``A``.
+    attributes : dict of str to str, optional
+        String attributes added to the header (what made the image, e.g. ``{"ffls:pocs_scheme":
+        "least-power"}``); read back by ``OpenEXR.File(path).header()``.
 
     Returns
     -------
@@ -778,7 +781,8 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> P
     ------
     ValueError
         Wrong shape or extension, or (``half=True``) finite values beyond the half range
-        (+-65504), which would silently become infinite.
+        (+-65504), which would silently become infinite; an attribute that is not a string, or
+        that names a standard header attribute.
     """
     import OpenEXR
 
@@ -799,6 +803,13 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None) -> P
     if alpha is not None:
         channels["A"] = np.ascontiguousarray(_check_alpha(alpha, a.shape[:2], "write_exr"), dtype=dtype)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, value in (attributes or {}).items():
+        if not (isinstance(key, str) and isinstance(value, str)) or key in header or key in (
+                "channels", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
+                "screenWindowCenter", "screenWindowWidth"):
+            raise ValueError(f"write_exr: attribute {key!r}: {value!r} must be a string attribute of "
+                             "a string name that is not a standard one")
+        header[key] = value
     with atomic_output(path) as tmp:
         with quiet_native_output() as cap:
             try:

@@ -44,8 +44,12 @@ class LightmapEstimate:
 def save_estimate(est: LightmapEstimate, path: str | os.PathLike, half: bool = False) -> Path:
     """Write the map as an RGBA OpenEXR: RGB the radiance, alpha 1 where the probe saw the direction, 0 elsewhere.
 
-    ``load_lightmap`` (``relight``, ``render``, ``view``) reads the RGB and ignores the alpha.
-    The write is atomic (:func:`ffls.io.images.write_exr`).
+    ``load_lightmap`` (``relight``, ``render``, ``view``) reads the RGB and ignores the alpha. The header's
+    string attributes say what made it: ``ffls:probe_method`` (``est.method``) and, where the method has one,
+    ``ffls:pocs_scheme`` (POCS's ``details['scheme']``). The write is atomic (:func:`ffls.io.images.write_exr`).
     """
     path = Path(path)
-    return write_exr(path, est.lightmap.data, half=half, alpha=est.seen.astype(np.float32))
+    attrs = {"ffls:probe_method": str(est.method)}
+    if est.method == "pocs" and "scheme" in est.details:
+        attrs["ffls:pocs_scheme"] = str(est.details["scheme"])
+    return write_exr(path, est.lightmap.data, half=half, alpha=est.seen.astype(np.float32), attributes=attrs)

@@ -544,16 +544,27 @@ def _l1_programme(H, lo, hi):
 
 
 def _least_absolute_deviation(H, g, lo, hi) -> tuple[np.ndarray, float]:
-    """``(x, r)``: ``x`` in ``[lo, hi]`` of least ``r = sum_i |g_i - h_i . x|`` (one channel; HiGHS)."""
+    """``(x, r)``: ``x`` in ``[lo, hi]`` of least ``r = sum_i |g_i - h_i . x|`` (one channel; HiGHS).
+
+    Solved through the dual programme, ``max g'^T y - u^T z`` subject to ``H^T y - z <= 0``, ``-1 <= y <= 1``,
+    ``z >= 0`` (``g' = g - H lo``, ``u = hi - lo``; ``z`` only where ``u`` is finite): ``J`` rows against the
+    primal's ``m`` (one per pixel), 1.6-3.7 times faster on the benchmark ball's 1000 pixels
+    (``docs/probes.md``); ``x - lo`` is the rows' dual values, and ``r`` the optimum of both programmes.
+    """
+    from scipy import sparse
     from scipy.optimize import linprog
 
     m, J = H.shape
     k = _unit_scale(g)
-    A_eq, bounds = _l1_programme(H, lo / k, hi / k)
-    sol = linprog(np.r_[np.zeros(J), np.ones(2 * m)], A_eq=A_eq, b_eq=g / k, bounds=bounds, method="highs")
+    u = (hi - lo) / k
+    fin = np.flatnonzero(np.isfinite(u))
+    gp = (g - H @ lo) / k
+    A = sparse.hstack([sparse.csr_matrix(H.T), -sparse.identity(J, format="csr")[:, fin]], format="csr")
+    bounds = np.r_[np.tile([-1.0, 1.0], (m, 1)), np.tile([0.0, np.inf], (fin.size, 1))]
+    sol = linprog(np.r_[-gp, u[fin]], A_ub=A, b_ub=np.zeros(J), bounds=bounds, method="highs")
     if sol.status != 0:
         raise InputError(f"the least-absolute-deviation fit has no solution ({sol.message.strip()})")
-    x = np.clip(sol.x[:J] * k, lo, hi)
+    x = np.clip(lo - sol.ineqlin.marginals * k, lo, hi)
     return x, float(np.sum(np.abs(g - H @ x)))
 
 
