@@ -713,50 +713,6 @@ def test_cli_lights_same_for_one_and_two_workers(tmp_path, capsys):
     assert docs[0] == docs[1]
 
 
-def _half_exr_capture(folder, n=5, shape=(24, 32), chromaticities=None):
-    """``n`` random half EXR photos (values over the half range's fine steps), optionally with a
-    ``chromaticities`` attribute, and their capture.json."""
-    import OpenEXR
-
-    rng = np.random.default_rng(4)
-    names = []
-    for i in range(n):
-        rgb = rng.random((*shape, 3)).astype(np.float16) * np.float16(3.0)
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        if chromaticities is not None:
-            header["chromaticities"] = tuple(float(v) for v in chromaticities)
-        names.append(f"p{i}.exr")
-        with OpenEXR.File(header, {c: np.ascontiguousarray(rgb[..., k]) for k, c in enumerate("RGB")}) as f:
-            f.write(str(folder / names[-1]))
-    K = [[40.0, 0, (shape[1] - 1) / 2], [0, 40.0, (shape[0] - 1) / 2], [0, 0, 1]]
-    (folder / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": names,
-                                                     "camera": {"K": K}, "sphere_radius": 0.04}))
-
-
-@pytest.mark.parametrize("workers", [1, 2])
-def test_decode_photos_keeps_half_photos_as_half_exactly(tmp_path, workers):
-    """Half EXR photos are kept as half (half the memory of float32, and of its page faults), their
-    values exactly those read; photos converted on reading (a ``chromaticities`` attribute) are not
-    kept as half but read again by the first pass."""
-    from ffls.io.capture import load_capture
-    from ffls.radiance.photos import read_photo
-    from ffls.spheres.estimate import decode_photos
-
-    _half_exr_capture(tmp_path)
-    cap = load_capture(tmp_path)
-    d = decode_photos(cap, workers=workers)
-    assert d.bit_depths == {"half"} and d.linear.dtype == np.float16
-    for i in range(5):
-        lin, raw, depth = d.photo(i)
-        assert depth == "half" and raw is None
-        assert np.array_equal(lin.astype(np.float64), read_photo(cap, i).linear.astype(np.float64))
-    aces = tmp_path / "aces"
-    aces.mkdir()
-    _half_exr_capture(aces, chromaticities=(0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767))
-    d = decode_photos(load_capture(aces), workers=workers)
-    assert d.linear is None and d.photo(0) is None  # (converted values are no half values)
-
-
 def test_decode_photos_names_a_photo_of_another_size(tmp_path):
     import cv2
 

@@ -867,8 +867,8 @@ class DecodedPhotos:
     """A capture's photos decoded once (:func:`decode_photos`): what the sphere detection needs of
     them, and (memory permitting) the decoded photos themselves for the first pass.
 
-    Float photos are kept linear (float32; half ones as half, exactly); integer photos as their
-    stored codes only (a quarter of the memory for 8 bits), linearised where they are read (:meth:`photo`: the spheres'
+    Float photos are kept linear (float32); integer photos as their stored codes only (a quarter
+    of the memory for 8 bits), linearised where they are read (:meth:`photo`: the spheres'
     pixels), with the capture's encoding, or, when ``capture.json`` states none, with the
     encoding calibrated from these same codes (:func:`ffls.spheres.encoding.calibrate_capture_encoding`).
 
@@ -880,9 +880,9 @@ class DecodedPhotos:
         of the linear photos, or of the stored values when ``stored``.
     bit_depths : set
         The photos' stored bit depths.
-    linear : (n, H, W, 3) float16 or float32, or None
+    linear : (n, H, W, 3) float32 or None
         Float photos, in memory shared with the worker processes (None: integer photos, or over
-        the budget): half EXR photos as half (their values exactly), the others as float32.
+        the budget).
     raw : (n, H, W, 3) uint8 or uint16, or None
         Integer photos' stored codes (None: float photos, or over the budget).
     encoding : str or dict
@@ -926,7 +926,7 @@ class DecodedPhotos:
 
         Returns
         -------
-        linear : (H, W, 3) float32, or float16 for half photos (their values exactly)
+        linear : (H, W, 3) float32
         raw : (H, W, 3) uint8 or uint16, or None
             The stored codes (None for float photos).
         bit_depth : {8, 16, 'half', 'float'}
@@ -982,7 +982,6 @@ class _DecodeContext:
     raw: np.ndarray | None
     depth: int | str | None = None  # the bit depth every photo must have (no encoding stated), else None
     slots: dict | None = None  # per chunk start: shared buffers its reductions are stowed in (workers)
-    exact: np.ndarray | None = None  # (n,) uint8, half photos kept as half: 1 where the stored value is exact
 
 
 _decode_context: _DecodeContext | None = None
@@ -1002,21 +1001,15 @@ def _decode_range(bounds: tuple[int, int]):
     start, stop = bounds
     acc = SequenceAccumulator(n_images=ctx.n)
     depths = set()
-    half = ctx.linear is not None and ctx.linear.dtype == np.float16
-    widened = np.empty(ctx.shape, np.float32) if half else None  # (one per range: its pages reused)
     for i in range(start, stop):
-        slot = widened if half else None if ctx.linear is None else ctx.linear[i]  # widened in place (no copy)
+        slot = None if ctx.linear is None else ctx.linear[i]  # an EXR is widened in place (no copy)
         ph = read_photo(ctx.capture, i, out=slot, depth=ctx.depth)
         if ph.linear.shape != ctx.shape:
             raise InputError(f"image is {ph.linear.shape[1]}x{ph.linear.shape[0]}, the capture's first is "
                              f"{ctx.shape[1]}x{ctx.shape[0]}: every photo must have the same size",
                              ctx.capture.image_paths[i])
         depths.add(ph.bit_depth)
-        if half:  # the file's half values, widened in place and nothing else, go back to half exactly
-            ctx.exact[i] = ph.bit_depth == "half" and ph.linear is widened
-            if ctx.exact[i]:
-                ctx.linear[i] = widened
-        elif ctx.linear is not None and ph.bit_depth not in (8, 16) and ph.linear is not slot:
+        if ctx.linear is not None and ph.bit_depth not in (8, 16) and ph.linear is not slot:
             ctx.linear[i] = ph.linear
         if ctx.raw is not None and ph.bit_depth in (8, 16):
             if ph.codes is not None and ph.codes.dtype == ctx.raw.dtype:
@@ -1072,18 +1065,14 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     first = read_photo(decoding, 0)
     shape = first.linear.shape
     integer = first.bit_depth in (8, 16)
-    # half EXR photos are kept as half (exact, as read): half the memory and its page faults
-    kept_type = np.float16 if first.bit_depth == "half" else np.float32
-    per_photo = first.linear.size * (1 if first.bit_depth == 8 else 2 if integer or kept_type == np.float16 else 4)
-    linear = raw = exact = None
+    per_photo = first.linear.size * (1 if first.bit_depth == 8 else 2) if integer else first.linear.nbytes
+    linear = raw = None
     if keep and n * per_photo <= DECODED_MEMORY_SHARE * _available_memory():
         if integer:
             raw = _shared_array((n,) + shape, np.uint8 if first.bit_depth == 8 else np.uint16)
         else:
-            linear = _shared_array((n,) + shape, kept_type)
-            exact = _shared_array((n,), np.uint8) if kept_type == np.float16 else None
-    context = _DecodeContext(decoding, n, shape, linear, raw, first.bit_depth if capture.encoding == "auto" else None,
-                             exact=exact)
+            linear = _shared_array((n,) + shape, np.float32)
+    context = _DecodeContext(decoding, n, shape, linear, raw, first.bit_depth if capture.encoding == "auto" else None)
     workers = max(1, min(int(workers), n))
     size = max(1, -(-n // DECODE_CHUNKS))  # the chunks do not depend on the workers: nor does the result
     chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
@@ -1123,9 +1112,7 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
                 del context.slots[c[0]]  # (its shared memory is freed)
                 if progress_bar is not None:
                     progress_bar.update(c[1] - c[0])
-    if len(depths) != 1 or (exact is not None and not exact.all()):
-        # mixed bit depths, or half photos changed on reading (a colour conversion): the first
-        # pass reads each photo again
+    if len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
         linear = raw = None
     return DecodedPhotos(stats=acc.result(), bit_depths=depths, linear=linear, raw=raw, encoding=capture.encoding,
                          response=capture.response, stored=stored)
