@@ -116,3 +116,38 @@ def test_photo_edges_read_once_per_search(tmp_path, monkeypatch):
     monkeypatch.setattr(detect, "consistent_edge_strength", counted)
     assert len(find_spheres_in_capture(cap)) == 4
     assert calls.count(False) == 1 and calls.count(True) <= 1, calls
+
+
+def test_ridge_rows_bound_the_band_and_keep_the_fit():
+    """``_ConsistentEdges.near_rows`` holds every ridge point of a band of rows, in their order, for
+    points listed row by row (short) and in any order; the photo-edge fit on it is the fit on all
+    the points, to the bit."""
+    from ffls.spheres import detect
+
+    rng = np.random.default_rng(3)
+    H, W = 200, 240
+    c, R = np.array([120.0, 95.0]), 40.0
+    t = np.radians(np.arange(0, 360, 0.8))
+    ring = c + R * np.stack([np.cos(t), np.sin(t)], axis=1)
+    clutter = rng.uniform(0, [W, H], (3000, 2))
+    pix = np.rint(np.concatenate([ring, clutter]))  # each point's pixel, then sub-pixel within half of it
+    order = np.lexsort((pix[:, 0], pix[:, 1]))  # row by row, as consistent_edge_points lists them
+    pts = (pix + rng.uniform(-0.5, 0.5, pix.shape))[order]
+    dirs = pts - c
+    dirs /= np.maximum(np.hypot(dirs[:, 0], dirs[:, 1]), 1e-9)[:, None]
+    for p, d in ((pts, dirs), (pts[rng.permutation(len(pts))], dirs)):
+        ev = detect._ConsistentEdges(None, None, (p, d, np.ones(len(p))))
+        for y0, y1 in ((50.0, 80.0), (-5.0, 3.0), (190.5, 260.0), (100.0, 99.0)):
+            s = ev.near_rows(y0, y1)
+            inside = np.flatnonzero((p[:, 1] >= y0) & (p[:, 1] <= y1))
+            assert np.all((inside >= s.start) & (inside < s.stop)), (y0, y1)
+    ev = detect._ConsistentEdges(None, None, (pts, dirs, np.ones(len(pts))))
+    s = ev.near_rows(50.0, 80.0)
+    assert s.stop - s.start < 0.25 * len(pts)  # row by row: about the band's rows only
+    cam = detect._Camera("orthographic", None, None, np.eye(4), 1.0, (H, W))
+    fit = detect._fit_on_consistent_edges(c + [2.0, -1.5], R + 1.0, ev, cam, "auto")
+    everything = detect._ConsistentEdges(None, None, (pts, dirs, np.ones(len(pts))))
+    everything.rows = (np.full(len(pts), np.inf), np.full(len(pts), -np.inf))  # no row is left out
+    same = detect._fit_on_consistent_edges(c + [2.0, -1.5], R + 1.0, everything, cam, "auto")
+    assert fit is not None and np.hypot(*(fit.center_px - c)) < 0.2
+    assert np.array_equal(fit.center_px, same.center_px) and fit.radius_px == same.radius_px

@@ -589,11 +589,25 @@ class _ConsistentEdges:
     strength: np.ndarray
     angle: np.ndarray
     points: tuple
+    rows: tuple = dataclasses.field(init=False, repr=False)  # the points' running y bounds (:meth:`near_rows`)
+
+    def __post_init__(self):
+        # the ridge points come row by row (each within half a pixel of its row): a running maximum
+        # of y from the start and a running minimum from the end are sorted, and bound a band of rows
+        y = self.points[0][:, 1]
+        self.rows = (np.maximum.accumulate(y), np.minimum.accumulate(y[::-1])[::-1])
 
     @classmethod
     def of(cls, tensor, n_photos: int, centered: bool = False) -> "_ConsistentEdges":
         S, ang = consistent_edge_strength(tensor, n_photos, centered)
         return cls(S, ang, _ridge_points(S, ang))
+
+    def near_rows(self, y0: float, y1: float) -> slice:
+        """A slice of ``points`` (in their order) holding every point with ``y0 <= y <= y1``: the
+        ones before it have a running maximum of y below ``y0``, those after it a running minimum
+        from the end above ``y1`` (so the slice is exact for any order, and short for rows)."""
+        up, down = self.rows
+        return slice(int(np.searchsorted(up, y0, "left")), int(np.searchsorted(down, y1, "right")))
 
 
 def photo_colour_counts(im, lum, counts, lit_fraction: float = 0.1, clip_fraction: float = 0.98) -> None:
@@ -1930,12 +1944,12 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
         # only the ALT transform's well-formed circles: the plain gradient's 30 (of some 5,000 it
         # rates on a busy capture's strength) are mostly arcs of moving shadows, and the transform
         # and their fits were a quarter of the search's cost for no sphere found (docs/spheres.md)
-        passes.append((centered, ev.points))
+        passes.append((centered, ev))
         images.append((g8, 3, min(H, W) / 2, 0.5 * sc, False))
     found = _hough_candidates_many(images)  # every pass's transforms at once
     circles = [(k, x, y, r) for k, hc in enumerate(found) for x, y, r in hc]
     global _photo_edge_context
-    _photo_edge_context = (circles, [cpts for _, cpts in passes], cam)  # inherited by forked workers
+    _photo_edge_context = (circles, [ev for _, ev in passes], cam)  # inherited by forked workers
     try:
         done = _forked_map(_photo_edge_fit, len(circles), workers)
     finally:
@@ -1969,7 +1983,7 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     return more, len(circles)
 
 
-#: ``(circles [(pass, x, y, r)], each pass's ridge points, camera)`` of the running
+#: ``(circles [(pass, x, y, r)], each pass's edge evidence (:class:`_ConsistentEdges`), camera)`` of the running
 #: :func:`_photo_edge_fits`, inherited by its forked workers.
 _photo_edge_context: tuple | None = None
 
@@ -1978,14 +1992,14 @@ def _photo_edge_fit(k: int):
     """Circle ``k`` of :data:`_photo_edge_context` fitted on its pass's ridge points
     (:func:`_fit_on_consistent_edges`), searched again from its own fit while that improves
     :func:`outline_quality`; None where there is no fit."""
-    circles, ridges, cam = _photo_edge_context
+    circles, evidence, cam = _photo_edge_context
     p, x, y, r = circles[k]
-    cpts = ridges[p]
-    ft = _fit_on_consistent_edges(np.array([x, y]), float(r), cpts, cam, "auto")
+    ev = evidence[p]
+    ft = _fit_on_consistent_edges(np.array([x, y]), float(r), ev, cam, "auto")
     for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
         if ft is None:
             break
-        again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, cpts, cam, "auto")
+        again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, ev, cam, "auto")
         if again is None or outline_quality(again) <= outline_quality(ft):
             break
         ft = again
@@ -2426,9 +2440,8 @@ def _with_consistent_edges(fits, held: _ConsistentEdges | None, L, cam: _Camera,
     photo as the reflected contrasts inside it; its outline is the max image's (:func:`_outer_outline`)."""
     if held is None or not fits:
         return fits
-    cpts = held.points
     return [ft if ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
-            else _refine_on_consistent_edges(ft, cpts, cam, max_residual_px) for ft in fits]
+            else _refine_on_consistent_edges(ft, held, cam, max_residual_px) for ft in fits]
 
 
 #: Band (radii, + 2 px) around a mirror ball's outline searched for its silhouette on the edges
@@ -2507,7 +2520,7 @@ def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camer
             out.append(ft)
             continue
         c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
-        new = _fit_on_consistent_edges(c0, r0, changing.points, cam, ft.source, MIRROR_CHANGING_BAND)
+        new = _fit_on_consistent_edges(c0, r0, changing, cam, ft.source, MIRROR_CHANGING_BAND)
         if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
                 or outline_support(new, pts, cam.shape) < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape)):
             out.append(ft)
@@ -2518,9 +2531,9 @@ def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camer
     return out
 
 
-def _fit_on_consistent_edges(c0, r0: float, cpts, cam: _Camera, source: str, band: float = 0.1,
+def _fit_on_consistent_edges(c0, r0: float, ev: _ConsistentEdges, cam: _Camera, source: str, band: float = 0.1,
                              min_points: int = 8):
-    """A sphere fitted on the ridge points ``cpts`` (:func:`consistent_edge_points`) near the circle
+    """A sphere fitted on the ridge points of ``ev`` (:func:`consistent_edge_points`) near the circle
     ``(c0, r0)`` (pixels), or None.
 
     The points within ``band`` radii (+ 2 px) of the circle whose direction is radial
@@ -2528,9 +2541,14 @@ def _fit_on_consistent_edges(c0, r0: float, cpts, cam: _Camera, source: str, ban
     tolerance: a contact shadow's boundary runs a few pixels outside the silhouette); the points
     within 1.5 px of it are fitted (:func:`_fit_outline`).
     """
-    pts, dirs, _ = cpts
+    pts, dirs, _ = ev.points
     if len(pts) < min_points:
         return None
+    # only the rows the band can reach (|y - y0| < d < (1 + band) r0 + 2, and a pixel to spare) are
+    # measured: the same points, in the same order, as over all of them
+    reach = (1.0 + band) * r0 + 3.0
+    rows = ev.near_rows(c0[1] - reach, c0[1] + reach)
+    pts, dirs = pts[rows], dirs[rows]
     v = pts - c0
     d = np.hypot(v[:, 0], v[:, 1])
     cosr = np.abs(np.sum(v * dirs, axis=1)) / np.maximum(d, 1e-9)
@@ -2550,8 +2568,8 @@ def _fit_on_consistent_edges(c0, r0: float, cpts, cam: _Camera, source: str, ban
         return None
 
 
-def _refine_on_consistent_edges(ft, cpts, cam: _Camera, max_residual_px: float, band: float = 0.1,
-                                min_points: int = 8):
+def _refine_on_consistent_edges(ft, ev: _ConsistentEdges, cam: _Camera, max_residual_px: float,
+                                band: float = 0.1, min_points: int = 8):
     """Refit a found sphere on the per-photo edge evidence (:func:`consistent_edge_points`), if it fits better.
 
     In the max image a silhouette can merge with a bright ground (a white sphere on a white
@@ -2568,7 +2586,7 @@ def _refine_on_consistent_edges(ft, cpts, cam: _Camera, max_residual_px: float, 
     if ft.source == "override":
         return ft
     c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
-    new = _fit_on_consistent_edges(c0, r0, cpts, cam, ft.source, band, min_points)
+    new = _fit_on_consistent_edges(c0, r0, ev, cam, ft.source, band, min_points)
     if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
             or outline_quality(new) <= outline_quality(ft)):
         return ft

@@ -112,16 +112,28 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
     w = max(2.0 * tol, 1.5 * s)
     lo = r_min - 0.5 * w
     nb = int(np.ceil((r_max + 0.5 * w - lo) / (0.5 * w))) + 1
-    d = np.hypot(P[None, :, 0] - cs[:, None, 0], P[None, :, 1] - cs[:, None, 1])  # (C, n)
-    b = np.floor((d - lo) / (0.5 * w)).astype(np.int64)
-    ok = (b >= 0) & (b < nb)
-    flat = (np.arange(len(cs))[:, None] * nb + b)[ok]
-    votes = np.bincount(flat, minlength=len(cs) * nb).reshape(len(cs), nb)
+    # the distances' bins, computed in place on (C, n) arrays (the voting is most of the search's
+    # own cost); sqrt(dx^2 + dy^2) rather than np.hypot, 4x faster and within 1 ulp of it: a vote
+    # moves to the next bin only where a distance lies within 1 ulp (1e-14 px) of a bin's edge
+    d = P[None, :, 0] - cs[:, None, 0]  # (C, n)
+    dy = P[None, :, 1] - cs[:, None, 1]
+    d *= d
+    dy *= dy
+    d += dy
+    np.sqrt(d, out=d)
+    d -= lo
+    d /= 0.5 * w
+    np.floor(d, out=d)
+    ok = (d >= 0) & (d < nb)
+    d += (np.arange(len(cs)) * nb)[:, None]  # (exact: integers far below 2**53)
+    votes = np.bincount(d[ok].astype(np.int64), minlength=len(cs) * nb).reshape(len(cs), nb)
     win = votes[:, :-1] + votes[:, 1:]  # window j covers [lo + j w/2, lo + (j + 2) w/2)
     radii = lo + (np.arange(nb - 1) + 1.0) * 0.5 * w
     score = win / np.maximum(radii, 1.0)[None, :] if per_radius else win.astype(np.float64)
     score = np.where((win >= 3) & (radii >= r_min - 0.5 * w)[None, :] & (radii <= r_max + 0.5 * w)[None, :], score, -1)
-    order = np.lexsort((np.arange(score.size), -score.ravel()))  # highest first, ties by grid index
+    # highest first, ties by grid index; only the windows that may be picked (score >= 0) are sorted
+    valid = np.flatnonzero(score.ravel() >= 0)
+    order = valid[np.argsort(-score.ravel()[valid], kind="stable")]
     picked = []
     for idx in order:
         if score.flat[idx] < 0 or len(picked) >= max(2 * n_best, 3):
