@@ -15,7 +15,8 @@ squares (``numpy.linalg.lstsq``, optionally truncated at a relative singular val
 non-negative columns ``+1`` and ``-1`` (``A = a+ - a-``; the pair's minimum-norm choice is what
 NNLS returns, and the fit is the same as with a free column). Optional Tikhonov rows: a
 first-difference ``smoothness`` between neighbouring unknowns and a minimum-``energy`` term on the
-radiance of each source's cell.
+radiance of each source's cell; and total variation (``tv``) between neighbours, by iteratively reweighted
+least squares.
 """
 from __future__ import annotations
 
