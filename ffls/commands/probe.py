@@ -104,6 +104,9 @@ def _add_inverse(sub, common):
     d.add_argument("--orientations", type=integer(1, 64), default=1,
                    help="with adaptive sources: average the estimate over this many orientations of the geodesic "
                         "source set (default 1: one estimate; costs as many estimates)")
+    d.add_argument("--prior", choices=("quadratic", "tv"), default="quadratic",
+                   help="what --smoothness penalises: the squared differences between neighbouring sources "
+                        "(quadratic, default) or their absolute values (tv: total variation, keeps small lamps sharp)")
     d.add_argument("--ground", action="store_true",
                    help="sources only above the ground plane (probe.json's plane, else the world +Z), the light "
                         "below it one uniform term")
@@ -257,9 +260,13 @@ def method_knobs(args) -> dict:
 
             raise InputError(f"--orientations applies to --sources auto or adaptive without --smoothness cv, not "
                              f"--sources {args.sources}" + (" --smoothness cv" if args.smoothness == "cv" else ""))
+        if args.prior != "quadratic" and args.smoothness == 0:
+            from ffls.errors import InputError
+
+            raise InputError(f"--prior {args.prior} weighs --smoothness: give it a weight or cv (it is 0)")
         return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
                 "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill,
-                "orientations": args.orientations, "ground": args.ground}
+                "orientations": args.orientations, "ground": args.ground, "prior": args.prior}
     if args.method == "shadow":
         if args.smoothness == "cv":
             from ffls.errors import InputError

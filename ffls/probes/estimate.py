@@ -338,11 +338,13 @@ def _finish(radiance, confidence, threshold: float, method: str, probe, notes: l
 #: ``diffuse_lightmap(smoothness='cv')``'s candidate weights: ``select_regularization``'s default, 0 (the
 #: plain fit) and steps of about 3 up to 0.03, the range ``docs/probes.md`` measures.
 SMOOTHNESS_WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
+#: ``diffuse_lightmap``'s ``prior``: what its ``smoothness`` weight penalises.
+PRIORS = ("quadratic", "tv")
 
 
 def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="auto",
                      criterion: str = "cv", smoothness: float | str = 0.0, rcond: float | None = None,
-                     orientations: int = 1, ground: bool = False, rim_px: float = 0.5,
+                     orientations: int = 1, ground: bool = False, prior: str = "quadratic", rim_px: float = 0.5,
                      max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
                      fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
@@ -373,6 +375,11 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         cross-validation on that set (:func:`ffls.probes.selection.select_regularization`, rule
         ``one_se``: the largest weight the held-out pixels cannot tell from the best);
         ``docs/probes.md`` (*The ambient term*) measures it.
+    prior : {'quadratic', 'tv'}
+        What ``smoothness`` weighs: ``'quadratic'`` (default), the squared first differences between
+        neighbouring sources; ``'tv'``, total variation, their absolute values (edge-preserving: a small
+        bright lamp keeps its peak; :func:`ffls.probes.linear.solve_sources`' ``tv``;
+        ``docs/probes.md``, *An edge-preserving prior*).
     rcond : float, optional
         Unconstrained only: truncate singular values below ``rcond`` times the largest (large
         source sets are rank deficient on a Lambertian sphere).
@@ -406,7 +413,10 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         raise ValueError(f"orientations must be an integer >= 1, not {orientations!r}")
     if orientations > 1 and (sources not in ("auto", "adaptive") or by_cv):
         raise ValueError("orientations > 1 applies to adaptive sources without smoothness='cv'")
-    kw = dict(nonnegative=nonnegative, ambient=ambient, smoothness=0.0 if by_cv else smoothness, rcond=rcond)
+    if prior not in PRIORS:
+        raise ValueError(f"prior must be one of {PRIORS}, not {prior!r}")
+    penalty = "tv" if prior == "tv" else "smoothness"
+    kw = {"nonnegative": nonnegative, "ambient": ambient, penalty: 0.0 if by_cv else smoothness, "rcond": rcond}
     up = None
     if ground:
         up = np.asarray(probe.plane.normal if probe.plane is not None else (0.0, 0.0, 1.0), dtype=np.float64)
@@ -431,7 +441,7 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
             # the set's own domain and ambient (the rings keep theirs: explicit directions default to the sphere)
             amb_set = False if up is not None and ambient == "auto" else resolve_ambient(ambient, nonnegative,
                                                                                           fit.hemisphere)
-            reg = select_regularization(N, V, albedo, fit.directions, SMOOTHNESS_WEIGHTS, "smoothness",
+            reg = select_regularization(N, V, albedo, fit.directions, SMOOTHNESS_WEIGHTS, penalty,
                                         nonnegative=nonnegative, rcond=rcond, hemisphere=fit.hemisphere,
                                         ambient=amb_set, **({} if up is None else {"ground": up}))
             fit = reg.fit
@@ -452,6 +462,8 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         details["ground"] = [float(g) for g in fit.ground]
     if by_cv:
         details["smoothness"] = float(reg.chosen)
+    if prior != "quadratic":
+        details["prior"] = prior
     return _finish(fit.latlong(height), normal_confidence(N, height), confidence_threshold, "diffuse", probe, notes,
                    details, fill)
 

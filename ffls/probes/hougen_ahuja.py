@@ -218,7 +218,7 @@ def ground_column(normals, up) -> np.ndarray:
 
 def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str = True, nonnegative: bool = False,
                  rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full",
-                 smoothness: float = 0.0, energy: float = 0.0, ground=None) -> SourceFit:
+                 smoothness: float = 0.0, energy: float = 0.0, ground=None, tv: float = 0.0) -> SourceFit:
     """Recover model-source intensities from a diffuse object's pixels (Hougen and Ahuja 1993).
 
     Parameters
@@ -260,6 +260,13 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str 
         the most evenly spread: NNLS alone returns a vertex of the solution set, which can
         gather light spread over many directions into a few sources at their mean direction
         (``docs/probes.md``, *Regularised Hougen-Ahuja*).
+    tv : float
+        Optional total-variation (edge-preserving) penalty between neighbouring sources, the L1
+        norm of their differences (:func:`ffls.probes.linear.solve_sources`); 0 is the paper's
+        plain fit. Like ``smoothness`` it fills and evens out spread light, but it charges a lamp
+        by its height, not its squared height, so a small bright lamp keeps its peak where the
+        quadratic penalty spreads it over its neighbours (``docs/probes.md``, *An edge-preserving
+        prior*).
     ground : (3,) array_like, optional
         The normal (up) of a ground plane. The model sources then lie on or above that plane
         (the hemisphere around it: ``hemisphere`` and ``axis`` are set to it), and the light from
@@ -311,8 +318,8 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str 
     ambient = resolve_ambient(ambient, nonnegative, hemisphere)
     what = f"{dirs.shape[0]} sources{' + ground' if up is not None else ''}{' + ambient' if ambient else ''}"
     sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond, what=what,
-                        smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 else None,
-                        ambient_nonnegative=ambient == "nonnegative", energy=energy, cell_solid_angles=om)
+                        smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 or tv > 0 else None,
+                        ambient_nonnegative=ambient == "nonnegative", energy=energy, cell_solid_angles=om, tv=tv)
     k = dirs.shape[0]
     rendered = sol.predicted * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))

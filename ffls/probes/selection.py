@@ -39,7 +39,7 @@ __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_houge
 #: Model-selection criteria.
 CRITERIA = ("cv", "bic")
 #: Penalties :func:`select_regularization` chooses the weight of.
-REGULARIZERS = ("energy", "smoothness")
+REGULARIZERS = ("energy", "smoothness", "tv")
 #: Rules :func:`choose_weight` applies to the held-out errors of a sweep of penalty weights.
 WEIGHT_RULES = ("one_se", "paired_se", "min")
 
@@ -676,7 +676,8 @@ def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0
 
     A diffuse object sees only the low orders of its lighting, so many maps fit its pixels; NNLS
     returns a vertex of that set. A penalty (``'energy'``: minimum squared radiance;
-    ``'smoothness'``: first differences between neighbouring sources; both of
+    ``'smoothness'``: first differences between neighbouring sources; ``'tv'``: their absolute values,
+    total variation; all of
     :func:`ffls.probes.hougen_ahuja.hougen_ahuja`) picks another member of it. Its weight is
     chosen from the data: every weight is fitted on the blocked folds of :func:`select_model`
     (pixels grouped by normal) and scored by the squared error of its prediction of the held-out
@@ -690,7 +691,7 @@ def select_regularization(normals, radiance, albedo, directions, weights=(0.0, 0
         The source set (for example ``adaptive_hougen_ahuja(...).fit.directions``).
     weights : sequence of float
         Candidate weights, 0 (the plain fit) first, increasing.
-    penalty : {'energy', 'smoothness'}
+    penalty : {'energy', 'smoothness', 'tv'}
     rule : {'one_se', 'paired_se', 'min'}
         :func:`choose_weight`. ``'min'``: the weight with the lowest held-out error. ``'one_se'``
         (default): the largest weight whose held-out error is within one standard error of the
