@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ffls import conventions
-from ffls.errors import InputError, atomic_output, os_error_message, register_input
+from ffls.errors import InputError, atomic_output, not_a_regular_file, os_error_message, register_input
 from ffls.io.response import load_response, polynomial_response_table
 
 __all__ = [
@@ -117,6 +117,9 @@ class _Json:
         if self.path.is_dir():
             self.fail("", f"is a folder, not {what}" + (" (a capture's lights are its lights.json)"
                                                          if what == LIGHTS_FILE else ""))
+        special = not_a_regular_file(self.path)  # (a FIFO was waited on forever, /dev/zero read to no end)
+        if special:
+            self.fail("", f"{special} ({what} expected)")
         register_input(self.path)
         try:
             text = self.path.read_text(encoding="utf-8-sig")  # (a BOM, as Notepad writes, is no content)
@@ -669,8 +672,9 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     paths = [folder / n for n in names]
     for n, p in zip(names, paths):
         if not p.is_file():
+            special = not_a_regular_file(p)
             j.fail("images", f"listed image {n!r} is a folder, not a file" if p.is_dir()
-                   else f"listed image {n!r} not found in {folder}")
+                   else f"listed image {n!r} {special}" if special else f"listed image {n!r} not found in {folder}")
         register_input(p)  # (an output onto a photo is refused from now on, not only once it was read)
 
     image_size = None
@@ -1141,7 +1145,8 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError("is a folder, not an .lp file" if path.is_dir() else ".lp file not found", path)
+        raise InputError("is a folder, not an .lp file" if path.is_dir() else not_a_regular_file(path)
+                         or ".lp file not found", path)
     register_input(path)
     try:
         lines = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()
@@ -1338,6 +1343,8 @@ def _read_lights_file(path: Path, capture: Capture) -> Lights:
 
 def _looks_like(path: Path) -> str | None:
     """``'json'`` or ``'lp'`` by the first characters of a lights file, None when neither."""
+    if not path.is_file():  # (a FIFO: its first characters would be waited for)
+        return None
     try:
         with open(path, "rb") as f:
             head = f.read(256).lstrip()

@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import (InputError, OutputError, atomic_output, os_error_message, register_input,
-                         run_uninterrupted)
+from ffls.errors import (InputError, OutputError, atomic_output, not_a_regular_file, os_error_message,
+                         register_input, run_uninterrupted)
 
 __all__ = [
     "ImageData",
@@ -282,7 +282,8 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         raise InputError("is a folder, not an image file", path)
     kind = _kind_of(path)
     if not path.is_file():
-        raise InputError("image file not found" if not path.exists() else "not a file", path)
+        raise InputError("image file not found" if not path.exists() else not_a_regular_file(path) or "not a file",
+                         path)
     register_input(path)
     head = _check_decodable_size(path)
     if kind == "exr":

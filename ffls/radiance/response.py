@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ffls.errors import InputError
+from ffls.errors import InputError, not_a_regular_file
 from ffls.io.capture import parse_json
 from ffls.io.images import image_header, read_image
 from ffls.io.probe import exposure_time_problem
@@ -211,6 +211,10 @@ def read_bracket(folder: str | os.PathLike):
     if not folder.is_dir():
         raise InputError("not a folder", folder)
     jpath = folder / "exposures.json"
+    for p in [jpath] + sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES):
+        special = not_a_regular_file(p)  # (a FIFO's EXIF or JSON was waited for forever)
+        if special:
+            raise InputError(special, p)
     if jpath.is_file():
         try:
             doc = parse_json(jpath.read_text(encoding="utf-8-sig"))
