@@ -52,22 +52,24 @@ def add_arguments(p):
     from ffls.relight.composite import METHODS, REGISTRATION_MODES
 
     g = p.add_argument_group("inputs")
-    g.add_argument("--object", required=True, metavar="CAPTURE", help="capture folder of the object on the surface")
+    g.add_argument("--object", required=True, metavar="CAPTURE", type=input_path,
+                   help="capture folder of the object on the surface")
     g.add_argument("--object-lights", default=None, metavar="FILE", type=input_path,
                    help="lights.json or .lp of the object capture (default CAPTURE/lights.json)")
-    g.add_argument("--surface", required=True, metavar="CAPTURE",
+    g.add_argument("--surface", required=True, metavar="CAPTURE", type=input_path,
                    help="capture folder of the surface alone (same camera; its own lights)")
     g.add_argument("--surface-lights", default=None, metavar="FILE", type=input_path,
                    help="lights.json or .lp of the surface capture (default CAPTURE/lights.json)")
-    g.add_argument("--lightmap", required=True, metavar="MAP",
+    g.add_argument("--lightmap", required=True, metavar="MAP", type=input_path,
                    help="the scene's light map at the object's place (.exr/.hdr, or a built-in name)")
     g.add_argument("--layout", default=None, choices=LAYOUTS,
                    help="layout of the light-map file (default: detected from the file)")
-    g.add_argument("--background", required=True, metavar="BG.exr",
+    g.add_argument("--background", required=True, metavar="BG.exr", type=input_path,
                    help="linear render or photograph of the scene without the object, from the captures' camera "
                         "(.exr or .hdr, same size as the photos)")
-    g.add_argument("--mask", required=True, metavar="OBJ_MASK.png", help="object mask (white = object)")
-    g.add_argument("--surface-mask", required=True, metavar="SURF.png",
+    g.add_argument("--mask", required=True, metavar="OBJ_MASK.png", type=input_path,
+                   help="object mask (white = object)")
+    g.add_argument("--surface-mask", required=True, metavar="SURF.png", type=input_path,
                    help="surface region (white = the captured surface stands for the scene's; leave the "
                         "calibration spheres out)")
     add_rotation_arguments(p)
