@@ -208,3 +208,134 @@ def test_fill_refuses_stated_spheres_that_cannot_be_the_photos(cset, tmp_path, c
                                  "--surface-mask", cset / "surface_mask.png", "--fill", "model", "-o", out / "c.exr"])
     assert rc == 2 and f"{obj}/capture.json: --fill: " in line and names in line, line
     assert list(out.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- FIFOs and devices
+@pytest.fixture(scope="module")
+def specials(cap, tmp_path_factory):
+    """FIFOs where files are read (each would be waited on forever), and a copy of the capture whose
+    capture.json, and another whose photo, is a FIFO."""
+    root = tmp_path_factory.mktemp("r12fifo")
+    for name in ("fifo.json", "fifo.lp", "fifo.png", "fifo.exr"):
+        os.mkfifo(root / name)
+    for sub, name in (("cap_fifo_json", "capture.json"), ("cap_fifo_photo", "img_0002.exr")):
+        shutil.copytree(cap, root / sub)
+        (root / sub / name).unlink()
+        os.mkfifo(root / sub / name)
+    br = root / "bracket"
+    br.mkdir()
+    os.mkfifo(br / "b0.jpg")
+    return root
+
+
+FIFO = "is a FIFO (named pipe), not a regular file"
+R12 = ["relight", "{cap}", "--probe", "sky", "-o", "{out}/a.exr"]
+SPECIAL_CASES = [
+    ("lights-fifo-json", R12 + ["--lights", "{root}/fifo.json"], f"fifo.json: {FIFO} (lights.json expected)"),
+    ("lights-fifo-lp", R12 + ["--lights", "{root}/fifo.lp"], f"fifo.lp: {FIFO}"),
+    ("lights-map-fifo", R12 + ["--lights-map", "{root}/fifo.json"], f"fifo.json: {FIFO} (lights map expected)"),
+    ("mask-fifo", R12 + ["--mask", "{root}/fifo.png"], f"fifo.png: {FIFO}"),
+    ("probe-fifo", ["relight", "{cap}", "--probe", "{root}/fifo.exr", "-o", "{out}/a.exr"], f"fifo.exr: {FIFO}"),
+    ("capture-json-fifo", ["relight", "{root}/cap_fifo_json", "--probe", "sky", "-o", "{out}/a.exr"],
+     f"capture.json: {FIFO} (capture.json expected)"),
+    ("capture-photo-fifo", ["relight", "{root}/cap_fifo_photo", "--probe", "sky", "-o", "{out}/a.exr"],
+     f"capture.json: images: listed image 'img_0002.exr' {FIFO}"),
+    ("bracket-photo-fifo", ["calibrate", "response", "{root}/bracket", "-o", "{out}/r.npy"], f"b0.jpg: {FIFO}"),
+    # /dev/zero was read until the memory ran out ("out of memory; ask for a smaller size")
+    ("lights-dev-zero", R12 + ["--lights", "/dev/zero"], "/dev/zero: is a character device, not a regular file"),
+    ("lights-map-dev-zero", R12 + ["--lights-map", "/dev/zero"], "/dev/zero: is a character device"),
+    # an output onto a FIFO or a device: the atomic rename replaced it with a regular file
+    ("output-onto-fifo", ["lightmap", "make", "sky", "{root}/fifo.exr", "--height", "8"],
+     f"fifo.exr: {FIFO}: ffls writes an output beside its path and renames it there, which would replace it"),
+]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs")
+@pytest.mark.parametrize("argv,names", [pytest.param(a, n, id=i) for i, a, n in SPECIAL_CASES])
+def test_fifos_and_devices_are_one_line(cap, specials, tmp_path, capfd, argv, names):
+    """Each hung forever on a FIFO (a blocking read), or ran out of memory on /dev/zero; an output
+    onto a FIFO (or, as root, ``-o /dev/null``) replaced it with a regular file."""
+    out = tmp_path / "out"
+    out.mkdir()
+    args = [a.format(out=out, cap=cap, root=specials) for a in argv]
+    before = sorted((p.name, p.stat().st_mode) for p in specials.iterdir())
+    rc, line = _one_line(capfd, args)
+    assert rc == 2 and "error" in line and names in line, line
+    assert list(out.iterdir()) == [] and sorted((p.name, p.stat().st_mode) for p in specials.iterdir()) == before
+
+
+def test_an_output_onto_a_device_is_refused(tmp_path, capfd):
+    """``-o /dev/null`` as root replaced the device with a file (tried on a copy of the node where mknod is allowed)."""
+    from ffls.errors import OutputError, check_output_path
+
+    node = tmp_path / "null.exr"
+    try:
+        os.mknod(node, 0o666 | __import__("stat").S_IFCHR, os.makedev(1, 3))
+    except (PermissionError, OSError):
+        pytest.skip("mknod is not allowed here")
+    with pytest.raises(OutputError, match="is a character device, not a regular file"):
+        check_output_path(node)
+    rc, line = _one_line(capfd, ["lightmap", "make", "sky", node, "--height", "8"])
+    assert rc == 2 and "null.exr: is a character device" in line and node.is_char_device(), line
+
+
+# ----------------------------------------------------------------------------- probe diffuse --ground
+@pytest.fixture(scope="module")
+def ball(tmp_path_factory):
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.synth.probe_scenes import diffuse_sphere_scene, write_diffuse_probe
+
+    sc = diffuse_sphere_scene(builtin_lightmap("studio").downsample(8), resolution=32, albedo=0.7)
+    return write_diffuse_probe(tmp_path_factory.mktemp("r12ball") / "ball", sc)
+
+
+def test_a_huge_plane_normal_is_a_direction(ball, tmp_path, capfd):
+    """``plane.normal`` [1e308, 1e308, 1e308]: its norm overflowed, the normal became zero, and
+    ``probe diffuse --ground`` ended in a ValueError traceback."""
+    from ffls.io.probe import load_probe
+
+    p = tmp_path / "p"
+    shutil.copytree(ball, p)
+    doc = json.loads((p / "probe.json").read_text())
+    doc["plane"] = {"point": [0, 0, 0], "normal": [1e308, 1e308, 1e308]}
+    (p / "probe.json").write_text(json.dumps(doc))
+    np.testing.assert_allclose(load_probe(p).plane.normal, np.full(3, 3 ** -0.5))
+    assert main(["probe", "diffuse", str(p), "-o", str(tmp_path / "m.exr"), "--size", "8", "--sources", "9",
+                 "--ground"]) == 0
+    assert "Traceback" not in capfd.readouterr().err
+
+
+def test_nothing_poorly_seen_says_no_more(ball, tmp_path, capfd):
+    """At a coarse map every direction is seen: the line went on "(confidence <= 0.2; the map there
+    is the method's extrapolation)" about no direction."""
+    capfd.readouterr()
+    assert main(["probe", "diffuse", str(ball), "-o", str(tmp_path / "m.exr"), "--size", "4", "--sources", "9"]) == 0
+    lines = [ln for ln in capfd.readouterr().err.splitlines() if "poorly seen" in ln]
+    assert lines == ["ffls probe: poorly seen: none (every direction seen)"], lines
+
+
+# ----------------------------------------------------------------------------- empty path values
+_COMPOSITE = ["composite", "--object", "o", "--surface", "s", "--lightmap", "sky", "--background", "b.exr", "--mask",
+              "m.png", "--surface-mask", "sm.png", "-o", "{out}/c.exr"]
+
+
+@pytest.mark.parametrize("argv,flag", [
+    (_COMPOSITE[:2] + [""] + _COMPOSITE[3:], "--object"),  # (was the working folder: a capture there was used)
+    (_COMPOSITE[:4] + [""] + _COMPOSITE[5:], "--surface"),
+    (_COMPOSITE[:6] + [""] + _COMPOSITE[7:], "--lightmap"),
+    (_COMPOSITE[:8] + [""] + _COMPOSITE[9:], "--background"),
+    (_COMPOSITE[:10] + [""] + _COMPOSITE[11:], "--mask"),
+    (_COMPOSITE[:12] + [""] + _COMPOSITE[13:], "--surface-mask"),
+    (["render", "{cap}", "--probe", "sky", "--cpu", "--store", "", "-o", "{out}/a.exr"], "--store"),  # (ran, status 0)
+    (["relight", "{cap}", "--probe", "sky", "--tiles", "--store", "", "-o", "{out}/a.exr"], "--store"),  # (named '.')
+    (["ingest", "{cap}", "--store", ""], "--store"),
+    (["calibrate", "camera", "b.png", "--capture", ""], "--capture"),
+], ids=["composite-object", "composite-surface", "composite-lightmap", "composite-background", "composite-mask",
+        "composite-surface-mask", "render-store", "relight-store", "ingest-store", "calibrate-capture"])
+def test_an_empty_path_value_is_refused(cap, tmp_path, capfd, argv, flag):
+    """An empty value (an unset shell variable) is refused as every positional path and -o already are."""
+    out = tmp_path / "out"
+    out.mkdir()
+    rc, line = _one_line(capfd, [a.format(out=out, cap=cap) for a in argv])
+    assert rc == 2 and f"argument {flag}: empty path" in line, line
+    assert list(out.iterdir()) == []
