@@ -339,3 +339,16 @@ def test_an_empty_path_value_is_refused(cap, tmp_path, capfd, argv, flag):
     rc, line = _one_line(capfd, [a.format(out=out, cap=cap) for a in argv])
     assert rc == 2 and f"argument {flag}: empty path" in line, line
     assert list(out.iterdir()) == []
+
+
+def test_an_image_size_of_the_stored_layout_names_the_orientation(cap, tmp_path, capfd):
+    """A capture.json written for the stored (unturned) size: the refusal says why the sizes differ."""
+    c = _png_capture(cap, tmp_path / "c", [6] * 6)
+    for k in range(6):  # stored 32 wide and 24 high, tagged 6: shown 24 wide and 32 high
+        _save_oriented(c / f"img_{k:04d}.png", np.full((24, 32, 3), 100, np.uint8), 6)
+    doc = json.loads((c / "capture.json").read_text())
+    doc["image_size"] = [32, 24]
+    (c / "capture.json").write_text(json.dumps(doc))
+    rc, line = _one_line(capfd, ["relight", c, "--probe", "sky", "-o", tmp_path / "a.exr"])
+    assert rc == 2 and "img_0000.png: image is 24x32 but capture.json says image_size 32x24 (as shown: its EXIF " \
+        "orientation 6, turned 90 degrees clockwise, turns the stored 32x24; docs/formats.md)" in line, line

@@ -616,7 +616,9 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
         if ref is None:
             ref = ((h.width, h.height), f"the first image {n!r} is")
         elif (h.width, h.height) != ref[0]:
-            raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}", p)
+            turned = (f" (as shown: its EXIF orientation {h.orientation}, {ORIENTATION_NAMES[h.orientation]}, turns "
+                      f"the stored {h.height}x{h.width}; docs/formats.md)") if h.orientation >= 5 else ""
+            raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}{turned}", p)
     grey = [k for k, h in enumerate(heads) if h is not None and h.grey]
     colour = [k for k, h in enumerate(heads) if h is not None and not h.grey]
     if grey and colour:
