@@ -256,11 +256,27 @@ STDOUT_CLOSED = ("ffls: error: standard output: is closed, and the command's res
                  "was done (give >/dev/null to discard them)")
 
 
+def _stderr_to_null() -> None:
+    """Standard error closed at start (``2>&-``): its lines are dropped, as asked (the status still
+    says how the command ended). ``print(..., file=None)`` wrote them to standard output, among the
+    results, and a file opened later would take descriptor 2, where a library's messages would land."""
+    import os
+
+    fd = os.open(os.devnull, os.O_WRONLY)
+    if fd != 2:
+        os.dup2(fd, 2)
+        os.close(fd)
+    sys.stderr = open(2, "w", closefd=False)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``ffls ARGV``; the exit status (0, 2 for an error, 130 Ctrl-C, 143 SIGTERM).
 
-    Standard output closed at start (:data:`STDOUT_CLOSED`) is one line, status 2, nothing run.
+    Standard output closed at start (:data:`STDOUT_CLOSED`) is one line, status 2, nothing run;
+    standard error closed at start drops its lines (:func:`_stderr_to_null`).
     """
+    if sys.stderr is None:  # (fd 2 closed at start, ``2>&-``)
+        _stderr_to_null()
     if sys.stdout is None:  # (fd 1 closed at start, ``>&-``: Python set sys.stdout to None)
         print(STDOUT_CLOSED, file=sys.stderr)
         return 2

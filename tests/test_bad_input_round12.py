@@ -352,3 +352,12 @@ def test_an_image_size_of_the_stored_layout_names_the_orientation(cap, tmp_path,
     rc, line = _one_line(capfd, ["relight", c, "--probe", "sky", "-o", tmp_path / "a.exr"])
     assert rc == 2 and "img_0000.png: image is 24x32 but capture.json says image_size 32x24 (as shown: its EXIF " \
         "orientation 6, turned 90 degrees clockwise, turns the stored 32x24; docs/formats.md)" in line, line
+
+
+def test_closed_standard_error_keeps_its_lines_out_of_the_results(tmp_path):
+    """``ffls lightmap info nope.exr 2>&- > out.txt``: the error line went into out.txt (print's
+    fallback for a missing stderr is standard output); now it is dropped, the status says 2."""
+    p = subprocess.run([sys.executable, "-m", "ffls", "lightmap", "info", str(tmp_path / "nope.exr")],
+                       env=_child_env(), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, timeout=120,
+                       preexec_fn=lambda: os.close(2))
+    assert p.returncode == 2 and p.stdout == "", p.stdout
