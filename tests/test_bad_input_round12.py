@@ -361,3 +361,22 @@ def test_closed_standard_error_keeps_its_lines_out_of_the_results(tmp_path):
                        env=_child_env(), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, timeout=120,
                        preexec_fn=lambda: os.close(2))
     assert p.returncode == 2 and p.stdout == "", p.stdout
+
+
+@pytest.mark.parametrize("cmd", ["calibrate", "merge"])
+def test_a_bracket_mixing_orientations_is_refused(tmp_path, capfd, cmd):
+    """A bracket shot from a tripod whose middle photo is tagged "rotated 180 degrees": it kept its size,
+    and was read as stored; shown as viewers show it, it would be upside down against the others."""
+    br = tmp_path / "br"
+    br.mkdir()
+    rng = np.random.default_rng(1)
+    base = rng.integers(20, 120, (16, 16, 3), dtype=np.uint8)
+    for k, turn in enumerate((1, 3, 1)):
+        _save_oriented(br / f"b{k}.png", np.clip(base.astype(int) * (k + 1), 0, 255).astype(np.uint8), turn)
+    (br / "exposures.json").write_text('{"b0.png": 0.01, "b1.png": 0.02, "b2.png": 0.04}')
+    argv = (["calibrate", "response", br, "-o", tmp_path / "r.npy"] if cmd == "calibrate" else
+            ["probe", "merge", br / "b0.png", br / "b1.png", br / "b2.png", "--exposures", "0.01,0.02,0.04",
+             "--encoding", "srgb", "-o", tmp_path / "m.exr"])
+    rc, line = _one_line(capfd, argv)
+    assert rc == 2 and "b1.png: its EXIF orientation is 3 (rotated 180 degrees) but 2 of the 3 bracketed " in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["br"]

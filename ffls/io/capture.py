@@ -606,7 +606,7 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
     camera share their pixel grid, and a camera that looks down (at a turntable, a table top)
     tags its shots upright or turned as its tilt sensor wavers: turning some would misalign them.
     """
-    from ffls.io.images import ORIENTATION_NAMES, image_header
+    from ffls.io.images import ORIENTATION_NAMES, check_one_orientation, image_header
 
     heads = [image_header(p) for p in paths]
     ref = None if image_size is None else (tuple(image_size), f"{CAPTURE_FILE} says image_size")
@@ -628,17 +628,7 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
                          f" photos are {many} (e.g. {names[(colour if many == 'colour' else grey)[0]]!r}): a capture "
                          f"mixing grey and colour photos is almost always a wrong export; export every photo "
                          f"{'in colour' if many == 'colour' else 'grey'}", paths[few[0]])
-    turns = [h.orientation for h in heads if h is not None]
-    if len(set(turns)) > 1:
-        common = max(sorted(set(turns)), key=turns.count)
-        odd = next(k for k, h in enumerate(heads) if h is not None and h.orientation != common)
-        first = next(k for k, h in enumerate(heads) if h is not None and h.orientation == common)
-        turn = heads[odd].orientation
-        raise InputError(f"its EXIF orientation is {turn} ({ORIENTATION_NAMES[turn]}) but {turns.count(common)} of "
-                         f"the {len(turns)} photos are {common} ("
-                         f"{ORIENTATION_NAMES[common]}, e.g. {names[first]!r}): the photos of one fixed camera share "
-                         "their pixels' layout, and a camera's tilt sensor tags shots that look down either way; "
-                         "export every photo with one orientation (e.g. exiftool -Orientation=1 -n)", paths[odd])
+    check_one_orientation(paths, names, heads)
 
 
 def load_capture(folder: str | os.PathLike) -> Capture:

@@ -54,6 +54,7 @@ __all__ = [
     "ImageHeader",
     "image_header",
     "ORIENTATION_NAMES",
+    "check_one_orientation",
     "nonfinite_message",
 ]
 
@@ -631,6 +632,43 @@ _ORIENTED = {
 ORIENTATION_NAMES = {1: "upright (as stored)", 2: "mirrored", 3: "rotated 180 degrees", 4: "mirrored upside down",
                      5: "transposed", 6: "turned 90 degrees clockwise", 7: "transversed",
                      8: "turned 90 degrees counter-clockwise"}
+
+
+def check_one_orientation(paths, names=None, heads=None, what: str = "photos") -> None:
+    """Refuse images of one fixed camera (a capture's photos, a bracket) whose EXIF orientations differ.
+
+    They share their pixel grid, and a camera that looks down (at a turntable, a table top) tags
+    its shots upright or turned as its tilt sensor wavers: read as viewers show them, some would
+    be turned against the others. The minority is named.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+    names : sequence of str, optional
+        How the message names the images (default: the file names).
+    heads : sequence of ImageHeader or None, optional
+        Their headers, when already read (:func:`image_header`; None where unreadable).
+
+    Raises
+    ------
+    InputError
+        Naming the first image of a minority orientation.
+    """
+    paths = [Path(p) for p in paths]
+    names = [p.name for p in paths] if names is None else list(names)
+    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    turns = [h.orientation for h in heads if h is not None]
+    if len(set(turns)) <= 1:
+        return
+    common = max(sorted(set(turns)), key=turns.count)
+    odd = next(k for k, h in enumerate(heads) if h is not None and h.orientation != common)
+    first = next(k for k, h in enumerate(heads) if h is not None and h.orientation == common)
+    turn = heads[odd].orientation
+    raise InputError(f"its EXIF orientation is {turn} ({ORIENTATION_NAMES[turn]}) but {turns.count(common)} of the "
+                     f"{len(turns)} {what} are {common} ({ORIENTATION_NAMES[common]}, e.g. {names[first]!r}): the "
+                     f"{what} of one fixed camera share their pixels' layout, and a camera's tilt sensor tags shots "
+                     "that look down either way; export them with one orientation (e.g. exiftool -Orientation=1 -n)",
+                     paths[odd])
 
 
 def _exif_orientation(im) -> int:

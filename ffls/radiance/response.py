@@ -20,7 +20,7 @@ import numpy as np
 
 from ffls.errors import InputError, not_a_regular_file
 from ffls.io.capture import parse_json
-from ffls.io.images import image_header, read_image
+from ffls.io.images import check_one_orientation, image_header, read_image
 from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
 
@@ -250,6 +250,7 @@ def read_bracket(folder: str | os.PathLike):
             times.append(t)
     if len(paths) < 2:
         raise InputError(f"need at least two bracketed images, found {len(paths)}", folder)
+    check_one_orientation(paths, what="bracketed photos")
     images = []
     for p in paths:
         data = read_image(p, working_space=False)  # (its one line: not found, a folder, truncated, ...)
