@@ -176,8 +176,8 @@ def test_closed_standard_output_is_refused_before_anything_runs(cap, tmp_path, a
 def cset(tmp_path_factory):
     """A small composite set whose object capture states its spheres' world centres (as --fill reads them)."""
     root = tmp_path_factory.mktemp("r12set") / "set"
-    assert main(["synth", str(root), "--composite-set", "sunrise", "--lights", "16", "--surface-lights", "16",
-                 "--resolution", "32", "--truth-dirs", "64", "--quiet"]) == 0
+    assert main(["synth", str(root), "--composite-set", "sunrise", "--lights", "8", "--surface-lights", "8",
+                 "--resolution", "24", "--truth-dirs", "32", "--quiet"]) == 0
     return root
 
 
