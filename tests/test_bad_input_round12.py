@@ -380,3 +380,16 @@ def test_a_bracket_mixing_orientations_is_refused(tmp_path, capfd, cmd):
     rc, line = _one_line(capfd, argv)
     assert rc == 2 and "b1.png: its EXIF orientation is 3 (rotated 180 degrees) but 2 of the 3 bracketed " in line, line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["br"]
+
+
+def test_a_singular_system_counts_its_unknowns():
+    """``probe diffuse --sources 100000 --ground`` said "1396 pixels for 98012 unknowns (99406 sources
+    + ground)": the sources that light no pixel were left out without a word."""
+    from ffls.errors import InputError
+    from ffls.probes.linear import solve_sources
+
+    M = np.zeros((3, 6))
+    M[:, :4] = np.random.default_rng(0).random((3, 4))  # 2 of the 6 sources light no pixel
+    with pytest.raises(InputError, match=r"3 pixels for 4 unknowns \(6 sources; the 2 that light no pixel left "
+                                         r"out\)"):
+        solve_sources(M, np.ones(3), what="6 sources")
