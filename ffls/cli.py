@@ -28,11 +28,12 @@ import signal
 import sys
 import warnings
 
+from ffls import INTERRUPTED_LINE
 from ffls.commands import command_modules
 from ffls.commands.common import deferred_notes, print_notes
 from ffls.errors import FflsError, guard_inputs, interrupt_note, os_error_message
 
-__all__ = ["build_parser", "subcommands", "main", "OneLineParser", "Terminated"]
+__all__ = ["build_parser", "subcommands", "main", "OneLineParser", "Terminated", "STDOUT_CLOSED"]
 
 
 class Terminated(KeyboardInterrupt):
@@ -247,12 +248,42 @@ def _innermost(p: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
     return OneLineParser(prog=f"{p.prog} {chosen}") if isinstance(chosen, str) else p
 
 
+#: The answer when standard output is closed at start (``ffls lights CAP >&-``): every command prints
+#: its result there (a summary, the numbers), and with it closed they were lost under status 0;
+#: nothing is run, as an output file opened then would take descriptor 1, where a library's
+#: printing would land in it.
+STDOUT_CLOSED = ("ffls: error: standard output: is closed, and the command's results are printed there; nothing "
+                 "was done (give >/dev/null to discard them)")
+
+
+def _stderr_to_null() -> None:
+    """Standard error closed at start (``2>&-``): its lines are dropped, as asked (the status still
+    says how the command ended). ``print(..., file=None)`` wrote them to standard output, among the
+    results, and a file opened later would take descriptor 2, where a library's messages would land."""
+    import os
+
+    fd = os.open(os.devnull, os.O_WRONLY)
+    if fd != 2:
+        os.dup2(fd, 2)
+        os.close(fd)
+    sys.stderr = open(2, "w", closefd=False)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run ``ffls ARGV``; the exit status (0, 2 for an error, 130 Ctrl-C, 143 SIGTERM)."""
+    """Run ``ffls ARGV``; the exit status (0, 2 for an error, 130 Ctrl-C, 143 SIGTERM).
+
+    Standard output closed at start (:data:`STDOUT_CLOSED`) is one line, status 2, nothing run;
+    standard error closed at start drops its lines (:func:`_stderr_to_null`).
+    """
+    if sys.stderr is None:  # (fd 2 closed at start, ``2>&-``)
+        _stderr_to_null()
+    if sys.stdout is None:  # (fd 1 closed at start, ``>&-``: Python set sys.stdout to None)
+        print(STDOUT_CLOSED, file=sys.stderr)
+        return 2
     try:
         return _main(argv)
     except KeyboardInterrupt:  # (Ctrl-C while the parser was built, before a command ran: a traceback)
-        print("ffls: interrupted; nothing was done", file=sys.stderr)
+        print(INTERRUPTED_LINE, file=sys.stderr)
         return 130
 
 

@@ -15,12 +15,14 @@ import contextvars
 import errno
 import os
 import shutil
+import stat
 import tempfile
 from pathlib import Path
 
 __all__ = ["FflsError", "InputError", "OutputError", "GLUnavailable", "atomic_output", "atomic_folder",
            "check_output_path", "os_error_message", "register_input", "guard_inputs", "kept_on_interrupt",
-           "interrupt_note", "name_output", "disk_full", "available_memory", "atomic_outputs"]
+           "interrupt_note", "name_output", "disk_full", "available_memory", "atomic_outputs",
+           "not_a_regular_file"]
 
 
 class FflsError(Exception):
@@ -147,6 +149,29 @@ def _through_link(path: Path) -> Path:
     return target
 
 
+#: What an existing path that is neither a file nor a folder is, by its ``stat`` type
+_SPECIAL_KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                  (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def not_a_regular_file(path: str | os.PathLike) -> str | None:
+    """``'is a FIFO (named pipe), not a regular file'`` (a device, a socket) for an existing ``path``
+    that is neither a regular file nor a folder (after links), else None.
+
+    Such a path is refused as an input, where reading a FIFO waited for a writer forever and
+    ``/dev/zero`` was read until the memory ran out, and as an output, where the atomic rename
+    replaced it (``-o /dev/null``, run as root, replaced the device with a regular file).
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = next((name for test, name in _SPECIAL_KINDS if test(mode)), "a special file")
+    return f"is {kind}, not a regular file"
+
+
 def check_output_path(path: str | os.PathLike, folder: bool = False) -> Path:
     """Check, before any work, that ``path`` can be written as a file (or, ``folder=True``, a folder).
 
@@ -174,6 +199,10 @@ def _check_output_path(path: Path, folder: bool) -> Path:
         raise OutputError("output folder does not exist", parent)
     if not parent.is_dir():
         raise OutputError("is a file, not a folder", parent)
+    special = not_a_regular_file(path)
+    if special:  # (an output is a temporary file renamed over the path: that would replace the device)
+        raise OutputError(f"{special}: ffls writes an output beside its path and renames it there, which would "
+                          f"replace it; name a {'folder' if folder else 'file'}", path)
     if path.exists() or path.is_symlink():
         if folder and not path.is_dir():
             raise OutputError("exists and is a file, not a folder", path)

@@ -15,7 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ffls.errors import InputError, atomic_output
+from ffls.errors import InputError, atomic_output, not_a_regular_file
 from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT, parse_json
 from ffls.io.images import read_image
 
@@ -252,7 +252,7 @@ def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
     """
     path = Path(capture_dir) / "capture.json"
     if not path.is_file():
-        raise InputError("capture.json not found", path)
+        raise InputError(not_a_regular_file(path) or "capture.json not found", path)
     try:
         doc = parse_json(path.read_text(encoding="utf-8-sig"))
     except (OSError, ValueError) as e:

@@ -93,7 +93,8 @@ def add_arguments(p):
                    help=f"ArUco marker side, smaller than --square-size (charuco only; default {MARKER_SIZE})")
     c.add_argument("--dictionary", type=_dictionary_name, default=None,
                    help=f"ArUco dictionary, OpenCV's name (charuco only; default {DICTIONARY})")
-    c.add_argument("--capture", help="capture folder whose capture.json gets camera.K and camera.dist")
+    c.add_argument("--capture", type=input_path,
+                   help="capture folder whose capture.json gets camera.K and camera.dist")
 
 
 def run(args) -> int:

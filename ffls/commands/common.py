@@ -1002,7 +1002,7 @@ def add_scale_arguments(p, store: bool = True, memory: bool = True) -> None:
                        help="memory budget, e.g. 1G or 512M (default: half of the memory available now); photos "
                             "that do not fit are streamed tile by tile from the capture's store")
     if store:
-        p.add_argument("--store", default=None, metavar="DIR.zarr",
+        p.add_argument("--store", default=None, metavar="DIR.zarr", type=input_path,
                        help="the chunked store of the photos (default CAPTURE/field.zarr; built on first use)")
         p.add_argument("--tiles", action="store_true",
                        help="stream from the store even when the photos would fit in memory")

@@ -57,22 +57,24 @@ def add_arguments(p):
     from ffls.relight.composite import METHODS, REGISTRATION_MODES
 
     g = p.add_argument_group("inputs")
-    g.add_argument("--object", required=True, metavar="CAPTURE", help="capture folder of the object on the surface")
+    g.add_argument("--object", required=True, metavar="CAPTURE", type=input_path,
+                   help="capture folder of the object on the surface")
     g.add_argument("--object-lights", default=None, metavar="FILE", type=input_path,
                    help="lights.json or .lp of the object capture (default CAPTURE/lights.json)")
-    g.add_argument("--surface", required=True, metavar="CAPTURE",
+    g.add_argument("--surface", required=True, metavar="CAPTURE", type=input_path,
                    help="capture folder of the surface alone (same camera; its own lights)")
     g.add_argument("--surface-lights", default=None, metavar="FILE", type=input_path,
                    help="lights.json or .lp of the surface capture (default CAPTURE/lights.json)")
-    g.add_argument("--lightmap", required=True, metavar="MAP",
+    g.add_argument("--lightmap", required=True, metavar="MAP", type=input_path,
                    help="the scene's light map at the object's place (.exr/.hdr, or a built-in name)")
     g.add_argument("--layout", default=None, choices=LAYOUTS,
                    help="layout of the light-map file (default: detected from the file)")
-    g.add_argument("--background", required=True, metavar="BG.exr",
+    g.add_argument("--background", required=True, metavar="BG.exr", type=input_path,
                    help="linear render or photograph of the scene without the object, from the captures' camera "
                         "(.exr or .hdr, same size as the photos)")
-    g.add_argument("--mask", required=True, metavar="OBJ_MASK.png", help="object mask (white = object)")
-    g.add_argument("--surface-mask", required=True, metavar="SURF.png",
+    g.add_argument("--mask", required=True, metavar="OBJ_MASK.png", type=input_path,
+                   help="object mask (white = object)")
+    g.add_argument("--surface-mask", required=True, metavar="SURF.png", type=input_path,
                    help="surface region (white = the captured surface stands for the scene's; leave the "
                         "calibration spheres out)")
     add_rotation_arguments(p)
@@ -200,6 +202,35 @@ def check_distinct_captures(object_capture, surface_capture) -> None:
                          "a copy of the object capture? give the capture of the surface alone", folder)
 
 
+def _stated_spheres_problem(capture, centres, r: float) -> str | None:
+    """Why the spheres stated in ``capture.json`` (``spheres[].center``, ``sphere_radius``) cannot be
+    the calibration spheres of the photos, or None: two spheres whose centres are closer than a radius
+    (a stated ``sphere_radius`` of 50 m for spheres 0.5 m apart, one centre given twice), or a sphere
+    behind the camera or whose disc misses the photo (a centre of 1e300, a typo in a coordinate).
+    Checked by K and ``world_from_camera`` without distortion: the disc only has to meet the photo."""
+    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+    i, k = np.unravel_index(np.argmin(d + np.diag(np.full(len(centres), np.inf))), d.shape)
+    if len(centres) > 1 and not d[i, k] >= r:
+        return (f"spheres[{i}].center and spheres[{k}].center are {d[i, k]:.4g} apart, less than sphere_radius "
+                f"{r:.4g}: spheres of that radius would overlap")
+    cam = np.linalg.inv(capture.world_from_camera)
+    with np.errstate(over="ignore", invalid="ignore"):
+        xc = centres @ cam[:3, :3].T + cam[:3, 3]
+        uv = xc[:, :2] / xc[:, 2:] * np.diag(capture.K)[:2] + capture.K[:2, 2]
+        rad = float(max(capture.K[0, 0], capture.K[1, 1])) * r / xc[:, 2]
+    w, h = capture.image_size if capture.image_size is not None else (2 * capture.K[0, 2] + 1,
+                                                                      2 * capture.K[1, 2] + 1)
+    for k in range(len(centres)):
+        inside = (xc[k, 2] > r and np.all(np.isfinite(uv[k])) and -rad[k] <= uv[k, 0] <= w + rad[k]
+                  and -rad[k] <= uv[k, 1] <= h + rad[k])
+        if not inside:
+            where = "is behind the camera" if not xc[k, 2] > r else \
+                f"projects to pixel ({uv[k, 0]:.4g}, {uv[k, 1]:.4g}), off the {w}x{h} photos"
+            return (f"spheres[{k}].center {np.array2string(centres[k], precision=4)} {where} "
+                    "(camera.K and camera.world_from_camera)")
+    return None
+
+
 def sphere_geometry(capture, lights) -> dict:
     """The calibration spheres and the ground of a capture, in its world, for ``--fill``.
 
@@ -224,7 +255,8 @@ def sphere_geometry(capture, lights) -> dict:
     ------
     ffls.errors.InputError
         One line: no pinhole camera, no ``world_from_camera``, no ``sphere_radius``, near lights,
-        no sphere found, spheres not on one ground, a camera below the ground.
+        no sphere found, stated spheres that overlap or miss the photos, spheres not on one ground, a
+        camera below the ground.
     """
     from ffls.errors import InputError
 
@@ -258,6 +290,9 @@ def sphere_geometry(capture, lights) -> dict:
         raise InputError("--fill needs the calibration spheres' world centres: none found in the photos; give "
                          "them in capture.json, \"spheres\": [{\"center\": [x, y, z]}, ...]", where)
     r = float(capture.sphere_radius)
+    why = _stated_spheres_problem(capture, centres, r) if source == "capture.json" else None
+    if why:
+        raise InputError(f"--fill: {why}", where)
     bottoms = centres[:, 2] - r
     ground = float(np.median(bottoms))
     if np.abs(bottoms - ground).max() > GROUND_SPREAD_RADII * r:

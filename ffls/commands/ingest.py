@@ -17,7 +17,8 @@ def add_arguments(p):
     p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     add_lights_arguments(p)
     add_scale_arguments(p, store=False, memory=False)
-    p.add_argument("--store", default=None, metavar="DIR.zarr", help="the store (default CAPTURE/field.zarr)")
+    p.add_argument("--store", default=None, metavar="DIR.zarr", type=input_path,
+                   help="the store (default CAPTURE/field.zarr)")
     p.add_argument("--tile", type=integer(16, 4096), default=None, metavar="PX",
                    help="tile side in pixels (default: chunks of all photos of about 8 MiB)")
     p.add_argument("--rank", type=integer(1, 100000), default=None, metavar="K",

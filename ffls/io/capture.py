@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ffls import conventions
-from ffls.errors import InputError, atomic_output, os_error_message, register_input
+from ffls.errors import InputError, atomic_output, not_a_regular_file, os_error_message, register_input
 from ffls.io.response import load_response, polynomial_response_table
 
 __all__ = [
@@ -117,6 +117,9 @@ class _Json:
         if self.path.is_dir():
             self.fail("", f"is a folder, not {what}" + (" (a capture's lights are its lights.json)"
                                                          if what == LIGHTS_FILE else ""))
+        special = not_a_regular_file(self.path)  # (a FIFO was waited on forever, /dev/zero read to no end)
+        if special:
+            self.fail("", f"{special} ({what} expected)")
         register_input(self.path)
         try:
             text = self.path.read_text(encoding="utf-8-sig")  # (a BOM, as Notepad writes, is no content)
@@ -597,8 +600,13 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
     photos is refused too: a grey photo would be replicated to RGB, a colourless light among
     coloured ones, and such a mix is almost always a wrong export. The minority is named.
     Headers that cannot be read here are left to the decoder (:func:`ffls.io.images.image_header`).
+
+    Photos are read as image viewers show them, turned by their EXIF orientation; a capture whose
+    photos state different orientations is refused, naming the minority. The photos of one fixed
+    camera share their pixel grid, and a camera that looks down (at a turntable, a table top)
+    tags its shots upright or turned as its tilt sensor wavers: turning some would misalign them.
     """
-    from ffls.io.images import image_header
+    from ffls.io.images import ORIENTATION_NAMES, check_one_orientation, image_header
 
     heads = [image_header(p) for p in paths]
     ref = None if image_size is None else (tuple(image_size), f"{CAPTURE_FILE} says image_size")
@@ -608,7 +616,9 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
         if ref is None:
             ref = ((h.width, h.height), f"the first image {n!r} is")
         elif (h.width, h.height) != ref[0]:
-            raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}", p)
+            turned = (f" (as shown: its EXIF orientation {h.orientation}, {ORIENTATION_NAMES[h.orientation]}, turns "
+                      f"the stored {h.height}x{h.width}; docs/formats.md)") if h.orientation >= 5 else ""
+            raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}{turned}", p)
     grey = [k for k, h in enumerate(heads) if h is not None and h.grey]
     colour = [k for k, h in enumerate(heads) if h is not None and not h.grey]
     if grey and colour:
@@ -618,6 +628,7 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
                          f" photos are {many} (e.g. {names[(colour if many == 'colour' else grey)[0]]!r}): a capture "
                          f"mixing grey and colour photos is almost always a wrong export; export every photo "
                          f"{'in colour' if many == 'colour' else 'grey'}", paths[few[0]])
+    check_one_orientation(paths, names, heads)
 
 
 def load_capture(folder: str | os.PathLike) -> Capture:
@@ -653,8 +664,9 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     paths = [folder / n for n in names]
     for n, p in zip(names, paths):
         if not p.is_file():
+            special = not_a_regular_file(p)
             j.fail("images", f"listed image {n!r} is a folder, not a file" if p.is_dir()
-                   else f"listed image {n!r} not found in {folder}")
+                   else f"listed image {n!r} {special}" if special else f"listed image {n!r} not found in {folder}")
         register_input(p)  # (an output onto a photo is refused from now on, not only once it was read)
 
     image_size = None
@@ -1125,7 +1137,8 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError("is a folder, not an .lp file" if path.is_dir() else ".lp file not found", path)
+        raise InputError("is a folder, not an .lp file" if path.is_dir() else not_a_regular_file(path)
+                         or ".lp file not found", path)
     register_input(path)
     try:
         lines = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()
@@ -1322,6 +1335,8 @@ def _read_lights_file(path: Path, capture: Capture) -> Lights:
 
 def _looks_like(path: Path) -> str | None:
     """``'json'`` or ``'lp'`` by the first characters of a lights file, None when neither."""
+    if not path.is_file():  # (a FIFO: its first characters would be waited for)
+        return None
     try:
         with open(path, "rb") as f:
             head = f.read(256).lstrip()

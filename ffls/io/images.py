@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import (InputError, OutputError, atomic_output, os_error_message, register_input,
-                         run_uninterrupted)
+from ffls.errors import (InputError, OutputError, atomic_output, not_a_regular_file, os_error_message,
+                         register_input, run_uninterrupted)
 
 __all__ = [
     "ImageData",
@@ -53,6 +53,8 @@ __all__ = [
     "quiet_native_output",
     "ImageHeader",
     "image_header",
+    "ORIENTATION_NAMES",
+    "check_one_orientation",
     "nonfinite_message",
 ]
 
@@ -281,10 +283,14 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         raise InputError("is a folder, not an image file", path)
     kind = _kind_of(path)
     if not path.is_file():
-        raise InputError("image file not found" if not path.exists() else "not a file", path)
+        raise InputError("image file not found" if not path.exists() else not_a_regular_file(path) or "not a file",
+                         path)
     register_input(path)
-    _check_decodable_size(path)
-    img = read_exr(path, working_space=working_space, out=out) if kind == "exr" else _read_cv2(path, kind)
+    head = _check_decodable_size(path)
+    if kind == "exr":
+        img = read_exr(path, working_space=working_space, out=out)
+    else:
+        img = _read_cv2(path, kind, 1 if head is None else head.orientation)
     if not allow_nonfinite:
         why = nonfinite_message(img.pixels)
         if why is None and img.alpha is not None and not np.all(np.isfinite(img.alpha)):
@@ -299,21 +305,23 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
 DECODE_BYTES_PER_PIXEL = 24
 
 
-def _check_decodable_size(path: Path) -> None:
+def _check_decodable_size(path: Path) -> ImageHeader | None:
     """Refuse, from its header, an image whose decoding needs more memory than is available
-    (a huge light map or background, which was decoded until the system ran out of memory)."""
+    (a huge light map or background, which was decoded until the system ran out of memory).
+    Returns the header (:func:`image_header`)."""
     from ffls.errors import available_memory
 
     head = image_header(path)
     if head is None:
-        return
+        return None
     if path.suffix.lower() != ".exr" and head.width * head.height >= 2 ** 30:
-        return  # (OpenCV refuses it without decoding, and _undecodable says so, the same on every machine)
+        return head  # (OpenCV refuses it without decoding, and _undecodable says so, the same on every machine)
     need = float(head.width) * float(head.height) * DECODE_BYTES_PER_PIXEL
     have = available_memory()
     if need > have:
         raise InputError(f"a {head.width}x{head.height} image needs about {need / 2**30:.3g} GiB to decode, more "
                          f"than the {have / 2**30:.3g} GiB of memory available", path)
+    return head
 
 
 def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarray | None = None) -> ImageData:
@@ -493,7 +501,9 @@ def _undecodable(path: Path, kind: str, whole: bool) -> str:
 _CORRUPT_DATA_LINES = ("incomplete", "libpng error", "Corrupt JPEG data", "Premature end of JPEG file")
 
 
-def _read_cv2(path: Path, kind: str) -> ImageData:
+def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
+    """A PNG, JPEG, TIFF or Radiance file through OpenCV, shown as its EXIF ``orientation`` asks
+    (OpenCV's ``IMREAD_UNCHANGED`` keeps a JPEG's or PNG's stored rows; it turns a TIFF itself)."""
     import cv2
 
     try:
@@ -513,6 +523,8 @@ def _read_cv2(path: Path, kind: str) -> ImageData:
         said = next((ln for ln in cap.text.splitlines() if "Corrupt JPEG" in ln or "Premature end" in ln), "")
         raise InputError(_undecodable(path, kind, img is None) + (f" (libjpeg: {said.strip()})" if said else ""),
                          path)
+    if kind in ("jpeg", "png") and orientation in _ORIENTED:
+        img = np.ascontiguousarray(_ORIENTED[orientation](img))
     alpha = None
     if kind == "tiff" and (img.ndim == 2 or img.shape[2] in (1, 3)):
         alpha = _tiff_alpha_dropped(path, img.shape[:2])
@@ -591,11 +603,87 @@ class ImageHeader:
     grey : bool
         One colour channel (grey, or grey + alpha; an EXR of ``Y`` only): :func:`read_image`
         replicates it to RGB.
+    orientation : int
+        The EXIF orientation (1 to 8; 1, upright as stored, where the file gives none or a value
+        outside 1 to 8) of a JPEG, PNG or TIFF. ``width`` and ``height`` are the displayed size,
+        after it (:func:`read_image` shows the photo as image viewers do).
     """
 
     width: int
     height: int
     grey: bool
+    orientation: int = 1
+
+
+#: The EXIF tag of the orientation (TIFF tag 274)
+_ORIENTATION_TAG = 0x0112
+#: What each EXIF orientation asks a viewer to do to the stored pixels (rows, columns, channels):
+#: the transforms of Pillow's ``ImageOps.exif_transpose`` and OpenCV's ``IMREAD_COLOR``
+_ORIENTED = {
+    2: lambda a: a[:, ::-1],  # mirrored left-right
+    3: lambda a: a[::-1, ::-1],  # rotated 180 degrees
+    4: lambda a: a[::-1],  # mirrored top-bottom
+    5: lambda a: a.swapaxes(0, 1),  # transposed
+    6: lambda a: np.rot90(a, -1),  # turned 90 degrees clockwise
+    7: lambda a: a.swapaxes(0, 1)[::-1, ::-1],  # transversed
+    8: lambda a: np.rot90(a, 1),  # turned 90 degrees counter-clockwise
+}
+#: How each orientation is named in a message
+ORIENTATION_NAMES = {1: "upright (as stored)", 2: "mirrored", 3: "rotated 180 degrees", 4: "mirrored upside down",
+                     5: "transposed", 6: "turned 90 degrees clockwise", 7: "transversed",
+                     8: "turned 90 degrees counter-clockwise"}
+
+
+def check_one_orientation(paths, names=None, heads=None, what: str = "photos") -> None:
+    """Refuse images of one fixed camera (a capture's photos, a bracket) whose EXIF orientations differ.
+
+    They share their pixel grid, and a camera that looks down (at a turntable, a table top) tags
+    its shots upright or turned as its tilt sensor wavers: read as viewers show them, some would
+    be turned against the others. The minority is named.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+    names : sequence of str, optional
+        How the message names the images (default: the file names).
+    heads : sequence of ImageHeader or None, optional
+        Their headers, when already read (:func:`image_header`; None where unreadable).
+
+    Raises
+    ------
+    InputError
+        Naming the first image of a minority orientation.
+    """
+    paths = [Path(p) for p in paths]
+    names = [p.name for p in paths] if names is None else list(names)
+    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    turns = [h.orientation for h in heads if h is not None]
+    if len(set(turns)) <= 1:
+        return
+    common = max(sorted(set(turns)), key=turns.count)
+    odd = next(k for k, h in enumerate(heads) if h is not None and h.orientation != common)
+    first = next(k for k, h in enumerate(heads) if h is not None and h.orientation == common)
+    turn = heads[odd].orientation
+    raise InputError(f"its EXIF orientation is {turn} ({ORIENTATION_NAMES[turn]}) but {turns.count(common)} of the "
+                     f"{len(turns)} {what} are {common} ({ORIENTATION_NAMES[common]}, e.g. {names[first]!r}): the "
+                     f"{what} of one fixed camera share their pixels' layout, and a camera's tilt sensor tags shots "
+                     "that look down either way; export them with one orientation (e.g. exiftool -Orientation=1 -n)",
+                     paths[odd])
+
+
+def _exif_orientation(im) -> int:
+    """The EXIF orientation of an open Pillow image (1 where it gives none, or a value outside 1 to 8).
+
+    A PNG's ``eXIf`` chunk counts where the PNG specification puts it, before the image data
+    (Pillow has read it on opening; one after the data would need the whole image decoded).
+    """
+    if im.format != "TIFF" and "exif" not in im.info:
+        return 1
+    try:
+        turn = im.getexif().get(_ORIENTATION_TAG, 1)
+    except Exception:  # (a damaged EXIF block: the photo as stored, as viewers show it)
+        return 1
+    return turn if isinstance(turn, int) and 1 <= turn <= 8 else 1
 
 
 # Pillow modes of one colour channel (with or without alpha)
@@ -646,7 +734,10 @@ def image_header(path: str | os.PathLike) -> ImageHeader | None:
                       "tiff": TiffImagePlugin.TiffImageFile}[kind]
             with reader(path) as im:
                 (w, h), mode = im.size, im.mode
-            return ImageHeader(int(w), int(h), mode in _GREY_MODES)
+                turn = _exif_orientation(im)
+            if turn >= 5 and kind != "tiff":  # (Pillow gives a TIFF's size as displayed already)
+                w, h = h, w
+            return ImageHeader(int(w), int(h), mode in _GREY_MODES, turn)
     except Exception:  # (unreadable here: read_image decodes it and names what is wrong)
         return None
     return None

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls import conventions
-from ffls.errors import InputError, register_input
+from ffls.errors import InputError, not_a_regular_file, register_input
 from ffls.io.capture import JsonReader, check_file_name, parse_camera, parse_encoding
 
 __all__ = ["PROBE_FILE", "PROBE_FORMAT", "SPHERE_MATERIALS", "ProbeCamera", "ProbeSphere", "ProbeImage", "ProbeView",
@@ -279,7 +279,8 @@ def _file(j: JsonReader, folder: Path, name, key: str, suffixes: tuple | None = 
     if suffixes is not None and p.suffix.lower() not in suffixes:
         j.fail(key, f"{name!r}: expected one of {', '.join(suffixes)}")
     if not p.is_file():
-        j.fail(key, f"file {name!r} not found in {folder}")
+        special = not_a_regular_file(p)
+        j.fail(key, f"file {name!r} {special}" if special else f"file {name!r} not found in {folder}")
     register_input(p)
     return p
 
@@ -468,11 +469,12 @@ def _plane(j: JsonReader, value) -> ProbePlane:
     p = _object(j, value, "plane", {"point", "normal", "albedo"})
     point = j.array(j.require(p, "point", "plane."), "plane.point", (3,))
     n = j.array(j.require(p, "normal", "plane."), "plane.normal", (3,))
-    norm = float(np.linalg.norm(n))
-    if not norm > 0:
+    big = float(np.abs(n).max())  # (scaled first: the norm of [1e308, 1e308, 1e308] overflowed to a zero normal)
+    if not big > 0:
         j.fail("plane.normal", "must not be zero")
+    n = n / big
     albedo = _fraction(j, p["albedo"], "plane.albedo") if "albedo" in p else None
-    return ProbePlane(point, n / norm, albedo)
+    return ProbePlane(point, n / np.linalg.norm(n), albedo)
 
 
 def _views(j: JsonReader, folder: Path, items, camera: ProbeCamera, sphere: ProbeSphere) -> list:

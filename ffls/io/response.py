@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import InputError, atomic_output
+from ffls.errors import InputError, atomic_output, not_a_regular_file
 
 __all__ = ["save_response", "load_response", "polynomial_response", "polynomial_response_partials",
            "polynomial_response_table", "POLYNOMIAL_MIN_SLOPE"]
@@ -161,7 +161,7 @@ def load_response(path: str | os.PathLike) -> np.ndarray:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError("response file not found", path)
+        raise InputError(not_a_regular_file(path) or "response file not found", path)
     try:
         if path.suffix.lower() == ".npy":
             c = np.load(path, allow_pickle=False)

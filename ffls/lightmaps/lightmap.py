@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls import conventions
-from ffls.errors import FflsError, InputError
+from ffls.errors import FflsError, InputError, not_a_regular_file
 from ffls.io.images import read_image, write_exr, write_hdr
 
 __all__ = [
@@ -767,7 +767,7 @@ def lightmap_from_spec(spec, layout: str | None = None) -> LightMap:
             raise InputError(f"the light map is black everywhere: it lights nothing{why}", p)
         return lm
     if p.suffix or os.sep in str(spec):
-        raise InputError("light map not found", p)
+        raise InputError(not_a_regular_file(p) or "light map not found", p)
     if layout is not None:
         raise InputError(f"a layout ({layout}) applies to a light-map file, and {spec!r} is a built-in map",
                          "--layout")

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.io.images import ImageData, read_image
+from ffls.io.images import ImageData, check_one_orientation, read_image
 from ffls.radiance.photos import linearise
 
 __all__ = ["SATURATION", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
@@ -228,6 +228,7 @@ def decode_image(img: ImageData, encoding, response=None) -> tuple[np.ndarray, f
 
 
 def _read_all(paths) -> list[ImageData]:
+    check_one_orientation(paths, what="bracketed images")
     imgs = [read_image(p) for p in paths]
     for im in imgs[1:]:
         if im.shape != imgs[0].shape:

@@ -327,8 +327,8 @@ def _finish(radiance, confidence, threshold: float, method: str, probe, notes: l
     if clipped:
         notes.append(f"{clipped} texels with negative radiance (unconstrained least squares) set to 0")
     bs = blind_spot(seen)
-    notes.append(bs.describe().replace("blind spot", "poorly seen") + f" (confidence <= {threshold:g}; the map "
-                 "there is the method's extrapolation)")
+    notes.append(bs.describe().replace("blind spot", "poorly seen") + ("" if bs.direction is None else (
+        f" (confidence <= {threshold:g}; the map there is the method's extrapolation)")))
     details.update(seen_fraction=float(1 - bs.fraction), blind_spot_sr=bs.solid_angle,
                    blind_spot_fraction=bs.fraction, negative_texels=int(clipped))
     return LightmapEstimate(LightMap(data, "latlong", str(probe.folder)), seen, conf.astype(np.float32), method,

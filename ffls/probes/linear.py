@@ -281,7 +281,9 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
     D = np.concatenate(cols, axis=1)
     k = D.shape[1]
     if m < k:
-        raise InputError(f"singular system: {m} pixels for {k} unknowns ({what}); "
+        dark = int(n - observed.sum())  # (left out: the count of unknowns would not add up to ``what``)
+        left = f"; the {dark} that light no pixel left out" if dark else ""
+        raise InputError(f"singular system: {m} pixels for {k} unknowns ({what}{left}); "
                          f"use fewer sources or more pixels")
     scale = np.linalg.norm(D, axis=0)
     scale = np.where(scale > 0, scale, 1.0)

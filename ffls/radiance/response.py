@@ -18,9 +18,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ffls.errors import InputError
+from ffls.errors import InputError, not_a_regular_file
 from ffls.io.capture import parse_json
-from ffls.io.images import image_header, read_image
+from ffls.io.images import check_one_orientation, image_header, read_image
 from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
 
@@ -211,6 +211,10 @@ def read_bracket(folder: str | os.PathLike):
     if not folder.is_dir():
         raise InputError("not a folder", folder)
     jpath = folder / "exposures.json"
+    for p in [jpath] + sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES):
+        special = not_a_regular_file(p)  # (a FIFO's EXIF or JSON was waited for forever)
+        if special:
+            raise InputError(special, p)
     if jpath.is_file():
         try:
             doc = parse_json(jpath.read_text(encoding="utf-8-sig"))
@@ -246,6 +250,7 @@ def read_bracket(folder: str | os.PathLike):
             times.append(t)
     if len(paths) < 2:
         raise InputError(f"need at least two bracketed images, found {len(paths)}", folder)
+    check_one_orientation(paths, what="bracketed photos")
     images = []
     for p in paths:
         data = read_image(p, working_space=False)  # (its one line: not found, a folder, truncated, ...)
