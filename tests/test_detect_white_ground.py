@@ -119,7 +119,7 @@ def test_photo_edges_read_once_per_search(tmp_path, monkeypatch):
 
 
 def test_ridge_rows_bound_the_band_and_keep_the_fit():
-    """``_ConsistentEdges.near_rows`` holds every ridge point of a band of rows, in their order, for
+    """``ConsistentEdges.near_rows`` holds every ridge point of a band of rows, in their order, for
     points listed row by row (short) and in any order; the photo-edge fit on it is the fit on all
     the points, to the bit."""
     from ffls.spheres import detect
@@ -136,18 +136,18 @@ def test_ridge_rows_bound_the_band_and_keep_the_fit():
     dirs = pts - c
     dirs /= np.maximum(np.hypot(dirs[:, 0], dirs[:, 1]), 1e-9)[:, None]
     for p, d in ((pts, dirs), (pts[rng.permutation(len(pts))], dirs)):
-        ev = detect._ConsistentEdges(None, None, (p, d, np.ones(len(p))))
+        ev = detect.ConsistentEdges(None, None, (p, d, np.ones(len(p))))
         for y0, y1 in ((50.0, 80.0), (-5.0, 3.0), (190.5, 260.0), (100.0, 99.0)):
             s = ev.near_rows(y0, y1)
             inside = np.flatnonzero((p[:, 1] >= y0) & (p[:, 1] <= y1))
             assert np.all((inside >= s.start) & (inside < s.stop)), (y0, y1)
-    ev = detect._ConsistentEdges(None, None, (pts, dirs, np.ones(len(pts))))
+    ev = detect.ConsistentEdges(None, None, (pts, dirs, np.ones(len(pts))))
     s = ev.near_rows(50.0, 80.0)
     assert s.stop - s.start < 0.25 * len(pts)  # row by row: about the band's rows only
-    cam = detect._Camera("orthographic", None, None, np.eye(4), 1.0, (H, W))
-    fit = detect._fit_on_consistent_edges(c + [2.0, -1.5], R + 1.0, ev, cam, "auto")
-    everything = detect._ConsistentEdges(None, None, (pts, dirs, np.ones(len(pts))))
+    cam = detect.DetectionCamera("orthographic", None, None, np.eye(4), 1.0, (H, W))
+    fit = detect.fit_on_consistent_edges(c + [2.0, -1.5], R + 1.0, ev, cam, "auto")
+    everything = detect.ConsistentEdges(None, None, (pts, dirs, np.ones(len(pts))))
     everything.rows = (np.full(len(pts), np.inf), np.full(len(pts), -np.inf))  # no row is left out
-    same = detect._fit_on_consistent_edges(c + [2.0, -1.5], R + 1.0, everything, cam, "auto")
+    same = detect.fit_on_consistent_edges(c + [2.0, -1.5], R + 1.0, everything, cam, "auto")
     assert fit is not None and np.hypot(*(fit.center_px - c)) < 0.2
     assert np.array_equal(fit.center_px, same.center_px) and fit.radius_px == same.radius_px

@@ -581,7 +581,7 @@ def _ridge_points(S, ang):
 
 
 @dataclasses.dataclass
-class _ConsistentEdges:
+class ConsistentEdges:
     """One reading of the per-photo edge evidence: its strength and angle
     (:func:`consistent_edge_strength`) and ridge points (:func:`consistent_edge_points`), made once
     per :func:`find_spheres` and shared by the photo-edge search and every refit on these edges."""
@@ -598,7 +598,7 @@ class _ConsistentEdges:
         self.rows = (np.maximum.accumulate(y), np.minimum.accumulate(y[::-1])[::-1])
 
     @classmethod
-    def of(cls, tensor, n_photos: int, centered: bool = False) -> "_ConsistentEdges":
+    def of(cls, tensor, n_photos: int, centered: bool = False) -> "ConsistentEdges":
         S, ang = consistent_edge_strength(tensor, n_photos, centered)
         return cls(S, ang, _ridge_points(S, ang))
 
@@ -1346,7 +1346,7 @@ def _hough_candidates_many(images: list) -> list:
 
 # ----------------------------------------------------------------------------- camera of one search
 @dataclasses.dataclass
-class _Camera:
+class DetectionCamera:
     """What the stages need of the camera: pinhole (K, dist, f) or orthographic (pixels only)."""
 
     model: str
@@ -1379,7 +1379,7 @@ def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, 
                                                                             shape))
 
 
-def _make_fit_ortho(cpx, rpx, cam: _Camera, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0):
+def _make_fit_ortho(cpx, rpx, cam: DetectionCamera, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0):
     H, W = cam.shape
     cpx = np.asarray(cpx, dtype=np.float64)
     scale = cam.R / float(rpx)  # scene units per pixel
@@ -1415,7 +1415,7 @@ def _centre_sigma_px(fun, p, args) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
 
 
-def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, n_edge=None):
+def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None):
     """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails.
 
     The fit's ``center_sigma_px`` is the standard error of its centre (:func:`_centre_sigma_px`).
@@ -1445,7 +1445,7 @@ def _fit_outline(P, cam: _Camera, c0_px, r0_px, source, n_edge=None):
 
 
 # ----------------------------------------------------------------------------- hints
-def _parse_hint(h, cam: _Camera):
+def _parse_hint(h, cam: DetectionCamera):
     """(center_px (2,), radius_px or None, center_cam or None, projected radius or None) from one hint dict.
 
     A hint giving both a pixel circle and a world centre must agree: the projected world centre
@@ -1639,10 +1639,10 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     n_photos = int(n_photos) if n_photos is not None else n_img
     if not ortho:
         _check_scale(K, wfc, R, L.shape, source, scene_center)
-    cam = _Camera(camera_model, K, dist, wfc, R, L.shape)
+    cam = DetectionCamera(camera_model, K, dist, wfc, R, L.shape)
     edges = _edge_map(mx, L, source)
     # the edges that hold in the photos (None: a single image, or fewer than 3 photos), read once
-    held = _ConsistentEdges.of(*tensor) if tensor is not None and tensor[1] >= 3 else None
+    held = ConsistentEdges.of(*tensor) if tensor is not None and tensor[1] >= 3 else None
     # and whether those whose contrast changes with the light can be read (a mirror ball's silhouette
     # on a textured ground; the photo-edge search reads them too)
     with_changing = held is not None and len(tensor[0]) >= EDGE_TENSOR_ROWS
@@ -1660,7 +1660,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         mirror = [_is_mirror_outline(ft, L) for ft in fits]
         if any(mirror):  # a mirror's outline: on the changing edges where they decide, else grown as unhinted
-            changing = _ConsistentEdges.of(*tensor, centered=True) if with_changing else None
+            changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
             refit = _with_changing_edges(fits, changing, L, cam, max_residual_px)
             grow = [m and r is f for m, r, f in zip(mirror, refit, fits)]
             if any(grow):
@@ -1673,7 +1673,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
         hint_info = []
-        changing = _ConsistentEdges.of(*tensor, centered=True) if with_changing else None
+        changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
         ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
         cands = _hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
@@ -1893,9 +1893,9 @@ def _same_circle(a, b) -> bool:
 PHOTO_EDGE_MAX_RESIDUAL_PX = 0.5
 
 
-def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: _EdgeMap,
-                     held: _ConsistentEdges, workers: int = 1,
-                     changing: _ConsistentEdges | None = None) -> tuple[list, int]:
+def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float, edges: _EdgeMap,
+                     held: ConsistentEdges, workers: int = 1,
+                     changing: ConsistentEdges | None = None) -> tuple[list, int]:
     """Stages 3-4 again on the edges that hold in the photos: round outlines the max image does not show.
 
     In the max image every pixel reads its best light, so a white matte sphere on a white ground
@@ -1905,7 +1905,7 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     the per-photo edge evidence (:func:`consistent_edge_strength`; ``held``, read once by
     :func:`find_spheres`) outlines it in full. Circles are proposed by Hough's ``HOUGH_GRADIENT_ALT`` transforms
     on that strength (8 bit over its robust peak) and each is fitted on the
-    ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
+    ridge points (:func:`consistent_edge_points`) near it (:func:`fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
     with the light (``centered``, the gradient's covariance over the photos; ``changing``, read
@@ -1932,7 +1932,7 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     passes, images = [], []
     for centered in (False, True)[:1 + (len(tensor[0]) >= EDGE_TENSOR_ROWS)]:
         if centered and changing is None:
-            changing = _ConsistentEdges.of(*tensor, centered=True)
+            changing = ConsistentEdges.of(*tensor, centered=True)
         ev = changing if centered else held
         H, W = ev.strength.shape
         peak = _robust_peak(ev.strength)
@@ -1983,23 +1983,23 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     return more, len(circles)
 
 
-#: ``(circles [(pass, x, y, r)], each pass's edge evidence (:class:`_ConsistentEdges`), camera)`` of the running
+#: ``(circles [(pass, x, y, r)], each pass's edge evidence (:class:`ConsistentEdges`), camera)`` of the running
 #: :func:`_photo_edge_fits`, inherited by its forked workers.
 _photo_edge_context: tuple | None = None
 
 
 def _photo_edge_fit(k: int):
     """Circle ``k`` of :data:`_photo_edge_context` fitted on its pass's ridge points
-    (:func:`_fit_on_consistent_edges`), searched again from its own fit while that improves
+    (:func:`fit_on_consistent_edges`), searched again from its own fit while that improves
     :func:`outline_quality`; None where there is no fit."""
     circles, evidence, cam = _photo_edge_context
     p, x, y, r = circles[k]
     ev = evidence[p]
-    ft = _fit_on_consistent_edges(np.array([x, y]), float(r), ev, cam, "auto")
+    ft = fit_on_consistent_edges(np.array([x, y]), float(r), ev, cam, "auto")
     for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
         if ft is None:
             break
-        again = _fit_on_consistent_edges(ft.center_px, ft.radius_px, ev, cam, "auto")
+        again = fit_on_consistent_edges(ft.center_px, ft.radius_px, ev, cam, "auto")
         if again is None or outline_quality(again) <= outline_quality(ft):
             break
         ft = again
@@ -2021,7 +2021,7 @@ def _forked_map(fn, n: int, workers: int) -> list:
     return [fn(k) for k in range(n)]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, cam: _Camera, search_tol, label, workers: int = 1):
+def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
@@ -2061,7 +2061,7 @@ class _CandidateContext:
 
     cands: list
     edges: _EdgeMap
-    cam: _Camera
+    cam: DetectionCamera
     search_tol: float
     label: str
     und_all: np.ndarray  # the edge points undistorted (square pixels), for the circle start
@@ -2111,7 +2111,7 @@ def outline_quality(ft) -> float:
     return float(ft.coverage) / (1.0 + (float(ft.residual_px) / 0.5) ** 2)
 
 
-def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera) -> list:
+def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: DetectionCamera) -> list:
     """Each candidate grown to its outer outline (:func:`_outer_outline`); where a grown outline is
     the same circle (centre and radius within 15%) as a candidate fitted directly, the direct one is
     kept if it is round (RMS within ``CRITERIA['max_residual_px']``) and fits at least as well by
@@ -2152,7 +2152,7 @@ def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: _Camera) -> list:
 MIRROR_STEP_COVERAGE = 0.75
 
 
-def _hinted_mirror_outlines(fits, edges: _EdgeMap, L, cam: _Camera, ratio=None, workers: int = 1) -> list:
+def _hinted_mirror_outlines(fits, edges: _EdgeMap, L, cam: DetectionCamera, ratio=None, workers: int = 1) -> list:
     """Each hinted sphere outlined as a mirror ball's (:func:`_is_mirror_outline`) found as an
     unhinted one would be: the candidate circles of the search without hints
     (:func:`_hough_circle_candidates`) whose centres lie within half the hinted fit's radius of
@@ -2179,7 +2179,7 @@ def _hinted_mirror_outlines(fits, edges: _EdgeMap, L, cam: _Camera, ratio=None, 
     return out
 
 
-def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera):
+def _outer_outline(ft, edges: _EdgeMap, L, cam: DetectionCamera):
     """A candidate that is a dark cap (:func:`ffls.spheres.mirror_outline.dark_cap`) inside a larger
     outline the edges support (a mirror ball's reflected dark room inside its silhouette, :func:`ffls.spheres.mirror_outline.enclosing_circle`) is refitted on that outline,
     again until no larger one is supported (at most 3 times); its ``outline_sigma_px`` is the
@@ -2241,7 +2241,7 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: _Camera):
     return ft, False
 
 
-def _with_radius(ft, radius_px: float, cam: _Camera):
+def _with_radius(ft, radius_px: float, cam: DetectionCamera):
     """The same sphere fit with its apparent radius set to ``radius_px`` and its centre's direction kept.
 
     Pinhole: the tangent cone's half-angle is scaled by ``radius_px / ft.radius_px`` (the apparent
@@ -2358,7 +2358,7 @@ def _check_radius(fits, hint_info, wfc, R, source, scene_center=None):
                              f" but the scene centre is at {cam_dist:.3g} (radius {R:g})", source)
 
 
-def _refine_on_lit_limb(ft, L, cam: _Camera, lit_limb, min_points: int = 8, min_coverage: float = 0.5):
+def _refine_on_lit_limb(ft, L, cam: DetectionCamera, lit_limb, min_points: int = 8, min_coverage: float = 0.5):
     """Refit a found sphere on the part of its outline where the limb is directly lit.
 
     Where the limb is lit only by the ground bounce (the underside, above the sphere's own contact
@@ -2397,7 +2397,7 @@ def _pixel_noise(L) -> float:
     return 1.4826 * float(np.median(np.abs(L32 - cv2.medianBlur(L32, 3))))
 
 
-def _refine_on_profiles(ft, L, cam: _Camera, max_residual_px: float, noise: float = 0.0, clip=None,
+def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noise: float = 0.0, clip=None,
                         min_points: int = 8):
     """Refit a found sphere on its outline points moved to the step of the linear max image (:func:`step_edges`).
 
@@ -2431,7 +2431,7 @@ def _refine_on_profiles(ft, L, cam: _Camera, max_residual_px: float, noise: floa
     return new
 
 
-def _with_consistent_edges(fits, held: _ConsistentEdges | None, L, cam: _Camera, max_residual_px: float) -> list:
+def _with_consistent_edges(fits, held: ConsistentEdges | None, L, cam: DetectionCamera, max_residual_px: float) -> list:
     """Every fitted candidate refitted on the per-photo edge evidence ``held`` (its ridge points)
     where it fits better (:func:`_refine_on_consistent_edges`); unchanged without the evidence
     (None: a single image, or fewer than 3 photos). A mirror ball (an outer outline, or
@@ -2484,7 +2484,7 @@ def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144) -> f
     return float(np.mean(d <= tol))
 
 
-def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camera,
+def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera,
                          max_residual_px: float) -> list:
     """Each mirror ball's outline refitted on the edges whose contrast changes with the light,
     where the outline it has is not on them.
@@ -2500,7 +2500,7 @@ def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camer
     times than the ground beside it, and the sky with the lights' highlights. The ridge points
     within :data:`MIRROR_CHANGING_BAND` radii (+ 2 px) of each mirror outline
     (:func:`_is_mirror_outline`) are searched for the best-supported circle and fitted
-    (:func:`_fit_on_consistent_edges`). The refit replaces the outline when it is round (RMS within
+    (:func:`fit_on_consistent_edges`). The refit replaces the outline when it is round (RMS within
     ``max_residual_px``), moves the centre by less than a quarter of the radius, and has
     :data:`MIRROR_CHANGING_GAIN` times the share of its outline on the changing edges that the
     outline it replaces has (:func:`outline_support`, 1 px): the two outlines judged on the same
@@ -2520,7 +2520,7 @@ def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camer
             out.append(ft)
             continue
         c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
-        new = _fit_on_consistent_edges(c0, r0, changing, cam, ft.source, MIRROR_CHANGING_BAND)
+        new = fit_on_consistent_edges(c0, r0, changing, cam, ft.source, MIRROR_CHANGING_BAND)
         if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
                 or outline_support(new, pts, cam.shape) < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape)):
             out.append(ft)
@@ -2531,7 +2531,7 @@ def _with_changing_edges(fits, changing: _ConsistentEdges | None, L, cam: _Camer
     return out
 
 
-def _fit_on_consistent_edges(c0, r0: float, ev: _ConsistentEdges, cam: _Camera, source: str, band: float = 0.1,
+def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
                              min_points: int = 8):
     """A sphere fitted on the ridge points of ``ev`` (:func:`consistent_edge_points`) near the circle
     ``(c0, r0)`` (pixels), or None.
@@ -2568,7 +2568,7 @@ def _fit_on_consistent_edges(c0, r0: float, ev: _ConsistentEdges, cam: _Camera, 
         return None
 
 
-def _refine_on_consistent_edges(ft, ev: _ConsistentEdges, cam: _Camera, max_residual_px: float,
+def _refine_on_consistent_edges(ft, ev: ConsistentEdges, cam: DetectionCamera, max_residual_px: float,
                                 band: float = 0.1, min_points: int = 8):
     """Refit a found sphere on the per-photo edge evidence (:func:`consistent_edge_points`), if it fits better.
 
@@ -2586,7 +2586,7 @@ def _refine_on_consistent_edges(ft, ev: _ConsistentEdges, cam: _Camera, max_resi
     if ft.source == "override":
         return ft
     c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
-    new = _fit_on_consistent_edges(c0, r0, ev, cam, ft.source, band, min_points)
+    new = fit_on_consistent_edges(c0, r0, ev, cam, ft.source, band, min_points)
     if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
             or outline_quality(new) <= outline_quality(ft)):
         return ft
