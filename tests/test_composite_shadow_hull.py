@@ -67,6 +67,15 @@ def _scene(directions, spheres=(SPHERE,)):
     return K, M, obj, ground, pts, basis
 
 
+def _one_texel_sun(sun):
+    """A dim uniform lat-long map (1e-4) with one texel of 2e4 toward ``sun``."""
+    lm = LightMap(np.full((64, 128, 3), 1e-4, np.float32), "latlong")
+    dirs, _, _ = lm.samples()
+    data = lm.data.reshape(-1, 3).copy()
+    data[np.argmax(dirs @ sun)] = 2e4
+    return replace(lm, data=data.reshape(lm.data.shape))
+
+
 def test_unshadowed_fit_prior_leaves_out_photos_known_to_be_dark():
     """A photo with prior 0 does not pull the model, however many are dark (a sphere's cone)."""
     d = stratified_directions(60, "upper", 0)
@@ -181,11 +190,7 @@ def test_relighter_fills_a_hidden_sun_with_the_model_and_the_hull():
     hull = ShadowHull.carve(basis, d, obj, K, M, ground=ground, hidden=hidden_photos(pts, [c], r, directions=d))
     e = math.radians(15)
     sun = np.array([-math.cos(e), 0.0, math.sin(e)])
-    lm = LightMap(np.full((64, 128, 3), 1e-4, np.float32), "latlong")
-    dirs, _, _ = lm.samples()
-    data = lm.data.reshape(-1, 3).copy()
-    data[np.argmax(dirs @ sun)] = 2e4                    # a sun of one texel
-    lm = replace(lm, data=data.reshape(lm.data.shape))
+    lm = _one_texel_sun(sun)
     fill = SphereShadowFill.from_geometry(pts, [c], r, d)
     images = {}
     for mode, h in (("model", hull), (False, None)):
@@ -223,11 +228,7 @@ def test_ground_fill_places_the_objects_shadow_by_its_hull_on_the_whole_ground()
     az, el = np.meshgrid(np.radians(np.arange(0, 360, 5)), np.radians(np.arange(20, 41, 5)))
     cand = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], -1).reshape(-1, 3)
     sun = cand[np.argmax(np.arccos(np.clip(cand @ d.T, -1, 1)).min(1))]
-    lm = LightMap(np.full((64, 128, 3), 1e-4, np.float32), "latlong")
-    dirs, _, _ = lm.samples()
-    data = lm.data.reshape(-1, 3).copy()
-    data[np.argmax(dirs @ sun)] = 2e4                        # a sun of one texel
-    lm = replace(lm, data=data.reshape(lm.data.shape))
+    lm = _one_texel_sun(sun)
     fill = SphereShadowFill.from_geometry(pts, [c], r, d)
     images = {}
     for mode in ("ground", "model", False):

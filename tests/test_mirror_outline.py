@@ -256,17 +256,23 @@ def test_mirror_on_textured_ground_outlined_by_changing_edges(textured_mirror):
     assert sp[0].outline_sigma_px >= MIRROR_OUTLINE_FLOOR_PX
 
 
+def _hinted_copy(folder, sphere, tmp_path):
+    """The capture in ``folder`` (its photos linked into ``tmp_path``) with one pixel hint, 3 px
+    off ``sphere``'s true centre and without a radius, loaded."""
+    doc = json.loads((folder / "capture.json").read_text())
+    doc["spheres"] = [{"center_px": [sphere["center_px"][0] + 3, sphere["center_px"][1] - 3]}]
+    for name in doc["images"]:
+        (tmp_path / name).symlink_to(folder / name)
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    return load_capture(tmp_path)
+
+
 def test_pixel_hint_on_a_mirror_ball(textured_mirror, tmp_path):
     """A pixel hint without a radius on the same chrome ball is fitted as a mirror's outline (it
     failed with "its centre is poorly constrained by the visible outline")."""
     folder, truth = textured_mirror
     t = truth["spheres"][0]
-    doc = json.loads((folder / "capture.json").read_text())
-    doc["spheres"] = [{"center_px": [t["center_px"][0] + 3, t["center_px"][1] - 3]}]
-    for name in doc["images"]:
-        (tmp_path / name).symlink_to(folder / name)
-    (tmp_path / "capture.json").write_text(json.dumps(doc))
-    sp = find_spheres_in_capture(load_capture(tmp_path))
+    sp = find_spheres_in_capture(_hinted_copy(folder, t, tmp_path))
     assert len(sp) == 1
     assert np.hypot(*(np.asarray(sp[0].center_px) - t["center_px"])) < 1.0
 
@@ -296,12 +302,7 @@ def test_pixel_hint_on_a_chrome_ball_finds_its_silhouette(mirror_capture, tmp_pa
     (the hinted circle alone is the reflected room's dark cap, inside it)."""
     folder, truth = mirror_capture
     t = truth["spheres"][0]
-    doc = json.loads((folder / "capture.json").read_text())
-    doc["spheres"] = [{"center_px": [t["center_px"][0] + 3, t["center_px"][1] - 3]}]
-    for name in doc["images"]:
-        (tmp_path / name).symlink_to(folder / name)
-    (tmp_path / "capture.json").write_text(json.dumps(doc))
-    sp = find_spheres_in_capture(load_capture(tmp_path))
+    sp = find_spheres_in_capture(_hinted_copy(folder, t, tmp_path))
     assert len(sp) == 1
     assert np.hypot(*(np.asarray(sp[0].center_px) - t["center_px"])) < 1.0
     assert sp[0].source == OUTER_SOURCE
