@@ -471,8 +471,8 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     up : (3,) float
     bounce_ratio : list of (float or None), optional
         Per sphere, the calibrated ground ratio (:func:`ffls.spheres.estimate.calibrate_bounce`):
-        the bounce is then imposed (``c = rho a max(l_z, 0)``) instead of fitted. None (or a None
-        entry): free.
+        the bounce is then imposed (``c = rho a max(l_z, 0)``) instead of fitted in the spheres'
+        own fits (the joint near fit fits it: :func:`_near_terms`). None (or a None entry): free.
     values : list of SphereValues, optional
         :func:`ffls.spheres.samples.sphere_values` of the photo, instead of ``image``.
     start : list, optional
