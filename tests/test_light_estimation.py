@@ -851,3 +851,16 @@ def test_first_pass_flag_out_of_range_is_one_line(value, tmp_path, capsys):
     assert main(["lights", str(tmp_path), "--first-pass", value]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--first-pass" in err, err
+
+
+def test_near_joint_fit_frees_a_calibrated_bounce(samples):
+    """A ground ratio imposed on the spheres' own fits (the capture's calibration, read from
+    distant-light fits: too low under a near light) does not bias the joint near fit, which fits
+    each sphere's bounce itself: the light is where a free bounce puts it."""
+    S = SCENE_CENTER + 2.0 * light(20, -60)
+    v = sphere_values(render(position=S), samples)
+    free = estimate_photo(None, samples, SCENE_CENTER, values=v)
+    low = estimate_photo(None, samples, SCENE_CENTER, values=v, bounce_ratio=[0.15] * len(samples))
+    assert free.model == "near" and low.model == "near"
+    assert np.linalg.norm(low.position - free.position) < 0.1
+    assert np.degrees(angle_between(low.direction, S - SCENE_CENTER)) < 0.3

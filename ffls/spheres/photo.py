@@ -423,11 +423,17 @@ def _near_ground(s: SphereSamples, position: np.ndarray, up: np.ndarray) -> np.n
 
 
 def _near_terms(fits: list[LambertFit]) -> list[tuple]:
-    """Per sphere, the joint fit's shading terms of its own fit's model: (ambient, bounce)."""
+    """Per sphere, the joint fit's shading terms of its own fit's model: (ambient, bounce).
+
+    A sphere whose fit imposed the capture's calibrated ground ratio gets a free (non-negative)
+    bounce here: that ratio is read from the spheres' distant-light fits, which under a near
+    light put it too low (0.24-0.25 for a ground of albedo 0.3), and imposed in the joint fit it
+    pulls the light low and out of its cone (docs/spheres.md, "The bounce under a near light:
+    free in the joint fit")."""
     terms = []
     for f in fits:
         if f.bounce_ratio is not None:
-            terms.append((f.model == "fixed_ambient", float(f.bounce_ratio)))
+            terms.append((f.model == "fixed_ambient", True))
         else:
             terms.append((f.model != "plain", f.model == "bounce"))
     return terms
@@ -465,8 +471,8 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     up : (3,) float
     bounce_ratio : list of (float or None), optional
         Per sphere, the calibrated ground ratio (:func:`ffls.spheres.estimate.calibrate_bounce`):
-        the bounce is then imposed (``c = rho a max(l_z, 0)``) instead of fitted. None (or a None
-        entry): free.
+        the bounce is then imposed (``c = rho a max(l_z, 0)``) instead of fitted in the spheres'
+        own fits (the joint near fit fits it: :func:`_near_terms`). None (or a None entry): free.
     values : list of SphereValues, optional
         :func:`ffls.spheres.samples.sphere_values` of the photo, instead of ``image``.
     start : list, optional
