@@ -61,7 +61,8 @@ def true_samples(cap, truth):
     return out, idx, (H, W)
 
 
-def measure(folder: str, mask: bool = False) -> dict:
+def measure(folder: str, mask: bool = False, kappa_imposed: float | None = None,
+            hidden_ratio: float | None = None) -> dict:
     cap = load_capture(folder)
     truth = json.loads((Path(folder) / "truth.json").read_text())
     if truth.get("positions"):
@@ -124,6 +125,7 @@ def measure(folder: str, mask: bool = False) -> dict:
             if f.status == "ok" and f.model == "bounce" and f.bounce > 0:
                 c.append(f.bounce)
         kappa = float(np.median(c)) if c else 0.0
+        kappa = kappa if kappa_imposed is None else kappa_imposed
         r = []
         for row in fits:
             v, _, _, _, (bs, hid, lref) = row[k]
@@ -131,6 +133,7 @@ def measure(folder: str, mask: bool = False) -> dict:
             if f.status == "ok" and np.isfinite(f.ground_ratio):
                 r.append(f.ground_ratio)
         rho.append(float(np.clip(np.median(r), 0.0, 1.0)) if r else 0.0)
+        rho[2] = rho[2] if hidden_ratio is None else hidden_ratio
         ratios.append(rho)
         kappas.append(kappa)
         for i, row in enumerate(fits):
@@ -161,12 +164,16 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("captures", nargs="+")
     ap.add_argument("--out")
+    ap.add_argument("--albedo", type=float, help="impose this sphere albedo (kappa) in the two terms (e.g. the "
+                    "truth's, to tell its calibration's error from the model's)")
+    ap.add_argument("--hidden-ratio", type=float, help="impose this hidden ground ratio in the two terms (e.g. "
+                    "the truth's ground albedo)")
     ap.add_argument("--mask", action="store_true", help="take out of each sphere's ground the seen points that "
                     "are not shaded as the ground plane (ffls.spheres.ground.not_ground, under the true lights)")
     args = ap.parse_args(argv)
     rows = []
     for c in args.captures:
-        r = measure(c, args.mask)
+        r = measure(c, args.mask, args.albedo, args.hidden_ratio)
         rows.append(r)
         print(f"{c}: spheres {r['spheres']}, seen directions {r['seen_directions']}, masked {r['masked']}, ground ratios "
               f"(uniform, observed, two terms' hidden) {[[round(x, 3) for x in p] for p in r['ground_ratios']]}, "
