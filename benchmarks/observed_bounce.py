@@ -36,7 +36,7 @@ import numpy as np
 from ffls.io.capture import load_capture
 from ffls.radiance.photos import read_photo
 from ffls.spheres.ground import (ground_radiance, ground_views, hidden_form_factor, observed_bounce,
-                                 own_shadow_mask, seen_bounce)
+                                 mask_view, not_ground, own_shadow_mask, seen_bounce)
 from ffls.spheres.lambert import fit_lambert, shadowed_ground_bounce
 from ffls.spheres.samples import sphere_samples, sphere_samples_orthographic, sphere_values
 
@@ -61,7 +61,8 @@ def true_samples(cap, truth):
     return out, idx, (H, W)
 
 
-def measure(folder: str) -> dict:
+def measure(folder: str, mask: bool = False, kappa_imposed: float | None = None,
+            hidden_ratio: float | None = None) -> dict:
     cap = load_capture(folder)
     truth = json.loads((Path(folder) / "truth.json").read_text())
     if truth.get("positions"):
@@ -71,6 +72,16 @@ def measure(folder: str) -> dict:
     samples, idx, shape = true_samples(cap, truth)
     views = ground_views(samples, shape, cap.camera_model, cap.K, cap.dist, cap.world_from_camera)
     dirs = np.asarray(truth["directions"], dtype=np.float64)
+    masked = [0] * len(views)
+    if mask:  # the seen points that the photos show are not the ground (under the true lights)
+        photos = [[ground_radiance(gv, img) for gv in views]
+                  for img in (read_photo(cap, i).linear for i in range(len(cap.image_names)))]
+        for k, gv in enumerate(views):
+            R = np.stack([row[k] for row in photos])
+            lit = np.stack([~own_shadow_mask(gv, d)[:gv.n_seen] for d in dirs])
+            keep = ~not_ground(R, lit)
+            views[k] = mask_view(gv, keep)
+            masked[k] = 0 if views[k] is gv else int((~keep).sum())
     fits = []  # per photo, per sphere: (values, uniform free fit, observed form factor, observed free fit)
     for i in range(len(cap.image_names)):
         img = read_photo(cap, i).linear
@@ -114,6 +125,7 @@ def measure(folder: str) -> dict:
             if f.status == "ok" and f.model == "bounce" and f.bounce > 0:
                 c.append(f.bounce)
         kappa = float(np.median(c)) if c else 0.0
+        kappa = kappa if kappa_imposed is None else kappa_imposed
         r = []
         for row in fits:
             v, _, _, _, (bs, hid, lref) = row[k]
@@ -121,6 +133,7 @@ def measure(folder: str) -> dict:
             if f.status == "ok" and np.isfinite(f.ground_ratio):
                 r.append(f.ground_ratio)
         rho.append(float(np.clip(np.median(r), 0.0, 1.0)) if r else 0.0)
+        rho[2] = rho[2] if hidden_ratio is None else hidden_ratio
         ratios.append(rho)
         kappas.append(kappa)
         for i, row in enumerate(fits):
@@ -133,7 +146,7 @@ def measure(folder: str) -> dict:
                 fit_lambert(s.normals, v.grey, v.valid, g=B, bounce_ratio=rho[1], own_shadow=False, **kw))
             add("two terms calibrated", k, i, fit_lambert(s.normals, v.grey - kappa * bs, v.valid, g=hid,
                                                           bounce_ratio=rho[2], own_shadow=False, **kw))
-    out = {"capture": str(folder), "spheres": idx, "seen_directions": [v.n_seen for v in views],
+    out = {"capture": str(folder), "spheres": idx, "seen_directions": [v.n_seen for v in views], "masked": masked,
            "ground_ratios": ratios, "kappas": kappas}
     # only the fits that every mode accepts (a mode's extra acceptances, e.g. a sphere in the
     # object's shadow, would not be compared)
@@ -151,12 +164,18 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("captures", nargs="+")
     ap.add_argument("--out")
+    ap.add_argument("--albedo", type=float, help="impose this sphere albedo (kappa) in the two terms (e.g. the "
+                    "truth's, to tell its calibration's error from the model's)")
+    ap.add_argument("--hidden-ratio", type=float, help="impose this hidden ground ratio in the two terms (e.g. "
+                    "the truth's ground albedo)")
+    ap.add_argument("--mask", action="store_true", help="take out of each sphere's ground the seen points that "
+                    "are not shaded as the ground plane (ffls.spheres.ground.not_ground, under the true lights)")
     args = ap.parse_args(argv)
     rows = []
     for c in args.captures:
-        r = measure(c)
+        r = measure(c, args.mask, args.albedo, args.hidden_ratio)
         rows.append(r)
-        print(f"{c}: spheres {r['spheres']}, seen directions {r['seen_directions']}, ground ratios "
+        print(f"{c}: spheres {r['spheres']}, seen directions {r['seen_directions']}, masked {r['masked']}, ground ratios "
               f"(uniform, observed, two terms' hidden) {[[round(x, 3) for x in p] for p in r['ground_ratios']]}, "
               f"albedos (two terms) {[round(x, 3) for x in r['kappas']]}, "
               f"{r['compared']} fits compared")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ffls.conventions import angle_between, spherical_to_direction
-from ffls.spheres.ground import ground_views, observed_bounce
+from ffls.spheres.ground import ground_radiance, ground_views, observed_bounce
 from ffls.spheres.lambert import fit_lambert, shadowed_ground_bounce
 from ffls.spheres.samples import sphere_samples, sphere_values
 
@@ -55,8 +55,28 @@ def _ground_radiance(X, light, dark_side=True):
     return L
 
 
-def _render(light, samples, K, M, dark_side=True, n_rays=24):
-    """The photo (RES, RES) float: ground pixels, and the ball's pixels (direct + bounce)."""
+#: An object standing beside the ball, as the camera sees it over the ground: the pixels whose ground
+#: point lies within these x and |y| show its surface, normals turning about the vertical (a column).
+OBJECT_X, OBJECT_Y, RHO_O = (1.8 * R, 3.2 * R), 1.2 * R, 0.5
+
+
+def _object_radiance(X, light):
+    """The object's radiance where the camera sees it at ground points X (n, 3): its own normals'
+    shading (Lambertian, ``RHO_O``), not the ground's."""
+    a = np.pi * (X[:, 1] / OBJECT_Y) * 0.8
+    n = np.stack([-np.cos(a), np.sin(a), np.full(len(X), 0.3)], axis=1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return RHO_O / np.pi * np.maximum(n @ light, 0.0)
+
+
+def _in_object(X):
+    return (X[:, 0] > OBJECT_X[0]) & (X[:, 0] < OBJECT_X[1]) & (np.abs(X[:, 1]) < OBJECT_Y)
+
+
+def _render(light, samples, K, M, dark_side=True, n_rays=24, seen_object=False):
+    """The photo (RES, RES) float: ground pixels, and the ball's pixels (direct + bounce).
+    ``seen_object``: the object of :func:`_object_radiance` stands in front of part of the ground
+    (in the image only: the ball's bounce is the ground's)."""
     img = np.zeros((RES, RES))
     yy, xx = np.mgrid[0:RES, 0:RES]
     d = np.stack([(xx.ravel() - K[0, 2]) / FOCAL, (yy.ravel() - K[1, 2]) / FOCAL, np.ones(RES * RES)], axis=1)
@@ -66,6 +86,9 @@ def _render(light, samples, K, M, dark_side=True, n_rays=24):
     X = o + d * t[:, None]
     ok = t > 0
     img.ravel()[ok] = _ground_radiance(X[ok], light, dark_side)
+    if seen_object:
+        on = np.flatnonzero(ok)[_in_object(X[ok])]
+        img.ravel()[on] = _object_radiance(X[on], light)
     # the ball: direct light and, from each surface point, the bounce of the ground below
     n = samples.normals
     u = (np.arange(n_rays) + 0.5) / n_rays
@@ -99,20 +122,21 @@ def rig():
 _PHOTOS = {}
 
 
-def _photo_values(rig, light_index, dark_side):
+def _photo_values(rig, light_index, dark_side, seen_object=False):
     """The ball's values in the photo under ``LIGHTS[light_index]`` (rendered once per module)."""
-    key = (light_index, dark_side)
+    key = (light_index, dark_side, seen_object)
     if key not in _PHOTOS:
         s, K, M = rig
-        _PHOTOS[key] = sphere_values(_render(LIGHTS[light_index], s, K, M, dark_side)[..., None], [s])
+        _PHOTOS[key] = sphere_values(_render(LIGHTS[light_index], s, K, M, dark_side, seen_object=seen_object)[..., None],
+                                     [s])
     return _PHOTOS[key]
 
 
-def _errors(rig, dark_side):
+def _errors(rig, dark_side, seen_object=False, values=None):
     s, K, M = rig
     out = {"uniform": [], "observed": []}
     for i, light in enumerate(LIGHTS):
-        v = _photo_values(rig, i, dark_side)[0]
+        v = _photo_values(rig, i, dark_side, seen_object)[0] if values is None else values[i][0]
         assert v.ground is not None and v.ground.size == s.ground_view.n_seen
         kw = dict(bounce_ratio=RHO_G, g=s.ground)
         fu = fit_lambert(s.normals, v.grey, v.valid, **kw)
@@ -224,3 +248,54 @@ def test_two_terms_seen_bounce_and_hidden_form_factor(rig):
         f = fit_lambert(s.normals, v.grey - RHO_S * bs, v.valid, g=hid, bounce_ratio=RHO_G, own_shadow=False)
         errors.append(np.degrees(angle_between(f.direction, light)))
     assert np.median(errors) < 0.15 and max(errors) < 0.25, errors  # (uniform model: 0.53 / 0.99)
+
+
+def test_not_ground_flags_what_is_not_shaded_as_the_plane():
+    """A textured, vignetted ground under 20 distant lights, each point in a cast shadow in up to
+    40% of the photos and in the sphere's own shadow in some, with 2% noise: no ground point is
+    flagged; the points of a surface turning about the vertical (an object) are."""
+    from ffls.spheres.ground import not_ground
+
+    rng = np.random.default_rng(3)
+    n, p, q = 20, 300, 40
+    lights = np.stack([spherical_to_direction(np.radians(th), np.radians(ph))
+                       for th, ph in zip(rng.uniform(10, 60, n), rng.uniform(-180, 180, n))])
+    albedo = rng.uniform(0.05, 0.9, p) * rng.uniform(0.6, 1.0, p)  # texture times vignetting
+    R = albedo[None, :] * lights[:, 2:3] * rng.uniform(0.2, 1.0, n)[:, None]  # the lamps' powers
+    R[rng.uniform(size=(n, p)) < rng.uniform(0.0, 0.4, p)] *= 0.1  # cast shadows
+    a = rng.uniform(-np.pi, np.pi, q)
+    normals = np.stack([np.cos(a), np.sin(a), rng.uniform(0.0, 0.6, q)], axis=1)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    R[:, -q:] = rng.uniform(0.2, 0.9, q) * np.maximum(lights @ normals.T, 0.0) * rng.uniform(0.2, 1.0, n)[:, None]
+    R *= rng.normal(1.0, 0.02, R.shape)
+    lit = rng.uniform(size=(n, p)) > 0.2
+    flagged = not_ground(R, lit)
+    assert not flagged[:-q].any()
+    assert flagged[-q:].mean() > 0.9, flagged[-q:].mean()
+    assert not not_ground(R[:2], lit[:2]).any()  # too few photos: nothing is flagged
+
+
+def test_the_object_seen_over_the_ground_is_masked(rig):
+    """An object seen in front of the ball's ground (its own shading) is read as ground without the
+    mask, which tilts the observed bounce's fits; ``mask_object_from_ground`` takes it out (its
+    points then taken as their seen neighbours') and the fits are back to the plain ground's."""
+    from ffls.spheres.estimate import mask_object_from_ground
+
+    s, K, M = rig
+    values = [_photo_values(rig, i, False, seen_object=True) for i in range(len(LIGHTS))]
+    (masked_s,), masked_values, counts = mask_object_from_ground([s], values, list(enumerate(LIGHTS)))
+    gv = s.ground_view
+    X = gv.offsets[:gv.n_seen] * R + CENTER
+    obj = _in_object(X)
+    assert counts[0] >= 0.75 * obj.sum() and counts[0] <= obj.sum() + 0.05 * gv.n_seen, (counts, obj.sum())
+    # the masked view reads, in a photo, what the values were cut to
+    img = _render(LIGHTS[0], s, K, M, False, n_rays=2, seen_object=True)
+    np.testing.assert_allclose(ground_radiance(masked_s.ground_view, img), masked_values[0][0].ground, rtol=1e-5)
+    plain = _errors(rig, False)["observed"]
+    seen = _errors(rig, False, seen_object=True)["observed"]
+    fixed = _errors((masked_s, K, M), False, values=masked_values)["observed"]
+    assert np.median(seen) > 2.0 * np.median(plain) + 0.05, (seen, plain)
+    assert np.median(fixed) < 0.7 * np.median(seen) and fixed.max() < 0.8 * seen.max(), (fixed, seen, plain)
+    # nothing to mask on the plain ground
+    assert mask_object_from_ground([s], [_photo_values(rig, i, False) for i in range(len(LIGHTS))],
+                                   list(enumerate(LIGHTS)))[2] == [0]

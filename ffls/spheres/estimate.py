@@ -51,7 +51,8 @@ from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
                                    outline_holding_highlights, refine_view_limb)
-from ffls.spheres.ground import ground_pixels, ground_views, reference_radiance
+from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mask_view, not_ground, own_shadow_mask,
+                                 reference_radiance)
 from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
                                estimate_photo)
@@ -68,6 +69,7 @@ __all__ = [
     "capture_samples",
     "observed_ground_samples",
     "calibrate_ground_albedo",
+    "mask_object_from_ground",
     "sphere_views",
     "sphere_kinds",
     "calibrate_bounce",
@@ -250,6 +252,54 @@ def observed_ground_samples(capture, samples: list[SphereSamples], shape: tuple[
     views = ground_views(samples, shape, getattr(capture, "camera_model", "pinhole"), capture.K, capture.dist,
                          capture.world_from_camera)
     return [replace(s, ground_view=v) for s, v in zip(samples, views)]
+
+
+def mask_object_from_ground(samples: list[SphereSamples], values: list,
+                            lights: list) -> tuple[list[SphereSamples], list, list[int]]:
+    """Each sphere's ground view without the seen points that the photos show are not the ground
+    plane (:func:`ffls.spheres.ground.not_ground`: the object, or another one, within reach), and
+    every photo's ground values cut to match (``bounce='observed'``).
+
+    Parameters
+    ----------
+    samples : list of SphereSamples
+    values : list (photos) of lists (spheres) of SphereValues
+        Every photo's values, as read (:class:`~ffls.spheres.samples.GroundedValues` where the
+        sphere has a ground view).
+    lights : list of (photo index, (3,) float)
+        Photos with a light found (the first pass's), for the sphere's own shadow on its ground.
+
+    Returns
+    -------
+    samples, values, masked
+        ``masked`` per sphere: how many seen points were taken out (0: the view is unchanged).
+    """
+    out_samples, keeps, masked = list(samples), [None] * len(samples), [0] * len(samples)
+    for k, s in enumerate(samples):
+        gv = s.ground_view
+        if gv is None or gv.n_seen == 0:
+            continue
+        rows, lit = [], []
+        for i, light in lights:
+            g = getattr(values[i][k], "ground", None)
+            if g is not None and len(g) == gv.n_seen:
+                rows.append(g)
+                lit.append(~own_shadow_mask(gv, light)[:gv.n_seen])
+        if len(rows) < 3:
+            continue
+        keep = ~not_ground(np.stack(rows), np.stack(lit))
+        view = mask_view(gv, keep)
+        if view is not gv:
+            out_samples[k], keeps[k], masked[k] = replace(s, ground_view=view), keep, int((~keep).sum())
+    if not any(masked):
+        return list(samples), values, masked
+
+    def cut(v, s, keep):
+        if keep is None or getattr(v, "ground", None) is None:
+            return v
+        return sphere_values_of(v.grey, v.valid, v.n_saturated, mask_radiance(s.ground_view, keep, v.ground))
+
+    return out_samples, [[cut(v, s, keep) for v, s, keep in zip(photo, samples, keeps)] for photo in values], masked
 
 
 def sphere_views(capture, spheres) -> list[SphereView]:
@@ -1403,6 +1453,11 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
     if values is None:
         values = [v for _, v in first]
     results = [r for r, _ in first if r is not None]
+    if any(s.ground_view is not None for s in samples):  # bounce 'observed': the object out of the ground
+        lights = [(i, r.direction) for i, r in zip(fitted, results) if r.status == "ok"]
+        samples, values, masked = mask_object_from_ground(samples, values, lights)
+        if any(masked):
+            results = run_fitted(values)
     kinds = sphere_kinds(materials, samples, values)
     views = [limb(v) if kd.kind == "mirror" and m != "mirror" else v for kd, m, v in zip(kinds, materials, views)]
     mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views)]

@@ -16,13 +16,16 @@ around the sphere, against the uniform model's own shadow; :func:`observed_bounc
 ground within reach (behind the sphere) as its nearest seen neighbours, the ground out of reach
 as the uniform model has it. A uniform ground then gives the uniform form factor less the own
 shadow (:func:`ffls.spheres.lambert.shadowed_ground_bounce`) back, its scale and the capture's
-ground ratio their meaning. The object is not masked (its outline is unknown):
-:data:`GROUND_REACH` keeps the ground read near the sphere.
+ground ratio their meaning. The object's outline is unknown: :data:`GROUND_REACH` keeps the
+ground read near the sphere, and :func:`not_ground` finds, from the photos, the seen points
+that are not shaded as the ground plane is (the object within reach), which :func:`mask_view`
+then reads as the ground around them (:func:`ffls.spheres.estimate.mask_object_from_ground`).
 Measured in docs/spheres.md, "The ground bounce from the photograph".
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import warnings
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -30,9 +33,9 @@ from scipy.spatial import cKDTree
 from ffls.camera.projection import project_points
 from ffls.conventions import UP
 
-__all__ = ["GROUND_DIRECTIONS", "GROUND_MARGIN_PX", "GROUND_REACH", "GroundView", "ground_pixels", "ground_radiance",
-           "ground_views", "hidden_form_factor", "observed_bounce", "own_shadow_mask", "reference_radiance",
-           "seen_bounce"]
+__all__ = ["GROUND_DIRECTIONS", "GROUND_MARGIN_PX", "GROUND_REACH", "GROUND_SHADING_RATIO", "GroundView",
+           "ground_pixels", "ground_radiance", "ground_views", "hidden_form_factor", "mask_radiance", "mask_view",
+           "not_ground", "observed_bounce", "own_shadow_mask", "reference_radiance", "seen_bounce"]
 
 #: Directions of the lower hemisphere at which each sphere's ground is read (equal solid angles).
 GROUND_DIRECTIONS = 1024
@@ -47,6 +50,15 @@ FILL_NEIGHBOURS = 4
 #: Margin around each sphere's outline, in pixels, within which the ground is not read (the
 #: outline's pixels mix sphere and ground).
 GROUND_MARGIN_PX = 2.0
+#: A seen ground point is not the ground (:func:`not_ground`) where, in some well-exposed photo,
+#: its radiance over the ground's (the median of the sphere's seen ground in that photo) exceeds
+#: its median over the photos by more than this factor: under distant lights a plane's points
+#: share one shading (a point's ratio is its albedo's, lower only in a cast shadow), while a
+#: surface that is not horizontal (the object) is shaded by its own normal.
+GROUND_SHADING_RATIO = 1.3
+#: Photos whose ground (the median of the seen ground) is darker than this fraction of the
+#: brightest photo's are not used by :func:`not_ground` (their ratios are noise).
+GROUND_MASK_EXPOSURE = 0.1
 
 
 def _lower_directions(n: int) -> np.ndarray:
@@ -65,10 +77,11 @@ class GroundView:
 
     Attributes
     ----------
-    rows, cols : (p, 4) int
-        The four pixels of each seen direction's bilinear read.
-    weights : (p, 4) float
-        Their bilinear weights.
+    rows, cols : (p, r) int
+        The pixels of each seen direction's read: its bilinear four (``r = 4``), or, after
+        :func:`mask_view`, its neighbours' (``r = 4 FILL_NEIGHBOURS``, unused columns weigh 0).
+    weights : (p, r) float
+        Their weights.
     seen : (D,) bool
         Which of the directions are read (in the frame, not behind a sphere, within reach).
     offsets : (p + h, 3) float
@@ -241,6 +254,118 @@ def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, wo
                                 areas=d_omega / np.concatenate([cos_down[ok], cos_down[hidden]]) ** 3,
                                 fill_index=fill_index, fill_weights=fill_weights, up=up))
     return views
+
+
+def _upper_quartile(a: np.ndarray, axis: int) -> np.ndarray:
+    """The 75th percentile along ``axis`` of the finite values (NaN where none)."""
+    with warnings.catch_warnings():  # (an all-NaN slice gives NaN, and says so)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanpercentile(a, 75, axis=axis)
+
+
+def not_ground(radiances: np.ndarray, lit: np.ndarray | None = None, ratio: float = GROUND_SHADING_RATIO,
+               exposure: float = GROUND_MASK_EXPOSURE) -> np.ndarray:
+    """(p,) bool: the seen ground points that are not a Lambertian plane's, from their radiance
+    over the photos (the object standing within the sphere's reach, another object, a highlight).
+
+    Under a distant light every point of a horizontal Lambertian plane has the same shading, so
+    its radiance over the plane's (the median of the lit points in that photo) is its albedo's
+    ratio in every photo where it is lit, and lower where it is in a cast shadow. A point on a
+    surface that is not the plane follows its own normal's shading: its ratio rises well above
+    its usual one in the photos whose light faces it. A point is flagged where its second-highest
+    ratio over the photos where it is outside the sphere's own shadow (one photo's noise or glint
+    is not enough) exceeds ``ratio`` times their upper quartile (a point in another cast shadow
+    in up to three quarters of the photos keeps its lit ratio there). No outline of the object is
+    needed, and the test holds through vignetting and a textured ground (fixed per pixel).
+
+    Parameters
+    ----------
+    radiances : (n, p) float
+        :func:`ground_radiance` of ``n`` photos (rows with a non-finite value are skipped).
+    lit : (n, p) bool, optional
+        Which points are outside the sphere's own shadow in each photo
+        (``~``:func:`own_shadow_mask` under its light); None: all.
+    ratio : float
+        :data:`GROUND_SHADING_RATIO`.
+    exposure : float
+        :data:`GROUND_MASK_EXPOSURE`.
+
+    Returns
+    -------
+    (p,) bool
+        True: not the ground. False where fewer than 3 of the photos are usable for the point.
+    """
+    R = np.asarray(radiances, dtype=np.float64)
+    if R.ndim != 2 or R.size == 0:
+        return np.zeros(R.shape[-1] if R.ndim == 2 else 0, bool)
+    lit = np.ones(R.shape, bool) if lit is None else np.asarray(lit, bool).copy()
+    lit &= np.isfinite(R)
+    # rank one, robust to shadows (low) and to the object (a few points): each photo's level and
+    # each point's albedo, both as upper quartiles of the other's ratios
+    level = np.array([np.percentile(r[m], 75) if m.sum() >= 3 else np.nan for r, m in zip(R, lit)])
+    good = np.isfinite(level) & (level > 0)
+    good &= level > exposure * (level[good].max() if good.any() else 0.0)
+    R, lit = np.maximum(R[good], 0.0), lit[good]
+    usable = lit.sum(axis=0) >= 3
+    out = np.zeros(usable.shape, bool)
+    if len(R) < 3 or not usable.any():
+        return out
+    R, lit, level = R[:, usable], lit[:, usable], level[good]
+    for _ in range(3):
+        albedo = _upper_quartile(np.where(lit, R / level[:, None], np.nan), axis=0)
+        level = _upper_quartile(np.where(lit, R / np.maximum(albedo, 1e-30)[None, :], np.nan), axis=1)
+        level = np.where(np.isfinite(level) & (level > 0), level, np.inf)
+    q = np.where(lit, R / (level[:, None] * np.maximum(albedo, 1e-30)[None, :]), -np.inf)
+    high = -np.sort(-q, axis=0)[1]  # the second highest
+    out[usable] = high > ratio
+    return out
+
+
+def _neighbour_fill(view: GroundView, keep: np.ndarray):
+    """(gone (g,), src (g, k), w (g, k)): the seen points not kept, their nearest kept seen points
+    and inverse-distance weights; None where all are kept or too few are."""
+    keep = np.asarray(keep, bool)
+    if keep.all() or keep.sum() < FILL_NEIGHBOURS:
+        return None
+    kept, gone = np.flatnonzero(keep), np.flatnonzero(~keep)
+    seen_off = view.offsets[:view.n_seen]
+    dist_, near = cKDTree(seen_off[kept]).query(seen_off[gone], k=FILL_NEIGHBOURS)
+    w = 1.0 / np.maximum(dist_, 1e-9)
+    return gone, kept[near], w / w.sum(axis=1, keepdims=True)
+
+
+def mask_radiance(view: GroundView, keep: np.ndarray, radiance: np.ndarray) -> np.ndarray:
+    """(p,) float: a photo's :func:`ground_radiance` under the unmasked ``view`` as the masked view
+    (:func:`mask_view` of ``view`` and ``keep``) reads it: the points not kept take their
+    neighbours' radiance."""
+    out = np.array(radiance, dtype=np.float64)
+    fill = _neighbour_fill(view, keep)
+    if fill is not None:
+        gone, src, w = fill
+        out[gone] = (out[src] * w).sum(axis=1)
+    return out
+
+
+def mask_view(view: GroundView, keep: np.ndarray) -> GroundView:
+    """The view with the seen points not in ``keep`` (p,) bool read elsewhere: each is given the
+    radiance of its :data:`FILL_NEIGHBOURS` nearest kept seen points along the ground (inverse
+    distance; their pixels and bilinear weights, scaled), in every photo. The ground an object
+    stands on (or that it hides from the camera) then reads as the ground around it, its shadows
+    included. The view itself where fewer than :data:`FILL_NEIGHBOURS` points are kept."""
+    fill = _neighbour_fill(view, keep)
+    if fill is None:
+        return view
+    p = view.n_seen
+    gone, src, w = fill
+    width = 4 * FILL_NEIGHBOURS
+    rows = np.repeat(view.rows[:, :1], width, axis=1)  # (a kept point's extra columns weigh 0)
+    cols = np.repeat(view.cols[:, :1], width, axis=1)
+    weights = np.zeros((p, width))
+    rows[:, :4], cols[:, :4], weights[:, :4] = view.rows, view.cols, view.weights
+    rows[gone] = view.rows[src].reshape(len(gone), width)
+    cols[gone] = view.cols[src].reshape(len(gone), width)
+    weights[gone] = (view.weights[src] * w[:, :, None]).reshape(len(gone), width)
+    return replace(view, rows=rows, cols=cols, weights=weights, _kernels={})
 
 
 def ground_pixels(views: list[GroundView]) -> tuple[np.ndarray, np.ndarray]:
