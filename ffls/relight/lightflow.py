@@ -569,7 +569,7 @@ def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, it
     L = np.asarray(directions, dtype=np.float64).reshape(k, 3)
     y = y.reshape(k, H * W, 3).transpose(1, 0, 2)  # (P, k, 3)
     lum = y @ LUMINANCE.astype(np.float32)  # (P, k)
-    LL = np.einsum("ki,kj->kij", L, L).reshape(k, 9)  # (k, 9): the normal equations by one matmul
+    LL = np.einsum("ki,kj->kij", L, L).reshape(k, 9)  # (k, 9)
     if prior is None:
         w0 = np.ones(lum.shape, dtype=np.float64)
     else:
@@ -580,15 +580,14 @@ def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, it
     ridge = 1e-9 * np.eye(3)
     b = None
     for _ in range(max(1, int(iterations))):
-        M = (m @ LL).reshape(-1, 3, 3) + ridge
-        # sum_k m_pk L_ki y_pkc as one (3, k) x (k, P * 3) product
-        my = (m.T[:, :, None] * y.transpose(1, 0, 2)).reshape(k, -1)
-        rhs = (L.T @ my).reshape(3, -1, 3).transpose(1, 0, 2)  # (P, i, c)
+        # Two-operand contractions, each pixel summed on its own (the same model in any chunk of pixels)
+        M = np.einsum("pk,kn->pn", m, LL).reshape(-1, 3, 3) + ridge
+        rhs = np.einsum("ki,pkc->pic", L, m[:, :, None] * y)
         ok = (m > 0).sum(1) >= 3
         b = np.full((H * W, 3, 3), np.nan)
         if ok.any():
             b[ok] = np.linalg.solve(M[ok], rhs[ok]).transpose(0, 2, 1)  # (P, channel, 3)
-        pred = (LUMINANCE @ np.nan_to_num(b)) @ L.T  # (P, k): the luminance of the model
+        pred = np.einsum("pi,ki->pk", np.einsum("c,pci->pi", LUMINANCE, np.nan_to_num(b)), L)  # (P, k)
         new = ((lum >= shadow_level * pred) | (pred <= 0)) * w0
         if np.array_equal(new, m):
             break

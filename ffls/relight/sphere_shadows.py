@@ -130,6 +130,8 @@ def hidden_photos(points, centres, radius, directions=None, positions=None, marg
     out = np.zeros((n, H, W), dtype=bool)
     valid = np.all(np.isfinite(P), axis=-1)
     pts = P[valid]
+    # Per sphere, the points' offsets and squared distances, shared by every photo.
+    offsets = [(c - pts, np.einsum("ij,ij->i", c - pts, c - pts)) for c in C]
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dilate_px + 1, 2 * dilate_px + 1)) if dilate_px > 0 else None
     for i in range(n):
         near = L is not None and np.all(np.isfinite(L[i]))
@@ -144,11 +146,15 @@ def hidden_photos(points, centres, radius, directions=None, positions=None, marg
             reach = np.full(pts.shape[0], np.inf)
         tan_m = np.tan(np.radians(margin[i]))
         hit = np.zeros(pts.shape[0], dtype=bool)
-        for c in C:
-            v = c - pts
+        for v, vv in offsets:
             along = np.einsum("ij,ij->i", v, d)
-            off = np.linalg.norm(v - along[:, None] * d, axis=-1)
-            hit |= (along > 0) & (along < reach) & (off < r + along * tan_m)
+            cone = r + along * tan_m
+            # The distance from the ray by |v|^2 - along^2 picks the candidates (with a margin for its
+            # rounding); the exact test below decides them, as for every point before.
+            near_ray = vv - along ** 2 < (1 + 1e-6) * cone ** 2 + 1e-12 * vv
+            k = np.flatnonzero((along > 0) & (along < reach) & near_ray)
+            off = np.linalg.norm(v[k] - along[k, None] * d[k], axis=-1)
+            hit[k] |= off < cone[k]
         m = np.zeros((H, W), dtype=bool)
         m[valid] = hit
         if kernel is not None and m.any():
