@@ -580,14 +580,14 @@ def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, it
     ridge = 1e-9 * np.eye(3)
     b = None
     for _ in range(max(1, int(iterations))):
-        # Two-operand contractions, each pixel summed on its own (the same model in any chunk of pixels)
-        M = np.einsum("pk,kn->pn", m, LL).reshape(-1, 3, 3) + ridge
-        rhs = np.einsum("ki,pkc->pic", L, m[:, :, None] * y)
+        # Stacked products, each pixel on its own (the same model in any chunk of pixels)
+        M = np.matmul(m[:, None, :], LL)[:, 0].reshape(-1, 3, 3) + ridge
+        rhs = np.matmul(L.T, m[:, :, None] * y)  # (P, i, c)
         ok = (m > 0).sum(1) >= 3
         b = np.full((H * W, 3, 3), np.nan)
         if ok.any():
             b[ok] = np.linalg.solve(M[ok], rhs[ok]).transpose(0, 2, 1)  # (P, channel, 3)
-        pred = np.einsum("pi,ki->pk", np.einsum("c,pci->pi", LUMINANCE, np.nan_to_num(b)), L)  # (P, k)
+        pred = np.matmul(np.matmul(LUMINANCE, np.nan_to_num(b))[:, None, :], L.T)[:, 0]  # (P, k)
         new = ((lum >= shadow_level * pred) | (pred <= 0)) * w0
         if np.array_equal(new, m):
             break

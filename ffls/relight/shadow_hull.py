@@ -360,7 +360,8 @@ def _ground_pixels_along(X, direction, K, M, dist) -> np.ndarray:
     K = np.asarray(K, dtype=np.float64).reshape(3, 3)
     if dist is not None and np.any(np.asarray(dist, dtype=np.float64)):
         return _pixels(X - (X[:, 2] / direction[2])[:, None] * direction, K, M, dist)
-    Kp = np.array([[K[0, 0], 0.0, K[0, 2]], [0.0, K[1, 1], K[1, 2]], [0.0, 0.0, 1.0]])  # as projectPoints
+    # fx, fy, cx, cy as cv2.projectPoints reads them (no skew)
+    Kp = np.array([[K[0, 0], 0.0, K[0, 2]], [0.0, K[1, 1], K[1, 2]], [0.0, 0.0, 1.0]])
     shift = np.eye(3)
     shift[:, 2] -= direction / direction[2]
     A = Kp @ M[:3, :3].T

@@ -206,6 +206,7 @@ class SphereShadowFill:
         any_hidden = np.flatnonzero(flat.any(axis=0))
         self.groups = []
         self._triangulations: dict = {}
+        self._sets: np.ndarray | None = None  # _hidden_sets(), built on first use
         #: Per flat pixel, its index in :attr:`groups` (-1: no photo hidden there).
         self.group_of = np.full(flat.shape[1], -1, dtype=np.int32)
         if any_hidden.size == 0:
@@ -247,6 +248,15 @@ class SphereShadowFill:
             self._triangulations[g] = (Barycentric(self.directions, visible, self.hemisphere)
                                        if visible.size >= 3 else None)
         return self._triangulations[g]
+
+    def _hidden_sets(self) -> np.ndarray:
+        """(groups + 1, n) bool: row g the photos hidden from group g's pixels; the last row, all
+        False, is that of the pixels with no group (:attr:`group_of` -1)."""
+        if self._sets is None:
+            self._sets = np.zeros((len(self.groups) + 1, self.n), dtype=bool)
+            for g, (hid, _, _) in enumerate(self.groups):
+                self._sets[g, hid] = True
+        return self._sets
 
     @property
     def hidden_pixels(self) -> int:
@@ -375,10 +385,9 @@ class SphereShadowFill:
         step = max(1, MODEL_CHUNK_VALUES // self.n)  # pixels per chunk: the whole ground of a large photo
         for lo in range(0, pix.size, step):
             p = pix[lo:lo + step]
-            prior = np.repeat(near, p.size, axis=1)
             groups = self.group_of[p]
-            for g in np.unique(groups[groups >= 0]):
-                prior[np.ix_(self.groups[g][0], np.flatnonzero(groups == g))] = 0.0
+            # 0 where the pixel's group has the photo hidden (a row of False for no group)
+            prior = np.where(self._hidden_sets()[groups].T, 0.0, near)
             B = flat_basis[:, p].astype(np.float32)
             b = unshadowed_fit(B[:, :, None], self.directions, prior=prior[:, :, None])[:, 0]
             model[lo:lo + step] = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
