@@ -387,6 +387,24 @@ def test_composite_turntable(cset, tmp_path, capfd):
     assert not np.array_equal(a, b)  # the scene's map turned
 
 
+def test_composite_turntable_frame_is_the_still_at_its_rotation(cset, tmp_path, capfd):
+    """A turntable reuses the fill's spheres, hull and sphere shadows (fitted once per run, they do not
+    depend on the map's rotation): its frame k is the still at rotation 360 k / n, pixel for pixel,
+    under the default fill (``auto`` -> ``ground`` under the sunrise's sun)."""
+    _, common = _fill_args(cset, tmp_path)
+    common += ["--registration", "none", "--exposure", "0"]  # a still fits its own registration, exposure
+    frames = tmp_path / "frames"
+    rc = main(common + ["--turntable", "3", "-o", str(frames)])
+    err = capfd.readouterr().err
+    assert rc == 0 and "fill auto: ground" in err, err
+    for k, deg in ((0, "0"), (1, "120")):
+        out = tmp_path / f"still{k}.exr"
+        assert main(common + ["--rotate-z", deg, "-o", str(out)]) == 0
+        still = read_image(out.with_suffix(".png"), working_space=False).pixels
+        frame = read_image(frames / f"frame_{k:04d}.png", working_space=False).pixels
+        assert np.array_equal(frame, still), k
+
+
 def test_viewer_composite_mode(cset, gl_session, tmp_path):
     """The viewer's composite mode: the background with the object and its shadow, live under rotation."""
     pytest.importorskip("imgui_bundle", reason="imgui-bundle is not installed")

@@ -267,3 +267,39 @@ def test_source_model_in_chunks_is_the_same(monkeypatch):
     monkeypatch.setattr(ss, "MODEL_CHUNK_VALUES", 7 * len(d) + 3)   # 7 pixels a chunk
     chunked = fill.source_model(np.zeros((RES, RES, 3)), src, basis, everywhere=True)
     assert np.array_equal(whole, chunked) and (whole[ground][:, 0] > 0).mean() > 0.9
+
+
+def test_hull_and_sphere_shadows_without_distortion_match_opencvs_projection():
+    """Without lens distortion the carving maps voxels to the ground's pixels by one 3 x 3 matrix per
+    light and ``project_points`` projects in NumPy (``cv2.projectPoints`` also computes a Jacobian,
+    30 times the work), and ``hidden_photos`` tests only the points near each shadow's axis exactly:
+    the same hull as through OpenCV's projection (a distortion of 1e-300 takes that path), and the
+    same sphere shadows as the direct test of every point."""
+    import cv2
+
+    from ffls.camera.projection import project_points
+
+    d = stratified_directions(150, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    cam = (pts[ground] - M[:3, 3]) @ M[:3, :3]
+    ref, _ = cv2.projectPoints(cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, np.zeros(5))
+    np.testing.assert_array_equal(project_points(cam, K), ref.reshape(-1, 2))
+    fast = ShadowHull.carve(basis, d, obj, K, M, ground=ground)
+    slow = ShadowHull.carve(basis, d, obj, K, M, ground=ground, dist=[0.0, 0.0, 0.0, 0.0, 1e-300])
+    assert fast.occupancy.any()
+    np.testing.assert_array_equal(fast.occupancy, slow.occupancy)
+    np.testing.assert_array_equal(fast.votes, slow.votes)
+    centres, r = np.array([SPHERE[0], (-0.2, 0.1, 0.05)]), SPHERE[1]
+    margin = np.linspace(0.0, 3.0, len(d))
+    got = hidden_photos(pts, centres, r, directions=d, margin_deg=margin, dilate_px=0)
+    valid = np.all(np.isfinite(pts), axis=-1)
+    for i in range(len(d)):
+        want = np.zeros(valid.sum(), dtype=bool)
+        for c in centres:
+            v = c - pts[valid]
+            along = v @ d[i]
+            off = np.linalg.norm(v - along[:, None] * d[i], axis=-1)
+            want |= (along > 0) & (off < r + along * math.tan(math.radians(margin[i])))
+        np.testing.assert_array_equal(got[i][valid], want)
+    assert got.any()

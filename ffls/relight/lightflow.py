@@ -569,7 +569,7 @@ def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, it
     L = np.asarray(directions, dtype=np.float64).reshape(k, 3)
     y = y.reshape(k, H * W, 3).transpose(1, 0, 2)  # (P, k, 3)
     lum = y @ LUMINANCE.astype(np.float32)  # (P, k)
-    LL = np.einsum("ki,kj->kij", L, L)  # (k, 3, 3)
+    LL = np.einsum("ki,kj->kij", L, L).reshape(k, 9)  # (k, 9)
     if prior is None:
         w0 = np.ones(lum.shape, dtype=np.float64)
     else:
@@ -580,13 +580,14 @@ def unshadowed_fit(photos, directions, *, shadow_level: float = SHADOW_LEVEL, it
     ridge = 1e-9 * np.eye(3)
     b = None
     for _ in range(max(1, int(iterations))):
-        M = np.einsum("pk,kij->pij", m, LL) + ridge
-        rhs = np.einsum("pk,ki,pkc->pic", m, L, y)
+        # Stacked products, each pixel on its own (the same model in any chunk of pixels)
+        M = np.matmul(m[:, None, :], LL)[:, 0].reshape(-1, 3, 3) + ridge
+        rhs = np.matmul(L.T, m[:, :, None] * y)  # (P, i, c)
         ok = (m > 0).sum(1) >= 3
         b = np.full((H * W, 3, 3), np.nan)
         if ok.any():
             b[ok] = np.linalg.solve(M[ok], rhs[ok]).transpose(0, 2, 1)  # (P, channel, 3)
-        pred = np.einsum("pci,ki->pkc", np.nan_to_num(b), L) @ LUMINANCE  # (P, k)
+        pred = np.matmul(np.matmul(LUMINANCE, np.nan_to_num(b))[:, None, :], L.T)[:, 0]  # (P, k)
         new = ((lum >= shadow_level * pred) | (pred <= 0)) * w0
         if np.array_equal(new, m):
             break

@@ -286,8 +286,7 @@ class ShadowHull:
         for i in range(d.shape[0]):
             if not d[i, 2] > 0:
                 continue
-            g = Xc - (Xc[:, 2] / d[i, 2])[:, None] * d[i]
-            q = _pixels(g, K, M, dist)
+            q = _ground_pixels_along(Xc, d[i], K, M, dist)
             vis, known = _decoded(codes[i])
             seen = _lookup(known, q)
             lit = _bilinear(vis, q) >= level
@@ -351,6 +350,26 @@ class ShadowHull:
         res[hit] = best
         out[ok] = np.clip(res, 0.0, 1.0)
         return out
+
+
+def _ground_pixels_along(X, direction, K, M, dist) -> np.ndarray:
+    """Pixels (m, 2) of the ground points (z = 0) below world points ``X`` (m, 3) along
+    ``direction`` (z > 0; NaN behind the camera). Without distortion the map from ``X`` to the
+    pixel is one 3 x 3 matrix per direction (the shift along it, then the camera's), so the
+    ground points themselves are never formed."""
+    K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    if dist is not None and np.any(np.asarray(dist, dtype=np.float64)):
+        return _pixels(X - (X[:, 2] / direction[2])[:, None] * direction, K, M, dist)
+    # fx, fy, cx, cy as cv2.projectPoints reads them (no skew)
+    Kp = np.array([[K[0, 0], 0.0, K[0, 2]], [0.0, K[1, 1], K[1, 2]], [0.0, 0.0, 1.0]])
+    shift = np.eye(3)
+    shift[:, 2] -= direction / direction[2]
+    A = Kp @ M[:3, :3].T
+    h = X @ (A @ shift).T - A @ M[:3, 3]
+    px = np.full((X.shape[0], 2), np.nan)
+    front = h[:, 2] > 1e-9
+    px[front] = h[front, :2] / h[front, 2:]
+    return px
 
 
 def _pixels(X, K, M, dist) -> np.ndarray:

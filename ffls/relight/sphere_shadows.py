@@ -130,6 +130,8 @@ def hidden_photos(points, centres, radius, directions=None, positions=None, marg
     out = np.zeros((n, H, W), dtype=bool)
     valid = np.all(np.isfinite(P), axis=-1)
     pts = P[valid]
+    # Per sphere, the points' offsets and squared distances, shared by every photo.
+    offsets = [(c - pts, np.einsum("ij,ij->i", c - pts, c - pts)) for c in C]
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dilate_px + 1, 2 * dilate_px + 1)) if dilate_px > 0 else None
     for i in range(n):
         near = L is not None and np.all(np.isfinite(L[i]))
@@ -144,11 +146,15 @@ def hidden_photos(points, centres, radius, directions=None, positions=None, marg
             reach = np.full(pts.shape[0], np.inf)
         tan_m = np.tan(np.radians(margin[i]))
         hit = np.zeros(pts.shape[0], dtype=bool)
-        for c in C:
-            v = c - pts
+        for v, vv in offsets:
             along = np.einsum("ij,ij->i", v, d)
-            off = np.linalg.norm(v - along[:, None] * d, axis=-1)
-            hit |= (along > 0) & (along < reach) & (off < r + along * tan_m)
+            cone = r + along * tan_m
+            # The distance from the ray by |v|^2 - along^2 picks the candidates (with a margin for its
+            # rounding); the exact test below decides them, as for every point before.
+            near_ray = vv - along ** 2 < (1 + 1e-6) * cone ** 2 + 1e-12 * vv
+            k = np.flatnonzero((along > 0) & (along < reach) & near_ray)
+            off = np.linalg.norm(v[k] - along[k, None] * d[k], axis=-1)
+            hit[k] |= off < cone[k]
         m = np.zeros((H, W), dtype=bool)
         m[valid] = hit
         if kernel is not None and m.any():
@@ -200,6 +206,7 @@ class SphereShadowFill:
         any_hidden = np.flatnonzero(flat.any(axis=0))
         self.groups = []
         self._triangulations: dict = {}
+        self._sets: np.ndarray | None = None  # _hidden_sets(), built on first use
         #: Per flat pixel, its index in :attr:`groups` (-1: no photo hidden there).
         self.group_of = np.full(flat.shape[1], -1, dtype=np.int32)
         if any_hidden.size == 0:
@@ -241,6 +248,15 @@ class SphereShadowFill:
             self._triangulations[g] = (Barycentric(self.directions, visible, self.hemisphere)
                                        if visible.size >= 3 else None)
         return self._triangulations[g]
+
+    def _hidden_sets(self) -> np.ndarray:
+        """(groups + 1, n) bool: row g the photos hidden from group g's pixels; the last row, all
+        False, is that of the pixels with no group (:attr:`group_of` -1)."""
+        if self._sets is None:
+            self._sets = np.zeros((len(self.groups) + 1, self.n), dtype=bool)
+            for g, (hid, _, _) in enumerate(self.groups):
+                self._sets[g, hid] = True
+        return self._sets
 
     @property
     def hidden_pixels(self) -> int:
@@ -369,10 +385,9 @@ class SphereShadowFill:
         step = max(1, MODEL_CHUNK_VALUES // self.n)  # pixels per chunk: the whole ground of a large photo
         for lo in range(0, pix.size, step):
             p = pix[lo:lo + step]
-            prior = np.repeat(near, p.size, axis=1)
             groups = self.group_of[p]
-            for g in np.unique(groups[groups >= 0]):
-                prior[np.ix_(self.groups[g][0], np.flatnonzero(groups == g))] = 0.0
+            # 0 where the pixel's group has the photo hidden (a row of False for no group)
+            prior = np.where(self._hidden_sets()[groups].T, 0.0, near)
             B = flat_basis[:, p].astype(np.float32)
             b = unshadowed_fit(B[:, :, None], self.directions, prior=prior[:, :, None])[:, 0]
             model[lo:lo + step] = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
