@@ -1905,8 +1905,8 @@ def _photo_edge_fits(fits, tensor, cam: _Camera, max_residual_px: float, edges: 
     each photo, though, its limb and the ground behind it differ (which is brighter changes), so
     the per-photo edge evidence (:func:`consistent_edge_strength`; ``held``, read once by
     :func:`find_spheres`) outlines it in full. Circles are proposed by Hough's ``HOUGH_GRADIENT_ALT`` transforms
-    on that strength (8 bit over its robust peak) and each is fitted on the
-    ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
+    on that strength (8 bit over its robust peak) and each worth a fit (:func:`_circles_to_fit`: one
+    per distinct start, none on a round outline already fitted) is fitted on the ridge points (:func:`consistent_edge_points`) near it (:func:`_fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
     with the light (``centered``, the gradient's covariance over the photos; ``changing``, read
