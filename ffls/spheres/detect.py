@@ -1880,9 +1880,10 @@ def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio
     return cands[:max_candidates]
 
 
-def _same_circle(a, b) -> bool:
-    """Whether circle ``a = (x, y, r)`` is a near-duplicate of ``b``: centre and radius within 20 % of ``a``'s radius."""
-    return bool(np.hypot(a[0] - b[0], a[1] - b[1]) <= 0.2 * a[2] and abs(a[2] - b[2]) <= 0.2 * a[2])
+def _same_circle(a, b, tol: float = 0.2) -> bool:
+    """Whether circle ``a = (x, y, r)`` is a near-duplicate of ``b``: centre and radius within ``tol``
+    (20 %) of ``a``'s radius."""
+    return bool(np.hypot(a[0] - b[0], a[1] - b[1]) <= tol * a[2] and abs(a[2] - b[2]) <= tol * a[2])
 
 
 #: Largest RMS (px) of an outline that only the photos' edges show (:func:`_photo_edge_fits`): the
@@ -1904,8 +1905,9 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
     each photo, though, its limb and the ground behind it differ (which is brighter changes), so
     the per-photo edge evidence (:func:`consistent_edge_strength`; ``held``, read once by
     :func:`find_spheres`) outlines it in full. Circles are proposed by Hough's ``HOUGH_GRADIENT_ALT`` transforms
-    on that strength (8 bit over its robust peak) and each is fitted on the
-    ridge points (:func:`consistent_edge_points`) near it (:func:`fit_on_consistent_edges`), searched
+    on that strength (8 bit over its robust peak) and each worth a fit (:func:`_circles_to_fit`: one
+    per distinct start, none on a round outline already fitted) is fitted on the ridge points
+    (:func:`consistent_edge_points`) near it (:func:`fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
     with the light (``centered``, the gradient's covariance over the photos; ``changing``, read
@@ -1947,7 +1949,8 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
         passes.append((centered, ev))
         images.append((g8, 3, min(H, W) / 2, 0.5 * sc, False))
     found = _hough_candidates_many(images)  # every pass's transforms at once
-    circles = [(k, x, y, r) for k, hc in enumerate(found) for x, y, r in hc]
+    proposed = [(k, x, y, r) for k, hc in enumerate(found) for x, y, r in hc]
+    circles = _circles_to_fit(proposed, [(*o.center_px, o.radius_px) for o in round_])
     global _photo_edge_context
     _photo_edge_context = (circles, [ev for _, ev in passes], cam)  # inherited by forked workers
     try:
@@ -1980,7 +1983,34 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
             more.append(ft)
         elif outline_quality(ft) > outline_quality(more[same[0]]):  # the better outline of the same circle
             more[same[0]] = ft
-    return more, len(circles)
+    return more, len(proposed)
+
+
+#: Circles of one photo-edge pass whose centre distance plus radius difference is at most this
+#: (px) are fitted once (:func:`_circles_to_fit`): a tenth of the 1-pixel tolerance of the search
+#: that starts each fit (:func:`_start_circle`).
+SAME_START_PX = 0.1
+
+
+def _circles_to_fit(circles, round_) -> list:
+    """The photo-edge circles ``[(pass, x, y, r)]`` worth a fit (:func:`_photo_edge_fits`), in order.
+
+    Dropped: a circle within half the near-duplicate tolerance (:func:`_same_circle`, 10 % of its
+    radius) of a round outline ``round_`` ``[(x, y, r)]`` already fitted on the max image, whose fit
+    on the sphere's own ridge would be dropped as that outline's near-duplicate (its search keeps
+    the centre within half a radius of the start; docs/spheres.md: no such fit kept on the 768 px
+    captures); and a circle within :data:`SAME_START_PX` of an earlier one of its pass, which starts
+    the same search (one fit per distinct circle).
+    """
+    out = []
+    for c in circles:
+        if any(_same_circle(c[1:], o, 0.5 * 0.2) for o in round_):
+            continue
+        if any(o[0] == c[0] and np.hypot(c[1] - o[1], c[2] - o[2]) + abs(c[3] - o[3]) <= SAME_START_PX
+               for o in out):
+            continue
+        out.append(c)
+    return out
 
 
 #: ``(circles [(pass, x, y, r)], each pass's edge evidence (:class:`ConsistentEdges`), camera)`` of the running
