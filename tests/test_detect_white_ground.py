@@ -154,11 +154,11 @@ def test_ridge_rows_bound_the_band_and_keep_the_fit():
 
 
 def test_photo_edge_circles_fitted_once_and_not_on_known_outlines():
-    """``_circles_to_fit``: of the photo-edge circles of one pass, those within ``SAME_START_PX`` of an
+    """``circles_to_fit``: of the photo-edge circles of one pass, those within ``SAME_START_PX`` of an
     earlier one are fitted once; a circle within 10 % of a round outline already fitted on the max
     image is not fitted (its fit would be dropped as that outline's near-duplicate); a circle of
     the other pass, and one just outside either tolerance, is; the order is kept."""
-    from ffls.spheres.detect import SAME_START_PX, _circles_to_fit
+    from ffls.spheres.detect import SAME_START_PX, circles_to_fit
 
     d = 0.5 * SAME_START_PX
     circles = [(0, 100.0, 100.0, 40.0), (0, 100.0 + d, 100.0, 40.0 + 0.9 * d),  # the same start twice
@@ -166,6 +166,6 @@ def test_photo_edge_circles_fitted_once_and_not_on_known_outlines():
                (0, 100.0, 100.0 + 3 * d, 40.0),  # 0.15 px away: its own search
                (0, 300.0, 200.0, 30.0), (0, 302.9, 200.0, 30.0),  # within 10 % of the known outline
                (0, 303.1, 200.0, 30.0), (0, 300.0, 200.0, 33.4)]  # just outside it
-    kept = _circles_to_fit(circles, [(300.0, 200.0, 30.0)])
+    kept = circles_to_fit(circles, [(300.0, 200.0, 30.0)])
     assert kept == [circles[0], circles[2], circles[3], circles[6], circles[7]]
-    assert _circles_to_fit(circles[:1], []) == circles[:1] and _circles_to_fit([], [(1.0, 2.0, 3.0)]) == []
+    assert circles_to_fit(circles[:1], []) == circles[:1] and circles_to_fit([], [(1.0, 2.0, 3.0)]) == []

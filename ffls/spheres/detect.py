@@ -1905,7 +1905,7 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
     each photo, though, its limb and the ground behind it differ (which is brighter changes), so
     the per-photo edge evidence (:func:`consistent_edge_strength`; ``held``, read once by
     :func:`find_spheres`) outlines it in full. Circles are proposed by Hough's ``HOUGH_GRADIENT_ALT`` transforms
-    on that strength (8 bit over its robust peak) and each worth a fit (:func:`_circles_to_fit`: one
+    on that strength (8 bit over its robust peak) and each worth a fit (:func:`circles_to_fit`: one
     per distinct start, none on a round outline already fitted) is fitted on the ridge points
     (:func:`consistent_edge_points`) near it (:func:`fit_on_consistent_edges`), searched
     again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
@@ -1950,7 +1950,7 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
         images.append((g8, 3, min(H, W) / 2, 0.5 * sc, False))
     found = _hough_candidates_many(images)  # every pass's transforms at once
     proposed = [(k, x, y, r) for k, hc in enumerate(found) for x, y, r in hc]
-    circles = _circles_to_fit(proposed, [(*o.center_px, o.radius_px) for o in round_])
+    circles = circles_to_fit(proposed, [(*o.center_px, o.radius_px) for o in round_])
     global _photo_edge_context
     _photo_edge_context = (circles, [ev for _, ev in passes], cam)  # inherited by forked workers
     try:
@@ -1987,12 +1987,12 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
 
 
 #: Circles of one photo-edge pass whose centre distance plus radius difference is at most this
-#: (px) are fitted once (:func:`_circles_to_fit`): a tenth of the 1-pixel tolerance of the search
+#: (px) are fitted once (:func:`circles_to_fit`): a tenth of the 1-pixel tolerance of the search
 #: that starts each fit (:func:`_start_circle`).
 SAME_START_PX = 0.1
 
 
-def _circles_to_fit(circles, round_) -> list:
+def circles_to_fit(circles, round_) -> list:
     """The photo-edge circles ``[(pass, x, y, r)]`` worth a fit (:func:`_photo_edge_fits`), in order.
 
     Dropped: a circle within half the near-duplicate tolerance (:func:`_same_circle`, 10 % of its
