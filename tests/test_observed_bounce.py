@@ -299,3 +299,17 @@ def test_the_object_seen_over_the_ground_is_masked(rig):
     # nothing to mask on the plain ground
     assert mask_object_from_ground([s], [_photo_values(rig, i, False) for i in range(len(LIGHTS))],
                                    list(enumerate(LIGHTS)))[2] == [0]
+
+
+def test_grounded_values_survive_pickling_to_the_workers():
+    """``GroundedValues`` go to the ``--workers`` processes by pickle: the triple and its ground come
+    back (``ffls lights --bounce observed --workers 2`` failed with BrokenProcessPool: ``__new__``
+    missing ``ground``)."""
+    import pickle
+
+    from ffls.spheres.samples import GroundedValues
+
+    v = GroundedValues(np.arange(3.0), np.ones(3, bool), 2, {"radiance": np.arange(4.0)})
+    w = pickle.loads(pickle.dumps(v))
+    assert type(w) is GroundedValues and w.n_saturated == 2 and tuple(map(len, w[:2])) == (3, 3)
+    assert np.array_equal(w.ground["radiance"], np.arange(4.0)) and np.array_equal(w.grey, v.grey)

@@ -264,6 +264,10 @@ class GroundedValues(SphereValues):
         self.ground = ground
         return self
 
+    def __getnewargs__(self):
+        # pickled to the --workers processes: the tuple's own arguments and the ground
+        return (*self, self.ground)
+
 
 def sphere_values_of(grey, valid, n_saturated, ground=None) -> SphereValues:
     """A :class:`SphereValues`, or a :class:`GroundedValues` where ``ground`` is given."""
