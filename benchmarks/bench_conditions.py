@@ -86,7 +86,7 @@ CONDITIONS = {
     "long lens (10 m, 4.8 deg)": ["--lens", "long"],
     "orthographic": ["--lens", "orthographic"],
     "calibration shot: grey + mirror, no object": ["--no-object", "--spheres", "2", "--sphere-material", "grey,mirror"],
-    # appended (the cache folders are numbered by position)
+    # appended (the cache folders are numbered by position; each records its condition: check_cached_condition)
     "one mirror ball, textured ground": ["--spheres", "1", "--sphere-material", "mirror", "--background", "textured"],
     # the spheres on one side of the object: their errors (each away from the object) add in the
     # photo's mean instead of cancelling as on the ring (docs/spheres.md, "The cones too wide")
@@ -516,6 +516,26 @@ def main_truth_check(a) -> None:
                        "results": out})
 
 
+#: The file in each cached render's folder naming the condition it was rendered for
+#: (:func:`check_cached_condition`).
+CONDITION_FILE = "condition.txt"
+
+
+def check_cached_condition(folder, command: str) -> None:
+    """Stop when the cached render in ``folder`` was made for another condition than ``command``.
+
+    The cache's folders are numbered by the conditions' positions (``c00_384``, ``ds00``): a
+    condition inserted or removed anywhere but at the end would otherwise score one condition's
+    renders as another's. Each folder records its condition's command (:data:`CONDITION_FILE`,
+    written by :func:`run_condition`); a folder without one (a cache of an earlier version) is
+    taken as it is.
+    """
+    f = Path(folder) / CONDITION_FILE
+    if f.exists() and f.read_text().strip() != command:
+        raise SystemExit(f"{folder} holds the renders of another condition ({f.read_text().strip()!r}, "
+                         f"not {command!r}); remove it or use another --cache")
+
+
 def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, recalibrate_only: bool = False,
                   common_correlation: float | None = None) -> dict:
     """``flags``: ``ffls synth`` flags, or a :data:`SCENES` tuple (rendered by tests/detect_scenes.py).
@@ -524,12 +544,15 @@ def run_condition(name: str, flags, res: int, dirs: np.ndarray, folder: Path, re
     folder = Path(folder)
     if isinstance(flags, tuple):
         spec = flags
+        command = f"tests/detect_scenes.py: {spec[0]} balls, {spec[1]} background, {spec[2]} {spec[3]}"
+        check_cached_condition(folder, command)
         truth = cached_capture(folder, scene_directions(), lambda f: render_scene(f, spec))
-        flags = [f"tests/detect_scenes.py: {spec[0]} balls, {spec[1]} background, {spec[2]} {spec[3]}"]
-        command = flags[0]
+        flags = [command]
     else:
-        truth = cached_capture(folder, dirs, lambda f: render(f, flags, res, dirs))
         command = f"ffls synth OUT --resolution {res} {' '.join(flags)}".strip()
+        check_cached_condition(folder, command)
+        truth = cached_capture(folder, dirs, lambda f: render(f, flags, res, dirs))
+    (folder / CONDITION_FILE).write_text(command + "\n")
     out = folder / "lights_estimated.json"
     stdout, stderr = io.StringIO(), io.StringIO()
     t0 = time.perf_counter()
