@@ -760,82 +760,6 @@ def calibrate_ground_albedo(results: list[PhotoEstimate], samples: list[SphereSa
     return out
 
 
-#: Factors of the free fits' ratio at which :func:`profile_bounce_ratio` fits the photos again.
-PROFILE_FACTORS = (0.8, 0.9, 1.0, 1.1, 1.2, 1.3)
-
-
-def profile_bounce_ratio(fit, calibration: list[BounceCalibration], which: list[bool] | None = None,
-                         factors: tuple[float, ...] = PROFILE_FACTORS) -> list[BounceCalibration]:
-    """Each sphere's ground ratio fitted jointly over the photos: the minimum of their summed misfit.
-
-    :func:`calibrate_bounce` takes the median of per-photo free fits, in which the ambient and the
-    bounce share the shadow side; on a uniform grey ground (``ffls synth``, the hidden ground of
-    ``bounce='observed'``) that median comes out about 10% low (docs/spheres.md, "The hidden
-    ratio fitted jointly"). Here the ratio is shared by the photos and imposed: every photo is
-    fitted with ``factor`` times the free fits' ratio (its light, intensity and ambient free, the
-    calibrated models), and each sphere's relative misfit (``LambertFit.rms`` squared) is summed
-    over the photos whose fit of it is ``'ok'`` at every factor. The minimum is the vertex of the
-    parabola through the grid's lowest point and its neighbours (a grid end where it lies there).
-
-    Parameters
-    ----------
-    fit : callable
-        ``fit(ratios)`` -> list of PhotoEstimate: the photos fitted with the ratios imposed (one
-        per sphere, None for a free bounce).
-    calibration : list of BounceCalibration
-        The free fits' calibration (:func:`calibrate_bounce`).
-    which : list of bool, optional
-        The spheres to profile (default all); the others keep their ratio at every factor.
-    factors : tuple of float
-        Increasing, including 1.
-
-    Returns
-    -------
-    list of BounceCalibration
-        Per sphere, the ratio at the minimum (clipped to [0, 1]); a sphere without a ratio, or
-        with fewer than 3 photos ok at every factor, keeps its calibration.
-    """
-    base = [c.ratio for c in calibration]
-    which = [True] * len(base) if which is None else list(which)
-    if all(r is None or not w for r, w in zip(base, which)):
-        return calibration
-    cost = []  # (factor, photo, sphere): the relative mean square misfit, NaN where not 'ok'
-    for m in factors:
-        rows = []
-        os.environ["XNOAMB"] = "1" if os.environ.get("XPROF_NOAMB") else ""
-        res_ = fit([r if r is None or not w else m * r for r, w in zip(base, which)])
-        os.environ["XNOAMB"] = ""
-        for r in res_:
-            row = [np.nan] * len(base)
-            for k, sp in enumerate(r.spheres or []):
-                if sp.status == "ok" and isinstance(sp.fit, LambertFit) and np.isfinite(sp.fit.rms):
-                    row[k] = sp.fit.rms ** 2
-            rows.append(row)
-        cost.append(rows)
-    cost = np.asarray(cost, dtype=np.float64)
-    out = []
-    f = np.asarray(factors, dtype=np.float64)
-    for k, c in enumerate(calibration):
-        if c.ratio is None or not which[k]:
-            out.append(c)
-            continue
-        ck = cost[:, :, k]
-        keep = np.isfinite(ck).all(axis=0)
-        if keep.sum() < 3:
-            out.append(c)
-            continue
-        total = ck[:, keep].sum(axis=1)
-
-        j = int(np.argmin(total))
-        m = f[j]
-        if 0 < j < len(f) - 1:
-            a, b = np.polyfit(f[j - 1:j + 2], total[j - 1:j + 2], 2)[:2]
-            if a > 0:
-                m = float(np.clip(-b / (2.0 * a), f[j - 1], f[j + 1]))
-        out.append(replace(c, ratio=float(np.clip(m * c.ratio, 0.0, 1.0))))
-    return out
-
-
 def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
     """The weighted median of per-photo ground ratios (weights: inverse variances), clipped to [0, 1]."""
     est, w = np.asarray(est, dtype=np.float64), np.asarray(w, dtype=np.float64)
@@ -1603,11 +1527,6 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
             results = run_fitted(values)  # the free fits of the hidden ground's bounce, for its ratio
             by_photo = dict(zip(fitted, results))
     calibration = calibrate_bounce(results, len(samples))
-    if any(s.ground_view is not None and s.ground_view.kappa is not None for s in samples):
-        # the hidden ground's ratio fitted jointly over the first-pass photos
-        calibration = profile_bounce_ratio(lambda ratios: refit(fitted, ratios, counted=False), calibration,
-                                           [s.ground_view is not None and s.ground_view.kappa is not None
-                                            for s in samples])
     ratios = [c.ratio for c in calibration]
     if bounce_shape is None:  # auto: with one matte sphere nothing cancels its bias (docs/spheres.md)
         bounce_shape = sum(kd.kind == "matte" for kd in kinds) == 1

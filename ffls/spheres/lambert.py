@@ -941,7 +941,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     if bounce_ratio is not None:
         if not (np.isfinite(bounce_ratio) and bounce_ratio >= 0):
             raise ValueError(f"bounce_ratio must be finite and >= 0, got {bounce_ratio!r}")
-        models = ("fixed",) if __import__("os").environ.get("XNOAMB") else ("fixed", "fixed_ambient")
+        models = ("fixed", "fixed_ambient")
         ratio = float(bounce_ratio)
     else:
         ratio = 0.0
