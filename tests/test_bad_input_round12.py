@@ -440,3 +440,39 @@ def test_radiance_files_of_every_orientation_read_as_shown(tmp_path, capfd, line
     assert (head.width, head.height) == (12, 6)
     assert main(["lightmap", "info", str(p)]) == 0
     assert "corrupt" not in capfd.readouterr().err
+
+
+# ----------------------------------------------------------------- POCS time estimate (leftover)
+def _interrupt(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("flags, said", [
+    (["--iterations", "100000"], "estimate: adaptive sources, --scheme least-power, 100000 sweeps, "),
+    (["--sources", "grid", "--grid", "256", "--size", "256", "--iterations", "100000"],
+     "estimate: --sources grid --grid 256 (131072 unknowns), --scheme sequential, 100000 sweeps, "),
+    (["--sources", "grid", "--grid", "256", "--size", "256", "--scheme", "dykstra"],
+     "--sources grid --grid 256 (131072 unknowns), --scheme dykstra: a linear programme over "),
+    (["--sources", "grid", "--grid", "256", "--size", "256", "--scheme", "least-power"],
+     "--sources grid --grid 256 (131072 unknowns), --scheme least-power: a linear programme over "),
+])
+def test_a_long_pocs_says_its_estimate_before_it_starts(ball, tmp_path, capfd, monkeypatch, flags, said):
+    """``probe pocs --iterations 100000`` (and a 256-row grid with least-power or dykstra) ran for
+    minutes without a word. The estimate is said once the probe is read, before the solve (which
+    is interrupted here, as a user's Ctrl-C: the line is already out and nothing is written)."""
+    import ffls.probes.singh_ahuja as sa
+
+    monkeypatch.setattr(sa, "adaptive_singh_ahuja", _interrupt)
+    monkeypatch.setattr(sa, "singh_ahuja", _interrupt)
+    out = tmp_path / "m.exr"
+    assert main(["probe", "pocs", str(ball), "-o", str(out), *flags]) == 130
+    err = capfd.readouterr().err
+    line = err.splitlines()[0]
+    assert line.startswith("ffls probe: " + said) and " on a 2-core machine" in line, line
+    assert line.endswith("Ctrl-C stops it and writes nothing"), line
+    assert not out.exists()
+
+
+def test_a_short_pocs_says_no_estimate(ball, tmp_path, capfd):
+    assert main(["probe", "pocs", str(ball), "-o", str(tmp_path / "m.exr"), "--size", "8"]) == 0
+    assert "estimate" not in capfd.readouterr().err
