@@ -19,14 +19,15 @@ OUTPUT_SUFFIXES = (".exr",)
 #: CPU seconds of ``ffls probe pocs`` per unit of work on the 2-core team machine, for fits over
 #: the default 2000 pixels (``benchmarks/pocs_time.py``, docs/probes.md "Time of POCS"): per sweep
 #: of the adaptive set's rounds and folds (least-power, the default, and sequential, which grow the
-#: set by the same sweeps: 0.449 s); per sweep and unknown on the grid (sequential: 1.5e-5 s). The
+#: set by the same sweeps: 0.417 s); per sweep and unknown on the grid (sequential: 2.4e-5 s). The
 #: others have no rate: their time is not the sweeps' (below).
-POCS_RATES = {("adaptive", "least-power"): 0.449, ("adaptive", "sequential"): 0.449,
-              ("grid", "sequential"): 1.5e-5}
-#: Above this many grid unknowns, dykstra and least-power (a linear programme over the pixels and
-#: the unknowns: dykstra's residual bound, least-power's map) ran past 40 s: 5 dykstra sweeps took
-#: 12.6 s at ``--grid 32`` and 40.4 s at ``--grid 48`` (4608 unknowns), 20 took 10.2 s at 32: the
-#: time is the programme's, not the sweeps'. No rate is measured for it: it is said to have none.
+POCS_RATES = {("adaptive", "least-power"): 0.417, ("adaptive", "sequential"): 0.417,
+              ("grid", "sequential"): 2.4e-5}
+#: Above this many grid unknowns, dykstra and least-power solve a linear programme over the pixels
+#: and the unknowns (dykstra's residual bound, least-power's map) that takes more than half a minute:
+#: 5 dykstra sweeps took 11.0 s at ``--grid 32`` and 36.9 s at ``--grid 48`` (4608 unknowns;
+#: ``benchmarks/pocs_time.py``; 20 sweeps at 32 took 10.2 s in an earlier run): the time is the
+#: programme's, not the sweeps'. No rate is measured for it: it is said to have none.
 POCS_LP_UNKNOWNS_NOTE = 2 * 48 * 48
 #: The pixel count the rates were measured at (each rate scales with the pixels a fit uses).
 POCS_RATE_PIXELS = 2000
@@ -342,7 +343,7 @@ def say_pocs_estimate(scheme: str, sources: str, grid: int, iterations: int, pix
             and unknowns > POCS_LP_UNKNOWNS_NOTE:
         print_notes(NAME, f"--sources grid --grid {grid} ({unknowns} unknowns), --scheme {scheme}: a linear "
                           f"programme over {pixels} pixels and {unknowns} unknowns, with no time estimate; --grid "
-                          "48 (4608) ran past 40 s on a 2-core machine, and the time grows faster than the "
+                          "48 (4608) took 37 s on a 2-core machine, and the time grows faster than the "
                           "unknowns (docs/probes.md, \"Time of POCS\"); Ctrl-C stops it and writes nothing")
         flush_notes()
     if seconds is None or seconds <= ESTIMATE_NOTE_S:
