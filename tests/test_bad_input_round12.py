@@ -393,3 +393,86 @@ def test_a_singular_system_counts_its_unknowns():
     with pytest.raises(InputError, match=r"3 pixels for 4 unknowns \(6 sources; the 2 that light no pixel left "
                                          r"out\)"):
         solve_sources(M, np.ones(3), what="6 sources")
+
+
+# ----------------------------------------------------------------- Radiance orientations (leftover)
+#: Radiance's coordinates: (0, 0) is the picture's lower left, +X right, +Y up. A resolution line
+#: names the scanline axis (slow), then the pixel axis (fast), each with its direction.
+_RADIANCE_LINES = ("-Y {h} +X {w}", "+Y {h} +X {w}", "-Y {h} -X {w}", "+Y {h} -X {w}",
+                   "+X {w} -Y {h}", "+X {w} +Y {h}", "-X {w} -Y {h}", "-X {w} +Y {h}")
+
+
+def _stored_scanlines(img: np.ndarray, line: str) -> np.ndarray:
+    """The pixels of ``img`` (shown: top row first) in the order ``line`` stores them."""
+    h, w = img.shape[:2]
+    (a1, _, a2, _) = line.split()
+    n1, n2 = (h if a1[1] == "Y" else w), (h if a2[1] == "Y" else w)
+    out = np.empty((n1, n2, 3), img.dtype)
+    for k1 in range(n1):
+        for k2 in range(n2):
+            coord = {}
+            for axis, k, n in ((a1, k1, n1), (a2, k2, n2)):
+                coord[axis[1]] = k if axis[0] == "+" else n - 1 - k
+            out[k1, k2] = img[h - 1 - coord["Y"], coord["X"]]  # row 0 is the top (+Y up)
+    return out
+
+
+@pytest.mark.parametrize("line", _RADIANCE_LINES)
+def test_radiance_files_of_every_orientation_read_as_shown(tmp_path, capfd, line):
+    """Radiance allows 8 orientations; OpenCV reads only ``-Y H +X W`` and called the others
+    "corrupt, truncated or not a HDR file". They are read turned to the standard layout."""
+    import cv2
+
+    from ffls.io.images import image_header, read_image, write_hdr
+
+    img = np.random.default_rng(7).uniform(0.01, 4.0, size=(6, 12, 3)).astype(np.float32)
+    shown = read_image(write_hdr(tmp_path / "std.hdr", img), working_space=False).pixels  # RGBE-rounded
+    stored = _stored_scanlines(shown, line)
+    cv2.imwrite(str(tmp_path / "s.hdr"), np.ascontiguousarray(stored[:, :, ::-1]))  # BGR
+    data = (tmp_path / "s.hdr").read_bytes()
+    standard = f"-Y {stored.shape[0]} +X {stored.shape[1]}".encode()
+    assert data.count(standard) == 1
+    p = tmp_path / "turned.hdr"
+    p.write_bytes(data.replace(standard, line.format(h=6, w=12).encode()))
+    got = read_image(p, working_space=False)
+    np.testing.assert_array_equal(got.pixels, shown)
+    head = image_header(p)
+    assert (head.width, head.height) == (12, 6)
+    assert main(["lightmap", "info", str(p)]) == 0
+    assert "corrupt" not in capfd.readouterr().err
+
+
+# ----------------------------------------------------------------- POCS time estimate (leftover)
+def _interrupt(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("flags, said", [
+    (["--iterations", "100000"], "estimate: adaptive sources, --scheme least-power, 100000 sweeps, "),
+    (["--sources", "grid", "--grid", "256", "--size", "256", "--iterations", "100000"],
+     "estimate: --sources grid --grid 256 (131072 unknowns), --scheme sequential, 100000 sweeps, "),
+    (["--sources", "grid", "--grid", "256", "--size", "256", "--scheme", "dykstra"],
+     "--sources grid --grid 256 (131072 unknowns), --scheme dykstra: a linear programme over "),
+    (["--sources", "grid", "--grid", "256", "--size", "256", "--scheme", "least-power"],
+     "--sources grid --grid 256 (131072 unknowns), --scheme least-power: a linear programme over "),
+])
+def test_a_long_pocs_says_its_estimate_before_it_starts(ball, tmp_path, capfd, monkeypatch, flags, said):
+    """``probe pocs --iterations 100000`` (and a 256-row grid with least-power or dykstra) ran for
+    minutes without a word. The estimate is said once the probe is read, before the solve (which
+    is interrupted here, as a user's Ctrl-C: the line is already out and nothing is written)."""
+    import ffls.probes.singh_ahuja as sa
+
+    monkeypatch.setattr(sa, "adaptive_singh_ahuja", _interrupt)
+    monkeypatch.setattr(sa, "singh_ahuja", _interrupt)
+    out = tmp_path / "m.exr"
+    assert main(["probe", "pocs", str(ball), "-o", str(out), *flags]) == 130
+    err = capfd.readouterr().err
+    line = err.splitlines()[0]
+    assert line.startswith("ffls probe: " + said) and " on a 2-core machine" in line, line
+    assert line.endswith("Ctrl-C stops it and writes nothing"), line
+    assert not out.exists()
+
+
+def test_a_short_pocs_says_no_estimate(ball, tmp_path, capfd):
+    assert main(["probe", "pocs", str(ball), "-o", str(tmp_path / "m.exr"), "--size", "8"]) == 0
+    assert "estimate" not in capfd.readouterr().err

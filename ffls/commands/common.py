@@ -327,6 +327,8 @@ FRAMES = integer(1, 100000)
 FPS = number(0.1, 1000.0)
 #: Height of a lat-long light map made or resampled (width twice it).
 MAP_HEIGHT = integer(4, 16384, memory=lambda h: 160.0 * 2 * h * h, what="light map")
+#: A long job's time estimate above this many seconds is said before it starts (``synth``, ``probe pocs``).
+ESTIMATE_NOTE_S = 60.0
 #: Number of lights of a synthetic capture.
 N_LIGHTS = integer(1, 100000)
 #: Width and height of synthetic images.

@@ -16,6 +16,21 @@ DESCRIPTION = (
 )
 
 OUTPUT_SUFFIXES = (".exr",)
+#: CPU seconds of ``ffls probe pocs`` per unit of work on the 2-core team machine, for fits over
+#: the default 2000 pixels (``benchmarks/pocs_time.py``, docs/probes.md "Time of POCS"): per sweep
+#: of the adaptive set's rounds and folds (least-power, the default, and sequential, which grow the
+#: set by the same sweeps: 0.417 s); per sweep and unknown on the grid (sequential: 2.4e-5 s). The
+#: others have no rate: their time is not the sweeps' (below).
+POCS_RATES = {("adaptive", "least-power"): 0.417, ("adaptive", "sequential"): 0.417,
+              ("grid", "sequential"): 2.4e-5}
+#: Above this many grid unknowns, dykstra and least-power solve a linear programme over the pixels
+#: and the unknowns (dykstra's residual bound, least-power's map) that takes more than half a minute:
+#: 5 dykstra sweeps took 11.0 s at ``--grid 32`` and 36.9 s at ``--grid 48`` (4608 unknowns;
+#: ``benchmarks/pocs_time.py``; 20 sweeps at 32 took 10.2 s in an earlier run): the time is the
+#: programme's, not the sweeps'. No rate is measured for it: it is said to have none.
+POCS_LP_UNKNOWNS_NOTE = 2 * 48 * 48
+#: The pixel count the rates were measured at (each rate scales with the pixels a fit uses).
+POCS_RATE_PIXELS = 2000
 ENCODING_FORMS = "srgb, linear, gamma=G, response=FILE.npy|.csv, or calibrate (8-bit brackets)"
 
 
@@ -309,13 +324,47 @@ def _probe_colour_note(folder) -> str | None:
     return colour_summary(paths + ([probe.surface_image] if probe.surface_image is not None else []))
 
 
+def pocs_seconds(scheme: str, sources: str, grid: int, iterations: int, pixels: int) -> float | None:
+    """The estimated seconds of a POCS solve from :data:`POCS_RATES` (None where none is measured)."""
+    rate = POCS_RATES.get((sources, scheme))
+    if rate is None:
+        return None
+    return rate * pixels / POCS_RATE_PIXELS * iterations * (2 * grid * grid if sources == "grid" else 1)
+
+
+def say_pocs_estimate(scheme: str, sources: str, grid: int, iterations: int, pixels: int) -> None:
+    """``pocs_lightmap``'s ``before_solve``: say the estimate before a solve of more than
+    :data:`ffls.commands.common.ESTIMATE_NOTE_S` (``--iterations 100000`` ran for minutes without a word)."""
+    from ffls.commands.common import ESTIMATE_NOTE_S, flush_notes, print_notes
+
+    seconds = pocs_seconds(scheme, sources, grid, iterations, pixels)
+    unknowns = 2 * grid * grid
+    if seconds is None and sources == "grid" and scheme in ("dykstra", "least-power") \
+            and unknowns > POCS_LP_UNKNOWNS_NOTE:
+        print_notes(NAME, f"--sources grid --grid {grid} ({unknowns} unknowns), --scheme {scheme}: a linear "
+                          f"programme over {pixels} pixels and {unknowns} unknowns, with no time estimate; --grid "
+                          "48 (4608) took 37 s on a 2-core machine, and the time grows faster than the "
+                          "unknowns (docs/probes.md, \"Time of POCS\"); Ctrl-C stops it and writes nothing")
+        flush_notes()
+    if seconds is None or seconds <= ESTIMATE_NOTE_S:
+        return
+    what = (f"--sources grid --grid {grid} ({2 * grid * grid} unknowns)" if sources == "grid"
+            else "adaptive sources") + f", --scheme {scheme}, {iterations} sweeps, {pixels} pixels"
+    print_notes(NAME, f"estimate: {what}: about {seconds / 60:.0f} min on a 2-core machine (docs/probes.md, "
+                      "\"Time of POCS\"); Ctrl-C stops it and writes nothing")
+    flush_notes()
+
+
 def run(args) -> int:
     from ffls.commands.common import print_notes
     from ffls.probes import estimate_lightmap, save_estimate
 
     if args.method == "merge":
         return _merge(args)
-    est = estimate_lightmap(args.folder, method=args.method, height=args.size, **method_knobs(args))
+    knobs = method_knobs(args)
+    if args.method == "pocs":
+        knobs["before_solve"] = say_pocs_estimate
+    est = estimate_lightmap(args.folder, method=args.method, height=args.size, **knobs)
     save_estimate(est, args.out, half=args.half)
     print_notes(NAME, *est.notes, _probe_colour_note(args.folder))
     h = est.lightmap.data.shape[0]

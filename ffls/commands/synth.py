@@ -12,6 +12,8 @@ import argparse
 import sys
 import time
 
+from ffls.commands.common import ESTIMATE_NOTE_S
+
 NAME = "synth"
 HELP = "render a synthetic capture (object, calibration spheres, one light per image)"
 DESCRIPTION = (
@@ -35,8 +37,6 @@ TRUTH_DIRS = 2048
 SECONDS_PER_IMAGE, SECONDS_PER_PIXEL, NEAR_FACTOR = 9e-3, 3e-7, 10.0
 #: Bytes a pixel at most, per ``--format`` (RGB; EXR half floats; a JPEG is far smaller than 3).
 BYTES_PER_PIXEL = {"exr": 6, "png8": 3, "png16": 6, "tiff16": 6, "jpeg": 3}
-#: An estimate above this many seconds is said before the rendering starts.
-ESTIMATE_NOTE_S = 60.0
 
 
 # ----------------------------------------------------------------------------- argument types

@@ -501,6 +501,52 @@ def _undecodable(path: Path, kind: str, whole: bool) -> str:
 _CORRUPT_DATA_LINES = ("incomplete", "libpng error", "Corrupt JPEG data", "Premature end of JPEG file")
 
 
+#: A Radiance resolution line: the scanline axis with its count, then the pixel axis with its
+#: count; ``-Y H +X W`` (top to bottom, left to right) is the standard, and the format allows all 8
+_RADIANCE_AXES = {(b"-Y", b"+X"), (b"-Y", b"-X"), (b"+Y", b"+X"), (b"+Y", b"-X"),
+                  (b"+X", b"-Y"), (b"+X", b"+Y"), (b"-X", b"-Y"), (b"-X", b"+Y")}
+
+
+def _radiance_resolution(buf: bytes):
+    """The resolution line of a Radiance file's first bytes: ``(start, end, words)``, the line's
+    byte span after the header's blank line and its four words; None where there is none."""
+    end_head = buf.find(b"\n\n")
+    if end_head < 0:
+        return None
+    start = end_head + 2
+    end = buf.find(b"\n", start)
+    words = buf[start:end].split() if end > 0 else []
+    if (len(words) != 4 or (words[0], words[2]) not in _RADIANCE_AXES
+            or not (words[1].isdigit() and words[3].isdigit())):
+        return None
+    return start, end, words
+
+
+def _radiance_standard(buf: np.ndarray):
+    """A Radiance file stored in another of the format's 8 orientations, given to OpenCV (which
+    reads only ``-Y H +X W``) as its scanlines, and the turn to the standard layout.
+
+    Returns ``(buf, turn)``: the bytes with the resolution line ``-Y N1 +X N2`` (N1 scanlines of
+    N2 pixels, the file's own counts) and a function from OpenCV's array to the image shown as
+    viewers show it (top row up, +X right); ``turn`` is None for a standard or unreadable file.
+    """
+    found = _radiance_resolution(buf[:65536].tobytes())
+    if found is None or (found[2][0], found[2][2]) == (b"-Y", b"+X"):
+        return buf, None
+    start, end, (a1, n1, a2, n2) = found
+    line = np.frombuffer(b"-Y " + n1 + b" +X " + n2, dtype=np.uint8)
+    buf = np.concatenate([buf[:start], line, buf[end:]])
+
+    def turn(img: np.ndarray) -> np.ndarray:
+        if a1 in (b"+Y", b"-X"):  # scanlines bottom to top, or right to left
+            img = img[::-1]
+        if a2 in (b"-X", b"+Y"):  # pixels right to left, or bottom to top
+            img = img[:, ::-1]
+        return np.ascontiguousarray(img.swapaxes(0, 1) if a1[1:] == b"X" else img)
+
+    return buf, turn
+
+
 def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
     """A PNG, JPEG, TIFF or Radiance file through OpenCV, shown as its EXIF ``orientation`` asks
     (OpenCV's ``IMREAD_UNCHANGED`` keeps a JPEG's or PNG's stored rows; it turns a TIFF itself)."""
@@ -513,6 +559,7 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
     if buf.size == 0:
         raise InputError("image file is empty", path)
     flags = cv2.IMREAD_UNCHANGED if kind != "hdr" else cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR
+    buf, radiance_turn = _radiance_standard(buf) if kind == "hdr" else (buf, None)
     _silence_opencv_log()
     with quiet_native_output() as cap:
         try:
@@ -525,6 +572,8 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
                          path)
     if kind in ("jpeg", "png") and orientation in _ORIENTED:
         img = np.ascontiguousarray(_ORIENTED[orientation](img))
+    if radiance_turn is not None:
+        img = radiance_turn(img)
     alpha = None
     if kind == "tiff" and (img.ndim == 2 or img.shape[2] in (1, 3)):
         alpha = _tiff_alpha_dropped(path, img.shape[:2])
@@ -702,7 +751,7 @@ def image_header(path: str | os.PathLike) -> ImageHeader | None:
     -------
     ImageHeader or None
         None where the header cannot be read here (a sample format Pillow does not know, such as
-        a float TIFF, a corrupt file, an ``.hdr`` in another orientation): :func:`read_image`
+        a float TIFF, a corrupt file): :func:`read_image`
         then decodes the file and reports what is wrong with it.
     """
     path = Path(path)
@@ -718,13 +767,14 @@ def image_header(path: str | os.PathLike) -> ImageHeader | None:
             names = {ch.name for ch in header["channels"]}
             grey = not {"R", "G", "B"} <= names and "Y" in names and not names & {"RY", "BY"}
             return ImageHeader(x1 - x0 + 1, y1 - y0 + 1, grey)
-        if kind == "hdr":  # text lines, a blank line, then e.g. "-Y 480 +X 640"
+        if kind == "hdr":  # text lines, a blank line, then e.g. "-Y 480 +X 640" (or "+X 640 -Y 480")
             with open(path, "rb") as f:
-                head = f.read(4096).split(b"\n\n", 1)
-            words = head[1].split(b"\n", 1)[0].split() if len(head) == 2 else []
-            if len(words) == 4 and words[0] == b"-Y" and words[2] == b"+X":
-                return ImageHeader(int(words[3]), int(words[1]), False)
-            return None
+                found = _radiance_resolution(f.read(65536))
+            if found is None:
+                return None
+            a1, n1, _, n2 = found[2]
+            h, w = (n1, n2) if a1[1:] == b"Y" else (n2, n1)
+            return ImageHeader(int(w), int(h), False)
         if kind in ("png", "jpeg", "tiff"):
             from PIL import JpegImagePlugin, PngImagePlugin, TiffImagePlugin
 

@@ -493,7 +493,7 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
                   rim_px: float = 0.5, max_pixels: int | None = 2000, confidence_threshold: float = 0.2,
                   fill: str = "nearest", sources: str = "auto", criterion: str = "cv",
                   scheme: str | None = None, relaxation: float = 1.0,
-                  tol: float | None = None) -> LightmapEstimate:
+                  tol: float | None = None, before_solve=None) -> LightmapEstimate:
     """A light map from a diffuse sphere by POCS (Singh and Ahuja, :mod:`ffls.probes.singh_ahuja`).
 
     Parameters
@@ -528,6 +528,11 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
         :func:`ffls.probes.singh_ahuja.pocs`. ``None``: :data:`POCS_DEFAULT_SCHEME` of ``sources`` (least-power
         on adaptive sources, the paper's sweeps on its grid). ``details['scheme']`` and the saved map's header
         say which ran.
+    before_solve : callable, optional
+        Called once the probe's pixels are read and the knobs checked, before the solve (a caller's
+        time estimate: ``ffls probe pocs``), with the keywords ``scheme``, ``sources`` (``'grid'`` or
+        ``'adaptive'``), ``grid``, ``iterations`` (the sweeps that will run, or cap) and ``pixels``
+        (those each fit uses).
     """
     from ffls.probes.hougen_ahuja import normal_confidence
     from ffls.probes.singh_ahuja import adaptive_singh_ahuja, singh_ahuja
@@ -559,6 +564,9 @@ def pocs_lightmap(probe, height: int = 128, grid: int = 16, iterations: int | No
         raise InputError(f"--relaxation {relaxation:g} does not apply with --scheme dykstra (exact projections)")
     solver = dict(scheme=scheme, relaxation=relaxation, tol=tol)
     N, V, albedo, notes = diffuse_pixels(probe, "pocs", rim_px, None)
+    if before_solve is not None:
+        before_solve(scheme=scheme, sources="grid" if sources == "grid" else "adaptive", grid=int(grid),
+                     iterations=int(iterations), pixels=len(N) if max_pixels is None else min(len(N), int(max_pixels)))
     try:
         if sources == "grid":
             res = singh_ahuja(N, V, albedo, height=grid, iterations=iterations, upper=upper, delta=delta,
