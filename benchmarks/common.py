@@ -156,10 +156,24 @@ def noisy_diffuse_probes(maps, height: int, capture, lights, conditions: str):
         truth = probe_benchmark_map(name, height, capture, lights)
         sph = diffuse_sphere_scene(truth[0], 80, albedo=0.7, world_from_camera=capture.world_from_camera)
         for noise, seed in pairs:
-            rad = sph.radiance
-            if noise > 0:
-                rad = rad + np.random.default_rng(seed).normal(0.0, noise * float(np.mean(rad)), size=rad.shape)
-            yield name, truth, sph, noise, seed, rad
+            yield name, truth, sph, noise, seed, with_noise(sph.radiance, noise, np.random.default_rng(seed))
+
+
+def with_noise(radiance, noise: float, rng):
+    """``radiance`` with Gaussian noise of ``noise`` times its mean added, drawn from ``rng`` (the
+    probe benchmarks' noise); ``radiance`` itself, and no draw, where ``noise`` is 0."""
+    if noise > 0:
+        return radiance + rng.normal(0.0, noise * float(np.mean(radiance)), size=radiance.shape)
+    return radiance
+
+
+def diffuse_ball(lightmap, capture, noise: float, rng):
+    """The probe benchmarks' 80 px diffuse ball (albedo 0.7) under ``lightmap``, seen as ``capture``'s
+    camera sees it, and its radiance with :func:`with_noise`. Returns ``(scene, radiance)``."""
+    from ffls.synth.probe_scenes import diffuse_sphere_scene
+
+    sph = diffuse_sphere_scene(lightmap, 80, albedo=0.7, world_from_camera=capture.world_from_camera)
+    return sph, with_noise(sph.radiance, noise, rng)
 
 
 def probe_benchmark_args(doc: str, maps, argv=None):

@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from common import (host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map, relit_capture_error,
-                    write_json)
+from common import (diffuse_ball, host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map,
+                    relit_capture_error, write_json)
 from probes import H, MAPS
 from ffls.probes.evaluate import relit_error, sh_basis
 from ffls.conventions import normalize
@@ -43,7 +43,6 @@ from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.selection import WEIGHT_RULES, adaptive_hougen_ahuja, choose_weight, select_regularization
 from ffls.probes.sources import latlong_solid_angles
 from ffls.conventions import latlong_directions
-from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 ORDERS = (2, 4, 6)
@@ -109,10 +108,7 @@ def main(argv=None):
         row = {"map": name, "low_order_limit": {str(o): err(low_orders(true, o)) for o in ORDERS}, "rows": []}
         print(f"{name}: true map cut to SH orders 0-2 / 0-4 / 0-6 relights "
               + " / ".join(f"{100 * row['low_order_limit'][str(o)]:.1f}%" for o in ORDERS), flush=True)
-        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
-        rad = sph.radiance
-        if a.noise > 0:
-            rad = rad + rng.normal(0.0, a.noise * float(np.mean(rad)), size=rad.shape)
+        sph, rad = diffuse_ball(lm, cap, a.noise, rng)
         for crit in ("cv", "bic"):
             for amb in ("nonnegative", "auto"):
                 t = time.process_time()

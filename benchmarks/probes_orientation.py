@@ -24,12 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from common import (host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map, relit_capture_error,
-                    write_json)
+from common import (diffuse_ball, host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map,
+                    relit_capture_error, write_json)
 from probes import H, MAPS
 from ffls.probes.hougen_ahuja import average_fits
 from ffls.probes.selection import adaptive_hougen_ahuja
-from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -48,10 +47,7 @@ def main(argv=None):
     out = []
     for name in a.maps.split(","):
         lm, true, truth = probe_benchmark_map(name, H, cap, lights)
-        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
-        rad = sph.radiance
-        if a.noise > 0:
-            rad = rad + rng.normal(0.0, a.noise * float(np.mean(rad)), size=rad.shape)
+        sph, rad = diffuse_ball(lm, cap, a.noise, rng)
         t = time.process_time()
         sel = adaptive_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="auto",
                                     orientations=own.orientations, ground=(0.0, 0.0, 1.0) if own.ground else None)

@@ -27,14 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from common import (host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map, relit_capture_error,
-                    write_json)
+from common import (diffuse_ball, host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map,
+                    relit_capture_error, write_json)
 from probes import H, MAPS
 from ffls.probes.evaluate import relit_error
 from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.selection import adaptive_hougen_ahuja, select_regularization
 from ffls.probes.sources import cell_energies
-from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
@@ -58,10 +57,7 @@ def main(argv=None):
         def err(L):
             return relit_capture_error(cap, lights, L, truth)
 
-        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
-        rad = sph.radiance
-        if a.noise > 0:
-            rad = rad + rng.normal(0.0, a.noise * float(np.mean(rad)), size=rad.shape)
+        sph, rad = diffuse_ball(lm, cap, a.noise, rng)
         sel = adaptive_hougen_ahuja(sph.normals, rad, 0.7, criterion="cv", **KW)
         d = sel.fit.directions
         rec = np.abs(sel.fit.intensities).sum(axis=1)

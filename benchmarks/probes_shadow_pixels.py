@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from common import host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, write_json
+from common import (host_info, probe_benchmark_capture, probe_benchmark_map, relit_capture_error, with_noise,
+                    write_json)
 from probes import H, MAPS, SHADOW_GEOMETRY, SHADOW_RES
 from ffls.probes.estimate import pixel_grid_subset, shadow_lightmap
 from ffls.probes.selection import adaptive_sato_sato_ikeuchi
@@ -46,8 +47,7 @@ def main(argv=None):
         sc = cast_shadow_scene(lm, SHADOW_RES, albedo="checker", **SHADOW_GEOMETRY)
         occ = {"box": {"center": sc.box_center.tolist(), "size": sc.box_size.tolist()}}
         rad = sc.radiance
-        if a.noise > 0:
-            rad = rad + rng.normal(0.0, a.noise * float(np.mean(rad)), size=rad.shape)
+        rad = with_noise(rad, a.noise, rng)
         rows, cols = np.nonzero(sc.mask)  # row-major, as sc.points
         grid, _ = pixel_grid_subset(np.stack([cols, rows], axis=1), BUDGET)
         rand = np.sort(np.random.default_rng(0).choice(sc.points.shape[0], BUDGET, replace=False))

@@ -25,13 +25,12 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from common import (host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map, relit_capture_error,
-                    write_json)
+from common import (diffuse_ball, host_info, probe_benchmark_args, probe_benchmark_capture, probe_benchmark_map,
+                    relit_capture_error, write_json)
 from probes import H, MAPS
 from ffls.conventions import normalize
 from ffls.probes.estimate import SMOOTHNESS_WEIGHTS
 from ffls.probes.selection import adaptive_hougen_ahuja, select_regularization
-from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 PRIORS = ("smoothness", "tv")
@@ -54,10 +53,7 @@ def main(argv=None):
     scenes = {}
     for name in a.maps.split(","):
         lm, true, truth = probe_benchmark_map(name, H, cap, lights)
-        sph = diffuse_sphere_scene(lm, 80, albedo=0.7, world_from_camera=cap.world_from_camera)
-        rad = sph.radiance
-        if a.noise > 0:
-            rad = rad + rng.normal(0.0, a.noise * float(np.mean(rad)), size=rad.shape)
+        sph, rad = diffuse_ball(lm, cap, a.noise, rng)
         scenes[name] = (sph.normals, rad, truth)
     out = []
     for i, R in enumerate(rots):  # orientation first: the own orientation of every map is measured first
