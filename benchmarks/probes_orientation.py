@@ -52,18 +52,21 @@ def main(argv=None):
         sel = adaptive_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="auto",
                                     orientations=own.orientations, ground=(0.0, 0.0, 1.0) if own.ground else None)
         cpu = time.process_time() - t
-        members = sel.fit.members
+        # one orientation: a plain Selection (one SourceFit; ``chosen`` its size, ``scores`` every round's)
+        members = sel.fit.members if own.orientations > 1 else (sel.fit,)
+        chosen = sel.chosen if own.orientations > 1 else (sel.chosen,)
+        heldout = sel.scores if own.orientations > 1 else [sel.scores[list(sel.candidates).index(sel.chosen)]]
         single = [relit_capture_error(cap, lights, f.latlong(H), truth) for f in members]
         avg = {str(j): relit_capture_error(cap, lights, average_fits(members[:j], rad).latlong(H), truth)
                for j in sorted({2, 4, len(members)}) if j <= len(members)}
-        row = {"map": name, "sources": list(sel.chosen), "heldout": [float(s) for s in sel.scores],
+        row = {"map": name, "sources": list(chosen), "heldout": [float(s) for s in heldout],
                "relit_capture_single": single, "relit_capture_average": avg, "cpu_s": cpu}
         out.append(row)
         print(f"{name}: one orientation each "
               + " ".join(f"{100 * e:.1f}" for e in single)
               + " % (the first is the default's); average of "
               + ", ".join(f"{j}: {100 * e:.1f}%" for j, e in avg.items())
-              + f"; sources {'/'.join(map(str, sel.chosen))}; {cpu:.1f} CPU s", flush=True)
+              + f"; sources {'/'.join(map(str, chosen))}; {cpu:.1f} CPU s", flush=True)
     tag = ("_noise" if a.noise > 0 else "") + (f"_seed{own.seed}" if own.seed else "") + (
         "_ground" if own.ground else "")
     path = a.json or str(ROOT / f"benchmarks/results/probes_orientation{tag}.json")

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from ffls.errors import InputError, atomic_output, not_a_regular_file
-from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT, parse_json
+from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT, parse_json, read_json_text
 from ffls.io.images import read_image
 
 __all__ = ["CameraCalibration", "aruco_dictionary", "charuco_problem", "camera_matrix_problem", "make_board",
@@ -254,7 +254,7 @@ def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
     if not path.is_file():
         raise InputError(not_a_regular_file(path) or "capture.json not found", path)
     try:
-        doc = parse_json(path.read_text(encoding="utf-8-sig"))
+        doc = parse_json(read_json_text(path, "capture.json"))
     except (OSError, ValueError) as e:
         raise InputError(f"cannot read JSON ({e})", path) from None
     if not isinstance(doc, dict):

@@ -135,6 +135,7 @@ def _siblings(out: Path) -> dict:
     import json
 
     from ffls.errors import InputError, check_output_path
+    from ffls.io.capture import read_json_text
 
     files = {s: out.with_suffix(s) for s in (".exr", ".png", ".json")}
     for p in files.values():
@@ -142,7 +143,7 @@ def _siblings(out: Path) -> dict:
     others = [p for p in files.values() if p != out and p.exists()]
     if others:
         try:
-            ours = json.loads(files[".json"].read_text()).get("format") == "ffls-composite"
+            ours = json.loads(read_json_text(files[".json"])).get("format") == "ffls-composite"
         except (OSError, ValueError, AttributeError):
             ours = False
         if not ours:

@@ -162,6 +162,18 @@ def check_first_pass(first_pass, bounce: str, n_photos: int) -> None:
                          f"{n_photos}, or --first-pass all")
 
 
+def check_bounce_shape(bounce_shape: str, bounce: str) -> None:
+    """``--bounce-shape on|off`` only with ``--bounce calibrated``: the other bounces have no shape to
+    turn on or off (``off`` with ``--bounce free`` was accepted and changed nothing)."""
+    from ffls.errors import InputError
+
+    if bounce_shape != "auto" and bounce != "calibrated":
+        raise InputError(f"--bounce-shape {bounce_shape} applies only with --bounce calibrated (the shape is "
+                         "calibrated over the capture with the ground ratio; --bounce free fits a uniform bounce "
+                         "per photo and --bounce observed reads it from the photos, so neither has a shape to "
+                         "turn on or off)")
+
+
 def run(args) -> int:
     from ffls.errors import check_output_path
     from ffls.io.capture import load_capture, save_lights
@@ -169,6 +181,7 @@ def run(args) -> int:
 
     from ffls.commands.common import print_notes, show_progress
 
+    check_bounce_shape(args.bounce_shape, args.bounce)
     cap = load_capture(args.capture)
     check_first_pass(args.first_pass, args.bounce, len(cap))
     # onto capture.json or a photo, or into a read-only capture folder: refused before the fits
@@ -181,12 +194,6 @@ def run(args) -> int:
     # --first-pass given: N photos, or every photo ("all"); not given: the estimation's default
     first_pass = {} if args.first_pass is None else {"first_pass": args.first_pass or None}
     shape = {"auto": None, "on": True, "off": False}[args.bounce_shape]
-    if shape and args.bounce != "calibrated":
-        from ffls.errors import InputError
-
-        raise InputError("--bounce-shape on applies only with --bounce calibrated (the shape is calibrated over "
-                         "the capture with the ground ratio; --bounce observed reads it from the photos)",
-                         cap.json_path)
     if args.bounce == "observed":
         from ffls.errors import InputError
 

@@ -63,6 +63,9 @@ __all__ = [
     "parse_camera",
     "parse_encoding",
     "check_file_name",
+    "MAX_JSON_BYTES",
+    "FileTooLarge",
+    "read_json_text",
 ]
 
 CAPTURE_FILE = "capture.json"
@@ -122,7 +125,9 @@ class _Json:
             self.fail("", f"{special} ({what} expected)")
         register_input(self.path)
         try:
-            text = self.path.read_text(encoding="utf-8-sig")  # (a BOM, as Notepad writes, is no content)
+            text = read_json_text(self.path, what)  # (a BOM, as Notepad writes, is no content)
+        except FileTooLarge as e:
+            self.fail("", str(e))
         except UnicodeDecodeError:
             self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 text")
         except OSError as e:
@@ -195,6 +200,41 @@ def _unique_keys(pairs) -> dict:
         seen = set()
         raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
     return d
+
+
+#: The largest JSON (or ``.lp``) file ffls reads, in bytes. Such a file is read whole and parsed into
+#: Python objects: 1.6 times its size for a real ``lights.json`` (4 to 8 spheres, 5 to 8 kB a photo, so
+#: 256 MiB holds some 30000 photos of 8 spheres), up to 24 times for ``[{}, {}, ...]`` (docs/formats.md).
+MAX_JSON_BYTES = 256 << 20
+
+
+class FileTooLarge(ValueError):
+    """A text file over :data:`MAX_JSON_BYTES`, refused before it is read (the message names no path)."""
+
+
+def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str:
+    """The text of a JSON or ``.lp`` file (a UTF-8 BOM dropped), refused over :data:`MAX_JSON_BYTES`.
+
+    The size is checked on the open file before anything is read, and at most one byte more than
+    the limit is ever read (a file that grows meanwhile is refused too).
+
+    Raises
+    ------
+    FileTooLarge
+        The file is larger than :data:`MAX_JSON_BYTES`.
+    UnicodeDecodeError
+        Its bytes are not UTF-8 (with ``errors='strict'``).
+    OSError
+        It cannot be opened or read.
+    """
+    with open(path, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        data = b"" if size > MAX_JSON_BYTES else f.read(MAX_JSON_BYTES + 1)
+    if size > MAX_JSON_BYTES or len(data) > MAX_JSON_BYTES:
+        raise FileTooLarge(f"is {max(size, len(data))} bytes, more than the {MAX_JSON_BYTES >> 20} MiB "
+                           f"({MAX_JSON_BYTES} bytes) a {what} may be (ffls reads it whole into memory; "
+                           "docs/formats.md)")
+    return data.decode("utf-8-sig", errors=errors)
 
 
 def parse_json(text: str):
@@ -725,7 +765,7 @@ def capture_listing(path: str | os.PathLike) -> Path | None:
     for folder in list(target.parents)[:CAPTURE_SEARCH_DEPTH + 1]:
         cj = folder / CAPTURE_FILE
         try:
-            doc = parse_json(cj.read_text(encoding="utf-8-sig")) if cj.is_file() else None
+            doc = parse_json(read_json_text(cj)) if cj.is_file() else None
         except (OSError, ValueError):
             continue
         names = doc.get("images") if isinstance(doc, dict) else None
@@ -1141,7 +1181,9 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
                          or ".lp file not found", path)
     register_input(path)
     try:
-        lines = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()
+        lines = read_json_text(path, ".lp file", errors="replace").splitlines()
+    except FileTooLarge as e:
+        raise InputError(str(e), path) from None
     except OSError as e:
         raise InputError(f"cannot read .lp file ({e})", path) from None
     rows = [(k + 1, ln.strip()) for k, ln in enumerate(lines) if ln.strip()]

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from ffls.errors import InputError, not_a_regular_file
-from ffls.io.capture import parse_json
+from ffls.io.capture import parse_json, read_json_text
 from ffls.io.images import check_one_orientation, image_header, read_image
 from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
@@ -217,7 +217,7 @@ def read_bracket(folder: str | os.PathLike):
             raise InputError(special, p)
     if jpath.is_file():
         try:
-            doc = parse_json(jpath.read_text(encoding="utf-8-sig"))
+            doc = parse_json(read_json_text(jpath, "exposures.json"))
         except (OSError, ValueError) as e:  # (a UnicodeDecodeError is a ValueError)
             raise InputError(f"cannot read exposures ({e})", jpath) from None
         if not isinstance(doc, dict) or not doc:
