@@ -22,7 +22,7 @@ from pathlib import Path
 __all__ = ["FflsError", "InputError", "OutputError", "GLUnavailable", "atomic_output", "atomic_folder",
            "check_output_path", "os_error_message", "register_input", "guard_inputs", "kept_on_interrupt",
            "interrupt_note", "name_output", "disk_full", "available_memory", "atomic_outputs",
-           "not_a_regular_file"]
+           "not_a_regular_file", "broken_link"]
 
 
 class FflsError(Exception):
@@ -144,14 +144,30 @@ def _through_link(path: Path) -> Path:
         return path
     target = Path(os.path.realpath(path))
     if not target.exists():
-        raise OutputError(f"is a symbolic link to {target}, which does not exist; ffls writes through a link "
-                          "only to an existing file or folder (as cp does)", path)
+        raise OutputError(f"{broken_link(path)}; ffls writes through a link only to an existing file or folder "
+                          "(as cp does)", path)
     return target
 
 
 #: What an existing path that is neither a file nor a folder is, by its ``stat`` type
 _SPECIAL_KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
                   (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def broken_link(path: str | os.PathLike) -> str | None:
+    """What is wrong with a symbolic link ``path`` that leads nowhere: a loop of links (which
+    was called "not found"), or a link to a missing file; None for anything else."""
+    try:
+        if not os.path.islink(path):
+            return None
+        os.stat(path)
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            return "is a symbolic link loop (its links lead back to themselves, to no file)"
+        return f"is a symbolic link to {os.path.realpath(path)}, which does not exist"
+    except ValueError:
+        return None
+    return None
 
 
 def not_a_regular_file(path: str | os.PathLike) -> str | None:
@@ -164,8 +180,8 @@ def not_a_regular_file(path: str | os.PathLike) -> str | None:
     """
     try:
         mode = os.stat(path).st_mode
-    except (OSError, ValueError):
-        return None
+    except (OSError, ValueError) as e:
+        return broken_link(path) if isinstance(e, OSError) else None
     if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
         return None
     kind = next((name for test, name in _SPECIAL_KINDS if test(mode)), "a special file")

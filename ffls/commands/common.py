@@ -352,6 +352,18 @@ def input_path(text: str) -> str:
     return text
 
 
+def store_path(text: str) -> str:
+    """argparse type of ``--store DIR.zarr``: a non-empty path whose folder exists and that can be a
+    store (:func:`ffls.store.ingest.store_path_problem`), checked even where the store goes unused
+    (``relight``/``render`` on photos that fit in memory accepted ``--store nofolder/s.zarr``)."""
+    from ffls.store.ingest import store_path_problem
+
+    why = store_path_problem(input_path(text))
+    if why:
+        raise argparse.ArgumentTypeError(f"{text}: {why}")
+    return text
+
+
 #: A random seed (NumPy accepts non-negative integers).
 SEED = integer(0, 2**63 - 1)
 
@@ -1004,7 +1016,7 @@ def add_scale_arguments(p, store: bool = True, memory: bool = True) -> None:
                        help="memory budget, e.g. 1G or 512M (default: half of the memory available now); photos "
                             "that do not fit are streamed tile by tile from the capture's store")
     if store:
-        p.add_argument("--store", default=None, metavar="DIR.zarr", type=input_path,
+        p.add_argument("--store", default=None, metavar="DIR.zarr", type=store_path,
                        help="the chunked store of the photos (default CAPTURE/field.zarr; built on first use)")
         p.add_argument("--tiles", action="store_true",
                        help="stream from the store even when the photos would fit in memory")

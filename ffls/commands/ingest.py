@@ -12,12 +12,12 @@ DESCRIPTION = (
 
 
 def add_arguments(p):
-    from ffls.commands.common import add_lights_arguments, add_scale_arguments, input_path, integer
+    from ffls.commands.common import add_lights_arguments, add_scale_arguments, input_path, integer, store_path
 
     p.add_argument("capture", type=input_path, help="capture folder (with capture.json)")
     add_lights_arguments(p)
     add_scale_arguments(p, store=False, memory=False)
-    p.add_argument("--store", default=None, metavar="DIR.zarr", type=input_path,
+    p.add_argument("--store", default=None, metavar="DIR.zarr", type=store_path,
                    help="the store (default CAPTURE/field.zarr)")
     p.add_argument("--tile", type=integer(16, 4096), default=None, metavar="PX",
                    help="tile side in pixels (default: chunks of all photos of about 8 MiB)")
@@ -37,9 +37,9 @@ def load_capture_for_ingest(args):
     path = Path(args.lights) if args.lights else capture.folder / LIGHTS_FILE
     if not path.exists():
         if args.lights:
-            from ffls.errors import InputError
+            from ffls.errors import InputError, broken_link
 
-            raise InputError("lights file not found", path)
+            raise InputError(broken_link(path) or "lights file not found", path)
         return capture, None
     lights = load_lights_any(path, capture, args.lights_map)
     lights.path = path

@@ -23,7 +23,8 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ffls import conventions
-from ffls.errors import InputError, atomic_output, not_a_regular_file, os_error_message, register_input
+from ffls.errors import (InputError, atomic_output, broken_link, not_a_regular_file, os_error_message,
+                         register_input)
 from ffls.io.response import load_response, polynomial_response_table
 
 __all__ = [
@@ -108,7 +109,8 @@ class _Json:
         if folder.name == filename and folder.is_file():
             folder = folder.parent
         if not folder.is_dir():
-            raise InputError(f"{kind} folder not found" if not folder.exists() else "not a folder", folder)
+            raise InputError(broken_link(folder) or (f"{kind} folder not found" if not folder.exists()
+                                                     else "not a folder"), folder)
         j = cls(folder / filename)
         doc = j.load(filename)
         j.header(doc, fmt)
@@ -116,7 +118,7 @@ class _Json:
 
     def load(self, what: str) -> dict:
         if not self.path.exists():
-            self.fail("", f"{what} not found")
+            self.fail("", broken_link(self.path) or f"{what} not found")
         if self.path.is_dir():
             self.fail("", f"is a folder, not {what}" + (" (a capture's lights are its lights.json)"
                                                          if what == LIGHTS_FILE else ""))
@@ -1527,8 +1529,9 @@ def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Captu
     path = Path(lights) if lights else capture.folder / LIGHTS_FILE  # (FOLDER may name capture.json itself)
     if not path.exists():
         if lights:
-            raise InputError("lights file not found", path)
-        raise InputError("no lights file: estimate the light directions first (ffls lights CAPTURE)", path)
+            raise InputError(broken_link(path) or "lights file not found", path)
+        raise InputError(broken_link(path) or "no lights file: estimate the light directions first (ffls lights "
+                         "CAPTURE)", path)
     found = load_lights_any(path, capture, lights_map)
     found.path = path
     return apply_lights_encoding(capture, found), found

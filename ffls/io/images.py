@@ -283,7 +283,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         raise InputError("is a folder, not an image file", path)
     kind = _kind_of(path)
     if not path.is_file():
-        raise InputError("image file not found" if not path.exists() else not_a_regular_file(path) or "not a file",
+        raise InputError(not_a_regular_file(path) or ("image file not found" if not path.exists() else "not a file"),
                          path)
     register_input(path)
     head = _check_decodable_size(path)
@@ -358,7 +358,7 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
 
     path = Path(path)
     if not path.is_file():
-        raise InputError("image file not found", path)
+        raise InputError(not_a_regular_file(path) or "image file not found", path)
     err = None
     with quiet_native_output() as cap:
         try:

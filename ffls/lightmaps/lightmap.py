@@ -439,9 +439,13 @@ def detect_layout(height: int, width: int, layout: str | None = None) -> str:
     if layout not in LAYOUTS:
         raise ValueError(f"unknown light-map layout {layout!r}; one of {LAYOUTS}")
     if layout not in found:
-        article = "an" if layout[0] in "aeiou" else "a"
-        raise ValueError(f"a {width}x{height} image cannot be {article} {layout} map (it looks like {found[0]})")
+        raise ValueError(f"a {width}x{height} image cannot be {_a(layout)} map (it looks like {found[0]})")
     return layout
+
+
+def _a(layout: str) -> str:
+    """The layout's name with its article: 'an angular', 'a cube'."""
+    return ("an " if layout[0] in "aeiou" else "a ") + layout
 
 
 #: The largest radiance a light map may hold: the sun is about 1e9 in cd/m^2; a texel near
@@ -536,7 +540,7 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
         raise InputError(str(e), path) from None
     res = w // 4 if layout == "cube" and 3 * w == 4 * h else (h // 4 if layout == "cube" else h)
     if res < MIN_RES[layout]:
-        raise InputError(f"a {w}x{h} light map is too small: a {layout} map must be at least "
+        raise InputError(f"a {w}x{h} light map is too small: {_a(layout)} map must be at least "
                          f"{min_size_text(layout)}", path)
     data, clamped = validate_radiance(img.pixels, path)
     if layout == "cube":

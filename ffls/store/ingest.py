@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.errors import FflsError, InputError, OutputError, kept_on_interrupt, os_error_message
+from ffls.errors import FflsError, InputError, OutputError, broken_link, kept_on_interrupt, os_error_message
 from ffls.store.field import (FORMAT, MARKER, MIN_LEVEL_SIZE, VERSION, ReflectanceField, choose_tile, compressor, default_store_path,
                               level_shapes, open_field, photo_record, provenance, read_json, stale_reason,
                               tile_slices, write_json_atomic)
@@ -215,6 +215,27 @@ def _group_format(path: Path):
     return attrs.get("format") if isinstance(attrs, dict) else None
 
 
+def store_path_problem(path) -> str | None:
+    """What is wrong with a store path whatever the store holds, or None: its folder missing, a new
+    store named like a file (``--store x.exr`` made a zarr folder named ``x.exr``), or a file.
+
+    Checked where ``--store`` is parsed: ``relight``/``render`` use the store only when the photos
+    do not fit in memory, and a bad path was accepted silently when they did."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return f"the store's folder {path.parent} does not exist"
+    if path.is_symlink() and not path.exists():
+        return broken_link(path)
+    if not path.exists():
+        if path.suffix and path.suffix.lower() != STORE_SUFFIX:
+            return f"a store is a folder: its name ends with {STORE_SUFFIX} or has no extension, not {path.suffix}"
+        return None
+    if not path.is_dir():
+        return ("is a file; the store must be a new path or an ffls store, and ffls never replaces anything "
+                "else")
+    return None
+
+
 def check_store_path(path) -> None:
     """Refuse a store path that ffls must not write: its folder missing, or something there that is not an ffls store.
 
@@ -226,14 +247,12 @@ def check_store_path(path) -> None:
     ffls.errors.InputError
     """
     path = Path(path)
-    if not path.parent.is_dir():
-        raise InputError(f"the store's folder {path.parent} does not exist", path)
+    why = store_path_problem(path)
+    if why:
+        raise InputError(why, path)
     if not os.access(path.parent, os.W_OK | os.X_OK):  # (the ingest's first write failed, naming no file)
         raise OutputError("folder is not writable (permission denied or read-only)", path.parent)
     if not path.exists():
-        if path.suffix and path.suffix.lower() != STORE_SUFFIX:  # (--store x.exr made a zarr folder named x.exr)
-            raise InputError(f"a store is a folder: its name ends with {STORE_SUFFIX} or has no extension, "
-                             f"not {path.suffix}", path)
         return
     marker = read_json(path / MARKER) if path.is_dir() else None
     ours = path.is_dir() and ((isinstance(marker, dict) and marker.get("format") == FORMAT)
