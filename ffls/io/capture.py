@@ -648,7 +648,7 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
     camera share their pixel grid, and a camera that looks down (at a turntable, a table top)
     tags its shots upright or turned as its tilt sensor wavers: turning some would misalign them.
     """
-    from ffls.io.images import ORIENTATION_NAMES, check_one_orientation, image_header
+    from ffls.io.images import ORIENTATION_NAMES, check_one_colour_kind, check_one_orientation, image_header
 
     heads = [image_header(p) for p in paths]
     ref = None if image_size is None else (tuple(image_size), f"{CAPTURE_FILE} says image_size")
@@ -661,15 +661,7 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
             turned = (f" (as shown: its EXIF orientation {h.orientation}, {ORIENTATION_NAMES[h.orientation]}, turns "
                       f"the stored {h.height}x{h.width}; docs/formats.md)") if h.orientation >= 5 else ""
             raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}{turned}", p)
-    grey = [k for k, h in enumerate(heads) if h is not None and h.grey]
-    colour = [k for k, h in enumerate(heads) if h is not None and not h.grey]
-    if grey and colour:
-        few, many = (grey, "colour") if len(grey) <= len(colour) else (colour, "grey")
-        what = "grey (one channel)" if many == "colour" else "colour"
-        raise InputError(f"is {what} but {len(colour if many == 'colour' else grey)} of the {len(grey) + len(colour)}"
-                         f" photos are {many} (e.g. {names[(colour if many == 'colour' else grey)[0]]!r}): a capture "
-                         f"mixing grey and colour photos is almost always a wrong export; export every photo "
-                         f"{'in colour' if many == 'colour' else 'grey'}", paths[few[0]])
+    check_one_colour_kind(paths, names, heads, what="photos", whole="a capture")
     check_one_orientation(paths, names, heads)
 
 

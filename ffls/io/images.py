@@ -55,6 +55,7 @@ __all__ = [
     "image_header",
     "ORIENTATION_NAMES",
     "check_one_orientation",
+    "check_one_colour_kind",
     "nonfinite_message",
 ]
 
@@ -681,6 +682,33 @@ _ORIENTED = {
 ORIENTATION_NAMES = {1: "upright (as stored)", 2: "mirrored", 3: "rotated 180 degrees", 4: "mirrored upside down",
                      5: "transposed", 6: "turned 90 degrees clockwise", 7: "transversed",
                      8: "turned 90 degrees counter-clockwise"}
+
+
+def check_one_colour_kind(paths, names=None, heads=None, what: str = "photos", whole: str = "a capture") -> None:
+    """Refuse images of one camera (a capture's photos, a bracket) that mix grey (one channel) and colour.
+
+    A grey image would be replicated to RGB, a colourless light (or exposure) among coloured ones,
+    and such a mix is almost always a wrong export. The minority is named. Arguments as
+    :func:`check_one_orientation`; ``whole`` names the set in the message (``'a capture'``).
+
+    Raises
+    ------
+    InputError
+        Naming the first image of the minority.
+    """
+    paths = [Path(p) for p in paths]
+    names = [p.name for p in paths] if names is None else list(names)
+    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    grey = [k for k, h in enumerate(heads) if h is not None and h.grey]
+    colour = [k for k, h in enumerate(heads) if h is not None and not h.grey]
+    if not (grey and colour):
+        return
+    few, many = (grey, "colour") if len(grey) <= len(colour) else (colour, "grey")
+    kind = "grey (one channel)" if many == "colour" else "colour"
+    most = colour if many == "colour" else grey
+    raise InputError(f"is {kind} but {len(most)} of the {len(grey) + len(colour)} {what} are {many} (e.g. "
+                     f"{names[most[0]]!r}): {whole} mixing grey and colour images is almost always a wrong export; "
+                     f"export every one {'in colour' if many == 'colour' else 'grey'}", paths[few[0]])
 
 
 def check_one_orientation(paths, names=None, heads=None, what: str = "photos") -> None:

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.io.images import ImageData, check_one_orientation, read_image
+from ffls.io.images import ImageData, check_one_colour_kind, check_one_orientation, image_header, read_image
 from ffls.radiance.photos import linearise
 
 __all__ = ["SATURATION", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
@@ -205,7 +205,7 @@ def check_encoding(img: ImageData, encoding, source, key: str = "encoding") -> N
     """
     if encoding == "auto":
         if not img.is_hdr:
-            raise InputError(f"{key}: not stated, and {img.path.name} is a {img.bit_depth}-bit image that could be "
+            raise InputError(f"{key}: not stated, and {img.path.name} is {'an' if img.bit_depth == 8 else 'a'} {img.bit_depth}-bit image that could be "
                              f"sRGB, gamma or linear; ffls does not guess: state it (\"srgb\", \"linear\", "
                              f"{{\"gamma\": g}} or {{\"response\": \"file.npy\"}})", source)
         return
@@ -228,7 +228,9 @@ def decode_image(img: ImageData, encoding, response=None) -> tuple[np.ndarray, f
 
 
 def _read_all(paths) -> list[ImageData]:
-    check_one_orientation(paths, what="bracketed images")
+    heads = [image_header(p) for p in paths]
+    check_one_orientation(paths, heads=heads, what="bracketed images")
+    check_one_colour_kind(paths, heads=heads, what="bracketed images", whole="a bracket")
     imgs = [read_image(p) for p in paths]
     for im in imgs[1:]:
         if im.shape != imgs[0].shape:

@@ -256,7 +256,8 @@ def read_bracket(folder: str | os.PathLike):
         data = read_image(p, working_space=False)  # (its one line: not found, a folder, truncated, ...)
         header = image_header(p)
         if data.bit_depth != 8 or (header is not None and header.grey):
-            raise InputError(f"bracketed images must be 8-bit RGB, got a {data.bit_depth}-bit "
+            depth = {"half": "half-float", "float": "32-bit float"}.get(data.bit_depth, f"{data.bit_depth}-bit")
+            raise InputError(f"bracketed images must be 8-bit RGB, got a {depth} "
                              f"{'grey' if header is not None and header.grey else 'RGB'} image", p)
         im = data.codes
         if images and im.shape != images[0].shape:
