@@ -731,12 +731,33 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     if units is not None and not isinstance(units, str):
         j.fail("units", f"expected a string, got {_short(units)}")
     extra = {k: v for k, v in doc.items() if k not in _CAPTURE_KEYS}
+    _check_misspelt_keys(j, extra)
     return Capture(
         folder=folder, image_names=names, image_paths=paths, encoding=encoding, K=K, dist=dist,
         world_from_camera=wfc, world_from_camera_is_default=wfc_default, sphere_radius=radius,
         scene_center=center, hemisphere=hemisphere, spheres=spheres, image_size=image_size,
         units=units, response=response, extra=extra, camera_model=model, sphere_count=sphere_count,
     )
+
+
+#: Top-level keys of ``capture.json`` that other readers take from ``Capture.extra``
+_EXTRA_KEYS = {"sphere_material", "truth"}
+
+
+def _check_misspelt_keys(j: _Json, extra: dict) -> None:
+    """Refuse an unknown top-level key that is a near miss of a known one (``"encodng"``,
+    ``"sphere_radus"``, ``"Encoding"``): unknown keys are kept and ignored (docs/formats.md), so a
+    misspelt one silently dropped what it stated (an unstated encoding is calibrated instead)."""
+    import difflib
+
+    known = sorted(_CAPTURE_KEYS | _EXTRA_KEYS)
+    for key in extra:
+        if key in _EXTRA_KEYS or not isinstance(key, str) or key.startswith("x-"):
+            continue
+        close = difflib.get_close_matches(key, known, n=1, cutoff=0.8)
+        if close:
+            j.fail(key, f"unknown key; did you mean {close[0]!r}? (an unknown key is kept but ignored, so what "
+                        "it states would be dropped; name a key of your own with an 'x-' prefix)")
 
 
 #: How many folders up from a file :func:`capture_listing` looks for a ``capture.json`` that lists it.
