@@ -20,7 +20,7 @@ from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT, parse_json, read_jso
 from ffls.io.images import read_image
 
 __all__ = ["CameraCalibration", "aruco_dictionary", "charuco_problem", "camera_matrix_problem", "make_board",
-           "detect_board", "calibrate_camera", "write_camera_to_capture"]
+           "detect_board", "calibrate_camera", "check_camera_capture", "write_camera_to_capture"]
 
 
 @dataclasses.dataclass
@@ -243,14 +243,22 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
                              rms=float(rms), image_size=size, used=used, skipped=skipped)
 
 
-def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
-    """Set ``camera.K`` and ``camera.dist`` in ``CAPTURE_DIR/capture.json``, keeping every other key.
+def check_camera_capture(capture_dir) -> tuple[Path, dict]:
+    """``(path, doc)`` of ``CAPTURE_DIR/capture.json`` that :func:`write_camera_to_capture` can update:
+    a readable JSON object whose ``camera`` is an object, in a folder where it can be replaced.
 
-    The file is read, modified and written back atomically. With ``image_size`` (W, H), the size
-    of the board photos, a capture whose ``image_size`` differs is refused: K is in the pixels of
-    the photos it was calibrated on.
+    Called before the board photos are calibrated too (a missing capture, a broken link or a
+    read-only folder was reported only after the calibration).
     """
-    path = Path(capture_dir) / "capture.json"
+    from ffls.errors import broken_link, check_output_path
+
+    folder = Path(capture_dir)
+    if folder.name == "capture.json" and folder.is_file():  # (the file named instead of its folder)
+        folder = folder.parent
+    why = broken_link(folder)
+    if why or not folder.is_dir():
+        raise InputError(why or ("capture folder not found" if not folder.exists() else "not a folder"), folder)
+    path = folder / "capture.json"
     if not path.is_file():
         raise InputError(not_a_regular_file(path) or "capture.json not found", path)
     try:
@@ -259,13 +267,25 @@ def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
         raise InputError(f"cannot read JSON ({e})", path) from None
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object", path)
+    if not isinstance(doc.get("camera") or {}, dict):
+        raise InputError("'camera' must be an object", path)
+    check_output_path(path)
+    return path, doc
+
+
+def write_camera_to_capture(capture_dir, K, dist, image_size=None) -> Path:
+    """Set ``camera.K`` and ``camera.dist`` in ``CAPTURE_DIR/capture.json``, keeping every other key.
+
+    The file is read, modified and written back atomically. With ``image_size`` (W, H), the size
+    of the board photos, a capture whose ``image_size`` differs is refused: K is in the pixels of
+    the photos it was calibrated on.
+    """
+    path, doc = check_camera_capture(capture_dir)
     have = doc.get("image_size")
     if image_size is not None and isinstance(have, list) and len(have) == 2 and list(have) != [int(v) for v in image_size]:
         raise InputError(f"image_size {have[0]}x{have[1]} differs from the {image_size[0]}x{image_size[1]} board "
                          "photos: K calibrated on them is not this capture's camera", path)
     cam = doc.get("camera") or {}
-    if not isinstance(cam, dict):
-        raise InputError("'camera' must be an object", path)
     cam["K"] = np.asarray(K, dtype=np.float64).reshape(3, 3).tolist()
     cam["dist"] = np.asarray(dist, dtype=np.float64).ravel().tolist()
     doc["camera"] = cam

@@ -105,8 +105,10 @@ def run(args) -> int:
                                           smoothness=args.smoothness)
         print(f"wrote {args.output}: inverse response (256, 3), code 128 -> {curve[128].round(4).tolist()}")
         return 0
-    from ffls.camera.calibrate import calibrate_camera, write_camera_to_capture
+    from ffls.camera.calibrate import calibrate_camera, check_camera_capture, write_camera_to_capture
 
+    if args.capture:  # before the calibration: a missing or read-only capture was reported after it
+        check_camera_capture(args.capture)
     cal = calibrate_camera(args.photos, **board_flags(args))
     if args.capture:
         path = write_camera_to_capture(args.capture, cal.K, cal.dist, cal.image_size)

@@ -440,8 +440,10 @@ def load_inputs(args):
                          f"{size[0]}x{size[1]}: two fields from different cameras", scap.folder)
     bg_path = Path(args.background)
     if bg_path.suffix.lower() not in BACKGROUND_SUFFIXES:
-        raise InputError("the background must be a linear HDR image (.exr or .hdr); convert an 8-bit photograph "
-                         "to linear radiance first (ffls never guesses its encoding)", bg_path)
+        raise InputError("the background must be a linear HDR image (.exr or .hdr), not "
+                         f"{bg_path.suffix or 'a file without an extension'}; "
+                         "convert a photograph to linear radiance first (ffls never guesses an integer image's "
+                         "encoding), or save a float TIFF as .exr", bg_path)
     bg = read_image(bg_path)
     if (bg.pixels.shape[1], bg.pixels.shape[0]) != size:
         raise InputError(f"the background is {bg.pixels.shape[1]}x{bg.pixels.shape[0]}, the captures' photos "
