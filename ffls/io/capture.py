@@ -740,8 +740,8 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     )
 
 
-#: Top-level keys of ``capture.json`` that other readers take from ``Capture.extra``
-_EXTRA_KEYS = {"sphere_material", "truth"}
+#: Top-level keys of ``capture.json`` that other readers take from ``Capture.extra`` (the viewer its ``mask``)
+_EXTRA_KEYS = {"sphere_material", "truth", "mask"}
 
 
 def _check_misspelt_keys(j: _Json, extra: dict) -> None:
