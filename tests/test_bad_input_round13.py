@@ -251,6 +251,24 @@ def test_a_misspelt_capture_key_is_refused(cap, tmp_path, capfd, key, meant):
     assert not (tmp_path / "o.exr").exists()
 
 
+@pytest.mark.parametrize("edit,named", [
+    (lambda d: d["lights"][2].update(stauts="rejected", reason="blurred"), "lights[2].stauts: unknown key; did you "
+     "mean 'status'?"),
+    (lambda d: d["lights"][0].update(uncertainty_dge=2.0), "lights[0].uncertainty_dge: unknown key; did you mean "
+     "'uncertainty_deg'?"),
+    (lambda d: d.update(encodng={"curve": "srgb"}), "encodng: unknown key; did you mean 'encoding'?"),
+], ids=["status", "uncertainty", "encoding"])
+def test_a_misspelt_lights_key_is_refused(cap, tmp_path, capfd, edit, named):
+    """``"stauts": "rejected"`` left the light's status "ok": a light meant rejected was used, silently."""
+    doc = json.loads((cap / "lights.json").read_text())
+    edit(doc)
+    (tmp_path / "l.json").write_text(json.dumps(doc))
+    rc, line = _one_line(capfd, ["relight", cap, "--lights", tmp_path / "l.json", "--probe", "sky",
+                                 "-o", tmp_path / "o.exr"])
+    assert rc == 2 and f"l.json: {named}" in line, line
+    assert not (tmp_path / "o.exr").exists()
+
+
 def test_keys_of_ones_own_are_still_kept(cap, tmp_path):
     from ffls.io.capture import load_capture
 
@@ -261,6 +279,13 @@ def test_keys_of_ones_own_are_still_kept(cap, tmp_path):
     (c / "capture.json").write_text(json.dumps(doc))
     extra = load_capture(c).extra
     assert {"notes", "x-encodng", "author", "truth"} <= set(extra)
+    from ffls.io.capture import load_lights
+
+    doc = json.loads((cap / "lights.json").read_text())
+    doc["lights"][1].update({"note": "lamp 2", "x-stauts": 1})
+    doc["x-lihgts"] = 2
+    (tmp_path / "l.json").write_text(json.dumps(doc))
+    assert load_lights(tmp_path / "l.json").extra[1] == {"note": "lamp 2", "x-stauts": 1}
 
 
 # ----------------------------------------------------------------------------- calibrate camera --capture

@@ -744,20 +744,27 @@ def load_capture(folder: str | os.PathLike) -> Capture:
 _EXTRA_KEYS = {"sphere_material", "truth", "mask"}
 
 
-def _check_misspelt_keys(j: _Json, extra: dict) -> None:
-    """Refuse an unknown top-level key that is a near miss of a known one (``"encodng"``,
-    ``"sphere_radus"``, ``"Encoding"``): unknown keys are kept and ignored (docs/formats.md), so a
-    misspelt one silently dropped what it stated (an unstated encoding is calibrated instead)."""
+#: The keys of ``lights.json``: top level, and each light's (``ffls lights`` writes the last five)
+_LIGHTS_KEYS = {"format", "version", "lights", "encoding", "uncertainty", "flat_field"}
+_LIGHT_KEYS = {"image", "direction", "position", "status", "reason", "uncertainty_deg", "model", "used_spheres",
+               "spheres", "chi2", "dof"}
+
+
+def _check_misspelt_keys(j: _Json, keys, known=_CAPTURE_KEYS | _EXTRA_KEYS, where: str = "") -> None:
+    """Refuse an unknown key that is a near miss of a ``known`` one (``"encodng"``, ``"sphere_radus"``,
+    ``"Encoding"``, a light's ``"stauts"``): unknown keys are kept and ignored (docs/formats.md), so a
+    misspelt one silently dropped what it stated (an unstated encoding was calibrated instead, a
+    light meant ``"rejected"`` was used). ``where`` prefixes the key in the message."""
     import difflib
 
-    known = sorted(_CAPTURE_KEYS | _EXTRA_KEYS)
-    for key in extra:
-        if key in _EXTRA_KEYS or not isinstance(key, str) or key.startswith("x-"):
+    known = sorted(known)
+    for key in keys:
+        if key in known or not isinstance(key, str) or key.startswith("x-"):
             continue
         close = difflib.get_close_matches(key, known, n=1, cutoff=0.8)
         if close:
-            j.fail(key, f"unknown key; did you mean {close[0]!r}? (an unknown key is kept but ignored, so what "
-                        "it states would be dropped; name a key of your own with an 'x-' prefix)")
+            j.fail(where + key, f"unknown key; did you mean {close[0]!r}? (an unknown key is kept but ignored, so "
+                                "what it states would be dropped; name a key of your own with an 'x-' prefix)")
 
 
 #: How many folders up from a file :func:`capture_listing` looks for a ``capture.json`` that lists it.
@@ -1042,6 +1049,7 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
     j = _Json(path)
     doc = j.load("lights.json")
     j.header(doc, "ffls-lights")
+    _check_misspelt_keys(j, doc, _LIGHTS_KEYS)
     items = j.require(doc, "lights")
     if not isinstance(items, list) or not items:
         j.fail("lights", f"expected a non-empty list, got {_short(items)}")
@@ -1050,6 +1058,7 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         key = f"lights[{k}]"
         if not isinstance(it, dict):
             j.fail(key, f"expected an object, got {_short(it)}")
+        _check_misspelt_keys(j, it, _LIGHT_KEYS, key + ".")
         name = j.string(j.require(it, "image", key + "."), key + ".image")
         if name in names:
             j.fail(key + ".image", f"image {name!r} has two lights")
