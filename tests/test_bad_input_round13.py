@@ -345,6 +345,25 @@ def test_a_too_small_angular_map_has_its_article(tmp_path, capfd):
     assert rc == 2 and "a 1x1 light map is too small: an angular map must be at least 4x4" in line, line
 
 
+def test_a_cut_png_past_pillows_bomb_limit_says_its_size(cap, tmp_path, capfd):
+    """A 14000x14000 grey PNG whose data is cut (196 million pixels, past Pillow's 179 million of
+    ``Image.open``, within OpenCV's 2^30) was "over 178956970 pixels, which OpenCV did not decode
+    (its limit is 2^30 pixels)": neither was the reason."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", 14000, 14000, 8, 0, 0, 0, 0)
+    (tmp_path / "cut.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+                                       + chunk(b"IDAT", zlib.compress(bytes(1000))) + chunk(b"IEND", b""))
+    rc, line = _one_line(capfd, ["relight", cap, "--probe", "sky", "--mask", tmp_path / "cut.png",
+                                 "-o", tmp_path / "o.exr"])
+    assert rc == 2 and line.endswith("cut.png: cannot decode PNG image: its 14000x14000 header is valid but the "
+                                     "data is corrupt or truncated"), line
+
+
 # ----------------------------------------------------------------------------- Ctrl-C during the exit
 def test_a_ctrl_c_while_the_interpreter_exits_keeps_the_commands_status(tmp_path):
     """The command done and its output complete, a Ctrl-C while the interpreter joined its threads

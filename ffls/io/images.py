@@ -476,12 +476,11 @@ def _undecodable(path: Path, kind: str, whole: bool) -> str:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # (Pillow's own size warning: judged here)
-                with Image.open(path) as im:
+                # the format's own reader: Image.open refuses sizes past its bomb limit, and the
+                # 30000x30000 PNG whose data was cut was called "over 178956970 pixels"
+                with (_pillow_reader(kind) or Image.open)(path) as im:
                     (w, h), mode = im.size, im.mode
-        except Image.DecompressionBombError:
-            return (f"{what}: over {2 * Image.MAX_IMAGE_PIXELS} pixels, which OpenCV did not decode (its limit is "
-                    "2^30 pixels)")
-        except (OSError, ValueError, SyntaxError):
+        except (OSError, ValueError, SyntaxError, Image.DecompressionBombError):
             pass
         else:
             if w * h >= 2 ** 30:
@@ -767,6 +766,15 @@ def _exif_orientation(im) -> int:
 _GREY_MODES = {"1", "L", "LA", "La", "I", "F", "I;16", "I;16B", "I;16L", "I;16N", "PA"}
 
 
+def _pillow_reader(kind: str):
+    """Pillow's reader of one format (PNG, JPEG, TIFF; None for others), not ``Image.open``: that
+    refuses (or warns about) large sizes, which are the caller's to judge."""
+    from PIL import JpegImagePlugin, PngImagePlugin, TiffImagePlugin
+
+    return {"png": PngImagePlugin.PngImageFile, "jpeg": JpegImagePlugin.JpegImageFile,
+            "tiff": TiffImagePlugin.TiffImageFile}.get(kind)
+
+
 def image_header(path: str | os.PathLike) -> ImageHeader | None:
     """Size and channel count of an image file from its header alone, without decoding it.
 
@@ -804,13 +812,7 @@ def image_header(path: str | os.PathLike) -> ImageHeader | None:
             h, w = (n1, n2) if a1[1:] == b"Y" else (n2, n1)
             return ImageHeader(int(w), int(h), False)
         if kind in ("png", "jpeg", "tiff"):
-            from PIL import JpegImagePlugin, PngImagePlugin, TiffImagePlugin
-
-            # the format's own reader, not Image.open: that refuses (or warns about) large sizes,
-            # which are the caller's to judge
-            reader = {"png": PngImagePlugin.PngImageFile, "jpeg": JpegImagePlugin.JpegImageFile,
-                      "tiff": TiffImagePlugin.TiffImageFile}[kind]
-            with reader(path) as im:
+            with _pillow_reader(kind)(path) as im:
                 (w, h), mode = im.size, im.mode
                 turn = _exif_orientation(im)
             if turn >= 5 and kind != "tiff":  # (Pillow gives a TIFF's size as displayed already)
