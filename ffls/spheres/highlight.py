@@ -983,11 +983,7 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     kept. Either way the kept outline is uncertain by at least the gap between the two: the
     centre's sigma at least the distance between their centres, the radius's the difference of
     their :func:`apparent_radius_px`, each with the step's own precision and
-    :data:`LIMB_MODEL_FLOOR_PX` in quadrature. A kept detected outline is never less uncertain
-    than its own sigmas (a step that agrees with a wrong outline does not make it right); a taken
-    step does not inherit them (they describe the outline it replaces: a glossy ball found as a
-    chrome ball's outer outline carries :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX`,
-    1 px, where its centre is 0.03-0.13 px off and its step's sigma 0.15-0.34 px). A
+    :data:`LIMB_MODEL_FLOOR_PX` in quadrature, and neither below the detected outline's own. A
     gap beyond half of :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another
     edge), or no fit, leaves the view as it is.
 
@@ -1026,13 +1022,7 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
         # a chrome ball (a weak step, or a body that reflects its surroundings): the detected
         # outline (its reflections' edges) is kept
         return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb
-    # the step is taken (a clear step all round a dark body: the silhouette of a dark ball): the kept
-    # outline is the step, uncertain by its own precision and the gap to the detected outline. The
-    # detected outline's own uncertainty describes an outline no longer used (a glossy ball found
-    # as a chrome ball's outer outline carries MIRROR_OUTLINE_FLOOR_PX, the reflected room's
-    # contrasts inside the limb, which a dark body does not show)
-    c_sig = float(max(np.hypot(gap_c, c_own), np.hypot(c_own, limb.radius_sigma_px)))
-    r_sig = float(np.hypot(gap_r, r_own))
+    c_sig = float(max(c_sig, np.hypot(c_own, limb.radius_sigma_px)))
     if view.model == "pinhole":
         return replace(view, center_px=limb.center_px, center_cam=limb.center_cam, center_sigma_px=c_sig,
                        radius_sigma_px=r_sig), limb
