@@ -2258,17 +2258,25 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: DetectionCamera):
     r_limb = limb_radius(log_l, ft.center_px, ft.radius_px)
     if r_limb is not None and abs(r_limb / ft.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
         ft = _with_radius(ft, r_limb, cam)
-    ft.outline_sigma_px = MIRROR_OUTLINE_FLOOR_PX
-    sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, shape=cam.shape)
-    if sil is not None:  # the limb's reflectance step: a second outline estimate
-        try:
-            limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
-            # the reflected contrasts run inside the limb, the step at or just outside it: half their gap
-            gap = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px), limb.radius_px - ft.radius_px))
-            ft.outline_sigma_px = max(gap, MIRROR_OUTLINE_FLOOR_PX)
-        except ValueError:
-            pass
+    ft.outline_sigma_px = _outline_ambiguity(ft, log_l, cam)
     return ft, False
+
+
+def _outline_ambiguity(ft, log_l, cam: DetectionCamera) -> float:
+    """A mirror outline's ambiguity (``SphereFit.outline_sigma_px``, pixels): half the gap (centre
+    and radius) between it and the limb's reflectance step around it
+    (:func:`ffls.spheres.mirror_outline.mirror_silhouette`, a second outline estimate: the
+    reflected contrasts run inside the limb, the step at or just outside it), at least
+    :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` (the floor alone without a step)."""
+    sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, shape=cam.shape)
+    if sil is None:
+        return MIRROR_OUTLINE_FLOOR_PX
+    try:
+        limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
+    except ValueError:
+        return MIRROR_OUTLINE_FLOOR_PX
+    gap = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px), limb.radius_px - ft.radius_px))
+    return max(gap, MIRROR_OUTLINE_FLOOR_PX)
 
 
 def _with_radius(ft, radius_px: float, cam: DetectionCamera):
@@ -2538,12 +2546,14 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
     max image's outline already lies on the changing edges (0.53-0.65 of it on the renders of
     ``bench_conditions.py``, against 0.64-0.67 for the refit) the refit is one of several circles
     of equal support, and 1-2 sphere radii off in depth. Where it is replaced the old outline had
-    0.25-0.42 of it, the refit 0.71-0.94. Unchanged without the evidence (None: fewer than 3
-    photos, or a tensor without the summed gradient).
+    0.25-0.42 of it, the refit 0.71-0.94. A refit's ``outline_sigma_px`` is its own ambiguity
+    (:func:`_outline_ambiguity`), not the outline's it replaces. Unchanged without the evidence
+    (None: fewer than 3 photos, or a tensor without the summed gradient).
     """
     if changing is None or not fits:
         return fits
     pts = changing.points[0]
+    log_l = np.log(np.maximum(L, 1e-12))
     out = []
     for ft in fits:
         if ft.source == "override" or not _is_mirror_outline(ft, L):
@@ -2556,7 +2566,9 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
             out.append(ft)
             continue
         new.score, new.outline_edges = ft.score, PHOTO_EDGES
-        new.outline_sigma_px = max(ft.outline_sigma_px, MIRROR_OUTLINE_FLOOR_PX)
+        # its own ambiguity, not the outline's it replaces (that one was the worse supported: on
+        # the textured ground c18 its 2.66 px made the centre's sigma 2.74 px, the refit 0.51 px off)
+        new.outline_sigma_px = _outline_ambiguity(new, log_l, cam)
         out.append(new)
     return out
 
