@@ -202,6 +202,13 @@ def test_the_ground_view_reads_only_ground(rig):
     ball[s.rows, s.cols] = True
     assert not ball[view.rows, view.cols].any()
     assert 0.3 * 1024 < view.n_seen < 1024  # behind the ball and beyond reach are not read
+    # the hidden points filled from their seen neighbours are in the frame (behind the ball): the
+    # ground out of the frame is the uniform model's (filled from the frame's edge, a cast shadow
+    # by the edge would spread out to the reach)
+    X = CENTER + R * view.offsets[view.n_seen:]
+    Xc = (X - M[:3, 3]) @ M[:3, :3]
+    px = Xc[:, :2] / Xc[:, 2:] * FOCAL + K[0, 2]
+    assert len(X) > 0 and np.all((px >= 0) & (px <= RES - 1)), px
 
 
 def test_observed_needs_a_world_frame(tmp_path, capsys):
