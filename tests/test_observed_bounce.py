@@ -24,10 +24,12 @@ CENTER = np.array([0.0, 0.0, R])  # resting on z = 0
 RHO_S, RHO_G = 0.8, 0.3
 #: The object's cast shadow beside the ball: the ground within these x and |y| (world) is this dark.
 SHADOW_X, SHADOW_Y, SHADOW_LEVEL = (1.5 * R, 4.0 * R), 3.0 * R, 0.15
+#: A farther cast shadow beside the ball: 4.5 to 7.5 radii along x, |y| < 3 radii.
+FAR_SHADOW_X, FAR_SHADOW_Y = (4.5 * R, 7.5 * R), 3.0 * R
 LIGHTS = [spherical_to_direction(np.radians(th), np.radians(ph)) for th in (30, 50) for ph in range(-150, 180, 60)]
 
 
-def _camera():
+def _camera(res=RES, focal=FOCAL):
     """A camera 1 m away, 30 degrees above the ground, looking at the ball (world +Z up)."""
     el = np.radians(30.0)
     eye = CENTER + np.array([0.0, -np.cos(el), np.sin(el)])
@@ -39,16 +41,19 @@ def _camera():
     M = np.eye(4)
     M[:3, :3] = np.stack([x, y, z], axis=1)
     M[:3, 3] = eye
-    K = np.array([[FOCAL, 0, (RES - 1) / 2], [0, FOCAL, (RES - 1) / 2], [0, 0, 1.0]])
+    K = np.array([[focal, 0, (res - 1) / 2], [0, focal, (res - 1) / 2], [0, 0, 1.0]])
     return K, M
 
 
-def _ground_radiance(X, light, dark_side=True):
+def _ground_radiance(X, light, dark_side=True, far_shadow=False):
     """The ground's radiance at points X (n, 3) under a distant light: rho_g / pi * l_z, darker
-    in the object's shadow (SHADOW_X, SHADOW_Y), zero in the ball's own shadow."""
+    in the object's shadow (SHADOW_X, SHADOW_Y; ``far_shadow``: FAR_SHADOW_X, FAR_SHADOW_Y), zero
+    in the ball's own shadow."""
     L = np.full(len(X), RHO_G / np.pi * max(light[2], 0.0))
     if dark_side:
         L[(X[:, 0] > SHADOW_X[0]) & (X[:, 0] < SHADOW_X[1]) & (np.abs(X[:, 1]) < SHADOW_Y)] *= SHADOW_LEVEL
+    if far_shadow:
+        L[(X[:, 0] > FAR_SHADOW_X[0]) & (X[:, 0] < FAR_SHADOW_X[1]) & (np.abs(X[:, 1]) < FAR_SHADOW_Y)] *= SHADOW_LEVEL
     P = X - CENTER
     tc = -(P @ light)
     L[(tc > 0) & (np.einsum("ij,ij->i", P, P) - tc * tc < R * R)] = 0.0
@@ -73,19 +78,19 @@ def _in_object(X):
     return (X[:, 0] > OBJECT_X[0]) & (X[:, 0] < OBJECT_X[1]) & (np.abs(X[:, 1]) < OBJECT_Y)
 
 
-def _render(light, samples, K, M, dark_side=True, n_rays=24, seen_object=False):
+def _render(light, samples, K, M, dark_side=True, n_rays=24, seen_object=False, far_shadow=False, res=RES):
     """The photo (RES, RES) float: ground pixels, and the ball's pixels (direct + bounce).
     ``seen_object``: the object of :func:`_object_radiance` stands in front of part of the ground
     (in the image only: the ball's bounce is the ground's)."""
-    img = np.zeros((RES, RES))
-    yy, xx = np.mgrid[0:RES, 0:RES]
-    d = np.stack([(xx.ravel() - K[0, 2]) / FOCAL, (yy.ravel() - K[1, 2]) / FOCAL, np.ones(RES * RES)], axis=1)
+    img = np.zeros((res, res))
+    yy, xx = np.mgrid[0:res, 0:res]
+    d = np.stack([(xx.ravel() - K[0, 2]) / K[0, 0], (yy.ravel() - K[1, 2]) / K[1, 1], np.ones(res * res)], axis=1)
     d = d @ M[:3, :3].T
     o = M[:3, 3]
     t = -o[2] / d[:, 2]
     X = o + d * t[:, None]
     ok = t > 0
-    img.ravel()[ok] = _ground_radiance(X[ok], light, dark_side)
+    img.ravel()[ok] = _ground_radiance(X[ok], light, dark_side, far_shadow)
     if seen_object:
         on = np.flatnonzero(ok)[_in_object(X[ok])]
         img.ravel()[on] = _object_radiance(X[on], light)
@@ -103,7 +108,7 @@ def _render(light, samples, K, M, dark_side=True, n_rays=24, seen_object=False):
         w = local @ np.stack([t1, np.cross(ni, t1), ni])
         w = w[w[:, 2] < -1e-9]
         G = p + w * (-p[2] / w[:, 2])[:, None]
-        bounce[i] = _ground_radiance(G, light, dark_side).sum() / len(local)  # (1/pi) int L cos
+        bounce[i] = _ground_radiance(G, light, dark_side, far_shadow).sum() / len(local)  # (1/pi) int L cos
     img[samples.rows, samples.cols] = RHO_S / np.pi * np.maximum(n @ light, 0.0) + RHO_S * bounce
     return img
 
@@ -197,6 +202,13 @@ def test_the_ground_view_reads_only_ground(rig):
     ball[s.rows, s.cols] = True
     assert not ball[view.rows, view.cols].any()
     assert 0.3 * 1024 < view.n_seen < 1024  # behind the ball and beyond reach are not read
+    # the hidden points filled from their seen neighbours are in the frame (behind the ball): the
+    # ground out of the frame is the uniform model's (filled from the frame's edge, a cast shadow
+    # by the edge would spread out to the reach)
+    X = CENTER + R * view.offsets[view.n_seen:]
+    Xc = (X - M[:3, 3]) @ M[:3, :3]
+    px = Xc[:, :2] / Xc[:, 2:] * FOCAL + K[0, 2]
+    assert len(X) > 0 and np.all((px >= 0) & (px <= RES - 1)), px
 
 
 def test_observed_needs_a_world_frame(tmp_path, capsys):
@@ -248,6 +260,37 @@ def test_two_terms_seen_bounce_and_hidden_form_factor(rig):
         f = fit_lambert(s.normals, v.grey - RHO_S * bs, v.valid, g=hid, bounce_ratio=RHO_G, own_shadow=False)
         errors.append(np.degrees(angle_between(f.direction, light)))
     assert np.median(errors) < 0.15 and max(errors) < 0.25, errors  # (uniform model: 0.53 / 0.99)
+
+
+def test_a_far_cast_shadow_is_read_within_reach():
+    """A cast shadow 4.5 to 7.5 radii beside the ball (another object's; a wider lens, 9 radii
+    each side of the ball, sees it): with
+    the ground read out to GROUND_REACH (8 radii) the seen term measures it; read out to 4 radii
+    (the earlier reach) it is the hidden ground's uniform model, and the two terms' fits at the
+    true albedo and ground ratio keep its bias (docs/spheres.md, "The hidden ratio's bias")."""
+    from dataclasses import replace
+
+    from ffls.spheres.ground import GROUND_REACH, ground_radiance, hidden_form_factor, seen_bounce
+
+    res = 320
+    K, M = _camera(res, 350.0)
+    s = sphere_samples((res, res), K, None, (CENTER - M[:3, 3]) @ M[:3, :3], R, M)
+    assert GROUND_REACH >= FAR_SHADOW_X[1] / R
+    views = {"reach 4": ground_views([s], (res, res), "pinhole", K, None, M, reach=4.0)[0],
+             "reach": ground_views([s], (res, res), "pinhole", K, None, M)[0]}
+    s = replace(s, ground_view=views["reach"])
+    errors = {k: [] for k in views}
+    for light in LIGHTS:
+        img = _render(light, s, K, M, dark_side=False, far_shadow=True, res=res)
+        v = sphere_values(img[..., None], [s])[0]
+        for k, view in views.items():
+            L = ground_radiance(view, img[..., None])
+            hid = hidden_form_factor(view, light, shadowed_ground_bounce(s.normals, light, g=s.ground), s.normals)
+            f = fit_lambert(s.normals, v.grey - RHO_S * seen_bounce(view, L, s.normals), v.valid, g=hid,
+                            bounce_ratio=RHO_G, own_shadow=False)
+            errors[k].append(np.degrees(angle_between(f.direction, light)))
+    med = {k: float(np.median(e)) for k, e in errors.items()}
+    assert med["reach"] < 0.5 * med["reach 4"], med
 
 
 def test_not_ground_flags_what_is_not_shaded_as_the_plane():

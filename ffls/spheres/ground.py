@@ -41,10 +41,15 @@ __all__ = ["GROUND_DIRECTIONS", "GROUND_MARGIN_PX", "GROUND_REACH", "GROUND_SHAD
 GROUND_DIRECTIONS = 1024
 #: Farthest ground point read, in sphere radii from the contact point along the ground. From the
 #: sphere's lowest point (``n = -up``) the ground within ``rho`` radii of the contact holds
-#: ``rho^2 / (rho^2 + 1)`` of the cosine-weighted bounce (the centre is one radius up): 94% at 4;
-#: farther ground is more likely another object's (an object's ground point, hidden from the
-#: sphere or from the camera, is not the sphere's ground) and is left to the uniform model.
-GROUND_REACH = 4.0
+#: ``rho^2 / (rho^2 + 1)`` of the cosine-weighted bounce (the centre is one radius up): 98.5% at 8
+#: (94% at 4). The ground out of reach is the uniform model's, in the hidden ground's term whose
+#: ratio is calibrated (:func:`hidden_form_factor`); from the sphere's upper half that far ground
+#: is most of its bounce, and smooth, nearly the direct term's and the ambient's columns, so a
+#: calibrated ratio carrying it is pulled by any misfit of the far field (an object 7 radii away
+#: that hides the far ground: 11% low at 4 radii, docs/spheres.md, "The hidden ratio's bias").
+#: Read out to 8 radii, the photo measures most of it; the object within reach is taken out of
+#: the ground by :func:`not_ground`.
+GROUND_REACH = 8.0
 #: Seen ground points whose radiance a hidden one (behind the sphere) takes, by inverse distance.
 FILL_NEIGHBOURS = 4
 #: Margin around each sphere's outline, in pixels, within which the ground is not read (the
@@ -86,7 +91,7 @@ class GroundView:
         Which of the directions are read (in the frame, not behind a sphere, within reach).
     offsets : (p + h, 3) float
         The ground points, from the sphere's centre, in sphere radii: the ``p`` seen ones, then the
-        ``h`` hidden ones within reach (behind a sphere, out of the frame).
+        ``h`` hidden ones within reach (in the frame, behind a sphere).
     areas : (p + h,) float
         The ground area each stands for, in square sphere radii (``dOmega / |w . up|^3``).
     fill_index, fill_weights : (h, k) int, float
@@ -228,6 +233,7 @@ def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, wo
         radii = np.array([sm.radius + margin_px / sc for sm, sc in zip(samples, scale_px)])
         ok = reach_ok & in_front & np.isfinite(px).all(axis=1)
         ok &= (px[:, 0] >= 0) & (px[:, 0] <= W - 1) & (px[:, 1] >= 0) & (px[:, 1] <= H - 1)
+        framed = ok.copy()  # (in the frame: hidden only by a sphere)
         if ok.any():
             idx = np.flatnonzero(ok)
             o = origin[idx] if np.ndim(origin) == 2 else origin
@@ -238,8 +244,11 @@ def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, wo
         rows = np.stack([y0, y0, y0 + 1, y0 + 1], axis=1)
         cols = np.stack([x0, x0 + 1, x0, x0 + 1], axis=1)
         wts = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], axis=1)
-        # the ground within reach that the camera does not see: as its nearest seen neighbours
-        hidden = reach_ok & ~ok
+        # the ground within reach that a sphere hides from the camera: as its nearest seen
+        # neighbours (the ground out of the frame is left to the uniform model, as out of reach:
+        # filled from the frame's edge out to 8 radii, the test's cast shadow 1.5-4 radii beside
+        # the ball spread to 8, tests/test_observed_bounce.py)
+        hidden = framed & ~ok
         fill_index = np.zeros((0, FILL_NEIGHBOURS), np.intp)
         fill_weights = np.zeros((0, FILL_NEIGHBOURS))
         if hidden.any() and ok.sum() >= FILL_NEIGHBOURS:
@@ -406,8 +415,8 @@ def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.nda
     (:func:`ffls.spheres.lambert.shadowed_ground_bounce`), for a ground of radiance ``L_ref``: the
     median of the seen ground outside the own shadow. Where the ground is seen, its departure from
     that model, ``L(w) / L_ref - (1 - shadow(w))``, is added with its cosine weights; where it is
-    hidden within reach (behind the sphere, out of the frame), it is taken as bright as its
-    nearest seen points that are lit (:attr:`GroundView.fill_index`); out of reach, the uniform
+    hidden within reach (behind the sphere, in the frame), it is taken as bright as its
+    nearest seen points that are lit (:attr:`GroundView.fill_index`); out of reach or of the frame, the uniform
     model stands. A
     uniform ground gives ``uniform`` back, so the ground ratio of
     :func:`ffls.spheres.estimate.calibrate_bounce` keeps its meaning (``L_ref`` is the uniform
