@@ -14,7 +14,7 @@ from ffls.io.capture import load_capture
 from ffls.radiance.photos import load_photo
 from ffls.spheres.detect import SphereFit, extreme_images, find_spheres_in_capture, outline_support
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circle_coverage, circle_search,
-                                        dark_cap, enclosing_circle, highlight_ratio)
+                                          dark_cap, enclosing_circle, highest_first, highlight_ratio)
 from ffls.synth.photo import PhotoSettings
 from ffls.synth.scene import make_scene, write_synthetic_capture
 
@@ -112,6 +112,43 @@ def test_circle_search_finds_a_partial_circle_among_clutter():
         assert np.hypot(*(cc - c)) < 0.2 and abs(rr - R) < 0.2 and inl.sum() >= 0.9 * len(arc)
         np.testing.assert_allclose(cc, out[0][0][0], atol=1e-9)
     assert circle_search(pts[:2], c, 10.0, 15.0, 35.0) == []
+
+
+def test_highest_first_blocks_are_one_stable_sort():
+    """The windows' order in blocks (the highest few, then the rest) is that of one stable sort of all,
+    ties (many, at the block's edge too) in index order."""
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 5, 64, 65, 300, 5000):
+        for levels in (3, 40, 10**6):
+            values = rng.integers(-1, levels, n).astype(np.float64)
+            idx = np.flatnonzero(values >= 0)
+            want = idx[np.argsort(-values[idx], kind="stable")]
+            blocks = list(highest_first(values, idx))
+            assert len(blocks) == (2 if len(idx) > 64 else 1)
+            assert np.array_equal(np.concatenate(blocks), want)
+
+
+def test_circle_search_points_out_of_the_radius_range_do_not_vote():
+    """Points nearer every grid centre than the smallest radius, or farther than the largest, fall
+    out of the vote (its spare bins): appended, they leave the circles the same floats, and are no
+    circle's inliers."""
+    rng = np.random.default_rng(11)
+    c, R = np.array([60.0, 70.0]), 25.0
+    t = np.radians(np.arange(150, 360, 1.25))
+    arc = c + R * np.stack([np.cos(t), np.sin(t)], axis=1) + rng.normal(0, 0.3, (len(t), 2))
+    pts = np.concatenate([arc, rng.uniform(0, 140, (400, 2))])
+    # within 2 px of the search centre (nearer every grid centre, at most 10 px from it, than the
+    # lowest window, 14 px), and 3 radii out (farther than the highest, 36 px)
+    far = np.concatenate([c + [3.0, -4.0] + rng.uniform(-1.4, 1.4, (60, 2)),
+                          c + 3.0 * R * np.stack([np.cos(t), np.sin(t)], axis=1)])
+    for per_radius in (False, True):
+        want = circle_search(pts, c + [3.0, -4.0], 10.0, 15.0, 35.0, n_best=3, per_radius=per_radius)
+        got = circle_search(np.concatenate([pts, far]), c + [3.0, -4.0], 10.0, 15.0, 35.0, n_best=3,
+                            per_radius=per_radius)
+        assert len(got) == len(want) == 3
+        for (cw, rw, iw), (cg, rg, ig) in zip(want, got):
+            assert np.array_equal(cg, cw) and rg == rw
+            assert np.array_equal(ig[:len(pts)], iw) and not ig[len(pts):].any()
 
 
 def test_highlight_ratio_tells_a_mirror_from_a_dark_patch():

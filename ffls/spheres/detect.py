@@ -60,6 +60,7 @@ scene centre from ``world_from_camera``, or world-centre hints).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 
 import cv2
@@ -1158,19 +1159,24 @@ def unit_cone_residuals(params, s, f):
     :func:`ffls.conventions.angle_between` written out for (n, 3) unit rows against one direction:
     the same operations in the same order (so the same floats), without normalising the rays
     again at every evaluation nor ``np.cross``'s general-axis overhead (the outline fits evaluate
-    it tens of thousands of times per capture)."""
+    it tens of thousands of times per capture). The direction ``c`` is normalised twice as before
+    (``c /= np.linalg.norm(c)``, whose 1-D path is the square root of ``c.dot(c)``, then
+    :func:`ffls.conventions.normalize`, the squares summed in order) on three scalars: the same
+    floats without the arrays' per-call overhead."""
     x, y, a = params / f
-    c = np.array([x, y, 1.0])
-    c /= np.linalg.norm(c)
-    c = normalize(c)
+    v = np.array([x, y, 1.0])
+    n = math.sqrt(v.dot(v))
+    c0, c1, c2 = x / n, y / n, 1.0 / n
+    n = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    c0, c1, c2 = c0 / n, c1 / n, c2 / n
     s0, s1, s2 = s[:, 0], s[:, 1], s[:, 2]
-    x0 = s1 * c[2]
-    x0 -= s2 * c[1]
-    x1 = s2 * c[0]
-    x1 -= s0 * c[2]
-    x2 = s0 * c[1]
-    x2 -= s1 * c[0]
-    return f * (np.arctan2(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), s0 * c[0] + s1 * c[1] + s2 * c[2]) - a)
+    x0 = s1 * c2
+    x0 -= s2 * c1
+    x1 = s2 * c0
+    x1 -= s0 * c2
+    x2 = s0 * c1
+    x2 -= s1 * c0
+    return f * (np.arctan2(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), s0 * c0 + s1 * c1 + s2 * c2) - a)
 
 
 def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, trim: float = 3.0):

@@ -59,6 +59,19 @@ class OuterCircle:
     new_fraction: float
 
 
+def highest_first(values, idx, head: int = 64):
+    """``idx`` ordered by ``values[idx]``, highest first and ties in the order of ``idx``: the order
+    of one stable sort of all, in two blocks, the ``head`` highest (with every value tied with the
+    last of them) and then the rest, sorted only when it is asked for (a search picks its few
+    windows among the highest of thousands)."""
+    v = values[idx]
+    if len(v) > head:
+        top = v >= np.partition(v, len(v) - head)[len(v) - head]
+        yield idx[top][np.argsort(-v[top], kind="stable")]
+        idx, v = idx[~top], v[~top]
+    yield idx[np.argsort(-v, kind="stable")]
+
+
 def circle_search(points, center, max_offset: float, r_min: float, r_max: float, *, tol: float = 1.0,
                   n_best: int = 1, per_radius: bool = False) -> list:
     """The best-supported circles near a centre: a Hough vote on a grid of centres, refined by least squares.
@@ -124,44 +137,58 @@ def circle_search(points, center, max_offset: float, r_min: float, r_max: float,
     d -= lo
     d /= 0.5 * w
     np.floor(d, out=d)
-    ok = (d >= 0) & (d < nb)
-    d += (np.arange(len(cs)) * nb)[:, None]  # (exact: integers far below 2**53)
-    votes = np.bincount(d[ok].astype(np.int64), minlength=len(cs) * nb).reshape(len(cs), nb)
+    # the bins out of range go to two spare bins per centre (below and above), cut off after the
+    # count: the same votes as selecting the bins in range, without the boolean mask's copy
+    np.clip(d, -1.0, nb, out=d)
+    d += (np.arange(len(cs)) * (nb + 2) + 1)[:, None]  # (exact: integers far below 2**53)
+    votes = np.bincount(d.ravel().astype(np.int64), minlength=len(cs) * (nb + 2)).reshape(len(cs), nb + 2)
+    votes = votes[:, 1:-1]
     win = votes[:, :-1] + votes[:, 1:]  # window j covers [lo + j w/2, lo + (j + 2) w/2)
     radii = lo + (np.arange(nb - 1) + 1.0) * 0.5 * w
     score = win / np.maximum(radii, 1.0)[None, :] if per_radius else win.astype(np.float64)
     score = np.where((win >= 3) & (radii >= r_min - 0.5 * w)[None, :] & (radii <= r_max + 0.5 * w)[None, :], score, -1)
     # highest first, ties by grid index; only the windows that may be picked (score >= 0) are sorted
-    valid = np.flatnonzero(score.ravel() >= 0)
-    order = valid[np.argsort(-score.ravel()[valid], kind="stable")]
     picked = []
-    for idx in order:
-        if score.flat[idx] < 0 or len(picked) >= max(2 * n_best, 3):
+    need = max(2 * n_best, 3)
+    for block in highest_first(score.ravel(), np.flatnonzero(score.ravel() >= 0)):
+        for idx in block:
+            if len(picked) >= need:
+                break
+            ci, ri = divmod(int(idx), nb - 1)
+            if any(np.hypot(*(cs[ci] - cs[cj])) <= s + 1e-9 and abs(radii[ri] - radii[rj]) <= w
+                   for cj, rj in picked):
+                continue
+            picked.append((ci, ri))
+        if len(picked) >= need:
             break
-        ci, ri = divmod(int(idx), nb - 1)
-        if any(np.hypot(*(cs[ci] - cs[cj])) <= s + 1e-9 and abs(radii[ri] - radii[rj]) <= w for cj, rj in picked):
-            continue
-        picked.append((ci, ri))
 
-    def resid(p, Q):
-        return np.hypot(Q[:, 0] - p[0], Q[:, 1] - p[1]) - p[2]
+    # the residuals and Jacobian on the points' x and y columns (contiguous, split once): the same
+    # floats as on the (n, 2) rows, with less of the per-evaluation overhead of the small fits
+    def resid(p, X, Y):
+        return np.hypot(X - p[0], Y - p[1]) - p[2]
 
-    def jac(p, Q):
-        v = Q - p[:2]
-        dist = np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-12)
-        return np.column_stack([-v[:, 0] / dist, -v[:, 1] / dist, -np.ones(len(Q))])
+    def jac(p, X, Y):
+        J = np.empty((len(X), 3))
+        dist = np.hypot(X - p[0], Y - p[1])
+        np.maximum(dist, 1e-12, out=dist)
+        np.divide(np.subtract(p[0], X, out=J[:, 0]), dist, out=J[:, 0])  # -(x - x0) / dist
+        np.divide(np.subtract(p[1], Y, out=J[:, 1]), dist, out=J[:, 1])
+        J[:, 2] = -1.0
+        return J
 
+    PX, PY = np.ascontiguousarray(P[:, 0]), np.ascontiguousarray(P[:, 1])
     out = []
     for ci, ri in picked:
         p = np.array([cs[ci, 0], cs[ci, 1], radii[ri]])
         for band, scale in ((w, tol), (2.0 * tol, tol)):
-            Q = P[np.abs(resid(p, P)) <= band]
-            if len(Q) < 3:
+            near = np.abs(resid(p, PX, PY)) <= band
+            if np.count_nonzero(near) < 3:
                 break
-            p = least_squares(resid, p, jac=jac, args=(Q,), loss="soft_l1", f_scale=scale, method="trf").x
+            p = least_squares(resid, p, jac=jac, args=(PX[near], PY[near]), loss="soft_l1", f_scale=scale,
+                              method="trf").x
         else:
             if r_min <= p[2] <= r_max and np.hypot(*(p[:2] - c0)) <= max_offset + tol:
-                inl = np.abs(resid(p, P)) <= tol
+                inl = np.abs(resid(p, PX, PY)) <= tol
                 out.append((p[:2].copy(), float(p[2]), inl))
     rank = [(-(inl.sum() / max(r, 1.0) if per_radius else inl.sum()), float(np.hypot(*(c - c0))), i)
             for i, (c, r, inl) in enumerate(out)]
