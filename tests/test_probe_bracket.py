@@ -173,3 +173,25 @@ def test_cli_merge_refuses_times_no_camera_gives_and_a_file_twice(tmp_path, caps
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and msg in err[0], (extra, err)
         assert not (tmp_path / "x.exr").exists()
+
+
+def test_noisy_short_exposures_do_not_set_the_dark_parts():
+    """Read noise of a fixed size in the stored values (clipped at black, as a camera's codes are)
+    is 1/t larger in x/t: the default merge weighs each exposure by t^2 (Robertson et al. 2003), so
+    a dark region is set by the long exposure, not by the short one's biased noise."""
+    from ffls.probes.bracket import merge_exposures
+
+    rng = np.random.default_rng(5)
+    L = np.full((64, 64, 3), 0.02)           # a dark region ...
+    L[:, 32:] = 20.0                         # ... beside a bright one
+    times = (1 / 1000, 1 / 30, 1.0)
+    stored = [np.clip(np.rint((L * t + rng.normal(0, 0.004, L.shape)).clip(0, 1) * 255) / 255, 0, 1)
+              for t in times]
+    m = merge_exposures(stored, stored, times, [1.0] * 3)
+    dark = m.radiance[:, :32].astype(np.float64)
+    assert abs(np.median(dark) / 0.02 - 1) < 0.05, np.median(dark)
+    bright = m.radiance[:, 32:].astype(np.float64)
+    assert abs(np.median(bright) / 20.0 - 1) < 0.05
+    # the hat-weighted mean alone (Debevec and Malik) is pulled up by the short exposure's noise
+    old = merge_exposures_DebevecMalik1997(stored, stored, times, [1.0] * 3).radiance[:, :32]
+    assert np.median(old) > 1.5 * 0.02
