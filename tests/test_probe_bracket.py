@@ -116,6 +116,8 @@ def test_cli_merge_with_exposures_and_exif(tmp_path, capsys):
         assert code == 2 and len(err) == 1 and "error" in err[0], (bad, err)
         if "--encoding" not in bad:  # the unstated encoding itself is named, not a default's parse error
             assert "not stated" in err[0] and "does not guess" in err[0], err
+            # in the flag's own words (gamma=G), not probe.json's ({"gamma": g}), and in English
+            assert "gamma=G" in err[0] and '{"gamma"' not in err[0] and "an 8-bit image" in err[0], err
         assert not (tmp_path / "x.exr").exists()
 
 

@@ -40,7 +40,7 @@ from ffls.errors import InputError
 from ffls.io.images import ImageData, check_one_orientation, read_image
 from ffls.radiance.photos import linearise
 
-__all__ = ["SATURATION", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
+__all__ = ["SATURATION", "JSON_ENCODING_FORMS", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
            "merge_exposures_DebevecMalik1997", "merge_exposures_Robertson2003", "MERGE_METHODS",
            "merge_exposures", "check_encoding", "decode_image",
            "merge_bracket_files", "view_radiance", "exposure_from_exif"]
@@ -227,17 +227,23 @@ def merge_exposures(linear, stored, exposures, clip_levels, method: str = "Rober
 
 
 # ----------------------------------------------------------------------------- files
-def check_encoding(img: ImageData, encoding, source, key: str = "encoding") -> None:
+#: How ``probe.json``'s ``encoding`` key states an encoding (the forms named when it is missing).
+JSON_ENCODING_FORMS = '"srgb", "linear", {"gamma": g} or {"response": "file.npy"}'
+
+
+def check_encoding(img: ImageData, encoding, source, key: str = "encoding", forms: str = JSON_ENCODING_FORMS
+                   ) -> None:
     """Refuse an encoding that does not apply to ``img``, naming ``source`` (the file that states it) and ``key``.
 
     ``'auto'`` (not stated) with an integer image is refused: ffls never guesses whether an
-    8- or 16-bit image is sRGB, gamma or linear.
+    8- or 16-bit image is sRGB, gamma or linear. ``forms`` lists how ``key`` states one (the
+    JSON values of ``probe.json``, or a command-line flag's values).
     """
     if encoding == "auto":
         if not img.is_hdr:
-            raise InputError(f"{key}: not stated, and {img.path.name} is a {img.bit_depth}-bit image that could be "
-                             f"sRGB, gamma or linear; ffls does not guess: state it (\"srgb\", \"linear\", "
-                             f"{{\"gamma\": g}} or {{\"response\": \"file.npy\"}})", source)
+            article = "an" if img.bit_depth == 8 else "a"
+            raise InputError(f"{key}: not stated, and {img.path.name} is {article} {img.bit_depth}-bit image that "
+                             f"could be sRGB, gamma or linear; ffls does not guess: state it ({forms})", source)
         return
     if img.is_hdr and encoding != "linear":
         raise InputError(f"{key}: {encoding!r} applies to integer images, but {img.path.name} is floating point "
@@ -267,8 +273,8 @@ def _read_all(paths) -> list[ImageData]:
     return imgs
 
 
-def merge_bracket_files(paths, exposures, encoding, response=None, source=None, key: str = "encoding"
-                        ) -> BracketMerge:
+def merge_bracket_files(paths, exposures, encoding, response=None, source=None, key: str = "encoding",
+                        forms: str = JSON_ENCODING_FORMS) -> BracketMerge:
     """Read a bracket of image files and merge it (:func:`merge_exposures_Robertson2003`).
 
     Parameters
@@ -283,8 +289,8 @@ def merge_bracket_files(paths, exposures, encoding, response=None, source=None, 
         The table of ``{'response': ...}``.
     source : path-like, optional
         The file or flag named in errors about the encoding or the exposures (default: the first image).
-    key : str
-        The key or flag that states the encoding, for messages.
+    key, forms : str
+        The key or flag that states the encoding, and how it states one, for messages.
 
     Returns
     -------
@@ -301,7 +307,7 @@ def merge_bracket_files(paths, exposures, encoding, response=None, source=None, 
     imgs = _read_all(paths)
     lin, clips = [], []
     for im in imgs:
-        check_encoding(im, encoding, source, key)
+        check_encoding(im, encoding, source, key, forms)
         x, c = decode_image(im, encoding, response)
         lin.append(x)
         clips.append(c)
