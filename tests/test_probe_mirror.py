@@ -204,6 +204,14 @@ def test_bad_input_is_one_line(tmp_path):
     with pytest.raises(InputError) as e:
         estimate_lightmap(folder, "mirror")
     assert "no sphere found" in str(e.value) and "probe.json" in str(e.value) and "\n" not in str(e.value)
+    # in probe.json's words: one "sphere", no capture's sphere_count or spheres[0], and one image
+    assert "sphere_count" not in str(e.value) and "max image" not in str(e.value), str(e.value)
+    folder = _probe_with_image(tmp_path / "h", lambda p: (p.parent.mkdir(), write_exr(p, env)), "env.exr",
+                               {"center_px": [48, 48]})
+    with pytest.raises(InputError) as e:
+        estimate_lightmap(folder, "mirror")
+    assert str(e.value).split("probe.json: ", 1)[1].startswith("sphere"), str(e.value)
+    assert "spheres[" not in str(e.value), str(e.value)
     sphere = {"center_px": [48, 48], "radius_px": 40}
     folder = _probe_with_image(tmp_path / "b", lambda p: (p.parent.mkdir(), write_exr(p, np.zeros((96, 96, 3)))),
                                "dark.exr", sphere)
