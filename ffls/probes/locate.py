@@ -212,6 +212,9 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                                                                       "\"sphere_count\": n",
                                                                       "\"sphere\": {\"center_px\": [u, v]}")
         msg = re.sub(r"\bspheres\[0\]", "sphere", msg).replace("no sphere found (sphere_count 1)", "no sphere found")
+        if sph.location == "pixel" and "radius_px" not in msg:  # the hint's way out: a circle used as given
+            msg += ("; measure the ball's outline in the photo and give \"radius_px\" with \"center_px\" "
+                    "(a circle stated in pixels is used as given)")
         raise InputError(msg, source) from None
     ft = found[0]
     if view.sphere.material == "mirror":  # the limb's reflectance step rather than a reflected edge
