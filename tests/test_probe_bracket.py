@@ -52,6 +52,7 @@ def test_integer_bracket_recovers_radiance(tmp_path, bits):
     assert np.median(rel) < (0.01 if bits == 8 else 0.001) and rel.max() < (0.15 if bits == 8 else 0.01)
     # the sun is clipped in every exposure: flagged, and given the shortest exposure's (lower-bound) value
     assert m.saturated[:3, :3].all() and m.saturated.sum() == 9
+    assert "9 pixels" in m.describe() and "lower bound" in m.describe() and "shorter than 0.004 s" in m.describe()
     assert np.all(rec[:3, :3] < 1e6) and np.all(rec[:3, :3] >= 0.99 * 50 / TIMES[0])
 
 

@@ -76,8 +76,12 @@ class BracketMerge:
         """One line: exposures, flagged pixels."""
         n = self.saturated.size
         t = ", ".join(f"{x:.4g}" for x in self.exposures)
-        return (f"{len(self.exposures)} exposures ({t} s); {int(self.saturated.sum())} pixels "
-                f"({100 * self.saturated.sum() / n:.2f}%) saturated in every exposure, "
+        k = int(self.saturated.sum())
+        # a sun clipped in every exposure can hold most of a scene's light: its value is only a bound
+        bound = (" (their radiance is only a lower bound, and a light map misses the rest of their light: "
+                 f"add an exposure shorter than {self.exposures.min():.4g} s, or an ND filter)") if k else ""
+        return (f"{len(self.exposures)} exposures ({t} s); {k} pixel{'' if k == 1 else 's'} "
+                f"({100 * k / n:.2f}%) saturated in every exposure{bound}, "
                 f"{int(self.dark.sum())} ({100 * self.dark.sum() / n:.2f}%) black in every exposure")
 
 
