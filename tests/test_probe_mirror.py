@@ -218,7 +218,8 @@ def test_bad_input_is_one_line(tmp_path):
     from ffls.lightmaps.lightmap import builtin_lightmap
     from ffls.synth.probe_scenes import diffuse_sphere_scene
 
-    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=200, albedo=0.25, radius_frac=0.3)
+    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=200, albedo=0.25,
+                              radius_frac=0.3)
     rng = np.random.default_rng(1)
     bg = cv2.GaussianBlur(rng.uniform(0, 1, (200, 200, 3)), (0, 0), 3)
     bg = (bg - bg.min()) / np.ptp(bg) * np.percentile(sc.image[sc.mask], 90)
