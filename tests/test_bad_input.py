@@ -242,6 +242,9 @@ CASES = [
     ("render-fps-0", R + ["--turntable", "3", "--fps", "0", "-o", "{out}/t.mp4"], "--fps", "t.mp4"),
     ("render-fps-inf", R + ["--turntable", "3", "--fps", "inf", "-o", "{out}/t.mp4"], "--fps", "t.mp4"),
     ("render-fps-neg", R + ["--turntable", "3", "--fps=-5", "-o", "{out}/frames"], "--fps", "frames"),
+    # a video has no alpha: a --mask that would not even meter --exposure auto is refused, not ignored
+    ("render-turntable-mask", R + ["--turntable", "3", "--mask", "{root}/mask.png", "-o", "{out}/t.mp4"], "--mask",
+     "t.mp4"),
     ("render-out-suffix", R + ["-o", "{out}/a.txt"], "a.txt", "a.txt"),
     ("relight-rotz-nan", L + ["--rotate-z", "nan", "-o", "{out}/a.exr"], "--rotate-z", "a.exr"),
     ("relight-rot-nan", L + ["--rotate", "nan,0,0", "-o", "{out}/a.exr"], "--rotate", "a.exr"),

@@ -481,3 +481,16 @@ def test_encoding_calibration_finds_the_spheres_with_its_workers(linear_captures
     assert seen == [2]
     assert cal_2.record() == cal_1.record()
     assert [tuple(s.center_px) for s in sph_2] == [tuple(s.center_px) for s in sph_1]
+
+
+def test_spheres_declared_mirrors_do_not_calibrate(linear_captures, tmp_path):
+    """A sphere capture.json declares a mirror (chrome, black glossy) is not fitted as a matte one:
+    with only such spheres the encoding is asked for, naming why."""
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", "srgb")
+    doc = json.loads((folder / "capture.json").read_text())
+    doc["sphere_material"] = "mirror"
+    (folder / "capture.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError) as e:
+        calibrate_capture_encoding(cap.load_capture(folder))
+    _one_line(e.value, "cannot calibrate the encoding", "no matte sphere", "capture.json", '"encoding"')

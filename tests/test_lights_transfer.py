@@ -194,6 +194,10 @@ def test_lp_with_rejected_lights_left_out_applies_by_a_map(calib, tmp_path):
     # a lights.json lists every photo, rejected ones too: an image the map leaves out is still an error
     with pytest.raises(InputError, match="'obj_03.exr' has no light"):
         load_lights_any(calib / "lights.json", obj, listed)
+    # without a map, the error says why the counts differ, and which file applies by order
+    with pytest.raises(InputError) as e:
+        load_lights_any(lp, obj)
+    assert "only accepted lights" in str(e.value) and "lights.json" in str(e.value) and "\n" not in str(e.value)
 
 
 def test_a_file_with_more_lights_than_the_capture_applies_by_name(calib, tmp_path):

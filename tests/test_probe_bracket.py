@@ -52,6 +52,7 @@ def test_integer_bracket_recovers_radiance(tmp_path, bits):
     assert np.median(rel) < (0.01 if bits == 8 else 0.001) and rel.max() < (0.15 if bits == 8 else 0.01)
     # the sun is clipped in every exposure: flagged, and given the shortest exposure's (lower-bound) value
     assert m.saturated[:3, :3].all() and m.saturated.sum() == 9
+    assert "9 pixels" in m.describe() and "lower bound" in m.describe() and "shorter than 0.004 s" in m.describe()
     assert np.all(rec[:3, :3] < 1e6) and np.all(rec[:3, :3] >= 0.99 * 50 / TIMES[0])
 
 
@@ -116,6 +117,8 @@ def test_cli_merge_with_exposures_and_exif(tmp_path, capsys):
         assert code == 2 and len(err) == 1 and "error" in err[0], (bad, err)
         if "--encoding" not in bad:  # the unstated encoding itself is named, not a default's parse error
             assert "not stated" in err[0] and "does not guess" in err[0], err
+            # in the flag's own words (gamma=G), not probe.json's ({"gamma": g}), and in English
+            assert "gamma=G" in err[0] and '{"gamma"' not in err[0] and "an 8-bit image" in err[0], err
         assert not (tmp_path / "x.exr").exists()
 
 
@@ -173,3 +176,25 @@ def test_cli_merge_refuses_times_no_camera_gives_and_a_file_twice(tmp_path, caps
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and msg in err[0], (extra, err)
         assert not (tmp_path / "x.exr").exists()
+
+
+def test_noisy_short_exposures_do_not_set_the_dark_parts():
+    """Read noise of a fixed size in the stored values (clipped at black, as a camera's codes are)
+    is 1/t larger in x/t: the default merge weighs each exposure by t^2 (Robertson et al. 2003), so
+    a dark region is set by the long exposure, not by the short one's biased noise."""
+    from ffls.probes.bracket import merge_exposures
+
+    rng = np.random.default_rng(5)
+    L = np.full((64, 64, 3), 0.02)           # a dark region ...
+    L[:, 32:] = 20.0                         # ... beside a bright one
+    times = (1 / 1000, 1 / 30, 1.0)
+    stored = [np.clip(np.rint((L * t + rng.normal(0, 0.004, L.shape)).clip(0, 1) * 255) / 255, 0, 1)
+              for t in times]
+    m = merge_exposures(stored, stored, times, [1.0] * 3)
+    dark = m.radiance[:, :32].astype(np.float64)
+    assert abs(np.median(dark) / 0.02 - 1) < 0.05, np.median(dark)
+    bright = m.radiance[:, 32:].astype(np.float64)
+    assert abs(np.median(bright) / 20.0 - 1) < 0.05
+    # the hat-weighted mean alone (Debevec and Malik) is pulled up by the short exposure's noise
+    old = merge_exposures_DebevecMalik1997(stored, stored, times, [1.0] * 3).radiance[:, :32]
+    assert np.median(old) > 1.5 * 0.02

@@ -204,6 +204,31 @@ def test_bad_input_is_one_line(tmp_path):
     with pytest.raises(InputError) as e:
         estimate_lightmap(folder, "mirror")
     assert "no sphere found" in str(e.value) and "probe.json" in str(e.value) and "\n" not in str(e.value)
+    # in probe.json's words: one "sphere", no capture's sphere_count or spheres[0], and one image
+    assert "sphere_count" not in str(e.value) and "max image" not in str(e.value), str(e.value)
+    folder = _probe_with_image(tmp_path / "h", lambda p: (p.parent.mkdir(), write_exr(p, env)), "env.exr",
+                               {"center_px": [48, 48]})
+    with pytest.raises(InputError) as e:
+        estimate_lightmap(folder, "mirror")
+    assert str(e.value).split("probe.json: ", 1)[1].startswith("sphere"), str(e.value)
+    assert "spheres[" not in str(e.value), str(e.value)
+    # a pixel hint the finder cannot confirm says how to state the circle instead: a grey ball on a
+    # busy background as bright as its lit side
+    import cv2
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.synth.probe_scenes import diffuse_sphere_scene
+
+    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=200, albedo=0.25,
+                              radius_frac=0.3)
+    rng = np.random.default_rng(1)
+    bg = cv2.GaussianBlur(rng.uniform(0, 1, (200, 200, 3)), (0, 0), 3)
+    bg = (bg - bg.min()) / np.ptp(bg) * np.percentile(sc.image[sc.mask], 90)
+    busy = np.where(sc.mask[..., None], sc.image, bg).astype(np.float32)
+    folder = _probe_with_image(tmp_path / "k", lambda p: (p.parent.mkdir(), write_exr(p, busy)), "ball.exr",
+                               {"center_px": [100, 100], "material": "diffuse"})
+    with pytest.raises(InputError) as e:
+        estimate_lightmap(folder, "diffuse")
+    assert "radius_px" in str(e.value) and "\n" not in str(e.value), str(e.value)
     sphere = {"center_px": [48, 48], "radius_px": 40}
     folder = _probe_with_image(tmp_path / "b", lambda p: (p.parent.mkdir(), write_exr(p, np.zeros((96, 96, 3)))),
                                "dark.exr", sphere)

@@ -254,7 +254,7 @@ def _merge(args) -> int:
         response = recover_response_DebevecMalik1997(codes, np.asarray(times, dtype=np.float32)).astype(np.float64)
         enc = {"response": "calibrated"}
         print_notes(NAME, "camera response recovered from the bracket (Debevec-Malik 1997)")
-    m = merge_bracket_files(paths, times, enc, response, source=paths[0], key="--encoding")
+    m = merge_bracket_files(paths, times, enc, response, source=paths[0], key="--encoding", forms=ENCODING_FORMS)
     alpha = (~m.saturated).astype(np.float32)
     write_exr(args.out, m.radiance, half=args.half, alpha=alpha)
     print_notes(NAME, f"exposure times {how}; " + m.describe(), colour_summary(paths))

@@ -220,6 +220,13 @@ def run(args) -> int:
     if (args.light is None) == (args.probe is None):
         raise InputError("give either --probe MAP or --light AZ,EL" if args.light is None
                          else "--probe and --light exclude each other: give one")
+    if args.turntable is not None and args.mask is not None:
+        # a video has no alpha channel (nor, for now, the turntable's PNG frames): the mask can only meter
+        if args.exposure != "auto":
+            raise InputError("--mask: a --turntable's frames have no alpha channel, so the mask would only meter "
+                             "--exposure auto; give --exposure auto, or leave --mask out (a still .png or .exr "
+                             "gets the alpha)")
+        print_notes(NAME, "--mask: the turntable's frames have no alpha channel; the mask meters --exposure auto")
     capture, lights, lightmap, mask = load_relight_inputs(args, NAME, lightmap=args.light is None)
     if args.light is not None:
         from ffls.conventions import in_domain

@@ -1,4 +1,4 @@
-"""Exposure brackets merged into one radiance image (Debevec and Malik 1997), and a probe view's radiance.
+"""Exposure brackets merged into one radiance image (Robertson et al. 2003), and a probe view's radiance.
 
 Debevec, P. E. and Malik, J., "Recovering High Dynamic Range Radiance Maps from Photographs",
 SIGGRAPH 1997, equation 6: the radiance of a pixel is the weighted mean over the exposures of
@@ -6,6 +6,10 @@ SIGGRAPH 1997, equation 6: the radiance of a pixel is the weighted mean over the
 the mean is taken on linear values, ``E = sum_j w_j x_j / t_j / sum_j w_j``, where ``x_j`` is the
 stored value decoded with the stated (or calibrated) encoding: sRGB, a gamma, linear, or an
 inverse response table (:func:`ffls.radiance.response.recover_response_DebevecMalik1997`).
+The default merge (:func:`merge_exposures_Robertson2003`, used by ``ffls probe merge`` and
+bracketed probe views) also weighs each exposure by ``t_j^2``, the inverse variance of
+``x_j / t_j`` under noise of a fixed size in the stored values (Robertson, Borman and Stevenson
+2003): the hat weight alone lets a short exposure's noisy dark pixels set the dark parts.
 
 Unlike OpenCV's ``MergeDebevec`` (8-bit input only, and a triangle weight that never reaches
 zero inside the range), the input may be 8- or 16-bit integers or floats, and the weight is
@@ -36,8 +40,9 @@ from ffls.errors import InputError
 from ffls.io.images import ImageData, check_one_colour_kind, check_one_orientation, image_header, read_image
 from ffls.radiance.photos import linearise
 
-__all__ = ["SATURATION", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
-           "merge_exposures_DebevecMalik1997", "merge_exposures", "check_encoding", "decode_image",
+__all__ = ["SATURATION", "JSON_ENCODING_FORMS", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
+           "merge_exposures_DebevecMalik1997", "merge_exposures_Robertson2003", "MERGE_METHODS",
+           "merge_exposures", "check_encoding", "decode_image",
            "merge_bracket_files", "view_radiance", "exposure_from_exif"]
 
 #: Fraction of the clipping level at and above which a stored value counts as clipped.
@@ -71,8 +76,12 @@ class BracketMerge:
         """One line: exposures, flagged pixels."""
         n = self.saturated.size
         t = ", ".join(f"{x:.4g}" for x in self.exposures)
-        return (f"{len(self.exposures)} exposures ({t} s); {int(self.saturated.sum())} pixels "
-                f"({100 * self.saturated.sum() / n:.2f}%) saturated in every exposure, "
+        k = int(self.saturated.sum())
+        # a sun clipped in every exposure can hold most of a scene's light: its value is only a bound
+        bound = (" (their radiance is only a lower bound, and a light map misses the rest of their light: "
+                 f"add an exposure shorter than {self.exposures.min():.4g} s, or an ND filter)") if k else ""
+        return (f"{len(self.exposures)} exposures ({t} s); {k} pixel{'' if k == 1 else 's'} "
+                f"({100 * k / n:.2f}%) saturated in every exposure{bound}, "
                 f"{int(self.dark.sum())} ({100 * self.dark.sum() / n:.2f}%) black in every exposure")
 
 
@@ -157,6 +166,27 @@ def merge_exposures_DebevecMalik1997(linear, stored, exposures, clip_levels, sat
     ValueError
         Shapes that differ, fewer than two exposures, a non-positive time, or all times equal.
     """
+    return _weighted_merge(linear, stored, exposures, clip_levels, saturation, time_power=0)
+
+
+def merge_exposures_Robertson2003(linear, stored, exposures, clip_levels, saturation: float = SATURATION
+                                  ) -> BracketMerge:
+    """Merge an exposure bracket: the mean of ``linear / t`` weighted by ``w(z) t^2`` (Robertson et al. 2003).
+
+    Robertson, M. A., Borman, S. and Stevenson, R. L., "Estimation-theoretic approach to dynamic
+    range enhancement using multiple exposures", Journal of Electronic Imaging 12(2), 2003:
+    ``E = sum_j w_j t_j x_j / sum_j w_j t_j^2``. Noise of a fixed size in the stored
+    values (read noise, quantisation, JPEG) becomes ``1 / t`` times larger in ``x / t``, so each
+    exposure counts with its inverse variance ``t^2`` on top of the hat weight. The hat-weighted
+    mean of Debevec and Malik (:func:`merge_exposures_DebevecMalik1997`) lets the shortest
+    exposures' dark, noisy pixels (noise clipped at zero: biased upward) dominate the dark
+    parts of the scene. Same parameters, clipping and flags as that function.
+    """
+    return _weighted_merge(linear, stored, exposures, clip_levels, saturation, time_power=2)
+
+
+def _weighted_merge(linear, stored, exposures, clip_levels, saturation, time_power) -> BracketMerge:
+    """The mean of ``linear / t`` weighted by ``hat_weights * t ** time_power``, with the flags."""
     t = np.asarray(exposures, dtype=np.float64).ravel()
     n = len(t)
     if n < 2:
@@ -173,7 +203,7 @@ def merge_exposures_DebevecMalik1997(linear, stored, exposures, clip_levels, sat
     den = np.zeros(shape, dtype=np.float64)
     clipped_all = np.ones(shape[:2], dtype=bool)
     for x, z, tj, c in zip(linear, stored, t, clip_levels):
-        w = hat_weights(z, c, saturation)
+        w = hat_weights(z, c, saturation) * (tj / t.max()) ** time_power
         num += w * np.asarray(x, dtype=np.float64) / tj
         den += w
         zz = np.where(np.isfinite(z), z, np.inf)
@@ -188,26 +218,36 @@ def merge_exposures_DebevecMalik1997(linear, stored, exposures, clip_levels, sat
                         den.sum(axis=-1).astype(np.float32), t)
 
 
-def merge_exposures(linear, stored, exposures, clip_levels, method: str = "DebevecMalik1997", **kwargs
+MERGE_METHODS = {"Robertson2003": merge_exposures_Robertson2003,
+                 "DebevecMalik1997": merge_exposures_DebevecMalik1997}
+
+
+def merge_exposures(linear, stored, exposures, clip_levels, method: str = "Robertson2003", **kwargs
                     ) -> BracketMerge:
-    """Merge an exposure bracket; ``method`` ``'DebevecMalik1997'`` (:func:`merge_exposures_DebevecMalik1997`)."""
-    if method != "DebevecMalik1997":
-        raise ValueError(f"unknown merge method {method!r} (known: 'DebevecMalik1997')")
-    return merge_exposures_DebevecMalik1997(linear, stored, exposures, clip_levels, **kwargs)
+    """Merge an exposure bracket; ``method`` is a key of :data:`MERGE_METHODS` (default ``'Robertson2003'``)."""
+    if method not in MERGE_METHODS:
+        raise ValueError(f"unknown merge method {method!r} (known: {', '.join(map(repr, MERGE_METHODS))})")
+    return MERGE_METHODS[method](linear, stored, exposures, clip_levels, **kwargs)
 
 
 # ----------------------------------------------------------------------------- files
-def check_encoding(img: ImageData, encoding, source, key: str = "encoding") -> None:
+#: How ``probe.json``'s ``encoding`` key states an encoding (the forms named when it is missing).
+JSON_ENCODING_FORMS = '"srgb", "linear", {"gamma": g} or {"response": "file.npy"}'
+
+
+def check_encoding(img: ImageData, encoding, source, key: str = "encoding", forms: str = JSON_ENCODING_FORMS
+                   ) -> None:
     """Refuse an encoding that does not apply to ``img``, naming ``source`` (the file that states it) and ``key``.
 
     ``'auto'`` (not stated) with an integer image is refused: ffls never guesses whether an
-    8- or 16-bit image is sRGB, gamma or linear.
+    8- or 16-bit image is sRGB, gamma or linear. ``forms`` lists how ``key`` states one (the
+    JSON values of ``probe.json``, or a command-line flag's values).
     """
     if encoding == "auto":
         if not img.is_hdr:
-            raise InputError(f"{key}: not stated, and {img.path.name} is {'an' if img.bit_depth == 8 else 'a'} {img.bit_depth}-bit image that could be "
-                             f"sRGB, gamma or linear; ffls does not guess: state it (\"srgb\", \"linear\", "
-                             f"{{\"gamma\": g}} or {{\"response\": \"file.npy\"}})", source)
+            article = "an" if img.bit_depth == 8 else "a"
+            raise InputError(f"{key}: not stated, and {img.path.name} is {article} {img.bit_depth}-bit image that "
+                             f"could be sRGB, gamma or linear; ffls does not guess: state it ({forms})", source)
         return
     if img.is_hdr and encoding != "linear":
         raise InputError(f"{key}: {encoding!r} applies to integer images, but {img.path.name} is floating point "
@@ -239,9 +279,9 @@ def _read_all(paths) -> list[ImageData]:
     return imgs
 
 
-def merge_bracket_files(paths, exposures, encoding, response=None, source=None, key: str = "encoding"
-                        ) -> BracketMerge:
-    """Read a bracket of image files and merge it (:func:`merge_exposures_DebevecMalik1997`).
+def merge_bracket_files(paths, exposures, encoding, response=None, source=None, key: str = "encoding",
+                        forms: str = JSON_ENCODING_FORMS) -> BracketMerge:
+    """Read a bracket of image files and merge it (:func:`merge_exposures_Robertson2003`).
 
     Parameters
     ----------
@@ -255,8 +295,8 @@ def merge_bracket_files(paths, exposures, encoding, response=None, source=None, 
         The table of ``{'response': ...}``.
     source : path-like, optional
         The file or flag named in errors about the encoding or the exposures (default: the first image).
-    key : str
-        The key or flag that states the encoding, for messages.
+    key, forms : str
+        The key or flag that states the encoding, and how it states one, for messages.
 
     Returns
     -------
@@ -273,7 +313,7 @@ def merge_bracket_files(paths, exposures, encoding, response=None, source=None, 
     imgs = _read_all(paths)
     lin, clips = [], []
     for im in imgs:
-        check_encoding(im, encoding, source, key)
+        check_encoding(im, encoding, source, key, forms)
         x, c = decode_image(im, encoding, response)
         lin.append(x)
         clips.append(c)
@@ -281,7 +321,7 @@ def merge_bracket_files(paths, exposures, encoding, response=None, source=None, 
     if len(t) != len(paths):
         raise InputError(f"{len(paths)} images but {len(t)} exposure times", source)
     try:
-        return merge_exposures_DebevecMalik1997(lin, [im.pixels for im in imgs], t, clips)
+        return merge_exposures_Robertson2003(lin, [im.pixels for im in imgs], t, clips)
     except ValueError as e:
         raise InputError(str(e), source) from None
 

@@ -7,6 +7,7 @@ case run :func:`ffls.spheres.detect.find_spheres` on the view's radiance (one sp
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -206,9 +207,14 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                              world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
                              lit_limb=None)
     except InputError as e:
+        # the finder speaks capture.json's keys (spheres[0], sphere_count); probe.json has one "sphere"
         msg = e.message.replace("capture.json", "probe.json").replace("\"spheres\": [{\"center_px\": [u, v]}] or "
                                                                       "\"sphere_count\": n",
                                                                       "\"sphere\": {\"center_px\": [u, v]}")
+        msg = re.sub(r"\bspheres\[0\]", "sphere", msg).replace("no sphere found (sphere_count 1)", "no sphere found")
+        if sph.location == "pixel" and "radius_px" not in msg:  # the hint's way out: a circle used as given
+            msg += ("; measure the ball's outline in the photo and give \"radius_px\" with \"center_px\" "
+                    "(a circle stated in pixels is used as given)")
         raise InputError(msg, source) from None
     ft = found[0]
     if view.sphere.material == "mirror":  # the limb's reflectance step rather than a reflected edge

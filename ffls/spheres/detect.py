@@ -2313,7 +2313,7 @@ def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands) -> s
     H, W = shape
     found = (f"found {len(fits)} of {int(n_spheres)} spheres" if n_spheres is not None and fits
              else f"no sphere found (sphere_count {int(n_spheres)})" if n_spheres is not None else "no sphere found")
-    photos = f"the max image of {n_photos} photos" if n_photos > 1 else "the given max image"
+    photos = f"the max image of {n_photos} photos" if n_photos > 1 else "the image"
     aside = f"; set aside: {rejected[0]}" + (f" (and {len(rejected) - 1} more)" if len(rejected) > 1 else "") \
         if rejected else ""
     return (f"{found}: looked in {photos} ({W}x{H} px) for round outlines of radius 3 to {min(H, W) // 2} px"

@@ -1255,7 +1255,10 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         if len(photos) < min_photos:
             raise EncodingCalibrationError(
                 f"only {len(photos)} photo{'s' if len(photos) != 1 else ''} show a matte sphere's shading clearly "
-                f"enough (at least {min_photos} needed, of {len(raw)} photos)")
+                f"enough (at least {min_photos} needed, of {len(raw)} photos)"
+                + ("; if the sphere is a mirror or glossy ball (chrome, black glossy), it has no shading to "
+                   "calibrate it from"
+                   if not photos else ""))
         k = int(np.argmin(curves.sum(axis=0)))
         a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
         res = minimize_scalar(lambda g: sum(u.rss(g) for u in used), bounds=(a, b), method="bounded",
@@ -1421,7 +1424,8 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
     spheres : list of SphereFit, optional
         As :func:`ffls.spheres.detect.find_spheres_in_capture` returns (found when None).
     matte : sequence of bool, optional
-        Per sphere, whether it is matte (all tried by default; see :func:`calibrate_encoding_gamma`).
+        Per sphere, whether it is matte (default: every sphere that ``capture.json`` does not
+        declare a mirror, :func:`ffls.io.capture.sphere_materials`; see :func:`calibrate_encoding_gamma`).
     method : {'gamma'}
     progress : callable, optional
         A wrapper such as ``tqdm.tqdm``, called as ``progress(iterable, total=n, desc=...)``.
@@ -1477,6 +1481,10 @@ def calibrate_capture_encoding(capture, spheres=None, matte=None, method: str = 
                 spheres = find_spheres_in_capture(replace(capture, encoding="srgb"), workers=workers)
             except InputError:
                 raise first_error from None
+    if matte is None:  # a sphere capture.json declares a mirror (chrome, black glossy) has no shading to fit
+        from ffls.io.capture import sphere_materials
+
+        matte = [m != "mirror" for m in sphere_materials(capture, len(spheres))]
     h, w = first.shape
     samples = capture_samples(capture, spheres, (h, w))
     it = range(len(capture))
