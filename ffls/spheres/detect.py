@@ -1713,6 +1713,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
+        fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px)  # a dark cap -> its silhouette
         fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
@@ -2576,6 +2577,63 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
         # the textured ground c18 its 2.66 px made the centre's sigma 2.74 px, the refit 0.51 px off)
         new.outline_sigma_px = _outline_ambiguity(new, log_l, cam)
         out.append(new)
+    return out
+
+
+#: Least share of its outline on the changing edges (:func:`outline_support`) for a mirror ball's
+#: outline grown on them (:func:`_grown_on_changing_edges`): a silhouette is a closed ring there.
+MIRROR_GROWN_SUPPORT = 0.75
+
+
+def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera,
+                             max_residual_px: float, max_steps: int = 3) -> list:
+    """Each mirror ball's outline (:func:`_is_mirror_outline`) grown to the outermost circle the
+    edges that change with the light support around it, where the max image's edges left it on a
+    reflected circle inside the silhouette.
+
+    A chrome ball reflects the room above it as a dark cap and the ground below it as ground: in
+    the max image its lower silhouette has no edge where the reflected ground meets the ground
+    beside it, and the enclosing circle of the max image's edges (:func:`_outer_outline`) is not
+    found, so the ball is taken for its dark cap (``ffls synth --sphere-material mirror`` at 384
+    px, seed 7, JPEG: 11.9 px off, radius 12.5 px short). Over the photos the inside of the ball
+    changes otherwise than the ground beside it (the reflected shadows and highlights move with
+    the light), and in the changing edges (:func:`consistent_edge_strength` ``centered``) the
+    silhouette is a closed ring around the cap. The enclosing circle search
+    (:func:`ffls.spheres.mirror_outline.enclosing_circle`) runs on their ridge points; the circle
+    found is fitted (:func:`_fit_outline`) and taken when it is round (RMS within
+    ``max_residual_px``), at least :data:`MIRROR_GROWN_SUPPORT` of it lies on the changing edges
+    and more than of the outline it replaces (:func:`outline_support`), repeated until no larger
+    one is taken (at most ``max_steps``). The shadow edges of the many lights around a ball also
+    make circles that enclose it; they are broken arcs, 0.34-0.62 of them on the changing edges,
+    against 0.88-0.97 for a silhouette. Unchanged without the evidence (``changing`` None).
+    """
+    if changing is None or not fits:
+        return fits
+    pts = changing.points[0]
+    log_l = np.log(np.maximum(L, 1e-12))
+    out = []
+    for ft in fits:
+        if ft.source == "override" or not _is_mirror_outline(ft, L):
+            out.append(ft)
+            continue
+        cur, grown = ft, False
+        for _ in range(max_steps):
+            oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
+            if oc is None:
+                break
+            try:
+                new = _fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
+            except ValueError:
+                break
+            support = outline_support(new, pts, cam.shape)
+            if (new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT
+                    or support <= outline_support(cur, pts, cam.shape)):
+                break
+            cur, grown = new, True
+        if grown:
+            cur.score, cur.outline_edges = ft.score, PHOTO_EDGES
+            cur.outline_sigma_px = _outline_ambiguity(cur, log_l, cam)
+        out.append(cur)
     return out
 
 
