@@ -55,7 +55,7 @@ from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mas
                                  reference_radiance)
 from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
-                               estimate_photo)
+                               estimate_photo, ray_origins)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values, sphere_values_of)
@@ -87,6 +87,7 @@ __all__ = [
     "refit_spheres",
     "calibrate_uncertainty",
     "reject_shadowed_photos",
+    "place_at_capture_range",
     "DecodedPhotos",
     "decode_photos",
     "estimate_photos",
@@ -1517,7 +1518,8 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                                                     samples, counted=False)]
             by_photo = dict(zip(fitted, results))
     if bounce == "free":
-        error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
+        results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
+        error_model, results = calibrate_uncertainty(results, samples, refinements)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1550,8 +1552,89 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
                 by_photo[i] = r
         results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
-    error_model, results = calibrate_uncertainty(reject_shadowed_photos(results), samples, refinements)
+    results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
+    error_model, results = calibrate_uncertainty(results, samples, refinements)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
+
+
+#: Fewest near photos, and least fraction of the accepted photos, that make a capture's lights near
+#: for :func:`place_at_capture_range`.
+NEAR_CAPTURE_MIN_PHOTOS = 3
+NEAR_CAPTURE_FRACTION = 0.5
+
+
+def _place_on_ray(r: PhotoEstimate, direction: np.ndarray, centers: np.ndarray, c: np.ndarray,
+                  distance: float) -> np.ndarray | None:
+    """The point at ``distance`` from ``c`` on the ray along ``direction`` from the weighted place
+    of a photo's used spheres (None where the distance does not reach past them)."""
+    w = np.asarray(r.weights if r.weights else np.ones(len(r.used_spheres)), dtype=np.float64)
+    origin = (w[:, None] * ray_origins(r.used_spheres, [s.fit for s in r.spheres], centers)).sum(0) / w.sum() - c
+    d = normalize(np.asarray(direction, dtype=np.float64))
+    b = float(origin @ d)
+    disc = b * b - float(origin @ origin) + distance ** 2
+    return None if disc <= 0 else origin + (np.sqrt(disc) - b) * d + c
+
+
+def place_at_capture_range(results: list[PhotoEstimate], samples: list[SphereSamples],
+                           scene_center: np.ndarray, confidence: float = 0.95) -> list[PhotoEstimate]:
+    """The distant combinations of a capture of near lights, placed at the capture's light distance.
+
+    A photo keeps the distant model when its spheres' parallax is not significant: one sphere's
+    direction far less certain than the others' (a grazing light, a highlight at the rim) leaves
+    the rays' meeting point unmeasured. Its direction is then the used spheres' common direction,
+    seen from their (weighted) place, not from the scene centre: under a lamp 2 m away, a sphere
+    0.35 m off the centre sees it up to 10 degrees away from where the centre does, far outside
+    the combination's cone (``ffls synth --near 2 --sphere-material mixed``: 9.4-11.2 degrees
+    against cones of 0.75-0.94, docs/spheres.md). Where most accepted photos (at least
+    :data:`NEAR_CAPTURE_FRACTION`, and :data:`NEAR_CAPTURE_MIN_PHOTOS`) have a near light, such
+    a photo's light is put on its ray at the median distance of the near photos' lights.
+
+    Its cone is widened (in quadrature, ``range_deg``) by what the same placement misses on the
+    near photos themselves: each near photo's used spheres' inverse-variance mean direction,
+    placed at the median distance, against its near fit's direction; the ``confidence`` quantile
+    of those angles. It holds both the spread of the lights' distances and the spheres' own
+    directions' bias under a near light (the shading's ``1/r^2`` over a matte sphere), which the
+    joint near fit takes out and a distant combination keeps.
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+    samples : list of SphereSamples
+        The spheres (their world centres).
+    scene_center : (3,) float
+    confidence : float
+
+    Returns
+    -------
+    list of PhotoEstimate
+    """
+    c = np.asarray(scene_center, dtype=np.float64)
+    ok = [r for r in results if r.ok]
+    near = [r for r in ok if r.model == "near" and r.position is not None]
+    if len(near) < max(NEAR_CAPTURE_MIN_PHOTOS, NEAR_CAPTURE_FRACTION * len(ok)):
+        return results
+    distance = float(np.median([np.linalg.norm(r.position - c) for r in near]))
+    centers = np.array([s.center for s in samples], dtype=np.float64)
+    misses = []
+    for r in near:
+        dirs = [r.spheres[i].direction for i in r.used_spheres]
+        if any(d is None for d in dirs):
+            continue
+        w = np.asarray(r.weights if r.weights else np.ones(len(dirs)), dtype=np.float64)
+        point = _place_on_ray(r, (w[:, None] * np.array(dirs)).sum(0), centers, c, distance)
+        if point is not None:
+            cos = float(normalize(point - c) @ normalize(np.asarray(r.direction, dtype=np.float64)))
+            misses.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    if len(misses) < NEAR_CAPTURE_MIN_PHOTOS:
+        return results
+    miss = float(np.quantile(misses, confidence))
+    out = []
+    for r in results:
+        point = (_place_on_ray(r, r.direction, centers, c, distance)
+                 if r.ok and r.model == "distant" and r.used_spheres else None)
+        out.append(r if point is None else replace(r, direction=normalize(point - c), position=point,
+                                                   model="near", range_deg=miss))
+    return out
 
 
 #: Fewest accepted photos of a sphere for its capture statistics in :func:`reject_shadowed_photos`.

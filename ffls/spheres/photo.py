@@ -167,6 +167,10 @@ class PhotoEstimate:
         The used spheres' weights in the combination (inverse variances of
         :func:`sphere_uncertainty_deg`): the photo's variance under an error model is that of
         this weighted mean (:meth:`with_error_model`).
+    range_deg : float
+        A distant combination placed at the capture's light distance
+        (:func:`ffls.spheres.estimate.place_at_capture_range`): the angle by which the spread of
+        the capture's near lights' distances moves its direction, added to its cone (0 otherwise).
     """
 
     status: str
@@ -182,6 +186,7 @@ class PhotoEstimate:
     joint_pending: bool = False
     joint_sigma_deg: float = 0.0
     weights: list[float] | None = None
+    range_deg: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -207,7 +212,7 @@ class PhotoEstimate:
             sigma = (model.photo_sigma_deg(np.asarray(used), self.used_spheres, self.weights) if used
                      else float("inf"))
             sigma = max(sigma, model.scale * self.joint_sigma_deg / np.sqrt(2.0))
-            unc = float(model.cone_deg(sigma))
+            unc = float(np.hypot(model.cone_deg(sigma), self.range_deg))
         return replace(self, spheres=spheres, uncertainty_deg=unc)
 
     def sphere_directions(self) -> list[np.ndarray | None]:
@@ -231,6 +236,8 @@ class PhotoEstimate:
                  "spheres": self.sphere_reports(refinements)}
         if self.chi2 is not None:
             extra.update(chi2=self.chi2, dof=self.dof)
+        if self.range_deg:
+            extra.update(placed_at_capture_range=True, range_deg=self.range_deg)
         return extra
 
 
