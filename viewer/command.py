@@ -160,6 +160,41 @@ def choose_auto_quality(app, args, capture, lights) -> None:
     st.quality.update(state_quality(q))
 
 
+def choose_default_rank(app, args, capture, lights) -> str | None:
+    """No ``--rank``, ``--precision`` or ``--quality`` on a CPU rasteriser (the compressed basis):
+    the rank from the data (:func:`ffls.relight.compress.choose_rank`: the smallest whose
+    truncation error is under :data:`~ffls.relight.compress.AUTO_RANK_ERROR`, capped by the frame
+    budget), set in the panel. Returns the line saying so, or None where nothing was chosen (a
+    GPU, a flag given, or photos too large for host memory: the fixed default then)."""
+    import numpy as np
+
+    from ffls.commands.common import available_memory
+    from ffls.gpu.context import is_software_renderer
+    from ffls.relight.basis import capture_basis
+    from ffls.relight.compress import AUTO_RANK_ERROR, choose_rank
+    from ffls.relight.stream import default_memory
+    from viewer.state import quality_from_state
+
+    st = app.state
+    if (args.rank is not None or getattr(args, "precision", None) is not None or args.quality == "auto"
+            or st.quality.get("method") != "auto" or not is_software_renderer(app.renderer.info.renderer)):
+        return None
+    n = int(np.count_nonzero(lights.ok_mask))
+    w, h = capture.image_size or (0, 0)
+    if n < 2 or n * w * h * 12 > default_memory(available_memory()):
+        return None
+    q = quality_from_state(st.quality, n, True)
+    basis, _, _ = capture_basis(capture, lights, q)
+    if len(basis) < 2:
+        return None
+    k, err = choose_rank(basis)
+    st.quality["rank"] = k
+    why = "exact" if k >= len(basis) - 1 else (f"under {AUTO_RANK_ERROR:.0%}" if err <= AUTO_RANK_ERROR
+                                                else "capped by the frame budget")
+    return (f"rank {k} of {len(basis)} photos chosen from the data ({why}): expected basis error "
+            f"{err:.1%} RMS (--rank K to override; docs/viewer.md, \"Default rank\")")
+
+
 def _check_and_report(args, capture, lights) -> None:
     """``--rank`` against the accepted lights (0 = full basis), and the informational lines
     (lights matched by order or map, colour conversions, coverage warnings)."""
@@ -288,6 +323,9 @@ def run(args) -> int:
     try:
         if args.quality == "auto":
             choose_auto_quality(app, args, capture, lights)
+        line = choose_default_rank(app, args, capture, lights)
+        if line:
+            print(f"ffls {NAME}: {line}")
         if args.exposure == "auto":  # expose the first frame for the object's log-average luminance
             app.auto_expose()
         from ffls.commands.common import flush_notes
