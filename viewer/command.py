@@ -160,8 +160,9 @@ def choose_auto_quality(app, args, capture, lights) -> None:
     st.quality.update(state_quality(q))
 
 
-def choose_default_rank(app, args, capture, lights) -> str | None:
-    """No ``--rank``, ``--precision`` or ``--quality`` on a CPU rasteriser (the compressed basis):
+def choose_default_rank(app, capture, lights, args=None) -> str | None:
+    """No ``--rank``, ``--precision`` or ``--quality`` in ``args`` (None: ``ffls demo``'s window) on
+    a CPU rasteriser (the compressed basis):
     the rank from the data (:func:`ffls.relight.compress.choose_rank`: the smallest whose
     truncation error is under :data:`~ffls.relight.compress.AUTO_RANK_ERROR`, capped by the frame
     budget), set in the panel. Returns the line saying so, or None where nothing was chosen (a
@@ -176,8 +177,8 @@ def choose_default_rank(app, args, capture, lights) -> str | None:
     from viewer.state import quality_from_state
 
     st = app.state
-    if (args.rank is not None or getattr(args, "precision", None) is not None or args.quality == "auto"
-            or st.quality.get("method") != "auto" or not is_software_renderer(app.renderer.info.renderer)):
+    if (getattr(args, "rank", None) is not None or getattr(args, "precision", None) is not None
+            or getattr(args, "quality", None) == "auto" or st.quality.get("method") != "auto" or not is_software_renderer(app.renderer.info.renderer)):
         return None
     n = int(np.count_nonzero(lights.ok_mask))
     w, h = capture.image_size or (0, 0)
@@ -323,7 +324,7 @@ def run(args) -> int:
     try:
         if args.quality == "auto":
             choose_auto_quality(app, args, capture, lights)
-        line = choose_default_rank(app, args, capture, lights)
+        line = choose_default_rank(app, capture, lights, args)
         if line:
             print(f"ffls {NAME}: {line}")
         if args.exposure == "auto":  # expose the first frame for the object's log-average luminance
@@ -376,10 +377,14 @@ def show_capture(capture_dir) -> str | None:
     except ImportError as e:  # imgui-bundle or glfw missing
         return f"not opened ({e})"
     try:
-        app = ViewerApp(*open_capture(capture_dir), headless=False)
+        capture, lights = open_capture(capture_dir)
+        app = ViewerApp(capture, lights, headless=False)
     except GLUnavailable as e:
         return f"not opened ({e})"
     try:
+        line = choose_default_rank(app, capture, lights)
+        if line:
+            print(f"ffls {NAME}: {line}")
         app.auto_expose()
         app.run()
     finally:
