@@ -47,7 +47,8 @@ def add_arguments(p):
                         "and viewport limits; ffls info lists them)")
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
-                        "(default: full on a GPU, rank min(7, n-1) on a CPU rasteriser such as llvmpipe)")
+                        "(default: full on a GPU; on a CPU rasteriser such as llvmpipe the smallest rank whose "
+                        "truncation error is <= 1%%, in whole blocks of 8 layers, at most 23, printed)")
     p.add_argument("--mask", default=None, metavar="FILE", type=input_path,
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true",

@@ -73,7 +73,7 @@ def default_rank(n_lights: int, preferred: int = DEFAULT_RANK) -> int:
     return int(min(max(int(preferred), lo), hi))
 
 
-def truncation_errors(basis, max_pixels: int = 1 << 16) -> np.ndarray:
+def truncation_errors(basis, max_pixels: int = 1 << 14) -> np.ndarray:
     """Relative RMS error of the mean + K eigen-images approximation of ``basis``, for every K.
 
     ``err[K] = sqrt(sum_{k > K} s_k^2 / ||B||^2)`` (per-channel SVD of the centred basis, as
