@@ -173,26 +173,32 @@ def choose_default_rank(app, capture, lights, args=None) -> str | None:
     from ffls.commands.common import available_memory
     from ffls.gpu.context import is_software_renderer
     from ffls.relight.basis import capture_basis
-    from ffls.relight.compress import AUTO_RANK_ERROR, choose_rank
+    from ffls.relight.compress import AUTO_RANK_ERROR, LAYER_BLOCK, budget_rank, choose_rank
     from ffls.relight.stream import default_memory
     from viewer.state import quality_from_state
 
     st = app.state
     if (getattr(args, "rank", None) is not None or getattr(args, "precision", None) is not None
-            or getattr(args, "quality", None) == "auto" or st.quality.get("method") != "auto" or not is_software_renderer(app.renderer.info.renderer)):
+            or getattr(args, "quality", None) == "auto" or st.quality.get("method") != "auto"
+            or not is_software_renderer(app.renderer.info.renderer)):
         return None
     n = int(np.count_nonzero(lights.ok_mask))
     w, h = capture.image_size or (0, 0)
     if n < 2 or n * w * h * 12 > default_memory(available_memory()):
         return None
     q = quality_from_state(st.quality, n, True)
+    cap = budget_rank(h, w)
+    if cap < LAYER_BLOCK:  # one block of layers: the data cannot change the rank, the photos are not read again
+        k = st.quality["rank"] = min(cap, n - 1)
+        why = "exact" if k == n - 1 else f"the frame budget at {w}x{h} allows one block of {LAYER_BLOCK} layers"
+        return f"rank {k} of {n} photos ({why}; --rank K to override; docs/viewer.md, \"Default rank\")"
     basis, _, _ = capture_basis(capture, lights, q)
     if len(basis) < 2:
         return None
-    k, err = choose_rank(basis)
+    k, err = choose_rank(basis, max_rank=cap)
     st.quality["rank"] = k
     why = "exact" if k >= len(basis) - 1 else (f"under {AUTO_RANK_ERROR:.0%}" if err <= AUTO_RANK_ERROR
-                                                else "capped by the frame budget")
+                                                else f"capped by the frame budget at {w}x{h}")
     return (f"rank {k} of {len(basis)} photos chosen from the data ({why}): expected basis error "
             f"{err:.1%} RMS (--rank K to override; docs/viewer.md, \"Default rank\")")
 

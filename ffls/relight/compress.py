@@ -37,7 +37,7 @@ from ffls.errors import FflsError, InputError, atomic_output, os_error_message
 __all__ = ["CompressedBasis", "compress_basis", "randomized_svd_Halko2011", "save_compressed",
            "load_compressed", "load_or_compress", "basis_checksum", "COMPRESSED_FILENAME", "MODES", "DEFAULT_RANK",
            "rank_range", "default_rank", "truncation_errors", "choose_rank", "AUTO_RANK_ERROR",
-           "AUTO_RANK_MAX", "LAYER_BLOCK"]
+           "AUTO_RANK_MAX", "LAYER_BLOCK", "LAYER_PIXEL_BUDGET", "budget_rank"]
 
 #: File name of a compressed basis inside a capture folder.
 COMPRESSED_FILENAME = "basis_compressed.npz"
@@ -54,6 +54,16 @@ LAYER_BLOCK = 8
 #: Largest rank :func:`choose_rank` picks on a CPU rasteriser: K + 1 = 24 layers, three blocks
 #: (the frame budget measured in docs/viewer.md, "Default rank").
 AUTO_RANK_MAX = 23
+#: Layers x pixels of pass 2 a CPU rasteriser's frame allows: three blocks at 384 x 384 (measured
+#: in docs/viewer.md, "Default rank": 24 layers at 512 x 512 cut the frame rate 3-6x).
+LAYER_PIXEL_BUDGET = 24 * 384 * 384
+
+
+def budget_rank(height: int, width: int, budget: int = LAYER_PIXEL_BUDGET) -> int:
+    """The largest rank whose K + 1 layers of ``height`` x ``width`` fit ``budget`` in whole blocks
+    of :data:`LAYER_BLOCK` (at least one block: 7), at most :data:`AUTO_RANK_MAX`."""
+    blocks = max(1, int(budget) // max(int(height) * int(width) * LAYER_BLOCK, 1))
+    return int(min(blocks * LAYER_BLOCK - 1, AUTO_RANK_MAX))
 
 
 def rank_range(n_lights: int) -> tuple[int, int]:
