@@ -48,7 +48,8 @@ def add_arguments(p):
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
                         "(default: full on a GPU; on a CPU rasteriser such as llvmpipe the smallest rank whose "
-                        "truncation error is <= 1%%, in whole blocks of 8 layers, at most 23, printed)")
+                        "truncation error is <= 1%%, in whole blocks of 8 layers, within the frame "
+                        "budget: 23 up to 384x384, 15 up to 470x470, else 7; printed)")
     p.add_argument("--mask", default=None, metavar="FILE", type=input_path,
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true",
