@@ -322,6 +322,32 @@ def test_compression_algebra_and_error(rng, mode):
     _check_close(compress_basis(basis, 39, mode=mode).relight(w), ref, tol=1e-4)
 
 
+def test_truncation_errors_match_the_compression_and_choose_rank(rng):
+    """The data-driven rank (issue 9 item 9): the spectrum's truncation error equals the measured
+    error of :func:`compress_basis` at each K (NumPy reference), and :func:`choose_rank` takes the
+    smallest K under the level, raised to whole blocks of 8 layers and capped."""
+    from ffls.relight.compress import budget_rank, choose_rank, compress_basis, truncation_errors
+
+    basis = _lowrank_basis(rng, n=40, r=12, noise=0.002)
+    err = truncation_errors(basis)
+    assert err.shape == (40,) and err[-1] == 0 and np.all(np.diff(err) <= 1e-12)
+    b = basis.astype(np.float64)
+    for k in (3, 11, 20):
+        cb = compress_basis(basis, k)
+        recon = np.stack([cb.reconstruct(i) for i in range(40)])
+        assert np.sqrt(np.sum((recon - b) ** 2) / np.sum(b ** 2)) == pytest.approx(err[k], rel=0.02, abs=1e-4)
+    first = int(np.flatnonzero(err[1:] <= 0.01)[0]) + 1  # the 12 - 1 signal components (the mean is one)
+    k, e = choose_rank(basis, max_error=0.01, max_rank=39)
+    assert first <= k and (k + 1) % 8 == 0 and k < first + 8 and e == err[k] <= 0.01
+    assert choose_rank(basis, max_error=0.01, max_rank=7) == (7, err[7])  # the frame budget binds
+    assert choose_rank(basis[:6], max_error=0.0)[0] == 5  # never beyond n - 1
+    # the frame budget: three blocks up to 384 x 384, one block (the old default 7) at 512 x 512
+    assert [budget_rank(s, s) for s in (64, 256, 384, 512, 2048)] == [23, 23, 23, 7, 7]
+    small = _lowrank_basis(rng, n=40, H=300, W=300, r=3)  # the spectrum from a pixel grid
+    assert truncation_errors(small, max_pixels=4096)[2] == pytest.approx(truncation_errors(small, 10**6)[2],
+                                                                         rel=0.1)
+
+
 def test_compressed_save_load_roundtrip(tmp_path, rng):
     from ffls.relight.compress import compress_basis, load_compressed, save_compressed
 

@@ -47,7 +47,9 @@ def add_arguments(p):
                         "and viewport limits; ffls info lists them)")
     p.add_argument("--rank", type=int, default=None, metavar="K",
                    help="compressed basis of K eigen-images, 1 <= K <= n-1 for n lights; 0 = full float16 basis "
-                        "(default: full on a GPU, rank min(7, n-1) on a CPU rasteriser such as llvmpipe)")
+                        "(default: full on a GPU; on a CPU rasteriser such as llvmpipe the smallest rank whose "
+                        "truncation error is <= 1%%, in whole blocks of 8 layers, within the frame "
+                        "budget: 23 up to 384x384, 15 up to 470x470, else 7; printed)")
     p.add_argument("--mask", default=None, metavar="FILE", type=input_path,
                    help="object mask image (white = object): enables hiding the background")
     p.add_argument("--fullscreen", action="store_true",
@@ -158,6 +160,48 @@ def choose_auto_quality(app, args, capture, lights) -> None:
     q = resolve_quality(args, capture, lights, lm, rotation_ypr(st.yaw, st.pitch, st.roll), timer=timer,
                         command=NAME)
     st.quality.update(state_quality(q))
+
+
+def choose_default_rank(app, capture, lights, args=None) -> str | None:
+    """No ``--rank``, ``--precision`` or ``--quality`` in ``args`` (None: ``ffls demo``'s window) on
+    a CPU rasteriser (the compressed basis):
+    the rank from the data (:func:`ffls.relight.compress.choose_rank`: the smallest whose
+    truncation error is under :data:`~ffls.relight.compress.AUTO_RANK_ERROR`, capped by the frame
+    budget), set in the panel. Returns the line saying so, or None where nothing was chosen (a
+    GPU, a flag given, or photos too large for host memory: the fixed default then)."""
+    import numpy as np
+
+    from ffls.commands.common import available_memory
+    from ffls.gpu.context import is_software_renderer
+    from ffls.relight.basis import capture_basis
+    from ffls.relight.compress import AUTO_RANK_ERROR, LAYER_BLOCK, budget_rank, choose_rank
+    from ffls.relight.stream import default_memory
+    from viewer.state import quality_from_state
+
+    st = app.state
+    if (getattr(args, "rank", None) is not None or getattr(args, "precision", None) is not None
+            or getattr(args, "quality", None) == "auto" or st.quality.get("method") != "auto"
+            or not is_software_renderer(app.renderer.info.renderer)):
+        return None
+    n = int(np.count_nonzero(lights.ok_mask))
+    w, h = capture.image_size or (0, 0)
+    if n < 2 or n * w * h * 12 > default_memory(available_memory()):
+        return None
+    q = quality_from_state(st.quality, n, True)
+    cap = budget_rank(h, w)
+    if cap < LAYER_BLOCK:  # one block of layers: the data cannot change the rank, the photos are not read again
+        k = st.quality["rank"] = min(cap, n - 1)
+        why = "exact" if k == n - 1 else f"the frame budget at {w}x{h} allows one block of {LAYER_BLOCK} layers"
+        return f"rank {k} of {n} photos ({why}; --rank K to override; docs/viewer.md, \"Default rank\")"
+    basis, _, _ = capture_basis(capture, lights, q)
+    if len(basis) < 2:
+        return None
+    k, err = choose_rank(basis, max_rank=cap)
+    st.quality["rank"] = k
+    why = "exact" if k >= len(basis) - 1 else (f"under {AUTO_RANK_ERROR:.0%}" if err <= AUTO_RANK_ERROR
+                                                else f"capped by the frame budget at {w}x{h}")
+    return (f"rank {k} of {len(basis)} photos chosen from the data ({why}): expected basis error "
+            f"{err:.1%} RMS (--rank K to override; docs/viewer.md, \"Default rank\")")
 
 
 def _check_and_report(args, capture, lights) -> None:
@@ -288,6 +332,9 @@ def run(args) -> int:
     try:
         if args.quality == "auto":
             choose_auto_quality(app, args, capture, lights)
+        line = choose_default_rank(app, capture, lights, args)
+        if line:
+            print(f"ffls {NAME}: {line}")
         if args.exposure == "auto":  # expose the first frame for the object's log-average luminance
             app.auto_expose()
         from ffls.commands.common import flush_notes
@@ -338,10 +385,14 @@ def show_capture(capture_dir) -> str | None:
     except ImportError as e:  # imgui-bundle or glfw missing
         return f"not opened ({e})"
     try:
-        app = ViewerApp(*open_capture(capture_dir), headless=False)
+        capture, lights = open_capture(capture_dir)
+        app = ViewerApp(capture, lights, headless=False)
     except GLUnavailable as e:
         return f"not opened ({e})"
     try:
+        line = choose_default_rank(app, capture, lights)
+        if line:
+            print(f"ffls {NAME}: {line}")
         app.auto_expose()
         app.run()
     finally:

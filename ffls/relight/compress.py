@@ -36,7 +36,8 @@ from ffls.errors import FflsError, InputError, atomic_output, os_error_message
 
 __all__ = ["CompressedBasis", "compress_basis", "randomized_svd_Halko2011", "save_compressed",
            "load_compressed", "load_or_compress", "basis_checksum", "COMPRESSED_FILENAME", "MODES", "DEFAULT_RANK",
-           "rank_range", "default_rank"]
+           "rank_range", "default_rank", "truncation_errors", "choose_rank", "AUTO_RANK_ERROR",
+           "AUTO_RANK_MAX", "LAYER_BLOCK", "LAYER_PIXEL_BUDGET", "budget_rank"]
 
 #: File name of a compressed basis inside a capture folder.
 COMPRESSED_FILENAME = "basis_compressed.npz"
@@ -45,6 +46,24 @@ _FORMAT_VERSION = 1
 #: Rank used where none is asked for (the viewer on a CPU rasteriser); capped by :func:`default_rank`.
 #: K + 1 = 8 layers fill one block of the packed pass 2 (docs/viewer.md, "Frame budget").
 DEFAULT_RANK = 7
+#: Relative RMS error of the truncated basis that the viewer's data-driven rank aims at
+#: (:func:`choose_rank`; docs/viewer.md, "Default rank").
+AUTO_RANK_ERROR = 0.01
+#: Layers of one block of the packed pass 2: K + 1 = 8, 16, 24... cost the same within a block.
+LAYER_BLOCK = 8
+#: Largest rank :func:`choose_rank` picks on a CPU rasteriser: K + 1 = 24 layers, three blocks
+#: (the frame budget measured in docs/viewer.md, "Default rank").
+AUTO_RANK_MAX = 23
+#: Layers x pixels of pass 2 a CPU rasteriser's frame allows: three blocks at 384 x 384 (measured
+#: in docs/viewer.md, "Default rank": 24 layers at 512 x 512 cut the frame rate 3-6x).
+LAYER_PIXEL_BUDGET = 24 * 384 * 384
+
+
+def budget_rank(height: int, width: int, budget: int = LAYER_PIXEL_BUDGET) -> int:
+    """The largest rank whose K + 1 layers of ``height`` x ``width`` fit ``budget`` in whole blocks
+    of :data:`LAYER_BLOCK` (at least one block: 7), at most :data:`AUTO_RANK_MAX`."""
+    blocks = max(1, int(budget) // max(int(height) * int(width) * LAYER_BLOCK, 1))
+    return int(min(blocks * LAYER_BLOCK - 1, AUTO_RANK_MAX))
 
 
 def rank_range(n_lights: int) -> tuple[int, int]:
@@ -62,6 +81,61 @@ def default_rank(n_lights: int, preferred: int = DEFAULT_RANK) -> int:
     """
     lo, hi = rank_range(n_lights)
     return int(min(max(int(preferred), lo), hi))
+
+
+def truncation_errors(basis, max_pixels: int = 1 << 14) -> np.ndarray:
+    """Relative RMS error of the mean + K eigen-images approximation of ``basis``, for every K.
+
+    ``err[K] = sqrt(sum_{k > K} s_k^2 / ||B||^2)`` (per-channel SVD of the centred basis, as
+    :func:`compress_basis`'s default mode; ``||B||`` the uncentred basis, what a relit image is
+    made of). The spectrum is the exact eigen-decomposition of the ``(n, n)`` Gram matrix of a
+    regular pixel grid of at most ``max_pixels`` pixels (every s-th row and column).
+
+    Parameters
+    ----------
+    basis : (n, H, W, 3) float array
+
+    Returns
+    -------
+    (n,) float64
+        ``err[0]`` the mean alone, ``err[n - 1] = 0`` (exact).
+    """
+    b = np.asarray(basis)
+    if b.ndim != 4 or b.shape[-1] != 3:
+        raise ValueError(f"basis must be (n, H, W, 3), not {b.shape}")
+    n, H, W, _ = b.shape
+    step = max(1, int(np.ceil(np.sqrt(H * W / max(int(max_pixels), 1)))))
+    sub = b[:, ::step, ::step].astype(np.float64)
+    total = float(np.square(sub).sum())
+    discarded = np.zeros(n)
+    for c in range(3):
+        X = sub[..., c].reshape(n, -1)
+        X = X - X.mean(axis=0, keepdims=True)
+        ev = np.sort(np.maximum(np.linalg.eigvalsh(X @ X.T), 0.0))[::-1]
+        tail = np.concatenate([np.cumsum(ev[::-1])[::-1], [0.0]])  # tail[K] = sum_{k >= K} ev_k
+        discarded += tail[:n]
+    discarded[-1] = 0.0  # K = n - 1 is exact (the centred basis has rank <= n - 1)
+    return np.sqrt(discarded / total) if total > 0 else np.zeros(n)
+
+
+def choose_rank(basis, max_error: float = AUTO_RANK_ERROR, max_rank: int = AUTO_RANK_MAX) -> tuple[int, float]:
+    """The smallest rank whose truncation error (:func:`truncation_errors`) is ``<= max_error``,
+    raised to fill its block of :data:`LAYER_BLOCK` layers (free in pass 2), capped by ``max_rank``
+    and by :func:`rank_range`.
+
+    Returns
+    -------
+    rank : int
+    error : float
+        The truncation error at ``rank`` (above ``max_error`` when the cap binds).
+    """
+    err = truncation_errors(basis)
+    lo, hi = rank_range(len(err))
+    ok = np.flatnonzero(err[lo:] <= max_error)
+    k = lo + int(ok[0]) if len(ok) else hi
+    k = -(-(k + 1) // LAYER_BLOCK) * LAYER_BLOCK - 1  # K + 1 a whole number of blocks
+    k = int(min(max(k, lo), hi, max(int(max_rank), lo)))
+    return k, float(err[min(k, len(err) - 1)])
 
 
 @dataclass
