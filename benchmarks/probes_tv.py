@@ -8,7 +8,8 @@ The scenes and the measure are those of ``benchmarks/probes_orientation.py`` (a 
 capture relit under the recovered vs the true map; relative RMS; ``--seed`` seeds the noise). Per orientation
 and per map of the geodesic hierarchy (the first its own, the others those of
 ``adaptive_hougen_ahuja(..., orientations=K)``: ``Rotation.random(K, random_state=0)``): the plain
-estimate (``default``: adaptive set by CV, NNLS, ``ambient='auto'``; the default before the thirteenth stop), then on its source set the weight of the
+estimate (``default``: adaptive set by CV, NNLS, ``ambient='auto'``; the default before the thirteenth
+stop), then on its source set the weight of the
 quadratic first-difference prior (``'smoothness'``) and of total variation (``'tv'``) chosen by
 ``select_regularization`` (blocked CV, rule ``one_se``, weights ``SMOOTHNESS_WEIGHTS``): the relit error
 of each, the weight chosen and the CPU seconds of each choice (``time.process_time``). The fits are
