@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-METHODS = ("default", "smoothness", "tv", "paired")
+METHODS = ("default", "smoothness", "tv", "paired", "paired_tv")
 
 
 def relit(row, method) -> float:
