@@ -33,6 +33,16 @@ from ffls.probes.selection import adaptive_hougen_ahuja
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def ensemble_parts(sel):
+    """The members (fits), their source counts and their held-out scores of an ``adaptive_hougen_ahuja``
+    selection: an ensemble's own with ``orientations > 1``, the plain estimate as the one member with 1
+    (a ``SourceFit``, one size and one score per refinement round, of which the chosen round's)."""
+    if hasattr(sel.fit, "members"):
+        return sel.fit.members, [int(c) for c in sel.chosen], [float(s) for s in sel.scores]
+    score = float(sel.scores[list(sel.candidates).index(sel.chosen)])
+    return (sel.fit,), [int(sel.chosen)], [score]
+
+
 def main(argv=None):
     import argparse
 
@@ -52,21 +62,18 @@ def main(argv=None):
         sel = adaptive_hougen_ahuja(sph.normals, rad, 0.7, nonnegative=True, ambient="auto",
                                     orientations=own.orientations, ground=(0.0, 0.0, 1.0) if own.ground else None)
         cpu = time.process_time() - t
-        # one orientation: a plain Selection (one SourceFit; ``chosen`` its size, ``scores`` every round's)
-        members = sel.fit.members if own.orientations > 1 else (sel.fit,)
-        chosen = sel.chosen if own.orientations > 1 else (sel.chosen,)
-        heldout = sel.scores if own.orientations > 1 else [sel.scores[list(sel.candidates).index(sel.chosen)]]
+        members, sizes, heldout = ensemble_parts(sel)
         single = [relit_capture_error(cap, lights, f.latlong(H), truth) for f in members]
         avg = {str(j): relit_capture_error(cap, lights, average_fits(members[:j], rad).latlong(H), truth)
                for j in sorted({2, 4, len(members)}) if j <= len(members)}
-        row = {"map": name, "sources": list(chosen), "heldout": [float(s) for s in heldout],
+        row = {"map": name, "sources": sizes, "heldout": heldout,
                "relit_capture_single": single, "relit_capture_average": avg, "cpu_s": cpu}
         out.append(row)
         print(f"{name}: one orientation each "
               + " ".join(f"{100 * e:.1f}" for e in single)
               + " % (the first is the default's); average of "
               + ", ".join(f"{j}: {100 * e:.1f}%" for j, e in avg.items())
-              + f"; sources {'/'.join(map(str, chosen))}; {cpu:.1f} CPU s", flush=True)
+              + f"; sources {'/'.join(map(str, sizes))}; {cpu:.1f} CPU s", flush=True)
     tag = ("_noise" if a.noise > 0 else "") + (f"_seed{own.seed}" if own.seed else "") + (
         "_ground" if own.ground else "")
     path = a.json or str(ROOT / f"benchmarks/results/probes_orientation{tag}.json")

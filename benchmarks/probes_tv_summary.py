@@ -3,9 +3,10 @@ hierarchy's own orientation, the median and worst over the orientations measured
 
     python benchmarks/probes_tv_summary.py [RESULT.json ...]
 
-Without arguments: every ``benchmarks/results/probes_tv*.json``. Methods: the default estimate, and on its
-source set the quadratic first-difference prior and total variation, each weight chosen by blocked CV.
-Reads only, writes nothing.
+Without arguments: every ``benchmarks/results/probes_tv*.json`` and ``probes_paired*.json``. Methods (those a
+file holds): the default estimate before the thirteenth stop, and on its source set the quadratic
+first-difference prior and total variation, each weight chosen by blocked CV; ``paired``, the round and the
+quadratic prior's weight chosen by paired folds (the default since). Reads only, writes nothing.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-METHODS = ("default", "smoothness", "tv")
+METHODS = ("default", "smoothness", "tv", "paired", "paired_tv")
 
 
 def relit(row, method) -> float:
@@ -32,7 +33,7 @@ def summarise(path) -> list[str]:
     rows = doc["rows"]
     maps = list(dict.fromkeys(r["map"] for r in rows))
     lines = [f"{Path(path).name}: noise {doc.get('noise', 0)}, seed {doc.get('seed', 0)}"]
-    for method in METHODS:
+    for method in [m for m in METHODS if m == "default" or any(m in r for r in rows)]:
         cells, misses, n = [], 0, 0
         for m in maps:
             rs = [r for r in rows if r["map"] == m]
@@ -49,8 +50,9 @@ def summarise(path) -> list[str]:
 
 
 def main(argv=None):
+    res = ROOT / "benchmarks/results"
     paths = (argv if argv is not None else sys.argv[1:]) or sorted(
-        str(p) for p in (ROOT / "benchmarks/results").glob("probes_tv*.json"))
+        str(p) for p in [*res.glob("probes_tv*.json"), *res.glob("probes_paired*.json")])
     for p in paths:
         print("\n".join(summarise(p)))
 

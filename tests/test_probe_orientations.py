@@ -85,3 +85,25 @@ def test_cli_orientations(folder, tmp_path, capsys):
         assert not (tmp_path / "x.exr").exists()
     with pytest.raises(ValueError, match="orientations"):
         estimate_lightmap(folder, "diffuse", height=16, sources="uniform", orientations=2)
+
+
+def test_orientation_benchmark_takes_one_orientation():
+    """``benchmarks/probes_orientation.py --orientations 1`` crashed: the plain estimate is a SourceFit
+    (no members) and one size; its parts are the one member, its size and its chosen round's score."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from probes_orientation import ensemble_parts
+
+    light = np.array([0.5, -0.6, 0.4])
+    light /= np.linalg.norm(light)
+    n, rad = _ball(light)
+    kw = dict(nonnegative=True, ambient="auto", max_sources=150, criterion="bic")
+    one = adaptive_hougen_ahuja(n, rad, 0.7, **kw)
+    members, sizes, heldout = ensemble_parts(one)
+    assert members == (one.fit,) and sizes == [one.chosen]
+    assert heldout == [float(one.scores[list(one.candidates).index(one.chosen)])]
+    two = adaptive_hougen_ahuja(n, rad, 0.7, orientations=2, **kw)
+    members, sizes, heldout = ensemble_parts(two)
+    assert members == two.fit.members and sizes == list(two.chosen) and len(heldout) == 2

@@ -97,9 +97,11 @@ def _add_inverse(sub, common):
     shared = argparse.ArgumentParser(add_help=False)
     shared.add_argument("--criterion", choices=("cv", "bic"), default="cv",
                         help="how the model size is chosen when 'auto': cross-validation (default) or BIC")
-    shared.add_argument("--smoothness", type=number(0.0, 1e6, special=("cv",)), default=0.0,
+    # default None: diffuse's own (cv, 0 with --orientations > 1; ffls.probes.estimate.diffuse_lightmap), 0 elsewhere
+    shared.add_argument("--smoothness", type=number(0.0, 1e6, special=("cv",)), default=None,
                         help="first-difference penalty between neighbouring sources (default 0: the paper's fit); "
-                             "diffuse also takes cv: the weight chosen by blocked cross-validation")
+                             "diffuse also takes cv: the weight chosen by blocked cross-validation (diffuse's "
+                             "default, 0 with --orientations > 1)")
     shared.add_argument("--fill", choices=("nearest", "zero"), default="nearest",
                         help="directions not seen: the method's own values (default) or black")
     d = sub.add_parser("diffuse", parents=[common, shared], help="a diffuse sphere (Hougen-Ahuja 1993)",
@@ -122,6 +124,10 @@ def _add_inverse(sub, common):
     d.add_argument("--prior", choices=("quadratic", "tv"), default="quadratic",
                    help="what --smoothness penalises: the squared differences between neighbouring sources "
                         "(quadratic, default) or their absolute values (tv: total variation, keeps small lamps sharp)")
+    d.add_argument("--rule", choices=("paired_se", "one_se"), default="paired_se",
+                   help="how cross-validation chooses the adaptive set's refinement and the --smoothness cv weight: "
+                        "within one standard error of the paired fold differences (paired_se, default) or the rules "
+                        "before (one_se: the set within 5%% of the best, the weight within one fold spread)")
     d.add_argument("--ground", action="store_true",
                    help="sources only above the ground plane (probe.json's plane, else the world +Z), the light "
                         "below it one uniform term")
@@ -275,13 +281,13 @@ def method_knobs(args) -> dict:
 
             raise InputError(f"--orientations applies to --sources auto or adaptive without --smoothness cv, not "
                              f"--sources {args.sources}" + (" --smoothness cv" if args.smoothness == "cv" else ""))
-        if args.prior != "quadratic" and args.smoothness == 0:
+        if args.prior != "quadratic" and (args.smoothness == 0 or args.smoothness is None and args.orientations > 1):
             from ffls.errors import InputError
 
             raise InputError(f"--prior {args.prior} weighs --smoothness: give it a weight or cv (it is 0)")
         return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
                 "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill,
-                "orientations": args.orientations, "ground": args.ground, "prior": args.prior}
+                "orientations": args.orientations, "ground": args.ground, "prior": args.prior, "rule": args.rule}
     if args.method == "shadow":
         if args.smoothness == "cv":
             from ffls.errors import InputError
@@ -289,7 +295,8 @@ def method_knobs(args) -> dict:
             raise InputError("--smoothness cv applies to diffuse (a weight chosen on the ball's pixels); give shadow "
                              "a number")
         return {"nodes": args.nodes, "case": args.case, "nonnegative": not args.unconstrained, "ks": args.ks,
-                "sigma_deg": args.sigma, "criterion": args.criterion, "smoothness": args.smoothness,
+                "sigma_deg": args.sigma, "criterion": args.criterion,
+                "smoothness": 0.0 if args.smoothness is None else args.smoothness,
                 "fill": args.fill}
     if args.method == "pocs":
         from ffls.errors import InputError

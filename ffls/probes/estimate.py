@@ -340,11 +340,14 @@ def _finish(radiance, confidence, threshold: float, method: str, probe, notes: l
 SMOOTHNESS_WEIGHTS = (0.0, 0.001, 0.003, 0.01, 0.03)
 #: ``diffuse_lightmap``'s ``prior``: what its ``smoothness`` weight penalises.
 PRIORS = ("quadratic", "tv")
+#: ``diffuse_lightmap``'s ``rule``: how cross-validation chooses the adaptive set's round and the weight.
+DIFFUSE_RULES = ("paired_se", "one_se")
 
 
 def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool = True, ambient="auto",
-                     criterion: str = "cv", smoothness: float | str = 0.0, rcond: float | None = None,
-                     orientations: int = 1, ground: bool = False, prior: str = "quadratic", rim_px: float = 0.5,
+                     criterion: str = "cv", smoothness: float | str | None = None, rcond: float | None = None,
+                     orientations: int = 1, ground: bool = False, prior: str = "quadratic", rule: str = "paired_se",
+                     rim_px: float = 0.5,
                      max_pixels: int | None = 5000, confidence_threshold: float = 0.2,
                      fill: str = "nearest") -> LightmapEstimate:
     """A light map from a diffuse sphere (Hougen and Ahuja 1993, :mod:`ffls.probes.hougen_ahuja`).
@@ -369,12 +372,20 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         (with ``nonnegative``), free (``True``, the paper's; it may come out negative), or none.
         ``docs/probes.md`` (*The ambient term*) measures why.
     criterion : {'cv', 'bic'}
-    smoothness : float or 'cv'
+    smoothness : float, 'cv' or None
         First-difference penalty between neighbouring sources (0: the paper). ``'cv'``: the
         source set is chosen without it, then its weight among ``SMOOTHNESS_WEIGHTS`` by blocked
-        cross-validation on that set (:func:`ffls.probes.selection.select_regularization`, rule
-        ``one_se``: the largest weight the held-out pixels cannot tell from the best);
-        ``docs/probes.md`` (*The ambient term*) measures it.
+        cross-validation on that set (:func:`ffls.probes.selection.select_regularization`, by
+        ``rule``); ``docs/probes.md`` (*The ambient term*, *Choosing with paired folds*) measures it.
+        None (default): ``'cv'``, or 0 with ``orientations > 1`` (whose members have no one set).
+    rule : {'paired_se', 'one_se'}
+        How cross-validation chooses. ``'paired_se'`` (default): the adaptive set's round (with
+        ``criterion='cv'``) and the ``'cv'`` weight are the smallest round and the largest weight whose
+        held-out excess over the best is within one standard error of that excess, from the paired
+        differences of the folds (:func:`ffls.probes.selection.refine_sources`,
+        :func:`ffls.probes.selection.choose_weight`); ``'one_se'``: the round within 5% of the best held-out
+        error and the largest weight within one standard error of the best fold spread (the rules before;
+        ``docs/probes.md``, *Choosing with paired folds*, measures why they were replaced).
     prior : {'quadratic', 'tv'}
         What ``smoothness`` weighs: ``'quadratic'`` (default), the squared first differences between
         neighbouring sources; ``'tv'``, total variation, their absolute values (edge-preserving: a small
@@ -406,17 +417,24 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
 
     src = probe.json_path
     N, V, albedo, notes = diffuse_pixels(probe, "diffuse", rim_px, max_pixels)
+    if int(orientations) != orientations or orientations < 1:
+        raise ValueError(f"orientations must be an integer >= 1, not {orientations!r}")
+    if smoothness is None:
+        smoothness = "cv" if orientations == 1 else 0.0
     by_cv = isinstance(smoothness, str)
     if by_cv and smoothness != "cv":
         raise ValueError(f"smoothness must be a number >= 0 or 'cv', not {smoothness!r}")
-    if int(orientations) != orientations or orientations < 1:
-        raise ValueError(f"orientations must be an integer >= 1, not {orientations!r}")
+    if rule not in DIFFUSE_RULES:
+        raise ValueError(f"rule must be one of {DIFFUSE_RULES}, not {rule!r}")
     if orientations > 1 and (sources not in ("auto", "adaptive") or by_cv):
         raise ValueError("orientations > 1 applies to adaptive sources without smoothness='cv'")
     if prior not in PRIORS:
         raise ValueError(f"prior must be one of {PRIORS}, not {prior!r}")
+    if prior != "quadratic" and not by_cv and smoothness == 0:
+        raise ValueError(f"prior {prior!r} weighs smoothness: give it a weight or 'cv' (it is 0)")
     penalty = "tv" if prior == "tv" else "smoothness"
     kw = {"nonnegative": nonnegative, "ambient": ambient, penalty: 0.0 if by_cv else smoothness, "rcond": rcond}
+    rounds_by_rule = sources in ("auto", "adaptive") and criterion == "cv"  # the adaptive set's round by ``rule``
     up = None
     if ground:
         up = np.asarray(probe.plane.normal if probe.plane is not None else (0.0, 0.0, 1.0), dtype=np.float64)
@@ -428,6 +446,8 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         if sources in ("auto", "adaptive", "uniform"):
             select = select_hougen_ahuja if sources == "uniform" else adaptive_hougen_ahuja
             extra = {"orientations": int(orientations)} if orientations > 1 else {}
+            if rounds_by_rule:
+                extra["rule"] = "paired_se" if rule == "paired_se" else "tolerance"
             sel = select(N, V, albedo, criterion=criterion, **kw, **extra)
             fit, chosen = sel.fit, sel.chosen
             notes.append(sel.note)
@@ -441,7 +461,7 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
             # the set's own domain and ambient (the rings keep theirs: explicit directions default to the sphere)
             amb_set = False if up is not None and ambient == "auto" else resolve_ambient(ambient, nonnegative,
                                                                                           fit.hemisphere)
-            reg = select_regularization(N, V, albedo, fit.directions, SMOOTHNESS_WEIGHTS, penalty,
+            reg = select_regularization(N, V, albedo, fit.directions, SMOOTHNESS_WEIGHTS, penalty, rule=rule,
                                         nonnegative=nonnegative, rcond=rcond, hemisphere=fit.hemisphere,
                                         ambient=amb_set, **({} if up is None else {"ground": up}))
             fit = reg.fit
@@ -462,6 +482,8 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         details["ground"] = [float(g) for g in fit.ground]
     if by_cv:
         details["smoothness"] = float(reg.chosen)
+    if by_cv or rounds_by_rule:
+        details["rule"] = rule
     if prior != "quadratic":
         details["prior"] = prior
     return _finish(fit.latlong(height), normal_confidence(N, height), confidence_threshold, "diffuse", probe, notes,

@@ -34,7 +34,7 @@ from ffls.probes.sources import HOUGEN_AHUJA_SIZES, geodesic_sources
 __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_hougen_ahuja",
            "adaptive_sato_sato_ikeuchi", "normal_blocks", "position_blocks", "select_hougen_ahuja",
            "select_sato_sato_ikeuchi", "select_regularization", "choose_weight", "CRITERIA", "REGULARIZERS",
-           "WEIGHT_RULES"]
+           "WEIGHT_RULES", "ROUND_RULES"]
 
 #: Model-selection criteria.
 CRITERIA = ("cv", "bic")
@@ -42,6 +42,8 @@ CRITERIA = ("cv", "bic")
 REGULARIZERS = ("energy", "smoothness", "tv")
 #: Rules :func:`choose_weight` applies to the held-out errors of a sweep of penalty weights.
 WEIGHT_RULES = ("one_se", "paired_se", "min")
+#: Rules :func:`refine_sources` applies to the held-out errors of its rounds (CV).
+ROUND_RULES = ("tolerance", "paired_se")
 
 
 @dataclass(frozen=True)
@@ -61,8 +63,8 @@ class Selection:
     note : str
         One line saying what was chosen and why (for the caller to report).
     fold_errors : (k, K) float64 or None
-        Held-out sum of squared errors per candidate and CV fold (:func:`select_regularization`
-        only; None elsewhere).
+        Held-out sum of squared errors per candidate and CV fold (:func:`select_regularization`, and
+        :func:`refine_sources` with ``rule='paired_se'``; None elsewhere).
     """
 
     chosen: object
@@ -169,18 +171,28 @@ def _cv_folds(m: int, blocks, folds: int, rng) -> tuple[np.ndarray, int, int]:
     return fold_of_block[np.searchsorted(ub, lab)], k, int(ub.size)
 
 
-def _cv_score(fit_predict, c, fold, k: int, y) -> float:
-    """Held-out relative RMS of candidate ``c`` over the folds (inf if a fold cannot be fitted)."""
-    err = 0.0
+def _cv_fold_errors(fit_predict, c, fold, k: int, y) -> np.ndarray:
+    """Held-out sum of squared errors (k,) of candidate ``c`` per fold (inf if a fold cannot be fitted)."""
+    err = np.full(k, np.inf)
     try:
         for f in range(k):
             test = np.flatnonzero(fold == f)
             train = np.flatnonzero(fold != f)
             pred = fit_predict(c, train, test)
-            err += float(np.sum((pred - y[test]) ** 2))
+            err[f] = float(np.sum((pred - y[test]) ** 2))
     except InputError:
-        return np.inf  # this candidate cannot be fitted on a fold: not a choice
-    return float(np.sqrt(err / y.size) / max(float(np.sqrt(np.mean(y ** 2))), 1e-300))
+        return np.full(k, np.inf)  # this candidate cannot be fitted on a fold: not a choice
+    return err
+
+
+def _relative_rms(sse: float, y) -> float:
+    """Held-out relative RMS of a total squared error ``sse`` over the data ``y``."""
+    return float(np.sqrt(sse / y.size) / max(float(np.sqrt(np.mean(y ** 2))), 1e-300))
+
+
+def _cv_score(fit_predict, c, fold, k: int, y) -> float:
+    """Held-out relative RMS of candidate ``c`` over the folds (inf if a fold cannot be fitted)."""
+    return _relative_rms(float(np.sum(_cv_fold_errors(fit_predict, c, fold, k, y))), y)
 
 
 def bic(predicted, data, n_params: int) -> float:
@@ -335,7 +347,7 @@ def select_sato_sato_ikeuchi(points, radiance, occluder, plane_normal=(0.0, 0.0,
 
 def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", max_sources: int = 500,
                    max_level: int = 3, power_share: float = 0.5, patience: int = 2, criterion: str = "cv",
-                   tolerance: float = 0.05, can_split=None) -> Selection:
+                   tolerance: float = 0.05, can_split=None, rule: str = "tolerance") -> Selection:
     """Adaptive source sets: refine the geodesic hierarchy where the recovered light is, stop by CV or BIC.
 
     Start from level 0 of the hierarchy (:func:`ffls.probes.sources.geodesic_level`). Each round
@@ -346,7 +358,7 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
     measures the floors). The rounds stop when the score has not improved for ``patience``
     rounds, when nothing is left to split, or at ``max_sources``; the chosen round is the one
     :func:`select_model` would choose among them (CV: the smallest within ``tolerance`` of the
-    best; BIC: the lowest).
+    best, or with ``rule='paired_se'`` within one paired standard error; BIC: the lowest).
 
     Parameters
     ----------
@@ -375,11 +387,22 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
     can_split : callable, optional
         ``can_split(directions) -> (n,) bool``: sources the data can resolve finer (for a cast
         shadow, :func:`ffls.probes.sato_sato_ikeuchi.shadow_in_view`); the others are never split.
+    rule : {'tolerance', 'paired_se'}
+        CV only. ``'tolerance'`` (default): the smallest round whose held-out relative RMS is
+        within ``(1 + tolerance)`` of the best. ``'paired_se'``: the smallest round whose excess
+        over the best is within one standard error of that excess, from the paired differences of
+        the ``K`` folds' held-out errors (:func:`choose_weight`'s rule, the rounds taken from the
+        richest). ``score`` must then return ``(score, (K,) held-out squared errors per fold)``.
+        A relative tolerance is a tolerance on the noise too: with 1% noise the held-out error is
+        mostly the noise, every round past the first few is within 5% of the best, and the
+        smallest of them is too coarse for a lamp (``docs/probes.md``, *Choosing with paired
+        folds*); the paired differences cancel the noise that all rounds share.
 
     Returns
     -------
     Selection
-        ``chosen`` and ``candidates`` are source counts (one per round), ``fit`` the chosen round's fit.
+        ``chosen`` and ``candidates`` are source counts (one per round), ``fit`` the chosen round's fit;
+        ``fold_errors`` the ``(rounds, K)`` held-out squared errors with ``rule='paired_se'``.
     """
     from ffls.probes.sources import geodesic_level, split_sources
 
@@ -387,9 +410,12 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
         raise ValueError(f"criterion must be one of {CRITERIA}, not {criterion!r}")
     if not 0.0 < float(power_share) <= 1.0:
         raise ValueError(f"power_share must be in (0, 1], not {power_share!r}")
+    if rule not in ROUND_RULES or rule != "tolerance" and criterion != "cv":
+        raise ValueError(f"rule must be one of {ROUND_RULES} ('paired_se' with criterion 'cv'), not {rule!r}")
+    paired = rule == "paired_se"
     d = np.array(geodesic_level(base_frequency, 0, hemisphere))
     lev = np.zeros(d.shape[0], dtype=np.int64)
-    fits, scores = [], []
+    fits, scores, folds = [], [], []
     best, since = np.inf, 0
     while True:
         try:
@@ -398,7 +424,11 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
             if not fits:
                 raise
             break  # the finer set cannot be fitted (too few pixels for it): the coarser ones stand
-        sc = float(score(d, fit))
+        sc = score(d, fit)
+        if paired:
+            sc, fe = sc
+            folds.append(np.asarray(fe, dtype=np.float64))
+        sc = float(sc)
         fits.append(fit)
         scores.append(sc)
         if sc < best:
@@ -427,14 +457,22 @@ def refine_sources(fit_all, score, base_frequency: int = 3, hemisphere="full", m
         d, lev = d2, lev2
     s = np.asarray(scores)
     sizes = [int(f.directions.shape[0]) for f in fits]
-    if criterion == "cv":
+    fold_errors = None
+    if paired:  # choose_weight takes the last within: the rounds from the richest, the smallest within last
+        fold_errors = np.stack(folds)
+        i = len(fits) - 1 - choose_weight(fold_errors[::-1], "paired_se")[0]
+        note = (f"adaptive sources, cross-validation over {len(fits)} refinements ({sizes[0]}..{max(sizes)} sources) "
+                f"chose {sizes[i]}: held-out relative RMS {s[i]:.4f} (best {np.min(s):.4f}, within one paired "
+                f"standard error)")
+    elif criterion == "cv":
         i = int(np.flatnonzero(s <= np.min(s) * (1.0 + tolerance))[0])
         note = (f"adaptive sources, cross-validation over {len(fits)} refinements ({sizes[0]}..{max(sizes)} sources) "
                 f"chose {sizes[i]}: held-out relative RMS {s[i]:.4f} (best {np.min(s):.4f}, tolerance {tolerance:.0%})")
     else:
         i = int(np.argmin(s))
         note = f"adaptive sources, BIC over {len(fits)} refinements ({sizes[0]}..{max(sizes)} sources) chose {sizes[i]}"
-    return Selection(chosen=sizes[i], candidates=sizes, scores=s, criterion=criterion, fit=fits[i], note=note)
+    return Selection(chosen=sizes[i], candidates=sizes, scores=s, criterion=criterion, fit=fits[i], note=note,
+                     fold_errors=fold_errors)
 
 
 def _base_frequency(base_frequency: int, m: int, hemisphere, extra: int) -> int:
@@ -448,18 +486,27 @@ def _base_frequency(base_frequency: int, m: int, hemisphere, extra: int) -> int:
     return f
 
 
-def _scorer(criterion, fit_predict, data, blocks, folds, seed, extra_params):
-    """``score(directions, fit)`` for :func:`refine_sources`: CV on fixed folds, or BIC."""
+def _scorer(criterion, fit_predict, data, blocks, folds, seed, extra_params, per_fold: bool = False):
+    """``score(directions, fit)`` for :func:`refine_sources`: CV on fixed folds, or BIC. ``per_fold`` (CV
+    only): the pair ``(held-out relative RMS, (K,) held-out squared errors per fold)``, which
+    :func:`refine_sources`' paired rule needs."""
     if criterion == "bic":
         return lambda d, fit: bic(fit.rendered, data, d.shape[0] + extra_params)
     fold, k, _ = _cv_folds(data.shape[0], blocks, folds, np.random.default_rng(seed))
-    return lambda d, fit: _cv_score(fit_predict, d, fold, k, data)
+    if not per_fold:
+        return lambda d, fit: _cv_score(fit_predict, d, fold, k, data)
+
+    def score(d, fit):
+        e = _cv_fold_errors(fit_predict, d, fold, k, data)
+        return _relative_rms(float(np.sum(e)), data), e
+
+    return score
 
 
 def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3, max_sources: int = 500,
                           max_level: int = 3, criterion: str = "cv", folds: int = 5, tolerance: float = 0.05,
                           seed: int = 0, power_share: float = 0.5, patience: int = 2, orientations: int = 1,
-                          orientation_seed: int = 0, ground=None, **kwargs) -> Selection:
+                          orientation_seed: int = 0, ground=None, rule: str = "tolerance", **kwargs) -> Selection:
     """Hougen-Ahuja over an adaptive geodesic source set (:func:`refine_sources`).
 
     Parameters
@@ -471,6 +518,10 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
         frequency is lowered until a CV fold (4/5 of the pixels) holds more pixels than unknowns.
     criterion, folds, tolerance, seed
         As :func:`select_model`; CV blocks group the pixels by normal direction.
+    rule : {'tolerance', 'paired_se'}
+        How CV chooses the round (:func:`refine_sources`): within ``tolerance`` of the best
+        (default), or within one paired standard error (``docs/probes.md``, *Choosing with paired
+        folds*).
     orientations : int
         1 (default): the geodesic hierarchy in its own orientation (a vertex on +Z). ``K > 1``: the
         whole estimate (refinement and choice) is made ``K`` times, the hierarchy turned by ``K``
@@ -511,7 +562,7 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
         return _oriented_ensemble(normals, radiance, albedo, n, k_or, orientation_seed, dict(
             base_frequency=base_frequency, max_sources=max_sources, max_level=max_level, criterion=criterion,
             folds=folds, tolerance=tolerance, seed=seed, power_share=power_share, patience=patience,
-            ground=ground, **kwargs))
+            ground=ground, rule=rule, **kwargs))
     dom = "full"
     if ground is not None:
         kwargs["ground"] = ground_axis(ground)
@@ -525,10 +576,10 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
 
     extra = 1 if resolve_ambient(kwargs.get("ambient", True), kwargs.get("nonnegative", False), "full") else 0
     extra += 0 if ground is None else 1
-    score = _scorer(criterion, fp, b, normal_blocks(n), folds, seed, extra)
+    score = _scorer(criterion, fp, b, normal_blocks(n), folds, seed, extra, per_fold=rule == "paired_se")
     base_frequency = _base_frequency(base_frequency, n.shape[0], dom, extra)
     return refine_sources(lambda d: hougen_ahuja(n, b, rho, d, **kwargs), score, base_frequency, dom,
-                          max_sources, max_level, power_share, patience, criterion, tolerance)
+                          max_sources, max_level, power_share, patience, criterion, tolerance, rule=rule)
 
 
 def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: dict) -> Selection:
