@@ -106,11 +106,14 @@ CENSORED_SIGMA_PX = 0.05
 #: Fewest clipped pixels for the censored fit (:func:`highlight_centre_Tobin1958`): a smaller
 #: blob has fewer informative pixels than the fit's five parameters.
 MIN_CENSORED_PX = 8
-#: A highlight whose centre lies within ``RIM_SIGMAS`` standard deviations of its and the outline's
-#: position (plus :data:`RIM_MIN_PX`, the last pixel the limb's anti-aliasing mixes with the
-#: background) of the sphere's outline is at the rim (:func:`_rim_status`).
+#: A highlight whose centre or core lies within ``RIM_SIGMAS`` standard deviations of its and the
+#: outline's position plus half a pixel, or within :data:`RIM_MIN_PX`, of the sphere's outline is
+#: at the rim (:func:`_rim_status`). 1.5 px: the old test's reach (signal within 1.5 px of the
+#: disc's edge), now applied to the core and centre; at 0.5 px, renders of ``tests/test_highlight.py`` (a 60 px
+#: ball, lights 6-10 deg wide at 153-162 deg from the view) were accepted 9-12 deg off with 95%
+#: cones of 8.5 deg (the limb and the edge pixels' anti-aliasing cut the light's image).
 RIM_SIGMAS = 1.0
-RIM_MIN_PX = 0.5
+RIM_MIN_PX = 2.0
 #: The fraction of the disc above half the brightest signal below which a sphere is a mirror.
 MIRROR_COMPACTNESS = 0.03
 
@@ -793,12 +796,11 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
             d, method = dc, "censored"
             own = float(np.sqrt(var_noise + CENSORED_SIGMA_PX ** 2 + PIXEL_FLOOR_PX ** 2))
             sigma = float(np.sqrt(own ** 2 + view.center_sigma_px ** 2))
-    status, bend_deg = spot.status, 0.0
+    status, widen_deg = spot.status, 0.0
     if status == "highlight_at_rim":  # the blob reaches the edge; its centre and core decide (_rim_status)
-        status, trunc, bend_deg = _rim_status(view, pixel, px, spot.weights, float(np.hypot(own, view.center_sigma_px)))
-        own = float(np.hypot(own, trunc))
+        status, widen_deg = _rim_status(view, d, pixel, px, spot.weights, float(np.hypot(own, view.center_sigma_px)))
     _, point = highlight_direction(view, pixel)
-    stat = float(np.hypot(np.hypot(np.degrees(own * norm_J), outline_deg), bend_deg))
+    stat = float(np.hypot(np.hypot(np.degrees(own * norm_J), outline_deg), widen_deg))
     return HighlightFit(status=status, direction=d, point=point, uncertainty_deg=float(np.hypot(stat, floor_deg)),
                         pixel=pixel, pixel_sigma=sigma, method=method, near_rim=spot.status != status, **base)
 
@@ -828,36 +830,41 @@ def rim_distance_px(view: SphereView, pixels) -> np.ndarray:
     return np.where(on(np.zeros(len(p))), 0.5 * (lo + hi), np.nan)
 
 
-def _rim_status(view: SphereView, pixel, px, weights, sigma_px: float) -> tuple[str, float, float]:
-    """(status, truncation sigma px, bend deg) of a highlight whose blob reaches the disc's edge.
+def _rim_status(view: SphereView, direction, pixel, px, weights, sigma_px: float) -> tuple[str, float]:
+    """(status, widening deg) of a highlight whose blob reaches the disc's edge.
 
     The blob (:func:`find_highlight`) may reach the edge by its spread alone (a compact highlight
     a few pixels inside the rim, blurred by the lens or JPEG): its direction is determined. With
     ``a`` = :data:`RIM_SIGMAS` standard deviations of the centre (its own and the outline's
-    centre and radius, in quadrature) plus :data:`RIM_MIN_PX` (the pixel's half-width), it is
+    centre and radius, in quadrature) plus the pixel's half-width, or :data:`RIM_MIN_PX` (the
+    edge pixels' band) where wider, it is
     ``'highlight_at_rim'`` where its centre or its core (the blob's pixels above half its peak
     signal) lies within ``a`` of the outline: the light may be behind the sphere, or its image
-    cut by the limb (a lit area hugging the edge). Otherwise ``'ok'``, with two widenings of its
-    cone: the limb may hide the blob's outer tail and pull the centroid inward by up to the blob's
-    weighted RMS extent along the ball's radius (returned in pixels, for the centre's per-axis
-    uncertainty); and toward the rim the pixel-to-direction map bends faster than its Jacobian
-    says, so half the angle between the directions at ``a`` / :data:`RIM_SIGMAS` px inward and
-    outward along the radius (the exact map, not its linearisation) is returned in degrees."""
+    cut by the limb (a lit area hugging the edge). Otherwise ``'ok'``, with its cone widened (RMS,
+    degrees) by two parts in quadrature: the limb may hide part of the light's image, which moves
+    the centroid by up to the light's own angular extent (the blob's signal-weighted RMS angle
+    from ``direction``, its pixels' reflected directions); and toward the rim the
+    pixel-to-direction map bends faster than its Jacobian says (half the angle between the exact
+    directions one standard deviation plus half a pixel inward and outward along the ball's
+    radius)."""
     p = np.asarray(pixel, dtype=np.float64).reshape(1, 2)
     px = np.asarray(px, dtype=np.float64).reshape(-1, 2)
     w = np.clip(np.asarray(weights, dtype=np.float64), 0.0, None)
     if not (w.size and w.sum() > 0):
-        return "highlight_at_rim", 0.0, 0.0
-    u = p[0] - np.asarray(view.center_px, dtype=np.float64)
-    u = u / max(float(np.hypot(*u)), 1e-12)
-    spread = float(np.sqrt(np.sum(w * ((px - p) @ u) ** 2) / w.sum()))
+        return "highlight_at_rim", 0.0
     d = rim_distance_px(view, np.concatenate([p, px[w >= 0.5 * w.max()]]))
     sigma_rim = float(np.hypot(sigma_px, view.radius_sigma_px))
-    if not (np.all(np.isfinite(d)) and float(d.min()) > RIM_SIGMAS * sigma_rim + RIM_MIN_PX):
-        return "highlight_at_rim", 0.0, 0.0
-    a = sigma_rim + RIM_MIN_PX / RIM_SIGMAS
+    if not (np.all(np.isfinite(d)) and float(d.min()) > max(RIM_SIGMAS * sigma_rim + 0.5, RIM_MIN_PX)):
+        return "highlight_at_rim", 0.0
+    dirs = view.reflect(px)[0]
+    seen = np.all(np.isfinite(dirs), axis=1) & (w > 0)
+    cosang = np.clip(dirs[seen] @ np.asarray(direction, dtype=np.float64), -1.0, 1.0)
+    extent = float(np.degrees(np.sqrt(np.sum(w[seen] * np.arccos(cosang) ** 2) / w[seen].sum())))
+    u = p[0] - np.asarray(view.center_px, dtype=np.float64)
+    u = u / max(float(np.hypot(*u)), 1e-12)
+    a = sigma_rim + 0.5  # one standard deviation and the pixel's half-width
     ends = view.reflect(np.concatenate([p + a * u, p - a * u]))[0]
-    return "ok", spread, 0.5 * float(np.degrees(angle_between(ends[0], ends[1])))
+    return "ok", float(np.hypot(extent, 0.5 * np.degrees(angle_between(ends[0], ends[1]))))
 
 
 def _patch(rows: np.ndarray, cols: np.ndarray, *arrays):
