@@ -7,6 +7,7 @@ orthographic projection, with sensor noise and clipping: independent of ``ffls s
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -19,6 +20,7 @@ from ffls.io.capture import load_capture, sphere_materials
 from ffls.spheres.estimate import estimate_photos
 from ffls.spheres.highlight import (
     CONE95_PER_RMS,
+    HighlightFit,
     MIRROR_COMPACTNESS,
     SphereView,
     classify_sphere,
@@ -517,3 +519,31 @@ if __name__ == "__main__":
         print(f"| {r['condition']} | {r['accepted']} | {r['median']:.3f} | {r['max']:.3f} | {r['cone95_median']:.3f} "
               f"| {100 * r['coverage']:.0f} % | "
               + ("–" if np.isnan(r["coverage_stat"]) else f"{100 * r['coverage_stat']:.0f} %") + " |")
+
+
+def test_highlight_near_rim_kept_with_a_wider_cone():
+    """A small chrome ball (23 px) lit from 110-125 deg off the view, its highlight blurred as by a
+    lens or JPEG (sigma 0.8 px) so that its signal reaches the rim: the blob touches the edge
+    (``rim_px`` <= 1.5, the old rejection), but its centre and core lie 2+ px inside, so the
+    direction is determined. Kept (``near_rim``), every error within its (wider) 95 % cone."""
+    K, s, view = _disc_view((72, 72), R=0.023)
+    view = replace(view, center_sigma_px=0.5)
+    for deg in (110.0, 115.0, 120.0, 125.0):
+        for ph in (0.3, 2.0):
+            th = np.radians(deg)
+            l = np.array([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), -np.cos(th)])
+            img = render((72, 72), [((0, 0, 1.0), 0.023, "mirror")], light=l, light_radius_deg=1.5, K=K,
+                         noise=0.002, seed=1)
+            fit = _fit_image(cv2.GaussianBlur(img, (0, 0), 0.8), s, view)
+            assert fit.rim_px <= 1.5 and fit.status == "ok" and fit.near_rim, (deg, ph, fit.status)
+            assert np.degrees(angle_between(fit.direction, l)) <= fit.cone95_deg, (deg, ph)
+
+
+def test_near_rim_highlight_only_where_no_other_sphere_is_usable():
+    """A near-rim highlight (wide cone) is set aside beside a usable sphere (it would enter the
+    capture's disagreement model), and used where it is the photo's only direction."""
+    from ffls.spheres.photo import _mark_shadowed
+    good = HighlightFit(status="ok", direction=np.array([0.0, 0.0, 1.0]), uncertainty_deg=0.1)
+    rim = HighlightFit(status="ok", direction=np.array([0.0, 1.0, 0.0]), uncertainty_deg=12.0, near_rim=True)
+    assert _mark_shadowed([good, rim]) == (["ok", "highlight_at_rim"], [0])
+    assert _mark_shadowed([rim, HighlightFit(status="no_highlight")]) == (["ok", "no_highlight"], [0])

@@ -106,6 +106,14 @@ CENSORED_SIGMA_PX = 0.05
 #: Fewest clipped pixels for the censored fit (:func:`highlight_centre_Tobin1958`): a smaller
 #: blob has fewer informative pixels than the fit's five parameters.
 MIN_CENSORED_PX = 8
+#: A highlight whose centre or core lies within ``RIM_SIGMAS`` standard deviations of its and the
+#: outline's position plus half a pixel, or within :data:`RIM_MIN_PX`, of the sphere's outline is
+#: at the rim (:func:`_rim_status`). 1.5 px: the old test's reach (signal within 1.5 px of the
+#: disc's edge), now applied to the core and centre; at 0.5 px, renders of ``tests/test_highlight.py`` (a 60 px
+#: ball, lights 6-10 deg wide at 153-162 deg from the view) were accepted 9-12 deg off with 95%
+#: cones of 8.5 deg (the limb and the edge pixels' anti-aliasing cut the light's image).
+RIM_SIGMAS = 1.0
+RIM_MIN_PX = 2.0
 #: The fraction of the disc above half the brightest signal below which a sphere is a mirror.
 MIRROR_COMPACTNESS = 0.03
 
@@ -658,6 +666,9 @@ class HighlightFit:
     clipped : bool
     rim_px : float
         Distance of the highlight to the disc's edge.
+    near_rim : bool
+        The blob reaches the disc's edge but its centre and core lie inside it
+        (:func:`_rim_status`): usable, with its cone widened, where no other sphere is.
     model : str
         ``'highlight'``.
     method : {'centroid', 'censored'}
@@ -677,6 +688,7 @@ class HighlightFit:
     n_saturated: int = 0
     clipped: bool = False
     rim_px: float = float("inf")
+    near_rim: bool = False
     model: str = "highlight"
     method: str = "centroid"
 
@@ -698,7 +710,8 @@ class HighlightFit:
                 "intensity": num(self.intensity),
                 "highlight_px": [float(x) for x in self.pixel] if np.all(np.isfinite(self.pixel)) else None,
                 "highlight_sigma_px": num(self.pixel_sigma), "n_blob": int(self.n_blob), "n_core": int(self.n_core),
-                "n_saturated": int(self.n_saturated), "clipped": bool(self.clipped), "rim_px": num(self.rim_px)}
+                "n_saturated": int(self.n_saturated), "clipped": bool(self.clipped), "rim_px": num(self.rim_px),
+                "near_rim": bool(self.near_rim)}
 
 
 def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.ndarray,
@@ -783,14 +796,75 @@ def highlight_direction_Mudge2006(view: SphereView, image: np.ndarray, disc: np.
             d, method = dc, "censored"
             own = float(np.sqrt(var_noise + CENSORED_SIGMA_PX ** 2 + PIXEL_FLOOR_PX ** 2))
             sigma = float(np.sqrt(own ** 2 + view.center_sigma_px ** 2))
+    status, widen_deg = spot.status, 0.0
+    if status == "highlight_at_rim":  # the blob reaches the edge; its centre and core decide (_rim_status)
+        status, widen_deg = _rim_status(view, d, pixel, px, spot.weights, float(np.hypot(own, view.center_sigma_px)))
     _, point = highlight_direction(view, pixel)
-    stat = float(np.hypot(np.degrees(own * norm_J), outline_deg))
-    return HighlightFit(status=spot.status, direction=d, point=point, uncertainty_deg=float(np.hypot(stat, floor_deg)),
-                        pixel=pixel, pixel_sigma=sigma, method=method, **base)
+    stat = float(np.hypot(np.hypot(np.degrees(own * norm_J), outline_deg), widen_deg))
+    return HighlightFit(status=status, direction=d, point=point, uncertainty_deg=float(np.hypot(stat, floor_deg)),
+                        pixel=pixel, pixel_sigma=sigma, method=method, near_rim=spot.status != status, **base)
 
 
 #: The package's name for the method (one paper per function; see the module docstring).
 fit_highlight = highlight_direction_Mudge2006
+
+
+def rim_distance_px(view: SphereView, pixels) -> np.ndarray:
+    """Image distances (n,) in pixels from each of ``pixels`` (n, 2) outward, away from the sphere
+    centre's image, to the sphere's outline (where the ray stops meeting the sphere,
+    :meth:`SphereView.reflect`): bisection to 0.01 px, any camera model; NaN off the sphere."""
+    p = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    u = p - np.asarray(view.center_px, dtype=np.float64)
+    n = np.hypot(u[:, 0], u[:, 1])[:, None]
+    u = np.where(n > 0, u / np.where(n > 0, n, 1.0), np.array([1.0, 0.0]))
+
+    def on(t):
+        return np.all(np.isfinite(view.reflect(p + t[:, None] * u)[0]), axis=1)
+
+    lo = np.zeros(len(p))
+    hi = np.full(len(p), 2.0 * float(view.radius_px) + 4.0)  # beyond the outline from any disc point
+    while np.any(hi - lo > 0.01):
+        mid = 0.5 * (lo + hi)
+        inside = on(mid)
+        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+    return np.where(on(np.zeros(len(p))), 0.5 * (lo + hi), np.nan)
+
+
+def _rim_status(view: SphereView, direction, pixel, px, weights, sigma_px: float) -> tuple[str, float]:
+    """(status, widening deg) of a highlight whose blob reaches the disc's edge.
+
+    The blob (:func:`find_highlight`) may reach the edge by its spread alone (a compact highlight
+    a few pixels inside the rim, blurred by the lens or JPEG): its direction is determined. With
+    ``a`` = :data:`RIM_SIGMAS` standard deviations of the centre (its own and the outline's
+    centre and radius, in quadrature) plus the pixel's half-width, or :data:`RIM_MIN_PX` (the
+    edge pixels' band) where wider, it is
+    ``'highlight_at_rim'`` where its centre or its core (the blob's pixels above half its peak
+    signal) lies within ``a`` of the outline: the light may be behind the sphere, or its image
+    cut by the limb (a lit area hugging the edge). Otherwise ``'ok'``, with its cone widened (RMS,
+    degrees) by two parts in quadrature: the limb may hide part of the light's image, which moves
+    the centroid by up to the light's own angular extent (the blob's signal-weighted RMS angle
+    from ``direction``, its pixels' reflected directions); and toward the rim the
+    pixel-to-direction map bends faster than its Jacobian says (half the angle between the exact
+    directions one standard deviation plus half a pixel inward and outward along the ball's
+    radius)."""
+    p = np.asarray(pixel, dtype=np.float64).reshape(1, 2)
+    px = np.asarray(px, dtype=np.float64).reshape(-1, 2)
+    w = np.clip(np.asarray(weights, dtype=np.float64), 0.0, None)
+    if not (w.size and w.sum() > 0):
+        return "highlight_at_rim", 0.0
+    d = rim_distance_px(view, np.concatenate([p, px[w >= 0.5 * w.max()]]))
+    sigma_rim = float(np.hypot(sigma_px, view.radius_sigma_px))
+    if not (np.all(np.isfinite(d)) and float(d.min()) > max(RIM_SIGMAS * sigma_rim + 0.5, RIM_MIN_PX)):
+        return "highlight_at_rim", 0.0
+    dirs = view.reflect(px)[0]
+    seen = np.all(np.isfinite(dirs), axis=1) & (w > 0)
+    cosang = np.clip(dirs[seen] @ np.asarray(direction, dtype=np.float64), -1.0, 1.0)
+    extent = float(np.degrees(np.sqrt(np.sum(w[seen] * np.arccos(cosang) ** 2) / w[seen].sum())))
+    u = p[0] - np.asarray(view.center_px, dtype=np.float64)
+    u = u / max(float(np.hypot(*u)), 1e-12)
+    a = sigma_rim + 0.5  # one standard deviation and the pixel's half-width
+    ends = view.reflect(np.concatenate([p + a * u, p - a * u]))[0]
+    return "ok", float(np.hypot(extent, 0.5 * np.degrees(angle_between(ends[0], ends[1]))))
 
 
 def _patch(rows: np.ndarray, cols: np.ndarray, *arrays):

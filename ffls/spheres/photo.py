@@ -299,7 +299,8 @@ SHADOW_RATIO = 0.25
 
 def _mark_shadowed(fits: list) -> tuple[list[str], list[int]]:
     """Statuses and usable spheres: a matte sphere far darker than the other usable matte ones is
-    in a shadow (a mirror's highlight brightness says nothing about a cast shadow's)."""
+    in a shadow (a mirror's highlight brightness says nothing about a cast shadow's); a highlight
+    near the rim is used only where no other sphere is usable."""
     status = [f.status for f in fits]
     ok = [i for i, f in enumerate(fits) if f.status == "ok"]
     matte = [i for i in ok if isinstance(fits[i], LambertFit)]
@@ -309,6 +310,13 @@ def _mark_shadowed(fits: list) -> tuple[list[str], list[int]]:
             if fits[i].intensity < SHADOW_RATIO * med:
                 status[i] = "shadowed"
                 ok.remove(i)
+    # a highlight near the rim (HighlightFit.near_rim) is a photo's last resort: beside a sphere
+    # that sees the light well it adds next to nothing, but its wide misfit would enter the
+    # capture's error model (fit from the spheres' disagreement) as if it were any sphere's
+    if any(not getattr(fits[i], "near_rim", False) for i in ok):
+        for i in [i for i in ok if getattr(fits[i], "near_rim", False)]:
+            status[i] = "highlight_at_rim"
+            ok.remove(i)
     return status, ok
 
 
@@ -514,10 +522,10 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         values = sphere_values(image, samples, saturation=saturation)
     fits = fit_spheres(samples, values, terminator=terminator, up=up, bounce_ratio=bounce_ratio, start=start,
                        mirrors=mirrors, mirror_floor_deg=mirror_floor_deg, own_shadow=own_shadow)
-    # a mirror that cannot show this light (behind it: no highlight, or one at the rim) is not missing
-    blind = sum(isinstance(f, HighlightFit) and f.status in ("no_highlight", "highlight_at_rim") for f in fits)
-    need = max(min(2, n_sph - blind), 1) if min_spheres is None else int(min_spheres)
     status, ok = _mark_shadowed(fits)
+    # a mirror that cannot show this light (behind it: no highlight, or one at the rim) is not missing
+    blind = sum(isinstance(f, HighlightFit) and st in ("no_highlight", "highlight_at_rim") for f, st in zip(fits, status))
+    need = max(min(2, n_sph - blind), 1) if min_spheres is None else int(min_spheres)
     centers = np.array([s.center for s in samples])
 
     def rejected(reason, direction=None):
