@@ -1913,8 +1913,8 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
     :func:`find_spheres`) outlines it in full. Circles are proposed by Hough's ``HOUGH_GRADIENT_ALT`` transforms
     on that strength (8 bit over its robust peak) and each worth a fit (:func:`circles_to_fit`: one
     per distinct start, none on a round outline already fitted) is fitted on the ridge points
-    (:func:`consistent_edge_points`) near it (:func:`fit_on_consistent_edges`), searched
-    again from its own fit while that improves :func:`outline_quality`; it is kept when its RMS is at
+    (:func:`consistent_edge_points`) near it (:func:`fit_on_consistent_edges`, refitted on
+    the points near its own outline until they hold); it is kept when its RMS is at
     most :data:`PHOTO_EDGE_MAX_RESIDUAL_PX`. The same is done on the edges whose contrast changes
     with the light (``centered``, the gradient's covariance over the photos; ``changing``, read
     once by :func:`find_spheres`, or read here when None), where a textured ground's edges, the
@@ -2026,20 +2026,12 @@ _photo_edge_context: tuple | None = None
 
 def _photo_edge_fit(k: int):
     """Circle ``k`` of :data:`_photo_edge_context` fitted on its pass's ridge points
-    (:func:`fit_on_consistent_edges`), searched again from its own fit while that improves
-    :func:`outline_quality`; None where there is no fit."""
+    (:func:`fit_on_consistent_edges`, refitted on the points near its own outline until they hold:
+    a Hough circle a few pixels off is not searched again from its fit, which changed no sphere of
+    the bench rows and cost 10-40 % of the detection, docs/spheres.md); None where there is no fit."""
     circles, evidence, cam = _photo_edge_context
     p, x, y, r = circles[k]
-    ev = evidence[p]
-    ft = fit_on_consistent_edges(np.array([x, y]), float(r), ev, cam, "auto")
-    for _ in range(2):  # a Hough circle a few pixels off gathers part of the ridge: search again from the fit
-        if ft is None:
-            break
-        again = fit_on_consistent_edges(ft.center_px, ft.radius_px, ev, cam, "auto")
-        if again is None or outline_quality(again) <= outline_quality(ft):
-            break
-        ft = again
-    return ft
+    return fit_on_consistent_edges(np.array([x, y]), float(r), evidence[p], cam, "auto")
 
 
 def _forked_map(fn, n: int, workers: int) -> list:
