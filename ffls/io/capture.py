@@ -1509,8 +1509,8 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
         return out
     if hits == 0:
         # an .lp lists only the accepted lights: the lights.json written beside it keeps every photo, in order
-        why = (f"; an .lp lists only accepted lights (ffls lights --lp leaves the rejected out): the lights.json "
-               f"written with it keeps every photo in order" if lp and len(raw) < len(cap_names) else "")
+        why = ("; an .lp lists only accepted lights (ffls lights --lp leaves the rejected out): the lights.json "
+               "written with it keeps every photo in order" if lp and len(raw) < len(cap_names) else "")
         raise InputError(f"none of the {len(raw)} lights names an image of the capture ({len(cap_names)} images), so "
                          "they cannot apply by order either; give --lights-map '{\"light image\": \"capture image\"}'"
                          + why, path)
