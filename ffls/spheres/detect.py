@@ -2549,24 +2549,35 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
     (:func:`_outline_ambiguity`), not the outline's it replaces. Unchanged without the evidence
     (None: fewer than 3 photos, or a tensor without the summed gradient).
     """
+    def refit(ft, pts):
+        c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+        new = fit_on_consistent_edges(c0, r0, changing, cam, ft.source, MIRROR_CHANGING_BAND)
+        if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
+                or outline_support(new, pts, cam.shape) < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape)):
+            return None
+        return new
+
+    # a refit's ambiguity is its own, not the outline's it replaces (that one was the worse supported:
+    # on the textured ground c18 its 2.66 px made the centre's sigma 2.74 px, the refit 0.51 px off)
+    return _mirror_outlines_replaced(fits, changing, L, cam, refit)
+
+
+def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera, refit) -> list:
+    """``fits`` with each mirror ball's outline (:func:`_is_mirror_outline`, not an override)
+    replaced by ``refit(fit, changing_points)`` where that gives one (not None): the replacement
+    keeps the score, is marked as outlined on :data:`PHOTO_EDGES` and gets its own ambiguity
+    (:func:`_outline_ambiguity`). Unchanged without the evidence (``changing`` None)."""
     if changing is None or not fits:
         return fits
     pts = changing.points[0]
     log_l = np.log(np.maximum(L, 1e-12))
     out = []
     for ft in fits:
-        if ft.source == "override" or not _is_mirror_outline(ft, L):
-            out.append(ft)
-            continue
-        c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
-        new = fit_on_consistent_edges(c0, r0, changing, cam, ft.source, MIRROR_CHANGING_BAND)
-        if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
-                or outline_support(new, pts, cam.shape) < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape)):
+        new = None if ft.source == "override" or not _is_mirror_outline(ft, L) else refit(ft, pts)
+        if new is None:
             out.append(ft)
             continue
         new.score, new.outline_edges = ft.score, PHOTO_EDGES
-        # its own ambiguity, not the outline's it replaces (that one was the worse supported: on
-        # the textured ground c18 its 2.66 px made the centre's sigma 2.74 px, the refit 0.51 px off)
         new.outline_sigma_px = _outline_ambiguity(new, log_l, cam)
         out.append(new)
     return out
@@ -2599,15 +2610,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
     make circles that enclose it; they are broken arcs, 0.34-0.62 of them on the changing edges,
     against 0.88-0.97 for a silhouette. Unchanged without the evidence (``changing`` None).
     """
-    if changing is None or not fits:
-        return fits
-    pts = changing.points[0]
-    log_l = np.log(np.maximum(L, 1e-12))
-    out = []
-    for ft in fits:
-        if ft.source == "override" or not _is_mirror_outline(ft, L):
-            out.append(ft)
-            continue
+    def grow(ft, pts):
         cur, grown = ft, False
         for _ in range(max_steps):
             oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
@@ -2622,11 +2625,9 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
                     or support <= outline_support(cur, pts, cam.shape)):
                 break
             cur, grown = new, True
-        if grown:
-            cur.score, cur.outline_edges = ft.score, PHOTO_EDGES
-            cur.outline_sigma_px = _outline_ambiguity(cur, log_l, cam)
-        out.append(cur)
-    return out
+        return cur if grown else None
+
+    return _mirror_outlines_replaced(fits, changing, L, cam, grow)
 
 
 def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
