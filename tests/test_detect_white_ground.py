@@ -216,7 +216,7 @@ def test_each_photo_edge_circle_is_one_search(tmp_path, monkeypatch):
     _white_capture(tmp_path)
     cap = load_capture(tmp_path)
     per_circle, calls = [], []
-    fit, one = detect.fit_on_consistent_edges, detect._photo_edge_fit
+    fit, one = detect.fit_on_consistent_edges, detect.photo_edge_fit
 
     def counted(*a, **k):
         calls.append(1)
@@ -229,6 +229,6 @@ def test_each_photo_edge_circle_is_one_search(tmp_path, monkeypatch):
         return ft
 
     monkeypatch.setattr(detect, "fit_on_consistent_edges", counted)
-    monkeypatch.setattr(detect, "_photo_edge_fit", each)
+    monkeypatch.setattr(detect, "photo_edge_fit", each)
     assert len(find_spheres_in_capture(cap)) == 4
     assert per_circle and set(per_circle) == {1}, per_circle

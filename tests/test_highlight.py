@@ -542,8 +542,8 @@ def test_highlight_near_rim_kept_with_a_wider_cone():
 def test_near_rim_highlight_only_where_no_other_sphere_is_usable():
     """A near-rim highlight (wide cone) is set aside beside a usable sphere (it would enter the
     capture's disagreement model), and used where it is the photo's only direction."""
-    from ffls.spheres.photo import _mark_shadowed
+    from ffls.spheres.photo import usable_spheres
     good = HighlightFit(status="ok", direction=np.array([0.0, 0.0, 1.0]), uncertainty_deg=0.1)
     rim = HighlightFit(status="ok", direction=np.array([0.0, 1.0, 0.0]), uncertainty_deg=12.0, near_rim=True)
-    assert _mark_shadowed([good, rim]) == (["ok", "highlight_at_rim"], [0])
-    assert _mark_shadowed([rim, HighlightFit(status="no_highlight")]) == (["ok", "no_highlight"], [0])
+    assert usable_spheres([good, rim]) == (["ok", "highlight_at_rim"], [0])
+    assert usable_spheres([rim, HighlightFit(status="no_highlight")]) == (["ok", "no_highlight"], [0])

@@ -1961,7 +1961,7 @@ def _photo_edge_fits(fits, tensor, cam: DetectionCamera, max_residual_px: float,
     global _photo_edge_context
     _photo_edge_context = (circles, [ev for _, ev in passes], cam)  # inherited by forked workers
     try:
-        done = _forked_map(_photo_edge_fit, len(circles), workers)
+        done = _forked_map(photo_edge_fit, len(circles), workers)
     finally:
         _photo_edge_context = None
     more = []
@@ -2025,7 +2025,7 @@ def circles_to_fit(circles, round_) -> list:
 _photo_edge_context: tuple | None = None
 
 
-def _photo_edge_fit(k: int):
+def photo_edge_fit(k: int):
     """Circle ``k`` of :data:`_photo_edge_context` fitted on its pass's ridge points
     (:func:`fit_on_consistent_edges`, refitted on the points near its own outline until they hold:
     a Hough circle a few pixels off is not searched again from its fit, which changed no sphere of

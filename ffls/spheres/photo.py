@@ -42,7 +42,7 @@ from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel
 
 __all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SHADOW_RATIO", "SphereResult", "LightHypothesis", "PhotoEstimate",
            "fit_spheres", "sphere_uncertainty_deg", "ray_origins", "fit_light_model", "near_fit_mask",
-           "estimate_photo"]
+           "estimate_photo", "usable_spheres"]
 
 #: Rejection reasons of a photo (and of single spheres), with their meaning.
 REASONS = {
@@ -297,7 +297,7 @@ def _ground(s: SphereSamples, v: SphereValues) -> tuple | None:
 SHADOW_RATIO = 0.25
 
 
-def _mark_shadowed(fits: list) -> tuple[list[str], list[int]]:
+def usable_spheres(fits: list) -> tuple[list[str], list[int]]:
     """Statuses and usable spheres: a matte sphere far darker than the other usable matte ones is
     in a shadow (a mirror's highlight brightness says nothing about a cast shadow's); a highlight
     near the rim is used only where no other sphere is usable."""
@@ -522,7 +522,7 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         values = sphere_values(image, samples, saturation=saturation)
     fits = fit_spheres(samples, values, terminator=terminator, up=up, bounce_ratio=bounce_ratio, start=start,
                        mirrors=mirrors, mirror_floor_deg=mirror_floor_deg, own_shadow=own_shadow)
-    status, ok = _mark_shadowed(fits)
+    status, ok = usable_spheres(fits)
     # a mirror that cannot show this light (behind it: no highlight, or one at the rim) is not missing
     blind = sum(isinstance(f, HighlightFit) and st in ("no_highlight", "highlight_at_rim") for f, st in zip(fits, status))
     need = max(min(2, n_sph - blind), 1) if min_spheres is None else int(min_spheres)
