@@ -1137,7 +1137,11 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | N
 
 
 # ----------------------------------------------------------------------------- fitting
-def _start_circle(pts, center, r_expected, tol=1.5):
+#: Inlier distance (pixels) of the start circle of a candidate's fit (:func:`_start_circle`).
+START_TOL = 1.5
+
+
+def _start_circle(pts, center, r_expected, tol=START_TOL):
     """Best-supported circle (centre (2,), radius) near a candidate, radius within 40 %, or None.
 
     :func:`ffls.spheres.mirror_outline.circle_search` (deterministic) with the centre within half
@@ -2055,7 +2059,11 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, la
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
     majority polarity; a deterministic circle start (:func:`ffls.spheres.mirror_outline.circle_search`); :func:`fit_sphere_center` (pinhole) or
-    :func:`fit_circle` (orthographic). Returns the fits and the failures ``(k, x, y, r, why)``.
+    :func:`fit_circle` (orthographic). A hinted circle (``label`` ``'hint'``) keeps both
+    polarities (a grey ball on a ground of its own brightness is brighter than the ground on its
+    lit side and darker on its shadowed side) and is fitted to the points within ``2 START_TOL``
+    of its start circle only (a busy ground's edges fill the search band and pull a fit to all of
+    them off the outline). Returns the fits and the failures ``(k, x, y, r, why)``.
     The candidates are independent: with ``workers > 1`` they are fitted in that many forked
     processes (the same fits, in the same order).
     """
@@ -2096,6 +2104,11 @@ class _CandidateContext:
     und_all: np.ndarray  # the edge points undistorted (square pixels), for the circle start
     K_und: np.ndarray | None
 
+    @property
+    def hinted(self) -> bool:
+        """The candidates are hinted circles (:func:`_fit_candidate`'s hinted rules)."""
+        return self.label == "hint"
+
 
 _candidate_context: _CandidateContext | None = None
 
@@ -2113,7 +2126,7 @@ def _fit_candidate(k: int):
     radial = np.stack([pts[:, 0] - cx, pts[:, 1] - cy], axis=1) / np.maximum(d, 1e-9)[:, None]
     cosr = np.sum(radial * grads, axis=1)
     sel = near & (np.abs(cosr) > 0.7)
-    if sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
+    if sel.sum() >= 3 and not ctx.hinted:  # majority polarity (bright sphere on dark ground: gradient inward)
         inward = sel & (cosr < 0)
         sel = inward if inward.sum() >= 0.5 * sel.sum() else sel & (cosr > 0)
     P = pts[sel]
@@ -2124,6 +2137,11 @@ def _fit_candidate(k: int):
     circ = _start_circle(ctx.und_all[sel], c_und, r)
     if circ is None:
         return (k, cx, cy, r, "no circle through the edge points")
+    if ctx.hinted:  # only the start circle's own points: a busy ground's edges in the band pull the fit
+        on = np.abs(np.hypot(*(ctx.und_all[sel] - circ[0]).T) - circ[1]) <= 2 * START_TOL
+        P = P[on]
+        if len(P) < 8:
+            return (k, cx, cy, r, f"only {len(P)} edge points on the outline")
     try:
         return _fit_outline(P, cam, circ[0], circ[1], ctx.label)
     except ValueError as e:
