@@ -103,3 +103,21 @@ def test_centre_only_hint_on_a_busy_ground(tmp_path, seed, hint):
     geo = _busy_ground_probe(tmp_path, seed, hint)
     assert geo.source == "hint"
     assert np.hypot(*(geo.center_px - 99.5)) < 0.1 and abs(geo.radius_px - 60.0) < 0.1
+
+
+def test_centre_only_hint_on_a_mirror_ball_keeps_its_first_fit(tmp_path):
+    """A probe stated to be a mirror ball keeps the hint's first fit (``retry_hints`` False): under
+    the sunrise map it is refused in one line, as before; the second try would give a circle that
+    ``mirror_limb`` moves onto a reflected circle 3.4 px off, used without a word."""
+    import json
+
+    from ffls.errors import InputError
+
+    c_true = _probe(tmp_path, "sunrise")
+    doc = json.loads((tmp_path / "probe.json").read_text())
+    doc["sphere"]["center_px"] = [float(c_true[0]), float(c_true[1])]
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    probe = load_probe(tmp_path)
+    vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
+    with pytest.raises(InputError, match="poorly constrained.*radius_px"):
+        locate_sphere(probe.views[0], vr.radiance, probe.json_path)

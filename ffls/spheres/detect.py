@@ -1514,7 +1514,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
                  n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
                  saturates: bool = False, colour_counts=None, edge_tensor=None,
-                 edge_photos: int | None = None, workers: int = 1) -> Spheres:
+                 edge_photos: int | None = None, workers: int = 1, retry_hints: bool = True) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -1592,6 +1592,10 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     workers : int
         Processes (forked) that fit the candidate outlines, which are independent: the same
         spheres for any number (1: in this process).
+    retry_hints : bool
+        A hint whose outline's centre is poorly constrained is tried again (:func:`_fit_hints`);
+        False keeps the first fit, refused where it is poorly constrained (a probe stated to be a
+        mirror ball, :func:`ffls.probes.locate.locate_sphere`).
 
     Returns
     -------
@@ -1664,7 +1668,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 hint_info.append(_parse_hint(h, cam))
             except (ValueError, TypeError) as e:
                 raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
-        fits, failures = _fit_hints(hint_info, edges, cam, L.shape, source, workers)
+        fits, failures = _fit_hints(hint_info, edges, cam, L.shape, source, workers, retry_hints)
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         mirror = [_is_mirror_outline(ft, L) for ft in fits]
         if any(mirror):  # a mirror's outline: on the changing edges where they decide, else grown as unhinted
@@ -1828,7 +1832,8 @@ def _circle_near_hint(pts, grads, cpx, r_min, r_max):
     return c, r
 
 
-def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, workers: int = 1):
+def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, workers: int = 1,
+               retry: bool = True):
     """Stages 3 and 4 with hints: one circle per hint, fitted (:func:`_fit_candidates`, search
     band 0.35 of the radius); returns the fits and the failures as that does.
 
@@ -1839,7 +1844,8 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
     both gradient polarities on its start circle's points only (``narrow``); the second fit is
     taken when it succeeds with a smaller standard error. A grey ball on a busy ground of its own
     brightness (``tests/test_probe_detect.py``) outlines in both polarities, and the search band
-    holds the ground's edges: its first fit is 4-20 px off and poorly constrained.
+    holds the ground's edges: its first fit is 4-20 px off and poorly constrained. Without
+    ``retry`` the first fit stands.
     """
     H, W = shape
     cands, fits, failures = [], [], []
@@ -1853,7 +1859,7 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
             cand = None if r0 is None else (float(cpx[0]), float(cpx[1]), float(r0))
         got = _fit_candidates([cand], edges, cam, 0.35, "hint", workers) if cand is not None else ([], [])
         first = got[0][0] if got[0] else None
-        if first is None or first.center_sigma_px > limit:
+        if retry and (first is None or first.center_sigma_px > limit):
             again = cand if rpx is not None else None
             if rpx is None:
                 near = _circle_near_hint(edges.points, edges.grads, cpx, lo, hi)
