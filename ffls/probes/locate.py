@@ -205,7 +205,7 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     try:
         found = find_spheres(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, n_spheres=1, hints=hints,
                              world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
-                             lit_limb=None)
+                             lit_limb=None, retry_hints=sph.material != "mirror")
     except InputError as e:
         # the finder speaks capture.json's keys (spheres[0], sphere_count); probe.json has one "sphere"
         msg = e.message.replace("capture.json", "probe.json").replace("\"spheres\": [{\"center_px\": [u, v]}] or "

@@ -1137,7 +1137,11 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | N
 
 
 # ----------------------------------------------------------------------------- fitting
-def _start_circle(pts, center, r_expected, tol=1.5):
+#: Inlier distance (pixels) of the start circle of a candidate's fit (:func:`_start_circle`).
+START_TOL = 1.5
+
+
+def _start_circle(pts, center, r_expected, tol=START_TOL):
     """Best-supported circle (centre (2,), radius) near a candidate, radius within 40 %, or None.
 
     :func:`ffls.spheres.mirror_outline.circle_search` (deterministic) with the centre within half
@@ -1510,12 +1514,12 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
                  n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
                  saturates: bool = False, colour_counts=None, edge_tensor=None,
-                 edge_photos: int | None = None, workers: int = 1) -> Spheres:
+                 edge_photos: int | None = None, workers: int = 1, retry_hints: bool = True) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
     (:func:`_max_luminance`), its edges (:func:`_edge_map`), candidate circles
-    (:func:`_hinted_candidates` or :func:`_hough_circle_candidates`), a fit per candidate
+    (:func:`_fit_hints` or :func:`_hough_circle_candidates`), a fit per candidate
     (:func:`_fit_candidates`: the tangent cone for a pinhole camera, a circle for an orthographic
     one), the choice of the spheres (:func:`ffls.spheres.select.select_spheres` without hints, :func:`_check_hinted_fits`
     with hints), the lit-limb refit (:func:`_refine_on_lit_limb`) and the scale check
@@ -1588,6 +1592,10 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     workers : int
         Processes (forked) that fit the candidate outlines, which are independent: the same
         spheres for any number (1: in this process).
+    retry_hints : bool
+        A hint whose outline's centre is poorly constrained is tried again (:func:`_fit_hints`);
+        False keeps the first fit, refused where it is poorly constrained (a probe stated to be a
+        mirror ball, :func:`ffls.probes.locate.locate_sphere`).
 
     Returns
     -------
@@ -1660,9 +1668,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 hint_info.append(_parse_hint(h, cam))
             except (ValueError, TypeError) as e:
                 raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
-        cands = _hinted_candidates(hint_info, edges, L.shape, source)
-        _check_duplicate_circles(cands, "hint", source)
-        fits, failures = _fit_candidates(cands, edges, cam, 0.35, "hint", workers)
+        fits, failures = _fit_hints(hint_info, edges, cam, L.shape, source, workers, retry_hints)
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         mirror = [_is_mirror_outline(ft, L) for ft in fits]
         if any(mirror):  # a mirror's outline: on the changing edges where they decide, else grown as unhinted
@@ -1780,19 +1786,96 @@ def _edge_map(mx, L, source) -> _EdgeMap:
                     distance=cv2.distanceTransform(edge_img, cv2.DIST_L2, 3))
 
 
-def _hinted_candidates(hint_info, edges: _EdgeMap, shape, source) -> list[tuple[float, float, float]]:
-    """Stage 3 with hints: one circle (x, y, r) per hint; a radius the hint lacks comes from the edges."""
+#: A centre-only pixel hint lies within this share of the radius of the ball's centre
+#: (:func:`_circle_near_hint`): a click on the middle of the ball, not on its outline.
+HINT_CENTRE_OFFSET = 0.25
+
+
+def _hint_radius_range(hint, shape) -> tuple[float, float]:
+    """The radii (pixels) searched around a centre-only hint: 3 px to half the photo's shorter
+    side, or a factor 4 either side of a world hint's projected radius."""
     H, W = shape
-    cands = []
-    for k, (cpx, rpx, _, r_proj) in enumerate(hint_info):
-        if rpx is None:  # centre only: the radius comes from the edges around it
-            lo, hi = (3.0, min(H, W) / 2) if r_proj is None else (r_proj / 4, min(4 * r_proj, max(H, W)))
-            rpx = _radius_from_edges(edges.points, edges.grads, cpx, hi, lo)
+    r_proj = hint[3]
+    return (3.0, min(H, W) / 2) if r_proj is None else (r_proj / 4, min(4 * r_proj, max(H, W)))
+
+
+def _circle_near_hint(pts, grads, cpx, r_min, r_max):
+    """The round outline around a centre-only hint: (centre (2,), radius), or None.
+
+    The search goes outward from the hint in bands of radius (a factor 1.5 each, ``r_min`` to
+    ``r_max``); in each, :func:`ffls.spheres.mirror_outline.circle_search` takes the circle best
+    supported per pixel of radius (a share of its circumference, not how much clutter a large
+    circle crosses), its centre within :data:`HINT_CENTRE_OFFSET` of the radius of the hint, among
+    the edge points whose gradient lies within 25 degrees of the direction from the hint (an
+    outline's gradients point at its centre, which such a hint sees within 14.5 degrees of it). Of
+    the bands' circles scoring at least 0.6 of the best, the largest is taken (the outline encloses
+    whatever lies inside the sphere), as :func:`_radius_from_edges` does around a known centre,
+    whose histogram spreads over 20 px of radius when the click is 10 px off a 60-px ball.
+    """
+    v = pts - cpx
+    d = np.hypot(v[:, 0], v[:, 1])
+    cosr = np.abs(np.sum(v * grads, axis=1)) / np.maximum(d, 1e-9)
+    keep = (cosr > np.cos(np.radians(25.0))) & (d >= (1 - HINT_CENTRE_OFFSET) * r_min - START_TOL) \
+        & (d <= (1 + HINT_CENTRE_OFFSET) * r_max + START_TOL)
+    P = pts[keep]
+    found = []
+    lo = float(r_min)
+    while lo < r_max:
+        hi = min(1.5 * lo, float(r_max))
+        for c, r, inl in circle_search(P, cpx, HINT_CENTRE_OFFSET * hi, lo, hi, tol=START_TOL, per_radius=True):
+            found.append((np.count_nonzero(inl) / max(r, 1.0), r, c))
+        lo = hi
+    if not found:
+        return None
+    best = max(f[0] for f in found)
+    _, r, c = max((f for f in found if f[0] >= 0.6 * best), key=lambda f: f[1])
+    return c, r
+
+
+def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, workers: int = 1,
+               retry: bool = True):
+    """Stages 3 and 4 with hints: one circle per hint, fitted (:func:`_fit_candidates`, search
+    band 0.35 of the radius); returns the fits and the failures as that does.
+
+    A hint without a radius takes the radius of the edges around its centre
+    (:func:`_radius_from_edges`). Where that fails, or its fit's centre is poorly constrained
+    (standard error above ``CRITERIA['max_center_sigma_px']``), the hint is tried again: a
+    centre-only one on the round outline found around it (:func:`_circle_near_hint`), fitted with
+    both gradient polarities on its start circle's points only (``narrow``); the second fit is
+    taken when it succeeds with a smaller standard error. A grey ball on a busy ground of its own
+    brightness (``tests/test_probe_detect.py``) outlines in both polarities, and the search band
+    holds the ground's edges: its first fit is 4-20 px off and poorly constrained. Without
+    ``retry`` the first fit stands.
+    """
+    H, W = shape
+    cands, fits, failures = [], [], []
+    limit = CRITERIA["max_center_sigma_px"]
+    for k, h in enumerate(hint_info):
+        cpx, rpx = h[0], h[1]
+        cand = None if rpx is None else (float(cpx[0]), float(cpx[1]), float(rpx))
+        if rpx is None:
+            lo, hi = _hint_radius_range(h, shape)
+            r0 = _radius_from_edges(edges.points, edges.grads, cpx, hi, lo)
+            cand = None if r0 is None else (float(cpx[0]), float(cpx[1]), float(r0))
+        got = _fit_candidates([cand], edges, cam, 0.35, "hint", workers) if cand is not None else ([], [])
+        first = got[0][0] if got[0] else None
+        if retry and (first is None or first.center_sigma_px > limit):
+            again = cand if rpx is not None else None
             if rpx is None:
-                raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
-                                 f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
-        cands.append((float(cpx[0]), float(cpx[1]), float(rpx)))
-    return cands
+                near = _circle_near_hint(edges.points, edges.grads, cpx, lo, hi)
+                again = None if near is None else (float(near[0][0]), float(near[0][1]), float(near[1]))
+            second = _fit_candidates([again], edges, cam, 0.35, "hint", workers, narrow=True)[0] \
+                if again is not None else []
+            if second and (first is None or second[0].center_sigma_px < first.center_sigma_px):
+                got, cand = (second, []), again
+        if cand is None:
+            raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
+                             f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
+        cands.append(cand)
+        fits += got[0]
+        failures += [(k, *f[1:]) for f in got[1]]
+    _check_duplicate_circles(cands, "hint", source)
+    return fits, failures
 
 
 def shading_ratio(L_max, L_mean) -> np.ndarray:
@@ -2050,12 +2133,17 @@ def _forked_map(fn, n: int, workers: int) -> list:
     return [fn(k) for k in range(n)]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1):
+def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
+                    narrow: bool = False):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
     majority polarity; a deterministic circle start (:func:`ffls.spheres.mirror_outline.circle_search`); :func:`fit_sphere_center` (pinhole) or
-    :func:`fit_circle` (orthographic). Returns the fits and the failures ``(k, x, y, r, why)``.
+    :func:`fit_circle` (orthographic). With ``narrow`` both polarities are kept (a grey ball on a
+    ground of its own brightness is brighter than the ground on its lit side and darker on its
+    shadowed side) and the fit takes the points within ``2 START_TOL`` of the start circle only (a
+    busy ground's edges fill the search band and pull a fit to all of them off the outline): the
+    second try of a hint (:func:`_fit_hints`). Returns the fits and the failures ``(k, x, y, r, why)``.
     The candidates are independent: with ``workers > 1`` they are fitted in that many forked
     processes (the same fits, in the same order).
     """
@@ -2066,7 +2154,7 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, la
         f = cam.f
         K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])  # undistorted, square pixels
         und_all = project_points(pixel_rays(pts, cam.K, cam.dist), K_und, None) if len(pts) else pts
-    context = _CandidateContext(list(cands), edges, cam, search_tol, label, und_all, K_und)
+    context = _CandidateContext(list(cands), edges, cam, search_tol, label, und_all, K_und, narrow)
     global _candidate_context
     _candidate_context = context  # inherited by the forked workers (nothing pickled)
     try:
@@ -2095,6 +2183,7 @@ class _CandidateContext:
     label: str
     und_all: np.ndarray  # the edge points undistorted (square pixels), for the circle start
     K_und: np.ndarray | None
+    narrow: bool = False  # both polarities, fitted on the start circle's points (:func:`_fit_candidates`)
 
 
 _candidate_context: _CandidateContext | None = None
@@ -2113,7 +2202,7 @@ def _fit_candidate(k: int):
     radial = np.stack([pts[:, 0] - cx, pts[:, 1] - cy], axis=1) / np.maximum(d, 1e-9)[:, None]
     cosr = np.sum(radial * grads, axis=1)
     sel = near & (np.abs(cosr) > 0.7)
-    if sel.sum() >= 3:  # majority polarity (bright sphere on dark ground: gradient inward)
+    if sel.sum() >= 3 and not ctx.narrow:  # majority polarity (bright sphere on dark ground: gradient inward)
         inward = sel & (cosr < 0)
         sel = inward if inward.sum() >= 0.5 * sel.sum() else sel & (cosr > 0)
     P = pts[sel]
@@ -2124,6 +2213,11 @@ def _fit_candidate(k: int):
     circ = _start_circle(ctx.und_all[sel], c_und, r)
     if circ is None:
         return (k, cx, cy, r, "no circle through the edge points")
+    if ctx.narrow:  # only the start circle's own points: a busy ground's edges in the band pull the fit
+        on = np.abs(np.hypot(*(ctx.und_all[sel] - circ[0]).T) - circ[1]) <= 2 * START_TOL
+        P = P[on]
+        if len(P) < 8:
+            return (k, cx, cy, r, f"only {len(P)} edge points on the outline")
     try:
         return _fit_outline(P, cam, circ[0], circ[1], ctx.label)
     except ValueError as e:

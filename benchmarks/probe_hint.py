@@ -1,0 +1,122 @@
+"""A probe ball located from a pixel hint without a radius, in one photo: how often, and how close.
+
+Diffuse: a grey ball (albedo 0.25, radius 60 px, centre (99.5, 99.5), 200 x 200 px, orthographic)
+rendered by ``ffls.synth.probe_scenes.diffuse_sphere_scene`` under the built-in ``courtyard`` and
+``sunrise`` maps (downsampled 16x), on a ground of blurred uniform noise (sigma 3 px, 6 seeds)
+scaled to the ball's 90th percentile: the ball is brighter than the ground on its lit side and
+darker on its shadowed side. Three ``probe.json`` spheres per render: no hint, ``center_px`` on
+the centre (100, 100), and ``center_px`` 10 px off (108, 94). Outcome: ``ok`` (centre within
+0.1 px), ``off`` (found farther), ``refused`` (one-line InputError).
+
+Mirror: the chrome ball of ``tests/test_probe_detect.py`` (f = 400 px at 1.2 m, 320 x 240 px,
+radius 33 px) under the 4 built-in maps, ``center_px`` on the projected centre and 7.8 px off;
+outcome ``ok`` within 1 px.
+
+Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_hint.py [--out FILE]``
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from common import host_info, write_json
+from ffls.camera.projection import project_points
+from ffls.errors import InputError
+from ffls.io.images import write_exr
+from ffls.io.probe import load_probe
+from ffls.lightmaps.lightmap import builtin_lightmap
+from ffls.probes.bracket import view_radiance
+from ffls.probes.locate import locate_sphere
+from ffls.synth.probe import look_at, write_mirror_probe
+from ffls.synth.probe_scenes import diffuse_sphere_scene
+
+
+def _locate(folder):
+    probe = load_probe(folder)
+    vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
+    try:
+        geo = locate_sphere(probe.views[0], vr.radiance, probe.json_path)
+        return np.asarray(geo.center_px), float(geo.radius_px)
+    except InputError:
+        return None
+
+
+def _set_sphere(folder, sphere):
+    doc = json.loads((folder / "probe.json").read_text())
+    doc["sphere"] = sphere
+    (folder / "probe.json").write_text(json.dumps(doc))
+
+
+def diffuse_rows(tmp: Path) -> list:
+    rows = []
+    for name in ("courtyard", "sunrise"):
+        sc = diffuse_sphere_scene(builtin_lightmap(name).downsample(16), resolution=200, albedo=0.25,
+                                  radius_frac=0.3)
+        for seed in range(1, 7):
+            bg = cv2.GaussianBlur(np.random.default_rng(seed).uniform(0, 1, (200, 200, 3)), (0, 0), 3)
+            bg = (bg - bg.min()) / np.ptp(bg) * np.percentile(sc.image[sc.mask], 90)
+            folder = tmp / f"{name}_{seed}"
+            folder.mkdir()
+            write_exr(folder / "ball.exr", np.where(sc.mask[..., None], sc.image, bg).astype(np.float32))
+            (folder / "probe.json").write_text(json.dumps({"format": "ffls-probe", "version": 1,
+                                                           "images": ["ball.exr"],
+                                                           "camera": {"model": "orthographic"}}))
+            for hint in (None, [100.0, 100.0], [108.0, 94.0]):
+                _set_sphere(folder, {"material": "diffuse", **({"center_px": hint} if hint else {})})
+                got = _locate(folder)
+                err = None if got is None else float(np.hypot(*(got[0] - sc.center_px)))
+                rows.append({"kind": "diffuse", "map": name, "seed": seed, "hint": hint, "centre_error_px": err,
+                             "outcome": "refused" if got is None else ("ok" if err < 0.1 else "off")})
+    return rows
+
+
+def mirror_rows(tmp: Path) -> list:
+    rows = []
+    f, d, center = 400.0, 1.2, np.array([0.0, 0.0, 0.1])
+    eye = center + d * np.array([0.94, 0.0, 0.34])
+    T0 = look_at(eye, center)
+    T = look_at(eye, center + 70.0 / f * d * T0[:3, 0] - 10.0 / f * d * T0[:3, 1])
+    K = np.array([[f, 0, 159.5], [0, f, 119.5], [0, 0, 1.0]])
+    Ti = np.linalg.inv(T)
+    c_true = project_points((Ti[:3, :3] @ center + Ti[:3, 3])[None], K, None)[0]
+    for name in ("courtyard", "night", "studio", "sunrise"):
+        folder = tmp / f"mirror_{name}"
+        write_mirror_probe(folder, builtin_lightmap(name), (320, 240), "pinhole", K, None, T, center, 0.1,
+                           sphere="auto", reflectance=0.7)
+        for off in ((0.0, 0.0), (6.0, -5.0)):
+            hint = [float(c_true[0] + off[0]), float(c_true[1] + off[1])]
+            _set_sphere(folder, {"material": "mirror", "reflectance": 0.7, "center_px": hint})
+            got = _locate(folder)
+            err = None if got is None else float(np.hypot(*(got[0] - c_true)))
+            rows.append({"kind": "mirror", "map": name, "hint_offset_px": list(off), "centre_error_px": err,
+                         "outcome": "refused" if got is None else ("ok" if err < 1.0 else "off")})
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "probe_hint.json"))
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = diffuse_rows(Path(tmp)) + mirror_rows(Path(tmp))
+    for r in rows:
+        e = "-" if r["centre_error_px"] is None else f"{r['centre_error_px']:.3f}"
+        where = f"seed {r['seed']} hint {r['hint']}" if r["kind"] == "diffuse" else f"offset {r['hint_offset_px']}"
+        print(f"{r['kind']:8s} {r['map']:10s} {where:28s} centre error {e:>7s} px  {r['outcome']}")
+    summary = {}
+    for r in rows:
+        key = f"{r['kind']} {'no hint' if r.get('hint', 1) is None else 'centre hint'}"
+        summary.setdefault(key, {}).setdefault(r["outcome"], 0)
+        summary[key][r["outcome"]] += 1
+    for k, v in summary.items():
+        print(k, v)
+    write_json(args.out, {"host": host_info(), "summary": summary, "rows": rows})
+
+
+if __name__ == "__main__":
+    main()
