@@ -139,3 +139,22 @@ def test_sequence_accumulator_stowed_in_buffers_gives_the_same_stats():
     for name in ("max", "brightest", "mean", "colour_counts", "edge_tensor"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
     assert (got.n, got.edge_photos) == (want.n, want.edge_photos)
+
+
+def test_read_image_keeps_a_half_exr_as_stored(tmp_path):
+    """``read_image(stored=...)`` interleaves a half EXR's values into the caller's float16 array
+    as stored (``decode_photos`` keeps them there), and widens them as without it; a float EXR, or
+    an array of another size, is left untouched."""
+    path = _exr(tmp_path, half=True)
+    plain = read_image(path)
+    stored = np.full((24, 32, 3), -1.0, np.float16)
+    out = np.empty((24, 32, 3), np.float32)
+    img = read_image(path, out=out, stored=stored)
+    assert img.pixels is out and img.bit_depth == "half"
+    np.testing.assert_array_equal(out.view(np.uint32), plain.pixels.view(np.uint32))
+    np.testing.assert_array_equal(stored.astype(np.float32).view(np.uint32), plain.pixels.view(np.uint32))
+    for shape, half in (((24, 32, 3), False), ((24, 31, 3), True)):
+        other = np.full(shape, -1.0, np.float16)
+        img = read_image(_exr(tmp_path, half), stored=other)
+        assert np.all(other == -1.0)
+        np.testing.assert_array_equal(img.pixels, read_image(_exr(tmp_path, half)).pixels)
