@@ -1222,13 +1222,18 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
 def _trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
     """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
     to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
-    on the rest. Returns the parameters and the inlier mask (n,) of the last round."""
+    on the rest. Returns the parameters and the inlier mask (n,) of the last round.
+
+    The points are handed to ``residuals`` column-major (``np.asfortranarray``): both residuals
+    read them column by column, elementwise, so the floats are the same and each column is
+    contiguous (the evaluations, tens of thousands per capture, ran on strided columns)."""
     from scipy.optimize import least_squares
     p = p0
+    pts = np.asfortranarray(pts)
     inl = np.ones(len(pts), dtype=bool)
     for _ in range(3):
-        p = least_squares(residuals, p, args=(pts[inl],), loss="soft_l1", f_scale=f_scale, x_scale=1.0,
-                          method="trf").x
+        p = least_squares(residuals, p, args=(np.asfortranarray(pts[inl]),), loss="soft_l1", f_scale=f_scale,
+                          x_scale=1.0, method="trf").x
         r = residuals(p, pts)
         sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
         new = np.abs(r) < max(trim * sigma, 1.0)
