@@ -1125,7 +1125,8 @@ def _decode_range(bounds: tuple[int, int]):
 
     ctx = _decode_context
     start, stop = bounds
-    acc = SequenceAccumulator(n_images=ctx.n)
+    # made in the shared buffers it is handed over in (workers)
+    acc = SequenceAccumulator(n_images=ctx.n, buffers=None if ctx.slots is None else ctx.slots[start])
     depths = set()
     half = ctx.linear is not None and ctx.linear.dtype == np.float16
     scratch = np.empty(ctx.shape, np.float32) if half else None  # each half photo widened here
