@@ -139,3 +139,51 @@ def test_sequence_accumulator_stowed_in_buffers_gives_the_same_stats():
     for name in ("max", "brightest", "mean", "colour_counts", "edge_tensor"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
     assert (got.n, got.edge_photos) == (want.n, want.edge_photos)
+
+
+def test_read_image_keeps_a_half_exr_as_stored(tmp_path):
+    """``read_image(stored=...)`` interleaves a half EXR's values into the caller's float16 array
+    as stored (``decode_photos`` keeps them there), and widens them as without it; a float EXR, or
+    an array of another size, is left untouched."""
+    path = _exr(tmp_path, half=True)
+    plain = read_image(path)
+    stored = np.full((24, 32, 3), -1.0, np.float16)
+    out = np.empty((24, 32, 3), np.float32)
+    img = read_image(path, out=out, stored=stored)
+    assert img.pixels is out and img.bit_depth == "half"
+    np.testing.assert_array_equal(out.view(np.uint32), plain.pixels.view(np.uint32))
+    np.testing.assert_array_equal(stored.astype(np.float32).view(np.uint32), plain.pixels.view(np.uint32))
+    for shape, half in (((24, 32, 3), False), ((24, 31, 3), True)):
+        other = np.full(shape, -1.0, np.float16)
+        img = read_image(_exr(tmp_path, half), stored=other)
+        assert np.all(other == -1.0)
+        np.testing.assert_array_equal(img.pixels, read_image(_exr(tmp_path, half)).pixels)
+
+
+def test_sequence_accumulator_made_in_its_buffers():
+    """An accumulator given its buffers makes its reductions in them (a worker's shared memory:
+    ``stow`` then copies nothing, and pickles neither arrays nor buffers), with the same stats as
+    one without; buffers of another shape or type are not used."""
+    import pickle
+
+    from ffls.spheres.detect import SequenceAccumulator
+
+    rng = np.random.default_rng(6)
+    photos = rng.uniform(0.0, 1.0, (4, 40, 56, 3)).astype(np.float32)
+    plain = SequenceAccumulator(n_images=4)
+    layout = plain.layout(photos.shape[1:])
+    buffers = {k: np.full(shape, 7, dtype) for k, (shape, dtype) in layout.items()}  # (not zeroed)
+    wrong = {"max": np.zeros((40, 55, 3), np.float32), "total": np.zeros((40, 56), np.float32)}
+    made, other = SequenceAccumulator(n_images=4, buffers=buffers), SequenceAccumulator(n_images=4, buffers=wrong)
+    for i, ph in enumerate(photos):
+        for acc in (plain, made, other):
+            acc.add(ph, i)
+    assert all(getattr(made, k) is buffers[k] for k in layout)
+    assert made.max is not wrong["max"] and other.total is not wrong["total"] and not wrong["max"].any()
+    want = plain.result()
+    sent = pickle.dumps(made.stow(buffers))
+    assert len(sent) < 2000
+    got = pickle.loads(sent).unstow(buffers).result()
+    for name in ("max", "brightest", "mean", "colour_counts", "edge_tensor"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+        np.testing.assert_array_equal(getattr(other.result(), name), getattr(want, name))

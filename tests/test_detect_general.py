@@ -287,3 +287,24 @@ def test_cone_residuals_of_unit_rays_are_the_same_floats():
         axis = np.array([x, y, 1.0]) / np.linalg.norm([x, y, 1.0])
         want = f * (angle_between(s, axis) - a)
         assert np.array_equal(detect.unit_cone_residuals(p, normalize(s), f), want)
+
+
+def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
+    """The outline fits (``_trimmed_fit``) hand their points to the residuals column-major, so
+    that each column the residuals read is contiguous; the residuals of either layout are the
+    same floats, so the fits are too."""
+    from ffls.conventions import normalize
+
+    rng = np.random.default_rng(5)
+    s = normalize(rng.normal(size=(500, 3)) * [0.05, 0.05, 0.01] + [0.1, -0.05, 1.0])
+    p = np.array([100.0, -50.0, 40.0])
+    assert np.array_equal(detect.unit_cone_residuals(p, s, 900.0),
+                          detect.unit_cone_residuals(p, np.asfortranarray(s), 900.0))
+    seen = []
+
+    def residuals(q, pts):
+        seen.append(pts.flags.f_contiguous and pts.ndim == 2)
+        return detect.unit_cone_residuals(q, pts, 900.0)
+
+    detect._trimmed_fit(residuals, p, s, 1.0, 3.0)
+    assert seen and all(seen)

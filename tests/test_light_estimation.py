@@ -680,6 +680,52 @@ def test_decode_photos_once_matches_reading_them(tmp_path, workers):
         assert np.array_equal(raw, np.rint(ph.raw * 255).astype(np.uint8))
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_decode_photos_keeps_half_photos_as_stored(tmp_path, workers):
+    """Half EXR photos are kept as their half values (half the memory of float32) and widened where
+    read: the same float32 values as reading the photo, whole or at given pixels (0 elsewhere). A
+    photo colour-converted on reading (an EXR ``chromaticities`` attribute) is not held: it is read
+    again."""
+    import json
+
+    from ffls.io.capture import load_capture
+    from ffls.io.images import write_exr
+    from ffls.radiance.photos import read_photo
+    from ffls.spheres.estimate import decode_photos
+
+    import OpenEXR
+
+    rng = np.random.default_rng(4)
+    names = [f"p{i}.exr" for i in range(5)]
+    for i, name in enumerate(names):
+        rgb = rng.uniform(0.0, 3.0, (24, 32, 3))
+        if i != 3:
+            write_exr(tmp_path / name, rgb, half=True)
+            continue
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+                  "chromaticities": (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)}  # ACEScg
+        planes = {c: np.ascontiguousarray(rgb[..., k], np.float16) for k, c in enumerate("RGB")}
+        with OpenEXR.File(header, planes) as f:
+            f.write(str(tmp_path / name))
+    (tmp_path / "capture.json").write_text(json.dumps({"format": "ffls-capture", "version": 1, "images": names,
+                                                       "sphere_radius": 0.04}))
+    cap = load_capture(tmp_path)
+    d = decode_photos(cap, workers=workers)
+    assert d.linear.dtype == np.float16 and d.held.tolist() == [True, True, True, False, True]
+    rows, cols = np.array([0, 5, 23]), np.array([1, 7, 31])
+    for i in range(5):
+        want = read_photo(cap, i).linear
+        if i == 3:
+            assert d.photo(i) is None and d.photo(i, pixels=(rows, cols)) is None
+            continue
+        lin, raw, depth = d.photo(i)
+        assert depth == "half" and raw is None and lin.dtype == np.float32
+        np.testing.assert_array_equal(lin.view(np.uint32), want.view(np.uint32))
+        lin, _, _ = d.photo(i, pixels=(rows, cols))
+        np.testing.assert_array_equal(lin[rows, cols].view(np.uint32), want[rows, cols].view(np.uint32))
+        assert np.count_nonzero(lin) == np.count_nonzero(want[rows, cols])
+
+
 def test_decode_photos_same_for_any_workers(tmp_path):
     """The chunks do not depend on the number of workers: the reductions are identical to the bit."""
     from ffls.io.capture import load_capture

@@ -249,7 +249,7 @@ def _kind_of(path: Path) -> str:
 
 
 def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfinite: bool = False,
-               out: np.ndarray | None = None) -> ImageData:
+               out: np.ndarray | None = None, stored: np.ndarray | None = None) -> ImageData:
     """Read an image file as RGB float32.
 
     Parameters
@@ -265,6 +265,10 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         Where an EXR's pixels are widened to float32 when its size matches (``pixels`` is then
         ``out``, unless a colour conversion made a new array): a caller that keeps the photo, e.g.
         in shared memory, saves a copy. Ignored for other formats and other sizes.
+    stored : (H, W, 3) float16 ndarray, optional
+        Where a half EXR's R, G, B values are interleaved as stored (before any colour
+        conversion) when its size matches; ``pixels`` is widened from them (into ``out``, if
+        given). Ignored for other formats, float EXRs and other sizes.
 
     Returns
     -------
@@ -289,7 +293,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
     register_input(path)
     head = _check_decodable_size(path)
     if kind == "exr":
-        img = read_exr(path, working_space=working_space, out=out)
+        img = read_exr(path, working_space=working_space, out=out, stored=stored)
     else:
         img = _read_cv2(path, kind, 1 if head is None else head.orientation)
     if not allow_nonfinite:
@@ -325,7 +329,8 @@ def _check_decodable_size(path: Path) -> ImageHeader | None:
     return head
 
 
-def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarray | None = None) -> ImageData:
+def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarray | None = None,
+             stored: np.ndarray | None = None) -> ImageData:
     """Read an OpenEXR file (half or float channels) as RGB float32.
 
     Takes the ``R``, ``G``, ``B`` channels, or replicates ``Y`` for luminance-only files, and
@@ -342,6 +347,8 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
         (:func:`ffls.io.colourspace.convert_to_working_space`).
     out : (H, W, 3) float32 ndarray, optional
         Where the pixels are widened when the file's size matches (:func:`read_image`).
+    stored : (H, W, 3) float16 ndarray, optional
+        Where a half file's R, G, B values are interleaved when its size matches (:func:`read_image`).
 
     Returns
     -------
@@ -423,7 +430,11 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
         alpha = planes.pop().astype(np.float32)
     # interleaved in the stored type, then widened (exact): half the bytes through the strided
     # interleave, which costs more than the decompression itself
-    rgb = np.stack(planes, axis=-1)
+    into = None
+    if (stored is not None and depth == "half" and stored.shape == planes[0].shape + (len(planes),)
+            and stored.dtype == np.float16 and stored.flags.c_contiguous and stored.flags.writeable):
+        into = stored  # (the caller keeps the half values: no half copy of its own)
+    rgb = np.stack(planes, axis=-1, out=into)
     if (out is not None and out.shape == rgb.shape and out.dtype == np.float32
             and out.flags.c_contiguous and out.flags.writeable):
         _widen(rgb, out)

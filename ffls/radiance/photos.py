@@ -174,14 +174,16 @@ def _check_photo(capture, i: int, img: ImageData) -> None:
             )
 
 
-def read_photo(capture, i: int, out: np.ndarray | None = None, depth: int | str | None = None) -> Photo:
+def read_photo(capture, i: int, out: np.ndarray | None = None, depth: int | str | None = None,
+               stored: np.ndarray | None = None) -> Photo:
     """Photo ``i`` of ``capture``: linear radiance, raw values and bit depth.
 
     ``out`` (H, W, 3) float32, optional: where an EXR photo is widened (:func:`ffls.io.images.read_image`;
-    its ``linear`` is then ``out`` when no colour conversion applies). ``depth``, optional: the
-    bit depth of the capture's first photo, which this one must share when ``capture.json``
-    states no encoding (checked before the encoding is applied, so that a mixed capture is named
-    as such rather than as an unstated encoding).
+    its ``linear`` is then ``out`` when no colour conversion applies). ``stored`` (H, W, 3) float16,
+    optional: where a half EXR photo's values are interleaved as stored (``read_image``).
+    ``depth``, optional: the bit depth of the capture's first photo, which this one must share
+    when ``capture.json`` states no encoding (checked before the encoding is applied, so that a
+    mixed capture is named as such rather than as an unstated encoding).
 
     Raises
     ------
@@ -189,7 +191,7 @@ def read_photo(capture, i: int, out: np.ndarray | None = None, depth: int | str 
         Unreadable image, a size that differs from the capture's ``image_size``, or a bit depth
         that differs from ``depth`` with no stated encoding.
     """
-    img = read_image(capture.image_paths[i], out=out)
+    img = read_image(capture.image_paths[i], out=out, stored=stored)
     _check_photo(capture, i, img)
     if depth is not None and capture.encoding == "auto" and img.bit_depth != depth:
         raise InputError(_mixed_depth_message(img.bit_depth, depth), img.path)

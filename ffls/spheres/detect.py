@@ -677,10 +677,16 @@ class SequenceAccumulator:
         (``k = 1`` when the length is unknown: the first :data:`EDGE_PHOTOS`).
     n_images : int, optional
         The whole sequence's length.
+    buffers : dict, optional
+        Arrays of :meth:`layout`'s shapes and types, by name, that the reductions are made in
+        (e.g. the shared memory a worker process hands them over in: :meth:`stow` then copies
+        nothing); an array without one of its shape and type is made as usual.
     """
 
-    def __init__(self, colour: bool = True, edges: bool = True, n_images: int | None = None):
+    def __init__(self, colour: bool = True, edges: bool = True, n_images: int | None = None,
+                 buffers: dict | None = None):
         self.colour, self.edges = bool(colour), bool(edges)
+        self.buffers = buffers
         self.every = max(1, -(-int(n_images) // EDGE_PHOTOS)) if n_images else 1
         self.max = self.best = self.brightest = self.total = self.counts = self.tensor = None
         self.n = self.edge_photos = 0
@@ -703,12 +709,21 @@ class SequenceAccumulator:
         else:
             lum = (im[..., 0] if im.ndim == 3 else im).astype(np.float32)
         if self.max is None:
-            self.max, self.best = im.copy(), lum
-            self.brightest, self.total = np.full(lum.shape, i, np.int32), lum.astype(np.float64)
+            self.max = self._array("max", im.shape, np.float32)
+            self.best = self._array("best", lum.shape, np.float32)
+            self.brightest, self.total = (self._array("brightest", lum.shape, np.int32),
+                                          self._array("total", lum.shape, np.float64))
+            np.copyto(self.max, im)
+            np.copyto(self.best, lum)
+            self.brightest.fill(i)
+            np.copyto(self.total, lum)  # (float32 into float64: exact)
             if self.colour and im.ndim == 3 and im.shape[2] >= 3:
-                self.counts = np.zeros((COLOUR_BINS, *lum[::COLOUR_STEP, ::COLOUR_STEP].shape), np.uint16)
+                sub = lum[::COLOUR_STEP, ::COLOUR_STEP].shape
+                self.counts = self._array("counts", (COLOUR_BINS, *sub), np.uint16)
+                self.counts.fill(0)
             if self.edges:
-                self.tensor = np.zeros((EDGE_TENSOR_ROWS, *lum.shape), np.float32)
+                self.tensor = self._array("tensor", (EDGE_TENSOR_ROWS, *lum.shape), np.float32)
+                self.tensor.fill(0)
         elif im.shape != self.max.shape:
             raise ValueError(f"image shapes differ: {im.shape} vs {self.max.shape}")
         else:
@@ -723,6 +738,14 @@ class SequenceAccumulator:
             photo_edge_tensor(lum, self.tensor)
             self.edge_photos += 1
         self.n += 1
+
+    def _array(self, name: str, shape: tuple, dtype) -> np.ndarray:
+        """The buffer ``name`` where one of this shape and type was given, else a new array (both
+        uninitialised: the caller fills it)."""
+        buf = None if self.buffers is None else self.buffers.get(name)
+        if buf is None or buf.shape != tuple(shape) or buf.dtype != np.dtype(dtype):
+            return np.empty(shape, dtype)
+        return buf
 
     #: The array attributes (:meth:`layout`, :meth:`stow`, :meth:`unstow`).
     ARRAYS = ("max", "best", "brightest", "total", "counts", "tensor")
@@ -747,8 +770,10 @@ class SequenceAccumulator:
         for name, buf in buffers.items():
             arr = getattr(self, name)
             if isinstance(arr, np.ndarray) and arr.shape == buf.shape and arr.dtype == buf.dtype:
-                np.copyto(buf, arr)
+                if arr is not buf:  # (made in it: nothing to copy)
+                    np.copyto(buf, arr)
                 setattr(self, name, _Stowed())
+        self.buffers = None  # (not pickled with it)
         return self
 
     def unstow(self, buffers: dict, copy: bool = False) -> "SequenceAccumulator":
@@ -1226,13 +1251,18 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
 def _trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
     """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
     to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
-    on the rest. Returns the parameters and the inlier mask (n,) of the last round."""
+    on the rest. Returns the parameters and the inlier mask (n,) of the last round.
+
+    The points are handed to ``residuals`` column-major (``np.asfortranarray``): both residuals
+    read them column by column, elementwise, so the floats are the same and each column is
+    contiguous (the evaluations, tens of thousands per capture, ran on strided columns)."""
     from scipy.optimize import least_squares
     p = p0
+    pts = np.asfortranarray(pts)
     inl = np.ones(len(pts), dtype=bool)
     for _ in range(3):
-        p = least_squares(residuals, p, args=(pts[inl],), loss="soft_l1", f_scale=f_scale, x_scale=1.0,
-                          method="trf").x
+        p = least_squares(residuals, p, args=(np.asfortranarray(pts[inl]),), loss="soft_l1", f_scale=f_scale,
+                          x_scale=1.0, method="trf").x
         r = residuals(p, pts)
         sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
         new = np.abs(r) < max(trim * sigma, 1.0)

@@ -974,10 +974,13 @@ class DecodedPhotos:
     """A capture's photos decoded once (:func:`decode_photos`): what the sphere detection needs of
     them, and (memory permitting) the decoded photos themselves for the first pass.
 
-    Float photos are kept linear (float32); integer photos as their stored codes only (a quarter
-    of the memory for 8 bits), linearised where they are read (:meth:`photo`: the spheres'
-    pixels), with the capture's encoding, or, when ``capture.json`` states none, with the
-    encoding calibrated from these same codes (:func:`ffls.spheres.encoding.calibrate_capture_encoding`).
+    Float photos are kept linear (float32), half EXR photos as their stored half values (half the
+    memory, and half the pages to touch: the linear values are these widened, exactly, where no
+    colour conversion applies; ``held`` says which photos); integer photos as their stored codes
+    only (a quarter of the memory for 8 bits). Half and integer photos are widened or linearised
+    where they are read (:meth:`photo`: the spheres' pixels), with the capture's encoding, or,
+    when ``capture.json`` states none, with the encoding calibrated from these same codes
+    (:func:`ffls.spheres.encoding.calibrate_capture_encoding`).
 
     Attributes
     ----------
@@ -987,9 +990,12 @@ class DecodedPhotos:
         of the linear photos, or of the stored values when ``stored``.
     bit_depths : set
         The photos' stored bit depths.
-    linear : (n, H, W, 3) float32 or None
+    linear : (n, H, W, 3) float32 or float16, or None
         Float photos, in memory shared with the worker processes (None: integer photos, or over
-        the budget).
+        the budget); float16: half photos as stored.
+    held : (n,) bool or None
+        With float16 ``linear``: which photos it holds (False: one whose linear values are not
+        its stored ones, a colour-converted or float photo, read again where needed).
     raw : (n, H, W, 3) uint8 or uint16, or None
         Integer photos' stored codes (None: float photos, or over the budget).
     encoding : str or dict
@@ -1009,6 +1015,7 @@ class DecodedPhotos:
     encoding: object = "auto"
     response: np.ndarray | None = None
     stored: bool = False
+    held: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -1029,7 +1036,8 @@ class DecodedPhotos:
             Its ``encoding`` and ``response`` linearise integer photos (default: the encoding
             they were decoded with); an encoding still unknown gives None.
         pixels : (rows, cols) of int arrays, optional
-            Linearise an integer photo at these pixels only (the others are 0), e.g. the spheres'.
+            Linearise an integer or half photo at these pixels only (the others are 0), e.g. the
+            spheres'.
 
         Returns
         -------
@@ -1041,8 +1049,18 @@ class DecodedPhotos:
         if len(self.bit_depths) != 1:
             return None
         depth = next(iter(self.bit_depths))
-        if self.linear is not None:
+        if self.linear is not None and self.linear.dtype == np.float32:
             return self.linear[i], None, depth
+        if self.linear is not None:  # half values as stored: widened (exactly) where read
+            if not self.held[i]:
+                return None
+            half = self.linear[i]
+            if pixels is None:
+                return half.astype(np.float32), None, depth
+            rows, cols = pixels
+            linear = np.zeros(half.shape, np.float32)  # (untouched pages of a zeroed array cost nothing)
+            linear[rows, cols] = half[rows, cols]
+            return linear, None, depth
         if self.raw is None:
             return None
         from ffls.io.images import ImageData
@@ -1088,6 +1106,7 @@ class _DecodeContext:
     linear: np.ndarray | None
     raw: np.ndarray | None
     depth: int | str | None = None  # the bit depth every photo must have (no encoding stated), else None
+    held: np.ndarray | None = None  # with float16 ``linear``: which photos it holds (DecodedPhotos.held)
     slots: dict | None = None  # per chunk start: shared buffers its reductions are stowed in (workers)
 
 
@@ -1106,17 +1125,25 @@ def _decode_range(bounds: tuple[int, int]):
 
     ctx = _decode_context
     start, stop = bounds
-    acc = SequenceAccumulator(n_images=ctx.n)
+    # made in the shared buffers it is handed over in (workers)
+    acc = SequenceAccumulator(n_images=ctx.n, buffers=None if ctx.slots is None else ctx.slots[start])
     depths = set()
+    half = ctx.linear is not None and ctx.linear.dtype == np.float16
+    scratch = np.empty(ctx.shape, np.float32) if half else None  # each half photo widened here
     for i in range(start, stop):
         slot = None if ctx.linear is None else ctx.linear[i]  # an EXR is widened in place (no copy)
-        ph = read_photo(ctx.capture, i, out=slot, depth=ctx.depth)
+        if half:  # its half values are interleaved into the slot as read, widened into the scratch
+            ph = read_photo(ctx.capture, i, out=scratch, depth=ctx.depth, stored=slot)
+            # held where the linear values are the stored ones widened: a half photo, no conversion
+            ctx.held[i] = ph.bit_depth == "half" and ph.linear is scratch and ph.raw is scratch
+        else:
+            ph = read_photo(ctx.capture, i, out=slot, depth=ctx.depth)
         if ph.linear.shape != ctx.shape:
             raise InputError(f"image is {ph.linear.shape[1]}x{ph.linear.shape[0]}, the capture's first is "
                              f"{ctx.shape[1]}x{ctx.shape[0]}: every photo must have the same size",
                              ctx.capture.image_paths[i])
         depths.add(ph.bit_depth)
-        if ctx.linear is not None and ph.bit_depth not in (8, 16) and ph.linear is not slot:
+        if ctx.linear is not None and not half and ph.bit_depth not in (8, 16) and ph.linear is not slot:
             ctx.linear[i] = ph.linear
         if ctx.raw is not None and ph.bit_depth in (8, 16):
             if ph.codes is not None and ph.codes.dtype == ctx.raw.dtype:
@@ -1166,20 +1193,27 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     if n == 0:
         raise InputError("capture lists no images", capture.json_path)
     decoding = capture
-    stored = encoding_unknown(capture.encoding, read_image(capture.image_paths[0]).bit_depth)
+    head = read_image(capture.image_paths[0])
+    stored = encoding_unknown(capture.encoding, head.bit_depth)
     if stored:  # no encoding stated: the stored values (what the encoding calibration finds the spheres on)
         decoding = replace(capture, encoding="linear")
     first = read_photo(decoding, 0)
     shape = first.linear.shape
     integer = first.bit_depth in (8, 16)
     per_photo = first.linear.size * (1 if first.bit_depth == 8 else 2) if integer else first.linear.nbytes
-    linear = raw = None
+    # half photos kept as stored where the first one's values are not colour-converted on reading
+    half = first.bit_depth == "half" and head.colour_note is None
+    if half:
+        per_photo //= 2
+    linear = raw = held = None
     if keep and n * per_photo <= DECODED_MEMORY_SHARE * _available_memory():
         if integer:
             raw = _shared_array((n,) + shape, np.uint8 if first.bit_depth == 8 else np.uint16)
         else:
-            linear = _shared_array((n,) + shape, np.float32)
-    context = _DecodeContext(decoding, n, shape, linear, raw, first.bit_depth if capture.encoding == "auto" else None)
+            linear = _shared_array((n,) + shape, np.float16 if half else np.float32)
+            held = _shared_array((n,), np.bool_) if half else None
+    context = _DecodeContext(decoding, n, shape, linear, raw,
+                             first.bit_depth if capture.encoding == "auto" else None, held=held)
     workers = max(1, min(int(workers), n))
     size = max(1, -(-n // DECODE_CHUNKS))  # the chunks do not depend on the workers: nor does the result
     chunks = [(a, min(a + size, n)) for a in range(0, n, size)]
@@ -1220,9 +1254,9 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
                 if progress_bar is not None:
                     progress_bar.update(c[1] - c[0])
     if len(depths) != 1:  # mixed bit depths: the first pass reads each photo again
-        linear = raw = None
+        linear = raw = held = None
     return DecodedPhotos(stats=acc.result(), bit_depths=depths, linear=linear, raw=raw, encoding=capture.encoding,
-                         response=capture.response, stored=stored)
+                         response=capture.response, stored=stored, held=held)
 
 
 # ----------------------------------------------------------------------------- running the photo fits
