@@ -290,7 +290,7 @@ def test_cone_residuals_of_unit_rays_are_the_same_floats():
 
 
 def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
-    """The outline fits (``_trimmed_fit``) hand their points to the residuals column-major, so
+    """The outline fits (``trimmed_fit``) hand their points to the residuals column-major, so
     that each column the residuals read is contiguous; the residuals of either layout are the
     same floats, so the fits are too."""
     from ffls.conventions import normalize
@@ -306,5 +306,5 @@ def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
         seen.append(pts.flags.f_contiguous and pts.ndim == 2)
         return detect.unit_cone_residuals(q, pts, 900.0)
 
-    detect._trimmed_fit(residuals, p, s, 1.0, 3.0)
+    detect.trimmed_fit(residuals, p, s, 1.0, 3.0)
     assert seen and all(seen)

@@ -1239,7 +1239,7 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     s = np.asarray(rays, dtype=np.float64)
     d = np.asarray(init_dir, dtype=np.float64)
     p0 = f * np.array([d[0] / d[2], d[1] / d[2], init_alpha])
-    p, inl = _trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim)
+    p, inl = trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim)
     x, y, a = p / f
     if not (0 < a < np.pi / 2):
         raise ValueError("fitted apparent radius is not in (0, 90) degrees")
@@ -1248,7 +1248,7 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     return R / np.sin(a) * c, inl, _cone_residuals(p, s, f)
 
 
-def _trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
+def trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
     """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
     to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
     on the rest. Returns the parameters and the inlier mask (n,) of the last round.
@@ -1300,7 +1300,7 @@ def fit_circle(points, init_center, init_radius, f_scale: float = 1.0, trim: flo
     """
     P = np.asarray(points, dtype=np.float64)
     p0 = np.array([init_center[0], init_center[1], init_radius], dtype=np.float64)
-    p, inl = _trimmed_fit(_circle_residuals, p0, P, f_scale, trim)
+    p, inl = trimmed_fit(_circle_residuals, p0, P, f_scale, trim)
     if not p[2] > 0:
         raise ValueError("fitted radius is not positive")
     return p[:2].copy(), float(p[2]), inl, _circle_residuals(p, P)
