@@ -494,3 +494,13 @@ def test_spheres_declared_mirrors_do_not_calibrate(linear_captures, tmp_path):
     with pytest.raises(InputError) as e:
         calibrate_capture_encoding(cap.load_capture(folder))
     _one_line(e.value, "cannot calibrate the encoding", "no matte sphere", "capture.json", '"encoding"')
+
+
+def test_unknown_encoding_line_names_the_route_for_a_capture_without_spheres():
+    """An object capture has no spheres to calibrate from: the refusal names the calibration
+    capture's lights.json (whose "encoding" record ffls applies), not only 'ffls lights'."""
+    from ffls.radiance.photos import unknown_encoding_message
+
+    line = unknown_encoding_message(8)
+    assert "\n" not in line
+    assert "'ffls lights'" in line and "calibration capture" in line and "\"encoding\" record" in line

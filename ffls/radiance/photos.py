@@ -55,7 +55,9 @@ def unknown_encoding_message(bit_depth) -> str:
     """The one line that refuses an integer image of unknown encoding (``bit_depth`` 8 or 16)."""
     return (f"{CAPTURE_FILE} states no \"encoding\" and this {bit_depth}-bit image could be sRGB, linear or "
             f"gamma-encoded; ffls does not guess: state \"encoding\" (\"srgb\", \"linear\" or {{\"gamma\": g}}) "
-            f"in {CAPTURE_FILE}, or run 'ffls lights' to calibrate it from the spheres")
+            f"in {CAPTURE_FILE}, or calibrate it from spheres: 'ffls lights' on this capture if its photos "
+            f"show spheres, else give as this command's lights the lights.json of a calibration capture of the "
+            f"same camera (its \"encoding\" record applies)")
 
 
 def encoding_unknown(encoding, bit_depth) -> bool:
