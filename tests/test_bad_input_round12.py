@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_lines import child_env, tiny_capture
 from cli_lines import one_line as _one_line
 from ffls.cli import main
 
@@ -25,15 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def cap(tmp_path_factory):
-    from ffls.synth.scene import write_synthetic_capture
-
-    root = tmp_path_factory.mktemp("r12")
-    write_synthetic_capture(root / "cap", n_lights=6, resolution=24, progress=False, seed=4)
-    return root / "cap"
-
-
-def _child_env():
-    return dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))
+    return tiny_capture(tmp_path_factory.mktemp("r12"), seed=4)
 
 
 # ----------------------------------------------------------------------------- EXIF orientation
@@ -134,7 +127,7 @@ def test_console_script_imports_nothing_before_it_can_answer_ctrl_c():
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     assert scripts["ffls"] == "ffls.__main__:main"
     code = "import sys, ffls.__main__; print(sorted(m for m in sys.modules if m.startswith(('ffls', 'numpy'))))"
-    out = subprocess.run([sys.executable, "-c", code], env=_child_env(), capture_output=True, text=True, timeout=60)
+    out = subprocess.run([sys.executable, "-c", code], env=child_env(), capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "['ffls', 'ffls.__main__']", out
 
 
@@ -152,7 +145,7 @@ def test_ctrl_c_while_the_cli_imports_is_one_line(tmp_path):
         "sys.argv = ['ffls', 'lightmap', 'info', 'sky']\n"
         "from ffls.__main__ import main\n"
         "sys.exit(main())\n")
-    p = subprocess.run([sys.executable, str(script)], env=_child_env(), capture_output=True, text=True, timeout=60)
+    p = subprocess.run([sys.executable, str(script)], env=child_env(), capture_output=True, text=True, timeout=60)
     assert p.returncode == 130 and p.stderr == "ffls: interrupted; nothing was done\n", p.stderr
 
 
@@ -163,7 +156,7 @@ def test_closed_standard_output_is_refused_before_anything_runs(cap, tmp_path, a
     """``ffls lights CAP -o x.json >&-`` (and every command) ran, lost its result lines and said 0."""
     out = tmp_path / "x.json"
     args = [a.format(cap=cap, out=out) for a in argv]
-    p = subprocess.run([sys.executable, "-m", "ffls", *args], env=_child_env(), stdout=subprocess.DEVNULL,
+    p = subprocess.run([sys.executable, "-m", "ffls", *args], env=child_env(), stdout=subprocess.DEVNULL,
                        stderr=subprocess.PIPE, text=True, timeout=120, preexec_fn=lambda: os.close(1))
     assert p.returncode == 2 and p.stderr.splitlines() == [
         "ffls: error: standard output: is closed, and the command's results are printed there; nothing was done "
@@ -358,7 +351,7 @@ def test_closed_standard_error_keeps_its_lines_out_of_the_results(tmp_path):
     """``ffls lightmap info nope.exr 2>&- > out.txt``: the error line went into out.txt (print's
     fallback for a missing stderr is standard output); now it is dropped, the status says 2."""
     p = subprocess.run([sys.executable, "-m", "ffls", "lightmap", "info", str(tmp_path / "nope.exr")],
-                       env=_child_env(), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, timeout=120,
+                       env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, timeout=120,
                        preexec_fn=lambda: os.close(2))
     assert p.returncode == 2 and p.stdout == "", p.stdout
 

@@ -10,7 +10,6 @@ left.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_lines import child_env, tiny_capture
 from cli_lines import one_line as _one_line
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -26,15 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def cap(tmp_path_factory):
-    from ffls.synth.scene import write_synthetic_capture
-
-    root = tmp_path_factory.mktemp("r13")
-    write_synthetic_capture(root / "cap", n_lights=6, resolution=24, progress=False, seed=5)
-    return root / "cap"
-
-
-def _child_env():
-    return dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))
+    return tiny_capture(tmp_path_factory.mktemp("r13"), seed=5)
 
 
 def _entries(folder: Path) -> set:
@@ -382,7 +374,7 @@ def test_a_ctrl_c_while_the_interpreter_exits_keeps_the_commands_status(tmp_path
         "threading.Thread(target=late).start()\n"
         "sys.exit(rc)\n")
     out = tmp_path / "m.exr"
-    p = subprocess.run([sys.executable, str(script), str(out)], env=_child_env(), capture_output=True, text=True,
+    p = subprocess.run([sys.executable, str(script), str(out)], env=child_env(), capture_output=True, text=True,
                        timeout=60)
     assert p.returncode == 0 and "Traceback" not in p.stderr and "Exception ignored" not in p.stderr, p
     assert out.is_file()
