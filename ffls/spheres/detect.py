@@ -2694,13 +2694,15 @@ def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: De
     if changing is None or not fits:
         return fits
     pts = changing.points[0]
-    log_l = np.log(np.maximum(L, 1e-12))
+    log_l = None  # the image's log, taken once and only where an outline is replaced
     out = []
     for ft in fits:
         new = None if ft.source == "override" or not _is_mirror_outline(ft, L) else refit(ft, pts)
         if new is None:
             out.append(ft)
             continue
+        if log_l is None:
+            log_l = np.log(np.maximum(L, 1e-12))
         new.score, new.outline_edges = ft.score, PHOTO_EDGES
         new.outline_sigma_px = _outline_ambiguity(new, log_l, cam)
         out.append(new)
@@ -2735,7 +2737,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
     against 0.88-0.97 for a silhouette. Unchanged without the evidence (``changing`` None).
     """
     def grow(ft, pts):
-        cur, grown = ft, False
+        cur, cur_support, grown = ft, None, False  # the current outline's support, once measured
         for _ in range(max_steps):
             oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
             if oc is None:
@@ -2745,10 +2747,13 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
             except ValueError:
                 break
             support = outline_support(new, pts, cam.shape)
-            if (new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT
-                    or support <= outline_support(cur, pts, cam.shape)):
+            if new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT:
                 break
-            cur, grown = new, True
+            if cur_support is None:
+                cur_support = outline_support(cur, pts, cam.shape)
+            if support <= cur_support:
+                break
+            cur, cur_support, grown = new, support, True
         return cur if grown else None
 
     return _mirror_outlines_replaced(fits, changing, L, cam, grow)
