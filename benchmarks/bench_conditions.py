@@ -385,11 +385,7 @@ def truth_check(folder: Path) -> dict:
         sph = [l["spheres"][i] for i in used]
         dirs = np.array([s["direction"] for s in sph], dtype=np.float64)
         centres = np.array([s["center"] for s in sph], dtype=np.float64)
-        if pos is not None:
-            near = [int(np.argmin(np.linalg.norm(true_centres - c, axis=1))) for c in centres]
-            at = normalize(pos[j][None, :] - true_centres[near])
-        else:
-            at = np.repeat(T[j][None, :], len(used), axis=0)
+        at = _sphere_truth(l, j, T, pos, true_centres, centres)
         e = np.degrees(tangent_residuals(dirs, at))
         per[j, used] = e
         E = np.degrees(tangent_residuals(np.asarray(l["direction"], dtype=np.float64)[None], T[j][None]))[0]
@@ -513,6 +509,168 @@ def main_truth_check(a) -> None:
               f"{100 * r['photo_coverage']:.1f}% |", flush=True)
     print("\nper-axis degrees; medians over the accepted photos with 2+ spheres (truth_check)")
     write_json(a.out, {"benchmark": "bench_conditions --truth-check", **host_info(), "resolution": a.res,
+                       "results": out})
+
+
+#: The directions a per-photo bias is resolved along (:func:`bias_check`): from each sphere toward
+#: the scene centre on the light's tangent plane; ``visible`` weights it by the share of the
+#: sphere's face toward the centre that the camera sees, ``(1 + g . v) / 2``.
+BIAS_DIRECTIONS = ("toward_centre", "visible")
+
+
+def _sphere_truth(l: dict, j: int, T: np.ndarray, pos, true_centres: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Per used sphere of light ``l`` (index ``j``), the true direction there: the distant light's,
+    or a near light's position seen from the true centre nearest each recorded one."""
+    from ffls.conventions import normalize
+
+    if pos is not None:
+        near = [int(np.argmin(np.linalg.norm(true_centres - c, axis=1))) for c in centres]
+        return normalize(pos[j][None, :] - true_centres[near])
+    return np.repeat(T[j][None, :], len(centres), axis=0)
+
+
+def bias_check(folder: Path, direction: str = "toward_centre") -> dict:
+    """One bias magnitude per photo along a direction known from the geometry, against the truth.
+
+    The spheres' main error around an object is light the object (and the ground it hides) sends
+    onto each sphere's side that faces it. Model sphere ``i``'s error in a photo as ``b h_i +
+    n_i``: one magnitude ``b`` per photo, ``h_i`` the direction from the sphere toward the scene
+    centre (``capture.json``'s ``scene_center``, else the world origin) on the light's tangent
+    plane (:data:`BIAS_DIRECTIONS`). Only ``b sum_i w_i h_i`` enters the photo's weighted mean.
+
+    * ``explained``: the share of the spheres' squared errors against the truth that the term
+      explains, ``b`` fitted per photo to the true errors (the best this term can do);
+    * ``photo_over_independent`` / ``..._remainder``: ``sum |sum_i w_i e_i|^2 / sum sum_i w_i^2
+      |e_i|^2`` over the photos, of the true errors and of what the term leaves (1: independent
+      spheres; below 1: they still cancel in the mean);
+    * ``p``: the capture's own test of the term (``b`` from each photo's sphere offsets, weighted
+      by the sphere variances of the stored run's model; ``sum b^2 / var b`` against a chi-square
+      with one degree of freedom per photo);
+    * ``coverage`` / ``median_cone_deg`` (the stored run's model, replayed as :func:`recalibrate`)
+      against ``coverage_term`` / ``median_cone_term_deg``: the model fitted to the offsets less
+      the term, with the term's share of the mean, ``|sum w h| sqrt((b^2 + var b) / 2)`` per axis,
+      added in quadrature.
+
+    Returns ``{"skipped": reason}`` without photos with 2+ spheres.
+    """
+    from scipy.special import chdtrc
+
+    from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, normalize, tangent_basis
+    from ffls.spheres.uncertainty import ErrorModel, fit_error_model, photo_residuals, tangent_residuals
+
+    if direction not in BIAS_DIRECTIONS:
+        raise ValueError(f"direction must be one of {BIAS_DIRECTIONS}")
+    folder = Path(folder)
+    doc = json.loads((folder / "lights_estimated.json").read_text())
+    truth = json.loads((folder / "truth.json").read_text())
+    cap = json.loads((folder / "capture.json").read_text())
+    centre_xyz = np.asarray(cap.get("scene_center", (0.0, 0.0, 0.0)), dtype=np.float64)
+    camera = np.asarray((cap.get("camera") or {}).get("world_from_camera", DEFAULT_WORLD_FROM_CAMERA),
+                        dtype=np.float64)[:3, 3]
+    T = np.asarray(truth["directions"], dtype=np.float64)
+    pos = np.asarray(truth["positions"], dtype=np.float64) if truth.get("light_model") == "near" else None
+    true_centres = np.asarray(truth.get("sphere_centers") or np.zeros((0, 3)), dtype=np.float64)
+    centre_deg = np.asarray((doc.get("uncertainty") or {}).get("centre_deg", ()), dtype=np.float64)
+    photos = []
+    for j, l in enumerate(doc["lights"]):
+        used = list(l.get("used_spheres") or [])
+        if l.get("status", "ok") != "ok" or not used:
+            continue
+        sph = [l["spheres"][i] for i in used]
+        L = normalize(np.asarray(l["direction"], dtype=np.float64))
+        centres = np.array([s["center"] for s in sph], dtype=np.float64)
+        g = normalize(centre_xyz[None, :] - centres)
+        e1, e2 = tangent_basis(L)
+        h = np.stack([g @ e1, g @ e2], axis=1)
+        if direction == "visible":
+            h = h * ((1.0 + np.einsum("ij,ij->i", g, normalize(camera[None, :] - centres))) / 2.0)[:, None]
+        w = _combination_weights(sph)
+        p = {"used": np.asarray(used, dtype=np.intp), "w": w / w.sum(), "h": h,
+             "stat": np.array([s.get("sigma_deg") or np.inf for s in sph]) / np.sqrt(2.0),
+             "error": float(np.degrees(angle_between(L, T[j])))}
+        if len(used) >= 2:
+            near = l.get("model") == "near" and l.get("position") is not None
+            p["r"] = photo_residuals(np.array([s["direction"] for s in sph]), L,
+                                     np.asarray(l["position"]) if near else None, centres if near else None)
+            p["e"] = np.degrees(tangent_residuals(np.array([s["direction"] for s in sph]),
+                                                  _sphere_truth(l, j, T, pos, true_centres, centres)))
+        photos.append(p)
+    multi = [p for p in photos if "r" in p]
+    if len(multi) < 3:
+        return {"skipped": "fewer than 3 photos with 2+ spheres"}
+    # the term fitted to the true errors: what it explains, and whether the rest still cancels
+    tot = rest = ph0 = ind0 = ph1 = ind1 = 0.0
+    for p in multi:
+        e, h, w = p["e"], p["h"], p["w"]
+        b = float(np.sum(h * e) / max(np.sum(h * h), 1e-300))
+        n = e - b * h
+        tot, rest = tot + np.sum(e * e), rest + np.sum(n * n)
+        ph0, ind0 = ph0 + np.sum((w @ e) ** 2), ind0 + np.sum(w[:, None] ** 2 * e * e)
+        ph1, ind1 = ph1 + np.sum((w @ n) ** 2), ind1 + np.sum(w[:, None] ** 2 * n * n)
+    # the capture's own: b from each photo's offsets, r_i = b (h_i - sum w h) + noise
+    model = fit_error_model([p["r"] for p in multi], [p["stat"] for p in multi],
+                            spheres=[p["used"] for p in multi], centre_deg=centre_deg)
+    chi, left = 0.0, []
+    for p in multi:
+        v = np.radians(model.sphere_sigma_deg(p["stat"], p["used"])) ** 2
+        p["hbar"] = p["w"] @ p["h"]
+        H = p["h"] - p["hbar"]
+        info = float(np.sum(np.sum(H * H, axis=1) / v))
+        p["b"] = float(np.sum(np.sum(H * p["r"], axis=1) / v) / info) if info > 0 else 0.0
+        p["var_b"] = 1.0 / info if info > 0 else np.inf
+        chi += p["b"] ** 2 * info if info > 0 else 0.0
+        left.append(p["r"] - p["b"] * H)
+    termed = fit_error_model(left, [p["stat"] for p in multi], spheres=[p["used"] for p in multi],
+                             centre_deg=centre_deg)
+    err = np.array([p["error"] for p in photos])
+
+    def cones(m: ErrorModel, with_term: bool) -> np.ndarray:
+        out = []
+        for p in photos:
+            s = m.photo_sigma_deg(p["stat"], p["used"], p["w"])
+            if with_term and "b" in p:
+                s = np.hypot(s, np.degrees(np.linalg.norm(p["hbar"]) * np.sqrt((p["b"] ** 2 + p["var_b"]) / 2.0)))
+            out.append(m.cone_deg(s))
+        return np.array(out)
+
+    c0, c1 = cones(model, False), cones(termed, True)
+    return {"photos": len(photos), "multi": len(multi), "direction": direction,
+            "explained": float(1.0 - rest / tot), "photo_over_independent": float(ph0 / ind0),
+            "photo_over_independent_remainder": float(ph1 / ind1),
+            "p": float(chdtrc(len(multi), chi)), "median_hbar": float(np.median([np.linalg.norm(p["hbar"]) for p in multi])),
+            "coverage": float(np.mean(err <= c0)), "median_cone_deg": float(np.median(c0)),
+            "coverage_term": float(np.mean(err <= c1)), "median_cone_term_deg": float(np.median(c1)),
+            "median_error_deg": float(np.median(err))}
+
+
+def main_bias_check(a) -> None:
+    """``--bias-check``: :func:`bias_check` (both :data:`BIAS_DIRECTIONS`) on each cached run, or on
+    the ``--folders`` given; a Markdown table and JSON."""
+    if a.folders:
+        jobs = [(Path(f).name, Path(f)) for f in a.folders]
+    elif a.cache:
+        jobs = [(name, Path(a.cache) / f"c{i:02d}_{a.res}") for i, name in enumerate(CONDITIONS)]
+        jobs += [(name, Path(a.cache) / f"ds{i:02d}") for i, name in enumerate(SCENES)]
+    else:
+        raise SystemExit("--bias-check needs --cache (a folder of earlier runs) or --folders")
+    out = []
+    print("| condition | direction | photos (2+ spheres) | explained | photo / independent variance: errors, "
+          "remainder | median abs(sum w h) | p | coverage (median cone) | with the term |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, folder in jobs:
+        if (a.only and not any(o in name for o in a.only)) or not (folder / "lights_estimated.json").exists():
+            continue
+        for direction in BIAS_DIRECTIONS:
+            r = {"condition": name, **bias_check(folder, direction)}
+            out.append(r)
+            if "skipped" in r:
+                print(f"| {name} | {direction} | skipped: {r['skipped']} | | | | | | |", flush=True)
+                continue
+            print(f"| {name} | {direction} | {r['photos']} ({r['multi']}) | {100 * r['explained']:.0f}% | "
+                  f"{r['photo_over_independent']:.2f}, {r['photo_over_independent_remainder']:.2f} | "
+                  f"{r['median_hbar']:.2f} | {r['p']:.1e} | {100 * r['coverage']:.1f}% ({r['median_cone_deg']:.2f}) | "
+                  f"{100 * r['coverage_term']:.1f}% ({r['median_cone_term_deg']:.2f}) |", flush=True)
+    write_json(a.out, {"benchmark": "bench_conditions --bias-check", **host_info(), "resolution": a.res,
                        "results": out})
 
 
@@ -735,6 +893,11 @@ def main(argv=None):
     ap.add_argument("--truth-check", action="store_true",
                     help="no ffls lights run: each part of the stored runs' cones against the renders' truth "
                          "(truth_check; needs --cache with earlier runs)")
+    ap.add_argument("--bias-check", action="store_true",
+                    help="no ffls lights run: one bias magnitude per photo along a direction known from the "
+                         "geometry, against the stored runs' truth (bias_check; --cache with earlier runs, or --folders)")
+    ap.add_argument("--folders", nargs="*", default=None,
+                    help="with --bias-check: capture folders (truth.json, lights_estimated.json) instead of the cache's")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_conditions.json"))
     a = ap.parse_args(argv)
     _, _, dirs = grid(a.phi_step, a.theta_step)
@@ -742,6 +905,8 @@ def main(argv=None):
         return main_shared_check(a)
     if a.truth_check:
         return main_truth_check(a)
+    if a.bias_check:
+        return main_bias_check(a)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(a.cache or tmp)
