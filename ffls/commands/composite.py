@@ -209,6 +209,8 @@ def _stated_spheres_problem(capture, centres, r: float) -> str | None:
     (a stated ``sphere_radius`` of 50 m for spheres 0.5 m apart, one centre given twice), or a sphere
     behind the camera or whose disc misses the photo (a centre of 1e300, a typo in a coordinate).
     Checked by K and ``world_from_camera`` without distortion: the disc only has to meet the photo."""
+    from ffls.camera.projection import project_points
+
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
     i, k = np.unravel_index(np.argmin(d + np.diag(np.full(len(centres), np.inf))), d.shape)
     if len(centres) > 1 and not d[i, k] >= r:
@@ -217,7 +219,7 @@ def _stated_spheres_problem(capture, centres, r: float) -> str | None:
     cam = np.linalg.inv(capture.world_from_camera)
     with np.errstate(over="ignore", invalid="ignore"):
         xc = centres @ cam[:3, :3].T + cam[:3, 3]
-        uv = xc[:, :2] / xc[:, 2:] * np.diag(capture.K)[:2] + capture.K[:2, 2]
+        uv = project_points(xc, capture.K)
         rad = float(max(capture.K[0, 0], capture.K[1, 1])) * r / xc[:, 2]
     w, h = capture.image_size if capture.image_size is not None else (2 * capture.K[0, 2] + 1,
                                                                       2 * capture.K[1, 2] + 1)

@@ -29,21 +29,9 @@ def add_arguments(p):
 
 def load_capture_for_ingest(args):
     """The capture with the encoding that its lights record (``ffls lights``), and the lights (or None)."""
-    from pathlib import Path
+    from ffls.io.capture import load_capture_and_lights
 
-    from ffls.io.capture import LIGHTS_FILE, apply_lights_encoding, load_capture, load_lights_any
-
-    capture = load_capture(args.capture)
-    path = Path(args.lights) if args.lights else capture.folder / LIGHTS_FILE
-    if not path.exists():
-        if args.lights:
-            from ffls.errors import InputError, broken_link
-
-            raise InputError(broken_link(path) or "lights file not found", path)
-        return capture, None
-    lights = load_lights_any(path, capture, args.lights_map)
-    lights.path = path
-    return apply_lights_encoding(capture, lights), lights
+    return load_capture_and_lights(args.capture, args.lights, args.lights_map, optional=True)
 
 
 def run(args) -> int:

@@ -1537,7 +1537,8 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
         raise
 
 
-def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Capture, Lights]:
+def load_capture_and_lights(folder, lights=None, lights_map=None, *,
+                            optional: bool = False) -> tuple[Capture, Lights | None]:
     """``(capture, lights)`` of a capture folder; ``lights`` defaults to ``FOLDER/lights.json``.
 
     ``lights`` may be a ``lights.json`` or an RTI ``.lp`` file, also one of another capture of
@@ -1548,13 +1549,16 @@ def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Captu
     ------
     InputError
         As :func:`load_capture` and :func:`load_lights_any`; a missing default ``lights.json`` says how
-        to make one (``ffls lights``).
+        to make one (``ffls lights``), unless ``optional``: then ``(capture, None)``. A missing file
+        named by ``lights`` is always an error.
     """
     capture = load_capture(folder)
     path = Path(lights) if lights else capture.folder / LIGHTS_FILE  # (FOLDER may name capture.json itself)
     if not path.exists():
         if lights:
             raise InputError(broken_link(path) or "lights file not found", path)
+        if optional:
+            return capture, None
         raise InputError(broken_link(path) or "no lights file: estimate the light directions first (ffls lights "
                          "CAPTURE)", path)
     found = load_lights_any(path, capture, lights_map)
