@@ -13,9 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.spheres.detect import find_spheres, orthographic_normals, sphere_mask, sphere_normals, disc_mask
+from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, edge_points, find_spheres,
+                                 orthographic_normals, sphere_mask, sphere_normals)
+from ffls.spheres.select import CRITERIA, round_outline
 
-__all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "LIMB_STEP_COVERAGE"]
+__all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
+           "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO"]
 
 
 @dataclass
@@ -130,6 +133,109 @@ def mirror_limb(radiance, center_px, radius_px, shape):
     return np.asarray(c, dtype=np.float64), float(r)
 
 
+#: An unhinted probe ball's apparent radius is at least this share of the photo's shorter side
+#: (:func:`diffuse_ball`): a probe is photographed to be unwrapped, framed on the ball (Debevec's fill
+#: the frame; the balls of ``benchmarks/probe_detect.py`` and ``probe_hint.py`` are 0.08-0.3 of it),
+#: while a busy ground's blobs give small round outlines (8 px in a 200 px photo, 0.04). A smaller ball
+#: is used when hinted (``center_px``).
+MIN_BALL_FRACTION = 0.05
+#: A diffuse ball's shading is smooth: the edge points strictly inside its outline (within 0.85 of its
+#: radius) number at most this share of its circumference in pixels, where a circle fitted to a textured
+#: ground's edges holds that ground's texture (2.3-2.5 in ``benchmarks/probe_hint.py``). The edges are
+#: found on log luminance, where a sunlit ball's terminator, its shading falling to the sky's level, is a
+#: step: about half a circumference (0.5 under ``sunrise`` there); a cast shadow's boundary across the
+#: ball is at most a third of one.
+MAX_INTERIOR_EDGES = 1.0
+#: Two separate round outlines that both pass as the ball, the smaller at least this share of the larger's
+#: radius: which one is the probe is not decided, and the finder asks for a hint.
+RIVAL_RATIO = 0.8
+
+
+def _interior_edges(points, center_px, radius_px) -> float:
+    """Edge points within 0.85 of the radius of the centre, per pixel of circumference."""
+    d = np.hypot(*(np.asarray(points) - np.asarray(center_px)).T) if len(points) else np.zeros(0)
+    return float(np.count_nonzero(d < 0.85 * radius_px)) / (2 * np.pi * max(radius_px, 1e-9))
+
+
+def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, saturates: bool = False):
+    """A diffuse probe ball found without a hint in one photo: a :class:`ffls.spheres.detect.SphereFit`.
+
+    A calibration capture's finder (:func:`ffls.spheres.detect.find_spheres` without hints) fits each
+    candidate circle on the edges around it, which on a ground as busy and as bright as the ball
+    (``benchmarks/probe_hint.py``) gives no round outline for the ball at all. Here each distinct
+    candidate circle (:func:`ffls.spheres.detect.circle_candidates`) is taken instead as a centre-only
+    pixel hint, whose fit searches outward from it for the best-supported round outline (the hint's
+    path, ``docs/probes.md``). A fit is the ball's when its outline is round, closed and supported
+    (:func:`ffls.spheres.select.round_outline`), its centre well constrained (``CRITERIA
+    ['max_center_sigma_px']``), at least ``min_visible`` of it in the frame, its interior smooth
+    (:data:`MAX_INTERIOR_EDGES`: a circle fitted to the ground's texture holds that texture) and its
+    radius at least :data:`MIN_BALL_FRACTION` of the photo's shorter side. Of those the largest is the ball
+    (an outline inside or overlapping it is its shading or the ground next to it), unless a separate one
+    is nearly as large (:data:`RIVAL_RATIO`).
+
+    Parameters
+    ----------
+    image : (H, W, 3) float
+        Linear radiance (the luminance repeated in the three channels, as
+        :func:`locate_sphere` gives the finder).
+    K, dist, R, world_from_camera, camera_model, source, saturates
+        As :func:`ffls.spheres.detect.find_spheres` takes them.
+
+    Raises
+    ------
+    InputError
+        No fit passes (one line: what was judged, and how to give a hint), or two separate ones do.
+    """
+    H, W = np.shape(image)[:2]
+    cands = circle_candidates(image, source)
+    pts, _ = edge_points(image)
+    min_r = MIN_BALL_FRACTION * min(H, W)
+    seeds, fits, why = [], [], []
+    for x, y, r in cands:
+        if any(np.hypot(x - a, y - b) < HINT_CENTRE_OFFSET * max(r, s) for a, b, s in seeds):
+            continue  # a hint this near an earlier one's centre finds the same outline
+        seeds.append((x, y, r))
+        try:
+            ft = find_spheres(image, K, dist, R, n_spheres=1, hints=[{"center_px": [float(x), float(y)]}],
+                              world_from_camera=world_from_camera, source=source, camera_model=camera_model,
+                              saturates=saturates, lit_limb=None)[0]
+        except InputError:
+            continue
+        if any(np.hypot(*(ft.center_px - o.center_px)) < 0.5 and abs(ft.radius_px - o.radius_px) < 0.5
+               for o in fits):
+            continue
+        fits.append(ft)
+    ok = []
+    for ft in sorted(fits, key=lambda f: -f.radius_px):
+        where = f"({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px"
+        inner = _interior_edges(pts, ft.center_px, ft.radius_px)
+        if not round_outline(ft, CRITERIA["max_residual_px"]) or ft.center_sigma_px > CRITERIA["max_center_sigma_px"]:
+            continue  # no round outline: not worth a word
+        if ft.visible_fraction < 0.6:
+            why.append(f"{where}: cut by the frame ({ft.visible_fraction:.0%} of its outline inside)")
+        elif inner > MAX_INTERIOR_EDGES:
+            why.append(f"{where}: not smooth inside as a diffuse ball is ({inner:.1f} edge points per pixel of "
+                       f"outline > {MAX_INTERIOR_EDGES})")
+        elif ft.radius_px < min_r:
+            why.append(f"{where}: too small for a probe (under {MIN_BALL_FRACTION:g} of the photo's shorter side, "
+                       f"{min_r:.0f} px)")
+        else:
+            ok.append(ft)
+    hint = "give a hint in probe.json, e.g. \"sphere\": {\"center_px\": [u, v]}"
+    if not ok:
+        judged = "; ".join(why[:3]) + (f"; and {len(why) - 3} more" if len(why) > 3 else "")
+        raise InputError(f"no sphere found: no round outline in the photo ({W}x{H} px, {len(seeds)} places "
+                          f"tried) is a diffuse ball's{': ' + judged if judged else ''}; {hint}", source)
+    ball = ok[0]
+    for o in ok[1:]:
+        apart = np.hypot(*(o.center_px - ball.center_px)) >= ball.radius_px + o.radius_px
+        if apart and o.radius_px >= RIVAL_RATIO * ball.radius_px:
+            raise InputError(f"two round outlines could be the probe ball: ({ball.center_px[0]:.0f}, "
+                              f"{ball.center_px[1]:.0f}) px, radius {ball.radius_px:.0f} px and ({o.center_px[0]:.0f},"
+                              f" {o.center_px[1]:.0f}) px, radius {o.radius_px:.0f} px; {hint}", source)
+    return ball
+
+
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
     """Locate the probe sphere of one view.
 
@@ -203,9 +309,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     rad = np.asarray(radiance, dtype=np.float32)
     lum = rad @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
     try:
-        found = find_spheres(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, n_spheres=1, hints=hints,
-                             world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
-                             lit_limb=None, retry_hints=sph.material != "mirror")
+        if hints is None and sph.material == "diffuse":
+            found = [diffuse_ball(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, Tf, cam.model, source,
+                                  saturates)]
+        else:
+            found = find_spheres(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, n_spheres=1, hints=hints,
+                                 world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
+                                 lit_limb=None, retry_hints=sph.material != "mirror")
     except InputError as e:
         # the finder speaks capture.json's keys (spheres[0], sphere_count); probe.json has one "sphere"
         msg = e.message.replace("capture.json", "probe.json").replace("\"spheres\": [{\"center_px\": [u, v]}] or "
