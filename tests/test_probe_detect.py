@@ -70,10 +70,11 @@ def test_mirror_limb_moves_an_inner_circle_to_the_limb(tmp_path):
     assert mirror_limb(vr.radiance, (300.0, 30.0), 12.0, vr.radiance.shape[:2]) is None
 
 
-def _busy_ground_probe(folder, seed, hint):
+def _busy_ground_probe(folder, seed, hint, name="courtyard", ball=True, image=None):
     """A grey diffuse ball (albedo 0.25, radius 60 px, centre (99.5, 99.5)) on a blurred-noise
     ground as bright as the ball (its 90th percentile), one orthographic EXR: the ball is brighter
-    than the ground on its lit side and darker on its shadowed side."""
+    than the ground on its lit side and darker on its shadowed side. ``hint`` None: no
+    ``center_px``; ``ball`` False: the ground alone; ``image``: that photo instead."""
     import json
 
     import cv2
@@ -81,14 +82,15 @@ def _busy_ground_probe(folder, seed, hint):
     from ffls.io.images import write_exr
     from ffls.synth.probe_scenes import diffuse_sphere_scene
 
-    sc = diffuse_sphere_scene(builtin_lightmap("courtyard").downsample(16), resolution=200, albedo=0.25,
+    sc = diffuse_sphere_scene(builtin_lightmap(name).downsample(16), resolution=200, albedo=0.25,
                               radius_frac=0.3)
     bg = cv2.GaussianBlur(np.random.default_rng(seed).uniform(0, 1, (200, 200, 3)), (0, 0), 3)
     bg = (bg - bg.min()) / np.ptp(bg) * np.percentile(sc.image[sc.mask], 90)
-    write_exr(folder / "ball.exr", np.where(sc.mask[..., None], sc.image, bg).astype(np.float32))
+    img = np.where(sc.mask[..., None] & ball, sc.image, bg) if image is None else image
+    write_exr(folder / "ball.exr", np.asarray(img, dtype=np.float32))
     (folder / "probe.json").write_text(json.dumps({
         "format": "ffls-probe", "version": 1, "images": ["ball.exr"], "camera": {"model": "orthographic"},
-        "sphere": {"center_px": hint, "material": "diffuse"}}))
+        "sphere": {**({} if hint is None else {"center_px": hint}), "material": "diffuse"}}))
     probe = load_probe(folder)
     vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
     return locate_sphere(probe.views[0], vr.radiance, probe.json_path)
@@ -121,3 +123,40 @@ def test_centre_only_hint_on_a_mirror_ball_keeps_its_first_fit(tmp_path):
     vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
     with pytest.raises(InputError, match="poorly constrained.*radius_px"):
         locate_sphere(probe.views[0], vr.radiance, probe.json_path)
+
+
+@pytest.mark.parametrize("name, seed", [("courtyard", 5), ("courtyard", 1), ("sunrise", 2)])
+def test_unhinted_diffuse_ball_on_a_busy_ground(tmp_path, name, seed):
+    """No hint (issue 11): the ball is found within 0.1 px (``locate.diffuse_ball``: each candidate
+    circle taken as a centre-only hint). Before, courtyard seed 5 used an 8 px circle of the ground,
+    101 px away, without a word, and the other two said "no sphere found"."""
+    geo = _busy_ground_probe(tmp_path, seed, None, name)
+    assert geo.source == "auto"
+    assert np.hypot(*(geo.center_px - 99.5)) < 0.1 and abs(geo.radius_px - 60.0) < 0.1
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_busy_ground_without_a_ball_is_refused(tmp_path, seed):
+    """The ground alone: its round outlines are too small for a probe (seed 1, a 5 px blob, which the
+    calibration finder used before) or hold the ground's texture (seed 3): one line, no ball."""
+    from ffls.errors import InputError
+
+    with pytest.raises(InputError, match=r"no sphere found: .*is a diffuse ball's.*center_px"):
+        _busy_ground_probe(tmp_path, seed, None, ball=False)
+
+
+def test_unhinted_diffuse_ball_too_small_or_with_a_rival_is_refused(tmp_path):
+    """A ball of 6 px in a 200 px photo is under ``MIN_BALL_FRACTION`` of its side; two balls alike
+    leave the choice open: each one line asking for a hint (before, each was used without a word)."""
+    from ffls.errors import InputError
+    from ffls.synth.probe_scenes import diffuse_sphere_scene
+
+    lm = builtin_lightmap("courtyard").downsample(16)
+    small = diffuse_sphere_scene(lm, resolution=200, albedo=0.25, radius_frac=0.03).image
+    with pytest.raises(InputError, match=r"radius 6 px: too small for a probe"):
+        _busy_ground_probe(tmp_path, 1, None, image=small)
+    one = diffuse_sphere_scene(lm, resolution=120, albedo=0.25, radius_frac=0.3).image
+    two = np.zeros((120, 260, 3), np.float32)
+    two[:, :120], two[:, 140:] = one, one
+    with pytest.raises(InputError, match=r"two round outlines could be the probe ball.*center_px"):
+        _busy_ground_probe(tmp_path, 1, None, image=two)
