@@ -18,7 +18,8 @@ from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mas
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
-           "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO"]
+           "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
+           "MIRROR_SHARP_OUTLINE_PX"]
 
 
 @dataclass
@@ -107,30 +108,48 @@ def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
 LIMB_STEP_COVERAGE = 0.85
 
 
+#: Circles of limb steps compared by :func:`mirror_limb`: the best-supported ones, of which the largest
+#: that covers :data:`LIMB_STEP_COVERAGE` is the limb.
+LIMB_CIRCLES = 6
+#: An unhinted mirror ball whose limb's steps do not confirm its outline (:func:`mirror_limb` None) is
+#: used only when that outline is a single sharp contour: its fit's RMS at most this (pixels).
+MIRROR_SHARP_OUTLINE_PX = 0.5
+
+
 def mirror_limb(radiance, center_px, radius_px, shape):
     """The circle (centre (2,), radius) of a mirror ball's limb near a found outline, or None.
 
     A mirror ball in a probe photo shows the scene around it, so the strongest edges the finder
     follows are often reflected ones just inside the limb (in ``benchmarks/probe_detect.py``, 2
     to 3 px off on 5 of 12 renders). At the limb the ball shows what lies just behind it, dimmed by
-    its reflectance: the circle of radial brightness steps (``mirror_silhouette``, radii 0.75 to 1.25
-    of the found one, log luminance) is taken when its steps cover at least
-    :data:`LIMB_STEP_COVERAGE` of it and it stays within 15% of the found circle (centre and radius).
+    its reflectance: the radial brightness steps (:func:`ffls.spheres.mirror_outline.radial_steps`,
+    radii 0.75 to 1.25 of the found one, log luminance) are searched for their best-supported
+    circles (:data:`LIMB_CIRCLES`, :func:`ffls.spheres.mirror_outline.circle_search`); of those whose
+    steps cover at least :data:`LIMB_STEP_COVERAGE` of them and that stay within 15% of the found
+    circle (centre and radius) the largest is taken: a circle of steps inside a mirror ball is a
+    reflection, and the limb encloses it (the best-supported circle alone was a reflected one in 3
+    renders there, 1.7-2.3 px off).
     """
-    from ffls.spheres.mirror_outline import circle_coverage, mirror_silhouette
+    from ffls.spheres.mirror_outline import circle_coverage, circle_search, radial_steps
 
     lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
     log_l = np.log(np.maximum(lum, 1e-12))
-    sil = mirror_silhouette(log_l, center_px, radius_px, shape=shape, min_shrink=0.75,
-                            min_coverage=LIMB_STEP_COVERAGE)
-    if sil is None:
+    c0 = np.asarray(center_px, dtype=np.float64)
+    lo, hi = 0.75, 1.25
+    pts = radial_steps(log_l, c0, radius_px, r_range=(lo, hi))
+    if len(pts) < 8:
         return None
-    pts, c, r = sil
-    if np.hypot(*(c - np.asarray(center_px))) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15:
+    good = []
+    for c, r, inl in circle_search(pts, c0, (hi - lo) * radius_px, lo * radius_px, hi * radius_px, tol=1.0,
+                                   n_best=LIMB_CIRCLES):
+        if np.hypot(*(c - c0)) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15 or inl.sum() < 8:
+            continue
+        if circle_coverage(pts[inl], c, r, 1.0, shape) >= LIMB_STEP_COVERAGE:
+            good.append((float(r), np.asarray(c, dtype=np.float64)))
+    if not good:
         return None
-    if circle_coverage(pts, c, r, 1.0, shape) < LIMB_STEP_COVERAGE:
-        return None
-    return np.asarray(c, dtype=np.float64), float(r)
+    r, c = max(good, key=lambda g: g[0])
+    return c, r
 
 
 #: An unhinted probe ball's apparent radius is at least this share of the photo's shorter side
@@ -224,8 +243,9 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
     hint = "give a hint in probe.json, e.g. \"sphere\": {\"center_px\": [u, v]}"
     if not ok:
         judged = "; ".join(why[:3]) + (f"; and {len(why) - 3} more" if len(why) > 3 else "")
-        raise InputError(f"no sphere found: no round outline in the photo ({W}x{H} px, {len(seeds)} "
-                          f"place{'' if len(seeds) == 1 else 's'} tried) is a diffuse ball's{': ' + judged if judged else ''}; {hint}", source)
+        tried = f"{len(seeds)} place{'' if len(seeds) == 1 else 's'} tried"
+        raise InputError(f"no sphere found: no round outline in the photo ({W}x{H} px, {tried}) is a diffuse "
+                         f"ball's{': ' + judged if judged else ''}; {hint}", source)
     # overlapping outlines cannot both be the ball's silhouette: the one that fits its edges best stays (a
     # circle through a textured ground's edges, crossing or enclosing the ball, fits them at an RMS near the
     # fit's band, 1.0-1.5 px in benchmarks/probe_hint.py, where the silhouette, one contour, fits at 0.22-0.25)
@@ -338,6 +358,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
         limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2])
         if limb is not None:
             return _circle_geometry(cam, T, limb[0], limb[1], sph.radius, "hint" if hints else "auto")
+        if hints is None and ft.residual_px > MIRROR_SHARP_OUTLINE_PX:
+            raise InputError(f"no sphere found: the round outline found, ({ft.center_px[0]:.0f}, "
+                             f"{ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px, is neither confirmed by a "
+                             f"mirror ball's limb (its reflectance steps cover under {LIMB_STEP_COVERAGE:.0%} of any "
+                             f"circle near it) nor a sharp outline (RMS {ft.residual_px:.2f} px > "
+                             f"{MIRROR_SHARP_OUTLINE_PX}); give a hint in probe.json, e.g. \"sphere\": "
+                             "{\"center_px\": [u, v], \"radius_px\": r}", source)
     if cam.model == "orthographic":
         return SphereGeometry(cam.model, None, None, T, None, None, np.asarray(ft.center_px, dtype=np.float64),
                               float(ft.radius_px), "hint" if hints else "auto")
