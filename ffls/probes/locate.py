@@ -243,6 +243,8 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
     hint = "give a hint in probe.json, e.g. \"sphere\": {\"center_px\": [u, v]}"
     if not ok:
         judged = "; ".join(why[:3]) + (f"; and {len(why) - 3} more" if len(why) > 3 else "")
+        if not seeds:
+            raise InputError(f"no sphere found: no round outline in the photo ({W}x{H} px); {hint}", source)
         tried = f"{len(seeds)} place{'' if len(seeds) == 1 else 's'} tried"
         raise InputError(f"no sphere found: no round outline in the photo ({W}x{H} px, {tried}) is a diffuse "
                          f"ball's{': ' + judged if judged else ''}; {hint}", source)
