@@ -160,7 +160,7 @@ def mirror_limb(radiance, center_px, radius_px, shape):
 MIN_BALL_FRACTION = 0.05
 #: A diffuse ball's shading is smooth: the edge points strictly inside its outline (within 0.85 of its
 #: radius) number at most this share of its circumference in pixels, where a circle fitted to a textured
-#: ground's edges holds that ground's texture (2.3-2.5 in ``benchmarks/probe_hint.py``). The edges are
+#: ground's edges holds that ground's texture (1.1-2.5 in ``benchmarks/probe_hint.py``). The edges are
 #: found on log luminance, where a sunlit ball's terminator, its shading falling to the sky's level, is a
 #: step: about half a circumference (0.5 under ``sunrise`` there); a cast shadow's boundary across the
 #: ball is at most a third of one.
