@@ -186,7 +186,7 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
     pixel hint, whose fit searches outward from it for the best-supported round outline (the hint's
     path, ``docs/probes.md``). A fit is the ball's when its outline is round, closed and supported
     (:func:`ffls.spheres.select.round_outline`), its centre well constrained (``CRITERIA
-    ['max_center_sigma_px']``), at least ``min_visible`` of it in the frame, its interior smooth
+    ['max_center_sigma_px']``), at least 60% of it in the frame, its interior smooth
     (:data:`MAX_INTERIOR_EDGES`: a circle fitted to the ground's texture holds that texture) and its
     radius at least :data:`MIN_BALL_FRACTION` of the photo's shorter side. Of outlines that overlap, the
     one fitting its edges best (lowest RMS) stays; of the separate ones left, the largest is the ball,
@@ -226,10 +226,10 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
         fits.append(ft)
     ok = []
     for ft in sorted(fits, key=lambda f: -f.radius_px):
-        where = f"({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px"
-        inner = _interior_edges(pts, ft.center_px, ft.radius_px)
         if not round_outline(ft, CRITERIA["max_residual_px"]) or ft.center_sigma_px > CRITERIA["max_center_sigma_px"]:
             continue  # no round outline: not worth a word
+        where = f"({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px"
+        inner = _interior_edges(pts, ft.center_px, ft.radius_px)
         if ft.visible_fraction < 0.6:
             why.append(f"{where}: cut by the frame ({ft.visible_fraction:.0%} of its outline inside)")
         elif inner > MAX_INTERIOR_EDGES:
@@ -260,8 +260,8 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
     for o in kept[1:]:
         if o.radius_px >= RIVAL_RATIO * ball.radius_px:
             raise InputError(f"two round outlines could be the probe ball: ({ball.center_px[0]:.0f}, "
-                              f"{ball.center_px[1]:.0f}) px, radius {ball.radius_px:.0f} px and ({o.center_px[0]:.0f},"
-                              f" {o.center_px[1]:.0f}) px, radius {o.radius_px:.0f} px; {hint}", source)
+                             f"{ball.center_px[1]:.0f}) px, radius {ball.radius_px:.0f} px and ({o.center_px[0]:.0f},"
+                             f" {o.center_px[1]:.0f}) px, radius {o.radius_px:.0f} px; {hint}", source)
     return ball
 
 
