@@ -4,15 +4,15 @@ Diffuse: a grey ball (albedo 0.25, radius 60 px, centre (99.5, 99.5), 200 x 200 
 rendered by ``ffls.synth.probe_scenes.diffuse_sphere_scene`` under the built-in ``courtyard`` and
 ``sunrise`` maps (downsampled 16x), on a ground of blurred uniform noise (sigma 3 px, 6 seeds)
 scaled to the ball's 90th percentile: the ball is brighter than the ground on its lit side and
-darker on its shadowed side. Three ``probe.json`` spheres per render: no hint, ``center_px`` on
-the centre (100, 100), and ``center_px`` 10 px off (108, 94). Outcome: ``ok`` (centre within
+darker on its shadowed side (``--seeds``: other grounds). Three ``probe.json`` spheres per render:
+no hint, ``center_px`` on the centre (100, 100), and ``center_px`` 10 px off (108, 94). Outcome: ``ok`` (centre within
 0.1 px), ``off`` (found farther), ``refused`` (one-line InputError).
 
 Mirror: the chrome ball of ``tests/test_probe_detect.py`` (f = 400 px at 1.2 m, 320 x 240 px,
 radius 33 px) under the 4 built-in maps, ``center_px`` on the projected centre and 7.8 px off;
 outcome ``ok`` within 1 px.
 
-Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_hint.py [--out FILE]``
+Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_hint.py [--seeds 1,2,...] [--no-mirror] [--out FILE]``
 """
 from __future__ import annotations
 
@@ -52,12 +52,12 @@ def _set_sphere(folder, sphere):
     (folder / "probe.json").write_text(json.dumps(doc))
 
 
-def diffuse_rows(tmp: Path) -> list:
+def diffuse_rows(tmp: Path, seeds=range(1, 7)) -> list:
     rows = []
     for name in ("courtyard", "sunrise"):
         sc = diffuse_sphere_scene(builtin_lightmap(name).downsample(16), resolution=200, albedo=0.25,
                                   radius_frac=0.3)
-        for seed in range(1, 7):
+        for seed in seeds:
             bg = cv2.GaussianBlur(np.random.default_rng(seed).uniform(0, 1, (200, 200, 3)), (0, 0), 3)
             bg = (bg - bg.min()) / np.ptp(bg) * np.percentile(sc.image[sc.mask], 90)
             folder = tmp / f"{name}_{seed}"
@@ -101,9 +101,12 @@ def mirror_rows(tmp: Path) -> list:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "probe_hint.json"))
+    ap.add_argument("--seeds", default="1,2,3,4,5,6", help="the busy grounds' seeds (default 1-6)")
+    ap.add_argument("--no-mirror", action="store_true", help="the diffuse rows only")
     args = ap.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
-        rows = diffuse_rows(Path(tmp)) + mirror_rows(Path(tmp))
+        rows = diffuse_rows(Path(tmp), seeds) + ([] if args.no_mirror else mirror_rows(Path(tmp)))
     for r in rows:
         e = "-" if r["centre_error_px"] is None else f"{r['centre_error_px']:.3f}"
         where = f"seed {r['seed']} hint {r['hint']}" if r["kind"] == "diffuse" else f"offset {r['hint_offset_px']}"

@@ -13,9 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.spheres.detect import find_spheres, orthographic_normals, sphere_mask, sphere_normals, disc_mask
+from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, edge_points, find_spheres,
+                                 orthographic_normals, sphere_mask, sphere_normals)
+from ffls.spheres.select import CRITERIA, round_outline
 
-__all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "LIMB_STEP_COVERAGE"]
+__all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
+           "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
+           "MIRROR_SHARP_OUTLINE_PX"]
 
 
 @dataclass
@@ -104,30 +108,161 @@ def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
 LIMB_STEP_COVERAGE = 0.85
 
 
+#: Circles of limb steps compared by :func:`mirror_limb`: the best-supported ones, of which the largest
+#: that covers :data:`LIMB_STEP_COVERAGE` is the limb.
+LIMB_CIRCLES = 6
+#: An unhinted mirror ball whose limb's steps do not confirm its outline (:func:`mirror_limb` None) is
+#: used only when that outline is a single sharp contour: its fit's RMS at most this (pixels).
+MIRROR_SHARP_OUTLINE_PX = 0.5
+
+
 def mirror_limb(radiance, center_px, radius_px, shape):
     """The circle (centre (2,), radius) of a mirror ball's limb near a found outline, or None.
 
     A mirror ball in a probe photo shows the scene around it, so the strongest edges the finder
     follows are often reflected ones just inside the limb (in ``benchmarks/probe_detect.py``, 2
     to 3 px off on 5 of 12 renders). At the limb the ball shows what lies just behind it, dimmed by
-    its reflectance: the circle of radial brightness steps (``mirror_silhouette``, radii 0.75 to 1.25
-    of the found one, log luminance) is taken when its steps cover at least
-    :data:`LIMB_STEP_COVERAGE` of it and it stays within 15% of the found circle (centre and radius).
+    its reflectance: the radial brightness steps (:func:`ffls.spheres.mirror_outline.radial_steps`,
+    radii 0.75 to 1.25 of the found one, log luminance) are searched for their best-supported
+    circles (:data:`LIMB_CIRCLES`, :func:`ffls.spheres.mirror_outline.circle_search`); of those whose
+    steps cover at least :data:`LIMB_STEP_COVERAGE` of them and that stay within 15% of the found
+    circle (centre and radius) the largest is taken: a circle of steps inside a mirror ball is a
+    reflection, and the limb encloses it (the best-supported circle alone was a reflected one in 3
+    renders there, 1.7-2.3 px off).
     """
-    from ffls.spheres.mirror_outline import circle_coverage, mirror_silhouette
+    from ffls.spheres.mirror_outline import circle_coverage, circle_search, radial_steps
 
     lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
     log_l = np.log(np.maximum(lum, 1e-12))
-    sil = mirror_silhouette(log_l, center_px, radius_px, shape=shape, min_shrink=0.75,
-                            min_coverage=LIMB_STEP_COVERAGE)
-    if sil is None:
+    c0 = np.asarray(center_px, dtype=np.float64)
+    lo, hi = 0.75, 1.25
+    pts = radial_steps(log_l, c0, radius_px, r_range=(lo, hi))
+    if len(pts) < 8:
         return None
-    pts, c, r = sil
-    if np.hypot(*(c - np.asarray(center_px))) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15:
+    good = []
+    for c, r, inl in circle_search(pts, c0, (hi - lo) * radius_px, lo * radius_px, hi * radius_px, tol=1.0,
+                                   n_best=LIMB_CIRCLES):
+        if np.hypot(*(c - c0)) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15 or inl.sum() < 8:
+            continue
+        if circle_coverage(pts[inl], c, r, 1.0, shape) >= LIMB_STEP_COVERAGE:
+            good.append((float(r), np.asarray(c, dtype=np.float64)))
+    if not good:
         return None
-    if circle_coverage(pts, c, r, 1.0, shape) < LIMB_STEP_COVERAGE:
-        return None
-    return np.asarray(c, dtype=np.float64), float(r)
+    r, c = max(good, key=lambda g: g[0])
+    return c, r
+
+
+#: An unhinted probe ball's apparent radius is at least this share of the photo's shorter side
+#: (:func:`diffuse_ball`): a probe is photographed to be unwrapped, framed on the ball (Debevec's fill
+#: the frame; the balls of ``benchmarks/probe_detect.py`` and ``probe_hint.py`` are 0.08-0.3 of it),
+#: while a busy ground's blobs give small round outlines (8 px in a 200 px photo, 0.04). A smaller ball
+#: is used when hinted (``center_px``).
+MIN_BALL_FRACTION = 0.05
+#: A diffuse ball's shading is smooth: the edge points strictly inside its outline (within 0.85 of its
+#: radius) number at most this share of its circumference in pixels, where a circle fitted to a textured
+#: ground's edges holds that ground's texture (1.1-2.5 in ``benchmarks/probe_hint.py``). The edges are
+#: found on log luminance, where a sunlit ball's terminator, its shading falling to the sky's level, is a
+#: step: about half a circumference (0.5 under ``sunrise`` there); a cast shadow's boundary across the
+#: ball is at most a third of one.
+MAX_INTERIOR_EDGES = 1.0
+#: Two separate round outlines that both pass as the ball, the smaller at least this share of the larger's
+#: radius: which one is the probe is not decided, and the finder asks for a hint.
+RIVAL_RATIO = 0.8
+
+
+def _interior_edges(points, center_px, radius_px) -> float:
+    """Edge points within 0.85 of the radius of the centre, per pixel of circumference."""
+    d = np.hypot(*(np.asarray(points) - np.asarray(center_px)).T) if len(points) else np.zeros(0)
+    return float(np.count_nonzero(d < 0.85 * radius_px)) / (2 * np.pi * max(radius_px, 1e-9))
+
+
+def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, saturates: bool = False):
+    """A diffuse probe ball found without a hint in one photo: a :class:`ffls.spheres.detect.SphereFit`.
+
+    A calibration capture's finder (:func:`ffls.spheres.detect.find_spheres` without hints) fits each
+    candidate circle on the edges around it, which on a ground as busy and as bright as the ball
+    (``benchmarks/probe_hint.py``) gives no round outline for the ball at all. Here each distinct
+    candidate circle (:func:`ffls.spheres.detect.circle_candidates`) is taken instead as a centre-only
+    pixel hint, whose fit searches outward from it for the best-supported round outline (the hint's
+    path, ``docs/probes.md``). A fit is the ball's when its outline is round, closed and supported
+    (:func:`ffls.spheres.select.round_outline`), its centre well constrained (``CRITERIA
+    ['max_center_sigma_px']``), at least 60% of it in the frame, its interior smooth
+    (:data:`MAX_INTERIOR_EDGES`: a circle fitted to the ground's texture holds that texture) and its
+    radius at least :data:`MIN_BALL_FRACTION` of the photo's shorter side. Of outlines that overlap, the
+    one fitting its edges best (lowest RMS) stays; of the separate ones left, the largest is the ball,
+    unless another is nearly as large (:data:`RIVAL_RATIO`).
+
+    Parameters
+    ----------
+    image : (H, W, 3) float
+        Linear radiance (the luminance repeated in the three channels, as
+        :func:`locate_sphere` gives the finder).
+    K, dist, R, world_from_camera, camera_model, source, saturates
+        As :func:`ffls.spheres.detect.find_spheres` takes them.
+
+    Raises
+    ------
+    InputError
+        No fit passes (one line: what was judged, and how to give a hint), or two separate ones do.
+    """
+    H, W = np.shape(image)[:2]
+    cands = circle_candidates(image, source)
+    pts, _ = edge_points(image)
+    min_r = MIN_BALL_FRACTION * min(H, W)
+    seeds, fits, why = [], [], []
+    for x, y, r in cands:
+        if any(np.hypot(x - a, y - b) < HINT_CENTRE_OFFSET * max(r, s) for a, b, s in seeds):
+            continue  # a hint this near an earlier one's centre finds the same outline
+        seeds.append((x, y, r))
+        try:
+            ft = find_spheres(image, K, dist, R, n_spheres=1, hints=[{"center_px": [float(x), float(y)]}],
+                              world_from_camera=world_from_camera, source=source, camera_model=camera_model,
+                              saturates=saturates, lit_limb=None)[0]
+        except InputError:
+            continue
+        if any(np.hypot(*(ft.center_px - o.center_px)) < 0.5 and abs(ft.radius_px - o.radius_px) < 0.5
+               for o in fits):
+            continue
+        fits.append(ft)
+    ok = []
+    for ft in sorted(fits, key=lambda f: -f.radius_px):
+        if not round_outline(ft, CRITERIA["max_residual_px"]) or ft.center_sigma_px > CRITERIA["max_center_sigma_px"]:
+            continue  # no round outline: not worth a word
+        where = f"({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px"
+        inner = _interior_edges(pts, ft.center_px, ft.radius_px)
+        if ft.visible_fraction < 0.6:
+            why.append(f"{where}: cut by the frame ({ft.visible_fraction:.0%} of its outline inside)")
+        elif inner > MAX_INTERIOR_EDGES:
+            why.append(f"{where}: not smooth inside as a diffuse ball is ({inner:.1f} edge points per pixel of "
+                       f"outline > {MAX_INTERIOR_EDGES})")
+        elif ft.radius_px < min_r:
+            why.append(f"{where}: too small for a probe (under {MIN_BALL_FRACTION:g} of the photo's shorter side, "
+                       f"{min_r:.0f} px)")
+        else:
+            ok.append(ft)
+    hint = "give a hint in probe.json, e.g. \"sphere\": {\"center_px\": [u, v]}"
+    if not ok:
+        judged = "; ".join(why[:3]) + (f"; and {len(why) - 3} more" if len(why) > 3 else "")
+        if not seeds:
+            raise InputError(f"no sphere found: no round outline in the photo ({W}x{H} px); {hint}", source)
+        tried = f"{len(seeds)} place{'' if len(seeds) == 1 else 's'} tried"
+        raise InputError(f"no sphere found: no round outline in the photo ({W}x{H} px, {tried}) is a diffuse "
+                         f"ball's{': ' + judged if judged else ''}; {hint}", source)
+    # overlapping outlines cannot both be the ball's silhouette: the one that fits its edges best stays (a
+    # circle through a textured ground's edges, crossing or enclosing the ball, fits them at an RMS near the
+    # fit's band, 1.0-1.5 px in benchmarks/probe_hint.py, where the silhouette, one contour, fits at 0.22-0.25)
+    kept = []
+    for ft in sorted(ok, key=lambda f: f.residual_px):
+        if all(np.hypot(*(ft.center_px - k.center_px)) >= ft.radius_px + k.radius_px for k in kept):
+            kept.append(ft)
+    kept.sort(key=lambda f: -f.radius_px)
+    ball = kept[0]
+    for o in kept[1:]:
+        if o.radius_px >= RIVAL_RATIO * ball.radius_px:
+            raise InputError(f"two round outlines could be the probe ball: ({ball.center_px[0]:.0f}, "
+                             f"{ball.center_px[1]:.0f}) px, radius {ball.radius_px:.0f} px and ({o.center_px[0]:.0f},"
+                             f" {o.center_px[1]:.0f}) px, radius {o.radius_px:.0f} px; {hint}", source)
+    return ball
 
 
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
@@ -203,9 +338,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     rad = np.asarray(radiance, dtype=np.float32)
     lum = rad @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
     try:
-        found = find_spheres(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, n_spheres=1, hints=hints,
-                             world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
-                             lit_limb=None, retry_hints=sph.material != "mirror")
+        if hints is None and sph.material == "diffuse":
+            found = [diffuse_ball(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, Tf, cam.model, source,
+                                  saturates)]
+        else:
+            found = find_spheres(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, n_spheres=1, hints=hints,
+                                 world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
+                                 lit_limb=None, retry_hints=sph.material != "mirror")
     except InputError as e:
         # the finder speaks capture.json's keys (spheres[0], sphere_count); probe.json has one "sphere"
         msg = e.message.replace("capture.json", "probe.json").replace("\"spheres\": [{\"center_px\": [u, v]}] or "
@@ -221,6 +360,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
         limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2])
         if limb is not None:
             return _circle_geometry(cam, T, limb[0], limb[1], sph.radius, "hint" if hints else "auto")
+        if hints is None and ft.residual_px > MIRROR_SHARP_OUTLINE_PX:
+            raise InputError(f"no sphere found: the round outline found, ({ft.center_px[0]:.0f}, "
+                             f"{ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px, is neither confirmed by a "
+                             f"mirror ball's limb (its reflectance steps cover under {LIMB_STEP_COVERAGE:.0%} of any "
+                             f"circle near it) nor a sharp outline (RMS {ft.residual_px:.2f} px > "
+                             f"{MIRROR_SHARP_OUTLINE_PX}); give a hint in probe.json, e.g. \"sphere\": "
+                             "{\"center_px\": [u, v], \"radius_px\": r}", source)
     if cam.model == "orthographic":
         return SphereGeometry(cam.model, None, None, T, None, None, np.asarray(ft.center_px, dtype=np.float64),
                               float(ft.radius_px), "hint" if hints else "auto")

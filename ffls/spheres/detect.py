@@ -81,6 +81,7 @@ __all__ = [
     "project_points",
     "find_spheres",
     "find_spheres_in_capture",
+    "circle_candidates",
     "fit_sphere_center",
     "sphere_mask",
     "sphere_normals",
@@ -2913,3 +2914,19 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         mean_luminance=mean if n_img > 1 else None,
                         saturates=any(isinstance(d, int) for d in depths), colour_counts=st.colour_counts,
                         edge_tensor=st.edge_tensor, edge_photos=st.edge_photos, workers=workers)
+
+
+def circle_candidates(image, source: str | os.PathLike | None = None) -> list[tuple[float, float, float]]:
+    """The candidate circles of one image, ``(x, y, r)`` pixels, best edge support first: stages 1-3 of
+    :func:`find_spheres` without hints (the max image's edges and :func:`_hough_circle_candidates`), for a
+    caller that judges the candidates by its own criteria (a probe ball, :func:`ffls.probes.locate.locate_sphere`).
+
+    Parameters
+    ----------
+    image : (H, W, 3) float
+        Linear radiance.
+    source : path, optional
+        Named in the all-black error.
+    """
+    mx, _, _, L, _, _, _ = _max_luminance(image, source)
+    return _hough_circle_candidates(_edge_map(mx, L, source), L)
