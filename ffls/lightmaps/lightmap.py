@@ -453,7 +453,7 @@ def _a(layout: str) -> str:
 MAX_RADIANCE = 1e30
 
 
-def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
+def validate_radiance(data: np.ndarray, path, colour_note: str | None = None) -> tuple[np.ndarray, int]:
     """Reject NaN/Inf and values above :data:`MAX_RADIANCE`, and clamp negatives of light-map data.
 
     Parameters
@@ -462,6 +462,9 @@ def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
         Radiance.
     path : path-like or str
         Named in the error and the warning.
+    colour_note : str, optional
+        The file's conversion to the working space (:attr:`ffls.io.images.ImageData.colour_note`):
+        the warning then says that its colours outside linear Rec.709's gamut came out negative.
 
     Returns
     -------
@@ -493,8 +496,10 @@ def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
     if clamped:
         lo = float(data.min())
         data = np.maximum(data, np.float32(0))
+        why = ("" if not colour_note else "; its colour space was converted to linear Rec.709, where colours outside "
+               "Rec.709's gamut have negative channels")
         warnings.warn(
-            f"{path}: clamped {clamped} pixels with negative values to 0 (most negative {lo:.3g})",
+            f"{path}: clamped {clamped} pixels with negative values to 0 (most negative {lo:.3g}){why}",
             LightMapWarning,
             stacklevel=3,
         )
@@ -542,7 +547,7 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
     if res < MIN_RES[layout]:
         raise InputError(f"a {w}x{h} light map is too small: {_a(layout)} map must be at least "
                          f"{min_size_text(layout)}", path)
-    data, clamped = validate_radiance(img.pixels, path)
+    data, clamped = validate_radiance(img.pixels, path, img.colour_note)
     if layout == "cube":
         data = cross_to_cube(data)
     return LightMap(data, layout, str(path), clamped, colour_note=img.colour_note)
