@@ -1559,7 +1559,15 @@ def load_capture_and_lights(folder, lights=None, lights_map=None) -> tuple[Captu
                          "CAPTURE)", path)
     found = load_lights_any(path, capture, lights_map)
     found.path = path
-    return apply_lights_encoding(capture, found), found
+    applied = apply_lights_encoding(capture, found)
+    if applied is not capture and path.resolve().parent != capture.folder.resolve():
+        # another capture's calibration applied to these photos: an assumption (the same camera and settings), said
+        curve = found.encoding.get("curve")
+        what = f"gamma {found.encoding['gamma']:g}" if curve == "gamma" else curve
+        found.note = "; ".join(filter(None, [found.note, (
+            f"encoding: capture.json states none; the {what} curve that ffls lights calibrated for {path} is "
+            "applied to these photos (the same camera and settings; state \"encoding\" in capture.json otherwise)")]))
+    return applied, found
 
 
 def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:
