@@ -112,6 +112,11 @@ class _Json:
             raise InputError(broken_link(folder) or (f"{kind} folder not found" if not folder.exists()
                                                      else "not a folder"), folder)
         j = cls(folder / filename)
+        if not j.path.exists() and not broken_link(j.path):  # a folder of photos: how to describe them
+            example = '"ball.exr"' if kind == "probe" else '"IMG_0001.JPG", ...'
+            j.fail("", f"{filename} not found: a {kind} folder needs one listing its photos, at least "
+                       f"{{\"format\": \"{fmt}\", \"version\": 1, \"images\": [{example}]}} "
+                       "(docs/formats.md)")
         doc = j.load(filename)
         j.header(doc, fmt)
         return folder, j, doc
