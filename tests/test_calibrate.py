@@ -136,3 +136,12 @@ def test_capture_of_another_size_is_refused(tmp_path):
     assert json.loads((tmp_path / "capture.json").read_text()) == doc
     cal.write_camera_to_capture(tmp_path, K, np.zeros(5), image_size=(96, 96))
     assert json.loads((tmp_path / "capture.json").read_text())["camera"]["K"] == K
+
+
+def test_camera_help_gives_every_board_default():
+    """``ffls calibrate camera --help`` showed no default for --board and --squares: a first user could not
+    tell that a board photographed as 5x7 is taken as 7x5 unless said."""
+    from ffls.cli import subcommands
+
+    text = " ".join(subcommands()["calibrate"]._subparsers._group_actions[0].choices["camera"].format_help().split())
+    assert "(default charuco)" in text and "(default 7x5)" in text and "(default 0.03)" in text
