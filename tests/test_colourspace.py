@@ -121,12 +121,17 @@ def test_lightmap_info_and_convert_say_the_colour_space_and_why_negatives_appear
 
     rgb = np.full((16, 32, 3), 0.2)
     rgb[2:5, 3:9] = (0.0, 5.0, 0.0)  # ACEScg green: (-3.1, 5.7, -0.6) in linear Rec.709
+    rgb[10, 10:12] = (-0.5, 0.2, 0.2)  # negative in the file itself (as lossy compression leaves)
     path = _write(tmp_path / "green.exr", rgb, ACESCG)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         load_lightmap(path)
     text = " ".join(str(w.message) for w in caught if issubclass(w.category, LightMapWarning))
-    assert "clamped 18 pixels" in text and "converted to linear Rec.709" in text and "gamut" in text, text
+    assert "clamped 20 pixels" in text and "18 of them are colours outside Rec.709's gamut" in text, text
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_lightmap(_write(tmp_path / "neg709.exr", rgb))  # no conversion: nothing said of a gamut
+    assert not any("gamut" in str(w.message) for w in caught)
     assert main(["lightmap", "info", str(path)]) == 0
     out = capsys.readouterr().out
     assert "colour: colour space ACEScg (" in out and "converted to linear Rec.709 (D65)" in out, out
