@@ -8,9 +8,9 @@ A calibration shot of a grey and a chrome ball (``ffls synth --no-object --spher
 - ``resized``: rendered at 1.5 ``--res`` and shrunk to ``--res`` with ``cv2.INTER_AREA`` (what a user
   does to a camera's photos), ``K`` scaled with it.
 
-Each is run through ``ffls lights CAPTURE --workers 1`` and scored against ``truth.json``: per sphere found
-(its own direction, named by the kind ffls gave it) and per photo (the combined one), median / max error, and the share of accepted
-photos whose truth lies inside their 95% cone.
+Each is run through ``ffls lights CAPTURE --workers 1`` and scored against ``truth.json``: per sphere
+found (its own direction, named by the kind ffls gave it) and per photo (the combined one), median /
+max error, and the share of accepted photos whose truth lies inside their 95% cone.
 
     cd benchmarks && OMP_NUM_THREADS=1 python blur_lights.py --cache /tmp/blur --out /tmp/blur.json
 """
@@ -76,10 +76,9 @@ def _score(folder: Path, truth: dict) -> dict:
                           if li["status"] == "ok"]), "spheres": []}
     found = max((len(li.get("spheres", ())) for li in lights), default=0)
     for k in range(found):  # each sphere found, by the kind ffls gave it
-        kind = next(li["spheres"][k]["kind"] for li in lights if k < len(li.get("spheres", ())))
-        out["spheres"].append({"material": kind, **row(
-            [(angle(li["spheres"][k]["direction"], i), li["spheres"][k]["uncertainty_deg"])
-             for i, li in enumerate(lights) if k < len(li.get("spheres", ())) and li["spheres"][k]["status"] == "ok"])})
+        fits = [(i, li["spheres"][k]) for i, li in enumerate(lights) if k < len(li.get("spheres", ()))]
+        out["spheres"].append({"material": fits[0][1]["kind"], **row(
+            [(angle(f["direction"], i), f["uncertainty_deg"]) for i, f in fits if f["status"] == "ok"])})
     return out
 
 
@@ -101,8 +100,10 @@ def main(argv=None) -> None:
     conditions = [("sharp", cache / "sharp", None, 1.0)]
     conditions += [(f"blur {s}", cache / "sharp", (lambda x, s=float(s): cv2.GaussianBlur(x, (0, 0), s)), 1.0)
                    for s in args.sigmas.split(",")]
-    conditions += [(f"resized {big}->{args.res}", cache / f"render{big}",
-                    (lambda x: cv2.resize(x, (args.res, args.res), interpolation=cv2.INTER_AREA)), args.res / big)]
+
+    def shrink(x):
+        return cv2.resize(x, (args.res, args.res), interpolation=cv2.INTER_AREA)
+    conditions += [(f"resized {big}->{args.res}", cache / f"render{big}", shrink, args.res / big)]
     rows = []
     print(f"{'condition':18s} {'photos: n, median / max deg, coverage (cone)':46s} per sphere")
     for name, src, image, scale in conditions:
@@ -116,10 +117,12 @@ def main(argv=None) -> None:
         def text(d):
             if not d["accepted"]:
                 return "none accepted"
-            return (f"{d['accepted']}, {d['median_deg']:.2f} / {d['max_deg']:.2f}, {100 * d['coverage']:.0f}% "
-                    f"({d['median_cone_deg']:.2f})")
-        print(f"{name:18s} {text(r['photos']):46s} " + "; ".join(f"{s['material']}: {text(s)}" for s in r["spheres"]))
-    write_json(args.out, {"host": host_info(), "res": args.res, "lights": args.lights, "seed": args.seed, "rows": rows})
+            return (f"{d['accepted']}, {d['median_deg']:.2f} / {d['max_deg']:.2f}, "
+                    f"{100 * d['coverage']:.0f}% ({d['median_cone_deg']:.2f})")
+        spheres = "; ".join(f"{s['material']}: {text(s)}" for s in r["spheres"])
+        print(f"{name:18s} {text(r['photos']):46s} {spheres}")
+    write_json(args.out, {"host": host_info(), "res": args.res, "lights": args.lights, "seed": args.seed,
+                          "rows": rows})
 
 
 if __name__ == "__main__":
