@@ -102,3 +102,24 @@ def test_summary_names_the_shaped_spheres(capture):
     text = summary(estimate_photos(vals, samples, SCENE_CENTER, bounce_shape=True, **kw).lights(names))
     assert "ground bounce shaped (--bounce-shape): sphere 0 gradient (+0." in text, text
     assert "ground bounce" not in summary(estimate_photos(vals, samples, SCENE_CENTER, **kw).lights(names))
+
+
+def test_cli_without_a_pose_says_the_bounce_leans_and_how_to_give_the_tilt(tmp_path, capfd):
+    """Without ``world_from_camera`` the bounce is modelled around the image's up: a camera looking down
+    made a grey ball's directions lean by 1-3 deg (docs/formats.md, "The camera's tilt"); the line said
+    only that the spheres' own shadows were left out."""
+    import json
+
+    from ffls.cli import main
+    from ffls.synth.scene import write_synthetic_capture
+
+    cap = tmp_path / "cap"
+    write_synthetic_capture(cap, n_lights=8, resolution=64, progress=False, seed=2)
+    doc = json.loads((cap / "capture.json").read_text())
+    del doc["camera"]["world_from_camera"]
+    (cap / "capture.json").write_text(json.dumps(doc))
+    capfd.readouterr()
+    assert main(["lights", str(cap), "-o", str(tmp_path / "l.json"), "--workers", "1", "--no-progress"]) == 0
+    err = capfd.readouterr().err
+    line = next(x for x in err.splitlines() if "world_from_camera" in x)
+    assert "modelled around the image's up" in line and "only its tilt" in line and "docs/formats.md" in line

@@ -136,3 +136,27 @@ def test_capture_of_another_size_is_refused(tmp_path):
     assert json.loads((tmp_path / "capture.json").read_text()) == doc
     cal.write_camera_to_capture(tmp_path, K, np.zeros(5), image_size=(96, 96))
     assert json.loads((tmp_path / "capture.json").read_text())["camera"]["K"] == K
+
+
+def test_camera_help_gives_every_board_default():
+    """``ffls calibrate camera --help`` showed no default for --board and --squares: a first user could not
+    tell that a board photographed as 5x7 is taken as 7x5 unless said."""
+    from ffls.cli import subcommands
+
+    text = " ".join(subcommands()["calibrate"]._subparsers._group_actions[0].choices["camera"].format_help().split())
+    assert "(default charuco)" in text and "(default 7x5)" in text and "(default 0.03)" in text
+
+
+def test_a_board_given_with_its_squares_swapped_says_which_it_is(tmp_path, views):
+    """A 7x5 ChArUco board given as ``--squares 5x7`` (board printers name columns and rows in either
+    order) was "found in 0 of 7 photos"; the line now says it is found as 7x5. Nothing is said where the
+    swapped board is not found either."""
+    names = [tmp_path / f"v{i}.png" for i in range(len(views))]
+    with pytest.raises(InputError) as e:
+        cal.calibrate_camera(names, squares=(5, 7), square_size=SQ, marker_size=MK, images=views)
+    assert "found in 0 of 7 photos" in str(e.value)
+    assert "found as 7x5 squares in 3 of the first 3 photos without it: give --squares 7x5" in str(e.value)
+    blank = np.full((120, 160), 128, np.uint8)
+    with pytest.raises(InputError) as e:
+        cal.calibrate_camera(names[:3], squares=(5, 7), images=[blank] * 3)
+    assert "found as" not in str(e.value)

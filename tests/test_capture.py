@@ -481,3 +481,18 @@ def test_encoding_record_naming_keys_are_checked(tmp_path, key, value, match):
     assert cap.encoding_from_record(ok) == "srgb"
     with pytest.raises(ValueError, match=match):
         cap.encoding_from_record({**ok, key: value})
+
+
+def test_a_folder_of_photos_without_its_document_says_how_to_write_one(tmp_path, capsys):
+    """A first user's folder of photos: "capture.json not found" said neither what it is nor what it holds."""
+    from ffls.cli import main
+    from ffls.io.probe import load_probe
+
+    write_png(tmp_path / "IMG_0001.png", np.zeros((4, 6, 3), np.uint8))
+    assert main(["lights", str(tmp_path), "--workers", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "capture.json not found: a capture folder needs one listing its photos" in err
+    doc = json.loads(err[err.index("{"):err.index("}") + 1].replace(", ...", ""))
+    assert doc["format"] == "ffls-capture" and doc["version"] == 1 and "docs/formats.md" in err
+    with pytest.raises(InputError, match='probe.json not found: a probe folder .*"format": "ffls-probe"'):
+        load_probe(tmp_path)

@@ -111,6 +111,36 @@ def test_light_map_in_acescg_is_converted_and_reported(tmp_path):
     assert load_lightmap(_write(tmp_path / "map709.exr", grey)).colour_note is None
 
 
+def test_lightmap_info_and_convert_say_the_colour_space_and_why_negatives_appear(tmp_path, capsys):
+    """``ffls lightmap info`` and ``convert`` said nothing of an ACEScg map's conversion, and the
+    negatives a saturated ACEScg colour gets in Rec.709 were warned about as if they were the file's."""
+    import warnings
+
+    from ffls.cli import main
+    from ffls.lightmaps.lightmap import LightMapWarning, load_lightmap
+
+    rgb = np.full((16, 32, 3), 0.2)
+    rgb[2:5, 3:9] = (0.0, 5.0, 0.0)  # ACEScg green: (-3.1, 5.7, -0.6) in linear Rec.709
+    rgb[10, 10:12] = (-0.5, 0.2, 0.2)  # negative in the file itself (as lossy compression leaves)
+    path = _write(tmp_path / "green.exr", rgb, ACESCG)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_lightmap(path)
+    text = " ".join(str(w.message) for w in caught if issubclass(w.category, LightMapWarning))
+    assert "clamped 20 pixels" in text and "18 of them are colours outside Rec.709's gamut" in text, text
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_lightmap(_write(tmp_path / "neg709.exr", rgb))  # no conversion: nothing said of a gamut
+    assert not any("gamut" in str(w.message) for w in caught)
+    assert main(["lightmap", "info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "colour: colour space ACEScg (" in out and "converted to linear Rec.709 (D65)" in out, out
+    assert main(["lightmap", "convert", str(path), str(tmp_path / "out.exr")]) == 0
+    assert "colour: colour space ACEScg (" in capsys.readouterr().out
+    assert main(["lightmap", "info", str(_write(tmp_path / "plain.exr", rgb))]) == 0
+    assert "colour: linear Rec.709 (D65), the working space" in capsys.readouterr().out
+
+
 def test_capture_photos_in_acescg_relight_in_rec709(tmp_path, capsys):
     """A capture whose EXR photos are tagged ACEScg: the photos are converted as they are loaded (the
     basis is the converted one), and relight says so in one line."""

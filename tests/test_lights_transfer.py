@@ -222,3 +222,32 @@ def test_a_file_with_more_lights_than_the_capture_applies_by_name(calib, tmp_pat
     with pytest.raises(InputError, match=r"3 of the 8 lights name images of the capture.*--lights-map") as e:
         load_capture_and_lights(tmp_path / "mix", calib / "lights.json")
     assert "\n" not in str(e.value)
+
+
+def test_an_encoding_calibrated_on_another_capture_is_said(tmp_path):
+    """8-bit object shots whose capture.json states no encoding take the one ``ffls lights`` calibrated on the
+    calibration shots (their lights.json's record): an assumption about the camera, made without a word."""
+    from ffls.io.capture import save_lights
+    from ffls.synth.photo import PhotoSettings
+    from ffls.synth.scene import write_synthetic_capture
+
+    cal = tmp_path / "cal"
+    write_synthetic_capture(cal, n_lights=4, resolution=24, progress=False, seed=3,
+                            photo=PhotoSettings("png8", "linear", exposure=3, state_encoding=False))
+    lights = load_lights(cal / "lights.json")
+    lights.encoding = {"curve": "gamma", "gamma": 1.05, "uncertainty": 0.01, "method": "spheres:gamma",
+                       "spheres": 4, "photos": 4}
+    save_lights(lights, cal / "lights.json")
+    obj = tmp_path / "obj"
+    obj.mkdir()
+    doc = json.loads((cal / "capture.json").read_text())
+    for k, src in enumerate(doc["images"]):
+        shutil.copy(cal / src, obj / f"obj_{k:02d}.png")
+    doc["images"] = [f"obj_{k:02d}.png" for k in range(4)]
+    (obj / "capture.json").write_text(json.dumps(doc))
+    cap, got = load_capture_and_lights(obj, cal / "lights.json")
+    assert cap.encoding == {"gamma": 1.05}
+    assert "by order" in got.note and "encoding: capture.json states none; the gamma 1.05 curve" in got.note
+    assert str(cal / "lights.json") in got.note
+    own, same = load_capture_and_lights(cal)  # its own calibration, which ffls lights printed: nothing more
+    assert own.encoding == {"gamma": 1.05} and same.note is None

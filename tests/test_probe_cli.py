@@ -96,3 +96,16 @@ def test_a_coarse_map_still_reports_the_blind_spot(probe_map):
     assert coarse.details["camera_cone_sr"] == pytest.approx(fine.details["camera_cone_sr"], rel=1e-6)
     assert not any("blind spot: none" in n for n in coarse.notes), coarse.notes
     assert coarse.seen.shape == (4, 8)
+
+
+def test_the_camera_cone_defaults_to_the_camera_distance(probe_map, capsys):
+    """Without ``--camera-cone`` the CLI masks ``atan(0.5 / D)`` as ``docs/probes.md`` says (the library's
+    default); it passed 10 degrees as if given, whatever the ball's distance."""
+    folder = probe_map.parent
+    assert main(["probe", "mirror", str(folder), "-o", str(folder / "d.exr"), "--size", "16"]) == 0
+    err = capsys.readouterr().err
+    expect = np.degrees(np.arctan(0.5 / np.hypot(1.0, 0.2)))  # the ball at the origin, the camera at (0, -1, 0.2)
+    assert f"camera cone {expect:.1f} deg masked (0.5 at " in err, err
+    assert main(["probe", "mirror", str(folder), "-o", str(folder / "g.exr"), "--size", "16",
+                 "--camera-cone", "10"]) == 0
+    assert "camera cone 10.0 deg masked (given)" in capsys.readouterr().err

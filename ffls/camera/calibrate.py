@@ -159,6 +159,24 @@ def detect_board(gray, board: str = "charuco", squares=(7, 5), square_size: floa
     raise ValueError(f"board must be 'charuco' or 'chessboard', not {board!r}")
 
 
+#: How many photos without the board :func:`calibrate_camera` tries with the squares the other way round.
+TRANSPOSED_TRIES = 3
+
+
+def _transposed_hint(missed, board, squares, square_size, marker_size, dictionary) -> str:
+    """``"; it is a RxC board in k of the first m photos without it: ..."`` when a ChArUco board given as
+    ``C x R`` squares is found as ``R x C`` (its columns and rows swapped: the tools that print boards
+    name them in either order), else ``""``."""
+    other = (int(squares[1]), int(squares[0]))
+    if board != "charuco" or other[0] == other[1] or not missed:
+        return ""
+    hits = sum(detect_board(im, board, other, square_size, marker_size, dictionary) is not None for im in missed)
+    if not hits:
+        return ""
+    return (f"; the board is found as {other[0]}x{other[1]} squares in {hits} of the first {len(missed)} photos "
+            f"without it: give --squares {other[0]}x{other[1]} (squares along x, then y)")
+
+
 def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square_size: float = 0.03,
                      marker_size: float = 0.022, dictionary="DICT_5X5_100", fix_k3: bool = True,
                      images=None) -> CameraCalibration:
@@ -193,6 +211,7 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
     """
     paths = [Path(p) for p in image_paths]
     obj_pts, img_pts, used, skipped = [], [], [], []
+    missed = []  # the first photos without the board, to try it with its squares the other way round
     size = None
     seen = {}
     n = len(images) if images is not None else len(paths)
@@ -215,6 +234,8 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
         found = detect_board(im, board, squares, square_size, marker_size, dictionary)
         if found is None:
             skipped.append(str(name))
+            if len(missed) < TRANSPOSED_TRIES:
+                missed.append(im)
             continue
         digest = hashlib.sha1(np.ascontiguousarray(im).tobytes()).hexdigest()
         if digest in seen:
@@ -231,7 +252,8 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
     if len(obj_pts) < 3:
         where = paths[0].parent if paths else None
         raise InputError(f"a {board} board ({squares[0]}x{squares[1]} squares) was found in {len(obj_pts)} of"
-                         f" {n} photos; need at least 3", where)
+                         f" {n} photos; need at least 3"
+                         + _transposed_hint(missed, board, squares, square_size, marker_size, dictionary), where)
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
     rms, K, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None, flags=flags)
     why = camera_matrix_problem(K)

@@ -86,8 +86,10 @@ def add_arguments(p):
                    help="smoothness weight lambda, > 0 (default 10)")
     c = sub.add_parser("camera", help="camera matrix and distortion from photos of a calibration board")
     c.add_argument("photos", nargs="+", type=input_path, help="photos of the board")
-    c.add_argument("--board", choices=("charuco", "chessboard"), default="charuco")
-    c.add_argument("--squares", type=size_wxh(2, 100), default=(7, 5), help="squares along x and y, e.g. 7x5")
+    c.add_argument("--board", choices=("charuco", "chessboard"), default="charuco",
+                   help="the board's kind (default charuco)")
+    c.add_argument("--squares", type=size_wxh(2, 100), default=(7, 5),
+                   help="squares along x and y, e.g. 7x5 (default 7x5)")
     c.add_argument("--square-size", type=number(0.0, 1e3, lo_open=True), default=0.03, help="square side, scene units (default 0.03)")
     c.add_argument("--marker-size", type=number(0.0, 1e3, lo_open=True), default=None,
                    help=f"ArUco marker side, smaller than --square-size (charuco only; default {MARKER_SIZE})")

@@ -52,6 +52,11 @@ def _fmt(v) -> str:
     return "(" + ", ".join(f"{x:.6g}" for x in v) + ")"
 
 
+def _colour(lm) -> str:
+    """The map's colour space: its conversion to the working space, or that its values are taken as they are."""
+    return lm.colour_note or "linear Rec.709 (D65), the working space (no other colour space stated)"
+
+
 def run(args) -> int:
     from ffls.lightmaps.lightmap import paper_map, save_lightmap, sky_sun_map
 
@@ -69,13 +74,15 @@ def run(args) -> int:
         print(f"  integral of L dw, upper hemisphere {_fmt(lm.total_power('upper'))}, full sphere {_fmt(lm.total_power('full'))}")
         print(f"  irradiance on an upward surface    {_fmt(lm.irradiance((0, 0, 1)))}")
         print(f"  negative pixels clamped to 0: {lm.clamped_negatives}")
+        print(f"  colour: {_colour(lm)}")
         return 0
     if args.action == "convert":
         lm = _load(args.input, args.layout)
         if args.to_latlong is not None:
             lm = lm.to_latlong(args.to_latlong)
         save_lightmap(lm, args.output, half=args.half)
-        print(f"wrote {args.output} ({lm.layout}, {lm.clamped_negatives} negative pixels clamped)")
+        print(f"wrote {args.output} ({lm.layout}, {lm.clamped_negatives} negative pixels clamped; colour: "
+              f"{_colour(lm)})")
         return 0
     lm = sky_sun_map(args.height) if args.kind == "sky" else paper_map(args.height)
     save_lightmap(lm, args.output, half=args.half)

@@ -242,7 +242,9 @@ def run(args) -> int:
     else:
         if cap.world_from_camera_is_default:
             print_notes(NAME, "capture.json gives no camera.world_from_camera: the world's up is taken as the "
-                              "image's, so the ground bounce is fitted without the spheres' own shadows")
+                              "image's, so the ground bounce is modelled around the image's up, without the "
+                              "spheres' own shadows; for a camera looking down, give its pose, or only its "
+                              "tilt (docs/formats.md, \"The camera's tilt\")")
         lights = estimate_lights(cap, spheres=spheres, progress=progress, workers=args.workers,
                                  model=args.model, bounce=args.bounce, decoded=decoded, bounce_shape=shape,
                                  **first_pass)

@@ -61,9 +61,10 @@ def _add_mirror(sub, common):
     p = sub.add_parser("mirror", parents=[common], help="a mirror ball (Debevec 1998)",
                        description="Unwrap one or more views of a mirror ball with exact perspective "
                                    "(or orthographic) reflection; views are merged with a confidence per direction.")
-    p.add_argument("--camera-cone", type=number(0.0, 90.0, unit="degrees"), default=10.0, metavar="DEG",
+    p.add_argument("--camera-cone", type=number(0.0, 90.0, unit="degrees"), default=None, metavar="DEG",
                    help="mask this cone around the direction toward the camera (camera and photographer); "
-                        "0 keeps it (default 10)")
+                        "0 keeps it (default: atan(0.5 / D) for a ball located in scene units at the "
+                        "distance D from the camera, else 10)")
     p.add_argument("--rim", type=number(0.0, 100.0, unit="pixels"), default=1.0, metavar="PX",
                    help="leave out this rim of the ball, pixels (default 1)")
     p.add_argument("--supersample", type=integer(1, 16), default=None,

@@ -83,5 +83,6 @@ def run(args) -> int:
     if learnt_kernel(r):
         print(f"ffls relight: {learnt_kernel(r)}")
     print(f"ffls relight: {out} ({image.shape[1]}x{image.shape[0]}, {w.weights.shape[0]} lights, "
-          f"{w.dropped_texels} light-map texels dropped, {100 * frac:.1f}% of the power used, {weighting} weighting)")
+          f"{w.dropped_texels} light-map texels dropped (outside the capture's hemisphere, {capture.hemisphere}), "
+          f"{100 * frac:.1f}% of the power used, {weighting} weighting)")
     return 0

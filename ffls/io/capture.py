@@ -112,6 +112,11 @@ class _Json:
             raise InputError(broken_link(folder) or (f"{kind} folder not found" if not folder.exists()
                                                      else "not a folder"), folder)
         j = cls(folder / filename)
+        if not j.path.exists() and not broken_link(j.path):  # a folder of photos: how to describe them
+            example = '"ball.exr"' if kind == "probe" else '"IMG_0001.JPG", ...'
+            j.fail("", f"{filename} not found: a {kind} folder needs one listing its photos, at least "
+                       f"{{\"format\": \"{fmt}\", \"version\": 1, \"images\": [{example}]}} "
+                       "(docs/formats.md)")
         doc = j.load(filename)
         j.header(doc, fmt)
         return folder, j, doc
@@ -1563,7 +1568,15 @@ def load_capture_and_lights(folder, lights=None, lights_map=None, *,
                          "CAPTURE)", path)
     found = load_lights_any(path, capture, lights_map)
     found.path = path
-    return apply_lights_encoding(capture, found), found
+    applied = apply_lights_encoding(capture, found)
+    if applied is not capture and path.resolve().parent != capture.folder.resolve():
+        # another capture's calibration applied to these photos: an assumption (the same camera and settings), said
+        curve = found.encoding.get("curve")
+        what = f"gamma {found.encoding['gamma']:g}" if curve == "gamma" else curve
+        found.note = "; ".join(filter(None, [found.note, (
+            f"encoding: capture.json states none; the {what} curve that ffls lights calibrated for {path} is "
+            "applied to these photos (the same camera and settings; state \"encoding\" in capture.json otherwise)")]))
+    return applied, found
 
 
 def apply_lights_encoding(capture: Capture, lights: Lights) -> Capture:

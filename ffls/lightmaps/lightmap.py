@@ -40,6 +40,7 @@ __all__ = [
     "LightMap",
     "LightMapWarning",
     "load_lightmap",
+    "gamut_negatives",
     "save_lightmap",
     "detect_layout",
     "MAX_RADIANCE",
@@ -453,7 +454,7 @@ def _a(layout: str) -> str:
 MAX_RADIANCE = 1e30
 
 
-def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
+def validate_radiance(data: np.ndarray, path, out_of_gamut: int = 0) -> tuple[np.ndarray, int]:
     """Reject NaN/Inf and values above :data:`MAX_RADIANCE`, and clamp negatives of light-map data.
 
     Parameters
@@ -462,6 +463,9 @@ def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
         Radiance.
     path : path-like or str
         Named in the error and the warning.
+    out_of_gamut : int, optional
+        How many of the negative pixels only the conversion from the file's colour space made
+        negative (:func:`gamut_negatives`): the warning says so.
 
     Returns
     -------
@@ -493,12 +497,32 @@ def validate_radiance(data: np.ndarray, path) -> tuple[np.ndarray, int]:
     if clamped:
         lo = float(data.min())
         data = np.maximum(data, np.float32(0))
+        why = ("" if not out_of_gamut else f"; {out_of_gamut} of them are colours outside Rec.709's gamut, made "
+               "negative by the conversion from the file's colour space")
         warnings.warn(
-            f"{path}: clamped {clamped} pixels with negative values to 0 (most negative {lo:.3g})",
+            f"{path}: clamped {clamped} pixels with negative values to 0 (most negative {lo:.3g}){why}",
             LightMapWarning,
             stacklevel=3,
         )
     return data, clamped
+
+
+def gamut_negatives(img) -> int:
+    """How many pixels of ``img`` (:class:`ffls.io.images.ImageData`, converted to the working space) have a
+    negative channel that the conversion made: non-negative as stored, outside Rec.709's gamut. 0 when the
+    file was not converted."""
+    if not img.colour_note or img.chromaticities is None:
+        return 0
+    from ffls.io.colourspace import working_space_conversion
+
+    conv = working_space_conversion(img.chromaticities)
+    if conv is None:
+        return 0
+    neg = np.any(img.pixels < 0, axis=-1)
+    if not neg.any():
+        return 0
+    stored = img.pixels[neg].astype(np.float64) @ np.linalg.inv(conv.matrix).T  # back to the file's values
+    return int(np.count_nonzero(np.all(stored >= -1e-6 * np.abs(stored).max(axis=-1, keepdims=True), axis=-1)))
 
 
 def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMap:
@@ -542,7 +566,7 @@ def load_lightmap(path: str | os.PathLike, layout: str | None = None) -> LightMa
     if res < MIN_RES[layout]:
         raise InputError(f"a {w}x{h} light map is too small: {_a(layout)} map must be at least "
                          f"{min_size_text(layout)}", path)
-    data, clamped = validate_radiance(img.pixels, path)
+    data, clamped = validate_radiance(img.pixels, path, gamut_negatives(img))
     if layout == "cube":
         data = cross_to_cube(data)
     return LightMap(data, layout, str(path), clamped, colour_note=img.colour_note)
