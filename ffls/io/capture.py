@@ -640,7 +640,9 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
     refused here, where its header costs a fraction of a millisecond: decoding a 12000x12000 PNG
     to find its size took 7 s and 2.6 GB. A capture that mixes grey (one-channel) and colour
     photos is refused too: a grey photo would be replicated to RGB, a colourless light among
-    coloured ones, and such a mix is almost always a wrong export. The minority is named.
+    coloured ones, and such a mix is almost always a wrong export. The minority is named. So is
+    a capture mixing 8-bit and 16-bit photos, whatever its encoding (a camera's JPEGs and a raw
+    converter's exports carry different tone curves).
     Headers that cannot be read here are left to the decoder (:func:`ffls.io.images.image_header`).
 
     Photos are read as image viewers show them, turned by their EXIF orientation; a capture whose
@@ -648,7 +650,8 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
     camera share their pixel grid, and a camera that looks down (at a turntable, a table top)
     tags its shots upright or turned as its tilt sensor wavers: turning some would misalign them.
     """
-    from ffls.io.images import ORIENTATION_NAMES, check_one_colour_kind, check_one_orientation, image_header
+    from ffls.io.images import (ORIENTATION_NAMES, check_one_bit_depth, check_one_colour_kind, check_one_orientation,
+                                image_header)
 
     heads = [image_header(p) for p in paths]
     ref = None if image_size is None else (tuple(image_size), f"{CAPTURE_FILE} says image_size")
@@ -662,6 +665,7 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
                       f"the stored {h.height}x{h.width}; docs/formats.md)") if h.orientation >= 5 else ""
             raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}{turned}", p)
     check_one_colour_kind(paths, names, heads, what="photos", whole="a capture")
+    check_one_bit_depth(paths, names, heads, what="photos", whole="a capture")
     check_one_orientation(paths, names, heads)
 
 

@@ -56,6 +56,7 @@ __all__ = [
     "ORIENTATION_NAMES",
     "check_one_orientation",
     "check_one_colour_kind",
+    "check_one_bit_depth",
     "nonfinite_message",
 ]
 
@@ -667,12 +668,17 @@ class ImageHeader:
         The EXIF orientation (1 to 8; 1, upright as stored, where the file gives none or a value
         outside 1 to 8) of a JPEG, PNG or TIFF. ``width`` and ``height`` are the displayed size,
         after it (:func:`read_image` shows the photo as image viewers do).
+    bits : {8, 16} or None
+        The integer bit depth :func:`read_image` gives a PNG, JPEG or TIFF (its ``bit_depth``: 8
+        for 1- to 8-bit samples, 16 for 16-bit ones); None for floating point files (EXR, HDR)
+        and where the header does not say (a 12-bit JPEG).
     """
 
     width: int
     height: int
     grey: bool
     orientation: int = 1
+    bits: int | None = None
 
 
 #: The EXIF tag of the orientation (TIFF tag 274)
@@ -694,6 +700,15 @@ ORIENTATION_NAMES = {1: "upright (as stored)", 2: "mirrored", 3: "rotated 180 de
                      8: "turned 90 degrees counter-clockwise"}
 
 
+def _headers_of(paths, names, heads) -> tuple[list, list, list]:
+    """The paths, the names the messages give them (default: the file names) and the headers
+    (read here unless given) of a set of images, as the ``check_one_*`` functions take them."""
+    paths = [Path(p) for p in paths]
+    names = [p.name for p in paths] if names is None else list(names)
+    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    return paths, names, heads
+
+
 def check_one_colour_kind(paths, names=None, heads=None, what: str = "photos", whole: str = "a capture") -> None:
     """Refuse images of one camera (a capture's photos, a bracket) that mix grey (one channel) and colour.
 
@@ -706,9 +721,7 @@ def check_one_colour_kind(paths, names=None, heads=None, what: str = "photos", w
     InputError
         Naming the first image of the minority.
     """
-    paths = [Path(p) for p in paths]
-    names = [p.name for p in paths] if names is None else list(names)
-    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    paths, names, heads = _headers_of(paths, names, heads)
     grey = [k for k, h in enumerate(heads) if h is not None and h.grey]
     colour = [k for k, h in enumerate(heads) if h is not None and not h.grey]
     if not (grey and colour):
@@ -719,6 +732,35 @@ def check_one_colour_kind(paths, names=None, heads=None, what: str = "photos", w
     raise InputError(f"is {kind} but {len(most)} of the {len(grey) + len(colour)} {what} are {many} (e.g. "
                      f"{names[most[0]]!r}): {whole} mixing grey and colour images is almost always a wrong export; "
                      f"export every one {'in colour' if many == 'colour' else 'grey'}", paths[few[0]])
+
+
+def check_one_bit_depth(paths, names=None, heads=None, what: str = "photos", whole: str = "a capture") -> None:
+    """Refuse integer images of one camera (a capture's photos) that mix 8-bit and 16-bit files.
+
+    Both decode to the same scale, but a camera's 8-bit JPEGs and a raw converter's 16-bit
+    exports carry different tone curves, which one stated encoding cannot both undo: such a mix
+    is almost always a wrong export. The minority is named (on a tie, the images not of the
+    first image's depth). Arguments as :func:`check_one_colour_kind`; floating point images
+    and headers that do not say (``ImageHeader.bits`` None) are not counted.
+
+    Raises
+    ------
+    InputError
+        Naming the first image of the minority depth.
+    """
+    paths, names, heads = _headers_of(paths, names, heads)
+    bits = [h.bits if h is not None else None for h in heads]
+    known = [b for b in bits if b is not None]
+    if len(set(known)) <= 1:
+        return
+    common = max(known, key=known.count)  # (the first image's depth on a tie)
+    odd = next(k for k, b in enumerate(bits) if b is not None and b != common)
+    first = bits.index(common)
+    raise InputError(f"is a {bits[odd]}-bit image but {known.count(common)} of the {len(known)} {what} are "
+                     f"{common}-bit (e.g. {names[first]!r}): {whole} mixing 8-bit and 16-bit images is almost "
+                     "always a wrong export (a camera's JPEGs and a raw converter's exports carry different "
+                     f"tone curves, which one encoding cannot both undo); export every one at {common} bits",
+                     paths[odd])
 
 
 def check_one_orientation(paths, names=None, heads=None, what: str = "photos") -> None:
@@ -741,9 +783,7 @@ def check_one_orientation(paths, names=None, heads=None, what: str = "photos") -
     InputError
         Naming the first image of a minority orientation.
     """
-    paths = [Path(p) for p in paths]
-    names = [p.name for p in paths] if names is None else list(names)
-    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    paths, names, heads = _headers_of(paths, names, heads)
     turns = [h.orientation for h in heads if h is not None]
     if len(set(turns)) <= 1:
         return
@@ -786,6 +826,21 @@ def _pillow_reader(kind: str):
             "tiff": TiffImagePlugin.TiffImageFile}.get(kind)
 
 
+def _integer_bits(im, kind: str) -> int | None:
+    """The bit depth (8 or 16) OpenCV decodes an open Pillow image of ``kind`` to; None where unsure."""
+    if kind == "png":  # (Pillow unpacks 16-bit samples with a raw mode such as "RGB;16B" or "I;16B")
+        return 16 if any(";16" in str(t.args) for t in im.tile) else 8
+    if kind == "jpeg":
+        return 8 if getattr(im, "bits", 8) == 8 else None
+    samples = im.tag_v2.get(258, (1,))  # TIFF BitsPerSample; SampleFormat 3 is floating point
+    samples = samples if isinstance(samples, tuple) else (samples,)
+    formats = im.tag_v2.get(339, (1,))
+    if 3 in (formats if isinstance(formats, tuple) else (formats,)):
+        return None
+    top = max(samples)
+    return 16 if top == 16 else 8 if top <= 8 else None
+
+
 def image_header(path: str | os.PathLike) -> ImageHeader | None:
     """Size and channel count of an image file from its header alone, without decoding it.
 
@@ -826,9 +881,10 @@ def image_header(path: str | os.PathLike) -> ImageHeader | None:
             with _pillow_reader(kind)(path) as im:
                 (w, h), mode = im.size, im.mode
                 turn = _exif_orientation(im)
+                bits = _integer_bits(im, kind)
             if turn >= 5 and kind != "tiff":  # (Pillow gives a TIFF's size as displayed already)
                 w, h = h, w
-            return ImageHeader(int(w), int(h), mode in _GREY_MODES, turn)
+            return ImageHeader(int(w), int(h), mode in _GREY_MODES, turn, bits)
     except Exception:  # (unreadable here: read_image decodes it and names what is wrong)
         return None
     return None
