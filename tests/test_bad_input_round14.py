@@ -145,3 +145,156 @@ def test_the_probe_benchmark_capture_is_removed_at_exit(tmp_path):
                        timeout=120, env=dict(child_env(), TMPDIR=str(tmp_path)))
     assert p.returncode == 0 and p.stdout.split() == ["6"], p.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- files of another format
+def test_a_file_of_another_format_than_its_name_is_refused(cap, tmp_path, capfd):
+    """A 16-bit PNG named ``.jpg`` among 8-bit PNGs was read (OpenCV decodes by content) and passed
+    every check made from the header (size, memory, grey, bit depth), which read it as a JPEG and
+    could not: one line now names it and the name it should have."""
+    import cv2
+
+    c = _png_copy(cap, tmp_path / "c", (8,) * 6)
+    doc = json.loads((c / "capture.json").read_text())
+    ok, buf = cv2.imencode(".png", np.full((24, 24, 3), 30000, np.uint16))
+    (c / "p5.png").unlink()
+    (c / "p5.jpg").write_bytes(buf.tobytes())
+    doc["images"][5] = "p5.jpg"
+    (c / "capture.json").write_text(json.dumps(doc))
+    out = tmp_path / "a.exr"
+    rc, line = _one_line(capfd, ["relight", c, "--probe", "sky", "--lights", cap / "lights.json",
+                                 "--lights-map", json.dumps({f"img_{k:04d}.exr": n for k, n in enumerate(doc["images"])}),
+                                 "-o", out])
+    assert rc == 2 and line.endswith("p5.jpg: is a PNG file named '.jpg': ffls reads a file as its extension says (its "
+                                     "checks before decoding read that format's header); rename it p5.png"), line
+    assert not out.exists()
+
+
+def test_an_exr_named_hdr_is_refused_as_a_light_map(tmp_path, capfd):
+    from ffls.io.images import write_exr
+
+    write_exr(tmp_path / "m.exr", np.ones((8, 16, 3), np.float32))
+    (tmp_path / "m.exr").rename(tmp_path / "m.hdr")
+    rc, line = _one_line(capfd, ["lightmap", "info", tmp_path / "m.hdr"])
+    assert rc == 2 and "m.hdr: is an OpenEXR file named '.hdr'" in line and line.endswith("rename it m.exr"), line
+
+
+def test_files_of_their_own_format_are_read(tmp_path):
+    """The guard: each format under its own names (``.jpeg``, ``.tiff``, ``.pic`` too) reads."""
+    import cv2
+
+    from ffls.io.images import read_image, write_exr, write_hdr
+
+    px = np.full((4, 6, 3), 100, np.uint8)
+    for name in ("a.png", "a.jpg", "a.jpeg", "a.tif", "a.tiff"):
+        assert cv2.imwrite(str(tmp_path / name), px)
+    write_exr(tmp_path / "a.exr", np.ones((4, 6, 3), np.float32))
+    write_hdr(tmp_path / "a.hdr", np.ones((4, 6, 3), np.float32))
+    (tmp_path / "a.pic").write_bytes((tmp_path / "a.hdr").read_bytes())
+    for p in sorted(tmp_path.iterdir()):
+        assert read_image(p).pixels.shape == (4, 6, 3), p
+
+
+# ----------------------------------------------------------------------------- transparent brackets
+@pytest.fixture()
+def clear_bracket(tmp_path):
+    """Three 8-bit RGBA PNGs whose top half is transparent, with exposures.json."""
+    from ffls.io.images import write_png
+
+    br = tmp_path / "br"
+    br.mkdir()
+    for k in range(3):
+        a = np.full((16, 16, 4), 40 * (k + 1), np.uint8)
+        a[..., 3] = 255
+        a[:8, :, 3] = 0
+        write_png(br / f"b{k}.png", a)
+    (br / "exposures.json").write_text(json.dumps({f"b{k}.png": 0.01 * 2 ** k for k in range(3)}))
+    return br
+
+
+CLEAR = ("b0.png: has transparent pixels (alpha below 1 in 50% of them): the colour under an unpremultiplied "
+         "alpha is undefined; export the bracket without alpha")
+
+
+@pytest.mark.parametrize("argv", [["probe", "merge", "{b}/b0.png", "{b}/b1.png", "--exposures", "0.01,0.02",
+                                   "--encoding", "srgb", "-o", "{o}/m.exr"],
+                                  ["calibrate", "response", "{b}", "-o", "{o}/r.npy"]], ids=["merge", "response"])
+def test_a_bracket_with_transparent_pixels_is_refused(clear_bracket, tmp_path, capfd, argv):
+    """``probe merge`` and ``calibrate response`` merged the colour under alpha 0 (status 0), where a
+    capture's photo with transparent pixels is refused: the colour there is undefined."""
+    out = tmp_path / "out"
+    out.mkdir()
+    rc, line = _one_line(capfd, [a.format(b=clear_bracket, o=out) for a in argv])
+    assert rc == 2 and line.endswith(CLEAR), line
+    assert _entries(out) == set()
+
+
+def test_an_opaque_rgba_bracket_merges(clear_bracket, tmp_path):
+    """The guard: alpha 255 everywhere is no transparency."""
+    from ffls.cli import main
+    from ffls.io.images import read_image, write_png
+
+    for k in range(3):
+        a = read_image(clear_bracket / f"b{k}.png").codes
+        write_png(clear_bracket / f"b{k}.png", np.dstack([a, np.full(a.shape[:2], 255, np.uint8)]))
+    assert main(["probe", "merge", str(clear_bracket / "b0.png"), str(clear_bracket / "b1.png"), "--exposures",
+                 "0.01,0.02", "--encoding", "srgb", "-o", str(tmp_path / "m.exr")]) == 0
+
+
+# ----------------------------------------------------------------------------- --half beyond its range
+@pytest.fixture(scope="module")
+def bright_probe(tmp_path_factory):
+    """A mirror probe (orthographic, 48 px) whose radiance reaches 1.5e6: beyond half floats."""
+    from ffls.conventions import latlong_directions
+    from ffls.synth.probe import write_mirror_probe
+
+    folder = tmp_path_factory.mktemp("r14probe")
+    d = latlong_directions(16, 8)
+    m = (1e6 * (1 + 0.5 * d)).astype(np.float32)
+    write_mirror_probe(folder, m, (48, 48), "orthographic", center_px=(24, 24), radius_px=20, sphere="pixel")
+    return folder
+
+
+@pytest.mark.parametrize("argv", [
+    ["probe", "mirror", "{p}", "--size", "8", "--half", "-o", "{o}/m.exr"],
+    ["probe", "merge", "{p}/ball.exr", "{b}", "--exposures", "0.01,0.02", "--half", "-o", "{o}/m.exr"],
+    ["lightmap", "convert", "{p}/ball.exr", "{o}/m.exr", "--half"],
+], ids=["mirror", "merge", "convert"])
+def test_half_output_beyond_the_half_range_is_one_line(bright_probe, tmp_path, capfd, argv):
+    """``probe mirror --half`` and ``probe merge --half`` of radiance above 65504 ended in write_exr's
+    ValueError traceback (``lightmap convert --half`` said it in one line: the same check now)."""
+    from ffls.io.images import read_image, write_exr
+
+    write_exr(tmp_path / "b.exr", read_image(bright_probe / "ball.exr").pixels * 2)  # (a bracket of two)
+    out = tmp_path / "out"
+    out.mkdir()
+    rc, line = _one_line(capfd, [a.format(p=bright_probe, b=tmp_path / "b.exr", o=out) for a in argv])
+    assert rc == 2 and "m.exr: values up to " in line and line.endswith(
+        "exceed the half-float range (65504): write float (without --half / half=False)"), line
+    assert _entries(out) == set()
+
+
+# ----------------------------------------------------------------------------- synth spheres
+@pytest.mark.parametrize("flags,says", [
+    (["--sphere-radius", "1"], "--sphere-radius 1 with --spheres 4 puts the camera inside sphere 0 (its centre is "
+                               "0.803 m from the camera)"),
+    (["--sphere-radius", "0.3"], "--sphere-radius 0.3 with --spheres 4 makes spheres 0 and 1 intersect: their "
+                                 "centres are 0.5 m apart, less than two radii (0.6 m)"),
+    (["--sphere-xy=0.2,0.2;0.2,0.2"], "--sphere-xy with --sphere-radius 0.05 makes spheres 0 and 1 intersect: "
+                                      "their centres are 0 m apart"),
+    (["--spheres", "64"], "--sphere-radius 0.05 with --spheres 64 makes spheres"),
+], ids=["camera-inside", "radius-0.3", "same-xy", "64-on-the-ring"])
+def test_synth_refuses_spheres_that_intersect_or_hold_the_camera(tmp_path, capfd, flags, says):
+    """``synth --sphere-radius 1`` (the camera inside every sphere) ended in a NaN traceback;
+    intersecting spheres were rendered and written to truth.json as if they were apart."""
+    rc, line = _one_line(capfd, ["synth", tmp_path / "s", "--lights", "2", "--resolution", "24", "--quiet", *flags])
+    assert rc == 2 and line.startswith(f"ffls synth: error: {says}"), line
+    assert _entries(tmp_path) == set()
+
+
+def test_synth_spheres_that_touch_are_rendered(tmp_path):
+    """The guard: centres two radii apart (0.2,0.2 and 0.2,0.3 at 0.05 m) touch and do not intersect."""
+    from ffls.cli import main
+
+    assert main(["synth", str(tmp_path / "s"), "--lights", "2", "--resolution", "24", "--quiet",
+                 "--sphere-xy=0.2,0.2;0.2,0.3"]) == 0

@@ -256,21 +256,37 @@ def check_flags_in_effect(args: argparse.Namespace) -> None:
 
 
 def check_spheres_in_frame(args: argparse.Namespace, scene) -> None:
-    """Refuse ``--sphere-xy`` positions whose sphere has no pixel in the image (InputError naming the flag).
+    """Refuse spheres that cannot be photographed (InputError naming the flags that placed them).
 
-    The frame test is :func:`ffls.synth.scene.sphere_silhouettes` (each sphere alone, rays through
-    the pixel centres): a sphere out of frame would be written into truth.json with 0 pixels.
+    A sphere around the camera (``--sphere-radius 1`` put the camera, 1 m away, inside every
+    sphere: a NaN traceback), two spheres that intersect (``--sphere-xy 0.2,0.2;0.2,0.2``, or
+    ``--sphere-radius 0.3`` on the default 0.5 m square: written as if they were apart), and
+    ``--sphere-xy`` positions whose sphere has no pixel in the image. The frame test is
+    :func:`ffls.synth.scene.sphere_silhouettes` (each sphere alone, rays through the pixel
+    centres): a sphere out of frame would be written into truth.json with 0 pixels.
     """
     import numpy as np
 
     from ffls.errors import InputError
     from ffls.synth.scene import sphere_silhouettes
 
-    if args.sphere_xy is None or scene.n_spheres == 0:
+    if scene.n_spheres == 0:
         return
-    c = (scene.sphere_centers - scene.camera_center())
-    if np.any(np.linalg.norm(c, axis=1) <= scene.sphere_radius):
-        raise InputError("--sphere-xy puts a sphere around the camera")
+    r = scene.sphere_radius
+    flags = (f"--sphere-xy with --sphere-radius {r:g}" if args.sphere_xy is not None else
+             f"--sphere-radius {r:g} with --spheres {scene.n_spheres}")
+    far = np.linalg.norm(scene.sphere_centers - scene.camera_center(), axis=1)
+    if np.any(far <= r):
+        k = int(np.argmin(far))
+        raise InputError(f"{flags} puts the camera inside sphere {k} (its centre is {far[k]:.3g} m from the camera)")
+    xy = np.asarray(scene.sphere_xy, dtype=np.float64)
+    gap = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.diag(np.full(len(xy), np.inf))
+    i, k = np.unravel_index(np.argmin(gap), gap.shape)
+    if gap[i, k] < 2 * r * (1 - 1e-9):  # (spheres that touch are apart: 0.3 - 0.2 is 0.0999...)
+        raise InputError(f"{flags} makes spheres {min(i, k)} and {max(i, k)} intersect: their centres are "
+                         f"{gap[i, k]:.3g} m apart, less than two radii ({2 * r:g} m)")
+    if args.sphere_xy is None:
+        return
     _, in_frame = sphere_silhouettes(scene, args.resolution)
     out = np.flatnonzero(in_frame == 0)
     if out.size:

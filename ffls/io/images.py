@@ -58,6 +58,8 @@ __all__ = [
     "check_one_colour_kind",
     "check_one_bit_depth",
     "nonfinite_message",
+    "transparency_message",
+    "check_half_range",
 ]
 
 _KINDS = {
@@ -228,6 +230,40 @@ def _flush_c_stdio() -> None:
         ctypes.CDLL(None).fflush(None)
 
 
+def transparency_message(img: "ImageData") -> str | None:
+    """What is wrong with an integer image (PNG, TIFF) that has transparent pixels, or None.
+
+    Its colour is not premultiplied, so under alpha < 1 it is undefined: a capture's photo or a
+    bracket's image with such pixels is refused (an EXR's RGB is premultiplied by convention: the
+    radiance, whatever its alpha). The callers add what to do instead.
+    """
+    if img.alpha is None or img.bit_depth not in (8, 16):
+        return None
+    clear = float(np.mean(img.alpha < 1.0))
+    if clear == 0:
+        return None
+    return f"has transparent pixels (alpha below 1 in {100 * clear:.3g}% of them): the colour under an " \
+           "unpremultiplied alpha is undefined"
+
+
+def check_half_range(a: np.ndarray, path) -> None:
+    """Refuse, before writing ``path`` with ``--half``, values beyond the half-float range (+-65504),
+    which would become infinite: one line naming the output (``write_exr`` raises a ValueError,
+    which reached the user as a traceback from ``probe merge --half`` and ``probe mirror --half``).
+
+    Raises
+    ------
+    OutputError
+        Naming ``path``, the largest value and what to do.
+    """
+    a = np.asarray(a)
+    finite = np.abs(a[np.isfinite(a)]) if a.size else a
+    top = float(finite.max()) if finite.size else 0.0
+    if top > _HALF_MAX:
+        raise OutputError(f"values up to {top:.6g} exceed the half-float range ({_HALF_MAX:g}): write float "
+                          "(without --half / half=False)", path)
+
+
 def nonfinite_message(a: np.ndarray) -> str | None:
     """``'N pixels with NaN or Inf values (a NaN, b Inf channel values)'`` for (H, W, C) data, or None when all finite."""
     bad = ~np.isfinite(a)
@@ -247,6 +283,32 @@ def _kind_of(path: Path) -> str:
     raise InputError(
         f"unsupported image format {ext or '(no extension)'!r}; supported: {', '.join(READ_EXTENSIONS)}", path
     )
+
+
+#: The first bytes of each format ffls reads (its signature), and how a message names it
+_SIGNATURES = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"\xff\xd8\xff", "jpeg"),
+               (b"II*\x00", "tiff"), (b"MM\x00*", "tiff"), (b"II+\x00", "tiff"), (b"MM\x00+", "tiff"),
+               (b"#?", "hdr"))
+_KIND_NAMES = {"exr": ("an OpenEXR", ".exr"), "png": ("a PNG", ".png"), "jpeg": ("a JPEG", ".jpg"),
+               "tiff": ("a TIFF", ".tif"), "hdr": ("a Radiance HDR", ".hdr")}
+
+
+def _check_content_kind(path: Path, kind: str) -> None:
+    """Refuse a file whose first bytes are another format's than its extension names (a 16-bit PNG
+    named ``.jpg``): ffls reads a file as its extension says, and the checks it makes from the
+    header before decoding (size, memory, grey or colour, bit depth, orientation) read that
+    format's header, so such a file passed them all unread. A signature ffls does not know (a
+    corrupt file) is left to the decoder, which names what is wrong."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(16)
+    except OSError:
+        return  # (the decoder names it)
+    found = next((k for sig, k in _SIGNATURES if head.startswith(sig)), None)
+    if found is not None and found != kind:
+        name, ext = _KIND_NAMES[found]
+        raise InputError(f"is {name} file named {path.suffix!r}: ffls reads a file as its extension says (its "
+                         f"checks before decoding read that format's header); rename it {path.stem}{ext}", path)
 
 
 def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfinite: bool = False,
@@ -292,6 +354,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         raise InputError(not_a_regular_file(path) or ("image file not found" if not path.exists() else "not a file"),
                          path)
     register_input(path)
+    _check_content_kind(path, kind)
     head = _check_decodable_size(path)
     if kind == "exr":
         img = read_exr(path, working_space=working_space, out=out, stored=stored)
