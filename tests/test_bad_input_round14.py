@@ -298,3 +298,58 @@ def test_synth_spheres_that_touch_are_rendered(tmp_path):
 
     assert main(["synth", str(tmp_path / "s"), "--lights", "2", "--resolution", "24", "--quiet",
                  "--sphere-xy=0.2,0.2;0.2,0.3"]) == 0
+
+
+# ----------------------------------------------------------------------------- Radiance headers
+def _hdr_with(path: Path, *lines: str, value: float = 0.5) -> Path:
+    """A 16x8 Radiance file of ``value`` whose header carries ``lines`` (e.g. ``EXPOSURE=4``)."""
+    from ffls.io.images import write_hdr
+
+    write_hdr(path, np.full((8, 16, 3), value, np.float32))
+    data = path.read_bytes()
+    end = data.index(b"\n\n")
+    path.write_bytes(data[:end] + b"".join(b"\n" + ln.encode() for ln in lines) + data[end:])
+    return path
+
+
+def test_a_radiance_files_exposure_and_colour_correction_are_undone(tmp_path):
+    """An ``.hdr`` with ``EXPOSURE=4`` (hdrgen, Photosphere) was read 4 times too bright: the format
+    says its values were multiplied by it (cumulatively), and by ``COLORCORR`` per channel."""
+    from ffls.io.images import read_image
+
+    assert np.allclose(read_image(_hdr_with(tmp_path / "a.hdr", "EXPOSURE=4")).pixels, 0.125)
+    two = read_image(_hdr_with(tmp_path / "b.hdr", "EXPOSURE=2", "EXPOSURE=0.5", "COLORCORR= 1 2 4")).pixels
+    assert np.allclose(two[..., 0], 0.5) and np.allclose(two[..., 1], 0.25) and np.allclose(two[..., 2], 0.125)
+    assert np.allclose(read_image(_hdr_with(tmp_path / "c.hdr", "SOFTWARE=x")).pixels, 0.5)
+
+
+def test_a_radiance_files_primaries_are_converted_and_reported(cap, tmp_path, capfd):
+    """``PRIMARIES=`` (a Rec.2020 render) was read as Rec.709, silently; it is the EXR's
+    ``chromaticities`` in another header, and converted and said as they are."""
+    from ffls.cli import main
+    from ffls.io.images import read_image
+
+    p = _hdr_with(tmp_path / "m.hdr", "PRIMARIES= 0.708 0.292 0.170 0.797 0.131 0.046 0.3127 0.3290")
+    capfd.readouterr()
+    assert main(["relight", str(cap), "--probe", str(p), "-o", str(tmp_path / "r.exr")]) == 0
+    out, err = capfd.readouterr()
+    assert ("colour: light map: colour space ITU-R BT.2020 (R 0.708,0.292 G 0.17,0.797 B 0.131,0.046 white "
+            "0.3127,0.329) converted to linear Rec.709 (D65)") in err, err
+    assert np.allclose(read_image(p).pixels, 0.5, atol=1e-5)  # (a grey stays grey: D65 white both sides)
+    assert read_image(p, working_space=False).chromaticities == (0.708, 0.292, 0.17, 0.797, 0.131, 0.046, 0.3127,
+                                                                 0.329)
+
+
+@pytest.mark.parametrize("line,says", [
+    ("EXPOSURE=0", "Radiance header line EXPOSURE= must give a positive number (what the stored values were "
+                   "multiplied by), not '0'"),
+    ("EXPOSURE=abc", "EXPOSURE= must give a positive number"),
+    ("EXPOSURE=nan", "EXPOSURE= must give a positive number"),
+    ("COLORCORR= 1 1", "COLORCORR= must give 3 positive numbers"),
+    ("PRIMARIES= 0.64 0.33", "PRIMARIES= must give 8 numbers (red, green, blue and white x y), not '0.64 0.33'"),
+    ("PRIMARIES= 0.64 0.33 0.64 0.33 0.64 0.33 0.3127 0.329", "degenerate primaries"),
+], ids=["exposure-0", "exposure-text", "exposure-nan", "colorcorr-2", "primaries-2", "primaries-collinear"])
+def test_a_radiance_header_that_says_nothing_usable_is_one_line(tmp_path, capfd, line, says):
+    p = _hdr_with(tmp_path / "m.hdr", line)
+    rc, msg = _one_line(capfd, ["lightmap", "info", p])
+    assert rc == 2 and "m.hdr: " in msg and says in msg, msg

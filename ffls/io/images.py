@@ -359,7 +359,7 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
     if kind == "exr":
         img = read_exr(path, working_space=working_space, out=out, stored=stored)
     else:
-        img = _read_cv2(path, kind, 1 if head is None else head.orientation)
+        img = _read_cv2(path, kind, 1 if head is None else head.orientation, working_space)
     if not allow_nonfinite:
         why = nonfinite_message(img.pixels)
         if why is None and img.alpha is not None and not np.all(np.isfinite(img.alpha)):
@@ -597,6 +597,50 @@ def _radiance_resolution(buf: bytes):
     return start, end, words
 
 
+def _radiance_header(buf: bytes, path) -> tuple[np.ndarray, tuple | None]:
+    """What a Radiance file's header says about its values (the lines before the blank line):
+    ``(scale, primaries)``.
+
+    ``scale`` (3,) float32 is what the stored values are divided by to give the radiance: the
+    product of every ``EXPOSURE=`` line (cumulative, by the format's definition) times every
+    ``COLORCORR=`` line (per channel); ``primaries`` the 8 numbers of a ``PRIMARIES=`` line (red,
+    green, blue and white xy, as an EXR's ``chromaticities``), or None. OpenCV reads none of
+    them: an hdrgen or Photosphere file with ``EXPOSURE=4`` was read 4 times too bright.
+
+    Raises
+    ------
+    InputError
+        An ``EXPOSURE`` or ``COLORCORR`` that is not a positive finite number (three for
+        ``COLORCORR``), or a ``PRIMARIES`` line that is not 8 numbers.
+    """
+    end = buf.find(b"\n\n")
+    scale, primaries = np.ones(3, dtype=np.float64), None
+    for line in (buf[:end] if end >= 0 else b"").split(b"\n"):
+        key, eq, value = line.partition(b"=")
+        key = key.strip().upper()
+        if not eq or key not in (b"EXPOSURE", b"COLORCORR", b"PRIMARIES"):
+            continue
+        words = value.split()
+        try:
+            v = np.array([float(w) for w in words], dtype=np.float64)
+        except ValueError:
+            v = np.array([])
+        name = key.decode()
+        if key == b"PRIMARIES":
+            if v.size != 8:
+                raise InputError(f"Radiance header line PRIMARIES= must give 8 numbers (red, green, blue and white "
+                                 f"x y), not {value.strip().decode('latin-1')!r}", path)
+            primaries = tuple(v.tolist())
+            continue
+        n = 1 if key == b"EXPOSURE" else 3
+        if v.size != n or not np.all(np.isfinite(v) & (v > 0)):
+            what = "a positive number" if n == 1 else "3 positive numbers"
+            raise InputError(f"Radiance header line {name}= must give {what} (what the stored values were "
+                             f"multiplied by), not {value.strip().decode('latin-1')!r}", path)
+        scale *= v
+    return scale.astype(np.float32), primaries
+
+
 def _radiance_standard(buf: np.ndarray):
     """A Radiance file stored in another of the format's 8 orientations, given to OpenCV (which
     reads only ``-Y H +X W``) as its scanlines, and the turn to the standard layout.
@@ -622,9 +666,11 @@ def _radiance_standard(buf: np.ndarray):
     return buf, turn
 
 
-def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
+def _read_cv2(path: Path, kind: str, orientation: int = 1, working_space: bool = True) -> ImageData:
     """A PNG, JPEG, TIFF or Radiance file through OpenCV, shown as its EXIF ``orientation`` asks
-    (OpenCV's ``IMREAD_UNCHANGED`` keeps a JPEG's or PNG's stored rows; it turns a TIFF itself)."""
+    (OpenCV's ``IMREAD_UNCHANGED`` keeps a JPEG's or PNG's stored rows; it turns a TIFF itself).
+    A Radiance file's values are divided by its header's ``EXPOSURE`` and ``COLORCORR``, and
+    converted from its ``PRIMARIES`` as an EXR's ``chromaticities`` are (:func:`_radiance_header`)."""
     import cv2
 
     try:
@@ -634,6 +680,7 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
     if buf.size == 0:
         raise InputError("image file is empty", path)
     flags = cv2.IMREAD_UNCHANGED if kind != "hdr" else cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR
+    scale, primaries = _radiance_header(buf[:65536].tobytes(), path) if kind == "hdr" else (None, None)
     buf, radiance_turn = _radiance_standard(buf) if kind == "hdr" else (buf, None)
     _silence_opencv_log()
     with quiet_native_output() as cap:
@@ -682,9 +729,21 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
     else:
         raise InputError(f"unsupported pixel type {dt} in {kind.upper()} image", path)
     if alpha is not None:
-        scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(alpha.dtype, 1.0)
-        alpha = np.ascontiguousarray(alpha.astype(np.float32) / np.float32(scale))
-    return ImageData(np.ascontiguousarray(pixels), depth, kind, path, alpha=alpha, codes=codes)
+        top = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(alpha.dtype, 1.0)
+        alpha = np.ascontiguousarray(alpha.astype(np.float32) / np.float32(top))
+    note = None
+    if scale is not None and np.any(scale != 1):
+        pixels = pixels / scale
+    if primaries is not None:
+        from ffls.io.colourspace import convert_to_working_space, working_space_conversion
+
+        if working_space:
+            pixels, conv = convert_to_working_space(pixels, primaries, path)
+            note = None if conv is None else conv.describe()
+        else:
+            working_space_conversion(primaries, path)  # malformed: an error either way
+    return ImageData(np.ascontiguousarray(pixels), depth, kind, path, alpha=alpha, codes=codes,
+                     chromaticities=primaries, colour_note=note)
 
 
 def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
@@ -966,10 +1025,20 @@ def exr_chromaticities(path: str | os.PathLike) -> tuple | None:
     return None if c is None else tuple(np.asarray(c, dtype=np.float64).reshape(-1).tolist())
 
 
+def _radiance_primaries(path: Path) -> tuple | None:
+    """The ``PRIMARIES`` of a Radiance file's header (:func:`_radiance_header`), None when absent or unreadable."""
+    try:
+        with open(path, "rb") as f:
+            return _radiance_header(f.read(65536), path)[1]
+    except OSError:
+        return None  # (read_image names it)
+
+
 def colour_summary(paths) -> str | None:
     """One line saying which of the image files ``paths`` are converted to the working space on reading.
 
-    Reads only the headers of the ``.exr`` files (the others carry no colour space ffls reads).
+    Reads only the headers of the ``.exr`` and Radiance files (the others carry no colour space
+    ffls reads).
     E.g. ``"colour: 12 of 12 images: colour space ACEScg (...) converted to linear Rec.709 (D65), ..."``.
 
     Returns
@@ -987,9 +1056,9 @@ def colour_summary(paths) -> str | None:
     paths = [Path(p) for p in paths]
     notes = []
     for p in paths:
-        if p.suffix.lower() != ".exr":
+        if _KINDS.get(p.suffix.lower()) not in ("exr", "hdr"):
             continue
-        c = exr_chromaticities(p)
+        c = exr_chromaticities(p) if p.suffix.lower() == ".exr" else _radiance_primaries(p)
         conv = None if c is None else working_space_conversion(c, p)
         if conv is not None:
             notes.append(conv.describe())
