@@ -353,3 +353,13 @@ def test_a_radiance_header_that_says_nothing_usable_is_one_line(tmp_path, capfd,
     p = _hdr_with(tmp_path / "m.hdr", line)
     rc, msg = _one_line(capfd, ["lightmap", "info", p])
     assert rc == 2 and "m.hdr: " in msg and says in msg, msg
+
+
+# ----------------------------------------------------------------------------- --lights-map
+def test_lights_map_to_an_unknown_image_names_the_flag_and_the_capture(cap, tmp_path, capfd):
+    """``--lights-map '{"img_0000.exr": "zzz.exr"}'`` was refused naming lights.json, which is right."""
+    rc, line = _one_line(capfd, ["relight", cap, "--probe", "sky", "--lights-map", '{"img_0000.exr": "zzz.exr"}',
+                                 "-o", tmp_path / "a.exr"])
+    assert rc == 2 and line == ("ffls relight: error: --lights-map maps 'img_0000.exr' to 'zzz.exr', which is not an "
+                                f"image of the capture {cap / 'capture.json'} (its images: 'img_0000.exr' to "
+                                "'img_0005.exr', 6 in all)"), line

@@ -1479,8 +1479,11 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
         known = set(cap_names)
         pos = {}
         for key, target in m.items():
-            if target not in known:
-                raise InputError(f"--lights-map maps {key!r} to {target!r}, which is not an image of the capture", path)
+            if target not in known:  # (the flag's value is wrong, not the lights file: it was named)
+                span = (f"{cap_names[0]!r} to {cap_names[-1]!r}, {len(cap_names)} in all" if len(cap_names) > 1 else
+                        repr(cap_names[0]))
+                raise InputError(f"--lights-map maps {key!r} to {target!r}, which is not an image of the capture "
+                                 f"{capture.json_path} (its images: {span})")
             if key in index:
                 pos[target] = index[key]
             elif not lp:
