@@ -363,3 +363,18 @@ def test_lights_map_to_an_unknown_image_names_the_flag_and_the_capture(cap, tmp_
     assert rc == 2 and line == ("ffls relight: error: --lights-map maps 'img_0000.exr' to 'zzz.exr', which is not an "
                                 f"image of the capture {cap / 'capture.json'} (its images: 'img_0000.exr' to "
                                 "'img_0005.exr', 6 in all)"), line
+
+
+# ----------------------------------------------------------------------------- --store onto -o
+@pytest.mark.parametrize("store,made", [("t", False), ("t/s.zarr", True)], ids=["same-folder", "store-in-frames"])
+def test_a_store_onto_the_output_folder_is_refused_before_it_is_built(cap, tmp_path, capfd, store, made):
+    """``render --turntable 2 --store D -o D/`` built the store in D (the ingest: minutes on real
+    photos), then refused D as the frames' folder, in four lines, and left the store there."""
+    out = tmp_path / "out"
+    (out / "t").mkdir(parents=True) if made else out.mkdir()
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    rc, line = _one_line(capfd, ["render", cap, "--probe", "sky", "--cpu", "--tiles", "--turntable", "2",
+                                 "--store", out / store, "-o", f"{out / 't'}/"])
+    assert rc == 2 and line.startswith(f"ffls render: error: --store {out / store} and -o {out / 't'}") and line.endswith(
+        "the store and the output each need their own place"), line
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
