@@ -378,3 +378,26 @@ def test_a_store_onto_the_output_folder_is_refused_before_it_is_built(cap, tmp_p
     assert rc == 2 and line.startswith(f"ffls render: error: --store {out / store} and -o {out / 't'}") and line.endswith(
         "the store and the output each need their own place"), line
     assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+
+
+# ----------------------------------------------------------------------------- view --screenshot
+def test_a_screenshot_whose_exr_fails_leaves_no_png(cap, tmp_path, capfd, monkeypatch):
+    """``view --screenshot s.png`` wrote the PNG, then the EXR: a failed EXR (disk full) left a new
+    PNG beside the old EXR (or none). Both now appear together or not at all."""
+    import ffls.io.images as images
+    from ffls.errors import OutputError
+
+    def full(path, *a, **k):
+        raise OutputError("cannot write OpenEXR file (no space left on the device (disk full))", path)
+
+    from ffls.cli import main
+
+    shot = tmp_path / "s.png"
+    monkeypatch.setattr(images, "write_exr", full)
+    capfd.readouterr()
+    rc = main(["view", str(cap), "--headless", "--frames", "1", "--screenshot", str(shot)])
+    out, err = capfd.readouterr()
+    lines = [ln for ln in err.splitlines() if ln.strip() and "coverage:" not in ln]  # (6 lights: 2 notes)
+    assert rc == 2 and "Traceback" not in err and len(lines) == 1 and lines[0].endswith(
+        "s.exr: cannot write OpenEXR file (no space left on the device (disk full))"), err
+    assert _entries(tmp_path) == set()
