@@ -283,7 +283,11 @@ def test_half_output_beyond_the_half_range_is_one_line(bright_probe, tmp_path, c
     (["--sphere-xy=0.2,0.2;0.2,0.2"], "--sphere-xy with --sphere-radius 0.05 makes spheres 0 and 1 intersect: "
                                       "their centres are 0 m apart"),
     (["--spheres", "64"], "--sphere-radius 0.05 with --spheres 64 makes spheres"),
-], ids=["camera-inside", "radius-0.3", "same-xy", "64-on-the-ring"])
+    (["--sphere-xy=0,0"], "--sphere-xy with --sphere-radius 0.05 makes sphere 0 intersect the object (its centre is "
+                          "inside the object); --no-object leaves the object out"),
+    (["--sphere-xy=0.15,0"], "--sphere-xy with --sphere-radius 0.05 makes sphere 0 intersect the object (its centre "
+                             "is 0.0327 m from the object, less than its radius 0.05 m)"),
+], ids=["camera-inside", "radius-0.3", "same-xy", "64-on-the-ring", "in-the-object", "into-the-object"])
 def test_synth_refuses_spheres_that_intersect_or_hold_the_camera(tmp_path, capfd, flags, says):
     """``synth --sphere-radius 1`` (the camera inside every sphere) ended in a NaN traceback;
     intersecting spheres were rendered and written to truth.json as if they were apart."""
@@ -293,11 +297,13 @@ def test_synth_refuses_spheres_that_intersect_or_hold_the_camera(tmp_path, capfd
 
 
 def test_synth_spheres_that_touch_are_rendered(tmp_path):
-    """The guard: centres two radii apart (0.2,0.2 and 0.2,0.3 at 0.05 m) touch and do not intersect."""
+    """The guard: centres two radii apart (0.2,0.2 and 0.2,0.3 at 0.05 m) touch and do not intersect;
+    a sphere where the object would be is rendered with --no-object; the benchmarks' row of four."""
     from ffls.cli import main
 
-    assert main(["synth", str(tmp_path / "s"), "--lights", "2", "--resolution", "24", "--quiet",
-                 "--sphere-xy=0.2,0.2;0.2,0.3"]) == 0
+    for k, flags in enumerate((["--sphere-xy=0.2,0.2;0.2,0.3"], ["--sphere-xy=0,0", "--no-object"],
+                               ["--sphere-xy=-0.3,-0.25;-0.1,-0.25;0.1,-0.25;0.3,-0.25"])):
+        assert main(["synth", str(tmp_path / f"s{k}"), "--lights", "2", "--resolution", "24", "--quiet", *flags]) == 0
 
 
 # ----------------------------------------------------------------------------- Radiance headers
