@@ -407,3 +407,20 @@ def test_a_screenshot_whose_exr_fails_leaves_no_png(cap, tmp_path, capfd, monkey
     assert rc == 2 and "Traceback" not in err and len(lines) == 1 and lines[0].endswith(
         "s.exr: cannot write OpenEXR file (no space left on the device (disk full))"), err
     assert _entries(tmp_path) == set()
+
+
+def test_lightmap_info_and_convert_say_the_colour_conversion(tmp_path, capfd):
+    """``lightmap info`` and ``convert`` of a map in another space (an EXR's chromaticities, a
+    Radiance file's PRIMARIES) converted it silently: their statistics and output are the converted
+    map, and they now say so, as ``relight`` does."""
+    from ffls.cli import main
+
+    p = _hdr_with(tmp_path / "m.hdr", "PRIMARIES= 0.708 0.292 0.170 0.797 0.131 0.046 0.3127 0.3290")
+    said = ("colour space ITU-R BT.2020 (R 0.708,0.292 G 0.17,0.797 B 0.131,0.046 white 0.3127,0.329) converted "
+            "to linear Rec.709 (D65)")
+    for argv in (["lightmap", "info", str(p)], ["lightmap", "convert", str(p), str(tmp_path / "o.exr"),
+                                                "--to-latlong", "8"]):
+        capfd.readouterr()
+        assert main(argv) == 0
+        out, err = capfd.readouterr()
+        assert said in out, out

@@ -69,13 +69,16 @@ def run(args) -> int:
         print(f"  integral of L dw, upper hemisphere {_fmt(lm.total_power('upper'))}, full sphere {_fmt(lm.total_power('full'))}")
         print(f"  irradiance on an upward surface    {_fmt(lm.irradiance((0, 0, 1)))}")
         print(f"  negative pixels clamped to 0: {lm.clamped_negatives}")
+        if lm.colour_note:  # (the values above are the converted ones: said, as relight says it)
+            print(f"  colour: {lm.colour_note}")
         return 0
     if args.action == "convert":
         lm = _load(args.input, args.layout)
+        colour = f"; {lm.colour_note}" if lm.colour_note else ""  # (the map as read: resampling keeps no note)
         if args.to_latlong is not None:
             lm = lm.to_latlong(args.to_latlong)
         save_lightmap(lm, args.output, half=args.half)
-        print(f"wrote {args.output} ({lm.layout}, {lm.clamped_negatives} negative pixels clamped)")
+        print(f"wrote {args.output} ({lm.layout}, {lm.clamped_negatives} negative pixels clamped{colour})")
         return 0
     lm = sky_sun_map(args.height) if args.kind == "sky" else paper_map(args.height)
     save_lightmap(lm, args.output, half=args.half)
