@@ -118,14 +118,18 @@ def probe_benchmark_capture(prefix: str):
     """The capture the probe benchmarks relight under recovered and true maps: ``ffls synth`` with
     150 distant lights at 64 px (seed 1), written to a new temporary folder named with ``prefix``.
 
-    Returns ``(capture, lights)``.
+    Returns ``(capture, lights)``. The capture's photos are read from the folder as the benchmark
+    goes, and the folder is removed when the interpreter exits (it was left in /tmp).
     """
+    import atexit
+    import shutil
     import tempfile
 
     from ffls.io.capture import load_capture_and_lights
     from ffls.synth.scene import write_synthetic_capture
 
     tmp = Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(shutil.rmtree, tmp, ignore_errors=True)
     write_synthetic_capture(tmp / "cap", n_lights=150, resolution=64, progress=False, seed=1)
     return load_capture_and_lights(tmp / "cap")
 

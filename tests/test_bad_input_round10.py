@@ -130,9 +130,9 @@ def test_image_header_reads_sizes_and_channels_without_decoding(tmp_path, monkey
     write_exr(tmp_path / "c.exr", np.zeros((5, 7, 3), np.float32))
     write_hdr(tmp_path / "c.hdr", np.zeros((5, 7, 3), np.float32))
     monkeypatch.setattr(cv2, "imdecode", None)  # nothing is decoded
-    for name, grey in (("c.png", False), ("g.png", True), ("g16.tif", True), ("c16.tif", False),
-                       ("g.jpg", True), ("c.exr", False), ("c.hdr", False)):
-        assert image_header(tmp_path / name) == ImageHeader(7, 5, grey), name
+    for name, grey, bits in (("c.png", False, 8), ("g.png", True, 8), ("g16.tif", True, 16), ("c16.tif", False, 16),
+                             ("g.jpg", True, 8), ("c.exr", False, None), ("c.hdr", False, None)):
+        assert image_header(tmp_path / name) == ImageHeader(7, 5, grey, bits=bits), name
     (tmp_path / "bad.png").write_bytes(b"not a png")
     assert image_header(tmp_path / "bad.png") is None  # left to the decoder, which names the problem
 

@@ -515,6 +515,40 @@ def test_default_rank_keeps_a_small_capture_close_to_the_cpu_relight(app, tmp_pa
     assert err7 > 3 * err
 
 
+@pytest.mark.viewer
+def test_default_rank_reads_each_photo_once(app, tmp_path, capsys, monkeypatch):
+    """Choosing the default rank read every photo, and the first engine build read them all again:
+    the engine now takes the basis the rank was chosen from (the same basis, the same frame as
+    with that rank given, where nothing is handed over)."""
+    import collections
+
+    import ffls.radiance.photos as photos
+    from ffls.cli import main
+    from ffls.io.images import read_image
+    from ffls.synth.scene import write_synthetic_capture
+
+    if not app.renderer.info.renderer or "llvmpipe" not in app.renderer.info.renderer.lower():
+        pytest.skip("the rank is chosen from the data on a CPU rasteriser")
+    cap = tmp_path / "cap12"
+    write_synthetic_capture(cap, n_lights=12, resolution=32, seed=4, progress=False)
+    reads = collections.Counter()
+    read = photos.read_image
+
+    def counted(path, *a, **k):
+        reads[Path(path).name] += 1
+        return read(path, *a, **k)
+
+    monkeypatch.setattr(photos, "read_image", counted)
+    argv = ["view", str(cap), "--headless", "--frames", "1", "--size", "160x100", "--probe", "paper"]
+    assert main([*argv, "--screenshot", str(tmp_path / "a.png")]) == 0
+    k = int(capsys.readouterr().out.split("ffls view: rank ")[1].split()[0])
+    assert len(reads) == 12 and set(reads.values()) == {1}, reads
+    reads.clear()
+    assert main([*argv, "--rank", str(k), "--screenshot", str(tmp_path / "b.png")]) == 0
+    assert len(reads) == 12 and set(reads.values()) == {1}, reads  # (a rank given: the engine reads them)
+    assert np.array_equal(read_image(tmp_path / "a.exr").pixels, read_image(tmp_path / "b.exr").pixels)
+
+
 def test_auto_method_is_full_on_a_gpu_and_compressed_on_llvmpipe():
     from viewer.renderer import resolve_method
 

@@ -496,15 +496,18 @@ class ViewerApp:
         (Path, Path)
             The PNG and the EXR.
         """
+        from ffls.errors import atomic_outputs
         from ffls.io.images import write_exr, write_png
 
         path = Path(path)
         if path.suffix.lower() != ".png":
             raise InputError("screenshot must be a .png (the HDR goes beside it as .exr)", path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_png(path, self.read_window())
         exr = path.with_suffix(".exr")
-        write_exr(exr, self.renderer.read_hdr_full())  # full resolution, tile by tile from a store
+        window, hdr = self.read_window(), self.renderer.read_hdr_full()  # (full resolution: from a store by tiles)
+        with atomic_outputs():  # the PNG and the EXR appear together or not at all (a failed EXR left a new PNG)
+            write_png(path, window)
+            write_exr(exr, hdr)
         self.renderer.info.message = f"saved {path} and {exr.name}"
         return path, exr
 

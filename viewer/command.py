@@ -193,9 +193,10 @@ def choose_default_rank(app, capture, lights, args=None) -> str | None:
         k = st.quality["rank"] = min(cap, n - 1)
         why = "exact" if k == n - 1 else f"the frame budget at {w}x{h} allows one block of {LAYER_BLOCK} layers"
         return f"rank {k} of {n} photos ({why}; --rank K to override; docs/viewer.md, \"Default rank\")"
-    basis, _, _ = capture_basis(capture, lights, q)
+    basis, d, _ = capture_basis(capture, lights, q)
     if len(basis) < 2:
         return None
+    app.renderer.hand_basis(basis, d, q)  # (the first engine takes it: the photos are read once)
     k, err = choose_rank(basis, max_rank=cap)
     st.quality["rank"] = k
     why = "exact" if k >= len(basis) - 1 else (f"under {AUTO_RANK_ERROR:.0%}" if err <= AUTO_RANK_ERROR

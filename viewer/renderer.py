@@ -184,6 +184,7 @@ class Renderer:
         self._preview_latlong = None
         self._preview_key = None
         self._photo_key = None
+        self._handed = None  # the basis read for the default rank, for the first engine (hand_basis)
         self.frame_ms = {}
         # textures owned here
         self._preview_tex = ctx.texture((2 * PREVIEW_HEIGHT, PREVIEW_HEIGHT), 4, dtype="f1")
@@ -217,6 +218,12 @@ class Renderer:
         self._overlay_tex = self.ctx.texture((w, h), 4, np.ascontiguousarray(rgba).tobytes())
         self.info.overlay_tex = self._overlay_tex.glo
 
+    def hand_basis(self, basis, directions, quality) -> None:
+        """The accepted basis (:func:`ffls.relight.basis.capture_basis` under ``quality``), read by the
+        command to choose the default rank: the next engine build takes it instead of reading every
+        photo again, when its own quality prepares the same basis (near correction, subset)."""
+        self._handed = ((quality.near_correction, quality.basis_subset), basis, directions)
+
     def _build_engine(self, state: ViewerState) -> None:
         from ffls.gpu.engine import Engine
 
@@ -236,10 +243,14 @@ class Renderer:
         from ffls.gpu.tiled import engine_for_view
         from ffls.relight.stream import default_memory
 
+        handed, self._handed = self._handed, None
+        kw = {} if handed is None or handed[0] != (quality.near_correction, quality.basis_subset) else {
+            "basis": handed[1:]}
         new, self.streamed, self.level = engine_for_view(self.ctx, self.capture, self.lights,
                                                          default_memory(available_memory()), quality=quality,
                                                          window=state.window_size, map_res=None, profile=self.profile,
-                                                         cell_res=quality.cell_res or 256, weights_res=None)
+                                                         cell_res=quality.cell_res or 256, weights_res=None, **kw)
+        del handed, kw
         self._light_key = None
         if self.engine is not None:
             self.engine.release()

@@ -904,6 +904,12 @@ def check_output_kind(args, out) -> None:
         why = frame_folder_problem(out)  # (render -o CAPTURE --turntable 2 was refused after its coverage lines)
         if why:
             raise InputError(why, out)
+    store = getattr(args, "store", None)
+    if store:  # (render --turntable 2 --store D -o D/ built the store, then refused D as the frames' folder)
+        a, b = Path(os.path.abspath(store)), Path(os.path.abspath(out))
+        if a == b or a in b.parents or b in a.parents:
+            raise InputError(f"--store {store} and -o {out} {'are one path' if a == b else 'hold one another'}: "
+                             "the store and the output each need their own place")
 
 
 def check_fps_flag(args, out=None) -> None:

@@ -153,6 +153,44 @@ def _siblings(out: Path) -> dict:
     return files
 
 
+def check_not_set_file(outputs, background) -> None:
+    """Refuse an output that is one of the files of the synthetic set (``ffls synth --composite-set``)
+    that ``background`` belongs to, when its ``composite.json`` lists it.
+
+    The set's background and masks are this command's inputs, refused as such; its ``truth.exr``,
+    ``scene_map.exr`` and ``sphere_mask.png`` are not read, and ``-o SET/truth.exr`` replaced
+    the ground truth the composite is compared with.
+
+    Raises
+    ------
+    ffls.errors.InputError
+        Naming the output and the set's file it would replace.
+    """
+    import os
+
+    from ffls.errors import InputError
+    from ffls.io.capture import read_json_text
+    from ffls.synth.virtual import COMPOSITE_FILE
+
+    record = Path(background).parent / COMPOSITE_FILE
+    if not record.is_file():  # (no set; nor a FIFO, which would wait for a writer)
+        return
+    try:
+        doc = json.loads(read_json_text(record))
+    except (OSError, ValueError, InputError):  # (no set, or not one ffls wrote: nothing to keep)
+        return
+    if not isinstance(doc, dict) or doc.get("format") != "ffls-composite-set":
+        return
+    listed = {key: record.parent / name for key, name in doc.items() if isinstance(name, str)
+              and Path(name).suffix.lower() in (".exr", ".png", ".json") and Path(name).name == name}
+    for out in outputs:
+        for key, p in listed.items():
+            if p.exists() and Path(out).exists() and os.path.samefile(p, out):
+                raise InputError(f"is the {key.replace('_', ' ')} of the synthetic set {record.parent} (its "
+                                 f"{COMPOSITE_FILE} lists it), which the composite would replace: choose another "
+                                 "name", out)
+
+
 def _image_size(capture) -> tuple[int, int]:
     """(W, H) of a capture's photos: ``image_size`` when stated, else the first photo's."""
     if capture.image_size is not None:
@@ -536,6 +574,7 @@ def run(args) -> int:
     R0 = rotation_from_args(args)
     inputs = load_inputs(args)
     files = _siblings(out) if args.turntable is None else None  # after the inputs are known: none is replaced
+    check_not_set_file(files.values() if files else [out], args.background)
     print_notes(NAME, *inputs["notes"])
     comp = make_compositor(args, inputs)
     try:

@@ -78,11 +78,12 @@ def run(args) -> int:
         return 0
     if args.action == "convert":
         lm = _load(args.input, args.layout)
+        colour = _colour(lm)  # (the map as read: resampling keeps no note)
         if args.to_latlong is not None:
             lm = lm.to_latlong(args.to_latlong)
         save_lightmap(lm, args.output, half=args.half)
         print(f"wrote {args.output} ({lm.layout}, {lm.clamped_negatives} negative pixels clamped; colour: "
-              f"{_colour(lm)})")
+              f"{colour})")
         return 0
     lm = sky_sun_map(args.height) if args.kind == "sky" else paper_map(args.height)
     save_lightmap(lm, args.output, half=args.half)

@@ -174,6 +174,27 @@ def check_bounce_shape(bounce_shape: str, bounce: str) -> None:
                          "turn on or off)")
 
 
+def check_bounce_observed(bounce: str, model: str, cluster: bool, cap=None) -> None:
+    """``--bounce observed`` against the other flags (before the capture is loaded) and, given
+    ``cap``, against the capture. The lines name the flag: the capture is not wrong, the flag
+    asks what it cannot give (they named capture.json)."""
+    from ffls.errors import InputError
+
+    if bounce != "observed":
+        return
+    if cluster:
+        raise InputError("--bounce observed is not available with --scheduler (the cluster reads the spheres' "
+                         "pixels only)")
+    if cap is None:
+        return
+    if cap.world_from_camera_is_default:
+        raise InputError(f"--bounce observed needs camera.world_from_camera in {cap.json_path} (the ground is the "
+                         "plane under each sphere, normal to the world's +Z)")
+    if model != "distant" and getattr(cap, "camera_model", "pinhole") != "orthographic":
+        raise InputError(f"--bounce observed needs --model distant, not --model {model} (the near light's joint "
+                         "fit keeps the uniform ground)")
+
+
 def run(args) -> int:
     from ffls.errors import check_output_path
     from ffls.io.capture import load_capture, save_lights
@@ -182,7 +203,10 @@ def run(args) -> int:
     from ffls.commands.common import print_notes, show_progress
 
     check_bounce_shape(args.bounce_shape, args.bounce)
+    cluster = bool(getattr(args, "scheduler", None))
+    check_bounce_observed(args.bounce, args.model, cluster)
     cap = load_capture(args.capture)
+    check_bounce_observed(args.bounce, args.model, cluster, cap)
     check_first_pass(args.first_pass, args.bounce, len(cap))
     # onto capture.json or a photo, or into a read-only capture folder: refused before the fits
     for out in (args.output or cap.folder / "lights.json", args.plot, args.lp):
@@ -190,22 +214,9 @@ def run(args) -> int:
             check_output_path(out)
     progress = show_progress(args)
     decoded = None
-    cluster = bool(getattr(args, "scheduler", None))
     # --first-pass given: N photos, or every photo ("all"); not given: the estimation's default
     first_pass = {} if args.first_pass is None else {"first_pass": args.first_pass or None}
     shape = {"auto": None, "on": True, "off": False}[args.bounce_shape]
-    if args.bounce == "observed":
-        from ffls.errors import InputError
-
-        if cap.world_from_camera_is_default:
-            raise InputError("--bounce observed needs camera.world_from_camera in capture.json (the ground is the "
-                             "plane under each sphere, normal to the world's +Z)", cap.json_path)
-        if args.model != "distant" and getattr(cap, "camera_model", "pinhole") != "orthographic":
-            raise InputError("--bounce observed needs --model distant (the near light's joint fit keeps the uniform "
-                             "ground)", cap.json_path)
-        if cluster:
-            raise InputError("--bounce observed is not available with --scheduler (the cluster reads the "
-                             "spheres' pixels only)", cap.json_path)
     if not cluster:  # every photo decoded once: the encoding calibration, the detection's reductions, the first pass
         from ffls.spheres.estimate import decode_photos
 

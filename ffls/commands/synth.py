@@ -255,22 +255,72 @@ def check_flags_in_effect(args: argparse.Namespace) -> None:
         raise InputError("--light-radius needs --near (distant lights have no radius; see --light-angle)")
 
 
-def check_spheres_in_frame(args: argparse.Namespace, scene) -> None:
-    """Refuse ``--sphere-xy`` positions whose sphere has no pixel in the image (InputError naming the flag).
+def _object_clearance(scene, c) -> float:
+    """Distance (m) from the point ``c`` (3,) to the nearest solid of the scene's object (inf
+    without one): its pedestal (a box), body (a sphere) and capsule."""
+    import numpy as np
 
-    The frame test is :func:`ffls.synth.scene.sphere_silhouettes` (each sphere alone, rays through
-    the pixel centres): a sphere out of frame would be written into truth.json with 0 pixels.
+    from ffls.synth.geometry import Box, Capsule, Sphere
+    from ffls.synth.scene import LABEL_OBJECT
+
+    best = np.inf
+    for p in scene.primitives():
+        if getattr(p, "label", None) != LABEL_OBJECT:
+            continue
+        if isinstance(p, Sphere):
+            d = np.linalg.norm(c - np.asarray(p.center)) - p.radius
+        elif isinstance(p, Box):
+            d = np.linalg.norm(np.maximum(np.maximum(np.asarray(p.lo) - c, c - np.asarray(p.hi)), 0.0))
+        elif isinstance(p, Capsule):
+            a, b = np.asarray(p.a, dtype=np.float64), np.asarray(p.b, dtype=np.float64)
+            t = np.clip(np.dot(c - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+            d = np.linalg.norm(c - (a + t * (b - a))) - p.radius
+        else:
+            continue
+        best = min(best, float(d))
+    return best
+
+
+def check_spheres_in_frame(args: argparse.Namespace, scene) -> None:
+    """Refuse spheres that cannot be photographed (InputError naming the flags that placed them).
+
+    A sphere around the camera (``--sphere-radius 1`` put the camera, 1 m away, inside every
+    sphere: a NaN traceback), two spheres that intersect (``--sphere-xy 0.2,0.2;0.2,0.2``, or
+    ``--sphere-radius 0.3`` on the default 0.5 m square: written as if they were apart), a sphere
+    that intersects the object (``--sphere-xy 0,0``), and
+    ``--sphere-xy`` positions whose sphere has no pixel in the image. The frame test is
+    :func:`ffls.synth.scene.sphere_silhouettes` (each sphere alone, rays through the pixel
+    centres): a sphere out of frame would be written into truth.json with 0 pixels.
     """
     import numpy as np
 
     from ffls.errors import InputError
     from ffls.synth.scene import sphere_silhouettes
 
-    if args.sphere_xy is None or scene.n_spheres == 0:
+    if scene.n_spheres == 0:
         return
-    c = (scene.sphere_centers - scene.camera_center())
-    if np.any(np.linalg.norm(c, axis=1) <= scene.sphere_radius):
-        raise InputError("--sphere-xy puts a sphere around the camera")
+    r = scene.sphere_radius
+    flags = (f"--sphere-xy with --sphere-radius {r:g}" if args.sphere_xy is not None else
+             f"--sphere-radius {r:g} with --spheres {scene.n_spheres}")
+    far = np.linalg.norm(scene.sphere_centers - scene.camera_center(), axis=1)
+    if np.any(far <= r):
+        k = int(np.argmin(far))
+        raise InputError(f"{flags} puts the camera inside sphere {k} (its centre is {far[k]:.3g} m from the camera)")
+    xy = np.asarray(scene.sphere_xy, dtype=np.float64)
+    gap = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.diag(np.full(len(xy), np.inf))
+    i, k = np.unravel_index(np.argmin(gap), gap.shape)
+    if gap[i, k] < 2 * r * (1 - 1e-9):  # (spheres that touch are apart: 0.3 - 0.2 is 0.0999...)
+        raise InputError(f"{flags} makes spheres {min(i, k)} and {max(i, k)} intersect: their centres are "
+                         f"{gap[i, k]:.3g} m apart, less than two radii ({2 * r:g} m)")
+    for k, c in enumerate(scene.sphere_centers):
+        near = _object_clearance(scene, np.asarray(c, dtype=np.float64))
+        if near < r * (1 - 1e-9):
+            where = ("its centre is inside the object" if near <= 0 else
+                     f"its centre is {near:.3g} m from the object, less than its radius {r:g} m")
+            raise InputError(f"{flags} makes sphere {k} intersect the object ({where}); --no-object leaves the "
+                             "object out")
+    if args.sphere_xy is None:
+        return
     _, in_frame = sphere_silhouettes(scene, args.resolution)
     out = np.flatnonzero(in_frame == 0)
     if out.size:

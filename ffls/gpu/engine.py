@@ -173,9 +173,12 @@ class Engine:
             As :class:`Engine`. With ``rank=K`` a compressed basis saved in the capture folder
             (:func:`ffls.relight.compress.load_compressed`) is used when it has at least K
             eigen-images and was made from the same images (checksum); otherwise it is computed and saved
-            there (skipped silently if the folder is read-only).
+            there (skipped silently if the folder is read-only). ``basis=(basis, directions)``:
+            what :func:`ffls.relight.basis.capture_basis` gives under ``quality``, read already
+            (the viewer's default rank reads it): the photos are not read again.
         """
-        basis, d, _ = capture_basis(capture, lights, quality)
+        given = kw.pop("basis", None)
+        basis, d = capture_basis(capture, lights, quality)[:2] if given is None else given
         if quality is not None:
             kw.setdefault("dtype", quality.precision)
             kw.setdefault("rank", quality.rank)

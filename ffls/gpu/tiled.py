@@ -168,6 +168,7 @@ def engine_for_view(ctx, capture, lights, memory: int, *, window=None, budget_by
         if rank is not None:
             kw["rank"] = rank
         return Engine.from_capture(ctx, capture, lights, quality=quality, **kw), None, 0
+    kw.pop("basis", None)  # (the photos' basis, read already: the store's pyramid is shown instead)
     if quality is not None:
         if quality.basis_subset is not None or quality.near_correction:
             flag = "--basis-subset" if quality.basis_subset is not None else "--near-correction"

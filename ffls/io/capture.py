@@ -645,7 +645,9 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
     refused here, where its header costs a fraction of a millisecond: decoding a 12000x12000 PNG
     to find its size took 7 s and 2.6 GB. A capture that mixes grey (one-channel) and colour
     photos is refused too: a grey photo would be replicated to RGB, a colourless light among
-    coloured ones, and such a mix is almost always a wrong export. The minority is named.
+    coloured ones, and such a mix is almost always a wrong export. The minority is named. So is
+    a capture mixing 8-bit and 16-bit photos, whatever its encoding (a camera's JPEGs and a raw
+    converter's exports carry different tone curves).
     Headers that cannot be read here are left to the decoder (:func:`ffls.io.images.image_header`).
 
     Photos are read as image viewers show them, turned by their EXIF orientation; a capture whose
@@ -653,7 +655,8 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
     camera share their pixel grid, and a camera that looks down (at a turntable, a table top)
     tags its shots upright or turned as its tilt sensor wavers: turning some would misalign them.
     """
-    from ffls.io.images import ORIENTATION_NAMES, check_one_colour_kind, check_one_orientation, image_header
+    from ffls.io.images import (ORIENTATION_NAMES, check_one_bit_depth, check_one_colour_kind, check_one_orientation,
+                                image_header)
 
     heads = [image_header(p) for p in paths]
     ref = None if image_size is None else (tuple(image_size), f"{CAPTURE_FILE} says image_size")
@@ -667,6 +670,7 @@ def _check_image_headers(names: list, paths: list, image_size) -> None:
                       f"the stored {h.height}x{h.width}; docs/formats.md)") if h.orientation >= 5 else ""
             raise InputError(f"image is {h.width}x{h.height} but {ref[1]} {ref[0][0]}x{ref[0][1]}{turned}", p)
     check_one_colour_kind(paths, names, heads, what="photos", whole="a capture")
+    check_one_bit_depth(paths, names, heads, what="photos", whole="a capture")
     check_one_orientation(paths, names, heads)
 
 
@@ -1480,8 +1484,11 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
         known = set(cap_names)
         pos = {}
         for key, target in m.items():
-            if target not in known:
-                raise InputError(f"--lights-map maps {key!r} to {target!r}, which is not an image of the capture", path)
+            if target not in known:  # (the flag's value is wrong, not the lights file: it was named)
+                span = (f"{cap_names[0]!r} to {cap_names[-1]!r}, {len(cap_names)} in all" if len(cap_names) > 1 else
+                        repr(cap_names[0]))
+                raise InputError(f"--lights-map maps {key!r} to {target!r}, which is not an image of the capture "
+                                 f"{capture.json_path} (its images: {span})")
             if key in index:
                 pos[target] = index[key]
             elif not lp:

@@ -56,7 +56,10 @@ __all__ = [
     "ORIENTATION_NAMES",
     "check_one_orientation",
     "check_one_colour_kind",
+    "check_one_bit_depth",
     "nonfinite_message",
+    "transparency_message",
+    "check_half_range",
 ]
 
 _KINDS = {
@@ -227,6 +230,40 @@ def _flush_c_stdio() -> None:
         ctypes.CDLL(None).fflush(None)
 
 
+def transparency_message(img: "ImageData") -> str | None:
+    """What is wrong with an integer image (PNG, TIFF) that has transparent pixels, or None.
+
+    Its colour is not premultiplied, so under alpha < 1 it is undefined: a capture's photo or a
+    bracket's image with such pixels is refused (an EXR's RGB is premultiplied by convention: the
+    radiance, whatever its alpha). The callers add what to do instead.
+    """
+    if img.alpha is None or img.bit_depth not in (8, 16):
+        return None
+    clear = float(np.mean(img.alpha < 1.0))
+    if clear == 0:
+        return None
+    return f"has transparent pixels (alpha below 1 in {100 * clear:.3g}% of them): the colour under an " \
+           "unpremultiplied alpha is undefined"
+
+
+def check_half_range(a: np.ndarray, path) -> None:
+    """Refuse, before writing ``path`` with ``--half``, values beyond the half-float range (+-65504),
+    which would become infinite: one line naming the output (``write_exr`` raises a ValueError,
+    which reached the user as a traceback from ``probe merge --half`` and ``probe mirror --half``).
+
+    Raises
+    ------
+    OutputError
+        Naming ``path``, the largest value and what to do.
+    """
+    a = np.asarray(a)
+    finite = np.abs(a[np.isfinite(a)]) if a.size else a
+    top = float(finite.max()) if finite.size else 0.0
+    if top > _HALF_MAX:
+        raise OutputError(f"values up to {top:.6g} exceed the half-float range ({_HALF_MAX:g}): write float "
+                          "(without --half / half=False)", path)
+
+
 def nonfinite_message(a: np.ndarray) -> str | None:
     """``'N pixels with NaN or Inf values (a NaN, b Inf channel values)'`` for (H, W, C) data, or None when all finite."""
     bad = ~np.isfinite(a)
@@ -246,6 +283,32 @@ def _kind_of(path: Path) -> str:
     raise InputError(
         f"unsupported image format {ext or '(no extension)'!r}; supported: {', '.join(READ_EXTENSIONS)}", path
     )
+
+
+#: The first bytes of each format ffls reads (its signature), and how a message names it
+_SIGNATURES = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"\xff\xd8\xff", "jpeg"),
+               (b"II*\x00", "tiff"), (b"MM\x00*", "tiff"), (b"II+\x00", "tiff"), (b"MM\x00+", "tiff"),
+               (b"#?", "hdr"))
+_KIND_NAMES = {"exr": ("an OpenEXR", ".exr"), "png": ("a PNG", ".png"), "jpeg": ("a JPEG", ".jpg"),
+               "tiff": ("a TIFF", ".tif"), "hdr": ("a Radiance HDR", ".hdr")}
+
+
+def _check_content_kind(path: Path, kind: str) -> None:
+    """Refuse a file whose first bytes are another format's than its extension names (a 16-bit PNG
+    named ``.jpg``): ffls reads a file as its extension says, and the checks it makes from the
+    header before decoding (size, memory, grey or colour, bit depth, orientation) read that
+    format's header, so such a file passed them all unread. A signature ffls does not know (a
+    corrupt file) is left to the decoder, which names what is wrong."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(16)
+    except OSError:
+        return  # (the decoder names it)
+    found = next((k for sig, k in _SIGNATURES if head.startswith(sig)), None)
+    if found is not None and found != kind:
+        name, ext = _KIND_NAMES[found]
+        raise InputError(f"is {name} file named {path.suffix!r}: ffls reads a file as its extension says (its "
+                         f"checks before decoding read that format's header); rename it {path.stem}{ext}", path)
 
 
 def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfinite: bool = False,
@@ -291,11 +354,12 @@ def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfin
         raise InputError(not_a_regular_file(path) or ("image file not found" if not path.exists() else "not a file"),
                          path)
     register_input(path)
+    _check_content_kind(path, kind)
     head = _check_decodable_size(path)
     if kind == "exr":
         img = read_exr(path, working_space=working_space, out=out, stored=stored)
     else:
-        img = _read_cv2(path, kind, 1 if head is None else head.orientation)
+        img = _read_cv2(path, kind, 1 if head is None else head.orientation, working_space)
     if not allow_nonfinite:
         why = nonfinite_message(img.pixels)
         if why is None and img.alpha is not None and not np.all(np.isfinite(img.alpha)):
@@ -533,6 +597,50 @@ def _radiance_resolution(buf: bytes):
     return start, end, words
 
 
+def _radiance_header(buf: bytes, path) -> tuple[np.ndarray, tuple | None]:
+    """What a Radiance file's header says about its values (the lines before the blank line):
+    ``(scale, primaries)``.
+
+    ``scale`` (3,) float32 is what the stored values are divided by to give the radiance: the
+    product of every ``EXPOSURE=`` line (cumulative, by the format's definition) times every
+    ``COLORCORR=`` line (per channel); ``primaries`` the 8 numbers of a ``PRIMARIES=`` line (red,
+    green, blue and white xy, as an EXR's ``chromaticities``), or None. OpenCV reads none of
+    them: an hdrgen or Photosphere file with ``EXPOSURE=4`` was read 4 times too bright.
+
+    Raises
+    ------
+    InputError
+        An ``EXPOSURE`` or ``COLORCORR`` that is not a positive finite number (three for
+        ``COLORCORR``), or a ``PRIMARIES`` line that is not 8 numbers.
+    """
+    end = buf.find(b"\n\n")
+    scale, primaries = np.ones(3, dtype=np.float64), None
+    for line in (buf[:end] if end >= 0 else b"").split(b"\n"):
+        key, eq, value = line.partition(b"=")
+        key = key.strip().upper()
+        if not eq or key not in (b"EXPOSURE", b"COLORCORR", b"PRIMARIES"):
+            continue
+        words = value.split()
+        try:
+            v = np.array([float(w) for w in words], dtype=np.float64)
+        except ValueError:
+            v = np.array([])
+        name = key.decode()
+        if key == b"PRIMARIES":
+            if v.size != 8:
+                raise InputError(f"Radiance header line PRIMARIES= must give 8 numbers (red, green, blue and white "
+                                 f"x y), not {value.strip().decode('latin-1')!r}", path)
+            primaries = tuple(v.tolist())
+            continue
+        n = 1 if key == b"EXPOSURE" else 3
+        if v.size != n or not np.all(np.isfinite(v) & (v > 0)):
+            what = "a positive number" if n == 1 else "3 positive numbers"
+            raise InputError(f"Radiance header line {name}= must give {what} (what the stored values were "
+                             f"multiplied by), not {value.strip().decode('latin-1')!r}", path)
+        scale *= v
+    return scale.astype(np.float32), primaries
+
+
 def _radiance_standard(buf: np.ndarray):
     """A Radiance file stored in another of the format's 8 orientations, given to OpenCV (which
     reads only ``-Y H +X W``) as its scanlines, and the turn to the standard layout.
@@ -558,9 +666,11 @@ def _radiance_standard(buf: np.ndarray):
     return buf, turn
 
 
-def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
+def _read_cv2(path: Path, kind: str, orientation: int = 1, working_space: bool = True) -> ImageData:
     """A PNG, JPEG, TIFF or Radiance file through OpenCV, shown as its EXIF ``orientation`` asks
-    (OpenCV's ``IMREAD_UNCHANGED`` keeps a JPEG's or PNG's stored rows; it turns a TIFF itself)."""
+    (OpenCV's ``IMREAD_UNCHANGED`` keeps a JPEG's or PNG's stored rows; it turns a TIFF itself).
+    A Radiance file's values are divided by its header's ``EXPOSURE`` and ``COLORCORR``, and
+    converted from its ``PRIMARIES`` as an EXR's ``chromaticities`` are (:func:`_radiance_header`)."""
     import cv2
 
     try:
@@ -570,6 +680,7 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
     if buf.size == 0:
         raise InputError("image file is empty", path)
     flags = cv2.IMREAD_UNCHANGED if kind != "hdr" else cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR
+    scale, primaries = _radiance_header(buf[:65536].tobytes(), path) if kind == "hdr" else (None, None)
     buf, radiance_turn = _radiance_standard(buf) if kind == "hdr" else (buf, None)
     _silence_opencv_log()
     with quiet_native_output() as cap:
@@ -618,9 +729,21 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1) -> ImageData:
     else:
         raise InputError(f"unsupported pixel type {dt} in {kind.upper()} image", path)
     if alpha is not None:
-        scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(alpha.dtype, 1.0)
-        alpha = np.ascontiguousarray(alpha.astype(np.float32) / np.float32(scale))
-    return ImageData(np.ascontiguousarray(pixels), depth, kind, path, alpha=alpha, codes=codes)
+        top = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(alpha.dtype, 1.0)
+        alpha = np.ascontiguousarray(alpha.astype(np.float32) / np.float32(top))
+    note = None
+    if scale is not None and np.any(scale != 1):
+        pixels = pixels / scale
+    if primaries is not None:
+        from ffls.io.colourspace import convert_to_working_space, working_space_conversion
+
+        if working_space:
+            pixels, conv = convert_to_working_space(pixels, primaries, path)
+            note = None if conv is None else conv.describe()
+        else:
+            working_space_conversion(primaries, path)  # malformed: an error either way
+    return ImageData(np.ascontiguousarray(pixels), depth, kind, path, alpha=alpha, codes=codes,
+                     chromaticities=primaries, colour_note=note)
 
 
 def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
@@ -667,12 +790,17 @@ class ImageHeader:
         The EXIF orientation (1 to 8; 1, upright as stored, where the file gives none or a value
         outside 1 to 8) of a JPEG, PNG or TIFF. ``width`` and ``height`` are the displayed size,
         after it (:func:`read_image` shows the photo as image viewers do).
+    bits : {8, 16} or None
+        The integer bit depth :func:`read_image` gives a PNG, JPEG or TIFF (its ``bit_depth``: 8
+        for 1- to 8-bit samples, 16 for 16-bit ones); None for floating point files (EXR, HDR)
+        and where the header does not say (a 12-bit JPEG).
     """
 
     width: int
     height: int
     grey: bool
     orientation: int = 1
+    bits: int | None = None
 
 
 #: The EXIF tag of the orientation (TIFF tag 274)
@@ -694,6 +822,15 @@ ORIENTATION_NAMES = {1: "upright (as stored)", 2: "mirrored", 3: "rotated 180 de
                      8: "turned 90 degrees counter-clockwise"}
 
 
+def _headers_of(paths, names, heads) -> tuple[list, list, list]:
+    """The paths, the names the messages give them (default: the file names) and the headers
+    (read here unless given) of a set of images, as the ``check_one_*`` functions take them."""
+    paths = [Path(p) for p in paths]
+    names = [p.name for p in paths] if names is None else list(names)
+    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    return paths, names, heads
+
+
 def check_one_colour_kind(paths, names=None, heads=None, what: str = "photos", whole: str = "a capture") -> None:
     """Refuse images of one camera (a capture's photos, a bracket) that mix grey (one channel) and colour.
 
@@ -706,9 +843,7 @@ def check_one_colour_kind(paths, names=None, heads=None, what: str = "photos", w
     InputError
         Naming the first image of the minority.
     """
-    paths = [Path(p) for p in paths]
-    names = [p.name for p in paths] if names is None else list(names)
-    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    paths, names, heads = _headers_of(paths, names, heads)
     grey = [k for k, h in enumerate(heads) if h is not None and h.grey]
     colour = [k for k, h in enumerate(heads) if h is not None and not h.grey]
     if not (grey and colour):
@@ -719,6 +854,35 @@ def check_one_colour_kind(paths, names=None, heads=None, what: str = "photos", w
     raise InputError(f"is {kind} but {len(most)} of the {len(grey) + len(colour)} {what} are {many} (e.g. "
                      f"{names[most[0]]!r}): {whole} mixing grey and colour images is almost always a wrong export; "
                      f"export every one {'in colour' if many == 'colour' else 'grey'}", paths[few[0]])
+
+
+def check_one_bit_depth(paths, names=None, heads=None, what: str = "photos", whole: str = "a capture") -> None:
+    """Refuse integer images of one camera (a capture's photos) that mix 8-bit and 16-bit files.
+
+    Both decode to the same scale, but a camera's 8-bit JPEGs and a raw converter's 16-bit
+    exports carry different tone curves, which one stated encoding cannot both undo: such a mix
+    is almost always a wrong export. The minority is named (on a tie, the images not of the
+    first image's depth). Arguments as :func:`check_one_colour_kind`; floating point images
+    and headers that do not say (``ImageHeader.bits`` None) are not counted.
+
+    Raises
+    ------
+    InputError
+        Naming the first image of the minority depth.
+    """
+    paths, names, heads = _headers_of(paths, names, heads)
+    bits = [h.bits if h is not None else None for h in heads]
+    known = [b for b in bits if b is not None]
+    if len(set(known)) <= 1:
+        return
+    common = max(known, key=known.count)  # (the first image's depth on a tie)
+    odd = next(k for k, b in enumerate(bits) if b is not None and b != common)
+    first = bits.index(common)
+    raise InputError(f"is a {bits[odd]}-bit image but {known.count(common)} of the {len(known)} {what} are "
+                     f"{common}-bit (e.g. {names[first]!r}): {whole} mixing 8-bit and 16-bit images is almost "
+                     "always a wrong export (a camera's JPEGs and a raw converter's exports carry different "
+                     f"tone curves, which one encoding cannot both undo); export every one at {common} bits",
+                     paths[odd])
 
 
 def check_one_orientation(paths, names=None, heads=None, what: str = "photos") -> None:
@@ -741,9 +905,7 @@ def check_one_orientation(paths, names=None, heads=None, what: str = "photos") -
     InputError
         Naming the first image of a minority orientation.
     """
-    paths = [Path(p) for p in paths]
-    names = [p.name for p in paths] if names is None else list(names)
-    heads = [image_header(p) for p in paths] if heads is None else list(heads)
+    paths, names, heads = _headers_of(paths, names, heads)
     turns = [h.orientation for h in heads if h is not None]
     if len(set(turns)) <= 1:
         return
@@ -786,6 +948,21 @@ def _pillow_reader(kind: str):
             "tiff": TiffImagePlugin.TiffImageFile}.get(kind)
 
 
+def _integer_bits(im, kind: str) -> int | None:
+    """The bit depth (8 or 16) OpenCV decodes an open Pillow image of ``kind`` to; None where unsure."""
+    if kind == "png":  # (Pillow unpacks 16-bit samples with a raw mode such as "RGB;16B" or "I;16B")
+        return 16 if any(";16" in str(t.args) for t in im.tile) else 8
+    if kind == "jpeg":
+        return 8 if getattr(im, "bits", 8) == 8 else None
+    samples = im.tag_v2.get(258, (1,))  # TIFF BitsPerSample; SampleFormat 3 is floating point
+    samples = samples if isinstance(samples, tuple) else (samples,)
+    formats = im.tag_v2.get(339, (1,))
+    if 3 in (formats if isinstance(formats, tuple) else (formats,)):
+        return None
+    top = max(samples)
+    return 16 if top == 16 else 8 if top <= 8 else None
+
+
 def image_header(path: str | os.PathLike) -> ImageHeader | None:
     """Size and channel count of an image file from its header alone, without decoding it.
 
@@ -826,9 +1003,10 @@ def image_header(path: str | os.PathLike) -> ImageHeader | None:
             with _pillow_reader(kind)(path) as im:
                 (w, h), mode = im.size, im.mode
                 turn = _exif_orientation(im)
+                bits = _integer_bits(im, kind)
             if turn >= 5 and kind != "tiff":  # (Pillow gives a TIFF's size as displayed already)
                 w, h = h, w
-            return ImageHeader(int(w), int(h), mode in _GREY_MODES, turn)
+            return ImageHeader(int(w), int(h), mode in _GREY_MODES, turn, bits)
     except Exception:  # (unreadable here: read_image decodes it and names what is wrong)
         return None
     return None
@@ -847,10 +1025,20 @@ def exr_chromaticities(path: str | os.PathLike) -> tuple | None:
     return None if c is None else tuple(np.asarray(c, dtype=np.float64).reshape(-1).tolist())
 
 
+def _radiance_primaries(path: Path) -> tuple | None:
+    """The ``PRIMARIES`` of a Radiance file's header (:func:`_radiance_header`), None when absent or unreadable."""
+    try:
+        with open(path, "rb") as f:
+            return _radiance_header(f.read(65536), path)[1]
+    except OSError:
+        return None  # (read_image names it)
+
+
 def colour_summary(paths) -> str | None:
     """One line saying which of the image files ``paths`` are converted to the working space on reading.
 
-    Reads only the headers of the ``.exr`` files (the others carry no colour space ffls reads).
+    Reads only the headers of the ``.exr`` and Radiance files (the others carry no colour space
+    ffls reads).
     E.g. ``"colour: 12 of 12 images: colour space ACEScg (...) converted to linear Rec.709 (D65), ..."``.
 
     Returns
@@ -868,9 +1056,9 @@ def colour_summary(paths) -> str | None:
     paths = [Path(p) for p in paths]
     notes = []
     for p in paths:
-        if p.suffix.lower() != ".exr":
+        if _KINDS.get(p.suffix.lower()) not in ("exr", "hdr"):
             continue
-        c = exr_chromaticities(p)
+        c = exr_chromaticities(p) if p.suffix.lower() == ".exr" else _radiance_primaries(p)
         conv = None if c is None else working_space_conversion(c, p)
         if conv is not None:
             notes.append(conv.describe())

@@ -22,7 +22,7 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.io.capture import CAPTURE_FILE
-from ffls.io.images import ImageData, read_image
+from ffls.io.images import ImageData, read_image, transparency_message
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 
 __all__ = ["Photo", "linearise", "encoding_unknown", "unknown_encoding_message", "read_photo", "load_photo",
@@ -161,12 +161,10 @@ def _check_photo(capture, i: int, img: ImageData) -> None:
     """The photo's size against ``image_size``, and no transparency in an integer photo: a PNG's or
     TIFF's colour is not premultiplied, so under alpha < 1 it is undefined (an EXR's is
     premultiplied by convention: its RGB is the radiance, and its alpha is ignored)."""
-    if img.alpha is not None and img.bit_depth in (8, 16):
-        clear = float(np.mean(img.alpha < 1.0))
-        if clear > 0:
-            raise InputError(f"has transparent pixels (alpha below 1 in {100 * clear:.3g}% of them): the colour under "
-                             "an unpremultiplied alpha is undefined; export the photos without alpha (an object's mask "
-                             "goes to --mask)", capture.image_paths[i])
+    clear = transparency_message(img)
+    if clear:
+        raise InputError(f"{clear}; export the photos without alpha (an object's mask goes to --mask)",
+                         capture.image_paths[i])
     if capture.image_size is not None:
         h, w = img.shape
         if (w, h) != tuple(capture.image_size):

@@ -20,7 +20,7 @@ import numpy as np
 
 from ffls.errors import InputError, not_a_regular_file
 from ffls.io.capture import parse_json, read_json_text
-from ffls.io.images import check_one_orientation, image_header, read_image
+from ffls.io.images import check_one_orientation, image_header, read_image, transparency_message
 from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
 
@@ -211,7 +211,8 @@ def read_bracket(folder: str | os.PathLike):
     if not folder.is_dir():
         raise InputError("not a folder", folder)
     jpath = folder / "exposures.json"
-    for p in [jpath] + sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES):
+    photos = sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)  # (the folder, listed once)
+    for p in [jpath] + photos:
         special = not_a_regular_file(p)  # (a FIFO's EXIF or JSON was waited for forever)
         if special:
             raise InputError(special, p)
@@ -233,12 +234,12 @@ def read_bracket(folder: str | os.PathLike):
             t = float(t)
             paths.append(p)
             times.append(t)
-        unlisted = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.name not in doc)
+        unlisted = [p.name for p in photos if p.name not in doc]
         if unlisted:
             raise InputError(f"photo {unlisted[0]!r} has no exposure time in exposures.json (list every photo of the"
                              " bracket, or move the others out)", folder / unlisted[0])
     else:
-        paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+        paths = photos
         times = []
         for p in paths:
             t = exif_exposure_time(p)
@@ -250,11 +251,14 @@ def read_bracket(folder: str | os.PathLike):
             times.append(t)
     if len(paths) < 2:
         raise InputError(f"need at least two bracketed images, found {len(paths)}", folder)
-    check_one_orientation(paths, what="bracketed photos")
+    heads = [image_header(p) for p in paths]
+    check_one_orientation(paths, heads=heads, what="bracketed photos")
     images = []
-    for p in paths:
+    for p, header in zip(paths, heads):
         data = read_image(p, working_space=False)  # (its one line: not found, a folder, truncated, ...)
-        header = image_header(p)
+        clear = transparency_message(data)
+        if clear:
+            raise InputError(f"{clear}; export the bracket without alpha", p)
         if data.bit_depth != 8 or (header is not None and header.grey):
             depth = {"half": "half-float", "float": "32-bit float"}.get(data.bit_depth, f"{data.bit_depth}-bit")
             raise InputError(f"bracketed images must be 8-bit RGB, got a {depth} "
