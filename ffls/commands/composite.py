@@ -267,7 +267,8 @@ def _stated_spheres_problem(capture, centres, r: float) -> str | None:
         if not inside:
             where = "is behind the camera" if not xc[k, 2] > r else \
                 f"projects to pixel ({uv[k, 0]:.4g}, {uv[k, 1]:.4g}), off the {w}x{h} photos"
-            return (f"spheres[{k}].center {np.array2string(centres[k], precision=4)} {where} "
+            centre = "[" + ", ".join(f"{v:.4g}" for v in centres[k]) + "]"  # (not numpy's printing: global options)
+            return (f"spheres[{k}].center {centre} {where} "
                     "(camera.K and camera.world_from_camera)")
     return None
 
