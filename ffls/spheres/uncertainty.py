@@ -100,6 +100,8 @@ __all__ = [
     "bounce_perturbation",
     "shared_parameter_deg",
     "own_parameter_deg",
+    "distance_coupling_deg",
+    "distance_spread",
 ]
 
 #: Confidence level of a reported cone.
@@ -258,6 +260,11 @@ class ErrorModel:
     common_floor_deg : float
         Per-axis common-mode floor (degrees) added in quadrature to the bound (with
         ``common_ratio``).
+    distance_sigma : float
+        Relative 1-sigma error of a near light's distance (:func:`distance_spread` of the
+        capture's near lights; 0 for distant lights): with a photo's coupling of direction and
+        distance (:func:`distance_coupling_deg`) a term of its cone
+        (:meth:`distance_sigma_deg`).
     """
 
     scale: float
@@ -271,6 +278,19 @@ class ErrorModel:
     n_tail: int = 0
     common_ratio: float | None = None
     common_floor_deg: float = COMMON_FLOOR_DEG
+    distance_sigma: float = 0.0
+
+    def distance_sigma_deg(self, coupling_deg: float) -> float:
+        """Per-axis standard deviation (degrees) of a near light's direction from its distance's
+        error: ``coupling_deg * distance_sigma`` (a turn along one axis), half its variance on
+        each tangent axis.
+
+        Parameters
+        ----------
+        coupling_deg : float
+            The photo's turn per unit relative distance error (:func:`distance_coupling_deg`).
+        """
+        return float(abs(float(coupling_deg)) * float(self.distance_sigma) / np.sqrt(2.0))
 
     def cone_deg(self, sigma_axis_deg):
         """95% cone radius (degrees) under this model: ``cone_factor * sigma_axis_deg``.
@@ -463,7 +483,8 @@ class ErrorModel:
                    centre_deg=tuple(float(x) for x in doc.get("centre_deg", ())),
                    cone_factor=float(doc.get("cone_factor", CONE_FACTOR)), n_tail=int(doc.get("n_tail", 0)),
                    common_ratio=None if ratio is None else float(ratio),
-                   common_floor_deg=float(doc.get("common_floor_deg", COMMON_FLOOR_DEG)))
+                   common_floor_deg=float(doc.get("common_floor_deg", COMMON_FLOOR_DEG)),
+                   distance_sigma=float(doc.get("distance_sigma", 0.0)))
 
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
@@ -478,7 +499,8 @@ class ErrorModel:
                 "source": self.source, "n_photos": int(self.n_photos), "n_trimmed": int(self.n_trimmed),
                 "cone_factor": float(self.cone_factor), "n_tail": int(self.n_tail), "confidence": CONFIDENCE,
                 "common_ratio": None if self.common_ratio is None else float(self.common_ratio),
-                "common_floor_deg": float(self.common_floor_deg)}
+                "common_floor_deg": float(self.common_floor_deg),
+                "distance_sigma": float(self.distance_sigma)}
 
 
 def _weights(v: np.ndarray, weights=None) -> np.ndarray | None:
@@ -911,3 +933,70 @@ def own_parameter_deg(shifts: np.ndarray, weights, standard_errors) -> float:
         return 0.0
     w = w / w.sum()
     return float(np.degrees(np.sqrt(np.sum((w * np.linalg.norm(t, axis=1) * se) ** 2) / 2.0)))
+
+
+# ----------------------------------------------------------------------------- a near light's distance
+def distance_coupling_deg(v: np.ndarray, cov_v: np.ndarray) -> float:
+    """How far a near light's direction moves with its distance's error, along the fit's coupling.
+
+    A near light's position ``p`` is triangulated from the spheres; its direction is reported
+    from the scene centre, ``v = p - c``. Where the spheres that place it stand off the centre
+    (two matte balls of one row, the mirrors of the other row without a highlight), an error of
+    the light's distance moves the position along the spheres' own ray, and so turns ``v``: the
+    direction error is the distance error times the parallax. The fit's covariance ``cov_v``
+    carries that coupling; its statistical size does not carry a systematic distance error
+    (``docs/spheres.md``, "Near captures: the light's distance seen from the scene centre").
+    The regression of the direction's tangent offset on the relative distance ``|v|``, under
+    ``cov_v``, gives the expected turn per unit relative distance error:
+    ``|E C u| / (u^T C u)`` with ``u = v / |v|`` and ``E`` the tangent basis at ``u``.
+
+    Parameters
+    ----------
+    v : (3,) float
+        The light's position from the scene centre.
+    cov_v : (3, 3) float
+        Its covariance (the joint fit's).
+
+    Returns
+    -------
+    float
+        Degrees per unit relative distance error (0 where the covariance is not finite or has
+        no radial part).
+    """
+    v = np.asarray(v, dtype=np.float64)
+    C = np.asarray(cov_v, dtype=np.float64)
+    nv = float(np.linalg.norm(v))
+    if not (np.isfinite(nv) and nv > 0 and C.shape == (3, 3) and np.all(np.isfinite(C))):
+        return 0.0
+    u = v / nv
+    radial = float(u @ C @ u)
+    if not radial > 0:
+        return 0.0
+    e1, e2 = tangent_basis(u)
+    cu = C @ u
+    return float(np.degrees(np.hypot(e1 @ cu, e2 @ cu) / radial))
+
+
+def distance_spread(distances) -> float:
+    """Relative 1-sigma spread of a capture's near lights' distances: ``1.4826 MAD`` of their logs.
+
+    Of a rig whose lamps stand at one distance (a dome, the paper's gantry) it is the
+    triangulation's own distance error; of hand-held lamps it is larger by their true spread, so
+    the cones it widens (:meth:`ErrorModel.distance_sigma_deg`) are then wider than needed.
+
+    Parameters
+    ----------
+    distances : (n,) float
+        The near lights' distances from the scene centre.
+
+    Returns
+    -------
+    float
+        0 with fewer than 3 finite positive distances.
+    """
+    d = np.asarray(distances, dtype=np.float64).ravel()
+    d = d[np.isfinite(d) & (d > 0)]
+    if d.size < 3:
+        return 0.0
+    l = np.log(d)
+    return float(1.4826 * np.median(np.abs(l - np.median(l))))
