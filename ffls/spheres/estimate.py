@@ -826,7 +826,12 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                                          centers[used] if near else None))
         sigmas.append(np.array([r.spheres[i].fit.uncertainty_deg for i in used]) / np.sqrt(2.0))
         used_all.append(np.asarray(used))
-    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre, **kwargs)
+    kinds = [""] * len(samples)  # each sphere's kind, for its kind's own terms of the model
+    for r in results:
+        for i, sp in enumerate(r.spheres[:len(kinds)]):
+            if not kinds[i] and sp.direction is not None:
+                kinds[i] = sp.kind
+    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre, kinds=kinds, **kwargs)
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(

@@ -217,6 +217,7 @@ class PhotoEstimate:
             used = [stat.get(i, np.inf) for i in self.used_spheres]
             sigma = (model.photo_sigma_deg(np.asarray(used), self.used_spheres, self.weights) if used
                      else float("inf"))
+            # the joint fit's statistics mix the kinds' pixels and rays: the shared scale
             sigma = max(sigma, model.scale * self.joint_sigma_deg / np.sqrt(2.0))
             sigma = float(np.hypot(sigma, model.distance_sigma_deg(self.distance_coupling_deg)))
             unc = float(np.hypot(model.cone_deg(sigma), self.range_deg))
