@@ -25,7 +25,12 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    the fitted model at a family-wise level (``p < 1e-3 / n_photos``) are left out and the fit
    repeated. ``g_i`` is the sphere's centre uncertainty propagated to its direction
    (:func:`centre_floor_deg`: the outline and the shading place the centre ``shift`` apart), a
-   known part of its variance.
+   known part of its variance. Where a capture holds both kinds of sphere and two or more of a
+   kind disagree in enough photos, that kind gets its own ``s`` and ``tau`` (fitted again with
+   the other spheres at the shared fit's; :attr:`ErrorModel.kind_terms`): a mirror's highlight
+   and a matte ball's shading err differently, and one pair for both lets either set the other's
+   cone. A photo of one sphere of each kind cannot tell them apart: such a capture keeps the
+   shared fit.
 3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
    (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
    assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
@@ -54,7 +59,9 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    and its common-mode share are used (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
-(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode. The cone is a
+(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode; a near light's
+also holds its distance's error turned by the parallax of the spheres that place it
+(:func:`distance_coupling_deg`, :func:`distance_spread`, :meth:`ErrorModel.distance_sigma_deg`). The cone is a
 multiple of it, :attr:`ErrorModel.cone_factor`. A per-axis Gaussian on the tangent plane would
 give ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` (:data:`CONE_FACTOR`: the squared angle over the per-axis
 variance is chi-square with 2 degrees of freedom), but systematic errors are not Gaussian: bounded
