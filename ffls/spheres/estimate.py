@@ -59,7 +59,8 @@ from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoE
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values, sphere_values_of)
-from ffls.spheres.uncertainty import ErrorModel, centre_floor_deg, fit_error_model, photo_residuals
+from ffls.spheres.uncertainty import (ErrorModel, centre_floor_deg, distance_spread, fit_error_model,
+                                     photo_residuals)
 
 __all__ = [
     "BOUNCE_MODES",
@@ -773,6 +774,7 @@ def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
 
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
                           refinements: list[CentreRefinement] | None = None,
+                          scene_center: np.ndarray | None = None,
                           **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
@@ -782,7 +784,10 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     :func:`ffls.spheres.uncertainty.fit_error_model` fits the capture's per-sphere scale and floor
     (trimmed restricted maximum likelihood) and bounds the common mode. With fewer such photos
     (one sphere per photo) the stated fallback model is used. Every photo (accepted or not) then
-    gets its cones (:meth:`ffls.spheres.photo.PhotoEstimate.with_error_model`).
+    gets its cones (:meth:`ffls.spheres.photo.PhotoEstimate.with_error_model`). With the scene
+    centre, the near photos' lights' distances from it give the model's distance error
+    (:func:`ffls.spheres.uncertainty.distance_spread`), which turns each near photo's direction
+    by its own coupling (``PhotoEstimate.distance_coupling_deg``).
 
     Parameters
     ----------
@@ -793,6 +798,8 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         Per sphere, its photometric centre refinement: an accepted one measures the centre's
         uncertainty (outline against shading), propagated to the sphere's direction
         (:func:`ffls.spheres.uncertainty.centre_floor_deg`) as a known part of its variance.
+    scene_center : (3,) float, optional
+        Where the directions are reported from (no distance term without it).
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -819,7 +826,17 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                                          centers[used] if near else None))
         sigmas.append(np.array([r.spheres[i].fit.uncertainty_deg for i in used]) / np.sqrt(2.0))
         used_all.append(np.asarray(used))
-    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre, **kwargs)
+    kinds = [""] * len(samples)  # each sphere's kind, for its kind's own terms of the model
+    for r in results:
+        for i, sp in enumerate(r.spheres[:len(kinds)]):
+            if not kinds[i] and sp.direction is not None:
+                kinds[i] = sp.kind
+    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre, kinds=kinds, **kwargs)
+    if scene_center is not None:  # the near fits' own distances (not those placed at their median)
+        c = np.asarray(scene_center, dtype=np.float64)
+        model = replace(model, distance_sigma=distance_spread(
+            [np.linalg.norm(r.position - c) for r in results
+             if r.ok and r.model == "near" and r.position is not None and not r.range_deg]))
     return model, [r.with_error_model(model) for r in results]
 
 
@@ -1553,7 +1570,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
             by_photo = dict(zip(fitted, results))
     if bounce == "free":
         results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-        error_model, results = calibrate_uncertainty(results, samples, refinements)
+        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1587,7 +1604,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
     results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-    error_model, results = calibrate_uncertainty(results, samples, refinements)
+    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 

@@ -38,7 +38,7 @@ from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView,
 from ffls.spheres.lambert import (LambertFit, fit_lambert, near_ground_bounce, shadowed_ground_bounce,
                                   tangent_uncertainty_deg)
 from ffls.spheres.samples import SphereSamples, SphereValues, sphere_values
-from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel
+from ffls.spheres.uncertainty import FALLBACK_MODEL, ErrorModel, distance_coupling_deg
 
 __all__ = ["REASONS", "LIGHT_MODELS", "OUTLIER", "SIGNIFICANCE", "SHADOW_RATIO", "SphereResult", "LightHypothesis", "PhotoEstimate",
            "fit_spheres", "sphere_uncertainty_deg", "ray_origins", "fit_light_model", "near_fit_mask",
@@ -167,6 +167,11 @@ class PhotoEstimate:
         The used spheres' weights in the combination (inverse variances of
         :func:`sphere_uncertainty_deg`): the photo's variance under an error model is that of
         this weighted mean (:meth:`with_error_model`).
+    distance_coupling_deg : float
+        A near light's turn of direction (degrees) per unit relative error of its distance, along
+        its joint fit's coupling (:func:`ffls.spheres.uncertainty.distance_coupling_deg`; 0
+        otherwise): with the capture's distance error
+        (:meth:`ErrorModel.distance_sigma_deg`) a term of its cone.
     range_deg : float
         A distant combination placed at the capture's light distance
         (:func:`ffls.spheres.estimate.place_at_capture_range`): the angle by which the spread of
@@ -186,6 +191,7 @@ class PhotoEstimate:
     joint_pending: bool = False
     joint_sigma_deg: float = 0.0
     weights: list[float] | None = None
+    distance_coupling_deg: float = 0.0
     range_deg: float = 0.0
 
     @property
@@ -211,7 +217,9 @@ class PhotoEstimate:
             used = [stat.get(i, np.inf) for i in self.used_spheres]
             sigma = (model.photo_sigma_deg(np.asarray(used), self.used_spheres, self.weights) if used
                      else float("inf"))
+            # the joint fit's statistics mix the kinds' pixels and rays: the shared scale
             sigma = max(sigma, model.scale * self.joint_sigma_deg / np.sqrt(2.0))
+            sigma = float(np.hypot(sigma, model.distance_sigma_deg(self.distance_coupling_deg)))
             unc = float(np.hypot(model.cone_deg(sigma), self.range_deg))
         return replace(self, spheres=spheres, uncertainty_deg=unc)
 
@@ -236,6 +244,8 @@ class PhotoEstimate:
                  "spheres": self.sphere_reports(refinements)}
         if self.chi2 is not None:
             extra.update(chi2=self.chi2, dof=self.dof)
+        if self.distance_coupling_deg:
+            extra.update(distance_coupling_deg=self.distance_coupling_deg)
         if self.range_deg:
             extra.update(placed_at_capture_range=True, range_deg=self.range_deg)
         return extra
@@ -542,7 +552,7 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
     if outlier is not None:
         status[outlier] = OUTLIER
     used = hyp.spheres
-    direction, position, joint_sigma = hyp.direction, hyp.position, 0.0
+    direction, position, joint_sigma, coupling = hyp.direction, hyp.position, 0.0, 0.0
     # the joint fit: matte spheres' shading, each sphere's pixels over its own residual deviation
     # (fit_near_light_mixed: a sphere whose shading the model misses, e.g. in part of a cast
     # shadow, would otherwise outweigh the others: one photo 2.8-3.4 degrees off at 384 px); with
@@ -570,11 +580,13 @@ def estimate_photo(image: np.ndarray | None, samples: list[SphereSamples], scene
         v = position - np.asarray(scene_center, dtype=np.float64)
         direction = normalize(v)
         joint_sigma = tangent_uncertainty_deg(v, jf.cov)
+        coupling = distance_coupling_deg(v, jf.cov)
     # 95% cones of the stated single-photo model; estimate_photos recalibrates them capture-wide
     return PhotoEstimate(status="ok", reason=None, direction=np.asarray(direction, dtype=np.float64),
                          position=None if position is None else np.asarray(position, dtype=np.float64),
                          model=hyp.model, used_spheres=[int(i) for i in used],
                          spheres=[SphereResult(f, st) for f, st in zip(fits, status)], chi2=float(hyp.chi2),
                          dof=int(hyp.dof), joint_pending=pending, joint_sigma_deg=float(joint_sigma),
+                         distance_coupling_deg=float(coupling),
                          weights=[float(sphere_uncertainty_deg(fits[i], sigma_floor_deg)) ** -2 for i in used]
                          ).with_error_model(FALLBACK_MODEL)

@@ -25,7 +25,12 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    the fitted model at a family-wise level (``p < 1e-3 / n_photos``) are left out and the fit
    repeated. ``g_i`` is the sphere's centre uncertainty propagated to its direction
    (:func:`centre_floor_deg`: the outline and the shading place the centre ``shift`` apart), a
-   known part of its variance.
+   known part of its variance. Where a capture holds both kinds of sphere and two or more of a
+   kind disagree in enough photos, that kind gets its own ``s`` and ``tau`` (fitted again with
+   the other spheres at the shared fit's; :attr:`ErrorModel.kind_terms`): a mirror's highlight
+   and a matte ball's shading err differently, and one pair for both lets either set the other's
+   cone. A photo of one sphere of each kind cannot tell them apart: such a capture keeps the
+   shared fit.
 3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
    (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
    assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
@@ -54,7 +59,9 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    and its common-mode share are used (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
-(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode. The cone is a
+(``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode; a near light's
+also holds its distance's error turned by the parallax of the spheres that place it
+(:func:`distance_coupling_deg`, :func:`distance_spread`, :meth:`ErrorModel.distance_sigma_deg`). The cone is a
 multiple of it, :attr:`ErrorModel.cone_factor`. A per-axis Gaussian on the tangent plane would
 give ``sqrt(chi2.ppf(0.95, 2)) = 2.448`` (:data:`CONE_FACTOR`: the squared angle over the per-axis
 variance is chi-square with 2 degrees of freedom), but systematic errors are not Gaussian: bounded
@@ -100,6 +107,8 @@ __all__ = [
     "bounce_perturbation",
     "shared_parameter_deg",
     "own_parameter_deg",
+    "distance_coupling_deg",
+    "distance_spread",
 ]
 
 #: Confidence level of a reported cone.
@@ -258,6 +267,17 @@ class ErrorModel:
     common_floor_deg : float
         Per-axis common-mode floor (degrees) added in quadrature to the bound (with
         ``common_ratio``).
+    distance_sigma : float
+        Relative 1-sigma error of a near light's distance (:func:`distance_spread` of the
+        capture's near lights; 0 for distant lights): with a photo's coupling of direction and
+        distance (:func:`distance_coupling_deg`) a term of its cone
+        (:meth:`distance_sigma_deg`).
+    sphere_kinds : tuple of str
+        Per sphere, its kind (``'matte'``, ``'mirror'``; empty: not given).
+    kind_terms : tuple of (str, float, float, int)
+        Per kind whose spheres disagree among themselves in enough photos, its own ``(kind, s,
+        tau_deg, n_photos)`` (:func:`fit_error_model`); a sphere of another kind, or of none,
+        has the shared ``scale`` and ``floor_deg``.
     """
 
     scale: float
@@ -271,6 +291,44 @@ class ErrorModel:
     n_tail: int = 0
     common_ratio: float | None = None
     common_floor_deg: float = COMMON_FLOOR_DEG
+    distance_sigma: float = 0.0
+    sphere_kinds: tuple = ()
+    kind_terms: tuple = ()
+
+    def terms(self, spheres, shape=()) -> tuple[np.ndarray, np.ndarray]:
+        """Per sphere, its scale ``s`` and floor ``tau`` (degrees): its kind's own (``kind_terms``)
+        or the shared ``scale`` and ``floor_deg``.
+
+        Parameters
+        ----------
+        spheres : int or (k,) int or None
+            Sphere indices (None: the shared terms).
+        shape : tuple
+            The shape of the result (that of the spheres' statistics).
+        """
+        s = np.full(shape, float(self.scale))
+        t = np.full(shape, float(self.floor_deg))
+        if spheres is None or not self.kind_terms or not self.sphere_kinds:
+            return s, t
+        idx = np.atleast_1d(np.asarray(spheres, dtype=np.intp)).ravel()
+        s, t = np.broadcast_to(s, idx.shape).copy(), np.broadcast_to(t, idx.shape).copy()
+        own = {k: (sk, tk) for k, sk, tk, _ in self.kind_terms}
+        for j, i in enumerate(idx):
+            if 0 <= i < len(self.sphere_kinds) and self.sphere_kinds[i] in own:
+                s[j], t[j] = own[self.sphere_kinds[i]]
+        return s.reshape(shape), t.reshape(shape)
+
+    def distance_sigma_deg(self, coupling_deg: float) -> float:
+        """Per-axis standard deviation (degrees) of a near light's direction from its distance's
+        error: ``coupling_deg * distance_sigma`` (a turn along one axis), half its variance on
+        each tangent axis.
+
+        Parameters
+        ----------
+        coupling_deg : float
+            The photo's turn per unit relative distance error (:func:`distance_coupling_deg`).
+        """
+        return float(abs(float(coupling_deg)) * float(self.distance_sigma) / np.sqrt(2.0))
 
     def cone_deg(self, sigma_axis_deg):
         """95% cone radius (degrees) under this model: ``cone_factor * sigma_axis_deg``.
@@ -316,7 +374,8 @@ class ErrorModel:
         """
         s = np.asarray(stat_sigma_deg, dtype=np.float64)
         g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
-        return np.sqrt((self.scale * s) ** 2 + g ** 2 + self.floor_deg ** 2)
+        sc, tau = self.terms(spheres, np.shape(s))
+        return np.sqrt((sc * s) ** 2 + g ** 2 + tau ** 2)
 
     def systematic_var_deg2(self, stat_sigma_deg, spheres=None) -> np.ndarray:
         """Per-axis variance (degrees squared) of each sphere's systematic error: what its variance
@@ -329,9 +388,9 @@ class ErrorModel:
         """
         s = np.asarray(stat_sigma_deg, dtype=np.float64)
         g = 0.0 if spheres is None else self.centre_sigma_deg(spheres).reshape(np.shape(s))
-        return self.floor_deg ** 2 + g ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
+        return self.shared_var_deg2(s, spheres) + g ** 2
 
-    def shared_var_deg2(self, stat_sigma_deg) -> np.ndarray:
+    def shared_var_deg2(self, stat_sigma_deg, spheres=None) -> np.ndarray:
         """Per-axis variance (degrees squared) of the part of each sphere's systematic error that
         other spheres may share, the base of the common-mode bound: ``tau^2 + max(s^2 - 1, 0)
         sigma^2`` (:meth:`systematic_var_deg2` without the centre term ``g``: a centre error is
@@ -340,9 +399,12 @@ class ErrorModel:
         Parameters
         ----------
         stat_sigma_deg : float or (k,) float
+        spheres : int or (k,) int, optional
+            The spheres' indices (for their kinds' terms, :meth:`terms`).
         """
         s = np.asarray(stat_sigma_deg, dtype=np.float64)
-        return self.floor_deg ** 2 + max(self.scale ** 2 - 1.0, 0.0) * s ** 2
+        sc, tau = self.terms(spheres, np.shape(s))
+        return tau ** 2 + np.maximum(sc ** 2 - 1.0, 0.0) * s ** 2
 
     def common_sigma_deg(self, stat_sigma_deg, spheres=None) -> float:
         """Per-axis standard deviation (degrees) of the common mode of a direction made from these
@@ -369,7 +431,7 @@ class ErrorModel:
         w = _weights(self.sphere_sigma_deg(s, idx) ** 2)
         if w is None:
             return float("inf")
-        u = self.shared_var_deg2(s)
+        u = self.shared_var_deg2(s, idx)
         return float(np.sqrt(self.common_ratio * float(np.sum(w * u)) + self.common_floor_deg ** 2))
 
     def photo_sigma_deg(self, stat_sigma_deg, spheres=None, weights=None) -> float:
@@ -434,12 +496,13 @@ class ErrorModel:
                     "common_floor_deg": common_floor, "sigma_deg": inf, "cone_factor": float(self.cone_factor),
                     "cone_deg": inf}
         g = np.zeros(stat.shape) if idx is None else self.centre_sigma_deg(idx).reshape(stat.shape)
+        sc, tau = self.terms(idx, stat.shape)
         w2 = w * w
         common = float(self.common_sigma_deg(stat, idx))
         sigma = np.sqrt(np.sum(w2 * v) + common ** 2)  # photo_sigma_deg's, without computing v and w again
-        return {"fit_deg": float(np.sqrt(np.sum(w2 * (self.scale * stat) ** 2))),
+        return {"fit_deg": float(np.sqrt(np.sum(w2 * (sc * stat) ** 2))),
                 "centre_deg": float(np.sqrt(np.sum(w2 * g * g))),
-                "floor_deg": float(np.sqrt(np.sum(w2)) * self.floor_deg),
+                "floor_deg": float(np.sqrt(np.sum(w2 * tau * tau))),
                 "common_deg": common, "common_floor_deg": common_floor,
                 "sigma_deg": float(sigma), "cone_factor": float(self.cone_factor),
                 "cone_deg": float(self.cone_deg(sigma))}
@@ -463,7 +526,11 @@ class ErrorModel:
                    centre_deg=tuple(float(x) for x in doc.get("centre_deg", ())),
                    cone_factor=float(doc.get("cone_factor", CONE_FACTOR)), n_tail=int(doc.get("n_tail", 0)),
                    common_ratio=None if ratio is None else float(ratio),
-                   common_floor_deg=float(doc.get("common_floor_deg", COMMON_FLOOR_DEG)))
+                   common_floor_deg=float(doc.get("common_floor_deg", COMMON_FLOOR_DEG)),
+                   distance_sigma=float(doc.get("distance_sigma", 0.0)),
+                   sphere_kinds=tuple(str(k) for k in doc.get("sphere_kinds", ())),
+                   kind_terms=tuple((str(k), float(t["scale"]), float(t["floor_deg"]), int(t.get("n_photos", 0)))
+                                    for k, t in (doc.get("kinds") or {}).items()))
 
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
@@ -478,7 +545,11 @@ class ErrorModel:
                 "source": self.source, "n_photos": int(self.n_photos), "n_trimmed": int(self.n_trimmed),
                 "cone_factor": float(self.cone_factor), "n_tail": int(self.n_tail), "confidence": CONFIDENCE,
                 "common_ratio": None if self.common_ratio is None else float(self.common_ratio),
-                "common_floor_deg": float(self.common_floor_deg)}
+                "common_floor_deg": float(self.common_floor_deg),
+                "distance_sigma": float(self.distance_sigma),
+                "sphere_kinds": list(self.sphere_kinds),
+                "kinds": {k: {"scale": float(sk), "floor_deg": float(tk), "n_photos": int(n)}
+                          for k, sk, tk, n in self.kind_terms}}
 
 
 def _weights(v: np.ndarray, weights=None) -> np.ndarray | None:
@@ -621,7 +692,7 @@ def tail_factor(residuals: list[np.ndarray], variances: list[np.ndarray], confid
 def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
                     common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
                     fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4,
-                    spheres: list[np.ndarray] | None = None, centre_deg=None) -> ErrorModel:
+                    spheres: list[np.ndarray] | None = None, centre_deg=None, kinds=None) -> ErrorModel:
     """The capture's error model from its spheres' disagreement (module docstring, parts 2 and 3).
 
     Parameters
@@ -650,6 +721,15 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         Per sphere, the per-axis standard deviation (degrees) its centre's uncertainty gives its
         direction (:func:`centre_floor_deg`): a known variance component of each sphere, so
         that ``tau`` is what remains beyond it.
+    kinds : (n_spheres,) str, optional
+        Per sphere, its kind (``'matte'``, ``'mirror'``), with ``spheres``. A kind whose spheres
+        disagree among themselves (two or more of them used) in at least ``min_photos`` kept photos
+        gets its own scale and floor, fitted (restricted maximum likelihood again, on the same
+        kept photos) with the other spheres at the shared fit's: a mirror's highlight and a
+        matte ball's shading err differently, and one scale and floor for both let either set
+        the other's cone (a chrome ball's larger sigma moved a grey ball's floor from 0.03 to 4.4
+        degrees, ``docs/spheres.md``). A capture of one kind, or without enough of any, keeps
+        the shared fit alone.
 
     Returns
     -------
@@ -661,18 +741,20 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     from scipy.special import chdtrc
     centre = np.zeros(0) if centre_deg is None else np.asarray(centre_deg, dtype=np.float64)
     centre_rad2 = np.radians(np.nan_to_num(centre)) ** 2
-    data = []
+    data, index = [], []
     for j, (r, s) in enumerate(zip(residuals, stat_sigma_deg)):
         r = np.asarray(r, dtype=np.float64).reshape(-1, 2)
         s = np.radians(np.asarray(s, dtype=np.float64).ravel())
         g2 = np.zeros(s.size)
-        if spheres is not None and centre.size:
+        idx = np.full(s.size, -1, dtype=np.intp)
+        if spheres is not None and np.asarray(spheres[j]).size == s.size:
             idx = np.asarray(spheres[j], dtype=np.intp).ravel()
-            if idx.size == s.size:
+            if centre.size:
                 g2 = np.where(idx < centre.size, centre_rad2[np.minimum(idx, centre.size - 1)], 0.0)
         if r.shape[0] >= 2 and r.shape[0] == s.size and np.all(np.isfinite(r)) and np.all(np.isfinite(s)) \
                 and np.all(s > 0):
             data.append((r, s * s, g2))
+            index.append(idx)
     if len(data) < min_photos:
         return FALLBACK_MODEL.with_centres(centre)
     keep = np.ones(len(data), dtype=bool)
@@ -692,7 +774,10 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
 
     def terms(x):
         """Per photo: -2 log restricted likelihood and chi-square of the scatter."""
-        v = np.exp(2.0 * x[0]) * S2_all + G2_all + np.exp(2.0 * x[1])
+        return terms_of(np.exp(2.0 * x[0]) * S2_all + G2_all + np.exp(2.0 * x[1]))
+
+    def terms_of(v):
+        """:func:`terms` of the spheres' variances ``v``."""
         w = 1.0 / v
         sw = np.add.reduceat(w, starts)
         mu = np.add.reduceat(w[:, None] * R_all, starts) / sw[:, None]
@@ -727,17 +812,61 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         keep = new_keep
     n_trimmed = int((~keep).sum())
     scale, tau = float(np.exp(x[0])), float(np.exp(x[1]))
+    # per kind: its own scale and floor where its spheres disagree among themselves in enough photos
+    I_all = np.concatenate(index)
+    kind_names = tuple(str(k) for k in (kinds if kinds is not None else ()))
+    kind_of = np.array([kind_names[i] if 0 <= i < len(kind_names) else "" for i in I_all], dtype=object)
+    counts = {kd: np.add.reduceat((kind_of == kd).astype(np.intp), starts) for kd in set(kind_of) - {""}}
+    own = sorted(kd for kd, n in counts.items() if int(np.sum((n >= 2) & keep)) >= min_photos)
+    var_all = np.exp(2.0 * x[0]) * S2_all + G2_all + np.exp(2.0 * x[1])
+    kind_terms = ()
+    if own and set(kind_of) != {own[0]}:  # one kind alone: the shared fit is its own
+        group = np.array([own.index(kd) + 1 if kd in own else 0 for kd in kind_of])
+        n_own = len(own)
+
+        def kind_var(y):
+            ls = np.concatenate([[x[0]], y[0::2]])[group]
+            lt = np.concatenate([[x[1]], y[1::2]])[group]
+            return np.exp(2.0 * ls) * S2_all + G2_all + np.exp(2.0 * lt)
+
+        def kind_objective(y):
+            return float(np.sum(terms_of(kind_var(y))[0][keep]))
+
+        # each kind's starts: the local minima of its grid profile, the other kinds at the shared fit
+        y_shared = np.tile(x, n_own)
+        candidates = []
+        for j in range(n_own):
+            f = []
+            for g in grid:
+                y = y_shared.copy()
+                y[2 * j:2 * j + 2] = g
+                f.append(kind_objective(y))
+            f = np.array(f).reshape(-1, START_GRID)
+            prof = f.min(axis=1)
+            padded = np.concatenate([[np.inf], prof, [np.inf]])
+            rows = np.flatnonzero((prof <= padded[:-2]) & (prof <= padded[2:]))
+            candidates.append([x] + [grid.reshape(-1, START_GRID, 2)[i, int(np.argmin(f[i]))] for i in rows])
+        from itertools import product
+        bounds = list(zip(np.tile(lo, n_own), np.tile(hi, n_own)))
+        fits = [minimize(kind_objective, np.concatenate(c), method="L-BFGS-B", bounds=bounds)
+                for c in product(*candidates)]
+        y = min(fits, key=lambda f: f.fun).x
+        var_all = kind_var(y)
+        kind_terms = tuple((kd, float(np.exp(y[2 * j])), float(np.degrees(np.exp(y[2 * j + 1]))),
+                            int(np.sum((counts[kd] >= 2) & keep))) for j, kd in enumerate(own))
     # the systematic per-sphere variance: the floor, plus what the scale adds beyond the statistics
     s2_med = float(np.median(np.concatenate([s2 for (_, s2, _), k in zip(data, keep) if k] or [np.zeros(1)])))
     sys_var = tau * tau + max(scale * scale - 1.0, 0.0) * s2_med  # shared_var_deg2: no centre term
     common = common_mode_deg(float(np.degrees(np.sqrt(sys_var))) ** 2, common_correlation)
     # the cone's radius from the capture's own standardised leave-one-out offsets (kept photos)
+    var_photo = np.split(var_all, np.cumsum(k_all)[:-1])
     factor, n_tail = tail_factor([r for (r, _, _), k in zip(data, keep) if k],
-                                 [scale * scale * s2 + g2 + tau * tau for (_, s2, g2), k in zip(data, keep) if k])
+                                 [v for v, k in zip(var_photo, keep) if k])
     return ErrorModel(scale=scale, floor_deg=float(np.degrees(tau)), common_deg=common,
                       source="disagreement", n_photos=int(keep.sum()), n_trimmed=n_trimmed,
                       centre_deg=tuple(float(x) for x in centre), cone_factor=factor, n_tail=n_tail,
-                      common_ratio=_ratio(common_correlation))
+                      common_ratio=_ratio(common_correlation),
+                      sphere_kinds=kind_names if kind_terms else (), kind_terms=kind_terms)
 
 
 def photo_residuals(directions: np.ndarray, light_direction: np.ndarray, position: np.ndarray | None = None,
@@ -911,3 +1040,70 @@ def own_parameter_deg(shifts: np.ndarray, weights, standard_errors) -> float:
         return 0.0
     w = w / w.sum()
     return float(np.degrees(np.sqrt(np.sum((w * np.linalg.norm(t, axis=1) * se) ** 2) / 2.0)))
+
+
+# ----------------------------------------------------------------------------- a near light's distance
+def distance_coupling_deg(v: np.ndarray, cov_v: np.ndarray) -> float:
+    """How far a near light's direction moves with its distance's error, along the fit's coupling.
+
+    A near light's position ``p`` is triangulated from the spheres; its direction is reported
+    from the scene centre, ``v = p - c``. Where the spheres that place it stand off the centre
+    (two matte balls of one row, the mirrors of the other row without a highlight), an error of
+    the light's distance moves the position along the spheres' own ray, and so turns ``v``: the
+    direction error is the distance error times the parallax. The fit's covariance ``cov_v``
+    carries that coupling; its statistical size does not carry a systematic distance error
+    (``docs/spheres.md``, "Near captures: the light's distance seen from the scene centre").
+    The regression of the direction's tangent offset on the relative distance ``|v|``, under
+    ``cov_v``, gives the expected turn per unit relative distance error:
+    ``|E C u| / (u^T C u)`` with ``u = v / |v|`` and ``E`` the tangent basis at ``u``.
+
+    Parameters
+    ----------
+    v : (3,) float
+        The light's position from the scene centre.
+    cov_v : (3, 3) float
+        Its covariance (the joint fit's).
+
+    Returns
+    -------
+    float
+        Degrees per unit relative distance error (0 where the covariance is not finite or has
+        no radial part).
+    """
+    v = np.asarray(v, dtype=np.float64)
+    C = np.asarray(cov_v, dtype=np.float64)
+    nv = float(np.linalg.norm(v))
+    if not (np.isfinite(nv) and nv > 0 and C.shape == (3, 3) and np.all(np.isfinite(C))):
+        return 0.0
+    u = v / nv
+    radial = float(u @ C @ u)
+    if not radial > 0:
+        return 0.0
+    e1, e2 = tangent_basis(u)
+    cu = C @ u
+    return float(np.degrees(np.hypot(e1 @ cu, e2 @ cu) / radial))
+
+
+def distance_spread(distances) -> float:
+    """Relative 1-sigma spread of a capture's near lights' distances: ``1.4826 MAD`` of their logs.
+
+    Of a rig whose lamps stand at one distance (a dome, the paper's gantry) it is the
+    triangulation's own distance error; of hand-held lamps it is larger by their true spread, so
+    the cones it widens (:meth:`ErrorModel.distance_sigma_deg`) are then wider than needed.
+
+    Parameters
+    ----------
+    distances : (n,) float
+        The near lights' distances from the scene centre.
+
+    Returns
+    -------
+    float
+        0 with fewer than 3 finite positive distances.
+    """
+    d = np.asarray(distances, dtype=np.float64).ravel()
+    d = d[np.isfinite(d) & (d > 0)]
+    if d.size < 3:
+        return 0.0
+    l = np.log(d)
+    return float(1.4826 * np.median(np.abs(l - np.median(l))))
