@@ -328,7 +328,26 @@ def test_cli_conditions(tmp_path, capsys):
     assert (pair / "calibration" / "lights.json").is_file() and not (pair / "object" / "lights.json").exists()
 
 
+def test_cli_supersample_antialiases_the_outlines(tmp_path):
+    """``--supersample S`` averages S x S rays per pixel: the same picture, with the outlines' pixels
+    mixed (a mirror ball's limb as a lens gives it, not one ray through each pixel's centre)."""
+    from ffls.io.capture import load_capture
+    from ffls.radiance.photos import load_photo
+
+    ims = []
+    for s in (1, 3):
+        out = tmp_path / f"s{s}"
+        assert _main(["synth", str(out), "--lights", "1", "--resolution", "48", "--quiet", "--spheres", "1",
+                      "--sphere-material", "mirror", "--no-object", "--supersample", str(s)]) == 0
+        ims.append(np.asarray(load_photo(load_capture(out), 0), dtype=np.float64))
+    d = np.abs(ims[1] - ims[0]).max(axis=-1)
+    assert np.count_nonzero(d > 1e-3) > 20  # the outlines' pixels changed
+    assert abs(ims[1].mean() / ims[0].mean() - 1) < 0.05  # the picture did not
+    assert np.median(d) < 1e-3
+
+
 @pytest.mark.parametrize("argv, flag", [
+    (["--supersample", "0"], "--supersample"),
     (["--sphere-material", "chrome"], "--sphere-material"),
     (["--spheres", "-1"], "--spheres"),
     (["--spheres", "2", "--sphere-material", "mirror,grey,grey"], "--sphere-material"),

@@ -106,6 +106,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="output capture folder (created if missing)")
     p.add_argument("--lights", type=N_LIGHTS, default=100, metavar="N", help="number of images (default 100)")
     p.add_argument("--resolution", type=SYNTH_RES, default=256, metavar="R", help="image width and height (default 256)")
+    p.add_argument("--supersample", type=integer(1, 8), default=1, metavar="S",
+                   help="S x S rays per pixel, averaged: an anti-aliased outline, as a lens and sensor give "
+                        "(default 1: one ray through each pixel's centre)")
     p.add_argument("--near", type=number(0.0, 1e6, lo_open=True), default=None, metavar="DIST",
                    help="point lights at DIST metres from the scene centre instead of distant lights")
     p.add_argument("--light-radius", type=number(0.0, 1e6), default=None, metavar="M",
@@ -227,6 +230,7 @@ def scene_of(args: argparse.Namespace):
     kw = {"ground_texture": "checker"} if args.background == "checker" else {}
     if args.ground_albedo is not None:
         kw["ground_albedo"] = args.ground_albedo
+    kw["supersample"] = getattr(args, "supersample", 1)
     return make_scene(spheres=n, sphere_material=mats, background=background, lens=args.lens,
                       with_object=not args.no_object, sphere_xy=args.sphere_xy, sphere_radius=args.sphere_radius, **kw)
 
