@@ -308,3 +308,66 @@ def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
 
     detect.trimmed_fit(residuals, p, s, 1.0, 3.0)
     assert seen and all(seen)
+
+
+def test_hints_fitted_in_one_call(monkeypatch):
+    """The hints' fits are one ``_fit_candidates`` call (which undistorts the image's edge points
+    once), not one per hint; the retries another; the same spheres as each hint fitted alone."""
+    scene = ds.layout(3, seed=22)
+    seq = ds.render(scene, LIGHTS, "white")
+    hints = [{"center_px": list(scene.centre_px(b) + [3.0, -2.0])} for b in scene.balls]
+    hints[1]["radius_px"] = float(np.mean(np.hypot(*(detect.silhouette_px(scene.K, None, scene.balls[1].center, 0.04)
+                                                      - scene.centre_px(scene.balls[1])).T)))
+    calls = []
+    real = detect._fit_candidates
+
+    def counted(cands, *a, **k):
+        calls.append(len(cands))
+        return real(cands, *a, **k)
+
+    monkeypatch.setattr(detect, "_fit_candidates", counted)
+    fits = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints, retry_hints=False)
+    assert calls == [3], calls
+    assert len(fits) == 3 and all(f.source == "hint" for f in fits)
+    assert max(_errors(scene, fits)) < 0.6
+    alone = [detect.find_spheres(seq, scene.K, None, 0.04, hints=[h], retry_hints=False)[0] for h in hints]
+    assert [f.center_px.tolist() for f in fits] == [f.center_px.tolist() for f in alone]
+
+
+def test_outline_refits_undistort_their_points_once(monkeypatch):
+    """``_fit_until_stable`` undistorts its points once for all its rounds (each round's fit and
+    band read the same rays; they were undistorted twice a round): the same fit as before."""
+    K = np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]])
+    dist = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
+    cam = detect.DetectionCamera("pinhole", K, dist, np.eye(4), 0.04, (240, 320))
+    C = np.array([0.02, -0.01, 0.6])
+    rng = np.random.default_rng(3)
+    P = detect.silhouette_px(K, dist, C, 0.04, n=240) + rng.normal(0, 0.3, (240, 2))
+    P = np.concatenate([P, rng.uniform([100, 60], [220, 180], (60, 2))])  # clutter inside and around
+    c0 = detect.project_points(C[None], K, dist)[0] + [1.5, -1.0]
+    on = np.abs(np.hypot(*(P - c0).T) - 34.0) <= detect.OUTLINE_BAND_PX
+    many = []
+    real = detect.pixel_rays
+
+    def counted(px, *a, **k):
+        if len(np.asarray(px).reshape(-1, 2)) > 1:
+            many.append(len(np.asarray(px).reshape(-1, 2)))
+        return real(px, *a, **k)
+
+    def before(on, c0_px, r0_px):  # the rounds as written before: each undistorting the points
+        ft = None
+        for _ in range(4):
+            ft = detect._fit_outline(P[on], cam, c0_px, r0_px, "auto")
+            c0_px, r0_px = ft.center_px, ft.radius_px
+            new = np.abs(detect.outline_residuals_px(ft, P, cam)) <= detect.OUTLINE_BAND_PX
+            if np.array_equal(new, on):
+                break
+            on = new
+        return ft
+
+    want = before(on, c0, 34.0)
+    monkeypatch.setattr(detect, "pixel_rays", counted)
+    got = detect._fit_until_stable(P, on, cam, c0, 34.0, "auto")
+    assert many == [len(P)], many
+    assert np.hypot(*(got.center_px - detect.project_points(C[None], K, dist)[0])) < 0.3
+    assert got.center_px.tolist() == want.center_px.tolist() and got.residual_px == want.residual_px

@@ -1455,10 +1455,12 @@ def _centre_sigma_px(fun, p, args) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
 
 
-def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None):
+def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None, rays=None):
     """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails.
 
     The fit's ``center_sigma_px`` is the standard error of its centre (:func:`_centre_sigma_px`).
+    ``rays`` (m, 3), optional: ``pixel_rays(P, cam.K, cam.dist)`` where the caller has them
+    (pinhole; each point's ray is undistorted on its own, so a subset's are the same floats).
     """
     if cam.ortho:
         c, r, inl, res = fit_circle(P, c0_px, r0_px)
@@ -1472,7 +1474,7 @@ def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None):
     c0 = pixel_rays(np.asarray(c0_px, dtype=np.float64)[None], K_und)[0]
     edge_ray = pixel_rays((np.asarray(c0_px, dtype=np.float64) + [r0_px, 0])[None], K_und)[0]
     a0 = float(angle_between(c0, edge_ray))
-    s = pixel_rays(P, cam.K, cam.dist)
+    s = pixel_rays(P, cam.K, cam.dist) if rays is None else rays
     C, inl, res = fit_sphere_center(s, cam.R, f, c0, a0)
     rms = float(np.sqrt(np.mean(res[inl] ** 2)))
     ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
@@ -1878,34 +1880,59 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
     ``retry`` the first fit stands.
     """
     H, W = shape
-    cands, fits, failures = [], [], []
     limit = CRITERIA["max_center_sigma_px"]
-    for k, h in enumerate(hint_info):
+    starts = []  # per hint: its start circle, or None
+    for h in hint_info:
         cpx, rpx = h[0], h[1]
         cand = None if rpx is None else (float(cpx[0]), float(cpx[1]), float(rpx))
         if rpx is None:
             lo, hi = _hint_radius_range(h, shape)
             r0 = _radius_from_edges(edges.points, edges.grads, cpx, hi, lo)
             cand = None if r0 is None else (float(cpx[0]), float(cpx[1]), float(r0))
-        got = _fit_candidates([cand], edges, cam, 0.35, "hint", workers) if cand is not None else ([], [])
-        first = got[0][0] if got[0] else None
+        starts.append(cand)
+    # the hints' fits in one call, then the retries' in one (each call undistorts the image's
+    # edge points once, and its workers share the circles)
+    firsts = _fit_each([c for c in starts if c is not None], edges, cam, 0.35, "hint", workers)
+    got = [firsts.pop(0) if c is not None else ([], []) for c in starts]
+    agains = {}
+    for k, h in enumerate(hint_info):
+        first = got[k][0][0] if got[k][0] else None
         if retry and (first is None or first.center_sigma_px > limit):
-            again = cand if rpx is not None else None
+            cpx, rpx = h[0], h[1]
+            again = starts[k] if rpx is not None else None
             if rpx is None:
+                lo, hi = _hint_radius_range(h, shape)
                 near = _circle_near_hint(edges.points, edges.grads, cpx, lo, hi)
                 again = None if near is None else (float(near[0][0]), float(near[0][1]), float(near[1]))
-            second = _fit_candidates([again], edges, cam, 0.35, "hint", workers, narrow=True)[0] \
-                if again is not None else []
+            if again is not None:
+                agains[k] = again
+    seconds = _fit_each(list(agains.values()), edges, cam, 0.35, "hint", workers, narrow=True)
+    cands, fits, failures = [], [], []
+    for k, h in enumerate(hint_info):
+        cpx, cand = h[0], starts[k]
+        if k in agains:
+            first = got[k][0][0] if got[k][0] else None
+            second = seconds.pop(0)[0]
             if second and (first is None or second[0].center_sigma_px < first.center_sigma_px):
-                got, cand = (second, []), again
+                got[k], cand = (second, []), agains[k]
         if cand is None:
             raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
                              f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
         cands.append(cand)
-        fits += got[0]
-        failures += [(k, *f[1:]) for f in got[1]]
+        fits += got[k][0]
+        failures += [(k, *f[1:]) for f in got[k][1]]
     _check_duplicate_circles(cands, "hint", source)
     return fits, failures
+
+
+def _fit_each(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
+              narrow: bool = False) -> list:
+    """:func:`_fit_candidates` of ``cands`` in one call, split per candidate: ``[(fits, failures)]``
+    as a call on that candidate alone returns (one fit or one failure)."""
+    if not cands:
+        return []
+    return [([], [d]) if isinstance(d, tuple) else ([d], [])
+            for d in _fit_candidates(cands, edges, cam, search_tol, label, workers, narrow, split=False)]
 
 
 def shading_ratio(L_max, L_mean) -> np.ndarray:
@@ -2164,7 +2191,7 @@ def _forked_map(fn, n: int, workers: int) -> list:
 
 
 def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
-                    narrow: bool = False):
+                    narrow: bool = False, split: bool = True):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
@@ -2175,7 +2202,8 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, la
     busy ground's edges fill the search band and pull a fit to all of them off the outline): the
     second try of a hint (:func:`_fit_hints`). Returns the fits and the failures ``(k, x, y, r, why)``.
     The candidates are independent: with ``workers > 1`` they are fitted in that many forked
-    processes (the same fits, in the same order).
+    processes (the same fits, in the same order). Without ``split``: one list, each candidate's
+    fit or failure in the candidates' order.
     """
     pts = edges.points
     if cam.ortho:
@@ -2191,6 +2219,8 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, la
         done = _forked_map(_fit_candidate, len(context.cands), workers if len(pts) else 1)
     finally:
         _candidate_context = None
+    if not split:
+        return done
     fits = [d for d in done if not isinstance(d, tuple)]
     failures = [d for d in done if isinstance(d, tuple)]
     return fits, failures
@@ -2620,13 +2650,15 @@ def _is_mirror_outline(ft, L) -> bool:
     return ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
 
 
-def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144) -> float:
+def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144, tree=None) -> float:
     """Share of a fitted sphere's outline within ``tol`` pixels of an edge point.
 
     The outline is sampled at ``n`` points (pinhole: the tangent cone's ellipse,
     :func:`silhouette_px`; orthographic: the circle); each counts when an edge point of ``points``
     ((m, 2) x, y) lies within ``tol`` of it. With the image ``shape`` (H, W) the share is of the
-    samples in the frame. 0 without points or samples.
+    samples in the frame. 0 without points or samples. ``tree``, optional: a
+    ``scipy.spatial.cKDTree`` of ``points``, for a caller that measures several outlines on the
+    same points (built here otherwise).
     """
     from scipy.spatial import cKDTree
 
@@ -2641,7 +2673,7 @@ def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144) -> f
         P = P[(P[:, 0] >= 0) & (P[:, 0] <= W - 1) & (P[:, 1] >= 0) & (P[:, 1] <= H - 1)]
     if len(pts) == 0 or len(P) == 0:
         return 0.0
-    d, _ = cKDTree(pts).query(P, distance_upper_bound=tol + 1e-9)
+    d, _ = (cKDTree(pts) if tree is None else tree).query(P, distance_upper_bound=tol + 1e-9)
     return float(np.mean(d <= tol))
 
 
@@ -2673,11 +2705,12 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
     (:func:`_outline_ambiguity`), not the outline's it replaces. Unchanged without the evidence
     (None: fewer than 3 photos, or a tensor without the summed gradient).
     """
-    def refit(ft, pts):
+    def refit(ft, pts, tree):
         c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
         new = fit_on_consistent_edges(c0, r0, changing, cam, ft.source, MIRROR_CHANGING_BAND)
         if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
-                or outline_support(new, pts, cam.shape) < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape)):
+                or outline_support(new, pts, cam.shape, tree=tree)
+                < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape, tree=tree)):
             return None
         return new
 
@@ -2688,16 +2721,23 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
 
 def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera, refit) -> list:
     """``fits`` with each mirror ball's outline (:func:`_is_mirror_outline`, not an override)
-    replaced by ``refit(fit, changing_points)`` where that gives one (not None): the replacement
+    replaced by ``refit(fit, changing_points, tree)`` where that gives one (not None; ``tree`` a
+    ``cKDTree`` of the points for :func:`outline_support`, built once): the replacement
     keeps the score, is marked as outlined on :data:`PHOTO_EDGES` and gets its own ambiguity
     (:func:`_outline_ambiguity`). Unchanged without the evidence (``changing`` None)."""
     if changing is None or not fits:
         return fits
     pts = changing.points[0]
-    log_l = None  # the image's log, taken once and only where an outline is replaced
+    log_l = tree = None  # the image's log and the points' tree: made once, only where needed
     out = []
     for ft in fits:
-        new = None if ft.source == "override" or not _is_mirror_outline(ft, L) else refit(ft, pts)
+        new = None
+        if ft.source != "override" and _is_mirror_outline(ft, L):
+            if tree is None:
+                from scipy.spatial import cKDTree
+
+                tree = cKDTree(np.asarray(pts, dtype=np.float64).reshape(-1, 2))
+            new = refit(ft, pts, tree)
         if new is None:
             out.append(ft)
             continue
@@ -2736,7 +2776,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
     make circles that enclose it; they are broken arcs, 0.34-0.62 of them on the changing edges,
     against 0.88-0.97 for a silhouette. Unchanged without the evidence (``changing`` None).
     """
-    def grow(ft, pts):
+    def grow(ft, pts, tree):
         cur, cur_support, grown = ft, None, False  # the current outline's support, once measured
         for _ in range(max_steps):
             oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
@@ -2746,11 +2786,11 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
                 new = _fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
             except ValueError:
                 break
-            support = outline_support(new, pts, cam.shape)
+            support = outline_support(new, pts, cam.shape, tree=tree)
             if new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT:
                 break
             if cur_support is None:
-                cur_support = outline_support(cur, pts, cam.shape)
+                cur_support = outline_support(cur, pts, cam.shape, tree=tree)
             if support <= cur_support:
                 break
             cur, cur_support, grown = new, support, True
@@ -2797,17 +2837,18 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
 OUTLINE_BAND_PX = 1.5
 
 
-def outline_residuals_px(ft, points, cam: DetectionCamera) -> np.ndarray:
+def outline_residuals_px(ft, points, cam: DetectionCamera, rays=None) -> np.ndarray:
     """Signed distances (pixels; positive outside) of ``points`` ((n, 2) x, y) from a fitted
     sphere's outline: the tangent cone's (:func:`_cone_residuals`, the fit's own residual) for a
-    pinhole camera, the circle's for an orthographic one."""
+    pinhole camera, the circle's for an orthographic one. ``rays`` (n, 3), optional: the points'
+    ``pixel_rays(points, cam.K, cam.dist)`` where the caller has them (pinhole)."""
     P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     if cam.ortho:
         return _circle_residuals([ft.center_px[0], ft.center_px[1], ft.radius_px], P)
     C = np.asarray(ft.center_cam, dtype=np.float64)
     d = C / np.linalg.norm(C)
     p = cam.f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
-    return _cone_residuals(p, pixel_rays(P, cam.K, cam.dist), cam.f)
+    return _cone_residuals(p, pixel_rays(P, cam.K, cam.dist) if rays is None else rays, cam.f)
 
 
 def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_points: int = 8, rounds: int = 4):
@@ -2822,15 +2863,17 @@ def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_poi
     starts end in the same set and the same fit (docs/spheres.md "Circle fits that do not depend
     on their start")."""
     ft = None
+    # the points undistorted once (pinhole): every round's fit and band read the same rays
+    rays = None if cam.ortho else pixel_rays(np.asarray(P, dtype=np.float64).reshape(-1, 2), cam.K, cam.dist)
     for _ in range(rounds):
         if np.count_nonzero(on) < min_points:
             return ft
         try:
-            ft = _fit_outline(P[on], cam, c0_px, r0_px, source)
+            ft = _fit_outline(P[on], cam, c0_px, r0_px, source, rays=None if rays is None else rays[on])
         except ValueError:
             return ft
         c0_px, r0_px = ft.center_px, ft.radius_px
-        new = np.abs(outline_residuals_px(ft, P, cam)) <= OUTLINE_BAND_PX
+        new = np.abs(outline_residuals_px(ft, P, cam, rays)) <= OUTLINE_BAND_PX
         if np.array_equal(new, on):
             break
         on = new
