@@ -336,7 +336,9 @@ def test_hints_fitted_in_one_call(monkeypatch):
 
 def test_outline_refits_undistort_their_points_once(monkeypatch):
     """``_fit_until_stable`` undistorts its points once for all its rounds (each round's fit and
-    band read the same rays; they were undistorted twice a round): the same fit as before."""
+    band read the same rays; they were undistorted twice a round), and makes a SphereFit (visible
+    share, coverage, centre's standard error) of the round it returns only: the same fit as
+    before, every field."""
     K = np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]])
     dist = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
     cam = detect.DetectionCamera("pinhole", K, dist, np.eye(4), 0.04, (240, 320))
@@ -366,8 +368,31 @@ def test_outline_refits_undistort_their_points_once(monkeypatch):
         return ft
 
     want = before(on, c0, 34.0)
+    made, solved = [], []
+    real_make, real_solve = detect._make_fit, detect._outline_solved
+
+    def make(*a, **k):
+        made.append(1)
+        return real_make(*a, **k)
+
+    def solve(*a, **k):
+        solved.append(1)
+        return real_solve(*a, **k)
+
     monkeypatch.setattr(detect, "pixel_rays", counted)
+    monkeypatch.setattr(detect, "_make_fit", make)
+    monkeypatch.setattr(detect, "_outline_solved", solve)
     got = detect._fit_until_stable(P, on, cam, c0, 34.0, "auto")
     assert many == [len(P)], many
+    assert len(solved) >= 2 and len(made) == 1, (solved, made)  # several rounds, one SphereFit
     assert np.hypot(*(got.center_px - detect.project_points(C[None], K, dist)[0])) < 0.3
-    assert got.center_px.tolist() == want.center_px.tolist() and got.residual_px == want.residual_px
+    for name in ("center_px", "center_cam", "radius_px", "residual_px", "coverage", "visible_fraction",
+                 "center_sigma_px", "n_inliers", "n_edge_points", "edge_px"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    # a fit its caller drops for its RMS (the photo-edge circles, over PHOTO_EDGE_MAX_RESIDUAL_PX) is
+    # not made at all: None, as the caller's test would have it
+    made.clear()
+    assert detect._fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=0.99 * want.residual_px) is None
+    assert made == []
+    kept = detect._fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=want.residual_px)
+    assert kept.residual_px == want.residual_px and np.array_equal(kept.center_px, want.center_px)

@@ -1405,13 +1405,19 @@ class DetectionCamera:
         return float(np.sqrt(self.K[0, 0] * self.K[1, 1]))
 
 
-def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0,
-              shape=None):
+def _outline_circle_px(C, R, K, dist) -> tuple[np.ndarray, float]:
+    """A sphere's projected centre (2,) and mean outline radius (pixels), as a SphereFit has them."""
     outline = silhouette_px(K, dist, C, R)
     cpx = project_points(np.asarray(C)[None], K, dist)[0]
+    return cpx, float(np.mean(np.hypot(*(outline - cpx).T)))
+
+
+def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0,
+              shape=None):
+    cpx, rpx = _outline_circle_px(C, R, K, dist)
     return SphereFit(
         center_cam=np.asarray(C, dtype=np.float64), center_world=to_world(C, wfc), radius=float(R),
-        center_px=cpx, radius_px=float(np.mean(np.hypot(*(outline - cpx).T))), residual_px=float(residual),
+        center_px=cpx, radius_px=rpx, residual_px=float(residual),
         n_edge_points=int(n_edge), n_inliers=int(n_in), inlier_fraction=float(n_in / n_edge) if n_edge else 1.0,
         coverage=float(coverage), source=source, edge_px=np.zeros((0, 2)) if edge_px is None else edge_px,
         K=K, dist=dist, world_from_camera=wfc,
@@ -1462,13 +1468,53 @@ def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None, ray
     ``rays`` (m, 3), optional: ``pixel_rays(P, cam.K, cam.dist)`` where the caller has them
     (pinhole; each point's ray is undistorted on its own, so a subset's are the same floats).
     """
+    return _outline_solved(P, cam, c0_px, r0_px, rays).fit(cam, source, n_edge)
+
+
+@dataclasses.dataclass
+class _OutlineSolution:
+    """The robust fit of :func:`_fit_outline` before its bookkeeping (:meth:`fit`): what a round of
+    :func:`_fit_until_stable` needs to place its band (``center_px``, ``radius_px``,
+    ``center_cam``), the rest (visible share, coverage, centre's standard error) made only for
+    the round it returns."""
+
+    P: np.ndarray
+    inl: np.ndarray
+    res: np.ndarray
+    center_px: np.ndarray
+    radius_px: float
+    center_cam: np.ndarray | None = None  # pinhole
+    rays: np.ndarray | None = None  # pinhole: the points' rays
+
+    @property
+    def rms(self) -> float:
+        """RMS distance (pixels) of the inliers from the outline: the fit's ``residual_px``."""
+        return float(np.sqrt(np.mean(self.res[self.inl] ** 2)))
+
+    def fit(self, cam: DetectionCamera, source, n_edge=None) -> SphereFit:
+        P, inl, rms = self.P, self.inl, self.rms
+        if cam.ortho:
+            c, r = self.center_px, self.radius_px
+            ft = _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
+                                 n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
+            ft.center_sigma_px = _centre_sigma_px(_circle_residuals, [c[0], c[1], r], (P[inl],))
+            return ft
+        C, f, s = self.center_cam, cam.f, self.rays
+        ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
+                       n_edge=n_edge or len(P), n_in=int(inl.sum()),
+                       coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
+        d = C / np.linalg.norm(C)
+        p = f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
+        ft.center_sigma_px = _centre_sigma_px(_cone_residuals, p, (s[inl], f))
+        return ft
+
+
+def _outline_solved(P, cam: DetectionCamera, c0_px, r0_px, rays=None) -> _OutlineSolution:
+    """The robust fit of :func:`_fit_outline` (``ValueError`` if it fails), its bookkeeping left
+    to :meth:`_OutlineSolution.fit`."""
     if cam.ortho:
         c, r, inl, res = fit_circle(P, c0_px, r0_px)
-        rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-        ft = _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
-                             n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
-        ft.center_sigma_px = _centre_sigma_px(_circle_residuals, [c[0], c[1], r], (P[inl],))
-        return ft
+        return _OutlineSolution(P, inl, res, np.asarray(c, dtype=np.float64), float(r))
     f = cam.f
     K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])
     c0 = pixel_rays(np.asarray(c0_px, dtype=np.float64)[None], K_und)[0]
@@ -1476,14 +1522,8 @@ def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None, ray
     a0 = float(angle_between(c0, edge_ray))
     s = pixel_rays(P, cam.K, cam.dist) if rays is None else rays
     C, inl, res = fit_sphere_center(s, cam.R, f, c0, a0)
-    rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-    ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
-                   n_edge=n_edge or len(P), n_in=int(inl.sum()),
-                   coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
-    d = C / np.linalg.norm(C)
-    p = f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
-    ft.center_sigma_px = _centre_sigma_px(_cone_residuals, p, (s[inl], f))
-    return ft
+    cpx, rpx = _outline_circle_px(C, cam.R, cam.K, cam.dist)
+    return _OutlineSolution(P, inl, res, cpx, rpx, np.asarray(C, dtype=np.float64), s)
 
 
 # ----------------------------------------------------------------------------- hints
@@ -2172,7 +2212,9 @@ def photo_edge_fit(k: int):
     the bench rows and cost 10-40 % of the detection, docs/spheres.md); None where there is no fit."""
     circles, evidence, cam = _photo_edge_context
     p, x, y, r = circles[k]
-    return fit_on_consistent_edges(np.array([x, y]), float(r), evidence[p], cam, "auto")
+    # a fit over PHOTO_EDGE_MAX_RESIDUAL_PX is dropped (_photo_edge_fits): none is made of it
+    return fit_on_consistent_edges(np.array([x, y]), float(r), evidence[p], cam, "auto",
+                                   max_rms_px=PHOTO_EDGE_MAX_RESIDUAL_PX)
 
 
 def _forked_map(fn, n: int, workers: int) -> list:
@@ -2800,7 +2842,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
 
 
 def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
-                             min_points: int = 8):
+                             min_points: int = 8, max_rms_px: float | None = None):
     """A sphere fitted on the ridge points of ``ev`` (:func:`consistent_edge_points`) near the circle
     ``(c0, r0)`` (pixels), or None.
 
@@ -2808,7 +2850,7 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
     (``|cos| > 0.7``) are searched for the best-supported circle (:func:`_start_circle`, 1-pixel
     tolerance: a contact shadow's boundary runs a few pixels outside the silhouette); the points
     within 1.5 px of it are fitted, then those within 1.5 px of the fitted outline, until they
-    hold (:func:`_fit_until_stable`).
+    hold (:func:`_fit_until_stable`; a fit whose RMS is above ``max_rms_px`` is None).
     """
     pts, dirs, _ = ev.points
     if len(pts) < min_points:
@@ -2829,7 +2871,7 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
     if circ is None:
         return None
     on = np.abs(np.hypot(P[:, 0] - circ[0][0], P[:, 1] - circ[0][1]) - circ[1]) <= OUTLINE_BAND_PX
-    return _fit_until_stable(P, on, cam, circ[0], circ[1], source, min_points)
+    return _fit_until_stable(P, on, cam, circ[0], circ[1], source, min_points, max_rms_px=max_rms_px)
 
 
 #: Half-width (px) of the band of edge points around a circle, then around the fitted outline, that
@@ -2851,7 +2893,8 @@ def outline_residuals_px(ft, points, cam: DetectionCamera, rays=None) -> np.ndar
     return _cone_residuals(p, pixel_rays(P, cam.K, cam.dist) if rays is None else rays, cam.f)
 
 
-def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_points: int = 8, rounds: int = 4):
+def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_points: int = 8, rounds: int = 4,
+                      max_rms_px: float | None = None):
     """The outline fitted (:func:`_fit_outline`) to the points ``P[on]`` ((n, 2), ``on`` (n,) bool: those
     within :data:`OUTLINE_BAND_PX` of the start circle ``(c0_px, r0_px)``), then to the points of
     ``P`` within that band of the fitted outline, until that set no longer changes (at most
@@ -2861,23 +2904,33 @@ def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_poi
     different points, and ended in fits of RMS 0.14 against 0.48 px. Around the fitted outline
     (the tangent cone's ellipse, not the start's circle) the band is the fit's own, so nearby
     starts end in the same set and the same fit (docs/spheres.md "Circle fits that do not depend
-    on their start")."""
-    ft = None
-    # the points undistorted once (pinhole): every round's fit and band read the same rays
+    on their start"). With ``max_rms_px``, a fit whose RMS (``residual_px``) is above it is None:
+    a caller that drops such fits has none made."""
+    # the points undistorted once (pinhole): every round's fit and band read the same rays; each
+    # round's robust fit only places the next band, and the one returned is made a SphereFit
     rays = None if cam.ortho else pixel_rays(np.asarray(P, dtype=np.float64).reshape(-1, 2), cam.K, cam.dist)
+    done = []  # the rounds' solutions
     for _ in range(rounds):
         if np.count_nonzero(on) < min_points:
-            return ft
+            break
         try:
-            ft = _fit_outline(P[on], cam, c0_px, r0_px, source, rays=None if rays is None else rays[on])
+            sol = _outline_solved(P[on], cam, c0_px, r0_px, None if rays is None else rays[on])
         except ValueError:
-            return ft
-        c0_px, r0_px = ft.center_px, ft.radius_px
-        new = np.abs(outline_residuals_px(ft, P, cam, rays)) <= OUTLINE_BAND_PX
+            break
+        done.append(sol)
+        c0_px, r0_px = sol.center_px, sol.radius_px
+        new = np.abs(outline_residuals_px(sol, P, cam, rays)) <= OUTLINE_BAND_PX
         if np.array_equal(new, on):
             break
         on = new
-    return ft
+    for sol in reversed(done):  # where the last round's bookkeeping fails, the round before stands
+        if max_rms_px is not None and sol.rms > max_rms_px:
+            return None
+        try:
+            return sol.fit(cam, source)
+        except ValueError:
+            continue
+    return None
 
 
 def _refine_on_consistent_edges(ft, ev: ConsistentEdges, cam: DetectionCamera, max_residual_px: float,
