@@ -289,6 +289,41 @@ def test_cone_residuals_of_unit_rays_are_the_same_floats():
         assert np.array_equal(detect.unit_cone_residuals(p, normalize(s), f), want)
 
 
+def test_cone_jacobian_is_the_residuals_derivative():
+    """The outline fit's analytic Jacobian (``unit_cone_jacobian``, handed to ``least_squares``
+    instead of its forward differences) agrees with central differences of the residuals, and a
+    sphere's centre fitted with it is the one fitted with forward differences within 1e-6 px."""
+    from ffls.conventions import normalize
+
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        f = rng.uniform(200, 3000)
+        p = np.concatenate([rng.normal(size=2) * 0.2 * f, [rng.uniform(0.01, 0.3) * f]])
+        s = normalize(rng.normal(size=(int(rng.integers(3, 300)), 3)) * [0.3, 0.3, 0.05] + [0, 0, 1])
+        J = detect.unit_cone_jacobian(p, s, f)
+        h = 1e-3
+        num = np.stack([(detect.unit_cone_residuals(p + h * e, s, f) - detect.unit_cone_residuals(p - h * e, s, f))
+                        / (2 * h) for e in np.eye(3)], axis=1)
+        np.testing.assert_allclose(J, num, rtol=1e-6, atol=1e-6)
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    C = np.array([0.05, -0.03, 0.7])
+    P = detect.silhouette_px(K, None, C, 0.04, n=300) + rng.normal(0, 0.4, (300, 2))
+    P = np.concatenate([P, rng.uniform([330, 170], [420, 260], (40, 2))])  # clutter for the trimming
+    rays = detect.pixel_rays(P, K)
+    c0 = normalize(C + [0.002, 0.001, 0.0])
+    got = detect.fit_sphere_center(rays, 0.04, 800.0, c0, 0.06)
+    fd = detect.trimmed_fit  # the same fit on forward differences (the Jacobian not handed over)
+
+    def forward(residuals, p0, pts, f_scale, trim, jac=None):
+        return fd(residuals, p0, pts, f_scale, trim)
+
+    import unittest.mock as mock
+    with mock.patch.object(detect, "trimmed_fit", forward):
+        want = detect.fit_sphere_center(rays, 0.04, 800.0, c0, 0.06)
+    px = [detect.project_points(w[0][None], K, None)[0] for w in (got, want)]
+    assert np.hypot(*(px[0] - px[1])) < 1e-6 and np.array_equal(got[1], want[1])
+
+
 def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
     """The outline fits (``trimmed_fit``) hand their points to the residuals column-major, so
     that each column the residuals read is contiguous; the residuals of either layout are the

@@ -1208,6 +1208,29 @@ def unit_cone_residuals(params, s, f):
     return f * (np.arctan2(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), s0 * c0 + s1 * c1 + s2 * c2) - a)
 
 
+def unit_cone_jacobian(params, s, f):
+    """Jacobian (n, 3) of :func:`unit_cone_residuals` with respect to ``params`` = f (x, y, alpha).
+
+    With ``u = (x, y, 1)``, ``c = u / |u|`` and ``theta`` the angle of a unit ray ``s`` from ``c``,
+    ``d theta / d u = -(s - (s . c) c) / (|u| sin theta)``; the residual ``f (theta - alpha)``
+    gives ``-(s_k - (s . c) c_k) / (|u| sin theta)`` for the first two parameters and -1 for the
+    third (``sin theta`` kept above 1e-12: a ray on the axis is no outline point)."""
+    x, y, _ = params / f
+    nu = math.sqrt(x * x + y * y + 1.0)
+    c0, c1, c2 = x / nu, y / nu, 1.0 / nu
+    s0, s1, s2 = s[:, 0], s[:, 1], s[:, 2]
+    dot = s0 * c0 + s1 * c1 + s2 * c2
+    x0 = s1 * c2 - s2 * c1
+    x1 = s2 * c0 - s0 * c2
+    x2 = s0 * c1 - s1 * c0
+    scale = -1.0 / (nu * np.maximum(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), 1e-12))
+    J = np.empty((len(dot), 3))
+    np.multiply(s0 - dot * c0, scale, out=J[:, 0])
+    np.multiply(s1 - dot * c1, scale, out=J[:, 1])
+    J[:, 2] = -1.0
+    return J
+
+
 def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, trim: float = 3.0):
     """Robust fit of a sphere centre to silhouette rays (equation 1 in geometric form).
 
@@ -1239,7 +1262,8 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     s = np.asarray(rays, dtype=np.float64)
     d = np.asarray(init_dir, dtype=np.float64)
     p0 = f * np.array([d[0] / d[2], d[1] / d[2], init_alpha])
-    p, inl = trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim)
+    p, inl = trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim,
+                         jac=lambda q, pts: unit_cone_jacobian(q, pts, f))
     x, y, a = p / f
     if not (0 < a < np.pi / 2):
         raise ValueError("fitted apparent radius is not in (0, 90) degrees")
@@ -1248,7 +1272,7 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     return R / np.sin(a) * c, inl, _cone_residuals(p, s, f)
 
 
-def trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
+def trimmed_fit(residuals, p0, pts, f_scale: float, trim: float, jac=None):
     """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
     to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
     on the rest. Returns the parameters and the inlier mask (n,) of the last round.
@@ -1261,8 +1285,8 @@ def trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
     pts = np.asfortranarray(pts)
     inl = np.ones(len(pts), dtype=bool)
     for _ in range(3):
-        p = least_squares(residuals, p, args=(np.asfortranarray(pts[inl]),), loss="soft_l1", f_scale=f_scale,
-                          x_scale=1.0, method="trf").x
+        p = least_squares(residuals, p, jac="2-point" if jac is None else jac, args=(np.asfortranarray(pts[inl]),),
+                          loss="soft_l1", f_scale=f_scale, x_scale=1.0, method="trf").x
         r = residuals(p, pts)
         sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
         new = np.abs(r) < max(trim * sigma, 1.0)
