@@ -289,6 +289,41 @@ def test_cone_residuals_of_unit_rays_are_the_same_floats():
         assert np.array_equal(detect.unit_cone_residuals(p, normalize(s), f), want)
 
 
+def test_cone_jacobian_is_the_residuals_derivative():
+    """The outline fit's analytic Jacobian (``unit_cone_jacobian``, handed to ``least_squares``
+    instead of its forward differences) agrees with central differences of the residuals, and a
+    sphere's centre fitted with it is the one fitted with forward differences within 1e-6 px."""
+    from ffls.conventions import normalize
+
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        f = rng.uniform(200, 3000)
+        p = np.concatenate([rng.normal(size=2) * 0.2 * f, [rng.uniform(0.01, 0.3) * f]])
+        s = normalize(rng.normal(size=(int(rng.integers(3, 300)), 3)) * [0.3, 0.3, 0.05] + [0, 0, 1])
+        J = detect.unit_cone_jacobian(p, s, f)
+        h = 1e-3
+        num = np.stack([(detect.unit_cone_residuals(p + h * e, s, f) - detect.unit_cone_residuals(p - h * e, s, f))
+                        / (2 * h) for e in np.eye(3)], axis=1)
+        np.testing.assert_allclose(J, num, rtol=1e-6, atol=1e-6)
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    C = np.array([0.05, -0.03, 0.7])
+    P = detect.silhouette_px(K, None, C, 0.04, n=300) + rng.normal(0, 0.4, (300, 2))
+    P = np.concatenate([P, rng.uniform([330, 170], [420, 260], (40, 2))])  # clutter for the trimming
+    rays = detect.pixel_rays(P, K)
+    c0 = normalize(C + [0.002, 0.001, 0.0])
+    got = detect.fit_sphere_center(rays, 0.04, 800.0, c0, 0.06)
+    fd = detect.trimmed_fit  # the same fit on forward differences (the Jacobian not handed over)
+
+    def forward(residuals, p0, pts, f_scale, trim, jac=None):
+        return fd(residuals, p0, pts, f_scale, trim)
+
+    import unittest.mock as mock
+    with mock.patch.object(detect, "trimmed_fit", forward):
+        want = detect.fit_sphere_center(rays, 0.04, 800.0, c0, 0.06)
+    px = [detect.project_points(w[0][None], K, None)[0] for w in (got, want)]
+    assert np.hypot(*(px[0] - px[1])) < 1e-6 and np.array_equal(got[1], want[1])
+
+
 def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
     """The outline fits (``trimmed_fit``) hand their points to the residuals column-major, so
     that each column the residuals read is contiguous; the residuals of either layout are the
@@ -308,3 +343,91 @@ def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
 
     detect.trimmed_fit(residuals, p, s, 1.0, 3.0)
     assert seen and all(seen)
+
+
+def test_hints_fitted_in_one_call(monkeypatch):
+    """The hints' fits are one ``_fit_candidates`` call (which undistorts the image's edge points
+    once), not one per hint; the retries another; the same spheres as each hint fitted alone."""
+    scene = ds.layout(3, seed=22)
+    seq = ds.render(scene, LIGHTS, "white")
+    hints = [{"center_px": list(scene.centre_px(b) + [3.0, -2.0])} for b in scene.balls]
+    hints[1]["radius_px"] = float(np.mean(np.hypot(*(detect.silhouette_px(scene.K, None, scene.balls[1].center, 0.04)
+                                                      - scene.centre_px(scene.balls[1])).T)))
+    calls = []
+    real = detect._fit_candidates
+
+    def counted(cands, *a, **k):
+        calls.append(len(cands))
+        return real(cands, *a, **k)
+
+    monkeypatch.setattr(detect, "_fit_candidates", counted)
+    fits = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints, retry_hints=False)
+    assert calls == [3], calls
+    assert len(fits) == 3 and all(f.source == "hint" for f in fits)
+    assert max(_errors(scene, fits)) < 0.6
+    alone = [detect.find_spheres(seq, scene.K, None, 0.04, hints=[h], retry_hints=False)[0] for h in hints]
+    assert [f.center_px.tolist() for f in fits] == [f.center_px.tolist() for f in alone]
+
+
+def test_outline_refits_undistort_their_points_once(monkeypatch):
+    """``_fit_until_stable`` undistorts its points once for all its rounds (each round's fit and
+    band read the same rays; they were undistorted twice a round), and makes a SphereFit (visible
+    share, coverage, centre's standard error) of the round it returns only: the same fit as
+    before, every field."""
+    K = np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]])
+    dist = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
+    cam = detect.DetectionCamera("pinhole", K, dist, np.eye(4), 0.04, (240, 320))
+    C = np.array([0.02, -0.01, 0.6])
+    rng = np.random.default_rng(3)
+    P = detect.silhouette_px(K, dist, C, 0.04, n=240) + rng.normal(0, 0.3, (240, 2))
+    P = np.concatenate([P, rng.uniform([100, 60], [220, 180], (60, 2))])  # clutter inside and around
+    c0 = detect.project_points(C[None], K, dist)[0] + [1.5, -1.0]
+    on = np.abs(np.hypot(*(P - c0).T) - 34.0) <= detect.OUTLINE_BAND_PX
+    many = []
+    real = detect.pixel_rays
+
+    def counted(px, *a, **k):
+        if len(np.asarray(px).reshape(-1, 2)) > 1:
+            many.append(len(np.asarray(px).reshape(-1, 2)))
+        return real(px, *a, **k)
+
+    def before(on, c0_px, r0_px):  # the rounds as written before: each undistorting the points
+        ft = None
+        for _ in range(4):
+            ft = detect._fit_outline(P[on], cam, c0_px, r0_px, "auto")
+            c0_px, r0_px = ft.center_px, ft.radius_px
+            new = np.abs(detect.outline_residuals_px(ft, P, cam)) <= detect.OUTLINE_BAND_PX
+            if np.array_equal(new, on):
+                break
+            on = new
+        return ft
+
+    want = before(on, c0, 34.0)
+    made, solved = [], []
+    real_make, real_solve = detect._make_fit, detect._outline_solved
+
+    def make(*a, **k):
+        made.append(1)
+        return real_make(*a, **k)
+
+    def solve(*a, **k):
+        solved.append(1)
+        return real_solve(*a, **k)
+
+    monkeypatch.setattr(detect, "pixel_rays", counted)
+    monkeypatch.setattr(detect, "_make_fit", make)
+    monkeypatch.setattr(detect, "_outline_solved", solve)
+    got = detect._fit_until_stable(P, on, cam, c0, 34.0, "auto")
+    assert many == [len(P)], many
+    assert len(solved) >= 2 and len(made) == 1, (solved, made)  # several rounds, one SphereFit
+    assert np.hypot(*(got.center_px - detect.project_points(C[None], K, dist)[0])) < 0.3
+    for name in ("center_px", "center_cam", "radius_px", "residual_px", "coverage", "visible_fraction",
+                 "center_sigma_px", "n_inliers", "n_edge_points", "edge_px"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    # a fit its caller drops for its RMS (the photo-edge circles, over PHOTO_EDGE_MAX_RESIDUAL_PX) is
+    # not made at all: None, as the caller's test would have it
+    made.clear()
+    assert detect._fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=0.99 * want.residual_px) is None
+    assert made == []
+    kept = detect._fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=want.residual_px)
+    assert kept.residual_px == want.residual_px and np.array_equal(kept.center_px, want.center_px)

@@ -910,3 +910,37 @@ def test_near_joint_fit_frees_a_calibrated_bounce(samples):
     assert free.model == "near" and low.model == "near"
     assert np.linalg.norm(low.position - free.position) < 0.1
     assert np.degrees(angle_between(low.direction, S - SCENE_CENTER)) < 0.3
+
+
+@pytest.mark.parametrize("encoding", ["linear", None])
+def test_decode_photos_reads_each_photo_once_and_the_first_once_more(tmp_path, monkeypatch, encoding):
+    """decode_photos reads the first photo once before the chunks (its depth, shape and colour
+    note; it was read twice) and every photo once in its chunk; the same reductions."""
+    import os
+
+    import ffls.io.images as images
+    import ffls.radiance.photos as photos
+    from ffls.io.capture import load_capture
+    from ffls.spheres.estimate import decode_photos
+
+    _png_capture(tmp_path)
+    if encoding is None:  # none stated: the stored values are decoded
+        doc = json.loads((tmp_path / "capture.json").read_text())
+        del doc["encoding"]
+        (tmp_path / "capture.json").write_text(json.dumps(doc))
+    cap = load_capture(tmp_path)
+    want = decode_photos(cap, workers=1)
+    assert want.stored == (encoding is None)
+    reads = []
+    real = images.read_image
+
+    def counted(path, *a, **k):
+        reads.append(os.path.basename(path))
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(images, "read_image", counted)
+    monkeypatch.setattr(photos, "read_image", counted)
+    got = decode_photos(cap, workers=1)
+    assert sorted(reads) == sorted(["p0.png"] + [f"p{i}.png" for i in range(5)]), reads
+    assert np.array_equal(got.stats.max, want.stats.max) and np.array_equal(got.raw, want.raw)
+    assert got.bit_depths == want.bit_depths and got.stored == want.stored

@@ -374,3 +374,41 @@ def test_pixel_hint_on_a_chrome_ball_finds_its_silhouette(mirror_capture, tmp_pa
     assert len(sp) == 1
     assert np.hypot(*(np.asarray(sp[0].center_px) - t["center_px"])) < 1.0
     assert sp[0].source == OUTER_SOURCE
+
+
+def test_changing_edges_tree_built_once_per_replacement_pass(textured_mirror, monkeypatch):
+    """``_mirror_outlines_replaced`` builds the changing edges' KD-tree once and hands it to every
+    ``outline_support`` of its refits (the tree was built again on every call); the same spheres."""
+    import scipy.spatial
+
+    from ffls.spheres import detect
+
+    folder, _ = textured_mirror
+    want = find_spheres_in_capture(load_capture(folder))
+    built, measured, passes = [], [], []
+    real_tree, real_support = scipy.spatial.cKDTree, detect.outline_support
+    real_pass = detect._mirror_outlines_replaced
+
+    def tree(*a, **k):
+        if passes and passes[-1] is None:  # (inside a pass)
+            built.append(len(a[0]))
+        return real_tree(*a, **k)
+
+    def one_pass(*a, **k):
+        passes.append(None)
+        try:
+            return real_pass(*a, **k)
+        finally:
+            passes[-1] = len(built)
+
+    def support(*a, **k):
+        measured.append(k.get("tree") is not None)
+        return real_support(*a, **k)
+
+    monkeypatch.setattr(scipy.spatial, "cKDTree", tree)
+    monkeypatch.setattr(detect, "outline_support", support)
+    monkeypatch.setattr(detect, "_mirror_outlines_replaced", one_pass)
+    got = find_spheres_in_capture(load_capture(folder))
+    assert measured and all(measured), measured  # every support measured on the handed tree
+    assert len(built) <= len(passes), (built, passes)  # at most one per pass
+    assert [(s.center_px.tolist(), s.radius_px) for s in got] == [(s.center_px.tolist(), s.radius_px) for s in want]

@@ -191,7 +191,12 @@ def read_photo(capture, i: int, out: np.ndarray | None = None, depth: int | str 
         Unreadable image, a size that differs from the capture's ``image_size``, or a bit depth
         that differs from ``depth`` with no stated encoding.
     """
-    img = read_image(capture.image_paths[i], out=out, stored=stored)
+    return photo_of_image(capture, i, read_image(capture.image_paths[i], out=out, stored=stored), depth)
+
+
+def photo_of_image(capture, i: int, img: ImageData, depth: int | str | None = None) -> Photo:
+    """:func:`read_photo` of photo ``i`` of ``capture`` already read as ``img``
+    (:func:`ffls.io.images.read_image` of its path): checked and linearised, not read again."""
     _check_photo(capture, i, img)
     if depth is not None and capture.encoding == "auto" and img.bit_depth != depth:
         raise InputError(_mixed_depth_message(img.bit_depth, depth), img.path)

@@ -1209,6 +1209,29 @@ def unit_cone_residuals(params, s, f):
     return f * (np.arctan2(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), s0 * c0 + s1 * c1 + s2 * c2) - a)
 
 
+def unit_cone_jacobian(params, s, f):
+    """Jacobian (n, 3) of :func:`unit_cone_residuals` with respect to ``params`` = f (x, y, alpha).
+
+    With ``u = (x, y, 1)``, ``c = u / |u|`` and ``theta`` the angle of a unit ray ``s`` from ``c``,
+    ``d theta / d u = -(s - (s . c) c) / (|u| sin theta)``; the residual ``f (theta - alpha)``
+    gives ``-(s_k - (s . c) c_k) / (|u| sin theta)`` for the first two parameters and -1 for the
+    third (``sin theta`` kept above 1e-12: a ray on the axis is no outline point)."""
+    x, y, _ = params / f
+    nu = math.sqrt(x * x + y * y + 1.0)
+    c0, c1, c2 = x / nu, y / nu, 1.0 / nu
+    s0, s1, s2 = s[:, 0], s[:, 1], s[:, 2]
+    dot = s0 * c0 + s1 * c1 + s2 * c2
+    x0 = s1 * c2 - s2 * c1
+    x1 = s2 * c0 - s0 * c2
+    x2 = s0 * c1 - s1 * c0
+    scale = -1.0 / (nu * np.maximum(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), 1e-12))
+    J = np.empty((len(dot), 3))
+    np.multiply(s0 - dot * c0, scale, out=J[:, 0])
+    np.multiply(s1 - dot * c1, scale, out=J[:, 1])
+    J[:, 2] = -1.0
+    return J
+
+
 def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, trim: float = 3.0):
     """Robust fit of a sphere centre to silhouette rays (equation 1 in geometric form).
 
@@ -1240,7 +1263,8 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     s = np.asarray(rays, dtype=np.float64)
     d = np.asarray(init_dir, dtype=np.float64)
     p0 = f * np.array([d[0] / d[2], d[1] / d[2], init_alpha])
-    p, inl = trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim)
+    p, inl = trimmed_fit(lambda q, pts: unit_cone_residuals(q, pts, f), p0, normalize(s), f_scale, trim,
+                         jac=lambda q, pts: unit_cone_jacobian(q, pts, f))
     x, y, a = p / f
     if not (0 < a < np.pi / 2):
         raise ValueError("fitted apparent radius is not in (0, 90) degrees")
@@ -1249,7 +1273,7 @@ def fit_sphere_center(rays, R, f, init_dir, init_alpha, f_scale: float = 1.0, tr
     return R / np.sin(a) * c, inl, _cone_residuals(p, s, f)
 
 
-def trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
+def trimmed_fit(residuals, p0, pts, f_scale: float, trim: float, jac=None):
     """``least_squares`` with a ``soft_l1`` loss of scale ``f_scale`` on ``residuals(p, pts)``, then up
     to three rounds of trimming the points farther than ``max(trim * robust sigma, 1)`` and refitting
     on the rest. Returns the parameters and the inlier mask (n,) of the last round.
@@ -1262,8 +1286,8 @@ def trimmed_fit(residuals, p0, pts, f_scale: float, trim: float):
     pts = np.asfortranarray(pts)
     inl = np.ones(len(pts), dtype=bool)
     for _ in range(3):
-        p = least_squares(residuals, p, args=(np.asfortranarray(pts[inl]),), loss="soft_l1", f_scale=f_scale,
-                          x_scale=1.0, method="trf").x
+        p = least_squares(residuals, p, jac="2-point" if jac is None else jac, args=(np.asfortranarray(pts[inl]),),
+                          loss="soft_l1", f_scale=f_scale, x_scale=1.0, method="trf").x
         r = residuals(p, pts)
         sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
         new = np.abs(r) < max(trim * sigma, 1.0)
@@ -1406,13 +1430,19 @@ class DetectionCamera:
         return float(np.sqrt(self.K[0, 0] * self.K[1, 1]))
 
 
-def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0,
-              shape=None):
+def _outline_circle_px(C, R, K, dist) -> tuple[np.ndarray, float]:
+    """A sphere's projected centre (2,) and mean outline radius (pixels), as a SphereFit has them."""
     outline = silhouette_px(K, dist, C, R)
     cpx = project_points(np.asarray(C)[None], K, dist)[0]
+    return cpx, float(np.mean(np.hypot(*(outline - cpx).T)))
+
+
+def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0,
+              shape=None):
+    cpx, rpx = _outline_circle_px(C, R, K, dist)
     return SphereFit(
         center_cam=np.asarray(C, dtype=np.float64), center_world=to_world(C, wfc), radius=float(R),
-        center_px=cpx, radius_px=float(np.mean(np.hypot(*(outline - cpx).T))), residual_px=float(residual),
+        center_px=cpx, radius_px=rpx, residual_px=float(residual),
         n_edge_points=int(n_edge), n_inliers=int(n_in), inlier_fraction=float(n_in / n_edge) if n_edge else 1.0,
         coverage=float(coverage), source=source, edge_px=np.zeros((0, 2)) if edge_px is None else edge_px,
         K=K, dist=dist, world_from_camera=wfc,
@@ -1456,33 +1486,69 @@ def _centre_sigma_px(fun, p, args) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
 
 
-def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None):
+def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None, rays=None):
     """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails.
 
     The fit's ``center_sigma_px`` is the standard error of its centre (:func:`_centre_sigma_px`).
+    ``rays`` (m, 3), optional: ``pixel_rays(P, cam.K, cam.dist)`` where the caller has them
+    (pinhole; each point's ray is undistorted on its own, so a subset's are the same floats).
     """
+    return _outline_solved(P, cam, c0_px, r0_px, rays).fit(cam, source, n_edge)
+
+
+@dataclasses.dataclass
+class _OutlineSolution:
+    """The robust fit of :func:`_fit_outline` before its bookkeeping (:meth:`fit`): what a round of
+    :func:`_fit_until_stable` needs to place its band (``center_px``, ``radius_px``,
+    ``center_cam``), the rest (visible share, coverage, centre's standard error) made only for
+    the round it returns."""
+
+    P: np.ndarray
+    inl: np.ndarray
+    res: np.ndarray
+    center_px: np.ndarray
+    radius_px: float
+    center_cam: np.ndarray | None = None  # pinhole
+    rays: np.ndarray | None = None  # pinhole: the points' rays
+
+    @property
+    def rms(self) -> float:
+        """RMS distance (pixels) of the inliers from the outline: the fit's ``residual_px``."""
+        return float(np.sqrt(np.mean(self.res[self.inl] ** 2)))
+
+    def fit(self, cam: DetectionCamera, source, n_edge=None) -> SphereFit:
+        P, inl, rms = self.P, self.inl, self.rms
+        if cam.ortho:
+            c, r = self.center_px, self.radius_px
+            ft = _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
+                                 n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
+            ft.center_sigma_px = _centre_sigma_px(_circle_residuals, [c[0], c[1], r], (P[inl],))
+            return ft
+        C, f, s = self.center_cam, cam.f, self.rays
+        ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
+                       n_edge=n_edge or len(P), n_in=int(inl.sum()),
+                       coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
+        d = C / np.linalg.norm(C)
+        p = f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
+        ft.center_sigma_px = _centre_sigma_px(_cone_residuals, p, (s[inl], f))
+        return ft
+
+
+def _outline_solved(P, cam: DetectionCamera, c0_px, r0_px, rays=None) -> _OutlineSolution:
+    """The robust fit of :func:`_fit_outline` (``ValueError`` if it fails), its bookkeeping left
+    to :meth:`_OutlineSolution.fit`."""
     if cam.ortho:
         c, r, inl, res = fit_circle(P, c0_px, r0_px)
-        rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-        ft = _make_fit_ortho(c, r, cam, source, edge_px=P[inl], residual=rms, n_edge=n_edge or len(P),
-                             n_in=int(inl.sum()), coverage=_coverage(P[inl], c))
-        ft.center_sigma_px = _centre_sigma_px(_circle_residuals, [c[0], c[1], r], (P[inl],))
-        return ft
+        return _OutlineSolution(P, inl, res, np.asarray(c, dtype=np.float64), float(r))
     f = cam.f
     K_und = np.array([[f, 0, cam.K[0, 2]], [0, f, cam.K[1, 2]], [0, 0, 1]])
     c0 = pixel_rays(np.asarray(c0_px, dtype=np.float64)[None], K_und)[0]
     edge_ray = pixel_rays((np.asarray(c0_px, dtype=np.float64) + [r0_px, 0])[None], K_und)[0]
     a0 = float(angle_between(c0, edge_ray))
-    s = pixel_rays(P, cam.K, cam.dist)
+    s = pixel_rays(P, cam.K, cam.dist) if rays is None else rays
     C, inl, res = fit_sphere_center(s, cam.R, f, c0, a0)
-    rms = float(np.sqrt(np.mean(res[inl] ** 2)))
-    ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
-                   n_edge=n_edge or len(P), n_in=int(inl.sum()),
-                   coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
-    d = C / np.linalg.norm(C)
-    p = f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
-    ft.center_sigma_px = _centre_sigma_px(_cone_residuals, p, (s[inl], f))
-    return ft
+    cpx, rpx = _outline_circle_px(C, cam.R, cam.K, cam.dist)
+    return _OutlineSolution(P, inl, res, cpx, rpx, np.asarray(C, dtype=np.float64), s)
 
 
 # ----------------------------------------------------------------------------- hints
@@ -1879,34 +1945,59 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
     ``retry`` the first fit stands.
     """
     H, W = shape
-    cands, fits, failures = [], [], []
     limit = CRITERIA["max_center_sigma_px"]
-    for k, h in enumerate(hint_info):
+    starts = []  # per hint: its start circle, or None
+    for h in hint_info:
         cpx, rpx = h[0], h[1]
         cand = None if rpx is None else (float(cpx[0]), float(cpx[1]), float(rpx))
         if rpx is None:
             lo, hi = _hint_radius_range(h, shape)
             r0 = _radius_from_edges(edges.points, edges.grads, cpx, hi, lo)
             cand = None if r0 is None else (float(cpx[0]), float(cpx[1]), float(r0))
-        got = _fit_candidates([cand], edges, cam, 0.35, "hint", workers) if cand is not None else ([], [])
-        first = got[0][0] if got[0] else None
+        starts.append(cand)
+    # the hints' fits in one call, then the retries' in one (each call undistorts the image's
+    # edge points once, and its workers share the circles)
+    firsts = _fit_each([c for c in starts if c is not None], edges, cam, 0.35, "hint", workers)
+    got = [firsts.pop(0) if c is not None else ([], []) for c in starts]
+    agains = {}
+    for k, h in enumerate(hint_info):
+        first = got[k][0][0] if got[k][0] else None
         if retry and (first is None or first.center_sigma_px > limit):
-            again = cand if rpx is not None else None
+            cpx, rpx = h[0], h[1]
+            again = starts[k] if rpx is not None else None
             if rpx is None:
+                lo, hi = _hint_radius_range(h, shape)
                 near = _circle_near_hint(edges.points, edges.grads, cpx, lo, hi)
                 again = None if near is None else (float(near[0][0]), float(near[0][1]), float(near[1]))
-            second = _fit_candidates([again], edges, cam, 0.35, "hint", workers, narrow=True)[0] \
-                if again is not None else []
+            if again is not None:
+                agains[k] = again
+    seconds = _fit_each(list(agains.values()), edges, cam, 0.35, "hint", workers, narrow=True)
+    cands, fits, failures = [], [], []
+    for k, h in enumerate(hint_info):
+        cpx, cand = h[0], starts[k]
+        if k in agains:
+            first = got[k][0][0] if got[k][0] else None
+            second = seconds.pop(0)[0]
             if second and (first is None or second[0].center_sigma_px < first.center_sigma_px):
-                got, cand = (second, []), again
+                got[k], cand = (second, []), agains[k]
         if cand is None:
             raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
                              f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
         cands.append(cand)
-        fits += got[0]
-        failures += [(k, *f[1:]) for f in got[1]]
+        fits += got[k][0]
+        failures += [(k, *f[1:]) for f in got[k][1]]
     _check_duplicate_circles(cands, "hint", source)
     return fits, failures
+
+
+def _fit_each(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
+              narrow: bool = False) -> list:
+    """:func:`_fit_candidates` of ``cands`` in one call, split per candidate: ``[(fits, failures)]``
+    as a call on that candidate alone returns (one fit or one failure)."""
+    if not cands:
+        return []
+    return [([], [d]) if isinstance(d, tuple) else ([d], [])
+            for d in _fit_candidates(cands, edges, cam, search_tol, label, workers, narrow, split=False)]
 
 
 def shading_ratio(L_max, L_mean) -> np.ndarray:
@@ -2146,7 +2237,9 @@ def photo_edge_fit(k: int):
     the bench rows and cost 10-40 % of the detection, docs/spheres.md); None where there is no fit."""
     circles, evidence, cam = _photo_edge_context
     p, x, y, r = circles[k]
-    return fit_on_consistent_edges(np.array([x, y]), float(r), evidence[p], cam, "auto")
+    # a fit over PHOTO_EDGE_MAX_RESIDUAL_PX is dropped (_photo_edge_fits): none is made of it
+    return fit_on_consistent_edges(np.array([x, y]), float(r), evidence[p], cam, "auto",
+                                   max_rms_px=PHOTO_EDGE_MAX_RESIDUAL_PX)
 
 
 def _forked_map(fn, n: int, workers: int) -> list:
@@ -2165,7 +2258,7 @@ def _forked_map(fn, n: int, workers: int) -> list:
 
 
 def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
-                    narrow: bool = False):
+                    narrow: bool = False, split: bool = True):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
     Edge points within ``search_tol`` of the circle's radius, with a radial gradient of the
@@ -2176,7 +2269,8 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, la
     busy ground's edges fill the search band and pull a fit to all of them off the outline): the
     second try of a hint (:func:`_fit_hints`). Returns the fits and the failures ``(k, x, y, r, why)``.
     The candidates are independent: with ``workers > 1`` they are fitted in that many forked
-    processes (the same fits, in the same order).
+    processes (the same fits, in the same order). Without ``split``: one list, each candidate's
+    fit or failure in the candidates' order.
     """
     pts = edges.points
     if cam.ortho:
@@ -2192,6 +2286,8 @@ def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, la
         done = _forked_map(_fit_candidate, len(context.cands), workers if len(pts) else 1)
     finally:
         _candidate_context = None
+    if not split:
+        return done
     fits = [d for d in done if not isinstance(d, tuple)]
     failures = [d for d in done if isinstance(d, tuple)]
     return fits, failures
@@ -2621,13 +2717,15 @@ def _is_mirror_outline(ft, L) -> bool:
     return ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)
 
 
-def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144) -> float:
+def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144, tree=None) -> float:
     """Share of a fitted sphere's outline within ``tol`` pixels of an edge point.
 
     The outline is sampled at ``n`` points (pinhole: the tangent cone's ellipse,
     :func:`silhouette_px`; orthographic: the circle); each counts when an edge point of ``points``
     ((m, 2) x, y) lies within ``tol`` of it. With the image ``shape`` (H, W) the share is of the
-    samples in the frame. 0 without points or samples.
+    samples in the frame. 0 without points or samples. ``tree``, optional: a
+    ``scipy.spatial.cKDTree`` of ``points``, for a caller that measures several outlines on the
+    same points (built here otherwise).
     """
     from scipy.spatial import cKDTree
 
@@ -2642,7 +2740,7 @@ def outline_support(ft, points, shape=None, tol: float = 1.0, n: int = 144) -> f
         P = P[(P[:, 0] >= 0) & (P[:, 0] <= W - 1) & (P[:, 1] >= 0) & (P[:, 1] <= H - 1)]
     if len(pts) == 0 or len(P) == 0:
         return 0.0
-    d, _ = cKDTree(pts).query(P, distance_upper_bound=tol + 1e-9)
+    d, _ = (cKDTree(pts) if tree is None else tree).query(P, distance_upper_bound=tol + 1e-9)
     return float(np.mean(d <= tol))
 
 
@@ -2674,11 +2772,12 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
     (:func:`_outline_ambiguity`), not the outline's it replaces. Unchanged without the evidence
     (None: fewer than 3 photos, or a tensor without the summed gradient).
     """
-    def refit(ft, pts):
+    def refit(ft, pts, tree):
         c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
         new = fit_on_consistent_edges(c0, r0, changing, cam, ft.source, MIRROR_CHANGING_BAND)
         if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
-                or outline_support(new, pts, cam.shape) < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape)):
+                or outline_support(new, pts, cam.shape, tree=tree)
+                < MIRROR_CHANGING_GAIN * outline_support(ft, pts, cam.shape, tree=tree)):
             return None
         return new
 
@@ -2689,16 +2788,23 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
 
 def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera, refit) -> list:
     """``fits`` with each mirror ball's outline (:func:`_is_mirror_outline`, not an override)
-    replaced by ``refit(fit, changing_points)`` where that gives one (not None): the replacement
+    replaced by ``refit(fit, changing_points, tree)`` where that gives one (not None; ``tree`` a
+    ``cKDTree`` of the points for :func:`outline_support`, built once): the replacement
     keeps the score, is marked as outlined on :data:`PHOTO_EDGES` and gets its own ambiguity
     (:func:`_outline_ambiguity`). Unchanged without the evidence (``changing`` None)."""
     if changing is None or not fits:
         return fits
     pts = changing.points[0]
-    log_l = None  # the image's log, taken once and only where an outline is replaced
+    log_l = tree = None  # the image's log and the points' tree: made once, only where needed
     out = []
     for ft in fits:
-        new = None if ft.source == "override" or not _is_mirror_outline(ft, L) else refit(ft, pts)
+        new = None
+        if ft.source != "override" and _is_mirror_outline(ft, L):
+            if tree is None:
+                from scipy.spatial import cKDTree
+
+                tree = cKDTree(np.asarray(pts, dtype=np.float64).reshape(-1, 2))
+            new = refit(ft, pts, tree)
         if new is None:
             out.append(ft)
             continue
@@ -2737,7 +2843,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
     make circles that enclose it; they are broken arcs, 0.34-0.62 of them on the changing edges,
     against 0.88-0.97 for a silhouette. Unchanged without the evidence (``changing`` None).
     """
-    def grow(ft, pts):
+    def grow(ft, pts, tree):
         cur, cur_support, grown = ft, None, False  # the current outline's support, once measured
         for _ in range(max_steps):
             oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
@@ -2747,11 +2853,11 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
                 new = _fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
             except ValueError:
                 break
-            support = outline_support(new, pts, cam.shape)
+            support = outline_support(new, pts, cam.shape, tree=tree)
             if new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT:
                 break
             if cur_support is None:
-                cur_support = outline_support(cur, pts, cam.shape)
+                cur_support = outline_support(cur, pts, cam.shape, tree=tree)
             if support <= cur_support:
                 break
             cur, cur_support, grown = new, support, True
@@ -2761,7 +2867,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
 
 
 def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
-                             min_points: int = 8):
+                             min_points: int = 8, max_rms_px: float | None = None):
     """A sphere fitted on the ridge points of ``ev`` (:func:`consistent_edge_points`) near the circle
     ``(c0, r0)`` (pixels), or None.
 
@@ -2769,7 +2875,7 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
     (``|cos| > 0.7``) are searched for the best-supported circle (:func:`_start_circle`, 1-pixel
     tolerance: a contact shadow's boundary runs a few pixels outside the silhouette); the points
     within 1.5 px of it are fitted, then those within 1.5 px of the fitted outline, until they
-    hold (:func:`_fit_until_stable`).
+    hold (:func:`_fit_until_stable`; a fit whose RMS is above ``max_rms_px`` is None).
     """
     pts, dirs, _ = ev.points
     if len(pts) < min_points:
@@ -2790,7 +2896,7 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
     if circ is None:
         return None
     on = np.abs(np.hypot(P[:, 0] - circ[0][0], P[:, 1] - circ[0][1]) - circ[1]) <= OUTLINE_BAND_PX
-    return _fit_until_stable(P, on, cam, circ[0], circ[1], source, min_points)
+    return _fit_until_stable(P, on, cam, circ[0], circ[1], source, min_points, max_rms_px=max_rms_px)
 
 
 #: Half-width (px) of the band of edge points around a circle, then around the fitted outline, that
@@ -2798,20 +2904,22 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
 OUTLINE_BAND_PX = 1.5
 
 
-def outline_residuals_px(ft, points, cam: DetectionCamera) -> np.ndarray:
+def outline_residuals_px(ft, points, cam: DetectionCamera, rays=None) -> np.ndarray:
     """Signed distances (pixels; positive outside) of ``points`` ((n, 2) x, y) from a fitted
     sphere's outline: the tangent cone's (:func:`_cone_residuals`, the fit's own residual) for a
-    pinhole camera, the circle's for an orthographic one."""
+    pinhole camera, the circle's for an orthographic one. ``rays`` (n, 3), optional: the points'
+    ``pixel_rays(points, cam.K, cam.dist)`` where the caller has them (pinhole)."""
     P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     if cam.ortho:
         return _circle_residuals([ft.center_px[0], ft.center_px[1], ft.radius_px], P)
     C = np.asarray(ft.center_cam, dtype=np.float64)
     d = C / np.linalg.norm(C)
     p = cam.f * np.array([d[0] / d[2], d[1] / d[2], np.arcsin(min(cam.R / np.linalg.norm(C), 1.0))])
-    return _cone_residuals(p, pixel_rays(P, cam.K, cam.dist), cam.f)
+    return _cone_residuals(p, pixel_rays(P, cam.K, cam.dist) if rays is None else rays, cam.f)
 
 
-def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_points: int = 8, rounds: int = 4):
+def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_points: int = 8, rounds: int = 4,
+                      max_rms_px: float | None = None):
     """The outline fitted (:func:`_fit_outline`) to the points ``P[on]`` ((n, 2), ``on`` (n,) bool: those
     within :data:`OUTLINE_BAND_PX` of the start circle ``(c0_px, r0_px)``), then to the points of
     ``P`` within that band of the fitted outline, until that set no longer changes (at most
@@ -2821,21 +2929,33 @@ def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_poi
     different points, and ended in fits of RMS 0.14 against 0.48 px. Around the fitted outline
     (the tangent cone's ellipse, not the start's circle) the band is the fit's own, so nearby
     starts end in the same set and the same fit (docs/spheres.md "Circle fits that do not depend
-    on their start")."""
-    ft = None
+    on their start"). With ``max_rms_px``, a fit whose RMS (``residual_px``) is above it is None:
+    a caller that drops such fits has none made."""
+    # the points undistorted once (pinhole): every round's fit and band read the same rays; each
+    # round's robust fit only places the next band, and the one returned is made a SphereFit
+    rays = None if cam.ortho else pixel_rays(np.asarray(P, dtype=np.float64).reshape(-1, 2), cam.K, cam.dist)
+    done = []  # the rounds' solutions
     for _ in range(rounds):
         if np.count_nonzero(on) < min_points:
-            return ft
+            break
         try:
-            ft = _fit_outline(P[on], cam, c0_px, r0_px, source)
+            sol = _outline_solved(P[on], cam, c0_px, r0_px, None if rays is None else rays[on])
         except ValueError:
-            return ft
-        c0_px, r0_px = ft.center_px, ft.radius_px
-        new = np.abs(outline_residuals_px(ft, P, cam)) <= OUTLINE_BAND_PX
+            break
+        done.append(sol)
+        c0_px, r0_px = sol.center_px, sol.radius_px
+        new = np.abs(outline_residuals_px(sol, P, cam, rays)) <= OUTLINE_BAND_PX
         if np.array_equal(new, on):
             break
         on = new
-    return ft
+    for sol in reversed(done):  # where the last round's bookkeeping fails, the round before stands
+        if max_rms_px is not None and sol.rms > max_rms_px:
+            return None
+        try:
+            return sol.fit(cam, source)
+        except ValueError:
+            continue
+    return None
 
 
 def _refine_on_consistent_edges(ft, ev: ConsistentEdges, cam: DetectionCamera, max_residual_px: float,

@@ -1204,7 +1204,7 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
         An unreadable photo, or one whose size differs from the first one's.
     """
     from ffls.io.images import read_image
-    from ffls.radiance.photos import encoding_unknown, read_photo
+    from ffls.radiance.photos import encoding_unknown, photo_of_image
 
     n = len(capture.image_paths)
     if n == 0:
@@ -1214,7 +1214,7 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
     stored = encoding_unknown(capture.encoding, head.bit_depth)
     if stored:  # no encoding stated: the stored values (what the encoding calibration finds the spheres on)
         decoding = replace(capture, encoding="linear")
-    first = read_photo(decoding, 0)
+    first = photo_of_image(decoding, 0, head)  # (read once here; its chunk reads it into place)
     shape = first.linear.shape
     integer = first.bit_depth in (8, 16)
     per_photo = first.linear.size * (1 if first.bit_depth == 8 else 2) if integer else first.linear.nbytes
