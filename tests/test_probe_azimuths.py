@@ -9,7 +9,6 @@ import pytest
 from ffls.cli import main
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes import estimate_lightmap
-from ffls.probes.estimate import DIFFUSE_AZIMUTHS
 from ffls.probes.hougen_ahuja import hougen_ahuja
 from ffls.probes.selection import HIERARCHY_PERIOD_DEG, horizon_rotations, oriented_fits
 from ffls.probes.sources import geodesic_level
@@ -72,24 +71,20 @@ def folder(tmp_path_factory):
     return write_diffuse_probe(tmp_path_factory.mktemp("studio"), sc)
 
 
-def test_default_is_the_mean_over_azimuths(folder):
-    est = estimate_lightmap(folder, "diffuse", height=16, max_pixels=600)
-    assert DIFFUSE_AZIMUTHS == 4 and est.details["azimuths"] == 4
+def test_azimuths_average_the_members_and_the_default_is_one(folder):
+    est = estimate_lightmap(folder, "diffuse", height=16, max_pixels=600, azimuths=4)
+    assert est.details["azimuths"] == 4
     assert len(est.details["sources"]) == 4 and len(est.details["smoothness"]) == 4
     assert any("4 azimuths 18 degrees apart" in s for s in est.notes)
     assert any("within one paired standard error" in s for s in est.notes)
-    one = estimate_lightmap(folder, "diffuse", height=16, max_pixels=600, azimuths=1)
+    one = estimate_lightmap(folder, "diffuse", height=16, max_pixels=600)  # the default: one estimate
     assert "azimuths" not in one.details and isinstance(one.details["sources"], int)
     assert isinstance(one.details["smoothness"], float)
-    # the mean of 4 is another map than its first member
-    assert not np.allclose(est.lightmap.data, one.lightmap.data)
+    assert not np.allclose(est.lightmap.data, one.lightmap.data)  # the mean of 4 is not its first member
     for bad in ({"azimuths": 2, "ground": True}, {"azimuths": 2, "sources": "uniform"},
                 {"azimuths": 2, "orientations": 2}, {"azimuths": 0}):
         with pytest.raises(ValueError, match="azimuths"):
             estimate_lightmap(folder, "diffuse", height=16, max_pixels=600, **bad)
-    # the other estimates keep one orientation unless asked
-    ground = estimate_lightmap(folder, "diffuse", height=16, max_pixels=600, ground=True)
-    assert "azimuths" not in ground.details
 
 
 def test_cli_azimuths(folder, tmp_path, capsys):

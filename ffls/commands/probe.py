@@ -121,11 +121,10 @@ def _add_inverse(sub, common):
     d.add_argument("--orientations", type=integer(1, 64), default=1,
                    help="with adaptive sources: average the estimate over this many orientations of the geodesic "
                         "source set (default 1: one estimate; costs as many estimates)")
-    d.add_argument("--azimuths", type=integer(1, 64), default=None,
+    d.add_argument("--azimuths", type=integer(1, 64), default=1,
                    help="with adaptive sources: make the estimate with the source set's vertex on the world's up "
                         "(probe.json's plane normal, else +Z) in this many azimuths about it, the same elevations "
-                        "in each, and average them (default 4; 1 with --orientations > 1 or --ground; 1: one "
-                        "estimate; costs as many estimates)")
+                        "in each, and average them (default 1: one estimate; costs as many estimates)")
     d.add_argument("--prior", choices=("quadratic", "tv"), default="quadratic",
                    help="what --smoothness penalises: the squared differences between neighbouring sources "
                         "(quadratic, default) or their absolute values (tv: total variation, keeps small lamps sharp)")
@@ -286,7 +285,7 @@ def method_knobs(args) -> dict:
 
             raise InputError(f"--orientations applies to --sources auto or adaptive without --smoothness cv, not "
                              f"--sources {args.sources}" + (" --smoothness cv" if args.smoothness == "cv" else ""))
-        if (args.azimuths or 1) > 1 and (args.sources not in ("auto", "adaptive") or args.orientations > 1
+        if args.azimuths > 1 and (args.sources not in ("auto", "adaptive") or args.orientations > 1
                                          or args.ground):
             from ffls.errors import InputError
 

@@ -617,7 +617,7 @@ def horizon_rotations(up, k: int) -> np.ndarray:
                      for i in range(k)])
 
 
-def oriented_fits(normals, rotations, estimate) -> tuple[list, list]:
+def oriented_fits(normals, rotations, estimate, turned_from=None) -> tuple[list, list]:
     """An estimate made in several orientations of its source set, each fit turned back into the world.
 
     Parameters
@@ -631,6 +631,9 @@ def oriented_fits(normals, rotations, estimate) -> tuple[list, list]:
     estimate : callable
         ``estimate(turned_normals) -> (fit, selection)``: a :class:`SourceFit` in the turned frame and
         whatever the caller wants back with it.
+    turned_from : (m, 3) array_like, optional
+        The normals the rotations other than the identity turn (default ``normals``; the same
+        directions, for example re-normalised).
 
     Returns
     -------
@@ -641,7 +644,8 @@ def oriented_fits(normals, rotations, estimate) -> tuple[list, list]:
     """
     import dataclasses
 
-    n = check_normals(normals)
+    check_normals(normals)
+    n = np.asarray(normals if turned_from is None else turned_from, dtype=np.float64)
     fits, sels = [], []
     for R in np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3):
         same = np.array_equal(R, np.eye(3))
@@ -671,7 +675,7 @@ def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: 
         sel = adaptive_hougen_ahuja(turned, radiance, albedo, **kwargs)
         return sel.fit, sel
 
-    fits, sels = oriented_fits(normals, rots, one)
+    fits, sels = oriented_fits(normals, rots, one, turned_from=n)
     sizes = tuple(int(s.chosen) for s in sels)
     note = (f"adaptive sources in {k} orientations of the geodesic hierarchy (the first its own, the others "
             f"random), averaged: {', '.join(map(str, sizes))} sources chosen ({sels[0].note})")
