@@ -122,6 +122,10 @@ def _add_inverse(sub, common):
     d.add_argument("--orientations", type=integer(1, 64), default=1,
                    help="with adaptive sources: average the estimate over this many orientations of the geodesic "
                         "source set (default 1: one estimate; costs as many estimates)")
+    d.add_argument("--azimuths", type=integer(1, 64), default=1,
+                   help="with adaptive sources: make the estimate with the source set's vertex on the world's up "
+                        "(probe.json's plane normal, else +Z) in this many azimuths about it, the same elevations "
+                        "in each, and average them (default 1: one estimate; costs as many estimates)")
     d.add_argument("--prior", choices=("quadratic", "tv"), default="quadratic",
                    help="what --smoothness penalises: the squared differences between neighbouring sources "
                         "(quadratic, default) or their absolute values (tv: total variation, keeps small lamps sharp)")
@@ -284,13 +288,22 @@ def method_knobs(args) -> dict:
 
             raise InputError(f"--orientations applies to --sources auto or adaptive without --smoothness cv, not "
                              f"--sources {args.sources}" + (" --smoothness cv" if args.smoothness == "cv" else ""))
+        if args.azimuths > 1 and (args.sources not in ("auto", "adaptive") or args.orientations > 1
+                                         or args.ground):
+            from ffls.errors import InputError
+
+            given = ((f"--sources {args.sources}", args.sources not in ("auto", "adaptive")),
+                     (f"--orientations {args.orientations}", args.orientations > 1), ("--ground", args.ground))
+            raise InputError(f"--azimuths {args.azimuths} applies to --sources auto or adaptive without --orientations "
+                             f"or --ground, not " + " ".join(f for f, on in given if on))
         if args.prior != "quadratic" and (args.smoothness == 0 or args.smoothness is None and args.orientations > 1):
             from ffls.errors import InputError
 
             raise InputError(f"--prior {args.prior} weighs --smoothness: give it a weight or cv (it is 0)")
         return {"sources": args.sources, "nonnegative": not args.unconstrained, "ambient": ambient,
                 "rcond": args.rcond, "criterion": args.criterion, "smoothness": args.smoothness, "fill": args.fill,
-                "orientations": args.orientations, "ground": args.ground, "prior": args.prior, "rule": args.rule}
+                "orientations": args.orientations, "ground": args.ground, "prior": args.prior, "rule": args.rule,
+                "azimuths": args.azimuths}
     if args.method == "shadow":
         if args.smoothness == "cv":
             from ffls.errors import InputError

@@ -34,7 +34,7 @@ from ffls.probes.sources import HOUGEN_AHUJA_SIZES, geodesic_sources
 __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_hougen_ahuja",
            "adaptive_sato_sato_ikeuchi", "normal_blocks", "position_blocks", "select_hougen_ahuja",
            "select_sato_sato_ikeuchi", "select_regularization", "choose_weight", "CRITERIA", "REGULARIZERS",
-           "WEIGHT_RULES", "ROUND_RULES"]
+           "WEIGHT_RULES", "ROUND_RULES", "HIERARCHY_PERIOD_DEG", "horizon_rotations", "oriented_fits"]
 
 #: Model-selection criteria.
 CRITERIA = ("cv", "bic")
@@ -44,6 +44,9 @@ REGULARIZERS = ("energy", "smoothness", "tv")
 WEIGHT_RULES = ("one_se", "paired_se", "min")
 #: Rules :func:`refine_sources` applies to the held-out errors of its rounds (CV).
 ROUND_RULES = ("tolerance", "paired_se")
+#: Degrees: the geodesic hierarchy (:func:`ffls.probes.sources.geodesic_level`) maps onto itself when turned
+#: by this much about its vertex on +Z (the icosahedron's 5-fold axis).
+HIERARCHY_PERIOD_DEG = 72.0
 
 
 @dataclass(frozen=True)
@@ -582,12 +585,79 @@ def adaptive_hougen_ahuja(normals, radiance, albedo=1.0, base_frequency: int = 3
                           max_sources, max_level, power_share, patience, criterion, tolerance, rule=rule)
 
 
-def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: dict) -> Selection:
-    """:func:`adaptive_hougen_ahuja` in ``k`` orientations of the source hierarchy, averaged (``n``: the
-    checked normals; the first member gets the caller's arrays as given, so that it is the plain estimate to
-    the last bit: NNLS can return another of its equally good vertices after a change in the last bits)."""
+def horizon_rotations(up, k: int) -> np.ndarray:
+    """The ``k`` orientations of the geodesic hierarchy that share its layout about the horizon.
+
+    Each puts the hierarchy's vertex (its own +Z) on ``up`` and turns it about ``up`` by ``i`` of ``k``
+    equal steps of :data:`HIERARCHY_PERIOD_DEG`, the period of its symmetry about that vertex: the
+    sources' elevations above and below the horizon are the same in every member, only their azimuths
+    change, and ``k`` members sample the azimuths evenly. With ``up`` the world's +Z the first is the
+    identity (the hierarchy's own orientation, to the last bit).
+
+    Parameters
+    ----------
+    up : (3,) array_like
+        The world's up (the normal of the horizon plane); non-zero.
+    k : int
+        ``>= 1``.
+
+    Returns
+    -------
+    (k, 3, 3) float64
+        Rotations ``R`` in :func:`oriented_fits`' convention (the pixels turned by ``R``, the sources
+        found in the turned frame turned back by ``R^T``).
+    """
+    from ffls.probes.sources import frame_to_axis
+
+    k = int(k)
+    if k < 1:
+        raise ValueError(f"the number of azimuths must be >= 1, not {k!r}")
+    F = frame_to_axis(ground_axis(up))
+    return np.stack([(F @ rotation_about_axis((0.0, 0.0, 1.0), HIERARCHY_PERIOD_DEG * i / k)).T
+                     for i in range(k)])
+
+
+def oriented_fits(normals, rotations, estimate, turned_from=None) -> tuple[list, list]:
+    """An estimate made in several orientations of its source set, each fit turned back into the world.
+
+    Parameters
+    ----------
+    normals : (m, 3) array_like
+        Unit world-frame normals.
+    rotations : (k, 3, 3) array_like
+        The source hierarchy fixed, the pixels turned by ``R`` (``normals @ R.T``): the sources ``d'``
+        the estimate finds are the world's ``R^T d'``. An identity gets ``normals`` as given (NNLS
+        can return another of its equally good vertices after a change in the last bits).
+    estimate : callable
+        ``estimate(turned_normals) -> (fit, selection)``: a :class:`SourceFit` in the turned frame and
+        whatever the caller wants back with it.
+    turned_from : (m, 3) array_like, optional
+        The normals the rotations other than the identity turn (default ``normals``; the same
+        directions, for example re-normalised).
+
+    Returns
+    -------
+    fits : list of SourceFit
+        In the world frame.
+    selections : list
+        The estimate's second outputs.
+    """
     import dataclasses
 
+    check_normals(normals)
+    n = np.asarray(normals if turned_from is None else turned_from, dtype=np.float64)
+    fits, sels = [], []
+    for R in np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3):
+        same = np.array_equal(R, np.eye(3))
+        fit, sel = estimate(normals if same else n @ R.T)
+        fits.append(fit if same else dataclasses.replace(fit, directions=normalize(fit.directions @ R)))
+        sels.append(sel)
+    return fits, sels
+
+
+def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: dict) -> Selection:
+    """:func:`adaptive_hougen_ahuja` in ``k`` orientations of the source hierarchy, averaged (``n``: the
+    checked normals; the first member is the plain estimate to the last bit)."""
     from scipy.spatial.transform import Rotation
 
     from ffls.probes.hougen_ahuja import average_fits
@@ -600,13 +670,12 @@ def _oriented_ensemble(normals, radiance, albedo, n, k: int, seed: int, kwargs: 
         az = np.random.default_rng(int(seed)).uniform(0.0, 360.0, k)
         rots = np.stack([rotation_about_axis(up, a) for a in az])
     rots[0] = np.eye(3)
-    sels, fits = [], []
-    for i, R in enumerate(rots):
-        # the hierarchy fixed, the pixels turned by R: its sources d' are the world's R^T d'
-        sel = adaptive_hougen_ahuja(normals if i == 0 else n @ R.T, radiance, albedo, **kwargs)
-        sels.append(sel)
-        fits.append(sel.fit if i == 0 else
-                    dataclasses.replace(sel.fit, directions=normalize(sel.fit.directions @ R)))
+
+    def one(turned):
+        sel = adaptive_hougen_ahuja(turned, radiance, albedo, **kwargs)
+        return sel.fit, sel
+
+    fits, sels = oriented_fits(normals, rots, one, turned_from=n)
     sizes = tuple(int(s.chosen) for s in sels)
     note = (f"adaptive sources in {k} orientations of the geodesic hierarchy (the first its own, the others "
             f"random), averaged: {', '.join(map(str, sizes))} sources chosen ({sels[0].note})")
