@@ -1751,6 +1751,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px)  # a dark cap -> its silhouette
         fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
+        # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
+        fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
     noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
@@ -2715,7 +2717,7 @@ MIRROR_GROWN_SUPPORT = 0.75
 
 
 def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera,
-                             max_residual_px: float, max_steps: int = 3) -> list:
+                             max_residual_px: float, max_steps: int = 3, rings: bool = False) -> list:
     """Each mirror ball's outline (:func:`_is_mirror_outline`) grown to the outermost circle the
     edges that change with the light support around it, where the max image's edges left it on a
     reflected circle inside the silhouette.
@@ -2735,28 +2737,86 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
     one is taken (at most ``max_steps``). The shadow edges of the many lights around a ball also
     make circles that enclose it; they are broken arcs, 0.34-0.62 of them on the changing edges,
     against 0.88-0.97 for a silhouette. Unchanged without the evidence (``changing`` None).
+
+    With ``rings`` the circles tried are not the enclosing circle but every ring of the changing
+    edges around the outline (:func:`_rings_around`), larger or smaller, that is not the same
+    circle; the best supported of those that pass the same tests is taken. A cap's outline whose
+    top runs a pixel or two outside the silhouette has no enclosing circle, while the silhouette
+    is the best-supported ring around it: 0.86-0.96 of it on the changing edges (a chrome ball on
+    a checker ground, on a textured JPEG ground, near the frame's edge), where the rings around a
+    right outline reach 0.76 (``bench_conditions.py``'s mirror and glossy balls), the same circle
+    aside. :func:`find_spheres` runs it after the refit on the changing edges
+    (:func:`_with_changing_edges`), on the outlines that refit did not replace as well.
     """
+    def enclosing(cur, pts):
+        oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
+        if oc is None:
+            return []
+        try:
+            return [_fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)]
+        except ValueError:
+            return []
+
     def grow(ft, pts):
         cur, cur_support, grown = ft, None, False  # the current outline's support, once measured
         for _ in range(max_steps):
-            oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
-            if oc is None:
+            best = None
+            for new in _rings_around(cur, pts, cam) if rings else enclosing(cur, pts):
+                support = outline_support(new, pts, cam.shape)
+                if new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT:
+                    continue
+                if cur_support is None:
+                    cur_support = outline_support(cur, pts, cam.shape)
+                if support > cur_support and (best is None or support > best[1]):
+                    best = (new, support)
+            if best is None:
                 break
-            try:
-                new = _fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
-            except ValueError:
-                break
-            support = outline_support(new, pts, cam.shape)
-            if new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT:
-                break
-            if cur_support is None:
-                cur_support = outline_support(cur, pts, cam.shape)
-            if support <= cur_support:
-                break
-            cur, cur_support, grown = new, support, True
+            cur, cur_support, grown = best[0], best[1], True
         return cur if grown else None
 
     return _mirror_outlines_replaced(fits, changing, L, cam, grow)
+
+
+#: A mirror outline's rings (:func:`_rings_around`): their centres within this many of its radii of
+#: its centre, their radii within :data:`MIRROR_RING_RADII` times its radius.
+MIRROR_RING_OFFSET = 0.5
+MIRROR_RING_RADII = (0.8, 1.6)
+#: Rings of :func:`ffls.spheres.mirror_outline.circle_search` fitted by :func:`_rings_around`.
+MIRROR_RINGS = 8
+
+
+def _ring_fits(points, center, max_offset: float, r_min: float, r_max: float, cam: DetectionCamera) -> list:
+    """The :data:`MIRROR_RINGS` circles of the edge points ``points`` ((n, 2) x, y) best supported
+    per pixel of radius (:func:`ffls.spheres.mirror_outline.circle_search`, 1-pixel tolerance),
+    centres within ``max_offset`` of ``center``, radii ``r_min`` to ``r_max`` (pixels), each fitted
+    to the points within :data:`OUTLINE_BAND_PX` of it until they hold (:func:`_fit_until_stable`)."""
+    c0 = np.asarray(center, dtype=np.float64)
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    P = P[np.hypot(P[:, 0] - c0[0], P[:, 1] - c0[1]) <= max_offset + r_max + OUTLINE_BAND_PX]
+    out = []
+    for cc, rr, _ in circle_search(P, c0, max_offset, r_min, r_max, tol=1.0, n_best=MIRROR_RINGS, per_radius=True):
+        on = np.abs(np.hypot(P[:, 0] - cc[0], P[:, 1] - cc[1]) - rr) <= OUTLINE_BAND_PX
+        new = _fit_until_stable(P, on, cam, cc, rr, OUTER_SOURCE)
+        if new is not None:
+            out.append(new)
+    return out
+
+
+def _rings_around(ft, points, cam: DetectionCamera) -> list:
+    """The rings of edge points ``points`` ((n, 2) x, y) around a mirror outline ``ft``, each fitted
+    (:func:`_ring_fits`): centres within :data:`MIRROR_RING_OFFSET` radii of its centre, radii
+    within :data:`MIRROR_RING_RADII` times its radius; those that end as the same circle (centre and
+    radius within :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` of its) are dropped.
+
+    A dark cap's outline runs along the limb at the top of a chrome ball and inside it below; where
+    the fit of the cap puts its top a pixel or two outside the silhouette, no circle of the edges
+    encloses it (:func:`ffls.spheres.mirror_outline.enclosing_circle` asks that it lies inside),
+    though the silhouette is a closed ring of the changing edges around it (a chrome ball on a
+    checker ground, ``ffls synth --background checker`` at 384 px: 5.2 px off, the ring 0.4 px)."""
+    c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+    lo, hi = MIRROR_RING_RADII
+    return [new for new in _ring_fits(points, c0, MIRROR_RING_OFFSET * r0, lo * r0, hi * r0, cam)
+            if np.hypot(np.hypot(*(new.center_px - c0)), new.radius_px - r0) > MIRROR_OUTLINE_FLOOR_PX]
 
 
 def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
