@@ -1753,6 +1753,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
         # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
+        fits = _with_max_image_rings(fits, edges, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
     noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
@@ -2817,6 +2818,43 @@ def _rings_around(ft, points, cam: DetectionCamera) -> list:
     lo, hi = MIRROR_RING_RADII
     return [new for new in _ring_fits(points, c0, MIRROR_RING_OFFSET * r0, lo * r0, hi * r0, cam)
             if np.hypot(np.hypot(*(new.center_px - c0)), new.radius_px - r0) > MIRROR_OUTLINE_FLOOR_PX]
+
+
+def _with_max_image_rings(fits, edges: _EdgeMap, L, cam: DetectionCamera, max_residual_px: float) -> list:
+    """Each mirror ball's outline still on the max image's edges (:func:`_is_mirror_outline`, not
+    refitted on the photos' edges) replaced by the ring of the max image's edges around it
+    (:func:`_rings_around`) that fits best (:func:`outline_quality`), where that one is round (RMS
+    within ``max_residual_px``) and fits better than it; the replacement keeps the score and gets
+    its own ambiguity (:func:`_outline_ambiguity`).
+
+    Below a chrome ball on a plain table the ball reflects the table, which meets the table
+    beside it with only the step of the ball's reflectance; just outside it the contact shadow's
+    edge runs as a second arc. The enclosing circle (:func:`_outer_outline`) takes the better
+    covered of the circles through the cap's top and either arc (ties: the larger), and took the
+    shadow's (the chrome ball of ``bench_conditions.py``'s calibration shot: 2.36 px off, RMS
+    0.76 px); the circle through the reflectance step fits the cap's top and the step closely. A
+    ring whose centre lies within :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` of
+    the outline's is the same outline (its radius may be the limb step's) and is not taken."""
+    log_l = None
+    out = []
+    for ft in fits:
+        if ft.source == "override" or ft.outline_edges == PHOTO_EDGES or not _is_mirror_outline(ft, L):
+            out.append(ft)
+            continue
+        # a ring about the same centre is the same outline, whose radius may be its limb step's
+        # (_outer_outline): only another centre replaces it
+        rings = [g for g in _rings_around(ft, edges.points, cam) if g.residual_px <= max_residual_px
+                 and np.hypot(*(g.center_px - ft.center_px)) > MIRROR_OUTLINE_FLOOR_PX]
+        best = max(rings, key=outline_quality, default=None)
+        if best is None or outline_quality(best) <= outline_quality(ft):
+            out.append(ft)
+            continue
+        if log_l is None:
+            log_l = np.log(np.maximum(L, 1e-12))
+        best.score = ft.score
+        best.outline_sigma_px = _outline_ambiguity(best, log_l, cam)
+        out.append(best)
+    return out
 
 
 def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
