@@ -330,7 +330,8 @@ def test_a_mirror_outline_through_the_contact_shadow_moves_to_the_reflectance_st
     shadow's edge 3 px outside the lower limb. The circle through the cap's top and the shadow's
     arc (what the enclosing circle took on the calibration shot of ``bench_conditions.py``: 2.36 px
     off) is replaced by the ring of the max image's edges that fits best, the silhouette, within
-    0.5 px; the silhouette's own outline stays as it is. (The calibration shot itself is an 80-light
+    0.5 px, where the changing edges agree (a ring of them on the silhouette), and only then; the
+    silhouette's own outline stays as it is. (The calibration shot itself is an 80-light
     384 px render; smaller renders of it do not take the shadow's arc.)"""
     import cv2
 
@@ -357,7 +358,14 @@ def test_a_mirror_outline_through_the_contact_shadow_moves_to_the_reflectance_st
     wrong = detect._fit_outline(P[top | shadow], cam, c, R + 1.0, OUTER_SOURCE)
     right = detect._fit_outline(P[top | step], cam, c, R, OUTER_SOURCE)
     assert np.hypot(*(wrong.center_px - c)) > 2.0
-    new, same = detect._with_max_image_rings([wrong, right], edges, L, cam, 1.5)
+    # the changing edges: the silhouette (the reflected scene changes with the light inside it)
+    t = np.radians(np.arange(0.0, 360.0, 2.0))
+    ring = c + R * np.stack([np.cos(t), np.sin(t)], axis=1)
+    ring = ring[np.argsort(ring[:, 1], kind="stable")]
+    changing = detect.ConsistentEdges(np.zeros((H, W)), np.zeros((H, W)),
+                                      (ring, (ring - c) / R, np.ones(len(ring))))
+    assert detect._with_max_image_rings([wrong], edges, None, L, cam, 1.5)[0] is wrong  # no photos' evidence
+    new, same = detect._with_max_image_rings([wrong, right], edges, changing, L, cam, 1.5)
     assert np.hypot(*(new.center_px - c)) < 0.5 and abs(new.radius_px - R) < 1.0
     assert new.outline_sigma_px >= MIRROR_OUTLINE_FLOOR_PX
     assert same is right

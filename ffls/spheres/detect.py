@@ -1753,7 +1753,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
         # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
-        fits = _with_max_image_rings(fits, edges, L, cam, max_residual_px)
+        fits = _with_max_image_rings(fits, edges, changing, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
     noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
@@ -2820,12 +2820,19 @@ def _rings_around(ft, points, cam: DetectionCamera) -> list:
             if np.hypot(np.hypot(*(new.center_px - c0)), new.radius_px - r0) > MIRROR_OUTLINE_FLOOR_PX]
 
 
-def _with_max_image_rings(fits, edges: _EdgeMap, L, cam: DetectionCamera, max_residual_px: float) -> list:
+def _with_max_image_rings(fits, edges: _EdgeMap, changing: ConsistentEdges | None, L, cam: DetectionCamera,
+                          max_residual_px: float) -> list:
     """Each mirror ball's outline still on the max image's edges (:func:`_is_mirror_outline`, not
     refitted on the photos' edges) replaced by the ring of the max image's edges around it
-    (:func:`_rings_around`) that fits best (:func:`outline_quality`), where that one is round (RMS
-    within ``max_residual_px``) and fits better than it; the replacement keeps the score and gets
-    its own ambiguity (:func:`_outline_ambiguity`).
+    (:func:`_ring_fits`: centre within a quarter of its radius, radius within 0.1 radii + 2 px of its)
+    that fits best (:func:`outline_quality`), where that one is round (RMS within ``max_residual_px``)
+    and fits better than it; the replacement keeps the score and gets its own ambiguity
+    (:func:`_outline_ambiguity`). The rings are another arc of the same ball: in a single probe
+    photo a wider search (radii 0.8-1.6) took an inner reflection (``benchmarks/probe_detect.py``,
+    night long: 2.2 -> 9.1 px off), and this band a reflected circle 0.89 px off for one 0.23 px
+    off (courtyard normal). So the ring must also have more of its outline on the edges that change
+    with the light (``changing``, :func:`outline_support`) than the outline it replaces (the
+    calibration shot: 0.53 -> 0.57); unchanged without that evidence (None: fewer than 3 photos).
 
     Below a chrome ball on a plain table the ball reflects the table, which meets the table
     beside it with only the step of the ball's reflectance; just outside it the contact shadow's
@@ -2835,18 +2842,25 @@ def _with_max_image_rings(fits, edges: _EdgeMap, L, cam: DetectionCamera, max_re
     0.76 px); the circle through the reflectance step fits the cap's top and the step closely. A
     ring whose centre lies within :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` of
     the outline's is the same outline (its radius may be the limb step's) and is not taken."""
+    if changing is None or not fits:
+        return fits
+    pts = changing.points[0]
     log_l = None
     out = []
     for ft in fits:
         if ft.source == "override" or ft.outline_edges == PHOTO_EDGES or not _is_mirror_outline(ft, L):
             out.append(ft)
             continue
-        # a ring about the same centre is the same outline, whose radius may be its limb step's
-        # (_outer_outline): only another centre replaces it
-        rings = [g for g in _rings_around(ft, edges.points, cam) if g.residual_px <= max_residual_px
-                 and np.hypot(*(g.center_px - ft.center_px)) > MIRROR_OUTLINE_FLOOR_PX]
+        # another arc of the same ball: the centre within a quarter radius, the radius within the
+        # refit's band (0.1 radii + 2 px, as _refine_on_consistent_edges); a ring about the same
+        # centre is the same outline, whose radius may be its limb step's (_outer_outline)
+        c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+        band = 0.1 * r0 + 2.0
+        rings = [g for g in _ring_fits(edges.points, c0, 0.25 * r0, r0 - band, r0 + band, cam)
+                 if g.residual_px <= max_residual_px and np.hypot(*(g.center_px - c0)) > MIRROR_OUTLINE_FLOOR_PX]
         best = max(rings, key=outline_quality, default=None)
-        if best is None or outline_quality(best) <= outline_quality(ft):
+        if (best is None or outline_quality(best) <= outline_quality(ft)
+                or outline_support(best, pts, cam.shape) <= outline_support(ft, pts, cam.shape)):
             out.append(ft)
             continue
         if log_l is None:
