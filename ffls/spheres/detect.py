@@ -2806,8 +2806,10 @@ def _ring_fits(points, center, max_offset: float, r_min: float, r_max: float, ca
 def _rings_around(ft, points, cam: DetectionCamera) -> list:
     """The rings of edge points ``points`` ((n, 2) x, y) around a mirror outline ``ft``, each fitted
     (:func:`_ring_fits`): centres within :data:`MIRROR_RING_OFFSET` radii of its centre, radii
-    within :data:`MIRROR_RING_RADII` times its radius; those that end as the same circle (centre and
-    radius within :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` of its) are dropped.
+    within :data:`MIRROR_RING_RADII` times its radius; those that end smaller than it (the
+    silhouette encloses the reflected scene: on an 8-light chrome ball a reflected ring 0.8 px
+    smaller took the outline from 0.77 to 1.01 px off) or as the same circle (centre and radius
+    within :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` of its) are dropped.
 
     A dark cap's outline runs along the limb at the top of a chrome ball and inside it below; where
     the fit of the cap puts its top a pixel or two outside the silhouette, no circle of the edges
@@ -2817,7 +2819,8 @@ def _rings_around(ft, points, cam: DetectionCamera) -> list:
     c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
     lo, hi = MIRROR_RING_RADII
     return [new for new in _ring_fits(points, c0, MIRROR_RING_OFFSET * r0, lo * r0, hi * r0, cam)
-            if np.hypot(np.hypot(*(new.center_px - c0)), new.radius_px - r0) > MIRROR_OUTLINE_FLOOR_PX]
+            if new.radius_px >= r0
+            and np.hypot(np.hypot(*(new.center_px - c0)), new.radius_px - r0) > MIRROR_OUTLINE_FLOOR_PX]
 
 
 def _with_max_image_rings(fits, edges: _EdgeMap, changing: ConsistentEdges | None, L, cam: DetectionCamera,
