@@ -1818,6 +1818,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px)  # a dark cap -> its silhouette
         fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
+        # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
+        fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
+        fits = _with_max_image_rings(fits, edges, changing, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear max image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels)
     noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
@@ -2358,7 +2361,12 @@ def outline_quality(ft) -> float:
     the share of the outline with edge support, discounted by the RMS distance of the points
     from the fitted outline (a 0.5-pixel RMS halves it).
     """
-    return float(ft.coverage) / (1.0 + (float(ft.residual_px) / 0.5) ** 2)
+    return float(ft.coverage) * _rms_discount(ft)
+
+
+def _rms_discount(ft) -> float:
+    """The fit-quality discount of :func:`outline_quality`: ``1 / (1 + (residual_px / 0.5)^2)``."""
+    return 1.0 / (1.0 + (float(ft.residual_px) / 0.5) ** 2)
 
 
 def _with_outer_outlines(fits, edges: _EdgeMap, L, cam: DetectionCamera) -> list:
@@ -2786,12 +2794,14 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
     return _mirror_outlines_replaced(fits, changing, L, cam, refit)
 
 
-def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera, refit) -> list:
+def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera, refit,
+                              photo_edges: bool = True) -> list:
     """``fits`` with each mirror ball's outline (:func:`_is_mirror_outline`, not an override)
     replaced by ``refit(fit, changing_points, tree)`` where that gives one (not None; ``tree`` a
     ``cKDTree`` of the points for :func:`outline_support`, built once): the replacement
-    keeps the score, is marked as outlined on :data:`PHOTO_EDGES` and gets its own ambiguity
-    (:func:`_outline_ambiguity`). Unchanged without the evidence (``changing`` None)."""
+    keeps the score, is marked as outlined on :data:`PHOTO_EDGES` (with ``photo_edges``: a refit on
+    the photos' edges) and gets its own ambiguity (:func:`_outline_ambiguity`). Unchanged without
+    the evidence (``changing`` None)."""
     if changing is None or not fits:
         return fits
     pts = changing.points[0]
@@ -2810,7 +2820,9 @@ def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: De
             continue
         if log_l is None:
             log_l = np.log(np.maximum(L, 1e-12))
-        new.score, new.outline_edges = ft.score, PHOTO_EDGES
+        new.score = ft.score
+        if photo_edges:
+            new.outline_edges = PHOTO_EDGES
         new.outline_sigma_px = _outline_ambiguity(new, log_l, cam)
         out.append(new)
     return out
@@ -2822,7 +2834,7 @@ MIRROR_GROWN_SUPPORT = 0.75
 
 
 def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera,
-                             max_residual_px: float, max_steps: int = 3) -> list:
+                             max_residual_px: float, max_steps: int = 3, rings: bool = False) -> list:
     """Each mirror ball's outline (:func:`_is_mirror_outline`) grown to the outermost circle the
     edges that change with the light support around it, where the max image's edges left it on a
     reflected circle inside the silhouette.
@@ -2842,28 +2854,139 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
     one is taken (at most ``max_steps``). The shadow edges of the many lights around a ball also
     make circles that enclose it; they are broken arcs, 0.34-0.62 of them on the changing edges,
     against 0.88-0.97 for a silhouette. Unchanged without the evidence (``changing`` None).
+
+    With ``rings`` the circles tried are not the enclosing circle but every ring of the changing
+    edges around the outline (:func:`_rings_around`), larger or smaller, that is not the same
+    circle and not smaller, whose support discounted by its RMS as :func:`outline_quality` discounts
+    coverage is higher than the outline's (a lone chrome ball lit from one side: a ring of the
+    lights' shadow edges 4.7 px off, 0.76 of it on the changing edges at RMS 0.59 px, against the
+    silhouette's 0.75 at 0.31 px); the best supported of those that pass the same tests is taken.
+    A cap's outline whose
+    top runs a pixel or two outside the silhouette has no enclosing circle, while the silhouette
+    is the best-supported ring around it: 0.86-0.96 of it on the changing edges (a chrome ball on
+    a checker ground, on a textured JPEG ground, near the frame's edge), where the rings around a
+    right outline reach 0.76 (``bench_conditions.py``'s mirror and glossy balls), the same circle
+    aside. :func:`find_spheres` runs it after the refit on the changing edges
+    (:func:`_with_changing_edges`), on the outlines that refit did not replace as well.
     """
+    def enclosing(cur, pts):
+        oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
+        if oc is None:
+            return []
+        try:
+            return [_fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)]
+        except ValueError:
+            return []
+
     def grow(ft, pts, tree):
         cur, cur_support, grown = ft, None, False  # the current outline's support, once measured
         for _ in range(max_steps):
-            oc = enclosing_circle(pts, cur.center_px, cur.radius_px, shape=cam.shape)
-            if oc is None:
+            best = None
+            for new in _rings_around(cur, pts, cam) if rings else enclosing(cur, pts):
+                support = outline_support(new, pts, cam.shape, tree=tree)
+                if new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT:
+                    continue
+                if cur_support is None:
+                    cur_support = outline_support(cur, pts, cam.shape, tree=tree)
+                # a ring against the outline: its support discounted by its RMS as the selection's
+                # outline quality is (outline_quality: a ring of the lights' shadow edges, as well
+                # supported but twice as rough, does not replace a silhouette)
+                if rings and support * _rms_discount(new) <= cur_support * _rms_discount(cur):
+                    continue
+                if support > cur_support and (best is None or support > best[1]):
+                    best = (new, support)
+            if best is None:
                 break
-            try:
-                new = _fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
-            except ValueError:
-                break
-            support = outline_support(new, pts, cam.shape, tree=tree)
-            if new.residual_px > max_residual_px or support < MIRROR_GROWN_SUPPORT:
-                break
-            if cur_support is None:
-                cur_support = outline_support(cur, pts, cam.shape, tree=tree)
-            if support <= cur_support:
-                break
-            cur, cur_support, grown = new, support, True
+            cur, cur_support, grown = best[0], best[1], True
         return cur if grown else None
 
     return _mirror_outlines_replaced(fits, changing, L, cam, grow)
+
+
+#: A mirror outline's rings (:func:`_rings_around`): their centres within this many of its radii of
+#: its centre, their radii within :data:`MIRROR_RING_RADII` times its radius.
+MIRROR_RING_OFFSET = 0.5
+MIRROR_RING_RADII = (0.8, 1.6)
+#: Rings of :func:`ffls.spheres.mirror_outline.circle_search` fitted by :func:`_rings_around`.
+MIRROR_RINGS = 8
+
+
+def _ring_fits(points, center, max_offset: float, r_min: float, r_max: float, cam: DetectionCamera) -> list:
+    """The :data:`MIRROR_RINGS` circles of the edge points ``points`` ((n, 2) x, y) best supported
+    per pixel of radius (:func:`ffls.spheres.mirror_outline.circle_search`, 1-pixel tolerance),
+    centres within ``max_offset`` of ``center``, radii ``r_min`` to ``r_max`` (pixels), each fitted
+    to the points within :data:`OUTLINE_BAND_PX` of it until they hold (:func:`_fit_until_stable`)."""
+    c0 = np.asarray(center, dtype=np.float64)
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    P = P[np.hypot(P[:, 0] - c0[0], P[:, 1] - c0[1]) <= max_offset + r_max + OUTLINE_BAND_PX]
+    out = []
+    for cc, rr, _ in circle_search(P, c0, max_offset, r_min, r_max, tol=1.0, n_best=MIRROR_RINGS, per_radius=True):
+        on = np.abs(np.hypot(P[:, 0] - cc[0], P[:, 1] - cc[1]) - rr) <= OUTLINE_BAND_PX
+        new = _fit_until_stable(P, on, cam, cc, rr, OUTER_SOURCE)
+        if new is not None:
+            out.append(new)
+    return out
+
+
+def _rings_around(ft, points, cam: DetectionCamera) -> list:
+    """The rings of edge points ``points`` ((n, 2) x, y) around a mirror outline ``ft``, each fitted
+    (:func:`_ring_fits`): centres within :data:`MIRROR_RING_OFFSET` radii of its centre, radii
+    within :data:`MIRROR_RING_RADII` times its radius; those that end smaller than it (the
+    silhouette encloses the reflected scene: on an 8-light chrome ball a reflected ring 0.8 px
+    smaller took the outline from 0.77 to 1.01 px off) or as the same circle (centre and radius
+    within :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` of its) are dropped.
+
+    A dark cap's outline runs along the limb at the top of a chrome ball and inside it below; where
+    the fit of the cap puts its top a pixel or two outside the silhouette, no circle of the edges
+    encloses it (:func:`ffls.spheres.mirror_outline.enclosing_circle` asks that it lies inside),
+    though the silhouette is a closed ring of the changing edges around it (a chrome ball on a
+    checker ground, ``ffls synth --background checker`` at 384 px: 5.2 px off, the ring 0.4 px)."""
+    c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+    lo, hi = MIRROR_RING_RADII
+    return [new for new in _ring_fits(points, c0, MIRROR_RING_OFFSET * r0, lo * r0, hi * r0, cam)
+            if new.radius_px >= r0
+            and np.hypot(np.hypot(*(new.center_px - c0)), new.radius_px - r0) > MIRROR_OUTLINE_FLOOR_PX]
+
+
+def _with_max_image_rings(fits, edges: _EdgeMap, changing: ConsistentEdges | None, L, cam: DetectionCamera,
+                          max_residual_px: float) -> list:
+    """Each mirror ball's outline still on the max image's edges (:func:`_is_mirror_outline`, not
+    refitted on the photos' edges) replaced by the ring of the max image's edges around it
+    (:func:`_ring_fits`: centre within a quarter of its radius, radius within 0.1 radii + 2 px of its)
+    that fits best (:func:`outline_quality`), where that one is round (RMS within ``max_residual_px``)
+    and fits better than it; the replacement keeps the score and gets its own ambiguity
+    (:func:`_outline_ambiguity`). The rings are another arc of the same ball: in a single probe
+    photo a wider search (radii 0.8-1.6) took an inner reflection (``benchmarks/probe_detect.py``,
+    night long: 2.2 -> 9.1 px off), and this band a reflected circle 0.89 px off for one 0.23 px
+    off (courtyard normal). So the ring must also have more of its outline on the edges that change
+    with the light (``changing``, :func:`outline_support`) than the outline it replaces (the
+    calibration shot: 0.53 -> 0.57); unchanged without that evidence (None: fewer than 3 photos).
+
+    Below a chrome ball on a plain table the ball reflects the table, which meets the table
+    beside it with only the step of the ball's reflectance; just outside it the contact shadow's
+    edge runs as a second arc. The enclosing circle (:func:`_outer_outline`) takes the better
+    covered of the circles through the cap's top and either arc (ties: the larger), and took the
+    shadow's (the chrome ball of ``bench_conditions.py``'s calibration shot: 2.36 px off, RMS
+    0.76 px); the circle through the reflectance step fits the cap's top and the step closely. A
+    ring whose centre lies within :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` of
+    the outline's is the same outline (its radius may be the limb step's) and is not taken."""
+    def ring(ft, pts, tree):
+        if ft.outline_edges == PHOTO_EDGES:
+            return None
+        # another arc of the same ball: the centre within a quarter radius, the radius within the
+        # refit's band (0.1 radii + 2 px, as _refine_on_consistent_edges); a ring about the same
+        # centre is the same outline, whose radius may be its limb step's (_outer_outline)
+        c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
+        band = 0.1 * r0 + 2.0
+        rings = [g for g in _ring_fits(edges.points, c0, 0.25 * r0, r0 - band, r0 + band, cam)
+                 if g.residual_px <= max_residual_px and np.hypot(*(g.center_px - c0)) > MIRROR_OUTLINE_FLOOR_PX]
+        best = max(rings, key=outline_quality, default=None)
+        if best is None or outline_quality(best) <= outline_quality(ft):
+            return None
+        return best if outline_support(best, pts, cam.shape, tree=tree) > outline_support(ft, pts, cam.shape,
+                                                                                            tree=tree) else None
+
+    return _mirror_outlines_replaced(fits, changing, L, cam, ring, photo_edges=False)
 
 
 def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
