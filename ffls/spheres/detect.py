@@ -1086,7 +1086,7 @@ def _fit_steps(Lf, P, U, k: int, noise: float, radius=None):
     return P + e[:, None] * U, ok, s, inner
 
 
-def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | None = None):
+def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | None = None, clip_image=None):
     """Sub-pixel edge of each radial profile: a blurred step between two sloped sides, fitted in linear radiance.
 
     Where the sphere meets its background, the image is a step blurred by the lens and the pixels:
@@ -1126,6 +1126,9 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | N
     clip : float, optional
         The level at or above which ``L`` is clipped (an integer file's largest code): a profile
         that reaches it is not used (a clipped side's level, hence the half-way level, is unknown).
+    clip_image : (H, W) float, optional
+        The image whose profiles are checked against ``clip`` (default ``L``): the max image of the
+        photos whose mean ``L`` is (a profile clipped in one photo is not a blurred step in the mean).
 
     Returns
     -------
@@ -1143,7 +1146,8 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | N
     unclipped = np.ones(len(P), dtype=bool)
     if clip is not None:  # over the soft scale's window, the wider one
         t = STEP_SEARCHES[1].t
-        V = _bilinear(Lf, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(len(P), -1)
+        C = Lf if clip_image is None else np.asarray(clip_image, dtype=np.float64)
+        V = _bilinear(C, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(len(P), -1)
         unclipped = V.max(axis=1) < clip
         if not unclipped.any():
             return P.copy(), np.zeros(len(P), dtype=bool)
@@ -1751,11 +1755,16 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px)  # a dark cap -> its silhouette
         fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
-    # every outline's points moved to the step of the linear max image; an integer file's clipped
-    # pixels read its largest code, the max image's maximum (as select.clip_levels)
-    noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
-    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
-                                                                                     clip) for ft in fits]
+    # every outline's points moved to the step of the linear image; an integer file's clipped
+    # pixels read its largest code, the max image's maximum (as select.clip_levels). The steps are
+    # fitted on the mean image where there is one: a mean of blurred photos is the blurred mean, a
+    # blurred step; their max is not (the brighter photo on each side: a step sharper than the
+    # blur and off the outline by up to half a pixel, toward the side that fewer lights reach)
+    clip = 0.98 * float(L.max()) if saturates else None
+    M = np.asarray(mean, dtype=np.float64) if mean is not None and n_photos >= 3 else L
+    noise = _pixel_noise(M)
+    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, M, cam, max_residual_px, noise,
+                                                                                     clip, clip_image=L) for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -2559,12 +2568,13 @@ def _pixel_noise(L) -> float:
 
 
 def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noise: float = 0.0, clip=None,
-                        min_points: int = 8):
-    """Refit a found sphere on its outline points moved to the step of the linear max image (:func:`step_edges`).
+                        min_points: int = 8, clip_image=None):
+    """Refit a found sphere on its outline points moved to the step of a linear image (:func:`step_edges`).
 
     Each inlier outline point is moved along the ray from the fitted centre to where a blurred
     step between the sphere and its background, each side with its own level and slope, best fits
-    the luminance profile of ``L`` (pixel noise ``noise``, clipped at ``clip`` or never); points
+    the luminance profile of ``L`` (the photos' mean, or the max image; pixel noise ``noise``;
+    a profile reaching ``clip`` in ``clip_image``, default ``L``, is not used); points
     where it shows no usable step (a white sphere's top on a white ground, seen only in the
     photos' edges; a clipped limb) keep their place. The refit
     replaces the fit when it is round (RMS within ``max_residual_px``) and moves the outline by
@@ -2576,7 +2586,7 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
     c = np.asarray(ft.center_px, dtype=np.float64)
     v = P - c
     u = v / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)[:, None]
-    Q, ok = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip)
+    Q, ok = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip, clip_image=clip_image)
     if ok.sum() < min_points:
         return ft
     Q = np.where(ok[:, None], Q, P)
