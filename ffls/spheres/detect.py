@@ -2597,7 +2597,9 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
     where it shows no usable step (a white sphere's top on a white ground, seen only in the
     photos' edges; a clipped limb) keep their place. The refit
     replaces the fit when it is round (RMS within ``max_residual_px``) and moves the outline by
-    less than a pixel (centre and radius); otherwise the fit is returned unchanged.
+    less than a pixel, or twice the steps' median blur sigma where that is more (the log edges
+    move toward the dark side with the blur), centre and radius; otherwise the fit is returned
+    unchanged.
     """
     P = ft.edge_px
     if P is None or len(P) < min_points:
@@ -2608,7 +2610,7 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
     Q, ok, blur = step_edges(L if mean is None else mean, P, u, noise if mean is None else mean_noise,
                              radius=ft.radius_px, clip=clip, clip_image=L, with_blur=True)
     if mean is not None and not (ok.sum() >= min_points and np.median(blur[ok]) >= SHARP_BLUR_PX):
-        Q, ok = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip)
+        Q, ok, blur = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip, with_blur=True)
     if ok.sum() < min_points:
         return ft
     Q = np.where(ok[:, None], Q, P)
@@ -2616,8 +2618,10 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
         new = _fit_outline(Q, cam, c, ft.radius_px, ft.source, n_edge=ft.n_edge_points)
     except ValueError:
         return ft
-    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c)) > 1.0
-            or abs(new.radius_px - ft.radius_px) > 1.0):
+    # the log edges it starts from lie up to ~1 blur sigma toward the dark side (step_edges)
+    reach = max(1.0, 2.0 * float(np.median(blur[ok])))
+    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c)) > reach
+            or abs(new.radius_px - ft.radius_px) > reach):
         return ft
     new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
     new.outline_at_step = True
