@@ -43,8 +43,9 @@ Method
    by a refit on the inliers.
 5b. **The outline at the linear step** (:func:`step_edges`, once the spheres are chosen): each
    outline point is moved along its ray from the centre to the Gaussian-blurred step between
-   sphere and background fitted to the linear max image's profile, and the outline refitted. The
-   gradient maximum of the log image lies toward the dark side of an anti-aliased or defocused
+   sphere and background fitted to the linear max image's profile (the photos' mean's, where its
+   steps are blurred beyond a pixel: the max of blurred photos is no blurred step), and the
+   outline refitted. The gradient maximum of the log image lies toward the dark side of an anti-aliased or defocused
    edge, and inside a limb that shades off (0.1-0.3 px on ``ffls synth`` renders).
 6. **Which outlines are spheres** (no hints, :mod:`ffls.spheres.select`): round
    (fit RMS), closed and supported (coverage of the visible outline), visible enough (a sphere
