@@ -321,6 +321,30 @@ def test_synth_capture_half_azimuth_grid(tmp_path):
     assert max(err) < 0.5, err
 
 
+@pytest.mark.parametrize("resolution, seed", [(256, 4), (256, 9), (320, 4)])
+def test_blurred_photos_outline_on_the_mean_step(tmp_path, resolution, seed):
+    """Photos blurred by a lens (Gaussian sigma 1.2 px) of one grey ball, long lens, 16 lights: the
+    max of blurred photos is no blurred step (the brighter photo on each side), and its step put
+    the centre 0.39-1.39 px off (down, toward the contact with the ground); the step of the
+    photos' mean (a blurred step: the mean of blurred photos is their blurred mean) keeps it within
+    0.5 px (0.12-0.37). The sharp render's outline is the max image's, as before."""
+    import cv2
+    from ffls.io.capture import load_capture
+    from ffls.io.images import read_image
+    from ffls.synth.scene import make_scene, write_synthetic_capture
+
+    write_synthetic_capture(tmp_path, n_lights=16, resolution=resolution, seed=seed, progress=False,
+                            scene=make_scene(spheres=1, sphere_material="grey", lens="long", with_object=False))
+    cap = load_capture(tmp_path)
+    truth = json.loads((tmp_path / "truth.json").read_text())["spheres"][0]
+    photos = [read_image(p).pixels for p in cap.image_paths]
+    for sigma, tol in ((0.0, 0.3), (1.2, 0.5)):
+        seq = [cv2.GaussianBlur(x, (0, 0), sigma) for x in photos] if sigma else photos
+        ft = detect.find_spheres(seq, cap.K, cap.dist, cap.sphere_radius, world_from_camera=cap.world_from_camera)[0]
+        assert np.hypot(*(ft.center_px - np.asarray(truth["center_px"]))) < tol, (sigma, ft.center_px)
+        assert abs(ft.radius_px - truth["radius_px"]) < tol and ft.outline_at_step
+
+
 def test_outline_is_the_silhouette_not_the_log_edge(scene0):
     """The outline is the silhouette: each sphere's apparent radius (its tangent cone's half-angle,
     in pixels) within 0.1 px of the truth. The edge of the log-tone-mapped max image lies outside

@@ -43,8 +43,9 @@ Method
    by a refit on the inliers.
 5b. **The outline at the linear step** (:func:`step_edges`, once the spheres are chosen): each
    outline point is moved along its ray from the centre to the Gaussian-blurred step between
-   sphere and background fitted to the linear max image's profile, and the outline refitted. The
-   gradient maximum of the log image lies toward the dark side of an anti-aliased or defocused
+   sphere and background fitted to the linear max image's profile (the photos' mean's, where its
+   steps are blurred beyond a pixel: the max of blurred photos is no blurred step), and the
+   outline refitted. The gradient maximum of the log image lies toward the dark side of an anti-aliased or defocused
    edge, and inside a limb that shades off (0.1-0.3 px on ``ffls synth`` renders).
 6. **Which outlines are spheres** (no hints, :mod:`ffls.spheres.select`): round
    (fit RMS), closed and supported (coverage of the visible outline), visible enough (a sphere
@@ -1029,6 +1030,11 @@ STEP_SEARCHES = (
 #: high threshold of :func:`edge_points` stands for (a white sphere's limb against a white ground,
 #: 1.1 in the max image, is left to the photos' edges).
 MIN_STEP_RATIO = 1.2
+#: Least blur sigma (pixels, the median over an outline's steps in the photos' mean) for which the
+#: outline's steps are fitted on the mean rather than the max image (:func:`_refine_on_profiles`): a
+#: pixel's own footprint (a box, sigma 0.29 px, sampled bilinearly) fits the sharp scale's least
+#: blurs, 0.3 px; beyond it the max of the photos is no blurred step (``benchmarks/blur_lights.py``).
+SHARP_BLUR_PX = 0.45
 
 
 def _step_design(t, e, s) -> np.ndarray:
@@ -1087,7 +1093,8 @@ def _fit_steps(Lf, P, U, k: int, noise: float, radius=None):
     return P + e[:, None] * U, ok, s, inner
 
 
-def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | None = None):
+def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | None = None, clip_image=None,
+               with_blur: bool = False):
     """Sub-pixel edge of each radial profile: a blurred step between two sloped sides, fitted in linear radiance.
 
     Where the sphere meets its background, the image is a step blurred by the lens and the pixels:
@@ -1127,6 +1134,11 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | N
     clip : float, optional
         The level at or above which ``L`` is clipped (an integer file's largest code): a profile
         that reaches it is not used (a clipped side's level, hence the half-way level, is unknown).
+    clip_image : (H, W) float, optional
+        The image whose profiles are checked against ``clip`` (default ``L``): the max image of the
+        photos whose mean ``L`` is (a profile clipped in one photo is not a blurred step in the mean).
+    with_blur : bool
+        Return the fitted blurs too.
 
     Returns
     -------
@@ -1134,32 +1146,41 @@ def step_edges(L, points, dirs, noise: float = 0.0, radius=None, clip: float | N
         The edge points moved along ``dirs`` to the fitted step.
     ok : (n,) bool
         A step was found within the search range, with the contrast above.
+    blur : (n,) float64
+        With ``with_blur``: each step's fitted blur sigma, pixels (NaN where none was fitted).
     """
     P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     U = np.asarray(dirs, dtype=np.float64).reshape(-1, 2)
     if len(P) == 0:
-        return P.copy(), np.zeros(0, dtype=bool)
+        return (P.copy(), np.zeros(0, dtype=bool)) + ((np.zeros(0),) if with_blur else ())
     Lf = np.asarray(L, dtype=np.float64)
     rad = None if radius is None else np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(P),))
     unclipped = np.ones(len(P), dtype=bool)
     if clip is not None:  # over the soft scale's window, the wider one
         t = STEP_SEARCHES[1].t
-        V = _bilinear(Lf, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(len(P), -1)
+        C = Lf if clip_image is None else np.asarray(clip_image, dtype=np.float64)
+        V = _bilinear(C, (P[:, None, :] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)).reshape(len(P), -1)
         unclipped = V.max(axis=1) < clip
         if not unclipped.any():
-            return P.copy(), np.zeros(len(P), dtype=bool)
+            return (P.copy(), np.zeros(len(P), dtype=bool)) + ((np.full(len(P), np.nan),) if with_blur else ())
         P, U = P[unclipped], U[unclipped]
         rad = None if rad is None else rad[unclipped]
     Q, ok, s, inner = _fit_steps(Lf, P, U, 0, noise, rad)
     soft = (ok & (s >= STEP_SEARCHES[1].blurs[0])) | ~inner
     if soft.any():
-        Qs, oks, _, _ = _fit_steps(Lf, P[soft], U[soft], 1, noise, None if rad is None else rad[soft])
+        Qs, oks, ss, _ = _fit_steps(Lf, P[soft], U[soft], 1, noise, None if rad is None else rad[soft])
         Q[soft] = np.where(oks[:, None], Qs, Q[soft])
+        s = s.copy()
+        s[soft] = np.where(oks, ss, s[soft])
         ok[soft] = oks
     Q_all = np.asarray(points, dtype=np.float64).reshape(-1, 2).copy()
     ok_all = np.zeros(len(Q_all), dtype=bool)
     Q_all[unclipped], ok_all[unclipped] = Q, ok
-    return Q_all, ok_all
+    if not with_blur:
+        return Q_all, ok_all
+    s_all = np.full(len(Q_all), np.nan)
+    s_all[unclipped] = np.where(ok, s, np.nan)
+    return Q_all, ok_all, s_all
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -1821,11 +1842,15 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
         fits = _with_max_image_rings(fits, edges, changing, L, cam, max_residual_px)
-    # every outline's points moved to the step of the linear max image; an integer file's clipped
-    # pixels read its largest code, the max image's maximum (as select.clip_levels)
-    noise, clip = _pixel_noise(L), 0.98 * float(L.max()) if saturates else None
-    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
-                                                                                     clip) for ft in fits]
+    # every outline's points moved to the step of the linear image; an integer file's clipped
+    # pixels read its largest code, the max image's maximum (as select.clip_levels); on the photos'
+    # mean where they are blurred beyond the pixel (_refine_on_profiles)
+    clip = 0.98 * float(L.max()) if saturates else None
+    M = np.asarray(mean, dtype=np.float64) if mean is not None and n_photos >= 3 else None
+    noise = _pixel_noise(L), None if M is None else _pixel_noise(M)
+    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise[0],
+                                                                                     clip, mean=M, mean_noise=noise[1])
+            for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
@@ -2664,16 +2689,23 @@ def _pixel_noise(L) -> float:
 
 
 def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noise: float = 0.0, clip=None,
-                        min_points: int = 8):
-    """Refit a found sphere on its outline points moved to the step of the linear max image (:func:`step_edges`).
+                        min_points: int = 8, mean=None, mean_noise: float = 0.0):
+    """Refit a found sphere on its outline points moved to the step of a linear image (:func:`step_edges`).
 
     Each inlier outline point is moved along the ray from the fitted centre to where a blurred
     step between the sphere and its background, each side with its own level and slope, best fits
-    the luminance profile of ``L`` (pixel noise ``noise``, clipped at ``clip`` or never); points
+    the luminance profile of ``L``, the max image (pixel noise ``noise``, clipped at ``clip`` or
+    never), or of ``mean``, the photos' mean luminance (noise ``mean_noise``; its profiles that
+    reach ``clip`` in ``L`` are not used), where its steps are blurred by :data:`SHARP_BLUR_PX` or
+    more (the median over the outline): the mean of blurred photos is their blurred mean, a
+    blurred step; their maximum is not (the brighter photo on each side, a step sharper than the
+    blur, off the outline by up to half a pixel: ``benchmarks/blur_lights.py``); points
     where it shows no usable step (a white sphere's top on a white ground, seen only in the
     photos' edges; a clipped limb) keep their place. The refit
     replaces the fit when it is round (RMS within ``max_residual_px``) and moves the outline by
-    less than a pixel (centre and radius); otherwise the fit is returned unchanged.
+    less than a pixel, or twice the steps' median blur sigma where that is more (the log edges
+    move toward the dark side with the blur), centre and radius; otherwise the fit is returned
+    unchanged.
     """
     P = ft.edge_px
     if P is None or len(P) < min_points:
@@ -2681,7 +2713,10 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
     c = np.asarray(ft.center_px, dtype=np.float64)
     v = P - c
     u = v / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)[:, None]
-    Q, ok = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip)
+    Q, ok, blur = step_edges(L if mean is None else mean, P, u, noise if mean is None else mean_noise,
+                             radius=ft.radius_px, clip=clip, clip_image=L, with_blur=True)
+    if mean is not None and not (ok.sum() >= min_points and np.median(blur[ok]) >= SHARP_BLUR_PX):
+        Q, ok, blur = step_edges(L, P, u, noise, radius=ft.radius_px, clip=clip, with_blur=True)
     if ok.sum() < min_points:
         return ft
     Q = np.where(ok[:, None], Q, P)
@@ -2689,8 +2724,10 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
         new = _fit_outline(Q, cam, c, ft.radius_px, ft.source, n_edge=ft.n_edge_points)
     except ValueError:
         return ft
-    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c)) > 1.0
-            or abs(new.radius_px - ft.radius_px) > 1.0):
+    # the log edges it starts from lie up to ~1 blur sigma toward the dark side (step_edges)
+    reach = max(1.0, 2.0 * float(np.median(blur[ok])))
+    if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c)) > reach
+            or abs(new.radius_px - ft.radius_px) > reach):
         return ft
     new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
     new.outline_at_step = True
