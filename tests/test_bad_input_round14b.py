@@ -1,0 +1,128 @@
+"""Bad input, round 14b: attacks on round 14's merged refusals (issues 9 and 11).
+
+Valid but unusual files (``.JPG``/``.jpeg``/``.TIFF``/``.HDR``, a JPEG-compressed TIFF, a 16-bit PNG
+with sRGB/iCCP/gAMA chunks, a tiled EXR, a Radiance file with several EXPOSURE lines) are read as
+before; the faults found are below, each one line, status 2, nothing written.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cli_lines import one_line, tiny_capture
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory):
+    return tiny_capture(tmp_path_factory.mktemp("r14b"), seed=141)
+
+
+def _latlong_u8() -> np.ndarray:
+    """A 64x32 8-bit RGB image: the size of a lat-long light map, so that only its format can refuse it."""
+    return (np.random.default_rng(0).random((32, 64, 3)) * 255).astype(np.uint8)
+
+
+def _relight_with_mask(capfd, cap, mask, out):
+    """``ffls relight CAP --probe sky --mask MASK -o OUT``: its status and its one line."""
+    return one_line(capfd, ["relight", cap, "--probe", "sky", "--mask", mask, "-o", out])
+
+
+def _encoded(fmt: str) -> bytes:
+    """A 24x24 white 8-bit image (a mask of :func:`tiny_capture`'s photos) in ``fmt``, by OpenCV (BMP,
+    PPM, WebP) or Pillow (GIF, JPEG 2000: OpenCV's OpenJPEG writes none this small)."""
+    import io
+
+    import cv2
+    from PIL import Image
+
+    white = np.full((24, 24, 3), 255, np.uint8)
+    if fmt in ("gif", "jp2"):
+        b = io.BytesIO()
+        Image.fromarray(white).save(b, format={"gif": "GIF", "jp2": "JPEG2000"}[fmt])
+        return b.getvalue()
+    ok, buf = cv2.imencode("." + fmt, white)
+    if not ok:
+        pytest.skip(f"this OpenCV cannot write .{fmt}")
+    return buf.tobytes()
+
+
+@pytest.mark.parametrize("fmt, name, what", [("webp", "m.jpg", "a WebP"), ("webp", "m.png", "a WebP"),
+                                             ("bmp", "m.png", "a BMP"), ("gif", "m.png", "a GIF"),
+                                             ("jp2", "m.jpg", "a JPEG 2000"), ("ppm", "m.tif", "a PNM")])
+def test_a_file_of_a_format_ffls_does_not_read_is_refused(cap, tmp_path, capfd, fmt, name, what):
+    """Round 14 refused a file whose signature is another format's that ffls reads (a PNG named
+    ``.jpg``), and left unknown signatures to the decoder. But OpenCV decodes by content: a WebP
+    (a web download), BMP, GIF, JPEG 2000 or PPM named ``.jpg``/``.png``/``.tif`` was read with no
+    check made from its header (size, memory, grey, bit depth, orientation: ``image_header`` None):
+    ``relight --mask`` used it, status 0. One line now names the format."""
+    src = tmp_path / name
+    src.write_bytes(_encoded(fmt))
+    out = tmp_path / "out.exr"
+    rc, line = _relight_with_mask(capfd, cap, src, out)
+    assert rc == 2 and f"{name}: is {what}" in line and "a format ffls does not read" in line, line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("head, what", [(b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00", "a HEIF (HEIC)"),
+                                        (b"\x00\x00\x00\x0cJXL \r\n\x87\n", "a JPEG XL")])
+def test_a_phone_or_new_format_named_jpg_is_named(cap, tmp_path, capfd, head, what):
+    """A phone's HEIC or a JPEG XL named ``.jpg`` was refused as 'cannot decode JPEG image (corrupt,
+    truncated or not a JPEG file)': the file is not corrupt; the line now says what it is."""
+    src = tmp_path / "IMG_0001.jpg"
+    src.write_bytes(head + bytes(200))
+    out = tmp_path / "out.exr"
+    rc, line = _relight_with_mask(capfd, cap, src, out)
+    assert not out.exists()
+    assert rc == 2 and f"IMG_0001.jpg: is {what} file named '.jpg', a format ffls does not read" in line, line
+
+
+def test_a_radiance_xyze_file_is_named(tmp_path, capfd):
+    """A Radiance picture of CIE XYZ values (``FORMAT=32-bit_rle_xyze``, e.g. from ``ra_xyze``) was
+    refused as 'cannot decode HDR image (corrupt, truncated or not a HDR file)' (OpenCV reads RGBE
+    only): one line now says what it is and how to convert it."""
+    import cv2
+
+    ok, buf = cv2.imencode(".hdr", np.full((32, 64, 3), 0.5, np.float32))
+    src = tmp_path / "m.hdr"
+    src.write_bytes(buf.tobytes().replace(b"FORMAT=32-bit_rle_rgbe", b"FORMAT=32-bit_rle_xyze", 1))
+    out = tmp_path / "out.exr"
+    rc, line = one_line(capfd, ["lightmap", "convert", src, out])
+    assert rc == 2 and "m.hdr: is a Radiance XYZE file (FORMAT=32-bit_rle_xyze" in line and "ra_xyze -r" in line
+    assert not out.exists()
+
+
+def test_unusual_valid_files_are_still_read(tmp_path):
+    """The new refusals leave valid files alone: upper-case and long extensions, a JPEG-compressed
+    and an LZW TIFF, a progressive JPEG, a 16-bit PNG with sRGB, gAMA and iCCP chunks, a palette
+    PNG, and a Radiance file whose EXPOSURE lines multiply to 1 (Radiance's definition) read as
+    their plain twins."""
+    import struct
+    import zlib
+
+    import cv2
+    from PIL import Image
+
+    from ffls.io.images import image_header, read_image
+
+    a8 = _latlong_u8()
+    a16 = a8.astype(np.uint16) * 257
+    Image.fromarray(a8).save(tmp_path / "p.JPEG", quality=95, progressive=True)
+    Image.fromarray(a8).save(tmp_path / "t.TIFF", compression="jpeg")
+    Image.fromarray(a8).save(tmp_path / "l.tif", compression="tiff_lzw")
+    Image.fromarray(a8).convert("P").save(tmp_path / "pal.PNG")
+    png = cv2.imencode(".png", a16)[1].tobytes()
+
+    def chunk(typ, data):
+        return struct.pack(">I", len(data)) + typ + data + struct.pack(">I", zlib.crc32(typ + data) & 0xFFFFFFFF)
+
+    icc = b"sRGB\x00\x00" + zlib.compress(bytes(64))
+    (tmp_path / "c16.png").write_bytes(png[:33] + chunk(b"sRGB", b"\x00") + chunk(b"gAMA", struct.pack(">I", 45455))
+                                       + chunk(b"iCCP", icc) + png[33:])
+    hdr = cv2.imencode(".hdr", np.full((32, 64, 3), 0.5, np.float32))[1].tobytes()
+    end = hdr.find(b"\n\n")
+    (tmp_path / "e.HDR").write_bytes(hdr[:end] + b"\nEXPOSURE=2\nEXPOSURE=0.5" + hdr[end:])
+    for name, bits in [("p.JPEG", 8), ("t.TIFF", 8), ("l.tif", 8), ("pal.PNG", 8), ("c16.png", 16)]:
+        img = read_image(tmp_path / name)
+        assert img.pixels.shape == (32, 64, 3) and image_header(tmp_path / name).bits == bits == img.bit_depth
+    np.testing.assert_allclose(read_image(tmp_path / "c16.png").pixels, a8[..., ::-1] / 255.0, atol=1e-6)
+    np.testing.assert_allclose(read_image(tmp_path / "e.HDR").pixels, 0.5, rtol=0.01)
