@@ -126,3 +126,46 @@ def test_unusual_valid_files_are_still_read(tmp_path):
         assert img.pixels.shape == (32, 64, 3) and image_header(tmp_path / name).bits == bits == img.bit_depth
     np.testing.assert_allclose(read_image(tmp_path / "c16.png").pixels, a8[..., ::-1] / 255.0, atol=1e-6)
     np.testing.assert_allclose(read_image(tmp_path / "e.HDR").pixels, 0.5, rtol=0.01)
+
+
+def test_an_unhinted_probe_ball_too_small_for_a_probe_is_refused(tmp_path):
+    """A mirror ball (radius 33 px) under ``night``, photographed 320x240 with a blur of 1 px and 1%
+    noise: the unhinted finder's outline was a street lamp's 4 px blob at the frame's top edge, 137 px
+    from the ball, sharp enough to pass, and ``probe mirror`` unwrapped it without a word. Unhinted
+    outlines under ``MIN_BALL_FRACTION`` of the shorter side (12 px) are now refused in one line, as
+    ``diffuse_ball`` refuses them; without blur the ball is still found (within 1 px)."""
+    import cv2
+
+    from ffls.camera.projection import project_points
+    from ffls.errors import InputError
+    from ffls.io.images import read_image, write_exr
+    from ffls.io.probe import load_probe
+    from ffls.lightmaps.lightmap import builtin_lightmap
+    from ffls.probes.bracket import view_radiance
+    from ffls.probes.locate import locate_sphere
+    from ffls.synth.probe import look_at, write_mirror_probe
+
+    f, d, centre = 400.0, 1.2, np.array([0.0, 0.0, 0.1])
+    eye = centre + d * np.array([0.94, 0.0, 0.34])
+    T0 = look_at(eye, centre)
+    T = look_at(eye, centre + 70.0 / f * d * T0[:3, 0] - 10.0 / f * d * T0[:3, 1])
+    K = np.array([[f, 0, 159.5], [0, f, 119.5], [0, 0, 1.0]])
+    Ti = np.linalg.inv(T)
+    c_true = project_points((Ti[:3, :3] @ centre + Ti[:3, 3])[None], K, None)[0]
+
+    def locate(blurred):
+        folder = tmp_path / ("blurred" if blurred else "sharp")
+        write_mirror_probe(folder, builtin_lightmap("night"), (320, 240), "pinhole", K, None, T, centre, 0.1,
+                           sphere="auto", reflectance=0.7)
+        if blurred:
+            img = cv2.GaussianBlur(read_image(folder / "ball.exr").pixels, (0, 0), 1.0)
+            img = img * (1 + 0.01 * np.random.default_rng(0).standard_normal(img.shape)).astype(np.float32)
+            write_exr(folder / "ball.exr", np.clip(img, 0, None).astype(np.float32))
+        probe = load_probe(folder)
+        vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
+        return locate_sphere(probe.views[0], vr.radiance, probe.json_path)
+
+    assert np.hypot(*(locate(False).center_px - c_true)) < 1.0
+    with pytest.raises(InputError, match=r"radius 4 px, is too small for a probe \(under 0.05 of the photo's "
+                                         r"shorter side, 12 px\); give a hint"):
+        locate(True)
