@@ -169,3 +169,38 @@ def test_an_unhinted_probe_ball_too_small_for_a_probe_is_refused(tmp_path):
     with pytest.raises(InputError, match=r"radius 4 px, is too small for a probe \(under 0.05 of the photo's "
                                          r"shorter side, 12 px\); give a hint"):
         locate(True)
+
+
+def test_a_charuco_board_of_the_legacy_layout_is_calibrated(tmp_path):
+    """A ChArUco board with an even number of rows printed before OpenCV 4.6 (or by a generator that
+    kept its layout) is not found by today's detector: an 8x6 board in 5 sharp views was 'found in 0
+    of 5 photos; need at least 3'. It is now looked for in the legacy layout too, found in all 5, and
+    the result says so; today's layout of the same board is unchanged (not legacy)."""
+    import cv2
+
+    from ffls.camera import calibrate as cal
+
+    K = np.array([[820.0, 0, 331.0], [0, 820.0, 236.0], [0, 0, 1]])
+    squares, sq, mk = (8, 6), 0.03, 0.022
+
+    def views(legacy):
+        board = cal.make_board(squares, sq, mk, legacy=legacy)
+        flat = board.generateImage((8 * 120 + 80, 6 * 120 + 80), marginSize=40, borderBits=1)
+        obj, img = cal.detect_board(flat, "charuco", squares, sq, mk, legacy=legacy)
+        Hb, _ = cv2.findHomography(obj[:, :2], img, 0)
+        out = []
+        for ax, ay, az, ox, oy in [(0, 0, 0, 0, 0), (30, 0, 0, 0.05, 0.03), (-30, 5, 0, -0.05, -0.03),
+                                   (0, 30, 10, -0.06, 0.04), (5, -30, -10, 0.06, -0.04)]:
+            R, _ = cv2.Rodrigues(np.deg2rad([ax, ay, az]).astype(np.float64))
+            t = np.array([ox, oy, 0.5]) - R @ np.array([8 * sq / 2, 6 * sq / 2, 0])
+            M = K @ np.column_stack([R[:, 0], R[:, 1], t]) @ np.linalg.inv(Hb)
+            out.append(cv2.GaussianBlur(cv2.warpPerspective(flat, M, (640, 480), flags=cv2.INTER_AREA,
+                                                            borderValue=200), (0, 0), 0.6))
+        return out
+
+    names = [tmp_path / f"v{i}.png" for i in range(5)]
+    for legacy in (True, False):
+        res = cal.calibrate_camera(names, squares=squares, square_size=sq, marker_size=mk, images=views(legacy))
+        assert len(res.used) == 5 and res.legacy_pattern == legacy and res.rms < 0.5
+        assert abs(res.K[0, 0] / 820.0 - 1) < 0.01
+        assert res.to_dict().get("legacy_pattern", False) == legacy
