@@ -181,7 +181,7 @@ def cset(tmp_path_factory):
     (lambda d, c: d.__setitem__("sphere_radius", 50.0), "less than sphere_radius 50: spheres of that radius"),
     (lambda d, c: d.__setitem__("sphere_radius", 1e300), "less than sphere_radius 1e+300"),
     (lambda d, c: d["spheres"][1].__setitem__("center", [c[1][0], c[1][1], c[1][2] - 10.0]),
-     "spheres[1].center [ 0.25 -0.25 -9.95] projects to pixel ("),
+     "spheres[1].center [0.25, -0.25, -9.95] projects to pixel ("),
     (lambda d, c: d["spheres"][2].__setitem__("center", [1e300, 0.0, 0.0]), "spheres[2].center [1e+300, 0, 0]"),
 ], ids=["one-centre-for-all", "radius-50", "radius-1e300", "one-10m-below", "centre-1e300"])
 def test_fill_refuses_stated_spheres_that_cannot_be_the_photos(cset, tmp_path, capfd, edit, names):

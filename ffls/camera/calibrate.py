@@ -20,7 +20,7 @@ from ffls.io.capture import MAX_FOCAL_PX, MAX_PIXEL_ASPECT, parse_json, read_jso
 from ffls.io.images import read_image
 
 __all__ = ["CameraCalibration", "aruco_dictionary", "charuco_problem", "camera_matrix_problem", "make_board",
-           "detect_board", "calibrate_camera", "check_camera_capture", "write_camera_to_capture"]
+           "legacy_differs", "detect_board", "calibrate_camera", "check_camera_capture", "write_camera_to_capture"]
 
 
 @dataclasses.dataclass
@@ -39,6 +39,8 @@ class CameraCalibration:
         The images whose board was found.
     skipped : list of str
         The images without a usable board.
+    legacy_pattern : bool
+        The ChArUco board was found with OpenCV's legacy layout (:func:`make_board`).
     """
 
     K: np.ndarray
@@ -47,10 +49,12 @@ class CameraCalibration:
     image_size: tuple
     used: list
     skipped: list
+    legacy_pattern: bool = False
 
     def to_dict(self) -> dict:
         return {"K": self.K.tolist(), "dist": self.dist.ravel().tolist(), "rms_px": float(self.rms),
-                "image_size": list(self.image_size), "used": list(self.used), "skipped": list(self.skipped)}
+                "image_size": list(self.image_size), "used": list(self.used), "skipped": list(self.skipped),
+                **({"legacy_pattern": True} if self.legacy_pattern else {})}
 
 
 def aruco_dictionary(dictionary):
@@ -114,17 +118,29 @@ def camera_matrix_problem(K) -> str | None:
 
 
 def make_board(squares=(7, 5), square_size: float = 0.03, marker_size: float = 0.022,
-               dictionary="DICT_5X5_100"):
-    """A :class:`cv2.aruco.CharucoBoard` of ``squares`` = (columns, rows) squares."""
+               dictionary="DICT_5X5_100", legacy: bool = False):
+    """A :class:`cv2.aruco.CharucoBoard` of ``squares`` = (columns, rows) squares.
+
+    ``legacy``: the layout of boards made before OpenCV 4.6 (and by generators that kept it), which
+    differs from today's where the number of rows is even (:func:`legacy_differs`)."""
     why = charuco_problem(squares, square_size, marker_size, dictionary)
     if why:
         raise ValueError(why)
-    return cv2.aruco.CharucoBoard((int(squares[0]), int(squares[1])), float(square_size), float(marker_size),
-                                  aruco_dictionary(dictionary))
+    b = cv2.aruco.CharucoBoard((int(squares[0]), int(squares[1])), float(square_size), float(marker_size),
+                               aruco_dictionary(dictionary))
+    if legacy:
+        b.setLegacyPattern(True)
+    return b
+
+
+def legacy_differs(board: str, squares) -> bool:
+    """Whether OpenCV's legacy ChArUco layout differs from today's for this board: an even number of rows."""
+    return board == "charuco" and int(squares[1]) % 2 == 0
 
 
 def detect_board(gray, board: str = "charuco", squares=(7, 5), square_size: float = 0.03,
-                 marker_size: float = 0.022, dictionary="DICT_5X5_100", min_corners: int = 6):
+                 marker_size: float = 0.022, dictionary="DICT_5X5_100", min_corners: int = 6,
+                 legacy: bool = False):
     """Board corners in one image.
 
     Parameters
@@ -133,13 +149,15 @@ def detect_board(gray, board: str = "charuco", squares=(7, 5), square_size: floa
     board : {'charuco', 'chessboard'}
     squares : (int, int)
         Squares along x and y (a chessboard has ``(x-1) * (y-1)`` inner corners).
+    legacy : bool
+        A ChArUco board of OpenCV's legacy layout (:func:`make_board`).
 
     Returns
     -------
     (object_points (n, 3) float32, image_points (n, 2) float32) or None when no board is found.
     """
     if board == "charuco":
-        b = make_board(squares, square_size, marker_size, dictionary)
+        b = make_board(squares, square_size, marker_size, dictionary, legacy)
         det = cv2.aruco.CharucoDetector(b)
         corners, ids, _, _ = det.detectBoard(gray)
         if ids is None or len(ids) < min_corners:
@@ -179,7 +197,7 @@ def _transposed_hint(missed, board, squares, square_size, marker_size, dictionar
 
 def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square_size: float = 0.03,
                      marker_size: float = 0.022, dictionary="DICT_5X5_100", fix_k3: bool = True,
-                     images=None) -> CameraCalibration:
+                     images=None, legacy: bool = False) -> CameraCalibration:
     """Intrinsics K and distortion from photos of a calibration board.
 
     Parameters
@@ -197,6 +215,11 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
         Keep k3 = 0 (recommended unless the lens is very wide).
     images : list of (H, W) or (H, W, 3) uint8, optional
         Images already in memory (then ``image_paths`` only names them).
+    legacy : bool
+        Look for a ChArUco board of OpenCV's legacy layout. Without it, a board with an even number
+        of rows found in fewer than 3 photos is looked for in that layout too, and used when the
+        first photos without it show it so (a board printed before OpenCV 4.6 was "found in 0 of
+        N photos"): ``legacy_pattern`` of the result says so.
 
     Returns
     -------
@@ -231,7 +254,7 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
             size = (im.shape[1], im.shape[0])
         elif size != (im.shape[1], im.shape[0]):
             raise InputError(f"image size {im.shape[1]}x{im.shape[0]} differs from {size[0]}x{size[1]}", name)
-        found = detect_board(im, board, squares, square_size, marker_size, dictionary)
+        found = detect_board(im, board, squares, square_size, marker_size, dictionary, legacy=legacy)
         if found is None:
             skipped.append(str(name))
             if len(missed) < TRANSPOSED_TRIES:
@@ -249,6 +272,11 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
         obj_pts.append(found[0])
         img_pts.append(found[1])
         used.append(str(name))
+    if (len(obj_pts) < 3 and not legacy and legacy_differs(board, squares)
+            and any(detect_board(im, board, squares, square_size, marker_size, dictionary, legacy=True) is not None
+                    for im in missed)):
+        return calibrate_camera(image_paths, board, squares, square_size, marker_size, dictionary, fix_k3, images,
+                                legacy=True)
     if len(obj_pts) < 3:
         where = paths[0].parent if paths else None
         raise InputError(f"a {board} board ({squares[0]}x{squares[1]} squares) was found in {len(obj_pts)} of"
@@ -262,7 +290,7 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
                          " the views are too alike; photograph the board from several angles", paths[0].parent
                          if paths else None)
     return CameraCalibration(K=np.asarray(K, dtype=np.float64), dist=np.asarray(dist, dtype=np.float64).ravel()[:5],
-                             rms=float(rms), image_size=size, used=used, skipped=skipped)
+                             rms=float(rms), image_size=size, used=used, skipped=skipped, legacy_pattern=legacy)
 
 
 def check_camera_capture(capture_dir) -> tuple[Path, dict]:

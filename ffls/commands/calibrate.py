@@ -114,8 +114,10 @@ def run(args) -> int:
     cal = calibrate_camera(args.photos, **board_flags(args))
     if args.capture:
         path = write_camera_to_capture(args.capture, cal.K, cal.dist, cal.image_size)
+        legacy = ("; the board's ChArUco layout is OpenCV's legacy one, of boards made before OpenCV 4.6"
+                  if cal.legacy_pattern else "")
         print(f"wrote camera.K and camera.dist to {path} (rms {cal.rms:.3f} px, {len(cal.used)} views"
-              f", {len(cal.skipped)} skipped)")
+              f", {len(cal.skipped)} skipped{legacy})")
     else:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()

@@ -291,14 +291,35 @@ _SIGNATURES = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"\xff\xd8\x
                (b"#?", "hdr"))
 _KIND_NAMES = {"exr": ("an OpenEXR", ".exr"), "png": ("a PNG", ".png"), "jpeg": ("a JPEG", ".jpg"),
                "tiff": ("a TIFF", ".tif"), "hdr": ("a Radiance HDR", ".hdr")}
+#: Formats ffls does not read whose signatures it knows, by (offset, bytes) (OpenCV decodes by content:
+#: a WebP, BMP, GIF, JPEG 2000 or PNM file named .jpg/.png/.tif was decoded with no header check)
+_OTHER_SIGNATURES = (((0, b"RIFF"), (8, b"WEBP"), "a WebP"), ((0, b"BM"), "a BMP"), ((0, b"GIF8"), "a GIF"),
+                     ((0, b"\x00\x00\x00\x0cjP  \r\n\x87\n"), "a JPEG 2000"), ((0, b"\xffO\xffQ"), "a JPEG 2000"),
+                     ((4, b"ftypheic"), "a HEIF (HEIC)"), ((4, b"ftypheix"), "a HEIF (HEIC)"),
+                     ((4, b"ftypmif1"), "a HEIF"), ((4, b"ftypavif"), "an AVIF"),
+                     ((0, b"\x00\x00\x00\x0cJXL \r\n\x87\n"), "a JPEG XL"), ((0, b"\xff\n"), "a JPEG XL"),
+                     ((0, b"PF\n"), "a PFM"), ((0, b"Pf\n"), "a PFM"), ((0, b"P7\n"), "a PAM"),
+                     *(((0, b"P%d" % k), "a PNM (PBM/PGM/PPM)") for k in range(1, 7)))
+
+
+def _other_format(head: bytes) -> str | None:
+    """The name of a format ffls does not read (:data:`_OTHER_SIGNATURES`) whose signature ``head`` has, or None."""
+    for *parts, name in _OTHER_SIGNATURES:
+        if all(head[at:at + len(sig)] == sig for at, sig in parts):
+            if name.startswith("a PNM") and not head[2:3].isspace():
+                continue  # (a netpbm magic number is followed by whitespace)
+            return name
+    return None
 
 
 def _check_content_kind(path: Path, kind: str) -> None:
     """Refuse a file whose first bytes are another format's than its extension names (a 16-bit PNG
     named ``.jpg``): ffls reads a file as its extension says, and the checks it makes from the
     header before decoding (size, memory, grey or colour, bit depth, orientation) read that
-    format's header, so such a file passed them all unread. A signature ffls does not know (a
-    corrupt file) is left to the decoder, which names what is wrong."""
+    format's header, so such a file passed them all unread. So did a file of a format ffls does not
+    read (a WebP, BMP, GIF, JPEG 2000 or PNM file, which OpenCV decodes by content; a HEIF or JPEG
+    XL, which it refused as corrupt): refused naming it. A signature ffls does not know (a corrupt
+    file) is left to the decoder, which names what is wrong."""
     try:
         with open(path, "rb") as f:
             head = f.read(16)
@@ -309,6 +330,10 @@ def _check_content_kind(path: Path, kind: str) -> None:
         name, ext = _KIND_NAMES[found]
         raise InputError(f"is {name} file named {path.suffix!r}: ffls reads a file as its extension says (its "
                          f"checks before decoding read that format's header); rename it {path.stem}{ext}", path)
+    other = None if found is not None else _other_format(head)
+    if other is not None:
+        raise InputError(f"is {other} file named {path.suffix!r}, a format ffls does not read; convert it to "
+                         f"one of {', '.join(READ_EXTENSIONS)}", path)
 
 
 def read_image(path: str | os.PathLike, working_space: bool = True, allow_nonfinite: bool = False,
@@ -611,13 +636,17 @@ def _radiance_header(buf: bytes, path) -> tuple[np.ndarray, tuple | None]:
     ------
     InputError
         An ``EXPOSURE`` or ``COLORCORR`` that is not a positive finite number (three for
-        ``COLORCORR``), or a ``PRIMARIES`` line that is not 8 numbers.
+        ``COLORCORR``), a ``PRIMARIES`` line that is not 8 numbers, or ``FORMAT=32-bit_rle_xyze``
+        (CIE XYZ values, which OpenCV cannot decode: it was refused as a corrupt file).
     """
     end = buf.find(b"\n\n")
     scale, primaries = np.ones(3, dtype=np.float64), None
     for line in (buf[:end] if end >= 0 else b"").split(b"\n"):
         key, eq, value = line.partition(b"=")
         key = key.strip().upper()
+        if key == b"FORMAT" and value.strip().lower() == b"32-bit_rle_xyze":
+            raise InputError("is a Radiance XYZE file (FORMAT=32-bit_rle_xyze, CIE XYZ values): ffls reads "
+                             "Radiance's RGBE files; convert it (Radiance's ra_xyze -r) or write an EXR", path)
         if not eq or key not in (b"EXPOSURE", b"COLORCORR", b"PRIMARIES"):
             continue
         words = value.split()

@@ -265,6 +265,19 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
     return ball
 
 
+def _check_probe_size(center_px, radius_px, shape, source) -> None:
+    """Refuse an unhinted probe ball's outline under :data:`MIN_BALL_FRACTION` of the photo's shorter
+    side (InputError, one line): the finder's best outline in a blurred, noisy night photo was a
+    street lamp's 4 px blob at the frame's edge, 137 px from the mirror ball, used without a word.
+    :func:`diffuse_ball` judges its candidates by the same bound."""
+    min_r = MIN_BALL_FRACTION * min(shape)
+    if radius_px < min_r:
+        raise InputError(f"no sphere found: the round outline found, ({center_px[0]:.0f}, {center_px[1]:.0f}) px, "
+                         f"radius {radius_px:.0f} px, is too small for a probe (under {MIN_BALL_FRACTION:g} of the "
+                         f"photo's shorter side, {min_r:.0f} px); give a hint in probe.json, e.g. \"sphere\": "
+                         "{\"center_px\": [u, v], \"radius_px\": r}", source)
+
+
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
     """Locate the probe sphere of one view.
 
@@ -356,9 +369,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                     "(a circle stated in pixels is used as given)")
         raise InputError(msg, source) from None
     ft = found[0]
+    if hints is None:
+        _check_probe_size(ft.center_px, ft.radius_px, rad.shape[:2], source)
     if view.sphere.material == "mirror":  # the limb's reflectance step rather than a reflected edge
         limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2])
         if limb is not None:
+            if hints is None:
+                _check_probe_size(limb[0], limb[1], rad.shape[:2], source)
             return _circle_geometry(cam, T, limb[0], limb[1], sph.radius, "hint" if hints else "auto")
         if hints is None and ft.residual_px > MIRROR_SHARP_OUTLINE_PX:
             raise InputError(f"no sphere found: the round outline found, ({ft.center_px[0]:.0f}, "
