@@ -91,6 +91,14 @@ CONDITIONS = {
     # the spheres on one side of the object: their errors (each away from the object) add in the
     # photo's mean instead of cancelling as on the ring (docs/spheres.md, "The cones too wide")
     "4 white in a row in front of the object": ["--sphere-xy=-0.3,-0.25;-0.1,-0.25;0.1,-0.25;0.3,-0.25"],
+    # each pixel integrated as a camera's is (3 x 3 rays), not one ray through its centre: the
+    # outlines' anti-aliased steps of real photographs (docs/spheres.md, the blurred photos' step and
+    # the chrome outline on an anti-aliased limb)
+    "4 white, anti-aliased (3x3 rays a pixel), 8-bit sRGB": ["--supersample", "3", "--format", "png8", "--encoding",
+                                                            "srgb", "--exposure", "3"],
+    "one mirror ball, anti-aliased (3x3 rays a pixel), 8-bit sRGB": ["--supersample", "3", "--spheres", "1",
+                                                                    "--sphere-material", "mirror", "--format",
+                                                                    "png8", "--encoding", "srgb", "--exposure", "3"],
 }
 
 
