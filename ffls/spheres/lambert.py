@@ -50,6 +50,7 @@ __all__ = [
     "fit_lambert",
     "fit_lambert_MasselusDutreAnrys2002",
     "OwnShadow",
+    "own_shadow_of",
     "own_shadow_factor",
     "shadowed_ground_bounce",
     "near_ground_bounce",
@@ -286,6 +287,28 @@ class OwnShadow:
         hi += fy * (plane[k + 1] - hi)
         lo += self.fx * (hi - lo)
         return np.clip(lo, 0.0, 1.0, out=lo)
+
+
+#: :func:`own_shadow_of`'s kept :class:`OwnShadow` objects: ``(id(normals), up) -> (normals, OwnShadow)``.
+_OWN_SHADOWS: dict = {}
+#: How many :func:`own_shadow_of` keeps (a capture's spheres, and their recentred samples).
+OWN_SHADOWS_KEPT = 16
+
+
+def own_shadow_of(normals: np.ndarray, up: np.ndarray = UP) -> OwnShadow:
+    """The :class:`OwnShadow` of a normals array, made once per array and kept (the last
+    :data:`OWN_SHADOWS_KEPT`): a capture's fits reuse their samples' normals, and its per-pixel
+    geometry depends on them and ``up`` only. The array must not be changed in place after."""
+    up = np.asarray(up, dtype=np.float64)
+    key = (id(normals), up.tobytes())
+    hit = _OWN_SHADOWS.get(key)
+    if hit is not None and hit[0] is normals:
+        return hit[1]
+    out = OwnShadow(normals, up)
+    if len(_OWN_SHADOWS) >= OWN_SHADOWS_KEPT:
+        _OWN_SHADOWS.clear()
+    _OWN_SHADOWS[key] = (normals, out)
+    return out
 
 
 def own_shadow_factor(normals: np.ndarray, light: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
@@ -987,7 +1010,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
         l_g = v0 / np.linalg.norm(v0)
         if shade:
-            shadow = OwnShadow(normals, up)
+            shadow = own_shadow_of(normals, up)
 
             def form(light):  # the bounce's form factor under ``light``
                 g_l = shadowed_ground_bounce(normals, light, up, g_plain, shadow)
