@@ -382,10 +382,22 @@ def _cosine_directions(side: int) -> np.ndarray:
     return np.stack([r * np.cos(ph), r * np.sin(ph), np.sqrt(1.0 - u1)], axis=1)
 
 
-def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.ndarray:
-    """:func:`near_ground_bounce` at every point, by quadrature (the light above the contact point)."""
+#: :func:`_near_bounce_geometry`'s kept results, by their inputs (bytes).
+_NEAR_GEOMETRIES: dict = {}
+#: How many :func:`_near_bounce_geometry` keeps (a capture's spheres, and their recentred samples).
+NEAR_GEOMETRIES_KEPT = 16
+
+
+def _near_bounce_geometry(points, normals, center, radius, up, side) -> tuple:
+    """What :func:`_near_bounce_quadrature` needs that does not depend on the light: per point and
+    quadrature direction, whether the direction meets the ground (``down``), the ground point
+    ``X``, ``W = center - X`` and ``W . W``; made once per sphere and process (every photo's near fit
+    integrates at the same nodes), so the same floats as made at every call."""
+    key = (points.tobytes(), normals.tobytes(), center.tobytes(), float(radius), up.tobytes(), int(side))
+    hit = _NEAR_GEOMETRIES.get(key)
+    if hit is not None:
+        return hit
     G = center - radius * up
-    e_ref = float((S - G) @ up) / float(np.linalg.norm(S - G)) ** 3
     loc = _cosine_directions(int(side))
     # a tangent frame per normal
     helper = np.where(np.abs(normals @ up)[:, None] < 0.9, up[None, :], np.roll(up, 1)[None, :])
@@ -398,15 +410,29 @@ def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.
     down = dz < -1e-9
     height = points @ up - float(G @ up)
     X = points[:, None, :] + (np.maximum(height, 0.0)[:, None] / np.where(down, -dz, 1.0))[..., None] * D
+    W = center - X  # the segment from the ground point to the light meets the sphere: own shadow
+    out = (down, X, W, np.einsum("msi,msi->ms", W, W), loc.shape[0])
+    for a in out[:4]:
+        a.flags.writeable = False
+    if len(_NEAR_GEOMETRIES) >= NEAR_GEOMETRIES_KEPT:
+        _NEAR_GEOMETRIES.clear()
+    _NEAR_GEOMETRIES[key] = out
+    return out
+
+
+def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.ndarray:
+    """:func:`near_ground_bounce` at every point, by quadrature (the light above the contact point)."""
+    G = center - radius * up
+    e_ref = float((S - G) @ up) / float(np.linalg.norm(S - G)) ** 3
+    down, X, W, WW, n_dirs = _near_bounce_geometry(points, normals, center, radius, up, side)
     V = S - X
     r2 = np.einsum("msi,msi->ms", V, V)
     r = np.sqrt(r2)
     E = np.maximum(V @ up, 0.0) / (r2 * r)
-    W = center - X  # the segment from the ground point to the light meets the sphere: own shadow
     tc = np.einsum("msi,msi->ms", W, V) / r
-    dark = (tc > 0.0) & (np.einsum("msi,msi->ms", W, W) - tc * tc < radius * radius)
+    dark = (tc > 0.0) & (WW - tc * tc < radius * radius)
     E[~down | dark] = 0.0
-    return E.sum(axis=1) / (loc.shape[0] * e_ref)
+    return E.sum(axis=1) / (n_dirs * e_ref)
 
 
 #: :func:`near_ground_bounce`'s triangulations of its nodes, by the nodes' coordinates (bytes).
