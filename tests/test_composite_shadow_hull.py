@@ -303,3 +303,22 @@ def test_hull_and_sphere_shadows_without_distortion_match_opencvs_projection():
             want |= (along > 0) & (off < r + along * math.tan(math.radians(margin[i])))
         np.testing.assert_array_equal(got[i][valid], want)
     assert got.any()
+
+
+def test_sphere_fill_ground_pixels_made_once():
+    """The ground's pixels (``ground_pixels``, read by every compact source's ``source_model`` on
+    the whole ground) are made once, from the points held in float64 once: the same mask, and the
+    same source image as before."""
+    d = stratified_directions(60, "upper", 3)
+    d = d[d[:, 2] > math.sin(math.radians(12))]
+    K, M, obj, ground, pts, basis = _scene(d)
+    c, r = SPHERE
+    fill = SphereShadowFill.from_geometry(pts.astype(np.float32), [c], r, d, dilate_px=0)
+    assert fill.geometry["points"].dtype == np.float64
+    mask = fill.ground_pixels()
+    assert fill.ground_pixels() is mask and not mask.flags.writeable
+    assert np.array_equal(mask, np.all(np.isfinite(pts), axis=-1))
+    src = np.array([0.5, 0.5, 0.7]) / np.linalg.norm([0.5, 0.5, 0.7])
+    first = fill.source_model(np.zeros((RES, RES, 3)), src, basis, everywhere=True)
+    again = fill.source_model(np.zeros((RES, RES, 3)), src, basis, everywhere=True)
+    assert np.array_equal(first, again) and fill.ground_pixels() is mask

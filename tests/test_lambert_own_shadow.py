@@ -138,3 +138,30 @@ def test_black_ground_directions_do_not_change():
     assert not a.own_shadow and a.as_dict()["own_shadow"] is False  # no bounce fitted: nothing taken out
     c = fit_lambert(n, y, bounce_ratio=0.0)
     assert np.degrees(angle_between(c.direction, light)) < 1e-3
+
+
+def test_own_shadow_geometry_made_once_per_normals_array(backlit, monkeypatch):
+    """The own shadow's per-pixel geometry (``OwnShadow``) depends on the normals and ``up`` only:
+    the fits of one normals array (a sphere's, over a capture's photos and passes) make it once,
+    with the same fits as a fresh one each time; another array, or another ``up``, gets its own."""
+    import ffls.spheres.lambert as lam
+
+    n, light, y = backlit
+    n = n.copy()  # (an array no other test has fitted)
+    made = []
+    init = lam.OwnShadow.__init__
+
+    def counting(self, *args, **kwargs):
+        made.append(1)
+        init(self, *args, **kwargs)
+
+    fresh = [fit_lambert(n.copy(), y), fit_lambert(n.copy(), y, bounce_ratio=0.3)]
+    monkeypatch.setattr(lam.OwnShadow, "__init__", counting)
+    kept = [fit_lambert(n, y), fit_lambert(n, y, bounce_ratio=0.3), fit_lambert(n, 1.1 * y)]
+    assert len(made) == 1
+    for a, b in zip(fresh, kept):
+        assert a.status == b.status == "ok" and a.model == b.model
+        assert np.array_equal(a.direction, b.direction) and a.bounce == b.bounce
+    assert lam.own_shadow_of(n) is lam.own_shadow_of(n) and lam.own_shadow_of(n.copy()) is not lam.own_shadow_of(n)
+    up = normalize(np.array([0.0, 0.1, 1.0]))
+    assert lam.own_shadow_of(n, up) is not lam.own_shadow_of(n) and len(made) == 3

@@ -110,3 +110,31 @@ def test_a_low_lamp_bright_spot_is_resolved_by_the_default_quadrature():
     rel = lambda g: float(np.sqrt(np.mean((g - ref) ** 2) / np.mean(ref ** 2)))  # noqa: E731
     assert rel(got) < 0.03, (rel(got), rel(coarse))
     assert rel(coarse) > 0.06
+
+
+def test_near_form_factor_geometry_made_once_per_sphere(monkeypatch):
+    """The quadrature's geometry (directions, ground points, their offsets from the centre) does not
+    depend on the light: a sphere's near fits, one per photo, make it once, and the form factor is
+    the same floats as with the geometry made afresh; another sphere gets its own."""
+    import ffls.spheres.lambert as lam
+
+    rng = np.random.default_rng(11)
+    n = normalize(rng.normal(size=(900, 3)) * [1.0, 0.3, 1.0] - [0.0, 1.0, 0.0])  # (a camera's side)
+    center, radius = np.array([0.0, 0.0, 0.05]), 0.05
+    p = center + radius * n
+    lights = [center + d * normalize(np.array(v)) for d, v in ((2.0, (0.4, -0.5, 0.75)), (1.2, (-0.3, 0.2, 0.9)),
+                                                               (0.6, (0.1, -0.8, 0.5)))]
+    monkeypatch.setattr(lam, "_NEAR_GEOMETRIES", {})
+    fresh = []
+    for S in lights:  # (the geometry dropped before each: made afresh)
+        lam._NEAR_GEOMETRIES.clear()
+        fresh.append(near_ground_bounce(p, n, center, radius, S))
+    made = []
+    cosine = lam._cosine_directions
+    monkeypatch.setattr(lam, "_cosine_directions", lambda side: made.append(side) or cosine(side))
+    lam._NEAR_GEOMETRIES.clear()
+    kept = [near_ground_bounce(p, n, center, radius, S) for S in lights]
+    assert len(made) == 1
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(fresh, kept))
+    near_ground_bounce(p, n, center + [0.3, 0.0, 0.0], radius, lights[0])  # another sphere
+    assert len(made) == 2

@@ -356,3 +356,67 @@ def test_grounded_values_survive_pickling_to_the_workers():
     w = pickle.loads(pickle.dumps(v))
     assert type(w) is GroundedValues and w.n_saturated == 2 and tuple(map(len, w[:2])) == (3, 3)
     assert np.array_equal(w.ground["radiance"], np.arange(4.0)) and np.array_equal(w.grey, v.grey)
+
+
+def test_mask_object_from_ground_builds_one_neighbour_fill_per_sphere(rig, monkeypatch):
+    """The masked view and every photo's cut ground values share one neighbour fill per sphere
+    (one k-d tree of the kept points, not one more per photo), with the same values as a fill
+    made afresh for each."""
+    from dataclasses import replace
+
+    import ffls.spheres.ground as gr
+    from ffls.spheres.estimate import mask_object_from_ground
+
+    s, K, M = rig
+    s = replace(s, ground_view=replace(s.ground_view, _fills={}))  # (no fill kept from another test)
+    values = [_photo_values(rig, i, False, seen_object=True) for i in range(len(LIGHTS))]
+    trees = []
+
+    class CountingTree(gr.cKDTree):
+        def __init__(self, *args, **kwargs):
+            trees.append(1)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(gr, "cKDTree", CountingTree)
+    (masked_s,), masked_values, counts = mask_object_from_ground([s], values, list(enumerate(LIGHTS)))
+    assert counts[0] > 0 and len(trees) == 1, (counts, len(trees))
+    gv = s.ground_view
+    keep = ~gr.not_ground(np.stack([v[0].ground for v in values]),
+                          np.stack([~gr.own_shadow_mask(gv, light)[:gv.n_seen] for light in LIGHTS]))
+    assert int((~keep).sum()) == counts[0]
+    monkeypatch.undo()
+    for v, mv in zip(values, masked_values):
+        fresh = replace(gv, _fills={})
+        assert np.array_equal(gr.mask_radiance(fresh, keep, v[0].ground), mv[0].ground)
+
+
+def test_ground_kernel_widened_once_and_the_same_floats(rig):
+    """``GroundView.kernel64`` is the float32 kernel widened, made once per normals array: the
+    observed bounce and the seen ground's bounce read it instead of widening the kernel at every
+    fit, with the same floats as the float32 kernel promoted in the product."""
+    from dataclasses import replace
+
+    from ffls.spheres.ground import hidden_form_factor, own_shadow_mask, seen_bounce
+
+    s, K, M = rig
+    view = replace(s.ground_view, _kernels={})
+    n = s.normals
+    K64 = view.kernel64(n)
+    assert K64.dtype == np.float64 and view.kernel64(n) is K64
+    assert np.array_equal(K64, view.kernel(n).astype(np.float64))
+    light = LIGHTS[3]
+    img = _render(light, s, K, M, True, n_rays=2)
+    L = ground_radiance(view, img)
+    g_l = shadowed_ground_bounce(n, light)
+    lit = ~own_shadow_mask(view, light)
+    ref = float(np.median(L[lit[:view.n_seen]]))
+    q = L / ref
+    w = view.fill_weights * lit[:view.n_seen][view.fill_index]
+    near = (w * q[view.fill_index]).sum(axis=1) / np.where(w.sum(axis=1) > 0, w.sum(axis=1), 1.0)
+    dev = np.concatenate([q - lit[:view.n_seen], lit[view.n_seen:] * (near - 1.0)])
+    want = np.maximum(g_l + view.kernel(n) @ dev, 0.0)  # (float32 kernel promoted in the product)
+    assert observed_bounce(view, L, light, g_l, n).tobytes() == want.tobytes()
+    want = view.kernel(n)[:, :view.n_seen].astype(np.float64) @ L
+    assert seen_bounce(view, L, n).tobytes() == want.tobytes()
+    want = np.maximum(g_l - view.kernel(n)[:, :view.n_seen] @ lit[:view.n_seen], 0.0)  # (float32 product)
+    assert hidden_form_factor(view, light, g_l, n).tobytes() == want.tobytes()

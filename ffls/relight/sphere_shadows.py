@@ -198,6 +198,9 @@ class SphereShadowFill:
         #: :func:`hidden_photos`' keywords (``points``, ``centres``, ``radius``, ...) to find any
         #: direction's sphere shadows (a compact source's), or None.
         self.geometry = None if geometry is None else dict(geometry)
+        if self.geometry is not None and "points" in self.geometry:  # (float64 once, as every use reads it)
+            self.geometry["points"] = np.asarray(self.geometry["points"], dtype=np.float64)
+        self._ground: np.ndarray | None = None  # ground_pixels(), made on first use
         self.shape = hid.shape[1:]
         self.n = hid.shape[0]
         unit, keep = unique_directions(d)
@@ -333,10 +336,14 @@ class SphereShadowFill:
         return float(np.degrees(np.arccos(1.0 - area / (2 * np.pi))))
 
     def ground_pixels(self) -> np.ndarray:
-        """(H, W) bool: the pixels with a ground point (``geometry['points']`` finite)."""
+        """(H, W) bool: the pixels with a ground point (``geometry['points']`` finite); made once
+        (every compact source's :meth:`source_model` reads it). Read-only."""
         if self.geometry is None:
             raise ValueError("ground_pixels needs the spheres' geometry (SphereShadowFill.from_geometry)")
-        return np.all(np.isfinite(np.asarray(self.geometry["points"], dtype=np.float64)), axis=-1)
+        if self._ground is None:
+            self._ground = np.all(np.isfinite(self.geometry["points"]), axis=-1)
+            self._ground.flags.writeable = False
+        return self._ground
 
     def source_model(self, image, direction, basis, *, hull=None, everywhere: bool = False) -> np.ndarray:
         """A compact source's unit-power image with its sphere shadows replaced by the unshadowed model.
@@ -393,7 +400,7 @@ class SphereShadowFill:
             model[lo:lo + step] = np.maximum(np.einsum("qci,i->qc", b.astype(np.float64), d), 0.0)
         good = np.all(np.isfinite(model), axis=-1)
         if hull is not None:
-            pts = np.asarray(self.geometry["points"], dtype=np.float64).reshape(-1, 3)[pix]
+            pts = self.geometry["points"].reshape(-1, 3)[pix]
             model *= hull.visibility(pts, d)[:, None]
         flat = out.reshape(-1, 3)
         flat[pix[good]] = model[good]

@@ -53,7 +53,7 @@ from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classi
                                    outline_holding_highlights, refine_view_limb)
 from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mask_view, not_ground, own_shadow_mask,
                                  reference_radiance)
-from ffls.spheres.lambert import LambertFit, OwnShadow, fit_lambert, flat_field_terms, shadowed_ground_bounce
+from ffls.spheres.lambert import LambertFit, fit_lambert, flat_field_terms, own_shadow_of, shadowed_ground_bounce
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
                                estimate_photo, ray_origins)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
@@ -534,7 +534,7 @@ def _measured_gradient(results, k, s, values, up, min_photos):
                 and f.inliers is not None and f.intensity > 0):
             continue
         if offsets is None:
-            offsets, g0, shadow = flat_field_offsets(s), s.ground_factor(up), OwnShadow(s.normals, up)
+            offsets, g0, shadow = flat_field_offsets(s), s.ground_factor(up), own_shadow_of(s.normals, up)
         g = shadowed_ground_bounce(s.normals, f.direction, up, g0, shadow) if f.own_shadow else g0
         Ap, bp = flat_field_terms(s.normals, vals[k][0], f, offsets, g)
         A.append(Ap)
@@ -695,7 +695,7 @@ def calibrate_bounce_shape(results: list[PhotoEstimate], samples: list[SphereSam
     out = []
     for k, s in enumerate(samples):
         n = s.normals
-        g0, own = s.ground_factor(UP), OwnShadow(n, UP)
+        g0, own = s.ground_factor(UP), own_shadow_of(n, UP)
         A, y = [], []
         for r, vals in zip(results, values):
             if not r.spheres:

@@ -117,6 +117,7 @@ class GroundView:
     up: np.ndarray
     kappa: float | None = None
     _kernels: dict = field(default_factory=dict, compare=False, repr=False)
+    _fills: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def n_seen(self) -> int:
@@ -139,9 +140,21 @@ class GroundView:
             r2 = np.einsum("ijk,ijk->ij", r, r)
             cos_p = np.maximum(np.einsum("ijk,ik->ij", r, n[a:a + 1024]), 0.0)
             out[a:a + 1024] = cos_p * np.maximum(-(r @ self.up), 0.0) / r2 * self.areas / (np.pi * r2 + self.areas)
-        if len(self._kernels) > 8:  # (recentred samples replace the first ones)
+        if len(self._kernels) > 16:  # (recentred samples replace the first ones; 2 per normals)
             self._kernels.clear()
         self._kernels[id(normals)] = (normals, out)
+        return out
+
+    def kernel64(self, normals: np.ndarray) -> np.ndarray:
+        """(m, p + h) float64: :meth:`kernel` widened (its float32 values), kept as it is: the
+        bounce's matrix-vector products in float64 (:func:`observed_bounce`, :func:`seen_bounce`)
+        read it instead of widening the kernel at every fit (the same floats)."""
+        key = ("float64", id(normals))
+        hit = self._kernels.get(key)
+        if hit is not None and hit[0] is normals:
+            return hit[1]
+        out = self.kernel(normals).astype(np.float64)
+        self._kernels[key] = (normals, out)
         return out
 
 
@@ -206,12 +219,15 @@ def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, wo
         else:
             depth = float(Rw[:, 2] @ (s.center - tw))
             scale_px.append(0.5 * (K[0][0] + K[1][1]) / depth)
+    # what depends on no sphere: the directions' slope to the ground, and every sphere's hiding radius
+    cos_down = -(base @ up)  # > 0
+    sin_down = np.sqrt(np.maximum(1.0 - cos_down ** 2, 0.0))
+    radii = np.array([sm.radius + margin_px / sc for sm, sc in zip(samples, scale_px)])
     views = []
     for k, s in enumerate(samples):
         height = s.radius  # the centre's height above the ground it rests on
-        cos_down = -(base @ up)  # > 0
         t = height / cos_down
-        reach_ok = t * np.sqrt(np.maximum(1.0 - cos_down ** 2, 0.0)) <= reach * s.radius
+        reach_ok = t * sin_down <= reach * s.radius
         X = s.center + base * t[:, None]
         Xc = (X - tw) @ Rw  # camera frame
         if ortho:  # pixel offsets from the sphere's centre pixel, at the sphere's scale
@@ -230,7 +246,6 @@ def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, wo
             if in_front.any():
                 px[in_front] = project_points(Xc[in_front], K, dist)
             origin = tw
-        radii = np.array([sm.radius + margin_px / sc for sm, sc in zip(samples, scale_px)])
         ok = reach_ok & in_front & np.isfinite(px).all(axis=1)
         ok &= (px[:, 0] >= 0) & (px[:, 0] <= W - 1) & (px[:, 1] >= 0) & (px[:, 1] <= H - 1)
         framed = ok.copy()  # (in the frame: hidden only by a sphere)
@@ -332,15 +347,23 @@ def not_ground(radiances: np.ndarray, lit: np.ndarray | None = None, ratio: floa
 
 def _neighbour_fill(view: GroundView, keep: np.ndarray):
     """(gone (g,), src (g, k), w (g, k)): the seen points not kept, their nearest kept seen points
-    and inverse-distance weights; None where all are kept or too few are."""
+    and inverse-distance weights; None where all are kept or too few are. Kept in the view per
+    ``keep`` (:func:`mask_view` and every photo's :func:`mask_radiance` of a sphere share one)."""
     keep = np.asarray(keep, bool)
-    if keep.all() or keep.sum() < FILL_NEIGHBOURS:
-        return None
-    kept, gone = np.flatnonzero(keep), np.flatnonzero(~keep)
-    seen_off = view.offsets[:view.n_seen]
-    dist_, near = cKDTree(seen_off[kept]).query(seen_off[gone], k=FILL_NEIGHBOURS)
-    w = 1.0 / np.maximum(dist_, 1e-9)
-    return gone, kept[near], w / w.sum(axis=1, keepdims=True)
+    key = keep.tobytes()
+    if key in view._fills:
+        return view._fills[key]
+    fill = None
+    if not (keep.all() or keep.sum() < FILL_NEIGHBOURS):
+        kept, gone = np.flatnonzero(keep), np.flatnonzero(~keep)
+        seen_off = view.offsets[:view.n_seen]
+        dist_, near = cKDTree(seen_off[kept]).query(seen_off[gone], k=FILL_NEIGHBOURS)
+        w = 1.0 / np.maximum(dist_, 1e-9)
+        fill = gone, kept[near], w / w.sum(axis=1, keepdims=True)
+    if len(view._fills) > 8:
+        view._fills.clear()
+    view._fills[key] = fill
+    return fill
 
 
 def mask_radiance(view: GroundView, keep: np.ndarray, radiance: np.ndarray) -> np.ndarray:
@@ -374,7 +397,7 @@ def mask_view(view: GroundView, keep: np.ndarray) -> GroundView:
     rows[gone] = view.rows[src].reshape(len(gone), width)
     cols[gone] = view.cols[src].reshape(len(gone), width)
     weights[gone] = (view.weights[src] * w[:, :, None]).reshape(len(gone), width)
-    return replace(view, rows=rows, cols=cols, weights=weights, _kernels={})
+    return replace(view, rows=rows, cols=cols, weights=weights, _kernels={}, _fills={})
 
 
 def ground_pixels(views: list[GroundView]) -> tuple[np.ndarray, np.ndarray]:
@@ -458,7 +481,7 @@ def observed_bounce(view: GroundView, radiance: np.ndarray | None, light: np.nda
     # (the ground out of reach stays as the uniform model has it: filling all the unseen ground
     # with the seen ground's mean spread a cast shadow beside the sphere all round it, and
     # tripled the test's errors, tests/test_observed_bounce.py)
-    return np.maximum(uniform + view.kernel(normals) @ dev, 0.0)
+    return np.maximum(uniform + view.kernel64(normals) @ dev, 0.0)
 
 
 def reference_radiance(view: GroundView, radiance: np.ndarray, light: np.ndarray) -> float:
@@ -473,7 +496,7 @@ def seen_bounce(view: GroundView, radiance: np.ndarray, normals: np.ndarray) -> 
     photo's own linear units (``sum_j K_j L_j``): times the sphere's albedo, its pixels' bounce
     from that ground. The albedo is one constant of the sphere for the capture (measured in
     docs/spheres.md, "Two terms")."""
-    return view.kernel(normals)[:, :view.n_seen].astype(np.float64) @ np.asarray(radiance, dtype=np.float64)
+    return view.kernel64(normals)[:, :view.n_seen] @ np.asarray(radiance, dtype=np.float64)
 
 
 def hidden_form_factor(view: GroundView, light: np.ndarray, uniform: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -50,6 +50,7 @@ __all__ = [
     "fit_lambert",
     "fit_lambert_MasselusDutreAnrys2002",
     "OwnShadow",
+    "own_shadow_of",
     "own_shadow_factor",
     "shadowed_ground_bounce",
     "near_ground_bounce",
@@ -290,6 +291,28 @@ class OwnShadow:
         return np.clip(lo, 0.0, 1.0, out=lo)
 
 
+#: :func:`own_shadow_of`'s kept :class:`OwnShadow` objects: ``(id(normals), up) -> (normals, OwnShadow)``.
+_OWN_SHADOWS: dict = {}
+#: How many :func:`own_shadow_of` keeps (a capture's spheres, and their recentred samples).
+OWN_SHADOWS_KEPT = 16
+
+
+def own_shadow_of(normals: np.ndarray, up: np.ndarray = UP) -> OwnShadow:
+    """The :class:`OwnShadow` of a normals array, made once per array and kept (the last
+    :data:`OWN_SHADOWS_KEPT`): a capture's fits reuse their samples' normals, and its per-pixel
+    geometry depends on them and ``up`` only. The array must not be changed in place after."""
+    up = np.asarray(up, dtype=np.float64)
+    key = (id(normals), up.tobytes())
+    hit = _OWN_SHADOWS.get(key)
+    if hit is not None and hit[0] is normals:
+        return hit[1]
+    out = OwnShadow(normals, up)
+    if len(_OWN_SHADOWS) >= OWN_SHADOWS_KEPT:
+        _OWN_SHADOWS.clear()
+    _OWN_SHADOWS[key] = (normals, out)
+    return out
+
+
 def own_shadow_factor(normals: np.ndarray, light: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
     """View factor from sphere points to the sphere's own shadow on the ground it rests on.
 
@@ -369,10 +392,22 @@ def _cosine_directions(side: int) -> np.ndarray:
     return np.stack([r * np.cos(ph), r * np.sin(ph), np.sqrt(1.0 - u1)], axis=1)
 
 
-def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.ndarray:
-    """:func:`near_ground_bounce` at every point, by quadrature (the light above the contact point)."""
+#: :func:`_near_bounce_geometry`'s kept results, by their inputs (bytes).
+_NEAR_GEOMETRIES: dict = {}
+#: How many :func:`_near_bounce_geometry` keeps (a capture's spheres, and their recentred samples).
+NEAR_GEOMETRIES_KEPT = 16
+
+
+def _near_bounce_geometry(points, normals, center, radius, up, side) -> tuple:
+    """What :func:`_near_bounce_quadrature` needs that does not depend on the light: per point and
+    quadrature direction, whether the direction meets the ground (``down``), the ground point
+    ``X``, ``W = center - X`` and ``W . W``; made once per sphere and process (every photo's near fit
+    integrates at the same nodes), so the same floats as made at every call."""
+    key = (points.tobytes(), normals.tobytes(), center.tobytes(), float(radius), up.tobytes(), int(side))
+    hit = _NEAR_GEOMETRIES.get(key)
+    if hit is not None:
+        return hit
     G = center - radius * up
-    e_ref = float((S - G) @ up) / float(np.linalg.norm(S - G)) ** 3
     loc = _cosine_directions(int(side))
     # a tangent frame per normal
     helper = np.where(np.abs(normals @ up)[:, None] < 0.9, up[None, :], np.roll(up, 1)[None, :])
@@ -385,15 +420,29 @@ def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.
     down = dz < -1e-9
     height = points @ up - float(G @ up)
     X = points[:, None, :] + (np.maximum(height, 0.0)[:, None] / np.where(down, -dz, 1.0))[..., None] * D
+    W = center - X  # the segment from the ground point to the light meets the sphere: own shadow
+    out = (down, X, W, np.einsum("msi,msi->ms", W, W), loc.shape[0])
+    for a in out[:4]:
+        a.flags.writeable = False
+    if len(_NEAR_GEOMETRIES) >= NEAR_GEOMETRIES_KEPT:
+        _NEAR_GEOMETRIES.clear()
+    _NEAR_GEOMETRIES[key] = out
+    return out
+
+
+def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.ndarray:
+    """:func:`near_ground_bounce` at every point, by quadrature (the light above the contact point)."""
+    G = center - radius * up
+    e_ref = float((S - G) @ up) / float(np.linalg.norm(S - G)) ** 3
+    down, X, W, WW, n_dirs = _near_bounce_geometry(points, normals, center, radius, up, side)
     V = S - X
     r2 = np.einsum("msi,msi->ms", V, V)
     r = np.sqrt(r2)
     E = np.maximum(V @ up, 0.0) / (r2 * r)
-    W = center - X  # the segment from the ground point to the light meets the sphere: own shadow
     tc = np.einsum("msi,msi->ms", W, V) / r
-    dark = (tc > 0.0) & (np.einsum("msi,msi->ms", W, W) - tc * tc < radius * radius)
+    dark = (tc > 0.0) & (WW - tc * tc < radius * radius)
     E[~down | dark] = 0.0
-    return E.sum(axis=1) / (loc.shape[0] * e_ref)
+    return E.sum(axis=1) / (n_dirs * e_ref)
 
 
 #: :func:`near_ground_bounce`'s triangulations of its nodes, by the nodes' coordinates (bytes).
@@ -1006,7 +1055,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
     if np.all(np.isfinite(v0)) and np.linalg.norm(v0) > 0:
         l_g = v0 / np.linalg.norm(v0)
         if shade:
-            shadow = OwnShadow(normals, up)
+            shadow = own_shadow_of(normals, up)
 
             def form(light):  # the bounce's form factor under ``light``
                 g_l = shadowed_ground_bounce(normals, light, up, g_plain, shadow)
