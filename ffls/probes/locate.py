@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, edge_points, find_spheres,
+from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, find_spheres,
                                  orthographic_normals, sphere_mask, sphere_normals)
 from ffls.spheres.select import CRITERIA, round_outline
 
@@ -199,8 +199,7 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
         No fit passes (one line: what was judged, and how to give a hint), or two separate ones do.
     """
     H, W = np.shape(image)[:2]
-    cands = circle_candidates(image, source)
-    pts, _ = edge_points(image)
+    cands, pts = circle_candidates(image, source)
     min_r = MIN_BALL_FRACTION * min(H, W)
     seeds, fits, why = [], [], []
     for x, y, r in cands:
