@@ -80,6 +80,7 @@ reported ``uncertainty_deg`` values are 95% cone radii.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -312,11 +313,19 @@ class ErrorModel:
             return s, t
         idx = np.atleast_1d(np.asarray(spheres, dtype=np.intp)).ravel()
         s, t = np.broadcast_to(s, idx.shape).copy(), np.broadcast_to(t, idx.shape).copy()
-        own = {k: (sk, tk) for k, sk, tk, _ in self.kind_terms}
-        for j, i in enumerate(idx):
-            if 0 <= i < len(self.sphere_kinds) and self.sphere_kinds[i] in own:
-                s[j], t[j] = own[self.sphere_kinds[i]]
+        s_k, t_k = self._kind_sphere_terms
+        have = (idx >= 0) & (idx < s_k.size)
+        s[have], t[have] = s_k[idx[have]], t_k[idx[have]]
         return s.reshape(shape), t.reshape(shape)
+
+    @cached_property
+    def _kind_sphere_terms(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per sphere of ``sphere_kinds``, its ``s`` and ``tau`` (degrees) for :meth:`terms`: its kind's
+        own (``kind_terms``) or the shared ones; derived once (the model is frozen)."""
+        own = {k: (sk, tk) for k, sk, tk, _ in self.kind_terms}
+        st = np.array([own.get(kd, (self.scale, self.floor_deg)) for kd in self.sphere_kinds],
+                      dtype=np.float64).reshape(-1, 2)
+        return st[:, 0], st[:, 1]
 
     def distance_sigma_deg(self, coupling_deg: float) -> float:
         """Per-axis standard deviation (degrees) of a near light's direction from its distance's
