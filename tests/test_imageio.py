@@ -62,6 +62,16 @@ def test_exr_half_overflow_rejected(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_exr_half_overflow_is_one_line_naming_the_output(tmp_path):
+    """write_exr itself makes the commands' check (``check_half_range``, called before it at three
+    sites): an OutputError naming the path, the commands' one line with status 2."""
+    rgb = np.full((2, 2, 3), 1e5, np.float32)
+    with pytest.raises(OutputError) as e:
+        imageio.write_exr(tmp_path / "h.exr", rgb, half=True)
+    assert str(e.value) == (f"{tmp_path / 'h.exr'}: values up to 100000 exceed the half-float range (65504): "
+                            "write float (without --half / half=False)")
+
+
 def test_exr_luminance_only_is_replicated(tmp_path):
     import OpenEXR
 

@@ -14,7 +14,8 @@ from ffls.io.capture import load_capture
 from ffls.radiance.photos import load_photo
 from ffls.spheres.detect import SphereFit, extreme_images, find_spheres_in_capture, outline_support
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circle_coverage, circle_search,
-                                          dark_cap, enclosing_circle, highest_first, highlight_ratio)
+                                          dark_cap, enclosing_circle, highest_first, highlight_ratio,
+                                          mirror_silhouette)
 from ffls.synth.photo import PhotoSettings
 from ffls.synth.scene import make_scene, write_synthetic_capture
 
@@ -149,6 +150,24 @@ def test_circle_search_points_out_of_the_radius_range_do_not_vote():
         for (cw, rw, iw), (cg, rg, ig) in zip(want, got):
             assert np.array_equal(cg, cw) and rg == rw
             assert np.array_equal(ig[:len(pts)], iw) and not ig[len(pts):].any()
+
+
+def test_mirror_silhouette_n_best_gives_every_covered_circle():
+    """Two concentric reflectance steps (a limb at 50 px around a reflected circle at 42 px): the
+    default gives the best-supported circle alone; ``n_best`` gives each circle passing the
+    coverage test, the default's first (what :func:`ffls.probes.locate.mirror_limb` chooses from)."""
+    import cv2
+
+    yy, xx = np.mgrid[0:160, 0:160]
+    d = np.hypot(xx - 80.3, yy - 79.6)
+    log_l = cv2.GaussianBlur(np.where(d < 50, 2.0, 0.0) - np.where(d < 42, 1.0, 0.0), (0, 0), 0.8)
+    kw = dict(shape=log_l.shape, min_coverage=0.85, min_shrink=0.75)
+    pts, c, r = mirror_silhouette(log_l, (80.0, 80.0), 47.0, **kw)
+    found = mirror_silhouette(log_l, (80.0, 80.0), 47.0, n_best=6, **kw)
+    assert [round(x, 1) for _, _, x in found] == [50.0, 42.0]
+    assert np.array_equal(found[0][0], pts) and np.array_equal(found[0][1], c) and found[0][2] == r
+    assert np.allclose(c, [80.3, 79.6], atol=0.05)
+    assert mirror_silhouette(log_l, (80.0, 80.0), 47.0, n_best=6, **dict(kw, min_coverage=1.01)) == []
 
 
 def test_highlight_ratio_tells_a_mirror_from_a_dark_patch():

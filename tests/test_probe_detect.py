@@ -178,3 +178,18 @@ def test_unhinted_diffuse_ball_too_small_or_with_a_rival_is_refused(tmp_path):
     two[:, :120], two[:, 140:] = one, one
     with pytest.raises(InputError, match=r"two round outlines could be the probe ball.*center_px"):
         _busy_ground_probe(tmp_path, 1, None, image=two)
+
+
+def test_circle_candidates_give_the_edge_points_they_were_found_from():
+    """``diffuse_ball`` judges a candidate's interior by the edge points ``circle_candidates`` found the
+    candidates from, which it returns (it ran ``edge_points`` on the photo a second time)."""
+    from ffls.spheres.detect import circle_candidates, edge_points
+
+    yy, xx = np.mgrid[0:120, 0:140]
+    lum = np.where(np.hypot(xx - 71.3, yy - 58.6) < 30.0, 0.8, 0.1) * (1.0 + 0.1 * np.sin(xx / 7.0))
+    image = np.repeat(lum[..., None], 3, axis=2).astype(np.float32)
+    cands, pts = circle_candidates(image)
+    want, _ = edge_points(image)
+    assert np.array_equal(pts, want) and len(pts) > 100
+    x, y, r = cands[0]
+    assert np.hypot(x - 71.3, y - 58.6) < 1.5 and abs(r - 30.0) < 1.5, cands[:3]

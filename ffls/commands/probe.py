@@ -218,7 +218,7 @@ def _merge(args) -> int:
 
     from ffls.commands.common import print_notes
     from ffls.errors import InputError
-    from ffls.io.images import check_half_range, colour_summary, read_image, write_exr
+    from ffls.io.images import colour_summary, read_image, write_exr
     from ffls.io.response import load_response
     from ffls.io.probe import exposure_time_problem
     from ffls.probes.bracket import exposure_from_exif, merge_bracket_files
@@ -267,8 +267,6 @@ def _merge(args) -> int:
         print_notes(NAME, "camera response recovered from the bracket (Debevec-Malik 1997)")
     m = merge_bracket_files(paths, times, enc, response, source=paths[0], key="--encoding", forms=ENCODING_FORMS)
     alpha = (~m.saturated).astype(np.float32)
-    if args.half:
-        check_half_range(m.radiance, args.out)
     write_exr(args.out, m.radiance, half=args.half, alpha=alpha)
     print_notes(NAME, f"exposure times {how}; " + m.describe(), colour_summary(paths))
     print(f"wrote {args.out} ({m.radiance.shape[1]}x{m.radiance.shape[0]}, alpha 0 where saturated in every "

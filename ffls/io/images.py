@@ -60,6 +60,7 @@ __all__ = [
     "nonfinite_message",
     "transparency_message",
     "check_half_range",
+    "HalfRangeError",
 ]
 
 _KINDS = {
@@ -246,22 +247,28 @@ def transparency_message(img: "ImageData") -> str | None:
            "unpremultiplied alpha is undefined"
 
 
+class HalfRangeError(OutputError, ValueError):
+    """Values beyond the half-float range for a half-float output (:func:`check_half_range`): an
+    :class:`ffls.errors.OutputError` (one line naming the output, status 2 from the commands) and a
+    ValueError (a wrong value given to :func:`write_exr`)."""
+
+
 def check_half_range(a: np.ndarray, path) -> None:
-    """Refuse, before writing ``path`` with ``--half``, values beyond the half-float range (+-65504),
-    which would become infinite: one line naming the output (``write_exr`` raises a ValueError,
-    which reached the user as a traceback from ``probe merge --half`` and ``probe mirror --half``).
+    """Refuse, before writing ``path`` with half floats (:func:`write_exr`, ``--half``), values beyond
+    the half-float range (+-65504), which would become infinite: one line naming the output (a bare
+    ValueError reached the user as a traceback from ``probe merge --half`` and ``probe mirror --half``).
 
     Raises
     ------
-    OutputError
+    HalfRangeError
         Naming ``path``, the largest value and what to do.
     """
     a = np.asarray(a)
     finite = np.abs(a[np.isfinite(a)]) if a.size else a
     top = float(finite.max()) if finite.size else 0.0
     if top > _HALF_MAX:
-        raise OutputError(f"values up to {top:.6g} exceed the half-float range ({_HALF_MAX:g}): write float "
-                          "(without --half / half=False)", path)
+        raise HalfRangeError(f"values up to {top:.6g} exceed the half-float range ({_HALF_MAX:g}): write "
+                             "float (without --half / half=False)", path)
 
 
 def nonfinite_message(a: np.ndarray) -> str | None:
@@ -1179,24 +1186,21 @@ def write_exr(path: str | os.PathLike, rgb, half: bool = False, alpha=None, attr
     Raises
     ------
     ValueError
-        Wrong shape or extension, or (``half=True``) finite values beyond the half range
-        (+-65504), which would silently become infinite; an attribute that is not a string, or
-        that names a standard header attribute.
+        Wrong shape or extension; an attribute that is not a string, or that names a standard
+        header attribute.
+    HalfRangeError
+        (a ValueError) ``half=True`` and finite values beyond the half range (+-65504), which
+        would silently become infinite (:func:`check_half_range`: one line naming ``path``).
     """
     import OpenEXR
 
     path = Path(path)
     _check_suffix(path, (".exr",), "write_exr")
-    a = _check_rgb(rgb, "write_exr").astype(np.float32, copy=False)
-    dtype = np.float16 if half else np.float32
+    a = _check_rgb(rgb, "write_exr")
     if half:
-        finite = np.isfinite(a)
-        big = finite & (np.abs(a) > _HALF_MAX)
-        if big.any():
-            raise ValueError(
-                f"write_exr: {int(big.sum())} values exceed the half-float range (max |x| = "
-                f"{float(np.abs(a[finite]).max()):.6g} > {_HALF_MAX}); scale them or write float"
-            )
+        check_half_range(a, path)
+    a = a.astype(np.float32, copy=False)
+    dtype = np.float16 if half else np.float32
     # OpenEXR 3.x mis-writes non-contiguous channel views without error: copy each channel.
     channels = {c: np.ascontiguousarray(a[:, :, i], dtype=dtype) for i, c in enumerate("RGB")}
     if alpha is not None:

@@ -31,7 +31,7 @@ import numpy as np
 
 from ffls import conventions
 from ffls.errors import FflsError, InputError, not_a_regular_file
-from ffls.io.images import check_half_range, read_image, write_exr, write_hdr
+from ffls.io.images import read_image, write_exr, write_hdr
 
 __all__ = [
     "LAYOUTS",
@@ -598,8 +598,6 @@ def save_lightmap(lm: LightMap, path: str | os.PathLike, half: bool = False) -> 
     ext = path.suffix.lower()
     img = cube_to_cross(lm.data) if lm.layout == "cube" else lm.data
     if ext == ".exr":
-        if half:
-            check_half_range(img, path)
         return write_exr(path, img, half=half)
     if ext in (".hdr", ".pic"):
         if half:

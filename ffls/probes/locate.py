@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, edge_points, find_spheres,
+from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, find_spheres,
                                  orthographic_normals, sphere_mask, sphere_normals)
 from ffls.spheres.select import CRITERIA, round_outline
 
@@ -124,28 +124,21 @@ def mirror_limb(radiance, center_px, radius_px, shape):
     to 3 px off on 5 of 12 renders). At the limb the ball shows what lies just behind it, dimmed by
     its reflectance: the radial brightness steps (:func:`ffls.spheres.mirror_outline.radial_steps`,
     radii 0.75 to 1.25 of the found one, log luminance) are searched for their best-supported
-    circles (:data:`LIMB_CIRCLES`, :func:`ffls.spheres.mirror_outline.circle_search`); of those whose
+    circles (:data:`LIMB_CIRCLES`, :func:`ffls.spheres.mirror_outline.mirror_silhouette`); of those whose
     steps cover at least :data:`LIMB_STEP_COVERAGE` of them and that stay within 15% of the found
     circle (centre and radius) the largest is taken: a circle of steps inside a mirror ball is a
     reflection, and the limb encloses it (the best-supported circle alone was a reflected one in 3
     renders there, 1.7-2.3 px off).
     """
-    from ffls.spheres.mirror_outline import circle_coverage, circle_search, radial_steps
+    from ffls.spheres.mirror_outline import mirror_silhouette
 
     lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
-    log_l = np.log(np.maximum(lum, 1e-12))
     c0 = np.asarray(center_px, dtype=np.float64)
-    lo, hi = 0.75, 1.25
-    pts = radial_steps(log_l, c0, radius_px, r_range=(lo, hi))
-    if len(pts) < 8:
-        return None
-    good = []
-    for c, r, inl in circle_search(pts, c0, (hi - lo) * radius_px, lo * radius_px, hi * radius_px, tol=1.0,
-                                   n_best=LIMB_CIRCLES):
-        if np.hypot(*(c - c0)) > 0.15 * radius_px or abs(r / radius_px - 1) > 0.15 or inl.sum() < 8:
-            continue
-        if circle_coverage(pts[inl], c, r, 1.0, shape) >= LIMB_STEP_COVERAGE:
-            good.append((float(r), np.asarray(c, dtype=np.float64)))
+    found = mirror_silhouette(np.log(np.maximum(lum, 1e-12)), c0, radius_px, shape=shape,
+                              min_coverage=LIMB_STEP_COVERAGE, max_growth=1.25, tol=1.0, min_shrink=0.75,
+                              n_best=LIMB_CIRCLES)
+    good = [(float(r), np.asarray(c, dtype=np.float64)) for _, c, r in found
+            if np.hypot(*(c - c0)) <= 0.15 * radius_px and abs(r / radius_px - 1) <= 0.15]
     if not good:
         return None
     r, c = max(good, key=lambda g: g[0])
@@ -206,8 +199,7 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
         No fit passes (one line: what was judged, and how to give a hint), or two separate ones do.
     """
     H, W = np.shape(image)[:2]
-    cands = circle_candidates(image, source)
-    pts, _ = edge_points(image)
+    cands, pts = circle_candidates(image, source)
     min_r = MIN_BALL_FRACTION * min(H, W)
     seeds, fits, why = [], [], []
     for x, y, r in cands:

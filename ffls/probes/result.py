@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffls.io.images import check_half_range, write_exr
+from ffls.io.images import write_exr
 from ffls.lightmaps.lightmap import LightMap
 
 __all__ = ["LightmapEstimate", "save_estimate"]
@@ -52,6 +52,4 @@ def save_estimate(est: LightmapEstimate, path: str | os.PathLike, half: bool = F
     attrs = {"ffls:probe_method": str(est.method)}
     if est.method == "pocs" and "scheme" in est.details:
         attrs["ffls:pocs_scheme"] = str(est.details["scheme"])
-    if half:
-        check_half_range(est.lightmap.data, path)
     return write_exr(path, est.lightmap.data, half=half, alpha=est.seen.astype(np.float32), attributes=attrs)

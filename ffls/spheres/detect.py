@@ -3196,7 +3196,8 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         edge_tensor=st.edge_tensor, edge_photos=st.edge_photos, workers=workers)
 
 
-def circle_candidates(image, source: str | os.PathLike | None = None) -> list[tuple[float, float, float]]:
+def circle_candidates(image, source: str | os.PathLike | None = None
+                      ) -> tuple[list[tuple[float, float, float]], np.ndarray]:
     """The candidate circles of one image, ``(x, y, r)`` pixels, best edge support first: stages 1-3 of
     :func:`find_spheres` without hints (the max image's edges and :func:`_hough_circle_candidates`), for a
     caller that judges the candidates by its own criteria (a probe ball, :func:`ffls.probes.locate.locate_sphere`).
@@ -3207,6 +3208,14 @@ def circle_candidates(image, source: str | os.PathLike | None = None) -> list[tu
         Linear radiance.
     source : path, optional
         Named in the all-black error.
+
+    Returns
+    -------
+    candidates : list of (x, y, r)
+        The circles, pixels.
+    points : (n, 2) float64
+        The max image's edge points (x, y) they were found from (:func:`edge_points`).
     """
     mx, _, _, L, _, _, _ = _max_luminance(image, source)
-    return _hough_circle_candidates(_edge_map(mx, L, source), L)
+    edges = _edge_map(mx, L, source)
+    return _hough_circle_candidates(edges, L), edges.points

@@ -774,7 +774,7 @@ def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
 
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
                           refinements: list[CentreRefinement] | None = None,
-                          scene_center: np.ndarray | None = None,
+                          scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
                           **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
@@ -800,6 +800,9 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         (:func:`ffls.spheres.uncertainty.centre_floor_deg`) as a known part of its variance.
     scene_center : (3,) float, optional
         Where the directions are reported from (no distance term without it).
+    kinds : list of SphereKind, optional
+        Each sphere's kind (:func:`sphere_kinds`), for its kind's own terms of the model (without
+        them, one shared model).
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -826,12 +829,8 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                                          centers[used] if near else None))
         sigmas.append(np.array([r.spheres[i].fit.uncertainty_deg for i in used]) / np.sqrt(2.0))
         used_all.append(np.asarray(used))
-    kinds = [""] * len(samples)  # each sphere's kind, for its kind's own terms of the model
-    for r in results:
-        for i, sp in enumerate(r.spheres[:len(kinds)]):
-            if not kinds[i] and sp.direction is not None:
-                kinds[i] = sp.kind
-    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre, kinds=kinds, **kwargs)
+    model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre,
+                            kinds=[kd.kind for kd in kinds] if kinds is not None else None, **kwargs)
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(
@@ -1570,7 +1569,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
             by_photo = dict(zip(fitted, results))
     if bounce == "free":
         results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center)
+        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1604,7 +1603,7 @@ def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list |
         results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
     results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center)
+    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 

@@ -457,7 +457,8 @@ def limb_radius(log_lum, center, radius, *, r_range=(0.97, 1.1), n_angles: int =
 
 
 def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: float = 0.5,
-                      max_growth: float = 1.25, tol: float = 1.0, min_shrink: float = 0.97):
+                      max_growth: float = 1.25, tol: float = 1.0, min_shrink: float = 0.97,
+                      n_best: int | None = None):
     """A mirror ball's silhouette near an outer outline: the circle of weak reflectance steps.
 
     The outline found from the image-wide edges (:func:`enclosing_circle`) follows the reflected
@@ -474,22 +475,26 @@ def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: floa
     384 px: that fit was 1.8 px off and its radius 7 % large; the circle of steps from 0.75 radii
     is 0.2 px off).
 
+    ``n_best`` asks for the ``n_best`` best-supported circles (:func:`circle_search`) instead of the
+    best one, for a caller that chooses among them (:func:`ffls.probes.locate.mirror_limb`).
+
     Returns
     -------
     (points (m, 2), centre (2,), radius) or None
         The inlier points (for the sphere fit) and the circle.
+    list of (points (m, 2), centre (2,), radius)
+        With ``n_best``: each of those circles that passes the coverage test, best first (empty
+        when none does).
     """
     lo = min(0.9, min_shrink)
     pts = radial_steps(log_lum, center, radius, r_range=(lo, max_growth))
-    if len(pts) < 8:
-        return None
-    found = circle_search(pts, center, (max_growth - lo) * radius, min_shrink * radius, max_growth * radius, tol=tol)
-    if not found:
-        return None
-    c, r, inl = found[0]
-    if inl.sum() < 8 or circle_coverage(pts[inl], c, r, tol, shape) < min_coverage:
-        return None
-    return pts[inl], c, r
+    found = [] if len(pts) < 8 else circle_search(pts, center, (max_growth - lo) * radius, min_shrink * radius,
+                                                  max_growth * radius, tol=tol, n_best=n_best or 1)
+    passed = [(pts[inl], c, r) for c, r, inl in (found if n_best else found[:1])
+              if inl.sum() >= 8 and circle_coverage(pts[inl], c, r, tol, shape) >= min_coverage]
+    if n_best:
+        return passed
+    return passed[0] if passed else None
 
 
 def _disc_crop(lum, center, radius, outer: float = 1.4):

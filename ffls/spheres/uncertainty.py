@@ -80,6 +80,7 @@ reported ``uncertainty_deg`` values are 95% cone radii.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -312,11 +313,19 @@ class ErrorModel:
             return s, t
         idx = np.atleast_1d(np.asarray(spheres, dtype=np.intp)).ravel()
         s, t = np.broadcast_to(s, idx.shape).copy(), np.broadcast_to(t, idx.shape).copy()
-        own = {k: (sk, tk) for k, sk, tk, _ in self.kind_terms}
-        for j, i in enumerate(idx):
-            if 0 <= i < len(self.sphere_kinds) and self.sphere_kinds[i] in own:
-                s[j], t[j] = own[self.sphere_kinds[i]]
+        s_k, t_k = self._kind_sphere_terms
+        have = (idx >= 0) & (idx < s_k.size)
+        s[have], t[have] = s_k[idx[have]], t_k[idx[have]]
         return s.reshape(shape), t.reshape(shape)
+
+    @cached_property
+    def _kind_sphere_terms(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per sphere of ``sphere_kinds``, its ``s`` and ``tau`` (degrees) for :meth:`terms`: its kind's
+        own (``kind_terms``) or the shared ones; derived once (the model is frozen)."""
+        own = {k: (sk, tk) for k, sk, tk, _ in self.kind_terms}
+        st = np.array([own.get(kd, (self.scale, self.floor_deg)) for kd in self.sphere_kinds],
+                      dtype=np.float64).reshape(-1, 2)
+        return st[:, 0], st[:, 1]
 
     def distance_sigma_deg(self, coupling_deg: float) -> float:
         """Per-axis standard deviation (degrees) of a near light's direction from its distance's
@@ -772,9 +781,13 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     G2_all = np.concatenate([g2 for _, _, g2 in data])
     photo_of = np.repeat(np.arange(len(data)), k_all)
 
+    def var_of(ls, lt):
+        """The spheres' variances under log scale ``ls`` and log floor ``lt`` (each one value, or one per sphere)."""
+        return np.exp(2.0 * ls) * S2_all + G2_all + np.exp(2.0 * lt)
+
     def terms(x):
         """Per photo: -2 log restricted likelihood and chi-square of the scatter."""
-        return terms_of(np.exp(2.0 * x[0]) * S2_all + G2_all + np.exp(2.0 * x[1]))
+        return terms_of(var_of(x[0], x[1]))
 
     def terms_of(v):
         """:func:`terms` of the spheres' variances ``v``."""
@@ -791,17 +804,21 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     # beside them): start from the best node of a coarse grid over the box, not from one point
     grid = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], START_GRID if fit_scale else 1),
                                 np.linspace(lo[1], hi[1], START_GRID), indexing="ij"), axis=-1).reshape(-1, 2)
-    for _ in range(max_rounds):
-        if keep.sum() < min_photos:
-            break
-        f_grid = np.array([objective(g, keep) for g in grid]).reshape(-1, START_GRID)
-        # the profile over the scale nodes (each with its best floor node): a start at each of its
-        # local minima, one in each basin the grid can separate
+
+    def start_nodes(f_grid):
+        """The profile of the objective ``f_grid`` (one per node of ``grid``) over the scale nodes,
+        each with its best floor node: that best node at each of its local minima, one in each basin
+        the grid can separate."""
+        f_grid = np.asarray(f_grid).reshape(-1, START_GRID)
         prof = f_grid.min(axis=1)
         padded = np.concatenate([[np.inf], prof, [np.inf]])
         rows = np.flatnonzero((prof <= padded[:-2]) & (prof <= padded[2:]))
-        starts_x = [np.clip(x0, lo, hi)] + [grid.reshape(-1, START_GRID, 2)[i, int(np.argmin(f_grid[i]))]
-                                            for i in rows]
+        return [grid.reshape(-1, START_GRID, 2)[i, int(np.argmin(f_grid[i]))] for i in rows]
+
+    for _ in range(max_rounds):
+        if keep.sum() < min_photos:
+            break
+        starts_x = [np.clip(x0, lo, hi)] + start_nodes([objective(g, keep) for g in grid])
         fits = [minimize(objective, s0, args=(keep,), method="L-BFGS-B", bounds=list(zip(lo, hi)))
                 for s0 in starts_x]
         x = min(fits, key=lambda f: f.fun).x
@@ -818,7 +835,7 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     kind_of = np.array([kind_names[i] if 0 <= i < len(kind_names) else "" for i in I_all], dtype=object)
     counts = {kd: np.add.reduceat((kind_of == kd).astype(np.intp), starts) for kd in set(kind_of) - {""}}
     own = sorted(kd for kd, n in counts.items() if int(np.sum((n >= 2) & keep)) >= min_photos)
-    var_all = np.exp(2.0 * x[0]) * S2_all + G2_all + np.exp(2.0 * x[1])
+    var_all = var_of(x[0], x[1])
     kind_terms = ()
     if own and set(kind_of) != {own[0]}:  # one kind alone: the shared fit is its own
         group = np.array([own.index(kd) + 1 if kd in own else 0 for kd in kind_of])
@@ -827,7 +844,7 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
         def kind_var(y):
             ls = np.concatenate([[x[0]], y[0::2]])[group]
             lt = np.concatenate([[x[1]], y[1::2]])[group]
-            return np.exp(2.0 * ls) * S2_all + G2_all + np.exp(2.0 * lt)
+            return var_of(ls, lt)
 
         def kind_objective(y):
             return float(np.sum(terms_of(kind_var(y))[0][keep]))
@@ -841,11 +858,7 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
                 y = y_shared.copy()
                 y[2 * j:2 * j + 2] = g
                 f.append(kind_objective(y))
-            f = np.array(f).reshape(-1, START_GRID)
-            prof = f.min(axis=1)
-            padded = np.concatenate([[np.inf], prof, [np.inf]])
-            rows = np.flatnonzero((prof <= padded[:-2]) & (prof <= padded[2:]))
-            candidates.append([x] + [grid.reshape(-1, START_GRID, 2)[i, int(np.argmin(f[i]))] for i in rows])
+            candidates.append([x] + start_nodes(f))
         from itertools import product
         bounds = list(zip(np.tile(lo, n_own), np.tile(hi, n_own)))
         fits = [minimize(kind_objective, np.concatenate(c), method="L-BFGS-B", bounds=bounds)
