@@ -30,7 +30,12 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    the other spheres at the shared fit's; :attr:`ErrorModel.kind_terms`): a mirror's highlight
    and a matte ball's shading err differently, and one pair for both lets either set the other's
    cone. A photo of one sphere of each kind cannot tell them apart: such a capture keeps the
-   shared fit.
+   shared fit. A sphere whose photos' other spheres are far less certain (a grey ball beside a
+   chrome ball) has a floor the disagreement cannot measure: their sigma explains the scatter,
+   and the fitted floor falls near 0 whatever its own is. Where the profile likelihood of an
+   extra floor on that sphere alone cannot exclude doubling its variance, it gets that floor's
+   95% upper bound, at most the fallback's (:func:`unchecked_floor_deg`,
+   :attr:`ErrorModel.sphere_floor_deg`).
 3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
    (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
    assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
