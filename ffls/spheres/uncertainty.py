@@ -30,7 +30,12 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    the other spheres at the shared fit's; :attr:`ErrorModel.kind_terms`): a mirror's highlight
    and a matte ball's shading err differently, and one pair for both lets either set the other's
    cone. A photo of one sphere of each kind cannot tell them apart: such a capture keeps the
-   shared fit.
+   shared fit. A sphere whose photos' other spheres are far less certain (a grey ball beside a
+   chrome ball) has a floor the disagreement cannot measure: their sigma explains the scatter,
+   and the fitted floor falls near 0 whatever its own is. Where the profile likelihood of an
+   extra floor on that sphere alone cannot exclude doubling its variance, it gets that floor's
+   95% upper bound, at most the fallback's (:func:`unchecked_floor_deg`,
+   :attr:`ErrorModel.sphere_floor_deg`).
 3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
    (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
    assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
@@ -103,6 +108,7 @@ __all__ = [
     "FALLBACK_MODEL",
     "MIN_TAIL_SAMPLES",
     "tail_factor",
+    "unchecked_floor_deg",
     "shading_shift",
     "encoding_perturbation",
     "bounce_perturbation",
@@ -279,6 +285,10 @@ class ErrorModel:
         Per kind whose spheres disagree among themselves in enough photos, its own ``(kind, s,
         tau_deg, n_photos)`` (:func:`fit_error_model`); a sphere of another kind, or of none,
         has the shared ``scale`` and ``floor_deg``.
+    sphere_floor_deg : tuple of float
+        Per sphere, the least per-axis floor (degrees) of a sphere whose floor the disagreement
+        cannot measure (0 where it does): the profile likelihood's upper bound of its own floor,
+        at most the fallback's (:func:`unchecked_floor_deg`).
     """
 
     scale: float
@@ -295,6 +305,7 @@ class ErrorModel:
     distance_sigma: float = 0.0
     sphere_kinds: tuple = ()
     kind_terms: tuple = ()
+    sphere_floor_deg: tuple = ()
 
     def terms(self, spheres, shape=()) -> tuple[np.ndarray, np.ndarray]:
         """Per sphere, its scale ``s`` and floor ``tau`` (degrees): its kind's own (``kind_terms``)
@@ -309,13 +320,16 @@ class ErrorModel:
         """
         s = np.full(shape, float(self.scale))
         t = np.full(shape, float(self.floor_deg))
-        if spheres is None or not self.kind_terms or not self.sphere_kinds:
+        if spheres is None or not ((self.kind_terms and self.sphere_kinds) or self.sphere_floor_deg):
             return s, t
         idx = np.atleast_1d(np.asarray(spheres, dtype=np.intp)).ravel()
         s, t = np.broadcast_to(s, idx.shape).copy(), np.broadcast_to(t, idx.shape).copy()
         s_k, t_k = self._kind_sphere_terms
         have = (idx >= 0) & (idx < s_k.size)
         s[have], t[have] = s_k[idx[have]], t_k[idx[have]]
+        lift = np.asarray(self.sphere_floor_deg, dtype=np.float64)  # (unchecked_floor_deg)
+        at = (idx >= 0) & (idx < lift.size)
+        t[at] = np.maximum(t[at], lift[idx[at]])
         return s.reshape(shape), t.reshape(shape)
 
     @cached_property
@@ -539,7 +553,8 @@ class ErrorModel:
                    distance_sigma=float(doc.get("distance_sigma", 0.0)),
                    sphere_kinds=tuple(str(k) for k in doc.get("sphere_kinds", ())),
                    kind_terms=tuple((str(k), float(t["scale"]), float(t["floor_deg"]), int(t.get("n_photos", 0)))
-                                    for k, t in (doc.get("kinds") or {}).items()))
+                                    for k, t in (doc.get("kinds") or {}).items()),
+                   sphere_floor_deg=tuple(float(x) for x in doc.get("sphere_floor_deg", ())))
 
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
@@ -558,7 +573,8 @@ class ErrorModel:
                 "distance_sigma": float(self.distance_sigma),
                 "sphere_kinds": list(self.sphere_kinds),
                 "kinds": {k: {"scale": float(sk), "floor_deg": float(tk), "n_photos": int(n)}
-                          for k, sk, tk, n in self.kind_terms}}
+                          for k, sk, tk, n in self.kind_terms},
+                "sphere_floor_deg": [float(x) for x in self.sphere_floor_deg]}
 
 
 def _weights(v: np.ndarray, weights=None) -> np.ndarray | None:
@@ -698,6 +714,92 @@ def tail_factor(residuals: list[np.ndarray], variances: list[np.ndarray], confid
     return float(np.quantile(z, confidence)), int(z.size)
 
 
+def _restricted_terms(v, R, starts, photo_of):
+    """Per photo, -2 log restricted likelihood and chi-square of its spheres' scatter.
+
+    ``R`` (n, 2) the stacked tangent offsets, ``v`` (n,) their per-axis variances, ``starts`` each
+    photo's first row and ``photo_of`` each row's photo (:func:`fit_error_model`)."""
+    w = 1.0 / v
+    sw = np.add.reduceat(w, starts)
+    mu = np.add.reduceat(w[:, None] * R, starts) / sw[:, None]
+    chi = np.add.reduceat(w * np.sum((R - mu[photo_of]) ** 2, axis=1), starts)
+    return 2.0 * np.add.reduceat(np.log(v), starts) + 2.0 * np.log(sw) + chi, chi
+
+
+def unchecked_floor_deg(residuals: list[np.ndarray], variances: list[np.ndarray], spheres: list[np.ndarray],
+                        n_spheres: int, confidence: float = CONFIDENCE,
+                        cap_deg: float | None = None) -> np.ndarray:
+    """Per sphere, a floor (per axis, degrees) where the disagreement cannot measure its own.
+
+    A floor added to one sphere shows in its photos' scatter only as far as the photos' other
+    spheres are as certain: beside a matte ball, a chrome ball's highlight uncertain by a degree
+    explains all their disagreement, and the fit puts the matte ball's floor near 0 whatever it
+    is (the calibration shot of ``docs/spheres.md``). For each sphere, an extra per-axis variance
+    ``a^2`` added to it alone (the others at the fitted model) is profiled in the restricted
+    likelihood of the photos, and its one-sided ``confidence`` upper bound ``a_up`` taken (where
+    ``-2 log L`` has risen ``chi2.ppf(2 confidence - 1, 1)`` above its least value). Where ``a_up``
+    is above the sphere's own standard deviation under the model (the median over its photos), the
+    disagreement cannot tell its variance from twice its variance: the floor is not measured, and
+    the sphere gets ``min(a_up, cap_deg)``. Elsewhere 0 (the fitted floor stands).
+
+    Parameters
+    ----------
+    residuals : list of (k_j, 2) float
+        Per photo, its spheres' tangent offsets (radians).
+    variances : list of (k_j,) float
+        Their per-axis variances under the fitted model (radians squared).
+    spheres : list of (k_j,) int
+        Their sphere indices.
+    n_spheres : int
+    confidence : float
+    cap_deg : float, optional
+        The most a floor is raised to (the fallback's per-axis floor, :data:`FALLBACK_MODEL`, when
+        omitted: a sphere no other checks gets at most what a lone sphere gets).
+
+    Returns
+    -------
+    (n_spheres,) float
+    """
+    from scipy.optimize import brentq
+    from scipy.special import chdtri
+    cap = np.radians(FALLBACK_MODEL.floor_deg if cap_deg is None else float(cap_deg))
+    out = np.zeros(int(n_spheres))
+    if not residuals:
+        return out
+    k = np.array([np.asarray(r).reshape(-1, 2).shape[0] for r in residuals])
+    R = np.concatenate([np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in residuals])
+    V = np.concatenate([np.asarray(v, dtype=np.float64).ravel() for v in variances])
+    I = np.concatenate([np.asarray(i, dtype=np.intp).ravel() for i in spheres])
+    photo_of = np.repeat(np.arange(len(k)), k)
+    rise = float(chdtri(1, 2.0 * (1.0 - confidence)))
+    a_grid = np.concatenate([[0.0], np.geomspace(1e-3 * np.sqrt(np.min(V)), np.radians(30.0), 160)])
+    for i in range(int(n_spheres)):
+        mine = I == i
+        if not mine.any():
+            continue
+        rows = np.unique(photo_of[mine])
+        sub = np.isin(photo_of, rows)
+        Rs, Vs, ms = R[sub], V[sub], mine[sub]
+        ks = np.bincount(photo_of[sub])[rows]
+        st = np.concatenate([[0], np.cumsum(ks)[:-1]])
+        po = np.repeat(np.arange(rows.size), ks)
+
+        def f(a):
+            return float(np.sum(_restricted_terms(Vs + a * a * ms, Rs, st, po)[0]))
+
+        prof = np.array([f(a) for a in a_grid])
+        j0 = int(np.argmin(prof))
+        above = np.flatnonzero(prof[j0:] >= prof[j0] + rise)
+        if above.size:
+            j = j0 + int(above[0])
+            a_up = brentq(lambda a: f(a) - prof[j0] - rise, a_grid[j - 1], a_grid[j], xtol=1e-9)
+        else:
+            a_up = np.inf
+        if a_up * a_up > np.median(Vs[ms]):
+            out[i] = np.degrees(min(a_up, cap))
+    return out
+
+
 def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
                     common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
                     fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4,
@@ -791,11 +893,7 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
 
     def terms_of(v):
         """:func:`terms` of the spheres' variances ``v``."""
-        w = 1.0 / v
-        sw = np.add.reduceat(w, starts)
-        mu = np.add.reduceat(w[:, None] * R_all, starts) / sw[:, None]
-        chi = np.add.reduceat(w * np.sum((R_all - mu[photo_of]) ** 2, axis=1), starts)
-        return 2.0 * np.add.reduceat(np.log(v), starts) + 2.0 * np.log(sw) + chi, chi
+        return _restricted_terms(v, R_all, starts, photo_of)
 
     def objective(x, subset):
         return float(np.sum(terms(x)[0][subset]))
@@ -875,7 +973,14 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     var_photo = np.split(var_all, np.cumsum(k_all)[:-1])
     factor, n_tail = tail_factor([r for (r, _, _), k in zip(data, keep) if k],
                                  [v for v, k in zip(var_photo, keep) if k])
+    # a sphere whose floor the disagreement cannot measure (the others of its photos far less
+    # certain) gets a floor bounded by the profile likelihood, not the fit's near-zero one
+    kept = [j for j in np.flatnonzero(keep) if np.all(index[j] >= 0)]
+    n_spheres = max((int(index[j].max()) + 1 for j in kept), default=0)
+    lifted = unchecked_floor_deg([data[j][0] for j in kept], [var_photo[j] for j in kept],
+                                 [index[j] for j in kept], n_spheres)
     return ErrorModel(scale=scale, floor_deg=float(np.degrees(tau)), common_deg=common,
+                      sphere_floor_deg=tuple(float(f) for f in lifted) if np.any(lifted > 0) else (),
                       source="disagreement", n_photos=int(keep.sum()), n_trimmed=n_trimmed,
                       centre_deg=tuple(float(x) for x in centre), cone_factor=factor, n_tail=n_tail,
                       common_ratio=_ratio(common_correlation),
