@@ -458,7 +458,7 @@ def limb_radius(log_lum, center, radius, *, r_range=(0.97, 1.1), n_angles: int =
 
 def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outside_px=(4.0, 7.0),
                          level: float = 0.5, n_angles: int = 180, step_px: float = 0.25,
-                         min_angles: int = 30) -> float | None:
+                         min_angles: int = 30, max_spread_px: float = 1.0) -> float | None:
     """A mirror ball's radius from the outer edge of the band of edges that change with the light.
 
     Inside a chrome ball the reflected scene changes with each light (reflected highlights and
@@ -475,7 +475,11 @@ def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outs
     and the edge is where the profile first falls, going outward from the peak, below ``level``
     of the way from the outside level to the peak (linear between samples). The median of the
     edges' distances is the radius. Rays leaving the frame and rays whose peak is not above the
-    outside level are skipped. None with fewer than ``min_angles`` edges.
+    outside level are skipped. None with fewer than ``min_angles`` edges, or where the edges'
+    median absolute deviation from their median exceeds ``max_spread_px``: the band's edge is then
+    no circle about the outline's centre (a neighbouring sphere, shadows crossing it; on the
+    renders of ``bench_conditions.py`` a lone chrome ball's edges spread 0.4-0.9 px, the chrome
+    ball beside a grey one in the calibration shot 1.7 px).
 
     Parameters
     ----------
@@ -490,6 +494,7 @@ def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outs
     n_angles : int
     step_px : float
     min_angles : int
+    max_spread_px : float
 
     Returns
     -------
@@ -519,7 +524,8 @@ def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outs
         edges.append(rs[k] + (p[k] - thr) / (p[k] - p[k + 1]) * step_px)
     if len(edges) < min_angles:
         return None
-    return float(np.median(edges))
+    r = float(np.median(edges))
+    return r if float(np.median(np.abs(np.asarray(edges) - r))) <= max_spread_px else None
 
 
 def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: float = 0.5,
