@@ -72,8 +72,9 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
 from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
-from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circle_search, dark_cap,
-                                         enclosing_circle, limb_radius, mirror_silhouette)
+from ffls.spheres.mirror_outline import (LIMB_DARK_BODY_RATIO, MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE,
+                                         changing_limb_radius, circle_search, dark_cap, enclosing_circle,
+                                         limb_radius, mirror_silhouette)
 
 __all__ = [
     "SphereFit",
@@ -1798,7 +1799,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 grown = _hinted_mirror_outlines([f for f, g in zip(fits, grow) if g], edges, L, cam, ratio, workers)
                 it = iter(_with_changing_edges(grown, changing, L, cam, max_residual_px))
                 refit = [next(it) if g else r for r, g in zip(refit, grow)]
-            fits = refit
+            fits = _on_changing_limb(refit, changing, L, mean, cam)
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
@@ -1842,6 +1843,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
         fits = _with_max_image_rings(fits, edges, changing, L, cam, max_residual_px)
+        fits = _on_changing_limb(fits, changing, L, mean, cam)  # the radius at the changing band's outer edge
     # every outline's points moved to the step of the linear image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels); on the photos'
     # mean where they are blurred beyond the pixel (_refine_on_profiles)
@@ -2862,6 +2864,46 @@ def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: De
             new.outline_edges = PHOTO_EDGES
         new.outline_sigma_px = _outline_ambiguity(new, log_l, cam)
         out.append(new)
+    return out
+
+
+#: Largest change of a mirror ball's radius, as a share of it, that the outer edge of its band of
+#: changing edges may make (:func:`_on_changing_limb`); beyond it the edge found is another one.
+MIRROR_LIMB_MAX_CHANGE = 0.15
+
+
+def _on_changing_limb(fits, changing: ConsistentEdges | None, L, mean, cam: DetectionCamera) -> list:
+    """Each mirror ball's outline (:func:`_is_mirror_outline`, not an override) with its radius at
+    the outer edge of the band of edges that change with the light
+    (:func:`ffls.spheres.mirror_outline.changing_limb_radius`), its centre's direction kept
+    (:func:`_with_radius`).
+
+    Every mirror outline before this step follows the peak of an edge: of the max image's (the
+    reflected room's contrasts), of the changing edges (:func:`_with_changing_edges`,
+    :func:`_grown_on_changing_edges`), or the limb's reflectance step (:func:`limb_radius`). Inside
+    a chrome ball the reflected scene is squeezed toward the rim, and the changing edges peak 0.5-1.5
+    px inside the silhouette; where a lens and sensor integrate each pixel (anti-aliased, ``ffls
+    synth --supersample 4``) the reflectance step fades too, and the outline came out 1.1-2.4 px
+    short on 20-28 px balls (``benchmarks/mirror_outline_error.py``, docs/spheres.md). Taken when
+    the radius changes by at most :data:`MIRROR_LIMB_MAX_CHANGE` of itself. A ball whose body is
+    dark in ``mean`` (the sequence's mean luminance; :data:`LIMB_DARK_BODY_RATIO`, as
+    :func:`ffls.spheres.highlight.refine_view_limb` tells a glossy black ball) is left as it is:
+    its silhouette is its own edge, the band's peak, and the outer edge lies outside it (an
+    anti-aliased glossy ball: -0.23 -> +1.14 px). The centre, the fit statistics and the outline's
+    ambiguity are kept. Unchanged without the evidence (``changing`` or ``mean`` None).
+    """
+    if changing is None or mean is None or not fits:
+        return fits
+    out = []
+    for ft in fits:
+        r = None
+        if (ft.source != "override" and _is_mirror_outline(ft, L)
+                and not dark_cap(mean, ft.center_px, ft.radius_px, ratio=LIMB_DARK_BODY_RATIO, quantile=90.0)):
+            r = changing_limb_radius(changing.strength, ft.center_px, ft.radius_px)
+        if r is None or abs(r / ft.radius_px - 1.0) > MIRROR_LIMB_MAX_CHANGE:
+            out.append(ft)
+        else:
+            out.append(_with_radius(ft, r, cam))
     return out
 
 

@@ -48,7 +48,7 @@ import numpy as np
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
 from ffls.io.capture import SPHERE_MATERIALS
-from ffls.spheres.mirror_outline import LIMB_BAND_PX, LimbFit, dark_cap, fit_limb_profile
+from ffls.spheres.mirror_outline import LIMB_BAND_PX, LIMB_DARK_BODY_RATIO, LimbFit, dark_cap, fit_limb_profile
 
 __all__ = [
     "MATERIALS",
@@ -1031,14 +1031,6 @@ LIMB_CLEAR_SNR = 10.0
 #: leaves the step 0.13 to 0.17 px inside the silhouette on the glossy black renders of
 #: ``benchmarks/bench_conditions.py`` at 384 px (docs/spheres.md).
 LIMB_MODEL_FLOOR_PX = 0.15
-#: The limb's step places a ball only where its body is dark against what surrounds it: 90 % of
-#: the disc (inside 0.7 radii of the sequence's mean image) below this fraction of the ring just
-#: outside it (:func:`ffls.spheres.mirror_outline.dark_cap`). A black glossy ball (a dielectric:
-#: about 4 % reflectance) reads 0.10-0.12 on the renders of ``bench_conditions.py``; a chrome ball
-#: reflects its surroundings at their own brightness somewhere on its disc (0.96-4.9), and a clear
-#: step there can be a reflected edge inside the rim (a chrome ball of the 8 mixed spheres: a jump
-#: of 18 noise units, the step 1.4 px short where the detected outline was 0.46 px short).
-LIMB_DARK_BODY_RATIO = 0.5
 
 
 def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, LimbFit | None]:

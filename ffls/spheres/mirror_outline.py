@@ -456,6 +456,78 @@ def limb_radius(log_lum, center, radius, *, r_range=(0.97, 1.1), n_angles: int =
     return float(np.median([v[0] for v in best.values()]))
 
 
+def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outside_px=(4.0, 7.0),
+                         level: float = 0.5, n_angles: int = 180, step_px: float = 0.25,
+                         min_angles: int = 30, max_spread_px: float = 1.0) -> float | None:
+    """A mirror ball's radius from the outer edge of the band of edges that change with the light.
+
+    Inside a chrome ball the reflected scene changes with each light (reflected highlights and
+    shadows move), and near the limb it is squeezed into the last pixels (a reflected direction's
+    distance from the rim goes as the square root of its distance from grazing), so the strength
+    of the changing edges (``strength``: :func:`ffls.spheres.detect.consistent_edge_strength`
+    ``centered``) is a plateau over the ball's inside that peaks just inside the limb and falls to
+    the ground's level outside it. A pixel on the silhouette integrates part ball, part ground
+    (a lens and sensor blur the limb over a pixel or more): the peak of the band lies 0.5-1.5 px
+    inside the silhouette, its outer edge on it. Along ``n_angles`` rays from ``center``,
+    ``strength`` is sampled (bilinear, 0.7-pixel Gaussian along the ray) from ``radius -
+    band_px - 1`` to ``radius + outside_px[1]``; on each ray the peak within ``band_px`` of
+    ``radius`` and the outside level (the median over ``outside_px`` beyond ``radius``) are taken,
+    and the edge is where the profile first falls, going outward from the peak, below ``level``
+    of the way from the outside level to the peak (linear between samples). The median of the
+    edges' distances is the radius. Rays leaving the frame and rays whose peak is not above the
+    outside level are skipped. None with fewer than ``min_angles`` edges, or where the edges'
+    median absolute deviation from their median exceeds ``max_spread_px``: the band's edge is then
+    no circle about the outline's centre (a neighbouring sphere, shadows crossing it; on the
+    renders of ``bench_conditions.py`` a lone chrome ball's edges spread 0.4-0.9 px, the chrome
+    ball beside a grey one in the calibration shot 1.7 px).
+
+    Parameters
+    ----------
+    strength : (H, W) float
+    center : (2,) float
+        The outline's centre, pixels (x, y).
+    radius : float
+        The outline's radius, pixels.
+    band_px : float
+    outside_px : (2,) float
+    level : float
+    n_angles : int
+    step_px : float
+    min_angles : int
+    max_spread_px : float
+
+    Returns
+    -------
+    float or None
+        Pixels.
+    """
+    c = np.asarray(center, dtype=np.float64).reshape(2)
+    rs = np.arange(max(radius - band_px - 1.0, step_px), radius + outside_px[1] + step_px / 2, step_px)
+    inside, prof, _ = _ray_profiles(strength, c, rs, n_angles, step_px)
+    whole = np.all(inside, axis=1)
+    in_band = np.abs(rs - radius) <= band_px
+    outer = (rs >= radius + outside_px[0]) & (rs <= radius + outside_px[1])
+    if not (whole.any() and in_band.any() and outer.any()):
+        return None
+    edges = []
+    first = int(np.flatnonzero(in_band)[0])
+    for p in prof[whole]:
+        k0 = first + int(np.argmax(p[in_band]))
+        out = float(np.median(p[outer]))
+        if not p[k0] > out:
+            continue
+        thr = out + level * (p[k0] - out)
+        below = np.flatnonzero(p[k0 + 1:] < thr)
+        if below.size == 0:
+            continue
+        k = k0 + int(below[0])  # p[k] >= thr > p[k + 1]
+        edges.append(rs[k] + (p[k] - thr) / (p[k] - p[k + 1]) * step_px)
+    if len(edges) < min_angles:
+        return None
+    r = float(np.median(edges))
+    return r if float(np.median(np.abs(np.asarray(edges) - r))) <= max_spread_px else None
+
+
 def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: float = 0.5,
                       max_growth: float = 1.25, tol: float = 1.0, min_shrink: float = 0.97,
                       n_best: int | None = None):
@@ -576,6 +648,15 @@ def highlight_ratio(lum, center, radius) -> float | None:
 #: brightness: the blurred step and the ramps on either side (a glossy ball's Fresnel rim brightens
 #: over 2-3 px at 384 px) within it, the ball's reflected contents beyond it.
 LIMB_BAND_PX = 5.0
+#: The limb's step places a ball only where its body is dark against what surrounds it: 90 % of
+#: the disc (inside 0.7 radii of the sequence's mean image) below this fraction of the ring just
+#: outside it (:func:`dark_cap`; :func:`ffls.spheres.highlight.refine_view_limb`,
+#: ``detect._on_changing_limb``). A black glossy ball (a dielectric:
+#: about 4 % reflectance) reads 0.10-0.12 on the renders of ``bench_conditions.py``; a chrome ball
+#: reflects its surroundings at their own brightness somewhere on its disc (0.96-4.9), and a clear
+#: step there can be a reflected edge inside the rim (a chrome ball of the 8 mixed spheres: a jump
+#: of 18 noise units, the step 1.4 px short where the detected outline was 0.46 px short).
+LIMB_DARK_BODY_RATIO = 0.5
 #: Least brightness jump of a sector at the limb, in units of the band's noise, for its edge to
 #: count in the outline's uncertainty (:attr:`LimbFit.sector_offsets_px`).
 LIMB_MIN_JUMP_SNR = 3.0
