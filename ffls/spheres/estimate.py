@@ -1364,6 +1364,12 @@ class _PhotoFitter:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
+            # what each worker would otherwise make for itself after the fork, made here once and
+            # inherited: the validity masks' module (imported by sphere_values where it is used) and
+            # the own-shadow table (the parent needs both too)
+            import ffls.radiance.response  # noqa: F401
+            if self.options.get("own_shadow", True):
+                OwnShadow.prepare()
             methods = multiprocessing.get_all_start_methods()  # fork: the decoded photos are inherited
             self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_set_inherited,
                                              initargs=(self.decoded,),
