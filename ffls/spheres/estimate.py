@@ -37,6 +37,7 @@ refinement or the bounce calibration (both model shading).
 """
 from __future__ import annotations
 
+import importlib
 import os
 import warnings
 from dataclasses import dataclass, replace
@@ -1380,6 +1381,12 @@ class _PhotoFitter:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
+            # what each worker would otherwise make for itself after the fork, made here once and
+            # inherited: the validity masks' module (imported by sphere_values where it is used) and
+            # the own-shadow table (which the parent builds too)
+            importlib.import_module("ffls.radiance.response")
+            if self.options.get("own_shadow", True):
+                OwnShadow.prepare()
             methods = multiprocessing.get_all_start_methods()  # fork: the decoded photos are inherited
             self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_set_inherited,
                                              initargs=(self.decoded,),
