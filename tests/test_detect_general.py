@@ -346,7 +346,7 @@ def test_trimmed_fits_read_contiguous_columns_and_the_same_floats():
 
 
 def test_hints_fitted_in_one_call(monkeypatch):
-    """The hints' fits are one ``_fit_candidates`` call (which undistorts the image's edge points
+    """The hints' fits are one ``fit_candidates`` call (which undistorts the image's edge points
     once), not one per hint; the retries another; the same spheres as each hint fitted alone."""
     scene = ds.layout(3, seed=22)
     seq = ds.render(scene, LIGHTS, "white")
@@ -354,13 +354,13 @@ def test_hints_fitted_in_one_call(monkeypatch):
     hints[1]["radius_px"] = float(np.mean(np.hypot(*(detect.silhouette_px(scene.K, None, scene.balls[1].center, 0.04)
                                                       - scene.centre_px(scene.balls[1])).T)))
     calls = []
-    real = detect._fit_candidates
+    real = detect.fit_candidates
 
     def counted(cands, *a, **k):
         calls.append(len(cands))
         return real(cands, *a, **k)
 
-    monkeypatch.setattr(detect, "_fit_candidates", counted)
+    monkeypatch.setattr(detect, "fit_candidates", counted)
     fits = detect.find_spheres(seq, scene.K, None, 0.04, hints=hints, retry_hints=False)
     assert calls == [3], calls
     assert len(fits) == 3 and all(f.source == "hint" for f in fits)
@@ -370,7 +370,7 @@ def test_hints_fitted_in_one_call(monkeypatch):
 
 
 def test_outline_refits_undistort_their_points_once(monkeypatch):
-    """``_fit_until_stable`` undistorts its points once for all its rounds (each round's fit and
+    """``fit_until_stable`` undistorts its points once for all its rounds (each round's fit and
     band read the same rays; they were undistorted twice a round), and makes a SphereFit (visible
     share, coverage, centre's standard error) of the round it returns only: the same fit as
     before, every field."""
@@ -394,7 +394,7 @@ def test_outline_refits_undistort_their_points_once(monkeypatch):
     def before(on, c0_px, r0_px):  # the rounds as written before: each undistorting the points
         ft = None
         for _ in range(4):
-            ft = detect._fit_outline(P[on], cam, c0_px, r0_px, "auto")
+            ft = detect.fit_outline(P[on], cam, c0_px, r0_px, "auto")
             c0_px, r0_px = ft.center_px, ft.radius_px
             new = np.abs(detect.outline_residuals_px(ft, P, cam)) <= detect.OUTLINE_BAND_PX
             if np.array_equal(new, on):
@@ -404,7 +404,7 @@ def test_outline_refits_undistort_their_points_once(monkeypatch):
 
     want = before(on, c0, 34.0)
     made, solved = [], []
-    real_make, real_solve = detect._make_fit, detect._outline_solved
+    real_make, real_solve = detect.make_fit, detect.outline_solved
 
     def make(*a, **k):
         made.append(1)
@@ -415,9 +415,9 @@ def test_outline_refits_undistort_their_points_once(monkeypatch):
         return real_solve(*a, **k)
 
     monkeypatch.setattr(detect, "pixel_rays", counted)
-    monkeypatch.setattr(detect, "_make_fit", make)
-    monkeypatch.setattr(detect, "_outline_solved", solve)
-    got = detect._fit_until_stable(P, on, cam, c0, 34.0, "auto")
+    monkeypatch.setattr(detect, "make_fit", make)
+    monkeypatch.setattr(detect, "outline_solved", solve)
+    got = detect.fit_until_stable(P, on, cam, c0, 34.0, "auto")
     assert many == [len(P)], many
     assert len(solved) >= 2 and len(made) == 1, (solved, made)  # several rounds, one SphereFit
     assert np.hypot(*(got.center_px - detect.project_points(C[None], K, dist)[0])) < 0.3
@@ -427,7 +427,7 @@ def test_outline_refits_undistort_their_points_once(monkeypatch):
     # a fit its caller drops for its RMS (the photo-edge circles, over PHOTO_EDGE_MAX_RESIDUAL_PX) is
     # not made at all: None, as the caller's test would have it
     made.clear()
-    assert detect._fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=0.99 * want.residual_px) is None
+    assert detect.fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=0.99 * want.residual_px) is None
     assert made == []
-    kept = detect._fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=want.residual_px)
+    kept = detect.fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=want.residual_px)
     assert kept.residual_px == want.residual_px and np.array_equal(kept.center_px, want.center_px)

@@ -173,7 +173,7 @@ def test_photo_edge_circles_fitted_once_and_not_on_known_outlines():
 
 def test_photo_edge_fit_does_not_depend_on_a_small_move_of_its_start():
     """``fit_on_consistent_edges`` fits the ridge points within 1.5 px of the *fitted* outline until they
-    hold (``_fit_until_stable``), not those of its start circle: starts 0.05 px apart end within 0.05
+    hold (``fit_until_stable``), not those of its start circle: starts 0.05 px apart end within 0.05
     px of each other (outline of 30 px with a contact shadow's arc 2 px outside it below, a reflected
     arc 1.6 px inside above and 1,500 clutter points; fitting the start circle's band, they ended up
     to 0.15 px apart), within 1 px of the true centre."""

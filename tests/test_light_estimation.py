@@ -952,11 +952,11 @@ def _worker_state(_):
 
     from ffls.spheres import lambert
 
-    return "ffls.radiance.response" in sys.modules, lambert._own_shadow_table.cache_info().currsize
+    return "ffls.radiance.response" in sys.modules, lambert.own_shadow_table.cache_info().currsize
 
 
 def test_photo_fitter_workers_inherit_what_the_fits_need(monkeypatch):
-    """A _PhotoFitter's forked workers inherit the module of sphere_values' validity masks and the
+    """A PhotoFitter's forked workers inherit the module of sphere_values' validity masks and the
     own-shadow table, imported and built once before the fork (each worker made them for itself:
     about 0.04 s of CPU per worker on a 768 px capture)."""
     import multiprocessing
@@ -964,16 +964,16 @@ def test_photo_fitter_workers_inherit_what_the_fits_need(monkeypatch):
 
     import ffls.radiance
     from ffls.spheres import lambert
-    from ffls.spheres.estimate import _PhotoFitter
+    from ffls.spheres.estimate import PhotoFitter
 
     if "fork" not in multiprocessing.get_all_start_methods():
         pytest.skip("no fork on this platform")
     monkeypatch.delitem(sys.modules, "ffls.radiance.response", raising=False)
     monkeypatch.delattr(ffls.radiance, "response", raising=False)
-    lambert._own_shadow_table.cache_clear()
-    with _PhotoFitter(None, None, {}, workers=2) as fitter:
+    lambert.own_shadow_table.cache_clear()
+    with PhotoFitter(None, None, {}, workers=2) as fitter:
         got = fitter.map(_worker_state, [0, 1])
     assert got == [(True, 1), (True, 1)]
-    with _PhotoFitter(None, None, {"own_shadow": False}, workers=2) as fitter:  # no table needed: none built
-        lambert._own_shadow_table.cache_clear()
+    with PhotoFitter(None, None, {"own_shadow": False}, workers=2) as fitter:  # no table needed: none built
+        lambert.own_shadow_table.cache_clear()
         assert [t for _, t in fitter.map(_worker_state, [0, 1])] == [0, 0]

@@ -371,15 +371,15 @@ def test_a_mirror_outline_through_the_contact_shadow_moves_to_the_reflectance_st
     img[(d <= R) & (yy < c[1] + 0.25 * R - 0.3 * np.abs(xx - c[0]))] = 0.03  # the dark cap
     L = cv2.GaussianBlur(cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA), (0, 0), 0.7)
     L *= 1 + 0.005 * np.random.default_rng(0).standard_normal(L.shape)
-    edges = detect._edge_map(np.repeat(L[..., None], 3, axis=2).astype(np.float32), L, None)
+    edges = detect.edge_map(np.repeat(L[..., None], 3, axis=2).astype(np.float32), L, None)
     cam = detect.DetectionCamera("orthographic", None, None, DEFAULT_WORLD_FROM_CAMERA, 1.0, (H, W))
     P = edges.points
     dd = np.hypot(*(P - c).T)
     top = (P[:, 1] < c[1]) & (np.abs(dd - R) < 1.5)
     shadow = (P[:, 1] > c[1] + 0.5 * R) & (np.abs(dd - R - 3.0) < 1.5)
     step = (P[:, 1] > c[1]) & (np.abs(dd - R) < 1.5)
-    wrong = detect._fit_outline(P[top | shadow], cam, c, R + 1.0, OUTER_SOURCE)
-    right = detect._fit_outline(P[top | step], cam, c, R, OUTER_SOURCE)
+    wrong = detect.fit_outline(P[top | shadow], cam, c, R + 1.0, OUTER_SOURCE)
+    right = detect.fit_outline(P[top | step], cam, c, R, OUTER_SOURCE)
     assert np.hypot(*(wrong.center_px - c)) > 2.0
     # the changing edges: the silhouette (the reflected scene changes with the light inside it)
     t = np.radians(np.arange(0.0, 360.0, 2.0))
@@ -387,8 +387,8 @@ def test_a_mirror_outline_through_the_contact_shadow_moves_to_the_reflectance_st
     ring = ring[np.argsort(ring[:, 1], kind="stable")]
     changing = detect.ConsistentEdges(np.zeros((H, W)), np.zeros((H, W)),
                                       (ring, (ring - c) / R, np.ones(len(ring))))
-    assert detect._with_max_image_rings([wrong], edges, None, L, cam, 1.5)[0] is wrong  # no photos' evidence
-    new, same = detect._with_max_image_rings([wrong, right], edges, changing, L, cam, 1.5)
+    assert detect.with_max_image_rings([wrong], edges, None, L, cam, 1.5)[0] is wrong  # no photos' evidence
+    new, same = detect.with_max_image_rings([wrong, right], edges, changing, L, cam, 1.5)
     assert np.hypot(*(new.center_px - c)) < 0.5 and abs(new.radius_px - R) < 1.0
     assert new.outline_sigma_px >= MIRROR_OUTLINE_FLOOR_PX
     assert same is right
@@ -463,7 +463,7 @@ def test_pixel_hint_on_a_chrome_ball_finds_its_silhouette(mirror_capture, tmp_pa
 
 
 def test_changing_edges_tree_built_once_per_replacement_pass(textured_mirror, monkeypatch):
-    """``_mirror_outlines_replaced`` builds the changing edges' KD-tree once and hands it to every
+    """``mirror_outlines_replaced`` builds the changing edges' KD-tree once and hands it to every
     ``outline_support`` of its refits (the tree was built again on every call); the same spheres."""
     import scipy.spatial
 
@@ -473,7 +473,7 @@ def test_changing_edges_tree_built_once_per_replacement_pass(textured_mirror, mo
     want = find_spheres_in_capture(load_capture(folder))
     built, measured, passes = [], [], []
     real_tree, real_support = scipy.spatial.cKDTree, detect.outline_support
-    real_pass = detect._mirror_outlines_replaced
+    real_pass = detect.mirror_outlines_replaced
 
     def tree(*a, **k):
         if passes and passes[-1] is None:  # (inside a pass)
@@ -493,7 +493,7 @@ def test_changing_edges_tree_built_once_per_replacement_pass(textured_mirror, mo
 
     monkeypatch.setattr(scipy.spatial, "cKDTree", tree)
     monkeypatch.setattr(detect, "outline_support", support)
-    monkeypatch.setattr(detect, "_mirror_outlines_replaced", one_pass)
+    monkeypatch.setattr(detect, "mirror_outlines_replaced", one_pass)
     got = find_spheres_in_capture(load_capture(folder))
     assert measured and all(measured), measured  # every support measured on the handed tree
     assert len(built) <= len(passes), (built, passes)  # at most one per pass

@@ -124,15 +124,15 @@ def test_near_form_factor_geometry_made_once_per_sphere(monkeypatch):
     p = center + radius * n
     lights = [center + d * normalize(np.array(v)) for d, v in ((2.0, (0.4, -0.5, 0.75)), (1.2, (-0.3, 0.2, 0.9)),
                                                                (0.6, (0.1, -0.8, 0.5)))]
-    monkeypatch.setattr(lam, "_NEAR_GEOMETRIES", {})
+    monkeypatch.setattr(lam, "NEAR_GEOMETRIES", {})
     fresh = []
     for S in lights:  # (the geometry dropped before each: made afresh)
-        lam._NEAR_GEOMETRIES.clear()
+        lam.NEAR_GEOMETRIES.clear()
         fresh.append(near_ground_bounce(p, n, center, radius, S))
     made = []
-    cosine = lam._cosine_directions
-    monkeypatch.setattr(lam, "_cosine_directions", lambda side: made.append(side) or cosine(side))
-    lam._NEAR_GEOMETRIES.clear()
+    cosine = lam.cosine_directions
+    monkeypatch.setattr(lam, "cosine_directions", lambda side: made.append(side) or cosine(side))
+    lam.NEAR_GEOMETRIES.clear()
     kept = [near_ground_bounce(p, n, center, radius, S) for S in lights]
     assert len(made) == 1
     assert all(a.tobytes() == b.tobytes() for a, b in zip(fresh, kept))

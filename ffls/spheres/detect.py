@@ -1459,7 +1459,7 @@ def _outline_circle_px(C, R, K, dist) -> tuple[np.ndarray, float]:
     return cpx, float(np.mean(np.hypot(*(outline - cpx).T)))
 
 
-def _make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0,
+def make_fit(C, R, K, dist, wfc, source, edge_px=None, residual=0.0, n_edge=0, n_in=0, coverage=1.0,
               shape=None):
     cpx, rpx = _outline_circle_px(C, R, K, dist)
     return SphereFit(
@@ -1508,20 +1508,20 @@ def _centre_sigma_px(fun, p, args) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
 
 
-def _fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None, rays=None):
+def fit_outline(P, cam: DetectionCamera, c0_px, r0_px, source, n_edge=None, rays=None):
     """One sphere fitted to outline points ``P`` (m, 2) around a circle start; ``ValueError`` if it fails.
 
     The fit's ``center_sigma_px`` is the standard error of its centre (:func:`_centre_sigma_px`).
     ``rays`` (m, 3), optional: ``pixel_rays(P, cam.K, cam.dist)`` where the caller has them
     (pinhole; each point's ray is undistorted on its own, so a subset's are the same floats).
     """
-    return _outline_solved(P, cam, c0_px, r0_px, rays).fit(cam, source, n_edge)
+    return outline_solved(P, cam, c0_px, r0_px, rays).fit(cam, source, n_edge)
 
 
 @dataclasses.dataclass
 class _OutlineSolution:
-    """The robust fit of :func:`_fit_outline` before its bookkeeping (:meth:`fit`): what a round of
-    :func:`_fit_until_stable` needs to place its band (``center_px``, ``radius_px``,
+    """The robust fit of :func:`fit_outline` before its bookkeeping (:meth:`fit`): what a round of
+    :func:`fit_until_stable` needs to place its band (``center_px``, ``radius_px``,
     ``center_cam``), the rest (visible share, coverage, centre's standard error) made only for
     the round it returns."""
 
@@ -1547,7 +1547,7 @@ class _OutlineSolution:
             ft.center_sigma_px = _centre_sigma_px(_circle_residuals, [c[0], c[1], r], (P[inl],))
             return ft
         C, f, s = self.center_cam, cam.f, self.rays
-        ft = _make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
+        ft = make_fit(C, cam.R, cam.K, cam.dist, cam.wfc, source, edge_px=P[inl], residual=rms,
                        n_edge=n_edge or len(P), n_in=int(inl.sum()),
                        coverage=_coverage(P[inl], project_points(C[None], cam.K, cam.dist)[0]), shape=cam.shape)
         d = C / np.linalg.norm(C)
@@ -1556,8 +1556,8 @@ class _OutlineSolution:
         return ft
 
 
-def _outline_solved(P, cam: DetectionCamera, c0_px, r0_px, rays=None) -> _OutlineSolution:
-    """The robust fit of :func:`_fit_outline` (``ValueError`` if it fails), its bookkeeping left
+def outline_solved(P, cam: DetectionCamera, c0_px, r0_px, rays=None) -> _OutlineSolution:
+    """The robust fit of :func:`fit_outline` (``ValueError`` if it fails), its bookkeeping left
     to :meth:`_OutlineSolution.fit`."""
     if cam.ortho:
         c, r, inl, res = fit_circle(P, c0_px, r0_px)
@@ -1637,9 +1637,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
-    (:func:`_max_luminance`), its edges (:func:`_edge_map`), candidate circles
+    (:func:`_max_luminance`), its edges (:func:`edge_map`), candidate circles
     (:func:`_fit_hints` or :func:`_hough_circle_candidates`), a fit per candidate
-    (:func:`_fit_candidates`: the tangent cone for a pinhole camera, a circle for an orthographic
+    (:func:`fit_candidates`: the tangent cone for a pinhole camera, a circle for an orthographic
     one), the choice of the spheres (:func:`ffls.spheres.select.select_spheres` without hints, :func:`_check_hinted_fits`
     with hints), the lit-limb refit (:func:`_refine_on_lit_limb`) and the scale check
     (:func:`_check_radius`).
@@ -1773,7 +1773,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     if not ortho:
         _check_scale(K, wfc, R, L.shape, source, scene_center)
     cam = DetectionCamera(camera_model, K, dist, wfc, R, L.shape)
-    edges = _edge_map(mx, L, source)
+    edges = edge_map(mx, L, source)
     # the edges that hold in the photos (None: a single image, or fewer than 3 photos), read once
     held = ConsistentEdges.of(*tensor) if tensor is not None and tensor[1] >= 3 else None
     # and whether those whose contrast changes with the light can be read (a mirror ball's silhouette
@@ -1807,7 +1807,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
         ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
         cands = _hough_circle_candidates(edges, L, ratio=ratio)
-        fits, _ = _fit_candidates(cands, edges, cam, 0.3, "auto", workers)
+        fits, _ = fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
         if held is not None:  # outlines the max image leaves out (white on white)
@@ -1816,7 +1816,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
             # may have missed among the texture's: it is fitted on the max image's edges too
             seeds = [(*ft.center_px, ft.radius_px) for ft in more if not round_outline(ft, max_residual_px)]
-            again, _ = _fit_candidates(seeds, edges, cam, 0.3, "auto", workers) if seeds else ([], [])
+            again, _ = fit_candidates(seeds, edges, cam, 0.3, "auto", workers) if seeds else ([], [])
             fits, n_cands = fits + more + again, n_cands + n_more
         # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
@@ -1843,7 +1843,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _on_changing_limb(fits, changing, L, mean, cam)  # the radius at the changing band's outer edge
         # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
-        fits = _with_max_image_rings(fits, edges, changing, L, cam, max_residual_px)
+        fits = with_max_image_rings(fits, edges, changing, L, cam, max_residual_px)
     # every outline's points moved to the step of the linear image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels); on the photos'
     # mean where they are blurred beyond the pixel (_refine_on_profiles)
@@ -1870,7 +1870,7 @@ def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFi
             C = T[:3, :3] @ Cw + T[:3, 3]
         if C[2] <= R or np.linalg.norm(C) <= R:
             raise InputError(f"sphere override {o} is not in front of the camera", source)
-        fits.append(_make_fit(C, R, K, dist, wfc, "override"))
+        fits.append(make_fit(C, R, K, dist, wfc, "override"))
     return fits
 
 
@@ -1900,7 +1900,7 @@ class _EdgeMap:
     distance: np.ndarray  # (H, W) float32: distance to the nearest edge pixel
 
 
-def _edge_map(mx, L, source) -> _EdgeMap:
+def edge_map(mx, L, source) -> _EdgeMap:
     """Stage 2: edges of the max image (:func:`edge_points`) and the distance to them."""
     H, W = L.shape
     pts, grads = edge_points(mx)
@@ -1961,7 +1961,7 @@ def _circle_near_hint(pts, grads, cpx, r_min, r_max):
 
 def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, workers: int = 1,
                retry: bool = True):
-    """Stages 3 and 4 with hints: one circle per hint, fitted (:func:`_fit_candidates`, search
+    """Stages 3 and 4 with hints: one circle per hint, fitted (:func:`fit_candidates`, search
     band 0.35 of the radius); returns the fits and the failures as that does.
 
     A hint without a radius takes the radius of the edges around its centre
@@ -2022,12 +2022,12 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
 
 def _fit_each(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
               narrow: bool = False) -> list:
-    """:func:`_fit_candidates` of ``cands`` in one call, split per candidate: ``[(fits, failures)]``
+    """:func:`fit_candidates` of ``cands`` in one call, split per candidate: ``[(fits, failures)]``
     as a call on that candidate alone returns (one fit or one failure)."""
     if not cands:
         return []
     return [([], [d]) if isinstance(d, tuple) else ([d], [])
-            for d in _fit_candidates(cands, edges, cam, search_tol, label, workers, narrow, split=False)]
+            for d in fit_candidates(cands, edges, cam, search_tol, label, workers, narrow, split=False)]
 
 
 def shading_ratio(L_max, L_mean) -> np.ndarray:
@@ -2287,7 +2287,7 @@ def _forked_map(fn, n: int, workers: int) -> list:
     return [fn(k) for k in range(n)]
 
 
-def _fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
+def fit_candidates(cands, edges: _EdgeMap, cam: DetectionCamera, search_tol, label, workers: int = 1,
                     narrow: bool = False, split: bool = True):
     """Stage 4: per candidate circle, the sphere fitted to its outline edge points.
 
@@ -2331,7 +2331,7 @@ def _mp_methods() -> list:
 
 @dataclasses.dataclass
 class _CandidateContext:
-    """What every candidate fit of :func:`_fit_candidates` shares."""
+    """What every candidate fit of :func:`fit_candidates` shares."""
 
     cands: list
     edges: _EdgeMap
@@ -2340,7 +2340,7 @@ class _CandidateContext:
     label: str
     und_all: np.ndarray  # the edge points undistorted (square pixels), for the circle start
     K_und: np.ndarray | None
-    narrow: bool = False  # both polarities, fitted on the start circle's points (:func:`_fit_candidates`)
+    narrow: bool = False  # both polarities, fitted on the start circle's points (:func:`fit_candidates`)
 
 
 _candidate_context: _CandidateContext | None = None
@@ -2376,7 +2376,7 @@ def _fit_candidate(k: int):
         if len(P) < 8:
             return (k, cx, cy, r, f"only {len(P)} edge points on the outline")
     try:
-        return _fit_outline(P, cam, circ[0], circ[1], ctx.label)
+        return fit_outline(P, cam, circ[0], circ[1], ctx.label)
     except ValueError as e:
         return (k, cx, cy, r, str(e))
 
@@ -2456,7 +2456,7 @@ def _hinted_mirror_outlines(fits, edges: _EdgeMap, L, cam: DetectionCamera, rati
     for ft, m in zip(fits, mirror):
         c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
         near = [c for c in cands if np.hypot(c[0] - c0[0], c[1] - c0[1]) < 0.5 * r0 and 0.5 * r0 < c[2] < 2 * r0]
-        got = _fit_candidates(near, edges, cam, 0.3, "auto", workers)[0] if m and near else []
+        got = fit_candidates(near, edges, cam, 0.3, "auto", workers)[0] if m and near else []
         grown = [g for g in _with_outer_outlines(got + [ft], edges, L, cam) if g.source == OUTER_SOURCE
                  and np.hypot(*(g.center_px - c0)) < 0.25 * r0] if m else []
         best = max(grown, key=outline_quality, default=None)
@@ -2487,7 +2487,7 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: DetectionCamera):
         if oc is None:
             break
         try:
-            ft = _fit_outline(edges.points[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
+            ft = fit_outline(edges.points[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)
         except ValueError:
             break
     log_l = np.log(np.maximum(L, 1e-12))
@@ -2497,7 +2497,7 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: DetectionCamera):
         if sil is None:
             return ft, False
         try:
-            new = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
+            new = fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
         except ValueError:
             return ft, False
         # kept only if it fits better and has the support the selection asks (its points are one per ray)
@@ -2527,7 +2527,7 @@ def _outline_ambiguity(ft, log_l, cam: DetectionCamera) -> float:
     if sil is None:
         return MIRROR_OUTLINE_FLOOR_PX
     try:
-        limb = _fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
+        limb = fit_outline(sil[0], cam, sil[1], sil[2], OUTER_SOURCE)
     except ValueError:
         return MIRROR_OUTLINE_FLOOR_PX
     gap = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px), limb.radius_px - ft.radius_px))
@@ -2550,7 +2550,7 @@ def _with_radius(ft, radius_px: float, cam: DetectionCamera):
         alpha = np.arcsin(min(ft.radius / d, 1.0)) * radius_px / ft.radius_px
         if not 0 < alpha < np.pi / 2:
             return ft
-        new = _make_fit(cam.R / np.sin(alpha) * C / d, cam.R, cam.K, cam.dist, cam.wfc, ft.source, edge_px=ft.edge_px,
+        new = make_fit(cam.R / np.sin(alpha) * C / d, cam.R, cam.K, cam.dist, cam.wfc, ft.source, edge_px=ft.edge_px,
                         residual=ft.residual_px, n_edge=ft.n_edge_points, n_in=ft.n_inliers, coverage=ft.coverage,
                         shape=cam.shape)
     new.score, new.center_sigma_px = ft.score, ft.center_sigma_px
@@ -2677,7 +2677,7 @@ def _refine_on_lit_limb(ft, L, cam: DetectionCamera, lit_limb, min_points: int =
     if keep.sum() < min_points or keep.all() or _coverage(P[keep], cpx) < min_coverage * ft.visible_fraction:
         return ft
     try:
-        new = _fit_outline(P[keep], cam, cpx, r, ft.source, n_edge=ft.n_edge_points)
+        new = fit_outline(P[keep], cam, cpx, r, ft.source, n_edge=ft.n_edge_points)
     except ValueError:
         return ft
     new.score = ft.score
@@ -2723,7 +2723,7 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
         return ft
     Q = np.where(ok[:, None], Q, P)
     try:
-        new = _fit_outline(Q, cam, c, ft.radius_px, ft.source, n_edge=ft.n_edge_points)
+        new = fit_outline(Q, cam, c, ft.radius_px, ft.source, n_edge=ft.n_edge_points)
     except ValueError:
         return ft
     # the log edges it starts from lie up to ~1 blur sigma toward the dark side (step_edges)
@@ -2830,10 +2830,10 @@ def _with_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Detecti
 
     # a refit's ambiguity is its own, not the outline's it replaces (that one was the worse supported:
     # on the textured ground c18 its 2.66 px made the centre's sigma 2.74 px, the refit 0.51 px off)
-    return _mirror_outlines_replaced(fits, changing, L, cam, refit)
+    return mirror_outlines_replaced(fits, changing, L, cam, refit)
 
 
-def _mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera, refit,
+def mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: DetectionCamera, refit,
                               photo_edges: bool = True) -> list:
     """``fits`` with each mirror ball's outline (:func:`_is_mirror_outline`, not an override)
     replaced by ``refit(fit, changing_points, tree)`` where that gives one (not None; ``tree`` a
@@ -2927,7 +2927,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
     the light), and in the changing edges (:func:`consistent_edge_strength` ``centered``) the
     silhouette is a closed ring around the cap. The enclosing circle search
     (:func:`ffls.spheres.mirror_outline.enclosing_circle`) runs on their ridge points; the circle
-    found is fitted (:func:`_fit_outline`) and taken when it is round (RMS within
+    found is fitted (:func:`fit_outline`) and taken when it is round (RMS within
     ``max_residual_px``), at least :data:`MIRROR_GROWN_SUPPORT` of it lies on the changing edges
     and more than of the outline it replaces (:func:`outline_support`), repeated until no larger
     one is taken (at most ``max_steps``). The shadow edges of the many lights around a ball also
@@ -2953,7 +2953,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
         if oc is None:
             return []
         try:
-            return [_fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)]
+            return [fit_outline(pts[oc.inliers], cam, oc.center, oc.radius, OUTER_SOURCE)]
         except ValueError:
             return []
 
@@ -2979,7 +2979,7 @@ def _grown_on_changing_edges(fits, changing: ConsistentEdges | None, L, cam: Det
             cur, cur_support, grown = best[0], best[1], True
         return cur if grown else None
 
-    return _mirror_outlines_replaced(fits, changing, L, cam, grow)
+    return mirror_outlines_replaced(fits, changing, L, cam, grow)
 
 
 #: A mirror outline's rings (:func:`_rings_around`): their centres within this many of its radii of
@@ -2994,14 +2994,14 @@ def _ring_fits(points, center, max_offset: float, r_min: float, r_max: float, ca
     """The :data:`MIRROR_RINGS` circles of the edge points ``points`` ((n, 2) x, y) best supported
     per pixel of radius (:func:`ffls.spheres.mirror_outline.circle_search`, 1-pixel tolerance),
     centres within ``max_offset`` of ``center``, radii ``r_min`` to ``r_max`` (pixels), each fitted
-    to the points within :data:`OUTLINE_BAND_PX` of it until they hold (:func:`_fit_until_stable`)."""
+    to the points within :data:`OUTLINE_BAND_PX` of it until they hold (:func:`fit_until_stable`)."""
     c0 = np.asarray(center, dtype=np.float64)
     P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     P = P[np.hypot(P[:, 0] - c0[0], P[:, 1] - c0[1]) <= max_offset + r_max + OUTLINE_BAND_PX]
     out = []
     for cc, rr, _ in circle_search(P, c0, max_offset, r_min, r_max, tol=1.0, n_best=MIRROR_RINGS, per_radius=True):
         on = np.abs(np.hypot(P[:, 0] - cc[0], P[:, 1] - cc[1]) - rr) <= OUTLINE_BAND_PX
-        new = _fit_until_stable(P, on, cam, cc, rr, OUTER_SOURCE)
+        new = fit_until_stable(P, on, cam, cc, rr, OUTER_SOURCE)
         if new is not None:
             out.append(new)
     return out
@@ -3027,7 +3027,7 @@ def _rings_around(ft, points, cam: DetectionCamera) -> list:
             and np.hypot(np.hypot(*(new.center_px - c0)), new.radius_px - r0) > MIRROR_OUTLINE_FLOOR_PX]
 
 
-def _with_max_image_rings(fits, edges: _EdgeMap, changing: ConsistentEdges | None, L, cam: DetectionCamera,
+def with_max_image_rings(fits, edges: _EdgeMap, changing: ConsistentEdges | None, L, cam: DetectionCamera,
                           max_residual_px: float) -> list:
     """Each mirror ball's outline still on the max image's edges (:func:`_is_mirror_outline`, not
     refitted on the photos' edges) replaced by the ring of the max image's edges around it
@@ -3065,7 +3065,7 @@ def _with_max_image_rings(fits, edges: _EdgeMap, changing: ConsistentEdges | Non
         return best if outline_support(best, pts, cam.shape, tree=tree) > outline_support(ft, pts, cam.shape,
                                                                                             tree=tree) else None
 
-    return _mirror_outlines_replaced(fits, changing, L, cam, ring, photo_edges=False)
+    return mirror_outlines_replaced(fits, changing, L, cam, ring, photo_edges=False)
 
 
 def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCamera, source: str, band: float = 0.1,
@@ -3077,7 +3077,7 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
     (``|cos| > 0.7``) are searched for the best-supported circle (:func:`_start_circle`, 1-pixel
     tolerance: a contact shadow's boundary runs a few pixels outside the silhouette); the points
     within 1.5 px of it are fitted, then those within 1.5 px of the fitted outline, until they
-    hold (:func:`_fit_until_stable`; a fit whose RMS is above ``max_rms_px`` is None).
+    hold (:func:`fit_until_stable`; a fit whose RMS is above ``max_rms_px`` is None).
     """
     pts, dirs, _ = ev.points
     if len(pts) < min_points:
@@ -3098,11 +3098,11 @@ def fit_on_consistent_edges(c0, r0: float, ev: ConsistentEdges, cam: DetectionCa
     if circ is None:
         return None
     on = np.abs(np.hypot(P[:, 0] - circ[0][0], P[:, 1] - circ[0][1]) - circ[1]) <= OUTLINE_BAND_PX
-    return _fit_until_stable(P, on, cam, circ[0], circ[1], source, min_points, max_rms_px=max_rms_px)
+    return fit_until_stable(P, on, cam, circ[0], circ[1], source, min_points, max_rms_px=max_rms_px)
 
 
 #: Half-width (px) of the band of edge points around a circle, then around the fitted outline, that
-#: an outline is fitted to (:func:`fit_on_consistent_edges`, :func:`_fit_until_stable`).
+#: an outline is fitted to (:func:`fit_on_consistent_edges`, :func:`fit_until_stable`).
 OUTLINE_BAND_PX = 1.5
 
 
@@ -3120,9 +3120,9 @@ def outline_residuals_px(ft, points, cam: DetectionCamera, rays=None) -> np.ndar
     return _cone_residuals(p, pixel_rays(P, cam.K, cam.dist) if rays is None else rays, cam.f)
 
 
-def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_points: int = 8, rounds: int = 4,
+def fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_points: int = 8, rounds: int = 4,
                       max_rms_px: float | None = None):
-    """The outline fitted (:func:`_fit_outline`) to the points ``P[on]`` ((n, 2), ``on`` (n,) bool: those
+    """The outline fitted (:func:`fit_outline`) to the points ``P[on]`` ((n, 2), ``on`` (n,) bool: those
     within :data:`OUTLINE_BAND_PX` of the start circle ``(c0_px, r0_px)``), then to the points of
     ``P`` within that band of the fitted outline, until that set no longer changes (at most
     ``rounds`` fits); None where fewer than ``min_points`` are in the band or the first fit fails.
@@ -3141,7 +3141,7 @@ def _fit_until_stable(P, on, cam: DetectionCamera, c0_px, r0_px, source, min_poi
         if np.count_nonzero(on) < min_points:
             break
         try:
-            sol = _outline_solved(P[on], cam, c0_px, r0_px, None if rays is None else rays[on])
+            sol = outline_solved(P[on], cam, c0_px, r0_px, None if rays is None else rays[on])
         except ValueError:
             break
         done.append(sol)
@@ -3259,5 +3259,5 @@ def circle_candidates(image, source: str | os.PathLike | None = None
         The max image's edge points (x, y) they were found from (:func:`edge_points`).
     """
     mx, _, _, L, _, _, _ = _max_luminance(image, source)
-    edges = _edge_map(mx, L, source)
+    edges = edge_map(mx, L, source)
     return _hough_circle_candidates(edges, L), edges.points

@@ -54,7 +54,8 @@ from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classi
                                    outline_holding_highlights, refine_view_limb)
 from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mask_view, not_ground, own_shadow_mask,
                                  reference_radiance)
-from ffls.spheres.lambert import LambertFit, fit_lambert, flat_field_terms, own_shadow_of, shadowed_ground_bounce
+from ffls.spheres.lambert import (LambertFit, OwnShadow, fit_lambert, flat_field_terms, own_shadow_of,
+                                  shadowed_ground_bounce)
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
                                estimate_photo, ray_origins)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
@@ -1343,7 +1344,7 @@ def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
     return est, (values if read else None)
 
 
-#: The decoded photos the worker processes of a :class:`_PhotoFitter` inherited when forked.
+#: The decoded photos the worker processes of a :class:`PhotoFitter` inherited when forked.
 _inherited_decoded: DecodedPhotos | None = None
 
 
@@ -1362,7 +1363,7 @@ def _run_photo_chunk(job: tuple) -> list:
     return [_run_photo_task(t) for t in tasks]
 
 
-class _PhotoFitter:
+class PhotoFitter:
     """Runs a pass's photo fits in this process (``workers == 1``) or in a pool of processes.
 
     One pool for every pass and the centre refinement: forked once, at the first parallel call,
@@ -1465,7 +1466,7 @@ def _outlines_holding_highlights(results: list[PhotoEstimate], mirrors: list, li
     return out
 
 
-def _two_pass(fitter: _PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
+def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
               first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None) -> CaptureEstimate:
@@ -1853,7 +1854,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
         if not all(s.ground_view is not None for s in samples):
             raise ValueError("bounce 'observed' needs every sphere's ground_view (observed_ground_samples)")
         bounce, bounce_shape = "calibrated", False
-    fitter = _PhotoFitter(None, scene_center, kwargs)
+    fitter = PhotoFitter(None, scene_center, kwargs)
     return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
                      refine_options=refine_options, materials=materials, views=views, limb_image=limb_image,
                      flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape)
@@ -2001,7 +2002,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         # the own shadow needs the ground's normal: without a world frame, up is only the image's
         options = {"model": model, "own_shadow": not getattr(capture, "world_from_camera_is_default", False),
                    **kwargs}
-        with _PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
+        with PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
             est = _two_pass(fitter, samples, None, n, bounce=bounce,
                             refine_centres=centres_to_refine(spheres) if refine_centres else False,
                             refine_options=refine_options, materials=materials, views=views,

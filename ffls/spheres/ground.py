@@ -123,6 +123,26 @@ class GroundView:
     def n_seen(self) -> int:
         return int(len(self.offsets) - len(self.fill_index))
 
+    def neighbour_fill(self, keep: np.ndarray):
+        """(gone (g,), src (g, k), w (g, k)): the seen points not kept, their nearest kept seen points
+        and inverse-distance weights; None where all are kept or too few are. Kept in the view per
+        ``keep`` (:func:`mask_view` and every photo's :func:`mask_radiance` of a sphere share one)."""
+        keep = np.asarray(keep, bool)
+        key = keep.tobytes()
+        if key in self._fills:
+            return self._fills[key]
+        fill = None
+        if not (keep.all() or keep.sum() < FILL_NEIGHBOURS):
+            kept, gone = np.flatnonzero(keep), np.flatnonzero(~keep)
+            seen_off = self.offsets[:self.n_seen]
+            dist_, near = cKDTree(seen_off[kept]).query(seen_off[gone], k=FILL_NEIGHBOURS)
+            w = 1.0 / np.maximum(dist_, 1e-9)
+            fill = gone, kept[near], w / w.sum(axis=1, keepdims=True)
+        if len(self._fills) > 8:
+            self._fills.clear()
+        self._fills[key] = fill
+        return fill
+
     def kernel(self, normals: np.ndarray) -> np.ndarray:
         """(m, p + h) float32: the form factor from each sphere point (its unit ``normals``; the point
         is the centre plus a radius along it) to each seen ground patch, as a disc of the patch's
@@ -345,33 +365,12 @@ def not_ground(radiances: np.ndarray, lit: np.ndarray | None = None, ratio: floa
     return out
 
 
-def _neighbour_fill(view: GroundView, keep: np.ndarray):
-    """(gone (g,), src (g, k), w (g, k)): the seen points not kept, their nearest kept seen points
-    and inverse-distance weights; None where all are kept or too few are. Kept in the view per
-    ``keep`` (:func:`mask_view` and every photo's :func:`mask_radiance` of a sphere share one)."""
-    keep = np.asarray(keep, bool)
-    key = keep.tobytes()
-    if key in view._fills:
-        return view._fills[key]
-    fill = None
-    if not (keep.all() or keep.sum() < FILL_NEIGHBOURS):
-        kept, gone = np.flatnonzero(keep), np.flatnonzero(~keep)
-        seen_off = view.offsets[:view.n_seen]
-        dist_, near = cKDTree(seen_off[kept]).query(seen_off[gone], k=FILL_NEIGHBOURS)
-        w = 1.0 / np.maximum(dist_, 1e-9)
-        fill = gone, kept[near], w / w.sum(axis=1, keepdims=True)
-    if len(view._fills) > 8:
-        view._fills.clear()
-    view._fills[key] = fill
-    return fill
-
-
 def mask_radiance(view: GroundView, keep: np.ndarray, radiance: np.ndarray) -> np.ndarray:
     """(p,) float: a photo's :func:`ground_radiance` under the unmasked ``view`` as the masked view
     (:func:`mask_view` of ``view`` and ``keep``) reads it: the points not kept take their
     neighbours' radiance."""
     out = np.array(radiance, dtype=np.float64)
-    fill = _neighbour_fill(view, keep)
+    fill = view.neighbour_fill(keep)
     if fill is not None:
         gone, src, w = fill
         out[gone] = (out[src] * w).sum(axis=1)
@@ -384,7 +383,7 @@ def mask_view(view: GroundView, keep: np.ndarray) -> GroundView:
     distance; their pixels and bilinear weights, scaled), in every photo. The ground an object
     stands on (or that it hides from the camera) then reads as the ground around it, its shadows
     included. The view itself where fewer than :data:`FILL_NEIGHBOURS` points are kept."""
-    fill = _neighbour_fill(view, keep)
+    fill = view.neighbour_fill(keep)
     if fill is None:
         return view
     p = view.n_seen

@@ -194,7 +194,7 @@ OWN_SHADOW_MIN_ELEVATION_DEG = 3.0
 
 
 @functools.lru_cache(maxsize=1)
-def _own_shadow_table() -> np.ndarray:
+def own_shadow_table() -> np.ndarray:
     """(nz, elevation, cos azimuth) table of :func:`own_shadow_factor` (built once per process, ~0.2 s of CPU).
 
     A unit sphere rests on the plane ``z = -1``. From the point of normal ``n`` (``n_z`` on the
@@ -259,7 +259,7 @@ class OwnShadow:
     def prepare() -> None:
         """Build this process's own-shadow table now instead of at the first lookup: before
         forking worker processes, which then inherit it instead of each building its own."""
-        _own_shadow_table()
+        own_shadow_table()
 
     def __call__(self, light: np.ndarray) -> np.ndarray:
         """(m,) view factor of the own shadow under the distant ``light`` (3,), in [0, 1]."""
@@ -272,7 +272,7 @@ class OwnShadow:
         lz = float(light @ self.up)
         if lz <= 0.0:
             return np.zeros(m)
-        table = _own_shadow_table()
+        table = own_shadow_table()
         _, el_n, az_n = table.shape
         lh = light - lz * self.up
         lhn = float(np.linalg.norm(lh))
@@ -329,7 +329,7 @@ def own_shadow_factor(normals: np.ndarray, light: np.ndarray, up: np.ndarray = U
     behind the sphere, the side the camera sees) receive less bounce. This is the view factor of
     that shadow: the share of the ground's view factor that is dark. It depends on ``n . up``,
     the light's elevation and the azimuth between them only (the sphere's size cancels); it is
-    interpolated (trilinear) in a table of cosine-weighted quadrature (:func:`_own_shadow_table`).
+    interpolated (trilinear) in a table of cosine-weighted quadrature (:func:`own_shadow_table`).
     Lights below :data:`OWN_SHADOW_MIN_ELEVATION_DEG` use that elevation; lights below the
     horizon give no shadow (and no ground irradiance). :class:`OwnShadow` evaluates it for
     several lights.
@@ -390,7 +390,7 @@ NEAR_BOUNCE_NODES = 128
 
 
 @functools.lru_cache(maxsize=4)
-def _cosine_directions(side: int) -> np.ndarray:
+def cosine_directions(side: int) -> np.ndarray:
     """(side^2, 3) stratified cosine-weighted directions about +z (Malley's method)."""
     u = (np.arange(side) + 0.5) / side
     u1, u2 = (x.ravel() for x in np.meshgrid(u, u))
@@ -399,7 +399,7 @@ def _cosine_directions(side: int) -> np.ndarray:
 
 
 #: :func:`_near_bounce_geometry`'s kept results, by their inputs (bytes).
-_NEAR_GEOMETRIES: dict = {}
+NEAR_GEOMETRIES: dict = {}
 #: How many :func:`_near_bounce_geometry` keeps (a capture's spheres, and their recentred samples).
 NEAR_GEOMETRIES_KEPT = 16
 
@@ -410,11 +410,11 @@ def _near_bounce_geometry(points, normals, center, radius, up, side) -> tuple:
     ``X``, ``W = center - X`` and ``W . W``; made once per sphere and process (every photo's near fit
     integrates at the same nodes), so the same floats as made at every call."""
     key = (points.tobytes(), normals.tobytes(), center.tobytes(), float(radius), up.tobytes(), int(side))
-    hit = _NEAR_GEOMETRIES.get(key)
+    hit = NEAR_GEOMETRIES.get(key)
     if hit is not None:
         return hit
     G = center - radius * up
-    loc = _cosine_directions(int(side))
+    loc = cosine_directions(int(side))
     # a tangent frame per normal
     helper = np.where(np.abs(normals @ up)[:, None] < 0.9, up[None, :], np.roll(up, 1)[None, :])
     t1 = np.cross(normals, helper)
@@ -430,9 +430,9 @@ def _near_bounce_geometry(points, normals, center, radius, up, side) -> tuple:
     out = (down, X, W, np.einsum("msi,msi->ms", W, W), loc.shape[0])
     for a in out[:4]:
         a.flags.writeable = False
-    if len(_NEAR_GEOMETRIES) >= NEAR_GEOMETRIES_KEPT:
-        _NEAR_GEOMETRIES.clear()
-    _NEAR_GEOMETRIES[key] = out
+    if len(NEAR_GEOMETRIES) >= NEAR_GEOMETRIES_KEPT:
+        NEAR_GEOMETRIES.clear()
+    NEAR_GEOMETRIES[key] = out
     return out
 
 
