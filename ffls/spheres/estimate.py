@@ -2024,10 +2024,10 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         (:func:`calibrate_bounce_shape`); False: the uniform ground's shape; None (default): only
         with one matte sphere (as :func:`estimate_photos`).
     fit_tilt : bool
-        Where the capture gives no ``world_from_camera`` (``model`` ``'distant'``), fit the camera's
-        tilt, and so the ground's normal under the spheres, to the matte spheres' shading
-        (:func:`fit_camera_tilt`; False: the image's up is the world's). The lights stay in the
-        capture's default frame.
+        Where the capture gives no ``world_from_camera`` and its lights cover the upper hemisphere
+        (over a ground; ``model`` not ``'near'``), fit the camera's tilt, and so the ground's normal
+        under the spheres, to the matte spheres' shading (:func:`fit_camera_tilt`; False: the
+        image's up is the world's). The lights stay in the capture's default frame.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -2062,8 +2062,11 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                 read_photo(capture, 0)
         spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths,
                                           workers=workers)
-    if fit_tilt and model == "distant" and bounce != "observed" and getattr(capture, "world_from_camera_is_default",
-                                                                              False):
+    # lights over the upper hemisphere stand above a ground, whose normal the tilt gives; lights all
+    # round ("full") or around a stated axis have no ground under the spheres to orient
+    if (fit_tilt and model != "near" and bounce != "observed"
+            and getattr(capture, "world_from_camera_is_default", False)
+            and getattr(capture.hemisphere, "name", "upper") == "upper"):
         return _estimate_with_fitted_tilt(capture, spheres, progress, workers, model=model, bounce=bounce,
                                           refine_centres=refine_centres, refine_options=refine_options,
                                           decoded=decoded, flat_field=flat_field, first_pass=first_pass,
@@ -2121,7 +2124,8 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, **options):
     tilt, tried = fit_camera_tilt(fit)
     if not np.isfinite(tilt):
         return estimate_lights(capture, spheres, progress=progress, workers=workers, fit_tilt=False, **options)
-    lights = _lights_to_frame(tried[tilt][1], DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ tilted_world_from_camera(tilt)[:3, :3].T)
+    to_default = DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ tilted_world_from_camera(tilt)[:3, :3].T
+    lights = _lights_to_frame(tried[tilt][1], to_default)
     for e in lights.extra or ():
         e["camera_tilt_deg"] = round(tilt, 2)
     return lights
