@@ -1890,17 +1890,13 @@ def tilted_world_from_camera(tilt_deg: float) -> np.ndarray:
 
 
 def _matte_misfit(lights) -> float:
-    """Mean squared shading residual of the matte spheres over the photos with a light, per lit pixel
-    (the ``rms`` and ``n_lit`` of each sphere's record); NaN without any."""
-    num = den = 0.0
-    for e in lights.extra or ():
-        if e.get("status", "ok") != "ok":
-            continue
-        for r in e.get("spheres") or ():
-            if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None:
-                num += float(r["rms"]) ** 2 * float(r.get("n_lit") or 1)
-                den += float(r.get("n_lit") or 1)
-    return num / den if den else float("nan")
+    """Median over the photos with a light of their matte spheres' RMS shading residual (the ``rms``
+    of each sphere's record): a median, as a few photos' misfits (a light behind the ball, a sphere
+    near the frame's edge) would rule a mean. NaN without any."""
+    rms = [float(r["rms"]) for e in lights.extra or () if e.get("status", "ok") == "ok"
+           for r in e.get("spheres") or ()
+           if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None]
+    return float(np.median(rms)) if rms else float("nan")
 
 
 def fit_camera_tilt(fit, search=TILT_SEARCH_DEG) -> tuple[float, dict]:
@@ -1911,7 +1907,8 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG) -> tuple[float, dict]:
     shadow darkens the ground under it: modelled around the wrong up (the image's, when the camera
     looks down), both leave a residual that leans the fitted light. ``fit(tilt_deg)`` estimates
     every light with the ground under a camera tilted that much (:func:`tilted_world_from_camera`)
-    and returns the :class:`~ffls.io.capture.Lights`; the tilt minimising :func:`_matte_misfit` is
+    and returns the :class:`~ffls.io.capture.Lights`; the tilt minimising :func:`_matte_misfit` (the
+    median matte sphere residual) is
     found on a grid, then refined (:func:`scipy.optimize.minimize_scalar`, bounded).
 
     Parameters
