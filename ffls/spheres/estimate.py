@@ -1890,13 +1890,16 @@ def tilted_world_from_camera(tilt_deg: float) -> np.ndarray:
 
 
 def _matte_misfit(lights) -> float:
-    """Median over the photos with a light of their matte spheres' RMS shading residual (the ``rms``
-    of each sphere's record): a median, as a few photos' misfits (a light behind the ball, a sphere
-    near the frame's edge) would rule a mean. NaN without any."""
+    """Interquartile mean (:func:`scipy.stats.trim_mean`, a quarter cut from each end) over the photos
+    with a light of their matte spheres' RMS shading residual (the ``rms`` of each sphere's record):
+    a few photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean,
+    and a median of one ball's 12 photos wanders. NaN without any."""
     rms = [float(r["rms"]) for e in lights.extra or () if e.get("status", "ok") == "ok"
            for r in e.get("spheres") or ()
            if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None]
-    return float(np.median(rms)) if rms else float("nan")
+    from scipy.stats import trim_mean
+
+    return float(trim_mean(rms, 0.25)) if rms else float("nan")
 
 
 def fit_camera_tilt(fit, search=TILT_SEARCH_DEG) -> tuple[float, dict]:
@@ -1908,7 +1911,7 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG) -> tuple[float, dict]:
     looks down), both leave a residual that leans the fitted light. ``fit(tilt_deg)`` estimates
     every light with the ground under a camera tilted that much (:func:`tilted_world_from_camera`)
     and returns the :class:`~ffls.io.capture.Lights`; the tilt minimising :func:`_matte_misfit` (the
-    median matte sphere residual) is
+    interquartile mean of the matte spheres' residuals) is
     found on a grid, then refined (:func:`scipy.optimize.minimize_scalar`, bounded).
 
     Parameters
