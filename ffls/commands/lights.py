@@ -251,14 +251,11 @@ def run(args) -> int:
             lights = estimate_lights_dask(cap, runner, spheres=spheres, model=args.model, bounce=args.bounce,
                                           bounce_shape=shape, **first_pass)
     else:
-        if cap.world_from_camera_is_default:
-            print_notes(NAME, "capture.json gives no camera.world_from_camera: the world's up is taken as the "
-                              "image's, so the ground bounce is modelled around the image's up, without the "
-                              "spheres' own shadows; for a camera looking down, give its pose, or only its "
-                              "tilt (docs/formats.md, \"The camera's tilt\")")
         lights = estimate_lights(cap, spheres=spheres, progress=progress, workers=args.workers,
                                  model=args.model, bounce=args.bounce, decoded=decoded, bounce_shape=shape,
                                  **first_pass)
+        if cap.world_from_camera_is_default:
+            print_notes(NAME, tilt_note(lights))
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"
@@ -281,6 +278,21 @@ def run(args) -> int:
 
         print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere))
     return 0
+
+
+def tilt_note(lights) -> str:
+    """The line for a capture without ``world_from_camera``: the camera's tilt fitted to the matte
+    spheres (``camera_tilt_deg`` of :func:`ffls.spheres.estimate.estimate_lights`), or that the
+    image's up was taken as the world's."""
+    tilt = next((e["camera_tilt_deg"] for e in lights.extra or () if e.get("camera_tilt_deg") is not None), None)
+    if tilt is None:
+        return ("capture.json gives no camera.world_from_camera: the world's up is taken as the image's, so the "
+                "ground bounce is modelled around the image's up, without the spheres' own shadows; for a camera "
+                "looking down, give its pose, or only its tilt (docs/formats.md, \"The camera's tilt\")")
+    return (f"capture.json gives no camera.world_from_camera: the ground under the spheres was fitted to their "
+            f"shading, the camera looking {tilt:.1f} deg down (the lights stay in the image's frame: image up "
+            f"+Z; docs/spheres.md, 'Without the camera's pose'); to fix it, give the pose, or only its tilt "
+            f"(docs/formats.md, \"The camera's tilt\")")
 
 
 def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers: int = 1):

@@ -1892,11 +1892,115 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
     return model, refine_options
 
 
+#: Camera tilts searched when a capture gives no ``world_from_camera`` (:func:`fit_camera_tilt`):
+#: degrees below the horizon that the optical axis looks, a level camera (0) to nearly straight
+#: down; the coarse grid's step, then a bounded refinement to this tolerance.
+TILT_SEARCH_DEG = (0.0, 80.0, 10.0, 0.5)
+
+
+def tilted_world_from_camera(tilt_deg: float) -> np.ndarray:
+    """The ``world_from_camera`` of a camera at the origin, level (image right is +X) and looking
+    ``tilt_deg`` degrees below the horizon: 0 is
+    :data:`ffls.conventions.DEFAULT_WORLD_FROM_CAMERA` (image up +Z, forward +Y).
+
+    Returns
+    -------
+    (4, 4) float64
+    """
+    t = np.radians(float(tilt_deg))
+    M = np.eye(4)
+    M[:3, :3] = [[1.0, 0.0, 0.0], [0.0, -np.sin(t), np.cos(t)], [0.0, -np.cos(t), -np.sin(t)]]
+    return M
+
+
+def _matte_misfit(lights) -> float:
+    """Interquartile mean (:func:`scipy.stats.trim_mean`, a quarter cut from each end) over the photos
+    with a light of their matte spheres' RMS shading residual (the ``rms`` of each sphere's record):
+    a few photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean,
+    and a median of one ball's 12 photos wanders. NaN without any."""
+    rms = [float(r["rms"]) for e in lights.extra or () if e.get("status", "ok") == "ok"
+           for r in e.get("spheres") or ()
+           if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None]
+    from scipy.stats import trim_mean
+
+    return float(trim_mean(rms, 0.25)) if rms else float("nan")
+
+
+def fit_camera_tilt(fit, search=TILT_SEARCH_DEG) -> tuple[float, dict]:
+    """The camera's tilt that the matte spheres' shading fits best, for a capture without
+    ``world_from_camera``.
+
+    The ground bounce lights a matte sphere's lower half around the ground's normal, and its own
+    shadow darkens the ground under it: modelled around the wrong up (the image's, when the camera
+    looks down), both leave a residual that leans the fitted light. ``fit(tilt_deg)`` estimates
+    every light with the ground under a camera tilted that much (:func:`tilted_world_from_camera`)
+    and returns the :class:`~ffls.io.capture.Lights`; the tilt minimising :func:`_matte_misfit` (the
+    interquartile mean of the matte spheres' residuals) is
+    found on a grid, then refined (:func:`scipy.optimize.minimize_scalar`, bounded).
+
+    Parameters
+    ----------
+    fit : callable
+        ``fit(tilt_deg) -> Lights``.
+    search : (lo, hi, step, tolerance) degrees
+
+    Returns
+    -------
+    tilt_deg : float
+        NaN when no matte sphere fitted (the bounce then does not depend on the tilt).
+    tried : dict
+        Tilt (degrees) -> (misfit, Lights) of every fit made.
+    """
+    from scipy.optimize import minimize_scalar
+
+    lo, hi, step, tol = search
+    tried: dict = {}
+
+    def misfit(t: float) -> float:
+        t = float(t)
+        if t not in tried:
+            lights = fit(t)
+            tried[t] = (_matte_misfit(lights), lights)
+        m = tried[t][0]
+        return m if np.isfinite(m) else np.inf
+
+    grid = np.arange(lo, hi + 0.5 * step, step)
+    costs = [misfit(t) for t in grid]
+    if not np.isfinite(min(costs)):
+        return float("nan"), tried
+    k = int(np.argmin(costs))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    res = minimize_scalar(misfit, bounds=(a, b), method="bounded", options={"xatol": tol})
+    best = min(tried, key=lambda t: misfit(t))
+    return (float(res.x) if misfit(res.x) <= misfit(best) else best), tried
+
+
+def _lights_to_frame(lights, R: np.ndarray):
+    """``lights`` with its directions, positions and the spheres' directions and centres turned by the
+    rotation ``R`` (3x3): from one world frame to another around the same origin."""
+    dirs = lights.directions @ R.T
+    pos = None if lights.positions is None else lights.positions @ R.T
+    extra = []
+    for e in lights.extra or ():
+        e = dict(e)
+        if e.get("spheres"):
+            sph = []
+            for r in e["spheres"]:
+                r = dict(r)
+                for key in ("direction", "center", "position"):
+                    if r.get(key) is not None:
+                        r[key] = (R @ np.asarray(r[key], dtype=np.float64)).tolist()
+                sph.append(r)
+            e["spheres"] = sph
+        extra.append(e)
+    return replace(lights, directions=dirs, positions=pos, extra=extra if lights.extra is not None else None)
+
+
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
                     flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
-                    **kwargs):
+                    fit_tilt: bool = True, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -1943,6 +2047,11 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         Give each matte sphere's calibrated bounce its horizontal gradient
         (:func:`calibrate_bounce_shape`); False: the uniform ground's shape; None (default): only
         with one matte sphere (as :func:`estimate_photos`).
+    fit_tilt : bool
+        Where the capture gives no ``world_from_camera`` and its lights cover the upper hemisphere
+        (over a ground; ``model`` not ``'near'``), fit the camera's tilt, and so the ground's normal
+        under the spheres, to the matte spheres' shading (:func:`fit_camera_tilt`; False: the
+        image's up is the world's). The lights stay in the capture's default frame.
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -1977,6 +2086,15 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                 read_photo(capture, 0)
         spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths,
                                           workers=workers)
+    # lights over the upper hemisphere stand above a ground, whose normal the tilt gives; lights all
+    # round ("full") or around a stated axis have no ground under the spheres to orient
+    if (fit_tilt and model != "near" and bounce != "observed"
+            and getattr(capture, "world_from_camera_is_default", False)
+            and getattr(capture.hemisphere, "name", "upper") == "upper"):
+        return _estimate_with_fitted_tilt(capture, spheres, progress, workers, model=model, bounce=bounce,
+                                          refine_centres=refine_centres, refine_options=refine_options,
+                                          decoded=decoded, flat_field=flat_field, first_pass=first_pass,
+                                          bounce_shape=bounce_shape, **kwargs)
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
     if capture.image_size is not None:
@@ -2013,6 +2131,28 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         if bar is not None:
             bar.close()
     return est.lights(capture.image_names)
+
+
+def _estimate_with_fitted_tilt(capture, spheres, progress, workers, **options):
+    """:func:`estimate_lights` of a capture without ``world_from_camera``, the ground's normal (the
+    camera's tilt) fitted to the matte spheres' shading (:func:`fit_camera_tilt`); the lights are
+    returned in the capture's default world frame, each light's ``extra`` with ``camera_tilt_deg``
+    (absent when no matte sphere fitted: then the image's up is the world's, as before)."""
+    from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+
+    def fit(tilt_deg: float):
+        tilted = replace(capture, world_from_camera=tilted_world_from_camera(tilt_deg),
+                         world_from_camera_is_default=False)
+        return estimate_lights(tilted, spheres, progress=False, workers=workers, fit_tilt=False, **options)
+
+    tilt, tried = fit_camera_tilt(fit)
+    if not np.isfinite(tilt):
+        return estimate_lights(capture, spheres, progress=progress, workers=workers, fit_tilt=False, **options)
+    to_default = DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ tilted_world_from_camera(tilt)[:3, :3].T
+    lights = _lights_to_frame(tried[tilt][1], to_default)
+    for e in lights.extra or ():
+        e["camera_tilt_deg"] = round(tilt, 2)
+    return lights
 
 
 #: The paper's method under its name (GUIDE: one paper per function).

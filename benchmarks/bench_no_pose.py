@@ -1,0 +1,98 @@
+"""Light directions from a capture that gives no camera pose (issue 9's first example).
+
+Renders ``ffls synth --calibration-pair`` sets of one grey ball on the ground, seen from 30 deg above
+(the photometric-stereo set of issue 9: 12 lights, 8-bit linear PNG, encoding unstated, shot and
+read noise), cuts each ``capture.json`` to the images and a camera without ``world_from_camera``
+(``--camera orthographic``: ``{"model": "orthographic"}``; ``pinhole``: the render's ``K``), runs
+``ffls lights --workers 1`` with the given executable and scores the lights against ``truth.json``
+in the camera's frame: accepted, median / max error, the share inside the 95% cones, and the
+camera tilt found (docs/spheres.md, "Without the camera's pose").
+
+    cd benchmarks && OMP_NUM_THREADS=1 ../.venv/bin/python bench_no_pose.py --seeds 0 1 2 3 4 \\
+        --lens long --camera orthographic --ffls ../.venv/bin/ffls --out /tmp/no_pose.json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+
+
+def _render(folder: Path, seed: int, lens: str, resolution: int) -> Path:
+    subprocess.run([sys.executable, "-m", "ffls.cli", "synth", str(folder), "--calibration-pair", "--spheres", "1",
+                    "--sphere-material", "grey", "--lights", "12", "--format", "png8", "--encoding", "linear",
+                    "--unstated-encoding", "--lens", lens, "--exposure", "3", "--resolution", str(resolution),
+                    "--shot-noise", "1e-4", "--read-noise", "0.002", "--seed", str(seed), "--quiet"], check=True,
+                   stdout=subprocess.DEVNULL)
+    return folder / "calibration"
+
+
+def _without_pose(cal: Path, camera: str, pose: bool) -> np.ndarray:
+    """Rewrites ``cal/capture.json``; returns the capture's world_from_camera rotation as ffls reads it."""
+    doc = json.loads((cal / "capture.json").read_text())
+    cam = doc["camera"]
+    new = {"model": "orthographic"} if camera == "orthographic" else {"K": cam["K"], "dist": cam["dist"]}
+    if pose:
+        new["world_from_camera"] = cam["world_from_camera"]
+    keep = {"format": doc["format"], "version": doc["version"], "images": doc["images"], "camera": new}
+    if camera != "orthographic" or pose:
+        keep["sphere_radius"] = doc["sphere_radius"]
+    (cal / "capture.json").write_text(json.dumps(keep))
+    return np.array(cam["world_from_camera"])[:3, :3] if pose else DEFAULT_WORLD_FROM_CAMERA[:3, :3]
+
+
+def _score(cal: Path, lights: Path, Rw: np.ndarray, Rm: np.ndarray) -> dict:
+    truth = json.loads((cal / "truth.json").read_text())
+    true_cam = dict(zip(truth["images"], np.asarray(truth["directions"]) @ Rw))  # world -> camera: R^T d
+    got = json.loads(lights.read_text())["lights"]
+    err, inside, tilt = [], [], None
+    for e in got:
+        tilt = e.get("camera_tilt_deg", tilt)
+        if e.get("status", "ok") != "ok":
+            continue
+        d = Rm.T @ np.asarray(e["direction"])
+        err.append(float(np.degrees(np.arccos(np.clip(true_cam[e["image"]] @ d / np.linalg.norm(d), -1, 1)))))
+        inside.append(err[-1] <= e["uncertainty_deg"])
+    return {"accepted": f"{len(err)}/{len(got)}", "median_deg": float(np.median(err)), "max_deg": float(max(err)),
+            "inside": float(np.mean(inside)), "tilt_deg": tilt}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--lens", choices=("long", "normal"), default="long")
+    ap.add_argument("--camera", choices=("orthographic", "pinhole"), default="orthographic")
+    ap.add_argument("--pose", action="store_true", help="keep the true world_from_camera (the reference)")
+    ap.add_argument("--resolution", type=int, default=384)
+    ap.add_argument("--ffls", default=str(Path(sys.executable).with_name("ffls")), help="the ffls to measure")
+    ap.add_argument("--out", help="JSON of the rows")
+    a = ap.parse_args(argv)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for s in a.seeds:
+            cal = _render(Path(tmp) / f"s{s}", s, a.lens, a.resolution)
+            Rw = np.array(json.loads((cal / "capture.json").read_text())["camera"]["world_from_camera"])[:3, :3]
+            Rm = _without_pose(cal, a.camera, a.pose)
+            out = Path(tmp) / f"lights{s}.json"
+            subprocess.run([a.ffls, "lights", str(cal), "--workers", "1", "--no-progress", "-o", str(out)], check=True,
+                           capture_output=True, env=dict(os.environ, OMP_NUM_THREADS="1"))
+            rows.append({"seed": s, **_score(cal, out, Rw, Rm)})
+            r = rows[-1]
+            tilt = "-" if r["tilt_deg"] is None else f"{r['tilt_deg']:.1f}"
+            print(f"seed {s}: {r['accepted']} {r['median_deg']:.2f} / {r['max_deg']:.2f} deg, "
+                  f"{r['inside']:.0%} in the cones, tilt {tilt}", flush=True)
+    if a.out:
+        Path(a.out).write_text(json.dumps({"args": vars(a), "rows": rows}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
