@@ -425,6 +425,21 @@ def _check_decodable_size(path: Path) -> ImageHeader | None:
     return head
 
 
+def _in_working_space(pixels, primaries, path, working_space: bool):
+    """``(pixels, note)``: pixels stored in ``primaries`` (a file's chromaticities; None: Rec.709)
+    converted to the working space where ``working_space``, with the conversion's description (None
+    where nothing was converted). Malformed primaries are an error either way."""
+    if primaries is None:
+        return pixels, None
+    from ffls.io.colourspace import convert_to_working_space, working_space_conversion
+
+    if not working_space:
+        working_space_conversion(primaries, path)
+        return pixels, None
+    pixels, conv = convert_to_working_space(pixels, primaries, path)
+    return pixels, None if conv is None else conv.describe()
+
+
 def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarray | None = None,
              stored: np.ndarray | None = None) -> ImageData:
     """Read an OpenEXR file (half or float channels) as RGB float32.
@@ -538,15 +553,8 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
     else:
         rgb = _widen(rgb)
     chroma = header.get("chromaticities")
-    note = None
+    rgb, note = _in_working_space(rgb, chroma, path, working_space)
     if chroma is not None:
-        from ffls.io.colourspace import convert_to_working_space, working_space_conversion
-
-        if working_space:
-            rgb, conv = convert_to_working_space(rgb, chroma, path)
-            note = None if conv is None else conv.describe()
-        else:
-            working_space_conversion(chroma, path)  # malformed: an error either way
         chroma = tuple(float(v) for v in np.asarray(chroma, dtype=np.float64).reshape(-1))
     return ImageData(rgb, depth, "exr", path, alpha=alpha, chromaticities=chroma, colour_note=note)
 
@@ -767,17 +775,9 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1, working_space: bool =
     if alpha is not None:
         top = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(alpha.dtype, 1.0)
         alpha = np.ascontiguousarray(alpha.astype(np.float32) / np.float32(top))
-    note = None
     if scale is not None and np.any(scale != 1):
         pixels = pixels / scale
-    if primaries is not None:
-        from ffls.io.colourspace import convert_to_working_space, working_space_conversion
-
-        if working_space:
-            pixels, conv = convert_to_working_space(pixels, primaries, path)
-            note = None if conv is None else conv.describe()
-        else:
-            working_space_conversion(primaries, path)  # malformed: an error either way
+    pixels, note = _in_working_space(pixels, primaries, path, working_space)
     return ImageData(np.ascontiguousarray(pixels), depth, kind, path, alpha=alpha, codes=codes,
                      chromaticities=primaries, colour_note=note)
 
