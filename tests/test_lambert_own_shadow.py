@@ -148,6 +148,7 @@ def test_own_shadow_geometry_made_once_per_normals_array(backlit, monkeypatch):
 
     n, light, y = backlit
     n = n.copy()  # (an array no other test has fitted)
+    monkeypatch.setattr(lam, "OWN_SHADOWS_KEPT", 10 ** 6)  # (the kept ones not cleared by earlier tests' arrays)
     made = []
     init = lam.OwnShadow.__init__
 

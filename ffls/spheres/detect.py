@@ -72,8 +72,8 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import read_photo
 from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
-from ffls.spheres.mirror_outline import (LIMB_DARK_BODY_RATIO, MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE,
-                                         changing_limb_radius, circle_search, dark_cap, enclosing_circle,
+from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE,
+                                         changing_limb_radius, circle_search, dark_body, dark_cap, enclosing_circle,
                                          limb_radius, mirror_silhouette)
 
 __all__ = [
@@ -2886,7 +2886,7 @@ def _on_changing_limb(fits, changing: ConsistentEdges | None, L, mean, cam: Dete
     synth --supersample 4``) the reflectance step fades too, and the outline came out 1.1-2.4 px
     short on 20-28 px balls (``benchmarks/mirror_outline_error.py``, docs/spheres.md). Taken when
     the radius changes by at most :data:`MIRROR_LIMB_MAX_CHANGE` of itself. A ball whose body is
-    dark in ``mean`` (the sequence's mean luminance; :data:`LIMB_DARK_BODY_RATIO`, as
+    dark in ``mean`` (the sequence's mean luminance; :data:`ffls.spheres.mirror_outline.LIMB_DARK_BODY_RATIO`, as
     :func:`ffls.spheres.highlight.refine_view_limb` tells a glossy black ball) is left as it is:
     its silhouette is its own edge, the band's peak, and the outer edge lies outside it (an
     anti-aliased glossy ball: -0.23 -> +1.14 px). The centre, the fit statistics and the outline's
@@ -2898,7 +2898,7 @@ def _on_changing_limb(fits, changing: ConsistentEdges | None, L, mean, cam: Dete
     for ft in fits:
         r = None
         if (ft.source != "override" and _is_mirror_outline(ft, L)
-                and not dark_cap(mean, ft.center_px, ft.radius_px, ratio=LIMB_DARK_BODY_RATIO, quantile=90.0)):
+                and not dark_body(mean, ft.center_px, ft.radius_px)):
             r = changing_limb_radius(changing.strength, ft.center_px, ft.radius_px)
         if r is None or abs(r / ft.radius_px - 1.0) > MIRROR_LIMB_MAX_CHANGE:
             out.append(ft)

@@ -54,7 +54,7 @@ from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classi
                                    outline_holding_highlights, refine_view_limb)
 from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mask_view, not_ground, own_shadow_mask,
                                  reference_radiance)
-from ffls.spheres.lambert import (LambertFit, OwnShadow, fit_lambert, flat_field_terms, own_shadow_of,
+from ffls.spheres.lambert import (LambertFit, fit_lambert, flat_field_terms, own_shadow_of, own_shadow_table,
                                   shadowed_ground_bounce)
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
                                estimate_photo, ray_origins)
@@ -1387,7 +1387,7 @@ class PhotoFitter:
             # the own-shadow table (which the parent builds too)
             importlib.import_module("ffls.radiance.response")
             if self.options.get("own_shadow", True):
-                OwnShadow.prepare()
+                own_shadow_table()  # (inherited by the workers, not built by each)
             methods = multiprocessing.get_all_start_methods()  # fork: the decoded photos are inherited
             self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_set_inherited,
                                              initargs=(self.decoded,),
@@ -2088,9 +2088,13 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                                           workers=workers)
     # lights over the upper hemisphere stand above a ground, whose normal the tilt gives; lights all
     # round ("full") or around a stated axis have no ground under the spheres to orient
+    from ffls.io.capture import sphere_materials
+
+    # (a declared mirror is never matte: with only those the tilt's misfit would be NaN everywhere)
     if (fit_tilt and model != "near" and bounce != "observed"
             and getattr(capture, "world_from_camera_is_default", False)
-            and getattr(capture.hemisphere, "name", "upper") == "upper"):
+            and getattr(capture.hemisphere, "name", "upper") == "upper"
+            and any(m != "mirror" for m in sphere_materials(capture, len(spheres)))):
         return _estimate_with_fitted_tilt(capture, spheres, progress, workers, model=model, bounce=bounce,
                                           refine_centres=refine_centres, refine_options=refine_options,
                                           decoded=decoded, flat_field=flat_field, first_pass=first_pass,
@@ -2107,8 +2111,6 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     if bounce == "observed":
         samples = observed_ground_samples(capture, samples, shape)
         bounce, bounce_shape = "calibrated", False
-    from ffls.io.capture import sphere_materials
-
     materials = sphere_materials(capture, len(spheres))
     views = sphere_views(capture, spheres)
     bar = None

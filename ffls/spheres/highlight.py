@@ -48,7 +48,7 @@ import numpy as np
 from ffls.camera.projection import camera_rays
 from ffls.conventions import CAMERA_MODELS, angle_between, normalize, tangent_basis
 from ffls.io.capture import SPHERE_MATERIALS
-from ffls.spheres.mirror_outline import LIMB_BAND_PX, LIMB_DARK_BODY_RATIO, LimbFit, dark_cap, fit_limb_profile
+from ffls.spheres.mirror_outline import LIMB_BAND_PX, LIMB_DARK_BODY_RATIO, LimbFit, dark_body, fit_limb_profile
 
 __all__ = [
     "MATERIALS",
@@ -1084,7 +1084,7 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     c_sig = float(max(np.hypot(gap_c, c_own), view.center_sigma_px))
     r_sig = float(max(np.hypot(gap_r, r_own), view.radius_sigma_px))
     if (np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR
-            or not dark_cap(image, view.center_px, view.radius_px, ratio=LIMB_DARK_BODY_RATIO, quantile=90.0)):
+            or not dark_body(image, view.center_px, view.radius_px)):
         # a chrome ball (a weak step, or a body that reflects its surroundings): the detected
         # outline (its reflections' edges) is kept
         return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb

@@ -255,12 +255,6 @@ class OwnShadow:
         self.row = i0 * _OS_GRID[2]  # flat index of the cell's first row in an (nz, az) plane
         self.fx = x - i0
 
-    @staticmethod
-    def prepare() -> None:
-        """Build this process's own-shadow table now instead of at the first lookup: before
-        forking worker processes, which then inherit it instead of each building its own."""
-        own_shadow_table()
-
     def __call__(self, light: np.ndarray) -> np.ndarray:
         """(m,) view factor of the own shadow under the distant ``light`` (3,), in [0, 1]."""
         light = np.asarray(light, dtype=np.float64)

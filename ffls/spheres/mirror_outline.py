@@ -562,7 +562,7 @@ def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: floa
     pts = radial_steps(log_lum, center, radius, r_range=(lo, max_growth))
     found = [] if len(pts) < 8 else circle_search(pts, center, (max_growth - lo) * radius, min_shrink * radius,
                                                   max_growth * radius, tol=tol, n_best=n_best or 1)
-    passed = [(pts[inl], c, r) for c, r, inl in (found if n_best else found[:1])
+    passed = [(pts[inl], c, r) for c, r, inl in found
               if inl.sum() >= 8 and circle_coverage(pts[inl], c, r, tol, shape) >= min_coverage]
     if n_best:
         return passed
@@ -657,6 +657,12 @@ LIMB_BAND_PX = 5.0
 #: step there can be a reflected edge inside the rim (a chrome ball of the 8 mixed spheres: a jump
 #: of 18 noise units, the step 1.4 px short where the detected outline was 0.46 px short).
 LIMB_DARK_BODY_RATIO = 0.5
+
+
+def dark_body(lum, center, radius) -> bool:
+    """Whether a ball's body is dark against what surrounds it (:data:`LIMB_DARK_BODY_RATIO`, 90 %
+    of the disc: :func:`dark_cap`): a black glossy ball's, not a chrome ball's."""
+    return dark_cap(lum, center, radius, ratio=LIMB_DARK_BODY_RATIO, quantile=90.0)
 #: Least brightness jump of a sector at the limb, in units of the band's noise, for its edge to
 #: count in the outline's uncertainty (:attr:`LimbFit.sector_offsets_px`).
 LIMB_MIN_JUMP_SNR = 3.0
