@@ -9,6 +9,7 @@ module's centre-based quadrature.
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -420,3 +421,40 @@ def test_ground_kernel_widened_once_and_the_same_floats(rig):
     assert seen_bounce(view, L, n).tobytes() == want.tobytes()
     want = np.maximum(g_l - view.kernel(n)[:, :view.n_seen] @ lit[:view.n_seen], 0.0)  # (float32 product)
     assert hidden_form_factor(view, light, g_l, n).tobytes() == want.tobytes()
+
+
+def test_workers_build_the_ground_kernel_once_per_pass(rig, tmp_path, monkeypatch):
+    """``--workers 2``: a sphere's ground kernel is built once per worker process, not once per fit
+    (a worker's unpickled normals came to each fit as a new view, missing the kernel kept per
+    array) nor once per chunk of photos (each chunk re-sent the samples): ``ffls lights --bounce
+    observed --workers 2`` took 6.6x the CPU of ``--workers 1``. The estimates are those of
+    ``--workers 1``, to the bit."""
+    from dataclasses import replace
+
+    import ffls.spheres.ground as gr
+    from ffls.spheres.estimate import _PhotoFitter, _PhotoTask
+
+    s = replace(rig[0], ground_view=replace(rig[0].ground_view, _kernels={}))
+    values = [_photo_values(rig, i, True) for i in range(len(LIGHTS))]
+    log = tmp_path / "builds.txt"
+    kernel = gr.GroundView.kernel
+
+    def counted(self, normals):  # (a build: the view keeps one more kernel; the workers inherit it)
+        before = len(self._kernels)
+        out = kernel(self, normals)
+        if len(self._kernels) > before:
+            with open(log, "a") as f:
+                f.write(f"{os.getpid()}\n")
+        return out
+
+    monkeypatch.setattr(gr.GroundView, "kernel", counted)
+    tasks = [_PhotoTask(i, values=values[i], bounce_ratio=[RHO_G]) for i in range(len(LIGHTS))]
+    out = {}
+    for workers in (1, 2):
+        log.write_text("")
+        with _PhotoFitter(None, CENTER, {}, workers=workers) as fitter:
+            out[workers] = [r for r, _ in fitter.run(tasks, [s])]
+            assert len(tasks) // (8 * workers) <= 1  # (one photo a chunk: a build per chunk before)
+        assert 1 <= len(log.read_text().splitlines()) <= workers, (workers, log.read_text())
+        s = replace(s, ground_view=replace(s.ground_view, _kernels={}))
+    assert [r.direction.tobytes() for r in out[1]] == [r.direction.tobytes() for r in out[2]]

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import pickle
 import warnings
 from dataclasses import dataclass, replace
 from typing import NamedTuple
@@ -1353,13 +1354,24 @@ def _set_inherited(decoded: DecodedPhotos | None) -> None:
     _inherited_decoded = decoded
 
 
+#: The pass whose context this worker process last unpickled: ``(pass number, context)``.
+_worker_pass: tuple | None = None
+
+
 def _run_photo_chunk(job: tuple) -> list:
-    """A worker's share of a pass: ``(context, tasks)``, the context without its decoded photos
-    (inherited by the worker: :func:`_set_inherited`); :func:`_run_photo_task` of each task."""
-    context, tasks = job
-    if context.decoded is None:
-        context.decoded = _inherited_decoded
-    _set_context(context)
+    """A worker's share of a pass: ``(pass number, pickled context, tasks)``, the context without
+    its decoded photos (inherited by the worker: :func:`_set_inherited`); :func:`_run_photo_task`
+    of each task. The context is unpickled once per pass in each worker: its ground views' kernels
+    (kept per normals array, :meth:`GroundView.kernel`) then serve every chunk of the pass, not
+    only the chunk that built them."""
+    global _worker_pass
+    number, pickled, tasks = job
+    if _worker_pass is None or _worker_pass[0] != number:
+        context = pickle.loads(pickled)
+        if context.decoded is None:
+            context.decoded = _inherited_decoded
+        _worker_pass = (number, context)
+    _set_context(_worker_pass[1])
     return [_run_photo_task(t) for t in tasks]
 
 
@@ -1376,6 +1388,7 @@ class PhotoFitter:
         self.capture, self.scene_center, self.options, self.decoded = capture, scene_center, options, decoded
         self.workers, self.progress_bar = max(1, int(workers)), progress_bar
         self._pool = None
+        self._passes = 0  # (numbers the passes sent to the workers: :func:`_run_photo_chunk`)
 
     def _executor(self):
         if self._pool is None:
@@ -1430,10 +1443,12 @@ class PhotoFitter:
                 if counted:
                     self.advance(1)
             return out
-        sent = replace(context, decoded=None)  # (the workers have the decoded photos)
+        # (pickled once: the workers have the decoded photos, and unpickle it once per pass)
+        sent = pickle.dumps(replace(context, decoded=None), protocol=pickle.HIGHEST_PROTOCOL)
+        self._passes += 1
         size = max(1, len(tasks) // (8 * self.workers))
         chunks = [tasks[a:a + size] for a in range(0, len(tasks), size)]
-        for part in self._executor().map(_run_photo_chunk, [(sent, c) for c in chunks]):
+        for part in self._executor().map(_run_photo_chunk, [(self._passes, sent, c) for c in chunks]):
             out.extend(part)
             if counted:
                 self.advance(len(part))

@@ -149,9 +149,11 @@ class GroundView:
         area facing up: ``cos_p cos_g dA / (pi |r|^2 + dA)`` (Wallace, Elmquist, Haines 1989),
         ``r`` from the point to the patch in radii (a patch near the point is then not an
         infinitely bright point). Kept per ``normals`` array (a capture's fits reuse their
-        samples' normals)."""
-        hit = self._kernels.get(id(normals))
-        if hit is not None and hit[0] is normals:
+        samples' normals), or a view of the same memory (:func:`_memory_key`)."""
+        normals = np.asarray(normals)
+        key = _memory_key(normals)
+        hit = self._kernels.get(key)
+        if hit is not None:
             return hit[1]
         n = np.asarray(normals, dtype=np.float64)
         out = np.empty((len(n), len(self.offsets)), np.float32)
@@ -162,20 +164,29 @@ class GroundView:
             out[a:a + 1024] = cos_p * np.maximum(-(r @ self.up), 0.0) / r2 * self.areas / (np.pi * r2 + self.areas)
         if len(self._kernels) > 16:  # (recentred samples replace the first ones; 2 per normals)
             self._kernels.clear()
-        self._kernels[id(normals)] = (normals, out)
+        self._kernels[key] = (normals, out)  # (the array kept: its memory is not reused while kept)
         return out
 
     def kernel64(self, normals: np.ndarray) -> np.ndarray:
         """(m, p + h) float64: :meth:`kernel` widened (its float32 values), kept as it is: the
         bounce's matrix-vector products in float64 (:func:`observed_bounce`, :func:`seen_bounce`)
         read it instead of widening the kernel at every fit (the same floats)."""
-        key = ("float64", id(normals))
+        normals = np.asarray(normals)
+        key = ("float64", _memory_key(normals))
         hit = self._kernels.get(key)
-        if hit is not None and hit[0] is normals:
+        if hit is not None:
             return hit[1]
         out = self.kernel(normals).astype(np.float64)
         self._kernels[key] = (normals, out)
         return out
+
+
+def _memory_key(a: np.ndarray) -> tuple:
+    """What :meth:`GroundView.kernel` keeps a kernel under: the array's memory (address, shape,
+    strides, type), not the array object: a worker process's unpickled samples have a dtype that
+    is equal to, but not, numpy's own, so ``np.asarray(normals, dtype=np.float64)`` in each fit
+    gives a new view of the same normals (``ffls lights --workers 2`` built the kernel per fit)."""
+    return (a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
 
 
 def _camera_frame(world_from_camera) -> tuple[np.ndarray, np.ndarray]:
