@@ -432,7 +432,7 @@ def test_workers_build_the_ground_kernel_once_per_pass(rig, tmp_path, monkeypatc
     from dataclasses import replace
 
     import ffls.spheres.ground as gr
-    from ffls.spheres.estimate import _PhotoFitter, _PhotoTask
+    from ffls.spheres.estimate import PhotoFitter, PhotoTask
 
     s = replace(rig[0], ground_view=replace(rig[0].ground_view, _kernels={}))
     values = [_photo_values(rig, i, True) for i in range(len(LIGHTS))]
@@ -448,11 +448,11 @@ def test_workers_build_the_ground_kernel_once_per_pass(rig, tmp_path, monkeypatc
         return out
 
     monkeypatch.setattr(gr.GroundView, "kernel", counted)
-    tasks = [_PhotoTask(i, values=values[i], bounce_ratio=[RHO_G]) for i in range(len(LIGHTS))]
+    tasks = [PhotoTask(i, values=values[i], bounce_ratio=[RHO_G]) for i in range(len(LIGHTS))]
     out = {}
     for workers in (1, 2):
         log.write_text("")
-        with _PhotoFitter(None, CENTER, {}, workers=workers) as fitter:
+        with PhotoFitter(None, CENTER, {}, workers=workers) as fitter:
             out[workers] = [r for r, _ in fitter.run(tasks, [s])]
             assert len(tasks) // (8 * workers) <= 1  # (one photo a chunk: a build per chunk before)
         assert 1 <= len(log.read_text().splitlines()) <= workers, (workers, log.read_text())

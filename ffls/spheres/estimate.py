@@ -1279,7 +1279,7 @@ def decode_photos(capture, workers: int = 1, keep: bool = True, progress_bar=Non
 
 
 # ----------------------------------------------------------------------------- running the photo fits
-class _PhotoTask(NamedTuple):
+class PhotoTask(NamedTuple):
     """One photo's fit: its values (None: read photo ``index`` of the capture), the imposed
     ground ratios, the spheres' start directions and whether to run the joint near fit."""
 
@@ -1321,7 +1321,7 @@ def _set_context(context: _FitContext) -> None:
     _context = context
 
 
-def _run_photo_task(task: _PhotoTask) -> tuple[PhotoEstimate, list | None]:
+def _run_photo_task(task: PhotoTask) -> tuple[PhotoEstimate, list | None]:
     """Fit one photo in the current context; returns its estimate and, where the photo was read
     here, its sphere values (grey float32: kept in memory for the later passes)."""
     ctx = _context
@@ -1431,7 +1431,7 @@ class PhotoFitter:
         if self.progress_bar is not None:
             self.progress_bar.update(n)
 
-    def run(self, tasks: list[_PhotoTask], samples: list[SphereSamples],
+    def run(self, tasks: list[PhotoTask], samples: list[SphereSamples],
             counted: bool = True) -> list[tuple[PhotoEstimate, list | None]]:
         """:func:`_run_photo_task` for every task, in order; ``counted`` advances the progress bar."""
         context = _FitContext(self.capture, samples, self.scene_center, self.options, self.decoded)
@@ -1519,10 +1519,10 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
     chosen = set(fitted)
 
     def run_fitted(vals, counted=False):  # the fitted photos' first-pass fits from ``vals`` (every photo's)
-        return [r for r, _ in fitter.run([_PhotoTask(i, values=vals[i], joint=joint) for i in fitted], samples,
+        return [r for r, _ in fitter.run([PhotoTask(i, values=vals[i], joint=joint) for i in fitted], samples,
                                          counted=counted)]
 
-    first = fitter.run([_PhotoTask(i, values=None if values is None else values[i], joint=joint, fit=i in chosen)
+    first = fitter.run([PhotoTask(i, values=None if values is None else values[i], joint=joint, fit=i in chosen)
                         for i in range(n_photos)], samples)
     if values is None:
         values = [v for _, v in first]
@@ -1540,7 +1540,7 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
         if mirrors == fitter.options["mirrors"]:  # the others' fits (else all are fitted again just below)
             rest = [i for i in range(n_photos) if i not in chosen]
             done = dict(zip(fitted, results))
-            done.update(zip(rest, [r for r, _ in fitter.run([_PhotoTask(i, values=values[i], joint=joint)
+            done.update(zip(rest, [r for r, _ in fitter.run([PhotoTask(i, values=values[i], joint=joint)
                                                               for i in rest], samples, counted=False)]))
             results = [done[i] for i in range(n_photos)]
         fitted = list(range(n_photos))
@@ -1572,7 +1572,7 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
     by_photo = dict(zip(fitted, results))
 
     def refit(indices, ratios, counted):
-        tasks = [_PhotoTask(i, values=values[i], bounce_ratio=ratios,
+        tasks = [PhotoTask(i, values=values[i], bounce_ratio=ratios,
                             start=_starts(by_photo[i]) if i in by_photo else None) for i in indices]
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
@@ -1586,7 +1586,7 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
             if bounce == "free":
                 results = refit(range(n_photos), None, counted=False)
             else:  # only what the bounce calibration reads: the recentred spheres' fits
-                results = [r for r, _ in fitter.run([_PhotoTask(i, values=values[i], refit=(r, refinements))
+                results = [r for r, _ in fitter.run([PhotoTask(i, values=values[i], refit=(r, refinements))
                                                      for i, r in zip(fitted, results)],
                                                     samples, counted=False)]
             by_photo = dict(zip(fitted, results))
