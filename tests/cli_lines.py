@@ -31,3 +31,16 @@ def tiny_capture(root: Path, seed: int) -> Path:
 
     write_synthetic_capture(root / "cap", n_lights=6, resolution=24, progress=False, seed=seed)
     return root / "cap"
+
+
+def entries(folder: Path) -> set:
+    """The names in ``folder`` (what a refused command must not have left there)."""
+    return {p.name for p in folder.iterdir()}
+
+
+def composite_set(root: Path) -> Path:
+    """A small composite set (``ffls synth --composite-set sunrise``, 8 + 8 lights at 24 px) in
+    ``root / 'set'``; its object capture states its spheres' world centres (as ``--fill`` reads them)."""
+    assert main(["synth", str(root / "set"), "--composite-set", "sunrise", "--lights", "8", "--surface-lights", "8",
+                 "--resolution", "24", "--truth-dirs", "32", "--quiet"]) == 0
+    return root / "set"

@@ -22,6 +22,8 @@ import pytest
 from ffls.cli import main, subcommands
 from ffls.io.images import read_image, write_exr, write_hdr, write_png
 
+from cli_lines import entries
+
 N_LIGHTS = 40
 
 
@@ -196,17 +198,14 @@ def ws(tmp_path_factory):
     return w
 
 
-def _entries(folder: Path) -> set:
-    return {p.name for p in folder.iterdir()}
-
 
 def _run(capfd, argv, where: Path):
     """main(argv) -> (rc, stderr lines, entries of `where` before and after)."""
-    before = _entries(where)
+    before = entries(where)
     capfd.readouterr()
     rc = main([str(a) for a in argv])
     out, err = capfd.readouterr()
-    return rc, out, [ln for ln in err.splitlines() if ln.strip()], before, _entries(where)
+    return rc, out, [ln for ln in err.splitlines() if ln.strip()], before, entries(where)
 
 
 # ----------------------------------------------------------------------------- the table
@@ -549,7 +548,7 @@ def test_bad_input_is_one_line(ws, tmp_path, capfd, argv, names, output):
     out.mkdir()
     args = _fill(argv, ws, out)
     watched = [out, ws["root"], ws["cap"], ws["maps"]]
-    before = {w: _entries(w) for w in watched}
+    before = {w: entries(w) for w in watched}
     capfd.readouterr()
     rc = main(args)
     stdout, err = capfd.readouterr()
@@ -562,7 +561,7 @@ def test_bad_input_is_one_line(ws, tmp_path, capfd, argv, names, output):
     if output:
         assert not (out / output).exists()
     for w in watched:  # nothing written, no temporary left anywhere
-        assert _entries(w) == before[w], (w, _entries(w) ^ before[w])
+        assert entries(w) == before[w], (w, entries(w) ^ before[w])
 
 
 # ----------------------------------------------------------------------------- faults while writing
@@ -673,7 +672,7 @@ def test_real_full_disk_is_one_line(ws, tiny_tmpfs, capfd, cmd):
     lines = [ln for ln in err.splitlines() if ln.strip() and "error" in ln]
     assert rc == 2 and len(lines) == 1 and out in lines[0], err
     assert "Traceback" not in err
-    assert _entries(tiny_tmpfs) == {"filler"}
+    assert entries(tiny_tmpfs) == {"filler"}
 
 
 def test_existing_output_survives_a_failed_write(ws, tmp_path, capfd, monkeypatch):
@@ -688,7 +687,7 @@ def test_existing_output_survives_a_failed_write(ws, tmp_path, capfd, monkeypatc
 
     monkeypatch.setattr(ffls.errors.os, "replace", full)
     assert main(["lightmap", "make", "sky", str(target), "--height", "16"]) == 2
-    assert target.read_bytes() == old and _entries(tmp_path) == {"m.exr"}
+    assert target.read_bytes() == old and entries(tmp_path) == {"m.exr"}
 
 
 def test_cell_texture_too_coarse_for_the_lights_is_refused():
@@ -738,7 +737,7 @@ def test_turntable_never_replaces_a_folder_of_other_files(ws, tmp_path, capfd):
     d.mkdir()
     (d / "notes.txt").write_text("keep me")
     assert main(["render", str(ws["cap"]), "--probe", "sky", "--cpu", "--turntable", "2", "-o", str(d)]) == 2
-    assert _entries(d) == {"notes.txt"} and _entries(tmp_path) == {"mine"}
+    assert entries(d) == {"notes.txt"} and entries(tmp_path) == {"mine"}
     err = capfd.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "mine" in err[0] and "refusing" in err[0], err
 
@@ -746,9 +745,9 @@ def test_turntable_never_replaces_a_folder_of_other_files(ws, tmp_path, capfd):
 def test_turntable_replaces_its_own_frames_after_success(ws, tmp_path, capfd):
     d = tmp_path / "frames"
     assert main(["render", str(ws["cap"]), "--probe", "sky", "--cpu", "--turntable", "3", "-o", str(d)]) == 0
-    assert _entries(d) == {"frame_0000.png", "frame_0001.png", "frame_0002.png"}
+    assert entries(d) == {"frame_0000.png", "frame_0001.png", "frame_0002.png"}
     assert main(["render", str(ws["cap"]), "--probe", "sky", "--cpu", "--turntable", "2", "-o", str(d)]) == 0
-    assert _entries(d) == {"frame_0000.png", "frame_0001.png"} and _entries(tmp_path) == {"frames"}
+    assert entries(d) == {"frame_0000.png", "frame_0001.png"} and entries(tmp_path) == {"frames"}
 
 
 def test_every_command_has_help(capsys):
@@ -830,7 +829,7 @@ def test_signal_during_synth_keeps_the_old_capture(ws, tmp_path, sig, code):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("ffls synth: ") and "nothing partial" in lines[0], err
     assert {p.name: p.read_bytes() for p in cap.iterdir()} == old  # the old capture, untouched
-    assert _entries(tmp_path) == {"cap"}
+    assert entries(tmp_path) == {"cap"}
 
 
 def test_synth_over_a_capture_swaps_it_whole(ws, tmp_path, capfd):
@@ -839,7 +838,7 @@ def test_synth_over_a_capture_swaps_it_whole(ws, tmp_path, capfd):
     (cap / "stale.txt").write_text("from the old capture")
     assert main(["synth", str(cap), "--lights", "5", "--resolution", "16", "--quiet"]) == 0
     assert not (cap / "stale.txt").exists() and len(json.loads((cap / "lights.json").read_text())["lights"]) == 5
-    assert _entries(tmp_path) == {"cap"}
+    assert entries(tmp_path) == {"cap"}
 
 
 def test_synth_refuses_a_folder_that_is_not_a_capture(tmp_path, capfd):

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_lines import child_env, tiny_capture
+from cli_lines import child_env, composite_set, tiny_capture
 from cli_lines import one_line as _one_line
 from ffls.cli import main
 
@@ -168,10 +168,7 @@ def test_closed_standard_output_is_refused_before_anything_runs(cap, tmp_path, a
 @pytest.fixture(scope="module")
 def cset(tmp_path_factory):
     """A small composite set whose object capture states its spheres' world centres (as --fill reads them)."""
-    root = tmp_path_factory.mktemp("r12set") / "set"
-    assert main(["synth", str(root), "--composite-set", "sunrise", "--lights", "8", "--surface-lights", "8",
-                 "--resolution", "24", "--truth-dirs", "32", "--quiet"]) == 0
-    return root
+    return composite_set(tmp_path_factory.mktemp("r12set"))
 
 
 @pytest.mark.parametrize("edit,names", [

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_lines import child_env, tiny_capture
+from cli_lines import child_env, entries, tiny_capture
 from cli_lines import one_line as _one_line
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,9 +28,6 @@ ROOT = Path(__file__).resolve().parents[1]
 def cap(tmp_path_factory):
     return tiny_capture(tmp_path_factory.mktemp("r13"), seed=5)
 
-
-def _entries(folder: Path) -> set:
-    return {p.name for p in folder.iterdir()}
 
 
 # ----------------------------------------------------------------------------- --bounce-shape
@@ -101,7 +98,7 @@ def test_a_json_file_over_the_limit_is_refused_before_it_is_read(cap, huge, tmp_
     monkeypatch.setattr(capture_io, "parse_json", small_only)
     rc, line = _one_line(capfd, [a.format(h=huge, cap=cap, o=tmp_path) for a in argv])
     assert rc == 2 and named in line and "(ffls reads it whole into memory; docs/formats.md)" in line, line
-    assert _entries(tmp_path) == set()
+    assert entries(tmp_path) == set()
 
 
 def test_a_json_file_at_the_limit_is_read(tmp_path):
@@ -161,10 +158,10 @@ LOOP = "is a symbolic link loop (its links lead back to themselves, to no file)"
 def test_a_symbolic_link_loop_says_so(cap, loop, capfd, argv, named):
     """A link loop was "image file not found" (or "lights file not found", "capture folder not found");
     as an output, "a symbolic link to X, which does not exist" (X the link itself)."""
-    before = _entries(loop)
+    before = entries(loop)
     rc, line = _one_line(capfd, [a.format(t=loop, cap=cap) for a in argv])
     assert rc == 2 and named in line, line
-    assert _entries(loop) == before
+    assert entries(loop) == before
 
 
 def test_a_dangling_link_names_its_target(cap, tmp_path, capfd):
@@ -187,7 +184,7 @@ def test_a_bad_store_path_is_refused_where_it_is_parsed(cap, tmp_path, capfd, st
     argv = [command, cap, "--probe", "sky", "--store", tmp_path / store, "-o", tmp_path / "o.png"]
     rc, line = _one_line(capfd, argv + (["--cpu"] if command == "render" else []))
     assert rc == 2 and named.format(t=tmp_path) in line, line
-    assert _entries(tmp_path) == {"file.zarr"} and (tmp_path / "file.zarr").read_text() == "mine"
+    assert entries(tmp_path) == {"file.zarr"} and (tmp_path / "file.zarr").read_text() == "mine"
 
 
 # ----------------------------------------------------------------------------- brackets

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_lines import child_env, tiny_capture
+from cli_lines import child_env, composite_set, entries, tiny_capture
 from cli_lines import one_line as _one_line
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -26,9 +26,6 @@ ROOT = Path(__file__).resolve().parents[1]
 def cap(tmp_path_factory):
     return tiny_capture(tmp_path_factory.mktemp("r14"), seed=14)
 
-
-def _entries(folder: Path) -> set:
-    return {p.name for p in folder.iterdir()}
 
 
 # ----------------------------------------------------------------------------- bit depths
@@ -109,12 +106,7 @@ def test_bounce_observed_lines_name_the_flag(cap, tmp_path, capfd):
 @pytest.fixture(scope="module")
 def cset(tmp_path_factory):
     """A small composite set (``ffls synth --composite-set``)."""
-    from ffls.cli import main
-
-    root = tmp_path_factory.mktemp("r14set") / "set"
-    assert main(["synth", str(root), "--composite-set", "sunrise", "--lights", "8", "--surface-lights", "8",
-                 "--resolution", "24", "--truth-dirs", "32", "--quiet"]) == 0
-    return root
+    return composite_set(tmp_path_factory.mktemp("r14set"))
 
 
 @pytest.mark.parametrize("name,key", [("truth.exr", "truth"), ("scene_map.exr", "scene map"),
@@ -130,7 +122,7 @@ def test_composite_refuses_to_replace_a_file_of_its_synthetic_set(cset, tmp_path
                                  "-o", s / name])
     assert rc == 2 and line == (f"ffls composite: error: {s / name}: is the {key} of the synthetic set {s} (its "
                                 "composite.json lists it), which the composite would replace: choose another name"), line
-    assert (s / name).read_bytes() == before and _entries(s) == _entries(cset)
+    assert (s / name).read_bytes() == before and entries(s) == entries(cset)
 
 
 # ----------------------------------------------------------------------------- benchmark folders
@@ -226,7 +218,7 @@ def test_a_bracket_with_transparent_pixels_is_refused(clear_bracket, tmp_path, c
     out.mkdir()
     rc, line = _one_line(capfd, [a.format(b=clear_bracket, o=out) for a in argv])
     assert rc == 2 and line.endswith(CLEAR), line
-    assert _entries(out) == set()
+    assert entries(out) == set()
 
 
 def test_an_opaque_rgba_bracket_merges(clear_bracket, tmp_path):
@@ -271,7 +263,7 @@ def test_half_output_beyond_the_half_range_is_one_line(bright_probe, tmp_path, c
     rc, line = _one_line(capfd, [a.format(p=bright_probe, b=tmp_path / "b.exr", o=out) for a in argv])
     assert rc == 2 and "m.exr: values up to " in line and line.endswith(
         "exceed the half-float range (65504): write float (without --half / half=False)"), line
-    assert _entries(out) == set()
+    assert entries(out) == set()
 
 
 # ----------------------------------------------------------------------------- synth spheres
@@ -293,7 +285,7 @@ def test_synth_refuses_spheres_that_intersect_or_hold_the_camera(tmp_path, capfd
     intersecting spheres were rendered and written to truth.json as if they were apart."""
     rc, line = _one_line(capfd, ["synth", tmp_path / "s", "--lights", "2", "--resolution", "24", "--quiet", *flags])
     assert rc == 2 and line.startswith(f"ffls synth: error: {says}"), line
-    assert _entries(tmp_path) == set()
+    assert entries(tmp_path) == set()
 
 
 def test_synth_spheres_that_touch_are_rendered(tmp_path):
@@ -406,7 +398,7 @@ def test_a_screenshot_whose_exr_fails_leaves_no_png(cap, tmp_path, capfd, monkey
     lines = [ln for ln in err.splitlines() if ln.strip() and "coverage:" not in ln]  # (6 lights: 2 notes)
     assert rc == 2 and "Traceback" not in err and len(lines) == 1 and lines[0].endswith(
         "s.exr: cannot write OpenEXR file (no space left on the device (disk full))"), err
-    assert _entries(tmp_path) == set()
+    assert entries(tmp_path) == set()
 
 
 def test_lightmap_info_and_convert_say_the_colour_conversion(tmp_path, capfd):

@@ -149,9 +149,9 @@ class GroundView:
         area facing up: ``cos_p cos_g dA / (pi |r|^2 + dA)`` (Wallace, Elmquist, Haines 1989),
         ``r`` from the point to the patch in radii (a patch near the point is then not an
         infinitely bright point). Kept per ``normals`` array (a capture's fits reuse their
-        samples' normals), or a view of the same memory (:func:`_memory_key`)."""
+        samples' normals), or a view of the same memory (:func:`memory_key`)."""
         normals = np.asarray(normals)
-        key = _memory_key(normals)
+        key = memory_key(normals)
         hit = self._kernels.get(key)
         if hit is not None:
             return hit[1]
@@ -172,7 +172,7 @@ class GroundView:
         bounce's matrix-vector products in float64 (:func:`observed_bounce`, :func:`seen_bounce`)
         read it instead of widening the kernel at every fit (the same floats)."""
         normals = np.asarray(normals)
-        key = ("float64", _memory_key(normals))
+        key = ("float64", memory_key(normals))
         hit = self._kernels.get(key)
         if hit is not None:
             return hit[1]
@@ -181,8 +181,8 @@ class GroundView:
         return out
 
 
-def _memory_key(a: np.ndarray) -> tuple:
-    """What :meth:`GroundView.kernel` keeps a kernel under: the array's memory (address, shape,
+def memory_key(a: np.ndarray) -> tuple:
+    """What :meth:`GroundView.kernel` (and :func:`ffls.spheres.lambert.own_shadow_of`) keeps a result under: the array's memory (address, shape,
     strides, type), not the array object: a worker process's unpickled samples have a dtype that
     is equal to, but not, numpy's own, so ``np.asarray(normals, dtype=np.float64)`` in each fit
     gives a new view of the same normals (``ffls lights --workers 2`` built the kernel per fit)."""

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ffls.conventions import UP
-from ffls.spheres.ground import hidden_form_factor, observed_bounce, seen_bounce
+from ffls.spheres.ground import hidden_form_factor, memory_key, observed_bounce, seen_bounce
 from ffls.spheres.samples import ground_bounce
 from ffls.spheres.uncertainty import correlation_inflation
 
@@ -302,9 +302,9 @@ def own_shadow_of(normals: np.ndarray, up: np.ndarray = UP) -> OwnShadow:
     :data:`OWN_SHADOWS_KEPT`): a capture's fits reuse their samples' normals, and its per-pixel
     geometry depends on them and ``up`` only. The array must not be changed in place after."""
     up = np.asarray(up, dtype=np.float64)
-    key = (id(normals), up.tobytes())
+    key = (memory_key(normals), up.tobytes())  # (the kept array pins that memory)
     hit = _OWN_SHADOWS.get(key)
-    if hit is not None and hit[0] is normals:
+    if hit is not None:
         return hit[1]
     out = OwnShadow(normals, up)
     if len(_OWN_SHADOWS) >= OWN_SHADOWS_KEPT:
@@ -401,7 +401,7 @@ NEAR_GEOMETRIES_KEPT = 16
 def _near_bounce_geometry(points, normals, center, radius, up, side) -> tuple:
     """What :func:`_near_bounce_quadrature` needs that does not depend on the light: per point and
     quadrature direction, whether the direction meets the ground (``down``), the ground point
-    ``X``, ``W = center - X`` and ``W . W``; made once per sphere and process (every photo's near fit
+    ``X`` and ``W . W`` for ``W = center - X``; made once per sphere and process (every photo's near fit
     integrates at the same nodes), so the same floats as made at every call."""
     key = (points.tobytes(), normals.tobytes(), center.tobytes(), float(radius), up.tobytes(), int(side))
     hit = NEAR_GEOMETRIES.get(key)
@@ -421,8 +421,8 @@ def _near_bounce_geometry(points, normals, center, radius, up, side) -> tuple:
     height = points @ up - float(G @ up)
     X = points[:, None, :] + (np.maximum(height, 0.0)[:, None] / np.where(down, -dz, 1.0))[..., None] * D
     W = center - X  # the segment from the ground point to the light meets the sphere: own shadow
-    out = (down, X, W, np.einsum("msi,msi->ms", W, W), loc.shape[0])
-    for a in out[:4]:
+    out = (down, X, np.einsum("msi,msi->ms", W, W), loc.shape[0])  # (W itself not kept: one subtraction)
+    for a in out[:3]:
         a.flags.writeable = False
     if len(NEAR_GEOMETRIES) >= NEAR_GEOMETRIES_KEPT:
         NEAR_GEOMETRIES.clear()
@@ -434,7 +434,8 @@ def _near_bounce_quadrature(points, normals, center, radius, S, up, side) -> np.
     """:func:`near_ground_bounce` at every point, by quadrature (the light above the contact point)."""
     G = center - radius * up
     e_ref = float((S - G) @ up) / float(np.linalg.norm(S - G)) ** 3
-    down, X, W, WW, n_dirs = _near_bounce_geometry(points, normals, center, radius, up, side)
+    down, X, WW, n_dirs = _near_bounce_geometry(points, normals, center, radius, up, side)
+    W = center - X
     V = S - X
     r2 = np.einsum("msi,msi->ms", V, V)
     r = np.sqrt(r2)
