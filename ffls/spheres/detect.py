@@ -1841,22 +1841,23 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px)  # a dark cap -> its silhouette
         fits = _with_changing_edges(fits, changing, L, cam, max_residual_px)
         # a cap whose outline crosses the silhouette -> the ring of the changing edges around it
-        before = {id(ft) for ft in fits}
+        old = fits
         fits = _grown_on_changing_edges(fits, changing, L, cam, max_residual_px, rings=True)
-        fits = with_max_image_rings(fits, edges, changing, L, cam, max_residual_px)
+        fits = list(with_max_image_rings(fits, edges, changing, L, cam, max_residual_px))
         # the radius at the changing band's outer edge, where no ring replaced the outline (a ring is
         # fitted on that band already: moved again, a checker ground's ball went 1.3 px long; moved
         # first, a lone 8-bit chrome ball's longer outline found a ring 4.7 px off)
-        fits = [new if id(ft) in before else ft
-                for ft, new in zip(fits, _on_changing_limb(fits, changing, L, mean, cam))]
+        same = [k for k, (a, b) in enumerate(zip(old, fits)) if a is b]
+        for k, ft in zip(same, _on_changing_limb([fits[k] for k in same], changing, L, mean, cam)):
+            fits[k] = ft
     # every outline's points moved to the step of the linear image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels); on the photos'
     # mean where they are blurred beyond the pixel (_refine_on_profiles)
     clip = 0.98 * float(L.max()) if saturates else None
     M = np.asarray(mean, dtype=np.float64) if mean is not None and n_photos >= 3 else None
-    noise = _pixel_noise(L), None if M is None else _pixel_noise(M)
-    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise[0],
-                                                                                     clip, mean=M, mean_noise=noise[1])
+    noise, mean_noise = _pixel_noise(L), None if M is None else _pixel_noise(M)
+    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
+                                                                                     clip, mean=M, mean_noise=mean_noise)
             for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)

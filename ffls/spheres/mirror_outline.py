@@ -663,6 +663,8 @@ def dark_body(lum, center, radius) -> bool:
     """Whether a ball's body is dark against what surrounds it (:data:`LIMB_DARK_BODY_RATIO`, 90 %
     of the disc: :func:`dark_cap`): a black glossy ball's, not a chrome ball's."""
     return dark_cap(lum, center, radius, ratio=LIMB_DARK_BODY_RATIO, quantile=90.0)
+
+
 #: Least brightness jump of a sector at the limb, in units of the band's noise, for its edge to
 #: count in the outline's uncertainty (:attr:`LimbFit.sector_offsets_px`).
 LIMB_MIN_JUMP_SNR = 3.0
