@@ -112,18 +112,16 @@ class _Json:
             raise InputError(broken_link(folder) or (f"{kind} folder not found" if not folder.exists()
                                                      else "not a folder"), folder)
         j = cls(folder / filename)
-        if not j.path.exists() and not broken_link(j.path):  # a folder of photos: how to describe them
-            example = '"ball.exr"' if kind == "probe" else '"IMG_0001.JPG", ...'
-            j.fail("", f"{filename} not found: a {kind} folder needs one listing its photos, at least "
-                       f"{{\"format\": \"{fmt}\", \"version\": 1, \"images\": [{example}]}} "
-                       "(docs/formats.md)")
-        doc = j.load(filename)
+        example = '"ball.exr"' if kind == "probe" else '"IMG_0001.JPG", ...'  # (a folder of photos: how to describe them)
+        doc = j.load(filename, missing=f"{filename} not found: a {kind} folder needs one listing its photos, at least "
+                                       f"{{\"format\": \"{fmt}\", \"version\": 1, \"images\": [{example}]}} "
+                                       "(docs/formats.md)")
         j.header(doc, fmt)
         return folder, j, doc
 
-    def load(self, what: str) -> dict:
-        if not self.path.exists():
-            self.fail("", broken_link(self.path) or f"{what} not found")
+    def load(self, what: str, missing: str | None = None) -> dict:
+        if not self.path.exists():  # (``missing``: the line for a file that is not there, not a broken link)
+            self.fail("", broken_link(self.path) or missing or f"{what} not found")
         if self.path.is_dir():
             self.fail("", f"is a folder, not {what}" + (" (a capture's lights are its lights.json)"
                                                          if what == LIGHTS_FILE else ""))

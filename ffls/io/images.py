@@ -58,7 +58,7 @@ __all__ = [
     "check_one_colour_kind",
     "check_one_bit_depth",
     "nonfinite_message",
-    "transparency_message",
+    "check_opaque",
     "check_half_range",
     "HalfRangeError",
 ]
@@ -231,20 +231,21 @@ def _flush_c_stdio() -> None:
         ctypes.CDLL(None).fflush(None)
 
 
-def transparency_message(img: "ImageData") -> str | None:
-    """What is wrong with an integer image (PNG, TIFF) that has transparent pixels, or None.
+def check_opaque(img: "ImageData", advice: str, path=None) -> None:
+    """Refuse an integer image (PNG, TIFF) that has transparent pixels, naming ``path`` (default
+    the image's) and adding ``advice``, what to do instead.
 
     Its colour is not premultiplied, so under alpha < 1 it is undefined: a capture's photo or a
     bracket's image with such pixels is refused (an EXR's RGB is premultiplied by convention: the
-    radiance, whatever its alpha). The callers add what to do instead.
+    radiance, whatever its alpha).
     """
     if img.alpha is None or img.bit_depth not in (8, 16):
-        return None
+        return
     clear = float(np.mean(img.alpha < 1.0))
     if clear == 0:
-        return None
-    return f"has transparent pixels (alpha below 1 in {100 * clear:.3g}% of them): the colour under an " \
-           "unpremultiplied alpha is undefined"
+        return
+    raise InputError(f"has transparent pixels (alpha below 1 in {100 * clear:.3g}% of them): the colour under an "
+                     f"unpremultiplied alpha is undefined; {advice}", img.path if path is None else path)
 
 
 class HalfRangeError(OutputError, ValueError):

@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.io.images import (ImageData, check_one_colour_kind, check_one_orientation, image_header, read_image,
-                            transparency_message)
+from ffls.io.images import (ImageData, check_one_colour_kind, check_one_orientation, check_opaque, image_header,
+                            read_image)
 from ffls.radiance.photos import linearise
 
 __all__ = ["SATURATION", "JSON_ENCODING_FORMS", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
@@ -274,9 +274,7 @@ def _read_all(paths) -> list[ImageData]:
     check_one_colour_kind(paths, heads=heads, what="bracketed images", whole="a bracket")
     imgs = [read_image(p) for p in paths]
     for im in imgs:
-        clear = transparency_message(im)
-        if clear:
-            raise InputError(f"{clear}; export the bracket without alpha", im.path)
+        check_opaque(im, "export the bracket without alpha")
     for im in imgs[1:]:
         if im.shape != imgs[0].shape:
             raise InputError(f"image size {im.shape[1]}x{im.shape[0]} differs from {imgs[0].shape[1]}x"

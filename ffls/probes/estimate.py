@@ -447,8 +447,9 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
     kw = {"nonnegative": nonnegative, "ambient": ambient, penalty: 0.0 if by_cv else smoothness, "rcond": rcond}
     rounds_by_rule = sources in ("auto", "adaptive") and criterion == "cv"  # the adaptive set's round by ``rule``
     up = None
+    plane_up = np.asarray(probe.plane.normal if probe.plane is not None else (0.0, 0.0, 1.0), dtype=np.float64)
     if ground:
-        up = np.asarray(probe.plane.normal if probe.plane is not None else (0.0, 0.0, 1.0), dtype=np.float64)
+        up = plane_up
         kw["ground"] = up
         notes.append(f"ground plane: sources above the plane of normal ({up[0]:+.2f}, {up[1]:+.2f}, {up[2]:+.2f})"
                      f"{'' if probe.plane is not None else ' (no plane in probe.json: the world +Z)'}, the light "
@@ -481,12 +482,11 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
 
     try:
         if azimuths > 1:
-            world_up = np.asarray(probe.plane.normal if probe.plane is not None else (0.0, 0.0, 1.0), dtype=np.float64)
-            fits, parts = oriented_fits(N, horizon_rotations(world_up, azimuths), one)
+            fits, parts = oriented_fits(N, horizon_rotations(plane_up, azimuths), one)
             fit = average_fits(fits, V)
             chosen = tuple(int(sel.chosen) for sel, _ in parts)
             weights = [float(reg.chosen) for _, reg in parts] if by_cv else []
-            u = world_up
+            u = plane_up
             notes.append(f"the source hierarchy with a vertex on the world's up ({u[0]:+.2f}, {u[1]:+.2f}, {u[2]:+.2f}"
                          f"{'' if probe.plane is not None else ': no plane in probe.json, +Z'}) "
                          f"in {azimuths} azimuths {HIERARCHY_PERIOD_DEG / azimuths:g} degrees apart, the same "

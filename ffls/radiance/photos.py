@@ -22,7 +22,7 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.io.capture import CAPTURE_FILE
-from ffls.io.images import ImageData, read_image, transparency_message
+from ffls.io.images import ImageData, check_opaque, read_image
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 
 __all__ = ["Photo", "linearise", "encoding_unknown", "unknown_encoding_message", "read_photo", "load_photo",
@@ -161,10 +161,7 @@ def _check_photo(capture, i: int, img: ImageData) -> None:
     """The photo's size against ``image_size``, and no transparency in an integer photo: a PNG's or
     TIFF's colour is not premultiplied, so under alpha < 1 it is undefined (an EXR's is
     premultiplied by convention: its RGB is the radiance, and its alpha is ignored)."""
-    clear = transparency_message(img)
-    if clear:
-        raise InputError(f"{clear}; export the photos without alpha (an object's mask goes to --mask)",
-                         capture.image_paths[i])
+    check_opaque(img, "export the photos without alpha (an object's mask goes to --mask)", capture.image_paths[i])
     if capture.image_size is not None:
         h, w = img.shape
         if (w, h) != tuple(capture.image_size):

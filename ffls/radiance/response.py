@@ -20,7 +20,7 @@ import numpy as np
 
 from ffls.errors import InputError, not_a_regular_file
 from ffls.io.capture import parse_json, read_json_text
-from ffls.io.images import check_one_orientation, image_header, read_image, transparency_message
+from ffls.io.images import check_one_orientation, check_opaque, image_header, read_image
 from ffls.io.probe import exposure_time_problem
 from ffls.io.response import save_response
 
@@ -256,9 +256,7 @@ def read_bracket(folder: str | os.PathLike):
     images = []
     for p, header in zip(paths, heads):
         data = read_image(p, working_space=False)  # (its one line: not found, a folder, truncated, ...)
-        clear = transparency_message(data)
-        if clear:
-            raise InputError(f"{clear}; export the bracket without alpha", p)
+        check_opaque(data, "export the bracket without alpha", p)
         if data.bit_depth != 8 or (header is not None and header.grey):
             depth = {"half": "half-float", "float": "32-bit float"}.get(data.bit_depth, f"{data.bit_depth}-bit")
             raise InputError(f"bracketed images must be 8-bit RGB, got a {depth} "
