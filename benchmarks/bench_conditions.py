@@ -485,22 +485,32 @@ def _centre_check(folder: Path, truth: dict, first: dict, model) -> list | None:
     return out
 
 
+def cached_runs(a, flag: str, folders=None):
+    """``(name, folder)`` of each cached run a check reads: ``--cache``'s rows, or ``folders``
+    where the check takes them ([] when none are given), keeping ``--only``'s and those with a
+    ``lights_estimated.json``."""
+    if folders:
+        jobs = [(Path(f).name, Path(f)) for f in folders]
+    elif a.cache:
+        jobs = [(name, Path(a.cache) / f"c{i:02d}_{a.res}") for i, name in enumerate(CONDITIONS)]
+        jobs += [(name, Path(a.cache) / f"ds{i:02d}") for i, name in enumerate(SCENES)]
+    else:
+        raise SystemExit(f"{flag} needs --cache (a folder of earlier runs)"
+                         + (" or --folders" if folders is not None else ""))
+    return [(name, folder) for name, folder in jobs
+            if not (a.only and not any(o in name for o in a.only)) and (folder / "lights_estimated.json").exists()]
+
+
 def main_truth_check(a) -> None:
     """``--truth-check``: :func:`truth_check` on each cached run; a Markdown table and JSON."""
-    if not a.cache:
-        raise SystemExit("--truth-check needs --cache (a folder of earlier runs)")
-    jobs = [(name, f"c{i:02d}_{a.res}") for i, name in enumerate(CONDITIONS)]
-    jobs += [(name, f"ds{i:02d}") for i, name in enumerate(SCENES)]
+    jobs = cached_runs(a, "--truth-check")
     out = []
     print("| condition | s | tau | sphere error / model sd | pair correlation | photo / independent variance | "
           "photos' RMS error | independent part | common bound | cone factor | factor needed | "
           "needed, independent part only | shape factor | away from layout centre: mean, share | "
           "actual centre error / g, per sphere | sphere coverage (without common mode) | photo coverage |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for name, sub in jobs:
-        folder = Path(a.cache) / sub
-        if (a.only and not any(o in name for o in a.only)) or not (folder / "lights_estimated.json").exists():
-            continue
+    for name, folder in jobs:
         r = {"condition": name, **truth_check(folder)}
         out.append(r)
         if "skipped" in r:
@@ -654,20 +664,12 @@ def bias_check(folder: Path, direction: str = "toward_centre") -> dict:
 def main_bias_check(a) -> None:
     """``--bias-check``: :func:`bias_check` (both :data:`BIAS_DIRECTIONS`) on each cached run, or on
     the ``--folders`` given; a Markdown table and JSON."""
-    if a.folders:
-        jobs = [(Path(f).name, Path(f)) for f in a.folders]
-    elif a.cache:
-        jobs = [(name, Path(a.cache) / f"c{i:02d}_{a.res}") for i, name in enumerate(CONDITIONS)]
-        jobs += [(name, Path(a.cache) / f"ds{i:02d}") for i, name in enumerate(SCENES)]
-    else:
-        raise SystemExit("--bias-check needs --cache (a folder of earlier runs) or --folders")
+    jobs = cached_runs(a, "--bias-check", a.folders or [])
     out = []
     print("| condition | direction | photos (2+ spheres) | explained | photo / independent variance: errors, "
           "remainder | median abs(sum w h) | p | coverage (median cone) | with the term |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, folder in jobs:
-        if (a.only and not any(o in name for o in a.only)) or not (folder / "lights_estimated.json").exists():
-            continue
         for direction in BIAS_DIRECTIONS:
             r = {"condition": name, **bias_check(folder, direction)}
             out.append(r)
@@ -957,18 +959,12 @@ def main(argv=None):
 
 def main_shared_check(a) -> None:
     """``--shared-check``: :func:`shared_check` on each cached run; a Markdown table and JSON."""
-    if not a.cache:
-        raise SystemExit("--shared-check needs --cache (a folder of earlier runs)")
-    jobs = [(name, f"c{i:02d}_{a.res}") for i, name in enumerate(CONDITIONS)]
-    jobs += [(name, f"ds{i:02d}") for i, name in enumerate(SCENES)]
+    jobs = cached_runs(a, "--shared-check")
     out = []
     print("| condition | photos | encoding exponent (deg) | ground ratios' SE (deg) | ground ratios' spread (deg) | "
           "common-mode bound now (deg) | photos' RMS error (deg) | mean elevation error (deg) |")
     print("|---|---|---|---|---|---|---|---|")
-    for name, sub in jobs:
-        folder = Path(a.cache) / sub
-        if (a.only and not any(o in name for o in a.only)) or not (folder / "lights_estimated.json").exists():
-            continue
+    for name, folder in jobs:
         r = {"condition": name, **shared_check(folder)}
         out.append(r)
         if "skipped" in r:

@@ -238,6 +238,8 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
     size = None
     seen = {}
     n = len(images) if images is not None else len(paths)
+    retry = not legacy and legacy_differs(board, squares)
+    decoded = [] if retry and images is None else None  # (the legacy retry reuses them, not the files)
     for i in range(n):
         name = paths[i] if i < len(paths) else Path(f"image {i}")
         if images is not None:
@@ -250,6 +252,8 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
             im = cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)
         if im.dtype != np.uint8:
             raise InputError(f"calibration photos must be 8-bit, got {im.dtype}", name)
+        if decoded is not None:
+            decoded.append(im)
         if size is None:
             size = (im.shape[1], im.shape[0])
         elif size != (im.shape[1], im.shape[0]):
@@ -272,11 +276,11 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
         obj_pts.append(found[0])
         img_pts.append(found[1])
         used.append(str(name))
-    if (len(obj_pts) < 3 and not legacy and legacy_differs(board, squares)
+    if (len(obj_pts) < 3 and retry
             and any(detect_board(im, board, squares, square_size, marker_size, dictionary, legacy=True) is not None
                     for im in missed)):
-        return calibrate_camera(image_paths, board, squares, square_size, marker_size, dictionary, fix_k3, images,
-                                legacy=True)
+        return calibrate_camera(image_paths, board, squares, square_size, marker_size, dictionary, fix_k3,
+                                images if decoded is None else decoded, legacy=True)
     if len(obj_pts) < 3:
         where = paths[0].parent if paths else None
         raise InputError(f"a {board} board ({squares[0]}x{squares[1]} squares) was found in {len(obj_pts)} of"

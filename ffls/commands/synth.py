@@ -262,27 +262,10 @@ def check_flags_in_effect(args: argparse.Namespace) -> None:
 def _object_clearance(scene, c) -> float:
     """Distance (m) from the point ``c`` (3,) to the nearest solid of the scene's object (inf
     without one): its pedestal (a box), body (a sphere) and capsule."""
-    import numpy as np
-
-    from ffls.synth.geometry import Box, Capsule, Sphere
     from ffls.synth.scene import LABEL_OBJECT
 
-    best = np.inf
-    for p in scene.primitives():
-        if getattr(p, "label", None) != LABEL_OBJECT:
-            continue
-        if isinstance(p, Sphere):
-            d = np.linalg.norm(c - np.asarray(p.center)) - p.radius
-        elif isinstance(p, Box):
-            d = np.linalg.norm(np.maximum(np.maximum(np.asarray(p.lo) - c, c - np.asarray(p.hi)), 0.0))
-        elif isinstance(p, Capsule):
-            a, b = np.asarray(p.a, dtype=np.float64), np.asarray(p.b, dtype=np.float64)
-            t = np.clip(np.dot(c - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
-            d = np.linalg.norm(c - (a + t * (b - a))) - p.radius
-        else:
-            continue
-        best = min(best, float(d))
-    return best
+    return min((p.distance(c) for p in scene.primitives()
+                if getattr(p, "label", None) == LABEL_OBJECT and hasattr(p, "distance")), default=float("inf"))
 
 
 def check_spheres_in_frame(args: argparse.Namespace, scene) -> None:

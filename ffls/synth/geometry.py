@@ -68,6 +68,10 @@ class Sphere:
     def normal(self, p):
         return (p - np.asarray(self.center)) / self.radius
 
+    def distance(self, p) -> float:
+        """Signed distance (m) from the point ``p`` (3,) to the surface (negative inside)."""
+        return float(np.linalg.norm(np.asarray(p) - np.asarray(self.center)) - self.radius)
+
 
 @dataclass(frozen=True)
 class Box:
@@ -95,6 +99,11 @@ class Box:
         n = np.zeros_like(p)
         n[np.arange(len(p)), axis] = np.sign(q[np.arange(len(p)), axis])
         return n
+
+    def distance(self, p) -> float:
+        """Distance (m) from the point ``p`` (3,) to the box (0 inside)."""
+        p = np.asarray(p)
+        return float(np.linalg.norm(np.maximum(np.maximum(np.asarray(self.lo) - p, p - np.asarray(self.hi)), 0.0)))
 
 
 @dataclass(frozen=True)
@@ -153,11 +162,19 @@ class Capsule:
         ivs = self.intervals(o, d)
         return np.minimum.reduce([i[0] for i in ivs]), np.maximum.reduce([i[1] for i in ivs])
 
-    def normal(self, p):
-        a, b = np.asarray(self.a), np.asarray(self.b)
+    def _offset(self, p):
+        """``p`` (..., 3) minus its nearest point on the segment ``a``-``b``."""
+        a, b = np.asarray(self.a, dtype=np.float64), np.asarray(self.b, dtype=np.float64)
         ax = b - a
         t = np.clip(((p - a) @ ax) / (ax @ ax), 0.0, 1.0)
-        return normalize(p - (a + t[:, None] * ax))
+        return p - (a + t[..., None] * ax)
+
+    def normal(self, p):
+        return normalize(self._offset(p))
+
+    def distance(self, p) -> float:
+        """Signed distance (m) from the point ``p`` (3,) to the surface (negative inside)."""
+        return float(np.linalg.norm(self._offset(np.asarray(p, dtype=np.float64))) - self.radius)
 
 
 @dataclass(frozen=True)
