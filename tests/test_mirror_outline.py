@@ -555,8 +555,8 @@ def test_changing_limb_radius_taken_where_sectors_beside_the_limb_spread_its_edg
 def test_changing_limb_edges_per_ray_and_their_median_is_the_radius():
     """The band's outer edge per ray (the radius step's evidence, read by
     ``benchmarks/mirror_limb_profile.py --band``): each ray of the band of the test above falls
-    halfway within 0.5 px of its 20 px limb (the disc drawn on the pixel grid); rays that leave the frame give NaN; the radius is the
-    median of the rays' edges; seen from 3 px off the centre, the edges trace the offset circle
+    halfway within 0.5 px of its 20 px limb (the disc drawn on the pixel grid); rays that leave
+    the frame give NaN; the radius is the median of the rays' edges; seen from 3 px off the centre, the edges trace the offset circle
     (x - 3 cos: -3 px to the right, +3 px to the left)."""
     from scipy.ndimage import gaussian_filter
 
