@@ -13,9 +13,15 @@ Printed per ball:
   sector (0 = image right, 90 = down; the count in brackets);
 * medians over ``t`` bins (0.5 px) of the mean luminance (``SequenceStats.mean``), the strength of
   the edges that change with the light (:func:`ffls.spheres.detect.consistent_edge_strength`
-  ``centered``) and of the edges that hold in the photos (not centered).
+  ``centered``) and of the edges that hold in the photos (not centered);
+* with ``--band``, the outer edge of the changing edges' band along 180 rays from the found
+  centre, as the chrome radius step reads it (:func:`ffls.spheres.mirror_outline.changing_limb_edges`):
+  the edge points' median ``t`` and per sector, their distances' median absolute deviation (the
+  step's spread test, :func:`ffls.spheres.mirror_outline.changing_limb_radius`, refuses over
+  1 px), and the outline fitted on them (:func:`ffls.spheres.detect.fit_outline`, centre and
+  radius): its centre offset and radial offset, as for the found outline.
 
-Usage: ``OMP_NUM_THREADS=1 python benchmarks/mirror_limb_profile.py CAPTURE ...``
+Usage: ``OMP_NUM_THREADS=1 python benchmarks/mirror_limb_profile.py CAPTURE ... [--band]``
 """
 from __future__ import annotations
 
@@ -28,8 +34,10 @@ from scipy.spatial import cKDTree
 
 from ffls.camera.projection import project_points
 from ffls.io.capture import load_capture
-from ffls.spheres.detect import consistent_edge_strength, find_spheres_in_capture, silhouette_px
+from ffls.spheres.detect import (DetectionCamera, consistent_edge_strength, find_spheres_in_capture, fit_outline,
+                                 silhouette_px)
 from ffls.spheres.estimate import decode_photos
+from ffls.spheres.mirror_outline import changing_limb_edges
 
 KINDS = ("mirror", "glossy_black")
 
@@ -44,9 +52,49 @@ def signed_distance(points, outline, center) -> np.ndarray:
     return np.where(far, d, -d)
 
 
+def by_sector(t, ang) -> str:
+    """Median of ``t`` per 30-degree sector of ``ang`` (degrees; 0 = image right, 90 = down)."""
+    return " ".join(f"{s}:{np.median(t[m]):+.2f}({m.sum()})" if (m := (ang >= s) & (ang < s + 30)).any()
+                    else f"{s}:-" for s in range(0, 360, 30))
+
+
+def outline_offsets(ft, outline, cpx) -> str:
+    """A fit's centre offset (x, y) from the true centre ``cpx`` and its outline's mean signed
+    distance from the true ``outline`` (pixels)."""
+    found_outline = silhouette_px(np.asarray(ft.K, dtype=np.float64), ft.dist, ft.center_cam, ft.radius, n=1440)
+    dr = float(np.mean(signed_distance(found_outline, outline, cpx)))
+    return (f"centre offset {ft.center_px[0] - cpx[0]:+.2f}, {ft.center_px[1] - cpx[1]:+.2f} px "
+            f"({np.hypot(*(np.asarray(ft.center_px) - cpx)):.2f}); outline {dr:+.2f} px from the silhouette")
+
+
+def band_lines(strength, ft, outline, cpx, R, shape) -> list[str]:
+    """The ``--band`` lines of one ball (the module's docstring)."""
+    c = np.asarray(ft.center_px, dtype=np.float64)
+    e = changing_limb_edges(strength, c, float(ft.radius_px))
+    ok = np.isfinite(e)
+    if ok.sum() < 8:
+        return ["  band's outer edge: fewer than 8 rays"]
+    th = np.arange(e.size) * 2 * np.pi / e.size
+    P = c + e[ok, None] * np.stack([np.cos(th[ok]), np.sin(th[ok])], axis=1)
+    t = signed_distance(P, outline, cpx)
+    ang = np.degrees(np.arctan2(P[:, 1] - cpx[1], P[:, 0] - cpx[0])) % 360
+    med = float(np.median(e[ok]))
+    lines = [f"  band's outer edge ({int(ok.sum())} rays): median t {np.median(t):+.2f} px, spread (MAD) "
+             f"{np.median(np.abs(e[ok] - med)):.2f} px; by sector " + by_sector(t, ang)]
+    cam = DetectionCamera("pinhole", np.asarray(ft.K, dtype=np.float64), ft.dist,
+                          np.asarray(ft.world_from_camera, dtype=np.float64), R, shape)
+    try:
+        fit = fit_outline(P, cam, c, float(ft.radius_px), ft.source)
+        lines.append("  outline fitted on the band's edges: " + outline_offsets(fit, outline, cpx))
+    except ValueError as err:
+        lines.append(f"  outline fitted on the band's edges: failed ({err})")
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("captures", type=Path, nargs="+")
+    ap.add_argument("--band", action="store_true", help="the changing band's outer edge per ray, and a fit on it")
     a = ap.parse_args(argv)
     bins = np.arange(-4.0, 4.01, 0.5)
     for folder in a.captures:
@@ -72,17 +120,16 @@ def main(argv=None) -> int:
             K = np.asarray(ft.K, dtype=np.float64)
             outline = silhouette_px(K, ft.dist, C, float(truth["sphere_radius"]), n=1440)
             cpx = project_points(C[None], K, ft.dist)[0]
-            found_outline = silhouette_px(K, ft.dist, ft.center_cam, ft.radius, n=1440)
-            dr = float(np.mean(signed_distance(found_outline, outline, cpx)))
-            print(f"{folder.name} {mats[j]} ({ft.source}): centre offset {ft.center_px[0] - cpx[0]:+.2f}, "
-                  f"{ft.center_px[1] - cpx[1]:+.2f} px; outline {dr:+.2f} px from the silhouette")
+            print(f"{folder.name} {mats[j]} ({ft.source}): " + outline_offsets(ft, outline, cpx))
             P = np.asarray(ft.edge_px, dtype=np.float64).reshape(-1, 2)
             if len(P):
                 t = signed_distance(P, outline, cpx)
                 ang = np.degrees(np.arctan2(P[:, 1] - cpx[1], P[:, 0] - cpx[0])) % 360
-                sec = [f"{s}:{np.median(t[m]):+.2f}({m.sum()})" if (m := (ang >= s) & (ang < s + 30)).any()
-                       else f"{s}:-" for s in range(0, 360, 30)]
-                print(f"  outline points: median t {np.median(t):+.2f} px; by sector " + " ".join(sec))
+                print(f"  outline points: median t {np.median(t):+.2f} px; by sector " + by_sector(t, ang))
+            if a.band and "changing edges" in maps:
+                for line in band_lines(maps["changing edges"], ft, outline, cpx, float(truth["sphere_radius"]),
+                                       maps["mean image"].shape):
+                    print(line)
             H, W = maps["mean image"].shape
             r = float(np.max(np.hypot(*(outline - cpx).T))) + 6
             y0, y1 = max(int(cpx[1] - r), 0), min(int(cpx[1] + r) + 1, H)

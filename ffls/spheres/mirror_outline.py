@@ -456,9 +456,62 @@ def limb_radius(log_lum, center, radius, *, r_range=(0.97, 1.1), n_angles: int =
     return float(np.median([v[0] for v in best.values()]))
 
 
+def changing_limb_edges(strength, center, radius, *, band_px: float = 3.0, outside_px=(4.0, 7.0),
+                        level: float = 0.5, n_angles: int = 180, step_px: float = 0.25) -> np.ndarray:
+    """Per ray, the outer edge of the band of edges that change with the light (see
+    :func:`changing_limb_radius`, which takes their median).
+
+    Along ``n_angles`` rays from ``center`` (ray ``k`` at ``2 pi k / n_angles`` from the image's
+    +x, toward +y), ``strength`` is sampled (bilinear, 0.7-pixel Gaussian along the ray) from
+    ``radius - band_px - 1`` to ``radius + outside_px[1]``; on each ray the peak within ``band_px``
+    of ``radius`` and the outside level (the median over ``outside_px`` beyond ``radius``) are
+    taken, and the edge is where the profile first falls, going outward from the peak, below
+    ``level`` of the way from the outside level to the peak (linear between samples).
+
+    Parameters
+    ----------
+    strength : (H, W) float
+    center : (2,) float
+        Pixels (x, y).
+    radius : float
+        Pixels.
+    band_px, outside_px, level, n_angles, step_px
+        As :func:`changing_limb_radius`.
+
+    Returns
+    -------
+    (n_angles,) float
+        Each ray's edge, pixels from ``center``; NaN for a ray that leaves the frame, whose peak is
+        not above the outside level, or that does not fall below the level.
+    """
+    c = np.asarray(center, dtype=np.float64).reshape(2)
+    edges = np.full(n_angles, np.nan)
+    rs = np.arange(max(radius - band_px - 1.0, step_px), radius + outside_px[1] + step_px / 2, step_px)
+    inside, prof, _ = _ray_profiles(strength, c, rs, n_angles, step_px)
+    whole = np.all(inside, axis=1)
+    in_band = np.abs(rs - radius) <= band_px
+    outer = (rs >= radius + outside_px[0]) & (rs <= radius + outside_px[1])
+    if not (in_band.any() and outer.any()):
+        return edges
+    first = int(np.flatnonzero(in_band)[0])
+    for a in np.flatnonzero(whole):
+        p = prof[a]
+        k0 = first + int(np.argmax(p[in_band]))
+        out = float(np.median(p[outer]))
+        if not p[k0] > out:
+            continue
+        thr = out + level * (p[k0] - out)
+        below = np.flatnonzero(p[k0 + 1:] < thr)
+        if below.size == 0:
+            continue
+        k = k0 + int(below[0])  # p[k] >= thr > p[k + 1]
+        edges[a] = rs[k] + (p[k] - thr) / (p[k] - p[k + 1]) * step_px
+    return edges
+
+
 def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outside_px=(4.0, 7.0),
                          level: float = 0.5, n_angles: int = 180, step_px: float = 0.25,
-                         min_angles: int = 30, max_spread_px: float = 1.0) -> float | None:
+                         min_angles: int = 30, max_spread_px: float | None = None) -> float | None:
     """A mirror ball's radius from the outer edge of the band of edges that change with the light.
 
     Inside a chrome ball the reflected scene changes with each light (reflected highlights and
@@ -468,18 +521,16 @@ def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outs
     ``centered``) is a plateau over the ball's inside that peaks just inside the limb and falls to
     the ground's level outside it. A pixel on the silhouette integrates part ball, part ground
     (a lens and sensor blur the limb over a pixel or more): the peak of the band lies 0.5-1.5 px
-    inside the silhouette, its outer edge on it. Along ``n_angles`` rays from ``center``,
-    ``strength`` is sampled (bilinear, 0.7-pixel Gaussian along the ray) from ``radius -
-    band_px - 1`` to ``radius + outside_px[1]``; on each ray the peak within ``band_px`` of
-    ``radius`` and the outside level (the median over ``outside_px`` beyond ``radius``) are taken,
-    and the edge is where the profile first falls, going outward from the peak, below ``level``
-    of the way from the outside level to the peak (linear between samples). The median of the
-    edges' distances is the radius. Rays leaving the frame and rays whose peak is not above the
-    outside level are skipped. None with fewer than ``min_angles`` edges, or where the edges'
-    median absolute deviation from their median exceeds ``max_spread_px``: the band's edge is then
-    no circle about the outline's centre (a neighbouring sphere, shadows crossing it; on the
-    renders of ``bench_conditions.py`` a lone chrome ball's edges spread 0.4-0.9 px, the chrome
-    ball beside a grey one in the calibration shot 1.7 px).
+    inside the silhouette, its outer edge on it. The edge is found per ray
+    (:func:`changing_limb_edges`), and the median of the edges' distances is the radius. None with
+    fewer than ``min_angles`` edges, or, with ``max_spread_px``, where the edges' median absolute
+    deviation from their median exceeds it. The edges spread by what changes with the light just
+    beside the limb (the ball's cast and contact shadows outside it, the dark cap's edge and the
+    reflected horizon inside it: 1-4 px in some 30-degree sectors), not by the median's error: an
+    anti-aliased lone chrome ball whose edges spread 1.38 px (``bench_conditions.py``'s c21) has
+    their median 0.13 px inside its silhouette, and refusing it left the outline 1.64 px short
+    (docs/spheres.md, ``i-aa15``). The caller's
+    :data:`ffls.spheres.detect.MIRROR_LIMB_MAX_CHANGE` bounds the change instead.
 
     Parameters
     ----------
@@ -494,38 +545,23 @@ def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outs
     n_angles : int
     step_px : float
     min_angles : int
-    max_spread_px : float
+    max_spread_px : float or None
+        None (the default): no spread test.
 
     Returns
     -------
     float or None
         Pixels.
     """
-    c = np.asarray(center, dtype=np.float64).reshape(2)
-    rs = np.arange(max(radius - band_px - 1.0, step_px), radius + outside_px[1] + step_px / 2, step_px)
-    inside, prof, _ = _ray_profiles(strength, c, rs, n_angles, step_px)
-    whole = np.all(inside, axis=1)
-    in_band = np.abs(rs - radius) <= band_px
-    outer = (rs >= radius + outside_px[0]) & (rs <= radius + outside_px[1])
-    if not (whole.any() and in_band.any() and outer.any()):
-        return None
-    edges = []
-    first = int(np.flatnonzero(in_band)[0])
-    for p in prof[whole]:
-        k0 = first + int(np.argmax(p[in_band]))
-        out = float(np.median(p[outer]))
-        if not p[k0] > out:
-            continue
-        thr = out + level * (p[k0] - out)
-        below = np.flatnonzero(p[k0 + 1:] < thr)
-        if below.size == 0:
-            continue
-        k = k0 + int(below[0])  # p[k] >= thr > p[k + 1]
-        edges.append(rs[k] + (p[k] - thr) / (p[k] - p[k + 1]) * step_px)
+    edges = changing_limb_edges(strength, center, radius, band_px=band_px, outside_px=outside_px, level=level,
+                                n_angles=n_angles, step_px=step_px)
+    edges = edges[np.isfinite(edges)]
     if len(edges) < min_angles:
         return None
     r = float(np.median(edges))
-    return r if float(np.median(np.abs(np.asarray(edges) - r))) <= max_spread_px else None
+    if max_spread_px is not None and float(np.median(np.abs(edges - r))) > max_spread_px:
+        return None
+    return r
 
 
 def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: float = 0.5,
