@@ -281,16 +281,19 @@ def run(args) -> int:
 
 
 def tilt_note(lights) -> str:
-    """The line for a capture without ``world_from_camera``: the camera's tilt fitted to the matte
-    spheres (``camera_tilt_deg`` of :func:`ffls.spheres.estimate.estimate_lights`), or that the
-    image's up was taken as the world's."""
-    tilt = next((e["camera_tilt_deg"] for e in lights.extra or () if e.get("camera_tilt_deg") is not None), None)
-    if tilt is None:
+    """The line for a capture without ``world_from_camera``: the camera's tilt and roll fitted to the
+    matte spheres (``camera_tilt_deg``, ``camera_roll_deg`` of
+    :func:`ffls.spheres.estimate.estimate_lights`), or that the image's up was taken as the world's."""
+    fitted = next((e for e in lights.extra or () if e.get("camera_tilt_deg") is not None), None)
+    if fitted is None:
         return ("capture.json gives no camera.world_from_camera: the world's up is taken as the image's, so the "
                 "ground bounce is modelled around the image's up, without the spheres' own shadows; for a camera "
                 "looking down, give its pose, or only its tilt (docs/formats.md, \"The camera's tilt\")")
+    roll = ("its roll not fitted (looking down too steeply to show it)" if fitted.get("camera_roll_deg") is None
+            else f"rolled {fitted['camera_roll_deg']:.1f} deg about its axis")
     return (f"capture.json gives no camera.world_from_camera: the ground under the spheres was fitted to their "
-            f"shading, the camera looking {tilt:.1f} deg down (the lights stay in the image's frame: image up "
+            f"shading, the camera looking {fitted['camera_tilt_deg']:.1f} deg down, {roll} (the lights stay in "
+            f"the image's frame: image up "
             f"+Z; docs/spheres.md, 'Without the camera's pose'); to fix it, give the pose, or only its tilt "
             f"(docs/formats.md, \"The camera's tilt\")")
 
