@@ -1921,11 +1921,16 @@ TILT_SEARCH_DEG = (0.0, 80.0, 10.0, 0.5)
 #: it is less than half the tilt's, which the shading gives to 1-2 deg (docs/spheres.md).
 ROLL_SEARCH_DEG = (10.0, 60.0, 0.5)
 
+#: Significance at which the photos must agree that the fitted roll fits their shading better than
+#: none (:func:`_fits_better`), or the roll is not fitted.
+ROLL_EVIDENCE = 0.05
+
 #: Photos (spread over the sequence: :func:`first_pass_photos`) whose estimates the tilt search
-#: compares (:func:`_estimate_with_fitted_tilt`): its coarse grid's (which only brackets the least
-#: misfit), and its refinements'; every photo is then fitted once, in the frame found. A capture of
-#: at most ``refinement`` photos is searched on all of them (its search's fit is the result).
-TILT_SEARCH_PHOTOS = {"grid": 6, "refinement": 24}
+#: compares (:func:`_estimate_with_fitted_tilt`); every photo is then fitted once, in the frame
+#: found. A capture of at most this many photos is searched on all of them (the search's fit in
+#: the frame found is the result). (A grid on 6 of 12 photos bracketed another tilt than all 12 on
+#: a rolled capture: 33.4 against 30.0 deg.)
+TILT_SEARCH_PHOTOS = 24
 
 
 def tilted_world_from_camera(tilt_deg: float, roll_deg: float = 0.0) -> np.ndarray:
@@ -1945,20 +1950,44 @@ def tilted_world_from_camera(tilt_deg: float, roll_deg: float = 0.0) -> np.ndarr
     return M
 
 
+def _matte_residuals(lights) -> dict:
+    """``(photo, sphere) -> RMS`` shading residual (the ``rms`` of the sphere's record) of every matte
+    sphere fitted in a photo with a light."""
+    return {(i, k): float(r["rms"]) for i, e in enumerate(lights.extra or ()) if e.get("status", "ok") == "ok"
+            for k, r in enumerate(e.get("spheres") or ())
+            if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None}
+
+
 def _matte_misfit(lights) -> float:
     """Interquartile mean (:func:`scipy.stats.trim_mean`, a quarter cut from each end) over the photos
-    with a light of their matte spheres' RMS shading residual (the ``rms`` of each sphere's record):
-    a few photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean,
-    and a median of one ball's 12 photos wanders. NaN without any."""
-    rms = [float(r["rms"]) for e in lights.extra or () if e.get("status", "ok") == "ok"
-           for r in e.get("spheres") or ()
-           if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None]
+    with a light of their matte spheres' RMS shading residual (:func:`_matte_residuals`): a few
+    photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean, and
+    a median of one ball's 12 photos wanders. NaN without any."""
+    rms = list(_matte_residuals(lights).values())
     from scipy.stats import trim_mean
 
     return float(trim_mean(rms, 0.25)) if rms else float("nan")
 
 
-def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, coarse=None, roll=ROLL_SEARCH_DEG) -> tuple[float, float, dict]:
+def _fits_better(before, after, level: float) -> bool:
+    """Whether the estimates ``after`` fit the matte spheres' shading better than ``before`` photo by
+    photo: the one-sided Wilcoxon signed-rank test (:func:`scipy.stats.wilcoxon`) of the log ratios
+    of each sphere's residual in each photo (:func:`_matte_residuals`) rejects "no better" at
+    ``level``. The misfit's curves are rough at the 1% level (a frame moves pixels across the
+    terminator and the own shadow's edge), and a roll's gain is about as small: its least misfit
+    alone would be a roll fitted to that roughness."""
+    a, b = _matte_residuals(before), _matte_residuals(after)
+    d = np.log([b[k] / a[k] for k in a if k in b and a[k] > 0 and b[k] > 0])
+    d = d[d != 0]
+    if len(d) < 6:
+        return False
+    from scipy.stats import wilcoxon
+
+    return bool(wilcoxon(d, alternative="less").pvalue < level)
+
+
+def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, roll=ROLL_SEARCH_DEG,
+                    evidence: float = ROLL_EVIDENCE) -> tuple[float, float, dict]:
     """The camera's tilt, and its roll, that the matte spheres' shading fits best, for a capture
     without ``world_from_camera``.
 
@@ -1968,28 +1997,31 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, coarse=None, roll=ROLL_SEARCH_D
     roll_deg)`` estimates every light with the ground under a camera tilted and rolled that much
     (:func:`tilted_world_from_camera`) and returns the :class:`~ffls.io.capture.Lights`. The tilt
     minimising :func:`_matte_misfit` (the interquartile mean of the matte spheres' residuals) is
-    bracketed on a grid (with ``coarse``, on its estimates: a sample of the photos), then refined
-    on ``fit``'s (:func:`scipy.optimize.minimize_scalar`, bounded); then, where the tilt found is at
-    most ``roll``'s largest (:data:`ROLL_SEARCH_DEG`), the roll at that tilt, and where a roll fits
-    better than none, the tilt at that roll within half a grid step (one bounded refinement each:
-    the two turn the ground's normal, seen from the camera, at about right angles).
+    found on a grid, then refined (:func:`scipy.optimize.minimize_scalar`, bounded); then, where
+    the tilt found is at most ``roll``'s largest (:data:`ROLL_SEARCH_DEG`), the roll at that tilt,
+    and where a roll fits better than none, the tilt at that roll within half a grid step (one
+    bounded refinement each:
+    the two turn the ground's normal, seen from the camera, at about right angles). The roll is
+    kept only where the photos agree that it fits better than the tilt alone (:func:`_fits_better`
+    at ``evidence``).
 
     Parameters
     ----------
     fit : callable
         ``fit(tilt_deg, roll_deg) -> Lights``.
     search : (lo, hi, step, tolerance) degrees
-    coarse : callable, optional
-        ``coarse(tilt_deg) -> Lights`` (no roll) for the grid; None: ``fit``'s.
     roll : (bound, largest tilt, tolerance) degrees, optional
         None: no roll.
+    evidence : float
+        The roll's significance level (:data:`ROLL_EVIDENCE`).
 
     Returns
     -------
     tilt_deg : float
         NaN when no matte sphere fitted (the bounce then does not depend on the tilt).
     roll_deg : float
-        NaN where not fitted (no tilt, or a tilt past ``roll``'s largest).
+        NaN where not fitted (no tilt, a tilt past ``roll``'s largest, or a roll the photos do not
+        agree fits better); 0 where no roll fits better at all.
     tried : dict
         ``(tilt, roll)`` (degrees) -> (misfit, Lights) of every ``fit`` made.
     """
@@ -2006,20 +2038,14 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, coarse=None, roll=ROLL_SEARCH_D
         m = tried[key][0]
         return m if np.isfinite(m) else np.inf
 
-    def grid_misfit(t: float) -> float:
-        if coarse is None:
-            return misfit(t)
-        m = _matte_misfit(coarse(float(t)))
-        return m if np.isfinite(m) else np.inf
-
     grid = np.arange(lo, hi + 0.5 * step, step)
-    costs = [grid_misfit(t) for t in grid]
+    costs = [misfit(t) for t in grid]
     if not np.isfinite(min(costs)):
         return float("nan"), float("nan"), tried
     k = int(np.argmin(costs))
     a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
     res = minimize_scalar(misfit, bounds=(a, b), method="bounded", options={"xatol": tol})
-    best = min((t for t, r in tried if r == 0.0), key=misfit)  # (the grid's too, where fitted on every photo)
+    best = min((t for t, r in tried if r == 0.0), key=misfit)
     tilt = float(res.x) if misfit(res.x) <= misfit(best) else best
     if roll is None or tilt > roll[1]:
         return tilt, float("nan"), tried
@@ -2029,11 +2055,15 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, coarse=None, roll=ROLL_SEARCH_D
     minimize_scalar(lambda r: misfit(tilt, r), bounds=(-roll[0], roll[0]), method="bounded",
                     options={"xatol": roll[2]})
     r = min((r for t, r in tried if t == tilt), key=lambda r: misfit(tilt, r))  # (0 where none fits better)
-    if r != 0.0:
-        minimize_scalar(lambda t: misfit(t, r), bounds=(max(tilt - 0.5 * step, lo), min(tilt + 0.5 * step, hi)),
-                        method="bounded", options={"xatol": tol})
-        tilt = min((t for t, q in tried if q == r), key=lambda t: misfit(t, r))
-    return tilt, r, tried
+    if r == 0.0:
+        return tilt, r, tried
+    minimize_scalar(lambda t: misfit(t, r), bounds=(max(tilt - 0.5 * step, lo), min(tilt + 0.5 * step, hi)),
+                    method="bounded", options={"xatol": tol})
+    rolled = min((t for t, q in tried if q == r), key=lambda t: misfit(t, r))
+    # kept where the photos agree that it fits better than the tilt alone; else not measured
+    if _fits_better(tried[(tilt, 0.0)][1], tried[(rolled, r)][1], evidence):
+        return rolled, r, tried
+    return tilt, float("nan"), tried
 
 
 def _lights_to_frame(lights, R: np.ndarray):
@@ -2231,7 +2261,7 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
     without a matte sphere's fit the image's up is the world's, as before).
 
     The search reads every photo's sphere values once and runs every frame's estimate in one
-    :class:`PhotoFitter` (one pool of processes), on samples of the photos
+    :class:`PhotoFitter` (one pool of processes), on a sample of the photos
     (:data:`TILT_SEARCH_PHOTOS`; ``stages``: the estimation's keywords, ``photo_options``:
     :func:`ffls.spheres.photo.estimate_photo`'s)."""
     from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
@@ -2251,13 +2281,11 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
             return _estimate_in_frame(posed(tilt_deg, roll_deg), spheres, False, workers, fitter=fitter,
                                       values=values, photos=photos, **stages, **photo_options)
 
-        grid, refined = (first_pass_photos(n, TILT_SEARCH_PHOTOS[k]) for k in ("grid", "refinement"))
-        tilt, roll, tried = fit_camera_tilt(
-            lambda t, r: fit(t, r, None if len(refined) == n else refined),
-            coarse=None if len(grid) == len(refined) else (lambda t: fit(t, photos=grid)))
+        sample = first_pass_photos(n, TILT_SEARCH_PHOTOS)
+        tilt, roll, tried = fit_camera_tilt(lambda t, r: fit(t, r, None if len(sample) == n else sample))
         rolled = float(roll) if np.isfinite(roll) else 0.0
         if np.isfinite(tilt):
-            found = tried[(tilt, rolled)][1] if len(refined) == n else fit(tilt, rolled)
+            found = tried[(tilt, rolled)][1] if len(sample) == n else fit(tilt, rolled)
     if not np.isfinite(tilt):
         return _estimate_in_frame(capture, spheres, progress, workers, values=values, **stages, **photo_options)
     to_default = DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ tilted_world_from_camera(tilt, rolled)[:3, :3].T
