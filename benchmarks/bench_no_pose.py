@@ -8,7 +8,7 @@ read noise), cuts each ``capture.json`` to the images and a camera without ``wor
 in the camera's frame: accepted, median / max error, the share inside the 95% cones, the
 camera tilt (and roll) found and the wall time of ``ffls lights`` (docs/spheres.md, "Without the
 camera's pose"). ``--roll DEG`` renders with the camera turned about its optical axis (``ffls synth
---camera-roll``: a tripod that is not level).
+--camera-roll``: a tripod that is not level); ``--fit-roll`` runs ``ffls lights --fit-roll``.
 
     cd benchmarks && OMP_NUM_THREADS=1 ../.venv/bin/python bench_no_pose.py --seeds 0 1 2 3 4 \\
         --lens long --camera orthographic --ffls ../.venv/bin/ffls --out /tmp/no_pose.json
@@ -78,6 +78,7 @@ def main(argv=None) -> int:
     ap.add_argument("--pose", action="store_true", help="keep the true world_from_camera (the reference)")
     ap.add_argument("--resolution", type=int, default=384)
     ap.add_argument("--roll", type=float, default=0.0, help="the camera's roll about its optical axis (deg)")
+    ap.add_argument("--fit-roll", action="store_true", help="run ffls lights --fit-roll")
     ap.add_argument("--ffls", default=str(Path(sys.executable).with_name("ffls")), help="the ffls to measure")
     ap.add_argument("--out", help="JSON of the rows")
     a = ap.parse_args(argv)
@@ -89,7 +90,8 @@ def main(argv=None) -> int:
             Rm = _without_pose(cal, a.camera, a.pose)
             out = Path(tmp) / f"lights{s}.json"
             t0 = time.perf_counter()
-            subprocess.run([a.ffls, "lights", str(cal), "--workers", "1", "--no-progress", "-o", str(out)], check=True,
+            subprocess.run([a.ffls, "lights", str(cal), "--workers", "1", "--no-progress", "-o", str(out),
+                            *(["--fit-roll"] if a.fit_roll else [])], check=True,
                            capture_output=True, env=dict(os.environ, OMP_NUM_THREADS="1"))
             wall = time.perf_counter() - t0
             rows.append({"seed": s, **_score(cal, out, Rw, Rm), "wall_s": wall})

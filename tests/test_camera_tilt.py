@@ -73,13 +73,34 @@ def test_a_rolled_camera_has_its_roll_fitted(tmp_path, capfd):
     cap, truth = _without_pose(tmp_path, 5.0)
     out = tmp_path / "lights.json"
     capfd.readouterr()
-    assert main(["lights", str(cap), "-o", str(out), "--workers", "1", "--no-progress"]) == 0
+    assert main(["lights", str(cap), "-o", str(out), "--workers", "1", "--no-progress", "--fit-roll"]) == 0
     line = next(x for x in capfd.readouterr().err.splitlines() if "world_from_camera" in x)
     assert "deg down, rolled" in line, line
     got, err = _errors(out, truth)
     rolls = {e["camera_roll_deg"] for e in got}
     assert len(rolls) == 1 and 1.0 < rolls.pop() < 7.0
     assert np.median(err) < 0.6 and err.max() < 0.8, err
+    # without --fit-roll the camera is taken as level, and says so
+    assert main(["lights", str(cap), "-o", str(out), "--workers", "1", "--no-progress"]) == 0
+    line = next(x for x in capfd.readouterr().err.splitlines() if "world_from_camera" in x)
+    assert "taken as level (--fit-roll" in line, line
+    assert all("camera_roll_deg" not in e for e in json.loads(out.read_text())["lights"])
+
+
+def test_fit_roll_with_a_stated_pose_is_one_line(tmp_path, capfd):
+    """A stated ``world_from_camera`` holds the roll: ``--fit-roll`` would do nothing, so it is refused
+    in one line naming the flag and capture.json, and nothing is written."""
+    from ffls.cli import main
+
+    assert main(["synth", str(tmp_path / "s"), "--spheres", "1", "--lights", "2", "--resolution", "32",
+                 "--quiet"]) == 0
+    capfd.readouterr()
+    out = tmp_path / "l.json"
+    assert main(["lights", str(tmp_path / "s"), "-o", str(out), "--workers", "1", "--no-progress",
+                 "--fit-roll"]) == 2
+    err = [x for x in capfd.readouterr().err.splitlines() if x.strip()]
+    assert len(err) == 1 and "--fit-roll" in err[0] and "capture.json" in err[0], err
+    assert not out.exists()
 
 
 def test_no_pose_fits_the_tilt_and_the_cones_hold(grey_ball_without_pose, tmp_path, capfd):

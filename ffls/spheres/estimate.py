@@ -2091,7 +2091,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
                     flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
-                    fit_tilt: bool = True, **kwargs):
+                    fit_tilt: bool = True, fit_roll: bool = False, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -2140,9 +2140,13 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         with one matte sphere (as :func:`estimate_photos`).
     fit_tilt : bool
         Where the capture gives no ``world_from_camera`` and its lights cover the upper hemisphere
-        (over a ground; ``model`` not ``'near'``), fit the camera's tilt, and so the ground's normal
-        under the spheres, to the matte spheres' shading (:func:`fit_camera_tilt`; False: the
-        image's up is the world's). The lights stay in the capture's default frame.
+        (over a ground; ``model`` not ``'near'``), fit the camera's tilt (and with ``fit_roll`` its
+        roll, where it shows), and so the ground's normal under the spheres, to the matte spheres' shading
+        (:func:`fit_camera_tilt`; False: the image's up is the world's). The lights stay in the
+        capture's default frame.
+    fit_roll : bool
+        With the tilt, fit the camera's roll about its axis (:data:`ROLL_SEARCH_DEG`); off by
+        default: an object beside a sphere can pass for a roll (docs/spheres.md).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -2188,7 +2192,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         return _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=dict(
             model=model, bounce=bounce, refine_centres=refine_centres, refine_options=refine_options,
             decoded=decoded, flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape),
-            photo_options=kwargs)
+            photo_options=kwargs, fit_roll=fit_roll)
     return _estimate_in_frame(capture, spheres, progress, workers, model=model, bounce=bounce,
                               refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
                               flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape, **kwargs)
@@ -2253,9 +2257,10 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     return est.lights(names)
 
 
-def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict, photo_options: dict):
+def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict, photo_options: dict,
+                               fit_roll: bool = False):
     """:func:`estimate_lights` of a capture without ``world_from_camera``, the ground's normal (the
-    camera's tilt, and its roll where the tilt lets it show) fitted to the matte spheres' shading
+    camera's tilt, and with ``fit_roll`` its roll where it shows) fitted to the matte spheres' shading
     (:func:`fit_camera_tilt`); the lights are returned in the capture's default world frame, each
     light's ``extra`` with ``camera_tilt_deg`` and ``camera_roll_deg`` (absent when not fitted:
     without a matte sphere's fit the image's up is the world's, as before).
@@ -2282,7 +2287,8 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
                                       values=values, photos=photos, **stages, **photo_options)
 
         sample = first_pass_photos(n, TILT_SEARCH_PHOTOS)
-        tilt, roll, tried = fit_camera_tilt(lambda t, r: fit(t, r, None if len(sample) == n else sample))
+        tilt, roll, tried = fit_camera_tilt(lambda t, r: fit(t, r, None if len(sample) == n else sample),
+                                            roll=ROLL_SEARCH_DEG if fit_roll else None)
         rolled = float(roll) if np.isfinite(roll) else 0.0
         if np.isfinite(tilt):
             found = tried[(tilt, rolled)][1] if len(sample) == n else fit(tilt, rolled)
