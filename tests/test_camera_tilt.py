@@ -101,6 +101,15 @@ def test_fit_roll_with_a_stated_pose_is_one_line(tmp_path, capfd):
     err = [x for x in capfd.readouterr().err.splitlines() if x.strip()]
     assert len(err) == 1 and "--fit-roll" in err[0] and "capture.json" in err[0], err
     assert not out.exists()
+    # nor on a cluster, whose estimation fits no tilt (refused before any cluster starts)
+    doc = json.loads((tmp_path / "s" / "capture.json").read_text())
+    del doc["camera"]["world_from_camera"]
+    (tmp_path / "s" / "capture.json").write_text(json.dumps(doc))
+    assert main(["lights", str(tmp_path / "s"), "-o", str(out), "--no-progress", "--fit-roll",
+                 "--scheduler", "local"]) == 2
+    err = [x for x in capfd.readouterr().err.splitlines() if x.strip()]
+    assert len(err) == 1 and "--fit-roll" in err[0] and "--scheduler" in err[0], err
+    assert not out.exists()
 
 
 def test_no_pose_fits_the_tilt_and_the_cones_hold(grey_ball_without_pose, tmp_path, capfd):
