@@ -5,8 +5,10 @@ Renders ``ffls synth --calibration-pair`` sets of one grey ball on the ground, s
 read noise), cuts each ``capture.json`` to the images and a camera without ``world_from_camera``
 (``--camera orthographic``: ``{"model": "orthographic"}``; ``pinhole``: the render's ``K``), runs
 ``ffls lights --workers 1`` with the given executable and scores the lights against ``truth.json``
-in the camera's frame: accepted, median / max error, the share inside the 95% cones, and the
-camera tilt found (docs/spheres.md, "Without the camera's pose").
+in the camera's frame: accepted, median / max error, the share inside the 95% cones, the
+camera tilt (and roll) found and the wall time of ``ffls lights`` (docs/spheres.md, "Without the
+camera's pose"). ``--roll DEG`` renders with the camera turned about its optical axis (``ffls synth
+--camera-roll``: a tripod that is not level); ``--fit-roll`` runs ``ffls lights --fit-roll``.
 
     cd benchmarks && OMP_NUM_THREADS=1 ../.venv/bin/python bench_no_pose.py --seeds 0 1 2 3 4 \\
         --lens long --camera orthographic --ffls ../.venv/bin/ffls --out /tmp/no_pose.json
@@ -19,6 +21,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -26,11 +29,12 @@ import numpy as np
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
 
 
-def _render(folder: Path, seed: int, lens: str, resolution: int) -> Path:
+def _render(folder: Path, seed: int, lens: str, resolution: int, roll: float) -> Path:
     subprocess.run([sys.executable, "-m", "ffls.cli", "synth", str(folder), "--calibration-pair", "--spheres", "1",
                     "--sphere-material", "grey", "--lights", "12", "--format", "png8", "--encoding", "linear",
                     "--unstated-encoding", "--lens", lens, "--exposure", "3", "--resolution", str(resolution),
-                    "--shot-noise", "1e-4", "--read-noise", "0.002", "--seed", str(seed), "--quiet"], check=True,
+                    "--shot-noise", "1e-4", "--read-noise", "0.002", "--seed", str(seed), "--camera-roll", str(roll),
+                    "--quiet"], check=True,
                    stdout=subprocess.DEVNULL)
     return folder / "calibration"
 
@@ -53,16 +57,17 @@ def _score(cal: Path, lights: Path, Rw: np.ndarray, Rm: np.ndarray) -> dict:
     truth = json.loads((cal / "truth.json").read_text())
     true_cam = dict(zip(truth["images"], np.asarray(truth["directions"]) @ Rw))  # world -> camera: R^T d
     got = json.loads(lights.read_text())["lights"]
-    err, inside, tilt = [], [], None
+    err, inside, tilt, roll = [], [], None, None
     for e in got:
         tilt = e.get("camera_tilt_deg", tilt)
+        roll = e.get("camera_roll_deg", roll)
         if e.get("status", "ok") != "ok":
             continue
         d = Rm.T @ np.asarray(e["direction"])
         err.append(float(np.degrees(np.arccos(np.clip(true_cam[e["image"]] @ d / np.linalg.norm(d), -1, 1)))))
         inside.append(err[-1] <= e["uncertainty_deg"])
     return {"accepted": f"{len(err)}/{len(got)}", "median_deg": float(np.median(err)), "max_deg": float(max(err)),
-            "inside": float(np.mean(inside)), "tilt_deg": tilt}
+            "inside": float(np.mean(inside)), "tilt_deg": tilt, "roll_deg": roll}
 
 
 def main(argv=None) -> int:
@@ -72,23 +77,29 @@ def main(argv=None) -> int:
     ap.add_argument("--camera", choices=("orthographic", "pinhole"), default="orthographic")
     ap.add_argument("--pose", action="store_true", help="keep the true world_from_camera (the reference)")
     ap.add_argument("--resolution", type=int, default=384)
+    ap.add_argument("--roll", type=float, default=0.0, help="the camera's roll about its optical axis (deg)")
+    ap.add_argument("--fit-roll", action="store_true", help="run ffls lights --fit-roll")
     ap.add_argument("--ffls", default=str(Path(sys.executable).with_name("ffls")), help="the ffls to measure")
     ap.add_argument("--out", help="JSON of the rows")
     a = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for s in a.seeds:
-            cal = _render(Path(tmp) / f"s{s}", s, a.lens, a.resolution)
+            cal = _render(Path(tmp) / f"s{s}", s, a.lens, a.resolution, a.roll)
             Rw = np.array(json.loads((cal / "capture.json").read_text())["camera"]["world_from_camera"])[:3, :3]
             Rm = _without_pose(cal, a.camera, a.pose)
             out = Path(tmp) / f"lights{s}.json"
-            subprocess.run([a.ffls, "lights", str(cal), "--workers", "1", "--no-progress", "-o", str(out)], check=True,
+            t0 = time.perf_counter()
+            subprocess.run([a.ffls, "lights", str(cal), "--workers", "1", "--no-progress", "-o", str(out),
+                            *(["--fit-roll"] if a.fit_roll else [])], check=True,
                            capture_output=True, env=dict(os.environ, OMP_NUM_THREADS="1"))
-            rows.append({"seed": s, **_score(cal, out, Rw, Rm)})
+            wall = time.perf_counter() - t0
+            rows.append({"seed": s, **_score(cal, out, Rw, Rm), "wall_s": wall})
             r = rows[-1]
             tilt = "-" if r["tilt_deg"] is None else f"{r['tilt_deg']:.1f}"
+            roll = "-" if r["roll_deg"] is None else f"{r['roll_deg']:.1f}"
             print(f"seed {s}: {r['accepted']} {r['median_deg']:.2f} / {r['max_deg']:.2f} deg, "
-                  f"{r['inside']:.0%} in the cones, tilt {tilt}", flush=True)
+                  f"{r['inside']:.0%} in the cones, tilt {tilt}, roll {roll}, {wall:.1f} s", flush=True)
     if a.out:
         Path(a.out).write_text(json.dumps({"args": vars(a), "rows": rows}, indent=1))
     return 0

@@ -368,6 +368,9 @@ def test_cli_supersample_antialiases_the_outlines(tmp_path):
     (["--ground-albedo", "2"], "--ground-albedo"),
     (["--srgb8", "--format", "jpeg"], "--srgb8"),
     (["--no-object", "--spheres", "0"], "--no-object"),
+    (["--camera-roll", "46"], "--camera-roll"),
+    (["--camera-roll", "inf"], "--camera-roll"),
+    (["--camera-roll", "3", "--composite-set", "sky.exr"], "--camera-roll"),
 ])
 def test_cli_bad_values_get_one_line(tmp_path, capsys, argv, flag):
     out = tmp_path / "bad"

@@ -43,6 +43,10 @@ def add_arguments(p):
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT|local", type=scheduler_type(allow_local=True),
                    help="read and linearise the photos on Dask: a dask.distributed cluster, or 'local' for a local "
                         "cluster of --workers processes (docs/scale.md)")
+    p.add_argument("--fit-roll", action="store_true",
+                   help="where capture.json gives no camera.world_from_camera, fit the camera's roll about its "
+                        "axis with its tilt (a tripod not level); off by default: an object beside a sphere can "
+                        "pass for a roll (docs/spheres.md, 'The search's cost, and the camera's roll')")
     p.add_argument("--plot", default=None, type=output_path((".png",)), metavar="PLOT.png",
                    help="draw the accepted directions and their Voronoi cells on the hemisphere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (bars are drawn only on a terminal, and not when CI is set)")
@@ -174,6 +178,20 @@ def check_bounce_shape(bounce_shape: str, bounce: str) -> None:
                          "turn on or off)")
 
 
+def check_fit_roll(fit_roll: bool, cluster: bool, cap) -> None:
+    """``--fit-roll`` only where the roll is fitted: without ``world_from_camera`` (a stated pose holds
+    its roll) and not on a cluster (whose estimation fits no tilt)."""
+    from ffls.errors import InputError
+
+    if not fit_roll:
+        return
+    if cluster:
+        raise InputError("--fit-roll is not available with --scheduler (the cluster's estimation fits no tilt)")
+    if not cap.world_from_camera_is_default:
+        raise InputError(f"--fit-roll: {cap.json_path} gives camera.world_from_camera, which holds the camera's "
+                         "roll; the roll is fitted only without it")
+
+
 def check_bounce_observed(bounce: str, model: str, cluster: bool, cap=None) -> None:
     """``--bounce observed`` against the other flags (before the capture is loaded) and, given
     ``cap``, against the capture. The lines name the flag: the capture is not wrong, the flag
@@ -207,6 +225,7 @@ def run(args) -> int:
     check_bounce_observed(args.bounce, args.model, cluster)
     cap = load_capture(args.capture)
     check_bounce_observed(args.bounce, args.model, cluster, cap)
+    check_fit_roll(args.fit_roll, cluster, cap)
     check_first_pass(args.first_pass, args.bounce, len(cap))
     # onto capture.json or a photo, or into a read-only capture folder: refused before the fits
     for out in (args.output or cap.folder / "lights.json", args.plot, args.lp):
@@ -253,9 +272,9 @@ def run(args) -> int:
     else:
         lights = estimate_lights(cap, spheres=spheres, progress=progress, workers=args.workers,
                                  model=args.model, bounce=args.bounce, decoded=decoded, bounce_shape=shape,
-                                 **first_pass)
+                                 fit_roll=args.fit_roll, **first_pass)
         if cap.world_from_camera_is_default:
-            print_notes(NAME, tilt_note(lights))
+            print_notes(NAME, tilt_note(lights, args.fit_roll))
     if calibration is not None:
         lights.encoding = calibration.record()
     out = Path(args.output) if args.output else cap.folder / "lights.json"
@@ -280,17 +299,24 @@ def run(args) -> int:
     return 0
 
 
-def tilt_note(lights) -> str:
-    """The line for a capture without ``world_from_camera``: the camera's tilt fitted to the matte
-    spheres (``camera_tilt_deg`` of :func:`ffls.spheres.estimate.estimate_lights`), or that the
-    image's up was taken as the world's."""
-    tilt = next((e["camera_tilt_deg"] for e in lights.extra or () if e.get("camera_tilt_deg") is not None), None)
-    if tilt is None:
+def tilt_note(lights, fit_roll: bool = False) -> str:
+    """The line for a capture without ``world_from_camera``: the camera's tilt (and, with
+    ``fit_roll``, roll) fitted to the matte spheres (``camera_tilt_deg``, ``camera_roll_deg`` of
+    :func:`ffls.spheres.estimate.estimate_lights`), or that the image's up was taken as the world's."""
+    fitted = next((e for e in lights.extra or () if e.get("camera_tilt_deg") is not None), None)
+    if fitted is None:
         return ("capture.json gives no camera.world_from_camera: the world's up is taken as the image's, so the "
                 "ground bounce is modelled around the image's up, without the spheres' own shadows; for a camera "
                 "looking down, give its pose, or only its tilt (docs/formats.md, \"The camera's tilt\")")
+    if fitted.get("camera_roll_deg") is not None:
+        roll = f"rolled {fitted['camera_roll_deg']:.1f} deg about its axis"
+    elif fit_roll:
+        roll = "its roll not fitted (looking down too steeply, or no roll fits the photos better)"
+    else:
+        roll = "taken as level (--fit-roll fits its roll)"
     return (f"capture.json gives no camera.world_from_camera: the ground under the spheres was fitted to their "
-            f"shading, the camera looking {tilt:.1f} deg down (the lights stay in the image's frame: image up "
+            f"shading, the camera looking {fitted['camera_tilt_deg']:.1f} deg down, {roll} (the lights stay in "
+            f"the image's frame: image up "
             f"+Z; docs/spheres.md, 'Without the camera's pose'); to fix it, give the pose, or only its tilt "
             f"(docs/formats.md, \"The camera's tilt\")")
 

@@ -135,6 +135,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--lens", type=_choice("normal", "long", "orthographic"), default="normal",
                    metavar="{normal,long,orthographic}",
                    help="normal (46 deg at 1 m, default), long (4.8 deg at 10 m) or orthographic (parallel rays)")
+    g.add_argument("--camera-roll", type=number(-45.0, 45.0, unit="degrees"), default=0.0, metavar="DEG",
+                   help="the camera turned about its optical axis (a tripod not level; positive dips the "
+                        "image's right; default 0)")
     g.add_argument("--calibration-pair", action="store_true",
                    help="write OUT_DIR/calibration (spheres, no object, lights.json) and OUT_DIR/object "
                         "(object, no spheres, no lights.json) under the same lights")
@@ -224,6 +227,8 @@ def scene_of(args: argparse.Namespace):
     if getattr(args, "composite_set", None) is not None and (args.calibration_pair or args.no_object):
         raise InputError("--composite-set writes the object and surface captures itself; drop "
                          + ("--calibration-pair" if args.calibration_pair else "--no-object"))
+    if getattr(args, "composite_set", None) is not None and getattr(args, "camera_roll", 0.0):
+        raise InputError("--composite-set renders its virtual scene with a level camera; drop --camera-roll")
     if args.calibration_pair and args.no_object:
         raise InputError("--calibration-pair writes the object capture itself; drop --no-object")
     background = "textured" if args.background == "checker" else args.background
@@ -231,6 +236,7 @@ def scene_of(args: argparse.Namespace):
     if args.ground_albedo is not None:
         kw["ground_albedo"] = args.ground_albedo
     kw["supersample"] = getattr(args, "supersample", 1)
+    kw["camera_roll_deg"] = getattr(args, "camera_roll", 0.0)
     return make_scene(spheres=n, sphere_material=mats, background=background, lens=args.lens,
                       with_object=not args.no_object, sphere_xy=args.sphere_xy, sphere_radius=args.sphere_radius, **kw)
 

@@ -41,6 +41,7 @@ import importlib
 import os
 import pickle
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -1912,82 +1913,157 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
 #: down; the coarse grid's step, then a bounded refinement to this tolerance.
 TILT_SEARCH_DEG = (0.0, 80.0, 10.0, 0.5)
 
+#: The camera's roll about its optical axis searched after its tilt (:func:`fit_camera_tilt`): the
+#: bound (degrees either way: a tripod that is not level), the largest tilt at which it is fitted,
+#: and the refinement's tolerance. A roll ``r`` turns the ground's normal, seen from the camera, by
+#: about ``r cos(tilt)`` sideways (a tilt ``t`` turns it by ``t``): looking down more steeply the
+#: roll's effect vanishes (straight down it only turns the world about the normal), and past 60 deg
+#: it is less than half the tilt's, which the shading gives to 1-2 deg (docs/spheres.md).
+ROLL_SEARCH_DEG = (10.0, 60.0, 0.5)
 
-def tilted_world_from_camera(tilt_deg: float) -> np.ndarray:
-    """The ``world_from_camera`` of a camera at the origin, level (image right is +X) and looking
-    ``tilt_deg`` degrees below the horizon: 0 is
-    :data:`ffls.conventions.DEFAULT_WORLD_FROM_CAMERA` (image up +Z, forward +Y).
+#: Significance at which the photos must agree that the fitted roll fits their shading better than
+#: none (:func:`_fits_better`), or the roll is not fitted.
+ROLL_EVIDENCE = 0.05
+
+#: Photos (spread over the sequence: :func:`first_pass_photos`) whose estimates the tilt search
+#: compares (:func:`_estimate_with_fitted_tilt`); every photo is then fitted once, in the frame
+#: found. A capture of at most this many photos is searched on all of them (the search's fit in
+#: the frame found is the result). (A grid on 6 of 12 photos bracketed another tilt than all 12 on
+#: a rolled capture: 33.4 against 30.0 deg.)
+TILT_SEARCH_PHOTOS = 24
+
+
+def tilted_world_from_camera(tilt_deg: float, roll_deg: float = 0.0) -> np.ndarray:
+    """The ``world_from_camera`` of a camera at the origin looking ``tilt_deg`` degrees below the
+    horizon, turned ``roll_deg`` about its optical axis (positive dips the image's right: the
+    camera's x axis turns toward its y, down; ``ffls synth --camera-roll``); 0, 0 is
+    :data:`ffls.conventions.DEFAULT_WORLD_FROM_CAMERA` (image right +X, image up +Z, forward +Y).
 
     Returns
     -------
     (4, 4) float64
     """
-    t = np.radians(float(tilt_deg))
+    t, r = np.radians(float(tilt_deg)), np.radians(float(roll_deg))
     M = np.eye(4)
-    M[:3, :3] = [[1.0, 0.0, 0.0], [0.0, -np.sin(t), np.cos(t)], [0.0, -np.cos(t), -np.sin(t)]]
+    roll = np.array([[np.cos(r), -np.sin(r), 0.0], [np.sin(r), np.cos(r), 0.0], [0.0, 0.0, 1.0]])
+    M[:3, :3] = np.array([[1.0, 0.0, 0.0], [0.0, -np.sin(t), np.cos(t)], [0.0, -np.cos(t), -np.sin(t)]]) @ roll
     return M
+
+
+def _matte_residuals(lights) -> dict:
+    """``(photo, sphere) -> RMS`` shading residual (the ``rms`` of the sphere's record) of every matte
+    sphere fitted in a photo with a light."""
+    return {(i, k): float(r["rms"]) for i, e in enumerate(lights.extra or ()) if e.get("status", "ok") == "ok"
+            for k, r in enumerate(e.get("spheres") or ())
+            if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None}
 
 
 def _matte_misfit(lights) -> float:
     """Interquartile mean (:func:`scipy.stats.trim_mean`, a quarter cut from each end) over the photos
-    with a light of their matte spheres' RMS shading residual (the ``rms`` of each sphere's record):
-    a few photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean,
-    and a median of one ball's 12 photos wanders. NaN without any."""
-    rms = [float(r["rms"]) for e in lights.extra or () if e.get("status", "ok") == "ok"
-           for r in e.get("spheres") or ()
-           if r.get("kind") == "matte" and r.get("status") == "ok" and r.get("rms") is not None]
+    with a light of their matte spheres' RMS shading residual (:func:`_matte_residuals`): a few
+    photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean, and
+    a median of one ball's 12 photos wanders. NaN without any."""
+    rms = list(_matte_residuals(lights).values())
     from scipy.stats import trim_mean
 
     return float(trim_mean(rms, 0.25)) if rms else float("nan")
 
 
-def fit_camera_tilt(fit, search=TILT_SEARCH_DEG) -> tuple[float, dict]:
-    """The camera's tilt that the matte spheres' shading fits best, for a capture without
-    ``world_from_camera``.
+def _fits_better(before, after, level: float) -> bool:
+    """Whether the estimates ``after`` fit the matte spheres' shading better than ``before`` photo by
+    photo: the one-sided Wilcoxon signed-rank test (:func:`scipy.stats.wilcoxon`) of the log ratios
+    of each sphere's residual in each photo (:func:`_matte_residuals`) rejects "no better" at
+    ``level``. The misfit's curves are rough at the 1% level (a frame moves pixels across the
+    terminator and the own shadow's edge), and a roll's gain is about as small: its least misfit
+    alone would be a roll fitted to that roughness."""
+    a, b = _matte_residuals(before), _matte_residuals(after)
+    d = np.log([b[k] / a[k] for k in a if k in b and a[k] > 0 and b[k] > 0])
+    d = d[d != 0]
+    if len(d) < 6:
+        return False
+    from scipy.stats import wilcoxon
+
+    return bool(wilcoxon(d, alternative="less").pvalue < level)
+
+
+def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, roll=ROLL_SEARCH_DEG,
+                    evidence: float = ROLL_EVIDENCE) -> tuple[float, float, dict]:
+    """The camera's tilt, and its roll, that the matte spheres' shading fits best, for a capture
+    without ``world_from_camera``.
 
     The ground bounce lights a matte sphere's lower half around the ground's normal, and its own
     shadow darkens the ground under it: modelled around the wrong up (the image's, when the camera
-    looks down), both leave a residual that leans the fitted light. ``fit(tilt_deg)`` estimates
-    every light with the ground under a camera tilted that much (:func:`tilted_world_from_camera`)
-    and returns the :class:`~ffls.io.capture.Lights`; the tilt minimising :func:`_matte_misfit` (the
-    interquartile mean of the matte spheres' residuals) is
-    found on a grid, then refined (:func:`scipy.optimize.minimize_scalar`, bounded).
+    looks down, or leans), both leave a residual that leans the fitted light. ``fit(tilt_deg,
+    roll_deg)`` estimates every light with the ground under a camera tilted and rolled that much
+    (:func:`tilted_world_from_camera`) and returns the :class:`~ffls.io.capture.Lights`. The tilt
+    minimising :func:`_matte_misfit` (the interquartile mean of the matte spheres' residuals) is
+    found on a grid, then refined (:func:`scipy.optimize.minimize_scalar`, bounded); then, where
+    the tilt found is at most ``roll``'s largest (:data:`ROLL_SEARCH_DEG`), the roll at that tilt,
+    and where a roll fits better than none, the tilt at that roll within half a grid step (one
+    bounded refinement each:
+    the two turn the ground's normal, seen from the camera, at about right angles). The roll is
+    kept only where the photos agree that it fits better than the tilt alone (:func:`_fits_better`
+    at ``evidence``).
 
     Parameters
     ----------
     fit : callable
-        ``fit(tilt_deg) -> Lights``.
+        ``fit(tilt_deg, roll_deg) -> Lights``.
     search : (lo, hi, step, tolerance) degrees
+    roll : (bound, largest tilt, tolerance) degrees, optional
+        None: no roll.
+    evidence : float
+        The roll's significance level (:data:`ROLL_EVIDENCE`).
 
     Returns
     -------
     tilt_deg : float
         NaN when no matte sphere fitted (the bounce then does not depend on the tilt).
+    roll_deg : float
+        NaN where not fitted (no tilt, a tilt past ``roll``'s largest, or a roll the photos do not
+        agree fits better); 0 where no roll fits better at all.
     tried : dict
-        Tilt (degrees) -> (misfit, Lights) of every fit made.
+        ``(tilt, roll)`` (degrees) -> (misfit, Lights) of every ``fit`` made.
     """
     from scipy.optimize import minimize_scalar
 
     lo, hi, step, tol = search
     tried: dict = {}
 
-    def misfit(t: float) -> float:
-        t = float(t)
-        if t not in tried:
-            lights = fit(t)
-            tried[t] = (_matte_misfit(lights), lights)
-        m = tried[t][0]
+    def misfit(t: float, r: float = 0.0) -> float:
+        key = (float(t), float(r))
+        if key not in tried:
+            lights = fit(*key)
+            tried[key] = (_matte_misfit(lights), lights)
+        m = tried[key][0]
         return m if np.isfinite(m) else np.inf
 
     grid = np.arange(lo, hi + 0.5 * step, step)
     costs = [misfit(t) for t in grid]
     if not np.isfinite(min(costs)):
-        return float("nan"), tried
+        return float("nan"), float("nan"), tried
     k = int(np.argmin(costs))
     a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
     res = minimize_scalar(misfit, bounds=(a, b), method="bounded", options={"xatol": tol})
-    best = min(tried, key=lambda t: misfit(t))
-    return (float(res.x) if misfit(res.x) <= misfit(best) else best), tried
+    best = min((t for t, r in tried if r == 0.0), key=misfit)
+    tilt = float(res.x) if misfit(res.x) <= misfit(best) else best
+    if roll is None or tilt > roll[1]:
+        return tilt, float("nan"), tried
+    # the roll at that tilt, then the tilt at that roll (within half a grid step): a roll also moves
+    # the tilt that fits best (ffls synth --camera-roll 4, normal lens: 32.4 at no roll, 28.4 at the
+    # roll found, true 30)
+    minimize_scalar(lambda r: misfit(tilt, r), bounds=(-roll[0], roll[0]), method="bounded",
+                    options={"xatol": roll[2]})
+    r = min((r for t, r in tried if t == tilt), key=lambda r: misfit(tilt, r))  # (0 where none fits better)
+    if r == 0.0:
+        return tilt, r, tried
+    minimize_scalar(lambda t: misfit(t, r), bounds=(max(tilt - 0.5 * step, lo), min(tilt + 0.5 * step, hi)),
+                    method="bounded", options={"xatol": tol})
+    rolled = min((t for t, q in tried if q == r), key=lambda t: misfit(t, r))
+    # kept where the photos agree that it fits better than the tilt alone; else not measured
+    if _fits_better(tried[(tilt, 0.0)][1], tried[(rolled, r)][1], evidence):
+        return rolled, r, tried
+    return tilt, float("nan"), tried
 
 
 def _lights_to_frame(lights, R: np.ndarray):
@@ -2015,7 +2091,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
                     flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
-                    fit_tilt: bool = True, **kwargs):
+                    fit_tilt: bool = True, fit_roll: bool = False, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -2064,9 +2140,13 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         with one matte sphere (as :func:`estimate_photos`).
     fit_tilt : bool
         Where the capture gives no ``world_from_camera`` and its lights cover the upper hemisphere
-        (over a ground; ``model`` not ``'near'``), fit the camera's tilt, and so the ground's normal
-        under the spheres, to the matte spheres' shading (:func:`fit_camera_tilt`; False: the
-        image's up is the world's). The lights stay in the capture's default frame.
+        (over a ground; ``model`` not ``'near'``), fit the camera's tilt (and with ``fit_roll`` its
+        roll, where it shows), and so the ground's normal under the spheres, to the matte spheres' shading
+        (:func:`fit_camera_tilt`; False: the image's up is the world's). The lights stay in the
+        capture's default frame.
+    fit_roll : bool
+        With the tilt, fit the camera's roll about its axis (:data:`ROLL_SEARCH_DEG`); off by
+        default: an object beside a sphere can pass for a roll (docs/spheres.md).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -2090,7 +2170,6 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     if bounce == "observed" and model != "distant":
         raise InputError("bounce 'observed' needs model 'distant' (the near light's joint fit keeps the uniform "
                          "ground)", capture.json_path)
-    n = len(capture.image_names)
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if spheres is None:
         from ffls.spheres.detect import find_spheres_in_capture
@@ -2110,35 +2189,63 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             and getattr(capture, "world_from_camera_is_default", False)
             and getattr(capture.hemisphere, "name", "upper") == "upper"
             and any(m != "mirror" for m in sphere_materials(capture, len(spheres)))):
-        return _estimate_with_fitted_tilt(capture, spheres, progress, workers, model=model, bounce=bounce,
-                                          refine_centres=refine_centres, refine_options=refine_options,
-                                          decoded=decoded, flat_field=flat_field, first_pass=first_pass,
-                                          bounce_shape=bounce_shape, **kwargs)
+        return _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=dict(
+            model=model, bounce=bounce, refine_centres=refine_centres, refine_options=refine_options,
+            decoded=decoded, flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape),
+            photo_options=kwargs, fit_roll=fit_roll)
+    return _estimate_in_frame(capture, spheres, progress, workers, model=model, bounce=bounce,
+                              refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
+                              flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape, **kwargs)
+
+
+def _photo_shape(capture, decoded: DecodedPhotos | None) -> tuple[int, int]:
+    """The photos' ``(height, width)``: capture.json's, the decoded photos', or the first photo's."""
+    if capture.image_size is not None:
+        return int(capture.image_size[1]), int(capture.image_size[0])
+    if decoded is not None:
+        return decoded.shape
+    return load_photo(capture, 0).shape[:2]
+
+
+def _fit_options(capture, model: str, kwargs: dict) -> dict:
+    """The photo fits' options (:func:`ffls.spheres.photo.estimate_photo`'s keywords) in the capture's frame."""
+    # the own shadow needs the ground's normal: without a world frame, up is only the image's
+    return {"model": model, "own_shadow": not getattr(capture, "world_from_camera_is_default", False), **kwargs}
+
+
+def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, refine_centres, refine_options,
+                       decoded, flat_field, first_pass, bounce_shape, fitter: PhotoFitter | None = None,
+                       values: list | None = None, photos: list | None = None, **kwargs):
+    """:func:`estimate_lights` in the capture's world frame as given (no tilt search).
+
+    ``fitter`` (a :class:`PhotoFitter` with :func:`_fit_options`, shared by the calls of a tilt
+    search: one pool of processes), ``values`` (every photo's sphere values, read once for all the
+    frames: the pixels are the same in each) and ``photos`` (fit only these photos, by index; the
+    lights are theirs) serve the tilt search (:func:`_estimate_with_fitted_tilt`)."""
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
-    if capture.image_size is not None:
-        shape = (int(capture.image_size[1]), int(capture.image_size[0]))
-    elif decoded is not None:
-        shape = decoded.shape
-    else:
-        shape = load_photo(capture, 0).shape[:2]
+    shape = _photo_shape(capture, decoded)
     samples = capture_samples(capture, spheres, shape)
     if bounce == "observed":
         samples = observed_ground_samples(capture, samples, shape)
         bounce, bounce_shape = "calibrated", False
+    from ffls.io.capture import sphere_materials
+
     materials = sphere_materials(capture, len(spheres))
     views = sphere_views(capture, spheres)
+    names = list(capture.image_names)
+    if photos is not None:
+        names = [names[i] for i in photos]
+        values = None if values is None else [values[i] for i in photos]
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=n * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
+        bar = tqdm(total=len(names) * (2 if bounce == "calibrated" else 1), desc="lights", unit="img")
     try:
-        # the own shadow needs the ground's normal: without a world frame, up is only the image's
-        options = {"model": model, "own_shadow": not getattr(capture, "world_from_camera_is_default", False),
-                   **kwargs}
-        with PhotoFitter(capture, capture.scene_center, options, workers, bar, decoded) as fitter:
-            est = _two_pass(fitter, samples, None, n, bounce=bounce,
+        with (PhotoFitter(capture, capture.scene_center, _fit_options(capture, model, kwargs), workers, bar,
+                          decoded) if fitter is None else nullcontext(fitter)) as fit:
+            est = _two_pass(fit, samples, values, len(names), bounce=bounce,
                             refine_centres=centres_to_refine(spheres) if refine_centres else False,
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
@@ -2147,28 +2254,52 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     finally:
         if bar is not None:
             bar.close()
-    return est.lights(capture.image_names)
+    return est.lights(names)
 
 
-def _estimate_with_fitted_tilt(capture, spheres, progress, workers, **options):
+def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict, photo_options: dict,
+                               fit_roll: bool = False):
     """:func:`estimate_lights` of a capture without ``world_from_camera``, the ground's normal (the
-    camera's tilt) fitted to the matte spheres' shading (:func:`fit_camera_tilt`); the lights are
-    returned in the capture's default world frame, each light's ``extra`` with ``camera_tilt_deg``
-    (absent when no matte sphere fitted: then the image's up is the world's, as before)."""
+    camera's tilt, and with ``fit_roll`` its roll where it shows) fitted to the matte spheres' shading
+    (:func:`fit_camera_tilt`); the lights are returned in the capture's default world frame, each
+    light's ``extra`` with ``camera_tilt_deg`` and ``camera_roll_deg`` (absent when not fitted:
+    without a matte sphere's fit the image's up is the world's, as before).
+
+    The search reads every photo's sphere values once and runs every frame's estimate in one
+    :class:`PhotoFitter` (one pool of processes), on a sample of the photos
+    (:data:`TILT_SEARCH_PHOTOS`; ``stages``: the estimation's keywords, ``photo_options``:
+    :func:`ffls.spheres.photo.estimate_photo`'s)."""
     from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
 
-    def fit(tilt_deg: float):
-        tilted = replace(capture, world_from_camera=tilted_world_from_camera(tilt_deg),
-                         world_from_camera_is_default=False)
-        return estimate_lights(tilted, spheres, progress=False, workers=workers, fit_tilt=False, **options)
+    def posed(tilt_deg: float, roll_deg: float = 0.0):
+        return replace(capture, world_from_camera=tilted_world_from_camera(tilt_deg, roll_deg),
+                       world_from_camera_is_default=False)
 
-    tilt, tried = fit_camera_tilt(fit)
+    n, decoded, level = len(capture.image_names), stages["decoded"], posed(0.0)
+    with PhotoFitter(level, capture.scene_center, _fit_options(level, stages["model"], photo_options), workers,
+                     None, decoded) as fitter:
+        # every photo's sphere values, read once: a frame turns the spheres' normals, not their pixels
+        samples = capture_samples(level, spheres, _photo_shape(capture, decoded))
+        values = [v for _, v in fitter.run([PhotoTask(i, fit=False) for i in range(n)], samples, counted=False)]
+
+        def fit(tilt_deg: float, roll_deg: float = 0.0, photos=None):
+            return _estimate_in_frame(posed(tilt_deg, roll_deg), spheres, False, workers, fitter=fitter,
+                                      values=values, photos=photos, **stages, **photo_options)
+
+        sample = first_pass_photos(n, TILT_SEARCH_PHOTOS)
+        tilt, roll, tried = fit_camera_tilt(lambda t, r: fit(t, r, None if len(sample) == n else sample),
+                                            roll=ROLL_SEARCH_DEG if fit_roll else None)
+        rolled = float(roll) if np.isfinite(roll) else 0.0
+        if np.isfinite(tilt):
+            found = tried[(tilt, rolled)][1] if len(sample) == n else fit(tilt, rolled)
     if not np.isfinite(tilt):
-        return estimate_lights(capture, spheres, progress=progress, workers=workers, fit_tilt=False, **options)
-    to_default = DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ tilted_world_from_camera(tilt)[:3, :3].T
-    lights = _lights_to_frame(tried[tilt][1], to_default)
+        return _estimate_in_frame(capture, spheres, progress, workers, values=values, **stages, **photo_options)
+    to_default = DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ tilted_world_from_camera(tilt, rolled)[:3, :3].T
+    lights = _lights_to_frame(found, to_default)
     for e in lights.extra or ():
         e["camera_tilt_deg"] = round(tilt, 2)
+        if np.isfinite(roll):
+            e["camera_roll_deg"] = round(rolled, 2)
     return lights
 
 

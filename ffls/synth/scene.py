@@ -145,6 +145,10 @@ class SynthScene:
         Distance from the camera centre to ``camera_target`` (m).
     camera_elevation_deg : float
         How far the camera looks down, degrees (the camera sits at -Y, raised).
+    camera_roll_deg : float
+        The camera turned about its optical axis, degrees: a tripod that is not level. Positive
+        dips the image's right (the camera's x axis turns toward its y, down), so the world's
+        vertical leans counter-clockwise in the image. 0: image right is level.
     camera_fov_deg : float
         Horizontal (and vertical: square pixels, square images) field of view, degrees.
     camera_target : tuple of 3
@@ -172,6 +176,7 @@ class SynthScene:
     ground_albedo: float = 0.3
     camera_distance: float = 1.0
     camera_elevation_deg: float = 30.0
+    camera_roll_deg: float = 0.0
     camera_fov_deg: float = 46.0
     camera_target: tuple = (0.0, 0.0, 0.05)
     bounce_samples: int = 64
@@ -244,6 +249,8 @@ class SynthScene:
         f = normalize(np.asarray(self.camera_target) - c)
         x = normalize(np.cross(f, [0.0, 0.0, 1.0]))
         y = np.cross(f, x)
+        r = math.radians(self.camera_roll_deg)
+        x, y = math.cos(r) * x + math.sin(r) * y, math.cos(r) * y - math.sin(r) * x
         M = np.eye(4)
         M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, y, f, c
         return M
@@ -1210,6 +1217,7 @@ def _lens_truth(scene: SynthScene, resolution: int) -> dict:
         "distance": scene.camera_distance,
         "fov_deg": scene.camera_fov_deg,
         "elevation_deg": scene.camera_elevation_deg,
+        "roll_deg": scene.camera_roll_deg,
         "target": list(scene.camera_target),
         "K": None if ortho else scene.K(resolution).tolist(),
         "metres_per_pixel": scene.metres_per_pixel(resolution) if ortho else None,
