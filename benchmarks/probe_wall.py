@@ -6,8 +6,8 @@ A grey ball (albedo 0.25, radius 72 px, orthographic) rendered by
 ``--levels`` times the ball's 90th percentile (0.5: the lit side brighter than the wall, the side
 toward the terminator darker, and between them no outline at all), the whole photo with 2%
 multiplicative Gaussian noise (``--seeds``; the scene: ``tests/probe_wall_scene.py``). Also the wall
-alone (must be refused). ``probe.json`` locates nothing (``"sphere": {"material": "diffuse"}``); outcome ``ok`` (centre within 0.3 px),
-``off`` (found farther), ``refused`` (one-line InputError).
+alone (must be refused). ``probe.json`` locates nothing (``"sphere": {"material": "diffuse"}``);
+outcome ``ok`` (centre within 0.3 px), ``off`` (found farther), ``refused`` (one-line InputError).
 
 Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_wall.py [--levels 0.3,0.5,0.7] [--seeds 1,2] [--out FILE]``
 """
