@@ -226,11 +226,11 @@ def test_unhinted_diffuse_ball_on_a_wall_of_its_brightness(tmp_path, seed):
 def test_unhinted_diffuse_ball_under_a_low_sun_takes_its_limb(tmp_path, level, seed):
     """Under ``sunrise`` the terminator is a sharp arc just inside the dark side's limb: the fit of the lit
     side's outline with that arc was used 4.8 and 4.5 px off (radius 4.1 and 4.4 px short) without a word.
-    The circle of both polarities' edges enclosing it (``locate._enclosing_outline``) is the limb: 0.73 and
-    0.34 px. The wall alone is refused."""
+    The circle of both polarities' edges enclosing it (``locate._enclosing_outline``) is the limb: 0.10 and
+    0.11 px. The wall alone is refused."""
     from ffls.errors import InputError
 
     geo, c_true, r_true = _wall_probe(tmp_path, "sunrise", level, seed)
-    assert np.hypot(*(geo.center_px - c_true)) < 1.0 and abs(geo.radius_px - r_true) < 0.5
+    assert np.hypot(*(geo.center_px - c_true)) < 0.2 and abs(geo.radius_px - r_true) < 0.1
     with pytest.raises(InputError, match="no sphere found"):
         _wall_probe(tmp_path, "sunrise", level, seed, ball=False)

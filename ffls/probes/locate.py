@@ -309,7 +309,10 @@ def _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_
     of the radius, radius up to that share larger); the largest that is at least as closed and supported
     is fitted (:func:`ffls.spheres.detect.fit_outline`) on those points within twice
     :data:`OUTLINE_TOL_PX` of it, and kept when that fit stays within :data:`OUTLINE_TOL_PX` of it, fits
-    its points no worse than the ball's fit and has a well-constrained centre.
+    its points no worse than the ball's fit and has a well-constrained centre. A circle encloses the
+    found one when that lies inside it to :data:`OUTLINE_TOL_PX` plus the found fit's RMS (a fit through
+    the lit limb and the terminator pokes out of the limb where they meet: by 1.1 px at RMS 1.37 px in
+    ``probe_wall.py`` under ``sunrise``, level 0.3, seed 4).
     """
     from ffls.spheres.mirror_outline import circle_search
 
@@ -324,12 +327,12 @@ def _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_
                           tol=OUTLINE_TOL_PX, n_best=3)
     now = _outline_both_ways(pts, grads, ball)
     for c, r, _ in sorted(found, key=lambda f: -f[1]):
-        if np.hypot(*(c - c0)) + r0 > r + OUTLINE_TOL_PX:
-            continue  # does not enclose the fit
+        if np.hypot(*(c - c0)) + r0 > r + OUTLINE_TOL_PX + ball.residual_px:
+            continue  # does not enclose the fit (known to its RMS)
         closed, support = _outline_both_ways(pts, grads, _Circle(c, r, ball.visible_fraction))
         if closed < now[0] or support < now[1]:
             continue
-        on = sel & (np.abs(d - r) <= 2 * OUTLINE_TOL_PX)
+        on = sel & (np.abs(np.hypot(*(pts - c).T) - r) <= 2 * OUTLINE_TOL_PX)
         try:
             cam = DetectionCamera(camera_model, K, dist, np.asarray(world_from_camera, dtype=np.float64), R,
                                   np.shape(image)[:2])
