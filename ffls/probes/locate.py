@@ -19,7 +19,7 @@ from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
            "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
-           "MIRROR_SHARP_OUTLINE_PX"]
+           "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET"]
 
 
 @dataclass
@@ -210,12 +210,14 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
     candidate circle (:func:`ffls.spheres.detect.circle_candidates`) is taken instead as a centre-only
     pixel hint, whose fit searches outward from it for the best-supported round outline (the hint's
     path, ``docs/probes.md``). A fit is the ball's when its outline is round, closed and supported
-    (:func:`ffls.spheres.select.round_outline`), its centre well constrained (``CRITERIA
+    (:func:`ffls.spheres.select.round_outline`, on the fit's own edge points or on the photo's of both
+    polarities, :func:`_outline_both_ways`), its centre well constrained (``CRITERIA
     ['max_center_sigma_px']``), at least 60% of it in the frame, its interior smooth
     (:data:`MAX_INTERIOR_EDGES`: a circle fitted to the ground's texture holds that texture) and its
     radius at least :data:`MIN_BALL_FRACTION` of the photo's shorter side. Of outlines that overlap, the
     one fitting its edges best (lowest RMS) stays; of the separate ones left, the largest is the ball,
-    unless another is nearly as large (:data:`RIVAL_RATIO`).
+    unless another is nearly as large (:data:`RIVAL_RATIO`); an outline of edge points enclosing it, at
+    least as closed and supported, replaces it (:func:`_enclosing_outline`).
 
     Parameters
     ----------
