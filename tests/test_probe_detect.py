@@ -193,3 +193,44 @@ def test_circle_candidates_give_the_edge_points_they_were_found_from():
     assert np.array_equal(pts, want) and len(pts) > 100
     x, y, r = cands[0]
     assert np.hypot(x - 71.3, y - 58.6) < 1.5 and abs(r - 30.0) < 1.5, cands[:3]
+
+
+def _wall_probe(folder, name, level, seed, ball=True):
+    """``tests/probe_wall_scene.py``'s photo as an unhinted diffuse probe, located."""
+    import json
+
+    from ffls.io.images import write_exr
+    from probe_wall_scene import wall_photo
+
+    img, c_true, r_true = wall_photo(name, level, seed, ball)
+    write_exr(folder / "ball.exr", img)
+    (folder / "probe.json").write_text(json.dumps({
+        "format": "ffls-probe", "version": 1, "images": ["ball.exr"], "camera": {"model": "orthographic"},
+        "sphere": {"material": "diffuse"}}))
+    probe = load_probe(folder)
+    vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
+    return locate_sphere(probe.views[0], vr.radiance, probe.json_path), c_true, r_true
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_unhinted_diffuse_ball_on_a_wall_of_its_brightness(tmp_path, seed):
+    """A grey ball in front of a wall at half its 90th percentile: brighter than the wall on its lit side,
+    darker toward the terminator, and no outline between. Its hinted fit keeps the lit side's edges
+    (closed 0.47-0.5 < 0.5) and it was refused ("no round outline ... is a diffuse ball's"); its outline's
+    edges of both polarities close it (``locate._outline_both_ways``): found within 0.14 px."""
+    geo, c_true, r_true = _wall_probe(tmp_path, "courtyard", 0.5, seed)
+    assert np.hypot(*(geo.center_px - c_true)) < 0.2 and abs(geo.radius_px - r_true) < 0.2
+
+
+@pytest.mark.parametrize("level, seed", [(0.5, 1), (0.7, 2)])
+def test_unhinted_diffuse_ball_under_a_low_sun_takes_its_limb(tmp_path, level, seed):
+    """Under ``sunrise`` the terminator is a sharp arc just inside the dark side's limb: the fit of the lit
+    side's outline with that arc was used 4.8 and 4.5 px off (radius 4.1 and 4.4 px short) without a word.
+    The circle of both polarities' edges enclosing it (``locate._enclosing_outline``) is the limb: 0.10 and
+    0.11 px. The wall alone is refused."""
+    from ffls.errors import InputError
+
+    geo, c_true, r_true = _wall_probe(tmp_path, "sunrise", level, seed)
+    assert np.hypot(*(geo.center_px - c_true)) < 0.2 and abs(geo.radius_px - r_true) < 0.1
+    with pytest.raises(InputError, match="no sphere found"):
+        _wall_probe(tmp_path, "sunrise", level, seed, ball=False)

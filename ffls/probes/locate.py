@@ -13,13 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, find_spheres,
-                                 orthographic_normals, sphere_mask, sphere_normals)
+from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask, edge_points,
+                                 find_spheres, fit_outline, orthographic_normals, sphere_mask, sphere_normals)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
            "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
-           "MIRROR_SHARP_OUTLINE_PX"]
+           "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET"]
 
 
 @dataclass
@@ -169,6 +169,38 @@ def _interior_edges(points, center_px, radius_px) -> float:
     return float(np.count_nonzero(d < 0.85 * radius_px)) / (2 * np.pi * max(radius_px, 1e-9))
 
 
+#: A diffuse ball's outline is judged on the photo's edge points within this distance (pixels) of its
+#: circle whose gradient lies within 25 degrees of the radial direction, of either polarity
+#: (:func:`_outline_both_ways`).
+OUTLINE_TOL_PX = 1.0
+#: :func:`diffuse_ball` looks for an outline enclosing the found one with its centre within this share of
+#: the radius and a radius up to this share larger (:func:`_enclosing_outline`).
+ENCLOSING_OFFSET = 0.15
+
+
+def _outline_both_ways(points, grads, ft) -> tuple[float, float]:
+    """``(closed, support)`` of a fitted circle (as :func:`ffls.spheres.select.outline_closure` gives them)
+    on the photo's edge points of either polarity.
+
+    A diffuse ball in front of a wall of its own brightness is brighter than the wall on its lit side and
+    darker toward its terminator; between, where the two match, its outline shows no edge at all. The
+    hinted fit keeps the edge points of one side (closed 0.47, support 0.52 in ``benchmarks/probe_wall.py``
+    at level 0.5, and in a 90 px ball of the same make in an 800 x 600 photo: under ``min_closed`` 0.5),
+    while the outline's edge points of both polarities close it (0.86-0.89, support 0.96-0.97). Points:
+    within :data:`OUTLINE_TOL_PX` of the circle, their gradient within 25 degrees of the radial direction;
+    closed: the share of the 36 angular bins of the visible outline they fall in; support: their number
+    per pixel of visible outline.
+    """
+    c = np.asarray(ft.center_px, dtype=np.float64)
+    v = np.asarray(points, dtype=np.float64).reshape(-1, 2) - c
+    d = np.hypot(v[:, 0], v[:, 1])
+    cosr = np.abs(np.sum(v * np.asarray(grads, dtype=np.float64).reshape(-1, 2), axis=1)) / np.maximum(d, 1e-9)
+    on = (np.abs(d - ft.radius_px) <= OUTLINE_TOL_PX) & (cosr >= np.cos(np.radians(25.0)))
+    vis = max(float(ft.visible_fraction), 1e-6)
+    bins = np.floor((np.arctan2(v[on, 1], v[on, 0]) + np.pi) / (2 * np.pi) * 36).astype(int) % 36
+    return min(np.unique(bins).size / 36 / vis, 1.0), float(on.sum()) / (2 * np.pi * ft.radius_px * vis)
+
+
 def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, saturates: bool = False):
     """A diffuse probe ball found without a hint in one photo: a :class:`ffls.spheres.detect.SphereFit`.
 
@@ -178,12 +210,14 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
     candidate circle (:func:`ffls.spheres.detect.circle_candidates`) is taken instead as a centre-only
     pixel hint, whose fit searches outward from it for the best-supported round outline (the hint's
     path, ``docs/probes.md``). A fit is the ball's when its outline is round, closed and supported
-    (:func:`ffls.spheres.select.round_outline`), its centre well constrained (``CRITERIA
+    (:func:`ffls.spheres.select.round_outline`, on the fit's own edge points or on the photo's of both
+    polarities, :func:`_outline_both_ways`), its centre well constrained (``CRITERIA
     ['max_center_sigma_px']``), at least 60% of it in the frame, its interior smooth
     (:data:`MAX_INTERIOR_EDGES`: a circle fitted to the ground's texture holds that texture) and its
     radius at least :data:`MIN_BALL_FRACTION` of the photo's shorter side. Of outlines that overlap, the
     one fitting its edges best (lowest RMS) stays; of the separate ones left, the largest is the ball,
-    unless another is nearly as large (:data:`RIVAL_RATIO`).
+    unless another is nearly as large (:data:`RIVAL_RATIO`); an outline of edge points enclosing it, at
+    least as closed and supported, replaces it (:func:`_enclosing_outline`).
 
     Parameters
     ----------
@@ -216,10 +250,16 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
                for o in fits):
             continue
         fits.append(ft)
-    ok = []
+    ok, both = [], None
     for ft in sorted(fits, key=lambda f: -f.radius_px):
-        if not round_outline(ft, CRITERIA["max_residual_px"]) or ft.center_sigma_px > CRITERIA["max_center_sigma_px"]:
+        if ft.center_sigma_px > CRITERIA["max_center_sigma_px"] or ft.residual_px > CRITERIA["max_residual_px"]:
             continue  # no round outline: not worth a word
+        if not round_outline(ft, CRITERIA["max_residual_px"]):
+            if both is None:  # the photo's edge points with their gradients, once
+                both = edge_points(image)
+            closed, support = _outline_both_ways(*both, ft)
+            if closed < CRITERIA["min_closed"] or support < CRITERIA["min_support"]:
+                continue
         where = f"({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px"
         inner = _interior_edges(pts, ft.center_px, ft.radius_px)
         if ft.visible_fraction < 0.6:
@@ -254,7 +294,66 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
             raise InputError(f"two round outlines could be the probe ball: ({ball.center_px[0]:.0f}, "
                              f"{ball.center_px[1]:.0f}) px, radius {ball.radius_px:.0f} px and ({o.center_px[0]:.0f},"
                              f" {o.center_px[1]:.0f}) px, radius {o.radius_px:.0f} px; {hint}", source)
+    if both is None:
+        both = edge_points(image)
+    return _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_model, source)
+
+
+def _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_model, source):
+    """The ball's outline, or the circle of edge points (either polarity) enclosing it when that is at least as
+    closed and as supported (:func:`_outline_both_ways`): the outline encloses whatever lies inside the ball.
+
+    Under a low sun the terminator is a sharp arc just inside the limb on the ball's dark side; a fit of
+    the lit side's outline with that arc (in ``benchmarks/probe_wall.py`` under ``sunrise``, 3.6-4.8 px off,
+    3.1-4.4 px short) is round, closed and smooth inside, while the limb, whose edges run all round,
+    encloses it. The enclosing circles are searched on the edge points of either polarity whose gradient
+    is radial (:func:`ffls.spheres.mirror_outline.circle_search`, centre within :data:`ENCLOSING_OFFSET`
+    of the radius, radius up to that share larger); the largest that is at least as closed and supported
+    is fitted (:func:`ffls.spheres.detect.fit_outline`) on those points within twice
+    :data:`OUTLINE_TOL_PX` of it, and kept when that fit stays within :data:`OUTLINE_TOL_PX` of it, fits
+    its points no worse than the ball's fit and has a well-constrained centre. A circle encloses the
+    found one when that lies inside it to :data:`OUTLINE_TOL_PX` plus the found fit's RMS (a fit through
+    the lit limb and the terminator pokes out of the limb where they meet: by 1.1 px at RMS 1.37 px in
+    ``probe_wall.py`` under ``sunrise``, level 0.3, seed 4).
+    """
+    from ffls.spheres.mirror_outline import circle_search
+
+    pts, grads = both
+    c0, r0 = np.asarray(ball.center_px, dtype=np.float64), float(ball.radius_px)
+    v = pts - c0
+    d = np.hypot(v[:, 0], v[:, 1])
+    cosr = np.abs(np.sum(v * grads, axis=1)) / np.maximum(d, 1e-9)
+    sel = (cosr >= np.cos(np.radians(25.0))) & (d >= r0 - 2 * OUTLINE_TOL_PX) & \
+        (d <= (1 + 2 * ENCLOSING_OFFSET) * r0 + OUTLINE_TOL_PX)
+    found = circle_search(pts[sel], c0, ENCLOSING_OFFSET * r0, r0 + OUTLINE_TOL_PX, (1 + ENCLOSING_OFFSET) * r0,
+                          tol=OUTLINE_TOL_PX, n_best=3)
+    now = _outline_both_ways(pts, grads, ball)
+    for c, r, _ in sorted(found, key=lambda f: -f[1]):
+        if np.hypot(*(c - c0)) + r0 > r + OUTLINE_TOL_PX + ball.residual_px:
+            continue  # does not enclose the fit (known to its RMS)
+        closed, support = _outline_both_ways(pts, grads, _Circle(c, r, ball.visible_fraction))
+        if closed < now[0] or support < now[1]:
+            continue
+        on = sel & (np.abs(np.hypot(*(pts - c).T) - r) <= 2 * OUTLINE_TOL_PX)
+        try:
+            cam = DetectionCamera(camera_model, K, dist, np.asarray(world_from_camera, dtype=np.float64), R,
+                                  np.shape(image)[:2])
+            ft = fit_outline(pts[on], cam, c, r, source, n_edge=len(pts))
+        except ValueError:
+            continue
+        if np.hypot(*(ft.center_px - c)) <= OUTLINE_TOL_PX and abs(ft.radius_px - r) <= OUTLINE_TOL_PX \
+                and ft.residual_px <= ball.residual_px and ft.center_sigma_px <= CRITERIA["max_center_sigma_px"]:
+            return ft
     return ball
+
+
+@dataclass
+class _Circle:
+    """A circle judged by :func:`_outline_both_ways` (the fields of a fit it reads)."""
+
+    center_px: np.ndarray
+    radius_px: float
+    visible_fraction: float
 
 
 def _check_probe_size(center_px, radius_px, shape, source) -> None:
