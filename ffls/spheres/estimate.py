@@ -58,12 +58,12 @@ from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mas
 from ffls.spheres.lambert import (LambertFit, fit_lambert, flat_field_terms, own_shadow_of, own_shadow_table,
                                   shadowed_ground_bounce)
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
-                               estimate_photo, ray_origins)
+                               estimate_photo, fit_spheres, ray_origins)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values, sphere_values_of)
 from ffls.spheres.uncertainty import (ErrorModel, centre_floor_deg, distance_spread, fit_error_model,
-                                     photo_residuals)
+                                     halves_error_model, photo_residuals, tangent_residuals)
 
 __all__ = [
     "BOUNCE_MODES",
@@ -775,9 +775,68 @@ def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
     return BounceCalibration(ratio=float(np.clip(med, 0.0, 1.0)), spread=spread, n_photos=int(len(est)))
 
 
+def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, *,
+                   terminator: float = 0.15, up: np.ndarray = UP,
+                   own_shadow: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each accepted photo's matte spheres fitted again on the two halves of their pixels.
+
+    The halves lie either side of the plane through the sphere's fitted light and the world's up
+    (through the light and the world's x axis for a light within 6 degrees of up): each holds half
+    of the lit cap, so both fit the light about equally well, with their own pixels' noise and
+    their own share of what the model leaves out (:func:`ffls.spheres.uncertainty.halves_error_model`).
+    Each half is fitted as the sphere was (:func:`ffls.spheres.photo.fit_spheres`: its calibrated
+    ground ratio, its own shadow, started from its direction).
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+        One per entry of ``values``.
+    samples : list of SphereSamples
+    values : list
+        Per photo, its :func:`ffls.spheres.samples.sphere_values`.
+    terminator : float
+    up : (3,) float
+    own_shadow : bool
+
+    Returns
+    -------
+    residuals : list of (2, 2) float
+        Per photo and used matte sphere whose halves both fit, the halves' tangent offsets
+        (radians) from the sphere's direction.
+    sigmas : list of (2,) float
+        The halves' statistical per-axis standard deviations (degrees).
+    """
+    up = normalize(np.asarray(up, dtype=np.float64))
+    residuals, sigmas = [], []
+    for r, vals in zip(results, values):
+        if not r.ok:
+            continue
+        for k in r.used_spheres:
+            sp = r.spheres[k]
+            f = sp.fit
+            if sp.status != "ok" or not isinstance(f, LambertFit):
+                continue
+            l = np.asarray(f.direction, dtype=np.float64)
+            axis = np.cross(l, up)
+            if np.linalg.norm(axis) < np.sin(np.radians(6.0)):
+                axis = np.cross(l, [1.0, 0.0, 0.0])
+            side = samples[k].normals @ normalize(axis) >= 0.0
+            v = vals[k]
+            halves = fit_spheres([samples[k]] * 2,
+                                 [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2], v.ground)
+                                  for h in (side, ~side)],
+                                 terminator=terminator, up=up, bounce_ratio=[f.bounce_ratio] * 2,
+                                 start=[l, l], own_shadow=own_shadow)
+            if all(h.status == "ok" and np.isfinite(h.uncertainty_deg) for h in halves):
+                residuals.append(tangent_residuals(np.array([h.direction for h in halves]), l))
+                sigmas.append(np.array([h.uncertainty_deg for h in halves]) / np.sqrt(2.0))
+    return residuals, sigmas
+
+
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
                           refinements: list[CentreRefinement] | None = None,
                           scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
+                          values: list | None = None, fit_options: dict | None = None,
                           **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
@@ -834,6 +893,9 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         used_all.append(np.asarray(used))
     model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre,
                             kinds=[kd.kind for kd in kinds] if kinds is not None else None, **kwargs)
+    if model.source == "fallback" and values is not None:  # no sphere checks another: their halves do
+        model = halves_error_model(*halves_offsets(results, samples, values, **(fit_options or {})), centre,
+                                   **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(
@@ -1481,6 +1543,11 @@ def _outlines_holding_highlights(results: list[PhotoEstimate], mirrors: list, li
     return out
 
 
+def _fit_options(fitter: PhotoFitter) -> dict:
+    """The fitter's options that a sphere's own fit takes (:func:`halves_offsets`)."""
+    return {k: fitter.options[k] for k in ("terminator", "up", "own_shadow") if k in fitter.options}
+
+
 def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
@@ -1592,7 +1659,8 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
             by_photo = dict(zip(fitted, results))
     if bounce == "free":
         results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds)
+        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
+                                                 values=values, fit_options=_fit_options(fitter))
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1626,7 +1694,8 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
         results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
     results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds)
+    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
+                                                 values=values, fit_options=_fit_options(fitter))
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 

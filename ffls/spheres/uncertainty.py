@@ -108,6 +108,7 @@ __all__ = [
     "FALLBACK_MODEL",
     "MIN_TAIL_SAMPLES",
     "tail_factor",
+    "halves_error_model",
     "unchecked_floor_deg",
     "shading_shift",
     "encoding_perturbation",
@@ -253,10 +254,11 @@ class ErrorModel:
         Per-axis standard deviation (degrees) of the error shared by all spheres of a photo: the
         bound for the capture's median sphere (a summary), or, with ``common_ratio`` None, the
         value added to every photo.
-    source : {'disagreement', 'fallback'}
-        Measured from the spheres' disagreement, or the stated single-sphere fallback.
+    source : {'disagreement', 'halves', 'fallback'}
+        Measured from the spheres' disagreement, from a lone sphere's halves'
+        (:func:`halves_error_model`), or the stated single-sphere fallback.
     n_photos : int
-        Photos with two or more spheres used in the fit.
+        Photos with two or more spheres (or both halves of a lone sphere) used in the fit.
     n_trimmed : int
         Of those, left out as improbable under the fitted model.
     centre_deg : tuple of float
@@ -658,6 +660,49 @@ def _fallback() -> ErrorModel:
 
 #: The single-sphere model (no disagreement to measure): statistics plus ``FALLBACK_FLOOR_DEG``.
 FALLBACK_MODEL = _fallback()
+
+
+def halves_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], centre_deg=None, *,
+                       common_correlation: float = COMMON_CORRELATION, min_photos: int = 3) -> ErrorModel:
+    """A lone sphere's error model from the disagreement of its two halves (module docstring, "one sphere").
+
+    With one sphere per photo no other sphere checks it, but the two halves of its pixels (either
+    side of a plane through its light, :func:`ffls.spheres.estimate.halves_offsets`) are two fits of
+    the same light with their own pixels' noise and their own share of the model's misfit (light the
+    model leaves out, a blurred or darkened limb, an unmodelled shading pattern). Their offsets
+    from the sphere's direction are fitted as two spheres' (:func:`fit_error_model`: the halves'
+    scale ``s``, floor ``tau``, cone factor and common-mode bound), and the sphere's direction is,
+    to first order, the mean of its halves': its per-axis floor is ``tau / sqrt(2)`` (its
+    statistics, about those of a half over ``sqrt(2)``, keep the scale), and the common-mode bound,
+    stated on a half's systematic variance, is twice the mean's (``common_ratio`` doubled). The
+    centre term ``g`` is the sphere's (a centre error turns both halves alike, so it is not in
+    their disagreement). Too few photos with both halves fitted: :data:`FALLBACK_MODEL`.
+
+    Parameters
+    ----------
+    residuals : list of (2, 2) float
+        Per photo, its halves' tangent offsets (radians) from the sphere's direction.
+    stat_sigma_deg : list of (2,) float
+        The halves' statistical per-axis standard deviations (degrees).
+    centre_deg : (n_spheres,) float, optional
+        Per sphere, its centre term (:func:`centre_floor_deg`).
+    common_correlation : float
+    min_photos : int
+
+    Returns
+    -------
+    ErrorModel
+        ``source`` ``'halves'`` (or the fallback's).
+    """
+    from dataclasses import replace
+
+    centre = np.zeros(0) if centre_deg is None else np.asarray(centre_deg, dtype=np.float64)
+    halves = fit_error_model(residuals, stat_sigma_deg, common_correlation=common_correlation,
+                             min_photos=min_photos)
+    if halves.source != "disagreement":
+        return FALLBACK_MODEL.with_centres(centre)
+    return replace(halves, floor_deg=halves.floor_deg / np.sqrt(2.0), common_ratio=2.0 * halves.common_ratio,
+                   source="halves", centre_deg=tuple(float(x) for x in centre))
 
 
 def tail_factor(residuals: list[np.ndarray], variances: list[np.ndarray], confidence: float = CONFIDENCE,
