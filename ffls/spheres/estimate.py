@@ -780,10 +780,12 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
                    own_shadow: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Each accepted photo's matte spheres fitted again on the two halves of their pixels.
 
-    The halves lie either side of the plane through the sphere's fitted light and the world's up
-    (through the light and the world's x axis for a light within 6 degrees of up): each holds half
-    of the lit cap, so both fit the light about equally well, with their own pixels' noise and
-    their own share of what the model leaves out (:func:`ffls.spheres.uncertainty.halves_error_model`).
+    The halves lie either side of a plane through the sphere's fitted light, across the plane of
+    the light and the camera (the mean of the sphere's seen normals), placed where each holds
+    half of the photo's lit pixels (the lit part the camera sees is symmetric about the plane of
+    the light and the camera, so each half holds a like share of it): both fit the light about
+    equally well, with their own pixels' noise and their own share of what the model leaves out
+    (:func:`ffls.spheres.uncertainty.halves_error_model`).
     Each half is fitted as the sphere was (:func:`ffls.spheres.photo.fit_spheres`: its calibrated
     ground ratio, its own shadow, started from its direction).
 
@@ -817,11 +819,16 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
             if sp.status != "ok" or not isinstance(f, LambertFit):
                 continue
             l = np.asarray(f.direction, dtype=np.float64)
-            axis = np.cross(l, up)
-            if np.linalg.norm(axis) < np.sin(np.radians(6.0)):
-                axis = np.cross(l, [1.0, 0.0, 0.0])
-            side = samples[k].normals @ normalize(axis) >= 0.0
+            n = samples[k].normals
+            axis = np.cross(l, n.mean(axis=0))  # across the plane of the light and the camera
+            if np.linalg.norm(axis) < 1e-3 * np.linalg.norm(n.mean(axis=0)):
+                axis = np.cross(l, up if abs(l @ up) < 0.99 else [1.0, 0.0, 0.0])
             v = vals[k]
+            key = n @ normalize(axis)
+            lit = np.asarray(v[1], bool) & np.isfinite(v[0]) & (n @ l > terminator)
+            if not lit.any():
+                continue
+            side = key >= np.median(key[lit])  # as many lit pixels on each side
             halves = fit_spheres([samples[k]] * 2,
                                  [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2], v.ground)
                                   for h in (side, ~side)],

@@ -701,7 +701,7 @@ def halves_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndar
                              min_photos=min_photos)
     if halves.source != "disagreement":
         return FALLBACK_MODEL.with_centres(centre)
-    return replace(halves, floor_deg=halves.floor_deg / np.sqrt(2.0), common_ratio=2.0 * halves.common_ratio,
+    return replace(halves, floor_deg=float(halves.floor_deg / np.sqrt(2.0)), common_ratio=2.0 * halves.common_ratio,
                    source="halves", centre_deg=tuple(float(x) for x in centre))
 
 
