@@ -840,6 +840,11 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
     return residuals, sigmas
 
 
+def _fit_of(results: list[PhotoEstimate], k: int):
+    """Sphere ``k``'s fit in the first accepted photo that used it (None: no such photo)."""
+    return next((r.spheres[k].fit for r in results if r.ok and k in r.used_spheres), None)
+
+
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
                           refinements: list[CentreRefinement] | None = None,
                           scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
@@ -872,6 +877,15 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     kinds : list of SphereKind, optional
         Each sphere's kind (:func:`sphere_kinds`), for its kind's own terms of the model (without
         them, one shared model).
+    values : list, optional
+        Per photo of ``results``, its :func:`ffls.spheres.samples.sphere_values`. Where no sphere
+        checks another (fewer than 3 photos with 2+ spheres), the matte spheres' halves are then
+        fitted (:func:`halves_offsets`) and the model is theirs
+        (:func:`ffls.spheres.uncertainty.halves_error_model`), with each matte sphere's centre
+        term measured (its shading's centre against its outline, :func:`refine_sphere_centres`,
+        not applied) where no refinement gave one. None: the stated fallback.
+    fit_options : dict, optional
+        ``terminator``, ``up`` and ``own_shadow`` of the spheres' fits (for the halves).
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -901,7 +915,17 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre,
                             kinds=[kd.kind for kd in kinds] if kinds is not None else None, **kwargs)
     if model.source == "fallback" and values is not None:  # no sphere checks another: their halves do
-        model = halves_error_model(*halves_offsets(results, samples, values, **(fit_options or {})), centre,
+        options = fit_options or {}
+        # a centre error turns both halves alike: each unrefined sphere's centre measured by its
+        # shading against its outline (not applied: only its uncertainty, as a refined one's)
+        which = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
+        if any(which):
+            measured = refine_sphere_centres(samples, results, values, which=which,
+                                             terminator=options.get("terminator", 0.15))[2]
+            for k, ref in enumerate(measured):
+                if which[k] and ref.accepted:
+                    centre[k] = centre_floor_deg(ref.shift_px, samples[k].radius_px)
+        model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
                                    **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)

@@ -60,8 +60,12 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    ratios move the directions by at most 0.06 degrees, 6-90 times less than the common errors
    measured against renders' truth, which come from the model's misfit (``docs/spheres.md``,
    "The common mode from the capture's fitted parameters"). With one sphere there is no
-   disagreement: the fit statistics plus a stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS)
-   and its common-mode share are used (:data:`FALLBACK_MODEL`).
+   disagreement between spheres, but a matte sphere's two halves disagree
+   (:func:`halves_error_model`): the same fit on the two halves' offsets gives its scale, floor,
+   cone factor and common-mode bound, measured on its own photos. Where neither can be measured
+   (a lone mirror ball, too few photos with both halves fitted), the fit statistics plus a stated
+   per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
+   (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
 (``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode; a near light's
