@@ -840,6 +840,60 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
     return residuals, sigmas
 
 
+def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                         flat: FlatField | None, *, terminator: float = 0.15, up: np.ndarray = UP,
+                         own_shadow: bool = True) -> float:
+    """Per-axis standard deviation (degrees) of the matte spheres' directions from a lens fall-off
+    that the spheres measured but the capture did not divide out.
+
+    :func:`calibrate_flat_field` keeps a fall-off only where the spheres agree better with it
+    (:func:`disagreement_change`), which one sphere cannot show; a gradient across its disk turns
+    its direction alike in both halves, so their disagreement does not show it either. Where a
+    sphere's freely fitted gradient (``FlatField.measured``, less what was divided out) is
+    significant (its chi-square over its standard errors, 2 degrees of freedom, at
+    :data:`ffls.spheres.photo.SIGNIFICANCE`), each accepted photo's sphere is fitted again with
+    it divided out: the root mean square of the turn over the photos, half on each axis.
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+    samples : list of SphereSamples
+    values : list
+        Per photo of ``results``, its sphere values (as fitted).
+    flat : FlatField or None
+    terminator, up, own_shadow
+        As the spheres' own fits (:func:`ffls.spheres.photo.fit_spheres`).
+
+    Returns
+    -------
+    float
+        0 without a significant unapplied gradient.
+    """
+    if flat is None:
+        return 0.0
+    rest = np.nan_to_num(np.asarray(flat.measured, dtype=np.float64)
+                         - np.asarray(flat.gradients, dtype=np.float64))
+    sd = np.asarray(flat.measured_sigma, dtype=np.float64)
+    z2 = np.sum(np.where(sd > 0, rest / np.where(sd > 0, sd, 1.0), 0.0) ** 2, axis=1)
+    significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
+    turns = []
+    for r, vals in zip(results, values):
+        if not r.ok:
+            continue
+        for k in r.used_spheres:
+            f = r.spheres[k].fit
+            if k >= significant.size or not significant[k] or not isinstance(f, LambertFit) or f.status != "ok":
+                continue
+            v = vals[k]
+            div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
+            g = fit_spheres([samples[k]], [sphere_values_of(v[0] / div, v[1], v[2], v.ground)],
+                            terminator=terminator, up=up, bounce_ratio=[f.bounce_ratio], start=[f.direction],
+                            own_shadow=own_shadow)[0]
+            if g.status == "ok":
+                turns.append(float(np.arccos(np.clip(g.direction @ f.direction, -1.0, 1.0))))
+    return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
+
+
 def _fit_of(results: list[PhotoEstimate], k: int):
     """Sphere ``k``'s fit in the first accepted photo that used it (None: no such photo)."""
     return next((r.spheres[k].fit for r in results if r.ok and k in r.used_spheres), None)
@@ -849,7 +903,7 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                           refinements: list[CentreRefinement] | None = None,
                           scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
                           values: list | None = None, fit_options: dict | None = None,
-                          **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
+                          flat: FlatField | None = None, **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
     Every accepted photo with two or more used spheres gives their tangent offsets from the
@@ -886,6 +940,10 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         not applied) where no refinement gave one. None: the stated fallback.
     fit_options : dict, optional
         ``terminator``, ``up`` and ``own_shadow`` of the spheres' fits (for the halves).
+    flat : FlatField, optional
+        The capture's lens fall-off: with the halves, a significant gradient the spheres measured
+        but the capture did not divide out adds its turn (:func:`flat_field_shift_deg`) to the
+        model's common floor.
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -927,6 +985,9 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                     centre[k] = centre_floor_deg(ref.shift_px, samples[k].radius_px)
         model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
                                    **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
+        lens = flat_field_shift_deg(results, samples, values, flat, **options)
+        if lens > 0.0:  # a turn the halves share, as the geometry's common floor is
+            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, lens)))
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(
@@ -1691,7 +1752,7 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
     if bounce == "free":
         results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
         error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                 values=values, fit_options=_fit_options(fitter))
+                                                 values=values, fit_options=_fit_options(fitter), flat=flat)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1726,7 +1787,7 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
         fitter.advance(n_photos)
     results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
     error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                 values=values, fit_options=_fit_options(fitter))
+                                                 values=values, fit_options=_fit_options(fitter), flat=flat)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 
