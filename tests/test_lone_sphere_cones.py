@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ffls.conventions import normalize, spherical_to_direction
+from ffls.conventions import spherical_to_direction
 from ffls.spheres.estimate import (FlatField, calibrate_uncertainty, flat_field_offsets, flat_field_shift_deg)
 from ffls.spheres.photo import estimate_photo
 from ffls.spheres.samples import sphere_samples_orthographic, sphere_values_of
