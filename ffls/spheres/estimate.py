@@ -775,6 +775,24 @@ def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
     return BounceCalibration(ratio=float(np.clip(med, 0.0, 1.0)), spread=spread, n_photos=int(len(est)))
 
 
+def _used_matte_fits(results: list[PhotoEstimate], values: list):
+    """``(k, fit, values)`` of each accepted photo's used matte spheres fitted ``'ok'``."""
+    for r, vals in zip(results, values):
+        if not r.ok:
+            continue
+        for k in r.used_spheres:
+            f = r.spheres[k].fit
+            if r.spheres[k].status == "ok" and isinstance(f, LambertFit):
+                yield k, f, vals[k]
+
+
+def _refit_matte(s: SphereSamples, fit: LambertFit, values: list[SphereValues], **options) -> list[LambertFit]:
+    """Sphere ``s``'s fit ``fit`` made again on each of ``values`` (its calibrated ground ratio, started
+    from its direction; ``options``: ``terminator``, ``up``, ``own_shadow``)."""
+    n = len(values)
+    return fit_spheres([s] * n, values, bounce_ratio=[fit.bounce_ratio] * n, start=[fit.direction] * n, **options)
+
+
 def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, *,
                    terminator: float = 0.15, up: np.ndarray = UP,
                    own_shadow: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -810,33 +828,23 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
     """
     up = normalize(np.asarray(up, dtype=np.float64))
     residuals, sigmas = [], []
-    for r, vals in zip(results, values):
-        if not r.ok:
+    for k, f, v in _used_matte_fits(results, values):
+        l = np.asarray(f.direction, dtype=np.float64)
+        n = samples[k].normals
+        axis = np.cross(l, n.mean(axis=0))  # across the plane of the light and the camera
+        if np.linalg.norm(axis) < 1e-3 * np.linalg.norm(n.mean(axis=0)):
+            axis = np.cross(l, up if abs(l @ up) < 0.99 else [1.0, 0.0, 0.0])
+        key = n @ normalize(axis)
+        lit = np.asarray(v[1], bool) & np.isfinite(v[0]) & (n @ l > terminator)
+        if not lit.any():
             continue
-        for k in r.used_spheres:
-            sp = r.spheres[k]
-            f = sp.fit
-            if sp.status != "ok" or not isinstance(f, LambertFit):
-                continue
-            l = np.asarray(f.direction, dtype=np.float64)
-            n = samples[k].normals
-            axis = np.cross(l, n.mean(axis=0))  # across the plane of the light and the camera
-            if np.linalg.norm(axis) < 1e-3 * np.linalg.norm(n.mean(axis=0)):
-                axis = np.cross(l, up if abs(l @ up) < 0.99 else [1.0, 0.0, 0.0])
-            v = vals[k]
-            key = n @ normalize(axis)
-            lit = np.asarray(v[1], bool) & np.isfinite(v[0]) & (n @ l > terminator)
-            if not lit.any():
-                continue
-            side = key >= np.median(key[lit])  # as many lit pixels on each side
-            halves = fit_spheres([samples[k]] * 2,
-                                 [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2], v.ground)
-                                  for h in (side, ~side)],
-                                 terminator=terminator, up=up, bounce_ratio=[f.bounce_ratio] * 2,
-                                 start=[l, l], own_shadow=own_shadow)
-            if all(h.status == "ok" and np.isfinite(h.uncertainty_deg) for h in halves):
-                residuals.append(tangent_residuals(np.array([h.direction for h in halves]), l))
-                sigmas.append(np.array([h.uncertainty_deg for h in halves]) / np.sqrt(2.0))
+        side = key >= np.median(key[lit])  # as many lit pixels on each side
+        halves = _refit_matte(samples[k], f, [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2],
+                                                               getattr(v, "ground", None)) for h in (side, ~side)],
+                              terminator=terminator, up=up, own_shadow=own_shadow)
+        if all(h.status == "ok" and np.isfinite(h.uncertainty_deg) for h in halves):
+            residuals.append(tangent_residuals(np.array([h.direction for h in halves]), l))
+            sigmas.append(np.array([h.uncertainty_deg for h in halves]) / np.sqrt(2.0))
     return residuals, sigmas
 
 
@@ -877,20 +885,14 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     z2 = np.sum(np.where(sd > 0, rest / np.where(sd > 0, sd, 1.0), 0.0) ** 2, axis=1)
     significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
     turns = []
-    for r, vals in zip(results, values):
-        if not r.ok:
+    for k, f, v in _used_matte_fits(results, values):
+        if k >= significant.size or not significant[k]:
             continue
-        for k in r.used_spheres:
-            f = r.spheres[k].fit
-            if k >= significant.size or not significant[k] or not isinstance(f, LambertFit) or f.status != "ok":
-                continue
-            v = vals[k]
-            div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
-            g = fit_spheres([samples[k]], [sphere_values_of(v[0] / div, v[1], v[2], v.ground)],
-                            terminator=terminator, up=up, bounce_ratio=[f.bounce_ratio], start=[f.direction],
-                            own_shadow=own_shadow)[0]
-            if g.status == "ok":
-                turns.append(float(np.arccos(np.clip(g.direction @ f.direction, -1.0, 1.0))))
+        div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
+        g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
+                         terminator=terminator, up=up, own_shadow=own_shadow)[0]
+        if g.status == "ok":
+            turns.append(float(np.arccos(np.clip(g.direction @ f.direction, -1.0, 1.0))))
     return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
 
 
