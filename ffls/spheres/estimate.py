@@ -1645,7 +1645,8 @@ def _fit_options(fitter: PhotoFitter) -> dict:
 def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
-              first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None) -> CaptureEstimate:
+              first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
+              halves: bool = True) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
@@ -1659,7 +1660,9 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
     Gauss-Newton step from the photos' fits). ``first_pass`` (None: every photo): with a calibrated
     bounce the first pass fits only that many photos (:func:`first_pass_photos`; the others' values
     are read) and the steps it feeds use those; the second pass fits every photo. A capture with a
-    mirror sphere has every photo fitted in the first pass (its highlight checks read them all)."""
+    mirror sphere has every photo fitted in the first pass (its highlight checks read them all).
+    ``halves`` False: a lone sphere's cones are the stated fallback's, not its halves'
+    (:func:`calibrate_uncertainty` without the values)."""
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
@@ -1754,7 +1757,8 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
     if bounce == "free":
         results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
         error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                 values=values, fit_options=_fit_options(fitter), flat=flat)
+                                                     values=values if halves else None,
+                                                     fit_options=_fit_options(fitter), flat=flat)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1789,7 +1793,8 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
         fitter.advance(n_photos)
     results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
     error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                 values=values, fit_options=_fit_options(fitter), flat=flat)
+                                                 values=values if halves else None,
+                                                 fit_options=_fit_options(fitter), flat=flat)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 
@@ -2178,7 +2183,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
                     flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
-                    fit_tilt: bool = True, **kwargs):
+                    fit_tilt: bool = True, halves: bool = True, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -2230,6 +2235,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         (over a ground; ``model`` not ``'near'``), fit the camera's tilt, and so the ground's normal
         under the spheres, to the matte spheres' shading (:func:`fit_camera_tilt`; False: the
         image's up is the world's). The lights stay in the capture's default frame.
+    halves : bool
+        A lone matte sphere's cones from its halves' disagreement (:func:`calibrate_uncertainty`);
+        False: the stated fallback's (as under a fitted tilt, whose error turns every photo alike).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -2306,7 +2314,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
                             flat_field=lens_centre(capture, shape) if flat_field else None,
-                            first_pass=first_pass, bounce_shape=bounce_shape)
+                            first_pass=first_pass, bounce_shape=bounce_shape, halves=halves)
     finally:
         if bar is not None:
             bar.close()
@@ -2323,7 +2331,10 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, **options):
     def fit(tilt_deg: float):
         tilted = replace(capture, world_from_camera=tilted_world_from_camera(tilt_deg),
                          world_from_camera_is_default=False)
-        return estimate_lights(tilted, spheres, progress=False, workers=workers, fit_tilt=False, **options)
+        # (a lone sphere keeps the fallback's cones: the tilt's error turns every photo alike, and
+        # neither its halves nor anything else here measures it, docs/spheres.md)
+        return estimate_lights(tilted, spheres, progress=False, workers=workers, fit_tilt=False, halves=False,
+                               **options)
 
     tilt, tried = fit_camera_tilt(fit)
     if not np.isfinite(tilt):
