@@ -187,15 +187,62 @@ def test_centre_floor_propagates_the_centre_shift():
 
 
 def test_one_sphere_capture_gets_finite_honest_cones(tmp_path):
+    """One matte sphere: its cones come from its halves' disagreement (here errors of 0.05-0.4 deg:
+    cones of about 0.64 deg, a third of the stated fallback's 2.0), and cover the errors."""
     from ffls.synth.scene import SynthScene
 
     _capture(tmp_path, n_phi=5, n_theta=3, scene=SynthScene(sphere_xy=((0.25, -0.25),), ground_albedo=0.3))
     est, err, cone = _run(tmp_path, truth_spheres=True)
-    assert est.error_model.source == "fallback"  # with the sphere's centre term (centre_deg)
-    assert est.error_model == FALLBACK_MODEL.with_centres(est.error_model.centre_deg)
+    assert est.error_model.source == "halves" and est.error_model.n_photos >= 10, est.error_model
+    assert est.error_model.centre_deg == pytest.approx((0.0906,), abs=1e-3)  # the sphere's centre term
     assert err.size >= 12
-    assert np.all(np.isfinite(cone)) and np.all(cone >= CONE_FACTOR * FALLBACK_MODEL.floor_deg)
+    fallback = FALLBACK_MODEL.cone_deg(FALLBACK_MODEL.photo_sigma_deg([0.0]))
+    assert np.all(np.isfinite(cone)) and np.median(cone) < 0.5 * fallback, (cone, fallback)
     assert np.mean(err <= cone) >= 0.9, (err, cone)
+
+
+def _halves(rng, n_photos, tau_deg, stat_deg=(0.05, 0.3)):
+    """Per photo a lone sphere's two halves: each off the light by its statistics and a floor ``tau``
+    of its own (per axis); the sphere's direction is their inverse-variance mean. Returns the
+    halves' offsets from the sphere's direction (radians), their statistics (the sphere's own is a
+    half's over sqrt(2)) and the sphere's true errors (degrees)."""
+    res, sig, stat, errs = [], [], [], []
+    for _ in range(n_photos):
+        s = rng.uniform(*stat_deg, size=2)
+        sd = np.radians(np.hypot(s, tau_deg))
+        e = rng.normal(size=(2, 2)) * sd[:, None]
+        w = 1.0 / sd ** 2
+        mean = (w[:, None] * e).sum(0) / w.sum()
+        res.append(e - mean)
+        sig.append(s)
+        stat.append(1.0 / np.sqrt(np.sum(1.0 / s ** 2)))
+        errs.append(np.degrees(np.linalg.norm(mean)))
+    return res, sig, np.array(stat), np.array(errs)
+
+
+@pytest.mark.parametrize("tau_deg", [0.1, 2.0])
+def test_halves_error_model_sizes_a_lone_sphere_from_its_own_data(tau_deg, rng=np.random.default_rng(8)):
+    """A lone sphere's halves that disagree little give a narrow cone, and a wide one where they
+    disagree a lot (a model that fits the ball badly), each covering the sphere's errors; the
+    stated fallback gives the same cone to both."""
+    from ffls.spheres.uncertainty import halves_error_model
+
+    res, sig, stat, errs = _halves(rng, 300, tau_deg)
+    m = halves_error_model(res, sig, [0.0], common_correlation=0.0)
+    assert m.source == "halves" and m.n_photos >= 295, m
+    assert m.floor_deg == pytest.approx(tau_deg / np.sqrt(2.0), rel=0.2), m
+    cones = np.array([m.cone_deg(np.sqrt(m.photo_sigma_deg(s, [0]) ** 2 - m.common_floor_deg ** 2))
+                      for s in stat])
+    assert 0.9 <= np.mean(errs <= cones) <= 0.98, np.mean(errs <= cones)
+    fallback = FALLBACK_MODEL.cone_deg(FALLBACK_MODEL.photo_sigma_deg(0.1))
+    assert (np.median(cones) < 0.5 * fallback) if tau_deg < 0.5 else (np.median(cones) > 1.3 * fallback)
+
+
+def test_halves_error_model_without_enough_halves_is_the_fallback():
+    from ffls.spheres.uncertainty import halves_error_model
+
+    m = halves_error_model([np.zeros((2, 2))] * 2, [np.ones(2)] * 2, [0.3])
+    assert m == FALLBACK_MODEL.with_centres([0.3])
 
 
 def _heteroscedastic(rng, n_photos=300, k=4, tau_deg=0.5, spread=0.6):

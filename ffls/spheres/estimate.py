@@ -59,12 +59,12 @@ from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mas
 from ffls.spheres.lambert import (LambertFit, fit_lambert, flat_field_terms, own_shadow_of, own_shadow_table,
                                   shadowed_ground_bounce)
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
-                               estimate_photo, ray_origins)
+                               estimate_photo, fit_spheres, ray_origins)
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values, sphere_values_of)
 from ffls.spheres.uncertainty import (ErrorModel, centre_floor_deg, distance_spread, fit_error_model,
-                                     photo_residuals)
+                                     halves_error_model, photo_residuals, tangent_residuals)
 
 __all__ = [
     "BOUNCE_MODES",
@@ -454,7 +454,7 @@ class FlatField:
         One-sided significance of a fall-off (``strength > 0``; Student's t over the photos).
     applied : bool
         ``p <`` :data:`ffls.spheres.photo.SIGNIFICANCE`: every matte sphere's values are divided
-        by its ``gradients`` before its directions are fitted; :func:`_two_pass` then keeps the
+        by its ``gradients`` before its directions are fitted; :func:`two_pass` then keeps the
         division only where the spheres agree better with it (:func:`disagreement_change`).
     gradients : (k, 2) float
         Per sphere, the law's gradient across its disk (zeros where not applied, and for
@@ -490,7 +490,7 @@ class FlatField:
                 "photos": [int(n) for n in np.asarray(self.n_photos).ravel()]}
 
 
-#: Rounds of the flat-field fit and first pass in :func:`_two_pass` (the fit is one Gauss-Newton
+#: Rounds of the flat-field fit and first pass in :func:`two_pass` (the fit is one Gauss-Newton
 #: step from the photos' fits, biased by the gradient: on a 7% per radius gradient the first
 #: step found 87-92% of it; a second is kept only where the spheres then agree better).
 FLAT_FIELD_ROUNDS = 2
@@ -592,7 +592,7 @@ def calibrate_flat_field(results: list[PhotoEstimate], samples: list[SphereSampl
     Parameters
     ----------
     results : list of PhotoEstimate
-        The photos' fits (a pass of :func:`_two_pass`).
+        The photos' fits (a pass of :func:`two_pass`).
     samples : list of SphereSamples
     values : list
         Per photo, its :func:`ffls.spheres.samples.sphere_values`.
@@ -776,10 +776,137 @@ def _weighted_median_ratio(est: list, w: list) -> BounceCalibration:
     return BounceCalibration(ratio=float(np.clip(med, 0.0, 1.0)), spread=spread, n_photos=int(len(est)))
 
 
+def _used_matte_fits(results: list[PhotoEstimate], values: list):
+    """``(k, fit, values)`` of each accepted photo's used matte spheres fitted ``'ok'``."""
+    for r, vals in zip(results, values):
+        if not r.ok:
+            continue
+        for k in r.used_spheres:
+            f = r.spheres[k].fit
+            if r.spheres[k].status == "ok" and isinstance(f, LambertFit):
+                yield k, f, vals[k]
+
+
+def _refit_matte(s: SphereSamples, fit: LambertFit, values: list[SphereValues], **options) -> list[LambertFit]:
+    """Sphere ``s``'s fit ``fit`` made again on each of ``values`` (its calibrated ground ratio, started
+    from its direction; ``options``: ``terminator``, ``up``, ``own_shadow``)."""
+    n = len(values)
+    return fit_spheres([s] * n, values, bounce_ratio=[fit.bounce_ratio] * n, start=[fit.direction] * n, **options)
+
+
+def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, *,
+                   terminator: float = 0.15, up: np.ndarray = UP,
+                   own_shadow: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each accepted photo's matte spheres fitted again on the two halves of their pixels.
+
+    The halves lie either side of a plane through the sphere's fitted light, across the plane of
+    the light and the camera (the mean of the sphere's seen normals), placed where each holds
+    half of the photo's lit pixels (the lit part the camera sees is symmetric about the plane of
+    the light and the camera, so each half holds a like share of it): both fit the light about
+    equally well, with their own pixels' noise and their own share of what the model leaves out
+    (:func:`ffls.spheres.uncertainty.halves_error_model`).
+    Each half is fitted as the sphere was (:func:`ffls.spheres.photo.fit_spheres`: its calibrated
+    ground ratio, its own shadow, started from its direction).
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+        One per entry of ``values``.
+    samples : list of SphereSamples
+    values : list
+        Per photo, its :func:`ffls.spheres.samples.sphere_values`.
+    terminator : float
+    up : (3,) float
+    own_shadow : bool
+
+    Returns
+    -------
+    residuals : list of (2, 2) float
+        Per photo and used matte sphere whose halves both fit, the halves' tangent offsets
+        (radians) from the sphere's direction.
+    sigmas : list of (2,) float
+        The halves' statistical per-axis standard deviations (degrees).
+    """
+    up = normalize(np.asarray(up, dtype=np.float64))
+    residuals, sigmas = [], []
+    for k, f, v in _used_matte_fits(results, values):
+        l = np.asarray(f.direction, dtype=np.float64)
+        n = samples[k].normals
+        axis = np.cross(l, n.mean(axis=0))  # across the plane of the light and the camera
+        if np.linalg.norm(axis) < 1e-3 * np.linalg.norm(n.mean(axis=0)):
+            axis = np.cross(l, up if abs(l @ up) < 0.99 else [1.0, 0.0, 0.0])
+        key = n @ normalize(axis)
+        lit = np.asarray(v[1], bool) & np.isfinite(v[0]) & (n @ l > terminator)
+        if not lit.any():
+            continue
+        side = key >= np.median(key[lit])  # as many lit pixels on each side
+        halves = _refit_matte(samples[k], f, [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2],
+                                                               getattr(v, "ground", None)) for h in (side, ~side)],
+                              terminator=terminator, up=up, own_shadow=own_shadow)
+        if all(h.status == "ok" and np.isfinite(h.uncertainty_deg) for h in halves):
+            residuals.append(tangent_residuals(np.array([h.direction for h in halves]), l))
+            sigmas.append(np.array([h.uncertainty_deg for h in halves]) / np.sqrt(2.0))
+    return residuals, sigmas
+
+
+def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                         flat: FlatField | None, *, terminator: float = 0.15, up: np.ndarray = UP,
+                         own_shadow: bool = True) -> float:
+    """Per-axis standard deviation (degrees) of the matte spheres' directions from a lens fall-off
+    that the spheres measured but the capture did not divide out.
+
+    :func:`calibrate_flat_field` keeps a fall-off only where the spheres agree better with it
+    (:func:`disagreement_change`), which one sphere cannot show; a gradient across its disk turns
+    its direction alike in both halves, so their disagreement does not show it either. Where a
+    sphere's freely fitted gradient (``FlatField.measured``, less what was divided out) is
+    significant (its chi-square over its standard errors, 2 degrees of freedom, at
+    :data:`ffls.spheres.photo.SIGNIFICANCE`), each accepted photo's sphere is fitted again with
+    it divided out: the root mean square of the turn over the photos, half on each axis.
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+    samples : list of SphereSamples
+    values : list
+        Per photo of ``results``, its sphere values (as fitted).
+    flat : FlatField or None
+    terminator, up, own_shadow
+        As the spheres' own fits (:func:`ffls.spheres.photo.fit_spheres`).
+
+    Returns
+    -------
+    float
+        0 without a significant unapplied gradient.
+    """
+    if flat is None:
+        return 0.0
+    rest = np.nan_to_num(np.asarray(flat.measured, dtype=np.float64)
+                         - np.asarray(flat.gradients, dtype=np.float64))
+    sd = np.asarray(flat.measured_sigma, dtype=np.float64)
+    z2 = np.sum(np.where(sd > 0, rest / np.where(sd > 0, sd, 1.0), 0.0) ** 2, axis=1)
+    significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
+    turns = []
+    for k, f, v in _used_matte_fits(results, values):
+        if k >= significant.size or not significant[k]:
+            continue
+        div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
+        g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
+                         terminator=terminator, up=up, own_shadow=own_shadow)[0]
+        if g.status == "ok":
+            turns.append(float(np.arccos(np.clip(g.direction @ f.direction, -1.0, 1.0))))
+    return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
+
+
+def _fit_of(results: list[PhotoEstimate], k: int):
+    """Sphere ``k``'s fit in the first accepted photo that used it (None: no such photo)."""
+    return next((r.spheres[k].fit for r in results if r.ok and k in r.used_spheres), None)
+
+
 def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamples],
                           refinements: list[CentreRefinement] | None = None,
                           scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
-                          **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
+                          values: list | None = None, fit_options: dict | None = None,
+                          flat: FlatField | None = None, **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
     Every accepted photo with two or more used spheres gives their tangent offsets from the
@@ -807,6 +934,19 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
     kinds : list of SphereKind, optional
         Each sphere's kind (:func:`sphere_kinds`), for its kind's own terms of the model (without
         them, one shared model).
+    values : list, optional
+        Per photo of ``results``, its :func:`ffls.spheres.samples.sphere_values`. Where no sphere
+        checks another (fewer than 3 photos with 2+ spheres), the matte spheres' halves are then
+        fitted (:func:`halves_offsets`) and the model is theirs
+        (:func:`ffls.spheres.uncertainty.halves_error_model`), with each matte sphere's centre
+        term measured (its shading's centre against its outline, :func:`refine_sphere_centres`,
+        not applied) where no refinement gave one. None: the stated fallback.
+    fit_options : dict, optional
+        ``terminator``, ``up`` and ``own_shadow`` of the spheres' fits (for the halves).
+    flat : FlatField, optional
+        The capture's lens fall-off: with the halves, a significant gradient the spheres measured
+        but the capture did not divide out adds its turn (:func:`flat_field_shift_deg`) to the
+        model's common floor.
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -835,6 +975,22 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         used_all.append(np.asarray(used))
     model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre,
                             kinds=[kd.kind for kd in kinds] if kinds is not None else None, **kwargs)
+    if model.source == "fallback" and values is not None:  # no sphere checks another: their halves do
+        options = fit_options or {}
+        # a centre error turns both halves alike: each unrefined sphere's centre measured by its
+        # shading against its outline (not applied: only its uncertainty, as a refined one's)
+        which = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
+        if any(which):
+            measured = refine_sphere_centres(samples, results, values, which=which,
+                                             terminator=options.get("terminator", 0.15))[2]
+            for k, ref in enumerate(measured):
+                if which[k] and ref.accepted:
+                    centre[k] = centre_floor_deg(ref.shift_px, samples[k].radius_px)
+        model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
+                                   **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
+        lens = flat_field_shift_deg(results, samples, values, flat, **options)
+        if lens > 0.0:  # a turn the halves share, as the geometry's common floor is
+            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, lens)))
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(
@@ -1482,10 +1638,16 @@ def _outlines_holding_highlights(results: list[PhotoEstimate], mirrors: list, li
     return out
 
 
-def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
+def _sphere_fit_options(fitter: PhotoFitter) -> dict:
+    """The fitter's options that a sphere's own fit takes (:func:`halves_offsets`)."""
+    return {k: fitter.options[k] for k in ("terminator", "up", "own_shadow") if k in fitter.options}
+
+
+def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | None, n_photos: int, *,
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
-              first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None) -> CaptureEstimate:
+              first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
+              halves: bool = True) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
@@ -1499,7 +1661,9 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
     Gauss-Newton step from the photos' fits). ``first_pass`` (None: every photo): with a calibrated
     bounce the first pass fits only that many photos (:func:`first_pass_photos`; the others' values
     are read) and the steps it feeds use those; the second pass fits every photo. A capture with a
-    mirror sphere has every photo fitted in the first pass (its highlight checks read them all)."""
+    mirror sphere has every photo fitted in the first pass (its highlight checks read them all).
+    ``halves`` False: a lone sphere's cones are the stated fallback's, not its halves'
+    (:func:`calibrate_uncertainty` without the values)."""
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
@@ -1593,7 +1757,9 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
             by_photo = dict(zip(fitted, results))
     if bounce == "free":
         results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds)
+        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
+                                                     values=values if halves else None,
+                                                     fit_options=_sphere_fit_options(fitter), flat=flat)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1627,7 +1793,9 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
         results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
     results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds)
+    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
+                                                 values=values if halves else None,
+                                                 fit_options=_sphere_fit_options(fitter), flat=flat)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 
@@ -1871,7 +2039,7 @@ def estimate_photos(values: list, samples: list[SphereSamples], scene_center: np
             raise ValueError("bounce 'observed' needs every sphere's ground_view (observed_ground_samples)")
         bounce, bounce_shape = "calibrated", False
     fitter = PhotoFitter(None, scene_center, kwargs)
-    return _two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
+    return two_pass(fitter, samples, list(values), len(values), bounce=bounce, refine_centres=refine_centres,
                      refine_options=refine_options, materials=materials, views=views, limb_image=limb_image,
                      flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape)
 
@@ -2091,7 +2259,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
                     flat_field: bool = True, first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
-                    fit_tilt: bool = True, fit_roll: bool = False, **kwargs):
+                    fit_tilt: bool = True, fit_roll: bool = False, halves: bool = True, **kwargs):
     """Estimate every photograph's light from the capture's spheres.
 
     Two passes (module docstring): every photo is fitted with a free ground bounce; each sphere's
@@ -2147,6 +2315,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
     fit_roll : bool
         With the tilt, fit the camera's roll about its axis (:data:`ROLL_SEARCH_DEG`); off by
         default: an object beside a sphere can pass for a roll (docs/spheres.md).
+    halves : bool
+        A lone matte sphere's cones from its halves' disagreement (:func:`calibrate_uncertainty`);
+        False: the stated fallback's (as under a fitted tilt, whose error turns every photo alike).
     **kwargs
         Passed to :func:`ffls.spheres.photo.estimate_photo` (``min_spheres``,
         ``sigma_floor_deg``, ``terminator``, ``saturation``, ``own_shadow``: by default on, and
@@ -2195,7 +2366,8 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             photo_options=kwargs, fit_roll=fit_roll)
     return _estimate_in_frame(capture, spheres, progress, workers, model=model, bounce=bounce,
                               refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
-                              flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape, **kwargs)
+                              flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape,
+                              halves=halves, **kwargs)
 
 
 def _photo_shape(capture, decoded: DecodedPhotos | None) -> tuple[int, int]:
@@ -2215,7 +2387,7 @@ def _fit_options(capture, model: str, kwargs: dict) -> dict:
 
 def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, refine_centres, refine_options,
                        decoded, flat_field, first_pass, bounce_shape, fitter: PhotoFitter | None = None,
-                       values: list | None = None, photos: list | None = None, **kwargs):
+                       values: list | None = None, photos: list | None = None, halves: bool = True, **kwargs):
     """:func:`estimate_lights` in the capture's world frame as given (no tilt search).
 
     ``fitter`` (a :class:`PhotoFitter` with :func:`_fit_options`, shared by the calls of a tilt
@@ -2245,12 +2417,12 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     try:
         with (PhotoFitter(capture, capture.scene_center, _fit_options(capture, model, kwargs), workers, bar,
                           decoded) if fitter is None else nullcontext(fitter)) as fit:
-            est = _two_pass(fit, samples, values, len(names), bounce=bounce,
+            est = two_pass(fit, samples, values, len(names), bounce=bounce,
                             refine_centres=centres_to_refine(spheres) if refine_centres else False,
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
                             flat_field=lens_centre(capture, shape) if flat_field else None,
-                            first_pass=first_pass, bounce_shape=bounce_shape)
+                            first_pass=first_pass, bounce_shape=bounce_shape, halves=halves)
     finally:
         if bar is not None:
             bar.close()
@@ -2283,8 +2455,10 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
         values = [v for _, v in fitter.run([PhotoTask(i, fit=False) for i in range(n)], samples, counted=False)]
 
         def fit(tilt_deg: float, roll_deg: float = 0.0, photos=None):
+            # (a lone sphere keeps the fallback's cones: the tilt's error turns every photo alike, and
+            # neither its halves nor anything else here measures it, docs/spheres.md)
             return _estimate_in_frame(posed(tilt_deg, roll_deg), spheres, False, workers, fitter=fitter,
-                                      values=values, photos=photos, **stages, **photo_options)
+                                      values=values, photos=photos, halves=False, **stages, **photo_options)
 
         sample = first_pass_photos(n, TILT_SEARCH_PHOTOS)
         tilt, roll, tried = fit_camera_tilt(lambda t, r: fit(t, r, None if len(sample) == n else sample),

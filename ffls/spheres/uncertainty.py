@@ -60,8 +60,12 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    ratios move the directions by at most 0.06 degrees, 6-90 times less than the common errors
    measured against renders' truth, which come from the model's misfit (``docs/spheres.md``,
    "The common mode from the capture's fitted parameters"). With one sphere there is no
-   disagreement: the fit statistics plus a stated per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS)
-   and its common-mode share are used (:data:`FALLBACK_MODEL`).
+   disagreement between spheres, but a matte sphere's two halves disagree
+   (:func:`halves_error_model`): the same fit on the two halves' offsets gives its scale, floor,
+   cone factor and common-mode bound, measured on its own photos. Where neither can be measured
+   (a lone mirror ball, too few photos with both halves fitted), the fit statistics plus a stated
+   per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
+   (:data:`FALLBACK_MODEL`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
 (``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode; a near light's
@@ -108,6 +112,7 @@ __all__ = [
     "FALLBACK_MODEL",
     "MIN_TAIL_SAMPLES",
     "tail_factor",
+    "halves_error_model",
     "unchecked_floor_deg",
     "shading_shift",
     "encoding_perturbation",
@@ -253,10 +258,11 @@ class ErrorModel:
         Per-axis standard deviation (degrees) of the error shared by all spheres of a photo: the
         bound for the capture's median sphere (a summary), or, with ``common_ratio`` None, the
         value added to every photo.
-    source : {'disagreement', 'fallback'}
-        Measured from the spheres' disagreement, or the stated single-sphere fallback.
+    source : {'disagreement', 'halves', 'fallback'}
+        Measured from the spheres' disagreement, from a lone sphere's halves'
+        (:func:`halves_error_model`), or the stated single-sphere fallback.
     n_photos : int
-        Photos with two or more spheres used in the fit.
+        Photos with two or more spheres (or both halves of a lone sphere) used in the fit.
     n_trimmed : int
         Of those, left out as improbable under the fitted model.
     centre_deg : tuple of float
@@ -658,6 +664,55 @@ def _fallback() -> ErrorModel:
 
 #: The single-sphere model (no disagreement to measure): statistics plus ``FALLBACK_FLOOR_DEG``.
 FALLBACK_MODEL = _fallback()
+
+
+def halves_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], centre_deg=None, *,
+                       common_correlation: float = COMMON_CORRELATION, min_photos: int = 3) -> ErrorModel:
+    """A lone sphere's error model from the disagreement of its two halves (module docstring, "one sphere").
+
+    With one sphere per photo no other sphere checks it, but the two halves of its pixels (either
+    side of a plane through its light, :func:`ffls.spheres.estimate.halves_offsets`) are two fits of
+    the same light with their own pixels' noise and their own share of the model's misfit (light the
+    model leaves out, a blurred or darkened limb, an unmodelled shading pattern). Their offsets
+    from the sphere's direction are fitted as two spheres' (:func:`fit_error_model`: the halves'
+    scale ``s``, floor ``tau``, cone factor and common-mode bound), and the sphere's direction is,
+    to first order, the mean of its halves': its per-axis floor is ``tau / sqrt(2)`` (its
+    statistics, about those of a half over ``sqrt(2)``, keep the scale), and the common-mode bound,
+    stated on a half's systematic variance, is twice the mean's (``common_ratio`` doubled). The
+    centre term ``g`` is the sphere's (a centre error turns both halves alike, so it is not in
+    their disagreement). The cone factor is the halves' own quantile where their tails are heavier
+    than the Gaussian's, never less than :data:`CONE_FACTOR`: the cone also holds what the halves
+    share and cannot show (the centre, the common mode), whose tails nothing measures (a lone
+    orthographic grey ball turned 0.21 degrees alike in both halves: the halves' factor 2.10 covered
+    86.8% of its photos, the Gaussian's 97.4%, ``docs/spheres.md``). Too few photos with both
+    halves fitted: :data:`FALLBACK_MODEL`.
+
+    Parameters
+    ----------
+    residuals : list of (2, 2) float
+        Per photo, its halves' tangent offsets (radians) from the sphere's direction.
+    stat_sigma_deg : list of (2,) float
+        The halves' statistical per-axis standard deviations (degrees).
+    centre_deg : (n_spheres,) float, optional
+        Per sphere, its centre term (:func:`centre_floor_deg`).
+    common_correlation : float
+    min_photos : int
+
+    Returns
+    -------
+    ErrorModel
+        ``source`` ``'halves'`` (or the fallback's).
+    """
+    from dataclasses import replace
+
+    centre = np.zeros(0) if centre_deg is None else np.asarray(centre_deg, dtype=np.float64)
+    halves = fit_error_model(residuals, stat_sigma_deg, common_correlation=common_correlation,
+                             min_photos=min_photos)
+    if halves.source != "disagreement":
+        return FALLBACK_MODEL.with_centres(centre)
+    return replace(halves, floor_deg=float(halves.floor_deg / np.sqrt(2.0)), common_ratio=2.0 * halves.common_ratio,
+                   source="halves", centre_deg=tuple(float(x) for x in centre),
+                   cone_factor=max(float(halves.cone_factor), CONE_FACTOR))
 
 
 def tail_factor(residuals: list[np.ndarray], variances: list[np.ndarray], confidence: float = CONFIDENCE,
