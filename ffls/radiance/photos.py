@@ -26,7 +26,7 @@ from ffls.io.images import ImageData, check_opaque, read_image
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 
 __all__ = ["Photo", "linearise", "encoding_unknown", "unknown_encoding_message", "read_photo", "load_photo",
-           "load_photos"]
+           "load_photos", "full_scale_share"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,19 @@ class Photo:
     raw: np.ndarray
     bit_depth: int | str
     codes: np.ndarray | None = None
+
+
+def full_scale_share(photo: Photo) -> float | None:
+    """The share of ``photo``'s pixels stored at full scale (the top code in any channel): how much
+    of an integer file the camera clipped; None for a floating-point file, which does not clip."""
+    if photo.bit_depth not in (8, 16):
+        return None
+    if photo.codes is not None:
+        top = np.iinfo(photo.codes.dtype).max
+        at_top = (photo.codes.max(axis=2) if photo.codes.ndim == 3 else photo.codes) >= top
+    else:
+        at_top = (photo.raw.max(axis=2) if photo.raw.ndim == 3 else photo.raw) >= 1.0
+    return float(np.count_nonzero(at_top)) / at_top.size
 
 
 def unknown_encoding_message(bit_depth) -> str:
