@@ -82,3 +82,19 @@ def test_lights_finds_the_spheres_past_an_overexposed_photo(overexposed_capture,
     err = [np.degrees(np.arccos(np.clip(np.dot(truth[i], e["direction"]), -1, 1)))
            for i, e in enumerate(got) if e["status"] == "ok"]
     assert len(err) >= 9 and max(err) < 2.0, err
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_full_scale_share_counts_pixels_with_any_channel_at_the_top_code(dtype):
+    from ffls.radiance.photos import Photo, full_scale_share
+
+    top = np.iinfo(dtype).max
+    rng = np.random.default_rng(1)
+    codes = rng.integers(0, top, (20, 30, 3), dtype=dtype)
+    codes[rng.random((20, 30, 3)) < 0.2] = top
+    want = np.count_nonzero(codes.max(axis=2) == top) / 600
+    raw = codes.astype(np.float32) / np.float32(top)
+    depth = 8 if dtype == np.uint8 else 16
+    assert full_scale_share(Photo(raw, raw, depth, codes)) == pytest.approx(want)
+    assert full_scale_share(Photo(raw, raw, depth, None)) == pytest.approx(want)  # from raw
+    assert full_scale_share(Photo(raw, raw, "half", None)) is None  # a float file does not clip
