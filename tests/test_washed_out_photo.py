@@ -98,3 +98,17 @@ def test_full_scale_share_counts_pixels_with_any_channel_at_the_top_code(dtype):
     assert full_scale_share(Photo(raw, raw, depth, codes)) == pytest.approx(want)
     assert full_scale_share(Photo(raw, raw, depth, None)) == pytest.approx(want)  # from raw
     assert full_scale_share(Photo(raw, raw, "half", None)) is None  # a float file does not clip
+
+
+def test_a_repeated_photo_is_named_in_the_coverage_line():
+    """A photo copied twice into a set gives its light twice: the coverage line said only "1 light
+    repeats the direction of an earlier one"; with the photos' names it says which."""
+    from ffls.synth.scene import stratified_directions
+    from ffls.weights.voronoi import coverage_warnings
+
+    d = stratified_directions(40)
+    d = np.concatenate([d[:10], d[9:10], d[10:]])  # photo 10 a copy of photo 9
+    names = [f"img_{i:04d}.tiff" for i in range(len(d))]
+    line = next(x for x in coverage_warnings(d, names=names) if "repeat" in x)
+    assert "'img_0010.tiff' repeats 'img_0009.tiff'" in line, line
+    assert "img_" not in next(x for x in coverage_warnings(d) if "repeat" in x)

@@ -278,7 +278,7 @@ def run(args) -> int:
     if len(idx):
         from ffls.weights.voronoi import coverage_warnings
 
-        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere))
+        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere, names=[cap.image_names[i] for i in idx]))
     return 0
 
 
