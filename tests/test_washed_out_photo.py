@@ -112,3 +112,15 @@ def test_a_repeated_photo_is_named_in_the_coverage_line():
     line = next(x for x in coverage_warnings(d, names=names) if "repeat" in x)
     assert "'img_0010.tiff' repeats 'img_0009.tiff'" in line, line
     assert "img_" not in next(x for x in coverage_warnings(d) if "repeat" in x)
+
+
+def test_find_spheres_in_capture_reading_the_photos_itself_leaves_it_apart(overexposed_capture):
+    """The path that reads the photos itself (the Dask cluster's, ``find_spheres_in_capture``
+    without ``stats``) keeps the overexposed photo apart too: both balls."""
+    import dataclasses
+
+    from ffls.io.capture import load_capture
+    from ffls.spheres.detect import find_spheres_in_capture
+
+    cap = dataclasses.replace(load_capture(overexposed_capture), encoding="srgb")
+    assert len(find_spheres_in_capture(cap)) == 2

@@ -70,7 +70,7 @@ import numpy as np
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize, tangent_basis
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
-from ffls.radiance.photos import read_photo
+from ffls.radiance.photos import full_scale_share, read_photo
 from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE,
                                          changing_limb_radius, circle_search, dark_body, dark_cap, enclosing_circle,
@@ -3242,7 +3242,7 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
         for i in range(n):
             ph = read_photo(capture, i)
             depths.add(ph.bit_depth)
-            yield ph.linear
+            yield ph
 
     if getattr(capture, "camera_model", "pinhole") != "orthographic" and capture.sphere_radius is None:
         raise InputError("has no sphere_radius: finding the spheres with a pinhole camera needs their radius "
@@ -3256,7 +3256,10 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
         it = photos()
         if progress is not None:
             it = progress(it, total=n)
-        stats = sequence_stats(it, n_images=n)
+        acc = SequenceAccumulator(n_images=n)  # (sequence_stats, with the washed-out photos kept apart)
+        for i, ph in enumerate(it):
+            acc.add(ph.linear, i, full_scale=full_scale_share(ph))
+        stats = acc.result()
     st = stats
     mx, brightest, mean, n_img = st.max, st.brightest, st.mean, st.n
     hints = getattr(capture, "spheres", None) or None
