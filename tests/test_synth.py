@@ -351,3 +351,23 @@ def test_docs_synth_python_example_names_resolve():
     assert names and all(hasattr(ns["synth"], n) for n in names), sorted(n for n in names
                                                                           if not hasattr(ns["synth"], n))
     assert callable(ns["sky_sun_map"]) and "dirs = " in block
+
+
+def test_docs_probes_comparison_command_runs(tmp_path):
+    """docs/probes.md's command that compares a map with the true one runs as written (a map against
+    itself: 0)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from ffls.lightmaps.lightmap import sky_sun_map
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "probes.md").read_text(encoding="utf-8")
+    cmd = doc.split("**Comparing a map with the true one.**", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    from ffls.io.images import write_exr
+
+    write_exr(tmp_path / "TRUE.exr", sky_sun_map(16).data)
+    write_exr(tmp_path / "MAP.exr", sky_sun_map(16).data)
+    code = cmd.strip()[len('python -c "'):-1]
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["relit", "0.00%", "map", "0.000"], out.stdout
