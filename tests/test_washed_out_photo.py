@@ -49,7 +49,7 @@ def test_accumulator_leaves_a_washed_out_photo_apart():
 @pytest.fixture(scope="module")
 def overexposed_capture(tmp_path_factory):
     """Two grey balls, a long lens, 16-bit TIFFs of an unstated encoding, 12 lights; photo 5 three
-    stops over (94% of it clipped)."""
+    stops over (91% of its pixels at full scale)."""
     from ffls.cli import main
 
     cap = tmp_path_factory.mktemp("washed") / "cap"
