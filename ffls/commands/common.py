@@ -676,7 +676,7 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
     notes.append(None if lm is None or not lm.colour_note else f"colour: light map: {lm.colour_note}")
     if len(idx):
-        notes += coverage_warnings(dirs, capture.hemisphere)
+        notes += coverage_warnings(dirs, capture.hemisphere, names=[capture.image_names[i] for i in idx])
     print_notes(command, *notes)
     return capture, lights, lm, mask
 

@@ -249,6 +249,8 @@ def run(args) -> int:
         finally:
             if bar is not None:
                 bar.close()
+    if decoded is not None:
+        print_notes(NAME, *washed_out_notes(decoded.stats, cap.image_names))
     cap, spheres, calibration = calibrate_if_unknown(cap, progress=progress, decoded=decoded,
                                                      workers=args.workers or os.cpu_count() or 1)
     if calibration is not None:
@@ -295,8 +297,22 @@ def run(args) -> int:
     if len(idx):
         from ffls.weights.voronoi import coverage_warnings
 
-        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere))
+        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere, names=[cap.image_names[i] for i in idx]))
     return 0
+
+
+def washed_out_notes(stats, names) -> list[str]:
+    """The line for the photos the sphere detection left out as washed out (``stats.washed_out`` of
+    :class:`ffls.spheres.detect.SequenceStats`), or none."""
+    from ffls.spheres.detect import WASHED_OUT_SHARE
+
+    out = list(stats.washed_out)
+    if not out:
+        return []
+    shown = ", ".join(f"{names[i]!r} ({share:.0%})" for i, share in out[:3]) + (", ..." if len(out) > 3 else "")
+    return [f"{len(out)} photo{'s' if len(out) > 1 else ''} with more than {WASHED_OUT_SHARE:.0%} of the pixels at "
+            f"full scale (overexposed, or lit by more than the capture's light) left out of finding the spheres: "
+            f"{shown}; each is still judged with the others, and rejected where its spheres clip"]
 
 
 def tilt_note(lights, fit_roll: bool = False) -> str:

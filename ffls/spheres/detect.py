@@ -70,7 +70,7 @@ import numpy as np
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize, tangent_basis
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
-from ffls.radiance.photos import read_photo
+from ffls.radiance.photos import full_scale_share, read_photo
 from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE,
                                          changing_limb_radius, circle_search, dark_body, dark_cap, enclosing_circle,
@@ -444,6 +444,11 @@ EDGE_PHOTOS = 24
 #: Rows of the per-photo edge evidence (:func:`photo_edge_tensor`): ``[sum gx^2, sum gx gy, sum gy^2,
 #: sum gx, sum gy]``.
 EDGE_TENSOR_ROWS = 5
+#: A photo with more than this share of its pixels at full scale (an integer file's top code in any
+#: channel) is washed out (overexposed, or lit by more than the capture's light): it shades nothing,
+#: and in the max image and the brightest-photo map it would hide every other photo. It is left out
+#: of the detection's reductions (:meth:`SequenceAccumulator.add`), unless every photo is.
+WASHED_OUT_SHARE = 0.5
 
 
 @dataclasses.dataclass
@@ -469,6 +474,9 @@ class SequenceStats:
         photos; None for a single image.
     edge_photos : int
         How many photos gave ``edge_tensor``.
+    washed_out : tuple of (int, float)
+        The photos left out as washed out (:data:`WASHED_OUT_SHARE`): (index, share of their
+        pixels at full scale), in index order; not counted in ``n``.
     """
 
     max: np.ndarray
@@ -478,6 +486,7 @@ class SequenceStats:
     colour_counts: np.ndarray | None = None
     edge_tensor: np.ndarray | None = None
     edge_photos: int = 0
+    washed_out: tuple = ()
 
 
 def _robust_peak(lum, q: float = 99.5) -> float:
@@ -693,8 +702,10 @@ class SequenceAccumulator:
         self.every = max(1, -(-int(n_images) // EDGE_PHOTOS)) if n_images else 1
         self.max = self.best = self.brightest = self.total = self.counts = self.tensor = None
         self.n = self.edge_photos = 0
+        # the washed-out photos: (index, share) and their own reductions (used where every photo is)
+        self.washed_out, self.washed = [], None
 
-    def add(self, im, index: int | None = None) -> None:
+    def add(self, im, index: int | None = None, full_scale: float | None = None) -> None:
         """Add photo number ``index`` (default: the count so far) of the sequence.
 
         Parameters
@@ -702,8 +713,17 @@ class SequenceAccumulator:
         im : (H, W, 3), (H, W, 1) or (H, W) float
             Linear photo (non-finite values count as 0).
         index : int, optional
+        full_scale : float, optional
+            The share of the photo's pixels at full scale (:func:`ffls.radiance.photos.full_scale_share`;
+            None for a floating-point file): above :data:`WASHED_OUT_SHARE` the photo is kept apart.
         """
-        i = self.n if index is None else int(index)
+        i = self.n + len(self.washed_out) if index is None else int(index)
+        if full_scale is not None and full_scale > WASHED_OUT_SHARE:
+            if self.washed is None:
+                self.washed = SequenceAccumulator(colour=False, edges=False)
+            self.washed.add(im, i)
+            self.washed_out.append((i, float(full_scale)))
+            return
         im = np.asarray(im, dtype=np.float32)
         if not np.isfinite(im).all():
             im = np.nan_to_num(im, nan=0.0, posinf=0.0, neginf=0.0)
@@ -789,10 +809,15 @@ class SequenceAccumulator:
     def merge(self, later: "SequenceAccumulator") -> "SequenceAccumulator":
         """Fold in ``later``, an accumulator of photos that all come after this one's (ties of the
         brightest photo go to the earlier photo); returns self."""
+        if later.washed is not None:
+            self.washed = later.washed if self.washed is None else self.washed.merge(later.washed)
+            self.washed_out = self.washed_out + later.washed_out
         if later.max is None:
             return self
         if self.max is None:
+            washed, washed_out = self.washed, self.washed_out
             self.__dict__.update(later.__dict__)
+            self.washed, self.washed_out = washed, washed_out
             return self
         if later.max.shape != self.max.shape:
             raise ValueError(f"image shapes differ: {later.max.shape} vs {self.max.shape}")
@@ -810,12 +835,15 @@ class SequenceAccumulator:
         return self
 
     def result(self) -> SequenceStats:
-        """The :class:`SequenceStats` of the photos added (and merged)."""
+        """The :class:`SequenceStats` of the photos added (and merged); those of the washed-out
+        photos where every photo is washed out."""
         if self.max is None:
+            if self.washed is not None:
+                return self.washed.result()
             raise ValueError("no images")
         tensor = self.tensor if self.n > 1 and self.edge_photos else None
         return SequenceStats(self.max, self.brightest, self.total / self.n, self.n, self.counts, tensor,
-                             self.edge_photos if tensor is not None else 0)
+                             self.edge_photos if tensor is not None else 0, tuple(self.washed_out))
 
 
 def sequence_stats(images, colour: bool = True, edges: bool = True, n_images: int | None = None) -> SequenceStats:
@@ -3214,7 +3242,7 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
         for i in range(n):
             ph = read_photo(capture, i)
             depths.add(ph.bit_depth)
-            yield ph.linear
+            yield ph
 
     if getattr(capture, "camera_model", "pinhole") != "orthographic" and capture.sphere_radius is None:
         raise InputError("has no sphere_radius: finding the spheres with a pinhole camera needs their radius "
@@ -3228,7 +3256,10 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
         it = photos()
         if progress is not None:
             it = progress(it, total=n)
-        stats = sequence_stats(it, n_images=n)
+        acc = SequenceAccumulator(n_images=n)  # (sequence_stats, with the washed-out photos kept apart)
+        for i, ph in enumerate(it):
+            acc.add(ph.linear, i, full_scale=full_scale_share(ph))
+        stats = acc.result()
     st = stats
     mx, brightest, mean, n_img = st.max, st.brightest, st.mean, st.n
     hints = getattr(capture, "spheres", None) or None

@@ -1297,7 +1297,7 @@ def _set_decode_context(context: _DecodeContext) -> None:
 def _decode_range(bounds: tuple[int, int]):
     """Decode photos ``start..stop-1`` (into the shared arrays where kept) and reduce them:
     ``(SequenceAccumulator of the range, bit depths)``."""
-    from ffls.radiance.photos import read_photo
+    from ffls.radiance.photos import full_scale_share, read_photo
 
     ctx = _decode_context
     start, stop = bounds
@@ -1327,7 +1327,7 @@ def _decode_range(bounds: tuple[int, int]):
             else:
                 top = 255.0 if ctx.raw.dtype == np.uint8 else 65535.0
                 ctx.raw[i] = np.rint(np.clip(ph.raw, 0.0, 1.0) * top)
-        acc.add(ph.linear, i)
+        acc.add(ph.linear, i, full_scale=full_scale_share(ph))
     if ctx.slots is not None:  # handed over in shared memory, not through the pipe
         acc.stow(ctx.slots[start])
     return acc, depths

@@ -765,7 +765,7 @@ def coverage(directions, hemisphere="upper", far_deg: float = FAR_DEG, res: int 
 
 
 def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CELL_DEG, far_deg: float = FAR_DEG,
-                      far_share: float = FAR_SHARE) -> list:
+                      far_share: float = FAR_SHARE, names=None) -> list:
     """One line per coverage problem of ``directions`` over the hemisphere (empty when none).
 
     * cells wider than ``wide_deg`` degrees: ``"coverage: 3 cells wider than 60 deg (widest 84
@@ -783,6 +783,9 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
     hemisphere : Hemisphere, {'upper', 'full'} or {'axis': [x, y, z]}
     wide_deg, far_deg, far_share : float
         Thresholds (defaults :data:`WIDE_CELL_DEG`, :data:`FAR_DEG`, :data:`FAR_SHARE`).
+    names : sequence of str, optional
+        The photo of each direction: a repeat is named with the photo it repeats (a photo copied
+        twice into a set gives the same direction twice).
 
     Returns
     -------
@@ -794,9 +797,15 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
     _, keep = unique_directions(unit)
     if keep.size < len(unit):  # only the first of equal directions takes a cell: said, not silent
         k = len(unit) - keep.size
+        which = ""
+        if names is not None:
+            _, first, group = np.unique(unit + 0.0, axis=0, return_index=True, return_inverse=True)
+            rep = [j for j in range(len(unit)) if first[group.ravel()[j]] != j]
+            which = ": " + ", ".join(f"{names[j]!r} repeats {names[first[group.ravel()[j]]]!r}" for j in rep[:3]) + \
+                (", ..." if len(rep) > 3 else "") + " (the same photo twice?)"
         out.append(f"coverage: {k} light{'s' if k > 1 else ''} repeat{'' if k > 1 else 's'} the direction of "
                    f"an earlier one and get{'' if k > 1 else 's'} no weight ({keep.size} distinct directions of "
-                   f"{len(unit)})")
+                   f"{len(unit)}){which}")
     hemi = check_hemisphere(hemisphere)
     outside = np.flatnonzero(~in_domain(unit, hemi))
     if outside.size:  # e.g. a light below the horizon of an 'upper' capture: said, not silently kept
