@@ -7,7 +7,8 @@ read noise), cuts each ``capture.json`` to the images and a camera without ``wor
 ``ffls lights --workers 1`` with the given executable and scores the lights against ``truth.json``
 in the camera's frame: accepted, median / max error, the share inside the 95% cones, the
 camera tilt (and roll) found and the wall time of ``ffls lights`` (docs/spheres.md, "Without the
-camera's pose"). ``--roll DEG`` renders with the camera turned about its optical axis (``ffls synth
+camera's pose"). ``--elevation DEG`` renders the camera that far down (default 30; a copy stand
+90), ``--roll DEG`` renders with the camera turned about its optical axis (``ffls synth
 --camera-roll``: a tripod that is not level); ``--fit-roll`` runs ``ffls lights --fit-roll``.
 
     cd benchmarks && OMP_NUM_THREADS=1 ../.venv/bin/python bench_no_pose.py --seeds 0 1 2 3 4 \\
@@ -29,11 +30,12 @@ import numpy as np
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
 
 
-def _render(folder: Path, seed: int, lens: str, resolution: int, roll: float) -> Path:
+def _render(folder: Path, seed: int, lens: str, resolution: int, roll: float, elevation: float) -> Path:
     subprocess.run([sys.executable, "-m", "ffls.cli", "synth", str(folder), "--calibration-pair", "--spheres", "1",
                     "--sphere-material", "grey", "--lights", "12", "--format", "png8", "--encoding", "linear",
                     "--unstated-encoding", "--lens", lens, "--exposure", "3", "--resolution", str(resolution),
                     "--shot-noise", "1e-4", "--read-noise", "0.002", "--seed", str(seed), "--camera-roll", str(roll),
+                    "--camera-elevation", str(elevation),
                     "--quiet"], check=True,
                    stdout=subprocess.DEVNULL)
     return folder / "calibration"
@@ -79,13 +81,15 @@ def main(argv=None) -> int:
     ap.add_argument("--resolution", type=int, default=384)
     ap.add_argument("--roll", type=float, default=0.0, help="the camera's roll about its optical axis (deg)")
     ap.add_argument("--fit-roll", action="store_true", help="run ffls lights --fit-roll")
+    ap.add_argument("--elevation", type=float, default=30.0,
+                    help="how far the camera looks down (deg; ffls synth --camera-elevation)")
     ap.add_argument("--ffls", default=str(Path(sys.executable).with_name("ffls")), help="the ffls to measure")
     ap.add_argument("--out", help="JSON of the rows")
     a = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for s in a.seeds:
-            cal = _render(Path(tmp) / f"s{s}", s, a.lens, a.resolution, a.roll)
+            cal = _render(Path(tmp) / f"s{s}", s, a.lens, a.resolution, a.roll, a.elevation)
             Rw = np.array(json.loads((cal / "capture.json").read_text())["camera"]["world_from_camera"])[:3, :3]
             Rm = _without_pose(cal, a.camera, a.pose)
             out = Path(tmp) / f"lights{s}.json"

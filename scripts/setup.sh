@@ -26,4 +26,7 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
 .venv/bin/python -m pip install -q -e '.[test]'
+# an editable install compiles nothing: where PYTHONDONTWRITEBYTECODE is set, every run compiled
+# ffls again (the main process's CPU of `ffls lights` 0.93x with it compiled; docs/spheres.md, Speed)
+.venv/bin/python -m compileall -q ffls >/dev/null
 echo "setup: ffls installed in $(pwd)/.venv"

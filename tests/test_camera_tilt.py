@@ -32,15 +32,15 @@ def test_a_rolled_frame_is_synths_rolled_camera():
     assert np.allclose(tilted_world_from_camera(30.0, 0.0), tilted_world_from_camera(30.0))
 
 
-def _without_pose(root, *roll):
-    """One grey ball resting on the ground, a camera 30 deg above the horizon (``ffls synth``'s,
+def _without_pose(root, *roll, elevation=30.0):
+    """One grey ball resting on the ground, a camera ``elevation`` deg above the horizon (``ffls synth``'s,
     ``roll``: ``--camera-roll``), capture.json without its ``world_from_camera``; truth turned into the
     default frame."""
     from ffls.cli import main
 
     assert main(["synth", str(root / "pair"), "--calibration-pair", "--spheres", "1", "--sphere-material", "grey",
                  "--lights", "10", "--resolution", "192", "--format", "exr", "--seed", "3", "--quiet",
-                 *(("--camera-roll", str(roll[0])) if roll else ())]) == 0
+                 "--camera-elevation", str(elevation), *(("--camera-roll", str(roll[0])) if roll else ())]) == 0
     cap = root / "pair" / "calibration"
     doc = json.loads((cap / "capture.json").read_text())
     Rw = np.array(doc["camera"].pop("world_from_camera"))[:3, :3]
@@ -62,6 +62,19 @@ def _errors(out, truth):
     err = np.array([np.degrees(np.arccos(np.clip(np.dot(truth[e["image"]], e["direction"]), -1, 1))) for e in ok])
     assert all(a <= e["uncertainty_deg"] for a, e in zip(err, ok)), (err, [e["uncertainty_deg"] for e in ok])
     return got, err
+
+
+def test_a_copy_stand_camera_is_found_past_80_deg(tmp_path):
+    """A camera 88 deg down (a copy stand, an RTI dome's camera): the search reaches 90 (it stopped at
+    80, the grid's end: the ground's normal 8 deg off), and the lights lie inside their cones."""
+    from ffls.cli import main
+
+    cap, truth = _without_pose(tmp_path, elevation=88.0)
+    out = tmp_path / "lights.json"
+    assert main(["lights", str(cap), "-o", str(out), "--workers", "1", "--no-progress"]) == 0
+    got, err = _errors(out, truth)
+    tilts = {e["camera_tilt_deg"] for e in got}
+    assert len(tilts) == 1 and abs(tilts.pop() - 88.0) < 3.0
 
 
 def test_a_rolled_camera_has_its_roll_fitted(tmp_path, capfd):

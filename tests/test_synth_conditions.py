@@ -371,6 +371,10 @@ def test_cli_supersample_antialiases_the_outlines(tmp_path):
     (["--camera-roll", "46"], "--camera-roll"),
     (["--camera-roll", "inf"], "--camera-roll"),
     (["--camera-roll", "3", "--composite-set", "sky.exr"], "--camera-roll"),
+    (["--camera-elevation", "90.5"], "--camera-elevation"),
+    (["--camera-elevation", "0"], "--camera-elevation"),
+    (["--camera-elevation", "nan"], "--camera-elevation"),
+    (["--camera-elevation", "60", "--composite-set", "sky.exr"], "--camera-elevation"),
 ])
 def test_cli_bad_values_get_one_line(tmp_path, capsys, argv, flag):
     out = tmp_path / "bad"

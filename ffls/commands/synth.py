@@ -135,6 +135,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--lens", type=_choice("normal", "long", "orthographic"), default="normal",
                    metavar="{normal,long,orthographic}",
                    help="normal (46 deg at 1 m, default), long (4.8 deg at 10 m) or orthographic (parallel rays)")
+    g.add_argument("--camera-elevation", type=number(1.0, 89.9, unit="degrees"), default=30.0, metavar="DEG",
+                   help="how far the camera looks down at the scene's centre (default 30; 89.9: a copy stand)")
     g.add_argument("--camera-roll", type=number(-45.0, 45.0, unit="degrees"), default=0.0, metavar="DEG",
                    help="the camera turned about its optical axis (a tripod not level; positive dips the "
                         "image's right; default 0)")
@@ -229,6 +231,8 @@ def scene_of(args: argparse.Namespace):
                          + ("--calibration-pair" if args.calibration_pair else "--no-object"))
     if getattr(args, "composite_set", None) is not None and getattr(args, "camera_roll", 0.0):
         raise InputError("--composite-set renders its virtual scene with a level camera; drop --camera-roll")
+    if getattr(args, "composite_set", None) is not None and getattr(args, "camera_elevation", 30.0) != 30.0:
+        raise InputError("--composite-set renders its virtual scene from 30 deg above; drop --camera-elevation")
     if args.calibration_pair and args.no_object:
         raise InputError("--calibration-pair writes the object capture itself; drop --no-object")
     background = "textured" if args.background == "checker" else args.background
@@ -237,6 +241,7 @@ def scene_of(args: argparse.Namespace):
         kw["ground_albedo"] = args.ground_albedo
     kw["supersample"] = getattr(args, "supersample", 1)
     kw["camera_roll_deg"] = getattr(args, "camera_roll", 0.0)
+    kw["camera_elevation_deg"] = getattr(args, "camera_elevation", 30.0)
     return make_scene(spheres=n, sphere_material=mats, background=background, lens=args.lens,
                       with_object=not args.no_object, sphere_xy=args.sphere_xy, sphere_radius=args.sphere_radius, **kw)
 
