@@ -3,17 +3,20 @@
 Runs ``ffls lights CAPTURE -o OUT --no-progress [ARGS...]`` in this process (``ffls.cli.main``)
 with the pipeline's stages wrapped: each call records its ``time.perf_counter`` start and end and
 this (the main) process's CPU over it. A sampler thread reads every process's CPU (the main one
-and its worker processes, :mod:`psutil`) every ``--every`` seconds, so each stage also shows the
-workers' CPU over it, and the run shows how busy each core was over time: the main process's
-serial stretches (its CPU while no worker runs) bound the wall from below.
+and its worker processes, from /proc) every ``--every`` seconds, so each stage also shows the
+workers' CPU over it and the main process's CPU *alone*: in the samples where no worker process
+ran (grew its CPU by at least a tenth of the sample). That part is serial: on idle cores it is
+wall time with one core unused, whatever the load it was measured at (the other columns are
+inflated by a loaded machine's contention, the wall most).
 
     OMP_NUM_THREADS=1 python benchmarks/lights_timeline.py CAPTURE --out T.json -- --workers 2
 
-Prints one line per stage call (start, wall, main CPU, workers' CPU; nested calls indented), then
-the run's totals: wall, the main process's and the workers' CPU, the wall spent with 0, 1, 2 or
-more processes busy (a process is busy over a sample when its CPU grew by at least half the
-sample's length), and writes them with the samples to ``--out``. The sampler costs the main
-process about 1% of its CPU at the default 20 ms.
+Prints one line per stage call (start, wall, main CPU, workers' CPU, main CPU alone; nested calls
+indented; the Hough transforms run in two threads of the main process), then the run's totals:
+wall, the main process's CPU (and its CPU before the first stage: the imports and the
+arguments), the workers' CPU, the main CPU alone, and the wall spent with 0, 1, 2 or more
+processes busy (busy: its CPU grew by at least half the sample's length; on a loaded machine few
+are), and writes them with the samples to ``--out``.
 """
 from __future__ import annotations
 
@@ -162,6 +165,16 @@ def busy_profile(samples, every: float) -> dict:
     return {"seconds_with_n_busy": {str(k): round(v, 3) for k, v in sorted(hist.items())}, "marks": marks}
 
 
+def main_alone(samples, a: float = -1.0, b: float = float("inf"), share: float = 0.1) -> float:
+    """The main process's CPU in the samples between wall times ``a`` and ``b`` where no worker
+    process grew its CPU by ``share`` of the sample's length."""
+    out = 0.0
+    for (t0, m0, k0), (t1, m1, k1) in zip(samples, samples[1:]):
+        if a <= t0 < b and not any(v - k0.get(p, 0.0) >= share * (t1 - t0) for p, v in k1.items()):
+            out += m1 - m0
+    return out
+
+
 def workers_cpu(samples, a: float, b: float) -> float:
     """The children's CPU grown between wall times ``a`` and ``b`` (nearest samples)."""
     def at(t):
@@ -205,19 +218,21 @@ def main(argv=None):
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     main_cpu = time.process_time() - cpu_start
     s = sampler.samples
-    print(f"{'stage':44s} {'start':>7s} {'wall':>7s} {'main':>7s} {'workers':>8s}")
+    print(f"{'stage':44s} {'start':>7s} {'wall':>7s} {'main':>7s} {'workers':>8s} {'alone':>6s}")
     print(f"{'(before: the imports, the arguments)':44s} {0:7.2f} {_calls[0]['start']:7.2f} {first_cpu:7.2f}")
     for r in _calls:
         if "end" not in r:
             continue
         w = workers_cpu(s, r["start"], r["end"])
-        r["workers_cpu"] = w
+        r["workers_cpu"], r["main_alone_cpu"] = w, main_alone(s, r["start"], r["end"])
         print(f"{'  ' * r['depth'] + r['stage']:44s} {r['start']:7.2f} {r['end'] - r['start']:7.2f} "
-              f"{r['main_cpu']:7.2f} {w:8.2f}")
+              f"{r['main_cpu']:7.2f} {w:8.2f} {r['main_alone_cpu']:6.2f}")
     prof = busy_profile(s, a.every)
-    total = {"wall_s": wall, "main_cpu_s": main_cpu, "workers_cpu_s": kids.ru_utime + kids.ru_stime,
+    total = {"wall_s": wall, "main_cpu_s": main_cpu, "main_cpu_before_stages_s": first_cpu, "workers_cpu_s": kids.ru_utime + kids.ru_stime,
+             "main_alone_cpu_s": main_alone(s),
              "processes": len(s[-1][2]) + 1, "rc": rc, **{k: v for k, v in prof.items() if k != "marks"}}
-    print(f"wall {wall:.2f} s; CPU: main {main_cpu:.2f} s, workers {total['workers_cpu_s']:.2f} s "
+    print(f"wall {wall:.2f} s; CPU: main {main_cpu:.2f} s (before the stages {first_cpu:.2f}, alone "
+          f"{total['main_alone_cpu_s']:.2f}), workers {total['workers_cpu_s']:.2f} s "
           f"({total['processes'] - 1} worker processes); wall with N processes busy: "
           + ", ".join(f"{k}: {v:.2f} s" for k, v in prof["seconds_with_n_busy"].items())
           + f"; load {os.getloadavg()[0]:.1f}")
