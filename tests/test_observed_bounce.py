@@ -373,15 +373,12 @@ def test_mask_object_from_ground_builds_one_neighbour_fill_per_sphere(rig, monke
     values = [_photo_values(rig, i, False, seen_object=True) for i in range(len(LIGHTS))]
     trees = []
 
-    import scipy.spatial
-
-    class CountingTree(scipy.spatial.cKDTree):
+    class CountingTree(gr.cKDTree):
         def __init__(self, *args, **kwargs):
             trees.append(1)
             super().__init__(*args, **kwargs)
 
-    # (ground.py imports it where it builds a fill: SciPy's import is slow)
-    monkeypatch.setattr(scipy.spatial, "cKDTree", CountingTree)
+    monkeypatch.setattr(gr, "cKDTree", CountingTree)
     (masked_s,), masked_values, counts = mask_object_from_ground([s], values, list(enumerate(LIGHTS)))
     assert counts[0] > 0 and len(trees) == 1, (counts, len(trees))
     gv = s.ground_view

@@ -28,6 +28,7 @@ import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ffls.camera.projection import project_points
 from ffls.conventions import UP
@@ -134,8 +135,6 @@ class GroundView:
         if not (keep.all() or keep.sum() < FILL_NEIGHBOURS):
             kept, gone = np.flatnonzero(keep), np.flatnonzero(~keep)
             seen_off = self.offsets[:self.n_seen]
-            from scipy.spatial import cKDTree  # (here: SciPy's import is slow, and only these fills need it)
-
             dist_, near = cKDTree(seen_off[kept]).query(seen_off[gone], k=FILL_NEIGHBOURS)
             w = 1.0 / np.maximum(dist_, 1e-9)
             fill = gone, kept[near], w / w.sum(axis=1, keepdims=True)
@@ -299,8 +298,6 @@ def ground_views(samples, shape: tuple[int, int], camera_model: str, K, dist, wo
         fill_index = np.zeros((0, FILL_NEIGHBOURS), np.intp)
         fill_weights = np.zeros((0, FILL_NEIGHBOURS))
         if hidden.any() and ok.sum() >= FILL_NEIGHBOURS:
-            from scipy.spatial import cKDTree  # (here: SciPy's import is slow)
-
             dist_, fill_index = cKDTree(X[ok]).query(X[hidden], k=FILL_NEIGHBOURS)
             w = 1.0 / np.maximum(dist_, 1e-9 * s.radius)
             fill_weights = w / w.sum(axis=1, keepdims=True)
