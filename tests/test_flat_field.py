@@ -2,8 +2,6 @@
 (:func:`ffls.spheres.estimate.calibrate_flat_field`, :func:`ffls.spheres.lambert.flat_field_terms`)."""
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -145,30 +143,3 @@ def test_the_disagreement_change_counts_the_photos_accepted_both_times():
     after = [photo("ok", 4.0), photo("rejected", 0.0), photo("ok", 1.0)]
     assert disagreement_change(before, after) == -6.0
     assert disagreement_change(after, before) == 6.0
-
-
-def test_flat_field_terms_made_in_the_worker_processes_the_same_field(samples):
-    """``calibrate_flat_field(map_fn=...)`` hands each sphere's photos, in chunks, to ``map_fn`` (a
-    :class:`ffls.spheres.estimate.PhotoFitter`'s workers in ``_two_pass``) and sums their terms here
-    in the photos' order: the field is the one made in this process, to the bit, with the shadowed
-    bounce of fits with their own shadow."""
-    from ffls.spheres.estimate import PhotoFitter
-
-    dirs = [spherical_to_direction(np.radians(th), np.radians(ph)) for th, ph in LIGHTS]
-    vals = [photo_values(samples, d, vignetting=1, seed=i) for i, d in enumerate(dirs)]
-    for own_shadow in (False, True):
-        est = estimate_photos(vals, samples, SCENE_CENTER, refine_centres=False, bounce="free",
-                              own_shadow=own_shadow)
-        here = calibrate_flat_field(est.photos, samples, vals, LENS)
-        calls = []
-
-        def recorded(fn, items):
-            calls.append(len(items))
-            return [fn(x) for x in items]
-
-        with PhotoFitter(None, None, {"own_shadow": own_shadow}, workers=2) as fitter:
-            for mapped in (calibrate_flat_field(est.photos, samples, vals, LENS, map_fn=recorded),
-                           calibrate_flat_field(est.photos, samples, vals, LENS, map_fn=fitter.map)):
-                for a, b in zip(dataclasses.astuple(here), dataclasses.astuple(mapped)):
-                    np.testing.assert_array_equal(a, b)  # (NaN where a sphere has no gradient)
-        assert calls and calls[0] > len(samples), calls  # (chunks of each sphere's photos)

@@ -846,28 +846,6 @@ def test_sphere_kinds_subtract_the_per_pixel_median_with_or_without_nan(samples)
     assert kinds == reference(values) and all(k.kind == "matte" and np.isfinite(k.statistic) for k in kinds)
 
 
-def test_sphere_kinds_statistics_made_in_the_worker_processes_the_same_kinds(samples):
-    """``sphere_kinds(map_fn=...)`` hands each 'auto' sphere's photos, in chunks, to ``map_fn`` (a
-    :class:`PhotoFitter`'s workers in ``_two_pass``): the kinds and statistics made here, to the bit;
-    a declared sphere is not handed over."""
-    from ffls.spheres.estimate import PhotoFitter, sphere_kinds
-
-    values = [sphere_values(render(direction=light(t, p)), samples)
-              for t, p in ((10, 0), (40, 60), (60, 200), (30, 300), (50, 120))]
-    materials = ["matte"] + ["auto"] * (len(samples) - 1)
-    here = sphere_kinds(materials, samples, values)
-    calls = []
-
-    def recorded(fn, items):
-        calls.append([len(x[1]) for x in items])
-        return [fn(x) for x in items]
-
-    assert sphere_kinds(materials, samples, values, map_fn=recorded) == here
-    assert len(calls) == 1 and len(calls[0]) > len(samples) - 1 and sum(calls[0]) == len(values) * (len(samples) - 1)
-    with PhotoFitter(None, None, {"own_shadow": False}, workers=2) as fitter:
-        assert sphere_kinds(materials, samples, values, map_fn=fitter.map) == here
-
-
 # ----------------------------------------------------------------------------- first pass on some photos
 def test_first_pass_photos_are_spread_over_the_sequence():
     from ffls.spheres.estimate import first_pass_photos

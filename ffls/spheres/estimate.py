@@ -344,35 +344,7 @@ def sphere_views(capture, spheres) -> list[SphereView]:
     return out
 
 
-def _map_chunks(fn, jobs: list, map_fn=None) -> list:
-    """``fn`` of each job's chunks of photos, through ``map_fn`` (``(fn, items) -> list``, e.g.
-    :meth:`PhotoFitter.map`: the worker processes; None: here), each job's results joined in order.
-    A job is ``(shared, photos)``: ``fn((shared, chunk))`` returns one result per photo of the
-    chunk. The results do not depend on the chunks, nor on where they are made."""
-    items, where = [], []
-    for shared, photos in jobs:
-        size = max(1, -(-len(photos) // PHOTO_CHUNKS_PER_JOB))
-        where.append(len(items))
-        items += [(shared, photos[a:a + size]) for a in range(0, len(photos), size)]
-    done = [fn(x) for x in items] if map_fn is None else map_fn(fn, items)
-    where.append(len(items))
-    return [[r for part in done[a:b] for r in part] for a, b in zip(where, where[1:])]
-
-
-#: Chunks of photos per sphere that :func:`sphere_kinds` and :func:`calibrate_flat_field` hand to
-#: the worker processes (their per-photo statistics; the capture-wide sums stay here, in order).
-PHOTO_CHUNKS_PER_JOB = 4
-
-
-def _compactness_chunk(job) -> list:
-    """:func:`ffls.spheres.highlight.highlight_compactness` of each photo of one sphere's chunk:
-    ``((rows, cols), grey (p, m))``."""
-    (rows, cols), grey = job
-    return [highlight_compactness(rows, cols, g) for g in grey]
-
-
-def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: list,
-                 map_fn=None) -> list[SphereKind]:
+def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: list) -> list[SphereKind]:
     """Each sphere's kind: as declared, or for ``'auto'`` classified from the photos' values.
 
     With 3 photos or more, each pixel's median over the photos is subtracted first: a chrome ball
@@ -385,15 +357,12 @@ def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: lis
     samples : list of SphereSamples
     values : list
         Per photo, its :func:`ffls.spheres.samples.sphere_values`.
-    map_fn : callable, optional
-        ``map_fn(fn, items) -> list`` (:meth:`PhotoFitter.map`): the photos' highlight statistics
-        made in the worker processes (the same kinds).
 
     Returns
     -------
     list of SphereKind
     """
-    out, jobs = [], []
+    out = []
     for k, (m, s) in enumerate(zip(materials, samples)):
         if m != "auto":
             out.append(SphereKind(m, "declared"))
@@ -406,10 +375,9 @@ def sphere_kinds(materials: list[str], samples: list[SphereSamples], values: lis
                 with warnings.catch_warnings():  # a pixel non-finite in every photo stays NaN (then ignored)
                     warnings.simplefilter("ignore", RuntimeWarning)
                     grey = grey - np.nanmedian(grey, axis=0)
-        out.append(None)
-        jobs.append(((s.rows, s.cols), grey))
-    it = iter(_map_chunks(_compactness_chunk, jobs, map_fn))
-    return [classify_sphere(next(it)) if kd is None else kd for kd in out]
+        stats = [highlight_compactness(s.rows, s.cols, g) for g in grey]
+        out.append(classify_sphere(stats))
+    return out
 
 
 def calibrate_bounce(results: list[PhotoEstimate], n_spheres: int, max_sigma: float = 0.05, min_photos: int = 3,
@@ -557,35 +525,23 @@ def cos4_gradient(s: SphereSamples, lens: tuple) -> np.ndarray:
     return -4.0 * np.array([x, y]) / (1.0 + x * x + y * y) * float(s.radius_px) / f
 
 
-def _flat_field_chunk(job) -> list:
-    """:func:`ffls.spheres.lambert.flat_field_terms` ``(A, b)`` of each photo of one sphere's chunk:
-    ``((normals, offsets, g0, shadow, up), [(fit, values)])``."""
-    (normals, offsets, g0, shadow, up), photos = job
-    return [flat_field_terms(normals, v, f, offsets,
-                             shadowed_ground_bounce(normals, f.direction, up, g0, shadow) if f.own_shadow else g0)
-            for f, v in photos]
-
-
-def _flat_field_job(results, k, s, values, up):
-    """One sphere's :func:`_flat_field_chunk` job: its usable photos' fits and values (None: none)."""
-    photos = []
+def _measured_gradient(results, k, s, values, up, min_photos):
+    """One sphere's gradient fitted freely over the photos: ``(gradient, covariance, n_photos)``."""
+    offsets, A, b = None, [], []
     for r, vals in zip(results, values):
         if not r.spheres or k >= len(r.spheres):
             continue
         sr = r.spheres[k]
         f = sr.fit
-        if (isinstance(f, LambertFit) and f.status == "ok" and sr.status != "shadowed"
+        if not (isinstance(f, LambertFit) and f.status == "ok" and sr.status != "shadowed"
                 and f.inliers is not None and f.intensity > 0):
-            photos.append((f, vals[k][0]))
-    if not photos:
-        return None
-    return (s.normals, flat_field_offsets(s), s.ground_factor(up), own_shadow_of(s.normals, up), up), photos
-
-
-def _measured_gradient(terms, min_photos):
-    """One sphere's gradient fitted freely over the photos, from their :func:`_flat_field_chunk`
-    terms ``[(A, b)]``: ``(gradient, covariance, n_photos)``."""
-    A, b = [t[0] for t in terms], [t[1] for t in terms]
+            continue
+        if offsets is None:
+            offsets, g0, shadow = flat_field_offsets(s), s.ground_factor(up), own_shadow_of(s.normals, up)
+        g = shadowed_ground_bounce(s.normals, f.direction, up, g0, shadow) if f.own_shadow else g0
+        Ap, bp = flat_field_terms(s.normals, vals[k][0], f, offsets, g)
+        A.append(Ap)
+        b.append(bp)
     n = len(A)
     if n < max(int(min_photos), 3):
         return np.full(2, np.nan), np.full((2, 2), np.nan), n
@@ -612,7 +568,7 @@ def lens_centre(capture, shape: tuple[int, int]) -> tuple[float, float, float]:
 
 
 def calibrate_flat_field(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, lens: tuple,
-                         up: np.ndarray = UP, min_photos: int = FLAT_FIELD_MIN_PHOTOS, map_fn=None) -> FlatField:
+                         up: np.ndarray = UP, min_photos: int = FLAT_FIELD_MIN_PHOTOS) -> FlatField:
     """The capture's lens fall-off, fitted over all photos' shading fits of its matte spheres.
 
     A lens's fall-off (vignetting) is the same in every photo of a capture: across a sphere's
@@ -646,9 +602,6 @@ def calibrate_flat_field(results: list[PhotoEstimate], samples: list[SphereSampl
         World up (the bounce's form factor).
     min_photos : int
         Fewer usable photos of a sphere leave it out of the law's fit.
-    map_fn : callable, optional
-        ``map_fn(fn, items) -> list`` (:meth:`PhotoFitter.map`): the photos' terms made in the
-        worker processes (summed here, in the photos' order: the same field).
 
     Returns
     -------
@@ -661,13 +614,9 @@ def calibrate_flat_field(results: list[PhotoEstimate], samples: list[SphereSampl
     matte = np.zeros(k, dtype=bool)
     num = den = 0.0
     dof = None
-    up = np.asarray(up, dtype=np.float64)
-    jobs = [_flat_field_job(results, i, s, values, up) for i, s in enumerate(samples)]
-    made = iter(_map_chunks(_flat_field_chunk, [j for j in jobs if j is not None], map_fn))
-    terms = [[] if j is None else next(made) for j in jobs]
     for i, s in enumerate(samples):
         matte[i] = any(r.spheres and i < len(r.spheres) and isinstance(r.spheres[i].fit, LambertFit) for r in results)
-        grad, cov, count[i] = _measured_gradient(terms[i], min_photos)
+        grad, cov, count[i] = _measured_gradient(results, i, s, values, up, min_photos)
         if not np.all(np.isfinite(grad)):
             continue
         meas[i], sig[i] = grad, np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -1583,7 +1532,7 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
         samples, values, masked = mask_object_from_ground(samples, values, lights)
         if any(masked):
             results = run_fitted(values)
-    kinds = sphere_kinds(materials, samples, values, map_fn=fitter.map)
+    kinds = sphere_kinds(materials, samples, values)
     views = [limb(v) if kd.kind == "mirror" and m != "mirror" else v for kd, m, v in zip(kinds, materials, views)]
     mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views)]
     if len(fitted) < n_photos and any(kd.kind == "mirror" for kd in kinds):
@@ -1609,8 +1558,7 @@ def _two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | 
     if flat_field is not None:  # the lens's fall-off across each sphere, shared by all photos, divided out
         up = fitter.options.get("up", UP)
         for _ in range(FLAT_FIELD_ROUNDS):
-            step = calibrate_flat_field(results, samples, [values[i] for i in fitted], flat_field, up,
-                                        map_fn=fitter.map)
+            step = calibrate_flat_field(results, samples, [values[i] for i in fitted], flat_field, up)
             if step.applied:
                 corrected = flat_field_values(values, samples, step)
                 refitted = run_fitted(corrected)
