@@ -4,10 +4,11 @@ Each round runs A B B A (then B A A B), each a new process ``ffls lights CAPTURE
 --no-progress [ARGS...]``: its wall time, its CPU (user + system of it and its worker processes)
 and its main process's CPU; then the ratios B / A of the sums. A tree is named by environment
 settings ``K=V,K=V`` (``PYTHONPATH=DIR`` of a ``git archive``; ``K=-`` unsets ``K``; ``PY=PATH``
-another interpreter). Run it from outside a checkout (the working directory comes first on
-``sys.path``). The lights.json of every run is kept in OUTDIR (compare them with ``cmp``).
+another interpreter). The runs start in OUTDIR (a ``python -c`` puts its working directory first
+on ``sys.path``: a checkout's ``ffls`` there would shadow ``PYTHONPATH``), where the lights.json of
+every run is kept (compare them with ``cmp``).
 
-    cd /tmp && OMP_NUM_THREADS=1 python /path/benchmarks/abba_lights.py ROUNDS CAPTURE OUTDIR \\
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/abba_lights.py ROUNDS CAPTURE OUTDIR \\
         PYTHONPATH=/tmp/a PYTHONPATH=/tmp/b -- --workers 2
 """
 from __future__ import annotations
@@ -42,6 +43,7 @@ def main(argv=None) -> int:
     cut = argv.index("--") if "--" in argv else len(argv)
     rounds, capture, outdir, a_spec, b_spec = argv[:cut]
     extra = argv[cut + 1:]
+    capture, outdir = os.path.abspath(capture), os.path.abspath(outdir)
     os.makedirs(outdir, exist_ok=True)
     envs = {"A": environment(a_spec), "B": environment(b_spec)}
     order = [n for r in range(int(rounds)) for n in (("A", "B", "B", "A") if r % 2 == 0 else ("B", "A", "A", "B"))]
@@ -51,8 +53,8 @@ def main(argv=None) -> int:
         load = os.getloadavg()[0]
         before, t = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
         done = subprocess.run([py, "-c", MAIN_CPU, "lights", capture, "-o", os.path.join(outdir, f"{name}_{k}.json"),
-                               "--no-progress", *extra], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                              text=True)
+                               "--no-progress", *extra], env=env, cwd=outdir, stdout=subprocess.PIPE,
+                              stderr=subprocess.DEVNULL, text=True)
         wall, after = time.perf_counter() - t, resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
         main_cpu = float(done.stdout.strip().splitlines()[-1].split()[-1]) if done.returncode == 0 else float("nan")
