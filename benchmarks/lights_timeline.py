@@ -6,8 +6,8 @@ this (the main) process's CPU over it. A sampler thread reads every process's CP
 and its worker processes, from /proc) every ``--every`` seconds, so each stage also shows the
 workers' CPU over it and the main process's CPU *alone*: in the samples where no worker process
 ran (grew its CPU by at least a tenth of the sample). That part is serial: on idle cores it is
-wall time with one core unused, whatever the load it was measured at (the other columns are
-inflated by a loaded machine's contention, the wall most).
+wall time with one core unused, except where the main process runs threads of its own (the Hough
+transforms). CPU is inflated by a loaded machine's contention much less than the wall is.
 
     OMP_NUM_THREADS=1 python benchmarks/lights_timeline.py CAPTURE --out T.json -- --workers 2
 
