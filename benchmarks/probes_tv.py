@@ -1,7 +1,7 @@
 """Hougen-Ahuja with an edge-preserving prior: total variation on the source graph, over orientations.
 
     OMP_NUM_THREADS=1 python benchmarks/probes_tv.py [--noise 0.01 [--seed 1]] [--maps night,studio]
-        [--orientations 4] [--methods default,smoothness,tv,paired,paired_tv]
+        [--orientations 4] [--methods default,smoothness,tv,paired,paired_tv,paired_power]
 
 The scenes and the measure are those of ``benchmarks/probes_orientation.py`` (a Lambertian ball of albedo
 0.7, 80 px, seen from the relit capture's camera; the four bundled maps at 64 rows; the ``ffls synth``
@@ -17,8 +17,9 @@ made in the turned frame (the pixels turned, as ``adaptive_hougen_ahuja`` does) 
 back. ``paired``: ``diffuse_lightmap``'s default since the thirteenth stop, the adaptive set's round and
 the quadratic prior's weight both chosen by the paired-fold rule (``adaptive_hougen_ahuja(...,
 rule='paired_se')``, then ``select_regularization(..., 'smoothness', rule='paired_se')`` on its set; its
-``cpu_s`` is both); ``paired_tv``: the same with total variation. ``--methods`` runs a subset (``default``
-always). Writes
+``cpu_s`` is both); ``paired_tv``: the same with total variation; ``paired_power``: the same with the
+least-total-power penalty, its weight among ``POWER_WEIGHTS`` (``--prior power``). ``--methods`` runs a
+subset (``default`` too where a prior on its set is asked). Writes
 ``benchmarks/results/probes_tv[_noise[_seedS]].json`` (``--json`` another file).
 """
 from __future__ import annotations
@@ -35,12 +36,15 @@ from common import (diffuse_ball, host_info, probe_benchmark_args, probe_benchma
                     relit_capture_error, write_json)
 from probes import H, MAPS
 from ffls.conventions import normalize
-from ffls.probes.estimate import SMOOTHNESS_WEIGHTS
+from ffls.probes.estimate import POWER_WEIGHTS, SMOOTHNESS_WEIGHTS
 from ffls.probes.selection import adaptive_hougen_ahuja, select_regularization
 
 ROOT = Path(__file__).resolve().parent.parent
 PRIORS = ("smoothness", "tv")
-METHODS = ("default", *PRIORS, "paired", "paired_tv")
+#: The paired methods: what each weighs and its candidate weights.
+PAIRED = {"paired": ("smoothness", SMOOTHNESS_WEIGHTS), "paired_tv": ("tv", SMOOTHNESS_WEIGHTS),
+          "paired_power": ("power", POWER_WEIGHTS)}
+METHODS = ("default", *PRIORS, *PAIRED)
 
 
 def main(argv=None):
@@ -75,32 +79,33 @@ def main(argv=None):
                 back = fit if i == 0 else dataclasses.replace(fit, directions=normalize(fit.directions @ R))
                 return relit_capture_error(cap, lights, back.latlong(H), truth)
 
-            t = time.process_time()
-            sel = adaptive_hougen_ahuja(n, rad, 0.7, nonnegative=True, ambient="auto")
-            r = {"map": name, "orientation": i, "sources": int(sel.chosen), "default": err(sel.fit),
-                 "default_cpu_s": time.process_time() - t}
+            r = {"map": name, "orientation": i}
+            if "default" in methods or any(p in methods for p in PRIORS):
+                t = time.process_time()
+                sel = adaptive_hougen_ahuja(n, rad, 0.7, nonnegative=True, ambient="auto")
+                r.update(sources=int(sel.chosen), default=err(sel.fit), default_cpu_s=time.process_time() - t)
             for prior in [p for p in PRIORS if p in methods]:
                 t = time.process_time()
                 reg = select_regularization(n, rad, 0.7, sel.fit.directions, SMOOTHNESS_WEIGHTS, prior,
                                             nonnegative=True, ambient="auto")
                 r[prior] = {"weight": reg.chosen, "relit_capture": err(reg.fit), "cpu_s": time.process_time() - t,
                             "heldout": [float(s) for s in reg.scores]}
-            paired = [m for m in ("paired", "paired_tv") if m in methods]
+            paired = [m for m in PAIRED if m in methods]
             if paired:
                 t = time.process_time()
                 ps = adaptive_hougen_ahuja(n, rad, 0.7, nonnegative=True, ambient="auto", rule="paired_se")
                 set_cpu = time.process_time() - t
             for m in paired:
                 t = time.process_time()
-                reg = select_regularization(n, rad, 0.7, ps.fit.directions, SMOOTHNESS_WEIGHTS,
-                                            "tv" if m == "paired_tv" else "smoothness", rule="paired_se",
-                                            nonnegative=True, ambient="auto")
+                reg = select_regularization(n, rad, 0.7, ps.fit.directions, PAIRED[m][1], PAIRED[m][0],
+                                            rule="paired_se", nonnegative=True, ambient="auto")
                 r[m] = {"sources": int(ps.chosen), "weight": reg.chosen, "relit_capture": err(reg.fit),
                         "relit_capture_unregularised": err(ps.fit), "cpu_s": set_cpu + time.process_time() - t,
                         "heldout": [float(s) for s in reg.scores]}
             out.append(r)
             shown = [p for p in METHODS[1:] if p in r]
-            print(f"{name} orientation {i}: {r['sources']} sources, default {100 * r['default']:.1f}%; "
+            print(f"{name} orientation {i}: "
+                  + (f"{r['sources']} sources, default {100 * r['default']:.1f}%; " if "default" in r else "")
                   + "; ".join(f"{p} cv {r[p]['weight']:g}: {100 * r[p]['relit_capture']:.1f}% "
                               f"({r[p]['cpu_s']:.1f} CPU s)" for p in shown), flush=True)
             write_json(path, {"host": host_info(), "noise": a.noise, "seed": own.seed, "map_height": H,

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-METHODS = ("default", "smoothness", "tv", "paired", "paired_tv")
+METHODS = ("default", "smoothness", "tv", "paired", "paired_tv", "paired_power")
 
 
 def relit(row, method) -> float:
@@ -33,7 +33,7 @@ def summarise(path) -> list[str]:
     rows = doc["rows"]
     maps = list(dict.fromkeys(r["map"] for r in rows))
     lines = [f"{Path(path).name}: noise {doc.get('noise', 0)}, seed {doc.get('seed', 0)}"]
-    for method in [m for m in METHODS if m == "default" or any(m in r for r in rows)]:
+    for method in [m for m in METHODS if all(m in r for r in rows)]:
         cells, misses, n = [], 0, 0
         for m in maps:
             rs = [r for r in rows if r["map"] == m]

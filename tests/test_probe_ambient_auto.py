@@ -84,14 +84,18 @@ def test_diffuse_default_has_no_ambient_with_geodesic_sources(folder, tmp_path, 
 
 
 def test_smoothness_chosen_by_cv(folder, tmp_path, capsys):
-    est = estimate_lightmap(folder, "diffuse", height=16, sources=42, smoothness="cv")
+    est = estimate_lightmap(folder, "diffuse", height=16, sources=42, smoothness="cv", prior="quadratic")
     w = est.details["smoothness"]
     assert w in (0.0, 0.001, 0.003, 0.01, 0.03)
     assert any("smoothness penalty: cross-validation" in s for s in est.notes)
     out = tmp_path / "m.exr"
     assert main(["probe", "diffuse", str(folder), "-o", str(out), "--size", "16", "--sources", "42",
-                 "--smoothness", "cv"]) == 0
+                 "--smoothness", "cv", "--prior", "quadratic"]) == 0
     assert "smoothness penalty" in capsys.readouterr().err
+    # the default prior with a cv weight (since the fifteenth stop): the total power's
+    assert main(["probe", "diffuse", str(folder), "-o", str(out), "--size", "16", "--sources", "42",
+                 "--smoothness", "cv"]) == 0
+    assert "power penalty" in capsys.readouterr().err
     # with the rings the refit keeps their hemisphere and their ambient
     ring = estimate_lightmap(folder, "diffuse", height=16, sources=9, smoothness="cv")
     assert any("non-negative ambient" in s for s in ring.notes) and ring.details["sources"] == 9

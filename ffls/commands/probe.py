@@ -126,9 +126,12 @@ def _add_inverse(sub, common):
                    help="with adaptive sources: make the estimate with the source set's vertex on the world's up "
                         "(probe.json's plane normal, else +Z) in this many azimuths about it, the same elevations "
                         "in each, and average them (default 1: one estimate; costs as many estimates)")
-    d.add_argument("--prior", choices=("quadratic", "tv"), default="quadratic",
+    d.add_argument("--prior", choices=("quadratic", "tv", "power"), default=None,
                    help="what --smoothness penalises: the squared differences between neighbouring sources "
-                        "(quadratic, default) or their absolute values (tv: total variation, keeps small lamps sharp)")
+                        "(quadratic), their absolute values (tv: total variation, keeps small lamps sharp) "
+                        "or the light's total power (power: of the maps the ball cannot tell apart the least "
+                        "powerful, whatever the source set's orientation). Default: power with --smoothness cv, "
+                        "quadratic with a stated weight")
     d.add_argument("--rule", choices=("paired_se", "one_se"), default="paired_se",
                    help="how cross-validation chooses the adaptive set's refinement and the --smoothness cv weight: "
                         "within one standard error of the paired fold differences (paired_se, default) or the rules "
@@ -294,7 +297,8 @@ def method_knobs(args) -> dict:
                      (f"--orientations {args.orientations}", args.orientations > 1), ("--ground", args.ground))
             raise InputError(f"--azimuths {args.azimuths} applies to --sources auto or adaptive without --orientations "
                              f"or --ground, not " + " ".join(f for f, on in given if on))
-        if args.prior != "quadratic" and (args.smoothness == 0 or args.smoothness is None and args.orientations > 1):
+        if args.prior not in (None, "quadratic") and (args.smoothness == 0
+                                                        or args.smoothness is None and args.orientations > 1):
             from ffls.errors import InputError
 
             raise InputError(f"--prior {args.prior} weighs --smoothness: give it a weight or cv (it is 0)")

@@ -218,7 +218,8 @@ def ground_column(normals, up) -> np.ndarray:
 
 def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str = True, nonnegative: bool = False,
                  rcond: float | None = None, axis=(0.0, 0.0, 1.0), hemisphere="full",
-                 smoothness: float = 0.0, energy: float = 0.0, ground=None, tv: float = 0.0) -> SourceFit:
+                 smoothness: float = 0.0, energy: float = 0.0, ground=None, tv: float = 0.0,
+                 power: float = 0.0) -> SourceFit:
     """Recover model-source intensities from a diffuse object's pixels (Hougen and Ahuja 1993).
 
     Parameters
@@ -319,7 +320,8 @@ def hougen_ahuja(normals, radiance, albedo=1.0, sources=17, ambient: bool | str 
     what = f"{dirs.shape[0]} sources{' + ground' if up is not None else ''}{' + ambient' if ambient else ''}"
     sol = solve_sources(M, target, np.ones(n.shape[0]) if ambient else None, nonnegative, rcond, what=what,
                         smoothness=smoothness, edges=neighbour_edges(dirs) if smoothness > 0 or tv > 0 else None,
-                        ambient_nonnegative=ambient == "nonnegative", energy=energy, cell_solid_angles=om, tv=tv)
+                        ambient_nonnegative=ambient == "nonnegative", energy=energy, cell_solid_angles=om, tv=tv,
+                        power=power)
     k = dirs.shape[0]
     rendered = sol.predicted * rho / np.pi
     rms = float(np.sqrt(np.mean((rendered - b) ** 2)))

@@ -203,7 +203,7 @@ def reduce_rows(A, b) -> tuple[np.ndarray, np.ndarray]:
 def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: float | None = None,
                   what: str = "sources", smoothness: float = 0.0, edges=None,
                   ambient_nonnegative: bool = False, energy: float = 0.0, cell_solid_angles=None,
-                  tv: float = 0.0, tv_rounds: int | None = None) -> LinearSolution:
+                  tv: float = 0.0, tv_rounds: int | None = None, power: float = 0.0) -> LinearSolution:
     """Solve ``b ~ M x + c a`` per channel, ``x >= 0`` with ``nonnegative``, ``a`` always free.
 
     Unknowns whose column is all zero (a source that lights no pixel) are left out and set to 0.
@@ -257,6 +257,14 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
         0 is the papers' plain fit.
     tv_rounds : int
         The most reweighted fits after the first (None: ``TV_ROUNDS``).
+    power : float
+        Weight ``lambda`` of a least-total-power penalty ``lambda^2 (ref sum_k x_k)^2`` on the
+        unknowns of ``M`` (not the free term), ``ref`` the RMS column norm of ``M`` as for
+        ``smoothness``. With ``nonnegative`` the sum is the light's total power, whatever the
+        source set: the penalty does not depend on where the sources lie. A source lighting every
+        seen pixel adds only a linear function of the normal, which the sum of other such sources
+        can replace; of those equally good maps the penalty prefers the one with the least power,
+        the most concentrated (``docs/probes.md``, *Least total power*). 0 is the papers' plain fit.
 
     Returns
     -------
@@ -324,8 +332,16 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
         Ge[np.arange(nobs), np.arange(nobs)] = np.sqrt(np.mean(om) / om) / scale[:nobs]
         Dsolve = np.concatenate([Dsolve, float(energy) * ref * Ge], axis=0)
         bsolve = np.concatenate([bsolve, np.zeros((nobs, b.shape[1]))], axis=0)
+    if power > 0:
+        nobs = int(observed.sum())
+        ref = float(np.sqrt(np.mean(np.sum(M[:, observed] ** 2, axis=0))))
+        Gp = np.zeros((1, k))
+        Gp[0, :nobs] = float(power) * ref / scale[:nobs]
+        Dsolve = np.concatenate([Dsolve, Gp], axis=0)
+        bsolve = np.concatenate([bsolve, np.zeros((1, b.shape[1]))], axis=0)
     split = nonnegative and ambient_column is not None and not ambient_nonnegative
-    if not nonnegative and rcond is None and rank < k and not (smoothness > 0 or energy > 0 or tv > 0):
+    if not nonnegative and rcond is None and rank < k and not (smoothness > 0 or energy > 0 or tv > 0
+                                                                   or power > 0):
         raise InputError(f"singular system: the {m} pixels determine only {rank} of the {k} unknowns "
                          f"({what}); use fewer sources, non-negativity, or a cut-off (rcond)")
 

@@ -39,7 +39,7 @@ __all__ = ["Selection", "select_model", "bic", "refine_sources", "adaptive_houge
 #: Model-selection criteria.
 CRITERIA = ("cv", "bic")
 #: Penalties :func:`select_regularization` chooses the weight of.
-REGULARIZERS = ("energy", "smoothness", "tv")
+REGULARIZERS = ("energy", "smoothness", "tv", "power")
 #: Rules :func:`choose_weight` applies to the held-out errors of a sweep of penalty weights.
 WEIGHT_RULES = ("one_se", "paired_se", "min")
 #: Rules :func:`refine_sources` applies to the held-out errors of its rounds (CV).
