@@ -381,11 +381,6 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts, ma
             judged = "median over its lit pixels in the photos" if colour_counts is not None else "in the max image"
             rejected.append(f"{where}: coloured (min/max channel {neutral:.2f} < {crit['min_neutral']}, {judged}),"
                             f" not a white, grey or chrome sphere")
-        elif (max_over_mean is not None and n_photos >= 3
-              and (spread := light_spread(max_over_mean, ft)) is not None and spread < crit["min_light_spread"]):
-            rejected.append(f"{where}: the light changes alike all over it, as on a flat patch of the ground (the"
-                            f" spread of ln(max / mean) over the {n_photos} photos is {spread:.2f} inside it"
-                            f" < {crit['min_light_spread']}), not a sphere")
         elif (mirror := ft.source == OUTER_SOURCE or dark_cap(L, ft.center_px, ft.radius_px)) and n_photos >= 3 and (
                 (hl := _highlight_evidence(L, max_over_mean, ft))[0] is not None and hl[0] < crit["min_highlight"]):
             rejected.append(f"{where}: outlined as a mirror ball's, but it holds no highlight (its brightest pixel is"
@@ -394,6 +389,11 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts, ma
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
             rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
                             f" (the same photo is brightest on {1 - chg:.0%} of it)")
+        elif (max_over_mean is not None and n_photos >= 3
+              and (spread := light_spread(max_over_mean, ft)) is not None and spread < crit["min_light_spread"]):
+            rejected.append(f"{where}: the light changes alike all over it, as on a flat patch of the ground (the"
+                            f" spread of ln(max / mean) over the {n_photos} photos is {spread:.2f} inside it"
+                            f" < {crit['min_light_spread']}), not a sphere")
         else:
             ok.append(ft)
     return ok, rejected
