@@ -229,6 +229,32 @@ def test_clipped_ground_patch_is_no_mirror_ball():
     assert "max over mean of the photos" in rejected[0]
 
 
+def test_highlights_in_no_outline_are_named_in_the_refusal():
+    """A chrome ball on a black ground mirrors black but its highlights: no outline of it shows
+    (``ffls synth ... --sphere-material mirror --background black``, 40 lights at 384 px: "no sphere
+    found"), and a hint of its true circle is refitted to the highlights' cluster. The refusal names
+    where the highlights gather, and that a hint cannot outline such a ball."""
+    from ffls.errors import InputError
+    from ffls.spheres.detect import find_spheres
+
+    n, H, W = 12, 120, 160
+    stack = np.full((n, H, W, 3), 0.002)
+    stack[:, 90:110, 10:40] = 0.3  # a lit patch of the table, the same in every photo
+    rng = np.random.default_rng(5)
+    for k in range(n):  # one highlight per photo, each in its own place on the ball
+        a, r = rng.uniform(0, 2 * np.pi), rng.uniform(0, 12)
+        stack[k, int(50 + r * np.sin(a)), int(100 + r * np.cos(a))] = 1.0
+    K = np.array([[300.0, 0, 79.5], [0, 300, 59.5], [0, 0, 1]])
+    with pytest.raises(InputError) as e:
+        find_spheres(stack, K, None, 0.04)
+    msg = str(e.value)
+    import re
+
+    m = re.search(rf"the highlights of {n} photos gather around pixel \((\d+), (\d+)\)", msg)
+    assert "no sphere found" in msg and m and np.hypot(int(m[1]) - 100, int(m[2]) - 50) < 6, msg
+    assert "cannot be outlined, by a hint either" in msg and "\n" not in msg
+
+
 def test_mirror_ball_found_by_its_silhouette(mirror_capture):
     """One chrome ball, no hints: the centre within 1 px of the truth (the dark cap's circle was 9 px off)."""
     folder, truth = mirror_capture

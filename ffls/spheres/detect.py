@@ -1859,7 +1859,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
         if not fits or (n_spheres is not None and len(fits) < n_spheres):
-            raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands), source)
+            hls = None if fits else unoutlined_highlights(L, ratio, brightest, n_photos)
+            raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
         fits = [ft if ft.source == OUTER_SOURCE or ft.outline_edges == PHOTO_EDGES
@@ -2592,15 +2593,50 @@ def _with_radius(ft, radius_px: float, cam: DetectionCamera):
     return new
 
 
-def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands) -> str:
+def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
+    """Where the photos' highlights gather with no round outline found: ``(x, y, extent_px, photos)``
+    of the largest group, or None.
+
+    A chrome ball on a black ground mirrors black all round but its highlights: no outline of it
+    shows in the max image or the photos' edges, yet its highlights, each lit in one photo, gather
+    on it. The pixels as bright as half the max image's maximum and lit in at most about two photos
+    (``ratio``, :func:`shading_ratio`, above ``ln(n_photos / 2)``) are joined within ``gap_px``;
+    the group holding the most distinct brightest photos is returned when they are at least 3 and a
+    quarter of the photos (its centroid, the largest distance of its pixels from it, the count).
+    """
+    if ratio is None or brightest is None or n_photos < 3:
+        return None
+    L = np.asarray(L, dtype=np.float64)
+    hl = (np.asarray(ratio) > np.log(n_photos / 2.0)) & (L >= 0.5 * float(L.max()))
+    if not hl.any():
+        return None
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * gap_px + 1, 2 * gap_px + 1))
+    n, lab = cv2.connectedComponents(cv2.dilate(hl.astype(np.uint8), k))
+    best = None
+    for j in range(1, n):
+        ys, xs = np.nonzero(hl & (lab == j))
+        photos = int(np.unique(brightest[ys, xs]).size)
+        if best is None or photos > best[3]:
+            cx, cy = float(xs.mean()), float(ys.mean())
+            best = (cx, cy, float(np.hypot(xs - cx, ys - cy).max()), photos)
+    return best if best is not None and best[3] >= max(3, n_photos / 4) else None
+
+
+def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, highlights=None) -> str:
     H, W = shape
     found = (f"found {len(fits)} of {int(n_spheres)} spheres" if n_spheres is not None and fits
              else f"no sphere found (sphere_count {int(n_spheres)})" if n_spheres is not None else "no sphere found")
     photos = f"the max image of {n_photos} photos" if n_photos > 1 else "the image"
     aside = f"; set aside: {rejected[0]}" + (f" (and {len(rejected) - 1} more)" if len(rejected) > 1 else "") \
         if rejected else ""
+    where = "" if highlights is None else (
+        f"; the highlights of {highlights[3]} photos gather around pixel ({highlights[0]:.0f}, {highlights[1]:.0f})"
+        f" (within {highlights[2]:.0f} px) in no round outline: a mirror ball whose outline does not show"
+        f" against its ground (chrome on black) cannot be outlined, by a hint either: photograph it on a"
+        f" lit or grey ground; where an outline shows,")
     return (f"{found}: looked in {photos} ({W}x{H} px) for round outlines of radius 3 to {min(H, W) // 2} px"
-            f" ({n_cands} candidate circles){aside}; give a hint in capture.json, e.g. "
+            f" ({n_cands} candidate circles){aside}{where}{';' if highlights is None else ''} give a hint in"
+            f" capture.json, e.g. "
             f"\"spheres\": [{{\"center_px\": [u, v]}}] or \"sphere_count\": n")
 
 

@@ -5,8 +5,8 @@ outline (a :class:`ffls.spheres.detect.SphereFit`) is judged by criteria that ho
 calibration spheres in general (:data:`CRITERIA`, documented with their reasons in
 ``docs/spheres.md``, "Detection without hints"): round, closed and supported outline; visible
 enough when the frame edge cuts it; a well-constrained centre; neutral colour; shading that
-changes across the photos as a sphere's does; a size consistent with the other spheres (all
-share ``sphere_radius``).
+changes across the photos as a sphere's does, and unlike a flat patch of the ground's; a size
+consistent with the other spheres (all share ``sphere_radius``).
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import numpy as np
 from ffls.spheres.mirror_outline import OUTER_SOURCE, dark_cap, highlight_ratio
 
 __all__ = ["CRITERIA", "COLOUR_STEP", "clip_levels", "disc_pixels", "light_directions_per_photo", "neutrality", "photo_neutrality",
-           "shading_change", "select_spheres", "round_outline", "outline_closure"]
+           "light_spread", "moving_highlights", "shading_change", "select_spheres", "round_outline", "outline_closure"]
 
 
 #: Criteria an unhinted round outline must meet to count as a calibration sphere
@@ -32,6 +32,8 @@ CRITERIA = {
     "max_light_disagreement_deg": 40.0,  # per-photo light directions vs the closest other sphere (3+ spheres)
     "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
     "min_highlight": 1.5,        # a mirror's brightest pixel over its surroundings' 95th percentile (max image)
+    "min_light_spread": 0.2,     # spread (10th to 90th percentile) of ln(max / mean) inside 0.8 radii
+    "min_moving_highlights": 3,  # or highlights of this many photos, each in its own place
 }
 
 
@@ -143,6 +145,67 @@ def shading_change(brightest, L, rows, cols) -> float:
     return float(1.0 - counts.max() / lit.sum())
 
 
+def light_spread(max_over_mean, ft) -> float | None:
+    """How much the light's change across the photos differs over a circle's inside: a sphere's, or a
+    pattern's of the ground.
+
+    ``ln(max / mean)`` of a pixel over the photos cancels its albedo (a Lambertian pixel's photos
+    share it) and keeps how the lights fall on it, which depends on its normal. A flat patch of a
+    textured ground faces one way: the ratio is the same all over it (as on the ground around it), and
+    its spread stays within the noise's, however dark or bright the patch; a sphere faces every way
+    and a mirror's highlights each sit in their own photo's place, so the ratio varies across it.
+    Returns the 10th to 90th percentile spread of ``ln(max_over_mean)`` over the pixels within 0.8
+    radii (inside the image; the limb's mixed pixels left out), or None with fewer than 20 of them.
+
+    Parameters
+    ----------
+    max_over_mean : (H, W) float
+        The max over the mean luminance of the photos (``exp`` of
+        :func:`ffls.spheres.detect.shading_ratio`).
+    ft : ffls.spheres.detect.SphereFit
+    """
+    rows, cols = disc_pixels(ft, max_over_mean.shape, 0.8)
+    if rows.size < 20:
+        return None
+    v = np.log(np.maximum(np.asarray(max_over_mean, dtype=np.float64)[rows, cols], 1e-30))
+    q10, q90 = np.percentile(v, [10, 90])
+    return float(q90 - q10)
+
+
+def moving_highlights(max_over_mean, brightest, L, ft) -> int:
+    """How many photos hold a highlight on a circle: a mirror's highlights move with the light.
+
+    A chrome ball mirrors the ground and the room, whose light changes as the ground's does, so away
+    from its highlights its ``ln(max / mean)`` is as flat as the ground's (under 16 lights at 256 px
+    the highlights fill less than a tenth of it). Its highlights are lit in one photo each: their
+    ``ln(max / mean)`` stands above the rest of it, they are as bright in the max image as the
+    brightest of the ground around it, and each is brightest in its own photo. A patch of the ground
+    holds none. Returns the count of distinct brightest photos among the pixels within 0.95 radii
+    whose ``ln(max / mean)`` exceeds the median inside 0.8 radii by ``ln 2`` and whose max
+    luminance reaches the 95th percentile of the ring from 1.15 to 1.4 radii (0 where either holds
+    fewer than 5 pixels in the frame).
+
+    Parameters
+    ----------
+    max_over_mean : (H, W) float
+    brightest : (H, W) int
+        Per pixel, the brightest photo.
+    L : (H, W) float
+        Luminance of the max image.
+    ft : ffls.spheres.detect.SphereFit
+    """
+    shape = L.shape
+    rows, cols = disc_pixels(ft, shape, 1.4)
+    d = np.hypot(cols - ft.center_px[0], rows - ft.center_px[1]) / ft.radius_px
+    ring, disc, core = d >= 1.15, d <= 0.95, d <= 0.8
+    if ring.sum() < 5 or core.sum() < 5:
+        return 0
+    v = np.log(np.maximum(np.asarray(max_over_mean, dtype=np.float64)[rows, cols], 1e-30))
+    lum = np.asarray(L, dtype=np.float64)[rows, cols]
+    hl = disc & (v > np.median(v[core]) + np.log(2.0)) & (lum >= np.percentile(lum[ring], 95))
+    return int(np.unique(brightest[rows[hl], cols[hl]]).size)
+
+
 def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3, L=None,
                                highlight_fraction: float = 0.8):
     """Per photo, the light direction a sphere's brightest pixels suggest, as matte and as mirror.
@@ -245,7 +308,12 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     one (support x closure x (0.25 + 0.75 neutrality) / (1 + (rms / 0.5 px)^2)). A round outline
     is then set aside, with a one-line reason, when it is cut by the frame edge (less than
     ``min_visible`` of it inside), its centre is poorly constrained (standard error above
-    ``max_center_sigma_px``), it is coloured (``min_neutral``), its shading does not change
+    ``max_center_sigma_px``), it is coloured (``min_neutral``), the light changes alike all over it
+    as on a flat patch of the ground (with at least 3 photos and ``max_over_mean``: the spread of
+    ``ln(max / mean)`` inside it, :func:`light_spread`, below ``min_light_spread``, and, with
+    ``brightest``, the highlights of fewer than ``min_moving_highlights`` photos on it,
+    :func:`moving_highlights`; a textured ground's blob, dark or bright, whatever its outline;
+    judged after the other tests), its shading does not change
     across the photos as a sphere's does (``min_shading_change``, with at least 3 photos; not asked
     of a mirror ball's outer outline or dark cap, whose reflected table is brightest in the same
     photo: with at least 3 photos, lit by lights, such an outline must instead hold a highlight, its
@@ -358,6 +426,14 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts, ma
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
             rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
                             f" (the same photo is brightest on {1 - chg:.0%} of it)")
+        elif (max_over_mean is not None and n_photos >= 3
+              and (spread := light_spread(max_over_mean, ft)) is not None and spread < crit["min_light_spread"]
+              and (brightest is None or (hls := moving_highlights(max_over_mean, brightest, L, ft))
+                   < crit["min_moving_highlights"])):
+            moving = "" if brightest is None else f", and highlights of {hls} photos"
+            rejected.append(f"{where}: the light changes alike all over it, as on a flat patch of the ground (the"
+                            f" spread of ln(max / mean) over the {n_photos} photos is {spread:.2f} inside it"
+                            f" < {crit['min_light_spread']}{moving}), not a sphere")
         else:
             ok.append(ft)
     return ok, rejected
