@@ -14,7 +14,8 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask, edge_points,
-                                 find_spheres, fit_outline, orthographic_normals, sphere_mask, sphere_normals)
+                                 find_spheres, fit_outline, orthographic_normals, outline_visible_fraction,
+                                 sphere_mask, sphere_normals)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
@@ -186,7 +187,10 @@ def unhinted_mirror_limb(radiance, image, outline, source):
     for diffuse balls, every candidate circle of the photo (:func:`ffls.spheres.detect.circle_candidates`,
     radius at least :data:`MIN_BALL_FRACTION` of the shorter side) is a start besides ``outline``; each start's
     :func:`mirror_limb` is grown to the largest enclosing circle of steps (:func:`_grown_limb`), and of the
-    limbs found the largest is taken: a circle of steps inside a mirror ball is a reflection.
+    limbs found with at least 60% of their circle in the frame (as :func:`diffuse_ball` asks of an outline)
+    the largest is taken: a circle of steps inside a mirror ball is a reflection. (From a start on the
+    photo's top edge, a courtyard's round structure half outside the frame, radius 66 px, centre 134 px
+    from a 33 px ball, was the largest: ``probe_detect.py --azimuth 45``.)
 
     Raises
     ------
@@ -203,10 +207,14 @@ def unhinted_mirror_limb(radiance, image, outline, source):
                                                            for a, b in starts):
             starts.append((np.array([x, y], dtype=np.float64), float(r)))
     limbs = []
+    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
     for c0, r0 in starts:
         limb = mirror_limb(radiance, c0, r0, shape)
-        if limb is not None:
-            limbs.append(_grown_limb(log_lum, limb[0], limb[1], shape))
+        if limb is None:
+            continue
+        c, r = _grown_limb(log_lum, limb[0], limb[1], shape)
+        if outline_visible_fraction(c + r * np.stack([np.cos(t), np.sin(t)], axis=1), shape) >= 0.6:
+            limbs.append((c, r))
     if not limbs:
         return None
     limbs.sort(key=lambda g: -g[1])
