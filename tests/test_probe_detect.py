@@ -17,9 +17,10 @@ from ffls.probes.locate import locate_sphere, mirror_limb
 from ffls.synth.probe import look_at, write_mirror_probe
 
 
-def _probe(folder, name="night", f=400.0, d=1.2, offset=(-70.0, 10.0)):
+def _probe(folder, name="night", f=400.0, d=1.2, offset=(-70.0, 10.0), azimuth=0.0):
     center = np.array([0.0, 0.0, 0.1])
-    eye = center + d * np.array([0.94, 0.0, 0.34])
+    a = np.radians(azimuth)
+    eye = center + d * np.array([0.94 * np.cos(a), 0.94 * np.sin(a), 0.34])
     T0 = look_at(eye, center)
     T = look_at(eye, center - offset[0] / f * d * T0[:3, 0] - offset[1] / f * d * T0[:3, 1])
     K = np.array([[f, 0, 159.5], [0, f, 119.5], [0, 0, 1.0]])
@@ -72,6 +73,19 @@ def test_unhinted_mirror_ball_reaches_its_limb_from_an_inner_outline(tmp_path, f
     geo = locate_sphere(view, vr.radiance, probe.json_path)
     r_true = f * 0.1 / np.sqrt(4.0 ** 2 - 0.1 ** 2)
     assert np.hypot(*(geo.center_px - c_true)) < 0.6 and abs(geo.radius_px - r_true) < 0.6
+
+
+def test_unhinted_mirror_limb_half_outside_the_frame_is_not_taken(tmp_path):
+    """Seen from azimuth 45 under courtyard, one candidate circle is a round structure on the photo's top
+    edge (centre 134 px from the 33 px ball, radius 66 px) whose in-frame half the limb's steps cover:
+    as the largest limb it was taken, 133.8 px off. A limb needs 60% of its circle in the frame: 0.71 px."""
+    c_true = _probe(tmp_path, "courtyard", azimuth=45.0)
+    probe = load_probe(tmp_path)
+    view = probe.views[0]
+    vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
+    geo = locate_sphere(view, vr.radiance, probe.json_path)
+    r_true = 400.0 * 0.1 / np.sqrt(1.2 ** 2 - 0.1 ** 2)
+    assert np.hypot(*(geo.center_px - c_true)) < 1.0 and abs(geo.radius_px - r_true) < 1.0
 
 
 def test_mirror_limb_takes_the_enclosing_circle_of_steps(tmp_path):
