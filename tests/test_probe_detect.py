@@ -30,8 +30,8 @@ def _probe(folder, name="night", f=400.0, d=1.2, offset=(-70.0, 10.0), azimuth=0
     return project_points((Ti[:3, :3] @ center + Ti[:3, 3])[None], K, None)[0]
 
 
-def _located(folder, name):
-    c_true = _probe(folder, name)
+def _located(folder, name, render: bool = True):
+    c_true = _probe(folder, name) if render else None
     probe = load_probe(folder)
     view = probe.views[0]
     vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
@@ -86,6 +86,21 @@ def test_unhinted_mirror_limb_half_outside_the_frame_is_not_taken(tmp_path):
     geo = locate_sphere(view, vr.radiance, probe.json_path)
     r_true = 400.0 * 0.1 / np.sqrt(1.2 ** 2 - 0.1 ** 2)
     assert np.hypot(*(geo.center_px - c_true)) < 1.0 and abs(geo.radius_px - r_true) < 1.0
+
+
+def test_two_unhinted_mirror_limbs_alike_are_refused(tmp_path):
+    """The night ball's square (its limb and 6 px of background) copied 150 px to its right: two separate
+    limbs of one size, neither the probe by any rule here, refused in one line."""
+    from ffls.errors import InputError
+    from ffls.io.images import read_exr, write_exr
+
+    c_true = _probe(tmp_path, "night")
+    img = np.array(read_exr(tmp_path / "ball.exr", working_space=False).pixels)
+    x0, y0, h = int(round(c_true[0])), int(round(c_true[1])), 40
+    img[y0 - h:y0 + h, x0 + 150 - h:x0 + 150 + h] = img[y0 - h:y0 + h, x0 - h:x0 + h]
+    write_exr(tmp_path / "ball.exr", img)
+    with pytest.raises(InputError, match=r"two mirror ball limbs could be the probe: .*center_px"):
+        _located(tmp_path, "night", render=False)
 
 
 def test_mirror_limb_takes_the_enclosing_circle_of_steps(tmp_path):
