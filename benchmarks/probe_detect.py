@@ -15,7 +15,11 @@ error, and the outcome: ``ok`` (centre within 1 px), ``off`` (found, centre 1 px
 ``inner`` (a circle inside the ball: radius below 0.8 of the truth, an inner reflection),
 ``none`` (no sphere found). Then the rate within 1 px and the time per photo.
 
-Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_detect.py [--maps courtyard,night,studio,sunrise] [--out FILE]``
+``--azimuth DEG`` turns every layout's camera by that much more about the vertical: the same maps and
+lenses seen from other sides, renders not looked at while building the finder.
+
+Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_detect.py [--maps courtyard,night,studio,sunrise] [--azimuth DEG]
+[--out FILE]``
 """
 from __future__ import annotations
 
@@ -82,6 +86,7 @@ def locate(folder):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--maps", default="courtyard,night,studio,sunrise")
+    ap.add_argument("--azimuth", type=float, default=0.0, help="added to every camera's azimuth (degrees)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "probe_detect.json"))
     a = ap.parse_args(argv)
     rows = []
@@ -93,7 +98,7 @@ def main(argv=None):
                 lm = load_lightmap(HDRI / f"{name}.exr")
             for k, layout in enumerate(LAYOUTS):
                 folder = Path(tmp) / f"{name}_{layout[0]}"
-                c_true, r_true = render(folder, lm, layout, azimuth_deg=90.0 * m + 120.0 * k)
+                c_true, r_true = render(folder, lm, layout, azimuth_deg=90.0 * m + 120.0 * k + a.azimuth)
                 found, dt = locate(folder)
                 if found is None:
                     err, dr, outcome = None, None, "none"

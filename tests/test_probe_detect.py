@@ -17,9 +17,10 @@ from ffls.probes.locate import locate_sphere, mirror_limb
 from ffls.synth.probe import look_at, write_mirror_probe
 
 
-def _probe(folder, name="night", f=400.0, d=1.2, offset=(-70.0, 10.0)):
+def _probe(folder, name="night", f=400.0, d=1.2, offset=(-70.0, 10.0), azimuth=0.0):
     center = np.array([0.0, 0.0, 0.1])
-    eye = center + d * np.array([0.94, 0.0, 0.34])
+    a = np.radians(azimuth)
+    eye = center + d * np.array([0.94 * np.cos(a), 0.94 * np.sin(a), 0.34])
     T0 = look_at(eye, center)
     T = look_at(eye, center - offset[0] / f * d * T0[:3, 0] - offset[1] / f * d * T0[:3, 1])
     K = np.array([[f, 0, 159.5], [0, f, 119.5], [0, 0, 1.0]])
@@ -29,8 +30,8 @@ def _probe(folder, name="night", f=400.0, d=1.2, offset=(-70.0, 10.0)):
     return project_points((Ti[:3, :3] @ center + Ti[:3, 3])[None], K, None)[0]
 
 
-def _located(folder, name):
-    c_true = _probe(folder, name)
+def _located(folder, name, render: bool = True):
+    c_true = _probe(folder, name) if render else None
     probe = load_probe(folder)
     view = probe.views[0]
     vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
@@ -47,16 +48,59 @@ def test_mirror_ball_found_without_hint(tmp_path):
     assert np.hypot(*(geo.center_px - c_true)) < 1.0
 
 
-@pytest.mark.parametrize("name", ["sunrise", "studio"])
-def test_unconfirmed_mirror_outline_is_refused(tmp_path, name):
-    """Under sunrise the finder's outline is a reflected circle 5.7 px off (it was the strict xfail
-    here), under studio another round outline 30 px off, both used without a word before. Neither
-    is confirmed by the limb's steps (``mirror_limb`` None) nor a sharp contour (RMS 0.66 and
-    0.74 px > ``MIRROR_SHARP_OUTLINE_PX``): one line asking for a hint."""
-    from ffls.errors import InputError
+@pytest.mark.parametrize("name, tol", [("sunrise", 1.2), ("studio", 1.6)])
+def test_unconfirmed_mirror_outline_is_not_used(tmp_path, name, tol):
+    """Under sunrise the finder's outline is a reflected circle 5.7 px off, under studio another round
+    outline 30 px off; neither is confirmed by the limb's steps. They were refused (before that, used
+    without a word); now the limb is found from another start (``unhinted_mirror_limb``: each candidate
+    circle's ``mirror_limb``, grown to the largest enclosing circle of steps), 1.05 and 1.52 px off."""
+    geo, c_true = _located(tmp_path, name)
+    r_true = 400.0 * 0.1 / np.sqrt(1.2 ** 2 - 0.1 ** 2)
+    assert np.hypot(*(geo.center_px - c_true)) < tol and abs(geo.radius_px - r_true) < 1.0
 
-    with pytest.raises(InputError, match=r"no sphere found: .*neither confirmed by a mirror ball's limb.*center_px"):
-        _located(tmp_path, name)
+
+@pytest.mark.parametrize("f, offset", [(1600.0, (-60.0, 40.0)), (800.0, (90.0, -55.0))])
+def test_unhinted_mirror_ball_reaches_its_limb_from_an_inner_outline(tmp_path, f, offset):
+    """The layouts of ``benchmarks/probe_detect.py`` at f = 1600 and 800 px (4 m) under sunrise: the
+    finder's outline is a reflected circle inside the ball, from where ``mirror_limb``'s window does not
+    reach the limb; that circle was used without a word, 3.86 and 2.74 px off, radius 3.8 and 2.5 px short.
+    Each candidate circle as a start, grown to the largest enclosing circle of limb steps: 0.33 and
+    0.08 px."""
+    c_true = _probe(tmp_path, "sunrise", f=f, d=4.0, offset=offset)
+    probe = load_probe(tmp_path)
+    view = probe.views[0]
+    vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
+    geo = locate_sphere(view, vr.radiance, probe.json_path)
+    r_true = f * 0.1 / np.sqrt(4.0 ** 2 - 0.1 ** 2)
+    assert np.hypot(*(geo.center_px - c_true)) < 0.6 and abs(geo.radius_px - r_true) < 0.6
+
+
+def test_unhinted_mirror_limb_half_outside_the_frame_is_not_taken(tmp_path):
+    """Seen from azimuth 45 under courtyard, one candidate circle is a round structure on the photo's top
+    edge (centre 134 px from the 33 px ball, radius 66 px) whose in-frame half the limb's steps cover:
+    as the largest limb it was taken, 133.8 px off. A limb needs 60% of its circle in the frame: 0.71 px."""
+    c_true = _probe(tmp_path, "courtyard", azimuth=45.0)
+    probe = load_probe(tmp_path)
+    view = probe.views[0]
+    vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
+    geo = locate_sphere(view, vr.radiance, probe.json_path)
+    r_true = 400.0 * 0.1 / np.sqrt(1.2 ** 2 - 0.1 ** 2)
+    assert np.hypot(*(geo.center_px - c_true)) < 1.0 and abs(geo.radius_px - r_true) < 1.0
+
+
+def test_two_unhinted_mirror_limbs_alike_are_refused(tmp_path):
+    """The night ball's square (its limb and 6 px of background) copied 150 px to its right: two separate
+    limbs of one size, neither the probe by any rule here, refused in one line."""
+    from ffls.errors import InputError
+    from ffls.io.images import read_exr, write_exr
+
+    c_true = _probe(tmp_path, "night")
+    img = np.array(read_exr(tmp_path / "ball.exr", working_space=False).pixels)
+    x0, y0, h = int(round(c_true[0])), int(round(c_true[1])), 40
+    img[y0 - h:y0 + h, x0 + 150 - h:x0 + 150 + h] = img[y0 - h:y0 + h, x0 - h:x0 + h]
+    write_exr(tmp_path / "ball.exr", img)
+    with pytest.raises(InputError, match=r"two mirror ball limbs could be the probe: .*center_px"):
+        _located(tmp_path, "night", render=False)
 
 
 def test_mirror_limb_takes_the_enclosing_circle_of_steps(tmp_path):

@@ -14,12 +14,13 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask, edge_points,
-                                 find_spheres, fit_outline, orthographic_normals, sphere_mask, sphere_normals)
+                                 find_spheres, fit_outline, orthographic_normals, outline_visible_fraction,
+                                 sphere_mask, sphere_normals)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
            "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
-           "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET"]
+           "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET", "LIMB_GROWTH", "unhinted_mirror_limb"]
 
 
 @dataclass
@@ -142,6 +143,87 @@ def mirror_limb(radiance, center_px, radius_px, shape):
     if not good:
         return None
     r, c = max(good, key=lambda g: g[0])
+    return c, r
+
+
+#: :func:`unhinted_mirror_limb` grows a circle of limb steps to the largest one enclosing it with its centre
+#: within this share of its radius and a radius up to this share larger (a 1 px search grid).
+LIMB_GROWTH = 0.2
+
+
+def _grown_limb(log_lum, center_px, radius_px, shape, max_steps: int = 8):
+    """The largest circle of radial steps enclosing (``center_px``, ``radius_px``), grown until none does.
+
+    :func:`mirror_limb`'s search spans half the radius on a 2-2.5 px grid, where a weak limb's votes
+    lose to the reflected circles just inside it. Here the steps
+    (:func:`ffls.spheres.mirror_outline.radial_steps`, 0.9 to ``1 + 2 LIMB_GROWTH`` radii) are searched
+    (:func:`ffls.spheres.mirror_outline.circle_search`, a grid of 1 px) only for circles larger than the
+    current one, centre within :data:`LIMB_GROWTH` of its radius, radius up to that share larger; of those
+    that enclose it (to 1 px) and whose steps cover :data:`LIMB_STEP_COVERAGE` of them the largest is
+    taken, and the search repeated from it.
+    """
+    from ffls.spheres.mirror_outline import circle_coverage, circle_search, radial_steps
+
+    c, r = np.asarray(center_px, dtype=np.float64), float(radius_px)
+    for _ in range(max_steps):
+        pts = radial_steps(log_lum, c, r, r_range=(0.9, 1 + 2 * LIMB_GROWTH))
+        found = circle_search(pts, c, LIMB_GROWTH * r, r + 0.5, (1 + LIMB_GROWTH) * r, tol=1.0,
+                              n_best=LIMB_CIRCLES)
+        good = [(float(rr), cc) for cc, rr, inl in found
+                if inl.sum() >= 8 and np.hypot(*(cc - c)) + r <= rr + 1.0
+                and circle_coverage(pts[inl], cc, rr, 1.0, shape) >= LIMB_STEP_COVERAGE]
+        if not good:
+            break
+        r, c = max(good, key=lambda g: g[0])
+    return c, r
+
+
+def unhinted_mirror_limb(radiance, image, outline, source):
+    """The limb of a mirror ball found without a hint: (centre (2,), radius), or None when no start confirms one.
+
+    The calibration finder's outline of a mirror probe can be a reflected circle well inside the ball
+    (``benchmarks/probe_detect.py``, night at f = 1600 px: 7.65 px off, radius 9.15 px short), from where
+    :func:`mirror_limb`'s window (15 % of the outline) does not reach the limb. As :func:`diffuse_ball` does
+    for diffuse balls, every candidate circle of the photo (:func:`ffls.spheres.detect.circle_candidates`,
+    radius at least :data:`MIN_BALL_FRACTION` of the shorter side) is a start besides ``outline``; each start's
+    :func:`mirror_limb` is grown to the largest enclosing circle of steps (:func:`_grown_limb`), and of the
+    limbs found with at least 60% of their circle in the frame (as :func:`diffuse_ball` asks of an outline)
+    the largest is taken: a circle of steps inside a mirror ball is a reflection. (From a start on the
+    photo's top edge, a courtyard's round structure half outside the frame, radius 66 px, centre 134 px
+    from a 33 px ball, was the largest: ``probe_detect.py --azimuth 45``.)
+
+    Raises
+    ------
+    InputError
+        Two separate limbs (not overlapping), the smaller at least :data:`RIVAL_RATIO` of the larger.
+    """
+    lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    log_lum = np.log(np.maximum(lum, 1e-12))
+    shape = lum.shape
+    cands, _ = circle_candidates(image, source)
+    starts = [(np.asarray(outline.center_px, dtype=np.float64), float(outline.radius_px))]
+    for x, y, r in cands:
+        if r >= MIN_BALL_FRACTION * min(shape) and not any(np.hypot(x - a[0], y - a[1]) < 0.5 and abs(r - b) < 0.5
+                                                           for a, b in starts):
+            starts.append((np.array([x, y], dtype=np.float64), float(r)))
+    limbs = []
+    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    for c0, r0 in starts:
+        limb = mirror_limb(radiance, c0, r0, shape)
+        if limb is None:
+            continue
+        c, r = _grown_limb(log_lum, limb[0], limb[1], shape)
+        if outline_visible_fraction(c + r * np.stack([np.cos(t), np.sin(t)], axis=1), shape) >= 0.6:
+            limbs.append((c, r))
+    if not limbs:
+        return None
+    limbs.sort(key=lambda g: -g[1])
+    c, r = limbs[0]
+    for o, ro in limbs[1:]:
+        if np.hypot(*(o - c)) >= r + ro and ro >= RIVAL_RATIO * r:
+            raise InputError(f"two mirror ball limbs could be the probe: ({c[0]:.0f}, {c[1]:.0f}) px, radius "
+                             f"{r:.0f} px and ({o[0]:.0f}, {o[1]:.0f}) px, radius {ro:.0f} px; give a hint in "
+                             "probe.json, e.g. \"sphere\": {\"center_px\": [u, v], \"radius_px\": r}", source)
     return c, r
 
 
@@ -463,7 +545,8 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     if hints is None:
         _check_probe_size(ft.center_px, ft.radius_px, rad.shape[:2], source)
     if view.sphere.material == "mirror":  # the limb's reflectance step rather than a reflected edge
-        limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2])
+        limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2]) if hints else \
+            unhinted_mirror_limb(rad, np.repeat(lum[..., None], 3, axis=2), ft, source)
         if limb is not None:
             if hints is None:
                 _check_probe_size(limb[0], limb[1], rad.shape[:2], source)
