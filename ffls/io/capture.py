@@ -73,6 +73,10 @@ CAPTURE_FILE = "capture.json"
 LIGHTS_FILE = "lights.json"
 #: Largest accepted | |d| - 1 | for a light direction read from a file.
 UNIT_TOLERANCE = 1e-3
+#: Largest accepted deviation of a stated rotation block from a rotation (``R R^T`` against the
+#: identity, ``det R`` against 1): any rotation written to 3 decimals is within it (docs/formats.md,
+#: "The camera's tilt", gives them so); such a block is taken as its nearest rotation.
+ROTATION_TOLERANCE = 2e-3
 _ENCODINGS = ("srgb", "linear")
 _FLOAT_SUFFIXES = (".exr", ".hdr", ".pic")
 _ENCODING_FORMS = "'srgb', 'linear', {\"gamma\": g} or {\"response\": \"file.npy|.csv\"}"
@@ -529,9 +533,7 @@ def _parse_camera(j: _Json, cam, image_size=None) -> tuple:
     wfc = conventions.DEFAULT_WORLD_FROM_CAMERA.copy()
     default = True
     if "world_from_camera" in cam:
-        wfc = j.array(cam["world_from_camera"], "camera.world_from_camera", (4, 4))
-        if not (conventions.is_rotation(wfc[:3, :3], atol=1e-4) and np.allclose(wfc[3], [0, 0, 0, 1])):
-            j.fail("camera.world_from_camera", "not a rigid transform (rotation block must be orthonormal with det 1, last row 0 0 0 1)")
+        wfc = _rigid(j, cam["world_from_camera"], "camera.world_from_camera")
         default = False
     unknown = set(cam) - {"K", "dist", "world_from_camera", "model"}
     if unknown:
@@ -543,6 +545,28 @@ def _parse_camera(j: _Json, cam, image_size=None) -> tuple:
         j.fail("camera", f"an orthographic camera has no {'K' if 'K' in cam else 'dist'} (parallel rays need no "
                          "focal length); remove it, or use \"model\": \"pinhole\"")
     return K, dist, wfc, default, model
+
+
+def _rigid(j: _Json, value, key: str) -> np.ndarray:
+    """``value`` as a 4x4 rigid transform; a rotation block within :data:`ROTATION_TOLERANCE` of a
+    rotation (typed to 3 decimals) is replaced by its nearest rotation (SciPy's)."""
+    from scipy.spatial.transform import Rotation
+
+    T = j.array(value, key, (4, 4))
+    if not np.allclose(T[3], [0, 0, 0, 1]):
+        j.fail(key, f"not a rigid transform: its last row must be 0 0 0 1, got {_short(T[3].tolist())}")
+    R = T[:3, :3]
+    det = np.linalg.det(R)
+    if not det > 0:
+        j.fail(key, f"not a rigid transform: its rotation block has determinant {det:.3g} (a rotation's is 1; "
+                    "a negative one mirrors the image: check the signs of its columns x right, y down, z forward)")
+    dev = max(float(np.abs(R @ R.T - np.eye(3)).max()), abs(det - 1.0))
+    if dev > ROTATION_TOLERANCE:
+        j.fail(key, f"not a rigid transform: its rotation block is {dev:.2g} from orthonormal with determinant 1 "
+                    f"(tolerance {ROTATION_TOLERANCE:g}, met by a rotation written to 3 decimals)")
+    T = T.copy()
+    T[:3, :3] = Rotation.from_matrix(R).as_matrix()
+    return T
 
 
 def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:

@@ -1,0 +1,82 @@
+"""Bad input found by the round-15 tester (briefs s15/atk15, docs/reliability.md "Round 15").
+
+The stop's merged tree attacked as a careless user would: camera poses typed by hand (rolled,
+rounded, scaled, mirrored), ``--lights`` files with odd keys, ``.lp`` files, captures of one or two
+photos, photos all alike or all black but one, ``--workers`` out of range. The promise checked is the
+one of ``tests/test_bad_input.py``: exit status 2, one stderr line naming the flag or file, nothing
+left; and valid but unusual input read (no false refusal).
+"""
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from cli_lines import one_line, tiny_capture
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory):
+    return tiny_capture(tmp_path_factory.mktemp("r15"), seed=15)
+
+
+def _tilted(t_deg: float, decimals: int | None) -> list:
+    """docs/formats.md's pose of a camera looking down by ``t_deg`` (its "The camera's tilt"), rounded."""
+    s, c = np.sin(np.radians(t_deg)), np.cos(np.radians(t_deg))
+    T = np.array([[1, 0, 0, 0], [0, -s, c, -c], [0, -c, -s, 0.5], [0, 0, 0, 1]], dtype=float)
+    return (T if decimals is None else np.round(T, decimals)).tolist()
+
+
+def _with_pose(cap, tmp_path, pose):
+    c = tmp_path / "c"
+    shutil.copytree(cap, c)
+    doc = json.loads((c / "capture.json").read_text())
+    doc["camera"]["world_from_camera"] = pose
+    (c / "capture.json").write_text(json.dumps(doc))
+    return c
+
+
+# ----------------------------------------------------------------------------- world_from_camera
+@pytest.mark.parametrize("t", [20, 30, 45, 60])
+def test_a_pose_typed_to_3_decimals_is_read_as_its_rotation(cap, tmp_path, t):
+    """docs/formats.md gives the tilt's pose to 3 decimals; ``R R^T`` of 20 deg so written is 5.6e-4
+    off the identity (45 deg: 3.0e-4), and a 1e-4 tolerance refused it: "not a rigid transform"."""
+    from ffls.conventions import is_rotation
+    from ffls.io.capture import load_capture
+
+    c = _with_pose(cap, tmp_path, _tilted(t, 3))
+    wfc = load_capture(c).world_from_camera
+    assert is_rotation(wfc[:3, :3], atol=1e-12)
+    assert np.abs(wfc - _tilted(t, None)).max() < 1e-3
+
+
+def test_a_rolled_pose_is_read(cap, tmp_path):
+    from ffls.io.capture import load_capture
+
+    a = np.radians(25)
+    T = np.array(_tilted(30, None))
+    T[:3, :3] = T[:3, :3] @ [[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]
+    assert np.allclose(load_capture(_with_pose(cap, tmp_path, T.tolist())).world_from_camera, T)
+
+
+@pytest.mark.parametrize("edit,named", [
+    (lambda T: T[:3, :3].__imul__(1.3), "its rotation block is 1.2 from orthonormal with determinant 1 "
+                                        "(tolerance 0.002"),
+    (lambda T: T[0].__setitem__(1, 0.4), "its rotation block is 0.38 from orthonormal"),
+    (lambda T: T.__setitem__(slice(None), np.round(_tilted(30, None), 2)), "is 0.0069 from orthonormal"),
+    (lambda T: T[:3, 0].__imul__(-1), "its rotation block has determinant -1 (a rotation's is 1; a negative one "
+                                      "mirrors the image"),
+    (lambda T: T[:3, :3].__setitem__(slice(None), 0), "its rotation block has determinant 0"),
+    (lambda T: T[3].__setitem__(2, 1), "its last row must be 0 0 0 1, got [0.0, 0.0, 1.0, 1.0]"),
+], ids=["scaled", "sheared", "2-decimals", "mirrored", "zero", "last-row"])
+def test_a_pose_that_is_no_rotation_says_how_far_off_it_is(cap, tmp_path, capfd, edit, named):
+    """Every such pose got the same line, however far off (a 1.3 scale and a 3-decimal rounding alike)."""
+    T = np.array(_tilted(20, None))
+    edit(T)
+    c = _with_pose(cap, tmp_path, T.tolist())
+    rc, line = one_line(capfd, ["relight", c, "--probe", "sky", "-o", tmp_path / "o.exr"])
+    assert rc == 2 and "capture.json: camera.world_from_camera: not a rigid transform: " in line, line
+    assert named in line, line
+    assert not (tmp_path / "o.exr").exists()
