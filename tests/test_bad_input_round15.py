@@ -80,3 +80,27 @@ def test_a_pose_that_is_no_rotation_says_how_far_off_it_is(cap, tmp_path, capfd,
     assert rc == 2 and "capture.json: camera.world_from_camera: not a rigid transform: " in line, line
     assert named in line, line
     assert not (tmp_path / "o.exr").exists()
+
+
+# ----------------------------------------------------------------------------- UTF-16 / UTF-32 text
+@pytest.mark.parametrize("which,codec", [("capture.json", "utf-16"), ("lights.json", "utf-16-le"),
+                                         ("lights.json", "utf-32"), ("lights.lp", "utf-16")])
+def test_json_and_lp_files_saved_as_unicode_by_notepad_are_read(cap, tmp_path, capfd, which, codec):
+    """Windows Notepad's "Unicode" is UTF-16 (with a BOM): such a capture.json was refused ("its bytes
+    are not UTF-8 text"), a UTF-16-LE one without a BOM as "corrupt JSON at line 1 column 2", and an
+    .lp as "line 1: expected the number of lights, got '\\ufffd\\ufffd6\\x00'"."""
+    from ffls.io.capture import load_capture, load_lights, world_to_lp, write_lp
+
+    c = tmp_path / "c"
+    shutil.copytree(cap, c)
+    lights = load_lights(c / "lights.json")
+    write_lp(c / "lights.lp", lights.image_names, world_to_lp(lights.directions, load_capture(c).world_from_camera))
+    (c / which).write_bytes((c / which).read_text(encoding="utf-8").encode(codec))
+    argv = ["relight", c, "--probe", "sky", "-o", tmp_path / "o.exr"]
+    if which != "capture.json":
+        argv += ["--lights", c / which]
+    capfd.readouterr()
+    from ffls.cli import main
+
+    assert main([str(a) for a in argv]) == 0, capfd.readouterr().err
+    assert (tmp_path / "o.exr").is_file()

@@ -138,7 +138,7 @@ class _Json:
         except FileTooLarge as e:
             self.fail("", str(e))
         except UnicodeDecodeError:
-            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 text")
+            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 (nor UTF-16 or UTF-32) text")
         except OSError as e:
             self.fail("", f"cannot read {what} ({os_error_message(e)})")
         try:
@@ -222,7 +222,10 @@ class FileTooLarge(ValueError):
 
 
 def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str:
-    """The text of a JSON or ``.lp`` file (a UTF-8 BOM dropped), refused over :data:`MAX_JSON_BYTES`.
+    """The text of a JSON or ``.lp`` file, refused over :data:`MAX_JSON_BYTES`.
+
+    UTF-8 (a BOM dropped), or UTF-16 / UTF-32 (as Windows Notepad's "Unicode" saves it), told apart
+    as :func:`json.detect_encoding` does (which ``json.loads`` of bytes uses).
 
     The size is checked on the open file before anything is read, and at most one byte more than
     the limit is ever read (a file that grows meanwhile is refused too).
@@ -243,7 +246,8 @@ def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str
         raise FileTooLarge(f"is {max(size, len(data))} bytes, more than the {MAX_JSON_BYTES >> 20} MiB "
                            f"({MAX_JSON_BYTES} bytes) a {what} may be (ffls reads it whole into memory; "
                            "docs/formats.md)")
-    return data.decode("utf-8-sig", errors=errors)
+    enc = json.detect_encoding(data)
+    return data.decode("utf-8-sig" if enc == "utf-8" else enc, errors=errors)
 
 
 def parse_json(text: str):
