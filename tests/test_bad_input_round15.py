@@ -104,3 +104,37 @@ def test_json_and_lp_files_saved_as_unicode_by_notepad_are_read(cap, tmp_path, c
 
     assert main([str(a) for a in argv]) == 0, capfd.readouterr().err
     assert (tmp_path / "o.exr").is_file()
+
+
+# ----------------------------------------------------------------------------- camera_tilt_deg
+@pytest.mark.parametrize("value,named", [
+    ("abc", "camera_tilt_deg: expected a finite number, got 'abc'"),
+    (400, "camera_tilt_deg: a camera's tilt is between -90 and 90 deg, got 400"),
+    (True, "camera_tilt_deg: expected a finite number, got True"),
+    ([30], "camera_tilt_deg: expected a finite number"),
+], ids=["text", "400", "bool", "list"])
+def test_a_lights_files_camera_tilt_is_checked(cap, tmp_path, capfd, value, named):
+    """``ffls lights`` writes ``camera_tilt_deg`` (this stop); a ``--lights`` file giving it as text or
+    400 deg was read without a word."""
+    doc = json.loads((cap / "lights.json").read_text())
+    doc["lights"][0]["camera_tilt_deg"] = value
+    (tmp_path / "l.json").write_text(json.dumps(doc))
+    rc, line = one_line(capfd, ["relight", cap, "--lights", tmp_path / "l.json", "--probe", "sky",
+                                "-o", tmp_path / "o.exr"])
+    assert rc == 2 and f"l.json: light for 'img_0000.exr': {named}" in line, line
+    assert not (tmp_path / "o.exr").exists()
+
+
+def test_a_fitted_camera_tilt_is_read_back_and_a_misspelt_one_named(cap, tmp_path, capfd):
+    from ffls.io.capture import load_lights
+
+    doc = json.loads((cap / "lights.json").read_text())
+    for k, e in enumerate(doc["lights"]):
+        e["camera_tilt_deg"] = None if k == 1 else 31.27
+    (tmp_path / "l.json").write_text(json.dumps(doc))
+    assert [e.get("camera_tilt_deg") for e in load_lights(tmp_path / "l.json").extra][:2] == [31.27, None]
+    doc["lights"][0]["camera_tilt_dge"] = doc["lights"][0].pop("camera_tilt_deg")
+    (tmp_path / "l.json").write_text(json.dumps(doc))
+    rc, line = one_line(capfd, ["relight", cap, "--lights", tmp_path / "l.json", "--probe", "sky",
+                                "-o", tmp_path / "o.exr"])
+    assert rc == 2 and "lights[0].camera_tilt_dge: unknown key; did you mean 'camera_tilt_deg'?" in line, line

@@ -782,7 +782,7 @@ _EXTRA_KEYS = {"sphere_material", "truth", "mask"}
 #: The keys of ``lights.json``: top level, and each light's (``ffls lights`` writes the last five)
 _LIGHTS_KEYS = {"format", "version", "lights", "encoding", "uncertainty", "flat_field"}
 _LIGHT_KEYS = {"image", "direction", "position", "status", "reason", "uncertainty_deg", "model", "used_spheres",
-               "spheres", "chi2", "dof"}
+               "spheres", "chi2", "dof", "camera_tilt_deg"}
 
 
 def _check_misspelt_keys(j: _Json, keys, known=_CAPTURE_KEYS | _EXTRA_KEYS, where: str = "") -> None:
@@ -1114,6 +1114,11 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
             ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
             if ex["uncertainty_deg"] < 0:
                 j.fail(key + ": uncertainty_deg", f"a cone radius must be >= 0, got {ex['uncertainty_deg']:g}")
+        if ex.get("camera_tilt_deg") is not None:
+            ex["camera_tilt_deg"] = j.number(ex["camera_tilt_deg"], key + ": camera_tilt_deg")
+            if abs(ex["camera_tilt_deg"]) > 90:
+                j.fail(key + ": camera_tilt_deg", f"a camera's tilt is between -90 and 90 deg, got "
+                                                  f"{ex['camera_tilt_deg']:g}")
         names.append(name)
         dirs.append(d / norm)
         pos.append(p)
