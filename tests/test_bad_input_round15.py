@@ -138,3 +138,54 @@ def test_a_fitted_camera_tilt_is_read_back_and_a_misspelt_one_named(cap, tmp_pat
     rc, line = one_line(capfd, ["relight", cap, "--lights", tmp_path / "l.json", "--probe", "sky",
                                 "-o", tmp_path / "o.exr"])
     assert rc == 2 and "lights[0].camera_tilt_dge: unknown key; did you mean 'camera_tilt_deg'?" in line, line
+
+
+# ----------------------------------------------------------------------------- probe.json circle off the photo
+@pytest.fixture(scope="module")
+def probes(tmp_path_factory):
+    """Two mirror probes of 80 px: an orthographic one stated by its pixel circle, a pinhole one by
+    its world centre."""
+    from ffls.synth.probe import look_at, write_mirror_probe
+
+    root = tmp_path_factory.mktemp("r15probe")
+    m = np.full((16, 32, 3), 0.3, np.float32)
+    m[:8] *= 2
+    write_mirror_probe(root / "px", m, (80, 80), "orthographic", center_px=(40, 40), radius_px=30, sphere="pixel",
+                       supersample=1)
+    K = np.array([[350.0, 0, 40], [0, 350.0, 40], [0, 0, 1]])
+    write_mirror_probe(root / "world", m, (80, 80), K=K, world_from_camera=look_at([0, -1.0, 0.2]), radius=0.1,
+                       supersample=1)
+    return root
+
+
+def _probe_with(probes, tmp_path, which, **sphere):
+    p = tmp_path / which
+    shutil.copytree(probes / which, p)
+    doc = json.loads((p / "probe.json").read_text())
+    doc["sphere"].update(sphere)
+    (p / "probe.json").write_text(json.dumps(doc))
+    return p
+
+
+@pytest.mark.parametrize("which,sphere,named", [
+    ("px", {"center_px": [500, 40]}, "sphere.center_px (500, 40) px, radius 30 px, lies wholly outside the photo "
+                                     "(80x80 px)"),
+    ("px", {"center_px": [-31, -31]}, "sphere.center_px (-31, -31) px, radius 30 px, lies wholly outside"),
+    ("world", {"center": [0.6, 0.0, 0.0]}, "sphere.center projects to a circle at ("),
+], ids=["right", "corner", "world"])
+def test_a_probe_circle_wholly_off_the_photo_names_probe_json(probes, tmp_path, capfd, which, sphere, named):
+    """Such a circle was unwrapped as a ball seen nowhere: "ball.exr: the ball shows no usable
+    direction (all its pixels invalid or masked)", the photo blamed for probe.json's hint."""
+    p = _probe_with(probes, tmp_path, which, **sphere)
+    rc, line = one_line(capfd, ["probe", "mirror", p, "-o", tmp_path / "m.exr", "--size", "8"])
+    assert rc == 2 and f"{p.name}/probe.json: {named}" in line and "wholly outside the photo" in line, line
+    assert not (tmp_path / "m.exr").exists()
+
+
+def test_a_probe_circle_partly_off_the_photo_is_unwrapped(probes, tmp_path, capfd):
+    p = _probe_with(probes, tmp_path, "px", center_px=[-20, 40])
+    capfd.readouterr()
+    from ffls.cli import main
+
+    assert main(["probe", "mirror", str(p), "-o", str(tmp_path / "m.exr"), "--size", "8"]) == 0
+    assert "saw " in capfd.readouterr().err

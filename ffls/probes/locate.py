@@ -83,6 +83,17 @@ def _given_circle(cam, T, sph) -> SphereGeometry:
                             sph.radius, "probe.json")
 
 
+def _check_circle_in_photo(cpx, rpx, shape, what: str, source) -> None:
+    """Refuse a stated circle that no pixel of the photo (``shape``, its pixels' centres at integer
+    coordinates) falls inside: it was read as a ball seen nowhere ("no usable direction", the photo
+    named)."""
+    h, w = shape[:2]
+    gap = np.hypot(max(-0.5 - cpx[0], 0.0, cpx[0] - (w - 0.5)), max(-0.5 - cpx[1], 0.0, cpx[1] - (h - 0.5)))
+    if gap >= rpx:
+        raise InputError(f"{what} ({cpx[0]:.0f}, {cpx[1]:.0f}) px, radius {rpx:.0f} px, lies wholly outside the "
+                         f"photo ({w}x{h} px): check it", source)
+
+
 def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
     """The sphere whose outline is the pixel circle (``cpx``, ``rpx``).
 
@@ -319,12 +330,15 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                                  f"{f', radius_px {hr:.0f}' if hr is not None else ''} disagrees with sphere.center, "
                                  f"which projects to ({cpx[0]:.0f}, {cpx[1]:.0f}) px, radius {rpx:.0f} px: give "
                                  "one of them, or correct it", source)
+        _check_circle_in_photo(cpx, rpx, np.shape(radiance), "sphere.center projects to a circle at", source)
         return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json", True)
     if sph.location == "pixel" and sph.radius_px is not None:
         h, w = np.shape(radiance)[:2]
         if float(sph.radius_px) > max(h, w):
             raise InputError(f"sphere.radius_px: {float(sph.radius_px):g} px is larger than the photo ({w}x{h} px): "
                              "a circle measured in the photo has a radius of at most its size", source)
+        _check_circle_in_photo(np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px), (h, w),
+                               "sphere.center_px", source)
         return _given_circle(cam, T, sph)
     hints = None
     if sph.location == "pixel":
