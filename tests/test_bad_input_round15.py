@@ -168,10 +168,10 @@ def _probe_with(probes, tmp_path, which, **sphere):
 
 
 @pytest.mark.parametrize("which,sphere,named", [
-    ("px", {"center_px": [500, 40]}, "sphere.center_px (500, 40) px, radius 30 px, lies wholly outside the photo "
+    ("px", {"center_px": [500, 40]}, "sphere.center_px and radius_px: the circle (500, 40) px, radius 30 px, lies wholly outside the photo "
                                      "(80x80 px)"),
-    ("px", {"center_px": [-31, -31]}, "sphere.center_px (-31, -31) px, radius 30 px, lies wholly outside"),
-    ("world", {"center": [0.6, 0.0, 0.0]}, "sphere.center projects to a circle at ("),
+    ("px", {"center_px": [-31, -31]}, "sphere.center_px and radius_px: the circle (-31, -31) px, radius 30 px, lies wholly outside"),
+    ("world", {"center": [0.6, 0.0, 0.0]}, "sphere.center projects to a circle (246, 40) px, radius 37 px, "),
 ], ids=["right", "corner", "world"])
 def test_a_probe_circle_wholly_off_the_photo_names_probe_json(probes, tmp_path, capfd, which, sphere, named):
     """Such a circle was unwrapped as a ball seen nowhere: "ball.exr: the ball shows no usable
@@ -189,3 +189,22 @@ def test_a_probe_circle_partly_off_the_photo_is_unwrapped(probes, tmp_path, capf
 
     assert main(["probe", "mirror", str(p), "-o", str(tmp_path / "m.exr"), "--size", "8"]) == 0
     assert "saw " in capfd.readouterr().err
+
+
+@pytest.mark.parametrize("hint,named", [
+    ({"center_px": [400, 10], "radius_px": 5}, "the circle (400, 10) px, radius 5 px, lies wholly outside the photo "
+                                               "(24x24 px)"),
+    ({"center_px": [12, 12], "radius_px": 500}, "the circle (12, 12) px, radius 500 px, is larger than the photo "
+                                                "(24x24 px)"),
+], ids=["outside", "larger"])
+def test_a_capture_hint_circle_off_the_photo_is_named(cap, tmp_path, capfd, hint, named):
+    """capture.json's hints: "spheres[0] near pixel (12, 12): cannot fit its outline (only 0 edge
+    points)" for a radius of 500 px in a 24 px photo (probe.json refused it already, in its words)."""
+    c = tmp_path / "c"
+    shutil.copytree(cap, c)
+    doc = json.loads((c / "capture.json").read_text())
+    doc["spheres"] = [hint]
+    (c / "capture.json").write_text(json.dumps(doc))
+    rc, line = one_line(capfd, ["lights", c, "--workers", "1", "-o", tmp_path / "l.json"])
+    assert rc == 2 and f"spheres[0]: bad sphere hint: {named}" in line, line
+    assert not (tmp_path / "l.json").exists()

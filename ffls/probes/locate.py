@@ -14,7 +14,7 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.spheres.detect import (HINT_CENTRE_OFFSET, circle_candidates, disc_mask, find_spheres,
-                                 orthographic_normals, sphere_mask, sphere_normals)
+                                 orthographic_normals, sphere_mask, sphere_normals, stated_circle_problem)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
@@ -81,17 +81,6 @@ def _given_circle(cam, T, sph) -> SphereGeometry:
     """A disc stated in pixels (``center_px`` and ``radius_px``), used as it is (:func:`_circle_geometry`)."""
     return _circle_geometry(cam, T, np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px),
                             sph.radius, "probe.json")
-
-
-def _check_circle_in_photo(cpx, rpx, shape, what: str, source) -> None:
-    """Refuse a stated circle that no pixel of the photo (``shape``, its pixels' centres at integer
-    coordinates) falls inside: it was read as a ball seen nowhere ("no usable direction", the photo
-    named)."""
-    h, w = shape[:2]
-    gap = np.hypot(max(-0.5 - cpx[0], 0.0, cpx[0] - (w - 0.5)), max(-0.5 - cpx[1], 0.0, cpx[1] - (h - 0.5)))
-    if gap >= rpx:
-        raise InputError(f"{what} ({cpx[0]:.0f}, {cpx[1]:.0f}) px, radius {rpx:.0f} px, lies wholly outside the "
-                         f"photo ({w}x{h} px): check it", source)
 
 
 def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
@@ -330,15 +319,14 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                                  f"{f', radius_px {hr:.0f}' if hr is not None else ''} disagrees with sphere.center, "
                                  f"which projects to ({cpx[0]:.0f}, {cpx[1]:.0f}) px, radius {rpx:.0f} px: give "
                                  "one of them, or correct it", source)
-        _check_circle_in_photo(cpx, rpx, np.shape(radiance), "sphere.center projects to a circle at", source)
+        why = stated_circle_problem(cpx, rpx, np.shape(radiance))
+        if why:
+            raise InputError(f"sphere.center projects to a circle {why}", source)
         return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json", True)
     if sph.location == "pixel" and sph.radius_px is not None:
-        h, w = np.shape(radiance)[:2]
-        if float(sph.radius_px) > max(h, w):
-            raise InputError(f"sphere.radius_px: {float(sph.radius_px):g} px is larger than the photo ({w}x{h} px): "
-                             "a circle measured in the photo has a radius of at most its size", source)
-        _check_circle_in_photo(np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px), (h, w),
-                               "sphere.center_px", source)
+        why = stated_circle_problem(sph.center_px, sph.radius_px, np.shape(radiance))
+        if why:
+            raise InputError(f"sphere.center_px and radius_px: the circle {why}", source)
         return _given_circle(cam, T, sph)
     hints = None
     if sph.location == "pixel":
