@@ -553,9 +553,8 @@ def _parse_camera(j: _Json, cam, image_size=None) -> tuple:
 
 def _rigid(j: _Json, value, key: str) -> np.ndarray:
     """``value`` as a 4x4 rigid transform; a rotation block within :data:`ROTATION_TOLERANCE` of a
-    rotation (typed to 3 decimals) is replaced by its nearest rotation (SciPy's)."""
-    from scipy.spatial.transform import Rotation
-
+    rotation (typed to 3 decimals) is replaced by its nearest rotation, ``U V^T`` of its SVD (the
+    orthogonal Procrustes solution; its determinant is then 1, the block's being positive)."""
     T = j.array(value, key, (4, 4))
     if not np.allclose(T[3], [0, 0, 0, 1]):
         j.fail(key, f"not a rigid transform: its last row must be 0 0 0 1, got {_short(T[3].tolist())}")
@@ -569,7 +568,8 @@ def _rigid(j: _Json, value, key: str) -> np.ndarray:
         j.fail(key, f"not a rigid transform: its rotation block is {dev:.2g} from orthonormal with determinant 1 "
                     f"(tolerance {ROTATION_TOLERANCE:g}, met by a rotation written to 3 decimals)")
     T = T.copy()
-    T[:3, :3] = Rotation.from_matrix(R).as_matrix()
+    U, _, Vt = np.linalg.svd(R)
+    T[:3, :3] = U @ Vt
     return T
 
 
