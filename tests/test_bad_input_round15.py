@@ -208,3 +208,46 @@ def test_a_capture_hint_circle_off_the_photo_is_named(cap, tmp_path, capfd, hint
     rc, line = one_line(capfd, ["lights", c, "--workers", "1", "-o", tmp_path / "l.json"])
     assert rc == 2 and f"spheres[0]: bad sphere hint: {named}" in line, line
     assert not (tmp_path / "l.json").exists()
+
+
+# ----------------------------------------------------------------------------- long tail, kept already
+@pytest.mark.parametrize("flag,value", [("--workers", "0"), ("--workers", "-1"), ("--workers", "10000"),
+                                        ("--workers", "1.5"), ("--first-pass", "0")])
+def test_out_of_range_counts_are_one_line(cap, tmp_path, capfd, flag, value):
+    rc, line = one_line(capfd, ["lights", cap, flag, value, "-o", tmp_path / "l.json"])
+    assert rc == 2 and line.startswith(f"ffls lights: error: argument {flag}: expected an integer in [1, "), line
+    assert not (tmp_path / "l.json").exists()
+
+
+def _lp_of(cap, tmp_path) -> str:
+    from ffls.io.capture import load_capture, load_lights, world_to_lp, write_lp
+
+    lights = load_lights(cap / "lights.json")
+    write_lp(tmp_path / "w.lp", lights.image_names, world_to_lp(lights.directions, load_capture(cap).world_from_camera))
+    return (tmp_path / "w.lp").read_text()
+
+
+@pytest.mark.parametrize("edit", [lambda t: t.replace("\n", "\r\n"), lambda t: "\ufeff" + t,
+                                  lambda t: t.replace(" ", "\t"), lambda t: "\n\n" + t + "\n\n"],
+                         ids=["crlf", "bom", "tabs", "blank-lines"])
+def test_lp_files_as_editors_save_them_are_read(cap, tmp_path, capfd, edit):
+    from ffls.cli import main
+
+    (tmp_path / "l.lp").write_text(edit(_lp_of(cap, tmp_path)), encoding="utf-8", newline="")
+    out = tmp_path / "out dir ü" / "relit é.exr"
+    out.parent.mkdir()
+    assert main(["relight", str(cap), "--lights", str(tmp_path / "l.lp"), "--probe", "sky", "-o", str(out)]) == 0
+    assert out.is_file()
+
+
+@pytest.mark.parametrize("edit,named", [
+    (lambda t: "\n".join(t.splitlines()[:-2]), "the count on line 1 says 6 lights but 4 follow"),
+    (lambda t: "# made by hand\n" + t, "line 1: expected the number of lights, got '# made by hand'"),
+    (lambda t: t.replace("6\n", "6.0\n", 1), "line 1: expected the number of lights, got '6.0'"),
+], ids=["fewer-lines", "comment", "float-count"])
+def test_lp_files_that_say_other_than_they_hold_are_one_line(cap, tmp_path, capfd, edit, named):
+    (tmp_path / "l.lp").write_text(edit(_lp_of(cap, tmp_path)))
+    rc, line = one_line(capfd, ["relight", cap, "--lights", tmp_path / "l.lp", "--probe", "sky",
+                                "-o", tmp_path / "o.exr"])
+    assert rc == 2 and f"l.lp: {named}" in line, line
+    assert not (tmp_path / "o.exr").exists()
