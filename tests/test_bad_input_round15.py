@@ -168,9 +168,10 @@ def _probe_with(probes, tmp_path, which, **sphere):
 
 
 @pytest.mark.parametrize("which,sphere,named", [
-    ("px", {"center_px": [500, 40]}, "sphere.center_px and radius_px: the circle (500, 40) px, radius 30 px, lies wholly outside the photo "
-                                     "(80x80 px)"),
-    ("px", {"center_px": [-31, -31]}, "sphere.center_px and radius_px: the circle (-31, -31) px, radius 30 px, lies wholly outside"),
+    ("px", {"center_px": [500, 40]}, "sphere.center_px and radius_px: the circle (500, 40) px, radius 30 px, "
+                                     "lies wholly outside the photo (80x80 px)"),
+    ("px", {"center_px": [-31, -31]}, "sphere.center_px and radius_px: the circle (-31, -31) px, radius 30 px, "
+                                      "lies wholly outside"),
     ("world", {"center": [0.6, 0.0, 0.0]}, "sphere.center projects to a circle (246, 40) px, radius 37 px, "),
 ], ids=["right", "corner", "world"])
 def test_a_probe_circle_wholly_off_the_photo_names_probe_json(probes, tmp_path, capfd, which, sphere, named):

@@ -138,7 +138,8 @@ class _Json:
         except FileTooLarge as e:
             self.fail("", str(e))
         except UnicodeDecodeError:
-            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 (nor UTF-16 or UTF-32) text")
+            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 (nor UTF-16 or "
+                          "UTF-32) text")
         except OSError as e:
             self.fail("", f"cannot read {what} ({os_error_message(e)})")
         try:
