@@ -139,7 +139,8 @@ def test_bad_input(diffuse_folder, shadow_folder, tmp_path):
     # a measured circle larger than the photo is named as such (not as too few cross-validation blocks)
     big = dict(d, sphere=dict(d["sphere"], radius_px=500.0))
     (tiny / "probe.json").write_text(json.dumps(big))
-    with pytest.raises(InputError, match=r"sphere.radius_px: 500 px is larger than the photo \(16x16 px\)"):
+    with pytest.raises(InputError, match=r"sphere.center_px and radius_px: the circle \([0-9]+, [0-9]+\) px, "
+                                         r"radius 500 px, is larger than the photo \(16x16 px\)"):
         estimate_lightmap(tiny, "diffuse", height=16, sources=9)
     (tiny / "probe.json").write_text(json.dumps(d))
     # the wrong material for the method

@@ -73,6 +73,10 @@ CAPTURE_FILE = "capture.json"
 LIGHTS_FILE = "lights.json"
 #: Largest accepted | |d| - 1 | for a light direction read from a file.
 UNIT_TOLERANCE = 1e-3
+#: Largest accepted deviation of a stated rotation block from a rotation (``R R^T`` against the
+#: identity, ``det R`` against 1): any rotation written to 3 decimals is within it (docs/formats.md,
+#: "The camera's tilt", gives them so); such a block is taken as its nearest rotation.
+ROTATION_TOLERANCE = 2e-3
 _ENCODINGS = ("srgb", "linear")
 _FLOAT_SUFFIXES = (".exr", ".hdr", ".pic")
 _ENCODING_FORMS = "'srgb', 'linear', {\"gamma\": g} or {\"response\": \"file.npy|.csv\"}"
@@ -134,7 +138,8 @@ class _Json:
         except FileTooLarge as e:
             self.fail("", str(e))
         except UnicodeDecodeError:
-            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 text")
+            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 (nor UTF-16 or "
+                          "UTF-32) text")
         except OSError as e:
             self.fail("", f"cannot read {what} ({os_error_message(e)})")
         try:
@@ -218,7 +223,10 @@ class FileTooLarge(ValueError):
 
 
 def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str:
-    """The text of a JSON or ``.lp`` file (a UTF-8 BOM dropped), refused over :data:`MAX_JSON_BYTES`.
+    """The text of a JSON or ``.lp`` file, refused over :data:`MAX_JSON_BYTES`.
+
+    UTF-8 (a BOM dropped), or UTF-16 / UTF-32 (as Windows Notepad's "Unicode" saves it), told apart
+    as :func:`json.detect_encoding` does (which ``json.loads`` of bytes uses).
 
     The size is checked on the open file before anything is read, and at most one byte more than
     the limit is ever read (a file that grows meanwhile is refused too).
@@ -239,7 +247,8 @@ def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str
         raise FileTooLarge(f"is {max(size, len(data))} bytes, more than the {MAX_JSON_BYTES >> 20} MiB "
                            f"({MAX_JSON_BYTES} bytes) a {what} may be (ffls reads it whole into memory; "
                            "docs/formats.md)")
-    return data.decode("utf-8-sig", errors=errors)
+    enc = json.detect_encoding(data)
+    return data.decode("utf-8-sig" if enc == "utf-8" else enc, errors=errors)
 
 
 def parse_json(text: str):
@@ -529,9 +538,7 @@ def _parse_camera(j: _Json, cam, image_size=None) -> tuple:
     wfc = conventions.DEFAULT_WORLD_FROM_CAMERA.copy()
     default = True
     if "world_from_camera" in cam:
-        wfc = j.array(cam["world_from_camera"], "camera.world_from_camera", (4, 4))
-        if not (conventions.is_rotation(wfc[:3, :3], atol=1e-4) and np.allclose(wfc[3], [0, 0, 0, 1])):
-            j.fail("camera.world_from_camera", "not a rigid transform (rotation block must be orthonormal with det 1, last row 0 0 0 1)")
+        wfc = _rigid(j, cam["world_from_camera"], "camera.world_from_camera")
         default = False
     unknown = set(cam) - {"K", "dist", "world_from_camera", "model"}
     if unknown:
@@ -543,6 +550,28 @@ def _parse_camera(j: _Json, cam, image_size=None) -> tuple:
         j.fail("camera", f"an orthographic camera has no {'K' if 'K' in cam else 'dist'} (parallel rays need no "
                          "focal length); remove it, or use \"model\": \"pinhole\"")
     return K, dist, wfc, default, model
+
+
+def _rigid(j: _Json, value, key: str) -> np.ndarray:
+    """``value`` as a 4x4 rigid transform; a rotation block within :data:`ROTATION_TOLERANCE` of a
+    rotation (typed to 3 decimals) is replaced by its nearest rotation, ``U V^T`` of its SVD (the
+    orthogonal Procrustes solution; its determinant is then 1, the block's being positive)."""
+    T = j.array(value, key, (4, 4))
+    if not np.allclose(T[3], [0, 0, 0, 1]):
+        j.fail(key, f"not a rigid transform: its last row must be 0 0 0 1, got {_short(T[3].tolist())}")
+    R = T[:3, :3]
+    det = np.linalg.det(R)
+    if not det > 0:
+        j.fail(key, f"not a rigid transform: its rotation block has determinant {det:.3g} (a rotation's is 1; "
+                    "a negative one mirrors the image: check the signs of its columns x right, y down, z forward)")
+    dev = max(float(np.abs(R @ R.T - np.eye(3)).max()), abs(det - 1.0))
+    if dev > ROTATION_TOLERANCE:
+        j.fail(key, f"not a rigid transform: its rotation block is {dev:.2g} from orthonormal with determinant 1 "
+                    f"(tolerance {ROTATION_TOLERANCE:g}, met by a rotation written to 3 decimals)")
+    T = T.copy()
+    U, _, Vt = np.linalg.svd(R)
+    T[:3, :3] = U @ Vt
+    return T
 
 
 def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
@@ -754,7 +783,7 @@ _EXTRA_KEYS = {"sphere_material", "truth", "mask"}
 #: The keys of ``lights.json``: top level, and each light's (``ffls lights`` writes the last five)
 _LIGHTS_KEYS = {"format", "version", "lights", "encoding", "uncertainty", "flat_field"}
 _LIGHT_KEYS = {"image", "direction", "position", "status", "reason", "uncertainty_deg", "model", "used_spheres",
-               "spheres", "chi2", "dof"}
+               "spheres", "chi2", "dof", "camera_tilt_deg", "camera_roll_deg"}
 
 
 def _check_misspelt_keys(j: _Json, keys, known=_CAPTURE_KEYS | _EXTRA_KEYS, where: str = "") -> None:
@@ -1086,6 +1115,12 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
             ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
             if ex["uncertainty_deg"] < 0:
                 j.fail(key + ": uncertainty_deg", f"a cone radius must be >= 0, got {ex['uncertainty_deg']:g}")
+        for angle, what, bound in (("camera_tilt_deg", "tilt", 90), ("camera_roll_deg", "roll", 180)):
+            if ex.get(angle) is not None:
+                ex[angle] = j.number(ex[angle], f"{key}: {angle}")
+                if abs(ex[angle]) > bound:
+                    j.fail(f"{key}: {angle}", f"a camera's {what} is between -{bound} and {bound} deg, got "
+                                              f"{ex[angle]:g}")
         names.append(name)
         dirs.append(d / norm)
         pos.append(p)

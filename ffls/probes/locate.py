@@ -15,7 +15,7 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask, edge_points,
                                  find_spheres, fit_outline, orthographic_normals, outline_visible_fraction,
-                                 sphere_mask, sphere_normals)
+                                 sphere_mask, sphere_normals, stated_circle_problem)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
@@ -500,12 +500,14 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                                  f"{f', radius_px {hr:.0f}' if hr is not None else ''} disagrees with sphere.center, "
                                  f"which projects to ({cpx[0]:.0f}, {cpx[1]:.0f}) px, radius {rpx:.0f} px: give "
                                  "one of them, or correct it", source)
+        why = stated_circle_problem(cpx, rpx, np.shape(radiance))
+        if why:
+            raise InputError(f"sphere.center projects to a circle {why}", source)
         return SphereGeometry(cam.model, cam.K, cam.dist, T, C, R, cpx, rpx, "probe.json", True)
     if sph.location == "pixel" and sph.radius_px is not None:
-        h, w = np.shape(radiance)[:2]
-        if float(sph.radius_px) > max(h, w):
-            raise InputError(f"sphere.radius_px: {float(sph.radius_px):g} px is larger than the photo ({w}x{h} px): "
-                             "a circle measured in the photo has a radius of at most its size", source)
+        why = stated_circle_problem(sph.center_px, sph.radius_px, np.shape(radiance))
+        if why:
+            raise InputError(f"sphere.center_px and radius_px: the circle {why}", source)
         return _given_circle(cam, T, sph)
     hints = None
     if sph.location == "pixel":

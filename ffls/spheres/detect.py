@@ -83,6 +83,7 @@ __all__ = [
     "project_points",
     "find_spheres",
     "find_spheres_in_capture",
+    "stated_circle_problem",
     "circle_candidates",
     "fit_sphere_center",
     "sphere_mask",
@@ -1602,6 +1603,22 @@ def outline_solved(P, cam: DetectionCamera, c0_px, r0_px, rays=None) -> _Outline
 
 
 # ----------------------------------------------------------------------------- hints
+def stated_circle_problem(center_px, radius_px, shape) -> str | None:
+    """What is wrong with a circle stated in pixels (a hint's or probe.json's ``center_px`` and
+    ``radius_px``) for a photo of ``shape`` (H, W, ...), or None: a radius larger than the photo, or
+    a circle that no pixel (their centres at integer coordinates) falls inside. The text follows
+    "the circle " (e.g. "(500, 80) px, radius 60 px, lies wholly outside the photo (160x160 px)")."""
+    cx, cy = (float(v) for v in center_px)
+    r = float(radius_px)
+    h, w = shape[:2]
+    if r > max(h, w):
+        return (f"({cx:.0f}, {cy:.0f}) px, radius {r:.0f} px, is larger than the photo ({w}x{h} px): a circle measured "
+                "in the photo has a radius of at most its size")
+    if np.hypot(max(-0.5 - cx, 0.0, cx - (w - 0.5)), max(-0.5 - cy, 0.0, cy - (h - 0.5))) >= r:
+        return f"({cx:.0f}, {cy:.0f}) px, radius {r:.0f} px, lies wholly outside the photo ({w}x{h} px)"
+    return None
+
+
 def _parse_hint(h, cam: DetectionCamera):
     """(center_px (2,), radius_px or None, center_cam or None, projected radius or None) from one hint dict.
 
@@ -1614,6 +1631,9 @@ def _parse_hint(h, cam: DetectionCamera):
     if "center_px" in h:
         px = np.asarray(h["center_px"], dtype=np.float64).reshape(2)
         rpx = float(h.get("radius_px") or 0) or None
+        why = None if rpx is None else stated_circle_problem(px, rpx, cam.shape)
+        if why:
+            raise ValueError(f"the circle {why}")
     if "center" in h or "center_world" in h or "center_cam" in h:
         if cam.ortho:
             raise ValueError("a world centre hint needs a pinhole camera (camera.K); give 'center_px' for an "
