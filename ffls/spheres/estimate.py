@@ -1792,8 +1792,10 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
         samples, values, masked = mask_object_from_ground(samples, values, lights)
         if any(masked):
             results = run_fitted(values)
-    occluded = False  # an occluder over a matte sphere: its pixels out, the fits again
-    for _ in range(FOREIGN_ROUNDS):
+    # an occluder over a lone matte sphere: its pixels out, the fits again (with 2+ spheres the
+    # photos' combination sets a turned sphere aside; masking there moved c11's and c14's errors)
+    occluded = False
+    for _ in range(FOREIGN_ROUNDS if len(samples) == 1 else 0):
         values, foreign = mask_foreign_pixels(results, fitted, samples, values)
         if not any(foreign):
             break
