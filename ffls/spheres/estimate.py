@@ -63,7 +63,8 @@ from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoE
 from ffls.spheres.refine import CentreRefinement, recentre_samples, refine_sphere_centre
 from ffls.spheres.samples import (SphereSamples, SphereValues, sphere_samples, sphere_samples_orthographic,
                                   sphere_values, sphere_values_of)
-from ffls.spheres.uncertainty import (ErrorModel, centre_floor_deg, distance_spread, fit_error_model,
+from ffls.spheres.uncertainty import (FALLBACK_FLOOR_DEG, ErrorModel, centre_floor_deg, distance_spread,
+                                     fit_error_model,
                                      halves_error_model, photo_residuals, tangent_residuals)
 
 __all__ = [
@@ -75,6 +76,7 @@ __all__ = [
     "observed_ground_samples",
     "calibrate_ground_albedo",
     "mask_object_from_ground",
+    "mask_foreign_pixels",
     "sphere_views",
     "sphere_kinds",
     "calibrate_bounce",
@@ -306,6 +308,89 @@ def mask_object_from_ground(samples: list[SphereSamples], values: list,
         return sphere_values_of(v.grey, v.valid, v.n_saturated, mask_radiance(s.ground_view, keep, v.ground))
 
     return out_samples, [[cut(v, s, keep) for v, s, keep in zip(photo, samples, keeps)] for photo in values], masked
+
+
+#: Least share of the photos whose fits reject a pixel of a matte sphere's disk that makes it
+#: foreign (:func:`mask_foreign_pixels`): an object in front of the ball, not its surface. A cast
+#: shadow, a highlight or the terminator's band moves with the light and is rejected in a few
+#: photos; an occluder's pixels follow no light and are rejected in most.
+FOREIGN_REJECTED_SHARE = 0.5
+#: Fewest photos with a fit that must see a pixel valid before :func:`mask_foreign_pixels` judges it.
+FOREIGN_MIN_PHOTOS = 5
+#: Most of a sphere's pixels that :func:`mask_foreign_pixels` takes out (more: the fits, not the
+#: pixels, are wrong, and the sphere keeps every pixel).
+FOREIGN_MAX_SHARE = 0.4
+#: Most rounds of :func:`mask_foreign_pixels` in :func:`two_pass`: fits turned by an occluder reject
+#: only part of it, and the fits without that part reject more of it.
+FOREIGN_ROUNDS = 3
+
+
+def _grown(s: SphereSamples, mask: np.ndarray) -> np.ndarray:
+    """``mask`` over sphere ``s``'s pixels grown by one pixel (its 8 neighbours) within them."""
+    import cv2
+
+    r0, c0 = int(s.rows.min()), int(s.cols.min())
+    grid = np.zeros((int(s.rows.max()) - r0 + 1, int(s.cols.max()) - c0 + 1), np.uint8)
+    grid[s.rows[mask] - r0, s.cols[mask] - c0] = 1
+    return cv2.dilate(grid, np.ones((3, 3), np.uint8))[s.rows - r0, s.cols - c0].astype(bool)
+
+
+def mask_foreign_pixels(results: list[PhotoEstimate], photos: list[int], samples: list[SphereSamples],
+                        values: list) -> tuple[list, list[int]]:
+    """Every photo's matte-sphere values without the disk's pixels that are not the sphere.
+
+    An object in front of the ball (or a stand, a finger) covers part of its disk in every photo;
+    its pixels follow no light on the sphere, and a fit either rejects them as outliers or, where
+    they are many, is turned by them (a lone grey ball behind the object under a long lens: 17% of
+    its disk hidden, every photo 3-9 deg off). A pixel that at least :data:`FOREIGN_REJECTED_SHARE`
+    of the first pass's matte fits reject (valid, not :attr:`LambertFit.non_outliers`), among at
+    least :data:`FOREIGN_MIN_PHOTOS` that see it valid, is made invalid in every photo.
+
+    Parameters
+    ----------
+    results : list of PhotoEstimate
+        The first pass's estimates of ``photos``.
+    photos : list of int
+        Their indices into ``values``.
+    samples : list of SphereSamples
+        The spheres' pixels (the foreign pixels grow by one pixel among them: the occluder's edge).
+    values : list (photos) of lists (spheres) of SphereValues
+
+    Returns
+    -------
+    values, masked
+        ``masked`` per sphere: how many pixels were taken out (0: its values are unchanged).
+    """
+    n_spheres = len(values[0]) if values else 0
+    seen, rejected = [None] * n_spheres, [None] * n_spheres
+    for i, r in zip(photos, results):
+        for k, sr in enumerate(r.spheres):
+            f = sr.fit
+            if not isinstance(f, LambertFit) or f.non_outliers is None or sr.status not in ("ok", "shadowed"):
+                continue
+            valid = np.asarray(values[i][k].valid, bool)
+            if seen[k] is None:
+                seen[k], rejected[k] = np.zeros(valid.size, int), np.zeros(valid.size, int)
+            seen[k] += valid
+            rejected[k] += valid & ~np.asarray(f.non_outliers, bool)
+    keeps, masked = [None] * n_spheres, [0] * n_spheres
+    for k in range(n_spheres):
+        if seen[k] is None:
+            continue
+        foreign = (seen[k] >= FOREIGN_MIN_PHOTOS) & (rejected[k] >= FOREIGN_REJECTED_SHARE * seen[k])
+        if foreign.any():  # the occluder's edge: pixels that mix it with the sphere
+            foreign = _grown(samples[k], foreign)
+        if 0 < foreign.sum() <= FOREIGN_MAX_SHARE * foreign.size:
+            keeps[k], masked[k] = ~foreign, int(foreign.sum())
+    if not any(masked):
+        return values, masked
+
+    def cut(v, keep):
+        if keep is None:
+            return v
+        return sphere_values_of(v.grey, v.valid & keep, v.n_saturated, getattr(v, "ground", None))
+
+    return [[cut(v, keep) for v, keep in zip(photo, keeps)] for photo in values], masked
 
 
 def sphere_views(capture, spheres) -> list[SphereView]:
@@ -906,7 +991,8 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                           refinements: list[CentreRefinement] | None = None,
                           scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
                           values: list | None = None, fit_options: dict | None = None,
-                          flat: FlatField | None = None, **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
+                          flat: FlatField | None = None, occluded: bool = False,
+                          **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
     Every accepted photo with two or more used spheres gives their tangent offsets from the
@@ -947,6 +1033,12 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         The capture's lens fall-off: with the halves, a significant gradient the spheres measured
         but the capture did not divide out adds its turn (:func:`flat_field_shift_deg`) to the
         model's common floor.
+    occluded : bool
+        Whether pixels of a matte sphere's disk were found foreign (:func:`mask_foreign_pixels`): with
+        the halves, the occluder's own light on the ball (its bounce, the ground it hides from the
+        ball), which turns both halves alike and nothing here measures, joins the model's common
+        floor at the stated fallback's floor (:data:`ffls.spheres.uncertainty.FALLBACK_FLOOR_DEG`
+        RMS, per axis over ``sqrt(2)``).
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -991,6 +1083,9 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         lens = flat_field_shift_deg(results, samples, values, flat, **options)
         if lens > 0.0:  # a turn the halves share, as the geometry's common floor is
             model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, lens)))
+        if occluded:  # the occluder's light on the ball: a turn the halves share, unmeasured
+            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg,
+                                                                   FALLBACK_FLOOR_DEG / np.sqrt(2.0))))
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(
@@ -1697,6 +1792,15 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
         samples, values, masked = mask_object_from_ground(samples, values, lights)
         if any(masked):
             results = run_fitted(values)
+    # an occluder over a lone matte sphere: its pixels out, the fits again (with 2+ spheres the
+    # photos' combination sets a turned sphere aside; masking there moved c11's and c14's errors)
+    occluded = False
+    for _ in range(FOREIGN_ROUNDS if len(samples) == 1 else 0):
+        values, foreign = mask_foreign_pixels(results, fitted, samples, values)
+        if not any(foreign):
+            break
+        occluded = True
+        results = run_fitted(values)
     kinds = sphere_kinds(materials, samples, values)
     views = [limb(v) if kd.kind == "mirror" and m != "mirror" else v for kd, m, v in zip(kinds, materials, views)]
     mirrors = [v if kd.kind == "mirror" else None for kd, v in zip(kinds, views)]
@@ -1759,7 +1863,8 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
         results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
         error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
                                                      values=values if halves else None,
-                                                     fit_options=_sphere_fit_options(fitter), flat=flat)
+                                                     fit_options=_sphere_fit_options(fitter), flat=flat,
+                                                     occluded=occluded)
         return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
@@ -1795,7 +1900,8 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
     results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
     error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
                                                  values=values if halves else None,
-                                                 fit_options=_sphere_fit_options(fitter), flat=flat)
+                                                 fit_options=_sphere_fit_options(fitter), flat=flat,
+                                                 occluded=occluded)
     return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
 
@@ -1883,9 +1989,17 @@ def place_at_capture_range(results: list[PhotoEstimate], samples: list[SphereSam
 CAPTURE_SHADOW_MIN_PHOTOS = 5
 
 
+#: A matte fit's relative RMS residual above this multiple of its sphere's median over the capture
+#: (and an outlier of their spread) is a cast shadow's edge across the ball
+#: (:func:`reject_shadowed_photos`): noise, JPEG and the shading model's errors stay within a few
+#: times the median, a shadow's edge leaves residuals of the order of the shading.
+SHADOW_MISFIT_RATIO = 8.0
+
+
 def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_RATIO,
                            level: float = SIGNIFICANCE,
-                           min_photos: int = CAPTURE_SHADOW_MIN_PHOTOS) -> list[PhotoEstimate]:
+                           min_photos: int = CAPTURE_SHADOW_MIN_PHOTOS,
+                           misfit_ratio: float = SHADOW_MISFIT_RATIO) -> list[PhotoEstimate]:
     """The photos with every sphere in a cast shadow (or every mirror without the lamp's highlight), rejected.
 
     :func:`ffls.spheres.photo.estimate_photo` sets a sphere aside that is far darker than the
@@ -1906,11 +2020,21 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
     one photo 165 degrees off), not the lamp. Such a sphere is marked ``no_highlight``; a photo
     whose used spheres are all dark is rejected, as ``no_highlight`` when they are all mirrors.
 
+    A used matte sphere is shadowed too where its fit's relative RMS residual is above
+    ``misfit_ratio`` times its median over the capture's accepted photos and an outlier of their
+    spread (``log`` RMS, the same one-sided test): the edge of a cast shadow across its lit part
+    (an object's shadow over half the ball) leaves residuals of the order of the shading itself,
+    which the fit neither rejects (the robust clip scales with them) nor flags by its intensity,
+    and turns it by 20-60 deg (lone grey balls ``g41``, ``g36r``, ``g38t``, ``g42l`` in
+    docs/spheres.md: such fits at 13-107 times the median RMS, the others at most 5 times).
+
     Parameters
     ----------
     results : list of PhotoEstimate
     ratio : float
         The fraction of the sphere's median (:data:`ffls.spheres.photo.SHADOW_RATIO`).
+    misfit_ratio : float
+        The multiple of the sphere's median RMS residual (:data:`SHADOW_MISFIT_RATIO`).
     level : float
         One-sided significance of the outlier test (:data:`ffls.spheres.photo.SIGNIFICANCE`).
     min_photos : int
@@ -1932,8 +2056,15 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
             if isinstance(f, (LambertFit, HighlightFit)) and f.intensity > 0:
                 logs[i].append(np.log(float(f.intensity)))
     z = -float(ndtri(level))
-    stats = [(np.median(v), 1.4826 * np.median(np.abs(np.asarray(v) - np.median(v))))
-             if len(v) >= min_photos else None for v in logs]
+
+    def robust(v):
+        return (np.median(v), 1.4826 * np.median(np.abs(np.asarray(v) - np.median(v)))) if len(v) >= min_photos \
+            else None
+
+    stats = [robust(v) for v in logs]
+    misfits = [robust([np.log(float(r.spheres[i].fit.rms)) for r in results if r.ok and i in r.used_spheres
+                       and isinstance(r.spheres[i].fit, LambertFit) and r.spheres[i].fit.rms > 0])
+               for i in range(k)]
 
     def dark(f, st):
         if not isinstance(f, (LambertFit, HighlightFit)) or st is None:
@@ -1943,10 +2074,16 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
         d = np.log(float(f.intensity)) - st[0]
         return bool(d < np.log(ratio) and d < -z * st[1])
 
+    def misfit(f, st):  # a cast shadow's edge across the lit part: residuals of the order of the shading
+        if not isinstance(f, LambertFit) or st is None or not f.rms > 0:
+            return False
+        d = np.log(float(f.rms)) - st[0]
+        return bool(d > np.log(misfit_ratio) and d > z * st[1])
+
     out = []
     for r in results:
         used = list(r.used_spheres) if r.ok else []
-        shaded = [i for i in used if dark(r.spheres[i].fit, stats[i])]
+        shaded = [i for i in used if dark(r.spheres[i].fit, stats[i]) or misfit(r.spheres[i].fit, misfits[i])]
         if not used or len(shaded) < len(used):
             out.append(r)
             continue
