@@ -897,6 +897,20 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
 
 
+def _measured_centre_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                         which: list[bool], terminator: float) -> np.ndarray:
+    """Per sphere, the per-axis turn (degrees, :func:`ffls.spheres.uncertainty.centre_floor_deg`)
+    that its centre's uncertainty gives its direction, its shading's centre measured against its
+    outline (:func:`refine_sphere_centres`, not applied) where ``which``; 0 elsewhere."""
+    out = np.zeros(len(samples))
+    if any(which):
+        for k, ref in enumerate(refine_sphere_centres(samples, results, values, which=which,
+                                                      terminator=terminator)[2]):
+            if which[k] and ref.accepted:
+                out[k] = centre_floor_deg(ref.shift_px, samples[k].radius_px)
+    return out
+
+
 def _fit_of(results: list[PhotoEstimate], k: int):
     """Sphere ``k``'s fit in the first accepted photo that used it (None: no such photo)."""
     return next((r.spheres[k].fit for r in results if r.ok and k in r.used_spheres), None)
@@ -975,22 +989,23 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         used_all.append(np.asarray(used))
     model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre,
                             kinds=[kd.kind for kd in kinds] if kinds is not None else None, **kwargs)
-    if model.source == "fallback" and values is not None:  # no sphere checks another: their halves do
+    if values is not None:
         options = fit_options or {}
-        # a centre error turns both halves alike: each unrefined sphere's centre measured by its
-        # shading against its outline (not applied: only its uncertainty, as a refined one's)
-        which = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
-        if any(which):
-            measured = refine_sphere_centres(samples, results, values, which=which,
-                                             terminator=options.get("terminator", 0.15))[2]
-            for k, ref in enumerate(measured):
-                if which[k] and ref.accepted:
-                    centre[k] = centre_floor_deg(ref.shift_px, samples[k].radius_px)
-        model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
-                                   **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
+        # a centre error turns a sphere's halves alike, and one sphere's outline error is its
+        # neighbours' too (one detector, the same ground below each): each unrefined matte sphere's
+        # centre measured by its shading against its outline (not applied: only its uncertainty)
+        unrefined = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
+        measured = _measured_centre_deg(results, samples, values, unrefined, options.get("terminator", 0.15))
         lens = flat_field_shift_deg(results, samples, values, flat, **options)
-        if lens > 0.0:  # a turn the halves share, as the geometry's common floor is
-            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, lens)))
+        if model.source == "fallback":  # no sphere checks another: their halves do
+            centre = np.where(unrefined, measured, centre)
+            model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
+                                       **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
+            shared = lens  # (the centres are the halves' own terms)
+        else:  # the spheres' disagreement shows what differs between them, not what they share
+            shared = float(np.hypot(lens, np.sqrt(np.mean(np.square(measured[unrefined]))) if any(unrefined) else 0.0))
+        if shared > 0.0:  # a turn the spheres (or halves) share, as the geometry's common floor is
+            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, shared)))
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(
