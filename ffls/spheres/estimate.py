@@ -897,17 +897,17 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
 
 
-def _measured_centre_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
-                         which: list[bool], terminator: float) -> np.ndarray:
-    """Per sphere, the per-axis turn (degrees, :func:`ffls.spheres.uncertainty.centre_floor_deg`)
-    that its centre's uncertainty gives its direction, its shading's centre measured against its
-    outline (:func:`refine_sphere_centres`, not applied) where ``which``; 0 elsewhere."""
-    out = np.zeros(len(samples))
+def _measured_centre_shifts(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                            which: list[bool], terminator: float) -> np.ndarray:
+    """(k, 2) per sphere, its shading's centre against its outline (:func:`refine_sphere_centres`,
+    not applied) in its radii, where ``which`` and accepted; 0 elsewhere
+    (:func:`ffls.spheres.uncertainty.centre_floor_deg` of a radius 1 gives its turn)."""
+    out = np.zeros((len(samples), 2))
     if any(which):
         for k, ref in enumerate(refine_sphere_centres(samples, results, values, which=which,
                                                       terminator=terminator)[2]):
-            if which[k] and ref.accepted:
-                out[k] = centre_floor_deg(ref.shift_px, samples[k].radius_px)
+            if which[k] and ref.accepted and samples[k].radius_px > 0:
+                out[k] = np.asarray(ref.shift_px, dtype=np.float64) / float(samples[k].radius_px)
     return out
 
 
@@ -991,19 +991,20 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                             kinds=[kd.kind for kd in kinds] if kinds is not None else None, **kwargs)
     if values is not None:
         options = fit_options or {}
-        # a centre error turns a sphere's halves alike, and one sphere's outline error is its
-        # neighbours' too (one detector, the same ground below each): each unrefined matte sphere's
-        # centre measured by its shading against its outline (not applied: only its uncertainty)
+        # a centre error turns a sphere's halves alike, and the spheres' outlines can be off alike
+        # (one detector, the same ground below each): each unrefined matte sphere's centre measured
+        # by its shading against its outline (not applied: only its uncertainty)
         unrefined = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
-        measured = _measured_centre_deg(results, samples, values, unrefined, options.get("terminator", 0.15))
+        shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15))
         lens = flat_field_shift_deg(results, samples, values, flat, **options)
         if model.source == "fallback":  # no sphere checks another: their halves do
-            centre = np.where(unrefined, measured, centre)
+            centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
             model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
                                        **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
             shared = lens  # (the centres are the halves' own terms)
-        else:  # the spheres' disagreement shows what differs between them, not what they share
-            shared = float(np.hypot(lens, np.sqrt(np.mean(np.square(measured[unrefined]))) if any(unrefined) else 0.0))
+        else:  # their disagreement shows how the spheres' centres differ, not the shift they share
+            mean = shifts[unrefined].mean(axis=0) if any(unrefined) else np.zeros(2)
+            shared = float(np.hypot(lens, centre_floor_deg(mean, 1.0)))
         if shared > 0.0:  # a turn the spheres (or halves) share, as the geometry's common floor is
             model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, shared)))
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
