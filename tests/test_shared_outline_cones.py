@@ -28,9 +28,10 @@ def _sphere(center_px, margin_px):
                                        margin_px=margin_px)
 
 
-def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6):
+def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6, opposite=False):
     """Both spheres' outlines found ``shift_px`` (columns, rows) off their true centres, and a lens
-    gradient (the same across both disks): their samples, the photos' values and fits."""
+    gradient across both disks (``opposite``: the second's is the first's negative, as a lens's
+    on either side of the frame): their samples, the photos' values and fits."""
     rng = np.random.default_rng(seed)
     lights = _lights()
     outlines, takes, rendered = [], [], []
@@ -44,8 +45,9 @@ def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6):
     values = []
     for l in lights:
         photo = []
-        for r, o, t in zip(rendered, outlines, takes):
-            fall = 1.0 + flat_field_offsets(o) @ np.asarray(gradient, dtype=np.float64)
+        for i, (r, o, t) in enumerate(zip(rendered, outlines, takes)):
+            sign = -1.0 if opposite and i else 1.0
+            fall = 1.0 + flat_field_offsets(o) @ (sign * np.asarray(gradient, dtype=np.float64))
             v = 0.5 * np.maximum(r.normals[t] @ l, 0.0) * fall + 0.01 + noise * rng.normal(size=t.size)
             photo.append(sphere_values_of(v, np.ones(v.size, bool), 0))
         values.append(photo)
@@ -85,15 +87,26 @@ def test_outlines_where_they_are_add_little():
     assert _covered(new, lights)[0] >= 0.9
 
 
+def _flat(measured):
+    return FlatField(strength=0.0, sigma=0.0, p=1.0, applied=False, gradients=np.zeros((2, 2)),
+                     measured=np.array(measured, dtype=float), measured_sigma=np.full((2, 2), 0.002),
+                     n_photos=np.array([30, 30]))
+
+
 def test_a_lens_gradient_not_divided_out_is_shared():
     """The same lens gradient across both disks (one side of the frame darker) turns both spheres
-    alike; measured and not divided out, its turn is in the common mode."""
-    lights, outlines, values, photos = _capture(shift_px=(0.0, 0.0), gradient=(0.05, 0.0))
-    flat = FlatField(strength=0.0, sigma=0.0, p=1.0, applied=False, gradients=np.zeros((2, 2)),
-                     measured=np.array([[0.05, 0.0], [0.05, 0.0]]), measured_sigma=np.full((2, 2), 0.002),
-                     n_photos=np.array([30, 30]))
+    alike; measured and not divided out, its turn is in the common mode. Opposite gradients turn
+    them apart: their disagreement shows it, and the mean does not turn."""
     opts = {"own_shadow": False}
+    lights, outlines, values, photos = _capture(shift_px=(0.0, 0.0), gradient=(0.05, 0.0))
     without = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts)[0]
-    model, new = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts, flat=flat)
+    model, new = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts,
+                                       flat=_flat([[0.05, 0.0], [0.05, 0.0]]))
     assert model.common_floor_deg > without.common_floor_deg + 0.3, (model, without)
+    assert _covered(new, lights)[0] >= 0.9
+    lights, outlines, values, photos = _capture(shift_px=(0.0, 0.0), gradient=(0.05, 0.0), opposite=True)
+    without = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts)[0]
+    model, new = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts,
+                                       flat=_flat([[0.05, 0.0], [-0.05, 0.0]]))
+    assert model.common_floor_deg < without.common_floor_deg + 0.1, (model, without)
     assert _covered(new, lights)[0] >= 0.9

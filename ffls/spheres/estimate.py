@@ -851,7 +851,7 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
 
 def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
                          flat: FlatField | None, *, terminator: float = 0.15, up: np.ndarray = UP,
-                         own_shadow: bool = True) -> float:
+                         own_shadow: bool = True, shared: bool = False) -> float:
     """Per-axis standard deviation (degrees) of the matte spheres' directions from a lens fall-off
     that the spheres measured but the capture did not divide out.
 
@@ -861,7 +861,10 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     sphere's freely fitted gradient (``FlatField.measured``, less what was divided out) is
     significant (its chi-square over its standard errors, 2 degrees of freedom, at
     :data:`ffls.spheres.photo.SIGNIFICANCE`), each accepted photo's sphere is fitted again with
-    it divided out: the root mean square of the turn over the photos, half on each axis.
+    it divided out: the root mean square of the turn over the photos, half on each axis. With
+    ``shared``, the turn is that of the mean of each photo's used spheres (a sphere without such a
+    gradient, or not matte, turns 0): what the spheres share, which their disagreement cannot show
+    (it shows how their turns differ).
 
     Parameters
     ----------
@@ -872,6 +875,8 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     flat : FlatField or None
     terminator, up, own_shadow
         As the spheres' own fits (:func:`ffls.spheres.photo.fit_spheres`).
+    shared : bool
+        The turn of each photo's spheres' mean, not of each sphere.
 
     Returns
     -------
@@ -886,14 +891,20 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     z2 = np.sum(np.where(sd > 0, rest / np.where(sd > 0, sd, 1.0), 0.0) ** 2, axis=1)
     significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
     turns = []
-    for k, f, v in _used_matte_fits(results, values):
-        if k >= significant.size or not significant[k]:
-            continue
-        div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
-        g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
-                         terminator=terminator, up=up, own_shadow=own_shadow)[0]
-        if g.status == "ok":
-            turns.append(float(np.arccos(np.clip(g.direction @ f.direction, -1.0, 1.0))))
+    for r, vals in zip(results, values):
+        moved = []  # the turns of the photo's used spheres with a significant gradient (vectors)
+        for k, f, v in _used_matte_fits([r], [vals]):
+            if k >= significant.size or not significant[k]:
+                continue
+            div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
+            g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
+                             terminator=terminator, up=up, own_shadow=own_shadow)[0]
+            if g.status == "ok":
+                moved.append(g.direction - f.direction)
+        if not shared:
+            turns.extend(float(np.linalg.norm(m)) for m in moved)
+        elif r.ok and r.used_spheres:  # the turn of their mean (the others turn 0)
+            turns.append(float(np.linalg.norm(np.sum(moved, axis=0) / len(r.used_spheres))) if moved else 0.0)
     return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
 
 
@@ -996,7 +1007,7 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         # by its shading against its outline (not applied: only its uncertainty)
         unrefined = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
         shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15))
-        lens = flat_field_shift_deg(results, samples, values, flat, **options)
+        lens = flat_field_shift_deg(results, samples, values, flat, shared=model.source != "fallback", **options)
         if model.source == "fallback":  # no sphere checks another: their halves do
             centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
             model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
