@@ -965,13 +965,15 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         fitted (:func:`halves_offsets`) and the model is theirs
         (:func:`ffls.spheres.uncertainty.halves_error_model`), with each matte sphere's centre
         term measured (its shading's centre against its outline, :func:`refine_sphere_centres`,
-        not applied) where no refinement gave one. None: the stated fallback.
+        not applied) where no refinement gave one. Where the spheres check each other, those
+        measured shifts' mean over the spheres (what turns them alike, which their disagreement
+        cannot show) joins the model's common floor. None: the stated fallback, and no shared terms.
     fit_options : dict, optional
         ``terminator``, ``up`` and ``own_shadow`` of the spheres' fits (for the halves).
     flat : FlatField, optional
-        The capture's lens fall-off: with the halves, a significant gradient the spheres measured
-        but the capture did not divide out adds its turn (:func:`flat_field_shift_deg`) to the
-        model's common floor.
+        The capture's lens fall-off: a significant gradient the spheres measured but the capture
+        did not divide out adds its turn (:func:`flat_field_shift_deg`; with two or more spheres,
+        that of their mean) to the model's common floor.
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
