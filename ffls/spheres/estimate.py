@@ -936,7 +936,7 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
 
 def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
                          flat: FlatField | None, *, terminator: float = 0.15, up: np.ndarray = UP,
-                         own_shadow: bool = True) -> float:
+                         own_shadow: bool = True, shared: bool = False) -> float:
     """Per-axis standard deviation (degrees) of the matte spheres' directions from a lens fall-off
     that the spheres measured but the capture did not divide out.
 
@@ -946,7 +946,10 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     sphere's freely fitted gradient (``FlatField.measured``, less what was divided out) is
     significant (its chi-square over its standard errors, 2 degrees of freedom, at
     :data:`ffls.spheres.photo.SIGNIFICANCE`), each accepted photo's sphere is fitted again with
-    it divided out: the root mean square of the turn over the photos, half on each axis.
+    it divided out: the root mean square of the turn over the photos, half on each axis. With
+    ``shared``, the turn is that of the mean of each photo's used spheres (a sphere without such a
+    gradient, or not matte, turns 0): what the spheres share, which their disagreement cannot show
+    (it shows how their turns differ).
 
     Parameters
     ----------
@@ -957,6 +960,8 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     flat : FlatField or None
     terminator, up, own_shadow
         As the spheres' own fits (:func:`ffls.spheres.photo.fit_spheres`).
+    shared : bool
+        The turn of each photo's spheres' mean, not of each sphere.
 
     Returns
     -------
@@ -971,15 +976,35 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     z2 = np.sum(np.where(sd > 0, rest / np.where(sd > 0, sd, 1.0), 0.0) ** 2, axis=1)
     significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
     turns = []
-    for k, f, v in _used_matte_fits(results, values):
-        if k >= significant.size or not significant[k]:
-            continue
-        div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
-        g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
-                         terminator=terminator, up=up, own_shadow=own_shadow)[0]
-        if g.status == "ok":
-            turns.append(float(np.arccos(np.clip(g.direction @ f.direction, -1.0, 1.0))))
+    for r, vals in zip(results, values):
+        moved = []  # the turns of the photo's used spheres with a significant gradient (vectors)
+        for k, f, v in _used_matte_fits([r], [vals]):
+            if k >= significant.size or not significant[k]:
+                continue
+            div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
+            g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
+                             terminator=terminator, up=up, own_shadow=own_shadow)[0]
+            if g.status == "ok":
+                moved.append(g.direction - f.direction)
+        if not shared:
+            turns.extend(float(np.linalg.norm(m)) for m in moved)
+        elif r.ok and r.used_spheres:  # the turn of their mean (the others turn 0)
+            turns.append(float(np.linalg.norm(np.sum(moved, axis=0) / len(r.used_spheres))) if moved else 0.0)
     return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
+
+
+def _measured_centre_shifts(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
+                            which: list[bool], terminator: float) -> np.ndarray:
+    """(k, 2) per sphere, its shading's centre against its outline (:func:`refine_sphere_centres`,
+    not applied) in its radii, where ``which`` and accepted; 0 elsewhere
+    (:func:`ffls.spheres.uncertainty.centre_floor_deg` of a radius 1 gives its turn)."""
+    out = np.zeros((len(samples), 2))
+    if any(which):
+        for k, ref in enumerate(refine_sphere_centres(samples, results, values, which=which,
+                                                      terminator=terminator)[2]):
+            if which[k] and ref.accepted and samples[k].radius_px > 0:
+                out[k] = np.asarray(ref.shift_px, dtype=np.float64) / float(samples[k].radius_px)
+    return out
 
 
 def _fit_of(results: list[PhotoEstimate], k: int):
@@ -1026,13 +1051,15 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         fitted (:func:`halves_offsets`) and the model is theirs
         (:func:`ffls.spheres.uncertainty.halves_error_model`), with each matte sphere's centre
         term measured (its shading's centre against its outline, :func:`refine_sphere_centres`,
-        not applied) where no refinement gave one. None: the stated fallback.
+        not applied) where no refinement gave one. Where the spheres check each other, those
+        measured shifts' mean over the spheres (what turns them alike, which their disagreement
+        cannot show) joins the model's common floor. None: the stated fallback, and no shared terms.
     fit_options : dict, optional
         ``terminator``, ``up`` and ``own_shadow`` of the spheres' fits (for the halves).
     flat : FlatField, optional
-        The capture's lens fall-off: with the halves, a significant gradient the spheres measured
-        but the capture did not divide out adds its turn (:func:`flat_field_shift_deg`) to the
-        model's common floor.
+        The capture's lens fall-off: a significant gradient the spheres measured but the capture
+        did not divide out adds its turn (:func:`flat_field_shift_deg`; with two or more spheres,
+        that of their mean) to the model's common floor.
     occluded : bool
         Whether pixels of a matte sphere's disk were found foreign (:func:`mask_foreign_pixels`): with
         the halves, the occluder's own light on the ball (its bounce, the ground it hides from the
@@ -1067,25 +1094,26 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         used_all.append(np.asarray(used))
     model = fit_error_model(residuals, sigmas, spheres=used_all, centre_deg=centre,
                             kinds=[kd.kind for kd in kinds] if kinds is not None else None, **kwargs)
-    if model.source == "fallback" and values is not None:  # no sphere checks another: their halves do
+    if values is not None:
         options = fit_options or {}
-        # a centre error turns both halves alike: each unrefined sphere's centre measured by its
-        # shading against its outline (not applied: only its uncertainty, as a refined one's)
-        which = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
-        if any(which):
-            measured = refine_sphere_centres(samples, results, values, which=which,
-                                             terminator=options.get("terminator", 0.15))[2]
-            for k, ref in enumerate(measured):
-                if which[k] and ref.accepted:
-                    centre[k] = centre_floor_deg(ref.shift_px, samples[k].radius_px)
-        model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
-                                   **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
-        lens = flat_field_shift_deg(results, samples, values, flat, **options)
-        if lens > 0.0:  # a turn the halves share, as the geometry's common floor is
-            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, lens)))
-        if occluded:  # the occluder's light on the ball: a turn the halves share, unmeasured
-            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg,
-                                                                   FALLBACK_FLOOR_DEG / np.sqrt(2.0))))
+        # a centre error turns a sphere's halves alike, and the spheres' outlines can be off alike
+        # (one detector, the same ground below each): each unrefined matte sphere's centre measured
+        # by its shading against its outline (not applied: only its uncertainty)
+        unrefined = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
+        shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15))
+        lens = flat_field_shift_deg(results, samples, values, flat, shared=model.source != "fallback", **options)
+        if model.source == "fallback":  # no sphere checks another: their halves do
+            centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
+            model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
+                                       **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
+            shared = lens  # (the centres are the halves' own terms)
+            if occluded:  # the occluder's light on the ball: a turn the halves share, unmeasured
+                shared = float(np.hypot(shared, FALLBACK_FLOOR_DEG / np.sqrt(2.0)))
+        else:  # their disagreement shows how the spheres' centres differ, not the shift they share
+            mean = shifts[unrefined].mean(axis=0) if any(unrefined) else np.zeros(2)
+            shared = float(np.hypot(lens, centre_floor_deg(mean, 1.0)))
+        if shared > 0.0:  # a turn the spheres (or halves) share, as the geometry's common floor is
+            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, shared)))
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(
