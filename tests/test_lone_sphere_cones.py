@@ -6,22 +6,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ffls.conventions import spherical_to_direction
 from ffls.spheres.estimate import (FlatField, calibrate_uncertainty, flat_field_offsets, flat_field_shift_deg)
 from ffls.spheres.photo import estimate_photo
 from ffls.spheres.samples import sphere_samples_orthographic, sphere_values_of
 from ffls.spheres.uncertainty import COMMON_FLOOR_DEG
 
-# a camera looking along world +y (image x = world x, image down = world -z): the ground is the image's bottom
-WORLD_FROM_CAMERA = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
-
-
-def _lights(n=24, seed=3):
-    rng = np.random.default_rng(seed)
-    theta = np.radians(rng.uniform(15, 70, n))
-    phi = np.radians(rng.uniform(-160, -20, n))  # in front of the sphere (the camera's side, -y)
-    return spherical_to_direction(theta, phi)
-
+from lone_sphere_rig import WORLD_FROM_CAMERA, front_lights
 
 def _sphere(center_px=(60.0, 60.0), radius_px=30.0, margin_px=1.5):
     return sphere_samples_orthographic((120, 120), center_px, radius_px, world_from_camera=WORLD_FROM_CAMERA,
@@ -54,7 +44,7 @@ def test_an_unapplied_lens_gradient_is_the_turn_it_gives():
     """A lens gradient of 0.05 across the disk turns a lone sphere's direction by about 1 degree in
     every photo; measured (significant) and not divided out, it is that turn, and nothing where the
     measurement is within its noise."""
-    s, lights = _sphere(), _lights()
+    s, lights = _sphere(), front_lights()
     photos = _photos(s, _values(s, lights, gradient=(0.04, -0.03)))
     ok = [p.ok for p in photos]
     err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", np.array([p.direction for p in photos])[ok],
@@ -73,7 +63,7 @@ def test_a_lone_sphere_model_is_its_halves_with_its_measured_centre_and_lens():
     turn its two halves alike, so the halves' model alone covers a third of the photos (cones of
     0.55 deg); with its centre measured by its shading (1.08 deg per axis) and the lens's turn
     (1.03), every photo."""
-    rendered, lights = _sphere(margin_px=0.0), _lights()
+    rendered, lights = _sphere(margin_px=0.0), front_lights()
     outline = _sphere(center_px=(61.0, 60.0), margin_px=2.5)  # found 1 px to the right; inside the disk
     idx = {(r, c): i for i, (r, c) in enumerate(zip(rendered.rows, rendered.cols))}
     take = np.array([idx[(r, c)] for r, c in zip(outline.rows, outline.cols)])

@@ -4,21 +4,11 @@ occluder's pixels found by the photos' fits and taken out, and a photo whose fit
 broke rejected as shadowed."""
 import numpy as np
 
-from ffls.conventions import spherical_to_direction
 from ffls.spheres.estimate import mask_foreign_pixels, reject_shadowed_photos
 from ffls.spheres.photo import estimate_photo
 from ffls.spheres.samples import sphere_samples_orthographic, sphere_values_of
 
-# a camera looking along world +y (image x = world x, image down = world -z)
-WORLD_FROM_CAMERA = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
-
-
-def _lights(n=24, seed=3):
-    rng = np.random.default_rng(seed)
-    theta = np.radians(rng.uniform(15, 70, n))
-    phi = np.radians(rng.uniform(-160, -20, n))  # in front of the sphere (the camera's side, -y)
-    return spherical_to_direction(theta, phi)
-
+from lone_sphere_rig import WORLD_FROM_CAMERA, front_lights
 
 def _sphere():
     return sphere_samples_orthographic((120, 120), (60.0, 60.0), 30.0, world_from_camera=WORLD_FROM_CAMERA)
@@ -54,7 +44,7 @@ def test_an_object_over_a_quarter_of_the_disk_is_masked_and_the_fits_recover():
     """A band over the disk's left quarter (an object in front of the ball, lit by the same lamp)
     turns one photo by 31 deg that the fits' outlier rejection does not save; the pixels most fits
     reject are that band (with a pixel of its edge), and every fit without them is right."""
-    s, lights = _sphere(), _lights()
+    s, lights = _sphere(), front_lights()
     band = s.cols < 48
     values = _values(s, lights, occluder=band)
     photos = _photos(s, values)
@@ -76,7 +66,7 @@ def test_a_photo_half_in_a_cast_shadow_is_rejected_as_shadowed():
     """Two photos with the disk's right half in a cast shadow: their fits, turned by degrees, keep
     their intensity and reject no pixel, but leave residuals many times the capture's; they are
     rejected as shadowed, and the others kept."""
-    s, lights = _sphere(), _lights()
+    s, lights = _sphere(), front_lights()
     photos = _photos(s, _values(s, lights, shadow=(3, 7)))
     assert all(photos[j].ok for j in (3, 7))
     assert max(_errors([photos[j] for j in (3, 7)], lights[[3, 7]])) > 5.0
