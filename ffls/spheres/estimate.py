@@ -2373,7 +2373,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                                     refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
                                     flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape,
                                     halves=halves, **kwargs)
-    return widen_for_lens(lights, lens_check(capture, spheres, _photo_shape(capture, decoded)))
+    if getattr(capture, "camera_model", "pinhole") == "orthographic":  # (a pinhole's outlines are its lens's)
+        lights = widen_for_lens(lights, lens_check(capture, spheres, _photo_shape(capture, decoded)))
+    return lights
 
 
 def lens_check(capture, spheres, shape):
