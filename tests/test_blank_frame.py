@@ -54,9 +54,11 @@ def test_blank_photo_rejected_as_too_dark():
     samples = []
     for k, cx in enumerate((-0.3, 0.3)):
         center = np.array([cx, 0.0, 0.05])
-        samples.append(SphereSamples(rows=rows, cols=cols + 100 * k, normals=n, points=center + 0.05 * n,
-                                     center=center, radius=0.05, radius_px=30.0))
-    values = [SphereValues(0.004 * rng.standard_normal(len(n)), np.ones(len(n), dtype=bool), 0) for _ in samples]
+        samples.append(SphereSamples(rows=rows, cols=cols + 100 * k, normals=n,
+                                     points=center + 0.05 * n, center=center, radius=0.05,
+                                     radius_px=30.0))
+    values = [SphereValues(0.004 * rng.standard_normal(len(n)), np.ones(len(n), dtype=bool), 0)
+              for _ in samples]
     est = estimate_photo(None, samples, np.zeros(3), values=values, own_shadow=False)
     assert est.status == "rejected"
     assert est.reason == "too_dark"

@@ -95,12 +95,13 @@ class PerspectiveEvidence:
         if not self.detected:
             return None
         k = sum(s is not None and a > 0 for s, a in zip(self.shapes, self.angles_deg))
-        return (f"{where}: the camera is declared orthographic, but {k} sphere outline{'s are' if k > 1 else ' is'} "
-                f"elongated toward the image centre as a normal lens makes (significance {self.z:.1f} sigma; "
-                f"a focal length of about {self.focal_px:.0f} px, spheres up to "
-                f"{max(self.angles_deg):.1f} deg off its axis): the directions are turned by up to that, "
-                f"and their cones were widened by it; give the lens's \"K\" (and \"sphere_radius\") in "
-                f"\"camera\" (docs/formats.md, \"camera\")")
+        outlines = f"{k} sphere outline{'s are' if k > 1 else ' is'}"
+        return (f"{where}: the camera is declared orthographic, but {outlines} elongated "
+                f"toward the image centre as a normal lens makes (significance {self.z:.1f} "
+                f"sigma; a focal length of about {self.focal_px:.0f} px, spheres up to "
+                f"{max(self.angles_deg):.1f} deg off its axis): the directions are turned by up "
+                f"to that, and their cones were widened by it; give the lens's \"K\" (and "
+                f"\"sphere_radius\") in \"camera\" (docs/formats.md, \"camera\")")
 
 
 def outline_shape(fit, shape) -> OutlineShape | None:
@@ -122,7 +123,8 @@ def outline_shape(fit, shape) -> OutlineShape | None:
     e = a / b - 1.0
     sigma = 2.0 * max(float(fit.residual_px), 1e-3) * np.sqrt(2.0 / len(pts)) / float(fit.radius_px)
     return OutlineShape(center_px=np.array([cx, cy]), offset_px=float(np.hypot(dx, dy)),
-                        radial=float(e * np.cos(2 * d)), across=float(e * np.sin(2 * d)), sigma=float(sigma))
+                        radial=float(e * np.cos(2 * d)), across=float(e * np.sin(2 * d)),
+                        sigma=float(sigma))
 
 
 def perspective_outlines(spheres, shape) -> PerspectiveEvidence:
@@ -141,8 +143,8 @@ def perspective_outlines(spheres, shape) -> PerspectiveEvidence:
     """
     from scipy.stats import norm
 
-    shapes = [outline_shape(s, shape) if getattr(s, "camera_model", "pinhole") == "orthographic" else None
-              for s in spheres]
+    ortho = [getattr(s, "camera_model", "pinhole") == "orthographic" for s in spheres]
+    shapes = [outline_shape(s, shape) if o else None for s, o in zip(spheres, ortho)]
     meas = [s for s in shapes if s is not None]
     out = PerspectiveEvidence(shapes=shapes, angles_deg=[0.0] * len(shapes))
     if not meas:
@@ -167,8 +169,9 @@ def perspective_outlines(spheres, shape) -> PerspectiveEvidence:
             focal.append(s.offset_px / np.tan(np.arccos(1.0 / (1.0 + s.radial))))
     out.focal_px = float(np.median(focal)) if focal else float("nan")
     c0 = np.array([(shape[1] - 1) / 2.0, (shape[0] - 1) / 2.0])
-    for i, (s, ft) in enumerate(zip(shapes, spheres)):  # an unmeasured sphere: the lens's angle at its offset
-        if s is None and np.isfinite(out.focal_px) and getattr(ft, "camera_model", "") == "orthographic":
+    # an unmeasured sphere: the lens's angle at its offset
+    for i, (s, ft, o) in enumerate(zip(shapes, spheres, ortho)):
+        if s is None and o and np.isfinite(out.focal_px):
             off = float(np.hypot(*(np.asarray(ft.center_px, dtype=np.float64) - c0)))
             out.angles_deg[i] = float(np.degrees(np.arctan2(off, out.focal_px)))
     return out
