@@ -83,7 +83,7 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
     """
     from ffls.io.capture import sphere_materials
     from ffls.spheres.estimate import (capture_samples, centres_to_refine, check_estimable, estimate_photos,
-                                       lens_centre, sphere_views)
+                                       lens_centre, lens_check, sphere_views, widen_for_lens)
     from ffls.spheres.mirror_outline import limb_window
 
     model, refine_options = check_estimable(capture, model, refine_options)
@@ -114,4 +114,5 @@ def estimate_lights_dask(capture, runner, spheres=None, model: str = "auto", bou
                           refine_centres=centres_to_refine(spheres) if refine_centres else False,
                           refine_options=refine_options, flat_field=flat, materials=materials, views=views,
                           model=model, limb_image=limb_image, **kwargs)
-    return est.lights(capture.image_names)
+    # a normal lens declared orthographic: the cones widened as estimate_lights widens them
+    return widen_for_lens(est.lights(capture.image_names), lens_check(capture, spheres, shape))

@@ -263,6 +263,7 @@ def run(args) -> int:
                                            workers=args.workers or os.cpu_count() or 1))
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
+    print_notes(NAME, lens_note(cap, spheres, decoded))
     if cluster:
         from ffls.cluster import open_client
         from ffls.cluster.lights import estimate_lights_dask
@@ -299,6 +300,22 @@ def run(args) -> int:
 
         print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere, names=[cap.image_names[i] for i in idx]))
     return 0
+
+
+def lens_note(cap, spheres, decoded) -> str | None:
+    """The line for a capture declared orthographic whose spheres' outlines show a normal lens
+    (:func:`ffls.spheres.estimate.lens_check`; the estimation widens the cones by it), or None."""
+    from ffls.spheres.estimate import lens_check
+
+    if getattr(cap, "camera_model", "pinhole") != "orthographic":
+        return None
+    if decoded is not None:
+        shape = decoded.shape
+    else:
+        from ffls.radiance.photos import load_photo
+
+        shape = load_photo(cap, 0).shape[:2]
+    return lens_check(cap, spheres, shape).note(cap.json_path)
 
 
 def washed_out_notes(stats, names) -> list[str]:

@@ -94,6 +94,8 @@ __all__ = [
     "refit_spheres",
     "calibrate_uncertainty",
     "reject_shadowed_photos",
+    "lens_check",
+    "widen_for_lens",
     "place_at_capture_range",
     "DecodedPhotos",
     "decode_photos",
@@ -2527,14 +2529,46 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
             and getattr(capture, "world_from_camera_is_default", False)
             and getattr(capture.hemisphere, "name", "upper") == "upper"
             and any(m != "mirror" for m in sphere_materials(capture, len(spheres)))):
-        return _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=dict(
+        lights = _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=dict(
             model=model, bounce=bounce, refine_centres=refine_centres, refine_options=refine_options,
             decoded=decoded, flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape),
             photo_options=kwargs, fit_roll=fit_roll)
-    return _estimate_in_frame(capture, spheres, progress, workers, model=model, bounce=bounce,
-                              refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
-                              flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape,
-                              halves=halves, **kwargs)
+    else:
+        lights = _estimate_in_frame(capture, spheres, progress, workers, model=model, bounce=bounce,
+                                    refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
+                                    flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape,
+                                    halves=halves, **kwargs)
+    if getattr(capture, "camera_model", "pinhole") == "orthographic":  # (a pinhole's outlines are its lens's)
+        lights = widen_for_lens(lights, lens_check(capture, spheres, _photo_shape(capture, decoded)))
+    return lights
+
+
+def lens_check(capture, spheres, shape):
+    """:func:`ffls.spheres.perspective.perspective_outlines` of a capture declared orthographic
+    (None for a pinhole camera: its outlines are fitted as its lens projects them)."""
+    if getattr(capture, "camera_model", "pinhole") != "orthographic":
+        return None
+    from ffls.spheres.perspective import perspective_outlines
+
+    return perspective_outlines(spheres, shape)
+
+
+def widen_for_lens(lights, evidence):
+    """The lights with each accepted light's cone widened by its used spheres' largest angle off the
+    lens axis (``evidence``: :func:`lens_check`, where it detected a normal lens behind an
+    orthographic camera; the lights unchanged otherwise): the orthographic model turns a sphere's
+    directions by about that angle (:mod:`ffls.spheres.perspective`). Each widened light's
+    ``extra`` records it as ``orthographic_misfit_deg``."""
+    if evidence is None or not evidence.detected or not lights.extra:
+        return lights
+    for st, e in zip(lights.status, lights.extra):
+        used = [i for i in e.get("used_spheres") or () if 0 <= i < len(evidence.angles_deg)]
+        if st != "ok" or not used or e.get("uncertainty_deg") is None:
+            continue
+        widen = max(evidence.angles_deg[i] for i in used)
+        e["uncertainty_deg"] = float(np.hypot(e["uncertainty_deg"], widen))
+        e["orthographic_misfit_deg"] = round(float(widen), 3)
+    return lights
 
 
 def _photo_shape(capture, decoded: DecodedPhotos | None) -> tuple[int, int]:

@@ -48,6 +48,8 @@ __all__ = [
     "FIXED_MODELS",
     "LambertFit",
     "fit_lambert",
+    "SIGNAL_SIGNIFICANCE",
+    "shading_signal_p",
     "fit_lambert_MasselusDutreAnrys2002",
     "OwnShadow",
     "own_shadow_of",
@@ -1100,6 +1102,7 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         inflation = correlation_inflation(res[use], np.asarray(rows)[use], np.asarray(cols)[use],
                                           max_factor=k / (2.0 * fit.x.size))[0]
     unc = stat * float(np.sqrt(inflation))
+    signal_p = shading_signal_p(y[use], fit)
     # the ground ratio c / (a l_z) of the free-bounce fit and its standard deviation at a relative
     # noise of at least rel_noise_floor: small only where the shadow side separates c from b, l
     ratio_est, ratio_sd = float("nan"), float("inf")
@@ -1132,7 +1135,57 @@ def fit_lambert(normals: np.ndarray, values: np.ndarray, valid: np.ndarray | Non
         fitres.status = "saturated"
     elif not np.isfinite(unc):
         fitres.status = "fit_failed"
+    elif not (signal_p < SIGNAL_SIGNIFICANCE and fitres.rms < 1.0):
+        # noise only (a blank frame, the lens cap on): the shading is not above the noise (its
+        # peak below the residuals' deviation, or no better than a constant): no direction
+        fitres.status = "too_dark"
     return fitres
+
+
+#: Significance level of a sphere's shading against the noise (:func:`shading_signal_p`): the
+#: level of the photo's other tests (:data:`ffls.spheres.photo.SIGNIFICANCE`).
+SIGNAL_SIGNIFICANCE = 1e-3
+
+
+def shading_signal_p(y: np.ndarray, fit) -> float:
+    """p-value of a sphere's fitted shading against no shading at all (a constant).
+
+    The F-test of the fitted model (``fit``: its ``k`` pixels ``y`` and residual sum of squares)
+    against a constant on the same pixels. On a blank frame (the lens cap on, noise only) the
+    fit still finds a "direction": i-user15's photometric-stereo set, two 8-bit grey balls, had
+    both "ok" (relative residual 3.6 and 5.1 times the fitted intensity, 25 and 33 deg
+    statistical uncertainty) and the photo rejected as ``spheres_disagree``; :func:`fit_lambert`
+    calls a sphere ``too_dark`` where p is not below :data:`SIGNAL_SIGNIFICANCE` or the
+    residuals' deviation exceeds the fitted intensity (``rms > 1``: the lit signal at its peak is
+    not above the noise). The pixels are taken as independent: the residuals' correlation
+    inflation (:func:`ffls.spheres.uncertainty.correlation_inflation`) is a misfit's smoothness,
+    not noise (a lit ball whose residuals are smooth, inflation 70: p 0.19 with it, 2e-80
+    without; the set's other lit spheres 1e-44 or below, its blank ones 3e-4 to 0.65).
+
+    Parameters
+    ----------
+    y : (k,) float
+        The fitted pixels' values.
+    fit : the fit's least-squares solution (``x``, ``rss``)
+
+    Returns
+    -------
+    float
+    """
+    from scipy.stats import f as f_dist
+
+    y = np.asarray(y, dtype=np.float64)
+    df1 = max(int(fit.x.size) - 1, 1)
+    df2 = y.size - fit.x.size
+    if y.size < 2 or not df2 > 0:
+        return 1.0
+    rss0 = float(np.sum((y - y.mean()) ** 2))
+    rss1 = float(fit.rss)
+    if not rss0 > rss1:
+        return 1.0
+    if not rss1 > 0:
+        return 0.0
+    return float(f_dist.sf((rss0 - rss1) / df1 / (rss1 / df2), df1, df2))
 
 
 #: The paper's per-sphere method, under its name (GUIDE: one paper per function).
