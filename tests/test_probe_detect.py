@@ -233,8 +233,11 @@ def test_circle_candidates_give_the_edge_points_they_were_found_from():
     lum = np.where(np.hypot(xx - 71.3, yy - 58.6) < 30.0, 0.8, 0.1) * (1.0 + 0.1 * np.sin(xx / 7.0))
     image = np.repeat(lum[..., None], 3, axis=2).astype(np.float32)
     cands, pts = circle_candidates(image)
-    want, _ = edge_points(image)
+    want, want_grads = edge_points(image)
     assert np.array_equal(pts, want) and len(pts) > 100
+    # with their gradients, for judging outlines on the same edges (it ran ``edge_points`` again)
+    cands2, pts2, grads = circle_candidates(image, with_grads=True)
+    assert cands2 == cands and np.array_equal(pts2, want) and np.array_equal(grads, want_grads)
     x, y, r = cands[0]
     assert np.hypot(x - 71.3, y - 58.6) < 1.5 and abs(r - 30.0) < 1.5, cands[:3]
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask, edge_points,
+from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask,
                                  find_spheres, fit_outline, orthographic_normals, outline_visible_fraction,
                                  sphere_mask, sphere_normals, stated_circle_problem)
 from ffls.spheres.select import CRITERIA, round_outline
@@ -131,11 +131,22 @@ def mirror_limb(radiance, center_px, radius_px, shape):
     reflection, and the limb encloses it (the best-supported circle alone was a reflected one in 3
     renders there, 1.7-2.3 px off).
     """
+    return _limb_near(_log_luminance(radiance), center_px, radius_px, shape)
+
+
+def _log_luminance(radiance):
+    """The natural log of a photo's luminance (float64, floored at 1e-12), as the limb's steps are found on."""
+    lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    return np.log(np.maximum(lum, 1e-12))
+
+
+def _limb_near(log_lum, center_px, radius_px, shape):
+    """:func:`mirror_limb` on the photo's log luminance (:func:`_log_luminance`), computed once by a caller
+    that tries many starts (:func:`unhinted_mirror_limb`)."""
     from ffls.spheres.mirror_outline import mirror_silhouette
 
-    lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
     c0 = np.asarray(center_px, dtype=np.float64)
-    found = mirror_silhouette(np.log(np.maximum(lum, 1e-12)), c0, radius_px, shape=shape,
+    found = mirror_silhouette(log_lum, c0, radius_px, shape=shape,
                               min_coverage=LIMB_STEP_COVERAGE, max_growth=1.25, tol=1.0, min_shrink=0.75,
                               n_best=LIMB_CIRCLES)
     good = [(float(r), np.asarray(c, dtype=np.float64)) for _, c, r in found
@@ -197,9 +208,8 @@ def unhinted_mirror_limb(radiance, image, outline, source):
     InputError
         Two separate limbs (not overlapping), the smaller at least :data:`RIVAL_RATIO` of the larger.
     """
-    lum = np.asarray(radiance, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
-    log_lum = np.log(np.maximum(lum, 1e-12))
-    shape = lum.shape
+    log_lum = _log_luminance(radiance)
+    shape = log_lum.shape
     cands, _ = circle_candidates(image, source)
     starts = [(np.asarray(outline.center_px, dtype=np.float64), float(outline.radius_px))]
     for x, y, r in cands:
@@ -209,7 +219,7 @@ def unhinted_mirror_limb(radiance, image, outline, source):
     limbs = []
     t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
     for c0, r0 in starts:
-        limb = mirror_limb(radiance, c0, r0, shape)
+        limb = _limb_near(log_lum, c0, r0, shape)
         if limb is None:
             continue
         c, r = _grown_limb(log_lum, limb[0], limb[1], shape)
@@ -255,13 +265,26 @@ def _interior_edges(points, center_px, radius_px) -> float:
 #: circle whose gradient lies within 25 degrees of the radial direction, of either polarity
 #: (:func:`_outline_both_ways`).
 OUTLINE_TOL_PX = 1.0
+#: An edge point lies on a circle's outline when its gradient is within this angle (degrees) of the radial
+#: direction, of either polarity (:func:`_radial`).
+RADIAL_GRADIENT_DEG = 25.0
+_RADIAL_COS = np.cos(np.radians(RADIAL_GRADIENT_DEG))
 #: :func:`diffuse_ball` looks for an outline enclosing the found one with its centre within this share of
 #: the radius and a radius up to this share larger (:func:`_enclosing_outline`).
 ENCLOSING_OFFSET = 0.15
 
 
-def _outline_both_ways(points, grads, ft) -> tuple[float, float]:
-    """``(closed, support)`` of a fitted circle (as :func:`ffls.spheres.select.outline_closure` gives them)
+def _radial(points, grads, center_px):
+    """``(v, d, radial)`` of edge points about ``center_px``: their offsets (n, 2), distances (n,) and whether
+    their gradient lies within :data:`RADIAL_GRADIENT_DEG` of the radial direction, of either polarity (n,)."""
+    v = np.asarray(points, dtype=np.float64).reshape(-1, 2) - np.asarray(center_px, dtype=np.float64)
+    d = np.hypot(v[:, 0], v[:, 1])
+    cosr = np.abs(np.sum(v * np.asarray(grads, dtype=np.float64).reshape(-1, 2), axis=1)) / np.maximum(d, 1e-9)
+    return v, d, cosr >= _RADIAL_COS
+
+
+def _outline_both_ways(points, grads, center_px, radius_px, visible_fraction) -> tuple[float, float]:
+    """``(closed, support)`` of a circle (as :func:`ffls.spheres.select.outline_closure` gives them)
     on the photo's edge points of either polarity.
 
     A diffuse ball in front of a wall of its own brightness is brighter than the wall on its lit side and
@@ -269,18 +292,15 @@ def _outline_both_ways(points, grads, ft) -> tuple[float, float]:
     hinted fit keeps the edge points of one side (closed 0.47, support 0.52 in ``benchmarks/probe_wall.py``
     at level 0.5, and in a 90 px ball of the same make in an 800 x 600 photo: under ``min_closed`` 0.5),
     while the outline's edge points of both polarities close it (0.86-0.89, support 0.96-0.97). Points:
-    within :data:`OUTLINE_TOL_PX` of the circle, their gradient within 25 degrees of the radial direction;
-    closed: the share of the 36 angular bins of the visible outline they fall in; support: their number
-    per pixel of visible outline.
+    within :data:`OUTLINE_TOL_PX` of the circle, their gradient radial (:func:`_radial`); closed: the share
+    of the 36 angular bins of the visible outline they fall in; support: their number per pixel of visible
+    outline.
     """
-    c = np.asarray(ft.center_px, dtype=np.float64)
-    v = np.asarray(points, dtype=np.float64).reshape(-1, 2) - c
-    d = np.hypot(v[:, 0], v[:, 1])
-    cosr = np.abs(np.sum(v * np.asarray(grads, dtype=np.float64).reshape(-1, 2), axis=1)) / np.maximum(d, 1e-9)
-    on = (np.abs(d - ft.radius_px) <= OUTLINE_TOL_PX) & (cosr >= np.cos(np.radians(25.0)))
-    vis = max(float(ft.visible_fraction), 1e-6)
+    v, d, radial = _radial(points, grads, center_px)
+    on = (np.abs(d - radius_px) <= OUTLINE_TOL_PX) & radial
+    vis = max(float(visible_fraction), 1e-6)
     bins = np.floor((np.arctan2(v[on, 1], v[on, 0]) + np.pi) / (2 * np.pi) * 36).astype(int) % 36
-    return min(np.unique(bins).size / 36 / vis, 1.0), float(on.sum()) / (2 * np.pi * ft.radius_px * vis)
+    return min(np.unique(bins).size / 36 / vis, 1.0), float(on.sum()) / (2 * np.pi * radius_px * vis)
 
 
 def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, saturates: bool = False):
@@ -315,7 +335,7 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
         No fit passes (one line: what was judged, and how to give a hint), or two separate ones do.
     """
     H, W = np.shape(image)[:2]
-    cands, pts = circle_candidates(image, source)
+    cands, pts, grads = circle_candidates(image, source, with_grads=True)
     min_r = MIN_BALL_FRACTION * min(H, W)
     seeds, fits, why = [], [], []
     for x, y, r in cands:
@@ -332,14 +352,12 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
                for o in fits):
             continue
         fits.append(ft)
-    ok, both = [], None
+    ok = []
     for ft in sorted(fits, key=lambda f: -f.radius_px):
         if ft.center_sigma_px > CRITERIA["max_center_sigma_px"] or ft.residual_px > CRITERIA["max_residual_px"]:
             continue  # no round outline: not worth a word
         if not round_outline(ft, CRITERIA["max_residual_px"]):
-            if both is None:  # the photo's edge points with their gradients, once
-                both = edge_points(image)
-            closed, support = _outline_both_ways(*both, ft)
+            closed, support = _outline_both_ways(pts, grads, ft.center_px, ft.radius_px, ft.visible_fraction)
             if closed < CRITERIA["min_closed"] or support < CRITERIA["min_support"]:
                 continue
         where = f"({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px"
@@ -376,9 +394,7 @@ def diffuse_ball(image, K, dist, R, world_from_camera, camera_model, source, sat
             raise InputError(f"two round outlines could be the probe ball: ({ball.center_px[0]:.0f}, "
                              f"{ball.center_px[1]:.0f}) px, radius {ball.radius_px:.0f} px and ({o.center_px[0]:.0f},"
                              f" {o.center_px[1]:.0f}) px, radius {o.radius_px:.0f} px; {hint}", source)
-    if both is None:
-        both = edge_points(image)
-    return _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_model, source)
+    return _enclosing_outline(image, ball, (pts, grads), K, dist, R, world_from_camera, camera_model, source)
 
 
 def _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_model, source):
@@ -402,24 +418,21 @@ def _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_
 
     pts, grads = both
     c0, r0 = np.asarray(ball.center_px, dtype=np.float64), float(ball.radius_px)
-    v = pts - c0
-    d = np.hypot(v[:, 0], v[:, 1])
-    cosr = np.abs(np.sum(v * grads, axis=1)) / np.maximum(d, 1e-9)
-    sel = (cosr >= np.cos(np.radians(25.0))) & (d >= r0 - 2 * OUTLINE_TOL_PX) & \
-        (d <= (1 + 2 * ENCLOSING_OFFSET) * r0 + OUTLINE_TOL_PX)
+    _, d, radial = _radial(pts, grads, c0)
+    sel = radial & (d >= r0 - 2 * OUTLINE_TOL_PX) & (d <= (1 + 2 * ENCLOSING_OFFSET) * r0 + OUTLINE_TOL_PX)
     found = circle_search(pts[sel], c0, ENCLOSING_OFFSET * r0, r0 + OUTLINE_TOL_PX, (1 + ENCLOSING_OFFSET) * r0,
                           tol=OUTLINE_TOL_PX, n_best=3)
-    now = _outline_both_ways(pts, grads, ball)
+    now = _outline_both_ways(pts, grads, c0, r0, ball.visible_fraction)
+    cam = DetectionCamera(camera_model, K, dist, np.asarray(world_from_camera, dtype=np.float64), R,
+                          np.shape(image)[:2])
     for c, r, _ in sorted(found, key=lambda f: -f[1]):
         if np.hypot(*(c - c0)) + r0 > r + OUTLINE_TOL_PX + ball.residual_px:
             continue  # does not enclose the fit (known to its RMS)
-        closed, support = _outline_both_ways(pts, grads, _Circle(c, r, ball.visible_fraction))
+        closed, support = _outline_both_ways(pts, grads, c, r, ball.visible_fraction)
         if closed < now[0] or support < now[1]:
             continue
         on = sel & (np.abs(np.hypot(*(pts - c).T) - r) <= 2 * OUTLINE_TOL_PX)
         try:
-            cam = DetectionCamera(camera_model, K, dist, np.asarray(world_from_camera, dtype=np.float64), R,
-                                  np.shape(image)[:2])
             ft = fit_outline(pts[on], cam, c, r, source, n_edge=len(pts))
         except ValueError:
             continue
@@ -427,15 +440,6 @@ def _enclosing_outline(image, ball, both, K, dist, R, world_from_camera, camera_
                 and ft.residual_px <= ball.residual_px and ft.center_sigma_px <= CRITERIA["max_center_sigma_px"]:
             return ft
     return ball
-
-
-@dataclass
-class _Circle:
-    """A circle judged by :func:`_outline_both_ways` (the fields of a fit it reads)."""
-
-    center_px: np.ndarray
-    radius_px: float
-    visible_fraction: float
 
 
 def _check_probe_size(center_px, radius_px, shape, source) -> None:
@@ -525,12 +529,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     # evidence of what it is (its neutrality criterion is for calibration spheres)
     rad = np.asarray(radiance, dtype=np.float32)
     lum = rad @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    lum3 = np.repeat(lum[..., None], 3, axis=2)
     try:
         if hints is None and sph.material == "diffuse":
-            found = [diffuse_ball(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, Tf, cam.model, source,
+            found = [diffuse_ball(lum3, cam.K, cam.dist, R, Tf, cam.model, source,
                                   saturates)]
         else:
-            found = find_spheres(np.repeat(lum[..., None], 3, axis=2), cam.K, cam.dist, R, n_spheres=1, hints=hints,
+            found = find_spheres(lum3, cam.K, cam.dist, R, n_spheres=1, hints=hints,
                                  world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
                                  lit_limb=None, retry_hints=sph.material != "mirror")
     except InputError as e:
@@ -548,7 +553,7 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
         _check_probe_size(ft.center_px, ft.radius_px, rad.shape[:2], source)
     if view.sphere.material == "mirror":  # the limb's reflectance step rather than a reflected edge
         limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2]) if hints else \
-            unhinted_mirror_limb(rad, np.repeat(lum[..., None], 3, axis=2), ft, source)
+            unhinted_mirror_limb(rad, lum3, ft, source)
         if limb is not None:
             if hints is None:
                 _check_probe_size(limb[0], limb[1], rad.shape[:2], source)

@@ -3331,8 +3331,7 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         edge_tensor=st.edge_tensor, edge_photos=st.edge_photos, workers=workers)
 
 
-def circle_candidates(image, source: str | os.PathLike | None = None
-                      ) -> tuple[list[tuple[float, float, float]], np.ndarray]:
+def circle_candidates(image, source: str | os.PathLike | None = None, with_grads: bool = False) -> tuple:
     """The candidate circles of one image, ``(x, y, r)`` pixels, best edge support first: stages 1-3 of
     :func:`find_spheres` without hints (the max image's edges and :func:`_hough_circle_candidates`), for a
     caller that judges the candidates by its own criteria (a probe ball, :func:`ffls.probes.locate.locate_sphere`).
@@ -3343,6 +3342,8 @@ def circle_candidates(image, source: str | os.PathLike | None = None
         Linear radiance.
     source : path, optional
         Named in the all-black error.
+    with_grads : bool
+        Also return the edge points' gradients (a caller that judges outlines on the same edges).
 
     Returns
     -------
@@ -3350,7 +3351,11 @@ def circle_candidates(image, source: str | os.PathLike | None = None
         The circles, pixels.
     points : (n, 2) float64
         The max image's edge points (x, y) they were found from (:func:`edge_points`).
+    grads : (n, 2) float64
+        Only with ``with_grads``: the points' unit gradients, toward brighter (:func:`edge_points`).
     """
     mx, _, _, L, _, _, _ = _max_luminance(image, source)
     edges = edge_map(mx, L, source)
+    if with_grads:
+        return _hough_circle_candidates(edges, L), edges.points, edges.grads
     return _hough_circle_candidates(edges, L), edges.points
