@@ -302,6 +302,9 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
     rank = int(np.count_nonzero(s > s[0] * RANK_TOL))
     Dsolve, bsolve = Ds, bq
     G = None
+    # the penalties' common scale: the RMS column norm of the seen unknowns
+    ref = float(np.sqrt(np.mean(np.sum(M[:, observed] ** 2, axis=0)))) \
+        if smoothness > 0 or tv > 0 or energy > 0 or power > 0 else None
     if smoothness > 0 or tv > 0:
         if edges is None:
             raise ValueError("smoothness and tv need the edges between neighbouring unknowns")
@@ -313,7 +316,6 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
         if e.shape[0]:
             G = np.zeros((e.shape[0], k))
             rows = np.arange(e.shape[0])
-            ref = float(np.sqrt(np.mean(np.sum(M[:, observed] ** 2, axis=0))))
             G[rows, e[:, 0]] = ref / scale[e[:, 0]]
             G[rows, e[:, 1]] = -ref / scale[e[:, 1]]
     if smoothness > 0 and G is not None:
@@ -327,14 +329,12 @@ def solve_sources(M, b, ambient_column=None, nonnegative: bool = False, rcond: f
             raise ValueError(f"cell_solid_angles must be ({n},) positive, not {om.shape}")
         om = om[observed]
         nobs = om.shape[0]
-        ref = float(np.sqrt(np.mean(np.sum(M[:, observed] ** 2, axis=0))))
         Ge = np.zeros((nobs, k))
         Ge[np.arange(nobs), np.arange(nobs)] = np.sqrt(np.mean(om) / om) / scale[:nobs]
         Dsolve = np.concatenate([Dsolve, float(energy) * ref * Ge], axis=0)
         bsolve = np.concatenate([bsolve, np.zeros((nobs, b.shape[1]))], axis=0)
     if power > 0:
         nobs = int(observed.sum())
-        ref = float(np.sqrt(np.mean(np.sum(M[:, observed] ** 2, axis=0))))
         Gp = np.zeros((1, k))
         Gp[0, :nobs] = float(power) * ref / scale[:nobs]
         Dsolve = np.concatenate([Dsolve, Gp], axis=0)
