@@ -448,12 +448,11 @@ def diffuse_lightmap(probe, height: int = 128, sources="auto", nonnegative: bool
         raise ValueError(f"rule must be one of {DIFFUSE_RULES}, not {rule!r}")
     if orientations > 1 and (sources not in ("auto", "adaptive") or by_cv):
         raise ValueError("orientations > 1 applies to adaptive sources without smoothness='cv'")
-    stated = prior is not None
-    if not stated:
+    if prior is None:
         prior = "power" if by_cv else "quadratic"
     if prior not in PRIORS:
         raise ValueError(f"prior must be one of {PRIORS}, not {prior!r}")
-    if stated and prior != "quadratic" and not by_cv and smoothness == 0:
+    if prior != "quadratic" and not by_cv and smoothness == 0:
         raise ValueError(f"prior {prior!r} weighs smoothness: give it a weight or 'cv' (it is 0)")
     penalty = {"quadratic": "smoothness"}.get(prior, prior)
     weights_cv = POWER_WEIGHTS if prior == "power" else SMOOTHNESS_WEIGHTS
