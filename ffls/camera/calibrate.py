@@ -276,6 +276,8 @@ def calibrate_camera(image_paths, board: str = "charuco", squares=(7, 5), square
         obj_pts.append(found[0])
         img_pts.append(found[1])
         used.append(str(name))
+        if len(obj_pts) >= 3:
+            decoded = None  # (three views: the legacy retry cannot fire, the decoded photos are not kept)
     if (len(obj_pts) < 3 and retry
             and any(detect_board(im, board, squares, square_size, marker_size, dictionary, legacy=True) is not None
                     for im in missed)):
