@@ -5,22 +5,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from ffls.conventions import spherical_to_direction
 from ffls.spheres.estimate import FlatField, calibrate_uncertainty, flat_field_offsets
 from ffls.spheres.photo import estimate_photo
 from ffls.spheres.samples import sphere_samples_orthographic, sphere_values_of
 from ffls.spheres.uncertainty import COMMON_FLOOR_DEG
+from lone_sphere_rig import WORLD_FROM_CAMERA, front_lights
 
-# a camera looking along world +y (image x = world x, image down = world -z)
-WORLD_FROM_CAMERA = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
 CENTRES = ((45.0, 60.0), (135.0, 60.0))
-
-
-def _lights(n=30, seed=5):
-    rng = np.random.default_rng(seed)
-    theta = np.radians(rng.uniform(15, 70, n))
-    phi = np.radians(rng.uniform(-160, -20, n))  # in front of the spheres (the camera's side, -y)
-    return spherical_to_direction(theta, phi)
 
 
 def _sphere(center_px, margin_px):
@@ -33,7 +24,7 @@ def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6, oppo
     gradient across both disks (``opposite``: the second's is the first's negative, as a lens's
     on either side of the frame): their samples, the photos' values and fits."""
     rng = np.random.default_rng(seed)
-    lights = _lights()
+    lights = front_lights(30, 5)
     outlines, takes, rendered = [], [], []
     for c in CENTRES:
         r = _sphere(c, 0.0)
