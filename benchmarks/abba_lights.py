@@ -20,10 +20,7 @@ import subprocess
 import sys
 import time
 
-#: ``python -c`` program: ``ffls ARGS``, then this (the main) process's CPU as its last line.
-MAIN_CPU = ("import resource, sys; from ffls.cli import main; rc = main(sys.argv[1:]); "
-            "u = resource.getrusage(resource.RUSAGE_SELF); print('MAINCPU', u.ru_utime + u.ru_stime); sys.exit(rc)")
-
+from common import MAIN_CPU  # benchmarks/common.py
 
 def environment(spec: str) -> tuple[str, dict]:
     env, py = dict(os.environ, OMP_NUM_THREADS="1"), sys.executable

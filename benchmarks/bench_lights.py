@@ -43,7 +43,7 @@ from ffls.spheres.samples import sphere_values
 from ffls.synth.scene import SynthScene, make_scene, write_synthetic_capture
 from ffls.radiance.photos import load_photo
 
-from common import cached_capture, host_info, print_error_table, write_json  # benchmarks/common.py
+from common import MAIN_CPU, cached_capture, host_info, print_error_table, write_json  # benchmarks/common.py
 
 CONFIGS = {
     "distant_grey": dict(light_model="distant", ground_albedo=0.3),
@@ -152,13 +152,6 @@ def eight_bit_copy(src, dst, state_encoding: bool) -> Path:
         doc["encoding"] = "srgb"
     (dst / "capture.json").write_text(json.dumps(doc, indent=1) + "\n")
     return dst
-
-
-#: ``python -c`` program: ``ffls lights ARGS`` (``sys.argv[1:]``), then the CPU seconds (user +
-#: system) of this, the command's main process, printed as the last line.
-MAIN_CPU = ("import resource, sys; from ffls.cli import main; rc = main(sys.argv[1:]); "
-            "u = resource.getrusage(resource.RUSAGE_SELF); print('main process CPU s', u.ru_utime + u.ru_stime); "
-            "sys.exit(rc)")
 
 
 def end_to_end(folder, workers: int, n: int, label: str = "", truth_dirs=None, first_pass: str | None = None) -> dict:

@@ -97,6 +97,20 @@ def write_json(path, doc, indent: int = 1, quiet: bool = False) -> Path:
     return out
 
 
+#: ``python -c`` program: ``ffls ARGS`` (``sys.argv[1:]``), then the CPU seconds (user + system) of
+#: this, the command's main process, printed as the last line (its last word the number).
+MAIN_CPU = ("import resource, sys; from ffls.cli import main; rc = main(sys.argv[1:]); "
+            "u = resource.getrusage(resource.RUSAGE_SELF); print('main process CPU s', u.ru_utime + u.ru_stime); "
+            "sys.exit(rc)")
+
+
+def set_probe_sphere(folder, sphere) -> None:
+    """Replace the ``sphere`` of ``folder/probe.json`` (a benchmark's hint or material)."""
+    doc = json.loads((Path(folder) / "probe.json").read_text())
+    doc["sphere"] = sphere
+    (Path(folder) / "probe.json").write_text(json.dumps(doc))
+
+
 def cached_capture(folder, directions, render) -> dict:
     """The ``truth.json`` of a synthetic capture in ``folder`` under ``directions`` (n, 3).
 
