@@ -24,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from common import host_info, write_json
+from common import host_info, set_probe_sphere, write_json
 from ffls.camera.projection import project_points
 from ffls.errors import InputError
 from ffls.io.images import write_exr
@@ -46,12 +46,6 @@ def _locate(folder):
         return None
 
 
-def _set_sphere(folder, sphere):
-    doc = json.loads((folder / "probe.json").read_text())
-    doc["sphere"] = sphere
-    (folder / "probe.json").write_text(json.dumps(doc))
-
-
 def diffuse_rows(tmp: Path, seeds=range(1, 7)) -> list:
     rows = []
     for name in ("courtyard", "sunrise"):
@@ -67,7 +61,7 @@ def diffuse_rows(tmp: Path, seeds=range(1, 7)) -> list:
                                                            "images": ["ball.exr"],
                                                            "camera": {"model": "orthographic"}}))
             for hint in (None, [100.0, 100.0], [108.0, 94.0]):
-                _set_sphere(folder, {"material": "diffuse", **({"center_px": hint} if hint else {})})
+                set_probe_sphere(folder, {"material": "diffuse", **({"center_px": hint} if hint else {})})
                 got = _locate(folder)
                 err = None if got is None else float(np.hypot(*(got[0] - sc.center_px)))
                 rows.append({"kind": "diffuse", "map": name, "seed": seed, "hint": hint, "centre_error_px": err,
@@ -90,7 +84,7 @@ def mirror_rows(tmp: Path) -> list:
                            sphere="auto", reflectance=0.7)
         for off in ((0.0, 0.0), (6.0, -5.0)):
             hint = [float(c_true[0] + off[0]), float(c_true[1] + off[1])]
-            _set_sphere(folder, {"material": "mirror", "reflectance": 0.7, "center_px": hint})
+            set_probe_sphere(folder, {"material": "mirror", "reflectance": 0.7, "center_px": hint})
             got = _locate(folder)
             err = None if got is None else float(np.hypot(*(got[0] - c_true)))
             rows.append({"kind": "mirror", "map": name, "hint_offset_px": list(off), "centre_error_px": err,

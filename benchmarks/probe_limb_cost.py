@@ -15,45 +15,23 @@ Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_limb_cost.py [--maps ...] [--ou
 from __future__ import annotations
 
 import argparse
-import json
 import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from common import host_info, write_json
-from ffls.errors import InputError
+from common import host_info, set_probe_sphere, write_json
 from ffls.io.capture import load_capture_and_lights
-from ffls.io.probe import load_probe
 from ffls.lightmaps.lightmap import LightMapWarning, load_lightmap
 from ffls.probes import estimate_lightmap
-from ffls.probes.bracket import view_radiance
 from ffls.probes.debevec import latlong_solid_angles
-from ffls.probes.locate import locate_sphere
 from ffls.relight.cpu import relight_capture
 from ffls.synth.scene import write_synthetic_capture
-from probe_detect import HDRI, LAYOUTS, MAPS, render
+from probe_detect import HDRI, LAYOUTS, MAPS, locate, render
 
 HEIGHT = 64
 CIRCLES = ("true", "x+1", "x+2", "r-1", "r-2", "found")
-
-
-def _set_sphere(folder, sphere):
-    doc = json.loads((folder / "probe.json").read_text())
-    doc["sphere"] = sphere
-    (folder / "probe.json").write_text(json.dumps(doc))
-
-
-def _found(folder):
-    probe = load_probe(folder)
-    view = probe.views[0]
-    vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
-    try:
-        geo = locate_sphere(view, vr.radiance, probe.json_path)
-    except InputError:
-        return None
-    return np.asarray(geo.center_px, dtype=np.float64), float(geo.radius_px)
 
 
 def _map_error(est, truth, seen):
@@ -90,7 +68,7 @@ def main(argv=None):
                 c_true, r_true = render(folder, lm, layout, azimuth_deg=90.0 * m + 120.0 * k)
                 circles = {"true": (c_true, r_true), "x+1": (c_true + [1.0, 0.0], r_true),
                            "x+2": (c_true + [2.0, 0.0], r_true), "r-1": (c_true, r_true - 1.0),
-                           "r-2": (c_true, r_true - 2.0), "found": _found(folder)}
+                           "r-2": (c_true, r_true - 2.0), "found": locate(folder)[0]}
                 row = {"map": name, "layout": layout[0], "radius_true_px": r_true}
                 seen = None
                 for c in CIRCLES:
@@ -98,7 +76,7 @@ def main(argv=None):
                         row[c] = None
                         continue
                     cpx, rpx = circles[c]
-                    _set_sphere(folder, {"material": "mirror", "reflectance": 0.7,
+                    set_probe_sphere(folder, {"material": "mirror", "reflectance": 0.7,
                                          "center_px": [float(v) for v in cpx], "radius_px": float(rpx)})
                     est = estimate_lightmap(folder, "mirror", height=HEIGHT)
                     if seen is None:  # the true circle's seen directions, area-averaged like the maps
