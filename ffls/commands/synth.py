@@ -31,6 +31,8 @@ _MATERIALS = ("matte", "grey", "mirror", "glossy_black")
 SCENE_ALBEDO = 0.5
 WALL_ALBEDO = (0.6, 0.35, 0.25)
 TRUTH_DIRS = 2048
+#: ``--camera-elevation``'s default (degrees): :class:`ffls.synth.scene.SynthScene`'s.
+CAMERA_ELEVATION_DEG = 30.0
 #: Cost of one image on the 2-core team machine (docs/synth.md "Speed"; ``ffls synth`` of 500 and
 #: 2000 lights at 8 px, 500 at 64 px, 200 at 256 px): about 9 ms each plus 0.3 us a pixel, the
 #: pixel part about 10 times more for a near light (9 sample points).
@@ -135,7 +137,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--lens", type=_choice("normal", "long", "orthographic"), default="normal",
                    metavar="{normal,long,orthographic}",
                    help="normal (46 deg at 1 m, default), long (4.8 deg at 10 m) or orthographic (parallel rays)")
-    g.add_argument("--camera-elevation", type=number(1.0, 89.9, unit="degrees"), default=30.0, metavar="DEG",
+    g.add_argument("--camera-elevation", type=number(1.0, 89.9, unit="degrees"), default=CAMERA_ELEVATION_DEG,
+                   metavar="DEG",
                    help="how far the camera looks down at the scene's centre (default 30; 89.9: a copy stand)")
     g.add_argument("--camera-roll", type=number(-45.0, 45.0, unit="degrees"), default=0.0, metavar="DEG",
                    help="the camera turned about its optical axis (a tripod not level; positive dips the "
@@ -229,10 +232,6 @@ def scene_of(args: argparse.Namespace):
     if getattr(args, "composite_set", None) is not None and (args.calibration_pair or args.no_object):
         raise InputError("--composite-set writes the object and surface captures itself; drop "
                          + ("--calibration-pair" if args.calibration_pair else "--no-object"))
-    if getattr(args, "composite_set", None) is not None and getattr(args, "camera_roll", 0.0):
-        raise InputError("--composite-set renders its virtual scene with a level camera; drop --camera-roll")
-    if getattr(args, "composite_set", None) is not None and getattr(args, "camera_elevation", 30.0) != 30.0:
-        raise InputError("--composite-set renders its virtual scene from 30 deg above; drop --camera-elevation")
     if args.calibration_pair and args.no_object:
         raise InputError("--calibration-pair writes the object capture itself; drop --no-object")
     background = "textured" if args.background == "checker" else args.background
@@ -241,7 +240,7 @@ def scene_of(args: argparse.Namespace):
         kw["ground_albedo"] = args.ground_albedo
     kw["supersample"] = getattr(args, "supersample", 1)
     kw["camera_roll_deg"] = getattr(args, "camera_roll", 0.0)
-    kw["camera_elevation_deg"] = getattr(args, "camera_elevation", 30.0)
+    kw["camera_elevation_deg"] = getattr(args, "camera_elevation", CAMERA_ELEVATION_DEG)
     return make_scene(spheres=n, sphere_material=mats, background=background, lens=args.lens,
                       with_object=not args.no_object, sphere_xy=args.sphere_xy, sphere_radius=args.sphere_radius, **kw)
 

@@ -38,8 +38,8 @@ from ffls.lightmaps.lightmap import LightMap, save_lightmap
 from ffls.synth.scene import (LABEL_GROUND, LABEL_OBJECT, LABEL_SPHERE0, make_scene, pixel_labels, render_lightmap,
                               stratified_directions, write_synthetic_capture)
 
-__all__ = ["WALL", "wall_lightmap", "composite_masks", "render_virtual_scene", "write_composite_set",
-           "COMPOSITE_FILE"]
+__all__ = ["WALL", "wall_lightmap", "composite_masks", "render_virtual_scene", "virtual_camera",
+           "write_composite_set", "COMPOSITE_FILE"]
 
 #: Parameters of ``composite.json`` written by :func:`write_composite_set`.
 COMPOSITE_FILE = "composite.json"
@@ -108,6 +108,14 @@ def composite_masks(scene, resolution: int) -> dict:
     return {"object": lab == LABEL_OBJECT, "surface": surface, "spheres": lab >= LABEL_SPHERE0}
 
 
+def virtual_camera(scene) -> dict:
+    """The keywords of :func:`ffls.synth.scene.make_scene` that give the virtual scene ``scene``'s camera
+    (distance, elevation, roll, field of view, target, model, supersampling): the truth and background
+    are seen as the object and surface captures are."""
+    return {k: getattr(scene, k) for k in ("camera_distance", "camera_elevation_deg", "camera_roll_deg",
+                                           "camera_fov_deg", "camera_target", "camera_model", "supersample")}
+
+
 def render_virtual_scene(lightmap, resolution: int, scene_albedo: float = 0.5, with_object: bool = True,
                          n_dirs: int = 2048, progress: bool = False, **scene_kwargs) -> np.ndarray:
     """The virtual scene rendered directly under ``lightmap`` (no spheres): (R, R, 3) float32.
@@ -174,8 +182,7 @@ def write_composite_set(folder, lightmap, *, n_object_lights: int = 100, n_surfa
     if scene is None:
         scene = make_scene(spheres=spheres, sphere_material=sphere_material, ground_albedo=float(capture_albedo))
     obj_scene = dataclasses.replace(scene, with_object=True)
-    camera = {k: getattr(obj_scene, k) for k in ("camera_distance", "camera_elevation_deg", "camera_fov_deg",
-                                                   "camera_target", "camera_model", "supersample")}
+    camera = virtual_camera(obj_scene)
     surf_scene = dataclasses.replace(obj_scene, with_object=False)
     kw = {"resolution": R, "progress": progress, "photo": photo}
     write_synthetic_capture(folder / "object", scene=obj_scene,
