@@ -167,22 +167,19 @@ def _grown_limb(log_lum, center_px, radius_px, shape, max_steps: int = 8):
 
     :func:`mirror_limb`'s search spans half the radius on a 2-2.5 px grid, where a weak limb's votes
     lose to the reflected circles just inside it. Here the steps
-    (:func:`ffls.spheres.mirror_outline.radial_steps`, 0.9 to ``1 + 2 LIMB_GROWTH`` radii) are searched
-    (:func:`ffls.spheres.mirror_outline.circle_search`, a grid of 1 px) only for circles larger than the
-    current one, centre within :data:`LIMB_GROWTH` of its radius, radius up to that share larger; of those
-    that enclose it (to 1 px) and whose steps cover :data:`LIMB_STEP_COVERAGE` of them the largest is
-    taken, and the search repeated from it.
+    (:func:`ffls.spheres.mirror_outline.mirror_silhouette`, 0.9 to ``1 + 2 LIMB_GROWTH`` radii) are searched
+    (a grid of 1 px) only for circles larger than the current one, centre within :data:`LIMB_GROWTH` of its
+    radius, radius up to that share larger; of those that enclose it (to 1 px) and whose steps cover
+    :data:`LIMB_STEP_COVERAGE` of them the largest is taken, and the search repeated from it.
     """
-    from ffls.spheres.mirror_outline import circle_coverage, circle_search, radial_steps
+    from ffls.spheres.mirror_outline import mirror_silhouette
 
     c, r = np.asarray(center_px, dtype=np.float64), float(radius_px)
     for _ in range(max_steps):
-        pts = radial_steps(log_lum, c, r, r_range=(0.9, 1 + 2 * LIMB_GROWTH))
-        found = circle_search(pts, c, LIMB_GROWTH * r, r + 0.5, (1 + LIMB_GROWTH) * r, tol=1.0,
-                              n_best=LIMB_CIRCLES)
-        good = [(float(rr), cc) for cc, rr, inl in found
-                if inl.sum() >= 8 and np.hypot(*(cc - c)) + r <= rr + 1.0
-                and circle_coverage(pts[inl], cc, rr, 1.0, shape) >= LIMB_STEP_COVERAGE]
+        found = mirror_silhouette(log_lum, c, r, shape=shape, min_coverage=LIMB_STEP_COVERAGE,
+                                  max_growth=1 + 2 * LIMB_GROWTH, tol=1.0, n_best=LIMB_CIRCLES,
+                                  max_offset=LIMB_GROWTH * r, r_min=r + 0.5, r_max=(1 + LIMB_GROWTH) * r)
+        good = [(float(rr), cc) for _, cc, rr in found if np.hypot(*(cc - c)) + r <= rr + 1.0]
         if not good:
             break
         r, c = max(good, key=lambda g: g[0])

@@ -566,7 +566,8 @@ def changing_limb_radius(strength, center, radius, *, band_px: float = 3.0, outs
 
 def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: float = 0.5,
                       max_growth: float = 1.25, tol: float = 1.0, min_shrink: float = 0.97,
-                      n_best: int | None = None):
+                      n_best: int | None = None, max_offset: float | None = None, r_min: float | None = None,
+                      r_max: float | None = None):
     """A mirror ball's silhouette near an outer outline: the circle of weak reflectance steps.
 
     The outline found from the image-wide edges (:func:`enclosing_circle`) follows the reflected
@@ -585,6 +586,9 @@ def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: floa
 
     ``n_best`` asks for the ``n_best`` best-supported circles (:func:`circle_search`) instead of the
     best one, for a caller that chooses among them (:func:`ffls.probes.locate.mirror_limb`).
+    ``max_offset``, ``r_min`` and ``r_max`` (pixels) replace the search window's centre offset
+    (``max_growth - 0.9`` radii) and radius range (``min_shrink`` to ``max_growth`` radii), for a
+    caller that searches another window on the same steps (:func:`ffls.probes.locate.unhinted_mirror_limb`).
 
     Returns
     -------
@@ -596,8 +600,11 @@ def mirror_silhouette(log_lum, center, radius, *, shape=None, min_coverage: floa
     """
     lo = min(0.9, min_shrink)
     pts = radial_steps(log_lum, center, radius, r_range=(lo, max_growth))
-    found = [] if len(pts) < 8 else circle_search(pts, center, (max_growth - lo) * radius, min_shrink * radius,
-                                                  max_growth * radius, tol=tol, n_best=n_best or 1)
+    max_offset = (max_growth - lo) * radius if max_offset is None else max_offset
+    r_min = min_shrink * radius if r_min is None else r_min
+    r_max = max_growth * radius if r_max is None else r_max
+    found = [] if len(pts) < 8 else circle_search(pts, center, max_offset, r_min, r_max, tol=tol,
+                                                  n_best=n_best or 1)
     passed = [(pts[inl], c, r) for c, r, inl in found
               if inl.sum() >= 8 and circle_coverage(pts[inl], c, r, tol, shape) >= min_coverage]
     if n_best:
