@@ -2539,7 +2539,7 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                                     flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape,
                                     halves=halves, **kwargs)
     if getattr(capture, "camera_model", "pinhole") == "orthographic":  # (a pinhole's outlines are its lens's)
-        lights = widen_for_lens(lights, lens_check(capture, spheres, _photo_shape(capture, decoded)))
+        lights = widen_for_lens(lights, lens_check(capture, spheres, photo_shape(capture, decoded)))
     return lights
 
 
@@ -2571,7 +2571,7 @@ def widen_for_lens(lights, evidence):
     return lights
 
 
-def _photo_shape(capture, decoded: DecodedPhotos | None) -> tuple[int, int]:
+def photo_shape(capture, decoded: DecodedPhotos | None) -> tuple[int, int]:
     """The photos' ``(height, width)``: capture.json's, the decoded photos', or the first photo's."""
     if capture.image_size is not None:
         return int(capture.image_size[1]), int(capture.image_size[0])
@@ -2597,7 +2597,7 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     lights are theirs) serve the tilt search (:func:`_estimate_with_fitted_tilt`)."""
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
-    shape = _photo_shape(capture, decoded)
+    shape = photo_shape(capture, decoded)
     samples = capture_samples(capture, spheres, shape)
     if bounce == "observed":
         samples = observed_ground_samples(capture, samples, shape)
@@ -2652,7 +2652,7 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
     with PhotoFitter(level, capture.scene_center, _fit_options(level, stages["model"], photo_options), workers,
                      None, decoded) as fitter:
         # every photo's sphere values, read once: a frame turns the spheres' normals, not their pixels
-        samples = capture_samples(level, spheres, _photo_shape(capture, decoded))
+        samples = capture_samples(level, spheres, photo_shape(capture, decoded))
         values = [v for _, v in fitter.run([PhotoTask(i, fit=False) for i in range(n)], samples, counted=False)]
 
         def fit(tilt_deg: float, roll_deg: float = 0.0, photos=None):
