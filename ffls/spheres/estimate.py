@@ -598,6 +598,13 @@ def flat_field_offsets(s: SphereSamples) -> np.ndarray:
     return np.column_stack([(s.cols - s.cols.mean()) / r, (s.rows - s.rows.mean()) / r])
 
 
+def _flat_field_divisor(s: SphereSamples, gradient) -> np.ndarray:
+    """(m,) the divisor of a sphere's pixels under a relative ``gradient`` (2,) per radius
+    (:func:`flat_field_offsets`); the guard keeps it positive: a gradient of a radius or more is no
+    lens's."""
+    return np.maximum(1.0 + flat_field_offsets(s) @ gradient, 1e-3)
+
+
 def cos4_gradient(s: SphereSamples, lens: tuple) -> np.ndarray:
     """(2,) the relative gradient per radius of the natural ``cos^4`` fall-off across a sphere's disk.
 
@@ -741,8 +748,7 @@ def flat_field_values(values: list, samples: list[SphereSamples], field: FlatFie
     """The photos' sphere values divided by the capture's applied flat field (:class:`FlatField`)."""
     if not field.applied:
         return values
-    # (the guard keeps a divisor positive: a gradient of a radius or more is no lens's)
-    div = [np.maximum(1.0 + flat_field_offsets(s) @ g, 1e-3) if np.any(g != 0) else None
+    div = [_flat_field_divisor(s, g) if np.any(g != 0) else None
            for s, g in zip(samples, field.gradients)]
     return [[v if d is None else sphere_values_of((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2],
                                                   getattr(v, "ground", None))
@@ -977,13 +983,15 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     sd = np.asarray(flat.measured_sigma, dtype=np.float64)
     z2 = np.sum(np.where(sd > 0, rest / np.where(sd > 0, sd, 1.0), 0.0) ** 2, axis=1)
     significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
+    if not significant.any():
+        return 0.0
     turns = []
     for r, vals in zip(results, values):
         moved = []  # the turns of the photo's used spheres with a significant gradient (vectors)
         for k, f, v in _used_matte_fits([r], [vals]):
             if k >= significant.size or not significant[k]:
                 continue
-            div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
+            div = _flat_field_divisor(samples[k], rest[k])
             g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
                              terminator=terminator, up=up, own_shadow=own_shadow)[0]
             if g.status == "ok":
