@@ -1883,6 +1883,14 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
                             start=_starts(by_photo[i]) if i in by_photo else None) for i in indices]
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
+    def finished(results, samples, calibration):  # the final fits' near distances, cones and estimate
+        results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
+        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
+                                                     values=values if halves else None,
+                                                     fit_options=_sphere_fit_options(fitter), flat=flat,
+                                                     occluded=occluded)
+        return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
+
     refinements = None
     which = None if isinstance(refine_centres, bool) else [bool(w) for w in refine_centres]
     if which is not None or refine_centres:
@@ -1898,12 +1906,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
                                                     samples, counted=False)]
             by_photo = dict(zip(fitted, results))
     if bounce == "free":
-        results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                     values=values if halves else None,
-                                                     fit_options=_sphere_fit_options(fitter), flat=flat,
-                                                     occluded=occluded)
-        return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
+        return finished(results, samples, None)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
         if any(k is not None for k in kappas):
@@ -1935,12 +1938,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
                 by_photo[i] = r
         results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
-    results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                 values=values if halves else None,
-                                                 fit_options=_sphere_fit_options(fitter), flat=flat,
-                                                 occluded=occluded)
-    return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
+    return finished(results, samples, calibration)
 
 
 #: Fewest near photos, and least fraction of the accepted photos, that make a capture's lights near
