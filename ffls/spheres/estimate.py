@@ -49,7 +49,7 @@ import numpy as np
 
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
-from ffls.io.capture import Lights
+from ffls.io.capture import Lights, sphere_materials
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
@@ -2526,24 +2526,19 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                 read_photo(capture, 0)
         spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths,
                                           workers=workers)
+    stages = dict(model=model, bounce=bounce, refine_centres=refine_centres, refine_options=refine_options,
+                  decoded=decoded, flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape)
     # lights over the upper hemisphere stand above a ground, whose normal the tilt gives; lights all
     # round ("full") or around a stated axis have no ground under the spheres to orient
-    from ffls.io.capture import sphere_materials
-
     # (a declared mirror is never matte: with only those the tilt's misfit would be NaN everywhere)
     if (fit_tilt and model != "near" and bounce != "observed"
             and getattr(capture, "world_from_camera_is_default", False)
             and getattr(capture.hemisphere, "name", "upper") == "upper"
             and any(m != "mirror" for m in sphere_materials(capture, len(spheres)))):
-        lights = _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=dict(
-            model=model, bounce=bounce, refine_centres=refine_centres, refine_options=refine_options,
-            decoded=decoded, flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape),
-            photo_options=kwargs, fit_roll=fit_roll)
+        lights = _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=stages,
+                                            photo_options=kwargs, fit_roll=fit_roll)
     else:
-        lights = _estimate_in_frame(capture, spheres, progress, workers, model=model, bounce=bounce,
-                                    refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
-                                    flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape,
-                                    halves=halves, **kwargs)
+        lights = _estimate_in_frame(capture, spheres, progress, workers, halves=halves, **stages, **kwargs)
     if getattr(capture, "camera_model", "pinhole") == "orthographic":  # (a pinhole's outlines are its lens's)
         lights = widen_for_lens(lights, lens_check(capture, spheres, photo_shape(capture, decoded)))
     return lights
@@ -2608,8 +2603,6 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     if bounce == "observed":
         samples = observed_ground_samples(capture, samples, shape)
         bounce, bounce_shape = "calibrated", False
-    from ffls.io.capture import sphere_materials
-
     materials = sphere_materials(capture, len(spheres))
     views = sphere_views(capture, spheres)
     names = list(capture.image_names)
