@@ -53,7 +53,7 @@ from ffls.io.capture import Lights, sphere_materials
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
-                                   outline_holding_highlights, refine_view_limb)
+                                   outline_holding_highlights, refine_view_limb, sample_patch)
 from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mask_view, not_ground, own_shadow_mask,
                                  reference_radiance)
 from ffls.spheres.lambert import (LambertFit, fit_lambert, flat_field_terms, own_shadow_of, own_shadow_table,
@@ -331,9 +331,7 @@ def _grown(s: SphereSamples, mask: np.ndarray) -> np.ndarray:
     """``mask`` over sphere ``s``'s pixels grown by one pixel (its 8 neighbours) within them."""
     import cv2
 
-    r0, c0 = int(s.rows.min()), int(s.cols.min())
-    grid = np.zeros((int(s.rows.max()) - r0 + 1, int(s.cols.max()) - c0 + 1), np.uint8)
-    grid[s.rows[mask] - r0, s.cols[mask] - c0] = 1
+    (c0, r0), _, (grid,) = sample_patch(s.rows, s.cols, np.asarray(mask, dtype=np.uint8))
     return cv2.dilate(grid, np.ones((3, 3), np.uint8))[s.rows - r0, s.cols - c0].astype(bool)
 
 
