@@ -886,8 +886,8 @@ def _refit_matte(s: SphereSamples, fit: LambertFit, values: list[SphereValues], 
 
 
 def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, *,
-                   terminator: float = 0.15, up: np.ndarray = UP,
-                   own_shadow: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
+                   terminator: float = 0.15, up: np.ndarray = UP, own_shadow: bool = True,
+                   map_fn=map) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Each accepted photo's matte spheres fitted again on the two halves of their pixels.
 
     The halves lie either side of a plane through the sphere's fitted light, across the plane of
@@ -909,6 +909,8 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
     terminator : float
     up : (3,) float
     own_shadow : bool
+    map_fn : callable
+        ``map``-like: runs the halves' fits (independent of each other), e.g. in a pool of processes.
 
     Returns
     -------
@@ -919,7 +921,7 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
         The halves' statistical per-axis standard deviations (degrees).
     """
     up = normalize(np.asarray(up, dtype=np.float64))
-    residuals, sigmas = [], []
+    tasks = []
     for k, f, v in _used_matte_fits(results, values):
         l = np.asarray(f.direction, dtype=np.float64)
         n = samples[k].normals
@@ -931,13 +933,22 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
         if not lit.any():
             continue
         side = key >= np.median(key[lit])  # as many lit pixels on each side
-        halves = _refit_matte(samples[k], f, [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2],
-                                                               getattr(v, "ground", None)) for h in (side, ~side)],
-                              terminator=terminator, up=up, own_shadow=own_shadow)
+        tasks.append((samples[k], f, [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2],
+                                                       getattr(v, "ground", None)) for h in (side, ~side)],
+                      dict(terminator=terminator, up=up, own_shadow=own_shadow)))
+    residuals, sigmas = [], []
+    for (_, f, _, _), halves in zip(tasks, map_fn(_refit_halves, tasks)):
         if all(h.status == "ok" and np.isfinite(h.uncertainty_deg) for h in halves):
-            residuals.append(tangent_residuals(np.array([h.direction for h in halves]), l))
+            residuals.append(tangent_residuals(np.array([h.direction for h in halves]),
+                                               np.asarray(f.direction, dtype=np.float64)))
             sigmas.append(np.array([h.uncertainty_deg for h in halves]) / np.sqrt(2.0))
     return residuals, sigmas
+
+
+def _refit_halves(args) -> list[LambertFit]:
+    """:func:`_refit_matte` of one sphere's two halves (a picklable task of :func:`halves_offsets`)."""
+    s, fit, halves, options = args
+    return _refit_matte(s, fit, halves, **options)
 
 
 def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
@@ -1002,14 +1013,13 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
 
 
 def _measured_centre_shifts(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
-                            which: list[bool], terminator: float) -> np.ndarray:
+                            which: list[bool], terminator: float, map_fn=map) -> np.ndarray:
     """(k, 2) per sphere, its shading's centre against its outline (:func:`refine_sphere_centres`,
     not applied) in its radii, where ``which`` and accepted; 0 elsewhere
     (:func:`ffls.spheres.uncertainty.centre_floor_deg` of a radius 1 gives its turn)."""
     out = np.zeros((len(samples), 2))
     if any(which):
-        for k, ref in enumerate(refine_sphere_centres(samples, results, values, which=which,
-                                                      terminator=terminator)[2]):
+        for k, ref in enumerate(_centre_refinements(samples, results, values, terminator, map_fn, None, which)):
             if which[k] and ref.accepted and samples[k].radius_px > 0:
                 out[k] = np.asarray(ref.shift_px, dtype=np.float64) / float(samples[k].radius_px)
     return out
@@ -1024,7 +1034,7 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                           refinements: list[CentreRefinement] | None = None,
                           scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
                           values: list | None = None, fit_options: dict | None = None,
-                          flat: FlatField | None = None, occluded: bool = False,
+                          flat: FlatField | None = None, occluded: bool = False, map_fn=map,
                           **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
@@ -1074,6 +1084,9 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         ball), which turns both halves alike and nothing here measures, joins the model's common
         floor at the stated fallback's floor (:data:`ffls.spheres.uncertainty.FALLBACK_FLOOR_DEG`
         RMS, per axis over ``sqrt(2)``).
+    map_fn : callable
+        ``map``-like: runs the measured centres' refinements and the halves' fits, e.g. in a pool
+        of processes (:meth:`PhotoFitter.map`).
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -1108,11 +1121,12 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         # (one detector, the same ground below each): each unrefined matte sphere's centre measured
         # by its shading against its outline (not applied: only its uncertainty)
         unrefined = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
-        shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15))
+        shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15),
+                                         map_fn)
         lens = flat_field_shift_deg(results, samples, values, flat, shared=model.source != "fallback", **options)
         if model.source == "fallback":  # no sphere checks another: their halves do
             centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
-            model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
+            model = halves_error_model(*halves_offsets(results, samples, values, map_fn=map_fn, **options), centre,
                                        **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
             shared = lens  # (the centres are the halves' own terms)
             if occluded:  # the occluder's light on the ball: a turn the halves share, unmeasured
@@ -1149,6 +1163,31 @@ def centres_to_refine(spheres) -> list[bool]:
     without ``outline_at_step`` (any object with a ``center_cam`` and a ``radius``) is refined.
     """
     return [not getattr(s, "outline_at_step", False) for s in spheres]
+
+
+def _centre_refinements(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
+                        terminator: float, map_fn, photos: list[int] | None, which: list[bool] | None,
+                        **kwargs) -> list[CentreRefinement]:
+    """:func:`refine_sphere_centres`' refinements alone (not applied: no sphere recentred)."""
+    which = [True] * len(samples) if which is None else list(which)
+    tasks = []
+    for k, s in enumerate(samples):
+        if not which[k]:
+            continue
+        dirs = []
+        for r in results:
+            sp = r.spheres[k] if r.spheres else None
+            dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
+        fitted = values if photos is None else [values[i] for i in photos]
+        tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
+    done = iter(map_fn(_refine_one, tasks))
+    refinements = []
+    for s, w in zip(samples, which):  # a sphere not refined: its detected centre, as not accepted
+        centre = np.array(s.center, dtype=np.float64)
+        refinements.append(next(done) if w else CentreRefinement(center=centre, center_initial=centre.copy(),
+                                                                 shift_px=np.zeros(2),
+                                                                 message="outline at the linear step"))
+    return refinements
 
 
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
@@ -1190,25 +1229,8 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         Per photo, the values for the new samples.
     refinements : list of CentreRefinement
     """
+    refinements = _centre_refinements(samples, results, values, terminator, map_fn, photos, which, **kwargs)
     new_samples, kept = [], []
-    which = [True] * len(samples) if which is None else list(which)
-    tasks = []
-    for k, s in enumerate(samples):
-        if not which[k]:
-            continue
-        dirs = []
-        for r in results:
-            sp = r.spheres[k] if r.spheres else None
-            dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
-        fitted = values if photos is None else [values[i] for i in photos]
-        tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
-    done = iter(map_fn(_refine_one, tasks))
-    refinements = []
-    for s, w in zip(samples, which):  # a sphere not refined: its detected centre, as not accepted
-        centre = np.array(s.center, dtype=np.float64)
-        refinements.append(next(done) if w else CentreRefinement(center=centre, center_initial=centre.copy(),
-                                                                 shift_px=np.zeros(2),
-                                                                 message="outline at the linear step"))
     for s, ref in zip(samples, refinements):
         if ref.accepted:
             s2, idx = recentre_samples(s, ref.center)
@@ -1886,7 +1908,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
         error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
                                                      values=values if halves else None,
                                                      fit_options=_sphere_fit_options(fitter), flat=flat,
-                                                     occluded=occluded)
+                                                     occluded=occluded, map_fn=fitter.map)
         return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
 
     refinements = None
