@@ -17,8 +17,8 @@ Printed per ball:
 * with ``--band``, the outer edge of the changing edges' band along 180 rays from the found
   centre, as the chrome radius step reads it (:func:`ffls.spheres.mirror_outline.changing_limb_edges`):
   the edge points' median ``t`` and per sector, their distances' median absolute deviation (the
-  step's spread test, :func:`ffls.spheres.mirror_outline.changing_limb_radius`, refuses over
-  1 px), and the outline fitted on them (:func:`ffls.spheres.detect.fit_outline`, centre and
+  step, :func:`ffls.spheres.mirror_outline.changing_limb_radius`, once refused over 1 px; it keeps
+  their median now: docs/spheres.md), and the outline fitted on them (:func:`ffls.spheres.detect.fit_outline`, centre and
   radius): its centre offset and radial offset, as for the found outline.
 
 Usage: ``OMP_NUM_THREADS=1 python benchmarks/mirror_limb_profile.py CAPTURE ... [--band]``

@@ -305,17 +305,11 @@ def run(args) -> int:
 def lens_note(cap, spheres, decoded) -> str | None:
     """The line for a capture declared orthographic whose spheres' outlines show a normal lens
     (:func:`ffls.spheres.estimate.lens_check`; the estimation widens the cones by it), or None."""
-    from ffls.spheres.estimate import lens_check
+    from ffls.spheres.estimate import lens_check, photo_shape
 
     if getattr(cap, "camera_model", "pinhole") != "orthographic":
         return None
-    if decoded is not None:
-        shape = decoded.shape
-    else:
-        from ffls.radiance.photos import load_photo
-
-        shape = load_photo(cap, 0).shape[:2]
-    return lens_check(cap, spheres, shape).note(cap.json_path)
+    return lens_check(cap, spheres, photo_shape(cap, decoded)).note(cap.json_path)
 
 
 def washed_out_notes(stats, names) -> list[str]:

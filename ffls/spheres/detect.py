@@ -2633,8 +2633,10 @@ def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * gap_px + 1, 2 * gap_px + 1))
     n, lab = cv2.connectedComponents(cv2.dilate(hl.astype(np.uint8), k))
     best = None
+    hy, hx = np.nonzero(hl)  # (once: each group's pixels are these, in the same order)
+    labs = lab[hy, hx]
     for j in range(1, n):
-        ys, xs = np.nonzero(hl & (lab == j))
+        ys, xs = hy[labs == j], hx[labs == j]
         photos = int(np.unique(brightest[ys, xs]).size)
         if best is None or photos > best[3]:
             cx, cy = float(xs.mean()), float(ys.mean())

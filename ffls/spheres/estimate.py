@@ -49,11 +49,11 @@ import numpy as np
 
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
-from ffls.io.capture import Lights
+from ffls.io.capture import Lights, sphere_materials
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
-                                   outline_holding_highlights, refine_view_limb)
+                                   outline_holding_highlights, refine_view_limb, sample_patch)
 from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mask_view, not_ground, own_shadow_mask,
                                  reference_radiance)
 from ffls.spheres.lambert import (LambertFit, fit_lambert, flat_field_terms, own_shadow_of, own_shadow_table,
@@ -331,9 +331,7 @@ def _grown(s: SphereSamples, mask: np.ndarray) -> np.ndarray:
     """``mask`` over sphere ``s``'s pixels grown by one pixel (its 8 neighbours) within them."""
     import cv2
 
-    r0, c0 = int(s.rows.min()), int(s.cols.min())
-    grid = np.zeros((int(s.rows.max()) - r0 + 1, int(s.cols.max()) - c0 + 1), np.uint8)
-    grid[s.rows[mask] - r0, s.cols[mask] - c0] = 1
+    (c0, r0), _, (grid,) = sample_patch(s.rows, s.cols, np.asarray(mask, dtype=np.uint8))
     return cv2.dilate(grid, np.ones((3, 3), np.uint8))[s.rows - r0, s.cols - c0].astype(bool)
 
 
@@ -598,6 +596,13 @@ def flat_field_offsets(s: SphereSamples) -> np.ndarray:
     return np.column_stack([(s.cols - s.cols.mean()) / r, (s.rows - s.rows.mean()) / r])
 
 
+def _flat_field_divisor(s: SphereSamples, gradient) -> np.ndarray:
+    """(m,) the divisor of a sphere's pixels under a relative ``gradient`` (2,) per radius
+    (:func:`flat_field_offsets`); the guard keeps it positive: a gradient of a radius or more is no
+    lens's."""
+    return np.maximum(1.0 + flat_field_offsets(s) @ gradient, 1e-3)
+
+
 def cos4_gradient(s: SphereSamples, lens: tuple) -> np.ndarray:
     """(2,) the relative gradient per radius of the natural ``cos^4`` fall-off across a sphere's disk.
 
@@ -741,8 +746,7 @@ def flat_field_values(values: list, samples: list[SphereSamples], field: FlatFie
     """The photos' sphere values divided by the capture's applied flat field (:class:`FlatField`)."""
     if not field.applied:
         return values
-    # (the guard keeps a divisor positive: a gradient of a radius or more is no lens's)
-    div = [np.maximum(1.0 + flat_field_offsets(s) @ g, 1e-3) if np.any(g != 0) else None
+    div = [_flat_field_divisor(s, g) if np.any(g != 0) else None
            for s, g in zip(samples, field.gradients)]
     return [[v if d is None else sphere_values_of((v[0] / d).astype(v[0].dtype, copy=False), v[1], v[2],
                                                   getattr(v, "ground", None))
@@ -882,8 +886,8 @@ def _refit_matte(s: SphereSamples, fit: LambertFit, values: list[SphereValues], 
 
 
 def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, *,
-                   terminator: float = 0.15, up: np.ndarray = UP,
-                   own_shadow: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
+                   terminator: float = 0.15, up: np.ndarray = UP, own_shadow: bool = True,
+                   map_fn=map) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Each accepted photo's matte spheres fitted again on the two halves of their pixels.
 
     The halves lie either side of a plane through the sphere's fitted light, across the plane of
@@ -905,6 +909,8 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
     terminator : float
     up : (3,) float
     own_shadow : bool
+    map_fn : callable
+        ``map``-like: runs the halves' fits (independent of each other), e.g. in a pool of processes.
 
     Returns
     -------
@@ -915,7 +921,7 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
         The halves' statistical per-axis standard deviations (degrees).
     """
     up = normalize(np.asarray(up, dtype=np.float64))
-    residuals, sigmas = [], []
+    tasks = []
     for k, f, v in _used_matte_fits(results, values):
         l = np.asarray(f.direction, dtype=np.float64)
         n = samples[k].normals
@@ -927,13 +933,22 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
         if not lit.any():
             continue
         side = key >= np.median(key[lit])  # as many lit pixels on each side
-        halves = _refit_matte(samples[k], f, [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2],
-                                                               getattr(v, "ground", None)) for h in (side, ~side)],
-                              terminator=terminator, up=up, own_shadow=own_shadow)
+        tasks.append((samples[k], f, [sphere_values_of(v[0], np.asarray(v[1], bool) & h, v[2],
+                                                       getattr(v, "ground", None)) for h in (side, ~side)],
+                      dict(terminator=terminator, up=up, own_shadow=own_shadow)))
+    residuals, sigmas = [], []
+    for (_, f, _, _), halves in zip(tasks, map_fn(_refit_halves, tasks)):
         if all(h.status == "ok" and np.isfinite(h.uncertainty_deg) for h in halves):
-            residuals.append(tangent_residuals(np.array([h.direction for h in halves]), l))
+            residuals.append(tangent_residuals(np.array([h.direction for h in halves]),
+                                               np.asarray(f.direction, dtype=np.float64)))
             sigmas.append(np.array([h.uncertainty_deg for h in halves]) / np.sqrt(2.0))
     return residuals, sigmas
+
+
+def _refit_halves(args) -> list[LambertFit]:
+    """:func:`_refit_matte` of one sphere's two halves (a picklable task of :func:`halves_offsets`)."""
+    s, fit, halves, options = args
+    return _refit_matte(s, fit, halves, **options)
 
 
 def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
@@ -977,13 +992,15 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     sd = np.asarray(flat.measured_sigma, dtype=np.float64)
     z2 = np.sum(np.where(sd > 0, rest / np.where(sd > 0, sd, 1.0), 0.0) ** 2, axis=1)
     significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
+    if not significant.any():
+        return 0.0
     turns = []
     for r, vals in zip(results, values):
         moved = []  # the turns of the photo's used spheres with a significant gradient (vectors)
         for k, f, v in _used_matte_fits([r], [vals]):
             if k >= significant.size or not significant[k]:
                 continue
-            div = np.maximum(1.0 + flat_field_offsets(samples[k]) @ rest[k], 1e-3)
+            div = _flat_field_divisor(samples[k], rest[k])
             g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
                              terminator=terminator, up=up, own_shadow=own_shadow)[0]
             if g.status == "ok":
@@ -996,14 +1013,13 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
 
 
 def _measured_centre_shifts(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
-                            which: list[bool], terminator: float) -> np.ndarray:
+                            which: list[bool], terminator: float, map_fn=map) -> np.ndarray:
     """(k, 2) per sphere, its shading's centre against its outline (:func:`refine_sphere_centres`,
     not applied) in its radii, where ``which`` and accepted; 0 elsewhere
     (:func:`ffls.spheres.uncertainty.centre_floor_deg` of a radius 1 gives its turn)."""
     out = np.zeros((len(samples), 2))
     if any(which):
-        for k, ref in enumerate(refine_sphere_centres(samples, results, values, which=which,
-                                                      terminator=terminator)[2]):
+        for k, ref in enumerate(_centre_refinements(samples, results, values, terminator, map_fn, None, which)):
             if which[k] and ref.accepted and samples[k].radius_px > 0:
                 out[k] = np.asarray(ref.shift_px, dtype=np.float64) / float(samples[k].radius_px)
     return out
@@ -1018,7 +1034,7 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
                           refinements: list[CentreRefinement] | None = None,
                           scene_center: np.ndarray | None = None, kinds: list[SphereKind] | None = None,
                           values: list | None = None, fit_options: dict | None = None,
-                          flat: FlatField | None = None, occluded: bool = False,
+                          flat: FlatField | None = None, occluded: bool = False, map_fn=map,
                           **kwargs) -> tuple[ErrorModel, list[PhotoEstimate]]:
     """The capture's error model from its spheres' disagreement, and the photos' 95% cones under it.
 
@@ -1068,6 +1084,9 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         ball), which turns both halves alike and nothing here measures, joins the model's common
         floor at the stated fallback's floor (:data:`ffls.spheres.uncertainty.FALLBACK_FLOOR_DEG`
         RMS, per axis over ``sqrt(2)``).
+    map_fn : callable
+        ``map``-like: runs the measured centres' refinements and the halves' fits, e.g. in a pool
+        of processes (:meth:`PhotoFitter.map`).
     **kwargs
         Passed to :func:`ffls.spheres.uncertainty.fit_error_model`.
 
@@ -1102,11 +1121,12 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         # (one detector, the same ground below each): each unrefined matte sphere's centre measured
         # by its shading against its outline (not applied: only its uncertainty)
         unrefined = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
-        shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15))
+        shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15),
+                                         map_fn)
         lens = flat_field_shift_deg(results, samples, values, flat, shared=model.source != "fallback", **options)
         if model.source == "fallback":  # no sphere checks another: their halves do
             centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
-            model = halves_error_model(*halves_offsets(results, samples, values, **options), centre,
+            model = halves_error_model(*halves_offsets(results, samples, values, map_fn=map_fn, **options), centre,
                                        **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
             shared = lens  # (the centres are the halves' own terms)
             if occluded:  # the occluder's light on the ball: a turn the halves share, unmeasured
@@ -1143,6 +1163,31 @@ def centres_to_refine(spheres) -> list[bool]:
     without ``outline_at_step`` (any object with a ``center_cam`` and a ``radius``) is refined.
     """
     return [not getattr(s, "outline_at_step", False) for s in spheres]
+
+
+def _centre_refinements(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
+                        terminator: float, map_fn, photos: list[int] | None, which: list[bool] | None,
+                        **kwargs) -> list[CentreRefinement]:
+    """:func:`refine_sphere_centres`' refinements alone (not applied: no sphere recentred)."""
+    which = [True] * len(samples) if which is None else list(which)
+    tasks = []
+    for k, s in enumerate(samples):
+        if not which[k]:
+            continue
+        dirs = []
+        for r in results:
+            sp = r.spheres[k] if r.spheres else None
+            dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
+        fitted = values if photos is None else [values[i] for i in photos]
+        tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
+    done = iter(map_fn(_refine_one, tasks))
+    refinements = []
+    for s, w in zip(samples, which):  # a sphere not refined: its detected centre, as not accepted
+        centre = np.array(s.center, dtype=np.float64)
+        refinements.append(next(done) if w else CentreRefinement(center=centre, center_initial=centre.copy(),
+                                                                 shift_px=np.zeros(2),
+                                                                 message="outline at the linear step"))
+    return refinements
 
 
 def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstimate], values: list,
@@ -1184,25 +1229,8 @@ def refine_sphere_centres(samples: list[SphereSamples], results: list[PhotoEstim
         Per photo, the values for the new samples.
     refinements : list of CentreRefinement
     """
+    refinements = _centre_refinements(samples, results, values, terminator, map_fn, photos, which, **kwargs)
     new_samples, kept = [], []
-    which = [True] * len(samples) if which is None else list(which)
-    tasks = []
-    for k, s in enumerate(samples):
-        if not which[k]:
-            continue
-        dirs = []
-        for r in results:
-            sp = r.spheres[k] if r.spheres else None
-            dirs.append(sp.direction if sp is not None and sp.status == "ok" and sp.kind == "matte" else None)
-        fitted = values if photos is None else [values[i] for i in photos]
-        tasks.append((s, [v[k] for v in fitted], dirs, terminator, kwargs))
-    done = iter(map_fn(_refine_one, tasks))
-    refinements = []
-    for s, w in zip(samples, which):  # a sphere not refined: its detected centre, as not accepted
-        centre = np.array(s.center, dtype=np.float64)
-        refinements.append(next(done) if w else CentreRefinement(center=centre, center_initial=centre.copy(),
-                                                                 shift_px=np.zeros(2),
-                                                                 message="outline at the linear step"))
     for s, ref in zip(samples, refinements):
         if ref.accepted:
             s2, idx = recentre_samples(s, ref.center)
@@ -1875,6 +1903,14 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
                             start=_starts(by_photo[i]) if i in by_photo else None) for i in indices]
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
+    def finished(results, samples, calibration):  # the final fits' near distances, cones and estimate
+        results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
+        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
+                                                     values=values if halves else None,
+                                                     fit_options=_sphere_fit_options(fitter), flat=flat,
+                                                     occluded=occluded, map_fn=fitter.map)
+        return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
+
     refinements = None
     which = None if isinstance(refine_centres, bool) else [bool(w) for w in refine_centres]
     if which is not None or refine_centres:
@@ -1890,12 +1926,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
                                                     samples, counted=False)]
             by_photo = dict(zip(fitted, results))
     if bounce == "free":
-        results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-        error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                     values=values if halves else None,
-                                                     fit_options=_sphere_fit_options(fitter), flat=flat,
-                                                     occluded=occluded)
-        return CaptureEstimate(results, None, refinements, samples, error_model, kinds, flat)
+        return finished(results, samples, None)
     if any(s.ground_view is not None for s in samples):  # bounce 'observed': the seen ground measured
         kappas = calibrate_ground_albedo(results, samples, [values[i] for i in fitted])
         if any(k is not None for k in kappas):
@@ -1927,12 +1958,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
                 by_photo[i] = r
         results = [by_photo[i] for i in range(n_photos)]
         fitter.advance(n_photos)
-    results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
-    error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
-                                                 values=values if halves else None,
-                                                 fit_options=_sphere_fit_options(fitter), flat=flat,
-                                                 occluded=occluded)
-    return CaptureEstimate(results, calibration, refinements, samples, error_model, kinds, flat)
+    return finished(results, samples, calibration)
 
 
 #: Fewest near photos, and least fraction of the accepted photos, that make a capture's lights near
@@ -2520,26 +2546,21 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
                 read_photo(capture, 0)
         spheres = find_spheres_in_capture(capture, stats=decoded.stats, bit_depths=decoded.bit_depths,
                                           workers=workers)
+    stages = dict(model=model, bounce=bounce, refine_centres=refine_centres, refine_options=refine_options,
+                  decoded=decoded, flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape)
     # lights over the upper hemisphere stand above a ground, whose normal the tilt gives; lights all
     # round ("full") or around a stated axis have no ground under the spheres to orient
-    from ffls.io.capture import sphere_materials
-
     # (a declared mirror is never matte: with only those the tilt's misfit would be NaN everywhere)
     if (fit_tilt and model != "near" and bounce != "observed"
             and getattr(capture, "world_from_camera_is_default", False)
             and getattr(capture.hemisphere, "name", "upper") == "upper"
             and any(m != "mirror" for m in sphere_materials(capture, len(spheres)))):
-        lights = _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=dict(
-            model=model, bounce=bounce, refine_centres=refine_centres, refine_options=refine_options,
-            decoded=decoded, flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape),
-            photo_options=kwargs, fit_roll=fit_roll)
+        lights = _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages=stages,
+                                            photo_options=kwargs, fit_roll=fit_roll)
     else:
-        lights = _estimate_in_frame(capture, spheres, progress, workers, model=model, bounce=bounce,
-                                    refine_centres=refine_centres, refine_options=refine_options, decoded=decoded,
-                                    flat_field=flat_field, first_pass=first_pass, bounce_shape=bounce_shape,
-                                    halves=halves, **kwargs)
+        lights = _estimate_in_frame(capture, spheres, progress, workers, halves=halves, **stages, **kwargs)
     if getattr(capture, "camera_model", "pinhole") == "orthographic":  # (a pinhole's outlines are its lens's)
-        lights = widen_for_lens(lights, lens_check(capture, spheres, _photo_shape(capture, decoded)))
+        lights = widen_for_lens(lights, lens_check(capture, spheres, photo_shape(capture, decoded)))
     return lights
 
 
@@ -2571,7 +2592,7 @@ def widen_for_lens(lights, evidence):
     return lights
 
 
-def _photo_shape(capture, decoded: DecodedPhotos | None) -> tuple[int, int]:
+def photo_shape(capture, decoded: DecodedPhotos | None) -> tuple[int, int]:
     """The photos' ``(height, width)``: capture.json's, the decoded photos', or the first photo's."""
     if capture.image_size is not None:
         return int(capture.image_size[1]), int(capture.image_size[0])
@@ -2597,13 +2618,11 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     lights are theirs) serve the tilt search (:func:`_estimate_with_fitted_tilt`)."""
     if model == "near" and len(spheres) < 2:
         raise InputError("model 'near' needs at least 2 spheres to triangulate the light", capture.json_path)
-    shape = _photo_shape(capture, decoded)
+    shape = photo_shape(capture, decoded)
     samples = capture_samples(capture, spheres, shape)
     if bounce == "observed":
         samples = observed_ground_samples(capture, samples, shape)
         bounce, bounce_shape = "calibrated", False
-    from ffls.io.capture import sphere_materials
-
     materials = sphere_materials(capture, len(spheres))
     views = sphere_views(capture, spheres)
     names = list(capture.image_names)
@@ -2652,7 +2671,7 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
     with PhotoFitter(level, capture.scene_center, _fit_options(level, stages["model"], photo_options), workers,
                      None, decoded) as fitter:
         # every photo's sphere values, read once: a frame turns the spheres' normals, not their pixels
-        samples = capture_samples(level, spheres, _photo_shape(capture, decoded))
+        samples = capture_samples(level, spheres, photo_shape(capture, decoded))
         values = [v for _, v in fitter.run([PhotoTask(i, fit=False) for i in range(n)], samples, counted=False)]
 
         def fit(tilt_deg: float, roll_deg: float = 0.0, photos=None):

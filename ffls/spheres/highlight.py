@@ -70,6 +70,7 @@ __all__ = [
     "highlight_direction_Mudge2006",
     "fit_highlight",
     "fit_highlight_samples",
+    "sample_patch",
     "highlight_compactness",
     "classify_sphere",
     "saturated_pixels",
@@ -867,8 +868,10 @@ def _rim_status(view: SphereView, direction, pixel, px, weights, sigma_px: float
     return "ok", float(np.hypot(extent, 0.5 * np.degrees(angle_between(ends[0], ends[1]))))
 
 
-def _patch(rows: np.ndarray, cols: np.ndarray, *arrays):
-    """Scatter per-pixel arrays of a sphere's samples into their bounding-box patch (+ the disc mask)."""
+def sample_patch(rows: np.ndarray, cols: np.ndarray, *arrays):
+    """Scatter per-pixel arrays of a sphere's samples into their bounding-box patch: ``((c0, r0),
+    disc, patches)``, the patch's top-left pixel (column, row), the samples' mask over it and one
+    patch per array (zero elsewhere, of its dtype)."""
     r0, c0 = int(rows.min()), int(cols.min())
     shape = (int(rows.max()) - r0 + 1, int(cols.max()) - c0 + 1)
     disc = np.zeros(shape, dtype=bool)
@@ -908,7 +911,7 @@ def fit_highlight_samples(view: SphereView, samples, grey: np.ndarray, valid: np
     g = np.asarray(grey, dtype=np.float64)
     sat = saturated_pixels(g, valid)
     fin = np.isfinite(g)
-    origin, disc, (img, satp, finp) = _patch(rows, cols, np.where(fin, g, 0.0), sat, fin)
+    origin, disc, (img, satp, finp) = sample_patch(rows, cols, np.where(fin, g, 0.0), sat, fin)
     return fit_highlight(view, img, disc & finp, satp, origin, floor_deg=floor_deg, **kwargs)
 
 
@@ -941,7 +944,7 @@ def highlight_compactness(rows: np.ndarray, cols: np.ndarray, grey: np.ndarray) 
     fin = np.isfinite(g)
     if fin.sum() < 20:
         return float("nan")
-    _, disc, (img,) = _patch(np.asarray(rows)[fin], np.asarray(cols)[fin], g[fin])
+    _, disc, (img,) = sample_patch(np.asarray(rows)[fin], np.asarray(cols)[fin], g[fin])
     med = float(np.median(g[fin]))
     z = img.astype(np.float32)
     num = cv2.blur(z, (3, 3), borderType=cv2.BORDER_CONSTANT)

@@ -88,7 +88,7 @@ reported ``uncertainty_deg`` values are 95% cone radii.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -564,8 +564,6 @@ class ErrorModel:
 
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
-        from dataclasses import replace
-
         return replace(self, centre_deg=tuple(float(x) for x in np.atleast_1d(centre_deg)))
 
     def as_dict(self) -> dict:
@@ -703,8 +701,6 @@ def halves_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndar
     ErrorModel
         ``source`` ``'halves'`` (or the fallback's).
     """
-    from dataclasses import replace
-
     centre = np.zeros(0) if centre_deg is None else np.asarray(centre_deg, dtype=np.float64)
     halves = fit_error_model(residuals, stat_sigma_deg, common_correlation=common_correlation,
                              min_photos=min_photos)
