@@ -263,10 +263,11 @@ def run(args) -> int:
     if spheres is None:  # on the cluster the photos are read there for the fits; here for detection only
         from ffls.spheres.detect import find_spheres_in_capture
 
-        as_stored = decoded is not None and decoded.stored and calibration is not None  # its stats are not linear
-        spheres = (find_spheres_in_capture(cap, workers=args.workers or os.cpu_count() or 1)
-                   if decoded is None or as_stored else
-                   find_spheres_in_capture(cap, stats=decoded.stats, bit_depths=decoded.bit_depths,
+        stats = None if decoded is None else decoded.stats
+        if stats is not None and decoded.stored and calibration is not None:  # of the stored values
+            stats = decoded.linear_stats(cap)  # None: the photos are read again
+        spheres = (find_spheres_in_capture(cap, workers=args.workers or os.cpu_count() or 1) if stats is None else
+                   find_spheres_in_capture(cap, stats=stats, bit_depths=decoded.bit_depths,
                                            workers=args.workers or os.cpu_count() or 1))
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
