@@ -266,7 +266,8 @@ def run(args) -> int:
         stats = None if decoded is None else decoded.stats
         if stats is not None and decoded.stored and calibration is not None:  # of the stored values
             stats = decoded.linear_stats(cap)  # None: the photos are read again
-        spheres = (find_spheres_in_capture(cap, workers=args.workers or os.cpu_count() or 1) if stats is None else
+        spheres = (find_spheres_in_capture(cap) if decoded is None else  # (the cluster: as before)
+                   find_spheres_in_capture(cap, workers=args.workers or os.cpu_count() or 1) if stats is None else
                    find_spheres_in_capture(cap, stats=stats, bit_depths=decoded.bit_depths,
                                            workers=args.workers or os.cpu_count() or 1))
     print(spheres_summary(spheres))
