@@ -504,3 +504,32 @@ def test_unknown_encoding_line_names_the_route_for_a_capture_without_spheres():
     line = unknown_encoding_message(8)
     assert "\n" not in line
     assert "'ffls lights'" in line and "calibration capture" in line and "\"encoding\" record" in line
+
+
+def test_lights_finds_the_spheres_again_on_the_calibrated_photos(linear_captures, tmp_path, monkeypatch):
+    """With no encoding stated, the spheres the lights are estimated with are found on the photos
+    linearised with the calibrated curve (the stored codes in memory), not on the stored values the
+    calibration found them on: a curve moves a limb's half-way step toward its dark side (0.2-0.3
+    px on an anti-aliased sRGB render, ``docs/spheres.md``)."""
+    from ffls.spheres import detect
+    from ffls.spheres.estimate import decode_photos
+
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", 2.2)
+    calls = []
+    real = detect.find_spheres_in_capture
+
+    def spy(capture, *args, **kwargs):
+        calls.append((capture.encoding, kwargs.get("stats")))
+        return real(capture, *args, **kwargs)
+
+    monkeypatch.setattr(detect, "find_spheres_in_capture", spy)
+    assert main(["lights", str(folder), "--no-progress", "--workers", "1"]) == 0
+    encoding, stats = calls[-1]  # the spheres handed to the estimation
+    assert encoding not in ("linear", "auto"), encoding  # the calibrated curve
+    stored = decode_photos(cap.load_capture(folder)).stats.max
+    assert stats is not None and stats.max.shape == stored.shape
+    lit = stored > 0.2
+    # the linear max image: the stored one decoded with the curve (2.2), not the stored values
+    assert np.allclose(stats.max[lit], gamma_decode(stored[lit].astype(np.float64), 2.2), rtol=0.1, atol=0.01)
+    assert not np.allclose(stats.max[lit], stored[lit], rtol=0.1, atol=0.01)

@@ -1411,6 +1411,25 @@ class DecodedPhotos:
                                         dtype=np.float32)[:, 0]
         return linear, codes, depth
 
+    def linear_stats(self, capture):
+        """The detection's reductions (:func:`ffls.spheres.detect.sequence_stats`) of the integer
+        photos kept in memory, linearised with ``capture``'s encoding (e.g. the one calibrated from
+        ``stats``, of the stored values): no photo is read again. None where they are not kept."""
+        from types import SimpleNamespace
+
+        from ffls.radiance.photos import full_scale_share
+
+        if self.raw is None:
+            return None
+        acc = SequenceAccumulator(n_images=self.n)
+        for i in range(self.n):
+            ph = self.photo(i, capture)
+            if ph is None:
+                return None
+            linear, codes, depth = ph
+            acc.add(linear, i, full_scale=full_scale_share(SimpleNamespace(bit_depth=depth, codes=codes)))
+        return acc.result()
+
 
 def _available_memory() -> int:
     try:
