@@ -33,6 +33,7 @@ CRITERIA = {
     "max_center_sigma_px": 0.3,  # standard error of the fitted centre (a well-constrained fit)
     "min_highlight": 1.5,        # a mirror's brightest pixel over its surroundings' 95th percentile (max image)
     "min_light_spread": 0.2,     # spread (10th to 90th percentile) of ln(max / mean) inside 0.8 radii
+    "light_spread_ratio": 0.5,   # and under this share of the round outlines' largest spread
     "min_moving_highlights": 3,  # or highlights of this many photos, each in its own place
 }
 
@@ -310,7 +311,8 @@ def select_spheres(fits, mx, brightest, L, ortho: bool, n_photos, max_residual_p
     ``min_visible`` of it inside), its centre is poorly constrained (standard error above
     ``max_center_sigma_px``), it is coloured (``min_neutral``), the light changes alike all over it
     as on a flat patch of the ground (with at least 3 photos and ``max_over_mean``: the spread of
-    ``ln(max / mean)`` inside it, :func:`light_spread`, below ``min_light_spread``, and, with
+    ``ln(max / mean)`` inside it, :func:`light_spread`, below ``min_light_spread`` and below
+    ``light_spread_ratio`` of the largest spread among the neutral round outlines, and, with
     ``brightest``, the highlights of fewer than ``min_moving_highlights`` photos on it,
     :func:`moving_highlights`; a textured ground's blob, dark or bright, whatever its outline;
     judged after the other tests), its shading does not change
@@ -406,6 +408,14 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts, ma
         if all(np.hypot(*(ft.center_px - o[0].center_px)) > 0.8 * (ft.radius_px + o[0].radius_px) for o in distinct):
             distinct.append(t)
     rejected, ok = [], []
+    # the spread a sphere shows depends on the lights and on the values' encoding (an unstated camera
+    # curve's stored codes compress it: four white spheres under 16 lights, filmic codes, 0.18-0.24):
+    # a flat candidate is one whose spread is also well under the capture's most varied outline's
+    # (a white, grey or chrome one: the object's coloured ball under the same lights varied 0.40)
+    spreads = {id(t[0]): light_spread(max_over_mean, t[0]) for t in distinct} if (
+        max_over_mean is not None and n_photos >= 3) else {}
+    top = max((spreads[id(t[0])] for t in distinct if spreads.get(id(t[0])) is not None
+               and (t[1] is None or t[1] >= crit["min_neutral"])), default=None)
     for ft, neutral, rows, cols in distinct:
         where = f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius {ft.radius_px:.0f} px"
         if ft.visible_fraction < min_visible:
@@ -426,14 +436,15 @@ def _judged_alone(round_, brightest, L, n_photos, min_visible, colour_counts, ma
               and (chg := shading_change(brightest, L, rows, cols)) < crit["min_shading_change"]):
             rejected.append(f"{where}: its shading does not change across the {n_photos} photos as a sphere's does"
                             f" (the same photo is brightest on {1 - chg:.0%} of it)")
-        elif (max_over_mean is not None and n_photos >= 3
-              and (spread := light_spread(max_over_mean, ft)) is not None and spread < crit["min_light_spread"]
+        elif ((spread := spreads.get(id(ft))) is not None and spread < crit["min_light_spread"]
+              and top is not None and spread < crit["light_spread_ratio"] * top
               and (brightest is None or (hls := moving_highlights(max_over_mean, brightest, L, ft))
                    < crit["min_moving_highlights"])):
             moving = "" if brightest is None else f", and highlights of {hls} photos"
             rejected.append(f"{where}: the light changes alike all over it, as on a flat patch of the ground (the"
                             f" spread of ln(max / mean) over the {n_photos} photos is {spread:.2f} inside it"
-                            f" < {crit['min_light_spread']}{moving}), not a sphere")
+                            f" < {crit['min_light_spread']}, and under {crit['light_spread_ratio']:g} x the"
+                            f" {top:.2f} of the neutral round outline it varies most on{moving}), not a sphere")
         else:
             ok.append(ft)
     return ok, rejected
