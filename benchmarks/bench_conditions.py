@@ -501,33 +501,47 @@ def cached_runs(a, flag: str, folders=None):
             if not (a.only and not any(o in name for o in a.only)) and (folder / "lights_estimated.json").exists()]
 
 
-def main_truth_check(a) -> None:
-    """``--truth-check``: :func:`truth_check` on each cached run; a Markdown table and JSON."""
-    jobs = cached_runs(a, "--truth-check")
+def check_table(a, benchmark: str, header: str, rows, cells, footer: str | None = None) -> None:
+    """A check's Markdown table, printed a row at a time as ``rows`` yields ``(lead, result)`` (the
+    row's leading cells and the check's result; ``cells(result)`` the rest, or the reason it was
+    skipped), then the results as JSON."""
+    n = header.count("|") - 1
+    print(header)
+    print("|" + "---|" * n)
     out = []
-    print("| condition | s | tau | sphere error / model sd | pair correlation | photo / independent variance | "
-          "photos' RMS error | independent part | common bound | cone factor | factor needed | "
-          "needed, independent part only | shape factor | away from layout centre: mean, share | "
-          "actual centre error / g, per sphere | sphere coverage (without common mode) | photo coverage |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for name, folder in jobs:
-        r = {"condition": name, **truth_check(folder)}
+    for lead, r in rows:
         out.append(r)
         if "skipped" in r:
-            print(f"| {name} | skipped: {r['skipped']} | | | | | | | | | | | | | | | |", flush=True)
-            continue
+            print("| " + " | ".join([*lead, f"skipped: {r['skipped']}"]) + " |" + " |" * (n - len(lead) - 1),
+                  flush=True)
+        else:
+            print("| " + " | ".join([*lead, *cells(r)]) + " |", flush=True)
+    if footer:
+        print(footer)
+    write_json(a.out, {"benchmark": benchmark, **host_info(), "resolution": a.res, "results": out})
+
+
+def main_truth_check(a) -> None:
+    """``--truth-check``: :func:`truth_check` on each cached run; a Markdown table and JSON."""
+    def cells(r):
         pc = "-" if r["pair_correlation"] is None else f"{r['pair_correlation']:+.2f}"
         cr = "-" if not r["centre_ratio"] else " / ".join("-" if x is None else f"{x:.1f}" for x in r["centre_ratio"])
         aw = "-" if r["away_mean_deg"] is None else f"{r['away_mean_deg']:+.2f}, {100 * r['away_share']:.0f}%"
-        print(f"| {name} | {r['scale']:.2f} | {r['floor']:.2f} | {r['sphere_ratio']:.2f} | {pc} | "
-              f"{r['photo_over_independent']:.2f} | {r['photo_rms_deg']:.3f} | {r['independent_deg']:.3f} | "
-              f"{r['common_deg']:.3f} | {r['cone_factor']:.2f} | {r['needed_factor']:.2f} | "
-              f"{r['needed_factor_independent']:.2f} | {r['shape_factor']:.2f} | {aw} | {cr} | "
-              f"{100 * r['sphere_coverage']:.1f}% ({100 * r['sphere_coverage_independent']:.1f}%) | "
-              f"{100 * r['photo_coverage']:.1f}% |", flush=True)
-    print("\nper-axis degrees; medians over the accepted photos with 2+ spheres (truth_check)")
-    write_json(a.out, {"benchmark": "bench_conditions --truth-check", **host_info(), "resolution": a.res,
-                       "results": out})
+        return [f"{r['scale']:.2f}", f"{r['floor']:.2f}", f"{r['sphere_ratio']:.2f}", pc,
+                f"{r['photo_over_independent']:.2f}", f"{r['photo_rms_deg']:.3f}", f"{r['independent_deg']:.3f}",
+                f"{r['common_deg']:.3f}", f"{r['cone_factor']:.2f}", f"{r['needed_factor']:.2f}",
+                f"{r['needed_factor_independent']:.2f}", f"{r['shape_factor']:.2f}", aw, cr,
+                f"{100 * r['sphere_coverage']:.1f}% ({100 * r['sphere_coverage_independent']:.1f}%)",
+                f"{100 * r['photo_coverage']:.1f}%"]
+
+    check_table(a, "bench_conditions --truth-check",
+                "| condition | s | tau | sphere error / model sd | pair correlation | photo / independent variance | "
+                "photos' RMS error | independent part | common bound | cone factor | factor needed | "
+                "needed, independent part only | shape factor | away from layout centre: mean, share | "
+                "actual centre error / g, per sphere | sphere coverage (without common mode) | photo coverage |",
+                (([name], {"condition": name, **truth_check(folder)})
+                 for name, folder in cached_runs(a, "--truth-check")), cells,
+                "\nper-axis degrees; medians over the accepted photos with 2+ spheres (truth_check)")
 
 
 #: The directions a per-photo bias is resolved along (:func:`bias_check`): from each sphere toward
@@ -664,24 +678,16 @@ def bias_check(folder: Path, direction: str = "toward_centre") -> dict:
 def main_bias_check(a) -> None:
     """``--bias-check``: :func:`bias_check` (both :data:`BIAS_DIRECTIONS`) on each cached run, or on
     the ``--folders`` given; a Markdown table and JSON."""
-    jobs = cached_runs(a, "--bias-check", a.folders or [])
-    out = []
-    print("| condition | direction | photos (2+ spheres) | explained | photo / independent variance: errors, "
-          "remainder | median abs(sum w h) | p | coverage (median cone) | with the term |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for name, folder in jobs:
-        for direction in BIAS_DIRECTIONS:
-            r = {"condition": name, **bias_check(folder, direction)}
-            out.append(r)
-            if "skipped" in r:
-                print(f"| {name} | {direction} | skipped: {r['skipped']} | | | | | | |", flush=True)
-                continue
-            print(f"| {name} | {direction} | {r['photos']} ({r['multi']}) | {100 * r['explained']:.0f}% | "
-                  f"{r['photo_over_independent']:.2f}, {r['photo_over_independent_remainder']:.2f} | "
-                  f"{r['median_hbar']:.2f} | {r['p']:.1e} | {100 * r['coverage']:.1f}% ({r['median_cone_deg']:.2f}) | "
-                  f"{100 * r['coverage_term']:.1f}% ({r['median_cone_term_deg']:.2f}) |", flush=True)
-    write_json(a.out, {"benchmark": "bench_conditions --bias-check", **host_info(), "resolution": a.res,
-                       "results": out})
+    check_table(a, "bench_conditions --bias-check",
+                "| condition | direction | photos (2+ spheres) | explained | photo / independent variance: errors, "
+                "remainder | median abs(sum w h) | p | coverage (median cone) | with the term |",
+                (([name, direction], {"condition": name, **bias_check(folder, direction)})
+                 for name, folder in cached_runs(a, "--bias-check", a.folders or []) for direction in BIAS_DIRECTIONS),
+                lambda r: [f"{r['photos']} ({r['multi']})", f"{100 * r['explained']:.0f}%",
+                           f"{r['photo_over_independent']:.2f}, {r['photo_over_independent_remainder']:.2f}",
+                           f"{r['median_hbar']:.2f}", f"{r['p']:.1e}",
+                           f"{100 * r['coverage']:.1f}% ({r['median_cone_deg']:.2f})",
+                           f"{100 * r['coverage_term']:.1f}% ({r['median_cone_term_deg']:.2f})"])
 
 
 #: The file in each cached render's folder naming the condition it was rendered for
@@ -959,23 +965,15 @@ def main(argv=None):
 
 def main_shared_check(a) -> None:
     """``--shared-check``: :func:`shared_check` on each cached run; a Markdown table and JSON."""
-    jobs = cached_runs(a, "--shared-check")
-    out = []
-    print("| condition | photos | encoding exponent (deg) | ground ratios' SE (deg) | ground ratios' spread (deg) | "
-          "common-mode bound now (deg) | photos' RMS error (deg) | mean elevation error (deg) |")
-    print("|---|---|---|---|---|---|---|---|")
-    for name, folder in jobs:
-        r = {"condition": name, **shared_check(folder)}
-        out.append(r)
-        if "skipped" in r:
-            print(f"| {name} | skipped: {r['skipped']} | | | | | | |", flush=True)
-            continue
-        print(f"| {name} | {r['photos']} | {r['encoding_deg']:.4f} | {r['ratio_deg']:.4f} | "
-              f"{r['ratio_spread_deg']:.3f} | {r['common_deg']:.3f} | {r['photo_rms_deg']:.3f} | "
-              f"{r['elevation_bias_deg']:+.2f} |", flush=True)
-    print("\nper-axis standard deviations, medians over the accepted photos; RMS error per axis, from the truth")
-    write_json(a.out, {"benchmark": "bench_conditions --shared-check", **host_info(), "resolution": a.res,
-                       "results": out})
+    check_table(a, "bench_conditions --shared-check",
+                "| condition | photos | encoding exponent (deg) | ground ratios' SE (deg) | ground ratios' spread (deg) | "
+                "common-mode bound now (deg) | photos' RMS error (deg) | mean elevation error (deg) |",
+                (([name], {"condition": name, **shared_check(folder)})
+                 for name, folder in cached_runs(a, "--shared-check")),
+                lambda r: [str(r["photos"]), f"{r['encoding_deg']:.4f}", f"{r['ratio_deg']:.4f}",
+                           f"{r['ratio_spread_deg']:.3f}", f"{r['common_deg']:.3f}", f"{r['photo_rms_deg']:.3f}",
+                           f"{r['elevation_bias_deg']:+.2f}"],
+                "\nper-axis standard deviations, medians over the accepted photos; RMS error per axis, from the truth")
 
 
 if __name__ == "__main__":
