@@ -25,14 +25,13 @@ import cv2
 import numpy as np
 
 from common import host_info, set_probe_sphere, write_json
-from ffls.camera.projection import project_points
 from ffls.errors import InputError
 from ffls.io.images import write_exr
 from ffls.io.probe import load_probe
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.bracket import view_radiance
 from ffls.probes.locate import locate_sphere
-from ffls.synth.probe import look_at, write_mirror_probe
+from ffls.synth.probe import off_axis_view, write_mirror_probe
 from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 
@@ -71,13 +70,8 @@ def diffuse_rows(tmp: Path, seeds=range(1, 7)) -> list:
 
 def mirror_rows(tmp: Path) -> list:
     rows = []
-    f, d, center = 400.0, 1.2, np.array([0.0, 0.0, 0.1])
-    eye = center + d * np.array([0.94, 0.0, 0.34])
-    T0 = look_at(eye, center)
-    T = look_at(eye, center + 70.0 / f * d * T0[:3, 0] - 10.0 / f * d * T0[:3, 1])
-    K = np.array([[f, 0, 159.5], [0, f, 119.5], [0, 0, 1.0]])
-    Ti = np.linalg.inv(T)
-    c_true = project_points((Ti[:3, :3] @ center + Ti[:3, 3])[None], K, None)[0]
+    center = np.array([0.0, 0.0, 0.1])
+    K, T, c_true = off_axis_view(center, 1.2, 400.0, (70.0, 10.0))
     for name in ("courtyard", "night", "studio", "sunrise"):
         folder = tmp / f"mirror_{name}"
         write_mirror_probe(folder, builtin_lightmap(name), (320, 240), "pinhole", K, None, T, center, 0.1,

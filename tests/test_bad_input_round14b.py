@@ -136,22 +136,16 @@ def test_an_unhinted_probe_ball_too_small_for_a_probe_is_refused(tmp_path):
     ``diffuse_ball`` refuses them; without blur the ball is still found (within 1 px)."""
     import cv2
 
-    from ffls.camera.projection import project_points
     from ffls.errors import InputError
     from ffls.io.images import read_image, write_exr
     from ffls.io.probe import load_probe
     from ffls.lightmaps.lightmap import builtin_lightmap
     from ffls.probes.bracket import view_radiance
     from ffls.probes.locate import locate_sphere
-    from ffls.synth.probe import look_at, write_mirror_probe
+    from ffls.synth.probe import off_axis_view, write_mirror_probe
 
-    f, d, centre = 400.0, 1.2, np.array([0.0, 0.0, 0.1])
-    eye = centre + d * np.array([0.94, 0.0, 0.34])
-    T0 = look_at(eye, centre)
-    T = look_at(eye, centre + 70.0 / f * d * T0[:3, 0] - 10.0 / f * d * T0[:3, 1])
-    K = np.array([[f, 0, 159.5], [0, f, 119.5], [0, 0, 1.0]])
-    Ti = np.linalg.inv(T)
-    c_true = project_points((Ti[:3, :3] @ centre + Ti[:3, 3])[None], K, None)[0]
+    centre = np.array([0.0, 0.0, 0.1])
+    K, T, c_true = off_axis_view(centre, 1.2, 400.0, (70.0, 10.0))
 
     def locate(blurred):
         folder = tmp_path / ("blurred" if blurred else "sharp")

@@ -56,6 +56,26 @@ def look_at(eye, target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0)) -> np.ndarray:
     return T
 
 
+def off_axis_view(center, distance: float, focal_px: float, offset_px, size=(320, 240),
+                  direction=(0.94, 0.0, 0.34)):
+    """A pinhole camera ``distance`` from ``center`` along ``direction`` (from the +x side, 20 deg up),
+    turned so that ``center`` lies ``offset_px`` (right, up) off its principal point: a probe ball
+    photographed off the lens axis, as a hand-held shot frames it.
+
+    Returns ``(K, world_from_camera, center_px)``: the (3, 3) intrinsics of a ``size`` (W, H) image,
+    the (4, 4) pose and ``center``'s projection (2,)."""
+    from ffls.camera.projection import project_points
+
+    center = np.asarray(center, dtype=np.float64)
+    d, f = float(distance), float(focal_px)
+    eye = center + d * np.asarray(direction, dtype=np.float64)
+    T0 = look_at(eye, center)
+    T = look_at(eye, center + offset_px[0] / f * d * T0[:3, 0] - offset_px[1] / f * d * T0[:3, 1])
+    K = np.array([[f, 0, 0.5 * (size[0] - 1)], [0, f, 0.5 * (size[1] - 1)], [0, 0, 1.0]])
+    Ti = np.linalg.inv(T)
+    return K, T, project_points((Ti[:3, :3] @ center + Ti[:3, 3])[None], K, None)[0]
+
+
 def render_mirror_ball(lightmap, size=(256, 256), camera_model: str = "pinhole", K=None, dist=None,
                        world_from_camera=None, center=(0.0, 0.0, 0.0), radius: float = 0.1, center_px=None,
                        radius_px=None, supersample: int = 4, reflectance: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
