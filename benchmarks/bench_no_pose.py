@@ -6,7 +6,9 @@ read noise), cuts each ``capture.json`` to the images and a camera without ``wor
 (``--camera orthographic``: ``{"model": "orthographic"}``; ``pinhole``: the render's ``K``), runs
 ``ffls lights --workers 1`` with the given executable and scores the lights against ``truth.json``
 in the camera's frame: accepted, median / max error, the share inside the 95% cones, the
-camera tilt (and roll) found and the wall time of ``ffls lights`` (docs/spheres.md, "Without the
+camera tilt (and roll) found and the wall time of ``ffls lights``; and in the scene's frame (the
+render's world, +Y the camera's forward, where the fitted tilt's error counts: the lights as
+lights.json's ``frame`` gives them, or turned by the tilt found) with the accepted lights at z >= 0 (docs/spheres.md, "Without the
 camera's pose"). ``--elevation DEG`` renders the camera that far down (default 30; a copy stand
 90), ``--roll DEG`` renders with the camera turned about its optical axis (``ffls synth
 --camera-roll``: a tripod that is not level); ``--fit-roll`` runs ``ffls lights --fit-roll``.
@@ -28,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
+from ffls.spheres.estimate import tilted_world_from_camera
 
 
 def _render(folder: Path, seed: int, lens: str, resolution: int, roll: float, elevation: float) -> Path:
@@ -55,21 +58,40 @@ def _without_pose(cal: Path, camera: str, pose: bool) -> np.ndarray:
     return np.array(cam["world_from_camera"])[:3, :3] if pose else DEFAULT_WORLD_FROM_CAMERA[:3, :3]
 
 
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))))
+
+
 def _score(cal: Path, lights: Path, Rw: np.ndarray, Rm: np.ndarray) -> dict:
+    """Errors in the camera's frame (the fitted tilt's error cancels) and in the scene's (up +Z,
+    azimuth from the camera: the render's world, whose +Y is the camera's forward; the lights as
+    the tilt fitted turns them: the fitted tilt's error counts)."""
     truth = json.loads((cal / "truth.json").read_text())
-    true_cam = dict(zip(truth["images"], np.asarray(truth["directions"]) @ Rw))  # world -> camera: R^T d
-    got = json.loads(lights.read_text())["lights"]
-    err, inside, tilt, roll = [], [], None, None
+    true_world = dict(zip(truth["images"], np.asarray(truth["directions"])))
+    doc = json.loads(lights.read_text())
+    got = doc["lights"]
+    if (doc.get("frame") or {}).get("world_from_camera") is not None:  # the lights' own frame (the fitted one)
+        Rm = np.asarray(doc["frame"]["world_from_camera"])[:3, :3]
+    tilt = next((e["camera_tilt_deg"] for e in got if e.get("camera_tilt_deg") is not None), None)
+    roll = next((e["camera_roll_deg"] for e in got if e.get("camera_roll_deg") is not None), None)
+    # the scene's frame as the fit found it (the capture's own when stated or nothing was fitted)
+    Rs = Rm if tilt is None or "frame" in doc else tilted_world_from_camera(tilt, roll or 0.0)[:3, :3]
+    err, inside, werr, winside = [], [], [], []
     for e in got:
-        tilt = e.get("camera_tilt_deg", tilt)
-        roll = e.get("camera_roll_deg", roll)
         if e.get("status", "ok") != "ok":
             continue
-        d = Rm.T @ np.asarray(e["direction"])
-        err.append(float(np.degrees(np.arccos(np.clip(true_cam[e["image"]] @ d / np.linalg.norm(d), -1, 1)))))
+        d = Rm.T @ np.asarray(e["direction"])  # camera frame
+        t = true_world[e["image"]]
+        err.append(_angle(Rw.T @ t, d))
         inside.append(err[-1] <= e["uncertainty_deg"])
+        werr.append(_angle(t, Rs @ d))
+        winside.append(werr[-1] <= e["uncertainty_deg"])
     return {"accepted": f"{len(err)}/{len(got)}", "median_deg": float(np.median(err)), "max_deg": float(max(err)),
-            "inside": float(np.mean(inside)), "tilt_deg": tilt, "roll_deg": roll}
+            "inside": float(np.mean(inside)), "tilt_deg": tilt, "roll_deg": roll,
+            "world_median_deg": float(np.median(werr)), "world_max_deg": float(max(werr)),
+            "world_inside": float(np.mean(winside)),
+            "upper": f"{sum(float(np.asarray(e['direction'])[2]) >= 0 for e in got if e.get('status', 'ok') == 'ok')}"
+                     f"/{len(err)}"}
 
 
 def main(argv=None) -> int:
@@ -103,7 +125,9 @@ def main(argv=None) -> int:
             tilt = "-" if r["tilt_deg"] is None else f"{r['tilt_deg']:.1f}"
             roll = "-" if r["roll_deg"] is None else f"{r['roll_deg']:.1f}"
             print(f"seed {s}: {r['accepted']} {r['median_deg']:.2f} / {r['max_deg']:.2f} deg, "
-                  f"{r['inside']:.0%} in the cones, tilt {tilt}, roll {roll}, {wall:.1f} s", flush=True)
+                  f"{r['inside']:.0%} in the cones, tilt {tilt}, roll {roll}; in the scene's frame "
+                  f"{r['world_median_deg']:.2f} / {r['world_max_deg']:.2f} deg, {r['world_inside']:.0%} in the "
+                  f"cones, {r['upper']} at z >= 0; {wall:.1f} s", flush=True)
     if a.out:
         Path(a.out).write_text(json.dumps({"args": vars(a), "rows": rows}, indent=1))
     return 0

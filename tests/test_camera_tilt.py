@@ -35,7 +35,7 @@ def test_a_rolled_frame_is_synths_rolled_camera():
 def _without_pose(root, *roll, elevation=30.0):
     """One grey ball resting on the ground, a camera ``elevation`` deg above the horizon (``ffls synth``'s,
     ``roll``: ``--camera-roll``), capture.json without its ``world_from_camera``; truth turned into the
-    default frame."""
+    camera's frame."""
     from ffls.cli import main
 
     assert main(["synth", str(root / "pair"), "--calibration-pair", "--spheres", "1", "--sphere-material", "grey",
@@ -46,8 +46,7 @@ def _without_pose(root, *roll, elevation=30.0):
     Rw = np.array(doc["camera"].pop("world_from_camera"))[:3, :3]
     (cap / "capture.json").write_text(json.dumps(doc))
     truth = json.loads((cap / "truth.json").read_text())
-    to_default = DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ Rw.T
-    return cap, {n: to_default @ d for n, d in zip(truth["images"], truth["directions"])}
+    return cap, {n: Rw.T @ d for n, d in zip(truth["images"], truth["directions"])}
 
 
 @pytest.fixture(scope="module")
@@ -56,25 +55,50 @@ def grey_ball_without_pose(tmp_path_factory):
 
 
 def _errors(out, truth):
-    got = json.loads(out.read_text())["lights"]
+    """The lights of ``out`` against ``truth`` (camera frame): each turned to the camera's frame from
+    the lights' (their ``frame`` record, a fitted tilt's, or the capture's default)."""
+    doc = json.loads(out.read_text())
+    R = np.asarray((doc.get("frame") or {"world_from_camera": DEFAULT_WORLD_FROM_CAMERA})["world_from_camera"])
+    got = doc["lights"]
     ok = [e for e in got if e["status"] == "ok"]
     assert len(ok) == len(got)
-    err = np.array([np.degrees(np.arccos(np.clip(np.dot(truth[e["image"]], e["direction"]), -1, 1))) for e in ok])
+    err = np.array([np.degrees(np.arccos(np.clip(truth[e["image"]] @ R[:3, :3].T @ e["direction"], -1, 1)))
+                    for e in ok])
     assert all(a <= e["uncertainty_deg"] for a, e in zip(err, ok)), (err, [e["uncertainty_deg"] for e in ok])
     return got, err
 
 
-def test_a_copy_stand_camera_is_found_past_80_deg(tmp_path):
+def test_a_copy_stand_camera_is_found_past_80_deg(tmp_path, capfd):
     """A camera 88 deg down (a copy stand, an RTI dome's camera): the search reaches 90 (it stopped at
-    80, the grid's end: the ground's normal 8 deg off), and the lights lie inside their cones."""
+    80, the grid's end: the ground's normal 8 deg off), and the lights lie inside their cones.
+
+    The lights are in the ground's frame the fit found (``frame`` in lights.json), not the image's:
+    there 5 of the 10 lay below the upper hemisphere (said by the coverage line; ``relight`` gave the
+    sky's light to the wrong cells). In the scene's frame the fitted tilt's error counts too, and
+    the truths still lie in the cones; ``--lp`` writes the camera's frame."""
     from ffls.cli import main
+    from ffls.io.capture import read_lp
 
     cap, truth = _without_pose(tmp_path, elevation=88.0)
-    out = tmp_path / "lights.json"
-    assert main(["lights", str(cap), "-o", str(out), "--workers", "1", "--no-progress"]) == 0
+    out, lp = tmp_path / "lights.json", tmp_path / "lights.lp"
+    capfd.readouterr()
+    assert main(["lights", str(cap), "-o", str(out), "--workers", "1", "--no-progress", "--lp", str(lp)]) == 0
+    err_lines = capfd.readouterr().err
     got, err = _errors(out, truth)
     tilts = {e["camera_tilt_deg"] for e in got}
-    assert len(tilts) == 1 and abs(tilts.pop() - 88.0) < 3.0
+    tilt = tilts.pop()
+    assert not tilts and abs(tilt - 88.0) < 3.0
+    doc = json.loads(out.read_text())
+    assert np.allclose(doc["frame"]["world_from_camera"], tilted_world_from_camera(tilt), atol=1e-3)  # (2 decimals)
+    assert all(e["direction"][2] >= 0 for e in got)
+    assert "outside the capture's upper hemisphere" not in err_lines and "ground's frame" in err_lines, err_lines
+    scene = tilted_world_from_camera(88.0)[:3, :3]  # synth's world: +Y the camera's forward over the ground
+    for e in got:
+        a = np.degrees(np.arccos(np.clip(scene @ truth[e["image"]] @ e["direction"], -1, 1)))
+        assert a <= e["uncertainty_deg"], (e["image"], a, e["uncertainty_deg"])
+    names, lp_dirs = read_lp(lp)
+    cam = {n: np.diag([1.0, -1.0, -1.0]) @ d for n, d in zip(names, lp_dirs)}  # .lp: x right, y up, z to camera
+    assert max(np.degrees(np.arccos(np.clip(truth[n] @ d, -1, 1))) for n, d in cam.items()) < 1.0
 
 
 def test_a_rolled_camera_has_its_roll_fitted(tmp_path, capfd):
@@ -216,3 +240,31 @@ def test_the_search_reads_once_and_fits_a_sample(grey_ball_without_pose, monkeyp
     lights = estimate.estimate_lights(cap, progress=False, workers=1)
     assert sizes[-1] == len(cap.image_names) == 10 and set(sizes[:-1]) == {4} and len(fitters) == 1
     assert len(lights.image_names) == 10 and all("camera_tilt_deg" in e for e in lights.extra)
+
+
+def test_the_lights_frame_round_trips_and_a_bad_one_is_named(tmp_path):
+    """``lights.json``'s ``frame`` (the lights' world frame where a fitted tilt gave it) is kept on
+    load and when matched to a capture; a frame that is not a rigid transform is named in one line."""
+    from ffls.errors import InputError
+    from ffls.io.capture import Lights, load_lights, save_lights
+
+    M = tilted_world_from_camera(60.0, 2.0)
+    li = Lights(["a.png", "b.png"], [[0.0, 0.0, 1.0], [0.0, 0.6, 0.8]],
+                frame={"world_from_camera": M, "source": "the camera's tilt fitted to the spheres' shading"})
+    save_lights(li, tmp_path / "l.json")
+    back = load_lights(tmp_path / "l.json")
+    assert np.allclose(back.frame["world_from_camera"], M) and back.frame["source"].startswith("the camera's")
+    # applied to another capture's images (by order: no name matches): the directions keep their frame
+    from ffls.io.capture import Capture, load_lights_any
+
+    other = load_lights_any(tmp_path / "l.json", Capture(tmp_path, ["x.png", "y.png"]))
+    assert other.image_names == ["x.png", "y.png"] and np.allclose(other.frame["world_from_camera"], M)
+    doc = json.loads((tmp_path / "l.json").read_text())
+    doc["frame"]["world_from_camera"][0][0] = 3.0
+    (tmp_path / "l.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="frame.world_from_camera: not a rigid transform"):
+        load_lights(tmp_path / "l.json")
+    doc["frame"] = [1, 2]
+    (tmp_path / "l.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="frame: expected an object"):
+        load_lights(tmp_path / "l.json")

@@ -351,10 +351,10 @@ def tilt_note(lights, fit_roll: bool = False) -> str:
     else:
         roll = "taken as level (--fit-roll fits its roll)"
     return (f"capture.json gives no camera.world_from_camera: the ground under the spheres was fitted to their "
-            f"shading, the camera looking {fitted['camera_tilt_deg']:.1f} deg down, {roll} (the lights stay in "
-            f"the image's frame: image up "
-            f"+Z; docs/spheres.md, 'Without the camera's pose'); to fix it, give the pose, or only its tilt "
-            f"(docs/formats.md, \"The camera's tilt\")")
+            f"shading, the camera looking {fitted['camera_tilt_deg']:.1f} deg down, {roll}; the lights are in "
+            f"that ground's frame (+Z its normal, +X the image's right, +Y the camera's forward over the ground; "
+            f"\"frame\" in lights.json; docs/spheres.md, 'Without the camera's pose'); to fix it, give the pose, "
+            f"or only its tilt (docs/formats.md, \"The camera's tilt\")")
 
 
 def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers: int = 1):
@@ -399,8 +399,9 @@ def calibrate_if_unknown(capture, progress: bool = False, decoded=None, workers:
 def export_lp(lights, capture, path) -> str:
     """Write the accepted ``lights`` of ``capture`` as an RTI ``.lp`` file; returns the line to print.
 
-    Directions go to the ``.lp`` frame with the capture's ``world_from_camera``
-    (:func:`ffls.io.capture.world_to_lp`); rejected lights are left out (``.lp`` has no status).
+    Directions go to the ``.lp`` frame with the camera's pose in the lights' frame: ``lights.frame``'s
+    (a fitted tilt) or else the capture's ``world_from_camera`` (:func:`ffls.io.capture.world_to_lp`);
+    rejected lights are left out (``.lp`` has no status).
     """
     from ffls.errors import InputError
     from ffls.io.capture import world_to_lp, write_lp
@@ -408,6 +409,7 @@ def export_lp(lights, capture, path) -> str:
     idx, dirs = lights.accepted()
     if not len(idx):
         raise InputError("no accepted light to write", path)
-    write_lp(path, [lights.image_names[i] for i in idx], world_to_lp(dirs, capture.world_from_camera))
+    wfc = capture.world_from_camera if lights.frame is None else lights.frame["world_from_camera"]
+    write_lp(path, [lights.image_names[i] for i in idx], world_to_lp(dirs, wfc))
     left = len(lights) - len(idx)
     return f"wrote {path} ({len(idx)} lights" + (f"; {left} rejected left out)" if left else ")")

@@ -781,7 +781,7 @@ _EXTRA_KEYS = {"sphere_material", "truth", "mask"}
 
 
 #: The keys of ``lights.json``: top level, and each light's (``ffls lights`` writes the last five)
-_LIGHTS_KEYS = {"format", "version", "lights", "encoding", "uncertainty", "flat_field"}
+_LIGHTS_KEYS = {"format", "version", "lights", "encoding", "uncertainty", "flat_field", "frame"}
 _LIGHT_KEYS = {"image", "direction", "position", "status", "reason", "uncertainty_deg", "model", "used_spheres",
                "spheres", "chi2", "dof", "camera_tilt_deg", "camera_roll_deg"}
 
@@ -883,6 +883,13 @@ class Lights:
         ``"flat_field"`` record: :meth:`ffls.spheres.estimate.FlatField.as_dict`, e.g. ``strength``,
         ``p``, ``applied``, and per sphere its ``gradients`` and freely ``measured`` gradients);
         kept as read, None when absent.
+    frame : dict or None
+        The world frame of the directions where it is not the capture's (the top-level ``"frame"``
+        record): ``world_from_camera`` ((4, 4) float64, the camera's pose in that frame) and
+        ``source`` (str, e.g. ``'camera tilt fitted to the spheres' shading'``). ``ffls lights``
+        writes it for a capture without ``camera.world_from_camera`` whose camera's tilt it fitted:
+        the lights are then in the scene's frame (+Z the ground's normal), not the image's. None:
+        the capture's frame.
     """
 
     image_names: list
@@ -896,6 +903,7 @@ class Lights:
     path: Path | None = field(default=None, compare=False)
     uncertainty: dict | None = None
     flat_field: dict | None = None
+    frame: dict | None = None
 
     def __post_init__(self):
         if self.encoding is not None:
@@ -947,6 +955,8 @@ class Lights:
             doc["uncertainty"] = dict(self.uncertainty)
         if self.flat_field is not None:
             doc["flat_field"] = dict(self.flat_field)
+        if self.frame is not None:
+            doc["frame"] = {**self.frame, "world_from_camera": np.asarray(self.frame["world_from_camera"]).tolist()}
         doc["lights"] = lights
         return doc
 
@@ -1139,11 +1149,18 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
     flat = doc.get("flat_field")
     if "flat_field" in doc and not isinstance(flat, dict):
         j.fail("flat_field", f"expected an object, got {_short(flat)}")
+    frame = doc.get("frame")
+    if "frame" in doc:
+        if not isinstance(frame, dict):
+            j.fail("frame", f"expected an object, got {_short(frame)}")
+        frame = {**frame, "world_from_camera": _rigid(j, j.require(frame, "world_from_camera", "frame: "),
+                                                      "frame.world_from_camera")}
     order = np.arange(len(names)) if capture is None else _order_to_capture(j, names, capture)
     return Lights(
         encoding=record,
         uncertainty=uncertainty,
         flat_field=flat,
+        frame=frame,
         image_names=[names[i] for i in order],
         directions=np.array(dirs)[order],
         positions=np.array(pos)[order],
@@ -1465,6 +1482,7 @@ def _select(lights: Lights, order) -> Lights:
         reasons=[lights.reasons[i] for i in order],
         extra=[lights.extra[i] for i in order],
         encoding=lights.encoding,
+        frame=lights.frame,
     )
 
 

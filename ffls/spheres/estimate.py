@@ -2315,6 +2315,10 @@ ROLL_EVIDENCE = 0.05
 TILT_SEARCH_PHOTOS = 24
 
 
+#: ``Lights.frame['source']`` of lights in the frame of a fitted camera tilt (:func:`estimate_lights`).
+FITTED_FRAME_SOURCE = "the camera's tilt fitted to the spheres' shading"
+
+
 def tilted_world_from_camera(tilt_deg: float, roll_deg: float = 0.0) -> np.ndarray:
     """The ``world_from_camera`` of a camera at the origin looking ``tilt_deg`` degrees below the
     horizon, turned ``roll_deg`` about its optical axis (positive dips the image's right: the
@@ -2448,27 +2452,6 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, roll=ROLL_SEARCH_DEG,
     return tilt, float("nan"), tried
 
 
-def _lights_to_frame(lights, R: np.ndarray):
-    """``lights`` with its directions, positions and the spheres' directions and centres turned by the
-    rotation ``R`` (3x3): from one world frame to another around the same origin."""
-    dirs = lights.directions @ R.T
-    pos = None if lights.positions is None else lights.positions @ R.T
-    extra = []
-    for e in lights.extra or ():
-        e = dict(e)
-        if e.get("spheres"):
-            sph = []
-            for r in e["spheres"]:
-                r = dict(r)
-                for key in ("direction", "center", "position"):
-                    if r.get(key) is not None:
-                        r[key] = (R @ np.asarray(r[key], dtype=np.float64)).tolist()
-                sph.append(r)
-            e["spheres"] = sph
-        extra.append(e)
-    return replace(lights, directions=dirs, positions=pos, extra=extra if lights.extra is not None else None)
-
-
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
                     model: str = "auto", bounce: str = "calibrated", refine_centres: bool = True,
                     refine_options: dict | None = None, decoded: DecodedPhotos | None = None,
@@ -2524,8 +2507,9 @@ def estimate_lights(capture, spheres=None, progress: bool = True, workers: int |
         Where the capture gives no ``world_from_camera`` and its lights cover the upper hemisphere
         (over a ground; ``model`` not ``'near'``), fit the camera's tilt (and with ``fit_roll`` its
         roll, where it shows), and so the ground's normal under the spheres, to the matte spheres' shading
-        (:func:`fit_camera_tilt`; False: the image's up is the world's). The lights stay in the
-        capture's default frame.
+        (:func:`fit_camera_tilt`; False: the image's up is the world's). The lights are then in
+        the frame found (``Lights.frame``: +Z the ground's normal, +X the image's right turned by
+        the roll, +Y the camera's forward over the ground), not the capture's default frame.
     fit_roll : bool
         With the tilt, fit the camera's roll about its axis (:data:`ROLL_SEARCH_DEG`); off by
         default: an object beside a sphere can pass for a roll (docs/spheres.md).
@@ -2672,15 +2656,14 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
                                fit_roll: bool = False):
     """:func:`estimate_lights` of a capture without ``world_from_camera``, the ground's normal (the
     camera's tilt, and with ``fit_roll`` its roll where it shows) fitted to the matte spheres' shading
-    (:func:`fit_camera_tilt`); the lights are returned in the capture's default world frame, each
-    light's ``extra`` with ``camera_tilt_deg`` and ``camera_roll_deg`` (absent when not fitted:
+    (:func:`fit_camera_tilt`); the lights are returned in the frame found
+    (:func:`tilted_world_from_camera`, recorded as ``Lights.frame``), each light's ``extra`` with ``camera_tilt_deg`` and ``camera_roll_deg`` (absent when not fitted:
     without a matte sphere's fit the image's up is the world's, as before).
 
     The search reads every photo's sphere values once and runs every frame's estimate in one
     :class:`PhotoFitter` (one pool of processes), on a sample of the photos
     (:data:`TILT_SEARCH_PHOTOS`; ``stages``: the estimation's keywords, ``photo_options``:
     :func:`ffls.spheres.photo.estimate_photo`'s)."""
-    from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
 
     def posed(tilt_deg: float, roll_deg: float = 0.0):
         return replace(capture, world_from_camera=tilted_world_from_camera(tilt_deg, roll_deg),
@@ -2707,8 +2690,11 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
             found = tried[(tilt, rolled)][1] if len(sample) == n else fit(tilt, rolled)
     if not np.isfinite(tilt):
         return _estimate_in_frame(capture, spheres, progress, workers, values=values, **stages, **photo_options)
-    to_default = DEFAULT_WORLD_FROM_CAMERA[:3, :3] @ tilted_world_from_camera(tilt, rolled)[:3, :3].T
-    lights = _lights_to_frame(found, to_default)
+    # the lights stay in the frame found (+Z the ground's normal: the scene's up, as a pose would give
+    # it; GUIDE section 1), recorded as Lights.frame: in the image's frame a camera looking down put
+    # the lights over the ground half below the upper hemisphere (docs/spheres.md)
+    lights = replace(found, frame={"world_from_camera": tilted_world_from_camera(tilt, rolled),
+                                   "source": FITTED_FRAME_SOURCE})
     for e in lights.extra or ():
         e["camera_tilt_deg"] = round(tilt, 2)
         if np.isfinite(roll):
