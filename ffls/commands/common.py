@@ -676,9 +676,19 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
     notes.append(None if lm is None or not lm.colour_note else f"colour: light map: {lm.colour_note}")
     if len(idx):
-        notes += coverage_warnings(dirs, capture.hemisphere, names=[capture.image_names[i] for i in idx])
+        notes += coverage_warnings(dirs, capture.hemisphere, names=[capture.image_names[i] for i in idx],
+                                   same_photo=same_photo_of(capture, idx))
     print_notes(command, *notes)
     return capture, lights, lm, mask
+
+
+def same_photo_of(capture, idx):
+    """``same_photo`` for :func:`ffls.weights.voronoi.coverage_warnings` of the lights ``idx`` (the
+    accepted ones, by capture index) of ``capture``: whether two of their photos hold the same pixels
+    (:func:`ffls.io.images.same_pixels`; read only for the repeated lights named)."""
+    from ffls.io.images import same_pixels
+
+    return lambda a, b: same_pixels(capture.image_paths[idx[a]], capture.image_paths[idx[b]])
 
 
 # ----------------------------------------------------------------------------- quality knobs

@@ -218,7 +218,7 @@ def run(args) -> int:
     from ffls.io.capture import load_capture, save_lights
     from ffls.spheres.estimate import estimate_lights
 
-    from ffls.commands.common import print_notes, show_progress
+    from ffls.commands.common import print_notes, same_photo_of, show_progress
 
     check_bounce_shape(args.bounce_shape, args.bounce)
     cluster = bool(getattr(args, "scheduler", None))
@@ -307,7 +307,8 @@ def run(args) -> int:
     if len(idx):
         from ffls.weights.voronoi import coverage_warnings
 
-        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere, names=[cap.image_names[i] for i in idx]))
+        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere, names=[cap.image_names[i] for i in idx],
+                                             same_photo=same_photo_of(cap, idx)))
     return 0
 
 

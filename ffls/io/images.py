@@ -783,6 +783,27 @@ def _read_cv2(path: Path, kind: str, orientation: int = 1, working_space: bool =
                      chromaticities=primaries, colour_note=note)
 
 
+#: Two images are the same photo (:func:`same_pixels`) when the RMS of their difference is at most
+#: this share of their RMS value: a file copied twice differs by 0; two shots of one light differ
+#: by the sensor's noise, about 1% at mid-grey even on a good camera (sqrt 2 times the shot noise),
+#: and a rendered light twice by 0 (a deterministic renderer).
+SAME_PIXELS_RTOL = 1e-3
+
+
+def same_pixels(a: str | os.PathLike, b: str | os.PathLike, rtol: float = SAME_PIXELS_RTOL) -> bool:
+    """Whether the images ``a`` and ``b`` hold (nearly) the same pixels, as stored: the RMS of the
+    difference at most ``rtol`` times the RMS of ``a`` and ``b`` (:data:`SAME_PIXELS_RTOL`).
+    Images of different sizes differ. Reads both (:func:`read_image`, as stored: no colour
+    conversion)."""
+    pa = read_image(a, working_space=False).pixels
+    pb = read_image(b, working_space=False).pixels
+    if pa.shape != pb.shape:
+        return False
+    d = pa.astype(np.float64) - pb
+    scale = np.sqrt(0.5 * (np.mean(np.square(pa, dtype=np.float64)) + np.mean(np.square(pb, dtype=np.float64))))
+    return bool(np.sqrt(np.mean(d * d)) <= rtol * scale)
+
+
 def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
     """An object mask image as coverage (H, W) float32 in [0, 1] (white = object).
 

@@ -764,8 +764,23 @@ def coverage(directions, hemisphere="upper", far_deg: float = FAR_DEG, res: int 
                     max_gap_deg=float(ang.max()))
 
 
+def _repeat_guess(pairs, same_photo) -> str:
+    """The guess after :func:`coverage_warnings`' repeated lights ``pairs`` ((later, earlier)
+    indices): one photo twice where ``same_photo`` finds their pixels the same, one light position
+    repeated where they differ; nothing without ``same_photo``."""
+    if same_photo is None or not pairs:
+        return ""
+    same = [bool(same_photo(j, i)) for j, i in pairs]
+    if all(same):
+        return " (identical photos: the same photo twice, or a render of one light twice?)"
+    if not any(same):
+        return " (the photos differ: the same light position given for different photos)"
+    return (f" ({sum(same)} of the {len(same)} named pairs identical photos, the same photo twice?; the others "
+            "differ: the same light position given twice)")
+
+
 def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CELL_DEG, far_deg: float = FAR_DEG,
-                      far_share: float = FAR_SHARE, names=None) -> list:
+                      far_share: float = FAR_SHARE, names=None, same_photo=None) -> list:
     """One line per coverage problem of ``directions`` over the hemisphere (empty when none).
 
     * cells wider than ``wide_deg`` degrees: ``"coverage: 3 cells wider than 60 deg (widest 84
@@ -784,8 +799,14 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
     wide_deg, far_deg, far_share : float
         Thresholds (defaults :data:`WIDE_CELL_DEG`, :data:`FAR_DEG`, :data:`FAR_SHARE`).
     names : sequence of str, optional
-        The photo of each direction: a repeat is named with the photo it repeats (a photo copied
-        twice into a set gives the same direction twice).
+        The photo of each direction: a repeat is named with the photo it repeats.
+    same_photo : callable, optional
+        ``same_photo(i, j)`` (indices into ``directions``): whether the two photos hold the same
+        pixels (e.g. :func:`ffls.io.images.same_pixels` of their files), asked of the repeats
+        named. Identical photos are said to be perhaps one photo twice (a file copied twice into
+        a set gives the same fit twice); differing ones, one light position given twice (a
+        grid's zenith on every ring, a light file that repeats a position). Without it neither
+        is guessed.
 
     Returns
     -------
@@ -800,9 +821,9 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
         which = ""
         if names is not None:
             _, first, group = np.unique(unit + 0.0, axis=0, return_index=True, return_inverse=True)
-            rep = [j for j in range(len(unit)) if first[group.ravel()[j]] != j]
-            which = ": " + ", ".join(f"{names[j]!r} repeats {names[first[group.ravel()[j]]]!r}" for j in rep[:3]) + \
-                (", ..." if len(rep) > 3 else "") + " (the same photo twice?)"
+            rep = [(j, int(first[group.ravel()[j]])) for j in range(len(unit)) if first[group.ravel()[j]] != j]
+            which = ": " + ", ".join(f"{names[j]!r} repeats {names[i]!r}" for j, i in rep[:3]) + \
+                (", ..." if len(rep) > 3 else "") + _repeat_guess(rep[:3], same_photo)
         out.append(f"coverage: {k} light{'s' if k > 1 else ''} repeat{'' if k > 1 else 's'} the direction of "
                    f"an earlier one and get{'' if k > 1 else 's'} no weight ({keep.size} distinct directions of "
                    f"{len(unit)}){which}")
