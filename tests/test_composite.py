@@ -221,6 +221,29 @@ def test_fill_finds_all_four_spheres_of_a_96_px_set(tmp_path):
         assert abs(geo["ground_z"]) < 0.25 * geo["radius"]
 
 
+def test_fill_finds_the_spheres_ffls_lights_found_on_an_unstated_encoding(tmp_path):
+    """An 8-bit sRGB set whose capture.json states no encoding: ``--fill`` finds the spheres as ``ffls
+    lights`` does, on the photos linearised with the curve it calibrated (lights.json's ``encoding``,
+    applied by ``load_capture_and_lights``), not on the stored codes (``ffls lights`` before
+    i-step15): the same world centres as lights.json's. Here (96 px) the four centres lie 2.46, 18.33,
+    44.20 and 0.85 mm from the truth, on the stored codes 0.86, 30.46, 40.44 and 2.38 (the back
+    spheres are 4.6 px in radius); at 256 px 0.05-1.33 mm against 0.15-3.66 (docs/composite.md)."""
+    from ffls.commands.composite import sphere_geometry
+    from ffls.io.capture import load_capture_and_lights
+
+    root = tmp_path / "set"
+    assert main(["synth", str(root), "--composite-set", "sunrise", "--lights", "16", "--surface-lights", "12",
+                 "--resolution", "96", "--truth-dirs", "64", "--format", "png8", "--encoding", "srgb",
+                 "--unstated-encoding", "--quiet"]) == 0
+    cap = root / "object"
+    assert main(["lights", str(cap), "--workers", "1", "--no-progress", "--model", "distant"]) == 0
+    capture, lights = load_capture_and_lights(cap)
+    assert capture.encoding != "auto"
+    geo = sphere_geometry(capture, lights)
+    found = [r["center"] for r in next(e["spheres"] for e in lights.extra if e.get("spheres"))]
+    assert geo["source"] == "found" and np.allclose(geo["centres"], found, atol=1e-9), (geo["centres"], found)
+
+
 # ----------------------------------------------------------------------------- end to end on ffls synth
 @pytest.fixture(scope="module")
 def cset(tmp_path_factory):
