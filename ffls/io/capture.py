@@ -783,7 +783,7 @@ _EXTRA_KEYS = {"sphere_material", "truth", "mask"}
 #: The keys of ``lights.json``: top level, and each light's (``ffls lights`` writes the last five)
 _LIGHTS_KEYS = {"format", "version", "lights", "encoding", "uncertainty", "flat_field", "frame"}
 _LIGHT_KEYS = {"image", "direction", "position", "status", "reason", "uncertainty_deg", "model", "used_spheres",
-               "spheres", "chi2", "dof", "camera_tilt_deg", "camera_roll_deg"}
+               "spheres", "chi2", "dof", "camera_tilt_deg", "camera_roll_deg", "tilt_widened_deg"}
 
 
 def _check_misspelt_keys(j: _Json, keys, known=_CAPTURE_KEYS | _EXTRA_KEYS, where: str = "") -> None:
