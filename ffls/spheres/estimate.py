@@ -2682,8 +2682,10 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
     """:func:`estimate_lights` of a capture without ``world_from_camera``, the ground's normal (the
     camera's tilt, and with ``fit_roll`` its roll where it shows) fitted to the matte spheres' shading
     (:func:`fit_camera_tilt`); the lights are returned in the frame found
-    (:func:`tilted_world_from_camera`, recorded as ``Lights.frame``), each light's ``extra`` with ``camera_tilt_deg`` and ``camera_roll_deg`` (absent when not fitted:
-    without a matte sphere's fit the image's up is the world's, as before).
+    (:func:`tilted_world_from_camera`, recorded as ``Lights.frame``; the cones widened by the tilt's
+    error, :func:`widen_for_tilt`), each light's ``extra`` with ``camera_tilt_deg`` and
+    ``camera_roll_deg`` (absent when not fitted: without a matte sphere's fit the image's up is the
+    world's, as before).
 
     The search reads every photo's sphere values once and runs every frame's estimate in one
     :class:`PhotoFitter` (one pool of processes), on a sample of the photos
