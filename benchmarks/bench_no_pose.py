@@ -10,8 +10,9 @@ camera tilt (and roll) found and the wall time of ``ffls lights``; and in the sc
 render's world, +Y the camera's forward, where the fitted tilt's error counts: the lights as
 lights.json's ``frame`` gives them, or turned by the tilt found) with the accepted lights at
 z >= 0 (docs/spheres.md, "Without the camera's pose"). ``--elevation DEG`` renders the camera
-that far down (default 30; a copy stand 90), ``--roll DEG`` renders with the camera turned about its optical axis (``ffls synth
---camera-roll``: a tripod that is not level); ``--fit-roll`` runs ``ffls lights --fit-roll``.
+that far down (default 30; a copy stand 90), ``--roll DEG`` renders with the camera turned about
+its optical axis (``ffls synth --camera-roll``: a tripod that is not level); ``--fit-roll`` runs
+``ffls lights --fit-roll``.
 
     cd benchmarks && OMP_NUM_THREADS=1 ../.venv/bin/python bench_no_pose.py --seeds 0 1 2 3 4 \\
         --lens long --camera orthographic --ffls ../.venv/bin/ffls --out /tmp/no_pose.json
