@@ -1128,8 +1128,12 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
             centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
             model = halves_error_model(*halves_offsets(results, samples, values, map_fn=map_fn, **options), centre,
                                        **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
+            if model.source == "fallback" and kinds is not None:  # a mirror's highlight: its own floors
+                model = model.with_mirrors_own_floor([kd.kind for kd in kinds])
             shared = lens  # (the centres are the halves' own terms)
-            if occluded:  # the occluder's light on the ball: a turn the halves share, unmeasured
+            # the occluder's light on a matte ball: a turn the halves share, unmeasured (a mirror's
+            # "foreign" pixels are its highlight and reflections, and it has no halves)
+            if occluded and (kinds is None or any(kd.kind != "mirror" for kd in kinds)):
                 shared = float(np.hypot(shared, FALLBACK_FLOOR_DEG / np.sqrt(2.0)))
         else:  # their disagreement shows how the spheres' centres differ, not the shift they share
             mean = shifts[unrefined].mean(axis=0) if any(unrefined) else np.zeros(2)

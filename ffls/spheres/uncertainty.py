@@ -562,6 +562,26 @@ class ErrorModel:
                                     for k, t in (doc.get("kinds") or {}).items()),
                    sphere_floor_deg=tuple(float(x) for x in doc.get("sphere_floor_deg", ())))
 
+    def with_mirrors_own_floor(self, sphere_kinds) -> "ErrorModel":
+        """This (fallback) model with each mirror sphere's own terms: scale 1 and no added floor.
+
+        :data:`FALLBACK_FLOOR_DEG` stands for a shading fit's unmeasured misfit (the bounce, the
+        ambient, the encoding); a mirror's highlight carries its own floors and its outline's
+        uncertainty (:func:`ffls.spheres.highlight.highlight_direction_Mudge2006`), so a lone mirror
+        ball's cone is those alone, with the common floor (``docs/spheres.md``, "A lone mirror
+        ball's own cone"). Other spheres keep the shared terms.
+
+        Parameters
+        ----------
+        sphere_kinds : sequence of str
+            Per sphere, its kind (``'matte'``, ``'mirror'``).
+        """
+        kinds = tuple(str(k) for k in sphere_kinds)
+        if "mirror" not in kinds:
+            return self
+        own = tuple(t for t in self.kind_terms if t[0] != "mirror") + (("mirror", 1.0, 0.0, 0),)
+        return replace(self, sphere_kinds=kinds, kind_terms=own)
+
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
         return replace(self, centre_deg=tuple(float(x) for x in np.atleast_1d(centre_deg)))
