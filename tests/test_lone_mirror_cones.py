@@ -56,3 +56,26 @@ def test_a_lone_glossy_balls_cone_is_its_highlight_and_outline(lone_glossy):
         cones.append(extra["uncertainty_deg"])
     assert len(errs) >= 12
     assert np.mean(np.asarray(errs) <= np.asarray(cones)) >= 0.9, (errs, cones)
+
+
+def test_a_lone_mirror_outline_keeps_its_measured_ambiguity_beside_others_the_floor():
+    """A mirror outline whose limb step agrees with it (ambiguity at the measured floor, 0.4 px) gives
+    a lone ball's view that centre sigma; beside another sphere the 1 px floor stays (their
+    directions are combined by these statistics: a glossy ball at 0.4 px outweighed matte balls)."""
+    from types import SimpleNamespace
+
+    from ffls.spheres.estimate import sphere_views
+    from ffls.spheres.mirror_outline import MIRROR_OUTLINE_FLOOR_PX, MIRROR_OUTLINE_SIGMA_FLOOR_PX
+
+    K = np.array([[800.0, 0, 192], [0, 800.0, 192], [0, 0, 1]])
+    cap = SimpleNamespace(camera_model="pinhole", K=K, dist=None, world_from_camera=np.eye(4), sphere_radius=0.05)
+
+    def fit(x, amb):
+        return SimpleNamespace(center_cam=np.array([x, 0.0, 1.5]), radius=0.05, center_px=None, radius_px=None,
+                               residual_px=0.3, n_inliers=100, outline_sigma_px=amb)
+
+    lone = sphere_views(cap, [fit(0.0, MIRROR_OUTLINE_SIGMA_FLOOR_PX)])[0]
+    assert lone.center_sigma_px == pytest.approx(np.hypot(0.3, MIRROR_OUTLINE_SIGMA_FLOOR_PX))
+    pair = sphere_views(cap, [fit(-0.2, MIRROR_OUTLINE_SIGMA_FLOOR_PX), fit(0.2, 0.0)])
+    assert pair[0].center_sigma_px == pytest.approx(np.hypot(0.3, MIRROR_OUTLINE_FLOOR_PX))
+    assert pair[1].center_sigma_px == pytest.approx(0.3)  # a matte outline: no ambiguity term
