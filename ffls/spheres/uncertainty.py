@@ -65,7 +65,8 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    cone factor and common-mode bound, measured on its own photos. Where neither can be measured
    (a lone mirror ball, too few photos with both halves fitted), the fit statistics plus a stated
    per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
-   (:data:`FALLBACK_MODEL`).
+   (:data:`FALLBACK_MODEL`); a mirror sphere there has its highlight's and outline's own terms
+   and the common floor only (:meth:`ErrorModel.with_mirrors_own_floor`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
 (``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode; a near light's
