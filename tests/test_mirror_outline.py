@@ -13,7 +13,7 @@ import pytest
 from ffls.io.capture import load_capture
 from ffls.radiance.photos import load_photo
 from ffls.spheres.detect import SphereFit, extreme_images, find_spheres_in_capture, outline_support
-from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE, circle_coverage, circle_search,
+from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_SIGMA_FLOOR_PX, OUTER_SOURCE, circle_coverage, circle_search,
                                           changing_limb_edges, changing_limb_radius, dark_cap, enclosing_circle,
                                           highest_first, highlight_ratio, mirror_silhouette)
 from ffls.synth.photo import PhotoSettings
@@ -335,7 +335,7 @@ def test_mirror_on_textured_ground_outlined_by_changing_edges(textured_mirror):
     sp = find_spheres_in_capture(load_capture(folder))
     assert len(sp) == 1
     assert np.hypot(*(np.asarray(sp[0].center_px) - truth["spheres"][0]["center_px"])) < 1.0
-    assert sp[0].outline_sigma_px >= MIRROR_OUTLINE_FLOOR_PX
+    assert sp[0].outline_sigma_px >= MIRROR_OUTLINE_SIGMA_FLOOR_PX
 
 
 def test_a_dark_cap_grows_to_the_silhouette_on_the_changing_edges(tmp_path):
@@ -354,7 +354,7 @@ def test_a_dark_cap_grows_to_the_silhouette_on_the_changing_edges(tmp_path):
     C = (np.linalg.inv(cap.world_from_camera) @ np.r_[truth["center"], 1.0])[:3]
     r_true = _silhouette_circle(cap.K, cap.dist, C, truth["radius"])[1]
     assert abs(_silhouette_circle(sp[0].K, sp[0].dist, sp[0].center_cam, sp[0].radius)[1] - r_true) < 1.5
-    assert sp[0].outline_sigma_px >= MIRROR_OUTLINE_FLOOR_PX
+    assert sp[0].outline_sigma_px >= MIRROR_OUTLINE_SIGMA_FLOOR_PX
 
 
 def test_a_cap_that_crosses_the_silhouette_moves_to_the_ring_of_the_changing_edges(tmp_path):
@@ -370,7 +370,7 @@ def test_a_cap_that_crosses_the_silhouette_moves_to_the_ring_of_the_changing_edg
     assert len(sp) == 1 and sp[0].outline_edges == "photos"
     assert np.hypot(*(np.asarray(sp[0].center_px) - truth["center_px"])) < 1.0
     assert abs(sp[0].radius_px - truth["radius_px"]) < 1.0
-    assert sp[0].outline_sigma_px >= MIRROR_OUTLINE_FLOOR_PX
+    assert sp[0].outline_sigma_px >= MIRROR_OUTLINE_SIGMA_FLOOR_PX
 
 
 def test_a_mirror_outline_through_the_contact_shadow_moves_to_the_reflectance_step():
@@ -416,7 +416,8 @@ def test_a_mirror_outline_through_the_contact_shadow_moves_to_the_reflectance_st
     assert detect.with_max_image_rings([wrong], edges, None, L, cam, 1.5)[0] is wrong  # no photos' evidence
     new, same = detect.with_max_image_rings([wrong, right], edges, changing, L, cam, 1.5)
     assert np.hypot(*(new.center_px - c)) < 0.5 and abs(new.radius_px - R) < 1.0
-    assert new.outline_sigma_px >= MIRROR_OUTLINE_FLOOR_PX
+    # its limb step agrees with it: the measured floor, not the 1 px of an outline without a second estimate
+    assert new.outline_sigma_px == pytest.approx(MIRROR_OUTLINE_SIGMA_FLOOR_PX), new.outline_sigma_px
     assert same is right
 
 
@@ -433,7 +434,7 @@ def test_a_refit_on_the_changing_edges_is_as_ambiguous_as_itself(tmp_path):
     sp = find_spheres_in_capture(load_capture(tmp_path))
     assert len(sp) == 1 and sp[0].outline_edges == "photos"  # the refit was taken
     assert np.hypot(*(np.asarray(sp[0].center_px) - truth["spheres"][0]["center_px"])) < 0.5
-    assert MIRROR_OUTLINE_FLOOR_PX <= sp[0].outline_sigma_px < 1.5
+    assert MIRROR_OUTLINE_SIGMA_FLOOR_PX <= sp[0].outline_sigma_px < 1.5
 
 
 def _hinted_copy(folder, sphere, tmp_path):

@@ -72,7 +72,7 @@ from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, pro
 from ffls.errors import InputError
 from ffls.radiance.photos import full_scale_share, read_photo
 from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
-from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE,
+from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, MIRROR_OUTLINE_SIGMA_FLOOR_PX, OUTER_SOURCE,
                                          changing_limb_radius, circle_search, dark_body, dark_cap, enclosing_circle,
                                          limb_radius, mirror_silhouette)
 
@@ -2563,7 +2563,7 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: DetectionCamera):
         r_limb = limb_radius(log_l, new.center_px, new.radius_px)
         if r_limb is not None and abs(r_limb / new.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
             new = _with_radius(new, r_limb, cam)
-        new.outline_sigma_px = max(gap, MIRROR_OUTLINE_FLOOR_PX)
+        new.outline_sigma_px = max(gap, MIRROR_OUTLINE_SIGMA_FLOOR_PX)
         return new, True
     r_limb = limb_radius(log_l, ft.center_px, ft.radius_px)
     if r_limb is not None and abs(r_limb / ft.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
@@ -2577,7 +2577,8 @@ def _outline_ambiguity(ft, log_l, cam: DetectionCamera) -> float:
     and radius) between it and the limb's reflectance step around it
     (:func:`ffls.spheres.mirror_outline.mirror_silhouette`, a second outline estimate: the
     reflected contrasts run inside the limb, the step at or just outside it), at least
-    :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` (the floor alone without a step)."""
+    :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_SIGMA_FLOOR_PX`;
+    :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` without a step (no second estimate)."""
     sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, shape=cam.shape)
     if sil is None:
         return MIRROR_OUTLINE_FLOOR_PX
@@ -2586,7 +2587,7 @@ def _outline_ambiguity(ft, log_l, cam: DetectionCamera) -> float:
     except ValueError:
         return MIRROR_OUTLINE_FLOOR_PX
     gap = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px), limb.radius_px - ft.radius_px))
-    return max(gap, MIRROR_OUTLINE_FLOOR_PX)
+    return max(gap, MIRROR_OUTLINE_SIGMA_FLOOR_PX)
 
 
 def _with_radius(ft, radius_px: float, cam: DetectionCamera):

@@ -56,6 +56,7 @@ from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classi
                                    outline_holding_highlights, refine_view_limb, sample_patch)
 from ffls.spheres.ground import (ground_pixels, ground_views, mask_radiance, mask_view, not_ground, own_shadow_mask,
                                  reference_radiance)
+from ffls.spheres.mirror_outline import MIRROR_OUTLINE_FLOOR_PX
 from ffls.spheres.lambert import (LambertFit, fit_lambert, flat_field_terms, own_shadow_of, own_shadow_table,
                                   shadowed_ground_bounce)
 from ffls.spheres.photo import (LIGHT_MODELS, SHADOW_RATIO, SIGNIFICANCE, PhotoEstimate, SphereResult,
@@ -413,6 +414,13 @@ def sphere_views(capture, spheres) -> list[SphereView]:
     model = getattr(capture, "camera_model", "pinhole")
     out = []
     for s in spheres:
+        # a mirror outline's ambiguity (0 for a matte one): with 2+ spheres their directions are
+        # combined by these statistics before the error model measures them, and a glossy ball at
+        # the measured floor took a matte ball's weight (bench c11: 0.36 / 0.56 -> 0.39 / 0.62 deg),
+        # so there the floor of an outline without a second estimate stays
+        amb = float(getattr(s, "outline_sigma_px", 0.0) or 0.0)
+        if amb > 0.0 and len(spheres) > 1:
+            amb = max(amb, MIRROR_OUTLINE_FLOOR_PX)
         C = np.asarray(s.center_cam, dtype=np.float64)
         R = float(getattr(s, "radius", None) or capture.sphere_radius)
         cpx = getattr(s, "center_px", None)
@@ -425,7 +433,7 @@ def sphere_views(capture, spheres) -> list[SphereView]:
         proxy = type("Sphere", (), dict(center_px=cpx, radius_px=rpx, center_cam=C, radius=R,
                                         residual_px=getattr(s, "residual_px", 0.0),
                                         n_inliers=getattr(s, "n_inliers", 0),
-                                        outline_sigma_px=getattr(s, "outline_sigma_px", 0.0)))
+                                        outline_sigma_px=amb))
         out.append(SphereView.from_sphere(proxy, model, capture.K, capture.dist, capture.world_from_camera))
     return out
 
@@ -1128,8 +1136,12 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
             centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
             model = halves_error_model(*halves_offsets(results, samples, values, map_fn=map_fn, **options), centre,
                                        **{k: v for k, v in kwargs.items() if k in ("common_correlation", "min_photos")})
+            if model.source == "fallback" and kinds is not None:  # a mirror's highlight: its own floors
+                model = model.with_mirrors_own_floor([kd.kind for kd in kinds])
             shared = lens  # (the centres are the halves' own terms)
-            if occluded:  # the occluder's light on the ball: a turn the halves share, unmeasured
+            # the occluder's light on a matte ball: a turn the halves share, unmeasured (a mirror's
+            # "foreign" pixels are its highlight and reflections, and it has no halves)
+            if occluded and (kinds is None or any(kd.kind != "mirror" for kd in kinds)):
                 shared = float(np.hypot(shared, FALLBACK_FLOOR_DEG / np.sqrt(2.0)))
         else:  # their disagreement shows how the spheres' centres differ, not the shift they share
             mean = shifts[unrefined].mean(axis=0) if any(unrefined) else np.zeros(2)

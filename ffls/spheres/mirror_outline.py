@@ -32,6 +32,13 @@ OUTER_SOURCE = "auto (outer outline)"
 #: run 1 to 2 px inside the limb at 384 px (``ffls synth --sphere-material mirror``), and the two
 #: outline estimates can agree by chance (``SphereFit.outline_sigma_px``).
 MIRROR_OUTLINE_FLOOR_PX = 1.0
+#: Least outline ambiguity (pixels) of a mirror ball whose outline a second estimate measured (the
+#: limb's reflectance step, ``SphereFit.outline_sigma_px``: at least half their gap): the
+#: per-axis RMS of the centre errors of 17 chrome balls' outlines found without hints (0.24-0.90 px,
+#: 2-D; 384 px renders with JPEG, noise, vignetting, textured, white and grey grounds, long lenses,
+#: anti-aliasing: ``docs/spheres.md``, "A lone mirror ball's own cone"). Without a second
+#: estimate the ambiguity stays :data:`MIRROR_OUTLINE_FLOOR_PX`.
+MIRROR_OUTLINE_SIGMA_FLOOR_PX = 0.4
 
 
 @dataclasses.dataclass

@@ -65,7 +65,8 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    cone factor and common-mode bound, measured on its own photos. Where neither can be measured
    (a lone mirror ball, too few photos with both halves fitted), the fit statistics plus a stated
    per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
-   (:data:`FALLBACK_MODEL`).
+   (:data:`FALLBACK_MODEL`); a mirror sphere there has its highlight's and outline's own terms
+   and the common floor only (:meth:`ErrorModel.with_mirrors_own_floor`).
 
 The photo's per-axis standard deviation is that of the weighted mean its direction was made with
 (``sum w_i^2 var_i``, :meth:`ErrorModel.photo_sigma_deg`) plus its common mode; a near light's
@@ -561,6 +562,26 @@ class ErrorModel:
                    kind_terms=tuple((str(k), float(t["scale"]), float(t["floor_deg"]), int(t.get("n_photos", 0)))
                                     for k, t in (doc.get("kinds") or {}).items()),
                    sphere_floor_deg=tuple(float(x) for x in doc.get("sphere_floor_deg", ())))
+
+    def with_mirrors_own_floor(self, sphere_kinds) -> "ErrorModel":
+        """This (fallback) model with each mirror sphere's own terms: scale 1 and no added floor.
+
+        :data:`FALLBACK_FLOOR_DEG` stands for a shading fit's unmeasured misfit (the bounce, the
+        ambient, the encoding); a mirror's highlight carries its own floors and its outline's
+        uncertainty (:func:`ffls.spheres.highlight.highlight_direction_Mudge2006`), so a lone mirror
+        ball's cone is those alone, with the common floor (``docs/spheres.md``, "A lone mirror
+        ball's own cone"). Other spheres keep the shared terms.
+
+        Parameters
+        ----------
+        sphere_kinds : sequence of str
+            Per sphere, its kind (``'matte'``, ``'mirror'``).
+        """
+        kinds = tuple(str(k) for k in sphere_kinds)
+        if "mirror" not in kinds:
+            return self
+        own = tuple(t for t in self.kind_terms if t[0] != "mirror") + (("mirror", 1.0, 0.0, 0),)
+        return replace(self, sphere_kinds=kinds, kind_terms=own)
 
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
