@@ -939,6 +939,7 @@ class Lights:
             if self.reasons[i] is not None:
                 item["reason"] = self.reasons[i]
             item.update(self.extra[i])
+            _cap_cones(item)
             lights.append(item)
         doc = {"format": "ffls-lights", "version": 1}
         if self.encoding is not None:
@@ -949,6 +950,20 @@ class Lights:
             doc["flat_field"] = dict(self.flat_field)
         doc["lights"] = lights
         return doc
+
+
+def _cap_cones(item: dict) -> None:
+    """A light's cones, its own and its spheres', at most ``MAX_CONE_DEG`` (in place; the spheres'
+    list is copied): a fit that knows little of a direction has a cone wider than the sphere (a
+    sphere's reached 1617 deg on the bench), which means the same and which ``load_lights`` refuses."""
+    def capped(d):
+        wide = isinstance(d, dict) and isinstance(d.get("uncertainty_deg"), float) \
+            and d["uncertainty_deg"] > conventions.MAX_CONE_DEG
+        return {**d, "uncertainty_deg": conventions.MAX_CONE_DEG} if wide else d
+
+    item.update(capped(item))
+    if isinstance(item.get("spheres"), list):
+        item["spheres"] = [capped(s) for s in item["spheres"]]
 
 
 ENCODING_CURVES = ("linear", "srgb", "gamma", "polynomial")
@@ -1113,8 +1128,16 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         ex = {kk: v for kk, v in it.items() if kk not in ("image", "direction", "position", "status", "reason")}
         if ex.get("uncertainty_deg") is not None:  # null: a rejected light has none
             ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
-            if ex["uncertainty_deg"] < 0:
-                j.fail(key + ": uncertainty_deg", f"a cone radius must be >= 0, got {ex['uncertainty_deg']:g}")
+            if not 0 <= ex["uncertainty_deg"] <= conventions.MAX_CONE_DEG:
+                j.fail(key + ": uncertainty_deg", f"a 95% cone's radius is between 0 and "
+                                                  f"{conventions.MAX_CONE_DEG:g} deg, got {ex['uncertainty_deg']:g}")
+        model = ex.get("model")
+        if model is not None and model not in conventions.LIGHT_MODELS:
+            j.fail(key + ": model", f"expected one of {conventions.LIGHT_MODELS} (or null), got {_short(model)}")
+        if model is not None and (model == "near") != ("position" in it):
+            j.fail(key + ": model", "a near light needs a position" if model == "near" else
+                   "a distant light has no position (a light with one is taken as near): drop the position "
+                   "or say \"model\": \"near\"")
         for angle, what, bound in (("camera_tilt_deg", "tilt", 90), ("camera_roll_deg", "roll", 180)):
             if ex.get(angle) is not None:
                 ex[angle] = j.number(ex[angle], f"{key}: {angle}")
