@@ -169,3 +169,36 @@ def test_a_float_plateau_is_not_called_clipped_alone(tmp_path):
     assert vr.saturated.sum() > 0
     assert "plateau at its maximum (50)" in vr.note and "render's flat brightest region" in vr.note
     assert "pixels clipped" not in vr.note
+
+
+# ----------------------------------------------------------------------------- capture.json's sphere materials
+@pytest.mark.parametrize("edit, expect", [
+    (lambda d: d.update(sphere_material="chrome"), 'sphere_material: expected one of \'matte\', \'mirror\', \'auto\', '
+                                                   'got "chrome"'),
+    (lambda d: d.update(sphere_material=["mirror"]), "sphere_material: expected one of"),
+    (lambda d: d.update(spheres=[{"center_px": [12, 12], "radius_px": 4, "material": 7}]),
+     "spheres[0].material: expected one of"),
+    (lambda d: d.update(spheres=[{"center_px": [12, 12], "radius_px": 4, "materal": "mirror"}]),
+     "spheres[0].materal: unknown key; did you mean 'material'?"),
+    (lambda d: d.update(spheres=[{"center_px": [12, 12], "radius_pix": 4}]),
+     "spheres[0].radius_pix: unknown key; did you mean 'radius_px'?"),
+])
+def test_sphere_materials_and_hint_keys_are_checked_where_read(cap, tmp_path, capfd, edit, expect):
+    """A material was checked only once the spheres were found (``lights`` on bench c08: refused
+    after 6.8 s, now 1.7 s), and never by ``relight``; a misspelt hint key dropped what it said."""
+    c = _edited(cap, tmp_path, "capture.json", edit)
+    for argv in (["lights", c, "-o", tmp_path / "l.json", "--workers", "1", "--no-progress"],
+                 ["relight", c, "--probe", "sky", "-o", tmp_path / "o.exr", "--workers", "1"]):
+        rc, line = one_line(capfd, argv)
+        assert rc == 2 and "capture.json" in line and expect in line
+    assert entries(tmp_path) == {"c"}
+
+
+def test_a_stated_material_and_own_hint_keys_are_read(cap, tmp_path):
+    from ffls.io.capture import load_capture
+
+    c = _edited(cap, tmp_path, "capture.json", lambda d: d.update(
+        sphere_material="mirror", spheres=[{"center_px": [12, 12], "radius_px": 4, "material": "matte",
+                                            "x-note": "the left ball"}]))
+    got = load_capture(c)
+    assert got.extra["sphere_material"] == "mirror" and got.spheres[0]["material"] == "matte"

@@ -595,6 +595,9 @@ def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
         key = f"spheres[{k}]"
         if not isinstance(s, dict):
             j.fail(key, f"expected an object, got {_short(s)}")
+        _check_misspelt_keys(j, s, ("center", "center_px", "radius_px", "material"), key + ".")
+        if "material" in s:
+            _check_material(j, s["material"], key + ".material")
         item = {}
         if "center" in s:
             item["center"] = j.array(s["center"], key + ".center", (3,)).tolist()
@@ -617,6 +620,21 @@ def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
 
 #: Sphere materials of ``capture.json`` (``"auto"``: classified from the photos).
 SPHERE_MATERIALS = ("matte", "mirror", "auto")
+
+
+def _material_problem(value) -> str | None:
+    """What is wrong with a sphere material of ``capture.json``, or None."""
+    if value not in SPHERE_MATERIALS:
+        return f"expected one of {', '.join(repr(m) for m in SPHERE_MATERIALS)}, got {_short(value)}"
+    return None
+
+
+def _check_material(j: _Json, value, key: str) -> None:
+    """A sphere material of ``capture.json`` checked where it is read (it was first looked at once the
+    spheres were found, after the photos' longest step)."""
+    why = _material_problem(value)
+    if why:
+        j.fail(key, why)
 
 
 def sphere_materials(capture: Capture, n_spheres: int) -> list[str]:
@@ -646,9 +664,9 @@ def sphere_materials(capture: Capture, n_spheres: int) -> list[str]:
     path = capture.json_path
 
     def check(value, key):
-        if value not in SPHERE_MATERIALS:
-            raise InputError(f"{key}: expected one of {', '.join(repr(m) for m in SPHERE_MATERIALS)}, "
-                             f"got {_short(value)}", path)
+        why = _material_problem(value)
+        if why:
+            raise InputError(f"{key}: {why}", path)
         return value
 
     default = check(capture.extra.get("sphere_material", "auto"), "sphere_material")
@@ -768,6 +786,8 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         j.fail("units", f"expected a string, got {_short(units)}")
     extra = {k: v for k, v in doc.items() if k not in _CAPTURE_KEYS}
     _check_misspelt_keys(j, extra)
+    if "sphere_material" in extra:
+        _check_material(j, extra["sphere_material"], "sphere_material")
     return Capture(
         folder=folder, image_names=names, image_paths=paths, encoding=encoding, K=K, dist=dist,
         world_from_camera=wfc, world_from_camera_is_default=wfc_default, sphere_radius=radius,
