@@ -202,3 +202,46 @@ def test_a_stated_material_and_own_hint_keys_are_read(cap, tmp_path):
                                             "x-note": "the left ball"}]))
     got = load_capture(c)
     assert got.extra["sphere_material"] == "mirror" and got.spheres[0]["material"] == "matte"
+
+
+# ----------------------------------------------------------------------------- a flag given twice
+@pytest.mark.parametrize("argv, flag", [
+    (["synth", "{t}/s", "--lights", "2", "--lights", "3", "--resolution", "16"], "--lights"),
+    (["relight", "{cap}", "--probe", "sky", "--exposure", "1", "--exposure", "2", "-o", "{t}/o.exr"], "--exposure"),
+    (["lightmap", "make", "sky", "{t}/a.exr", "--height", "16", "--height", "32"], "--height"),
+    (["probe", "mirror", "{t}/p", "-o", "{t}/a.exr", "-o", "{t}/b.exr"], "-o/--out"),  # (a parents= flag)
+])
+def test_a_flag_given_twice_with_two_values_is_refused(cap, tmp_path, capfd, argv, flag):
+    """argparse kept the last value silently (``-o a.exr ... -o b.exr`` wrote b.exr), as a JSON key
+    given twice was read before round 11: which one is meant?"""
+    argv = [a.format(t=tmp_path, cap=cap) for a in argv]
+    rc, line = one_line(capfd, argv)
+    assert rc == 2 and f"argument {flag}: given twice" in line and "which one is meant" in line
+    assert entries(tmp_path) == set()
+
+
+def test_a_flag_given_twice_with_one_value_is_read(tmp_path, capfd):
+    from ffls.cli import main
+
+    assert main(["lightmap", "make", "sky", str(tmp_path / "a.exr"), "--height", "16", "--height", "16"]) == 0
+    assert main(["lightmap", "make", "sky", str(tmp_path / "b.exr"), "--half", "--half"]) == 0
+
+
+# ----------------------------------------------------------------------------- a stated circle of less than a pixel
+@pytest.mark.parametrize("circle, expect", [
+    ({"center_px": [80, 80], "radius_px": 1e-9}, "radius 1e-09 px, holds at most one pixel"),
+    ({"center_px": [80.5, 80.5], "radius_px": 0.6}, "holds at most one pixel"),
+])
+def test_a_probe_circle_of_no_pixels_names_probe_json(tmp_path, capfd, circle, expect):
+    """Round 15 named probe.json for a circle off the photo; one of 1e-9 px on it blamed the photo:
+    "ball.exr: the ball shows no usable direction"."""
+    from ffls.synth.probe import write_mirror_probe
+
+    m = np.random.default_rng(1).uniform(0.1, 1.0, (32, 64, 3)).astype(np.float32)
+    write_mirror_probe(tmp_path / "p", m, size=(160, 160), camera_model="orthographic", center_px=(80, 80),
+                       radius_px=70, sphere="pixel")
+    doc = json.loads((tmp_path / "p" / "probe.json").read_text())
+    doc["sphere"].update(circle)
+    (tmp_path / "p" / "probe.json").write_text(json.dumps(doc))
+    rc, line = one_line(capfd, ["probe", "mirror", tmp_path / "p", "-o", tmp_path / "m.exr"])
+    assert rc == 2 and "probe.json" in line and expect in line and not (tmp_path / "m.exr").exists()
