@@ -32,6 +32,12 @@ HEMISPHERES = ("upper", "full")
 #: Camera models a capture may declare (``"camera": {"model": ...}``): OpenCV pinhole with
 #: distortion, or orthographic (parallel rays along the camera's +z; no focal length needed).
 CAMERA_MODELS = ("pinhole", "orthographic")
+#: Light models of ``lights.json`` (a light's ``"model"``): a distant light (a direction only) or a
+#: near one (also a ``"position"``).
+LIGHT_MODELS = ("distant", "near")
+#: The widest 95% cone (``uncertainty_deg``): 180 deg covers every direction, so a wider one says
+#: nothing more.
+MAX_CONE_DEG = 180.0
 
 #: world_from_camera when a capture gives none: camera x (image right) -> +X,
 #: camera y (image down) -> -Z, camera z (forward) -> +Y. The camera sits at the origin.

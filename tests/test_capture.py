@@ -293,7 +293,7 @@ def test_lights_capture_records_round_trip_and_checked(tmp_path, rng, key, rec):
     del doc[key]
     doc["lights"][0]["uncertainty_deg"] = -1.0  # a cone radius cannot be negative
     p.write_text(json.dumps(doc))
-    with pytest.raises(InputError, match="uncertainty_deg: a cone radius must be >= 0"):
+    with pytest.raises(InputError, match="uncertainty_deg: a 95% cone's radius is between 0 and 180 deg, got -1"):
         cap.load_lights(p, c)
 
 

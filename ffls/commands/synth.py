@@ -80,7 +80,18 @@ def _vignetting(text: str):
     if text.startswith("radial:"):
         coeffs = text[len("radial:"):].split(",")
         if 1 <= len(coeffs) <= 3:
-            return "radial", tuple(_finite(c) for c in coeffs)
+            coeffs = tuple(_finite(c) for c in coeffs)
+            f = [(1.0 + sum(c * (i / 1000) ** (2 * k + 2) for k, c in enumerate(coeffs)), i / 1000)
+                 for i in range(1001)]  # r = 1 at the corners
+            dark = next(((v, r) for v, r in f if v <= 0), None)
+            top = max(f)
+            if dark or top[0] > 1 + 1e-12:
+                what = (f"reaches {dark[0]:.3g} at r = {dark[1]:.3g}" if dark else
+                        f"brightens to {top[0]:.6g} at r = {top[1]:.3g}")
+                raise argparse.ArgumentTypeError(
+                    f"{text!r} {what} (r = 1 at the corners): vignetting darkens, by a factor in (0, 1] out to the "
+                    "corners (0 or less would be clipped to black)")
+            return "radial", coeffs
     raise argparse.ArgumentTypeError(f"expected none, cos4 or radial:A[,B[,C]], not {text!r}")
 
 

@@ -595,6 +595,9 @@ def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
         key = f"spheres[{k}]"
         if not isinstance(s, dict):
             j.fail(key, f"expected an object, got {_short(s)}")
+        _check_misspelt_keys(j, s, ("center", "center_px", "radius_px", "material"), key + ".")
+        if "material" in s:
+            _check_material(j, s["material"], key + ".material")
         item = {}
         if "center" in s:
             item["center"] = j.array(s["center"], key + ".center", (3,)).tolist()
@@ -617,6 +620,21 @@ def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
 
 #: Sphere materials of ``capture.json`` (``"auto"``: classified from the photos).
 SPHERE_MATERIALS = ("matte", "mirror", "auto")
+
+
+def _material_problem(value) -> str | None:
+    """What is wrong with a sphere material of ``capture.json``, or None."""
+    if value not in SPHERE_MATERIALS:
+        return f"expected one of {', '.join(repr(m) for m in SPHERE_MATERIALS)}, got {_short(value)}"
+    return None
+
+
+def _check_material(j: _Json, value, key: str) -> None:
+    """A sphere material of ``capture.json`` checked where it is read (it was first looked at once the
+    spheres were found, after the photos' longest step)."""
+    why = _material_problem(value)
+    if why:
+        j.fail(key, why)
 
 
 def sphere_materials(capture: Capture, n_spheres: int) -> list[str]:
@@ -646,9 +664,9 @@ def sphere_materials(capture: Capture, n_spheres: int) -> list[str]:
     path = capture.json_path
 
     def check(value, key):
-        if value not in SPHERE_MATERIALS:
-            raise InputError(f"{key}: expected one of {', '.join(repr(m) for m in SPHERE_MATERIALS)}, "
-                             f"got {_short(value)}", path)
+        why = _material_problem(value)
+        if why:
+            raise InputError(f"{key}: {why}", path)
         return value
 
     default = check(capture.extra.get("sphere_material", "auto"), "sphere_material")
@@ -768,6 +786,8 @@ def load_capture(folder: str | os.PathLike) -> Capture:
         j.fail("units", f"expected a string, got {_short(units)}")
     extra = {k: v for k, v in doc.items() if k not in _CAPTURE_KEYS}
     _check_misspelt_keys(j, extra)
+    if "sphere_material" in extra:
+        _check_material(j, extra["sphere_material"], "sphere_material")
     return Capture(
         folder=folder, image_names=names, image_paths=paths, encoding=encoding, K=K, dist=dist,
         world_from_camera=wfc, world_from_camera_is_default=wfc_default, sphere_radius=radius,
@@ -947,6 +967,7 @@ class Lights:
             if self.reasons[i] is not None:
                 item["reason"] = self.reasons[i]
             item.update(self.extra[i])
+            _cap_cones(item)
             lights.append(item)
         doc = {"format": "ffls-lights", "version": 1}
         if self.encoding is not None:
@@ -959,6 +980,20 @@ class Lights:
             doc["frame"] = {**self.frame, "world_from_camera": np.asarray(self.frame["world_from_camera"]).tolist()}
         doc["lights"] = lights
         return doc
+
+
+def _cap_cones(item: dict) -> None:
+    """A light's cones, its own and its spheres', at most ``MAX_CONE_DEG`` (in place; the spheres'
+    list is copied): a fit that knows little of a direction has a cone wider than the sphere (a
+    sphere's reached 1617 deg on the bench), which means the same and which ``load_lights`` refuses."""
+    def capped(d):
+        wide = isinstance(d, dict) and isinstance(d.get("uncertainty_deg"), float) \
+            and d["uncertainty_deg"] > conventions.MAX_CONE_DEG
+        return {**d, "uncertainty_deg": conventions.MAX_CONE_DEG} if wide else d
+
+    item.update(capped(item))
+    if isinstance(item.get("spheres"), list):
+        item["spheres"] = [capped(s) for s in item["spheres"]]
 
 
 ENCODING_CURVES = ("linear", "srgb", "gamma", "polynomial")
@@ -1123,8 +1158,16 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
         ex = {kk: v for kk, v in it.items() if kk not in ("image", "direction", "position", "status", "reason")}
         if ex.get("uncertainty_deg") is not None:  # null: a rejected light has none
             ex["uncertainty_deg"] = j.number(ex["uncertainty_deg"], key + ": uncertainty_deg")
-            if ex["uncertainty_deg"] < 0:
-                j.fail(key + ": uncertainty_deg", f"a cone radius must be >= 0, got {ex['uncertainty_deg']:g}")
+            if not 0 <= ex["uncertainty_deg"] <= conventions.MAX_CONE_DEG:
+                j.fail(key + ": uncertainty_deg", f"a 95% cone's radius is between 0 and "
+                                                  f"{conventions.MAX_CONE_DEG:g} deg, got {ex['uncertainty_deg']:g}")
+        model = ex.get("model")
+        if model is not None and model not in conventions.LIGHT_MODELS:
+            j.fail(key + ": model", f"expected one of {conventions.LIGHT_MODELS} (or null), got {_short(model)}")
+        if model is not None and (model == "near") != ("position" in it):
+            j.fail(key + ": model", "a near light needs a position" if model == "near" else
+                   "a distant light has no position (a light with one is taken as near): drop the position "
+                   "or say \"model\": \"near\"")
         for angle, what, bound in (("camera_tilt_deg", "tilt", 90), ("camera_roll_deg", "roll", 180)):
             if ex.get(angle) is not None:
                 ex[angle] = j.number(ex[angle], f"{key}: {angle}")

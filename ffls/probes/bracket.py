@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from ffls.errors import InputError
-from ffls.io.images import (ImageData, check_one_colour_kind, check_one_orientation, check_opaque, image_header,
-                            read_image)
+from ffls.io.images import (ImageData, check_one_bit_depth, check_one_colour_kind, check_one_orientation, check_opaque,
+                            image_header, read_image)
 from ffls.radiance.photos import linearise
 
 __all__ = ["SATURATION", "JSON_ENCODING_FORMS", "BracketMerge", "ViewRadiance", "hat_weights", "float_clip_level",
@@ -272,6 +272,7 @@ def _read_all(paths) -> list[ImageData]:
     heads = [image_header(p) for p in paths]
     check_one_orientation(paths, heads=heads, what="bracketed images")
     check_one_colour_kind(paths, heads=heads, what="bracketed images", whole="a bracket")
+    check_one_bit_depth(paths, heads=heads, what="bracketed images", whole="a bracket")
     imgs = [read_image(p) for p in paths]
     for im in imgs:
         check_opaque(im, "export the bracket without alpha")
@@ -386,7 +387,10 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
         sat = (z >= SATURATION * clip) if clip is not None else np.zeros(z.shape, dtype=bool)
         alpha = img.alpha
         depth = {"half": "half float", "float": "32-bit float"}.get(img.bit_depth, f"{img.bit_depth}-bit")
-        note = f"{paths[0].name}: {depth}" + (f", {int(sat.sum())} pixels clipped" if sat.any() else "")
+        note = f"{paths[0].name}: {depth}" + ("" if not sat.any() else f", {int(sat.sum())} pixels clipped"
+                                             if not img.is_hdr else f", {int(sat.sum())} pixels on a plateau at "
+                                             f"its maximum ({clip:.6g}), taken as clipped (lower bounds; a render's "
+                                             f"flat brightest region reads the same)")
         what = paths[0].name
     valid = np.all(np.isfinite(rad), axis=-1)
     if alpha is not None:

@@ -1606,7 +1606,8 @@ def outline_solved(P, cam: DetectionCamera, c0_px, r0_px, rays=None) -> _Outline
 def stated_circle_problem(center_px, radius_px, shape) -> str | None:
     """What is wrong with a circle stated in pixels (a hint's or probe.json's ``center_px`` and
     ``radius_px``) for a photo of ``shape`` (H, W, ...), or None: a radius larger than the photo, or
-    a circle that no pixel (their centres at integer coordinates) falls inside. The text follows
+    a circle that no pixel (their centres at integer coordinates) falls inside (a radius under 1 px
+    holds at most one: a probe was refused blaming the photo). The text follows
     "the circle " (e.g. "(500, 80) px, radius 60 px, lies wholly outside the photo (160x160 px)")."""
     cx, cy = (float(v) for v in center_px)
     r = float(radius_px)
@@ -1616,6 +1617,9 @@ def stated_circle_problem(center_px, radius_px, shape) -> str | None:
                 "in the photo has a radius of at most its size")
     if np.hypot(max(-0.5 - cx, 0.0, cx - (w - 0.5)), max(-0.5 - cy, 0.0, cy - (h - 0.5))) >= r:
         return f"({cx:.0f}, {cy:.0f}) px, radius {r:.0f} px, lies wholly outside the photo ({w}x{h} px)"
+    if r < 1 or np.hypot(cx - min(max(round(cx), 0), w - 1), cy - min(max(round(cy), 0), h - 1)) >= r:
+        return (f"({cx:.1f}, {cy:.1f}) px, radius {r:.3g} px, holds " + ("at most one pixel" if r < 1 else
+                "no pixel's centre") + ": a ball in a photo is several pixels across")
     return None
 
 
