@@ -54,13 +54,6 @@ class OneLineParser(argparse.ArgumentParser):
         self.register("action", None, _StoreOnce)
         self.register("action", "store", _StoreOnce)
 
-    def _add_container_actions(self, container):
-        """``parents=[...]``: the parents' ``store`` flags (plain ``ArgumentParser``'s) become :class:`_StoreOnce`."""
-        super()._add_container_actions(container)
-        for action in self._actions:
-            if type(action) is argparse._StoreAction:
-                action.__class__ = _StoreOnce
-
     def parse_known_args(self, args=None, namespace=None):
         self._given = list(sys.argv[1:] if args is None else args)  # (for the hint in error)
         self._stored = {}  # (what each flag was given, for _StoreOnce)
@@ -101,7 +94,7 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-class _StoreOnce(argparse._StoreAction):
+class _StoreOnce(argparse.Action):
     """argparse's ``store``, except that a flag given twice with different values is refused
     (``-o a.exr ... -o b.exr`` kept the last silently): which one is meant? (as a key given twice
     in a JSON file is refused). The same value twice is no question and is read."""
@@ -114,7 +107,7 @@ class _StoreOnce(argparse._StoreAction):
                 parser.error(f"argument {'/'.join(self.option_strings)}: given twice, as {first} {before!s} and "
                              f"{option_string} {values!s}: which one is meant? give it once")
             stored[self.dest] = (option_string, values)
-        super().__call__(parser, namespace, values, option_string)
+        setattr(namespace, self.dest, values)
 
 
 class _Version(argparse.Action):

@@ -95,7 +95,7 @@ def _sources_arg(text: str):
 def _add_inverse(sub, common):
     from ffls.commands.common import integer, number
 
-    shared = argparse.ArgumentParser(add_help=False)
+    shared = type(common)(add_help=False)  # (the command line's parser class: its store rules)
     shared.add_argument("--criterion", choices=("cv", "bic"), default="cv",
                         help="how the model size is chosen when 'auto': cross-validation (default) or BIC")
     # default None: diffuse's own (cv, 0 with --orientations > 1; ffls.probes.estimate.diffuse_lightmap), 0 elsewhere
@@ -193,7 +193,7 @@ def add_arguments(p):
     from ffls.commands.common import MAP_HEIGHT, float_list, input_path, output_path
 
     sub = p.add_subparsers(dest="method", metavar="METHOD", required=True)
-    common = argparse.ArgumentParser(add_help=False)
+    common = type(p)(add_help=False)  # (the command line's parser class: its store rules)
     common.add_argument("folder", metavar="FOLDER", type=input_path, help="probe folder (probe.json)")
     common.add_argument("-o", "--out", required=True, type=output_path(OUTPUT_SUFFIXES),
                         help="output lat-long map, .exr (alpha: the directions seen)")
