@@ -99,6 +99,7 @@ __all__ = [
     "CONFIDENCE",
     "CONE_FACTOR",
     "COMMON_CORRELATION",
+    "SPHERES_CORRELATION",
     "COMMON_FLOOR_DEG",
     "FALLBACK_FLOOR_DEG",
     "ErrorModel",
@@ -129,8 +130,15 @@ CONFIDENCE = 0.95
 #: form (the chi-square of 2 degrees of freedom is exponential: ``ppf(p) = -2 ln(1 - p)``; the same
 #: float as ``scipy.special.chdtri(2, 0.05)``, without importing SciPy with this module).
 CONE_FACTOR = float(np.sqrt(-2.0 * np.log(1.0 - CONFIDENCE)))
-#: Assumed upper bound of the correlation between two spheres' systematic errors (module docstring).
+#: Assumed upper bound of the correlation between a lone sphere's two halves' systematic errors, and
+#: the stated fallback's common-mode share (module docstring, part 3).
 COMMON_CORRELATION = 0.25
+#: The common mode's share of the systematic variance between two spheres of a photo (module
+#: docstring, part 3): none beyond the common floor. Measured against renders' truth
+#: (``docs/spheres.md``, "The multi-sphere common mode measured"): the spheres' errors correlate
+#: -0.21..+0.05 where their disagreement is large and +0.20..+0.65 only where it is small (0.06-0.21
+#: degrees), so the shared error does not follow the disagreement; the floor bounds it on every row.
+SPHERES_CORRELATION = 0.0
 #: Per-axis standard deviation (degrees) of the common-mode error of even perfectly agreeing spheres.
 COMMON_FLOOR_DEG = 0.1
 #: Per-sphere RMS floor (degrees) where no disagreement can be measured (one sphere per photo).
@@ -852,7 +860,7 @@ def unchecked_floor_deg(residuals: list[np.ndarray], variances: list[np.ndarray]
 
 
 def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
-                    common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
+                    common_correlation: float = SPHERES_CORRELATION, min_photos: int = 3,
                     fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4,
                     spheres: list[np.ndarray] | None = None, centre_deg=None, kinds=None) -> ErrorModel:
     """The capture's error model from its spheres' disagreement (module docstring, parts 2 and 3).
@@ -865,7 +873,9 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     stat_sigma_deg : list of (k_j,) float
         The spheres' statistical per-axis standard deviations (degrees).
     common_correlation : float
-        Bound of the correlation between two spheres' systematic errors (the common mode).
+        Bound of the correlation between two spheres' systematic errors (the common mode's share
+        of their systematic variance, beside the floor): :data:`SPHERES_CORRELATION`, 0, for a
+        photo's spheres; a lone sphere's halves pass :data:`COMMON_CORRELATION`.
     min_photos : int
         Fewer usable photos give :data:`FALLBACK_MODEL`.
     fit_scale : bool
