@@ -115,3 +115,16 @@ def test_one_spheres_own_gradient_is_not_shared():
                                        flat=_flat([[0.1, 0.0], [0.0, 0.0]]))
     assert model.common_floor_deg < without.common_floor_deg + 0.05, (model, without)
     assert _covered(new, lights)[0] >= 0.9
+
+
+def test_a_gradient_on_no_used_sphere_turns_nothing():
+    """A significant gradient measured on a sphere that no photo used: no photo's spheres turn, and
+    the common floor is the disagreement's (the shared part of no turns is 0, not an error)."""
+    opts = {"own_shadow": False}
+    lights, outlines, values, photos = _capture(shift_px=(0.0, 0.0))
+    without = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts)[0]
+    flat = FlatField(strength=0.0, sigma=0.0, p=1.0, applied=False, gradients=np.zeros((3, 2)),
+                     measured=np.array([[0.0, 0.0], [0.0, 0.0], [0.1, 0.0]]), measured_sigma=np.full((3, 2), 0.002),
+                     n_photos=np.array([30, 30, 30]))
+    model = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts, flat=flat)[0]
+    assert model.common_floor_deg == without.common_floor_deg

@@ -1011,7 +1011,8 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
             turns.extend(float(np.sum(np.square(m))) for m in moved)
         elif r.ok and r.used_spheres:  # the part of their turns they share (the others turn 0)
             t = np.zeros((len(r.used_spheres), 3))
-            t[:len(moved)] = moved
+            for j, m in enumerate(moved):
+                t[j] = m
             turns.append(_shared_square(t))
     return float(np.degrees(np.sqrt(max(float(np.mean(turns)), 0.0) / 2.0))) if turns else 0.0
 
