@@ -45,12 +45,14 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    of the spheres' systematic variance (an assumed correlation of at most 0.25 between two spheres'
    systematic errors), which made the common mode the largest term of the cone on most captures.
    Measured against renders' truth (``docs/spheres.md``, "The multi-sphere common mode
-   measured"), the shared error does not follow the disagreement: where the spheres disagree
-   most (0.5-2 degrees per sphere, the bench's rings of four) their errors correlate -0.21..+0.05
-   and cancel in the mean; where they correlate +0.20..+0.65 (balls before a plane) they disagree
-   by 0.06-0.21 degrees, and the error they share is 0.05-0.09 degrees. On every multi-sphere
-   capture measured (17 bench rows, 4 independent renders, 12 fresh captures) the photos' error
-   common to the whole capture is under the floor. So the share is 0 for a photo's spheres
+   measured"), the shared error does not follow the disagreement: on the bench's ffls synth rows
+   (spheres around an object, 0.1-2.3 degrees of disagreement per axis) the spheres' errors
+   correlate -0.21..+0.05 and partly cancel in the mean; on independent renders (balls before a
+   plane) they correlate +0.08..+0.65 but disagree by 0.06-0.11 degrees. On 32 multi-sphere
+   captures with distant lights (16 bench rows, 7 independent renders, 9 fresh ffls synth ones)
+   the photos' error common to the whole capture (their mean, per axis) is at or under the floor
+   (the largest excess 0.196 against 0.189 degrees, within its sampling error of 0.04). So the
+   share is 0 for a photo's spheres
    (:data:`SPHERES_CORRELATION`, :meth:`ErrorModel.common_sigma_deg` with ``common_ratio`` 0), and
    the proportional bound (``COMMON_CORRELATION`` 0.25, ``rho / (1 - rho)`` of the shared
    systematic variance, :meth:`ErrorModel.shared_var_deg2`, averaged with the spheres' inverse
@@ -62,8 +64,9 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    "The common mode from the capture's fitted parameters"). Left as an assumption: the spheres'
    errors beyond the common floor are independent. Around an object they partly cancel (the
    cones there are about 2 times the 95th percentile of the errors), which their offsets cannot
-   tell from independent errors, and a layout where they do not cancel exists (a row). With one sphere there is no
-   disagreement between spheres, but a matte sphere's two halves disagree
+   tell from independent errors, and a layout where they do not cancel exists (a row).
+
+   With one sphere there is no disagreement between spheres, but a matte sphere's two halves disagree
    (:func:`halves_error_model`): the same fit on the two halves' offsets gives its scale, floor,
    cone factor and common-mode bound, measured on its own photos. Where neither can be measured
    (a lone mirror ball, too few photos with both halves fitted), the fit statistics plus a stated
@@ -139,8 +142,8 @@ COMMON_CORRELATION = 0.25
 #: The common mode's share of the systematic variance between two spheres of a photo (module
 #: docstring, part 3): none beyond the common floor. Measured against renders' truth
 #: (``docs/spheres.md``, "The multi-sphere common mode measured"): the spheres' errors correlate
-#: -0.21..+0.05 where their disagreement is large and +0.20..+0.65 only where it is small (0.06-0.21
-#: degrees), so the shared error does not follow the disagreement; the floor bounds it on every row.
+#: -0.21..+0.05 where they disagree by 0.1-2.3 degrees and up to +0.65 only where they disagree by
+#: 0.06-0.11, so the shared error does not follow the disagreement; the floor bounds it.
 SPHERES_CORRELATION = 0.0
 #: Per-axis standard deviation (degrees) of the common-mode error of even perfectly agreeing spheres.
 COMMON_FLOOR_DEG = 0.1
