@@ -967,8 +967,8 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     ``shared``, the turn is the part of each photo's used spheres' turns (a sphere without such a
     gradient, or not matte, turns 0) that they share, which their disagreement cannot show (it
     shows how their turns differ): the squared turn of their mean less what their spread about it
-    gives that mean (:func:`_shared_square`), so that one sphere's own gradient (a shadow or a bounce
-    across its disk, not the lens) is left to the disagreement that already holds it.
+    gives that mean (:func:`_shared_square`), so that one sphere's own gradient (a shadow or a
+    bounce across its disk, not the lens) is left to the disagreement that already holds it.
 
     Parameters
     ----------

@@ -41,9 +41,10 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    together. For a photo's spheres it is the **common floor** alone: ``COMMON_FLOOR_DEG`` (per
    axis, stated) plus, in quadrature, the turns the spheres share that the capture measures (the
    mean of the spheres' centre shifts, shading against outline, and the turn of an undivided lens
-   fall-off: :func:`ffls.spheres.estimate.calibrate_uncertainty`). Until stop 29 it also held a third
-   of the spheres' systematic variance (an assumed correlation of at most 0.25 between two spheres'
-   systematic errors), which made the common mode the largest term of the cone on most captures.
+   fall-off: :func:`ffls.spheres.estimate.calibrate_uncertainty`). Until stop 29 it also held a
+   third of the spheres' systematic variance (an assumed correlation of at most 0.25 between two
+   spheres' systematic errors), which made the common mode the largest term of the cone on most
+   captures.
    Measured against renders' truth (``docs/spheres.md``, "The multi-sphere common mode
    measured"), the shared error does not follow the disagreement: on the bench's ffls synth rows
    (spheres around an object, 0.1-2.3 degrees of disagreement per axis) the spheres' errors
@@ -66,8 +67,8 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    cones there are about 2 times the 95th percentile of the errors), which their offsets cannot
    tell from independent errors, and a layout where they do not cancel exists (a row).
 
-   With one sphere there is no disagreement between spheres, but a matte sphere's two halves disagree
-   (:func:`halves_error_model`): the same fit on the two halves' offsets gives its scale, floor,
+   With one sphere there is no disagreement between spheres, but a matte sphere's two halves
+   disagree (:func:`halves_error_model`): the same fit on the two halves' offsets gives its scale, floor,
    cone factor and common-mode bound, measured on its own photos. Where neither can be measured
    (a lone mirror ball, too few photos with both halves fitted), the fit statistics plus a stated
    per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
