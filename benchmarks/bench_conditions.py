@@ -184,7 +184,7 @@ def recalibrate(doc: dict, common_correlation: float | None = None) -> dict:
     quadrature, a highlight fit's own) times the cone factor. A near light's joint-fit statistics
     are not recorded, so its cone here can be below the one ``ffls lights`` would report.
     ``common_correlation``: the common-mode bound's correlation (default the module's
-    ``COMMON_CORRELATION``), to replay the cones under another bound.
+    ``SPHERES_CORRELATION``), to replay the cones under another bound.
     """
     from ffls.spheres.uncertainty import fit_error_model, photo_residuals
 
@@ -203,9 +203,9 @@ def recalibrate(doc: dict, common_correlation: float | None = None) -> dict:
                                    np.array([s["center"] for s in sph]) if near else None))
         stats.append(np.array([s["sigma_deg"] for s in sph]) / np.sqrt(2.0))
         used_all.append(np.asarray(used))
-    from ffls.spheres.uncertainty import COMMON_CORRELATION
+    from ffls.spheres.uncertainty import SPHERES_CORRELATION
 
-    rho = COMMON_CORRELATION if common_correlation is None else float(common_correlation)
+    rho = SPHERES_CORRELATION if common_correlation is None else float(common_correlation)
     model = fit_error_model(res, stats, spheres=used_all, centre_deg=centre, common_correlation=rho)
     if model.source == "fallback" and common_correlation is not None:  # one sphere: its common share too
         from dataclasses import replace
@@ -341,8 +341,8 @@ def truth_check(folder: Path) -> dict:
       1 for a Gaussian of that sd; 1.1774 = the median of a Rayleigh radius);
     * ``pair_correlation``: per pair of spheres, the correlation of their errors over the photos
       that use both (uncentred: ``sum e_i . e_j / sqrt(sum |e_i|^2 sum |e_j|^2)``), averaged over
-      the pairs. The model takes the spheres' errors as independent beside a common mode bounded
-      by a correlation of at most ``COMMON_CORRELATION``;
+      the pairs. The model takes the spheres' errors as independent beside a common mode that is
+      its floor alone (``SPHERES_CORRELATION`` 0);
     * ``photo_over_independent``: the median over the photos of the photo's squared per-axis error
       ``|E|^2 / 2`` over the variance the independent-sphere part predicts for it (``sum w^2 v``,
       the budget's sigma without the common mode): 1 if the spheres' errors are independent,

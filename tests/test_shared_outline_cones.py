@@ -19,10 +19,11 @@ def _sphere(center_px, margin_px):
                                        margin_px=margin_px)
 
 
-def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6, opposite=False):
+def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6, opposite=False, alone=False):
     """Both spheres' outlines found ``shift_px`` (columns, rows) off their true centres, and a lens
     gradient across both disks (``opposite``: the second's is the first's negative, as a lens's
-    on either side of the frame): their samples, the photos' values and fits."""
+    on either side of the frame; ``alone``: across the first disk only, a shadow's or a bounce's,
+    not a lens's): their samples, the photos' values and fits."""
     rng = np.random.default_rng(seed)
     lights = front_lights(30, 5)
     outlines, takes, rendered = [], [], []
@@ -37,7 +38,7 @@ def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6, oppo
     for l in lights:
         photo = []
         for i, (r, o, t) in enumerate(zip(rendered, outlines, takes)):
-            sign = -1.0 if opposite and i else 1.0
+            sign = (0.0 if alone else -1.0 if opposite else 1.0) if i else 1.0
             fall = 1.0 + flat_field_offsets(o) @ (sign * np.asarray(gradient, dtype=np.float64))
             v = 0.5 * np.maximum(r.normals[t] @ l, 0.0) * fall + 0.01 + noise * rng.normal(size=t.size)
             photo.append(sphere_values_of(v, np.ones(v.size, bool), 0))
@@ -101,3 +102,29 @@ def test_a_lens_gradient_not_divided_out_is_shared():
                                        flat=_flat([[0.05, 0.0], [-0.05, 0.0]]))
     assert model.common_floor_deg < without.common_floor_deg + 0.1, (model, without)
     assert _covered(new, lights)[0] >= 0.9
+
+
+def test_one_spheres_own_gradient_is_not_shared():
+    """A gradient across one sphere's disk alone (the shading of its surroundings, not a lens) turns
+    that sphere alone: its disagreement with the other sphere shows it, and the photos' common mode
+    does not take half its turn as shared (it did: the mean of the spheres' turns was counted)."""
+    opts = {"own_shadow": False}
+    lights, outlines, values, photos = _capture(shift_px=(0.0, 0.0), gradient=(0.1, 0.0), alone=True)
+    without = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts)[0]
+    model, new = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts,
+                                       flat=_flat([[0.1, 0.0], [0.0, 0.0]]))
+    assert model.common_floor_deg < without.common_floor_deg + 0.05, (model, without)
+    assert _covered(new, lights)[0] >= 0.9
+
+
+def test_a_gradient_on_no_used_sphere_turns_nothing():
+    """A significant gradient measured on a sphere that no photo used: no photo's spheres turn, and
+    the common floor is the disagreement's (the shared part of no turns is 0, not an error)."""
+    opts = {"own_shadow": False}
+    lights, outlines, values, photos = _capture(shift_px=(0.0, 0.0))
+    without = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts)[0]
+    flat = FlatField(strength=0.0, sigma=0.0, p=1.0, applied=False, gradients=np.zeros((3, 2)),
+                     measured=np.array([[0.0, 0.0], [0.0, 0.0], [0.1, 0.0]]), measured_sigma=np.full((3, 2), 0.002),
+                     n_photos=np.array([30, 30, 30]))
+    model = calibrate_uncertainty(photos, outlines, values=values, fit_options=opts, flat=flat)[0]
+    assert model.common_floor_deg == without.common_floor_deg

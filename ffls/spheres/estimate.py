@@ -972,9 +972,11 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     significant (its chi-square over its standard errors, 2 degrees of freedom, at
     :data:`ffls.spheres.photo.SIGNIFICANCE`), each accepted photo's sphere is fitted again with
     it divided out: the root mean square of the turn over the photos, half on each axis. With
-    ``shared``, the turn is that of the mean of each photo's used spheres (a sphere without such a
-    gradient, or not matte, turns 0): what the spheres share, which their disagreement cannot show
-    (it shows how their turns differ).
+    ``shared``, the turn is the part of each photo's used spheres' turns (a sphere without such a
+    gradient, or not matte, turns 0) that they share, which their disagreement cannot show (it
+    shows how their turns differ): the squared turn of their mean less what their spread about it
+    gives that mean (:func:`_shared_square`), so that one sphere's own gradient (a shadow or a
+    bounce across its disk, not the lens) is left to the disagreement that already holds it.
 
     Parameters
     ----------
@@ -1014,10 +1016,31 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
             if g.status == "ok":
                 moved.append(g.direction - f.direction)
         if not shared:
-            turns.extend(float(np.linalg.norm(m)) for m in moved)
-        elif r.ok and r.used_spheres:  # the turn of their mean (the others turn 0)
-            turns.append(float(np.linalg.norm(np.sum(moved, axis=0) / len(r.used_spheres))) if moved else 0.0)
-    return float(np.degrees(np.sqrt(np.mean(np.square(turns)) / 2.0))) if turns else 0.0
+            turns.extend(float(np.sum(np.square(m))) for m in moved)
+        elif r.ok and r.used_spheres:  # the part of their turns they share (the others turn 0)
+            t = np.zeros((len(r.used_spheres), 3))
+            for j, m in enumerate(moved):
+                t[j] = m
+            turns.append(_shared_square(t))
+    return float(np.degrees(np.sqrt(max(float(np.mean(turns)), 0.0) / 2.0))) if turns else 0.0
+
+
+def _shared_square(turns: np.ndarray) -> float:
+    """The squared norm of the turn that ``k`` spheres share, from their turns ``(k, d)``.
+
+    With ``t_i = c + e_i`` (``e_i`` each sphere's own, independent), ``|mean t|^2`` holds
+    ``|c|^2`` plus ``sum |e_i|^2 / k^2``, whose expectation ``sum |t_i - mean t|^2 / (k (k - 1))``
+    is subtracted (the between- and within-group decomposition of a one-way random-effects model):
+    an unbiased estimate of ``|c|^2``, negative where the turns differ more than they agree (a mean
+    over photos is clipped at 0 by the caller). One sphere turned alone gives 0; all turned alike,
+    their turn's square.
+    """
+    t = np.asarray(turns, dtype=np.float64)
+    k = t.shape[0]
+    mean = t.mean(axis=0)
+    if k < 2:
+        return float(mean @ mean)
+    return float(mean @ mean - np.sum((t - mean) ** 2) / (k * (k - 1)))
 
 
 def _measured_centre_shifts(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,

@@ -37,31 +37,38 @@ A reported ``uncertainty_deg`` is the radius of the 95% confidence cone around a
    95% upper bound, at most the fallback's (:func:`unchecked_floor_deg`,
    :attr:`ErrorModel.sphere_floor_deg`).
 3. **The common mode, which no disagreement shows.** An error shared by all spheres of a photo
-   (the bounce or encoding model, a wrong scene geometry) moves them together. It is bounded by
-   assumption, stated here and in ``docs/spheres.md``: the correlation between two spheres'
-   systematic errors is at most ``COMMON_CORRELATION = 0.25`` (the shared part's variance at most
-   a third of the unshared part's), so the common-mode variance is at most
-   ``rho / (1 - rho) * tau_s^2``, where ``tau_s^2`` is the per-sphere systematic variance that
-   the disagreement measured and that other spheres can share (``tau^2`` plus the part of
-   ``s^2 sigma_i^2`` beyond the fit statistics, :meth:`ErrorModel.shared_var_deg2`; not the centre
-   term ``g_i^2``: a centre error comes from the sphere's own outline and shading), averaged over
-   the photo's spheres with their inverse variances under the fitted model (:meth:`ErrorModel.common_sigma_deg`): each
-   photo (and each sphere's own cone) gets the bound of the spheres that carry information. A
-   capture-wide median over all spheres let an uninformative sphere set the bound: beside a matte
-   ball, a mirror ball whose highlight is uncertain by degrees gave the calibration shot of
-   ``docs/spheres.md`` a common mode of 2.4 degrees per axis, eight times the 95th percentile of its
-   matte ball's error. Plus ``COMMON_FLOOR_DEG`` (per axis) for the geometry shared by all spheres
-   (camera pose, a bias of the detected radii) that even perfectly agreeing spheres carry. The
-   bound was chosen on ffls synth renders (``docs/spheres.md``), where the measured common mode
-   lies in this range except where the estimator itself is biased (noisy dark pixels): that bias
-   is not bounded by it. The capture's fitted parameters cannot size it instead: propagated by
-   their standard errors (a GUM type-B evaluation, :func:`shading_shift`,
-   :func:`shared_parameter_deg`, :func:`own_parameter_deg`), the encoding's exponent and the ground
-   ratios move the directions by at most 0.06 degrees, 6-90 times less than the common errors
-   measured against renders' truth, which come from the model's misfit (``docs/spheres.md``,
-   "The common mode from the capture's fitted parameters"). With one sphere there is no
-   disagreement between spheres, but a matte sphere's two halves disagree
-   (:func:`halves_error_model`): the same fit on the two halves' offsets gives its scale, floor,
+   (camera pose, the encoding or bounce model, a bias of all detected outlines) moves them
+   together. For a photo's spheres it is the **common floor** alone: ``COMMON_FLOOR_DEG`` (per
+   axis, stated) plus, in quadrature, the turns the spheres share that the capture measures (the
+   mean of the spheres' centre shifts, shading against outline, and the turn of an undivided lens
+   fall-off: :func:`ffls.spheres.estimate.calibrate_uncertainty`). Until stop 29 it also held a
+   third of the spheres' systematic variance (an assumed correlation of at most 0.25 between two
+   spheres' systematic errors), which made the common mode the largest term of the cone on most
+   captures.
+   Measured against renders' truth (``docs/spheres.md``, "The multi-sphere common mode
+   measured"), the shared error does not follow the disagreement: on the bench's ffls synth rows
+   (spheres around an object, 0.1-2.3 degrees of disagreement per axis) the spheres' errors
+   correlate -0.21..+0.05 and partly cancel in the mean; on independent renders (balls before a
+   plane) they correlate +0.08..+0.65 but disagree by 0.06-0.11 degrees. On 32 multi-sphere
+   captures with distant lights (16 bench rows, 7 independent renders, 9 fresh ffls synth ones)
+   the photos' error common to the whole capture (their mean, per axis) is at or under the floor
+   (the largest excess 0.196 against 0.189 degrees, within its sampling error of 0.04). So the
+   share is 0 for a photo's spheres
+   (:data:`SPHERES_CORRELATION`, :meth:`ErrorModel.common_sigma_deg` with ``common_ratio`` 0), and
+   the proportional bound (``COMMON_CORRELATION`` 0.25, ``rho / (1 - rho)`` of the shared
+   systematic variance, :meth:`ErrorModel.shared_var_deg2`, averaged with the spheres' inverse
+   variances) stays only for a lone sphere's two halves and the stated fallback, whose halves share
+   one sphere's centre, surface and surroundings. The capture's fitted parameters cannot size the
+   common mode: propagated by their standard errors (a GUM type-B evaluation,
+   :func:`shading_shift`, :func:`shared_parameter_deg`, :func:`own_parameter_deg`), the encoding's
+   exponent and the ground ratios move the directions by at most 0.06 degrees (``docs/spheres.md``,
+   "The common mode from the capture's fitted parameters"). Left as an assumption: the spheres'
+   errors beyond the common floor are independent. Around an object they partly cancel (the
+   cones there are about 2 times the 95th percentile of the errors), which their offsets cannot
+   tell from independent errors, and a layout where they do not cancel exists (a row).
+
+   With one sphere there is no disagreement between spheres, but a matte sphere's two halves
+   disagree (:func:`halves_error_model`): the same fit on the two halves' offsets gives its scale, floor,
    cone factor and common-mode bound, measured on its own photos. Where neither can be measured
    (a lone mirror ball, too few photos with both halves fitted), the fit statistics plus a stated
    per-sphere floor (``FALLBACK_FLOOR_DEG``, RMS) and its common-mode share are used
@@ -100,6 +107,7 @@ __all__ = [
     "CONFIDENCE",
     "CONE_FACTOR",
     "COMMON_CORRELATION",
+    "SPHERES_CORRELATION",
     "COMMON_FLOOR_DEG",
     "FALLBACK_FLOOR_DEG",
     "ErrorModel",
@@ -130,8 +138,15 @@ CONFIDENCE = 0.95
 #: form (the chi-square of 2 degrees of freedom is exponential: ``ppf(p) = -2 ln(1 - p)``; the same
 #: float as ``scipy.special.chdtri(2, 0.05)``, without importing SciPy with this module).
 CONE_FACTOR = float(np.sqrt(-2.0 * np.log(1.0 - CONFIDENCE)))
-#: Assumed upper bound of the correlation between two spheres' systematic errors (module docstring).
+#: Assumed upper bound of the correlation between a lone sphere's two halves' systematic errors, and
+#: the stated fallback's common-mode share (module docstring, part 3).
 COMMON_CORRELATION = 0.25
+#: The common mode's share of the systematic variance between two spheres of a photo (module
+#: docstring, part 3): none beyond the common floor. Measured against renders' truth
+#: (``docs/spheres.md``, "The multi-sphere common mode measured"): the spheres' errors correlate
+#: -0.21..+0.05 where they disagree by 0.1-2.3 degrees and up to +0.65 only where they disagree by
+#: 0.06-0.11, so the shared error does not follow the disagreement; the floor bounds it.
+SPHERES_CORRELATION = 0.0
 #: Per-axis standard deviation (degrees) of the common-mode error of even perfectly agreeing spheres.
 COMMON_FLOOR_DEG = 0.1
 #: Per-sphere RMS floor (degrees) where no disagreement can be measured (one sphere per photo).
@@ -873,7 +888,7 @@ def unchecked_floor_deg(residuals: list[np.ndarray], variances: list[np.ndarray]
 
 
 def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray], *,
-                    common_correlation: float = COMMON_CORRELATION, min_photos: int = 3,
+                    common_correlation: float = SPHERES_CORRELATION, min_photos: int = 3,
                     fit_scale: bool = True, trim: float = TRIM_SIGNIFICANCE, max_rounds: int = 4,
                     spheres: list[np.ndarray] | None = None, centre_deg=None, kinds=None) -> ErrorModel:
     """The capture's error model from its spheres' disagreement (module docstring, parts 2 and 3).
@@ -886,7 +901,9 @@ def fit_error_model(residuals: list[np.ndarray], stat_sigma_deg: list[np.ndarray
     stat_sigma_deg : list of (k_j,) float
         The spheres' statistical per-axis standard deviations (degrees).
     common_correlation : float
-        Bound of the correlation between two spheres' systematic errors (the common mode).
+        Bound of the correlation between two spheres' systematic errors (the common mode's share
+        of their systematic variance, beside the floor): :data:`SPHERES_CORRELATION`, 0, for a
+        photo's spheres; a lone sphere's halves pass :data:`COMMON_CORRELATION`.
     min_photos : int
         Fewer usable photos give :data:`FALLBACK_MODEL`.
     fit_scale : bool
