@@ -79,6 +79,8 @@ def test_nan_inf_rejected_with_count(tmp_path, bad):
     with pytest.raises(InputError, match="2 pixels with NaN or Inf") as e:
         lightmap.load_lightmap(tmp_path / "bad.exr")
     _one_line(e.value, "bad.exr")
+    # where to look: a half-float sun over 65504 is stored as Inf (round 16: the count alone)
+    assert "the first at column 2, row 1)" in str(e.value)
 
 
 def test_overflowing_and_black_maps_refused(tmp_path):
