@@ -4,6 +4,7 @@ seen from their place, not from the scene centre, and under a lamp 2 units away 
 off (``ffls synth --near 2 --sphere-material mixed``: 9.4-11.2 degrees against cones under 1)."""
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -12,6 +13,7 @@ from ffls.conventions import normalize, spherical_to_direction
 from ffls.spheres.estimate import place_at_capture_range
 from ffls.spheres.highlight import HighlightFit
 from ffls.spheres.photo import PhotoEstimate, SphereResult
+from ffls.spheres.uncertainty import FALLBACK_MODEL
 
 CENTERS = np.array([[-0.25, -0.25, 0.05], [0.25, -0.25, 0.05], [0.25, 0.25, 0.05]])
 SAMPLES = [SimpleNamespace(center=c) for c in CENTERS]
@@ -77,3 +79,25 @@ def test_a_capture_of_distant_lights_is_left_as_it_is():
     near, truth = capture(4, rng)
     photos = near + [distant_photo(truth, rng) for _ in range(6)]
     assert place_at_capture_range(photos, SAMPLES, np.zeros(3)) == photos
+
+
+def test_a_near_fit_that_did_not_locate_its_light_is_placed_at_its_distance():
+    """A near fit whose position ran off (a grazing hand-held lamp, its spheres' rays nearly parallel:
+    put 9 km away, 12.9 degrees off, with a cone of 1e8 degrees) is placed like a distant
+    combination: within 1 degree, and its joint fit's 1-sigma (millions of degrees) leaves its cone."""
+    rng = np.random.default_rng(3)
+    near, truth = capture(20, rng)
+    ran_off = replace(distant_photo(truth, rng), model="near", joint_sigma_deg=3.9e7,
+                      distance_coupling_deg=0.001)
+    ran_off = replace(ran_off, position=9000.0 * ran_off.direction)
+    assert angle_deg(ran_off.direction, truth) > 8.0
+    out = place_at_capture_range(near + [ran_off], SAMPLES, np.zeros(3))
+    assert out[:-1] == near
+    placed = out[-1]
+    assert abs(np.linalg.norm(placed.position) - DISTANCE) < 0.15
+    assert angle_deg(placed.direction, truth) < 1.0 and 0.3 < placed.range_deg < 3.0
+    assert placed.joint_sigma_deg == 0.0 and placed.distance_coupling_deg == 0.0
+    assert placed.with_error_model(FALLBACK_MODEL).uncertainty_deg < 10.0
+    # a located near fit (1-sigma under one radian) is left as it is
+    located = replace(ran_off, joint_sigma_deg=2.0)
+    assert place_at_capture_range(near + [located], SAMPLES, np.zeros(3))[-1] is located

@@ -79,6 +79,8 @@ def test_nan_inf_rejected_with_count(tmp_path, bad):
     with pytest.raises(InputError, match="2 pixels with NaN or Inf") as e:
         lightmap.load_lightmap(tmp_path / "bad.exr")
     _one_line(e.value, "bad.exr")
+    # where to look: a half-float sun over 65504 is stored as Inf (round 16: the count alone)
+    assert "the first at column 2, row 1)" in str(e.value)
 
 
 def test_overflowing_and_black_maps_refused(tmp_path):
@@ -243,6 +245,29 @@ def test_constant_map_integrals(layout, shape):
 def test_upper_hemisphere_power():
     lm = lightmap.constant_map(32, (1.0, 2.0, 3.0))
     np.testing.assert_allclose(lm.total_power("upper"), 2 * np.pi * np.array([1, 2, 3]), rtol=1e-9)
+
+
+def test_downsample_works_in_bands(rng, monkeypatch):
+    """A large map is box-filtered band by band, never as a whole in float64 (a 16384 x 8192 map,
+    relit with --map-res 512, peaked at 10 GB): the result is the whole-map solid-angle weighted
+    mean, and the peak allocation stays under the map's own size."""
+    import tracemalloc
+
+    data = (rng.random((512, 1024, 3)) ** 4 * 50).astype(np.float32)
+    lm = LightMap(data, "latlong")
+    sa = lm.solid_angles()
+    monkeypatch.setattr(lightmap, "DOWNSAMPLE_BAND_BYTES", 1 << 20)
+    for f in (1, 2, 8, 64, 512):
+        want = ((data.astype(np.float64) * sa[..., None]).reshape(512 // f, f, 1024 // f, f, 3).sum(axis=(1, 3))
+                / sa.reshape(512 // f, f, 1024 // f, f).sum(axis=(1, 3))[..., None])
+        np.testing.assert_allclose(lm.downsample(f).data, want, rtol=1e-6)
+    tracemalloc.start()
+    try:
+        lm.downsample(8)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < data.nbytes, (peak, data.nbytes)
 
 
 def test_downsample_keeps_integral(rng):

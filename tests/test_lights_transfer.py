@@ -251,3 +251,27 @@ def test_an_encoding_calibrated_on_another_capture_is_said(tmp_path):
     assert str(cal / "lights.json") in got.note
     own, same = load_capture_and_lights(cal)  # its own calibration, which ffls lights printed: nothing more
     assert own.encoding == {"gamma": 1.05} and same.note is None
+
+
+def test_an_lp_says_the_frame_it_was_read_in(calib, tmp_path):
+    """RTI tools differ in the .lp's axes (z toward the camera or into the scene, y up or down) and
+    nothing in the file says which: a relight with an .lp whose z was negated was 0.63 relative RMS
+    off without a word about the frame (only coverage lines). Every .lp read says the frame, and a
+    file whose lights mostly point away from the camera (behind the object) is named."""
+    from ffls.commands.lights import export_lp
+    from ffls.io.capture import world_to_lp
+
+    cap, lights = load_capture_and_lights(calib)
+    lp = tmp_path / "calib.lp"
+    export_lp(lights, cap, lp)
+    _, same = load_capture_and_lights(calib, lp)
+    assert "calib.lp: .lp directions read in the image frame (x right, y up, z toward the camera" in same.note
+    assert "point away from the camera" not in same.note
+    names, d = read_lp(lp)
+    flipped = tmp_path / "zaway.lp"
+    flipped.write_text(f"{len(names)}\n" + "".join(f"{n} {x:.9f} {y:.9f} {-z:.9f}\n" for n, (x, y, z) in zip(names, d)))
+    away = int(np.sum(d[:, 2] > 0))  # negated: these now point away
+    assert away > len(names) / 2
+    _, neg = load_capture_and_lights(calib, flipped)
+    assert f"{away} of its {N} lights point away from the camera (z < 0)" in neg.note
+    np.testing.assert_allclose(world_to_lp(neg.directions, cap.world_from_camera)[:, 2], -d[:, 2], atol=1e-8)

@@ -47,7 +47,7 @@ __all__ = [
     "lp_to_world",
     "world_to_lp",
     "lights_from_lp",
-    "load_lights_any",
+    "load_lights_any", "lp_frame_note",
     "parse_lights_map",
     "load_capture_and_lights",
     "UNIT_TOLERANCE",
@@ -1556,7 +1556,8 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
     -------
     Lights
         In the capture's image order, named by the capture's images; ``note`` set when matched
-        by order or by the map.
+        by order or by the map, and for an ``.lp`` always: the frame its directions were read in
+        (:func:`lp_frame_note`).
 
     Raises
     ------
@@ -1565,6 +1566,42 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
         matches, a map naming unknown lights or images, or a capture image without a light.
     """
     path = Path(path)
+    out = _match_lights_file(path, capture, lights_map)
+    if path.suffix.lower() == ".lp":
+        out.note = "; ".join(filter(None, [out.note, lp_frame_note(path, out, capture)]))
+    return out
+
+
+def lp_frame_note(path: str | os.PathLike, lights: Lights, capture: Capture) -> str:
+    """What ffls assumed of an ``.lp`` file's directions, in one line.
+
+    RTI tools differ (y up or down, z toward the camera or into the scene, another tool's world
+    axes), and nothing in the file says which: the note names the frame ffls read (the image's:
+    x right, y up, z toward the camera) and, where most accepted lights point away from the
+    camera (z < 0: behind the object, which no RTI dome has), says so.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.lp`` file.
+    lights : Lights
+        Its lights in the capture's world frame.
+    capture : Capture
+        Whose ``world_from_camera`` turned them.
+    """
+    ok = np.array([st == "ok" for st in lights.status], dtype=bool)
+    z = world_to_lp(np.asarray(lights.directions, dtype=np.float64)[ok], capture.world_from_camera)[:, 2]
+    note = (f"lights: {Path(path).name}: .lp directions read in the image frame (x right, y up, z toward the "
+            "camera; docs/formats.md) and turned to the world by capture.json's world_from_camera")
+    away = int(np.sum(z < 0.0))
+    if away > z.size / 2:
+        note += (f"; {away} of its {z.size} lights point away from the camera (z < 0), behind the object: "
+                 "a file whose z points into the scene needs its z negated")
+    return note
+
+
+def _match_lights_file(path: Path, capture: Capture, lights_map=None) -> Lights:
+    """:func:`load_lights_any`'s matching of a lights file's lights to the capture's images."""
     lp = path.suffix.lower() == ".lp"
     raw = _read_lights_file(path, capture)
     cap_names = list(capture.image_names)

@@ -273,13 +273,19 @@ def check_half_range(a: np.ndarray, path) -> None:
 
 
 def nonfinite_message(a: np.ndarray) -> str | None:
-    """``'N pixels with NaN or Inf values (a NaN, b Inf channel values)'`` for (H, W, C) data, or None when all finite."""
+    """``'N pixels with NaN or Inf values (a NaN, b Inf channel values; the first at column x, row y)'`` for
+    (H, W, C) or (H, W) data, or None when all finite (the place: where to look in an image editor)."""
     bad = ~np.isfinite(a)
     if not bad.any():
         return None
-    npx = int(np.count_nonzero(bad.any(axis=-1))) if a.ndim == 3 else int(np.count_nonzero(bad))
+    px = bad.any(axis=-1) if a.ndim == 3 else bad
+    npx = int(np.count_nonzero(px))
+    where = ""
+    if px.ndim == 2:
+        row, col = np.unravel_index(int(np.argmax(px)), px.shape)
+        where = f"; the first at column {col}, row {row}"
     return (f"{npx} pixels with NaN or Inf values ({int(np.isnan(a).sum())} NaN, "
-            f"{int(np.isinf(a).sum())} Inf channel values)")
+            f"{int(np.isinf(a).sum())} Inf channel values{where})")
 
 
 def _kind_of(path: Path) -> str:

@@ -68,6 +68,9 @@ BUILTIN_PROCEDURAL = ("sky", "paper")
 #: (a 2x1 lat-long map has one row straddling the horizon, so its upper-hemisphere integral equals
 #: the full sphere's) and resolve no direction.
 MIN_RES = {"latlong": 4, "angular": 4, "mirrorball": 4, "cube": 2}
+#: Bytes of float64 a band of :meth:`LightMap.downsample` holds at a time (16 MiB): its memory does not
+#: grow with the map beyond the map itself and its output.
+DOWNSAMPLE_BAND_BYTES = 1 << 24
 
 
 def min_size_text(layout: str) -> str:
@@ -237,13 +240,18 @@ class LightMap:
             raise ValueError(f"downsample factor {factor} must be >= 1 and divide the height {h}")
         if factor == 1:
             return LightMap(self.data.copy(), self.layout, self.source, self.clamped_negatives)
-        sa = self.solid_angles()  # (h, w)
-        num = (self.data.astype(np.float64) * sa[..., None]).reshape(h // factor, factor, w // factor, factor, 3)
-        den = sa.reshape(h // factor, factor, w // factor, factor)
-        num = num.sum(axis=(1, 3))
-        den = den.sum(axis=(1, 3))
-        out = num / np.maximum(den, 1e-300)[..., None]
-        return LightMap(out.astype(np.float32), "latlong", self.source, self.clamped_negatives)
+        # in bands of output rows, float64 only within a band: a 16384 x 8192 map's float64 copies
+        # of the whole map (3.2 GB each) made the relight of it with --map-res 512 peak at 10 GB
+        rows = _sphere_map("latlong").row_solid_angles(h)  # every texel of a row has its row's
+        out = np.empty((h // factor, w // factor, 3), dtype=np.float32)
+        band = max(1, DOWNSAMPLE_BAND_BYTES // (factor * w * 3 * 8))  # output rows a band
+        for i in range(0, h // factor, band):
+            sa = rows[i * factor:(i + band) * factor]
+            strip = self.data[i * factor:(i + band) * factor].astype(np.float64) * sa[:, None, None]
+            num = strip.reshape(-1, factor, w // factor, factor, 3).sum(axis=(1, 3))
+            den = sa.reshape(-1, factor).sum(axis=1) * factor
+            out[i:i + num.shape[0]] = num / np.maximum(den, 1e-300)[:, None, None]
+        return LightMap(out, "latlong", self.source, self.clamped_negatives)
 
     def to_latlong(self, height: int) -> "LightMap":
         """Resample to a lat-long map by nearest-texel lookup.

@@ -240,10 +240,15 @@ class LatLongMap(SphereMap):
 
     def solid_angles(self, res: int) -> np.ndarray:
         h, w = self.shape(res)
+        return np.repeat(self.row_solid_angles(res)[:, None], w, axis=1)
+
+    def row_solid_angles(self, res: int) -> np.ndarray:
+        """Exact solid angle (sr) of one texel of each row, (H,) float64: every texel of a row has it."""
+        h, w = self.shape(res)
         theta = np.pi * np.arange(h + 1) / h
         # cos t0 - cos t1 = 2 sin((t0 + t1)/2) sin((t1 - t0)/2), no cancellation for thin rows
         band = 2.0 * np.sin(0.5 * (theta[:-1] + theta[1:])) * np.sin(0.5 * (theta[1:] - theta[:-1]))
-        return np.repeat((band * (2.0 * np.pi / w))[:, None], w, axis=1)
+        return band * (2.0 * np.pi / w)
 
 
 # ============================================================================ concentric

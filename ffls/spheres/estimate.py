@@ -2019,6 +2019,10 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
 #: for :func:`place_at_capture_range`.
 NEAR_CAPTURE_MIN_PHOTOS = 3
 NEAR_CAPTURE_FRACTION = 0.5
+#: A near fit whose direction's 1-sigma error (``PhotoEstimate.joint_sigma_deg``) is over one radian
+#: did not locate its light (the linearised covariance means nothing there): in
+#: :func:`place_at_capture_range` it is placed like a distant combination.
+UNLOCATED_SIGMA_DEG = float(np.degrees(1.0))
 
 
 def _place_on_ray(r: PhotoEstimate, direction: np.ndarray, centers: np.ndarray, c: np.ndarray,
@@ -2047,6 +2051,12 @@ def place_at_capture_range(results: list[PhotoEstimate], samples: list[SphereSam
     :data:`NEAR_CAPTURE_FRACTION`, and :data:`NEAR_CAPTURE_MIN_PHOTOS`) have a near light, such
     a photo's light is put on its ray at the median distance of the near photos' lights.
 
+    So is a near fit that did not locate its light (its direction's 1-sigma over one radian,
+    :data:`UNLOCATED_SIGMA_DEG`): the rays of a grazing light's spheres nearly parallel, one of them
+    in the object's cast shadow, its position ran off (a hand-held lamp 1.5 m away, 4 degrees up,
+    put 9 km away, 12.9 degrees off, with a cone of 1e8 degrees; docs/spheres.md). Its direction,
+    seen from its spheres, is placed the same way, and its joint fit's terms leave its cone.
+
     Its cone is widened (in quadrature, ``range_deg``) by what the same placement misses on the
     near photos themselves: each near photo's used spheres' inverse-variance mean direction,
     placed at the median distance, against its near fit's direction; the ``confidence`` quantile
@@ -2068,7 +2078,9 @@ def place_at_capture_range(results: list[PhotoEstimate], samples: list[SphereSam
     """
     c = np.asarray(scene_center, dtype=np.float64)
     ok = [r for r in results if r.ok]
-    near = [r for r in ok if r.model == "near" and r.position is not None]
+    unlocated = [r.ok and r.model == "near" and not r.joint_sigma_deg <= UNLOCATED_SIGMA_DEG for r in results]
+    near = [r for r, u in zip(results, unlocated) if r.ok and r.model == "near" and r.position is not None
+            and not u]
     if len(near) < max(NEAR_CAPTURE_MIN_PHOTOS, NEAR_CAPTURE_FRACTION * len(ok)):
         return results
     distance = float(np.median([np.linalg.norm(r.position - c) for r in near]))
@@ -2087,11 +2099,12 @@ def place_at_capture_range(results: list[PhotoEstimate], samples: list[SphereSam
         return results
     miss = float(np.quantile(misses, confidence))
     out = []
-    for r in results:
+    for r, u in zip(results, unlocated):
         point = (_place_on_ray(r, r.direction, centers, c, distance)
-                 if r.ok and r.model == "distant" and r.used_spheres else None)
+                 if r.ok and (r.model == "distant" or u) and r.used_spheres else None)
         out.append(r if point is None else replace(r, direction=normalize(point - c), position=point,
-                                                   model="near", range_deg=miss))
+                                                   model="near", range_deg=miss, joint_sigma_deg=0.0,
+                                                   distance_coupling_deg=0.0))
     return out
 
 
