@@ -1842,6 +1842,15 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         seen = [h for k, h in enumerate(hint_info) if k not in stated]
         fits, failures = _fit_hints(seen, edges, cam, L.shape, source, workers, retry_hints,
                                     [k for k in range(len(hint_info)) if k not in stated]) if seen else ([], [])
+        seen_k = [k for k in range(len(hint_info)) if k not in stated]
+        if not failures:  # a centre alone, around which only highlights show: their cluster, not the ball
+            for k, ft in zip(seen_k, fits):
+                if hint_info[k][1] is None and outline_unseen(ft.center_px, ft.radius_px, edges, L, ratio, brightest,
+                                                              n_photos, min_coverage):
+                    x, y = hint_info[k][0]
+                    raise InputError(f"spheres[{k}]: around the hinted centre ({x:.0f}, {y:.0f}) px only highlights"
+                                     f" show, no outline (a mirror ball on a black ground): its radius cannot be"
+                                     f" measured; give the ball's circle, \"center_px\" and \"radius_px\"", source)
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         mirror = [_is_mirror_outline(ft, L) for ft in fits]
         if any(mirror):  # a mirror's outline: on the changing edges where they decide, else grown as unhinted
@@ -1853,7 +1862,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 it = iter(_with_changing_edges(grown, changing, L, cam, max_residual_px))
                 refit = [next(it) if g else r for r, g in zip(refit, grow)]
             fits = _on_changing_limb(refit, changing, L, mean, cam)
-        seen_k = [k for k in range(len(hint_info)) if k not in stated]
         failures = [(seen_k[f[0]], *f[1:]) for f in failures]
         if not failures:  # in the hints' order
             it = iter(fits)
