@@ -96,3 +96,22 @@ def test_chrome_on_black_lights_from_a_stated_circle(tmp_path):
     ok = np.array([s == "ok" for s in out.status])
     err = np.degrees(angle_between(np.asarray(out.directions)[ok], np.asarray(truth["directions"])[ok]))
     assert ok.sum() >= 18 and np.median(err) < 3.0 and err.max() < 8.0, (ok.sum(), np.median(err), err.max())
+
+
+def test_the_outline_of_some_highlights_is_no_sphere(tmp_path):
+    """A chrome ball on a black ground in a noisy JPEG (``ffls synth --lights 24 --resolution 256
+    --spheres 1 --sphere-material mirror --background black --seed 63 --format jpeg --noise 0.01``):
+    main took a circle of radius 7.5 px 12.9 px off the ball (radius 18) for a sphere, the outline
+    of some of its highlights, with highlights of other photos just outside it. Now set aside, and
+    the refusal asks for the ball's circle."""
+    from ffls.cli import main
+    from ffls.io.capture import load_capture
+    from ffls.spheres.detect import find_spheres_in_capture
+
+    assert main(["synth", str(tmp_path / "c"), "--lights", "24", "--resolution", "256", "--spheres", "1",
+                 "--sphere-material", "mirror", "--background", "black", "--seed", "63", "--format", "jpeg",
+                 "--noise", "0.01", "--quiet"]) == 0
+    with pytest.raises(InputError) as e:
+        find_spheres_in_capture(load_capture(tmp_path / "c"))
+    msg = str(e.value)
+    assert "no sphere found" in msg and "lie just outside it" in msg and '"radius_px": r' in msg, msg

@@ -71,7 +71,8 @@ from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import full_scale_share, read_photo
-from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
+from ffls.spheres.select import (COLOUR_STEP, CRITERIA, disc_pixels, highlight_pixels, highlights_outside,
+                                 round_outline, select_spheres)
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, OUTER_SOURCE,
                                          changing_limb_radius, circle_search, dark_body, dark_cap, enclosing_circle,
                                          limb_radius, mirror_silhouette)
@@ -1917,6 +1918,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         same = [k for k, (a, b) in enumerate(zip(old, fits)) if a is b]
         for k, ft in zip(same, _on_changing_limb([fits[k] for k in same], changing, L, mean, cam)):
             fits[k] = ft
+        fits = _without_highlight_clusters(fits, rejected, L, ratio, brightest, n_photos, n_spheres, n_cands, source)
     # every outline's points moved to the step of the linear image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels); on the photos'
     # mean where they are blurred beyond the pixel (_refine_on_profiles)
@@ -2633,13 +2635,6 @@ def _with_radius(ft, radius_px: float, cam: DetectionCamera):
     return new
 
 
-def highlight_pixels(L, ratio, n_photos: int) -> np.ndarray:
-    """(H, W) bool: the max image's highlights, pixels as bright as half its maximum and lit in
-    about one photo (``ratio``, :func:`shading_ratio`, above ``ln(n_photos / 2)``)."""
-    L = np.asarray(L, dtype=np.float64)
-    return (np.asarray(ratio) > np.log(n_photos / 2.0)) & (L >= 0.5 * float(L.max()))
-
-
 #: Edge points within this many pixels of a highlight pixel (:func:`highlight_pixels`) are the
 #: highlight's own edges, not an outline (:func:`outline_unseen`).
 HIGHLIGHT_EDGE_PX = 3
@@ -2724,6 +2719,31 @@ def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
     return best if best is not None and best[3] >= max(3, n_photos / 4) else None
 
 
+def _without_highlight_clusters(fits, rejected, L, ratio, brightest, n_photos, n_spheres, n_cands, source):
+    """The spheres found without hints, less those whose final outline has the highlights of
+    ``CRITERIA["max_outside_highlights"]`` photos or more just outside it
+    (:func:`ffls.spheres.select.highlights_outside`): the cluster of a chrome ball's highlights
+    outlined inside the ball, whose own silhouette does not show (on a black ground). Judged on the
+    final outlines: a cap that grows to its ball's silhouette on the changing edges (the calibration
+    shot's chrome ball) holds its highlights once grown. Each one set aside is named first in
+    ``rejected`` (it was chosen as a sphere); none left, or fewer than ``n_spheres``: the "no sphere found" line."""
+    if ratio is None or brightest is None or n_photos < 3:
+        return fits
+    keep = []
+    for ft in fits:
+        out = highlights_outside(ratio, brightest, L, ft, n_photos)
+        if out >= CRITERIA["max_outside_highlights"]:
+            rejected.insert(0, f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius"
+                            f" {ft.radius_px:.0f} px: the highlights of {out} photos lie just outside it (1.1 to"
+                            f" 1.6 radii): the outline of some of a mirror ball's highlights, not its silhouette")
+        else:
+            keep.append(ft)
+    if len(keep) < len(fits) and (not keep or (n_spheres is not None and len(keep) < n_spheres)):
+        hls = None if keep else unoutlined_highlights(L, ratio, brightest, n_photos)
+        raise InputError(_not_found_message(keep, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
+    return keep
+
+
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, highlights=None) -> str:
     H, W = shape
     found = (f"found {len(fits)} of {int(n_spheres)} spheres" if n_spheres is not None and fits
@@ -2731,14 +2751,15 @@ def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, high
     photos = f"the max image of {n_photos} photos" if n_photos > 1 else "the image"
     aside = f"; set aside: {rejected[0]}" + (f" (and {len(rejected) - 1} more)" if len(rejected) > 1 else "") \
         if rejected else ""
-    where = "" if highlights is None else (
-        f"; the highlights of {highlights[3]} photos gather around pixel ({highlights[0]:.0f}, {highlights[1]:.0f})"
-        f" (within {highlights[2]:.0f} px) in no round outline: a mirror ball whose outline does not show"
-        f" against its ground (chrome on black) cannot be outlined, by a hint either: photograph it on a"
-        f" lit or grey ground; where an outline shows,")
-    return (f"{found}: looked in {photos} ({W}x{H} px) for round outlines of radius 3 to {min(H, W) // 2} px"
-            f" ({n_cands} candidate circles){aside}{where}{';' if highlights is None else ''} give a hint in"
-            f" capture.json, e.g. "
+    looked = (f"{found}: looked in {photos} ({W}x{H} px) for round outlines of radius 3 to {min(H, W) // 2} px"
+              f" ({n_cands} candidate circles){aside}")
+    if highlights is not None:  # a ball whose outline does not show is used from its stated circle
+        x, y, e = highlights[:3]
+        return (f"{looked}; the highlights of {highlights[3]} photos gather around pixel ({x:.0f}, {y:.0f})"
+                f" (within {e:.0f} px) in no round outline: a mirror ball whose outline does not show against"
+                f" its ground (chrome on black); give its circle in capture.json, \"spheres\": [{{\"center_px\":"
+                f" [u, v], \"radius_px\": r}}] (r more than {e:.0f} px)")
+    return (f"{looked}; give a hint in capture.json, e.g. "
             f"\"spheres\": [{{\"center_px\": [u, v]}}] or \"sphere_count\": n")
 
 
