@@ -35,7 +35,7 @@ CRITERIA = {
     "min_light_spread": 0.2,     # spread (10th to 90th percentile) of ln(max / mean) inside 0.8 radii
     "light_spread_ratio": 0.5,   # and under this share of the round outlines' largest spread
     "min_moving_highlights": 3,  # or highlights of this many photos, each in its own place
-    "max_outside_highlights": 3,  # a mirror outline with highlights of this many photos just outside it
+    "max_outside_highlights": 3,  # a final outline with highlights of this many photos just outside it
 }
 
 
@@ -224,9 +224,7 @@ def highlights_outside(ratio, brightest, L, ft, n_photos: int) -> int:
     ``ln(max / mean)`` over the photos; ``brightest``: per pixel, the brightest photo."""
     rows, cols = disc_pixels(ft, L.shape, 1.6)
     d = np.hypot(cols - ft.center_px[0], rows - ft.center_px[1]) / ft.radius_px
-    lum = np.asarray(L, dtype=np.float64)
-    hl = (d >= 1.1) & (np.asarray(ratio)[rows, cols] > np.log(n_photos / 2.0)) \
-        & (lum[rows, cols] >= 0.5 * float(lum.max()))
+    hl = (d >= 1.1) & highlight_pixels(L, ratio, n_photos)[rows, cols]
     return int(np.unique(brightest[rows[hl], cols[hl]]).size)
 
 
