@@ -232,8 +232,8 @@ def test_clipped_ground_patch_is_no_mirror_ball():
 def test_highlights_in_no_outline_are_named_in_the_refusal():
     """A chrome ball on a black ground mirrors black but its highlights: no outline of it shows
     (``ffls synth ... --sphere-material mirror --background black``, 40 lights at 384 px: "no sphere
-    found"), and a hint of its true circle is refitted to the highlights' cluster. The refusal names
-    where the highlights gather, and that a hint cannot outline such a ball."""
+    found"). The refusal names where the highlights gather, and asks for the ball's circle, which a
+    hint then gives as stated (``tests/test_chrome_on_black.py``)."""
     from ffls.errors import InputError
     from ffls.spheres.detect import find_spheres
 
@@ -252,7 +252,7 @@ def test_highlights_in_no_outline_are_named_in_the_refusal():
 
     m = re.search(rf"the highlights of {n} photos gather around pixel \((\d+), (\d+)\)", msg)
     assert "no sphere found" in msg and m and np.hypot(int(m[1]) - 100, int(m[2]) - 50) < 6, msg
-    assert "cannot be outlined, by a hint either" in msg and "\n" not in msg
+    assert '"radius_px": r}] (r more than' in msg and "\n" not in msg
 
 
 def test_mirror_ball_found_by_its_silhouette(mirror_capture):

@@ -71,7 +71,8 @@ from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import full_scale_share, read_photo
-from ffls.spheres.select import COLOUR_STEP, CRITERIA, disc_pixels, round_outline, select_spheres
+from ffls.spheres.select import (COLOUR_STEP, CRITERIA, disc_pixels, highlight_pixels, highlights_outside,
+                                 round_outline, select_spheres)
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, MIRROR_OUTLINE_SIGMA_FLOOR_PX, OUTER_SOURCE,
                                          changing_limb_radius, circle_search, dark_body, dark_cap, enclosing_circle,
                                          limb_radius, mirror_silhouette)
@@ -1839,7 +1840,22 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 hint_info.append(_parse_hint(h, cam))
             except (ValueError, TypeError) as e:
                 raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
-        fits, failures = _fit_hints(hint_info, edges, cam, L.shape, source, workers, retry_hints)
+        # a stated circle whose outline does not show (chrome on black) is taken as stated
+        ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
+        stated = {k: stated_fit(h[0], h[1], cam) for k, h in enumerate(hint_info) if h[1] is not None
+                  and outline_unseen(h[0], h[1], edges, L, ratio, brightest, n_photos, min_coverage)}
+        seen = [h for k, h in enumerate(hint_info) if k not in stated]
+        fits, failures = _fit_hints(seen, edges, cam, L.shape, source, workers, retry_hints,
+                                    [k for k in range(len(hint_info)) if k not in stated]) if seen else ([], [])
+        seen_k = [k for k in range(len(hint_info)) if k not in stated]
+        if not failures:  # a centre alone, around which only highlights show: their cluster, not the ball
+            for k, ft in zip(seen_k, fits):
+                if hint_info[k][1] is None and outline_unseen(ft.center_px, ft.radius_px, edges, L, ratio, brightest,
+                                                              n_photos, min_coverage):
+                    x, y = hint_info[k][0]
+                    raise InputError(f"spheres[{k}]: around the hinted centre ({x:.0f}, {y:.0f}) px only highlights"
+                                     f" show, no outline (a mirror ball on a black ground): its radius cannot be"
+                                     f" measured; give the ball's circle, \"center_px\" and \"radius_px\"", source)
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
         mirror = [_is_mirror_outline(ft, L) for ft in fits]
         if any(mirror):  # a mirror's outline: on the changing edges where they decide, else grown as unhinted
@@ -1847,11 +1863,14 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             refit = _with_changing_edges(fits, changing, L, cam, max_residual_px)
             grow = [m and r is f for m, r, f in zip(mirror, refit, fits)]
             if any(grow):
-                ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
                 grown = _hinted_mirror_outlines([f for f, g in zip(fits, grow) if g], edges, L, cam, ratio, workers)
                 it = iter(_with_changing_edges(grown, changing, L, cam, max_residual_px))
                 refit = [next(it) if g else r for r, g in zip(refit, grow)]
             fits = _on_changing_limb(refit, changing, L, mean, cam)
+        failures = [(seen_k[f[0]], *f[1:]) for f in failures]
+        if not failures:  # in the hints' order
+            it = iter(fits)
+            fits = [stated[k] if k in stated else next(it) for k in range(len(hint_info))]
         _check_hinted_fits(fits, failures, max_residual_px, min_coverage, min_visible, source)
         _check_duplicate_circles([(*ft.center_px, ft.radius_px) for ft in fits], "hints fit", source)
     else:
@@ -1887,7 +1906,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [ft if ft.source == OUTER_SOURCE or ft.outline_edges == PHOTO_EDGES
+        fits = [ft if ft.source in (OUTER_SOURCE, STATED_SOURCE) or ft.outline_edges == PHOTO_EDGES
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
@@ -1903,13 +1922,14 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         same = [k for k, (a, b) in enumerate(zip(old, fits)) if a is b]
         for k, ft in zip(same, _on_changing_limb([fits[k] for k in same], changing, L, mean, cam)):
             fits[k] = ft
+        fits = _without_highlight_clusters(fits, rejected, L, ratio, brightest, n_photos, n_spheres, n_cands, source)
     # every outline's points moved to the step of the linear image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels); on the photos'
     # mean where they are blurred beyond the pixel (_refine_on_profiles)
     clip = 0.98 * float(L.max()) if saturates else None
     M = np.asarray(mean, dtype=np.float64) if mean is not None and n_photos >= 3 else None
     noise, mean_noise = _pixel_noise(L), None if M is None else _pixel_noise(M)
-    fits = [ft if ft.source in ("override", OUTER_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
+    fits = [ft if ft.source in ("override", OUTER_SOURCE, STATED_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
                                                                                      clip, mean=M, mean_noise=mean_noise)
             for ft in fits]
     if not ortho:
@@ -2019,7 +2039,7 @@ def _circle_near_hint(pts, grads, cpx, r_min, r_max):
 
 
 def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, workers: int = 1,
-               retry: bool = True):
+               retry: bool = True, index=None):
     """Stages 3 and 4 with hints: one circle per hint, fitted (:func:`fit_candidates`, search
     band 0.35 of the radius); returns the fits and the failures as that does.
 
@@ -2031,9 +2051,11 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
     taken when it succeeds with a smaller standard error. A grey ball on a busy ground of its own
     brightness (``tests/test_probe_detect.py``) outlines in both polarities, and the search band
     holds the ground's edges: its first fit is 4-20 px off and poorly constrained. Without
-    ``retry`` the first fit stands.
+    ``retry`` the first fit stands. ``index``: each hint's place in capture.json's list, for the
+    messages (default: its place in ``hint_info``).
     """
     H, W = shape
+    index = list(range(len(hint_info))) if index is None else list(index)
     limit = CRITERIA["max_center_sigma_px"]
     starts = []  # per hint: its start circle, or None
     for h in hint_info:
@@ -2070,7 +2092,7 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
             if second and (first is None or second[0].center_sigma_px < first.center_sigma_px):
                 got[k], cand = (second, []), agains[k]
         if cand is None:
-            raise InputError(f"spheres[{k}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
+            raise InputError(f"spheres[{index[k]}]: no round outline found around the hinted centre ({cpx[0]:.0f}, "
                              f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
         cands.append(cand)
         fits += got[k][0]
@@ -2618,6 +2640,60 @@ def _with_radius(ft, radius_px: float, cam: DetectionCamera):
     return new
 
 
+#: Edge points within this many pixels of a highlight pixel (:func:`highlight_pixels`) are the
+#: highlight's own edges, not an outline (:func:`outline_unseen`).
+HIGHLIGHT_EDGE_PX = 3
+
+
+def outline_unseen(cpx, rpx, edges: _EdgeMap, L, ratio, brightest, n_photos: int, min_coverage: float) -> bool:
+    """Whether a stated circle (a hint's ``center_px`` and ``radius_px``) is a ball whose outline
+    does not show: a chrome ball on a black ground, which mirrors black all round but its highlights.
+
+    True when the circle holds the highlights (:func:`highlight_pixels`) of at least 3 photos and a
+    quarter of them (a ball that reflects the lights), while the edge points of the max image that
+    are not a highlight's own (farther than :data:`HIGHLIGHT_EDGE_PX` from one) cover less than
+    ``min_coverage`` (a hinted fit's least) of the 36 angular bins of the hint's search band (0.35
+    radii either side of the circle, as :func:`_fit_hints` searches): no fit there could pass
+    :func:`_check_hinted_fits`, and a fit on the highlights' edges outlines their cluster, which
+    lies well inside the ball (``docs/spheres.md``, "A chrome ball on a black ground").
+    """
+    if ratio is None or brightest is None or n_photos < 3:
+        return False
+    H, W = L.shape
+    hl = highlight_pixels(L, ratio, n_photos)
+    c = np.asarray(cpx, dtype=np.float64)
+    yy, xx = np.nonzero(hl)
+    inside = np.hypot(xx - c[0], yy - c[1]) <= rpx
+    photos = np.unique(np.asarray(brightest)[yy[inside], xx[inside]]).size
+    if photos < max(3, n_photos / 4):
+        return False
+    pts = edges.points
+    if len(pts):
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * HIGHLIGHT_EDGE_PX + 1,) * 2)
+        near = cv2.dilate(hl.astype(np.uint8), k).astype(bool)
+        ij = np.clip(np.rint(pts).astype(int), 0, [W - 1, H - 1])
+        pts = pts[~near[ij[:, 1], ij[:, 0]]]
+    d = np.hypot(pts[:, 0] - c[0], pts[:, 1] - c[1])
+    band = pts[np.abs(d - rpx) <= 0.35 * rpx]
+    return _coverage(band, c) < min_coverage
+
+
+#: ``SphereFit.source`` of a hinted circle taken as stated: its outline does not show
+#: (:func:`outline_unseen`), so no stage refits it.
+STATED_SOURCE = "hint (as stated)"
+
+
+def stated_fit(cpx, rpx, cam: DetectionCamera) -> SphereFit:
+    """The sphere whose outline is the circle ``cpx``, ``rpx`` (pixels) as stated: the tangent cone
+    (pinhole) or the circle (orthographic) through 72 points of it, its ``outline_sigma_px`` the
+    mirror outline's floor (:data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX`)."""
+    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    P = np.asarray(cpx, dtype=np.float64) + float(rpx) * np.stack([np.cos(t), np.sin(t)], axis=1)
+    ft = fit_outline(P, cam, cpx, rpx, STATED_SOURCE)
+    ft.outline_sigma_px = MIRROR_OUTLINE_FLOOR_PX
+    return ft
+
+
 def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
     """Where the photos' highlights gather with no round outline found: ``(x, y, extent_px, photos)``
     of the largest group, or None.
@@ -2631,8 +2707,7 @@ def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
     """
     if ratio is None or brightest is None or n_photos < 3:
         return None
-    L = np.asarray(L, dtype=np.float64)
-    hl = (np.asarray(ratio) > np.log(n_photos / 2.0)) & (L >= 0.5 * float(L.max()))
+    hl = highlight_pixels(L, ratio, n_photos)
     if not hl.any():
         return None
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * gap_px + 1, 2 * gap_px + 1))
@@ -2649,6 +2724,31 @@ def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
     return best if best is not None and best[3] >= max(3, n_photos / 4) else None
 
 
+def _without_highlight_clusters(fits, rejected, L, ratio, brightest, n_photos, n_spheres, n_cands, source):
+    """The spheres found without hints, less those whose final outline has the highlights of
+    ``CRITERIA["max_outside_highlights"]`` photos or more just outside it
+    (:func:`ffls.spheres.select.highlights_outside`): the cluster of a chrome ball's highlights
+    outlined inside the ball, whose own silhouette does not show (on a black ground). Judged on the
+    final outlines: a cap that grows to its ball's silhouette on the changing edges (the calibration
+    shot's chrome ball) holds its highlights once grown. Each one set aside is named first in
+    ``rejected`` (it was chosen as a sphere); none left, or fewer than ``n_spheres``: the "no sphere found" line."""
+    if ratio is None or brightest is None or n_photos < 3:
+        return fits
+    keep = []
+    for ft in fits:
+        out = highlights_outside(ratio, brightest, L, ft, n_photos)
+        if out >= CRITERIA["max_outside_highlights"]:
+            rejected.insert(0, f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius"
+                            f" {ft.radius_px:.0f} px: the highlights of {out} photos lie just outside it (1.1 to"
+                            f" 1.6 radii): the outline of some of a mirror ball's highlights, not its silhouette")
+        else:
+            keep.append(ft)
+    if len(keep) < len(fits) and (not keep or (n_spheres is not None and len(keep) < n_spheres)):
+        hls = None if keep else unoutlined_highlights(L, ratio, brightest, n_photos)
+        raise InputError(_not_found_message(keep, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
+    return keep
+
+
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, highlights=None) -> str:
     H, W = shape
     found = (f"found {len(fits)} of {int(n_spheres)} spheres" if n_spheres is not None and fits
@@ -2656,14 +2756,15 @@ def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, high
     photos = f"the max image of {n_photos} photos" if n_photos > 1 else "the image"
     aside = f"; set aside: {rejected[0]}" + (f" (and {len(rejected) - 1} more)" if len(rejected) > 1 else "") \
         if rejected else ""
-    where = "" if highlights is None else (
-        f"; the highlights of {highlights[3]} photos gather around pixel ({highlights[0]:.0f}, {highlights[1]:.0f})"
-        f" (within {highlights[2]:.0f} px) in no round outline: a mirror ball whose outline does not show"
-        f" against its ground (chrome on black) cannot be outlined, by a hint either: photograph it on a"
-        f" lit or grey ground; where an outline shows,")
-    return (f"{found}: looked in {photos} ({W}x{H} px) for round outlines of radius 3 to {min(H, W) // 2} px"
-            f" ({n_cands} candidate circles){aside}{where}{';' if highlights is None else ''} give a hint in"
-            f" capture.json, e.g. "
+    looked = (f"{found}: looked in {photos} ({W}x{H} px) for round outlines of radius 3 to {min(H, W) // 2} px"
+              f" ({n_cands} candidate circles){aside}")
+    if highlights is not None:  # a ball whose outline does not show is used from its stated circle
+        x, y, e = highlights[:3]
+        return (f"{looked}; the highlights of {highlights[3]} photos gather around pixel ({x:.0f}, {y:.0f})"
+                f" (within {e:.0f} px) in no round outline: a mirror ball whose outline does not show against"
+                f" its ground (chrome on black); give its circle in capture.json, \"spheres\": [{{\"center_px\":"
+                f" [u, v], \"radius_px\": r}}] (r more than {e:.0f} px)")
+    return (f"{looked}; give a hint in capture.json, e.g. "
             f"\"spheres\": [{{\"center_px\": [u, v]}}] or \"sphere_count\": n")
 
 

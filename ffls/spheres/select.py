@@ -35,6 +35,7 @@ CRITERIA = {
     "min_light_spread": 0.2,     # spread (10th to 90th percentile) of ln(max / mean) inside 0.8 radii
     "light_spread_ratio": 0.5,   # and under this share of the round outlines' largest spread
     "min_moving_highlights": 3,  # or highlights of this many photos, each in its own place
+    "max_outside_highlights": 3,  # a final outline with highlights of this many photos just outside it
 }
 
 
@@ -204,6 +205,26 @@ def moving_highlights(max_over_mean, brightest, L, ft) -> int:
     v = np.log(np.maximum(np.asarray(max_over_mean, dtype=np.float64)[rows, cols], 1e-30))
     lum = np.asarray(L, dtype=np.float64)[rows, cols]
     hl = disc & (v > np.median(v[core]) + np.log(2.0)) & (lum >= np.percentile(lum[ring], 95))
+    return int(np.unique(brightest[rows[hl], cols[hl]]).size)
+
+
+def highlight_pixels(L, ratio, n_photos: int) -> np.ndarray:
+    """(H, W) bool: the max image's highlights, pixels as bright as half its maximum and lit in
+    about one photo (``ratio``, ``ln(max / mean)`` over the photos, above ``ln(n_photos / 2)``)."""
+    L = np.asarray(L, dtype=np.float64)
+    return (np.asarray(ratio) > np.log(n_photos / 2.0)) & (L >= 0.5 * float(L.max()))
+
+
+def highlights_outside(ratio, brightest, L, ft, n_photos: int) -> int:
+    """How many photos hold a highlight (:func:`highlight_pixels`) just outside a circle, between
+    1.1 and 1.6 radii: a mirror ball's highlights all lie on it, so a circle with highlights just
+    around it is the outline of some of them, inside the ball (a chrome ball on a black ground,
+    whose silhouette does not show: the cluster of its highlights outlined as a dark cap's
+    enclosing circle, ``docs/spheres.md``, "A chrome ball on a black ground"). ``ratio``:
+    ``ln(max / mean)`` over the photos; ``brightest``: per pixel, the brightest photo."""
+    rows, cols = disc_pixels(ft, L.shape, 1.6)
+    d = np.hypot(cols - ft.center_px[0], rows - ft.center_px[1]) / ft.radius_px
+    hl = (d >= 1.1) & highlight_pixels(L, ratio, n_photos)[rows, cols]
     return int(np.unique(brightest[rows[hl], cols[hl]]).size)
 
 
