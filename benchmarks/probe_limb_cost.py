@@ -3,9 +3,12 @@
 The 12 renders of ``probe_detect.py`` (a chrome ball, reflectance 0.7, radius 20-40 px, 320 x 240 px,
 under the 4 maps of ``/work/shared/hdri``) are unwrapped by ``ffls probe mirror``'s library call with
 the ball stated as a pixel circle (``center_px`` + ``radius_px``, used as given): the true circle, the
-true circle moved 1 and 2 px (along the image's x), the true circle 1 and 2 px smaller, and the circle
-the finder gives without a hint (``ffls.probes.locate.locate_sphere``; the row is left out where it
-refuses). Reported per circle: ``map``, the relative RMS (solid-angle weighted) over the directions the
+true circle moved 1 and 2 px (along the image's x), the true circle 1 and 2 px smaller, and the ball
+the finder gives without a hint (``ffls.probes.locate.locate_sphere``, the ``probe.json`` sphere left
+unlocated as ``ffls probe mirror`` reads it; the row is left out where it refuses). The true circle is
+the projected centre with the tangent cone's radius near the axis (``probe_detect.render``): off the
+lens axis the true outline is an ellipse, whose best circle is 0.5 px from that centre and 0.8 px
+larger in the f = 400 px layout. Reported per circle: ``map``, the relative RMS (solid-angle weighted) over the directions the
 true circle's estimate saw, of the map against the true one, both area-averaged to 16 x 32 texels; and
 ``relit``, the relative RMS over the object of a synthetic capture (``ffls synth``, 150 distant lights,
 64 px) relit under the estimate against the same capture relit under the true map.
@@ -76,8 +79,11 @@ def main(argv=None):
                         row[c] = None
                         continue
                     cpx, rpx = circles[c]
-                    set_probe_sphere(folder, {"material": "mirror", "reflectance": 0.7,
-                                         "center_px": [float(v) for v in cpx], "radius_px": float(rpx)})
+                    # the finder's ball is unwrapped as ``ffls probe mirror`` does it, located again (its sphere
+                    # may be a tangent cone fitted to the limb, not the cone through a stated circle)
+                    set_probe_sphere(folder, {"material": "mirror", "reflectance": 0.7} if c == "found" else
+                                     {"material": "mirror", "reflectance": 0.7,
+                                      "center_px": [float(v) for v in cpx], "radius_px": float(rpx)})
                     est = estimate_lightmap(folder, "mirror", height=HEIGHT)
                     if seen is None:  # the true circle's seen directions, area-averaged like the maps
                         seen = est.seen.reshape(16, HEIGHT // 16, 32, HEIGHT // 16).mean(axis=(1, 3)) > 0.5

@@ -212,9 +212,10 @@ def test_bad_input_is_one_line(tmp_path):
         estimate_lightmap(folder, "mirror")
     assert str(e.value).split("probe.json: ", 1)[1].startswith("sphere"), str(e.value)
     assert "spheres[" not in str(e.value), str(e.value)
-    # a pixel hint the finder cannot confirm says how to state the circle instead: a ball on a busy
-    # background as bright as its lit side, stated to be a mirror (a diffuse ball's hint gets a
-    # second try and is found: tests/test_probe_detect.py; a mirror's does not)
+    # a pixel hint the finder cannot confirm says how to state the circle instead: a hint on a busy
+    # background as bright as a ball's lit side, 98 px from the ball, the probe stated to be a mirror (the
+    # mirror's limb search around a refused hint finds no limb there). Hinted on the ball itself, its limb is
+    # found (0.49 px, radius 0.19 px long; refused before the limb search around the hint, probe16)
     import cv2
     from ffls.lightmaps.lightmap import builtin_lightmap
     from ffls.synth.probe_scenes import diffuse_sphere_scene
@@ -226,10 +227,20 @@ def test_bad_input_is_one_line(tmp_path):
     bg = (bg - bg.min()) / np.ptp(bg) * np.percentile(sc.image[sc.mask], 90)
     busy = np.where(sc.mask[..., None], sc.image, bg).astype(np.float32)
     folder = _probe_with_image(tmp_path / "k", lambda p: (p.parent.mkdir(), write_exr(p, busy)), "ball.exr",
-                               {"center_px": [100, 100], "material": "mirror"})
+                               {"center_px": [30, 30], "material": "mirror"})
     with pytest.raises(InputError) as e:
         estimate_lightmap(folder, "mirror")
     assert "radius_px" in str(e.value) and "\n" not in str(e.value), str(e.value)
+    from ffls.io.probe import load_probe
+    from ffls.probes.bracket import view_radiance
+    from ffls.probes.locate import locate_sphere
+
+    folder = _probe_with_image(tmp_path / "m", lambda p: (p.parent.mkdir(), write_exr(p, busy)), "ball.exr",
+                               {"center_px": [100, 100], "material": "mirror"})
+    probe = load_probe(folder)
+    vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
+    geo = locate_sphere(probe.views[0], vr.radiance, probe.json_path)
+    assert np.hypot(*(geo.center_px - sc.center_px)) < 0.6 and abs(geo.radius_px - 60.0) < 0.5
     sphere = {"center_px": [48, 48], "radius_px": 40}
     folder = _probe_with_image(tmp_path / "b", lambda p: (p.parent.mkdir(), write_exr(p, np.zeros((96, 96, 3)))),
                                "dark.exr", sphere)

@@ -14,13 +14,15 @@ import numpy as np
 
 from ffls.errors import InputError
 from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask,
-                                 find_spheres, fit_outline, orthographic_normals, outline_visible_fraction,
-                                 sphere_mask, sphere_normals, stated_circle_problem)
+                                 find_spheres, fit_circle, fit_outline, orthographic_normals,
+                                 outline_visible_fraction, silhouette_px, sphere_mask, sphere_normals,
+                                 stated_circle_problem)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
            "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
-           "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET", "LIMB_GROWTH", "unhinted_mirror_limb"]
+           "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET", "LIMB_GROWTH", "unhinted_mirror_limb",
+           "LIMB_CONE_MOVE_PX", "limb_cone"]
 
 
 @dataclass
@@ -186,7 +188,7 @@ def _grown_limb(log_lum, center_px, radius_px, shape, max_steps: int = 8):
     return c, r
 
 
-def unhinted_mirror_limb(radiance, image, outline, source):
+def unhinted_mirror_limb(radiance, image, outline, source, near=None):
     """The limb of a mirror ball found without a hint: (centre (2,), radius), or None when no start confirms one.
 
     The calibration finder's outline of a mirror probe can be a reflected circle well inside the ball
@@ -200,6 +202,10 @@ def unhinted_mirror_limb(radiance, image, outline, source):
     photo's top edge, a courtyard's round structure half outside the frame, radius 66 px, centre 134 px
     from a 33 px ball, was the largest: ``probe_detect.py --azimuth 45``.)
 
+    ``near`` (2,), a centre-only pixel hint: ``outline`` may be None (the finder refused the hint), the starts
+    and the limbs are only circles whose centre lies within :data:`ffls.spheres.detect.HINT_CENTRE_OFFSET` of
+    their radius of it, of any size, and the largest is taken without the rival test (the hint says which).
+
     Raises
     ------
     InputError
@@ -208,10 +214,16 @@ def unhinted_mirror_limb(radiance, image, outline, source):
     log_lum = _log_luminance(radiance)
     shape = log_lum.shape
     cands, _ = circle_candidates(image, source)
-    starts = [(np.asarray(outline.center_px, dtype=np.float64), float(outline.radius_px))]
+    hint = None if near is None else np.asarray(near, dtype=np.float64)
+
+    def by_hint(c, r):
+        return hint is None or np.hypot(*(np.asarray(c) - hint)) <= HINT_CENTRE_OFFSET * r
+
+    min_r = 0.0 if hint is not None else MIN_BALL_FRACTION * min(shape)
+    starts = [] if outline is None else [(np.asarray(outline.center_px, dtype=np.float64), float(outline.radius_px))]
     for x, y, r in cands:
-        if r >= MIN_BALL_FRACTION * min(shape) and not any(np.hypot(x - a[0], y - a[1]) < 0.5 and abs(r - b) < 0.5
-                                                           for a, b in starts):
+        if r >= min_r and by_hint((x, y), r) and not any(np.hypot(x - a[0], y - a[1]) < 0.5 and abs(r - b) < 0.5
+                                                         for a, b in starts):
             starts.append((np.array([x, y], dtype=np.float64), float(r)))
     limbs = []
     t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
@@ -220,18 +232,73 @@ def unhinted_mirror_limb(radiance, image, outline, source):
         if limb is None:
             continue
         c, r = _grown_limb(log_lum, limb[0], limb[1], shape)
-        if outline_visible_fraction(c + r * np.stack([np.cos(t), np.sin(t)], axis=1), shape) >= 0.6:
+        if outline_visible_fraction(c + r * np.stack([np.cos(t), np.sin(t)], axis=1), shape) >= 0.6 and by_hint(c, r):
             limbs.append((c, r))
     if not limbs:
         return None
     limbs.sort(key=lambda g: -g[1])
     c, r = limbs[0]
-    for o, ro in limbs[1:]:
+    for o, ro in ([] if hint is not None else limbs[1:]):
         if np.hypot(*(o - c)) >= r + ro and ro >= RIVAL_RATIO * r:
             raise InputError(f"two mirror ball limbs could be the probe: ({c[0]:.0f}, {c[1]:.0f}) px, radius "
                              f"{r:.0f} px and ({o[0]:.0f}, {o[1]:.0f}) px, radius {ro:.0f} px; give a hint in "
                              "probe.json, e.g. \"sphere\": {\"center_px\": [u, v], \"radius_px\": r}", source)
     return c, r
+
+
+#: :func:`limb_cone` keeps the tangent cone fitted to a limb circle's steps only when the circle that best fits
+#: the cone's outline lies within this many pixels of the limb circle (its centre's move plus its radius's
+#: change): the same steps, seen through the exact perspective outline rather than a circle, move it by the
+#: perspective's share alone (0.05-0.95 px in ``benchmarks/probe_detect.py``), where a larger move means
+#: the robust cone fit followed other steps (2.9 px once there).
+LIMB_CONE_MOVE_PX = 1.0
+
+
+def limb_cone(radiance, center_px, radius_px, K, dist, radius, shape, source):
+    """The pinhole sphere whose exact outline fits a mirror ball's limb circle's steps, or None.
+
+    A sphere seen off the lens axis outlines an ellipse, not a circle, whose centre is not the image of
+    the sphere's centre: a limb circle (:func:`mirror_limb`, :func:`unhinted_mirror_limb`) taken as the
+    tangent cone's cross-section puts the ball's centre off by the perspective alone (0.5 px for a 33 px
+    ball 10 degrees off the axis at f = 400 px). The radial steps
+    (:func:`ffls.spheres.mirror_outline.radial_steps`, 0.9 to 1.1 radii, log luminance) within 1 px of the
+    circle are fitted by the sphere's tangent cone (:func:`ffls.spheres.detect.fit_outline`, robust); the fit
+    is kept when the circle that best fits its outline stays within :data:`LIMB_CONE_MOVE_PX` of the limb
+    circle.
+
+    Parameters
+    ----------
+    radiance : (H, W, 3) float
+    center_px : (2,) float
+    radius_px : float
+        The limb circle, pixels.
+    K, dist
+        The pinhole camera.
+    radius : float
+        The sphere's radius in the units of the centre returned (1 when unknown).
+    shape : (H, W)
+    source : path-like
+        Named by the fit.
+
+    Returns
+    -------
+    ffls.spheres.detect.SphereFit or None
+    """
+    from ffls.spheres.mirror_outline import radial_steps
+
+    c = np.asarray(center_px, dtype=np.float64)
+    r = float(radius_px)
+    pts = radial_steps(_log_luminance(radiance), c, r, r_range=(0.9, 1.1))
+    on = np.abs(np.hypot(*(pts - c).T) - r) <= 1.0
+    if np.count_nonzero(on) < 8:
+        return None
+    cam = DetectionCamera("pinhole", np.asarray(K, dtype=np.float64), dist, np.eye(4), float(radius), tuple(shape))
+    try:
+        ft = fit_outline(pts[on], cam, c, r, source, n_edge=len(pts))
+        oc, orad, _, _ = fit_circle(silhouette_px(cam.K, dist, ft.center_cam, float(radius)), c, r)
+    except ValueError:
+        return None
+    return ft if np.hypot(*(oc - c)) + abs(orad - r) <= LIMB_CONE_MOVE_PX else None
 
 
 #: An unhinted probe ball's apparent radius is at least this share of the photo's shorter side
@@ -452,6 +519,18 @@ def _check_probe_size(center_px, radius_px, shape, source) -> None:
                          "{\"center_px\": [u, v], \"radius_px\": r}", source)
 
 
+def _limb_geometry(cam, T, R, stated_radius, radiance, limb, how, source) -> SphereGeometry:
+    """The sphere of a mirror ball's limb circle ``limb`` (centre, radius px): the tangent cone fitted to its steps
+    (:func:`limb_cone`, pinhole), else the cone through the circle (:func:`_circle_geometry`)."""
+    cone = None if cam.model == "orthographic" else \
+        limb_cone(radiance, limb[0], limb[1], cam.K, cam.dist, R, np.shape(radiance)[:2], source)
+    if cone is None:
+        return _circle_geometry(cam, T, limb[0], limb[1], stated_radius, how)
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(cone.center_cam, dtype=np.float64), float(R),
+                          np.asarray(cone.center_px, dtype=np.float64), float(cone.radius_px), how,
+                          stated_radius is not None)
+
+
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
     """Locate the probe sphere of one view.
 
@@ -536,6 +615,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
                                  world_from_camera=Tf, source=source, camera_model=cam.model, saturates=saturates,
                                  lit_limb=None, retry_hints=sph.material != "mirror")
     except InputError as e:
+        limb = None
+        if hints is not None and sph.material == "mirror":
+            # the finder's outline near the hint failed its own tests (in benchmarks/probe_hint.py a reflected
+            # edge's fit, centre poorly constrained): the limb of the candidate circles around the hint instead
+            limb = unhinted_mirror_limb(rad, lum3, None, source, near=sph.center_px)
+        if limb is not None:
+            return _limb_geometry(cam, T, R, sph.radius, rad, limb, "hint", source)
         # the finder speaks capture.json's keys (spheres[0], sphere_count); probe.json has one "sphere"
         msg = e.message.replace("capture.json", "probe.json").replace("\"spheres\": [{\"center_px\": [u, v]}] or "
                                                                       "\"sphere_count\": n",
@@ -554,7 +640,7 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
         if limb is not None:
             if hints is None:
                 _check_probe_size(limb[0], limb[1], rad.shape[:2], source)
-            return _circle_geometry(cam, T, limb[0], limb[1], sph.radius, "hint" if hints else "auto")
+            return _limb_geometry(cam, T, R, sph.radius, rad, limb, "hint" if hints else "auto", source)
         if hints is None and ft.residual_px > MIRROR_SHARP_OUTLINE_PX:
             raise InputError(f"no sphere found: the round outline found, ({ft.center_px[0]:.0f}, "
                              f"{ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px, is neither confirmed by a "
