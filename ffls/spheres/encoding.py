@@ -581,6 +581,14 @@ class _Unit:
                                  for i in range(p) for j in range(p)], axis=1)
 
     @property
+    def sums(self) -> SimpleNamespace:
+        """The selection's per-triple sums (:meth:`select`): ``width`` (the design's columns p),
+        ``triples`` (3, t) indices into the stored values, ``count`` (t,), ``sum_a`` (t, p),
+        ``sum_aa`` (t, p * p)."""
+        return SimpleNamespace(width=self._A.shape[1], triples=self._raw.triples, count=self._count,
+                               sum_a=self._sum_a, sum_aa=self._sum_aa)
+
+    @property
     def selected_codes(self) -> _Codes:
         """The selected pixels' stored values (:meth:`select`)."""
         return self._raw
@@ -674,12 +682,13 @@ class _StackedUnits:
 
     def __init__(self, units: list, shared: _SharedValues):
         self.units, self.shared = units, shared
-        small = [u for u in units if u._raw.triples.shape[1] <= self.SMALL]
-        self.alone = [u for u in units if u._raw.triples.shape[1] > self.SMALL]
+        sums = [u.sums for u in units]
+        small = [(u, t) for u, t in zip(units, sums) if t.triples.shape[1] <= self.SMALL]
+        self.alone = [u for u, t in zip(units, sums) if t.triples.shape[1] > self.SMALL]
         self.groups = []
-        for p in sorted({u._A.shape[1] for u in small}):
-            for us in self._blocks([u for u in small if u._A.shape[1] == p]):
-                self._add_group(us, p)
+        for p in sorted({t.width for _, t in small}):
+            for block in self._blocks([(u, t) for u, t in small if t.width == p]):
+                self._add_group(block, p)
 
     #: Units with more triples (16-bit files: ~1,400 a unit) are evaluated each on its own: their
     #: arithmetic outweighs a call (stacked, 278 units of 16-bit c05_384 cost 60-74 ms a gradient,
@@ -690,22 +699,22 @@ class _StackedUnits:
     @classmethod
     def _blocks(cls, units: list) -> list:
         blocks, size = [], cls.BLOCK
-        for u in units:
-            t = u._raw.triples.shape[1]
-            if size + t > cls.BLOCK:
+        for u, t in units:
+            n = t.triples.shape[1]
+            if size + n > cls.BLOCK:
                 blocks.append([])
                 size = 0
-            blocks[-1].append(u)
-            size += t
+            blocks[-1].append((u, t))
+            size += n
         return blocks
 
-    def _add_group(self, us: list, p: int) -> None:
-        sizes = np.array([u._raw.triples.shape[1] for u in us])
+    def _add_group(self, block: list, p: int) -> None:
+        sizes = np.array([t.triples.shape[1] for _, t in block])
         self.groups.append(SimpleNamespace(
-            p=p, triples=np.concatenate([self.shared.index[id(u)][u._raw.triples] for u in us], axis=1),
+            p=p, triples=np.concatenate([self.shared.index[id(u)][t.triples] for u, t in block], axis=1),
             starts=np.concatenate([[0], np.cumsum(sizes)[:-1]]), sizes=sizes,
-            count=np.concatenate([u._count for u in us]), sum_a=np.concatenate([u._sum_a for u in us]),
-            sum_aa=np.concatenate([u._sum_aa for u in us])))
+            count=np.concatenate([t.count for _, t in block]), sum_a=np.concatenate([t.sum_a for _, t in block]),
+            sum_aa=np.concatenate([t.sum_aa for _, t in block])))
 
     @staticmethod
     def _solve(g, w2, y, degenerate: bool = False) -> tuple[np.ndarray, np.ndarray]:
