@@ -1,4 +1,5 @@
 """The encoding of integer images: never guessed; calibrated from the matte spheres (ffls.spheres.encoding)."""
+import importlib
 import json
 import shutil
 from dataclasses import replace
@@ -533,3 +534,30 @@ def test_lights_finds_the_spheres_again_on_the_calibrated_photos(linear_captures
     # the linear max image: the stored one decoded with the curve (2.2), not the stored values
     assert np.allclose(stats.max[lit], gamma_decode(stored[lit].astype(np.float64), 2.2), rtol=0.1, atol=0.01)
     assert not np.allclose(stats.max[lit], stored[lit], rtol=0.1, atol=0.01)
+
+
+def test_tone_curve_fit_evaluates_the_units_stacked(monkeypatch):
+    """The polynomial tone curve's fit evaluates the RSS and its gradient of every unit with a few
+    hundred distinct (r, g, b) triples (an 8-bit photo's sphere) stacked, in one pass of array
+    operations, not one call per unit; the calibration is the one each unit's own evaluation gives
+    (the same arithmetic summed in another order: within 1e-7)."""
+    rng = np.random.default_rng(5)
+    normals = _disc_normals()
+    raw = []
+    for _ in range(24):  # grey pixels: each unit's triples are its distinct codes, at most 256
+        lin = 0.8 * np.maximum(normals @ _random_light(rng), 0) + 0.03
+        enc = np.clip(np.rint((srgb_encode(lin) + rng.normal(0, 1 / 255, len(lin))) * 255), 0, 255) / 255
+        raw.append([np.repeat(enc[:, None], 3, axis=1)])
+    calls = []
+    unit = getattr(importlib.import_module("ffls.spheres.encoding"), "_Unit")
+    real = unit.rss_and_gradient
+    monkeypatch.setattr(unit, "rss_and_gradient", lambda self, shared: calls.append(1) or real(self, shared))
+    stacked = calibrate_encoding(raw, [normals], code_step=1 / 255)
+    assert stacked.order >= 0 and stacked.polynomial_excess is not None and calls == []
+    monkeypatch.setattr("ffls.spheres.encoding._StackedUnits.SMALL", -1)  # every unit on its own
+    alone = calibrate_encoding(raw, [normals], code_step=1 / 255)
+    assert len(calls) > 10 * alone.n_units
+    assert stacked.curve == alone.curve and stacked.n_units == alone.n_units == 24
+    for a, b in [(stacked.gamma, alone.gamma), (stacked.polynomial_excess, alone.polynomial_excess),
+                 (stacked.srgb_excess, alone.srgb_excess), *zip(stacked.coefficients, alone.coefficients)]:
+        assert a == pytest.approx(b, rel=1e-7, abs=1e-9)
