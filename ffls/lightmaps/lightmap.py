@@ -171,6 +171,31 @@ class LightMap:
         rad = self.data.reshape(-1, 3).astype(np.float64)[valid]
         return d, rad, sa
 
+    def sample_bands(self, band_bytes: int = DOWNSAMPLE_BAND_BYTES):
+        """:meth:`samples` in bands of rows, for sums over a map too large for them at once.
+
+        A lat-long map's bands hold about ``band_bytes`` of float64 directions each (the same
+        values :meth:`samples` gives, in the same order); other layouts come as one band.
+
+        Yields
+        ------
+        directions, radiance, solid_angle
+            As :meth:`samples` returns them, for a band of rows.
+        """
+        if self.layout != "latlong":
+            yield self.samples()
+            return
+        h, w, _ = self.data.shape
+        rows = _sphere_map("latlong").row_solid_angles(h)
+        u = (np.arange(w) + 0.5) / w
+        band = max(1, int(band_bytes) // (w * 3 * 8))
+        for i in range(0, h, band):
+            v = (np.arange(i, min(h, i + band)) + 0.5) / h
+            uu, vv = np.meshgrid(u, v)
+            d = conventions.latlong_uv_to_direction(uu, vv).reshape(-1, 3)
+            rad = self.data[i:i + band].reshape(-1, 3).astype(np.float64)
+            yield d, rad, np.repeat(rows[i:i + band], w)
+
     def total_power(self, hemisphere: str = "full") -> np.ndarray:
         """Integral of radiance over solid angle, sum of ``L dw`` (W m^-2), per channel.
 
@@ -184,9 +209,11 @@ class LightMap:
         -------
         (3,) float64
         """
-        d, rad, sa = self.samples()
-        keep = conventions.in_domain(d, hemisphere)
-        return (rad[keep] * sa[keep, None]).sum(axis=0)
+        total = np.zeros(3)
+        for d, rad, sa in self.sample_bands():
+            keep = conventions.in_domain(d, hemisphere)
+            total += (rad[keep] * sa[keep, None]).sum(axis=0)
+        return total
 
     def irradiance(self, normal=(0.0, 0.0, 1.0)) -> np.ndarray:
         """Cosine-weighted irradiance on a surface facing ``normal``: sum of ``L max(0, n.w) dw``.
@@ -201,18 +228,19 @@ class LightMap:
         (3,) float64
         """
         n = conventions.normalize(np.asarray(normal, dtype=np.float64))
-        d, rad, sa = self.samples()
-        w = np.maximum(d @ n, 0.0) * sa
-        return (rad * w[:, None]).sum(axis=0)
+        total = np.zeros(3)
+        for d, rad, sa in self.sample_bands():
+            total += (rad * (np.maximum(d @ n, 0.0) * sa)[:, None]).sum(axis=0)
+        return total
 
     def stats(self) -> dict:
         """Summary numbers over the valid texels: ``min``, ``max``, ``mean`` (solid-angle weighted), (3,) each."""
-        _, rad, sa = self.samples()
-        return {
-            "min": rad.min(axis=0),
-            "max": rad.max(axis=0),
-            "mean": (rad * sa[:, None]).sum(axis=0) / sa.sum(),
-        }
+        lo, hi, num, den = np.full(3, np.inf), np.full(3, -np.inf), np.zeros(3), 0.0
+        for _, rad, sa in self.sample_bands():
+            lo, hi = np.minimum(lo, rad.min(axis=0)), np.maximum(hi, rad.max(axis=0))
+            num += (rad * sa[:, None]).sum(axis=0)
+            den += sa.sum()
+        return {"min": lo, "max": hi, "mean": num / den}
 
     # ------------------------------------------------------------------ resampling
     def downsample(self, factor: int) -> "LightMap":
