@@ -68,8 +68,8 @@ BUILTIN_PROCEDURAL = ("sky", "paper")
 #: (a 2x1 lat-long map has one row straddling the horizon, so its upper-hemisphere integral equals
 #: the full sphere's) and resolve no direction.
 MIN_RES = {"latlong": 4, "angular": 4, "mirrorball": 4, "cube": 2}
-#: Bytes of float64 a band of :meth:`LightMap.downsample` holds at a time (16 MiB): its memory does not
-#: grow with the map beyond the map itself and its output.
+#: Bytes of float64 a band of :meth:`LightMap.downsample` and :meth:`LightMap.sample_bands` holds at a
+#: time (16 MiB): their memory does not grow with the map beyond the map itself and its output.
 DOWNSAMPLE_BAND_BYTES = 1 << 24
 
 
@@ -171,11 +171,12 @@ class LightMap:
         rad = self.data.reshape(-1, 3).astype(np.float64)[valid]
         return d, rad, sa
 
-    def sample_bands(self, band_bytes: int = DOWNSAMPLE_BAND_BYTES):
+    def sample_bands(self, band_bytes: int | None = None):
         """:meth:`samples` in bands of rows, for sums over a map too large for them at once.
 
-        A lat-long map's bands hold about ``band_bytes`` of float64 directions each (the same
-        values :meth:`samples` gives, in the same order); other layouts come as one band.
+        A lat-long map's bands hold about ``band_bytes`` (default :data:`DOWNSAMPLE_BAND_BYTES`) of
+        float64 directions each (the values :meth:`samples` gives, in its order); other layouts
+        come as one band.
 
         Yields
         ------
@@ -188,7 +189,7 @@ class LightMap:
         h, w, _ = self.data.shape
         rows = _sphere_map("latlong").row_solid_angles(h)
         u = (np.arange(w) + 0.5) / w
-        band = max(1, int(band_bytes) // (w * 3 * 8))
+        band = max(1, int(band_bytes or DOWNSAMPLE_BAND_BYTES) // (w * 3 * 8))
         for i in range(0, h, band):
             v = (np.arange(i, min(h, i + band)) + 0.5) / h
             uu, vv = np.meshgrid(u, v)
