@@ -305,6 +305,32 @@ def test_info_statistics_work_in_bands(rng, monkeypatch):
     assert peak < data.size * 8, (peak, data.size * 8)
 
 
+def test_load_peak_memory(rng, tmp_path, monkeypatch):
+    """Reading a half-float map interleaves its planes in bands (no whole interleaved half copy: a
+    8192 x 4096 map's read peaked at 2x its float32 size) and the validation holds one mask of the
+    map's size at a time; the values are the file's, exactly."""
+    import tracemalloc
+
+    from ffls.io import images
+
+    data = (rng.random((512, 1024, 3)) * 20).astype(np.float16).astype(np.float32)
+    write_exr(tmp_path / "m.exr", data, half=True)
+    monkeypatch.setattr(images, "EXR_BAND_BYTES", 1 << 16)
+    tracemalloc.start()
+    try:
+        img = read_image(tmp_path / "m.exr")
+        read_peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        got, clamped = lightmap.validate_radiance(img.pixels, "m.exr")
+        check_peak = tracemalloc.get_traced_memory()[1] - tracemalloc.get_traced_memory()[0]
+    finally:
+        tracemalloc.stop()
+    np.testing.assert_array_equal(got, data)
+    assert clamped == 0
+    assert read_peak < 1.75 * data.nbytes, (read_peak, data.nbytes)
+    assert check_peak < 0.45 * data.nbytes, (check_peak, data.nbytes)
+
+
 def test_downsample_keeps_integral(rng):
     lm = LightMap(rng.random((32, 64, 3)) * 10, "latlong")
     for f in (2, 4, 8, 32):

@@ -517,7 +517,8 @@ def validate_radiance(data: np.ndarray, path, out_of_gamut: int = 0) -> tuple[np
         If any value is NaN, infinite or above :data:`MAX_RADIANCE`.
     """
     data = np.asarray(data, dtype=np.float32)
-    bad = ~np.isfinite(data)
+    bad = np.isfinite(data)
+    np.logical_not(bad, out=bad)  # (in place: one mask of the map's size at a time)
     if bad.any():
         npx = int(np.count_nonzero(bad.any(axis=-1)))
         raise InputError(
@@ -525,6 +526,7 @@ def validate_radiance(data: np.ndarray, path, out_of_gamut: int = 0) -> tuple[np
             f"({int(np.isnan(data).sum())} NaN, {int(np.isinf(data).sum())} Inf channel values)",
             path,
         )
+    del bad
     top = float(data.max()) if data.size else 0.0
     if top > MAX_RADIANCE:
         raise InputError(f"light map radiance up to {top:.3g}: beyond {MAX_RADIANCE:.0e}, which no light map holds "
