@@ -199,6 +199,23 @@ def test_coverage_numbers():
     assert lines[0].startswith("coverage: 2 lights outside the capture's upper hemisphere (farthest at az 0 el -90, "
                                "90 deg beyond its edge)"), lines
     assert not any("outside" in ln for ln in coverage_warnings(below, "full"))
+    # a light estimated just under the horizon, within its 95% cone, is at the horizon: no advice to declare
+    # full (its cone reaches the hemisphere); one beyond its cone is still outside, with the advice
+    e = np.radians(-0.4)
+    near = np.vstack([stratified_directions(200), [[np.cos(e), 0.0, np.sin(e)], [0.0, 0.866, -0.5]]])
+    cones = np.full(len(near), 2.0)
+    lines = coverage_warnings(near, "upper", cones_deg=cones)
+    assert lines[0].startswith("coverage: 1 light outside the capture's upper hemisphere (farthest at az 90 el "
+                               "-30, 30 deg beyond its edge)") and "full" in lines[0], lines
+    assert lines[1].startswith("coverage: 1 light at the horizon: estimated just outside the capture's upper "
+                               "hemisphere, within its 95% cone (farthest at az 0 el -0.4, 0.4 deg beyond its "
+                               "edge, cone 2.0 deg)") and "full" not in lines[1], lines
+    assert not any("horizon" in ln for ln in coverage_warnings(near[:-1], "upper", cones_deg=np.full(201, 0.2)))
+    assert not any("horizon" in ln for ln in coverage_warnings(near, "upper"))  # no cones: as before
+    from ffls.io.capture import Lights
+
+    li = Lights(["a.png", "b.png"], [[0, 0, 1], [1, 0, 0]], extra=[{"uncertainty_deg": 1.5}, {}])
+    np.testing.assert_array_equal(li.cones_deg([1, 0]), [np.nan, 1.5])
     # lights repeating an earlier one's direction get no weight (only the first takes the cell): said first
     even = stratified_directions(200)
     lines = coverage_warnings(np.vstack([even, np.repeat(even[:1], 3, axis=0)]), "upper")

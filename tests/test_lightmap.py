@@ -270,6 +270,67 @@ def test_downsample_works_in_bands(rng, monkeypatch):
     assert peak < data.nbytes, (peak, data.nbytes)
 
 
+def test_info_statistics_work_in_bands(rng, monkeypatch):
+    """``ffls lightmap info``'s statistics (stats, total_power, irradiance) sum a lat-long map band by
+    band, never with float64 directions of the whole map (a 16384 x 8192 map peaked at 16 GB): the
+    samples of the bands are :meth:`samples`' own, the sums the whole map's, the peak allocation
+    under one float64 copy of the map."""
+    import tracemalloc
+
+    data = (rng.random((256, 512, 3)) ** 4 * 50).astype(np.float32)
+    lm = LightMap(data, "latlong")
+    monkeypatch.setattr(lightmap, "DOWNSAMPLE_BAND_BYTES", 1 << 16)
+    d, rad, sa = lm.samples()
+    bands = list(lm.sample_bands())
+    assert len(bands) > 10
+    for whole, parts in zip((d, rad, sa), zip(*bands)):
+        np.testing.assert_array_equal(np.concatenate(parts), whole)
+    st = lm.stats()
+    np.testing.assert_array_equal(st["min"], rad.min(axis=0))
+    np.testing.assert_array_equal(st["max"], rad.max(axis=0))
+    np.testing.assert_allclose(st["mean"], (rad * sa[:, None]).sum(axis=0) / sa.sum(), rtol=1e-13)
+    up = d[:, 2] >= 0
+    np.testing.assert_allclose(lm.total_power("upper"), (rad[up] * sa[up, None]).sum(axis=0), rtol=1e-13)
+    np.testing.assert_allclose(lm.total_power(), (rad * sa[:, None]).sum(axis=0), rtol=1e-13)
+    n = conventions.normalize([0.2, -0.3, 1.0])
+    np.testing.assert_allclose(lm.irradiance(n), (rad * (np.maximum(d @ n, 0) * sa)[:, None]).sum(axis=0),
+                               rtol=1e-13)
+    del d, rad, sa
+    tracemalloc.start()
+    try:
+        lm.stats(), lm.total_power("upper"), lm.total_power(), lm.irradiance()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < data.size * 8, (peak, data.size * 8)
+
+
+def test_load_peak_memory(rng, tmp_path, monkeypatch):
+    """Reading a half-float map interleaves its planes in bands (no whole interleaved half copy: a
+    8192 x 4096 map's read peaked at 2x its float32 size) and the validation holds one mask of the
+    map's size at a time; the values are the file's, exactly."""
+    import tracemalloc
+
+    from ffls.io import images
+
+    data = (rng.random((512, 1024, 3)) * 20).astype(np.float16).astype(np.float32)
+    write_exr(tmp_path / "m.exr", data, half=True)
+    monkeypatch.setattr(images, "EXR_BAND_BYTES", 1 << 16)
+    tracemalloc.start()
+    try:
+        img = read_image(tmp_path / "m.exr")
+        read_peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        got, clamped = lightmap.validate_radiance(img.pixels, "m.exr")
+        check_peak = tracemalloc.get_traced_memory()[1] - tracemalloc.get_traced_memory()[0]
+    finally:
+        tracemalloc.stop()
+    np.testing.assert_array_equal(got, data)
+    assert clamped == 0
+    assert read_peak < 1.75 * data.nbytes, (read_peak, data.nbytes)
+    assert check_peak < 0.45 * data.nbytes, (check_peak, data.nbytes)
+
+
 def test_downsample_keeps_integral(rng):
     lm = LightMap(rng.random((32, 64, 3)) * 10, "latlong")
     for f in (2, 4, 8, 32):

@@ -84,3 +84,23 @@ def test_relight_guesses_from_the_photos(three_photos, tmp_path, capfd, copied):
         assert "(identical photos: the same photo twice" in line, line
     else:
         assert "(the photos differ: the same light position given for different photos)" in line, line
+
+
+def test_relight_says_a_light_at_the_horizon(three_photos, tmp_path, capfd):
+    """relight passes the lights' cones to the coverage lines: a light 0.4 deg under the horizon with a
+    2 deg cone is at the horizon (no advice to declare full); with a 0.1 deg cone it is outside."""
+    from ffls.commands.common import load_relight_inputs
+
+    cap = tmp_path / "c"
+    shutil.copytree(three_photos, cap)
+    doc = json.loads((cap / "lights.json").read_text())
+    e = np.radians(-0.4)
+    for cone, want in ((2.0, "1 light at the horizon"), (0.1, "1 light outside the capture's upper hemisphere")):
+        doc["lights"][2].update(direction=[float(np.cos(e)), 0.0, float(np.sin(e))], uncertainty_deg=cone)
+        (cap / "lights.json").write_text(json.dumps(doc))
+        capfd.readouterr()
+        load_relight_inputs(SimpleNamespace(capture=cap, lights=None, probe=None, layout=None), "relight",
+                            lightmap=False)
+        line = next(x for x in capfd.readouterr().err.splitlines() if "light at the horizon" in x or "outside" in x)
+        assert want in line, line
+        assert ("declare" in line) == (cone < 0.4), line

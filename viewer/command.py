@@ -219,7 +219,7 @@ def _check_and_report(args, capture, lights) -> None:
     check_quality_args(args, len(idx), accepted_positions(lights))
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
     if len(idx):
-        notes += coverage_warnings(dirs, capture.hemisphere)
+        notes += coverage_warnings(dirs, capture.hemisphere, cones_deg=lights.cones_deg(idx))
     print_notes(NAME, *notes)
 
 

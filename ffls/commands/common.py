@@ -677,7 +677,7 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
     notes.append(None if lm is None or not lm.colour_note else f"colour: light map: {lm.colour_note}")
     if len(idx):
         notes += coverage_warnings(dirs, capture.hemisphere, names=[capture.image_names[i] for i in idx],
-                                   same_photo=same_photo_of(capture, idx))
+                                   same_photo=same_photo_of(capture, idx), cones_deg=lights.cones_deg(idx))
     print_notes(command, *notes)
     return capture, lights, lm, mask
 

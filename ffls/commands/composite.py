@@ -470,7 +470,8 @@ def load_inputs(args):
         check_cells_res(args.cells_res, dirs, cap.hemisphere)
         fields[key] = (cap, li)
         notes += [li.note, colour_summary([cap.image_paths[i] for i in idx])]
-        notes += [f"{key}: {w}" for w in coverage_warnings(dirs, cap.hemisphere)] if len(idx) else []
+        if len(idx):
+            notes += [f"{key}: {w}" for w in coverage_warnings(dirs, cap.hemisphere, cones_deg=li.cones_deg(idx))]
     (ocap, _), (scap, _) = fields["object"], fields["surface"]
     check_distinct_captures(ocap, scap)
     check_same_camera(ocap, scap, Path(scap.folder) / "capture.json")

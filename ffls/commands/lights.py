@@ -308,7 +308,8 @@ def run(args) -> int:
         from ffls.weights.voronoi import coverage_warnings
 
         print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere, names=[cap.image_names[i] for i in idx],
-                                             same_photo=same_photo_of(cap, idx)))
+                                             same_photo=same_photo_of(cap, idx),
+                                             cones_deg=lights.cones_deg(idx)))
     return 0
 
 

@@ -956,6 +956,11 @@ class Lights:
         idx = np.flatnonzero(self.ok_mask)
         return idx, self.directions[idx]
 
+    def cones_deg(self, idx) -> np.ndarray:
+        """The 95% cone radii (deg) of the lights ``idx``, (k,) float64: NaN where a light has none."""
+        c = [self.extra[i].get("uncertainty_deg") for i in np.asarray(idx, dtype=np.int64).ravel()]
+        return np.array([np.nan if v is None else float(v) for v in c], dtype=np.float64)
+
     def to_json(self) -> dict:
         """The ``lights.json`` document."""
         lights = []

@@ -68,8 +68,8 @@ BUILTIN_PROCEDURAL = ("sky", "paper")
 #: (a 2x1 lat-long map has one row straddling the horizon, so its upper-hemisphere integral equals
 #: the full sphere's) and resolve no direction.
 MIN_RES = {"latlong": 4, "angular": 4, "mirrorball": 4, "cube": 2}
-#: Bytes of float64 a band of :meth:`LightMap.downsample` holds at a time (16 MiB): its memory does not
-#: grow with the map beyond the map itself and its output.
+#: Bytes of float64 a band of :meth:`LightMap.downsample` and :meth:`LightMap.sample_bands` holds at a
+#: time (16 MiB): their memory does not grow with the map beyond the map itself and its output.
 DOWNSAMPLE_BAND_BYTES = 1 << 24
 
 
@@ -171,6 +171,32 @@ class LightMap:
         rad = self.data.reshape(-1, 3).astype(np.float64)[valid]
         return d, rad, sa
 
+    def sample_bands(self, band_bytes: int | None = None):
+        """:meth:`samples` in bands of rows, for sums over a map too large for them at once.
+
+        A lat-long map's bands hold about ``band_bytes`` (default :data:`DOWNSAMPLE_BAND_BYTES`) of
+        float64 directions each (the values :meth:`samples` gives, in its order); other layouts
+        come as one band.
+
+        Yields
+        ------
+        directions, radiance, solid_angle
+            As :meth:`samples` returns them, for a band of rows.
+        """
+        if self.layout != "latlong":
+            yield self.samples()
+            return
+        h, w, _ = self.data.shape
+        rows = _sphere_map("latlong").row_solid_angles(h)
+        u = (np.arange(w) + 0.5) / w
+        band = max(1, int(band_bytes or DOWNSAMPLE_BAND_BYTES) // (w * 3 * 8))
+        for i in range(0, h, band):
+            v = (np.arange(i, min(h, i + band)) + 0.5) / h
+            uu, vv = np.meshgrid(u, v)
+            d = conventions.latlong_uv_to_direction(uu, vv).reshape(-1, 3)
+            rad = self.data[i:i + band].reshape(-1, 3).astype(np.float64)
+            yield d, rad, np.repeat(rows[i:i + band], w)
+
     def total_power(self, hemisphere: str = "full") -> np.ndarray:
         """Integral of radiance over solid angle, sum of ``L dw`` (W m^-2), per channel.
 
@@ -184,9 +210,11 @@ class LightMap:
         -------
         (3,) float64
         """
-        d, rad, sa = self.samples()
-        keep = conventions.in_domain(d, hemisphere)
-        return (rad[keep] * sa[keep, None]).sum(axis=0)
+        total = np.zeros(3)
+        for d, rad, sa in self.sample_bands():
+            keep = conventions.in_domain(d, hemisphere)
+            total += (rad[keep] * sa[keep, None]).sum(axis=0)
+        return total
 
     def irradiance(self, normal=(0.0, 0.0, 1.0)) -> np.ndarray:
         """Cosine-weighted irradiance on a surface facing ``normal``: sum of ``L max(0, n.w) dw``.
@@ -201,18 +229,19 @@ class LightMap:
         (3,) float64
         """
         n = conventions.normalize(np.asarray(normal, dtype=np.float64))
-        d, rad, sa = self.samples()
-        w = np.maximum(d @ n, 0.0) * sa
-        return (rad * w[:, None]).sum(axis=0)
+        total = np.zeros(3)
+        for d, rad, sa in self.sample_bands():
+            total += (rad * (np.maximum(d @ n, 0.0) * sa)[:, None]).sum(axis=0)
+        return total
 
     def stats(self) -> dict:
         """Summary numbers over the valid texels: ``min``, ``max``, ``mean`` (solid-angle weighted), (3,) each."""
-        _, rad, sa = self.samples()
-        return {
-            "min": rad.min(axis=0),
-            "max": rad.max(axis=0),
-            "mean": (rad * sa[:, None]).sum(axis=0) / sa.sum(),
-        }
+        lo, hi, num, den = np.full(3, np.inf), np.full(3, -np.inf), np.zeros(3), 0.0
+        for _, rad, sa in self.sample_bands():
+            lo, hi = np.minimum(lo, rad.min(axis=0)), np.maximum(hi, rad.max(axis=0))
+            num += (rad * sa[:, None]).sum(axis=0)
+            den += sa.sum()
+        return {"min": lo, "max": hi, "mean": num / den}
 
     # ------------------------------------------------------------------ resampling
     def downsample(self, factor: int) -> "LightMap":
@@ -488,7 +517,8 @@ def validate_radiance(data: np.ndarray, path, out_of_gamut: int = 0) -> tuple[np
         If any value is NaN, infinite or above :data:`MAX_RADIANCE`.
     """
     data = np.asarray(data, dtype=np.float32)
-    bad = ~np.isfinite(data)
+    bad = np.isfinite(data)
+    np.logical_not(bad, out=bad)  # (in place: one mask of the map's size at a time)
     if bad.any():
         npx = int(np.count_nonzero(bad.any(axis=-1)))
         raise InputError(
@@ -496,6 +526,7 @@ def validate_radiance(data: np.ndarray, path, out_of_gamut: int = 0) -> tuple[np
             f"({int(np.isnan(data).sum())} NaN, {int(np.isinf(data).sum())} Inf channel values)",
             path,
         )
+    del bad
     top = float(data.max()) if data.size else 0.0
     if top > MAX_RADIANCE:
         raise InputError(f"light map radiance up to {top:.3g}: beyond {MAX_RADIANCE:.0e}, which no light map holds "

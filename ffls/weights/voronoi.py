@@ -780,7 +780,7 @@ def _repeat_guess(pairs, same_photo) -> str:
 
 
 def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CELL_DEG, far_deg: float = FAR_DEG,
-                      far_share: float = FAR_SHARE, names=None, same_photo=None) -> list:
+                      far_share: float = FAR_SHARE, names=None, same_photo=None, cones_deg=None) -> list:
     """One line per coverage problem of ``directions`` over the hemisphere (empty when none).
 
     * cells wider than ``wide_deg`` degrees: ``"coverage: 3 cells wider than 60 deg (widest 84
@@ -788,7 +788,9 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
       frame, of the widest cell's light);
     * more than ``far_share`` of the domain farther than ``far_deg`` from every light:
       ``"coverage: 18% of the domain is more than 30 deg from every light (farthest 52 deg)"``;
-    * lights outside the hemisphere (e.g. below the horizon of ``'upper'``), first;
+    * lights outside the hemisphere (e.g. below the horizon of ``'upper'``), first: those whose
+      95% cone (``cones_deg``) reaches the hemisphere are said to be at its edge (the horizon),
+      the others to be beyond it, with the advice to declare ``full`` if the lights were there;
     * before them, lights that repeat an earlier light's direction exactly (they get no weight:
       :func:`unique_directions`).
 
@@ -807,6 +809,10 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
         a set gives the same fit twice); differing ones, one light position given twice (a
         grid's zenith on every ring, a light file that repeats a position). Without it neither
         is guessed.
+    cones_deg : (n,) array_like, optional
+        The 95% cone radius (deg) of each light, NaN where unknown
+        (:meth:`ffls.io.capture.Lights.cones_deg`): a light outside the hemisphere by no more than
+        its cone is at the edge, not beyond it.
 
     Returns
     -------
@@ -828,17 +834,31 @@ def coverage_warnings(directions, hemisphere="upper", wide_deg: float = WIDE_CEL
                    f"an earlier one and get{'' if k > 1 else 's'} no weight ({keep.size} distinct directions of "
                    f"{len(unit)}){which}")
     hemi = check_hemisphere(hemisphere)
-    outside = np.flatnonzero(~in_domain(unit, hemi))
-    if outside.size:  # e.g. a light below the horizon of an 'upper' capture: said, not silently kept
-        axis = np.asarray(hemi.axis, dtype=np.float64)
-        i = int(outside[np.argmin(unit[outside] @ axis)])
+    outside = ~in_domain(unit, hemi)
+    beyond_deg = np.zeros(len(unit)) if not outside.any() else \
+        np.degrees(np.arcsin(np.clip(-hemi.side(unit), -1.0, 1.0)))  # > 0 outside the domain
+    cones = np.full(len(unit), np.nan) if cones_deg is None else \
+        np.asarray(cones_deg, dtype=np.float64).reshape(len(unit))
+    edge = outside & (beyond_deg <= cones)  # its cone reaches the hemisphere: estimated at the edge
+    for which in (outside & ~edge, edge):  # e.g. below the horizon of an 'upper' capture: said, not kept silently
+        if not which.any():
+            continue
+        i = int(np.argmax(np.where(which, beyond_deg, -np.inf)))
         az = np.degrees(np.arctan2(unit[i, 1], unit[i, 0]))
         el = np.degrees(np.arcsin(np.clip(unit[i, 2], -1.0, 1.0)))
-        k = outside.size
-        out.append(f"coverage: {k} light{'s' if k > 1 else ''} outside the capture's {hemi.name} hemisphere "
-                   f"(farthest at az {az:.0f} el {el:.0f}, {np.degrees(np.arcsin(-(unit[i] @ axis))):.0f} deg beyond its "
-                   f"edge): {'their cells keep' if k > 1 else 'its cell keeps'} only the domain nearest; if the "
-                   "lights were there, declare \"hemisphere\": \"full\" in capture.json")
+        k = int(np.count_nonzero(which))
+        cells = f"{'their cells keep' if k > 1 else 'its cell keeps'} only the domain nearest"
+        if which is edge:
+            where = "the horizon" if hemi.name == "upper" else "the hemisphere's edge"
+            out.append(f"coverage: {k} light{'s' if k > 1 else ''} at {where}: estimated just outside the "
+                       f"capture's {hemi.name} hemisphere, within {'their 95% cones' if k > 1 else 'its 95% cone'} "
+                       f"(farthest at az {az:.0f} el {el:.1f}, {beyond_deg[i]:.1f} deg beyond its edge, cone "
+                       f"{cones[i]:.1f} deg): {cells}")
+        else:
+            out.append(f"coverage: {k} light{'s' if k > 1 else ''} outside the capture's {hemi.name} hemisphere "
+                       f"(farthest at az {az:.0f} el {el:.0f}, {beyond_deg[i]:.0f} deg beyond its "
+                       f"edge): {cells}; if the lights were there, declare \"hemisphere\": \"full\" in "
+                       "capture.json")
     wide = np.flatnonzero(c.cell_width_deg > wide_deg)
     if wide.size:
         i = int(np.argmax(c.cell_width_deg))
