@@ -1,7 +1,7 @@
 """Hougen-Ahuja's least-power weight: what each weight's map gets wrong, and what the pixels can tell.
 
     OMP_NUM_THREADS=1 python benchmarks/probes_power_split.py [--noise 0.01 [--seed 1]] [--maps studio,night]
-        [--orientations 0,1,2,3] [--json OUT.json]
+        [--orientations 0,1,2,3] [--patience P] [--json OUT.json]
 
 The scenes, the orientations and the measure are those of ``benchmarks/probes_tv.py --methods paired_power``
 (an 80 px Lambertian ball of albedo 0.7 seen from the relit capture's camera, the four bundled maps at 64
@@ -13,7 +13,8 @@ map plus that part of the difference, relit) and above 2 (the rest), the per-ord
 orders 0-4 (``evaluate.sh_recovery``), the fit's re-rendered relative RMS and sum of squares over all
 pixels, its total power; and the paired-fold cross-validation's held-out squared errors per fold
 (``select_regularization(..., 'power', rule='paired_se')``) with the weight it chose. Writes
-``benchmarks/results/probes_power_split[_noise[_seedS]].json``; prints a line per weight.
+``benchmarks/results/probes_power_split[_noise[_seedS]].json``; prints a line per weight. ``--patience``: the
+adaptive set's ``patience`` (rounds without a better held-out score before it stops; default 2, the estimator's).
 """
 from __future__ import annotations
 
@@ -43,6 +44,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(add_help=False)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--orientations", default="0,1,2,3")
+    ap.add_argument("--patience", type=int, default=2)
     own, rest = ap.parse_known_args(argv if argv is not None else sys.argv[1:])
     a = probe_benchmark_args(__doc__, MAPS, rest)
     rng = np.random.default_rng(own.seed)
@@ -63,7 +65,8 @@ def main(argv=None):
             normals, rad, truth, true = scenes[name]
             R = rots[i]
             n = normals if i == 0 else normals @ R.T
-            ps = adaptive_hougen_ahuja(n, rad, 0.7, nonnegative=True, ambient="auto", rule="paired_se")
+            ps = adaptive_hougen_ahuja(n, rad, 0.7, nonnegative=True, ambient="auto", rule="paired_se",
+                                       patience=own.patience)
             reg = select_regularization(n, rad, 0.7, ps.fit.directions, POWER_WEIGHTS, "power", rule="paired_se",
                                         nonnegative=True, ambient="auto")
             row = {"map": name, "orientation": i, "sources": int(ps.chosen), "cv_weight": reg.chosen,
@@ -88,7 +91,7 @@ def main(argv=None):
                       + f"; re-render {w['rerender']:.5f}; power {w['power']:.2f}", flush=True)
             out.append(row)
             write_json(path, {"host": host_info(), "noise": a.noise, "seed": own.seed, "map_height": H,
-                              "weights": list(WEIGHTS), "rows": out,
+                              "weights": list(WEIGHTS), "patience": own.patience, "rows": out,
                               "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_power_split.py",
                                                    *sys.argv[1:]])})
     print(f"wrote {path}")
