@@ -11,7 +11,8 @@ of the paired rule, then on it every weight of ``WEIGHTS`` (``POWER_WEIGHTS`` an
 pixels: the relit error, that error split by the map's error in spherical-harmonic orders 0-2 (the true
 map plus that part of the difference, relit) and above 2 (the rest), the per-order relative error of
 orders 0-4 (``evaluate.sh_recovery``), the fit's re-rendered relative RMS and sum of squares over all
-pixels, its total power; and the paired-fold cross-validation's held-out squared errors per fold
+pixels, its total power; the adaptive set's rounds (sizes) and their held-out relative RMS; and the
+paired-fold cross-validation's held-out squared errors per fold
 (``select_regularization(..., 'power', rule='paired_se')``) with the weight it chose. Writes
 ``benchmarks/results/probes_power_split[_noise[_seedS]].json``; prints a line per weight. ``--patience``: the
 adaptive set's ``patience`` (rounds without a better held-out score before it stops; default 2, the estimator's).
@@ -70,8 +71,11 @@ def main(argv=None):
             reg = select_regularization(n, rad, 0.7, ps.fit.directions, POWER_WEIGHTS, "power", rule="paired_se",
                                         nonnegative=True, ambient="auto")
             row = {"map": name, "orientation": i, "sources": int(ps.chosen), "cv_weight": reg.chosen,
-                   "fold_errors": reg.fold_errors.tolist(), "pixels": int(rad.size), "weights": []}
-            print(f"{name} orientation {i}: {ps.chosen} sources, paired CV chose {reg.chosen:g}", flush=True)
+                   "fold_errors": reg.fold_errors.tolist(), "pixels": int(rad.size), "weights": [],
+                   "rounds": [int(c) for c in ps.candidates], "round_scores": [float(x) for x in ps.scores]}
+            print(f"{name} orientation {i}: {ps.chosen} sources (rounds "
+                  + ", ".join(f"{c}: {x:.5f}" for c, x in zip(row["rounds"], row["round_scores"]))
+                  + f" held-out relative RMS), paired CV chose {reg.chosen:g}", flush=True)
             for lam in WEIGHTS:
                 fit = hougen_ahuja(n, rad, 0.7, ps.fit.directions, nonnegative=True, ambient="auto", power=lam)
                 rec = dataclasses.replace(fit, directions=normalize(fit.directions @ R)).latlong(H)
