@@ -4,6 +4,7 @@ lens gradient the capture did not divide out are the photos' common mode."""
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from ffls.spheres.estimate import FlatField, calibrate_uncertainty, flat_field_offsets
 from ffls.spheres.photo import estimate_photo
@@ -19,17 +20,20 @@ def _sphere(center_px, margin_px):
                                        margin_px=margin_px)
 
 
-def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6, opposite=False, alone=False):
-    """Both spheres' outlines found ``shift_px`` (columns, rows) off their true centres, and a lens
-    gradient across both disks (``opposite``: the second's is the first's negative, as a lens's
-    on either side of the frame; ``alone``: across the first disk only, a shadow's or a bounce's,
-    not a lens's): their samples, the photos' values and fits."""
+def _capture(shift_px=(0.0, 1.0), gradient=(0.0, 0.0), noise=0.002, seed=6, opposite=False, alone=False,
+             shift_alone=False):
+    """Both spheres' outlines found ``shift_px`` (columns, rows) off their true centres
+    (``shift_alone``: the first's only), and a lens gradient across both disks (``opposite``: the
+    second's is the first's negative, as a lens's on either side of the frame; ``alone``: across
+    the first disk only, a shadow's or a bounce's, not a lens's): their samples, the photos' values
+    and fits."""
     rng = np.random.default_rng(seed)
     lights = front_lights(30, 5)
     outlines, takes, rendered = [], [], []
-    for c in CENTRES:
+    for i, c in enumerate(CENTRES):
         r = _sphere(c, 0.0)
-        o = _sphere((c[0] + shift_px[0], c[1] + shift_px[1]), 2.5)  # inside the disk
+        dc, dr = (0.0, 0.0) if shift_alone and i else shift_px
+        o = _sphere((c[0] + dc, c[1] + dr), 2.5)  # inside the disk
         idx = {(a, b): i for i, (a, b) in enumerate(zip(r.rows, r.cols))}
         takes.append(np.array([idx[(a, b)] for a, b in zip(o.rows, o.cols)]))
         outlines.append(o)
@@ -69,6 +73,20 @@ def test_outlines_off_alike_are_the_common_mode():
     assert before < 0.5, before  # the disagreement does not see it
     assert covered > before + 0.4, (covered, before, model)
     assert model.common_floor_deg > 0.7, model  # 0.5 px on 30 px: 0.95 deg per axis
+    # lights.json's summary is the bound the cones use (it was the floor before the shared terms)
+    assert model.as_dict()["common_deg"] == pytest.approx(model.common_sigma_deg([0.1, 0.1], [0, 1]))
+
+
+def test_one_outline_off_alone_is_not_shared():
+    """One sphere's outline 1 px low, the other's where it is: that sphere turns alone, its
+    disagreement with the other shows it, and its measured centre is not the photos' common mode
+    (the shifts' mean was: half of it, 0.24 deg per axis in every cone; now the part they share,
+    as the lens turn's)."""
+    lights, outlines, values, photos = _capture(shift_alone=True)
+    model, new = calibrate_uncertainty(photos, outlines, values=values, fit_options={"own_shadow": False})
+    assert model.source == "disagreement", model
+    assert model.common_floor_deg < COMMON_FLOOR_DEG + 0.1, model  # (0.49 by the mean)
+    assert _covered(new, lights)[0] >= 0.9
 
 
 def test_outlines_where_they_are_add_little():

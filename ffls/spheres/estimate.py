@@ -1100,9 +1100,10 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         fitted (:func:`halves_offsets`) and the model is theirs
         (:func:`ffls.spheres.uncertainty.halves_error_model`), with each matte sphere's centre
         term measured (its shading's centre against its outline, :func:`refine_sphere_centres`,
-        not applied) where no refinement gave one. Where the spheres check each other, those
-        measured shifts' mean over the spheres (what turns them alike, which their disagreement
-        cannot show) joins the model's common floor. None: the stated fallback, and no shared terms.
+        not applied) where no refinement gave one. Where the spheres check each other, the part
+        of those measured shifts that the spheres share (what turns them alike, which their
+        disagreement cannot show; :func:`_shared_square`, as the lens turn's) joins the model's
+        common floor. None: the stated fallback, and no shared terms.
     fit_options : dict, optional
         ``terminator``, ``up`` and ``own_shadow`` of the spheres' fits (for the halves).
     flat : FlatField, optional
@@ -1167,10 +1168,10 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
             if occluded and (kinds is None or any(kd.kind != "mirror" for kd in kinds)):
                 shared = float(np.hypot(shared, FALLBACK_FLOOR_DEG / np.sqrt(2.0)))
         else:  # their disagreement shows how the spheres' centres differ, not the shift they share
-            mean = shifts[unrefined].mean(axis=0) if any(unrefined) else np.zeros(2)
-            shared = float(np.hypot(lens, centre_floor_deg(mean, 1.0)))
+            common = np.sqrt(max(_shared_square(shifts[unrefined]), 0.0)) if any(unrefined) else 0.0
+            shared = float(np.hypot(lens, centre_floor_deg(common, 1.0)))
         if shared > 0.0:  # a turn the spheres (or halves) share, as the geometry's common floor is
-            model = replace(model, common_floor_deg=float(np.hypot(model.common_floor_deg, shared)))
+            model = model.with_shared_floor(shared)
     if scene_center is not None:  # the near fits' own distances (not those placed at their median)
         c = np.asarray(scene_center, dtype=np.float64)
         model = replace(model, distance_sigma=distance_spread(

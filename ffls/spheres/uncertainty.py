@@ -598,6 +598,20 @@ class ErrorModel:
         own = tuple(t for t in self.kind_terms if t[0] != "mirror") + (("mirror", 1.0, 0.0, 0),)
         return replace(self, sphere_kinds=kinds, kind_terms=own)
 
+    def with_shared_floor(self, shared_deg: float) -> "ErrorModel":
+        """This model with a measured turn its spheres share, ``shared_deg`` per axis, added in
+        quadrature to its common floor, and so to its ``common_deg`` summary (the floor is in
+        every bound :meth:`common_sigma_deg` gives, as in the summary).
+
+        Parameters
+        ----------
+        shared_deg : float
+            Per-axis standard deviation (degrees), e.g. an unapplied lens gradient's turn.
+        """
+        shared = float(shared_deg)
+        return replace(self, common_floor_deg=float(np.hypot(self.common_floor_deg, shared)),
+                       common_deg=float(np.hypot(self.common_deg, shared)))
+
     def with_centres(self, centre_deg) -> "ErrorModel":
         """This model with per-sphere centre terms ``centre_deg`` (degrees per axis), e.g. for the fallback."""
         return replace(self, centre_deg=tuple(float(x) for x in np.atleast_1d(centre_deg)))
