@@ -563,8 +563,11 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
         out = None
     if into is not None:
         rgb = np.stack(planes, axis=-1, out=into)
-        rgb = _widen(rgb) if out is None else _widen(rgb, out)
-    else:  # in bands of rows: no interleaved copy of the whole image beside its planes and the result
+        rgb = _widen(rgb, out)
+    elif depth == "float":  # float32 planes (any half among them widened exactly): straight into the result
+        rgb = np.empty(shape, dtype=np.float32) if out is None else out
+        np.stack(planes, axis=-1, out=rgb)
+    else:  # half, in bands of rows: no interleaved copy of the whole image beside its planes and the result
         rgb = np.empty(shape, dtype=np.float32) if out is None else out
         step = max(1, EXR_BAND_BYTES // (shape[1] * shape[2] * planes[0].itemsize))
         for r in range(0, shape[0], step):
