@@ -280,7 +280,8 @@ def check_half_range(a: np.ndarray, path) -> None:
 def nonfinite_message(a: np.ndarray) -> str | None:
     """``'N pixels with NaN or Inf values (a NaN, b Inf channel values; the first at column x, row y)'`` for
     (H, W, C) or (H, W) data, or None when all finite (the place: where to look in an image editor)."""
-    bad = ~np.isfinite(a)
+    bad = np.isfinite(a)
+    np.logical_not(bad, out=bad)  # (in place: one mask of the data's size, not two)
     if not bad.any():
         return None
     px = bad.any(axis=-1) if a.ndim == 3 else bad
