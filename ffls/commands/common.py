@@ -697,10 +697,16 @@ def coverage_notes(capture, lights, idx, dirs, repeats: bool = False) -> list:
 def same_photo_of(capture, idx):
     """``same_photo`` for :func:`ffls.weights.voronoi.coverage_warnings` of the lights ``idx`` (the
     accepted ones, by capture index) of ``capture``: whether two of their photos hold the same pixels
-    (:func:`ffls.io.images.same_pixels`; read only for the repeated lights named)."""
-    from ffls.io.images import same_pixels
+    (:func:`ffls.io.images.same_pixels`; read only for the repeated lights named, each once)."""
+    from functools import lru_cache
 
-    return lambda a, b: same_pixels(capture.image_paths[idx[a]], capture.image_paths[idx[b]])
+    from ffls.io.images import pixels_match, read_image
+
+    @lru_cache(maxsize=None)
+    def pixels(i):
+        return read_image(capture.image_paths[idx[i]], working_space=False).pixels
+
+    return lambda a, b: pixels_match(pixels(a), pixels(b))
 
 
 # ----------------------------------------------------------------------------- quality knobs

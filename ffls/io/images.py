@@ -815,8 +815,12 @@ def same_pixels(a: str | os.PathLike, b: str | os.PathLike, rtol: float = SAME_P
     difference at most ``rtol`` times the RMS of ``a`` and ``b`` (:data:`SAME_PIXELS_RTOL`).
     Images of different sizes differ. Reads both (:func:`read_image`, as stored: no colour
     conversion)."""
-    pa = read_image(a, working_space=False).pixels
-    pb = read_image(b, working_space=False).pixels
+    return pixels_match(read_image(a, working_space=False).pixels, read_image(b, working_space=False).pixels, rtol)
+
+
+def pixels_match(pa: np.ndarray, pb: np.ndarray, rtol: float = SAME_PIXELS_RTOL) -> bool:
+    """Whether the pixel arrays ``pa`` and ``pb`` (as :func:`read_image` gives them) are (nearly) the
+    same: the test of :func:`same_pixels`, for callers that hold the arrays already."""
     if pa.shape != pb.shape:
         return False
     d = pa.astype(np.float64) - pb
