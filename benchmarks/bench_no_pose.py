@@ -59,11 +59,11 @@ def _without_pose(cal: Path, camera: str, pose: bool) -> np.ndarray:
     return np.array(cam["world_from_camera"])[:3, :3] if pose else DEFAULT_WORLD_FROM_CAMERA[:3, :3]
 
 
-def _angle(a: np.ndarray, b: np.ndarray) -> float:
+def angle(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))))
 
 
-def _score(cal: Path, lights: Path, Rw: np.ndarray, Rm: np.ndarray) -> dict:
+def score(cal: Path, lights: Path, Rw: np.ndarray, Rm: np.ndarray) -> dict:
     """Errors in the camera's frame (the fitted tilt's error cancels) and in the scene's (up +Z,
     azimuth from the camera: the render's world, whose +Y is the camera's forward; the lights as
     the tilt fitted turns them: the fitted tilt's error counts)."""
@@ -83,9 +83,9 @@ def _score(cal: Path, lights: Path, Rw: np.ndarray, Rm: np.ndarray) -> dict:
             continue
         d = Rm.T @ np.asarray(e["direction"])  # camera frame
         t = true_world[e["image"]]
-        err.append(_angle(Rw.T @ t, d))
+        err.append(angle(Rw.T @ t, d))
         inside.append(err[-1] <= e["uncertainty_deg"])
-        werr.append(_angle(t, Rs @ d))
+        werr.append(angle(t, Rs @ d))
         winside.append(werr[-1] <= e["uncertainty_deg"])
     return {"accepted": f"{len(err)}/{len(got)}", "median_deg": float(np.median(err)), "max_deg": float(max(err)),
             "inside": float(np.mean(inside)), "tilt_deg": tilt, "roll_deg": roll,
@@ -121,7 +121,7 @@ def main(argv=None) -> int:
                             *(["--fit-roll"] if a.fit_roll else [])], check=True,
                            capture_output=True, env=dict(os.environ, OMP_NUM_THREADS="1"))
             wall = time.perf_counter() - t0
-            rows.append({"seed": s, **_score(cal, out, Rw, Rm), "wall_s": wall})
+            rows.append({"seed": s, **score(cal, out, Rw, Rm), "wall_s": wall})
             r = rows[-1]
             tilt = "-" if r["tilt_deg"] is None else f"{r['tilt_deg']:.1f}"
             roll = "-" if r["roll_deg"] is None else f"{r['roll_deg']:.1f}"

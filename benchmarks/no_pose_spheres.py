@@ -23,6 +23,8 @@ import numpy as np
 from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA
 from ffls.spheres.estimate import tilted_world_from_camera
 
+from bench_no_pose import score  # benchmarks/bench_no_pose.py
+
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
@@ -40,26 +42,14 @@ def main(argv=None) -> int:
     out = root / (Path(ffls).name + ".json")
     subprocess.run([ffls, "lights", str(root), "--workers", "1", "--no-progress", "-o", str(out)], check=True,
                    capture_output=True, env=dict(os.environ, OMP_NUM_THREADS="1"))
-    truth = json.loads((root / "truth.json").read_text())
-    true_world = dict(zip(truth["images"], np.asarray(truth["directions"])))
     doc = json.loads(out.read_text())
-    tilt = doc["lights"][0].get("camera_tilt_deg")
-    scene = tilted_world_from_camera(tilt)[:3, :3] if tilt is not None else DEFAULT_WORLD_FROM_CAMERA[:3, :3]
-    own = np.asarray((doc.get("frame") or {"world_from_camera": DEFAULT_WORLD_FROM_CAMERA})["world_from_camera"])
-    true_cam = tilted_world_from_camera(elev)[:3, :3].T
-    cam_err, scene_err, cone = [], [], []
-    for e in doc["lights"]:
-        if e["status"] != "ok":
-            continue
-        d = own[:3, :3].T @ np.asarray(e["direction"])  # camera frame
-        t = true_world[e["image"]]
-        cam_err.append(np.degrees(np.arccos(np.clip(d @ (true_cam @ t), -1, 1))))
-        scene_err.append(np.degrees(np.arccos(np.clip((scene @ d) @ t, -1, 1))))
-        cone.append(e["uncertainty_deg"])
-    c, s, u = map(np.asarray, (cam_err, scene_err, cone))
-    print(f"elevation {elev:g}, seed {seed}, {Path(ffls).name}: tilt {tilt}, {len(u)}/{len(doc['lights'])}, "
-          f"median cone {np.median(u):.2f}; camera frame {np.median(c):.2f} / {c.max():.2f}, {np.mean(c <= u):.0%}; "
-          f"scene frame {np.median(s):.2f} / {s.max():.2f}, {np.mean(s <= u):.0%} "
+    ok = [e for e in doc["lights"] if e["status"] == "ok"]
+    r = score(root, out, tilted_world_from_camera(elev)[:3, :3], DEFAULT_WORLD_FROM_CAMERA[:3, :3])
+    tilt, u = r["tilt_deg"], np.asarray([e["uncertainty_deg"] for e in ok])
+    print(f"elevation {elev:g}, seed {seed}, {Path(ffls).name}: tilt {tilt}, {r['accepted']}, "
+          f"median cone {np.median(u):.2f}; camera frame {r['median_deg']:.2f} / {r['max_deg']:.2f}, "
+          f"{r['inside']:.0%}; scene frame {r['world_median_deg']:.2f} / {r['world_max_deg']:.2f}, "
+          f"{r['world_inside']:.0%} "
           f"(cones: {(doc.get('uncertainty') or {}).get('source')})")
     return 0
 

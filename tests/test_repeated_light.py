@@ -104,3 +104,23 @@ def test_relight_says_a_light_at_the_horizon(three_photos, tmp_path, capfd):
         line = next(x for x in capfd.readouterr().err.splitlines() if "light at the horizon" in x or "outside" in x)
         assert want in line, line
         assert ("declare" in line) == (cone < 0.4), line
+
+
+def test_same_photo_of_reads_each_photo_once(tmp_path, monkeypatch):
+    """The pairs named share photos (a grid's zenith on every ring): each is read once, not once a
+    pair."""
+    from ffls.commands.common import same_photo_of
+    from ffls.io import images
+
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0.2, 0.8, (16, 16, 3)).astype(np.float32)
+    paths = []
+    for i, img in enumerate((a, a, a * 1.5, a)):
+        paths.append(tmp_path / f"p{i}.exr")
+        images.write_exr(paths[-1], img)
+    reads = []
+    read = images.read_image
+    monkeypatch.setattr(images, "read_image", lambda p, **kw: reads.append(p) or read(p, **kw))
+    same = same_photo_of(SimpleNamespace(image_paths=paths), [0, 1, 2, 3])
+    assert [same(j, 0) for j in (1, 2, 3)] == [True, False, True]
+    assert sorted(reads) == paths

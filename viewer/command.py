@@ -208,18 +208,16 @@ def choose_default_rank(app, capture, lights, args=None) -> str | None:
 def _check_and_report(args, capture, lights) -> None:
     """``--rank`` against the accepted lights (0 = full basis), and the informational lines
     (lights matched by order or map, colour conversions, coverage warnings)."""
-    from ffls.commands.common import check_quality_args, check_rank_arg, print_notes
+    from ffls.commands.common import check_quality_args, check_rank_arg, coverage_notes, print_notes
     from ffls.io.images import colour_summary
     from ffls.relight.basis import accepted_positions
-    from ffls.weights.voronoi import coverage_warnings
 
     idx, dirs = lights.accepted()
     if args.rank:
         check_rank_arg(args.rank, len(idx))
     check_quality_args(args, len(idx), accepted_positions(lights))
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
-    if len(idx):
-        notes += coverage_warnings(dirs, capture.hemisphere, cones_deg=lights.cones_deg(idx))
+    notes += coverage_notes(capture, lights, idx, dirs)
     print_notes(NAME, *notes)
 
 

@@ -657,7 +657,6 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
     """
     from ffls.io.capture import load_capture_and_lights
     from ffls.io.images import colour_summary, read_mask
-    from ffls.weights.voronoi import coverage_warnings
 
     capture, lights = load_capture_and_lights(args.capture, args.lights, getattr(args, "lights_map", None))
     idx, dirs = lights.accepted()
@@ -675,20 +674,39 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
         check_mask_not_empty(mask, args.mask)
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
     notes.append(None if lm is None or not lm.colour_note else f"colour: light map: {lm.colour_note}")
-    if len(idx):
-        notes += coverage_warnings(dirs, capture.hemisphere, names=[capture.image_names[i] for i in idx],
-                                   same_photo=same_photo_of(capture, idx), cones_deg=lights.cones_deg(idx))
+    notes += coverage_notes(capture, lights, idx, dirs, repeats=True)
     print_notes(command, *notes)
     return capture, lights, lm, mask
+
+
+def coverage_notes(capture, lights, idx, dirs, repeats: bool = False) -> list:
+    """The coverage warnings (:func:`ffls.weights.voronoi.coverage_warnings`, with their 95% cones)
+    of the accepted lights ``idx`` (by capture index; directions ``dirs``) of ``capture``; [] when
+    none is accepted. ``repeats=True`` names the photos of repeated lights and says whether they
+    hold the same pixels (:func:`same_photo_of`)."""
+    if not len(idx):
+        return []
+    from ffls.weights.voronoi import coverage_warnings
+
+    named = {}
+    if repeats:
+        named = {"names": [capture.image_names[i] for i in idx], "same_photo": same_photo_of(capture, idx)}
+    return coverage_warnings(dirs, capture.hemisphere, **named, cones_deg=lights.cones_deg(idx))
 
 
 def same_photo_of(capture, idx):
     """``same_photo`` for :func:`ffls.weights.voronoi.coverage_warnings` of the lights ``idx`` (the
     accepted ones, by capture index) of ``capture``: whether two of their photos hold the same pixels
-    (:func:`ffls.io.images.same_pixels`; read only for the repeated lights named)."""
-    from ffls.io.images import same_pixels
+    (:func:`ffls.io.images.same_pixels`; read only for the repeated lights named, each once)."""
+    from functools import lru_cache
 
-    return lambda a, b: same_pixels(capture.image_paths[idx[a]], capture.image_paths[idx[b]])
+    from ffls.io.images import pixels_match, read_image
+
+    @lru_cache(maxsize=None)
+    def pixels(i):
+        return read_image(capture.image_paths[idx[i]], working_space=False).pixels
+
+    return lambda a, b: pixels_match(pixels(a), pixels(b))
 
 
 # ----------------------------------------------------------------------------- quality knobs

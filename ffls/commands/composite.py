@@ -452,13 +452,12 @@ def load_inputs(args):
         ``object``, ``surface`` ((capture, lights) each), ``lightmap``, ``background`` (H, W, 3),
         ``object_mask``, ``surface_mask`` ((H, W) float32), ``notes`` (informational lines).
     """
-    from ffls.commands.common import check_cells_res, check_mask_not_empty, check_rank_arg
+    from ffls.commands.common import check_cells_res, check_mask_not_empty, check_rank_arg, coverage_notes
     from ffls.errors import InputError
     from ffls.io.capture import load_capture_and_lights
     from ffls.io.images import colour_summary, read_image, read_mask
     from ffls.lightmaps.lightmap import lightmap_from_spec
     from ffls.relight.composite import check_same_camera
-    from ffls.weights.voronoi import coverage_warnings
 
     fields = {}
     notes = []
@@ -470,8 +469,7 @@ def load_inputs(args):
         check_cells_res(args.cells_res, dirs, cap.hemisphere)
         fields[key] = (cap, li)
         notes += [li.note, colour_summary([cap.image_paths[i] for i in idx])]
-        if len(idx):
-            notes += [f"{key}: {w}" for w in coverage_warnings(dirs, cap.hemisphere, cones_deg=li.cones_deg(idx))]
+        notes += [f"{key}: {w}" for w in coverage_notes(cap, li, idx, dirs)]
     (ocap, _), (scap, _) = fields["object"], fields["surface"]
     check_distinct_captures(ocap, scap)
     check_same_camera(ocap, scap, Path(scap.folder) / "capture.json")

@@ -218,7 +218,7 @@ def run(args) -> int:
     from ffls.io.capture import load_capture, save_lights
     from ffls.spheres.estimate import estimate_lights
 
-    from ffls.commands.common import print_notes, same_photo_of, show_progress
+    from ffls.commands.common import coverage_notes, print_notes, show_progress
 
     check_bounce_shape(args.bounce_shape, args.bounce)
     cluster = bool(getattr(args, "scheduler", None))
@@ -303,13 +303,7 @@ def run(args) -> int:
         print(f"wrote {args.plot}")
     if lp_line:
         print(lp_line)
-    idx, dirs = lights.accepted()
-    if len(idx):
-        from ffls.weights.voronoi import coverage_warnings
-
-        print_notes(NAME, *coverage_warnings(dirs, cap.hemisphere, names=[cap.image_names[i] for i in idx],
-                                             same_photo=same_photo_of(cap, idx),
-                                             cones_deg=lights.cones_deg(idx)))
+    print_notes(NAME, *coverage_notes(cap, lights, *lights.accepted(), repeats=True))
     return 0
 
 

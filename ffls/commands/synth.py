@@ -80,14 +80,19 @@ def _vignetting(text: str):
     if text.startswith("radial:"):
         coeffs = text[len("radial:"):].split(",")
         if 1 <= len(coeffs) <= 3:
+            import numpy as np
+
+            from ffls.synth.photo import radial_falloff
+
             coeffs = tuple(_finite(c) for c in coeffs)
-            f = [(1.0 + sum(c * (i / 1000) ** (2 * k + 2) for k, c in enumerate(coeffs)), i / 1000)
-                 for i in range(1001)]  # r = 1 at the corners
-            dark = next(((v, r) for v, r in f if v <= 0), None)
-            top = max(f)
-            if dark or top[0] > 1 + 1e-12:
-                what = (f"reaches {dark[0]:.3g} at r = {dark[1]:.3g}" if dark else
-                        f"brightens to {top[0]:.6g} at r = {top[1]:.3g}")
+            r = np.arange(1001) / 1000  # r = 1 at the corners
+            with np.errstate(over="ignore"):  # (a sum beyond float range is inf: reported below)
+                v = radial_falloff(r * r, coeffs)
+            dark = np.flatnonzero(v <= 0)[:1]
+            top = np.flatnonzero(v == v.max())[-1]  # (the last of equal maxima)
+            if dark.size or v[top] > 1 + 1e-12:
+                what = (f"reaches {v[dark[0]]:.3g} at r = {r[dark[0]]:.3g}" if dark.size else
+                        f"brightens to {v[top]:.6g} at r = {r[top]:.3g}")
                 raise argparse.ArgumentTypeError(
                     f"{text!r} {what} (r = 1 at the corners): vignetting darkens, by a factor in (0, 1] out to the "
                     "corners (0 or less would be clipped to black)")

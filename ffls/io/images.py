@@ -280,7 +280,8 @@ def check_half_range(a: np.ndarray, path) -> None:
 def nonfinite_message(a: np.ndarray) -> str | None:
     """``'N pixels with NaN or Inf values (a NaN, b Inf channel values; the first at column x, row y)'`` for
     (H, W, C) or (H, W) data, or None when all finite (the place: where to look in an image editor)."""
-    bad = ~np.isfinite(a)
+    bad = np.isfinite(a)
+    np.logical_not(bad, out=bad)  # (in place: one mask of the data's size, not two)
     if not bad.any():
         return None
     px = bad.any(axis=-1) if a.ndim == 3 else bad
@@ -563,8 +564,11 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
         out = None
     if into is not None:
         rgb = np.stack(planes, axis=-1, out=into)
-        rgb = _widen(rgb) if out is None else _widen(rgb, out)
-    else:  # in bands of rows: no interleaved copy of the whole image beside its planes and the result
+        rgb = _widen(rgb, out)
+    elif depth == "float":  # float32 planes (any half among them widened exactly): straight into the result
+        rgb = np.empty(shape, dtype=np.float32) if out is None else out
+        np.stack(planes, axis=-1, out=rgb)
+    else:  # half, in bands of rows: no interleaved copy of the whole image beside its planes and the result
         rgb = np.empty(shape, dtype=np.float32) if out is None else out
         step = max(1, EXR_BAND_BYTES // (shape[1] * shape[2] * planes[0].itemsize))
         for r in range(0, shape[0], step):
@@ -811,8 +815,12 @@ def same_pixels(a: str | os.PathLike, b: str | os.PathLike, rtol: float = SAME_P
     difference at most ``rtol`` times the RMS of ``a`` and ``b`` (:data:`SAME_PIXELS_RTOL`).
     Images of different sizes differ. Reads both (:func:`read_image`, as stored: no colour
     conversion)."""
-    pa = read_image(a, working_space=False).pixels
-    pb = read_image(b, working_space=False).pixels
+    return pixels_match(read_image(a, working_space=False).pixels, read_image(b, working_space=False).pixels, rtol)
+
+
+def pixels_match(pa: np.ndarray, pb: np.ndarray, rtol: float = SAME_PIXELS_RTOL) -> bool:
+    """Whether the pixel arrays ``pa`` and ``pb`` (as :func:`read_image` gives them) are (nearly) the
+    same: the test of :func:`same_pixels`, for callers that hold the arrays already."""
     if pa.shape != pb.shape:
         return False
     d = pa.astype(np.float64) - pb

@@ -171,10 +171,10 @@ class LightMap:
         rad = self.data.reshape(-1, 3).astype(np.float64)[valid]
         return d, rad, sa
 
-    def sample_bands(self, band_bytes: int | None = None):
+    def sample_bands(self):
         """:meth:`samples` in bands of rows, for sums over a map too large for them at once.
 
-        A lat-long map's bands hold about ``band_bytes`` (default :data:`DOWNSAMPLE_BAND_BYTES`) of
+        A lat-long map's bands hold about :data:`DOWNSAMPLE_BAND_BYTES` of
         float64 directions each (the values :meth:`samples` gives, in its order); other layouts
         come as one band.
 
@@ -189,7 +189,7 @@ class LightMap:
         h, w, _ = self.data.shape
         rows = _sphere_map("latlong").row_solid_angles(h)
         u = (np.arange(w) + 0.5) / w
-        band = max(1, int(band_bytes or DOWNSAMPLE_BAND_BYTES) // (w * 3 * 8))
+        band = max(1, DOWNSAMPLE_BAND_BYTES // (w * 3 * 8))
         for i in range(0, h, band):
             v = (np.arange(i, min(h, i + band)) + 0.5) / h
             uu, vv = np.meshgrid(u, v)

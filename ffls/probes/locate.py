@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -188,7 +189,7 @@ def _grown_limb(log_lum, center_px, radius_px, shape, max_steps: int = 8):
     return c, r
 
 
-def unhinted_mirror_limb(radiance, image, outline, source, near=None):
+def unhinted_mirror_limb(radiance, image, outline, source, near=None, log_lum=None):
     """The limb of a mirror ball found without a hint: (centre (2,), radius), or None when no start confirms one.
 
     The calibration finder's outline of a mirror probe can be a reflected circle well inside the ball
@@ -206,12 +207,14 @@ def unhinted_mirror_limb(radiance, image, outline, source, near=None):
     and the limbs are only circles whose centre lies within :data:`ffls.spheres.detect.HINT_CENTRE_OFFSET` of
     their radius of it, of any size, and the largest is taken without the rival test (the hint says which).
 
+    ``log_lum`` (H, W), optional: ``radiance``'s log luminance (:func:`_log_luminance`), when the caller has it.
+
     Raises
     ------
     InputError
         Two separate limbs (not overlapping), the smaller at least :data:`RIVAL_RATIO` of the larger.
     """
-    log_lum = _log_luminance(radiance)
+    log_lum = _log_luminance(radiance) if log_lum is None else log_lum
     shape = log_lum.shape
     cands, _ = circle_candidates(image, source)
     hint = None if near is None else np.asarray(near, dtype=np.float64)
@@ -284,11 +287,21 @@ def limb_cone(radiance, center_px, radius_px, K, dist, radius, shape, source):
     -------
     ffls.spheres.detect.SphereFit or None
     """
+    return _limb_cone(_log_luminance(radiance), center_px, radius_px, SimpleNamespace(K=K, dist=dist), radius,
+                      source, shape)
+
+
+def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None):
+    """:func:`limb_cone` on the photo's log luminance (:func:`_log_luminance`), computed once by
+    :func:`locate_sphere`; ``cam`` has the pinhole's ``K`` and ``dist``; ``shape`` defaults to
+    ``log_lum``'s."""
     from ffls.spheres.mirror_outline import radial_steps
 
+    K, dist = cam.K, cam.dist
+    shape = log_lum.shape if shape is None else shape
     c = np.asarray(center_px, dtype=np.float64)
     r = float(radius_px)
-    pts = radial_steps(_log_luminance(radiance), c, r, r_range=(0.9, 1.1))
+    pts = radial_steps(log_lum, c, r, r_range=(0.9, 1.1))
     on = np.abs(np.hypot(*(pts - c).T) - r) <= 1.0
     if np.count_nonzero(on) < 8:
         return None
@@ -519,11 +532,12 @@ def _check_probe_size(center_px, radius_px, shape, source) -> None:
                          "{\"center_px\": [u, v], \"radius_px\": r}", source)
 
 
-def _limb_geometry(cam, T, R, stated_radius, radiance, limb, how, source) -> SphereGeometry:
+def _limb_geometry(cam, T, stated_radius, log_lum, limb, how, source) -> SphereGeometry:
     """The sphere of a mirror ball's limb circle ``limb`` (centre, radius px): the tangent cone fitted to its steps
-    (:func:`limb_cone`, pinhole), else the cone through the circle (:func:`_circle_geometry`)."""
-    cone = None if cam.model == "orthographic" else \
-        limb_cone(radiance, limb[0], limb[1], cam.K, cam.dist, R, np.shape(radiance)[:2], source)
+    (:func:`limb_cone`, pinhole; on the photo's log luminance ``log_lum``), else the cone through the circle
+    (:func:`_circle_geometry`). The radius is ``stated_radius``, 1 when None (the scale unknown)."""
+    R = 1.0 if stated_radius is None else stated_radius
+    cone = None if cam.model == "orthographic" else _limb_cone(log_lum, limb[0], limb[1], cam, R, source)
     if cone is None:
         return _circle_geometry(cam, T, limb[0], limb[1], stated_radius, how)
     return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(cone.center_cam, dtype=np.float64), float(R),
@@ -619,9 +633,10 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
         if hints is not None and sph.material == "mirror":
             # the finder's outline near the hint failed its own tests (in benchmarks/probe_hint.py a reflected
             # edge's fit, centre poorly constrained): the limb of the candidate circles around the hint instead
-            limb = unhinted_mirror_limb(rad, lum3, None, source, near=sph.center_px)
+            log_lum = _log_luminance(rad)
+            limb = unhinted_mirror_limb(rad, lum3, None, source, near=sph.center_px, log_lum=log_lum)
         if limb is not None:
-            return _limb_geometry(cam, T, R, sph.radius, rad, limb, "hint", source)
+            return _limb_geometry(cam, T, sph.radius, log_lum, limb, "hint", source)
         # the finder speaks capture.json's keys (spheres[0], sphere_count); probe.json has one "sphere"
         msg = e.message.replace("capture.json", "probe.json").replace("\"spheres\": [{\"center_px\": [u, v]}] or "
                                                                       "\"sphere_count\": n",
@@ -635,12 +650,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
     if hints is None:
         _check_probe_size(ft.center_px, ft.radius_px, rad.shape[:2], source)
     if view.sphere.material == "mirror":  # the limb's reflectance step rather than a reflected edge
-        limb = mirror_limb(rad, ft.center_px, ft.radius_px, rad.shape[:2]) if hints else \
-            unhinted_mirror_limb(rad, lum3, ft, source)
+        log_lum = _log_luminance(rad)  # (once: the limb's search and its cone's fit)
+        limb = _limb_near(log_lum, ft.center_px, ft.radius_px, rad.shape[:2]) if hints else \
+            unhinted_mirror_limb(rad, lum3, ft, source, log_lum=log_lum)
         if limb is not None:
             if hints is None:
                 _check_probe_size(limb[0], limb[1], rad.shape[:2], source)
-            return _limb_geometry(cam, T, R, sph.radius, rad, limb, "hint" if hints else "auto", source)
+            return _limb_geometry(cam, T, sph.radius, log_lum, limb, "hint" if hints else "auto", source)
         if hints is None and ft.residual_px > MIRROR_SHARP_OUTLINE_PX:
             raise InputError(f"no sphere found: the round outline found, ({ft.center_px[0]:.0f}, "
                              f"{ft.center_px[1]:.0f}) px, radius {ft.radius_px:.0f} px, is neither confirmed by a "

@@ -179,11 +179,28 @@ def vignetting_factor(shape, model: str, coeffs=(), K=None) -> np.ndarray:
         return 1.0 / (1.0 + x * x + y * y) ** 2
     if model == "radial":
         r2 = ((u - 0.5 * (W - 1)) ** 2 + (v - 0.5 * (H - 1)) ** 2) / (0.25 * ((W - 1) ** 2 + (H - 1) ** 2) or 1.0)
-        f = np.ones_like(r2)
-        for k, c in enumerate(coeffs):
-            f += c * r2 ** (k + 1)
-        return np.maximum(f, 0.0)
+        return np.maximum(radial_falloff(r2, coeffs), 0.0)
     raise ValueError(f"unknown vignetting model {model!r}")
+
+
+def radial_falloff(r2, coeffs) -> np.ndarray:
+    """``1 + a r^2 + b r^4 + c r^6`` (not clipped) of the ``'radial'`` vignetting model.
+
+    Parameters
+    ----------
+    r2 : float ndarray
+        Squared distance from the image centre over the half diagonal (1 at the corners).
+    coeffs : tuple of up to 3 floats
+        ``(a, b, c)``.
+
+    Returns
+    -------
+    float64 ndarray, the shape of ``r2``
+    """
+    f = np.ones_like(r2, dtype=np.float64)
+    for k, c in enumerate(coeffs):
+        f += c * r2 ** (k + 1)
+    return f
 
 
 def vignette(img, model: str, coeffs=(), K=None) -> np.ndarray:
