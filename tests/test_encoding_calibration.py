@@ -536,6 +536,38 @@ def test_lights_finds_the_spheres_again_on_the_calibrated_photos(linear_captures
     assert not np.allclose(stats.max[lit], stored[lit], rtol=0.1, atol=0.01)
 
 
+def test_second_detection_fits_the_first_ones_circles(linear_captures, tmp_path, monkeypatch):
+    """The detection on the linearised photos starts from the circles found on the stored codes
+    (``seeds``): no Hough transform or photo-edge search again, and the same outlines as the full
+    search on the same linearised photos (docs/spheres.md, "Speed")."""
+    from ffls.spheres import detect
+
+    src, _ = linear_captures["four"]
+    folder = encoded_capture(src, tmp_path / "c", 2.2)
+    calls, searched = [], []
+    real, hough = detect.find_spheres_in_capture, detect._hough_circle_candidates
+
+    def spy(capture, *args, **kwargs):
+        found = real(capture, *args, **kwargs)
+        calls.append((capture, kwargs, found, len(searched)))
+        return found
+
+    def counted(*args, **kwargs):
+        searched.append(1)
+        return hough(*args, **kwargs)
+
+    monkeypatch.setattr(detect, "find_spheres_in_capture", spy)
+    monkeypatch.setattr(detect, "_hough_circle_candidates", counted)
+    assert main(["lights", str(folder), "--no-progress", "--workers", "1"]) == 0
+    (_, _, first, n_first), (capture, kwargs, second, n_second) = calls[-2], calls[-1]
+    assert kwargs.get("seeds") is first and n_second == n_first  # seeded: no search in the second
+    full = real(capture, stats=kwargs["stats"], bit_depths=kwargs["bit_depths"], workers=1)
+    assert len(searched) == n_second + 1
+    a = np.array([[*ft.center_px, ft.radius_px] for ft in full])
+    b = np.array([[*ft.center_px, ft.radius_px] for ft in second])
+    assert a.shape == b.shape == (4, 3) and np.abs(a - b).max() < 1e-9, (a, b)
+
+
 def test_tone_curve_fit_evaluates_the_units_stacked(monkeypatch):
     """The polynomial tone curve's fit evaluates the RSS and its gradient of every unit with a few
     hundred distinct (r, g, b) triples (an 8-bit photo's sphere) stacked, in one pass of array

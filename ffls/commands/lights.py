@@ -255,11 +255,13 @@ def run(args) -> int:
                                                      workers=args.workers or os.cpu_count() or 1)
     if calibration is not None:
         print(calibration.summary())
+    seeds = None
     if spheres is not None and calibration is not None:
         # found on the stored values: a curve keeps the outlines' pixels but not their steps, the
         # half-way crossings of the limbs' mixed pixels (0.2-0.3 px toward the dark side under an
-        # sRGB curve, 0.8 deg on a 22 px ball); found again on the photos linearised with it
-        spheres = None
+        # sRGB curve, 0.8 deg on a 22 px ball); fitted again on the photos linearised with it,
+        # from these circles (find_spheres' seeds: not searched again)
+        seeds, spheres = spheres, None
     if spheres is None:  # on the cluster the photos are read there for the fits; here for detection only
         from ffls.spheres.detect import find_spheres_in_capture
 
@@ -269,7 +271,7 @@ def run(args) -> int:
         spheres = (find_spheres_in_capture(cap) if decoded is None else  # (the cluster: as before)
                    find_spheres_in_capture(cap, workers=args.workers or os.cpu_count() or 1) if stats is None else
                    find_spheres_in_capture(cap, stats=stats, bit_depths=decoded.bit_depths,
-                                           workers=args.workers or os.cpu_count() or 1))
+                                           workers=args.workers or os.cpu_count() or 1, seeds=seeds))
     print(spheres_summary(spheres))
     print_notes(NAME, *(f"set aside: {r}" for r in getattr(spheres, "rejected", ())))
     print_notes(NAME, lens_note(cap, spheres, decoded))

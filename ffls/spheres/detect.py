@@ -1686,7 +1686,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                  lit_limb: float | None = 0.65, camera_model: str = "pinhole", brightest_index=None,
                  n_photos: int | None = None, min_visible: float = 0.6, mean_luminance=None,
                  saturates: bool = False, colour_counts=None, edge_tensor=None,
-                 edge_photos: int | None = None, workers: int = 1, retry_hints: bool = True) -> Spheres:
+                 edge_photos: int | None = None, workers: int = 1, retry_hints: bool = True,
+                 seeds=None) -> Spheres:
     """Find the reference spheres and their centres: any number, with or without hints.
 
     The stages of the module docstring, one function each: the max (and min) image
@@ -1768,6 +1769,13 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         A hint whose outline's centre is poorly constrained is tried again (:func:`_fit_hints`);
         False keeps the first fit, refused where it is poorly constrained (a probe stated to be a
         mirror ball, :func:`ffls.probes.locate.locate_sphere`).
+    seeds : Spheres, optional
+        The spheres found before on other values of the same photos (an unstated capture's stored
+        codes, before its curve is known): without hints, when each was fitted on the max image's
+        edges (:func:`seeded_circles`), their circles are fitted again on these images' edges,
+        chosen and refined as the search's candidates are, instead of searched again (the Hough
+        transforms and the photo-edge search); their ``rejected`` lines are kept. Where the seeded
+        fits do not give as many spheres, the full search.
 
     Returns
     -------
@@ -1877,11 +1885,12 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         hint_info = []
         changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
         ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
-        cands = _hough_circle_candidates(edges, L, ratio=ratio)
+        seeded = seeded_circles(seeds)
+        cands = seeded or _hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
-        if held is not None:  # outlines the max image leaves out (white on white)
+        if held is not None and not seeded:  # outlines the max image leaves out (white on white)
             more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers, changing)
             # one the photos' edges outline precisely but leave open (a textured ground's patches
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
@@ -1901,6 +1910,17 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                                         max_over_mean=None if ratio is None else np.exp(ratio))
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
+        if seeded and (len(fits) != len(seeded) or not all(  # not the same spheres: searched
+                any(np.hypot(*(np.subtract(ft.center_px, c[:2]))) < 1.0 and abs(ft.radius_px - c[2]) < 1.0
+                    for c in seeded) for ft in fits)):
+            return find_spheres(images, K, dist, sphere_radius, n_spheres, world_from_camera=world_from_camera,
+                                scene_center=scene_center, source=source, max_residual_px=max_residual_px,
+                                min_coverage=min_coverage, lit_limb=lit_limb, camera_model=camera_model,
+                                brightest_index=brightest_index, n_photos=n_photos, min_visible=min_visible,
+                                mean_luminance=mean_luminance, saturates=saturates, colour_counts=colour_counts,
+                                edge_tensor=edge_tensor, edge_photos=edge_photos, workers=workers)
+        if seeded:
+            rejected = list(seeds.rejected)
         if not fits or (n_spheres is not None and len(fits) < n_spheres):
             hls = None if fits else unoutlined_highlights(L, ratio, brightest, n_photos)
             raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
@@ -1935,6 +1955,16 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
     return Spheres(fits, rejected)
+
+
+def seeded_circles(seeds) -> list[tuple[float, float, float]]:
+    """The circles ``(x, y, r)`` px of ``seeds`` (:class:`Spheres`) that :func:`find_spheres` fits
+    again instead of searching: all of them when each is an unhinted candidate's outline (source
+    ``"auto"``), else none (a mirror's outer outline, a stated circle: found by stages that the
+    seeded fit skips)."""
+    if not seeds or any(ft.source != "auto" for ft in seeds):
+        return []
+    return [(float(ft.center_px[0]), float(ft.center_px[1]), float(ft.radius_px)) for ft in seeds]
 
 
 def _spheres_from_overrides(overrides, K, dist, wfc, R, source) -> list[SphereFit]:
@@ -3387,7 +3417,8 @@ def _refine_on_consistent_edges(ft, ev: ConsistentEdges, cam: DetectionCamera, m
 
 
 def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=None, progress=None,
-                            stats: SequenceStats | None = None, bit_depths=None, workers: int = 1) -> Spheres:
+                            stats: SequenceStats | None = None, bit_depths=None, workers: int = 1,
+                            seeds=None) -> Spheres:
     """:func:`find_spheres` on a loaded :class:`ffls.io.capture.Capture`, using its whole sequence.
 
     Uses ``capture.K``, ``.dist``, ``.camera_model``, ``.sphere_radius``, ``.spheres`` (hints),
@@ -3397,7 +3428,8 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
     ``progress(iterable, total=n)``). ``stats``, when given, is that reduction already made, with
     ``bit_depths`` the photos' stored bit depths (e.g. :func:`ffls.spheres.estimate.decode_photos`,
     which decodes the photos once for detection and estimation): no photo is read. ``workers``
-    processes fit the candidate outlines (:func:`find_spheres`; the same spheres for any number).
+    processes fit the candidate outlines (:func:`find_spheres`; the same spheres for any number). ``seeds``:
+    the spheres found on the photos' stored codes, fitted again (:func:`find_spheres`).
     """
     n = len(capture.image_paths)
     depths = set()
@@ -3436,7 +3468,8 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
                         camera_model=model, brightest_index=brightest if n_img > 1 else None, n_photos=n_img,
                         mean_luminance=mean if n_img > 1 else None,
                         saturates=any(isinstance(d, int) for d in depths), colour_counts=st.colour_counts,
-                        edge_tensor=st.edge_tensor, edge_photos=st.edge_photos, workers=workers)
+                        edge_tensor=st.edge_tensor, edge_photos=st.edge_photos, workers=workers,
+                        seeds=None if hints else seeds)
 
 
 def circle_candidates(image, source: str | os.PathLike | None = None, with_grads: bool = False) -> tuple:
