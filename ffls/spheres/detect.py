@@ -1833,6 +1833,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     # on a textured ground; the photo-edge search reads them too)
     with_changing = held is not None and len(tensor[0]) >= EDGE_TENSOR_ROWS
     rejected: list[str] = []
+    ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
     if hints:
         hint_info = []
         for k, h in enumerate(hints):
@@ -1841,13 +1842,12 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             except (ValueError, TypeError) as e:
                 raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
         # a stated circle whose outline does not show (chrome on black) is taken as stated
-        ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
         stated = {k: stated_fit(h[0], h[1], cam) for k, h in enumerate(hint_info) if h[1] is not None
                   and outline_unseen(h[0], h[1], edges, L, ratio, brightest, n_photos, min_coverage)}
-        seen = [h for k, h in enumerate(hint_info) if k not in stated]
-        fits, failures = _fit_hints(seen, edges, cam, L.shape, source, workers, retry_hints,
-                                    [k for k in range(len(hint_info)) if k not in stated]) if seen else ([], [])
         seen_k = [k for k in range(len(hint_info)) if k not in stated]
+        seen = [hint_info[k] for k in seen_k]
+        fits, failures = _fit_hints(seen, edges, cam, L.shape, source, workers, retry_hints,
+                                    seen_k) if seen else ([], [])
         if not failures:  # a centre alone, around which only highlights show: their cluster, not the ball
             for k, ft in zip(seen_k, fits):
                 if hint_info[k][1] is None and outline_unseen(ft.center_px, ft.radius_px, edges, L, ratio, brightest,
@@ -1867,7 +1867,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 it = iter(_with_changing_edges(grown, changing, L, cam, max_residual_px))
                 refit = [next(it) if g else r for r, g in zip(refit, grow)]
             fits = _on_changing_limb(refit, changing, L, mean, cam)
-        failures = [(seen_k[f[0]], *f[1:]) for f in failures]
         if not failures:  # in the hints' order
             it = iter(fits)
             fits = [stated[k] if k in stated else next(it) for k in range(len(hint_info))]
@@ -1876,7 +1875,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     else:
         hint_info = []
         changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
-        ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
         cands = _hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
@@ -2041,7 +2039,8 @@ def _circle_near_hint(pts, grads, cpx, r_min, r_max):
 def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, workers: int = 1,
                retry: bool = True, index=None):
     """Stages 3 and 4 with hints: one circle per hint, fitted (:func:`fit_candidates`, search
-    band 0.35 of the radius); returns the fits and the failures as that does.
+    band 0.35 of the radius); returns the fits and the failures as that does, each failure's
+    first item its hint's place in ``index``.
 
     A hint without a radius takes the radius of the edges around its centre
     (:func:`_radius_from_edges`). Where that fails, or its fit's centre is poorly constrained
@@ -2096,7 +2095,7 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
                              f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
         cands.append(cand)
         fits += got[k][0]
-        failures += [(k, *f[1:]) for f in got[k][1]]
+        failures += [(index[k], *f[1:]) for f in got[k][1]]
     _check_duplicate_circles(cands, "hint", source)
     return fits, failures
 
