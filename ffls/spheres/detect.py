@@ -1899,9 +1899,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                                         max_over_mean=None if ratio is None else np.exp(ratio))
         if n_spheres is not None and len(fits) > n_spheres:
             fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
-        if not fits or (n_spheres is not None and len(fits) < n_spheres):
-            hls = None if fits else unoutlined_highlights(L, ratio, brightest, n_photos)
-            raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
+        _check_enough_found(fits, n_spheres, rejected, L, ratio, brightest, n_photos, n_cands, source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
         fits = [ft if ft.source in (OUTER_SOURCE, STATED_SOURCE) or ft.outline_edges == PHOTO_EDGES
@@ -2742,10 +2740,18 @@ def _without_highlight_clusters(fits, rejected, L, ratio, brightest, n_photos, n
                             f" 1.6 radii): the outline of some of a mirror ball's highlights, not its silhouette")
         else:
             keep.append(ft)
-    if len(keep) < len(fits) and (not keep or (n_spheres is not None and len(keep) < n_spheres)):
-        hls = None if keep else unoutlined_highlights(L, ratio, brightest, n_photos)
-        raise InputError(_not_found_message(keep, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
+    if len(keep) < len(fits):
+        _check_enough_found(keep, n_spheres, rejected, L, ratio, brightest, n_photos, n_cands, source)
     return keep
+
+
+def _check_enough_found(fits, n_spheres, rejected, L, ratio, brightest, n_photos, n_cands, source) -> None:
+    """The "no sphere found" line (:func:`_not_found_message`) as an :class:`InputError` where
+    ``fits`` holds no sphere, or fewer than ``n_spheres``; with none, it names the photos'
+    highlights that gather in no outline (:func:`unoutlined_highlights`)."""
+    if not fits or (n_spheres is not None and len(fits) < n_spheres):
+        hls = None if fits else unoutlined_highlights(L, ratio, brightest, n_photos)
+        raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
 
 
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, highlights=None) -> str:
