@@ -47,7 +47,7 @@ __all__ = [
     "lp_to_world",
     "world_to_lp",
     "lights_from_lp",
-    "load_lights_any", "lp_frame_note",
+    "load_lights_any",
     "parse_lights_map",
     "load_capture_and_lights",
     "UNIT_TOLERANCE",
@@ -1562,7 +1562,7 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
     Lights
         In the capture's image order, named by the capture's images; ``note`` set when matched
         by order or by the map, and for an ``.lp`` always: the frame its directions were read in
-        (:func:`lp_frame_note`).
+        (:func:`_lp_frame_note`).
 
     Raises
     ------
@@ -1573,11 +1573,11 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
     path = Path(path)
     out = _match_lights_file(path, capture, lights_map)
     if path.suffix.lower() == ".lp":
-        out.note = "; ".join(filter(None, [out.note, lp_frame_note(path, out, capture)]))
+        out.note = "; ".join(filter(None, [out.note, _lp_frame_note(path, out, capture)]))
     return out
 
 
-def lp_frame_note(path: str | os.PathLike, lights: Lights, capture: Capture) -> str:
+def _lp_frame_note(path: str | os.PathLike, lights: Lights, capture: Capture) -> str:
     """What ffls assumed of an ``.lp`` file's directions, in one line.
 
     RTI tools differ (y up or down, z toward the camera or into the scene, another tool's world
@@ -1594,8 +1594,8 @@ def lp_frame_note(path: str | os.PathLike, lights: Lights, capture: Capture) -> 
     capture : Capture
         Whose ``world_from_camera`` turned them.
     """
-    ok = np.array([st == "ok" for st in lights.status], dtype=bool)
-    z = world_to_lp(np.asarray(lights.directions, dtype=np.float64)[ok], capture.world_from_camera)[:, 2]
+    _, dirs = lights.accepted()
+    z = world_to_lp(dirs, capture.world_from_camera)[:, 2]
     note = (f"lights: {Path(path).name}: .lp directions read in the image frame (x right, y up, z toward the "
             "camera; docs/formats.md) and turned to the world by capture.json's world_from_camera")
     away = int(np.sum(z < 0.0))
