@@ -48,6 +48,7 @@ __all__ = [
     "world_to_lp",
     "lights_from_lp",
     "load_lights_any",
+    "cap_cones",
     "parse_lights_map",
     "load_capture_and_lights",
     "UNIT_TOLERANCE",
@@ -937,6 +938,8 @@ class Lights:
         self.status = ["ok"] * n if self.status is None else list(self.status)
         self.reasons = [None] * n if self.reasons is None else list(self.reasons)
         self.extra = [{} for _ in range(n)] if self.extra is None else [dict(e) for e in self.extra]
+        for e in self.extra:
+            cap_cones(e)
         if not (len(self.status) == len(self.reasons) == len(self.extra) == n):
             raise ValueError("Lights: image_names, status, reasons and extra must have the same length")
         bad = [s for s in self.status if s not in ("ok", "rejected")]
@@ -972,7 +975,6 @@ class Lights:
             if self.reasons[i] is not None:
                 item["reason"] = self.reasons[i]
             item.update(self.extra[i])
-            _cap_cones(item)
             lights.append(item)
         doc = {"format": "ffls-lights", "version": 1}
         if self.encoding is not None:
@@ -987,10 +989,11 @@ class Lights:
         return doc
 
 
-def _cap_cones(item: dict) -> None:
+def cap_cones(item: dict) -> None:
     """A light's cones, its own and its spheres', at most ``MAX_CONE_DEG`` (in place; the spheres'
     list is copied): a fit that knows little of a direction has a cone wider than the sphere (a
-    sphere's reached 1617 deg on the bench), which means the same and which ``load_lights`` refuses."""
+    sphere's reached 1617 deg on the bench), which means the same and which ``load_lights`` refuses.
+    ``Lights`` caps its ``extra`` when built; a stage that widens a built one's cones caps again."""
     def capped(d):
         wide = isinstance(d, dict) and isinstance(d.get("uncertainty_deg"), float) \
             and d["uncertainty_deg"] > conventions.MAX_CONE_DEG

@@ -49,7 +49,7 @@ import numpy as np
 
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
-from ffls.io.capture import Lights, sphere_materials
+from ffls.io.capture import Lights, cap_cones, sphere_materials
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
@@ -2648,6 +2648,7 @@ def widen_for_lens(lights, evidence):
         widen = max(evidence.angles_deg[i] for i in used)
         e["uncertainty_deg"] = float(np.hypot(e["uncertainty_deg"], widen))
         e["orthographic_misfit_deg"] = round(float(widen), 3)
+        cap_cones(e)
     return lights
 
 
@@ -2724,6 +2725,7 @@ def widen_for_tilt(lights) -> None:
         w = e * float(np.sqrt(max(0.0, 1.0 - d[0] * d[0])))
         x["uncertainty_deg"] = float(np.hypot(x["uncertainty_deg"], w))
         x["tilt_widened_deg"] = round(w, 3)
+        cap_cones(x)
 
 
 def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict, photo_options: dict,
