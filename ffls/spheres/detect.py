@@ -1905,7 +1905,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         _check_enough_found(fits, n_spheres, rejected, L.shape, hl, brightest, n_photos, n_cands, source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [ft if ft.source in (OUTER_SOURCE, STATED_SOURCE) or ft.outline_edges == PHOTO_EDGES
+        fits = [ft if ft.source in _UNREFINED_SOURCES or ft.outline_edges == PHOTO_EDGES
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
@@ -1929,8 +1929,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     clip = 0.98 * float(L.max()) if saturates else None
     M = np.asarray(mean, dtype=np.float64) if mean is not None and n_photos >= 3 else None
     noise, mean_noise = _pixel_noise(L), None if M is None else _pixel_noise(M)
-    fits = [ft if ft.source in ("override", OUTER_SOURCE, STATED_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
-                                                                                     clip, mean=M, mean_noise=mean_noise)
+    fits = [ft if ft.source in _UNREFINED_SOURCES
+            else _refine_on_profiles(ft, L, cam, max_residual_px, noise, clip, mean=M, mean_noise=mean_noise)
             for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
@@ -2690,6 +2690,9 @@ def outline_unseen(cpx, rpx, edges: _EdgeMap, hl, near, brightest, n_photos: int
 #: ``SphereFit.source`` of a hinted circle taken as stated: its outline does not show
 #: (:func:`outline_unseen`), so no stage refits it.
 STATED_SOURCE = "hint (as stated)"
+#: ``SphereFit.source`` of the fits that no later stage refits (on the lit limb, on the profiles):
+#: a circle the capture states (an override, a hint taken as stated) or a mirror's outer outline.
+_UNREFINED_SOURCES = ("override", OUTER_SOURCE, STATED_SOURCE)
 
 
 def stated_fit(cpx, rpx, cam: DetectionCamera) -> SphereFit:
