@@ -51,18 +51,36 @@ def test_a_cone_wider_than_the_sphere_is_refused(cap, tmp_path, capfd, cone):
 
 def test_the_writer_caps_cones_at_180_deg(tmp_path):
     """``ffls lights`` writes sphere cones of up to 1617 deg (bench c00..ds04): what it writes is
-    capped, so that its own file loads back under the reader's bound."""
+    capped, so that its own file loads back under the reader's bound. The cap is applied when the
+    ``Lights`` is built, so that what the command prints of its cones (the median) is the file's."""
     from ffls.io.capture import Lights, load_lights, save_lights
 
+    extra = [{"uncertainty_deg": 400.0, "model": "distant",
+              "spheres": [{"uncertainty_deg": 1616.7}, {"uncertainty_deg": 3.0}]}]
     lights = Lights(image_names=["a.exr"], directions=np.array([[0.0, 0.0, 1.0]]), positions=np.full((1, 3), np.nan),
-                    status=["ok"], reasons=[None],
-                    extra=[{"uncertainty_deg": 400.0, "model": "distant",
-                            "spheres": [{"uncertainty_deg": 1616.7}, {"uncertainty_deg": 3.0}]}])
+                    status=["ok"], reasons=[None], extra=extra)
+    assert lights.extra[0]["uncertainty_deg"] == 180.0 and lights.cones_deg([0]).tolist() == [180.0]
     save_lights(lights, tmp_path / "l.json")
     back = load_lights(tmp_path / "l.json")
     assert back.extra[0]["uncertainty_deg"] == 180.0
     assert [s["uncertainty_deg"] for s in back.extra[0]["spheres"]] == [180.0, 3.0]
-    assert lights.extra[0]["spheres"][0]["uncertainty_deg"] == 1616.7  # the estimate itself is left as it was
+    # the estimate's own records are left as they were
+    assert extra[0]["uncertainty_deg"] == 400.0 and extra[0]["spheres"][0]["uncertainty_deg"] == 1616.7
+
+
+def test_a_cone_widened_for_the_tilt_stays_capped(tmp_path):
+    """A built ``Lights``'s cone widened in place by a fitted tilt's error (``widen_for_tilt``) is
+    capped again: 179 deg widened by 30 deg is 181.5 deg, which the reader refuses."""
+    from ffls.io.capture import Lights, load_lights, save_lights
+    from ffls.spheres.estimate import widen_for_tilt
+
+    lights = Lights(image_names=["a.exr"], directions=np.array([[0.0, 0.0, 1.0]]), positions=np.full((1, 3), np.nan),
+                    status=["ok"], reasons=[None], extra=[{"uncertainty_deg": 179.0, "model": "distant"}],
+                    frame={"world_from_camera": np.eye(4), "source": "fitted", "tilt_uncertainty_deg": 30.0})
+    widen_for_tilt(lights)
+    assert lights.extra[0]["uncertainty_deg"] == 180.0 and lights.extra[0]["tilt_widened_deg"] == 30.0
+    save_lights(lights, tmp_path / "l.json")
+    assert load_lights(tmp_path / "l.json").extra[0]["uncertainty_deg"] == 180.0
 
 
 @pytest.mark.parametrize("model, position, expect", [

@@ -593,3 +593,20 @@ def test_tone_curve_fit_evaluates_the_units_stacked(monkeypatch):
     for a, b in [(stacked.gamma, alone.gamma), (stacked.polynomial_excess, alone.polynomial_excess),
                  (stacked.srgb_excess, alone.srgb_excess), *zip(stacked.coefficients, alone.coefficients)]:
         assert a == pytest.approx(b, rel=1e-7, abs=1e-9)
+
+
+def test_tone_curve_fit_stacks_the_units_once_per_round(monkeypatch):
+    """The units are stacked (:class:`_StackedUnits`) once per selection round and the polynomial
+    fit of every order reuses it (it was rebuilt per order and per call)."""
+    rng = np.random.default_rng(5)
+    normals = _disc_normals()
+    raw = []
+    for _ in range(24):
+        lin = 0.8 * np.maximum(normals @ _random_light(rng), 0) + 0.03
+        enc = np.clip(np.rint((srgb_encode(lin) + rng.normal(0, 1 / 255, len(lin))) * 255), 0, 255) / 255
+        raw.append([np.repeat(enc[:, None], 3, axis=1)])
+    stacked = getattr(importlib.import_module("ffls.spheres.encoding"), "_StackedUnits")
+    built, real = [], stacked.__init__
+    monkeypatch.setattr(stacked, "__init__", lambda self, *a: built.append(1) or real(self, *a))
+    fit = calibrate_encoding(raw, [normals], code_step=1 / 255)
+    assert fit.polynomial_excess is not None and len(built) == 2

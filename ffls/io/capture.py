@@ -47,7 +47,8 @@ __all__ = [
     "lp_to_world",
     "world_to_lp",
     "lights_from_lp",
-    "load_lights_any", "lp_frame_note",
+    "load_lights_any",
+    "cap_cones",
     "parse_lights_map",
     "load_capture_and_lights",
     "UNIT_TOLERANCE",
@@ -937,6 +938,8 @@ class Lights:
         self.status = ["ok"] * n if self.status is None else list(self.status)
         self.reasons = [None] * n if self.reasons is None else list(self.reasons)
         self.extra = [{} for _ in range(n)] if self.extra is None else [dict(e) for e in self.extra]
+        for e in self.extra:
+            cap_cones(e)
         if not (len(self.status) == len(self.reasons) == len(self.extra) == n):
             raise ValueError("Lights: image_names, status, reasons and extra must have the same length")
         bad = [s for s in self.status if s not in ("ok", "rejected")]
@@ -972,7 +975,6 @@ class Lights:
             if self.reasons[i] is not None:
                 item["reason"] = self.reasons[i]
             item.update(self.extra[i])
-            _cap_cones(item)
             lights.append(item)
         doc = {"format": "ffls-lights", "version": 1}
         if self.encoding is not None:
@@ -987,10 +989,11 @@ class Lights:
         return doc
 
 
-def _cap_cones(item: dict) -> None:
+def cap_cones(item: dict) -> None:
     """A light's cones, its own and its spheres', at most ``MAX_CONE_DEG`` (in place; the spheres'
     list is copied): a fit that knows little of a direction has a cone wider than the sphere (a
-    sphere's reached 1617 deg on the bench), which means the same and which ``load_lights`` refuses."""
+    sphere's reached 1617 deg on the bench), which means the same and which ``load_lights`` refuses.
+    ``Lights`` caps its ``extra`` when built; a stage that widens a built one's cones caps again."""
     def capped(d):
         wide = isinstance(d, dict) and isinstance(d.get("uncertainty_deg"), float) \
             and d["uncertainty_deg"] > conventions.MAX_CONE_DEG
@@ -1562,7 +1565,7 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
     Lights
         In the capture's image order, named by the capture's images; ``note`` set when matched
         by order or by the map, and for an ``.lp`` always: the frame its directions were read in
-        (:func:`lp_frame_note`).
+        (:func:`_lp_frame_note`).
 
     Raises
     ------
@@ -1573,11 +1576,11 @@ def load_lights_any(path: str | os.PathLike, capture: Capture, lights_map=None) 
     path = Path(path)
     out = _match_lights_file(path, capture, lights_map)
     if path.suffix.lower() == ".lp":
-        out.note = "; ".join(filter(None, [out.note, lp_frame_note(path, out, capture)]))
+        out.note = "; ".join(filter(None, [out.note, _lp_frame_note(path, out, capture)]))
     return out
 
 
-def lp_frame_note(path: str | os.PathLike, lights: Lights, capture: Capture) -> str:
+def _lp_frame_note(path: str | os.PathLike, lights: Lights, capture: Capture) -> str:
     """What ffls assumed of an ``.lp`` file's directions, in one line.
 
     RTI tools differ (y up or down, z toward the camera or into the scene, another tool's world
@@ -1594,8 +1597,8 @@ def lp_frame_note(path: str | os.PathLike, lights: Lights, capture: Capture) -> 
     capture : Capture
         Whose ``world_from_camera`` turned them.
     """
-    ok = np.array([st == "ok" for st in lights.status], dtype=bool)
-    z = world_to_lp(np.asarray(lights.directions, dtype=np.float64)[ok], capture.world_from_camera)[:, 2]
+    _, dirs = lights.accepted()
+    z = world_to_lp(dirs, capture.world_from_camera)[:, 2]
     note = (f"lights: {Path(path).name}: .lp directions read in the image frame (x right, y up, z toward the "
             "camera; docs/formats.md) and turned to the world by capture.json's world_from_camera")
     away = int(np.sum(z < 0.0))

@@ -71,7 +71,7 @@ from ffls.conventions import DEFAULT_WORLD_FROM_CAMERA, angle_between, normalize
 from ffls.camera.projection import CAMERA_MODELS, camera_arrays, pixel_rays, project_points
 from ffls.errors import InputError
 from ffls.radiance.photos import full_scale_share, read_photo
-from ffls.spheres.select import (COLOUR_STEP, CRITERIA, disc_pixels, highlight_pixels, highlights_outside,
+from ffls.spheres.select import (COLOUR_STEP, CRITERIA, disc_pixels, highlight_pixels, photos_highlighted_around,
                                  round_outline, select_spheres)
 from ffls.spheres.mirror_outline import (MIRROR_OUTLINE_FLOOR_PX, MIRROR_OUTLINE_SIGMA_FLOOR_PX, OUTER_SOURCE,
                                          changing_limb_radius, circle_search, dark_body, dark_cap, enclosing_circle,
@@ -1841,6 +1841,9 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     # on a textured ground; the photo-edge search reads them too)
     with_changing = held is not None and len(tensor[0]) >= EDGE_TENSOR_ROWS
     rejected: list[str] = []
+    ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
+    # the max image's highlights (a chrome ball on a black ground shows nothing else), once
+    hl = highlight_pixels(L, ratio, n_photos) if ratio is not None and brightest is not None else None
     if hints:
         hint_info = []
         for k, h in enumerate(hints):
@@ -1849,16 +1852,16 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             except (ValueError, TypeError) as e:
                 raise InputError(f"spheres[{k}]: bad sphere hint: {e}", source) from None
         # a stated circle whose outline does not show (chrome on black) is taken as stated
-        ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
+        near = _highlight_surroundings(hl)
         stated = {k: stated_fit(h[0], h[1], cam) for k, h in enumerate(hint_info) if h[1] is not None
-                  and outline_unseen(h[0], h[1], edges, L, ratio, brightest, n_photos, min_coverage)}
-        seen = [h for k, h in enumerate(hint_info) if k not in stated]
-        fits, failures = _fit_hints(seen, edges, cam, L.shape, source, workers, retry_hints,
-                                    [k for k in range(len(hint_info)) if k not in stated]) if seen else ([], [])
+                  and outline_unseen(h[0], h[1], edges, hl, near, brightest, n_photos, min_coverage)}
         seen_k = [k for k in range(len(hint_info)) if k not in stated]
+        seen = [hint_info[k] for k in seen_k]
+        fits, failures = _fit_hints(seen, edges, cam, L.shape, source, workers, retry_hints,
+                                    seen_k) if seen else ([], [])
         if not failures:  # a centre alone, around which only highlights show: their cluster, not the ball
             for k, ft in zip(seen_k, fits):
-                if hint_info[k][1] is None and outline_unseen(ft.center_px, ft.radius_px, edges, L, ratio, brightest,
+                if hint_info[k][1] is None and outline_unseen(ft.center_px, ft.radius_px, edges, hl, near, brightest,
                                                               n_photos, min_coverage):
                     x, y = hint_info[k][0]
                     raise InputError(f"spheres[{k}]: around the hinted centre ({x:.0f}, {y:.0f}) px only highlights"
@@ -1875,7 +1878,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                 it = iter(_with_changing_edges(grown, changing, L, cam, max_residual_px))
                 refit = [next(it) if g else r for r, g in zip(refit, grow)]
             fits = _on_changing_limb(refit, changing, L, mean, cam)
-        failures = [(seen_k[f[0]], *f[1:]) for f in failures]
         if not failures:  # in the hints' order
             it = iter(fits)
             fits = [stated[k] if k in stated else next(it) for k in range(len(hint_info))]
@@ -1884,7 +1886,6 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     else:
         hint_info = []
         changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
-        ratio = shading_ratio(L, mean) if mean is not None and n_photos >= 3 else None
         seeded = seeded_circles(seeds)
         cands = seeded or _hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = fit_candidates(cands, edges, cam, 0.3, "auto", workers)
@@ -1921,12 +1922,10 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
                                 edge_tensor=edge_tensor, edge_photos=edge_photos, workers=workers)
         if seeded:
             rejected = list(seeds.rejected)
-        if not fits or (n_spheres is not None and len(fits) < n_spheres):
-            hls = None if fits else unoutlined_highlights(L, ratio, brightest, n_photos)
-            raise InputError(_not_found_message(fits, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
+        _check_enough_found(fits, n_spheres, rejected, L.shape, hl, brightest, n_photos, n_cands, source)
         fits = sorted(fits, key=lambda ft: ft.center_px[0])
     if lit_limb is not None:  # the spheres are chosen; refine each on its directly lit outline
-        fits = [ft if ft.source in (OUTER_SOURCE, STATED_SOURCE) or ft.outline_edges == PHOTO_EDGES
+        fits = [ft if ft.source in _UNREFINED_SOURCES or ft.outline_edges == PHOTO_EDGES
                 else _refine_on_lit_limb(ft, L, cam, lit_limb) for ft in fits]
     if not hints:  # and on the edges that hold in the photos, where they fit better
         fits = _with_consistent_edges(fits, held, L, cam, max_residual_px)
@@ -1942,15 +1941,16 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         same = [k for k, (a, b) in enumerate(zip(old, fits)) if a is b]
         for k, ft in zip(same, _on_changing_limb([fits[k] for k in same], changing, L, mean, cam)):
             fits[k] = ft
-        fits = _without_highlight_clusters(fits, rejected, L, ratio, brightest, n_photos, n_spheres, n_cands, source)
+        fits = _without_highlight_clusters(fits, rejected, L.shape, hl, brightest, n_photos, n_spheres, n_cands,
+                                           source)
     # every outline's points moved to the step of the linear image; an integer file's clipped
     # pixels read its largest code, the max image's maximum (as select.clip_levels); on the photos'
     # mean where they are blurred beyond the pixel (_refine_on_profiles)
     clip = 0.98 * float(L.max()) if saturates else None
     M = np.asarray(mean, dtype=np.float64) if mean is not None and n_photos >= 3 else None
     noise, mean_noise = _pixel_noise(L), None if M is None else _pixel_noise(M)
-    fits = [ft if ft.source in ("override", OUTER_SOURCE, STATED_SOURCE) else _refine_on_profiles(ft, L, cam, max_residual_px, noise,
-                                                                                     clip, mean=M, mean_noise=mean_noise)
+    fits = [ft if ft.source in _UNREFINED_SOURCES
+            else _refine_on_profiles(ft, L, cam, max_residual_px, noise, clip, mean=M, mean_noise=mean_noise)
             for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
@@ -2071,7 +2071,8 @@ def _circle_near_hint(pts, grads, cpx, r_min, r_max):
 def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, workers: int = 1,
                retry: bool = True, index=None):
     """Stages 3 and 4 with hints: one circle per hint, fitted (:func:`fit_candidates`, search
-    band 0.35 of the radius); returns the fits and the failures as that does.
+    band 0.35 of the radius); returns the fits and the failures as that does, each failure's
+    first item its hint's place in ``index``.
 
     A hint without a radius takes the radius of the edges around its centre
     (:func:`_radius_from_edges`). Where that fails, or its fit's centre is poorly constrained
@@ -2126,7 +2127,7 @@ def _fit_hints(hint_info, edges: _EdgeMap, cam: DetectionCamera, shape, source, 
                              f"{cpx[1]:.0f}) px (image {W}x{H}); check the hint or add 'radius_px'", source)
         cands.append(cand)
         fits += got[k][0]
-        failures += [(k, *f[1:]) for f in got[k][1]]
+        failures += [(index[k], *f[1:]) for f in got[k][1]]
     _check_duplicate_circles(cands, "hint", source)
     return fits, failures
 
@@ -2675,7 +2676,16 @@ def _with_radius(ft, radius_px: float, cam: DetectionCamera):
 HIGHLIGHT_EDGE_PX = 3
 
 
-def outline_unseen(cpx, rpx, edges: _EdgeMap, L, ratio, brightest, n_photos: int, min_coverage: float) -> bool:
+def _highlight_surroundings(hl):
+    """(H, W) bool: the pixels within :data:`HIGHLIGHT_EDGE_PX` of a highlight pixel ``hl``
+    (:func:`highlight_pixels`), whose edge points are the highlights' own; None without ``hl``."""
+    if hl is None:
+        return None
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * HIGHLIGHT_EDGE_PX + 1,) * 2)
+    return cv2.dilate(hl.astype(np.uint8), k).astype(bool)
+
+
+def outline_unseen(cpx, rpx, edges: _EdgeMap, hl, near, brightest, n_photos: int, min_coverage: float) -> bool:
     """Whether a stated circle (a hint's ``center_px`` and ``radius_px``) is a ball whose outline
     does not show: a chrome ball on a black ground, which mirrors black all round but its highlights.
 
@@ -2686,11 +2696,12 @@ def outline_unseen(cpx, rpx, edges: _EdgeMap, L, ratio, brightest, n_photos: int
     radii either side of the circle, as :func:`_fit_hints` searches): no fit there could pass
     :func:`_check_hinted_fits`, and a fit on the highlights' edges outlines their cluster, which
     lies well inside the ball (``docs/spheres.md``, "A chrome ball on a black ground").
+    ``hl``: the max image's highlights (:func:`highlight_pixels`), None where the photos are too few
+    to tell them; ``near``: their surroundings (:func:`_highlight_surroundings`).
     """
-    if ratio is None or brightest is None or n_photos < 3:
+    if hl is None or brightest is None or n_photos < 3:
         return False
-    H, W = L.shape
-    hl = highlight_pixels(L, ratio, n_photos)
+    H, W = hl.shape
     c = np.asarray(cpx, dtype=np.float64)
     yy, xx = np.nonzero(hl)
     inside = np.hypot(xx - c[0], yy - c[1]) <= rpx
@@ -2699,8 +2710,6 @@ def outline_unseen(cpx, rpx, edges: _EdgeMap, L, ratio, brightest, n_photos: int
         return False
     pts = edges.points
     if len(pts):
-        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * HIGHLIGHT_EDGE_PX + 1,) * 2)
-        near = cv2.dilate(hl.astype(np.uint8), k).astype(bool)
         ij = np.clip(np.rint(pts).astype(int), 0, [W - 1, H - 1])
         pts = pts[~near[ij[:, 1], ij[:, 0]]]
     d = np.hypot(pts[:, 0] - c[0], pts[:, 1] - c[1])
@@ -2711,6 +2720,9 @@ def outline_unseen(cpx, rpx, edges: _EdgeMap, L, ratio, brightest, n_photos: int
 #: ``SphereFit.source`` of a hinted circle taken as stated: its outline does not show
 #: (:func:`outline_unseen`), so no stage refits it.
 STATED_SOURCE = "hint (as stated)"
+#: ``SphereFit.source`` of the fits that no later stage refits (on the lit limb, on the profiles):
+#: a circle the capture states (an override, a hint taken as stated) or a mirror's outer outline.
+_UNREFINED_SOURCES = ("override", OUTER_SOURCE, STATED_SOURCE)
 
 
 def stated_fit(cpx, rpx, cam: DetectionCamera) -> SphereFit:
@@ -2724,20 +2736,19 @@ def stated_fit(cpx, rpx, cam: DetectionCamera) -> SphereFit:
     return ft
 
 
-def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
+def unoutlined_highlights(hl, brightest, n_photos: int, gap_px: int = 5):
     """Where the photos' highlights gather with no round outline found: ``(x, y, extent_px, photos)``
     of the largest group, or None.
 
     A chrome ball on a black ground mirrors black all round but its highlights: no outline of it
     shows in the max image or the photos' edges, yet its highlights, each lit in one photo, gather
     on it. The pixels as bright as half the max image's maximum and lit in at most about two photos
-    (``ratio``, :func:`shading_ratio`, above ``ln(n_photos / 2)``) are joined within ``gap_px``;
+    (``hl``, :func:`highlight_pixels`; None where the photos are too few) are joined within ``gap_px``;
     the group holding the most distinct brightest photos is returned when they are at least 3 and a
     quarter of the photos (its centroid, the largest distance of its pixels from it, the count).
     """
-    if ratio is None or brightest is None or n_photos < 3:
+    if hl is None or brightest is None or n_photos < 3:
         return None
-    hl = highlight_pixels(L, ratio, n_photos)
     if not hl.any():
         return None
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * gap_px + 1, 2 * gap_px + 1))
@@ -2754,29 +2765,38 @@ def unoutlined_highlights(L, ratio, brightest, n_photos: int, gap_px: int = 5):
     return best if best is not None and best[3] >= max(3, n_photos / 4) else None
 
 
-def _without_highlight_clusters(fits, rejected, L, ratio, brightest, n_photos, n_spheres, n_cands, source):
+def _without_highlight_clusters(fits, rejected, shape, hl, brightest, n_photos, n_spheres, n_cands, source):
     """The spheres found without hints, less those whose final outline has the highlights of
     ``CRITERIA["max_outside_highlights"]`` photos or more just outside it
-    (:func:`ffls.spheres.select.highlights_outside`): the cluster of a chrome ball's highlights
-    outlined inside the ball, whose own silhouette does not show (on a black ground). Judged on the
+    (:func:`ffls.spheres.select.photos_highlighted_around`, of the highlights ``hl``): the cluster of
+    a chrome ball's highlights outlined inside the ball, whose own silhouette does not show (on a
+    black ground). Judged on the
     final outlines: a cap that grows to its ball's silhouette on the changing edges (the calibration
     shot's chrome ball) holds its highlights once grown. Each one set aside is named first in
     ``rejected`` (it was chosen as a sphere); none left, or fewer than ``n_spheres``: the "no sphere found" line."""
-    if ratio is None or brightest is None or n_photos < 3:
+    if hl is None or brightest is None or n_photos < 3:
         return fits
     keep = []
     for ft in fits:
-        out = highlights_outside(ratio, brightest, L, ft, n_photos)
+        out = photos_highlighted_around(hl, brightest, ft)
         if out >= CRITERIA["max_outside_highlights"]:
             rejected.insert(0, f"round outline at pixel ({ft.center_px[0]:.0f}, {ft.center_px[1]:.0f}), radius"
                             f" {ft.radius_px:.0f} px: the highlights of {out} photos lie just outside it (1.1 to"
                             f" 1.6 radii): the outline of some of a mirror ball's highlights, not its silhouette")
         else:
             keep.append(ft)
-    if len(keep) < len(fits) and (not keep or (n_spheres is not None and len(keep) < n_spheres)):
-        hls = None if keep else unoutlined_highlights(L, ratio, brightest, n_photos)
-        raise InputError(_not_found_message(keep, n_spheres, rejected, L.shape, n_photos, n_cands, hls), source)
+    if len(keep) < len(fits):
+        _check_enough_found(keep, n_spheres, rejected, shape, hl, brightest, n_photos, n_cands, source)
     return keep
+
+
+def _check_enough_found(fits, n_spheres, rejected, shape, hl, brightest, n_photos, n_cands, source) -> None:
+    """The "no sphere found" line (:func:`_not_found_message`) as an :class:`InputError` where
+    ``fits`` holds no sphere, or fewer than ``n_spheres``; with none, it names the photos'
+    highlights that gather in no outline (:func:`unoutlined_highlights`)."""
+    if not fits or (n_spheres is not None and len(fits) < n_spheres):
+        hls = None if fits else unoutlined_highlights(hl, brightest, n_photos)
+        raise InputError(_not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, hls), source)
 
 
 def _not_found_message(fits, n_spheres, rejected, shape, n_photos, n_cands, highlights=None) -> str:

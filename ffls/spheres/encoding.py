@@ -1155,8 +1155,10 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
 
 
 # ----------------------------------------------------------------------------- tone curves
-def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POLYNOMIAL_MIN_SLOPE) -> tuple[tuple, float]:
-    """The polynomial response of ``order`` that minimises the units' summed ``RSS``: (coefficients, RSS).
+def _fit_polynomial(stack: _StackedUnits, start: tuple, order: int,
+                    min_slope: float = POLYNOMIAL_MIN_SLOPE) -> tuple[tuple, float]:
+    """The polynomial response of ``order`` that minimises the summed ``RSS`` of the units of
+    ``stack`` (:class:`_StackedUnits`, built once per set of units): (coefficients, RSS).
 
     ``start`` (a lower order's coefficients, or ``(gamma,)``) is padded with zeros. The units'
     selections and shading columns are fixed, each unit's coefficients profiled out in closed form
@@ -1173,8 +1175,7 @@ def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POL
     x = np.linspace(0.0, 1.0, 65)
     C = np.column_stack([np.ones_like(x)] + [j * x ** j for j in range(1, order + 1)])
 
-    shared = _SharedValues(used)
-    stack = _StackedUnits(used, shared)
+    shared = stack.shared
 
     def total(thetas) -> np.ndarray:
         return stack.rss([tuple(float(v) for v in t) for t in thetas])
@@ -1200,7 +1201,7 @@ def _fit_polynomial(used: list, start: tuple, order: int, min_slope: float = POL
     return tuple(float(v) for v in theta), rss
 
 
-def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, penalty: float,
+def _best_polynomial(stack: _StackedUnits, gamma: float, rss_gamma: float, noise: float, penalty: float,
                      max_order: int, min_slope: float = POLYNOMIAL_MIN_SLOPE) -> tuple[int, tuple, float, float]:
     """The polynomial response whose order the BIC chooses: (order, coefficients, RSS, score).
 
@@ -1212,7 +1213,7 @@ def _best_polynomial(used: list, gamma: float, rss_gamma: float, noise: float, p
     best = (0, (gamma,), rss_gamma, float("inf"))
     theta = (gamma,)
     for order in range(1, max_order + 1):
-        theta, rss = _fit_polynomial(used, theta, order, min_slope=min_slope)
+        theta, rss = _fit_polynomial(stack, theta, order, min_slope=min_slope)
         score = (rss - rss_gamma) / noise + order * penalty
         if score < best[3]:
             best = (order, theta, rss, score)
@@ -1388,7 +1389,7 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
             n_sel = sum(int(u.selected.sum()) for u in used)
             s2_pilot = float(res.fun) / max(n_sel - sum(u.A.shape[1] for u in used) - 1, 1)
             pen = math.log(max(n_sel, 3))
-            order, coefs, _, score = _best_polynomial(used, best, float(res.fun), s2_pilot, pen, max_order, min_slope)
+            order, coefs, _, score = _best_polynomial(stack, best, float(res.fun), s2_pilot, pen, max_order, min_slope)
             named = min((sum(u.rss(c) for u in used) - float(res.fun)) / s2_pilot for c in (1.0, "srgb"))
             if order and pen + score < min(named, pen):
                 curve = coefs
@@ -1428,7 +1429,9 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
     if max_order >= 1:
         # a camera's tone curve (toe, shoulder) that no gamma follows: a polynomial response, its order
         # chosen by the BIC, scored against the named curves in the same units (module docstring)
-        order, coefs, rss_poly, score = _best_polynomial(used, best, rss_best, noise, penalty, max_order,
+        if stack.units is not used:  # the near model's units
+            stack = _StackedUnits(used, _SharedValues(used))
+        order, coefs, rss_poly, score = _best_polynomial(stack, best, rss_best, noise, penalty, max_order,
                                                           min_slope)
         if order:
             poly_excess, poly_rms = score, math.sqrt(rss_poly / n_pix)

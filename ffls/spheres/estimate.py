@@ -49,7 +49,7 @@ import numpy as np
 
 from ffls.conventions import UP, normalize
 from ffls.errors import InputError
-from ffls.io.capture import Lights, sphere_materials
+from ffls.io.capture import Lights, cap_cones, sphere_materials
 from ffls.radiance.photos import load_photo, read_photo
 from ffls.spheres.detect import SequenceAccumulator, SequenceStats
 from ffls.spheres.highlight import (HighlightFit, SphereKind, SphereView, classify_sphere, highlight_compactness,
@@ -1019,8 +1019,7 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
             turns.extend(float(np.sum(np.square(m))) for m in moved)
         elif r.ok and r.used_spheres:  # the part of their turns they share (the others turn 0)
             t = np.zeros((len(r.used_spheres), 3))
-            for j, m in enumerate(moved):
-                t[j] = m
+            t[:len(moved)] = np.reshape(moved, (-1, 3))
             turns.append(_shared_square(t))
     return float(np.degrees(np.sqrt(max(float(np.mean(turns)), 0.0) / 2.0))) if turns else 0.0
 
@@ -2079,9 +2078,9 @@ def place_at_capture_range(results: list[PhotoEstimate], samples: list[SphereSam
     """
     c = np.asarray(scene_center, dtype=np.float64)
     ok = [r for r in results if r.ok]
-    unlocated = [r.ok and r.model == "near" and not r.joint_sigma_deg <= UNLOCATED_SIGMA_DEG for r in results]
-    near = [r for r, u in zip(results, unlocated) if r.ok and r.model == "near" and r.position is not None
-            and not u]
+    is_near = [r.ok and r.model == "near" for r in results]
+    unlocated = [n and not r.joint_sigma_deg <= UNLOCATED_SIGMA_DEG for r, n in zip(results, is_near)]
+    near = [r for r, n, u in zip(results, is_near, unlocated) if n and r.position is not None and not u]
     if len(near) < max(NEAR_CAPTURE_MIN_PHOTOS, NEAR_CAPTURE_FRACTION * len(ok)):
         return results
     distance = float(np.median([np.linalg.norm(r.position - c) for r in near]))
@@ -2648,6 +2647,7 @@ def widen_for_lens(lights, evidence):
         widen = max(evidence.angles_deg[i] for i in used)
         e["uncertainty_deg"] = float(np.hypot(e["uncertainty_deg"], widen))
         e["orthographic_misfit_deg"] = round(float(widen), 3)
+        cap_cones(e)
     return lights
 
 
@@ -2718,12 +2718,15 @@ def widen_for_tilt(lights) -> None:
     if lights.frame is None or (lights.uncertainty or {}).get("source") == "fallback":
         return
     e = float(lights.frame.get("tilt_uncertainty_deg") or 0.0)
+    if not e:
+        return
     for d, st, x in zip(lights.directions, lights.status, lights.extra or ()):
-        if st != "ok" or x.get("uncertainty_deg") is None or not e:
+        if st != "ok" or x.get("uncertainty_deg") is None:
             continue
         w = e * float(np.sqrt(max(0.0, 1.0 - d[0] * d[0])))
         x["uncertainty_deg"] = float(np.hypot(x["uncertainty_deg"], w))
         x["tilt_widened_deg"] = round(w, 3)
+        cap_cones(x)
 
 
 def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict, photo_options: dict,

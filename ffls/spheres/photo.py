@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ffls import conventions
 from ffls.conventions import UP, normalize
 from ffls.spheres.combine import combine_distant, fit_near_light_mixed, fit_ray_convergence
 from ffls.spheres.highlight import HIGHLIGHT_STATUSES, HighlightFit, SphereView, fit_highlight_samples
@@ -57,7 +58,7 @@ REASONS = {
     "highlight_at_rim": HIGHLIGHT_STATUSES["highlight_at_rim"],
 }
 #: Light models of :func:`estimate_photo`.
-LIGHT_MODELS = ("auto", "distant", "near")
+LIGHT_MODELS = ("auto", *conventions.LIGHT_MODELS)
 #: Sphere status for a sphere dropped from the combination because it disagreed with the others.
 OUTLIER = "outlier"
 #: Significance level of the consistency and likelihood-ratio tests.

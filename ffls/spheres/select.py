@@ -215,17 +215,17 @@ def highlight_pixels(L, ratio, n_photos: int) -> np.ndarray:
     return (np.asarray(ratio) > np.log(n_photos / 2.0)) & (L >= 0.5 * float(L.max()))
 
 
-def highlights_outside(ratio, brightest, L, ft, n_photos: int) -> int:
+def photos_highlighted_around(hl, brightest, ft) -> int:
     """How many photos hold a highlight (:func:`highlight_pixels`) just outside a circle, between
     1.1 and 1.6 radii: a mirror ball's highlights all lie on it, so a circle with highlights just
     around it is the outline of some of them, inside the ball (a chrome ball on a black ground,
     whose silhouette does not show: the cluster of its highlights outlined as a dark cap's
-    enclosing circle, ``docs/spheres.md``, "A chrome ball on a black ground"). ``ratio``:
-    ``ln(max / mean)`` over the photos; ``brightest``: per pixel, the brightest photo."""
-    rows, cols = disc_pixels(ft, L.shape, 1.6)
+    enclosing circle, ``docs/spheres.md``, "A chrome ball on a black ground"). ``hl``: the max
+    image's highlights (:func:`highlight_pixels`); ``brightest``: per pixel, the brightest photo."""
+    rows, cols = disc_pixels(ft, hl.shape, 1.6)
     d = np.hypot(cols - ft.center_px[0], rows - ft.center_px[1]) / ft.radius_px
-    hl = (d >= 1.1) & highlight_pixels(L, ratio, n_photos)[rows, cols]
-    return int(np.unique(brightest[rows[hl], cols[hl]]).size)
+    out = (d >= 1.1) & hl[rows, cols]
+    return int(np.unique(brightest[rows[out], cols[out]]).size)
 
 
 def light_directions_per_photo(ft, brightest, n_photos: int, min_pixels: int = 3, L=None,
