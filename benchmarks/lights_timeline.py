@@ -41,7 +41,7 @@ STAGES = {
                               "reject_shadowed_photos", "sphere_kinds"],
     "ffls.spheres.detect": ["find_spheres_in_capture", "find_spheres", "SequenceAccumulator.result",
                             "_max_luminance", "edge_map", "ConsistentEdges.of", "shading_ratio",
-                            "_hough_circle_candidates", "fit_candidates", "_with_outer_outlines",
+                            "hough_circle_candidates", "fit_candidates", "_with_outer_outlines",
                             "_photo_edge_fits", "_hough_candidates_many", "_forked_map",
                             "_with_consistent_edges", "select_spheres", "_grown_on_changing_edges",
                             "_with_changing_edges", "mirror_outlines_replaced", "with_max_image_rings",

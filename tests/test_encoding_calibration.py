@@ -545,7 +545,7 @@ def test_second_detection_fits_the_first_ones_circles(linear_captures, tmp_path,
     src, _ = linear_captures["four"]
     folder = encoded_capture(src, tmp_path / "c", 2.2)
     calls, searched = [], []
-    real, hough = detect.find_spheres_in_capture, detect._hough_circle_candidates
+    real, hough = detect.find_spheres_in_capture, detect.hough_circle_candidates
 
     def spy(capture, *args, **kwargs):
         found = real(capture, *args, **kwargs)
@@ -557,7 +557,7 @@ def test_second_detection_fits_the_first_ones_circles(linear_captures, tmp_path,
         return hough(*args, **kwargs)
 
     monkeypatch.setattr(detect, "find_spheres_in_capture", spy)
-    monkeypatch.setattr(detect, "_hough_circle_candidates", counted)
+    monkeypatch.setattr(detect, "hough_circle_candidates", counted)
     assert main(["lights", str(folder), "--no-progress", "--workers", "1"]) == 0
     (_, _, first, n_first), (capture, kwargs, second, n_second) = calls[-2], calls[-1]
     assert kwargs.get("seeds") is first and n_second == n_first  # seeded: no search in the second

@@ -1692,7 +1692,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
 
     The stages of the module docstring, one function each: the max (and min) image
     (:func:`_max_luminance`), its edges (:func:`edge_map`), candidate circles
-    (:func:`_fit_hints` or :func:`_hough_circle_candidates`), a fit per candidate
+    (:func:`_fit_hints` or :func:`hough_circle_candidates`), a fit per candidate
     (:func:`fit_candidates`: the tangent cone for a pinhole camera, a circle for an orthographic
     one), the choice of the spheres (:func:`ffls.spheres.select.select_spheres` without hints, :func:`_check_hinted_fits`
     with hints), the lit-limb refit (:func:`_refine_on_lit_limb`) and the scale check
@@ -1887,7 +1887,7 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
         hint_info = []
         changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
         seeded = seeded_circles(seeds)
-        cands = seeded or _hough_circle_candidates(edges, L, ratio=ratio)
+        cands = seeded or hough_circle_candidates(edges, L, ratio=ratio)
         fits, _ = fit_candidates(cands, edges, cam, 0.3, "auto", workers)
         n_cands = len(cands)
         fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
@@ -2149,7 +2149,7 @@ def shading_ratio(L_max, L_mean) -> np.ndarray:
     textured ground (a patterned tablecloth, wood, paper with print) becomes flat: its value
     depends on its normal (and shadows) only. A sphere's pixels face every way, so its outline
     stands out against the ground whatever the ground's pattern. Circles are proposed on it as
-    well as on the max image (:func:`_hough_circle_candidates`).
+    well as on the max image (:func:`hough_circle_candidates`).
 
     Parameters
     ----------
@@ -2170,7 +2170,7 @@ def shading_ratio(L_max, L_mean) -> np.ndarray:
 #: Least share of a candidate circle's outline within 1.5 px of a max-image edge (:func:`_score_circle`).
 MIN_EDGE_SUPPORT = 0.35
 #: Circles of radius up to this many pixels are also sought on the images upsampled
-#: :data:`SMALL_CIRCLE_UPSAMPLE` times (:func:`_hough_circle_candidates`): the Hough transforms'
+#: :data:`SMALL_CIRCLE_UPSAMPLE` times (:func:`hough_circle_candidates`): the Hough transforms'
 #: 1.5 px blur and 1.5 px accumulator cells wash out a smaller outline (a 4.5 px sphere at the back
 #: of a 96 px photo gave no circle at all). Only the plain gradient transform runs there: over so
 #: few radii it costs little (0.3 s on a 1152 px image where the ``HOUGH_GRADIENT_ALT`` pair took
@@ -2179,7 +2179,7 @@ SMALL_CIRCLE_PX = 8.0
 SMALL_CIRCLE_UPSAMPLE = 2
 
 
-def _hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio=None) -> list[tuple[float, float, float]]:
+def hough_circle_candidates(edges: _EdgeMap, L, max_candidates: int = 60, ratio=None) -> list[tuple[float, float, float]]:
     """Stage 3 without hints: Hough circles scored by edge support, near-duplicates dropped.
 
     Circles are proposed on the log max image and, when ``ratio`` (:func:`shading_ratio`) is
@@ -2552,7 +2552,7 @@ MIRROR_STEP_COVERAGE = 0.75
 def _hinted_mirror_outlines(fits, edges: _EdgeMap, L, cam: DetectionCamera, ratio=None, workers: int = 1) -> list:
     """Each hinted sphere outlined as a mirror ball's (:func:`_is_mirror_outline`) found as an
     unhinted one would be: the candidate circles of the search without hints
-    (:func:`_hough_circle_candidates`) whose centres lie within half the hinted fit's radius of
+    (:func:`hough_circle_candidates`) whose centres lie within half the hinted fit's radius of
     its centre and whose radii are within a factor 2 of it are fitted and grown to their outer
     outlines (:func:`_with_outer_outlines`), with the hinted fit; the outer outline of the best
     :func:`outline_quality` within half a radius replaces the hinted fit where it fits better.
@@ -2563,7 +2563,7 @@ def _hinted_mirror_outlines(fits, edges: _EdgeMap, L, cam: DetectionCamera, rati
     mirror = [_is_mirror_outline(ft, L) for ft in fits]
     if not any(mirror):
         return fits
-    cands = _hough_circle_candidates(edges, L, ratio=ratio)
+    cands = hough_circle_candidates(edges, L, ratio=ratio)
     out = []
     for ft, m in zip(fits, mirror):
         c0, r0 = np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px)
@@ -3494,7 +3494,7 @@ def find_spheres_in_capture(capture, n_spheres: int | None = None, overrides=Non
 
 def circle_candidates(image, source: str | os.PathLike | None = None, with_grads: bool = False) -> tuple:
     """The candidate circles of one image, ``(x, y, r)`` pixels, best edge support first: stages 1-3 of
-    :func:`find_spheres` without hints (the max image's edges and :func:`_hough_circle_candidates`), for a
+    :func:`find_spheres` without hints (the max image's edges and :func:`hough_circle_candidates`), for a
     caller that judges the candidates by its own criteria (a probe ball, :func:`ffls.probes.locate.locate_sphere`).
 
     Parameters
@@ -3518,5 +3518,5 @@ def circle_candidates(image, source: str | os.PathLike | None = None, with_grads
     mx, _, _, L, _, _, _ = _max_luminance(image, source)
     edges = edge_map(mx, L, source)
     if with_grads:
-        return _hough_circle_candidates(edges, L), edges.points, edges.grads
-    return _hough_circle_candidates(edges, L), edges.points
+        return hough_circle_candidates(edges, L), edges.points, edges.grads
+    return hough_circle_candidates(edges, L), edges.points
