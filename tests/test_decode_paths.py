@@ -187,3 +187,32 @@ def test_sequence_accumulator_made_in_its_buffers():
     for name in ("max", "brightest", "mean", "colour_counts", "edge_tensor"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
         np.testing.assert_array_equal(getattr(other.result(), name), getattr(want, name))
+
+
+@pytest.mark.parametrize("encoding", ["srgb", {"gamma": 2.2}])
+@pytest.mark.parametrize("dtype,top", [(np.uint8, 255), (np.uint16, 65535)])
+def test_kept_codes_linearised_by_their_table(monkeypatch, encoding, dtype, top):
+    """A kept integer photo linearised whole (``DecodedPhotos.photo``, e.g. the reductions of
+    ``linear_stats``) has the curve evaluated at the float values, exactly, but by a table of its
+    codes: no curve is evaluated at each of its pixels."""
+    from types import SimpleNamespace
+
+    from ffls.io.images import ImageData
+    from ffls.radiance import photos
+    from ffls.spheres.estimate import DecodedPhotos
+
+    rng = np.random.default_rng(5)
+    codes = rng.integers(0, top + 1, (1, 30, 40, 3)).astype(dtype)
+    depth = 8 if dtype == np.uint8 else 16
+    want = photos.linearise(ImageData(codes[0].astype(np.float32) / np.float32(top), depth, "png", None), encoding)
+    stats = SimpleNamespace(n=1, max=np.zeros((30, 40, 3), np.float32))
+    decoded = DecodedPhotos(stats=stats, bit_depths={depth}, encoding=encoding, linear=None, raw=codes)
+    sizes = []
+    for name in ("srgb_decode", "gamma_decode"):
+        real = getattr(photos, name)
+        monkeypatch.setattr(photos, name, lambda x, *a, real=real: sizes.append(np.size(x)) or real(x, *a))
+    photos._code_table.cache_clear()
+    linear, kept, got_depth = decoded.photo(0)
+    np.testing.assert_array_equal(linear, want)
+    assert np.shares_memory(kept, codes) and got_depth == depth
+    assert sizes == [top + 1]  # the table's codes only, not the photo's 3600 values

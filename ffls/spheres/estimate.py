@@ -1437,8 +1437,9 @@ class DecodedPhotos:
         codes = self.raw[i]
         top = np.float32(255 if codes.dtype == np.uint8 else 65535)
         if pixels is None:  # the whole photo, as ffls.io.images reads it (codes / top, float32)
-            return np.asarray(linearise(ImageData(codes.astype(np.float32) / top, depth, "png", None), encoding,
-                                        response), dtype=np.float32), codes, depth
+            # (with its codes: an sRGB or gamma curve is undone by a table of the codes, not a power)
+            return np.asarray(linearise(ImageData(codes.astype(np.float32) / top, depth, "png", None, codes=codes),
+                                        encoding, response), dtype=np.float32), codes, depth
         rows, cols = pixels
         stored = codes[rows, cols].astype(np.float32)[:, None] / top
         linear = np.zeros(codes.shape, np.float32)  # untouched pages of a large zeroed array cost nothing
