@@ -211,7 +211,7 @@ def test_kept_codes_linearised_by_their_table(monkeypatch, encoding, dtype, top)
     for name in ("srgb_decode", "gamma_decode"):
         real = getattr(photos, name)
         monkeypatch.setattr(photos, name, lambda x, *a, real=real: sizes.append(np.size(x)) or real(x, *a))
-    photos._code_table.cache_clear()
+    photos.code_table.cache_clear()
     linear, kept, got_depth = decoded.photo(0)
     np.testing.assert_array_equal(linear, want)
     assert np.shares_memory(kept, codes) and got_depth == depth

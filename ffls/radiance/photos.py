@@ -147,7 +147,7 @@ def _codes_of(img: ImageData) -> np.ndarray | None:
 
 
 @functools.lru_cache(maxsize=16)
-def _code_table(curve: str, gamma: float, dtype: str) -> np.ndarray:
+def code_table(curve: str, gamma: float, dtype: str) -> np.ndarray:
     """The linear value of every code of ``dtype`` (uint8 or uint16) under ``curve``: the decode
     evaluated at the float32 values ``k / top`` that :func:`ffls.io.images.read_image` gives."""
     top = np.iinfo(np.dtype(dtype)).max
@@ -165,7 +165,7 @@ def _decode_codes(img: ImageData, curve: str, gamma: float) -> np.ndarray:
     import cv2
 
     codes = _codes_of(img)
-    table = _code_table(curve, gamma, codes.dtype.name)
+    table = code_table(curve, gamma, codes.dtype.name)
     if codes.dtype == np.uint8 and codes.ndim == 3 and codes.shape[2] <= 4:
         return cv2.LUT(np.ascontiguousarray(codes), table)
     return table[codes]
