@@ -1896,8 +1896,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             # one the photos' edges outline precisely but leave open (a textured ground's patches
             # match the sphere's limb in some photos) is a circle the max image's Hough transform
             # may have missed among the texture's: it is fitted on the max image's edges too
-            seeds = [(*ft.center_px, ft.radius_px) for ft in more if not round_outline(ft, max_residual_px)]
-            again, _ = fit_candidates(seeds, edges, cam, 0.3, "auto", workers) if seeds else ([], [])
+            open_circles = [(*ft.center_px, ft.radius_px) for ft in more if not round_outline(ft, max_residual_px)]
+            again, _ = fit_candidates(open_circles, edges, cam, 0.3, "auto", workers) if open_circles else ([], [])
             fits, n_cands = fits + more + again, n_cands + n_more
         # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
         # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
