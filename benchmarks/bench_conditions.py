@@ -34,7 +34,9 @@ against the photos' actual errors: how much of the common error they could expla
 With ``--truth-check`` (and a ``--cache`` of earlier runs) each part of the stored runs' cones is set
 against the renders' truth (:func:`truth_check`): the spheres' errors and their correlation within
 photos, the photos' errors against the independent-sphere part and the common-mode bound, the cone
-factor against the one 95% coverage needs, each sphere against its own cone.
+factor against the one 95% coverage needs, each sphere against its own cone, and beside them what
+the capture measures itself (the disagreement, the shading fits' misfit, the common mode's share);
+``--folders`` runs it on other captures than the cache's.
 
 With ``--recalibrate`` (and a ``--cache`` of earlier runs) no ``ffls lights`` runs: the cones of
 each stored run are made again by the current error model from the photo estimates it recorded
@@ -359,6 +361,14 @@ def truth_check(folder: Path) -> dict:
       cones (``f`` times the budget's sigma). Near 95% per sphere while the photos are at 100%:
       the spheres' errors cancel in the photo's mean more than independent ones would; per sphere
       well under 95% without the common mode: they share an error the disagreement cannot see;
+    * what the capture measures itself, no truth used (``i-cones17``: does any of these tell the
+      captures whose spheres' errors cancel from those whose errors add?): ``disagreement_deg``,
+      the used spheres' per-axis RMS offset from the photo's direction; ``inflation``, the median
+      of the used spheres' residual correlation factor (``correlation_inflation``: smooth misfit
+      against pixel noise); ``relative_rms``, the median of their shading fits' RMS residual over
+      their intensity; ``common_share``, the median over the photos of the common mode's share of
+      the photo's variance (``common_deg^2 / sigma^2``), and ``photo_coverage_without_common``, the
+      photos' coverage with the common mode left out of their cones (what the floor buys);
     * ``away_mean_deg`` / ``away_share``: the spheres' errors resolved along the horizontal
       direction from the centre of the spheres' layout to each sphere (on the light's tangent
       plane; photos where that direction's tangent part is under 0.2 are left out): its mean, and
@@ -385,7 +395,7 @@ def truth_check(folder: Path) -> dict:
     first = next(l for l in doc["lights"] if l.get("spheres"))
     layout = np.mean([s["center"] for s in first["spheres"]], axis=0)
     per = np.full((len(doc["lights"]), n_spheres, 2), np.nan)
-    rows, away, own = [], [], []
+    rows, away, own, offsets, misfit = [], [], [], [], []
     for j, l in enumerate(doc["lights"]):
         used = list(l.get("used_spheres") or [])
         if l.get("status", "ok") != "ok" or len(used) < 2:
@@ -397,6 +407,10 @@ def truth_check(folder: Path) -> dict:
         e = np.degrees(tangent_residuals(dirs, at))
         per[j, used] = e
         E = np.degrees(tangent_residuals(np.asarray(l["direction"], dtype=np.float64)[None], T[j][None]))[0]
+        if l.get("model") != "near":  # a near light's spheres see it from their own centres
+            offsets.append(np.degrees(tangent_residuals(dirs, np.asarray(l["direction"], dtype=np.float64))))
+        misfit += [(s.get("inflation") or np.nan, (s.get("rms") or np.nan) / (s.get("intensity") or np.nan))
+                   for s in sph]
         stat = np.array([s.get("sigma_deg") or np.inf for s in sph]) / np.sqrt(2.0)
         b = model.budget(stat, np.asarray(used, dtype=np.intp), _combination_weights(sph))
         if not np.isfinite(b["sigma_deg"]):
@@ -435,6 +449,8 @@ def truth_check(folder: Path) -> dict:
                 x, y = per[both, a], per[both, c]
                 corr.append(float(np.sum(x * y) / np.sqrt(np.sum(x * x) * np.sum(y * y))))
     aw = np.array(away) if away else np.zeros((0, 2))
+    mf = np.array(misfit, dtype=np.float64)
+    common2 = np.array([r[1]["common_deg"] ** 2 for r in rows])
     med = {k: float(np.median([r[1][k] for r in rows])) for k in (*BUDGET_TERMS, "sigma_deg")}
     centre_ratio = _centre_check(folder, truth, first, model)
     return {"photos": int(len(rows)), "scale": float(model.scale), "floor": float(model.floor_deg),
@@ -450,6 +466,12 @@ def truth_check(folder: Path) -> dict:
             "sphere_coverage": float(np.mean(np.concatenate(own)[:, 0])),
             "sphere_coverage_independent": float(np.mean(np.concatenate(own)[:, 1])),
             "photo_coverage": float(np.mean(rad <= np.array([r[1]["cone_deg"] for r in rows]))),
+            "disagreement_deg": float(np.sqrt(np.mean(np.concatenate(offsets) ** 2))) if offsets else None,
+            "inflation": float(np.nanmedian(mf[:, 0])) if np.isfinite(mf[:, 0]).any() else None,
+            "relative_rms": float(np.nanmedian(mf[:, 1])) if np.isfinite(mf[:, 1]).any() else None,
+            "common_share": float(np.median(common2 / sig ** 2)),
+            "photo_coverage_without_common": float(np.mean(
+                rad <= model.cone_deg(np.sqrt(np.maximum(sig ** 2 - common2, 0.0))))),
             "away_mean_deg": float(aw[:, 0].mean()) if len(aw) else None,
             "away_share": float(np.sum(aw[:, 0] ** 2) / np.sum(aw[:, 1] ** 2)) if len(aw) else None,
             "centre_ratio": centre_ratio}
@@ -521,6 +543,11 @@ def check_table(a, benchmark: str, header: str, rows, cells, footer: str | None 
     write_json(a.out, {"benchmark": benchmark, **host_info(), "resolution": a.res, "results": out})
 
 
+def _num(x, fmt: str) -> str:
+    """``x`` formatted, or "-" for None."""
+    return "-" if x is None else format(x, fmt)
+
+
 def main_truth_check(a) -> None:
     """``--truth-check``: :func:`truth_check` on each cached run; a Markdown table and JSON."""
     def cells(r):
@@ -532,15 +559,19 @@ def main_truth_check(a) -> None:
                 f"{r['common_deg']:.3f}", f"{r['cone_factor']:.2f}", f"{r['needed_factor']:.2f}",
                 f"{r['needed_factor_independent']:.2f}", f"{r['shape_factor']:.2f}", aw, cr,
                 f"{100 * r['sphere_coverage']:.1f}% ({100 * r['sphere_coverage_independent']:.1f}%)",
-                f"{100 * r['photo_coverage']:.1f}%"]
+                f"{100 * r['photo_coverage']:.1f}%", _num(r["disagreement_deg"], ".3f"), _num(r["inflation"], ".2f"),
+                _num(r["relative_rms"], ".4f"), f"{r['common_share']:.2f}",
+                f"{100 * r['photo_coverage_without_common']:.1f}%"]
 
     check_table(a, "bench_conditions --truth-check",
                 "| condition | s | tau | sphere error / model sd | pair correlation | photo / independent variance | "
                 "photos' RMS error | independent part | common bound | cone factor | factor needed | "
                 "needed, independent part only | shape factor | away from layout centre: mean, share | "
-                "actual centre error / g, per sphere | sphere coverage (without common mode) | photo coverage |",
+                "actual centre error / g, per sphere | sphere coverage (without common mode) | photo coverage | "
+                "disagreement | inflation | shading RMS / intensity | common mode's share | "
+                "photo coverage without common mode |",
                 (([name], {"condition": name, **truth_check(folder)})
-                 for name, folder in cached_runs(a, "--truth-check")), cells,
+                 for name, folder in cached_runs(a, "--truth-check", a.folders or [])), cells,
                 "\nper-axis degrees; medians over the accepted photos with 2+ spheres (truth_check)")
 
 
@@ -908,12 +939,13 @@ def main(argv=None):
                          "directions against their actual errors (shared_check; needs --cache with earlier runs)")
     ap.add_argument("--truth-check", action="store_true",
                     help="no ffls lights run: each part of the stored runs' cones against the renders' truth "
-                         "(truth_check; needs --cache with earlier runs)")
+                         "(truth_check; --cache with earlier runs, or --folders)")
     ap.add_argument("--bias-check", action="store_true",
                     help="no ffls lights run: one bias magnitude per photo along a direction known from the "
                          "geometry, against the stored runs' truth (bias_check; --cache with earlier runs, or --folders)")
     ap.add_argument("--folders", nargs="*", default=None,
-                    help="with --bias-check: capture folders (truth.json, lights_estimated.json) instead of the cache's")
+                    help="with --bias-check or --truth-check: capture folders (truth.json, "
+                         "lights_estimated.json) instead of the cache's")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "bench_conditions.json"))
     a = ap.parse_args(argv)
     _, _, dirs = grid(a.phi_step, a.theta_step)

@@ -152,3 +152,39 @@ def test_cone_budget_coverage_without_each_part():
     assert b["coverage_budget"] == 1.0
     assert b["coverage_without"]["common"] == 0.0
     assert b["needed_factor"] == pytest.approx(err[0] / b["sigma_deg"])
+
+
+def test_self_measured_signals_beside_the_truth(tmp_path):
+    """What a capture measures itself is reported beside the truth's measures (``i-cones17``): the
+    spheres' disagreement, their fits' misfit and the common mode's share of the photos' cones.
+    Errors that cancel in the mean and errors that add give the same misfit statistics here."""
+    _stored_run(tmp_path / "away", radial_deg=1.0, common_deg=0.0)
+    _stored_run(tmp_path / "shared", radial_deg=0.0, common_deg=1.0)
+    for name in ("away", "shared"):
+        doc = json.loads((tmp_path / name / "lights_estimated.json").read_text())
+        for l in doc["lights"]:
+            for s in l["spheres"]:
+                s.update(inflation=2.0, rms=0.01, intensity=0.5)
+        (tmp_path / name / "lights_estimated.json").write_text(json.dumps(doc))
+    away = bench_conditions.truth_check(tmp_path / "away")
+    shared = bench_conditions.truth_check(tmp_path / "shared")
+    # each sphere 1 deg from the photo's mean (which the radial turns leave on the truth): 1/sqrt(2) per axis
+    assert away["disagreement_deg"] == pytest.approx(1.0 / np.sqrt(2.0), rel=0.05)
+    assert shared["disagreement_deg"] < 0.1  # the shared turn moves the mean with the spheres
+    for r in (away, shared):
+        assert r["inflation"] == 2.0 and r["relative_rms"] == pytest.approx(0.02)
+        model = ErrorModel.from_dict(json.loads((tmp_path / "away" / "lights_estimated.json").read_text())["uncertainty"])
+        b = model.budget(np.full(4, 0.1 / np.sqrt(2.0)), np.arange(4), np.ones(4))
+        assert r["common_share"] == pytest.approx(b["common_deg"] ** 2 / b["sigma_deg"] ** 2, rel=0.02)
+        assert r["photo_coverage_without_common"] <= r["photo_coverage"]
+    # the shared 1 deg needs the common mode: without it the photos' cones miss more
+    assert shared["photo_coverage_without_common"] < shared["photo_coverage"]
+
+
+def test_truth_check_runs_on_named_folders(tmp_path, capsys):
+    _stored_run(tmp_path / "cap", radial_deg=1.0, common_deg=0.0)
+    out = tmp_path / "out.json"
+    bench_conditions.main(["--truth-check", "--folders", str(tmp_path / "cap"), "--out", str(out)])
+    rows = json.loads(out.read_text())["results"]
+    assert [r["condition"] for r in rows] == ["cap"] and rows[0]["photos"] == 60
+    assert "| cap |" in capsys.readouterr().out
