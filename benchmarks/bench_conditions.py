@@ -363,7 +363,9 @@ def truth_check(folder: Path) -> dict:
       well under 95% without the common mode: they share an error the disagreement cannot see;
     * what the capture measures itself, no truth used (``i-cones17``: does any of these tell the
       captures whose spheres' errors cancel from those whose errors add?): ``disagreement_deg``,
-      the used spheres' per-axis RMS offset from the photo's direction; ``inflation``, the median
+      the used spheres' offsets from the photo's direction as a per-axis sd (their median radius
+      over 1.1774: a sphere the combination all but ignores, its statistics tens of degrees, does
+      not set it; distant lights); ``inflation``, the median
       of the used spheres' residual correlation factor (``correlation_inflation``: smooth misfit
       against pixel noise); ``relative_rms``, the median of their shading fits' RMS residual over
       their intensity; ``common_share``, the median over the photos of the common mode's share of
@@ -466,7 +468,8 @@ def truth_check(folder: Path) -> dict:
             "sphere_coverage": float(np.mean(np.concatenate(own)[:, 0])),
             "sphere_coverage_independent": float(np.mean(np.concatenate(own)[:, 1])),
             "photo_coverage": float(np.mean(rad <= np.array([r[1]["cone_deg"] for r in rows]))),
-            "disagreement_deg": float(np.sqrt(np.mean(np.concatenate(offsets) ** 2))) if offsets else None,
+            "disagreement_deg": (float(np.median(np.linalg.norm(np.concatenate(offsets), axis=1)) / 1.1774)
+                                 if offsets else None),
             "inflation": float(np.nanmedian(mf[:, 0])) if np.isfinite(mf[:, 0]).any() else None,
             "relative_rms": float(np.nanmedian(mf[:, 1])) if np.isfinite(mf[:, 1]).any() else None,
             "common_share": float(np.median(common2 / sig ** 2)),

@@ -168,8 +168,8 @@ def test_self_measured_signals_beside_the_truth(tmp_path):
         (tmp_path / name / "lights_estimated.json").write_text(json.dumps(doc))
     away = bench_conditions.truth_check(tmp_path / "away")
     shared = bench_conditions.truth_check(tmp_path / "shared")
-    # each sphere 1 deg from the photo's mean (which the radial turns leave on the truth): 1/sqrt(2) per axis
-    assert away["disagreement_deg"] == pytest.approx(1.0 / np.sqrt(2.0), rel=0.05)
+    # each sphere 1 deg from the photo's mean (which the radial turns leave on the truth): radius 1
+    assert away["disagreement_deg"] == pytest.approx(1.0 / 1.1774, rel=0.05)
     assert shared["disagreement_deg"] < 0.1  # the shared turn moves the mean with the spheres
     for r in (away, shared):
         assert r["inflation"] == 2.0 and r["relative_rms"] == pytest.approx(0.02)
