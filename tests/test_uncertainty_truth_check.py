@@ -171,10 +171,10 @@ def test_self_measured_signals_beside_the_truth(tmp_path):
     # each sphere 1 deg from the photo's mean (which the radial turns leave on the truth): radius 1
     assert away["disagreement_deg"] == pytest.approx(1.0 / 1.1774, rel=0.05)
     assert shared["disagreement_deg"] < 0.1  # the shared turn moves the mean with the spheres
+    doc = json.loads((tmp_path / "away" / "lights_estimated.json").read_text())
+    b = ErrorModel.from_dict(doc["uncertainty"]).budget(np.full(4, 0.1 / np.sqrt(2.0)), np.arange(4), np.ones(4))
     for r in (away, shared):
         assert r["inflation"] == 2.0 and r["relative_rms"] == pytest.approx(0.02)
-        model = ErrorModel.from_dict(json.loads((tmp_path / "away" / "lights_estimated.json").read_text())["uncertainty"])
-        b = model.budget(np.full(4, 0.1 / np.sqrt(2.0)), np.arange(4), np.ones(4))
         assert r["common_share"] == pytest.approx(b["common_deg"] ** 2 / b["sigma_deg"] ** 2, rel=0.02)
         assert r["photo_coverage_without_common"] <= r["photo_coverage"]
     # the shared 1 deg needs the common mode: without it the photos' cones miss more
