@@ -100,7 +100,11 @@ def test_adaptive_fit_is_the_plain_fit_on_the_chosen_set(sun_sphere):
     assert max(sel.candidates) <= 200
     ref = hougen_ahuja(sun_sphere.normals, sun_sphere.radiance, 0.7, sel.fit.directions, nonnegative=True,
                        ambient="nonnegative")
-    np.testing.assert_allclose(sel.fit.intensities, ref.intensities, rtol=1e-9, atol=1e-12)
+    # The ball re-rendered, not the intensities: where NNLS's optimum is not unique (sources closer
+    # than the kernel resolves), two calls land on different optimal vertices. Under SciPy 1.18.1 /
+    # NumPy 2.5.2 (an H100 machine's image) the intensities differed by up to 0.038 on 16 of 360
+    # values while both re-rendered the ball alike to 1e-15; every optimum re-renders alike.
+    np.testing.assert_allclose(sel.fit.rendered, ref.rendered, rtol=1e-9, atol=1e-12)
     i = sel.candidates.index(sel.chosen)
     assert sel.scores[i] == pytest.approx(bic(ref.rendered, sun_sphere.radiance, ref.directions.shape[0] + 1))
 
