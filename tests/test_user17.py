@@ -1,0 +1,45 @@
+"""A new user's workflows, round 5 (``i-user17``): what a first trial found broken, each fixed."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ffls.errors import InputError
+from ffls.io.capture import POSITION_DIRECTION_TOLERANCE_DEG, load_lights
+
+
+def _lights_file(tmp_path, direction, position):
+    doc = {"format": "ffls-lights", "version": 1,
+           "lights": [{"image": "a.png", "direction": list(direction), "position": list(position),
+                       "model": "near"}]}
+    path = tmp_path / "lights.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_near_light_position_off_its_direction_refused(tmp_path):
+    # a position in another frame (x and y swapped) beside the right direction
+    d = np.array([0.6, 0.0, 0.8])
+    path = _lights_file(tmp_path, d, [0.0, 1.2, 1.6])
+    with pytest.raises(InputError, match=r"position: seen from the scene centre it lies 50\.21 deg off"):
+        load_lights(path)
+
+
+def test_near_light_position_on_its_direction_read(tmp_path):
+    d = np.array([0.6, 0.0, 0.8])
+    off = np.radians(POSITION_DIRECTION_TOLERANCE_DEG / 2)  # a hand-typed file's rounding
+    p = 2.0 * np.array([np.sin(np.arcsin(0.6) + off), 0.0, np.cos(np.arcsin(0.6) + off)])
+    lights = load_lights(_lights_file(tmp_path, d, p))
+    np.testing.assert_allclose(lights.positions[0], p)
+
+
+def test_near_light_position_seen_from_the_scene_centre(tmp_path):
+    # the directions are measured from capture.json's scene_center, not the origin
+    d = np.array([0.0, 0.0, 1.0])
+    path = _lights_file(tmp_path, d, [1.0, 0.0, 2.0])
+    load_lights(path, scene_center=np.array([1.0, 0.0, 0.0]))
+    with pytest.raises(InputError, match="deg off the light's direction"):
+        load_lights(path)
