@@ -43,3 +43,20 @@ def test_near_light_position_seen_from_the_scene_centre(tmp_path):
     load_lights(path, scene_center=np.array([1.0, 0.0, 0.0]))
     with pytest.raises(InputError, match="deg off the light's direction"):
         load_lights(path)
+
+
+def test_constant_float_probe_read_as_a_uniform_light(tmp_path):
+    # a float image with one value everywhere has no pixel under its plateau: nothing measures a
+    # clip (it was refused as "saturated everywhere: use a shorter exposure"); an 8-bit one is read
+    from ffls.io.images import write_exr
+    from ffls.probes import estimate_lightmap
+
+    write_exr(tmp_path / "ball.exr", np.full((96, 96, 3), 0.7, np.float32))
+    doc = {"format": "ffls-probe", "version": 1, "images": ["ball.exr"],
+           "camera": {"K": [[400, 0, 48], [0, 400, 48], [0, 0, 1]],
+                      "world_from_camera": [[1, 0, 0, 0], [0, 0, 1, -2], [0, -1, 0, 0], [0, 0, 0, 1]]},
+           "sphere": {"center": [0, 0, 0], "radius": 0.05, "material": "mirror"}}
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    est = estimate_lightmap(tmp_path, "mirror", height=16)
+    np.testing.assert_allclose(est.lightmap.data, 0.7, rtol=1e-6)
+    assert any("one value everywhere (largest channel 0.7 in every pixel)" in n for n in est.notes)
