@@ -60,3 +60,20 @@ def test_constant_float_probe_read_as_a_uniform_light(tmp_path):
     est = estimate_lightmap(tmp_path, "mirror", height=16)
     np.testing.assert_allclose(est.lightmap.data, 0.7, rtol=1e-6)
     assert any("one value everywhere (largest channel 0.7 in every pixel)" in n for n in est.notes)
+
+
+def test_lights_summary_names_each_reasons_photos():
+    # three misfired flashes and a light behind the ball were only counted ("no_highlight 4")
+    from ffls.commands.lights import summary
+    from ffls.io.capture import Lights
+
+    names = [f"IMG_{k}.JPG" for k in range(1000, 1008)]
+    status = ["ok", "rejected", "ok", "rejected", "rejected", "rejected", "rejected", "rejected"]
+    reasons = [None, "no_highlight", None, "no_highlight", "no_highlight", "no_highlight", "no_highlight",
+               "saturated"]
+    lights = Lights(names, np.tile([0.0, 0.0, 1.0], (8, 1)), status=status, reasons=reasons,
+                    extra=[{"uncertainty_deg": 1.0} if s == "ok" else {} for s in status])
+    lines = summary(lights).splitlines()
+    assert lines[1] == ("rejected: no_highlight 5 (IMG_1001.JPG, IMG_1003.JPG, IMG_1004.JPG, IMG_1005.JPG, "
+                        "... (1 more)): no compact highlight on the mirror sphere (light behind it, or off)")
+    assert lines[2] == "          saturated 1 (IMG_1007.JPG): the lit part of the spheres is clipped"

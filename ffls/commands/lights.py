@@ -54,8 +54,14 @@ def add_arguments(p):
                    help="also write the accepted lights as an RTI .lp file (camera frame; docs/formats.md)")
 
 
+#: How many rejected photos of each reason the summary names
+REJECTED_NAMED = 4
+
+
 def summary(lights) -> str:
-    """One-paragraph summary: accepted, rejected by reason, median uncertainty."""
+    """One-paragraph summary: accepted, rejected by reason (the first photos named), median uncertainty."""
+    from ffls.spheres.photo import REASONS
+
     n = len(lights)
     ok = lights.ok_mask
     reasons = Counter(r for r, s in zip(lights.reasons, lights.status) if s == "rejected")
@@ -64,8 +70,16 @@ def summary(lights) -> str:
     models = Counter(e.get("model") for e, s in zip(lights.extra, lights.status) if s == "ok")
     lines = [f"{int(ok.sum())} of {n} lights accepted"
              + (f" ({', '.join(f'{v} {k}' for k, v in sorted(models.items()))})" if models else "")]
-    if reasons:
-        lines.append("rejected: " + ", ".join(f"{k} {v}" for k, v in reasons.most_common()))
+    for k, (reason, count) in enumerate(reasons.most_common()):
+        # each reason's photos named (the first few) with what it means: a misfired flash's photos
+        # were only counted ("rejected: no_highlight 4"), the names only in lights.json
+        names = [m for m, r, s in zip(lights.image_names, lights.reasons, lights.status)
+                 if s == "rejected" and r == reason]
+        shown = ", ".join(names[:REJECTED_NAMED]) + (f", ... ({count - REJECTED_NAMED} more)"
+                                                      if count > REJECTED_NAMED else "")
+        meaning = REASONS.get(reason)
+        lines.append(("rejected: " if k == 0 else "          ") + f"{reason} {count} ({shown})"
+                     + (f": {meaning}" if meaning else ""))
     if unc:
         lines.append(f"median uncertainty {float(np.median(unc)):.2f} deg (radius of the 95% cone)")
     shapes = next((e["spheres"] for e in lights.extra if e and e.get("spheres")), [])
