@@ -77,3 +77,31 @@ def test_lights_summary_names_each_reasons_photos():
     assert lines[1] == ("rejected: no_highlight 5 (IMG_1001.JPG, IMG_1003.JPG, IMG_1004.JPG, IMG_1005.JPG, "
                         "... (1 more)): no compact highlight on the mirror sphere (light behind it, or off)")
     assert lines[2] == "          saturated 1 (IMG_1007.JPG): the lit part of the spheres is clipped"
+
+
+def test_voronoi_integration_in_bands_of_rows(monkeypatch):
+    # relight --map-res full on an 8192 x 4096 map held its 33.5M samples at once: 6.3 GB peak,
+    # 70.5 s (banded: 1.0 GB, 30.9 s, the relit EXR byte-identical)
+    import tracemalloc
+
+    from ffls.lightmaps import lightmap as lightmap_module
+    from ffls.lightmaps.lightmap import LightMap
+    from ffls.weights.voronoi import integrate_weights
+
+    rng = np.random.default_rng(0)
+    lm = LightMap(rng.uniform(0, 2, (512, 1024, 3)).astype(np.float32), "latlong")
+    d = rng.normal(size=(40, 3))
+    d[:, 2] = np.abs(d[:, 2])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    whole = integrate_weights(lm.samples(), d)  # a tuple of samples: one band
+    monkeypatch.setattr(lightmap_module, "DOWNSAMPLE_BAND_BYTES", 1 << 20)
+    tracemalloc.start()
+    banded = integrate_weights(lm, d)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    np.testing.assert_allclose(banded.weights, whole.weights, rtol=1e-12)
+    np.testing.assert_allclose(banded.total_power, whole.total_power, rtol=1e-12)
+    np.testing.assert_allclose(banded.dropped_power, whole.dropped_power, rtol=1e-12)
+    assert banded.dropped_texels == whole.dropped_texels
+    samples_bytes = lm.data.shape[0] * lm.data.shape[1] * 8 * 7  # directions, radiance, solid angles
+    assert peak < samples_bytes / 2
