@@ -105,3 +105,65 @@ def test_voronoi_integration_in_bands_of_rows(monkeypatch):
     assert banded.dropped_texels == whole.dropped_texels
     samples_bytes = lm.data.shape[0] * lm.data.shape[1] * 8 * 7  # directions, radiance, solid angles
     assert peak < samples_bytes / 2
+
+
+def _tiled_exr(path, rgb, mode, tile=16):
+    import OpenEXR
+
+    t = OpenEXR.TileDescription()
+    t.xSize = t.ySize = tile
+    t.mode, t.roundingMode = mode, OpenEXR.ROUND_DOWN
+    with OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.tiledimage, "tiles": t},
+                      {"RGB": rgb}) as f:
+        f.write(str(path))
+
+
+def _complete_mipmaps(path, rgb, tile=16):
+    """Every level's tiles appended to the binding's level-0-only file, the chunk table filled (a
+    mip-mapped map as a renderer's tools write it; uncompressed tiles: each row B, G, R float32)."""
+    import struct
+
+    b = bytearray(path.read_bytes())
+    pos = 8
+    while b[pos] != 0:  # the header's attributes: name, type, size, value
+        end = b.index(0, b.index(0, pos) + 1)
+        pos = end + 5 + struct.unpack_from("<i", b, end + 1)[0]
+    pos += 1
+    levels, img = [], rgb.astype(np.float64)
+    while True:
+        levels.append(img.astype(np.float32))
+        h, w = img.shape[:2]
+        if h == w == 1:
+            break
+        h2, w2 = max(1, h // 2), max(1, w // 2)
+        img = img[:h2 * (h // h2), :w2 * (w // w2)].reshape(h2, h // h2, w2, w // w2, 3).mean(axis=(1, 3))
+    n = sum(-(-lv.shape[0] // tile) * -(-lv.shape[1] // tile) for lv in levels)
+    out, offsets = bytearray(b[:pos] + bytes(8 * n)), []
+    for k, lv in enumerate(levels):
+        for ty in range(-(-lv.shape[0] // tile)):
+            for tx in range(-(-lv.shape[1] // tile)):
+                t = lv[ty * tile:(ty + 1) * tile, tx * tile:(tx + 1) * tile]
+                data = b"".join(t[r, :, c].astype("<f4").tobytes() for r in range(t.shape[0]) for c in (2, 1, 0))
+                offsets.append(len(out))
+                out += struct.pack("<iiiii", tx, ty, k, k, len(data)) + data
+    struct.pack_into(f"<{n}Q", out, pos, *offsets)
+    path.write_bytes(bytes(out))
+
+
+def test_mip_mapped_exr_read_or_named(tmp_path):
+    # a complete mip-mapped tiled map is read (level 0); the OpenEXR binding's own mip-mapped file
+    # (level 0's tiles only) was "corrupt or truncated" with no word of the levels
+    import OpenEXR
+
+    from ffls.io.images import read_image
+
+    rgb = np.random.default_rng(0).uniform(0, 5, (64, 128, 3)).astype(np.float32)
+    path = tmp_path / "mip.exr"
+    _tiled_exr(path, rgb, OpenEXR.MIPMAP_LEVELS)
+    with pytest.raises(InputError, match="its header says mip-mapped tiles, whose levels' tiles are not all "
+                                         r"there .* write this map with one level"):
+        read_image(path)
+    _complete_mipmaps(path, rgb)
+    np.testing.assert_array_equal(read_image(path).pixels, rgb)
+    _tiled_exr(path, rgb, OpenEXR.ONE_LEVEL)
+    np.testing.assert_array_equal(read_image(path).pixels, rgb)
