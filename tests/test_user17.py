@@ -167,3 +167,24 @@ def test_mip_mapped_exr_read_or_named(tmp_path):
     np.testing.assert_array_equal(read_image(path).pixels, rgb)
     _tiled_exr(path, rgb, OpenEXR.ONE_LEVEL)
     np.testing.assert_array_equal(read_image(path).pixels, rgb)
+
+
+def test_occluded_sphere_named_per_photo():
+    # a hand over one of four spheres in 5 photos of 80: the sphere kept "ok" at 42-130 times its
+    # median RMS residual (cone 180 deg) and the photo accepted, without a word
+    from ffls.commands.lights import occlusion_note
+    from ffls.io.capture import Lights
+
+    n = 12
+    names = [f"img_{k:04d}.exr" for k in range(n)]
+
+    def sphere(rms, status="ok"):
+        return {"status": status, "kind": "matte", "rms": rms}
+
+    extra = [{"uncertainty_deg": 0.5, "spheres": [sphere(0.005 + 1e-4 * k), sphere(0.004)]} for k in range(n)]
+    assert occlusion_note(Lights(names, np.tile([0.0, 0.0, 1.0], (n, 1)), extra=extra)) is None
+    extra[3]["spheres"][0] = sphere(0.3)
+    extra[7]["spheres"][1] = sphere(0.02, "shadowed")
+    note = occlusion_note(Lights(names, np.tile([0.0, 0.0, 1.0], (n, 1)), extra=extra))
+    assert note.startswith("2 accepted photos have a sphere in a shadow or fitting its shading far worse")
+    assert note.endswith("(numbered as found): 'img_0003.exr' sphere 0 (53x); 'img_0007.exr' sphere 1 (shadowed)")
