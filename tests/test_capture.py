@@ -257,7 +257,8 @@ def test_lights_round_trip(tmp_path, rng):
     names, _ = _make(tmp_path / "c")
     c = cap.load_capture(tmp_path / "c")
     dirs = _unit(rng, 3)
-    lights = cap.Lights(names, dirs, positions=[[1, 2, 3], [np.nan] * 3, [4, 5, 6]],
+    # near lights' positions lie along their directions (a position off it is refused: test_user17)
+    lights = cap.Lights(names, dirs, positions=[2.0 * dirs[0], [np.nan] * 3, 3.5 * dirs[2]],
                         status=["ok", "rejected", "ok"], reasons=[None, "sphere saturated", None],
                         extra=[{"uncertainty_deg": 0.5}, {}, {"source": "manual"}])
     p = cap.save_lights(lights, tmp_path / "c" / "lights.json")

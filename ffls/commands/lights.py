@@ -54,8 +54,14 @@ def add_arguments(p):
                    help="also write the accepted lights as an RTI .lp file (camera frame; docs/formats.md)")
 
 
+#: How many rejected photos of each reason the summary names
+REJECTED_NAMED = 4
+
+
 def summary(lights) -> str:
-    """One-paragraph summary: accepted, rejected by reason, median uncertainty."""
+    """One-paragraph summary: accepted, rejected by reason (the first photos named), median uncertainty."""
+    from ffls.spheres.photo import REASONS
+
     n = len(lights)
     ok = lights.ok_mask
     reasons = Counter(r for r, s in zip(lights.reasons, lights.status) if s == "rejected")
@@ -64,8 +70,16 @@ def summary(lights) -> str:
     models = Counter(e.get("model") for e, s in zip(lights.extra, lights.status) if s == "ok")
     lines = [f"{int(ok.sum())} of {n} lights accepted"
              + (f" ({', '.join(f'{v} {k}' for k, v in sorted(models.items()))})" if models else "")]
-    if reasons:
-        lines.append("rejected: " + ", ".join(f"{k} {v}" for k, v in reasons.most_common()))
+    for k, (reason, count) in enumerate(reasons.most_common()):
+        # each reason's photos named (the first few) with what it means: a misfired flash's photos
+        # were only counted ("rejected: no_highlight 4"), the names only in lights.json
+        names = [m for m, r, s in zip(lights.image_names, lights.reasons, lights.status)
+                 if s == "rejected" and r == reason]
+        shown = ", ".join(names[:REJECTED_NAMED]) + (f", ... ({count - REJECTED_NAMED} more)"
+                                                      if count > REJECTED_NAMED else "")
+        meaning = REASONS.get(reason)
+        lines.append(("rejected: " if k == 0 else "          ") + f"{reason} {count} ({shown})"
+                     + (f": {meaning}" if meaning else ""))
     if unc:
         lines.append(f"median uncertainty {float(np.median(unc)):.2f} deg (radius of the 95% cone)")
     shapes = next((e["spheres"] for e in lights.extra if e and e.get("spheres")), [])
@@ -305,8 +319,50 @@ def run(args) -> int:
         print(f"wrote {args.plot}")
     if lp_line:
         print(lp_line)
+    print_notes(NAME, occlusion_note(lights))
     print_notes(NAME, *coverage_notes(cap, lights, *lights.accepted(), repeats=True))
     return 0
+
+
+def occlusion_note(lights) -> str | None:
+    """The line naming accepted photos in which a matte sphere fits its own shading far worse than in
+    the capture's other photos (an arm, the object or its shadow over it), or None.
+
+    Such a sphere is kept with a wide cone, so the photo leans on its other spheres, and nothing
+    said so (``i-user17``: a hand over one of four spheres in 5 photos of 80: four kept ``ok`` at
+    42-130 times the sphere's median RMS residual, cone 180 deg, one ``shadowed``). A sphere is
+    named where its status is ``shadowed`` in an accepted photo or its relative RMS residual is over
+    :data:`ffls.spheres.estimate.SHADOW_MISFIT_RATIO` times its median over the accepted photos.
+    """
+    from ffls.spheres.estimate import SHADOW_MISFIT_RATIO
+
+    ok = [k for k, s in enumerate(lights.status) if s == "ok"]
+    rows = {k: (lights.extra[k] or {}).get("spheres") or [] for k in ok}
+    n = max((len(r) for r in rows.values()), default=0)
+    hits = []  # (photo, sphere, ratio or None)
+    for j in range(n):
+        rms = {k: r[j]["rms"] for k, r in rows.items() if len(r) > j and r[j].get("status") == "ok"
+               and isinstance(r[j].get("rms"), (int, float)) and r[j]["rms"] > 0}
+        if len(rms) < 5:
+            continue
+        med = float(np.median(list(rms.values())))
+        for k, r in rows.items():
+            if len(r) <= j:
+                continue
+            if r[j].get("status") == "shadowed":
+                hits.append((k, j, None))
+            elif k in rms and rms[k] > SHADOW_MISFIT_RATIO * med:
+                hits.append((k, j, rms[k] / med))
+    if not hits:
+        return None
+    hits.sort()
+    photos = sorted({k for k, _, _ in hits})
+    shown = "; ".join(f"{lights.image_names[k]!r} sphere {j} ({'shadowed' if q is None else f'{q:.0f}x'})"
+                      for k, j, q in hits[:REJECTED_NAMED])
+    more = f"; ... ({len(hits) - REJECTED_NAMED} more)" if len(hits) > REJECTED_NAMED else ""
+    return (f"{len(photos)} accepted photos have a sphere in a shadow or fitting its shading far worse than in the "
+            f"other photos (RMS residual over {SHADOW_MISFIT_RATIO:g}x its median): an arm, the object or its "
+            f"shadow over it? They lean on their other spheres (numbered as found): {shown}{more}")
 
 
 def lens_note(cap, spheres, decoded) -> str | None:

@@ -1111,7 +1111,28 @@ def _order_to_capture(j: _Json, names: list, capture: Capture) -> np.ndarray:
     return np.array([pos[n] for n in capture.image_names], dtype=np.intp)
 
 
-def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Lights:
+#: How far (deg) a light's ``position``, seen from the scene centre, may lie from its ``direction``:
+#: ffls writes them within 1e-6 deg; a hand-typed file rounded to 3 decimals is within 0.1 deg
+POSITION_DIRECTION_TOLERANCE_DEG = 0.5
+
+
+def _check_position_on_direction(j: _Json, key: str, position, direction, scene_center) -> None:
+    """Refuse a light whose ``position`` does not lie along its ``direction`` from the scene centre."""
+    v = np.asarray(position, dtype=np.float64) - np.asarray(scene_center, dtype=np.float64)
+    dist = float(np.linalg.norm(v))
+    if dist == 0.0:
+        j.fail(key + ": position", "the position is the scene centre, which has no direction")
+    cos = float(np.dot(v / dist, direction) / np.linalg.norm(direction))
+    angle = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    if angle > POSITION_DIRECTION_TOLERANCE_DEG:
+        seen = (v / dist).round(4).tolist()
+        j.fail(key + ": position", f"seen from the scene centre it lies {angle:.2f} deg off the light's "
+                                   f"direction (along {seen}; at most {POSITION_DIRECTION_TOLERANCE_DEG:g} "
+                                   "deg): direction and position disagree (another frame, or a typo?)")
+
+
+def load_lights(path: str | os.PathLike, capture: Capture | None = None, *,
+                scene_center=None) -> Lights:
     """Load and validate a ``lights.json`` file.
 
     Parameters
@@ -1121,6 +1142,9 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
     capture : Capture, optional
         When given, the light images must be exactly the capture's images, and the result is
         reordered to the capture's image order (light ``i`` belongs to image ``i``).
+    scene_center : (3,) float, optional
+        The world point the directions are measured from (default: the capture's, else the
+        origin): a light's ``position`` must lie along its ``direction`` from it.
 
     Returns
     -------
@@ -1132,9 +1156,12 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
     InputError
         Corrupt JSON, missing keys, non-finite numbers, a direction that is not unit (within
         ``UNIT_TOLERANCE``; the message gives the image and the norm), duplicate images, or
-        images that do not match the capture (naming the first one).
+        images that do not match the capture (naming the first one), a ``position`` off its
+        ``direction`` by more than ``POSITION_DIRECTION_TOLERANCE_DEG``.
     """
     path = Path(path)
+    if scene_center is None:
+        scene_center = capture.scene_center if capture is not None else np.zeros(3)
     j = _Json(path)
     doc = j.load("lights.json")
     j.header(doc, "ffls-lights")
@@ -1176,6 +1203,8 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None) -> Ligh
             j.fail(key + ": model", "a near light needs a position" if model == "near" else
                    "a distant light has no position (a light with one is taken as near): drop the position "
                    "or say \"model\": \"near\"")
+        if "position" in it:
+            _check_position_on_direction(j, key, p, d, scene_center)
         for angle, what, bound in (("camera_tilt_deg", "tilt", 90), ("camera_roll_deg", "roll", 180)):
             if ex.get(angle) is not None:
                 ex[angle] = j.number(ex[angle], f"{key}: {angle}")
@@ -1499,7 +1528,7 @@ def _read_lights_file(path: Path, capture: Capture) -> Lights:
         if is_lp:
             names, d = read_lp(path)
             return Lights(names, lp_to_world(d, capture.world_from_camera))
-        return load_lights(path)
+        return load_lights(path, scene_center=capture.scene_center)
     except InputError as e:
         other = _looks_like(path)
         if other is None or other == ("lp" if is_lp else "json"):

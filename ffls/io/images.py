@@ -503,8 +503,8 @@ def read_exr(path: str | os.PathLike, working_space: bool = True, out: np.ndarra
         err = RuntimeError(cap.first_line())
     if err is not None:
         why = cap.first_line().replace(str(path) + ": ", "")
-        raise InputError(f"cannot read OpenEXR file, corrupt or truncated ({why or f'{type(err).__name__}: {err}'})",
-                         path) from None
+        raise InputError(f"cannot read OpenEXR file, corrupt or truncated ({why or f'{type(err).__name__}: {err}'})"
+                         + _exr_levels_hint(path), path) from None
     n_parts = len(getattr(f, "parts", [None]))
     if n_parts > 1:  # only the first part would be read, as if it were the image
         raise InputError(f"OpenEXR file has {n_parts} parts; ffls reads single-part files: write the image as "
@@ -729,6 +729,28 @@ def _radiance_standard(buf: np.ndarray):
         return np.ascontiguousarray(img.swapaxes(0, 1) if a1[1:] == b"X" else img)
 
     return buf, turn
+
+
+def _exr_levels_hint(path: Path) -> str:
+    """What to do with an unreadable EXR whose header names mip- or rip-mapped tiles, or ``''``.
+
+    ffls reads a tiled file's level 0, which a complete mip-mapped file (every level's tiles in
+    its chunk table) gives; the OpenEXR Python binding (3.x) writes such a header with level 0's
+    tiles only, leaving the chunk table incomplete, which reads as corrupt."""
+    import OpenEXR
+
+    try:
+        with quiet_native_output():
+            tiles = OpenEXR.File(str(path), header_only=True).header().get("tiles")
+    except Exception:  # the header itself is unreadable: nothing to add
+        return ""
+    mode = getattr(tiles, "mode", None)
+    if mode is None or mode == OpenEXR.ONE_LEVEL:
+        return ""
+    kind = "mip-mapped" if mode == OpenEXR.MIPMAP_LEVELS else "rip-mapped"
+    return (f"; its header says {kind} tiles, whose levels' tiles are not all there (a writer that stored level 0 "
+            "only, as the OpenEXR Python binding does): ffls reads level 0 of a complete one; write this map "
+            "with one level (tiles ONE_LEVEL, or scanlines)")
 
 
 def _read_cv2(path: Path, kind: str, orientation: int = 1, working_space: bool = True) -> ImageData:

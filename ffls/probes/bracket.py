@@ -387,10 +387,16 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
         sat = (z >= SATURATION * clip) if clip is not None else np.zeros(z.shape, dtype=bool)
         alpha = img.alpha
         depth = {"half": "half float", "float": "32-bit float"}.get(img.bit_depth, f"{img.bit_depth}-bit")
-        note = f"{paths[0].name}: {depth}" + ("" if not sat.any() else f", {int(sat.sum())} pixels clipped"
-                                             if not img.is_hdr else f", {int(sat.sum())} pixels on a plateau at "
-                                             f"its maximum ({clip:.6g}), taken as clipped (lower bounds; a render's "
-                                             f"flat brightest region reads the same)")
+        on = np.all(np.isfinite(img.pixels), axis=-1) & (alpha > 0 if alpha is not None else True)
+        whole = img.is_hdr and clip is not None and bool(sat[on].all())
+        if whole:  # no pixel under the plateau: nothing measures a clip level (a float has no white level)
+            sat = np.zeros(z.shape, dtype=bool)
+        note = f"{paths[0].name}: {depth}" + (
+            f", one value everywhere (largest channel {clip:.6g} in every pixel): read as it is, a uniform "
+            f"light (a float file states no clip level; an over-exposed one needs a shorter exposure)" if whole
+            else "" if not sat.any() else f", {int(sat.sum())} pixels clipped" if not img.is_hdr else
+            f", {int(sat.sum())} pixels on a plateau at its maximum ({clip:.6g}), taken as clipped (lower "
+            f"bounds; a render's flat brightest region reads the same)")
         what = paths[0].name
     valid = np.all(np.isfinite(rad), axis=-1)
     if alpha is not None:

@@ -601,20 +601,26 @@ def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere
     if cells is not None:
         if cells.hemisphere != hemisphere or cells.directions.shape != unit.shape or not np.array_equal(cells.directions, unit):
             raise ValueError("cells were baked for other directions or another hemisphere")
-    dirs, rad, sa = as_samples(lightmap_or_samples)
-    power = rad * sa[:, None]
-    total = power.sum(axis=0)
-    p = rotate_directions(R, dirs)
-    keep = in_domain(p, hemisphere)
-    idx = np.full(p.shape[0], -1, dtype=np.int64)
-    if np.any(keep):
-        idx[keep] = assign_cells(p[keep], unit, cells)
-    hit = idx >= 0
     n = unit.shape[0]
-    w = np.stack([np.bincount(idx[hit], weights=power[hit, c], minlength=n) for c in range(3)], axis=1)
-    dropped = ~hit
-    return Weights(weights=w, dropped_texels=int(np.count_nonzero(dropped)),
-                   dropped_power=power[dropped].sum(axis=0), total_power=total)
+    w, total, lost, n_lost = np.zeros((n, 3)), np.zeros(3), np.zeros(3), 0
+    # a lat-long map in bands of rows (an 8192 x 4096 map's samples at once held 6.3 GB)
+    bands = (lightmap_or_samples.sample_bands() if hasattr(lightmap_or_samples, "sample_bands")
+             else [lightmap_or_samples])
+    for band in bands:
+        dirs, rad, sa = as_samples(band)
+        power = rad * sa[:, None]
+        total += power.sum(axis=0)
+        p = rotate_directions(R, dirs)
+        keep = in_domain(p, hemisphere)
+        idx = np.full(p.shape[0], -1, dtype=np.int64)
+        if np.any(keep):
+            idx[keep] = assign_cells(p[keep], unit, cells)
+        hit = idx >= 0
+        w += np.stack([np.bincount(idx[hit], weights=power[hit, c], minlength=n) for c in range(3)], axis=1)
+        dropped = ~hit
+        n_lost += int(np.count_nonzero(dropped))
+        lost += power[dropped].sum(axis=0)
+    return Weights(weights=w, dropped_texels=n_lost, dropped_power=lost, total_power=total)
 
 
 # ----------------------------------------------------------------------------- cell areas

@@ -460,24 +460,29 @@ def integrate(lightmap_or_samples, directions, rotation=None, hemisphere="upper"
         elif weighting.scheme != scheme or not np.array_equal(weighting.directions, unit):
             raise ValueError("the weighting was prepared for another scheme or directions")
         evaluate = weighting
-    dirs, rad, sa = as_samples(lightmap_or_samples)
-    power = rad * sa[:, None]
-    total = power.sum(axis=0)
-    p = rotate_directions(R, dirs)
-    keep = in_domain(p, hemisphere)
     n = unit.shape[0]
-    w = np.zeros((n, 3))
-    hit = np.zeros(p.shape[0], dtype=bool)
-    sel = np.flatnonzero(keep)
+    w, total, lost, n_lost = np.zeros((n, 3)), np.zeros(3), np.zeros(3), 0
+    # a lat-long map in bands of rows, as integrate_weights: never every texel's samples at once
+    bands = (lightmap_or_samples.sample_bands() if hasattr(lightmap_or_samples, "sample_bands")
+             else [lightmap_or_samples])
     chunk = 1 << 17
-    for a in range(0, sel.size, chunk):
-        s = sel[a:a + chunk]
-        sw = evaluate(p[s])
-        ok = sw.index >= 0
-        rows = np.broadcast_to(np.arange(s.size)[:, None], sw.index.shape)[ok]
-        hit[s] = ok.any(axis=1)
-        for c in range(3):
-            w[:, c] += np.bincount(sw.index[ok], weights=power[s, c][rows] * sw.weight[ok], minlength=n)
-    dropped = ~hit
-    return Weights(weights=w, dropped_texels=int(np.count_nonzero(dropped)), dropped_power=power[dropped].sum(axis=0),
-                   total_power=total)
+    for band in bands:
+        dirs, rad, sa = as_samples(band)
+        power = rad * sa[:, None]
+        total += power.sum(axis=0)
+        p = rotate_directions(R, dirs)
+        keep = in_domain(p, hemisphere)
+        hit = np.zeros(p.shape[0], dtype=bool)
+        sel = np.flatnonzero(keep)
+        for a in range(0, sel.size, chunk):
+            s = sel[a:a + chunk]
+            sw = evaluate(p[s])
+            ok = sw.index >= 0
+            rows = np.broadcast_to(np.arange(s.size)[:, None], sw.index.shape)[ok]
+            hit[s] = ok.any(axis=1)
+            for c in range(3):
+                w[:, c] += np.bincount(sw.index[ok], weights=power[s, c][rows] * sw.weight[ok], minlength=n)
+        dropped = ~hit
+        n_lost += int(np.count_nonzero(dropped))
+        lost += power[dropped].sum(axis=0)
+    return Weights(weights=w, dropped_texels=n_lost, dropped_power=lost, total_power=total)
