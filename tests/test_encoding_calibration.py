@@ -610,29 +610,3 @@ def test_tone_curve_fit_stacks_the_units_once_per_round(monkeypatch):
     monkeypatch.setattr(stacked, "__init__", lambda self, *a: built.append(1) or real(self, *a))
     fit = calibrate_encoding(raw, [normals], code_step=1 / 255)
     assert fit.polynomial_excess is not None and len(built) == 2
-
-
-def test_near_lights_of_the_calibration_fitted_in_the_workers(linear_captures, tmp_path, monkeypatch):
-    """With ``workers=2`` the near-light model's per-photo lights (its ray convergence) are fitted in
-    forked processes, not in the main one (they were serial there); the record is the same."""
-    import os
-
-    from ffls.spheres import encoding
-    from ffls.spheres.estimate import decode_photos
-
-    src, _ = linear_captures["four"]
-    c = cap.load_capture(encoded_capture(src, tmp_path / "c", "srgb"))
-    decoded = decode_photos(c, workers=1)
-    cal_1, _ = calibrate_capture_encoding(c, decoded=decoded)
-    log, real = tmp_path / "pids.txt", encoding.fit_ray_convergence
-
-    def spy(*args, **kwargs):
-        with open(log, "a") as f:
-            f.write(f"{os.getpid()}\n")
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(encoding, "fit_ray_convergence", spy)
-    cal_2, _ = calibrate_capture_encoding(c, decoded=decoded, workers=2)
-    pids = set(log.read_text().split())
-    assert pids and str(os.getpid()) not in pids
-    assert cal_2.record() == cal_1.record()

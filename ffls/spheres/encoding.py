@@ -890,35 +890,14 @@ def _select_and_profile_range(task) -> list:
     return out
 
 
-def _near_lights_range(task) -> list:
-    """In a worker: :func:`_fit_near_photo` of each photo's units (indices into ``_pool_units``)."""
-    photos, centers, radii, up, curve = task
-    return [_fit_near_photo([_pool_units[i] for i in ix], centers, radii, up, curve) for ix in photos]
-
-
 class _UnitPool:
     """Selects and profiles the units in this process or, with several workers, in forked processes
     (each unit's work is independent; the parent then fixes the selections the workers chose)."""
 
     CHUNK = 16
-    PHOTO_CHUNK = 4  # (photos of the near lights' fits per task)
 
     def __init__(self, units: list, workers: int = 1):
         self.units, self.workers = units, max(1, int(workers))
-
-    def near_lights(self, photos: list, centers, radii, up, curve) -> list:
-        """:func:`_fit_near_photo` of each photo's units (``photos``: lists of indices into the
-        units), in order: in this process or, with several workers, in forked processes (each
-        photo's fit is independent of the others')."""
-        if self.workers == 1 or len(photos) < 2 * self.PHOTO_CHUNK:
-            return [_fit_near_photo([self.units[i] for i in ix], centers, radii, up, curve) for ix in photos]
-        from concurrent.futures import ProcessPoolExecutor
-
-        tasks = [(photos[a:a + self.PHOTO_CHUNK], centers, radii, up, curve)
-                 for a in range(0, len(photos), self.PHOTO_CHUNK)]
-        with ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), initializer=_set_pool_units,
-                                 initargs=(self.units,)) as ex:
-            return [light for part in ex.map(_near_lights_range, tasks) for light in part]
 
     def select_and_profile(self, curve, grid, terminator, min_pixels, min_r2, shadow=None) -> tuple[list, np.ndarray]:
         """The usable units (selected with ``curve``) and their RSS over ``grid``: (used, (len(used), k))."""
@@ -1124,7 +1103,7 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
     return direction(least_squares(residuals, np.zeros(2), x_scale=0.05).x), rho, center
 
 
-def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, hi: float, workers: int = 1):
+def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, hi: float):
     """The used units under the near-light model: ``(units, curves, grid, best, rss_best, n_photos)`` or None.
 
     In every photo with two or more spheres a point light is fitted (:func:`_fit_near_photo`) at the
@@ -1133,8 +1112,7 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
     (the near light's shading may move it far from the distant model's), the lights refitted at the
     best gamma and the profile repeated on the fine grid around it (``curves`` over ``grid``, as the
     distant model's second round). ``n_photos`` counts the photos with a light. None when no photo
-    has two spheres. With several ``workers``, the photos' lights are fitted in forked processes
-    (the same lights).
+    has two spheres.
     """
     from scipy.optimize import minimize_scalar
     centers = np.array([np.asarray(c, dtype=np.float64).reshape(3) for c, _ in geometry])
@@ -1148,10 +1126,8 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
     grid = np.arange(lo, hi + 0.5 * _COARSE_STEP, _COARSE_STEP)
     for rnd in range(2):  # the lights at the current gamma, then the gamma under those lights
         units, n_near = list(used), 0
-        lights = iter(_UnitPool(used, workers).near_lights([ix for ix in by_photo.values() if len(ix) >= 2],
-                                                           centers, radii, up, best))
         for ix in by_photo.values():
-            light = next(lights) if len(ix) >= 2 else None
+            light = _fit_near_photo([used[i] for i in ix], centers, radii, up, best) if len(ix) >= 2 else None
             if light is None:
                 continue
             n_near += 1
@@ -1425,7 +1401,7 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
     shading, shading_excess = "distant", None
     if geometry is not None:
         # the near-light model (module docstring, "Near lights"): chosen by the BIC over the distant one
-        near_fit = _near_model(used, geometry, up, best, lo, hi, workers)
+        near_fit = _near_model(used, geometry, up, best, lo, hi)
         if near_fit is not None:
             near_used, near_curves, near_grid, near_best, near_rss, n_near = near_fit
             k_distant = sum(u.A.shape[1] for u in used)
