@@ -63,3 +63,32 @@ def test_blank_photo_rejected_as_too_dark():
     assert est.status == "rejected"
     assert est.reason == "too_dark"
     assert SIGNAL_SIGNIFICANCE == pytest.approx(1e-3)
+
+
+def test_shading_signal_p_is_the_f_tests_survival_and_imports_no_scipy_stats():
+    # scipy.stats' import (about 0.25 s of CPU, in the main process and in each worker that fits)
+    # is made for nothing else in a run: the p-value is SciPy's fdtrc, which f.sf calls
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from scipy.stats import f
+
+    from ffls.spheres.lambert import shading_signal_p
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        k, p = int(rng.integers(10, 4000)), int(rng.integers(1, 6))
+        y = rng.standard_normal(k)
+        rss0 = float(np.sum((y - y.mean()) ** 2))
+        fit = type("Fit", (), {"x": np.zeros(p), "rss": rss0 * rng.uniform(0.2, 1.0)})
+        x = (rss0 - fit.rss) / max(p - 1, 1) / (fit.rss / (k - p))
+        assert shading_signal_p(y, fit) == float(f.sf(x, max(p - 1, 1), k - p))
+    code = ("import sys; import numpy as np; from ffls.spheres.lambert import fit_lambert; "
+            "from tests.test_blank_frame import disc_normals; n, r, c = disc_normals(); "
+            "v = np.maximum(n @ np.array([0.0, 0.6, 0.8]), 0.0); "
+            "assert fit_lambert(n, v + 0.01 * np.random.default_rng(0).standard_normal(len(n)), "
+            "pixels=(r, c)).status == 'ok'; print('scipy.stats' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert out.stdout.split() == ["False"]

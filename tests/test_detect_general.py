@@ -431,3 +431,19 @@ def test_outline_refits_undistort_their_points_once(monkeypatch):
     assert made == []
     kept = detect.fit_until_stable(P, on, cam, c0, 34.0, "auto", max_rms_px=want.residual_px)
     assert kept.residual_px == want.residual_px and np.array_equal(kept.center_px, want.center_px)
+
+
+def test_seeds_that_do_not_come_back_are_searched_again_on_the_same_photos():
+    """Seeds (the first detection's spheres) that the seeded fits do not return are searched in
+    full (``find_spheres``' local search, not a second call with its arguments copied: the photos
+    given once, as a generator, are read once) and give the full search's spheres."""
+    scene = ds.layout(3, seed=24)
+    seq = ds.render(scene, LIGHTS, "grey", seed=3)
+    full = detect.find_spheres(seq, scene.K, None, 0.04)
+    off = detect.make_fit(np.array([0.05, 0.02, 1.1]), 0.04, scene.K, None, np.eye(4), "auto")
+    wrong = detect.Spheres([off], ["a line of the first detection"])
+    found = detect.find_spheres((im for im in seq), scene.K, None, 0.04, seeds=wrong)
+    assert len(found) == len(full) == 3
+    for a, b in zip(found, full):
+        assert np.array_equal(a.center_px, b.center_px) and a.radius_px == b.radius_px
+    assert found.rejected == full.rejected

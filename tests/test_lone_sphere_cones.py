@@ -85,3 +85,24 @@ def test_a_lone_sphere_model_is_its_halves_with_its_measured_centre_and_lens():
     cone_halves = np.array([p.with_error_model(halves_only).uncertainty_deg for p in new])[ok]
     assert np.mean(err <= cone_new) >= 0.9, (err, cone_new)
     assert np.mean(err <= cone_halves) < 0.5, (err, cone_halves)  # the halves alone do not see either
+
+
+def test_the_lens_turns_refits_run_through_map_fn():
+    """The refits with the gradient divided out run through ``map_fn`` (the pool of worker
+    processes in ``ffls lights``: they had run serially in the main process), one task per sphere
+    with all its photos, and give the turn they give in this process."""
+    s, lights = _sphere(), front_lights()
+    values = _values(s, lights, gradient=(0.04, -0.03))
+    photos = _photos(s, _values(s, lights, gradient=(0.04, -0.03)))
+    flat = _flat((0.04, -0.03), (0.002, 0.002))
+    calls = []
+
+    def spy(fn, items):
+        items = list(items)
+        calls.append(len(items))
+        return [fn(x) for x in items]
+
+    turn = flat_field_shift_deg(photos, [s], values, flat, own_shadow=False, map_fn=spy)
+    assert calls == [1]
+    assert turn > 0.5
+    assert turn == flat_field_shift_deg(photos, [s], values, flat, own_shadow=False)

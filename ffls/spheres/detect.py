@@ -1886,40 +1886,41 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
     else:
         hint_info = []
         changing = ConsistentEdges.of(*tensor, centered=True) if with_changing else None
-        seeded = seeded_circles(seeds)
-        cands = seeded or hough_circle_candidates(edges, L, ratio=ratio)
-        fits, _ = fit_candidates(cands, edges, cam, 0.3, "auto", workers)
-        n_cands = len(cands)
-        fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
-        if held is not None and not seeded:  # outlines the max image leaves out (white on white)
-            more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers, changing)
-            # one the photos' edges outline precisely but leave open (a textured ground's patches
-            # match the sphere's limb in some photos) is a circle the max image's Hough transform
-            # may have missed among the texture's: it is fitted on the max image's edges too
-            open_circles = [(*ft.center_px, ft.radius_px) for ft in more if not round_outline(ft, max_residual_px)]
-            again, _ = fit_candidates(open_circles, edges, cam, 0.3, "auto", workers) if open_circles else ([], [])
-            fits, n_cands = fits + more + again, n_cands + n_more
-        # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
-        # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
-        # ground's circles hold in every photo too) gains from them a score that hides a real sphere
-        open_ = [ft.coverage < CRITERIA["min_closed"] * ft.visible_fraction for ft in fits]
-        refit = _with_consistent_edges([ft for ft, o in zip(fits, open_) if o], held, L, cam, max_residual_px)
-        it = iter(refit)
-        fits = [next(it) if o else ft for ft, o in zip(fits, open_)]
-        fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
-                                        saturates=saturates, colour_counts=colour,
-                                        max_over_mean=None if ratio is None else np.exp(ratio))
-        if n_spheres is not None and len(fits) > n_spheres:
-            fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
+        def search(start):
+            """The candidates (the circles of ``start``, a :class:`Spheres`, fitted again; or
+            Hough's and the photo edges' where none), their fits and the spheres chosen."""
+            seeded = seeded_circles(start)
+            cands = seeded or hough_circle_candidates(edges, L, ratio=ratio)
+            fits, _ = fit_candidates(cands, edges, cam, 0.3, "auto", workers)
+            n_cands = len(cands)
+            fits = _with_outer_outlines(fits, edges, L, cam)  # a mirror's dark cap -> its silhouette
+            if held is not None and not seeded:  # outlines the max image leaves out (white on white)
+                more, n_more = _photo_edge_fits(fits, tensor, cam, max_residual_px, edges, held, workers, changing)
+                # one the photos' edges outline precisely but leave open (a textured ground's patches
+                # match the sphere's limb in some photos) is a circle the max image's Hough transform
+                # may have missed among the texture's: it is fitted on the max image's edges too
+                open_circles = [(*ft.center_px, ft.radius_px) for ft in more if not round_outline(ft, max_residual_px)]
+                again, _ = fit_candidates(open_circles, edges, cam, 0.3, "auto", workers) if open_circles else ([], [])
+                fits, n_cands = fits + more + again, n_cands + n_more
+            # an outline the max image leaves open (a white sphere's top on a white ground) may close on the
+            # photos' edges; a closed one is refitted only once chosen, so that no candidate (a textured
+            # ground's circles hold in every photo too) gains from them a score that hides a real sphere
+            open_ = [ft.coverage < CRITERIA["min_closed"] * ft.visible_fraction for ft in fits]
+            refit = _with_consistent_edges([ft for ft, o in zip(fits, open_) if o], held, L, cam, max_residual_px)
+            it = iter(refit)
+            fits = [next(it) if o else ft for ft, o in zip(fits, open_)]
+            fits, rejected = select_spheres(fits, mx, brightest, L, cam.ortho, n_photos, max_residual_px, min_visible,
+                                            saturates=saturates, colour_counts=colour,
+                                            max_over_mean=None if ratio is None else np.exp(ratio))
+            if n_spheres is not None and len(fits) > n_spheres:
+                fits = sorted(fits, key=lambda ft: -ft.score)[:int(n_spheres)]
+            return seeded, fits, rejected, n_cands
+
+        seeded, fits, rejected, n_cands = search(seeds)
         if seeded and (len(fits) != len(seeded) or not all(  # not the same spheres: searched
                 any(np.hypot(*(np.subtract(ft.center_px, c[:2]))) < 1.0 and abs(ft.radius_px - c[2]) < 1.0
                     for c in seeded) for ft in fits)):
-            return find_spheres(images, K, dist, sphere_radius, n_spheres, world_from_camera=world_from_camera,
-                                scene_center=scene_center, source=source, max_residual_px=max_residual_px,
-                                min_coverage=min_coverage, lit_limb=lit_limb, camera_model=camera_model,
-                                brightest_index=brightest_index, n_photos=n_photos, min_visible=min_visible,
-                                mean_luminance=mean_luminance, saturates=saturates, colour_counts=colour_counts,
-                                edge_tensor=edge_tensor, edge_photos=edge_photos, workers=workers)
+            seeded, fits, rejected, n_cands = search(None)
         if seeded:
             rejected = list(seeds.rejected)
         _check_enough_found(fits, n_spheres, rejected, L.shape, hl, brightest, n_photos, n_cands, source)

@@ -889,8 +889,16 @@ def _used_matte_fits(results: list[PhotoEstimate], values: list):
 def _refit_matte(s: SphereSamples, fit: LambertFit, values: list[SphereValues], **options) -> list[LambertFit]:
     """Sphere ``s``'s fit ``fit`` made again on each of ``values`` (its calibrated ground ratio, started
     from its direction; ``options``: ``terminator``, ``up``, ``own_shadow``)."""
+    return _refit_each((s, [(fit.bounce_ratio, fit.direction)] * len(values), values, options))
+
+
+def _refit_each(args) -> list[LambertFit]:
+    """Sphere ``s``'s fits made again, each on its own values from its own fit's ground ratio and
+    direction (``starts``: ``(bounce_ratio, direction)`` per entry of ``values``): a picklable task."""
+    s, starts, values, options = args
     n = len(values)
-    return fit_spheres([s] * n, values, bounce_ratio=[fit.bounce_ratio] * n, start=[fit.direction] * n, **options)
+    return fit_spheres([s] * n, values, bounce_ratio=[b for b, _ in starts], start=[d for _, d in starts],
+                       **options)
 
 
 def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], values: list, *,
@@ -961,7 +969,7 @@ def _refit_halves(args) -> list[LambertFit]:
 
 def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
                          flat: FlatField | None, *, terminator: float = 0.15, up: np.ndarray = UP,
-                         own_shadow: bool = True, shared: bool = False) -> float:
+                         own_shadow: bool = True, shared: bool = False, map_fn=map) -> float:
     """Per-axis standard deviation (degrees) of the matte spheres' directions from a lens fall-off
     that the spheres measured but the capture did not divide out.
 
@@ -989,6 +997,9 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
         As the spheres' own fits (:func:`ffls.spheres.photo.fit_spheres`).
     shared : bool
         The turn of each photo's spheres' mean, not of each sphere.
+    map_fn : callable
+        ``map``-like: runs the refits (one task per sphere, its photos' fits), e.g. in a pool of
+        processes.
 
     Returns
     -------
@@ -1004,16 +1015,23 @@ def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSampl
     significant = np.exp(-0.5 * z2) < SIGNIFICANCE  # (chi-square of 2 degrees of freedom)
     if not significant.any():
         return 0.0
-    turns = []
-    for r, vals in zip(results, values):
-        moved = []  # the turns of the photo's used spheres with a significant gradient (vectors)
+    todo = {}  # per sphere with a significant gradient: its (photo, fit, values divided) to fit again
+    for i, (r, vals) in enumerate(zip(results, values)):
         for k, f, v in _used_matte_fits([r], [vals]):
-            if k >= significant.size or not significant[k]:
-                continue
-            div = _flat_field_divisor(samples[k], rest[k])
-            g = _refit_matte(samples[k], f, [sphere_values_of(v[0] / div, v[1], v[2], getattr(v, "ground", None))],
-                             terminator=terminator, up=up, own_shadow=own_shadow)[0]
-            if g.status == "ok":
+            if k < significant.size and significant[k]:
+                div = _flat_field_divisor(samples[k], rest[k])
+                todo.setdefault(k, []).append((i, f, sphere_values_of(v[0] / div, v[1], v[2],
+                                                                      getattr(v, "ground", None))))
+    options = dict(terminator=terminator, up=up, own_shadow=own_shadow)
+    tasks = [(samples[k], [(f.bounce_ratio, f.direction) for _, f, _ in t], [v for _, _, v in t], options)
+             for k, t in todo.items()]
+    refits = {(i, k): g for k, fits in zip(todo, map_fn(_refit_each, tasks)) for (i, _, _), g in zip(todo[k], fits)}
+    turns = []
+    for i, (r, vals) in enumerate(zip(results, values)):
+        moved = []  # the turns of the photo's used spheres with a significant gradient (vectors)
+        for k, f, _ in _used_matte_fits([r], [vals]):
+            g = refits.get((i, k))
+            if g is not None and g.status == "ok":
                 moved.append(g.direction - f.direction)
         if not shared:
             turns.extend(float(np.sum(np.square(m))) for m in moved)
@@ -1154,7 +1172,8 @@ def calibrate_uncertainty(results: list[PhotoEstimate], samples: list[SphereSamp
         unrefined = [c == 0.0 and isinstance(_fit_of(results, k), LambertFit) for k, c in enumerate(centre)]
         shifts = _measured_centre_shifts(results, samples, values, unrefined, options.get("terminator", 0.15),
                                          map_fn)
-        lens = flat_field_shift_deg(results, samples, values, flat, shared=model.source != "fallback", **options)
+        lens = flat_field_shift_deg(results, samples, values, flat, shared=model.source != "fallback",
+                                    map_fn=map_fn, **options)
         if model.source == "fallback":  # no sphere checks another: their halves do
             centre = np.where(unrefined, [centre_floor_deg(d, 1.0) for d in shifts], centre)
             model = halves_error_model(*halves_offsets(results, samples, values, map_fn=map_fn, **options), centre,
