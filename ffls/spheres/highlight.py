@@ -171,16 +171,19 @@ class SphereView:
     def from_sphere(cls, sphere, model: str = "pinhole", K=None, dist=None, world_from_camera=None) -> "SphereView":
         """The view of a detected sphere (:class:`ffls.spheres.detect.SphereFit` or any object with
         ``center_px``, ``radius_px``, ``center_cam``, ``radius`` and optionally ``residual_px``,
-        ``n_inliers``, ``outline_sigma_px``); its centre's uncertainty is the silhouette's RMS residual
-        (a mirror's outline points are edges of its reflections, whose misfit is shared, not
-        independent), with its outline ambiguity (``outline_sigma_px``) in quadrature. Its radius's
-        uncertainty is left at 0: the limb's step sets it (:func:`refine_view_limb`)."""
+        ``n_inliers``, ``outline_sigma_px``, ``outline_centre_sigma_px``); its centre's uncertainty
+        is ``outline_centre_sigma_px`` where given (> 0: measured with the misfit included), else
+        the silhouette's RMS residual (a mirror's outline points are edges of its reflections, whose
+        misfit is shared, not independent), with its outline ambiguity (``outline_sigma_px``) in
+        quadrature. Its radius's uncertainty is left at 0: the limb's step sets it
+        (:func:`refine_view_limb`)."""
         res = float(getattr(sphere, "residual_px", 0.0) or 0.0)
         n = int(getattr(sphere, "n_inliers", 0) or 0)
         # a mirror's outline is its reflections' edges: their misfit moves the centre as a whole (not
         # independent per point), so the full residual, and the outline ambiguity, in quadrature
         sig = res if n > 0 else 0.1
         sig = float(np.hypot(sig, float(getattr(sphere, "outline_sigma_px", 0.0) or 0.0)))
+        sig = float(getattr(sphere, "outline_centre_sigma_px", 0.0) or 0.0) or sig
         cc = getattr(sphere, "center_cam", None)
         return cls(center_px=np.asarray(sphere.center_px, dtype=np.float64), radius_px=float(sphere.radius_px),
                    model=model, K=None if K is None else np.asarray(K, dtype=np.float64),
