@@ -1881,7 +1881,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
     views = [None] * len(samples) if views is None else list(views)
 
     def limb(v):
-        return v if limb_image is None or v is None else refine_view_limb(v, limb_image)[0]
+        return v if limb_image is None or v is None else refine_view_limb(v, limb_image, len(views) == 1)[0]
 
     views = [limb(v) if m == "mirror" else v for m, v in zip(materials, views)]
     fitter.options["mirrors"] = [v if m == "mirror" else None for m, v in zip(materials, views)]

@@ -1039,7 +1039,7 @@ LIMB_CLEAR_SNR = 10.0
 LIMB_MODEL_FLOOR_PX = 0.15
 
 
-def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, LimbFit | None]:
+def refine_view_limb(view: SphereView, image: np.ndarray, bracket: bool = False) -> tuple[SphereView, LimbFit | None]:
     """A mirror or glossy ball's view with its outline at the step of its limb, where that step is clear.
 
     The detected outline of a black glossy ball lies up to a pixel inside its silhouette (the
@@ -1059,11 +1059,21 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     gap beyond half of :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another
     edge), or no fit, leaves the view as it is.
 
+    ``bracket`` (a lone ball, whose cone its own outline sets): where the detected outline of a
+    chrome ball is kept, the two estimates bracket its silhouette (its reflections' edges run
+    inside the limb, the step at or just outside it), and the kept one is uncertain by half their
+    gap (per axis), not all of it: on 9 lone chrome balls at 384 px (``docs/spheres.md``, "A lone
+    chrome ball's outline: jackknife and bracket") the detected radius was 0.09-0.61 px off where
+    the full gap said 0.45-1.36 px. Beside other spheres the full gap stays: it weights the
+    spheres' combination (bench c11, c17 moved with the half gap).
+
     Parameters
     ----------
     view : SphereView
     image : (H, W) float
         The sequence's mean luminance (linear preferred).
+    bracket : bool
+        The ball is alone (see above): a kept chrome outline uncertain by half the gap.
 
     Returns
     -------
@@ -1093,6 +1103,9 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
             or not dark_body(image, view.center_px, view.radius_px)):
         # a chrome ball (a weak step, or a body that reflects its surroundings): the detected
         # outline (its reflections' edges) is kept
+        if bracket:  # the two estimates bracket its silhouette: uncertain by half their gap
+            c_sig = float(max(np.hypot(0.5 * gap_c, c_own), view.center_sigma_px))
+            r_sig = float(max(np.hypot(0.5 * gap_r, r_own), view.radius_sigma_px))
         return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb
     c_sig = float(max(c_sig, np.hypot(c_own, limb.radius_sigma_px)))
     if view.model == "pinhole":
