@@ -154,7 +154,8 @@ def test_a_lone_chrome_balls_centre_sigma_is_measured_and_holds_its_error(lone_c
     dec = decode_photos(cap, 1)
     (s,) = find_spheres_in_capture(cap, stats=dec.stats, bit_depths=dec.bit_depths)
     truth = json.loads((lone_chrome / "truth.json").read_text())["spheres"][0]
-    assert MIRROR_OUTLINE_SIGMA_FLOOR_PX <= s.outline_centre_sigma_px <= max(s.outline_sigma_px,
+    assert s.outline_gap_px > 0
+    assert MIRROR_OUTLINE_SIGMA_FLOOR_PX <= s.outline_centre_sigma_px <= max(s.outline_gap_px,
                                                                               MIRROR_OUTLINE_SIGMA_FLOOR_PX)
     assert s.to_dict()["outline_centre_sigma_px"] == s.outline_centre_sigma_px
     err = float(np.hypot(*(np.asarray(s.center_px) - truth["center_px"])))

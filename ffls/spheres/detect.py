@@ -171,10 +171,14 @@ class SphereFit:
         A mirror ball's outline ambiguity, pixels: half the gap (centre and radius) between its two
         outline estimates (the reflected room's contrasts, which run inside the limb, and the limb's
         reflectance step, :mod:`ffls.spheres.mirror_outline`); 0 for other spheres.
+    outline_gap_px : float
+        Half the gap (centre and radius, pixels) between a mirror ball's outline and its second
+        estimate, the limb's reflectance step; 0 where there is none.
     outline_centre_sigma_px : float
-        A mirror ball's centre uncertainty per axis, pixels, its outline's misfit included, where a
-        second outline estimate measured it (:func:`_outline_centre_sigma`): the sector jackknife
-        of the outline fit, bounded above by half the gap to the second estimate, at least
+        A lone mirror ball's centre uncertainty per axis, pixels, its outline's misfit included,
+        where a second outline estimate exists (:func:`_outline_centre_sigma`, set by
+        :func:`find_spheres` when it finds one sphere): the sector jackknife of the outline fit,
+        bounded above by :attr:`outline_gap_px`, at least
         :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_SIGMA_FLOOR_PX`; 0 where not measured.
     outline_edges : {'max image', 'photos'}
         Where the outline's points come from: the max image's edges, or the edges that hold in the
@@ -205,6 +209,7 @@ class SphereFit:
     score: float = 0.0
     center_sigma_px: float = 0.0
     outline_sigma_px: float = 0.0
+    outline_gap_px: float = 0.0
     outline_centre_sigma_px: float = 0.0
     outline_edges: str = "max image"
     outline_at_step: bool = False
@@ -248,6 +253,7 @@ class SphereFit:
             "visible_fraction": float(self.visible_fraction),
             "center_sigma_px": float(self.center_sigma_px),
             "outline_sigma_px": float(self.outline_sigma_px),
+            "outline_gap_px": float(self.outline_gap_px),
             "outline_centre_sigma_px": float(self.outline_centre_sigma_px),
             "outline_edges": self.outline_edges,
             "outline_at_step": bool(self.outline_at_step),
@@ -1961,6 +1967,8 @@ def find_spheres(images, K, dist, sphere_radius, n_spheres: int | None = None, h
             for ft in fits]
     if not ortho:
         _check_radius(fits, hint_info, wfc, R, source, scene_center)
+    if len(fits) == 1 and fits[0].outline_gap_px > 0:  # a lone mirror ball: its centre's own sigma
+        fits[0].outline_centre_sigma_px = _outline_centre_sigma(fits[0], fits[0].outline_gap_px, cam)
     return Spheres(fits, rejected)
 
 
@@ -2628,12 +2636,12 @@ def _outer_outline(ft, edges: _EdgeMap, L, cam: DetectionCamera):
         if r_limb is not None and abs(r_limb / new.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
             new = _with_radius(new, r_limb, cam)
         new.outline_sigma_px = max(gap, MIRROR_OUTLINE_SIGMA_FLOOR_PX)
-        new.outline_centre_sigma_px = _outline_centre_sigma(new, gap, cam)
+        new.outline_gap_px = gap
         return new, True
     r_limb = limb_radius(log_l, ft.center_px, ft.radius_px)
     if r_limb is not None and abs(r_limb / ft.radius_px - 1) <= 0.1:  # the radius of the limb, same centre
         ft = _with_radius(ft, r_limb, cam)
-    ft.outline_sigma_px, ft.outline_centre_sigma_px = _outline_ambiguity(ft, log_l, cam)
+    ft.outline_sigma_px, ft.outline_gap_px = _outline_ambiguity(ft, log_l, cam)
     return ft, False
 
 
@@ -2644,8 +2652,7 @@ def _outline_ambiguity(ft, log_l, cam: DetectionCamera) -> tuple[float, float]:
     reflected contrasts run inside the limb, the step at or just outside it), at least
     :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_SIGMA_FLOOR_PX`;
     :data:`ffls.spheres.mirror_outline.MIRROR_OUTLINE_FLOOR_PX` without a step (no second estimate).
-    Returned with the centre's uncertainty that the step measured (``SphereFit.outline_centre_sigma_px``,
-    :func:`_outline_centre_sigma`; 0 without a step)."""
+    Returned with the half gap itself (``SphereFit.outline_gap_px``; 0 without a step)."""
     sil = mirror_silhouette(log_l, ft.center_px, ft.radius_px, shape=cam.shape)
     if sil is None:
         return MIRROR_OUTLINE_FLOOR_PX, 0.0
@@ -2654,7 +2661,7 @@ def _outline_ambiguity(ft, log_l, cam: DetectionCamera) -> tuple[float, float]:
     except ValueError:
         return MIRROR_OUTLINE_FLOOR_PX, 0.0
     gap = 0.5 * float(np.hypot(np.linalg.norm(limb.center_px - ft.center_px), limb.radius_px - ft.radius_px))
-    return max(gap, MIRROR_OUTLINE_SIGMA_FLOOR_PX), _outline_centre_sigma(ft, gap, cam)
+    return max(gap, MIRROR_OUTLINE_SIGMA_FLOOR_PX), gap
 
 
 #: Angular sectors of an outline's points left out in turn by :func:`outline_jackknife_px`.
@@ -2723,7 +2730,7 @@ def _with_radius(ft, radius_px: float, cam: DetectionCamera):
                         shape=cam.shape)
     new.score, new.center_sigma_px = ft.score, ft.center_sigma_px
     new.outline_sigma_px, new.outline_edges = ft.outline_sigma_px, ft.outline_edges
-    new.outline_centre_sigma_px = ft.outline_centre_sigma_px
+    new.outline_gap_px = ft.outline_gap_px
     return new
 
 
@@ -3036,7 +3043,7 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
             or abs(new.radius_px - ft.radius_px) > reach):
         return ft
     new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
-    new.outline_centre_sigma_px, new.outline_at_step = ft.outline_centre_sigma_px, True
+    new.outline_gap_px, new.outline_at_step = ft.outline_gap_px, True
     return new
 
 
@@ -3166,7 +3173,7 @@ def mirror_outlines_replaced(fits, changing: ConsistentEdges | None, L, cam: Det
         new.score = ft.score
         if photo_edges:
             new.outline_edges = PHOTO_EDGES
-        new.outline_sigma_px, new.outline_centre_sigma_px = _outline_ambiguity(new, log_l, cam)
+        new.outline_sigma_px, new.outline_gap_px = _outline_ambiguity(new, log_l, cam)
         out.append(new)
     return out
 
@@ -3487,7 +3494,7 @@ def _refine_on_consistent_edges(ft, ev: ConsistentEdges, cam: DetectionCamera, m
             or outline_quality(new) <= outline_quality(ft)):
         return ft
     new.score = ft.score
-    new.outline_sigma_px, new.outline_centre_sigma_px = ft.outline_sigma_px, ft.outline_centre_sigma_px
+    new.outline_sigma_px, new.outline_gap_px = ft.outline_sigma_px, ft.outline_gap_px
     new.outline_edges = PHOTO_EDGES
     return new
 
