@@ -103,7 +103,7 @@ def balls(folder: Path) -> list[dict]:
         j = int(np.argmin(np.hypot(*(tc - ft.center_px).T)))
         if mats[j] not in KINDS:
             continue
-        v, _ = refine_view_limb(view, dec.stats.mean)
+        v, _ = refine_view_limb(view, dec.stats.mean, len(found) == 1)  # a lone ball: bracketed
         ce = np.asarray(v.center_px) - tc[j]
         re = apparent_radius_px(v) - float(truth["sphere_radii_px"][j])
         row = {"capture": folder.name, "material": mats[j], "source": ft.source,

@@ -79,3 +79,84 @@ def test_a_lone_mirror_outline_keeps_its_measured_ambiguity_beside_others_the_fl
     pair = sphere_views(cap, [fit(-0.2, MIRROR_OUTLINE_SIGMA_FLOOR_PX), fit(0.2, 0.0)])
     assert pair[0].center_sigma_px == pytest.approx(np.hypot(0.3, MIRROR_OUTLINE_FLOOR_PX))
     assert pair[1].center_sigma_px == pytest.approx(0.3)  # a matte outline: no ambiguity term
+
+
+def test_a_lone_mirror_view_takes_its_measured_centre_sigma_beside_others_not():
+    """Where a second outline estimate measured a lone chrome ball's centre uncertainty (its
+    misfit's sector jackknife, bounded by half the gap: ``SphereFit.outline_centre_sigma_px``), the
+    view's centre sigma is that, not the residual and the half gap in quadrature (bench c21: 1.41
+    -> 0.40 px, actual 0.33 px per axis); beside another sphere the old terms stay."""
+    from types import SimpleNamespace
+
+    from ffls.spheres.estimate import sphere_views
+    from ffls.spheres.mirror_outline import MIRROR_OUTLINE_FLOOR_PX
+
+    K = np.array([[800.0, 0, 192], [0, 800.0, 192], [0, 0, 1]])
+    cap = SimpleNamespace(camera_model="pinhole", K=K, dist=None, world_from_camera=np.eye(4), sphere_radius=0.05)
+
+    def fit(x, amb, own):
+        return SimpleNamespace(center_cam=np.array([x, 0.0, 1.5]), radius=0.05, center_px=None, radius_px=None,
+                               residual_px=0.35, n_inliers=100, outline_sigma_px=amb, outline_centre_sigma_px=own)
+
+    lone = sphere_views(cap, [fit(0.0, 1.37, 0.42)])[0]
+    assert lone.center_sigma_px == pytest.approx(0.42)
+    pair = sphere_views(cap, [fit(-0.2, 1.37, 0.42), fit(0.2, 0.0, 0.0)])
+    assert pair[0].center_sigma_px == pytest.approx(np.hypot(0.35, max(1.37, MIRROR_OUTLINE_FLOOR_PX)))
+    unmeasured = sphere_views(cap, [fit(0.0, 0.8, 0.0)])[0]
+    assert unmeasured.center_sigma_px == pytest.approx(np.hypot(0.35, 0.8))
+
+
+def test_outline_jackknife_sees_correlated_arcs_that_the_fit_covariance_misses():
+    """A mirror outline's points are its reflections' edges: whole arcs sit off the silhouette
+    together. Their centre moves by what the delete-one-sector jackknife measures, many times the
+    fit's own standard error (independent points); on clean points both are small."""
+    from ffls.spheres.detect import DetectionCamera, fit_outline, outline_jackknife_px
+
+    cam = DetectionCamera("orthographic", None, None, np.eye(4), 0.05, (200, 200))
+    c, r = np.array([100.3, 98.7]), 30.0
+    t = np.linspace(-np.pi, np.pi, 180, endpoint=False)
+    rng = np.random.default_rng(5)
+    u = np.stack([np.cos(t), np.sin(t)], axis=1)
+    clean = c + (r + rng.normal(0, 0.05, t.size))[:, None] * u
+    ft = fit_outline(clean, cam, c, r, "auto")
+    assert outline_jackknife_px(ft, cam) < 0.05
+    shifts, errs = [], []
+    for seed in range(20):  # 12 arcs of 30 deg, each off by its own offset (0.5 px RMS)
+        g = np.random.default_rng(seed)
+        off = g.normal(0, 0.5, 12)[np.minimum(((t + np.pi) / (2 * np.pi) * 12).astype(int), 11)]
+        pts = c + (r + off + g.normal(0, 0.05, t.size))[:, None] * u
+        ft = fit_outline(pts, cam, c, r, "auto")
+        shifts.append(outline_jackknife_px(ft, cam))
+        errs.append(ft.center_px - c)
+        assert shifts[-1] > 3 * ft.center_sigma_px
+    rms = float(np.sqrt(np.mean(np.square(errs))))  # per axis
+    assert 0.5 * rms < np.median(shifts) < 2.0 * rms, (rms, np.median(shifts))
+
+
+@pytest.fixture(scope="module")
+def lone_chrome(tmp_path_factory):
+    """One chrome ball (no object), 16 lights, 256 px, 8-bit JPEG with noise."""
+    folder = tmp_path_factory.mktemp("lone_chrome")
+    scene = make_scene(spheres=1, sphere_material="mirror", with_object=False)
+    write_synthetic_capture(folder, n_lights=16, resolution=256, scene=scene, progress=False, seed=171,
+                            photo=PhotoSettings(file_format="jpeg", curve="srgb", noise=0.01))
+    return folder
+
+
+def test_a_lone_chrome_balls_centre_sigma_is_measured_and_holds_its_error(lone_chrome):
+    """Found as ``ffls lights`` finds it: its centre sigma (per axis) at least the measured floor,
+    at most the half gap, and its actual centre error inside its 95 % region (2.45 sigma)."""
+    from ffls.spheres.detect import find_spheres_in_capture
+    from ffls.spheres.estimate import decode_photos
+    from ffls.spheres.mirror_outline import MIRROR_OUTLINE_SIGMA_FLOOR_PX
+
+    cap = load_capture(lone_chrome)
+    dec = decode_photos(cap, 1)
+    (s,) = find_spheres_in_capture(cap, stats=dec.stats, bit_depths=dec.bit_depths)
+    truth = json.loads((lone_chrome / "truth.json").read_text())["spheres"][0]
+    assert s.outline_gap_px > 0
+    assert MIRROR_OUTLINE_SIGMA_FLOOR_PX <= s.outline_centre_sigma_px <= max(s.outline_gap_px,
+                                                                              MIRROR_OUTLINE_SIGMA_FLOOR_PX)
+    assert s.to_dict()["outline_centre_sigma_px"] == s.outline_centre_sigma_px
+    err = float(np.hypot(*(np.asarray(s.center_px) - truth["center_px"])))
+    assert err < 2.45 * s.outline_centre_sigma_px, (err, s.outline_centre_sigma_px)

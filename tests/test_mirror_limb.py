@@ -233,3 +233,27 @@ def test_the_kept_outline_is_uncertain_by_at_least_the_gap_between_the_two():
     new, limb = refine_view_limb(unsure, weak)
     np.testing.assert_array_equal(new.center_px, unsure.center_px)
     assert new.center_sigma_px >= 2.0 and new.radius_sigma_px >= 1.5
+
+
+def test_a_lone_chrome_outline_is_uncertain_by_half_its_gap_to_the_step():
+    """A chrome ball's detected outline kept beside a weak step: the two estimates bracket its
+    silhouette, so a lone ball's (``bracket``) is uncertain by half their gap (with the step's own
+    precision); beside other spheres the full gap stays. On 9 lone chrome balls the detected radius
+    was 0.09-0.61 px off where the full gap said 0.45-1.36 px (docs/spheres.md)."""
+    c, r = np.array([61.3, 58.6]), 26.4
+    weak = _render(lambda p: np.hypot(p[:, 0] - c[0], p[:, 1] - c[1]) / r, 120, 124, jump=0.03, noise=0.004,
+                   ramp=False)
+    view = SphereView(center_px=c + [0.5, -0.4], radius_px=r - 1.2, model="orthographic", center_sigma_px=0.1)
+    full, limb = refine_view_limb(view, weak)
+    half, limb2 = refine_view_limb(view, weak, bracket=True)
+    assert limb is not None and np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR
+    np.testing.assert_array_equal(half.center_px, view.center_px)
+    gap_c = np.hypot(*(limb.center_px - view.center_px))
+    gap_r = abs(limb.radius_px - view.radius_px)
+    assert full.center_sigma_px >= gap_c and full.radius_sigma_px >= gap_r
+    assert 0.5 * gap_c <= half.center_sigma_px < full.center_sigma_px
+    assert 0.5 * gap_r <= half.radius_sigma_px < full.radius_sigma_px
+    # never below the detected outline's own uncertainty
+    unsure, _ = refine_view_limb(SphereView(center_px=c, radius_px=r, model="orthographic", center_sigma_px=2.0,
+                                            radius_sigma_px=1.5), weak, bracket=True)
+    assert unsure.center_sigma_px >= 2.0 and unsure.radius_sigma_px >= 1.5

@@ -421,6 +421,9 @@ def sphere_views(capture, spheres) -> list[SphereView]:
         amb = float(getattr(s, "outline_sigma_px", 0.0) or 0.0)
         if amb > 0.0 and len(spheres) > 1:
             amb = max(amb, MIRROR_OUTLINE_FLOOR_PX)
+        # a lone mirror's centre uncertainty as its second outline estimate measured it
+        # (SphereFit.outline_centre_sigma_px: the misfit's sector jackknife bounded by the gap)
+        own = float(getattr(s, "outline_centre_sigma_px", 0.0) or 0.0) if len(spheres) == 1 else 0.0
         C = np.asarray(s.center_cam, dtype=np.float64)
         R = float(getattr(s, "radius", None) or capture.sphere_radius)
         cpx = getattr(s, "center_px", None)
@@ -433,7 +436,7 @@ def sphere_views(capture, spheres) -> list[SphereView]:
         proxy = type("Sphere", (), dict(center_px=cpx, radius_px=rpx, center_cam=C, radius=R,
                                         residual_px=getattr(s, "residual_px", 0.0),
                                         n_inliers=getattr(s, "n_inliers", 0),
-                                        outline_sigma_px=amb))
+                                        outline_sigma_px=amb, outline_centre_sigma_px=own))
         out.append(SphereView.from_sphere(proxy, model, capture.K, capture.dist, capture.world_from_camera))
     return out
 
@@ -1897,7 +1900,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
     views = [None] * len(samples) if views is None else list(views)
 
     def limb(v):
-        return v if limb_image is None or v is None else refine_view_limb(v, limb_image)[0]
+        return v if limb_image is None or v is None else refine_view_limb(v, limb_image, len(views) == 1)[0]
 
     views = [limb(v) if m == "mirror" else v for m, v in zip(materials, views)]
     fitter.options["mirrors"] = [v if m == "mirror" else None for m, v in zip(materials, views)]

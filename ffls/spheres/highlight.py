@@ -171,16 +171,19 @@ class SphereView:
     def from_sphere(cls, sphere, model: str = "pinhole", K=None, dist=None, world_from_camera=None) -> "SphereView":
         """The view of a detected sphere (:class:`ffls.spheres.detect.SphereFit` or any object with
         ``center_px``, ``radius_px``, ``center_cam``, ``radius`` and optionally ``residual_px``,
-        ``n_inliers``, ``outline_sigma_px``); its centre's uncertainty is the silhouette's RMS residual
-        (a mirror's outline points are edges of its reflections, whose misfit is shared, not
-        independent), with its outline ambiguity (``outline_sigma_px``) in quadrature. Its radius's
-        uncertainty is left at 0: the limb's step sets it (:func:`refine_view_limb`)."""
+        ``n_inliers``, ``outline_sigma_px``, ``outline_centre_sigma_px``); its centre's uncertainty
+        is ``outline_centre_sigma_px`` where given (> 0: measured with the misfit included), else
+        the silhouette's RMS residual (a mirror's outline points are edges of its reflections, whose
+        misfit is shared, not independent), with its outline ambiguity (``outline_sigma_px``) in
+        quadrature. Its radius's uncertainty is left at 0: the limb's step sets it
+        (:func:`refine_view_limb`)."""
         res = float(getattr(sphere, "residual_px", 0.0) or 0.0)
         n = int(getattr(sphere, "n_inliers", 0) or 0)
         # a mirror's outline is its reflections' edges: their misfit moves the centre as a whole (not
         # independent per point), so the full residual, and the outline ambiguity, in quadrature
         sig = res if n > 0 else 0.1
         sig = float(np.hypot(sig, float(getattr(sphere, "outline_sigma_px", 0.0) or 0.0)))
+        sig = float(getattr(sphere, "outline_centre_sigma_px", 0.0) or 0.0) or sig
         cc = getattr(sphere, "center_cam", None)
         return cls(center_px=np.asarray(sphere.center_px, dtype=np.float64), radius_px=float(sphere.radius_px),
                    model=model, K=None if K is None else np.asarray(K, dtype=np.float64),
@@ -1036,7 +1039,7 @@ LIMB_CLEAR_SNR = 10.0
 LIMB_MODEL_FLOOR_PX = 0.15
 
 
-def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, LimbFit | None]:
+def refine_view_limb(view: SphereView, image: np.ndarray, bracket: bool = False) -> tuple[SphereView, LimbFit | None]:
     """A mirror or glossy ball's view with its outline at the step of its limb, where that step is clear.
 
     The detected outline of a black glossy ball lies up to a pixel inside its silhouette (the
@@ -1056,11 +1059,21 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
     gap beyond half of :data:`ffls.spheres.mirror_outline.LIMB_BAND_PX` (the step found another
     edge), or no fit, leaves the view as it is.
 
+    ``bracket`` (a lone ball, whose cone its own outline sets): where the detected outline of a
+    chrome ball is kept, the two estimates bracket its silhouette (its reflections' edges run
+    inside the limb, the step at or just outside it), and the kept one is uncertain by half their
+    gap (per axis), not all of it: on 9 lone chrome balls at 384 px (``docs/spheres.md``, "A lone
+    chrome ball's outline: jackknife and bracket") the detected radius was 0.09-0.61 px off where
+    the full gap said 0.45-1.36 px. Beside other spheres the full gap stays: it weights the
+    spheres' combination (bench c11, c17 moved with the half gap).
+
     Parameters
     ----------
     view : SphereView
     image : (H, W) float
         The sequence's mean luminance (linear preferred).
+    bracket : bool
+        The ball is alone (see above): a kept chrome outline uncertain by half the gap.
 
     Returns
     -------
@@ -1090,6 +1103,9 @@ def refine_view_limb(view: SphereView, image: np.ndarray) -> tuple[SphereView, L
             or not dark_body(image, view.center_px, view.radius_px)):
         # a chrome ball (a weak step, or a body that reflects its surroundings): the detected
         # outline (its reflections' edges) is kept
+        if bracket:  # the two estimates bracket its silhouette: uncertain by half their gap
+            c_sig = float(max(np.hypot(0.5 * gap_c, c_own), view.center_sigma_px))
+            r_sig = float(max(np.hypot(0.5 * gap_r, r_own), view.radius_sigma_px))
         return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb
     c_sig = float(max(c_sig, np.hypot(c_own, limb.radius_sigma_px)))
     if view.model == "pinhole":

@@ -37,7 +37,8 @@ MIRROR_OUTLINE_FLOOR_PX = 1.0
 #: per-axis RMS of the centre errors of 17 chrome balls' outlines found without hints (0.24-0.90 px,
 #: 2-D; 384 px renders with JPEG, noise, vignetting, textured, white and grey grounds, long lenses,
 #: anti-aliasing: ``docs/spheres.md``, "A lone mirror ball's own cone"). Without a second
-#: estimate the ambiguity stays :data:`MIRROR_OUTLINE_FLOOR_PX`.
+#: estimate the ambiguity stays :data:`MIRROR_OUTLINE_FLOOR_PX`. Also the least centre sigma of a
+#: lone ball that the second estimate measured (``SphereFit.outline_centre_sigma_px``).
 MIRROR_OUTLINE_SIGMA_FLOOR_PX = 0.4
 
 
