@@ -23,7 +23,8 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.gpu.context import release_gl
 # the checked float16 conversion is shared with the chunked store on disk (one definition)
-from ffls.store.float16 import F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, to_float16
+from ffls.store.float16 import (F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, finite_max_abs,
+                                to_float16)
 
 __all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
            "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "ARRAY_LAYERS", "SSBO_BAND_BYTES", "PACKED_STORAGES"]
@@ -52,6 +53,15 @@ def _check_basis(basis, dtype: str, path=None) -> np.ndarray:
     if basis.ndim != 4 or basis.shape[-1] != 3 or basis.shape[0] < 1:
         raise InputError(f"basis must have shape (n, H, W, 3) with n >= 1, not {basis.shape}", path)
     return basis
+
+
+def _finite_max_abs(basis: np.ndarray, path=None) -> float:
+    """``max |basis|`` in one pass of cache-sized blocks (:func:`ffls.store.float16.finite_max_abs`);
+    a basis with NaN or Inf values is refused, with their count."""
+    max_abs = finite_max_abs(basis)
+    if not np.isfinite(max_abs):
+        raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
+    return max_abs
 
 
 class BasisTextures:
@@ -106,9 +116,7 @@ class BasisTextures:
                 f"basis of {n} images {W}x{H} needs {self.nbytes / 2**20:.0f} MiB of GPU memory as {dtype}, "
                 f"over the budget of {budget_bytes / 2**20:.0f} MiB; use --rank K (compression), dtype 'f16', "
                 f"or a smaller capture", path)
-        if not np.all(np.isfinite(basis)):
-            raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
-        max_abs = float(np.max(np.abs(basis)))
+        max_abs = _finite_max_abs(basis, path)
         self.scale = choose_scale(max_abs) if dtype == "f16" else 1.0
         self.report = None
         self.textures, self.offsets, self.counts = [], [], []
@@ -123,7 +131,7 @@ class BasisTextures:
                     rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
                 else:
                     rgba[..., :3] = basis[a:b]
-                tex = ctx.texture_array((W, H, b - a), 4, data=rgba.tobytes(), dtype="f2" if dtype == "f16" else "f4")
+                tex = ctx.texture_array((W, H, b - a), 4, data=rgba, dtype="f2" if dtype == "f16" else "f4")
                 tex.filter = (0x2600, 0x2600)  # GL_NEAREST; pass 2 uses texelFetch anyway
                 self.textures.append(tex)
                 self.offsets.append(a)
@@ -244,8 +252,7 @@ class PackedBasis:
                 f"basis of {n} images {W}x{H} needs {self.nbytes / 2**20:.0f} MiB of GPU memory as {dtype}, "
                 f"over the budget of {budget_bytes / 2**20:.0f} MiB; use --rank K (compression), dtype 'f16', "
                 f"or a smaller capture", path)
-        if not np.all(np.isfinite(basis)):
-            raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
+        max_abs = _finite_max_abs(basis, path)
         limit = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or SSBO_BAND_BYTES)
         limit = min(limit, SSBO_BAND_BYTES) if band_bytes is None else int(band_bytes)
         if storage == "image":
@@ -256,7 +263,6 @@ class PackedBasis:
             if 3 * -(-max(self.counts) // per) > max_arr:
                 raise ValueError(f"{max(self.counts)} layers per chunk need more than GL_MAX_ARRAY_TEXTURE_LAYERS "
                                  f"({max_arr}) image layers; use a smaller max_layers")
-        max_abs = float(np.max(np.abs(basis)))
         self.scale = choose_scale(max_abs) if dtype == "f16" else 1.0
         self.report = None
         self.bands = []
@@ -278,7 +284,7 @@ class PackedBasis:
                             part = np.asarray(part, dtype=np.float32)
                         words = pack_pixel_major(part, dtype)[:, :, 0]  # h, w, 3, 4
                         planes = np.ascontiguousarray(words.transpose(2, 0, 1, 3))  # 3, h, w, 4
-                        tex.write(planes.tobytes(), viewport=(0, 0, 3 * blk, W, H, 3))
+                        tex.write(planes, viewport=(0, 0, 3 * blk, W, H, 3))
                     continue
                 if W * pb > limit:
                     raise InputError(f"one image row of {cnt} packed layers ({W * pb} bytes) exceeds the SSBO "
@@ -294,7 +300,7 @@ class PackedBasis:
                     else:
                         part = np.asarray(part, dtype=np.float32)
                     words = pack_pixel_major(part, dtype)
-                    chunk.append((r, part.shape[1], ctx.buffer(words.tobytes())))
+                    chunk.append((r, part.shape[1], ctx.buffer(words)))
         except BaseException:
             self.release()
             raise
