@@ -160,3 +160,24 @@ def test_half_casts_match_numpy_bit_for_bit():
     back = np.empty(x.shape, np.float32)
     widen_half(out.reshape(-1, 1, 1), back.reshape(-1, 1, 1))
     assert np.array_equal(back.view(np.uint32), want.astype(np.float32).view(np.uint32))
+
+
+@pytest.mark.gl
+def test_basis_textures_hold_the_checked_float16_values_and_zero_alpha(ctx):
+    """The f16 texture arrays hold to_float16's values and alpha 0 (the RGBA layers are assembled by
+    OpenCV's channel copy), over two arrays."""
+    from ffls.gpu.basis import BasisTextures
+
+    rng = np.random.default_rng(7)
+    b = (rng.random((5, 9, 11, 3)) ** 3).astype(np.float32)
+    b[1, 2, 3] = 0.0
+    bt = BasisTextures(ctx, b, "f16", max_layers=3)
+    try:
+        h, rep = to_float16(b)
+        want = np.zeros((5, 9, 11, 4), np.float16)
+        want[..., :3] = h
+        got = np.concatenate([np.frombuffer(t.read(), np.float16).reshape(-1, 9, 11, 4) for t in bt.textures])
+        assert bt.n_arrays == 2 and got.tobytes() == want.tobytes()
+        assert bt.report == rep
+    finally:
+        bt.release()

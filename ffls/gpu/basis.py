@@ -64,6 +64,26 @@ def _finite_max_abs(basis: np.ndarray, path=None) -> float:
     return max_abs
 
 
+def _with_zero_alpha(rgb: np.ndarray) -> np.ndarray:
+    """``(m, H, W, 3)`` float16 layers as ``(m, H, W, 4)`` with alpha 0: OpenCV's channel copy
+    (``mixChannels``, a layer at a time: 5x NumPy's strided ``rgba[..., :3] = rgb``, the same
+    bytes); NumPy where OpenCV cannot take the arrays."""
+    import cv2
+
+    m, H, W, _ = rgb.shape
+    rgba = np.empty((m, H, W, 4), dtype=np.float16)
+    src, dst = rgb.view(np.uint16), rgba.view(np.uint16)
+    try:
+        if not rgb.flags.c_contiguous:
+            raise cv2.error("not contiguous")
+        for k in range(m):  # (channel -1: filled with zero)
+            cv2.mixChannels([src[k].reshape(H * W, 1, 3)], [dst[k].reshape(H * W, 1, 4)], [0, 0, 1, 1, 2, 2, -1, 3])
+    except cv2.error:
+        rgba[..., :3] = rgb
+        rgba[..., 3] = 0
+    return rgba
+
+
 class BasisTextures:
     """A basis ``(n, H, W, 3)`` resident on the GPU as one or more texture arrays.
 
@@ -124,12 +144,12 @@ class BasisTextures:
         try:
             for a in range(0, n, self.max_layers):
                 b = min(n, a + self.max_layers)
-                rgba = np.zeros((b - a, H, W, 4), dtype=np.float16 if dtype == "f16" else np.float32)
                 if dtype == "f16":
                     h, rep = to_float16(basis[a:b], scale=self.scale, path=path, max_abs=max_abs)
-                    rgba[..., :3] = h
+                    rgba = _with_zero_alpha(h)
                     rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
                 else:
+                    rgba = np.zeros((b - a, H, W, 4), dtype=np.float32)
                     rgba[..., :3] = basis[a:b]
                 tex = ctx.texture_array((W, H, b - a), 4, data=rgba, dtype="f2" if dtype == "f16" else "f4")
                 tex.filter = (0x2600, 0x2600)  # GL_NEAREST; pass 2 uses texelFetch anyway
