@@ -23,7 +23,8 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.gpu.context import release_gl
 # the checked float16 conversion is shared with the chunked store on disk (one definition)
-from ffls.store.float16 import F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, to_float16
+from ffls.store.float16 import (F16_TARGET_MAX, SIGNIFICANT_REL, Float16Report, choose_scale, finite_max_abs,
+                                to_float16)
 
 __all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16", "BasisTextures",
            "PackedBasis", "pack_pixel_major", "PACKED_LAYERS", "ARRAY_LAYERS", "SSBO_BAND_BYTES", "PACKED_STORAGES"]
@@ -52,6 +53,35 @@ def _check_basis(basis, dtype: str, path=None) -> np.ndarray:
     if basis.ndim != 4 or basis.shape[-1] != 3 or basis.shape[0] < 1:
         raise InputError(f"basis must have shape (n, H, W, 3) with n >= 1, not {basis.shape}", path)
     return basis
+
+
+def _finite_max_abs(basis: np.ndarray, path=None) -> float:
+    """``max |basis|`` in one pass of cache-sized blocks (:func:`ffls.store.float16.finite_max_abs`);
+    a basis with NaN or Inf values is refused, with their count."""
+    max_abs = finite_max_abs(basis)
+    if not np.isfinite(max_abs):
+        raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
+    return max_abs
+
+
+def _with_zero_alpha(rgb: np.ndarray) -> np.ndarray:
+    """``(m, H, W, 3)`` float16 layers as ``(m, H, W, 4)`` with alpha 0: OpenCV's channel copy
+    (``mixChannels``, a layer at a time: 5x NumPy's strided ``rgba[..., :3] = rgb``, the same
+    bytes); NumPy where OpenCV cannot take the arrays."""
+    import cv2
+
+    m, H, W, _ = rgb.shape
+    rgba = np.empty((m, H, W, 4), dtype=np.float16)
+    src, dst = rgb.view(np.uint16), rgba.view(np.uint16)
+    try:
+        if not rgb.flags.c_contiguous:
+            raise cv2.error("not contiguous")
+        for k in range(m):  # (channel -1: filled with zero)
+            cv2.mixChannels([src[k].reshape(H * W, 1, 3)], [dst[k].reshape(H * W, 1, 4)], [0, 0, 1, 1, 2, 2, -1, 3])
+    except cv2.error:
+        rgba[..., :3] = rgb
+        rgba[..., 3] = 0
+    return rgba
 
 
 class BasisTextures:
@@ -106,9 +136,7 @@ class BasisTextures:
                 f"basis of {n} images {W}x{H} needs {self.nbytes / 2**20:.0f} MiB of GPU memory as {dtype}, "
                 f"over the budget of {budget_bytes / 2**20:.0f} MiB; use --rank K (compression), dtype 'f16', "
                 f"or a smaller capture", path)
-        if not np.all(np.isfinite(basis)):
-            raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
-        max_abs = float(np.max(np.abs(basis)))
+        max_abs = _finite_max_abs(basis, path)
         self.scale = choose_scale(max_abs) if dtype == "f16" else 1.0
         self.report = None
         self.textures, self.offsets, self.counts = [], [], []
@@ -116,14 +144,14 @@ class BasisTextures:
         try:
             for a in range(0, n, self.max_layers):
                 b = min(n, a + self.max_layers)
-                rgba = np.zeros((b - a, H, W, 4), dtype=np.float16 if dtype == "f16" else np.float32)
                 if dtype == "f16":
                     h, rep = to_float16(basis[a:b], scale=self.scale, path=path, max_abs=max_abs)
-                    rgba[..., :3] = h
+                    rgba = _with_zero_alpha(h)
                     rel, n_flush = max(rel, rep.max_rel_error), n_flush + rep.n_flushed
                 else:
+                    rgba = np.zeros((b - a, H, W, 4), dtype=np.float32)
                     rgba[..., :3] = basis[a:b]
-                tex = ctx.texture_array((W, H, b - a), 4, data=rgba.tobytes(), dtype="f2" if dtype == "f16" else "f4")
+                tex = ctx.texture_array((W, H, b - a), 4, data=rgba, dtype="f2" if dtype == "f16" else "f4")
                 tex.filter = (0x2600, 0x2600)  # GL_NEAREST; pass 2 uses texelFetch anyway
                 self.textures.append(tex)
                 self.offsets.append(a)
@@ -244,8 +272,7 @@ class PackedBasis:
                 f"basis of {n} images {W}x{H} needs {self.nbytes / 2**20:.0f} MiB of GPU memory as {dtype}, "
                 f"over the budget of {budget_bytes / 2**20:.0f} MiB; use --rank K (compression), dtype 'f16', "
                 f"or a smaller capture", path)
-        if not np.all(np.isfinite(basis)):
-            raise InputError(f"basis has {int(np.count_nonzero(~np.isfinite(basis)))} NaN/Inf values", path)
+        max_abs = _finite_max_abs(basis, path)
         limit = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or SSBO_BAND_BYTES)
         limit = min(limit, SSBO_BAND_BYTES) if band_bytes is None else int(band_bytes)
         if storage == "image":
@@ -256,7 +283,6 @@ class PackedBasis:
             if 3 * -(-max(self.counts) // per) > max_arr:
                 raise ValueError(f"{max(self.counts)} layers per chunk need more than GL_MAX_ARRAY_TEXTURE_LAYERS "
                                  f"({max_arr}) image layers; use a smaller max_layers")
-        max_abs = float(np.max(np.abs(basis)))
         self.scale = choose_scale(max_abs) if dtype == "f16" else 1.0
         self.report = None
         self.bands = []
@@ -278,7 +304,7 @@ class PackedBasis:
                             part = np.asarray(part, dtype=np.float32)
                         words = pack_pixel_major(part, dtype)[:, :, 0]  # h, w, 3, 4
                         planes = np.ascontiguousarray(words.transpose(2, 0, 1, 3))  # 3, h, w, 4
-                        tex.write(planes.tobytes(), viewport=(0, 0, 3 * blk, W, H, 3))
+                        tex.write(planes, viewport=(0, 0, 3 * blk, W, H, 3))
                     continue
                 if W * pb > limit:
                     raise InputError(f"one image row of {cnt} packed layers ({W * pb} bytes) exceeds the SSBO "
@@ -294,7 +320,7 @@ class PackedBasis:
                     else:
                         part = np.asarray(part, dtype=np.float32)
                     words = pack_pixel_major(part, dtype)
-                    chunk.append((r, part.shape[1], ctx.buffer(words.tobytes())))
+                    chunk.append((r, part.shape[1], ctx.buffer(words)))
         except BaseException:
             self.release()
             raise

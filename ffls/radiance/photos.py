@@ -250,7 +250,9 @@ def load_photos(capture, indices=None, progress: bool = True) -> np.ndarray:
     out = None
     depth0 = None
     for n, i in enumerate(tqdm(idx, desc="loading images", unit="img", disable=disable, leave=False)):
-        img = read_image(capture.image_paths[i])
+        # an EXR of the first one's size is widened straight into its place (no copy of its own)
+        dst = None if out is None else out[n]
+        img = read_image(capture.image_paths[i], out=dst)
         _check_photo(capture, i, img)
         if out is None:
             out = np.empty((len(idx), *img.pixels.shape), dtype=np.float32)
@@ -262,7 +264,9 @@ def load_photos(capture, indices=None, progress: bool = True) -> np.ndarray:
                 f"{out.shape[2]}x{out.shape[1]}", img.path)
         elif capture.encoding == "auto" and img.bit_depth != depth0:
             raise InputError(_mixed_depth_message(img.bit_depth, depth0), img.path)
-        out[n] = linearise(img, capture.encoding, capture.response)
+        lin = linearise(img, capture.encoding, capture.response)
+        if lin is not dst:
+            out[n] = lin
     return out
 
 

@@ -17,8 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffls.errors import InputError
+from ffls.io.images import narrow_to_half, widen_half
 
-__all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "to_float16"]
+__all__ = ["F16_TARGET_MAX", "SIGNIFICANT_REL", "Float16Report", "choose_scale", "finite_max_abs",
+           "to_float16"]
 
 #: The largest basis magnitude after scaling to float16 (2**12; float16 max is 65504).
 F16_TARGET_MAX = 2.0 ** 12
@@ -26,6 +28,9 @@ F16_TARGET_MAX = 2.0 ** 12
 SIGNIFICANT_REL = 1e-6
 
 _F16_MIN_NORMAL = 2.0 ** -14
+#: Values checked at a time by :func:`to_float16` and :func:`finite_max_abs` (1 MiB of float32): the
+#: temporaries of the checks stay in the CPU's cache, and no temporary of a whole basis is made.
+BLOCK_VALUES = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -74,9 +79,51 @@ def choose_scale(max_abs: float, target: float = F16_TARGET_MAX) -> float:
     return float(2.0 ** np.floor(np.log2(target / max_abs)))
 
 
+def _flat_blocks(a: np.ndarray):
+    """``a``'s values in C order as flat views of at most :data:`BLOCK_VALUES` values (one layer
+    range copied at a time where ``a`` is not C-contiguous)."""
+    block = BLOCK_VALUES
+    if a.flags.c_contiguous:
+        flat = a.reshape(-1)
+        for i in range(0, flat.size, block):
+            yield flat[i:i + block]
+        return
+    per = max(1, block // max(1, a[0].size)) if a.ndim else 1
+    for k in range(0, a.shape[0], per):
+        flat = np.ascontiguousarray(a[k:k + per]).reshape(-1)
+        for i in range(0, flat.size, block):
+            yield flat[i:i + block]
+
+
+def finite_max_abs(basis: np.ndarray) -> float:
+    """Largest magnitude of ``basis`` in one pass of cache-sized blocks (no temporary of its size).
+
+    Returns
+    -------
+    float
+        ``max |x|`` (0 for an empty array); NaN or inf where ``basis`` holds a NaN or an inf, so
+        that one ``np.isfinite`` of the result checks the whole array.
+    """
+    basis = np.asarray(basis)
+    top = 0.0
+    buf = None
+    for blk in _flat_blocks(basis.reshape(1) if basis.ndim == 0 else basis):
+        if buf is None:
+            buf = np.empty(blk.size, dtype=blk.dtype)
+        v = float(np.abs(blk, out=buf[:blk.size]).max())
+        if not v <= top:  # (a NaN stays: NaN compares false)
+            top = v
+            if np.isnan(v):
+                break
+    return top
+
+
 def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: int = 64,
                max_abs: float | None = None) -> tuple[np.ndarray, Float16Report]:
     """Scale and convert a basis to float16, checking overflow and underflow.
+
+    The values are converted and checked in cache-sized blocks (:data:`BLOCK_VALUES`): the result
+    and the report do not depend on the blocks (counts add up, the error is a maximum).
 
     Parameters
     ----------
@@ -87,7 +134,7 @@ def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: 
     path : path-like, optional
         Named in errors.
     chunk : int
-        Layers converted at a time (bounds the temporaries).
+        Layers at most copied at a time where ``basis`` is not C-contiguous (bounds that copy).
     max_abs : float, optional
         The dataset's largest magnitude when ``basis`` is one part of it (defines which values
         are significant); default the largest magnitude of ``basis``.
@@ -102,31 +149,47 @@ def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: 
         On NaN/Inf input, on overflow to inf, or on underflow of significant values.
     """
     basis = np.asarray(basis)
-    if basis.size and not np.all(np.isfinite(basis)):
-        bad = int(np.count_nonzero(~np.isfinite(basis)))
-        raise InputError(f"basis has {bad} NaN/Inf values; cannot upload", path)
-    if max_abs is None:
-        max_abs = float(np.max(np.abs(basis))) if basis.size else 0.0
+    checked = False  # every value known finite
+    if max_abs is None or not (np.isfinite(max_abs) and max_abs >= 0):
+        top = finite_max_abs(basis) if basis.size else 0.0
+        if not np.isfinite(top):
+            _raise_nonfinite(basis, path)
+        checked = True
+        max_abs = top if max_abs is None else max_abs
     if scale is None:
         scale = choose_scale(max_abs)
     out = np.empty(basis.shape, dtype=np.float16)
-    n_over = n_under = n_flush = 0
-    rel = 0.0
     sig = SIGNIFICANT_REL * max_abs
-    for a in range(0, max(basis.shape[0], 1) if basis.ndim else 1, chunk):
-        x = np.asarray(basis[a:a + chunk], dtype=np.float32) * np.float32(scale)
-        with np.errstate(over="ignore"):
-            h = x.astype(np.float16)
-        out[a:a + chunk] = h
-        hf = h.astype(np.float32)
-        n_over += int(np.count_nonzero(np.isinf(hf)))
-        tiny = (np.abs(hf) < _F16_MIN_NORMAL) & (x != 0)
-        significant = np.abs(x) >= np.float32(sig * scale)
-        n_under += int(np.count_nonzero(tiny & significant & (sig > 0)))
-        n_flush += int(np.count_nonzero(tiny & ~significant))
-        m = significant & (x != 0) & np.isfinite(hf)
-        if np.any(m):
-            rel = max(rel, float(np.max(np.abs(hf[m] - x[m]) / np.abs(x[m]))))
+    s32, sig32 = np.float32(scale), np.float32(sig * scale)
+    # where sig * scale >= 2**-14, a significant value rounds to a normal float16 (rounding is
+    # monotone and 2**-14 is a float16): no significant value can underflow, and every value that
+    # becomes zero or subnormal is a flushed one; blocks that hold an inf or a NaN after the
+    # conversion take the general checks
+    fast = sig > 0 and sig32 >= _F16_MIN_NORMAL
+    counts = np.zeros(3, dtype=np.int64)  # overflow, underflow, flushed
+    rel = 0.0
+    chunk = max(1, int(chunk))
+    src_all, dst_all = (basis.reshape(1), out.reshape(1)) if basis.ndim == 0 else (basis, out)
+    bufs = None
+    for a in range(0, src_all.shape[0], chunk):
+        src_c = src_all[a:a + chunk]
+        if not src_c.flags.c_contiguous:
+            src_c = np.ascontiguousarray(src_c)
+        src_f, dst_f = src_c.reshape(-1), dst_all[a:a + chunk].reshape(-1)
+        for i in range(0, src_f.size, BLOCK_VALUES):
+            src, dst = src_f[i:i + BLOCK_VALUES], dst_f[i:i + BLOCK_VALUES]
+            if bufs is None:
+                bufs = _Buffers(min(BLOCK_VALUES, src_f.size))
+            x = bufs.scaled(src, s32)
+            narrow_to_half(x, dst)
+            if fast and bufs.all_finite(dst):  # (a NaN or inf of the input is one after it)
+                counts[2] += bufs.flushed(x, dst)
+                rel = max(rel, bufs.max_rel_error(x, dst, sig32))
+                continue
+            if not checked and not np.all(np.isfinite(src)):
+                _raise_nonfinite(basis, path)
+            rel = max(rel, _check_block(x, dst, sig, sig32, counts))
+    n_over, n_under, n_flush = (int(c) for c in counts)
     report = Float16Report(float(scale), max_abs, n_over, n_under, n_flush, rel)
     if n_over:
         raise InputError(f"float16 basis: {n_over} values overflow to inf at scale {scale:g} (max |x| = {max_abs:g})", path)
@@ -134,3 +197,73 @@ def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: 
         raise InputError(f"float16 basis: {n_under} significant values underflow at scale {scale:g} "
                          f"(max |x| = {max_abs:g}); use dtype='f32'", path)
     return out, report
+
+
+def _raise_nonfinite(basis: np.ndarray, path):
+    bad = int(np.count_nonzero(~np.isfinite(basis)))
+    raise InputError(f"basis has {bad} NaN/Inf values; cannot upload", path)
+
+
+def _check_block(x: np.ndarray, h: np.ndarray, sig: float, sig32, counts: np.ndarray) -> float:
+    """The general checks of one block: ``x`` the scaled float32 values, ``h`` their float16;
+    adds (overflow, underflow, flushed) to ``counts`` and returns the largest relative error."""
+    hf = h.astype(np.float32)
+    counts[0] += np.count_nonzero(np.isinf(hf))
+    tiny = (np.abs(hf) < _F16_MIN_NORMAL) & (x != 0)
+    significant = np.abs(x) >= sig32
+    counts[1] += np.count_nonzero(tiny & significant & (sig > 0))
+    counts[2] += np.count_nonzero(tiny & ~significant)
+    m = significant & (x != 0) & np.isfinite(hf)
+    if np.any(m):
+        return float(np.max(np.abs(hf[m] - x[m]) / np.abs(x[m])))
+    return 0.0
+
+
+class _Buffers:
+    """Scratch arrays of one block for :func:`to_float16`'s checks (reused: no allocation per block)."""
+
+    def __init__(self, n: int):
+        self.x = np.empty(n, dtype=np.float32)
+        self.e = np.empty(n, dtype=np.float32)
+        self.d = np.empty(n, dtype=np.float32)
+        self.bits = np.empty(n, dtype=np.uint16)
+        self.words = np.empty(n, dtype=np.uint32)
+        self.mask = np.empty(n, dtype=bool)
+
+    def scaled(self, src: np.ndarray, s32) -> np.ndarray:
+        """``float32(src) * s32`` (the float32 product, as ``np.asarray(src, float32) * s32``)."""
+        x = self.x[:src.size]
+        if src.dtype != np.float32:
+            np.copyto(x, src, casting="unsafe")
+            src = x
+        return np.multiply(src, s32, out=x)
+
+    def all_finite(self, h: np.ndarray) -> bool:
+        """No inf or NaN in the float16 block ``h`` (exponent bits all set: magnitude >= 0x7c00);
+        leaves the magnitudes' bits in ``self.bits``."""
+        bits = np.bitwise_and(h.view(np.uint16), np.uint16(0x7FFF), out=self.bits[:h.size])
+        return bool(bits.max() < 0x7C00)
+
+    def flushed(self, x: np.ndarray, h: np.ndarray) -> int:
+        """Non-zero values of ``x`` whose float16 ``h`` is zero or subnormal (exponent bits 0), from
+        :meth:`all_finite`'s bits: non-zero values less those that stayed normal (a zero of ``x``
+        is a zero of ``h``)."""
+        nonzero = np.left_shift(x.view(np.uint32), 1, out=self.words[:x.size])  # (no sign: +-0 are 0)
+        normal = np.right_shift(self.bits[:h.size], 10, out=self.bits[:h.size])
+        return int(np.count_nonzero(nonzero)) - int(np.count_nonzero(normal))
+
+    def max_rel_error(self, x: np.ndarray, h: np.ndarray, sig32) -> float:
+        """``max |float32(h) - x| / |x|`` over ``|x| >= sig32`` (> 0), each in float32 as
+        :func:`_check_block` forms it: the others' numerators are set to 0 and their
+        denominators to ``sig32`` (0 / sig32 = 0 adds nothing to a maximum of values >= 0)."""
+        n = x.size
+        e, d, m = self.e[:n], self.d[:n], self.mask[:n]
+        widen_half(h.reshape(n, 1, 1), e.reshape(n, 1, 1))
+        np.subtract(e, x, out=e)
+        np.abs(e, out=e)
+        np.abs(x, out=d)
+        np.greater_equal(d, sig32, out=m)
+        np.multiply(e, m, out=e)
+        np.maximum(d, sig32, out=d)
+        np.divide(e, d, out=e)
+        return float(e.max())
