@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from cli_lines import entries, one_line, tiny_capture
+from ffls.cli import main
 
 
 @pytest.fixture(scope="module")
@@ -63,3 +64,50 @@ def test_a_sphere_placed_beyond_the_pixels_a_float_holds_is_out_of_frame(tmp_pat
                                 f"--sphere-xy={xy}"])
     assert rc == 2 and "--sphere-xy" in line and "out of the frame" in line
     assert entries(tmp_path) == set()
+
+
+# ----------------------------------------------------------------------------- probes
+def test_a_probe_pose_beyond_any_number_is_one_line(tmp_path, capfd):
+    """``probe.json`` ``camera.world_from_camera`` with a translation of 1e308: the ball's distance
+    overflowed to inf and ``detect``'s ``ValueError: the sphere must lie in front of the camera``
+    came out as a traceback."""
+    from ffls.synth.probe import look_at, write_mirror_probe
+
+    d = tmp_path / "p"
+    m = np.random.default_rng(17).uniform(0.1, 1.0, (16, 32, 3)).astype(np.float32)
+    K = np.array([[300.0, 0, 40], [0, 300.0, 40], [0, 0, 1]])
+    write_mirror_probe(d, m, (80, 80), K=K, world_from_camera=look_at([0, -1.0, 0.2]), radius=0.1, supersample=1)
+    doc = json.loads((d / "probe.json").read_text())
+    doc["camera"]["world_from_camera"][0][3] = 1e308
+    (d / "probe.json").write_text(json.dumps(doc))
+    rc, line = one_line(capfd, ["probe", "mirror", d, "-o", tmp_path / "m.exr", "--size", "8"])
+    assert rc == 2 and "probe.json" in line and "world_from_camera" in line and "beyond any number" in line
+    assert not (tmp_path / "m.exr").exists()
+
+
+@pytest.mark.parametrize("level, word", [(255, "saturated everywhere"), (0, "black everywhere")])
+def test_probe_merge_of_a_bracket_that_recorded_nothing_is_refused(tmp_path, capfd, level, word):
+    """``probe merge`` of a bracket clipped (or black) in every exposure wrote an HDR of lower bounds
+    (or of zeros) with status 0; the same bracket in a probe folder was refused."""
+    import cv2
+
+    for i in range(2):
+        cv2.imwrite(str(tmp_path / f"s{i}.png"), np.full((16, 16, 3), level, np.uint8))
+    rc, line = one_line(capfd, ["probe", "merge", tmp_path / "s0.png", tmp_path / "s1.png", "-o", tmp_path / "h.exr",
+                                "--exposures", "0.01,0.02", "--encoding", "srgb"])
+    assert rc == 2 and "s0.png" in line and word in line
+    assert not (tmp_path / "h.exr").exists()
+
+
+def test_probe_merge_of_a_usable_bracket_is_written(tmp_path, capfd):
+    """The guard's other side: a bracket with some pixels clipped in every exposure is merged."""
+    import cv2
+
+    rng = np.random.default_rng(17)
+    for i, s in enumerate([1, 2]):
+        a = np.clip(rng.random((16, 16, 3)) * 120 * s, 0, 255).astype(np.uint8)
+        a[:2] = 255
+        cv2.imwrite(str(tmp_path / f"b{i}.png"), a)
+    assert main(["probe", "merge", str(tmp_path / "b0.png"), str(tmp_path / "b1.png"), "-o", str(tmp_path / "h.exr"),
+                 "--exposures", "0.01,0.02", "--encoding", "srgb"]) == 0
+    assert (tmp_path / "h.exr").exists()
