@@ -111,3 +111,22 @@ def test_probe_merge_of_a_usable_bracket_is_written(tmp_path, capfd):
     assert main(["probe", "merge", str(tmp_path / "b0.png"), str(tmp_path / "b1.png"), "-o", str(tmp_path / "h.exr"),
                  "--exposures", "0.01,0.02", "--encoding", "srgb"]) == 0
     assert (tmp_path / "h.exr").exists()
+
+
+# ----------------------------------------------------------------------------- exposures.json
+@pytest.mark.parametrize("value, shown", [("0.01", '"0.01"'), (True, "true")])
+def test_an_exposure_time_given_as_a_string_or_boolean_is_refused(tmp_path, capfd, value, shown):
+    """``calibrate response``'s ``exposures.json`` with ``"r0.png": true`` was read as 1 s (the
+    response came out 684 times too bright, status 0), ``"0.01"`` as 0.01 s: ``float()`` reads both."""
+    import cv2
+
+    g = np.linspace(0, 1, 64)[None, :, None] * np.ones((48, 1, 3))
+    times = {}
+    for i, s in enumerate([1, 2, 4, 8]):
+        cv2.imwrite(str(tmp_path / f"r{i}.png"), np.clip(g * 80 * s, 0, 255).astype(np.uint8))
+        times[f"r{i}.png"] = 0.01 * s
+    times["r0.png"] = value
+    (tmp_path / "exposures.json").write_text(json.dumps(times))
+    rc, line = one_line(capfd, ["calibrate", "response", tmp_path, "-o", tmp_path / "c.npy"])
+    assert rc == 2 and "exposures.json" in line and "r0.png" in line and f"{shown} is not a number" in line
+    assert not (tmp_path / "c.npy").exists()
