@@ -153,8 +153,10 @@ def as_hemisphere(value) -> Hemisphere:
                 v = np.array(a, dtype=np.float64)
             except (TypeError, ValueError):
                 ok = False
-        if ok and np.all(np.isfinite(v)) and np.linalg.norm(v) > 0:
-            v = v / np.linalg.norm(v)
+        if ok and np.all(np.isfinite(v)) and np.any(v != 0):
+            # scaled by its largest entry first: the norm of (0, 0, 1e308) overflows to inf,
+            # which had made the axis (0, 0, 0) without a word
+            v = normalize(v / np.max(np.abs(v)))
             v = v + 0.0  # -0.0 -> 0.0
             if np.allclose(v, [0.0, 0.0, 1.0], rtol=0, atol=1e-12):
                 return UPPER

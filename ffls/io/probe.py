@@ -19,6 +19,7 @@ formats would not.
 """
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -246,7 +247,10 @@ def _short(value, n: int = 60) -> str:
 
 def exposure_time_problem(t) -> str | None:
     """Why ``t`` is not an exposure time in seconds (not a finite number inside
-    :data:`EXPOSURE_RANGE_S`), or None when it is one."""
+    :data:`EXPOSURE_RANGE_S`), or None when it is one. A JSON string (``"0.01"``) or boolean is
+    not a number (``float()`` would read them: ``true`` as 1 s)."""
+    if isinstance(t, (str, bool)):
+        return f"{json.dumps(t)} is not a number of seconds"
     try:
         t = float(t)
     except (TypeError, ValueError, ZeroDivisionError):

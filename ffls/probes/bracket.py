@@ -310,7 +310,7 @@ def merge_bracket_files(paths, exposures, encoding, response=None, source=None, 
     ------
     InputError
         An unreadable image, sizes that differ, an encoding that does not apply (or none stated
-        for integer images), all exposure times equal.
+        for integer images), all exposure times equal, a bracket black or clipped everywhere.
     """
     paths = [Path(p) for p in paths]
     source = paths[0] if source is None else source
@@ -325,9 +325,13 @@ def merge_bracket_files(paths, exposures, encoding, response=None, source=None, 
     if len(t) != len(paths):
         raise InputError(f"{len(paths)} images but {len(t)} exposure times", source)
     try:
-        return merge_exposures_Robertson2003(lin, [im.pixels for im in imgs], t, clips)
+        m = merge_exposures_Robertson2003(lin, [im.pixels for im in imgs], t, clips)
     except ValueError as e:
         raise InputError(str(e), source) from None
+    # a bracket black, or clipped, in every exposure holds no radiance (`probe merge` wrote it)
+    _check_recorded(m.radiance, m.saturated, np.all(np.isfinite(m.radiance), axis=-1),
+                    f"the bracket {paths[0].name}..{paths[-1].name}", paths[0])
+    return m
 
 
 @dataclass
@@ -401,12 +405,18 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
     valid = np.all(np.isfinite(rad), axis=-1)
     if alpha is not None:
         valid &= alpha > 0
+    _check_recorded(rad, sat, valid, what, paths[0])
+    return ViewRadiance(np.where(valid[..., None], rad, 0.0).astype(np.float32), sat, valid, note)
+
+
+def _check_recorded(rad, sat, valid, what: str, path) -> None:
+    """InputError naming ``path`` where the ``valid`` pixels of ``rad`` recorded no light, or where
+    (nearly) all of them are clipped (``sat``): an image or merged bracket that holds no radiance."""
     if not np.any(rad[valid] > 0):
-        raise InputError(f"{what} is black everywhere (no light recorded): check the exposure", paths[0])
+        raise InputError(f"{what} is black everywhere (no light recorded): check the exposure", path)
     if sat[valid].mean() > 0.999 if valid.any() else False:
         raise InputError(f"{what} is saturated everywhere (every pixel clipped): use a shorter exposure or a "
-                         f"bracket", paths[0])
-    return ViewRadiance(np.where(valid[..., None], rad, 0.0).astype(np.float32), sat, valid, note)
+                         f"bracket", path)
 
 
 def exposure_from_exif(path: str | os.PathLike) -> float:

@@ -578,7 +578,13 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
         Ti = np.linalg.inv(T)
         C = Ti[:3, :3] @ sph.center + Ti[:3, 3]
         R = float(sph.radius)
-        if not (C[2] > R and np.linalg.norm(C) > R):
+        with np.errstate(over="ignore", invalid="ignore"):  # a distance beyond any number: named here
+            dist = float(np.linalg.norm(C))
+        if not np.isfinite(dist):
+            raise InputError(f"sphere.center {np.round(sph.center, 4).tolist()} and camera.world_from_camera put "
+                             "the ball at a distance beyond any number from the camera: one of them is wrong",
+                             source)
+        if not (C[2] > R and dist > R):
             raise InputError(f"sphere.center: {np.round(sph.center, 4).tolist()} is not in front of the camera "
                              f"(camera frame {np.round(C, 4).tolist()}); check camera.world_from_camera", source)
         from ffls.camera.projection import project_points

@@ -1046,6 +1046,10 @@ def sphere_silhouettes(scene: SynthScene, resolution: int) -> tuple[np.ndarray, 
     whole = np.zeros(scene.n_spheres, dtype=np.int64)
     inside = np.zeros(scene.n_spheres, dtype=np.int64)
     for k, c in enumerate(scene.sphere_centers):
+        if not (np.all(np.abs(uv[k]) < 2.0 ** 53) and rpx[k] < 2.0 ** 53):
+            # a sphere so far off (--sphere-xy 1e200,0) that its image lies past the pixel
+            # coordinates a float holds exactly (or at inf): counted with no pixel
+            continue
         h = int(math.ceil(2.0 * rpx[k])) + 2  # off-axis outlines are stretched ellipses: search 2 radii
         u0, v0 = int(round(uv[k, 0])), int(round(uv[k, 1]))
         vv, uu = np.mgrid[v0 - h:v0 + h + 1, u0 - h:u0 + h + 1]
