@@ -11,16 +11,21 @@ of the paired rule, then on it every weight of ``WEIGHTS`` (``POWER_WEIGHTS`` an
 pixels: the relit error, that error split by the map's error in spherical-harmonic orders 0-2 (the true
 map plus that part of the difference, relit) and above 2 (the rest), the per-order relative error of
 orders 0-4 (``evaluate.sh_recovery``), the fit's re-rendered relative RMS and sum of squares over all
-pixels, its total power; the adaptive set's rounds (sizes) and their held-out relative RMS; and the
+pixels, its total power; the adaptive set's rounds (sizes), their held-out relative RMS and the set's CPU seconds
+(``set_cpu_s``, ``time.process_time``); and the
 paired-fold cross-validation's held-out squared errors per fold
 (``select_regularization(..., 'power', rule='paired_se')``) with the weight it chose. Writes
 ``benchmarks/results/probes_power_split[_noise[_seedS]].json``; prints a line per weight. ``--patience``: the
 adaptive set's ``patience`` (rounds without a better held-out score before it stops; default 2, the estimator's).
+``--jitter S``: the normals multiplied by ``1 + 1e-15 z`` (``z`` standard normal from seed ``S``), to see which
+answers change with the inputs' last bits. ``--energy E``: every fit with the energy prior ``E`` too (a ridge:
+one solution where NNLS has many).
 """
 from __future__ import annotations
 
 import dataclasses
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +51,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--orientations", default="0,1,2,3")
     ap.add_argument("--patience", type=int, default=2)
+    ap.add_argument("--jitter", type=int, default=None)
+    ap.add_argument("--energy", type=float, default=0.0)
     own, rest = ap.parse_known_args(argv if argv is not None else sys.argv[1:])
     a = probe_benchmark_args(__doc__, MAPS, rest)
     rng = np.random.default_rng(own.seed)
@@ -56,7 +63,10 @@ def main(argv=None):
     for name in MAPS:  # every map, in probes_tv.py's order, so that each gets the same noise as there
         lm, true, truth = probe_benchmark_map(name, H, cap, lights)
         sph, rad = diffuse_ball(lm, cap, a.noise, rng)
-        scenes[name] = (sph.normals, rad, truth, true)
+        normals = sph.normals
+        if own.jitter is not None:  # the normals moved by their last bits: which answers are a lottery
+            normals = normals * (1 + 1e-15 * np.random.default_rng(own.jitter).standard_normal(normals.shape))
+        scenes[name] = (normals, rad, truth, true)
     low = sh_basis(latlong_directions(2 * H, H).reshape(-1, 3), 2)
     tag = ("_noise" if a.noise > 0 else "") + (f"_seed{own.seed}" if own.seed else "")
     path = a.json or str(ROOT / f"benchmarks/results/probes_power_split{tag}.json")
@@ -66,18 +76,22 @@ def main(argv=None):
             normals, rad, truth, true = scenes[name]
             R = rots[i]
             n = normals if i == 0 else normals @ R.T
+            t = time.process_time()
             ps = adaptive_hougen_ahuja(n, rad, 0.7, nonnegative=True, ambient="auto", rule="paired_se",
-                                       patience=own.patience)
+                                       patience=own.patience, energy=own.energy)
+            set_cpu = time.process_time() - t
             reg = select_regularization(n, rad, 0.7, ps.fit.directions, POWER_WEIGHTS, "power", rule="paired_se",
-                                        nonnegative=True, ambient="auto")
+                                        nonnegative=True, ambient="auto", energy=own.energy)
             row = {"map": name, "orientation": i, "sources": int(ps.chosen), "cv_weight": reg.chosen,
                    "fold_errors": reg.fold_errors.tolist(), "pixels": int(rad.size), "weights": [],
-                   "rounds": [int(c) for c in ps.candidates], "round_scores": [float(x) for x in ps.scores]}
+                   "rounds": [int(c) for c in ps.candidates], "round_scores": [float(x) for x in ps.scores],
+                   "set_cpu_s": set_cpu}
             print(f"{name} orientation {i}: {ps.chosen} sources (rounds "
                   + ", ".join(f"{c}: {x:.5f}" for c, x in zip(row["rounds"], row["round_scores"]))
-                  + f" held-out relative RMS), paired CV chose {reg.chosen:g}", flush=True)
+                  + f" held-out relative RMS; {set_cpu:.1f} CPU s), paired CV chose {reg.chosen:g}", flush=True)
             for lam in WEIGHTS:
-                fit = hougen_ahuja(n, rad, 0.7, ps.fit.directions, nonnegative=True, ambient="auto", power=lam)
+                fit = hougen_ahuja(n, rad, 0.7, ps.fit.directions, nonnegative=True, ambient="auto", power=lam,
+                                   energy=own.energy)
                 rec = dataclasses.replace(fit, directions=normalize(fit.directions @ R)).latlong(H)
                 diff = rec - true
                 part = (low @ sh_project(diff, 2)).reshape(diff.shape)
@@ -95,7 +109,8 @@ def main(argv=None):
                       + f"; re-render {w['rerender']:.5f}; power {w['power']:.2f}", flush=True)
             out.append(row)
             write_json(path, {"host": host_info(), "noise": a.noise, "seed": own.seed, "map_height": H,
-                              "weights": list(WEIGHTS), "patience": own.patience, "rows": out,
+                              "weights": list(WEIGHTS), "patience": own.patience, "jitter": own.jitter,
+                              "energy": own.energy, "rows": out,
                               "command": " ".join(["OMP_NUM_THREADS=1 python", "benchmarks/probes_power_split.py",
                                                    *sys.argv[1:]])})
     print(f"wrote {path}")

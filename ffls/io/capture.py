@@ -78,6 +78,9 @@ UNIT_TOLERANCE = 1e-3
 #: identity, ``det R`` against 1): any rotation written to 3 decimals is within it (docs/formats.md,
 #: "The camera's tilt", gives them so); such a block is taken as its nearest rotation.
 ROTATION_TOLERANCE = 2e-3
+#: A rotation block within this of orthonormal with determinant 1 is a rotation to float64 rounding
+#: (a computed rotation's ``R R^T`` is within a few 1e-16 of the identity) and is used as given.
+ROTATION_ROUNDING = 1e-14
 _ENCODINGS = ("srgb", "linear")
 _FLOAT_SUFFIXES = (".exr", ".hdr", ".pic")
 _ENCODING_FORMS = "'srgb', 'linear', {\"gamma\": g} or {\"response\": \"file.npy|.csv\"}"
@@ -556,7 +559,10 @@ def _parse_camera(j: _Json, cam, image_size=None) -> tuple:
 def _rigid(j: _Json, value, key: str) -> np.ndarray:
     """``value`` as a 4x4 rigid transform; a rotation block within :data:`ROTATION_TOLERANCE` of a
     rotation (typed to 3 decimals) is replaced by its nearest rotation, ``U V^T`` of its SVD (the
-    orthogonal Procrustes solution; its determinant is then 1, the block's being positive)."""
+    orthogonal Procrustes solution; its determinant is then 1, the block's being positive). A block
+    within :data:`ROTATION_ROUNDING` (a rotation to float64 rounding, a renderer's pose) is used as
+    given: the SVD's own rounding moved the probe benchmarks' exact pose by 1.1e-16, which changed
+    ``benchmarks/probes_power_split.py``'s rows (``docs/probes.md``)."""
     T = j.array(value, key, (4, 4))
     if not np.allclose(T[3], [0, 0, 0, 1]):
         j.fail(key, f"not a rigid transform: its last row must be 0 0 0 1, got {_short(T[3].tolist())}")
@@ -569,6 +575,8 @@ def _rigid(j: _Json, value, key: str) -> np.ndarray:
     if dev > ROTATION_TOLERANCE:
         j.fail(key, f"not a rigid transform: its rotation block is {dev:.2g} from orthonormal with determinant 1 "
                     f"(tolerance {ROTATION_TOLERANCE:g}, met by a rotation written to 3 decimals)")
+    if dev <= ROTATION_ROUNDING:
+        return T
     T = T.copy()
     U, _, Vt = np.linalg.svd(R)
     T[:3, :3] = U @ Vt
