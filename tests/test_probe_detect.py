@@ -245,6 +245,31 @@ def test_limb_cone_puts_the_centre_where_the_perspective_outline_says(tmp_path):
     assert limb_cone(vr.radiance, (300.0, 30.0), 12.0, cam.K, cam.dist, 1.0, vr.radiance.shape[:2], "x") is None
 
 
+def test_stated_pixel_circle_is_the_outline_best_circle(tmp_path):
+    """A circle stated in pixels (``center_px`` and ``radius_px``) is the ball's outline as measured in the
+    photo: for the test's ball (33 px, 10 degrees off the axis at f = 400 px) the circle that best fits its
+    exact outline. Taken as the cone's cross-section (before) the centre was 0.51 px off; now the sphere whose
+    outline has that best circle: within 0.01 px (0.00005 px measured), its distance over its radius exact."""
+    import json
+
+    from ffls.spheres.detect import fit_circle, silhouette_px
+
+    c_true = _probe(tmp_path, "night")
+    probe = load_probe(tmp_path)
+    cam = probe.views[0].camera
+    Ti = np.linalg.inv(np.asarray(cam.world_from_camera))
+    C = Ti[:3, :3] @ np.array([0.0, 0.0, 0.1]) + Ti[:3, 3]
+    cc, rc, _, _ = fit_circle(silhouette_px(cam.K, cam.dist, C, 0.1), c_true, 33.0)
+    doc = json.loads((tmp_path / "probe.json").read_text())
+    doc["sphere"] = {"material": "mirror", "reflectance": 0.7, "center_px": cc.tolist(), "radius_px": float(rc)}
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    probe = load_probe(tmp_path)
+    vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
+    geo = locate_sphere(probe.views[0], vr.radiance, probe.json_path)
+    assert geo.source == "probe.json" and np.hypot(*(geo.center_px - c_true)) < 0.01
+    assert abs(np.linalg.norm(geo.center_cam) / geo.radius - np.linalg.norm(C) / 0.1) < 1e-3 * np.linalg.norm(C) / 0.1
+
+
 @pytest.mark.parametrize("name, seed", [("courtyard", 5), ("courtyard", 1), ("sunrise", 2)])
 def test_unhinted_diffuse_ball_on_a_busy_ground(tmp_path, name, seed):
     """No hint (issue 11): the ball is found within 0.1 px (``locate.diffuse_ball``: each candidate
