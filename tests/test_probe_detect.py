@@ -249,7 +249,7 @@ def test_stated_pixel_circle_is_the_outline_best_circle(tmp_path):
     """A circle stated in pixels (``center_px`` and ``radius_px``) is the ball's outline as measured in the
     photo: for the test's ball (33 px, 10 degrees off the axis at f = 400 px) the circle that best fits its
     exact outline. Taken as the cone's cross-section (before) the centre was 0.51 px off; now the sphere whose
-    outline has that best circle: within 0.01 px (0.00005 px measured), its distance over its radius exact."""
+    outline fits that circle best (``fit_outline``): within 0.01 px (0.004 px measured)."""
     import json
 
     from ffls.spheres.detect import fit_circle, silhouette_px
