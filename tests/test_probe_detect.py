@@ -66,8 +66,8 @@ def test_mirror_limb_states_how_far_its_centre_may_be(tmp_path, name, flagged):
     """Under studio the limb's steps follow a reflected edge just inside the limb over 80 degrees, and the
     centre is 1.12 px off while the cone fit's standard error is 0.12 px: it was used without a word. The fit
     repeated without each sixth of the steps (``limb_centre_uncertainty``) spreads by as much: its 95% radius
-    (1.48 px measured) covers the error and, over ``MIRROR_CENTRE_TOL_PX``, the description says so. Under
-    night (0.14 px off) it is 0.28 px, and the description gives it without the flag."""
+    (2.52 px measured) covers the error and, over ``MIRROR_CENTRE_TOL_PX``, the description says so. Under
+    night (0.14 px off) it is 0.47 px, and the description gives it without the flag."""
     from ffls.probes.locate import MIRROR_CENTRE_TOL_PX
 
     geo, c_true = _located(tmp_path, name)
