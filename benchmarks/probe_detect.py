@@ -13,13 +13,17 @@ about 20 to 40 px. ``probe.json`` locates nothing (``"sphere": {"material": "mir
 Reported per render: the centre error (pixels, against the projected true centre), the radius
 error, and the outcome: ``ok`` (centre within 1 px), ``off`` (found, centre 1 px or more off),
 ``inner`` (a circle inside the ball: radius below 0.8 of the truth, an inner reflection),
-``none`` (no sphere found). Then the rate within 1 px and the time per photo.
+``none`` (no sphere found). Then the rate within 1 px and the time per photo. Also per render the 95% radius
+of the centre the located sphere states (``SphereGeometry.center_uncertainty_px``, None where not stated) and
+whether its description flags it (over ``MIRROR_CENTRE_TOL_PX``); summed: the renders whose error lies within
+the stated radius, the flagged ones, and those off (1 px or more) without a flag. ``--sectors N`` sets
+``ffls.probes.locate.LIMB_JACKKNIFE_SECTORS``.
 
 ``--azimuth DEG`` turns every layout's camera by that much more about the vertical: the same maps and
 lenses seen from other sides, renders not looked at while building the finder.
 
 Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_detect.py [--maps courtyard,night,studio,sunrise] [--azimuth DEG]
-[--out FILE]``
+[--sectors N] [--out FILE]``
 """
 from __future__ import annotations
 
@@ -37,7 +41,8 @@ from ffls.errors import InputError
 from ffls.io.probe import load_probe
 from ffls.lightmaps.lightmap import LightMapWarning, load_lightmap
 from ffls.probes.bracket import view_radiance
-from ffls.probes.locate import locate_sphere
+from ffls.probes import locate as locate_module
+from ffls.probes.locate import MIRROR_CENTRE_TOL_PX, locate_sphere
 from ffls.synth.probe import look_at, write_mirror_probe
 
 HDRI = Path("/work/shared/hdri")
@@ -69,15 +74,16 @@ def render(folder, lightmap, layout, azimuth_deg):
     return c_px, float(r_px)
 
 
-def locate(folder):
-    """The located sphere (centre px, radius px) of the probe in ``folder``, or None, and the seconds taken."""
+def locate(folder, stated: bool = False):
+    """The located sphere (centre px, radius px) of the probe in ``folder``, or None, and the seconds taken;
+    ``stated``: also its 95% centre radius (or None) last in the tuple."""
     probe = load_probe(folder)
     view = probe.views[0]
     vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
     t = time.perf_counter()
     try:
         geo = locate_sphere(view, vr.radiance, probe.json_path)
-        out = (np.asarray(geo.center_px), float(geo.radius_px))
+        out = (np.asarray(geo.center_px), float(geo.radius_px)) + ((geo.center_uncertainty_px,) if stated else ())
     except InputError:
         out = None
     return out, time.perf_counter() - t
@@ -87,8 +93,11 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--maps", default="courtyard,night,studio,sunrise")
     ap.add_argument("--azimuth", type=float, default=0.0, help="added to every camera's azimuth (degrees)")
+    ap.add_argument("--sectors", type=int, default=locate_module.LIMB_JACKKNIFE_SECTORS,
+                    help="the limb jackknife's sectors (ffls.probes.locate.LIMB_JACKKNIFE_SECTORS)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "probe_detect.json"))
     a = ap.parse_args(argv)
+    locate_module.LIMB_JACKKNIFE_SECTORS = a.sectors
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in a.maps.split(","):
@@ -99,7 +108,8 @@ def main(argv=None):
             for k, layout in enumerate(LAYOUTS):
                 folder = Path(tmp) / f"{name}_{layout[0]}"
                 c_true, r_true = render(folder, lm, layout, azimuth_deg=90.0 * m + 120.0 * k + a.azimuth)
-                found, dt = locate(folder)
+                found, dt = locate(folder, stated=True)
+                u = None if found is None else found[2]
                 if found is None:
                     err, dr, outcome = None, None, "none"
                 else:
@@ -107,18 +117,28 @@ def main(argv=None):
                     dr = found[1] - r_true
                     outcome = ("inner" if found[1] < 0.8 * r_true else "ok" if err < 1.0 else "off")
                 rows.append({"map": name, "layout": layout[0], "center_true_px": c_true.tolist(), "radius_true_px": r_true,
-                             "center_error_px": err, "radius_error_px": dr, "outcome": outcome, "seconds": dt})
+                             "center_error_px": err, "radius_error_px": dr, "outcome": outcome, "seconds": dt,
+                             "center_uncertainty_px": u, "flagged": u is not None and u > MIRROR_CENTRE_TOL_PX})
                 print(f"{name:10s} {layout[0]:7s} r={r_true:5.1f} px  "
                       + ("not found" if err is None else f"centre error {err:6.2f} px, radius {dr:+6.2f} px")
-                      + f"  {outcome:5s} {dt:5.2f} s", flush=True)
+                      + f"  {outcome:5s} {dt:5.2f} s" + ("" if u is None else f"  stated {u:5.2f} px (95%)"
+                                                         + (" FLAGGED" if u > MIRROR_CENTRE_TOL_PX else "")), flush=True)
     n_ok = sum(r["outcome"] == "ok" for r in rows)
     errs = [r["center_error_px"] for r in rows if r["center_error_px"] is not None]
     summary = {"renders": len(rows), "within_1px": n_ok,
                "outcomes": {o: sum(r["outcome"] == o for r in rows) for o in ("ok", "off", "inner", "none")},
                "median_center_error_px": float(np.median(errs)) if errs else None,
-               "median_seconds": float(np.median([r["seconds"] for r in rows]))}
+               "median_seconds": float(np.median([r["seconds"] for r in rows])),
+               "stated": sum(r["center_uncertainty_px"] is not None for r in rows),
+               "within_stated": sum(r["center_uncertainty_px"] is not None
+                                    and r["center_error_px"] <= r["center_uncertainty_px"] for r in rows),
+               "flagged": sum(r["flagged"] for r in rows),
+               "off_without_flag": sum(r["center_error_px"] is not None and r["center_error_px"] >= 1.0
+                                       and not r["flagged"] for r in rows)}
     print(f"found within 1 px: {n_ok}/{len(rows)}; outcomes {summary['outcomes']}; median centre error "
-          f"{summary['median_center_error_px']:.2f} px; median {summary['median_seconds']:.2f} s per photo")
+          f"{summary['median_center_error_px']:.2f} px; median {summary['median_seconds']:.2f} s per photo; within "
+          f"the stated 95% radius {summary['within_stated']}/{summary['stated']}; flagged {summary['flagged']}; "
+          f"1 px or more off without a flag {summary['off_without_flag']}")
     write_json(a.out, {"host": host_info(), "summary": summary, "rows": rows})
 
 

@@ -10,7 +10,8 @@ no hint, ``center_px`` on the centre (100, 100), and ``center_px`` 10 px off (10
 
 Mirror: the chrome ball of ``tests/test_probe_detect.py`` (f = 400 px at 1.2 m, 320 x 240 px,
 radius 33 px) under the 4 built-in maps, ``center_px`` on the projected centre and 7.8 px off;
-outcome ``ok`` within 1 px.
+outcome ``ok`` within 1 px, else ``off`` (``off, flagged`` where the sphere's description flags its centre
+as uncertain); with the 95% centre radius it states.
 
 Run: ``OMP_NUM_THREADS=1 python benchmarks/probe_hint.py [--seeds 1,2,...] [--no-mirror] [--out FILE]``
 """
@@ -30,17 +31,18 @@ from ffls.io.images import write_exr
 from ffls.io.probe import load_probe
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.bracket import view_radiance
-from ffls.probes.locate import locate_sphere
+from ffls.probes.locate import MIRROR_CENTRE_TOL_PX, locate_sphere
 from ffls.synth.probe import off_axis_view, write_mirror_probe
 from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 
 def _locate(folder):
+    """(centre px, radius px, stated 95% centre radius or None) of the located sphere, or None (refused)."""
     probe = load_probe(folder)
     vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
     try:
         geo = locate_sphere(probe.views[0], vr.radiance, probe.json_path)
-        return np.asarray(geo.center_px), float(geo.radius_px)
+        return np.asarray(geo.center_px), float(geo.radius_px), geo.center_uncertainty_px
     except InputError:
         return None
 
@@ -81,8 +83,12 @@ def mirror_rows(tmp: Path) -> list:
             set_probe_sphere(folder, {"material": "mirror", "reflectance": 0.7, "center_px": hint})
             got = _locate(folder)
             err = None if got is None else float(np.hypot(*(got[0] - c_true)))
+            u = None if got is None else got[2]
+            flagged = u is not None and u > MIRROR_CENTRE_TOL_PX
             rows.append({"kind": "mirror", "map": name, "hint_offset_px": list(off), "centre_error_px": err,
-                         "outcome": "refused" if got is None else ("ok" if err < 1.0 else "off")})
+                         "center_uncertainty_px": u, "flagged": flagged,
+                         "outcome": "refused" if got is None else ("ok" if err < 1.0 else
+                                                                   ("off, flagged" if flagged else "off"))})
     return rows
 
 
@@ -98,7 +104,9 @@ def main():
     for r in rows:
         e = "-" if r["centre_error_px"] is None else f"{r['centre_error_px']:.3f}"
         where = f"seed {r['seed']} hint {r['hint']}" if r["kind"] == "diffuse" else f"offset {r['hint_offset_px']}"
-        print(f"{r['kind']:8s} {r['map']:10s} {where:28s} centre error {e:>7s} px  {r['outcome']}")
+        u = r.get("center_uncertainty_px")
+        print(f"{r['kind']:8s} {r['map']:10s} {where:28s} centre error {e:>7s} px  {r['outcome']}"
+              + ("" if u is None else f"  (stated {u:.2f} px, 95%{', FLAGGED' if r['flagged'] else ''})"))
     summary = {}
     for r in rows:
         key = f"{r['kind']} {'no hint' if r.get('hint', 1) is None else 'centre hint'}"

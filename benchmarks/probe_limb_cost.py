@@ -6,9 +6,11 @@ the ball stated as a pixel circle (``center_px`` + ``radius_px``, used as given)
 true circle moved 1 and 2 px (along the image's x), the true circle 1 and 2 px smaller, and the ball
 the finder gives without a hint (``ffls.probes.locate.locate_sphere``, the ``probe.json`` sphere left
 unlocated as ``ffls probe mirror`` reads it; the row is left out where it refuses). The true circle is
-the projected centre with the tangent cone's radius near the axis (``probe_detect.render``): off the
-lens axis the true outline is an ellipse, whose best circle is 0.5 px from that centre and 0.8 px
-larger in the f = 400 px layout. Reported per circle: ``map``, the relative RMS (solid-angle weighted) over the directions the
+the circle that best fits the ball's exact outline (``ffls.spheres.detect.fit_circle`` on
+``silhouette_px``), what a measured outline is: off the lens axis the outline is an ellipse, whose best
+circle is 0.5 px from the image of the ball's centre and 0.8 px larger than the tangent cone's radius near
+the axis in the f = 400 px layout. (Before the eighteenth stop a stated circle was taken as the cone's
+cross-section, and the true circle here was that centre with that radius: ``--circle cone``.) Reported per circle: ``map``, the relative RMS (solid-angle weighted) over the directions the
 true circle's estimate saw, of the map against the true one, both area-averaged to 16 x 32 texels; and
 ``relit``, the relative RMS over the object of a synthetic capture (``ffls synth``, 150 distant lights,
 64 px) relit under the estimate against the same capture relit under the true map.
@@ -31,7 +33,9 @@ from ffls.probes import estimate_lightmap
 from ffls.probes.debevec import latlong_solid_angles
 from ffls.relight.cpu import relight_capture
 from ffls.synth.scene import write_synthetic_capture
-from probe_detect import HDRI, LAYOUTS, MAPS, locate, render
+from ffls.io.probe import load_probe
+from ffls.spheres.detect import fit_circle, silhouette_px
+from probe_detect import CENTER, HDRI, LAYOUTS, MAPS, RADIUS, locate, render
 
 HEIGHT = 64
 CIRCLES = ("true", "x+1", "x+2", "r-1", "r-2", "found")
@@ -51,6 +55,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--maps", default="courtyard,night,studio,sunrise")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "probe_limb_cost.json"))
+    ap.add_argument("--circle", choices=("outline", "cone"), default="outline",
+                    help="the true circle: the exact outline's best circle, or the centre's image with the "
+                         "cone's radius near the axis (the stored tables before the eighteenth stop)")
     a = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -69,6 +76,11 @@ def main(argv=None):
             for k, layout in enumerate(LAYOUTS):
                 folder = tmp / f"{name}_{layout[0]}"
                 c_true, r_true = render(folder, lm, layout, azimuth_deg=90.0 * m + 120.0 * k)
+                if a.circle == "outline":
+                    cam = load_probe(folder).views[0].camera
+                    Ti = np.linalg.inv(np.asarray(cam.world_from_camera, dtype=np.float64))
+                    c_true, r_true, _, _ = fit_circle(silhouette_px(cam.K, cam.dist, Ti[:3, :3] @ CENTER + Ti[:3, 3],
+                                                                    RADIUS), c_true, r_true)
                 circles = {"true": (c_true, r_true), "x+1": (c_true + [1.0, 0.0], r_true),
                            "x+2": (c_true + [2.0, 0.0], r_true), "r-1": (c_true, r_true - 1.0),
                            "r-2": (c_true, r_true - 2.0), "found": locate(folder)[0]}

@@ -61,6 +61,22 @@ def test_unconfirmed_mirror_outline_is_not_used(tmp_path, name, tol):
     assert np.hypot(*(geo.center_px - c_true)) < tol and abs(geo.radius_px - r_true) < 1.0
 
 
+@pytest.mark.parametrize("name, flagged", [("studio", True), ("night", False)])
+def test_mirror_limb_states_how_far_its_centre_may_be(tmp_path, name, flagged):
+    """Under studio the limb's steps follow a reflected edge just inside the limb over 80 degrees, and the
+    centre is 1.12 px off while the cone fit's standard error is 0.12 px: it was used without a word. The fit
+    repeated without each sixth of the steps (``limb_centre_uncertainty``) spreads by as much: its 95% radius
+    (2.52 px measured) covers the error and, over ``MIRROR_CENTRE_TOL_PX``, the description says so. Under
+    night (0.14 px off) it is 0.47 px, and the description gives it without the flag."""
+    from ffls.probes.locate import MIRROR_CENTRE_TOL_PX
+
+    geo, c_true = _located(tmp_path, name)
+    err = np.hypot(*(geo.center_px - c_true))
+    assert geo.center_uncertainty_px is not None and err <= geo.center_uncertainty_px
+    assert (geo.center_uncertainty_px > MIRROR_CENTRE_TOL_PX) == flagged
+    assert ("UNCERTAIN" in geo.describe()) == flagged and "95%" in geo.describe()
+
+
 @pytest.mark.parametrize("f, offset", [(1600.0, (-60.0, 40.0)), (800.0, (90.0, -55.0))])
 def test_unhinted_mirror_ball_reaches_its_limb_from_an_inner_outline(tmp_path, f, offset):
     """The layouts of ``benchmarks/probe_detect.py`` at f = 1600 and 800 px (4 m) under sunrise: the
@@ -227,6 +243,31 @@ def test_limb_cone_puts_the_centre_where_the_perspective_outline_says(tmp_path):
     cone = limb_cone(vr.radiance, cc, rc, cam.K, cam.dist, 1.0, vr.radiance.shape[:2], probe.json_path)
     assert cone is not None and np.hypot(*(cone.center_px - c_true)) < 0.15
     assert limb_cone(vr.radiance, (300.0, 30.0), 12.0, cam.K, cam.dist, 1.0, vr.radiance.shape[:2], "x") is None
+
+
+def test_stated_pixel_circle_is_the_outline_best_circle(tmp_path):
+    """A circle stated in pixels (``center_px`` and ``radius_px``) is the ball's outline as measured in the
+    photo: for the test's ball (33 px, 10 degrees off the axis at f = 400 px) the circle that best fits its
+    exact outline. Taken as the cone's cross-section (before) the centre was 0.51 px off; now the sphere whose
+    outline fits that circle best (``fit_outline``): within 0.01 px (0.004 px measured)."""
+    import json
+
+    from ffls.spheres.detect import fit_circle, silhouette_px
+
+    c_true = _probe(tmp_path, "night")
+    probe = load_probe(tmp_path)
+    cam = probe.views[0].camera
+    Ti = np.linalg.inv(np.asarray(cam.world_from_camera))
+    C = Ti[:3, :3] @ np.array([0.0, 0.0, 0.1]) + Ti[:3, 3]
+    cc, rc, _, _ = fit_circle(silhouette_px(cam.K, cam.dist, C, 0.1), c_true, 33.0)
+    doc = json.loads((tmp_path / "probe.json").read_text())
+    doc["sphere"] = {"material": "mirror", "reflectance": 0.7, "center_px": cc.tolist(), "radius_px": float(rc)}
+    (tmp_path / "probe.json").write_text(json.dumps(doc))
+    probe = load_probe(tmp_path)
+    vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
+    geo = locate_sphere(probe.views[0], vr.radiance, probe.json_path)
+    assert geo.source == "probe.json" and np.hypot(*(geo.center_px - c_true)) < 0.01
+    assert abs(np.linalg.norm(geo.center_cam) / geo.radius - np.linalg.norm(C) / 0.1) < 1e-3 * np.linalg.norm(C) / 0.1
 
 
 @pytest.mark.parametrize("name, seed", [("courtyard", 5), ("courtyard", 1), ("sunrise", 2)])

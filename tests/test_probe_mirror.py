@@ -168,6 +168,7 @@ def test_sphere_located_by_pixels(tmp_path):
     est = estimate_lightmap(tmp_path, "mirror", height=32)
     v = est.details["views"][0]
     assert v["sphere_source"] == "auto" and abs(v["radius_px"] - 64) < 1.0
+    assert v["center_uncertainty_px"] is None  # orthographic: not stated (docs/probes.md, eighteenth stop)
     assert np.hypot(v["center_px"][0] - 83.2, v["center_px"][1] - 77.9) < 1.0
     # a pinhole camera and a stated circle in pixels, no radius: the reflection needs only |C| / R
     T = look_at([0.0, -0.6, 0.2])

@@ -107,7 +107,8 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
     Returns
     -------
     LightmapEstimate
-        ``details``: ``views`` (per view: sphere, seen fraction), ``seen_fraction``,
+        ``details``: ``views`` (per view: sphere, the 95% radius of its centre where stated
+        (``center_uncertainty_px``, else None), seen fraction), ``seen_fraction``,
         ``blind_spot_sr``, ``blind_spot_fraction``, ``camera_cone_sr``, ``clipped_fraction``.
 
     Raises
@@ -141,7 +142,8 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
         notes.append(f"{tag}{vr.note}; {geo.describe()}; saw {100 * frac:.1f}% of the sphere; camera cone "
                      + (f"{cone:.1f} deg masked ({why})" if cone > 0 else "kept"))
         per_view.append({"sphere_source": geo.source, "center_px": geo.center_px.tolist(),
-                         "radius_px": geo.radius_px, "seen_fraction": frac, "camera_cone_deg": cone})
+                         "radius_px": geo.radius_px, "seen_fraction": frac, "camera_cone_deg": cone,
+                         "center_uncertainty_px": geo.center_uncertainty_px})
         views.append(mv)
     merged = merge_mirror_views(views, power=weight_power)
     seen = merged.confidence > 0

@@ -23,7 +23,8 @@ from ffls.spheres.select import CRITERIA, round_outline
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
            "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
            "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET", "LIMB_GROWTH", "unhinted_mirror_limb",
-           "LIMB_CONE_MOVE_PX", "limb_cone"]
+           "LIMB_CONE_MOVE_PX", "limb_cone",
+           "LIMB_JACKKNIFE_SECTORS", "MIRROR_CENTRE_TOL_PX", "limb_centre_uncertainty"]
 
 
 @dataclass
@@ -48,6 +49,9 @@ class SphereGeometry:
         ``'probe.json'`` (world centre, or a stated pixel circle), ``'hint'`` or ``'auto'`` (found).
     radius_known : bool
         ``radius`` is the stated one (scene units), not the stand-in 1.
+    center_uncertainty_px : float or None
+        A mirror ball's limb (found or hinted): the radius (pixels) of the 95% region of its centre
+        (:func:`limb_centre_uncertainty`); None where not measured (a stated sphere, a finder's fit).
     """
 
     camera_model: str
@@ -60,6 +64,7 @@ class SphereGeometry:
     radius_px: float
     source: str
     radius_known: bool = False
+    center_uncertainty_px: float | None = None
 
     def mask(self, shape, margin_px: float = 0.0) -> np.ndarray:
         """(H, W) bool: the pixels that see the sphere (``margin_px`` inside its outline)."""
@@ -77,14 +82,53 @@ class SphereGeometry:
         """One line."""
         where = "as given in probe.json" if self.source == "probe.json" else \
             ("found near the pixel hint" if self.source == "hint" else "found automatically")
-        return f"sphere {where}: centre ({self.center_px[0]:.1f}, {self.center_px[1]:.1f}) px, radius " \
+        line = f"sphere {where}: centre ({self.center_px[0]:.1f}, {self.center_px[1]:.1f}) px, radius " \
                f"{self.radius_px:.1f} px"
+        u = self.center_uncertainty_px
+        if u is None:
+            return line
+        # a centre off by u moves the normals near the ball's centre by u / radius_px radians, the
+        # reflected directions by twice that (more toward the rim)
+        line += f", centre within {u:.2f} px (95%; directions near the ball's centre within " \
+                f"{np.degrees(2 * u / self.radius_px):.1f} deg)"
+        if u > MIRROR_CENTRE_TOL_PX:
+            line += f"; UNCERTAIN: over {MIRROR_CENTRE_TOL_PX:g} px, the limb's steps disagree around the ball (a " \
+                    "reflected edge beside the limb?): measure the ball's outline and give \"center_px\" with " \
+                    "\"radius_px\" in probe.json"
+        return line
 
 
-def _given_circle(cam, T, sph) -> SphereGeometry:
-    """A disc stated in pixels (``center_px`` and ``radius_px``), used as it is (:func:`_circle_geometry`)."""
-    return _circle_geometry(cam, T, np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px),
-                            sph.radius, "probe.json")
+def _given_circle(cam, T, sph, source) -> SphereGeometry:
+    """A disc stated in pixels (``center_px`` and ``radius_px``): the ball's outline as measured in the photo.
+
+    Orthographic: the disc itself. Pinhole: a sphere off the lens axis outlines an ellipse, and the circle
+    that best fits it (what a measured outline is) is not centred on the image of the sphere's centre (0.5 px
+    from it and 0.8 px larger than the cone's cross-section, for a 33 px ball 10 degrees off the axis at
+    f = 400 px), so the cone through the circle (:func:`_circle_geometry`) put the ball's centre 0.5 px off.
+    The sphere is instead the one whose exact outline best fits 360 points of the circle (the tangent cone of
+    :func:`ffls.spheres.detect.fit_outline`, as :func:`limb_cone` fits a limb's steps): 0.004 px from the
+    true centre there. (Far off the axis of a wide lens a circle only approximates the outline: for a 60 px
+    circle in the corner of a 320 x 240 photo at f = 400 px the best outline is 1.5 px RMS from it, the
+    least-squares sphere all the same.) Refused (InputError, one line) where the fit fails.
+    """
+    c, r = np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px)
+    geo = _circle_geometry(cam, T, c, r, sph.radius, "probe.json")
+    if cam.model == "orthographic":
+        return geo
+    t = np.linspace(0, 2 * np.pi, 360, endpoint=False)
+    dc = DetectionCamera("pinhole", np.asarray(cam.K, dtype=np.float64), cam.dist, np.eye(4), float(geo.radius),
+                         (1, 1))
+    try:
+        ft = fit_outline(c + r * np.stack([np.cos(t), np.sin(t)], axis=1), dc, c, r, source)
+    except ValueError:
+        ft = None
+    if ft is None or not np.all(np.isfinite(ft.center_cam)):
+        raise InputError(f"sphere.center_px and radius_px: no sphere seen through camera.K has the circle "
+                         f"({c[0]:.1f}, {c[1]:.1f}) px, radius {r:.1f} px as its outline: check the circle and "
+                         "camera.K", source)
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(ft.center_cam, dtype=np.float64), geo.radius,
+                          np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px), "probe.json",
+                          geo.radius_known)
 
 
 def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
@@ -98,13 +142,22 @@ def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
         return SphereGeometry(cam.model, None, None, T, None, None, cpx, rpx, source)
     from ffls.camera.projection import pixel_rays
 
-    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
-    ring = cpx + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
     axis = pixel_rays(cpx[None], cam.K, cam.dist)[0]
-    alpha = float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
+    alpha = _circle_half_angle(cam, cpx, rpx)
     R = float(radius) if radius is not None else 1.0
     return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, source,
                           radius is not None)
+
+
+def _circle_half_angle(cam, cpx, rpx) -> float:
+    """The mean angle (radians) between the viewing ray through ``cpx`` and those through 72 points of the
+    pixel circle (``cpx``, ``rpx``), the distortion undone (pinhole ``cam``)."""
+    from ffls.camera.projection import pixel_rays
+
+    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    ring = np.asarray(cpx, dtype=np.float64) + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
+    axis = pixel_rays(np.asarray(cpx, dtype=np.float64)[None], cam.K, cam.dist)[0]
+    return float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
 
 
 #: A found mirror ball is moved to the circle of its limb's reflectance steps
@@ -288,13 +341,15 @@ def limb_cone(radiance, center_px, radius_px, K, dist, radius, shape, source):
     ffls.spheres.detect.SphereFit or None
     """
     return _limb_cone(_log_luminance(radiance), center_px, radius_px, SimpleNamespace(K=K, dist=dist), radius,
-                      source, shape)
+                      source, shape)[0]
 
 
 def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None):
     """:func:`limb_cone` on the photo's log luminance (:func:`_log_luminance`), computed once by
     :func:`locate_sphere`; ``cam`` has the pinhole's ``K`` and ``dist``; ``shape`` defaults to
-    ``log_lum``'s."""
+    ``log_lum``'s. Returns ``(fit or None, u)``: ``u`` the 95% radius of the centre
+    (:func:`limb_centre_uncertainty`) of the fit kept, or of the limb circle where the fit is not kept (at
+    least the two's disagreement, the circle's move); None without a fit."""
     from ffls.spheres.mirror_outline import radial_steps
 
     K, dist = cam.K, cam.dist
@@ -304,14 +359,80 @@ def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None):
     pts = radial_steps(log_lum, c, r, r_range=(0.9, 1.1))
     on = np.abs(np.hypot(*(pts - c).T) - r) <= 1.0
     if np.count_nonzero(on) < 8:
-        return None
+        return None, None
     cam = DetectionCamera("pinhole", np.asarray(K, dtype=np.float64), dist, np.eye(4), float(radius), tuple(shape))
     try:
         ft = fit_outline(pts[on], cam, c, r, source, n_edge=len(pts))
         oc, orad, _, _ = fit_circle(silhouette_px(cam.K, dist, ft.center_cam, float(radius)), c, r)
     except ValueError:
+        return None, None
+    u = limb_centre_uncertainty(pts[on], cam, ft, source)
+    move = float(np.hypot(*(oc - c)) + abs(orad - r))
+    if move <= LIMB_CONE_MOVE_PX:
+        return ft, u
+    return None, (None if u is None else max(u, move))
+
+
+#: :func:`limb_centre_uncertainty` refits a limb's tangent cone without each of this many equal angular
+#: sectors of its steps in turn (a delete-one-group jackknife).
+LIMB_JACKKNIFE_SECTORS = 6
+#: A mirror ball's limb whose centre's 95% radius (:func:`limb_centre_uncertainty`) exceeds this many pixels
+#: is flagged in its description (:meth:`SphereGeometry.describe`, printed with the map): the tolerance within
+#: which ``benchmarks/probe_detect.py`` counts a ball as found.
+MIRROR_CENTRE_TOL_PX = 1.0
+
+
+def limb_centre_uncertainty(points, cam, fit, source) -> float | None:
+    """The radius (pixels) of the 95% region of a limb fit's centre, from the spread of the fit over the circle.
+
+    The fit's own standard error (``center_sigma_px``) takes the steps for independent noise about one
+    outline; where an arc of them follows a reflected edge just inside the limb instead (studio at f = 400 px in
+    ``benchmarks/probe_detect.py``: 2.5-3.3 px inside over 80 degrees, the centre 1.2 px off at a standard
+    error of 0.12 px) the error is shared along that arc. The fit (:func:`ffls.spheres.detect.fit_outline`) is
+    repeated without the steps of each of :data:`LIMB_JACKKNIFE_SECTORS` equal sectors (about the fit's centre)
+    that hold any: the jackknife variance of the centre, ``(g - 1) / g * sum |c_i - mean|^2`` over the ``g``
+    refits, is the sum of two axes' variances. Half of it per axis, with the fit's own standard error in
+    quadrature, is the variance ``s^2`` of a round normal error estimated from ``g - 1`` degrees of freedom:
+    the 95% radius is Hotelling's, ``s * sqrt(2 (g - 1) / (g - 2) * F(0.95; 2, g - 2))`` (4.17 ``s`` for six
+    refits, where a known variance would give ``sqrt(-2 ln 0.05)`` = 2.45 ``s``: with that, 24 of 29 balls of
+    ``probe_detect.py`` and ``probe_hint.py`` lay within it).
+
+    Parameters
+    ----------
+    points : (m, 2) float
+        The steps fitted, pixels.
+    cam : ffls.spheres.detect.DetectionCamera
+    fit : ffls.spheres.detect.SphereFit
+        Their fit.
+    source : path-like
+
+    Returns
+    -------
+    float or None
+        None when fewer than 3 sectors can be left out (a refit needs 8 steps).
+    """
+    from scipy.stats import f as f_dist
+
+    P = np.asarray(points, dtype=np.float64)
+    c0, r0 = np.asarray(fit.center_px, dtype=np.float64), float(fit.radius_px)
+    sector = np.floor((np.arctan2(P[:, 1] - c0[1], P[:, 0] - c0[0]) + np.pi) / (2 * np.pi)
+                      * LIMB_JACKKNIFE_SECTORS).astype(int) % LIMB_JACKKNIFE_SECTORS
+    centres = []
+    for k in np.unique(sector):
+        keep = sector != k
+        if np.count_nonzero(keep) < 8:
+            continue
+        try:
+            centres.append(fit_outline(P[keep], cam, c0, r0, source).center_px)
+        except ValueError:
+            continue
+    g = len(centres)
+    if g < 3:
         return None
-    return ft if np.hypot(*(oc - c)) + abs(orad - r) <= LIMB_CONE_MOVE_PX else None
+    cs = np.asarray(centres, dtype=np.float64)
+    var = (g - 1) / g * float(np.sum((cs - cs.mean(axis=0)) ** 2))
+    scale = np.sqrt(2 * (g - 1) / (g - 2) * f_dist.ppf(0.95, 2, g - 2))
+    return float(scale * np.sqrt(var / 2 + float(fit.center_sigma_px) ** 2))
 
 
 #: An unhinted probe ball's apparent radius is at least this share of the photo's shorter side
@@ -537,12 +658,14 @@ def _limb_geometry(cam, T, stated_radius, log_lum, limb, how, source) -> SphereG
     (:func:`limb_cone`, pinhole; on the photo's log luminance ``log_lum``), else the cone through the circle
     (:func:`_circle_geometry`). The radius is ``stated_radius``, 1 when None (the scale unknown)."""
     R = 1.0 if stated_radius is None else stated_radius
-    cone = None if cam.model == "orthographic" else _limb_cone(log_lum, limb[0], limb[1], cam, R, source)
+    cone, u = (None, None) if cam.model == "orthographic" else _limb_cone(log_lum, limb[0], limb[1], cam, R, source)
     if cone is None:
-        return _circle_geometry(cam, T, limb[0], limb[1], stated_radius, how)
+        geo = _circle_geometry(cam, T, limb[0], limb[1], stated_radius, how)
+        geo.center_uncertainty_px = u
+        return geo
     return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(cone.center_cam, dtype=np.float64), float(R),
                           np.asarray(cone.center_px, dtype=np.float64), float(cone.radius_px), how,
-                          stated_radius is not None)
+                          stated_radius is not None, u)
 
 
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
@@ -608,7 +731,7 @@ def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeom
         why = stated_circle_problem(sph.center_px, sph.radius_px, np.shape(radiance))
         if why:
             raise InputError(f"sphere.center_px and radius_px: the circle {why}", source)
-        return _given_circle(cam, T, sph)
+        return _given_circle(cam, T, sph, source)
     hints = None
     if sph.location == "pixel":
         h = {"center_px": [float(x) for x in sph.center_px]}
