@@ -278,10 +278,12 @@ def test_cones_measured_from_the_spheres_take_the_tilts_error():
     camera's). Each cone now adds the stated tilt error times the light's lever arm about +X, in
     quadrature (100%); a lone sphere's stated fallback cones, set to hold it, are left."""
     from ffls.io.capture import Lights
-    from ffls.spheres.estimate import TILT_UNCERTAINTY_DEG, widen_for_tilt
+    from ffls.spheres.estimate import widen_for_tilt
+
+    tilt_error = 2.5  # (a fitted tilt's 95% error, as lights.json's frame records it)
 
     d = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.6, 0.0, 0.8], [0.0, 1.0, 0.0]])
-    frame = {"world_from_camera": tilted_world_from_camera(60.0), "tilt_uncertainty_deg": TILT_UNCERTAINTY_DEG}
+    frame = {"world_from_camera": tilted_world_from_camera(60.0), "tilt_uncertainty_deg": tilt_error}
 
     def lights(source, frame=frame):
         return Lights(list("abcd"), d, status=["ok", "ok", "ok", "rejected"], reasons=[None, None, None, "x"],
@@ -289,9 +291,9 @@ def test_cones_measured_from_the_spheres_take_the_tilts_error():
 
     li = lights("disagreement")
     widen_for_tilt(li)
-    want = np.hypot(1.0, TILT_UNCERTAINTY_DEG * np.array([1.0, 0.0, 0.8]))
+    want = np.hypot(1.0, tilt_error * np.array([1.0, 0.0, 0.8]))
     assert np.allclose([e["uncertainty_deg"] for e in li.extra[:3]], want)
-    assert li.extra[0]["tilt_widened_deg"] == TILT_UNCERTAINTY_DEG and "uncertainty_deg" not in li.extra[3]
+    assert li.extra[0]["tilt_widened_deg"] == tilt_error and "uncertainty_deg" not in li.extra[3]
     for kept in (lights("fallback"), lights("disagreement", frame=None)):
         widen_for_tilt(kept)
         assert [e.get("uncertainty_deg") for e in kept.extra] == [1.0, 1.0, 1.0, None]
