@@ -2782,9 +2782,11 @@ def widen_for_tilt(lights) -> None:
     tilt's error (``frame['tilt_uncertainty_deg']``): an error ``e`` turns every light about the
     frame's +X (the axis of the tilt), a direction ``d`` by ``e sqrt(1 - d_x^2)``, added in
     quadrature to its cone and recorded per light as ``tilt_widened_deg``. The cones measured from
-    the spheres' disagreement do not see it (it turns every photo alike); the stated fallback's
-    (a lone sphere) are left: they were set to hold it (docs/spheres.md)."""
-    if lights.frame is None or (lights.uncertainty or {}).get("source") == "fallback":
+    the spheres' disagreement do not see it (it turns every photo alike), nor the stated fallback's
+    (a lone sphere), set for a typical capture, not this one's tilt: both take it (a lone ball 89
+    deg down found at 93.6, 4.6 off, had 14% of its lights in the fallback's cones; docs/spheres.md,
+    "The tilt's own error")."""
+    if lights.frame is None:
         return
     e = float(lights.frame.get("tilt_uncertainty_deg") or 0.0)
     if not e:
@@ -2825,8 +2827,8 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
         values = [v for _, v in fitter.run([PhotoTask(i, fit=False) for i in range(n)], samples, counted=False)]
 
         def fit(tilt_deg: float, roll_deg: float = 0.0, photos=None):
-            # (a lone sphere keeps the fallback's cones: the tilt's error turns every photo alike, and
-            # neither its halves nor anything else here measures it, docs/spheres.md)
+            # (a lone sphere's halves are off: the tilt's error turns every photo alike, which they do
+            # not measure; its fallback cones take the tilt's measured error, widen_for_tilt)
             return _estimate_in_frame(posed(tilt_deg, roll_deg), spheres, False, workers, fitter=fitter,
                                       values=values, photos=photos, halves=False, **stages, **photo_options)
 
