@@ -109,7 +109,7 @@ def test_json_and_lp_files_saved_as_unicode_by_notepad_are_read(cap, tmp_path, c
 # ----------------------------------------------------------------------------- camera_tilt_deg
 @pytest.mark.parametrize("angle,value,named", [
     ("camera_tilt_deg", "abc", "camera_tilt_deg: expected a finite number, got 'abc'"),
-    ("camera_tilt_deg", 400, "camera_tilt_deg: a camera's tilt is between -90 and 90 deg, got 400"),
+    ("camera_tilt_deg", 400, "camera_tilt_deg: a camera's tilt is between -90 and 180 deg, got 400"),
     ("camera_tilt_deg", True, "camera_tilt_deg: expected a finite number, got True"),
     ("camera_tilt_deg", [30], "camera_tilt_deg: expected a finite number"),
     ("camera_roll_deg", "x", "camera_roll_deg: expected a finite number, got 'x'"),

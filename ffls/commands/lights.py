@@ -404,8 +404,17 @@ def tilt_note(lights, fit_roll: bool = False) -> str:
         roll = "its roll not fitted (looking down too steeply, or no roll fits the photos better)"
     else:
         roll = "taken as level (--fit-roll fits its roll)"
+    from ffls.spheres.estimate import TILT_REACH_DEG
+
+    tilt = float(fitted["camera_tilt_deg"])
+    error = (lights.frame or {}).get("tilt_uncertainty_deg")
+    looking = f"{tilt:.1f}" + ("" if error is None else f" +- {error:.1f} (95%)") + " deg down"
+    if tilt > 90:
+        looking += " (past straight down: looking back under itself)"
+    if min(abs(tilt - end) for end in TILT_REACH_DEG) < 0.5:
+        looking += f" (at the search's end, {tilt:g} deg: the tilt may lie beyond it)"
     return (f"capture.json gives no camera.world_from_camera: the ground under the spheres was fitted to their "
-            f"shading, the camera looking {fitted['camera_tilt_deg']:.1f} deg down, {roll}; the lights are in "
+            f"shading, the camera looking {looking}, {roll}; the lights are in "
             f"that ground's frame (+Z its normal, +X the image's right, +Y the camera's forward over the ground; "
             f"\"frame\" in lights.json; docs/spheres.md, 'Without the camera's pose'); to fix it, give the pose, "
             f"or only its tilt (docs/formats.md, \"The camera's tilt\")")

@@ -1213,11 +1213,12 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None, *,
                    "or say \"model\": \"near\"")
         if "position" in it:
             _check_position_on_direction(j, key, p, d, scene_center)
-        for angle, what, bound in (("camera_tilt_deg", "tilt", 90), ("camera_roll_deg", "roll", 180)):
+        # (a tilt past 90 looks down and back: ffls.spheres.estimate.TILT_REACH_DEG)
+        for angle, what, low, high in (("camera_tilt_deg", "tilt", -90, 180), ("camera_roll_deg", "roll", -180, 180)):
             if ex.get(angle) is not None:
                 ex[angle] = j.number(ex[angle], f"{key}: {angle}")
-                if abs(ex[angle]) > bound:
-                    j.fail(f"{key}: {angle}", f"a camera's {what} is between -{bound} and {bound} deg, got "
+                if not low <= ex[angle] <= high:
+                    j.fail(f"{key}: {angle}", f"a camera's {what} is between {low} and {high} deg, got "
                                               f"{ex[angle]:g}")
         names.append(name)
         dirs.append(d / norm)

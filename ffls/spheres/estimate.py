@@ -2366,6 +2366,14 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
 #: to 90, 87.6: 0.49 / 0.80, 100%; docs/spheres.md.)
 TILT_SEARCH_DEG = (0.0, 90.0, 10.0, 0.5)
 
+#: How far past :data:`TILT_SEARCH_DEG`'s ends the grid reaches, a step at a time, while its least
+#: misfit is at an end (:func:`fit_camera_tilt`): from a camera looking straight up (-90) to one
+#: turned over onto its back (180): past 90 a camera looks down and back, toward its own feet (an
+#: RTI dome's camera is as likely at 92 as at 88: a 41-light dome 88 deg down was found at 90.0,
+#: the grid's end, docs/spheres.md). Every tilt in it is a distinct ground normal seen from the
+#: camera; a tilt found at one of these ends is said (``ffls lights``' line).
+TILT_REACH_DEG = (-90.0, 180.0)
+
 #: The camera's roll about its optical axis searched after its tilt (:func:`fit_camera_tilt`): the
 #: bound (degrees either way: a tripod that is not level), the largest tilt at which it is fitted,
 #: and the refinement's tolerance. A roll ``r`` turns the ground's normal, seen from the camera, by
@@ -2386,12 +2394,8 @@ ROLL_EVIDENCE = 0.05
 TILT_SEARCH_PHOTOS = 24
 
 
-#: The 95% error (degrees) of a camera tilt fitted to the shading (:func:`fit_camera_tilt`), stated:
-#: on 20 renders (one or two grey balls, 10-41 lights, normal and long lenses, pinhole and
-#: orthographic, 30-88 deg down; docs/spheres.md, "The lights in the ground's frame") the tilt
-#: found was 0.1-2.4 deg off. The search's own misfit curve does not show it (a bootstrap over the
-#: photos gave 0 on a dome 2 deg off, at the search's bound): the error is the models', not noise.
-TILT_UNCERTAINTY_DEG = 2.5
+#: Resamples of the two-way bootstrap that measures a fitted tilt's 95% error (:func:`tilt_uncertainty`).
+TILT_BOOTSTRAP = 200
 
 #: ``Lights.frame['source']`` of lights in the frame of a fitted camera tilt (:func:`estimate_lights`).
 FITTED_FRAME_SOURCE = "the camera's tilt fitted to the spheres' shading"
@@ -2428,9 +2432,14 @@ def _matte_misfit(lights) -> float:
     photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean, and
     a median of one ball's 12 photos wanders. NaN without any."""
     rms = list(_matte_residuals(lights).values())
+    return _interquartile_mean(rms) if rms else float("nan")
+
+
+def _interquartile_mean(values) -> float:
+    """:func:`scipy.stats.trim_mean` of ``values`` with a quarter cut from each end."""
     from scipy.stats import trim_mean
 
-    return float(trim_mean(rms, 0.25)) if rms else float("nan")
+    return float(trim_mean(values, 0.25))
 
 
 def _fits_better(before, after, level: float) -> bool:
@@ -2461,7 +2470,8 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, roll=ROLL_SEARCH_DEG,
     roll_deg)`` estimates every light with the ground under a camera tilted and rolled that much
     (:func:`tilted_world_from_camera`) and returns the :class:`~ffls.io.capture.Lights`. The tilt
     minimising :func:`_matte_misfit` (the interquartile mean of the matte spheres' residuals) is
-    found on a grid, then refined (:func:`scipy.optimize.minimize_scalar`, bounded); then, where
+    found on a grid (reaching past ``search``'s ends, a step at a time, while the least misfit is at
+    one: :data:`TILT_REACH_DEG`), then refined (:func:`scipy.optimize.minimize_scalar`, bounded); then, where
     the tilt found is at most ``roll``'s largest (:data:`ROLL_SEARCH_DEG`), the roll at that tilt,
     and where a roll fits better than none, the tilt at that roll within half a grid step (one
     bounded refinement each:
@@ -2502,10 +2512,18 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, roll=ROLL_SEARCH_DEG,
         m = tried[key][0]
         return m if np.isfinite(m) else np.inf
 
-    grid = np.arange(lo, hi + 0.5 * step, step)
+    grid = list(np.arange(lo, hi + 0.5 * step, step))
     costs = [misfit(t) for t in grid]
     if not np.isfinite(min(costs)):
         return float("nan"), float("nan"), tried
+    # a least misfit at the grid's end is searched past it (TILT_REACH_DEG), until one is inside
+    while int(np.argmin(costs)) == len(grid) - 1 and grid[-1] + step <= TILT_REACH_DEG[1]:
+        grid.append(grid[-1] + step)
+        costs.append(misfit(grid[-1]))
+    while int(np.argmin(costs)) == 0 and grid[0] - step >= TILT_REACH_DEG[0]:
+        grid.insert(0, grid[0] - step)
+        costs.insert(0, misfit(grid[0]))
+    lo, hi = grid[0], grid[-1]
     k = int(np.argmin(costs))
     a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
     res = minimize_scalar(misfit, bounds=(a, b), method="bounded", options={"xatol": tol})
@@ -2528,6 +2546,56 @@ def fit_camera_tilt(fit, search=TILT_SEARCH_DEG, roll=ROLL_SEARCH_DEG,
     if _fits_better(tried[(tilt, 0.0)][1], tried[(rolled, r)][1], evidence):
         return rolled, r, tried
     return tilt, float("nan"), tried
+
+
+def _least_by_parabola(tilts: np.ndarray, misfits: np.ndarray) -> float:
+    """Where the parabola through the least of ``misfits`` (at sorted ``tilts``) and its two
+    neighbours is least, within them; the least tilt itself at an end or where it is not convex."""
+    k = int(np.argmin(misfits))
+    if k == 0 or k == len(tilts) - 1:
+        return float(tilts[k])
+    c = np.polyfit(tilts[k - 1:k + 2], misfits[k - 1:k + 2], 2)
+    return float(np.clip(-c[1] / (2 * c[0]), tilts[k - 1], tilts[k + 1])) if c[0] > 0 else float(tilts[k])
+
+
+def tilt_uncertainty(tried: dict, resamples: int = TILT_BOOTSTRAP, seed: int = 0) -> float:
+    """The 95% error (degrees) of the tilt :func:`fit_camera_tilt` found, measured from its own fit.
+
+    A two-way bootstrap over the photos and the matte spheres (each resampled with replacement, a
+    sphere's residuals in a photo weighted by both counts): :func:`_matte_misfit` recomputed at every
+    tilt tried without a roll (``tried``: :func:`fit_camera_tilt`'s), the tilt where each
+    resample's misfit is least (:func:`_least_by_parabola`), and 1.96 times their standard
+    deviation. The photos alone see the noise; a model's error (the bounce, an object's shadow)
+    shows as the spheres' disagreement, which resampling them adds (docs/spheres.md, "The tilt's
+    own error": 41 of 44 renders' tilts inside; over the photos alone 38). NaN without a matte
+    sphere's residual.
+
+    Parameters
+    ----------
+    tried : dict
+        ``(tilt, roll) -> (misfit, Lights)`` (degrees).
+    resamples : int
+    seed : int
+        The resampling's generator seed (the same fit gives the same error).
+    """
+    flat = sorted((t, lights) for (t, r), (_, lights) in tried.items() if r == 0.0)
+    res = [_matte_residuals(lights) for _, lights in flat]
+    keys = sorted(set().union(*res))
+    if len(flat) < 3 or not keys:
+        return float("nan")
+    tilts = np.array([t for t, _ in flat])
+    table = np.array([[r.get(k, np.nan) for k in keys] for r in res])  # (tilts, photo-sphere pairs)
+    photos, spheres = (np.unique([k[j] for k in keys], return_inverse=True)[1] for j in (0, 1))
+    rng = np.random.default_rng(seed)
+    found = []
+    for _ in range(resamples):
+        weight = (np.bincount(rng.integers(0, photos.max() + 1, photos.max() + 1), minlength=photos.max() + 1)[photos]
+                  * np.bincount(rng.integers(0, spheres.max() + 1, spheres.max() + 1),
+                                minlength=spheres.max() + 1)[spheres])
+        drawn = table[:, np.repeat(np.arange(len(keys)), weight)]
+        misfits = [_interquartile_mean(row[np.isfinite(row)]) if np.isfinite(row).any() else np.inf for row in drawn]
+        found.append(_least_by_parabola(tilts, np.array(misfits)))
+    return float(1.96 * np.std(found))
 
 
 def estimate_lights(capture, spheres=None, progress: bool = True, workers: int | None = None,
@@ -2736,9 +2804,11 @@ def widen_for_tilt(lights) -> None:
     tilt's error (``frame['tilt_uncertainty_deg']``): an error ``e`` turns every light about the
     frame's +X (the axis of the tilt), a direction ``d`` by ``e sqrt(1 - d_x^2)``, added in
     quadrature to its cone and recorded per light as ``tilt_widened_deg``. The cones measured from
-    the spheres' disagreement do not see it (it turns every photo alike); the stated fallback's
-    (a lone sphere) are left: they were set to hold it (docs/spheres.md)."""
-    if lights.frame is None or (lights.uncertainty or {}).get("source") == "fallback":
+    the spheres' disagreement do not see it (it turns every photo alike), nor the stated fallback's
+    (a lone sphere), set for a typical capture, not this one's tilt: both take it (a lone ball 89
+    deg down found at 93.6, 4.6 off, had 14% of its lights in the fallback's cones; docs/spheres.md,
+    "The tilt's own error")."""
+    if lights.frame is None:
         return
     e = float(lights.frame.get("tilt_uncertainty_deg") or 0.0)
     if not e:
@@ -2779,8 +2849,8 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
         values = [v for _, v in fitter.run([PhotoTask(i, fit=False) for i in range(n)], samples, counted=False)]
 
         def fit(tilt_deg: float, roll_deg: float = 0.0, photos=None):
-            # (a lone sphere keeps the fallback's cones: the tilt's error turns every photo alike, and
-            # neither its halves nor anything else here measures it, docs/spheres.md)
+            # (a lone sphere's halves are off: the tilt's error turns every photo alike, which they do
+            # not measure; its fallback cones take the tilt's measured error, widen_for_tilt)
             return _estimate_in_frame(posed(tilt_deg, roll_deg), spheres, False, workers, fitter=fitter,
                                       values=values, photos=photos, halves=False, **stages, **photo_options)
 
@@ -2796,7 +2866,8 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
     # it; GUIDE section 1), recorded as Lights.frame: in the image's frame a camera looking down put
     # the lights over the ground half below the upper hemisphere (docs/spheres.md)
     lights = replace(found, frame={"world_from_camera": tilted_world_from_camera(tilt, rolled),
-                                   "source": FITTED_FRAME_SOURCE, "tilt_uncertainty_deg": TILT_UNCERTAINTY_DEG})
+                                   "source": FITTED_FRAME_SOURCE,
+                                   "tilt_uncertainty_deg": round(tilt_uncertainty(tried), 3)})
     widen_for_tilt(lights)
     for e in lights.extra or ():
         e["camera_tilt_deg"] = round(tilt, 2)
