@@ -382,7 +382,6 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
         m = merge_bracket_files(paths, [im.exposure_s for im in view.images], encoding, response, source)
         rad, sat, note = m.radiance, m.saturated, "bracket: " + m.describe()
         alpha = None
-        what = f"the bracket {paths[0].name}..{paths[-1].name}"
     else:
         img = read_image(paths[0])
         check_encoding(img, encoding, source)
@@ -401,11 +400,11 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
             else "" if not sat.any() else f", {int(sat.sum())} pixels clipped" if not img.is_hdr else
             f", {int(sat.sum())} pixels on a plateau at its maximum ({clip:.6g}), taken as clipped (lower "
             f"bounds; a render's flat brightest region reads the same)")
-        what = paths[0].name
     valid = np.all(np.isfinite(rad), axis=-1)
     if alpha is not None:
         valid &= alpha > 0
-    _check_recorded(rad, sat, valid, what, paths[0])
+    if not view.is_bracket:  # (merge_bracket_files checked a bracket's merged radiance)
+        _check_recorded(rad, sat, valid, paths[0].name, paths[0])
     return ViewRadiance(np.where(valid[..., None], rad, 0.0).astype(np.float32), sat, valid, note)
 
 
