@@ -16,8 +16,8 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask,
                                  find_spheres, fit_circle, fit_outline, orthographic_normals,
-                                 outline_visible_fraction, silhouette_px, sphere_mask, sphere_normals,
-                                 stated_circle_problem)
+                                 outline_visible_fraction, sector_jackknife_centres, silhouette_px,
+                                 sphere_mask, sphere_normals, stated_circle_problem)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
@@ -417,19 +417,10 @@ def limb_centre_uncertainty(points, cam, fit, source) -> float | None:
     c0, r0 = np.asarray(fit.center_px, dtype=np.float64), float(fit.radius_px)
     sector = np.floor((np.arctan2(P[:, 1] - c0[1], P[:, 0] - c0[0]) + np.pi) / (2 * np.pi)
                       * LIMB_JACKKNIFE_SECTORS).astype(int) % LIMB_JACKKNIFE_SECTORS
-    centres = []
-    for k in np.unique(sector):
-        keep = sector != k
-        if np.count_nonzero(keep) < 8:
-            continue
-        try:
-            centres.append(fit_outline(P[keep], cam, c0, r0, source).center_px)
-        except ValueError:
-            continue
-    g = len(centres)
+    cs = sector_jackknife_centres(P, sector, cam, c0, r0, source, 8)
+    g = len(cs)
     if g < 3:
         return None
-    cs = np.asarray(centres, dtype=np.float64)
     var = (g - 1) / g * float(np.sum((cs - cs.mean(axis=0)) ** 2))
     scale = np.sqrt(2 * (g - 1) / (g - 2) * fdtri(2, g - 2, 0.95))
     return float(scale * np.sqrt(var / 2 + float(fit.center_sigma_px) ** 2))
