@@ -143,21 +143,12 @@ def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
     from ffls.camera.projection import pixel_rays
 
     axis = pixel_rays(cpx[None], cam.K, cam.dist)[0]
-    alpha = _circle_half_angle(cam, cpx, rpx)
+    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    ring = np.asarray(cpx, dtype=np.float64) + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
+    alpha = float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
     R = float(radius) if radius is not None else 1.0
     return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, source,
                           radius is not None)
-
-
-def _circle_half_angle(cam, cpx, rpx) -> float:
-    """The mean angle (radians) between the viewing ray through ``cpx`` and those through 72 points of the
-    pixel circle (``cpx``, ``rpx``), the distortion undone (pinhole ``cam``)."""
-    from ffls.camera.projection import pixel_rays
-
-    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
-    ring = np.asarray(cpx, dtype=np.float64) + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
-    axis = pixel_rays(np.asarray(cpx, dtype=np.float64)[None], cam.K, cam.dist)[0]
-    return float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
 
 
 #: A found mirror ball is moved to the circle of its limb's reflectance steps
@@ -341,15 +332,16 @@ def limb_cone(radiance, center_px, radius_px, K, dist, radius, shape, source):
     ffls.spheres.detect.SphereFit or None
     """
     return _limb_cone(_log_luminance(radiance), center_px, radius_px, SimpleNamespace(K=K, dist=dist), radius,
-                      source, shape)[0]
+                      source, shape, uncertainty=False)[0]
 
 
-def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None):
+def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None, uncertainty=True):
     """:func:`limb_cone` on the photo's log luminance (:func:`_log_luminance`), computed once by
     :func:`locate_sphere`; ``cam`` has the pinhole's ``K`` and ``dist``; ``shape`` defaults to
     ``log_lum``'s. Returns ``(fit or None, u)``: ``u`` the 95% radius of the centre
     (:func:`limb_centre_uncertainty`) of the fit kept, or of the limb circle where the fit is not kept (at
-    least the two's disagreement, the circle's move); None without a fit."""
+    least the two's disagreement, the circle's move); None without a fit, or without ``uncertainty`` (its
+    refits skipped)."""
     from ffls.spheres.mirror_outline import radial_steps
 
     K, dist = cam.K, cam.dist
@@ -366,7 +358,7 @@ def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None):
         oc, orad, _, _ = fit_circle(silhouette_px(cam.K, dist, ft.center_cam, float(radius)), c, r)
     except ValueError:
         return None, None
-    u = limb_centre_uncertainty(pts[on], cam, ft, source)
+    u = limb_centre_uncertainty(pts[on], cam, ft, source) if uncertainty else None
     move = float(np.hypot(*(oc - c)) + abs(orad - r))
     if move <= LIMB_CONE_MOVE_PX:
         return ft, u
