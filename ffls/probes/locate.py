@@ -112,12 +112,11 @@ def _given_circle(cam, T, sph, source) -> SphereGeometry:
     least-squares sphere all the same.) Refused (InputError, one line) where the fit fails.
     """
     c, r = np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px)
-    geo = _circle_geometry(cam, T, c, r, sph.radius, "probe.json")
     if cam.model == "orthographic":
-        return geo
+        return _circle_geometry(cam, T, c, r, sph.radius, "probe.json")
+    R = float(sph.radius) if sph.radius is not None else 1.0
     t = np.linspace(0, 2 * np.pi, 360, endpoint=False)
-    dc = DetectionCamera("pinhole", np.asarray(cam.K, dtype=np.float64), cam.dist, np.eye(4), float(geo.radius),
-                         (1, 1))
+    dc = DetectionCamera("pinhole", np.asarray(cam.K, dtype=np.float64), cam.dist, np.eye(4), R, (1, 1))
     try:
         ft = fit_outline(c + r * np.stack([np.cos(t), np.sin(t)], axis=1), dc, c, r, source)
     except ValueError:
@@ -126,9 +125,9 @@ def _given_circle(cam, T, sph, source) -> SphereGeometry:
         raise InputError(f"sphere.center_px and radius_px: no sphere seen through camera.K has the circle "
                          f"({c[0]:.1f}, {c[1]:.1f}) px, radius {r:.1f} px as its outline: check the circle and "
                          "camera.K", source)
-    return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(ft.center_cam, dtype=np.float64), geo.radius,
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(ft.center_cam, dtype=np.float64), R,
                           np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px), "probe.json",
-                          geo.radius_known)
+                          sph.radius is not None)
 
 
 def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
