@@ -73,14 +73,16 @@ def _with_zero_alpha(rgb: np.ndarray) -> np.ndarray:
     m, H, W, _ = rgb.shape
     rgba = np.empty((m, H, W, 4), dtype=np.float16)
     src, dst = rgb.view(np.uint16), rgba.view(np.uint16)
-    try:
-        if not rgb.flags.c_contiguous:
-            raise cv2.error("not contiguous")
-        for k in range(m):  # (channel -1: filled with zero)
-            cv2.mixChannels([src[k].reshape(H * W, 1, 3)], [dst[k].reshape(H * W, 1, 4)], [0, 0, 1, 1, 2, 2, -1, 3])
-    except cv2.error:
-        rgba[..., :3] = rgb
-        rgba[..., 3] = 0
+    if rgb.flags.c_contiguous:
+        try:
+            for k in range(m):  # (channel -1: filled with zero)
+                cv2.mixChannels([src[k].reshape(H * W, 1, 3)], [dst[k].reshape(H * W, 1, 4)],
+                                [0, 0, 1, 1, 2, 2, -1, 3])
+            return rgba
+        except cv2.error:
+            pass
+    rgba[..., :3] = rgb
+    rgba[..., 3] = 0
     return rgba
 
 

@@ -873,3 +873,19 @@ def as_samples(lightmap_or_samples):
     if not np.all(np.isfinite(dirs)):
         raise ValueError("light map directions contain NaN or Inf (pass valid texels only)")
     return dirs, rad, sa
+
+
+def sample_bands_of(lightmap_or_samples):
+    """:func:`as_samples` of each band of a map's rows (:meth:`LightMap.sample_bands`: a lat-long map
+    never holds every texel's samples at once; an 8192 x 4096 map's held 6.3 GB), or of
+    ``lightmap_or_samples`` whole where it has no bands (another object, a samples tuple).
+
+    Yields
+    ------
+    dirs, radiance, solid_angle
+        As :func:`as_samples` returns them.
+    """
+    bands = (lightmap_or_samples.sample_bands() if hasattr(lightmap_or_samples, "sample_bands")
+             else [lightmap_or_samples])
+    for band in bands:
+        yield as_samples(band)

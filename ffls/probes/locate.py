@@ -16,8 +16,8 @@ import numpy as np
 from ffls.errors import InputError
 from ffls.spheres.detect import (HINT_CENTRE_OFFSET, DetectionCamera, circle_candidates, disc_mask,
                                  find_spheres, fit_circle, fit_outline, orthographic_normals,
-                                 outline_visible_fraction, silhouette_px, sphere_mask, sphere_normals,
-                                 stated_circle_problem)
+                                 outline_visible_fraction, sector_jackknife_centres, silhouette_px,
+                                 sphere_mask, sphere_normals, stated_circle_problem)
 from ffls.spheres.select import CRITERIA, round_outline
 
 __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LIMB_STEP_COVERAGE",
@@ -112,12 +112,11 @@ def _given_circle(cam, T, sph, source) -> SphereGeometry:
     least-squares sphere all the same.) Refused (InputError, one line) where the fit fails.
     """
     c, r = np.asarray(sph.center_px, dtype=np.float64), float(sph.radius_px)
-    geo = _circle_geometry(cam, T, c, r, sph.radius, "probe.json")
     if cam.model == "orthographic":
-        return geo
+        return _circle_geometry(cam, T, c, r, sph.radius, "probe.json")
+    R = float(sph.radius) if sph.radius is not None else 1.0
     t = np.linspace(0, 2 * np.pi, 360, endpoint=False)
-    dc = DetectionCamera("pinhole", np.asarray(cam.K, dtype=np.float64), cam.dist, np.eye(4), float(geo.radius),
-                         (1, 1))
+    dc = DetectionCamera("pinhole", np.asarray(cam.K, dtype=np.float64), cam.dist, np.eye(4), R, (1, 1))
     try:
         ft = fit_outline(c + r * np.stack([np.cos(t), np.sin(t)], axis=1), dc, c, r, source)
     except ValueError:
@@ -126,9 +125,9 @@ def _given_circle(cam, T, sph, source) -> SphereGeometry:
         raise InputError(f"sphere.center_px and radius_px: no sphere seen through camera.K has the circle "
                          f"({c[0]:.1f}, {c[1]:.1f}) px, radius {r:.1f} px as its outline: check the circle and "
                          "camera.K", source)
-    return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(ft.center_cam, dtype=np.float64), geo.radius,
+    return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(ft.center_cam, dtype=np.float64), R,
                           np.asarray(ft.center_px, dtype=np.float64), float(ft.radius_px), "probe.json",
-                          geo.radius_known)
+                          sph.radius is not None)
 
 
 def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
@@ -143,21 +142,12 @@ def _circle_geometry(cam, T, cpx, rpx, radius, source) -> SphereGeometry:
     from ffls.camera.projection import pixel_rays
 
     axis = pixel_rays(cpx[None], cam.K, cam.dist)[0]
-    alpha = _circle_half_angle(cam, cpx, rpx)
+    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    ring = np.asarray(cpx, dtype=np.float64) + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
+    alpha = float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
     R = float(radius) if radius is not None else 1.0
     return SphereGeometry(cam.model, cam.K, cam.dist, T, R / np.sin(alpha) * axis, R, cpx, rpx, source,
                           radius is not None)
-
-
-def _circle_half_angle(cam, cpx, rpx) -> float:
-    """The mean angle (radians) between the viewing ray through ``cpx`` and those through 72 points of the
-    pixel circle (``cpx``, ``rpx``), the distortion undone (pinhole ``cam``)."""
-    from ffls.camera.projection import pixel_rays
-
-    t = np.linspace(0, 2 * np.pi, 72, endpoint=False)
-    ring = np.asarray(cpx, dtype=np.float64) + rpx * np.stack([np.cos(t), np.sin(t)], axis=1)
-    axis = pixel_rays(np.asarray(cpx, dtype=np.float64)[None], cam.K, cam.dist)[0]
-    return float(np.mean(np.arccos(np.clip(pixel_rays(ring, cam.K, cam.dist) @ axis, -1.0, 1.0))))
 
 
 #: A found mirror ball is moved to the circle of its limb's reflectance steps
@@ -341,15 +331,16 @@ def limb_cone(radiance, center_px, radius_px, K, dist, radius, shape, source):
     ffls.spheres.detect.SphereFit or None
     """
     return _limb_cone(_log_luminance(radiance), center_px, radius_px, SimpleNamespace(K=K, dist=dist), radius,
-                      source, shape)[0]
+                      source, shape, uncertainty=False)[0]
 
 
-def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None):
+def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None, uncertainty=True):
     """:func:`limb_cone` on the photo's log luminance (:func:`_log_luminance`), computed once by
     :func:`locate_sphere`; ``cam`` has the pinhole's ``K`` and ``dist``; ``shape`` defaults to
     ``log_lum``'s. Returns ``(fit or None, u)``: ``u`` the 95% radius of the centre
     (:func:`limb_centre_uncertainty`) of the fit kept, or of the limb circle where the fit is not kept (at
-    least the two's disagreement, the circle's move); None without a fit."""
+    least the two's disagreement, the circle's move); None without a fit, or without ``uncertainty`` (its
+    refits skipped)."""
     from ffls.spheres.mirror_outline import radial_steps
 
     K, dist = cam.K, cam.dist
@@ -366,7 +357,7 @@ def _limb_cone(log_lum, center_px, radius_px, cam, radius, source, shape=None):
         oc, orad, _, _ = fit_circle(silhouette_px(cam.K, dist, ft.center_cam, float(radius)), c, r)
     except ValueError:
         return None, None
-    u = limb_centre_uncertainty(pts[on], cam, ft, source)
+    u = limb_centre_uncertainty(pts[on], cam, ft, source) if uncertainty else None
     move = float(np.hypot(*(oc - c)) + abs(orad - r))
     if move <= LIMB_CONE_MOVE_PX:
         return ft, u
@@ -417,19 +408,10 @@ def limb_centre_uncertainty(points, cam, fit, source) -> float | None:
     c0, r0 = np.asarray(fit.center_px, dtype=np.float64), float(fit.radius_px)
     sector = np.floor((np.arctan2(P[:, 1] - c0[1], P[:, 0] - c0[0]) + np.pi) / (2 * np.pi)
                       * LIMB_JACKKNIFE_SECTORS).astype(int) % LIMB_JACKKNIFE_SECTORS
-    centres = []
-    for k in np.unique(sector):
-        keep = sector != k
-        if np.count_nonzero(keep) < 8:
-            continue
-        try:
-            centres.append(fit_outline(P[keep], cam, c0, r0, source).center_px)
-        except ValueError:
-            continue
-    g = len(centres)
+    cs = sector_jackknife_centres(P, sector, cam, c0, r0, source, 8)
+    g = len(cs)
     if g < 3:
         return None
-    cs = np.asarray(centres, dtype=np.float64)
     var = (g - 1) / g * float(np.sum((cs - cs.mean(axis=0)) ** 2))
     scale = np.sqrt(2 * (g - 1) / (g - 2) * fdtri(2, g - 2, 0.95))
     return float(scale * np.sqrt(var / 2 + float(fit.center_sigma_px) ** 2))

@@ -2683,20 +2683,31 @@ def outline_jackknife_px(ft, cam: DetectionCamera, sectors: int = JACKKNIFE_SECT
     P = np.asarray(ft.edge_px, dtype=np.float64).reshape(-1, 2)
     ang = np.arctan2(P[:, 1] - ft.center_px[1], P[:, 0] - ft.center_px[0])
     sector = np.minimum((ang + np.pi) / (2 * np.pi) * sectors, sectors - 1).astype(int)
+    c = sector_jackknife_centres(P, sector, cam, ft.center_px, ft.radius_px, ft.source, 5)
+    if len(c) < 3:
+        return float("inf")
+    k = len(c)
+    return float(np.sqrt((k - 1) / k * np.sum((c - c.mean(axis=0)) ** 2) / 2.0))
+
+
+def sector_jackknife_centres(points, sector, cam: DetectionCamera, center_px, radius_px, source,
+                             min_keep: int) -> np.ndarray:
+    """The centres (pixels, ``(g, 2)``) of the delete-one-group refits of an outline: for each
+    distinct value of ``sector`` (one per point of ``points``, ``(m, 2)`` pixels) in ascending
+    order, :func:`fit_outline` of the points outside it (started at ``center_px``,
+    ``radius_px``), where at least ``min_keep`` remain and the refit succeeds. The jackknife of
+    :func:`outline_jackknife_px` and :func:`ffls.probes.locate.limb_centre_uncertainty`, each
+    with its own sectors and ``min_keep``."""
     centres = []
     for k in np.unique(sector):
         keep = sector != k
-        if keep.sum() < 5:
+        if np.count_nonzero(keep) < min_keep:
             continue
         try:
-            centres.append(fit_outline(P[keep], cam, ft.center_px, ft.radius_px, ft.source).center_px)
+            centres.append(fit_outline(points[keep], cam, center_px, radius_px, source).center_px)
         except ValueError:
             continue
-    if len(centres) < 3:
-        return float("inf")
-    c = np.asarray(centres, dtype=np.float64)
-    k = len(c)
-    return float(np.sqrt((k - 1) / k * np.sum((c - c.mean(axis=0)) ** 2) / 2.0))
+    return np.asarray(centres, dtype=np.float64).reshape(-1, 2)
 
 
 def _outline_centre_sigma(ft, half_gap: float, cam: DetectionCamera) -> float:

@@ -79,20 +79,24 @@ def choose_scale(max_abs: float, target: float = F16_TARGET_MAX) -> float:
     return float(2.0 ** np.floor(np.log2(target / max_abs)))
 
 
-def _flat_blocks(a: np.ndarray):
-    """``a``'s values in C order as flat views of at most :data:`BLOCK_VALUES` values (one layer
-    range copied at a time where ``a`` is not C-contiguous)."""
+def _flat_blocks(a: np.ndarray, per: int | None = None):
+    """``a``'s values in C order as ``(offset, block)``: flat views of at most
+    :data:`BLOCK_VALUES` values and the C-order index of each one's first value. By default a
+    C-contiguous ``a`` is walked whole and another one layer range at a time (copied); with
+    ``per``, always ``per`` layers at a time (copied only where not C-contiguous)."""
     block = BLOCK_VALUES
-    if a.flags.c_contiguous:
+    if per is None and a.flags.c_contiguous:
         flat = a.reshape(-1)
         for i in range(0, flat.size, block):
-            yield flat[i:i + block]
+            yield i, flat[i:i + block]
         return
-    per = max(1, block // max(1, a[0].size)) if a.ndim else 1
+    if per is None:
+        per = max(1, block // max(1, a[0].size)) if a.ndim else 1
+    row = a[0].size if a.shape[0] else 0
     for k in range(0, a.shape[0], per):
         flat = np.ascontiguousarray(a[k:k + per]).reshape(-1)
         for i in range(0, flat.size, block):
-            yield flat[i:i + block]
+            yield k * row + i, flat[i:i + block]
 
 
 def finite_max_abs(basis: np.ndarray) -> float:
@@ -107,7 +111,7 @@ def finite_max_abs(basis: np.ndarray) -> float:
     basis = np.asarray(basis)
     top = 0.0
     buf = None
-    for blk in _flat_blocks(basis.reshape(1) if basis.ndim == 0 else basis):
+    for _, blk in _flat_blocks(basis.reshape(1) if basis.ndim == 0 else basis):
         if buf is None:
             buf = np.empty(blk.size, dtype=blk.dtype)
         v = float(np.abs(blk, out=buf[:blk.size]).max())
@@ -169,26 +173,21 @@ def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: 
     counts = np.zeros(3, dtype=np.int64)  # overflow, underflow, flushed
     rel = 0.0
     chunk = max(1, int(chunk))
-    src_all, dst_all = (basis.reshape(1), out.reshape(1)) if basis.ndim == 0 else (basis, out)
+    src_all, dst_f = basis.reshape(1) if basis.ndim == 0 else basis, out.reshape(-1)
     bufs = None
-    for a in range(0, src_all.shape[0], chunk):
-        src_c = src_all[a:a + chunk]
-        if not src_c.flags.c_contiguous:
-            src_c = np.ascontiguousarray(src_c)
-        src_f, dst_f = src_c.reshape(-1), dst_all[a:a + chunk].reshape(-1)
-        for i in range(0, src_f.size, BLOCK_VALUES):
-            src, dst = src_f[i:i + BLOCK_VALUES], dst_f[i:i + BLOCK_VALUES]
-            if bufs is None:
-                bufs = _Buffers(min(BLOCK_VALUES, src_f.size))
-            x = bufs.scaled(src, s32)
-            narrow_to_half(x, dst)
-            if fast and bufs.all_finite(dst):  # (a NaN or inf of the input is one after it)
-                counts[2] += bufs.flushed(x, dst)
-                rel = max(rel, bufs.max_rel_error(x, dst, sig32))
-                continue
-            if not checked and not np.all(np.isfinite(src)):
-                _raise_nonfinite(basis, path)
-            rel = max(rel, _check_block(x, dst, sig, sig32, counts))
+    for i, src in _flat_blocks(src_all, per=chunk):
+        dst = dst_f[i:i + src.size]
+        if bufs is None:
+            bufs = _Buffers(src.size)
+        x = bufs.scaled(src, s32)
+        narrow_to_half(x, dst)
+        if fast and bufs.all_finite(dst):  # (a NaN or inf of the input is one after it)
+            counts[2] += bufs.flushed(x, dst)
+            rel = max(rel, bufs.max_rel_error(x, dst, sig32))
+            continue
+        if not checked and not np.all(np.isfinite(src)):
+            _raise_nonfinite(basis, path)
+        rel = max(rel, _check_block(x, dst, sig, sig32, counts))
     n_over, n_under, n_flush = (int(c) for c in counts)
     report = Float16Report(float(scale), max_abs, n_over, n_under, n_flush, rel)
     if n_over:

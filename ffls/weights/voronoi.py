@@ -53,7 +53,7 @@ from ffls.conventions import (
     latlong_directions,
     rotate_directions,
 )
-from ffls.lightmaps.lightmap import as_samples
+from ffls.lightmaps.lightmap import sample_bands_of
 
 __all__ = [
     "CellTexture",
@@ -604,10 +604,7 @@ def integrate_weights(lightmap_or_samples, directions, rotation=None, hemisphere
     n = unit.shape[0]
     w, total, lost, n_lost = np.zeros((n, 3)), np.zeros(3), np.zeros(3), 0
     # a lat-long map in bands of rows (an 8192 x 4096 map's samples at once held 6.3 GB)
-    bands = (lightmap_or_samples.sample_bands() if hasattr(lightmap_or_samples, "sample_bands")
-             else [lightmap_or_samples])
-    for band in bands:
-        dirs, rad, sa = as_samples(band)
+    for dirs, rad, sa in sample_bands_of(lightmap_or_samples):
         power = rad * sa[:, None]
         total += power.sum(axis=0)
         p = rotate_directions(R, dirs)

@@ -47,7 +47,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ffls.conventions import check_hemisphere, in_domain, is_rotation, rotate_directions
-from ffls.lightmaps.lightmap import as_samples
+from ffls.lightmaps.lightmap import sample_bands_of
 from ffls.weights import antialiased as _aa
 from ffls.weights import gaussian as _ga
 from ffls.weights import kriging as _kr
@@ -462,12 +462,9 @@ def integrate(lightmap_or_samples, directions, rotation=None, hemisphere="upper"
         evaluate = weighting
     n = unit.shape[0]
     w, total, lost, n_lost = np.zeros((n, 3)), np.zeros(3), np.zeros(3), 0
-    # a lat-long map in bands of rows, as integrate_weights: never every texel's samples at once
-    bands = (lightmap_or_samples.sample_bands() if hasattr(lightmap_or_samples, "sample_bands")
-             else [lightmap_or_samples])
     chunk = 1 << 17
-    for band in bands:
-        dirs, rad, sa = as_samples(band)
+    # a lat-long map in bands of rows, as integrate_weights: never every texel's samples at once
+    for dirs, rad, sa in sample_bands_of(lightmap_or_samples):
         power = rad * sa[:, None]
         total += power.sum(axis=0)
         p = rotate_directions(R, dirs)
