@@ -2407,7 +2407,7 @@ def tilted_world_from_camera(tilt_deg: float, roll_deg: float = 0.0) -> np.ndarr
     return M
 
 
-def _matte_residuals(lights) -> dict:
+def matte_residuals(lights) -> dict:
     """``(photo, sphere) -> RMS`` shading residual (the ``rms`` of the sphere's record) of every matte
     sphere fitted in a photo with a light."""
     return {(i, k): float(r["rms"]) for i, e in enumerate(lights.extra or ()) if e.get("status", "ok") == "ok"
@@ -2417,10 +2417,10 @@ def _matte_residuals(lights) -> dict:
 
 def _matte_misfit(lights) -> float:
     """Interquartile mean (:func:`scipy.stats.trim_mean`, a quarter cut from each end) over the photos
-    with a light of their matte spheres' RMS shading residual (:func:`_matte_residuals`): a few
+    with a light of their matte spheres' RMS shading residual (:func:`matte_residuals`): a few
     photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean, and
     a median of one ball's 12 photos wanders. NaN without any."""
-    rms = list(_matte_residuals(lights).values())
+    rms = list(matte_residuals(lights).values())
     return _interquartile_mean(rms) if rms else float("nan")
 
 
@@ -2439,11 +2439,11 @@ def _interquartile_mean(values) -> float:
 def _fits_better(before, after, level: float) -> bool:
     """Whether the estimates ``after`` fit the matte spheres' shading better than ``before`` photo by
     photo: the one-sided Wilcoxon signed-rank test (:func:`scipy.stats.wilcoxon`) of the log ratios
-    of each sphere's residual in each photo (:func:`_matte_residuals`) rejects "no better" at
+    of each sphere's residual in each photo (:func:`matte_residuals`) rejects "no better" at
     ``level``. The misfit's curves are rough at the 1% level (a frame moves pixels across the
     terminator and the own shadow's edge), and a roll's gain is about as small: its least misfit
     alone would be a roll fitted to that roughness."""
-    a, b = _matte_residuals(before), _matte_residuals(after)
+    a, b = matte_residuals(before), matte_residuals(after)
     d = np.log([b[k] / a[k] for k in a if k in b and a[k] > 0 and b[k] > 0])
     d = d[d != 0]
     if len(d) < 6:
@@ -2573,7 +2573,7 @@ def tilt_uncertainty(tried: dict, resamples: int = TILT_BOOTSTRAP, seed: int = 0
         The resampling's generator seed (the same fit gives the same error).
     """
     flat = sorted((t, lights) for (t, r), (_, lights) in tried.items() if r == 0.0)
-    res = [_matte_residuals(lights) for _, lights in flat]
+    res = [matte_residuals(lights) for _, lights in flat]
     keys = sorted(set().union(*res))
     if len(flat) < 3 or not keys:
         return float("nan")
