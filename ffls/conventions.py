@@ -38,6 +38,14 @@ LIGHT_MODELS = ("distant", "near")
 #: The widest 95% cone (``uncertainty_deg``): 180 deg covers every direction, so a wider one says
 #: nothing more.
 MAX_CONE_DEG = 180.0
+#: How far past :data:`ffls.spheres.estimate.TILT_SEARCH_DEG`'s ends the grid reaches, a step at
+#: a time, while its least misfit is at an end (:func:`ffls.spheres.estimate.fit_camera_tilt`):
+#: from a camera looking straight up (-90) to one turned over onto its back (180): past 90 a camera
+#: looks down and back, toward its own feet (an RTI dome's camera is as likely at 92 as at 88: a
+#: 41-light dome 88 deg down was found at 90.0, the grid's end, docs/spheres.md). Every tilt in it
+#: is a distinct ground normal seen from the camera; a tilt found at one of these ends is said
+#: (``ffls lights``' line); a capture's ``camera_tilt_deg`` is refused outside it.
+TILT_REACH_DEG = (-90.0, 180.0)
 
 #: world_from_camera when a capture gives none: camera x (image right) -> +X,
 #: camera y (image down) -> -Z, camera z (forward) -> +Y. The camera sits at the origin.

@@ -75,8 +75,7 @@ def summary(lights) -> str:
         # were only counted ("rejected: no_highlight 4"), the names only in lights.json
         names = [m for m, r, s in zip(lights.image_names, lights.reasons, lights.status)
                  if s == "rejected" and r == reason]
-        shown = ", ".join(names[:REJECTED_NAMED]) + (f", ... ({count - REJECTED_NAMED} more)"
-                                                      if count > REJECTED_NAMED else "")
+        shown = _first_named(names, ", ")
         meaning = REASONS.get(reason)
         lines.append(("rejected: " if k == 0 else "          ") + f"{reason} {count} ({shown})"
                      + (f": {meaning}" if meaning else ""))
@@ -88,6 +87,12 @@ def summary(lights) -> str:
         lines.append("ground bounce shaped (--bounce-shape): " + "; ".join(
             f"sphere {k} gradient ({g[0]:+.3f}, {g[1]:+.3f})" for k, g in shaped))
     return "\n".join(lines)
+
+
+def _first_named(items: list[str], sep: str) -> str:
+    """The first :data:`REJECTED_NAMED` of ``items`` joined by ``sep``, then how many more."""
+    more = f"{sep}... ({len(items) - REJECTED_NAMED} more)" if len(items) > REJECTED_NAMED else ""
+    return sep.join(items[:REJECTED_NAMED]) + more
 
 
 def spheres_summary(spheres) -> str:
@@ -334,16 +339,16 @@ def occlusion_note(lights) -> str | None:
     named where its status is ``shadowed`` in an accepted photo or its relative RMS residual is over
     :data:`ffls.spheres.estimate.SHADOW_MISFIT_RATIO` times its median over the accepted photos.
     """
-    from ffls.spheres.estimate import SHADOW_MISFIT_RATIO
+    from ffls.spheres.estimate import CAPTURE_SHADOW_MIN_PHOTOS, SHADOW_MISFIT_RATIO, matte_residuals
 
     ok = [k for k, s in enumerate(lights.status) if s == "ok"]
     rows = {k: (lights.extra[k] or {}).get("spheres") or [] for k in ok}
     n = max((len(r) for r in rows.values()), default=0)
+    res = {(i, k): v for (i, k), v in matte_residuals(lights).items() if lights.status[i] == "ok" and v > 0}
     hits = []  # (photo, sphere, ratio or None)
     for j in range(n):
-        rms = {k: r[j]["rms"] for k, r in rows.items() if len(r) > j and r[j].get("status") == "ok"
-               and isinstance(r[j].get("rms"), (int, float)) and r[j]["rms"] > 0}
-        if len(rms) < 5:
+        rms = {i: v for (i, k), v in res.items() if k == j}
+        if len(rms) < CAPTURE_SHADOW_MIN_PHOTOS:
             continue
         med = float(np.median(list(rms.values())))
         for k, r in rows.items():
@@ -357,12 +362,11 @@ def occlusion_note(lights) -> str | None:
         return None
     hits.sort()
     photos = sorted({k for k, _, _ in hits})
-    shown = "; ".join(f"{lights.image_names[k]!r} sphere {j} ({'shadowed' if q is None else f'{q:.0f}x'})"
-                      for k, j, q in hits[:REJECTED_NAMED])
-    more = f"; ... ({len(hits) - REJECTED_NAMED} more)" if len(hits) > REJECTED_NAMED else ""
+    shown = _first_named([f"{lights.image_names[k]!r} sphere {j} ({'shadowed' if q is None else f'{q:.0f}x'})"
+                          for k, j, q in hits], "; ")
     return (f"{len(photos)} accepted photos have a sphere in a shadow or fitting its shading far worse than in the "
             f"other photos (RMS residual over {SHADOW_MISFIT_RATIO:g}x its median): an arm, the object or its "
-            f"shadow over it? They lean on their other spheres (numbered as found): {shown}{more}")
+            f"shadow over it? They lean on their other spheres (numbered as found): {shown}")
 
 
 def lens_note(cap, spheres, decoded) -> str | None:
@@ -404,7 +408,7 @@ def tilt_note(lights, fit_roll: bool = False) -> str:
         roll = "its roll not fitted (looking down too steeply, or no roll fits the photos better)"
     else:
         roll = "taken as level (--fit-roll fits its roll)"
-    from ffls.spheres.estimate import TILT_REACH_DEG
+    from ffls.conventions import TILT_REACH_DEG
 
     tilt = float(fitted["camera_tilt_deg"])
     error = (lights.frame or {}).get("tilt_uncertainty_deg")

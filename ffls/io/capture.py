@@ -1130,8 +1130,7 @@ def _check_position_on_direction(j: _Json, key: str, position, direction, scene_
     dist = float(np.linalg.norm(v))
     if dist == 0.0:
         j.fail(key + ": position", "the position is the scene centre, which has no direction")
-    cos = float(np.dot(v / dist, direction) / np.linalg.norm(direction))
-    angle = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    angle = float(np.degrees(conventions.angle_between(v, np.asarray(direction, dtype=np.float64))))
     if angle > POSITION_DIRECTION_TOLERANCE_DEG:
         seen = (v / dist).round(4).tolist()
         j.fail(key + ": position", f"seen from the scene centre it lies {angle:.2f} deg off the light's "
@@ -1213,12 +1212,13 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None, *,
                    "or say \"model\": \"near\"")
         if "position" in it:
             _check_position_on_direction(j, key, p, d, scene_center)
-        # (a tilt past 90 looks down and back: ffls.spheres.estimate.TILT_REACH_DEG)
-        for angle, what, low, high in (("camera_tilt_deg", "tilt", -90, 180), ("camera_roll_deg", "roll", -180, 180)):
+        # (a tilt past 90 looks down and back: conventions.TILT_REACH_DEG)
+        for angle, what, (low, high) in (("camera_tilt_deg", "tilt", conventions.TILT_REACH_DEG),
+                                         ("camera_roll_deg", "roll", (-180, 180))):
             if ex.get(angle) is not None:
                 ex[angle] = j.number(ex[angle], f"{key}: {angle}")
                 if not low <= ex[angle] <= high:
-                    j.fail(f"{key}: {angle}", f"a camera's {what} is between {low} and {high} deg, got "
+                    j.fail(f"{key}: {angle}", f"a camera's {what} is between {low:g} and {high:g} deg, got "
                                               f"{ex[angle]:g}")
         names.append(name)
         dirs.append(d / norm)

@@ -2740,9 +2740,15 @@ def _with_radius(ft, radius_px: float, cam: DetectionCamera):
         new = make_fit(cam.R / np.sin(alpha) * C / d, cam.R, cam.K, cam.dist, cam.wfc, ft.source, edge_px=ft.edge_px,
                         residual=ft.residual_px, n_edge=ft.n_edge_points, n_in=ft.n_inliers, coverage=ft.coverage,
                         shape=cam.shape)
-    new.score, new.center_sigma_px = ft.score, ft.center_sigma_px
-    new.outline_sigma_px, new.outline_edges = ft.outline_sigma_px, ft.outline_edges
-    new.outline_gap_px = ft.outline_gap_px
+    _carry_outline(new, ft).center_sigma_px = ft.center_sigma_px
+    return new
+
+
+def _carry_outline(new, ft):
+    """``new`` (a refit of ``ft``) given ``ft``'s score and outline ambiguity: ``score``,
+    ``outline_sigma_px``, ``outline_gap_px`` and ``outline_edges``."""
+    new.score, new.outline_sigma_px, new.outline_gap_px = ft.score, ft.outline_sigma_px, ft.outline_gap_px
+    new.outline_edges = ft.outline_edges
     return new
 
 
@@ -3054,8 +3060,7 @@ def _refine_on_profiles(ft, L, cam: DetectionCamera, max_residual_px: float, noi
     if (new.residual_px > max_residual_px or np.hypot(*(new.center_px - c)) > reach
             or abs(new.radius_px - ft.radius_px) > reach):
         return ft
-    new.score, new.outline_sigma_px, new.outline_edges = ft.score, ft.outline_sigma_px, ft.outline_edges
-    new.outline_gap_px, new.outline_at_step = ft.outline_gap_px, True
+    _carry_outline(new, ft).outline_at_step = True
     return new
 
 
@@ -3505,9 +3510,7 @@ def _refine_on_consistent_edges(ft, ev: ConsistentEdges, cam: DetectionCamera, m
     if (new is None or new.residual_px > max_residual_px or np.hypot(*(new.center_px - c0)) > 0.25 * r0
             or outline_quality(new) <= outline_quality(ft)):
         return ft
-    new.score = ft.score
-    new.outline_sigma_px, new.outline_gap_px = ft.outline_sigma_px, ft.outline_gap_px
-    new.outline_edges = PHOTO_EDGES
+    _carry_outline(new, ft).outline_edges = PHOTO_EDGES
     return new
 
 

@@ -47,7 +47,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ffls.conventions import UP, normalize
+from ffls.conventions import TILT_REACH_DEG, UP, normalize
 from ffls.errors import InputError
 from ffls.io.capture import Lights, cap_cones, sphere_materials
 from ffls.radiance.photos import load_photo, read_photo
@@ -889,12 +889,6 @@ def _used_matte_fits(results: list[PhotoEstimate], values: list):
                 yield k, f, vals[k]
 
 
-def _refit_matte(s: SphereSamples, fit: LambertFit, values: list[SphereValues], **options) -> list[LambertFit]:
-    """Sphere ``s``'s fit ``fit`` made again on each of ``values`` (its calibrated ground ratio, started
-    from its direction; ``options``: ``terminator``, ``up``, ``own_shadow``)."""
-    return _refit_each((s, [(fit.bounce_ratio, fit.direction)] * len(values), values, options))
-
-
 def _refit_each(args) -> list[LambertFit]:
     """Sphere ``s``'s fits made again, each on its own values from its own fit's ground ratio and
     direction (``starts``: ``(bounce_ratio, direction)`` per entry of ``values``): a picklable task."""
@@ -965,9 +959,11 @@ def halves_offsets(results: list[PhotoEstimate], samples: list[SphereSamples], v
 
 
 def _refit_halves(args) -> list[LambertFit]:
-    """:func:`_refit_matte` of one sphere's two halves (a picklable task of :func:`halves_offsets`)."""
+    """Sphere ``s``'s fit ``fit`` made again on each of its two halves (its calibrated ground ratio,
+    started from its direction; ``options``: ``terminator``, ``up``, ``own_shadow``): a picklable
+    task of :func:`halves_offsets`."""
     s, fit, halves, options = args
-    return _refit_matte(s, fit, halves, **options)
+    return _refit_each((s, [(fit.bounce_ratio, fit.direction)] * len(halves), halves, options))
 
 
 def flat_field_shift_deg(results: list[PhotoEstimate], samples: list[SphereSamples], values: list,
@@ -2366,13 +2362,6 @@ def check_estimable(capture, model: str, refine_options=None) -> tuple[str, dict
 #: to 90, 87.6: 0.49 / 0.80, 100%; docs/spheres.md.)
 TILT_SEARCH_DEG = (0.0, 90.0, 10.0, 0.5)
 
-#: How far past :data:`TILT_SEARCH_DEG`'s ends the grid reaches, a step at a time, while its least
-#: misfit is at an end (:func:`fit_camera_tilt`): from a camera looking straight up (-90) to one
-#: turned over onto its back (180): past 90 a camera looks down and back, toward its own feet (an
-#: RTI dome's camera is as likely at 92 as at 88: a 41-light dome 88 deg down was found at 90.0,
-#: the grid's end, docs/spheres.md). Every tilt in it is a distinct ground normal seen from the
-#: camera; a tilt found at one of these ends is said (``ffls lights``' line).
-TILT_REACH_DEG = (-90.0, 180.0)
 
 #: The camera's roll about its optical axis searched after its tilt (:func:`fit_camera_tilt`): the
 #: bound (degrees either way: a tripod that is not level), the largest tilt at which it is fitted,
@@ -2418,7 +2407,7 @@ def tilted_world_from_camera(tilt_deg: float, roll_deg: float = 0.0) -> np.ndarr
     return M
 
 
-def _matte_residuals(lights) -> dict:
+def matte_residuals(lights) -> dict:
     """``(photo, sphere) -> RMS`` shading residual (the ``rms`` of the sphere's record) of every matte
     sphere fitted in a photo with a light."""
     return {(i, k): float(r["rms"]) for i, e in enumerate(lights.extra or ()) if e.get("status", "ok") == "ok"
@@ -2428,28 +2417,33 @@ def _matte_residuals(lights) -> dict:
 
 def _matte_misfit(lights) -> float:
     """Interquartile mean (:func:`scipy.stats.trim_mean`, a quarter cut from each end) over the photos
-    with a light of their matte spheres' RMS shading residual (:func:`_matte_residuals`): a few
+    with a light of their matte spheres' RMS shading residual (:func:`matte_residuals`): a few
     photos' misfits (a light behind the ball, a sphere near the frame's edge) would rule a mean, and
     a median of one ball's 12 photos wanders. NaN without any."""
-    rms = list(_matte_residuals(lights).values())
+    rms = list(matte_residuals(lights).values())
     return _interquartile_mean(rms) if rms else float("nan")
 
 
 def _interquartile_mean(values) -> float:
-    """:func:`scipy.stats.trim_mean` of ``values`` with a quarter cut from each end."""
-    from scipy.stats import trim_mean
-
-    return float(trim_mean(values, 0.25))
+    """Mean of ``values`` with a quarter cut from each end (the steps of :func:`scipy.stats.trim_mean`
+    at 0.25, bit-identical to it, without its import and its per-call cost); NaN without any."""
+    v = np.asarray(values, dtype=np.float64)
+    n = v.size
+    if n == 0:
+        return float("nan")
+    lo = int(0.25 * n)
+    hi = n - lo
+    return float(np.mean(np.partition(v, (lo, hi - 1))[lo:hi]))
 
 
 def _fits_better(before, after, level: float) -> bool:
     """Whether the estimates ``after`` fit the matte spheres' shading better than ``before`` photo by
     photo: the one-sided Wilcoxon signed-rank test (:func:`scipy.stats.wilcoxon`) of the log ratios
-    of each sphere's residual in each photo (:func:`_matte_residuals`) rejects "no better" at
+    of each sphere's residual in each photo (:func:`matte_residuals`) rejects "no better" at
     ``level``. The misfit's curves are rough at the 1% level (a frame moves pixels across the
     terminator and the own shadow's edge), and a roll's gain is about as small: its least misfit
     alone would be a roll fitted to that roughness."""
-    a, b = _matte_residuals(before), _matte_residuals(after)
+    a, b = matte_residuals(before), matte_residuals(after)
     d = np.log([b[k] / a[k] for k in a if k in b and a[k] > 0 and b[k] > 0])
     d = d[d != 0]
     if len(d) < 6:
@@ -2579,7 +2573,7 @@ def tilt_uncertainty(tried: dict, resamples: int = TILT_BOOTSTRAP, seed: int = 0
         The resampling's generator seed (the same fit gives the same error).
     """
     flat = sorted((t, lights) for (t, r), (_, lights) in tried.items() if r == 0.0)
-    res = [_matte_residuals(lights) for _, lights in flat]
+    res = [matte_residuals(lights) for _, lights in flat]
     keys = sorted(set().union(*res))
     if len(flat) < 3 or not keys:
         return float("nan")
@@ -2588,10 +2582,10 @@ def tilt_uncertainty(tried: dict, resamples: int = TILT_BOOTSTRAP, seed: int = 0
     photos, spheres = (np.unique([k[j] for k in keys], return_inverse=True)[1] for j in (0, 1))
     rng = np.random.default_rng(seed)
     found = []
+    n_p, n_s = photos.max() + 1, spheres.max() + 1
     for _ in range(resamples):
-        weight = (np.bincount(rng.integers(0, photos.max() + 1, photos.max() + 1), minlength=photos.max() + 1)[photos]
-                  * np.bincount(rng.integers(0, spheres.max() + 1, spheres.max() + 1),
-                                minlength=spheres.max() + 1)[spheres])
+        weight = (np.bincount(rng.integers(0, n_p, n_p), minlength=n_p)[photos]
+                  * np.bincount(rng.integers(0, n_s, n_s), minlength=n_s)[spheres])
         drawn = table[:, np.repeat(np.arange(len(keys)), weight)]
         misfits = [_interquartile_mean(row[np.isfinite(row)]) if np.isfinite(row).any() else np.inf for row in drawn]
         found.append(_least_by_parabola(tilts, np.array(misfits)))

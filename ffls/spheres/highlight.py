@@ -181,9 +181,8 @@ class SphereView:
         n = int(getattr(sphere, "n_inliers", 0) or 0)
         # a mirror's outline is its reflections' edges: their misfit moves the centre as a whole (not
         # independent per point), so the full residual, and the outline ambiguity, in quadrature
-        sig = res if n > 0 else 0.1
-        sig = float(np.hypot(sig, float(getattr(sphere, "outline_sigma_px", 0.0) or 0.0)))
-        sig = float(getattr(sphere, "outline_centre_sigma_px", 0.0) or 0.0) or sig
+        own = float(getattr(sphere, "outline_centre_sigma_px", 0.0) or 0.0)
+        sig = own or float(np.hypot(res if n > 0 else 0.1, float(getattr(sphere, "outline_sigma_px", 0.0) or 0.0)))
         cc = getattr(sphere, "center_cam", None)
         return cls(center_px=np.asarray(sphere.center_px, dtype=np.float64), radius_px=float(sphere.radius_px),
                    model=model, K=None if K is None else np.asarray(K, dtype=np.float64),
@@ -1097,15 +1096,14 @@ def refine_view_limb(view: SphereView, image: np.ndarray, bracket: bool = False)
         return view, limb  # the step found another edge than the limb: the detected outline's own uncertainty
     # never below the detected outline's own uncertainty (a second estimate that agrees with it
     # does not make it better: the limb's step can lie on the same wrong edge)
-    c_sig = float(max(np.hypot(gap_c, c_own), view.center_sigma_px))
-    r_sig = float(max(np.hypot(gap_r, r_own), view.radius_sigma_px))
-    if (np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR
-            or not dark_body(image, view.center_px, view.radius_px)):
-        # a chrome ball (a weak step, or a body that reflects its surroundings): the detected
-        # outline (its reflections' edges) is kept
-        if bracket:  # the two estimates bracket its silhouette: uncertain by half their gap
-            c_sig = float(max(np.hypot(0.5 * gap_c, c_own), view.center_sigma_px))
-            r_sig = float(max(np.hypot(0.5 * gap_r, r_own), view.radius_sigma_px))
+    # a chrome ball (a weak step, or a body that reflects its surroundings): the detected outline
+    # (its reflections' edges) is kept; bracketed by the two estimates, uncertain by half their gap
+    chrome = (np.nanmedian(limb.jump_snr) < LIMB_CLEAR_SNR
+              or not dark_body(image, view.center_px, view.radius_px))
+    k = 0.5 if bracket and chrome else 1.0
+    c_sig = float(max(np.hypot(k * gap_c, c_own), view.center_sigma_px))
+    r_sig = float(max(np.hypot(k * gap_r, r_own), view.radius_sigma_px))
+    if chrome:
         return replace(view, center_sigma_px=c_sig, radius_sigma_px=r_sig), limb
     c_sig = float(max(c_sig, np.hypot(c_own, limb.radius_sigma_px)))
     if view.model == "pinhole":

@@ -1173,7 +1173,8 @@ def shading_signal_p(y: np.ndarray, fit) -> float:
     float
     """
     # (the F distribution's survival function is SciPy's ``fdtrc``, which ``scipy.stats.f.sf``
-    # calls: scipy.stats' import, about 0.25 s of CPU, is made by no other part of a run)
+    # calls: scipy.stats' import, about 0.25 s of CPU, is otherwise made only by a fitted roll's
+    # test (ffls.spheres.estimate.fit_camera_tilt) and an orthographic capture's lens check)
     from scipy.special import fdtrc
 
     y = np.asarray(y, dtype=np.float64)
