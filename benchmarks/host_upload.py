@@ -29,6 +29,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from common import write_json  # benchmarks/common.py (atomic)
 
 HERE = Path(__file__).resolve().parent
 STAGES = ("load_photos", "to_float16", "BasisTextures", "PackedBasis")
@@ -107,10 +108,9 @@ def main(argv=None) -> None:
             line += f"{table['after'][s]['cpu_s'] / table['before'][s]['cpu_s']:12.2f}"
         print(line)
     if a.out:
-        Path(a.out).write_text(json.dumps({"capture": a.capture, "shape": first["shape"],
-                                           "renderer": first["renderer"], "cpus": os.cpu_count(),
-                                           "runs": a.runs, "same_bytes": same, "median": table,
-                                           "all": runs}, indent=1))
+        write_json(a.out, {"capture": a.capture, "shape": first["shape"], "renderer": first["renderer"],
+                           "cpus": os.cpu_count(), "runs": a.runs, "same_bytes": same, "median": table,
+                           "all": runs})
 
 
 if __name__ == "__main__":

@@ -32,6 +32,7 @@ from ffls.io.images import read_exr, write_exr
 from ffls.spheres.estimate import tilted_world_from_camera
 
 from bench_no_pose import score  # benchmarks/bench_no_pose.py
+from common import write_json  # benchmarks/common.py (atomic)
 
 JPEG = ("--format", "jpeg", "--encoding", "srgb", "--unstated-encoding", "--jpeg-quality", "85")
 NOISE = ("--format", "png8", "--encoding", "linear", "--unstated-encoding", "--shot-noise", "1e-4",
@@ -125,7 +126,7 @@ def main(argv=None) -> int:
           f"{len(multi)} captures): {sum(r['world_inside'] >= 0.9 for r in multi)} at 90% or more, "
           f"{sum(0.9 <= r['world_inside'] <= 0.98 for r in multi)} in 90-98%")
     if a.out:
-        Path(a.out).write_text(json.dumps({"args": vars(a), "rows": rows}, indent=1))
+        write_json(a.out, {"args": vars(a), "rows": rows})
     return 0
 
 
