@@ -20,9 +20,29 @@ def main() -> int:
     except KeyboardInterrupt:
         print(INTERRUPTED_LINE, file=sys.stderr)
         return 130
-    rc = cli_main()
-    _exit_at_once_on_signal(rc)
+    rc = None
+    try:
+        rc = cli_main()
+        _exit_at_once_on_signal(rc)
+    except KeyboardInterrupt:  # (a Ctrl-C in the instant between the command's return and the handler)
+        if rc is None:
+            print(INTERRUPTED_LINE, file=sys.stderr)
+            return 130
+        _flush_and_exit(rc)
     return rc
+
+
+def _flush_and_exit(rc: int) -> None:
+    """End the process at once with ``rc``, the standard streams flushed (never the interpreter's
+    exit: its thread joins and exit callbacks can wait on anything)."""
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:  # (closed, or a full disk: the command already said what it could)
+            pass
+    os._exit(rc)
 
 
 def _exit_at_once_on_signal(rc: int) -> None:
@@ -31,16 +51,10 @@ def _exit_at_once_on_signal(rc: int) -> None:
     no line, although every output was complete and its status known (``ingest`` interrupted 0.9 to
     1.1 s after its start ended so in 5 of 20 runs). Now it ends the exit at once, with that status.
     """
-    import os
     import signal
 
     def finish(signum, frame):
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except Exception:  # (closed, or a full disk: the command already said what it could)
-                pass
-        os._exit(rc)
+        _flush_and_exit(rc)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         try:

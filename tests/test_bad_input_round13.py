@@ -375,3 +375,23 @@ def test_a_ctrl_c_while_the_interpreter_exits_keeps_the_commands_status(tmp_path
                        timeout=60)
     assert p.returncode == 0 and "Traceback" not in p.stderr and "Exception ignored" not in p.stderr, p
     assert out.is_file()
+
+
+def test_a_ctrl_c_just_after_the_command_returned_keeps_its_status(tmp_path):
+    """A Ctrl-C after the command returned but before the exit's handler was in place (the instant in
+    which ``signal.signal`` runs) ended in a ``KeyboardInterrupt`` traceback and status -2 (seen once
+    in 8 Ctrl-Cs of ``ffls relight`` timed at its end); now it exits at once with the command's status."""
+    script = tmp_path / "instant.py"
+    script.write_text(
+        "import signal, sys\n"
+        "import ffls.cli\n"
+        "ffls.cli.main = lambda: 3\n"  # (a command that returned status 3)
+        "real = signal.signal\n"
+        "def interrupted(*a):\n"  # (the Ctrl-C lands while the first handler is being set)
+        "    signal.signal = real\n"
+        "    raise KeyboardInterrupt\n"
+        "signal.signal = interrupted\n"
+        "from ffls.__main__ import main\n"
+        "sys.exit(main())\n")
+    p = subprocess.run([sys.executable, str(script)], env=child_env(), capture_output=True, text=True, timeout=60)
+    assert p.returncode == 3 and "Traceback" not in p.stderr and p.stderr == "", p
