@@ -25,7 +25,7 @@ import os
 import sys
 from pathlib import Path
 
-from ffls.errors import available_memory
+from ffls.errors import available_memory, physical_memory
 
 __all__ = [
     "learnt_kernel",
@@ -1035,6 +1035,10 @@ def _memory_type(text):
         raise argparse.ArgumentTypeError(str(e)) from None
     if v < 64 * 2 ** 20:
         raise argparse.ArgumentTypeError(f"expected at least 64M, not {text!r}")
+    have = physical_memory()  # (1T on a 24 GiB machine was no limit: the photos were held, then swapped or killed)
+    if have is not None and v > have:
+        raise argparse.ArgumentTypeError(f"{text!r} is more than the {have / 2 ** 30:.3g} GiB of memory this "
+                                         f"machine has (at most {have // 2 ** 20}M)")
     return v
 
 

@@ -142,8 +142,7 @@ class _Json:
         except FileTooLarge as e:
             self.fail("", str(e))
         except UnicodeDecodeError:
-            self.fail("", f"is not a JSON text file ({what} expected): its bytes are not UTF-8 (nor UTF-16 or "
-                          "UTF-32) text")
+            self.fail("", f"is not a JSON text file ({what} expected): {NOT_TEXT}")
         except OSError as e:
             self.fail("", f"cannot read {what} ({os_error_message(e)})")
         try:
@@ -222,11 +221,15 @@ def _unique_keys(pairs) -> dict:
 MAX_JSON_BYTES = 256 << 20
 
 
+NOT_TEXT = "its bytes are not UTF-8 (nor UTF-16 or UTF-32) text"
+"""Why :func:`read_json_text` refused a file's bytes, the same words for every text file ffls reads."""
+
+
 class FileTooLarge(ValueError):
     """A text file over :data:`MAX_JSON_BYTES`, refused before it is read (the message names no path)."""
 
 
-def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str:
+def read_json_text(path, what: str = "JSON file") -> str:
     """The text of a JSON or ``.lp`` file, refused over :data:`MAX_JSON_BYTES`.
 
     UTF-8 (a BOM dropped), or UTF-16 / UTF-32 (as Windows Notepad's "Unicode" saves it), told apart
@@ -240,7 +243,7 @@ def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str
     FileTooLarge
         The file is larger than :data:`MAX_JSON_BYTES`.
     UnicodeDecodeError
-        Its bytes are not UTF-8 (with ``errors='strict'``).
+        Its bytes are not UTF-8 (nor UTF-16 / UTF-32): :data:`NOT_TEXT`.
     OSError
         It cannot be opened or read.
     """
@@ -252,7 +255,7 @@ def read_json_text(path, what: str = "JSON file", errors: str = "strict") -> str
                            f"({MAX_JSON_BYTES} bytes) a {what} may be (ffls reads it whole into memory; "
                            "docs/formats.md)")
     enc = json.detect_encoding(data)
-    return data.decode("utf-8-sig" if enc == "utf-8" else enc, errors=errors)
+    return data.decode("utf-8-sig" if enc == "utf-8" else enc)
 
 
 def parse_json(text: str):
@@ -1353,9 +1356,11 @@ def read_lp(path: str | os.PathLike) -> tuple[list, np.ndarray]:
                          or ".lp file not found", path)
     register_input(path)
     try:
-        lines = read_json_text(path, ".lp file", errors="replace").splitlines()
+        lines = read_json_text(path, ".lp file").splitlines()
     except FileTooLarge as e:
         raise InputError(str(e), path) from None
+    except UnicodeDecodeError:  # (a Windows tool's latin-1 names were read with U+FFFD, then missed)
+        raise InputError(f"is not a text .lp file: {NOT_TEXT} (save it as UTF-8)", path) from None
     except OSError as e:
         raise InputError(f"cannot read .lp file ({e})", path) from None
     rows = [(k + 1, ln.strip()) for k, ln in enumerate(lines) if ln.strip()]
