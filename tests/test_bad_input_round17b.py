@@ -8,6 +8,8 @@ nothing left.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from cli_lines import entries, one_line, tiny_capture
@@ -44,3 +46,52 @@ def test_a_memory_budget_above_the_machines_memory_is_refused(cap, tmp_path, cap
     assert rc == 2
     assert "--memory" in line and size in line and "memory this machine has" in line
     assert not (tmp_path / "o.png").exists()
+
+
+# ----------------------------------------------------------------------------- lights.json frame
+def _lights_with_frame(cap, tmp_path, frame) -> Path:
+    import json
+
+    from ffls.io.capture import load_lights
+
+    doc = load_lights(cap / "lights.json").to_json()
+    doc["frame"] = frame
+    out = tmp_path / "lf.json"
+    out.write_text(json.dumps(doc))
+    return out
+
+
+_POSE = [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]
+
+
+@pytest.mark.parametrize("frame, key, words", [
+    ({"world_from_camera": [[1, 0, 0, 1e308], *_POSE[1:]]}, "frame.world_from_camera", "beyond any number"),
+    ({"world_from_camera": [[1, 0, 0, 1e200], [0, -1, 0, 1e200], [0, 0, -1, 0], [0, 0, 0, 1]]},
+     "frame.world_from_camera", "beyond any number"),
+    ({"world_from_camera": _POSE, "sorce": "mine"}, "frame.sorce", "did you mean 'source'"),
+    ({"world_from_camera": _POSE, "tilt_uncertainty": 2.0}, "frame.tilt_uncertainty", "did you mean"),
+    ({"world_from_camera": _POSE, "tilt_uncertainty_deg": "abc"}, "frame.tilt_uncertainty_deg", "finite number"),
+    ({"world_from_camera": _POSE, "tilt_uncertainty_deg": -1.0}, "frame.tilt_uncertainty_deg", "0 to 180"),
+    ({"world_from_camera": _POSE, "source": 3}, "frame.source", "string"),
+])
+def test_a_lights_frame_is_checked_as_the_other_blocks(cap, tmp_path, capfd, frame, key, words):
+    """A translation of 1e308 and unknown or wrong-typed keys of ``frame`` were read without a word
+    (only the pose's rotation was checked)."""
+    lf = _lights_with_frame(cap, tmp_path, frame)
+    rc, line = one_line(capfd, ["relight", cap, "--lights", lf, "--probe", "sky", "-o", tmp_path / "o.png",
+                                "--workers", "1"])
+    assert rc == 2
+    assert f"lf.json: {key}" in line and words in line, line
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_a_lights_frame_as_ffls_writes_it_is_read(cap, tmp_path):
+    """The guard: the keys ``ffls lights`` writes, a null error (not measured), an ``x-`` key of
+    the user's and a translation of a real pose are read as before."""
+    from ffls.io.capture import load_lights
+
+    frame = {"world_from_camera": [[1, 0, 0, 2.5], [0, -1, 0, -1e3], [0, 0, -1, 0], [0, 0, 0, 1]],
+             "source": "the camera's tilt fitted to the spheres' shading", "tilt_uncertainty_deg": None,
+             "x-note": "mine"}
+    lights = load_lights(_lights_with_frame(cap, tmp_path, frame))
+    assert lights.frame["world_from_camera"][1, 3] == -1e3 and lights.frame["x-note"] == "mine"

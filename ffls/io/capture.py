@@ -586,6 +586,25 @@ def _rigid(j: _Json, value, key: str) -> np.ndarray:
     return T
 
 
+#: The keys of ``lights.json``'s ``frame`` record (others are kept and ignored, a near miss refused).
+_FRAME_KEYS = {"world_from_camera", "source", "tilt_uncertainty_deg"}
+
+
+def _frame_pose(j: _Json, value) -> np.ndarray:
+    """``frame.world_from_camera`` (:func:`_rigid`), its translation within a distance a float holds.
+
+    Only its rotation turns the lights, but a translation whose squared length overflows (1e308)
+    places the camera beyond any distance: no frame a tool wrote (a fitted frame's camera is at
+    the origin), so it is refused rather than carried into the next file."""
+    T = _rigid(j, value, "frame.world_from_camera")
+    with np.errstate(over="ignore"):
+        far = not np.isfinite(np.dot(T[:3, 3], T[:3, 3]))
+    if far:
+        j.fail("frame.world_from_camera", f"its translation {_short(T[:3, 3].tolist())} puts the camera at a "
+                                          "distance beyond any number (a frame's camera is at its origin)")
+    return T
+
+
 def _parse_spheres(j: _Json, spheres, count=None) -> tuple[list, int | None]:
     """``spheres`` (hints) and ``sphere_count``: (list of hint dicts, count or None).
 
@@ -1245,8 +1264,14 @@ def load_lights(path: str | os.PathLike, capture: Capture | None = None, *,
     if "frame" in doc:
         if not isinstance(frame, dict):
             j.fail("frame", f"expected an object, got {_short(frame)}")
-        frame = {**frame, "world_from_camera": _rigid(j, j.require(frame, "world_from_camera", "frame: "),
-                                                      "frame.world_from_camera")}
+        frame = {**frame, "world_from_camera": _frame_pose(j, j.require(frame, "world_from_camera", "frame: "))}
+        _check_misspelt_keys(j, frame, _FRAME_KEYS, "frame.")
+        if "source" in frame:
+            j.string(frame["source"], "frame.source")
+        if frame.get("tilt_uncertainty_deg") is not None:  # (null: not measured; float() by the cones' widening)
+            e = j.number(frame["tilt_uncertainty_deg"], "frame.tilt_uncertainty_deg")
+            if not 0 <= e <= 180:
+                j.fail("frame.tilt_uncertainty_deg", f"expected an angle in degrees from 0 to 180, got {e!r}")
     order = np.arange(len(names)) if capture is None else _order_to_capture(j, names, capture)
     return Lights(
         encoding=record,
