@@ -95,3 +95,65 @@ def test_a_lights_frame_as_ffls_writes_it_is_read(cap, tmp_path):
              "x-note": "mine"}
     lights = load_lights(_lights_with_frame(cap, tmp_path, frame))
     assert lights.frame["world_from_camera"][1, 3] == -1e3 and lights.frame["x-note"] == "mine"
+
+
+# ----------------------------------------------------------------------------- --mask values
+def _relight_mask(cap, tmp_path, capfd, mask):
+    from ffls.cli import main
+
+    capfd.readouterr()
+    rc = main([str(a) for a in ["relight", cap, "--probe", "sky", "-o", tmp_path / "o.png", "--workers", "1",
+                                "--mask", mask]])
+    err = capfd.readouterr().err
+    assert "Traceback" not in err
+    return rc, [ln for ln in err.splitlines() if ln.strip() and "coverage: " not in ln]
+
+
+def test_a_float_photo_as_mask_is_refused(cap, tmp_path, capfd):
+    """A float EXR whose values run past 1 on most pixels (a photo) was clipped to a "mask"."""
+    import numpy as np
+
+    from ffls.io.images import read_image, write_exr
+
+    photo = read_image(cap / "img_0000.exr").pixels
+    mask = tmp_path / "photo.exr"
+    write_exr(mask, photo / np.median(photo) * 2)  # (half its pixels past 1)
+    rc, lines = _relight_mask(cap, tmp_path, capfd, mask)
+    assert rc == 2 and len(lines) == 1, lines
+    assert "photo.exr" in lines[0] and "outside 0..1" in lines[0] and "is it a photo?" in lines[0]
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_a_grey_mask_is_said_to_be_read_as_a_soft_one(cap, tmp_path, capfd):
+    """A 0.7 grey TIFF was read as a 70% opaque object without a word."""
+    import cv2
+    import numpy as np
+
+    from ffls.io.images import read_image
+
+    h, w = read_image(cap / "img_0000.exr").pixels.shape[:2]
+    mask = tmp_path / "grey.tif"
+    cv2.imwrite(str(mask), np.full((h, w), 178, np.uint8))
+    rc, lines = _relight_mask(cap, tmp_path, capfd, mask)
+    assert rc == 0
+    assert any("grey.tif has no white pixel" in ln and "soft mask" in ln for ln in lines), lines
+
+
+def test_a_mask_with_soft_edges_reads_without_a_note(cap, tmp_path, capfd):
+    """The guard: a binary mask, anti-aliased at its edges and resampled with a filter's ringing past
+    0..1 on a few pixels, is read as before, without a note."""
+    import numpy as np
+    from scipy import ndimage
+
+    from ffls.io.images import read_image, write_exr
+
+    h, w = read_image(cap / "img_0000.exr").pixels.shape[:2]
+    m = np.zeros((h, w), np.float32)
+    m[h // 4: 3 * h // 4, w // 4: 3 * w // 4] = 1
+    m = ndimage.gaussian_filter(m, 0.5)  # (an anti-aliased edge)
+    m[h // 4, w // 4: w // 4 + 5] = 1.05  # (ringing on 5 pixels)
+    mask = tmp_path / "soft.exr"
+    write_exr(mask, np.repeat(m[..., None], 3, axis=-1))
+    rc, lines = _relight_mask(cap, tmp_path, capfd, mask)
+    assert rc == 0
+    assert not any("mask" in ln for ln in lines), lines

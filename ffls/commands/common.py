@@ -656,7 +656,7 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
     capture, lights, lightmap (or None), mask ((H, W) float32 coverage, or None)
     """
     from ffls.io.capture import load_capture_and_lights
-    from ffls.io.images import colour_summary, read_mask
+    from ffls.io.images import colour_summary, mask_note, read_mask
 
     capture, lights = load_capture_and_lights(args.capture, args.lights, getattr(args, "lights_map", None))
     idx, dirs = lights.accepted()
@@ -673,6 +673,7 @@ def load_relight_inputs(args, command: str, lightmap: bool = True):
         mask = read_mask(args.mask, size=capture.image_size)
         check_mask_not_empty(mask, args.mask)
     notes = [lights.note, colour_summary([capture.image_paths[i] for i in idx])]
+    notes.append(None if mask is None else mask_note(mask, args.mask))
     notes.append(None if lm is None or not lm.colour_note else f"colour: light map: {lm.colour_note}")
     notes += coverage_notes(capture, lights, idx, dirs, repeats=True)
     print_notes(command, *notes)

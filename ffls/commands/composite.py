@@ -19,6 +19,7 @@ from ffls.commands.common import (CELLS_RES, FPS, FRAMES, RANK, add_rotation_arg
                                   check_fps_flag, check_output_kind,
                                   exposure_arg, input_path, learnt_kernel, output_path, print_notes, flush_notes,
                                   rotation_from_args, compressed_note)
+from ffls.io.images import MAX_RINGING_SHARE
 
 NAME = "composite"
 HELP = "merge a relit object and its shadows into a virtual scene or photograph (differential rendering)"
@@ -49,7 +50,7 @@ BACKGROUND_SUFFIXES = (".exr", ".hdr", ".pic")
 #: Share of a background's pixels that may hold a negative value: a renderer's reconstruction
 #: filter (Lanczos, Mitchell) rings below zero beside bright edges, on a few pixels; more than this
 #: is not radiance (an offset image, a difference image).
-MAX_NEGATIVE_BACKGROUND = 0.01
+MAX_NEGATIVE_BACKGROUND = MAX_RINGING_SHARE
 
 
 def add_arguments(p):
@@ -455,7 +456,7 @@ def load_inputs(args):
     from ffls.commands.common import check_cells_res, check_mask_not_empty, check_rank_arg, coverage_notes
     from ffls.errors import InputError
     from ffls.io.capture import load_capture_and_lights
-    from ffls.io.images import colour_summary, read_image, read_mask
+    from ffls.io.images import colour_summary, mask_note, read_image, read_mask
     from ffls.lightmaps.lightmap import lightmap_from_spec
     from ffls.relight.composite import check_same_camera
 
@@ -497,6 +498,7 @@ def load_inputs(args):
         notes.append(f"colour: background: {bg.colour_note}")
     om = read_mask(args.mask, size=size)
     check_mask_not_empty(om, args.mask)
+    notes.append(mask_note(om, args.mask))
     sm = read_mask(args.surface_mask, size=size)
     if not ((sm > 0.5) & (om < 0.5)).any():
         raise InputError("the surface mask has no surface pixel outside the object's mask (white = surface)",

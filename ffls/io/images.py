@@ -39,6 +39,8 @@ from ffls.errors import (InputError, OutputError, atomic_output, not_a_regular_f
 
 __all__ = [
     "ImageData",
+    "MAX_RINGING_SHARE",
+    "mask_note",
     "READ_EXTENSIONS",
     "read_image",
     "read_exr",
@@ -79,6 +81,8 @@ _KINDS = {
 READ_EXTENSIONS = tuple(_KINDS)
 
 _HALF_MAX = float(np.finfo(np.float16).max)
+#: Half of an 8-bit step: a coverage within it of 0 or 1 is black or white (what a file can hold).
+_HALF_EPS = 0.5 / 255
 #: The float32 value ``k / 255`` of every 8-bit code ``k`` (what an 8-bit file is read as).
 _CODE_VALUES_8 = np.arange(256, dtype=np.float32) / np.float32(255)
 
@@ -877,11 +881,19 @@ def pixels_match(pa: np.ndarray, pb: np.ndarray, rtol: float = SAME_PIXELS_RTOL)
     return bool(np.sqrt(np.mean(d * d)) <= rtol * scale)
 
 
+#: Share of an image's pixels that a reconstruction filter (Lanczos, Mitchell, bicubic) may ring
+#: outside its range on, beside sharp edges; more than this is another kind of image (a mask's
+#: coverage past 0..1: an HDR photo; a background's negative radiance: an offset image).
+MAX_RINGING_SHARE = 0.01
+
+
 def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
     """An object mask image as coverage (H, W) float32 in [0, 1] (white = object).
 
     The coverage of a pixel is its largest channel (integer files scaled to [0, 1]; floats
-    clipped to [0, 1]); a file with alpha uses the alpha times that.
+    clipped to [0, 1]: a resampled mask rings past them on a few pixels, at most
+    :data:`MAX_RINGING_SHARE` of them); a file with alpha uses the alpha times that. Grey is
+    partial coverage (a soft mask): :func:`mask_note` says when a mask is mostly grey.
 
     Parameters
     ----------
@@ -893,7 +905,8 @@ def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
     Raises
     ------
     InputError
-        Unreadable, non-finite values, or the wrong size.
+        Unreadable, non-finite values, values outside [0, 1] on more than
+        :data:`MAX_RINGING_SHARE` of the pixels (a float photo, not a mask), or the wrong size.
     """
     img = read_image(path, working_space=False)
     m = img.pixels.max(axis=-1)
@@ -903,7 +916,33 @@ def read_mask(path: str | os.PathLike, size: tuple | None = None) -> np.ndarray:
         raise InputError("mask has NaN or Inf values", path)
     if size is not None and (m.shape[1], m.shape[0]) != tuple(size):
         raise InputError(f"mask is {m.shape[1]}x{m.shape[0]}, the images are {size[0]}x{size[1]}", path)
+    outside = float(np.mean((m < 0) | (m > 1)))
+    if outside > MAX_RINGING_SHARE:  # (a float EXR photo was clipped to a "mask" without a word)
+        raise InputError(f"mask values run from {float(m.min()):.3g} to {float(m.max()):.3g}, outside 0..1 on "
+                         f"{100 * outside:.1f}% of the pixels: a mask is coverage, 0 (black, background) to 1 "
+                         f"(white, object); is it a photo? (at most {100 * MAX_RINGING_SHARE:g}% from a "
+                         "filter's ringing is clipped)", path)
     return np.clip(m, 0.0, 1.0).astype(np.float32)
+
+
+def mask_note(mask, path) -> str | None:
+    """The line that says a mask (:func:`read_mask`'s coverage) is read as a soft one, or None.
+
+    Grey is partial coverage (docs/formats.md): an anti-aliased or feathered edge is grey on
+    fewer pixels than the object's white inside. A mask with no white pixel, or more grey pixels
+    than white ones (a grey card, a photo), is still read as coverage, but said: its object is at
+    most that opaque, or it is not the mask meant."""
+    m = np.asarray(mask)
+    white = int(np.count_nonzero(m >= 1.0 - _HALF_EPS))
+    grey = int(np.count_nonzero((m > _HALF_EPS) & (m < 1.0 - _HALF_EPS)))
+    name = Path(path).name
+    if not white:
+        return (f"mask: {name} has no white pixel (coverage at most {float(m.max()):.3g}): read as a soft mask, "
+                f"the object at most {100 * float(m.max()):.0f}% opaque (white = object)")
+    if grey > white:
+        return (f"mask: {name} is grey (partial coverage) on {100 * grey / m.size:.0f}% of its pixels, more than "
+                f"are white ({100 * white / m.size:.0f}%): read as a soft mask, each pixel's alpha its grey")
+    return None
 
 
 @dataclass(frozen=True)
