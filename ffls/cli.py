@@ -31,7 +31,7 @@ import warnings
 from ffls import INTERRUPTED_LINE
 from ffls.commands import command_modules
 from ffls.commands.common import deferred_notes, print_notes
-from ffls.errors import FflsError, guard_inputs, interrupt_note, os_error_message
+from ffls.errors import FflsError, guard_inputs, interrupt_note, os_error_message, outputs_on_interrupt
 
 __all__ = ["build_parser", "subcommands", "main", "OneLineParser", "Terminated", "STDOUT_CLOSED"]
 
@@ -323,8 +323,8 @@ def _main(argv: list[str] | None = None) -> int:
     name = f"ffls {args.command}"
     _quiet_opencv()
     try:
-        with _sigterm_as_interrupt(), _one_line_warnings(args.command), guard_inputs(), deferred_notes(), \
-                _named_stdout():  # (innermost: its last flush fails before the notes are printed)
+        with _sigterm_as_interrupt(), _one_line_warnings(args.command), guard_inputs(), outputs_on_interrupt(), \
+                deferred_notes(), _named_stdout():  # (innermost: its last flush fails before the notes are printed)
             return int(args.handler(args) or 0)
     except FflsError as e:
         print(f"{name}: error: {e}", file=sys.stderr)

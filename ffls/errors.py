@@ -21,7 +21,8 @@ from pathlib import Path
 
 __all__ = ["FflsError", "InputError", "OutputError", "GLUnavailable", "atomic_output", "atomic_folder",
            "check_output_path", "os_error_message", "register_input", "guard_inputs", "kept_on_interrupt",
-           "interrupt_note", "name_output", "disk_full", "available_memory", "atomic_outputs",
+           "outputs_on_interrupt",
+           "interrupt_note", "name_output", "disk_full", "available_memory", "physical_memory", "atomic_outputs",
            "not_a_regular_file", "broken_link"]
 
 
@@ -107,8 +108,48 @@ def kept_on_interrupt(note: str):
 
 
 def interrupt_note(e: BaseException) -> str | None:
-    """What an interrupted command kept on purpose (:func:`kept_on_interrupt`), or None."""
-    return getattr(e, "ffls_kept", None)
+    """What an interrupted command kept on purpose (:func:`kept_on_interrupt`) and the outputs it
+    had completed before the interruption (:func:`outputs_on_interrupt`), or None."""
+    kept = getattr(e, "ffls_kept", None)
+    done = [p for p in getattr(e, "ffls_written", None) or () if os.path.lexists(p)]  # (not in a staging folder)
+    if not done:
+        return kept
+    names = ", ".join(str(p) for p in done)
+    return f"{names} {'was' if len(done) == 1 else 'were'} written whole before it; {kept or 'nothing partial was left'}"
+
+
+_WRITTEN: contextvars.ContextVar = contextvars.ContextVar("ffls_written", default=None)
+
+
+@contextlib.contextmanager
+def outputs_on_interrupt():
+    """While active, the outputs :func:`atomic_output`, :func:`atomic_outputs` and
+    :func:`atomic_folder` complete (renamed onto their paths) are recorded, and an interruption
+    (a :class:`KeyboardInterrupt`) carries them for :func:`interrupt_note`: a Ctrl-C just after
+    ``ffls relight`` renamed its image said "nothing partial was left" of a whole output."""
+    done: list = []
+    token = _WRITTEN.set(done)
+    try:
+        yield
+    except KeyboardInterrupt as e:
+        if done and getattr(e, "ffls_written", None) is None:
+            e.ffls_written = list(done)
+        raise
+    finally:
+        _WRITTEN.reset(token)
+
+
+def _completed(path: Path, renamed=None) -> None:
+    """Record ``path`` as a completed output (:func:`outputs_on_interrupt`).
+
+    Called after its rename, and, with ``renamed`` (the :func:`_identity` of the temporary file
+    or folder taken before the rename), from the handler of an exception that may have come
+    between the rename and that call: a Ctrl-C goes to any thread of the process (the signal
+    mask holds it from this one only), and Python raises it at the main thread's next bytecode.
+    Recorded then only where ``path`` is that file."""
+    done = _WRITTEN.get()
+    if done is not None and path not in done and (renamed is None or _identity(path) == renamed):
+        done.append(path)
 
 
 @contextlib.contextmanager
@@ -282,8 +323,11 @@ def _raise_os(e: OSError, path: Path):
 
 
 @contextlib.contextmanager
-def atomic_output(path: str | os.PathLike, suffix: str | None = None):
+def atomic_output(path: str | os.PathLike, suffix: str | None = None, part: bool = False):
     """Yield a temporary path beside ``path``; rename it onto ``path`` only if the block succeeds.
+
+    Once renamed, ``path`` is named by the line of a later interruption (:func:`outputs_on_interrupt`)
+    unless it is a ``part`` of a larger output (a store's bookkeeping files).
 
     A failing writer (an exception, Ctrl-C, SIGTERM turned into an exception by the CLI) leaves
     nothing behind, neither the temporary file nor a half-written output, and an existing
@@ -310,6 +354,7 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None):
     except OSError as e:
         _raise_os(e, path)
     tmp = Path(tmp)
+    renamed = None  # (the file's identity once it is being renamed onto path)
     try:
         try:
             yield tmp
@@ -332,10 +377,15 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None):
             if group is not None:  # renamed with the group's other outputs (atomic_outputs)
                 group.append((tmp, path))
             else:
+                renamed = None if part else _identity(tmp)
                 os.replace(tmp, path)
+                if not part:
+                    _completed(path)
         except OSError as e:
             _raise_os(e, path)
     except BaseException as e:
+        if renamed is not None:
+            _completed(path, renamed)
         with contextlib.suppress(OSError):
             tmp.unlink()
         name_output(e, tmp, path)
@@ -356,6 +406,7 @@ def atomic_outputs():
     back an output it wrote (it is not there yet).
     """
     pending: list = []
+    renamed = path = None
     token = _GROUP.set(pending)
     try:
         try:
@@ -365,12 +416,16 @@ def atomic_outputs():
         with _signals_deferred():
             while pending:
                 tmp, path = pending[0]
+                renamed = _identity(tmp)
                 try:
                     os.replace(tmp, path)
                 except OSError as e:
                     _raise_os(e, path)
                 pending.pop(0)
+                _completed(path)
     except BaseException:
+        if renamed is not None:
+            _completed(path, renamed)
         for tmp, _ in pending:
             with contextlib.suppress(OSError):
                 tmp.unlink()
@@ -398,7 +453,7 @@ def atomic_folder(path: str | os.PathLike):
     except OSError as e:
         _raise_os(e, path)
     os.chmod(stage, 0o777 & ~_umask())
-    old = None
+    old = renamed = None
     try:
         try:
             yield stage
@@ -411,12 +466,16 @@ def atomic_folder(path: str | os.PathLike):
                 if path.exists():
                     old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=parent))
                     os.replace(path, old / path.name)
+                renamed = _identity(stage)
                 os.replace(stage, path)
+                _completed(path)
             except OSError as e:
                 if old is not None and (old / path.name).exists() and not path.exists():
                     os.replace(old / path.name, path)  # put the old output back
                 _raise_os(e, path)
     except BaseException as e:
+        if renamed is not None:
+            _completed(path, renamed)
         shutil.rmtree(stage, ignore_errors=True)
         name_output(e, stage, path)
         raise

@@ -157,3 +157,58 @@ def test_a_mask_with_soft_edges_reads_without_a_note(cap, tmp_path, capfd):
     rc, lines = _relight_mask(cap, tmp_path, capfd, mask)
     assert rc == 0
     assert not any("mask" in ln for ln in lines), lines
+
+
+# ----------------------------------------------------------------------------- Ctrl-C after the output
+@pytest.mark.parametrize("extra", [[], ["--mask", None]])
+def test_a_ctrl_c_just_after_the_output_is_renamed_names_it(cap, tmp_path, capfd, monkeypatch, extra):
+    """A Ctrl-C arriving as ``ffls relight`` renamed its image (at ~1.6 s) said "interrupted;
+    nothing partial was left", status 130, of a whole output. The signal is sent by the rename
+    itself (deterministic, not timed): the line now names the complete output."""
+    import os
+    import signal
+
+    import cv2
+    import numpy as np
+
+    from ffls.cli import main
+    from ffls.io.images import read_image
+
+    out = tmp_path / "o.png"
+    if extra:
+        h, w = read_image(cap / "img_0000.exr").pixels.shape[:2]
+        extra = ["--mask", tmp_path / "m.png"]
+        cv2.imwrite(str(extra[1]), np.full((h, w), 255, np.uint8))
+    real = os.replace
+
+    def replace(src, dst, **kw):
+        real(src, dst, **kw)
+        if os.path.basename(dst) == "o.png":
+            os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", replace)
+    capfd.readouterr()
+    rc = main([str(a) for a in ["relight", cap, "--probe", "sky", "-o", out, "--workers", "1", *extra]])
+    err = capfd.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 130 and len(lines) == 1, err
+    assert lines[0] == f"ffls relight: interrupted; {out} was written whole before it; nothing partial was left"
+    assert out.exists() and read_image(out).pixels.shape[:2] == read_image(cap / "img_0000.exr").pixels.shape[:2]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["o.png", *(["m.png"] if extra else [])])
+
+
+def test_a_ctrl_c_before_the_rename_still_says_nothing_partial(cap, tmp_path, capfd, monkeypatch):
+    """The guard: interrupted before its output is renamed, the command leaves nothing and says so."""
+    import os
+
+    real = os.replace
+
+    def replace(src, dst, **kw):
+        if os.path.basename(dst) == "o.png":
+            raise KeyboardInterrupt
+        real(src, dst, **kw)
+
+    monkeypatch.setattr(os, "replace", replace)
+    rc, line = one_line(capfd, ["relight", cap, "--probe", "sky", "-o", tmp_path / "o.png", "--workers", "1"])
+    assert rc == 130 and line == "ffls relight: interrupted; nothing partial was left"
+    assert list(tmp_path.iterdir()) == []

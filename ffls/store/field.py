@@ -168,9 +168,10 @@ def stale_reason(recorded: dict, current: dict) -> str | None:
 
 # ----------------------------------------------------------------------------- small json files
 def write_json_atomic(path, doc: dict) -> Path:
-    """Write ``doc`` to ``path`` through :func:`ffls.errors.atomic_output` (never a half-written file)."""
+    """Write ``doc`` to ``path`` through :func:`ffls.errors.atomic_output` (never a half-written file;
+    a part of the store, not named as an output of its own)."""
     path = Path(path)
-    with atomic_output(path) as tmp:
+    with atomic_output(path, part=True) as tmp:
         tmp.write_text(json.dumps(doc, indent=1, sort_keys=True))
     return path
 
