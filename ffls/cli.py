@@ -12,7 +12,8 @@ The error policy (``docs/reliability.md``), applied here once for every command:
 * an OS error that escapes a command (a file that cannot be read or written) is one line naming
   the file, status 2; running out of memory is one line, status 2;
 * Ctrl-C (SIGINT) and SIGTERM unwind the command (every output is atomic, so nothing partial is
-  left) and print one line, status 130 or 143;
+  left) and print one line, status 130 or 143, naming the outputs completed before the signal
+  (:func:`ffls.errors.outputs_on_interrupt`);
 * a Python warning (a light map's clamped negatives, ...) is one line, ``ffls COMMAND: warning: ...``,
   held with the informational lines until the inputs are loaded, so a command that fails prints
   only its error line;
