@@ -15,7 +15,8 @@ error, and the outcome: ``ok`` (centre within 1 px), ``off`` (found, centre 1 px
 ``inner`` (a circle inside the ball: radius below 0.8 of the truth, an inner reflection),
 ``none`` (no sphere found). Then the rate within 1 px and the time per photo. Also per render the 95% radius
 of the centre the located sphere states (``SphereGeometry.center_uncertainty_px``, None where not stated) and
-whether its description flags it (over ``MIRROR_CENTRE_TOL_PX``); summed: the renders whose error lies within
+whether its description flags it (``SphereGeometry.flagged``: over ``MIRROR_CENTRE_TOL_PX``, or a larger circle of
+steps encloses its limb); summed: the renders whose error lies within
 the stated radius, the flagged ones, and those off (1 px or more) without a flag. ``--sectors N`` sets
 ``ffls.probes.locate.LIMB_JACKKNIFE_SECTORS``.
 
@@ -42,7 +43,7 @@ from ffls.io.probe import load_probe
 from ffls.lightmaps.lightmap import LightMapWarning, load_lightmap
 from ffls.probes.bracket import view_radiance
 from ffls.probes import locate as locate_module
-from ffls.probes.locate import MIRROR_CENTRE_TOL_PX, locate_sphere
+from ffls.probes.locate import locate_sphere
 from ffls.synth.probe import look_at, write_mirror_probe
 
 HDRI = Path("/work/shared/hdri")
@@ -76,14 +77,16 @@ def render(folder, lightmap, layout, azimuth_deg):
 
 def locate(folder, stated: bool = False):
     """The located sphere (centre px, radius px) of the probe in ``folder``, or None, and the seconds taken;
-    ``stated``: also its 95% centre radius (or None) last in the tuple."""
+    ``stated``: also its 95% centre radius (or None) and whether its description flags it
+    (``SphereGeometry.flagged``) last in the tuple."""
     probe = load_probe(folder)
     view = probe.views[0]
     vr = view_radiance(view, probe.encoding, probe.response, probe.json_path)
     t = time.perf_counter()
     try:
         geo = locate_sphere(view, vr.radiance, probe.json_path)
-        out = (np.asarray(geo.center_px), float(geo.radius_px)) + ((geo.center_uncertainty_px,) if stated else ())
+        out = (np.asarray(geo.center_px), float(geo.radius_px)) + ((geo.center_uncertainty_px, geo.flagged)
+                                                                   if stated else ())
     except InputError:
         out = None
     return out, time.perf_counter() - t
@@ -109,7 +112,7 @@ def main(argv=None):
                 folder = Path(tmp) / f"{name}_{layout[0]}"
                 c_true, r_true = render(folder, lm, layout, azimuth_deg=90.0 * m + 120.0 * k + a.azimuth)
                 found, dt = locate(folder, stated=True)
-                u = None if found is None else found[2]
+                u, flag = (None, False) if found is None else found[2:4]
                 if found is None:
                     err, dr, outcome = None, None, "none"
                 else:
@@ -118,11 +121,11 @@ def main(argv=None):
                     outcome = ("inner" if found[1] < 0.8 * r_true else "ok" if err < 1.0 else "off")
                 rows.append({"map": name, "layout": layout[0], "center_true_px": c_true.tolist(), "radius_true_px": r_true,
                              "center_error_px": err, "radius_error_px": dr, "outcome": outcome, "seconds": dt,
-                             "center_uncertainty_px": u, "flagged": u is not None and u > MIRROR_CENTRE_TOL_PX})
+                             "center_uncertainty_px": u, "flagged": flag})
                 print(f"{name:10s} {layout[0]:7s} r={r_true:5.1f} px  "
                       + ("not found" if err is None else f"centre error {err:6.2f} px, radius {dr:+6.2f} px")
                       + f"  {outcome:5s} {dt:5.2f} s" + ("" if u is None else f"  stated {u:5.2f} px (95%)"
-                                                         + (" FLAGGED" if u > MIRROR_CENTRE_TOL_PX else "")), flush=True)
+                                                         + ("" if not flag else " FLAGGED")), flush=True)
     n_ok = sum(r["outcome"] == "ok" for r in rows)
     errs = [r["center_error_px"] for r in rows if r["center_error_px"] is not None]
     summary = {"renders": len(rows), "within_1px": n_ok,

@@ -31,18 +31,19 @@ from ffls.io.images import write_exr
 from ffls.io.probe import load_probe
 from ffls.lightmaps.lightmap import builtin_lightmap
 from ffls.probes.bracket import view_radiance
-from ffls.probes.locate import MIRROR_CENTRE_TOL_PX, locate_sphere
+from ffls.probes.locate import locate_sphere
 from ffls.synth.probe import off_axis_view, write_mirror_probe
 from ffls.synth.probe_scenes import diffuse_sphere_scene
 
 
 def _locate(folder):
-    """(centre px, radius px, stated 95% centre radius or None) of the located sphere, or None (refused)."""
+    """(centre px, radius px, stated 95% centre radius or None, flagged) of the located sphere, or None (refused);
+    flagged: its description says UNCERTAIN (``SphereGeometry.flagged``)."""
     probe = load_probe(folder)
     vr = view_radiance(probe.views[0], probe.encoding, probe.response, probe.json_path)
     try:
         geo = locate_sphere(probe.views[0], vr.radiance, probe.json_path)
-        return np.asarray(geo.center_px), float(geo.radius_px), geo.center_uncertainty_px
+        return np.asarray(geo.center_px), float(geo.radius_px), geo.center_uncertainty_px, geo.flagged
     except InputError:
         return None
 
@@ -84,7 +85,7 @@ def mirror_rows(tmp: Path) -> list:
             got = _locate(folder)
             err = None if got is None else float(np.hypot(*(got[0] - c_true)))
             u = None if got is None else got[2]
-            flagged = u is not None and u > MIRROR_CENTRE_TOL_PX
+            flagged = got is not None and got[3]
             rows.append({"kind": "mirror", "map": name, "hint_offset_px": list(off), "centre_error_px": err,
                          "center_uncertainty_px": u, "flagged": flagged,
                          "outcome": "refused" if got is None else ("ok" if err < 1.0 else

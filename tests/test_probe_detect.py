@@ -377,3 +377,41 @@ def test_the_limb_and_its_cone_share_one_log_luminance(tmp_path, monkeypatch):
     geo, c_true = _located(tmp_path / "p", "night")
     assert geo.source == "auto" and np.hypot(*(geo.center_px - c_true)) < 0.3
     assert len(calls) == 1
+
+
+def test_limb_well_inside_a_circle_of_steps_is_flagged():
+    """At azimuth 130 under courtyard (f = 400 px, ``benchmarks/probe_detect.py``) a reflected circle inside
+    the ball (radius 20 px of 33, 8.6 px off) was taken for the limb: its steps are one sharp edge all round
+    (95% radius 0.89 px) and the ball's own limb, weak beside a dark background, covers 0.76-0.78 of its circle
+    (under ``LIMB_STEP_COVERAGE``): used without a word. Here a textured ball of radius 33 px whose limb's step
+    shows over 300 degrees holds a bright disc of radius 20 px 8 px from its centre: from that disc,
+    ``enclosing_steps`` finds the ball's circle, and a sphere that keeps it is flagged; from the ball's
+    circle, and around a lone disc of radius 20 px, nothing encloses."""
+    from scipy.ndimage import gaussian_filter
+
+    from ffls.probes.locate import SphereGeometry, enclosing_steps
+
+    rng = np.random.default_rng(3)
+    H, W = 200, 240
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
+    back = gaussian_filter(rng.normal(size=(H, W)), 3.0) * 4.0
+    ball = gaussian_filter(rng.normal(size=(H, W)), 3.0) * 4.0 - 0.36  # log 0.7: the reflectance
+    C, R = np.array([120.3, 100.6]), 33.0
+    d, a = np.hypot(xx - C[0], yy - C[1]), np.degrees(np.arctan2(yy - C[1], xx - C[0]))
+    inside = d <= R
+    log_lum = np.where(inside, np.where(np.abs(a) < 30.0, back, ball - 0.8), back)  # no step over 60 degrees
+    c_in, r_in = C + np.array([8.0, 0.0]), 20.0
+    log_lum = np.where(np.hypot(xx - c_in[0], yy - c_in[1]) <= r_in, log_lum + 1.5, log_lum)
+    log_lum = gaussian_filter(log_lum, 0.7)
+    found = enclosing_steps(log_lum, c_in, r_in)
+    assert found is not None
+    (cx, cy), r, cov = found
+    assert np.hypot(cx - C[0], cy - C[1]) < 1.5 and abs(r - R) < 1.5 and cov >= 0.75
+    assert enclosing_steps(log_lum, C, R) is None
+    lone = np.where(np.hypot(xx - c_in[0], yy - c_in[1]) <= r_in, back + 1.5, back)
+    assert enclosing_steps(gaussian_filter(lone, 0.7), c_in, r_in) is None
+    geo = SphereGeometry("orthographic", None, None, np.eye(4), None, None, c_in, r_in, "auto",
+                         center_uncertainty_px=0.5, enclosed_by=found)
+    assert geo.flagged and "UNCERTAIN" in geo.describe() and "encloses" in geo.describe()
+    geo.enclosed_by = None
+    assert not geo.flagged and "UNCERTAIN" not in geo.describe()

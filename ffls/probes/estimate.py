@@ -108,7 +108,8 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
     -------
     LightmapEstimate
         ``details``: ``views`` (per view: sphere, the 95% radius of its centre where stated
-        (``center_uncertainty_px``, else None), seen fraction), ``seen_fraction``,
+        (``center_uncertainty_px``, else None), a larger circle of steps enclosing its limb (``enclosed_by``:
+        ``center_px``, ``radius_px``, ``coverage``, else None), seen fraction), ``seen_fraction``,
         ``blind_spot_sr``, ``blind_spot_fraction``, ``camera_cone_sr``, ``clipped_fraction``.
 
     Raises
@@ -143,7 +144,10 @@ def mirror_lightmap(probe, height: int = 128, camera_cone_deg: float | None = No
                      + (f"{cone:.1f} deg masked ({why})" if cone > 0 else "kept"))
         per_view.append({"sphere_source": geo.source, "center_px": geo.center_px.tolist(),
                          "radius_px": geo.radius_px, "seen_fraction": frac, "camera_cone_deg": cone,
-                         "center_uncertainty_px": geo.center_uncertainty_px})
+                         "center_uncertainty_px": geo.center_uncertainty_px,
+                         "enclosed_by": None if geo.enclosed_by is None else
+                         {"center_px": [float(x) for x in geo.enclosed_by[0]], "radius_px": geo.enclosed_by[1],
+                          "coverage": geo.enclosed_by[2]}})
         views.append(mv)
     merged = merge_mirror_views(views, power=weight_power)
     seen = merged.confidence > 0

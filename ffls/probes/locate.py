@@ -24,7 +24,8 @@ __all__ = ["SphereGeometry", "locate_sphere", "mirror_limb", "diffuse_ball", "LI
            "MIN_BALL_FRACTION", "MAX_INTERIOR_EDGES", "RIVAL_RATIO", "LIMB_CIRCLES",
            "MIRROR_SHARP_OUTLINE_PX", "OUTLINE_TOL_PX", "ENCLOSING_OFFSET", "LIMB_GROWTH", "unhinted_mirror_limb",
            "LIMB_CONE_MOVE_PX", "limb_cone",
-           "LIMB_JACKKNIFE_SECTORS", "MIRROR_CENTRE_TOL_PX", "limb_centre_uncertainty"]
+           "LIMB_JACKKNIFE_SECTORS", "MIRROR_CENTRE_TOL_PX", "limb_centre_uncertainty",
+           "ENCLOSED_LIMB_COVERAGE", "enclosing_steps"]
 
 
 @dataclass
@@ -52,6 +53,10 @@ class SphereGeometry:
     center_uncertainty_px : float or None
         A mirror ball's limb (found or hinted): the radius (pixels) of the 95% region of its centre
         (:func:`limb_centre_uncertainty`); None where not measured (a stated sphere, a finder's fit).
+    enclosed_by : ((2,) float, float, float) or None
+        A mirror ball's limb (found or hinted) well inside a larger circle of brightness steps
+        (:func:`enclosing_steps`): that circle's centre (px), radius (px) and the share of it its steps
+        cover; the limb may be a reflection inside the ball. None where none was found or not looked for.
     """
 
     camera_model: str
@@ -65,6 +70,14 @@ class SphereGeometry:
     source: str
     radius_known: bool = False
     center_uncertainty_px: float | None = None
+    enclosed_by: tuple | None = None
+
+    @property
+    def flagged(self) -> bool:
+        """The description says UNCERTAIN: the centre's 95% radius over :data:`MIRROR_CENTRE_TOL_PX`, or a circle
+        of steps encloses the limb (``enclosed_by``)."""
+        u = self.center_uncertainty_px
+        return (u is not None and u > MIRROR_CENTRE_TOL_PX) or self.enclosed_by is not None
 
     def mask(self, shape, margin_px: float = 0.0) -> np.ndarray:
         """(H, W) bool: the pixels that see the sphere (``margin_px`` inside its outline)."""
@@ -85,15 +98,21 @@ class SphereGeometry:
         line = f"sphere {where}: centre ({self.center_px[0]:.1f}, {self.center_px[1]:.1f}) px, radius " \
                f"{self.radius_px:.1f} px"
         u = self.center_uncertainty_px
-        if u is None:
-            return line
-        # a centre off by u moves the normals near the ball's centre by u / radius_px radians, the
-        # reflected directions by twice that (more toward the rim)
-        line += f", centre within {u:.2f} px (95%; directions near the ball's centre within " \
-                f"{np.degrees(2 * u / self.radius_px):.1f} deg)"
-        if u > MIRROR_CENTRE_TOL_PX:
-            line += f"; UNCERTAIN: over {MIRROR_CENTRE_TOL_PX:g} px, the limb's steps disagree around the ball (a " \
-                    "reflected edge beside the limb?): measure the ball's outline and give \"center_px\" with " \
+        if u is not None:
+            # a centre off by u moves the normals near the ball's centre by u / radius_px radians, the
+            # reflected directions by twice that (more toward the rim)
+            line += f", centre within {u:.2f} px (95%; directions near the ball's centre within " \
+                    f"{np.degrees(2 * u / self.radius_px):.1f} deg)"
+        why = []
+        if u is not None and u > MIRROR_CENTRE_TOL_PX:
+            why.append(f"over {MIRROR_CENTRE_TOL_PX:g} px, the limb's steps disagree around the ball (a reflected "
+                       "edge beside the limb?)")
+        if self.enclosed_by is not None:
+            (ex, ey), er, cov = self.enclosed_by
+            why.append(f"a larger circle of brightness steps encloses it (({ex:.1f}, {ey:.1f}) px, radius {er:.1f} "
+                       f"px, its steps cover {cov:.0%} of it): this one may be a reflection inside the ball")
+        if why:
+            line += f"; UNCERTAIN: {'; '.join(why)}: measure the ball's outline and give \"center_px\" with " \
                     "\"radius_px\" in probe.json"
         return line
 
@@ -417,6 +436,43 @@ def limb_centre_uncertainty(points, cam, fit, source) -> float | None:
     return float(scale * np.sqrt(var / 2 + float(fit.center_sigma_px) ** 2))
 
 
+#: :func:`enclosing_steps` reports a circle of a limb's radial steps that encloses the limb and whose steps cover
+#: at least this share of it. In ``benchmarks/probe_detect.py`` (azimuths 0, 45, 130, 200: 46 limbs) the
+#: best circle of steps enclosing a correct limb covered at most 0.68 of itself (the clutter around the 20 px
+#: balls at f = 800 px); around the one reflected circle taken for the limb (azimuth 130, courtyard, f = 400
+#: px: radius 20 px of 33, 8.6 px off) the ball's own limb did, 0.875 (radius 33.3 px), which the growth of
+#: :func:`unhinted_mirror_limb` (a radius up to 1.2 of the current one at each step) did not reach.
+ENCLOSED_LIMB_COVERAGE = 0.75
+
+
+def enclosing_steps(log_lum, center_px, radius_px, shape=None):
+    """The best-covered circle of radial brightness steps that encloses a limb circle, or None.
+
+    A reflected circle inside a mirror ball can be consistent all round (its steps one sharp edge, its
+    jackknife radius small: :func:`limb_centre_uncertainty` 0.89 px for a circle 8.6 px off) and no larger
+    circle of steps covers :data:`LIMB_STEP_COVERAGE` (the limb's own steps weak where the background beside
+    it is as dark as the ball), so neither :func:`unhinted_mirror_limb`'s growth nor the jackknife catches
+    it. The ball's outline still shows as a larger circle of steps enclosing it: the steps
+    (:func:`ffls.spheres.mirror_outline.mirror_silhouette`, 0.9 to 2.8 radii on ``log_lum``, the photo's log
+    luminance) are searched for circles of radius 1.15 to 2 of the limb's, centre within 0.8 of it, that
+    enclose it (to 1 px); the best-covered one covering :data:`ENCLOSED_LIMB_COVERAGE` is returned as
+    ``(centre (2,), radius, coverage)``.
+    """
+    from ffls.spheres.mirror_outline import circle_coverage, mirror_silhouette
+
+    c, r = np.asarray(center_px, dtype=np.float64), float(radius_px)
+    shape = log_lum.shape if shape is None else shape
+    # the steps from 0.9 to 2.8 radii: every circle searched (radius up to 2, centre up to 0.8 away) lies in them
+    found = mirror_silhouette(log_lum, c, r, shape=shape, min_coverage=ENCLOSED_LIMB_COVERAGE, max_growth=2.8,
+                              tol=1.0, n_best=LIMB_CIRCLES, max_offset=0.8 * r, r_min=1.15 * r, r_max=2.0 * r)
+    enc = [(circle_coverage(p, cc, rr, 1.0, shape), np.asarray(cc, dtype=np.float64), float(rr))
+           for p, cc, rr in found if np.hypot(*(cc - c)) + r <= rr + 1.0]
+    if not enc:
+        return None
+    cov, cc, rr = max(enc, key=lambda e: e[0])
+    return cc, rr, float(cov)
+
+
 #: An unhinted probe ball's apparent radius is at least this share of the photo's shorter side
 #: (:func:`diffuse_ball`): a probe is photographed to be unwrapped, framed on the ball (Debevec's fill
 #: the frame; the balls of ``benchmarks/probe_detect.py`` and ``probe_hint.py`` are 0.08-0.3 of it),
@@ -638,16 +694,19 @@ def _check_probe_size(center_px, radius_px, shape, source) -> None:
 def _limb_geometry(cam, T, stated_radius, log_lum, limb, how, source) -> SphereGeometry:
     """The sphere of a mirror ball's limb circle ``limb`` (centre, radius px): the tangent cone fitted to its steps
     (:func:`limb_cone`, pinhole; on the photo's log luminance ``log_lum``), else the cone through the circle
-    (:func:`_circle_geometry`). The radius is ``stated_radius``, 1 when None (the scale unknown)."""
+    (:func:`_circle_geometry`). The radius is ``stated_radius``, 1 when None (the scale unknown); a larger circle
+    of steps enclosing the limb (:func:`enclosing_steps`) is kept as ``enclosed_by``."""
     R = 1.0 if stated_radius is None else stated_radius
     cone, u = (None, None) if cam.model == "orthographic" else _limb_cone(log_lum, limb[0], limb[1], cam, R, source)
+    enclosed = enclosing_steps(log_lum, limb[0], limb[1])
     if cone is None:
         geo = _circle_geometry(cam, T, limb[0], limb[1], stated_radius, how)
         geo.center_uncertainty_px = u
+        geo.enclosed_by = enclosed
         return geo
     return SphereGeometry(cam.model, cam.K, cam.dist, T, np.asarray(cone.center_cam, dtype=np.float64), float(R),
                           np.asarray(cone.center_px, dtype=np.float64), float(cone.radius_px), how,
-                          stated_radius is not None, u)
+                          stated_radius is not None, u, enclosed)
 
 
 def locate_sphere(view, radiance, source, saturates: bool = False) -> SphereGeometry:
