@@ -95,6 +95,8 @@ __all__ = [
     "refit_spheres",
     "calibrate_uncertainty",
     "reject_shadowed_photos",
+    "reject_dark_photos",
+    "DARK_RATIO",
     "lens_check",
     "widen_for_lens",
     "place_at_capture_range",
@@ -1465,6 +1467,27 @@ class DecodedPhotos:
                                         dtype=np.float32)[:, 0]
         return linear, codes, depth
 
+    def photo_levels(self, capture) -> np.ndarray | None:
+        """Per photo, its frame's level (:attr:`ffls.spheres.detect.SequenceStats.levels`, the
+        99.5th percentile of its luminance) in linear units: stored levels (``stored``) linearised
+        as a grey of that code with ``capture``'s encoding (the one calibrated from them); None
+        where some photo has none or the encoding is still unknown."""
+        levels = dict(self.stats.levels)
+        if sorted(levels) != list(range(self.n)):
+            return None
+        out = np.array([levels[i] for i in range(self.n)], dtype=np.float64)
+        if not self.stored:
+            return out
+        from ffls.io.images import ImageData
+        from ffls.radiance.photos import encoding_unknown, linearise
+
+        depth = max(self.bit_depths)
+        if encoding_unknown(capture.encoding, depth):
+            return None
+        grey = np.repeat(np.clip(out, 0.0, 1.0).astype(np.float32)[:, None, None], 3, axis=2)
+        linear = linearise(ImageData(grey, depth, "png", None), capture.encoding, capture.response)
+        return np.asarray(linear, dtype=np.float64)[:, 0, 1]
+
     def linear_stats(self, capture):
         """The detection's reductions (:func:`ffls.spheres.detect.sequence_stats`) of the integer
         photos kept in memory, linearised with ``capture``'s encoding (e.g. the one calibrated from
@@ -2238,6 +2261,35 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
     return out
 
 
+#: A photo whose frame's level is below this fraction of the capture's median is ``dark``
+#: (:func:`reject_dark_photos`): a misfired flash.
+DARK_RATIO = 0.06
+
+
+def reject_dark_photos(results: list[PhotoEstimate], levels, ratio: float = DARK_RATIO) -> list[PhotoEstimate]:
+    """Reject, as ``dark``, the photos whose whole frame is far darker than the capture's: a
+    misfired flash (or a lamp that did not fire), whatever their spheres' fits said.
+
+    ``levels`` are the photos' frame levels (:meth:`DecodedPhotos.photo_levels`: the 99.5th
+    percentile of the linear luminance); a photo below ``ratio`` times their median is dark. A
+    light behind the spheres or grazing them darkens the spheres, not the frame (the ground, the
+    object and the background it lights), and keeps its own reason (``no_highlight``,
+    ``shadowed``, ...). Without levels (None) the results are returned as they are."""
+    if levels is None or len(levels) != len(results) or len(results) < 3:
+        return results
+    levels = np.asarray(levels, dtype=np.float64)
+    median = float(np.median(levels))
+    if not median > 0:
+        return results
+    out = []
+    for r, level in zip(results, levels):
+        if level < ratio * median:
+            r = replace(r, status="rejected", reason="dark", model=None, used_spheres=[], position=None,
+                        uncertainty_deg=float("inf"), weights=None)
+        out.append(r)
+    return out
+
+
 def _starts(result: PhotoEstimate) -> list:
     """Per sphere, where its refit starts: its own earlier direction, or else the photo's.
 
@@ -2790,6 +2842,10 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     finally:
         if bar is not None:
             bar.close()
+    levels = None if decoded is None else decoded.photo_levels(capture)
+    if levels is not None and photos is not None:
+        levels = levels[photos]
+    est = replace(est, photos=reject_dark_photos(est.photos, levels))
     return est.lights(names)
 
 
