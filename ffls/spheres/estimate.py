@@ -1896,7 +1896,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
               first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
-              halves: bool = True) -> CaptureEstimate:
+              halves: bool = True, levels=None) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
@@ -1912,7 +1912,9 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
     are read) and the steps it feeds use those; the second pass fits every photo. A capture with a
     mirror sphere has every photo fitted in the first pass (its highlight checks read them all).
     ``halves`` False: a lone sphere's cones are the stated fallback's, not its halves'
-    (:func:`calibrate_uncertainty` without the values)."""
+    (:func:`calibrate_uncertainty` without the values). ``levels`` (per photo its frame's level,
+    :meth:`DecodedPhotos.photo_levels`, or None): a misfired photo is rejected as ``dark``
+    (:func:`reject_dark_photos`) before the cones are calibrated on the accepted ones."""
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
@@ -2000,7 +2002,8 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
     def finished(results, samples, calibration):  # the final fits' near distances, cones and estimate
-        results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
+        results = reject_shadowed_photos(reject_dark_photos(results, levels))
+        results = place_at_capture_range(results, samples, fitter.scene_center)
         error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
                                                      values=values if halves else None,
                                                      fit_options=_sphere_fit_options(fitter), flat=flat,
@@ -2825,6 +2828,9 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     if photos is not None:
         names = [names[i] for i in photos]
         values = None if values is None else [values[i] for i in photos]
+    levels = None if decoded is None else decoded.photo_levels(capture)
+    if levels is not None and photos is not None:
+        levels = levels[photos]
     bar = None
     if progress:
         from tqdm import tqdm
@@ -2838,14 +2844,10 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
                             flat_field=lens_centre(capture, shape) if flat_field else None,
-                            first_pass=first_pass, bounce_shape=bounce_shape, halves=halves)
+                            first_pass=first_pass, bounce_shape=bounce_shape, halves=halves, levels=levels)
     finally:
         if bar is not None:
             bar.close()
-    levels = None if decoded is None else decoded.photo_levels(capture)
-    if levels is not None and photos is not None:
-        levels = levels[photos]
-    est = replace(est, photos=reject_dark_photos(est.photos, levels))
     return est.lights(names)
 
 
