@@ -478,7 +478,7 @@ def test_spheres_disagree(samples):
 
 def test_reasons_documented():
     assert set(REASONS) == {"spheres_disagree", "saturated", "too_dark", "shadowed", "too_few_spheres", "fit_failed",
-                            "no_highlight", "highlight_at_rim"}
+                            "no_highlight", "highlight_at_rim", "dark"}
 
 
 # ----------------------------------------------------------------------------- capture level

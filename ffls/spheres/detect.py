@@ -492,6 +492,10 @@ class SequenceStats:
     washed_out : tuple of (int, float)
         The photos left out as washed out (:data:`WASHED_OUT_SHARE`): (index, share of their
         pixels at full scale), in index order; not counted in ``n``.
+    levels : tuple of (int, float)
+        Per photo (washed-out ones included), in index order: (index, the 99.5th percentile of its
+        luminance, :func:`_robust_peak`), the frame's level (a misfired flash's is far below the
+        capture's: ``ffls.spheres.estimate.reject_dark_photos``).
     """
 
     max: np.ndarray
@@ -502,6 +506,7 @@ class SequenceStats:
     edge_tensor: np.ndarray | None = None
     edge_photos: int = 0
     washed_out: tuple = ()
+    levels: tuple = ()
 
 
 def _robust_peak(lum, q: float = 99.5) -> float:
@@ -719,6 +724,7 @@ class SequenceAccumulator:
         self.n = self.edge_photos = 0
         # the washed-out photos: (index, share) and their own reductions (used where every photo is)
         self.washed_out, self.washed = [], None
+        self.levels = {}  # per photo index: the frame's level (SequenceStats.levels)
 
     def add(self, im, index: int | None = None, full_scale: float | None = None) -> None:
         """Add photo number ``index`` (default: the count so far) of the sequence.
@@ -738,6 +744,7 @@ class SequenceAccumulator:
                 self.washed = SequenceAccumulator(colour=False, edges=False)
             self.washed.add(im, i)
             self.washed_out.append((i, float(full_scale)))
+            self.levels[i] = self.washed.levels[i]
             return
         im = np.asarray(im, dtype=np.float32)
         if not np.isfinite(im).all():
@@ -746,6 +753,7 @@ class SequenceAccumulator:
             lum = im[..., 0] * np.float32(0.2126) + im[..., 1] * np.float32(0.7152) + im[..., 2] * np.float32(0.0722)
         else:
             lum = (im[..., 0] if im.ndim == 3 else im).astype(np.float32)
+        self.levels[i] = _robust_peak(lum)
         if self.max is None:
             self.max = self._array("max", im.shape, np.float32)
             self.best = self._array("best", lum.shape, np.float32)
@@ -827,12 +835,14 @@ class SequenceAccumulator:
         if later.washed is not None:
             self.washed = later.washed if self.washed is None else self.washed.merge(later.washed)
             self.washed_out = self.washed_out + later.washed_out
+        levels = {**self.levels, **later.levels}
+        self.levels = levels
         if later.max is None:
             return self
         if self.max is None:
             washed, washed_out = self.washed, self.washed_out
             self.__dict__.update(later.__dict__)
-            self.washed, self.washed_out = washed, washed_out
+            self.washed, self.washed_out, self.levels = washed, washed_out, levels
             return self
         if later.max.shape != self.max.shape:
             raise ValueError(f"image shapes differ: {later.max.shape} vs {self.max.shape}")
@@ -858,7 +868,8 @@ class SequenceAccumulator:
             raise ValueError("no images")
         tensor = self.tensor if self.n > 1 and self.edge_photos else None
         return SequenceStats(self.max, self.brightest, self.total / self.n, self.n, self.counts, tensor,
-                             self.edge_photos if tensor is not None else 0, tuple(self.washed_out))
+                             self.edge_photos if tensor is not None else 0, tuple(self.washed_out),
+                             tuple(sorted(self.levels.items())))
 
 
 def sequence_stats(images, colour: bool = True, edges: bool = True, n_images: int | None = None) -> SequenceStats:

@@ -95,6 +95,8 @@ __all__ = [
     "refit_spheres",
     "calibrate_uncertainty",
     "reject_shadowed_photos",
+    "reject_dark_photos",
+    "DARK_RATIO",
     "lens_check",
     "widen_for_lens",
     "place_at_capture_range",
@@ -1465,6 +1467,27 @@ class DecodedPhotos:
                                         dtype=np.float32)[:, 0]
         return linear, codes, depth
 
+    def photo_levels(self, capture) -> np.ndarray | None:
+        """Per photo, its frame's level (:attr:`ffls.spheres.detect.SequenceStats.levels`, the
+        99.5th percentile of its luminance) in linear units: stored levels (``stored``) linearised
+        as a grey of that code with ``capture``'s encoding (the one calibrated from them); None
+        where some photo has none or the encoding is still unknown."""
+        levels = dict(self.stats.levels)
+        if sorted(levels) != list(range(self.n)):
+            return None
+        out = np.array([levels[i] for i in range(self.n)], dtype=np.float64)
+        if not self.stored:
+            return out
+        from ffls.io.images import ImageData
+        from ffls.radiance.photos import encoding_unknown, linearise
+
+        depth = max(self.bit_depths)
+        if encoding_unknown(capture.encoding, depth):
+            return None
+        grey = np.repeat(np.clip(out, 0.0, 1.0).astype(np.float32)[:, None, None], 3, axis=2)
+        linear = linearise(ImageData(grey, depth, "png", None), capture.encoding, capture.response)
+        return np.asarray(linear, dtype=np.float64)[:, 0, 1]
+
     def linear_stats(self, capture):
         """The detection's reductions (:func:`ffls.spheres.detect.sequence_stats`) of the integer
         photos kept in memory, linearised with ``capture``'s encoding (e.g. the one calibrated from
@@ -1873,7 +1896,7 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
               bounce: str, refine_centres: bool, refine_options: dict | None, materials: list | None = None,
               views: list | None = None, where=None, limb_image=None, flat_field: tuple | None = None,
               first_pass: int | None = FIRST_PASS_PHOTOS, bounce_shape: bool | None = None,
-              halves: bool = True) -> CaptureEstimate:
+              halves: bool = True, levels=None) -> CaptureEstimate:
     """The two passes over the photos (module docstring); ``values`` None: the first pass reads the photos.
 
     ``materials`` (per sphere ``'matte'``, ``'mirror'`` or ``'auto'``; all matte when None) and
@@ -1889,7 +1912,9 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
     are read) and the steps it feeds use those; the second pass fits every photo. A capture with a
     mirror sphere has every photo fitted in the first pass (its highlight checks read them all).
     ``halves`` False: a lone sphere's cones are the stated fallback's, not its halves'
-    (:func:`calibrate_uncertainty` without the values)."""
+    (:func:`calibrate_uncertainty` without the values). ``levels`` (per photo its frame's level,
+    :meth:`DecodedPhotos.photo_levels`, or None): a misfired photo is rejected as ``dark``
+    (:func:`reject_dark_photos`) before the cones are calibrated on the accepted ones."""
     materials = ["matte"] * len(samples) if materials is None else list(materials)
     if views is None and any(m != "matte" for m in materials):
         raise ValueError("mirror or 'auto' spheres need their views")
@@ -1977,7 +2002,8 @@ def two_pass(fitter: PhotoFitter, samples: list[SphereSamples], values: list | N
         return [r for r, _ in fitter.run(tasks, samples, counted)]
 
     def finished(results, samples, calibration):  # the final fits' near distances, cones and estimate
-        results = place_at_capture_range(reject_shadowed_photos(results), samples, fitter.scene_center)
+        results = reject_shadowed_photos(reject_dark_photos(results, levels))
+        results = place_at_capture_range(results, samples, fitter.scene_center)
         error_model, results = calibrate_uncertainty(results, samples, refinements, fitter.scene_center, kinds,
                                                      values=values if halves else None,
                                                      fit_options=_sphere_fit_options(fitter), flat=flat,
@@ -2235,6 +2261,35 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
         reason = "no_highlight" if all(mirror) else "shadowed"
         out.append(replace(r, status="rejected", reason=reason, model=None, used_spheres=[], spheres=spheres,
                            position=None, uncertainty_deg=float("inf"), weights=None))
+    return out
+
+
+#: A photo whose frame's level is below this fraction of the capture's median is ``dark``
+#: (:func:`reject_dark_photos`): a misfired flash.
+DARK_RATIO = 0.06
+
+
+def reject_dark_photos(results: list[PhotoEstimate], levels, ratio: float = DARK_RATIO) -> list[PhotoEstimate]:
+    """Reject, as ``dark``, the photos whose whole frame is far darker than the capture's: a
+    misfired flash (or a lamp that did not fire), whatever their spheres' fits said.
+
+    ``levels`` are the photos' frame levels (:meth:`DecodedPhotos.photo_levels`: the 99.5th
+    percentile of the linear luminance); a photo below ``ratio`` times their median is dark. A
+    light behind the spheres or grazing them darkens the spheres, not the frame (the ground, the
+    object and the background it lights), and keeps its own reason (``no_highlight``,
+    ``shadowed``, ...). Without levels (None) the results are returned as they are."""
+    if levels is None or len(levels) != len(results) or len(results) < 3:
+        return results
+    levels = np.asarray(levels, dtype=np.float64)
+    median = float(np.median(levels))
+    if not median > 0:
+        return results
+    out = []
+    for r, level in zip(results, levels):
+        if level < ratio * median:
+            r = replace(r, status="rejected", reason="dark", model=None, used_spheres=[], position=None,
+                        uncertainty_deg=float("inf"), weights=None)
+        out.append(r)
     return out
 
 
@@ -2773,6 +2828,9 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
     if photos is not None:
         names = [names[i] for i in photos]
         values = None if values is None else [values[i] for i in photos]
+    levels = None if decoded is None else decoded.photo_levels(capture)
+    if levels is not None and photos is not None:
+        levels = levels[photos]
     bar = None
     if progress:
         from tqdm import tqdm
@@ -2786,7 +2844,7 @@ def _estimate_in_frame(capture, spheres, progress, workers, *, model, bounce, re
                             refine_options=refine_options, materials=materials, views=views,
                             where=capture.json_path, limb_image=None if decoded is None else decoded.stats.mean,
                             flat_field=lens_centre(capture, shape) if flat_field else None,
-                            first_pass=first_pass, bounce_shape=bounce_shape, halves=halves)
+                            first_pass=first_pass, bounce_shape=bounce_shape, halves=halves, levels=levels)
     finally:
         if bar is not None:
             bar.close()

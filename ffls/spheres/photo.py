@@ -56,6 +56,7 @@ REASONS = {
     "fit_failed": "the shading fit did not converge to a finite direction",
     "no_highlight": HIGHLIGHT_STATUSES["no_highlight"],
     "highlight_at_rim": HIGHLIGHT_STATUSES["highlight_at_rim"],
+    "dark": "the whole photo is far darker than the capture's others (a misfired flash, or the lamp off)",
 }
 #: Light models of :func:`estimate_photo`.
 LIGHT_MODELS = ("auto", *conventions.LIGHT_MODELS)
