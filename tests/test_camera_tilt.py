@@ -383,3 +383,30 @@ def test_a_copy_stand_cameras_tilt_error_is_its_own(tmp_path):
     inside = [np.degrees(np.arccos(np.clip(np.dot(e["direction"], truth[e["image"]]), -1, 1))) <= e["uncertainty_deg"]
               for e in got["lights"] if e["status"] == "ok"]
     assert np.mean(inside) >= 0.9, np.mean(inside)
+
+
+def test_a_tilt_whose_error_cannot_be_measured_is_not_fitted(grey_ball_without_pose, tmp_path, capfd,
+                                                             monkeypatch):
+    """``tilt_uncertainty`` is NaN with fewer than 3 tilts or no matte sphere's residual. Before, a
+    tilt found with such an error was kept: its frame recorded NaN, ``widen_for_tilt`` read NaN as an
+    error (NaN is truthy) and turned every cone NaN, and lights.json's writer refused NaN (a
+    traceback). A tilt whose error is unknown is now not fitted, as without a matte sphere: the image's
+    up is the world's, said in one line, the cones finite; and ``widen_for_tilt`` refuses a NaN error."""
+    import ffls.spheres.estimate as estimate
+    from ffls.cli import main
+    from ffls.io.capture import Lights
+
+    monkeypatch.setattr(estimate, "tilt_uncertainty", lambda tried, **kw: float("nan"))
+    cap, _ = grey_ball_without_pose
+    out = tmp_path / "lights.json"
+    capfd.readouterr()
+    assert main(["lights", str(cap), "-o", str(out), "--workers", "1", "--no-progress"]) == 0
+    line = next(x for x in capfd.readouterr().err.splitlines() if "world_from_camera" in x)
+    assert "the world's up is taken as the image's" in line, line
+    doc = json.loads(out.read_text())
+    assert doc.get("frame") is None and all("camera_tilt_deg" not in e for e in doc["lights"])
+    assert all(np.isfinite(e["uncertainty_deg"]) for e in doc["lights"] if e["status"] == "ok")
+    li = Lights(["a"], np.array([[0.0, 0.0, 1.0]]), status=["ok"], reasons=[None], extra=[{"uncertainty_deg": 1.0}],
+                frame={"world_from_camera": tilted_world_from_camera(30.0), "tilt_uncertainty_deg": float("nan")})
+    with pytest.raises(ValueError, match="finite"):
+        estimate.widen_for_tilt(li)

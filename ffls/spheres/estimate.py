@@ -2860,9 +2860,11 @@ def widen_for_tilt(lights) -> None:
     (a lone sphere), set for a typical capture, not this one's tilt: both take it (a lone ball 89
     deg down found at 93.6, 4.6 off, had 14% of its lights in the fallback's cones; docs/spheres.md,
     "The tilt's own error")."""
-    if lights.frame is None:
+    if lights.frame is None or lights.frame.get("tilt_uncertainty_deg") is None:
         return
-    e = float(lights.frame.get("tilt_uncertainty_deg") or 0.0)
+    e = float(lights.frame["tilt_uncertainty_deg"])
+    if not np.isfinite(e):  # (NaN is truthy: every cone would turn NaN; estimate_lights never records one)
+        raise ValueError(f"a fitted tilt's error must be a finite angle, got {e!r}")
     if not e:
         return
     for d, st, x in zip(lights.directions, lights.status, lights.extra or ()):
@@ -2881,8 +2883,8 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
     (:func:`fit_camera_tilt`); the lights are returned in the frame found
     (:func:`tilted_world_from_camera`, recorded as ``Lights.frame``; the cones widened by the tilt's
     error, :func:`widen_for_tilt`), each light's ``extra`` with ``camera_tilt_deg`` and
-    ``camera_roll_deg`` (absent when not fitted: without a matte sphere's fit the image's up is the
-    world's, as before).
+    ``camera_roll_deg`` (absent when not fitted: without a matte sphere's fit, or where the tilt's
+    error cannot be measured (:func:`tilt_uncertainty`), the image's up is the world's, as before).
 
     The search reads every photo's sphere values once and runs every frame's estimate in one
     :class:`PhotoFitter` (one pool of processes), on a sample of the photos
@@ -2912,14 +2914,20 @@ def _estimate_with_fitted_tilt(capture, spheres, progress, workers, stages: dict
         rolled = float(roll) if np.isfinite(roll) else 0.0
         if np.isfinite(tilt):
             found = tried[(tilt, rolled)][1] if len(sample) == n else fit(tilt, rolled)
-    if not np.isfinite(tilt):
+    # a tilt whose error cannot be measured (tilt_uncertainty: NaN) would give the lights cones that do
+    # not hold it: it is not fitted, as without a matte sphere (the image's up is the world's, which
+    # the lights command's note says). (fit_camera_tilt finds a tilt only where a matte sphere's
+    # residual is finite, over its grid of 10 tilts: not reached by a capture; kept in case either
+    # changes.)
+    error = tilt_uncertainty(tried) if np.isfinite(tilt) else float("nan")
+    if not np.isfinite(error):
         return _estimate_in_frame(capture, spheres, progress, workers, values=values, **stages, **photo_options)
     # the lights stay in the frame found (+Z the ground's normal: the scene's up, as a pose would give
     # it; GUIDE section 1), recorded as Lights.frame: in the image's frame a camera looking down put
     # the lights over the ground half below the upper hemisphere (docs/spheres.md)
     lights = replace(found, frame={"world_from_camera": tilted_world_from_camera(tilt, rolled),
                                    "source": FITTED_FRAME_SOURCE,
-                                   "tilt_uncertainty_deg": round(tilt_uncertainty(tried), 3)})
+                                   "tilt_uncertainty_deg": round(error, 3)})
     widen_for_tilt(lights)
     for e in lights.extra or ():
         e["camera_tilt_deg"] = round(tilt, 2)
