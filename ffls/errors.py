@@ -486,19 +486,40 @@ def atomic_folder(path: str | os.PathLike):
 
 @contextlib.contextmanager
 def _signals_deferred():
-    """Hold SIGINT and SIGTERM (delivered when the block ends) where the platform and thread allow."""
-    import signal
+    """Hold SIGINT and SIGTERM (delivered when the block ends) where the platform and thread allow.
 
-    sigs = {signal.SIGINT, signal.SIGTERM}
+    The mask (:func:`signal.pthread_sigmask`) is this thread's only: the kernel gives a Ctrl-C to any
+    thread that does not block it (OpenCV's, Dask's, a pool's), whose C handler marks it pending, and
+    Python runs the handler in the main thread at its next bytecode, inside the block. So in the main
+    thread the handlers are also replaced, while held, by one that records the signal; the recorded
+    signals are raised again (:func:`signal.raise_signal`) when the block ends, to the handlers it
+    found. (Elsewhere than the main thread no Python handler runs: the mask alone.)
+    """
+    import signal
+    import threading
+
+    sigs = (signal.SIGINT, signal.SIGTERM)
+    caught: list = []
+    handlers = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in sigs:
+            if signal.getsignal(s) is not None:  # (None: a handler not set from Python; left alone)
+                handlers[s] = signal.signal(s, lambda signum, frame: caught.append(signum))
     try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    except (AttributeError, ValueError, OSError):
-        yield
-        return
-    try:
-        yield
+        try:
+            old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+        except (AttributeError, ValueError, OSError):
+            yield
+            return
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)  # (a signal held meanwhile is recorded here)
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for s, h in handlers.items():
+            signal.signal(s, h)
+        for s in dict.fromkeys(caught):
+            signal.raise_signal(s)
 
 
 def run_uninterrupted(step) -> None:
