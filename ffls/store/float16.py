@@ -85,13 +85,14 @@ def _flat_blocks(a: np.ndarray, per: int | None = None):
     C-contiguous ``a`` is walked whole and another one layer range at a time (copied); with
     ``per``, always ``per`` layers at a time (copied only where not C-contiguous)."""
     block = BLOCK_VALUES
+    a = a.reshape(1) if a.ndim == 0 else a
     if per is None and a.flags.c_contiguous:
         flat = a.reshape(-1)
         for i in range(0, flat.size, block):
             yield i, flat[i:i + block]
         return
     if per is None:
-        per = max(1, block // max(1, a[0].size)) if a.ndim else 1
+        per = max(1, block // max(1, a[0].size))
     row = a[0].size if a.shape[0] else 0
     for k in range(0, a.shape[0], per):
         flat = np.ascontiguousarray(a[k:k + per]).reshape(-1)
@@ -111,7 +112,7 @@ def finite_max_abs(basis: np.ndarray) -> float:
     basis = np.asarray(basis)
     top = 0.0
     buf = None
-    for _, blk in _flat_blocks(basis.reshape(1) if basis.ndim == 0 else basis):
+    for _, blk in _flat_blocks(basis):
         if buf is None:
             buf = np.empty(blk.size, dtype=blk.dtype)
         v = float(np.abs(blk, out=buf[:blk.size]).max())
@@ -173,9 +174,9 @@ def to_float16(basis: np.ndarray, scale: float | None = None, path=None, chunk: 
     counts = np.zeros(3, dtype=np.int64)  # overflow, underflow, flushed
     rel = 0.0
     chunk = max(1, int(chunk))
-    src_all, dst_f = basis.reshape(1) if basis.ndim == 0 else basis, out.reshape(-1)
+    dst_f = out.reshape(-1)
     bufs = None
-    for i, src in _flat_blocks(src_all, per=chunk):
+    for i, src in _flat_blocks(basis, per=chunk):
         dst = dst_f[i:i + src.size]
         if bufs is None:
             bufs = _Buffers(src.size)
