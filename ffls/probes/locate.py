@@ -244,7 +244,7 @@ def _grown_limb(log_lum, center_px, radius_px, shape, max_steps: int = 8):
         found = mirror_silhouette(log_lum, c, r, shape=shape, min_coverage=LIMB_STEP_COVERAGE,
                                   max_growth=1 + 2 * LIMB_GROWTH, tol=1.0, n_best=LIMB_CIRCLES,
                                   max_offset=LIMB_GROWTH * r, r_min=r + 0.5, r_max=(1 + LIMB_GROWTH) * r)
-        good = [(float(rr), cc) for _, cc, rr in found if np.hypot(*(cc - c)) + r <= rr + 1.0]
+        good = [(float(rr), cc) for _, cc, rr in _enclosing(found, c, r)]
         if not good:
             break
         r, c = max(good, key=lambda g: g[0])
@@ -445,7 +445,7 @@ def limb_centre_uncertainty(points, cam, fit, source) -> float | None:
 ENCLOSED_LIMB_COVERAGE = 0.75
 
 
-def enclosing_steps(log_lum, center_px, radius_px, shape=None):
+def enclosing_steps(log_lum, center_px, radius_px):
     """The best-covered circle of radial brightness steps that encloses a limb circle, or None.
 
     A reflected circle inside a mirror ball can be consistent all round (its steps one sharp edge, its
@@ -460,17 +460,21 @@ def enclosing_steps(log_lum, center_px, radius_px, shape=None):
     """
     from ffls.spheres.mirror_outline import circle_coverage, mirror_silhouette
 
-    c, r = np.asarray(center_px, dtype=np.float64), float(radius_px)
-    shape = log_lum.shape if shape is None else shape
+    c, r, shape = np.asarray(center_px, dtype=np.float64), float(radius_px), log_lum.shape
     # the steps from 0.9 to 2.8 radii: every circle searched (radius up to 2, centre up to 0.8 away) lies in them
     found = mirror_silhouette(log_lum, c, r, shape=shape, min_coverage=ENCLOSED_LIMB_COVERAGE, max_growth=2.8,
                               tol=1.0, n_best=LIMB_CIRCLES, max_offset=0.8 * r, r_min=1.15 * r, r_max=2.0 * r)
     enc = [(circle_coverage(p, cc, rr, 1.0, shape), np.asarray(cc, dtype=np.float64), float(rr))
-           for p, cc, rr in found if np.hypot(*(cc - c)) + r <= rr + 1.0]
+           for p, cc, rr in _enclosing(found, c, r)]
     if not enc:
         return None
     cov, cc, rr = max(enc, key=lambda e: e[0])
     return cc, rr, float(cov)
+
+
+def _enclosing(found, c, r):
+    """The circles ``(points, centre, radius)`` of ``found`` that enclose the circle (``c``, ``r``) to 1 px."""
+    return [(p, cc, rr) for p, cc, rr in found if np.hypot(*(cc - c)) + r <= rr + 1.0]
 
 
 #: An unhinted probe ball's apparent radius is at least this share of the photo's shorter side
