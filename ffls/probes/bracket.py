@@ -394,12 +394,16 @@ def view_radiance(view, encoding, response=None, source=None) -> ViewRadiance:
         whole = img.is_hdr and clip is not None and bool(sat[on].all())
         if whole:  # no pixel under the plateau: nothing measures a clip level (a float has no white level)
             sat = np.zeros(z.shape, dtype=bool)
-        note = f"{paths[0].name}: {depth}" + (
-            f", one value everywhere (largest channel {clip:.6g} in every pixel): read as it is, a uniform "
-            f"light (a float file states no clip level; an over-exposed one needs a shorter exposure)" if whole
-            else "" if not sat.any() else f", {int(sat.sum())} pixels clipped" if not img.is_hdr else
-            f", {int(sat.sum())} pixels on a plateau at its maximum ({clip:.6g}), taken as clipped (lower "
-            f"bounds; a render's flat brightest region reads the same)")
+        note = f"{paths[0].name}: {depth}"
+        if whole:
+            note += (f", one value everywhere (largest channel {clip:.6g} in every pixel): read as it is, a "
+                     f"uniform light (a float file states no clip level; an over-exposed one needs a shorter "
+                     f"exposure)")
+        elif sat.any() and not img.is_hdr:
+            note += f", {int(sat.sum())} pixels clipped"
+        elif sat.any():
+            note += (f", {int(sat.sum())} pixels on a plateau at its maximum ({clip:.6g}), taken as clipped "
+                     f"(lower bounds; a render's flat brightest region reads the same)")
     valid = np.all(np.isfinite(rad), axis=-1)
     if alpha is not None:
         valid &= alpha > 0
