@@ -2259,9 +2259,15 @@ def reject_shadowed_photos(results: list[PhotoEstimate], ratio: float = SHADOW_R
         spheres = [replace(s, status="no_highlight" if isinstance(s.fit, HighlightFit) else "shadowed")
                    if i in shaded else s for i, s in enumerate(r.spheres)]
         reason = "no_highlight" if all(mirror) else "shadowed"
-        out.append(replace(r, status="rejected", reason=reason, model=None, used_spheres=[], spheres=spheres,
-                           position=None, uncertainty_deg=float("inf"), weights=None))
+        out.append(_rejected_after_fit(r, reason, spheres=spheres))
     return out
+
+
+def _rejected_after_fit(r: PhotoEstimate, reason: str, **changes) -> PhotoEstimate:
+    """``r`` rejected for ``reason`` by a capture-wide test after its fit (no model, no sphere used,
+    no position or weights, an infinite cone); ``changes`` replace other fields too."""
+    return replace(r, status="rejected", reason=reason, model=None, used_spheres=[], position=None,
+                   uncertainty_deg=float("inf"), weights=None, **changes)
 
 
 #: A photo whose frame's level is below this fraction of the capture's median is ``dark``
@@ -2287,8 +2293,7 @@ def reject_dark_photos(results: list[PhotoEstimate], levels, ratio: float = DARK
     out = []
     for r, level in zip(results, levels):
         if level < ratio * median:
-            r = replace(r, status="rejected", reason="dark", model=None, used_spheres=[], position=None,
-                        uncertainty_deg=float("inf"), weights=None)
+            r = _rejected_after_fit(r, "dark")
         out.append(r)
     return out
 
