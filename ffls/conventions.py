@@ -250,10 +250,10 @@ def direction_to_latlong_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, v
 
 
-def latlong_directions(width: int, height: int) -> np.ndarray:
-    """Texel-centre directions (height, width, 3) float64 of a lat-long map."""
+def latlong_directions(width: int, height: int, rows: slice = slice(None)) -> np.ndarray:
+    """Texel-centre directions (height, width, 3) float64 of a lat-long map (its ``rows`` only)."""
     u = (np.arange(width) + 0.5) / width
-    v = (np.arange(height) + 0.5) / height
+    v = ((np.arange(height) + 0.5) / height)[rows]
     uu, vv = np.meshgrid(u, v)
     return latlong_uv_to_direction(uu, vv)
 

@@ -188,12 +188,9 @@ class LightMap:
             return
         h, w, _ = self.data.shape
         rows = _sphere_map("latlong").row_solid_angles(h)
-        u = (np.arange(w) + 0.5) / w
         band = max(1, DOWNSAMPLE_BAND_BYTES // (w * 3 * 8))
         for i in range(0, h, band):
-            v = (np.arange(i, min(h, i + band)) + 0.5) / h
-            uu, vv = np.meshgrid(u, v)
-            d = conventions.latlong_uv_to_direction(uu, vv).reshape(-1, 3)
+            d = conventions.latlong_directions(w, h, slice(i, i + band)).reshape(-1, 3)
             rad = self.data[i:i + band].reshape(-1, 3).astype(np.float64)
             yield d, rad, np.repeat(rows[i:i + band], w)
 
