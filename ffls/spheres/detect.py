@@ -515,7 +515,7 @@ def _robust_peak(lum, q: float = 99.5) -> float:
     return float(np.percentile(sub, q))
 
 
-def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> None:
+def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01, peak: float | None = None) -> None:
     """Add one photo's log-luminance structure tensor to ``tensor`` (in place): per-photo edge evidence.
 
     A silhouette is an edge at the same place in nearly every photo, whatever the light: the
@@ -541,8 +541,10 @@ def photo_edge_tensor(lum, tensor, sigma: float = 1.0, floor: float = 0.01) -> N
         ``[sum gx^2, sum gx gy, sum gy^2]`` and, with 5 rows, ``sum gx, sum gy``: gradients in
         natural-log units per pixel.
     sigma, floor : float
+    peak : float, optional
+        ``lum``'s robust peak where the caller has it (:attr:`SequenceStats.levels`).
     """
-    peak = _robust_peak(lum)
+    peak = _robust_peak(lum) if peak is None else peak
     if not peak > 0:
         return
     g = cv2.GaussianBlur(np.log(np.asarray(lum, dtype=np.float32) + np.float32(floor * peak)), (0, 0), sigma)
@@ -781,7 +783,7 @@ class SequenceAccumulator:
         if self.counts is not None and i < np.iinfo(np.uint16).max:  # no count can overflow
             photo_colour_counts(im, lum, self.counts)
         if self.tensor is not None and i % self.every == 0 and i // self.every < EDGE_PHOTOS:
-            photo_edge_tensor(lum, self.tensor)
+            photo_edge_tensor(lum, self.tensor, peak=self.levels[i])
             self.edge_photos += 1
         self.n += 1
 
