@@ -1104,7 +1104,8 @@ def _fit_near_photo(units: list, centers: np.ndarray, radii: np.ndarray, up: np.
 
 
 def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, hi: float):
-    """The used units under the near-light model: ``(units, curves, grid, best, rss_best, n_photos)`` or None.
+    """The used units under the near-light model: ``(units, curves, grid, best, rss_best, n_photos, stack)``
+    or None (``stack`` the units' :class:`_StackedUnits`).
 
     In every photo with two or more spheres a point light is fitted (:func:`_fit_near_photo`) at the
     gamma ``curve`` and each unit gets the columns :func:`_near_columns` on the same pixels; a photo
@@ -1151,7 +1152,7 @@ def _near_model(used: list, geometry, up: np.ndarray, curve: float, lo: float, h
         if rnd == 0:
             grid = np.arange(max(lo, best - _FINE_HALF_WIDTH), min(hi, best + _FINE_HALF_WIDTH) + 0.5 * _GRID_STEP,
                              _GRID_STEP)
-    return units, curves, grid, best, float(res.fun), n_near
+    return units, curves, grid, best, float(res.fun), n_near, stack
 
 
 # ----------------------------------------------------------------------------- tone curves
@@ -1403,13 +1404,14 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
         # the near-light model (module docstring, "Near lights"): chosen by the BIC over the distant one
         near_fit = _near_model(used, geometry, up, best, lo, hi)
         if near_fit is not None:
-            near_used, near_curves, near_grid, near_best, near_rss, n_near = near_fit
+            near_used, near_curves, near_grid, near_best, near_rss, n_near, near_stack = near_fit
             k_distant = sum(u.A.shape[1] for u in used)
             k_near = sum(u.A.shape[1] for u in near_used) + _NEAR_PHOTO_PARAMS * n_near
             shading_excess = (rss_best - near_rss) / fit.noise - (k_near - k_distant) * fit.penalty
             if shading_excess > 0:
                 shading = "near"
                 used, curves, profiled, best, rss_best = near_used, near_curves, near_grid, near_best, near_rss
+                stack = near_stack
                 fit = _profile_statistics(used, curves, profiled, best, rss_best, _NEAR_PHOTO_PARAMS * n_near,
                                           n_bootstrap, seed)
     # (checked only now: a near light can bend a linear file's shading past the range's end under
@@ -1429,8 +1431,6 @@ def _calibrate_encoding_gamma(raw, normals, *, matte, terminator, min_pixels, mi
     if max_order >= 1:
         # a camera's tone curve (toe, shoulder) that no gamma follows: a polynomial response, its order
         # chosen by the BIC, scored against the named curves in the same units (module docstring)
-        if stack.units is not used:  # the near model's units
-            stack = _StackedUnits(used, _SharedValues(used))
         order, coefs, rss_poly, score = _best_polynomial(stack, best, rss_best, noise, penalty, max_order,
                                                           min_slope)
         if order:
