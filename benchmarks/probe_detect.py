@@ -124,8 +124,8 @@ def main(argv=None):
                              "center_uncertainty_px": u, "flagged": flag})
                 print(f"{name:10s} {layout[0]:7s} r={r_true:5.1f} px  "
                       + ("not found" if err is None else f"centre error {err:6.2f} px, radius {dr:+6.2f} px")
-                      + f"  {outcome:5s} {dt:5.2f} s" + ("" if u is None else f"  stated {u:5.2f} px (95%)"
-                                                         + ("" if not flag else " FLAGGED")), flush=True)
+                      + f"  {outcome:5s} {dt:5.2f} s" + ("" if u is None else f"  stated {u:5.2f} px (95%)")
+                      + ("" if not flag else " FLAGGED"), flush=True)
     n_ok = sum(r["outcome"] == "ok" for r in rows)
     errs = [r["center_error_px"] for r in rows if r["center_error_px"] is not None]
     summary = {"renders": len(rows), "within_1px": n_ok,

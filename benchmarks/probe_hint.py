@@ -107,7 +107,7 @@ def main():
         where = f"seed {r['seed']} hint {r['hint']}" if r["kind"] == "diffuse" else f"offset {r['hint_offset_px']}"
         u = r.get("center_uncertainty_px")
         print(f"{r['kind']:8s} {r['map']:10s} {where:28s} centre error {e:>7s} px  {r['outcome']}"
-              + ("" if u is None else f"  (stated {u:.2f} px, 95%{', FLAGGED' if r['flagged'] else ''})"))
+              + ("" if u is None else f"  (stated {u:.2f} px, 95%)") + (" FLAGGED" if r.get("flagged") else ""))
     summary = {}
     for r in rows:
         key = f"{r['kind']} {'no hint' if r.get('hint', 1) is None else 'centre hint'}"
