@@ -171,7 +171,6 @@ def test_a_ctrl_c_just_after_the_output_is_renamed_names_it(cap, tmp_path, capfd
     import cv2
     import numpy as np
 
-    from ffls.cli import main
     from ffls.io.images import read_image
 
     out = tmp_path / "o.png"
@@ -187,12 +186,9 @@ def test_a_ctrl_c_just_after_the_output_is_renamed_names_it(cap, tmp_path, capfd
             os.kill(os.getpid(), signal.SIGINT)
 
     monkeypatch.setattr(os, "replace", replace)
-    capfd.readouterr()
-    rc = main([str(a) for a in ["relight", cap, "--probe", "sky", "-o", out, "--workers", "1", *extra]])
-    err = capfd.readouterr().err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert rc == 130 and len(lines) == 1, err
-    assert lines[0] == f"ffls relight: interrupted; {out} was written whole before it; nothing partial was left"
+    rc, line = one_line(capfd, ["relight", cap, "--probe", "sky", "-o", out, "--workers", "1", *extra])
+    assert rc == 130, line
+    assert line == f"ffls relight: interrupted; {out} was written whole before it; nothing partial was left"
     assert out.exists() and read_image(out).pixels.shape[:2] == read_image(cap / "img_0000.exr").pixels.shape[:2]
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["o.png", *(["m.png"] if extra else [])])
 
